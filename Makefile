@@ -1,0 +1,15 @@
+# The two commands:  make reproduce   (the paper's full reproduction)
+#                    make test        (the whole test suite)
+.PHONY: setup reproduce test bench
+
+setup:
+	@bash scripts/setup.sh
+
+reproduce: setup
+	.venv/bin/trustseek solve
+
+test: setup
+	.venv/bin/python -m pytest -n 2 -q
+
+bench: setup
+	.venv/bin/python benchmarks/run.py

@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# Installs everything trustseek needs on a fresh Debian machine, idempotently:
+#   - Debian packages: chromium (browser tests, HTML report screenshots), fonts
+#   - a Python virtual environment in .venv with trustseek and its test extras
+#   - the web front end (npm ci + build), when web/ exists
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+PY=${PYTHON:-python3}
+
+if ! command -v chromium >/dev/null 2>&1; then
+  if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then
+    echo "setup: installing chromium from Debian packages"
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver fonts-dejavu-core >/dev/null
+  else
+    echo "setup: chromium not found and cannot apt-get install it (need root); browser tests will be skipped" >&2
+  fi
+fi
+
+if [ ! -x .venv/bin/python ]; then
+  echo "setup: creating .venv"
+  "$PY" -m venv .venv
+fi
+stamp=.venv/.trustseek-installed
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+  echo "setup: installing Python packages"
+  .venv/bin/python -m pip install -q --upgrade pip
+  .venv/bin/python -m pip install -q -e '.[test]'
+  touch "$stamp"
+fi
+
+if [ -f web/package.json ]; then
+  webstamp=web/node_modules/.trustseek-built
+  if [ ! -f "$webstamp" ] || [ -n "$(find web/src web/package.json web/package-lock.json -newer "$webstamp" 2>/dev/null | head -1)" ]; then
+    echo "setup: building the web front end"
+    (cd web && npm ci --no-audit --no-fund --loglevel=error && npm run build --silent)
+    touch "$webstamp"
+  fi
+fi

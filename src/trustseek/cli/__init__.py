@@ -1,0 +1,26 @@
+"""Command-line interface: a thin layer over the Python API.
+
+Each module registers its commands on the shared Typer ``app``.  ``main`` turns
+every :class:`~trustseek.errors.TrustseekError` into one clear line per problem
+on stderr and exit code 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from ..errors import TrustseekError
+from ._app import app, err_console
+from . import plan  # noqa: F401  (solve, plot-q)
+
+
+def main() -> None:
+    try:
+        app(standalone_mode=True)
+    except TrustseekError as exc:
+        for line in exc.lines():
+            err_console.print(f"[bold red]error:[/] {line}", highlight=False, soft_wrap=True)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        err_console.print("interrupted")
+        sys.exit(130)

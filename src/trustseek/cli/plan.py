@@ -1,0 +1,201 @@
+"""Planning commands: solve, agnostic, plot-q, preset, check."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from ..errors import TrustseekError
+from ..model import ModelError, Task, TrustModel
+from ..policy import TrustAwarePolicy, load_policy, trust_agnostic
+from ..presets import MODEL_PRESETS, TASK_PRESETS, load_model, load_task
+from ..solve import DEFAULT_GRID, METHODS, GridSolver
+from ..pomdp import AssistancePOMDP
+from ._app import app, console, print_json
+
+ModelOpt = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file.")
+TaskOpt = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file.")
+UpdateOpt = typer.Option("bayes", "--belief-update", "-u", help="Belief update: 'bayes' (exact filter, default) or 'paper' (eq. 3).")
+
+
+def _check_update(name: str) -> str:
+    if name not in ("bayes", "paper"):
+        raise TrustseekError([f"--belief-update must be 'bayes' or 'paper', got {name!r}"])
+    return name
+
+
+def solve_summary(policy: TrustAwarePolicy, task: Task) -> dict:
+    """The machine-readable summary of a solved policy (what ``solve --json`` prints)."""
+    b0 = float(policy.model.initial[-1])
+    v1 = policy.q_values(1.0).max(axis=-1)
+    v0 = policy.q_values(b0).max(axis=-1)
+    return {
+        "policy": "trust-aware",
+        "belief_update": policy.belief_update,
+        "thresholds": policy.thresholds(),
+        "ask_intervals": {k: [list(iv) for iv in v] for k, v in policy.ask_intervals().items()},
+        "value_at_b1": {cn: float(v1[c]) for c, cn in enumerate(policy.complexities)},
+        "initial_belief": b0,
+        "value_at_initial_belief": float(v0 @ task.complexity_probs),
+        "solver": policy.info,
+    }
+
+
+@app.command()
+def solve(
+    model: str = ModelOpt,
+    task: str = TaskOpt,
+    belief_update: str = UpdateOpt,
+    grid: int = typer.Option(DEFAULT_GRID, "--grid", "-g", min=3, help="Number of belief grid points on [0, 1]."),
+    method: str = typer.Option("policy-iteration", "--method", help=f"Grid solver method: {', '.join(METHODS)}."),
+    tol: float = typer.Option(1e-9, "--tol", help="Value iteration: stop when the certified error bound is below this."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
+) -> None:
+    """Solve the assistance-seeking POMDP for the optimal trust-aware policy (Section IV)."""
+    _check_update(belief_update)
+    if method not in METHODS:
+        raise TrustseekError([f"--method must be one of {list(METHODS)}, got {method!r}"])
+    m, t = load_model(model), load_task(task)
+    pomdp = AssistancePOMDP(m, t)
+    policy = GridSolver(grid=grid, belief_update=belief_update, method=method, tol=tol).solve(pomdp)
+    agn = trust_agnostic(m, t)
+    summary = solve_summary(policy, t)
+    summary["trust_agnostic"] = agn.to_dict()["p_ask"]
+    if out is not None:
+        policy.save(out)
+        summary["policy_file"] = str(out)
+    if as_json:
+        print_json(summary)
+        return
+    table = Table(title=f"Trust-aware policy (belief update: {belief_update}, grid {grid})", title_justify="left")
+    table.add_column("complexity")
+    table.add_column("asks when P(trust=high) in")
+    table.add_column("threshold", justify="right")
+    table.add_column("V(b=1, C)", justify="right")
+    table.add_column("trust-agnostic", justify="left")
+    for cn in policy.complexities:
+        iv = summary["ask_intervals"][cn]
+        ivs = ", ".join(f"[{lo:.4f}, {hi:.4f})" for lo, hi in iv) or "never asks"
+        th = summary["thresholds"][cn]
+        ths = "-" if th is None else f"{th:.4f}"
+        table.add_row(cn, ivs, ths, f"{summary['value_at_b1'][cn]:.3f}", "always ask" if summary["trust_agnostic"][cn] == 1 else "never ask")
+    console.print(table)
+    info = policy.info
+    console.print(
+        f"V(b0 = {summary['initial_belief']:g}) = {summary['value_at_initial_belief']:.3f} over P(C); "
+        f"{info['method']}: {info['iterations']} iterations, Bellman residual {info['bellman_residual']:.1e}, "
+        f"{info['seconds'] * 1000:.1f} ms"
+    )
+    if out is not None:
+        console.print(f"policy written to {out}")
+
+
+@app.command()
+def agnostic(
+    model: str = ModelOpt,
+    task: str = TaskOpt,
+    data: Optional[Path] = typer.Option(None, "--data", help="Estimate P(intervene | C) from this trial log instead of the model."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+) -> None:
+    """The optimal trust-agnostic policy (Section VI-A)."""
+    t = load_task(task)
+    if data is not None:
+        from ..data import read_trials  # provided by the data module
+        from ..policy import trust_agnostic_from_data
+
+        pol = trust_agnostic_from_data(read_trials(data).frame, t)
+    else:
+        pol = trust_agnostic(load_model(model), t)
+    if out is not None:
+        pol.save(out)
+    if as_json:
+        print_json(pol.to_dict())
+        return
+    table = Table(title="Trust-agnostic policy", title_justify="left")
+    for col in ("complexity", "P(intervene | C, autonomous)", "E\\[r | autonomous]", "E\\[r | ask]", "action"):
+        table.add_column(col)
+    for c, cn in enumerate(t.complexities):
+        er = pol.info["expected_reward"][cn]
+        table.add_row(cn, f"{pol.info['p_intervene'][cn]:.3f}", f"{er['autonomous']:.3f}", f"{er['ask']:.3f}", "ask" if pol.p_ask[c] == 1 else "autonomous")
+    console.print(table)
+    console.print(f"P(intervene | C) from the {pol.info['source']}")
+
+
+@app.command("plot-q")
+def plot_q_cmd(
+    model: str = ModelOpt,
+    task: str = TaskOpt,
+    belief_update: str = UpdateOpt,
+    grid: int = typer.Option(DEFAULT_GRID, "--grid", "-g", min=3, help="Number of belief grid points."),
+    policy_file: Optional[Path] = typer.Option(None, "--policy", help="Plot a solved policy file instead of solving."),
+    out: Path = typer.Option(Path("q.png"), "--out", "-o", help="PNG file to write."),
+) -> None:
+    """Plot Q(b, C, a) for both actions and complexities, with the threshold (Fig. 7)."""
+    from ..plots.q import plot_q
+
+    if policy_file is not None:
+        policy = load_policy(policy_file)
+        if not isinstance(policy, TrustAwarePolicy):
+            raise TrustseekError([f"{policy_file}: a {policy.kind} policy has no Q-function to plot"])
+    else:
+        _check_update(belief_update)
+        policy = GridSolver(grid=grid, belief_update=belief_update).solve(AssistancePOMDP(load_model(model), load_task(task)))
+    plot_q(policy, out)
+    console.print(f"wrote {out}")
+
+
+@app.command()
+def preset(
+    name: str = typer.Argument("paper", help="Preset name."),
+    model_out: Optional[Path] = typer.Option(None, "--model-out", help="Write the preset's trust model here."),
+    task_out: Optional[Path] = typer.Option(None, "--task-out", help="Write the preset's task here."),
+) -> None:
+    """Print or export a built-in preset (model and task JSON), a starting point for your own files."""
+    if name not in MODEL_PRESETS:
+        raise TrustseekError([f"unknown preset {name!r}; presets: {sorted(MODEL_PRESETS)}"])
+    m, t = MODEL_PRESETS[name](), TASK_PRESETS[name]()
+    if model_out:
+        m.save(model_out)
+        console.print(f"wrote {model_out}")
+    if task_out:
+        t.save(task_out)
+        console.print(f"wrote {task_out}")
+    if not model_out and not task_out:
+        print_json({"model": m.to_dict(), "task": t.to_dict()})
+
+
+@app.command()
+def check(
+    files: list[Path] = typer.Argument(..., help="Trust model, task or policy JSON files."),
+) -> None:
+    """Validate model, task and policy files; print every problem found."""
+    problems: list[str] = []
+    for f in files:
+        try:
+            text = json.loads(f.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            problems.append(f"{f}: file not found")
+            continue
+        except json.JSONDecodeError as exc:
+            problems.append(f"{f}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}")
+            continue
+        fmt = text.get("format", "") if isinstance(text, dict) else ""
+        try:
+            if "task" in fmt:
+                Task.from_dict(text, str(f))
+            elif "policy" in fmt:
+                load_policy(f)
+            else:
+                TrustModel.from_dict(text, str(f))
+            console.print(f"{f}: ok")
+        except ModelError as exc:
+            problems.extend(exc.lines())
+    if problems:
+        raise TrustseekError(problems)

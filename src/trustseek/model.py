@@ -1,0 +1,601 @@
+"""The supervisor model (`TrustModel`) and the task (`Task`).
+
+Vocabulary (fixed everywhere in trustseek):
+
+* robot action ``a``: ``autonomous`` / ``ask``            (index 0 / 1)
+* human action ``o``: ``intervene`` / ``rely``            (index 0 / 1)
+* experience ``E``:   ``faulty`` / ``reliable``           (index 0 / 1)
+* trust ``T`` and complexity ``C`` have user-chosen, ordered names; the paper
+  uses ``low`` / ``high`` for both.  Trust levels are ordered from lowest to
+  highest, so for two levels the belief is P(trust = high) = b[-1].
+
+Array layouts (all ``numpy.float64``):
+
+* ``TrustModel.initial[t]``                      P(T_1 = t)
+* ``TrustModel.emission[c, a, t, o]``             P(o_t = o | T_t = t, C_t = c, a_t = a)
+* ``TrustModel.transition[c, a, e, t, t2]``       P(T_{t+1} = t2 | T_t = t, E_{t+1} = e, C_t = c, a_t = a)
+* ``Task.complexity_probs[c]``                   P(C = c), i.i.d. over trials
+* ``Task.success[c]``                            P(autonomous collection succeeds | C = c)
+* ``Task.ask_experience[c]``                     experience index recorded when the robot asks in complexity c
+
+JSON formats are documented in ``docs/formats.md``.  Loading validates every
+cell and reports every problem at once through :class:`ModelError`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Sequence
+
+import numpy as np
+
+from .errors import TrustseekError
+
+ACTIONS: tuple[str, str] = ("autonomous", "ask")
+HUMAN_ACTIONS: tuple[str, str] = ("intervene", "rely")
+EXPERIENCES: tuple[str, str] = ("faulty", "reliable")
+AUTONOMOUS, ASK = 0, 1
+INTERVENE, RELY = 0, 1
+FAULTY, RELIABLE = 0, 1
+
+ATOL = 1e-9  # tolerance for a probability row to sum to one
+
+MODEL_FORMAT = "trustseek.trust-model/1"
+TASK_FORMAT = "trustseek.task/1"
+
+
+class ModelError(TrustseekError, ValueError):
+    """A model, task or policy file is malformed.  ``problems`` lists every violation."""
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.12g}"
+
+
+def _check_names(names: Any, what: str, problems: list[str], minimum: int = 2) -> list[str]:
+    if names is None:  # already reported as missing
+        return []
+    if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
+        problems.append(f"{what} must be a list of non-empty strings, got {names!r}")
+        return []
+    if len(set(names)) != len(names):
+        problems.append(f"{what} has duplicate names: {names!r}")
+    if len(names) < minimum:
+        problems.append(f"{what} needs at least {minimum} entries, got {len(names)}")
+    return names
+
+
+def _read_row(
+    obj: Any, keys: Sequence[str], label: str, problems: list[str]
+) -> np.ndarray | None:
+    """Read a probability row {key: p} and validate it; returns None if unusable."""
+    if not isinstance(obj, Mapping):
+        problems.append(f"{label} must be an object mapping {list(keys)} to probabilities, got {obj!r}")
+        return None
+    row = np.full(len(keys), np.nan)
+    ok = True
+    for k in obj:
+        if k not in keys:
+            problems.append(f"{label} has unknown entry {k!r} (expected one of {list(keys)})")
+            ok = False
+    for i, k in enumerate(keys):
+        if k not in obj:
+            problems.append(f"{label}[{k}] is missing")
+            ok = False
+            continue
+        v = obj[k]
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            problems.append(f"{label}[{k}] must be a number, got {v!r}")
+            ok = False
+            continue
+        v = float(v)
+        if not math.isfinite(v) or v < 0.0 or v > 1.0:
+            problems.append(f"{label}[{k}] = {_fmt(v)} is outside [0, 1]")
+            ok = False
+            continue
+        row[i] = v
+    if not ok:
+        return None
+    s = float(row.sum())
+    if abs(s - 1.0) > ATOL:
+        problems.append(f"{label} sums to {_fmt(s)}")
+        return None
+    return row
+
+
+def _get(obj: Any, key: str, label: str, problems: list[str]) -> Any:
+    if not isinstance(obj, Mapping):
+        problems.append(f"{label} must be an object, got {obj!r}")
+        return None
+    if key not in obj:
+        problems.append(f"{label} is missing")
+        return None
+    return obj[key]
+
+
+def _unknown_keys(obj: Any, allowed: Iterable[str], label: str, problems: list[str]) -> None:
+    if isinstance(obj, Mapping):
+        allowed = list(allowed)
+        for k in obj:
+            if k not in allowed:
+                problems.append(f"{label} has unknown entry {k!r} (expected one of {allowed})")
+
+
+def _check_row_array(arr: np.ndarray, label_of, problems: list[str]) -> None:
+    """Validate the last axis of ``arr`` as probability rows (for arrays built in Python)."""
+    if not np.all(np.isfinite(arr)):
+        problems.append("contains NaN or infinite values")
+        return
+    for idx in np.ndindex(arr.shape[:-1]):
+        row = arr[idx]
+        if np.any(row < 0) or np.any(row > 1):
+            problems.append(f"{label_of(idx)} has entries outside [0, 1]: {row.tolist()}")
+        elif abs(row.sum() - 1.0) > ATOL:
+            problems.append(f"{label_of(idx)} sums to {_fmt(float(row.sum()))}")
+
+
+def _load_json(path: str | Path) -> tuple[Any, str]:
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ModelError([f"file not found"], str(path)) from None
+    except OSError as exc:
+        raise ModelError([f"cannot read file: {exc.strerror}"], str(path)) from None
+    try:
+        return json.loads(text), str(path)
+    except json.JSONDecodeError as exc:
+        raise ModelError([f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"], str(path)) from None
+
+
+# --------------------------------------------------------------------------- TrustModel
+
+
+@dataclass(frozen=True, eq=False)
+class TrustModel:
+    """The supervisor: hidden trust, its dynamics, and how it drives the human action."""
+
+    trust_levels: tuple[str, ...]
+    complexities: tuple[str, ...]
+    initial: np.ndarray
+    emission: np.ndarray
+    transition: np.ndarray
+    notes: str = ""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "trust_levels", tuple(self.trust_levels))
+        object.__setattr__(self, "complexities", tuple(self.complexities))
+        for name in ("initial", "emission", "transition"):
+            arr = np.array(getattr(self, name), dtype=np.float64)
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+        problems = self.problems()
+        if problems:
+            raise ModelError(problems)
+
+    # -- shape -------------------------------------------------------------
+    @property
+    def n_trust(self) -> int:
+        return len(self.trust_levels)
+
+    @property
+    def n_complexity(self) -> int:
+        return len(self.complexities)
+
+    def problems(self) -> list[str]:
+        """Every violation of the model's constraints, as human-readable lines."""
+        K, N = len(self.trust_levels), len(self.complexities)
+        problems: list[str] = []
+        for what, names in (("trust_levels", self.trust_levels), ("complexities", self.complexities)):
+            if len(set(names)) != len(names):
+                problems.append(f"{what} has duplicate names: {list(names)}")
+            if len(names) < 2:
+                problems.append(f"{what} needs at least 2 entries, got {len(names)}")
+        shapes = {
+            "initial": (K,),
+            "emission": (N, 2, K, 2),
+            "transition": (N, 2, 2, K, K),
+        }
+        for name, shape in shapes.items():
+            if getattr(self, name).shape != shape:
+                problems.append(f"{name} has shape {getattr(self, name).shape}, expected {shape}")
+        if problems:
+            return problems
+        T, C = self.trust_levels, self.complexities
+        _check_row_array(self.initial[None, :], lambda idx: "initial", problems)
+        _check_row_array(
+            self.emission,
+            lambda i: f"emission[C={C[i[0]]}, a={ACTIONS[i[1]]}][T={T[i[2]]}]",
+            problems,
+        )
+        _check_row_array(
+            self.transition,
+            lambda i: f"transition[C={C[i[0]]}, a={ACTIONS[i[1]]}, E={EXPERIENCES[i[2]]}][T={T[i[3]]}]",
+            problems,
+        )
+        return problems
+
+    # -- convenience -------------------------------------------------------
+    def trust_index(self, name: str) -> int:
+        return self.trust_levels.index(name)
+
+    def complexity_index(self, name: str) -> int:
+        try:
+            return self.complexities.index(name)
+        except ValueError:
+            raise KeyError(f"unknown complexity {name!r}; expected one of {list(self.complexities)}") from None
+
+    def p_intervene(self, belief: np.ndarray, c: int, a: int) -> float:
+        """P(o = intervene | belief, C = c, a) for a belief vector over trust levels."""
+        return float(np.asarray(belief) @ self.emission[c, a, :, INTERVENE])
+
+    # -- JSON --------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        T, C = self.trust_levels, self.complexities
+        return {
+            "format": MODEL_FORMAT,
+            "notes": self.notes,
+            "trust_levels": list(T),
+            "complexities": list(C),
+            "initial": {T[t]: float(self.initial[t]) for t in range(len(T))},
+            "emission": {
+                C[c]: {
+                    ACTIONS[a]: {
+                        T[t]: {HUMAN_ACTIONS[o]: float(self.emission[c, a, t, o]) for o in range(2)}
+                        for t in range(len(T))
+                    }
+                    for a in range(2)
+                }
+                for c in range(len(C))
+            },
+            "transition": {
+                C[c]: {
+                    ACTIONS[a]: {
+                        EXPERIENCES[e]: {
+                            T[t]: {T[u]: float(self.transition[c, a, e, t, u]) for u in range(len(T))}
+                            for t in range(len(T))
+                        }
+                        for e in range(2)
+                    }
+                    for a in range(2)
+                }
+                for c in range(len(C))
+            },
+        }
+
+    @classmethod
+    def from_dict(cls, d: Any, source: str | None = None) -> "TrustModel":
+        problems: list[str] = []
+        if not isinstance(d, Mapping):
+            raise ModelError([f"a trust model must be a JSON object, got {type(d).__name__}"], source)
+        fmt = d.get("format", MODEL_FORMAT)
+        if fmt != MODEL_FORMAT:
+            problems.append(f"format is {fmt!r}, expected {MODEL_FORMAT!r}")
+        _unknown_keys(d, ["format", "notes", "trust_levels", "complexities", "initial", "emission", "transition"], "model", problems)
+        T = _check_names(_get(d, "trust_levels", "trust_levels", problems), "trust_levels", problems)
+        C = _check_names(_get(d, "complexities", "complexities", problems), "complexities", problems)
+        if problems or not T or not C:
+            raise ModelError(problems, source)
+        K, N = len(T), len(C)
+        initial = np.full(K, np.nan)
+        emission = np.full((N, 2, K, 2), np.nan)
+        transition = np.full((N, 2, 2, K, K), np.nan)
+
+        init = _get(d, "initial", "initial", problems)
+        if init is not None:
+            row = _read_row(init, T, "initial", problems)
+            if row is not None:
+                initial[:] = row
+
+        em = _get(d, "emission", "emission", problems)
+        if em is not None:
+            _unknown_keys(em, C, "emission", problems)
+            for c, cn in enumerate(C):
+                ec = _get(em, cn, f"emission[C={cn}]", problems)
+                if ec is None:
+                    continue
+                _unknown_keys(ec, ACTIONS, f"emission[C={cn}]", problems)
+                for a, an in enumerate(ACTIONS):
+                    ea = _get(ec, an, f"emission[C={cn}, a={an}]", problems)
+                    if ea is None:
+                        continue
+                    _unknown_keys(ea, T, f"emission[C={cn}, a={an}]", problems)
+                    for t, tn in enumerate(T):
+                        lab = f"emission[C={cn}, a={an}][T={tn}]"
+                        et = _get(ea, tn, lab, problems)
+                        if et is None:
+                            continue
+                        row = _read_row(et, HUMAN_ACTIONS, lab, problems)
+                        if row is not None:
+                            emission[c, a, t] = row
+
+        tr = _get(d, "transition", "transition", problems)
+        if tr is not None:
+            _unknown_keys(tr, C, "transition", problems)
+            for c, cn in enumerate(C):
+                tc = _get(tr, cn, f"transition[C={cn}]", problems)
+                if tc is None:
+                    continue
+                _unknown_keys(tc, ACTIONS, f"transition[C={cn}]", problems)
+                for a, an in enumerate(ACTIONS):
+                    ta = _get(tc, an, f"transition[C={cn}, a={an}]", problems)
+                    if ta is None:
+                        continue
+                    _unknown_keys(ta, EXPERIENCES, f"transition[C={cn}, a={an}]", problems)
+                    for e, en in enumerate(EXPERIENCES):
+                        te = _get(ta, en, f"transition[C={cn}, a={an}, E={en}]", problems)
+                        if te is None:
+                            continue
+                        _unknown_keys(te, T, f"transition[C={cn}, a={an}, E={en}]", problems)
+                        for t, tn in enumerate(T):
+                            lab = f"transition[C={cn}, a={an}, E={en}][T={tn}]"
+                            tt = _get(te, tn, lab, problems)
+                            if tt is None:
+                                continue
+                            row = _read_row(tt, T, lab, problems)
+                            if row is not None:
+                                transition[c, a, e, t] = row
+        notes = d.get("notes", "")
+        if not isinstance(notes, str):
+            problems.append(f"notes must be a string, got {notes!r}")
+        if problems:
+            raise ModelError(problems, source)
+        return cls(tuple(T), tuple(C), initial, emission, transition, notes=notes)
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+
+    @classmethod
+    def load(cls, path: str | Path) -> "TrustModel":
+        d, source = _load_json(path)
+        return cls.from_dict(d, source)
+
+    def replace(self, **changes: Any) -> "TrustModel":
+        kw = dict(
+            trust_levels=self.trust_levels,
+            complexities=self.complexities,
+            initial=self.initial,
+            emission=self.emission,
+            transition=self.transition,
+            notes=self.notes,
+        )
+        kw.update(changes)
+        return TrustModel(**kw)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, TrustModel):
+            return NotImplemented
+        return (
+            self.trust_levels == other.trust_levels
+            and self.complexities == other.complexities
+            and np.array_equal(self.initial, other.initial)
+            and np.array_equal(self.emission, other.emission)
+            and np.array_equal(self.transition, other.transition)
+        )
+
+
+# --------------------------------------------------------------------------- Task
+
+
+@dataclass(frozen=True)
+class Rewards:
+    """The per-trial team reward of eq. (1)."""
+
+    autonomous_success: float = 2.0  # (autonomous, rely, reliable)
+    ask: float = 1.0  # robot asked; human teleoperates
+    intervene: float = 0.0  # (autonomous, intervene)
+    autonomous_failure: float = -3.0  # (autonomous, rely, faulty)
+
+    def to_dict(self) -> dict[str, float]:
+        return {
+            "autonomous_success": self.autonomous_success,
+            "ask": self.ask,
+            "intervene": self.intervene,
+            "autonomous_failure": self.autonomous_failure,
+        }
+
+    def of(self, action: int, human_action: int, experience: int) -> float:
+        """Reward of one trial from its robot action, human action and experience indices."""
+        if action == ASK:
+            return self.ask
+        if human_action == INTERVENE:
+            return self.intervene
+        return self.autonomous_success if experience == RELIABLE else self.autonomous_failure
+
+
+@dataclass(frozen=True, eq=False)
+class Task:
+    """The object-collection task: complexity distribution, robot skill, rewards, discount."""
+
+    complexities: tuple[str, ...]
+    complexity_probs: np.ndarray
+    success: np.ndarray
+    ask_experience: tuple[int, ...]
+    rewards: Rewards = field(default_factory=Rewards)
+    discount: float = 0.987
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "complexities", tuple(self.complexities))
+        object.__setattr__(self, "ask_experience", tuple(int(x) for x in self.ask_experience))
+        for name in ("complexity_probs", "success"):
+            arr = np.array(getattr(self, name), dtype=np.float64)
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+        problems = self.problems()
+        if problems:
+            raise ModelError(problems)
+
+    @property
+    def n_complexity(self) -> int:
+        return len(self.complexities)
+
+    def problems(self) -> list[str]:
+        N = len(self.complexities)
+        problems: list[str] = []
+        if len(set(self.complexities)) != N:
+            problems.append(f"complexities has duplicate names: {list(self.complexities)}")
+        if N < 2:
+            problems.append(f"complexities needs at least 2 entries, got {N}")
+        if self.complexity_probs.shape != (N,) or self.success.shape != (N,) or len(self.ask_experience) != N:
+            problems.append("complexity_probs, success and ask_experience need one entry per complexity")
+            return problems
+        _check_row_array(self.complexity_probs[None, :], lambda i: "complexity probabilities", problems)
+        for c, cn in enumerate(self.complexities):
+            s = self.success[c]
+            if not (math.isfinite(s) and 0.0 <= s <= 1.0):
+                problems.append(f"complexities[{cn}].success = {_fmt(float(s))} is outside [0, 1]")
+            if self.ask_experience[c] not in (FAULTY, RELIABLE):
+                problems.append(f"complexities[{cn}].ask_experience must be 'faulty' or 'reliable'")
+        if not (math.isfinite(self.discount) and 0.0 <= self.discount < 1.0):
+            problems.append(f"discount = {_fmt(self.discount)} must lie in [0, 1)")
+        for k, v in self.rewards.to_dict().items():
+            if not math.isfinite(v):
+                problems.append(f"rewards[{k}] = {v!r} must be a finite number")
+        return problems
+
+    def complexity_index(self, name: str) -> int:
+        try:
+            return self.complexities.index(name)
+        except ValueError:
+            raise KeyError(f"unknown complexity {name!r}; expected one of {list(self.complexities)}") from None
+
+    def p_experience(self, c: int, a: int, o: int) -> np.ndarray:
+        """P(E_{t+1} | o_t, C_t = c, a_t = a) as a length-2 array over (faulty, reliable)."""
+        if a == ASK:
+            e = self.ask_experience[c]
+            return np.array([1.0 - e, float(e)])
+        if o == INTERVENE:
+            return np.array([1.0, 0.0])
+        s = float(self.success[c])
+        return np.array([1.0 - s, s])
+
+    def experience_table(self) -> np.ndarray:
+        """P(E' | o, C, a) as an array indexed [c, a, o, e]."""
+        out = np.zeros((self.n_complexity, 2, 2, 2))
+        for c in range(self.n_complexity):
+            for a in range(2):
+                for o in range(2):
+                    out[c, a, o] = self.p_experience(c, a, o)
+        return out
+
+    def reward_table(self) -> np.ndarray:
+        """Reward of eq. (1) as an array indexed [a, o, e]."""
+        out = np.zeros((2, 2, 2))
+        for a in range(2):
+            for o in range(2):
+                for e in range(2):
+                    out[a, o, e] = self.rewards.of(a, o, e)
+        return out
+
+    def check_compatible(self, model: TrustModel) -> None:
+        if tuple(model.complexities) != tuple(self.complexities):
+            raise ModelError(
+                [
+                    f"the model's complexities {list(model.complexities)} differ from the task's "
+                    f"{list(self.complexities)} (names and order must match)"
+                ]
+            )
+
+    # -- JSON --------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "format": TASK_FORMAT,
+            "complexities": {
+                cn: {
+                    "probability": float(self.complexity_probs[c]),
+                    "success": float(self.success[c]),
+                    "ask_experience": EXPERIENCES[self.ask_experience[c]],
+                }
+                for c, cn in enumerate(self.complexities)
+            },
+            "rewards": self.rewards.to_dict(),
+            "discount": self.discount,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Any, source: str | None = None) -> "Task":
+        problems: list[str] = []
+        if not isinstance(d, Mapping):
+            raise ModelError([f"a task must be a JSON object, got {type(d).__name__}"], source)
+        fmt = d.get("format", TASK_FORMAT)
+        if fmt != TASK_FORMAT:
+            problems.append(f"format is {fmt!r}, expected {TASK_FORMAT!r}")
+        _unknown_keys(d, ["format", "complexities", "rewards", "discount"], "task", problems)
+        cx = _get(d, "complexities", "complexities", problems)
+        names: list[str] = []
+        probs: list[float] = []
+        succ: list[float] = []
+        askx: list[int] = []
+        if cx is not None:
+            if not isinstance(cx, Mapping) or len(cx) < 2:
+                problems.append("complexities must be an object with at least 2 named levels")
+            else:
+                for cn, spec in cx.items():
+                    names.append(cn)
+                    lab = f"complexities[{cn}]"
+                    if not isinstance(spec, Mapping):
+                        problems.append(f"{lab} must be an object, got {spec!r}")
+                        continue
+                    _unknown_keys(spec, ["probability", "success", "ask_experience"], lab, problems)
+                    for key, store in (("probability", probs), ("success", succ)):
+                        v = _get(spec, key, f"{lab}.{key}", problems)
+                        if v is None:
+                            continue
+                        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0.0 <= float(v) <= 1.0):
+                            problems.append(f"{lab}.{key} = {v!r} must be a probability in [0, 1]")
+                            continue
+                        store.append(float(v))
+                    ae = _get(spec, "ask_experience", f"{lab}.ask_experience", problems)
+                    if ae is not None:
+                        if ae not in EXPERIENCES:
+                            problems.append(f"{lab}.ask_experience = {ae!r} must be one of {list(EXPERIENCES)}")
+                        else:
+                            askx.append(EXPERIENCES.index(ae))
+                if not problems and abs(sum(probs) - 1.0) > ATOL:
+                    problems.append(f"complexity probabilities sum to {_fmt(sum(probs))}")
+        rw = d.get("rewards", {})
+        rewards = Rewards()
+        if not isinstance(rw, Mapping):
+            problems.append(f"rewards must be an object, got {rw!r}")
+        else:
+            _unknown_keys(rw, Rewards().to_dict().keys(), "rewards", problems)
+            vals = {}
+            for k, v in rw.items():
+                if k in Rewards().to_dict():
+                    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
+                        problems.append(f"rewards[{k}] = {v!r} must be a finite number")
+                    else:
+                        vals[k] = float(v)
+            rewards = Rewards(**vals)
+        disc = d.get("discount", 0.987)
+        if isinstance(disc, bool) or not isinstance(disc, (int, float)) or not (0.0 <= float(disc) < 1.0):
+            problems.append(f"discount = {disc!r} must be a number in [0, 1)")
+        if problems:
+            raise ModelError(problems, source)
+        return cls(tuple(names), np.array(probs), np.array(succ), tuple(askx), rewards, float(disc))
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Task":
+        d, source = _load_json(path)
+        return cls.from_dict(d, source)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Task):
+            return NotImplemented
+        return (
+            self.complexities == other.complexities
+            and np.array_equal(self.complexity_probs, other.complexity_probs)
+            and np.array_equal(self.success, other.success)
+            and self.ask_experience == other.ask_experience
+            and self.rewards == other.rewards
+            and self.discount == other.discount
+        )

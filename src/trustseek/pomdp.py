@@ -1,0 +1,165 @@
+"""The assistance-seeking POMDP of Section IV, built from a TrustModel and a Task.
+
+States are S = (T, E, C): hidden trust T, the last experience E and the trial's
+complexity C (both observed).  Actions are {autonomous, ask}; observations are
+the human actions {intervene, rely}.  Timing follows the paper: the human
+action o_t depends on the state at the START of trial t, P(o_t | T_t, C_t, a_t),
+and the next state is drawn as
+
+    P(S_{t+1} | S_t, a_t) = P(T_{t+1} | E_{t+1}, T_t, C_t, a_t) P(C_{t+1}) P(E_{t+1} | T_t, C_t, a_t),
+    P(E_{t+1} | T_t, C_t, a_t) = sum_o P(E_{t+1} | o, C_t, a_t) P(o | T_t, C_t, a_t).
+
+The reward R(S, a) is eq. (2), the expectation of eq. (1) over o and E'.
+
+Two views of the same problem are offered:
+
+* factored arrays with named axes (what the belief-MDP solvers use):
+  ``emission[c, a, t, o]``, ``experience[c, a, o, e]``,
+  ``trust_transition[c, a, e, t, t2]``, ``complexity_probs[c]``,
+  ``trial_reward[a, o, e]``, ``expected_reward[c, a, t]`` and the joint one-step
+  kernel ``kernel[c, a, t, o, e, t2]``;
+* flat arrays over the enumerated states (what generic POMDP code uses):
+  ``states`` (tuples of names), ``transition_matrix[a, s, s2]``,
+  ``observation_matrix[a, s, o]`` (observation of the state at the start),
+  ``reward_matrix[s, a]``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from .model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
+
+
+@dataclass(frozen=True, eq=False)
+class AssistancePOMDP:
+    model: TrustModel
+    task: Task
+
+    def __post_init__(self) -> None:
+        self.task.check_compatible(self.model)
+
+    # -- sizes and names ---------------------------------------------------
+    @property
+    def n_trust(self) -> int:
+        return self.model.n_trust
+
+    @property
+    def n_complexity(self) -> int:
+        return self.task.n_complexity
+
+    @property
+    def discount(self) -> float:
+        return self.task.discount
+
+    @property
+    def complexities(self) -> tuple[str, ...]:
+        return self.task.complexities
+
+    @property
+    def trust_levels(self) -> tuple[str, ...]:
+        return self.model.trust_levels
+
+    actions = ACTIONS
+    observations = HUMAN_ACTIONS
+    experiences = EXPERIENCES
+
+    # -- factored arrays ---------------------------------------------------
+    @property
+    def emission(self) -> np.ndarray:
+        """P(o | T, C, a), axes [c, a, t, o]."""
+        return self.model.emission
+
+    @property
+    def trust_transition(self) -> np.ndarray:
+        """P(T' | T, E', C, a), axes [c, a, e, t, t2]."""
+        return self.model.transition
+
+    @property
+    def complexity_probs(self) -> np.ndarray:
+        return self.task.complexity_probs
+
+    @cached_property
+    def experience(self) -> np.ndarray:
+        """P(E' | o, C, a), axes [c, a, o, e]."""
+        return self.task.experience_table()
+
+    @cached_property
+    def trial_reward(self) -> np.ndarray:
+        """Eq. (1), axes [a, o, e]."""
+        return self.task.reward_table()
+
+    @cached_property
+    def kernel(self) -> np.ndarray:
+        """Joint one-step kernel P(o, E', T' | T, C, a), axes [c, a, t, o, e, t2]."""
+        return np.einsum(
+            "cato,caoe,caetu->catoeu", self.emission, self.experience, self.trust_transition, optimize=True
+        )
+
+    @cached_property
+    def outcome_probs(self) -> np.ndarray:
+        """P(o, E' | T, C, a), axes [c, a, t, o, e]."""
+        return np.einsum("cato,caoe->catoe", self.emission, self.experience)
+
+    @cached_property
+    def expected_reward(self) -> np.ndarray:
+        """R(S, a) of eq. (2) (it does not depend on E), axes [c, a, t]."""
+        return np.einsum("catoe,aoe->cat", self.outcome_probs, self.trial_reward)
+
+    # -- flat arrays -------------------------------------------------------
+    @cached_property
+    def states(self) -> tuple[tuple[str, str, str], ...]:
+        """Enumerated states (trust, experience, complexity); index = (t * 2 + e) * N + c."""
+        return tuple(
+            (tn, en, cn) for tn in self.trust_levels for en in EXPERIENCES for cn in self.complexities
+        )
+
+    def state_index(self, t: int, e: int, c: int) -> int:
+        return (t * 2 + e) * self.n_complexity + c
+
+    @cached_property
+    def transition_matrix(self) -> np.ndarray:
+        """P(S' | S, a), axes [a, s, s2]."""
+        K, N = self.n_trust, self.n_complexity
+        # P(e', t' | t, c, a) = sum_o kernel
+        pet = self.kernel.sum(axis=3)  # [c, a, t, e, u]
+        out = np.zeros((2, K, 2, N, K, 2, N))  # [a, t, e, c, u, e2, c2]
+        for a in range(2):
+            for c in range(N):
+                block = pet[c, a].transpose(0, 2, 1)  # [t, u, e2]
+                val = block[:, :, :, None] * self.complexity_probs[None, None, None, :]  # [t, u, e2, c2]
+                out[a, :, :, c] = val[:, None, :, :, :].repeat(2, axis=1)  # independent of e
+        S = K * 2 * N
+        return out.reshape(2, S, S)
+
+    @cached_property
+    def observation_matrix(self) -> np.ndarray:
+        """P(o | S, a) for the state S at the start of the trial, axes [a, s, o]."""
+        K, N = self.n_trust, self.n_complexity
+        out = np.zeros((2, K, 2, N, 2))
+        for a in range(2):
+            for t in range(K):
+                for c in range(N):
+                    out[a, t, :, c] = self.emission[c, a, t]
+        return out.reshape(2, K * 2 * N, 2)
+
+    @cached_property
+    def reward_matrix(self) -> np.ndarray:
+        """R(S, a) of eq. (2), axes [s, a]."""
+        K, N = self.n_trust, self.n_complexity
+        out = np.zeros((K, 2, N, 2))
+        for t in range(K):
+            for c in range(N):
+                out[t, :, c, :] = self.expected_reward[c, :, t]
+        return out.reshape(K * 2 * N, 2)
+
+    @cached_property
+    def initial_state_distribution(self) -> np.ndarray:
+        """Initial trust from the model, complexity from the task, experience ``reliable``."""
+        K, N = self.n_trust, self.n_complexity
+        out = np.zeros((K, 2, N))
+        out[:, 1, :] = self.model.initial[:, None] * self.complexity_probs[None, :]
+        return out.reshape(-1)

@@ -1,0 +1,105 @@
+"""Built-in presets.  ``paper`` holds exactly the numbers of Section V of the paper.
+
+Cells the paper never observes are set to the identity (trust does not change)
+and listed in :data:`PAPER_UNOBSERVED_CELLS`:
+
+* ``transition[C=low, a=ask, E=reliable]``: asking in low complexity is always
+  recorded as ``faulty``, so a ``reliable`` experience never follows it.
+* ``transition[C=high, a=ask, E=faulty]``: asking in high complexity is always
+  recorded as ``reliable``.
+
+Emissions of ``ask`` are P(intervene) = 1 for every trust and complexity: when
+asked, the human always teleoperates (Fig. 4a).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .model import ASK, AUTONOMOUS, FAULTY, RELIABLE, ModelError, Rewards, Task, TrustModel
+
+PAPER_UNOBSERVED_CELLS = (
+    "transition[C=low, a=ask, E=reliable]",
+    "transition[C=high, a=ask, E=faulty]",
+)
+
+LOW, HIGH = 0, 1
+
+
+def paper_model() -> TrustModel:
+    """The supervisor model estimated in Section V (Figs. 4-6)."""
+    rely = np.array(
+        [
+            # C = low:  T = low, T = high  (Fig. 4b)
+            [0.98, 1.00],
+            # C = high: T = low, T = high  (Fig. 4c)
+            [0.46, 0.95],
+        ]
+    )
+    emission = np.zeros((2, 2, 2, 2))
+    emission[:, AUTONOMOUS, :, 1] = rely
+    emission[:, AUTONOMOUS, :, 0] = 1.0 - rely
+    emission[:, ASK, :, 0] = 1.0  # Fig. 4a: asked -> always teleoperates
+
+    def m(p_low_to_high: float, p_high_to_high: float) -> np.ndarray:
+        return np.array([[1 - p_low_to_high, p_low_to_high], [1 - p_high_to_high, p_high_to_high]])
+
+    eye = np.eye(2)
+    transition = np.zeros((2, 2, 2, 2, 2))
+    transition[LOW, AUTONOMOUS, RELIABLE] = eye  # Fig. 5a
+    transition[LOW, AUTONOMOUS, FAULTY] = m(0.01, 0.61)  # Fig. 5b: high->low 0.39, low stays 0.99
+    transition[LOW, ASK, FAULTY] = eye  # Fig. 5c
+    transition[LOW, ASK, RELIABLE] = eye  # never observed (identity)
+    transition[HIGH, AUTONOMOUS, RELIABLE] = m(1.0, 1.0)  # Fig. 6a
+    transition[HIGH, AUTONOMOUS, FAULTY] = m(0.30, 0.0)  # Fig. 6b: high->low 1, low stays 0.7
+    transition[HIGH, ASK, RELIABLE] = m(0.44, 0.94)  # Fig. 6c
+    transition[HIGH, ASK, FAULTY] = eye  # never observed (identity)
+    return TrustModel(
+        trust_levels=("low", "high"),
+        complexities=("low", "high"),
+        initial=np.array([0.0, 1.0]),
+        emission=emission,
+        transition=transition,
+        notes=(
+            "Section V of Mangalindan, Rovira & Srivastava, 'On trust-aware assistance-seeking in "
+            "human-supervised autonomy'. Never-observed cells (identity): " + "; ".join(PAPER_UNOBSERVED_CELLS)
+        ),
+    )
+
+
+def paper_task() -> Task:
+    """The object-collection task of Sections III-V: rewards of eq. (1), gamma = 0.987."""
+    return Task(
+        complexities=("low", "high"),
+        complexity_probs=np.array([0.5, 0.5]),
+        success=np.array([0.97, 0.83]),
+        ask_experience=(FAULTY, RELIABLE),
+        rewards=Rewards(autonomous_success=2.0, ask=1.0, intervene=0.0, autonomous_failure=-3.0),
+        discount=0.987,
+    )
+
+
+MODEL_PRESETS = {"paper": paper_model}
+TASK_PRESETS = {"paper": paper_task}
+
+
+def _resolve(spec: str | Path, presets: dict, loader, kind: str):
+    s = str(spec)
+    if s in presets:
+        return presets[s]()
+    p = Path(s)
+    if p.suffix == "" and not p.exists():
+        raise ModelError([f"unknown {kind} preset {s!r}; presets: {sorted(presets)}; or give a path to a JSON file"])
+    return loader(p)
+
+
+def load_model(spec: str | Path) -> TrustModel:
+    """A trust model from a preset name (``paper``) or a JSON file path."""
+    return _resolve(spec, MODEL_PRESETS, TrustModel.load, "model")
+
+
+def load_task(spec: str | Path) -> Task:
+    """A task from a preset name (``paper``) or a JSON file path."""
+    return _resolve(spec, TASK_PRESETS, Task.load, "task")
