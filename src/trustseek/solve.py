@@ -148,10 +148,11 @@ class GridSolver:
 
         return TrustAwarePolicy.from_solution(self.solve_grid(pomdp), pomdp.model, pomdp.task)
 
-    def solve_grid(self, pomdp: AssistancePOMDP) -> GridSolution:
-        t0 = time.perf_counter()
+    def operators(self, pomdp: AssistancePOMDP):
+        """(grid, q_of, bellman): q_of(W) -> Q (G, N, 2) and the Bellman operator W -> T W
+        of the discretized belief MDP, where W(b) = Σ_C P(C) max_a Q(b, C, a)."""
         grid, r, P = self.build(pomdp)
-        N, G, gamma = pomdp.n_complexity, len(grid), pomdp.discount
+        N, gamma = pomdp.n_complexity, pomdp.discount
         pc = pomdp.complexity_probs
 
         def q_of(W):
@@ -159,6 +160,14 @@ class GridSolver:
 
         def bellman(W):
             return q_of(W).max(axis=2) @ pc
+
+        return grid, r, P, q_of, bellman
+
+    def solve_grid(self, pomdp: AssistancePOMDP) -> GridSolution:
+        t0 = time.perf_counter()
+        grid, r, P, q_of, bellman = self.operators(pomdp)
+        N, G, gamma = pomdp.n_complexity, len(grid), pomdp.discount
+        pc = pomdp.complexity_probs
 
         history: list[float] = []
         if self.method == "value-iteration":

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import sys
 
+from rich.markup import escape
+
 from ..errors import TrustseekError
 from ._app import app, err_console
 from . import plan  # noqa: F401  (solve, plot-q)
@@ -19,7 +21,7 @@ def main() -> None:
         app(standalone_mode=True)
     except TrustseekError as exc:
         for line in exc.lines():
-            err_console.print(f"[bold red]error:[/] {line}", highlight=False, soft_wrap=True)
+            err_console.print(f"[bold red]error:[/] {escape(line)}", highlight=False, soft_wrap=True)
         sys.exit(2)
     except KeyboardInterrupt:
         err_console.print("interrupted")

@@ -1,0 +1,80 @@
+"""The planning CLI: solve, agnostic, plot-q, preset, check, and clean errors."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from trustseek import TrustModel, load_policy
+
+
+def run(*args, check=True):
+    proc = subprocess.run([sys.executable, "-m", "trustseek", *args], capture_output=True, text=True, timeout=120)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"exit {proc.returncode}\nstdout:\n{proc.stdout}\nstderr:\n{proc.stderr}")
+    return proc
+
+
+def test_solve_json_and_policy_file(tmp_path):
+    out = tmp_path / "policy.json"
+    proc = run("solve", "--belief-update", "paper", "--grid", "1001", "--json", "--out", str(out))
+    d = json.loads(proc.stdout)
+    assert d["belief_update"] == "paper"
+    assert d["thresholds"]["low"] is None
+    assert 0.72 <= d["thresholds"]["high"] <= 0.80
+    assert d["trust_agnostic"] == {"low": 0.0, "high": 1.0}
+    pol = load_policy(out)
+    assert pol.thresholds()["high"] == pytest.approx(d["thresholds"]["high"])
+
+
+def test_solve_table_says_which_update():
+    proc = run("solve", "--grid", "501")
+    assert "belief update: bayes" in proc.stdout
+    assert "never asks" in proc.stdout
+
+
+def test_bad_model_file_gives_one_line_per_problem(tmp_path, model):
+    d = model.to_dict()
+    d["transition"]["high"]["ask"]["reliable"]["low"] = {"low": 0.53, "high": 0.44}
+    d["emission"]["low"]["autonomous"]["high"]["rely"] = 1.5
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(d))
+    proc = run("solve", "--model", str(bad), check=False)
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr
+    lines = [l for l in proc.stderr.splitlines() if l.strip()]
+    assert lines == [
+        f"error: {bad}: emission[C=low, a=autonomous][T=high][rely] = 1.5 is outside [0, 1]",
+        f"error: {bad}: transition[C=high, a=ask, E=reliable][T=low] sums to 0.97",
+    ]
+
+
+def test_bad_option_values(tmp_path):
+    proc = run("solve", "--belief-update", "magic", check=False)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "--belief-update must be 'bayes' or 'paper'" in proc.stderr
+    proc = run("solve", "--model", str(tmp_path / "missing.json"), check=False)
+    assert proc.returncode == 2 and "file not found" in proc.stderr
+
+
+def test_plot_q_writes_png(tmp_path):
+    out = tmp_path / "q.png"
+    run("plot-q", "--grid", "501", "--out", str(out))
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert out.stat().st_size > 10_000
+
+
+def test_preset_export_and_check(tmp_path):
+    run("preset", "paper", "--model-out", str(tmp_path / "m.json"), "--task-out", str(tmp_path / "t.json"))
+    assert TrustModel.load(tmp_path / "m.json").trust_levels == ("low", "high")
+    proc = run("check", str(tmp_path / "m.json"), str(tmp_path / "t.json"))
+    assert proc.stdout.count(": ok") == 2
+    proc = run("solve", "--model", str(tmp_path / "m.json"), "--task", str(tmp_path / "t.json"), "--json", "--grid", "501")
+    assert json.loads(proc.stdout)["thresholds"]["low"] is None
+
+
+def test_help_everywhere():
+    for cmd in ([], ["solve"], ["agnostic"], ["plot-q"], ["preset"], ["check"]):
+        proc = run(*cmd, "--help")
+        assert "Usage" in proc.stdout

@@ -1,0 +1,205 @@
+"""Trust model and task files: round trips, the paper preset, and validation."""
+
+import copy
+import json
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from trustseek import ModelError, Task, TrustModel
+from trustseek.presets import PAPER_UNOBSERVED_CELLS, load_model, load_task
+
+
+def test_paper_preset_numbers(model, task):
+    d = model.to_dict()
+    assert d["initial"] == {"low": 0.0, "high": 1.0}
+    em = d["emission"]
+    assert em["low"]["autonomous"]["high"]["rely"] == 1.0
+    assert em["low"]["autonomous"]["low"]["rely"] == 0.98
+    assert em["high"]["autonomous"]["high"]["rely"] == 0.95
+    assert em["high"]["autonomous"]["low"]["rely"] == 0.46
+    for c in ("low", "high"):
+        for t in ("low", "high"):
+            assert em[c]["ask"][t]["intervene"] == 1.0
+    tr = d["transition"]
+    assert tr["low"]["autonomous"]["reliable"]["high"]["high"] == 1.0
+    assert tr["low"]["autonomous"]["reliable"]["low"]["low"] == 1.0
+    assert tr["low"]["autonomous"]["faulty"]["high"]["low"] == pytest.approx(0.39)
+    assert tr["low"]["autonomous"]["faulty"]["low"]["low"] == pytest.approx(0.99)
+    assert tr["low"]["ask"]["faulty"]["high"]["high"] == 1.0
+    assert tr["low"]["ask"]["faulty"]["low"]["low"] == 1.0
+    assert tr["high"]["autonomous"]["reliable"]["high"]["high"] == 1.0
+    assert tr["high"]["autonomous"]["reliable"]["low"]["high"] == 1.0
+    assert tr["high"]["autonomous"]["faulty"]["high"]["low"] == 1.0
+    assert tr["high"]["autonomous"]["faulty"]["low"]["low"] == pytest.approx(0.7)
+    assert tr["high"]["ask"]["reliable"]["high"]["high"] == pytest.approx(0.94)
+    assert tr["high"]["ask"]["reliable"]["low"]["high"] == pytest.approx(0.44)
+    # never-observed cells are the identity, and documented
+    assert tr["low"]["ask"]["reliable"]["low"] == {"low": 1.0, "high": 0.0}
+    assert tr["high"]["ask"]["faulty"]["high"] == {"low": 0.0, "high": 1.0}
+    assert len(PAPER_UNOBSERVED_CELLS) == 2
+    assert task.success.tolist() == [0.97, 0.83]
+    assert task.complexity_probs.tolist() == [0.5, 0.5]
+    assert task.discount == 0.987
+    assert task.rewards.to_dict() == {"autonomous_success": 2.0, "ask": 1.0, "intervene": 0.0, "autonomous_failure": -3.0}
+
+
+def test_round_trip(tmp_path, model, task):
+    model.save(tmp_path / "m.json")
+    task.save(tmp_path / "t.json")
+    assert TrustModel.load(tmp_path / "m.json") == model
+    assert Task.load(tmp_path / "t.json") == task
+    assert load_model(tmp_path / "m.json") == model
+    assert load_task("paper") == task
+
+
+def test_precise_row_sum_message(model):
+    d = model.to_dict()
+    d["transition"]["high"]["ask"]["reliable"]["low"] = {"low": 0.53, "high": 0.44}
+    with pytest.raises(ModelError) as exc:
+        TrustModel.from_dict(d)
+    assert exc.value.problems == ["transition[C=high, a=ask, E=reliable][T=low] sums to 0.97"]
+
+
+def test_every_problem_reported(model):
+    d = model.to_dict()
+    del d["emission"]["high"]["ask"]
+    d["initial"] = {"low": -0.1, "high": 1.1}
+    d["transition"]["low"]["autonomous"]["faulty"]["high"]["medium"] = 0.0
+    with pytest.raises(ModelError) as exc:
+        TrustModel.from_dict(d, "m.json")
+    lines = exc.value.lines()
+    assert "m.json: emission[C=high, a=ask] is missing" in lines
+    assert "m.json: initial[low] = -0.1 is outside [0, 1]" in lines
+    assert "m.json: initial[high] = 1.1 is outside [0, 1]" in lines
+    assert any("transition[C=low, a=autonomous, E=faulty][T=high] has unknown entry 'medium'" in x for x in lines)
+    assert len(lines) == 4
+
+
+def test_task_validation(task):
+    d = task.to_dict()
+    d["complexities"]["high"]["success"] = 1.3
+    d["complexities"]["low"]["ask_experience"] = "great"
+    d["discount"] = 1.0
+    with pytest.raises(ModelError) as exc:
+        Task.from_dict(d)
+    p = exc.value.problems
+    assert "complexities[high].success = 1.3 must be a probability in [0, 1]" in p
+    assert any("ask_experience = 'great'" in x for x in p)
+    assert any(x.startswith("discount = 1.0") for x in p)
+
+
+def test_names_must_match(model, task):
+    from trustseek import AssistancePOMDP
+
+    other = Task.from_dict(json.loads(json.dumps(task.to_dict()).replace('"low"', '"easy"')))
+    with pytest.raises(ModelError, match="differ from the task"):
+        AssistancePOMDP(model, other)
+
+
+def test_missing_and_bad_files(tmp_path):
+    with pytest.raises(ModelError, match="file not found"):
+        TrustModel.load(tmp_path / "nope.json")
+    (tmp_path / "bad.json").write_text("{ not json")
+    with pytest.raises(ModelError, match=r"invalid JSON at line 1, column 3"):
+        TrustModel.load(tmp_path / "bad.json")
+    with pytest.raises(ModelError, match="unknown model preset"):
+        load_model("papr")
+
+
+# --------------------------------------------------------------------------- property-based
+
+
+def _paths(d, prefix=()):
+    """All (path, value) leaves and inner nodes of a nested dict."""
+    for k, v in d.items():
+        yield prefix + (k,), v
+        if isinstance(v, dict):
+            yield from _paths(v, prefix + (k,))
+
+
+def _set(d, path, value):
+    for k in path[:-1]:
+        d = d[k]
+    d[path[-1]] = value
+
+
+def _delete(d, path):
+    for k in path[:-1]:
+        d = d[k]
+    del d[path[-1]]
+
+
+PAPER = TrustModel.from_dict(load_model("paper").to_dict()).to_dict()
+PROB_LEAVES = [p for p, v in _paths(PAPER) if isinstance(v, float) and p[0] in ("initial", "emission", "transition")]
+NODES = [p for p, v in _paths(PAPER) if p[0] in ("initial", "emission", "transition", "trust_levels", "complexities")]
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    mutation=st.sampled_from(["delete", "range", "sum", "type", "unknown", "nan"]),
+    leaf=st.sampled_from(PROB_LEAVES),
+    node=st.sampled_from(NODES),
+    value=st.floats(min_value=1e-6, max_value=0.5),
+)
+def test_validation_catches_random_corruption(mutation, leaf, node, value):
+    d = copy.deepcopy(PAPER)
+    if mutation == "delete":
+        _delete(d, node)
+        expect = node[-1]
+    elif mutation == "range":
+        _set(d, leaf, 1.0 + value)
+        expect = "outside [0, 1]"
+    elif mutation == "sum":
+        # shift one cell within [0, 1] so that the row no longer sums to one
+        old = d
+        for k in leaf:
+            old = old[k]
+        new = old - value if old - value >= 0 else old + value
+        _set(d, leaf, new)
+        expect = "sums to"
+    elif mutation == "type":
+        _set(d, leaf, "0.5")
+        expect = "must be a number"
+    elif mutation == "nan":
+        _set(d, leaf, float("nan"))
+        expect = "outside [0, 1]"
+    else:
+        _set(d, leaf[:-1] + ("bogus",), 0.0)
+        expect = "unknown entry 'bogus'"
+    with pytest.raises(ModelError) as exc:
+        TrustModel.from_dict(d, "f.json")
+    assert exc.value.problems, "a problem must be reported"
+    assert any(expect in p for p in exc.value.problems), exc.value.problems
+    # every problem line names where it is
+    for line in exc.value.lines():
+        assert line.startswith("f.json: ")
+
+
+def _random_rows(draw, shape):
+    k = shape[-1]
+    n = int(np.prod(shape[:-1])) if len(shape) > 1 else 1
+    raw = np.array(draw(st.lists(st.floats(0.01, 1.0), min_size=n * k, max_size=n * k))).reshape(*shape[:-1], k) if len(shape) > 1 else np.array(draw(st.lists(st.floats(0.01, 1.0), min_size=k, max_size=k)))
+    return raw / raw.sum(axis=-1, keepdims=True)
+
+
+@st.composite
+def random_models(draw):
+    K = draw(st.integers(2, 4))
+    N = draw(st.integers(2, 3))
+    return TrustModel(
+        trust_levels=tuple(f"t{i}" for i in range(K)),
+        complexities=tuple(f"c{i}" for i in range(N)),
+        initial=_random_rows(draw, (K,)),
+        emission=_random_rows(draw, (N, 2, K, 2)),
+        transition=_random_rows(draw, (N, 2, 2, K, K)),
+    )
+
+
+@settings(max_examples=40, deadline=None)
+@given(random_models())
+def test_valid_random_models_round_trip(m):
+    again = TrustModel.from_dict(json.loads(json.dumps(m.to_dict())))
+    assert again == m
