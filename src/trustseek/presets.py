@@ -30,31 +30,22 @@ LOW, HIGH = 0, 1
 
 def paper_model() -> TrustModel:
     """The supervisor model estimated in Section V (Figs. 4-6)."""
-    rely = np.array(
-        [
-            # C = low:  T = low, T = high  (Fig. 4b)
-            [0.98, 1.00],
-            # C = high: T = low, T = high  (Fig. 4c)
-            [0.46, 0.95],
-        ]
-    )
+    # P(o | T, C, a), written as [intervene, rely] rows, T = low then high
     emission = np.zeros((2, 2, 2, 2))
-    emission[:, AUTONOMOUS, :, 1] = rely
-    emission[:, AUTONOMOUS, :, 0] = 1.0 - rely
-    emission[:, ASK, :, 0] = 1.0  # Fig. 4a: asked -> always teleoperates
+    emission[LOW, AUTONOMOUS] = [[0.02, 0.98], [0.00, 1.00]]  # Fig. 4b
+    emission[HIGH, AUTONOMOUS] = [[0.54, 0.46], [0.05, 0.95]]  # Fig. 4c
+    emission[:, ASK] = [[1.0, 0.0], [1.0, 0.0]]  # Fig. 4a: asked -> always teleoperates
 
-    def m(p_low_to_high: float, p_high_to_high: float) -> np.ndarray:
-        return np.array([[1 - p_low_to_high, p_low_to_high], [1 - p_high_to_high, p_high_to_high]])
-
-    eye = np.eye(2)
+    # P(T' | T, E', C, a), rows T = low then high, columns T' = low then high
+    eye = [[1.0, 0.0], [0.0, 1.0]]
     transition = np.zeros((2, 2, 2, 2, 2))
     transition[LOW, AUTONOMOUS, RELIABLE] = eye  # Fig. 5a
-    transition[LOW, AUTONOMOUS, FAULTY] = m(0.01, 0.61)  # Fig. 5b: high->low 0.39, low stays 0.99
+    transition[LOW, AUTONOMOUS, FAULTY] = [[0.99, 0.01], [0.39, 0.61]]  # Fig. 5b
     transition[LOW, ASK, FAULTY] = eye  # Fig. 5c
     transition[LOW, ASK, RELIABLE] = eye  # never observed (identity)
-    transition[HIGH, AUTONOMOUS, RELIABLE] = m(1.0, 1.0)  # Fig. 6a
-    transition[HIGH, AUTONOMOUS, FAULTY] = m(0.30, 0.0)  # Fig. 6b: high->low 1, low stays 0.7
-    transition[HIGH, ASK, RELIABLE] = m(0.44, 0.94)  # Fig. 6c
+    transition[HIGH, AUTONOMOUS, RELIABLE] = [[0.0, 1.0], [0.0, 1.0]]  # Fig. 6a
+    transition[HIGH, AUTONOMOUS, FAULTY] = [[0.70, 0.30], [1.00, 0.00]]  # Fig. 6b
+    transition[HIGH, ASK, RELIABLE] = [[0.56, 0.44], [0.06, 0.94]]  # Fig. 6c
     transition[HIGH, ASK, FAULTY] = eye  # never observed (identity)
     return TrustModel(
         trust_levels=("low", "high"),
