@@ -65,3 +65,9 @@ def test_kernel_marginals(pomdp):
     k = pomdp.kernel  # [c, a, t, o, e, t2]
     np.testing.assert_allclose(k.sum(axis=(3, 4, 5)), 1.0, atol=1e-12)
     np.testing.assert_allclose(k.sum(axis=(4, 5)), pomdp.emission, atol=1e-12)
+
+
+def test_named_axes_match_shapes(pomdp):
+    sizes = {"complexity": 2, "robot_action": 2, "trust": 2, "next_trust": 2, "human_action": 2, "next_experience": 2, "state": 8, "next_state": 8}
+    for name, axes in pomdp.axes.items():
+        assert getattr(pomdp, name).shape == tuple(sizes[a] for a in axes), name

@@ -129,12 +129,10 @@ class TrustAwarePolicy(_PolicyBase):
         return self.q[j] * (1 - f) + self.q[j + 1] * f
 
     def value(self, b_high, complexity=None) -> np.ndarray | float:
-        """V(b, C) = max_a Q(b, C, a); averaged over P(C) when ``complexity`` is None is not
-        possible here (the task holds P(C)); pass a complexity or use :meth:`values`."""
+        """V(b, C) = max_a Q(b, C, a) at P(trust = high) = b_high: shape (..., N), or (...) for
+        one complexity."""
         v = self.q_values(b_high).max(axis=-1)
-        if complexity is None:
-            return v
-        return v[..., self._cindex(complexity)]
+        return v if complexity is None else v[..., self._cindex(complexity)]
 
     def actions(self, beliefs, complexities, rng=None) -> np.ndarray:
         beliefs = np.asarray(beliefs, dtype=float)

@@ -34,10 +34,27 @@ import numpy as np
 from .model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
 
 
+AXES = {
+    "emission": ("complexity", "robot_action", "trust", "human_action"),
+    "experience": ("complexity", "robot_action", "human_action", "next_experience"),
+    "trust_transition": ("complexity", "robot_action", "next_experience", "trust", "next_trust"),
+    "complexity_probs": ("complexity",),
+    "trial_reward": ("robot_action", "human_action", "next_experience"),
+    "expected_reward": ("complexity", "robot_action", "trust"),
+    "outcome_probs": ("complexity", "robot_action", "trust", "human_action", "next_experience"),
+    "kernel": ("complexity", "robot_action", "trust", "human_action", "next_experience", "next_trust"),
+    "transition_matrix": ("robot_action", "state", "next_state"),
+    "observation_matrix": ("robot_action", "state", "human_action"),
+    "reward_matrix": ("state", "robot_action"),
+}
+
+
 @dataclass(frozen=True, eq=False)
 class AssistancePOMDP:
     model: TrustModel
     task: Task
+
+    axes = AXES  # the named axes of every array below
 
     def __post_init__(self) -> None:
         self.task.check_compatible(self.model)
