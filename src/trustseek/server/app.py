@@ -1,0 +1,64 @@
+"""The FastAPI application factory: ``create_app(db_url, token)``."""
+
+from __future__ import annotations
+
+import secrets
+from pathlib import Path
+
+from fastapi import FastAPI, HTTPException
+from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse
+from fastapi.staticfiles import StaticFiles
+
+from .. import __version__
+from .db import DEFAULT_URL, open_database
+from .routes import deploy, experimenter, participant
+
+STATIC = Path(__file__).resolve().parent.parent / "static" / "app"
+
+
+def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: str | None = None) -> FastAPI:
+    """The experiment server.  ``token`` guards the experimenter endpoints (a random one is
+    made when not given: read it from ``app.state.token``).  Migrations run here, before
+    the first request."""
+    app = FastAPI(
+        title="trustseek experiment server",
+        version=__version__,
+        description="Human-in-the-loop experiments with a live assistance-seeking policy, and a decision API for robots.",
+    )
+    app.state.db = open_database(db_url)
+    app.state.token = token or secrets.token_urlsafe(24)
+    app.state.public_url = public_url
+    app.include_router(experimenter)
+    app.include_router(participant)
+    app.include_router(deploy)
+
+    def page(name: str) -> FileResponse:
+        path = STATIC / name
+        if not path.exists():
+            raise HTTPException(503, "the web front end is not built: run scripts/setup.sh (npm ci && npm run build in web/)")
+        return FileResponse(path, media_type="text/html", headers={"Cache-Control": "no-store", "Referrer-Policy": "no-referrer"})
+
+    @app.get("/s/{token}", include_in_schema=False)
+    def participant_page(token: str):
+        return page("participant.html")
+
+    @app.get("/dashboard", include_in_schema=False)
+    def dashboard_page():
+        return page("dashboard.html")
+
+    @app.get("/", include_in_schema=False)
+    def index():
+        return RedirectResponse("/dashboard")
+
+    @app.get("/api/health", tags=["meta"])
+    def health():
+        return {"status": "ok", "version": __version__}
+
+    if STATIC.exists():
+        app.mount("/static/app", StaticFiles(directory=STATIC), name="static")
+    else:
+        @app.get("/static/app/{path:path}", include_in_schema=False)
+        def no_static(path: str):
+            return HTMLResponse("front end not built", status_code=503)
+
+    return app

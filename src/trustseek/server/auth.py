@@ -1,0 +1,42 @@
+"""Tokens: the experimenter token (studies, dashboard, export, opening deploy sessions) and
+the per-session tokens (a participant or a robot reaches only its own session)."""
+
+from __future__ import annotations
+
+import secrets
+
+from fastapi import Depends, HTTPException, Request
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from sqlalchemy import select
+
+from .orm import Session
+
+bearer = HTTPBearer(auto_error=False, description="Experimenter token, or a session token for session endpoints.")
+
+
+def _token(creds: HTTPAuthorizationCredentials | None) -> str:
+    if creds is None or not creds.credentials:
+        raise HTTPException(401, "missing token: send 'Authorization: Bearer <token>'", headers={"WWW-Authenticate": "Bearer"})
+    return creds.credentials
+
+
+def require_experimenter(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)) -> None:
+    token = _token(creds)
+    if not secrets.compare_digest(token.encode(), request.app.state.token.encode()):
+        raise HTTPException(403, "wrong experimenter token")
+
+
+def session_for_token(request: Request, token: str) -> Session:
+    with request.app.state.db() as db:
+        s = db.scalar(select(Session).where(Session.token == token))
+    if s is None:
+        raise HTTPException(401, "unknown session token")
+    return s
+
+
+def require_session(session_id: str, request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)) -> Session:
+    """The session named in the path, if the bearer token is that session's token."""
+    s = session_for_token(request, _token(creds))
+    if not secrets.compare_digest(s.id.encode(), session_id.encode()):
+        raise HTTPException(403, "this token belongs to another session")
+    return s

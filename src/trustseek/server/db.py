@@ -1,0 +1,63 @@
+"""Database connection and start-up migrations.
+
+``open_database(url)`` creates the engine (SQLite file by default, PostgreSQL by URL) and
+brings the schema to the newest Alembic revision before anything else touches it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from alembic import command
+from alembic.config import Config
+from sqlalchemy import create_engine, event
+from sqlalchemy.engine import Engine
+from sqlalchemy.orm import sessionmaker
+
+from ..errors import TrustseekError
+
+MIGRATIONS = Path(__file__).resolve().parent / "migrations"
+DEFAULT_URL = "sqlite:///trustseek.sqlite"
+
+
+class DatabaseError(TrustseekError):
+    """The database URL is unusable or the database cannot be reached."""
+
+
+def _sqlite_pragmas(dbapi_connection, _record) -> None:
+    cur = dbapi_connection.cursor()
+    cur.execute("PRAGMA journal_mode=WAL")
+    cur.execute("PRAGMA synchronous=NORMAL")  # WAL + NORMAL: committed trials survive a killed process
+    cur.execute("PRAGMA foreign_keys=ON")
+    cur.execute("PRAGMA busy_timeout=10000")
+    cur.close()
+
+
+def make_engine(url: str) -> Engine:
+    try:
+        if url.startswith("sqlite"):
+            engine = create_engine(url, connect_args={"check_same_thread": False, "timeout": 10}, pool_size=20, max_overflow=20)
+            event.listen(engine, "connect", _sqlite_pragmas)
+        else:
+            engine = create_engine(url, pool_pre_ping=True, pool_size=20, max_overflow=20)
+    except Exception as exc:  # noqa: BLE001 -- any driver or URL problem becomes one clear line
+        raise DatabaseError([f"cannot use database URL {url!r}: {exc}"]) from None
+    return engine
+
+
+def migrate(engine: Engine) -> None:
+    """Upgrade the schema to the newest revision (idempotent)."""
+    cfg = Config()
+    cfg.set_main_option("script_location", str(MIGRATIONS))
+    try:
+        with engine.begin() as conn:
+            cfg.attributes["connection"] = conn
+            command.upgrade(cfg, "head")
+    except Exception as exc:  # noqa: BLE001
+        raise DatabaseError([f"cannot migrate database {engine.url.render_as_string(hide_password=True)}: {exc}"]) from None
+
+
+def open_database(url: str = DEFAULT_URL) -> sessionmaker:
+    engine = make_engine(url)
+    migrate(engine)
+    return sessionmaker(engine, expire_on_commit=False)

@@ -1,0 +1,103 @@
+"""Export a study to the canonical trial-log format (what ``trustseek fit`` reads) and its
+UI events to an events table.
+
+Trial columns: ``participant, trial, complexity, robot_action, human_action, experience``
+(canonical, in that order), then ``block, block_name, policy, outcome, reward, belief,
+belief_after, effort_ms, self_report, study, session, committed_at``.  ``belief`` is
+P(trust = high) when the action was decided, ``belief_after`` after the trial's update.
+When the robot asks, the human teleoperates, recorded as ``intervene``.
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import pandas as pd
+from sqlalchemy import select
+from sqlalchemy.orm import Session as DBSession
+
+from .orm import Event, Report, Session, Study, Trial
+
+CANONICAL = ["participant", "trial", "complexity", "robot_action", "human_action", "experience"]
+EXTRA = ["block", "block_name", "policy", "outcome", "reward", "belief", "belief_after", "effort_ms", "self_report", "study", "session", "committed_at"]
+EVENT_COLUMNS = ["participant", "session", "trial", "client_time", "server_time", "type", "data"]
+
+
+def trials_frame(db: DBSession, study: Study) -> pd.DataFrame:
+    names = [b["name"] for b in study.config["blocks"]]
+    rows = db.execute(
+        select(Trial, Session.participant)
+        .join(Session, Trial.session_id == Session.id)
+        .where(Session.study_id == study.id)
+        .order_by(Session.participant, Trial.trial)
+    ).all()
+    reports = {
+        (r.session_id, r.after_trial): r.value
+        for r in db.scalars(select(Report).join(Session, Report.session_id == Session.id).where(Session.study_id == study.id))
+    }
+    data = [
+        {
+            "participant": p, "trial": t.trial, "complexity": t.complexity, "robot_action": t.robot_action,
+            "human_action": t.human_action, "experience": t.experience, "block": t.block + 1,
+            "block_name": names[t.block], "policy": t.policy, "outcome": t.outcome, "reward": t.reward,
+            "belief": t.belief, "belief_after": t.belief_after, "effort_ms": t.effort_ms,
+            "self_report": reports.get((t.session_id, t.trial)), "study": study.id, "session": t.session_id,
+            "committed_at": t.created_at.isoformat() + "Z",
+        }
+        for t, p in rows
+    ]
+    frame = pd.DataFrame(data, columns=CANONICAL + EXTRA)
+    frame["trial"] = frame["trial"].astype("int64")
+    frame["block"] = frame["block"].astype("int64")
+    for col in ("participant", "complexity", "robot_action", "human_action", "experience"):
+        frame[col] = frame[col].astype("object")
+    frame["self_report"] = frame["self_report"].astype("float64")
+    frame["effort_ms"] = frame["effort_ms"].astype("float64")
+    return frame
+
+
+def events_frame(db: DBSession, study: Study) -> pd.DataFrame:
+    rows = db.execute(
+        select(Event, Session.participant)
+        .join(Session, Event.session_id == Session.id)
+        .where(Session.study_id == study.id)
+        .order_by(Session.participant, Event.id)
+    ).all()
+    data = [
+        {
+            "participant": p, "session": e.session_id, "trial": e.trial, "client_time": e.client_time,
+            "server_time": e.created_at.isoformat() + "Z", "type": e.type, "data": e.data,
+        }
+        for e, p in rows
+    ]
+    frame = pd.DataFrame(data, columns=EVENT_COLUMNS)
+    frame["trial"] = frame["trial"].astype("Int64")
+    return frame
+
+
+def to_bytes(frame: pd.DataFrame, fmt: str) -> bytes:
+    buf = io.BytesIO()
+    if fmt == "parquet":
+        frame.to_parquet(buf, index=False)
+    else:
+        frame.to_csv(buf, index=False)
+    return buf.getvalue()
+
+
+def write_frame(frame: pd.DataFrame, path: str | Path, trials: bool = True) -> None:
+    """Write by suffix (.csv or .parquet); trial logs go through ``trustseek.data.write_trials``
+    when that module is present."""
+    path = Path(path)
+    if trials:
+        try:
+            from ..data import write_trials
+        except ImportError:
+            write_trials = None
+        if write_trials is not None:
+            write_trials(frame, path)
+            return
+    if path.suffix == ".parquet":
+        frame.to_parquet(path, index=False)
+    else:
+        frame.to_csv(path, index=False)

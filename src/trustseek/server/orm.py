@@ -1,0 +1,106 @@
+"""Database schema (SQLAlchemy 2 ORM).  The schema itself is created by the Alembic
+migrations in ``migrations/``; these classes mirror it.
+
+* ``Study``    -- an experiment: task, trust model, blocks (policy + schedule), options.
+* ``Session``  -- one participant of a study (``kind = "study"``) or one robot run of the
+  deploy API (``kind = "deploy"``); reached through its unguessable ``token``.  Holds the
+  live belief and the trial that is currently served.
+* ``Trial``    -- one committed trial; unique per (session, trial number).
+* ``Report``   -- a trust self-report (after a trial or a block).
+* ``Event``    -- a timestamped user-interface event.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime, timezone
+
+from sqlalchemy import JSON, Float, ForeignKey, Integer, String, Text, UniqueConstraint
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+
+def utcnow() -> datetime:
+    return datetime.now(timezone.utc).replace(tzinfo=None)
+
+
+class Base(DeclarativeBase):
+    pass
+
+
+class Study(Base):
+    __tablename__ = "studies"
+
+    id: Mapped[str] = mapped_column(String(32), primary_key=True)
+    name: Mapped[str] = mapped_column(String(200))
+    config: Mapped[dict] = mapped_column(JSON)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Session(Base):
+    __tablename__ = "sessions"
+
+    id: Mapped[str] = mapped_column(String(32), primary_key=True)
+    token: Mapped[str] = mapped_column(String(64), unique=True, index=True)
+    kind: Mapped[str] = mapped_column(String(16))  # "study" or "deploy"
+    study_id: Mapped[str | None] = mapped_column(ForeignKey("studies.id"), index=True, nullable=True)
+    participant: Mapped[str] = mapped_column(String(200))
+    seed: Mapped[int] = mapped_column(Integer)
+    # study sessions: block order and per-block complexity lists; deploy sessions: model/task/policy
+    plan: Mapped[dict] = mapped_column(JSON)
+    status: Mapped[str] = mapped_column(String(16), default="new")  # new, running, done
+    consented_at: Mapped[datetime | None] = mapped_column(nullable=True)
+    belief: Mapped[list] = mapped_column(JSON)  # the belief before the next trial
+    trials_done: Mapped[int] = mapped_column(Integer, default=0)
+    score: Mapped[float] = mapped_column(Float, default=0.0)
+    # the trial currently served (decided, not yet committed)
+    pending_trial: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    pending_complexity: Mapped[str | None] = mapped_column(String(32), nullable=True)
+    pending_action: Mapped[str | None] = mapped_column(String(16), nullable=True)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Trial(Base):
+    __tablename__ = "trials"
+    __table_args__ = (UniqueConstraint("session_id", "trial", name="uq_trial_session_number"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    session_id: Mapped[str] = mapped_column(ForeignKey("sessions.id"), index=True)
+    trial: Mapped[int] = mapped_column(Integer)
+    block: Mapped[int] = mapped_column(Integer)
+    policy: Mapped[str] = mapped_column(String(32))
+    complexity: Mapped[str] = mapped_column(String(32))
+    robot_action: Mapped[str] = mapped_column(String(16))
+    human_action: Mapped[str | None] = mapped_column(String(16), nullable=True)
+    outcome: Mapped[str] = mapped_column(String(16))
+    experience: Mapped[str] = mapped_column(String(16))
+    reward: Mapped[float] = mapped_column(Float)
+    belief: Mapped[float | None] = mapped_column(Float, nullable=True)  # P(trust=high) at the decision
+    belief_after: Mapped[float | None] = mapped_column(Float, nullable=True)
+    effort_ms: Mapped[float | None] = mapped_column(Float, nullable=True)
+    submission_id: Mapped[str] = mapped_column(String(64))
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Report(Base):
+    __tablename__ = "reports"
+    __table_args__ = (UniqueConstraint("session_id", "after_trial", name="uq_report_session_trial"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    session_id: Mapped[str] = mapped_column(ForeignKey("sessions.id"), index=True)
+    after_trial: Mapped[int] = mapped_column(Integer)
+    block: Mapped[int] = mapped_column(Integer)
+    scope: Mapped[str] = mapped_column(String(8))  # "trial" or "block"
+    value: Mapped[float] = mapped_column(Float)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Event(Base):
+    __tablename__ = "events"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    session_id: Mapped[str] = mapped_column(ForeignKey("sessions.id"), index=True)
+    trial: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    client_time: Mapped[float | None] = mapped_column(Float, nullable=True)  # ms since the Unix epoch
+    type: Mapped[str] = mapped_column(String(40))
+    data: Mapped[str] = mapped_column(Text, default="{}")
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)

@@ -1,0 +1,280 @@
+"""HTTP routes: experimenter (studies, sessions, dashboard, export), participant (one session
+through its token) and deploy (decisions for a real robot)."""
+
+from __future__ import annotations
+
+import time
+
+from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
+from sqlalchemy import select
+
+from .auth import require_experimenter, require_session
+from .export import events_frame, to_bytes, trials_frame
+from .orm import Report, Session, Study, Trial, utcnow
+from .schemas import ConsentIn, DecideIn, DeployIn, EventsIn, ObserveIn, ReportIn, SessionsIn, TrialIn
+from .sessions import (
+    SessionError, add_events, add_report, create_deploy, create_participant, deploy_decide, deploy_observe,
+    lock, new_id, p_high, report_due, serve, submit_trial, total_trials, trial_dict,
+)
+from .studies import ConfigError, StudyIn, build_study_config, load_model_spec, load_task_spec, resolve_policy
+
+experimenter = APIRouter(prefix="/api", tags=["experimenter"], dependencies=[Depends(require_experimenter)])
+participant = APIRouter(prefix="/api/sessions", tags=["participant"])
+deploy = APIRouter(prefix="/api/deploy", tags=["deploy"])
+
+
+def _db(request: Request):
+    return request.app.state.db()
+
+
+def _fail(exc: SessionError):
+    raise HTTPException(exc.status, exc.message)
+
+
+def _link(request: Request, s: Session) -> str:
+    return f"{request.app.state.public_url or str(request.base_url).rstrip('/')}/s/{s.token}"
+
+
+# --------------------------------------------------------------------------- experimenter
+
+
+@experimenter.post("/studies", status_code=201, summary="Create a study")
+def create_study(body: StudyIn, request: Request):
+    try:
+        cfg = build_study_config(body)
+    except ConfigError as exc:
+        raise HTTPException(400, {"problems": exc.problems}) from None
+    with _db(request) as db:
+        st = Study(id=new_id(), name=body.name, config=cfg)
+        db.add(st)
+        db.commit()
+        return study_summary(db, st)
+
+
+def study_summary(db, st: Study) -> dict:
+    n = len(db.scalars(select(Session.id).where(Session.study_id == st.id)).all())
+    cfg = st.config
+    return {
+        "id": st.id, "name": st.name, "created_at": st.created_at.isoformat() + "Z", "participants": n,
+        "blocks": [
+            {"name": b["name"], "policy": b["policy"]["kind"], "thresholds": b["policy"].get("thresholds"), "schedule": b["schedule"]}
+            for b in cfg["blocks"]
+        ],
+        "counterbalance": cfg["counterbalance"], "self_report": cfg["self_report"], "animation_speed": cfg["animation_speed"],
+    }
+
+
+@experimenter.get("/studies", summary="List studies")
+def list_studies(request: Request):
+    with _db(request) as db:
+        return [study_summary(db, st) for st in db.scalars(select(Study).order_by(Study.created_at))]
+
+
+def _study(db, study_id: str) -> Study:
+    st = db.get(Study, study_id)
+    if st is None:
+        raise HTTPException(404, f"no study {study_id!r}")
+    return st
+
+
+@experimenter.get("/studies/{study_id}", summary="A study's configuration")
+def get_study(study_id: str, request: Request):
+    with _db(request) as db:
+        st = _study(db, study_id)
+        return {**study_summary(db, st), "config": st.config}
+
+
+@experimenter.post("/studies/{study_id}/sessions", status_code=201, summary="Create participant sessions, one link each")
+def create_sessions(study_id: str, body: SessionsIn, request: Request):
+    labels = body.participants if body.participants is not None else [None] * body.count
+    if body.participants is not None:
+        bad = [p for p in body.participants if not p or len(p) > 200]
+        if bad or len(set(body.participants)) != len(body.participants):
+            raise HTTPException(400, "participant ids must be unique, non-empty strings of at most 200 characters")
+    out = []
+    with _db(request) as db:
+        st = _study(db, study_id)
+        try:
+            for label in labels:
+                s = create_participant(db, st, label)
+                db.flush()
+                out.append({"participant": s.participant, "session_id": s.id, "token": s.token, "link": _link(request, s),
+                            "block_order": [st.config["blocks"][b]["name"] for b in s.plan["block_order"]],
+                            "trials": total_trials(s)})
+        except SessionError as exc:
+            db.rollback()
+            _fail(exc)
+        db.commit()
+    return out
+
+
+@experimenter.get("/studies/{study_id}/dashboard", summary="Live state of every participant")
+def dashboard(study_id: str, request: Request):
+    with _db(request) as db:
+        st = _study(db, study_id)
+        sessions = db.scalars(select(Session).where(Session.study_id == st.id).order_by(Session.created_at, Session.participant)).all()
+        last = {}
+        for t in db.scalars(
+            select(Trial).join(Session, Trial.session_id == Session.id).where(Session.study_id == st.id, Trial.trial == Session.trials_done)
+        ):
+            last[t.session_id] = trial_dict(t)
+        reports = {}
+        for r in db.scalars(select(Report).join(Session, Report.session_id == Session.id).where(Session.study_id == st.id).order_by(Report.after_trial)):
+            reports[r.session_id] = r.value
+        rows = []
+        for s in sessions:
+            rows.append({
+                "participant": s.participant, "session_id": s.id, "status": s.status, "link": _link(request, s),
+                "trials_done": s.trials_done, "trials_total": total_trials(s), "score": s.score, "belief": p_high(s.belief),
+                "current": None if s.pending_trial is None else {"trial": s.pending_trial, "complexity": s.pending_complexity, "robot_action": s.pending_action},
+                "last": last.get(s.id), "last_self_report": reports.get(s.id), "updated_at": s.updated_at.isoformat() + "Z",
+            })
+        return {"study": study_summary(db, st), "participants": rows, "time": utcnow().isoformat() + "Z"}
+
+
+@experimenter.get("/studies/{study_id}/export", summary="Export trials (canonical trial log) or UI events")
+def export(study_id: str, request: Request, table: str = Query("trials", pattern="^(trials|events)$"),
+           format: str = Query("csv", pattern="^(csv|parquet)$")):
+    with _db(request) as db:
+        st = _study(db, study_id)
+        frame = trials_frame(db, st) if table == "trials" else events_frame(db, st)
+    media = "text/csv" if format == "csv" else "application/vnd.apache.parquet"
+    name = f"{st.id}-{table}.{format}"
+    return Response(to_bytes(frame, format), media_type=media, headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
+
+# --------------------------------------------------------------------------- participant
+
+
+def session_state(request: Request, s_id: str) -> dict:
+    with _db(request) as db:
+        s = db.get(Session, s_id)
+        if s.kind != "study":
+            raise HTTPException(409, "this is a deploy session; use /api/deploy")
+        st = db.get(Study, s.study_id)
+        cfg = st.config
+        current = serve(db, s)
+        due = report_due(db, s, cfg)
+        blocks = s.plan["block_order"]
+        return {
+            "session_id": s.id, "participant": s.participant, "status": s.status, "study": st.name,
+            "trials_total": total_trials(s), "trials_done": s.trials_done, "score": s.score,
+            "blocks": [cfg["blocks"][b]["name"] for b in blocks], "current": current, "report_due": due,
+            "self_report": cfg["self_report"], "animation_speed": cfg["animation_speed"],
+            "consent_text": cfg.get("consent_text"), "instructions": cfg.get("instructions"),
+            "rewards": cfg["task"].get("rewards"),
+        }
+
+
+@participant.get("/{session_id}/state", summary="The participant's session: status, current trial, score")
+def get_state(session_id: str, request: Request, s: Session = Depends(require_session)):
+    return session_state(request, s.id)
+
+
+@participant.post("/{session_id}/consent", summary="Record consent and start the session")
+def consent(session_id: str, body: ConsentIn, request: Request, s: Session = Depends(require_session)):
+    with _db(request) as db:
+        row = lock(db, s.id)
+        if row.status == "new":
+            row.status, row.consented_at, row.updated_at = "running", utcnow(), utcnow()
+        db.commit()
+        if body.events:
+            add_events(db, row, [e.model_dump() for e in body.events])
+    return session_state(request, s.id)
+
+
+@participant.post("/{session_id}/trials", summary="Submit the current trial (idempotent by submission_id)")
+def post_trial(session_id: str, body: TrialIn, request: Request, s: Session = Depends(require_session)):
+    with _db(request) as db:
+        try:
+            t, dup = submit_trial(db, s.id, body.trial, body.submission_id, body.human_action, body.effort_ms,
+                                  [e.model_dump() for e in body.events])
+        except SessionError as exc:
+            db.rollback()
+            _fail(exc)
+        result = trial_dict(t)
+    return {"trial": result, "duplicate": dup, "state": session_state(request, s.id)}
+
+
+@participant.post("/{session_id}/reports", summary="Submit a trust self-report (0-100)")
+def post_report(session_id: str, body: ReportIn, request: Request, s: Session = Depends(require_session)):
+    with _db(request) as db:
+        row = db.get(Session, s.id)
+        cfg = db.get(Study, row.study_id).config if row.study_id else {}
+        try:
+            rep, dup = add_report(db, row, cfg, body.after_trial, body.value)
+        except SessionError as exc:
+            db.rollback()
+            _fail(exc)
+        out = {"after_trial": rep.after_trial, "value": rep.value, "scope": rep.scope, "duplicate": dup}
+    return {"report": out, "state": session_state(request, s.id)}
+
+
+@participant.post("/{session_id}/events", summary="Log UI events")
+def post_events(session_id: str, body: EventsIn, request: Request, s: Session = Depends(require_session)):
+    with _db(request) as db:
+        n = add_events(db, db.get(Session, s.id), [e.model_dump() for e in body.events])
+    return {"stored": n}
+
+
+# --------------------------------------------------------------------------- deploy
+
+
+@deploy.post("/sessions", status_code=201, summary="Open a deploy session with a model and a policy",
+             dependencies=[Depends(require_experimenter)])
+def open_deploy(body: DeployIn, request: Request):
+    try:
+        task, model = load_task_spec(body.task), load_model_spec(body.model)
+        if tuple(model.complexities) != tuple(task.complexities):
+            raise ConfigError([f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}"])
+        policy = resolve_policy(body.policy, model, task)
+    except ConfigError as exc:
+        raise HTTPException(400, {"problems": exc.problems}) from None
+    with _db(request) as db:
+        s = create_deploy(db, body.label, task, model, policy, body.seed)
+        db.commit()
+        return {"session_id": s.id, "token": s.token, "policy": policy["kind"], "belief": p_high(s.belief),
+                "complexities": list(task.complexities), "thresholds": policy.get("thresholds")}
+
+
+def _deploy_session(s: Session) -> None:
+    if s.kind != "deploy":
+        raise HTTPException(409, "this is a participant session; use /api/sessions")
+
+
+@deploy.get("/sessions/{session_id}", summary="A deploy session's state and trials")
+def deploy_state(session_id: str, request: Request, s: Session = Depends(require_session)):
+    _deploy_session(s)
+    with _db(request) as db:
+        row = db.get(Session, s.id)
+        trials = db.scalars(select(Trial).where(Trial.session_id == s.id).order_by(Trial.trial)).all()
+        return {"session_id": row.id, "label": row.participant, "trials_done": row.trials_done, "score": row.score,
+                "belief": p_high(row.belief), "pending": None if row.pending_trial is None else
+                {"trial": row.pending_trial, "complexity": row.pending_complexity, "robot_action": row.pending_action},
+                "trials": [trial_dict(t) for t in trials]}
+
+
+@deploy.post("/sessions/{session_id}/decide", summary="Post a trial's complexity, get the robot action")
+def decide(session_id: str, body: DecideIn, request: Request, response: Response, s: Session = Depends(require_session)):
+    _deploy_session(s)
+    t0 = time.perf_counter()
+    with _db(request) as db:
+        try:
+            out = deploy_decide(db, s.id, body.trial, body.complexity)
+        except SessionError as exc:
+            db.rollback()
+            _fail(exc)
+    response.headers["Server-Timing"] = f"decide;dur={(time.perf_counter() - t0) * 1000:.3f}"
+    return out
+
+
+@deploy.post("/sessions/{session_id}/observe", summary="Post the observed human action and outcome; updates the belief")
+def observe(session_id: str, body: ObserveIn, request: Request, s: Session = Depends(require_session)):
+    _deploy_session(s)
+    with _db(request) as db:
+        try:
+            t, dup = deploy_observe(db, s.id, body.trial, body.human_action, body.outcome)
+        except SessionError as exc:
+            db.rollback()
+            _fail(exc)
+        return {"trial": trial_dict(t), "duplicate": dup, "belief": t.belief_after}

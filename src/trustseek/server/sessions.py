@@ -1,0 +1,390 @@
+"""What happens in a session, independent of HTTP: serving a trial (complexity from the plan,
+action from the block's policy), committing a trial (outcome, experience, reward, belief
+update), self-reports and events.
+
+Integrity rules:
+
+* a trial is committed (one database transaction with the belief update) before the next
+  trial is served;
+* the served trial is stored in the session row, and its action and outcome come from
+  generators seeded by (session seed, trial number), so a restarted server serves and
+  scores exactly what it would have before;
+* trial numbers are unique per session: a repeated submission returns the stored trial,
+  a conflicting one is refused.
+"""
+
+from __future__ import annotations
+
+import json
+import secrets
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from sqlalchemy import func, select
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session as DBSession
+
+from ..model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
+from ..policy import PolicyRunner
+from .orm import Event, Report, Session, Study, Trial, utcnow
+from .studies import participant_plan, policy_object
+
+OUTCOMES = ("success", "collision", "dropped", "teleoperated")
+MAX_EVENTS_PER_POST = 5000
+
+
+class SessionError(Exception):
+    """A request that the session's state does not allow; ``status`` is the HTTP code."""
+
+    def __init__(self, status: int, message: str):
+        self.status = status
+        self.message = message
+        super().__init__(message)
+
+
+def new_token() -> str:
+    return secrets.token_urlsafe(32)
+
+
+def new_id() -> str:
+    return secrets.token_hex(8)
+
+
+def p_high(belief) -> float | None:
+    return None if belief is None else float(np.asarray(belief, dtype=float)[-1])
+
+
+# --------------------------------------------------------------------------- session context
+
+
+@dataclass
+class Context:
+    """Everything needed to run one session's policy: task, model and per-trial plan."""
+
+    task: Task
+    model: TrustModel
+    policies: list[dict[str, Any]]  # per block: policy JSON
+    keys: list[str]  # per block: policy cache key
+    trials: list[dict[str, Any]] | None  # study sessions: [{block, complexity}]
+
+    def runner(self, block: int, belief, seed: int, trial: int) -> PolicyRunner:
+        pol = policy_object(self.keys[block], self.policies[block])
+        model = getattr(pol, "model", None) or self.model
+        return PolicyRunner(pol, model=model, rng=np.random.default_rng([seed, trial, 0]), belief=np.asarray(belief, dtype=float))
+
+
+_TASKS: dict[str, tuple[Task, TrustModel]] = {}
+
+
+def context(db: DBSession, s: Session) -> Context:
+    if s.kind == "study":
+        study = db.get(Study, s.study_id)
+        cfg = study.config
+        key = f"study:{study.id}"
+        tm = _TASKS.get(key)
+        if tm is None:
+            tm = _TASKS[key] = (Task.from_dict(cfg["task"]), TrustModel.from_dict(cfg["model"]))
+        blocks = cfg["blocks"]
+        return Context(tm[0], tm[1], [b["policy"] for b in blocks], [f"{key}:{i}" for i in range(len(blocks))], s.plan["trials"])
+    key = f"deploy:{s.id}"
+    tm = _TASKS.get(key)
+    if tm is None:
+        if len(_TASKS) > 4096:
+            _TASKS.clear()
+        tm = _TASKS[key] = (Task.from_dict(s.plan["task"]), TrustModel.from_dict(s.plan["model"]))
+    return Context(tm[0], tm[1], [s.plan["policy"]], [key], None)
+
+
+def total_trials(s: Session) -> int | None:
+    return len(s.plan["trials"]) if s.kind == "study" else None
+
+
+# --------------------------------------------------------------------------- creation
+
+
+def create_participant(db: DBSession, study: Study, participant: str | None) -> Session:
+    index = db.scalar(select(func.count()).select_from(Session).where(Session.study_id == study.id)) or 0
+    label = participant or f"P{index + 1:03d}"
+    if db.scalar(select(Session.id).where(Session.study_id == study.id, Session.participant == label)):
+        raise SessionError(409, f"participant {label!r} already exists in study {study.id}")
+    seed = int(np.random.default_rng().integers(0, 2**31 - 1))
+    plan = participant_plan(study.config, index, seed)
+    model = TrustModel.from_dict(study.config["model"])
+    s = Session(
+        id=new_id(), token=new_token(), kind="study", study_id=study.id, participant=label, seed=seed,
+        plan=plan, status="new", belief=[float(x) for x in model.initial], trials_done=0, score=0.0,
+    )
+    db.add(s)
+    return s
+
+
+def create_deploy(db: DBSession, label: str, task: Task, model: TrustModel, policy: dict[str, Any], seed: int) -> Session:
+    pol = policy_object(f"deploy-check:{new_id()}", policy)
+    pm = getattr(pol, "model", None) or model
+    s = Session(
+        id=new_id(), token=new_token(), kind="deploy", study_id=None, participant=label, seed=seed,
+        plan={"task": task.to_dict(), "model": model.to_dict(), "policy": policy},
+        status="running", belief=[float(x) for x in pm.initial], trials_done=0, score=0.0,
+    )
+    db.add(s)
+    return s
+
+
+# --------------------------------------------------------------------------- serving
+
+
+def lock(db: DBSession, session_id: str) -> Session:
+    """The session row, locked for update where the database supports it."""
+    s = db.execute(select(Session).where(Session.id == session_id).with_for_update()).scalar_one_or_none()
+    if s is None:
+        raise SessionError(404, "no such session")
+    return s
+
+
+def serve(db: DBSession, s: Session) -> dict[str, Any] | None:
+    """The current trial of a study session (deciding and storing it if not yet served);
+    None when the session is not running or is finished.  Commits."""
+    if s.status != "running":
+        return None
+    n = s.trials_done + 1
+    if n > total_trials(s):
+        return None
+    if s.pending_trial != n:
+        ctx = context(db, s)
+        step = ctx.trials[n - 1]
+        runner = ctx.runner(step["block"], s.belief, s.seed, n)
+        s.pending_trial, s.pending_complexity = n, step["complexity"]
+        s.pending_action = runner.decide(step["complexity"])
+        s.updated_at = utcnow()
+        db.commit()
+    return served(s)
+
+
+def served(s: Session) -> dict[str, Any]:
+    n = s.pending_trial
+    step = s.plan["trials"][n - 1]
+    blocks = s.plan["block_order"]
+    return {
+        "trial": n,
+        "block": step["block"],
+        "block_position": blocks.index(step["block"]) + 1,
+        "complexity": s.pending_complexity,
+        "robot_action": s.pending_action,
+        "scene_seed": (s.seed * 1000003 + n) % 2**31,
+    }
+
+
+def trial_dict(t: Trial) -> dict[str, Any]:
+    return {
+        "trial": t.trial, "block": t.block, "policy": t.policy, "complexity": t.complexity,
+        "robot_action": t.robot_action, "human_action": t.human_action, "outcome": t.outcome,
+        "experience": t.experience, "reward": t.reward, "belief": t.belief, "belief_after": t.belief_after,
+        "effort_ms": t.effort_ms, "submission_id": t.submission_id,
+    }
+
+
+def _experience(task: Task, c: int, action: str, human: str | None, success: bool | None) -> str:
+    if action == "ask":
+        return EXPERIENCES[task.ask_experience[c]]
+    if human == "intervene":
+        return "faulty"
+    return "reliable" if success else "faulty"
+
+
+def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: int, events: list[dict] | None) -> Trial:
+    runner = ctx.runner(block, s.belief, s.seed, row.trial)
+    before = runner.belief
+    after = runner.observe(row.complexity, row.robot_action, row.human_action, row.experience)
+    row.belief, row.belief_after = p_high(before), p_high(after)
+    a = ACTIONS.index(row.robot_action)
+    o = HUMAN_ACTIONS.index(row.human_action) if row.human_action is not None else 1
+    row.reward = float(ctx.task.rewards.of(a, o, EXPERIENCES.index(row.experience)))
+    db.add(row)
+    for ev in events or []:
+        db.add(Event(session_id=s.id, trial=row.trial, client_time=ev.get("t"), type=str(ev.get("type", ""))[:40], data=json.dumps(ev.get("data", {}))))
+    s.belief = [float(x) for x in after] if after is not None else s.belief
+    s.trials_done = row.trial
+    s.score = float(s.score + row.reward)
+    s.pending_trial = s.pending_complexity = s.pending_action = None
+    if s.kind == "study" and row.trial >= total_trials(s):
+        s.status = "done"
+    s.updated_at = utcnow()
+    try:
+        db.commit()
+    except IntegrityError:
+        db.rollback()
+        raise _Duplicate() from None
+    return row
+
+
+class _Duplicate(Exception):
+    pass
+
+
+def _existing(db: DBSession, s: Session, n: int) -> Trial | None:
+    return db.scalar(select(Trial).where(Trial.session_id == s.id, Trial.trial == n))
+
+
+def submit_trial(
+    db: DBSession, session_id: str, n: int, submission_id: str, human_action: str | None,
+    effort_ms: float | None, events: list[dict] | None,
+) -> tuple[Trial, bool]:
+    """Commit trial ``n`` of a study session; returns (trial, duplicate)."""
+    s = lock(db, session_id)
+    old = _existing(db, s, n)
+    if old is not None:
+        if old.submission_id == submission_id:
+            db.rollback()
+            return old, True
+        raise SessionError(409, f"trial {n} is already committed (by submission {old.submission_id!r})")
+    if s.status != "running":
+        raise SessionError(409, f"the session is {s.status!r}, not running" + (" (consent first)" if s.status == "new" else ""))
+    if n != s.trials_done + 1:
+        raise SessionError(409, f"trial {n} is not the current trial; the current trial is {s.trials_done + 1}")
+    if s.pending_trial != n:
+        raise SessionError(409, f"trial {n} has not been served yet; fetch the session state first")
+    action = s.pending_action
+    if action == "ask" and human_action != "intervene":
+        raise SessionError(400, f"the robot asked for help in trial {n}: human_action must be 'intervene' (teleoperation), got {human_action!r}")
+    if human_action not in HUMAN_ACTIONS:
+        raise SessionError(400, f"human_action must be one of {list(HUMAN_ACTIONS)}, got {human_action!r}")
+    ctx = context(db, s)
+    step = ctx.trials[n - 1]
+    c = ctx.task.complexity_index(s.pending_complexity)
+    if action == "autonomous" and human_action == "rely":
+        r = np.random.default_rng([s.seed, n, 1]).random(2)
+        success = bool(r[0] < ctx.task.success[c])
+        outcome = "success" if success else ("collision" if r[1] < 0.5 else "dropped")
+    else:
+        success, outcome = None, "teleoperated"
+    row = Trial(
+        session_id=s.id, trial=n, block=step["block"], policy=ctx.policies[step["block"]]["kind"],
+        complexity=s.pending_complexity, robot_action=action, human_action=human_action, outcome=outcome,
+        experience=_experience(ctx.task, c, action, human_action, success), effort_ms=effort_ms,
+        submission_id=submission_id,
+    )
+    try:
+        return _commit_trial(db, s, row, ctx, step["block"], events), False
+    except _Duplicate:
+        old = _existing(db, s, n)
+        if old is not None and old.submission_id == submission_id:
+            return old, True
+        raise SessionError(409, f"trial {n} was committed concurrently by another submission") from None
+
+
+def report_due(db: DBSession, s: Session, cfg: dict[str, Any]) -> int | None:
+    """The trial after which a self-report is still expected, or None."""
+    mode = cfg.get("self_report", "none")
+    n = s.trials_done
+    if mode == "none" or n == 0:
+        return None
+    if mode == "block":
+        trials = s.plan["trials"]
+        if n < len(trials) and trials[n]["block"] == trials[n - 1]["block"]:
+            return None
+    if db.scalar(select(Report.id).where(Report.session_id == s.id, Report.after_trial == n)):
+        return None
+    return n
+
+
+def add_report(db: DBSession, s: Session, cfg: dict[str, Any], after_trial: int, value: float) -> tuple[Report, bool]:
+    mode = cfg.get("self_report", "none")
+    if mode == "none":
+        raise SessionError(409, "this study takes no trust self-reports")
+    old = db.scalar(select(Report).where(Report.session_id == s.id, Report.after_trial == after_trial))
+    if old is not None:
+        if abs(old.value - value) < 1e-12:
+            return old, True
+        raise SessionError(409, f"a self-report after trial {after_trial} is already stored (value {old.value:g})")
+    if not 1 <= after_trial <= s.trials_done:
+        raise SessionError(409, f"after_trial must be a committed trial (1..{s.trials_done}), got {after_trial}")
+    block = s.plan["trials"][after_trial - 1]["block"]
+    rep = Report(session_id=s.id, after_trial=after_trial, block=block, scope=mode, value=value)
+    db.add(rep)
+    try:
+        db.commit()
+    except IntegrityError:
+        db.rollback()
+        old = db.scalar(select(Report).where(Report.session_id == s.id, Report.after_trial == after_trial))
+        return old, True
+    return rep, False
+
+
+def add_events(db: DBSession, s: Session, events: list[dict]) -> int:
+    for ev in events:
+        db.add(Event(session_id=s.id, trial=ev.get("trial"), client_time=ev.get("t"), type=str(ev.get("type", ""))[:40], data=json.dumps(ev.get("data", {}))))
+    db.commit()
+    return len(events)
+
+
+# --------------------------------------------------------------------------- deploy sessions
+
+
+def deploy_decide(db: DBSession, session_id: str, n: int, complexity: str) -> dict[str, Any]:
+    s = lock(db, session_id)
+    ctx = context(db, s)
+    if complexity not in ctx.task.complexities:
+        raise SessionError(400, f"complexity must be one of {list(ctx.task.complexities)}, got {complexity!r}")
+    old = _existing(db, s, n)
+    if old is not None:
+        if old.complexity != complexity:
+            raise SessionError(409, f"trial {n} was committed with complexity {old.complexity!r}, not {complexity!r}")
+        db.rollback()
+        return {"trial": n, "robot_action": old.robot_action, "belief": old.belief, "committed": True}
+    if n != s.trials_done + 1:
+        raise SessionError(409, f"trial {n} is not the next trial; the next trial is {s.trials_done + 1}")
+    if s.pending_trial == n:
+        if s.pending_complexity != complexity:
+            raise SessionError(409, f"trial {n} was already decided for complexity {s.pending_complexity!r}, not {complexity!r}")
+        db.rollback()
+        return {"trial": n, "robot_action": s.pending_action, "belief": p_high(s.belief), "committed": False}
+    runner = ctx.runner(0, s.belief, s.seed, n)
+    s.pending_trial, s.pending_complexity = n, complexity
+    s.pending_action = runner.decide(complexity)
+    s.updated_at = utcnow()
+    db.commit()
+    return {"trial": n, "robot_action": s.pending_action, "belief": p_high(s.belief), "committed": False}
+
+
+def deploy_observe(db: DBSession, session_id: str, n: int, human_action: str | None, outcome: str | None) -> tuple[Trial, bool]:
+    s = lock(db, session_id)
+    old = _existing(db, s, n)
+    if old is not None:
+        same_h = old.human_action == (human_action if human_action is not None or old.robot_action != "ask" else "intervene")
+        same_o = outcome is None or old.outcome == outcome
+        if same_h and same_o:
+            db.rollback()
+            return old, True
+        raise SessionError(409, f"trial {n} is already committed with human_action={old.human_action!r}, outcome={old.outcome!r}")
+    if s.pending_trial != n:
+        raise SessionError(409, f"trial {n} has no decision yet; post its complexity to /decide first (next trial: {s.trials_done + 1})")
+    action = s.pending_action
+    ctx = context(db, s)
+    c = ctx.task.complexity_index(s.pending_complexity)
+    if action == "ask":
+        if human_action not in (None, "intervene"):
+            raise SessionError(400, f"the robot asked in trial {n}: human_action must be 'intervene' (teleoperation) or omitted, got {human_action!r}")
+        human_action, success, outcome = "intervene", None, outcome or "teleoperated"
+    else:
+        if human_action not in HUMAN_ACTIONS:
+            raise SessionError(400, f"human_action must be one of {list(HUMAN_ACTIONS)}, got {human_action!r}")
+        if human_action == "intervene":
+            success, outcome = None, outcome or "teleoperated"
+        else:
+            if outcome not in ("success", "failure", "collision", "dropped"):
+                raise SessionError(400, f"outcome must be 'success' or 'failure' (or 'collision'/'dropped') when the human relied, got {outcome!r}")
+            success = outcome == "success"
+    if outcome not in ("success", "failure", "collision", "dropped", "teleoperated"):
+        raise SessionError(400, f"outcome {outcome!r} is not one of success, failure, collision, dropped, teleoperated")
+    row = Trial(
+        session_id=s.id, trial=n, block=0, policy=ctx.policies[0]["kind"], complexity=s.pending_complexity,
+        robot_action=action, human_action=human_action, outcome=outcome,
+        experience=_experience(ctx.task, c, action, human_action, success), effort_ms=None,
+        submission_id=f"deploy-{n}",
+    )
+    try:
+        return _commit_trial(db, s, row, ctx, 0, None), False
+    except _Duplicate:
+        return _existing(db, s, n), True
+

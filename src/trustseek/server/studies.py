@@ -1,0 +1,231 @@
+"""Study configuration: validation, policy resolution and per-participant plans.
+
+A study is created from a JSON object (see ``docs/experiments.md``)::
+
+    {"name": "pilot", "task": "paper", "model": "paper",
+     "blocks": [{"name": "agnostic", "policy": {"kind": "trust-agnostic"},
+                 "schedule": {"counts": {"low": 10, "high": 10}}},
+                {"name": "aware", "policy": {"kind": "trust-aware"},
+                 "schedule": {"trials": ["low", "high", "high"]}}],
+     "counterbalance": "rotate", "self_report": "block", "animation_speed": 1.0, "seed": 7}
+
+Policies are resolved once, at creation, into the core's policy JSON and stored with the
+study, so a study keeps behaving identically whatever the code later computes.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from ..model import ModelError, Task, TrustModel
+from ..policy import ComplexityPolicy, always_ask, never_ask, policy_from_dict, randomized, trust_agnostic
+from ..presets import MODEL_PRESETS, TASK_PRESETS
+from ..solve import solve
+
+POLICY_KINDS = ("trust-aware", "trust-agnostic", "randomized", "always-ask", "never-ask")
+MAX_TRIALS_PER_BLOCK = 1000
+
+
+class ConfigError(ValueError):
+    """A study or deploy configuration is invalid; ``problems`` lists every reason."""
+
+    def __init__(self, problems: list[str]):
+        self.problems = problems
+        super().__init__("; ".join(problems))
+
+
+class Schedule(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    counts: dict[str, int] | None = Field(None, description="Trials per complexity, shuffled per participant.")
+    trials: list[str] | None = Field(None, description="A fixed list of complexities, in order.")
+
+    @model_validator(mode="after")
+    def _one(self):
+        if (self.counts is None) == (self.trials is None):
+            raise ValueError("a schedule needs exactly one of 'counts' or 'trials'")
+        if self.counts is not None and any(v < 0 for v in self.counts.values()):
+            raise ValueError(f"counts must be non-negative, got {self.counts}")
+        n = sum(self.counts.values()) if self.counts is not None else len(self.trials or [])
+        if not 1 <= n <= MAX_TRIALS_PER_BLOCK:
+            raise ValueError(f"a block needs between 1 and {MAX_TRIALS_PER_BLOCK} trials, got {n}")
+        return self
+
+
+class BlockIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    name: str | None = Field(None, max_length=100)
+    policy: dict[str, Any] = Field(..., description="A policy spec ({'kind': ...}) or a full policy JSON.")
+    schedule: Schedule
+
+
+class StudyIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    name: str = Field(..., min_length=1, max_length=200)
+    task: str | dict[str, Any] = "paper"
+    model: str | dict[str, Any] = "paper"
+    blocks: list[BlockIn] = Field(..., min_length=1, max_length=20)
+    counterbalance: Literal["none", "rotate", "random"] = "none"
+    self_report: Literal["none", "trial", "block"] = "none"
+    animation_speed: float = Field(1.0, gt=0.05, le=50.0)
+    seed: int = Field(0, ge=0, lt=2**31)
+    consent_text: str | None = Field(None, max_length=20000)
+    instructions: str | None = Field(None, max_length=20000)
+
+    @field_validator("task", "model")
+    @classmethod
+    def _preset(cls, v, info):
+        presets = TASK_PRESETS if info.field_name == "task" else MODEL_PRESETS
+        if isinstance(v, str) and v not in presets:
+            raise ValueError(f"unknown {info.field_name} preset {v!r}; presets: {sorted(presets)}, or give the JSON object")
+        return v
+
+
+def load_task_spec(spec: str | dict) -> Task:
+    try:
+        return TASK_PRESETS[spec]() if isinstance(spec, str) else Task.from_dict(spec, "task")
+    except ModelError as exc:
+        raise ConfigError(exc.lines()) from None
+
+
+def load_model_spec(spec: str | dict) -> TrustModel:
+    try:
+        return MODEL_PRESETS[spec]() if isinstance(spec, str) else TrustModel.from_dict(spec, "model")
+    except ModelError as exc:
+        raise ConfigError(exc.lines()) from None
+
+
+def resolve_policy(spec: dict[str, Any], model: TrustModel, task: Task, where: str = "policy") -> dict[str, Any]:
+    """A policy spec to the core's policy JSON (solving the POMDP for ``trust-aware``)."""
+    if not isinstance(spec, dict):
+        raise ConfigError([f"{where} must be an object"])
+    if "format" in spec:
+        try:
+            pol = policy_from_dict(spec, where)
+        except ModelError as exc:
+            raise ConfigError(exc.lines()) from None
+        if tuple(pol.complexities) != tuple(task.complexities):
+            raise ConfigError([f"{where}: complexities {list(pol.complexities)} differ from the task's {list(task.complexities)}"])
+        return pol.to_dict()
+    kind = spec.get("kind")
+    allowed = {"kind", "belief_update", "grid", "p_ask"}
+    extra = sorted(set(spec) - allowed)
+    if extra:
+        raise ConfigError([f"{where} has unknown entries {extra} (expected some of {sorted(allowed)})"])
+    if kind not in POLICY_KINDS:
+        raise ConfigError([f"{where}.kind is {kind!r}, expected one of {list(POLICY_KINDS)} (or give a full policy JSON)"])
+    cx = task.complexities
+    if kind == "trust-aware":
+        bu = spec.get("belief_update", "bayes")
+        grid = spec.get("grid", 2001)
+        if bu not in ("bayes", "paper"):
+            raise ConfigError([f"{where}.belief_update is {bu!r}, expected 'bayes' or 'paper'"])
+        if not isinstance(grid, int) or isinstance(grid, bool) or not 3 <= grid <= 20001:
+            raise ConfigError([f"{where}.grid is {grid!r}, expected an integer in [3, 20001]"])
+        if model.n_trust != 2:
+            raise ConfigError([f"{where}: the trust-aware solver needs a model with two trust levels"])
+        return _solved(model, task, bu, grid)
+    if kind == "trust-agnostic":
+        return trust_agnostic(model, task).to_dict()
+    if kind == "randomized":
+        p = spec.get("p_ask")
+        if p is None:
+            return randomized().to_dict() if cx == ("low", "high") else randomized({c: 0.25 for c in cx}).to_dict()
+        if not isinstance(p, dict) or set(p) != set(cx):
+            raise ConfigError([f"{where}.p_ask must map each complexity {list(cx)} to a probability, got {p!r}"])
+        try:
+            return ComplexityPolicy("randomized", cx, [p[c] for c in cx]).to_dict()
+        except ModelError as exc:
+            raise ConfigError([f"{where}: {x}" for x in exc.problems]) from None
+    return (always_ask(cx) if kind == "always-ask" else never_ask(cx)).to_dict()
+
+
+def _solved(model: TrustModel, task: Task, bu: str, grid: int) -> dict[str, Any]:
+    return solve(model, task, belief_update=bu, grid=grid).to_dict()
+
+
+def build_study_config(study: StudyIn) -> dict[str, Any]:
+    """Validate every part of a study and return the stored configuration."""
+    problems: list[str] = []
+    task = model = None
+    try:
+        task = load_task_spec(study.task)
+    except ConfigError as exc:
+        problems += exc.problems
+    try:
+        model = load_model_spec(study.model)
+    except ConfigError as exc:
+        problems += exc.problems
+    if task is not None and model is not None and tuple(model.complexities) != tuple(task.complexities):
+        problems.append(f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}")
+    if problems:
+        raise ConfigError(problems)
+    blocks = []
+    for i, b in enumerate(study.blocks):
+        where = f"blocks[{i}]"
+        s = b.schedule
+        names = list(s.counts) if s.counts is not None else list(s.trials or [])
+        bad = sorted({c for c in names if c not in task.complexities})
+        if bad:
+            problems.append(f"{where}.schedule names unknown complexities {bad}; expected {list(task.complexities)}")
+        try:
+            pol = resolve_policy(b.policy, model, task, f"{where}.policy")
+        except ConfigError as exc:
+            problems += exc.problems
+            continue
+        blocks.append(
+            {
+                "name": b.name or f"block {i + 1}",
+                "policy": pol,
+                "schedule": {"counts": s.counts} if s.counts is not None else {"trials": s.trials},
+            }
+        )
+    if problems:
+        raise ConfigError(problems)
+    cfg = study.model_dump(exclude={"blocks", "task", "model"})
+    cfg.update(task=task.to_dict(), model=model.to_dict(), blocks=blocks)
+    return cfg
+
+
+def block_order(cfg: dict[str, Any], index: int, rng: np.random.Generator) -> list[int]:
+    """The block order of the ``index``-th participant (0-based) under the study's counterbalancing."""
+    n = len(cfg["blocks"])
+    base = list(range(n))
+    if cfg["counterbalance"] == "rotate":
+        k = index % n
+        return base[k:] + base[:k]
+    if cfg["counterbalance"] == "random":
+        return [int(x) for x in rng.permutation(n)]
+    return base
+
+
+def participant_plan(cfg: dict[str, Any], index: int, seed: int) -> dict[str, Any]:
+    """Block order and each block's complexity sequence, drawn once per participant."""
+    rng = np.random.default_rng([cfg["seed"], seed])
+    order = block_order(cfg, index, rng)
+    trials = []
+    for b in order:
+        sched = cfg["blocks"][b]["schedule"]
+        if "trials" in sched:
+            seq = list(sched["trials"])
+        else:
+            seq = [c for c, k in sched["counts"].items() for _ in range(k)]
+            seq = [seq[i] for i in rng.permutation(len(seq))]
+        trials.extend({"block": b, "complexity": c} for c in seq)
+    return {"block_order": order, "trials": trials}
+
+
+_POLICIES: dict[str, Any] = {}
+
+
+def policy_object(key: str, policy_json: dict[str, Any]):
+    """The policy object of a stored (immutable) policy JSON, cached by ``key``: parsing a
+    solved policy is not free, and stored policies never change."""
+    pol = _POLICIES.get(key)
+    if pol is None:
+        if len(_POLICIES) > 512:
+            _POLICIES.clear()
+        pol = _POLICIES[key] = policy_from_dict(policy_json, key)
+    return pol
