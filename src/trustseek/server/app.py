@@ -11,7 +11,7 @@ from fastapi.staticfiles import StaticFiles
 
 from .. import __version__
 from .db import DEFAULT_URL, open_database
-from .routes import deploy, experimenter, participant
+from .routes import deploy, experimenter, own, participant
 
 STATIC = Path(__file__).resolve().parent.parent / "static" / "app"
 
@@ -29,6 +29,7 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     app.state.token = token or secrets.token_urlsafe(24)
     app.state.public_url = public_url
     app.include_router(experimenter)
+    app.include_router(own)
     app.include_router(participant)
     app.include_router(deploy)
 

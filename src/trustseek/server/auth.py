@@ -14,14 +14,14 @@ from .orm import Session
 bearer = HTTPBearer(auto_error=False, description="Experimenter token, or a session token for session endpoints.")
 
 
-def _token(creds: HTTPAuthorizationCredentials | None) -> str:
+def token_of(creds: HTTPAuthorizationCredentials | None) -> str:
     if creds is None or not creds.credentials:
         raise HTTPException(401, "missing token: send 'Authorization: Bearer <token>'", headers={"WWW-Authenticate": "Bearer"})
     return creds.credentials
 
 
 def require_experimenter(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)) -> None:
-    token = _token(creds)
+    token = token_of(creds)
     if not secrets.compare_digest(token.encode(), request.app.state.token.encode()):
         raise HTTPException(403, "wrong experimenter token")
 
@@ -36,7 +36,7 @@ def session_for_token(request: Request, token: str) -> Session:
 
 def require_session(session_id: str, request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)) -> Session:
     """The session named in the path, if the bearer token is that session's token."""
-    s = session_for_token(request, _token(creds))
+    s = session_for_token(request, token_of(creds))
     if not secrets.compare_digest(s.id.encode(), session_id.encode()):
         raise HTTPException(403, "this token belongs to another session")
     return s

@@ -8,7 +8,9 @@ import time
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from sqlalchemy import select
 
-from .auth import require_experimenter, require_session
+from fastapi.security import HTTPAuthorizationCredentials
+
+from .auth import bearer, require_experimenter, require_session, session_for_token, token_of
 from .export import events_frame, to_bytes, trials_frame
 from .orm import Report, Session, Study, Trial, utcnow
 from .schemas import ConsentIn, DecideIn, DeployIn, EventsIn, ObserveIn, ReportIn, SessionsIn, TrialIn
@@ -21,6 +23,7 @@ from .studies import ConfigError, StudyIn, build_study_config, load_model_spec, 
 experimenter = APIRouter(prefix="/api", tags=["experimenter"], dependencies=[Depends(require_experimenter)])
 participant = APIRouter(prefix="/api/sessions", tags=["participant"])
 deploy = APIRouter(prefix="/api/deploy", tags=["deploy"])
+own = APIRouter(prefix="/api", tags=["participant"])
 
 
 def _db(request: Request):
@@ -164,6 +167,14 @@ def session_state(request: Request, s_id: str) -> dict:
             "consent_text": cfg.get("consent_text"), "instructions": cfg.get("instructions"),
             "rewards": cfg["task"].get("rewards"),
         }
+
+
+@own.get("/session", summary="The state of the session that the bearer token belongs to")
+def own_state(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)):
+    s = session_for_token(request, token_of(creds))
+    if s.kind != "study":
+        raise HTTPException(409, "this is a deploy session; use /api/deploy")
+    return session_state(request, s.id)
 
 
 @participant.get("/{session_id}/state", summary="The participant's session: status, current trial, score")

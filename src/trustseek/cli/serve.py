@@ -1,0 +1,95 @@
+"""Experiment server commands: serve, export."""
+
+from __future__ import annotations
+
+import ipaddress
+import os
+import secrets
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from ..errors import TrustseekError
+from ._app import app, console, print_json
+
+
+def _check_db(db: str) -> str:
+    if "://" not in db:
+        raise TrustseekError([f"--db must be a database URL such as sqlite:///study.sqlite or postgresql://user@host/db, got {db!r}"])
+    return db
+
+
+@app.command()
+def serve(
+    db: str = typer.Option("sqlite:///trustseek.sqlite", "--db", help="Database URL: a SQLite file (default) or postgresql://..."),
+    host: str = typer.Option("127.0.0.1", "--host", help="Address to listen on."),
+    port: int = typer.Option(8000, "--port", min=0, max=65535, help="Port to listen on."),
+    token: Optional[str] = typer.Option(None, "--token", envvar="TRUSTSEEK_TOKEN", help="Experimenter token (default: $TRUSTSEEK_TOKEN, else a random one, printed)."),
+    public_url: Optional[str] = typer.Option(None, "--public-url", help="Base URL used in participant links (default: the request's)."),
+    log_level: str = typer.Option("warning", "--log-level", help="uvicorn log level."),
+) -> None:
+    """Run the experiment server: participant interface, dashboard, experimenter and deploy APIs.
+
+    The schema is migrated at start-up.  The OpenAPI description is at /docs and /openapi.json.
+    """
+    import uvicorn
+
+    from ..server import create_app
+
+    _check_db(db)
+    if token is not None and len(token) < 8:
+        raise TrustseekError(["--token must be at least 8 characters"])
+    token = token or secrets.token_urlsafe(24)
+    application = create_app(db, token=token, public_url=public_url)
+    try:
+        loopback = ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        loopback = host == "localhost"
+    shown = "localhost" if host in ("0.0.0.0", "::") else host
+    console.print(f"[bold]trustseek server[/] on http://{shown}:{port}  (database {db})")
+    console.print(f"  dashboard:   http://{shown}:{port}/dashboard")
+    console.print(f"  API docs:    http://{shown}:{port}/docs")
+    if not os.environ.get("TRUSTSEEK_TOKEN") or os.environ.get("TRUSTSEEK_TOKEN") != token:
+        console.print(f"  experimenter token: {token}")
+    if not loopback:
+        console.print("[yellow]  listening beyond loopback: put the server behind HTTPS[/]")
+    uvicorn.run(application, host=host, port=port, log_level=log_level, access_log=False)
+
+
+@app.command("export")
+def export_cmd(
+    study: str = typer.Argument(..., help="Study id."),
+    db: str = typer.Option("sqlite:///trustseek.sqlite", "--db", help="Database URL."),
+    out: Path = typer.Option(..., "--out", "-o", help="Trial log to write (.csv or .parquet): the canonical format `trustseek fit` reads."),
+    events: Optional[Path] = typer.Option(None, "--events", help="Also write the UI events table (.csv or .parquet)."),
+    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+) -> None:
+    """Export a study's trials (canonical trial log) and, optionally, its UI events."""
+    from ..server.db import open_database
+    from ..server.export import events_frame, trials_frame, write_frame
+    from ..server.orm import Study
+
+    _check_db(db)
+    for p in (out, events):
+        if p is not None and p.suffix not in (".csv", ".parquet"):
+            raise TrustseekError([f"{p}: unknown suffix {p.suffix!r}; expected .csv or .parquet"])
+    maker = open_database(db)
+    with maker() as s:
+        st = s.get(Study, study)
+        if st is None:
+            raise TrustseekError([f"no study {study!r} in {db}"])
+        trials = trials_frame(s, st)
+        write_frame(trials, out)
+        n_events = None
+        if events is not None:
+            ev = events_frame(s, st)
+            write_frame(ev, events, trials=False)
+            n_events = len(ev)
+    summary = {"study": study, "trials": len(trials), "participants": int(trials["participant"].nunique()), "out": str(out),
+               "events": n_events, "events_out": None if events is None else str(events)}
+    if as_json:
+        print_json(summary)
+    else:
+        console.print(f"wrote {summary['trials']} trials of {summary['participants']} participants to {out}"
+                      + (f"; {n_events} events to {events}" if events is not None else ""))

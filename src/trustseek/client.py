@@ -1,0 +1,162 @@
+"""Python client for the experiment server (``trustseek serve``).
+
+For a real robot, open a deploy session and ask the server before every trial::
+
+    from trustseek.client import Client
+
+    client = Client("http://127.0.0.1:8000", token="experimenter-token")
+    robot = client.open_deploy(model="paper", policy={"kind": "trust-aware"})
+    for complexity in ["low", "high", "high"]:
+        action = robot.decide(complexity)          # "autonomous" or "ask"
+        ...                                        # run the trial on the robot
+        robot.observe(human_action="rely", outcome="success")
+        print(robot.belief)                        # P(trust = high) after the update
+
+The experimenter side (studies, participant links, live dashboard, export) is on the same
+class: :meth:`Client.create_study`, :meth:`Client.create_sessions`,
+:meth:`Client.dashboard` and :meth:`Client.export`.  Errors from the server are raised as
+:class:`ServerError` with the HTTP status and the server's message.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+from .errors import TrustseekError
+
+
+class ServerError(TrustseekError):
+    """The server refused a request (``status`` is the HTTP status code)."""
+
+    def __init__(self, status: int, detail: Any, url: str):
+        self.status = status
+        self.detail = detail
+        if isinstance(detail, dict) and "problems" in detail:
+            lines = [str(p) for p in detail["problems"]]
+        elif isinstance(detail, list):
+            lines = [f"{'.'.join(str(x) for x in d.get('loc', []))}: {d.get('msg')}" for d in detail if isinstance(d, dict)]
+        else:
+            lines = [str(detail)]
+        super().__init__([f"HTTP {status}: {x}" for x in lines] or [f"HTTP {status}"], url)
+
+
+def _check(r: httpx.Response) -> Any:
+    if r.status_code >= 400:
+        try:
+            detail = r.json().get("detail", r.text)
+        except ValueError:
+            detail = r.text
+        raise ServerError(r.status_code, detail, str(r.request.url))
+    return r.json() if r.headers.get("content-type", "").startswith("application/json") else r.content
+
+
+class Client:
+    """The experimenter's handle on a server (``token`` = the experimenter token)."""
+
+    def __init__(self, base_url: str = "http://127.0.0.1:8000", token: str | None = None, timeout: float = 30.0,
+                 http: httpx.Client | None = None):
+        self.base_url = base_url.rstrip("/")
+        self.token = token
+        self.http = http or httpx.Client(base_url=self.base_url, timeout=timeout)
+
+    def close(self) -> None:
+        self.http.close()
+
+    def __enter__(self) -> "Client":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _auth(self) -> dict[str, str]:
+        return {"Authorization": f"Bearer {self.token}"} if self.token else {}
+
+    def _get(self, path: str, **params) -> Any:
+        return _check(self.http.get(path, params=params or None, headers=self._auth()))
+
+    def _post(self, path: str, body: dict) -> Any:
+        return _check(self.http.post(path, json=body, headers=self._auth()))
+
+    # -- experimenter ------------------------------------------------------
+    def create_study(self, config: dict[str, Any]) -> dict[str, Any]:
+        """Create a study from its JSON configuration (see docs/experiments.md); returns its summary."""
+        return self._post("/api/studies", config)
+
+    def studies(self) -> list[dict[str, Any]]:
+        return self._get("/api/studies")
+
+    def create_sessions(self, study_id: str, participants: list[str] | None = None, count: int = 1) -> list[dict[str, Any]]:
+        """Participant sessions: each with its ``link`` (the unguessable URL to hand out) and ``token``."""
+        body: dict[str, Any] = {"participants": participants} if participants is not None else {"count": count}
+        return self._post(f"/api/studies/{study_id}/sessions", body)
+
+    def dashboard(self, study_id: str) -> dict[str, Any]:
+        return self._get(f"/api/studies/{study_id}/dashboard")
+
+    def export(self, study_id: str, path: str | Path | None = None, table: str = "trials") -> bytes:
+        """The study's trials (canonical trial log) or ``table="events"``; CSV or Parquet by the
+        suffix of ``path`` (CSV without a path).  Returns the bytes, and writes them to ``path``."""
+        fmt = "parquet" if path is not None and Path(path).suffix == ".parquet" else "csv"
+        data = self._get(f"/api/studies/{study_id}/export", table=table, format=fmt)
+        if path is not None:
+            Path(path).write_bytes(data)
+        return data
+
+    # -- deploy ------------------------------------------------------------
+    def open_deploy(self, model: str | dict = "paper", policy: dict | None = None, task: str | dict = "paper",
+                    label: str = "robot", seed: int = 0) -> "DeploySession":
+        """Open a decision session for a robot.  ``policy`` is a spec such as
+        ``{"kind": "trust-aware"}`` / ``{"kind": "trust-agnostic"}`` or a full policy JSON."""
+        body = {"model": model, "task": task, "policy": policy or {"kind": "trust-aware"}, "label": label, "seed": seed}
+        info = self._post("/api/deploy/sessions", body)
+        return DeploySession(self.http, info)
+
+
+class DeploySession:
+    """One robot's run: :meth:`decide` before each trial, :meth:`observe` after it.
+
+    Trials are numbered here (1, 2, ...); both calls are idempotent for a trial number, so
+    a retry after a network error is safe (pass ``trial=`` explicitly when retrying)."""
+
+    def __init__(self, http: httpx.Client, info: dict[str, Any]):
+        self.http = http
+        self.info = info
+        self.session_id: str = info["session_id"]
+        self.token: str = info["token"]
+        self.belief: float | None = info.get("belief")
+        self.trial = 0  # the last committed trial
+        self.action: str | None = None
+
+    @classmethod
+    def resume(cls, base_url: str, session_id: str, token: str, timeout: float = 30.0) -> "DeploySession":
+        """Reconnect to an existing deploy session (e.g. after the robot restarted)."""
+        self = cls(httpx.Client(base_url=base_url.rstrip("/"), timeout=timeout), {"session_id": session_id, "token": token})
+        st = self.state()
+        self.trial, self.belief = st["trials_done"], st["belief"]
+        return self
+
+    def _auth(self) -> dict[str, str]:
+        return {"Authorization": f"Bearer {self.token}"}
+
+    def decide(self, complexity: str, trial: int | None = None) -> str:
+        """The robot action (``autonomous`` or ``ask``) for the next trial of this complexity."""
+        n = self.trial + 1 if trial is None else trial
+        out = _check(self.http.post(f"/api/deploy/sessions/{self.session_id}/decide", json={"trial": n, "complexity": complexity}, headers=self._auth()))
+        self.action = out["robot_action"]
+        return self.action
+
+    def observe(self, human_action: str | None = None, outcome: str | None = None, trial: int | None = None) -> float | None:
+        """Report the trial: ``human_action`` ``intervene``/``rely`` (omit when the robot asked)
+        and, when the human relied, ``outcome`` ``success``/``failure``.  Returns the new belief."""
+        n = self.trial + 1 if trial is None else trial
+        body = {"trial": n, "human_action": human_action, "outcome": outcome}
+        out = _check(self.http.post(f"/api/deploy/sessions/{self.session_id}/observe", json=body, headers=self._auth()))
+        self.trial = max(self.trial, n)
+        self.belief = out["belief"]
+        return self.belief
+
+    def state(self) -> dict[str, Any]:
+        return _check(self.http.get(f"/api/deploy/sessions/{self.session_id}", headers=self._auth()))

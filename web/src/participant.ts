@@ -1,0 +1,423 @@
+// The participant's supervision interface (the paper's Fig. 1): world view, local view,
+// end-effector view and status panel; consent, instructions, trials, self-reports.
+//
+// The server decides everything that matters (complexity, robot action, outcome, score);
+// this page animates it, lets the participant intervene or teleoperate, and reports back.
+// `?speed=4` multiplies every motion (the study's animation_speed is multiplied in too).
+
+import { Api, ApiError, Current, State, TrialResult, UIEvent } from "./api";
+import { gamepadName, installKeyboard, poll } from "./input";
+import {
+  ARM_MAX, REACH, ItemState, Layout, RobotState, View, clampRobot, drawEndEffector, drawLocal, drawWorld,
+  gripperPos, makeLayout, pathLength, pointAlong,
+} from "./scene";
+
+type Phase = "loading" | "consent" | "instructions" | "approach" | "reach" | "waiting" | "outcome" | "teleop" | "result" | "report" | "done" | "error";
+
+const $ = <T extends HTMLElement = HTMLElement>(id: string) => document.getElementById(id) as T;
+const token = decodeURIComponent(location.pathname.split("/").filter(Boolean).pop() ?? "");
+const api = new Api(token);
+const speedParam = parseFloat(new URLSearchParams(location.search).get("speed") ?? "1");
+
+let st: State;
+let speed = 1;
+let phase: Phase = "loading";
+let current: Current | null = null;
+let layout: Layout = makeLayout(1, false);
+let robot: RobotState = freshRobot(layout);
+let item: ItemState = freshItem(layout);
+let pathS = 0;
+let pathL = 1;
+let phaseT = 0;
+let flash = 0;
+let trialEvents: UIEvent[] = [];
+let teleopStart = 0;
+let intervened = false;
+let submissionId = "";
+let outcome: TrialResult | null = null;
+let hint = "";
+let hintUntil = 0;
+let clock = 0;
+
+function freshRobot(l: Layout): RobotState {
+  return { x: l.start.x, y: l.start.y, heading: 0, arm: 0, jaw: 0.2, holding: false, binCount: 0, shake: 0 };
+}
+function freshItem(l: Layout): ItemState {
+  return { x: l.item.x, y: l.item.y, z: 0, inBin: false, visible: true };
+}
+
+function log(type: string, data: Record<string, unknown> = {}) {
+  trialEvents.push({ t: Date.now(), type, trial: current?.trial, data });
+}
+
+function setPhase(p: Phase) {
+  phase = p;
+  phaseT = 0;
+  document.body.dataset.phase = p;
+  for (const s of ["consent", "instructions", "task", "done"]) $(`screen-${s}`).hidden = true;
+  if (p === "consent") $("screen-consent").hidden = false;
+  else if (p === "instructions") $("screen-instructions").hidden = false;
+  else if (p === "done") $("screen-done").hidden = false;
+  else if (p !== "loading" && p !== "error") $("screen-task").hidden = false;
+  $("screen-report").hidden = p !== "report";
+  renderStatus();
+}
+
+function showError(msg: string) {
+  const e = $("error");
+  e.textContent = msg;
+  e.hidden = false;
+}
+
+function setHint(text: string, seconds = 2.5) {
+  hint = text;
+  hintUntil = clock + seconds;
+}
+
+// --------------------------------------------------------------------------- flow
+
+async function boot() {
+  installKeyboard(window);
+  window.addEventListener("gamepadconnected", (e) => log("gamepad_connected", { id: (e as GamepadEvent).gamepad.id }));
+  try {
+    st = await api.me();
+  } catch (e) {
+    setPhase("error");
+    showError(e instanceof ApiError && e.status === 401 ? "This link is not valid. Please check the address you were given." : `Cannot start: ${(e as Error).message}`);
+    return;
+  }
+  speed = (isFinite(speedParam) && speedParam > 0 ? speedParam : 1) * st.animation_speed;
+  if (st.consent_text) $("consent-text").textContent = st.consent_text;
+  if (st.instructions) $("instructions-text").textContent = st.instructions;
+  const rw = st.rewards;
+  $("reward-auto").textContent = fmtReward(rw.autonomous_success);
+  $("reward-ask").textContent = fmtReward(rw.ask);
+  $("reward-int").textContent = fmtReward(rw.intervene);
+  $("reward-fail").textContent = fmtReward(rw.autonomous_failure);
+  $<HTMLInputElement>("agree").addEventListener("change", (e) => ($<HTMLButtonElement>("consent-btn").disabled = !(e.target as HTMLInputElement).checked));
+  $("consent-btn").addEventListener("click", onConsent);
+  $("start-btn").addEventListener("click", () => {
+    api.events([{ t: Date.now(), type: "instructions_done" }]).catch(() => undefined);
+    route();
+  });
+  $("intervene-btn").addEventListener("click", () => intervene("button"));
+  $("report-btn").addEventListener("click", onReport);
+  $<HTMLInputElement>("report-slider").addEventListener("input", (e) => ($("report-value").textContent = (e.target as HTMLInputElement).value));
+  requestAnimationFrame(frame);
+  if (st.status === "new") setPhase("consent");
+  else route();
+}
+
+function fmtReward(x: number) {
+  return (x > 0 ? "+" : x < 0 ? "\u2212" : "") + Math.abs(x);
+}
+
+async function onConsent() {
+  $<HTMLButtonElement>("consent-btn").disabled = true;
+  st = await api.consent([{ t: Date.now(), type: "consent" }]);
+  setPhase("instructions");
+}
+
+function route() {
+  if (st.status === "done" && st.report_due === null) return finish();
+  if (st.report_due !== null) return askReport();
+  if (st.current) return startTrial(st.current);
+  finish();
+}
+
+function finish() {
+  $("final-score").textContent = String(st.score);
+  $("final-trials").textContent = String(st.trials_done);
+  setPhase("done");
+}
+
+function startTrial(cur: Current) {
+  current = cur;
+  trialEvents = [];
+  outcome = null;
+  intervened = false;
+  submissionId = `${api.sessionId}-${cur.trial}-${Math.random().toString(36).slice(2, 10)}`;
+  layout = makeLayout(cur.scene_seed, cur.complexity === "high");
+  const bin = robot.binCount;
+  robot = freshRobot(layout);
+  robot.binCount = bin;
+  item = freshItem(layout);
+  pathS = 0;
+  pathL = pathLength(layout.path);
+  log("trial_start", { complexity: cur.complexity, robot_action: cur.robot_action, block: cur.block });
+  if (cur.robot_action === "ask") {
+    teleopStart = performance.now();
+    log("teleop_start", { reason: "asked" });
+    setPhase("teleop");
+    setHint("The robot asks for your help: drive it to the item, grasp it and put it in the bin.", 5);
+  } else {
+    setPhase("approach");
+  }
+}
+
+function intervene(via: string) {
+  if (phase !== "approach" && phase !== "reach") return;
+  intervened = true;
+  log("intervene", { via, progress: pathS / pathL, arm: robot.arm });
+  teleopStart = performance.now();
+  log("teleop_start", { reason: "intervened" });
+  setPhase("teleop");
+  setHint("You took over: drive to the item, grasp it (G) and deposit it in the bin (B).", 4);
+}
+
+async function submit(human: "intervene" | "rely") {
+  const cur = current!;
+  const effort = human === "intervene" ? performance.now() - teleopStart : null;
+  setPhase(human === "rely" ? "waiting" : "result");
+  try {
+    const res = await api.submitTrial({ trial: cur.trial, submission_id: submissionId, human_action: human, effort_ms: effort, events: trialEvents });
+    outcome = res.trial;
+    st = res.state;
+  } catch (e) {
+    showError(`Could not save the trial: ${(e as Error).message}. Please reload the page.`);
+    setPhase("error");
+    return;
+  }
+  if (human === "rely") setPhase("outcome");
+  else {
+    phaseT = 0;
+    showBanner();
+  }
+  renderStatus();
+}
+
+function showBanner() {
+  const o = outcome!;
+  const r = fmtReward(o.reward);
+  const text: Record<string, string> = {
+    success: "Collected autonomously",
+    collision: "Failure: the robot collided with its surroundings",
+    dropped: "Failure: the robot dropped the item",
+    teleoperated: o.robot_action === "ask" ? "Collected with your help" : "You took over and collected the item",
+  };
+  const b = $("banner");
+  b.innerHTML = `<span class="pts ${o.reward > 0 ? "pos" : o.reward < 0 ? "neg" : ""}">${r}</span> ${text[o.outcome] ?? o.outcome}`;
+  b.className = "show";
+  api.events([{ t: Date.now(), type: "outcome_shown", trial: o.trial, data: { outcome: o.outcome, reward: o.reward } }]).catch(() => undefined);
+}
+
+function afterResult() {
+  $("banner").className = "";
+  route();
+}
+
+function askReport() {
+  $<HTMLInputElement>("report-slider").value = "50";
+  $("report-value").textContent = "50";
+  $("report-scope").textContent = st.self_report === "block" ? "this block" : "this trial";
+  setPhase("report");
+}
+
+async function onReport() {
+  const v = Number($<HTMLInputElement>("report-slider").value);
+  $<HTMLButtonElement>("report-btn").disabled = true;
+  try {
+    const res = await api.report(st.report_due!, v);
+    st = res.state;
+  } finally {
+    $<HTMLButtonElement>("report-btn").disabled = false;
+  }
+  route();
+}
+
+// --------------------------------------------------------------------------- per frame
+
+let last = performance.now();
+function frame(now: number) {
+  const dt = Math.min(0.05, (now - last) / 1000);
+  last = now;
+  clock += dt;
+  const cmd = poll();
+  const k = dt * speed;
+  phaseT += k;
+  flash = Math.max(0, flash - dt * 1.5);
+  robot.shake = Math.max(0, robot.shake - dt * 2);
+
+  if (phase === "approach" || phase === "reach") {
+    if (cmd.intervene) intervene("key");
+  }
+  if (phase === "approach") {
+    pathS = Math.min(pathL, pathS + 1.7 * k);
+    const p = pointAlong(layout.path, pathS);
+    robot.x = p.x;
+    robot.y = p.y;
+    robot.heading = p.heading;
+    if (pathS >= pathL) {
+      setPhase("reach");
+      robot.heading = 0;
+    }
+  } else if (phase === "reach") {
+    robot.jaw = Math.min(1, robot.jaw + 2 * k);
+    robot.arm = Math.min(layout.reachExtension, robot.arm + 1.1 * k);
+    if (robot.arm >= layout.reachExtension) {
+      log("grasp", { by: "robot" });
+      submit("rely");
+    }
+  } else if (phase === "outcome") {
+    animateOutcome(k);
+  } else if (phase === "teleop") {
+    teleop(cmd, k);
+  } else if (phase === "result") {
+    if (outcome && phaseT > 1.6) afterResult();
+  }
+  draw();
+  renderStatus();
+  requestAnimationFrame(frame);
+}
+
+function animateOutcome(k: number) {
+  const o = outcome!;
+  const t = phaseT;
+  const gp = gripperPos(robot, layout.side);
+  if (o.outcome === "success") {
+    if (t < 0.3) robot.jaw = Math.max(0, 1 - t / 0.3);
+    else {
+      robot.holding = true;
+      robot.arm = Math.max(0, robot.arm - 1.4 * k);
+      item.x = gp.x;
+      item.y = gp.y;
+      if (robot.arm <= 0) {
+        item.inBin = true;
+        robot.holding = false;
+        robot.binCount++;
+        toResult();
+      }
+    }
+  } else if (o.outcome === "collision") {
+    if (t < 0.05) {
+      flash = 1;
+      robot.shake = 1;
+    }
+    robot.y += (layout.side < 0 ? -1 : 1) * 0.02 * Math.max(0, 0.4 - t);
+    robot.arm = Math.max(0, robot.arm - 0.8 * k);
+    if (t > 1.2) toResult();
+  } else {
+    // dropped: grasp, lift, lose it on the way to the bin
+    if (t < 0.3) robot.jaw = Math.max(0, 1 - t / 0.3);
+    else if (t < 0.8) {
+      robot.holding = true;
+      robot.arm = Math.max(0, robot.arm - 1.2 * k);
+      item.x = gp.x;
+      item.y = gp.y;
+    } else {
+      if (robot.holding) {
+        robot.holding = false;
+        robot.jaw = 1;
+        flash = 0.8;
+      }
+      item.y += (robot.y - item.y) * Math.min(1, 3 * k) + 0.002;
+      item.x = robot.x + 0.45;
+      if (t > 1.6) toResult();
+    }
+  }
+}
+
+function toResult() {
+  setPhase("result");
+  showBanner();
+}
+
+function teleop(cmd: ReturnType<typeof poll>, k: number) {
+  const v = 1.8;
+  if (cmd.vx || cmd.vy) robot.heading = Math.atan2(cmd.vy, cmd.vx);
+  robot.x += cmd.vx * v * k;
+  robot.y += cmd.vy * v * k;
+  clampRobot(robot, layout);
+  robot.arm = Math.max(0, Math.min(ARM_MAX, robot.arm + cmd.arm * 1.0 * k));
+  const gp = gripperPos(robot, layout.side);
+  if (robot.holding) {
+    item.x = gp.x;
+    item.y = gp.y;
+  } else if (!robot.holding) robot.jaw = Math.min(1, robot.jaw + 2 * k);
+  if (cmd.grasp) {
+    if (robot.holding) setHint("Already holding the item: retract the arm (X) and deposit it (B).");
+    else if (Math.hypot(gp.x - item.x, gp.y - item.y) <= REACH) {
+      robot.holding = true;
+      robot.jaw = 0;
+      log("grasp", { by: "human" });
+    } else {
+      log("grasp_missed", { distance: Math.hypot(gp.x - item.x, gp.y - item.y) });
+      setHint("Too far: bring the gripper (orange) onto the item first.");
+    }
+  }
+  if (cmd.deposit) {
+    if (!robot.holding) setHint("Grasp the item first (G).");
+    else if (robot.arm > 0.3) setHint("Retract the arm (X) before depositing.");
+    else {
+      robot.holding = false;
+      item.inBin = true;
+      robot.binCount++;
+      log("deposit", {});
+      submit("intervene");
+    }
+  }
+}
+
+// --------------------------------------------------------------------------- drawing and status
+
+function view(): View {
+  return { layout, robot, item, showPath: phase === "approach", flash, highlight: !robot.holding && !item.inBin, time: clock };
+}
+
+function draw() {
+  const v = view();
+  drawWorld($<HTMLCanvasElement>("world"), v);
+  drawLocal($<HTMLCanvasElement>("local"), v);
+  drawEndEffector($<HTMLCanvasElement>("ee"), v);
+}
+
+let lastStatus = "";
+function renderStatus() {
+  if (!st) return;
+  const trial = current ? current.trial : st.trials_done;
+  let mode = "";
+  let cls = "";
+  if (phase === "approach" || phase === "reach" || phase === "waiting" || (phase === "outcome" && current?.robot_action === "autonomous")) {
+    mode = "Collecting autonomously";
+    cls = "auto";
+  } else if (phase === "teleop") {
+    mode = intervened ? "You are in control (intervention)" : "Asking for your help";
+    cls = intervened ? "teleop" : "ask";
+  } else if (phase === "result") {
+    mode = "Trial complete";
+    cls = "idle";
+  } else if (phase === "report") {
+    mode = "Your rating, please";
+    cls = "idle";
+  }
+  const gp = gripperPos(robot, layout.side);
+  const near = Math.hypot(gp.x - item.x, gp.y - item.y) <= REACH;
+  let h = clock < hintUntil ? hint : "";
+  if (!h && phase === "teleop") {
+    h = robot.holding ? (robot.arm > 0.3 ? "Retract the arm (X), then deposit (B)." : "Press B to deposit the item in the bin.") : near ? "Item within reach: press G to grasp." : "Drive (arrows/WASD) and extend the arm (Z) to reach the item.";
+  }
+  if (!h && (phase === "approach" || phase === "reach")) h = "Watch the robot. Intervene (Space) if you think it will fail.";
+  const pad = gamepadName();
+  const key = [trial, st.trials_total, st.score, mode, cls, h, pad, phase, current?.complexity].join("|");
+  if (key === lastStatus) return;
+  lastStatus = key;
+  $("trial-no").textContent = `${trial} / ${st.trials_total}`;
+  $("score").textContent = String(st.score);
+  const m = $("mode");
+  m.textContent = mode;
+  m.className = `mode ${cls}`;
+  $("hint").textContent = h;
+  $("block-name").textContent = current ? `Block ${current.block_position} of ${st.blocks.length}` : "";
+  $("gamepad").textContent = pad ? `Gamepad: ${pad.slice(0, 40)}` : "No gamepad (keyboard works)";
+  $<HTMLButtonElement>("intervene-btn").disabled = !(phase === "approach" || phase === "reach");
+}
+
+(window as unknown as { trustseek: unknown }).trustseek = {
+  state: () => ({
+    phase, trial: current?.trial ?? null, robot_action: current?.robot_action ?? null, complexity: current?.complexity ?? null,
+    robot: { x: robot.x, y: robot.y, arm: robot.arm, holding: robot.holding }, item: { x: item.x, y: item.y, inBin: item.inBin },
+    gripper: gripperPos(robot, layout.side), reach: REACH, side: layout.side, score: st?.score ?? null,
+  }),
+};
+
+boot();
