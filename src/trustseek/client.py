@@ -60,10 +60,12 @@ class Client:
                  http: httpx.Client | None = None):
         self.base_url = base_url.rstrip("/")
         self.token = token
+        self._owns_http = http is None
         self.http = http or httpx.Client(base_url=self.base_url, timeout=timeout)
 
     def close(self) -> None:
-        self.http.close()
+        if self._owns_http:
+            self.http.close()
 
     def __enter__(self) -> "Client":
         return self

@@ -77,8 +77,8 @@ export function makeLayout(seed: number, high: boolean): Layout {
   if (high) {
     // an obstacle in the direct path, and a second one narrowing the detour
     const ox = 4.8 + r() * 2.2;
-    obstacles.push({ x: ox - 0.5, y: AISLE_H / 2 - 0.75, w: 1.0, h: 1.5, kind: r() < 0.5 ? "crate" : "cart" });
-    const detourY = side < 0 ? SHELF_DEPTH + 0.62 : AISLE_H - SHELF_DEPTH - 0.62;
+    obstacles.push({ x: ox - 0.5, y: AISLE_H / 2 - 0.6, w: 1.0, h: 1.2, kind: r() < 0.5 ? "crate" : "cart" });
+    const detourY = side < 0 ? SHELF_DEPTH + 0.55 : AISLE_H - SHELF_DEPTH - 0.55;
     const sx = ox + 1.6 + r() * 0.8;
     const spillY = side < 0 ? AISLE_H - SHELF_DEPTH - 0.9 : SHELF_DEPTH + 0.1;
     obstacles.push({ x: sx, y: spillY, w: 0.8, h: 0.8, kind: "spill" });
@@ -424,8 +424,8 @@ export function drawEndEffector(c: HTMLCanvasElement, v: View) {
   const d = Math.hypot(gp.x - item.x, gp.y - item.y);
   g.fillStyle = d < REACH ? "#7dff9a" : "#d5d9e0";
   g.font = "13px system-ui, sans-serif";
-  g.textAlign = "left";
-  g.fillText(`distance to item ${d.toFixed(2)} m`, 10, 20);
+  g.textAlign = "right";
+  g.fillText(`distance to item ${d.toFixed(2)} m`, W - 10, 22);
   vignette(g, c);
 }
 
