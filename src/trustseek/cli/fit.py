@@ -1,0 +1,192 @@
+"""Estimation commands: fit, decode, select."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.markup import escape
+from rich.table import Table
+
+from ..data import ColumnMapping, read_trials, write_trials
+from ..errors import TrustseekError
+from ..fit import MODEL_INPUTS, PAPER_EMISSION_INPUTS, PAPER_TRANSITION_INPUTS, PRESETS, decode, fit_trust_model, select_levels
+from ..model import TrustModel
+from ._app import app, console, err_console, print_json
+
+MappingOpt = typer.Option(None, "--mapping", help="Column/label mapping file (JSON or TOML) for a log with other names.")
+ColumnOpt = typer.Option(None, "--column", help="Map a column: canonical=theirs (e.g. human_action=rely). Repeatable.")
+LabelOpt = typer.Option(None, "--label", help="Map a label: column:theirs=canonical (e.g. human_action:1=rely). Repeatable.")
+
+
+def _inputs(text: Optional[str], default: tuple[str, ...], flag: str) -> tuple[str, ...]:
+    if text is None:
+        return default
+    if text.strip().lower() in ("", "none", "-"):
+        return ()
+    cols = tuple(c.strip() for c in text.split(",") if c.strip())
+    bad = [c for c in cols if c not in MODEL_INPUTS]
+    if bad:
+        raise TrustseekError([f"{flag}: {c!r} is not one of {list(MODEL_INPUTS)} (or 'none')" for c in bad])
+    return cols
+
+
+def _read(log: Path, mapping: Optional[Path], column: Optional[list[str]], label: Optional[list[str]], needed: tuple[str, ...]):
+    m = ColumnMapping.from_flags(column or [], label or [], mapping)
+    return read_trials(log, m, required=("participant", "trial", "human_action", *needed))
+
+
+def _progress(description: str, quiet: bool):
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=True,
+        disable=quiet,
+    ), description
+
+
+@app.command()
+def fit(
+    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
+    preset: str = typer.Option("paper", "--preset", help=f"Model structure preset: {', '.join(PRESETS)}."),
+    levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Number of trust levels."),
+    transitions_on: Optional[str] = typer.Option(None, "--transitions-on", help="Comma-separated inputs of the trust transitions (default: complexity,robot_action,experience; 'none' for none)."),
+    emissions_on: Optional[str] = typer.Option(None, "--emissions-on", help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for none)."),
+    restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Random restarts; the best is kept."),
+    bootstrap: int = typer.Option(0, "--bootstrap", "-b", min=0, help="Participant-level bootstrap replicates for 95% CIs (0 = none)."),
+    prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."),
+    seed: int = typer.Option(0, "--seed", help="Random seed (restarts and bootstrap)."),
+    tol: float = typer.Option(1e-8, "--tol", help="Stop when the relative change of the log-likelihood is below this."),
+    max_iter: int = typer.Option(1000, "--max-iter", min=1, help="Iteration cap per restart (E-steps)."),
+    jobs: Optional[int] = typer.Option(None, "--jobs", "-j", min=1, help="Processes for the bootstrap (default: all cores)."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the fitted trust model (JSON, same format as the presets)."),
+    posteriors: Optional[Path] = typer.Option(None, "--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet)."),
+    plots: Optional[Path] = typer.Option(None, "--plots", help="Write emission/transition figures (Fig. 4-6 style) into this directory."),
+    as_json: bool = typer.Option(False, "--json", help="Print the fitted model and diagnostics as one JSON object."),
+    mapping: Optional[Path] = MappingOpt,
+    column: Optional[list[str]] = ColumnOpt,
+    label: Optional[list[str]] = LabelOpt,
+) -> None:
+    """Estimate the supervisor's trust model from logged trials (extended Baum-Welch)."""
+    tr = _inputs(transitions_on, PAPER_TRANSITION_INPUTS, "--transitions-on")
+    em = _inputs(emissions_on, PAPER_EMISSION_INPUTS, "--emissions-on")
+    frame = _read(log, mapping, column, label, tuple(dict.fromkeys((*tr, *em))))
+    bar, desc = _progress("fitting", as_json)
+    with bar:
+        task = bar.add_task(desc, total=restarts + bootstrap)
+
+        def progress(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total, description="bootstrap" if done > restarts else "restarts")
+
+        result = fit_trust_model(
+            frame, preset=preset, restarts=restarts, seed=seed, bootstrap=bootstrap, prior=prior, n_jobs=jobs,
+            tol=tol, max_iter=max_iter, progress=progress, levels=levels, transition_inputs=tr, emission_inputs=em,
+        )
+    if out is not None:
+        result.model.save(out)
+    if posteriors is not None:
+        write_trials(result.posteriors(), posteriors)
+    if plots is not None:
+        from ..plots.model import plot_emissions, plot_transitions
+        from ..presets import paper_model
+
+        plots.mkdir(parents=True, exist_ok=True)
+        ref = paper_model() if result.model.complexities == paper_model().complexities and result.model.n_trust == 2 else None
+        plot_emissions(result.model, plots / "emissions.png", ci=result.ci, reference=ref)
+        plot_transitions(result.model, plots / "transitions.png", ci=result.ci, reference=ref)
+    if as_json:
+        d = result.to_dict()
+        d["cells"] = result.cells()
+        print_json(d)
+        return
+    table = Table(title=f"Fitted trust model ({result.fit.seqs.n_participants} participants, {result.fit.seqs.n_trials} trials)", title_justify="left")
+    table.add_column("cell")
+    table.add_column("estimate", justify="right")
+    if result.ci is not None:
+        table.add_column("95% CI", justify="right")
+    table.add_column("events", justify="right")
+    for c in result.cells():
+        row = [c["cell"], f"{c['estimate']:.3f}"]
+        if result.ci is not None:
+            row.append(escape(f"[{c['lower']:.3f}, {c['upper']:.3f}]"))
+        ev = f"{c['events']:.1f}"
+        row.append(ev if c["events"] >= 5 else f"[yellow]{ev} (not identified)[/]")
+        table.add_row(*row)
+    console.print(table)
+    lls = ", ".join(f"{x:.3f}" for x in sorted(result.restart_logliks, reverse=True))
+    console.print(
+        f"log-likelihood {result.loglik:.4f}; {result.n_params} free parameters; AIC {result.aic:.2f}; BIC {result.bic:.2f}\n"
+        f"restarts (best first): {lls}"
+    )
+    for w in result.warnings:
+        console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
+    if out is not None:
+        console.print(f"model written to {out}")
+    if posteriors is not None:
+        console.print(f"posteriors written to {posteriors}")
+    if plots is not None:
+        console.print(f"figures written to {plots}/emissions.png, {plots}/transitions.png")
+
+
+@app.command("decode")
+def decode_cmd(
+    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
+    model: Path = typer.Option(..., "--model", "-m", help="Trust model JSON (e.g. from 'trustseek fit')."),
+    out: Path = typer.Option(Path("posteriors.csv"), "--out", "-o", help="Output file (.csv or .parquet)."),
+    mapping: Optional[Path] = MappingOpt,
+    column: Optional[list[str]] = ColumnOpt,
+    label: Optional[list[str]] = LabelOpt,
+) -> None:
+    """Per-trial smoothed P(trust | data) and the Viterbi trust path under a model."""
+    m = TrustModel.load(model)
+    frame = _read(log, mapping, column, label, ("complexity", "robot_action", "experience"))
+    post = decode(frame, m)
+    write_trials(post, out)
+    console.print(f"wrote {len(post)} trials to {out}")
+
+
+@app.command()
+def select(
+    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
+    max_levels: int = typer.Option(4, "--max-levels", min=1, max=8, help="Compare 1..this many trust levels."),
+    folds: int = typer.Option(5, "--folds", min=2, help="Folds over participants for the held-out log-likelihood."),
+    restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Random restarts per fit."),
+    prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count (MAP)."),
+    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    tol: float = typer.Option(1e-6, "--tol", help="Relative log-likelihood tolerance per fit."),
+    transitions_on: Optional[str] = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit)."),
+    emissions_on: Optional[str] = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit)."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+    mapping: Optional[Path] = MappingOpt,
+    column: Optional[list[str]] = ColumnOpt,
+    label: Optional[list[str]] = LabelOpt,
+) -> None:
+    """Choose the number of trust levels: BIC and participant-held-out log-likelihood."""
+    tr = _inputs(transitions_on, PAPER_TRANSITION_INPUTS, "--transitions-on")
+    em = _inputs(emissions_on, PAPER_EMISSION_INPUTS, "--emissions-on")
+    frame = _read(log, mapping, column, label, tuple(dict.fromkeys((*tr, *em))))
+    bar, desc = _progress("model selection", as_json)
+    with bar:
+        task = bar.add_task(desc, total=None)
+        rows = select_levels(
+            frame, levels=tuple(range(1, max_levels + 1)), folds=folds, restarts=restarts, seed=seed, prior=prior, tol=tol,
+            progress=lambda d, t: bar.update(task, completed=d, total=t), transition_inputs=tr, emission_inputs=em,
+        )
+    if as_json:
+        print_json({"levels": rows})
+        return
+    table = Table(title="Number of trust levels", title_justify="left")
+    for col in ("levels", "log-likelihood", "parameters", "AIC", "BIC", f"held-out LL ({folds}-fold)"):
+        table.add_column(col, justify="right")
+    for r in rows:
+        table.add_row(
+            str(r["levels"]), f"{r['loglik']:.3f}", str(r["n_params"]), f"{r['aic']:.2f}",
+            f"{r['bic']:.2f}" + (" *" if r["best_bic"] else ""), f"{r['heldout_loglik']:.3f}" + (" *" if r["best_heldout"] else ""),
+        )
+    console.print(table)
+    console.print("* best by that criterion")

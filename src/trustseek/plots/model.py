@@ -1,0 +1,87 @@
+"""Figs. 4-6: estimated emission and transition probabilities, with bootstrap CIs.
+
+``ci`` is the ``FitResult.ci`` dict ('emission'/'transition' -> (lower, upper)
+arrays of the TrustModel shapes); ``reference`` is a TrustModel (e.g. the paper
+preset) drawn as open markers.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model import ACTIONS, EXPERIENCES, RELY
+from . import COLORS, save, style
+
+_LEVEL_COLORS = ("#c8102e", "#1f5fa8", "#2a9d3f", "#7b3294", "#e08214", "#666666", "#000000", "#8c510a")
+
+
+def _bars(ax, values, lower, upper, ref, labels, series):
+    n_groups, n_series = values.shape
+    width = 0.8 / n_series
+    x = np.arange(n_groups)
+    for s in range(n_series):
+        pos = x - 0.4 + width * (s + 0.5)
+        color = _LEVEL_COLORS[s % len(_LEVEL_COLORS)]
+        ax.bar(pos, values[:, s], width * 0.9, color=color, alpha=0.75, label=series[s])
+        if lower is not None:
+            err = np.vstack([values[:, s] - lower[:, s], upper[:, s] - values[:, s]])
+            ax.errorbar(pos, values[:, s], yerr=np.clip(err, 0, None), fmt="none", ecolor="0.15", elinewidth=0.8, capsize=2)
+        if ref is not None:
+            ax.plot(pos, ref[:, s], ls="none", marker="o", mfc="white", mec="0.1", ms=4, label="reference" if s == 0 else None)
+    ax.set_xticks(x)
+    ax.set_xticklabels(labels)
+    ax.set_ylim(0, 1.05)
+
+
+def plot_emissions(model, path=None, ci=None, reference=None):
+    """P(rely | T, C, a) per complexity and robot action (Fig. 4), one bar per trust level."""
+    T, C = model.trust_levels, model.complexities
+    groups = [(c, a) for a in range(2) for c in range(len(C))]
+    vals = np.array([[model.emission[c, a, t, RELY] for t in range(len(T))] for c, a in groups])
+    lo = hi = ref = None
+    if ci is not None:
+        lo = np.array([[ci["emission"][0][c, a, t, RELY] for t in range(len(T))] for c, a in groups])
+        hi = np.array([[ci["emission"][1][c, a, t, RELY] for t in range(len(T))] for c, a in groups])
+    if reference is not None and reference.trust_levels == model.trust_levels and reference.complexities == model.complexities:
+        ref = np.array([[reference.emission[c, a, t, RELY] for t in range(len(T))] for c, a in groups])
+    with style() as plt:
+        fig, ax = plt.subplots(figsize=(4.6, 2.6))
+        _bars(ax, vals, lo, hi, ref, [f"C={C[c]}\na={ACTIONS[a]}" for c, a in groups], [f"T={t}" for t in T])
+        ax.set_ylabel(r"$P(o = \mathrm{rely} \mid T, C, a)$")
+        ax.set_title("Estimated probability of relying on the robot" + (" (95% CI)" if ci is not None else ""))
+        ax.legend(loc="lower left", frameon=False, ncol=3)
+        fig.tight_layout()
+        if path is not None:
+            save(fig, path)
+        return fig
+
+
+def plot_transitions(model, path=None, ci=None, reference=None):
+    """P(T' = highest | T, E', C, a) for each (C, a, E') (Figs. 5-6), one bar per current trust level."""
+    T, C = model.trust_levels, model.complexities
+    top = len(T) - 1
+    panels = []
+    for c in range(len(C)):
+        groups = [(a, e) for a in range(2) for e in range(2)]
+        panels.append((c, groups))
+    ref_ok = reference is not None and reference.trust_levels == model.trust_levels and reference.complexities == model.complexities
+    with style() as plt:
+        fig, axes = plt.subplots(1, len(C), figsize=(3.4 * len(C), 2.7), squeeze=False)
+        for ax, (c, groups) in zip(axes[0], panels):
+            vals = np.array([[model.transition[c, a, e, t, top] for t in range(len(T))] for a, e in groups])
+            lo = hi = ref = None
+            if ci is not None:
+                lo = np.array([[ci["transition"][0][c, a, e, t, top] for t in range(len(T))] for a, e in groups])
+                hi = np.array([[ci["transition"][1][c, a, e, t, top] for t in range(len(T))] for a, e in groups])
+            if ref_ok:
+                ref = np.array([[reference.transition[c, a, e, t, top] for t in range(len(T))] for a, e in groups])
+            _bars(ax, vals, lo, hi, ref, [f"{ACTIONS[a]}\nE'={EXPERIENCES[e]}" for a, e in groups], [f"T={t}" for t in T])
+            ax.set_title(f"complexity {C[c]}")
+            ax.set_ylabel(rf"$P(T' = \mathrm{{{T[top]}}} \mid T, E', C, a)$")
+            ax.tick_params(axis="x", labelsize=6.5)
+        axes[0, 0].legend(loc="upper left", frameon=False, fontsize=7)
+        fig.suptitle("Estimated trust transitions" + (" (95% CI)" if ci is not None else ""), fontsize=9)
+        fig.tight_layout()
+        if path is not None:
+            save(fig, path)
+        return fig
