@@ -256,7 +256,11 @@ def read_trials(
         if col not in raw.columns:
             texts[c] = [None] * n
             continue
-        texts[c] = [_as_text(v) for v in raw[col].tolist()]
+        values = raw[col]
+        if pd.api.types.is_numeric_dtype(values.dtype) or pd.api.types.is_bool_dtype(values.dtype):
+            texts[c] = [_as_text(v) for v in values.tolist()]
+        else:  # a null in a text column is an empty cell, not a NaN
+            texts[c] = [None if (isinstance(v, float) and math.isnan(v)) else _as_text(v) for v in values.tolist()]
 
     def add(i: int, c: str, msg: str) -> None:
         problems.append(f"{where(i)}, column {theirs[c]!r}: {msg}")

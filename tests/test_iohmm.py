@@ -1,0 +1,238 @@
+"""The discrete IOHMM: exact inference against brute force, EM against hmmlearn, monotonicity."""
+
+import itertools
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from trustseek.fit import paper_spec, simulate_design
+from trustseek.iohmm import (
+    FitError,
+    Fixed,
+    IOHMMSpec,
+    Params,
+    Structure,
+    Workspace,
+    encode,
+    fit_iohmm,
+    loglik,
+    posteriors,
+    run_em,
+)
+
+
+def small_paper_data(n=3, trials=(4, 3), seed=0):
+    from trustseek.presets import paper_model
+
+    return simulate_design(paper_model(), n, seed=seed, n_trials=trials)
+
+
+def brute_force(seqs, params):
+    """Enumerate every hidden path of every participant: loglik, marginals, best path."""
+    K = params.initial.shape[0]
+    total = 0.0
+    marg = np.zeros(seqs.y.shape + (K,))
+    best = np.full(seqs.y.shape, -1)
+    for n in range(seqs.n_participants):
+        L = int(seqs.lengths[n])
+        probs = {}
+        for path in itertools.product(range(K), repeat=L):
+            p = params.initial[path[0]]
+            for t in range(L):
+                if seqs.y[t, n] >= 0:
+                    p *= params.emission[seqs.ue[t, n], path[t], seqs.y[t, n]]
+                if t + 1 < L:
+                    p *= params.transition[seqs.ut[t, n], path[t], path[t + 1]]
+            probs[path] = p
+        z = sum(probs.values())
+        total += np.log(z)
+        for path, p in probs.items():
+            for t in range(L):
+                marg[t, n, path[t]] += p / z
+        bp = max(probs, key=probs.get)
+        best[:L, n] = bp
+    return total, marg, best
+
+
+def test_forward_backward_and_viterbi_match_brute_force():
+    df = small_paper_data(3, (4, 3), seed=5)
+    df.loc[[2, 9], "human_action"] = None  # unobserved trials
+    spec = paper_spec()
+    seqs = encode(df, spec)
+    s = Structure(spec, seqs)
+    params = s.random(np.random.default_rng(1))
+    ll, marg, best = brute_force(seqs, params)
+    gamma, path, ll2 = posteriors(seqs, spec, params)
+    assert ll2 == pytest.approx(ll, abs=1e-10)
+    assert loglik(seqs, spec, params) == pytest.approx(ll, abs=1e-10)
+    valid = seqs.rows >= 0
+    np.testing.assert_allclose(gamma[valid], marg[valid], atol=1e-10)
+    np.testing.assert_array_equal(path[valid], best[valid])
+
+
+def test_expected_counts_match_brute_force_derivative():
+    """Emission expected counts equal sum of posterior marginals per (input, level, output)."""
+    df = small_paper_data(2, (3, 3), seed=2)
+    spec = paper_spec()
+    seqs = encode(df, spec)
+    s = Structure(spec, seqs)
+    params = s.random(np.random.default_rng(3))
+    st = Workspace(seqs, 2, 2, s.Ue, s.Ut).estep(params)
+    _, marg, _ = brute_force(seqs, params)
+    expect = np.zeros_like(st.emission)
+    for t, n in zip(*np.nonzero(seqs.y >= 0)):
+        expect[seqs.ue[t, n], :, seqs.y[t, n]] += marg[t, n]
+    np.testing.assert_allclose(st.emission, expect, atol=1e-10)
+    assert st.transition.sum() == pytest.approx(seqs.n_trials - seqs.n_participants)
+
+
+def test_random_initial_values_have_no_zeros_and_respect_fixed_cells():
+    df = small_paper_data(20, (41, 30), seed=3)
+    spec = paper_spec()
+    s = Structure(spec, encode(df, spec))
+    for seed in range(20):
+        p = s.random(np.random.default_rng(seed))
+        free = ~s.em.fixed
+        assert np.all(p.emission[free] > 0) and np.all(p.initial > 0)
+        assert np.all(p.transition[~s.tr.fixed] > 0)
+        np.testing.assert_array_equal(p.emission[:, :, :][[1, 3]][..., 0], 1.0)  # P(intervene | ask) = 1
+        np.testing.assert_allclose(p.emission.sum(-1), 1)
+        np.testing.assert_allclose(p.transition.sum(-1), 1)
+
+
+# --------------------------------------------------------------------------- hmmlearn as oracle
+
+
+def test_input_free_fit_equals_hmmlearn_categorical_hmm():
+    hmm = pytest.importorskip("hmmlearn.hmm")
+    rng = np.random.default_rng(7)
+    gen = hmm.CategoricalHMM(n_components=2, random_state=3)
+    gen.startprob_ = np.array([0.7, 0.3])
+    gen.transmat_ = np.array([[0.9, 0.1], [0.2, 0.8]])
+    gen.emissionprob_ = np.array([[0.7, 0.2, 0.1], [0.1, 0.3, 0.6]])
+    lengths = [50, 80, 65, 30]
+    X = np.concatenate([gen.sample(L, random_state=int(rng.integers(1 << 30)))[0] for L in lengths])
+    cats = ("a", "b", "c")
+    df = pd.DataFrame(
+        {
+            "participant": np.repeat([f"p{i}" for i in range(len(lengths))], lengths),
+            "trial": np.concatenate([np.arange(1, L + 1) for L in lengths]),
+            "symbol": np.array(cats, dtype=object)[X[:, 0]],
+        }
+    )
+    spec = IOHMMSpec(levels=("s0", "s1"), output="symbol", output_categories=cats)
+    seqs = encode(df, spec)
+    init = Params(np.array([0.5, 0.5]), np.array([[[0.5, 0.3, 0.2], [0.2, 0.3, 0.5]]]), np.array([[[0.6, 0.4], [0.3, 0.7]]]))
+    n_iter = 25
+    ref = hmm.CategoricalHMM(n_components=2, n_iter=n_iter, tol=-np.inf, init_params="", params="ste", implementation="scaling")
+    ref.n_features = 3
+    ref.startprob_, ref.transmat_, ref.emissionprob_ = init.initial.copy(), init.transition[0].copy(), init.emission[0].copy()
+    ref.fit(X, lengths)
+    s = Structure(spec, seqs)
+    res = run_em(s, Workspace(seqs, 2, 3, 1, 1), init, tol=-np.inf, max_iter=n_iter + 1, accelerate=False)
+    assert res.iterations == n_iter + 1
+    assert res.loglik == pytest.approx(ref.score(X, lengths), abs=1e-6)
+    np.testing.assert_allclose(res.params.initial, ref.startprob_, atol=1e-5)
+    np.testing.assert_allclose(res.params.transition[0], ref.transmat_, atol=1e-5)
+    np.testing.assert_allclose(res.params.emission[0], ref.emissionprob_, atol=1e-5)
+    # the monitor of hmmlearn saw the same log-likelihood sequence (it logs before each M-step)
+    np.testing.assert_allclose(res.history[-len(ref.monitor_.history) - 1 : -1], list(ref.monitor_.history), atol=1e-6)
+
+
+# --------------------------------------------------------------------------- monotonicity and robustness
+
+
+@pytest.mark.parametrize("accelerate", [False, True])
+def test_objective_never_decreases(accelerate):
+    df = small_paper_data(30, (41, 30), seed=11)
+    for prior in (0.0, 0.5):
+        spec = paper_spec(prior=prior)
+        seqs = encode(df, spec)
+        s = Structure(spec, seqs)
+        res = run_em(s, Workspace(seqs, 2, 2, s.Ue, s.Ut), s.random(np.random.default_rng(4)), tol=1e-10, max_iter=300, accelerate=accelerate)
+        h = np.array(res.history)
+        assert np.all(np.isfinite(h))
+        assert np.all(np.diff(h) >= 0)
+        assert len(h) > 10
+
+
+def test_degenerate_participant_who_always_relies():
+    n = 60
+    df = pd.DataFrame(
+        {
+            "participant": "solo",
+            "trial": np.arange(1, n + 1),
+            "complexity": np.where(np.arange(n) % 2, "high", "low"),
+            "robot_action": "autonomous",
+            "human_action": "rely",
+            "experience": "reliable",
+        }
+    )
+    spec = paper_spec()
+    fit = fit_iohmm(encode(df, spec), spec, restarts=3, seed=0)
+    for r in fit.runs:
+        assert np.all(np.isfinite(r.history)) and np.all(np.diff(r.history) >= 0)
+    assert fit.loglik == pytest.approx(0.0, abs=1e-6)  # a level that always relies explains the data
+    assert np.all(np.isfinite(fit.params.vector()))
+
+
+def test_long_sequence_of_100000_trials_stays_finite_and_monotone():
+    from trustseek.presets import paper_model
+
+    df = simulate_design(paper_model(), 1, seed=1, n_trials=(57_750, 42_250))
+    spec = paper_spec()
+    seqs = encode(df, spec)
+    assert seqs.n_trials == 100_000
+    s = Structure(spec, seqs)
+    res = run_em(s, Workspace(seqs, 2, 2, s.Ue, s.Ut), s.random(np.random.default_rng(0)), max_iter=3)
+    h = np.array(res.history)
+    assert np.all(np.isfinite(h)) and np.all(np.diff(h) >= 0)
+    assert -100_000 < h[-1] < 0
+
+
+def test_tied_rows_and_prior():
+    df = small_paper_data(40, (41, 30), seed=8)
+    base = paper_spec()
+    # tie the autonomous emission rows of both complexities: one row per level
+    tied = IOHMMSpec(**{**base.__dict__, "tied_emissions": (({"robot_action": "autonomous"},),), "order_by": ({"robot_action": "autonomous"}, "rely")})
+    seqs = encode(df, tied)
+    fit = fit_iohmm(seqs, tied, restarts=2, seed=1)
+    np.testing.assert_allclose(fit.params.emission[0], fit.params.emission[2])  # (low, auto) == (high, auto)
+    assert fit.n_params == Structure(base, seqs).n_free - 2
+    # a Dirichlet pseudo-count keeps every free cell strictly inside (0, 1)
+    map_spec = paper_spec(prior=1.0)
+    fit = fit_iohmm(seqs, map_spec, restarts=2, seed=1)
+    s = fit.structure
+    assert np.all(fit.params.transition[~s.tr.fixed] > 1e-4)
+
+
+def test_impossible_event_under_a_fixed_cell_is_reported():
+    df = small_paper_data(2, (4, 3), seed=4)
+    i = df.index[df["robot_action"] == "ask"]
+    if len(i) == 0:
+        df.loc[0, "robot_action"] = "ask"
+        i = [0]
+    df.loc[i[0], "human_action"] = "rely"
+    spec = paper_spec()
+    with pytest.raises(FitError, match=f"row {i[0] + 1}: human_action = 'rely' is impossible"):
+        Structure(spec, encode(df, spec))
+
+
+def test_unseen_input_rows_default_to_identity_and_are_not_counted():
+    df = small_paper_data(10, (41, 30), seed=6)
+    spec = paper_spec()
+    s = Structure(spec, encode(df, spec))
+    # asking in low complexity is always followed by a faulty experience: (low, ask, reliable) is never seen
+    u = np.ravel_multi_index((0, 1, 1), (2, 2, 2))
+    assert s.tr.empty[u] and np.all(s.tr.fixed[u])
+    np.testing.assert_array_equal(s.tr.values[u], np.eye(2))
+    # 1 initial + 4 emission rows (autonomous x complexity x level) + 6 observed transition combos x 2 levels
+    assert s.n_free == 1 + 4 + 12
+
+
+def test_bad_spec_is_reported():
+    with pytest.raises(FitError, match="not one of the inputs"):
+        spec = paper_spec()
+        bad = IOHMMSpec(**{**spec.__dict__, "fixed_emissions": (Fixed({"experience": "faulty"}, {"intervene": 1.0}),)})
+        Structure(bad, encode(small_paper_data(), bad))
