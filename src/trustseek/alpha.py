@@ -1,0 +1,961 @@
+"""Alpha-vector solver with certified bounds, for two trust levels.
+
+The complexity and the last experience are observed, so the belief that matters
+is one number, x = P(trust = high), and the value over P(C) is
+
+    W(x) = Σ_C P(C) max_a Q(x, C, a),
+    Q(x, C, a) = r(x, C, a) + γ Σ_branch P(branch | x, C, a) W(x'_branch).
+
+``bayes`` update (the exact filter).  W is piecewise linear and convex, the
+maximum of *alpha vectors* (α(low), α(high)), i.e. lines in x.  In one dimension
+the exact Bellman backup of such a function is computed with upper envelopes
+(a branch's envelope of projected vectors, cross-sums over branches and over
+complexities, the maximum over actions), so no linear programs are needed.
+:class:`AlphaSolver` runs policy iteration on finite-state controllers: every
+vector of the exact backup becomes a controller node (an action per complexity
+and a successor node per (C, o, E')), the successors are re-pointed to the best
+node at the node's witness belief, and the controller is evaluated exactly by
+one linear solve.  Every vector kept is the value of an executable policy, so
+L(x) = max_α α·x is a certified lower bound on W, and T L ≥ L.  The contraction
+of the Bellman operator T then gives the upper bound
+
+    W ≤ T L + γ δ / (1 - γ),  δ = sup_x (T L - L)(x)  (computed exactly),
+
+so the certified gap is δ / (1 - γ).  The grid solver's interpolated value is a
+second, independent upper bound (linear interpolation over-estimates a convex
+function); the reported gap uses the smaller of the two.
+
+``paper`` update (eq. 3).  It is not a Bayes filter: the branch probability is
+linear in x while the next belief x' = x P(T'=high | T=high) + (1-x) P(T'=high | T=low)
+is not rescaled by it, so Q contains products (linear × piecewise linear) and W is
+neither linear nor convex.  Alpha vectors cannot represent it.  Instead the
+solver certifies the grid solution V (linear interpolation on G points): on every
+piece between grid points, their preimages under the belief maps and the roots of
+the advantage, (T V - V)(x) is one quadratic, so its supremum ε+ and infimum
+-ε- over the whole of [0, 1] are computed exactly, and
+
+    V - ε- / (1 - γ)  ≤  W  ≤  V + ε+ / (1 - γ).
+
+The grid is refined until the gap (ε+ + ε-) / (1 - γ) meets the tolerance.
+
+Thresholds come from the lower-bound Q, with an uncertainty interval: the
+advantage D = Q(ask) - Q(autonomous) of the optimal Q lies within ±γ·gap of the
+computed one, so the threshold lies where |D| ≤ γ·gap.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from scipy.optimize import brentq
+
+from .belief import BELIEF_UPDATES, to_vector
+from .model import ACTIONS, ASK, AUTONOMOUS, ModelError, TrustModel
+from .pomdp import AssistancePOMDP
+
+ALPHA_KIND = "alpha-vector"
+_WIDTH_EPS = 1e-13  # envelope pieces narrower than this are dropped
+
+
+# --------------------------------------------------------------------------- 1-D envelopes
+
+
+def envelope(vecs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The upper envelope over x in [0, 1] of the lines x -> v0 (1 - x) + v1 x.
+
+    Returns (idx, xs): indices of the lines on the envelope ordered by increasing x,
+    and the breakpoints xs (len(idx) + 1, from 0 to 1); line idx[i] is the maximum on
+    [xs[i], xs[i + 1]].
+    """
+    v0 = vecs[:, 0]
+    s = vecs[:, 1] - vecs[:, 0]
+    order = np.lexsort((-v0, s))
+    hull: list[int] = []
+    starts: list[float] = []
+    last_slope = None
+    for i in order:
+        i = int(i)
+        si = s[i]
+        if last_slope is not None and si == last_slope:
+            continue  # same slope, lower intercept (sorted)
+        while hull:
+            j = hull[-1]
+            x = (v0[j] - v0[i]) / (si - s[j])  # where line i overtakes line j
+            if x <= starts[-1] + _WIDTH_EPS:
+                hull.pop()
+                starts.pop()
+                continue
+            break
+        if hull:
+            j = hull[-1]
+            x = (v0[j] - v0[i]) / (si - s[j])
+            if x >= 1.0 - _WIDTH_EPS:
+                continue  # never above the envelope on [0, 1]
+            start = x
+        else:
+            start = 0.0
+        hull.append(i)
+        starts.append(start)
+        last_slope = si
+    xs = np.array(starts + [1.0])
+    xs[0] = 0.0
+    return np.array(hull, dtype=np.int64), xs
+
+
+def envelope_values(vecs: np.ndarray, xs: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Evaluate an envelope (vectors in order, breakpoints xs) at points x."""
+    x = np.asarray(x, dtype=float)
+    i = np.clip(np.searchsorted(xs, x, side="right") - 1, 0, len(vecs) - 1)
+    return vecs[i, 0] * (1 - x) + vecs[i, 1] * x
+
+
+def _cross_sum(xs1: np.ndarray, xs2: np.ndarray):
+    """Pieces of the sum of two envelopes: breakpoints and the active index in each."""
+    u = np.union1d(xs1, xs2)
+    keep = np.concatenate([[True], np.diff(u) > _WIDTH_EPS])
+    u = u[keep]
+    if u[-1] < 1.0:
+        u[-1] = 1.0
+    if len(u) < 2:
+        u = np.array([0.0, 1.0])
+    mids = 0.5 * (u[:-1] + u[1:])
+    i1 = np.clip(np.searchsorted(xs1, mids, side="right") - 1, 0, len(xs1) - 2)
+    i2 = np.clip(np.searchsorted(xs2, mids, side="right") - 1, 0, len(xs2) - 2)
+    return u, i1, i2
+
+
+@dataclass
+class Backup:
+    """The exact Bellman backup T L of a set of alpha vectors (two trust levels).
+
+    ``vectors``/``xs``: the envelope of T L; ``actions[n, c]`` and ``successors[n, c, o, e]``
+    (index into the input vectors, -1 for an impossible branch) say how each vector is
+    obtained.  ``q[c][a]`` = (vectors, xs) of the envelope of Q(x, C=c, a).
+    """
+
+    vectors: np.ndarray
+    xs: np.ndarray
+    actions: np.ndarray
+    successors: np.ndarray
+    q: list[list[tuple[np.ndarray, np.ndarray]]]
+
+
+def _project(vecs: np.ndarray, xs: np.ndarray, M: np.ndarray):
+    """Envelope of the projected vectors (M α)_j over x, for an envelope (vecs, xs).
+
+    max_j (b M)·α_j = |b M| L(x'), where x' = (b M)_high / |b M| is a monotone (Moebius) map of
+    x, so the projected envelope uses the lines of L active at x'(x) and its breakpoints are
+    the preimages of the breakpoints of L.  Returns (projected vectors, breakpoints, indices)."""
+    s0, s1 = M[0].sum(), M[1].sum()
+    m0, m1 = M[0, 1], M[1, 1]
+    if s0 <= 0 or s1 <= 0:
+        y = m1 / s1 if s0 <= 0 else m0 / s0
+        idx = _active(xs, np.array([y]))
+        return vecs[idx] @ M.T, np.array([0.0, 1.0]), idx
+    y0, y1 = m0 / s0, m1 / s1
+    if abs(y1 - y0) <= 1e-15:
+        idx = _active(xs, np.array([y0]))
+        return vecs[idx] @ M.T, np.array([0.0, 1.0]), idx
+    lo, hi = min(y0, y1), max(y0, y1)
+    ks = xs[1:-1]
+    ks = ks[(ks > lo) & (ks < hi)]
+    pre = np.sort((m0 - ks * s0) / (ks * (s1 - s0) - (m1 - m0)))
+    nxs = np.concatenate([[0.0], pre, [1.0]])
+    nxs = nxs[np.concatenate([[True], np.diff(nxs) > _WIDTH_EPS])]
+    nxs[-1] = 1.0
+    mids = 0.5 * (nxs[:-1] + nxs[1:])
+    y = (m0 * (1 - mids) + m1 * mids) / (s0 * (1 - mids) + s1 * mids)
+    idx = _active(xs, y)
+    return vecs[idx] @ M.T, nxs, idx
+
+
+def _active(xs: np.ndarray, x: np.ndarray) -> np.ndarray:
+    return np.clip(np.searchsorted(xs, x, side="right") - 1, 0, len(xs) - 2)
+
+
+def max_of(v1, xs1, v2, xs2):
+    """The upper envelope of two envelopes: (vectors, breakpoints, source (0/1), index)."""
+    u = np.union1d(xs1, xs2)
+    i1, i2 = _active(xs1, 0.5 * (u[:-1] + u[1:])), _active(xs2, 0.5 * (u[:-1] + u[1:]))
+    a, b = v1[i1], v2[i2]
+    d0 = a[:, 0] - b[:, 0]
+    ds = (a[:, 1] - a[:, 0]) - (b[:, 1] - b[:, 0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(ds != 0, -d0 / ds, np.nan)
+    inside = (r > u[:-1] + _WIDTH_EPS) & (r < u[1:] - _WIDTH_EPS)
+    u = np.union1d(u, r[inside])
+    u = u[np.concatenate([[True], np.diff(u) > _WIDTH_EPS])]
+    u[0], u[-1] = 0.0, 1.0
+    mids = 0.5 * (u[:-1] + u[1:])
+    i1, i2 = _active(xs1, mids), _active(xs2, mids)
+    val1 = v1[i1, 0] * (1 - mids) + v1[i1, 1] * mids
+    val2 = v2[i2, 0] * (1 - mids) + v2[i2, 1] * mids
+    src = (val2 > val1).astype(np.int64)
+    idx = np.where(src == 1, i2, i1)
+    vec = np.where(src[:, None] == 1, v2[i2], v1[i1])
+    # merge consecutive pieces of the same line
+    new = np.concatenate([[True], (src[1:] != src[:-1]) | (idx[1:] != idx[:-1])])
+    return vec[new], np.concatenate([u[:-1][new], [1.0]]), src[new], idx[new]
+
+
+def exact_backup(pomdp: AssistancePOMDP, vecs: np.ndarray, xs: np.ndarray | None = None) -> Backup:
+    """One exact Bellman backup (``bayes`` update) of L(x) = max_j vecs[j]·(1-x, x).
+
+    ``vecs`` must be an envelope with breakpoints ``xs`` (computed when not given)."""
+    if xs is None:
+        idx, xs = envelope(vecs)
+        vecs = vecs[idx]
+        remap = idx
+    else:
+        remap = np.arange(len(vecs))
+    gamma = pomdp.discount
+    K = pomdp.kernel  # [c, a, t, o, e, u]
+    R = pomdp.expected_reward  # [c, a, t]
+    N = pomdp.n_complexity
+    q_env: list[list[tuple[np.ndarray, np.ndarray]]] = []
+    w_vecs = w_xs = w_act = w_succ = None
+    for c in range(N):
+        per_a = []
+        tags = []
+        for a in range(2):
+            acc_v = R[c, a][None, :].copy()
+            acc_x = np.array([0.0, 1.0])
+            acc_t = np.full((1, 2, 2), -1, dtype=np.int64)
+            for o in range(2):
+                for e in range(2):
+                    M = K[c, a, :, o, e, :]
+                    if not np.any(M > 0):
+                        continue
+                    proj, pxs, pidx = _project(vecs, xs, M)
+                    u, i1, i2 = _cross_sum(acc_x, pxs)
+                    acc_v = acc_v[i1] + gamma * proj[i2]
+                    acc_t = acc_t[i1].copy()
+                    acc_t[:, o, e] = remap[pidx[i2]]
+                    acc_x = u
+            per_a.append((acc_v, acc_x))
+            tags.append(acc_t)
+        q_env.append(per_a)
+        cv, xs_c, src, idx = max_of(per_a[0][0], per_a[0][1], per_a[1][0], per_a[1][1])
+        ca = src
+        cs = np.where(src[:, None, None] == 1, tags[1][np.minimum(idx, len(tags[1]) - 1)], tags[0][np.minimum(idx, len(tags[0]) - 1)])
+        pc = pomdp.complexity_probs[c]
+        if w_vecs is None:
+            w_vecs, w_xs = pc * cv, xs_c
+            w_act, w_succ = ca[:, None], cs[:, None]
+        else:
+            u, i1, i2 = _cross_sum(w_xs, xs_c)
+            w_vecs = w_vecs[i1] + pc * cv[i2]
+            w_act = np.concatenate([w_act[i1], ca[i2][:, None]], axis=1)
+            w_succ = np.concatenate([w_succ[i1], cs[i2][:, None]], axis=1)
+            w_xs = u
+    return Backup(w_vecs, w_xs, w_act.astype(np.int64), w_succ, q_env)
+
+
+def sup_difference(v1, xs1, v2, xs2) -> float:
+    """sup over [0, 1] of env1(x) - env2(x) (both piecewise linear: attained at a breakpoint)."""
+    pts = np.union1d(xs1, xs2)
+    return float(np.max(envelope_values(v1, xs1, pts) - envelope_values(v2, xs2, pts)))
+
+
+# --------------------------------------------------------------------------- controllers
+
+
+def evaluate_controller(
+    pomdp: AssistancePOMDP, actions: np.ndarray, successors: np.ndarray, guess: np.ndarray | None = None
+) -> np.ndarray:
+    """Exact value α[n, t] of a finite-state controller: node n takes actions[n, c] in
+    complexity c and moves to successors[n, c, o, e] after (o, E').  Works for any number
+    of trust levels.  Solves (I - γ P) α = r with a sparse direct solver."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    K = pomdp.kernel  # [c, a, t, o, e, u]
+    R = pomdp.expected_reward
+    pc = pomdp.complexity_probs
+    gamma = pomdp.discount
+    n, N = actions.shape
+    k = pomdp.n_trust
+    rhs = np.zeros((n, k))
+    rows, cols, vals = [], [], []
+    node_t = np.arange(n)[:, None] * k + np.arange(k)[None, :]  # (n, k) row index
+    for c in range(N):
+        a = actions[:, c]
+        rhs += pc[c] * R[c, a]  # (n, k)
+        for o in range(2):
+            for e in range(2):
+                succ = successors[:, c, o, e]
+                ok = succ >= 0
+                if not np.any(ok):
+                    continue
+                M = K[c, a[ok], :, o, e, :]  # (m, t, u)
+                r = np.broadcast_to(node_t[ok][:, :, None], M.shape)
+                cc = np.broadcast_to((succ[ok][:, None] * k + np.arange(k)[None, :])[:, None, :], M.shape)
+                rows.append(r.ravel())
+                cols.append(cc.ravel())
+                vals.append((gamma * pc[c] * M).ravel())
+    size = n * k
+    P = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(size, size))
+    A = sp.identity(size, format="csr") - P
+    b = rhs.reshape(-1)
+    scale = max(1.0, float(np.max(np.abs(b))))
+    x0 = None if guess is None else guess.reshape(-1)
+    x, info = spla.bicgstab(A, b, x0=x0, rtol=1e-15, atol=1e-12 * scale, maxiter=5000)
+    if info != 0 or not np.all(np.isfinite(x)) or np.max(np.abs(A @ x - b)) > 1e-10 * scale:
+        x = spla.spsolve(A.tocsc(), b)
+    return np.asarray(x).reshape(n, k)
+
+
+def _one_node_controllers(pomdp: AssistancePOMDP, limit: int = 64) -> np.ndarray:
+    """Values of the memoryless controllers 'always take action a_C in complexity C'."""
+    N = pomdp.n_complexity
+    combos = list(itertools.product((AUTONOMOUS, ASK), repeat=N))
+    if len(combos) > limit:
+        combos = [tuple([AUTONOMOUS] * N), tuple([ASK] * N)]
+    out = []
+    for combo in combos:
+        acts = np.array([combo], dtype=np.int64)
+        succ = np.zeros((1, N, 2, 2), dtype=np.int64)
+        out.append(evaluate_controller(pomdp, acts, succ)[0])
+    return np.array(out)
+
+
+def _repoint(pomdp: AssistancePOMDP, vecs: np.ndarray, xs: np.ndarray, actions: np.ndarray) -> np.ndarray:
+    """Successors of each node (a vector of the envelope) at its witness belief (the middle of
+    the interval where it is maximal): the node of the envelope active at each next belief."""
+    K = pomdp.kernel
+    n, N = actions.shape
+    mids = 0.5 * (xs[:-1] + xs[1:])
+    b = np.stack([1 - mids, mids], axis=1)
+    succ = np.full((n, N, 2, 2), -1, dtype=np.int64)
+    for c in range(N):
+        M = K[c, actions[:, c]]  # (n, t, o, e, u)
+        nb = np.einsum("nt,ntoeu->noeu", b, M)
+        z = nb.sum(axis=-1)
+        x = np.where(z > 0, nb[..., 1] / np.where(z > 0, z, 1.0), 0.0)
+        succ[:, c] = np.where(z > 0, _active(xs, x), -1)
+    return succ
+
+
+# --------------------------------------------------------------------------- the solver
+
+
+@dataclass
+class AlphaSolution:
+    """Certified bounds for the two-level belief MDP."""
+
+    belief_update: str
+    method: str
+    lower: tuple[np.ndarray, np.ndarray] | None  # (vectors, xs) of L (bayes)
+    q: list[list[tuple[np.ndarray, np.ndarray]]] | None  # Q envelopes of T L (bayes)
+    gap: float  # certified sup_x (U - L)(x)
+    iterations: int
+    seconds: float
+    history: list[float] = field(default_factory=list)  # certified gap per iteration
+    grid_solution: Any = None  # GridSolution used (paper update) or as an extra upper bound
+    residuals: tuple[float, float] = (0.0, 0.0)  # (ε+, ε-) for the paper update
+
+    def advantage(self, pomdp: AssistancePOMDP, x: np.ndarray, c: int) -> np.ndarray:
+        """D(x) = Q(x, C=c, ask) - Q(x, C=c, autonomous) of the computed Q."""
+        x = np.asarray(x, dtype=float)
+        if self.q is not None:
+            qa = [envelope_values(v, xs, x) for v, xs in self.q[c]]
+            return qa[ASK] - qa[AUTONOMOUS]
+        q = _paper_q(pomdp, self.grid_solution.value @ pomdp.complexity_probs, x)
+        return q[c, ASK] - q[c, AUTONOMOUS]
+
+    def value(self, pomdp: AssistancePOMDP, x) -> np.ndarray:
+        """Lower bound on W(x) (certified)."""
+        x = np.asarray(x, dtype=float)
+        if self.lower is not None:
+            return envelope_values(self.lower[0], self.lower[1], x)
+        g = self.grid_solution
+        return np.interp(x, g.grid, g.value @ pomdp.complexity_probs) - self.residuals[1] / (1 - pomdp.discount)
+
+    def q_values(self, pomdp: AssistancePOMDP, x) -> np.ndarray:
+        """Lower bounds on Q(x, C, a); shape (..., N, 2)."""
+        x = np.asarray(x, dtype=float)
+        if self.q is not None:
+            return np.stack(
+                [np.stack([envelope_values(v, xs, x) for v, xs in per_a], axis=-1) for per_a in self.q], axis=-2
+            )
+        gam = pomdp.discount
+        q = _paper_q(pomdp, self.grid_solution.value @ pomdp.complexity_probs, x) - gam * self.residuals[1] / (1 - gam)
+        return np.moveaxis(q, (0, 1), (-2, -1))
+
+    def threshold_report(self, pomdp: AssistancePOMDP, points: int = 4001) -> dict[str, dict[str, Any]]:
+        """Per complexity: the threshold (None = never asks, 1.0 = always asks, nan = the ask
+        region is not an interval [0, θ)) and its certified uncertainty interval."""
+        margin = pomdp.discount * self.gap
+        grid = np.linspace(0.0, 1.0, points)
+        if self.q is not None:
+            pts = [np.union1d(grid, np.union1d(self.q[c][0][1], self.q[c][1][1])) for c in range(pomdp.n_complexity)]
+        else:
+            pts = [grid] * pomdp.n_complexity
+        out = {}
+        for c, cn in enumerate(pomdp.complexities):
+            x = pts[c]
+
+            def f(z, shift=0.0, c=c):
+                return float(self.advantage(pomdp, np.array([z]), c)[0]) - shift
+
+            d = self.advantage(pomdp, x, c)
+            ask = d > 0
+            if not np.any(ask):
+                out[cn] = {"threshold": None, "interval": None, "ask_intervals": []}
+                continue
+            changes = np.nonzero(ask[1:] != ask[:-1])[0]
+            roots = [brentq(f, x[i], x[i + 1], xtol=1e-15) if d[i] != d[i + 1] else float(x[i]) for i in changes]
+            edges = ([0.0] if ask[0] else []) + roots + ([1.0] if ask[-1] else [])
+            ivs = [(float(edges[2 * k]), float(edges[2 * k + 1])) for k in range(len(edges) // 2)]
+            if len(ivs) == 1 and ask[0]:
+                th = ivs[0][1]
+                lo = _bracket(f, x, d, th, +margin, left=True)
+                hi = _bracket(f, x, d, th, -margin, left=False)
+                out[cn] = {"threshold": th, "interval": [lo, hi], "ask_intervals": ivs}
+            else:
+                out[cn] = {"threshold": float("nan"), "interval": None, "ask_intervals": ivs}
+        return out
+
+
+def _bracket(f, x, d, th, level, left: bool) -> float:
+    """The nearest point to θ (left or right of it) where the advantage equals ``level``."""
+    if th >= 1.0:
+        return 1.0
+    if left:
+        idx = np.nonzero((x < th) & (d >= level))[0]
+        if len(idx) == 0:
+            return 0.0
+        i = idx[-1]
+        j = i + 1
+        if d[j] >= level or x[j] > th:
+            j = np.searchsorted(x, th)
+            if f(x[j], level) >= 0:
+                return float(x[j])
+        return float(brentq(f, x[i], x[j], args=(level,), xtol=1e-15))
+    idx = np.nonzero((x > th) & (d <= level))[0]
+    if len(idx) == 0:
+        return 1.0
+    j = idx[0]
+    i = j - 1
+    if f(x[i], level) <= 0:
+        return float(x[i])
+    return float(brentq(f, x[i], x[j], args=(level,), xtol=1e-15))
+
+
+class AlphaSolver:
+    """Certified solver for two trust levels (``bayes``: alpha vectors; ``paper``: certified grid)."""
+
+    def __init__(
+        self,
+        belief_update: str = "bayes",
+        tol: float = 1e-6,
+        method: str = "policy-iteration",
+        max_iter: int = 2000,
+        upper_grid: int = 201,
+        grid: int = 2001,
+        max_grid: int = 200_001,
+    ):
+        if belief_update not in BELIEF_UPDATES:
+            raise ValueError(f"unknown belief update {belief_update!r}; expected one of {list(BELIEF_UPDATES)}")
+        if method not in ("policy-iteration", "value-iteration"):
+            raise ValueError(f"unknown method {method!r}; expected 'policy-iteration' or 'value-iteration'")
+        if not tol > 0:
+            raise ValueError(f"tol must be positive, got {tol}")
+        self.belief_update = belief_update
+        self.tol = float(tol)
+        self.method = method
+        self.max_iter = int(max_iter)
+        self.upper_grid = int(upper_grid)
+        self.grid = int(grid)
+        self.max_grid = int(max_grid)
+
+    def _check(self, pomdp: AssistancePOMDP) -> None:
+        if pomdp.n_trust != 2:
+            raise ValueError(
+                f"the alpha solver handles two trust levels; this model has {pomdp.n_trust}. "
+                "Use the point solver (--solver point) for more trust levels."
+            )
+
+    def solve(self, pomdp: AssistancePOMDP):
+        """The optimal policy: an :class:`AlphaVectorPolicy` (bayes) or a certified
+        TrustAwarePolicy on a fine grid (paper); ``info`` holds the certificate."""
+        sol = self.solve_bounds(pomdp)
+        return policy_from_solution(sol, pomdp)
+
+    def solve_bounds(self, pomdp: AssistancePOMDP) -> AlphaSolution:
+        self._check(pomdp)
+        if self.belief_update == "bayes":
+            return self._solve_bayes(pomdp)
+        return self._solve_paper(pomdp)
+
+    # -- bayes ---------------------------------------------------------------
+    def _solve_bayes(self, pomdp: AssistancePOMDP) -> AlphaSolution:
+        t0 = time.perf_counter()
+        gamma = pomdp.discount
+        vecs = _one_node_controllers(pomdp)
+        idx, xs = envelope(vecs)
+        vecs = vecs[idx]
+        history: list[float] = []
+        it = 0
+        gap = np.inf
+        while True:
+            bk = exact_backup(pomdp, vecs, xs)
+            delta = max(0.0, sup_difference(bk.vectors, bk.xs, vecs, xs))
+            # L is made of policy values, so T L >= L up to rounding; measure the rounding too
+            below = max(0.0, sup_difference(vecs, xs, bk.vectors, bk.xs))
+            gap = (delta + below) / (1 - gamma)
+            history.append(gap)
+            if gap <= self.tol or it >= self.max_iter:
+                break
+            it += 1
+            # every vector of the backup is the value of "act, then follow a node of L"
+            vecs, xs = max_of(vecs, xs, bk.vectors, bk.xs)[:2]
+            if self.method == "policy-iteration":
+                succ = _repoint(pomdp, bk.vectors, bk.xs, bk.actions)
+                ev = evaluate_controller(pomdp, bk.actions, succ, guess=bk.vectors)
+                if np.all(np.isfinite(ev)):
+                    idx, exs = envelope(ev)
+                    vecs, xs = max_of(vecs, xs, ev[idx], exs)[:2]
+        grid_sol = None
+        if self.upper_grid and gap > self.tol:
+            # the grid solver's interpolated value: an independent upper bound (V is convex)
+            from .solve import GridSolver
+
+            grid_sol = GridSolver(grid=self.upper_grid, belief_update="bayes").solve_grid(pomdp)
+            up_grid = grid_sol.value @ pomdp.complexity_probs + grid_sol.error_bound
+            up_alpha = lambda z: envelope_values(bk.vectors, bk.xs, z) + gamma * (delta + below) / (1 - gamma)  # noqa: E731
+            # sup of min(U_alpha, U_grid) - L: all three are piecewise linear between these points
+            pts = np.union1d(np.union1d(xs, bk.xs), grid_sol.grid)
+            up = np.minimum(up_alpha(pts), np.interp(pts, grid_sol.grid, up_grid))
+            gap = min(gap, float(np.max(up - envelope_values(vecs, xs, pts))) + below / (1 - gamma))
+        return AlphaSolution(
+            belief_update="bayes",
+            method=self.method,
+            lower=(vecs, xs),
+            q=bk.q,
+            gap=float(gap),
+            iterations=it,
+            seconds=time.perf_counter() - t0,
+            history=history,
+            grid_solution=grid_sol,
+        )
+
+    # -- paper ---------------------------------------------------------------
+    def _solve_paper(self, pomdp: AssistancePOMDP) -> AlphaSolution:
+        from .solve import GridSolver
+
+        t0 = time.perf_counter()
+        gamma = pomdp.discount
+        G = self.grid
+        history = []
+        while True:
+            sol = GridSolver(grid=G, belief_update="paper").solve_grid(pomdp)
+            eps_plus, eps_minus = paper_residual(pomdp, sol.grid, sol.value @ pomdp.complexity_probs)
+            gap = (max(eps_plus, 0.0) + max(eps_minus, 0.0)) / (1 - gamma)
+            history.append(gap)
+            if gap <= self.tol or G >= self.max_grid:
+                break
+            # second-order convergence: the residual falls like 1/G^2
+            G = min(self.max_grid, int((G - 1) * min(8.0, max(1.5, np.sqrt(gap / self.tol) * 1.1))) + 1)
+        return AlphaSolution(
+            belief_update="paper",
+            method="certified-grid",
+            lower=None,
+            q=None,
+            gap=float(gap),
+            iterations=len(history),
+            seconds=time.perf_counter() - t0,
+            history=history,
+            grid_solution=sol,
+            residuals=(max(eps_plus, 0.0), max(eps_minus, 0.0)),
+        )
+
+
+# --------------------------------------------------------------------------- paper update: exact residual
+
+
+def _paper_maps(pomdp: AssistancePOMDP):
+    """For each (c, a, e): branch probability p(x) = p0 (1-x) + p1 x and next belief
+    f(x) = f0 (1-x) + f1 x, as arrays [c, a, e, 2]."""
+    pe = np.einsum("cato,caoe->cate", pomdp.emission, pomdp.experience)  # P(E' | T, C, a)
+    p = np.moveaxis(pe, 2, 3)  # [c, a, e, t]
+    f = pomdp.trust_transition[..., :, 1]  # [c, a, e, t] -> P(T'=high | T=t)
+    return p, f
+
+
+def _paper_q(pomdp: AssistancePOMDP, values: np.ndarray, x: np.ndarray, grid: np.ndarray | None = None) -> np.ndarray:
+    """Q[c, a, ...] at beliefs x for the eq.-3 belief MDP with W = linear interpolation of values."""
+    grid = np.linspace(0.0, 1.0, len(values)) if grid is None else grid
+    p, f = _paper_maps(pomdp)
+    R = pomdp.expected_reward
+    gamma = pomdp.discount
+    x = np.asarray(x, dtype=float)
+    xe = x[None, None, None, ...]
+    pb = p[..., 0, None] * (1 - x) + p[..., 1, None] * x if x.ndim == 1 else None
+    N = pomdp.n_complexity
+    out = np.zeros((N, 2) + x.shape)
+    for c in range(N):
+        for a in range(2):
+            acc = R[c, a, 0] * (1 - x) + R[c, a, 1] * x
+            for e in range(2):
+                pr = p[c, a, e, 0] * (1 - x) + p[c, a, e, 1] * x
+                nx = f[c, a, e, 0] * (1 - x) + f[c, a, e, 1] * x
+                acc = acc + gamma * pr * np.interp(nx, grid, values)
+            out[c, a] = acc
+    del xe, pb
+    return out
+
+
+def paper_residual(pomdp: AssistancePOMDP, grid: np.ndarray, values: np.ndarray) -> tuple[float, float]:
+    """(ε+, ε-) = (sup, -inf) over x in [0, 1] of (T V - V)(x) for the eq.-3 belief MDP, where V
+    is the linear interpolation of ``values`` on ``grid``.  Exact up to rounding: the interval is
+    cut at the grid points, their preimages under every belief map and the roots of every
+    advantage Q(ask) - Q(autonomous), so that on each piece T V - V is a single quadratic."""
+    p, f = _paper_maps(pomdp)
+    N = pomdp.n_complexity
+    cuts = [grid]
+    for c in range(N):
+        for a in range(2):
+            for e in range(2):
+                f0, f1 = f[c, a, e]
+                if abs(f1 - f0) > 1e-15:
+                    pre = (grid - f0) / (f1 - f0)
+                    cuts.append(pre[(pre > 0) & (pre < 1)])
+    pts = np.unique(np.concatenate(cuts))
+    pts = pts[np.concatenate([[True], np.diff(pts) > 1e-15])]
+    pts[0], pts[-1] = 0.0, 1.0
+
+    def coeffs(pts):
+        lo, hi = pts[:-1], pts[1:]
+        mid = 0.5 * (lo + hi)
+        w = hi - lo
+        qs = [_paper_q(pomdp, values, z, grid) for z in (lo, mid, hi)]  # each [c, a, n]
+        v = [np.interp(z, grid, values) for z in (lo, mid, hi)]
+        return lo, hi, mid, w, qs, v
+
+    # pass 1: cut at the roots of each advantage
+    lo, hi, mid, w, qs, v = coeffs(pts)
+    roots = []
+    for c in range(N):
+        d = [q[c, ASK] - q[c, AUTONOMOUS] for q in qs]
+        r = _quad_roots(d[0], d[1], d[2], w)
+        for rr in r:
+            ok = np.isfinite(rr)
+            roots.append(mid[ok] + rr[ok])
+    if roots:
+        pts = np.unique(np.concatenate([pts] + roots))
+        pts = pts[np.concatenate([[True], np.diff(pts) > 1e-15])]
+        pts[0], pts[-1] = 0.0, 1.0
+        lo, hi, mid, w, qs, v = coeffs(pts)
+    # pass 2: one quadratic per piece (the action active at the midpoint, per complexity)
+    pc = pomdp.complexity_probs
+    phi = []
+    for k in range(3):
+        q = qs[k]
+        best = np.where(qs[1][:, ASK] > qs[1][:, AUTONOMOUS], q[:, ASK], q[:, AUTONOMOUS])  # [c, n]
+        phi.append(pc @ best - v[k])
+    sup, inf = _quad_extrema(phi[0], phi[1], phi[2], w)
+    return float(np.max(sup)), float(-np.min(inf))
+
+
+def _quad_fit(y0, y1, y2, w):
+    """Coefficients of y(u) = c0 + c1 u + c2 u^2 through (-w/2, y0), (0, y1), (w/2, y2)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c1 = np.where(w > 0, (y2 - y0) / w, 0.0)
+        c2 = np.where(w > 0, 2.0 * (y2 + y0 - 2.0 * y1) / (w * w), 0.0)
+    return y1, c1, c2
+
+
+def _quad_roots(y0, y1, y2, w):
+    """Roots u in (-w/2, w/2) of the quadratic through three equally spaced values (nan if none)."""
+    c0, c1, c2 = _quad_fit(y0, y1, y2, w)
+    half = w / 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        small = np.abs(c2) * half * half <= 1e-12 * (np.abs(c0) + np.abs(c1) * half + 1e-300)
+        lin = np.where(small & (c1 != 0), -c0 / c1, np.nan)
+        disc = c1 * c1 - 4 * c2 * c0
+        sq = np.sqrt(np.where(disc >= 0, disc, np.nan))
+        qq = -0.5 * (c1 + np.where(c1 >= 0, sq, -sq))
+        r1 = np.where(small, lin, qq / c2)
+        r2 = np.where(small, np.nan, np.where(qq != 0, c0 / qq, np.nan))
+    out = []
+    for r in (r1, r2):
+        out.append(np.where((r > -half) & (r < half), r, np.nan))
+    return out
+
+
+def _quad_extrema(y0, y1, y2, w):
+    """Max and min over [-w/2, w/2] of the quadratic through three equally spaced values."""
+    c0, c1, c2 = _quad_fit(y0, y1, y2, w)
+    half = w / 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.where(c2 != 0, -c1 / (2 * c2), np.nan)
+    inside = np.isfinite(u) & (np.abs(u) < half)
+    uv = np.where(inside, u, 0.0)
+    yv = np.where(inside, c0 + c1 * uv + c2 * uv * uv, y1)
+    return np.maximum(np.maximum(y0, y2), yv), np.minimum(np.minimum(y0, y2), yv)
+
+
+# --------------------------------------------------------------------------- finite horizon
+
+
+def finite_horizon_vectors(pomdp: AssistancePOMDP, horizon: int) -> list[np.ndarray]:
+    """Exact alpha vectors of the h-step value (h = 0..horizon, ``bayes`` update, two trust
+    levels): V_0 = 0 and V_h = T V_{h-1}; returns the envelope vectors for each h."""
+    vecs = np.zeros((1, 2))
+    out = [vecs]
+    for _ in range(horizon):
+        bk = exact_backup(pomdp, vecs)
+        vecs = bk.vectors
+        out.append(vecs)
+    return out
+
+
+def finite_horizon_value(pomdp: AssistancePOMDP, horizon: int, belief, complexity: int | None = None) -> float:
+    """The exact h-step value at a belief (P(trust = high) or a vector), either for a known
+    complexity of the first trial or averaged over P(C)."""
+    b = to_vector(belief, 2)
+    if horizon == 0:
+        return 0.0
+    vecs = finite_horizon_vectors(pomdp, horizon - 1)[-1]
+    bk = exact_backup(pomdp, vecs)
+    if complexity is None:
+        return float(envelope_values(bk.vectors, bk.xs, np.array([b[1]]))[0])
+    return float(max(envelope_values(v, xs, np.array([b[1]]))[0] for v, xs in bk.q[complexity]))
+
+
+# --------------------------------------------------------------------------- the policy
+
+
+class AlphaVectorPolicy:
+    """Greedy in Q(b, C, a) = max over the Q-vectors of (C, a) of α·b; any number of trust levels.
+
+    ``q_vectors[c][a]`` is an array (n, K) of vectors, each the value of "take a now, then
+    follow a controller", so max α·b is a lower bound on Q(b, C, a).  ``value_vectors`` (n, K)
+    represent the lower bound on W(b) = Σ_C P(C) max_a Q(b, C, a).  Ties go to ``autonomous``.
+    """
+
+    kind = ALPHA_KIND
+
+    def __init__(
+        self,
+        q_vectors: Sequence[Sequence[np.ndarray]],
+        value_vectors: np.ndarray,
+        model: TrustModel,
+        complexities: Sequence[str],
+        belief_update: str = "bayes",
+        info: Mapping[str, Any] | None = None,
+    ):
+        self.q_vectors = [[np.atleast_2d(np.asarray(v, dtype=float)) for v in per_a] for per_a in q_vectors]
+        self.value_vectors = np.atleast_2d(np.asarray(value_vectors, dtype=float))
+        self.model = model
+        self.complexities = tuple(complexities)
+        self.belief_update = belief_update
+        self.info = dict(info or {})
+        K = model.n_trust
+        problems = []
+        if len(self.q_vectors) != len(self.complexities) or any(len(p) != 2 for p in self.q_vectors):
+            problems.append(f"q_vectors needs one entry per complexity {list(self.complexities)} and action {list(ACTIONS)}")
+        for per_a in self.q_vectors:
+            for v in per_a:
+                if v.ndim != 2 or v.shape[1] != K or len(v) == 0 or not np.all(np.isfinite(v)):
+                    problems.append(f"every Q-vector set must be a non-empty (n, {K}) array of finite numbers")
+                    break
+        if self.value_vectors.shape[1] != K or not np.all(np.isfinite(self.value_vectors)):
+            problems.append(f"value vectors must be a (n, {K}) array of finite numbers")
+        if problems:
+            raise ModelError(problems)
+
+    # -- Policy interface ------------------------------------------------------
+    def _cindex(self, complexity) -> int:
+        if isinstance(complexity, str):
+            try:
+                return self.complexities.index(complexity)
+            except ValueError:
+                raise KeyError(f"unknown complexity {complexity!r}; expected one of {list(self.complexities)}") from None
+        c = int(complexity)
+        if not 0 <= c < len(self.complexities):
+            raise KeyError(f"complexity index {c} out of range for {list(self.complexities)}")
+        return c
+
+    def q_of(self, beliefs: np.ndarray, complexities: np.ndarray) -> np.ndarray:
+        """Q lower bounds for each (belief, complexity) pair; shape (n, 2)."""
+        beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
+        complexities = np.asarray(complexities, dtype=np.int64).reshape(-1)
+        out = np.empty((len(beliefs), 2))
+        for c in np.unique(complexities):
+            sel = complexities == c
+            for a in range(2):
+                out[sel, a] = (beliefs[sel] @ self.q_vectors[c][a].T).max(axis=1)
+        return out
+
+    def actions(self, beliefs, complexities, rng=None) -> np.ndarray:
+        q = self.q_of(beliefs, complexities)
+        return np.where(q[:, ASK] > q[:, AUTONOMOUS], ASK, AUTONOMOUS).astype(np.int64)
+
+    def action(self, belief, complexity, rng=None) -> int:
+        b = to_vector(belief, self.model.n_trust)[None, :]
+        return int(self.actions(b, np.array([self._cindex(complexity)]), rng)[0])
+
+    def describe(self) -> str:
+        return f"{self.kind} ({sum(len(v) for p in self.q_vectors for v in p)} Q-vectors)"
+
+    def save(self, path) -> None:
+        import json
+        from pathlib import Path
+
+        Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n", encoding="utf-8")
+
+    # -- two trust levels: values, thresholds ----------------------------------
+    def _x_vectors(self, b_high):
+        x = np.asarray(b_high, dtype=float)
+        return np.stack([1 - x, x], axis=-1)
+
+    def q_values(self, b_high) -> np.ndarray:
+        """Q at P(trust = high) = b_high (two trust levels); shape (..., N, 2)."""
+        self._need_two()
+        b = self._x_vectors(b_high)
+        return np.stack(
+            [np.stack([(b @ v.T).max(axis=-1) for v in per_a], axis=-1) for per_a in self.q_vectors], axis=-2
+        )
+
+    def value(self, belief) -> float:
+        """Lower bound on W(b) (averaged over P(C))."""
+        b = to_vector(belief, self.model.n_trust)
+        return float((self.value_vectors @ b).max())
+
+    def _need_two(self) -> None:
+        if self.model.n_trust != 2:
+            raise ValueError("thresholds and q_values(b_high) need two trust levels")
+
+    def ask_intervals(self) -> dict[str, list[tuple[float, float]]]:
+        """Per complexity, the belief intervals where the policy asks (exact: the advantage is
+        piecewise linear, so its sign changes are found at breakpoints and by linear roots)."""
+        self._need_two()
+        out = {}
+        for c, cn in enumerate(self.complexities):
+            vs = [self.q_vectors[c][a] for a in range(2)]
+            pts = [np.array([0.0, 1.0])]
+            for v in vs:
+                idx, xs = envelope(v)
+                pts.append(xs)
+            x = np.unique(np.concatenate(pts))
+            q = self.q_values(x)[:, c]
+            d = q[:, ASK] - q[:, AUTONOMOUS]
+            ask = d > 0
+            ivs = []
+            i, n = 0, len(x)
+            while i < n:
+                if not ask[i]:
+                    i += 1
+                    continue
+                s = i
+                while i < n and ask[i]:
+                    i += 1
+                lo = 0.0 if s == 0 else _lin_root(x, d, s - 1)
+                hi = 1.0 if i == n else _lin_root(x, d, i - 1)
+                ivs.append((float(lo), float(hi)))
+            out[cn] = ivs
+        return out
+
+    def thresholds(self) -> dict[str, float | None]:
+        out: dict[str, float | None] = {}
+        for cn, iv in self.ask_intervals().items():
+            if not iv:
+                out[cn] = None
+            elif len(iv) == 1 and iv[0][0] == 0.0:
+                out[cn] = iv[0][1]
+            else:
+                out[cn] = float("nan")
+        return out
+
+    # -- JSON ----------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        from .policy import POLICY_FORMAT
+
+        d = {
+            "format": POLICY_FORMAT,
+            "kind": self.kind,
+            "complexities": list(self.complexities),
+            "belief_update": self.belief_update,
+            "info": self.info,
+            "model": self.model.to_dict(),
+            "q_vectors": {
+                cn: {an: self.q_vectors[c][a].tolist() for a, an in enumerate(ACTIONS)}
+                for c, cn in enumerate(self.complexities)
+            },
+            "value_vectors": self.value_vectors.tolist(),
+        }
+        if self.model.n_trust == 2:
+            d["thresholds"] = self.thresholds()
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], source: str | None = None) -> "AlphaVectorPolicy":
+        model = TrustModel.from_dict(d.get("model"), source)
+        cx = list(d.get("complexities") or [])
+        bu = d.get("belief_update")
+        if bu not in BELIEF_UPDATES:
+            raise ModelError([f"belief_update is {bu!r}, expected one of {list(BELIEF_UPDATES)}"], source)
+        qv = d.get("q_vectors")
+        try:
+            q = [[np.array(qv[c][a], dtype=float) for a in ACTIONS] for c in cx]
+            vv = np.array(d.get("value_vectors"), dtype=float)
+        except (KeyError, TypeError, ValueError):
+            raise ModelError(
+                [f"q_vectors must map each complexity {cx} and action {list(ACTIONS)} to a list of vectors"], source
+            ) from None
+        try:
+            return cls(q, vv, model, cx, bu, d.get("info"))
+        except ModelError as exc:
+            raise ModelError(exc.problems, source) from None
+
+
+def _lin_root(x, d, i) -> float:
+    d0, d1 = d[i], d[i + 1]
+    if d0 == d1:
+        return float(x[i])
+    return float(x[i] + d0 / (d0 - d1) * (x[i + 1] - x[i]))
+
+
+def certificate(sol: AlphaSolution, pomdp: AssistancePOMDP) -> dict[str, Any]:
+    """The machine-readable certificate: gap, bounds at the initial belief and at b = 1, thresholds."""
+    pc = pomdp.complexity_probs
+    b0 = float(pomdp.model.initial[-1])
+    q0 = sol.q_values(pomdp, np.array(b0))
+    low0 = float(q0.max(axis=-1) @ pc)
+    ths = sol.threshold_report(pomdp)
+    return {
+        "certified_gap": sol.gap,
+        "value_bounds_at_initial_belief": [low0, low0 + sol.gap],
+        "thresholds": {k: v["threshold"] for k, v in ths.items()},
+        "threshold_intervals": {k: v["interval"] for k, v in ths.items()},
+    }
+
+
+def policy_from_solution(sol: AlphaSolution, pomdp: AssistancePOMDP):
+    """Wrap a solution as a Policy: AlphaVectorPolicy (bayes) or TrustAwarePolicy (paper)."""
+    info = {
+        "solver": "alpha",
+        "method": sol.method,
+        "iterations": sol.iterations,
+        "bellman_residual": sol.gap * (1 - pomdp.discount),
+        "error_bound": sol.gap,
+        "seconds": sol.seconds,
+        "discount": pomdp.discount,
+    }
+    info.update(certificate(sol, pomdp))
+    if sol.q is not None:
+        info["vectors"] = int(len(sol.lower[0]))
+        return AlphaVectorPolicy(
+            [[v for v, _ in per_a] for per_a in sol.q], sol.lower[0], pomdp.model, pomdp.complexities, sol.belief_update, info
+        )
+    from .policy import TrustAwarePolicy
+
+    g = sol.grid_solution
+    info["grid_points"] = len(g.grid)
+    return TrustAwarePolicy(g.grid, g.q, pomdp.model, pomdp.complexities, sol.belief_update, info)
