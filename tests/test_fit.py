@@ -1,0 +1,180 @@
+"""Fitting trust models: parameter recovery, labels, bootstrap, other studies' logs, decode, select, CLI."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from trustseek import TrustModel, paper_model
+from trustseek.data import ColumnMapping, example_path, read_trials
+from trustseek.fit import decode, fit_trust_model, select_levels, simulate_design
+
+
+def free_cells(result):
+    """Estimated cells (the free parameters): P(T1=high), P(rely | ...), P(T'=high | ...)."""
+    m, est = result.model, result.estimated
+    pairs = [(m.initial[1:], est["initial"][1:])]
+    pairs.append((m.emission[..., 1], est["emission"][..., 1]))
+    pairs.append((m.transition[..., 1], est["transition"][..., 1]))
+    return pairs
+
+
+@pytest.fixture(scope="module")
+def big_fit():
+    df = simulate_design(paper_model(), 1000, seed=2024)
+    return df, fit_trust_model(df, restarts=4, seed=1)
+
+
+def test_parameter_recovery_at_1000_participants(big_fit):
+    df, res = big_fit
+    truth = paper_model()
+    errors = []
+    for name in ("initial", "emission", "transition"):
+        mask = res.estimated[name]
+        errors.append(np.abs(getattr(res.model, name) - getattr(truth, name))[mask])
+    err = np.concatenate(errors)
+    assert len(err) > 0
+    assert err.mean() <= 0.03, err
+    # the labelling rule: "high" relies more in high complexity
+    assert res.model.emission[1, 0, 1, 1] > res.model.emission[1, 0, 0, 1]
+    # never-observed cells follow the paper preset's convention (identity)
+    np.testing.assert_array_equal(res.model.transition[0, 1, 1], np.eye(2))
+    np.testing.assert_array_equal(res.model.transition[1, 1, 0], np.eye(2))
+    # P(intervene | ask) = 1 stays fixed
+    np.testing.assert_array_equal(res.model.emission[:, 1, :, 0], 1.0)
+    assert res.n_params == 17
+    assert res.bic == pytest.approx(17 * np.log(len(df)) - 2 * res.loglik)
+    assert res.aic == pytest.approx(34 - 2 * res.loglik)
+    assert len(res.restart_logliks) == 4 and max(res.restart_logliks) == pytest.approx(res.loglik)
+
+
+def test_decode_with_the_true_model_tracks_the_hidden_trust(big_fit):
+    df, res = big_fit
+    part = df[df["participant"].isin(df["participant"].unique()[:100])]
+    post = decode(part, paper_model())
+    assert len(post) == len(part)
+    np.testing.assert_allclose(post["p_trust_low"] + post["p_trust_high"], 1.0)
+    agree = (post["viterbi_trust"].to_numpy() == part["true_trust"].to_numpy()).mean()
+    assert agree > 0.85
+    # smoothed posteriors are calibrated: mean P(high) ~ share of trials in high trust
+    assert post["p_trust_high"].mean() == pytest.approx((part["true_trust"] == "high").mean(), abs=0.03)
+
+
+def test_result_json_and_counts(big_fit):
+    _, res = big_fit
+    d = json.loads(json.dumps(res.to_dict()))
+    assert TrustModel.from_dict(d["model"]) == res.model
+    assert d["n_params"] == 17 and len(d["restart_logliks"]) == 4
+    # events behind the emission rows of autonomous trials add up to the number of such trials
+    assert res.counts["emission"][:, 0, :, 0].sum() == pytest.approx(sum_autonomous(big_fit[0]), rel=1e-9)
+    for name in ("initial", "emission", "transition"):
+        assert res.counts[name].shape == getattr(res.model, name).shape
+
+
+def sum_autonomous(df):
+    return float(((df["robot_action"] == "autonomous") & df["human_action"].notna()).sum())
+
+
+def test_nine_participants_bootstrap_is_deterministic_across_processes():
+    df = read_trials(example_path())
+    one = fit_trust_model(df, restarts=2, seed=3, bootstrap=4, n_jobs=1)
+    two = fit_trust_model(df, restarts=2, seed=3, bootstrap=4, n_jobs=2)
+    assert one.ci is not None
+    for name in ("initial", "emission", "transition"):
+        lo, hi = one.ci[name]
+        assert lo.shape == getattr(one.model, name).shape
+        assert np.all(lo <= hi + 1e-12)
+        np.testing.assert_array_equal(lo, two.ci[name][0])
+        np.testing.assert_array_equal(hi, two.ci[name][1])
+    # fixed cells have degenerate intervals
+    assert np.all(one.ci["emission"][0][:, 1, :, 0] == 1.0)
+    # few participants: some cells are flagged as not identified
+    assert any("not identified" in w for w in one.warnings)
+    cells = one.cells()
+    assert all("lower" in c and "upper" in c for c in cells)
+
+
+def test_another_studys_log_fits_by_column_mapping_alone(tmp_path):
+    """participant, trial, automation_correct (0/1), rely (0/1): a 2-level model, transitions on
+    automation_correct, emissions on nothing."""
+    rng = np.random.default_rng(5)
+    N, T = 300, 60
+    p_correct = 0.8
+    rely = np.array([0.35, 0.95])  # P(rely | level)
+    up = np.array([[0.7, 0.3], [0.1, 0.9]])  # after a correct trial: rows = current level
+    down = np.array([[0.95, 0.05], [0.4, 0.6]])  # after an error
+    level = (rng.random(N) < 0.8).astype(int)
+    rows = []
+    for t in range(T):
+        r = (rng.random(N) < rely[level]).astype(int)
+        c = (rng.random(N) < p_correct).astype(int)
+        pr = np.where(c == 1, up[level, 1], down[level, 1])
+        rows.append(pd.DataFrame({"subject": [f"s{i}" for i in range(N)], "trial_no": t + 1, "automation_correct": c, "rely": r}))
+        level = (rng.random(N) < pr).astype(int)
+    log = pd.concat(rows).sort_values(["subject", "trial_no"])
+    path = tmp_path / "study.csv"
+    log.to_csv(path, index=False)
+    mapping = ColumnMapping.load(example_path("other_study_mapping.json"))
+    frame = read_trials(path, mapping, required=("experience", "human_action"))
+    res = fit_trust_model(frame, restarts=4, seed=0, transition_inputs=("experience",), emission_inputs=())
+    m = res.model
+    # emissions depend on nothing: identical across complexity and robot action
+    assert np.allclose(m.emission, m.emission[0, 0])
+    assert m.emission[0, 0, :, 1] == pytest.approx(rely, abs=0.04)
+    assert m.transition[0, 0, 1, :, 1] == pytest.approx(up[:, 1], abs=0.06)
+    assert m.transition[0, 0, 0, :, 1] == pytest.approx(down[:, 1], abs=0.08)
+    assert res.n_params == 1 + 2 + 4
+
+
+def test_select_levels_prefers_two_levels_on_paper_data():
+    df = simulate_design(paper_model(), 100, seed=9)
+    rows = select_levels(df, levels=(1, 2, 3), folds=2, restarts=2, seed=0, tol=1e-5)
+    by = {r["levels"]: r for r in rows}
+    assert by[2]["loglik"] > by[1]["loglik"] + 50
+    assert by[3]["loglik"] >= by[2]["loglik"] - 1.0  # nested: more levels fit at least about as well
+    assert by[2]["best_bic"]
+    assert by[2]["heldout_loglik"] > by[1]["heldout_loglik"]
+    assert by[1]["n_params"] < by[2]["n_params"] < by[3]["n_params"]
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def run(*args, check=True):
+    proc = subprocess.run([sys.executable, "-m", "trustseek", *args], capture_output=True, text=True, timeout=300)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"exit {proc.returncode}\nstdout:\n{proc.stdout}\nstderr:\n{proc.stderr}")
+    return proc
+
+
+def test_cli_fit_decode_select(tmp_path):
+    log = str(example_path())
+    out = tmp_path / "model.json"
+    proc = run("fit", log, "--preset", "paper", "--restarts", "2", "--seed", "1", "--out", str(out), "--json", "--plots", str(tmp_path / "figs"))
+    d = json.loads(proc.stdout)
+    m = TrustModel.load(out)
+    assert TrustModel.from_dict(d["model"]) == m
+    assert len(d["restart_logliks"]) == 2 and d["n_params"] == 17
+    assert (tmp_path / "figs" / "emissions.png").stat().st_size > 0
+    assert (tmp_path / "figs" / "transitions.png").stat().st_size > 0
+    post = tmp_path / "post.csv"
+    run("decode", log, "--model", str(out), "--out", str(post))
+    p = pd.read_csv(post)
+    assert len(p) == 9 * 71 and set(p["viterbi_trust"]) <= {"low", "high"}
+    proc = run("select", log, "--max-levels", "2", "--folds", "2", "--restarts", "1", "--json")
+    assert [r["levels"] for r in json.loads(proc.stdout)["levels"]] == [1, 2]
+    proc = run("fit", log, "--restarts", "1")
+    assert "log-likelihood" in proc.stdout and "events" in proc.stdout
+
+
+def test_cli_reports_bad_logs_cleanly(tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("participant,trial,complexity,robot_action,human_action\nA,1,low,autonomous,rely\n")
+    proc = run("fit", str(bad), check=False)
+    assert proc.returncode == 2
+    assert "missing column 'experience'" in proc.stderr and "Traceback" not in proc.stderr
+    proc = run("fit", str(bad), "--transitions-on", "weather", check=False)
+    assert proc.returncode == 2 and "'weather'" in proc.stderr
