@@ -178,3 +178,18 @@ def test_cli_reports_bad_logs_cleanly(tmp_path):
     assert "missing column 'experience'" in proc.stderr and "Traceback" not in proc.stderr
     proc = run("fit", str(bad), "--transitions-on", "weather", check=False)
     assert proc.returncode == 2 and "'weather'" in proc.stderr
+
+
+def test_small_coverage_study():
+    """The coverage report, cell by cell (the full study is in benchmarks/bench_fit.py)."""
+    from trustseek.fit import coverage_study
+
+    rows = coverage_study(paper_model(), n_participants=9, datasets=2, bootstrap=3, restarts=1, n_jobs=1, seed=4)
+    assert len(rows) >= 12
+    truth = paper_model()
+    for r in rows:
+        assert r["coverage"] in (0.0, 0.5, 1.0)
+        assert 0.0 <= r["truth"] <= 1.0 and r["mean_width"] >= 0
+    # the initial-trust cell's truth matches the preset
+    init = [r for r in rows if r["cell"] == "P(T1=high)"][0]
+    assert init["truth"] == truth.initial[1]
