@@ -59,6 +59,7 @@ from .pomdp import AssistancePOMDP
 
 ALPHA_KIND = "alpha-vector"
 _WIDTH_EPS = 1e-13  # envelope pieces narrower than this are dropped
+POLICY_TABLE_POINTS = 4001  # uniform Q table of the policy for the paper update
 
 
 # --------------------------------------------------------------------------- 1-D envelopes
@@ -364,7 +365,8 @@ class AlphaSolution:
         if self.q is not None:
             qa = [envelope_values(v, xs, x) for v, xs in self.q[c]]
             return qa[ASK] - qa[AUTONOMOUS]
-        q = _paper_q(pomdp, self.grid_solution.value @ pomdp.complexity_probs, x)
+        g, v = self.grid_solution
+        q = _paper_q(pomdp, v, x, g)
         return q[c, ASK] - q[c, AUTONOMOUS]
 
     def value(self, pomdp: AssistancePOMDP, x) -> np.ndarray:
@@ -372,8 +374,8 @@ class AlphaSolution:
         x = np.asarray(x, dtype=float)
         if self.lower is not None:
             return envelope_values(self.lower[0], self.lower[1], x)
-        g = self.grid_solution
-        return np.interp(x, g.grid, g.value @ pomdp.complexity_probs) - self.residuals[1] / (1 - pomdp.discount)
+        g, v = self.grid_solution
+        return np.interp(x, g, v) - self.residuals[1] / (1 - pomdp.discount)
 
     def q_values(self, pomdp: AssistancePOMDP, x) -> np.ndarray:
         """Lower bounds on Q(x, C, a); shape (..., N, 2)."""
@@ -383,7 +385,8 @@ class AlphaSolution:
                 [np.stack([envelope_values(v, xs, x) for v, xs in per_a], axis=-1) for per_a in self.q], axis=-2
             )
         gam = pomdp.discount
-        q = _paper_q(pomdp, self.grid_solution.value @ pomdp.complexity_probs, x) - gam * self.residuals[1] / (1 - gam)
+        g, v = self.grid_solution
+        q = _paper_q(pomdp, v, x, g) - gam * self.residuals[1] / (1 - gam)
         return np.moveaxis(q, (0, 1), (-2, -1))
 
     def threshold_report(self, pomdp: AssistancePOMDP, points: int = 4001) -> dict[str, dict[str, Any]]:
@@ -546,33 +549,95 @@ class AlphaSolver:
 
     # -- paper ---------------------------------------------------------------
     def _solve_paper(self, pomdp: AssistancePOMDP) -> AlphaSolution:
-        from .solve import GridSolver
-
         t0 = time.perf_counter()
         gamma = pomdp.discount
-        G = self.grid
+        grid = np.linspace(0.0, 1.0, self.grid)
         history = []
+        values = None
+        target = self.tol * (1 - gamma) / 2  # residual allowed on each side
         while True:
-            sol = GridSolver(grid=G, belief_update="paper").solve_grid(pomdp)
-            eps_plus, eps_minus = paper_residual(pomdp, sol.grid, sol.value @ pomdp.complexity_probs)
+            values = paper_grid_values(pomdp, grid, values)
+            eps_plus, eps_minus, lo, hi, sup, inf = paper_residual(pomdp, grid, values, pieces=True)
             gap = (max(eps_plus, 0.0) + max(eps_minus, 0.0)) / (1 - gamma)
             history.append(gap)
-            if gap <= self.tol or G >= self.max_grid:
+            if gap <= self.tol or len(grid) >= self.max_grid:
                 break
-            # second-order convergence: the residual falls like 1/G^2
-            G = min(self.max_grid, int((G - 1) * min(8.0, max(1.5, np.sqrt(gap / self.tol) * 1.1))) + 1)
+            # refine where the residual is large: split those cells into 8
+            bad = (sup > 0.5 * target) | (inf < -0.5 * target)
+            cells = np.unique(np.clip(np.searchsorted(grid, 0.5 * (lo[bad] + hi[bad]), side="right") - 1, 0, len(grid) - 2))
+            h = (grid[cells + 1] - grid[cells])[:, None]
+            new = grid[cells][:, None] + h * (np.arange(1, 8) / 8.0)[None, :]
+            values = np.interp(np.concatenate([grid, new.ravel()]), grid, values)
+            grid = np.concatenate([grid, new.ravel()])
+            order = np.argsort(grid)
+            grid, values = grid[order], values[order]
         return AlphaSolution(
             belief_update="paper",
-            method="certified-grid",
+            method="certified-adaptive-grid",
             lower=None,
             q=None,
             gap=float(gap),
             iterations=len(history),
             seconds=time.perf_counter() - t0,
             history=history,
-            grid_solution=sol,
+            grid_solution=(grid, values),
             residuals=(max(eps_plus, 0.0), max(eps_minus, 0.0)),
         )
+
+
+def paper_grid_values(pomdp: AssistancePOMDP, grid: np.ndarray, guess: np.ndarray | None = None) -> np.ndarray:
+    """W on a (possibly non-uniform) grid for the eq.-3 belief MDP with linear interpolation
+    between grid points: Howard's policy iteration on the grid MDP (sparse direct solves)."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    p, f = _paper_maps(pomdp)
+    R = pomdp.expected_reward
+    gamma = pomdp.discount
+    pc = pomdp.complexity_probs
+    N, G = pomdp.n_complexity, len(grid)
+    x = grid
+    r = R[:, :, 0, None] * (1 - x) + R[:, :, 1, None] * x  # [c, a, G]
+    P = [[None, None] for _ in range(N)]
+    for c in range(N):
+        for a in range(2):
+            m = None
+            for e in range(2):
+                w = p[c, a, e, 0] * (1 - x) + p[c, a, e, 1] * x
+                nx = np.clip(f[c, a, e, 0] * (1 - x) + f[c, a, e, 1] * x, 0.0, 1.0)
+                j = np.clip(np.searchsorted(grid, nx, side="right") - 1, 0, G - 2)
+                t = (nx - grid[j]) / (grid[j + 1] - grid[j])
+                rows = np.arange(G)
+                part = sp.csr_matrix(
+                    (np.concatenate([w * (1 - t), w * t]), (np.concatenate([rows, rows]), np.concatenate([j, j + 1]))),
+                    shape=(G, G),
+                )
+                m = part if m is None else m + part
+            P[c][a] = m.tocsr()
+
+    def q_of(W):
+        return np.stack([np.stack([r[c, a] + gamma * (P[c][a] @ W) for a in range(2)]) for c in range(N)])
+
+    W = q_of(guess).max(axis=1).T @ pc if guess is not None else None
+    policy = q_of(W).argmax(axis=1) if W is not None else r.argmax(axis=1)  # [c, G]
+    eye = sp.identity(G, format="csr")
+    for _ in range(200):
+        M = None
+        rr = np.zeros(G)
+        for c in range(N):
+            sel = policy[c]
+            Pc = sp.diags((sel == 0).astype(float)) @ P[c][0] + sp.diags((sel == 1).astype(float)) @ P[c][1]
+            M = pc[c] * Pc if M is None else M + pc[c] * Pc
+            rr += pc[c] * np.where(sel == 0, r[c, 0], r[c, 1])
+        W = spla.spsolve((eye - gamma * M).tocsc(), rr)
+        q = q_of(W)
+        cur = np.take_along_axis(q, policy[:, None, :], axis=1)[:, 0]
+        better = q.max(axis=1) > cur + 1e-12 * (1 + np.abs(cur))
+        new = np.where(better, q.argmax(axis=1), policy)
+        if np.array_equal(new, policy):
+            break
+        policy = new
+    return np.asarray(W)
 
 
 # --------------------------------------------------------------------------- paper update: exact residual
@@ -610,7 +675,7 @@ def _paper_q(pomdp: AssistancePOMDP, values: np.ndarray, x: np.ndarray, grid: np
     return out
 
 
-def paper_residual(pomdp: AssistancePOMDP, grid: np.ndarray, values: np.ndarray) -> tuple[float, float]:
+def paper_residual(pomdp: AssistancePOMDP, grid: np.ndarray, values: np.ndarray, pieces: bool = False):
     """(ε+, ε-) = (sup, -inf) over x in [0, 1] of (T V - V)(x) for the eq.-3 belief MDP, where V
     is the linear interpolation of ``values`` on ``grid``.  Exact up to rounding: the interval is
     cut at the grid points, their preimages under every belief map and the roots of every
@@ -659,6 +724,8 @@ def paper_residual(pomdp: AssistancePOMDP, grid: np.ndarray, values: np.ndarray)
         best = np.where(qs[1][:, ASK] > qs[1][:, AUTONOMOUS], q[:, ASK], q[:, AUTONOMOUS])  # [c, n]
         phi.append(pc @ best - v[k])
     sup, inf = _quad_extrema(phi[0], phi[1], phi[2], w)
+    if pieces:
+        return float(np.max(sup)), float(-np.min(inf)), lo, hi, sup, inf
     return float(np.max(sup)), float(-np.min(inf))
 
 
@@ -956,6 +1023,8 @@ def policy_from_solution(sol: AlphaSolution, pomdp: AssistancePOMDP):
         )
     from .policy import TrustAwarePolicy
 
-    g = sol.grid_solution
-    info["grid_points"] = len(g.grid)
-    return TrustAwarePolicy(g.grid, g.q, pomdp.model, pomdp.complexities, sol.belief_update, info)
+    g, v = sol.grid_solution
+    info["adaptive_grid_points"] = len(g)
+    table = np.linspace(0.0, 1.0, POLICY_TABLE_POINTS)  # Q of the certified solution on a uniform table
+    q = np.moveaxis(_paper_q(pomdp, v, table, g), -1, 0)
+    return TrustAwarePolicy(table, q, pomdp.model, pomdp.complexities, sol.belief_update, info)
