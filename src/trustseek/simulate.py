@@ -494,6 +494,10 @@ def _run_chunk(tab: _Tables, task: Task, rows: np.ndarray, blocks: list[Block], 
     return summ, out
 
 
+def _seed_sequence(seed) -> np.random.SeedSequence:
+    return seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+
+
 def participant_ids(n: int, prefix: str = "p", start: int = 1) -> np.ndarray:
     """Ids ``p001``, ``p002``, ... (zero-padded to sort in order)."""
     width = max(3, len(str(start + n - 1)))
@@ -541,7 +545,7 @@ def run(
     if len(participants) != n:
         raise SimulationError([f"{len(participants)} participant ids for {n} participants"])
     tab = _Tables(supervisors, task)
-    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    ss = _seed_sequence(seed)
     n_chunks = -(-n // CHUNK)
     chunk_seeds = [s.spawn(2) for s in ss.spawn(n_chunks)]
     nb = len(blocks)
@@ -594,7 +598,7 @@ def simulate(
     TrustModel or a :class:`Supervisors` population (then ``n_participants`` is its size).
     """
     sup = model if isinstance(model, Supervisors) else Supervisors.pooled(model, n_participants)
-    ss = np.random.SeedSequence(seed)
+    ss = _seed_sequence(seed)
     s_sched, s_run = ss.spawn(2)
     if (counts is None) == (trials is None):
         raise SimulationError(["give either counts (trials per complexity, in random order) or trials (i.i.d. complexities)"])
@@ -636,7 +640,7 @@ def crossover(
     first = np.arange(n) % P if first is None else np.asarray(first, dtype=np.int64)
     if first.shape != (n,) or first.min() < 0 or first.max() >= P:
         raise SimulationError([f"first must give, for each of the {n} participants, a policy index in 0..{P - 1}"])
-    ss = np.random.SeedSequence(seed)
+    ss = _seed_sequence(seed)
     s_sched, s_run = ss.spawn(2)
     rs = np.random.default_rng(s_sched)
     scheds = [schedule_counts(n, counts, rs, task.complexities) for _ in range(P)]

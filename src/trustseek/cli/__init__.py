@@ -16,6 +16,7 @@ from ._app import app, err_console
 from . import plan  # noqa: F401  (solve, plot-q)
 from . import fit  # noqa: F401
 from . import serve  # noqa: F401
+from . import simulate  # noqa: F401
 
 
 def main() -> None:

@@ -1,0 +1,225 @@
+"""Simulation commands: simulate (simulated supervisors) and reproduce (the paper end to end)."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import typer
+from rich.markup import escape
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from ..errors import TrustseekError
+from ..policy import COMPLEXITY_KINDS, PAPER_ASK_PROBABILITIES, TrustAwarePolicy, always_ask, load_policy, never_ask, randomized, trust_agnostic
+from ..presets import load_model, load_task
+from ._app import app, console, err_console, print_json
+
+POLICY_CHOICES = ("trust-aware", "trust-agnostic", "randomized", "always-ask", "never-ask")
+
+
+def _policy(spec: str, model, task, belief_update: str, grid: int, ask_low: float, ask_high: float):
+    if spec == "trust-aware":
+        from ..solve import solve
+
+        return solve(model, task, belief_update=belief_update, grid=grid)
+    if spec == "trust-agnostic":
+        return trust_agnostic(model, task)
+    if spec == "randomized":
+        return randomized(dict(zip(task.complexities, [ask_low, ask_high])))
+    if spec == "always-ask":
+        return always_ask(task.complexities)
+    if spec == "never-ask":
+        return never_ask(task.complexities)
+    p = Path(spec)
+    if p.suffix.lower() == ".json" or p.exists():
+        return load_policy(p)
+    raise TrustseekError([f"--policy must be one of {list(POLICY_CHOICES)} or a policy JSON file, got {spec!r}"])
+
+
+def _counts(text: str, task) -> list[int]:
+    parts = [x.strip() for x in text.split(",")]
+    if len(parts) != task.n_complexity:
+        raise TrustseekError([f"--counts needs one number per complexity {list(task.complexities)} (e.g. 41,30), got {text!r}"])
+    try:
+        vals = [int(x) for x in parts]
+    except ValueError:
+        raise TrustseekError([f"--counts must be comma-separated integers (e.g. 41,30), got {text!r}"]) from None
+    if any(v < 0 for v in vals) or sum(vals) < 1:
+        raise TrustseekError([f"--counts must be non-negative with at least one trial, got {text!r}"])
+    return vals
+
+
+@app.command()
+def simulate(
+    model: str = typer.Option("paper", "--model", "-m", help="Supervisors' trust model: a preset name (paper) or a JSON file."),
+    task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
+    policy: str = typer.Option("trust-aware", "--policy", "-p", help=f"Robot policy: {', '.join(POLICY_CHOICES)}, or a policy JSON file (e.g. from 'trustseek solve --out')."),
+    participants: int = typer.Option(9, "--participants", "-n", min=1, help="Number of simulated participants."),
+    counts: Optional[str] = typer.Option(None, "--counts", help="Trials per complexity in random order, e.g. 41,30 (the paper's design). Default: 41,30 unless --trials is given."),
+    trials: Optional[int] = typer.Option(None, "--trials", min=1, help="Number of trials with i.i.d. complexities from the task's probabilities (instead of --counts)."),
+    belief_update: str = typer.Option("paper", "--belief-update", "-u", help="Belief update of the trust-aware policy: 'paper' (eq. 3) or 'bayes'."),
+    policy_model: Optional[str] = typer.Option(None, "--policy-model", help="Model the trust-aware policy is solved for (default: the supervisors' model)."),
+    grid: int = typer.Option(1001, "--grid", min=3, help="Belief grid points for solving the trust-aware policy."),
+    ask_low: float = typer.Option(PAPER_ASK_PROBABILITIES["low"], "--ask-low", min=0.0, max=1.0, help="Randomized policy: P(ask) in the first complexity."),
+    ask_high: float = typer.Option(PAPER_ASK_PROBABILITIES["high"], "--ask-high", min=0.0, max=1.0, help="Randomized policy: P(ask) in the second complexity."),
+    concentration: Optional[float] = typer.Option(None, "--concentration", help="Heterogeneous population: each participant's probability rows ~ Dirichlet(concentration x pooled row + pseudo)."),
+    pseudo: float = typer.Option(0.0, "--pseudo", min=0.0, help="Dirichlet pseudo-count added to every cell (with --concentration)."),
+    seed: int = typer.Option(0, "--seed", help="Random seed (same seed, same supervisors and luck for any policy)."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write every trial (canonical trial log + true_trust, belief, reward, block, policy) to this CSV/Parquet file."),
+    summary_out: Optional[Path] = typer.Option(None, "--summary-out", help="Write the per-participant summary to this CSV/Parquet file."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
+) -> None:
+    """Simulate supervisors from a trust model working with the robot under a policy."""
+    from ..simulate import SimulationError, Supervisors
+    from ..simulate import simulate as run_simulation
+
+    if belief_update not in ("paper", "bayes"):
+        raise TrustseekError([f"--belief-update must be 'paper' or 'bayes', got {belief_update!r}"])
+    if counts is not None and trials is not None:
+        raise TrustseekError(["give either --counts or --trials, not both"])
+    for f in (out, summary_out):
+        if f is not None and f.suffix.lower() not in (".csv", ".parquet"):
+            raise TrustseekError([f"{f}: output files must end in .csv or .parquet"])
+    m, t = load_model(model), load_task(task)
+    t.check_compatible(m)
+    pm = load_model(policy_model) if policy_model else m
+    pol = _policy(policy, pm, t, belief_update, grid, ask_low, ask_high)
+    sup = Supervisors.pooled(m, participants)
+    if concentration is not None:
+        sup = Supervisors.dirichlet(m, participants, concentration, np.random.default_rng([seed, 7]), pseudo=pseudo)
+    cnt = None if trials is not None else _counts(counts or "41,30", t)
+    record = out is not None
+    t0 = time.perf_counter()
+    try:
+        sim = run_simulation(sup, t, pol, participants, counts=cnt, trials=trials, seed=seed, record=record, belief_model=pm)
+    except SimulationError:
+        raise
+    dt = time.perf_counter() - t0
+    if out is not None:
+        _write(sim.trials(), out)
+    summ = sim.summary()
+    if summary_out is not None:
+        _write(summ, summary_out)
+    cols = ["cumulative_reward", "discounted_reward", "autonomous_collections", "failures", "interventions", "asks"]
+    stats = {c: {"mean": float(summ[c].mean()), "median": float(summ[c].median()), "sd": float(summ[c].std(ddof=1)) if len(summ) > 1 else 0.0} for c in cols}
+    n_trials = int(summ["trials"].sum())
+    if as_json:
+        print_json({"policy": pol.to_dict() if not isinstance(pol, TrustAwarePolicy) else {"kind": pol.kind, "thresholds": pol.thresholds(), "belief_update": pol.belief_update},
+                    "participants": participants, "trials": n_trials, "seed": seed, "statistics": stats,
+                    "trials_file": str(out) if out else None, "summary_file": str(summary_out) if summary_out else None})
+        return
+    desc = pol.describe() if not isinstance(pol, TrustAwarePolicy) else f"trust-aware ({pol.belief_update} belief, thresholds " + ", ".join(
+        f"{k}: {'never asks' if v is None else f'{v:.3f}'}" for k, v in pol.thresholds().items()) + ")"
+    table = Table(title=f"{participants:,} simulated participants, {n_trials // participants} trials each, policy {escape(desc)}", title_justify="left")
+    table.add_column("per participant")
+    for h in ("mean", "median", "sd"):
+        table.add_column(h, justify="right")
+    for c in cols:
+        table.add_row(c.replace("_", " "), *(f"{stats[c][k]:.2f}" for k in ("mean", "median", "sd")))
+    console.print(table)
+    console.print(f"{n_trials:,} trials in {dt:.2f} s ({n_trials / max(dt, 1e-9) / 1e6:.1f} M trials/s), seed {seed}")
+    if out is not None:
+        console.print(f"trials written to {out}")
+    if summary_out is not None:
+        console.print(f"summary written to {summary_out}")
+
+
+def _write(frame, path: Path) -> None:
+    try:
+        from ..data import write_trials
+
+        if list(frame.columns[:2]) == ["participant", "trial"]:
+            write_trials(frame, path)
+            return
+    except ImportError:
+        pass
+    if path.suffix.lower() == ".parquet":
+        frame.to_parquet(path, index=False)
+    else:
+        frame.to_csv(path, index=False)
+
+
+@app.command()
+def reproduce(
+    out: Path = typer.Option(Path("report"), "--out", "-o", help="Report folder (report.html, PNGs, summary.json, data)."),
+    seed: int = typer.Option(0, "--seed", help="Random seed: the same seed gives the same numbers."),
+    replicates: int = typer.Option(20, "--replicates", "-r", min=0, help="Replicate experiments of the whole pipeline."),
+    large_n: int = typer.Option(10_000, "--large-n", min=1, help="Participants of the large experiment 2 and of the cost studies."),
+    bootstrap: int = typer.Option(20, "--bootstrap", "-b", min=0, help="Bootstrap resamples for the fitted model's intervals."),
+    restarts: int = typer.Option(10, "--restarts", min=1, help="EM restarts of the main fit."),
+    replicate_restarts: int = typer.Option(4, "--replicate-restarts", min=1, help="EM restarts per replicate fit."),
+    replicate_large_n: int = typer.Option(2_000, "--replicate-large-n", min=1, help="Participants of each replicate's large experiment 2."),
+    belief_update: str = typer.Option("paper", "--belief-update", "-u", help="Belief update of the trust-aware policy: 'paper' (eq. 3, as in the paper) or 'bayes'."),
+    jobs: int = typer.Option(2, "--jobs", "-j", min=1, help="Processes (bootstrap and replicates); numbers do not depend on it."),
+    as_json: bool = typer.Option(False, "--json", help="Print summary.json to stdout instead of tables."),
+) -> None:
+    """Reproduce Sections V-VI of the paper on simulated supervisors and write a report."""
+    from ..report import write_report
+    from ..reproduce import ReproduceConfig, reproduce as run_reproduce
+
+    cfg = ReproduceConfig(
+        seed=seed, replicates=replicates, large_n=large_n, bootstrap=bootstrap, restarts=restarts,
+        replicate_restarts=replicate_restarts, replicate_large_n=replicate_large_n, belief_update=belief_update, jobs=jobs,
+    )
+    problems = cfg.problems()
+    if problems:
+        raise TrustseekError(problems)
+    t0 = time.perf_counter()
+    with Progress(
+        TextColumn("[bold]{task.description:<44}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"), TimeElapsedColumn(),
+        console=err_console, transient=as_json, disable=False,
+    ) as bar:
+        task = bar.add_task("experiment 1", total=1000)
+
+        def progress(stage: str, frac: float) -> None:
+            bar.update(task, completed=int(1000 * frac), description=stage)
+
+        rep = run_reproduce(cfg, progress=progress)
+        bar.update(task, description="report", completed=990)
+        paths = write_report(rep, out)
+        bar.update(task, description="done", completed=1000)
+    if as_json:
+        print_json(rep.summary)
+        return
+    print_comparison(rep.summary)
+    s = rep.summary
+    e2 = s["experiment2"]
+    console.print(
+        f"Experiment 2, {e2['large']['participants']:,} participants: mean aware − agnostic "
+        f"{e2['large']['mean_difference']:.2f} [{e2['large']['mean_difference_ci'][0]:.2f}, {e2['large']['mean_difference_ci'][1]:.2f}] per block; "
+        f"Wilcoxon p = {_p(e2['large']['wilcoxon']['p_value'])}; 5 participants: p = {_p(e2['small']['wilcoxon']['p_value'])}"
+    )
+    if s["disagreements"]:
+        console.print("[bold red]Where the simulation disagrees with the paper:[/]")
+        for d in s["disagreements"]:
+            console.print(f"  • {escape(d)}", highlight=False)
+    else:
+        console.print("[green]Every number the paper reports lies inside our intervals.[/]")
+    console.print(f"report: {paths['html']}  ({time.perf_counter() - t0:.1f} s)")
+
+
+def _p(v) -> str:
+    return "–" if v is None else f"{v:.3g}"
+
+
+def print_comparison(summary: dict) -> None:
+    """The console table 'paper vs reproduction'."""
+    from ..report import fmt
+
+    table = Table(title="Paper vs reproduction", title_justify="left", show_lines=False)
+    table.add_column("quantity")
+    table.add_column("paper", justify="right")
+    table.add_column("ours", justify="right")
+    table.add_column("95% interval", justify="right")
+    table.add_column("verdict")
+    for r in summary["comparison"]:
+        iv = r["interval"]
+        ivs = f"[{fmt(iv[0])}, {fmt(iv[1])}]" if iv else (r["note"] or "–")
+        verdict = "[green]agrees[/]" if r["verdict"] == "agrees" else ("[bold red]DISAGREES[/]" if r["verdict"] == "DISAGREES" else r["verdict"])
+        table.add_row(escape(r["quantity"]), escape(fmt(r["paper"])), escape(fmt(r["ours"])), escape(ivs), verdict)
+    console.print(table)
+    console.print(f"[dim]intervals: 2.5-97.5% over {summary['replicates']['n']} replicate experiments unless the note says otherwise[/]")

@@ -1,0 +1,130 @@
+"""The reproduction report: one self-contained HTML file, the PNG figures, summary.json and the data.
+
+The HTML embeds every figure as base64 PNG and its styles inline, so it reads offline
+and can be mailed as a single file.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from jinja2 import Environment, FileSystemLoader, StrictUndefined
+
+from . import __version__
+from .presets import paper_model
+from .reproduce import AGNOSTIC, AWARE, PAPER, Reproduction, write_summary
+
+TEMPLATES = Path(__file__).resolve().parent / "templates"
+
+FIGURES = [
+    # file, section, caption
+    ("fig4_emissions.png", "fit", "Fig. 4 equivalent: fitted P(o | T, C, a), with the paper's values as markers."),
+    ("fig5_6_transitions.png", "fit", "Figs. 5–6 equivalent: fitted P(T' | T, E', C, a), with the paper's values as markers."),
+    ("fig7_q.png", "plan", "Fig. 7 equivalent: Q(b, C, a) of the fitted model's belief MDP; the dotted line is the threshold."),
+    ("fig8_rewards.png", "experiment2", "Fig. 8 equivalent: cumulative reward per block and policy; (a) the paper-sized experiment, lines join each participant's two blocks; (b) the large-N experiment. Diamonds: the paper's medians."),
+    ("replicates.png", "replicates", "Distributions over replicate experiments of the estimated threshold and of the aware − agnostic reward difference."),
+    ("policies.png", "costs", "Mean cumulative reward per block of each policy on the same simulated participants."),
+]
+
+
+def fmt(v: Any) -> str:
+    """Numbers for tables: integers plainly, others with 3 significant decimals."""
+    if v is None:
+        return "–"
+    if isinstance(v, bool):
+        return str(v)
+    if isinstance(v, (int, np.integer)):
+        return f"{v:,}"
+    if isinstance(v, (float, np.floating)):
+        if not np.isfinite(v):
+            return "–"
+        if float(v).is_integer() and abs(v) < 1e6:
+            return f"{int(v)}"
+        if abs(v) >= 100:
+            return f"{v:.1f}"
+        return f"{v:.3g}" if abs(v) < 0.01 else f"{v:.3f}".rstrip("0").rstrip(".") if abs(v) < 1 else f"{v:.2f}"
+    return str(v)
+
+
+def pct(v: Any) -> str:
+    return "–" if v is None else f"{100 * float(v):.0f}%"
+
+
+def make_figures(rep: Reproduction, out: Path) -> list[Path]:
+    """Write the PNG figures into ``out``; returns their paths."""
+    from .plots.model import plot_emissions, plot_transitions
+    from .plots.q import plot_q
+    from .plots.rewards import plot_policy_values, plot_replicates, plot_rewards
+
+    s = rep.summary
+    paper = paper_model()
+    ci = getattr(rep.fit, "ci", None)
+    paths = []
+    p = out / "fig4_emissions.png"
+    plot_emissions(rep.fitted, p, ci=ci, reference=paper)
+    paths.append(p)
+    p = out / "fig5_6_transitions.png"
+    plot_transitions(rep.fitted, p, ci=ci, reference=paper)
+    paths.append(p)
+    p = out / "fig7_q.png"
+    plot_q(rep.aware, p, title=f"Action-value functions of the fitted model (belief update: {rep.aware.belief_update})")
+    paths.append(p)
+    p = out / "fig8_rewards.png"
+    plot_rewards(
+        rep.experiment2.by_policy(),
+        rep.experiment2_large.by_policy(),
+        p,
+        paper_medians={AWARE: PAPER["median_aware"], AGNOSTIC: PAPER["median_agnostic"]},
+    )
+    paths.append(p)
+    r = s["replicates"]
+    p = out / "replicates.png"
+    plot_replicates(
+        [np.nan if v is None else v for v in r["threshold"]["values"]],
+        r["median_diff_small"]["values"],
+        r["mean_diff_large"]["values"],
+        p,
+        paper_threshold=PAPER["threshold_high"],
+        true_threshold=s["plan"]["true_model"]["thresholds"]["high"],
+        paper_difference=PAPER["median_aware"] - PAPER["median_agnostic"],
+    )
+    paths.append(p)
+    p = out / "policies.png"
+    plot_policy_values(s["costs"]["rows"], p, title=f"{s['costs']['participants']:,} simulated participants, one block of {s['costs']['trials_per_block']} trials")
+    paths.append(p)
+    return paths
+
+
+def render_html(summary: dict, figure_dir: Path) -> str:
+    """The report as one HTML string with every figure embedded."""
+    env = Environment(loader=FileSystemLoader(str(TEMPLATES)), autoescape=True, undefined=StrictUndefined)
+    figures = []
+    for file, section, caption in FIGURES:
+        path = figure_dir / file
+        data = base64.b64encode(path.read_bytes()).decode("ascii")
+        figures.append({"file": file, "section": section, "caption": caption, "alt": caption.split(":")[0], "data": data})
+    return env.get_template("report.html.j2").render(s=summary, figures=figures, fmt=fmt, pct=pct, version=__version__)
+
+
+def write_report(rep: Reproduction, out: str | Path) -> dict[str, Path]:
+    """Write the report folder: report.html, the PNGs, summary.json, data and policies."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    make_figures(rep, out)
+    write_summary(rep.summary, out / "summary.json")
+    rep.experiment1.to_csv(out / "experiment1.csv", index=False)
+    rep.experiment2.trials().to_csv(out / "experiment2.csv", index=False)
+    rep.fitted.save(out / "fitted_model.json")
+    rep.aware.save(out / "policy_trust_aware.json")
+    rep.agnostic.save(out / "policy_trust_agnostic.json")
+    html = out / "report.html"
+    html.write_text(render_html(rep.summary, out), encoding="utf-8")
+    return {"html": html, "summary": out / "summary.json", "dir": out}
+
+
+def load_summary(path: str | Path) -> dict:
+    return json.loads(Path(path).read_text(encoding="utf-8"))
