@@ -60,6 +60,7 @@ function setPhase(p: Phase) {
   else if (p === "done") $("screen-done").hidden = false;
   else if (p !== "loading" && p !== "error") $("screen-task").hidden = false;
   $("screen-report").hidden = p !== "report";
+  if (p === "report" || p === "done") hintUntil = 0;
   renderStatus();
 }
 
@@ -361,7 +362,8 @@ function teleop(cmd: ReturnType<typeof poll>, k: number) {
 // --------------------------------------------------------------------------- drawing and status
 
 function view(): View {
-  return { layout, robot, item, showPath: phase === "approach", flash, highlight: !robot.holding && !item.inBin, time: clock };
+  const asking = phase === "teleop" && !intervened && !robot.holding && !item.inBin;
+  return { layout, robot, item, showPath: phase === "approach", flash, highlight: !robot.holding && !item.inBin, time: clock, bubble: asking ? "Please help me!" : undefined };
 }
 
 function draw() {

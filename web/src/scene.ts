@@ -136,6 +136,7 @@ export interface View {
   flash: number; // 0..1 red flash after a failure
   highlight: boolean;
   time: number;
+  bubble?: string; // a speech bubble over the robot
 }
 
 function roundRect(g: CanvasRenderingContext2D, x: number, y: number, w: number, h: number, r: number) {
@@ -193,6 +194,7 @@ export function drawAisle(g: CanvasRenderingContext2D, v: View, px: number) {
   if (item.visible && !item.inBin && !robot.holding) drawItem(g, item.x, item.y, layout.item.color, v.highlight, v.time);
   drawRobot(g, v);
   if (robot.holding && item.visible) drawItem(g, item.x, item.y, layout.item.color, false, v.time);
+  if (v.bubble) drawBubble(g, robot.x, robot.y - BASE_H / 2 - 0.15, v.bubble);
   if (v.flash > 0) {
     g.fillStyle = `rgba(220,30,30,${0.35 * v.flash})`;
     g.fillRect(0, 0, AISLE_W, AISLE_H);
@@ -238,6 +240,27 @@ function drawObstacle(g: CanvasRenderingContext2D, o: Box, px: number) {
   g.font = `${0.22}px sans-serif`;
   g.textAlign = "center";
   g.fillText(o.kind === "crate" ? "CRATE" : "CART", o.x + o.w / 2, o.y + o.h / 2 + 0.08);
+}
+
+function drawBubble(g: CanvasRenderingContext2D, x: number, y: number, text: string) {
+  g.font = "bold 0.26px system-ui, sans-serif";
+  const w = g.measureText(text).width + 0.36;
+  const h = 0.46;
+  const bx = Math.max(0.1, Math.min(AISLE_W - w - 0.1, x - w / 2));
+  const by = Math.max(0.1, y - h - 0.18);
+  g.fillStyle = "#f5a524";
+  roundRect(g, bx, by, w, h, 0.12);
+  g.fill();
+  g.beginPath();
+  g.moveTo(x - 0.12, by + h);
+  g.lineTo(x, by + h + 0.18);
+  g.lineTo(x + 0.12, by + h);
+  g.fill();
+  g.fillStyle = "#1d2330";
+  g.textAlign = "center";
+  g.textBaseline = "middle";
+  g.fillText(text, bx + w / 2, by + h / 2 + 0.01);
+  g.textBaseline = "alphabetic";
 }
 
 function drawItem(g: CanvasRenderingContext2D, x: number, y: number, color: string, highlight: boolean, t: number) {

@@ -1,0 +1,187 @@
+"""End-to-end: a participant does a short study in headless Chromium (consent, instructions,
+an intervention, an autonomous trial, an assisted teleoperation, self-reports); the export
+holds exactly those trials in the canonical trial-log format."""
+
+from __future__ import annotations
+
+import io
+import os
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from trustseek.client import Client
+from trustseek.server.app import STATIC
+from trustseek.server.local import ThreadServer
+
+pytestmark = pytest.mark.browser
+
+CHROMIUM = "/usr/bin/chromium"
+ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
+        "--disable-sync", "--no-first-run", "--disable-quic"]
+TOKEN = "browser-test-token"
+
+
+def artifacts_dir(tmp_path: Path) -> Path:
+    d = Path(os.environ.get("TRUSTSEEK_ARTIFACTS", tmp_path))
+    d.mkdir(parents=True, exist_ok=True)
+    return d
+
+
+def st(page) -> dict:
+    return page.evaluate("window.trustseek.state()")
+
+
+def hold(page, key: str, until, timeout: float = 15.0) -> dict:
+    """Hold ``key`` until ``until(state)`` is true."""
+    page.keyboard.down(key)
+    try:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            s = st(page)
+            if until(s):
+                return s
+            page.wait_for_timeout(15)
+        raise AssertionError(f"holding {key} never reached the goal; state {st(page)}")
+    finally:
+        page.keyboard.up(key)
+
+
+def teleoperate(page) -> None:
+    """Drive to the item's shelf side, line up, extend the arm, grasp, retract, deposit."""
+    s = st(page)
+    side = s["side"]
+    # towards the shelf that holds the item (the base stops at the shelf edge)
+    key = "ArrowUp" if side < 0 else "ArrowDown"
+    prev = [None]
+
+    def stopped(s):
+        y = s["robot"]["y"]
+        done = prev[0] is not None and abs(y - prev[0]) < 1e-9
+        prev[0] = y
+        return done
+
+    hold(page, key, stopped)
+    for _ in range(8):  # line up the gripper with the item; correct any overshoot
+        s = st(page)
+        dx = s["item"]["x"] - s["gripper"]["x"]
+        dy = (s["item"]["y"] - s["gripper"]["y"]) * side  # > 0: the arm must extend further
+        if abs(dx) < 0.15 and abs(dy) < 0.15:
+            break
+        if dx > 0.15:
+            hold(page, "ArrowRight", lambda s: s["gripper"]["x"] >= s["item"]["x"] - 0.05)
+        elif dx < -0.15:
+            hold(page, "ArrowLeft", lambda s: s["gripper"]["x"] <= s["item"]["x"] + 0.05)
+        elif dy > 0.15:
+            hold(page, "z", lambda s: (s["item"]["y"] - s["gripper"]["y"]) * side <= 0.05)
+        else:
+            hold(page, "x", lambda s: (s["item"]["y"] - s["gripper"]["y"]) * side >= -0.05)
+    page.keyboard.press("g")
+    try:
+        page.wait_for_function("window.trustseek.state().robot.holding", timeout=5000)
+    except Exception:
+        raise AssertionError(f"grasp failed; state {st(page)}") from None
+    hold(page, "x", lambda s: s["robot"]["arm"] < 0.1)
+    page.keyboard.press("b")
+
+
+def test_participant_study_in_chromium(tmp_path):
+    if not Path(CHROMIUM).exists():
+        pytest.fail(f"{CHROMIUM} is missing: run scripts/setup.sh")
+    if not (STATIC / "participant.js").exists():
+        pytest.fail("front end not built: run scripts/setup.sh (npm ci && npm run build in web/)")
+    from playwright.sync_api import sync_playwright
+
+    out = artifacts_dir(tmp_path)
+    with ThreadServer(f"sqlite:///{tmp_path / 'e2e.sqlite'}", TOKEN) as url:
+        c = Client(url, TOKEN)
+        study = c.create_study({
+            "name": "e2e",
+            "blocks": [
+                {"name": "watch", "policy": {"kind": "never-ask"}, "schedule": {"trials": ["high", "low"]}},
+                {"name": "help", "policy": {"kind": "always-ask"}, "schedule": {"trials": ["high"]}},
+            ],
+            "self_report": "block",
+            "animation_speed": 3.0,
+        })
+        link = c.create_sessions(study["id"], participants=["chromium-1"])[0]["link"]
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS, headless=True)
+            page = browser.new_page(viewport={"width": 1320, "height": 900})
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            requests: list[str] = []
+            page.on("request", lambda r: requests.append(r.url))
+            page.goto(link + "?speed=1")
+
+            # consent and instructions
+            page.wait_for_selector("#screen-consent:not([hidden])")
+            assert page.is_disabled("#consent-btn")
+            page.check("#agree")
+            page.click("#consent-btn")
+            page.wait_for_selector("#screen-instructions:not([hidden])")
+            page.click("#start-btn")
+
+            # trial 1: autonomous in high complexity; the participant intervenes with the key
+            page.wait_for_function("window.trustseek.state().phase === 'approach'")
+            assert st(page)["trial"] == 1 and st(page)["complexity"] == "high"
+            assert page.inner_text("#mode") == "Collecting autonomously"
+            page.wait_for_timeout(300)
+            page.screenshot(path=str(out / "browser_autonomous.png"))
+            page.keyboard.press(" ")
+            page.wait_for_function("window.trustseek.state().phase === 'teleop'")
+            assert "intervention" in page.inner_text("#mode")
+            teleoperate(page)
+
+            # trial 2: autonomous in low complexity; the participant relies and sees the outcome
+            page.wait_for_function("window.trustseek.state().trial === 2 && window.trustseek.state().phase === 'approach'", timeout=15000)
+            page.wait_for_function("['outcome', 'result', 'report'].includes(window.trustseek.state().phase)", timeout=15000)
+
+            # end of block 1: self-report
+            page.wait_for_selector("#screen-report:not([hidden])", timeout=15000)
+            page.fill("#report-slider", "73")
+            page.click("#report-btn")
+
+            # trial 3: the robot asks; the participant teleoperates
+            page.wait_for_function("window.trustseek.state().trial === 3 && window.trustseek.state().phase === 'teleop'", timeout=15000)
+            assert page.inner_text("#mode") == "Asking for your help"
+            teleoperate(page)
+            page.wait_for_selector("#screen-report:not([hidden])", timeout=15000)
+            page.fill("#report-slider", "81")
+            page.screenshot(path=str(out / "browser_report.png"))
+            page.click("#report-btn")
+            page.wait_for_selector("#screen-done:not([hidden])", timeout=15000)
+            final_score = float(page.inner_text("#final-score"))
+            page.screenshot(path=str(out / "browser_done.png"))
+            browser.close()
+        assert not errors, errors
+        assert all(u.startswith(url) or u.startswith("data:") for u in requests), [u for u in requests if not u.startswith(url)]
+
+        trials = pd.read_csv(io.BytesIO(c.export(study["id"])))
+        events = pd.read_csv(io.BytesIO(c.export(study["id"], table="events")))
+
+    assert trials.columns[:6].tolist() == ["participant", "trial", "complexity", "robot_action", "human_action", "experience"]
+    assert trials["participant"].tolist() == ["chromium-1"] * 3
+    assert trials["trial"].tolist() == [1, 2, 3]
+    assert trials["complexity"].tolist() == ["high", "low", "high"]
+    assert trials["robot_action"].tolist() == ["autonomous", "autonomous", "ask"]
+    assert trials["human_action"].tolist() == ["intervene", "rely", "intervene"]
+    second = trials.iloc[1]
+    assert trials["experience"].tolist() == ["faulty", "reliable" if second.outcome == "success" else "faulty", "reliable"]
+    assert trials["reward"].tolist() == [0.0, 2.0 if second.outcome == "success" else -3.0, 1.0]
+    assert final_score == trials["reward"].sum()
+    assert trials["effort_ms"].iloc[0] > 0 and trials["effort_ms"].iloc[2] > 0 and pd.isna(trials["effort_ms"].iloc[1])
+    assert trials["self_report"].tolist()[1:] == [73.0, 81.0]
+    kinds = events["type"].tolist()
+    for k in ("consent", "instructions_done", "trial_start", "intervene", "teleop_start", "grasp", "deposit", "outcome_shown"):
+        assert k in kinds, (k, kinds)
+    assert events[events.type == "intervene"]["trial"].tolist() == [1]
+
+    # the export is a valid trial log for the data module and the fit
+    from trustseek.data import read_trials
+
+    frame = read_trials(trials)
+    assert len(frame) == 3 and frame["human_action"].tolist() == ["intervene", "rely", "intervene"]
+    trials.to_csv(out / "browser_trials.csv", index=False)
