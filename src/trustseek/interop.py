@@ -1,0 +1,530 @@
+"""Standard POMDP files: a flat POMDP, Cassandra's ``.pomdp`` format and POMDPX.
+
+:class:`FlatPOMDP` is a plain discrete POMDP: ``transition[a, s, s2]``,
+``observation[a, s2, o]`` (the observation depends on the action and the NEXT
+state, as in the file formats), ``reward[a, s, s2, o]``, a discount and a start
+distribution.  :func:`read_pomdp` / :func:`write_pomdp` handle Cassandra's format
+(``T:``, ``O:``, ``R:`` entries with names or indices, ``*`` wildcards, rows,
+matrices, ``uniform`` and ``identity``), so benchmark files such as Tiger can be
+solved with the point-based solver and checked against published values.
+
+Exporting the assistance POMDP (:func:`flat_from_assistance`).  In the paper
+the human action o_t depends on the state at the START of trial t, while a
+file's observation depends on the next state.  The export therefore augments the
+state with the last human action: a flat state is (T, E, C, last human action),
+and one step draws the human action together with the next trust and experience
+from the joint kernel P(o, E', T' | T, C, a) and the next complexity from P(C):
+
+    s = (T, E, C, ·)  --a-->  s' = (T', E', C', o)   with probability P(C') P(o, E', T' | T, C, a).
+
+The observation is (o, E', C'), read off s' with probability one: the human
+action of the trial just played and the experience and complexity that the robot
+sees.  The reward of (s, a) is eq. (2).  A belief over trust b with a known
+complexity c maps to the flat belief b(T) on (T, E = reliable, C = c, last = rely);
+the finite-horizon values of the two problems then agree exactly for every
+horizon (the tests check this against pomdp-py).  The ``start`` line of the file
+is P(T_1) P(C) with E = reliable: a flat solver does not observe the first
+complexity before the first action, so its value at ``start`` is a lower bound
+on Σ_C P(C) V(b0, C); start from one complexity (``initial_complexity``) to
+compare values.
+"""
+
+from __future__ import annotations
+
+import re
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from itertools import product
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .errors import TrustseekError
+from .model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
+from .pomdp import AssistancePOMDP
+
+
+class PomdpFileError(TrustseekError, ValueError):
+    """A ``.pomdp`` or POMDPX file is malformed."""
+
+
+@dataclass(eq=False)
+class FlatPOMDP:
+    """A discrete POMDP over enumerated states, actions and observations."""
+
+    states: tuple[str, ...]
+    actions: tuple[str, ...]
+    observations: tuple[str, ...]
+    transition: np.ndarray  # [a, s, s2]
+    observation: np.ndarray  # [a, s2, o]
+    reward: np.ndarray  # [a, s, s2, o]
+    discount: float
+    start: np.ndarray  # [s]
+    notes: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.states, self.actions, self.observations = tuple(self.states), tuple(self.actions), tuple(self.observations)
+        S, A, O = len(self.states), len(self.actions), len(self.observations)
+        self.transition = np.asarray(self.transition, dtype=float)
+        self.observation = np.asarray(self.observation, dtype=float)
+        self.reward = np.asarray(self.reward, dtype=float)
+        self.start = np.asarray(self.start, dtype=float)
+        problems = []
+        for name, arr, shape in (
+            ("transition", self.transition, (A, S, S)),
+            ("observation", self.observation, (A, S, O)),
+            ("reward", self.reward, (A, S, S, O)),
+            ("start", self.start, (S,)),
+        ):
+            if arr.shape != shape:
+                problems.append(f"{name} has shape {arr.shape}, expected {shape}")
+        if not problems:
+            for name, arr, labels in (
+                ("transition", self.transition, (self.actions, self.states)),
+                ("observation", self.observation, (self.actions, self.states)),
+            ):
+                sums = arr.sum(axis=-1)
+                bad = np.argwhere((np.abs(sums - 1.0) > 1e-6) | np.any(arr < 0, axis=-1))
+                for a, s in bad[:5]:
+                    problems.append(
+                        f"{name}[{labels[0][a]}, {labels[1][s]}] must be a probability row, sums to {sums[a, s]:.9g}"
+                    )
+            if abs(self.start.sum() - 1.0) > 1e-6 or np.any(self.start < 0):
+                problems.append(f"start must be a probability distribution, sums to {self.start.sum():.9g}")
+            if not 0.0 <= self.discount <= 1.0:
+                problems.append(f"discount = {self.discount} must lie in [0, 1]")
+        if problems:
+            raise PomdpFileError(problems)
+
+    @property
+    def expected_reward(self) -> np.ndarray:
+        """r[a, s] = Σ_{s2, o} T(s2 | s, a) O(o | s2, a) R(a, s, s2, o)."""
+        return np.einsum("aij,ajo,aijo->ai", self.transition, self.observation, self.reward)
+
+    @property
+    def branch_kernels(self) -> np.ndarray:
+        """M[a, o, s, s2] = T(s2 | s, a) O(o | s2, a): the unnormalized belief update."""
+        return np.einsum("aij,ajo->aoij", self.transition, self.observation)
+
+    def finite_horizon_value(self, belief, horizon: int) -> float:
+        """The exact optimal value of ``horizon`` steps from a belief (enumerating action and
+        observation branches; for small problems and short horizons)."""
+        b = np.asarray(belief, dtype=float)
+        r = self.expected_reward
+        M = self.branch_kernels
+
+        def v(b, h):
+            if h == 0:
+                return 0.0
+            best = -np.inf
+            for a in range(len(self.actions)):
+                q = float(r[a] @ b)
+                if h > 1:
+                    for o in range(len(self.observations)):
+                        nb = b @ M[a, o]
+                        p = nb.sum()
+                        if p > 1e-300:
+                            q += self.discount * p * v(nb / p, h - 1)
+                best = max(best, q)
+            return best
+
+        return v(b, horizon)
+
+
+# --------------------------------------------------------------------------- export of the assistance POMDP
+
+
+def _token(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_\-]", "_", name)
+
+
+def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None = None) -> FlatPOMDP:
+    """The flat POMDP with states (T, E, C, last human action) -- see the module docstring."""
+    K, N = pomdp.n_trust, pomdp.n_complexity
+    kern = pomdp.kernel  # [c, a, t, o, e, u]
+    pc = pomdp.complexity_probs
+    T_, C_ = [_token(x) for x in pomdp.trust_levels], [_token(x) for x in pomdp.complexities]
+    states = [f"{T_[t]}.{EXPERIENCES[e]}.{C_[c]}.{HUMAN_ACTIONS[o]}" for t in range(K) for e in range(2) for c in range(N) for o in range(2)]
+    obs = [f"{HUMAN_ACTIONS[o]}.{EXPERIENCES[e]}.{C_[c]}" for o in range(2) for e in range(2) for c in range(N)]
+
+    def sidx(t, e, c, o):
+        return ((t * 2 + e) * N + c) * 2 + o
+
+    def oidx(o, e, c):
+        return (o * 2 + e) * N + c
+
+    S, O = len(states), len(obs)
+    Tm = np.zeros((2, S, S))
+    Om = np.zeros((2, S, O))
+    Rm = np.zeros((2, S, S, O))
+    R = pomdp.expected_reward  # [c, a, t]
+    for a in range(2):
+        for t, e, c, o in product(range(K), range(2), range(N), range(2)):
+            s = sidx(t, e, c, o)
+            Om[a, s, oidx(o, e, c)] = 1.0
+            Rm[a, s] = R[c, a, t]
+            for o2, e2, u, c2 in product(range(2), range(2), range(K), range(N)):
+                Tm[a, s, sidx(u, e2, c2, o2)] += pc[c2] * kern[c, a, t, o2, e2, u]
+    start = np.zeros(S)
+    cw = pc if initial_complexity is None else np.eye(N)[initial_complexity]
+    for t, c in product(range(K), range(N)):
+        start[sidx(t, 1, c, 1)] = pomdp.model.initial[t] * cw[c]
+    notes = [
+        "trustseek assistance POMDP, flat form",
+        "state = trust.experience.complexity.last_human_action; observation = human_action.experience.complexity",
+        "the human action of a trial depends on the trust at its start: it is drawn with the transition and "
+        "stored in the next state, then observed",
+    ]
+    return FlatPOMDP(states, ACTIONS, obs, Tm, Om, Rm, pomdp.discount, start, notes)
+
+
+def flat_belief(pomdp: AssistancePOMDP, belief, complexity: int) -> np.ndarray:
+    """The flat belief for a belief over trust and a known complexity (E = reliable, last = rely)."""
+    from .belief import to_vector
+
+    b = to_vector(belief, pomdp.n_trust)
+    K, N = pomdp.n_trust, pomdp.n_complexity
+    out = np.zeros(K * 2 * N * 2)
+    for t in range(K):
+        out[((t * 2 + 1) * N + complexity) * 2 + 1] = b[t]
+    return out
+
+
+# --------------------------------------------------------------------------- Cassandra .pomdp
+
+
+def _num(x: float) -> str:
+    s = f"{x:.17g}"
+    return "0" if s == "-0" else s
+
+
+def write_pomdp(flat: FlatPOMDP, path: str | Path | None = None) -> str:
+    """Write Cassandra's ``.pomdp`` format; returns the text (and writes it when ``path`` is given)."""
+    lines = [f"# {n}" for n in flat.notes]
+    lines += [
+        f"discount: {_num(flat.discount)}",
+        "values: reward",
+        "states: " + " ".join(flat.states),
+        "actions: " + " ".join(flat.actions),
+        "observations: " + " ".join(flat.observations),
+        "start: " + " ".join(_num(x) for x in flat.start),
+        "",
+    ]
+    for a, an in enumerate(flat.actions):
+        lines.append(f"T: {an}")
+        lines += [" ".join(_num(x) for x in row) for row in flat.transition[a]]
+        lines.append("")
+    for a, an in enumerate(flat.actions):
+        lines.append(f"O: {an}")
+        lines += [" ".join(_num(x) for x in row) for row in flat.observation[a]]
+        lines.append("")
+    for a, an in enumerate(flat.actions):
+        for s, sn in enumerate(flat.states):
+            block = flat.reward[a, s]
+            if np.all(block == block.flat[0]):
+                if block.flat[0] != 0:
+                    lines.append(f"R: {an} : {sn} : * : * {_num(block.flat[0])}")
+                continue
+            for s2, o in zip(*np.nonzero(block)):
+                lines.append(f"R: {an} : {sn} : {flat.states[s2]} : {flat.observations[o]} {_num(block[s2, o])}")
+    text = "\n".join(lines) + "\n"
+    if path is not None:
+        Path(path).write_text(text, encoding="utf-8")
+    return text
+
+
+_HEADER = ("discount", "values", "states", "actions", "observations", "start")
+
+
+def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
+    """Parse Cassandra's ``.pomdp`` format from a file (or from ``text``, with ``source`` as its label)."""
+    label = str(source)
+    if text is None:
+        try:
+            text = Path(source).read_text(encoding="utf-8")
+        except FileNotFoundError:
+            raise PomdpFileError(["file not found"], label) from None
+        except OSError as exc:
+            raise PomdpFileError([f"cannot read file: {exc.strerror}"], label) from None
+    # group the lines into entries: an entry starts with a keyword followed by ':'
+    groups: list[tuple[int, str, str]] = []  # (line, keyword, rest)
+    key_re = re.compile(r"^\s*(discount|values|states|actions|observations|start\s+include|start\s+exclude|start|T|O|R)\s*:(.*)$")
+    for no, raw in enumerate(text.splitlines(), start=1):
+        line = raw.split("#", 1)[0].rstrip()
+        if not line.strip():
+            continue
+        m = key_re.match(line)
+        if m:
+            groups.append((no, re.sub(r"\s+", " ", m.group(1)), m.group(2)))
+        elif groups:
+            n0, k, rest = groups[-1]
+            groups[-1] = (n0, k, rest + " " + line)
+        else:
+            raise PomdpFileError([f"line {no}: expected a header such as 'states:', got {line.strip()!r}"], label)
+
+    header: dict[str, tuple[int, str]] = {}
+    for no, k, rest in groups:
+        if k in _HEADER or k.startswith("start"):
+            header[k] = (no, rest.strip())
+
+    def need(k):
+        if k not in header:
+            raise PomdpFileError([f"missing '{k}:' header"], label)
+        return header[k]
+
+    def names(k):
+        no, rest = need(k)
+        toks = rest.split()
+        if len(toks) == 1 and toks[0].isdigit():
+            return tuple(str(i) for i in range(int(toks[0])))
+        if not toks:
+            raise PomdpFileError([f"line {no}: '{k}:' needs a count or a list of names"], label)
+        return tuple(toks)
+
+    states, actions, observations = names("states"), names("actions"), names("observations")
+    S, A, O = len(states), len(actions), len(observations)
+    no, disc = need("discount")
+    try:
+        discount = float(disc)
+    except ValueError:
+        raise PomdpFileError([f"line {no}: discount must be a number, got {disc!r}"], label) from None
+    sign = 1.0
+    if "values" in header:
+        no, val = header["values"]
+        if val not in ("reward", "cost"):
+            raise PomdpFileError([f"line {no}: values must be 'reward' or 'cost', got {val!r}"], label)
+        sign = -1.0 if val == "cost" else 1.0
+
+    def index(kind, names_, tok, no):
+        if tok == "*":
+            return list(range(len(names_)))
+        if tok in names_:
+            return [names_.index(tok)]
+        if tok.isdigit() and int(tok) < len(names_):
+            return [int(tok)]
+        raise PomdpFileError([f"line {no}: unknown {kind} {tok!r}; expected one of {list(names_)} or an index"], label)
+
+    def numbers(toks, count, no, what):
+        try:
+            vals = [float(t) for t in toks]
+        except ValueError:
+            raise PomdpFileError([f"line {no}: {what} must be numbers, got {' '.join(toks)!r}"], label) from None
+        if len(vals) != count:
+            raise PomdpFileError([f"line {no}: {what} needs {count} numbers, got {len(vals)}"], label)
+        return np.array(vals)
+
+    start = np.full(S, 1.0 / S)
+    if "start" in header:
+        no, rest = header["start"]
+        toks = rest.split()
+        if toks == ["uniform"]:
+            pass
+        elif len(toks) == 1 and not _is_float(toks[0]):
+            start = np.zeros(S)
+            start[index("state", states, toks[0], no)[0]] = 1.0
+        else:
+            start = numbers(toks, S, no, "start")
+    for k in ("start include", "start exclude"):
+        if k in header:
+            no, rest = header[k]
+            sel = [i for t in rest.split() for i in index("state", states, t, no)]
+            mask = np.zeros(S, dtype=bool)
+            mask[sel] = True
+            if k == "start exclude":
+                mask = ~mask
+            start = np.where(mask, 1.0, 0.0) / mask.sum()
+
+    T = np.zeros((A, S, S))
+    Om = np.zeros((A, S, O))
+    R = np.zeros((A, S, S, O))
+    for no, k, rest in groups:
+        if k not in ("T", "O", "R"):
+            continue
+        fields = [f.strip() for f in rest.split(":")]
+        last = fields[-1].split()
+        specs = fields[:-1] + ([last[0]] if last else [])
+        vals = last[1:]
+        if k in ("T", "O"):
+            second = ("state", states) if k == "T" else ("state", states)
+            third = ("state", states) if k == "T" else ("observation", observations)
+            width = S if k == "T" else O
+            arr = T if k == "T" else Om
+            if len(specs) == 3:
+                a_, s_, x_ = (index("action", actions, specs[0], no), index(*second, specs[1], no), index(*third, specs[2], no))
+                v = numbers(vals, 1, no, f"{k} entry")[0]
+                arr[np.ix_(a_, s_, x_)] = v
+            elif len(specs) == 2:
+                a_, s_ = index("action", actions, specs[0], no), index(*second, specs[1], no)
+                row = np.full(width, 1.0 / width) if vals == ["uniform"] else numbers(vals, width, no, f"{k} row")
+                for a in a_:
+                    arr[a, s_] = row
+            elif len(specs) == 1:
+                a_ = index("action", actions, specs[0], no)
+                if vals == ["uniform"]:
+                    mat = np.full((S, width), 1.0 / width)
+                elif vals == ["identity"] and k == "T":
+                    mat = np.eye(S)
+                else:
+                    mat = numbers(vals, S * width, no, f"{k} matrix").reshape(S, width)
+                for a in a_:
+                    arr[a] = mat
+            else:
+                raise PomdpFileError([f"line {no}: malformed {k} entry"], label)
+        else:
+            if len(specs) == 4:
+                a_, s_, s2_, o_ = (
+                    index("action", actions, specs[0], no),
+                    index("state", states, specs[1], no),
+                    index("state", states, specs[2], no),
+                    index("observation", observations, specs[3], no),
+                )
+                R[np.ix_(a_, s_, s2_, o_)] = sign * numbers(vals, 1, no, "R entry")[0]
+            elif len(specs) == 3:
+                a_, s_, s2_ = index("action", actions, specs[0], no), index("state", states, specs[1], no), index("state", states, specs[2], no)
+                R[np.ix_(a_, s_, s2_)] = sign * numbers(vals, O, no, "R row")
+            elif len(specs) == 2:
+                a_, s_ = index("action", actions, specs[0], no), index("state", states, specs[1], no)
+                R[np.ix_(a_, s_)] = sign * numbers(vals, S * O, no, "R matrix").reshape(S, O)
+            else:
+                raise PomdpFileError([f"line {no}: malformed R entry"], label)
+    try:
+        return FlatPOMDP(states, actions, observations, T, Om, R, discount, start)
+    except PomdpFileError as exc:
+        raise PomdpFileError(exc.problems, label) from None
+
+
+def _is_float(tok: str) -> bool:
+    try:
+        float(tok)
+        return True
+    except ValueError:
+        return False
+
+
+# --------------------------------------------------------------------------- POMDPX
+
+
+def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
+    """Write the assistance POMDP as a factored, mixed-observability POMDPX file.
+
+    State variables: ``trust`` (hidden), ``experience`` and ``complexity`` (fully observed)
+    and ``human`` (the human action of the trial just played, as in the flat export; hidden
+    as a state variable and revealed by the observation variable ``human_action``).
+    """
+    K, N = pomdp.n_trust, pomdp.n_complexity
+    T_ = [_token(x) for x in pomdp.trust_levels]
+    C_ = [_token(x) for x in pomdp.complexities]
+    kern = pomdp.kernel  # [c, a, t, o, e, u]
+    root = ET.Element("pomdpx", version="0.1", id="trustseek")
+    ET.SubElement(root, "Description").text = "trustseek assistance POMDP (state augmented with the last human action)"
+    ET.SubElement(root, "Discount").text = _num(pomdp.discount)
+    var = ET.SubElement(root, "Variable")
+
+    def statevar(name, values, full):
+        sv = ET.SubElement(var, "StateVar", vnamePrev=f"{name}_0", vnameCurr=f"{name}_1", fullyObs="true" if full else "false")
+        ET.SubElement(sv, "ValueEnum").text = " ".join(values)
+
+    statevar("trust", T_, False)
+    statevar("experience", list(EXPERIENCES), True)
+    statevar("complexity", C_, True)
+    statevar("human", list(HUMAN_ACTIONS), False)
+    ov = ET.SubElement(var, "ObsVar", vname="human_action")
+    ET.SubElement(ov, "ValueEnum").text = " ".join(HUMAN_ACTIONS)
+    av = ET.SubElement(var, "ActionVar", vname="robot")
+    ET.SubElement(av, "ValueEnum").text = " ".join(ACTIONS)
+    rv = ET.SubElement(var, "RewardVar", vname="reward")
+    del rv
+
+    def cond(parent, var_, parents, table):
+        c = ET.SubElement(parent, "CondProb")
+        ET.SubElement(c, "Var").text = var_
+        ET.SubElement(c, "Parent").text = " ".join(parents)
+        p = ET.SubElement(c, "Parameter", type="TBL")
+        e = ET.SubElement(p, "Entry")
+        ET.SubElement(e, "Instance").text = " ".join(["-"] * (len(parents) + 1))
+        ET.SubElement(e, "ProbTable").text = " ".join(_num(x) for x in np.asarray(table).ravel())
+
+    init = ET.SubElement(root, "InitialStateBelief")
+    cond(init, "trust_0", ["null"], pomdp.model.initial)
+    cond(init, "experience_0", ["null"], [0.0, 1.0])
+    cond(init, "complexity_0", ["null"], pomdp.complexity_probs)
+    cond(init, "human_0", ["null"], [0.0, 1.0])
+    st = ET.SubElement(root, "StateTransitionFunction")
+    # joint P(o, E', T' | T, C, a) factored as P(o | T, C, a) P(E' | o, C, a) P(T' | T, C, a, o, E')
+    em = np.transpose(pomdp.emission, (1, 2, 0, 3))  # [a, t, c, o]
+    cond(st, "human_1", ["robot", "trust_0", "complexity_0"], em)
+    ex = np.transpose(pomdp.experience, (1, 0, 2, 3))  # [a, c, o, e]
+    cond(st, "experience_1", ["robot", "complexity_0", "human_1"], ex)
+    tr = np.transpose(pomdp.trust_transition, (1, 0, 2, 3, 4))  # [a, c, e, t, u]
+    cond(st, "trust_1", ["robot", "complexity_0", "experience_1", "trust_0"], tr)
+    cond(st, "complexity_1", ["null"], pomdp.complexity_probs)
+    of = ET.SubElement(root, "ObsFunction")
+    cond(of, "human_action", ["human_1"], np.eye(2))
+    rf = ET.SubElement(root, "RewardFunction")
+    f = ET.SubElement(rf, "Func")
+    ET.SubElement(f, "Var").text = "reward"
+    ET.SubElement(f, "Parent").text = "robot complexity_0 trust_0"
+    p = ET.SubElement(f, "Parameter", type="TBL")
+    R = np.transpose(pomdp.expected_reward, (1, 0, 2))  # [a, c, t]
+    e = ET.SubElement(p, "Entry")
+    ET.SubElement(e, "Instance").text = "- - -"
+    ET.SubElement(e, "ValueTable").text = " ".join(_num(x) for x in R.ravel())
+    del kern
+    ET.indent(root)
+    text = '<?xml version="1.0" encoding="ISO-8859-1"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    if path is not None:
+        Path(path).write_text(text, encoding="utf-8")
+    return text
+
+
+def read_pomdpx_tables(text: str) -> dict[str, tuple[list[str], np.ndarray]]:
+    """The conditional tables of a POMDPX file written by :func:`write_pomdpx`: variable ->
+    (parents, table with one axis per parent and a last axis for the variable)."""
+    root = ET.fromstring(text)
+    sizes = {}
+    for sv in root.iter("StateVar"):
+        n = len(sv.find("ValueEnum").text.split())
+        sizes[sv.get("vnamePrev")] = sizes[sv.get("vnameCurr")] = n
+    for tag in ("ObsVar", "ActionVar"):
+        for v in root.iter(tag):
+            sizes[v.get("vname")] = len(v.find("ValueEnum").text.split())
+    out = {}
+    for section in ("InitialStateBelief", "StateTransitionFunction", "ObsFunction"):
+        for c in root.find(section).iter("CondProb"):
+            name = c.find("Var").text
+            parents = c.find("Parent").text.split()
+            shape = [sizes[p] for p in parents if p != "null"] + [sizes[name]]
+            vals = np.array([float(x) for x in c.find("Parameter/Entry/ProbTable").text.split()])
+            out[f"{section}/{name}"] = (parents, vals.reshape(shape))
+    return out
+
+
+def export_assistance(pomdp: AssistancePOMDP, path: str | Path, fmt: str | None = None, initial_complexity: int | None = None) -> str:
+    """Export to ``.pomdp`` or ``.pomdpx`` (chosen by ``fmt`` or the file suffix)."""
+    fmt = fmt or Path(path).suffix.lstrip(".")
+    if fmt == "pomdp":
+        return write_pomdp(flat_from_assistance(pomdp, initial_complexity), path)
+    if fmt == "pomdpx":
+        return write_pomdpx(pomdp, path)
+    raise PomdpFileError([f"unknown export format {fmt!r}; expected 'pomdp' or 'pomdpx'"], str(path))
+
+
+def flat_values_check(pomdp: AssistancePOMDP, horizons: Sequence[int] = (1, 2, 3)) -> list[dict]:
+    """Finite-horizon values of the exported flat POMDP next to the belief-MDP values."""
+    from .alpha import finite_horizon_value
+
+    flat = flat_from_assistance(pomdp)
+    rows = []
+    b0 = pomdp.model.initial
+    for h in horizons:
+        for c, cn in enumerate(pomdp.complexities):
+            rows.append(
+                {
+                    "horizon": h,
+                    "complexity": cn,
+                    "flat": flat.finite_horizon_value(flat_belief(pomdp, b0, c), h),
+                    "belief_mdp": finite_horizon_value(pomdp, h, b0, c),
+                }
+            )
+    return rows
