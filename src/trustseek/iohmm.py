@@ -628,7 +628,9 @@ def run_em(
         step = -float(np.sqrt(r @ r)) / nv if nv > 0 else -1.0
         p0, st0, f0 = p2, st2, f2
         if step < -1.0 and n_e < max_iter:
-            x = v0 - 2 * step * r + step * step * v
+            # a cell may shrink at most 20-fold per cycle: clamping cells to the boundary
+            # would leave EM crawling there and stop it early at a worse point
+            x = np.maximum(v0 - 2 * step * r + step * step * v, 0.05 * v2)
             pe = structure.project(_unpack(x, p0))
             ste, fe = evaluate(pe)
             n_e += 1
