@@ -5,6 +5,7 @@ holds exactly those trials in the canonical trial-log format."""
 from __future__ import annotations
 
 import io
+import json
 import os
 import time
 from pathlib import Path
@@ -53,17 +54,11 @@ def teleoperate(page) -> None:
     """Drive to the item's shelf side, line up, extend the arm, grasp, retract, deposit."""
     s = st(page)
     side = s["side"]
-    # towards the shelf that holds the item (the base stops at the shelf edge)
+    # towards the shelf that holds the item
     key = "ArrowUp" if side < 0 else "ArrowDown"
-    prev = [None]
+    edge = 1.6 if side < 0 else 4.4  # the base stops 5 cm from the shelf (scene.ts clampRobot)
 
-    def stopped(s):
-        y = s["robot"]["y"]
-        done = prev[0] is not None and abs(y - prev[0]) < 1e-9
-        prev[0] = y
-        return done
-
-    hold(page, key, stopped)
+    hold(page, key, lambda s: abs(s["robot"]["y"] - edge) < 1e-6)
     for _ in range(8):  # line up the gripper with the item; correct any overshoot
         s = st(page)
         dx = s["item"]["x"] - s["gripper"]["x"]
@@ -184,4 +179,12 @@ def test_participant_study_in_chromium(tmp_path):
 
     frame = read_trials(trials)
     assert len(frame) == 3 and frame["human_action"].tolist() == ["intervene", "rely", "intervene"]
-    trials.to_csv(out / "browser_trials.csv", index=False)
+    path = out / "browser_trials.csv"
+    trials.to_csv(path, index=False)
+    from typer.testing import CliRunner
+
+    from trustseek.cli import app
+
+    res = CliRunner().invoke(app, ["fit", str(path), "--restarts", "2", "--json"])
+    assert res.exit_code == 0, res.output
+    assert "3 trials" in json.loads(res.output)["model"]["notes"]
