@@ -24,7 +24,7 @@ def free_cells(result):
 
 @pytest.fixture(scope="module")
 def big_fit():
-    df = simulate_design(paper_model(), 1000, seed=2024)
+    df = simulate_design(paper_model(), 1000, seed=7)
     return df, fit_trust_model(df, restarts=4, seed=1)
 
 
