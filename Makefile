@@ -6,7 +6,7 @@ setup:
 	@bash scripts/setup.sh
 
 reproduce: setup
-	.venv/bin/trustseek solve
+	.venv/bin/trustseek reproduce --out report
 
 test: setup
 	.venv/bin/python -m pytest -n 2 -q

@@ -9,6 +9,7 @@ from typing import Optional
 
 import numpy as np
 import typer
+from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
@@ -221,5 +222,6 @@ def print_comparison(summary: dict) -> None:
         ivs = f"[{fmt(iv[0])}, {fmt(iv[1])}]" if iv else (r["note"] or "–")
         verdict = "[green]agrees[/]" if r["verdict"] == "agrees" else ("[bold red]DISAGREES[/]" if r["verdict"] == "DISAGREES" else r["verdict"])
         table.add_row(escape(r["quantity"]), escape(fmt(r["paper"])), escape(fmt(r["ours"])), escape(ivs), verdict)
-    console.print(table)
-    console.print(f"[dim]intervals: 2.5-97.5% over {summary['replicates']['n']} replicate experiments unless the note says otherwise[/]")
+    out = console if console.is_terminal else Console(width=max(console.width, 150))
+    out.print(table)
+    out.print(f"[dim]intervals: 2.5-97.5% over {summary['replicates']['n']} replicate experiments unless the note says otherwise[/]")

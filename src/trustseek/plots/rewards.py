@@ -119,7 +119,7 @@ def plot_replicates(
         ax.set_xlabel("aware − agnostic cumulative reward")
         ax.set_ylabel("replicates")
         ax.set_title("(b) reward difference")
-        ax.legend(frameon=False, loc="upper right", fontsize=6.5)
+        ax.legend(frameon=False, loc="upper left", fontsize=6.5)
         fig.suptitle(f"{len(thresholds)} replicate experiments (9 × 71 data collection, fit, plan, evaluation)", fontsize=9)
         fig.tight_layout()
         if path is not None:
