@@ -37,6 +37,7 @@ import pandas as pd
 
 from .errors import TrustseekError
 
+SCAN_RATIO = 20  # sequences at least this many times longer than their number: E-step by prefix products
 MIN_EVENTS = 5  # fewer expected events than this behind a row: "not identified by this data"
 _FLOOR = 1e-300
 
@@ -449,10 +450,15 @@ class Workspace:
     per E-step.
     """
 
-    def __init__(self, seqs: Sequences, K: int, M: int, Ue: int, Ut: int):
+    def __init__(self, seqs: Sequences, K: int, M: int, Ue: int, Ut: int, method: str = "auto"):
         self.seqs, self.K, self.M, self.Ue, self.Ut = seqs, K, M, Ue, Ut
         T, N = seqs.y.shape
         self.T, self.N = T, N
+        if method not in ("auto", "loop", "scan"):
+            raise ValueError(f"method must be auto, loop or scan, got {method!r}")
+        # the time loop costs ~T numpy calls per pass; the scan ~log2(T) calls on
+        # log2(T)-times more work: it wins for few, long sequences
+        self.scan = method == "scan" or (method == "auto" and T > 1 and T >= SCAN_RATIO * N)
         obs = seqs.y >= 0
         self.PE = Ue * M + 1  # emission rows + dummy "nothing observed"
         self.eidx = np.where(obs, seqs.ue * M + seqs.y, Ue * M)
@@ -462,6 +468,9 @@ class Workspace:
         self.ebins = (self.eidx[None, :, :] + (np.arange(K) * self.PE)[:, None, None]).ravel()
         self.tbins = (self.tidx[None, :, :] + (np.arange(K * K) * (Ut + 1))[:, None, None]).ravel()
         self.eye = np.eye(K)
+        if self.scan:
+            self._init_scan()
+            return
         # work buffers, reused by every E-step (fresh multi-megabyte arrays cost page faults)
         self._Mt = np.empty((K, K, max(T - 1, 0), N))
         self._alpha = np.empty((K, T, N))
@@ -497,6 +506,8 @@ class Workspace:
         return B0, Mt
 
     def forward(self, p: Params, B0=None, Mt=None):
+        if self.scan:
+            return None, None, self._scan(p, counts=False).loglik
         if B0 is None:
             B0, Mt = self._steps(p)
         T, N, K = self.T, self.N, self.K
@@ -513,6 +524,8 @@ class Workspace:
         return alpha, c, loglik
 
     def estep(self, p: Params, posteriors: bool = False) -> EStep:
+        if self.scan:
+            return self._scan(p, counts=True, posteriors=posteriors)
         B0, Mt = self._steps(p)
         T, N, K = self.T, self.N, self.K
         alpha, c, loglik = self.forward(p, B0, Mt)
@@ -533,6 +546,57 @@ class Workspace:
         return EStep(loglik, gamma[:, 0].sum(1), np.ascontiguousarray(em), np.ascontiguousarray(tr),
                      gamma.transpose(1, 2, 0).copy() if posteriors else None)
 
+    # -- parallel prefix products (few or long sequences) ------------------------
+    def _init_scan(self) -> None:
+        K, T, N = self.K, self.T, self.N
+        self.midx_s = np.ascontiguousarray(self.midx.T)  # (N, T-1)
+        self.eidx0 = self.eidx[0]
+        self.ebins_s = (np.ascontiguousarray(self.eidx.T)[:, :, None] * K + np.arange(K)).ravel()
+        self.tbins_s = (np.ascontiguousarray(self.tidx.T)[:, :, None] * (K * K) + np.arange(K * K)).ravel()
+
+    def _scan(self, p: Params, counts: bool, posteriors: bool = False) -> EStep:
+        """E-step by inclusive prefix and suffix products of the per-step matrices.
+
+        M_t = A_t diag(B_{t+1}) (N, T-1, K, K).  F_t = M_0 ... M_t and G_t = M_t ... M_{T-2}
+        are built in log2(T) rounds of batched matrix products, each product rescaled to
+        sum 1 with its log-scale kept.  alpha_t ∝ alpha_0 F_{t-1}, beta_t ∝ G_t 1.
+        """
+        K, T, N = self.K, self.T, self.N
+        Bx, Ax = self._emission_table(p), self._transition_table(p)
+        mtab = Ax[:, None, :, :] * Bx[None, :, None, :]
+        mtab = mtab.reshape(-1, K, K)
+        Mt = mtab[self.midx_s]  # (N, T-1, K, K)
+        a0 = p.initial[None, :] * Bx[self.eidx0]  # (N, K)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s0 = a0.sum(1)
+            a0 = a0 / s0[:, None]
+            F, logF = _prefix_products(Mt)
+            last = np.einsum("nk,nkj->n", a0, F[:, -1]) if T > 1 else np.ones(N)
+            ll = np.log(s0) + (np.log(last) + logF[:, -1] if T > 1 else 0.0)
+            loglik = float(np.sum(ll))
+        K0 = np.zeros(K)
+        if not np.isfinite(loglik):
+            return EStep(-math.inf, K0, np.zeros_like(p.emission), np.zeros_like(p.transition))
+        if not counts:
+            return EStep(loglik, K0, p.emission * 0, p.transition * 0)
+        alpha = np.empty((N, T, K))
+        alpha[:, 0] = a0
+        alpha[:, 1:] = np.matmul(a0[:, None, None, :], F)[:, :, 0, :]
+        alpha[:, 1:] /= alpha[:, 1:].sum(-1, keepdims=True)
+        G = _suffix_products(Mt)
+        beta = np.ones((N, T, K))
+        beta[:, :-1] = G.sum(-1)
+        beta[:, :-1] /= beta[:, :-1].sum(-1, keepdims=True)
+        gamma = alpha * beta
+        gamma /= gamma.sum(-1, keepdims=True)
+        xi = alpha[:, :-1, :, None] * Mt * beta[:, 1:, None, :]
+        xi /= xi.sum((-2, -1), keepdims=True)
+        em = np.bincount(self.ebins_s, weights=gamma.ravel(), minlength=self.PE * K).reshape(self.PE, K)
+        em = em[:-1].reshape(self.Ue, self.M, K).transpose(0, 2, 1)
+        tr = np.bincount(self.tbins_s, weights=xi.ravel(), minlength=(self.Ut + 1) * K * K).reshape(self.Ut + 1, K, K)[:-1]
+        return EStep(loglik, gamma[:, 0].sum(0), np.ascontiguousarray(em), np.ascontiguousarray(tr),
+                     gamma.transpose(1, 0, 2).copy() if posteriors else None)
+
     def viterbi(self, p: Params) -> np.ndarray:
         """Most likely level path, (T, N), -1 on padding."""
         Bt, At = self.tables(p)
@@ -552,6 +616,33 @@ class Workspace:
         pad = np.arange(T)[:, None] >= self.seqs.lengths[None, :]
         path[pad] = -1
         return path
+
+
+def _prefix_products(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Inclusive prefix products along axis 1 (Hillis-Steele), rescaled: (F, log scale)."""
+    F = M.copy()
+    logs = np.zeros(M.shape[:2])
+    n, d = M.shape[1], 1
+    while d < n:
+        prod = np.matmul(F[:, :-d], F[:, d:])
+        sc = prod.sum((-2, -1))
+        prod /= sc[..., None, None]
+        logs[:, d:] = logs[:, :-d] + logs[:, d:] + np.log(sc)
+        F[:, d:] = prod
+        d *= 2
+    return F, logs
+
+
+def _suffix_products(M: np.ndarray) -> np.ndarray:
+    """Inclusive suffix products along axis 1 (G_t = M_t ... M_last), each rescaled to sum 1."""
+    G = M / M.sum((-2, -1), keepdims=True)
+    n, d = M.shape[1], 1
+    while d < n:
+        prod = np.matmul(G[:, :-d], G[:, d:])
+        prod /= prod.sum((-2, -1), keepdims=True)
+        G[:, :-d] = prod
+        d *= 2
+    return G
 
 
 # --------------------------------------------------------------------------- EM
