@@ -110,7 +110,7 @@ def agnostic(
         from ..data import read_trials  # provided by the data module
         from ..policy import trust_agnostic_from_data
 
-        pol = trust_agnostic_from_data(read_trials(data).frame, t)
+        pol = trust_agnostic_from_data(read_trials(data), t)
     else:
         pol = trust_agnostic(load_model(model), t)
     if out is not None:
