@@ -363,8 +363,8 @@ def comparison_rows(summary: dict) -> list[dict]:
                      (d["p2.5"], d["p97.5"]) if d["n"] else None, "replicates 95%",
                      f"large N mean difference {large['mean_difference']:.2f} [{large['mean_difference_ci'][0]:.2f}, {large['mean_difference_ci'][1]:.2f}]"))
     rows.append({"quantity": "Trust-aware better for most participants", "paper": "most (Fig. 8)",
-                 "ours": f"{small['share_aware_better']:.0%} of {small['participants']}", "interval": None,
-                 "interval_kind": "", "note": f"{large['share_aware_better']:.0%} better, {large['share_tied']:.0%} tied of {large['participants']:,}",
+                 "ours": f"{large['share_aware_better']:.0%} of {large['participants']:,}", "interval": None,
+                 "interval_kind": "", "note": f"{large['share_tied']:.0%} tied; {small['share_aware_better']:.0%} of {small['participants']} in the paper-sized run",
                  "verdict": "agrees" if large["share_aware_better"] > 0.5 else "DISAGREES"})
     aw = large["per_policy"][AWARE]["autonomous_collections"]["mean"]
     ag = large["per_policy"][AGNOSTIC]["autonomous_collections"]["mean"]
@@ -379,7 +379,7 @@ def disagreements(rows: list[dict]) -> list[str]:
     for r in rows:
         if r["verdict"] == "DISAGREES":
             iv = r["interval"]
-            ivs = f" (95% {r['interval_kind']}: [{iv[0]:.3g}, {iv[1]:.3g}])" if iv else ""
+            ivs = f" ({r['interval_kind']}: [{iv[0]:.3g}, {iv[1]:.3g}])" if iv else ""
             out.append(f"{r['quantity']}: the paper reports {r['paper']}, the simulation gives {_fmt(r['ours'])}{ivs}.")
     return out
 
