@@ -191,12 +191,15 @@ def test_degenerate_participant_who_always_relies():
 def test_long_sequence_of_100000_trials_stays_finite_and_monotone():
     from trustseek.presets import paper_model
 
-    df = simulate_design(paper_model(), 1, seed=1, n_trials=(57_750, 42_250))
+    # 1000 simulated runs of 100 trials, chained into one supervisor's 100,000-trial sequence
+    df = simulate_design(paper_model(), 1000, seed=1, n_trials=(58, 42))
+    df["participant"] = "long"
+    df["trial"] = np.arange(1, len(df) + 1)
     spec = paper_spec()
     seqs = encode(df, spec)
     assert seqs.n_trials == 100_000
     s = Structure(spec, seqs)
-    res = run_em(s, Workspace(seqs, 2, 2, s.Ue, s.Ut), s.random(np.random.default_rng(0)), max_iter=8)
+    res = run_em(s, Workspace(seqs, 2, 2, s.Ue, s.Ut), s.random(np.random.default_rng(0)), max_iter=5)
     h = np.array(res.history)
     assert np.all(np.isfinite(h)) and np.all(np.diff(h) >= 0)
     assert -100_000 < h[-1] < 0

@@ -243,25 +243,39 @@ class FitResult:
         }
 
     def cells(self) -> list[dict[str, Any]]:
-        """One record per estimated cell: name, estimate, CI, events (the summary table)."""
-        m = self.model
-        T, C = m.trust_levels, m.complexities
-        out = []
+        """One record per estimated cell: label, TrustModel index, estimate, CI, events.
 
-        def add(table: str, idx: tuple, label: str) -> None:
-            if not self.estimated[table][idx]:
+        A model whose tables ignore some inputs lists each distinct row once, labelled
+        by the inputs it depends on.
+        """
+        m, spec = self.model, self.fit.spec
+        T = m.trust_levels
+        short = {"complexity": "C", "robot_action": "a", "experience": "E'"}
+        names = {"complexity": m.complexities, "robot_action": ACTIONS, "experience": EXPERIENCES}
+        out: list[dict[str, Any]] = []
+        seen: set = set()
+
+        def add(table: str, idx: tuple, label: str, key) -> None:
+            if not self.estimated[table][idx] or key in seen:
                 return
-            rec = {"table": table, "cell": label, "estimate": float(getattr(m, table)[idx]), "events": float(self.counts[table][idx])}
+            seen.add(key)
+            rec = {"table": table, "index": list(idx), "cell": label, "estimate": float(getattr(m, table)[idx]), "events": float(self.counts[table][idx])}
             if self.ci is not None:
                 rec["lower"], rec["upper"] = float(self.ci[table][0][idx]), float(self.ci[table][1][idx])
             out.append(rec)
 
-        for t in range(m.n_trust):
-            add("initial", (t,), f"P(T1={T[t]})")
+        def cond(inputs, values) -> str:
+            return "".join(f", {short[c]}={names[c][values[c]]}" for c in inputs)
+
+        for t in range(1, m.n_trust) if m.n_trust == 2 else range(m.n_trust):
+            add("initial", (t,), f"P(T1={T[t]})", ("i", t))
+        eg = _index_grid(spec, spec.emission_inputs, False)
         for c in range(m.n_complexity):
             for a in range(2):
                 for t in range(m.n_trust):
-                    add("emission", (c, a, t, 1), f"P(rely | T={T[t]}, C={C[c]}, a={ACTIONS[a]})")
+                    v = {"complexity": c, "robot_action": a}
+                    add("emission", (c, a, t, 1), f"P(rely | T={T[t]}{cond(spec.emission_inputs, v)})", ("e", int(eg[c, a]), t))
+        tg = _index_grid(spec, spec.transition_inputs, True)
         for c in range(m.n_complexity):
             for a in range(2):
                 for e in range(2):
@@ -269,7 +283,8 @@ class FitResult:
                         for u in range(m.n_trust):
                             if m.n_trust == 2 and u == 0:
                                 continue
-                            add("transition", (c, a, e, t, u), f"P(T'={T[u]} | T={T[t]}, E'={EXPERIENCES[e]}, C={C[c]}, a={ACTIONS[a]})")
+                            v = {"complexity": c, "robot_action": a, "experience": e}
+                            add("transition", (c, a, e, t, u), f"P(T'={T[u]} | T={T[t]}{cond(spec.transition_inputs, v)})", ("t", int(tg[c, a, e]), t, u))
         return out
 
 
@@ -614,7 +629,7 @@ def coverage_study(
         res = fit_trust_model(df, restarts=restarts, seed=seed + d, bootstrap=bootstrap, n_jobs=n_jobs, tol=tol)
         for c in res.cells():
             key = c["cell"]
-            t = _cell_value(model, c["table"], key, res)
+            t = float(getattr(model, c["table"])[tuple(c["index"])])
             truth[key] = t
             hits.setdefault(key, []).append(float(c["lower"] - 1e-9 <= t <= c["upper"] + 1e-9))
             widths.setdefault(key, []).append(c["upper"] - c["lower"])
@@ -623,27 +638,3 @@ def coverage_study(
         {"cell": k, "truth": truth[k], "coverage": float(np.mean(v)), "datasets": len(v), "mean_width": float(np.mean(widths[k])), "mean_estimate": float(np.mean(ests[k]))}
         for k, v in hits.items()
     ]
-
-
-def _cell_value(model: TrustModel, table: str, label: str, res: FitResult) -> float:
-    for c, idx in _cell_index(res):
-        if c == label:
-            return float(getattr(model, table)[idx])
-    raise KeyError(label)
-
-
-def _cell_index(res: FitResult):
-    m = res.model
-    T, C = m.trust_levels, m.complexities
-    for t in range(m.n_trust):
-        yield f"P(T1={T[t]})", (t,)
-    for c in range(m.n_complexity):
-        for a in range(2):
-            for t in range(m.n_trust):
-                yield f"P(rely | T={T[t]}, C={C[c]}, a={ACTIONS[a]})", (c, a, t, 1)
-    for c in range(m.n_complexity):
-        for a in range(2):
-            for e in range(2):
-                for t in range(m.n_trust):
-                    for u in range(m.n_trust):
-                        yield f"P(T'={T[u]} | T={T[t]}, E'={EXPERIENCES[e]}, C={C[c]}, a={ACTIONS[a]})", (c, a, e, t, u)
