@@ -199,7 +199,11 @@ def reproduce(
         for d in s["disagreements"]:
             console.print(f"  • {escape(d)}", highlight=False)
     else:
-        console.print("[green]Every number the paper reports lies inside our intervals.[/]")
+        missing = sum(r["verdict"] == "no interval" for r in s["comparison"])
+        if missing:
+            console.print(f"No disagreement found, but {missing} numbers have no interval (run with --replicates > 0).")
+        else:
+            console.print("[green]Every number the paper reports lies inside our intervals.[/]")
     console.print(f"report: {paths['html']}  ({time.perf_counter() - t0:.1f} s)")
 
 
