@@ -107,19 +107,29 @@ def plot_replicates(
         ax.set_ylabel("replicates")
         missing = len(thresholds) - len(th)
         ax.set_title("(a) estimated threshold" + (f" ({missing} without one)" if missing else ""))
-        ax.legend(frameon=False, loc="upper left")
+        ax.set_ylim(0, ax.get_ylim()[1] * 1.45)
+        ax.legend(frameon=False, loc="upper left", ncols=2, fontsize=7)
+        ax.yaxis.get_major_locator().set_params(integer=True)
         ax = axes[1]
         ds, dl = np.asarray(diff_small, dtype=float), np.asarray(diff_large, dtype=float)
-        allv = np.concatenate([ds, dl, [paper_difference, 0.0]])
-        bins = np.linspace(allv.min() - 0.5, allv.max() + 0.5, 25)
-        ax.hist(ds, bins=bins, color="0.55", alpha=0.6, edgecolor="white", linewidth=0.5, label="median diff., 5 participants")
-        ax.hist(dl, bins=bins, color=COLORS["autonomous"], alpha=0.6, edgecolor="white", linewidth=0.5, label="mean diff., large N")
-        ax.axvline(paper_difference, color=COLORS["ask"], ls="--", lw=1.0, label=f"paper {paper_difference:g} (57 − 51)")
+        rows = [("large N:\nmean diff.", dl, COLORS["autonomous"]), ("5 participants:\nmedian diff.", ds, "0.45")]
+        for y, (_, v, col) in enumerate(rows):
+            v = v[np.isfinite(v)]
+            if not len(v):
+                continue
+            ax.boxplot([v], positions=[y], vert=False, widths=0.5, showfliers=False, patch_artist=True,
+                       boxprops={"facecolor": col, "alpha": 0.25, "edgecolor": col}, medianprops={"color": "black"},
+                       whiskerprops={"lw": 0.8}, capprops={"lw": 0.8})
+            jit = np.random.default_rng(0).uniform(-0.12, 0.12, len(v))
+            ax.scatter(v, y + jit, s=10, color=col, edgecolor="black", linewidth=0.3, zorder=3)
+        ax.axvline(paper_difference, color=COLORS["ask"], ls="--", lw=1.0, label=f"paper: {paper_difference:g} (57 − 51)")
         ax.axvline(0.0, color="black", lw=0.6)
-        ax.set_xlabel("aware − agnostic cumulative reward")
-        ax.set_ylabel("replicates")
+        ax.set_yticks(range(len(rows)), [r[0] for r in rows])
+        ax.set_ylim(-0.6, len(rows) - 0.4)
+        ax.set_xlabel("aware − agnostic cumulative reward per block")
         ax.set_title("(b) reward difference")
-        ax.legend(frameon=False, loc="upper left", fontsize=6.5)
+        ax.grid(axis="y", visible=False)
+        ax.legend(frameon=False, loc="lower left", fontsize=7)
         fig.suptitle(f"{len(thresholds)} replicate experiments (9 × 71 data collection, fit, plan, evaluation)", fontsize=9)
         fig.tight_layout()
         if path is not None:
