@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from trustseek import paper_model, paper_task
+from trustseek import paper_model
 from trustseek.cli._app import app
 from trustseek.reproduce import AGNOSTIC, AWARE, ReproduceConfig, reproduce, wilcoxon
 from trustseek.report import FIGURES, write_report

@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from trustseek import AssistancePOMDP, TrustModel, always_ask, make_updater, never_ask, paper_model, paper_task, randomized, solve
+from trustseek import AssistancePOMDP, TrustModel, always_ask, make_updater, never_ask, paper_model, randomized, solve
 from trustseek.model import ASK, AUTONOMOUS, INTERVENE, RELIABLE
 from trustseek.simulate import (
     Block,

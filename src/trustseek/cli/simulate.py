@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 from typing import Optional
@@ -15,7 +14,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..policy import COMPLEXITY_KINDS, PAPER_ASK_PROBABILITIES, TrustAwarePolicy, always_ask, load_policy, never_ask, randomized, trust_agnostic
+from ..policy import PAPER_ASK_PROBABILITIES, TrustAwarePolicy, always_ask, load_policy, never_ask, randomized, trust_agnostic
 from ..presets import load_model, load_task
 from ._app import app, console, err_console, print_json
 
@@ -62,7 +61,7 @@ def simulate(
     participants: int = typer.Option(9, "--participants", "-n", min=1, help="Number of simulated participants."),
     counts: Optional[str] = typer.Option(None, "--counts", help="Trials per complexity in random order, e.g. 41,30 (the paper's design). Default: 41,30 unless --trials is given."),
     trials: Optional[int] = typer.Option(None, "--trials", min=1, help="Number of trials with i.i.d. complexities from the task's probabilities (instead of --counts)."),
-    belief_update: str = typer.Option("paper", "--belief-update", "-u", help="Belief update of the trust-aware policy: 'paper' (eq. 3) or 'bayes'."),
+    belief_update: str = typer.Option("bayes", "--belief-update", "-u", help="Belief update of the trust-aware policy: 'bayes' (exact filter, default) or 'paper' (eq. 3)."),
     policy_model: Optional[str] = typer.Option(None, "--policy-model", help="Model the trust-aware policy is solved for (default: the supervisors' model)."),
     grid: int = typer.Option(1001, "--grid", min=3, help="Belief grid points for solving the trust-aware policy."),
     ask_low: float = typer.Option(PAPER_ASK_PROBABILITIES["low"], "--ask-low", min=0.0, max=1.0, help="Randomized policy: P(ask) in the first complexity."),
@@ -75,7 +74,7 @@ def simulate(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
 ) -> None:
     """Simulate supervisors from a trust model working with the robot under a policy."""
-    from ..simulate import SimulationError, Supervisors
+    from ..simulate import Supervisors
     from ..simulate import simulate as run_simulation
 
     if belief_update not in ("paper", "bayes"):
@@ -95,10 +94,7 @@ def simulate(
     cnt = None if trials is not None else _counts(counts or "41,30", t)
     record = out is not None
     t0 = time.perf_counter()
-    try:
-        sim = run_simulation(sup, t, pol, participants, counts=cnt, trials=trials, seed=seed, record=record, belief_model=pm)
-    except SimulationError:
-        raise
+    sim = run_simulation(sup, t, pol, participants, counts=cnt, trials=trials, seed=seed, record=record, belief_model=pm)
     dt = time.perf_counter() - t0
     if out is not None:
         _write(sim.trials(), out)

@@ -117,7 +117,7 @@ def plot_replicates(
             v = v[np.isfinite(v)]
             if not len(v):
                 continue
-            ax.boxplot([v], positions=[y], vert=False, widths=0.5, showfliers=False, patch_artist=True,
+            ax.boxplot([v], positions=[y], orientation="horizontal", widths=0.5, showfliers=False, patch_artist=True,
                        boxprops={"facecolor": col, "alpha": 0.25, "edgecolor": col}, medianprops={"color": "black"},
                        whiskerprops={"lw": 0.8}, capprops={"lw": 0.8})
             jit = np.random.default_rng(0).uniform(-0.12, 0.12, len(v))
