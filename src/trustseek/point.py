@@ -1,0 +1,407 @@
+"""Point-based solver with lower and upper bounds, for any number of trust levels.
+
+With K trust levels the belief is a point of the (K-1)-simplex and a dense grid
+is impractical, so the value is bounded from both sides at sampled beliefs, in
+the manner of HSVI / SARSOP:
+
+* lower bound: a set Γ of alpha vectors, L(b) = max_α α·b.  Every vector is the
+  value of an executable policy (memoryless controllers to start, then point
+  backups "act, then follow the best vector of Γ"), so L ≤ V;
+* upper bound: values at the corners of the simplex (the fully observed MDP,
+  solved exactly) and at sampled beliefs, combined by the sawtooth
+  interpolation, which over-estimates a convex function; a point backup of the
+  upper bound is again an upper bound.
+
+Beliefs are sampled by trials from the initial belief b0: at each step the
+complexity and branch (human action, experience) with the largest weighted
+excess gap are followed, and on the way back both bounds are backed up.  The
+solver stops when the gap at b0 falls below ``tol``.
+
+The structure is the mixed-observability one of the assistance POMDP: a
+context c (the complexity, drawn i.i.d. from P(C) and seen before acting), a
+hidden part t (trust), and branches (o, E') whose unnormalized kernel
+M[c, a, branch, t, t'] moves the belief.  A flat POMDP (e.g. a ``.pomdp`` file)
+is the special case of one context and branches = observations.  The bounds are
+valid for Bayes-filter beliefs (the value is convex); for the eq.-3 update use
+the ``alpha`` solver (two trust levels).
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .model import ASK, AUTONOMOUS
+from .pomdp import AssistancePOMDP
+
+
+@dataclass
+class BranchModel:
+    """context_probs[c], rewards[c, a, t], kernels[c, a, branch, t, t2], discount, initial[t]."""
+
+    context_probs: np.ndarray
+    rewards: np.ndarray
+    kernels: np.ndarray
+    discount: float
+    initial: np.ndarray
+
+    @classmethod
+    def from_assistance(cls, pomdp: AssistancePOMDP) -> "BranchModel":
+        k = pomdp.kernel  # [c, a, t, o, e, u]
+        N, K = pomdp.n_complexity, pomdp.n_trust
+        kern = np.transpose(k, (0, 1, 3, 4, 2, 5)).reshape(N, 2, 4, K, K)
+        return cls(pomdp.complexity_probs.copy(), pomdp.expected_reward.copy(), kern, pomdp.discount, pomdp.model.initial.copy())
+
+    @classmethod
+    def from_flat(cls, flat) -> "BranchModel":
+        return cls(np.ones(1), flat.expected_reward[None], flat.branch_kernels[None], flat.discount, flat.start.copy())
+
+    @property
+    def n_hidden(self) -> int:
+        return self.rewards.shape[2]
+
+    @property
+    def n_actions(self) -> int:
+        return self.rewards.shape[1]
+
+
+def evaluate_controller(model: BranchModel, actions: np.ndarray, successors: np.ndarray, guess: np.ndarray | None = None) -> np.ndarray:
+    """Exact values α[n, t] of a controller: node n takes actions[n, c] in context c and moves to
+    successors[n, c, branch] (-1: impossible branch).  Solves (I - γ P) α = r (sparse)."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    n, N = actions.shape
+    K = model.n_hidden
+    rhs = np.zeros((n, K))
+    g, pc = model.discount, model.context_probs
+    node_t = np.arange(n)[:, None] * K + np.arange(K)[None, :]
+    rows, cols, vals = [], [], []
+    for c in range(N):
+        a = actions[:, c]
+        rhs += pc[c] * model.rewards[c, a]
+        for br in range(model.kernels.shape[2]):
+            succ = successors[:, c, br]
+            ok = succ >= 0
+            if not np.any(ok):
+                continue
+            M = model.kernels[c, a[ok], br]  # (m, t, u)
+            rows.append(np.broadcast_to(node_t[ok][:, :, None], M.shape).ravel())
+            cols.append(np.broadcast_to((succ[ok][:, None] * K + np.arange(K)[None, :])[:, None, :], M.shape).ravel())
+            vals.append((g * pc[c] * M).ravel())
+    size = n * K
+    if rows:
+        P = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(size, size))
+    else:
+        P = sp.csr_matrix((size, size))
+    A = sp.identity(size, format="csr") - P
+    b = rhs.reshape(-1)
+    scale = max(1.0, float(np.max(np.abs(b))))
+    x, info = spla.bicgstab(A, b, x0=None if guess is None else guess.reshape(-1), rtol=1e-15, atol=1e-12 * scale, maxiter=5000)
+    if info != 0 or not np.all(np.isfinite(x)) or np.max(np.abs(A @ x - b)) > 1e-10 * scale:
+        x = spla.spsolve(A.tocsc(), b)
+    return np.asarray(x).reshape(n, K)
+
+
+def _mdp_upper(model: BranchModel) -> np.ndarray:
+    """Values of the fully observed MDP over the hidden state (an upper bound at the corners),
+    by policy iteration (exact)."""
+    K, N, A = model.n_hidden, len(model.context_probs), model.n_actions
+    P = model.kernels.sum(axis=2)  # [c, a, t, u]
+    pol = model.rewards.argmax(axis=1)  # [c, t]
+    for _ in range(1000):
+        # a context-dependent, state-dependent policy: mix over contexts
+        M = np.zeros((K, K))
+        r = np.zeros(K)
+        for c in range(N):
+            M += model.context_probs[c] * P[c, pol[c], np.arange(K)]
+            r += model.context_probs[c] * model.rewards[c, pol[c], np.arange(K)]
+        v = np.linalg.solve(np.eye(K) - model.discount * M, r)
+        q = model.rewards + model.discount * np.einsum("catu,u->cat", P, v)
+        new = np.where(q.max(axis=1) > np.take_along_axis(q, pol[:, None, :], axis=1)[:, 0] + 1e-12, q.argmax(axis=1), pol)
+        if np.array_equal(new, pol):
+            break
+        pol = new
+    del A
+    return v
+
+
+@dataclass
+class PointSolution:
+    """Bounds at the initial belief, the vectors of the lower bound and the upper-bound points."""
+
+    vectors: np.ndarray  # lower bound: L(b) = max_α α·b
+    points: np.ndarray  # upper bound: beliefs (the first K are the corners) ...
+    point_values: np.ndarray  # ... and their values (sawtooth interpolation)
+    lower: float
+    upper: float
+    iterations: int
+    seconds: float
+    history: list[tuple[int, float, float, float]] = field(default_factory=list)  # (points, seconds, lower, upper)
+
+    @property
+    def gap(self) -> float:
+        return self.upper - self.lower
+
+
+def freudenthal_vertices(K: int, r: int) -> np.ndarray:
+    """The beliefs at the vertices of Freudenthal's triangulation of the simplex at resolution r
+    (all beliefs with coordinates in multiples of 1/r)."""
+    return _simplex_lattice(K, r)
+
+
+def freudenthal_weights(B: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex codes (n, K) and barycentric weights (n, K) of beliefs B in Freudenthal's
+    triangulation at resolution r: the linear interpolation of vertex values (Lovejoy 1991)."""
+    n, K = B.shape
+    y = r * np.cumsum(B[:, ::-1], axis=1)[:, ::-1]  # y_i = r Σ_{j >= i} b_j, y_0 = r
+    v = np.floor(y + 1e-12)
+    v[:, 0] = r
+    v = np.minimum(v, r)
+    d = np.clip(y - v, 0.0, 1.0)
+    d[:, 0] = 0.0
+    order = np.argsort(-d[:, 1:], axis=1, kind="stable") + 1  # coordinates by decreasing d
+    ds = np.take_along_axis(d, order, axis=1)  # (n, K-1) decreasing
+    ds_next = np.concatenate([ds[:, 1:], np.zeros((n, 1))], axis=1)
+    w = np.concatenate([1.0 - ds[:, :1], ds - ds_next], axis=1)  # (n, K)
+    verts = np.empty((n, K, K), dtype=np.int64)
+    cur = v.astype(np.int64)
+    verts[:, 0] = cur
+    for k in range(1, K):
+        cur = cur.copy()
+        cur[np.arange(n), order[:, k - 1]] += 1
+        verts[:, k] = cur
+    return verts, w
+
+
+def _vertex_code(verts: np.ndarray, r: int) -> np.ndarray:
+    """Integer code of Freudenthal vertex coordinates (..., K) (v_0 = r is dropped).  Vertices
+    outside the simplex (they only occur with weight zero, on a face) get code 0."""
+    K = verts.shape[-1]
+    mult = (r + 1) ** np.arange(K - 1)
+    ok = np.all(verts[..., 1:] <= verts[..., :-1], axis=-1) & np.all(verts >= 0, axis=-1)
+    return np.where(ok, (np.clip(verts[..., 1:], 0, r) * mult).sum(axis=-1), 0)
+
+
+class PointSolver:
+    """Point-based lower bound and Freudenthal-grid upper bound, refined until the gap at b0 is small.
+
+    * Lower bound: point-based policy iteration.  On a set of beliefs (the grid vertices, b0 and
+      the beliefs reachable from b0 in a few trials) every belief is a controller node with its
+      greedy actions and, for every branch, the node that is best at the next belief; the
+      controller is evaluated exactly (one sparse linear solve) and its values join Γ.
+    * Upper bound: the fixed point of the Bellman operator with linear interpolation on
+      Freudenthal's triangulation of the simplex at resolution r (policy iteration, exact for the
+      grid problem); linear interpolation over-estimates the convex value, so the fixed point is
+      an upper bound, and it is certified against the rounding of the solve by its Bellman residual.
+    * The resolution is doubled until U(b0) - L(b0) <= tol.  The vertex count grows like
+      r^(K-1), which is what limits the number of trust levels.
+    """
+
+    def __init__(self, tol: float = 1e-3, max_seconds: float = 60.0, resolution: int | None = None, max_resolution: int | None = None, depth: int = 2, lower_lattice: int | None = None):
+        if not tol > 0:
+            raise ValueError(f"tol must be positive, got {tol}")
+        self.tol = float(tol)
+        self.max_seconds = float(max_seconds)
+        self.resolution = resolution
+        self.max_resolution = max_resolution
+        self.depth = int(depth)
+        self.lower_lattice = lower_lattice  # beliefs of the lower bound: this lattice and the reachable set
+
+    # -- successors of a set of beliefs ------------------------------------------
+    def _successors(self, B):
+        m = self.model
+        nb = np.einsum("nt,cabtu->ncabu", B, m.kernels)  # (n, N, A, Br, K)
+        p = nb.sum(axis=-1)
+        S = np.where(p[..., None] > 0, nb / np.where(p > 0, p, 1.0)[..., None], 1.0 / m.n_hidden)
+        return S, p
+
+
+    # -- lower bound: point-based controller evaluation -----------------------------
+    def _improve_lower(self, B, S, p, rounds: int = 30):
+        m = self.model
+        n, N, A, Br, K = S.shape
+        Sf = S.reshape(-1, K)
+        prev = None
+        for _ in range(rounds):
+            best = (Sf @ self.G.T).argmax(axis=1).reshape(n, N, A, Br)
+            # backup at every belief: g[i, c, a] = R + γ Σ_br M (p-weighted) G[best]
+            proj = np.einsum("cabtu,ncabu->ncat", m.kernels, self.G[best])
+            g = m.rewards[None] + m.discount * proj
+            acts = np.einsum("ncat,nt->nca", g, B).argmax(axis=2)  # (n, N)
+            alpha = np.einsum("c,nct->nt", m.context_probs, g[np.arange(n)[:, None], np.arange(N)[None, :], acts])
+            # controller: node i, successors = node best at the next belief among the new vectors
+            Sa = S[np.arange(n)[:, None], np.arange(N)[None, :], acts]  # (n, N, Br, K)
+            succ = (Sa.reshape(-1, K) @ alpha.T).argmax(axis=1).reshape(n, N, Br)
+            pa = p[np.arange(n)[:, None], np.arange(N)[None, :], acts]
+            succ = np.where(pa > 0, succ, -1)
+            key = (acts.tobytes(), succ.tobytes())
+            before = (B @ self.G.T).max(axis=1)
+            ev = evaluate_controller(m, acts, succ, guess=alpha)
+            if not np.all(np.isfinite(ev)):
+                ev = alpha
+            self.G = _prune(np.vstack([self.G, alpha, ev]), B)
+            gain = float(np.max((B @ self.G.T).max(axis=1) - before))
+            if key == prev or gain <= self.tol * 1e-2:
+                break
+            prev = key
+
+    # -- upper bound: Freudenthal grid, policy iteration ---------------------------------
+    def _upper(self, r: int):
+        """Vertex beliefs, certified upper values and the code lookup at resolution r."""
+        import scipy.sparse as sp
+        import scipy.sparse.linalg as spla
+
+        m = self.model
+        K, N, gamma, pc = m.n_hidden, len(m.context_probs), m.discount, m.context_probs
+        V = freudenthal_vertices(K, r)
+        nV = len(V)
+        lookup = np.full((r + 1) ** (K - 1), -1, dtype=np.int64)
+        own = np.round(np.cumsum(V[:, ::-1], axis=1)[:, ::-1] * r).astype(np.int64)
+        lookup[_vertex_code(own, r)] = np.arange(nV)
+        S, p = self._successors(V)  # (nV, N, A, Br, K)
+        Br = S.shape[3]
+        verts, w = freudenthal_weights(S.reshape(-1, K), r)
+        col = lookup[_vertex_code(verts, r)].reshape(S.shape)
+        if np.any(col < 0):
+            raise RuntimeError("Freudenthal interpolation left the vertex set")
+        wt = w.reshape(S.shape) * p[..., None]
+        rew = np.einsum("cat,nt->nca", m.rewards, V)
+        rows = np.broadcast_to(np.arange(nV)[:, None, None], (nV, Br, K))
+        ii = np.arange(nV)
+
+        def q_of(u):
+            return rew + gamma * np.einsum("ncabk,ncabk->nca", wt, u[col])
+
+        acts = rew.argmax(axis=2)
+        for _ in range(500):
+            rr = np.zeros(nV)
+            Wm = None
+            for c in range(N):
+                a = acts[:, c]
+                rr += pc[c] * rew[ii, c, a]
+                part = sp.csr_matrix(((gamma * pc[c] * wt[ii, c, a]).ravel(), (rows.ravel(), col[ii, c, a].ravel())), shape=(nV, nV))
+                Wm = part if Wm is None else Wm + part
+            u = spla.spsolve((sp.identity(nV, format="csr") - Wm).tocsc(), rr)
+            q = q_of(u)
+            cur = np.take_along_axis(q, acts[:, :, None], axis=2)[:, :, 0]
+            better = q.max(axis=2) > cur + 1e-12 * (1 + np.abs(cur))
+            if not np.any(better):
+                break
+            acts = np.where(better, q.argmax(axis=2), acts)
+        # H is monotone with modulus γ: u + max(H u - u)+ / (1 - γ) bounds its fixed point
+        eta = max(0.0, float(np.max(q_of(u).max(axis=2) @ pc - u)))
+        return V, u + eta / (1 - gamma), lookup
+
+    def upper_at(self, B: np.ndarray) -> np.ndarray:
+        """The certified upper bound at beliefs B (linear interpolation of the vertex values)."""
+        verts, w = freudenthal_weights(np.atleast_2d(np.asarray(B, dtype=float)), self.r)
+        return (w * self.u[self.lookup[_vertex_code(verts, self.r)]]).sum(axis=1)
+
+    def lower_at(self, B: np.ndarray) -> np.ndarray:
+        return (np.atleast_2d(np.asarray(B, dtype=float)) @ self.G.T).max(axis=1)
+
+    def _reachable(self, b0: np.ndarray, depth: int) -> np.ndarray:
+        """Beliefs reachable from b0 in up to ``depth`` trials (any context, action and branch)."""
+        K = self.model.n_hidden
+        out, front = [b0[None]], b0[None]
+        for _ in range(depth):
+            S, p = self._successors(front)
+            front = _unique_rows(S[p > 0].reshape(-1, K), K)
+            out.append(front)
+        return _unique_rows(np.vstack(out), K)
+
+    # -- solve -------------------------------------------------------------------------
+    def solve_bounds(self, model: BranchModel, initial: np.ndarray | None = None) -> PointSolution:
+        t0 = time.perf_counter()
+        self.model = model
+        K, N, A = model.n_hidden, len(model.context_probs), model.n_actions
+        b0 = np.asarray(model.initial if initial is None else initial, dtype=float)
+        combos = list(itertools.product(range(A), repeat=N)) if A**N <= 64 else [tuple([a] * N) for a in range(A)]
+        Br = model.kernels.shape[2]
+        self.G = np.array([evaluate_controller(model, np.array([cmb]), np.zeros((1, N, Br), dtype=np.int64))[0] for cmb in combos])
+        r = self.resolution or {2: 64, 3: 16, 4: 8}.get(K, 4)
+        r_max = self.max_resolution or {2: 4096, 3: 512, 4: 64}.get(K, 16)
+        lat = self.lower_lattice or {2: 256, 3: 16, 4: 6}.get(K, 3)
+        reach = self._reachable(b0, self.depth)
+        history = []
+        rounds = 0
+        while True:
+            rounds += 1
+            V, u, lookup = self._upper(r)
+            self.r, self.u, self.lookup, self.V = r, u, lookup, V
+            B = _unique_rows(np.vstack([_simplex_lattice(K, min(r, lat)), reach]), K)
+            S, p = self._successors(B)
+            self._improve_lower(B, S, p)
+            lo = float(self.lower_at(b0)[0])
+            up = float(self.upper_at(b0)[0])
+            history.append((len(V), time.perf_counter() - t0, lo, up))
+            if up - lo <= self.tol or r * 2 > r_max or time.perf_counter() - t0 > self.max_seconds:
+                break
+            r *= 2
+        return PointSolution(self.G.copy(), V.copy(), u.copy(), lo, up, rounds, time.perf_counter() - t0, history)
+
+    def q_vectors(self, beliefs: np.ndarray) -> list[list[np.ndarray]]:
+        """Q lower-bound vectors per (context, action): point backups of L at ``beliefs``."""
+        m = self.model
+        S, p = self._successors(beliefs)
+        n, N, A, Br, K = S.shape
+        best = (S.reshape(-1, K) @ self.G.T).argmax(axis=1).reshape(n, N, A, Br)
+        g = m.rewards[None] + m.discount * np.einsum("cabtu,ncabu->ncat", m.kernels, self.G[best])
+        return [[_unique_rows(g[:, c, a], K, decimals=12) for a in range(A)] for c in range(N)]
+
+    def solve(self, pomdp: AssistancePOMDP):
+        """Solve the assistance POMDP (Bayes update); returns an AlphaVectorPolicy."""
+        from .alpha import AlphaVectorPolicy
+
+        sol = self.solve_bounds(BranchModel.from_assistance(pomdp))
+        K = pomdp.n_trust
+        beliefs = _unique_rows(np.vstack([sol.points, _simplex_lattice(K, 400 if K == 2 else 20 if K == 3 else 5)]), K)
+        qv = self.q_vectors(beliefs)
+        info = {
+            "solver": "point",
+            "method": "point-based policy iteration + Freudenthal upper bound",
+            "resolution": self.r,
+            "iterations": sol.iterations,
+            "bellman_residual": float("nan"),
+            "error_bound": sol.gap,
+            "certified_gap": sol.gap,
+            "gap_at": "initial belief",
+            "value_bounds_at_initial_belief": [sol.lower, sol.upper],
+            "vectors": int(len(sol.vectors)),
+            "upper_points": int(len(sol.points)),
+            "seconds": sol.seconds,
+            "discount": pomdp.discount,
+        }
+        pol = AlphaVectorPolicy(qv, sol.vectors, pomdp.model, pomdp.complexities, "bayes", info)
+        if K == 2:
+            info["thresholds"] = pol.thresholds()
+        return pol
+
+
+def _unique_rows(B: np.ndarray, K: int, decimals: int = 13) -> np.ndarray:
+    """Rows of B without near-duplicates, keeping the first occurrence and the order."""
+    _, idx = np.unique(np.round(B, decimals), axis=0, return_index=True)
+    return B[np.sort(idx)]
+
+
+def _prune(G: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Keep the vectors that are best at some belief of B."""
+    keep = np.unique((B @ G.T).argmax(axis=1))
+    return G[keep]
+
+
+def _simplex_lattice(K: int, n: int) -> np.ndarray:
+    """All beliefs with coordinates in {0, 1/n, ..., 1} (the simplex lattice)."""
+    if K == 2:
+        x = np.linspace(0.0, 1.0, n + 1)
+        return np.stack([1 - x, x], axis=1)
+    pts = [c for c in itertools.product(range(n + 1), repeat=K - 1) if sum(c) <= n]
+    arr = np.array([[n - sum(c), *c] for c in pts], dtype=float) / n
+    return arr
+
+
+__all__ = ["BranchModel", "PointSolver", "PointSolution", "evaluate_controller", "ASK", "AUTONOMOUS"]
