@@ -38,6 +38,7 @@ import pandas as pd
 from .errors import TrustseekError
 
 SCAN_RATIO = 20  # sequences at least this many times longer than their number: E-step by prefix products
+BATCH_MAX_COLUMNS = 1000  # restarts x participants up to this: restarts run batched in lockstep
 MIN_EVENTS = 5  # fewer expected events than this behind a row: "not identified by this data"
 _FLOOR = 1e-300
 
@@ -277,28 +278,32 @@ class _Table:
         return p[self.group]
 
     def project(self, p: np.ndarray) -> np.ndarray:
-        """Put a (U, K, M) table back on the constraint set (after extrapolation)."""
-        g = p[self.rep]
+        """Put a (..., U, K, M) table back on the constraint set (after extrapolation)."""
+        g = p[..., self.rep, :, :]
         g = np.where(self.gfixed, 0.0, np.clip(g, 1e-12, None))
         s = g.sum(-1, keepdims=True)
         g = np.where(self.gfixed, self.gvalues, g / np.where(s > 0, s, 1.0) * self.mass[..., None])
-        return g[self.group]
+        return g[..., self.group, :, :]
 
     def mstep(self, counts: np.ndarray, prior: float, previous: np.ndarray) -> np.ndarray:
-        cg = np.zeros((self.G, self.K, self.M))
-        np.add.at(cg, self.group, counts)
+        """Closed-form M-step for (..., U, K, M) expected counts (leading axes: independent fits)."""
+        if not hasattr(self, "_onehot"):
+            self._onehot = (self.group[:, None] == np.arange(self.G)[None, :]).astype(float)  # (U, G)
+        cg = np.moveaxis(np.moveaxis(counts, -3, -1) @ self._onehot, -1, -3)  # (..., G, K, M)
         free = np.where(self.gfixed, 0.0, cg + prior)
         tot = free.sum(-1, keepdims=True)
-        prev = previous[self.rep]
+        prev = previous[..., self.rep, :, :]
         est = free / np.where(tot > 0, tot, 1.0) * self.mass[..., None]
         g = np.where(self.gfixed, self.gvalues, np.where(tot > 0, est, prev))
-        return g[self.group]
+        return g[..., self.group, :, :]
 
-    def log_prior(self, p: np.ndarray, prior: float) -> float:
+    def log_prior(self, p: np.ndarray, prior: float):
+        """Dirichlet log-density (up to a constant) over the leading axes."""
         if prior == 0:
-            return 0.0
-        g = p[self.rep]
-        return float(prior * np.log(np.maximum(g[~self.gfixed], _FLOOR)).sum())
+            return 0.0 if p.ndim == 3 else np.zeros(p.shape[:-3])
+        g = np.log(np.maximum(p[..., self.rep, :, :], _FLOOR))
+        out = prior * np.where(self.gfixed, 0.0, g).sum((-3, -2, -1))
+        return float(out) if p.ndim == 3 else out
 
 
 def _select(where: Mapping[str, str], inputs: Sequence[str], cats: Mapping[str, Sequence[str]], what: str) -> np.ndarray:
@@ -388,19 +393,21 @@ class Structure:
 
     def project(self, p: Params) -> Params:
         pi = np.clip(p.initial, 1e-12, None)
-        return Params(pi / pi.sum(), self.em.project(p.emission), self.tr.project(p.transition))
+        return Params(pi / pi.sum(-1, keepdims=True), self.em.project(p.emission), self.tr.project(p.transition))
 
     def mstep(self, stats: "EStep", previous: Params) -> Params:
         a = self.spec.prior
         c0 = stats.initial + a
-        pi = c0 / c0.sum() if c0.sum() > 0 else previous.initial
+        tot = c0.sum(-1, keepdims=True)
+        pi = np.where(tot > 0, c0 / np.where(tot > 0, tot, 1.0), previous.initial)
         return Params(pi, self.em.mstep(stats.emission, a, previous.emission), self.tr.mstep(stats.transition, a, previous.transition))
 
-    def log_prior(self, p: Params) -> float:
+    def log_prior(self, p: Params):
         a = self.spec.prior
         if a == 0:
-            return 0.0
-        return a * float(np.log(np.maximum(p.initial, _FLOOR)).sum()) + self.em.log_prior(p.emission, a) + self.tr.log_prior(p.transition, a)
+            return 0.0 if p.initial.ndim == 1 else np.zeros(p.initial.shape[0])
+        lp = a * np.log(np.maximum(p.initial, _FLOOR)).sum(-1) + self.em.log_prior(p.emission, a) + self.tr.log_prior(p.transition, a)
+        return float(lp) if p.initial.ndim == 1 else lp
 
     def order(self, p: Params) -> np.ndarray:
         """Permutation putting levels in ascending order of the spec's ``order_by`` emission."""
@@ -618,6 +625,194 @@ class Workspace:
         return path
 
 
+class BatchWorkspace:
+    """E-steps of R parameter sets on the same sequences at once.
+
+    The data are laid side by side R times (column r*N + n is sequence n under
+    parameter set r), so one pass of the time loop serves every restart: with few
+    participants the cost of a pass is numpy call overhead, shared this way.
+    Parameters carry a leading axis R.
+    """
+
+    def __init__(self, seqs: Sequences, K: int, M: int, Ue: int, Ut: int, R: int):
+        self.seqs, self.K, self.M, self.Ue, self.Ut, self.R = seqs, K, M, Ue, Ut, R
+        T, N = seqs.y.shape
+        self.T, self.N, self.NR = T, N, N * R
+        obs = seqs.y >= 0
+        PE = self.PE = Ue * M + 1
+        P = self.P = (Ut + 1) * PE
+        off = np.arange(R)
+        eidx = np.where(obs, seqs.ue * M + seqs.y, Ue * M)
+        tidx = np.where(_transition_mask(seqs), seqs.ut[:-1], Ut)
+        self.eidx = (eidx[:, None, :] + (off * PE)[None, :, None]).reshape(T, R * N)
+        self.midx = (tidx[:, None, :] * PE + eidx[1:, None, :] + (off * P)[None, :, None]).reshape(T - 1, R * N)
+        tidxR = (tidx[:, None, :] + (off * (Ut + 1))[None, :, None]).reshape(T - 1, R * N)
+        self.ebins = (self.eidx[None] + (np.arange(K) * R * PE)[:, None, None]).ravel()
+        self.tbins = (tidxR[None] + (np.arange(K * K) * R * (Ut + 1))[:, None, None]).ravel()
+        NR = R * N
+        self._Mt = np.empty((K, K, max(T - 1, 0), NR))
+        self._alpha = np.empty((K, T, NR))
+        self._beta = np.empty((K, T, NR))
+        self._gamma = np.empty((K, T, NR))
+        self._xi = np.empty((K, K, max(T - 1, 0), NR))
+        self._bs = np.empty((K, max(T - 1, 0), NR))
+        self._c = np.empty((T, NR))
+        self.eye = np.eye(K)
+
+    def estep(self, p: Params) -> EStep:
+        """Batched E-step: ``loglik`` (R,), counts with a leading axis R."""
+        K, T, N, R = self.K, self.T, self.N, self.R
+        Bx = np.ones((R, self.PE, K))
+        Bx[:, :-1] = p.emission.transpose(0, 1, 3, 2).reshape(R, self.Ue * self.M, K)
+        Ax = np.empty((R, self.Ut + 1, K, K))
+        Ax[:, :-1] = p.transition
+        Ax[:, -1] = self.eye
+        mtab = (Ax[:, :, None, :, :] * Bx[:, None, :, None, :]).reshape(R * self.P, K * K).T
+        Mt = self._Mt
+        np.take(mtab, self.midx, axis=1, out=Mt.reshape(K * K, T - 1, self.NR), mode="clip")
+        B0 = Bx.reshape(R * self.PE, K)[self.eidx[0]].T
+        alpha, c, beta = self._alpha, self._c, self._beta
+        a = np.repeat(p.initial.T, N, axis=1) * B0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            for t in range(T):
+                sm = a.sum(0)
+                c[t] = sm
+                np.divide(a, sm, out=alpha[:, t])
+                if t + 1 < T:
+                    a = (alpha[:, None, t] * Mt[:, :, t]).sum(0)
+            ll = np.log(c).sum(0).reshape(R, N).sum(1)
+            beta[:, T - 1] = 1.0
+            for t in range(T - 1, 0, -1):
+                b = beta[:, t] / c[t]
+                np.sum(Mt[:, :, t - 1] * b[None], axis=1, out=beta[:, t - 1])
+            gamma = np.multiply(alpha, beta, out=self._gamma)
+            xi = np.multiply(alpha[:, None, :-1], Mt, out=self._xi)
+            xi *= np.divide(beta[:, 1:], c[1:], out=self._bs)[None]
+        em = np.bincount(self.ebins, weights=gamma.ravel(), minlength=K * R * self.PE).reshape(K, R, self.PE)
+        em = em[:, :, :-1].reshape(K, R, self.Ue, self.M).transpose(1, 2, 0, 3)
+        tr = np.bincount(self.tbins, weights=xi.ravel(), minlength=K * K * R * (self.Ut + 1)).reshape(K, K, R, self.Ut + 1)
+        tr = tr[:, :, :, :-1].transpose(2, 3, 0, 1)
+        init = gamma[:, 0].reshape(K, R, N).sum(2).T
+        bad = ~np.isfinite(ll)
+        if bad.any():
+            ll = np.where(bad, -np.inf, ll)
+            em[bad], tr[bad], init[bad] = 0.0, 0.0, 0.0
+        return EStep(ll, np.ascontiguousarray(init), np.ascontiguousarray(em), np.ascontiguousarray(tr))
+
+
+def _stack(ps: Sequence[Params]) -> Params:
+    return Params(np.stack([p.initial for p in ps]), np.stack([p.emission for p in ps]), np.stack([p.transition for p in ps]))
+
+
+def _where(mask: np.ndarray, a: Params, b: Params) -> Params:
+    m1, m3 = mask[:, None], mask[:, None, None, None]
+    return Params(np.where(m1, a.initial, b.initial), np.where(m3, a.emission, b.emission), np.where(m3, a.transition, b.transition))
+
+
+def _where_stats(mask: np.ndarray, a: EStep, b: EStep) -> EStep:
+    m3 = mask[:, None, None, None]
+    return EStep(np.where(mask, a.loglik, b.loglik), np.where(mask[:, None], a.initial, b.initial),
+                 np.where(m3, a.emission, b.emission), np.where(m3, a.transition, b.transition))
+
+
+def run_em_batch(
+    structure: Structure,
+    work: BatchWorkspace,
+    starts: Sequence[Params],
+    tol: float = 1e-8,
+    max_iter: int = 1000,
+    accelerate: bool = True,
+) -> list[RunResult]:
+    """:func:`run_em` for several starts in lockstep on one :class:`BatchWorkspace`.
+
+    Every start follows exactly the decisions :func:`run_em` would take (accept or
+    reject the extrapolation, convergence); a converged start is frozen while the
+    others go on.  ``seconds`` is the batch's time divided evenly.
+    """
+    t0 = time.perf_counter()
+    R = len(starts)
+
+    def evaluate(p: Params):
+        st = work.estep(p)
+        return st, st.loglik + structure.log_prior(p)
+
+    p0 = _stack(starts)
+    st0, f0 = evaluate(p0)
+    if not np.all(np.isfinite(f0)):
+        raise FitError(["the initial values give the data probability zero"])
+    history = [[float(x)] for x in f0]
+    n_e = np.ones(R, dtype=np.int64)
+    active = np.ones(R, dtype=bool)
+    converged = np.zeros(R, dtype=bool)
+    final_p, final_st, final_f = p0, st0, f0.copy()
+
+    def freeze(mask, p, st, f, conv):
+        nonlocal final_p, final_st, final_f
+        if mask.any():
+            final_p = _where(mask, p, final_p)
+            final_st = _where_stats(mask, st, final_st)
+            final_f = np.where(mask, f, final_f)
+            converged[mask] = conv
+            active[mask] = False
+
+    def small(fa, fb):
+        return (fb - fa) <= tol * np.abs(fa)
+
+    while active.any():
+        if np.all(n_e[active] >= max_iter):
+            freeze(active.copy(), p0, st0, f0, False)
+            break
+        p1 = structure.mstep(st0, p0)
+        st1, f1 = evaluate(p1)
+        n_e[active] += 1
+        down = active & ~(f1 >= f0)
+        freeze(down, p0, st0, f0, True)
+        for r in np.flatnonzero(active):
+            history[r].append(float(f1[r]))
+        done = active & small(f0, f1)
+        freeze(done, p1, st1, f1, True)
+        cap = active & (n_e >= max_iter)
+        if not accelerate or cap.any():
+            freeze(cap, p1, st1, f1, False)
+            p0, st0, f0 = p1, st1, f1
+            continue
+        p2 = structure.mstep(st1, p1)
+        st2, f2 = evaluate(p2)
+        n_e[active] += 1
+        down = active & ~(f2 >= f1)
+        freeze(down, p1, st1, f1, True)
+        for r in np.flatnonzero(active):
+            history[r].append(float(f2[r]))
+        done = active & small(f1, f2)
+        freeze(done, p2, st2, f2, True)
+        v0, v1, v2 = (np.concatenate([q.initial.reshape(R, -1), q.emission.reshape(R, -1), q.transition.reshape(R, -1)], 1) for q in (p0, p1, p2))
+        r_, v_ = v1 - v0, v2 - 2 * v1 + v0
+        nv = np.sqrt((v_ * v_).sum(1))
+        step = np.where(nv > 0, -np.sqrt((r_ * r_).sum(1)) / np.where(nv > 0, nv, 1.0), -1.0)
+        p0, st0, f0 = p2, st2, f2
+        cap = active & (n_e >= max_iter)
+        freeze(cap, p2, st2, f2, False)
+        ext = active & (step < -1.0)
+        if ext.any():
+            st = step[:, None]
+            x = np.maximum(v0 - 2 * st * r_ + st * st * v_, 0.05 * v2)
+            a, b = p0.initial[0].size, p0.emission[0].size
+            pe = structure.project(Params(x[:, :a].copy(), x[:, a : a + b].reshape(p0.emission.shape).copy(), x[:, a + b :].reshape(p0.transition.shape).copy()))
+            pe = _where(ext, pe, p2)
+            ste, fe = evaluate(pe)
+            n_e[ext] += 1
+            ok = ext & (fe >= f2) & np.isfinite(fe)
+            for r in np.flatnonzero(ok):
+                history[r].append(float(fe[r]))
+            p0, st0, f0 = _where(ok, pe, p0), _where_stats(ok, ste, st0), np.where(ok, fe, f0)
+    seconds = (time.perf_counter() - t0) / R
+    out = []
+    for r in range(R):
+        pr = Params(final_p.initial[r].copy(), final_p.emission[r].copy(), final_p.transition[r].copy())
+        out.append(RunResult(pr, float(final_st.loglik[r]), float(final_f[r]), history[r], int(n_e[r]), bool(converged[r]), seconds))
+    return out
+
+
 def _prefix_products(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Inclusive prefix products along axis 1 (Hillis-Steele), rescaled: (F, log scale)."""
     F = M.copy()
@@ -810,11 +1005,19 @@ def fit_iohmm(
     if not starts:
         raise FitError(["at least one restart is needed"])
     runs = []
-    for i, p in enumerate(starts):
-        r = run_em(structure, work, p, tol=tol, max_iter=max_iter, accelerate=accelerate)
-        runs.append(r)
-        if on_restart is not None:
-            on_restart(i, r)
+    if len(starts) > 1 and not work.scan and seqs.n_participants * len(starts) <= BATCH_MAX_COLUMNS:
+        # few participants: run every start in lockstep on one batched workspace
+        bw = BatchWorkspace(seqs, structure.K, structure.M, structure.Ue, structure.Ut, len(starts))
+        runs = run_em_batch(structure, bw, starts, tol=tol, max_iter=max_iter, accelerate=accelerate)
+        for i, r in enumerate(runs):
+            if on_restart is not None:
+                on_restart(i, r)
+    else:
+        for i, p in enumerate(starts):
+            r = run_em(structure, work, p, tol=tol, max_iter=max_iter, accelerate=accelerate)
+            runs.append(r)
+            if on_restart is not None:
+                on_restart(i, r)
     best = int(np.argmax([r.objective for r in runs]))
     p = runs[best].params
     perm = structure.order(p)
