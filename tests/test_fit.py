@@ -150,24 +150,34 @@ def run(*args, check=True):
     return proc
 
 
+def invoke(*args):
+    from typer.testing import CliRunner
+
+    from trustseek.cli import app
+
+    res = CliRunner().invoke(app, [str(a) for a in args])
+    if res.exit_code != 0:
+        raise AssertionError(f"exit {res.exit_code}\n{res.output}\n{res.exception!r}")
+    return res.stdout
+
+
 def test_cli_fit_decode_select(tmp_path):
     log = str(example_path())
     out = tmp_path / "model.json"
-    proc = run("fit", log, "--preset", "paper", "--restarts", "2", "--seed", "1", "--tol", "1e-6", "--out", str(out), "--json", "--plots", str(tmp_path / "figs"))
-    d = json.loads(proc.stdout)
+    d = json.loads(invoke("fit", log, "--preset", "paper", "--restarts", "2", "--seed", "1", "--tol", "1e-6", "--out", out, "--json"))
     m = TrustModel.load(out)
     assert TrustModel.from_dict(d["model"]) == m
     assert len(d["restart_logliks"]) == 2 and d["n_params"] == 17
+    text = invoke("fit", log, "--restarts", "1", "--tol", "1e-5", "--plots", tmp_path / "figs")
+    assert "log-likelihood" in text and "events" in text
     assert (tmp_path / "figs" / "emissions.png").stat().st_size > 0
     assert (tmp_path / "figs" / "transitions.png").stat().st_size > 0
     post = tmp_path / "post.csv"
-    run("decode", log, "--model", str(out), "--out", str(post))
+    invoke("decode", log, "--model", out, "--out", post)
     p = pd.read_csv(post)
     assert len(p) == 9 * 71 and set(p["viterbi_trust"]) <= {"low", "high"}
-    proc = run("select", log, "--max-levels", "2", "--folds", "2", "--restarts", "1", "--json")
-    assert [r["levels"] for r in json.loads(proc.stdout)["levels"]] == [1, 2]
-    proc = run("fit", log, "--restarts", "1", "--tol", "1e-5")
-    assert "log-likelihood" in proc.stdout and "events" in proc.stdout
+    rows = json.loads(invoke("select", log, "--max-levels", "2", "--folds", "2", "--restarts", "1", "--json"))["levels"]
+    assert [r["levels"] for r in rows] == [1, 2]
 
 
 def test_cli_reports_bad_logs_cleanly(tmp_path):
