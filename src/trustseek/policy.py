@@ -383,6 +383,10 @@ def policy_from_dict(d: Any, source: str | None = None) -> Policy:
             raise ModelError([f"q must map each complexity {cx} and action {list(ACTIONS)} to a list of numbers"], source) from None
         grid = np.linspace(0.0, 1.0, arr.shape[0])
         return TrustAwarePolicy(grid, arr, model, cx, bu, d.get("info"))
+    if kind == "alpha-vector":
+        from .alpha import AlphaVectorPolicy
+
+        return AlphaVectorPolicy.from_dict(d, source)
     raise ModelError([f"unknown policy kind {kind!r}; expected one of {['trust-aware', *COMPLEXITY_KINDS]}"], source)
 
 

@@ -14,6 +14,7 @@ from rich.markup import escape
 from ..errors import TrustseekError
 from ._app import app, err_console
 from . import plan  # noqa: F401  (solve, plot-q)
+from . import interop  # noqa: F401
 from . import fit  # noqa: F401
 from . import serve  # noqa: F401
 from . import simulate  # noqa: F401

@@ -56,6 +56,10 @@ def solve(
     tol: float = typer.Option(1e-9, "--tol", help="Value iteration: stop when the certified error bound is below this."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
+    solver: str = typer.Option(
+        "grid", "--solver", help="grid (belief grid), alpha (certified alpha vectors, two trust levels) or point (point-based bounds, any number of trust levels)."
+    ),
+    gap: Optional[float] = typer.Option(None, "--gap", help="alpha/point: target certified gap between the value bounds (default 1e-6 / 1e-3)."),
 ) -> None:
     """Solve the assistance-seeking POMDP for the optimal trust-aware policy (Section IV)."""
     _check_update(belief_update)
@@ -63,6 +67,11 @@ def solve(
         raise TrustseekError([f"--method must be one of {list(METHODS)}, got {method!r}"])
     m, t = load_model(model), load_task(task)
     pomdp = AssistancePOMDP(m, t)
+    if solver != "grid":
+        from .interop import certified_policy, report_certified
+
+        report_certified(certified_policy(solver, pomdp, belief_update, gap), t, out, as_json)
+        return
     policy = GridSolver(grid=grid, belief_update=belief_update, method=method, tol=tol).solve(pomdp)
     agn = trust_agnostic(m, t)
     summary = solve_summary(policy, t)
