@@ -28,6 +28,7 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     app.state.db = open_database(db_url)
     app.state.token = token or secrets.token_urlsafe(24)
     app.state.public_url = public_url
+    app.state.tokens = {}  # session token -> Caller
     app.include_router(experimenter)
     app.include_router(own)
     app.include_router(participant)

@@ -4,6 +4,7 @@ the per-session tokens (a participant or a robot reaches only its own session)."
 from __future__ import annotations
 
 import secrets
+from dataclasses import dataclass
 
 from fastapi import Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
@@ -20,21 +21,35 @@ def token_of(creds: HTTPAuthorizationCredentials | None) -> str:
     return creds.credentials
 
 
-def require_experimenter(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)) -> None:
+async def require_experimenter(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)) -> None:
     token = token_of(creds)
     if not secrets.compare_digest(token.encode(), request.app.state.token.encode()):
         raise HTTPException(403, "wrong experimenter token")
 
 
-def session_for_token(request: Request, token: str) -> Session:
-    with request.app.state.db() as db:
-        s = db.scalar(select(Session).where(Session.token == token))
-    if s is None:
-        raise HTTPException(401, "unknown session token")
-    return s
+@dataclass(frozen=True)
+class Caller:
+    """The session a token belongs to (tokens never change, so this is cached per process)."""
+
+    id: str
+    kind: str
 
 
-def require_session(session_id: str, request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)) -> Session:
+def session_for_token(request: Request, token: str) -> Caller:
+    cache: dict[str, Caller] = request.app.state.tokens
+    caller = cache.get(token)
+    if caller is None:
+        with request.app.state.db() as db:
+            row = db.execute(select(Session.id, Session.kind).where(Session.token == token)).first()
+        if row is None:
+            raise HTTPException(401, "unknown session token")
+        if len(cache) > 100_000:
+            cache.clear()
+        caller = cache[token] = Caller(row.id, row.kind)
+    return caller
+
+
+async def require_session(session_id: str, request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)) -> Caller:
     """The session named in the path, if the bearer token is that session's token."""
     s = session_for_token(request, token_of(creds))
     if not secrets.compare_digest(s.id.encode(), session_id.encode()):

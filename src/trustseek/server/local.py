@@ -7,6 +7,7 @@ import os
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -24,7 +25,7 @@ def wait_ready(url: str, timeout: float = 30.0, proc: subprocess.Popen | None = 
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if proc is not None and proc.poll() is not None:
-            raise RuntimeError(f"the server exited with code {proc.returncode}: {proc.stderr.read().decode() if proc.stderr else ''}")
+            raise RuntimeError(f"the server exited with code {proc.returncode}")
         try:
             if httpx.get(f"{url}/api/health", timeout=1.0).status_code == 200:
                 return
@@ -65,6 +66,12 @@ def serve_process(db_url: str, token: str, port: int, log: Path | None = None) -
            "--host", "127.0.0.1", "--port", str(port), "--token", token]
     out = open(log, "ab") if log is not None else subprocess.DEVNULL
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.PIPE, env=env)
-    wait_ready(f"http://127.0.0.1:{port}", proc=proc)
+    # stderr goes to a file, not a pipe: an unread pipe would block a chatty server
+    err = tempfile.TemporaryFile()
+    proc = subprocess.Popen(cmd, stdout=out, stderr=err, env=env)
+    try:
+        wait_ready(f"http://127.0.0.1:{port}", proc=proc)
+    except RuntimeError as exc:
+        err.seek(0)
+        raise RuntimeError(f"{exc}\n{err.read().decode(errors='replace')[-4000:]}") from None
     return proc

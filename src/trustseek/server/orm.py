@@ -8,6 +8,7 @@ migrations in ``migrations/``; these classes mirror it.
 * ``Trial``    -- one committed trial; unique per (session, trial number).
 * ``Report``   -- a trust self-report (after a trial or a block).
 * ``Event``    -- a timestamped user-interface event.
+* ``PolicyBlob`` -- a policy JSON used by deploy sessions, stored once by its hash.
 """
 
 from __future__ import annotations
@@ -31,8 +32,18 @@ class Study(Base):
 
     id: Mapped[str] = mapped_column(String(32), primary_key=True)
     name: Mapped[str] = mapped_column(String(200))
-    config: Mapped[dict] = mapped_column(JSON)
+    config: Mapped[dict] = mapped_column(JSON, deferred=True)  # large (solved policies): loaded on use
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class PolicyBlob(Base):
+    """A stored policy JSON, addressed by its SHA-256 (deploy sessions refer to it, so the
+    frequently updated session rows stay small and identical policies are stored once)."""
+
+    __tablename__ = "policies"
+
+    sha256: Mapped[str] = mapped_column(String(64), primary_key=True)
+    policy: Mapped[dict] = mapped_column(JSON)
 
 
 class Session(Base):
@@ -45,7 +56,7 @@ class Session(Base):
     participant: Mapped[str] = mapped_column(String(200))
     seed: Mapped[int] = mapped_column(Integer)
     # study sessions: block order and per-block complexity lists; deploy sessions: model/task/policy
-    plan: Mapped[dict] = mapped_column(JSON)
+    plan: Mapped[dict] = mapped_column(JSON, deferred=True)
     status: Mapped[str] = mapped_column(String(16), default="new")  # new, running, done
     consented_at: Mapped[datetime | None] = mapped_column(nullable=True)
     belief: Mapped[list] = mapped_column(JSON)  # the belief before the next trial

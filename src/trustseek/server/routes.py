@@ -10,13 +10,13 @@ from sqlalchemy import select
 
 from fastapi.security import HTTPAuthorizationCredentials
 
-from .auth import bearer, require_experimenter, require_session, session_for_token, token_of
+from .auth import Caller, bearer, require_experimenter, require_session, session_for_token, token_of
 from .export import events_frame, to_bytes, trials_frame
 from .orm import Report, Session, Study, Trial, utcnow
 from .schemas import ConsentIn, DecideIn, DeployIn, EventsIn, ObserveIn, ReportIn, SessionsIn, TrialIn
 from .sessions import (
     SessionError, add_events, add_report, create_deploy, create_participant, deploy_decide, deploy_observe,
-    lock, new_id, p_high, report_due, serve, submit_trial, total_trials, trial_dict,
+    lock, new_id, p_high, report_due, serve, study_config, submit_trial, total_trials, trial_dict,
 )
 from .studies import ConfigError, StudyIn, build_study_config, load_model_spec, load_task_spec, resolve_policy
 
@@ -154,13 +154,12 @@ def session_state(request: Request, s_id: str) -> dict:
         s = db.get(Session, s_id)
         if s.kind != "study":
             raise HTTPException(409, "this is a deploy session; use /api/deploy")
-        st = db.get(Study, s.study_id)
-        cfg = st.config
+        cfg = study_config(db, s.study_id)
         current = serve(db, s)
         due = report_due(db, s, cfg)
         blocks = s.plan["block_order"]
         return {
-            "session_id": s.id, "participant": s.participant, "status": s.status, "study": st.name,
+            "session_id": s.id, "participant": s.participant, "status": s.status, "study": cfg["name"],
             "trials_total": total_trials(s), "trials_done": s.trials_done, "score": s.score,
             "blocks": [cfg["blocks"][b]["name"] for b in blocks], "current": current, "report_due": due,
             "self_report": cfg["self_report"], "animation_speed": cfg["animation_speed"],
@@ -178,12 +177,12 @@ def own_state(request: Request, creds: HTTPAuthorizationCredentials | None = Dep
 
 
 @participant.get("/{session_id}/state", summary="The participant's session: status, current trial, score")
-def get_state(session_id: str, request: Request, s: Session = Depends(require_session)):
+def get_state(session_id: str, request: Request, s: Caller = Depends(require_session)):
     return session_state(request, s.id)
 
 
 @participant.post("/{session_id}/consent", summary="Record consent and start the session")
-def consent(session_id: str, body: ConsentIn, request: Request, s: Session = Depends(require_session)):
+def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depends(require_session)):
     with _db(request) as db:
         row = lock(db, s.id)
         if row.status == "new":
@@ -195,7 +194,7 @@ def consent(session_id: str, body: ConsentIn, request: Request, s: Session = Dep
 
 
 @participant.post("/{session_id}/trials", summary="Submit the current trial (idempotent by submission_id)")
-def post_trial(session_id: str, body: TrialIn, request: Request, s: Session = Depends(require_session)):
+def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Depends(require_session)):
     with _db(request) as db:
         try:
             t, dup = submit_trial(db, s.id, body.trial, body.submission_id, body.human_action, body.effort_ms,
@@ -208,10 +207,10 @@ def post_trial(session_id: str, body: TrialIn, request: Request, s: Session = De
 
 
 @participant.post("/{session_id}/reports", summary="Submit a trust self-report (0-100)")
-def post_report(session_id: str, body: ReportIn, request: Request, s: Session = Depends(require_session)):
+def post_report(session_id: str, body: ReportIn, request: Request, s: Caller = Depends(require_session)):
     with _db(request) as db:
         row = db.get(Session, s.id)
-        cfg = db.get(Study, row.study_id).config if row.study_id else {}
+        cfg = study_config(db, row.study_id) if row.study_id else {}
         try:
             rep, dup = add_report(db, row, cfg, body.after_trial, body.value)
         except SessionError as exc:
@@ -222,7 +221,7 @@ def post_report(session_id: str, body: ReportIn, request: Request, s: Session = 
 
 
 @participant.post("/{session_id}/events", summary="Log UI events")
-def post_events(session_id: str, body: EventsIn, request: Request, s: Session = Depends(require_session)):
+def post_events(session_id: str, body: EventsIn, request: Request, s: Caller = Depends(require_session)):
     with _db(request) as db:
         n = add_events(db, db.get(Session, s.id), [e.model_dump() for e in body.events])
     return {"stored": n}
@@ -248,13 +247,13 @@ def open_deploy(body: DeployIn, request: Request):
                 "complexities": list(task.complexities), "thresholds": policy.get("thresholds")}
 
 
-def _deploy_session(s: Session) -> None:
+def _deploy_session(s: Caller) -> None:
     if s.kind != "deploy":
         raise HTTPException(409, "this is a participant session; use /api/sessions")
 
 
 @deploy.get("/sessions/{session_id}", summary="A deploy session's state and trials")
-def deploy_state(session_id: str, request: Request, s: Session = Depends(require_session)):
+def deploy_state(session_id: str, request: Request, s: Caller = Depends(require_session)):
     _deploy_session(s)
     with _db(request) as db:
         row = db.get(Session, s.id)
@@ -266,7 +265,7 @@ def deploy_state(session_id: str, request: Request, s: Session = Depends(require
 
 
 @deploy.post("/sessions/{session_id}/decide", summary="Post a trial's complexity, get the robot action")
-def decide(session_id: str, body: DecideIn, request: Request, response: Response, s: Session = Depends(require_session)):
+async def decide(session_id: str, body: DecideIn, request: Request, response: Response, s: Caller = Depends(require_session)):
     _deploy_session(s)
     t0 = time.perf_counter()
     with _db(request) as db:
@@ -280,7 +279,7 @@ def decide(session_id: str, body: DecideIn, request: Request, response: Response
 
 
 @deploy.post("/sessions/{session_id}/observe", summary="Post the observed human action and outcome; updates the belief")
-def observe(session_id: str, body: ObserveIn, request: Request, s: Session = Depends(require_session)):
+async def observe(session_id: str, body: ObserveIn, request: Request, s: Caller = Depends(require_session)):
     _deploy_session(s)
     with _db(request) as db:
         try:

@@ -15,6 +15,7 @@ Integrity rules:
 
 from __future__ import annotations
 
+import hashlib
 import json
 import secrets
 from dataclasses import dataclass
@@ -27,7 +28,7 @@ from sqlalchemy.orm import Session as DBSession
 
 from ..model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
 from ..policy import PolicyRunner
-from .orm import Event, Report, Session, Study, Trial, utcnow
+from .orm import Event, PolicyBlob, Report, Session, Study, Trial, utcnow
 from .studies import participant_plan, policy_object
 
 OUTCOMES = ("success", "collision", "dropped", "teleoperated")
@@ -60,40 +61,55 @@ def p_high(belief) -> float | None:
 
 @dataclass
 class Context:
-    """Everything needed to run one session's policy: task, model and per-trial plan."""
+    """Everything needed to run one session's policy: task, model, per-block policies (kinds
+    and cache keys) and, for study sessions, the per-trial plan."""
 
     task: Task
     model: TrustModel
-    policies: list[dict[str, Any]]  # per block: policy JSON
-    keys: list[str]  # per block: policy cache key
-    trials: list[dict[str, Any]] | None  # study sessions: [{block, complexity}]
+    kinds: list[str]
+    keys: list[str]
+    load_policy: Any  # callable(block) -> policy JSON, used when the policy is not cached
+    trials: list[dict[str, Any]] | None
 
     def runner(self, block: int, belief, seed: int, trial: int) -> PolicyRunner:
-        pol = policy_object(self.keys[block], self.policies[block])
+        pol = policy_object(self.keys[block], lambda: self.load_policy(block))
         model = getattr(pol, "model", None) or self.model
         return PolicyRunner(pol, model=model, rng=np.random.default_rng([seed, trial, 0]), belief=np.asarray(belief, dtype=float))
 
 
-_TASKS: dict[str, tuple[Task, TrustModel]] = {}
+_CONTEXTS: dict[str, tuple[Task, TrustModel, list[str]]] = {}
+_CONFIGS: dict[str, dict[str, Any]] = {}
+
+
+def study_config(db: DBSession, study_id: str) -> dict[str, Any]:
+    """A study's configuration (immutable once created, so cached per process)."""
+    cfg = _CONFIGS.get(study_id)
+    if cfg is None:
+        if len(_CONFIGS) > 256:
+            _CONFIGS.clear()
+        cfg = _CONFIGS[study_id] = db.get(Study, study_id).config
+    return cfg
 
 
 def context(db: DBSession, s: Session) -> Context:
     if s.kind == "study":
-        study = db.get(Study, s.study_id)
-        cfg = study.config
-        key = f"study:{study.id}"
-        tm = _TASKS.get(key)
-        if tm is None:
-            tm = _TASKS[key] = (Task.from_dict(cfg["task"]), TrustModel.from_dict(cfg["model"]))
-        blocks = cfg["blocks"]
-        return Context(tm[0], tm[1], [b["policy"] for b in blocks], [f"{key}:{i}" for i in range(len(blocks))], s.plan["trials"])
+        key = f"study:{s.study_id}"
+        cached = _CONTEXTS.get(key)
+        if cached is None:
+            cfg = study_config(db, s.study_id)
+            cached = _CONTEXTS[key] = (Task.from_dict(cfg["task"]), TrustModel.from_dict(cfg["model"]), [b["policy"]["kind"] for b in cfg["blocks"]])
+        task, model, kinds = cached
+        return Context(task, model, kinds, [f"{key}:{i}" for i in range(len(kinds))],
+                       lambda b: study_config(db, s.study_id)["blocks"][b]["policy"], s.plan["trials"])
     key = f"deploy:{s.id}"
-    tm = _TASKS.get(key)
-    if tm is None:
-        if len(_TASKS) > 4096:
-            _TASKS.clear()
-        tm = _TASKS[key] = (Task.from_dict(s.plan["task"]), TrustModel.from_dict(s.plan["model"]))
-    return Context(tm[0], tm[1], [s.plan["policy"]], [key], None)
+    cached = _CONTEXTS.get(key)
+    if cached is None:
+        if len(_CONTEXTS) > 4096:
+            _CONTEXTS.clear()
+        plan = s.plan
+        cached = _CONTEXTS[key] = (Task.from_dict(plan["task"]), TrustModel.from_dict(plan["model"]), [plan["policy_kind"]])
+    task, model, kinds = cached
+    return Context(task, model, kinds, [key], lambda b: db.get(PolicyBlob, s.plan["policy_sha256"]).policy, None)
 
 
 def total_trials(s: Session) -> int | None:
@@ -120,11 +136,20 @@ def create_participant(db: DBSession, study: Study, participant: str | None) -> 
 
 
 def create_deploy(db: DBSession, label: str, task: Task, model: TrustModel, policy: dict[str, Any], seed: int) -> Session:
-    pol = policy_object(f"deploy-check:{new_id()}", policy)
+    sid = new_id()
+    pol = policy_object(f"deploy:{sid}", policy)
     pm = getattr(pol, "model", None) or model
+    blob = json.dumps(policy, sort_keys=True)
+    sha = hashlib.sha256(blob.encode()).hexdigest()
+    if db.get(PolicyBlob, sha) is None:
+        db.add(PolicyBlob(sha256=sha, policy=json.loads(blob)))
+        try:
+            db.flush()
+        except IntegrityError:  # stored concurrently by another request
+            db.rollback()
     s = Session(
-        id=new_id(), token=new_token(), kind="deploy", study_id=None, participant=label, seed=seed,
-        plan={"task": task.to_dict(), "model": model.to_dict(), "policy": policy},
+        id=sid, token=new_token(), kind="deploy", study_id=None, participant=label, seed=seed,
+        plan={"task": task.to_dict(), "model": model.to_dict(), "policy_sha256": sha, "policy_kind": policy["kind"]},
         status="running", belief=[float(x) for x in pm.initial], trials_done=0, score=0.0,
     )
     db.add(s)
@@ -259,7 +284,7 @@ def submit_trial(
     else:
         success, outcome = None, "teleoperated"
     row = Trial(
-        session_id=s.id, trial=n, block=step["block"], policy=ctx.policies[step["block"]]["kind"],
+        session_id=s.id, trial=n, block=step["block"], policy=ctx.kinds[step["block"]],
         complexity=s.pending_complexity, robot_action=action, human_action=human_action, outcome=outcome,
         experience=_experience(ctx.task, c, action, human_action, success), effort_ms=effort_ms,
         submission_id=submission_id,
@@ -378,7 +403,7 @@ def deploy_observe(db: DBSession, session_id: str, n: int, human_action: str | N
     if outcome not in ("success", "failure", "collision", "dropped", "teleoperated"):
         raise SessionError(400, f"outcome {outcome!r} is not one of success, failure, collision, dropped, teleoperated")
     row = Trial(
-        session_id=s.id, trial=n, block=0, policy=ctx.policies[0]["kind"], complexity=s.pending_complexity,
+        session_id=s.id, trial=n, block=0, policy=ctx.kinds[0], complexity=s.pending_complexity,
         robot_action=action, human_action=human_action, outcome=outcome,
         experience=_experience(ctx.task, c, action, human_action, success), effort_ms=None,
         submission_id=f"deploy-{n}",

@@ -142,8 +142,19 @@ def resolve_policy(spec: dict[str, Any], model: TrustModel, task: Task, where: s
     return (always_ask(cx) if kind == "always-ask" else never_ask(cx)).to_dict()
 
 
+_SOLVED: dict[str, dict[str, Any]] = {}
+
+
 def _solved(model: TrustModel, task: Task, bu: str, grid: int) -> dict[str, Any]:
-    return solve(model, task, belief_update=bu, grid=grid).to_dict()
+    """The solved trust-aware policy (cached: many sessions open with the same model and task)."""
+    import json
+
+    key = json.dumps([model.to_dict(), task.to_dict(), bu, grid], sort_keys=True)
+    if key not in _SOLVED:
+        if len(_SOLVED) > 64:
+            _SOLVED.clear()
+        _SOLVED[key] = solve(model, task, belief_update=bu, grid=grid).to_dict()
+    return _SOLVED[key]
 
 
 def build_study_config(study: StudyIn) -> dict[str, Any]:
@@ -220,12 +231,14 @@ def participant_plan(cfg: dict[str, Any], index: int, seed: int) -> dict[str, An
 _POLICIES: dict[str, Any] = {}
 
 
-def policy_object(key: str, policy_json: dict[str, Any]):
+def policy_object(key: str, policy_json):
     """The policy object of a stored (immutable) policy JSON, cached by ``key``: parsing a
-    solved policy is not free, and stored policies never change."""
+    solved policy is not free, and stored policies never change.  ``policy_json`` may be a
+    callable returning the JSON, called only when the policy is not cached."""
     pol = _POLICIES.get(key)
     if pol is None:
-        if len(_POLICIES) > 512:
+        if len(_POLICIES) > 4096:
             _POLICIES.clear()
-        pol = _POLICIES[key] = policy_from_dict(policy_json, key)
+        d = policy_json() if callable(policy_json) else policy_json
+        pol = _POLICIES[key] = policy_from_dict(d, key)
     return pol

@@ -1,4 +1,4 @@
-"""Initial schema: studies, sessions, trials, reports, events.
+"""Initial schema: studies, policies, sessions, trials, reports, events.
 
 Revision ID: 0001
 Revises:
@@ -20,6 +20,11 @@ def upgrade() -> None:
         sa.Column("name", sa.String(200), nullable=False),
         sa.Column("config", sa.JSON(), nullable=False),
         sa.Column("created_at", sa.DateTime(), nullable=False),
+    )
+    op.create_table(
+        "policies",
+        sa.Column("sha256", sa.String(64), primary_key=True),
+        sa.Column("policy", sa.JSON(), nullable=False),
     )
     op.create_table(
         "sessions",
@@ -90,5 +95,5 @@ def upgrade() -> None:
 
 
 def downgrade() -> None:
-    for t in ("events", "reports", "trials", "sessions", "studies"):
+    for t in ("events", "reports", "trials", "sessions", "policies", "studies"):
         op.drop_table(t)
