@@ -202,8 +202,31 @@ def schedule_counts(n: int, counts: Sequence[int] | Mapping[str, int], rng, comp
     if len(counts) != len(complexities) or any(k < 0 for k in counts) or sum(counts) < 1:
         raise SimulationError([f"counts must give a non-negative number of trials for each of {list(complexities)} "
                                f"with at least one trial in total, got {counts}"])
-    base = np.repeat(np.arange(len(counts), dtype=np.int8), counts)
-    return np.random.default_rng(rng).permuted(np.broadcast_to(base, (n, len(base))), axis=1)
+    # Drawing trial by trial from an urn holding the remaining trials of each complexity
+    # gives every arrangement of the counts the same probability (vectorized over participants).
+    rng = np.random.default_rng(rng)
+    T, N = sum(counts), len(counts)
+    out = np.empty((T, n), dtype=np.int8)
+    remaining = [np.full(n, k, dtype=np.float64) for k in counts]
+    left = T
+    for t in range(T):
+        x = rng.random(n)
+        x *= left  # uniform over the trials left: below remaining[0] -> complexity 0, ...
+        if N == 2:
+            high = x >= remaining[0]
+            out[t] = high
+            remaining[0] -= ~high
+        else:
+            c = np.zeros(n, dtype=np.int8)
+            edge = remaining[0].copy()
+            for k in range(1, N):
+                c += x >= edge
+                edge += remaining[k]
+            out[t] = c
+            for k in range(N):
+                remaining[k] -= c == k
+        left -= 1
+    return out.T  # (n, T), stored trial-major: the simulator reads one trial of everyone at a time
 
 
 def schedule_iid(n: int, trials: int, probs: Sequence[float], rng) -> np.ndarray:
@@ -212,8 +235,8 @@ def schedule_iid(n: int, trials: int, probs: Sequence[float], rng) -> np.ndarray
     if int(trials) != trials or trials < 1:
         raise SimulationError([f"the number of trials must be a positive integer, got {trials!r}"])
     p = np.asarray(probs, dtype=float)
-    u = np.random.default_rng(rng).random((n, int(trials)))
-    return np.searchsorted(np.cumsum(p)[:-1], u, side="right").astype(np.int8)
+    u = np.random.default_rng(rng).random((int(trials), n))
+    return np.searchsorted(np.cumsum(p)[:-1], u, side="right").astype(np.int8).T
 
 
 # --------------------------------------------------------------------------- blocks and results
@@ -247,7 +270,7 @@ class Simulation:
 
     task: Task
     trust_levels: tuple[str, ...]
-    participants: np.ndarray  # (n,) string ids
+    participant_list: np.ndarray | None  # (n,) string ids, or None for p001, p002, ...
     block_labels: list[str]
     block_lengths: list[int]
     summary_arrays: dict[str, np.ndarray]  # name -> (n, n_blocks)
@@ -255,7 +278,14 @@ class Simulation:
 
     @property
     def n(self) -> int:
-        return len(self.participants)
+        return next(iter(self.summary_arrays.values())).shape[0]
+
+    @property
+    def participants(self) -> np.ndarray:
+        """(n,) participant ids."""
+        if self.participant_list is None:
+            self.participant_list = participant_ids(self.n)
+        return self.participant_list
 
     def block_of_trial(self) -> np.ndarray:
         """(T_total,) 1-based block number of every trial position."""
@@ -539,11 +569,10 @@ def run(
             raise SimulationError([f"block {j + 1}: the belief model's complexities differ from the task's"])
         b.schedule = sch
         _policy_belief(b)
-    if participants is None:
-        participants = participant_ids(n)
-    participants = np.asarray(participants, dtype=object)
-    if len(participants) != n:
-        raise SimulationError([f"{len(participants)} participant ids for {n} participants"])
+    if participants is not None:
+        participants = np.asarray(participants, dtype=object)
+        if len(participants) != n:
+            raise SimulationError([f"{len(participants)} participant ids for {n} participants"])
     tab = _Tables(supervisors, task)
     ss = _seed_sequence(seed)
     n_chunks = -(-n // CHUNK)
@@ -567,7 +596,7 @@ def run(
     return Simulation(
         task=task,
         trust_levels=tuple(supervisors.trust_levels),
-        participants=participants,
+        participant_list=participants,
         block_labels=[b.label for b in blocks],
         block_lengths=[b.schedule.shape[1] for b in blocks],
         summary_arrays=summary,
@@ -682,7 +711,7 @@ def _merge_crossover(task, sup, ids, labels, parts, record) -> Simulation:
     out = CrossoverSimulation(
         task=task,
         trust_levels=tuple(sup.trust_levels),
-        participants=ids,
+        participant_list=ids,
         block_labels=list(labels),
         block_lengths=list(lengths),
         summary_arrays=summary,
