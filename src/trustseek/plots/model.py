@@ -49,7 +49,7 @@ def plot_emissions(model, path=None, ci=None, reference=None):
         _bars(ax, vals, lo, hi, ref, [f"C={C[c]}\na={ACTIONS[a]}" for c, a in groups], [f"T={t}" for t in T])
         ax.set_ylabel(r"$P(o = \mathrm{rely} \mid T, C, a)$")
         ax.set_title("Estimated probability of relying on the robot" + (" (95% CI)" if ci is not None else ""))
-        ax.legend(loc="lower left", frameon=False, ncol=3)
+        ax.legend(loc="upper right", frameon=False, ncol=1)
         fig.tight_layout()
         if path is not None:
             save(fig, path)
