@@ -266,7 +266,7 @@ def sup_difference(v1, xs1, v2, xs2) -> float:
 
 
 def evaluate_controller(
-    pomdp: AssistancePOMDP, actions: np.ndarray, successors: np.ndarray, guess: np.ndarray | None = None
+    pomdp: AssistancePOMDP, actions: np.ndarray, successors: np.ndarray, guess: np.ndarray | None = None, rtol: float = 1e-15
 ) -> np.ndarray:
     """Exact value α[n, t] of a finite-state controller: node n takes actions[n, c] in
     complexity c and moves to successors[n, c, o, e] after (o, E').  Works for any number
@@ -304,8 +304,8 @@ def evaluate_controller(
     b = rhs.reshape(-1)
     scale = max(1.0, float(np.max(np.abs(b))))
     x0 = None if guess is None else guess.reshape(-1)
-    x, info = spla.bicgstab(A, b, x0=x0, rtol=1e-15, atol=1e-12 * scale, maxiter=5000)
-    if info != 0 or not np.all(np.isfinite(x)) or np.max(np.abs(A @ x - b)) > 1e-10 * scale:
+    x, info = spla.bicgstab(A, b, x0=x0, rtol=rtol, atol=min(rtol, 1e-12) * scale, maxiter=5000)
+    if info != 0 or not np.all(np.isfinite(x)) or np.max(np.abs(A @ x - b)) > max(1e-10, 10 * rtol) * scale:
         x = spla.spsolve(A.tocsc(), b)
     return np.asarray(x).reshape(n, k)
 
@@ -519,7 +519,7 @@ class AlphaSolver:
             vecs, xs = max_of(vecs, xs, bk.vectors, bk.xs)[:2]
             if self.method == "policy-iteration":
                 succ = _repoint(pomdp, bk.vectors, bk.xs, bk.actions)
-                ev = evaluate_controller(pomdp, bk.actions, succ, guess=bk.vectors)
+                ev = evaluate_controller(pomdp, bk.actions, succ, guess=bk.vectors, rtol=1e-11)
                 if np.all(np.isfinite(ev)):
                     idx, exs = envelope(ev)
                     vecs, xs = max_of(vecs, xs, ev[idx], exs)[:2]
