@@ -69,13 +69,21 @@ def plot_rewards(
                 for j, k in enumerate(order):
                     if k in paper_medians:
                         ax.scatter([j + 1], [paper_medians[k]], marker="D", s=22, facecolor="none", edgecolor=COLORS["ask"],
-                                   linewidth=1.0, zorder=4, label="paper median" if j == 0 else None)
-                ax.legend(loc="lower right", frameon=False, fontsize=7)
+                                   linewidth=1.0, zorder=4)
             ax.set_ylabel("cumulative reward per block")
             ax.set_xlim(0.5, len(order) + 0.7)
             ax.set_title(f"{'(a)' if paired else '(b)'} {n:,} simulated participants")
         fig.suptitle("Cumulative reward, 17 low + 17 high trials per block (Fig. 8)", fontsize=9)
-        fig.tight_layout()
+        if paper_medians:
+            from matplotlib.lines import Line2D
+
+            handle = Line2D([], [], marker="D", ls="none", markersize=5, markerfacecolor="none", markeredgecolor=COLORS["ask"])
+            med = Line2D([], [], color="black", lw=1.2)
+            fig.legend([med, handle], ["median (simulation)", "median reported in the paper"], loc="lower center",
+                       ncols=2, frameon=False, fontsize=7, bbox_to_anchor=(0.5, 0.0))
+            fig.tight_layout(rect=(0, 0.06, 1, 1))
+        else:
+            fig.tight_layout()
         if path is not None:
             save(fig, path)
         return fig
