@@ -302,7 +302,8 @@ class Simulation:
             "trials": np.tile(np.array(self.block_lengths), n),
         }
         for k in SUMMARY_COLUMNS[4:]:
-            out[k] = self.summary_arrays[k].reshape(-1)
+            v = self.summary_arrays[k].reshape(-1)
+            out[k] = v if k in ("cumulative_reward", "discounted_reward") else v.astype(np.int64)
         return pd.DataFrame(out, columns=list(SUMMARY_COLUMNS))
 
     def totals(self) -> pd.DataFrame:
