@@ -25,6 +25,8 @@ class DatabaseError(TrustseekError):
 
 
 def _sqlite_pragmas(dbapi_connection, _record) -> None:
+    # transactions are begun explicitly (see _sqlite_begin), not by the driver
+    dbapi_connection.isolation_level = None
     cur = dbapi_connection.cursor()
     cur.execute("PRAGMA journal_mode=WAL")
     cur.execute("PRAGMA synchronous=NORMAL")  # WAL + NORMAL: committed trials survive a killed process
@@ -33,11 +35,19 @@ def _sqlite_pragmas(dbapi_connection, _record) -> None:
     cur.close()
 
 
+def _sqlite_begin(conn) -> None:
+    """BEGIN IMMEDIATE: a transaction takes SQLite's write lock at its start, so concurrent
+    requests on one session serialize (the second sees the first's commit) instead of failing
+    with a stale snapshot."""
+    conn.exec_driver_sql("BEGIN IMMEDIATE")
+
+
 def make_engine(url: str) -> Engine:
     try:
         if url.startswith("sqlite"):
             engine = create_engine(url, connect_args={"check_same_thread": False, "timeout": 10}, pool_size=20, max_overflow=20)
             event.listen(engine, "connect", _sqlite_pragmas)
+            event.listen(engine, "begin", _sqlite_begin)
         else:
             engine = create_engine(url, pool_pre_ping=True, pool_size=20, max_overflow=20)
     except Exception as exc:  # noqa: BLE001 -- any driver or URL problem becomes one clear line

@@ -257,7 +257,8 @@ def submit_trial(
 ) -> tuple[Trial, bool]:
     """Commit trial ``n`` of a study session; returns (trial, duplicate)."""
     s = lock(db, session_id)
-    old = _existing(db, s, n)
+    # trials are committed in order together with trials_done, so trial n exists iff n <= trials_done
+    old = _existing(db, s, n) if n <= s.trials_done else None
     if old is not None:
         if old.submission_id == submission_id:
             db.rollback()
@@ -351,7 +352,8 @@ def deploy_decide(db: DBSession, session_id: str, n: int, complexity: str) -> di
     ctx = context(db, s)
     if complexity not in ctx.task.complexities:
         raise SessionError(400, f"complexity must be one of {list(ctx.task.complexities)}, got {complexity!r}")
-    old = _existing(db, s, n)
+    # trials are committed in order together with trials_done, so trial n exists iff n <= trials_done
+    old = _existing(db, s, n) if n <= s.trials_done else None
     if old is not None:
         if old.complexity != complexity:
             raise SessionError(409, f"trial {n} was committed with complexity {old.complexity!r}, not {complexity!r}")
@@ -374,7 +376,8 @@ def deploy_decide(db: DBSession, session_id: str, n: int, complexity: str) -> di
 
 def deploy_observe(db: DBSession, session_id: str, n: int, human_action: str | None, outcome: str | None) -> tuple[Trial, bool]:
     s = lock(db, session_id)
-    old = _existing(db, s, n)
+    # trials are committed in order together with trials_done, so trial n exists iff n <= trials_done
+    old = _existing(db, s, n) if n <= s.trials_done else None
     if old is not None:
         same_h = old.human_action == (human_action if human_action is not None or old.robot_action != "ask" else "intervene")
         same_o = outcome is None or old.outcome == outcome
