@@ -201,7 +201,7 @@ class PointSolver:
       r^(K-1), which is what limits the number of trust levels.
     """
 
-    def __init__(self, tol: float = 1e-3, max_seconds: float = 60.0, resolution: int | None = None, max_resolution: int | None = None, depth: int = 2, lower_lattice: int | None = None):
+    def __init__(self, tol: float = 1e-3, max_seconds: float = 60.0, resolution: int | None = None, max_resolution: int | None = None, depth: int = 2, lower_lattice: int | None = None, seed: int = 0):
         if not tol > 0:
             raise ValueError(f"tol must be positive, got {tol}")
         self.tol = float(tol)
@@ -209,6 +209,7 @@ class PointSolver:
         self.resolution = resolution
         self.max_resolution = max_resolution
         self.depth = int(depth)
+        self.seed = seed
         self.lower_lattice = lower_lattice  # beliefs of the lower bound: this lattice and the reachable set
 
     # -- successors of a set of beliefs ------------------------------------------
@@ -314,6 +315,28 @@ class PointSolver:
             out.append(front)
         return _unique_rows(np.vstack(out), K)
 
+    def _sampled(self, b0: np.ndarray, rng: np.random.Generator, trajectories: int = 8, length: int = 50) -> np.ndarray:
+        """Beliefs met along simulated trajectories from b0 (complexity and branch drawn with their
+        probabilities, actions greedy in the current lower bound): PBVI-style belief expansion."""
+        m = self.model
+        K, N = m.n_hidden, len(m.context_probs)
+        B = np.repeat(b0[None], trajectories, axis=0)
+        out = []
+        idx = np.arange(trajectories)
+        for _ in range(length):
+            S, p = self._successors(B)  # (n, N, A, Br, K)
+            c = rng.choice(N, size=trajectories, p=m.context_probs)
+            # greedy action of the one-step lookahead on the lower bound
+            lb = (S.reshape(-1, K) @ self.G.T).max(axis=1).reshape(p.shape)
+            qa = np.einsum("cat,nt->nca", m.rewards, B) + m.discount * (p * lb).sum(axis=-1)
+            a = qa[idx, c].argmax(axis=1)
+            pb = p[idx, c, a]  # (n, Br)
+            u = rng.random(trajectories)[:, None]
+            br = np.minimum((np.cumsum(pb, axis=1) / pb.sum(axis=1, keepdims=True) < u).sum(axis=1), pb.shape[1] - 1)
+            B = S[idx, c, a, br]
+            out.append(B)
+        return _unique_rows(np.vstack(out), K, decimals=9)
+
     # -- solve -------------------------------------------------------------------------
     def solve_bounds(self, model: BranchModel, initial: np.ndarray | None = None) -> PointSolution:
         t0 = time.perf_counter()
@@ -327,13 +350,14 @@ class PointSolver:
         r_max = self.max_resolution or {2: 4096, 3: 512, 4: 64}.get(K, 16)
         lat = self.lower_lattice or {2: 256, 3: 16, 4: 6}.get(K, 3)
         reach = self._reachable(b0, self.depth)
+        rng = np.random.default_rng(self.seed)
         history = []
         rounds = 0
         while True:
             rounds += 1
             V, u, lookup = self._upper(r)
             self.r, self.u, self.lookup, self.V = r, u, lookup, V
-            B = _unique_rows(np.vstack([_simplex_lattice(K, min(r, lat)), reach]), K)
+            B = _unique_rows(np.vstack([_simplex_lattice(K, min(r, lat)), reach, self._sampled(b0, rng)]), K)
             S, p = self._successors(B)
             self._improve_lower(B, S, p)
             lo = float(self.lower_at(b0)[0])

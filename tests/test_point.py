@@ -1,0 +1,139 @@
+"""Point-based solver: Freudenthal interpolation, bounds on known problems, agreement with alpha/grid."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import trustseek
+from trustseek import AssistancePOMDP, GridSolver
+from trustseek.alpha import AlphaSolver, AlphaVectorPolicy
+from trustseek.interop import read_pomdp
+from trustseek.model import Task, TrustModel
+from trustseek.point import BranchModel, PointSolver, _simplex_lattice, freudenthal_weights
+
+EXAMPLES = Path(trustseek.__file__).parent / "examples"
+
+TIGER = """discount: 0.95
+values: reward
+states: tiger-left tiger-right
+actions: listen open-left open-right
+observations: tiger-left tiger-right
+start: uniform
+T: listen
+identity
+T: open-left
+uniform
+T: open-right
+uniform
+O: listen
+0.85 0.15
+0.15 0.85
+O: open-left
+uniform
+O: open-right
+uniform
+R: listen : * : * : * -1
+R: open-left : tiger-left : * : * -100
+R: open-left : tiger-right : * : * 10
+R: open-right : tiger-left : * : * 10
+R: open-right : tiger-right : * : * -100
+"""
+
+
+@pytest.mark.parametrize("K,r", [(2, 7), (3, 5), (4, 3)])
+def test_freudenthal_weights_interpolate_linear_functions(rng, K, r):
+    B = rng.dirichlet(np.ones(K), size=300)
+    B = np.vstack([B, np.eye(K), _simplex_lattice(K, r)])
+    verts, w = freudenthal_weights(B, r)
+    assert np.all(w >= -1e-12) and np.allclose(w.sum(axis=1), 1.0)
+    # vertex coordinates back to beliefs: b_i = (v_i - v_{i+1}) / r
+    vb = (verts - np.concatenate([verts[..., 1:], np.zeros(verts.shape[:-1] + (1,), dtype=int)], axis=-1)) / r
+    rebuilt = np.einsum("nk,nkt->nt", w, vb)
+    assert np.allclose(rebuilt, B, atol=1e-12)
+    # every vertex with positive weight is a lattice point of the simplex
+    used = vb[w > 1e-12]
+    assert np.all(used >= -1e-12) and np.allclose(used.sum(axis=1), 1.0)
+
+
+def _tiger_grid_value(flat, G=4001, iters=2000):
+    """An independent belief-grid value iteration for two-state Tiger (linear interpolation)."""
+    x = np.linspace(0, 1, G)
+    b = np.stack([1 - x, x], axis=1)
+    r = flat.expected_reward
+    M = flat.branch_kernels
+    W = np.zeros(G)
+    for _ in range(iters):
+        q = []
+        for a in range(3):
+            v = b @ r[a]
+            for o in range(2):
+                nb = b @ M[a, o]
+                p = nb.sum(axis=1)
+                v = v + flat.discount * p * np.interp(nb[:, 1] / np.where(p > 0, p, 1), x, W)
+            q.append(v)
+        W_new = np.max(q, axis=0)
+        if np.max(np.abs(W_new - W)) < 1e-12:
+            break
+        W = W_new
+    return float(np.interp(0.5, x, W))
+
+
+def test_tiger_bounds_bracket_an_independent_grid_value():
+    flat = read_pomdp("tiger.pomdp", TIGER)
+    sol = PointSolver(tol=1e-4).solve_bounds(BranchModel.from_flat(flat))
+    assert sol.gap <= 1e-4
+    ref = _tiger_grid_value(flat)  # an upper bound (convex value), accurate to ~1e-5
+    assert sol.lower <= ref + 1e-9
+    assert ref == pytest.approx(sol.upper, abs=1e-4)
+    assert sol.lower == pytest.approx(19.3714, abs=1e-3)  # the published Tiger value (γ = 0.95)
+
+
+def test_paper_model_point_agrees_with_alpha_and_grid(pomdp):
+    pol = PointSolver(tol=1e-4).solve(pomdp)
+    assert isinstance(pol, AlphaVectorPolicy)
+    lo, hi = pol.info["value_bounds_at_initial_belief"]
+    assert hi - lo <= 1e-4
+    alpha = AlphaSolver(tol=1e-6).solve(pomdp)
+    a_lo, a_hi = alpha.info["value_bounds_at_initial_belief"]
+    assert lo <= a_hi + 1e-9 and a_lo <= hi + 1e-9  # the certified intervals intersect
+    grid = GridSolver(grid=2001).solve(pomdp)
+    th = {"point": pol.thresholds()["high"], "alpha": alpha.thresholds()["high"], "grid": grid.thresholds()["high"]}
+    assert max(th.values()) - min(th.values()) < 0.005
+    for b in (1.0, 0.5, 0.0):
+        vp, va, vg = pol.q_values(b).max(-1), alpha.q_values(b).max(-1), grid.q_values(b).max(-1)
+        assert np.all(np.abs(vp - va) < 1e-3) and np.all(np.abs(vg - va) < 1e-3)
+
+
+def test_lumped_three_level_model_has_the_two_level_value(model, task, pomdp):
+    """Split 'high' trust into two identical levels: the value from (0, 1/2, 1/2) must equal the
+    two-level value at b = 1 (the hidden chain is lumpable)."""
+    N = model.n_complexity
+    em = np.concatenate([model.emission, model.emission[:, :, 1:]], axis=2)  # high2 acts like high
+    tr2 = model.transition
+    tr3 = np.zeros((N, 2, 2, 3, 3))
+    for src, s2 in ((0, 0), (1, 1), (2, 1)):
+        tr3[..., src, 0] = tr2[..., s2, 0]
+        tr3[..., src, 1] = 0.5 * tr2[..., s2, 1]
+        tr3[..., src, 2] = 0.5 * tr2[..., s2, 1]
+    m3 = TrustModel(("low", "high", "high2"), model.complexities, np.array([0.0, 0.5, 0.5]), em, tr3)
+    sol = PointSolver(tol=1e-3).solve_bounds(BranchModel.from_assistance(AssistancePOMDP(m3, task)))
+    ref = AlphaSolver(tol=1e-6).solve_bounds(pomdp)
+    v = float(ref.q_values(pomdp, np.array(1.0)).max(axis=-1) @ task.complexity_probs)
+    assert sol.gap <= 1e-3
+    assert sol.lower - 1e-6 <= v <= sol.upper + 1e-6
+
+
+def test_three_level_example_solves_with_reported_gap():
+    m = TrustModel.load(EXAMPLES / "three_level_model.json")
+    t = Task.load(EXAMPLES / "three_level_task.json")
+    assert m.trust_levels == ("low", "medium", "high")
+    pol = PointSolver(tol=1e-3).solve(AssistancePOMDP(m, t))
+    lo, hi = pol.info["value_bounds_at_initial_belief"]
+    assert 0 <= hi - lo <= 1e-3 and pol.info["certified_gap"] == pytest.approx(hi - lo)
+    # sensible behaviour: never ask in low complexity at high trust; ask in high complexity at low trust
+    assert pol.action(np.array([0.0, 0.0, 1.0]), "low") == 0
+    assert pol.action(np.array([1.0, 0.0, 0.0]), "high") == 1
+    assert pol.action(np.array([0.0, 0.0, 1.0]), "high") == 0
+    # the lower bound at b0 is the value of the greedy vectors
+    assert pol.value(m.initial) == pytest.approx(lo, abs=1e-9)
