@@ -24,12 +24,14 @@ def plot_q(policy, path=None, title: str | None = None):
             th = thresholds[cn]
             if th is not None and np.isfinite(th) and 0 < th < 1:
                 ax.axvline(th, color="0.3", lw=0.8, ls=":")
-                ymin, ymax = ax.get_ylim()
+                right = th > 0.6
                 ax.annotate(
                     f"threshold {th:.3f}",
-                    xy=(th, ymin + 0.1 * (ymax - ymin)),
-                    xytext=(6, 0),
+                    xy=(th, 0.04),
+                    xycoords=("data", "axes fraction"),
+                    xytext=(-4 if right else 4, 0),
                     textcoords="offset points",
+                    ha="right" if right else "left",
                     fontsize=7,
                     color="0.25",
                 )
@@ -37,9 +39,10 @@ def plot_q(policy, path=None, title: str | None = None):
             ax.set_xlabel(r"belief $b^T = P(T = \mathrm{high})$")
             ax.set_ylabel(r"$Q(b^T, C, a)$")
             ax.set_title(f"complexity {cn}")
-            ax.legend(loc="upper left", frameon=False)
+        handles, labels = axes[0, 0].get_legend_handles_labels()
+        fig.legend(handles, labels, loc="lower center", ncol=2, frameon=False, bbox_to_anchor=(0.5, -0.02))
         fig.suptitle(title or f"Action-value functions (belief update: {policy.belief_update})", fontsize=9)
-        fig.tight_layout()
+        fig.tight_layout(rect=(0, 0.07, 1, 1))
         if path is not None:
             save(fig, path)
         return fig
