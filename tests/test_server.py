@@ -363,3 +363,23 @@ def test_concurrent_duplicate_submissions_store_one_trial(tmp_path):
         assert sorted(r.status_code for r in other) == [200] + [409] * 7
         frame = pd.read_csv(io.BytesIO(c.export(st["id"])))
     assert frame["trial"].tolist() == [1, 2]
+
+
+def test_migrations_render_for_postgresql():
+    """The same migrations produce PostgreSQL DDL (rendered offline, no server needed)."""
+    from trustseek.server.db import offline_sql
+
+    sql = offline_sql("postgresql://user:pw@localhost/study")
+    for table in ("studies", "policies", "sessions", "trials", "reports", "events", "alembic_version"):
+        assert f"CREATE TABLE {table}" in sql
+    assert "CONSTRAINT uq_trial_session_number UNIQUE (session_id, trial)" in sql
+    assert "id SERIAL NOT NULL" in sql and "JSON NOT NULL" in sql
+
+
+def test_database_errors_are_one_clear_line_without_the_password():
+    from trustseek.server.db import DatabaseError
+
+    with pytest.raises(DatabaseError) as ei:
+        create_app("postgresql://user:hunter2@127.0.0.1:1/study", token=TOKEN)
+    (line,) = ei.value.lines()
+    assert "hunter2" not in line and "cannot" in line

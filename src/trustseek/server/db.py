@@ -10,7 +10,7 @@ from pathlib import Path
 
 from alembic import command
 from alembic.config import Config
-from sqlalchemy import create_engine, event
+from sqlalchemy import create_engine, event, make_url
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import sessionmaker
 
@@ -51,7 +51,7 @@ def make_engine(url: str) -> Engine:
         else:
             engine = create_engine(url, pool_pre_ping=True, pool_size=20, max_overflow=20)
     except Exception as exc:  # noqa: BLE001 -- any driver or URL problem becomes one clear line
-        raise DatabaseError([f"cannot use database URL {url!r}: {exc}"]) from None
+        raise DatabaseError([f"cannot use database URL {_safe(url)!r}: {_first_line(exc)}"]) from None
     return engine
 
 
@@ -64,7 +64,30 @@ def migrate(engine: Engine) -> None:
             cfg.attributes["connection"] = conn
             command.upgrade(cfg, "head")
     except Exception as exc:  # noqa: BLE001
-        raise DatabaseError([f"cannot migrate database {engine.url.render_as_string(hide_password=True)}: {exc}"]) from None
+        raise DatabaseError([f"cannot migrate database {engine.url.render_as_string(hide_password=True)}: {_first_line(exc)}"]) from None
+
+
+def _safe(url: str) -> str:
+    try:
+        return make_url(url).render_as_string(hide_password=True)
+    except Exception:  # noqa: BLE001
+        return url.split("@")[-1]
+
+
+def _first_line(exc: Exception) -> str:
+    return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+
+
+def offline_sql(url: str) -> str:
+    """The migration SQL for a database URL's dialect, without connecting (``alembic --sql``)."""
+    import io
+
+    buf = io.StringIO()
+    cfg = Config(output_buffer=buf)
+    cfg.set_main_option("script_location", str(MIGRATIONS))
+    cfg.set_main_option("sqlalchemy.url", url)
+    command.upgrade(cfg, "head", sql=True)
+    return buf.getvalue()
 
 
 def open_database(url: str = DEFAULT_URL) -> sessionmaker:
