@@ -264,3 +264,22 @@ def test_bad_inputs_are_reported(task, model):
         Supervisors.dirichlet(model, 3, concentration=0.0)
     with pytest.raises(SimulationError, match="did not record"):
         simulate(model, task, never_ask(), 3, trials=4, record=False).trials()
+
+
+def test_non_threshold_policy_goes_through_policy_actions(task):
+    """A trust-aware policy whose ask region is not [0, θ) (here: asks only for beliefs in
+    (0.3, 0.6) in high complexity) is applied through ``policy.actions`` unchanged."""
+    from trustseek.policy import TrustAwarePolicy
+
+    model = paper_model()
+    grid = np.linspace(0, 1, 101)
+    q = np.zeros((101, 2, 2))
+    q[:, 1, ASK] = np.where((grid > 0.3) & (grid < 0.6), 1.0, -1.0)
+    policy = TrustAwarePolicy(grid, q, model, task.complexities, "bayes")
+    assert threshold_form(policy) is None
+    sim = simulate(model, task, policy, n_participants=3000, trials=30, seed=8)
+    a = sim.arrays
+    b = a["belief"].reshape(-1)
+    np.testing.assert_array_equal(policy.actions(np.stack([1 - b, b], 1), a["complexity"].reshape(-1).astype(int)), a["action"].reshape(-1))
+    asked = a["action"].reshape(-1) == ASK
+    assert asked.any() and np.all((b[asked] > 0.29) & (b[asked] < 0.61))
