@@ -28,6 +28,7 @@ FIGURES = [
     ("fig8_rewards.png", "experiment2", "Fig. 8 equivalent: cumulative reward per block and policy; (a) the paper-sized experiment, lines join each participant's two blocks; (b) the large-N experiment. Diamonds: the paper's medians."),
     ("replicates.png", "replicates", "Distributions over replicate experiments of the estimated threshold and of the aware − agnostic reward difference."),
     ("policies.png", "costs", "Mean cumulative reward per block of each policy on the same simulated participants."),
+    ("remark1.png", "remark1", "Remark 1: heterogeneous supervisors by quartile of conservativeness, under the pooled trust-aware and trust-agnostic policies."),
 ]
 
 
@@ -58,7 +59,7 @@ def make_figures(rep: Reproduction, out: Path) -> list[Path]:
     """Write the PNG figures into ``out``; returns their paths."""
     from .plots.model import plot_emissions, plot_transitions
     from .plots.q import plot_q
-    from .plots.rewards import plot_policy_values, plot_replicates, plot_rewards
+    from .plots.rewards import plot_heterogeneity, plot_policy_values, plot_replicates, plot_rewards
 
     s = rep.summary
     paper = paper_model()
@@ -95,6 +96,9 @@ def make_figures(rep: Reproduction, out: Path) -> list[Path]:
     paths.append(p)
     p = out / "policies.png"
     plot_policy_values(s["costs"]["rows"], p, title=f"{s['costs']['participants']:,} simulated participants, one block of {s['costs']['trials_per_block']} trials")
+    paths.append(p)
+    p = out / "remark1.png"
+    plot_heterogeneity(s["heterogeneity"]["quartiles"], p)
     paths.append(p)
     return paths
 

@@ -171,3 +171,38 @@ def plot_policy_values(rows: Sequence[Mapping], path=None, title: str | None = N
         if path is not None:
             save(fig, path)
         return fig
+
+
+def plot_heterogeneity(quartiles: Sequence[Mapping], path=None, score: str = ""):
+    """Remark 1: mean reward and interventions per policy, by quartile of how conservative the
+    simulated individuals are (1 = least)."""
+    q = [r["quartile"] for r in quartiles]
+    x = np.arange(len(q))
+    w = 0.36
+    with style() as plt:
+        fig, axes = plt.subplots(1, 2, figsize=(6.8, 2.5))
+        for ax, (ka, kg, ylabel) in zip(axes, [("mean_aware", "mean_agnostic", "mean cumulative reward per block"),
+                                               ("interventions_aware", "interventions_agnostic", "interventions per block")]):
+            va = [r[ka] for r in quartiles]
+            vg = [r[kg] for r in quartiles]
+            if ka == "mean_aware":  # levels close together: points, not bars on a cut axis
+                ax.plot(x, vg, marker="s", ms=4, color=POLICY_COLORS["trust-agnostic"], label="trust-agnostic")
+                ax.plot(x, va, marker="o", ms=4, color=POLICY_COLORS["trust-aware"], label="trust-aware")
+            else:
+                ax.bar(x - w / 2, vg, w, color=POLICY_COLORS["trust-agnostic"], alpha=0.6, label="trust-agnostic")
+                ax.bar(x + w / 2, va, w, color=POLICY_COLORS["trust-aware"], alpha=0.7, label="trust-aware")
+            ax.set_xticks(x, [f"Q{k}" for k in q])
+            ax.set_xlabel("conservativeness quartile (Q4 = most)")
+            ax.set_ylabel(ylabel)
+            ax.grid(axis="x", visible=False)
+            if ka == "mean_aware":
+                lo = min(min(va), min(vg))
+                hi = max(max(va), max(vg))
+                pad = max(0.3, 0.3 * (hi - lo))
+                ax.set_ylim(lo - pad, hi + pad)
+        axes[0].legend(frameon=False, loc="upper right", fontsize=7)
+        fig.suptitle("Heterogeneous supervisors under the pooled policies (Remark 1)", fontsize=9)
+        fig.tight_layout()
+        if path is not None:
+            save(fig, path)
+        return fig
