@@ -70,47 +70,37 @@ def envelope(vecs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     Returns (idx, xs): indices of the lines on the envelope ordered by increasing x,
     and the breakpoints xs (len(idx) + 1, from 0 to 1); line idx[i] is the maximum on
-    [xs[i], xs[i + 1]].
+    [xs[i], xs[i + 1]].  Vectorized: lines sorted by slope, then lines that lie below
+    their two neighbours (they cross the previous one after the next one) are removed
+    in passes until none is left; lines active only outside [0, 1] are cut off.
     """
     v0 = vecs[:, 0]
     s = vecs[:, 1] - vecs[:, 0]
     order = np.lexsort((-v0, s))
-    hull: list[int] = []
-    starts: list[float] = []
-    last_slope = None
-    for i in order:
-        i = int(i)
-        si = s[i]
-        if last_slope is not None and si == last_slope:
-            continue  # same slope, lower intercept (sorted)
-        while hull:
-            j = hull[-1]
-            x = (v0[j] - v0[i]) / (si - s[j])  # where line i overtakes line j
-            if x <= starts[-1] + _WIDTH_EPS:
-                hull.pop()
-                starts.pop()
-                continue
-            break
-        if hull:
-            j = hull[-1]
-            x = (v0[j] - v0[i]) / (si - s[j])
-            if x >= 1.0 - _WIDTH_EPS:
-                continue  # never above the envelope on [0, 1]
-            start = x
-        else:
-            start = 0.0
-        hull.append(i)
-        starts.append(start)
-        last_slope = si
-    xs = np.array(starts + [1.0])
-    xs[0] = 0.0
-    return np.array(hull, dtype=np.int64), xs
+    keep = np.concatenate([[True], s[order][1:] != s[order][:-1]])  # one line per slope: the highest
+    idx = order[keep]
+    while True:
+        a, b = v0[idx], s[idx]
+        if len(idx) == 1:
+            return idx, np.array([0.0, 1.0])
+        x = (a[:-1] - a[1:]) / (b[1:] - b[:-1])  # where line k+1 overtakes line k
+        # cut lines that are active only left of 0 or right of 1
+        first = int(np.argmax(x > _WIDTH_EPS)) if np.any(x > _WIDTH_EPS) else len(x)
+        last = int(len(x) - np.argmax((x < 1 - _WIDTH_EPS)[::-1])) if np.any(x < 1 - _WIDTH_EPS) else 0
+        if first > 0 or last < len(x):
+            idx = idx[first : last + 1]
+            continue
+        bad = np.zeros(len(idx), dtype=bool)
+        bad[1:-1] = x[:-1] >= x[1:] - _WIDTH_EPS
+        if not np.any(bad):
+            return idx, np.concatenate([[0.0], x, [1.0]])
+        idx = idx[~bad]
 
 
 def envelope_values(vecs: np.ndarray, xs: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Evaluate an envelope (vectors in order, breakpoints xs) at points x."""
     x = np.asarray(x, dtype=float)
-    i = np.clip(np.searchsorted(xs, x, side="right") - 1, 0, len(vecs) - 1)
+    i = np.searchsorted(xs[1:-1], x, side="right")
     return vecs[i, 0] * (1 - x) + vecs[i, 1] * x
 
 
@@ -124,9 +114,7 @@ def _cross_sum(xs1: np.ndarray, xs2: np.ndarray):
     if len(u) < 2:
         u = np.array([0.0, 1.0])
     mids = 0.5 * (u[:-1] + u[1:])
-    i1 = np.clip(np.searchsorted(xs1, mids, side="right") - 1, 0, len(xs1) - 2)
-    i2 = np.clip(np.searchsorted(xs2, mids, side="right") - 1, 0, len(xs2) - 2)
-    return u, i1, i2
+    return u, _active(xs1, mids), _active(xs2, mids)
 
 
 @dataclass
@@ -175,7 +163,8 @@ def _project(vecs: np.ndarray, xs: np.ndarray, M: np.ndarray):
 
 
 def _active(xs: np.ndarray, x: np.ndarray) -> np.ndarray:
-    return np.clip(np.searchsorted(xs, x, side="right") - 1, 0, len(xs) - 2)
+    """Index of the piece of breakpoints xs (xs[0] = 0, xs[-1] = 1) that contains each x."""
+    return np.searchsorted(xs[1:-1], x, side="right")
 
 
 def max_of(v1, xs1, v2, xs2):
@@ -302,6 +291,8 @@ def evaluate_controller(
     P = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(size, size))
     A = sp.identity(size, format="csr") - P
     b = rhs.reshape(-1)
+    if size <= 600:
+        return np.asarray(spla.spsolve(A.tocsc(), b)).reshape(n, k)
     scale = max(1.0, float(np.max(np.abs(b))))
     x0 = None if guess is None else guess.reshape(-1)
     x, info = spla.bicgstab(A, b, x0=x0, rtol=rtol, atol=min(rtol, 1e-12) * scale, maxiter=5000)
