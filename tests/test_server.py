@@ -383,3 +383,22 @@ def test_database_errors_are_one_clear_line_without_the_password():
         create_app("postgresql://user:hunter2@127.0.0.1:1/study", token=TOKEN)
     (line,) = ei.value.lines()
     assert "hunter2" not in line and "cannot" in line
+
+
+def test_self_reports_per_trial(client):
+    st = study(client, self_report="trial", blocks=[{"policy": {"kind": "never-ask"}, "schedule": {"trials": ["low", "high", "low"]}}])
+    sid, ph = participant(client, st["id"])
+    assert start(client, sid, ph)["report_due"] is None
+    for n in (1, 2, 3):
+        s = submit(client, sid, ph, n, "rely").json()["state"]
+        assert s["report_due"] == n
+        s = client.post(f"/api/sessions/{sid}/reports", json={"after_trial": n, "value": 10 * n}, headers=ph).json()["state"]
+        assert s["report_due"] is None
+    assert s["status"] == "done"
+    assert export(client, st["id"])["self_report"].tolist() == [10.0, 20.0, 30.0]
+    none = study(client)
+    sid2, ph2 = participant(client, none["id"])
+    start(client, sid2, ph2)
+    submit(client, sid2, ph2, 1, "rely")
+    r = client.post(f"/api/sessions/{sid2}/reports", json={"after_trial": 1, "value": 50}, headers=ph2)
+    assert r.status_code == 409 and "no trust self-reports" in r.text

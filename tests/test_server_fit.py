@@ -31,7 +31,7 @@ def test_exported_study_is_fitted(tmp_path):
             ph = {"Authorization": f"Bearer {s['token']}"}
             base = f"/api/sessions/{s['session_id']}"
             c.post(f"{base}/consent", json={"agree": True}, headers=ph)
-            trust = 1
+            trust = int(rng.random() < 0.5)  # some supervisors start with low trust
             for n in range(1, 21):
                 cur = c.get(f"{base}/state", headers=ph).json()["current"]
                 cx = 0 if cur["complexity"] == "low" else 1
@@ -52,5 +52,5 @@ def test_exported_study_is_fitted(tmp_path):
     assert res.exit_code == 0, res.output
     assert "80 trials" in json.loads(res.output)["model"]["notes"]
     fit = fit_trust_model(frame, restarts=2, seed=0)
-    assert np.isfinite(fit.loglik) and fit.loglik < 0
+    assert np.isfinite(fit.loglik) and fit.loglik < -1.0  # the data hold interventions: not a perfect fit
     assert fit.counts["emission"].sum() > 0
