@@ -12,7 +12,6 @@
 
 from __future__ import annotations
 
-import math
 import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -21,7 +20,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from .data import DEFAULT_COMPLEXITIES, read_trials
+from .data import DEFAULT_COMPLEXITIES
 from .iohmm import (
     MIN_EVENTS,
     FitError,
@@ -482,8 +481,6 @@ def select_levels(
     **spec_options: Any,
 ) -> list[dict[str, Any]]:
     """Compare numbers of trust levels: BIC on all data and k-fold participant-held-out log-likelihood."""
-    from .iohmm import loglik as _loglik
-
     base = preset_spec("paper", frame, prior=prior, **spec_options)
     seqs0 = encode(frame, base)
     N = seqs0.n_participants

@@ -1024,7 +1024,7 @@ def fit_iohmm(
     return IOHMMFit(spec, structure, seqs, p.permuted(perm), runs[best].loglik, runs[best].objective, runs, best)
 
 
-def loglik(seqs: Sequences, spec: IOHMMSpec, params: Params, structure: Structure | None = None) -> float:
+def loglik(seqs: Sequences, spec: IOHMMSpec, params: Params) -> float:
     """Log-likelihood of ``seqs`` under ``params`` (forward pass only)."""
     K, M = spec.n_levels, len(spec.output_categories)
     Ue, Ut = params.emission.shape[0], params.transition.shape[0]
