@@ -331,9 +331,12 @@ def comparison_rows(summary: dict) -> list[dict]:
         kind = "replicates 95%"
         if interval is None and key in boot:
             interval, kind = tuple(boot[key]), "bootstrap 95%"
-        note = ""
+        notes = []
+        if interval is not None and interval[1] - interval[0] > 0.8:
+            notes.append("not identified by a 9 × 71 sample (the range spans most of [0, 1])")
         if key in boot:
-            note = f"bootstrap 95% [{boot[key][0]:.3f}, {boot[key][1]:.3f}]"
+            notes.append(f"bootstrap 95% [{boot[key][0]:.3f}, {boot[key][1]:.3f}]")
+        note = "; ".join(notes)
         rows.append(_row(label, paper_val, fitted[key], interval, kind, note))
     plan = summary["plan"]
     th = summary["replicates"]["threshold"]
