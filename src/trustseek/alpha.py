@@ -245,6 +245,26 @@ def exact_backup(pomdp: AssistancePOMDP, vecs: np.ndarray, xs: np.ndarray | None
     return Backup(w_vecs, w_xs, w_act.astype(np.int64), w_succ, q_env)
 
 
+def thin(vecs: np.ndarray, xs: np.ndarray, eta: float) -> tuple[np.ndarray, np.ndarray]:
+    """Drop envelope lines whose removal lowers the envelope by less than ``eta`` (never two
+    neighbours at once).  The result is below the input by at most ``eta``: still a lower bound."""
+    if len(vecs) < 3 or eta <= 0:
+        return vecs, xs
+    a = vecs[:, 0]
+    b = vecs[:, 1] - vecs[:, 0]
+    x = (a[:-2] - a[2:]) / (b[2:] - b[:-2])  # where the neighbours of line k meet
+    err = (a[1:-1] + b[1:-1] * x) - (a[:-2] + b[:-2] * x)
+    drop = np.zeros(len(vecs), dtype=bool)
+    drop[1:-1] = (err < eta) & (np.arange(1, len(vecs) - 1) % 2 == 0)
+    if not np.any(drop):
+        return vecs, xs
+    keep = ~drop
+    nv = vecs[keep]
+    a, b = nv[:, 0], nv[:, 1] - nv[:, 0]
+    nxs = np.concatenate([[0.0], (a[:-1] - a[1:]) / (b[1:] - b[:-1]), [1.0]])
+    return nv, nxs
+
+
 def sup_difference(v1, xs1, v2, xs2) -> float:
     """sup over [0, 1] of env1(x) - env2(x) (both piecewise linear: attained at a breakpoint)."""
     pts = np.union1d(xs1, xs2)
@@ -288,17 +308,57 @@ def evaluate_controller(
                 cols.append(cc.ravel())
                 vals.append((gamma * pc[c] * M).ravel())
     size = n * k
-    P = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(size, size))
+    rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+    if size <= 200:  # small: dense
+        D = np.eye(size)
+        np.add.at(D, (rows, cols), -vals)
+        return np.linalg.solve(D, rhs.reshape(-1)).reshape(n, k)
+    P = sp.csr_matrix((vals, (rows, cols)), shape=(size, size))
     A = sp.identity(size, format="csr") - P
     b = rhs.reshape(-1)
     if size <= 600:
         return np.asarray(spla.spsolve(A.tocsc(), b)).reshape(n, k)
     scale = max(1.0, float(np.max(np.abs(b))))
-    x0 = None if guess is None else guess.reshape(-1)
-    x, info = spla.bicgstab(A, b, x0=x0, rtol=rtol, atol=min(rtol, 1e-12) * scale, maxiter=5000)
-    if info != 0 or not np.all(np.isfinite(x)) or np.max(np.abs(A @ x - b)) > max(1e-10, 10 * rtol) * scale:
+    x0 = np.zeros(size) if guess is None else guess.reshape(-1).astype(float)
+    x = _bicgstab(lambda y: y - P @ y, b, x0, max(rtol, 1e-15) * scale * np.sqrt(size), 2000)
+    if not np.all(np.isfinite(x)) or np.max(np.abs(A @ x - b)) > max(1e-10, 10 * rtol) * scale:
         x = spla.spsolve(A.tocsc(), b)
     return np.asarray(x).reshape(n, k)
+
+
+def _bicgstab(matvec, b: np.ndarray, x: np.ndarray, tol: float, maxiter: int) -> np.ndarray:
+    """Plain BiCGSTAB (van der Vorst) on a matvec; stops when ‖b - A x‖₂ <= tol."""
+    r = b - matvec(x)
+    rhat = r.copy()
+    rho = alpha = omega = 1.0
+    v = p = np.zeros_like(b)
+    for _ in range(maxiter):
+        if np.sqrt(r @ r) <= tol:
+            break
+        rho_new = rhat @ r
+        if rho_new == 0.0:
+            break
+        beta = (rho_new / rho) * (alpha / omega)
+        p = r + beta * (p - omega * v)
+        v = matvec(p)
+        den = rhat @ v
+        if den == 0.0:
+            break
+        alpha = rho_new / den
+        s = r - alpha * v
+        if np.sqrt(s @ s) <= tol:
+            x = x + alpha * p
+            break
+        t = matvec(s)
+        tt = t @ t
+        if tt == 0.0:
+            x = x + alpha * p
+            break
+        omega = (t @ s) / tt
+        x = x + alpha * p + omega * s
+        r = s - omega * t
+        rho = rho_new
+    return x
 
 
 def _one_node_controllers(pomdp: AssistancePOMDP, limit: int = 64) -> np.ndarray:
@@ -452,6 +512,7 @@ class AlphaSolver:
         upper_grid: int = 201,
         grid: int = 2001,
         max_grid: int = 200_001,
+        thin: float = 0.05,
     ):
         if belief_update not in BELIEF_UPDATES:
             raise ValueError(f"unknown belief update {belief_update!r}; expected one of {list(BELIEF_UPDATES)}")
@@ -466,6 +527,7 @@ class AlphaSolver:
         self.upper_grid = int(upper_grid)
         self.grid = int(grid)
         self.max_grid = int(max_grid)
+        self.thin = float(thin)  # lines worth less than thin * tol * (1 - γ) are dropped from L
 
     def _check(self, pomdp: AssistancePOMDP) -> None:
         if pomdp.n_trust != 2:
@@ -496,7 +558,9 @@ class AlphaSolver:
         history: list[float] = []
         it = 0
         gap = np.inf
+        eta = self.thin * self.tol * (1 - gamma)
         while True:
+            vecs, xs = thin(vecs, xs, eta)
             bk = exact_backup(pomdp, vecs, xs)
             delta = max(0.0, sup_difference(bk.vectors, bk.xs, vecs, xs))
             # L is made of policy values, so T L >= L up to rounding; measure the rounding too
