@@ -325,6 +325,8 @@ def comparison_rows(summary: dict) -> list[dict]:
     fitted = summary["fit"]["values"]
     boot = summary["fit"].get("bootstrap_ci") or {}
     reps = summary["replicates"]["params"]
+    cfg = summary["config"]
+    design = f"{cfg['participants_1']} × {sum(cfg['counts_1'])}"
     for key, label, paper_val, _, _ in _param_specs():
         rep = reps.get(key)
         interval = (rep["p2.5"], rep["p97.5"]) if rep and rep["n"] else None
@@ -333,7 +335,7 @@ def comparison_rows(summary: dict) -> list[dict]:
             interval, kind = tuple(boot[key]), "bootstrap 95%"
         notes = []
         if interval is not None and interval[1] - interval[0] > 0.8:
-            notes.append("not identified by a 9 × 71 sample (the range spans most of [0, 1])")
+            notes.append(f"not identified by a {design} sample (the range spans most of [0, 1])")
         if key in boot:
             notes.append(f"bootstrap 95% [{boot[key][0]:.3f}, {boot[key][1]:.3f}]")
         note = "; ".join(notes)
