@@ -15,6 +15,9 @@ think time, post the human action and outcome (``observe``).  Reported:
 from __future__ import annotations
 
 import argparse
+import http.client
+import json
+import os
 import sqlite3
 import sys
 import tempfile
@@ -22,7 +25,6 @@ import threading
 import time
 from pathlib import Path
 
-import httpx
 import numpy as np
 
 from trustseek.server.local import free_port, serve_process
@@ -30,45 +32,62 @@ from trustseek.server.local import free_port, serve_process
 TOKEN = "bench-token-0123456789"
 
 
-def run_session(url: str, info: dict, trials: int, think: float, seed: int, lat: list, srv: list, start: threading.Barrier) -> None:
+class Conn:
+    """A keep-alive loopback connection (the standard library's client: little overhead of its
+    own, so the latency measured is the server's plus the network stack's)."""
+
+    def __init__(self, port: int, token: str):
+        self.c = http.client.HTTPConnection("127.0.0.1", port, timeout=60)
+        self.h = {"Authorization": f"Bearer {token}", "Content-Type": "application/json"}
+
+    def post(self, path: str, body: dict) -> tuple[int, dict, str | None]:
+        self.c.request("POST", path, body=json.dumps(body), headers=self.h)
+        r = self.c.getresponse()
+        data = json.loads(r.read() or b"{}")
+        return r.status, data, r.getheader("server-timing")
+
+
+def run_session(port: int, info: dict, trials: int, think: float, seed: int, lat: list, srv: list, start: threading.Barrier) -> None:
     """One simulated robot: its own connection, trials paced by a think time."""
     rng = np.random.default_rng(seed)
-    sid, h = info["session_id"], {"Authorization": f"Bearer {info['token']}"}
-    with httpx.Client(base_url=url, timeout=60) as http:
-        http.get("/api/health")  # open the connection before the clock starts
-        start.wait()
+    sid = info["session_id"]
+    conn = Conn(port, info["token"])
+    conn.c.connect()
+    start.wait()
+    if think:
+        time.sleep(rng.uniform(0, 2) * think)  # sessions do not start in lockstep
+    for n in range(1, trials + 1):
+        cx = "high" if rng.random() < 0.5 else "low"
+        t0 = time.perf_counter()
+        status, out, timing = conn.post(f"/api/deploy/sessions/{sid}/decide", {"trial": n, "complexity": cx})
+        lat.append(time.perf_counter() - t0)
+        if status >= 400:
+            raise RuntimeError(f"decide failed: {status} {out}")
+        srv.append(float(timing.split("dur=")[1]) / 1000)
         if think:
-            time.sleep(rng.uniform(0, 2) * think)  # sessions do not start in lockstep
-        for n in range(1, trials + 1):
-            cx = "high" if rng.random() < 0.5 else "low"
-            t0 = time.perf_counter()
-            r = http.post(f"/api/deploy/sessions/{sid}/decide", json={"trial": n, "complexity": cx}, headers=h)
-            if r.status_code >= 400:
-                raise RuntimeError(f"decide failed: {r.status_code} {r.text}")
-            lat.append(time.perf_counter() - t0)
-            srv.append(float(r.headers["server-timing"].split("dur=")[1]) / 1000)
-            action = r.json()["robot_action"]
-            if think:
-                time.sleep(rng.uniform(0.5, 1.5) * think)
-            if action == "ask":
-                body = {"trial": n}
-            else:
-                human = "intervene" if rng.random() < 0.1 else "rely"
-                body = {"trial": n, "human_action": human, "outcome": None if human == "intervene" else ("success" if rng.random() < 0.9 else "failure")}
-            r = http.post(f"/api/deploy/sessions/{sid}/observe", json=body, headers=h)
-            if r.status_code >= 400:
-                raise RuntimeError(f"observe failed: {r.status_code} {r.text}")
-            if think:
-                time.sleep(rng.uniform(0.5, 1.5) * think)
+            time.sleep(rng.uniform(0.5, 1.5) * think)
+        if out["robot_action"] == "ask":
+            body = {"trial": n}
+        else:
+            human = "intervene" if rng.random() < 0.1 else "rely"
+            body = {"trial": n, "human_action": human, "outcome": None if human == "intervene" else ("success" if rng.random() < 0.9 else "failure")}
+        status, out, _ = conn.post(f"/api/deploy/sessions/{sid}/observe", body)
+        if status >= 400:
+            raise RuntimeError(f"observe failed: {status} {out}")
+        if think:
+            time.sleep(rng.uniform(0.5, 1.5) * think)
+    conn.c.close()
 
 
-def load(url: str, sessions: int, trials: int, think: float, policy: dict) -> tuple[list, list, float, list]:
-    with httpx.Client(base_url=url, timeout=60) as http:
-        infos = []
-        for i in range(sessions):
-            r = http.post("/api/deploy/sessions", json={"label": f"robot-{i}", "policy": policy, "seed": i}, headers={"Authorization": f"Bearer {TOKEN}"})
-            r.raise_for_status()
-            infos.append(r.json())
+def load(port: int, sessions: int, trials: int, think: float, policy: dict) -> tuple[list, list, float, list]:
+    admin = Conn(port, TOKEN)
+    infos = []
+    for i in range(sessions):
+        status, out, _ = admin.post("/api/deploy/sessions", {"label": f"robot-{i}", "policy": policy, "seed": i})
+        if status != 201:
+            raise RuntimeError(f"opening a session failed: {status} {out}")
+        infos.append(out)
+    admin.c.close()
     lat: list[float] = []
     srv: list[float] = []
     errors: list[BaseException] = []
@@ -76,7 +95,7 @@ def load(url: str, sessions: int, trials: int, think: float, policy: dict) -> tu
 
     def target(i, info):
         try:
-            run_session(url, info, trials, think, i, lat, srv, start)
+            run_session(port, info, trials, think, i, lat, srv, start)
         except BaseException as exc:  # reported after the run
             errors.append(exc)
             start.abort()
@@ -110,11 +129,10 @@ def main(argv: list[str] | None = None) -> int:
         port = free_port()
         proc = serve_process(f"sqlite:///{db}", TOKEN, port)
         try:
-            url = f"http://127.0.0.1:{port}"
             t = time.perf_counter()
-            base_lat, base_srv, _, base_ids = load(url, 1, 50, 0.0, policy)
+            base_lat, base_srv, _, base_ids = load(port, 1, 50, 0.0, policy)
             print(f"  (baseline took {time.perf_counter() - t:.1f} s)", flush=True)
-            lat, srv, wall, ids = load(url, args.sessions, args.trials, args.think_ms / 1000, policy)
+            lat, srv, wall, ids = load(port, args.sessions, args.trials, args.think_ms / 1000, policy)
         finally:
             proc.terminate()
             proc.wait(timeout=10)
@@ -135,6 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  p99 under load / baseline: client {pct(lat, 99) / pct(base_lat, 99):.2f}x, server {pct(srv, 99) / pct(base_srv, 99):.2f}x;  target p99 < 10 ms: "
           f"{'met' if pct(lat, 99) < 10 else 'NOT met'} (client round trip)")
     print(f"  throughput {2 * total / wall:.0f} requests/s ({total} trials in {wall:.1f} s)")
+    print(f"  machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f} at the end of the run (other processes share the cores)")
     print(f"  trials stored: {sum(len(v) for v in per_session.values())} of {total}; duplicates {dup}; every session complete and in order: {complete}")
     return 0 if complete and dup == 0 and sum(len(v) for v in per_session.values()) == total else 1
 
