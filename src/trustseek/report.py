@@ -92,6 +92,7 @@ def make_figures(rep: Reproduction, out: Path) -> list[Path]:
         paper_threshold=PAPER["threshold_high"],
         true_threshold=s["plan"]["true_model"]["thresholds"]["high"],
         paper_difference=PAPER["median_aware"] - PAPER["median_agnostic"],
+        design=f"{s['config']['participants_1']} × {sum(s['config']['counts_1'])}",
     )
     paths.append(p)
     p = out / "policies.png"

@@ -97,6 +97,7 @@ def plot_replicates(
     paper_threshold: float = 0.75,
     true_threshold: float | None = None,
     paper_difference: float = 6.0,
+    design: str = "9 × 71",
 ):
     """Distributions over replicate experiments: (a) the estimated ask threshold in high
     complexity; (b) the aware - agnostic reward difference (median difference of a
@@ -138,7 +139,7 @@ def plot_replicates(
         ax.set_title("(b) reward difference")
         ax.grid(axis="y", visible=False)
         ax.legend(frameon=False, loc="lower left", fontsize=7)
-        fig.suptitle(f"{len(thresholds)} replicate experiments (9 × 71 data collection, fit, plan, evaluation)", fontsize=9)
+        fig.suptitle(f"{len(thresholds)} replicate experiments ({design} data collection, fit, plan, evaluation)", fontsize=9)
         fig.tight_layout()
         if path is not None:
             save(fig, path)
