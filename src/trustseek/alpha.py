@@ -375,6 +375,31 @@ def _one_node_controllers(pomdp: AssistancePOMDP, limit: int = 64) -> np.ndarray
     return np.array(out)
 
 
+def _grid_controller(pomdp: AssistancePOMDP, points: int) -> np.ndarray:
+    """Values of a controller on a few beliefs: greedy actions of a one-step lookahead on the
+    one-node controllers' values, successors = the nearest belief of the set (a cheap start)."""
+    if points < 2:
+        return np.zeros((0, 2))
+    base = _one_node_controllers(pomdp)
+    x = np.linspace(0.0, 1.0, points)
+    b = np.stack([1 - x, x], axis=1)
+    K = pomdp.kernel
+    N = pomdp.n_complexity
+    acts = np.zeros((points, N), dtype=np.int64)
+    succ = np.full((points, N, 2, 2), -1, dtype=np.int64)
+    for c in range(N):
+        nb = np.einsum("nt,atoeu->naoeu", b, K[c])  # (n, a, o, e, u)
+        z = nb.sum(axis=-1)
+        val = np.where(z > 0, (nb @ base.T).max(axis=-1), 0.0)
+        q = b @ pomdp.expected_reward[c].T + pomdp.discount * val.sum(axis=(2, 3))
+        acts[:, c] = q.argmax(axis=1)
+        na = nb[np.arange(points), acts[:, c]]  # (n, o, e, u)
+        za = na.sum(axis=-1)
+        nx = np.where(za > 0, na[..., 1] / np.where(za > 0, za, 1.0), 0.0)
+        succ[:, c] = np.where(za > 0, np.rint(nx * (points - 1)).astype(np.int64), -1)
+    return evaluate_controller(pomdp, acts, succ)
+
+
 def _repoint(pomdp: AssistancePOMDP, vecs: np.ndarray, xs: np.ndarray, actions: np.ndarray) -> np.ndarray:
     """Successors of each node (a vector of the envelope) at its witness belief (the middle of
     the interval where it is maximal): the node of the envelope active at each next belief."""
@@ -513,6 +538,7 @@ class AlphaSolver:
         grid: int = 2001,
         max_grid: int = 200_001,
         thin: float = 0.05,
+        seed_points: int = 33,
     ):
         if belief_update not in BELIEF_UPDATES:
             raise ValueError(f"unknown belief update {belief_update!r}; expected one of {list(BELIEF_UPDATES)}")
@@ -527,6 +553,7 @@ class AlphaSolver:
         self.upper_grid = int(upper_grid)
         self.grid = int(grid)
         self.max_grid = int(max_grid)
+        self.seed_points = int(seed_points)  # beliefs of the starting controller
         self.thin = float(thin)  # lines worth less than thin * tol * (1 - γ) are dropped from L
 
     def _check(self, pomdp: AssistancePOMDP) -> None:
@@ -552,7 +579,7 @@ class AlphaSolver:
     def _solve_bayes(self, pomdp: AssistancePOMDP) -> AlphaSolution:
         t0 = time.perf_counter()
         gamma = pomdp.discount
-        vecs = _one_node_controllers(pomdp)
+        vecs = np.vstack([_one_node_controllers(pomdp), _grid_controller(pomdp, self.seed_points)])
         idx, xs = envelope(vecs)
         vecs = vecs[idx]
         history: list[float] = []
