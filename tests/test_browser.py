@@ -173,6 +173,9 @@ def test_participant_study_in_chromium(tmp_path):
     for k in ("consent", "instructions_done", "trial_start", "intervene", "teleop_start", "grasp", "deposit", "outcome_shown"):
         assert k in kinds, (k, kinds)
     assert events[events.type == "intervene"]["trial"].tolist() == [1]
+    deposits = [json.loads(d) for d in events[events.type == "deposit"]["data"]]
+    assert events[events.type == "deposit"]["trial"].tolist() == [1, 3]
+    assert all(d["driven_m"] > 0 and d["arm_m"] > 0 and d["grasp_attempts"] >= 1 for d in deposits)
 
     # the export is a valid trial log for the data module and the fit
     from trustseek.data import read_trials

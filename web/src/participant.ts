@@ -38,6 +38,9 @@ let outcome: TrialResult | null = null;
 let hint = "";
 let hintUntil = 0;
 let clock = 0;
+let driven = 0; // teleoperation: distance driven by the base (m)
+let armTravel = 0; // and by the arm
+let graspAttempts = 0;
 
 function freshRobot(l: Layout): RobotState {
   return { x: l.start.x, y: l.start.y, heading: 0, arm: 0, jaw: 0.2, holding: false, binCount: 0, shake: 0 };
@@ -148,6 +151,7 @@ function startTrial(cur: Current) {
   log("trial_start", { complexity: cur.complexity, robot_action: cur.robot_action, block: cur.block });
   if (cur.robot_action === "ask") {
     teleopStart = performance.now();
+    resetTeleop();
     log("teleop_start", { reason: "asked" });
     setPhase("teleop");
     setHint("The robot asks for your help: drive it to the item, grasp it and put it in the bin.", 5);
@@ -156,11 +160,18 @@ function startTrial(cur: Current) {
   }
 }
 
+function resetTeleop() {
+  driven = 0;
+  armTravel = 0;
+  graspAttempts = 0;
+}
+
 function intervene(via: string) {
   if (phase !== "approach" && phase !== "reach") return;
   intervened = true;
   log("intervene", { via, progress: pathS / pathL, arm: robot.arm });
   teleopStart = performance.now();
+  resetTeleop();
   log("teleop_start", { reason: "intervened" });
   setPhase("teleop");
   setHint("You took over: drive to the item, grasp it (G) and deposit it in the bin (B).", 4);
@@ -326,16 +337,20 @@ function toResult() {
 function teleop(cmd: ReturnType<typeof poll>, k: number) {
   const v = 1.8;
   if (cmd.vx || cmd.vy) robot.heading = Math.atan2(cmd.vy, cmd.vx);
+  const x0 = robot.x, y0 = robot.y, a0 = robot.arm;
   robot.x += cmd.vx * v * k;
   robot.y += cmd.vy * v * k;
   clampRobot(robot, layout);
   robot.arm = Math.max(0, Math.min(ARM_MAX, robot.arm + cmd.arm * 1.0 * k));
+  driven += Math.hypot(robot.x - x0, robot.y - y0);
+  armTravel += Math.abs(robot.arm - a0);
   const gp = gripperPos(robot, layout.side);
   if (robot.holding) {
     item.x = gp.x;
     item.y = gp.y;
   } else if (!robot.holding) robot.jaw = Math.min(1, robot.jaw + 2 * k);
   if (cmd.grasp) {
+    graspAttempts++;
     if (robot.holding) setHint("Already holding the item: retract the arm (X) and deposit it (B).");
     else if (Math.hypot(gp.x - item.x, gp.y - item.y) <= REACH) {
       robot.holding = true;
@@ -348,12 +363,15 @@ function teleop(cmd: ReturnType<typeof poll>, k: number) {
   }
   if (cmd.deposit) {
     if (!robot.holding) setHint("Grasp the item first (G).");
-    else if (robot.arm > 0.3) setHint("Retract the arm (X) before depositing.");
+    else if (robot.arm > 0.3) {
+      log("deposit_refused", { arm: robot.arm });
+      setHint("Retract the arm (X) before depositing.");
+    }
     else {
       robot.holding = false;
       item.inBin = true;
       robot.binCount++;
-      log("deposit", {});
+      log("deposit", { seconds: (performance.now() - teleopStart) / 1000, driven_m: +driven.toFixed(3), arm_m: +armTravel.toFixed(3), grasp_attempts: graspAttempts, gamepad: gamepadName() });
       submit("intervene");
     }
   }
