@@ -177,6 +177,18 @@ def freudenthal_weights(B: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
     return verts, w
 
 
+def _find(sorted_codes: np.ndarray, codes: np.ndarray) -> np.ndarray:
+    """Positions of ``codes`` in ``sorted_codes`` (-1 where absent)."""
+    i = np.minimum(np.searchsorted(sorted_codes, codes), len(sorted_codes) - 1)
+    return np.where(sorted_codes[i] == codes, i, -1)
+
+
+def _lattice_size(K: int, r: int) -> int:
+    from math import comb
+
+    return comb(r + K - 1, K - 1)
+
+
 def _vertex_code(verts: np.ndarray, r: int) -> np.ndarray:
     """Integer code of Freudenthal vertex coordinates (..., K) (v_0 = r is dropped).  Vertices
     outside the simplex (they only occur with weight zero, on a face) get code 0."""
@@ -210,6 +222,7 @@ class PointSolver:
         self.max_resolution = max_resolution
         self.depth = int(depth)
         self.seed = seed
+        self.max_vertices = 300_000
         self.lower_lattice = lower_lattice  # beliefs of the lower bound: this lattice and the reachable set
 
     # -- successors of a set of beliefs ------------------------------------------
@@ -260,13 +273,13 @@ class PointSolver:
         K, N, gamma, pc = m.n_hidden, len(m.context_probs), m.discount, m.context_probs
         V = freudenthal_vertices(K, r)
         nV = len(V)
-        lookup = np.full((r + 1) ** (K - 1), -1, dtype=np.int64)
         own = np.round(np.cumsum(V[:, ::-1], axis=1)[:, ::-1] * r).astype(np.int64)
-        lookup[_vertex_code(own, r)] = np.arange(nV)
+        lookup = np.sort(_vertex_code(own, r))
+        V = V[np.argsort(_vertex_code(own, r), kind="stable")]  # vertex i has code lookup[i]
         S, p = self._successors(V)  # (nV, N, A, Br, K)
         Br = S.shape[3]
         verts, w = freudenthal_weights(S.reshape(-1, K), r)
-        col = lookup[_vertex_code(verts, r)].reshape(S.shape)
+        col = _find(lookup, _vertex_code(verts, r)).reshape(S.shape)
         if np.any(col < 0):
             raise RuntimeError("Freudenthal interpolation left the vertex set")
         wt = w.reshape(S.shape) * p[..., None]
@@ -300,7 +313,7 @@ class PointSolver:
     def upper_at(self, B: np.ndarray) -> np.ndarray:
         """The certified upper bound at beliefs B (linear interpolation of the vertex values)."""
         verts, w = freudenthal_weights(np.atleast_2d(np.asarray(B, dtype=float)), self.r)
-        return (w * self.u[self.lookup[_vertex_code(verts, self.r)]]).sum(axis=1)
+        return (w * self.u[_find(self.lookup, _vertex_code(verts, self.r))]).sum(axis=1)
 
     def lower_at(self, B: np.ndarray) -> np.ndarray:
         return (np.atleast_2d(np.asarray(B, dtype=float)) @ self.G.T).max(axis=1)
@@ -346,8 +359,13 @@ class PointSolver:
         combos = list(itertools.product(range(A), repeat=N)) if A**N <= 64 else [tuple([a] * N) for a in range(A)]
         Br = model.kernels.shape[2]
         self.G = np.array([evaluate_controller(model, np.array([cmb]), np.zeros((1, N, Br), dtype=np.int64))[0] for cmb in combos])
-        r = self.resolution or {2: 64, 3: 16, 4: 8}.get(K, 4)
+        r = self.resolution or {2: 64, 3: 16, 4: 8}.get(K, 4 if K <= 8 else 2)
         r_max = self.max_resolution or {2: 4096, 3: 512, 4: 64}.get(K, 16)
+        if (r + 1) ** (K - 1) >= 2**62 or _lattice_size(K, r) > self.max_vertices:
+            raise ValueError(
+                f"{K} hidden states are too many for the grid upper bound of the point solver "
+                f"({_lattice_size(K, r)} vertices at resolution {r})"
+            )
         lat = self.lower_lattice or {2: 256, 3: 16, 4: 6}.get(K, 3)
         reach = self._reachable(b0, self.depth)
         rng = np.random.default_rng(self.seed)
@@ -363,7 +381,8 @@ class PointSolver:
             lo = float(self.lower_at(b0)[0])
             up = float(self.upper_at(b0)[0])
             history.append((len(V), time.perf_counter() - t0, lo, up))
-            if up - lo <= self.tol or r * 2 > r_max or time.perf_counter() - t0 > self.max_seconds:
+            too_big = _lattice_size(K, 2 * r) > self.max_vertices or (2 * r + 1) ** (K - 1) >= 2**62
+            if up - lo <= self.tol or r * 2 > r_max or too_big or time.perf_counter() - t0 > self.max_seconds:
                 break
             r *= 2
         return PointSolution(self.G.copy(), V.copy(), u.copy(), lo, up, rounds, time.perf_counter() - t0, history)
@@ -423,9 +442,12 @@ def _simplex_lattice(K: int, n: int) -> np.ndarray:
     if K == 2:
         x = np.linspace(0.0, 1.0, n + 1)
         return np.stack([1 - x, x], axis=1)
-    pts = [c for c in itertools.product(range(n + 1), repeat=K - 1) if sum(c) <= n]
-    arr = np.array([[n - sum(c), *c] for c in pts], dtype=float) / n
-    return arr
+    # stars and bars: K - 1 bar positions among n + K - 1 slots
+    rows = []
+    for bars in itertools.combinations(range(n + K - 1), K - 1):
+        edges = (-1, *bars, n + K - 1)
+        rows.append([edges[i + 1] - edges[i] - 1 for i in range(K)])
+    return np.array(rows, dtype=float) / n
 
 
 __all__ = ["BranchModel", "PointSolver", "PointSolution", "evaluate_controller", "ASK", "AUTONOMOUS"]
