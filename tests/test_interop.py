@@ -229,3 +229,36 @@ def test_cli_solve_with_alpha_and_point_json():
     assert lo <= d["thresholds"]["high"] <= hi
     proc = _run("solve", "--solver", "point", "--belief-update", "paper")
     assert proc.returncode == 2 and "Bayes filter" in proc.stderr
+
+
+def test_entry_forms_rows_single_entries_indices_and_costs():
+    text = """# every entry form
+discount: 0.9
+values: cost
+states: 2
+actions: go stay
+observations: beep quiet
+start include: 1
+T: * : 0 : 1 1.0
+T: * : 1 : 1 1.0
+T: stay : 0
+1 0
+O: * : * : beep 0.25
+O: * : * : quiet 0.75
+O: go : 1
+0.5 0.5
+R: go : 0 : 1
+4 6
+R: stay : *
+1 1
+1 1
+"""
+    f = read_pomdp("forms.pomdp", text)
+    assert f.states == ("0", "1") and np.array_equal(f.start, [0.0, 1.0])
+    assert np.array_equal(f.transition[0], [[0, 1], [0, 1]]) and np.array_equal(f.transition[1], [[1, 0], [0, 1]])
+    assert np.array_equal(f.observation[0], [[0.25, 0.75], [0.5, 0.5]])
+    assert np.array_equal(f.observation[1], [[0.25, 0.75], [0.25, 0.75]])
+    assert np.array_equal(f.reward[0, 0, 1], [-4.0, -6.0])  # costs are negated rewards
+    assert np.all(f.reward[1] == -1.0)
+    # expected reward of 'go' in state 0: next state 1, observation beep 0.5 / quiet 0.5
+    assert f.expected_reward[0, 0] == pytest.approx(-5.0)
