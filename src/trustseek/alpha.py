@@ -741,8 +741,6 @@ def _paper_q(pomdp: AssistancePOMDP, values: np.ndarray, x: np.ndarray, grid: np
     R = pomdp.expected_reward
     gamma = pomdp.discount
     x = np.asarray(x, dtype=float)
-    xe = x[None, None, None, ...]
-    pb = p[..., 0, None] * (1 - x) + p[..., 1, None] * x if x.ndim == 1 else None
     N = pomdp.n_complexity
     out = np.zeros((N, 2) + x.shape)
     for c in range(N):
@@ -753,7 +751,6 @@ def _paper_q(pomdp: AssistancePOMDP, values: np.ndarray, x: np.ndarray, grid: np
                 nx = f[c, a, e, 0] * (1 - x) + f[c, a, e, 1] * x
                 acc = acc + gamma * pr * np.interp(nx, grid, values)
             out[c, a] = acc
-    del xe, pb
     return out
 
 

@@ -1,29 +1,28 @@
 """Point-based solver with lower and upper bounds, for any number of trust levels.
 
-With K trust levels the belief is a point of the (K-1)-simplex and a dense grid
-is impractical, so the value is bounded from both sides at sampled beliefs, in
-the manner of HSVI / SARSOP:
+With K trust levels the belief is a point of the (K-1)-simplex.  The value at the
+initial belief b0 is bracketed from both sides:
 
 * lower bound: a set Γ of alpha vectors, L(b) = max_α α·b.  Every vector is the
-  value of an executable policy (memoryless controllers to start, then point
-  backups "act, then follow the best vector of Γ"), so L ≤ V;
-* upper bound: values at the corners of the simplex (the fully observed MDP,
-  solved exactly) and at sampled beliefs, combined by the sawtooth
-  interpolation, which over-estimates a convex function; a point backup of the
-  upper bound is again an upper bound.
+  value of an executable policy (memoryless controllers to start, then
+  point-based controllers evaluated exactly: one node per sampled belief, its
+  greedy actions, and per branch the node best at the next belief), so L ≤ V.
+  The beliefs are a lattice of the simplex, those reachable from b0 in two trials
+  and those met on simulated trajectories (seeded);
+* upper bound: the fixed point of the Bellman operator with linear interpolation
+  on Freudenthal's triangulation of the simplex (Lovejoy's bound), solved by
+  policy iteration; interpolation over-estimates a convex value, so it is an
+  upper bound, certified against the rounding of the solve by its residual.
 
-Beliefs are sampled by trials from the initial belief b0: at each step the
-complexity and branch (human action, experience) with the largest weighted
-excess gap are followed, and on the way back both bounds are backed up.  The
-solver stops when the gap at b0 falls below ``tol``.
+The resolution of the triangulation is doubled until U(b0) - L(b0) <= ``tol``.
 
 The structure is the mixed-observability one of the assistance POMDP: a
 context c (the complexity, drawn i.i.d. from P(C) and seen before acting), a
 hidden part t (trust), and branches (o, E') whose unnormalized kernel
 M[c, a, branch, t, t'] moves the belief.  A flat POMDP (e.g. a ``.pomdp`` file)
-is the special case of one context and branches = observations.  The bounds are
-valid for Bayes-filter beliefs (the value is convex); for the eq.-3 update use
-the ``alpha`` solver (two trust levels).
+is the special case of one context and branches = observations.  The bounds
+rest on the convexity of the Bayes-filter value; for the eq.-3 update use the
+``alpha`` solver (two trust levels).
 """
 
 from __future__ import annotations
@@ -34,7 +33,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .model import ASK, AUTONOMOUS
 from .pomdp import AssistancePOMDP
 
 
@@ -106,36 +104,13 @@ def evaluate_controller(model: BranchModel, actions: np.ndarray, successors: np.
     return np.asarray(x).reshape(n, K)
 
 
-def _mdp_upper(model: BranchModel) -> np.ndarray:
-    """Values of the fully observed MDP over the hidden state (an upper bound at the corners),
-    by policy iteration (exact)."""
-    K, N, A = model.n_hidden, len(model.context_probs), model.n_actions
-    P = model.kernels.sum(axis=2)  # [c, a, t, u]
-    pol = model.rewards.argmax(axis=1)  # [c, t]
-    for _ in range(1000):
-        # a context-dependent, state-dependent policy: mix over contexts
-        M = np.zeros((K, K))
-        r = np.zeros(K)
-        for c in range(N):
-            M += model.context_probs[c] * P[c, pol[c], np.arange(K)]
-            r += model.context_probs[c] * model.rewards[c, pol[c], np.arange(K)]
-        v = np.linalg.solve(np.eye(K) - model.discount * M, r)
-        q = model.rewards + model.discount * np.einsum("catu,u->cat", P, v)
-        new = np.where(q.max(axis=1) > np.take_along_axis(q, pol[:, None, :], axis=1)[:, 0] + 1e-12, q.argmax(axis=1), pol)
-        if np.array_equal(new, pol):
-            break
-        pol = new
-    del A
-    return v
-
-
 @dataclass
 class PointSolution:
     """Bounds at the initial belief, the vectors of the lower bound and the upper-bound points."""
 
     vectors: np.ndarray  # lower bound: L(b) = max_α α·b
-    points: np.ndarray  # upper bound: beliefs (the first K are the corners) ...
-    point_values: np.ndarray  # ... and their values (sawtooth interpolation)
+    points: np.ndarray  # upper bound: the vertices of the triangulation ...
+    point_values: np.ndarray  # ... and their certified values (linear interpolation)
     lower: float
     upper: float
     iterations: int
@@ -450,4 +425,4 @@ def _simplex_lattice(K: int, n: int) -> np.ndarray:
     return np.array(rows, dtype=float) / n
 
 
-__all__ = ["BranchModel", "PointSolver", "PointSolution", "evaluate_controller", "ASK", "AUTONOMOUS"]
+__all__ = ["BranchModel", "PointSolver", "PointSolution", "evaluate_controller", "freudenthal_weights"]
