@@ -433,7 +433,7 @@ class AlphaSolution:
     seconds: float
     history: list[float] = field(default_factory=list)  # certified gap per iteration
     grid_solution: Any = None  # GridSolution used (paper update) or as an extra upper bound
-    residuals: tuple[float, float] = (0.0, 0.0)  # (ε+, ε-) for the paper update
+    residuals: tuple[float, float] = (0.0, 0.0)  # (sup, -inf) of T V - V for the bounded function V
 
     def advantage(self, pomdp: AssistancePOMDP, x: np.ndarray, c: int) -> np.ndarray:
         """D(x) = Q(x, C=c, ask) - Q(x, C=c, autonomous) of the computed Q."""
@@ -449,18 +449,18 @@ class AlphaSolution:
         """Lower bound on W(x) (certified)."""
         x = np.asarray(x, dtype=float)
         if self.lower is not None:
-            return envelope_values(self.lower[0], self.lower[1], x)
+            return envelope_values(self.lower[0], self.lower[1], x) - self.residuals[1] / (1 - pomdp.discount)
         g, v = self.grid_solution
         return np.interp(x, g, v) - self.residuals[1] / (1 - pomdp.discount)
 
     def q_values(self, pomdp: AssistancePOMDP, x) -> np.ndarray:
         """Lower bounds on Q(x, C, a); shape (..., N, 2)."""
         x = np.asarray(x, dtype=float)
+        gam = pomdp.discount
         if self.q is not None:
             return np.stack(
                 [np.stack([envelope_values(v, xs, x) for v, xs in per_a], axis=-1) for per_a in self.q], axis=-2
-            )
-        gam = pomdp.discount
+            ) - gam * self.residuals[1] / (1 - gam)
         g, v = self.grid_solution
         q = _paper_q(pomdp, v, x, g) - gam * self.residuals[1] / (1 - gam)
         return np.moveaxis(q, (0, 1), (-2, -1))
@@ -627,6 +627,7 @@ class AlphaSolver:
             seconds=time.perf_counter() - t0,
             history=history,
             grid_solution=grid_sol,
+            residuals=(delta, below),  # sup(T L - L), sup(L - T L)
         )
 
     # -- paper ---------------------------------------------------------------
