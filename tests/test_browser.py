@@ -150,9 +150,26 @@ def test_participant_study_in_chromium(tmp_path):
             page.wait_for_selector("#screen-done:not([hidden])", timeout=15000)
             final_score = float(page.inner_text("#final-score"))
             page.screenshot(path=str(out / "browser_done.png"))
+
+            # the experimenter's dashboard shows the finished participant and creates a study
+            dash = browser.new_page(viewport={"width": 1320, "height": 700})
+            dash.on("pageerror", lambda e: errors.append(str(e)))
+            dash.goto(f"{url}/dashboard")
+            dash.fill("#token", TOKEN)
+            dash.dispatch_event("#token", "change")
+            dash.wait_for_selector("#rows td:has-text('chromium-1')")
+            row = dash.inner_text("#rows tr")
+            assert "done" in row and "3 / 3" in row and str(int(final_score)) in row
+            dash.click("#new-study-toggle")
+            dash.click("#create-study")
+            dash.wait_for_function("document.getElementById('create-msg').textContent.startsWith('Created pilot')", timeout=20000)
+            dash.click("#new-session")
+            dash.wait_for_selector("#rows td:has-text('P001')")
+            dash.screenshot(path=str(out / "browser_dashboard.png"))
             browser.close()
         assert not errors, errors
-        assert all(u.startswith(url) or u.startswith("data:") for u in requests), [u for u in requests if not u.startswith(url)]
+        assert all(u.startswith(url) or u.startswith("data:") or u.startswith("blob:") for u in requests), [u for u in requests if not u.startswith(url)]
+        assert [s["name"] for s in c.studies()] == ["e2e", "pilot"]
 
         trials = pd.read_csv(io.BytesIO(c.export(study["id"])))
         events = pd.read_csv(io.BytesIO(c.export(study["id"], table="events")))

@@ -96,5 +96,40 @@ $("new-session").addEventListener("click", async () => {
 });
 $("export-csv").addEventListener("click", () => download("trials").catch((e) => err(e.message)));
 $("export-events").addEventListener("click", () => download("events").catch((e) => err(e.message)));
+const EXAMPLE = {
+  name: "pilot",
+  task: "paper",
+  model: "paper",
+  blocks: [
+    { name: "trust-agnostic", policy: { kind: "trust-agnostic" }, schedule: { counts: { low: 10, high: 10 } } },
+    { name: "trust-aware", policy: { kind: "trust-aware" }, schedule: { counts: { low: 10, high: 10 } } },
+  ],
+  counterbalance: "rotate",
+  self_report: "block",
+  animation_speed: 1.0,
+  seed: 1,
+};
+$<HTMLTextAreaElement>("study-json").value = JSON.stringify(EXAMPLE, null, 2);
+$("new-study-toggle").addEventListener("click", () => ($("new-study").hidden = !$("new-study").hidden));
+$("create-study").addEventListener("click", async () => {
+  const msg = $("create-msg");
+  let body: unknown;
+  try {
+    body = JSON.parse($<HTMLTextAreaElement>("study-json").value);
+  } catch (e) {
+    msg.textContent = `Not valid JSON: ${(e as Error).message}`;
+    return;
+  }
+  msg.textContent = "Creating (solving the policies)...";
+  try {
+    const st = await (await call("/api/studies", { method: "POST", body: JSON.stringify(body) })).json();
+    msg.textContent = `Created ${st.name} (${st.id}).`;
+    study = st.id;
+    $("new-study").hidden = true;
+    loadStudies();
+  } catch (e) {
+    msg.textContent = (e as Error).message;
+  }
+});
 loadStudies();
 setInterval(refresh, 1000);
