@@ -48,6 +48,7 @@ class PolicyBlob(Base):
 
 class Session(Base):
     __tablename__ = "sessions"
+    __table_args__ = (UniqueConstraint("study_id", "participant", name="uq_session_study_participant"),)
 
     id: Mapped[str] = mapped_column(String(32), primary_key=True)
     token: Mapped[str] = mapped_column(String(64), unique=True, index=True)

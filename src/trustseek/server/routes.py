@@ -7,6 +7,7 @@ import time
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from sqlalchemy import select
+from sqlalchemy.exc import IntegrityError
 
 from fastapi.security import HTTPAuthorizationCredentials
 
@@ -107,7 +108,14 @@ def create_sessions(study_id: str, body: SessionsIn, request: Request):
         except SessionError as exc:
             db.rollback()
             _fail(exc)
-        db.commit()
+        except IntegrityError:
+            db.rollback()
+            raise HTTPException(409, "a participant id was taken concurrently; retry") from None
+        try:
+            db.commit()
+        except IntegrityError:
+            db.rollback()
+            raise HTTPException(409, "a participant id was taken concurrently; retry") from None
     return out
 
 

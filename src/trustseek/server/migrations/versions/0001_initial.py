@@ -45,6 +45,7 @@ def upgrade() -> None:
         sa.Column("pending_action", sa.String(16), nullable=True),
         sa.Column("created_at", sa.DateTime(), nullable=False),
         sa.Column("updated_at", sa.DateTime(), nullable=False),
+        sa.UniqueConstraint("study_id", "participant", name="uq_session_study_participant"),
     )
     op.create_index("ix_sessions_token", "sessions", ["token"], unique=True)
     op.create_index("ix_sessions_study_id", "sessions", ["study_id"])
