@@ -41,6 +41,7 @@ SCAN_RATIO = 20  # sequences at least this many times longer than their number: 
 BATCH_MAX_COLUMNS = 1000  # restarts x participants up to this: restarts run batched in lockstep
 MIN_EVENTS = 5  # fewer expected events than this behind a row: "not identified by this data"
 _FLOOR = 1e-300
+_SHRINK = 0.05  # SQUAREM: a cell may shrink at most this factor per extrapolation
 
 
 class FitError(TrustseekError, ValueError):
@@ -795,7 +796,7 @@ def run_em_batch(
         ext = active & (step < -1.0)
         if ext.any():
             st = step[:, None]
-            x = np.maximum(v0 - 2 * st * r_ + st * st * v_, 0.05 * v2)
+            x = np.maximum(v0 - 2 * st * r_ + st * st * v_, _SHRINK * v2)
             a, b = p0.initial[0].size, p0.emission[0].size
             pe = structure.project(Params(x[:, :a].copy(), x[:, a : a + b].reshape(p0.emission.shape).copy(), x[:, a + b :].reshape(p0.transition.shape).copy()))
             pe = _where(ext, pe, p2)
@@ -916,7 +917,7 @@ def run_em(
         if step < -1.0 and n_e < max_iter:
             # a cell may shrink at most 20-fold per cycle: clamping cells to the boundary
             # would leave EM crawling there and stop it early at a worse point
-            x = np.maximum(v0 - 2 * step * r + step * step * v, 0.05 * v2)
+            x = np.maximum(v0 - 2 * step * r + step * step * v, _SHRINK * v2)
             pe = structure.project(_unpack(x, p0))
             ste, fe = evaluate(pe)
             n_e += 1
