@@ -41,6 +41,7 @@ SCAN_RATIO = 20  # sequences at least this many times longer than their number: 
 BATCH_MAX_COLUMNS = 1000  # restarts x participants up to this: restarts run batched in lockstep
 MIN_EVENTS = 5  # fewer expected events than this behind a row: "not identified by this data"
 _FLOOR = 1e-300
+_add = np.add.reduce  # the ufunc method directly: the time loop is call-overhead bound
 _SHRINK = 0.05  # SQUAREM: a cell may shrink at most this factor per extrapolation
 
 
@@ -523,11 +524,10 @@ class Workspace:
         a = p.initial[:, None] * B0
         with np.errstate(invalid="ignore", divide="ignore"):
             for t in range(T):
-                s = a.sum(0)
-                c[t] = s
+                s = _add(a, 0, out=c[t])
                 np.divide(a, s, out=alpha[:, t])
                 if t + 1 < T:
-                    a = (alpha[:, None, t] * Mt[:, :, t]).sum(0)
+                    a = _add(alpha[:, None, t] * Mt[:, :, t], 0)
             loglik = float(np.log(c).sum())
         return alpha, c, loglik
 
@@ -543,7 +543,7 @@ class Workspace:
         beta[:, T - 1] = 1.0
         for t in range(T - 1, 0, -1):
             b = beta[:, t] / c[t]
-            np.sum(Mt[:, :, t - 1] * b[None], axis=1, out=beta[:, t - 1])
+            _add(Mt[:, :, t - 1] * b[None], 1, out=beta[:, t - 1])
         gamma = np.multiply(alpha, beta, out=self._gamma)
         xi = np.multiply(alpha[:, None, :-1], Mt, out=self._xi)
         xi *= np.divide(beta[:, 1:], c[1:], out=self._bs)[None]
@@ -676,16 +676,15 @@ class BatchWorkspace:
         a = np.repeat(p.initial.T, N, axis=1) * B0
         with np.errstate(invalid="ignore", divide="ignore"):
             for t in range(T):
-                sm = a.sum(0)
-                c[t] = sm
+                sm = _add(a, 0, out=c[t])
                 np.divide(a, sm, out=alpha[:, t])
                 if t + 1 < T:
-                    a = (alpha[:, None, t] * Mt[:, :, t]).sum(0)
+                    a = _add(alpha[:, None, t] * Mt[:, :, t], 0)
             ll = np.log(c).sum(0).reshape(R, N).sum(1)
             beta[:, T - 1] = 1.0
             for t in range(T - 1, 0, -1):
                 b = beta[:, t] / c[t]
-                np.sum(Mt[:, :, t - 1] * b[None], axis=1, out=beta[:, t - 1])
+                _add(Mt[:, :, t - 1] * b[None], 1, out=beta[:, t - 1])
             gamma = np.multiply(alpha, beta, out=self._gamma)
             xi = np.multiply(alpha[:, None, :-1], Mt, out=self._xi)
             xi *= np.divide(beta[:, 1:], c[1:], out=self._bs)[None]
