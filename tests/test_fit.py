@@ -203,3 +203,13 @@ def test_small_coverage_study():
     # the initial-trust cell's truth matches the preset
     init = [r for r in rows if r["cell"] == "P(T1=high)"][0]
     assert init["truth"] == truth.initial[1]
+
+
+def test_decode_names_participants_the_model_rules_out():
+    from trustseek.iohmm import FitError
+
+    df = read_trials(example_path())
+    i = df.index[(df["participant"] == "P004") & (df["robot_action"] == "ask")][0]
+    df.loc[i, "human_action"] = "rely"  # the paper model says the human always teleoperates when asked
+    with pytest.raises(FitError, match="participant 'P004': the trials have probability zero"):
+        decode(df, paper_model())

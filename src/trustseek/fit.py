@@ -463,9 +463,15 @@ def bootstrap_ci(
 
 def decode(frame: pd.DataFrame, model: TrustModel) -> pd.DataFrame:
     """Per-trial smoothed P(trust = level | all trials of the participant) and the Viterbi level."""
+    from .iohmm import loglik
+
     spec, params = from_trust_model(model)
     seqs = encode(frame, spec)
-    return _posterior_frame(seqs, spec, params)
+    try:
+        return _posterior_frame(seqs, spec, params)
+    except FitError:
+        bad = [seqs.participants[i] for i in range(seqs.n_participants) if not np.isfinite(loglik(seqs.subset([i]), spec, params))]
+        raise FitError([f"participant {p!r}: the trials have probability zero under this model" for p in bad] or ["the data have probability zero under this model"]) from None
 
 
 def select_levels(
