@@ -8,7 +8,7 @@
 import { Api, ApiError, Current, State, TrialResult, UIEvent } from "./api";
 import { gamepadName, installKeyboard, poll } from "./input";
 import {
-  ARM_MAX, REACH, ItemState, Layout, RobotState, View, clampRobot, drawEndEffector, drawLocal, drawWorld,
+  AISLE_H, ARM_MAX, BASE_H, REACH, SHELF_DEPTH, ItemState, Layout, RobotState, View, clampRobot, drawEndEffector, drawLocal, drawWorld,
   gripperPos, makeLayout, pathLength, pointAlong,
 } from "./scene";
 
@@ -38,6 +38,7 @@ let outcome: TrialResult | null = null;
 let hint = "";
 let hintUntil = 0;
 let clock = 0;
+let impact: { x: number; y: number; t: number } | undefined;
 let driven = 0; // teleoperation: distance driven by the base (m)
 let armTravel = 0; // and by the arm
 let graspAttempts = 0;
@@ -146,6 +147,7 @@ function startTrial(cur: Current) {
   robot = freshRobot(layout);
   robot.binCount = bin;
   item = freshItem(layout);
+  impact = undefined;
   pathS = 0;
   pathL = pathLength(layout.path);
   log("trial_start", { complexity: cur.complexity, robot_action: cur.robot_action, block: cur.block });
@@ -301,13 +303,19 @@ function animateOutcome(k: number) {
       }
     }
   } else if (o.outcome === "collision") {
-    if (t < 0.05) {
-      flash = 1;
-      robot.shake = 1;
-    }
-    robot.y += (layout.side < 0 ? -1 : 1) * 0.02 * Math.max(0, 0.4 - t);
+    // the base swerves into the shelf: a jolt, a flash, the arm pulls back
+    const edge = layout.side < 0 ? SHELF_DEPTH + BASE_H / 2 : AISLE_H - SHELF_DEPTH - BASE_H / 2;
+    if (!impact) {
+      robot.y += (edge - robot.y) * Math.min(1, 6 * k);
+      if (Math.abs(edge - robot.y) < 0.02 || t > 0.4) {
+        robot.y = edge;
+        impact = { x: robot.x + 0.3, y: layout.side < 0 ? SHELF_DEPTH : AISLE_H - SHELF_DEPTH, t: 0 };
+        flash = 1;
+        robot.shake = 1;
+      }
+    } else impact.t += k;
     robot.arm = Math.max(0, robot.arm - 0.8 * k);
-    if (t > 1.2) toResult();
+    if (t > 1.4) toResult();
   } else {
     // dropped: grasp, lift, lose it on the way to the bin
     if (t < 0.3) robot.jaw = Math.max(0, 1 - t / 0.3);
@@ -322,8 +330,10 @@ function animateOutcome(k: number) {
         robot.jaw = 1;
         flash = 0.8;
       }
-      item.y += (robot.y - item.y) * Math.min(1, 3 * k) + 0.002;
-      item.x = robot.x + 0.45;
+      // it falls to the floor beside the robot, out of reach
+      const fx = robot.x + 0.8, fy = robot.y;
+      item.x += (fx - item.x) * Math.min(1, 4 * k);
+      item.y += (fy - item.y) * Math.min(1, 4 * k);
       if (t > 1.6) toResult();
     }
   }
@@ -381,7 +391,7 @@ function teleop(cmd: ReturnType<typeof poll>, k: number) {
 
 function view(): View {
   const asking = phase === "teleop" && !intervened && !robot.holding && !item.inBin;
-  return { layout, robot, item, showPath: phase === "approach", flash, highlight: !robot.holding && !item.inBin, time: clock, bubble: asking ? "Please help me!" : undefined };
+  return { layout, robot, item, showPath: phase === "approach", flash, highlight: !robot.holding && !item.inBin, time: clock, bubble: asking ? "Please help me!" : undefined, impact };
 }
 
 function draw() {

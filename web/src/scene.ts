@@ -137,6 +137,7 @@ export interface View {
   highlight: boolean;
   time: number;
   bubble?: string; // a speech bubble over the robot
+  impact?: { x: number; y: number; t: number }; // a collision burst
 }
 
 function roundRect(g: CanvasRenderingContext2D, x: number, y: number, w: number, h: number, r: number) {
@@ -195,6 +196,7 @@ export function drawAisle(g: CanvasRenderingContext2D, v: View, px: number) {
   drawRobot(g, v);
   if (robot.holding && item.visible) drawItem(g, item.x, item.y, layout.item.color, false, v.time);
   if (v.bubble) drawBubble(g, robot.x, robot.y - BASE_H / 2 - 0.15, v.bubble);
+  if (v.impact) drawImpact(g, v.impact.x, v.impact.y, v.impact.t);
   if (v.flash > 0) {
     g.fillStyle = `rgba(220,30,30,${0.35 * v.flash})`;
     g.fillRect(0, 0, AISLE_W, AISLE_H);
@@ -240,6 +242,25 @@ function drawObstacle(g: CanvasRenderingContext2D, o: Box, px: number) {
   g.font = `${0.22}px sans-serif`;
   g.textAlign = "center";
   g.fillText(o.kind === "crate" ? "CRATE" : "CART", o.x + o.w / 2, o.y + o.h / 2 + 0.08);
+}
+
+function drawImpact(g: CanvasRenderingContext2D, x: number, y: number, t: number) {
+  const r = 0.25 + 0.35 * Math.min(1, t * 3);
+  g.save();
+  g.globalAlpha = Math.max(0, 1 - t / 1.5);
+  g.fillStyle = "#ffdd33";
+  g.strokeStyle = "#e5484d";
+  g.lineWidth = 0.05;
+  g.beginPath();
+  for (let i = 0; i < 16; i++) {
+    const a = (i / 16) * Math.PI * 2;
+    const rr = i % 2 ? r * 0.45 : r;
+    g.lineTo(x + Math.cos(a) * rr, y + Math.sin(a) * rr);
+  }
+  g.closePath();
+  g.fill();
+  g.stroke();
+  g.restore();
 }
 
 function drawBubble(g: CanvasRenderingContext2D, x: number, y: number, text: string) {
