@@ -316,6 +316,10 @@ def test_deploy_api_through_the_client(client):
     with pytest.raises(ServerError) as ei:
         robot.observe("rely")  # outcome missing
     assert ei.value.status == 400 and "outcome" in str(ei.value)
+    if robot.action == "autonomous":
+        with pytest.raises(ServerError) as ei:
+            robot.observe("intervene", "success")  # a takeover is not an autonomous success
+        assert ei.value.status == 400 and "teleoperated" in str(ei.value)
     with pytest.raises(ServerError) as ei:
         c.open_deploy(policy={"kind": "psychic"})
     assert ei.value.status == 400

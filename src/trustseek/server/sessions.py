@@ -393,18 +393,20 @@ def deploy_observe(db: DBSession, session_id: str, n: int, human_action: str | N
     if action == "ask":
         if human_action not in (None, "intervene"):
             raise SessionError(400, f"the robot asked in trial {n}: human_action must be 'intervene' (teleoperation) or omitted, got {human_action!r}")
-        human_action, success, outcome = "intervene", None, outcome or "teleoperated"
+        if outcome not in (None, "teleoperated"):
+            raise SessionError(400, f"the robot asked in trial {n}: the human teleoperated, so outcome must be 'teleoperated' or omitted, got {outcome!r}")
+        human_action, success, outcome = "intervene", None, "teleoperated"
     else:
         if human_action not in HUMAN_ACTIONS:
             raise SessionError(400, f"human_action must be one of {list(HUMAN_ACTIONS)}, got {human_action!r}")
         if human_action == "intervene":
-            success, outcome = None, outcome or "teleoperated"
+            if outcome not in (None, "teleoperated"):
+                raise SessionError(400, f"the human intervened in trial {n} and teleoperated: outcome must be 'teleoperated' or omitted, got {outcome!r}")
+            success, outcome = None, "teleoperated"
         else:
             if outcome not in ("success", "failure", "collision", "dropped"):
                 raise SessionError(400, f"outcome must be 'success' or 'failure' (or 'collision'/'dropped') when the human relied, got {outcome!r}")
             success = outcome == "success"
-    if outcome not in ("success", "failure", "collision", "dropped", "teleoperated"):
-        raise SessionError(400, f"outcome {outcome!r} is not one of success, failure, collision, dropped, teleoperated")
     row = Trial(
         session_id=s.id, trial=n, block=0, policy=ctx.kinds[0], complexity=s.pending_complexity,
         robot_action=action, human_action=human_action, outcome=outcome,
