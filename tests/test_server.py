@@ -406,3 +406,24 @@ def test_self_reports_per_trial(client):
     submit(client, sid2, ph2, 1, "rely")
     r = client.post(f"/api/sessions/{sid2}/reports", json={"after_trial": 1, "value": 50}, headers=ph2)
     assert r.status_code == 409 and "no trust self-reports" in r.text
+
+
+def test_client_reads_local_task_model_and_policy_files(client, tmp_path):
+    """Files stay on the experimenter's side: the client sends their JSON.  The solved policy
+    from a file behaves exactly as the one solved by the server."""
+    from trustseek import paper_model, paper_task, solve as solve_policy
+
+    paper_task().save(tmp_path / "task.json")
+    paper_model().save(tmp_path / "model.json")
+    solve_policy(paper_model(), paper_task(), grid=301).save(tmp_path / "policy.json")
+    (tmp_path / "study.json").write_text(json.dumps({
+        "name": "files", "task": str(tmp_path / "task.json"), "model": str(tmp_path / "model.json"),
+        "blocks": [{"policy": str(tmp_path / "policy.json"), "schedule": {"trials": ["high"]}}],
+    }))
+    c = Client("http://test", TOKEN, http=client)
+    st = c.create_study(tmp_path / "study.json")
+    assert st["blocks"][0]["policy"] == "trust-aware"
+    assert st["blocks"][0]["thresholds"]["high"] == pytest.approx(solve_policy(paper_model(), paper_task(), grid=301).thresholds()["high"])
+    with pytest.raises(Exception) as ei:
+        c.create_study({"name": "x", "task": str(tmp_path / "missing.json"), "blocks": []})
+    assert "missing.json" in str(ei.value) and "not found" in str(ei.value)

@@ -43,6 +43,12 @@ class ServerError(TrustseekError):
         super().__init__([f"HTTP {status}: {x}" for x in lines] or [f"HTTP {status}"], url)
 
 
+def _read_json(path: str | Path) -> Any:
+    from .model import _load_json
+
+    return _load_json(path)[0]
+
+
 def _check(r: httpx.Response) -> Any:
     if r.status_code >= 400:
         try:
@@ -83,8 +89,28 @@ class Client:
         return _check(self.http.post(path, json=body, headers=self._auth()))
 
     # -- experimenter ------------------------------------------------------
-    def create_study(self, config: dict[str, Any]) -> dict[str, Any]:
-        """Create a study from its JSON configuration (see docs/experiments.md); returns its summary."""
+    def create_study(self, config: dict[str, Any] | str | Path) -> dict[str, Any]:
+        """Create a study from its configuration (see docs/experiments.md); returns its summary.
+
+        ``config`` may be a path to the study JSON.  Local files are read here and sent as
+        JSON: ``task`` and ``model`` may be paths to task / trust-model JSON files (anything
+        that is not a preset name and ends in ``.json``), and a block's ``policy`` may be the
+        path of a policy JSON written by ``trustseek solve --out``."""
+        if isinstance(config, (str, Path)):
+            config = _read_json(config)
+        config = dict(config)
+        for key in ("task", "model"):
+            v = config.get(key)
+            if isinstance(v, Path) or (isinstance(v, str) and v.endswith(".json")):
+                config[key] = _read_json(v)
+        blocks = []
+        for b in config.get("blocks", []):
+            b = dict(b)
+            if isinstance(b.get("policy"), (str, Path)):
+                b["policy"] = _read_json(b["policy"])
+            blocks.append(b)
+        if "blocks" in config:
+            config["blocks"] = blocks
         return self._post("/api/studies", config)
 
     def studies(self) -> list[dict[str, Any]]:
