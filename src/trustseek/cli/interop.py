@@ -19,6 +19,8 @@ DEFAULT_GAP = {"alpha": 1e-6, "point": 1e-3}
 
 def certified_policy(solver: str, pomdp: AssistancePOMDP, belief_update: str, gap: float | None = None):
     """Solve with the ``alpha`` or ``point`` solver; raises TrustseekError for unsupported cases."""
+    if solver not in DEFAULT_GAP:
+        raise TrustseekError([f"--solver must be one of {list(SOLVERS)}, got {solver!r}"])
     gap = DEFAULT_GAP[solver] if gap is None else gap
     if not gap > 0:
         raise TrustseekError([f"--gap must be positive, got {gap}"])
