@@ -268,3 +268,41 @@ def test_batched_restarts_take_the_same_path_as_one_at_a_time():
             np.testing.assert_allclose(a.history, b.history, rtol=1e-8)  # rounding differs slightly
             np.testing.assert_allclose(a.params.vector(), b.params.vector(), atol=1e-6)
             assert np.all(np.diff(b.history) >= 0)
+
+
+@pytest.mark.parametrize("K", [2, 3])
+def test_compiled_estep_equals_the_numpy_reference(K):
+    """The fused numba kernel (general K and the K = 2 path) against the numpy time loop."""
+    from trustseek import forward_backward
+
+    if not forward_backward.AVAILABLE:
+        pytest.skip("numba is not installed")
+    from trustseek.iohmm import BatchWorkspace, _stack
+
+    df = small_paper_data(25, (41, 30), seed=21)
+    df = df[~((df["participant"] == "P004") & (df["trial"] > 40))]  # sequences of different lengths
+    df.loc[df.index[::17], "human_action"] = None  # unobserved trials
+    spec = paper_spec(levels=K)
+    seqs = encode(df, spec)
+    s = Structure(spec, seqs)
+    starts = [s.random(np.random.default_rng(r)) for r in range(3)]
+    for p in starts:
+        ref = Workspace(seqs, K, 2, s.Ue, s.Ut, method="loop").estep(p)
+        got = Workspace(seqs, K, 2, s.Ue, s.Ut, method="numba").estep(p)
+        assert got.loglik == pytest.approx(ref.loglik, abs=1e-9)
+        for name in ("initial", "emission", "transition"):
+            np.testing.assert_allclose(getattr(got, name), getattr(ref, name), atol=1e-9)
+    # the batched kernel skips inactive parameter sets and computes the others alike
+    bw = BatchWorkspace(seqs, K, 2, s.Ue, s.Ut, len(starts), method="numba")
+    st = bw.estep(_stack(starts), np.array([True, False, True]))
+    assert st.loglik[1] == 0.0 and np.all(st.transition[1] == 0)
+    for r in (0, 2):
+        ref = Workspace(seqs, K, 2, s.Ue, s.Ut, method="loop").estep(starts[r])
+        assert st.loglik[r] == pytest.approx(ref.loglik, abs=1e-9)
+        np.testing.assert_allclose(st.emission[r], ref.emission, atol=1e-9)
+    # data the parameters rule out: -inf and no counts, as in the reference
+    bad = Params(starts[0].initial, starts[0].emission.copy(), starts[0].transition)
+    bad.emission[:, :, 1] = 0.0
+    bad.emission[:, :, 0] = 1.0
+    got = Workspace(seqs, K, 2, s.Ue, s.Ut, method="numba").estep(bad)
+    assert got.loglik == -np.inf and np.all(got.emission == 0)

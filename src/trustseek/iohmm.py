@@ -35,6 +35,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
+from . import forward_backward as _fb
 from .errors import TrustseekError
 
 SCAN_RATIO = 20  # sequences at least this many times longer than their number: E-step by prefix products
@@ -463,11 +464,16 @@ class Workspace:
         self.seqs, self.K, self.M, self.Ue, self.Ut = seqs, K, M, Ue, Ut
         T, N = seqs.y.shape
         self.T, self.N = T, N
-        if method not in ("auto", "loop", "scan"):
-            raise ValueError(f"method must be auto, loop or scan, got {method!r}")
-        # the time loop costs ~T numpy calls per pass; the scan ~log2(T) calls on
-        # log2(T)-times more work: it wins for few, long sequences
-        self.scan = method == "scan" or (method == "auto" and T > 1 and T >= SCAN_RATIO * N)
+        if method not in ("auto", "numba", "loop", "scan"):
+            raise ValueError(f"method must be auto, numba, loop or scan, got {method!r}")
+        if method == "numba" and not _fb.AVAILABLE:
+            raise ValueError("method 'numba' needs the numba package")
+        # compiled loop when numba is there; otherwise the numpy time loop costs ~T numpy
+        # calls per pass and the scan ~log2(T) calls on log2(T)-times more work: the scan
+        # wins for few, long sequences
+        self.compiled = method == "numba" or (method == "auto" and _fb.AVAILABLE)
+        # the numpy fallback (and the posteriors, which the compiled loop does not keep)
+        self.scan = method == "scan" or (method in ("auto", "numba") and T > 1 and T >= SCAN_RATIO * N)
         obs = seqs.y >= 0
         self.PE = Ue * M + 1  # emission rows + dummy "nothing observed"
         self.eidx = np.where(obs, seqs.ue * M + seqs.y, Ue * M)
@@ -477,10 +483,21 @@ class Workspace:
         self.ebins = (self.eidx[None, :, :] + (np.arange(K) * self.PE)[:, None, None]).ravel()
         self.tbins = (self.tidx[None, :, :] + (np.arange(K * K) * (Ut + 1))[:, None, None]).ravel()
         self.eye = np.eye(K)
+        if self.compiled:
+            self._kernel = _fb.Kernel(self.eidx, self.tidx, seqs.lengths, K, self.PE, Ut + 1, 1)
+        self._buffered = False
         if self.scan:
             self._init_scan()
             return
-        # work buffers, reused by every E-step (fresh multi-megabyte arrays cost page faults)
+        if not self.compiled:
+            self._buffers()
+
+    def _buffers(self) -> None:
+        """Work buffers of the numpy time loop, reused by every E-step (fresh multi-megabyte arrays cost page faults)."""
+        if self._buffered:
+            return
+        self._buffered = True
+        K, T, N = self.K, self.T, self.N
         self._Mt = np.empty((K, K, max(T - 1, 0), N))
         self._alpha = np.empty((K, T, N))
         self._beta = np.empty((K, T, N))
@@ -514,9 +531,20 @@ class Workspace:
         B0 = Bx[self.eidx[0]].T
         return B0, Mt
 
+    def _compiled(self, p: Params) -> EStep:
+        K = self.K
+        emit = self._emission_table(p)[None]
+        trans = self._transition_table(p)[None]
+        ll, ci, ce, ct = self._kernel.run(p.initial[None], emit, trans)
+        em = ce[0, :-1].reshape(self.Ue, self.M, K).transpose(0, 2, 1)
+        return EStep(float(ll[0]), ci[0], np.ascontiguousarray(em), np.ascontiguousarray(ct[0, :-1]))
+
     def forward(self, p: Params, B0=None, Mt=None):
+        if self.compiled and B0 is None:
+            return None, None, self._compiled(p).loglik
         if self.scan:
             return None, None, self._scan(p, counts=False).loglik
+        self._buffers()
         if B0 is None:
             B0, Mt = self._steps(p)
         T, N, K = self.T, self.N, self.K
@@ -532,8 +560,11 @@ class Workspace:
         return alpha, c, loglik
 
     def estep(self, p: Params, posteriors: bool = False) -> EStep:
+        if self.compiled and not posteriors:
+            return self._compiled(p)
         if self.scan:
             return self._scan(p, counts=True, posteriors=posteriors)
+        self._buffers()
         B0, Mt = self._steps(p)
         T, N, K = self.T, self.N, self.K
         alpha, c, loglik = self.forward(p, B0, Mt)
@@ -635,13 +666,21 @@ class BatchWorkspace:
     Parameters carry a leading axis R.
     """
 
-    def __init__(self, seqs: Sequences, K: int, M: int, Ue: int, Ut: int, R: int):
+    def __init__(self, seqs: Sequences, K: int, M: int, Ue: int, Ut: int, R: int, method: str = "auto"):
         self.seqs, self.K, self.M, self.Ue, self.Ut, self.R = seqs, K, M, Ue, Ut, R
         T, N = seqs.y.shape
         self.T, self.N, self.NR = T, N, N * R
         obs = seqs.y >= 0
         PE = self.PE = Ue * M + 1
         P = self.P = (Ut + 1) * PE
+        if method not in ("auto", "numba", "loop"):
+            raise ValueError(f"method must be auto, numba or loop, got {method!r}")
+        self.compiled = method == "numba" or (method == "auto" and _fb.AVAILABLE)
+        if self.compiled:  # one compiled pass per parameter set; no side-by-side copies of the data
+            eidx = np.where(obs, seqs.ue * M + seqs.y, Ue * M)
+            tidx = np.where(_transition_mask(seqs), seqs.ut[:-1], Ut)
+            self._kernel = _fb.Kernel(eidx, tidx, seqs.lengths, K, PE, Ut + 1, R)
+            return
         off = np.arange(R)
         eidx = np.where(obs, seqs.ue * M + seqs.y, Ue * M)
         tidx = np.where(_transition_mask(seqs), seqs.ut[:-1], Ut)
@@ -660,9 +699,22 @@ class BatchWorkspace:
         self._c = np.empty((T, NR))
         self.eye = np.eye(K)
 
-    def estep(self, p: Params) -> EStep:
-        """Batched E-step: ``loglik`` (R,), counts with a leading axis R."""
+    def estep(self, p: Params, active: np.ndarray | None = None) -> EStep:
+        """Batched E-step: ``loglik`` (R,), counts with a leading axis R.
+
+        The compiled E-step skips parameter sets where ``active`` is false (their
+        log-likelihood and counts are reported as 0); the numpy one computes all.
+        """
         K, T, N, R = self.K, self.T, self.N, self.R
+        if self.compiled:
+            Bx = np.ones((R, self.PE, K))
+            Bx[:, :-1] = p.emission.transpose(0, 1, 3, 2).reshape(R, self.Ue * self.M, K)
+            Ax = np.empty((R, self.Ut + 1, K, K))
+            Ax[:, :-1] = p.transition
+            Ax[:, -1] = np.eye(K)
+            ll, ci, ce, ct = self._kernel.run(p.initial, Bx, Ax, active)
+            em = ce[:, :-1].reshape(R, self.Ue, self.M, K).transpose(0, 1, 3, 2)
+            return EStep(ll, ci, np.ascontiguousarray(em), np.ascontiguousarray(ct[:, :-1]))
         Bx = np.ones((R, self.PE, K))
         Bx[:, :-1] = p.emission.transpose(0, 1, 3, 2).reshape(R, self.Ue * self.M, K)
         Ax = np.empty((R, self.Ut + 1, K, K))
@@ -732,8 +784,8 @@ def run_em_batch(
     t0 = time.perf_counter()
     R = len(starts)
 
-    def evaluate(p: Params):
-        st = work.estep(p)
+    def evaluate(p: Params, mask: np.ndarray | None = None):
+        st = work.estep(p, mask)
         return st, st.loglik + structure.log_prior(p)
 
     p0 = _stack(starts)
@@ -763,7 +815,7 @@ def run_em_batch(
             freeze(active.copy(), p0, st0, f0, False)
             break
         p1 = structure.mstep(st0, p0)
-        st1, f1 = evaluate(p1)
+        st1, f1 = evaluate(p1, active)
         n_e[active] += 1
         down = active & ~(f1 >= f0)
         freeze(down, p0, st0, f0, True)
@@ -777,7 +829,7 @@ def run_em_batch(
             p0, st0, f0 = p1, st1, f1
             continue
         p2 = structure.mstep(st1, p1)
-        st2, f2 = evaluate(p2)
+        st2, f2 = evaluate(p2, active)
         n_e[active] += 1
         down = active & ~(f2 >= f1)
         freeze(down, p1, st1, f1, True)
@@ -799,7 +851,7 @@ def run_em_batch(
             a, b = p0.initial[0].size, p0.emission[0].size
             pe = structure.project(Params(x[:, :a].copy(), x[:, a : a + b].reshape(p0.emission.shape).copy(), x[:, a + b :].reshape(p0.transition.shape).copy()))
             pe = _where(ext, pe, p2)
-            ste, fe = evaluate(pe)
+            ste, fe = evaluate(pe, ext)
             n_e[ext] += 1
             ok = ext & (fe >= f2) & np.isfinite(fe)
             for r in np.flatnonzero(ok):
@@ -1005,7 +1057,7 @@ def fit_iohmm(
     if not starts:
         raise FitError(["at least one restart is needed"])
     runs = []
-    if len(starts) > 1 and not work.scan and seqs.n_participants * len(starts) <= BATCH_MAX_COLUMNS:
+    if len(starts) > 1 and (work.compiled or (not work.scan and seqs.n_participants * len(starts) <= BATCH_MAX_COLUMNS)):
         # few participants: run every start in lockstep on one batched workspace
         bw = BatchWorkspace(seqs, structure.K, structure.M, structure.Ue, structure.Ut, len(starts))
         runs = run_em_batch(structure, bw, starts, tol=tol, max_iter=max_iter, accelerate=accelerate)
