@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs everything trustseek needs on a fresh Debian machine, idempotently:
-#   - Debian packages: chromium (browser tests, HTML report screenshots), fonts
+#   - Debian packages: chromium (browser tests, HTML report screenshots), fonts, and
+#     postgresql (the experiment server's PostgreSQL tests start a throwaway cluster)
 #   - a Python virtual environment in .venv with trustseek and its test extras
 #   - the web front end (npm ci + build), when web/ exists
 set -euo pipefail
@@ -15,6 +16,16 @@ if ! command -v chromium >/dev/null 2>&1; then
     DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver fonts-dejavu-core >/dev/null
   else
     echo "setup: chromium not found and cannot apt-get install it (need root); browser tests will be skipped" >&2
+  fi
+fi
+
+if ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1; then
+  if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then
+    echo "setup: installing postgresql from Debian packages"
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq postgresql >/dev/null
+  else
+    echo "setup: PostgreSQL server not found and cannot apt-get install it (need root); PostgreSQL tests will be skipped" >&2
   fi
 fi
 

@@ -1,0 +1,273 @@
+"""The experiment server on a real PostgreSQL server.
+
+A throwaway PostgreSQL cluster is created for this module (``initdb`` in a temporary
+directory, ``pg_ctl start`` on a free loopback port with its socket in that directory) and
+removed at the end.  The same migrations, studies, participant trials, duplicate submissions,
+deploy API and export are run against it as against SQLite, and the export is checked against
+what was posted and against an independent run of the solved policy and the Bayes filter.
+
+Skipped only when the PostgreSQL server binaries are absent (``scripts/setup.sh`` installs
+Debian's ``postgresql`` package when run as root).
+"""
+
+from __future__ import annotations
+
+import glob
+import io
+import os
+import pwd
+import shutil
+import subprocess
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from fastapi.testclient import TestClient
+from sqlalchemy import create_engine, text
+
+from trustseek import BayesUpdate, paper_model, paper_task, solve
+from trustseek.client import Client, DeploySession
+from trustseek.data import read_trials
+from trustseek.model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
+from trustseek.server import create_app
+from trustseek.server.local import ThreadServer, free_port
+
+TOKEN = "postgres-experimenter-secret"
+H = {"Authorization": f"Bearer {TOKEN}"}
+
+
+def _pg_bin() -> Path | None:
+    """The directory of Debian's (or a PATH's) initdb / pg_ctl / postgres, newest version first."""
+    dirs = sorted(glob.glob("/usr/lib/postgresql/*/bin"), key=lambda d: int(d.split("/")[-2]) if d.split("/")[-2].isdigit() else 0, reverse=True)
+    on_path = shutil.which("pg_ctl")
+    if on_path:
+        dirs.append(str(Path(os.path.realpath(on_path)).parent))
+    for d in dirs:
+        if all((Path(d) / exe).exists() for exe in ("initdb", "pg_ctl", "postgres")):
+            return Path(d)
+    return None
+
+
+def _as_cluster_owner() -> tuple[list[str], int | None, int | None]:
+    """PostgreSQL refuses to run as root: as root, run its binaries as the ``postgres`` user."""
+    if os.geteuid() != 0:
+        return [], None, None
+    try:
+        pw = pwd.getpwnam("postgres")
+    except KeyError:
+        pytest.skip("running as root and there is no 'postgres' user to own a PostgreSQL cluster (install Debian's postgresql package)")
+    runuser = shutil.which("runuser")
+    if runuser is None:
+        pytest.skip("running as root without runuser: cannot start PostgreSQL as the 'postgres' user")
+    return [runuser, "-u", "postgres", "--"], pw.pw_uid, pw.pw_gid
+
+
+@pytest.fixture(scope="module")
+def pg_url(request):
+    """A fresh PostgreSQL cluster on 127.0.0.1:<free port>; yields its SQLAlchemy URL."""
+    bindir = _pg_bin()
+    if bindir is None:
+        pytest.skip("PostgreSQL server binaries (initdb, pg_ctl) not found; scripts/setup.sh installs Debian's postgresql package as root")
+    prefix, uid, gid = _as_cluster_owner()
+    root = Path(tempfile.mkdtemp(prefix="trustseek-pg-"))
+    data, log = root / "data", root / "server.log"
+    port = free_port()
+    started = False
+
+    def run(*cmd: str, timeout: float = 60) -> None:
+        res = subprocess.run([*prefix, *cmd], capture_output=True, text=True, timeout=timeout, cwd=root)
+        if res.returncode != 0:
+            tail = log.read_text()[-2000:] if log.exists() else ""
+            raise RuntimeError(f"{' '.join(cmd)} failed ({res.returncode}):\n{res.stdout}\n{res.stderr}\n{tail}")
+
+    def stop() -> None:
+        try:
+            if started:
+                subprocess.run([*prefix, str(bindir / "pg_ctl"), "-D", str(data), "-m", "immediate", "-w", "stop"],
+                               capture_output=True, timeout=60, cwd=root)
+        finally:
+            shutil.rmtree(root, ignore_errors=True)
+
+    request.addfinalizer(stop)
+    if uid is not None:
+        os.chown(root, uid, gid)
+    run(str(bindir / "initdb"), "-D", str(data), "-U", "postgres", "-A", "trust", "-E", "UTF8", "--no-sync", "--no-instructions")
+    opts = f"-k {root} -p {port} -c listen_addresses=127.0.0.1 -c fsync=off -c full_page_writes=off"
+    started = True  # from here on, stop() tries pg_ctl stop even if start fails half-way
+    run(str(bindir / "pg_ctl"), "-D", str(data), "-l", str(log), "-o", opts, "-w", "-t", "60", "start")
+    return f"postgresql://postgres@127.0.0.1:{port}/postgres"
+
+
+@pytest.fixture(scope="module")
+def app(pg_url):
+    return create_app(pg_url, token=TOKEN)
+
+
+def test_migrations_create_the_schema_and_rerun_as_a_no_op(pg_url, app):
+    create_app(pg_url, token=TOKEN)  # a restart on the same database: nothing to do
+    eng = create_engine(pg_url.replace("postgresql://", "postgresql+psycopg://"))
+    with eng.connect() as c:
+        assert c.execute(text("select version()")).scalar().startswith("PostgreSQL")
+        assert c.execute(text("select version_num from alembic_version")).scalars().all() == ["0001"]
+        tables = set(c.execute(text("select table_name from information_schema.tables where table_schema = 'public'")).scalars())
+        uniques = set(c.execute(text("select constraint_name from information_schema.table_constraints where constraint_type = 'UNIQUE'")).scalars())
+    eng.dispose()
+    assert {"studies", "policies", "sessions", "trials", "reports", "events", "alembic_version"} <= tables
+    assert {"uq_trial_session_number", "uq_session_study_participant", "uq_report_session_trial"} <= uniques
+
+
+def test_study_with_a_trust_aware_block_round_trips_through_postgresql(pg_url, app):
+    """Participant trials under a live trust-aware policy: the actions and stored beliefs equal
+    an independent run of the solved policy and the Bayes filter; a repeated submission is
+    answered from the database; the export holds exactly the posted trials and is a valid
+    canonical trial log."""
+    sched = ["high", "high", "low", "high", "high", "low"]
+    humans = ["intervene", "rely", "rely", "intervene", "rely", "rely"]
+    with TestClient(app) as client:
+        r = client.post("/api/studies", headers=H, json={
+            "name": "pg", "self_report": "block",
+            "blocks": [
+                {"name": "aware", "policy": {"kind": "trust-aware", "grid": 401}, "schedule": {"trials": sched}},
+                {"name": "never", "policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 1, "high": 1}}},
+            ],
+        })
+        assert r.status_code == 201, r.text
+        st = r.json()
+        (info,) = client.post(f"/api/studies/{st['id']}/sessions", json={"participants": ["P-pg"]}, headers=H).json()
+        sid, ph = info["session_id"], {"Authorization": f"Bearer {info['token']}"}
+        base = f"/api/sessions/{sid}"
+        assert client.post(f"{base}/consent", json={"agree": True, "events": [{"t": 5.0, "type": "consent"}]}, headers=ph).status_code == 200
+
+        model, task = paper_model(), paper_task()
+        pol, upd = solve(model, task, belief_update="bayes", grid=401), BayesUpdate(model)
+        b = model.initial.copy()
+        posted = []
+        for n in range(1, len(sched) + 3):
+            cur = client.get(f"{base}/state", headers=ph).json()["current"]
+            assert cur["trial"] == n
+            c = task.complexity_index(cur["complexity"])
+            if n <= len(sched):
+                assert (cur["block"], cur["complexity"], cur["robot_action"]) == (0, sched[n - 1], ACTIONS[pol.action(b, c)])
+                human = "intervene" if cur["robot_action"] == "ask" else humans[n - 1]
+            else:
+                assert (cur["block"], cur["robot_action"]) == (1, "autonomous")
+                human = "rely"
+            body = {"trial": n, "submission_id": f"sub-{n}", "human_action": human, "effort_ms": 100.0 * n,
+                    "events": [{"t": 1000.0 + n, "type": "trial-end", "data": {"n": n}}]}
+            res = client.post(f"{base}/trials", json=body, headers=ph)
+            assert res.status_code == 200, res.text
+            t = res.json()["trial"]
+            assert res.json()["duplicate"] is False
+            if n <= len(sched):
+                assert t["belief"] == pytest.approx(b[1], abs=1e-12)
+                b = upd.update(b, c, ACTIONS.index(cur["robot_action"]), HUMAN_ACTIONS.index(human), EXPERIENCES.index(t["experience"]))
+                assert t["belief_after"] == pytest.approx(b[1], abs=1e-12)
+            posted.append(t)
+            if n == 2:  # the same submission again: answered from the database, nothing stored twice
+                again = client.post(f"{base}/trials", json=body, headers=ph)
+                assert again.status_code == 200 and again.json()["duplicate"] is True and again.json()["trial"] == t
+                other = client.post(f"{base}/trials", json={**body, "submission_id": "another"}, headers=ph)
+                assert other.status_code == 409 and "already committed" in other.text
+            if n == len(sched):  # end of the first block: a self-report is due
+                assert res.json()["state"]["report_due"] == n
+                rep = client.post(f"{base}/reports", json={"after_trial": n, "value": 72.5}, headers=ph)
+                assert rep.status_code == 200 and rep.json()["state"]["report_due"] is None
+        state = client.get(f"{base}/state", headers=ph).json()
+        assert state["status"] == "done" and state["trials_done"] == len(posted)
+        assert state["score"] == pytest.approx(sum(t["reward"] for t in posted))
+        assert any(t["robot_action"] == "ask" for t in posted)  # the policy asked after interventions
+
+        dash = client.get(f"/api/studies/{st['id']}/dashboard", headers=H).json()
+        (row,) = dash["participants"]
+        assert row["trials_done"] == len(posted) and row["last"]["trial"] == len(posted) and row["last_self_report"] == 72.5
+
+        csv = client.get(f"/api/studies/{st['id']}/export", params={"format": "csv"}, headers=H)
+        parquet = client.get(f"/api/studies/{st['id']}/export", params={"format": "parquet"}, headers=H)
+        events = client.get(f"/api/studies/{st['id']}/export", params={"table": "events"}, headers=H)
+    for frame in (pd.read_csv(io.BytesIO(csv.content)), pd.read_parquet(io.BytesIO(parquet.content))):
+        canon = read_trials(frame)
+        assert canon["participant"].tolist() == ["P-pg"] * len(posted)
+        assert canon["trial"].tolist() == [t["trial"] for t in posted]
+        for col in ("complexity", "robot_action", "human_action", "experience"):
+            assert canon[col].tolist() == [t[col] for t in posted], col
+        assert frame["reward"].tolist() == [t["reward"] for t in posted]
+        assert np.allclose(frame["belief"].to_numpy(float), [t["belief"] for t in posted], atol=1e-12)
+        assert frame["effort_ms"].tolist() == [t["effort_ms"] for t in posted]
+    ev = pd.read_csv(io.BytesIO(events.content))
+    assert ev["type"].tolist() == ["consent"] + ["trial-end"] * len(posted)
+    assert ev["trial"].tolist()[1:] == [t["trial"] for t in posted]
+
+
+def test_concurrent_duplicate_submissions_store_one_trial(pg_url, app):
+    """Simultaneous submissions over real HTTP contend for PostgreSQL's row lock on the
+    session: one trial is stored, repeats of its submission id are duplicates, others 409."""
+    import httpx
+
+    with ThreadServer(pg_url, TOKEN) as url:
+        c = Client(url, TOKEN)
+        st = c.create_study({"name": "conc", "blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 3}}}]})
+        s = c.create_sessions(st["id"])[0]
+        ph = {"Authorization": f"Bearer {s['token']}"}
+        base = f"{url}/api/sessions/{s['session_id']}"
+        httpx.post(f"{base}/consent", json={"agree": True}, headers=ph).raise_for_status()
+
+        def post(i, n, same):
+            body = {"trial": n, "submission_id": "same" if same else f"id-{i}", "human_action": "rely"}
+            return httpx.post(f"{base}/trials", json=body, headers=ph, timeout=30)
+
+        with ThreadPoolExecutor(8) as ex:
+            same = list(ex.map(lambda i: post(i, 1, True), range(8)))
+            other = list(ex.map(lambda i: post(i, 2, False), range(8)))
+        assert [r.status_code for r in same] == [200] * 8
+        assert sorted(r.json()["duplicate"] for r in same) == [False] + [True] * 7
+        assert sorted(r.status_code for r in other) == [200] + [409] * 7
+        frame = read_trials(pd.read_csv(io.BytesIO(c.export(st["id"]))))
+        c.close()
+    assert frame["trial"].tolist() == [1, 2]
+
+
+def test_deploy_api_on_postgresql_resumes_after_a_restart(pg_url, app):
+    """The decision API: actions and beliefs follow the solved policy and the Bayes filter;
+    retries are idempotent; a new server process on the same database continues the session."""
+    model, task = paper_model(), paper_task()
+    pol, upd = solve(model, task, grid=401), BayesUpdate(model)
+    b = model.initial.copy()
+    steps = [("high", "intervene", None), ("high", None, None), ("low", "rely", "success"), ("high", "rely", "failure")]
+    with TestClient(app) as http:
+        robot = Client("http://test", TOKEN, http=http).open_deploy(model="paper", policy={"kind": "trust-aware", "grid": 401})
+        for cx, human, outcome in steps[:3]:
+            b, _, _ = _deploy_step(robot, pol, upd, task, b, cx, human, outcome)
+        assert robot.decide("low", trial=3) == robot.state()["trials"][2]["robot_action"]  # retry of a committed trial
+        first = robot.state()
+        sid, token = robot.session_id, robot.token
+    with TestClient(create_app(pg_url, token=TOKEN)) as http2:  # a new server on the same database
+        robot2 = DeploySession(http2, {"session_id": sid, "token": token})
+        robot2.trial = robot2.state()["trials_done"]
+        assert robot2.trial == first["trials_done"] == 3
+        cx, human, outcome = steps[3]
+        b, human, outcome = _deploy_step(robot2, pol, upd, task, b, cx, human, outcome)
+        again = robot2.observe(human_action=human, outcome=outcome, trial=4)  # a repeated observation
+        assert again == pytest.approx(b[1], abs=1e-12)
+        state = robot2.state()
+    assert [t["trial"] for t in state["trials"]] == [1, 2, 3, 4]
+    assert state["trials"][:3] == first["trials"]
+    assert state["belief"] == pytest.approx(b[1], abs=1e-12)
+
+
+def _deploy_step(robot, pol, upd, task, b, cx, human, outcome):
+    a = robot.decide(cx)
+    c = task.complexity_index(cx)
+    assert a == ACTIONS[pol.action(b, c)]
+    if a == "ask":
+        human, outcome, e = None, None, task.ask_experience[c]
+    else:
+        human = human or "rely"
+        outcome = outcome or ("success" if human == "rely" else None)
+        e = 0 if human == "intervene" or outcome == "failure" else 1
+    belief = robot.observe(human_action=human, outcome=outcome)
+    b = upd.update(b, c, ACTIONS.index(a), 0 if a == "ask" or human == "intervene" else 1, e)
+    assert belief == pytest.approx(b[1], abs=1e-12)
+    return b, human, outcome
