@@ -213,3 +213,25 @@ def test_decode_names_participants_the_model_rules_out():
     df.loc[i, "human_action"] = "rely"  # the paper model says the human always teleoperates when asked
     with pytest.raises(FitError, match="participant 'P004': the trials have probability zero"):
         decode(df, paper_model())
+
+
+def test_select_heldout_stays_finite_when_a_training_fold_never_saw_an_event():
+    """One participant relies in high complexity, nobody else ever does: the training fold
+    without them puts that cell at 0, yet the held-out score (smoothed) stays finite and
+    the JSON valid."""
+    n, T = 6, 20
+    frames = []
+    for i in range(n):
+        cx = np.where(np.arange(T) % 2, "high", "low")
+        ha = np.where(cx == "low", "rely", "intervene")
+        if i == 0:
+            ha = np.full(T, "rely")
+        frames.append(pd.DataFrame({"participant": f"p{i}", "trial": np.arange(1, T + 1), "complexity": cx, "robot_action": "autonomous",
+                                    "human_action": ha, "experience": np.where(ha == "rely", "reliable", "faulty")}))
+    df = pd.concat(frames, ignore_index=True)
+    rows = select_levels(df, levels=(1, 2), folds=3, restarts=2, seed=0, tol=1e-6)
+    for r in rows:
+        assert np.isfinite(r["heldout_loglik"]) and all(np.isfinite(r["heldout_per_fold"]))
+    json.dumps(rows, allow_nan=False)
+    # a fold that contains participant p0 scores lower than under the unsmoothed model's -inf, but finite
+    assert min(min(r["heldout_per_fold"]) for r in rows) < -5

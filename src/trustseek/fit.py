@@ -534,11 +534,26 @@ def select_levels(
     return rows
 
 
+HELDOUT_PSEUDOCOUNT = 0.5  # added to every free cell's training counts before held-out scoring
+
+
 def _test_loglik(test: Sequences, spec: IOHMMSpec, fit: IOHMMFit) -> float:
-    """Held-out log-likelihood; input rows unseen in training keep their defaults."""
+    """Held-out log-likelihood under the training fit, smoothed so that it stays finite.
+
+    A training fold can drive a cell to exactly 0 (no training participant ever did
+    that) while a held-out participant does it: the held-out log-likelihood would be
+    -inf, and every number of levels would tie at -inf.  The model is therefore scored
+    with the training fit's expected counts plus :data:`HELDOUT_PSEUDOCOUNT` per free
+    cell (one smoothed M-step from the maximum-likelihood point).  Input rows unseen in
+    training keep their defaults.
+    """
     s = fit.structure
+    st = fit.workspace().estep(fit.params)
+    a = spec.prior + HELDOUT_PSEUDOCOUNT
+    c0 = st.initial + a
+    params = Params(c0 / c0.sum(), s.em.mstep(st.emission, a, fit.params.emission), s.tr.mstep(st.transition, a, fit.params.transition))
     work = Workspace(test, s.K, s.M, s.Ue, s.Ut)
-    return work.forward(fit.params)[2]
+    return work.forward(params)[2]
 
 
 # --------------------------------------------------------------------------- synthetic data
