@@ -567,7 +567,7 @@ class AlphaSolver:
         """The optimal policy: an :class:`AlphaVectorPolicy` (bayes) or a certified
         TrustAwarePolicy on a fine grid (paper); ``info`` holds the certificate."""
         sol = self.solve_bounds(pomdp)
-        return policy_from_solution(sol, pomdp)
+        return policy_from_solution(sol, pomdp, self.tol)
 
     def solve_bounds(self, pomdp: AssistancePOMDP) -> AlphaSolution:
         self._check(pomdp)
@@ -1084,7 +1084,7 @@ def certificate(sol: AlphaSolution, pomdp: AssistancePOMDP) -> dict[str, Any]:
     }
 
 
-def policy_from_solution(sol: AlphaSolution, pomdp: AssistancePOMDP):
+def policy_from_solution(sol: AlphaSolution, pomdp: AssistancePOMDP, target_gap: float | None = None):
     """Wrap a solution as a Policy: AlphaVectorPolicy (bayes) or TrustAwarePolicy (paper)."""
     info = {
         "solver": "alpha",
@@ -1096,6 +1096,7 @@ def policy_from_solution(sol: AlphaSolution, pomdp: AssistancePOMDP):
         "discount": pomdp.discount,
     }
     info.update(certificate(sol, pomdp))
+    info["target_gap"] = target_gap
     if sol.q is not None:
         info["vectors"] = int(len(sol.lower[0]))
         return AlphaVectorPolicy(

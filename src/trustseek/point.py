@@ -197,7 +197,7 @@ class PointSolver:
         self.max_resolution = max_resolution
         self.depth = int(depth)
         self.seed = seed
-        self.max_vertices = 300_000
+        self.max_vertices = 100_000
         self.lower_lattice = lower_lattice  # beliefs of the lower bound: this lattice and the reachable set
 
     # -- successors of a set of beliefs ------------------------------------------
@@ -357,7 +357,12 @@ class PointSolver:
             up = float(self.upper_at(b0)[0])
             history.append((len(V), time.perf_counter() - t0, lo, up))
             too_big = _lattice_size(K, 2 * r) > self.max_vertices or (2 * r + 1) ** (K - 1) >= 2**62
-            if up - lo <= self.tol or r * 2 > r_max or too_big or time.perf_counter() - t0 > self.max_seconds:
+            now = time.perf_counter() - t0
+            last = now - (history[-2][1] if len(history) > 1 else 0.0)
+            # the next round costs about (vertex growth) x this one: do not start it past the limit
+            growth = _lattice_size(K, 2 * r) / _lattice_size(K, r)
+            late = now + 1.5 * growth * last > self.max_seconds
+            if up - lo <= self.tol or r * 2 > r_max or too_big or late:
                 break
             r *= 2
         return PointSolution(self.G.copy(), V.copy(), u.copy(), lo, up, rounds, time.perf_counter() - t0, history)
@@ -388,6 +393,7 @@ class PointSolver:
             "error_bound": sol.gap,
             "certified_gap": sol.gap,
             "gap_at": "initial belief",
+            "target_gap": self.tol,
             "value_bounds_at_initial_belief": [sol.lower, sol.upper],
             "vectors": int(len(sol.vectors)),
             "upper_points": int(len(sol.points)),

@@ -107,6 +107,9 @@ def report_certified(policy, task, out: Optional[Path], as_json: bool) -> None:
         f"V(b0) in [{lo:.6f}, {hi:.6f}]; certified gap {summary['certified_gap']:.2e} ({where}); "
         f"{info.get('method')}, {info['seconds'] * 1000:.1f} ms"
     )
+    target = info.get("target_gap")
+    if target is not None and summary["certified_gap"] > target:
+        console.print(f"[yellow]the target gap {target:g} was not reached (time or size limit)[/]")
     if out is not None:
         console.print(f"policy written to {out}")
 
