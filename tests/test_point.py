@@ -124,7 +124,7 @@ def test_lumped_three_level_model_has_the_two_level_value(model, task, pomdp):
     assert sol.lower - 1e-6 <= v <= sol.upper + 1e-6
 
 
-def test_three_level_example_solves_with_reported_gap():
+def test_three_level_example_solves_with_reported_gap(tmp_path):
     m = TrustModel.load(EXAMPLES / "three_level_model.json")
     t = Task.load(EXAMPLES / "three_level_task.json")
     assert m.trust_levels == ("low", "medium", "high")
@@ -137,3 +137,11 @@ def test_three_level_example_solves_with_reported_gap():
     assert pol.action(np.array([0.0, 0.0, 1.0]), "high") == 0
     # the lower bound at b0 is the value of the greedy vectors
     assert pol.value(m.initial) == pytest.approx(lo, abs=1e-9)
+    # the policy file round-trips and decides the same way
+    from trustseek import load_policy
+
+    pol.save(tmp_path / "p3.json")
+    back = load_policy(tmp_path / "p3.json")
+    B = np.random.default_rng(3).dirichlet(np.ones(3), size=200)
+    cx = np.arange(200) % 2
+    assert np.array_equal(back.actions(B, cx), pol.actions(B, cx))
