@@ -24,7 +24,10 @@ def free_cells(result):
 
 @pytest.fixture(scope="module")
 def big_fit():
-    df = simulate_design(paper_model(), 1000, seed=7)
+    # seed 0, the default, not a seed picked for a good result: over 20 synthetic data sets
+    # (seeds 0-19, benchmarks/bench_fit.py --recovery 20) the MAE is 0.004-0.047, median 0.010,
+    # above 0.03 on 2 of 20 (docs/fitting.md)
+    df = simulate_design(paper_model(), 1000, seed=0)
     return df, fit_trust_model(df, restarts=4, seed=1)
 
 
@@ -49,6 +52,33 @@ def test_parameter_recovery_at_1000_participants(big_fit):
     assert res.bic == pytest.approx(17 * np.log(len(df)) - 2 * res.loglik)
     assert res.aic == pytest.approx(34 - 2 * res.loglik)
     assert len(res.restart_logliks) == 4 and max(res.restart_logliks) == pytest.approx(res.loglik)
+
+
+WELL_IDENTIFIED_EVENTS = 5000  # expected events behind a cell for the check on several data sets
+
+
+@pytest.mark.parametrize("seed", [100, 101, 102])
+def test_recovery_of_well_identified_cells_on_other_data_sets(seed):
+    """On data sets not looked at beforehand: the fit reaches at least the likelihood of the
+    true parameters (the optimizer finds the maximum, whatever the sampling error), and the
+    cells with many expected events are within 0.03 of the truth.  (Event counts are only a
+    partial guide: the weakly identified cells -- P(rely | T=low, C=high) and the transitions
+    after a failure -- also have thousands of events; see docs/fitting.md.)"""
+    from trustseek.fit import from_trust_model
+    from trustseek.iohmm import loglik
+
+    truth = paper_model()
+    df = simulate_design(truth, 1000, seed=seed)
+    res = fit_trust_model(df, restarts=4, seed=0)
+    spec, ptrue = from_trust_model(truth)
+    assert res.loglik >= loglik(res.fit.seqs, spec, ptrue) - 1e-6
+    checked = 0
+    for c in res.cells():
+        if c["events"] >= WELL_IDENTIFIED_EVENTS:
+            t = float(getattr(truth, c["table"])[tuple(c["index"])])
+            assert abs(c["estimate"] - t) <= 0.03, c
+            checked += 1
+    assert checked >= 5
 
 
 def test_decode_with_the_true_model_tracks_the_hidden_trust(big_fit):
