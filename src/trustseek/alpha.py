@@ -535,7 +535,7 @@ class AlphaSolver:
         method: str = "policy-iteration",
         max_iter: int = 2000,
         upper_grid: int = 201,
-        grid: int = 2001,
+        grid: int = 129,  # starting grid of the paper update (refined adaptively)
         max_grid: int = 200_001,
         thin: float = 0.05,
         seed_points: int = 33,
