@@ -1,11 +1,14 @@
 """Benchmark of the trust-model fit (extended Baum-Welch for the discrete IOHMM).
 
-    python benchmarks/bench_fit.py                 # timing (1000 x 71 and 9 x 71, 10 restarts)
-    python benchmarks/bench_fit.py --coverage 20   # + bootstrap CI coverage at 9 x 71 over 20 datasets
+    python benchmarks/bench_fit.py                 # timing (9 x 71 and 1000 x 71, 10 restarts)
+    python benchmarks/bench_fit.py --recovery 20   # + parameter recovery at 1000 x 71 over 20 data sets
+    python benchmarks/bench_fit.py --coverage 20   # + bootstrap CI coverage at 9 x 71 over 20 data sets
 
-Prints iterations (E-steps) and seconds per restart, the total against the
-targets (< 2 s and < 0.1 s on one core), and the speed-up of SQUAREM over plain
-EM measured in the same run on the same start.
+Prints iterations (E-steps) and time per restart, the total against the targets
+(< 0.1 s and < 2 s on one core) as wall time and CPU time (the machine may be
+shared), the first-call time of the compiled E-step (compilation, or loading it
+from the cache), and, measured in the same run, the compiled E-step against the
+numpy E-step and SQUAREM against plain EM.
 """
 
 from __future__ import annotations
@@ -20,40 +23,108 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from trustseek.fit import coverage_study, paper_spec, simulate_design  # noqa: E402
-from trustseek.iohmm import Structure, Workspace, encode, fit_iohmm, run_em  # noqa: E402
+from trustseek import forward_backward  # noqa: E402
+from trustseek.fit import coverage_study, fit_trust_model, from_trust_model, paper_spec, simulate_design  # noqa: E402
+from trustseek.iohmm import Structure, Workspace, encode, fit_iohmm, loglik, run_em  # noqa: E402
 from trustseek.presets import paper_model  # noqa: E402
 
 
-def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None = None) -> None:
+def clocks():
+    return time.perf_counter(), time.process_time()
+
+
+def since(t):
+    return time.perf_counter() - t[0], time.process_time() - t[1]
+
+
+def first_call() -> None:
+    seqs = encode(simulate_design(paper_model(), 2, seed=0), paper_spec())
+    s = Structure(paper_spec(), seqs)
+    t = clocks()
+    Workspace(seqs, 2, 2, s.Ue, s.Ut).estep(s.random(np.random.default_rng(0)))
+    w, c = since(t)
+    print(f"compiled E-step available: {forward_backward.AVAILABLE}; first call {w:.2f} s wall, {c:.2f} s CPU "
+          "(compilation on the first run, then loading from the cache)")
+
+
+def estep_speed(seqs, s, p, reps: int) -> None:
+    out = {}
+    for method in ("numba", "loop"):
+        w = Workspace(seqs, s.K, s.M, s.Ue, s.Ut, method=method)
+        w.estep(p)
+        t = clocks()
+        for _ in range(reps):
+            w.estep(p)
+        out[method] = [x / reps for x in since(t)]
+    print(f"  E-step: compiled {out['numba'][0] * 1e3:.2f} ms wall / {out['numba'][1] * 1e3:.2f} ms CPU; "
+          f"numpy {out['loop'][0] * 1e3:.2f} ms wall / {out['loop'][1] * 1e3:.2f} ms CPU; "
+          f"x{out['loop'][1] / out['numba'][1]:.1f} (CPU)")
+
+
+def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None = None, numpy_fit: bool = False) -> None:
     df = simulate_design(paper_model(), n, seed=1)
     spec = paper_spec()
     seqs = encode(df, spec)
-    t0 = time.perf_counter()
+    t = clocks()
     fit = fit_iohmm(seqs, spec, restarts=restarts, seed=0, tol=tol)
-    total = time.perf_counter() - t0
+    wall, cpu = since(t)
     print(f"{n} participants x 71 trials, {restarts} restarts, tol {tol:g}")
     for i, r in enumerate(fit.runs):
         mark = " (best)" if i == fit.best else ""
         print(f"  restart {i:2d}: {r.iterations:4d} iterations, {r.seconds * 1000:8.1f} ms, log-likelihood {r.loglik:.6f}{mark}")
     its = sum(r.iterations for r in fit.runs)
-    print(f"  total {total:.3f} s" + (f" (target < {target:g} s: {'met' if total < target else 'not met'})" if target else "")
-          + f"; {total / its * 1000:.2f} ms per iteration")
+    verdict = f" (target < {target:g} s: {'met' if cpu < target else 'not met'} on CPU time)" if target else ""
+    print(f"  total {wall:.3f} s wall, {cpu:.3f} s CPU{verdict}; {cpu / its * 1000:.3f} ms CPU per iteration")
     s = Structure(spec, seqs)
-    w = Workspace(seqs, s.K, s.M, s.Ue, s.Ut)
-    if fit.runs[0].seconds == fit.runs[-1].seconds and restarts > 1:  # ran batched: compare one at a time
-        t1 = time.perf_counter()
-        starts = [s.random(np.random.default_rng(c)) for c in np.random.SeedSequence(0).spawn(restarts)]
-        for p in starts:
-            run_em(s, w, p, tol=tol)
-        one = time.perf_counter() - t1
-        print(f"  the same restarts one at a time: {one:.3f} s; batching speed-up x{one / total:.1f}")
+    p = s.random(np.random.default_rng(0))
+    estep_speed(seqs, s, p, reps=max(5, min(200, 20000 // n)))
+    if numpy_fit:  # the same fit with the numpy E-step (the previous implementation)
+        forward_backward.AVAILABLE = False
+        try:
+            t = clocks()
+            ref = fit_iohmm(seqs, spec, restarts=restarts, seed=0, tol=tol)
+            w2, c2 = since(t)
+        finally:
+            forward_backward.AVAILABLE = True
+        print(f"  numpy E-step fit: {w2:.3f} s wall, {c2:.3f} s CPU; compiled x{c2 / cpu:.1f} (CPU); "
+              f"same best log-likelihood: {abs(ref.loglik - fit.loglik) < 1e-6}")
     # SQUAREM vs plain EM from the same start
+    w = Workspace(seqs, s.K, s.M, s.Ue, s.Ut)
     start = s.random(np.random.default_rng(123))
     plain = run_em(s, w, start, tol=tol, max_iter=20000, accelerate=False)
     fast = run_em(s, w, start, tol=tol, max_iter=20000, accelerate=True)
     print(f"  plain EM: {plain.iterations} iterations {plain.seconds:.3f} s; SQUAREM: {fast.iterations} iterations {fast.seconds:.3f} s; "
           f"speed-up x{plain.seconds / fast.seconds:.1f}; log-likelihoods {plain.loglik:.6f} / {fast.loglik:.6f}")
+
+
+def recovery(datasets: int, n: int = 1000, restarts: int = 10) -> None:
+    """MAE over the free cells on ``datasets`` synthetic data sets (seeds 0..datasets-1), and per cell."""
+    truth = paper_model()
+    spec, ptrue = from_trust_model(truth)
+    print(f"parameter recovery at {n} x 71, {restarts} restarts, data set seeds 0..{datasets - 1}")
+    maes, errs, events, lr = [], {}, {}, []
+    t = clocks()
+    for d in range(datasets):
+        res = fit_trust_model(simulate_design(truth, n, seed=d), restarts=restarts, seed=0)
+        e = []
+        for c in res.cells():
+            x = c["estimate"] - float(getattr(truth, c["table"])[tuple(c["index"])])
+            e.append(abs(x))
+            errs.setdefault(c["cell"], []).append(x)
+            events.setdefault(c["cell"], []).append(c["events"])
+        maes.append(float(np.mean(e)))
+        lr.append(2 * (res.loglik - loglik(res.fit.seqs, spec, ptrue)))
+        print(f"  seed {d:3d}: MAE {maes[-1]:.4f}; 2 (LL(fit) - LL(truth)) = {lr[-1]:6.2f}; restarts end in "
+              f"[{min(res.restart_logliks):.2f}, {max(res.restart_logliks):.2f}]")
+    wall, cpu = since(t)
+    q = np.quantile(maes, [0, 0.5, 0.9, 1])
+    print(f"  MAE min {q[0]:.4f}, median {q[1]:.4f}, 90% {q[2]:.4f}, max {q[3]:.4f}; <= 0.03 on "
+          f"{sum(m <= 0.03 for m in maes)} of {datasets}; LL(fit) >= LL(truth) on {sum(x >= 0 for x in lr)} of {datasets} "
+          f"({wall:.1f} s wall, {cpu:.1f} s CPU)")
+    print(f"  {'cell':62s} {'RMSE':>6s} {'max|err|':>8s} {'events':>7s}")
+    for k, v in errs.items():
+        v = np.asarray(v)
+        print(f"  {k:62s} {np.sqrt(np.mean(v * v)):6.3f} {np.abs(v).max():8.3f} {np.mean(events[k]):7.0f}")
 
 
 def coverage(datasets: int, bootstrap: int) -> None:
@@ -68,11 +139,15 @@ def coverage(datasets: int, bootstrap: int) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--recovery", type=int, default=0, help="number of synthetic datasets for the recovery study at 1000 x 71 (0 = skip)")
     ap.add_argument("--coverage", type=int, default=0, help="number of synthetic datasets for the coverage study (0 = skip)")
     ap.add_argument("--bootstrap", type=int, default=100, help="bootstrap replicates per dataset in the coverage study")
     args = ap.parse_args(argv)
-    timing(9, target=0.1)
+    first_call()
+    timing(9, target=0.1, numpy_fit=True)
     timing(1000, target=2.0)
+    if args.recovery:
+        recovery(args.recovery)
     if args.coverage:
         coverage(args.coverage, args.bootstrap)
     return 0
