@@ -203,7 +203,7 @@ def check(
                 load_policy(f)
             else:
                 TrustModel.from_dict(text, str(f))
-            console.print(f"{f}: ok")
+            console.print(f"{f}: ok", soft_wrap=True, highlight=False)
         except ModelError as exc:
             problems.extend(exc.lines())
     if problems:
