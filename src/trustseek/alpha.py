@@ -55,6 +55,7 @@ from scipy.optimize import brentq
 
 from .belief import BELIEF_UPDATES, to_vector
 from .model import ACTIONS, ASK, AUTONOMOUS, ModelError, TrustModel
+from .policy import _PolicyBase
 from .pomdp import AssistancePOMDP
 
 ALPHA_KIND = "alpha-vector"
@@ -670,9 +671,10 @@ class AlphaSolver:
 
 def paper_grid_values(pomdp: AssistancePOMDP, grid: np.ndarray, guess: np.ndarray | None = None) -> np.ndarray:
     """W on a (possibly non-uniform) grid for the eq.-3 belief MDP with linear interpolation
-    between grid points: Howard's policy iteration on the grid MDP (sparse direct solves)."""
+    between grid points: Howard's policy iteration on the grid MDP."""
     import scipy.sparse as sp
-    import scipy.sparse.linalg as spla
+
+    from .solve import policy_iteration
 
     p, f = _paper_maps(pomdp)
     R = pomdp.expected_reward
@@ -698,28 +700,11 @@ def paper_grid_values(pomdp: AssistancePOMDP, grid: np.ndarray, guess: np.ndarra
                 m = part if m is None else m + part
             P[c][a] = m.tocsr()
 
-    def q_of(W):
-        return np.stack([np.stack([r[c, a] + gamma * (P[c][a] @ W) for a in range(2)]) for c in range(N)])
-
-    W = q_of(guess).max(axis=1).T @ pc if guess is not None else None
-    policy = q_of(W).argmax(axis=1) if W is not None else r.argmax(axis=1)  # [c, G]
-    eye = sp.identity(G, format="csr")
-    for _ in range(200):
-        M = None
-        rr = np.zeros(G)
-        for c in range(N):
-            sel = policy[c]
-            Pc = sp.diags((sel == 0).astype(float)) @ P[c][0] + sp.diags((sel == 1).astype(float)) @ P[c][1]
-            M = pc[c] * Pc if M is None else M + pc[c] * Pc
-            rr += pc[c] * np.where(sel == 0, r[c, 0], r[c, 1])
-        W = spla.spsolve((eye - gamma * M).tocsc(), rr)
-        q = q_of(W)
-        cur = np.take_along_axis(q, policy[:, None, :], axis=1)[:, 0]
-        better = q.max(axis=1) > cur + 1e-12 * (1 + np.abs(cur))
-        new = np.where(better, q.argmax(axis=1), policy)
-        if np.array_equal(new, policy):
-            break
-        policy = new
+    policy = None
+    if guess is not None:
+        q = np.stack([np.stack([r[c, a] + gamma * (P[c][a] @ guess) for a in range(2)]) for c in range(N)])
+        policy = q.argmax(axis=1)  # [c, G]
+    W, _, _ = policy_iteration(r, P, pc, gamma, policy, max_iter=200)
     return np.asarray(W)
 
 
@@ -878,7 +863,7 @@ def finite_horizon_value(pomdp: AssistancePOMDP, horizon: int, belief, complexit
 # --------------------------------------------------------------------------- the policy
 
 
-class AlphaVectorPolicy:
+class AlphaVectorPolicy(_PolicyBase):
     """Greedy in Q(b, C, a) = max over the Q-vectors of (C, a) of α·b; any number of trust levels.
 
     ``q_vectors[c][a]`` is an array (n, K) of vectors, each the value of "take a now, then
@@ -917,18 +902,7 @@ class AlphaVectorPolicy:
         if problems:
             raise ModelError(problems)
 
-    # -- Policy interface ------------------------------------------------------
-    def _cindex(self, complexity) -> int:
-        if isinstance(complexity, str):
-            try:
-                return self.complexities.index(complexity)
-            except ValueError:
-                raise KeyError(f"unknown complexity {complexity!r}; expected one of {list(self.complexities)}") from None
-        c = int(complexity)
-        if not 0 <= c < len(self.complexities):
-            raise KeyError(f"complexity index {c} out of range for {list(self.complexities)}")
-        return c
-
+    # -- Policy interface (complexity lookup, action(), save() from the core base) ----
     def q_of(self, beliefs: np.ndarray, complexities: np.ndarray) -> np.ndarray:
         """Q lower bounds for each (belief, complexity) pair; shape (n, 2)."""
         beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
@@ -944,18 +918,8 @@ class AlphaVectorPolicy:
         q = self.q_of(beliefs, complexities)
         return np.where(q[:, ASK] > q[:, AUTONOMOUS], ASK, AUTONOMOUS).astype(np.int64)
 
-    def action(self, belief, complexity, rng=None) -> int:
-        b = to_vector(belief, self.model.n_trust)[None, :]
-        return int(self.actions(b, np.array([self._cindex(complexity)]), rng)[0])
-
     def describe(self) -> str:
         return f"{self.kind} ({sum(len(v) for p in self.q_vectors for v in p)} Q-vectors)"
-
-    def save(self, path) -> None:
-        import json
-        from pathlib import Path
-
-        Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n", encoding="utf-8")
 
     # -- two trust levels: values, thresholds ----------------------------------
     def _x_vectors(self, b_high):

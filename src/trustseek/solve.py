@@ -184,29 +184,7 @@ class GridSolver:
                 if bound <= self.tol:
                     break
         else:
-            # Howard's policy iteration; start from the greedy policy of the myopic value.
-            policy = r.argmax(axis=1)  # [c, G]
-            it = 0
-            eye = sp.identity(G, format="csr")
-            W = np.zeros(G)
-            while it < self.max_iter:
-                it += 1
-                M = None
-                rr = np.zeros(G)
-                for c in range(N):
-                    sel = policy[c]
-                    Pc = sp.diags((sel == 0).astype(float)) @ P[c][0] + sp.diags((sel == 1).astype(float)) @ P[c][1]
-                    M = pc[c] * Pc if M is None else M + pc[c] * Pc
-                    rr += pc[c] * np.where(sel == 0, r[c, 0], r[c, 1])
-                W = _evaluate((eye - gamma * M).tocsr(), rr, W)
-                q = q_of(W)
-                # keep the current action on ties, so that the iteration terminates
-                cur = np.take_along_axis(q, policy.T[:, :, None], axis=2)[:, :, 0]
-                better = q.max(axis=2) > cur + 1e-12 * (1 + np.abs(cur))
-                new_policy = np.where(better.T, q.argmax(axis=2).T, policy)
-                if np.array_equal(new_policy, policy):
-                    break
-                policy = new_policy
+            W, _, it = policy_iteration(r, P, pc, gamma, max_iter=self.max_iter)
         q = q_of(W)
         residual = float(np.max(np.abs(q.max(axis=2) @ pc - W)))
         return GridSolution(
@@ -220,6 +198,39 @@ class GridSolver:
             seconds=time.perf_counter() - t0,
             history=history,
         )
+
+
+def policy_iteration(r: np.ndarray, P, pc: np.ndarray, gamma: float, policy: np.ndarray | None = None, max_iter: int = 1000):
+    """Howard's policy iteration on a finite belief MDP over G points.
+
+    ``r[c, a]`` (G,) are the rewards, ``P[c][a]`` sparse (G, G) transition matrices to the
+    next trial's points, ``pc`` P(C).  Starts from ``policy`` [c, G] (default: greedy in the
+    one-step reward).  Returns (W, policy, iterations) with W(b) = Σ_C P(C) max_a Q(b, C, a).
+    """
+    N, G = len(pc), r.shape[-1]
+    policy = r.argmax(axis=1) if policy is None else np.asarray(policy)
+    eye = sp.identity(G, format="csr")
+    W = np.zeros(G)
+    it = 0
+    while it < max_iter:
+        it += 1
+        M = None
+        rr = np.zeros(G)
+        for c in range(N):
+            sel = policy[c]
+            Pc = sp.diags((sel == 0).astype(float)) @ P[c][0] + sp.diags((sel == 1).astype(float)) @ P[c][1]
+            M = pc[c] * Pc if M is None else M + pc[c] * Pc
+            rr += pc[c] * np.where(sel == 0, r[c, 0], r[c, 1])
+        W = _evaluate((eye - gamma * M).tocsr(), rr, W)
+        q = np.stack([np.stack([r[c, a] + gamma * (P[c][a] @ W) for a in range(2)]) for c in range(N)])  # [c, a, G]
+        # keep the current action on ties, so that the iteration terminates
+        cur = np.take_along_axis(q, policy[:, None, :], axis=1)[:, 0]
+        better = q.max(axis=1) > cur + 1e-12 * (1 + np.abs(cur))
+        new_policy = np.where(better, q.argmax(axis=1), policy)
+        if np.array_equal(new_policy, policy):
+            break
+        policy = new_policy
+    return W, policy, it
 
 
 def _evaluate(A: sp.csr_matrix, rhs: np.ndarray, x0: np.ndarray) -> np.ndarray:
