@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import ipaddress
 import os
 import secrets
@@ -54,6 +55,10 @@ def serve(
         console.print(f"  experimenter token: {token}")
     if not loopback:
         console.print("[yellow]  listening beyond loopback: put the server behind HTTPS[/]")
+    # what start-up made (modules, the app, the schema) lives as long as the process: keep it
+    # out of the garbage collector's full passes, which would otherwise pause requests
+    gc.collect()
+    gc.freeze()
     uvicorn.run(application, host=host, port=port, log_level=log_level, access_log=False)
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import secrets
+import time
 from pathlib import Path
 
 from fastapi import FastAPI, HTTPException
@@ -16,6 +17,28 @@ from .routes import deploy, experimenter, own, participant
 STATIC = Path(__file__).resolve().parent.parent / "static" / "app"
 
 
+class ServerTiming:
+    """ASGI middleware: every response carries ``Server-Timing: app;dur=<ms>``, the time from
+    the request reaching the application to its response headers (routing, authentication,
+    validation, the handler with its database transaction, serialization)."""
+
+    def __init__(self, app):
+        self.app = app
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        t0 = time.perf_counter()
+
+        async def timed(message):
+            if message["type"] == "http.response.start":
+                dur = f"app;dur={(time.perf_counter() - t0) * 1000:.3f}".encode()
+                message["headers"] = [*message.get("headers", ()), (b"server-timing", dur)]
+            await send(message)
+
+        await self.app(scope, receive, timed)
+
+
 def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: str | None = None) -> FastAPI:
     """The experiment server.  ``token`` guards the experimenter endpoints (a random one is
     made when not given: read it from ``app.state.token``).  Migrations run here, before
@@ -26,13 +49,15 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
         description="Human-in-the-loop experiments with a live assistance-seeking policy, and a decision API for robots.",
     )
     app.state.db = open_database(db_url)
+    app.state.engine = app.state.db.kw["bind"]
     app.state.token = token or secrets.token_urlsafe(24)
     app.state.public_url = public_url
     app.state.tokens = {}  # session token -> Caller
+    app.add_middleware(ServerTiming)
+    app.include_router(deploy)  # first: the decision API is matched without trying the others
     app.include_router(experimenter)
     app.include_router(own)
     app.include_router(participant)
-    app.include_router(deploy)
 
     def page(name: str) -> FileResponse:
         path = STATIC / name

@@ -6,6 +6,11 @@ brings the schema to the newest Alembic revision before anything else touches it
 
 from __future__ import annotations
 
+import sqlite3
+import threading
+import time
+import urllib.parse
+import weakref
 from pathlib import Path
 
 from alembic import command
@@ -32,7 +37,43 @@ def _sqlite_pragmas(dbapi_connection, _record) -> None:
     cur.execute("PRAGMA synchronous=NORMAL")  # WAL + NORMAL: committed trials survive a killed process
     cur.execute("PRAGMA foreign_keys=ON")
     cur.execute("PRAGMA busy_timeout=10000")
+    # checkpoints run in a background thread (_checkpoint_in_background); this is only a backstop
+    cur.execute(f"PRAGMA wal_autocheckpoint={BACKSTOP_CHECKPOINT_PAGES}")
     cur.close()
+
+
+BACKSTOP_CHECKPOINT_PAGES = 20000
+CHECKPOINT_INTERVAL = 0.5  # seconds
+
+
+def _checkpoint_in_background(engine: Engine) -> None:
+    """In WAL mode SQLite copies the log back into the database file (a *checkpoint*, which
+    waits for the disk) inside whichever commit makes the log cross a size, 1000 pages by
+    default: that request, and every request queued behind it, would wait for the disk.  Here
+    a daemon thread runs a PASSIVE checkpoint (it never blocks readers or writers) twice a
+    second instead, on its own connection; automatic checkpoints remain only as a backstop for
+    a very long log.  The thread ends when the engine is gone."""
+    path = engine.url.database
+    if not path or path == ":memory:" or path.startswith("file:"):
+        return
+    uri = "file:" + urllib.parse.quote(str(Path(path).resolve())) + "?mode=rw"  # never create the file
+    ref = weakref.ref(engine)
+
+    def run() -> None:
+        con = None
+        while ref() is not None:
+            time.sleep(CHECKPOINT_INTERVAL)
+            try:
+                con = con or sqlite3.connect(uri, uri=True, timeout=1.0, isolation_level=None, check_same_thread=False)
+                con.execute("PRAGMA wal_checkpoint(PASSIVE)").fetchall()
+            except sqlite3.Error:  # removed, or busy: try again later
+                if con is not None:
+                    con.close()
+                con = None
+        if con is not None:
+            con.close()
+
+    threading.Thread(target=run, name="trustseek-sqlite-checkpoint", daemon=True).start()
 
 
 def _sqlite_begin(conn) -> None:
@@ -58,6 +99,7 @@ def make_engine(url: str) -> Engine:
             engine = create_engine(url, connect_args={"check_same_thread": False, "timeout": 10}, pool_size=20, max_overflow=20)
             event.listen(engine, "connect", _sqlite_pragmas)
             event.listen(engine, "begin", _sqlite_begin)
+            _checkpoint_in_background(engine)
         else:
             engine = create_engine(url, pool_pre_ping=True, pool_size=20, max_overflow=20)
     except Exception as exc:  # noqa: BLE001 -- any driver or URL problem becomes one clear line

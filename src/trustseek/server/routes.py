@@ -3,8 +3,6 @@ through its token) and deploy (decisions for a real robot)."""
 
 from __future__ import annotations
 
-import time
-
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
@@ -17,7 +15,7 @@ from .orm import Report, Session, Study, Trial, utcnow
 from .schemas import ConsentIn, DecideIn, DeployIn, EventsIn, ObserveIn, ReportIn, SessionsIn, TrialIn
 from .sessions import (
     SessionError, add_events, add_report, create_deploy, create_participant, deploy_decide, deploy_observe,
-    lock, new_id, p_high, report_due, serve, study_config, submit_trial, total_trials, trial_dict,
+    committed_trial, lock, new_id, p_high, report_due, serve, study_config, submit_trial, total_trials, trial_dict,
 )
 from .studies import ConfigError, StudyIn, build_study_config, load_model_spec, load_task_spec, resolve_policy
 
@@ -273,26 +271,29 @@ def deploy_state(session_id: str, request: Request, s: Caller = Depends(require_
 
 
 @deploy.post("/sessions/{session_id}/decide", summary="Post a trial's complexity, get the robot action")
-async def decide(session_id: str, body: DecideIn, request: Request, response: Response, s: Caller = Depends(require_session)):
+async def decide(session_id: str, body: DecideIn, request: Request, s: Caller = Depends(require_session)):
+    # async on purpose: a short transaction run on the event loop, without a hop to a worker thread
     _deploy_session(s)
-    t0 = time.perf_counter()
-    with _db(request) as db:
-        try:
-            out = deploy_decide(db, s.id, body.trial, body.complexity)
-        except SessionError as exc:
-            db.rollback()
-            _fail(exc)
-    response.headers["Server-Timing"] = f"decide;dur={(time.perf_counter() - t0) * 1000:.3f}"
-    return out
+    try:
+        with request.app.state.engine.begin() as conn:
+            return deploy_decide(conn, s.id, body.trial, body.complexity)
+    except SessionError as exc:
+        _fail(exc)
 
 
 @deploy.post("/sessions/{session_id}/observe", summary="Post the observed human action and outcome; updates the belief")
 async def observe(session_id: str, body: ObserveIn, request: Request, s: Caller = Depends(require_session)):
     _deploy_session(s)
-    with _db(request) as db:
-        try:
-            t, dup = deploy_observe(db, s.id, body.trial, body.human_action, body.outcome)
-        except SessionError as exc:
-            db.rollback()
-            _fail(exc)
-        return {"trial": trial_dict(t), "duplicate": dup, "belief": t.belief_after}
+    engine = request.app.state.engine
+    try:
+        with engine.begin() as conn:
+            t, dup = deploy_observe(conn, s.id, body.trial, body.human_action, body.outcome)
+    except SessionError as exc:
+        _fail(exc)
+    except IntegrityError:  # committed by a concurrent request in the meantime
+        with engine.connect() as conn:
+            old = committed_trial(conn, s.id, body.trial)
+        if old is None:
+            raise
+        t, dup = trial_dict(old), True
+    return {"trial": t, "duplicate": dup, "belief": t["belief_after"]}

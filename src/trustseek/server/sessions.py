@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from sqlalchemy import func, select
+from sqlalchemy import Connection, bindparam, func, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
@@ -77,7 +77,7 @@ class Context:
         return PolicyRunner(pol, model=model, rng=np.random.default_rng([seed, trial, 0]), belief=np.asarray(belief, dtype=float))
 
 
-_CONTEXTS: dict[str, tuple[Task, TrustModel, list[str]]] = {}
+_CONTEXTS: dict[str, tuple] = {}
 _CONFIGS: dict[str, dict[str, Any]] = {}
 
 
@@ -92,6 +92,7 @@ def study_config(db: DBSession, study_id: str) -> dict[str, Any]:
 
 
 def context(db: DBSession, s: Session) -> Context:
+    """The context of a study session (deploy sessions: ``deploy_context``)."""
     if s.kind == "study":
         key = f"study:{s.study_id}"
         cached = _CONTEXTS.get(key)
@@ -101,15 +102,7 @@ def context(db: DBSession, s: Session) -> Context:
         task, model, kinds = cached
         return Context(task, model, kinds, [f"{key}:{i}" for i in range(len(kinds))],
                        lambda b: study_config(db, s.study_id)["blocks"][b]["policy"], s.plan["trials"])
-    key = f"deploy:{s.id}"
-    cached = _CONTEXTS.get(key)
-    if cached is None:
-        if len(_CONTEXTS) > 4096:
-            _CONTEXTS.clear()
-        plan = s.plan
-        cached = _CONTEXTS[key] = (Task.from_dict(plan["task"]), TrustModel.from_dict(plan["model"]), [plan["policy_kind"]])
-    task, model, kinds = cached
-    return Context(task, model, kinds, [key], lambda b: db.get(PolicyBlob, s.plan["policy_sha256"]).policy, None)
+    raise ValueError("deploy sessions use deploy_context")
 
 
 def total_trials(s: Session) -> int | None:
@@ -137,10 +130,10 @@ def create_participant(db: DBSession, study: Study, participant: str | None) -> 
 
 def create_deploy(db: DBSession, label: str, task: Task, model: TrustModel, policy: dict[str, Any], seed: int) -> Session:
     sid = new_id()
-    pol = policy_object(f"deploy:{sid}", policy)
-    pm = getattr(pol, "model", None) or model
     blob = json.dumps(policy, sort_keys=True)
     sha = hashlib.sha256(blob.encode()).hexdigest()
+    pol = policy_object(f"policy:{sha}", policy)  # sessions with the same policy share one parsed copy
+    pm = getattr(pol, "model", None) or model
     if db.get(PolicyBlob, sha) is None:
         db.add(PolicyBlob(sha256=sha, policy=json.loads(blob)))
         try:
@@ -345,50 +338,96 @@ def add_events(db: DBSession, s: Session, events: list[dict]) -> int:
 
 
 # --------------------------------------------------------------------------- deploy sessions
+#
+# The decision API is the latency-critical path, so it runs on SQLAlchemy Core over one
+# connection: a locked SELECT of the session's live columns, then one UPDATE (decide) or one
+# INSERT and one UPDATE (observe), in one transaction.  The task, model and parsed policy of a
+# session are cached per process (they never change).
+
+_TRIALS = Trial.__table__
+_SESSIONS = Session.__table__
+# built once with bound parameters: constructing a statement costs more than running it
+_LIVE = select(
+    _SESSIONS.c.id, _SESSIONS.c.kind, _SESSIONS.c.seed, _SESSIONS.c.belief, _SESSIONS.c.trials_done, _SESSIONS.c.score,
+    _SESSIONS.c.pending_trial, _SESSIONS.c.pending_complexity, _SESSIONS.c.pending_action,
+).where(_SESSIONS.c.id == bindparam("sid")).with_for_update()
+_COMMITTED = select(_TRIALS).where(_TRIALS.c.session_id == bindparam("sid"), _TRIALS.c.trial == bindparam("n"))
+_DECIDED = update(_SESSIONS).where(_SESSIONS.c.id == bindparam("sid")).values(
+    pending_trial=bindparam("p_trial"), pending_complexity=bindparam("p_complexity"), pending_action=bindparam("p_action"),
+    updated_at=bindparam("now"),
+)
+_OBSERVED = update(_SESSIONS).where(_SESSIONS.c.id == bindparam("sid")).values(
+    belief=bindparam("new_belief", type_=_SESSIONS.c.belief.type), trials_done=bindparam("done"), score=bindparam("new_score"),
+    pending_trial=None, pending_complexity=None, pending_action=None, updated_at=bindparam("now"),
+)
+_INSERT_TRIAL = insert(_TRIALS)
 
 
-def deploy_decide(db: DBSession, session_id: str, n: int, complexity: str) -> dict[str, Any]:
-    s = lock(db, session_id)
-    ctx = context(db, s)
+def _live(conn: Connection, session_id: str):
+    row = conn.execute(_LIVE, {"sid": session_id}).first()
+    if row is None:
+        raise SessionError(404, "no such session")
+    return row
+
+
+def committed_trial(conn: Connection, session_id: str, n: int):
+    return conn.execute(_COMMITTED, {"sid": session_id, "n": n}).first()
+
+
+def deploy_context(conn: Connection, session_id: str) -> Context:
+    key = f"deploy:{session_id}"
+    cached = _CONTEXTS.get(key)
+    if cached is None:
+        if len(_CONTEXTS) > 4096:
+            _CONTEXTS.clear()
+        plan = conn.execute(select(Session.plan).where(Session.id == session_id)).scalar_one()
+        cached = _CONTEXTS[key] = (Task.from_dict(plan["task"]), TrustModel.from_dict(plan["model"]), [plan["policy_kind"]],
+                                   plan["policy_sha256"])
+    task, model, kinds, sha = cached
+    load = lambda b: conn.execute(select(PolicyBlob.policy).where(PolicyBlob.sha256 == sha)).scalar_one()  # noqa: E731
+    return Context(task, model, kinds, [f"policy:{sha}"], load, None)
+
+
+def deploy_decide(conn: Connection, session_id: str, n: int, complexity: str) -> dict[str, Any]:
+    """The robot action for trial ``n`` (decided once, stored as the session's pending trial;
+    repeated calls return the stored decision).  Runs in the caller's transaction."""
+    s = _live(conn, session_id)
+    ctx = deploy_context(conn, session_id)
     if complexity not in ctx.task.complexities:
         raise SessionError(400, f"complexity must be one of {list(ctx.task.complexities)}, got {complexity!r}")
     # trials are committed in order together with trials_done, so trial n exists iff n <= trials_done
-    old = _existing(db, s, n) if n <= s.trials_done else None
+    old = committed_trial(conn, session_id, n) if n <= s.trials_done else None
     if old is not None:
         if old.complexity != complexity:
             raise SessionError(409, f"trial {n} was committed with complexity {old.complexity!r}, not {complexity!r}")
-        db.rollback()
         return {"trial": n, "robot_action": old.robot_action, "belief": old.belief, "committed": True}
     if n != s.trials_done + 1:
         raise SessionError(409, f"trial {n} is not the next trial; the next trial is {s.trials_done + 1}")
     if s.pending_trial == n:
         if s.pending_complexity != complexity:
             raise SessionError(409, f"trial {n} was already decided for complexity {s.pending_complexity!r}, not {complexity!r}")
-        db.rollback()
         return {"trial": n, "robot_action": s.pending_action, "belief": p_high(s.belief), "committed": False}
-    runner = ctx.runner(0, s.belief, s.seed, n)
-    s.pending_trial, s.pending_complexity = n, complexity
-    s.pending_action = runner.decide(complexity)
-    s.updated_at = utcnow()
-    db.commit()
-    return {"trial": n, "robot_action": s.pending_action, "belief": p_high(s.belief), "committed": False}
+    action = ctx.runner(0, s.belief, s.seed, n).decide(complexity)
+    conn.execute(_DECIDED, {"sid": session_id, "p_trial": n, "p_complexity": complexity, "p_action": action, "now": utcnow()})
+    return {"trial": n, "robot_action": action, "belief": p_high(s.belief), "committed": False}
 
 
-def deploy_observe(db: DBSession, session_id: str, n: int, human_action: str | None, outcome: str | None) -> tuple[Trial, bool]:
-    s = lock(db, session_id)
+def deploy_observe(conn: Connection, session_id: str, n: int, human_action: str | None, outcome: str | None) -> tuple[dict[str, Any], bool]:
+    """Commit trial ``n`` from the observed human action and outcome; returns (trial, duplicate).
+    Runs in the caller's transaction."""
+    s = _live(conn, session_id)
     # trials are committed in order together with trials_done, so trial n exists iff n <= trials_done
-    old = _existing(db, s, n) if n <= s.trials_done else None
+    old = committed_trial(conn, session_id, n) if n <= s.trials_done else None
     if old is not None:
         same_h = old.human_action == (human_action if human_action is not None or old.robot_action != "ask" else "intervene")
         same_o = outcome is None or old.outcome == outcome
         if same_h and same_o:
-            db.rollback()
-            return old, True
+            return trial_dict(old), True
         raise SessionError(409, f"trial {n} is already committed with human_action={old.human_action!r}, outcome={old.outcome!r}")
     if s.pending_trial != n:
         raise SessionError(409, f"trial {n} has no decision yet; post its complexity to /decide first (next trial: {s.trials_done + 1})")
     action = s.pending_action
-    ctx = context(db, s)
+    ctx = deploy_context(conn, session_id)
     c = ctx.task.complexity_index(s.pending_complexity)
     if action == "ask":
         if human_action not in (None, "intervene"):
@@ -407,14 +446,19 @@ def deploy_observe(db: DBSession, session_id: str, n: int, human_action: str | N
             if outcome not in ("success", "failure", "collision", "dropped"):
                 raise SessionError(400, f"outcome must be 'success' or 'failure' (or 'collision'/'dropped') when the human relied, got {outcome!r}")
             success = outcome == "success"
-    row = Trial(
-        session_id=s.id, trial=n, block=0, policy=ctx.kinds[0], complexity=s.pending_complexity,
-        robot_action=action, human_action=human_action, outcome=outcome,
-        experience=_experience(ctx.task, c, action, human_action, success), effort_ms=None,
-        submission_id=f"deploy-{n}",
-    )
-    try:
-        return _commit_trial(db, s, row, ctx, 0, None), False
-    except _Duplicate:
-        return _existing(db, s, n), True
-
+    experience = _experience(ctx.task, c, action, human_action, success)
+    runner = ctx.runner(0, s.belief, s.seed, n)
+    before = runner.belief
+    after = runner.observe(s.pending_complexity, action, human_action, experience)
+    a, o = ACTIONS.index(action), HUMAN_ACTIONS.index(human_action)
+    t = {
+        "trial": n, "block": 0, "policy": ctx.kinds[0], "complexity": s.pending_complexity, "robot_action": action,
+        "human_action": human_action, "outcome": outcome, "experience": experience,
+        "reward": float(ctx.task.rewards.of(a, o, EXPERIENCES.index(experience))),
+        "belief": p_high(before), "belief_after": p_high(after), "effort_ms": None, "submission_id": f"deploy-{n}",
+    }
+    now = utcnow()
+    conn.execute(_INSERT_TRIAL, {"session_id": session_id, "created_at": now, **t})
+    conn.execute(_OBSERVED, {"sid": session_id, "new_belief": [float(x) for x in after] if after is not None else s.belief,
+                             "done": n, "new_score": float(s.score + t["reward"]), "now": now})
+    return t, False
