@@ -43,6 +43,8 @@ BATCH_MAX_COLUMNS = 1000  # restarts x participants up to this: restarts run bat
 MIN_EVENTS = 5  # fewer expected events than this behind a row: "not identified by this data"
 _FLOOR = 1e-300
 _add = np.add.reduce  # the ufunc method directly: the time loop is call-overhead bound
+_FINISH_SWITCH = 1e-5  # EM hands over to the L-BFGS-B finish at this relative change (or the fit's tol if looser)
+_FINISH_FTOL = 0.01  # the finish stops at this fraction of the fit's relative tolerance
 _SHRINK = 0.05  # SQUAREM: a cell may shrink at most this factor per extrapolation
 
 
@@ -988,6 +990,156 @@ def _unpack(x: np.ndarray, like: Params) -> Params:
     )
 
 
+# --------------------------------------------------------------------------- quasi-Newton finish
+
+
+class _Budget(Exception):
+    """The finish ran out of E-steps."""
+
+
+class _Sticks:
+    """Free cells as stick-breaking fractions in [0, 1]: a box, for L-BFGS-B.
+
+    A row with free cells c_0..c_{m-1} and free mass s holds p_0 = s v_0,
+    p_j = s v_j prod_{i<j} (1 - v_i), p_{m-1} = s prod_{i<m-1} (1 - v_i).  With
+    expected counts (plus pseudo-counts) w, the gradient of the objective is, by
+    Fisher's identity, w_j / v_j - (sum_{i>j} w_i) / (1 - v_j).
+    """
+
+    EPS = 1e-12
+
+    def __init__(self, structure: "Structure"):
+        self.s = structure
+        self.parts = []  # (table or None for initial, g, k, cells (R, m))
+        K = structure.K
+        if K >= 2:
+            self.parts.append((None, np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), np.arange(K)[None, :]))
+        for table in (structure.em, structure.tr):
+            rows: dict[int, list] = {}
+            for g in range(table.G):
+                for k in range(K):
+                    cells = np.flatnonzero(~table.gfixed[g, k])
+                    if len(cells) >= 2 and table.mass[g, k] > 0:
+                        rows.setdefault(len(cells), []).append((g, k, cells))
+            for m, lst in sorted(rows.items()):
+                self.parts.append((table, np.array([r[0] for r in lst]), np.array([r[1] for r in lst]), np.array([r[2] for r in lst])))
+        self.size = sum(c.shape[0] * (c.shape[1] - 1) for _, _, _, c in self.parts)
+
+    def _tables(self, p: Params):
+        return [(None, p.initial[None, None, :], np.ones((1, 1)))] + [
+            (t, arr[t.rep], t.mass) for t, arr in ((self.s.em, p.emission), (self.s.tr, p.transition))
+        ]
+
+    def theta(self, p: Params) -> np.ndarray:
+        out = []
+        tabs = {id(t): (g, m) for t, g, m in self._tables(p)}
+        for table, g, k, cells in self.parts:
+            grp, mass = tabs[id(table)]
+            cur = grp[g[:, None], k[:, None], cells]  # (R, m)
+            rem = mass[g, k].copy()
+            for j in range(cells.shape[1] - 1):
+                out.append(np.clip(cur[:, j] / np.maximum(rem, _FLOOR), self.EPS, 1 - self.EPS))
+                rem = rem - cur[:, j]
+        return np.concatenate(out) if out else np.zeros(0)
+
+    def params(self, theta: np.ndarray, base: Params) -> Params:
+        pi = base.initial.copy()
+        groups = {id(self.s.em): base.emission[self.s.em.rep].copy(), id(self.s.tr): base.transition[self.s.tr.rep].copy()}
+        pos = 0
+        for table, g, k, cells in self.parts:
+            R, m = cells.shape
+            v = theta[pos : pos + R * (m - 1)].reshape(m - 1, R)
+            pos += R * (m - 1)
+            rem = np.ones(R) if table is None else table.mass[g, k].copy()
+            vals = np.empty((R, m))
+            for j in range(m - 1):
+                vals[:, j] = rem * v[j]
+                rem = rem * (1 - v[j])
+            vals[:, m - 1] = rem
+            if table is None:
+                pi[cells[0]] = vals[0]
+            else:
+                groups[id(table)][g[:, None], k[:, None], cells] = vals
+        return Params(pi, groups[id(self.s.em)][self.s.em.group], groups[id(self.s.tr)][self.s.tr.group])
+
+    def gradient(self, theta: np.ndarray, st: "EStep") -> np.ndarray:
+        a = self.s.spec.prior
+        counts = {}
+        for table, c in ((self.s.em, st.emission), (self.s.tr, st.transition)):
+            cg = np.zeros((table.G,) + c.shape[1:])
+            np.add.at(cg, table.group, c)
+            counts[id(table)] = cg
+        out = np.empty_like(theta)
+        pos = 0
+        for table, g, k, cells in self.parts:
+            R, m = cells.shape
+            w = (st.initial[None, :][:, cells[0]] if table is None else counts[id(table)][g[:, None], k[:, None], cells]) + a
+            v = theta[pos : pos + R * (m - 1)].reshape(m - 1, R)
+            tail = np.cumsum(w[:, ::-1], axis=1)[:, ::-1]  # tail[:, j] = sum_{i>=j} w_i
+            for j in range(m - 1):
+                out[pos + j * R : pos + (j + 1) * R] = w[:, j] / v[j] - tail[:, j + 1] / (1 - v[j])
+            pos += R * (m - 1)
+        return out
+
+
+def finish(structure: "Structure", work: Workspace, run: "RunResult", tol: float = 1e-8, max_iter: int = 1000) -> "RunResult":
+    """Continue a run with L-BFGS-B on the stick-breaking fractions of the free cells.
+
+    EM crawls along flat ridges of the likelihood (weakly identified directions) with
+    tiny steps, and the relative-change test then stops it short of the maximum; a
+    quasi-Newton method walks such ridges.  The gradient is free (Fisher's identity on
+    the E-step counts).  Every iterate of L-BFGS-B decreases the negated objective, and
+    the result is kept only if its objective is at least the run's, so the objective
+    history never decreases.  Iterations count E-steps, within ``max_iter`` in total.
+    """
+    from scipy.optimize import minimize
+
+    t0 = time.perf_counter()
+    budget = max_iter - run.iterations
+    sticks = _Sticks(structure)
+    if budget < 2 or sticks.size == 0 or not math.isfinite(run.objective):
+        return run
+    base = run.params
+    seen: dict[bytes, tuple[float, Params, float]] = {}  # recent evaluations: theta -> (objective, params, loglik)
+    history = list(run.history)
+
+    calls = [0]
+
+    def fun(theta):
+        if calls[0] >= budget:
+            raise _Budget
+        calls[0] += 1
+        p = sticks.params(theta, base)
+        st = work.estep(p)
+        f = st.loglik + structure.log_prior(p)
+        if len(seen) > 32:
+            seen.pop(next(iter(seen)))
+        seen[np.asarray(theta, dtype=float).tobytes()] = (f, p, st.loglik)
+        if not math.isfinite(f):
+            return math.inf, np.zeros_like(theta)
+        return -f, -sticks.gradient(theta, st)
+
+    best = {"f": run.objective, "p": run.params, "ll": run.loglik}
+
+    def accepted(xk):
+        hit = seen.get(np.asarray(xk, dtype=float).tobytes())
+        if hit is not None and hit[0] >= best["f"]:
+            if hit[0] > best["f"]:
+                history.append(float(hit[0]))
+            best.update(f=hit[0], p=hit[1], ll=hit[2])
+
+    try:
+        res = minimize(fun, sticks.theta(base), jac=True, method="L-BFGS-B", bounds=[(sticks.EPS, 1 - sticks.EPS)] * sticks.size,
+                       callback=accepted, options={"ftol": tol, "gtol": 0.0, "maxfun": budget, "maxiter": budget, "maxcor": 20})
+        accepted(res.x)
+        success = calls[0] < budget  # stopped by its tolerance (or at the limits of precision), not by the cap
+    except _Budget:  # the E-step cap: keep the best accepted point
+        success = False
+    n_e = run.iterations + calls[0]
+    converged = run.converged and success
+    return RunResult(best["p"], float(best["ll"]), float(best["f"]), history, n_e, converged, run.seconds + time.perf_counter() - t0)
+
+
 @dataclass
 class IOHMMFit:
     """Result of :func:`fit_iohmm`; levels are ordered by the spec's ``order_by`` rule."""
@@ -1047,8 +1199,15 @@ def fit_iohmm(
     accelerate: bool = True,
     init: Sequence[Params] = (),
     on_restart: Callable[[int, RunResult], None] | None = None,
+    quasi_newton: bool = True,
 ) -> IOHMMFit:
-    """Fit ``spec`` to ``seqs``: the runs from ``init`` and ``restarts`` random starts; the best is kept."""
+    """Fit ``spec`` to ``seqs``: the runs from ``init`` and ``restarts`` random starts; the best is kept.
+
+    Each run is EM with SQUAREM (all runs in lockstep) and, with ``quasi_newton``, EM
+    only to the relative tolerance ``max(tol, 1e-5)`` followed by :func:`finish`
+    (L-BFGS-B) to ``tol / 100``: on flat ridges of the likelihood EM's small steps
+    would meet ``tol`` short of the maximum.  ``max_iter`` caps the E-steps of a run.
+    """
     structure = Structure(spec, seqs)
     work = Workspace(seqs, structure.K, structure.M, structure.Ue, structure.Ut)
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
@@ -1056,20 +1215,20 @@ def fit_iohmm(
     starts += [structure.random(np.random.default_rng(s)) for s in ss.spawn(restarts)]
     if not starts:
         raise FitError(["at least one restart is needed"])
-    runs = []
+    em_tol = max(tol, _FINISH_SWITCH) if quasi_newton else tol
     if len(starts) > 1 and (work.compiled or (not work.scan and seqs.n_participants * len(starts) <= BATCH_MAX_COLUMNS)):
-        # few participants: run every start in lockstep on one batched workspace
+        # run every start in lockstep on one batched workspace
         bw = BatchWorkspace(seqs, structure.K, structure.M, structure.Ue, structure.Ut, len(starts))
-        runs = run_em_batch(structure, bw, starts, tol=tol, max_iter=max_iter, accelerate=accelerate)
-        for i, r in enumerate(runs):
-            if on_restart is not None:
-                on_restart(i, r)
+        em_runs = run_em_batch(structure, bw, starts, tol=em_tol, max_iter=max_iter, accelerate=accelerate)
     else:
-        for i, p in enumerate(starts):
-            r = run_em(structure, work, p, tol=tol, max_iter=max_iter, accelerate=accelerate)
-            runs.append(r)
-            if on_restart is not None:
-                on_restart(i, r)
+        em_runs = [run_em(structure, work, p, tol=em_tol, max_iter=max_iter, accelerate=accelerate) for p in starts]
+    runs = []
+    for i, r in enumerate(em_runs):
+        if quasi_newton:
+            r = finish(structure, work, r, tol=tol * _FINISH_FTOL, max_iter=max_iter)
+        runs.append(r)
+        if on_restart is not None:
+            on_restart(i, r)
     best = int(np.argmax([r.objective for r in runs]))
     p = runs[best].params
     perm = structure.order(p)
