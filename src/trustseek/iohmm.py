@@ -34,6 +34,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
+from scipy.optimize import minimize
 
 from . import forward_backward as _fb
 from .errors import TrustseekError
@@ -1010,74 +1011,67 @@ class _Sticks:
 
     def __init__(self, structure: "Structure"):
         self.s = structure
-        self.parts = []  # (table or None for initial, g, k, cells (R, m))
         K = structure.K
+        # parts: rows with the same number m of free cells; cell j of row r is value
+        # r * m + j, stored at the flat positions dst of the full array (every member of
+        # a tie group), taken from the values src
+        self.parts = []
         if K >= 2:
-            self.parts.append((None, np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), np.arange(K)[None, :]))
-        for table in (structure.em, structure.tr):
+            self.parts.append(("initial", 1, K, np.ones(1), np.arange(K), np.arange(K)))
+        for name, table in (("emission", structure.em), ("transition", structure.tr)):
             rows: dict[int, list] = {}
             for g in range(table.G):
                 for k in range(K):
                     cells = np.flatnonzero(~table.gfixed[g, k])
                     if len(cells) >= 2 and table.mass[g, k] > 0:
                         rows.setdefault(len(cells), []).append((g, k, cells))
+            KM = K * table.M
             for m, lst in sorted(rows.items()):
-                self.parts.append((table, np.array([r[0] for r in lst]), np.array([r[1] for r in lst]), np.array([r[2] for r in lst])))
-        self.size = sum(c.shape[0] * (c.shape[1] - 1) for _, _, _, c in self.parts)
-
-    def _tables(self, p: Params):
-        return [(None, p.initial[None, None, :], np.ones((1, 1)))] + [
-            (t, arr[t.rep], t.mass) for t, arr in ((self.s.em, p.emission), (self.s.tr, p.transition))
-        ]
+                dst, src = [], []
+                for r, (g, k, cells) in enumerate(lst):
+                    for u in np.flatnonzero(table.group == g):
+                        dst.extend(u * KM + k * table.M + cells)
+                        src.extend(r * m + np.arange(m))
+                mass = np.array([table.mass[g, k] for g, k, _ in lst])
+                self.parts.append((name, len(lst), m, mass, np.array(dst, dtype=np.int64), np.array(src, dtype=np.int64)))
+        self.size = sum(R * (m - 1) for _, R, m, _, _, _ in self.parts)
 
     def theta(self, p: Params) -> np.ndarray:
         out = []
-        tabs = {id(t): (g, m) for t, g, m in self._tables(p)}
-        for table, g, k, cells in self.parts:
-            grp, mass = tabs[id(table)]
-            cur = grp[g[:, None], k[:, None], cells]  # (R, m)
-            rem = mass[g, k].copy()
-            for j in range(cells.shape[1] - 1):
-                out.append(np.clip(cur[:, j] / np.maximum(rem, _FLOOR), self.EPS, 1 - self.EPS))
-                rem = rem - cur[:, j]
+        for name, R, m, mass, dst, src in self.parts:
+            vals = np.empty(R * m)
+            vals[src] = getattr(p, name).ravel()[dst]
+            vals = vals.reshape(R, m)
+            rem = mass.copy()
+            for j in range(m - 1):
+                out.append(np.clip(vals[:, j] / np.maximum(rem, _FLOOR), self.EPS, 1 - self.EPS))
+                rem = rem - vals[:, j]
         return np.concatenate(out) if out else np.zeros(0)
 
     def params(self, theta: np.ndarray, base: Params) -> Params:
-        pi = base.initial.copy()
-        groups = {id(self.s.em): base.emission[self.s.em.rep].copy(), id(self.s.tr): base.transition[self.s.tr.rep].copy()}
+        arrays = {"initial": base.initial.copy(), "emission": base.emission.copy(), "transition": base.transition.copy()}
         pos = 0
-        for table, g, k, cells in self.parts:
-            R, m = cells.shape
+        for name, R, m, mass, dst, src in self.parts:
             v = theta[pos : pos + R * (m - 1)].reshape(m - 1, R)
             pos += R * (m - 1)
-            rem = np.ones(R) if table is None else table.mass[g, k].copy()
+            rem = mass.copy()
             vals = np.empty((R, m))
             for j in range(m - 1):
                 vals[:, j] = rem * v[j]
                 rem = rem * (1 - v[j])
             vals[:, m - 1] = rem
-            if table is None:
-                pi[cells[0]] = vals[0]
-            else:
-                groups[id(table)][g[:, None], k[:, None], cells] = vals
-        return Params(pi, groups[id(self.s.em)][self.s.em.group], groups[id(self.s.tr)][self.s.tr.group])
+            arrays[name].ravel()[dst] = vals.ravel()[src]
+        return Params(arrays["initial"], arrays["emission"], arrays["transition"])
 
     def gradient(self, theta: np.ndarray, st: "EStep") -> np.ndarray:
         a = self.s.spec.prior
-        counts = {}
-        for table, c in ((self.s.em, st.emission), (self.s.tr, st.transition)):
-            cg = np.zeros((table.G,) + c.shape[1:])
-            np.add.at(cg, table.group, c)
-            counts[id(table)] = cg
         out = np.empty_like(theta)
         pos = 0
-        for table, g, k, cells in self.parts:
-            R, m = cells.shape
-            w = (st.initial[None, :][:, cells[0]] if table is None else counts[id(table)][g[:, None], k[:, None], cells]) + a
+        for name, R, m, mass, dst, src in self.parts:
+            w = np.bincount(src, weights=getattr(st, name).ravel()[dst], minlength=R * m).reshape(R, m) + a
             v = theta[pos : pos + R * (m - 1)].reshape(m - 1, R)
             tail = np.cumsum(w[:, ::-1], axis=1)[:, ::-1]  # tail[:, j] = sum_{i>=j} w_i
-            for j in range(m - 1):
-                out[pos + j * R : pos + (j + 1) * R] = w[:, j] / v[j] - tail[:, j + 1] / (1 - v[j])
+            out[pos : pos + R * (m - 1)] = (w[:, : m - 1].T / v - tail[:, 1:].T / (1 - v)).ravel()
             pos += R * (m - 1)
         return out
 
@@ -1092,8 +1086,6 @@ def finish(structure: "Structure", work: Workspace, run: "RunResult", tol: float
     the result is kept only if its objective is at least the run's, so the objective
     history never decreases.  Iterations count E-steps, within ``max_iter`` in total.
     """
-    from scipy.optimize import minimize
-
     t0 = time.perf_counter()
     budget = max_iter - run.iterations
     sticks = _Sticks(structure)
