@@ -12,15 +12,8 @@ Debian's ``postgresql`` package when run as root).
 
 from __future__ import annotations
 
-import glob
 import io
-import os
-import pwd
-import shutil
-import subprocess
-import tempfile
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -33,72 +26,20 @@ from trustseek.client import Client, DeploySession
 from trustseek.data import read_trials
 from trustseek.model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from trustseek.server import create_app
-from trustseek.server.local import ThreadServer, free_port
+from trustseek.server.local import TemporaryPostgres, ThreadServer, postgres_binaries
 
 TOKEN = "postgres-experimenter-secret"
 H = {"Authorization": f"Bearer {TOKEN}"}
 
 
-def _pg_bin() -> Path | None:
-    """The directory of Debian's (or a PATH's) initdb / pg_ctl / postgres, newest version first."""
-    dirs = sorted(glob.glob("/usr/lib/postgresql/*/bin"), key=lambda d: int(d.split("/")[-2]) if d.split("/")[-2].isdigit() else 0, reverse=True)
-    on_path = shutil.which("pg_ctl")
-    if on_path:
-        dirs.append(str(Path(os.path.realpath(on_path)).parent))
-    for d in dirs:
-        if all((Path(d) / exe).exists() for exe in ("initdb", "pg_ctl", "postgres")):
-            return Path(d)
-    return None
-
-
-def _as_cluster_owner() -> tuple[list[str], int | None, int | None]:
-    """PostgreSQL refuses to run as root: as root, run its binaries as the ``postgres`` user."""
-    if os.geteuid() != 0:
-        return [], None, None
-    try:
-        pw = pwd.getpwnam("postgres")
-    except KeyError:
-        pytest.skip("running as root and there is no 'postgres' user to own a PostgreSQL cluster (install Debian's postgresql package)")
-    runuser = shutil.which("runuser")
-    if runuser is None:
-        pytest.skip("running as root without runuser: cannot start PostgreSQL as the 'postgres' user")
-    return [runuser, "-u", "postgres", "--"], pw.pw_uid, pw.pw_gid
-
-
 @pytest.fixture(scope="module")
 def pg_url(request):
-    """A fresh PostgreSQL cluster on 127.0.0.1:<free port>; yields its SQLAlchemy URL."""
-    bindir = _pg_bin()
-    if bindir is None:
+    """A fresh PostgreSQL cluster on 127.0.0.1:<free port>, stopped and removed at the end."""
+    if postgres_binaries() is None:
         pytest.skip("PostgreSQL server binaries (initdb, pg_ctl) not found; scripts/setup.sh installs Debian's postgresql package as root")
-    prefix, uid, gid = _as_cluster_owner()
-    root = Path(tempfile.mkdtemp(prefix="trustseek-pg-"))
-    data, log = root / "data", root / "server.log"
-    port = free_port()
-    started = False
-
-    def run(*cmd: str, timeout: float = 60) -> None:
-        res = subprocess.run([*prefix, *cmd], capture_output=True, text=True, timeout=timeout, cwd=root)
-        if res.returncode != 0:
-            tail = log.read_text()[-2000:] if log.exists() else ""
-            raise RuntimeError(f"{' '.join(cmd)} failed ({res.returncode}):\n{res.stdout}\n{res.stderr}\n{tail}")
-
-    def stop() -> None:
-        try:
-            if started:
-                subprocess.run([*prefix, str(bindir / "pg_ctl"), "-D", str(data), "-m", "immediate", "-w", "stop"],
-                               capture_output=True, timeout=60, cwd=root)
-        finally:
-            shutil.rmtree(root, ignore_errors=True)
-
-    request.addfinalizer(stop)
-    if uid is not None:
-        os.chown(root, uid, gid)
-    run(str(bindir / "initdb"), "-D", str(data), "-U", "postgres", "-A", "trust", "-E", "UTF8", "--no-sync", "--no-instructions")
-    opts = f"-k {root} -p {port} -c listen_addresses=127.0.0.1 -c fsync=off -c full_page_writes=off"
-    started = True  # from here on, stop() tries pg_ctl stop even if start fails half-way
-    run(str(bindir / "pg_ctl"), "-D", str(data), "-l", str(log), "-o", opts, "-w", "-t", "60", "start")
-    return f"postgresql://postgres@127.0.0.1:{port}/postgres"
+    cluster = TemporaryPostgres()
+    request.addfinalizer(cluster.stop)
+    return cluster.start()
 
 
 @pytest.fixture(scope="module")

@@ -1,9 +1,13 @@
 """Run the server on a free loopback port, in a background thread of this process or as a
-separate ``trustseek serve`` process (used by the tests, the benchmark and notebooks)."""
+separate ``trustseek serve`` process, and a throwaway PostgreSQL cluster to run it on (used by
+the tests, the benchmark and notebooks)."""
 
 from __future__ import annotations
 
+import glob
 import os
+import pwd
+import shutil
 import socket
 import subprocess
 import sys
@@ -75,3 +79,94 @@ def serve_process(db_url: str, token: str, port: int, log: Path | None = None) -
         err.seek(0)
         raise RuntimeError(f"{exc}\n{err.read().decode(errors='replace')[-4000:]}") from None
     return proc
+
+
+def postgres_binaries() -> Path | None:
+    """The directory holding PostgreSQL's ``initdb``, ``pg_ctl`` and ``postgres`` (Debian's
+    /usr/lib/postgresql/<version>/bin, newest first, else the one ``pg_ctl`` on PATH is in),
+    or None when the server is not installed."""
+
+    def version(d: str) -> int:
+        v = Path(d).parent.name
+        return int(v) if v.isdigit() else 0
+
+    dirs = sorted(glob.glob("/usr/lib/postgresql/*/bin"), key=version, reverse=True)
+    if shutil.which("pg_ctl"):
+        dirs.append(str(Path(os.path.realpath(shutil.which("pg_ctl"))).parent))
+    for d in dirs:
+        if all((Path(d) / exe).exists() for exe in ("initdb", "pg_ctl", "postgres")):
+            return Path(d)
+    return None
+
+
+class TemporaryPostgres:
+    """A throwaway PostgreSQL cluster: ``initdb`` in a temporary directory, the server on
+    127.0.0.1:<free port> with its socket in that directory, trust authentication for the
+    ``postgres`` role, no fsync (test data).  PostgreSQL refuses to run as root, so as root its
+    programs run as the ``postgres`` user (through ``runuser``).
+
+        with TemporaryPostgres() as url:    # postgresql://postgres@127.0.0.1:<port>/postgres
+            app = create_app(url)
+
+    ``start()`` / ``stop()`` for fixtures; ``stop()`` always removes the directory.
+    """
+
+    def __init__(self, bindir: Path | None = None):
+        self.bindir = bindir or postgres_binaries()
+        if self.bindir is None:
+            raise RuntimeError("PostgreSQL server binaries (initdb, pg_ctl) not found: install Debian's postgresql package")
+        self.prefix: list[str] = []
+        self.owner: tuple[int, int] | None = None
+        if os.geteuid() == 0:
+            runuser = shutil.which("runuser")
+            try:
+                pw = pwd.getpwnam("postgres")
+            except KeyError:
+                pw = None
+            if runuser is None or pw is None:
+                raise RuntimeError("running as root, PostgreSQL needs the 'postgres' user and runuser to start a cluster")
+            self.prefix, self.owner = [runuser, "-u", "postgres", "--"], (pw.pw_uid, pw.pw_gid)
+        self.root: Path | None = None
+        self.started = False
+        self.url: str | None = None
+
+    def _run(self, *cmd: str) -> None:
+        res = subprocess.run([*self.prefix, *cmd], capture_output=True, text=True, timeout=120, cwd=self.root)
+        if res.returncode != 0:
+            log = self.root / "server.log"
+            tail = log.read_text(errors="replace")[-2000:] if log.exists() else ""
+            raise RuntimeError(f"{Path(cmd[0]).name} failed with code {res.returncode}:\n{res.stdout}{res.stderr}{tail}")
+
+    def start(self) -> str:
+        self.root = Path(tempfile.mkdtemp(prefix="trustseek-pg-"))
+        if self.owner is not None:
+            os.chown(self.root, *self.owner)
+        data, port = self.root / "data", free_port()
+        self._run(str(self.bindir / "initdb"), "-D", str(data), "-U", "postgres", "-A", "trust", "-E", "UTF8",
+                  "--no-sync", "--no-instructions")
+        opts = f"-k {self.root} -p {port} -c listen_addresses=127.0.0.1 -c fsync=off -c full_page_writes=off"
+        self.started = True  # from here on stop() runs pg_ctl stop, even if the start fails half-way
+        self._run(str(self.bindir / "pg_ctl"), "-D", str(data), "-l", str(self.root / "server.log"), "-o", opts, "-w", "-t", "60", "start")
+        self.url = f"postgresql://postgres@127.0.0.1:{port}/postgres"
+        return self.url
+
+    def stop(self) -> None:
+        try:
+            if self.started and self.root is not None:
+                subprocess.run([*self.prefix, str(self.bindir / "pg_ctl"), "-D", str(self.root / "data"), "-m", "immediate", "-w", "stop"],
+                               capture_output=True, timeout=60, cwd=self.root)
+        finally:
+            self.started = False
+            if self.root is not None:
+                shutil.rmtree(self.root, ignore_errors=True)
+                self.root = None
+
+    def __enter__(self) -> str:
+        try:
+            return self.start()
+        except BaseException:
+            self.stop()
+            raise
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
