@@ -17,11 +17,13 @@ across input combinations, Dirichlet pseudo-counts ``prior`` (MAP), and rows tha
 no data event reaches: transitions default to the identity (the level does not
 change), emissions to uniform; such rows are not estimated.
 
-The fit is scaled forward-backward vectorized across sequences (sequences are
-padded into time-major arrays; the Python loop runs over time only), expected
-counts gathered with ``np.bincount`` over precomputed per-trial indices, an
-M-step in closed form, and SQUAREM acceleration that falls back to the plain
-EM step whenever the extrapolated point does not improve, so the objective
+The fit is scaled forward-backward with the expected counts accumulated in the
+same pass (compiled, :mod:`trustseek.forward_backward`; the numpy version --
+sequences padded into time-major arrays, a Python loop over time only, counts
+gathered with ``np.bincount`` -- is the reference and the fallback), an M-step
+in closed form, SQUAREM acceleration that falls back to the plain EM step
+whenever the extrapolated point does not improve, and a quasi-Newton finish
+(:func:`finish`, L-BFGS-B) for the flat ridges where EM crawls.  The objective
 (log-likelihood plus log-prior) never decreases.
 """
 
