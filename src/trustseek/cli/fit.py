@@ -10,11 +10,25 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.markup import escape
 from rich.table import Table
 
-from ..data import ColumnMapping, read_trials, write_trials
 from ..errors import TrustseekError
-from ..fit import MODEL_INPUTS, PAPER_EMISSION_INPUTS, PAPER_TRANSITION_INPUTS, PRESETS, decode, fit_trust_model, select_levels
 from ..model import TrustModel
 from ._app import app, console, err_console, print_json
+
+# The fit and data modules (pandas, numba) load only when a command of this group runs,
+# so that the rest of the CLI starts fast.
+
+
+def _fit():
+    from .. import fit
+
+    return fit
+
+
+def _data():
+    from .. import data
+
+    return data
+
 
 MappingOpt = typer.Option(None, "--mapping", help="Column/label mapping file (JSON or TOML) for a log with other names.")
 ColumnOpt = typer.Option(None, "--column", help="Map a column: canonical=theirs (e.g. human_action=rely). Repeatable.")
@@ -27,15 +41,15 @@ def _inputs(text: Optional[str], default: tuple[str, ...], flag: str) -> tuple[s
     if text.strip().lower() in ("", "none", "-"):
         return ()
     cols = tuple(c.strip() for c in text.split(",") if c.strip())
-    bad = [c for c in cols if c not in MODEL_INPUTS]
+    bad = [c for c in cols if c not in _fit().MODEL_INPUTS]
     if bad:
-        raise TrustseekError([f"{flag}: {c!r} is not one of {list(MODEL_INPUTS)} (or 'none')" for c in bad])
+        raise TrustseekError([f"{flag}: {c!r} is not one of {list(_fit().MODEL_INPUTS)} (or 'none')" for c in bad])
     return cols
 
 
 def _read(log: Path, mapping: Optional[Path], column: Optional[list[str]], label: Optional[list[str]], needed: tuple[str, ...]):
-    m = ColumnMapping.from_flags(column or [], label or [], mapping)
-    return read_trials(log, m, required=("participant", "trial", "human_action", *needed))
+    m = _data().ColumnMapping.from_flags(column or [], label or [], mapping)
+    return _data().read_trials(log, m, required=("participant", "trial", "human_action", *needed))
 
 
 def _progress(description: str, quiet: bool):
@@ -53,7 +67,7 @@ def _progress(description: str, quiet: bool):
 @app.command()
 def fit(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
-    preset: str = typer.Option("paper", "--preset", help=f"Model structure preset: {', '.join(PRESETS)}."),
+    preset: str = typer.Option("paper", "--preset", help="Model structure preset (paper)."),
     levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Number of trust levels."),
     transitions_on: Optional[str] = typer.Option(None, "--transitions-on", help="Comma-separated inputs of the trust transitions (default: complexity,robot_action,experience; 'none' for none)."),
     emissions_on: Optional[str] = typer.Option(None, "--emissions-on", help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for none)."),
@@ -73,8 +87,8 @@ def fit(
     label: Optional[list[str]] = LabelOpt,
 ) -> None:
     """Estimate the supervisor's trust model from logged trials (extended Baum-Welch)."""
-    tr = _inputs(transitions_on, PAPER_TRANSITION_INPUTS, "--transitions-on")
-    em = _inputs(emissions_on, PAPER_EMISSION_INPUTS, "--emissions-on")
+    tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on")
+    em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on")
     frame = _read(log, mapping, column, label, tuple(dict.fromkeys((*tr, *em))))
     bar, desc = _progress("fitting", as_json)
     with bar:
@@ -83,14 +97,14 @@ def fit(
         def progress(done: int, total: int) -> None:
             bar.update(task, completed=done, total=total, description="bootstrap" if done > restarts else "restarts")
 
-        result = fit_trust_model(
+        result = _fit().fit_trust_model(
             frame, preset=preset, restarts=restarts, seed=seed, bootstrap=bootstrap, prior=prior, n_jobs=jobs,
             tol=tol, max_iter=max_iter, progress=progress, levels=levels, transition_inputs=tr, emission_inputs=em,
         )
     if out is not None:
         result.model.save(out)
     if posteriors is not None:
-        write_trials(result.posteriors(), posteriors)
+        _data().write_trials(result.posteriors(), posteriors)
     if plots is not None:
         from ..plots.model import plot_emissions, plot_transitions
         from ..presets import paper_model
@@ -145,8 +159,8 @@ def decode_cmd(
     """Per-trial smoothed P(trust | data) and the Viterbi trust path under a model."""
     m = TrustModel.load(model)
     frame = _read(log, mapping, column, label, ("complexity", "robot_action", "experience"))
-    post = decode(frame, m)
-    write_trials(post, out)
+    post = _fit().decode(frame, m)
+    _data().write_trials(post, out)
     console.print(f"wrote {len(post)} trials to {out}")
 
 
@@ -167,13 +181,13 @@ def select(
     label: Optional[list[str]] = LabelOpt,
 ) -> None:
     """Choose the number of trust levels: BIC and participant-held-out log-likelihood."""
-    tr = _inputs(transitions_on, PAPER_TRANSITION_INPUTS, "--transitions-on")
-    em = _inputs(emissions_on, PAPER_EMISSION_INPUTS, "--emissions-on")
+    tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on")
+    em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on")
     frame = _read(log, mapping, column, label, tuple(dict.fromkeys((*tr, *em))))
     bar, desc = _progress("model selection", as_json)
     with bar:
         task = bar.add_task(desc, total=None)
-        rows = select_levels(
+        rows = _fit().select_levels(
             frame, levels=tuple(range(1, max_levels + 1)), folds=folds, restarts=restarts, seed=seed, prior=prior, tol=tol,
             progress=lambda d, t: bar.update(task, completed=d, total=t), transition_inputs=tr, emission_inputs=em,
         )
