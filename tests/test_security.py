@@ -68,6 +68,7 @@ def test_a_participant_token_cannot_read_or_write_another_session(env):
         ("post", f"/api/sessions/{other}/events", {"events": [{"type": "evil"}]}),
         ("get", f"/api/deploy/sessions/{robot['session_id']}", None),
         ("post", f"/api/deploy/sessions/{robot['session_id']}/decide", {"trial": 1, "complexity": "low"}),
+        ("post", f"/api/deploy/sessions/{robot['session_id']}/observe", {"trial": 1, "human_action": "rely", "outcome": "success"}),
     ]
     for method, path, body in attempts:
         assert call(c, method, path, body, ha).status_code == 403, path
@@ -85,6 +86,8 @@ def test_a_participant_token_cannot_read_or_write_another_session(env):
     hr = {"Authorization": f"Bearer {robot['token']}"}
     assert c.get(f"/api/sessions/{a['session_id']}/state", headers=hr).status_code == 403
     assert c.get(f"/api/deploy/sessions/{robot['session_id']}", headers=hr).status_code == 200
+    assert c.post(f"/api/deploy/sessions/{a['session_id']}/decide", json={"trial": 1, "complexity": "low"}, headers=ha).status_code == 409
+    assert c.post(f"/api/deploy/sessions/{robot['session_id']}/decide", json={"trial": 1, "complexity": "low"}, headers=hr).status_code == 200
 
 
 def test_session_tokens_are_unguessable(env):

@@ -3,6 +3,8 @@ through its token) and deploy (decisions for a real robot)."""
 
 from __future__ import annotations
 
+import json
+import secrets
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
@@ -270,20 +272,43 @@ def deploy_state(session_id: str, request: Request, s: Caller = Depends(require_
                 "trials": [trial_dict(t) for t in trials]}
 
 
-@deploy.post("/sessions/{session_id}/decide", summary="Post a trial's complexity, get the robot action")
-async def decide(session_id: str, body: DecideIn, request: Request, s: Caller = Depends(require_session)):
-    # async on purpose: a short transaction run on the event loop, without a hop to a worker thread
+def _robot(request: Request, session_id: str) -> Caller:
+    """The deploy session named in the path, if the bearer token is its token (the check of
+    ``require_session``, made inline: the decision API is latency-critical)."""
+    header = request.headers.get("authorization", "")
+    scheme, _, token = header.partition(" ")
+    if scheme.lower() != "bearer" or not token:
+        raise HTTPException(401, "missing token: send 'Authorization: Bearer <token>'", headers={"WWW-Authenticate": "Bearer"})
+    s = session_for_token(request, token.strip())
+    if not secrets.compare_digest(s.id.encode(), session_id.encode()):
+        raise HTTPException(403, "this token belongs to another session")
     _deploy_session(s)
+    return s
+
+
+_BEARER = {"security": [{"HTTPBearer": []}]}
+
+
+def _json(out: dict) -> Response:
+    """A JSON response of plain values (str, int, float, None), serialized directly."""
+    return Response(json.dumps(out, allow_nan=False, separators=(",", ":")).encode(), media_type="application/json")
+
+
+@deploy.post("/sessions/{session_id}/decide", summary="Post a trial's complexity, get the robot action", openapi_extra=_BEARER)
+async def decide(session_id: str, body: DecideIn, request: Request):
+    # async on purpose: a short transaction run on the event loop, without a hop to a worker thread
+    s = _robot(request, session_id)
     try:
         with request.app.state.engine.begin() as conn:
-            return deploy_decide(conn, s.id, body.trial, body.complexity)
+            out = deploy_decide(conn, s.id, body.trial, body.complexity)
     except SessionError as exc:
         _fail(exc)
+    return _json(out)
 
 
-@deploy.post("/sessions/{session_id}/observe", summary="Post the observed human action and outcome; updates the belief")
-async def observe(session_id: str, body: ObserveIn, request: Request, s: Caller = Depends(require_session)):
-    _deploy_session(s)
+@deploy.post("/sessions/{session_id}/observe", summary="Post the observed human action and outcome; updates the belief", openapi_extra=_BEARER)
+async def observe(session_id: str, body: ObserveIn, request: Request):
+    s = _robot(request, session_id)
     engine = request.app.state.engine
     try:
         with engine.begin() as conn:
@@ -296,4 +321,4 @@ async def observe(session_id: str, body: ObserveIn, request: Request, s: Caller 
         if old is None:
             raise
         t, dup = trial_dict(old), True
-    return {"trial": t, "duplicate": dup, "belief": t["belief_after"]}
+    return _json({"trial": t, "duplicate": dup, "belief": t["belief_after"]})
