@@ -127,6 +127,51 @@ def _unknown_keys(obj: Any, allowed: Iterable[str], label: str, problems: list[s
                 problems.append(f"{label} has unknown entry {k!r} (expected one of {allowed})")
 
 
+def _nested(arr: np.ndarray, levels: Sequence[Sequence[str]]) -> dict[str, Any]:
+    """An array as nested {name: ...} objects, one level per axis."""
+    if len(levels) == 1:
+        return {n: float(arr[i]) for i, n in enumerate(levels[0])}
+    return {n: _nested(arr[i], levels[1:]) for i, n in enumerate(levels[0])}
+
+
+def _read_table(
+    obj: Any,
+    base: str,
+    outer: Sequence[tuple[str, Sequence[str]]],
+    inner: tuple[str, Sequence[str]],
+    row_keys: Sequence[str],
+    out: np.ndarray,
+    problems: list[str],
+) -> None:
+    """Read nested probability rows into ``out``, naming each cell like
+    ``transition[C=high, a=ask, E=reliable][T=low]``: the ``outer`` axes inside the first
+    brackets, the ``inner`` (conditioning trust) axis in the second, then the row's keys."""
+    sym_in, names_in = inner
+
+    def label(parts: list[str], t: str | None = None) -> str:
+        s = f"{base}[{', '.join(parts)}]" if parts else base
+        return s if t is None else f"{s}[{sym_in}={t}]"
+
+    def walk(node: Any, depth: int, parts: list[str], idx: tuple[int, ...]) -> None:
+        if depth == len(outer):
+            _unknown_keys(node, names_in, label(parts), problems)
+            for t, tn in enumerate(names_in):
+                cell = _get(node, tn, label(parts, tn), problems)
+                if cell is not None:
+                    row = _read_row(cell, row_keys, label(parts, tn), problems)
+                    if row is not None:
+                        out[idx + (t,)] = row
+            return
+        sym, names = outer[depth]
+        _unknown_keys(node, names, label(parts), problems)
+        for i, n in enumerate(names):
+            child = _get(node, n, label(parts + [f"{sym}={n}"]), problems)
+            if child is not None:
+                walk(child, depth + 1, parts + [f"{sym}={n}"], idx + (i,))
+
+    walk(obj, 0, [], ())
+
+
 def _check_row_array(arr: np.ndarray, label_of, problems: list[str]) -> None:
     """Validate the last axis of ``arr`` as probability rows (for arrays built in Python)."""
     if not np.all(np.isfinite(arr)):
@@ -243,30 +288,9 @@ class TrustModel:
             "notes": self.notes,
             "trust_levels": list(T),
             "complexities": list(C),
-            "initial": {T[t]: float(self.initial[t]) for t in range(len(T))},
-            "emission": {
-                C[c]: {
-                    ACTIONS[a]: {
-                        T[t]: {HUMAN_ACTIONS[o]: float(self.emission[c, a, t, o]) for o in range(2)}
-                        for t in range(len(T))
-                    }
-                    for a in range(2)
-                }
-                for c in range(len(C))
-            },
-            "transition": {
-                C[c]: {
-                    ACTIONS[a]: {
-                        EXPERIENCES[e]: {
-                            T[t]: {T[u]: float(self.transition[c, a, e, t, u]) for u in range(len(T))}
-                            for t in range(len(T))
-                        }
-                        for e in range(2)
-                    }
-                    for a in range(2)
-                }
-                for c in range(len(C))
-            },
+            "initial": _nested(self.initial, [T]),
+            "emission": _nested(self.emission, [C, ACTIONS, T, HUMAN_ACTIONS]),
+            "transition": _nested(self.transition, [C, ACTIONS, EXPERIENCES, T, T]),
         }
 
     @classmethod
@@ -295,52 +319,10 @@ class TrustModel:
 
         em = _get(d, "emission", "emission", problems)
         if em is not None:
-            _unknown_keys(em, C, "emission", problems)
-            for c, cn in enumerate(C):
-                ec = _get(em, cn, f"emission[C={cn}]", problems)
-                if ec is None:
-                    continue
-                _unknown_keys(ec, ACTIONS, f"emission[C={cn}]", problems)
-                for a, an in enumerate(ACTIONS):
-                    ea = _get(ec, an, f"emission[C={cn}, a={an}]", problems)
-                    if ea is None:
-                        continue
-                    _unknown_keys(ea, T, f"emission[C={cn}, a={an}]", problems)
-                    for t, tn in enumerate(T):
-                        lab = f"emission[C={cn}, a={an}][T={tn}]"
-                        et = _get(ea, tn, lab, problems)
-                        if et is None:
-                            continue
-                        row = _read_row(et, HUMAN_ACTIONS, lab, problems)
-                        if row is not None:
-                            emission[c, a, t] = row
-
+            _read_table(em, "emission", [("C", C), ("a", ACTIONS)], ("T", T), HUMAN_ACTIONS, emission, problems)
         tr = _get(d, "transition", "transition", problems)
         if tr is not None:
-            _unknown_keys(tr, C, "transition", problems)
-            for c, cn in enumerate(C):
-                tc = _get(tr, cn, f"transition[C={cn}]", problems)
-                if tc is None:
-                    continue
-                _unknown_keys(tc, ACTIONS, f"transition[C={cn}]", problems)
-                for a, an in enumerate(ACTIONS):
-                    ta = _get(tc, an, f"transition[C={cn}, a={an}]", problems)
-                    if ta is None:
-                        continue
-                    _unknown_keys(ta, EXPERIENCES, f"transition[C={cn}, a={an}]", problems)
-                    for e, en in enumerate(EXPERIENCES):
-                        te = _get(ta, en, f"transition[C={cn}, a={an}, E={en}]", problems)
-                        if te is None:
-                            continue
-                        _unknown_keys(te, T, f"transition[C={cn}, a={an}, E={en}]", problems)
-                        for t, tn in enumerate(T):
-                            lab = f"transition[C={cn}, a={an}, E={en}][T={tn}]"
-                            tt = _get(te, tn, lab, problems)
-                            if tt is None:
-                                continue
-                            row = _read_row(tt, T, lab, problems)
-                            if row is not None:
-                                transition[c, a, e, t] = row
+            _read_table(tr, "transition", [("C", C), ("a", ACTIONS), ("E", EXPERIENCES)], ("T", T), T, transition, problems)
         notes = d.get("notes", "")
         if not isinstance(notes, str):
             problems.append(f"notes must be a string, got {notes!r}")
