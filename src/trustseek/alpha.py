@@ -105,9 +105,16 @@ def envelope_values(vecs: np.ndarray, xs: np.ndarray, x: np.ndarray) -> np.ndarr
     return vecs[i, 0] * (1 - x) + vecs[i, 1] * x
 
 
+def _union(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Sorted union of two sorted breakpoint arrays (exact duplicates removed)."""
+    u = np.concatenate([a, b])
+    u.sort(kind="mergesort")
+    return u[np.concatenate([[True], u[1:] != u[:-1]])]
+
+
 def _cross_sum(xs1: np.ndarray, xs2: np.ndarray):
     """Pieces of the sum of two envelopes: breakpoints and the active index in each."""
-    u = np.union1d(xs1, xs2)
+    u = _union(xs1, xs2)
     keep = np.concatenate([[True], np.diff(u) > _WIDTH_EPS])
     u = u[keep]
     if u[-1] < 1.0:
@@ -134,33 +141,29 @@ class Backup:
     q: list[list[tuple[np.ndarray, np.ndarray]]]
 
 
-def _project(vecs: np.ndarray, xs: np.ndarray, M: np.ndarray):
-    """Envelope of the projected vectors (M α)_j over x, for an envelope (vecs, xs).
+def _branch_maps(pomdp: AssistancePOMDP):
+    """Per (c, a, o, e): the branch matrices M[t, u] = P(o, E', T'=u | T=t, C=c, a) and the
+    coefficients of the monotone belief map x -> x'(x) = (m0 (1-x) + m1 x) / (s0 (1-x) + s1 x),
+    with its range [lo, hi] and whether it moves at all."""
+    K = pomdp.kernel  # [c, a, t, o, e, u]
+    N, A, T, O, E, U = K.shape
+    M = np.moveaxis(K, 2, 4).reshape(N, A, O * E, T, U)  # [c, a, branch, t, u]
+    s = M.sum(axis=-1)  # [c, a, b, t]
+    possible = s.sum(axis=-1) > 0  # [c, a, b]
+    s0, s1 = s[..., 0], s[..., 1]
+    m0, m1 = M[..., 0, 1], M[..., 1, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        y0 = np.where(s0 > 0, m0 / np.where(s0 > 0, s0, 1.0), np.nan)
+        y1 = np.where(s1 > 0, m1 / np.where(s1 > 0, s1, 1.0), np.nan)
+    moving = (s0 > 0) & (s1 > 0) & (np.abs(y1 - y0) > 1e-15)  # the map is not constant
+    return M, possible, s0, s1, m0, m1, np.fmin(y0, y1), np.fmax(y0, y1), moving
 
-    max_j (b M)·α_j = |b M| L(x'), where x' = (b M)_high / |b M| is a monotone (Moebius) map of
-    x, so the projected envelope uses the lines of L active at x'(x) and its breakpoints are
-    the preimages of the breakpoints of L.  Returns (projected vectors, breakpoints, indices)."""
-    s0, s1 = M[0].sum(), M[1].sum()
-    m0, m1 = M[0, 1], M[1, 1]
-    if s0 <= 0 or s1 <= 0:
-        y = m1 / s1 if s0 <= 0 else m0 / s0
-        idx = _active(xs, np.array([y]))
-        return vecs[idx] @ M.T, np.array([0.0, 1.0]), idx
-    y0, y1 = m0 / s0, m1 / s1
-    if abs(y1 - y0) <= 1e-15:
-        idx = _active(xs, np.array([y0]))
-        return vecs[idx] @ M.T, np.array([0.0, 1.0]), idx
-    lo, hi = min(y0, y1), max(y0, y1)
-    ks = xs[1:-1]
-    ks = ks[(ks > lo) & (ks < hi)]
-    pre = np.sort((m0 - ks * s0) / (ks * (s1 - s0) - (m1 - m0)))
-    nxs = np.concatenate([[0.0], pre, [1.0]])
-    nxs = nxs[np.concatenate([[True], np.diff(nxs) > _WIDTH_EPS])]
-    nxs[-1] = 1.0
-    mids = 0.5 * (nxs[:-1] + nxs[1:])
-    y = (m0 * (1 - mids) + m1 * mids) / (s0 * (1 - mids) + s1 * mids)
-    idx = _active(xs, y)
-    return vecs[idx] @ M.T, nxs, idx
+
+def _strip(u: np.ndarray) -> np.ndarray:
+    """Sorted breakpoints with pieces narrower than _WIDTH_EPS removed, from 0 to 1."""
+    u = u[np.concatenate([[True], np.diff(u) > _WIDTH_EPS])]
+    u[0], u[-1] = 0.0, 1.0
+    return u
 
 
 def _active(xs: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -196,7 +199,12 @@ def max_of(v1, xs1, v2, xs2):
 def exact_backup(pomdp: AssistancePOMDP, vecs: np.ndarray, xs: np.ndarray | None = None) -> Backup:
     """One exact Bellman backup (``bayes`` update) of L(x) = max_j vecs[j]·(1-x, x).
 
-    ``vecs`` must be an envelope with breakpoints ``xs`` (computed when not given)."""
+    ``vecs`` must be an envelope with breakpoints ``xs`` (computed when not given).
+
+    For each (C, a) the envelope of Q(·, C, a) is built in one pass: its breakpoints are the
+    preimages of L's breakpoints under every branch's belief map (all branches at once), and
+    on each piece every branch uses the line of L active at its next belief.  The actions are
+    combined by the upper envelope and the complexities by a weighted cross-sum."""
     if xs is None:
         idx, xs = envelope(vecs)
         vecs = vecs[idx]
@@ -204,31 +212,41 @@ def exact_backup(pomdp: AssistancePOMDP, vecs: np.ndarray, xs: np.ndarray | None
     else:
         remap = np.arange(len(vecs))
     gamma = pomdp.discount
-    K = pomdp.kernel  # [c, a, t, o, e, u]
     R = pomdp.expected_reward  # [c, a, t]
     N = pomdp.n_complexity
+    M, possible, s0, s1, m0, m1, lo, hi, moving = _branch_maps(pomdp)
+    n_branch = M.shape[2]
+    n_o, n_e = pomdp.kernel.shape[3], pomdp.kernel.shape[4]
+    ks = xs[1:-1]
+    if len(ks):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pre = (m0[..., None] - ks * s0[..., None]) / (ks * (s1 - s0)[..., None] - (m1 - m0)[..., None])
+        inside = moving[..., None] & possible[..., None] & (ks > lo[..., None]) & (ks < hi[..., None])
     q_env: list[list[tuple[np.ndarray, np.ndarray]]] = []
     w_vecs = w_xs = w_act = w_succ = None
     for c in range(N):
         per_a = []
         tags = []
         for a in range(2):
-            acc_v = R[c, a][None, :].copy()
-            acc_x = np.array([0.0, 1.0])
-            acc_t = np.full((1, 2, 2), -1, dtype=np.int64)
-            for o in range(2):
-                for e in range(2):
-                    M = K[c, a, :, o, e, :]
-                    if not np.any(M > 0):
-                        continue
-                    proj, pxs, pidx = _project(vecs, xs, M)
-                    u, i1, i2 = _cross_sum(acc_x, pxs)
-                    acc_v = acc_v[i1] + gamma * proj[i2]
-                    acc_t = acc_t[i1].copy()
-                    acc_t[:, o, e] = remap[pidx[i2]]
-                    acc_x = u
-            per_a.append((acc_v, acc_x))
-            tags.append(acc_t)
+            bs = np.nonzero(possible[c, a])[0]
+            u = np.concatenate([[0.0, 1.0], pre[c, a][inside[c, a]]]) if len(ks) else np.array([0.0, 1.0])
+            u.sort()
+            u = _strip(u)
+            mids = 0.5 * (u[:-1] + u[1:])
+            acc_v = np.broadcast_to(R[c, a], (len(mids), 2)).copy()
+            acc_t = np.full((len(mids), n_branch), -1, dtype=np.int64)
+            if len(bs):
+                sb0, sb1 = s0[c, a, bs][:, None], s1[c, a, bs][:, None]
+                num = m0[c, a, bs][:, None] * (1 - mids) + m1[c, a, bs][:, None] * mids
+                den = sb0 * (1 - mids) + sb1 * mids
+                y = num / den  # (branches, pieces): the next belief at each piece's middle
+                act = _active(xs, y.ravel()).reshape(y.shape)
+                # Σ_branch M_b α_act  (vectors of L projected through each branch)
+                proj = np.einsum("btu,bpu->pt", gamma * M[c, a, bs], vecs[act])
+                acc_v += proj
+                acc_t[:, bs] = remap[act].T
+            per_a.append((acc_v, u))
+            tags.append(acc_t.reshape(len(mids), n_o, n_e))
         q_env.append(per_a)
         cv, xs_c, src, idx = max_of(per_a[0][0], per_a[0][1], per_a[1][0], per_a[1][1])
         ca = src
@@ -280,7 +298,10 @@ def evaluate_controller(
 ) -> np.ndarray:
     """Exact value α[n, t] of a finite-state controller: node n takes actions[n, c] in
     complexity c and moves to successors[n, c, o, e] after (o, E').  Works for any number
-    of trust levels.  Solves (I - γ P) α = r with a sparse direct solver."""
+    of trust levels.  Solves (I - γ P) α = r: dense for small controllers, a sparse direct
+    solve for medium ones, BiCGSTAB (started from ``guess``, checked, with a direct fallback)
+    for large ones.  P is built directly in CSR form (rows (n, t) in order, the entries of a
+    row in (c, o, E', u) order), so no sorting or duplicate summing is needed."""
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
 
@@ -290,40 +311,36 @@ def evaluate_controller(
     gamma = pomdp.discount
     n, N = actions.shape
     k = pomdp.n_trust
-    rhs = np.zeros((n, k))
-    rows, cols, vals = [], [], []
-    node_t = np.arange(n)[:, None] * k + np.arange(k)[None, :]  # (n, k) row index
-    for c in range(N):
-        a = actions[:, c]
-        rhs += pc[c] * R[c, a]  # (n, k)
-        for o in range(2):
-            for e in range(2):
-                succ = successors[:, c, o, e]
-                ok = succ >= 0
-                if not np.any(ok):
-                    continue
-                M = K[c, a[ok], :, o, e, :]  # (m, t, u)
-                r = np.broadcast_to(node_t[ok][:, :, None], M.shape)
-                cc = np.broadcast_to((succ[ok][:, None] * k + np.arange(k)[None, :])[:, None, :], M.shape)
-                rows.append(r.ravel())
-                cols.append(cc.ravel())
-                vals.append((gamma * pc[c] * M).ravel())
+    cidx = np.arange(N)[None, :]
+    rhs = np.einsum("c,nct->nt", pc, R[cidx, actions])  # (n, k)
+    # weights [n, c, t, o, e, u] viewed as rows (n, t) with slots (c, o, e, u); zero slots
+    # (impossible branches, zero kernel entries, no successor) are dropped
+    Kg = K * (gamma * pc)[:, None, None, None, None, None]
+    W = np.moveaxis(Kg[cidx, actions], 2, 1)  # (n, t, c, o, e, u)
+    nz = (W != 0) & (successors >= 0)[:, None, :, :, :, None]
+    data = W[nz]
+    cols = (successors.astype(np.int64) * k)[:, None, :, :, :, None] + np.arange(k)
+    cols = np.broadcast_to(cols, W.shape)[nz]
     size = n * k
-    rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
-    if size <= 200:  # small: dense
-        D = np.eye(size)
-        np.add.at(D, (rows, cols), -vals)
-        return np.linalg.solve(D, rhs.reshape(-1)).reshape(n, k)
-    P = sp.csr_matrix((vals, (rows, cols)), shape=(size, size))
-    A = sp.identity(size, format="csr") - P
+    counts = nz.reshape(size, -1).sum(axis=1)
+    rows = np.repeat(np.arange(size), counts)
     b = rhs.reshape(-1)
+    if size <= 200:  # small: dense
+        D = np.zeros((size, size))
+        np.add.at(D, (rows, cols), -data)
+        D[np.diag_indices(size)] += 1.0
+        return np.linalg.solve(D, b).reshape(n, k)
+    indptr = np.zeros(size + 1, dtype=np.int64)
+    np.cumsum(counts, out=indptr[1:])
+    P = sp.csr_matrix((data, cols, indptr), shape=(size, size))
     if size <= 600:
-        return np.asarray(spla.spsolve(A.tocsc(), b)).reshape(n, k)
+        A = sp.identity(size, format="csc") - P.tocsc()
+        return np.asarray(spla.spsolve(A, b)).reshape(n, k)
     scale = max(1.0, float(np.max(np.abs(b))))
     x0 = np.zeros(size) if guess is None else guess.reshape(-1).astype(float)
     x = _bicgstab(lambda y: y - P @ y, b, x0, max(rtol, 1e-15) * scale * np.sqrt(size), 2000)
-    if not np.all(np.isfinite(x)) or np.max(np.abs(A @ x - b)) > max(1e-10, 10 * rtol) * scale:
-        x = spla.spsolve(A.tocsc(), b)
+    if not np.all(np.isfinite(x)) or np.max(np.abs(x - P @ x - b)) > max(1e-10, 10 * rtol) * scale:
+        x = spla.spsolve(sp.identity(size, format="csc") - P.tocsc(), b)
     return np.asarray(x).reshape(n, k)
 
 
