@@ -173,17 +173,18 @@ def _active(xs: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 def max_of(v1, xs1, v2, xs2):
     """The upper envelope of two envelopes: (vectors, breakpoints, source (0/1), index)."""
-    u = np.union1d(xs1, xs2)
-    i1, i2 = _active(xs1, 0.5 * (u[:-1] + u[1:])), _active(xs2, 0.5 * (u[:-1] + u[1:]))
+    u = _union(xs1, xs2)
+    mids = 0.5 * (u[:-1] + u[1:])
+    i1, i2 = _active(xs1, mids), _active(xs2, mids)
     a, b = v1[i1], v2[i2]
     d0 = a[:, 0] - b[:, 0]
     ds = (a[:, 1] - a[:, 0]) - (b[:, 1] - b[:, 0])
     with np.errstate(divide="ignore", invalid="ignore"):
         r = np.where(ds != 0, -d0 / ds, np.nan)
     inside = (r > u[:-1] + _WIDTH_EPS) & (r < u[1:] - _WIDTH_EPS)
-    u = np.union1d(u, r[inside])
-    u = u[np.concatenate([[True], np.diff(u) > _WIDTH_EPS])]
-    u[0], u[-1] = 0.0, 1.0
+    if np.any(inside):
+        u = _union(u, r[inside])  # the crossings lie strictly inside their pieces: still sorted
+    u = _strip(u)
     mids = 0.5 * (u[:-1] + u[1:])
     i1, i2 = _active(xs1, mids), _active(xs2, mids)
     val1 = v1[i1, 0] * (1 - mids) + v1[i1, 1] * mids
@@ -241,9 +242,9 @@ def exact_backup(pomdp: AssistancePOMDP, vecs: np.ndarray, xs: np.ndarray | None
                 den = sb0 * (1 - mids) + sb1 * mids
                 y = num / den  # (branches, pieces): the next belief at each piece's middle
                 act = _active(xs, y.ravel()).reshape(y.shape)
-                # Σ_branch M_b α_act  (vectors of L projected through each branch)
-                proj = np.einsum("btu,bpu->pt", gamma * M[c, a, bs], vecs[act])
-                acc_v += proj
+                # Σ_branch M_b α_act  (vectors of L projected through each branch), as one product
+                lines = vecs[act.T].reshape(len(mids), -1)  # (pieces, (branch, u))
+                acc_v += lines @ (gamma * M[c, a, bs]).transpose(0, 2, 1).reshape(-1, 2)
                 acc_t[:, bs] = remap[act].T
             per_a.append((acc_v, u))
             tags.append(acc_t.reshape(len(mids), n_o, n_e))
@@ -286,8 +287,14 @@ def thin(vecs: np.ndarray, xs: np.ndarray, eta: float) -> tuple[np.ndarray, np.n
 
 def sup_difference(v1, xs1, v2, xs2) -> float:
     """sup over [0, 1] of env1(x) - env2(x) (both piecewise linear: attained at a breakpoint)."""
-    pts = np.union1d(xs1, xs2)
-    return float(np.max(envelope_values(v1, xs1, pts) - envelope_values(v2, xs2, pts)))
+    return difference_extrema(v1, xs1, v2, xs2)[0]
+
+
+def difference_extrema(v1, xs1, v2, xs2) -> tuple[float, float]:
+    """(sup, inf) over [0, 1] of env1(x) - env2(x), both attained at a breakpoint of one of them."""
+    pts = _union(xs1, xs2)
+    d = envelope_values(v1, xs1, pts) - envelope_values(v2, xs2, pts)
+    return float(np.max(d)), float(np.min(d))
 
 
 # --------------------------------------------------------------------------- controllers
@@ -299,8 +306,8 @@ def evaluate_controller(
     """Exact value α[n, t] of a finite-state controller: node n takes actions[n, c] in
     complexity c and moves to successors[n, c, o, e] after (o, E').  Works for any number
     of trust levels.  Solves (I - γ P) α = r: dense for small controllers, a sparse direct
-    solve for medium ones, BiCGSTAB (started from ``guess``, checked, with a direct fallback)
-    for large ones.  P is built directly in CSR form (rows (n, t) in order, the entries of a
+    solve for medium ones without a guess, otherwise BiCGSTAB (started from ``guess``, checked,
+    with a direct fallback).  P is built directly in CSR form (rows (n, t) in order, the entries of a
     row in (c, o, E', u) order), so no sorting or duplicate summing is needed."""
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
@@ -333,7 +340,7 @@ def evaluate_controller(
     indptr = np.zeros(size + 1, dtype=np.int64)
     np.cumsum(counts, out=indptr[1:])
     P = sp.csr_matrix((data, cols, indptr), shape=(size, size))
-    if size <= 600:
+    if guess is None and size <= 600:
         A = sp.identity(size, format="csc") - P.tocsc()
         return np.asarray(spla.spsolve(A, b)).reshape(n, k)
     scale = max(1.0, float(np.max(np.abs(b))))
@@ -380,59 +387,65 @@ def _bicgstab(matvec, b: np.ndarray, x: np.ndarray, tol: float, maxiter: int) ->
 
 
 def _one_node_controllers(pomdp: AssistancePOMDP, limit: int = 64) -> np.ndarray:
-    """Values of the memoryless controllers 'always take action a_C in complexity C'."""
+    """Values of the memoryless controllers 'always take action a_C in complexity C' (one
+    controller of independent self-looping nodes, evaluated by one solve)."""
     N = pomdp.n_complexity
     combos = list(itertools.product((AUTONOMOUS, ASK), repeat=N))
     if len(combos) > limit:
         combos = [tuple([AUTONOMOUS] * N), tuple([ASK] * N)]
-    out = []
-    for combo in combos:
-        acts = np.array([combo], dtype=np.int64)
-        succ = np.zeros((1, N, 2, 2), dtype=np.int64)
-        out.append(evaluate_controller(pomdp, acts, succ)[0])
-    return np.array(out)
+    n = len(combos)
+    acts = np.array(combos, dtype=np.int64).reshape(n, N)
+    n_o, n_e = pomdp.kernel.shape[3], pomdp.kernel.shape[4]
+    succ = np.broadcast_to(np.arange(n)[:, None, None, None], (n, N, n_o, n_e)).copy()
+    return evaluate_controller(pomdp, acts, succ)
 
 
-def _grid_controller(pomdp: AssistancePOMDP, points: int) -> np.ndarray:
+def _grid_controller(pomdp: AssistancePOMDP, points: int, base: np.ndarray | None = None, rounds: int = 1) -> np.ndarray:
     """Values of a controller on a few beliefs: greedy actions of a one-step lookahead on the
-    one-node controllers' values, successors = the nearest belief of the set (a cheap start)."""
+    values known so far (first the one-node controllers'), successors = the nearest belief of
+    the set (a cheap start); ``rounds`` times, each round looking ahead on the last values."""
     if points < 2:
         return np.zeros((0, 2))
-    base = _one_node_controllers(pomdp)
+    base = _one_node_controllers(pomdp) if base is None else base
     x = np.linspace(0.0, 1.0, points)
     b = np.stack([1 - x, x], axis=1)
     K = pomdp.kernel
     N = pomdp.n_complexity
-    acts = np.zeros((points, N), dtype=np.int64)
-    succ = np.full((points, N, 2, 2), -1, dtype=np.int64)
-    for c in range(N):
-        nb = np.einsum("nt,atoeu->naoeu", b, K[c])  # (n, a, o, e, u)
-        z = nb.sum(axis=-1)
-        val = np.where(z > 0, (nb @ base.T).max(axis=-1), 0.0)
-        q = b @ pomdp.expected_reward[c].T + pomdp.discount * val.sum(axis=(2, 3))
-        acts[:, c] = q.argmax(axis=1)
-        na = nb[np.arange(points), acts[:, c]]  # (n, o, e, u)
-        za = na.sum(axis=-1)
-        nx = np.where(za > 0, na[..., 1] / np.where(za > 0, za, 1.0), 0.0)
-        succ[:, c] = np.where(za > 0, np.rint(nx * (points - 1)).astype(np.int64), -1)
-    return evaluate_controller(pomdp, acts, succ)
+    nbs = [np.einsum("nt,atoeu->naoeu", b, K[c]) for c in range(N)]  # (n, a, o, e, u) per c
+    ev = np.zeros((0, 2))
+    for _ in range(max(1, rounds)):
+        look = np.vstack([base, ev])
+        acts = np.zeros((points, N), dtype=np.int64)
+        succ = np.full((points, N, 2, 2), -1, dtype=np.int64)
+        for c, nb in enumerate(nbs):
+            z = nb.sum(axis=-1)
+            val = np.where(z > 0, (nb @ look.T).max(axis=-1), 0.0)
+            q = b @ pomdp.expected_reward[c].T + pomdp.discount * val.sum(axis=(2, 3))
+            acts[:, c] = q.argmax(axis=1)
+            na = nb[np.arange(points), acts[:, c]]  # (n, o, e, u)
+            za = na.sum(axis=-1)
+            nx = np.where(za > 0, na[..., 1] / np.where(za > 0, za, 1.0), 0.0)
+            succ[:, c] = np.where(za > 0, np.rint(nx * (points - 1)).astype(np.int64), -1)
+        ev = evaluate_controller(pomdp, acts, succ)
+    return ev
 
 
 def _repoint(pomdp: AssistancePOMDP, vecs: np.ndarray, xs: np.ndarray, actions: np.ndarray) -> np.ndarray:
     """Successors of each node (a vector of the envelope) at its witness belief (the middle of
     the interval where it is maximal): the node of the envelope active at each next belief."""
-    K = pomdp.kernel
     n, N = actions.shape
-    mids = 0.5 * (xs[:-1] + xs[1:])
-    b = np.stack([1 - mids, mids], axis=1)
-    succ = np.full((n, N, 2, 2), -1, dtype=np.int64)
-    for c in range(N):
-        M = K[c, actions[:, c]]  # (n, t, o, e, u)
-        nb = np.einsum("nt,ntoeu->noeu", b, M)
-        z = nb.sum(axis=-1)
-        x = np.where(z > 0, nb[..., 1] / np.where(z > 0, z, 1.0), 0.0)
-        succ[:, c] = np.where(z > 0, _active(xs, x), -1)
-    return succ
+    n_o, n_e = pomdp.kernel.shape[3], pomdp.kernel.shape[4]
+    _, _, s0, s1, m0, m1, _, _, _ = _branch_maps(pomdp)
+    mids = 0.5 * (xs[:-1] + xs[1:])[:, None, None]
+    tab = np.stack([s0, s1 - s0, m0, m1 - m0]).reshape(4, N * 2, -1)  # [coef, (c, a), branch]
+    g = tab[:, np.arange(N)[None, :] * 2 + actions]  # (coef, node, c, branch) for the node's action
+    # branch probability z and next belief num / z at the witness, per (node, c, branch)
+    z = g[0] + mids * g[1]
+    num = g[2] + mids * g[3]
+    ok = z > 0
+    x = (num / np.where(ok, z, 1.0)).transpose(1, 2, 0)  # (c, branch, node): monotone along nodes,
+    act = _active(xs, x.ravel()).reshape(x.shape).transpose(2, 0, 1)  # which makes the search fast
+    return np.where(ok, act, -1).reshape(n, N, n_o, n_e)
 
 
 # --------------------------------------------------------------------------- the solver
@@ -557,6 +570,7 @@ class AlphaSolver:
         max_grid: int = 200_001,
         thin: float = 0.05,
         seed_points: int = 33,
+        seed_rounds: int = 1,
     ):
         if belief_update not in BELIEF_UPDATES:
             raise ValueError(f"unknown belief update {belief_update!r}; expected one of {list(BELIEF_UPDATES)}")
@@ -572,6 +586,7 @@ class AlphaSolver:
         self.grid = int(grid)
         self.max_grid = int(max_grid)
         self.seed_points = int(seed_points)  # beliefs of the starting controller
+        self.seed_rounds = int(seed_rounds)  # its rounds of greedy improvement
         self.thin = float(thin)  # lines worth less than thin * tol * (1 - γ) are dropped from L
 
     def _check(self, pomdp: AssistancePOMDP) -> None:
@@ -597,7 +612,8 @@ class AlphaSolver:
     def _solve_bayes(self, pomdp: AssistancePOMDP) -> AlphaSolution:
         t0 = time.perf_counter()
         gamma = pomdp.discount
-        vecs = np.vstack([_one_node_controllers(pomdp), _grid_controller(pomdp, self.seed_points)])
+        base = _one_node_controllers(pomdp)
+        vecs = np.vstack([base, _grid_controller(pomdp, self.seed_points, base, self.seed_rounds)])
         idx, xs = envelope(vecs)
         vecs = vecs[idx]
         history: list[float] = []
@@ -607,9 +623,10 @@ class AlphaSolver:
         while True:
             vecs, xs = thin(vecs, xs, eta)
             bk = exact_backup(pomdp, vecs, xs)
-            delta = max(0.0, sup_difference(bk.vectors, bk.xs, vecs, xs))
+            sup, inf = difference_extrema(bk.vectors, bk.xs, vecs, xs)
+            delta = max(0.0, sup)
             # L is made of policy values, so T L >= L up to rounding; measure the rounding too
-            below = max(0.0, sup_difference(vecs, xs, bk.vectors, bk.xs))
+            below = max(0.0, -inf)
             gap = (delta + below) / (1 - gamma)
             history.append(gap)
             if gap <= self.tol or it >= self.max_iter:
