@@ -703,12 +703,17 @@ class AlphaSolver:
         )
 
 
-def paper_grid_values(pomdp: AssistancePOMDP, grid: np.ndarray, guess: np.ndarray | None = None) -> np.ndarray:
+def paper_grid_values(pomdp: AssistancePOMDP, grid: np.ndarray, guess: np.ndarray | None = None, max_iter: int = 200) -> np.ndarray:
     """W on a (possibly non-uniform) grid for the eq.-3 belief MDP with linear interpolation
-    between grid points: Howard's policy iteration on the grid MDP."""
-    import scipy.sparse as sp
+    between grid points: Howard's policy iteration on the grid MDP.
 
-    from .solve import policy_iteration
+    Every grid point has, per (C, a, E'), one next belief between two grid points, so the
+    transition rows are stored as index and weight arrays; a policy's matrix is built
+    directly in CSR form and evaluated by BiCGSTAB started from ``guess`` (checked, with a
+    direct fallback).  The first policy is greedy in ``guess`` (in the reward without one);
+    ties keep the current action, so the iteration terminates."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
 
     p, f = _paper_maps(pomdp)
     R = pomdp.expected_reward
@@ -717,29 +722,38 @@ def paper_grid_values(pomdp: AssistancePOMDP, grid: np.ndarray, guess: np.ndarra
     N, G = pomdp.n_complexity, len(grid)
     x = grid
     r = R[:, :, 0, None] * (1 - x) + R[:, :, 1, None] * x  # [c, a, G]
-    P = [[None, None] for _ in range(N)]
-    for c in range(N):
-        for a in range(2):
-            m = None
-            for e in range(2):
-                w = p[c, a, e, 0] * (1 - x) + p[c, a, e, 1] * x
-                nx = np.clip(f[c, a, e, 0] * (1 - x) + f[c, a, e, 1] * x, 0.0, 1.0)
-                j = np.clip(np.searchsorted(grid, nx, side="right") - 1, 0, G - 2)
-                t = (nx - grid[j]) / (grid[j + 1] - grid[j])
-                rows = np.arange(G)
-                part = sp.csr_matrix(
-                    (np.concatenate([w * (1 - t), w * t]), (np.concatenate([rows, rows]), np.concatenate([j, j + 1]))),
-                    shape=(G, G),
-                )
-                m = part if m is None else m + part
-            P[c][a] = m.tocsr()
+    w = p[..., 0, None] * (1 - x) + p[..., 1, None] * x  # [c, a, e, G] branch probabilities
+    nx = np.clip(f[..., 0, None] * (1 - x) + f[..., 1, None] * x, 0.0, 1.0)  # next beliefs
+    j = np.clip(np.searchsorted(grid, nx.ravel(), side="right").reshape(nx.shape) - 1, 0, G - 2)
+    t = (nx - grid[j]) / (grid[j + 1] - grid[j])
+    wl, wr = w * (1 - t), w * t  # weights of grid[j] and grid[j + 1]
 
-    policy = None
-    if guess is not None:
-        q = np.stack([np.stack([r[c, a] + gamma * (P[c][a] @ guess) for a in range(2)]) for c in range(N)])
-        policy = q.argmax(axis=1)  # [c, G]
-    W, _, _ = policy_iteration(r, P, pc, gamma, policy, max_iter=200)
-    return np.asarray(W)
+    def q_of(V):  # [c, a, G]
+        return r + gamma * (wl * V[j] + wr * V[j + 1]).sum(axis=2)
+
+    policy = r.argmax(axis=1) if guess is None else q_of(guess).argmax(axis=1)  # [c, G]
+    V = np.zeros(G) if guess is None else np.asarray(guess, dtype=float)
+    indptr = np.arange(0, G * N * 4 + 1, N * 4)
+    for _ in range(max_iter):
+        # the policy's rows: per (c, e), weights on grid[j] and grid[j + 1]
+        jl = np.take_along_axis(j, policy[:, None, None, :], axis=1)[:, 0]  # [c, e, G]
+        al = np.take_along_axis(wl, policy[:, None, None, :], axis=1)[:, 0] * (gamma * pc)[:, None, None]  # [c, e, G]
+        ar = np.take_along_axis(wr, policy[:, None, None, :], axis=1)[:, 0] * (gamma * pc)[:, None, None]
+        data = np.stack([al, ar], axis=-1).transpose(2, 0, 1, 3).reshape(-1)  # rows G, then (c, e, side)
+        cols = np.stack([jl, jl + 1], axis=-1).transpose(2, 0, 1, 3).reshape(-1)
+        P = sp.csr_matrix((data, cols, indptr), shape=(G, G))
+        rr = pc @ np.take_along_axis(r, policy[:, None, :], axis=1)[:, 0]
+        scale = max(1.0, float(np.max(np.abs(rr))))
+        V = _bicgstab(lambda y: y - P @ y, rr, V, 1e-14 * float(np.sqrt(rr @ rr)) + 1e-13 * scale, 10_000)
+        if not np.all(np.isfinite(V)) or np.max(np.abs(V - P @ V - rr)) > 1e-9 * scale:
+            V = np.asarray(spla.spsolve(sp.identity(G, format="csc") - P.tocsc(), rr))
+        q = q_of(V)
+        cur = np.take_along_axis(q, policy[:, None, :], axis=1)[:, 0]
+        better = q.max(axis=1) > cur + 1e-12 * (1 + np.abs(cur))
+        if not np.any(better):
+            break
+        policy = np.where(better, q.argmax(axis=1), policy)
+    return V
 
 
 # --------------------------------------------------------------------------- paper update: exact residual
@@ -755,23 +769,19 @@ def _paper_maps(pomdp: AssistancePOMDP):
 
 
 def _paper_q(pomdp: AssistancePOMDP, values: np.ndarray, x: np.ndarray, grid: np.ndarray | None = None) -> np.ndarray:
-    """Q[c, a, ...] at beliefs x for the eq.-3 belief MDP with W = linear interpolation of values."""
+    """Q[c, a, ...] at beliefs x for the eq.-3 belief MDP with W = linear interpolation of values
+    (all (c, a, E') branches interpolated in one pass)."""
     grid = np.linspace(0.0, 1.0, len(values)) if grid is None else grid
     p, f = _paper_maps(pomdp)
     R = pomdp.expected_reward
     gamma = pomdp.discount
     x = np.asarray(x, dtype=float)
-    N = pomdp.n_complexity
-    out = np.zeros((N, 2) + x.shape)
-    for c in range(N):
-        for a in range(2):
-            acc = R[c, a, 0] * (1 - x) + R[c, a, 1] * x
-            for e in range(2):
-                pr = p[c, a, e, 0] * (1 - x) + p[c, a, e, 1] * x
-                nx = f[c, a, e, 0] * (1 - x) + f[c, a, e, 1] * x
-                acc = acc + gamma * pr * np.interp(nx, grid, values)
-            out[c, a] = acc
-    return out
+    z = x.reshape(-1)
+    pr = p[..., 0, None] * (1 - z) + p[..., 1, None] * z  # [c, a, e, n]
+    nx = f[..., 0, None] * (1 - z) + f[..., 1, None] * z
+    w = np.interp(nx.ravel(), grid, values).reshape(nx.shape)  # each row is monotone in z
+    out = R[:, :, 0, None] * (1 - z) + R[:, :, 1, None] * z + gamma * (pr * w).sum(axis=2)
+    return out.reshape(out.shape[:2] + x.shape)
 
 
 def paper_residual(pomdp: AssistancePOMDP, grid: np.ndarray, values: np.ndarray, pieces: bool = False):
@@ -797,8 +807,10 @@ def paper_residual(pomdp: AssistancePOMDP, grid: np.ndarray, values: np.ndarray,
         lo, hi = pts[:-1], pts[1:]
         mid = 0.5 * (lo + hi)
         w = hi - lo
-        qs = [_paper_q(pomdp, values, z, grid) for z in (lo, mid, hi)]  # each [c, a, n]
-        v = [np.interp(z, grid, values) for z in (lo, mid, hi)]
+        qp, qm = _paper_q(pomdp, values, pts, grid), _paper_q(pomdp, values, mid, grid)  # [c, a, n]
+        vp, vm = np.interp(pts, grid, values), np.interp(mid, grid, values)
+        qs = [qp[..., :-1], qm, qp[..., 1:]]  # at lo, mid, hi
+        v = [vp[:-1], vm, vp[1:]]
         return lo, hi, mid, w, qs, v
 
     # pass 1: cut at the roots of each advantage
