@@ -566,7 +566,7 @@ class AlphaSolver:
         method: str = "policy-iteration",
         max_iter: int = 2000,
         upper_grid: int = 201,
-        grid: int = 129,  # starting grid of the paper update (refined adaptively)
+        grid: int = 1025,  # starting grid of the paper update (refined adaptively)
         max_grid: int = 200_001,
         thin: float = 0.05,
         seed_points: int = 33,
@@ -680,13 +680,22 @@ class AlphaSolver:
             history.append(gap)
             if gap <= self.tol or len(grid) >= self.max_grid:
                 break
-            # refine where the residual is large: split those cells into 8
-            bad = (sup > 0.5 * target) | (inf < -0.5 * target)
-            cells = np.unique(np.clip(np.searchsorted(grid, 0.5 * (lo[bad] + hi[bad]), side="right") - 1, 0, len(grid) - 2))
-            h = (grid[cells + 1] - grid[cells])[:, None]
-            new = grid[cells][:, None] + h * (np.arange(1, 8) / 8.0)[None, :]
-            values = np.interp(np.concatenate([grid, new.ravel()]), grid, values)
-            grid = np.concatenate([grid, new.ravel()])
+            # refine where the residual is large: split those cells into 8 parts, or up to 64
+            # where the residual is far above the budget (the interpolation error is first order
+            # at the kinks of W, so halving a cell roughly halves its residual)
+            over = np.maximum(sup, -inf) / (0.5 * target)
+            bad = over > 1.0
+            cells = np.clip(np.searchsorted(grid, 0.5 * (lo[bad] + hi[bad]), side="right") - 1, 0, len(grid) - 2)
+            worst = np.zeros(len(grid) - 1)
+            np.maximum.at(worst, cells, over[bad])
+            cells = np.nonzero(worst)[0]
+            parts = np.clip(2.0 ** np.ceil(np.log2(np.maximum(0.5 * worst[cells], 1.0))), 8, 64).astype(np.int64)
+            first = np.repeat(grid[cells], parts - 1)
+            h = np.repeat(grid[cells + 1] - grid[cells], parts - 1)
+            k = np.arange(len(first)) - np.repeat(np.cumsum(parts - 1) - (parts - 1), parts - 1) + 1
+            new = first + h * (k / np.repeat(parts, parts - 1))
+            values = np.interp(np.concatenate([grid, new]), grid, values)
+            grid = np.concatenate([grid, new])
             order = np.argsort(grid)
             grid, values = grid[order], values[order]
         return AlphaSolution(
