@@ -268,21 +268,33 @@ def exact_backup(pomdp: AssistancePOMDP, vecs: np.ndarray, xs: np.ndarray | None
 def thin(vecs: np.ndarray, xs: np.ndarray, eta: float) -> tuple[np.ndarray, np.ndarray]:
     """Drop envelope lines whose removal lowers the envelope by less than ``eta`` (never two
     neighbours at once).  The result is below the input by at most ``eta``: still a lower bound."""
-    if len(vecs) < 3 or eta <= 0:
+    keep = _thin_mask(vecs, eta)
+    if keep.all():
         return vecs, xs
+    return _refit(vecs, xs, keep)
+
+
+def _thin_mask(vecs: np.ndarray, eta: float) -> np.ndarray:
+    """The lines of an envelope that :func:`thin` keeps (a boolean mask)."""
+    keep = np.ones(len(vecs), dtype=bool)
+    if len(vecs) < 3 or eta <= 0:
+        return keep
     a = vecs[:, 0]
     b = vecs[:, 1] - vecs[:, 0]
     x = (a[:-2] - a[2:]) / (b[2:] - b[:-2])  # where the neighbours of line k meet
     err = (a[1:-1] + b[1:-1] * x) - (a[:-2] + b[:-2] * x)
-    drop = np.zeros(len(vecs), dtype=bool)
-    drop[1:-1] = (err < eta) & (np.arange(1, len(vecs) - 1) % 2 == 0)
-    if not np.any(drop):
+    keep[1:-1] = ~((err < eta) & (np.arange(1, len(vecs) - 1) % 2 == 0))
+    return keep
+
+
+def _refit(vecs: np.ndarray, xs: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The envelope of the kept lines of an envelope (no two dropped lines are neighbours, so
+    the kept lines stay in order and meet their new neighbours inside [0, 1])."""
+    if keep.all():
         return vecs, xs
-    keep = ~drop
     nv = vecs[keep]
     a, b = nv[:, 0], nv[:, 1] - nv[:, 0]
-    nxs = np.concatenate([[0.0], (a[:-1] - a[1:]) / (b[1:] - b[:-1]), [1.0]])
-    return nv, nxs
+    return nv, np.concatenate([[0.0], (a[:-1] - a[1:]) / (b[1:] - b[:-1]), [1.0]])
 
 
 def sup_difference(v1, xs1, v2, xs2) -> float:
@@ -633,13 +645,19 @@ class AlphaSolver:
                 break
             it += 1
             # every vector of the backup is the value of "act, then follow a node of L"
-            vecs, xs = max_of(vecs, xs, bk.vectors, bk.xs)[:2]
+            new = [vecs, bk.vectors]
             if self.method == "policy-iteration":
-                succ = _repoint(pomdp, bk.vectors, bk.xs, bk.actions)
-                ev = evaluate_controller(pomdp, bk.actions, succ, guess=bk.vectors, rtol=1e-11)
+                # the controller's nodes: the vectors of T L, less those worth under eta
+                keep = _thin_mask(bk.vectors, eta)
+                nodes, nxs = _refit(bk.vectors, bk.xs, keep)
+                succ = _repoint(pomdp, nodes, nxs, bk.actions[keep])
+                ev = evaluate_controller(pomdp, bk.actions[keep], succ, guess=nodes, rtol=1e-11)
                 if np.all(np.isfinite(ev)):
-                    idx, exs = envelope(ev)
-                    vecs, xs = max_of(vecs, xs, ev[idx], exs)[:2]
+                    new.append(ev)
+            # L <- the upper envelope of L, T L and the controller's values (one sort by slope)
+            allv = np.vstack(new)
+            idx, xs = envelope(allv)
+            vecs = allv[idx]
         grid_sol = None
         if self.upper_grid and gap > self.tol:
             # the grid solver's interpolated value: an independent upper bound (V is convex)
