@@ -427,6 +427,7 @@ def _grid_controller(pomdp: AssistancePOMDP, points: int, base: np.ndarray | Non
     ev = np.zeros((0, 2))
     for _ in range(max(1, rounds)):
         look = np.vstack([base, ev])
+        guess = look[(b @ look.T).argmax(axis=1)]  # the best known vector at each belief
         acts = np.zeros((points, N), dtype=np.int64)
         succ = np.full((points, N, 2, 2), -1, dtype=np.int64)
         for c, nb in enumerate(nbs):
@@ -438,7 +439,7 @@ def _grid_controller(pomdp: AssistancePOMDP, points: int, base: np.ndarray | Non
             za = na.sum(axis=-1)
             nx = np.where(za > 0, na[..., 1] / np.where(za > 0, za, 1.0), 0.0)
             succ[:, c] = np.where(za > 0, np.rint(nx * (points - 1)).astype(np.int64), -1)
-        ev = evaluate_controller(pomdp, acts, succ)
+        ev = evaluate_controller(pomdp, acts, succ, guess=guess, rtol=1e-11)
     return ev
 
 
@@ -580,8 +581,8 @@ class AlphaSolver:
         upper_grid: int = 201,
         grid: int = 1025,  # starting grid of the paper update (refined adaptively)
         max_grid: int = 200_001,
-        thin: float = 0.05,
-        seed_points: int = 33,
+        thin: float = 0.1,
+        seed_points: int = 257,
         seed_rounds: int = 1,
     ):
         if belief_update not in BELIEF_UPDATES:
