@@ -202,3 +202,61 @@ def test_alpha_needs_two_trust_levels():
     p3 = AssistancePOMDP(TrustModel.load(ex / "three_level_model.json"), Task.load(ex / "three_level_task.json"))
     with pytest.raises(ValueError, match="two trust levels"):
         AlphaSolver().solve(p3)
+
+
+def test_controller_values_satisfy_the_controller_bellman_equations(paper_pomdp, rng):
+    """Random controllers (some branches without successor), small and large enough for the
+    iterative solve: α[n] = Σ_C P(C) (r(C, a) + γ Σ_(o, E') M α[succ]) node by node."""
+    from trustseek.alpha import evaluate_controller
+
+    K, R, pc, gamma = paper_pomdp.kernel, paper_pomdp.expected_reward, paper_pomdp.complexity_probs, paper_pomdp.discount
+    for n in (1, 40, 700):
+        acts = rng.integers(0, 2, size=(n, 2))
+        succ = rng.integers(-1, n, size=(n, 2, 2, 2))
+        alpha = evaluate_controller(paper_pomdp, acts, succ, guess=np.full((n, 2), 100.0), rtol=1e-13)
+        for i in rng.choice(n, size=min(n, 25), replace=False):
+            v = np.zeros(2)
+            for c in range(2):
+                a = acts[i, c]
+                v += pc[c] * R[c, a]
+                for o in range(2):
+                    for e in range(2):
+                        if succ[i, c, o, e] >= 0:
+                            v += gamma * pc[c] * K[c, a, :, o, e, :] @ alpha[succ[i, c, o, e]]
+            assert np.allclose(v, alpha[i], atol=1e-9)
+
+
+def test_paper_grid_values_match_the_core_policy_iteration(paper_pomdp, rng):
+    """The eq.-3 grid MDP solved here equals the core's Howard iteration on the same
+    non-uniform grid (transition matrices assembled independently, as scipy matrices)."""
+    import scipy.sparse as sp
+
+    from trustseek.alpha import _paper_maps, paper_grid_values
+    from trustseek.solve import policy_iteration
+
+    grid = np.unique(np.concatenate([[0.0, 1.0], rng.random(300)]))
+    p, f = _paper_maps(paper_pomdp)
+    R, G = paper_pomdp.expected_reward, len(grid)
+    r = R[:, :, 0, None] * (1 - grid) + R[:, :, 1, None] * grid
+    P = [[None, None], [None, None]]
+    for c in range(2):
+        for a in range(2):
+            m = sp.csr_matrix((G, G))
+            for e in range(2):
+                w = p[c, a, e, 0] * (1 - grid) + p[c, a, e, 1] * grid
+                nx = f[c, a, e, 0] * (1 - grid) + f[c, a, e, 1] * grid
+                m = m + sp.diags(w) @ sp.csr_matrix(_interp_rows(grid, nx))
+            P[c][a] = m.tocsr()
+    expected, _, _ = policy_iteration(r, P, paper_pomdp.complexity_probs, paper_pomdp.discount)
+    assert np.allclose(paper_grid_values(paper_pomdp, grid), expected, atol=1e-9)
+    assert np.allclose(paper_grid_values(paper_pomdp, grid, expected + 1e-3), expected, atol=1e-9)
+
+
+def _interp_rows(grid, nx):
+    """Dense rows of linear-interpolation weights of the points nx on the grid."""
+    W = np.zeros((len(nx), len(grid)))
+    for i, z in enumerate(nx):
+        j = min(max(int(np.searchsorted(grid, z, side="right")) - 1, 0), len(grid) - 2)
+        t = (z - grid[j]) / (grid[j + 1] - grid[j])
+        W[i, j], W[i, j + 1] = 1 - t, t
+    return W
