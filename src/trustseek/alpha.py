@@ -271,7 +271,7 @@ def thin(vecs: np.ndarray, xs: np.ndarray, eta: float) -> tuple[np.ndarray, np.n
     keep = _thin_mask(vecs, eta)
     if keep.all():
         return vecs, xs
-    return _refit(vecs, xs, keep)
+    return _refit(vecs, xs, np.nonzero(keep)[0])[:2]
 
 
 def _thin_mask(vecs: np.ndarray, eta: float) -> np.ndarray:
@@ -287,14 +287,20 @@ def _thin_mask(vecs: np.ndarray, eta: float) -> np.ndarray:
     return keep
 
 
-def _refit(vecs: np.ndarray, xs: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The envelope of the kept lines of an envelope (no two dropped lines are neighbours, so
-    the kept lines stay in order and meet their new neighbours inside [0, 1])."""
-    if keep.all():
-        return vecs, xs
+def _refit(vecs: np.ndarray, xs: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The envelope of the kept lines (indices, in order) of an envelope: (lines, breakpoints,
+    their indices in ``vecs``).  No two dropped lines are neighbours, so the kept lines stay in
+    order and meet their new neighbours inside [0, 1]; degenerate cases are re-enveloped."""
+    if len(keep) == len(vecs):
+        return vecs, xs, keep
     nv = vecs[keep]
     a, b = nv[:, 0], nv[:, 1] - nv[:, 0]
-    return nv, np.concatenate([[0.0], (a[:-1] - a[1:]) / (b[1:] - b[:-1]), [1.0]])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nxs = np.concatenate([[0.0], (a[:-1] - a[1:]) / (b[1:] - b[:-1]), [1.0]])
+    if not (np.all(np.isfinite(nxs)) and np.all(np.diff(nxs) > 0)):  # parallel neighbours
+        idx, nxs = envelope(nv)
+        return nv[idx], nxs, keep[idx]
+    return nv, nxs, keep
 
 
 def sup_difference(v1, xs1, v2, xs2) -> float:
@@ -638,7 +644,7 @@ class AlphaSolver:
             bk = exact_backup(pomdp, vecs, xs)
             sup, inf = difference_extrema(bk.vectors, bk.xs, vecs, xs)
             delta = max(0.0, sup)
-            # L is made of policy values, so T L >= L up to rounding; measure the rounding too
+            # L is made of policy values, so T L >= L up to rounding and thinning; measure it too
             below = max(0.0, -inf)
             gap = (delta + below) / (1 - gamma)
             history.append(gap)
@@ -649,8 +655,8 @@ class AlphaSolver:
             new = [vecs, bk.vectors]
             if self.method == "policy-iteration":
                 # the controller's nodes: the vectors of T L, less those worth under eta
-                keep = _thin_mask(bk.vectors, eta)
-                nodes, nxs = _refit(bk.vectors, bk.xs, keep)
+                keep = np.nonzero(_thin_mask(bk.vectors, eta))[0]
+                nodes, nxs, keep = _refit(bk.vectors, bk.xs, keep)
                 succ = _repoint(pomdp, nodes, nxs, bk.actions[keep])
                 ev = evaluate_controller(pomdp, bk.actions[keep], succ, guess=nodes, rtol=1e-11)
                 if np.all(np.isfinite(ev)):
