@@ -79,9 +79,10 @@ def plot_transitions(model, path=None, ci=None, reference=None):
             ax.set_title(f"complexity {C[c]}")
             ax.set_ylabel(rf"$P(T' = \mathrm{{{T[top]}}} \mid T, E', C, a)$")
             ax.tick_params(axis="x", labelsize=6.5)
-        axes[0, 0].legend(loc="upper left", frameon=False, fontsize=7)
+        handles, labels = axes[0, 0].get_legend_handles_labels()
+        fig.legend(handles, labels, loc="lower center", ncol=len(labels), frameon=False, fontsize=7, bbox_to_anchor=(0.5, -0.01))
         fig.suptitle("Estimated trust transitions" + (" (95% CI)" if ci is not None else ""), fontsize=9)
-        fig.tight_layout()
+        fig.tight_layout(rect=(0, 0.07, 1, 1))
         if path is not None:
             save(fig, path)
         return fig
