@@ -64,7 +64,7 @@ def _progress(description: str, quiet: bool):
     ), description
 
 
-@app.command()
+@app.command(rich_help_panel="Estimate")
 def fit(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
     preset: str = typer.Option("paper", "--preset", help="Model structure preset (paper)."),
@@ -147,7 +147,7 @@ def fit(
         console.print(f"figures written to {plots}/emissions.png, {plots}/transitions.png")
 
 
-@app.command("decode")
+@app.command("decode", rich_help_panel="Estimate")
 def decode_cmd(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
     model: Path = typer.Option(..., "--model", "-m", help="Trust model JSON (e.g. from 'trustseek fit')."),
@@ -164,7 +164,7 @@ def decode_cmd(
     console.print(f"wrote {len(post)} trials to {out}")
 
 
-@app.command()
+@app.command(rich_help_panel="Estimate")
 def select(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
     max_levels: int = typer.Option(4, "--max-levels", min=1, max=8, help="Compare 1..this many trust levels."),

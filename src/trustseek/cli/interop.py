@@ -114,7 +114,7 @@ def report_certified(policy, task, out: Optional[Path], as_json: bool) -> None:
         console.print(f"policy written to {out}")
 
 
-@app.command("export-pomdp")
+@app.command("export-pomdp", rich_help_panel="Files")
 def export_pomdp(
     out: Path = typer.Argument(..., help="File to write: .pomdp (Cassandra) or .pomdpx (POMDPX)."),
     model: str = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file."),
@@ -148,7 +148,7 @@ def export_pomdp(
         console.print(table)
 
 
-@app.command("solve-pomdp-file")
+@app.command("solve-pomdp-file", rich_help_panel="Files")
 def solve_pomdp_file(
     path: Path = typer.Argument(..., help="A Cassandra .pomdp file (e.g. Tiger)."),
     gap: float = typer.Option(1e-3, "--gap", help="Target gap between the bounds at the start belief."),

@@ -46,7 +46,7 @@ def solve_summary(policy: TrustAwarePolicy, task: Task) -> dict:
     }
 
 
-@app.command()
+@app.command(rich_help_panel="Plan")
 def solve(
     model: str = ModelOpt,
     task: str = TaskOpt,
@@ -105,7 +105,7 @@ def solve(
         console.print(f"policy written to {out}")
 
 
-@app.command()
+@app.command(rich_help_panel="Plan")
 def agnostic(
     model: str = ModelOpt,
     task: str = TaskOpt,
@@ -137,7 +137,7 @@ def agnostic(
     console.print(f"P(intervene | C) from the {pol.info['source']}")
 
 
-@app.command("plot-q")
+@app.command("plot-q", rich_help_panel="Plan")
 def plot_q_cmd(
     model: str = ModelOpt,
     task: str = TaskOpt,
@@ -160,7 +160,7 @@ def plot_q_cmd(
     console.print(f"wrote {out}")
 
 
-@app.command()
+@app.command(rich_help_panel="Files")
 def preset(
     name: str = typer.Argument("paper", help="Preset name."),
     model_out: Optional[Path] = typer.Option(None, "--model-out", help="Write the preset's trust model here."),
@@ -180,7 +180,7 @@ def preset(
         print_json({"model": m.to_dict(), "task": t.to_dict()})
 
 
-@app.command()
+@app.command(rich_help_panel="Files")
 def check(
     files: list[Path] = typer.Argument(..., help="Trust model, task or policy JSON files."),
 ) -> None:

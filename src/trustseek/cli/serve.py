@@ -21,7 +21,7 @@ def _check_db(db: str) -> str:
     return db
 
 
-@app.command()
+@app.command(rich_help_panel="Experiments")
 def serve(
     db: str = typer.Option("sqlite:///trustseek.sqlite", "--db", help="Database URL: a SQLite file (default) or postgresql://..."),
     host: str = typer.Option("127.0.0.1", "--host", help="Address to listen on."),
@@ -62,7 +62,7 @@ def serve(
     uvicorn.run(application, host=host, port=port, log_level=log_level, access_log=False)
 
 
-@app.command("export")
+@app.command("export", rich_help_panel="Experiments")
 def export_cmd(
     study: str = typer.Argument(..., help="Study id."),
     db: str = typer.Option("sqlite:///trustseek.sqlite", "--db", help="Database URL."),

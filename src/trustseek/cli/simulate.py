@@ -53,7 +53,7 @@ def _counts(text: str, task) -> list[int]:
     return vals
 
 
-@app.command()
+@app.command(rich_help_panel="Simulate and reproduce")
 def simulate(
     model: str = typer.Option("paper", "--model", "-m", help="Supervisors' trust model: a preset name (paper) or a JSON file."),
     task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
@@ -140,7 +140,7 @@ def _write(frame, path: Path) -> None:
         frame.to_csv(path, index=False)
 
 
-@app.command()
+@app.command(rich_help_panel="Simulate and reproduce")
 def reproduce(
     out: Path = typer.Option(Path("report"), "--out", "-o", help="Report folder (report.html, PNGs, summary.json, data)."),
     seed: int = typer.Option(0, "--seed", help="Random seed: the same seed gives the same numbers."),
