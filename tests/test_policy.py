@@ -120,3 +120,20 @@ def test_runner_tracks_belief(aware):
     with pytest.raises(ValueError, match="human action"):
         run.observe("high", "ask", "maybe", "reliable")
     assert run.trial == 2
+
+
+def test_non_threshold_policy_writes_valid_json(tmp_path, aware):
+    # an ask region that is not [0, θ): asks only for beliefs in the middle
+    q = aware.q.copy()
+    adv = np.zeros(len(aware.grid))
+    adv[(aware.grid > 0.3) & (aware.grid < 0.6)] = 1.0
+    q[:, 1, ASK] = q[:, 1, AUTONOMOUS] + adv - 0.5
+    odd = TrustAwarePolicy(aware.grid, q, aware.model, aware.complexities, aware.belief_update)
+    assert np.isnan(odd.thresholds()["high"])
+    assert [round(x, 2) for x in odd.ask_intervals()["high"][0]] == [0.3, 0.6]
+    odd.save(tmp_path / "odd.json")
+    import json
+
+    d = json.loads((tmp_path / "odd.json").read_text())
+    assert d["thresholds"]["high"] is None
+    np.testing.assert_allclose(load_policy(tmp_path / "odd.json").q, q, atol=1e-9)

@@ -54,6 +54,18 @@ class ModelError(TrustseekError, ValueError):
 # --------------------------------------------------------------------------- helpers
 
 
+def json_safe(obj: Any) -> Any:
+    """``obj`` with every NaN or infinite float replaced by None, so that it is valid JSON
+    (e.g. a threshold that does not exist because a policy's ask region is not an interval)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, Mapping):
+        return {k: json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    return obj
+
+
 def _fmt(x: float) -> str:
     return f"{x:.12g}"
 

@@ -30,7 +30,7 @@ from typing import Any, Mapping, Protocol, Sequence
 import numpy as np
 
 from .belief import BELIEF_UPDATES, make_updater, to_vector
-from .model import ACTIONS, ASK, AUTONOMOUS, HUMAN_ACTIONS, INTERVENE, EXPERIENCES, ModelError, Task, TrustModel
+from .model import ACTIONS, ASK, AUTONOMOUS, HUMAN_ACTIONS, INTERVENE, EXPERIENCES, ModelError, Task, TrustModel, json_safe
 
 POLICY_FORMAT = "trustseek.policy/1"
 PAPER_ASK_PROBABILITIES = {"low": 0.10, "high": 0.40}
@@ -72,7 +72,7 @@ class _PolicyBase:
         return int(self.actions(b, np.array([self._cindex(complexity)]), rng)[0])
 
     def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n", encoding="utf-8")
+        Path(path).write_text(json.dumps(json_safe(self.to_dict()), indent=1, allow_nan=False) + "\n", encoding="utf-8")
 
     def describe(self) -> str:
         return self.kind
@@ -173,7 +173,8 @@ class TrustAwarePolicy(_PolicyBase):
 
     def thresholds(self) -> dict[str, float | None]:
         """Per complexity, the belief in high trust below which the policy asks (``None`` when it
-        never asks; 1.0 when it always asks).  Raises if the ask region is not of the form [0, θ)."""
+        never asks; 1.0 when it always asks; NaN when the ask region is not of the form [0, θ):
+        see :meth:`ask_intervals`)."""
         out: dict[str, float | None] = {}
         for cn, iv in self.ask_intervals().items():
             if not iv:

@@ -24,7 +24,9 @@ err_console = Console(stderr=True)
 
 def print_json(obj: Any) -> None:
     """Machine-readable output: one JSON object on stdout, nothing else."""
-    sys.stdout.write(json.dumps(obj, indent=2, default=_json_default) + "\n")
+    from ..model import json_safe
+
+    sys.stdout.write(json.dumps(json_safe(obj), indent=2, default=_json_default, allow_nan=False) + "\n")
 
 
 def _json_default(o: Any):

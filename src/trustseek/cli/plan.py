@@ -92,7 +92,7 @@ def solve(
         iv = summary["ask_intervals"][cn]
         ivs = ", ".join(f"[{lo:.4f}, {hi:.4f})" for lo, hi in iv) or "never asks"
         th = summary["thresholds"][cn]
-        ths = "-" if th is None else f"{th:.4f}"
+        ths = "-" if th is None else ("none: see intervals" if th != th else f"{th:.4f}")
         table.add_row(cn, ivs, ths, f"{summary['value_at_b1'][cn]:.3f}", "always ask" if summary["trust_agnostic"][cn] == 1 else "never ask")
     console.print(table)
     info = policy.info
