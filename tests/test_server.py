@@ -16,6 +16,8 @@ from trustseek.client import Client, ServerError
 from trustseek.model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from trustseek.server import create_app
 
+from server_checks import check_concurrent_duplicate_submissions
+
 TOKEN = "experimenter-secret"
 H = {"Authorization": f"Bearer {TOKEN}"}
 
@@ -339,34 +341,9 @@ def test_pages_are_served_without_external_resources(client):
 
 
 def test_concurrent_duplicate_submissions_store_one_trial(tmp_path):
-    """Eight simultaneous submissions of the same trial over real HTTP: one trial is stored;
-    repeats of its submission id are answered as duplicates, other ids are refused."""
-    from concurrent.futures import ThreadPoolExecutor
+    """Simultaneous duplicate submissions on SQLite: exactly one trial is stored."""
+    check_concurrent_duplicate_submissions(f"sqlite:///{tmp_path / 'conc.sqlite'}", TOKEN)
 
-    import httpx
-
-    from trustseek.server.local import ThreadServer
-
-    with ThreadServer(f"sqlite:///{tmp_path / 'conc.sqlite'}", TOKEN) as url:
-        c = Client(url, TOKEN)
-        st = c.create_study({"name": "c", "blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 3}}}]})
-        s = c.create_sessions(st["id"])[0]
-        ph = {"Authorization": f"Bearer {s['token']}"}
-        base = f"{url}/api/sessions/{s['session_id']}"
-        httpx.post(f"{base}/consent", json={"agree": True}, headers=ph).raise_for_status()
-
-        def post(i, n, same):
-            body = {"trial": n, "submission_id": "same" if same else f"id-{i}", "human_action": "rely"}
-            return httpx.post(f"{base}/trials", json=body, headers=ph, timeout=30)
-
-        with ThreadPoolExecutor(8) as ex:
-            same = list(ex.map(lambda i: post(i, 1, True), range(8)))
-            other = list(ex.map(lambda i: post(i, 2, False), range(8)))
-        assert [r.status_code for r in same] == [200] * 8
-        assert sorted(r.json()["duplicate"] for r in same) == [False] + [True] * 7
-        assert sorted(r.status_code for r in other) == [200] + [409] * 7
-        frame = pd.read_csv(io.BytesIO(c.export(st["id"])))
-    assert frame["trial"].tolist() == [1, 2]
 
 
 def test_migrations_render_for_postgresql():

@@ -13,7 +13,6 @@ Debian's ``postgresql`` package when run as root).
 from __future__ import annotations
 
 import io
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pandas as pd
@@ -26,7 +25,9 @@ from trustseek.client import Client, DeploySession
 from trustseek.data import read_trials
 from trustseek.model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from trustseek.server import create_app
-from trustseek.server.local import TemporaryPostgres, ThreadServer, postgres_binaries
+
+from server_checks import check_concurrent_duplicate_submissions
+from trustseek.server.local import TemporaryPostgres, postgres_binaries
 
 TOKEN = "postgres-experimenter-secret"
 H = {"Authorization": f"Bearer {TOKEN}"}
@@ -143,31 +144,9 @@ def test_study_with_a_trust_aware_block_round_trips_through_postgresql(pg_url, a
 
 
 def test_concurrent_duplicate_submissions_store_one_trial(pg_url, app):
-    """Simultaneous submissions over real HTTP contend for PostgreSQL's row lock on the
-    session: one trial is stored, repeats of its submission id are duplicates, others 409."""
-    import httpx
+    """Simultaneous submissions contend for PostgreSQL's row lock: exactly one trial is stored."""
+    check_concurrent_duplicate_submissions(pg_url, TOKEN)
 
-    with ThreadServer(pg_url, TOKEN) as url:
-        c = Client(url, TOKEN)
-        st = c.create_study({"name": "conc", "blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 3}}}]})
-        s = c.create_sessions(st["id"])[0]
-        ph = {"Authorization": f"Bearer {s['token']}"}
-        base = f"{url}/api/sessions/{s['session_id']}"
-        httpx.post(f"{base}/consent", json={"agree": True}, headers=ph).raise_for_status()
-
-        def post(i, n, same):
-            body = {"trial": n, "submission_id": "same" if same else f"id-{i}", "human_action": "rely"}
-            return httpx.post(f"{base}/trials", json=body, headers=ph, timeout=30)
-
-        with ThreadPoolExecutor(8) as ex:
-            same = list(ex.map(lambda i: post(i, 1, True), range(8)))
-            other = list(ex.map(lambda i: post(i, 2, False), range(8)))
-        assert [r.status_code for r in same] == [200] * 8
-        assert sorted(r.json()["duplicate"] for r in same) == [False] + [True] * 7
-        assert sorted(r.status_code for r in other) == [200] + [409] * 7
-        frame = read_trials(pd.read_csv(io.BytesIO(c.export(st["id"]))))
-        c.close()
-    assert frame["trial"].tolist() == [1, 2]
 
 
 def test_deploy_api_on_postgresql_resumes_after_a_restart(pg_url, app):

@@ -30,6 +30,13 @@ def _data():
     return data
 
 
+def _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on):
+    """The transition and emission inputs named by the flags, and the log with those columns."""
+    tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on")
+    em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on")
+    return tr, em, _read(log, mapping, column, label, tuple(dict.fromkeys((*tr, *em))))
+
+
 MappingOpt = typer.Option(None, "--mapping", help="Column/label mapping file (JSON or TOML) for a log with other names.")
 ColumnOpt = typer.Option(None, "--column", help="Map a column: canonical=theirs (e.g. human_action=rely). Repeatable.")
 LabelOpt = typer.Option(None, "--label", help="Map a label: column:theirs=canonical (e.g. human_action:1=rely). Repeatable.")
@@ -87,9 +94,7 @@ def fit(
     label: Optional[list[str]] = LabelOpt,
 ) -> None:
     """Estimate the supervisor's trust model from logged trials (extended Baum-Welch)."""
-    tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on")
-    em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on")
-    frame = _read(log, mapping, column, label, tuple(dict.fromkeys((*tr, *em))))
+    tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on)
     bar, desc = _progress("fitting", as_json)
     with bar:
         task = bar.add_task(desc, total=restarts + bootstrap)
@@ -181,9 +186,7 @@ def select(
     label: Optional[list[str]] = LabelOpt,
 ) -> None:
     """Choose the number of trust levels: BIC and participant-held-out log-likelihood."""
-    tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on")
-    em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on")
-    frame = _read(log, mapping, column, label, tuple(dict.fromkeys((*tr, *em))))
+    tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on)
     bar, desc = _progress("model selection", as_json)
     with bar:
         task = bar.add_task(desc, total=None)
