@@ -37,7 +37,7 @@ import numpy as np
 from sqlalchemy import create_engine, text
 
 from trustseek.server.db import driver_url
-from trustseek.server.local import TemporaryPostgres, free_port, serve_process
+from trustseek.testing.servers import TemporaryPostgres, free_port, serve_process
 
 TOKEN = "bench-token-0123456789"
 

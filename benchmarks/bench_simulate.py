@@ -25,8 +25,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from trustseek import PolicyRunner, paper_model, paper_task, solve  # noqa: E402
-from trustseek.model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS  # noqa: E402
-from trustseek.simulate import simulate, threshold_form  # noqa: E402
+from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS  # noqa: E402
+from trustseek.simulation.engine import simulate, threshold_form  # noqa: E402
 
 COUNTS = (41, 30)  # Section V: 71 trials, 41 low and 30 high
 

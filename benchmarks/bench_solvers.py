@@ -20,9 +20,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import trustseek  # noqa: E402
 from trustseek import AssistancePOMDP, GridSolver, paper_model, paper_task  # noqa: E402
-from trustseek.alpha import AlphaSolver  # noqa: E402
-from trustseek.model import Task, TrustModel  # noqa: E402
-from trustseek.point import BranchModel, PointSolver  # noqa: E402
+from trustseek.solvers.alpha import AlphaSolver  # noqa: E402
+from trustseek.model.core import Task, TrustModel  # noqa: E402
+from trustseek.solvers.point import BranchModel, PointSolver  # noqa: E402
 
 
 CPU = {}

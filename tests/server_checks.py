@@ -9,8 +9,8 @@ import httpx
 import pandas as pd
 
 from trustseek.client import Client
-from trustseek.data import read_trials
-from trustseek.server.local import ThreadServer
+from trustseek.data.trials import read_trials
+from trustseek.testing.servers import ThreadServer
 
 
 def check_concurrent_duplicate_submissions(db_url: str, token: str) -> None:

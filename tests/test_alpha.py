@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from trustseek import AssistancePOMDP, BayesUpdate, GridSolver, PolicyRunner, load_policy
-from trustseek.alpha import (
+from trustseek.solvers.alpha import (
     AlphaSolver,
     AlphaVectorPolicy,
     envelope,
@@ -16,7 +16,7 @@ from trustseek.alpha import (
     finite_horizon_vectors,
     paper_residual,
 )
-from trustseek.solve import belief_branches
+from trustseek.solvers.grid import belief_branches
 
 # Reference values of the issue (three independent solvers), Bayes update, paper preset
 REF_V0, REF_V1_LOW, REF_V1_HIGH, REF_THRESHOLD, REF_MYOPIC = 110.655, 111.061, 110.249, 0.7815, 0.836
@@ -180,7 +180,7 @@ def test_paper_update_certified(paper_pomdp, paper_update):
 
 def test_paper_residual_is_exact_on_a_coarse_grid(paper_pomdp):
     """The piecewise-quadratic supremum equals a brute-force maximum on a very fine sample."""
-    from trustseek.alpha import _paper_q
+    from trustseek.solvers.alpha import _paper_q
 
     sol = GridSolver(grid=41, belief_update="paper").solve_grid(paper_pomdp)
     values = sol.value @ paper_pomdp.complexity_probs
@@ -194,12 +194,10 @@ def test_paper_residual_is_exact_on_a_coarse_grid(paper_pomdp):
 
 
 def test_alpha_needs_two_trust_levels():
-    from trustseek.model import Task, TrustModel
-    from trustseek.point import __file__ as point_file
-    from pathlib import Path
+    from trustseek.model.core import Task, TrustModel
+    from trustseek.data import example_path
 
-    ex = Path(point_file).parent / "examples"
-    p3 = AssistancePOMDP(TrustModel.load(ex / "three_level_model.json"), Task.load(ex / "three_level_task.json"))
+    p3 = AssistancePOMDP(TrustModel.load(example_path("three_level_model.json")), Task.load(example_path("three_level_task.json")))
     with pytest.raises(ValueError, match="two trust levels"):
         AlphaSolver().solve(p3)
 
@@ -207,7 +205,7 @@ def test_alpha_needs_two_trust_levels():
 def test_controller_values_satisfy_the_controller_bellman_equations(paper_pomdp, rng):
     """Random controllers (some branches without successor), small and large enough for the
     iterative solve: α[n] = Σ_C P(C) (r(C, a) + γ Σ_(o, E') M α[succ]) node by node."""
-    from trustseek.alpha import evaluate_controller
+    from trustseek.solvers.alpha import evaluate_controller
 
     K, R, pc, gamma = paper_pomdp.kernel, paper_pomdp.expected_reward, paper_pomdp.complexity_probs, paper_pomdp.discount
     for n in (1, 40, 700):
@@ -231,8 +229,8 @@ def test_paper_grid_values_match_the_core_policy_iteration(paper_pomdp, rng):
     non-uniform grid (transition matrices assembled independently, as scipy matrices)."""
     import scipy.sparse as sp
 
-    from trustseek.alpha import _paper_maps, paper_grid_values
-    from trustseek.solve import policy_iteration
+    from trustseek.solvers.alpha import _paper_maps, paper_grid_values
+    from trustseek.solvers.grid import policy_iteration
 
     grid = np.unique(np.concatenate([[0.0, 1.0], rng.random(300)]))
     p, f = _paper_maps(paper_pomdp)

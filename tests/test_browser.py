@@ -15,7 +15,7 @@ import pytest
 
 from trustseek.client import Client
 from trustseek.server.app import STATIC
-from trustseek.server.local import ThreadServer
+from trustseek.testing.servers import ThreadServer
 
 pytestmark = pytest.mark.browser
 
@@ -195,7 +195,7 @@ def test_participant_study_in_chromium(tmp_path):
     assert all(d["driven_m"] > 0 and d["arm_m"] > 0 and d["grasp_attempts"] >= 1 for d in deposits)
 
     # the export is a valid trial log for the data module and the fit
-    from trustseek.data import read_trials
+    from trustseek.data.trials import read_trials
 
     frame = read_trials(trials)
     assert len(frame) == 3 and frame["human_action"].tolist() == ["intervene", "rely", "intervene"]

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from trustseek.data import CANONICAL, ColumnMapping, DataError, example_path, read_trials, write_trials
+from trustseek.data.trials import CANONICAL, ColumnMapping, DataError, example_path, read_trials, write_trials
 
 GOOD = """participant,trial,complexity,robot_action,human_action,experience,block
 A,1,low,autonomous,rely,reliable,1

@@ -9,8 +9,8 @@ import pandas as pd
 import pytest
 
 from trustseek import TrustModel, paper_model
-from trustseek.data import ColumnMapping, example_path, read_trials
-from trustseek.fit import decode, fit_trust_model, select_levels, simulate_design
+from trustseek.data.trials import ColumnMapping, example_path, read_trials
+from trustseek.estimation.fit import decode, fit_trust_model, select_levels, simulate_design
 
 
 def free_cells(result):
@@ -64,8 +64,8 @@ def test_recovery_of_well_identified_cells_on_other_data_sets(seed):
     cells with many expected events are within 0.03 of the truth.  (Event counts are only a
     partial guide: the weakly identified cells -- P(rely | T=low, C=high) and the transitions
     after a failure -- also have thousands of events; see docs/fitting.md.)"""
-    from trustseek.fit import from_trust_model
-    from trustseek.iohmm import loglik
+    from trustseek.estimation.fit import from_trust_model
+    from trustseek.estimation.iohmm import loglik
 
     truth = paper_model()
     df = simulate_design(truth, 1000, seed=seed)
@@ -222,7 +222,7 @@ def test_cli_reports_bad_logs_cleanly(tmp_path):
 
 def test_small_coverage_study():
     """The coverage report, cell by cell (the full study is in benchmarks/bench_fit.py)."""
-    from trustseek.fit import coverage_study
+    from trustseek.estimation.fit import coverage_study
 
     rows = coverage_study(paper_model(), n_participants=9, datasets=2, bootstrap=3, restarts=1, n_jobs=1, seed=4)
     assert len(rows) >= 12
@@ -236,7 +236,7 @@ def test_small_coverage_study():
 
 
 def test_decode_names_participants_the_model_rules_out():
-    from trustseek.iohmm import FitError
+    from trustseek.estimation.iohmm import FitError
 
     df = read_trials(example_path())
     i = df.index[(df["participant"] == "P004") & (df["robot_action"] == "ask")][0]

@@ -8,8 +8,8 @@ import sys
 import numpy as np
 import pytest
 
-from trustseek.alpha import finite_horizon_value
-from trustseek.interop import (
+from trustseek.solvers.alpha import finite_horizon_value
+from trustseek.interop.files import (
     FlatPOMDP,
     PomdpFileError,
     flat_belief,

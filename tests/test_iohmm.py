@@ -6,8 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from trustseek.fit import paper_spec, simulate_design
-from trustseek.iohmm import (
+from trustseek.estimation.fit import paper_spec, simulate_design
+from trustseek.estimation.iohmm import (
     FitError,
     Fixed,
     IOHMMSpec,
@@ -23,7 +23,7 @@ from trustseek.iohmm import (
 
 
 def small_paper_data(n=3, trials=(4, 3), seed=0):
-    from trustseek.presets import paper_model
+    from trustseek.model.presets import paper_model
 
     return simulate_design(paper_model(), n, seed=seed, n_trials=trials)
 
@@ -189,7 +189,7 @@ def test_degenerate_participant_who_always_relies():
 
 
 def test_long_sequence_of_100000_trials_stays_finite_and_monotone():
-    from trustseek.presets import paper_model
+    from trustseek.model.presets import paper_model
 
     # 1000 simulated runs of 100 trials, chained into one supervisor's 100,000-trial sequence
     df = simulate_design(paper_model(), 1000, seed=1, n_trials=(58, 42))
@@ -253,7 +253,7 @@ def test_bad_spec_is_reported():
 
 
 def test_batched_restarts_take_the_same_path_as_one_at_a_time():
-    from trustseek.iohmm import BatchWorkspace, run_em_batch
+    from trustseek.estimation.iohmm import BatchWorkspace, run_em_batch
 
     df = small_paper_data(9, (41, 30), seed=12)
     for prior in (0.0, 0.3):
@@ -273,11 +273,11 @@ def test_batched_restarts_take_the_same_path_as_one_at_a_time():
 @pytest.mark.parametrize("K", [2, 3])
 def test_compiled_estep_equals_the_numpy_reference(K):
     """The fused numba kernel (general K and the K = 2 path) against the numpy time loop."""
-    from trustseek import forward_backward
+    from trustseek.estimation import kernels as forward_backward
 
     if not forward_backward.AVAILABLE:
         pytest.skip("numba is not installed")
-    from trustseek.iohmm import BatchWorkspace, _stack
+    from trustseek.estimation.iohmm import BatchWorkspace, _stack
 
     df = small_paper_data(25, (41, 30), seed=21)
     df = df[~((df["participant"] == "P004") & (df["trial"] > 40))]  # sequences of different lengths
@@ -312,7 +312,7 @@ def test_compiled_estep_equals_the_numpy_reference(K):
 def test_stick_breaking_finish_gradient_and_monotone_history(K):
     """The quasi-Newton finish: its parametrization round-trips, its Fisher-identity gradient
     equals central differences of the objective, and it never lowers the objective."""
-    from trustseek.iohmm import _Sticks, finish
+    from trustseek.estimation.iohmm import _Sticks, finish
 
     df = small_paper_data(30, (41, 30), seed=13)
     spec = paper_spec(levels=K, prior=0.3)

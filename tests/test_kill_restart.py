@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from trustseek.client import Client, DeploySession
-from trustseek.server.local import free_port, serve_process
+from trustseek.testing.servers import free_port, serve_process
 
 TOKEN = "kill-restart-token"
 

@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from trustseek import ModelError, Task, TrustModel
-from trustseek.presets import PAPER_UNOBSERVED_CELLS, load_model, load_task
+from trustseek.model.presets import PAPER_UNOBSERVED_CELLS, load_model, load_task
 
 
 def test_paper_preset_numbers(model, task):

@@ -7,10 +7,10 @@ import pytest
 
 import trustseek
 from trustseek import AssistancePOMDP, GridSolver
-from trustseek.alpha import AlphaSolver, AlphaVectorPolicy
-from trustseek.interop import read_pomdp
-from trustseek.model import Task, TrustModel
-from trustseek.point import BranchModel, PointSolver, _simplex_lattice, freudenthal_weights
+from trustseek.solvers.alpha import AlphaSolver, AlphaVectorPolicy
+from trustseek.interop.files import read_pomdp
+from trustseek.model.core import Task, TrustModel
+from trustseek.solvers.point import BranchModel, PointSolver, _simplex_lattice, freudenthal_weights
 
 EXAMPLES = Path(trustseek.__file__).parent / "examples"
 

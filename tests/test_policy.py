@@ -15,8 +15,8 @@ from trustseek import (
     solve,
     trust_agnostic,
 )
-from trustseek.model import ASK, AUTONOMOUS, ModelError
-from trustseek.policy import agnostic_from_intervention_rates, trust_agnostic_from_data
+from trustseek.model.core import ASK, AUTONOMOUS, ModelError
+from trustseek.policies.core import agnostic_from_intervention_rates, trust_agnostic_from_data
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from trustseek.report import FIGURES, write_report
-from trustseek.reproduce import ReproduceConfig, reproduce
+from trustseek.reproduction.pipeline import ReproduceConfig, reproduce
 
 pytestmark = pytest.mark.browser
 

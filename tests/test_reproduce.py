@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 
 from trustseek import paper_model
 from trustseek.cli._app import app
-from trustseek.reproduce import AGNOSTIC, AWARE, ReproduceConfig, reproduce, wilcoxon
+from trustseek.reproduction.pipeline import AGNOSTIC, AWARE, ReproduceConfig, reproduce, wilcoxon
 from trustseek.report import FIGURES, write_report
 
 SMALL = dict(replicates=2, large_n=400, bootstrap=0, restarts=2, replicate_restarts=1, replicate_large_n=200, grid=201, jobs=1)
@@ -146,8 +146,8 @@ def test_simulated_log_round_trips_through_fit(tmp_path):
     # maximum likelihood: the fitted model explains the log at least as well as the truth
     # (cells such as P(rely | low trust, high complexity) are weakly identified, so the
     # likelihood, not each cell, is the sharp check)
-    from trustseek.fit import from_trust_model
-    from trustseek.iohmm import encode, loglik
+    from trustseek.estimation.fit import from_trust_model
+    from trustseek.estimation.iohmm import encode, loglik
 
     spec, params = from_trust_model(truth)
     ll_truth = loglik(encode(frame[frame.columns[:6]], spec), spec, params)

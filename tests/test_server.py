@@ -13,7 +13,7 @@ from sqlalchemy import create_engine, text
 
 from trustseek import BayesUpdate, paper_model, paper_task, solve
 from trustseek.client import Client, ServerError
-from trustseek.model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
+from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from trustseek.server import create_app
 
 from server_checks import check_concurrent_duplicate_submissions
@@ -251,7 +251,7 @@ def test_export_is_read_by_the_data_module_and_cli(client, db_url, tmp_path):
     from typer.testing import CliRunner
 
     from trustseek.cli import app
-    from trustseek.data import read_trials
+    from trustseek.data.trials import read_trials
 
     st = study(client)
     sid, ph = participant(client, st["id"])

@@ -11,9 +11,9 @@ from typer.testing import CliRunner
 
 from trustseek import paper_model
 from trustseek.cli import app
-from trustseek.data import read_trials
-from trustseek.fit import fit_trust_model, from_trust_model
-from trustseek.iohmm import loglik
+from trustseek.data.trials import read_trials
+from trustseek.estimation.fit import fit_trust_model, from_trust_model
+from trustseek.estimation.iohmm import loglik
 from trustseek.server import create_app
 
 TOKEN = "fit-token"

@@ -22,12 +22,12 @@ from sqlalchemy import create_engine, text
 
 from trustseek import BayesUpdate, paper_model, paper_task, solve
 from trustseek.client import Client, DeploySession
-from trustseek.data import read_trials
-from trustseek.model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
+from trustseek.data.trials import read_trials
+from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from trustseek.server import create_app
 
 from server_checks import check_concurrent_duplicate_submissions
-from trustseek.server.local import TemporaryPostgres, postgres_binaries
+from trustseek.testing.servers import TemporaryPostgres, postgres_binaries
 
 TOKEN = "postgres-experimenter-secret"
 H = {"Authorization": f"Bearer {TOKEN}"}

@@ -5,8 +5,8 @@ import pandas as pd
 import pytest
 
 from trustseek import AssistancePOMDP, TrustModel, always_ask, make_updater, never_ask, paper_model, randomized, solve
-from trustseek.model import ASK, AUTONOMOUS, INTERVENE, RELIABLE
-from trustseek.simulate import (
+from trustseek.model.core import ASK, AUTONOMOUS, INTERVENE, RELIABLE
+from trustseek.simulation.engine import (
     Block,
     SimulationError,
     Supervisors,
@@ -269,7 +269,7 @@ def test_bad_inputs_are_reported(task, model):
 def test_non_threshold_policy_goes_through_policy_actions(task):
     """A trust-aware policy whose ask region is not [0, θ) (here: asks only for beliefs in
     (0.3, 0.6) in high complexity) is applied through ``policy.actions`` unchanged."""
-    from trustseek.policy import TrustAwarePolicy
+    from trustseek.policies.core import TrustAwarePolicy
 
     model = paper_model()
     grid = np.linspace(0, 1, 101)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from trustseek import AssistancePOMDP, GridSolver, solve
-from trustseek.solve import belief_branches
+from trustseek.solvers.grid import belief_branches
 
 
 def test_paper_thresholds_both_updates(model, task):

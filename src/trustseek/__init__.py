@@ -10,10 +10,10 @@ The Python API, by module:
 * :mod:`trustseek.policy`  -- policies and ``PolicyRunner``
 """
 
-from .belief import BayesUpdate, PaperUpdate, make_updater
+from .pomdp.belief import BayesUpdate, PaperUpdate, make_updater
 from .errors import TrustseekError
-from .model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, ModelError, Rewards, Task, TrustModel
-from .policy import (
+from .model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, ModelError, Rewards, Task, TrustModel
+from .policies.core import (
     ComplexityPolicy,
     PolicyRunner,
     TrustAwarePolicy,
@@ -23,9 +23,9 @@ from .policy import (
     randomized,
     trust_agnostic,
 )
-from .pomdp import AssistancePOMDP
-from .presets import load_model, load_task, paper_model, paper_task
-from .solve import GridSolver, solve
+from .pomdp.problem import AssistancePOMDP
+from .model.presets import load_model, load_task, paper_model, paper_task
+from .solvers.grid import GridSolver, solve
 
 __version__ = "0.1.0"
 

@@ -44,7 +44,7 @@ class ServerError(TrustseekError):
 
 
 def _read_json(path: str | Path) -> Any:
-    from .model import _load_json
+    from .model.core import _load_json
 
     return _load_json(path)[0]
 

@@ -15,8 +15,8 @@ import numpy as np
 from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
 from . import __version__
-from .presets import paper_model
-from .reproduce import AGNOSTIC, AWARE, PAPER, Reproduction, write_summary
+from .model.presets import paper_model
+from .reproduction.pipeline import AGNOSTIC, AWARE, PAPER, Reproduction, write_summary
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 

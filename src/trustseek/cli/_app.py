@@ -24,7 +24,7 @@ err_console = Console(stderr=True)
 
 def print_json(obj: Any) -> None:
     """Machine-readable output: one JSON object on stdout, nothing else."""
-    from ..model import json_safe
+    from ..model.core import json_safe
 
     sys.stdout.write(json.dumps(json_safe(obj), indent=2, default=_json_default, allow_nan=False) + "\n")
 

@@ -11,7 +11,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..model import TrustModel
+from ..model.core import TrustModel
 from ._app import app, console, err_console, print_json
 
 # The fit and data modules (pandas, numba) load only when a command of this group runs,
@@ -19,13 +19,13 @@ from ._app import app, console, err_console, print_json
 
 
 def _fit():
-    from .. import fit
+    from ..estimation import fit
 
     return fit
 
 
 def _data():
-    from .. import data
+    from ..data import trials as data
 
     return data
 
@@ -112,7 +112,7 @@ def fit(
         _data().write_trials(result.posteriors(), posteriors)
     if plots is not None:
         from ..plots.model import plot_emissions, plot_transitions
-        from ..presets import paper_model
+        from ..model.presets import paper_model
 
         plots.mkdir(parents=True, exist_ok=True)
         ref = paper_model() if result.model.complexities == paper_model().complexities and result.model.n_trust == 2 else None

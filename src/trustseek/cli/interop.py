@@ -9,8 +9,8 @@ import typer
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..pomdp import AssistancePOMDP
-from ..presets import load_model, load_task
+from ..pomdp.problem import AssistancePOMDP
+from ..model.presets import load_model, load_task
 from ._app import app, console, print_json
 
 SOLVERS = ("grid", "alpha", "point")
@@ -25,7 +25,7 @@ def certified_policy(solver: str, pomdp: AssistancePOMDP, belief_update: str, ga
     if not gap > 0:
         raise TrustseekError([f"--gap must be positive, got {gap}"])
     if solver == "alpha":
-        from ..alpha import AlphaSolver
+        from ..solvers.alpha import AlphaSolver
 
         if pomdp.n_trust != 2:
             raise TrustseekError(
@@ -33,7 +33,7 @@ def certified_policy(solver: str, pomdp: AssistancePOMDP, belief_update: str, ga
             )
         return AlphaSolver(belief_update=belief_update, tol=gap).solve(pomdp)
     if solver == "point":
-        from ..point import PointSolver
+        from ..solvers.point import PointSolver
 
         if belief_update != "bayes":
             raise TrustseekError(
@@ -48,7 +48,7 @@ def certified_policy(solver: str, pomdp: AssistancePOMDP, belief_update: str, ga
 
 def certified_summary(policy, task) -> dict:
     """The JSON summary of a certified solve (any number of trust levels)."""
-    from ..policy import trust_agnostic
+    from ..policies.core import trust_agnostic
 
     info = policy.info
     out = {
@@ -126,7 +126,7 @@ def export_pomdp(
     verify: bool = typer.Option(False, "--verify", help="Also print finite-horizon values (1-3) of the file and of the belief MDP."),
 ) -> None:
     """Export the assistance POMDP to a standard file (state augmented with the last human action)."""
-    from ..interop import export_assistance, flat_values_check
+    from ..interop.files import export_assistance, flat_values_check
 
     m, t = load_model(model), load_task(task)
     pomdp = AssistancePOMDP(m, t)
@@ -157,8 +157,8 @@ def solve_pomdp_file(
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """Solve a standard .pomdp file: certified lower and upper bounds at its start belief."""
-    from ..interop import read_pomdp
-    from ..point import BranchModel, PointSolver
+    from ..interop.files import read_pomdp
+    from ..solvers.point import BranchModel, PointSolver
 
     flat = read_pomdp(path)
     if horizon is not None:

@@ -11,11 +11,11 @@ import typer
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..model import ModelError, Task, TrustModel
-from ..policy import TrustAwarePolicy, load_policy, trust_agnostic
-from ..presets import MODEL_PRESETS, TASK_PRESETS, load_model, load_task
-from ..solve import DEFAULT_GRID, METHODS, GridSolver
-from ..pomdp import AssistancePOMDP
+from ..model.core import ModelError, Task, TrustModel
+from ..policies.core import TrustAwarePolicy, load_policy, trust_agnostic
+from ..model.presets import MODEL_PRESETS, TASK_PRESETS, load_model, load_task
+from ..solvers.grid import DEFAULT_GRID, METHODS, GridSolver
+from ..pomdp.problem import AssistancePOMDP
 from ._app import app, console, print_json
 
 ModelOpt = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file.")
@@ -116,8 +116,8 @@ def agnostic(
     """The optimal trust-agnostic policy (Section VI-A)."""
     t = load_task(task)
     if data is not None:
-        from ..data import read_trials  # provided by the data module
-        from ..policy import trust_agnostic_from_data
+        from ..data.trials import read_trials  # provided by the data module
+        from ..policies.core import trust_agnostic_from_data
 
         pol = trust_agnostic_from_data(read_trials(data), t)
     else:

@@ -14,8 +14,8 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..policy import PAPER_ASK_PROBABILITIES, TrustAwarePolicy, always_ask, load_policy, never_ask, randomized, trust_agnostic
-from ..presets import load_model, load_task
+from ..policies.core import PAPER_ASK_PROBABILITIES, TrustAwarePolicy, always_ask, load_policy, never_ask, randomized, trust_agnostic
+from ..model.presets import load_model, load_task
 from ._app import app, console, err_console, print_json
 
 POLICY_CHOICES = ("trust-aware", "trust-agnostic", "randomized", "always-ask", "never-ask")
@@ -23,7 +23,7 @@ POLICY_CHOICES = ("trust-aware", "trust-agnostic", "randomized", "always-ask", "
 
 def _policy(spec: str, model, task, belief_update: str, grid: int, ask_low: float, ask_high: float):
     if spec == "trust-aware":
-        from ..solve import solve
+        from ..solvers.grid import solve
 
         return solve(model, task, belief_update=belief_update, grid=grid)
     if spec == "trust-agnostic":
@@ -74,8 +74,8 @@ def simulate(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
 ) -> None:
     """Simulate supervisors from a trust model working with the robot under a policy."""
-    from ..simulate import Supervisors
-    from ..simulate import simulate as run_simulation
+    from ..simulation.engine import Supervisors
+    from ..simulation.engine import simulate as run_simulation
 
     if belief_update not in ("paper", "bayes"):
         raise TrustseekError([f"--belief-update must be 'paper' or 'bayes', got {belief_update!r}"])
@@ -127,7 +127,7 @@ def simulate(
 
 def _write(frame, path: Path) -> None:
     try:
-        from ..data import write_trials
+        from ..data.trials import write_trials
 
         if list(frame.columns[:2]) == ["participant", "trial"]:
             write_trials(frame, path)
@@ -156,7 +156,7 @@ def reproduce(
 ) -> None:
     """Reproduce Sections V-VI of the paper on simulated supervisors and write a report."""
     from ..report import write_report
-    from ..reproduce import ReproduceConfig, reproduce as run_reproduce
+    from ..reproduction.pipeline import ReproduceConfig, reproduce as run_reproduce
 
     cfg = ReproduceConfig(
         seed=seed, replicates=replicates, large_n=large_n, bootstrap=bootstrap, restarts=restarts,

@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model import ACTIONS, EXPERIENCES, RELY
-from . import save, style
+from ..model.core import ACTIONS, EXPERIENCES, RELY
+from . import save
+from . import style
 
 _LEVEL_COLORS = ("#c8102e", "#1f5fa8", "#2a9d3f", "#7b3294", "#e08214", "#666666", "#000000", "#8c510a")
 

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import COLORS, save, style
+from . import COLORS
+from . import save
+from . import style
 
 
 def plot_q(policy, path=None, title: str | None = None):

@@ -6,7 +6,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from . import COLORS, save, style
+from . import COLORS
+from . import save
+from . import style
 
 POLICY_COLORS = {"trust-agnostic": "#7f7f7f", "trust-aware": COLORS["autonomous"]}
 

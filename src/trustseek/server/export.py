@@ -91,7 +91,7 @@ def write_frame(frame: pd.DataFrame, path: str | Path, trials: bool = True) -> N
     path = Path(path)
     if trials:
         try:
-            from ..data import write_trials
+            from ..data.trials import write_trials
         except ImportError:
             write_trials = None
         if write_trials is not None:

@@ -26,8 +26,8 @@ from sqlalchemy import Connection, bindparam, func, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
-from ..model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
-from ..policy import PolicyRunner
+from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
+from ..policies.core import PolicyRunner
 from .orm import Event, PolicyBlob, Report, Session, Study, Trial, utcnow
 from .studies import participant_plan, policy_object
 

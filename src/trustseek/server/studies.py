@@ -20,10 +20,10 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from ..model import ModelError, Task, TrustModel
-from ..policy import ComplexityPolicy, always_ask, never_ask, policy_from_dict, randomized, trust_agnostic
-from ..presets import MODEL_PRESETS, TASK_PRESETS
-from ..solve import solve
+from ..model.core import ModelError, Task, TrustModel
+from ..policies.core import ComplexityPolicy, always_ask, never_ask, policy_from_dict, randomized, trust_agnostic
+from ..model.presets import MODEL_PRESETS, TASK_PRESETS
+from ..solvers.grid import solve
 
 POLICY_KINDS = ("trust-aware", "trust-agnostic", "randomized", "always-ask", "never-ask")
 MAX_TRIALS_PER_BLOCK = 1000

@@ -45,7 +45,7 @@ class ThreadServer:
     def __init__(self, db_url: str, token: str, port: int | None = None):
         import uvicorn
 
-        from .app import create_app
+        from ..server.app import create_app
 
         self.port = port or free_port()
         self.url = f"http://127.0.0.1:{self.port}"

@@ -21,7 +21,7 @@ from typing import Protocol
 
 import numpy as np
 
-from .model import TrustModel
+from ..model.core import TrustModel
 
 BELIEF_UPDATES = ("bayes", "paper")
 UNOBSERVED = -1

@@ -29,8 +29,8 @@ from typing import Any, Mapping, Protocol, Sequence
 
 import numpy as np
 
-from .belief import BELIEF_UPDATES, make_updater, to_vector
-from .model import ACTIONS, ASK, AUTONOMOUS, HUMAN_ACTIONS, INTERVENE, EXPERIENCES, ModelError, Task, TrustModel, json_safe
+from ..pomdp.belief import BELIEF_UPDATES, make_updater, to_vector
+from ..model.core import ACTIONS, ASK, AUTONOMOUS, HUMAN_ACTIONS, INTERVENE, EXPERIENCES, ModelError, Task, TrustModel, json_safe
 
 POLICY_FORMAT = "trustseek.policy/1"
 PAPER_ASK_PROBABILITIES = {"low": 0.10, "high": 0.40}
@@ -307,7 +307,7 @@ def agnostic_from_intervention_rates(task: Task, p_intervene: Sequence[float], s
 def trust_occupancy(model: TrustModel, task: Task, data_policy: ComplexityPolicy, horizon: int) -> np.ndarray:
     """Average over trials 1..horizon of the trust marginal P(T_t) when ``data_policy`` runs
     (actions depend on complexity only, so the trust marginal is a Markov chain)."""
-    from .pomdp import AssistancePOMDP
+    from ..pomdp.problem import AssistancePOMDP
 
     pomdp = AssistancePOMDP(model, task)
     k = pomdp.kernel.sum(axis=(3, 4))  # [c, a, t, u]
@@ -385,14 +385,14 @@ def policy_from_dict(d: Any, source: str | None = None) -> Policy:
         grid = np.linspace(0.0, 1.0, arr.shape[0])
         return TrustAwarePolicy(grid, arr, model, cx, bu, d.get("info"))
     if kind == "alpha-vector":
-        from .alpha import AlphaVectorPolicy
+        from ..solvers.alpha import AlphaVectorPolicy
 
         return AlphaVectorPolicy.from_dict(d, source)
     raise ModelError([f"unknown policy kind {kind!r}; expected one of {['trust-aware', *COMPLEXITY_KINDS]}"], source)
 
 
 def load_policy(path: str | Path) -> Policy:
-    from .model import _load_json
+    from ..model.core import _load_json
 
     d, source = _load_json(path)
     return policy_from_dict(d, source)

@@ -31,7 +31,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
+from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
 
 
 AXES = {

@@ -40,9 +40,9 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import TrustseekError
-from .model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
-from .pomdp import AssistancePOMDP
+from ..errors import TrustseekError
+from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
+from ..pomdp.problem import AssistancePOMDP
 
 
 class PomdpFileError(TrustseekError, ValueError):
@@ -181,7 +181,7 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
 
 def flat_belief(pomdp: AssistancePOMDP, belief, complexity: int) -> np.ndarray:
     """The flat belief for a belief over trust and a known complexity (E = reliable, last = rely)."""
-    from .belief import to_vector
+    from ..pomdp.belief import to_vector
 
     b = to_vector(belief, pomdp.n_trust)
     K, N = pomdp.n_trust, pomdp.n_complexity
@@ -512,7 +512,7 @@ def export_assistance(pomdp: AssistancePOMDP, path: str | Path, fmt: str | None 
 
 def flat_values_check(pomdp: AssistancePOMDP, horizons: Sequence[int] = (1, 2, 3)) -> list[dict]:
     """Finite-horizon values of the exported flat POMDP next to the belief-MDP values."""
-    from .alpha import finite_horizon_value
+    from ..solvers.alpha import finite_horizon_value
 
     flat = flat_from_assistance(pomdp)
     rows = []

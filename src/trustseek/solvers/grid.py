@@ -28,8 +28,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .belief import BELIEF_UPDATES
-from .pomdp import AssistancePOMDP
+from ..pomdp.belief import BELIEF_UPDATES
+from ..pomdp.problem import AssistancePOMDP
 
 DEFAULT_GRID = 2001
 METHODS = ("policy-iteration", "value-iteration")
@@ -144,7 +144,7 @@ class GridSolver:
         return grid, r, P
 
     def solve(self, pomdp: AssistancePOMDP):
-        from .policy import TrustAwarePolicy
+        from ..policies.core import TrustAwarePolicy
 
         return TrustAwarePolicy.from_solution(self.solve_grid(pomdp), pomdp.model, pomdp.task)
 

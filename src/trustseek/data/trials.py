@@ -23,8 +23,8 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from .errors import TrustseekError
-from .model import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
+from ..errors import TrustseekError
+from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 
 CANONICAL = ("participant", "trial", "complexity", "robot_action", "human_action", "experience")
 CATEGORICAL = ("complexity", "robot_action", "human_action", "experience")
@@ -363,4 +363,4 @@ def write_trials(frame: pd.DataFrame, path: str | Path) -> None:
 
 def example_path(name: str = "paper_trials.csv") -> Path:
     """Path of an example file shipped in ``trustseek/examples``."""
-    return Path(__file__).resolve().parent / "examples" / name
+    return Path(__file__).resolve().parent.parent / "examples" / name

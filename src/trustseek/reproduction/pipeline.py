@@ -36,13 +36,13 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .errors import TrustseekError
-from .model import ASK, AUTONOMOUS, FAULTY, INTERVENE, RELIABLE, RELY, Task, TrustModel
-from .policy import always_ask, never_ask, randomized, trust_agnostic, trust_agnostic_from_data
-from .pomdp import AssistancePOMDP
-from .presets import paper_model, paper_task
-from .simulate import Supervisors, crossover, simulate
-from .solve import GridSolver
+from ..errors import TrustseekError
+from ..model.core import ASK, AUTONOMOUS, FAULTY, INTERVENE, RELIABLE, RELY, Task, TrustModel
+from ..policies.core import always_ask, never_ask, randomized, trust_agnostic, trust_agnostic_from_data
+from ..pomdp.problem import AssistancePOMDP
+from ..model.presets import paper_model, paper_task
+from ..simulation.engine import Supervisors, crossover, simulate
+from ..solvers.grid import GridSolver
 
 LOW, HIGH = 0, 1
 AWARE, AGNOSTIC = "trust-aware", "trust-agnostic"
@@ -193,7 +193,7 @@ def _experiment2(sim) -> dict[str, Any]:
 
 
 def _fit(frame, cfg: ReproduceConfig, restarts: int, seed: int, bootstrap: int, n_jobs: int, progress=None):
-    from .fit import fit_trust_model
+    from ..estimation.fit import fit_trust_model
 
     return fit_trust_model(
         frame[CANONICAL], preset="paper", restarts=restarts, seed=seed, bootstrap=bootstrap, n_jobs=n_jobs, progress=progress

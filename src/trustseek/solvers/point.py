@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .pomdp import AssistancePOMDP
+from ..pomdp.problem import AssistancePOMDP
 
 
 @dataclass

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .model import ASK, AUTONOMOUS, FAULTY, RELIABLE, ModelError, Rewards, Task, TrustModel
+from .core import ASK, AUTONOMOUS, FAULTY, RELIABLE, ModelError, Rewards, Task, TrustModel
 
 PAPER_UNOBSERVED_CELLS = (
     "transition[C=low, a=ask, E=reliable]",

@@ -38,9 +38,9 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from .belief import BELIEF_UPDATES, make_updater
-from .errors import TrustseekError
-from .model import ACTIONS, ASK, AUTONOMOUS, EXPERIENCES, HUMAN_ACTIONS, INTERVENE, RELIABLE, RELY, Task, TrustModel
+from ..pomdp.belief import BELIEF_UPDATES, make_updater
+from ..errors import TrustseekError
+from ..model.core import ACTIONS, ASK, AUTONOMOUS, EXPERIENCES, HUMAN_ACTIONS, INTERVENE, RELIABLE, RELY, Task, TrustModel
 
 CHUNK = 1 << 14  # participants simulated together (fits the working set in cache)
 
@@ -407,7 +407,7 @@ def threshold_form(policy) -> np.ndarray | None:
     where the interpolated advantage Q(ask) - Q(autonomous) crosses zero
     (``TrustAwarePolicy.ask_intervals``), so both agree except for beliefs within rounding
     error of the crossing itself."""
-    from .policy import TrustAwarePolicy
+    from ..policies.core import TrustAwarePolicy
 
     if not isinstance(policy, TrustAwarePolicy) or policy.model is None or policy.model.n_trust != 2:
         return None

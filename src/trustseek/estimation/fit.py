@@ -20,7 +20,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from .data import DEFAULT_COMPLEXITIES
+from ..data.trials import DEFAULT_COMPLEXITIES
 from .iohmm import (
     MIN_EVENTS,
     FitError,
@@ -35,7 +35,7 @@ from .iohmm import (
     encode,
     fit_iohmm,
 )
-from .model import ACTIONS, ASK, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
+from ..model.core import ACTIONS, ASK, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
 
 PAPER_TRANSITION_INPUTS = ("complexity", "robot_action", "experience")
 PAPER_EMISSION_INPUTS = ("complexity", "robot_action")
@@ -576,7 +576,7 @@ def simulate_design(
     trust at the start of each trial is kept in the extra column ``true_trust``.
     ``p_unobserved`` blanks that fraction of human actions (not recorded).
     """
-    from .presets import paper_task
+    from ..model.presets import paper_task
 
     task = task or paper_task()
     task.check_compatible(model)

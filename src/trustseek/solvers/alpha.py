@@ -53,10 +53,10 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 from scipy.optimize import brentq
 
-from .belief import BELIEF_UPDATES, to_vector
-from .model import ACTIONS, ASK, AUTONOMOUS, ModelError, TrustModel
-from .policy import _PolicyBase
-from .pomdp import AssistancePOMDP
+from ..pomdp.belief import BELIEF_UPDATES, to_vector
+from ..model.core import ACTIONS, ASK, AUTONOMOUS, ModelError, TrustModel
+from ..policies.core import _PolicyBase
+from ..pomdp.problem import AssistancePOMDP
 
 ALPHA_KIND = "alpha-vector"
 _WIDTH_EPS = 1e-13  # envelope pieces narrower than this are dropped
@@ -668,7 +668,7 @@ class AlphaSolver:
         grid_sol = None
         if self.upper_grid and gap > self.tol:
             # the grid solver's interpolated value: an independent upper bound (V is convex)
-            from .solve import GridSolver
+            from .grid import GridSolver
 
             grid_sol = GridSolver(grid=self.upper_grid, belief_update="bayes").solve_grid(pomdp)
             up_grid = grid_sol.value @ pomdp.complexity_probs + grid_sol.error_bound
@@ -1066,7 +1066,7 @@ class AlphaVectorPolicy(_PolicyBase):
 
     # -- JSON ----------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        from .policy import POLICY_FORMAT
+        from ..policies.core import POLICY_FORMAT
 
         d = {
             "format": POLICY_FORMAT,
@@ -1146,7 +1146,7 @@ def policy_from_solution(sol: AlphaSolution, pomdp: AssistancePOMDP, target_gap:
         return AlphaVectorPolicy(
             [[v for v, _ in per_a] for per_a in sol.q], sol.lower[0], pomdp.model, pomdp.complexities, sol.belief_update, info
         )
-    from .policy import TrustAwarePolicy
+    from ..policies.core import TrustAwarePolicy
 
     g, v = sol.grid_solution
     info["adaptive_grid_points"] = len(g)

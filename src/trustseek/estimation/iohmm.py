@@ -38,8 +38,8 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import minimize
 
-from . import forward_backward as _fb
-from .errors import TrustseekError
+from . import kernels as _fb
+from ..errors import TrustseekError
 
 SCAN_RATIO = 20  # sequences at least this many times longer than their number: E-step by prefix products
 BATCH_MAX_COLUMNS = 1000  # restarts x participants up to this: restarts run batched in lockstep

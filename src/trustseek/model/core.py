@@ -32,7 +32,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from .errors import TrustseekError
+from ..errors import TrustseekError
 
 ACTIONS: tuple[str, str] = ("autonomous", "ask")
 HUMAN_ACTIONS: tuple[str, str] = ("intervene", "rely")

@@ -1,0 +1,5 @@
+"""Trial logs: column mapping, reading (with located errors) and writing."""
+
+from .trials import CANONICAL, ColumnMapping, DataError, example_path, read_trials, write_trials
+
+__all__ = ["CANONICAL", "ColumnMapping", "DataError", "example_path", "read_trials", "write_trials"]

@@ -1,0 +1,5 @@
+"""Solvers: turn an assistance POMDP into a policy."""
+
+from .grid import GridSolver, solve
+
+__all__ = ["GridSolver", "solve"]
