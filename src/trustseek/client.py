@@ -44,9 +44,9 @@ class ServerError(TrustseekError):
 
 
 def _read_json(path: str | Path) -> Any:
-    from .model.core import _load_json
+    from .model.core import load_json
 
-    return _load_json(path)[0]
+    return load_json(path)[0]
 
 
 def _check(r: httpx.Response) -> Any:

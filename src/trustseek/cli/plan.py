@@ -11,6 +11,7 @@ import typer
 from rich.table import Table
 
 from ..errors import TrustseekError
+from ..vocab import check_belief_update
 from ..model.core import ModelError, Task, TrustModel
 from ..policies.core import TrustAwarePolicy, load_policy, trust_agnostic
 from ..model.presets import MODEL_PRESETS, TASK_PRESETS, load_model, load_task
@@ -24,9 +25,7 @@ UpdateOpt = typer.Option("bayes", "--belief-update", "-u", help="Belief update: 
 
 
 def _check_update(name: str) -> str:
-    if name not in ("bayes", "paper"):
-        raise TrustseekError([f"--belief-update must be 'bayes' or 'paper', got {name!r}"])
-    return name
+    return check_belief_update(name, "--belief-update")
 
 
 def solve_summary(policy: TrustAwarePolicy, task: Task) -> dict:

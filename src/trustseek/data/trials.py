@@ -24,10 +24,10 @@ import numpy as np
 import pandas as pd
 
 from ..errors import TrustseekError
-from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
+from ..vocab import ACTIONS, CATEGORICAL_COLUMNS, EXPERIENCES, HUMAN_ACTIONS, TRIAL_COLUMNS
 
-CANONICAL = ("participant", "trial", "complexity", "robot_action", "human_action", "experience")
-CATEGORICAL = ("complexity", "robot_action", "human_action", "experience")
+CANONICAL = TRIAL_COLUMNS
+CATEGORICAL = CATEGORICAL_COLUMNS
 DEFAULT_COMPLEXITIES = ("low", "high")
 MAX_PROBLEMS = 30
 

@@ -36,6 +36,7 @@ from .iohmm import (
     fit_iohmm,
 )
 from ..model.core import ACTIONS, ASK, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
+from ..vocab import PAPER_ASK_PROBABILITIES, PAPER_DATA_COUNTS
 
 PAPER_TRANSITION_INPUTS = ("complexity", "robot_action", "experience")
 PAPER_EMISSION_INPUTS = ("complexity", "robot_action")
@@ -564,8 +565,8 @@ def simulate_design(
     n_participants: int,
     seed: int = 0,
     task: Task | None = None,
-    n_trials: Sequence[int] = (41, 30),
-    p_ask: Sequence[float] = (0.10, 0.40),
+    n_trials: Sequence[int] = PAPER_DATA_COUNTS,
+    p_ask: Sequence[float] = tuple(PAPER_ASK_PROBABILITIES.values()),
     p_unobserved: float = 0.0,
 ) -> pd.DataFrame:
     """Trial logs from ``model`` with the paper's design (Section V).

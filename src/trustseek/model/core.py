@@ -34,12 +34,12 @@ import numpy as np
 
 from ..errors import TrustseekError
 
-ACTIONS: tuple[str, str] = ("autonomous", "ask")
-HUMAN_ACTIONS: tuple[str, str] = ("intervene", "rely")
-EXPERIENCES: tuple[str, str] = ("faulty", "reliable")
-AUTONOMOUS, ASK = 0, 1
-INTERVENE, RELY = 0, 1
-FAULTY, RELIABLE = 0, 1
+from ..vocab import ACTIONS, ASK, AUTONOMOUS, EXPERIENCES, FAULTY, HUMAN_ACTIONS, INTERVENE, RELIABLE, RELY
+
+__all__ = [  # the vocabulary is re-exported for convenience
+    "ACTIONS", "ASK", "AUTONOMOUS", "EXPERIENCES", "FAULTY", "HUMAN_ACTIONS", "INTERVENE", "RELIABLE", "RELY",
+    "ModelError", "Rewards", "Task", "TrustModel", "json_safe", "load_json",
+]
 
 ATOL = 1e-9  # tolerance for a probability row to sum to one
 
@@ -197,7 +197,7 @@ def _check_row_array(arr: np.ndarray, label_of, problems: list[str]) -> None:
             problems.append(f"{label_of(idx)} sums to {_fmt(float(row.sum()))}")
 
 
-def _load_json(path: str | Path) -> tuple[Any, str]:
+def load_json(path: str | Path) -> tuple[Any, str]:
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -347,7 +347,7 @@ class TrustModel:
 
     @classmethod
     def load(cls, path: str | Path) -> "TrustModel":
-        d, source = _load_json(path)
+        d, source = load_json(path)
         return cls.from_dict(d, source)
 
     def replace(self, **changes: Any) -> "TrustModel":
@@ -579,7 +579,7 @@ class Task:
 
     @classmethod
     def load(cls, path: str | Path) -> "Task":
-        d, source = _load_json(path)
+        d, source = load_json(path)
         return cls.from_dict(d, source)
 
     def __eq__(self, other: object) -> bool:

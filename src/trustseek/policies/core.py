@@ -29,11 +29,11 @@ from typing import Any, Mapping, Protocol, Sequence
 
 import numpy as np
 
-from ..pomdp.belief import BELIEF_UPDATES, make_updater, to_vector
+from ..pomdp.belief import make_updater, to_vector
+from ..vocab import BELIEF_UPDATES, PAPER_ASK_PROBABILITIES
 from ..model.core import ACTIONS, ASK, AUTONOMOUS, HUMAN_ACTIONS, INTERVENE, EXPERIENCES, ModelError, Task, TrustModel, json_safe
 
 POLICY_FORMAT = "trustseek.policy/1"
-PAPER_ASK_PROBABILITIES = {"low": 0.10, "high": 0.40}
 
 
 class Policy(Protocol):
@@ -392,9 +392,9 @@ def policy_from_dict(d: Any, source: str | None = None) -> Policy:
 
 
 def load_policy(path: str | Path) -> Policy:
-    from ..model.core import _load_json
+    from ..model.core import load_json
 
-    d, source = _load_json(path)
+    d, source = load_json(path)
     return policy_from_dict(d, source)
 
 

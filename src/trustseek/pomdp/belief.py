@@ -22,9 +22,10 @@ from typing import Protocol
 import numpy as np
 
 from ..model.core import TrustModel
+from ..vocab import BELIEF_UPDATES, UNOBSERVED, check_belief_update
 
-BELIEF_UPDATES = ("bayes", "paper")
-UNOBSERVED = -1
+__all__ = ["BELIEF_UPDATES", "UNOBSERVED", "BayesUpdate", "BeliefUpdater", "PaperUpdate", "make_updater", "to_vector"]
+
 
 
 class BeliefUpdater(Protocol):
@@ -83,11 +84,7 @@ class BayesUpdate(_Base):
 
 
 def make_updater(name: str, model: TrustModel) -> BayesUpdate | PaperUpdate:
-    if name == "bayes":
-        return BayesUpdate(model)
-    if name == "paper":
-        return PaperUpdate(model)
-    raise ValueError(f"unknown belief update {name!r}; expected one of {list(BELIEF_UPDATES)}")
+    return BayesUpdate(model) if check_belief_update(name) == "bayes" else PaperUpdate(model)
 
 
 def to_vector(belief, n_trust: int) -> np.ndarray:

@@ -43,6 +43,7 @@ from ..pomdp.problem import AssistancePOMDP
 from ..model.presets import paper_model, paper_task
 from ..simulation.engine import Supervisors, crossover, simulate
 from ..solvers.grid import GridSolver
+from ..vocab import PAPER_BLOCK_COUNTS, PAPER_DATA_COUNTS, TRIAL_COLUMNS
 
 LOW, HIGH = 0, 1
 AWARE, AGNOSTIC = "trust-aware", "trust-agnostic"
@@ -55,7 +56,7 @@ PAPER = {
     "participants_2": 5,
 }
 
-CANONICAL = ["participant", "trial", "complexity", "robot_action", "human_action", "experience"]
+CANONICAL = list(TRIAL_COLUMNS)
 
 
 @dataclass
@@ -66,11 +67,11 @@ class ReproduceConfig:
     replicates: int = 20
     large_n: int = 10_000
     participants_1: int = 9
-    counts_1: tuple[int, int] = (41, 30)
+    counts_1: tuple[int, int] = PAPER_DATA_COUNTS
     ask_low: float = 0.10
     ask_high: float = 0.40
     participants_2: int = 5
-    counts_2: tuple[int, int] = (17, 17)
+    counts_2: tuple[int, int] = PAPER_BLOCK_COUNTS
     restarts: int = 10
     bootstrap: int = 20
     replicate_restarts: int = 4

@@ -14,12 +14,14 @@ import io
 from pathlib import Path
 
 import pandas as pd
+
+from ..vocab import TRIAL_COLUMNS
 from sqlalchemy import select
 from sqlalchemy.orm import Session as DBSession
 
 from .orm import Event, Report, Session, Study, Trial
 
-CANONICAL = ["participant", "trial", "complexity", "robot_action", "human_action", "experience"]
+CANONICAL = list(TRIAL_COLUMNS)
 EXTRA = ["block", "block_name", "policy", "outcome", "reward", "belief", "belief_after", "effort_ms", "self_report", "study", "session", "committed_at"]
 EVENT_COLUMNS = ["participant", "session", "trial", "client_time", "server_time", "type", "data"]
 

@@ -38,7 +38,8 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from ..pomdp.belief import BELIEF_UPDATES, make_updater
+from ..pomdp.belief import make_updater
+from ..vocab import PAPER_BLOCK_COUNTS, TRIAL_COLUMNS, check_belief_update
 from ..errors import TrustseekError
 from ..model.core import ACTIONS, ASK, AUTONOMOUS, EXPERIENCES, HUMAN_ACTIONS, INTERVENE, RELIABLE, RELY, Task, TrustModel
 
@@ -49,7 +50,6 @@ CODE_INTERVENE = (AUTONOMOUS * 2 + INTERVENE) * 2 + 0
 CODE_FAILURE = (AUTONOMOUS * 2 + RELY) * 2 + 0
 CODE_SUCCESS = (AUTONOMOUS * 2 + RELY) * 2 + RELIABLE
 
-TRIAL_COLUMNS = ("participant", "trial", "complexity", "robot_action", "human_action", "experience")
 EXTRA_COLUMNS = ("block", "policy", "true_trust", "belief", "reward")
 SUMMARY_COLUMNS = (
     "participant",
@@ -430,8 +430,7 @@ def _policy_belief(block: Block):
     update = block.belief_update or getattr(pol, "belief_update", None) or "bayes"
     if getattr(pol, "belief_update", None) is not None and model is None:
         raise SimulationError([f"the {pol.kind} policy needs a trust model for its belief"])
-    if update not in BELIEF_UPDATES:
-        raise SimulationError([f"unknown belief update {update!r}; expected one of {list(BELIEF_UPDATES)}"])
+    check_belief_update(update)
     return (model, update) if model is not None else (None, None)
 
 
@@ -645,7 +644,7 @@ def crossover(
     task: Task,
     policies: Sequence[Any],
     n_participants: int,
-    counts: Sequence[int] | Mapping[str, int] = (17, 17),
+    counts: Sequence[int] | Mapping[str, int] = PAPER_BLOCK_COUNTS,
     first: Sequence[int] | None = None,
     seed: int = 0,
     record: bool = True,

@@ -53,7 +53,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 from scipy.optimize import brentq
 
-from ..pomdp.belief import BELIEF_UPDATES, to_vector
+from ..pomdp.belief import to_vector
+from ..vocab import BELIEF_UPDATES, check_belief_update
 from ..model.core import ACTIONS, ASK, AUTONOMOUS, ModelError, TrustModel
 from ..policies.core import _PolicyBase
 from ..pomdp.problem import AssistancePOMDP
@@ -591,8 +592,7 @@ class AlphaSolver:
         seed_points: int = 257,
         seed_rounds: int = 1,
     ):
-        if belief_update not in BELIEF_UPDATES:
-            raise ValueError(f"unknown belief update {belief_update!r}; expected one of {list(BELIEF_UPDATES)}")
+        check_belief_update(belief_update)
         if method not in ("policy-iteration", "value-iteration"):
             raise ValueError(f"unknown method {method!r}; expected 'policy-iteration' or 'value-iteration'")
         if not tol > 0:

@@ -28,7 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..pomdp.belief import BELIEF_UPDATES
+from ..vocab import check_belief_update
 from ..pomdp.problem import AssistancePOMDP
 
 DEFAULT_GRID = 2001
@@ -59,7 +59,7 @@ def belief_branches(pomdp: AssistancePOMDP, beliefs: np.ndarray, c: int, a: int,
             if np.any(pe[:, e] > 0):
                 out.append((pe[:, e], beliefs @ tr[e]))
     else:
-        raise ValueError(f"unknown belief update {update!r}; expected one of {list(BELIEF_UPDATES)}")
+        check_belief_update(update)
     return out
 
 
@@ -109,8 +109,7 @@ class GridSolver:
     ):
         if grid < 3:
             raise ValueError(f"grid must have at least 3 points, got {grid}")
-        if belief_update not in BELIEF_UPDATES:
-            raise ValueError(f"unknown belief update {belief_update!r}; expected one of {list(BELIEF_UPDATES)}")
+        check_belief_update(belief_update)
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; expected one of {list(METHODS)}")
         self.grid = int(grid)
