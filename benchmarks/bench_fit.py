@@ -24,7 +24,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from trustseek import forward_backward  # noqa: E402
-from trustseek.estimation.fit import coverage_study, fit_trust_model, from_trust_model, paper_spec, simulate_design  # noqa: E402
+from trustseek.estimation.fit import fit_trust_model, from_trust_model, paper_spec  # noqa: E402
+from trustseek.reproduction.coverage import coverage_study  # noqa: E402
+from trustseek.simulation.designs import simulate_design  # noqa: E402
 from trustseek.estimation.iohmm import Structure, Workspace, encode, fit_iohmm, loglik, run_em  # noqa: E402
 from trustseek.model.presets import paper_model  # noqa: E402
 

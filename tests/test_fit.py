@@ -10,7 +10,8 @@ import pytest
 
 from trustseek import TrustModel, paper_model
 from trustseek.data.trials import ColumnMapping, example_path, read_trials
-from trustseek.estimation.fit import decode, fit_trust_model, select_levels, simulate_design
+from trustseek.estimation.fit import decode, fit_trust_model, select_levels
+from trustseek.simulation.designs import simulate_design
 
 
 def free_cells(result):
@@ -222,7 +223,7 @@ def test_cli_reports_bad_logs_cleanly(tmp_path):
 
 def test_small_coverage_study():
     """The coverage report, cell by cell (the full study is in benchmarks/bench_fit.py)."""
-    from trustseek.estimation.fit import coverage_study
+    from trustseek.reproduction.coverage import coverage_study
 
     rows = coverage_study(paper_model(), n_participants=9, datasets=2, bootstrap=3, restarts=1, n_jobs=1, seed=4)
     assert len(rows) >= 12

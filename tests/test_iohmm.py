@@ -6,7 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from trustseek.estimation.fit import paper_spec, simulate_design
+from trustseek.estimation.fit import paper_spec
+from trustseek.simulation.designs import simulate_design
 from trustseek.estimation.iohmm import (
     FitError,
     Fixed,

@@ -7,7 +7,6 @@
 * :func:`fit_trust_model` -- restarts, the best fit, diagnostics, bootstrap CIs.
 * :func:`decode` -- smoothed P(trust | data) and the Viterbi path per trial.
 * :func:`select_levels` -- K = 1..4 by BIC and by participant-held-out log-likelihood.
-* :func:`simulate_design` -- synthetic logs with the paper's design (for checks).
 """
 
 from __future__ import annotations
@@ -35,8 +34,7 @@ from .iohmm import (
     encode,
     fit_iohmm,
 )
-from ..model.core import ACTIONS, ASK, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
-from ..vocab import PAPER_ASK_PROBABILITIES, PAPER_DATA_COUNTS
+from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 
 PAPER_TRANSITION_INPUTS = ("complexity", "robot_action", "experience")
 PAPER_EMISSION_INPUTS = ("complexity", "robot_action")
@@ -555,105 +553,3 @@ def _test_loglik(test: Sequences, spec: IOHMMSpec, fit: IOHMMFit) -> float:
     params = Params(c0 / c0.sum(), s.em.mstep(st.emission, a, fit.params.emission), s.tr.mstep(st.transition, a, fit.params.transition))
     work = Workspace(test, s.K, s.M, s.Ue, s.Ut)
     return work.forward(params)[2]
-
-
-# --------------------------------------------------------------------------- synthetic data
-
-
-def simulate_design(
-    model: TrustModel,
-    n_participants: int,
-    seed: int = 0,
-    task: Task | None = None,
-    n_trials: Sequence[int] = PAPER_DATA_COUNTS,
-    p_ask: Sequence[float] = tuple(PAPER_ASK_PROBABILITIES.values()),
-    p_unobserved: float = 0.0,
-) -> pd.DataFrame:
-    """Trial logs from ``model`` with the paper's design (Section V).
-
-    Each participant does ``n_trials[c]`` trials of complexity c in random order;
-    the robot asks with probability ``p_ask[c]``; outcomes follow ``task``
-    (default: the paper task) and the experience rule of Section III.  The hidden
-    trust at the start of each trial is kept in the extra column ``true_trust``.
-    ``p_unobserved`` blanks that fraction of human actions (not recorded).
-    """
-    from ..model.presets import paper_task
-
-    task = task or paper_task()
-    task.check_compatible(model)
-    rng = np.random.default_rng(seed)
-    N, C = int(n_participants), model.n_complexity
-    comp = np.repeat(np.arange(C), n_trials)
-    T = len(comp)
-    cx = rng.permuted(np.tile(comp, (N, 1)), axis=1)
-    K = model.n_trust
-    trust = (rng.random(N)[:, None] > np.cumsum(model.initial)[None, :]).sum(1)
-    trust = np.minimum(trust, K - 1)
-    A = np.empty((N, T), dtype=np.int64)
-    O = np.empty((N, T), dtype=np.int64)
-    E = np.empty((N, T), dtype=np.int64)
-    TR = np.empty((N, T), dtype=np.int64)
-    pask = np.asarray(p_ask, dtype=float)
-    ask_e = np.asarray(task.ask_experience)
-    for t in range(T):
-        c = cx[:, t]
-        TR[:, t] = trust
-        a = (rng.random(N) < pask[c]).astype(np.int64)
-        o = np.where(rng.random(N) < model.emission[c, a, trust, 0], 0, 1)
-        ok = rng.random(N) < task.success[c]
-        e = np.where(a == ASK, ask_e[c], np.where(o == 0, 0, ok.astype(np.int64)))
-        cum = np.cumsum(model.transition[c, a, e, trust], axis=1)
-        nxt = (rng.random(N)[:, None] > cum).sum(1)
-        trust = np.minimum(nxt, K - 1)
-        A[:, t], O[:, t], E[:, t] = a, o, e
-    ho = np.array(HUMAN_ACTIONS, dtype=object)[O].ravel()
-    if p_unobserved > 0:
-        ho[rng.random(N * T) < p_unobserved] = None
-    return pd.DataFrame(
-        {
-            "participant": np.repeat([f"P{i + 1:03d}" for i in range(N)], T),
-            "trial": np.tile(np.arange(1, T + 1), N),
-            "complexity": np.array(model.complexities, dtype=object)[cx].ravel(),
-            "robot_action": np.array(ACTIONS, dtype=object)[A].ravel(),
-            "human_action": ho,
-            "experience": np.array(EXPERIENCES, dtype=object)[E].ravel(),
-            "true_trust": np.array(model.trust_levels, dtype=object)[TR].ravel(),
-        }
-    )
-
-
-def coverage_study(
-    model: TrustModel,
-    n_participants: int = 9,
-    datasets: int = 20,
-    bootstrap: int = 100,
-    seed: int = 0,
-    restarts: int = 5,
-    n_jobs: int | None = None,
-    tol: float = 1e-6,
-) -> list[dict[str, Any]]:
-    """How often the 95 % bootstrap intervals cover the truth, cell by cell.
-
-    Simulates ``datasets`` logs from ``model`` with the paper design, fits each with
-    a ``bootstrap``-replicate participant bootstrap, and counts per estimated cell
-    how often [lower, upper] contains the true value.  Returns one record per cell
-    (label, truth, coverage, mean interval width, mean estimate).
-    """
-    hits: dict[str, list[float]] = {}
-    widths: dict[str, list[float]] = {}
-    ests: dict[str, list[float]] = {}
-    truth: dict[str, float] = {}
-    for d in range(datasets):
-        df = simulate_design(model, n_participants, seed=int(np.random.SeedSequence([seed, 5, d]).generate_state(1)[0]))
-        res = fit_trust_model(df, restarts=restarts, seed=seed + d, bootstrap=bootstrap, n_jobs=n_jobs, tol=tol)
-        for c in res.cells():
-            key = c["cell"]
-            t = float(getattr(model, c["table"])[tuple(c["index"])])
-            truth[key] = t
-            hits.setdefault(key, []).append(float(c["lower"] - 1e-9 <= t <= c["upper"] + 1e-9))
-            widths.setdefault(key, []).append(c["upper"] - c["lower"])
-            ests.setdefault(key, []).append(c["estimate"])
-    return [
-        {"cell": k, "truth": truth[k], "coverage": float(np.mean(v)), "datasets": len(v), "mean_width": float(np.mean(widths[k])), "mean_estimate": float(np.mean(ests[k]))}
-        for k, v in hits.items()
-    ]
