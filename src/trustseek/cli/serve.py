@@ -7,7 +7,6 @@ import ipaddress
 import os
 import secrets
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -17,17 +16,28 @@ from ._app import app, console, print_json
 
 def _check_db(db: str) -> str:
     if "://" not in db:
-        raise TrustseekError([f"--db must be a database URL such as sqlite:///study.sqlite or postgresql://user@host/db, got {db!r}"])
+        raise TrustseekError(
+            [f"--db must be a database URL such as sqlite:///study.sqlite or postgresql://user@host/db, got {db!r}"]
+        )
     return db
 
 
 @app.command(rich_help_panel="Experiments")
 def serve(
-    db: str = typer.Option("sqlite:///trustseek.sqlite", "--db", help="Database URL: a SQLite file (default) or postgresql://..."),
+    db: str = typer.Option(
+        "sqlite:///trustseek.sqlite", "--db", help="Database URL: a SQLite file (default) or postgresql://..."
+    ),
     host: str = typer.Option("127.0.0.1", "--host", help="Address to listen on."),
     port: int = typer.Option(8000, "--port", min=0, max=65535, help="Port to listen on."),
-    token: Optional[str] = typer.Option(None, "--token", envvar="TRUSTSEEK_TOKEN", help="Experimenter token (default: $TRUSTSEEK_TOKEN, else a random one, printed)."),
-    public_url: Optional[str] = typer.Option(None, "--public-url", help="Base URL used in participant links (default: the request's)."),
+    token: str | None = typer.Option(
+        None,
+        "--token",
+        envvar="TRUSTSEEK_TOKEN",
+        help="Experimenter token (default: $TRUSTSEEK_TOKEN, else a random one, printed).",
+    ),
+    public_url: str | None = typer.Option(
+        None, "--public-url", help="Base URL used in participant links (default: the request's)."
+    ),
     log_level: str = typer.Option("warning", "--log-level", help="uvicorn log level."),
 ) -> None:
     """Run the experiment server: participant interface, dashboard, experimenter and deploy APIs.
@@ -66,8 +76,10 @@ def serve(
 def export_cmd(
     study: str = typer.Argument(..., help="Study id."),
     db: str = typer.Option("sqlite:///trustseek.sqlite", "--db", help="Database URL."),
-    out: Path = typer.Option(..., "--out", "-o", help="Trial log to write (.csv or .parquet): the canonical format `trustseek fit` reads."),
-    events: Optional[Path] = typer.Option(None, "--events", help="Also write the UI events table (.csv or .parquet)."),
+    out: Path = typer.Option(
+        ..., "--out", "-o", help="Trial log to write (.csv or .parquet): the canonical format `trustseek fit` reads."
+    ),
+    events: Path | None = typer.Option(None, "--events", help="Also write the UI events table (.csv or .parquet)."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ) -> None:
     """Export a study's trials (canonical trial log) and, optionally, its UI events."""
@@ -91,10 +103,18 @@ def export_cmd(
             ev = events_frame(s, st)
             write_frame(ev, events, trials=False)
             n_events = len(ev)
-    summary = {"study": study, "trials": len(trials), "participants": int(trials["participant"].nunique()), "out": str(out),
-               "events": n_events, "events_out": None if events is None else str(events)}
+    summary = {
+        "study": study,
+        "trials": len(trials),
+        "participants": int(trials["participant"].nunique()),
+        "out": str(out),
+        "events": n_events,
+        "events_out": None if events is None else str(events),
+    }
     if as_json:
         print_json(summary)
     else:
-        console.print(f"wrote {summary['trials']} trials of {summary['participants']} participants to {out}"
-                      + (f"; {n_events} events to {events}" if events is not None else ""))
+        console.print(
+            f"wrote {summary['trials']} trials of {summary['participants']} participants to {out}"
+            + (f"; {n_events} events to {events}" if events is not None else "")
+        )

@@ -84,6 +84,7 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     if STATIC.exists():
         app.mount("/static/app", StaticFiles(directory=STATIC), name="static")
     else:
+
         @app.get("/static/app/{path:path}", include_in_schema=False)
         def no_static(path: str):
             return HTMLResponse("front end not built", status_code=503)
