@@ -14,14 +14,16 @@ from rich.markup import escape
 from ..errors import TrustseekError
 from ._app import app, err_console
 
-# the import order is the order of the help panels
+# the modules that register the commands; the import order is the order of the help panels
 # isort: off
-from . import simulate  # noqa: F401  (simulate, reproduce)
-from . import fit  # noqa: F401  (fit, decode, select)
-from . import plan  # noqa: F401  (solve, agnostic, plot-q; preset, check)
-from . import interop  # noqa: F401  (export-pomdp, solve-pomdp-file)
-from . import serve  # noqa: F401  (serve, export)
+from . import simulate  # simulate, reproduce
+from . import fit  # fit, decode, select
+from . import plan  # solve, agnostic, plot-q; preset, check
+from . import interop  # export-pomdp, solve-pomdp-file
+from . import serve  # serve, export
 # isort: on
+
+COMMAND_MODULES = (simulate, fit, plan, interop, serve)
 
 
 def main() -> None:
