@@ -10,7 +10,7 @@ from fastapi import FastAPI, HTTPException
 from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 
-from .. import __version__
+from ..version import __version__
 from .db import DEFAULT_URL, open_database
 from .routes import deploy, experimenter, own, participant
 
