@@ -11,11 +11,12 @@ reproduce: setup
 test: setup
 	.venv/bin/python -m pytest -n 2 -q
 
-# static checks: lint and formatting, types
+# static checks: lint and formatting, types, the layer contracts of docs/architecture.md
 lint: setup
 	.venv/bin/ruff check src tests benchmarks
 	.venv/bin/ruff format --check src tests benchmarks
 	.venv/bin/mypy
+	.venv/bin/lint-imports
 
 bench: setup
 	.venv/bin/python benchmarks/run.py
