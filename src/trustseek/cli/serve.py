@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gc
 import ipaddress
+import logging
 import os
 import secrets
 from pathlib import Path
@@ -38,7 +39,12 @@ def serve(
     public_url: str | None = typer.Option(
         None, "--public-url", help="Base URL used in participant links (default: the request's)."
     ),
-    log_level: str = typer.Option("warning", "--log-level", help="uvicorn log level."),
+    log_level: str = typer.Option(
+        "warning",
+        "--log-level",
+        help="uvicorn log level; trustseek's own log (studies, sessions, refused requests) goes to stderr at info, "
+        "or debug with --log-level debug.",
+    ),
 ) -> None:
     """Run the experiment server: participant interface, dashboard, experimenter and deploy APIs.
 
@@ -52,6 +58,7 @@ def serve(
     if token is not None and len(token) < 8:
         raise TrustseekError(["--token must be at least 8 characters"])
     token = token or secrets.token_urlsafe(24)
+    log_to_stderr(log_level)
     application = create_app(db, token=token, public_url=public_url)
     try:
         loopback = ipaddress.ip_address(host).is_loopback
@@ -70,6 +77,15 @@ def serve(
     gc.collect()
     gc.freeze()
     uvicorn.run(application, host=host, port=port, log_level=log_level, access_log=False)
+
+
+def log_to_stderr(level: str) -> None:
+    """Show the ``trustseek`` loggers on stderr: INFO and above, or ``level`` if it is lower."""
+    handler = logging.StreamHandler()
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    logger = logging.getLogger("trustseek")
+    logger.addHandler(handler)
+    logger.setLevel(min(logging.INFO, logging.getLevelNamesMapping().get(level.upper(), logging.INFO)))
 
 
 @app.command("export", rich_help_panel="Experiments")

@@ -103,7 +103,7 @@ def make_engine(url: str) -> Engine:
         else:
             engine = create_engine(url, pool_pre_ping=True, pool_size=20, max_overflow=20)
     except Exception as exc:  # any driver or URL problem becomes one clear line
-        raise DatabaseError([f"cannot use database URL {_safe(url)!r}: {_first_line(exc)}"]) from None
+        raise DatabaseError([f"cannot use database URL {safe_url(url)!r}: {_first_line(exc)}"]) from None
     return engine
 
 
@@ -121,7 +121,8 @@ def migrate(engine: Engine) -> None:
         ) from None
 
 
-def _safe(url: str) -> str:
+def safe_url(url: str) -> str:
+    """The database URL without its password, fit for logs and messages."""
     try:
         return make_url(url).render_as_string(hide_password=True)
     except Exception:

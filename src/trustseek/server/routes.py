@@ -4,6 +4,7 @@ through its token) and deploy (decisions for a real robot)."""
 from __future__ import annotations
 
 import json
+import logging
 import secrets
 from typing import Any
 
@@ -37,6 +38,8 @@ from .sessions import (
 )
 from .studies import ConfigError, StudyIn, build_study_config, load_model_spec, load_task_spec, resolve_policy
 
+log = logging.getLogger(__name__)
+
 experimenter = APIRouter(prefix="/api", tags=["experimenter"], dependencies=[Depends(require_experimenter)])
 participant = APIRouter(prefix="/api/sessions", tags=["participant"])
 deploy = APIRouter(prefix="/api/deploy", tags=["deploy"])
@@ -68,6 +71,7 @@ def create_study(body: StudyIn, request: Request):
         st = Study(id=new_id(), name=body.name, config=cfg)
         db.add(st)
         db.commit()
+        log.info("study %s created: %r, %d blocks", st.id, st.name, len(cfg["blocks"]))
         return study_summary(db, st)
 
 
@@ -149,6 +153,7 @@ def create_sessions(study_id: str, body: SessionsIn, request: Request):
         except IntegrityError:
             db.rollback()
             raise HTTPException(409, "a participant id was taken concurrently; retry") from None
+    log.info("study %s: %d participant sessions created", study_id, len(out))
     return out
 
 
@@ -260,9 +265,12 @@ def get_state(session_id: str, request: Request, s: Caller = Depends(require_ses
 def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depends(require_session)):
     with _db(request) as db:
         row = lock(db, s.id)
-        if row.status == "new":
+        started = row.status == "new"
+        if started:
             row.status, row.consented_at, row.updated_at = "running", utcnow(), utcnow()
         db.commit()
+        if started:
+            log.info("session %s of study %s started (consent given)", row.id, row.study_id)
         if body.events:
             add_events(db, row, [e.model_dump() for e in body.events])
     return session_state(request, s.id)
@@ -325,6 +333,7 @@ def open_deploy(body: DeployIn, request: Request):
     with _db(request) as db:
         s = create_deploy(db, body.label, task, model, policy, body.seed)
         db.commit()
+        log.info("deploy session %s opened: %s policy", s.id, policy["kind"])
         return {
             "session_id": s.id,
             "token": s.token,

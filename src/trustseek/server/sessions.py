@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import secrets
 from dataclasses import dataclass
 from typing import Any
@@ -30,6 +31,8 @@ from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
 from ..policies.core import PolicyRunner
 from .orm import Base, Event, PolicyBlob, Report, Session, Study, Trial, utcnow
 from .studies import participant_plan, policy_object
+
+log = logging.getLogger(__name__)
 
 OUTCOMES = ("success", "collision", "dropped", "teleoperated")
 MAX_EVENTS_PER_POST = 5000
@@ -289,6 +292,8 @@ def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: in
     except IntegrityError:
         db.rollback()
         raise _Duplicate() from None
+    if s.status == "done":
+        log.info("session %s of study %s finished: %d trials, score %g", s.id, s.study_id, s.trials_done, s.score)
     return row
 
 
