@@ -282,10 +282,11 @@ def read_trials(
         else:
             try:
                 f = float(v)
-                if not f.is_integer() or f < 1:
-                    raise ValueError
-                trial[i] = int(f)
             except ValueError:
+                f = math.nan
+            if f.is_integer() and f >= 1:
+                trial[i] = int(f)
+            else:
                 add(i, "trial", f"value {v!r} is not an integer >= 1")
     # categories
     for c in CATEGORICAL:

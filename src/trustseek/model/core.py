@@ -50,6 +50,7 @@ __all__ = [  # the vocabulary is re-exported for convenience
     "Rewards",
     "Task",
     "TrustModel",
+    "UnknownComplexityError",
     "json_safe",
     "load_json",
 ]
@@ -62,6 +63,11 @@ TASK_FORMAT = "trustseek.task/1"
 
 class ModelError(TrustseekError, ValueError):
     """A model, task or policy file is malformed.  ``problems`` lists every violation."""
+
+
+class UnknownComplexityError(ModelError, KeyError):
+    """A complexity name that the model or task does not have (a ``KeyError`` too: it is a
+    failed lookup by name)."""
 
 
 # --------------------------------------------------------------------------- helpers
@@ -297,7 +303,7 @@ class TrustModel:
         try:
             return self.complexities.index(name)
         except ValueError:
-            raise KeyError(f"unknown complexity {name!r}; expected one of {list(self.complexities)}") from None
+            raise UnknownComplexityError([f"unknown complexity {name!r}; expected one of {list(self.complexities)}"]) from None
 
     def p_intervene(self, belief: np.ndarray, c: int, a: int) -> float:
         """P(o = intervene | belief, C = c, a) for a belief vector over trust levels."""
@@ -470,7 +476,7 @@ class Task:
         try:
             return self.complexities.index(name)
         except ValueError:
-            raise KeyError(f"unknown complexity {name!r}; expected one of {list(self.complexities)}") from None
+            raise UnknownComplexityError([f"unknown complexity {name!r}; expected one of {list(self.complexities)}"]) from None
 
     def p_experience(self, c: int, a: int, o: int) -> np.ndarray:
         """P(E_{t+1} | o_t, C_t = c, a_t = a) as a length-2 array over (faulty, reliable)."""

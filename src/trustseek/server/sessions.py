@@ -27,6 +27,7 @@ from sqlalchemy import Connection, bindparam, func, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
+from ..errors import TrustseekError
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
 from ..policies.core import PolicyRunner
 from .orm import Base, Event, PolicyBlob, Report, Session, Study, Trial, utcnow
@@ -38,13 +39,13 @@ OUTCOMES = ("success", "collision", "dropped", "teleoperated")
 MAX_EVENTS_PER_POST = 5000
 
 
-class SessionError(Exception):
+class SessionError(TrustseekError):
     """A request that the session's state does not allow; ``status`` is the HTTP code."""
 
     def __init__(self, status: int, message: str):
         self.status = status
         self.message = message
-        super().__init__(message)
+        super().__init__([message])
 
 
 def new_token() -> str:
@@ -125,7 +126,7 @@ def context(db: DBSession, s: Session) -> Context:
             lambda b: study_config(db, study_id)["blocks"][b]["policy"],
             s.plan["trials"],
         )
-    raise ValueError("deploy sessions use deploy_context")
+    raise SessionError(409, "this is a deploy session; use /api/deploy")
 
 
 def total_trials(s: Session) -> int | None:
@@ -260,7 +261,9 @@ def _experience(task: Task, c: int, action: str, human: str | None, success: boo
     return "reliable" if success else "faulty"
 
 
-def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: int, events: list[dict] | None) -> Trial:
+def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: int, events: list[dict] | None) -> Trial | None:
+    """Commit ``row`` with the belief update and the session's progress; None when another
+    submission committed this trial first."""
     runner = ctx.runner(block, s.belief, s.seed, row.trial)
     before = runner.belief
     after = runner.observe(row.complexity, row.robot_action, row.human_action, row.experience)
@@ -291,14 +294,10 @@ def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: in
         db.commit()
     except IntegrityError:
         db.rollback()
-        raise _Duplicate() from None
+        return None
     if s.status == "done":
         log.info("session %s of study %s finished: %d trials, score %g", s.id, s.study_id, s.trials_done, s.score)
     return row
-
-
-class _Duplicate(Exception):
-    pass
 
 
 def _existing(db: DBSession, s: Session, n: int) -> Trial | None:
@@ -358,13 +357,13 @@ def submit_trial(
         effort_ms=effort_ms,
         submission_id=submission_id,
     )
-    try:
-        return _commit_trial(db, s, row, ctx, step["block"], events), False
-    except _Duplicate:
-        old = _existing(db, s, n)
-        if old is not None and old.submission_id == submission_id:
-            return old, True
-        raise SessionError(409, f"trial {n} was committed concurrently by another submission") from None
+    committed = _commit_trial(db, s, row, ctx, step["block"], events)
+    if committed is not None:
+        return committed, False
+    old = _existing(db, s, n)
+    if old is not None and old.submission_id == submission_id:
+        return old, True
+    raise SessionError(409, f"trial {n} was committed concurrently by another submission")
 
 
 def report_due(db: DBSession, s: Session, cfg: dict[str, Any]) -> int | None:

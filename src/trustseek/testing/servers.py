@@ -19,6 +19,13 @@ from pathlib import Path
 
 import httpx
 
+from ..errors import TrustseekError
+
+
+class ServerStartError(TrustseekError, RuntimeError):
+    """A server or a PostgreSQL cluster could not be started (a RuntimeError too, as it is a
+    failure of the environment rather than of an input)."""
+
 
 def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
@@ -30,14 +37,14 @@ def wait_ready(url: str, timeout: float = 30.0, proc: subprocess.Popen | None = 
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if proc is not None and proc.poll() is not None:
-            raise RuntimeError(f"the server exited with code {proc.returncode}")
+            raise ServerStartError(f"the server exited with code {proc.returncode}")
         try:
             if httpx.get(f"{url}/api/health", timeout=1.0).status_code == 200:
                 return
         except httpx.TransportError:
             pass
         time.sleep(0.05)
-    raise RuntimeError(f"the server at {url} did not start within {timeout} s")
+    raise ServerStartError(f"the server at {url} did not start within {timeout} s")
 
 
 class ThreadServer:
@@ -90,9 +97,9 @@ def serve_process(db_url: str, token: str, port: int, log: Path | None = None) -
         proc = subprocess.Popen(cmd, stdout=out, stderr=err, env=env)
         try:
             wait_ready(f"http://127.0.0.1:{port}", proc=proc)
-        except RuntimeError as exc:
+        except ServerStartError as exc:
             err.seek(0)
-            raise RuntimeError(f"{exc}\n{err.read().decode(errors='replace')[-4000:]}") from None
+            raise ServerStartError(f"{exc}\n{err.read().decode(errors='replace')[-4000:]}") from None
     return proc
 
 
@@ -130,7 +137,7 @@ class TemporaryPostgres:
     def __init__(self, bindir: Path | None = None):
         found = bindir or postgres_binaries()
         if found is None:
-            raise RuntimeError("PostgreSQL server binaries (initdb, pg_ctl) not found: install Debian's postgresql package")
+            raise ServerStartError("PostgreSQL server binaries (initdb, pg_ctl) not found: install Debian's postgresql package")
         self.bindir: Path = found
         self.prefix: list[str] = []
         self.owner: tuple[int, int] | None = None
@@ -141,7 +148,7 @@ class TemporaryPostgres:
             except KeyError:
                 pw = None
             if runuser is None or pw is None:
-                raise RuntimeError("running as root, PostgreSQL needs the 'postgres' user and runuser to start a cluster")
+                raise ServerStartError("running as root, PostgreSQL needs the 'postgres' user and runuser to start a cluster")
             self.prefix, self.owner = [runuser, "-u", "postgres", "--"], (pw.pw_uid, pw.pw_gid)
         self.root: Path | None = None
         self.started = False
@@ -152,7 +159,7 @@ class TemporaryPostgres:
         if res.returncode != 0:
             log = None if self.root is None else self.root / "server.log"
             tail = log.read_text(errors="replace")[-2000:] if log is not None and log.exists() else ""
-            raise RuntimeError(f"{Path(cmd[0]).name} failed with code {res.returncode}:\n{res.stdout}{res.stderr}{tail}")
+            raise ServerStartError(f"{Path(cmd[0]).name} failed with code {res.returncode}:\n{res.stdout}{res.stderr}{tail}")
 
     def start(self) -> str:
         root = self.root = Path(tempfile.mkdtemp(prefix="trustseek-pg-"))
