@@ -27,7 +27,7 @@ from .pomdp.problem import AssistancePOMDP
 from .model.presets import load_model, load_task, paper_model, paper_task
 from .solvers.grid import GridSolver, solve
 
-__version__ = "0.1.0"
+from .version import __version__ as __version__
 
 __all__ = [
     "ACTIONS",

@@ -62,8 +62,13 @@ def _check(r: httpx.Response) -> Any:
 class Client:
     """The experimenter's handle on a server (``token`` = the experimenter token)."""
 
-    def __init__(self, base_url: str = "http://127.0.0.1:8000", token: str | None = None, timeout: float = 30.0,
-                 http: httpx.Client | None = None):
+    def __init__(
+        self,
+        base_url: str = "http://127.0.0.1:8000",
+        token: str | None = None,
+        timeout: float = 30.0,
+        http: httpx.Client | None = None,
+    ):
         self.base_url = base_url.rstrip("/")
         self.token = token
         self._owns_http = http is None
@@ -73,7 +78,7 @@ class Client:
         if self._owns_http:
             self.http.close()
 
-    def __enter__(self) -> "Client":
+    def __enter__(self) -> Client:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -96,9 +101,8 @@ class Client:
         JSON: ``task`` and ``model`` may be paths to task / trust-model JSON files (anything
         that is not a preset name and ends in ``.json``), and a block's ``policy`` may be the
         path of a policy JSON written by ``trustseek solve --out``."""
-        if isinstance(config, (str, Path)):
-            config = _read_json(config)
-        config = dict(config)
+        raw = _read_json(config) if isinstance(config, (str, Path)) else config
+        config = dict(raw)
         for key in ("task", "model"):
             v = config.get(key)
             if isinstance(v, Path) or (isinstance(v, str) and v.endswith(".json")):
@@ -134,8 +138,14 @@ class Client:
         return data
 
     # -- deploy ------------------------------------------------------------
-    def open_deploy(self, model: str | dict = "paper", policy: dict | None = None, task: str | dict = "paper",
-                    label: str = "robot", seed: int = 0) -> "DeploySession":
+    def open_deploy(
+        self,
+        model: str | dict = "paper",
+        policy: dict | None = None,
+        task: str | dict = "paper",
+        label: str = "robot",
+        seed: int = 0,
+    ) -> DeploySession:
         """Open a decision session for a robot.  ``policy`` is a spec such as
         ``{"kind": "trust-aware"}`` / ``{"kind": "trust-agnostic"}`` or a full policy JSON."""
         body = {"model": model, "task": task, "policy": policy or {"kind": "trust-aware"}, "label": label, "seed": seed}
@@ -159,7 +169,7 @@ class DeploySession:
         self.action: str | None = None
 
     @classmethod
-    def resume(cls, base_url: str, session_id: str, token: str, timeout: float = 30.0) -> "DeploySession":
+    def resume(cls, base_url: str, session_id: str, token: str, timeout: float = 30.0) -> DeploySession:
         """Reconnect to an existing deploy session (e.g. after the robot restarted)."""
         self = cls(httpx.Client(base_url=base_url.rstrip("/"), timeout=timeout), {"session_id": session_id, "token": token})
         st = self.state()
@@ -172,7 +182,13 @@ class DeploySession:
     def decide(self, complexity: str, trial: int | None = None) -> str:
         """The robot action (``autonomous`` or ``ask``) for the next trial of this complexity."""
         n = self.trial + 1 if trial is None else trial
-        out = _check(self.http.post(f"/api/deploy/sessions/{self.session_id}/decide", json={"trial": n, "complexity": complexity}, headers=self._auth()))
+        out = _check(
+            self.http.post(
+                f"/api/deploy/sessions/{self.session_id}/decide",
+                json={"trial": n, "complexity": complexity},
+                headers=self._auth(),
+            )
+        )
         self.action = out["robot_action"]
         return self.action
 

@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
-from . import __version__
 from .model.presets import paper_model
 from .reproduction.pipeline import AGNOSTIC, AWARE, PAPER, Reproduction, write_summary
+from .version import __version__
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 
@@ -25,10 +25,24 @@ FIGURES = [
     ("fig4_emissions.png", "fit", "Fig. 4 equivalent: fitted P(o | T, C, a), with the paper's values as markers."),
     ("fig5_6_transitions.png", "fit", "Figs. 5–6 equivalent: fitted P(T' | T, E', C, a), with the paper's values as markers."),
     ("fig7_q.png", "plan", "Fig. 7 equivalent: Q(b, C, a) of the fitted model's belief MDP; the dotted line is the threshold."),
-    ("fig8_rewards.png", "experiment2", "Fig. 8 equivalent: cumulative reward per block and policy; (a) the paper-sized experiment, lines join each participant's two blocks; (b) the large-N experiment. Diamonds: the paper's medians."),
-    ("replicates.png", "replicates", "Distributions over replicate experiments of the estimated threshold and of the aware − agnostic reward difference."),
+    (
+        "fig8_rewards.png",
+        "experiment2",
+        "Fig. 8 equivalent: cumulative reward per block and policy; (a) the paper-sized experiment, lines join each "
+        "participant's two blocks; (b) the large-N experiment. Diamonds: the paper's medians.",
+    ),
+    (
+        "replicates.png",
+        "replicates",
+        "Distributions over replicate experiments of the estimated threshold and of the aware − agnostic reward difference.",
+    ),
     ("policies.png", "costs", "Mean cumulative reward per block of each policy on the same simulated participants."),
-    ("remark1.png", "remark1", "Remark 1: heterogeneous supervisors by quartile of conservativeness, under the pooled trust-aware and trust-agnostic policies."),
+    (
+        "remark1.png",
+        "remark1",
+        "Remark 1: heterogeneous supervisors by quartile of conservativeness, under the pooled trust-aware and "
+        "trust-agnostic policies.",
+    ),
 ]
 
 
@@ -41,13 +55,14 @@ def fmt(v: Any) -> str:
     if isinstance(v, (int, np.integer)):
         return f"{v:,}"
     if isinstance(v, (float, np.floating)):
-        if not np.isfinite(v):
+        x = float(v)
+        if not np.isfinite(x):
             return "–"
-        if float(v).is_integer() and abs(v) < 1e6:
-            return f"{int(v)}"
-        if abs(v) >= 100:
-            return f"{v:.1f}"
-        return f"{v:.3g}" if abs(v) < 0.01 else f"{v:.3f}".rstrip("0").rstrip(".") if abs(v) < 1 else f"{v:.2f}"
+        if x.is_integer() and abs(x) < 1e6:
+            return f"{int(x)}"
+        if abs(x) >= 100:
+            return f"{x:.1f}"
+        return f"{x:.3g}" if abs(x) < 0.01 else f"{x:.3f}".rstrip("0").rstrip(".") if abs(x) < 1 else f"{x:.2f}"
     return str(v)
 
 
@@ -96,7 +111,11 @@ def make_figures(rep: Reproduction, out: Path) -> list[Path]:
     )
     paths.append(p)
     p = out / "policies.png"
-    plot_policy_values(s["costs"]["rows"], p, title=f"{s['costs']['participants']:,} simulated participants, one block of {s['costs']['trials_per_block']} trials")
+    plot_policy_values(
+        s["costs"]["rows"],
+        p,
+        title=f"{s['costs']['participants']:,} simulated participants, one block of {s['costs']['trials_per_block']} trials",
+    )
     paths.append(p)
     p = out / "remark1.png"
     plot_heterogeneity(s["heterogeneity"]["quartiles"], p)

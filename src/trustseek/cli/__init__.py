@@ -2,7 +2,8 @@
 
 Each module registers its commands on the shared Typer ``app``.  ``main`` turns
 every :class:`~trustseek.errors.TrustseekError` into one clear line per problem
-on stderr and exit code 2, never a traceback.
+on stderr and exit code 2, never a traceback; so is a command that needs an optional
+extra (``server``, ``plots``) which is not installed.
 """
 
 from __future__ import annotations
@@ -13,21 +14,59 @@ from rich.markup import escape
 
 from ..errors import TrustseekError
 from ._app import app, err_console
-# the import order is the order of the help panels
-from . import simulate  # noqa: F401  (simulate, reproduce)
-from . import fit  # noqa: F401  (fit, decode, select)
-from . import plan  # noqa: F401  (solve, agnostic, plot-q; preset, check)
-from . import interop  # noqa: F401  (export-pomdp, solve-pomdp-file)
-from . import serve  # noqa: F401  (serve, export)
+
+# the modules that register the commands; the import order is the order of the help panels
+# isort: off
+from . import simulate  # simulate, reproduce
+from . import fit  # fit, decode, select
+from . import plan  # solve, agnostic, plot-q; preset, check
+from . import interop  # export-pomdp, solve-pomdp-file
+from . import serve  # serve, export
+# isort: on
+
+COMMAND_MODULES = (simulate, fit, plan, interop, serve)
+
+#: the optional extras of pyproject.toml, by the top-level module of each of their packages
+EXTRAS = {
+    "fastapi": "server",
+    "uvicorn": "server",
+    "sqlalchemy": "server",
+    "alembic": "server",
+    "httpx": "server",
+    "psycopg": "server",
+    "matplotlib": "plots",
+    "jinja2": "plots",
+}
+
+
+def missing_extra(exc: ModuleNotFoundError) -> TrustseekError | None:
+    """The error to show when ``exc`` is a package of an optional extra that is not installed;
+    None when it is not (then it is a bug, and its traceback is what to see)."""
+    module = (exc.name or "").partition(".")[0]
+    extra = EXTRAS.get(module)
+    if extra is None:
+        return None
+    return TrustseekError(
+        [f"this command needs the optional {extra!r} dependencies ({module} is not installed): pip install 'trustseek[{extra}]'"]
+    )
 
 
 def main() -> None:
     try:
         app(standalone_mode=True)
     except TrustseekError as exc:
-        for line in exc.lines():
-            err_console.print(f"[bold red]error:[/] {escape(line)}", highlight=False, soft_wrap=True)
-        sys.exit(2)
+        _exit_with(exc)
+    except ModuleNotFoundError as exc:
+        error = missing_extra(exc)
+        if error is None:
+            raise
+        _exit_with(error)
     except KeyboardInterrupt:
         err_console.print("interrupted")
         sys.exit(130)
+
+
+def _exit_with(error: TrustseekError) -> None:
+    for line in error.lines():
+        err_console.print(f"[bold red]error:[/] {escape(line)}", highlight=False, soft_wrap=True)
+    sys.exit(2)

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import gc
 import ipaddress
+import logging
 import os
 import secrets
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -17,18 +17,34 @@ from ._app import app, console, print_json
 
 def _check_db(db: str) -> str:
     if "://" not in db:
-        raise TrustseekError([f"--db must be a database URL such as sqlite:///study.sqlite or postgresql://user@host/db, got {db!r}"])
+        raise TrustseekError(
+            [f"--db must be a database URL such as sqlite:///study.sqlite or postgresql://user@host/db, got {db!r}"]
+        )
     return db
 
 
 @app.command(rich_help_panel="Experiments")
 def serve(
-    db: str = typer.Option("sqlite:///trustseek.sqlite", "--db", help="Database URL: a SQLite file (default) or postgresql://..."),
+    db: str = typer.Option(
+        "sqlite:///trustseek.sqlite", "--db", help="Database URL: a SQLite file (default) or postgresql://..."
+    ),
     host: str = typer.Option("127.0.0.1", "--host", help="Address to listen on."),
     port: int = typer.Option(8000, "--port", min=0, max=65535, help="Port to listen on."),
-    token: Optional[str] = typer.Option(None, "--token", envvar="TRUSTSEEK_TOKEN", help="Experimenter token (default: $TRUSTSEEK_TOKEN, else a random one, printed)."),
-    public_url: Optional[str] = typer.Option(None, "--public-url", help="Base URL used in participant links (default: the request's)."),
-    log_level: str = typer.Option("warning", "--log-level", help="uvicorn log level."),
+    token: str | None = typer.Option(
+        None,
+        "--token",
+        envvar="TRUSTSEEK_TOKEN",
+        help="Experimenter token (default: $TRUSTSEEK_TOKEN, else a random one, printed).",
+    ),
+    public_url: str | None = typer.Option(
+        None, "--public-url", help="Base URL used in participant links (default: the request's)."
+    ),
+    log_level: str = typer.Option(
+        "warning",
+        "--log-level",
+        help="uvicorn log level; trustseek's own log (studies, sessions, refused requests) goes to stderr at info, "
+        "or debug with --log-level debug.",
+    ),
 ) -> None:
     """Run the experiment server: participant interface, dashboard, experimenter and deploy APIs.
 
@@ -42,6 +58,7 @@ def serve(
     if token is not None and len(token) < 8:
         raise TrustseekError(["--token must be at least 8 characters"])
     token = token or secrets.token_urlsafe(24)
+    log_to_stderr(log_level)
     application = create_app(db, token=token, public_url=public_url)
     try:
         loopback = ipaddress.ip_address(host).is_loopback
@@ -62,12 +79,23 @@ def serve(
     uvicorn.run(application, host=host, port=port, log_level=log_level, access_log=False)
 
 
+def log_to_stderr(level: str) -> None:
+    """Show the ``trustseek`` loggers on stderr: INFO and above, or ``level`` if it is lower."""
+    handler = logging.StreamHandler()
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    logger = logging.getLogger("trustseek")
+    logger.addHandler(handler)
+    logger.setLevel(min(logging.INFO, logging.getLevelNamesMapping().get(level.upper(), logging.INFO)))
+
+
 @app.command("export", rich_help_panel="Experiments")
 def export_cmd(
     study: str = typer.Argument(..., help="Study id."),
     db: str = typer.Option("sqlite:///trustseek.sqlite", "--db", help="Database URL."),
-    out: Path = typer.Option(..., "--out", "-o", help="Trial log to write (.csv or .parquet): the canonical format `trustseek fit` reads."),
-    events: Optional[Path] = typer.Option(None, "--events", help="Also write the UI events table (.csv or .parquet)."),
+    out: Path = typer.Option(
+        ..., "--out", "-o", help="Trial log to write (.csv or .parquet): the canonical format `trustseek fit` reads."
+    ),
+    events: Path | None = typer.Option(None, "--events", help="Also write the UI events table (.csv or .parquet)."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ) -> None:
     """Export a study's trials (canonical trial log) and, optionally, its UI events."""
@@ -91,10 +119,18 @@ def export_cmd(
             ev = events_frame(s, st)
             write_frame(ev, events, trials=False)
             n_events = len(ev)
-    summary = {"study": study, "trials": len(trials), "participants": int(trials["participant"].nunique()), "out": str(out),
-               "events": n_events, "events_out": None if events is None else str(events)}
+    summary = {
+        "study": study,
+        "trials": len(trials),
+        "participants": int(trials["participant"].nunique()),
+        "out": str(out),
+        "events": n_events,
+        "events_out": None if events is None else str(events),
+    }
     if as_json:
         print_json(summary)
     else:
-        console.print(f"wrote {summary['trials']} trials of {summary['participants']} participants to {out}"
-                      + (f"; {n_events} events to {events}" if events is not None else ""))
+        console.print(
+            f"wrote {summary['trials']} trials of {summary['participants']} participants to {out}"
+            + (f"; {n_events} events to {events}" if events is not None else "")
+        )

@@ -16,9 +16,10 @@ from __future__ import annotations
 import json
 import math
 import tomllib
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -74,7 +75,7 @@ class ColumnMapping:
             return tuple(self.complexities or DEFAULT_COMPLEXITIES)
         return {"robot_action": ACTIONS, "human_action": HUMAN_ACTIONS, "experience": EXPERIENCES}[column]
 
-    def merged(self, other: "ColumnMapping") -> "ColumnMapping":
+    def merged(self, other: ColumnMapping) -> ColumnMapping:
         """This mapping overridden by ``other`` (e.g. a file overridden by command-line flags)."""
         labels = {k: dict(v) for k, v in self.labels.items()}
         for k, v in other.labels.items():
@@ -88,7 +89,7 @@ class ColumnMapping:
         return d
 
     @classmethod
-    def from_dict(cls, d: Any, source: str | None = None) -> "ColumnMapping":
+    def from_dict(cls, d: Any, source: str | None = None) -> ColumnMapping:
         if not isinstance(d, Mapping):
             raise DataError(["a mapping must be an object with 'columns' and/or 'labels'"], source)
         unknown = set(d) - {"columns", "labels", "complexities"}
@@ -116,7 +117,7 @@ class ColumnMapping:
         return m
 
     @classmethod
-    def load(cls, path: str | Path) -> "ColumnMapping":
+    def load(cls, path: str | Path) -> ColumnMapping:
         """A mapping file: JSON (``.json``) or TOML (``.toml``)."""
         path = Path(path)
         try:
@@ -130,7 +131,7 @@ class ColumnMapping:
         return cls.from_dict(d, str(path))
 
     @classmethod
-    def from_flags(cls, columns: Iterable[str] = (), labels: Iterable[str] = (), file: str | Path | None = None) -> "ColumnMapping":
+    def from_flags(cls, columns: Iterable[str] = (), labels: Iterable[str] = (), file: str | Path | None = None) -> ColumnMapping:
         """Command-line flags: ``--column canonical=theirs`` and ``--label column:theirs=canonical``."""
         base = cls.load(file) if file else cls()
         problems = []
@@ -281,10 +282,11 @@ def read_trials(
         else:
             try:
                 f = float(v)
-                if not f.is_integer() or f < 1:
-                    raise ValueError
-                trial[i] = int(f)
             except ValueError:
+                f = math.nan
+            if f.is_integer() and f >= 1:
+                trial[i] = int(f)
+            else:
                 add(i, "trial", f"value {v!r} is not an integer >= 1")
     # categories
     for c in CATEGORICAL:
@@ -302,7 +304,8 @@ def read_trials(
                 vals.append(None)
                 continue
             if v == "\x00nan":
-                add(i, c, f"value is NaN (expected one of {list(allowed)}{'; leave the cell empty for not recorded' if c == 'human_action' else ''})")
+                hint = "; leave the cell empty for not recorded" if c == "human_action" else ""
+                add(i, c, f"value is NaN (expected one of {list(allowed)}{hint})")
                 vals.append(None)
                 continue
             label = table.get(v, v) if table else v
@@ -322,9 +325,12 @@ def read_trials(
     for p, idx in frame.groupby("participant", sort=False).indices.items():
         t = trial[idx]
         seen: dict[int, int] = {}
-        for i, tv in zip(idx, t):
+        for i, tv in zip(idx, t, strict=True):
             if tv in seen:
-                problems.append(f"{where(i)}, column {theirs['trial']!r}: duplicate trial index {tv} for participant {p!r} (first at {where(seen[tv])})")
+                problems.append(
+                    f"{where(i)}, column {theirs['trial']!r}: duplicate trial index {tv} for participant {p!r} "
+                    f"(first at {where(seen[tv])})"
+                )
             else:
                 seen[int(tv)] = int(i)
         expected = set(range(1, len(seen) + 1))

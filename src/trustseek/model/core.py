@@ -26,19 +26,33 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 from ..errors import TrustseekError
-
 from ..vocab import ACTIONS, ASK, AUTONOMOUS, EXPERIENCES, FAULTY, HUMAN_ACTIONS, INTERVENE, RELIABLE, RELY
 
 __all__ = [  # the vocabulary is re-exported for convenience
-    "ACTIONS", "ASK", "AUTONOMOUS", "EXPERIENCES", "FAULTY", "HUMAN_ACTIONS", "INTERVENE", "RELIABLE", "RELY",
-    "ModelError", "Rewards", "Task", "TrustModel", "json_safe", "load_json",
+    "ACTIONS",
+    "ASK",
+    "AUTONOMOUS",
+    "EXPERIENCES",
+    "FAULTY",
+    "HUMAN_ACTIONS",
+    "INTERVENE",
+    "RELIABLE",
+    "RELY",
+    "ModelError",
+    "Rewards",
+    "Task",
+    "TrustModel",
+    "UnknownComplexityError",
+    "json_safe",
+    "load_json",
 ]
 
 ATOL = 1e-9  # tolerance for a probability row to sum to one
@@ -49,6 +63,11 @@ TASK_FORMAT = "trustseek.task/1"
 
 class ModelError(TrustseekError, ValueError):
     """A model, task or policy file is malformed.  ``problems`` lists every violation."""
+
+
+class UnknownComplexityError(ModelError, KeyError):
+    """A complexity name that the model or task does not have (a ``KeyError`` too: it is a
+    failed lookup by name)."""
 
 
 # --------------------------------------------------------------------------- helpers
@@ -83,9 +102,7 @@ def _check_names(names: Any, what: str, problems: list[str], minimum: int = 2) -
     return names
 
 
-def _read_row(
-    obj: Any, keys: Sequence[str], label: str, problems: list[str]
-) -> np.ndarray | None:
+def _read_row(obj: Any, keys: Sequence[str], label: str, problems: list[str]) -> np.ndarray | None:
     """Read a probability row {key: p} and validate it; returns None if unusable."""
     if not isinstance(obj, Mapping):
         problems.append(f"{label} must be an object mapping {list(keys)} to probabilities, got {obj!r}")
@@ -202,7 +219,7 @@ def load_json(path: str | Path) -> tuple[Any, str]:
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise ModelError([f"file not found"], str(path)) from None
+        raise ModelError(["file not found"], str(path)) from None
     except OSError as exc:
         raise ModelError([f"cannot read file: {exc.strerror}"], str(path)) from None
     try:
@@ -286,7 +303,7 @@ class TrustModel:
         try:
             return self.complexities.index(name)
         except ValueError:
-            raise KeyError(f"unknown complexity {name!r}; expected one of {list(self.complexities)}") from None
+            raise UnknownComplexityError([f"unknown complexity {name!r}; expected one of {list(self.complexities)}"]) from None
 
     def p_intervene(self, belief: np.ndarray, c: int, a: int) -> float:
         """P(o = intervene | belief, C = c, a) for a belief vector over trust levels."""
@@ -306,14 +323,16 @@ class TrustModel:
         }
 
     @classmethod
-    def from_dict(cls, d: Any, source: str | None = None) -> "TrustModel":
+    def from_dict(cls, d: Any, source: str | None = None) -> TrustModel:
         problems: list[str] = []
         if not isinstance(d, Mapping):
             raise ModelError([f"a trust model must be a JSON object, got {type(d).__name__}"], source)
         fmt = d.get("format", MODEL_FORMAT)
         if fmt != MODEL_FORMAT:
             problems.append(f"format is {fmt!r}, expected {MODEL_FORMAT!r}")
-        _unknown_keys(d, ["format", "notes", "trust_levels", "complexities", "initial", "emission", "transition"], "model", problems)
+        _unknown_keys(
+            d, ["format", "notes", "trust_levels", "complexities", "initial", "emission", "transition"], "model", problems
+        )
         T = _check_names(_get(d, "trust_levels", "trust_levels", problems), "trust_levels", problems)
         C = _check_names(_get(d, "complexities", "complexities", problems), "complexities", problems)
         if problems or not T or not C:
@@ -346,19 +365,19 @@ class TrustModel:
         Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
 
     @classmethod
-    def load(cls, path: str | Path) -> "TrustModel":
+    def load(cls, path: str | Path) -> TrustModel:
         d, source = load_json(path)
         return cls.from_dict(d, source)
 
-    def replace(self, **changes: Any) -> "TrustModel":
-        kw = dict(
-            trust_levels=self.trust_levels,
-            complexities=self.complexities,
-            initial=self.initial,
-            emission=self.emission,
-            transition=self.transition,
-            notes=self.notes,
-        )
+    def replace(self, **changes: Any) -> TrustModel:
+        kw: dict[str, Any] = {
+            "trust_levels": self.trust_levels,
+            "complexities": self.complexities,
+            "initial": self.initial,
+            "emission": self.emission,
+            "transition": self.transition,
+            "notes": self.notes,
+        }
         kw.update(changes)
         return TrustModel(**kw)
 
@@ -457,7 +476,7 @@ class Task:
         try:
             return self.complexities.index(name)
         except ValueError:
-            raise KeyError(f"unknown complexity {name!r}; expected one of {list(self.complexities)}") from None
+            raise UnknownComplexityError([f"unknown complexity {name!r}; expected one of {list(self.complexities)}"]) from None
 
     def p_experience(self, c: int, a: int, o: int) -> np.ndarray:
         """P(E_{t+1} | o_t, C_t = c, a_t = a) as a length-2 array over (faulty, reliable)."""
@@ -513,7 +532,7 @@ class Task:
         }
 
     @classmethod
-    def from_dict(cls, d: Any, source: str | None = None) -> "Task":
+    def from_dict(cls, d: Any, source: str | None = None) -> Task:
         problems: list[str] = []
         if not isinstance(d, Mapping):
             raise ModelError([f"a task must be a JSON object, got {type(d).__name__}"], source)
@@ -578,7 +597,7 @@ class Task:
         Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
 
     @classmethod
-    def load(cls, path: str | Path) -> "Task":
+    def load(cls, path: str | Path) -> Task:
         d, source = load_json(path)
         return cls.from_dict(d, source)
 

@@ -1,21 +1,29 @@
 """Figures in the style of the paper (matplotlib, Agg backend, no display needed).
 
 ``style()`` is the shared look: serif fonts, thin axes, the paper's two colours.
-Each figure lives in its own module: ``q`` (Fig. 7).
+Each family of figures lives in its own module: ``model`` (Figs. 4-6, the fitted trust
+model), ``q`` (Fig. 7, the belief MDP's Q-values), ``rewards`` (Fig. 8 and the replicate,
+policy-comparison and heterogeneity figures).
 """
 
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Iterator
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.pyplot as plt
+
+if TYPE_CHECKING:
+    from matplotlib.typing import RcKeyType
 
 COLORS = {"autonomous": "#1f5fa8", "ask": "#c8102e", "low": "#c8102e", "high": "#1f5fa8"}
 
-RC = {
+RC: dict[RcKeyType, Any] = {
     "font.family": "serif",
     "font.serif": ["DejaVu Serif"],
     "font.size": 9,
@@ -36,7 +44,8 @@ RC = {
 
 
 @contextlib.contextmanager
-def style():
+def style() -> Iterator[ModuleType]:
+    """``pyplot`` with the paper's look, restored on exit."""
     with plt.rc_context(RC):
         yield plt
 

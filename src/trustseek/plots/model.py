@@ -10,8 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.core import ACTIONS, EXPERIENCES, RELY
-from . import save
-from . import style
+from . import save, style
 
 _LEVEL_COLORS = ("#c8102e", "#1f5fa8", "#2a9d3f", "#7b3294", "#e08214", "#666666", "#000000", "#8c510a")
 
@@ -65,10 +64,12 @@ def plot_transitions(model, path=None, ci=None, reference=None):
     for c in range(len(C)):
         groups = [(a, e) for a in range(2) for e in range(2)]
         panels.append((c, groups))
-    ref_ok = reference is not None and reference.trust_levels == model.trust_levels and reference.complexities == model.complexities
+    ref_ok = (
+        reference is not None and reference.trust_levels == model.trust_levels and reference.complexities == model.complexities
+    )
     with style() as plt:
         fig, axes = plt.subplots(1, len(C), figsize=(3.4 * len(C), 2.7), squeeze=False)
-        for ax, (c, groups) in zip(axes[0], panels):
+        for ax, (c, groups) in zip(axes[0], panels, strict=True):
             vals = np.array([[model.transition[c, a, e, t, top] for t in range(len(T))] for a, e in groups])
             lo = hi = ref = None
             if ci is not None:

@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import COLORS
-from . import save
-from . import style
+from . import COLORS, save, style
 
 
 def plot_q(policy, path=None, title: str | None = None):

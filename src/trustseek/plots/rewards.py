@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from . import COLORS
-from . import save
-from . import style
+from . import COLORS, save, style
 
 POLICY_COLORS = {"trust-agnostic": "#7f7f7f", "trust-aware": COLORS["autonomous"]}
 
@@ -25,7 +23,7 @@ def _box(ax, data: Sequence[np.ndarray], labels: Sequence[str], colors: Sequence
         flierprops={"marker": ".", "markersize": 2, "alpha": 0.3, "markeredgecolor": "0.4"},
     )
     ax.set_xticks(range(1, len(labels) + 1), labels)
-    for patch, col in zip(bp["boxes"], colors):
+    for patch, col in zip(bp["boxes"], colors, strict=True):
         patch.set_facecolor(col)
         patch.set_alpha(0.35)
         patch.set_edgecolor(col)
@@ -70,8 +68,16 @@ def plot_rewards(
             if paper_medians:
                 for j, k in enumerate(order):
                     if k in paper_medians:
-                        ax.scatter([j + 1], [paper_medians[k]], marker="D", s=22, facecolor="none", edgecolor=COLORS["ask"],
-                                   linewidth=1.0, zorder=4)
+                        ax.scatter(
+                            [j + 1],
+                            [paper_medians[k]],
+                            marker="D",
+                            s=22,
+                            facecolor="none",
+                            edgecolor=COLORS["ask"],
+                            linewidth=1.0,
+                            zorder=4,
+                        )
             ax.set_ylabel("cumulative reward per block")
             ax.set_xlim(0.5, len(order) + 0.7)
             ax.set_title(f"{'(a)' if paired else '(b)'} {n:,} simulated participants")
@@ -80,9 +86,16 @@ def plot_rewards(
             from matplotlib.lines import Line2D
 
             handle = Line2D([], [], marker="D", ls="none", markersize=5, markerfacecolor="none", markeredgecolor=COLORS["ask"])
-            med = Line2D([], [], color="black", lw=1.2)
-            fig.legend([med, handle], ["median (simulation)", "median reported in the paper"], loc="lower center",
-                       ncols=2, frameon=False, fontsize=7, bbox_to_anchor=(0.5, 0.0))
+            median_line = Line2D([], [], color="black", lw=1.2)
+            fig.legend(
+                [median_line, handle],
+                ["median (simulation)", "median reported in the paper"],
+                loc="lower center",
+                ncols=2,
+                frameon=False,
+                fontsize=7,
+                bbox_to_anchor=(0.5, 0.0),
+            )
             fig.tight_layout(rect=(0, 0.06, 1, 1))
         else:
             fig.tight_layout()
@@ -128,9 +141,18 @@ def plot_replicates(
             v = v[np.isfinite(v)]
             if not len(v):
                 continue
-            ax.boxplot([v], positions=[y], orientation="horizontal", widths=0.5, showfliers=False, patch_artist=True,
-                       boxprops={"facecolor": col, "alpha": 0.25, "edgecolor": col}, medianprops={"color": "black"},
-                       whiskerprops={"lw": 0.8}, capprops={"lw": 0.8})
+            ax.boxplot(
+                [v],
+                positions=[y],
+                orientation="horizontal",
+                widths=0.5,
+                showfliers=False,
+                patch_artist=True,
+                boxprops={"facecolor": col, "alpha": 0.25, "edgecolor": col},
+                medianprops={"color": "black"},
+                whiskerprops={"lw": 0.8},
+                capprops={"lw": 0.8},
+            )
             jit = np.random.default_rng(0).uniform(-0.12, 0.12, len(v))
             ax.scatter(v, y + jit, s=10, color=col, edgecolor="black", linewidth=0.3, zorder=3)
         ax.axvline(paper_difference, color=COLORS["ask"], ls="--", lw=1.0, label=f"paper: {paper_difference:g} (57 − 51)")
@@ -158,7 +180,7 @@ def plot_policy_values(rows: Sequence[Mapping], path=None, title: str | None = N
         groups = sorted({r.get("group", "") for r in rows})
         palette = [COLORS["autonomous"], "#7f7f7f", COLORS["ask"], "#2a9d8f"]
         gcol = {g: palette[i % len(palette)] for i, g in enumerate(groups)}
-        for yi, r in zip(y, rows):
+        for yi, r in zip(y, rows, strict=True):
             col = gcol[r.get("group", "")]
             ax.barh(yi, r["mean"], color=col, alpha=0.45, height=0.62, edgecolor=col)
             ax.errorbar(r["mean"], yi, xerr=[[r["mean"] - r["lo"]], [r["hi"] - r["mean"]]], color="black", lw=0.8, capsize=2)
@@ -184,8 +206,14 @@ def plot_heterogeneity(quartiles: Sequence[Mapping], path=None, score: str = "")
     w = 0.36
     with style() as plt:
         fig, axes = plt.subplots(1, 2, figsize=(6.8, 2.5))
-        for ax, (ka, kg, ylabel) in zip(axes, [("mean_aware", "mean_agnostic", "mean cumulative reward per block"),
-                                               ("interventions_aware", "interventions_agnostic", "interventions per block")]):
+        for ax, (ka, kg, ylabel) in zip(
+            axes,
+            [
+                ("mean_aware", "mean_agnostic", "mean cumulative reward per block"),
+                ("interventions_aware", "interventions_agnostic", "interventions per block"),
+            ],
+            strict=True,
+        ):
             va = [r[ka] for r in quartiles]
             vg = [r[kg] for r in quartiles]
             if ka == "mean_aware":  # levels close together: points, not bars on a cut axis

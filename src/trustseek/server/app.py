@@ -2,41 +2,22 @@
 
 from __future__ import annotations
 
+import logging
 import secrets
-import time
 from pathlib import Path
 
 from fastapi import FastAPI, HTTPException
 from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 
-from .. import __version__
-from .db import DEFAULT_URL, open_database
+from ..version import __version__
+from .db import DEFAULT_URL, open_database, safe_url
+from .middleware import RequestLog, ServerTiming
 from .routes import deploy, experimenter, own, participant
 
 STATIC = Path(__file__).resolve().parent.parent / "static" / "app"
 
-
-class ServerTiming:
-    """ASGI middleware: every response carries ``Server-Timing: app;dur=<ms>``, the time from
-    the request reaching the application to its response headers (routing, authentication,
-    validation, the handler with its database transaction, serialization)."""
-
-    def __init__(self, app):
-        self.app = app
-
-    async def __call__(self, scope, receive, send):
-        if scope["type"] != "http":
-            return await self.app(scope, receive, send)
-        t0 = time.perf_counter()
-
-        async def timed(message):
-            if message["type"] == "http.response.start":
-                dur = f"app;dur={(time.perf_counter() - t0) * 1000:.3f}".encode()
-                message["headers"] = [*message.get("headers", ()), (b"server-timing", dur)]
-            await send(message)
-
-        await self.app(scope, receive, timed)
+log = logging.getLogger(__name__)
 
 
 def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: str | None = None) -> FastAPI:
@@ -53,6 +34,7 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     app.state.token = token or secrets.token_urlsafe(24)
     app.state.public_url = public_url
     app.state.tokens = {}  # session token -> Caller
+    app.add_middleware(RequestLog)
     app.add_middleware(ServerTiming)
     app.include_router(deploy)  # first: the decision API is matched without trying the others
     app.include_router(experimenter)
@@ -81,9 +63,12 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     def health():
         return {"status": "ok", "version": __version__}
 
+    log.info("trustseek %s experiment server: database %s", __version__, safe_url(db_url))
     if STATIC.exists():
         app.mount("/static/app", StaticFiles(directory=STATIC), name="static")
     else:
+        log.warning("the web front end is not built (%s is missing): run scripts/setup.sh", STATIC)
+
         @app.get("/static/app/{path:path}", include_in_schema=False)
         def no_static(path: str):
             return HTMLResponse("front end not built", status_code=503)

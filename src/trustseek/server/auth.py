@@ -49,7 +49,9 @@ def session_for_token(request: Request, token: str) -> Caller:
     return caller
 
 
-async def require_session(session_id: str, request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)) -> Caller:
+async def require_session(
+    session_id: str, request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)
+) -> Caller:
     """The session named in the path, if the bearer token is that session's token."""
     s = session_for_token(request, token_of(creds))
     if not secrets.compare_digest(s.id.encode(), session_id.encode()):

@@ -88,7 +88,7 @@ def driver_url(url: str) -> str:
     trustseek depends on (SQLAlchemy's own default would be psycopg2)."""
     for scheme in ("postgresql://", "postgres://"):
         if url.startswith(scheme):
-            return "postgresql+psycopg://" + url[len(scheme):]
+            return "postgresql+psycopg://" + url[len(scheme) :]
     return url
 
 
@@ -102,8 +102,8 @@ def make_engine(url: str) -> Engine:
             _checkpoint_in_background(engine)
         else:
             engine = create_engine(url, pool_pre_ping=True, pool_size=20, max_overflow=20)
-    except Exception as exc:  # noqa: BLE001 -- any driver or URL problem becomes one clear line
-        raise DatabaseError([f"cannot use database URL {_safe(url)!r}: {_first_line(exc)}"]) from None
+    except Exception as exc:  # any driver or URL problem becomes one clear line
+        raise DatabaseError([f"cannot use database URL {safe_url(url)!r}: {_first_line(exc)}"]) from None
     return engine
 
 
@@ -115,14 +115,17 @@ def migrate(engine: Engine) -> None:
         with engine.begin() as conn:
             cfg.attributes["connection"] = conn
             command.upgrade(cfg, "head")
-    except Exception as exc:  # noqa: BLE001
-        raise DatabaseError([f"cannot migrate database {engine.url.render_as_string(hide_password=True)}: {_first_line(exc)}"]) from None
+    except Exception as exc:
+        raise DatabaseError(
+            [f"cannot migrate database {engine.url.render_as_string(hide_password=True)}: {_first_line(exc)}"]
+        ) from None
 
 
-def _safe(url: str) -> str:
+def safe_url(url: str) -> str:
+    """The database URL without its password, fit for logs and messages."""
     try:
         return make_url(url).render_as_string(hide_password=True)
-    except Exception:  # noqa: BLE001
+    except Exception:
         return url.split("@")[-1]
 
 

@@ -14,15 +14,28 @@ import io
 from pathlib import Path
 
 import pandas as pd
-
-from ..vocab import TRIAL_COLUMNS
 from sqlalchemy import select
 from sqlalchemy.orm import Session as DBSession
 
+from ..data.trials import write_trials
+from ..vocab import TRIAL_COLUMNS
 from .orm import Event, Report, Session, Study, Trial
 
 CANONICAL = list(TRIAL_COLUMNS)
-EXTRA = ["block", "block_name", "policy", "outcome", "reward", "belief", "belief_after", "effort_ms", "self_report", "study", "session", "committed_at"]
+EXTRA = [
+    "block",
+    "block_name",
+    "policy",
+    "outcome",
+    "reward",
+    "belief",
+    "belief_after",
+    "effort_ms",
+    "self_report",
+    "study",
+    "session",
+    "committed_at",
+]
 EVENT_COLUMNS = ["participant", "session", "trial", "client_time", "server_time", "type", "data"]
 
 
@@ -40,11 +53,23 @@ def trials_frame(db: DBSession, study: Study) -> pd.DataFrame:
     }
     data = [
         {
-            "participant": p, "trial": t.trial, "complexity": t.complexity, "robot_action": t.robot_action,
-            "human_action": t.human_action, "experience": t.experience, "block": t.block + 1,
-            "block_name": names[t.block], "policy": t.policy, "outcome": t.outcome, "reward": t.reward,
-            "belief": t.belief, "belief_after": t.belief_after, "effort_ms": t.effort_ms,
-            "self_report": reports.get((t.session_id, t.trial)), "study": study.id, "session": t.session_id,
+            "participant": p,
+            "trial": t.trial,
+            "complexity": t.complexity,
+            "robot_action": t.robot_action,
+            "human_action": t.human_action,
+            "experience": t.experience,
+            "block": t.block + 1,
+            "block_name": names[t.block],
+            "policy": t.policy,
+            "outcome": t.outcome,
+            "reward": t.reward,
+            "belief": t.belief,
+            "belief_after": t.belief_after,
+            "effort_ms": t.effort_ms,
+            "self_report": reports.get((t.session_id, t.trial)),
+            "study": study.id,
+            "session": t.session_id,
             "committed_at": t.created_at.isoformat() + "Z",
         }
         for t, p in rows
@@ -68,8 +93,13 @@ def events_frame(db: DBSession, study: Study) -> pd.DataFrame:
     ).all()
     data = [
         {
-            "participant": p, "session": e.session_id, "trial": e.trial, "client_time": e.client_time,
-            "server_time": e.created_at.isoformat() + "Z", "type": e.type, "data": e.data,
+            "participant": p,
+            "session": e.session_id,
+            "trial": e.trial,
+            "client_time": e.client_time,
+            "server_time": e.created_at.isoformat() + "Z",
+            "type": e.type,
+            "data": e.data,
         }
         for e, p in rows
     ]
@@ -88,17 +118,12 @@ def to_bytes(frame: pd.DataFrame, fmt: str) -> bytes:
 
 
 def write_frame(frame: pd.DataFrame, path: str | Path, trials: bool = True) -> None:
-    """Write by suffix (.csv or .parquet); trial logs go through ``trustseek.data.write_trials``
-    when that module is present."""
+    """Write by suffix (.csv or .parquet); trial logs go through :func:`trustseek.data.trials.write_trials`
+    (the canonical format), other tables are written as they are."""
     path = Path(path)
     if trials:
-        try:
-            from ..data.trials import write_trials
-        except ImportError:
-            write_trials = None
-        if write_trials is not None:
-            write_trials(frame, path)
-            return
+        write_trials(frame, path)
+        return
     if path.suffix == ".parquet":
         frame.to_parquet(path, index=False)
     else:

@@ -4,22 +4,41 @@ through its token) and deploy (decisions for a real robot)."""
 from __future__ import annotations
 
 import json
+import logging
 import secrets
+from typing import Any
+
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
+from fastapi.security import HTTPAuthorizationCredentials
 from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
-
-from fastapi.security import HTTPAuthorizationCredentials
 
 from .auth import Caller, bearer, require_experimenter, require_session, session_for_token, token_of
 from .export import events_frame, to_bytes, trials_frame
 from .orm import Report, Session, Study, Trial, utcnow
 from .schemas import ConsentIn, DecideIn, DeployIn, EventsIn, ObserveIn, ReportIn, SessionsIn, TrialIn
 from .sessions import (
-    SessionError, add_events, add_report, create_deploy, create_participant, deploy_decide, deploy_observe,
-    committed_trial, lock, new_id, p_high, report_due, serve, study_config, submit_trial, total_trials, trial_dict,
+    SessionError,
+    add_events,
+    add_report,
+    committed_trial,
+    create_deploy,
+    create_participant,
+    deploy_decide,
+    deploy_observe,
+    lock,
+    new_id,
+    p_high,
+    report_due,
+    serve,
+    study_config,
+    submit_trial,
+    total_trials,
+    trial_dict,
 )
 from .studies import ConfigError, StudyIn, build_study_config, load_model_spec, load_task_spec, resolve_policy
+
+log = logging.getLogger(__name__)
 
 experimenter = APIRouter(prefix="/api", tags=["experimenter"], dependencies=[Depends(require_experimenter)])
 participant = APIRouter(prefix="/api/sessions", tags=["participant"])
@@ -52,6 +71,7 @@ def create_study(body: StudyIn, request: Request):
         st = Study(id=new_id(), name=body.name, config=cfg)
         db.add(st)
         db.commit()
+        log.info("study %s created: %r, %d blocks", st.id, st.name, len(cfg["blocks"]))
         return study_summary(db, st)
 
 
@@ -59,12 +79,22 @@ def study_summary(db, st: Study) -> dict:
     n = len(db.scalars(select(Session.id).where(Session.study_id == st.id)).all())
     cfg = st.config
     return {
-        "id": st.id, "name": st.name, "created_at": st.created_at.isoformat() + "Z", "participants": n,
+        "id": st.id,
+        "name": st.name,
+        "created_at": st.created_at.isoformat() + "Z",
+        "participants": n,
         "blocks": [
-            {"name": b["name"], "policy": b["policy"]["kind"], "thresholds": b["policy"].get("thresholds"), "schedule": b["schedule"]}
+            {
+                "name": b["name"],
+                "policy": b["policy"]["kind"],
+                "thresholds": b["policy"].get("thresholds"),
+                "schedule": b["schedule"],
+            }
             for b in cfg["blocks"]
         ],
-        "counterbalance": cfg["counterbalance"], "self_report": cfg["self_report"], "animation_speed": cfg["animation_speed"],
+        "counterbalance": cfg["counterbalance"],
+        "self_report": cfg["self_report"],
+        "animation_speed": cfg["animation_speed"],
     }
 
 
@@ -102,9 +132,16 @@ def create_sessions(study_id: str, body: SessionsIn, request: Request):
             for label in labels:
                 s = create_participant(db, st, label)
                 db.flush()
-                out.append({"participant": s.participant, "session_id": s.id, "token": s.token, "link": _link(request, s),
-                            "block_order": [st.config["blocks"][b]["name"] for b in s.plan["block_order"]],
-                            "trials": total_trials(s)})
+                out.append(
+                    {
+                        "participant": s.participant,
+                        "session_id": s.id,
+                        "token": s.token,
+                        "link": _link(request, s),
+                        "block_order": [st.config["blocks"][b]["name"] for b in s.plan["block_order"]],
+                        "trials": total_trials(s),
+                    }
+                )
         except SessionError as exc:
             db.rollback()
             _fail(exc)
@@ -116,6 +153,7 @@ def create_sessions(study_id: str, body: SessionsIn, request: Request):
         except IntegrityError:
             db.rollback()
             raise HTTPException(409, "a participant id was taken concurrently; retry") from None
+    log.info("study %s: %d participant sessions created", study_id, len(out))
     return out
 
 
@@ -123,29 +161,54 @@ def create_sessions(study_id: str, body: SessionsIn, request: Request):
 def dashboard(study_id: str, request: Request):
     with _db(request) as db:
         st = _study(db, study_id)
-        sessions = db.scalars(select(Session).where(Session.study_id == st.id).order_by(Session.created_at, Session.participant)).all()
+        sessions = db.scalars(
+            select(Session).where(Session.study_id == st.id).order_by(Session.created_at, Session.participant)
+        ).all()
         last = {}
         for t in db.scalars(
-            select(Trial).join(Session, Trial.session_id == Session.id).where(Session.study_id == st.id, Trial.trial == Session.trials_done)
+            select(Trial)
+            .join(Session, Trial.session_id == Session.id)
+            .where(Session.study_id == st.id, Trial.trial == Session.trials_done)
         ):
             last[t.session_id] = trial_dict(t)
         reports = {}
-        for r in db.scalars(select(Report).join(Session, Report.session_id == Session.id).where(Session.study_id == st.id).order_by(Report.after_trial)):
+        for r in db.scalars(
+            select(Report)
+            .join(Session, Report.session_id == Session.id)
+            .where(Session.study_id == st.id)
+            .order_by(Report.after_trial)
+        ):
             reports[r.session_id] = r.value
         rows = []
         for s in sessions:
-            rows.append({
-                "participant": s.participant, "session_id": s.id, "status": s.status, "link": _link(request, s),
-                "trials_done": s.trials_done, "trials_total": total_trials(s), "score": s.score, "belief": p_high(s.belief),
-                "current": None if s.pending_trial is None else {"trial": s.pending_trial, "complexity": s.pending_complexity, "robot_action": s.pending_action},
-                "last": last.get(s.id), "last_self_report": reports.get(s.id), "updated_at": s.updated_at.isoformat() + "Z",
-            })
+            rows.append(
+                {
+                    "participant": s.participant,
+                    "session_id": s.id,
+                    "status": s.status,
+                    "link": _link(request, s),
+                    "trials_done": s.trials_done,
+                    "trials_total": total_trials(s),
+                    "score": s.score,
+                    "belief": p_high(s.belief),
+                    "current": None
+                    if s.pending_trial is None
+                    else {"trial": s.pending_trial, "complexity": s.pending_complexity, "robot_action": s.pending_action},
+                    "last": last.get(s.id),
+                    "last_self_report": reports.get(s.id),
+                    "updated_at": s.updated_at.isoformat() + "Z",
+                }
+            )
         return {"study": study_summary(db, st), "participants": rows, "time": utcnow().isoformat() + "Z"}
 
 
 @experimenter.get("/studies/{study_id}/export", summary="Export trials (canonical trial log) or UI events")
-def export(study_id: str, request: Request, table: str = Query("trials", pattern="^(trials|events)$"),
-           format: str = Query("csv", pattern="^(csv|parquet)$")):
+def export(
+    study_id: str,
+    request: Request,
+    table: str = Query("trials", pattern="^(trials|events)$"),
+    format: str = Query("csv", pattern="^(csv|parquet)$"),
+):
     with _db(request) as db:
         st = _study(db, study_id)
         frame = trials_frame(db, st) if table == "trials" else events_frame(db, st)
@@ -167,11 +230,20 @@ def session_state(request: Request, s_id: str) -> dict:
         due = report_due(db, s, cfg)
         blocks = s.plan["block_order"]
         return {
-            "session_id": s.id, "participant": s.participant, "status": s.status, "study": cfg["name"],
-            "trials_total": total_trials(s), "trials_done": s.trials_done, "score": s.score,
-            "blocks": [cfg["blocks"][b]["name"] for b in blocks], "current": current, "report_due": due,
-            "self_report": cfg["self_report"], "animation_speed": cfg["animation_speed"],
-            "consent_text": cfg.get("consent_text"), "instructions": cfg.get("instructions"),
+            "session_id": s.id,
+            "participant": s.participant,
+            "status": s.status,
+            "study": cfg["name"],
+            "trials_total": total_trials(s),
+            "trials_done": s.trials_done,
+            "score": s.score,
+            "blocks": [cfg["blocks"][b]["name"] for b in blocks],
+            "current": current,
+            "report_due": due,
+            "self_report": cfg["self_report"],
+            "animation_speed": cfg["animation_speed"],
+            "consent_text": cfg.get("consent_text"),
+            "instructions": cfg.get("instructions"),
             "rewards": cfg["task"].get("rewards"),
         }
 
@@ -193,9 +265,12 @@ def get_state(session_id: str, request: Request, s: Caller = Depends(require_ses
 def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depends(require_session)):
     with _db(request) as db:
         row = lock(db, s.id)
-        if row.status == "new":
+        started = row.status == "new"
+        if started:
             row.status, row.consented_at, row.updated_at = "running", utcnow(), utcnow()
         db.commit()
+        if started:
+            log.info("session %s of study %s started (consent given)", row.id, row.study_id)
         if body.events:
             add_events(db, row, [e.model_dump() for e in body.events])
     return session_state(request, s.id)
@@ -205,8 +280,9 @@ def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depe
 def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Depends(require_session)):
     with _db(request) as db:
         try:
-            t, dup = submit_trial(db, s.id, body.trial, body.submission_id, body.human_action, body.effort_ms,
-                                  [e.model_dump() for e in body.events])
+            t, dup = submit_trial(
+                db, s.id, body.trial, body.submission_id, body.human_action, body.effort_ms, [e.model_dump() for e in body.events]
+            )
         except SessionError as exc:
             db.rollback()
             _fail(exc)
@@ -238,21 +314,34 @@ def post_events(session_id: str, body: EventsIn, request: Request, s: Caller = D
 # --------------------------------------------------------------------------- deploy
 
 
-@deploy.post("/sessions", status_code=201, summary="Open a deploy session with a model and a policy",
-             dependencies=[Depends(require_experimenter)])
+@deploy.post(
+    "/sessions",
+    status_code=201,
+    summary="Open a deploy session with a model and a policy",
+    dependencies=[Depends(require_experimenter)],
+)
 def open_deploy(body: DeployIn, request: Request):
     try:
         task, model = load_task_spec(body.task), load_model_spec(body.model)
         if tuple(model.complexities) != tuple(task.complexities):
-            raise ConfigError([f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}"])
+            raise ConfigError(
+                [f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}"]
+            )
         policy = resolve_policy(body.policy, model, task)
     except ConfigError as exc:
         raise HTTPException(400, {"problems": exc.problems}) from None
     with _db(request) as db:
         s = create_deploy(db, body.label, task, model, policy, body.seed)
         db.commit()
-        return {"session_id": s.id, "token": s.token, "policy": policy["kind"], "belief": p_high(s.belief),
-                "complexities": list(task.complexities), "thresholds": policy.get("thresholds")}
+        log.info("deploy session %s opened: %s policy", s.id, policy["kind"])
+        return {
+            "session_id": s.id,
+            "token": s.token,
+            "policy": policy["kind"],
+            "belief": p_high(s.belief),
+            "complexities": list(task.complexities),
+            "thresholds": policy.get("thresholds"),
+        }
 
 
 def _deploy_session(s: Caller) -> None:
@@ -266,10 +355,17 @@ def deploy_state(session_id: str, request: Request, s: Caller = Depends(require_
     with _db(request) as db:
         row = db.get(Session, s.id)
         trials = db.scalars(select(Trial).where(Trial.session_id == s.id).order_by(Trial.trial)).all()
-        return {"session_id": row.id, "label": row.participant, "trials_done": row.trials_done, "score": row.score,
-                "belief": p_high(row.belief), "pending": None if row.pending_trial is None else
-                {"trial": row.pending_trial, "complexity": row.pending_complexity, "robot_action": row.pending_action},
-                "trials": [trial_dict(t) for t in trials]}
+        return {
+            "session_id": row.id,
+            "label": row.participant,
+            "trials_done": row.trials_done,
+            "score": row.score,
+            "belief": p_high(row.belief),
+            "pending": None
+            if row.pending_trial is None
+            else {"trial": row.pending_trial, "complexity": row.pending_complexity, "robot_action": row.pending_action},
+            "trials": [trial_dict(t) for t in trials],
+        }
 
 
 def _robot(request: Request, session_id: str) -> Caller:
@@ -286,7 +382,7 @@ def _robot(request: Request, session_id: str) -> Caller:
     return s
 
 
-_BEARER = {"security": [{"HTTPBearer": []}]}
+_BEARER: dict[str, Any] = {"security": [{"HTTPBearer": []}]}
 
 
 def _json(out: dict) -> Response:
@@ -306,7 +402,11 @@ async def decide(session_id: str, body: DecideIn, request: Request):
     return _json(out)
 
 
-@deploy.post("/sessions/{session_id}/observe", summary="Post the observed human action and outcome; updates the belief", openapi_extra=_BEARER)
+@deploy.post(
+    "/sessions/{session_id}/observe",
+    summary="Post the observed human action and outcome; updates the belief",
+    openapi_extra=_BEARER,
+)
 async def observe(session_id: str, body: ObserveIn, request: Request):
     s = _robot(request, session_id)
     engine = request.app.state.engine

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import secrets
 from dataclasses import dataclass
 from typing import Any
@@ -26,22 +27,25 @@ from sqlalchemy import Connection, bindparam, func, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
+from ..errors import TrustseekError
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
 from ..policies.core import PolicyRunner
-from .orm import Event, PolicyBlob, Report, Session, Study, Trial, utcnow
+from .orm import Base, Event, PolicyBlob, Report, Session, Study, Trial, utcnow
 from .studies import participant_plan, policy_object
+
+log = logging.getLogger(__name__)
 
 OUTCOMES = ("success", "collision", "dropped", "teleoperated")
 MAX_EVENTS_PER_POST = 5000
 
 
-class SessionError(Exception):
+class SessionError(TrustseekError):
     """A request that the session's state does not allow; ``status`` is the HTTP code."""
 
     def __init__(self, status: int, message: str):
         self.status = status
         self.message = message
-        super().__init__(message)
+        super().__init__([message])
 
 
 def new_token() -> str:
@@ -71,6 +75,12 @@ class Context:
     load_policy: Any  # callable(block) -> policy JSON, used when the policy is not cached
     trials: list[dict[str, Any]] | None
 
+    def step(self, n: int) -> dict[str, Any]:
+        """The plan of trial ``n`` (block, complexity); only study sessions have one."""
+        if self.trials is None:
+            raise SessionError(409, "a deploy session has no trial plan")
+        return self.trials[n - 1]
+
     def runner(self, block: int, belief, seed: int, trial: int) -> PolicyRunner:
         pol = policy_object(self.keys[block], lambda: self.load_policy(block))
         model = getattr(pol, "model", None) or self.model
@@ -87,22 +97,36 @@ def study_config(db: DBSession, study_id: str) -> dict[str, Any]:
     if cfg is None:
         if len(_CONFIGS) > 256:
             _CONFIGS.clear()
-        cfg = _CONFIGS[study_id] = db.get(Study, study_id).config
+        study = db.get(Study, study_id)
+        if study is None:
+            raise SessionError(404, "no such study")
+        cfg = _CONFIGS[study_id] = study.config
     return cfg
 
 
 def context(db: DBSession, s: Session) -> Context:
     """The context of a study session (deploy sessions: ``deploy_context``)."""
-    if s.kind == "study":
-        key = f"study:{s.study_id}"
+    if s.kind == "study" and s.study_id is not None:
+        study_id = s.study_id
+        key = f"study:{study_id}"
         cached = _CONTEXTS.get(key)
         if cached is None:
-            cfg = study_config(db, s.study_id)
-            cached = _CONTEXTS[key] = (Task.from_dict(cfg["task"]), TrustModel.from_dict(cfg["model"]), [b["policy"]["kind"] for b in cfg["blocks"]])
+            cfg = study_config(db, study_id)
+            cached = _CONTEXTS[key] = (
+                Task.from_dict(cfg["task"]),
+                TrustModel.from_dict(cfg["model"]),
+                [b["policy"]["kind"] for b in cfg["blocks"]],
+            )
         task, model, kinds = cached
-        return Context(task, model, kinds, [f"{key}:{i}" for i in range(len(kinds))],
-                       lambda b: study_config(db, s.study_id)["blocks"][b]["policy"], s.plan["trials"])
-    raise ValueError("deploy sessions use deploy_context")
+        return Context(
+            task,
+            model,
+            kinds,
+            [f"{key}:{i}" for i in range(len(kinds))],
+            lambda b: study_config(db, study_id)["blocks"][b]["policy"],
+            s.plan["trials"],
+        )
+    raise SessionError(409, "this is a deploy session; use /api/deploy")
 
 
 def total_trials(s: Session) -> int | None:
@@ -121,8 +145,17 @@ def create_participant(db: DBSession, study: Study, participant: str | None) -> 
     plan = participant_plan(study.config, index, seed)
     model = TrustModel.from_dict(study.config["model"])
     s = Session(
-        id=new_id(), token=new_token(), kind="study", study_id=study.id, participant=label, seed=seed,
-        plan=plan, status="new", belief=[float(x) for x in model.initial], trials_done=0, score=0.0,
+        id=new_id(),
+        token=new_token(),
+        kind="study",
+        study_id=study.id,
+        participant=label,
+        seed=seed,
+        plan=plan,
+        status="new",
+        belief=[float(x) for x in model.initial],
+        trials_done=0,
+        score=0.0,
     )
     db.add(s)
     return s
@@ -141,9 +174,17 @@ def create_deploy(db: DBSession, label: str, task: Task, model: TrustModel, poli
         except IntegrityError:  # stored concurrently by another request
             db.rollback()
     s = Session(
-        id=sid, token=new_token(), kind="deploy", study_id=None, participant=label, seed=seed,
+        id=sid,
+        token=new_token(),
+        kind="deploy",
+        study_id=None,
+        participant=label,
+        seed=seed,
         plan={"task": task.to_dict(), "model": model.to_dict(), "policy_sha256": sha, "policy_kind": policy["kind"]},
-        status="running", belief=[float(x) for x in pm.initial], trials_done=0, score=0.0,
+        status="running",
+        belief=[float(x) for x in pm.initial],
+        trials_done=0,
+        score=0.0,
     )
     db.add(s)
     return s
@@ -166,21 +207,22 @@ def serve(db: DBSession, s: Session) -> dict[str, Any] | None:
     if s.status != "running":
         return None
     n = s.trials_done + 1
-    if n > total_trials(s):
+    total = total_trials(s)
+    if total is None or n > total:
         return None
     if s.pending_trial != n:
         ctx = context(db, s)
-        step = ctx.trials[n - 1]
+        step = ctx.step(n)
         runner = ctx.runner(step["block"], s.belief, s.seed, n)
         s.pending_trial, s.pending_complexity = n, step["complexity"]
         s.pending_action = runner.decide(step["complexity"])
         s.updated_at = utcnow()
         db.commit()
-    return served(s)
+    return served(s, n)
 
 
-def served(s: Session) -> dict[str, Any]:
-    n = s.pending_trial
+def served(s: Session, n: int) -> dict[str, Any]:
+    """Trial ``n`` as served to the participant (``n`` is the session's pending trial)."""
     step = s.plan["trials"][n - 1]
     blocks = s.plan["block_order"]
     return {
@@ -195,10 +237,19 @@ def served(s: Session) -> dict[str, Any]:
 
 def trial_dict(t: Trial) -> dict[str, Any]:
     return {
-        "trial": t.trial, "block": t.block, "policy": t.policy, "complexity": t.complexity,
-        "robot_action": t.robot_action, "human_action": t.human_action, "outcome": t.outcome,
-        "experience": t.experience, "reward": t.reward, "belief": t.belief, "belief_after": t.belief_after,
-        "effort_ms": t.effort_ms, "submission_id": t.submission_id,
+        "trial": t.trial,
+        "block": t.block,
+        "policy": t.policy,
+        "complexity": t.complexity,
+        "robot_action": t.robot_action,
+        "human_action": t.human_action,
+        "outcome": t.outcome,
+        "experience": t.experience,
+        "reward": t.reward,
+        "belief": t.belief,
+        "belief_after": t.belief_after,
+        "effort_ms": t.effort_ms,
+        "submission_id": t.submission_id,
     }
 
 
@@ -210,7 +261,9 @@ def _experience(task: Task, c: int, action: str, human: str | None, success: boo
     return "reliable" if success else "faulty"
 
 
-def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: int, events: list[dict] | None) -> Trial:
+def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: int, events: list[dict] | None) -> Trial | None:
+    """Commit ``row`` with the belief update and the session's progress; None when another
+    submission committed this trial first."""
     runner = ctx.runner(block, s.belief, s.seed, row.trial)
     before = runner.belief
     after = runner.observe(row.complexity, row.robot_action, row.human_action, row.experience)
@@ -220,24 +273,31 @@ def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: in
     row.reward = float(ctx.task.rewards.of(a, o, EXPERIENCES.index(row.experience)))
     db.add(row)
     for ev in events or []:
-        db.add(Event(session_id=s.id, trial=row.trial, client_time=ev.get("t"), type=str(ev.get("type", ""))[:40], data=json.dumps(ev.get("data", {}))))
+        db.add(
+            Event(
+                session_id=s.id,
+                trial=row.trial,
+                client_time=ev.get("t"),
+                type=str(ev.get("type", ""))[:40],
+                data=json.dumps(ev.get("data", {})),
+            )
+        )
     s.belief = [float(x) for x in after] if after is not None else s.belief
     s.trials_done = row.trial
     s.score = float(s.score + row.reward)
     s.pending_trial = s.pending_complexity = s.pending_action = None
-    if s.kind == "study" and row.trial >= total_trials(s):
+    total = total_trials(s)
+    if total is not None and row.trial >= total:
         s.status = "done"
     s.updated_at = utcnow()
     try:
         db.commit()
     except IntegrityError:
         db.rollback()
-        raise _Duplicate() from None
+        return None
+    if s.status == "done":
+        log.info("session %s of study %s finished: %d trials, score %g", s.id, s.study_id, s.trials_done, s.score)
     return row
-
-
-class _Duplicate(Exception):
-    pass
 
 
 def _existing(db: DBSession, s: Session, n: int) -> Trial | None:
@@ -245,8 +305,13 @@ def _existing(db: DBSession, s: Session, n: int) -> Trial | None:
 
 
 def submit_trial(
-    db: DBSession, session_id: str, n: int, submission_id: str, human_action: str | None,
-    effort_ms: float | None, events: list[dict] | None,
+    db: DBSession,
+    session_id: str,
+    n: int,
+    submission_id: str,
+    human_action: str | None,
+    effort_ms: float | None,
+    events: list[dict] | None,
 ) -> tuple[Trial, bool]:
     """Commit trial ``n`` of a study session; returns (trial, duplicate)."""
     s = lock(db, session_id)
@@ -261,16 +326,18 @@ def submit_trial(
         raise SessionError(409, f"the session is {s.status!r}, not running" + (" (consent first)" if s.status == "new" else ""))
     if n != s.trials_done + 1:
         raise SessionError(409, f"trial {n} is not the current trial; the current trial is {s.trials_done + 1}")
-    if s.pending_trial != n:
+    action, complexity = s.pending_action, s.pending_complexity
+    if s.pending_trial != n or action is None or complexity is None:
         raise SessionError(409, f"trial {n} has not been served yet; fetch the session state first")
-    action = s.pending_action
     if action == "ask" and human_action != "intervene":
-        raise SessionError(400, f"the robot asked for help in trial {n}: human_action must be 'intervene' (teleoperation), got {human_action!r}")
+        raise SessionError(
+            400, f"the robot asked for help in trial {n}: human_action must be 'intervene' (teleoperation), got {human_action!r}"
+        )
     if human_action not in HUMAN_ACTIONS:
         raise SessionError(400, f"human_action must be one of {list(HUMAN_ACTIONS)}, got {human_action!r}")
     ctx = context(db, s)
-    step = ctx.trials[n - 1]
-    c = ctx.task.complexity_index(s.pending_complexity)
+    step = ctx.step(n)
+    c = ctx.task.complexity_index(complexity)
     if action == "autonomous" and human_action == "rely":
         r = np.random.default_rng([s.seed, n, 1]).random(2)
         success = bool(r[0] < ctx.task.success[c])
@@ -278,18 +345,25 @@ def submit_trial(
     else:
         success, outcome = None, "teleoperated"
     row = Trial(
-        session_id=s.id, trial=n, block=step["block"], policy=ctx.kinds[step["block"]],
-        complexity=s.pending_complexity, robot_action=action, human_action=human_action, outcome=outcome,
-        experience=_experience(ctx.task, c, action, human_action, success), effort_ms=effort_ms,
+        session_id=s.id,
+        trial=n,
+        block=step["block"],
+        policy=ctx.kinds[step["block"]],
+        complexity=complexity,
+        robot_action=action,
+        human_action=human_action,
+        outcome=outcome,
+        experience=_experience(ctx.task, c, action, human_action, success),
+        effort_ms=effort_ms,
         submission_id=submission_id,
     )
-    try:
-        return _commit_trial(db, s, row, ctx, step["block"], events), False
-    except _Duplicate:
-        old = _existing(db, s, n)
-        if old is not None and old.submission_id == submission_id:
-            return old, True
-        raise SessionError(409, f"trial {n} was committed concurrently by another submission") from None
+    committed = _commit_trial(db, s, row, ctx, step["block"], events)
+    if committed is not None:
+        return committed, False
+    old = _existing(db, s, n)
+    if old is not None and old.submission_id == submission_id:
+        return old, True
+    raise SessionError(409, f"trial {n} was committed concurrently by another submission")
 
 
 def report_due(db: DBSession, s: Session, cfg: dict[str, Any]) -> int | None:
@@ -326,13 +400,23 @@ def add_report(db: DBSession, s: Session, cfg: dict[str, Any], after_trial: int,
     except IntegrityError:
         db.rollback()
         old = db.scalar(select(Report).where(Report.session_id == s.id, Report.after_trial == after_trial))
+        if old is None:
+            raise SessionError(409, f"the self-report after trial {after_trial} could not be stored; try again") from None
         return old, True
     return rep, False
 
 
 def add_events(db: DBSession, s: Session, events: list[dict]) -> int:
     for ev in events:
-        db.add(Event(session_id=s.id, trial=ev.get("trial"), client_time=ev.get("t"), type=str(ev.get("type", ""))[:40], data=json.dumps(ev.get("data", {}))))
+        db.add(
+            Event(
+                session_id=s.id,
+                trial=ev.get("trial"),
+                client_time=ev.get("t"),
+                type=str(ev.get("type", ""))[:40],
+                data=json.dumps(ev.get("data", {})),
+            )
+        )
     db.commit()
     return len(events)
 
@@ -344,21 +428,47 @@ def add_events(db: DBSession, s: Session, events: list[dict]) -> int:
 # INSERT and one UPDATE (observe), in one transaction.  The task, model and parsed policy of a
 # session are cached per process (they never change).
 
-_TRIALS = Trial.__table__
-_SESSIONS = Session.__table__
+_TRIALS = Base.metadata.tables[Trial.__tablename__]
+_SESSIONS = Base.metadata.tables[Session.__tablename__]
 # built once with bound parameters: constructing a statement costs more than running it
-_LIVE = select(
-    _SESSIONS.c.id, _SESSIONS.c.kind, _SESSIONS.c.seed, _SESSIONS.c.belief, _SESSIONS.c.trials_done, _SESSIONS.c.score,
-    _SESSIONS.c.pending_trial, _SESSIONS.c.pending_complexity, _SESSIONS.c.pending_action,
-).where(_SESSIONS.c.id == bindparam("sid")).with_for_update()
-_COMMITTED = select(_TRIALS).where(_TRIALS.c.session_id == bindparam("sid"), _TRIALS.c.trial == bindparam("n"))
-_DECIDED = update(_SESSIONS).where(_SESSIONS.c.id == bindparam("sid")).values(
-    pending_trial=bindparam("p_trial"), pending_complexity=bindparam("p_complexity"), pending_action=bindparam("p_action"),
-    updated_at=bindparam("now"),
+_LIVE = (
+    select(
+        _SESSIONS.c.id,
+        _SESSIONS.c.kind,
+        _SESSIONS.c.seed,
+        _SESSIONS.c.belief,
+        _SESSIONS.c.trials_done,
+        _SESSIONS.c.score,
+        _SESSIONS.c.pending_trial,
+        _SESSIONS.c.pending_complexity,
+        _SESSIONS.c.pending_action,
+    )
+    .where(_SESSIONS.c.id == bindparam("sid"))
+    .with_for_update()
 )
-_OBSERVED = update(_SESSIONS).where(_SESSIONS.c.id == bindparam("sid")).values(
-    belief=bindparam("new_belief", type_=_SESSIONS.c.belief.type), trials_done=bindparam("done"), score=bindparam("new_score"),
-    pending_trial=None, pending_complexity=None, pending_action=None, updated_at=bindparam("now"),
+_COMMITTED = select(_TRIALS).where(_TRIALS.c.session_id == bindparam("sid"), _TRIALS.c.trial == bindparam("n"))
+_DECIDED = (
+    update(_SESSIONS)
+    .where(_SESSIONS.c.id == bindparam("sid"))
+    .values(
+        pending_trial=bindparam("p_trial"),
+        pending_complexity=bindparam("p_complexity"),
+        pending_action=bindparam("p_action"),
+        updated_at=bindparam("now"),
+    )
+)
+_OBSERVED = (
+    update(_SESSIONS)
+    .where(_SESSIONS.c.id == bindparam("sid"))
+    .values(
+        belief=bindparam("new_belief", type_=_SESSIONS.c.belief.type),
+        trials_done=bindparam("done"),
+        score=bindparam("new_score"),
+        pending_trial=None,
+        pending_complexity=None,
+        pending_action=None,
+        updated_at=bindparam("now"),
+    )
 )
 _INSERT_TRIAL = insert(_TRIALS)
 
@@ -381,8 +491,12 @@ def deploy_context(conn: Connection, session_id: str) -> Context:
         if len(_CONTEXTS) > 4096:
             _CONTEXTS.clear()
         plan = conn.execute(select(Session.plan).where(Session.id == session_id)).scalar_one()
-        cached = _CONTEXTS[key] = (Task.from_dict(plan["task"]), TrustModel.from_dict(plan["model"]), [plan["policy_kind"]],
-                                   plan["policy_sha256"])
+        cached = _CONTEXTS[key] = (
+            Task.from_dict(plan["task"]),
+            TrustModel.from_dict(plan["model"]),
+            [plan["policy_kind"]],
+            plan["policy_sha256"],
+        )
     task, model, kinds, sha = cached
     load = lambda b: conn.execute(select(PolicyBlob.policy).where(PolicyBlob.sha256 == sha)).scalar_one()  # noqa: E731
     return Context(task, model, kinds, [f"policy:{sha}"], load, None)
@@ -412,7 +526,9 @@ def deploy_decide(conn: Connection, session_id: str, n: int, complexity: str) ->
     return {"trial": n, "robot_action": action, "belief": p_high(s.belief), "committed": False}
 
 
-def deploy_observe(conn: Connection, session_id: str, n: int, human_action: str | None, outcome: str | None) -> tuple[dict[str, Any], bool]:
+def deploy_observe(
+    conn: Connection, session_id: str, n: int, human_action: str | None, outcome: str | None
+) -> tuple[dict[str, Any], bool]:
     """Commit trial ``n`` from the observed human action and outcome; returns (trial, duplicate).
     Runs in the caller's transaction."""
     s = _live(conn, session_id)
@@ -425,26 +541,43 @@ def deploy_observe(conn: Connection, session_id: str, n: int, human_action: str 
             return trial_dict(old), True
         raise SessionError(409, f"trial {n} is already committed with human_action={old.human_action!r}, outcome={old.outcome!r}")
     if s.pending_trial != n:
-        raise SessionError(409, f"trial {n} has no decision yet; post its complexity to /decide first (next trial: {s.trials_done + 1})")
+        raise SessionError(
+            409, f"trial {n} has no decision yet; post its complexity to /decide first (next trial: {s.trials_done + 1})"
+        )
     action = s.pending_action
     ctx = deploy_context(conn, session_id)
     c = ctx.task.complexity_index(s.pending_complexity)
     if action == "ask":
         if human_action not in (None, "intervene"):
-            raise SessionError(400, f"the robot asked in trial {n}: human_action must be 'intervene' (teleoperation) or omitted, got {human_action!r}")
+            raise SessionError(
+                400,
+                f"the robot asked in trial {n}: human_action must be 'intervene' (teleoperation) or omitted, "
+                f"got {human_action!r}",
+            )
         if outcome not in (None, "teleoperated"):
-            raise SessionError(400, f"the robot asked in trial {n}: the human teleoperated, so outcome must be 'teleoperated' or omitted, got {outcome!r}")
+            raise SessionError(
+                400,
+                f"the robot asked in trial {n}: the human teleoperated, so outcome must be 'teleoperated' or omitted, "
+                f"got {outcome!r}",
+            )
         human_action, success, outcome = "intervene", None, "teleoperated"
     else:
         if human_action not in HUMAN_ACTIONS:
             raise SessionError(400, f"human_action must be one of {list(HUMAN_ACTIONS)}, got {human_action!r}")
         if human_action == "intervene":
             if outcome not in (None, "teleoperated"):
-                raise SessionError(400, f"the human intervened in trial {n} and teleoperated: outcome must be 'teleoperated' or omitted, got {outcome!r}")
+                raise SessionError(
+                    400,
+                    f"the human intervened in trial {n} and teleoperated: outcome must be 'teleoperated' or omitted, "
+                    f"got {outcome!r}",
+                )
             success, outcome = None, "teleoperated"
         else:
             if outcome not in ("success", "failure", "collision", "dropped"):
-                raise SessionError(400, f"outcome must be 'success' or 'failure' (or 'collision'/'dropped') when the human relied, got {outcome!r}")
+                raise SessionError(
+                    400,
+                    f"outcome must be 'success' or 'failure' (or 'collision'/'dropped') when the human relied, got {outcome!r}",
+                )
             success = outcome == "success"
     experience = _experience(ctx.task, c, action, human_action, success)
     runner = ctx.runner(0, s.belief, s.seed, n)
@@ -452,13 +585,30 @@ def deploy_observe(conn: Connection, session_id: str, n: int, human_action: str 
     after = runner.observe(s.pending_complexity, action, human_action, experience)
     a, o = ACTIONS.index(action), HUMAN_ACTIONS.index(human_action)
     t = {
-        "trial": n, "block": 0, "policy": ctx.kinds[0], "complexity": s.pending_complexity, "robot_action": action,
-        "human_action": human_action, "outcome": outcome, "experience": experience,
+        "trial": n,
+        "block": 0,
+        "policy": ctx.kinds[0],
+        "complexity": s.pending_complexity,
+        "robot_action": action,
+        "human_action": human_action,
+        "outcome": outcome,
+        "experience": experience,
         "reward": float(ctx.task.rewards.of(a, o, EXPERIENCES.index(experience))),
-        "belief": p_high(before), "belief_after": p_high(after), "effort_ms": None, "submission_id": f"deploy-{n}",
+        "belief": p_high(before),
+        "belief_after": p_high(after),
+        "effort_ms": None,
+        "submission_id": f"deploy-{n}",
     }
     now = utcnow()
     conn.execute(_INSERT_TRIAL, {"session_id": session_id, "created_at": now, **t})
-    conn.execute(_OBSERVED, {"sid": session_id, "new_belief": [float(x) for x in after] if after is not None else s.belief,
-                             "done": n, "new_score": float(s.score + t["reward"]), "now": now})
+    conn.execute(
+        _OBSERVED,
+        {
+            "sid": session_id,
+            "new_belief": [float(x) for x in after] if after is not None else s.belief,
+            "done": n,
+            "new_score": float(s.score + t["reward"]),
+            "now": now,
+        },
+    )
     return t, False

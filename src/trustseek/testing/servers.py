@@ -4,6 +4,7 @@ the tests, the benchmark and notebooks)."""
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import os
 import pwd
@@ -18,6 +19,13 @@ from pathlib import Path
 
 import httpx
 
+from ..errors import TrustseekError
+
+
+class ServerStartError(TrustseekError, RuntimeError):
+    """A server or a PostgreSQL cluster could not be started (a RuntimeError too, as it is a
+    failure of the environment rather than of an input)."""
+
 
 def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
@@ -29,14 +37,14 @@ def wait_ready(url: str, timeout: float = 30.0, proc: subprocess.Popen | None = 
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if proc is not None and proc.poll() is not None:
-            raise RuntimeError(f"the server exited with code {proc.returncode}")
+            raise ServerStartError(f"the server exited with code {proc.returncode}")
         try:
             if httpx.get(f"{url}/api/health", timeout=1.0).status_code == 200:
                 return
         except httpx.TransportError:
             pass
         time.sleep(0.05)
-    raise RuntimeError(f"the server at {url} did not start within {timeout} s")
+    raise ServerStartError(f"the server at {url} did not start within {timeout} s")
 
 
 class ThreadServer:
@@ -66,18 +74,32 @@ class ThreadServer:
 
 def serve_process(db_url: str, token: str, port: int, log: Path | None = None) -> subprocess.Popen:
     """Start ``trustseek serve`` as a child process on 127.0.0.1:port and wait until it answers."""
-    cmd = [sys.executable, "-c", "from trustseek.cli import main; main()", "serve", "--db", db_url,
-           "--host", "127.0.0.1", "--port", str(port), "--token", token]
-    out = open(log, "ab") if log is not None else subprocess.DEVNULL
+    cmd = [
+        sys.executable,
+        "-c",
+        "from trustseek.cli import main; main()",
+        "serve",
+        "--db",
+        db_url,
+        "--host",
+        "127.0.0.1",
+        "--port",
+        str(port),
+        "--token",
+        token,
+    ]
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    # stderr goes to a file, not a pipe: an unread pipe would block a chatty server
-    err = tempfile.TemporaryFile()
-    proc = subprocess.Popen(cmd, stdout=out, stderr=err, env=env)
-    try:
-        wait_ready(f"http://127.0.0.1:{port}", proc=proc)
-    except RuntimeError as exc:
-        err.seek(0)
-        raise RuntimeError(f"{exc}\n{err.read().decode(errors='replace')[-4000:]}") from None
+    # the child keeps its own descriptors: this process closes its copies once the server answers
+    with contextlib.ExitStack() as files:
+        out = files.enter_context(open(log, "ab")) if log is not None else subprocess.DEVNULL
+        # stderr goes to a file, not a pipe: an unread pipe would block a chatty server
+        err = files.enter_context(tempfile.TemporaryFile())
+        proc = subprocess.Popen(cmd, stdout=out, stderr=err, env=env)
+        try:
+            wait_ready(f"http://127.0.0.1:{port}", proc=proc)
+        except ServerStartError as exc:
+            err.seek(0)
+            raise ServerStartError(f"{exc}\n{err.read().decode(errors='replace')[-4000:]}") from None
     return proc
 
 
@@ -91,8 +113,9 @@ def postgres_binaries() -> Path | None:
         return int(v) if v.isdigit() else 0
 
     dirs = sorted(glob.glob("/usr/lib/postgresql/*/bin"), key=version, reverse=True)
-    if shutil.which("pg_ctl"):
-        dirs.append(str(Path(os.path.realpath(shutil.which("pg_ctl"))).parent))
+    pg_ctl = shutil.which("pg_ctl")
+    if pg_ctl is not None:
+        dirs.append(str(Path(os.path.realpath(pg_ctl)).parent))
     for d in dirs:
         if all((Path(d) / exe).exists() for exe in ("initdb", "pg_ctl", "postgres")):
             return Path(d)
@@ -112,9 +135,10 @@ class TemporaryPostgres:
     """
 
     def __init__(self, bindir: Path | None = None):
-        self.bindir = bindir or postgres_binaries()
-        if self.bindir is None:
-            raise RuntimeError("PostgreSQL server binaries (initdb, pg_ctl) not found: install Debian's postgresql package")
+        found = bindir or postgres_binaries()
+        if found is None:
+            raise ServerStartError("PostgreSQL server binaries (initdb, pg_ctl) not found: install Debian's postgresql package")
+        self.bindir: Path = found
         self.prefix: list[str] = []
         self.owner: tuple[int, int] | None = None
         if os.geteuid() == 0:
@@ -124,7 +148,7 @@ class TemporaryPostgres:
             except KeyError:
                 pw = None
             if runuser is None or pw is None:
-                raise RuntimeError("running as root, PostgreSQL needs the 'postgres' user and runuser to start a cluster")
+                raise ServerStartError("running as root, PostgreSQL needs the 'postgres' user and runuser to start a cluster")
             self.prefix, self.owner = [runuser, "-u", "postgres", "--"], (pw.pw_uid, pw.pw_gid)
         self.root: Path | None = None
         self.started = False
@@ -133,28 +157,55 @@ class TemporaryPostgres:
     def _run(self, *cmd: str) -> None:
         res = subprocess.run([*self.prefix, *cmd], capture_output=True, text=True, timeout=120, cwd=self.root)
         if res.returncode != 0:
-            log = self.root / "server.log"
-            tail = log.read_text(errors="replace")[-2000:] if log.exists() else ""
-            raise RuntimeError(f"{Path(cmd[0]).name} failed with code {res.returncode}:\n{res.stdout}{res.stderr}{tail}")
+            log = None if self.root is None else self.root / "server.log"
+            tail = log.read_text(errors="replace")[-2000:] if log is not None and log.exists() else ""
+            raise ServerStartError(f"{Path(cmd[0]).name} failed with code {res.returncode}:\n{res.stdout}{res.stderr}{tail}")
 
     def start(self) -> str:
-        self.root = Path(tempfile.mkdtemp(prefix="trustseek-pg-"))
+        root = self.root = Path(tempfile.mkdtemp(prefix="trustseek-pg-"))
         if self.owner is not None:
-            os.chown(self.root, *self.owner)
-        data, port = self.root / "data", free_port()
-        self._run(str(self.bindir / "initdb"), "-D", str(data), "-U", "postgres", "-A", "trust", "-E", "UTF8",
-                  "--no-sync", "--no-instructions")
-        opts = f"-k {self.root} -p {port} -c listen_addresses=127.0.0.1 -c fsync=off -c full_page_writes=off"
+            os.chown(root, *self.owner)
+        data, port = root / "data", free_port()
+        self._run(
+            str(self.bindir / "initdb"),
+            "-D",
+            str(data),
+            "-U",
+            "postgres",
+            "-A",
+            "trust",
+            "-E",
+            "UTF8",
+            "--no-sync",
+            "--no-instructions",
+        )
+        opts = f"-k {root} -p {port} -c listen_addresses=127.0.0.1 -c fsync=off -c full_page_writes=off"
         self.started = True  # from here on stop() runs pg_ctl stop, even if the start fails half-way
-        self._run(str(self.bindir / "pg_ctl"), "-D", str(data), "-l", str(self.root / "server.log"), "-o", opts, "-w", "-t", "60", "start")
+        self._run(
+            str(self.bindir / "pg_ctl"),
+            "-D",
+            str(data),
+            "-l",
+            str(root / "server.log"),
+            "-o",
+            opts,
+            "-w",
+            "-t",
+            "60",
+            "start",
+        )
         self.url = f"postgresql://postgres@127.0.0.1:{port}/postgres"
         return self.url
 
     def stop(self) -> None:
         try:
             if self.started and self.root is not None:
-                subprocess.run([*self.prefix, str(self.bindir / "pg_ctl"), "-D", str(self.root / "data"), "-m", "immediate", "-w", "stop"],
-                               capture_output=True, timeout=60, cwd=self.root)
+                subprocess.run(
+                    [*self.prefix, str(self.bindir / "pg_ctl"), "-D", str(self.root / "data"), "-m", "immediate", "-w", "stop"],
+                    capture_output=True,
+                    timeout=60,
+                    cwd=self.root,
+                )
         finally:
             self.started = False
             if self.root is not None:
