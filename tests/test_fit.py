@@ -10,7 +10,7 @@ import pytest
 
 from trustseek import TrustModel, paper_model
 from trustseek.data.trials import ColumnMapping, example_path, read_trials
-from trustseek.estimation.fit import decode, fit_trust_model, select_levels
+from trustseek.estimation import decode, fit_trust_model, select_levels
 from trustseek.simulation.designs import simulate_design
 
 
@@ -65,8 +65,7 @@ def test_recovery_of_well_identified_cells_on_other_data_sets(seed):
     cells with many expected events are within 0.03 of the truth.  (Event counts are only a
     partial guide: the weakly identified cells -- P(rely | T=low, C=high) and the transitions
     after a failure -- also have thousands of events; see docs/fitting.md.)"""
-    from trustseek.estimation.fit import from_trust_model
-    from trustseek.estimation.iohmm import loglik
+    from trustseek.estimation import from_trust_model, loglik
 
     truth = paper_model()
     df = simulate_design(truth, 1000, seed=seed)
@@ -237,7 +236,7 @@ def test_small_coverage_study():
 
 
 def test_decode_names_participants_the_model_rules_out():
-    from trustseek.estimation.iohmm import FitError
+    from trustseek.estimation import FitError
 
     df = read_trials(example_path())
     i = df.index[(df["participant"] == "P004") & (df["robot_action"] == "ask")][0]

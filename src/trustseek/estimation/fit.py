@@ -20,26 +20,18 @@ import numpy as np
 import pandas as pd
 
 from ..data.trials import DEFAULT_COMPLEXITIES
-from .iohmm import (
-    MIN_EVENTS,
-    FitError,
-    Fixed,
-    IOHMMFit,
-    IOHMMSpec,
-    Params,
-    Sequences,
-    Structure,
-    Workspace,
-    _describe_combo,
-    encode,
-    fit_iohmm,
-)
+from .estep import Workspace
+from .iohmm import IOHMMFit, fit_iohmm
+from .sequences import Sequences, encode
+from .spec import FitError, Fixed, IOHMMSpec, Params
+from .structure import Structure, describe_combination
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 
 PAPER_TRANSITION_INPUTS = ("complexity", "robot_action", "experience")
 PAPER_EMISSION_INPUTS = ("complexity", "robot_action")
 MODEL_INPUTS = ("complexity", "robot_action", "experience")
 PRESETS = ("paper",)
+MIN_EVENTS = 5  # fewer expected events than this behind a row: "not identified by this data"
 
 
 def level_names(k: int) -> tuple[str, ...]:
@@ -324,7 +316,7 @@ def _warnings(fit: IOHMMFit, events: dict[str, np.ndarray]) -> list[str]:
                 n = float(ev[u, k])
                 if n < MIN_EVENTS:
                     out.append(
-                        f"{name}[{_describe_combo(u, inputs, spec.categories)}][T={spec.levels[k]}]: "
+                        f"{name}[{describe_combination(u, inputs, spec.categories)}][T={spec.levels[k]}]: "
                         f"{n:.1f} expected events, not identified by this data"
                     )
     return out
@@ -551,5 +543,4 @@ def _test_loglik(test: Sequences, spec: IOHMMSpec, fit: IOHMMFit) -> float:
     a = spec.prior + HELDOUT_PSEUDOCOUNT
     c0 = st.initial + a
     params = Params(c0 / c0.sum(), s.em.mstep(st.emission, a, fit.params.emission), s.tr.mstep(st.transition, a, fit.params.transition))
-    work = Workspace(test, s.K, s.M, s.Ue, s.Ut)
-    return work.forward(params)[2]
+    return float(Workspace(test, *s.dims).loglik(params))
