@@ -6,25 +6,17 @@
 * :mod:`.estep` / :mod:`.kernels` -- the E-step (compiled, with the numpy reference);
 * :mod:`.em` / :mod:`.quasi_newton` -- EM for R starts with SQUAREM, and the L-BFGS-B finish;
 * :mod:`.iohmm` -- :func:`fit_iohmm`, log-likelihood, posteriors, Viterbi;
-* :mod:`.fit` -- the trust-model fit, its intervals, and the choice of the number of levels.
+* :mod:`.trust_iohmm` -- the paper's structure, tables to and from a TrustModel;
+* :mod:`.fit`, :mod:`.bootstrap`, :mod:`.selection` -- the trust-model fit, its intervals,
+  and the choice of the number of levels.
 """
 
-from .fit import (
-    MIN_EVENTS,
-    MODEL_INPUTS,
-    PAPER_EMISSION_INPUTS,
-    PAPER_TRANSITION_INPUTS,
-    FitResult,
-    decode,
-    fit_trust_model,
-    from_trust_model,
-    paper_spec,
-    select_levels,
-    to_trust_model,
-)
+from .fit import MIN_EVENTS, FitResult, decode, fit_trust_model
 from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
+from .selection import select_levels
 from .sequences import Sequences, encode
 from .spec import FitError, Fixed, IOHMMSpec, Params
+from .trust_iohmm import MODEL_INPUTS, PAPER_EMISSION_INPUTS, PAPER_TRANSITION_INPUTS, from_trust_model, paper_spec, to_trust_model
 
 __all__ = [
     "MIN_EVENTS",
