@@ -1,6 +1,7 @@
 """Fitting trust models: parameter recovery, labels, bootstrap, other studies' logs, decode, select, CLI."""
 
 import json
+import logging
 import subprocess
 import sys
 
@@ -127,6 +128,19 @@ def test_nine_participants_bootstrap_is_deterministic_across_processes():
     assert all("lower" in c and "upper" in c for c in cells)
 
 
+def test_fit_logs_each_start_and_bootstrap_replicate_and_prints_nothing(caplog, capsys):
+    df = read_trials(example_path())
+    with caplog.at_level(logging.DEBUG, logger="trustseek.estimation"):
+        fit_trust_model(df, restarts=2, seed=0, bootstrap=2, n_jobs=1, tol=1e-5)
+    messages = [r.getMessage() for r in caplog.records if r.name.startswith("trustseek.estimation")]
+    for start in (0, 1):  # every start reports how it ended
+        assert any(m.startswith(f"start {start}: log-likelihood") and ("converged" in m or "cap" in m) for m in messages), messages
+    assert any(m.startswith("best of 2 starts") for m in messages)
+    for replicate in (0, 1):
+        assert any(m.startswith(f"bootstrap replicate {replicate} done") for m in messages), messages
+    assert capsys.readouterr().out == ""
+
+
 def test_another_studys_log_fits_by_column_mapping_alone(tmp_path):
     """participant, trial, automation_correct (0/1), rely (0/1): a 2-level model, transitions on
     automation_correct, emissions on nothing."""
@@ -159,9 +173,11 @@ def test_another_studys_log_fits_by_column_mapping_alone(tmp_path):
     assert res.n_params == 1 + 2 + 4
 
 
-def test_select_levels_prefers_two_levels_on_paper_data():
+def test_select_levels_prefers_two_levels_on_paper_data(caplog):
     df = simulate_design(paper_model(), 100, seed=9)
-    rows = select_levels(df, levels=(1, 2, 3), folds=2, restarts=2, seed=0, tol=1e-5)
+    with caplog.at_level(logging.INFO, logger="trustseek.estimation"):
+        rows = select_levels(df, levels=(1, 2, 3), folds=2, restarts=2, seed=0, tol=1e-5)
+    assert [r.getMessage().split(":")[0] for r in caplog.records if r.name == "trustseek.estimation.selection"] == ["1 levels", "2 levels", "3 levels"]
     by = {r["levels"]: r for r in rows}
     assert by[2]["loglik"] > by[1]["loglik"] + 50
     assert by[3]["loglik"] >= by[2]["loglik"] - 1.0  # nested: more levels fit at least about as well
