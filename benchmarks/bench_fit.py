@@ -23,12 +23,13 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from trustseek import forward_backward  # noqa: E402
-from trustseek.estimation.fit import fit_trust_model, from_trust_model, paper_spec  # noqa: E402
+from trustseek.estimation import encode, fit_iohmm, fit_trust_model, from_trust_model, kernels, loglik, paper_spec  # noqa: E402
+from trustseek.estimation.em import run_em  # noqa: E402
+from trustseek.estimation.estep import Workspace  # noqa: E402
+from trustseek.estimation.structure import Structure  # noqa: E402
+from trustseek.model.presets import paper_model  # noqa: E402
 from trustseek.reproduction.coverage import coverage_study  # noqa: E402
 from trustseek.simulation.designs import simulate_design  # noqa: E402
-from trustseek.estimation.iohmm import Structure, Workspace, encode, fit_iohmm, loglik, run_em  # noqa: E402
-from trustseek.model.presets import paper_model  # noqa: E402
 
 
 def clocks():
@@ -49,7 +50,7 @@ def first_call() -> None:
     t = clocks()
     fit_iohmm(seqs, paper_spec(), restarts=2, seed=0)
     w2, c2 = since(t)
-    print(f"compiled E-step available: {forward_backward.AVAILABLE}; first E-step {w:.2f} s wall, {c:.2f} s CPU "
+    print(f"compiled E-step available: {kernels.AVAILABLE}; first E-step {w:.2f} s wall, {c:.2f} s CPU "
           f"(compilation on the first run, then loading from the cache); first fit (2 x 71) {w2:.2f} s wall, {c2:.2f} s CPU")
 
 
@@ -89,20 +90,20 @@ def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None =
     p = s.random(np.random.default_rng(0))
     estep_speed(seqs, s, p, reps=max(5, min(200, 20000 // n)))
     if numpy_fit:  # the same fit with the numpy E-step (the previous implementation)
-        forward_backward.AVAILABLE = False
+        kernels.AVAILABLE = False
         try:
             t = clocks()
             ref = fit_iohmm(seqs, spec, restarts=restarts, seed=0, tol=tol)
             w2, c2 = since(t)
         finally:
-            forward_backward.AVAILABLE = True
+            kernels.AVAILABLE = True
         print(f"  numpy E-step fit: {w2:.3f} s wall, {c2:.3f} s CPU; compiled x{c2 / cpu:.1f} (CPU); "
               f"same best log-likelihood: {abs(ref.loglik - fit.loglik) < 1e-6}")
     # SQUAREM vs plain EM from the same start
     w = Workspace(seqs, s.K, s.M, s.Ue, s.Ut)
     start = s.random(np.random.default_rng(123))
-    plain = run_em(s, w, start, tol=tol, max_iter=20000, accelerate=False)
-    fast = run_em(s, w, start, tol=tol, max_iter=20000, accelerate=True)
+    (plain,) = run_em(s, w, [start], tol=tol, max_iter=20000, accelerate=False)
+    (fast,) = run_em(s, w, [start], tol=tol, max_iter=20000, accelerate=True)
     print(f"  plain EM: {plain.iterations} iterations {plain.seconds:.3f} s; SQUAREM: {fast.iterations} iterations {fast.seconds:.3f} s; "
           f"speed-up x{plain.seconds / fast.seconds:.1f}; log-likelihoods {plain.loglik:.6f} / {fast.loglik:.6f}")
 

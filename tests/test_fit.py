@@ -1,6 +1,7 @@
 """Fitting trust models: parameter recovery, labels, bootstrap, other studies' logs, decode, select, CLI."""
 
 import json
+import logging
 import subprocess
 import sys
 
@@ -10,7 +11,7 @@ import pytest
 
 from trustseek import TrustModel, paper_model
 from trustseek.data.trials import ColumnMapping, example_path, read_trials
-from trustseek.estimation.fit import decode, fit_trust_model, select_levels
+from trustseek.estimation import decode, fit_trust_model, select_levels
 from trustseek.simulation.designs import simulate_design
 
 
@@ -26,7 +27,7 @@ def free_cells(result):
 @pytest.fixture(scope="module")
 def big_fit():
     # seed 0, the default, not a seed picked for a good result: over 20 synthetic data sets
-    # (seeds 0-19, benchmarks/bench_fit.py --recovery 20) the MAE is 0.004-0.047, median 0.010,
+    # (seeds 0-19, benchmarks/bench_fit.py --recovery 20) the MAE is 0.004-0.062, median 0.015,
     # above 0.03 on 2 of 20 (docs/fitting.md)
     df = simulate_design(paper_model(), 1000, seed=0)
     return df, fit_trust_model(df, restarts=4, seed=1)
@@ -65,8 +66,7 @@ def test_recovery_of_well_identified_cells_on_other_data_sets(seed):
     cells with many expected events are within 0.03 of the truth.  (Event counts are only a
     partial guide: the weakly identified cells -- P(rely | T=low, C=high) and the transitions
     after a failure -- also have thousands of events; see docs/fitting.md.)"""
-    from trustseek.estimation.fit import from_trust_model
-    from trustseek.estimation.iohmm import loglik
+    from trustseek.estimation import from_trust_model, loglik
 
     truth = paper_model()
     df = simulate_design(truth, 1000, seed=seed)
@@ -128,6 +128,19 @@ def test_nine_participants_bootstrap_is_deterministic_across_processes():
     assert all("lower" in c and "upper" in c for c in cells)
 
 
+def test_fit_logs_each_start_and_bootstrap_replicate_and_prints_nothing(caplog, capsys):
+    df = read_trials(example_path())
+    with caplog.at_level(logging.DEBUG, logger="trustseek.estimation"):
+        fit_trust_model(df, restarts=2, seed=0, bootstrap=2, n_jobs=1, tol=1e-5)
+    messages = [r.getMessage() for r in caplog.records if r.name.startswith("trustseek.estimation")]
+    for start in (0, 1):  # every start reports how it ended
+        assert any(m.startswith(f"start {start}: log-likelihood") and ("converged" in m or "cap" in m) for m in messages), messages
+    assert any(m.startswith("best of 2 starts") for m in messages)
+    for replicate in (0, 1):
+        assert any(m.startswith(f"bootstrap replicate {replicate} done") for m in messages), messages
+    assert capsys.readouterr().out == ""
+
+
 def test_another_studys_log_fits_by_column_mapping_alone(tmp_path):
     """participant, trial, automation_correct (0/1), rely (0/1): a 2-level model, transitions on
     automation_correct, emissions on nothing."""
@@ -160,9 +173,11 @@ def test_another_studys_log_fits_by_column_mapping_alone(tmp_path):
     assert res.n_params == 1 + 2 + 4
 
 
-def test_select_levels_prefers_two_levels_on_paper_data():
+def test_select_levels_prefers_two_levels_on_paper_data(caplog):
     df = simulate_design(paper_model(), 100, seed=9)
-    rows = select_levels(df, levels=(1, 2, 3), folds=2, restarts=2, seed=0, tol=1e-5)
+    with caplog.at_level(logging.INFO, logger="trustseek.estimation"):
+        rows = select_levels(df, levels=(1, 2, 3), folds=2, restarts=2, seed=0, tol=1e-5)
+    assert [r.getMessage().split(":")[0] for r in caplog.records if r.name == "trustseek.estimation.selection"] == ["1 levels", "2 levels", "3 levels"]
     by = {r["levels"]: r for r in rows}
     assert by[2]["loglik"] > by[1]["loglik"] + 50
     assert by[3]["loglik"] >= by[2]["loglik"] - 1.0  # nested: more levels fit at least about as well
@@ -237,7 +252,7 @@ def test_small_coverage_study():
 
 
 def test_decode_names_participants_the_model_rules_out():
-    from trustseek.estimation.iohmm import FitError
+    from trustseek.estimation import FitError
 
     df = read_trials(example_path())
     i = df.index[(df["participant"] == "P004") & (df["robot_action"] == "ask")][0]

@@ -147,7 +147,7 @@ def test_simulated_log_round_trips_through_fit(tmp_path):
     # (cells such as P(rely | low trust, high complexity) are weakly identified, so the
     # likelihood, not each cell, is the sharp check)
     from trustseek.estimation.fit import from_trust_model
-    from trustseek.estimation.iohmm import encode, loglik
+    from trustseek.estimation import encode, loglik
 
     spec, params = from_trust_model(truth)
     ll_truth = loglik(encode(frame[frame.columns[:6]], spec), spec, params)

@@ -19,9 +19,9 @@ from ._app import app, console, err_console, print_json
 
 
 def _fit():
-    from ..estimation import fit
+    from .. import estimation
 
-    return fit
+    return estimation
 
 
 def _data():
@@ -134,7 +134,7 @@ def fit(
         if result.ci is not None:
             row.append(escape(f"[{c['lower']:.3f}, {c['upper']:.3f}]"))
         ev = f"{c['events']:.1f}"
-        row.append(ev if c["events"] >= 5 else f"[yellow]{ev} (not identified)[/]")
+        row.append(ev if c["events"] >= _fit().MIN_EVENTS else f"[yellow]{ev} (not identified)[/]")
         table.add_row(*row)
     console.print(table)
     lls = ", ".join(f"{x:.3f}" for x in sorted(result.restart_logliks, reverse=True))

@@ -1,5 +1,43 @@
-"""Estimation: the discrete IOHMM, its extended Baum-Welch algorithm, and the trust-model fit."""
+"""Estimation: the discrete IOHMM, its extended Baum-Welch fit, and the trust-model fit built on it.
 
-from .fit import FitResult, decode, fit_trust_model, select_levels
+* :mod:`.spec` -- what an IOHMM is made of (:class:`IOHMMSpec`, :class:`Params`);
+* :mod:`.sequences` -- trial tables encoded as integer arrays (:func:`encode`);
+* :mod:`.structure` -- a spec compiled against data: free, tied and fixed cells, M-step;
+* :mod:`.estep` / :mod:`.kernels` -- the E-step (compiled, with the numpy reference);
+* :mod:`.em` / :mod:`.quasi_newton` -- EM for R starts with SQUAREM, and the L-BFGS-B finish;
+* :mod:`.iohmm` -- :func:`fit_iohmm`, log-likelihood, posteriors, Viterbi;
+* :mod:`.trust_iohmm` -- the paper's structure, tables to and from a TrustModel;
+* :mod:`.fit`, :mod:`.bootstrap`, :mod:`.selection` -- the trust-model fit, its intervals,
+  and the choice of the number of levels.
+"""
 
-__all__ = ["FitResult", "decode", "fit_trust_model", "select_levels"]
+from .fit import MIN_EVENTS, FitResult, decode, fit_trust_model
+from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
+from .selection import select_levels
+from .sequences import Sequences, encode
+from .spec import FitError, Fixed, IOHMMSpec, Params
+from .trust_iohmm import MODEL_INPUTS, PAPER_EMISSION_INPUTS, PAPER_TRANSITION_INPUTS, from_trust_model, paper_spec, to_trust_model
+
+__all__ = [
+    "MIN_EVENTS",
+    "MODEL_INPUTS",
+    "PAPER_EMISSION_INPUTS",
+    "PAPER_TRANSITION_INPUTS",
+    "FitError",
+    "FitResult",
+    "Fixed",
+    "IOHMMFit",
+    "IOHMMSpec",
+    "Params",
+    "Sequences",
+    "decode",
+    "encode",
+    "fit_iohmm",
+    "fit_trust_model",
+    "from_trust_model",
+    "loglik",
+    "paper_spec",
+    "posteriors",
+    "select_levels",
+    "to_trust_model",
+]

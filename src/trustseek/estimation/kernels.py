@@ -4,8 +4,8 @@ One call runs the E-step of R parameter sets of a discrete IOHMM on the same
 sequences: per sequence a scaled forward pass, a backward pass, and the
 posterior counts added straight into the emission, transition and initial
 tables, with no per-trial arrays.  The numpy implementation in
-:mod:`trustseek.iohmm` (``Workspace(method="loop")``) is the reference it is
-tested against.
+:mod:`.estep` (``Workspace(method="loop")``) is the reference it is tested
+against.
 
 Tables (leading axis R = parameter sets):
 
@@ -26,21 +26,32 @@ set -inf, with zero counts.
 from __future__ import annotations
 
 import math
+from typing import Any, Callable
 
 import numpy as np
 
 try:  # numba is a declared dependency; without it the numpy E-step is used
-    from numba import njit
+    import numba
 
     AVAILABLE = True
 except ImportError:  # pragma: no cover - exercised only without numba
     AVAILABLE = False
 
-    def njit(*args, **kwargs):
-        def wrap(f):
-            return f
 
-        return wrap
+def njit(**options: Any) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """numba's ``njit(**options)`` when numba is installed, else the plain Python function."""
+    if not AVAILABLE:  # pragma: no cover - exercised only without numba
+        return lambda f: f
+    return numba.njit(**options)
+
+
+@njit(cache=True, nogil=True)
+def _clear(r, loglik, c_init, c_emit, c_trans):
+    """Zero the log-likelihood and the counts of parameter set ``r``."""
+    loglik[r] = 0.0
+    c_init[r, :] = 0.0
+    c_emit[r, :, :] = 0.0
+    c_trans[r, :, :, :] = 0.0
 
 
 @njit(cache=True, nogil=True)
@@ -52,10 +63,7 @@ def estep_counts(initial, emit, trans, eidx, tidx, lengths, active, loglik, c_in
     R, K = initial.shape
     N = eidx.shape[0]
     for r in range(R):
-        loglik[r] = 0.0
-        c_init[r, :] = 0.0
-        c_emit[r, :, :] = 0.0
-        c_trans[r, :, :, :] = 0.0
+        _clear(r, loglik, c_init, c_emit, c_trans)
         if not active[r]:
             continue
         total = 0.0
@@ -130,21 +138,19 @@ def estep_counts(initial, emit, trans, eidx, tidx, lengths, active, loglik, c_in
             for k in range(K):
                 c_init[r, k] += alpha[0, k] * beta[0, k]
         if not total > -math.inf:
+            _clear(r, loglik, c_init, c_emit, c_trans)
             loglik[r] = -math.inf
-            c_init[r, :] = 0.0
-            c_emit[r, :, :] = 0.0
-            c_trans[r, :, :, :] = 0.0
         else:
             loglik[r] = total
 
 
 class Kernel:
-    """Buffers and index arrays of one data set for :func:`estep_counts` (R parameter sets)."""
+    """Buffers and index arrays of one data set for :func:`estep_counts` (any number of parameter sets)."""
 
-    def __init__(self, eidx: np.ndarray, tidx: np.ndarray, lengths: np.ndarray, K: int, PE: int, P: int, R: int):
+    def __init__(self, eidx: np.ndarray, tidx: np.ndarray, lengths: np.ndarray, K: int, PE: int, P: int):
         """``eidx`` (T, N) and ``tidx`` (T-1, N) as time-major arrays (padding is never read)."""
         T, N = eidx.shape
-        self.K, self.PE, self.P, self.R = K, PE, P, R
+        self.K, self.PE, self.P = K, PE, P
         self.eidx = np.ascontiguousarray(eidx.T, dtype=np.int64)
         t = np.zeros((N, max(T, 1)), dtype=np.int64)
         t[:, : T - 1] = tidx.T
@@ -154,16 +160,17 @@ class Kernel:
         self.beta = np.empty((max(T, 1), K))
         self.scale = np.empty(max(T, 1))
         self.tmp = np.empty(K)
-        self.all = np.ones(R, dtype=np.bool_)
 
-    def run(self, initial: np.ndarray, emit: np.ndarray, trans: np.ndarray, active: np.ndarray | None = None):
+    def run(
+        self, initial: np.ndarray, emit: np.ndarray, trans: np.ndarray, active: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(loglik (R,), initial counts (R, K), emission counts (R, PE, K), transition counts (R, P, K, K))."""
         R, K = initial.shape
         ll = np.empty(R)
         ci = np.empty((R, K))
         ce = np.empty((R, self.PE, K))
         ct = np.empty((R, self.P, K, K))
-        act = (self.all if R == self.R else np.ones(R, dtype=np.bool_)) if active is None else np.ascontiguousarray(active, dtype=np.bool_)
+        act = np.ones(R, dtype=np.bool_) if active is None else np.ascontiguousarray(active, dtype=np.bool_)
         (estep_counts2 if K == 2 else estep_counts)(
             np.ascontiguousarray(initial, dtype=np.float64),
             np.ascontiguousarray(emit, dtype=np.float64),
@@ -179,10 +186,7 @@ def estep_counts2(initial, emit, trans, eidx, tidx, lengths, active, loglik, c_i
     R = initial.shape[0]
     N = eidx.shape[0]
     for r in range(R):
-        loglik[r] = 0.0
-        c_init[r, :] = 0.0
-        c_emit[r, :, :] = 0.0
-        c_trans[r, :, :, :] = 0.0
+        _clear(r, loglik, c_init, c_emit, c_trans)
         if not active[r]:
             continue
         total = 0.0
@@ -256,9 +260,7 @@ def estep_counts2(initial, emit, trans, eidx, tidx, lengths, active, loglik, c_i
             c_init[r, 0] += alpha[0, 0] * g0
             c_init[r, 1] += alpha[0, 1] * g1
         if dead:
+            _clear(r, loglik, c_init, c_emit, c_trans)
             loglik[r] = -math.inf
-            c_init[r, :] = 0.0
-            c_emit[r, :, :] = 0.0
-            c_trans[r, :, :, :] = 0.0
         else:
             loglik[r] = total

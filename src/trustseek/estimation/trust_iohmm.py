@@ -1,0 +1,168 @@
+"""The supervisor's trust model as an IOHMM: the paper's structure, and tables to and from a TrustModel.
+
+* :func:`paper_spec` -- the IOHMM structure of Section V: trust levels ``low``/``high``,
+  transitions on (complexity, robot action, experience at the end of the trial),
+  emissions on (complexity, robot action), P(intervene | ask) = 1 fixed, levels
+  labelled so that ``high`` relies more in high complexity;
+* :func:`to_trust_model` / :func:`from_trust_model` -- IOHMM tables, whatever inputs they
+  depend on, broadcast to the :class:`~trustseek.model.TrustModel` arrays, and back.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+
+from ..model.core import TrustModel
+from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, LEVELS
+from .spec import FitError, Fixed, IOHMMSpec, Params
+
+PAPER_TRANSITION_INPUTS = ("complexity", "robot_action", "experience")
+PAPER_EMISSION_INPUTS = ("complexity", "robot_action")
+MODEL_INPUTS = ("complexity", "robot_action", "experience")
+PRESETS = ("paper",)
+
+
+def level_names(k: int) -> tuple[str, ...]:
+    """Names of k trust levels, lowest first."""
+    names = {1: ("single",), 2: ("low", "high"), 3: ("low", "medium", "high"), 4: ("low", "medium-low", "medium-high", "high")}
+    return names.get(k, tuple(f"level{i + 1}" for i in range(k)))
+
+
+def paper_spec(
+    complexities: Sequence[str] = LEVELS,
+    prior: float = 0.0,
+    levels: Sequence[str] | int = ("low", "high"),
+    transition_inputs: Sequence[str] = PAPER_TRANSITION_INPUTS,
+    emission_inputs: Sequence[str] = PAPER_EMISSION_INPUTS,
+) -> IOHMMSpec:
+    """The ``paper`` preset (Section V), optionally with other inputs or another number of levels.
+
+    Inputs are canonical columns among complexity, robot_action, experience.  The
+    row ``P(intervene | ask) = 1`` is fixed whenever emissions depend on the robot
+    action.  Levels are ordered by P(rely) in high complexity without asking (as far
+    as the emission inputs resolve it), lowest first.
+    """
+    if isinstance(levels, int):
+        levels = level_names(levels)
+    complexities = tuple(complexities)
+    cats = {"complexity": complexities, "robot_action": ACTIONS, "experience": EXPERIENCES}
+    bad = [c for c in (*transition_inputs, *emission_inputs) if c not in cats]
+    if bad:
+        raise FitError([f"input {c!r} is not one of {list(MODEL_INPUTS)}" for c in bad])
+    fixed = (Fixed({"robot_action": "ask"}, {"intervene": 1.0, "rely": 0.0}),) if "robot_action" in emission_inputs else ()
+    where = {}
+    if "complexity" in emission_inputs:
+        where["complexity"] = complexities[-1]
+    if "robot_action" in emission_inputs:
+        where["robot_action"] = "autonomous"
+    return IOHMMSpec(
+        levels=tuple(levels),
+        output="human_action",
+        output_categories=HUMAN_ACTIONS,
+        emission_inputs=tuple(emission_inputs),
+        transition_inputs=tuple(transition_inputs),
+        categories={c: cats[c] for c in (*transition_inputs, *emission_inputs)},
+        fixed_emissions=fixed,
+        order_by=(where, "rely"),
+        prior=float(prior),
+    )
+
+
+def preset_spec(
+    preset: str | IOHMMSpec,
+    frame: pd.DataFrame | None = None,
+    prior: float = 0.0,
+    complexities: Sequence[str] | None = None,
+    levels: Sequence[str] | int = ("low", "high"),
+    transition_inputs: Sequence[str] = PAPER_TRANSITION_INPUTS,
+    emission_inputs: Sequence[str] = PAPER_EMISSION_INPUTS,
+) -> IOHMMSpec:
+    """The spec named by ``preset`` (an :class:`IOHMMSpec` is returned as is, with ``prior`` if given).
+
+    The ``paper`` preset takes the options of :func:`paper_spec`, and its complexities
+    from ``frame`` when not given: the paper's levels in their order, then any others
+    in sorted order.
+    """
+    if isinstance(preset, IOHMMSpec):
+        return replace(preset, prior=float(prior)) if prior else preset
+    if preset != "paper":
+        raise FitError([f"unknown preset {preset!r}; presets: {list(PRESETS)}"])
+    if complexities is None and frame is not None and frame["complexity"].notna().any():
+        present = set(frame["complexity"].dropna())
+        extra = sorted(present - set(LEVELS))
+        complexities = tuple(LEVELS) if not extra else tuple([c for c in LEVELS if c in present] + extra)
+    return paper_spec(complexities or LEVELS, prior, levels, transition_inputs, emission_inputs)
+
+
+def model_complexities(spec: IOHMMSpec) -> tuple[str, ...]:
+    return tuple(spec.categories.get("complexity", LEVELS))
+
+
+def check_convertible(spec: IOHMMSpec) -> None:
+    """Raise a :class:`FitError` unless ``spec``'s tables can be written as a TrustModel."""
+    problems = []
+    if spec.output != "human_action" or tuple(spec.output_categories) != HUMAN_ACTIONS:
+        problems.append(f"a trust model needs the output human_action {list(HUMAN_ACTIONS)}")
+    for c in (*spec.emission_inputs, *spec.transition_inputs):
+        if c not in MODEL_INPUTS:
+            problems.append(f"a trust model has no input {c!r} (inputs: {list(MODEL_INPUTS)})")
+    if spec.n_levels < 2:
+        problems.append("a trust model needs at least 2 trust levels")
+    if problems:
+        raise FitError(problems)
+
+
+def index_grid(spec: IOHMMSpec, inputs: Sequence[str], with_experience: bool) -> np.ndarray:
+    """For every TrustModel cell (c, a[, e]) the combination index of ``inputs``."""
+    C = len(model_complexities(spec))
+    shape = (C, 2, 2) if with_experience else (C, 2)
+    out = np.zeros(shape, dtype=np.int64)
+    sizes = [len(spec.categories[c]) for c in inputs]
+    for idx in np.ndindex(shape):
+        codes = {"complexity": idx[0], "robot_action": idx[1]}
+        if with_experience:
+            codes["experience"] = idx[2]
+        out[idx] = np.ravel_multi_index(tuple(codes[c] for c in inputs), sizes) if inputs else 0
+    return out
+
+
+def to_trust_model(spec: IOHMMSpec, params: Params, notes: str = "") -> TrustModel:
+    """Broadcast IOHMM tables to the TrustModel arrays (inputs a table ignores repeat)."""
+    check_convertible(spec)
+    eg = index_grid(spec, spec.emission_inputs, False)
+    tg = index_grid(spec, spec.transition_inputs, True)
+    return TrustModel(
+        trust_levels=spec.levels,
+        complexities=model_complexities(spec),
+        initial=params.initial,
+        emission=params.emission[eg],
+        transition=params.transition[tg],
+        notes=notes,
+    )
+
+
+def broadcast(spec: IOHMMSpec, arrays: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Row-level arrays (U, K) to TrustModel shapes (cell value = its row's value)."""
+    K = spec.n_levels
+    eg = index_grid(spec, spec.emission_inputs, False)
+    tg = index_grid(spec, spec.transition_inputs, True)
+    return {
+        "initial": np.asarray(arrays["initial"], dtype=float),
+        "emission": np.repeat(arrays["emission"][eg][..., None], 2, axis=-1),
+        "transition": np.repeat(arrays["transition"][tg][..., None], K, axis=-1),
+    }
+
+
+def from_trust_model(model: TrustModel) -> tuple[IOHMMSpec, Params]:
+    """The paper-structured spec and tables that reproduce ``model`` exactly (for decoding)."""
+    K, C = model.n_trust, model.n_complexity
+    spec = paper_spec(complexities=model.complexities, levels=model.trust_levels)
+    return spec, Params(
+        np.array(model.initial, dtype=float),
+        np.array(model.emission, dtype=float).reshape(C * 2, K, 2),
+        np.array(model.transition, dtype=float).reshape(C * 4, K, K),
+    )
