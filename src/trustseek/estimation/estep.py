@@ -87,6 +87,7 @@ class Workspace:
         # log2(T)-times more work: the scan wins for few, long sequences
         self.compiled = method == "numba" or (method == "auto" and kernels.AVAILABLE)
         self.scan = method == "scan" or (method in ("auto", "numba") and self.T > 1 and self.T >= SCAN_RATIO * self.N)
+        self._eye = np.eye(K)
         self._kernel = kernels.Kernel(self.eidx, self.tidx, seqs.lengths, K, self.PE, Ut + 1) if self.compiled else None
         self._numpy: dict[int, _NumpyEStep] = {}
 
@@ -103,7 +104,7 @@ class Workspace:
         Bx[:, :-1] = p.emission.transpose(0, 1, 3, 2).reshape(R, self.Ue * self.M, K)
         Ax = np.empty((R, self.Ut + 1, K, K))
         Ax[:, :-1] = p.transition
-        Ax[:, -1] = np.eye(K)
+        Ax[:, -1] = self._eye
         return Bx, Ax
 
     def estep(self, p: Params, active: np.ndarray | None = None, posteriors: bool = False) -> EStep:
@@ -112,15 +113,16 @@ class Workspace:
         The compiled pass skips parameter sets of a batch where ``active`` is false (they
         report 0 and no counts); the numpy methods compute every set.
         """
-        if not p.batched:
-            return self.estep(p.as_batch(), posteriors=posteriors).take(0)
-        Bx, Ax = self.tables(p)
+        batch = p if p.batched else p.as_batch()
+        Bx, Ax = self.tables(batch)
         if self._kernel is not None and not posteriors:
-            ll, ci, ce, ct = self._kernel.run(p.initial, Bx, Ax, active)
-            R = len(ll)
-            em = ce[:, :-1].reshape(R, self.Ue, self.M, self.K).transpose(0, 1, 3, 2)
+            ll, ci, ce, ct = self._kernel.run(batch.initial, Bx, Ax, active)
+            em = ce[:, :-1].reshape(len(ll), self.Ue, self.M, self.K).transpose(0, 1, 3, 2)
+            if not p.batched:
+                return EStep(ll[0], ci[0], np.ascontiguousarray(em[0]), ct[0, :-1])
             return EStep(ll, ci, np.ascontiguousarray(em), np.ascontiguousarray(ct[:, :-1]))
-        return self._reference(len(p.initial)).estep(p.initial, Bx, Ax, posteriors)
+        st = self._reference(len(batch.initial)).estep(batch.initial, Bx, Ax, posteriors)
+        return st if p.batched else st.take(0)
 
     def loglik(self, p: Params) -> np.ndarray:
         """Log-likelihood of ``p`` (a 0-d array for one parameter set, (R,) for a batch)."""
