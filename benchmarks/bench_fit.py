@@ -82,7 +82,8 @@ def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None =
     print(f"{n} participants x 71 trials, {restarts} restarts, tol {tol:g} (best of 3 runs; median CPU {median_cpu:.3f} s)")
     for i, r in enumerate(fit.runs):
         mark = " (best)" if i == fit.best else ""
-        print(f"  restart {i:2d}: {r.iterations:4d} iterations, {r.seconds * 1000:8.1f} ms, log-likelihood {r.loglik:.6f}{mark}")
+        print(f"  restart {i:2d}: {r.iterations:4d} iterations, {r.finishes} finishes, {r.seconds * 1000:8.1f} ms, "
+              f"log-likelihood {r.loglik:.6f}, {r.ended}{mark}")
     its = sum(r.iterations for r in fit.runs)
     verdict = f" (target < {target:g} s: {'met' if cpu < target else 'not met'} on CPU time)" if target else ""
     print(f"  total {wall:.3f} s wall, {cpu:.3f} s CPU{verdict}; {cpu / its * 1000:.3f} ms CPU per iteration")

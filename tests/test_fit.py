@@ -99,6 +99,7 @@ def test_result_json_and_counts(big_fit):
     d = json.loads(json.dumps(res.to_dict()))
     assert TrustModel.from_dict(d["model"]) == res.model
     assert d["n_params"] == 17 and len(d["restart_logliks"]) == 4
+    assert d["ended"] == ["stationary"] * 4 and d["converged"] == [True] * 4  # how each restart ended
     # events behind the emission rows of autonomous trials add up to the number of such trials
     assert res.counts["emission"][:, 0, :, 0].sum() == pytest.approx(sum_autonomous(big_fit[0]), rel=1e-9)
     for name in ("initial", "emission", "transition"):

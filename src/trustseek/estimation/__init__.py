@@ -5,6 +5,7 @@
 * :mod:`.structure` -- a spec compiled against data: free, tied and fixed cells, M-step;
 * :mod:`.estep` / :mod:`.kernels` -- the E-step (compiled, with the numpy reference);
 * :mod:`.em` / :mod:`.quasi_newton` -- EM for R starts with SQUAREM, and the L-BFGS-B finish;
+* :mod:`.convergence` -- a run has converged at a stationary point, checked by one more EM step;
 * :mod:`.iohmm` -- :func:`fit_iohmm`, log-likelihood, posteriors, Viterbi;
 * :mod:`.trust_iohmm` -- the paper's structure, tables to and from a TrustModel;
 * :mod:`.fit`, :mod:`.bootstrap`, :mod:`.selection` -- the trust-model fit, its intervals,

@@ -85,6 +85,7 @@ class FitResult:
             "best_restart": self.fit.best,
             "iterations": [r.iterations for r in runs],
             "converged": [r.converged for r in runs],
+            "ended": [r.ended for r in runs],
             "seconds": [r.seconds for r in runs],
             "seed": self.seed,
             "bootstrap": self.bootstrap,
