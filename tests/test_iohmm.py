@@ -79,7 +79,7 @@ def test_expected_counts_match_brute_force_derivative():
     params = s.random(np.random.default_rng(3))
     _, marg, _ = brute_force(seqs, params)
     expect = np.zeros_like(params.emission)
-    for t, n in zip(*np.nonzero(seqs.y >= 0)):
+    for t, n in zip(*np.nonzero(seqs.y >= 0), strict=True):
         expect[seqs.ue[t, n], :, seqs.y[t, n]] += marg[t, n]
     sts = [Workspace(seqs, 2, 2, s.Ue, s.Ut, method=m).estep(params) for m in ("loop", "scan")]
     for st in sts:
@@ -152,7 +152,14 @@ def test_objective_never_decreases(accelerate):
         spec = paper_spec(prior=prior)
         seqs = encode(df, spec)
         s = Structure(spec, seqs)
-        (res,) = run_em(s, Workspace(seqs, 2, 2, s.Ue, s.Ut), [s.random(np.random.default_rng(4))], tol=1e-10, max_iter=300, accelerate=accelerate)
+        (res,) = run_em(
+            s,
+            Workspace(seqs, 2, 2, s.Ue, s.Ut),
+            [s.random(np.random.default_rng(4))],
+            tol=1e-10,
+            max_iter=300,
+            accelerate=accelerate,
+        )
         h = np.array(res.history)
         assert np.all(np.isfinite(h))
         assert np.all(np.diff(h) >= 0)
@@ -200,7 +207,13 @@ def test_tied_rows_and_prior():
     df = small_paper_data(40, (41, 30), seed=8)
     base = paper_spec()
     # tie the autonomous emission rows of both complexities: one row per level
-    tied = IOHMMSpec(**{**base.__dict__, "tied_emissions": (({"robot_action": "autonomous"},),), "order_by": ({"robot_action": "autonomous"}, "rely")})
+    tied = IOHMMSpec(
+        **{
+            **base.__dict__,
+            "tied_emissions": (({"robot_action": "autonomous"},),),
+            "order_by": ({"robot_action": "autonomous"}, "rely"),
+        }
+    )
     seqs = encode(df, tied)
     fit = fit_iohmm(seqs, tied, restarts=2, seed=1)
     np.testing.assert_allclose(fit.params.emission[0], fit.params.emission[2])  # (low, auto) == (high, auto)
@@ -256,7 +269,7 @@ def test_batched_restarts_take_the_same_path_as_one_at_a_time(method):
         starts = [s.random(np.random.default_rng(r)) for r in range(4)]
         one = [run_em(s, Workspace(seqs, 2, 2, s.Ue, s.Ut, method=method), [p], tol=1e-9)[0] for p in starts]
         many = run_em(s, Workspace(seqs, 2, 2, s.Ue, s.Ut, method=method), starts, tol=1e-9)
-        for a, b in zip(one, many):
+        for a, b in zip(one, many, strict=True):
             assert a.iterations == b.iterations and a.converged == b.converged
             np.testing.assert_allclose(a.history, b.history, rtol=1e-8)
             np.testing.assert_allclose(a.params.vector(), b.params.vector(), atol=1e-6)

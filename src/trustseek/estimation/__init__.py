@@ -17,7 +17,14 @@ from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
 from .selection import select_levels
 from .sequences import Sequences, encode
 from .spec import FitError, Fixed, IOHMMSpec, Params
-from .trust_iohmm import MODEL_INPUTS, PAPER_EMISSION_INPUTS, PAPER_TRANSITION_INPUTS, from_trust_model, paper_spec, to_trust_model
+from .trust_iohmm import (
+    MODEL_INPUTS,
+    PAPER_EMISSION_INPUTS,
+    PAPER_TRANSITION_INPUTS,
+    from_trust_model,
+    paper_spec,
+    to_trust_model,
+)
 
 __all__ = [
     "MIN_EVENTS",

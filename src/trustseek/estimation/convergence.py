@@ -68,9 +68,16 @@ def converge(
         f, q, fq = em_step(structure, work, run.params)
         if stationary(f, fq, tol):
             return _ended(replace(run, iterations=run.iterations + CHECK_STEPS), STATIONARY, seconds, t0)
-        (more,) = run_em(structure, work, [q], tol=em_tol, max_iter=max_iter - run.iterations - CHECK_STEPS, accelerate=accelerate)
-        run = replace(more, history=run.history + more.history, iterations=run.iterations + CHECK_STEPS + more.iterations,
-                      seconds=run.seconds, finishes=run.finishes)
+        (more,) = run_em(
+            structure, work, [q], tol=em_tol, max_iter=max_iter - run.iterations - CHECK_STEPS, accelerate=accelerate
+        )
+        run = replace(
+            more,
+            history=run.history + more.history,
+            iterations=run.iterations + CHECK_STEPS + more.iterations,
+            seconds=run.seconds,
+            finishes=run.finishes,
+        )
         if not more.converged:
             return _ended(run, CAPPED, seconds, t0)
 

@@ -9,8 +9,8 @@ log-likelihood plus the log-prior; it never decreases along a run.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -76,8 +76,16 @@ class _Lockstep:
 
     def results(self, seconds: float) -> list[RunResult]:
         return [
-            RunResult(self.params.take(r), float(self.loglik[r]), float(self.objective[r]), self.history[r],
-                      int(self.iterations[r]), bool(self.converged[r]), seconds, SMALL_STEP if self.converged[r] else CAPPED)
+            RunResult(
+                self.params.take(r),
+                float(self.loglik[r]),
+                float(self.objective[r]),
+                self.history[r],
+                int(self.iterations[r]),
+                bool(self.converged[r]),
+                seconds,
+                SMALL_STEP if self.converged[r] else CAPPED,
+            )
             for r in range(len(self.history))
         ]
 

@@ -48,15 +48,21 @@ class EStep:
     transition: np.ndarray  # (Ut, K, K)
     gamma: np.ndarray | None = None
 
-    def take(self, r: int) -> "EStep":
+    def take(self, r: int) -> EStep:
         """The E-step of parameter set ``r`` of a batch."""
-        return EStep(self.loglik[r], self.initial[r], self.emission[r], self.transition[r], None if self.gamma is None else self.gamma[r])
+        return EStep(
+            self.loglik[r], self.initial[r], self.emission[r], self.transition[r], None if self.gamma is None else self.gamma[r]
+        )
 
-    def where(self, mask: np.ndarray, other: "EStep") -> "EStep":
+    def where(self, mask: np.ndarray, other: EStep) -> EStep:
         """Per parameter set of a batch: this E-step where ``mask`` (R,) holds, else ``other`` (no posteriors)."""
         m3 = mask[:, None, None, None]
-        return EStep(np.where(mask, self.loglik, other.loglik), np.where(mask[:, None], self.initial, other.initial),
-                     np.where(m3, self.emission, other.emission), np.where(m3, self.transition, other.transition))
+        return EStep(
+            np.where(mask, self.loglik, other.loglik),
+            np.where(mask[:, None], self.initial, other.initial),
+            np.where(m3, self.emission, other.emission),
+            np.where(m3, self.transition, other.transition),
+        )
 
 
 class _NumpyEStep(Protocol):
@@ -187,7 +193,9 @@ class _TimeLoop(_Columns):
         self._bs = np.empty((K, max(T - 1, 0), NR))
         self._c = np.empty((T, NR))
 
-    def _forward(self, initial: np.ndarray, Bx: np.ndarray, Ax: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _forward(
+        self, initial: np.ndarray, Bx: np.ndarray, Ax: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Scaled forward pass: alpha (K, T, RN), scales c (T, RN), step matrices Mt, log-likelihood (R,)."""
         K, R, N = self.K, self.R, self.N
         T = self._c.shape[0]
@@ -222,7 +230,11 @@ class _TimeLoop(_Columns):
             xi = np.multiply(alpha[:, None, :-1], Mt, out=self._xi)
             xi *= np.divide(beta[:, 1:], c[1:], out=self._bs)[None]
         em = np.bincount(self.ebins, weights=gamma.ravel(), minlength=K * R * self.PE).reshape(K, R, self.PE).transpose(1, 2, 0)
-        tr = np.bincount(self.tbins, weights=xi.ravel(), minlength=K * K * R * self.U1).reshape(K, K, R, self.U1).transpose(2, 3, 0, 1)
+        tr = (
+            np.bincount(self.tbins, weights=xi.ravel(), minlength=K * K * R * self.U1)
+            .reshape(K, K, R, self.U1)
+            .transpose(2, 3, 0, 1)
+        )
         init = gamma[:, 0].reshape(K, R, N).sum(2).T
         post = gamma.reshape(K, T, R, N).transpose(2, 1, 3, 0).copy() if posteriors else None
         return self.result(ll, init, em, tr, post)
@@ -243,7 +255,9 @@ class _Scan(_Columns):
         self.ebins = (np.ascontiguousarray(self.eidx.T)[:, :, None] * K + np.arange(K)).ravel()
         self.tbins = (np.ascontiguousarray(self.tidx.T)[:, :, None] * (K * K) + np.arange(K * K)).ravel()
 
-    def _forward(self, initial: np.ndarray, Bx: np.ndarray, Ax: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _forward(
+        self, initial: np.ndarray, Bx: np.ndarray, Ax: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """alpha_0 (RN, K), step matrices Mt (RN, T-1, K, K), prefix products F, log-likelihood (R,)."""
         K, R, N = self.K, self.R, self.N
         Mt = self.step_table(Bx, Ax)[self.midx_s]

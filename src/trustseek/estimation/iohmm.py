@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
 
 import numpy as np
 
@@ -78,7 +78,10 @@ class IOHMMFit:
 
 def _describe(i: int, r: RunResult) -> str:
     state = "converged: stationary" if r.ended == STATIONARY else f"not converged: {r.ended}"
-    return f"start {i}: log-likelihood {r.loglik:.6f} after {r.iterations} E-steps and {r.finishes} finishes ({state}, {r.seconds:.3f} s)"
+    return (
+        f"start {i}: log-likelihood {r.loglik:.6f} after {r.iterations} E-steps and {r.finishes} finishes "
+        f"({state}, {r.seconds:.3f} s)"
+    )
 
 
 def fit_iohmm(
@@ -110,7 +113,13 @@ def fit_iohmm(
     starts += [structure.random(np.random.default_rng(s)) for s in ss.spawn(restarts)]
     if not starts:
         raise FitError(["at least one restart is needed"])
-    log.debug("fitting %d levels to %d sequences (%d trials) from %d starts", structure.K, seqs.n_participants, seqs.n_trials, len(starts))
+    log.debug(
+        "fitting %d levels to %d sequences (%d trials) from %d starts",
+        structure.K,
+        seqs.n_participants,
+        seqs.n_trials,
+        len(starts),
+    )
     em_tol = max(tol, FINISH_SWITCH) if quasi_newton else tol
     group = work.lockstep(len(starts))
     runs: list[RunResult] = []

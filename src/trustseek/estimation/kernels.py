@@ -26,7 +26,8 @@ set -inf, with zero counts.
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -181,7 +182,18 @@ class Kernel:
             np.ascontiguousarray(initial, dtype=np.float64),
             np.ascontiguousarray(emit, dtype=np.float64),
             np.ascontiguousarray(trans, dtype=np.float64),
-            self.eidx, self.tidx, self.lengths, act, ll, ci, ce, ct, self.alpha, self.beta, self.scale, self.tmp,
+            self.eidx,
+            self.tidx,
+            self.lengths,
+            act,
+            ll,
+            ci,
+            ce,
+            ct,
+            self.alpha,
+            self.beta,
+            self.scale,
+            self.tmp,
         )
         return ll, ci, ce, ct
 

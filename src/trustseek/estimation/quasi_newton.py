@@ -72,7 +72,9 @@ class Sticks:
                         dst.append(u * KM + k * table.M + cells)
                         src.append(r * m + np.arange(m))
                 mass = np.array([table.mass[g, k] for g, k, _ in lst])
-                self.parts.append(_Part(name, len(lst), m, mass, np.concatenate(dst).astype(np.int64), np.concatenate(src).astype(np.int64)))
+                self.parts.append(
+                    _Part(name, len(lst), m, mass, np.concatenate(dst).astype(np.int64), np.concatenate(src).astype(np.int64))
+                )
         self.size = sum(p.rows * (p.m - 1) for p in self.parts)
 
     def theta(self, p: Params) -> np.ndarray:
@@ -180,12 +182,28 @@ def finish(structure: Structure, work: Workspace, run: RunResult, tol: float = 1
         return -f, -sticks.gradient(theta, st)
 
     try:
-        res = minimize(fun, sticks.theta(base), jac=True, method="L-BFGS-B", bounds=[(sticks.EPS, 1 - sticks.EPS)] * sticks.size,
-                       callback=best.accept, options={"ftol": tol, "gtol": 0.0, "maxfun": budget, "maxiter": budget, "maxcor": MEMORY})
+        res = minimize(
+            fun,
+            sticks.theta(base),
+            jac=True,
+            method="L-BFGS-B",
+            bounds=[(sticks.EPS, 1 - sticks.EPS)] * sticks.size,
+            callback=best.accept,
+            options={"ftol": tol, "gtol": 0.0, "maxfun": budget, "maxiter": budget, "maxcor": MEMORY},
+        )
         best.accept(res.x)
         success = calls < budget  # stopped by its tolerance (or at the limits of precision), not by the cap
     except _Budget:  # the E-step cap: keep the best accepted point
         success = False
     converged = run.converged and success
-    return RunResult(best.params, best.loglik, best.objective, best.history, run.iterations + calls, converged,
-                     run.seconds + time.perf_counter() - t0, run.ended if converged else CAPPED, run.finishes + 1)
+    return RunResult(
+        best.params,
+        best.loglik,
+        best.objective,
+        best.history,
+        run.iterations + calls,
+        converged,
+        run.seconds + time.perf_counter() - t0,
+        run.ended if converged else CAPPED,
+        run.finishes + 1,
+    )
