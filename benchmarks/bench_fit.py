@@ -21,15 +21,15 @@ import time
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from trustseek.estimation import encode, fit_iohmm, fit_trust_model, from_trust_model, kernels, loglik, paper_spec  # noqa: E402
-from trustseek.estimation.em import run_em  # noqa: E402
-from trustseek.estimation.estep import Workspace  # noqa: E402
-from trustseek.estimation.structure import Structure  # noqa: E402
-from trustseek.model.presets import paper_model  # noqa: E402
-from trustseek.reproduction.coverage import coverage_study  # noqa: E402
-from trustseek.simulation.designs import simulate_design  # noqa: E402
+from trustseek.estimation import encode, fit_iohmm, fit_trust_model, from_trust_model, kernels, loglik, paper_spec
+from trustseek.estimation.em import run_em
+from trustseek.estimation.estep import Workspace
+from trustseek.estimation.structure import Structure
+from trustseek.model.presets import paper_model
+from trustseek.reproduction.coverage import coverage_study
+from trustseek.simulation.designs import simulate_design
 
 
 def clocks():
@@ -50,8 +50,10 @@ def first_call() -> None:
     t = clocks()
     fit_iohmm(seqs, paper_spec(), restarts=2, seed=0)
     w2, c2 = since(t)
-    print(f"compiled E-step available: {kernels.AVAILABLE}; first E-step {w:.2f} s wall, {c:.2f} s CPU "
-          f"(compilation on the first run, then loading from the cache); first fit (2 x 71) {w2:.2f} s wall, {c2:.2f} s CPU")
+    print(
+        f"compiled E-step available: {kernels.AVAILABLE}; first E-step {w:.2f} s wall, {c:.2f} s CPU "
+        f"(compilation on the first run, then loading from the cache); first fit (2 x 71) {w2:.2f} s wall, {c2:.2f} s CPU"
+    )
 
 
 def estep_speed(seqs, s, p, reps: int) -> None:
@@ -63,9 +65,11 @@ def estep_speed(seqs, s, p, reps: int) -> None:
         for _ in range(reps):
             w.estep(p)
         out[method] = [x / reps for x in since(t)]
-    print(f"  E-step: compiled {out['numba'][0] * 1e3:.2f} ms wall / {out['numba'][1] * 1e3:.2f} ms CPU; "
-          f"numpy {out['loop'][0] * 1e3:.2f} ms wall / {out['loop'][1] * 1e3:.2f} ms CPU; "
-          f"x{out['loop'][1] / out['numba'][1]:.1f} (CPU)")
+    print(
+        f"  E-step: compiled {out['numba'][0] * 1e3:.2f} ms wall / {out['numba'][1] * 1e3:.2f} ms CPU; "
+        f"numpy {out['loop'][0] * 1e3:.2f} ms wall / {out['loop'][1] * 1e3:.2f} ms CPU; "
+        f"x{out['loop'][1] / out['numba'][1]:.1f} (CPU)"
+    )
 
 
 def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None = None, numpy_fit: bool = False) -> None:
@@ -82,7 +86,10 @@ def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None =
     print(f"{n} participants x 71 trials, {restarts} restarts, tol {tol:g} (best of 3 runs; median CPU {median_cpu:.3f} s)")
     for i, r in enumerate(fit.runs):
         mark = " (best)" if i == fit.best else ""
-        print(f"  restart {i:2d}: {r.iterations:4d} iterations, {r.seconds * 1000:8.1f} ms, log-likelihood {r.loglik:.6f}{mark}")
+        print(
+            f"  restart {i:2d}: {r.iterations:4d} iterations, {r.finishes} finishes, {r.seconds * 1000:8.1f} ms, "
+            f"log-likelihood {r.loglik:.6f}, {r.ended}{mark}"
+        )
     its = sum(r.iterations for r in fit.runs)
     verdict = f" (target < {target:g} s: {'met' if cpu < target else 'not met'} on CPU time)" if target else ""
     print(f"  total {wall:.3f} s wall, {cpu:.3f} s CPU{verdict}; {cpu / its * 1000:.3f} ms CPU per iteration")
@@ -97,15 +104,20 @@ def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None =
             w2, c2 = since(t)
         finally:
             kernels.AVAILABLE = True
-        print(f"  numpy E-step fit: {w2:.3f} s wall, {c2:.3f} s CPU; compiled x{c2 / cpu:.1f} (CPU); "
-              f"same best log-likelihood: {abs(ref.loglik - fit.loglik) < 1e-6}")
+        print(
+            f"  numpy E-step fit: {w2:.3f} s wall, {c2:.3f} s CPU; compiled x{c2 / cpu:.1f} (CPU); "
+            f"same best log-likelihood: {abs(ref.loglik - fit.loglik) < 1e-6}"
+        )
     # SQUAREM vs plain EM from the same start
     w = Workspace(seqs, s.K, s.M, s.Ue, s.Ut)
     start = s.random(np.random.default_rng(123))
     (plain,) = run_em(s, w, [start], tol=tol, max_iter=20000, accelerate=False)
     (fast,) = run_em(s, w, [start], tol=tol, max_iter=20000, accelerate=True)
-    print(f"  plain EM: {plain.iterations} iterations {plain.seconds:.3f} s; SQUAREM: {fast.iterations} iterations {fast.seconds:.3f} s; "
-          f"speed-up x{plain.seconds / fast.seconds:.1f}; log-likelihoods {plain.loglik:.6f} / {fast.loglik:.6f}")
+    print(
+        f"  plain EM: {plain.iterations} iterations {plain.seconds:.3f} s; "
+        f"SQUAREM: {fast.iterations} iterations {fast.seconds:.3f} s; "
+        f"speed-up x{plain.seconds / fast.seconds:.1f}; log-likelihoods {plain.loglik:.6f} / {fast.loglik:.6f}"
+    )
 
 
 def recovery(datasets: int, n: int = 1000, restarts: int = 10) -> None:
@@ -125,13 +137,17 @@ def recovery(datasets: int, n: int = 1000, restarts: int = 10) -> None:
             events.setdefault(c["cell"], []).append(c["events"])
         maes.append(float(np.mean(e)))
         lr.append(2 * (res.loglik - loglik(res.fit.seqs, spec, ptrue)))
-        print(f"  seed {d:3d}: MAE {maes[-1]:.4f}; 2 (LL(fit) - LL(truth)) = {lr[-1]:6.2f}; restarts end in "
-              f"[{min(res.restart_logliks):.2f}, {max(res.restart_logliks):.2f}]")
+        print(
+            f"  seed {d:3d}: MAE {maes[-1]:.4f}; 2 (LL(fit) - LL(truth)) = {lr[-1]:6.2f}; restarts end in "
+            f"[{min(res.restart_logliks):.2f}, {max(res.restart_logliks):.2f}]"
+        )
     wall, cpu = since(t)
     q = np.quantile(maes, [0, 0.5, 0.9, 1])
-    print(f"  MAE min {q[0]:.4f}, median {q[1]:.4f}, 90% {q[2]:.4f}, max {q[3]:.4f}; <= 0.03 on "
-          f"{sum(m <= 0.03 for m in maes)} of {datasets}; LL(fit) >= LL(truth) on {sum(x >= 0 for x in lr)} of {datasets} "
-          f"({wall:.1f} s wall, {cpu:.1f} s CPU)")
+    print(
+        f"  MAE min {q[0]:.4f}, median {q[1]:.4f}, 90% {q[2]:.4f}, max {q[3]:.4f}; <= 0.03 on "
+        f"{sum(m <= 0.03 for m in maes)} of {datasets}; LL(fit) >= LL(truth) on {sum(x >= 0 for x in lr)} of {datasets} "
+        f"({wall:.1f} s wall, {cpu:.1f} s CPU)"
+    )
     print(f"  {'cell':62s} {'RMSE':>6s} {'max|err|':>8s} {'events':>7s}")
     for k, v in errs.items():
         v = np.asarray(v)
@@ -150,7 +166,9 @@ def coverage(datasets: int, bootstrap: int) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--recovery", type=int, default=0, help="number of synthetic datasets for the recovery study at 1000 x 71 (0 = skip)")
+    ap.add_argument(
+        "--recovery", type=int, default=0, help="number of synthetic datasets for the recovery study at 1000 x 71 (0 = skip)"
+    )
     ap.add_argument("--coverage", type=int, default=0, help="number of synthetic datasets for the coverage study (0 = skip)")
     ap.add_argument("--bootstrap", type=int, default=100, help="bootstrap replicates per dataset in the coverage study")
     args = ap.parse_args(argv)

@@ -83,7 +83,7 @@ def test_recovery_of_well_identified_cells_on_other_data_sets(seed):
 
 
 def test_decode_with_the_true_model_tracks_the_hidden_trust(big_fit):
-    df, res = big_fit
+    df, _ = big_fit
     part = df[df["participant"].isin(df["participant"].unique()[:100])]
     post = decode(part, paper_model())
     assert len(post) == len(part)
@@ -99,6 +99,7 @@ def test_result_json_and_counts(big_fit):
     d = json.loads(json.dumps(res.to_dict()))
     assert TrustModel.from_dict(d["model"]) == res.model
     assert d["n_params"] == 17 and len(d["restart_logliks"]) == 4
+    assert d["ended"] == ["stationary"] * 4 and d["converged"] == [True] * 4  # how each restart ended
     # events behind the emission rows of autonomous trials add up to the number of such trials
     assert res.counts["emission"][:, 0, :, 0].sum() == pytest.approx(sum_autonomous(big_fit[0]), rel=1e-9)
     for name in ("initial", "emission", "transition"):
@@ -134,7 +135,9 @@ def test_fit_logs_each_start_and_bootstrap_replicate_and_prints_nothing(caplog, 
         fit_trust_model(df, restarts=2, seed=0, bootstrap=2, n_jobs=1, tol=1e-5)
     messages = [r.getMessage() for r in caplog.records if r.name.startswith("trustseek.estimation")]
     for start in (0, 1):  # every start reports how it ended
-        assert any(m.startswith(f"start {start}: log-likelihood") and ("converged" in m or "cap" in m) for m in messages), messages
+        assert any(m.startswith(f"start {start}: log-likelihood") and ("converged" in m or "cap" in m) for m in messages), (
+            messages
+        )
     assert any(m.startswith("best of 2 starts") for m in messages)
     for replicate in (0, 1):
         assert any(m.startswith(f"bootstrap replicate {replicate} done") for m in messages), messages
@@ -177,7 +180,11 @@ def test_select_levels_prefers_two_levels_on_paper_data(caplog):
     df = simulate_design(paper_model(), 100, seed=9)
     with caplog.at_level(logging.INFO, logger="trustseek.estimation"):
         rows = select_levels(df, levels=(1, 2, 3), folds=2, restarts=2, seed=0, tol=1e-5)
-    assert [r.getMessage().split(":")[0] for r in caplog.records if r.name == "trustseek.estimation.selection"] == ["1 levels", "2 levels", "3 levels"]
+    assert [r.getMessage().split(":")[0] for r in caplog.records if r.name == "trustseek.estimation.selection"] == [
+        "1 levels",
+        "2 levels",
+        "3 levels",
+    ]
     by = {r["levels"]: r for r in rows}
     assert by[2]["loglik"] > by[1]["loglik"] + 50
     assert by[3]["loglik"] >= by[2]["loglik"] - 1.0  # nested: more levels fit at least about as well
@@ -210,7 +217,9 @@ def invoke(*args):
 def test_cli_fit_decode_select(tmp_path):
     log = str(example_path())
     out = tmp_path / "model.json"
-    d = json.loads(invoke("fit", log, "--preset", "paper", "--restarts", "2", "--seed", "1", "--tol", "1e-6", "--out", out, "--json"))
+    d = json.loads(
+        invoke("fit", log, "--preset", "paper", "--restarts", "2", "--seed", "1", "--tol", "1e-6", "--out", out, "--json")
+    )
     m = TrustModel.load(out)
     assert TrustModel.from_dict(d["model"]) == m
     assert len(d["restart_logliks"]) == 2 and d["n_params"] == 17
@@ -247,7 +256,7 @@ def test_small_coverage_study():
         assert r["coverage"] in (0.0, 0.5, 1.0)
         assert 0.0 <= r["truth"] <= 1.0 and r["mean_width"] >= 0
     # the initial-trust cell's truth matches the preset
-    init = [r for r in rows if r["cell"] == "P(T1=high)"][0]
+    init = next(r for r in rows if r["cell"] == "P(T1=high)")
     assert init["truth"] == truth.initial[1]
 
 
@@ -272,8 +281,18 @@ def test_select_heldout_stays_finite_when_a_training_fold_never_saw_an_event():
         ha = np.where(cx == "low", "rely", "intervene")
         if i == 0:
             ha = np.full(T, "rely")
-        frames.append(pd.DataFrame({"participant": f"p{i}", "trial": np.arange(1, T + 1), "complexity": cx, "robot_action": "autonomous",
-                                    "human_action": ha, "experience": np.where(ha == "rely", "reliable", "faulty")}))
+        frames.append(
+            pd.DataFrame(
+                {
+                    "participant": f"p{i}",
+                    "trial": np.arange(1, T + 1),
+                    "complexity": cx,
+                    "robot_action": "autonomous",
+                    "human_action": ha,
+                    "experience": np.where(ha == "rely", "reliable", "faulty"),
+                }
+            )
+        )
     df = pd.concat(frames, ignore_index=True)
     rows = select_levels(df, levels=(1, 2), folds=3, restarts=2, seed=0, tol=1e-6)
     for r in rows:
@@ -281,3 +300,10 @@ def test_select_heldout_stays_finite_when_a_training_fold_never_saw_an_event():
     json.dumps(rows, allow_nan=False)
     # a fold that contains participant p0 scores lower than under the unsmoothed model's -inf, but finite
     assert min(min(r["heldout_per_fold"]) for r in rows) < -5
+
+
+def test_simulate_design_needs_one_ask_probability_per_complexity():
+    from trustseek.errors import TrustseekError
+
+    with pytest.raises(TrustseekError, match="one probability per complexity"):
+        simulate_design(paper_model(), 2, p_ask=(0.1,))

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.markup import escape
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from ..errors import TrustseekError
@@ -42,7 +41,7 @@ ColumnOpt = typer.Option(None, "--column", help="Map a column: canonical=theirs 
 LabelOpt = typer.Option(None, "--label", help="Map a label: column:theirs=canonical (e.g. human_action:1=rely). Repeatable.")
 
 
-def _inputs(text: Optional[str], default: tuple[str, ...], flag: str) -> tuple[str, ...]:
+def _inputs(text: str | None, default: tuple[str, ...], flag: str) -> tuple[str, ...]:
     if text is None:
         return default
     if text.strip().lower() in ("", "none", "-"):
@@ -54,7 +53,7 @@ def _inputs(text: Optional[str], default: tuple[str, ...], flag: str) -> tuple[s
     return cols
 
 
-def _read(log: Path, mapping: Optional[Path], column: Optional[list[str]], label: Optional[list[str]], needed: tuple[str, ...]):
+def _read(log: Path, mapping: Path | None, column: list[str] | None, label: list[str] | None, needed: tuple[str, ...]):
     m = _data().ColumnMapping.from_flags(column or [], label or [], mapping)
     return _data().read_trials(log, m, required=("participant", "trial", "human_action", *needed))
 
@@ -76,22 +75,38 @@ def fit(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
     preset: str = typer.Option("paper", "--preset", help="Model structure preset (paper)."),
     levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Number of trust levels."),
-    transitions_on: Optional[str] = typer.Option(None, "--transitions-on", help="Comma-separated inputs of the trust transitions (default: complexity,robot_action,experience; 'none' for none)."),
-    emissions_on: Optional[str] = typer.Option(None, "--emissions-on", help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for none)."),
+    transitions_on: str | None = typer.Option(
+        None,
+        "--transitions-on",
+        help="Comma-separated inputs of the trust transitions (default: complexity,robot_action,experience; 'none' for none).",
+    ),
+    emissions_on: str | None = typer.Option(
+        None,
+        "--emissions-on",
+        help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for none).",
+    ),
     restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Random restarts; the best is kept."),
-    bootstrap: int = typer.Option(0, "--bootstrap", "-b", min=0, help="Participant-level bootstrap replicates for 95% CIs (0 = none)."),
-    prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."),
+    bootstrap: int = typer.Option(
+        0, "--bootstrap", "-b", min=0, help="Participant-level bootstrap replicates for 95% CIs (0 = none)."
+    ),
+    prior: float = typer.Option(
+        0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."
+    ),
     seed: int = typer.Option(0, "--seed", help="Random seed (restarts and bootstrap)."),
     tol: float = typer.Option(1e-8, "--tol", help="Stop when the relative change of the log-likelihood is below this."),
     max_iter: int = typer.Option(1000, "--max-iter", min=1, help="Iteration cap per restart (E-steps)."),
-    jobs: Optional[int] = typer.Option(None, "--jobs", "-j", min=1, help="Processes for the bootstrap (default: all cores)."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the fitted trust model (JSON, same format as the presets)."),
-    posteriors: Optional[Path] = typer.Option(None, "--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet)."),
-    plots: Optional[Path] = typer.Option(None, "--plots", help="Write emission/transition figures (Fig. 4-6 style) into this directory."),
+    jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Processes for the bootstrap (default: all cores)."),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Write the fitted trust model (JSON, same format as the presets)."),
+    posteriors: Path | None = typer.Option(
+        None, "--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet)."
+    ),
+    plots: Path | None = typer.Option(
+        None, "--plots", help="Write emission/transition figures (Fig. 4-6 style) into this directory."
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print the fitted model and diagnostics as one JSON object."),
-    mapping: Optional[Path] = MappingOpt,
-    column: Optional[list[str]] = ColumnOpt,
-    label: Optional[list[str]] = LabelOpt,
+    mapping: Path | None = MappingOpt,
+    column: list[str] | None = ColumnOpt,
+    label: list[str] | None = LabelOpt,
 ) -> None:
     """Estimate the supervisor's trust model from logged trials (extended Baum-Welch)."""
     tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on)
@@ -103,16 +118,27 @@ def fit(
             bar.update(task, completed=done, total=total, description="bootstrap" if done > restarts else "restarts")
 
         result = _fit().fit_trust_model(
-            frame, preset=preset, restarts=restarts, seed=seed, bootstrap=bootstrap, prior=prior, n_jobs=jobs,
-            tol=tol, max_iter=max_iter, progress=progress, levels=levels, transition_inputs=tr, emission_inputs=em,
+            frame,
+            preset=preset,
+            restarts=restarts,
+            seed=seed,
+            bootstrap=bootstrap,
+            prior=prior,
+            n_jobs=jobs,
+            tol=tol,
+            max_iter=max_iter,
+            progress=progress,
+            levels=levels,
+            transition_inputs=tr,
+            emission_inputs=em,
         )
     if out is not None:
         result.model.save(out)
     if posteriors is not None:
         _data().write_trials(result.posteriors(), posteriors)
     if plots is not None:
-        from ..plots.model import plot_emissions, plot_transitions
         from ..model.presets import paper_model
+        from ..plots.model import plot_emissions, plot_transitions
 
         plots.mkdir(parents=True, exist_ok=True)
         ref = paper_model() if result.model.complexities == paper_model().complexities and result.model.n_trust == 2 else None
@@ -123,7 +149,10 @@ def fit(
         d["cells"] = result.cells()
         print_json(d)
         return
-    table = Table(title=f"Fitted trust model ({result.fit.seqs.n_participants} participants, {result.fit.seqs.n_trials} trials)", title_justify="left")
+    table = Table(
+        title=f"Fitted trust model ({result.fit.seqs.n_participants} participants, {result.fit.seqs.n_trials} trials)",
+        title_justify="left",
+    )
     table.add_column("cell")
     table.add_column("estimate", justify="right")
     if result.ci is not None:
@@ -157,9 +186,9 @@ def decode_cmd(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
     model: Path = typer.Option(..., "--model", "-m", help="Trust model JSON (e.g. from 'trustseek fit')."),
     out: Path = typer.Option(Path("posteriors.csv"), "--out", "-o", help="Output file (.csv or .parquet)."),
-    mapping: Optional[Path] = MappingOpt,
-    column: Optional[list[str]] = ColumnOpt,
-    label: Optional[list[str]] = LabelOpt,
+    mapping: Path | None = MappingOpt,
+    column: list[str] | None = ColumnOpt,
+    label: list[str] | None = LabelOpt,
 ) -> None:
     """Per-trial smoothed P(trust | data) and the Viterbi trust path under a model."""
     m = TrustModel.load(model)
@@ -178,12 +207,12 @@ def select(
     prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count (MAP)."),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
     tol: float = typer.Option(1e-6, "--tol", help="Relative log-likelihood tolerance per fit."),
-    transitions_on: Optional[str] = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit)."),
-    emissions_on: Optional[str] = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit)."),
+    transitions_on: str | None = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit)."),
+    emissions_on: str | None = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit)."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
-    mapping: Optional[Path] = MappingOpt,
-    column: Optional[list[str]] = ColumnOpt,
-    label: Optional[list[str]] = LabelOpt,
+    mapping: Path | None = MappingOpt,
+    column: list[str] | None = ColumnOpt,
+    label: list[str] | None = LabelOpt,
 ) -> None:
     """Choose the number of trust levels: BIC and participant-held-out log-likelihood."""
     tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on)
@@ -191,8 +220,16 @@ def select(
     with bar:
         task = bar.add_task(desc, total=None)
         rows = _fit().select_levels(
-            frame, levels=tuple(range(1, max_levels + 1)), folds=folds, restarts=restarts, seed=seed, prior=prior, tol=tol,
-            progress=lambda d, t: bar.update(task, completed=d, total=t), transition_inputs=tr, emission_inputs=em,
+            frame,
+            levels=tuple(range(1, max_levels + 1)),
+            folds=folds,
+            restarts=restarts,
+            seed=seed,
+            prior=prior,
+            tol=tol,
+            progress=lambda d, t: bar.update(task, completed=d, total=t),
+            transition_inputs=tr,
+            emission_inputs=em,
         )
     if as_json:
         print_json({"levels": rows})
@@ -202,8 +239,12 @@ def select(
         table.add_column(col, justify="right")
     for r in rows:
         table.add_row(
-            str(r["levels"]), f"{r['loglik']:.3f}", str(r["n_params"]), f"{r['aic']:.2f}",
-            f"{r['bic']:.2f}" + (" *" if r["best_bic"] else ""), f"{r['heldout_loglik']:.3f}" + (" *" if r["best_heldout"] else ""),
+            str(r["levels"]),
+            f"{r['loglik']:.3f}",
+            str(r["n_params"]),
+            f"{r['aic']:.2f}",
+            f"{r['bic']:.2f}" + (" *" if r["best_bic"] else ""),
+            f"{r['heldout_loglik']:.3f}" + (" *" if r["best_heldout"] else ""),
         )
     console.print(table)
     console.print("* best by that criterion")

@@ -5,6 +5,7 @@
 * :mod:`.structure` -- a spec compiled against data: free, tied and fixed cells, M-step;
 * :mod:`.estep` / :mod:`.kernels` -- the E-step (compiled, with the numpy reference);
 * :mod:`.em` / :mod:`.quasi_newton` -- EM for R starts with SQUAREM, and the L-BFGS-B finish;
+* :mod:`.convergence` -- a run has converged at a stationary point, checked by one more EM step;
 * :mod:`.iohmm` -- :func:`fit_iohmm`, log-likelihood, posteriors, Viterbi;
 * :mod:`.trust_iohmm` -- the paper's structure, tables to and from a TrustModel;
 * :mod:`.fit`, :mod:`.bootstrap`, :mod:`.selection` -- the trust-model fit, its intervals,
@@ -16,7 +17,14 @@ from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
 from .selection import select_levels
 from .sequences import Sequences, encode
 from .spec import FitError, Fixed, IOHMMSpec, Params
-from .trust_iohmm import MODEL_INPUTS, PAPER_EMISSION_INPUTS, PAPER_TRANSITION_INPUTS, from_trust_model, paper_spec, to_trust_model
+from .trust_iohmm import (
+    MODEL_INPUTS,
+    PAPER_EMISSION_INPUTS,
+    PAPER_TRANSITION_INPUTS,
+    from_trust_model,
+    paper_spec,
+    to_trust_model,
+)
 
 __all__ = [
     "MIN_EVENTS",

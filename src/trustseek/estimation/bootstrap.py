@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -42,7 +42,15 @@ class _Replicate:
         rng = np.random.default_rng(self.seed)
         n = self.seqs.n_participants
         sample = self.seqs.subset(rng.integers(0, n, n))
-        fit = fit_iohmm(sample, self.spec, restarts=self.restarts, seed=self.seed.spawn(1)[0], tol=self.tol, max_iter=self.max_iter, init=[self.params])
+        fit = fit_iohmm(
+            sample,
+            self.spec,
+            restarts=self.restarts,
+            seed=self.seed.spawn(1)[0],
+            tol=self.tol,
+            max_iter=self.max_iter,
+            init=[self.params],
+        )
         m = to_trust_model(self.spec, fit.params)
         return np.concatenate([getattr(m, name).ravel() for name in TABLES])
 
@@ -76,7 +84,9 @@ def bootstrap_ci(
         if progress is not None:
             progress()
 
-    log.info("bootstrap: %d replicates of %d participants over %d processes", replicates, seqs.n_participants, min(n_jobs, replicates))
+    log.info(
+        "bootstrap: %d replicates of %d participants over %d processes", replicates, seqs.n_participants, min(n_jobs, replicates)
+    )
     if n_jobs <= 1 or replicates == 1:
         for i, job in enumerate(jobs):
             done(i, job.run())

@@ -9,8 +9,8 @@ log-likelihood plus the log-prior; it never decreases along a run.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -20,6 +20,11 @@ from .structure import Structure
 
 SHRINK = 0.05  # SQUAREM: a cell may shrink at most this factor per extrapolation
 
+# how a run ended (RunResult.ended)
+SMALL_STEP = "EM step below tol"  # EM's own test: the last step gained less than tol (relative)
+CAPPED = "E-step cap"  # stopped by max_iter, not converged
+STATIONARY = "stationary"  # checked at the end: one more EM step gains at most tol (relative)
+
 
 @dataclass
 class RunResult:
@@ -27,7 +32,9 @@ class RunResult:
 
     ``history`` holds the objective of every accepted point in order (it never
     decreases); ``iterations`` counts E-steps; ``converged`` is false when the run
-    stopped at the cap on E-steps.
+    stopped at the cap on E-steps; ``ended`` says how it ended (:data:`SMALL_STEP`,
+    :data:`CAPPED` or :data:`STATIONARY`) and ``finishes`` how many quasi-Newton
+    finishes it took.
     """
 
     params: Params
@@ -37,6 +44,8 @@ class RunResult:
     iterations: int
     converged: bool
     seconds: float
+    ended: str = SMALL_STEP
+    finishes: int = 0
 
 
 class _Lockstep:
@@ -67,8 +76,16 @@ class _Lockstep:
 
     def results(self, seconds: float) -> list[RunResult]:
         return [
-            RunResult(self.params.take(r), float(self.loglik[r]), float(self.objective[r]), self.history[r],
-                      int(self.iterations[r]), bool(self.converged[r]), seconds)
+            RunResult(
+                self.params.take(r),
+                float(self.loglik[r]),
+                float(self.objective[r]),
+                self.history[r],
+                int(self.iterations[r]),
+                bool(self.converged[r]),
+                seconds,
+                SMALL_STEP if self.converged[r] else CAPPED,
+            )
             for r in range(len(self.history))
         ]
 
@@ -105,28 +122,29 @@ def run_em(
     if not np.all(np.isfinite(f0)):
         raise FitError(["the initial values give the data probability zero"])
     runs = _Lockstep(p0, st0, f0)
+
+    def em_step(p: Params, st: EStep, f: np.ndarray) -> tuple[Params, EStep, np.ndarray]:
+        """One EM step of the active runs from ``p``; the runs it leaves converged stop."""
+        q = structure.mstep(st, p)
+        sq, fq = evaluate(q, runs.active)
+        runs.iterations[runs.active] += 1
+        runs.stop(~(fq >= f), p, st, f, True)  # only rounding can do this at a fixed point: keep the better point
+        runs.record(runs.active, fq)
+        runs.stop(small(f, fq), q, sq, fq, True)
+        return q, sq, fq
+
     while True:
         runs.stop(runs.iterations >= max_iter, p0, st0, f0, False)
         if not runs.active.any():
             break
-        p1 = structure.mstep(st0, p0)
-        st1, f1 = evaluate(p1, runs.active)
-        runs.iterations[runs.active] += 1
-        runs.stop(~(f1 >= f0), p0, st0, f0, True)  # only rounding can do this at a fixed point: keep the better point
-        runs.record(runs.active, f1)
-        runs.stop(small(f0, f1), p1, st1, f1, True)
+        p1, st1, f1 = em_step(p0, st0, f0)
         if not accelerate:
             p0, st0, f0 = p1, st1, f1
             continue
         runs.stop(runs.iterations >= max_iter, p1, st1, f1, False)
         if not runs.active.any():
             break
-        p2 = structure.mstep(st1, p1)
-        st2, f2 = evaluate(p2, runs.active)
-        runs.iterations[runs.active] += 1
-        runs.stop(~(f2 >= f1), p1, st1, f1, True)
-        runs.record(runs.active, f2)
-        runs.stop(small(f1, f2), p2, st2, f2, True)
+        p2, st2, f2 = em_step(p1, st1, f1)
         pe, faster = _extrapolate(structure, p0, p1, p2)
         ext = runs.active & faster & (runs.iterations < max_iter)
         p0, st0, f0 = p2, st2, f2

@@ -48,15 +48,21 @@ class EStep:
     transition: np.ndarray  # (Ut, K, K)
     gamma: np.ndarray | None = None
 
-    def take(self, r: int) -> "EStep":
+    def take(self, r: int) -> EStep:
         """The E-step of parameter set ``r`` of a batch."""
-        return EStep(self.loglik[r], self.initial[r], self.emission[r], self.transition[r], None if self.gamma is None else self.gamma[r])
+        return EStep(
+            self.loglik[r], self.initial[r], self.emission[r], self.transition[r], None if self.gamma is None else self.gamma[r]
+        )
 
-    def where(self, mask: np.ndarray, other: "EStep") -> "EStep":
+    def where(self, mask: np.ndarray, other: EStep) -> EStep:
         """Per parameter set of a batch: this E-step where ``mask`` (R,) holds, else ``other`` (no posteriors)."""
         m3 = mask[:, None, None, None]
-        return EStep(np.where(mask, self.loglik, other.loglik), np.where(mask[:, None], self.initial, other.initial),
-                     np.where(m3, self.emission, other.emission), np.where(m3, self.transition, other.transition))
+        return EStep(
+            np.where(mask, self.loglik, other.loglik),
+            np.where(mask[:, None], self.initial, other.initial),
+            np.where(m3, self.emission, other.emission),
+            np.where(m3, self.transition, other.transition),
+        )
 
 
 class _NumpyEStep(Protocol):
@@ -87,6 +93,7 @@ class Workspace:
         # log2(T)-times more work: the scan wins for few, long sequences
         self.compiled = method == "numba" or (method == "auto" and kernels.AVAILABLE)
         self.scan = method == "scan" or (method in ("auto", "numba") and self.T > 1 and self.T >= SCAN_RATIO * self.N)
+        self._eye = np.eye(K)
         self._kernel = kernels.Kernel(self.eidx, self.tidx, seqs.lengths, K, self.PE, Ut + 1) if self.compiled else None
         self._numpy: dict[int, _NumpyEStep] = {}
 
@@ -103,7 +110,7 @@ class Workspace:
         Bx[:, :-1] = p.emission.transpose(0, 1, 3, 2).reshape(R, self.Ue * self.M, K)
         Ax = np.empty((R, self.Ut + 1, K, K))
         Ax[:, :-1] = p.transition
-        Ax[:, -1] = np.eye(K)
+        Ax[:, -1] = self._eye
         return Bx, Ax
 
     def estep(self, p: Params, active: np.ndarray | None = None, posteriors: bool = False) -> EStep:
@@ -112,15 +119,16 @@ class Workspace:
         The compiled pass skips parameter sets of a batch where ``active`` is false (they
         report 0 and no counts); the numpy methods compute every set.
         """
-        if not p.batched:
-            return self.estep(p.as_batch(), posteriors=posteriors).take(0)
-        Bx, Ax = self.tables(p)
+        batch = p if p.batched else p.as_batch()
+        Bx, Ax = self.tables(batch)
         if self._kernel is not None and not posteriors:
-            ll, ci, ce, ct = self._kernel.run(p.initial, Bx, Ax, active)
-            R = len(ll)
-            em = ce[:, :-1].reshape(R, self.Ue, self.M, self.K).transpose(0, 1, 3, 2)
+            ll, ci, ce, ct = self._kernel.run(batch.initial, Bx, Ax, active)
+            em = ce[:, :-1].reshape(len(ll), self.Ue, self.M, self.K).transpose(0, 1, 3, 2)
+            if not p.batched:
+                return EStep(ll[0], ci[0], np.ascontiguousarray(em[0]), ct[0, :-1])
             return EStep(ll, ci, np.ascontiguousarray(em), np.ascontiguousarray(ct[:, :-1]))
-        return self._reference(len(p.initial)).estep(p.initial, Bx, Ax, posteriors)
+        st = self._reference(len(batch.initial)).estep(batch.initial, Bx, Ax, posteriors)
+        return st if p.batched else st.take(0)
 
     def loglik(self, p: Params) -> np.ndarray:
         """Log-likelihood of ``p`` (a 0-d array for one parameter set, (R,) for a batch)."""
@@ -185,7 +193,9 @@ class _TimeLoop(_Columns):
         self._bs = np.empty((K, max(T - 1, 0), NR))
         self._c = np.empty((T, NR))
 
-    def _forward(self, initial: np.ndarray, Bx: np.ndarray, Ax: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _forward(
+        self, initial: np.ndarray, Bx: np.ndarray, Ax: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Scaled forward pass: alpha (K, T, RN), scales c (T, RN), step matrices Mt, log-likelihood (R,)."""
         K, R, N = self.K, self.R, self.N
         T = self._c.shape[0]
@@ -220,7 +230,11 @@ class _TimeLoop(_Columns):
             xi = np.multiply(alpha[:, None, :-1], Mt, out=self._xi)
             xi *= np.divide(beta[:, 1:], c[1:], out=self._bs)[None]
         em = np.bincount(self.ebins, weights=gamma.ravel(), minlength=K * R * self.PE).reshape(K, R, self.PE).transpose(1, 2, 0)
-        tr = np.bincount(self.tbins, weights=xi.ravel(), minlength=K * K * R * self.U1).reshape(K, K, R, self.U1).transpose(2, 3, 0, 1)
+        tr = (
+            np.bincount(self.tbins, weights=xi.ravel(), minlength=K * K * R * self.U1)
+            .reshape(K, K, R, self.U1)
+            .transpose(2, 3, 0, 1)
+        )
         init = gamma[:, 0].reshape(K, R, N).sum(2).T
         post = gamma.reshape(K, T, R, N).transpose(2, 1, 3, 0).copy() if posteriors else None
         return self.result(ll, init, em, tr, post)
@@ -241,7 +255,9 @@ class _Scan(_Columns):
         self.ebins = (np.ascontiguousarray(self.eidx.T)[:, :, None] * K + np.arange(K)).ravel()
         self.tbins = (np.ascontiguousarray(self.tidx.T)[:, :, None] * (K * K) + np.arange(K * K)).ravel()
 
-    def _forward(self, initial: np.ndarray, Bx: np.ndarray, Ax: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _forward(
+        self, initial: np.ndarray, Bx: np.ndarray, Ax: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """alpha_0 (RN, K), step matrices Mt (RN, T-1, K, K), prefix products F, log-likelihood (R,)."""
         K, R, N = self.K, self.R, self.N
         Mt = self.step_table(Bx, Ax)[self.midx_s]

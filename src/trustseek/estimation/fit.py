@@ -12,8 +12,9 @@ tables and a TrustModel are in :mod:`.trust_iohmm`; the number of levels is chos
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -85,13 +86,16 @@ class FitResult:
             "best_restart": self.fit.best,
             "iterations": [r.iterations for r in runs],
             "converged": [r.converged for r in runs],
+            "ended": [r.ended for r in runs],
             "seconds": [r.seconds for r in runs],
             "seed": self.seed,
             "bootstrap": self.bootstrap,
             "spec": spec.to_dict(),
             "counts": {k: v.tolist() for k, v in self.counts.items()},
             "estimated": {k: v.tolist() for k, v in self.estimated.items()},
-            "ci": None if self.ci is None else {k: {"lower": lo.tolist(), "upper": hi.tolist()} for k, (lo, hi) in self.ci.items()},
+            "ci": None
+            if self.ci is None
+            else {k: {"lower": lo.tolist(), "upper": hi.tolist()} for k, (lo, hi) in self.ci.items()},
             "warnings": list(self.warnings),
         }
 
@@ -112,7 +116,13 @@ class FitResult:
             if not self.estimated[table][idx] or key in seen:
                 return
             seen.add(key)
-            rec: dict[str, Any] = {"table": table, "index": list(idx), "cell": label, "estimate": float(getattr(m, table)[idx]), "events": float(self.counts[table][idx])}
+            rec: dict[str, Any] = {
+                "table": table,
+                "index": list(idx),
+                "cell": label,
+                "estimate": float(getattr(m, table)[idx]),
+                "events": float(self.counts[table][idx]),
+            }
             if self.ci is not None:
                 rec["lower"], rec["upper"] = float(self.ci[table][0][idx]), float(self.ci[table][1][idx])
             out.append(rec)
@@ -137,7 +147,12 @@ class FitResult:
                             if m.n_trust == 2 and u == 0:
                                 continue
                             v = {"complexity": c, "robot_action": a, "experience": e}
-                            add("transition", (c, a, e, t, u), f"P(T'={T[u]} | T={T[t]}{cond(spec.transition_inputs, v)})", ("t", int(tg[c, a, e]), t, u))
+                            add(
+                                "transition",
+                                (c, a, e, t, u),
+                                f"P(T'={T[u]} | T={T[t]}{cond(spec.transition_inputs, v)})",
+                                ("t", int(tg[c, a, e]), t, u),
+                            )
         return out
 
 
@@ -208,9 +223,21 @@ def fit_sequences(
         if progress is not None:
             progress(done, total)
 
-    fit = fit_iohmm(seqs, spec, restarts=restarts, seed=np.random.SeedSequence([seed, 0]), tol=tol, max_iter=max_iter, init=init,
-                    on_restart=lambda i, r: tick())
-    model = to_trust_model(spec, fit.params, notes=f"fitted by trustseek: {seqs.n_participants} participants, {seqs.n_trials} trials, log-likelihood {fit.loglik:.4f}")
+    fit = fit_iohmm(
+        seqs,
+        spec,
+        restarts=restarts,
+        seed=np.random.SeedSequence([seed, 0]),
+        tol=tol,
+        max_iter=max_iter,
+        init=init,
+        on_restart=lambda i, r: tick(),
+    )
+    model = to_trust_model(
+        spec,
+        fit.params,
+        notes=f"fitted by trustseek: {seqs.n_participants} participants, {seqs.n_trials} trials, log-likelihood {fit.loglik:.4f}",
+    )
     events = fit.expected_events()
     counts = broadcast(spec, events)
     estimated = {k: v.astype(bool) for k, v in broadcast(spec, _estimated_mask(fit.structure)).items()}
@@ -218,7 +245,18 @@ def fit_sequences(
     for w in result.warnings:
         log.info("%s", w)
     if bootstrap > 0:
-        result.ci = bootstrap_ci(seqs, spec, fit.params, bootstrap, seed=seed, restarts=min(restarts, 3), n_jobs=n_jobs, tol=tol, max_iter=max_iter, progress=tick)
+        result.ci = bootstrap_ci(
+            seqs,
+            spec,
+            fit.params,
+            bootstrap,
+            seed=seed,
+            restarts=min(restarts, 3),
+            n_jobs=n_jobs,
+            tol=tol,
+            max_iter=max_iter,
+            progress=tick,
+        )
         result.bootstrap = bootstrap
     return result
 
@@ -257,6 +295,10 @@ def decode(frame: pd.DataFrame, model: TrustModel) -> pd.DataFrame:
     try:
         return posterior_frame(seqs, spec, params)
     except FitError:
-        bad = [seqs.participants[i] for i in range(seqs.n_participants) if not np.isfinite(loglik(seqs.subset([i]), spec, params))]
-        raise FitError([f"participant {p!r}: the trials have probability zero under this model" for p in bad]
-                       or ["the data have probability zero under this model"]) from None
+        bad = [
+            seqs.participants[i] for i in range(seqs.n_participants) if not np.isfinite(loglik(seqs.subset([i]), spec, params))
+        ]
+        raise FitError(
+            [f"participant {p!r}: the trials have probability zero under this model" for p in bad]
+            or ["the data have probability zero under this model"]
+        ) from None

@@ -12,14 +12,14 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
 
 import numpy as np
 
-from .em import RunResult, run_em
+from .convergence import converge
+from .em import STATIONARY, RunResult, run_em
 from .estep import Workspace
-from .quasi_newton import finish
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec, Params
 from .structure import Structure
@@ -77,8 +77,11 @@ class IOHMMFit:
 
 
 def _describe(i: int, r: RunResult) -> str:
-    state = "converged" if r.converged else "stopped at the E-step cap"
-    return f"start {i}: log-likelihood {r.loglik:.6f} after {r.iterations} E-steps ({state}, {r.seconds:.3f} s)"
+    state = "converged: stationary" if r.ended == STATIONARY else f"not converged: {r.ended}"
+    return (
+        f"start {i}: log-likelihood {r.loglik:.6f} after {r.iterations} E-steps and {r.finishes} finishes "
+        f"({state}, {r.seconds:.3f} s)"
+    )
 
 
 def fit_iohmm(
@@ -98,8 +101,10 @@ def fit_iohmm(
     Each run is EM with SQUAREM (the runs in lockstep) and, with ``quasi_newton``, EM
     only to the relative tolerance ``max(tol, 1e-5)`` followed by the L-BFGS-B finish
     to ``tol / 100``: on flat ridges of the likelihood EM's small steps would meet
-    ``tol`` short of the maximum.  ``max_iter`` caps the E-steps of a run.  Each run's
-    outcome is logged (``trustseek.estimation``, debug) and passed to ``on_restart``.
+    ``tol`` short of the maximum.  A run has converged only at a stationary point, where
+    one more EM step gains at most ``tol`` (relative); until then it goes on
+    (:func:`~.convergence.converge`).  ``max_iter`` caps the E-steps of a run.  Each
+    run's outcome is logged (``trustseek.estimation``, debug) and passed to ``on_restart``.
     """
     structure = Structure(spec, seqs)
     work = Workspace(seqs, *structure.dims)
@@ -108,15 +113,20 @@ def fit_iohmm(
     starts += [structure.random(np.random.default_rng(s)) for s in ss.spawn(restarts)]
     if not starts:
         raise FitError(["at least one restart is needed"])
-    log.debug("fitting %d levels to %d sequences (%d trials) from %d starts", structure.K, seqs.n_participants, seqs.n_trials, len(starts))
+    log.debug(
+        "fitting %d levels to %d sequences (%d trials) from %d starts",
+        structure.K,
+        seqs.n_participants,
+        seqs.n_trials,
+        len(starts),
+    )
     em_tol = max(tol, FINISH_SWITCH) if quasi_newton else tol
     group = work.lockstep(len(starts))
     runs: list[RunResult] = []
     for g in range(0, len(starts), group):
         for r in run_em(structure, work, starts[g : g + group], tol=em_tol, max_iter=max_iter, accelerate=accelerate):
-            if quasi_newton:
-                r = finish(structure, work, r, tol=tol * FINISH_FTOL, max_iter=max_iter)
-            log.debug(_describe(len(runs), r))
+            r = converge(structure, work, r, tol, max_iter, em_tol, tol * FINISH_FTOL, quasi_newton, accelerate)
+            log.debug("%s", _describe(len(runs), r))
             if on_restart is not None:
                 on_restart(len(runs), r)
             runs.append(r)

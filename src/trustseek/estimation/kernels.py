@@ -26,7 +26,8 @@ set -inf, with zero counts.
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -160,6 +161,7 @@ class Kernel:
         self.beta = np.empty((max(T, 1), K))
         self.scale = np.empty(max(T, 1))
         self.tmp = np.empty(K)
+        self.every = np.ones(1, dtype=np.bool_)  # the default "all parameter sets active", grown as needed
 
     def run(
         self, initial: np.ndarray, emit: np.ndarray, trans: np.ndarray, active: np.ndarray | None = None
@@ -170,12 +172,28 @@ class Kernel:
         ci = np.empty((R, K))
         ce = np.empty((R, self.PE, K))
         ct = np.empty((R, self.P, K, K))
-        act = np.ones(R, dtype=np.bool_) if active is None else np.ascontiguousarray(active, dtype=np.bool_)
+        if active is None:
+            if len(self.every) < R:
+                self.every = np.ones(R, dtype=np.bool_)
+            act = self.every[:R]
+        else:
+            act = np.ascontiguousarray(active, dtype=np.bool_)
         (estep_counts2 if K == 2 else estep_counts)(
             np.ascontiguousarray(initial, dtype=np.float64),
             np.ascontiguousarray(emit, dtype=np.float64),
             np.ascontiguousarray(trans, dtype=np.float64),
-            self.eidx, self.tidx, self.lengths, act, ll, ci, ce, ct, self.alpha, self.beta, self.scale, self.tmp,
+            self.eidx,
+            self.tidx,
+            self.lengths,
+            act,
+            ll,
+            ci,
+            ce,
+            ct,
+            self.alpha,
+            self.beta,
+            self.scale,
+            self.tmp,
         )
         return ll, ci, ce, ct
 

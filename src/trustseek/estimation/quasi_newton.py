@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize
 
-from .em import RunResult
+from .em import CAPPED, RunResult
 from .estep import EStep, Workspace
 from .spec import Params
 from .structure import FLOOR, Structure
@@ -72,7 +72,9 @@ class Sticks:
                         dst.append(u * KM + k * table.M + cells)
                         src.append(r * m + np.arange(m))
                 mass = np.array([table.mass[g, k] for g, k, _ in lst])
-                self.parts.append(_Part(name, len(lst), m, mass, np.concatenate(dst).astype(np.int64), np.concatenate(src).astype(np.int64)))
+                self.parts.append(
+                    _Part(name, len(lst), m, mass, np.concatenate(dst).astype(np.int64), np.concatenate(src).astype(np.int64))
+                )
         self.size = sum(p.rows * (p.m - 1) for p in self.parts)
 
     def theta(self, p: Params) -> np.ndarray:
@@ -152,8 +154,10 @@ def finish(structure: Structure, work: Workspace, run: RunResult, tol: float = 1
 
     Every iterate of L-BFGS-B decreases the negated objective, and the result is kept
     only if its objective is at least the run's, so the objective history never
-    decreases.  It stops when the relative change per iteration falls below ``tol``;
-    iterations count E-steps, within ``max_iter`` in total.
+    decreases.  It stops when the relative change per iteration falls below ``tol``,
+    which on a badly scaled stretch of the likelihood can happen short of a stationary
+    point (:mod:`.convergence` checks and goes on); iterations count E-steps, within
+    ``max_iter`` in total.
     """
     t0 = time.perf_counter()
     budget = max_iter - run.iterations
@@ -178,11 +182,28 @@ def finish(structure: Structure, work: Workspace, run: RunResult, tol: float = 1
         return -f, -sticks.gradient(theta, st)
 
     try:
-        res = minimize(fun, sticks.theta(base), jac=True, method="L-BFGS-B", bounds=[(sticks.EPS, 1 - sticks.EPS)] * sticks.size,
-                       callback=best.accept, options={"ftol": tol, "gtol": 0.0, "maxfun": budget, "maxiter": budget, "maxcor": MEMORY})
+        res = minimize(
+            fun,
+            sticks.theta(base),
+            jac=True,
+            method="L-BFGS-B",
+            bounds=[(sticks.EPS, 1 - sticks.EPS)] * sticks.size,
+            callback=best.accept,
+            options={"ftol": tol, "gtol": 0.0, "maxfun": budget, "maxiter": budget, "maxcor": MEMORY},
+        )
         best.accept(res.x)
         success = calls < budget  # stopped by its tolerance (or at the limits of precision), not by the cap
     except _Budget:  # the E-step cap: keep the best accepted point
         success = False
-    return RunResult(best.params, best.loglik, best.objective, best.history, run.iterations + calls, run.converged and success,
-                     run.seconds + time.perf_counter() - t0)
+    converged = run.converged and success
+    return RunResult(
+        best.params,
+        best.loglik,
+        best.objective,
+        best.history,
+        run.iterations + calls,
+        converged,
+        run.seconds + time.perf_counter() - t0,
+        run.ended if converged else CAPPED,
+        run.finishes + 1,
+    )

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import logging
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -60,7 +61,14 @@ def select_levels(
         per_fold = []
         for f in range(folds):
             train, test = np.flatnonzero(fold_of != f), np.flatnonzero(fold_of == f)
-            fit = fit_iohmm(seqs.subset(train), spec, restarts=restarts, seed=np.random.SeedSequence([seed, 4, K, f]), tol=tol, max_iter=max_iter)
+            fit = fit_iohmm(
+                seqs.subset(train),
+                spec,
+                restarts=restarts,
+                seed=np.random.SeedSequence([seed, 4, K, f]),
+                tol=tol,
+                max_iter=max_iter,
+            )
             per_fold.append(heldout_loglik(seqs.subset(test), fit))
             tick()
         held = float(sum(per_fold))
@@ -99,5 +107,7 @@ def heldout_loglik(test: Sequences, fit: IOHMMFit) -> float:
     st = fit.workspace().estep(fit.params)
     a = fit.spec.prior + HELDOUT_PSEUDOCOUNT
     c0 = st.initial + a
-    params = Params(c0 / c0.sum(), s.em.mstep(st.emission, a, fit.params.emission), s.tr.mstep(st.transition, a, fit.params.transition))
+    params = Params(
+        c0 / c0.sum(), s.em.mstep(st.emission, a, fit.params.emission), s.tr.mstep(st.transition, a, fit.params.transition)
+    )
     return float(Workspace(test, *s.dims).loglik(params))

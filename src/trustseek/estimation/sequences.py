@@ -8,8 +8,8 @@ E-step, M-step and bootstrap resample works on these arrays, never on the frame.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 import pandas as pd
@@ -48,7 +48,7 @@ class Sequences:
         T = self.y.shape[0]
         return np.arange(T - 1)[:, None] < (self.lengths[None, :] - 1)
 
-    def subset(self, idx: Sequence[int] | np.ndarray) -> "Sequences":
+    def subset(self, idx: Sequence[int] | np.ndarray) -> Sequences:
         """Sequences ``idx`` (repeats allowed: the bootstrap resamples participants)."""
         idx = np.asarray(idx, dtype=np.int64)
         T = int(self.lengths[idx].max()) if len(idx) else 1

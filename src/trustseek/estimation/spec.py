@@ -20,8 +20,9 @@ that names the levels.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -100,7 +101,7 @@ class IOHMMSpec:
             p.append(f"prior must be a finite pseudo-count >= 0, got {self.prior!r}")
         return p
 
-    def with_levels(self, levels: Sequence[str]) -> "IOHMMSpec":
+    def with_levels(self, levels: Sequence[str]) -> IOHMMSpec:
         return replace(self, levels=tuple(levels))
 
     def to_dict(self) -> dict[str, Any]:
@@ -138,25 +139,30 @@ class Params:
         return self.initial.ndim == 2
 
     @classmethod
-    def stack(cls, sets: Sequence["Params"]) -> "Params":
+    def stack(cls, sets: Sequence[Params]) -> Params:
         """R single parameter sets as one with a leading axis R."""
-        return cls(np.stack([p.initial for p in sets]), np.stack([p.emission for p in sets]), np.stack([p.transition for p in sets]))
+        return cls(
+            np.stack([p.initial for p in sets]), np.stack([p.emission for p in sets]), np.stack([p.transition for p in sets])
+        )
 
-    def as_batch(self) -> "Params":
+    def as_batch(self) -> Params:
         """A single parameter set as a batch of one (views, no copies)."""
         return Params(self.initial[None], self.emission[None], self.transition[None])
 
-    def take(self, r: int) -> "Params":
+    def take(self, r: int) -> Params:
         """Parameter set ``r`` of a batch (a copy)."""
         return Params(self.initial[r].copy(), self.emission[r].copy(), self.transition[r].copy())
 
-    def where(self, mask: np.ndarray, other: "Params") -> "Params":
+    def where(self, mask: np.ndarray, other: Params) -> Params:
         """Per parameter set of a batch: this one where ``mask`` (R,) holds, else ``other``."""
         m1, m3 = mask[:, None], mask[:, None, None, None]
-        return Params(np.where(m1, self.initial, other.initial), np.where(m3, self.emission, other.emission),
-                      np.where(m3, self.transition, other.transition))
+        return Params(
+            np.where(m1, self.initial, other.initial),
+            np.where(m3, self.emission, other.emission),
+            np.where(m3, self.transition, other.transition),
+        )
 
-    def copy(self) -> "Params":
+    def copy(self) -> Params:
         return Params(self.initial.copy(), self.emission.copy(), self.transition.copy())
 
     def vector(self) -> np.ndarray:
@@ -164,7 +170,7 @@ class Params:
         lead = self.initial.shape[:-1]
         return np.concatenate([a.reshape(*lead, -1) for a in (self.initial, self.emission, self.transition)], axis=-1)
 
-    def from_vector(self, x: np.ndarray) -> "Params":
+    def from_vector(self, x: np.ndarray) -> Params:
         """Parameters shaped like these, with cells from ``x`` (the inverse of :meth:`vector`)."""
         lead = x.ndim - 1
         a = int(np.prod(self.initial.shape[lead:]))
@@ -175,6 +181,6 @@ class Params:
             x[..., a + b :].reshape(self.transition.shape).copy(),
         )
 
-    def permuted(self, perm: np.ndarray) -> "Params":
+    def permuted(self, perm: np.ndarray) -> Params:
         """The same model with the levels renumbered: new level i is old level ``perm[i]``."""
         return Params(self.initial[perm], self.emission[:, perm], self.transition[:, perm][:, :, perm])

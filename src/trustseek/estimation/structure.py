@@ -12,7 +12,7 @@ Every operation accepts parameters with leading axes (independent runs side by s
 
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -124,7 +124,7 @@ def describe_combination(u: int, inputs: Sequence[str], cats: Mapping[str, Seque
     if not inputs:
         return "no inputs"
     idx = np.unravel_index(int(u), [len(cats[c]) for c in inputs])
-    return ", ".join(f"{c}={cats[c][int(i)]}" for c, i in zip(inputs, idx))
+    return ", ".join(f"{c}={cats[c][int(i)]}" for c, i in zip(inputs, idx, strict=True))
 
 
 class Structure:
@@ -203,7 +203,7 @@ class Structure:
         lines = [
             f"row {r + 1}: {spec.output} = {spec.output_categories[y]!r} is impossible under a fixed cell "
             f"({describe_combination(u, spec.emission_inputs, spec.categories)})"
-            for r, y, u in zip(rows[:10], yo[bad][:10], uo[bad][:10])
+            for r, y, u in zip(rows[:10], yo[bad][:10], uo[bad][:10], strict=True)
         ]
         if bad.sum() > 10:
             lines.append(f"... and {int(bad.sum()) - 10} more")
@@ -225,14 +225,20 @@ class Structure:
         c0 = stats.initial + a
         tot = c0.sum(-1, keepdims=True)
         pi = np.where(tot > 0, c0 / np.where(tot > 0, tot, 1.0), previous.initial)
-        return Params(pi, self.em.mstep(stats.emission, a, previous.emission), self.tr.mstep(stats.transition, a, previous.transition))
+        return Params(
+            pi, self.em.mstep(stats.emission, a, previous.emission), self.tr.mstep(stats.transition, a, previous.transition)
+        )
 
     def log_prior(self, p: Params) -> np.ndarray:
         """Dirichlet log-prior of the free cells, up to a constant (a 0-d array for one parameter set)."""
         a = self.spec.prior
         if a == 0:
             return np.zeros(p.initial.shape[:-1])
-        return a * np.log(np.maximum(p.initial, FLOOR)).sum(-1) + self.em.log_prior(p.emission, a) + self.tr.log_prior(p.transition, a)
+        return (
+            a * np.log(np.maximum(p.initial, FLOOR)).sum(-1)
+            + self.em.log_prior(p.emission, a)
+            + self.tr.log_prior(p.transition, a)
+        )
 
     def order(self, p: Params) -> np.ndarray:
         """Permutation putting levels in ascending order of the spec's ``order_by`` emission."""

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
@@ -11,7 +11,7 @@ from ..model.core import Task, TrustModel
 from ..model.presets import paper_task
 from ..policies import randomized
 from ..vocab import PAPER_ASK_PROBABILITIES, PAPER_DATA_COUNTS, TRIAL_COLUMNS
-from .engine import simulate
+from .engine import SimulationError, simulate
 
 
 def simulate_design(
@@ -34,7 +34,9 @@ def simulate_design(
     """
     task = task or paper_task()
     task.check_compatible(model)
-    policy = randomized(dict(zip(task.complexities, p_ask)))
+    if len(p_ask) != task.n_complexity:
+        raise SimulationError([f"p_ask needs one probability per complexity {list(task.complexities)}, got {list(p_ask)}"])
+    policy = randomized(dict(zip(task.complexities, p_ask, strict=True)))
     trials = simulate(model, task, policy, n_participants, counts=n_trials, seed=seed).trials()
     frame = trials[[*TRIAL_COLUMNS, "true_trust"]].copy()
     if p_unobserved > 0:
