@@ -16,7 +16,6 @@ from trustseek.solvers.alpha import (
     finite_horizon_vectors,
     paper_residual,
 )
-from trustseek.solvers.grid import belief_branches
 
 # Reference values of the issue (three independent solvers), Bayes update, paper preset
 REF_V0, REF_V1_LOW, REF_V1_HIGH, REF_THRESHOLD, REF_MYOPIC = 110.655, 111.061, 110.249, 0.7815, 0.836
@@ -50,16 +49,22 @@ def test_envelope_matches_brute_force_maximum(rng):
 
 
 def _bellman_at(pomdp, L, x):
-    """Direct Bellman backup W(x) = Σ_C P(C) max_a [r + γ Σ_branch w L(x')] with the core's
-    belief branches (an independent implementation of the Bayes update)."""
+    """Direct Bellman backup W(x) = Σ_C P(C) max_a [r + γ Σ_(o, E') P(o, E' | x) L(x')] with the
+    core Bayes filter for x' and the branch probabilities from the emission and experience tables
+    (independent of the solvers' branch kernels)."""
+    upd = BayesUpdate(pomdp.model)
     b = np.stack([1 - x, x], axis=1)
-    out = np.zeros(len(x))
+    n = len(x)
+    out = np.zeros(n)
     for c in range(pomdp.n_complexity):
         q = []
         for a in range(2):
             v = b @ pomdp.expected_reward[c, a]
-            for w, nb in belief_branches(pomdp, b, c, a, "bayes"):
-                v = v + pomdp.discount * w * L(nb[:, 1])
+            for o in range(2):
+                for e in range(2):
+                    w = (b @ pomdp.emission[c, a, :, o]) * pomdp.experience[c, a, o, e]
+                    nb = upd.update(b, np.full(n, c), np.full(n, a), np.full(n, o), np.full(n, e))
+                    v = v + pomdp.discount * w * L(nb[:, 1])
             q.append(v)
         out += pomdp.complexity_probs[c] * np.maximum(q[0], q[1])
     return out

@@ -8,9 +8,9 @@ import sys
 import numpy as np
 import pytest
 
+from trustseek.pomdp.flat import FlatPOMDP
 from trustseek.solvers.alpha import finite_horizon_value
 from trustseek.interop.files import (
-    FlatPOMDP,
     PomdpFileError,
     flat_belief,
     flat_from_assistance,

@@ -6,11 +6,11 @@ import pytest
 
 from trustseek import AssistancePOMDP, TrustModel, always_ask, make_updater, never_ask, paper_model, randomized, solve
 from trustseek.model.core import ASK, AUTONOMOUS, INTERVENE, RELIABLE
+from trustseek.pomdp.belief import ScalarBelief
 from trustseek.simulation.engine import (
     Block,
     SimulationError,
     Supervisors,
-    _ScalarBelief,
     crossover,
     run,
     schedule_counts,
@@ -143,7 +143,7 @@ def test_trust_aware_discounted_return_matches_value_function(task):
 @pytest.mark.parametrize("update", ["paper", "bayes"])
 def test_scalar_belief_equals_core_updaters(update, rng):
     model = interior_model()
-    fast = _ScalarBelief(model, update)
+    fast = ScalarBelief(model, update)
     core = make_updater(update, model)
     n = 5000
     x = rng.random(n)

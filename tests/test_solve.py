@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from trustseek import AssistancePOMDP, GridSolver, solve
-from trustseek.solvers.grid import belief_branches
 
 
 def test_paper_thresholds_both_updates(model, task):
@@ -70,7 +69,8 @@ def _brute_force_on_grid(pomdp, update, grid, horizon):
                 best = -np.inf
                 for a in range(2):
                     q = float(b[0] @ pomdp.expected_reward[c, a])
-                    for w, nb in belief_branches(pomdp, b, c, a, update):
+                    p, nxt = pomdp.branches(update).successors(b, c, a)
+                    for w, nb in zip(p.T, nxt.transpose(1, 0, 2)):
                         q += pomdp.discount * w[0] * np.interp(nb[0, 1], grid, W)
                     best = max(best, q)
                 total += pomdp.complexity_probs[c] * best
@@ -103,7 +103,8 @@ def _exact_finite_horizon(pomdp, update, b_high, horizon):
             best = -np.inf
             for a in range(2):
                 q = float(b[0] @ pomdp.expected_reward[c, a])
-                for w, nb in belief_branches(pomdp, b, c, a, update):
+                p, nxt = pomdp.branches(update).successors(b, c, a)
+                for w, nb in zip(p.T, nxt.transpose(1, 0, 2)):
                     if w[0] > 0:
                         q += pomdp.discount * w[0] * V(round(float(nb[0, 1]), 14), h - 1)
                 best = max(best, q)

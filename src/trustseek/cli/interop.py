@@ -158,7 +158,7 @@ def solve_pomdp_file(
 ) -> None:
     """Solve a standard .pomdp file: certified lower and upper bounds at its start belief."""
     from ..interop.files import read_pomdp
-    from ..solvers.point import BranchModel, PointSolver
+    from ..solvers.point import PointSolver
 
     flat = read_pomdp(path)
     if horizon is not None:
@@ -169,7 +169,7 @@ def solve_pomdp_file(
             raise TrustseekError([f"{path}: the point solver needs a discount below 1, got {flat.discount}"])
         if not gap > 0:
             raise TrustseekError([f"--gap must be positive, got {gap}"])
-        sol = PointSolver(tol=gap, max_seconds=max_seconds).solve_bounds(BranchModel.from_flat(flat))
+        sol = PointSolver(tol=gap, max_seconds=max_seconds).solve_bounds(flat.branch_model())
         res = {
             "file": str(path),
             "states": len(flat.states),

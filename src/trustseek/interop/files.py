@@ -1,9 +1,7 @@
-"""Standard POMDP files: a flat POMDP, Cassandra's ``.pomdp`` format and POMDPX.
+"""Standard POMDP files: Cassandra's ``.pomdp`` format and POMDPX.
 
-:class:`FlatPOMDP` is a plain discrete POMDP: ``transition[a, s, s2]``,
-``observation[a, s2, o]`` (the observation depends on the action and the NEXT
-state, as in the file formats), ``reward[a, s, s2, o]``, a discount and a start
-distribution.  :func:`read_pomdp` / :func:`write_pomdp` handle Cassandra's format
+Files are read into and written from a :class:`~trustseek.pomdp.flat.FlatPOMDP` (a plain
+discrete POMDP).  :func:`read_pomdp` / :func:`write_pomdp` handle Cassandra's format
 (``T:``, ``O:``, ``R:`` entries with names or indices, ``*`` wildcards, rows,
 matrices, ``uniform`` and ``identity``), so benchmark files such as Tiger can be
 solved with the point-based solver and checked against published values.
@@ -33,103 +31,32 @@ from __future__ import annotations
 
 import re
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
 from itertools import product
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from ..errors import TrustseekError
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
+from ..pomdp.belief import to_vector
+from ..pomdp.flat import FlatPOMDP, FlatPOMDPError
 from ..pomdp.problem import AssistancePOMDP
 
+__all__ = [
+    "PomdpFileError",
+    "export_assistance",
+    "flat_belief",
+    "flat_from_assistance",
+    "flat_values_check",
+    "read_pomdp",
+    "read_pomdpx_tables",
+    "write_pomdp",
+    "write_pomdpx",
+]
 
-class PomdpFileError(TrustseekError, ValueError):
+
+class PomdpFileError(FlatPOMDPError):
     """A ``.pomdp`` or POMDPX file is malformed."""
-
-
-@dataclass(eq=False)
-class FlatPOMDP:
-    """A discrete POMDP over enumerated states, actions and observations."""
-
-    states: tuple[str, ...]
-    actions: tuple[str, ...]
-    observations: tuple[str, ...]
-    transition: np.ndarray  # [a, s, s2]
-    observation: np.ndarray  # [a, s2, o]
-    reward: np.ndarray  # [a, s, s2, o]
-    discount: float
-    start: np.ndarray  # [s]
-    notes: list[str] = field(default_factory=list)
-
-    def __post_init__(self) -> None:
-        self.states, self.actions, self.observations = tuple(self.states), tuple(self.actions), tuple(self.observations)
-        S, A, O = len(self.states), len(self.actions), len(self.observations)
-        self.transition = np.asarray(self.transition, dtype=float)
-        self.observation = np.asarray(self.observation, dtype=float)
-        self.reward = np.asarray(self.reward, dtype=float)
-        self.start = np.asarray(self.start, dtype=float)
-        problems = []
-        for name, arr, shape in (
-            ("transition", self.transition, (A, S, S)),
-            ("observation", self.observation, (A, S, O)),
-            ("reward", self.reward, (A, S, S, O)),
-            ("start", self.start, (S,)),
-        ):
-            if arr.shape != shape:
-                problems.append(f"{name} has shape {arr.shape}, expected {shape}")
-        if not problems:
-            for name, arr, labels in (
-                ("transition", self.transition, (self.actions, self.states)),
-                ("observation", self.observation, (self.actions, self.states)),
-            ):
-                sums = arr.sum(axis=-1)
-                bad = np.argwhere((np.abs(sums - 1.0) > 1e-6) | np.any(arr < 0, axis=-1))
-                for a, s in bad[:5]:
-                    problems.append(
-                        f"{name}[{labels[0][a]}, {labels[1][s]}] must be a probability row, sums to {sums[a, s]:.9g}"
-                    )
-            if abs(self.start.sum() - 1.0) > 1e-6 or np.any(self.start < 0):
-                problems.append(f"start must be a probability distribution, sums to {self.start.sum():.9g}")
-            if not 0.0 <= self.discount <= 1.0:
-                problems.append(f"discount = {self.discount} must lie in [0, 1]")
-        if problems:
-            raise PomdpFileError(problems)
-
-    @property
-    def expected_reward(self) -> np.ndarray:
-        """r[a, s] = Σ_{s2, o} T(s2 | s, a) O(o | s2, a) R(a, s, s2, o)."""
-        return np.einsum("aij,ajo,aijo->ai", self.transition, self.observation, self.reward)
-
-    @property
-    def branch_kernels(self) -> np.ndarray:
-        """M[a, o, s, s2] = T(s2 | s, a) O(o | s2, a): the unnormalized belief update."""
-        return np.einsum("aij,ajo->aoij", self.transition, self.observation)
-
-    def finite_horizon_value(self, belief, horizon: int) -> float:
-        """The exact optimal value of ``horizon`` steps from a belief (enumerating action and
-        observation branches; for small problems and short horizons)."""
-        b = np.asarray(belief, dtype=float)
-        r = self.expected_reward
-        M = self.branch_kernels
-
-        def v(b, h):
-            if h == 0:
-                return 0.0
-            best = -np.inf
-            for a in range(len(self.actions)):
-                q = float(r[a] @ b)
-                if h > 1:
-                    for o in range(len(self.observations)):
-                        nb = b @ M[a, o]
-                        p = nb.sum()
-                        if p > 1e-300:
-                            q += self.discount * p * v(nb / p, h - 1)
-                best = max(best, q)
-            return best
-
-        return v(b, horizon)
 
 
 # --------------------------------------------------------------------------- export of the assistance POMDP
@@ -181,8 +108,6 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
 
 def flat_belief(pomdp: AssistancePOMDP, belief, complexity: int) -> np.ndarray:
     """The flat belief for a belief over trust and a known complexity (E = reliable, last = rely)."""
-    from ..pomdp.belief import to_vector
-
     b = to_vector(belief, pomdp.n_trust)
     K, N = pomdp.n_trust, pomdp.n_complexity
     out = np.zeros(K * 2 * N * 2)
@@ -390,7 +315,7 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
                 raise PomdpFileError([f"line {no}: malformed R entry"], label)
     try:
         return FlatPOMDP(states, actions, observations, T, Om, R, discount, start)
-    except PomdpFileError as exc:
+    except FlatPOMDPError as exc:
         raise PomdpFileError(exc.problems, label) from None
 
 
@@ -412,10 +337,8 @@ def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
     and ``human`` (the human action of the trial just played, as in the flat export; hidden
     as a state variable and revealed by the observation variable ``human_action``).
     """
-    K, N = pomdp.n_trust, pomdp.n_complexity
     T_ = [_token(x) for x in pomdp.trust_levels]
     C_ = [_token(x) for x in pomdp.complexities]
-    kern = pomdp.kernel  # [c, a, t, o, e, u]
     root = ET.Element("pomdpx", version="0.1", id="trustseek")
     ET.SubElement(root, "Description").text = "trustseek assistance POMDP (state augmented with the last human action)"
     ET.SubElement(root, "Discount").text = _num(pomdp.discount)
@@ -433,8 +356,7 @@ def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
     ET.SubElement(ov, "ValueEnum").text = " ".join(HUMAN_ACTIONS)
     av = ET.SubElement(var, "ActionVar", vname="robot")
     ET.SubElement(av, "ValueEnum").text = " ".join(ACTIONS)
-    rv = ET.SubElement(var, "RewardVar", vname="reward")
-    del rv
+    ET.SubElement(var, "RewardVar", vname="reward")
 
     def cond(parent, var_, parents, table):
         c = ET.SubElement(parent, "CondProb")
@@ -470,7 +392,6 @@ def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
     e = ET.SubElement(p, "Entry")
     ET.SubElement(e, "Instance").text = "- - -"
     ET.SubElement(e, "ValueTable").text = " ".join(_num(x) for x in R.ravel())
-    del kern
     ET.indent(root)
     text = '<?xml version="1.0" encoding="ISO-8859-1"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
     if path is not None:
@@ -511,10 +432,10 @@ def export_assistance(pomdp: AssistancePOMDP, path: str | Path, fmt: str | None 
 
 
 def flat_values_check(pomdp: AssistancePOMDP, horizons: Sequence[int] = (1, 2, 3)) -> list[dict]:
-    """Finite-horizon values of the exported flat POMDP next to the belief-MDP values."""
-    from ..solvers.alpha import finite_horizon_value
-
+    """Finite-horizon values of the exported flat POMDP next to the belief-MDP values (both by
+    exact expansion of the belief tree; any number of trust levels)."""
     flat = flat_from_assistance(pomdp)
+    belief_mdp = pomdp.branch_model()
     rows = []
     b0 = pomdp.model.initial
     for h in horizons:
@@ -524,7 +445,7 @@ def flat_values_check(pomdp: AssistancePOMDP, horizons: Sequence[int] = (1, 2, 3
                     "horizon": h,
                     "complexity": cn,
                     "flat": flat.finite_horizon_value(flat_belief(pomdp, b0, c), h),
-                    "belief_mdp": finite_horizon_value(pomdp, h, b0, c),
+                    "belief_mdp": belief_mdp.finite_horizon_value(b0, h, c),
                 }
             )
     return rows

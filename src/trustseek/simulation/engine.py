@@ -38,7 +38,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from ..pomdp.belief import make_updater
+from ..pomdp.belief import ScalarBelief, make_updater
 from ..vocab import PAPER_BLOCK_COUNTS, TRIAL_COLUMNS, check_belief_update
 from ..errors import TrustseekError
 from ..model.core import ACTIONS, ASK, AUTONOMOUS, EXPERIENCES, HUMAN_ACTIONS, INTERVENE, RELIABLE, RELY, Task, TrustModel
@@ -373,31 +373,6 @@ class _Tables:
             self.trust_low = self.trust_cum[:, 0].copy()  # P(T' = low | ...)
 
 
-class _ScalarBelief:
-    """The ``paper``/``bayes`` updates of belief.py for two trust levels, on x = P(trust = high),
-    with the model's tables flattened for gathers (checked against belief.py in the tests)."""
-
-    def __init__(self, model: TrustModel, update: str):
-        self.update_name = update
-        tr = model.transition  # [c, a, e, t, u]
-        self.a0 = np.ascontiguousarray(tr[..., 0, 1]).reshape(-1)  # P(high | low)     [c, a, e]
-        self.slope = np.ascontiguousarray(tr[..., 1, 1] - tr[..., 0, 1]).reshape(-1)
-        em = model.emission  # [c, a, t, o]
-        self.lik_high = np.ascontiguousarray(em[:, :, 1, :]).reshape(-1)  # [c, a, o]
-        self.lik_low = np.ascontiguousarray(em[:, :, 0, :]).reshape(-1)
-        self.x0 = float(model.initial[1])
-
-    def step(self, x: np.ndarray, ca: np.ndarray, o: np.ndarray, e: np.ndarray) -> np.ndarray:
-        if self.update_name == "bayes":
-            ko = ca * 2 + o
-            num = x * self.lik_high[ko]
-            z = num + (1.0 - x) * self.lik_low[ko]
-            ok = z > 0
-            x = np.where(ok, num / np.where(ok, z, 1.0), x)
-        k = ca * 2 + e
-        return self.a0[k] + self.slope[k] * x
-
-
 def threshold_form(policy) -> np.ndarray | None:
     """Per complexity index, the bound θ_C such that a trust-aware policy asks exactly when
     P(trust = high) < θ_C (``-inf``: never asks, ``+inf``: always asks), or ``None`` when its
@@ -459,7 +434,7 @@ def _run_chunk(tab: _Tables, task: Task, rows: np.ndarray, blocks: list[Block], 
         policy = block.policy
         scalar = None
         if bmodel is not None and bmodel.n_trust == 2:
-            scalar = _ScalarBelief(bmodel, bupdate)
+            scalar = ScalarBelief(bmodel, bupdate)
             x = np.full(m, scalar.x0)
             B = np.empty((m, 2))
         elif bmodel is not None:

@@ -143,21 +143,17 @@ class Backup:
 
 
 def _branch_maps(pomdp: AssistancePOMDP):
-    """Per (c, a, o, e): the branch matrices M[t, u] = P(o, E', T'=u | T=t, C=c, a) and the
+    """Per (c, a, branch): the branch matrices M[t, u] = P(o, E', T'=u | T=t, C=c, a) and the
     coefficients of the monotone belief map x -> x'(x) = (m0 (1-x) + m1 x) / (s0 (1-x) + s1 x),
     with its range [lo, hi] and whether it moves at all."""
-    K = pomdp.kernel  # [c, a, t, o, e, u]
-    N, A, T, O, E, U = K.shape
-    M = np.moveaxis(K, 2, 4).reshape(N, A, O * E, T, U)  # [c, a, branch, t, u]
-    s = M.sum(axis=-1)  # [c, a, b, t]
-    possible = s.sum(axis=-1) > 0  # [c, a, b]
-    s0, s1 = s[..., 0], s[..., 1]
-    m0, m1 = M[..., 0, 1], M[..., 1, 1]
+    branches = pomdp.branches("bayes")
+    s0, s1, m0, m1 = branches.two_level()
+    possible = (s0 + s1) > 0  # [c, a, b]
     with np.errstate(divide="ignore", invalid="ignore"):
         y0 = np.where(s0 > 0, m0 / np.where(s0 > 0, s0, 1.0), np.nan)
         y1 = np.where(s1 > 0, m1 / np.where(s1 > 0, s1, 1.0), np.nan)
     moving = (s0 > 0) & (s1 > 0) & (np.abs(y1 - y0) > 1e-15)  # the map is not constant
-    return M, possible, s0, s1, m0, m1, np.fmin(y0, y1), np.fmax(y0, y1), moving
+    return branches.move, possible, s0, s1, m0, m1, np.fmin(y0, y1), np.fmax(y0, y1), moving
 
 
 def _strip(u: np.ndarray) -> np.ndarray:
@@ -428,9 +424,9 @@ def _grid_controller(pomdp: AssistancePOMDP, points: int, base: np.ndarray | Non
     base = _one_node_controllers(pomdp) if base is None else base
     x = np.linspace(0.0, 1.0, points)
     b = np.stack([1 - x, x], axis=1)
-    K = pomdp.kernel
+    M = pomdp.branches("bayes").move  # [c, a, (o, e), t, u]
     N = pomdp.n_complexity
-    nbs = [np.einsum("nt,atoeu->naoeu", b, K[c]) for c in range(N)]  # (n, a, o, e, u) per c
+    nbs = [np.einsum("nt,abtu->nabu", b, M[c]).reshape(points, 2, 2, 2, 2) for c in range(N)]  # (n, a, o, e, u) per c
     ev = np.zeros((0, 2))
     for _ in range(max(1, rounds)):
         look = np.vstack([base, ev])
@@ -796,10 +792,8 @@ def paper_grid_values(pomdp: AssistancePOMDP, grid: np.ndarray, guess: np.ndarra
 def _paper_maps(pomdp: AssistancePOMDP):
     """For each (c, a, e): branch probability p(x) = p0 (1-x) + p1 x and next belief
     f(x) = f0 (1-x) + f1 x, as arrays [c, a, e, 2]."""
-    pe = np.einsum("cato,caoe->cate", pomdp.emission, pomdp.experience)  # P(E' | T, C, a)
-    p = np.moveaxis(pe, 2, 3)  # [c, a, e, t]
-    f = pomdp.trust_transition[..., :, 1]  # [c, a, e, t] -> P(T'=high | T=t)
-    return p, f
+    p0, p1, m0, m1 = pomdp.branches("paper").two_level()
+    return np.stack([p0, p1], axis=-1), np.stack([m0, m1], axis=-1)
 
 
 def _paper_q(pomdp: AssistancePOMDP, values: np.ndarray, x: np.ndarray, grid: np.ndarray | None = None) -> np.ndarray:

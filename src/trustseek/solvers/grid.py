@@ -35,45 +35,22 @@ DEFAULT_GRID = 2001
 METHODS = ("policy-iteration", "value-iteration")
 
 
-def belief_branches(pomdp: AssistancePOMDP, beliefs: np.ndarray, c: int, a: int, update: str):
-    """The successors of each belief after one trial with complexity c and action a.
-
-    ``beliefs`` has shape (G, K).  Returns a list of (probability (G,), next belief (G, K)).
-    """
-    em = pomdp.emission[c, a]  # [t, o]
-    ex = pomdp.experience[c, a]  # [o, e]
-    tr = pomdp.trust_transition[c, a]  # [e, t, u]
-    out = []
-    if update == "bayes":
-        for o in range(2):
-            joint = beliefs * em[None, :, o]
-            po = joint.sum(axis=1)
-            post = joint / np.where(po > 0, po, 1.0)[:, None]
-            for e in range(2):
-                w = po * ex[o, e]
-                if np.any(w > 0):
-                    out.append((w, post @ tr[e]))
-    elif update == "paper":
-        pe = beliefs @ em @ ex  # [G, e]
-        for e in range(2):
-            if np.any(pe[:, e] > 0):
-                out.append((pe[:, e], beliefs @ tr[e]))
-    else:
-        check_belief_update(update)
-    return out
-
-
 def interpolation_matrix(points: np.ndarray, grid: np.ndarray, weights: np.ndarray) -> sp.csr_matrix:
-    """Sparse (len(weights), len(grid)) matrix: row i spreads weights[i] linearly over the two
-    grid points that bracket points[i] (a uniform grid on [0, 1])."""
+    """Sparse (n, len(grid)) matrix from points and weights of shape (n, m): row i spreads each
+    weights[i, k] linearly over the two grid points that bracket points[i, k] (a uniform grid on
+    [0, 1]) and adds them up."""
     G = len(grid)
-    x = np.clip(points, 0.0, 1.0) * (G - 1)
+    n = points.shape[0]
+    x = np.clip(points, 0.0, 1.0).T.ravel() * (G - 1)
+    w = weights.T.ravel()
     j = np.minimum(np.floor(x).astype(np.int64), G - 2)
     f = x - j
-    rows = np.arange(len(points))
-    data = np.concatenate([weights * (1.0 - f), weights * f])
+    rows = np.tile(np.arange(n), points.shape[1])
+    data = np.concatenate([w * (1.0 - f), w * f])
     cols = np.concatenate([j, j + 1])
-    return sp.csr_matrix((data, (np.concatenate([rows, rows]), cols)), shape=(len(points), G))
+    m = sp.csr_matrix((data, (np.concatenate([rows, rows]), cols)), shape=(n, G))
+    m.eliminate_zeros()  # points on a grid point put weight 0 on its right neighbour
+    return m
 
 
 @dataclass
@@ -128,17 +105,16 @@ class GridSolver:
             )
         grid = np.linspace(0.0, 1.0, self.grid)
         beliefs = np.stack([1.0 - grid, grid], axis=1)
+        branches = pomdp.branches(self.belief_update)
         N = pomdp.n_complexity
         r = np.einsum("gk,cak->cag", beliefs, pomdp.expected_reward)
         P = []
         for c in range(N):
             row = []
             for a in range(2):
-                m = None
-                for w, nb in belief_branches(pomdp, beliefs, c, a, self.belief_update):
-                    part = interpolation_matrix(nb[:, 1], grid, w)
-                    m = part if m is None else m + part
-                row.append(m.tocsr())
+                p, nxt = branches.successors(beliefs, c, a)
+                live = np.any(p > 0, axis=0)  # branches that can happen at all
+                row.append(interpolation_matrix(nxt[:, live, 1], grid, p[:, live]))
             P.append(row)
         return grid, r, P
 
@@ -165,7 +141,7 @@ class GridSolver:
     def solve_grid(self, pomdp: AssistancePOMDP) -> GridSolution:
         t0 = time.perf_counter()
         grid, r, P, q_of, bellman = self.operators(pomdp)
-        N, G, gamma = pomdp.n_complexity, len(grid), pomdp.discount
+        G, gamma = len(grid), pomdp.discount
         pc = pomdp.complexity_probs
 
         history: list[float] = []

@@ -33,37 +33,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..pomdp.branch_model import BranchModel
 from ..pomdp.problem import AssistancePOMDP
-
-
-@dataclass
-class BranchModel:
-    """context_probs[c], rewards[c, a, t], kernels[c, a, branch, t, t2], discount, initial[t]."""
-
-    context_probs: np.ndarray
-    rewards: np.ndarray
-    kernels: np.ndarray
-    discount: float
-    initial: np.ndarray
-
-    @classmethod
-    def from_assistance(cls, pomdp: AssistancePOMDP) -> "BranchModel":
-        k = pomdp.kernel  # [c, a, t, o, e, u]
-        N, K = pomdp.n_complexity, pomdp.n_trust
-        kern = np.transpose(k, (0, 1, 3, 4, 2, 5)).reshape(N, 2, 4, K, K)
-        return cls(pomdp.complexity_probs.copy(), pomdp.expected_reward.copy(), kern, pomdp.discount, pomdp.model.initial.copy())
-
-    @classmethod
-    def from_flat(cls, flat) -> "BranchModel":
-        return cls(np.ones(1), flat.expected_reward[None], flat.branch_kernels[None], flat.discount, flat.start.copy())
-
-    @property
-    def n_hidden(self) -> int:
-        return self.rewards.shape[2]
-
-    @property
-    def n_actions(self) -> int:
-        return self.rewards.shape[1]
 
 
 def evaluate_controller(model: BranchModel, actions: np.ndarray, successors: np.ndarray, guess: np.ndarray | None = None) -> np.ndarray:
@@ -202,10 +173,7 @@ class PointSolver:
 
     # -- successors of a set of beliefs ------------------------------------------
     def _successors(self, B):
-        m = self.model
-        nb = np.einsum("nt,cabtu->ncabu", B, m.kernels)  # (n, N, A, Br, K)
-        p = nb.sum(axis=-1)
-        S = np.where(p[..., None] > 0, nb / np.where(p > 0, p, 1.0)[..., None], 1.0 / m.n_hidden)
+        p, S = self.model.branches.successors(B)  # (n, N, A, Br), (n, N, A, Br, K)
         return S, p
 
 
@@ -380,7 +348,7 @@ class PointSolver:
         """Solve the assistance POMDP (Bayes update); returns an AlphaVectorPolicy."""
         from .alpha import AlphaVectorPolicy
 
-        sol = self.solve_bounds(BranchModel.from_assistance(pomdp))
+        sol = self.solve_bounds(pomdp.branch_model())
         K = pomdp.n_trust
         beliefs = _unique_rows(np.vstack([sol.points, _simplex_lattice(K, 400 if K == 2 else 20 if K == 3 else 5)]), K)
         qv = self.q_vectors(beliefs)
@@ -431,4 +399,4 @@ def _simplex_lattice(K: int, n: int) -> np.ndarray:
     return np.array(rows, dtype=float) / n
 
 
-__all__ = ["BranchModel", "PointSolver", "PointSolution", "evaluate_controller", "freudenthal_weights"]
+__all__ = ["PointSolver", "PointSolution", "evaluate_controller", "freudenthal_weights"]
