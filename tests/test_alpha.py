@@ -6,11 +6,10 @@ import numpy as np
 import pytest
 
 from trustseek import AssistancePOMDP, BayesUpdate, GridSolver, PolicyRunner, load_policy
+from trustseek.policies import AlphaVectorPolicy
+from trustseek.policies.envelope import envelope, envelope_values
 from trustseek.solvers.alpha import (
     AlphaSolver,
-    AlphaVectorPolicy,
-    envelope,
-    envelope_values,
     exact_backup,
     finite_horizon_value,
     finite_horizon_vectors,

@@ -13,7 +13,7 @@ The Python API, by module:
 from .pomdp.belief import BayesUpdate, PaperUpdate, make_updater
 from .errors import TrustseekError
 from .model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, ModelError, Rewards, Task, TrustModel
-from .policies.core import (
+from .policies import (
     ComplexityPolicy,
     PolicyRunner,
     TrustAwarePolicy,
@@ -21,8 +21,8 @@ from .policies.core import (
     load_policy,
     never_ask,
     randomized,
-    trust_agnostic,
 )
+from .solvers.agnostic import trust_agnostic
 from .pomdp.problem import AssistancePOMDP
 from .model.presets import load_model, load_task, paper_model, paper_task
 from .solvers.grid import GridSolver, solve

@@ -48,7 +48,7 @@ def certified_policy(solver: str, pomdp: AssistancePOMDP, belief_update: str, ga
 
 def certified_summary(policy, task) -> dict:
     """The JSON summary of a certified solve (any number of trust levels)."""
-    from ..policies.core import trust_agnostic
+    from ..solvers.agnostic import trust_agnostic
 
     info = policy.info
     out = {

@@ -6,14 +6,14 @@ import json
 from pathlib import Path
 from typing import Optional
 
-import numpy as np
 import typer
 from rich.table import Table
 
 from ..errors import TrustseekError
 from ..vocab import check_belief_update
 from ..model.core import ModelError, Task, TrustModel
-from ..policies.core import TrustAwarePolicy, load_policy, trust_agnostic
+from ..policies import TrustAwarePolicy, load_policy
+from ..solvers.agnostic import trust_agnostic
 from ..model.presets import MODEL_PRESETS, TASK_PRESETS, load_model, load_task
 from ..solvers.grid import DEFAULT_GRID, METHODS, GridSolver
 from ..pomdp.problem import AssistancePOMDP
@@ -116,7 +116,7 @@ def agnostic(
     t = load_task(task)
     if data is not None:
         from ..data.trials import read_trials  # provided by the data module
-        from ..policies.core import trust_agnostic_from_data
+        from ..solvers.agnostic import trust_agnostic_from_data
 
         pol = trust_agnostic_from_data(read_trials(data), t)
     else:

@@ -14,7 +14,9 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..policies.core import PAPER_ASK_PROBABILITIES, TrustAwarePolicy, always_ask, load_policy, never_ask, randomized, trust_agnostic
+from ..policies import TrustAwarePolicy, always_ask, load_policy, never_ask, randomized
+from ..solvers.agnostic import trust_agnostic
+from ..vocab import PAPER_ASK_PROBABILITIES
 from ..model.presets import load_model, load_task
 from ._app import app, console, err_console, print_json
 

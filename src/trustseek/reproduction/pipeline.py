@@ -38,7 +38,8 @@ import numpy as np
 
 from ..errors import TrustseekError
 from ..model.core import ASK, AUTONOMOUS, FAULTY, INTERVENE, RELIABLE, RELY, Task, TrustModel
-from ..policies.core import always_ask, never_ask, randomized, trust_agnostic, trust_agnostic_from_data
+from ..policies import always_ask, never_ask, randomized
+from ..solvers.agnostic import trust_agnostic, trust_agnostic_from_data
 from ..pomdp.problem import AssistancePOMDP
 from ..model.presets import paper_model, paper_task
 from ..simulation.engine import Supervisors, crossover, simulate

@@ -27,7 +27,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
-from ..policies.core import PolicyRunner
+from ..policies import PolicyRunner
 from .orm import Event, PolicyBlob, Report, Session, Study, Trial, utcnow
 from .studies import participant_plan, policy_object
 

@@ -21,7 +21,8 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from ..model.core import ModelError, Task, TrustModel
-from ..policies.core import ComplexityPolicy, always_ask, never_ask, policy_from_dict, randomized, trust_agnostic
+from ..policies import ComplexityPolicy, always_ask, never_ask, policy_from_dict, randomized
+from ..solvers.agnostic import trust_agnostic
 from ..model.presets import MODEL_PRESETS, TASK_PRESETS
 from ..solvers.grid import solve
 

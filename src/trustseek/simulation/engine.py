@@ -38,6 +38,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
+from ..policies.thresholds import ask_bounds
 from ..pomdp.belief import ScalarBelief, make_updater
 from ..vocab import PAPER_BLOCK_COUNTS, TRIAL_COLUMNS, check_belief_update
 from ..errors import TrustseekError
@@ -373,37 +374,12 @@ class _Tables:
             self.trust_low = self.trust_cum[:, 0].copy()  # P(T' = low | ...)
 
 
-def threshold_form(policy) -> np.ndarray | None:
-    """Per complexity index, the bound θ_C such that a trust-aware policy asks exactly when
-    P(trust = high) < θ_C (``-inf``: never asks, ``+inf``: always asks), or ``None`` when its
-    ask region is not an interval starting at 0 (then ``policy.actions`` is used as is).
-
-    This is ``TrustAwarePolicy.actions`` evaluated in two operations per trial; the bound is
-    where the interpolated advantage Q(ask) - Q(autonomous) crosses zero
-    (``TrustAwarePolicy.ask_intervals``), so both agree except for beliefs within rounding
-    error of the crossing itself."""
-    from ..policies.core import TrustAwarePolicy
-
-    if not isinstance(policy, TrustAwarePolicy) or policy.model is None or policy.model.n_trust != 2:
-        return None
-    out = []
-    for cn, iv in policy.ask_intervals().items():
-        if not iv:
-            out.append(-np.inf)
-        elif len(iv) == 1 and iv[0][0] == policy.grid[0]:
-            hi = iv[0][1]
-            out.append(np.inf if hi >= policy.grid[-1] else hi)
-        else:
-            return None
-    return np.array(out)
-
-
 def _policy_belief(block: Block):
     """(model, update name) of the robot's belief in a block, or (None, None)."""
     pol = block.policy
-    model = getattr(pol, "model", None) or block.belief_model
-    update = block.belief_update or getattr(pol, "belief_update", None) or "bayes"
-    if getattr(pol, "belief_update", None) is not None and model is None:
+    model = pol.model or block.belief_model
+    update = block.belief_update or pol.belief_update or "bayes"
+    if pol.belief_update is not None and model is None:
         raise SimulationError([f"the {pol.kind} policy needs a trust model for its belief"])
     check_belief_update(update)
     return (model, update) if model is not None else (None, None)
@@ -442,7 +418,7 @@ def _run_chunk(tab: _Tables, task: Task, rows: np.ndarray, blocks: list[Block], 
             B = np.broadcast_to(updater.initial(), (m, bmodel.n_trust)).copy()
         else:
             B = np.full((m, 2), np.nan)
-        bounds = threshold_form(policy) if scalar is not None else None
+        bounds = ask_bounds(policy) if scalar is not None else None
         for t in range(sched.shape[0]):
             c = sched[t]
             if bounds is not None:

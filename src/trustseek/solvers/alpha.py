@@ -48,62 +48,25 @@ from __future__ import annotations
 import itertools
 import time
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from scipy.optimize import brentq
 
+from ..model.core import ASK, AUTONOMOUS
+from ..policies.alpha_vector import AlphaVectorPolicy
+from ..policies.envelope import WIDTH_EPS as _WIDTH_EPS
+from ..policies.envelope import active_piece as _active
+from ..policies.envelope import envelope, envelope_values
+from ..policies.grid_q import TrustAwarePolicy
 from ..pomdp.belief import to_vector
-from ..vocab import BELIEF_UPDATES, check_belief_update
-from ..model.core import ACTIONS, ASK, AUTONOMOUS, ModelError, TrustModel
-from ..policies.core import _PolicyBase
 from ..pomdp.problem import AssistancePOMDP
+from ..vocab import check_belief_update
 
-ALPHA_KIND = "alpha-vector"
-_WIDTH_EPS = 1e-13  # envelope pieces narrower than this are dropped
 POLICY_TABLE_POINTS = 4001  # uniform Q table of the policy for the paper update
 
 
 # --------------------------------------------------------------------------- 1-D envelopes
-
-
-def envelope(vecs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The upper envelope over x in [0, 1] of the lines x -> v0 (1 - x) + v1 x.
-
-    Returns (idx, xs): indices of the lines on the envelope ordered by increasing x,
-    and the breakpoints xs (len(idx) + 1, from 0 to 1); line idx[i] is the maximum on
-    [xs[i], xs[i + 1]].  Vectorized: lines sorted by slope, then lines that lie below
-    their two neighbours (they cross the previous one after the next one) are removed
-    in passes until none is left; lines active only outside [0, 1] are cut off.
-    """
-    v0 = vecs[:, 0]
-    s = vecs[:, 1] - vecs[:, 0]
-    order = np.lexsort((-v0, s))
-    keep = np.concatenate([[True], s[order][1:] != s[order][:-1]])  # one line per slope: the highest
-    idx = order[keep]
-    while True:
-        a, b = v0[idx], s[idx]
-        if len(idx) == 1:
-            return idx, np.array([0.0, 1.0])
-        x = (a[:-1] - a[1:]) / (b[1:] - b[:-1])  # where line k+1 overtakes line k
-        # cut lines that are active only left of 0 or right of 1
-        first = int(np.argmax(x > _WIDTH_EPS)) if np.any(x > _WIDTH_EPS) else len(x)
-        last = int(len(x) - np.argmax((x < 1 - _WIDTH_EPS)[::-1])) if np.any(x < 1 - _WIDTH_EPS) else 0
-        if first > 0 or last < len(x):
-            idx = idx[first : last + 1]
-            continue
-        bad = np.zeros(len(idx), dtype=bool)
-        bad[1:-1] = x[:-1] >= x[1:] - _WIDTH_EPS
-        if not np.any(bad):
-            return idx, np.concatenate([[0.0], x, [1.0]])
-        idx = idx[~bad]
-
-
-def envelope_values(vecs: np.ndarray, xs: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Evaluate an envelope (vectors in order, breakpoints xs) at points x."""
-    x = np.asarray(x, dtype=float)
-    i = np.searchsorted(xs[1:-1], x, side="right")
-    return vecs[i, 0] * (1 - x) + vecs[i, 1] * x
 
 
 def _union(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -161,11 +124,6 @@ def _strip(u: np.ndarray) -> np.ndarray:
     u = u[np.concatenate([[True], np.diff(u) > _WIDTH_EPS])]
     u[0], u[-1] = 0.0, 1.0
     return u
-
-
-def _active(xs: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Index of the piece of breakpoints xs (xs[0] = 0, xs[-1] = 1) that contains each x."""
-    return np.searchsorted(xs[1:-1], x, side="right")
 
 
 def max_of(v1, xs1, v2, xs2):
@@ -934,179 +892,6 @@ def finite_horizon_value(pomdp: AssistancePOMDP, horizon: int, belief, complexit
     return float(max(envelope_values(v, xs, np.array([b[1]]))[0] for v, xs in bk.q[complexity]))
 
 
-# --------------------------------------------------------------------------- the policy
-
-
-class AlphaVectorPolicy(_PolicyBase):
-    """Greedy in Q(b, C, a) = max over the Q-vectors of (C, a) of α·b; any number of trust levels.
-
-    ``q_vectors[c][a]`` is an array (n, K) of vectors, each the value of "take a now, then
-    follow a controller", so max α·b is a lower bound on Q(b, C, a).  ``value_vectors`` (n, K)
-    represent the lower bound on W(b) = Σ_C P(C) max_a Q(b, C, a).  Ties go to ``autonomous``.
-    """
-
-    kind = ALPHA_KIND
-
-    def __init__(
-        self,
-        q_vectors: Sequence[Sequence[np.ndarray]],
-        value_vectors: np.ndarray,
-        model: TrustModel,
-        complexities: Sequence[str],
-        belief_update: str = "bayes",
-        info: Mapping[str, Any] | None = None,
-    ):
-        self.q_vectors = [[np.atleast_2d(np.asarray(v, dtype=float)) for v in per_a] for per_a in q_vectors]
-        self.value_vectors = np.atleast_2d(np.asarray(value_vectors, dtype=float))
-        self.model = model
-        self.complexities = tuple(complexities)
-        self.belief_update = belief_update
-        self.info = dict(info or {})
-        K = model.n_trust
-        problems = []
-        if len(self.q_vectors) != len(self.complexities) or any(len(p) != 2 for p in self.q_vectors):
-            problems.append(f"q_vectors needs one entry per complexity {list(self.complexities)} and action {list(ACTIONS)}")
-        for per_a in self.q_vectors:
-            for v in per_a:
-                if v.ndim != 2 or v.shape[1] != K or len(v) == 0 or not np.all(np.isfinite(v)):
-                    problems.append(f"every Q-vector set must be a non-empty (n, {K}) array of finite numbers")
-                    break
-        if self.value_vectors.shape[1] != K or not np.all(np.isfinite(self.value_vectors)):
-            problems.append(f"value vectors must be a (n, {K}) array of finite numbers")
-        if problems:
-            raise ModelError(problems)
-
-    # -- Policy interface (complexity lookup, action(), save() from the core base) ----
-    def q_of(self, beliefs: np.ndarray, complexities: np.ndarray) -> np.ndarray:
-        """Q lower bounds for each (belief, complexity) pair; shape (n, 2)."""
-        beliefs = np.atleast_2d(np.asarray(beliefs, dtype=float))
-        complexities = np.asarray(complexities, dtype=np.int64).reshape(-1)
-        out = np.empty((len(beliefs), 2))
-        for c in np.unique(complexities):
-            sel = complexities == c
-            for a in range(2):
-                out[sel, a] = (beliefs[sel] @ self.q_vectors[c][a].T).max(axis=1)
-        return out
-
-    def actions(self, beliefs, complexities, rng=None) -> np.ndarray:
-        q = self.q_of(beliefs, complexities)
-        return np.where(q[:, ASK] > q[:, AUTONOMOUS], ASK, AUTONOMOUS).astype(np.int64)
-
-    def describe(self) -> str:
-        return f"{self.kind} ({sum(len(v) for p in self.q_vectors for v in p)} Q-vectors)"
-
-    # -- two trust levels: values, thresholds ----------------------------------
-    def _x_vectors(self, b_high):
-        x = np.asarray(b_high, dtype=float)
-        return np.stack([1 - x, x], axis=-1)
-
-    def q_values(self, b_high) -> np.ndarray:
-        """Q at P(trust = high) = b_high (two trust levels); shape (..., N, 2)."""
-        self._need_two()
-        b = self._x_vectors(b_high)
-        return np.stack(
-            [np.stack([(b @ v.T).max(axis=-1) for v in per_a], axis=-1) for per_a in self.q_vectors], axis=-2
-        )
-
-    def value(self, belief) -> float:
-        """Lower bound on W(b) (averaged over P(C))."""
-        b = to_vector(belief, self.model.n_trust)
-        return float((self.value_vectors @ b).max())
-
-    def _need_two(self) -> None:
-        if self.model.n_trust != 2:
-            raise ValueError("thresholds and q_values(b_high) need two trust levels")
-
-    def ask_intervals(self) -> dict[str, list[tuple[float, float]]]:
-        """Per complexity, the belief intervals where the policy asks (exact: the advantage is
-        piecewise linear, so its sign changes are found at breakpoints and by linear roots)."""
-        self._need_two()
-        out = {}
-        for c, cn in enumerate(self.complexities):
-            vs = [self.q_vectors[c][a] for a in range(2)]
-            pts = [np.array([0.0, 1.0])]
-            for v in vs:
-                idx, xs = envelope(v)
-                pts.append(xs)
-            x = np.unique(np.concatenate(pts))
-            q = self.q_values(x)[:, c]
-            d = q[:, ASK] - q[:, AUTONOMOUS]
-            ask = d > 0
-            ivs = []
-            i, n = 0, len(x)
-            while i < n:
-                if not ask[i]:
-                    i += 1
-                    continue
-                s = i
-                while i < n and ask[i]:
-                    i += 1
-                lo = 0.0 if s == 0 else _lin_root(x, d, s - 1)
-                hi = 1.0 if i == n else _lin_root(x, d, i - 1)
-                ivs.append((float(lo), float(hi)))
-            out[cn] = ivs
-        return out
-
-    def thresholds(self) -> dict[str, float | None]:
-        out: dict[str, float | None] = {}
-        for cn, iv in self.ask_intervals().items():
-            if not iv:
-                out[cn] = None
-            elif len(iv) == 1 and iv[0][0] == 0.0:
-                out[cn] = iv[0][1]
-            else:
-                out[cn] = float("nan")
-        return out
-
-    # -- JSON ----------------------------------------------------------------------
-    def to_dict(self) -> dict[str, Any]:
-        from ..policies.core import POLICY_FORMAT
-
-        d = {
-            "format": POLICY_FORMAT,
-            "kind": self.kind,
-            "complexities": list(self.complexities),
-            "belief_update": self.belief_update,
-            "info": self.info,
-            "model": self.model.to_dict(),
-            "q_vectors": {
-                cn: {an: self.q_vectors[c][a].tolist() for a, an in enumerate(ACTIONS)}
-                for c, cn in enumerate(self.complexities)
-            },
-            "value_vectors": self.value_vectors.tolist(),
-        }
-        if self.model.n_trust == 2:
-            d["thresholds"] = self.thresholds()
-        return d
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any], source: str | None = None) -> "AlphaVectorPolicy":
-        model = TrustModel.from_dict(d.get("model"), source)
-        cx = list(d.get("complexities") or [])
-        bu = d.get("belief_update")
-        if bu not in BELIEF_UPDATES:
-            raise ModelError([f"belief_update is {bu!r}, expected one of {list(BELIEF_UPDATES)}"], source)
-        qv = d.get("q_vectors")
-        try:
-            q = [[np.array(qv[c][a], dtype=float) for a in ACTIONS] for c in cx]
-            vv = np.array(d.get("value_vectors"), dtype=float)
-        except (KeyError, TypeError, ValueError):
-            raise ModelError(
-                [f"q_vectors must map each complexity {cx} and action {list(ACTIONS)} to a list of vectors"], source
-            ) from None
-        try:
-            return cls(q, vv, model, cx, bu, d.get("info"))
-        except ModelError as exc:
-            raise ModelError(exc.problems, source) from None
-
-
-def _lin_root(x, d, i) -> float:
-    d0, d1 = d[i], d[i + 1]
-    if d0 == d1:
-        return float(x[i])
-    return float(x[i] + d0 / (d0 - d1) * (x[i + 1] - x[i]))
-
-
 def certificate(sol: AlphaSolution, pomdp: AssistancePOMDP) -> dict[str, Any]:
     """The machine-readable certificate: gap, bounds at the initial belief and at b = 1, thresholds."""
     pc = pomdp.complexity_probs
@@ -1140,8 +925,6 @@ def policy_from_solution(sol: AlphaSolution, pomdp: AssistancePOMDP, target_gap:
         return AlphaVectorPolicy(
             [[v for v, _ in per_a] for per_a in sol.q], sol.lower[0], pomdp.model, pomdp.complexities, sol.belief_update, info
         )
-    from ..policies.core import TrustAwarePolicy
-
     g, v = sol.grid_solution
     info["adaptive_grid_points"] = len(g)
     table = np.linspace(0.0, 1.0, POLICY_TABLE_POINTS)  # Q of the certified solution on a uniform table

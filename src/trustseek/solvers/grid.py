@@ -28,8 +28,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..vocab import check_belief_update
+from ..policies.grid_q import TrustAwarePolicy
 from ..pomdp.problem import AssistancePOMDP
+from ..vocab import check_belief_update
 
 DEFAULT_GRID = 2001
 METHODS = ("policy-iteration", "value-iteration")
@@ -119,9 +120,18 @@ class GridSolver:
         return grid, r, P
 
     def solve(self, pomdp: AssistancePOMDP):
-        from ..policies.core import TrustAwarePolicy
-
-        return TrustAwarePolicy.from_solution(self.solve_grid(pomdp), pomdp.model, pomdp.task)
+        sol = self.solve_grid(pomdp)
+        info = {
+            "solver": "grid",
+            "method": sol.method,
+            "grid_points": len(sol.grid),
+            "iterations": sol.iterations,
+            "bellman_residual": sol.residual,
+            "error_bound": sol.error_bound,
+            "seconds": sol.seconds,
+            "discount": pomdp.discount,
+        }
+        return TrustAwarePolicy(sol.grid, sol.q, pomdp.model, pomdp.complexities, sol.belief_update, info)
 
     def operators(self, pomdp: AssistancePOMDP):
         """(grid, q_of, bellman): q_of(W) -> Q (G, N, 2) and the Bellman operator W -> T W

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..policies.alpha_vector import AlphaVectorPolicy
 from ..pomdp.branch_model import BranchModel
 from ..pomdp.problem import AssistancePOMDP
 
@@ -346,8 +347,6 @@ class PointSolver:
 
     def solve(self, pomdp: AssistancePOMDP):
         """Solve the assistance POMDP (Bayes update); returns an AlphaVectorPolicy."""
-        from .alpha import AlphaVectorPolicy
-
         sol = self.solve_bounds(pomdp.branch_model())
         K = pomdp.n_trust
         beliefs = _unique_rows(np.vstack([sol.points, _simplex_lattice(K, 400 if K == 2 else 20 if K == 3 else 5)]), K)
