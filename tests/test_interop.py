@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from trustseek.pomdp.flat import FlatPOMDP
-from trustseek.solvers.alpha import finite_horizon_value
+from trustseek.solvers.backup import finite_horizon_value
 from trustseek.interop.files import (
     PomdpFileError,
     flat_belief,

@@ -17,6 +17,7 @@ from ..model.core import AUTONOMOUS, INTERVENE, Task, TrustModel
 from ..policies.complexity import ComplexityPolicy, randomized
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import PAPER_ASK_PROBABILITIES, PAPER_DATA_COUNTS
+from .base import SolverBase, SolverError
 
 #: trials per participant of the paper's data collection (41 low + 30 high)
 PAPER_HORIZON = sum(PAPER_DATA_COUNTS)
@@ -87,6 +88,24 @@ def trust_agnostic_from_data(trials: Any, task: Task) -> ComplexityPolicy:
     for cn in task.complexities:
         rows = trials[(trials["complexity"] == cn) & (trials["robot_action"] == "autonomous") & trials["human_action"].notna()]
         if len(rows) == 0:
-            raise ValueError(f"no autonomous trials with a recorded human action in complexity {cn!r}")
+            raise SolverError([f"no autonomous trials with a recorded human action in complexity {cn!r}"])
         p_int.append(float((rows["human_action"] == "intervene").mean()))
     return agnostic_from_intervention_rates(task, p_int, source=f"data, {len(trials)} trials")
+
+
+class TrustAgnosticSolver(SolverBase):
+    """The optimal trust-agnostic policy of a model and task (:func:`trust_agnostic`) as a solver:
+    any number of trust levels; the policy ignores the belief."""
+
+    name = "trust-agnostic"
+
+    def __init__(self, horizon: int = PAPER_HORIZON, data_policy: ComplexityPolicy | None = None):
+        if int(horizon) != horizon or horizon < 1:
+            raise SolverError([f"the horizon must be a positive number of trials, got {horizon!r}"])
+        self.horizon = int(horizon)
+        self.data_policy = data_policy
+
+    def solve(self, pomdp: AssistancePOMDP) -> ComplexityPolicy:
+        """The trust-agnostic policy; ``info`` says where P(intervene | C) came from."""
+        self.check(pomdp)
+        return trust_agnostic(pomdp.model, pomdp.task, self.data_policy, self.horizon)

@@ -1,4 +1,4 @@
-"""Belief-MDP solvers (Section IV-C).
+"""The grid solver: the belief MDP of Section IV-C on a uniform grid of beliefs (two trust levels).
 
 The belief MDP has states (b, C): the belief over trust and the complexity of
 the coming trial (the last experience E does not matter, see Fig. 7).  Its
@@ -8,7 +8,7 @@ Q-function is
     W(b)       = Σ_C P(C) max_a Q(b, C, a),
 
 where a branch is (o, E') for the ``bayes`` update and E' alone for the ``paper``
-update (eq. 3 ignores o), and b' is the updated belief.
+update (eq. 3 ignores o), and b' is the updated belief (``pomdp.branches``).
 
 :class:`GridSolver` discretizes P(trust = high) on a uniform grid of two-level
 models and interpolates W linearly between grid points.  Interpolation weights
@@ -23,17 +23,23 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import Any, Callable
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
+from ..model.core import Task, TrustModel
 from ..policies.grid_q import TrustAwarePolicy
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
+from .base import SolverBase, SolverError
+from .numerics import grid_tolerances, improve, policy_values
 
 DEFAULT_GRID = 2001
 METHODS = ("policy-iteration", "value-iteration")
+
+#: per complexity and action, a sparse transition matrix between grid points
+GridMatrices = list[list[sp.csr_matrix]]
 
 
 def interpolation_matrix(points: np.ndarray, grid: np.ndarray, weights: np.ndarray) -> sp.csr_matrix:
@@ -74,8 +80,12 @@ class GridSolution:
         return self.q.max(axis=2)
 
 
-class GridSolver:
+class GridSolver(SolverBase):
     """Value/policy iteration on a uniform belief grid, for models with two trust levels."""
+
+    name = "grid"
+    trust_levels = 2
+    instead = {"trust_levels": "use the point solver", "problem": "use the point solver"}
 
     def __init__(
         self,
@@ -86,10 +96,10 @@ class GridSolver:
         max_iter: int = 100_000,
     ):
         if grid < 3:
-            raise ValueError(f"grid must have at least 3 points, got {grid}")
+            raise SolverError([f"grid must have at least 3 points, got {grid}"])
         check_belief_update(belief_update)
         if method not in METHODS:
-            raise ValueError(f"unknown method {method!r}; expected one of {list(METHODS)}")
+            raise SolverError([f"unknown method {method!r}; expected one of {list(METHODS)}"])
         self.grid = int(grid)
         self.belief_update = belief_update
         self.method = method
@@ -97,20 +107,15 @@ class GridSolver:
         self.max_iter = int(max_iter)
 
     # -- the discretized belief MDP ------------------------------------------
-    def build(self, pomdp: AssistancePOMDP):
-        """Rewards r[c][a] (G,) and sparse transition matrices P[c][a] (G, G) on the grid."""
-        if pomdp.n_trust != 2:
-            raise ValueError(
-                f"the grid solver handles two trust levels; this model has {pomdp.n_trust}. "
-                "Use a point-based solver for larger models."
-            )
+    def build(self, pomdp: AssistancePOMDP) -> tuple[np.ndarray, np.ndarray, GridMatrices]:
+        """Grid, rewards r[c, a] (G,) and sparse transition matrices P[c][a] (G, G) on the grid."""
+        self.check(pomdp)
         grid = np.linspace(0.0, 1.0, self.grid)
         beliefs = np.stack([1.0 - grid, grid], axis=1)
         branches = pomdp.branches(self.belief_update)
-        N = pomdp.n_complexity
         r = np.einsum("gk,cak->cag", beliefs, pomdp.expected_reward)
         P = []
-        for c in range(N):
+        for c in range(pomdp.n_complexity):
             row = []
             for a in range(2):
                 p, nxt = branches.successors(beliefs, c, a)
@@ -119,10 +124,29 @@ class GridSolver:
             P.append(row)
         return grid, r, P
 
-    def solve(self, pomdp: AssistancePOMDP):
+    def operators(
+        self, pomdp: AssistancePOMDP
+    ) -> tuple[np.ndarray, np.ndarray, GridMatrices, Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], np.ndarray]]:
+        """(grid, r, P, q_of, bellman): q_of(W) -> Q (G, N, 2) and the Bellman operator W -> T W
+        of the discretized belief MDP, where W(b) = Σ_C P(C) max_a Q(b, C, a)."""
+        grid, r, P = self.build(pomdp)
+        N, gamma = pomdp.n_complexity, pomdp.discount
+        pc = pomdp.complexity_probs
+
+        def q_of(W: np.ndarray) -> np.ndarray:
+            return np.stack([np.stack([r[c, a] + gamma * (P[c][a] @ W) for a in range(2)], axis=1) for c in range(N)], axis=1)
+
+        def bellman(W: np.ndarray) -> np.ndarray:
+            return q_of(W).max(axis=2) @ pc
+
+        return grid, r, P, q_of, bellman
+
+    # -- solving ---------------------------------------------------------------
+    def solve(self, pomdp: AssistancePOMDP) -> TrustAwarePolicy:
+        """The trust-aware policy: greedy in Q on the grid (``info`` says how it was obtained)."""
         sol = self.solve_grid(pomdp)
-        info = {
-            "solver": "grid",
+        info: dict[str, Any] = {
+            "solver": self.name,
             "method": sol.method,
             "grid_points": len(sol.grid),
             "iterations": sol.iterations,
@@ -133,22 +157,8 @@ class GridSolver:
         }
         return TrustAwarePolicy(sol.grid, sol.q, pomdp.model, pomdp.complexities, sol.belief_update, info)
 
-    def operators(self, pomdp: AssistancePOMDP):
-        """(grid, q_of, bellman): q_of(W) -> Q (G, N, 2) and the Bellman operator W -> T W
-        of the discretized belief MDP, where W(b) = Σ_C P(C) max_a Q(b, C, a)."""
-        grid, r, P = self.build(pomdp)
-        N, gamma = pomdp.n_complexity, pomdp.discount
-        pc = pomdp.complexity_probs
-
-        def q_of(W):
-            return np.stack([np.stack([r[c, a] + gamma * (P[c][a] @ W) for a in range(2)], axis=1) for c in range(N)], axis=1)
-
-        def bellman(W):
-            return q_of(W).max(axis=2) @ pc
-
-        return grid, r, P, q_of, bellman
-
     def solve_grid(self, pomdp: AssistancePOMDP) -> GridSolution:
+        """Q on the grid, with the iteration count, the Bellman residual and the error bound."""
         t0 = time.perf_counter()
         grid, r, P, q_of, bellman = self.operators(pomdp)
         G, gamma = len(grid), pomdp.discount
@@ -158,15 +168,13 @@ class GridSolver:
         if self.method == "value-iteration":
             W = np.zeros(G)
             it = 0
-            bound = np.inf
             while it < self.max_iter:
                 W_new = bellman(W)
                 it += 1
                 delta = float(np.max(np.abs(W_new - W)))
                 history.append(delta)
                 W = W_new
-                bound = gamma / (1 - gamma) * delta
-                if bound <= self.tol:
+                if gamma / (1 - gamma) * delta <= self.tol:
                     break
         else:
             W, _, it = policy_iteration(r, P, pc, gamma, max_iter=self.max_iter)
@@ -175,7 +183,7 @@ class GridSolver:
         return GridSolution(
             grid=grid,
             q=q,
-            belief_update=self.belief_update,
+            belief_update=str(self.belief_update),
             method=self.method,
             iterations=it,
             residual=residual,
@@ -185,7 +193,9 @@ class GridSolver:
         )
 
 
-def policy_iteration(r: np.ndarray, P, pc: np.ndarray, gamma: float, policy: np.ndarray | None = None, max_iter: int = 1000):
+def policy_iteration(
+    r: np.ndarray, P: GridMatrices, pc: np.ndarray, gamma: float, policy: np.ndarray | None = None, max_iter: int = 1000
+) -> tuple[np.ndarray, np.ndarray, int]:
     """Howard's policy iteration on a finite belief MDP over G points.
 
     ``r[c, a]`` (G,) are the rewards, ``P[c][a]`` sparse (G, G) transition matrices to the
@@ -194,47 +204,32 @@ def policy_iteration(r: np.ndarray, P, pc: np.ndarray, gamma: float, policy: np.
     """
     N, G = len(pc), r.shape[-1]
     policy = r.argmax(axis=1) if policy is None else np.asarray(policy)
-    eye = sp.identity(G, format="csr")
     W = np.zeros(G)
     it = 0
     while it < max_iter:
         it += 1
-        M = None
+        M = sp.csr_matrix((G, G))
         rr = np.zeros(G)
         for c in range(N):
             sel = policy[c]
-            Pc = sp.diags((sel == 0).astype(float)) @ P[c][0] + sp.diags((sel == 1).astype(float)) @ P[c][1]
-            M = pc[c] * Pc if M is None else M + pc[c] * Pc
+            M = M + (gamma * pc[c]) * (sp.diags((sel == 0).astype(float)) @ P[c][0] + sp.diags((sel == 1).astype(float)) @ P[c][1])
             rr += pc[c] * np.where(sel == 0, r[c, 0], r[c, 1])
-        W = _evaluate((eye - gamma * M).tocsr(), rr, W)
+        W = policy_values(M.tocsr(), rr, W, **grid_tolerances(rr))
         q = np.stack([np.stack([r[c, a] + gamma * (P[c][a] @ W) for a in range(2)]) for c in range(N)])  # [c, a, G]
-        # keep the current action on ties, so that the iteration terminates
-        cur = np.take_along_axis(q, policy[:, None, :], axis=1)[:, 0]
-        better = q.max(axis=1) > cur + 1e-12 * (1 + np.abs(cur))
-        new_policy = np.where(better, q.argmax(axis=1), policy)
-        if np.array_equal(new_policy, policy):
+        new_policy = improve(q, policy, axis=1)
+        if new_policy is None:
             break
         policy = new_policy
     return W, policy, it
 
 
-def _evaluate(A: sp.csr_matrix, rhs: np.ndarray, x0: np.ndarray) -> np.ndarray:
-    """Solve A x = rhs for a policy's value: BiCGSTAB (fast on these well-conditioned,
-    very sparse systems), falling back to a direct sparse solve if it does not converge."""
-    scale = max(1.0, float(np.max(np.abs(rhs))))
-    x, info = spla.bicgstab(A, rhs, x0=x0, rtol=1e-14, atol=1e-13 * scale, maxiter=10_000)
-    if info != 0 or not np.all(np.isfinite(x)) or np.max(np.abs(A @ x - rhs)) > 1e-9 * scale:
-        x = spla.spsolve(A.tocsc(), rhs)
-    return x
-
-
 def solve(
-    model,
-    task,
+    model: TrustModel,
+    task: Task,
     belief_update: str = "bayes",
     grid: int = DEFAULT_GRID,
     method: str = "policy-iteration",
     tol: float = 1e-9,
-):
+) -> TrustAwarePolicy:
     """Solve the assistance POMDP of ``model`` and ``task`` for the trust-aware policy."""
     return GridSolver(grid=grid, belief_update=belief_update, method=method, tol=tol).solve(AssistancePOMDP(model, task))
