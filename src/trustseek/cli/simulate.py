@@ -14,32 +14,25 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..policies import TrustAwarePolicy, always_ask, load_policy, never_ask, randomized
-from ..solvers.agnostic import trust_agnostic
-from ..vocab import PAPER_ASK_PROBABILITIES
+from ..model.core import Task, TrustModel, load_json
 from ..model.presets import load_model, load_task
+from ..policies.base import Policy
+from ..solvers import policy_from_spec
+from ..solvers.specs import SPEC_KINDS
+from ..vocab import PAPER_ASK_PROBABILITIES
 from ._app import app, console, err_console, print_json
 
-POLICY_CHOICES = ("trust-aware", "trust-agnostic", "randomized", "always-ask", "never-ask")
 
-
-def _policy(spec: str, model, task, belief_update: str, grid: int, ask_low: float, ask_high: float):
-    if spec == "trust-aware":
-        from ..solvers.grid import solve
-
-        return solve(model, task, belief_update=belief_update, grid=grid)
-    if spec == "trust-agnostic":
-        return trust_agnostic(model, task)
-    if spec == "randomized":
-        return randomized(dict(zip(task.complexities, [ask_low, ask_high])))
-    if spec == "always-ask":
-        return always_ask(task.complexities)
-    if spec == "never-ask":
-        return never_ask(task.complexities)
+def _policy(spec: str, model: TrustModel, task: Task, belief_update: str, grid: int, ask_low: float, ask_high: float) -> Policy:
+    """The policy ``--policy`` names: a kind (with the options of this command) or a policy JSON file."""
+    if spec in SPEC_KINDS:
+        options = {"belief_update": belief_update, "grid": grid, "p_ask": dict(zip(task.complexities, [ask_low, ask_high]))}
+        return policy_from_spec({"kind": spec, **options}, model, task, where="--policy")
     p = Path(spec)
     if p.suffix.lower() == ".json" or p.exists():
-        return load_policy(p)
-    raise TrustseekError([f"--policy must be one of {list(POLICY_CHOICES)} or a policy JSON file, got {spec!r}"])
+        d, source = load_json(p)
+        return policy_from_spec(d, model, task, where=source)
+    raise TrustseekError([f"--policy must be one of {list(SPEC_KINDS)} or a policy JSON file, got {spec!r}"])
 
 
 def _counts(text: str, task) -> list[int]:
@@ -59,7 +52,7 @@ def _counts(text: str, task) -> list[int]:
 def simulate(
     model: str = typer.Option("paper", "--model", "-m", help="Supervisors' trust model: a preset name (paper) or a JSON file."),
     task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
-    policy: str = typer.Option("trust-aware", "--policy", "-p", help=f"Robot policy: {', '.join(POLICY_CHOICES)}, or a policy JSON file (e.g. from 'trustseek solve --out')."),
+    policy: str = typer.Option("trust-aware", "--policy", "-p", help=f"Robot policy: {', '.join(SPEC_KINDS)}, or a policy JSON file (e.g. from 'trustseek solve --out')."),
     participants: int = typer.Option(9, "--participants", "-n", min=1, help="Number of simulated participants."),
     counts: Optional[str] = typer.Option(None, "--counts", help="Trials per complexity in random order, e.g. 41,30 (the paper's design). Default: 41,30 unless --trials is given."),
     trials: Optional[int] = typer.Option(None, "--trials", min=1, help="Number of trials with i.i.d. complexities from the task's probabilities (instead of --counts)."),
@@ -107,12 +100,11 @@ def simulate(
     stats = {c: {"mean": float(summ[c].mean()), "median": float(summ[c].median()), "sd": float(summ[c].std(ddof=1)) if len(summ) > 1 else 0.0} for c in cols}
     n_trials = int(summ["trials"].sum())
     if as_json:
-        print_json({"policy": pol.to_dict() if not isinstance(pol, TrustAwarePolicy) else {"kind": pol.kind, "thresholds": pol.thresholds(), "belief_update": pol.belief_update},
+        print_json({"policy": pol.overview(),
                     "participants": participants, "trials": n_trials, "seed": seed, "statistics": stats,
                     "trials_file": str(out) if out else None, "summary_file": str(summary_out) if summary_out else None})
         return
-    desc = pol.describe() if not isinstance(pol, TrustAwarePolicy) else f"trust-aware ({pol.belief_update} belief, thresholds " + ", ".join(
-        f"{k}: {'never asks' if v is None else f'{v:.3f}'}" for k, v in pol.thresholds().items()) + ")"
+    desc = pol.describe()
     table = Table(title=f"{participants:,} simulated participants, {n_trials // participants} trials each, policy {escape(desc)}", title_justify="left")
     table.add_column("per participant")
     for h in ("mean", "median", "sd"):

@@ -17,7 +17,7 @@ from .complexity import COMPLEXITY_KINDS, ComplexityPolicy, always_ask, never_as
 from .grid_q import TrustAwarePolicy
 from .kinds import POLICY_KINDS, load_policy, policy_from_dict
 from .runner import PolicyRunner
-from .thresholds import ask_bounds, ask_intervals, threshold
+from .thresholds import ask_bounds, ask_intervals, ask_regions, threshold
 
 __all__ = [
     "COMPLEXITY_KINDS",
@@ -33,6 +33,7 @@ __all__ = [
     "always_ask",
     "ask_bounds",
     "ask_intervals",
+    "ask_regions",
     "load_policy",
     "never_ask",
     "policy_from_dict",

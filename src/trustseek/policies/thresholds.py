@@ -10,7 +10,7 @@ the simulator compares beliefs with.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
@@ -88,3 +88,10 @@ def ask_bounds(policy: Policy) -> np.ndarray | None:
         else:
             out.append(np.inf if th >= 1.0 else th)
     return np.array(out)
+
+
+def ask_regions(policy: Policy) -> dict[str, Any]:
+    """Where a policy asks, ready for JSON: its ``thresholds`` and ``ask_intervals`` (as lists) per
+    complexity (for a policy that asks at random: thresholds ``None``, no intervals)."""
+    intervals = policy.ask_intervals() or {}
+    return {"thresholds": policy.thresholds(), "ask_intervals": {k: [list(iv) for iv in v] for k, v in intervals.items()}}

@@ -348,8 +348,7 @@ class PointSolver(SolverBase):
         self.check(problem)
         sol = self.solve_bounds(problem.branch_model())
         K = sol.vectors.shape[1]
-        beliefs = _unique_rows(np.vstack([sol.points, _simplex_lattice(K, 400 if K == 2 else 20 if K == 3 else 5)]), K)
-        qv = self.q_vectors(beliefs)
+        qv = self.q_vectors(_unique_rows(np.vstack([sol.points, _simplex_lattice(K, _q_lattice(K))]), K))
         info: dict[str, Any] = {
             "solver": self.name,
             "method": "point-based policy iteration + Freudenthal upper bound",
@@ -369,6 +368,16 @@ class PointSolver(SolverBase):
         if isinstance(problem, FlatPOMDP):
             return FlatAlphaPolicy(qv[0], sol.vectors, problem.states, problem.actions, info)
         return AlphaVectorPolicy(qv, sol.vectors, problem.model, problem.complexities, "bayes", info)
+
+
+def _q_lattice(K: int, max_points: int = 20_000) -> int:
+    """Resolution of the lattice of beliefs whose point backups give the policy's Q-vectors: 400
+    for two hidden states, 20 for three, 5 beyond, lowered until the lattice has at most
+    ``max_points`` beliefs (a flat POMDP may have many states)."""
+    r = 400 if K == 2 else 20 if K == 3 else 5
+    while r > 1 and _lattice_size(K, r) > max_points:
+        r -= 1
+    return r
 
 
 def _unique_rows(B: np.ndarray, K: int, decimals: int = 13) -> np.ndarray:

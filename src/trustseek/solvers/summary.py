@@ -12,6 +12,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..policies.base import Policy
+from ..policies.thresholds import ask_regions
 from ..pomdp.problem import AssistancePOMDP
 from .agnostic import TrustAgnosticSolver
 
@@ -26,7 +27,7 @@ def summarize(policy: Policy, pomdp: AssistancePOMDP) -> dict[str, Any]:
     two_levels = pomdp.n_trust == 2
     if "certified_gap" not in info:
         b0 = float(pomdp.model.initial[-1])
-        out: dict[str, Any] = {"policy": name, "belief_update": policy.belief_update, **_ask_regions(policy)}
+        out: dict[str, Any] = {"policy": name, "belief_update": policy.belief_update, **ask_regions(policy)}
         if policy.belief_update is not None:
             out["value_at_b1"] = _values_at_b1(policy)
             out["initial_belief"] = b0
@@ -43,7 +44,7 @@ def summarize(policy: Policy, pomdp: AssistancePOMDP) -> dict[str, Any]:
         "initial_belief": dict(zip(pomdp.trust_levels, map(float, pomdp.model.initial))),
     }
     if two_levels:
-        regions = _ask_regions(policy)
+        regions = ask_regions(policy)
         out["thresholds"] = regions["thresholds"]
         out["threshold_intervals"] = info.get("threshold_intervals")
         out["ask_intervals"] = regions["ask_intervals"]
@@ -51,11 +52,6 @@ def summarize(policy: Policy, pomdp: AssistancePOMDP) -> dict[str, Any]:
     out["trust_agnostic"] = agnostic
     out["info"] = {k: v for k, v in info.items() if k not in ("thresholds", "threshold_intervals")}
     return out
-
-
-def _ask_regions(policy: Policy) -> dict[str, Any]:
-    intervals = policy.ask_intervals() or {}
-    return {"thresholds": policy.thresholds(), "ask_intervals": {k: [list(iv) for iv in v] for k, v in intervals.items()}}
 
 
 def _values_at_b1(policy: Policy) -> dict[str, float]:
