@@ -194,10 +194,11 @@ def test_paper_residual_is_exact_on_a_coarse_grid(paper_pomdp):
 
 
 def test_alpha_needs_two_trust_levels():
-    from trustseek.model.core import Task, TrustModel
     from trustseek.data import example_path
+    from trustseek.model.core import Task, TrustModel
 
-    p3 = AssistancePOMDP(TrustModel.load(example_path("three_level_model.json")), Task.load(example_path("three_level_task.json")))
+    model = TrustModel.load(example_path("three_level_model.json"))
+    p3 = AssistancePOMDP(model, Task.load(example_path("three_level_task.json")))
     with pytest.raises(ValueError, match="two trust levels"):
         AlphaSolver().solve(p3)
 
@@ -211,7 +212,8 @@ def test_controller_values_satisfy_the_controller_bellman_equations(paper_pomdp,
     for n in (1, 40, 700):
         acts = rng.integers(0, 2, size=(n, 2))
         succ = rng.integers(-1, n, size=(n, 2, 2, 2))
-        alpha = evaluate_controller(paper_pomdp.branch_model(), acts, succ.reshape(n, 2, 4), guess=np.full((n, 2), 100.0), rtol=1e-13)
+        model = paper_pomdp.branch_model()
+        alpha = evaluate_controller(model, acts, succ.reshape(n, 2, 4), guess=np.full((n, 2), 100.0), rtol=1e-13)
         for i in rng.choice(n, size=min(n, 25), replace=False):
             v = np.zeros(2)
             for c in range(2):

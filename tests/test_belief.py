@@ -34,7 +34,8 @@ def test_bayes_update_by_hand(model):
     out = up.update(b, HIGH, AUTONOMOUS, RELY, FAULTY)
     assert out[1] == pytest.approx((1 - post_h) * 0.3)
     # when asked the human always teleoperates: no information, same as eq. (3)
-    np.testing.assert_allclose(up.update(b, HIGH, ASK, INTERVENE, RELIABLE), PaperUpdate(model).update(b, HIGH, ASK, INTERVENE, RELIABLE))
+    paper = PaperUpdate(model).update(b, HIGH, ASK, INTERVENE, RELIABLE)
+    np.testing.assert_allclose(up.update(b, HIGH, ASK, INTERVENE, RELIABLE), paper)
 
 
 def test_unobserved_and_impossible_actions(model):

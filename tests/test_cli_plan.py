@@ -43,7 +43,7 @@ def test_bad_model_file_gives_one_line_per_problem(tmp_path, model):
     proc = run("solve", "--model", str(bad), check=False)
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
-    lines = [l for l in proc.stderr.splitlines() if l.strip()]
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
     assert lines == [
         f"error: {bad}: emission[C=low, a=autonomous][T=high][rely] = 1.5 is outside [0, 1]",
         f"error: {bad}: transition[C=high, a=ask, E=reliable][T=low] sums to 0.97",

@@ -29,7 +29,8 @@ PROBLEMS = ("paper", "three-level")
 def _problem(name):
     if name == "paper":
         return AssistancePOMDP(paper_model(), paper_task())
-    return AssistancePOMDP(TrustModel.load(example_path("three_level_model.json")), Task.load(example_path("three_level_task.json")))
+    model = TrustModel.load(example_path("three_level_model.json"))
+    return AssistancePOMDP(model, Task.load(example_path("three_level_task.json")))
 
 
 @pytest.fixture(scope="module")

@@ -7,10 +7,10 @@ import pytest
 
 import trustseek
 from trustseek import AssistancePOMDP, GridSolver
-from trustseek.policies import AlphaVectorPolicy
-from trustseek.solvers.alpha import AlphaSolver
 from trustseek.interop.files import read_pomdp
 from trustseek.model.core import Task, TrustModel
+from trustseek.policies import AlphaVectorPolicy
+from trustseek.solvers.alpha import AlphaSolver
 from trustseek.solvers.point import PointSolver, _simplex_lattice, freudenthal_weights
 
 EXAMPLES = Path(trustseek.__file__).parent / "examples"

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
+from typing import Any, Optional
 
 import typer
 from rich.table import Table
@@ -56,6 +56,7 @@ def solve_pomdp_file(
 ) -> None:
     """Solve a standard .pomdp file: certified lower and upper bounds at its start belief."""
     flat = read_pomdp(path)
+    res: dict[str, Any]
     if horizon is not None:
         v = flat.finite_horizon_value(flat.start, horizon)
         res = {"file": str(path), "horizon": horizon, "value": v}

@@ -10,7 +10,7 @@ import typer
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..model.core import ModelError, Task, TrustModel
+from ..model.core import ACTIONS, ModelError, Task, TrustModel
 from ..model.presets import MODEL_PRESETS, TASK_PRESETS, load_model, load_task
 from ..policies import PolicyError, TrustAwarePolicy, load_policy
 from ..policies.base import Policy
@@ -143,6 +143,7 @@ def agnostic(
 ) -> None:
     """The optimal trust-agnostic policy (Section VI-A)."""
     t = load_task(task)
+    pol: Policy
     if data is not None:
         from ..data.trials import read_trials
 
@@ -157,9 +158,10 @@ def agnostic(
     table = Table(title="Trust-agnostic policy", title_justify="left")
     for col in ("complexity", "P(intervene | C, autonomous)", "E\\[r | autonomous]", "E\\[r | ask]", "action"):
         table.add_column(col)
-    for c, cn in enumerate(t.complexities):
+    for cn in t.complexities:
         er = pol.info["expected_reward"][cn]
-        table.add_row(cn, f"{pol.info['p_intervene'][cn]:.3f}", f"{er['autonomous']:.3f}", f"{er['ask']:.3f}", "ask" if pol.p_ask[c] == 1 else "autonomous")
+        action = ACTIONS[pol.action(None, cn)]
+        table.add_row(cn, f"{pol.info['p_intervene'][cn]:.3f}", f"{er['autonomous']:.3f}", f"{er['ask']:.3f}", action)
     console.print(table)
     console.print(f"P(intervene | C) from the {pol.info['source']}")
 

@@ -26,7 +26,8 @@ from ._app import app, console, err_console, print_json
 def _policy(spec: str, model: TrustModel, task: Task, belief_update: str, grid: int, ask_low: float, ask_high: float) -> Policy:
     """The policy ``--policy`` names: a kind (with the options of this command) or a policy JSON file."""
     if spec in SPEC_KINDS:
-        options = {"belief_update": belief_update, "grid": grid, "p_ask": dict(zip(task.complexities, [ask_low, ask_high]))}
+        p_ask = dict(zip(task.complexities, [ask_low, ask_high], strict=False))  # --ask-low, --ask-high: the first two
+        options = {"belief_update": belief_update, "grid": grid, "p_ask": p_ask}
         return policy_from_spec({"kind": spec, **options}, model, task, where="--policy")
     p = Path(spec)
     if p.suffix.lower() == ".json" or p.exists():
@@ -150,7 +151,8 @@ def reproduce(
 ) -> None:
     """Reproduce Sections V-VI of the paper on simulated supervisors and write a report."""
     from ..report import write_report
-    from ..reproduction.pipeline import ReproduceConfig, reproduce as run_reproduce
+    from ..reproduction.pipeline import ReproduceConfig
+    from ..reproduction.pipeline import reproduce as run_reproduce
 
     cfg = ReproduceConfig(
         seed=seed, replicates=replicates, large_n=large_n, bootstrap=bootstrap, restarts=restarts,

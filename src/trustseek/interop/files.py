@@ -31,9 +31,10 @@ from __future__ import annotations
 
 import re
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
+from typing import Any
 from itertools import product
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -72,7 +73,9 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
     kern = pomdp.kernel  # [c, a, t, o, e, u]
     pc = pomdp.complexity_probs
     T_, C_ = [_token(x) for x in pomdp.trust_levels], [_token(x) for x in pomdp.complexities]
-    states = [f"{T_[t]}.{EXPERIENCES[e]}.{C_[c]}.{HUMAN_ACTIONS[o]}" for t in range(K) for e in range(2) for c in range(N) for o in range(2)]
+    states = [
+        f"{T_[t]}.{EXPERIENCES[e]}.{C_[c]}.{HUMAN_ACTIONS[o]}" for t in range(K) for e in range(2) for c in range(N) for o in range(2)
+    ]
     obs = [f"{HUMAN_ACTIONS[o]}.{EXPERIENCES[e]}.{C_[c]}" for o in range(2) for e in range(2) for c in range(N)]
 
     def sidx(t, e, c, o):
@@ -81,10 +84,10 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
     def oidx(o, e, c):
         return (o * 2 + e) * N + c
 
-    S, O = len(states), len(obs)
-    Tm = np.zeros((2, S, S))
-    Om = np.zeros((2, S, O))
-    Rm = np.zeros((2, S, S, O))
+    n_s, n_o = len(states), len(obs)
+    Tm = np.zeros((2, n_s, n_s))
+    Om = np.zeros((2, n_s, n_o))
+    Rm = np.zeros((2, n_s, n_s, n_o))
     R = pomdp.expected_reward  # [c, a, t]
     for a in range(2):
         for t, e, c, o in product(range(K), range(2), range(N), range(2)):
@@ -93,7 +96,7 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
             Rm[a, s] = R[c, a, t]
             for o2, e2, u, c2 in product(range(2), range(2), range(K), range(N)):
                 Tm[a, s, sidx(u, e2, c2, o2)] += pc[c2] * kern[c, a, t, o2, e2, u]
-    start = np.zeros(S)
+    start = np.zeros(n_s)
     cw = pc if initial_complexity is None else np.eye(N)[initial_complexity]
     for t, c in product(range(K), range(N)):
         start[sidx(t, 1, c, 1)] = pomdp.model.initial[t] * cw[c]
@@ -103,7 +106,7 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
         "the human action of a trial depends on the trust at its start: it is drawn with the transition and "
         "stored in the next state, then observed",
     ]
-    return FlatPOMDP(states, ACTIONS, obs, Tm, Om, Rm, pomdp.discount, start, notes)
+    return FlatPOMDP(tuple(states), ACTIONS, tuple(obs), Tm, Om, Rm, pomdp.discount, start, notes)
 
 
 def flat_belief(pomdp: AssistancePOMDP, belief, complexity: int) -> np.ndarray:
@@ -151,7 +154,7 @@ def write_pomdp(flat: FlatPOMDP, path: str | Path | None = None) -> str:
                 if block.flat[0] != 0:
                     lines.append(f"R: {an} : {sn} : * : * {_num(block.flat[0])}")
                 continue
-            for s2, o in zip(*np.nonzero(block)):
+            for s2, o in zip(*np.nonzero(block), strict=True):
                 lines.append(f"R: {an} : {sn} : {flat.states[s2]} : {flat.observations[o]} {_num(block[s2, o])}")
     text = "\n".join(lines) + "\n"
     if path is not None:
@@ -208,7 +211,7 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
         return tuple(toks)
 
     states, actions, observations = names("states"), names("actions"), names("observations")
-    S, A, O = len(states), len(actions), len(observations)
+    n_s, n_a, n_o = len(states), len(actions), len(observations)
     no, disc = need("discount")
     try:
         discount = float(disc)
@@ -239,30 +242,30 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
             raise PomdpFileError([f"line {no}: {what} needs {count} numbers, got {len(vals)}"], label)
         return np.array(vals)
 
-    start = np.full(S, 1.0 / S)
+    start = np.full(n_s, 1.0 / n_s)
     if "start" in header:
         no, rest = header["start"]
         toks = rest.split()
         if toks == ["uniform"]:
             pass
         elif len(toks) == 1 and not _is_float(toks[0]):
-            start = np.zeros(S)
+            start = np.zeros(n_s)
             start[index("state", states, toks[0], no)[0]] = 1.0
         else:
-            start = numbers(toks, S, no, "start")
+            start = numbers(toks, n_s, no, "start")
     for k in ("start include", "start exclude"):
         if k in header:
             no, rest = header[k]
             sel = [i for t in rest.split() for i in index("state", states, t, no)]
-            mask = np.zeros(S, dtype=bool)
+            mask = np.zeros(n_s, dtype=bool)
             mask[sel] = True
             if k == "start exclude":
                 mask = ~mask
             start = np.where(mask, 1.0, 0.0) / mask.sum()
 
-    T = np.zeros((A, S, S))
-    Om = np.zeros((A, S, O))
-    R = np.zeros((A, S, S, O))
+    T = np.zeros((n_a, n_s, n_s))
+    Om = np.zeros((n_a, n_s, n_o))
+    R = np.zeros((n_a, n_s, n_s, n_o))
     for no, k, rest in groups:
         if k not in ("T", "O", "R"):
             continue
@@ -273,7 +276,7 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
         if k in ("T", "O"):
             second = ("state", states) if k == "T" else ("state", states)
             third = ("state", states) if k == "T" else ("observation", observations)
-            width = S if k == "T" else O
+            width = n_s if k == "T" else n_o
             arr = T if k == "T" else Om
             if len(specs) == 3:
                 a_, s_, x_ = (index("action", actions, specs[0], no), index(*second, specs[1], no), index(*third, specs[2], no))
@@ -287,11 +290,11 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
             elif len(specs) == 1:
                 a_ = index("action", actions, specs[0], no)
                 if vals == ["uniform"]:
-                    mat = np.full((S, width), 1.0 / width)
+                    mat = np.full((n_s, width), 1.0 / width)
                 elif vals == ["identity"] and k == "T":
-                    mat = np.eye(S)
+                    mat = np.eye(n_s)
                 else:
-                    mat = numbers(vals, S * width, no, f"{k} matrix").reshape(S, width)
+                    mat = numbers(vals, n_s * width, no, f"{k} matrix").reshape(n_s, width)
                 for a in a_:
                     arr[a] = mat
             else:
@@ -306,11 +309,12 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
                 )
                 R[np.ix_(a_, s_, s2_, o_)] = sign * numbers(vals, 1, no, "R entry")[0]
             elif len(specs) == 3:
-                a_, s_, s2_ = index("action", actions, specs[0], no), index("state", states, specs[1], no), index("state", states, specs[2], no)
-                R[np.ix_(a_, s_, s2_)] = sign * numbers(vals, O, no, "R row")
+                a_ = index("action", actions, specs[0], no)
+                s_, s2_ = index("state", states, specs[1], no), index("state", states, specs[2], no)
+                R[np.ix_(a_, s_, s2_)] = sign * numbers(vals, n_o, no, "R row")
             elif len(specs) == 2:
                 a_, s_ = index("action", actions, specs[0], no), index("state", states, specs[1], no)
-                R[np.ix_(a_, s_)] = sign * numbers(vals, S * O, no, "R matrix").reshape(S, O)
+                R[np.ix_(a_, s_)] = sign * numbers(vals, n_s * n_o, no, "R matrix").reshape(n_s, n_o)
             else:
                 raise PomdpFileError([f"line {no}: malformed R entry"], label)
     try:
@@ -403,25 +407,34 @@ def read_pomdpx_tables(text: str) -> dict[str, tuple[list[str], np.ndarray]]:
     """The conditional tables of a POMDPX file written by :func:`write_pomdpx`: variable ->
     (parents, table with one axis per parent and a last axis for the variable)."""
     root = ET.fromstring(text)
-    sizes = {}
+
+    def words(elem: ET.Element, path: str) -> list[str]:
+        found = elem.find(path)
+        if found is None or found.text is None:
+            raise PomdpFileError([f"POMDPX element <{elem.tag}> has no <{path}>"])
+        return found.text.split()
+
+    sizes: dict[str | None, int] = {}
     for sv in root.iter("StateVar"):
-        n = len(sv.find("ValueEnum").text.split())
-        sizes[sv.get("vnamePrev")] = sizes[sv.get("vnameCurr")] = n
+        sizes[sv.get("vnamePrev")] = sizes[sv.get("vnameCurr")] = len(words(sv, "ValueEnum"))
     for tag in ("ObsVar", "ActionVar"):
         for v in root.iter(tag):
-            sizes[v.get("vname")] = len(v.find("ValueEnum").text.split())
+            sizes[v.get("vname")] = len(words(v, "ValueEnum"))
     out = {}
     for section in ("InitialStateBelief", "StateTransitionFunction", "ObsFunction"):
-        for c in root.find(section).iter("CondProb"):
-            name = c.find("Var").text
-            parents = c.find("Parent").text.split()
-            shape = [sizes[p] for p in parents if p != "null"] + [sizes[name]]
-            vals = np.array([float(x) for x in c.find("Parameter/Entry/ProbTable").text.split()])
-            out[f"{section}/{name}"] = (parents, vals.reshape(shape))
+        for c in root.iter(section):
+            for cp in c.iter("CondProb"):
+                name = words(cp, "Var")[0]
+                parents = words(cp, "Parent")
+                shape = [sizes[p] for p in parents if p != "null"] + [sizes[name]]
+                vals = np.array([float(x) for x in words(cp, "Parameter/Entry/ProbTable")])
+                out[f"{section}/{name}"] = (parents, vals.reshape(shape))
     return out
 
 
-def export_assistance(pomdp: AssistancePOMDP, path: str | Path, fmt: str | None = None, initial_complexity: int | None = None) -> str:
+def export_assistance(
+    pomdp: AssistancePOMDP, path: str | Path, fmt: str | None = None, initial_complexity: int | None = None
+) -> str:
     """Export to ``.pomdp`` or ``.pomdpx`` (chosen by ``fmt`` or the file suffix)."""
     fmt = fmt or Path(path).suffix.lstrip(".")
     if fmt == "pomdp":
@@ -431,7 +444,7 @@ def export_assistance(pomdp: AssistancePOMDP, path: str | Path, fmt: str | None 
     raise PomdpFileError([f"unknown export format {fmt!r}; expected 'pomdp' or 'pomdpx'"], str(path))
 
 
-def flat_values_check(pomdp: AssistancePOMDP, horizons: Sequence[int] = (1, 2, 3)) -> list[dict]:
+def flat_values_check(pomdp: AssistancePOMDP, horizons: Sequence[int] = (1, 2, 3)) -> list[dict[str, Any]]:
     """Finite-horizon values of the exported flat POMDP next to the belief-MDP values (both by
     exact expansion of the belief tree; any number of trust levels)."""
     flat = flat_from_assistance(pomdp)

@@ -2,6 +2,7 @@
 
 * :mod:`.base`         -- the ``Policy`` interface every policy implements, ``PolicyError``;
 * :mod:`.thresholds`   -- ask intervals and thresholds, extracted once for every policy;
+* :mod:`.regions`      -- a policy's ask regions as simulator bounds and as JSON;
 * :mod:`.grid_q`       -- ``TrustAwarePolicy``: greedy in Q tabulated on a belief grid;
 * :mod:`.alpha_vector` -- ``AlphaVectorPolicy`` (and ``FlatAlphaPolicy`` for standard files);
 * :mod:`.complexity`   -- ``ComplexityPolicy``: trust-agnostic, randomized, always/never ask;
@@ -17,7 +18,8 @@ from .complexity import COMPLEXITY_KINDS, ComplexityPolicy, always_ask, never_as
 from .grid_q import TrustAwarePolicy
 from .kinds import POLICY_KINDS, load_policy, policy_from_dict
 from .runner import PolicyRunner
-from .thresholds import ask_bounds, ask_intervals, ask_regions, threshold
+from .regions import ask_bounds, ask_regions
+from .thresholds import ask_intervals, threshold
 
 __all__ = [
     "COMPLEXITY_KINDS",

@@ -8,7 +8,8 @@ levels); :class:`FlatAlphaPolicy` a flat POMDP read from a standard file.
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -135,7 +136,7 @@ class AlphaVectorPolicy(PolicyBase):
         bu = d.get("belief_update")
         if bu not in BELIEF_UPDATES:
             raise ModelError([f"belief_update is {bu!r}, expected one of {list(BELIEF_UPDATES)}"], source)
-        qv = d.get("q_vectors")
+        qv: Any = d.get("q_vectors")
         try:
             q = [[np.array(qv[c][a], dtype=float) for a in ACTIONS] for c in cx]
             vv = np.array(d.get("value_vectors"), dtype=float)
@@ -197,7 +198,8 @@ class FlatAlphaPolicy(PolicyBase):
         return float((self.value_vectors @ np.asarray(belief, dtype=float)).max())
 
     def ask_intervals(self) -> dict[str, list[Interval]] | None:
-        raise PolicyError([f"a {self.kind} policy chooses among the file's actions {list(self.action_names)}: it has no ask region"])
+        actions = list(self.action_names)
+        raise PolicyError([f"a {self.kind} policy chooses among the file's actions {actions}: it has no ask region"])
 
     def describe(self) -> str:
         return f"{self.kind} ({sum(len(v) for v in self.q_vectors)} Q-vectors over {len(self.states)} states)"
@@ -210,7 +212,7 @@ class FlatAlphaPolicy(PolicyBase):
             "states": list(self.states),
             "actions": list(self.action_names),
             "info": self.info,
-            "q_vectors": {an: v.tolist() for an, v in zip(self.action_names, self.q_vectors)},
+            "q_vectors": {an: v.tolist() for an, v in zip(self.action_names, self.q_vectors, strict=True)},
             "value_vectors": self.value_vectors.tolist(),
         }
 

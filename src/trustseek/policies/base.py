@@ -149,4 +149,6 @@ class PolicyBase:
 
     def _need_two_levels(self) -> None:
         if self.model is not None and self.model.n_trust != 2:
-            raise PolicyError([f"ask intervals, thresholds and Q(b_high) need two trust levels; this model has {self.model.n_trust}"])
+            raise PolicyError(
+                [f"ask intervals, thresholds and Q(b_high) need two trust levels; this model has {self.model.n_trust}"]
+            )

@@ -10,7 +10,8 @@ Kinds (the ``kind`` field of the policy JSON):
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -30,7 +31,9 @@ class ComplexityPolicy(PolicyBase):
     its ask region in a complexity is all beliefs or none, unless it asks at random.
     """
 
-    def __init__(self, kind: str, complexities: Sequence[str], p_ask: Sequence[float], info: Mapping[str, Any] | None = None):
+    def __init__(
+        self, kind: str, complexities: Sequence[str], p_ask: Sequence[float] | np.ndarray, info: Mapping[str, Any] | None = None
+    ):
         self.kind = kind
         self.complexities = tuple(complexities)
         self.p_ask = np.asarray(p_ask, dtype=float)
@@ -62,10 +65,10 @@ class ComplexityPolicy(PolicyBase):
         """All beliefs where it always asks, none where it never asks; ``None`` when it asks at random."""
         if not self.deterministic:
             return None
-        return {cn: [(0.0, 1.0)] if p == 1 else [] for cn, p in zip(self.complexities, self.p_ask)}
+        return {cn: [(0.0, 1.0)] if p == 1 else [] for cn, p in zip(self.complexities, self.p_ask, strict=True)}
 
     def describe(self) -> str:
-        parts = ", ".join(f"{cn}: {_describe_p(p)}" for cn, p in zip(self.complexities, self.p_ask))
+        parts = ", ".join(f"{cn}: {_describe_p(p)}" for cn, p in zip(self.complexities, self.p_ask, strict=True))
         return f"{self.kind} ({parts})"
 
     def to_dict(self) -> dict[str, Any]:
@@ -73,7 +76,7 @@ class ComplexityPolicy(PolicyBase):
             "format": POLICY_FORMAT,
             "kind": self.kind,
             "complexities": list(self.complexities),
-            "p_ask": {cn: float(p) for cn, p in zip(self.complexities, self.p_ask)},
+            "p_ask": {cn: float(p) for cn, p in zip(self.complexities, self.p_ask, strict=True)},
             "info": self.info,
         }
 

@@ -7,7 +7,8 @@ solution and how the paper's policy (Fig. 7) is drawn.
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -115,10 +116,12 @@ class TrustAwarePolicy(PolicyBase):
         bu = d.get("belief_update")
         if bu not in BELIEF_UPDATES:
             raise ModelError([f"belief_update is {bu!r}, expected one of {list(BELIEF_UPDATES)}"], source)
-        q = d.get("q")
+        q: Any = d.get("q")
         try:
             arr = np.array([[q[c][a] for a in ACTIONS] for c in cx], dtype=float).transpose(2, 0, 1)
         except (KeyError, TypeError, ValueError):
-            raise ModelError([f"q must map each complexity {cx} and action {list(ACTIONS)} to a list of numbers"], source) from None
+            raise ModelError(
+                [f"q must map each complexity {cx} and action {list(ACTIONS)} to a list of numbers"], source
+            ) from None
         grid = np.linspace(0.0, 1.0, arr.shape[0])
         return cls(grid, arr, model, cx, str(bu), d.get("info"))

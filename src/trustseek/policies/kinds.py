@@ -6,8 +6,9 @@ the rest depends on the kind.  Files written by earlier versions load unchanged.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any
 
 from ..model.core import ModelError, load_json
 from .alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy

@@ -4,18 +4,14 @@ For two trust levels a trust-aware policy asks where the advantage
 D(x) = Q(x, C, ask) - Q(x, C, autonomous) is positive, x = P(trust = high).  The paper's
 policies are *threshold* policies: they ask exactly when x < θ_C.  Every policy reports
 its ask region through ``ask_intervals()``; the functions here turn sampled advantages
-into intervals, intervals into thresholds, and thresholds into the per-complexity bounds
-the simulator compares beliefs with.
+into intervals and intervals into thresholds (:mod:`.regions` applies them to a policy).
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
-
-if TYPE_CHECKING:
-    from .base import Policy
 
 Interval = tuple[float, float]
 
@@ -64,34 +60,3 @@ def threshold(intervals: Sequence[Interval], start: float = 0.0) -> float | None
     if len(intervals) == 1 and intervals[0][0] == start:
         return float(intervals[0][1])
     return float("nan")
-
-
-def ask_bounds(policy: Policy) -> np.ndarray | None:
-    """Per complexity index, the bound θ_C such that the policy asks exactly when
-    P(trust = high) < θ_C (``-inf``: never asks, ``+inf``: always asks), or ``None`` when its
-    ask region is not an interval starting at 0 or when it asks at random.
-
-    This is the policy's ``actions`` in one comparison per trial (what the simulator uses);
-    the bounds are the ends of ``ask_intervals()``, so both agree except for beliefs within
-    rounding error of a crossing itself."""
-    intervals = policy.ask_intervals()
-    if intervals is None:
-        return None
-    out = []
-    for cn in policy.complexities:
-        iv = intervals[cn]
-        th = threshold(iv)
-        if th is None:
-            out.append(-np.inf)
-        elif np.isnan(th):
-            return None
-        else:
-            out.append(np.inf if th >= 1.0 else th)
-    return np.array(out)
-
-
-def ask_regions(policy: Policy) -> dict[str, Any]:
-    """Where a policy asks, ready for JSON: its ``thresholds`` and ``ask_intervals`` (as lists) per
-    complexity (for a policy that asks at random: thresholds ``None``, no intervals)."""
-    intervals = policy.ask_intervals() or {}
-    return {"thresholds": policy.thresholds(), "ask_intervals": {k: [list(iv) for iv in v] for k, v in intervals.items()}}

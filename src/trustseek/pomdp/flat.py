@@ -39,17 +39,17 @@ class FlatPOMDP:
 
     def __post_init__(self) -> None:
         self.states, self.actions, self.observations = tuple(self.states), tuple(self.actions), tuple(self.observations)
-        S, A, O = len(self.states), len(self.actions), len(self.observations)
+        n_s, n_a, n_o = len(self.states), len(self.actions), len(self.observations)
         self.transition = np.asarray(self.transition, dtype=float)
         self.observation = np.asarray(self.observation, dtype=float)
         self.reward = np.asarray(self.reward, dtype=float)
         self.start = np.asarray(self.start, dtype=float)
         problems = []
         for name, arr, shape in (
-            ("transition", self.transition, (A, S, S)),
-            ("observation", self.observation, (A, S, O)),
-            ("reward", self.reward, (A, S, S, O)),
-            ("start", self.start, (S,)),
+            ("transition", self.transition, (n_a, n_s, n_s)),
+            ("observation", self.observation, (n_a, n_s, n_o)),
+            ("reward", self.reward, (n_a, n_s, n_s, n_o)),
+            ("start", self.start, (n_s,)),
         ):
             if arr.shape != shape:
                 problems.append(f"{name} has shape {arr.shape}, expected {shape}")
@@ -83,7 +83,8 @@ class FlatPOMDP:
 
     def branch_model(self) -> BranchModel:
         """The problem in branch form: one context, one branch per observation."""
-        return BranchModel(np.ones(1), self.expected_reward[None], Branches.from_kernels(self.branch_kernels[None]), self.discount, self.start.copy())
+        branches = Branches.from_kernels(self.branch_kernels[None])
+        return BranchModel(np.ones(1), self.expected_reward[None], branches, self.discount, self.start.copy())
 
     def finite_horizon_value(self, belief, horizon: int) -> float:
         """The exact optimal value of ``horizon`` steps from a belief (enumerating action and

@@ -36,7 +36,6 @@ from ..vocab import check_belief_update
 from .belief import Branches
 from .branch_model import BranchModel
 
-
 AXES = {
     "emission": ("complexity", "robot_action", "trust", "human_action"),
     "experience": ("complexity", "robot_action", "human_action", "next_experience"),
@@ -150,7 +149,11 @@ class AssistancePOMDP:
     def branch_model(self) -> BranchModel:
         """The problem in branch form (contexts = complexities, Bayes branches (o, E'))."""
         return BranchModel(
-            self.complexity_probs.copy(), self.expected_reward.copy(), self.branches("bayes"), self.discount, self.model.initial.copy()
+            self.complexity_probs.copy(),
+            self.expected_reward.copy(),
+            self.branches("bayes"),
+            self.discount,
+            self.model.initial.copy(),
         )
 
     # -- flat arrays -------------------------------------------------------

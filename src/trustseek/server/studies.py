@@ -135,7 +135,7 @@ def build_study_config(study: StudyIn) -> dict[str, Any]:
         problems += exc.problems
     if task is not None and model is not None and tuple(model.complexities) != tuple(task.complexities):
         problems.append(f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}")
-    if problems:
+    if problems or task is None or model is None:
         raise ConfigError(problems)
     blocks = []
     for i, b in enumerate(study.blocks):
@@ -180,7 +180,7 @@ def participant_plan(cfg: dict[str, Any], index: int, seed: int) -> dict[str, An
     """Block order and each block's complexity sequence, drawn once per participant."""
     rng = np.random.default_rng([cfg["seed"], seed])
     order = block_order(cfg, index, rng)
-    trials = []
+    trials: list[dict[str, Any]] = []
     for b in order:
         sched = cfg["blocks"][b]["schedule"]
         if "trials" in sched:

@@ -38,7 +38,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from ..policies.thresholds import ask_bounds
+from ..policies.regions import ask_bounds
 from ..pomdp.belief import ScalarBelief, make_updater
 from ..vocab import PAPER_BLOCK_COUNTS, TRIAL_COLUMNS, check_belief_update
 from ..errors import TrustseekError

@@ -9,7 +9,8 @@ design produces) or from logged trials.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -34,9 +35,9 @@ def agnostic_from_intervention_rates(task: Task, p_intervene: Sequence[float], s
     r_ask = np.full_like(r_auto, rw.ask)
     p_ask = (r_ask > r_auto).astype(float)
     info = {
-        "p_intervene": {cn: float(p) for cn, p in zip(task.complexities, p_int)},
+        "p_intervene": {cn: float(p) for cn, p in zip(task.complexities, p_int, strict=True)},
         "expected_reward": {
-            cn: {"autonomous": float(ra), "ask": float(rk)} for cn, ra, rk in zip(task.complexities, r_auto, r_ask)
+            cn: {"autonomous": float(ra), "ask": float(rk)} for cn, ra, rk in zip(task.complexities, r_auto, r_ask, strict=True)
         },
         "source": source,
     }

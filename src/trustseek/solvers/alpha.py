@@ -56,7 +56,6 @@ class AlphaSolver(SolverBase):
 
     name = "alpha"
     trust_levels = 2
-    instead = {"trust_levels": "use the point solver", "problem": "use the point solver"}
 
     def __init__(
         self,

@@ -46,7 +46,8 @@ class SolverBase:
     belief_updates: tuple[str, ...] = ("bayes", "paper")
     belief_update: str | None = None
     #: what to use for a model with another number of trust levels / another belief update /
-    #: a problem that is not an assistance POMDP
+    #: a problem that is not an assistance POMDP (default: the point solver, which takes any
+    #: number of trust levels and flat POMDPs)
     instead: ClassVar[dict[str, str]] = {}
 
     def unsupported(self, problem: Any) -> list[str]:
@@ -63,7 +64,8 @@ class SolverBase:
                 f"{problem.n_trust}: {self.instead.get('trust_levels', 'use the point solver')}"
             )
         if self.belief_update is not None and self.belief_update not in self.belief_updates:
-            reasons.append(self.instead.get("belief_update", f"the {self.name} solver does not handle the {self.belief_update!r} update"))
+            default = f"the {self.name} solver does not handle the {self.belief_update!r} update"
+            reasons.append(self.instead.get("belief_update", default))
         return reasons
 
     def check(self, problem: Any) -> None:

@@ -11,8 +11,9 @@ within ±γ·gap of the computed one, so the threshold lies where |D| <= γ·gap
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from scipy.optimize import brentq
@@ -97,7 +98,11 @@ class CertifiedSolution:
                 return float(self.advantage(pomdp, np.array([z]), c)[0]) - shift
 
             d = self.advantage(pomdp, x, c)
-            ivs = ask_intervals(x, d, lambda i, x=x, d=d, f=f: brentq(f, x[i], x[i + 1], xtol=1e-15) if d[i] != d[i + 1] else float(x[i]))
+
+            def root(i: int, x: np.ndarray = x, d: np.ndarray = d, f: Callable[..., float] = f) -> float:
+                return float(brentq(f, x[i], x[i + 1], xtol=1e-15)) if d[i] != d[i + 1] else float(x[i])
+
+            ivs = ask_intervals(x, d, root)
             th = threshold(ivs)
             if th is not None and np.isfinite(th):
                 lo = _bracket(f, x, d, th, +margin, left=True)

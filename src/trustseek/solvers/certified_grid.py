@@ -85,7 +85,9 @@ class CertifiedGridSolver(SolverBase):
         )
 
 
-def _refine(grid: np.ndarray, values: np.ndarray, lo: np.ndarray, hi: np.ndarray, over: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _refine(
+    grid: np.ndarray, values: np.ndarray, lo: np.ndarray, hi: np.ndarray, over: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Split the cells that hold pieces [lo, hi] whose residual is ``over`` times the budget
     (> 1): into 8 parts, or up to 64 where the residual is far above the budget (the
     interpolation error is first order at the kinks of W, so halving a cell roughly halves its

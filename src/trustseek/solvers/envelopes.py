@@ -11,9 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..policies.envelope import WIDTH_EPS
-from ..policies.envelope import active_piece
-from ..policies.envelope import envelope, envelope_values
+from ..policies.envelope import WIDTH_EPS, active_piece, envelope, envelope_values
 
 __all__ = ["cross_sum", "difference_extrema", "max_of", "refit", "strip", "sup_difference", "thin", "thin_mask", "union"]
 

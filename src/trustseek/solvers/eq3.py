@@ -20,7 +20,7 @@ import scipy.sparse as sp
 
 from ..model.core import ASK, AUTONOMOUS
 from ..pomdp.problem import AssistancePOMDP
-from .numerics import grid_tolerances, improve, policy_values
+from .numerics import improve, policy_values
 
 __all__ = ["Residual", "paper_grid_values", "paper_maps", "paper_q", "paper_residual", "residual_pieces"]
 
@@ -32,7 +32,9 @@ def paper_maps(pomdp: AssistancePOMDP) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([p0, p1], axis=-1), np.stack([m0, m1], axis=-1)
 
 
-def paper_grid_values(pomdp: AssistancePOMDP, grid: np.ndarray, guess: np.ndarray | None = None, max_iter: int = 200) -> np.ndarray:
+def paper_grid_values(
+    pomdp: AssistancePOMDP, grid: np.ndarray, guess: np.ndarray | None = None, max_iter: int = 200
+) -> np.ndarray:
     """W on a (possibly non-uniform) grid for the eq.-3 belief MDP with linear interpolation
     between grid points: Howard's policy iteration on the grid MDP.
 
@@ -69,7 +71,7 @@ def paper_grid_values(pomdp: AssistancePOMDP, grid: np.ndarray, guess: np.ndarra
         cols = np.stack([jl, jl + 1], axis=-1).transpose(2, 0, 1, 3).reshape(-1)
         P = sp.csr_matrix((data, cols, indptr), shape=(G, G))
         rr = pc @ np.take_along_axis(r, policy[:, None, :], axis=1)[:, 0]
-        V = policy_values(P, rr, V, **grid_tolerances(rr))
+        V = policy_values(P, rr, V)
         new_policy = improve(q_of(V), policy, axis=1)
         if new_policy is None:
             break

@@ -22,8 +22,9 @@ result is reported either way.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -33,7 +34,7 @@ from ..policies.grid_q import TrustAwarePolicy
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
 from .base import SolverBase, SolverError
-from .numerics import grid_tolerances, improve, policy_values
+from .numerics import improve, policy_values
 
 DEFAULT_GRID = 2001
 METHODS = ("policy-iteration", "value-iteration")
@@ -85,7 +86,7 @@ class GridSolver(SolverBase):
 
     name = "grid"
     trust_levels = 2
-    instead = {"trust_levels": "use the point solver", "problem": "use the point solver"}
+    belief_update: str
 
     def __init__(
         self,
@@ -212,9 +213,10 @@ def policy_iteration(
         rr = np.zeros(G)
         for c in range(N):
             sel = policy[c]
-            M = M + (gamma * pc[c]) * (sp.diags((sel == 0).astype(float)) @ P[c][0] + sp.diags((sel == 1).astype(float)) @ P[c][1])
+            rows = sp.diags((sel == 0).astype(float)) @ P[c][0] + sp.diags((sel == 1).astype(float)) @ P[c][1]
+            M = M + (gamma * pc[c]) * rows
             rr += pc[c] * np.where(sel == 0, r[c, 0], r[c, 1])
-        W = policy_values(M.tocsr(), rr, W, **grid_tolerances(rr))
+        W = policy_values(M.tocsr(), rr, W)
         q = np.stack([np.stack([r[c, a] + gamma * (P[c][a] @ W) for a in range(2)]) for c in range(N)])  # [c, a, G]
         new_policy = improve(q, policy, axis=1)
         if new_policy is None:

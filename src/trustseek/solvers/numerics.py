@@ -21,15 +21,27 @@ import scipy.sparse.linalg as spla
 
 from ..pomdp.branch_model import BranchModel
 
-__all__ = ["evaluate_controller", "grid_tolerances", "improve", "memoryless_controllers", "policy_values"]
+__all__ = ["evaluate_controller", "improve", "memoryless_controllers", "policy_values"]
 
 
 def policy_values(
-    P: sp.csr_matrix, rhs: np.ndarray, guess: np.ndarray | None = None, *, tol: float, check: float, maxiter: int = 10_000
+    P: sp.csr_matrix,
+    rhs: np.ndarray,
+    guess: np.ndarray | None = None,
+    *,
+    tol: float | None = None,
+    check: float | None = None,
+    maxiter: int = 10_000,
 ) -> np.ndarray:
     """Solve x = rhs + P x.  BiCGSTAB on (I - P) x = rhs (as an operator: I - P is never formed),
     started from ``guess``, stops when ‖rhs - (I - P) x‖₂ <= ``tol``; a result that is not finite
-    or whose largest residual exceeds ``check`` is replaced by a direct sparse solve."""
+    or whose largest residual exceeds ``check`` is replaced by a direct sparse solve.
+
+    By default both are near machine precision relative to the rewards (the values are about
+    1/(1-γ) times larger): tol = 1e-14 ‖rhs‖₂ + 1e-13 s and check = 1e-9 s, s = max(1, ‖rhs‖∞)."""
+    scale = max(1.0, float(np.max(np.abs(rhs))))
+    tol = 1e-14 * float(np.sqrt(rhs @ rhs)) + 1e-13 * scale if tol is None else tol
+    check = 1e-9 * scale if check is None else check
     n = len(rhs)
     A = spla.LinearOperator((n, n), matvec=lambda y: y - P @ y, dtype=float)
     x0 = np.zeros(n) if guess is None else np.asarray(guess, dtype=float).reshape(-1)
@@ -37,13 +49,6 @@ def policy_values(
     if not np.all(np.isfinite(x)) or np.max(np.abs(x - P @ x - rhs)) > check:
         x = spla.spsolve(sp.identity(n, format="csc") - P.tocsc(), rhs)
     return np.asarray(x)
-
-
-def grid_tolerances(rhs: np.ndarray) -> dict[str, float]:
-    """The stopping and checking tolerances of a belief-grid policy evaluation: near machine
-    precision relative to the rewards (the values are ~1/(1-γ) times larger)."""
-    scale = max(1.0, float(np.max(np.abs(rhs))))
-    return {"tol": 1e-14 * float(np.sqrt(rhs @ rhs)) + 1e-13 * scale, "check": 1e-9 * scale}
 
 
 def improve(q: np.ndarray, policy: np.ndarray, axis: int) -> np.ndarray | None:
@@ -92,7 +97,8 @@ def evaluate_controller(
     if guess is None and size <= 600:
         return np.asarray(spla.spsolve(sp.identity(size, format="csc") - P.tocsc(), b)).reshape(n, k)
     scale = max(1.0, float(np.max(np.abs(b))))
-    x = policy_values(P, b, guess, tol=max(rtol, 1e-15) * scale * np.sqrt(size), check=max(1e-10, 10 * rtol) * scale, maxiter=2000)
+    tol, check = max(rtol, 1e-15) * scale * np.sqrt(size), max(1e-10, 10 * rtol) * scale
+    x = policy_values(P, b, guess, tol=tol, check=check, maxiter=2000)
     return x.reshape(n, k)
 
 

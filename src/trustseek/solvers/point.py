@@ -43,7 +43,7 @@ from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
 from .base import SolverBase, SolverError
-from .numerics import evaluate_controller, grid_tolerances, improve, memoryless_controllers, policy_values
+from .numerics import evaluate_controller, improve, memoryless_controllers, policy_values
 
 __all__ = ["PointSolution", "PointSolver", "freudenthal_vertices", "freudenthal_weights"]
 
@@ -241,8 +241,9 @@ class PointSolver(SolverBase):
             for c in range(N):
                 a = acts[:, c]
                 rr += pc[c] * rew[ii, c, a]
-                Wm = Wm + sp.csr_matrix(((gamma * pc[c] * wt[ii, c, a]).ravel(), (rows.ravel(), col[ii, c, a].ravel())), shape=(nV, nV))
-            u = policy_values(Wm, rr, u, **grid_tolerances(rr))
+                entries = (gamma * pc[c] * wt[ii, c, a]).ravel(), (rows.ravel(), col[ii, c, a].ravel())
+                Wm = Wm + sp.csr_matrix(entries, shape=(nV, nV))
+            u = policy_values(Wm, rr, u)
             new_acts = improve(q_of(u), acts, axis=2)
             if new_acts is None:
                 break
@@ -370,7 +371,7 @@ class PointSolver(SolverBase):
         return AlphaVectorPolicy(qv, sol.vectors, problem.model, problem.complexities, "bayes", info)
 
 
-def _q_lattice(K: int, max_points: int = 20_000) -> int:
+def _q_lattice(K: int, max_points: int = 5_000) -> int:
     """Resolution of the lattice of beliefs whose point backups give the policy's Q-vectors: 400
     for two hidden states, 20 for three, 5 beyond, lowered until the lattice has at most
     ``max_points`` beliefs (a flat POMDP may have many states)."""

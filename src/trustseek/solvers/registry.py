@@ -14,8 +14,9 @@ solver); an option no solver takes is an error.
 from __future__ import annotations
 
 import inspect
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 from ..policies.base import Policy
 from .agnostic import PAPER_HORIZON, TrustAgnosticSolver

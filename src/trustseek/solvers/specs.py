@@ -13,7 +13,8 @@ each line naming where in the spec it is (``where``).
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 from ..errors import TrustseekError
 from ..model.core import ModelError, Task, TrustModel
@@ -45,7 +46,8 @@ def policy_from_spec(spec: Any, model: TrustModel, task: Task, where: str = "pol
     if "format" in spec:
         pol = policy_from_dict(spec, where)
         if tuple(pol.complexities) != tuple(task.complexities):
-            raise PolicySpecError([f"{where}: complexities {list(pol.complexities)} differ from the task's {list(task.complexities)}"])
+            ours, theirs = list(pol.complexities), list(task.complexities)
+            raise PolicySpecError([f"{where}: complexities {ours} differ from the task's {theirs}"])
         return pol
     extra = sorted(set(spec) - set(SPEC_ENTRIES))
     if extra:

@@ -12,7 +12,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..policies.base import Policy
-from ..policies.thresholds import ask_regions
+from ..policies.regions import ask_regions
 from ..pomdp.problem import AssistancePOMDP
 from .agnostic import TrustAgnosticSolver
 
@@ -41,7 +41,7 @@ def summarize(policy: Policy, pomdp: AssistancePOMDP) -> dict[str, Any]:
         "belief_update": policy.belief_update,
         "certified_gap": info.get("certified_gap"),
         "value_bounds_at_initial_belief": info.get("value_bounds_at_initial_belief"),
-        "initial_belief": dict(zip(pomdp.trust_levels, map(float, pomdp.model.initial))),
+        "initial_belief": dict(zip(pomdp.trust_levels, map(float, pomdp.model.initial), strict=True)),
     }
     if two_levels:
         regions = ask_regions(policy)
