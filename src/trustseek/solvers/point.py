@@ -293,12 +293,17 @@ class PointSolver(SolverBase):
         return _unique_rows(np.vstack(out), K, decimals=9)
 
     # -- solve -------------------------------------------------------------------------
-    def solve_bounds(self, model: BranchModel, initial: np.ndarray | None = None) -> PointSolution:
+    def solve_bounds(self, problem: AssistancePOMDP | FlatPOMDP) -> PointSolution:
+        """Lower and upper bounds at the initial belief (the vectors and points behind them)."""
+        self.check(problem)
+        return self._bounds(problem.branch_model())
+
+    def _bounds(self, model: BranchModel) -> PointSolution:
         """Lower and upper bounds at the initial belief of a problem in branch form."""
         t0 = time.perf_counter()
         self.model = model
         K = model.n_hidden
-        b0 = np.asarray(model.initial if initial is None else initial, dtype=float)
+        b0 = np.asarray(model.initial, dtype=float)
         self.G = memoryless_controllers(model)
         r = self.resolution or {2: 64, 3: 16, 4: 8}.get(K, 4 if K <= 8 else 2)
         r_max = self.max_resolution or {2: 4096, 3: 512, 4: 64}.get(K, 16)
@@ -346,8 +351,7 @@ class PointSolver(SolverBase):
         """The policy of the lower bound's vectors, with the bounds at the initial belief in its
         ``info``: an AlphaVectorPolicy for the assistance POMDP (Bayes update), a FlatAlphaPolicy
         for a flat POMDP."""
-        self.check(problem)
-        sol = self.solve_bounds(problem.branch_model())
+        sol = self.solve_bounds(problem)
         K = sol.vectors.shape[1]
         qv = self.q_vectors(_unique_rows(np.vstack([sol.points, _simplex_lattice(K, _q_lattice(K))]), K))
         info: dict[str, Any] = {
