@@ -18,10 +18,10 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import trustseek  # noqa: E402
-from trustseek import AssistancePOMDP, GridSolver, paper_model, paper_task  # noqa: E402
-from trustseek.model.core import Task, TrustModel  # noqa: E402
-from trustseek.solvers import AlphaSolver, PointSolver  # noqa: E402
+import trustseek
+from trustseek import AssistancePOMDP, GridSolver, paper_model, paper_task
+from trustseek.model.core import Task, TrustModel
+from trustseek.solvers import AlphaSolver, PointSolver
 
 CPU = {}
 
@@ -44,7 +44,7 @@ def main() -> None:
     print("paper preset: alpha solver to a certified gap of 1e-6 (target < 50 ms)")
     for update in ("bayes", "paper"):
         grid_solver, alpha_solver = GridSolver(grid=2001, belief_update=update), AlphaSolver(belief_update=update, tol=1e-6)
-        t_grid, grid = best_of(lambda s=grid_solver: s.solve_grid(pomdp))
+        t_grid, _ = best_of(lambda s=grid_solver: s.solve_grid(pomdp))
         t_alpha, sol = best_of(lambda s=alpha_solver: s.solve_bounds(pomdp))
         c_alpha = CPU["last"]
         rep = sol.threshold_report(pomdp)["high"]
@@ -55,9 +55,7 @@ def main() -> None:
             f"gap {sol.gap:.1e}, "
             f"threshold {rep['threshold']:.6f} in [{lo:.6f}, {hi:.6f}], {sol.method}, {sol.iterations} iterations"
         )
-        print(
-            f"         grid 2001 points {t_grid * 1000:7.1f} ms (uncertified); alpha / grid time = {t_alpha / t_grid:.2f}"
-        )
+        print(f"         grid 2001 points {t_grid * 1000:7.1f} ms (uncertified); alpha / grid time = {t_alpha / t_grid:.2f}")
     ex = Path(trustseek.__file__).parent / "examples"
     p3 = AssistancePOMDP(TrustModel.load(ex / "three_level_model.json"), Task.load(ex / "three_level_task.json"))
     print("three-level example: point solver to a gap of 1e-3 at b0 (target < 2 s)")

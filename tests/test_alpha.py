@@ -90,8 +90,10 @@ def test_finite_horizon_values_match_enumeration_with_the_core_filter(paper_pomd
                         p = float(b @ K[c, a, :, o, e, :].sum(axis=1))
                         if p > 0:
                             nb = upd.update(b, c, a, o, e)
-                            q += paper_pomdp.discount * p * sum(
-                                pc * v(nb, c2, h - 1) for c2, pc in enumerate(paper_pomdp.complexity_probs)
+                            q += (
+                                paper_pomdp.discount
+                                * p
+                                * sum(pc * v(nb, c2, h - 1) for c2, pc in enumerate(paper_pomdp.complexity_probs))
                             )
             best = max(best, q)
         return best

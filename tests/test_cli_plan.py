@@ -86,7 +86,14 @@ def test_solvers_come_from_the_registry_and_refuse_cleanly():
     d = json.loads(run("solve", "--solver", "certified-grid", "-u", "paper", "--json").stdout)
     assert d["solver"] == "certified-grid" and d["certified_gap"] <= 1e-6
     proc = run(
-        "solve", "--model", str(example_path("three_level_model.json")), "--task", str(example_path("three_level_task.json")), check=False
+        "solve",
+        "--model",
+        str(example_path("three_level_model.json")),
+        "--task",
+        str(example_path("three_level_task.json")),
+        check=False,
     )
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
-    assert proc.stderr.strip().splitlines() == ["error: the grid solver needs two trust levels; this model has 3: use the point solver"]
+    assert proc.stderr.strip().splitlines() == [
+        "error: the grid solver needs two trust levels; this model has 3: use the point solver"
+    ]

@@ -7,8 +7,8 @@ import sys
 
 import numpy as np
 import pytest
-from test_point import TIGER
 
+from test_point import TIGER
 from trustseek.interop.files import (
     PomdpFileError,
     flat_belief,

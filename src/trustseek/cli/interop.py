@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import typer
 from rich.table import Table
@@ -21,11 +21,13 @@ def export_pomdp(
     out: Path = typer.Argument(..., help="File to write: .pomdp (Cassandra) or .pomdpx (POMDPX)."),
     model: str = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file."),
     task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
-    fmt: Optional[str] = typer.Option(None, "--format", help="pomdp or pomdpx (default: from the file suffix)."),
-    initial_complexity: Optional[str] = typer.Option(
+    fmt: str | None = typer.Option(None, "--format", help="pomdp or pomdpx (default: from the file suffix)."),
+    initial_complexity: str | None = typer.Option(
         None, "--initial-complexity", help="Start from this complexity instead of P(C) (.pomdp only)."
     ),
-    verify: bool = typer.Option(False, "--verify", help="Also print finite-horizon values (1-3) of the file and of the belief MDP."),
+    verify: bool = typer.Option(
+        False, "--verify", help="Also print finite-horizon values (1-3) of the file and of the belief MDP."
+    ),
 ) -> None:
     """Export the assistance POMDP to a standard file (state augmented with the last human action)."""
     m, t = load_model(model), load_task(task)
@@ -42,7 +44,13 @@ def export_pomdp(
         for col in ("horizon", "complexity", "flat file", "belief MDP", "difference"):
             table.add_column(col, justify="right")
         for r in flat_values_check(pomdp):
-            table.add_row(str(r["horizon"]), r["complexity"], f"{r['flat']:.12f}", f"{r['belief_mdp']:.12f}", f"{r['flat'] - r['belief_mdp']:.1e}")
+            table.add_row(
+                str(r["horizon"]),
+                r["complexity"],
+                f"{r['flat']:.12f}",
+                f"{r['belief_mdp']:.12f}",
+                f"{r['flat'] - r['belief_mdp']:.1e}",
+            )
         console.print(table)
 
 
@@ -50,7 +58,9 @@ def export_pomdp(
 def solve_pomdp_file(
     path: Path = typer.Argument(..., help="A Cassandra .pomdp file (e.g. Tiger)."),
     gap: float = typer.Option(1e-3, "--gap", help="Target gap between the bounds at the start belief."),
-    horizon: Optional[int] = typer.Option(None, "--horizon", min=1, max=8, help="Exact finite-horizon value instead (small files only)."),
+    horizon: int | None = typer.Option(
+        None, "--horizon", min=1, max=8, help="Exact finite-horizon value instead (small files only)."
+    ),
     max_seconds: float = typer.Option(60.0, "--max-seconds", help="Time limit for the point solver."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:

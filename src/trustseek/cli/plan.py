@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Optional
 
 import typer
 from rich.table import Table
@@ -22,7 +21,9 @@ from ._app import app, console, print_json
 
 ModelOpt = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file.")
 TaskOpt = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file.")
-UpdateOpt = typer.Option("bayes", "--belief-update", "-u", help="Belief update: 'bayes' (exact filter, default) or 'paper' (eq. 3).")
+UpdateOpt = typer.Option(
+    "bayes", "--belief-update", "-u", help="Belief update: 'bayes' (exact filter, default) or 'paper' (eq. 3)."
+)
 
 
 def _check_update(name: str) -> str:
@@ -37,12 +38,17 @@ def solve(
     grid: int = typer.Option(DEFAULT_GRID, "--grid", "-g", min=3, help="Number of belief grid points on [0, 1]."),
     method: str = typer.Option("policy-iteration", "--method", help=f"Grid solver method: {', '.join(METHODS)}."),
     tol: float = typer.Option(1e-9, "--tol", help="Value iteration: stop when the certified error bound is below this."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
     solver: str = typer.Option(
-        "grid", "--solver", help="grid (belief grid), alpha (certified alpha vectors, two trust levels), point (point-based bounds, any number of trust levels), certified-grid (eq. 3, certified) or trust-agnostic."
+        "grid",
+        "--solver",
+        help="grid (belief grid), alpha (certified alpha vectors, two trust levels), point (point-based bounds, "
+        "any number of trust levels), certified-grid (eq. 3, certified) or trust-agnostic.",
     ),
-    gap: Optional[float] = typer.Option(None, "--gap", help="alpha/point: target certified gap between the value bounds (default 1e-6 / 1e-3)."),
+    gap: float | None = typer.Option(
+        None, "--gap", help="alpha/point: target certified gap between the value bounds (default 1e-6 / 1e-3)."
+    ),
 ) -> None:
     """Solve the assistance-seeking POMDP for the optimal trust-aware policy (Section IV)."""
     _check_update(belief_update)
@@ -86,7 +92,9 @@ def _print_solution(policy: Policy, summary: dict) -> None:
         th = (summary["thresholds"] or {}).get(cn)
         ths = "-" if th is None else ("none: see intervals" if th != th else f"{th:.4f}")
         v1 = summary.get("value_at_b1", {}).get(cn)
-        table.add_row(cn, ivs, ths, "-" if v1 is None else f"{v1:.3f}", "always ask" if summary["trust_agnostic"][cn] == 1 else "never ask")
+        table.add_row(
+            cn, ivs, ths, "-" if v1 is None else f"{v1:.3f}", "always ask" if summary["trust_agnostic"][cn] == 1 else "never ask"
+        )
     console.print(table)
     if "iterations" in info:
         console.print(
@@ -137,8 +145,8 @@ def _print_certified(policy: Policy, summary: dict) -> None:
 def agnostic(
     model: str = ModelOpt,
     task: str = TaskOpt,
-    data: Optional[Path] = typer.Option(None, "--data", help="Estimate P(intervene | C) from this trial log instead of the model."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
+    data: Path | None = typer.Option(None, "--data", help="Estimate P(intervene | C) from this trial log instead of the model."),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """The optimal trust-agnostic policy (Section VI-A)."""
@@ -172,7 +180,7 @@ def plot_q_cmd(
     task: str = TaskOpt,
     belief_update: str = UpdateOpt,
     grid: int = typer.Option(DEFAULT_GRID, "--grid", "-g", min=3, help="Number of belief grid points."),
-    policy_file: Optional[Path] = typer.Option(None, "--policy", help="Plot a solved policy file instead of solving."),
+    policy_file: Path | None = typer.Option(None, "--policy", help="Plot a solved policy file instead of solving."),
     out: Path = typer.Option(Path("q.png"), "--out", "-o", help="PNG file to write."),
 ) -> None:
     """Plot Q(b, C, a) for both actions and complexities, with the threshold (Fig. 7)."""
@@ -193,8 +201,8 @@ def plot_q_cmd(
 @app.command(rich_help_panel="Files")
 def preset(
     name: str = typer.Argument("paper", help="Preset name."),
-    model_out: Optional[Path] = typer.Option(None, "--model-out", help="Write the preset's trust model here."),
-    task_out: Optional[Path] = typer.Option(None, "--task-out", help="Write the preset's task here."),
+    model_out: Path | None = typer.Option(None, "--model-out", help="Write the preset's trust model here."),
+    task_out: Path | None = typer.Option(None, "--task-out", help="Write the preset's task here."),
 ) -> None:
     """Print or export a built-in preset (model and task JSON), a starting point for your own files."""
     if name not in MODEL_PRESETS:

@@ -32,9 +32,9 @@ from __future__ import annotations
 import re
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
-from typing import Any
 from itertools import product
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -74,7 +74,11 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
     pc = pomdp.complexity_probs
     T_, C_ = [_token(x) for x in pomdp.trust_levels], [_token(x) for x in pomdp.complexities]
     states = [
-        f"{T_[t]}.{EXPERIENCES[e]}.{C_[c]}.{HUMAN_ACTIONS[o]}" for t in range(K) for e in range(2) for c in range(N) for o in range(2)
+        f"{T_[t]}.{EXPERIENCES[e]}.{C_[c]}.{HUMAN_ACTIONS[o]}"
+        for t in range(K)
+        for e in range(2)
+        for c in range(N)
+        for o in range(2)
     ]
     obs = [f"{HUMAN_ACTIONS[o]}.{EXPERIENCES[e]}.{C_[c]}" for o in range(2) for e in range(2) for c in range(N)]
 
@@ -274,7 +278,7 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
         specs = fields[:-1] + ([last[0]] if last else [])
         vals = last[1:]
         if k in ("T", "O"):
-            second = ("state", states) if k == "T" else ("state", states)
+            second = ("state", states)
             third = ("state", states) if k == "T" else ("observation", observations)
             width = n_s if k == "T" else n_o
             arr = T if k == "T" else Om

@@ -17,8 +17,8 @@ from .base import POLICY_FORMAT, Policy, PolicyError
 from .complexity import COMPLEXITY_KINDS, ComplexityPolicy, always_ask, never_ask, randomized
 from .grid_q import TrustAwarePolicy
 from .kinds import POLICY_KINDS, load_policy, policy_from_dict
-from .runner import PolicyRunner
 from .regions import ask_bounds, ask_regions
+from .runner import PolicyRunner
 from .thresholds import ask_intervals, threshold
 
 __all__ = [

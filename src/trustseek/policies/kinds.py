@@ -22,7 +22,7 @@ Loader = Callable[[Mapping[str, Any], "str | None"], Policy]
 POLICY_KINDS: dict[str, Loader] = {
     TrustAwarePolicy.kind: TrustAwarePolicy.from_dict,
     AlphaVectorPolicy.kind: AlphaVectorPolicy.from_dict,
-    **{kind: ComplexityPolicy.from_dict for kind in COMPLEXITY_KINDS},
+    **dict.fromkeys(COMPLEXITY_KINDS, ComplexityPolicy.from_dict),
     FlatAlphaPolicy.kind: FlatAlphaPolicy.from_dict,
 }
 

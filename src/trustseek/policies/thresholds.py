@@ -24,9 +24,7 @@ def linear_crossing(x: np.ndarray, d: np.ndarray, i: int) -> float:
     return float(x[i] + d0 / (d0 - d1) * (x[i + 1] - x[i]))
 
 
-def ask_intervals(
-    x: np.ndarray, advantage: np.ndarray, crossing: Callable[[int], float] | None = None
-) -> list[Interval]:
+def ask_intervals(x: np.ndarray, advantage: np.ndarray, crossing: Callable[[int], float] | None = None) -> list[Interval]:
     """The maximal intervals of [x[0], x[-1]] where the advantage of asking is positive, from
     its values at the increasing points ``x``.  An interval ends at a sample end point or,
     between samples i and i + 1 where the sign changes, at ``crossing(i)`` (by default the

@@ -61,9 +61,7 @@ class FlatPOMDP:
                 sums = arr.sum(axis=-1)
                 bad = np.argwhere((np.abs(sums - 1.0) > 1e-6) | np.any(arr < 0, axis=-1))
                 for a, s in bad[:5]:
-                    problems.append(
-                        f"{name}[{labels[0][a]}, {labels[1][s]}] must be a probability row, sums to {sums[a, s]:.9g}"
-                    )
+                    problems.append(f"{name}[{labels[0][a]}, {labels[1][s]}] must be a probability row, sums to {sums[a, s]:.9g}")
             if abs(self.start.sum() - 1.0) > 1e-6 or np.any(self.start < 0):
                 problems.append(f"start must be a probability distribution, sums to {self.start.sum():.9g}")
             if not 0.0 <= self.discount <= 1.0:

@@ -114,9 +114,7 @@ class AssistancePOMDP:
     @cached_property
     def kernel(self) -> np.ndarray:
         """Joint one-step kernel P(o, E', T' | T, C, a), axes [c, a, t, o, e, t2]."""
-        return np.einsum(
-            "cato,caoe,caetu->catoeu", self.emission, self.experience, self.trust_transition, optimize=True
-        )
+        return np.einsum("cato,caoe,caetu->catoeu", self.emission, self.experience, self.trust_transition, optimize=True)
 
     @cached_property
     def outcome_probs(self) -> np.ndarray:
@@ -160,9 +158,7 @@ class AssistancePOMDP:
     @cached_property
     def states(self) -> tuple[tuple[str, str, str], ...]:
         """Enumerated states (trust, experience, complexity); index = (t * 2 + e) * N + c."""
-        return tuple(
-            (tn, en, cn) for tn in self.trust_levels for en in EXPERIENCES for cn in self.complexities
-        )
+        return tuple((tn, en, cn) for tn in self.trust_levels for en in EXPERIENCES for cn in self.complexities)
 
     def state_index(self, t: int, e: int, c: int) -> int:
         return (t * 2 + e) * self.n_complexity + c

@@ -188,7 +188,7 @@ def _grid_controller(pomdp: AssistancePOMDP, model: BranchModel, points: int, ba
 def _repoint(pomdp: AssistancePOMDP, vecs: np.ndarray, xs: np.ndarray, actions: np.ndarray) -> np.ndarray:
     """Successors of each node (a vector of the envelope) at its witness belief (the middle of
     the interval where it is maximal): the node of the envelope active at each next belief."""
-    n, N = actions.shape
+    N = actions.shape[1]
     bl = branch_lines(pomdp)
     mids = 0.5 * (xs[:-1] + xs[1:])[:, None, None]
     tab = np.stack([bl.s0, bl.s1 - bl.s0, bl.m0, bl.m1 - bl.m0]).reshape(4, N * 2, -1)  # [coef, (c, a), branch]

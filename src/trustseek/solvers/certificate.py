@@ -169,7 +169,7 @@ def policy_from_solution(sol: CertifiedSolution, pomdp: AssistancePOMDP, solver:
     info.update(certificate(sol, pomdp))
     info["target_gap"] = target_gap
     if sol.q is not None and sol.lower is not None:
-        info["vectors"] = int(len(sol.lower[0]))
+        info["vectors"] = len(sol.lower[0])
         return AlphaVectorPolicy(
             [[v for v, _ in per_a] for per_a in sol.q], sol.lower[0], pomdp.model, pomdp.complexities, sol.belief_update, info
         )

@@ -17,6 +17,7 @@ tolerance.  The policy is a grid-Q policy whose Q table is computed from the cer
 from __future__ import annotations
 
 import time
+from typing import ClassVar
 
 import numpy as np
 
@@ -36,7 +37,7 @@ class CertifiedGridSolver(SolverBase):
     name = "certified-grid"
     trust_levels = 2
     belief_updates = ("paper",)
-    instead = {
+    instead: ClassVar[dict[str, str]] = {
         "trust_levels": "use the point solver (Bayes filter)",
         "belief_update": "the certified-grid solver certifies the eq.-3 update (belief update 'paper'); "
         "for the Bayes filter use the alpha solver",

@@ -118,7 +118,7 @@ def residual_pieces(pomdp: AssistancePOMDP, grid: np.ndarray, values: np.ndarray
     """The residual of :func:`paper_residual` with its pieces.  Exact up to rounding: the interval
     is cut at the grid points, their preimages under every belief map and the roots of every
     advantage Q(ask) - Q(autonomous), so that on each piece T V - V is a single quadratic."""
-    p, f = paper_maps(pomdp)
+    f = paper_maps(pomdp)[1]
     N = pomdp.n_complexity
     cuts = [grid]
     for c in range(N):
@@ -164,6 +164,8 @@ def residual_pieces(pomdp: AssistancePOMDP, grid: np.ndarray, values: np.ndarray
         phi.append(pc @ best - v[k])
     sup, inf = _quad_extrema(phi[0], phi[1], phi[2], w)
     return Residual(float(np.max(sup)), float(-np.min(inf)), lo, hi, sup, inf)
+
+
 def _quad_fit(y0: np.ndarray, y1: np.ndarray, y2: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Coefficients of y(u) = c0 + c1 u + c2 u^2 through (-w/2, y0), (0, y1), (w/2, y2)."""
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -107,7 +107,7 @@ def memoryless_controllers(model: BranchModel, limit: int = 64) -> np.ndarray:
     each (one controller of independent self-looping nodes, evaluated by one solve); with more
     than ``limit`` combinations, only the controllers that take one action everywhere."""
     N, A = model.n_contexts, model.n_actions
-    combos = list(itertools.product(range(A), repeat=N)) if A**N <= limit else [tuple([a] * N) for a in range(A)]
+    combos = list(itertools.product(range(A), repeat=N)) if limit >= A**N else [tuple([a] * N) for a in range(A)]
     n = len(combos)
     acts = np.array(combos, dtype=np.int64).reshape(n, N)
     succ = np.broadcast_to(np.arange(n)[:, None, None], (n, N, model.kernels.shape[2])).copy()

@@ -31,7 +31,7 @@ import itertools
 import time
 from dataclasses import dataclass, field
 from math import comb
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import scipy.sparse as sp
@@ -142,7 +142,7 @@ class PointSolver(SolverBase):
     u: np.ndarray
     lookup: np.ndarray
     V: np.ndarray
-    instead = {
+    instead: ClassVar[dict[str, str]] = {
         "belief_update": "the point solver bounds the value of the Bayes filter (belief update 'bayes'); "
         "for the eq.-3 update use the alpha solver (two trust levels) or the grid solver",
     }
@@ -341,7 +341,7 @@ class PointSolver(SolverBase):
     def q_vectors(self, beliefs: np.ndarray) -> list[list[np.ndarray]]:
         """Q lower-bound vectors per (context, action): point backups of L at ``beliefs``."""
         m = self.model
-        S, p = self._successors(beliefs)
+        S = self._successors(beliefs)[0]
         n, N, A, Br, K = S.shape
         best = (S.reshape(-1, K) @ self.G.T).argmax(axis=1).reshape(n, N, A, Br)
         g = m.rewards[None] + m.discount * np.einsum("cabtu,ncabu->ncat", m.kernels, self.G[best])
@@ -365,8 +365,8 @@ class PointSolver(SolverBase):
             "gap_at": "initial belief",
             "target_gap": self.tol,
             "value_bounds_at_initial_belief": [sol.lower, sol.upper],
-            "vectors": int(len(sol.vectors)),
-            "upper_points": int(len(sol.points)),
+            "vectors": len(sol.vectors),
+            "upper_points": len(sol.points),
             "seconds": sol.seconds,
             "discount": problem.discount,
         }
@@ -410,4 +410,4 @@ def _simplex_lattice(K: int, n: int) -> np.ndarray:
     return np.array(rows, dtype=float) / n
 
 
-__all__ = ["PointSolver", "PointSolution", "evaluate_controller", "freudenthal_weights"]
+__all__ = ["PointSolution", "PointSolver", "evaluate_controller", "freudenthal_weights"]

@@ -87,7 +87,7 @@ def _trust_aware(spec: Mapping[str, Any], model: TrustModel, task: Task, where: 
 
 def _randomized(p: Any, cx: tuple[str, ...], where: str) -> ComplexityPolicy:
     if p is None:  # the paper's design when the task has its complexities
-        return randomized(PAPER_ASK_PROBABILITIES if cx == tuple(PAPER_ASK_PROBABILITIES) else {c: 0.25 for c in cx})
+        return randomized(PAPER_ASK_PROBABILITIES if cx == tuple(PAPER_ASK_PROBABILITIES) else dict.fromkeys(cx, 0.25))
     if not isinstance(p, Mapping) or set(p) != set(cx):
         raise PolicySpecError([f"{where}.p_ask must map each complexity {list(cx)} to a probability, got {p!r}"])
     try:
