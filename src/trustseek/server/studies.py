@@ -31,12 +31,8 @@ MAX_TRIALS_PER_BLOCK = 1000
 MAX_GRID = 20001  # the largest belief grid a study may ask the server to solve
 
 
-class ConfigError(ValueError):
+class ConfigError(TrustseekError, ValueError):
     """A study or deploy configuration is invalid; ``problems`` lists every reason."""
-
-    def __init__(self, problems: list[str]):
-        self.problems = problems
-        super().__init__("; ".join(problems))
 
 
 class Schedule(BaseModel):
