@@ -26,7 +26,8 @@ import numpy as np  # noqa: E402
 
 from trustseek import PolicyRunner, paper_model, paper_task, solve  # noqa: E402
 from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS  # noqa: E402
-from trustseek.simulation.engine import simulate, threshold_form  # noqa: E402
+from trustseek.policies import ask_bounds  # noqa: E402
+from trustseek.simulation.engine import simulate  # noqa: E402
 
 COUNTS = (41, 30)  # Section V: 71 trials, 41 low and 30 high
 
@@ -52,7 +53,7 @@ def core_loop(model, task, policy, n_participants: int, seed: int = 0) -> float:
 
 def tight_loop(model, task, policy, n_participants: int, seed: int = 0) -> float:
     r = random.Random(seed)
-    th = threshold_form(policy).tolist()
+    th = ask_bounds(policy).tolist()
     em = model.emission[..., 0].tolist()  # [c][a][t] P(intervene)
     tr = model.transition[..., 1].tolist()  # [c][a][e][t] P(T' = high)
     a0 = model.transition[..., 0, 1].tolist()

@@ -12,8 +12,8 @@ import time
 os.environ.setdefault("OMP_NUM_THREADS", "1")  # one core
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from trustseek import AssistancePOMDP, GridSolver, paper_model, paper_task  # noqa: E402
-from trustseek.solvers.grid import DEFAULT_GRID  # noqa: E402
+from trustseek import AssistancePOMDP, GridSolver, paper_model, paper_task
+from trustseek.solvers.grid import DEFAULT_GRID
 
 
 def best_of(fn, repeat):
@@ -31,8 +31,10 @@ def main() -> None:
     print(f"{'update':7} {'grid':>6} {'method':18} {'time':>10} {'iters':>6} {'threshold':>10} {'residual':>9}  speed-up")
     for update in ("bayes", "paper"):
         for grid in (DEFAULT_GRID, 10_001):
-            t_pi, pol = best_of(lambda: GridSolver(grid=grid, belief_update=update).solve(pomdp), 5)
-            t_vi, vi = best_of(lambda: GridSolver(grid=grid, belief_update=update, method="value-iteration").solve(pomdp), 1)
+            pi = GridSolver(grid=grid, belief_update=update)
+            vi_solver = GridSolver(grid=grid, belief_update=update, method="value-iteration")
+            t_pi, pol = best_of(lambda s=pi: s.solve(pomdp), 5)
+            t_vi, vi = best_of(lambda s=vi_solver: s.solve(pomdp), 1)
             for name, t, p in (("value-iteration", t_vi, vi), ("policy-iteration", t_pi, pol)):
                 print(
                     f"{update:7} {grid:6d} {name:18} {t * 1000:8.1f}ms {p.info['iterations']:6d} "

@@ -18,12 +18,10 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import trustseek  # noqa: E402
-from trustseek import AssistancePOMDP, GridSolver, paper_model, paper_task  # noqa: E402
-from trustseek.solvers.alpha import AlphaSolver  # noqa: E402
-from trustseek.model.core import Task, TrustModel  # noqa: E402
-from trustseek.solvers.point import BranchModel, PointSolver  # noqa: E402
-
+import trustseek
+from trustseek import AssistancePOMDP, GridSolver, paper_model, paper_task
+from trustseek.model.core import Task, TrustModel
+from trustseek.solvers import AlphaSolver, PointSolver
 
 CPU = {}
 
@@ -45,30 +43,31 @@ def main() -> None:
     pomdp = AssistancePOMDP(paper_model(), paper_task())
     print("paper preset: alpha solver to a certified gap of 1e-6 (target < 50 ms)")
     for update in ("bayes", "paper"):
-        t_grid, grid = best_of(lambda: GridSolver(grid=2001, belief_update=update).solve_grid(pomdp))
-        t_alpha, sol = best_of(lambda: AlphaSolver(belief_update=update, tol=1e-6).solve_bounds(pomdp))
+        grid_solver, alpha_solver = GridSolver(grid=2001, belief_update=update), AlphaSolver(belief_update=update, tol=1e-6)
+        t_grid, _ = best_of(lambda s=grid_solver: s.solve_grid(pomdp))
+        t_alpha, sol = best_of(lambda s=alpha_solver: s.solve_bounds(pomdp))
         c_alpha = CPU["last"]
         rep = sol.threshold_report(pomdp)["high"]
         lo, hi = rep["interval"]
         status = "met" if min(t_alpha, CPU["last"]) < 0.05 else "not met"
         print(
-            f"  {update:5s}: alpha {t_alpha * 1000:7.1f} ms wall, {c_alpha * 1000:.1f} ms CPU (target {status}), gap {sol.gap:.1e}, "
+            f"  {update:5s}: alpha {t_alpha * 1000:7.1f} ms wall, {c_alpha * 1000:.1f} ms CPU (target {status}), "
+            f"gap {sol.gap:.1e}, "
             f"threshold {rep['threshold']:.6f} in [{lo:.6f}, {hi:.6f}], {sol.method}, {sol.iterations} iterations"
         )
-        print(
-            f"         grid 2001 points {t_grid * 1000:7.1f} ms (uncertified); alpha / grid time = {t_alpha / t_grid:.2f}"
-        )
+        print(f"         grid 2001 points {t_grid * 1000:7.1f} ms (uncertified); alpha / grid time = {t_alpha / t_grid:.2f}")
     ex = Path(trustseek.__file__).parent / "examples"
     p3 = AssistancePOMDP(TrustModel.load(ex / "three_level_model.json"), Task.load(ex / "three_level_task.json"))
     print("three-level example: point solver to a gap of 1e-3 at b0 (target < 2 s)")
-    t_point, sol = best_of(lambda: PointSolver(tol=1e-3).solve_bounds(BranchModel.from_assistance(p3)), repeat=3)
+    t_point, sol = best_of(lambda: PointSolver(tol=1e-3).solve_bounds(p3), repeat=3)
     status = "met" if t_point < 2.0 else "not met"
     print(
-        f"  point {t_point:.3f} s wall, {CPU['last']:.3f} s CPU (target {status}), V(b0) in [{sol.lower:.6f}, {sol.upper:.6f}], gap {sol.gap:.1e}, "
+        f"  point {t_point:.3f} s wall, {CPU['last']:.3f} s CPU (target {status}), "
+        f"V(b0) in [{sol.lower:.6f}, {sol.upper:.6f}], gap {sol.gap:.1e}, "
         f"{len(sol.vectors)} vectors, {len(sol.points)} upper-bound vertices"
     )
     # the same solver on the two-level preset, against the grid baseline of this run
-    t_pg, psol = best_of(lambda: PointSolver(tol=1e-3).solve_bounds(BranchModel.from_assistance(pomdp)), repeat=3)
+    t_pg, psol = best_of(lambda: PointSolver(tol=1e-3).solve_bounds(pomdp), repeat=3)
     t_grid, _ = best_of(lambda: GridSolver(grid=2001).solve_grid(pomdp))
     print(f"  point on the paper preset (gap {psol.gap:.1e}): {t_pg * 1000:.1f} ms; point / grid time = {t_pg / t_grid:.2f}")
 

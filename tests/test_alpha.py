@@ -6,17 +6,11 @@ import numpy as np
 import pytest
 
 from trustseek import AssistancePOMDP, BayesUpdate, GridSolver, PolicyRunner, load_policy
-from trustseek.solvers.alpha import (
-    AlphaSolver,
-    AlphaVectorPolicy,
-    envelope,
-    envelope_values,
-    exact_backup,
-    finite_horizon_value,
-    finite_horizon_vectors,
-    paper_residual,
-)
-from trustseek.solvers.grid import belief_branches
+from trustseek.policies import AlphaVectorPolicy
+from trustseek.policies.envelope import envelope, envelope_values
+from trustseek.solvers.alpha import AlphaSolver
+from trustseek.solvers.backup import exact_backup, finite_horizon_value, finite_horizon_vectors
+from trustseek.solvers.eq3 import paper_residual
 
 # Reference values of the issue (three independent solvers), Bayes update, paper preset
 REF_V0, REF_V1_LOW, REF_V1_HIGH, REF_THRESHOLD, REF_MYOPIC = 110.655, 111.061, 110.249, 0.7815, 0.836
@@ -50,16 +44,22 @@ def test_envelope_matches_brute_force_maximum(rng):
 
 
 def _bellman_at(pomdp, L, x):
-    """Direct Bellman backup W(x) = Σ_C P(C) max_a [r + γ Σ_branch w L(x')] with the core's
-    belief branches (an independent implementation of the Bayes update)."""
+    """Direct Bellman backup W(x) = Σ_C P(C) max_a [r + γ Σ_(o, E') P(o, E' | x) L(x')] with the
+    core Bayes filter for x' and the branch probabilities from the emission and experience tables
+    (independent of the solvers' branch kernels)."""
+    upd = BayesUpdate(pomdp.model)
     b = np.stack([1 - x, x], axis=1)
-    out = np.zeros(len(x))
+    n = len(x)
+    out = np.zeros(n)
     for c in range(pomdp.n_complexity):
         q = []
         for a in range(2):
             v = b @ pomdp.expected_reward[c, a]
-            for w, nb in belief_branches(pomdp, b, c, a, "bayes"):
-                v = v + pomdp.discount * w * L(nb[:, 1])
+            for o in range(2):
+                for e in range(2):
+                    w = (b @ pomdp.emission[c, a, :, o]) * pomdp.experience[c, a, o, e]
+                    nb = upd.update(b, np.full(n, c), np.full(n, a), np.full(n, o), np.full(n, e))
+                    v = v + pomdp.discount * w * L(nb[:, 1])
             q.append(v)
         out += pomdp.complexity_probs[c] * np.maximum(q[0], q[1])
     return out
@@ -90,8 +90,10 @@ def test_finite_horizon_values_match_enumeration_with_the_core_filter(paper_pomd
                         p = float(b @ K[c, a, :, o, e, :].sum(axis=1))
                         if p > 0:
                             nb = upd.update(b, c, a, o, e)
-                            q += paper_pomdp.discount * p * sum(
-                                pc * v(nb, c2, h - 1) for c2, pc in enumerate(paper_pomdp.complexity_probs)
+                            q += (
+                                paper_pomdp.discount
+                                * p
+                                * sum(pc * v(nb, c2, h - 1) for c2, pc in enumerate(paper_pomdp.complexity_probs))
                             )
             best = max(best, q)
         return best
@@ -180,13 +182,13 @@ def test_paper_update_certified(paper_pomdp, paper_update):
 
 def test_paper_residual_is_exact_on_a_coarse_grid(paper_pomdp):
     """The piecewise-quadratic supremum equals a brute-force maximum on a very fine sample."""
-    from trustseek.solvers.alpha import _paper_q
+    from trustseek.solvers.eq3 import paper_q
 
     sol = GridSolver(grid=41, belief_update="paper").solve_grid(paper_pomdp)
     values = sol.value @ paper_pomdp.complexity_probs
     eps_plus, eps_minus = paper_residual(paper_pomdp, sol.grid, values)
     x = np.linspace(0, 1, 400001)
-    tv = _paper_q(paper_pomdp, values, x, sol.grid).max(axis=1).T @ paper_pomdp.complexity_probs
+    tv = paper_q(paper_pomdp, values, x, sol.grid).max(axis=1).T @ paper_pomdp.complexity_probs
     diff = tv - np.interp(x, sol.grid, values)
     assert diff.max() <= eps_plus + 1e-12 and -diff.min() <= eps_minus + 1e-12
     assert diff.max() == pytest.approx(eps_plus, abs=1e-7)
@@ -194,10 +196,11 @@ def test_paper_residual_is_exact_on_a_coarse_grid(paper_pomdp):
 
 
 def test_alpha_needs_two_trust_levels():
-    from trustseek.model.core import Task, TrustModel
     from trustseek.data import example_path
+    from trustseek.model.core import Task, TrustModel
 
-    p3 = AssistancePOMDP(TrustModel.load(example_path("three_level_model.json")), Task.load(example_path("three_level_task.json")))
+    model = TrustModel.load(example_path("three_level_model.json"))
+    p3 = AssistancePOMDP(model, Task.load(example_path("three_level_task.json")))
     with pytest.raises(ValueError, match="two trust levels"):
         AlphaSolver().solve(p3)
 
@@ -205,13 +208,14 @@ def test_alpha_needs_two_trust_levels():
 def test_controller_values_satisfy_the_controller_bellman_equations(paper_pomdp, rng):
     """Random controllers (some branches without successor), small and large enough for the
     iterative solve: α[n] = Σ_C P(C) (r(C, a) + γ Σ_(o, E') M α[succ]) node by node."""
-    from trustseek.solvers.alpha import evaluate_controller
+    from trustseek.solvers.numerics import evaluate_controller
 
     K, R, pc, gamma = paper_pomdp.kernel, paper_pomdp.expected_reward, paper_pomdp.complexity_probs, paper_pomdp.discount
     for n in (1, 40, 700):
         acts = rng.integers(0, 2, size=(n, 2))
         succ = rng.integers(-1, n, size=(n, 2, 2, 2))
-        alpha = evaluate_controller(paper_pomdp, acts, succ, guess=np.full((n, 2), 100.0), rtol=1e-13)
+        model = paper_pomdp.branch_model()
+        alpha = evaluate_controller(model, acts, succ.reshape(n, 2, 4), guess=np.full((n, 2), 100.0), rtol=1e-13)
         for i in rng.choice(n, size=min(n, 25), replace=False):
             v = np.zeros(2)
             for c in range(2):
@@ -229,11 +233,11 @@ def test_paper_grid_values_match_the_core_policy_iteration(paper_pomdp, rng):
     non-uniform grid (transition matrices assembled independently, as scipy matrices)."""
     import scipy.sparse as sp
 
-    from trustseek.solvers.alpha import _paper_maps, paper_grid_values
+    from trustseek.solvers.eq3 import paper_grid_values, paper_maps
     from trustseek.solvers.grid import policy_iteration
 
     grid = np.unique(np.concatenate([[0.0, 1.0], rng.random(300)]))
-    p, f = _paper_maps(paper_pomdp)
+    p, f = paper_maps(paper_pomdp)
     R, G = paper_pomdp.expected_reward, len(grid)
     r = R[:, :, 0, None] * (1 - grid) + R[:, :, 1, None] * grid
     P = [[None, None], [None, None]]

@@ -43,7 +43,7 @@ def test_bad_model_file_gives_one_line_per_problem(tmp_path, model):
     proc = run("solve", "--model", str(bad), check=False)
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
-    lines = [l for l in proc.stderr.splitlines() if l.strip()]
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
     assert lines == [
         f"error: {bad}: emission[C=low, a=autonomous][T=high][rely] = 1.5 is outside [0, 1]",
         f"error: {bad}: transition[C=high, a=ask, E=reliable][T=low] sums to 0.97",
@@ -78,3 +78,22 @@ def test_help_everywhere():
     for cmd in ([], ["solve"], ["agnostic"], ["plot-q"], ["preset"], ["check"]):
         proc = run(*cmd, "--help")
         assert "Usage" in proc.stdout
+
+
+def test_solvers_come_from_the_registry_and_refuse_cleanly():
+    from trustseek.data import example_path
+
+    d = json.loads(run("solve", "--solver", "certified-grid", "-u", "paper", "--json").stdout)
+    assert d["solver"] == "certified-grid" and d["certified_gap"] <= 1e-6
+    proc = run(
+        "solve",
+        "--model",
+        str(example_path("three_level_model.json")),
+        "--task",
+        str(example_path("three_level_task.json")),
+        check=False,
+    )
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert proc.stderr.strip().splitlines() == [
+        "error: the grid solver needs two trust levels; this model has 3: use the point solver"
+    ]

@@ -37,11 +37,7 @@ def public_error_types() -> list[type[BaseException]]:
 
 
 def _param(error_type: type[BaseException]):
-    name = f"{error_type.__module__}.{error_type.__qualname__}"
-    if name == "trustseek.server.studies.ConfigError":
-        # remove this mark when the study configuration's error joins the family
-        return pytest.param(error_type, id=name, marks=pytest.mark.xfail(strict=True, reason="a ValueError only"))
-    return pytest.param(error_type, id=name)
+    return pytest.param(error_type, id=f"{error_type.__module__}.{error_type.__qualname__}")
 
 
 @pytest.mark.parametrize("error_type", [_param(t) for t in public_error_types()])

@@ -8,9 +8,8 @@ import sys
 import numpy as np
 import pytest
 
-from trustseek.solvers.alpha import finite_horizon_value
+from test_point import TIGER
 from trustseek.interop.files import (
-    FlatPOMDP,
     PomdpFileError,
     flat_belief,
     flat_from_assistance,
@@ -19,12 +18,11 @@ from trustseek.interop.files import (
     write_pomdp,
     write_pomdpx,
 )
-
-from test_point import TIGER
+from trustseek.pomdp.flat import FlatPOMDP
+from trustseek.solvers.backup import finite_horizon_value
 
 pomdp_py = pytest.importorskip("pomdp_py")
 from pomdp_py.algorithms import value_function  # noqa: E402
-
 
 # --------------------------------------------------------------------------- pomdp-py adapters
 
@@ -69,7 +67,7 @@ def pomdp_py_value(flat: FlatPOMDP, belief: np.ndarray, horizon: int) -> float:
         def probability(self, sp, s, a):
             return flat.transition[a.i, s.i, sp.i]
 
-    class O(pomdp_py.ObservationModel):
+    class Obs(pomdp_py.ObservationModel):
         def probability(self, o, sp, a):
             return flat.observation[a.i, sp.i, o.i]
 
@@ -81,7 +79,7 @@ def pomdp_py_value(flat: FlatPOMDP, belief: np.ndarray, horizon: int) -> float:
     A = [_A(i) for i in range(len(flat.actions))]
     Z = [_O(i) for i in range(len(flat.observations))]
     b = {s: float(belief[s.i]) for s in S}
-    return value_function.value(b, S, A, Z, T(), O(), R(), flat.discount, horizon=horizon)
+    return value_function.value(b, S, A, Z, T(), Obs(), R(), flat.discount, horizon=horizon)
 
 
 # --------------------------------------------------------------------------- .pomdp
@@ -110,7 +108,8 @@ def test_tiger_finite_horizon_values_match_pomdp_py():
     expected = {1: -1.0, 2: -1.95}
     for h in (1, 2, 3):
         ours = f.finite_horizon_value(f.start, h)
-        theirs = value_function.value({s: b0[s] for s in S}, S, A, Z, ag.transition_model, ag.observation_model, ag.reward_model, 0.95, horizon=h)
+        models = ag.transition_model, ag.observation_model, ag.reward_model
+        theirs = value_function.value({s: b0[s] for s in S}, S, A, Z, *models, 0.95, horizon=h)
         # pomdp-py's Tiger leaks 1e-9 of probability when listening; the values agree to ~1e-7
         assert ours == pytest.approx(theirs, abs=1e-6)
         assert ours == pytest.approx(pomdp_py_value(f, f.start, h), abs=1e-9)
@@ -136,7 +135,10 @@ def test_pomdp_round_trip(tmp_path, pomdp):
     "text,message",
     [
         (TIGER.replace("T: open-left\nuniform", "T: open-left\n0.5 0.5"), "line 9: T matrix needs 4 numbers, got 2"),
-        (TIGER.replace("O: listen\n0.85 0.15", "O: listen\n0.85 0.25"), "observation[listen, tiger-left] must be a probability row"),
+        (
+            TIGER.replace("O: listen\n0.85 0.15", "O: listen\n0.85 0.25"),
+            "observation[listen, tiger-left] must be a probability row",
+        ),
         (TIGER.replace("R: listen : * : * : * -1", "R: listen : tiger-middle : * : * -1"), "unknown state 'tiger-middle'"),
         (TIGER.replace("discount: 0.95", "discount: high"), "discount must be a number"),
         (TIGER.replace("states: tiger-left tiger-right\n", ""), "missing 'states:' header"),

@@ -7,10 +7,11 @@ import pytest
 
 import trustseek
 from trustseek import AssistancePOMDP, GridSolver
-from trustseek.solvers.alpha import AlphaSolver, AlphaVectorPolicy
 from trustseek.interop.files import read_pomdp
 from trustseek.model.core import Task, TrustModel
-from trustseek.solvers.point import BranchModel, PointSolver, _simplex_lattice, freudenthal_weights
+from trustseek.policies import AlphaVectorPolicy
+from trustseek.solvers.alpha import AlphaSolver
+from trustseek.solvers.point import PointSolver, _simplex_lattice, freudenthal_weights
 
 EXAMPLES = Path(trustseek.__file__).parent / "examples"
 
@@ -81,7 +82,7 @@ def _tiger_grid_value(flat, G=4001, iters=2000):
 
 def test_tiger_bounds_bracket_an_independent_grid_value():
     flat = read_pomdp("tiger.pomdp", TIGER)
-    sol = PointSolver(tol=1e-4).solve_bounds(BranchModel.from_flat(flat))
+    sol = PointSolver(tol=1e-4).solve_bounds(flat)
     assert sol.gap <= 1e-4
     ref = _tiger_grid_value(flat)  # an upper bound (convex value), accurate to ~1e-5
     assert sol.lower <= ref + 1e-9
@@ -117,7 +118,7 @@ def test_lumped_three_level_model_has_the_two_level_value(model, task, pomdp):
         tr3[..., src, 1] = 0.5 * tr2[..., s2, 1]
         tr3[..., src, 2] = 0.5 * tr2[..., s2, 1]
     m3 = TrustModel(("low", "high", "high2"), model.complexities, np.array([0.0, 0.5, 0.5]), em, tr3)
-    sol = PointSolver(tol=1e-3).solve_bounds(BranchModel.from_assistance(AssistancePOMDP(m3, task)))
+    sol = PointSolver(tol=1e-3).solve_bounds(AssistancePOMDP(m3, task))
     ref = AlphaSolver(tol=1e-6).solve_bounds(pomdp)
     v = float(ref.q_values(pomdp, np.array(1.0)).max(axis=-1) @ task.complexity_probs)
     assert sol.gap <= 1e-3
@@ -136,7 +137,7 @@ def test_three_level_example_solves_with_reported_gap(tmp_path):
     assert pol.action(np.array([1.0, 0.0, 0.0]), "high") == 1
     assert pol.action(np.array([0.0, 0.0, 1.0]), "high") == 0
     # the lower bound at b0 is the value of the greedy vectors
-    assert pol.value(m.initial) == pytest.approx(lo, abs=1e-9)
+    assert pol.value_bound(m.initial) == pytest.approx(lo, abs=1e-9)
     # the policy file round-trips and decides the same way
     from trustseek import load_policy
 

@@ -16,7 +16,7 @@ from trustseek import (
     trust_agnostic,
 )
 from trustseek.model.core import ASK, AUTONOMOUS, ModelError
-from trustseek.policies.core import agnostic_from_intervention_rates, trust_agnostic_from_data
+from trustseek.solvers.agnostic import agnostic_from_intervention_rates, trust_agnostic_from_data
 
 
 @pytest.fixture(scope="module")
@@ -137,3 +137,41 @@ def test_non_threshold_policy_writes_valid_json(tmp_path, aware):
     d = json.loads((tmp_path / "odd.json").read_text())
     assert d["thresholds"]["high"] is None
     np.testing.assert_allclose(load_policy(tmp_path / "odd.json").q, q, atol=1e-9)
+
+
+def test_ask_regions_of_complexity_policies(model, task):
+    """A policy that ignores the belief asks on all of [0, 1] or nowhere; at random it has no
+    ask region.  Its bounds for the simulator follow."""
+    from trustseek.policies import PolicyError, ask_bounds
+
+    agn = trust_agnostic(model, task)  # never in low, always in high
+    assert agn.ask_intervals() == {"low": [], "high": [(0.0, 1.0)]}
+    assert agn.thresholds() == {"low": None, "high": 1.0}
+    assert ask_bounds(agn).tolist() == [-np.inf, np.inf]
+    assert randomized().ask_intervals() is None and randomized().thresholds() is None
+    assert ask_bounds(randomized()) is None
+    with pytest.raises(PolicyError, match="no Q-function"):
+        agn.q_values(0.5)
+
+
+def test_ask_bounds_of_a_threshold_policy(aware):
+    from trustseek.policies import ask_bounds
+
+    bounds = ask_bounds(aware)
+    assert bounds[0] == -np.inf and bounds[1] == pytest.approx(aware.thresholds()["high"])
+
+
+def test_tabulated_q_keeps_the_decisions(aware):
+    from trustseek.policies import PolicyError
+
+    table = TrustAwarePolicy.tabulate(aware, points=len(aware.grid))
+    np.testing.assert_allclose(table.q, aware.q, atol=1e-9)
+    assert table.thresholds()["high"] == pytest.approx(aware.thresholds()["high"], abs=1e-9)
+    with pytest.raises(PolicyError, match="no Q-function"):
+        TrustAwarePolicy.tabulate(never_ask())
+
+
+def test_every_policy_kind_has_a_loader():
+    from trustseek.policies import COMPLEXITY_KINDS, POLICY_KINDS
+
+    assert {"trust-aware", "alpha-vector", "flat-alpha-vector", *COMPLEXITY_KINDS} == set(POLICY_KINDS)

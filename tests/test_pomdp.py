@@ -68,6 +68,15 @@ def test_kernel_marginals(pomdp):
 
 
 def test_named_axes_match_shapes(pomdp):
-    sizes = {"complexity": 2, "robot_action": 2, "trust": 2, "next_trust": 2, "human_action": 2, "next_experience": 2, "state": 8, "next_state": 8}
+    sizes = {
+        "complexity": 2,
+        "robot_action": 2,
+        "trust": 2,
+        "next_trust": 2,
+        "human_action": 2,
+        "next_experience": 2,
+        "state": 8,
+        "next_state": 8,
+    }
     for name, axes in pomdp.axes.items():
         assert getattr(pomdp, name).shape == tuple(sizes[a] for a in axes), name

@@ -6,17 +6,17 @@ import pytest
 
 from trustseek import AssistancePOMDP, TrustModel, always_ask, make_updater, never_ask, paper_model, randomized, solve
 from trustseek.model.core import ASK, AUTONOMOUS, INTERVENE, RELIABLE
+from trustseek.policies import TrustAwarePolicy, ask_bounds
+from trustseek.pomdp.belief import ScalarBelief
 from trustseek.simulation.engine import (
     Block,
     SimulationError,
     Supervisors,
-    _ScalarBelief,
     crossover,
     run,
     schedule_counts,
     schedule_iid,
     simulate,
-    threshold_form,
 )
 
 
@@ -143,7 +143,7 @@ def test_trust_aware_discounted_return_matches_value_function(task):
 @pytest.mark.parametrize("update", ["paper", "bayes"])
 def test_scalar_belief_equals_core_updaters(update, rng):
     model = interior_model()
-    fast = _ScalarBelief(model, update)
+    fast = ScalarBelief(model, update)
     core = make_updater(update, model)
     n = 5000
     x = rng.random(n)
@@ -155,7 +155,7 @@ def test_scalar_belief_equals_core_updaters(update, rng):
 @pytest.mark.parametrize("update", ["paper", "bayes"])
 def test_threshold_form_equals_policy_actions(task, update, rng):
     policy = solve(paper_model(), task, belief_update=update)
-    bounds = threshold_form(policy)
+    bounds = ask_bounds(policy)
     assert bounds[0] == -np.inf and 0.7 < bounds[1] < 0.8
     x = np.concatenate([rng.random(100_000), policy.grid, [0.0, 1.0, 0.61, 0.94, 0.44]])
     for c in range(2):
@@ -269,14 +269,12 @@ def test_bad_inputs_are_reported(task, model):
 def test_non_threshold_policy_goes_through_policy_actions(task):
     """A trust-aware policy whose ask region is not [0, θ) (here: asks only for beliefs in
     (0.3, 0.6) in high complexity) is applied through ``policy.actions`` unchanged."""
-    from trustseek.policies.core import TrustAwarePolicy
-
     model = paper_model()
     grid = np.linspace(0, 1, 101)
     q = np.zeros((101, 2, 2))
     q[:, 1, ASK] = np.where((grid > 0.3) & (grid < 0.6), 1.0, -1.0)
     policy = TrustAwarePolicy(grid, q, model, task.complexities, "bayes")
-    assert threshold_form(policy) is None
+    assert ask_bounds(policy) is None
     sim = simulate(model, task, policy, n_participants=3000, trials=30, seed=8)
     a = sim.arrays
     b = a["belief"].reshape(-1)

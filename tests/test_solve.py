@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from trustseek import AssistancePOMDP, GridSolver, solve
-from trustseek.solvers.grid import belief_branches
 
 
 def test_paper_thresholds_both_updates(model, task):
@@ -56,26 +55,31 @@ def test_value_iteration_converges_monotonically(pomdp):
         prev_delta, W = delta, W_new
 
 
+def _backup_at(pomdp, update, bh, W):
+    """One Bellman backup at P(trust = high) = bh by explicit loops over complexities, actions and
+    branches: Σ_C P(C) max_a [r + γ Σ_branch w W(x')], with W a function of x' (skipped for
+    branches that cannot happen)."""
+    b = np.array([[1 - bh, bh]])
+    total = 0.0
+    for c in range(pomdp.n_complexity):
+        best = -np.inf
+        for a in range(2):
+            q = float(b[0] @ pomdp.expected_reward[c, a])
+            p, nxt = pomdp.branches(update).successors(b, c, a)
+            for w, nb in zip(p[0], nxt[0], strict=True):
+                if w > 0:
+                    q += pomdp.discount * w * W(float(nb[1]))
+            best = max(best, q)
+        total += pomdp.complexity_probs[c] * best
+    return total
+
+
 def _brute_force_on_grid(pomdp, update, grid, horizon):
     """H-step value on the grid by explicit loops over grid points, complexities, actions and
     branches, interpolating with numpy.interp (independent of the solver's sparse matrices)."""
-    beliefs = np.stack([1 - grid, grid], axis=1)
     W = np.zeros(len(grid))
     for _ in range(horizon):
-        W_new = np.zeros(len(grid))
-        for i in range(len(grid)):
-            b = beliefs[i : i + 1]
-            total = 0.0
-            for c in range(pomdp.n_complexity):
-                best = -np.inf
-                for a in range(2):
-                    q = float(b[0] @ pomdp.expected_reward[c, a])
-                    for w, nb in belief_branches(pomdp, b, c, a, update):
-                        q += pomdp.discount * w[0] * np.interp(nb[0, 1], grid, W)
-                    best = max(best, q)
-                total += pomdp.complexity_probs[c] * best
-            W_new[i] = total
-        W = W_new
+        W = np.array([_backup_at(pomdp, update, x, lambda z, W=W: np.interp(z, grid, W)) for x in grid])
     return W
 
 
@@ -93,22 +97,11 @@ def test_value_iteration_matches_brute_force_expansion(pomdp, update):
 def _exact_finite_horizon(pomdp, update, b_high, horizon):
     """Exact H-step value by expanding the belief tree (no grid)."""
 
-    @functools.lru_cache(maxsize=None)
+    @functools.cache
     def V(bh, h):
         if h == 0:
             return 0.0
-        b = np.array([[1 - bh, bh]])
-        total = 0.0
-        for c in range(pomdp.n_complexity):
-            best = -np.inf
-            for a in range(2):
-                q = float(b[0] @ pomdp.expected_reward[c, a])
-                for w, nb in belief_branches(pomdp, b, c, a, update):
-                    if w[0] > 0:
-                        q += pomdp.discount * w[0] * V(round(float(nb[0, 1]), 14), h - 1)
-                best = max(best, q)
-            total += pomdp.complexity_probs[c] * best
-        return total
+        return _backup_at(pomdp, update, bh, lambda z: V(round(z, 14), h - 1))
 
     return V(round(float(b_high), 14), horizon)
 

@@ -1,31 +1,29 @@
 """trustseek: trust-aware assistance-seeking for human-supervised autonomy.
 
-The Python API, by module:
+The Python API, by package:
 
-* :mod:`trustseek.model`   -- ``TrustModel`` (the supervisor) and ``Task``; JSON formats
-* :mod:`trustseek.presets` -- the ``paper`` preset (Section V)
-* :mod:`trustseek.pomdp`   -- the assistance-seeking POMDP (Section IV)
-* :mod:`trustseek.belief`  -- belief updaters (``bayes``, ``paper``)
-* :mod:`trustseek.solve`   -- belief-MDP solvers
-* :mod:`trustseek.policy`  -- policies and ``PolicyRunner``
+* :mod:`trustseek.model`    -- ``TrustModel`` (the supervisor) and ``Task``; JSON formats; presets
+* :mod:`trustseek.pomdp`    -- the assistance POMDP (Section IV) and its belief filter (``bayes``, ``paper``)
+* :mod:`trustseek.policies` -- the ``Policy`` interface, every policy kind, ``PolicyRunner``
+* :mod:`trustseek.solvers`  -- ``solver.solve(problem) -> Policy``; the registry (``make_solver``)
 """
 
-from .pomdp.belief import BayesUpdate, PaperUpdate, make_updater
 from .errors import TrustseekError
 from .model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, ModelError, Rewards, Task, TrustModel
-from .policies.core import (
+from .model.presets import load_model, load_task, paper_model, paper_task
+from .policies import (
     ComplexityPolicy,
+    Policy,
     PolicyRunner,
     TrustAwarePolicy,
     always_ask,
     load_policy,
     never_ask,
     randomized,
-    trust_agnostic,
 )
+from .pomdp.belief import BayesUpdate, PaperUpdate, make_updater
 from .pomdp.problem import AssistancePOMDP
-from .model.presets import load_model, load_task, paper_model, paper_task
-from .solvers.grid import GridSolver, solve
+from .solvers import GridSolver, Solver, make_solver, solve, solver_names, trust_agnostic
 
 from .version import __version__ as __version__
 
@@ -39,8 +37,10 @@ __all__ = [
     "GridSolver",
     "ModelError",
     "PaperUpdate",
+    "Policy",
     "PolicyRunner",
     "Rewards",
+    "Solver",
     "Task",
     "TrustAwarePolicy",
     "TrustModel",
@@ -49,11 +49,13 @@ __all__ = [
     "load_model",
     "load_policy",
     "load_task",
+    "make_solver",
     "make_updater",
     "never_ask",
     "paper_model",
     "paper_task",
     "randomized",
     "solve",
+    "solver_names",
     "trust_agnostic",
 ]

@@ -4,45 +4,30 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Optional
 
-import numpy as np
 import typer
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..vocab import check_belief_update
-from ..model.core import ModelError, Task, TrustModel
-from ..policies.core import TrustAwarePolicy, load_policy, trust_agnostic
+from ..model.core import ACTIONS, ModelError, Task, TrustModel
 from ..model.presets import MODEL_PRESETS, TASK_PRESETS, load_model, load_task
-from ..solvers.grid import DEFAULT_GRID, METHODS, GridSolver
+from ..policies import PolicyError, TrustAwarePolicy, load_policy
+from ..policies.base import Policy
 from ..pomdp.problem import AssistancePOMDP
+from ..solvers import GridSolver, make_solver, solver_names, summarize, trust_agnostic_from_data
+from ..solvers.grid import DEFAULT_GRID, METHODS
+from ..vocab import check_belief_update
 from ._app import app, console, print_json
 
 ModelOpt = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file.")
 TaskOpt = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file.")
-UpdateOpt = typer.Option("bayes", "--belief-update", "-u", help="Belief update: 'bayes' (exact filter, default) or 'paper' (eq. 3).")
+UpdateOpt = typer.Option(
+    "bayes", "--belief-update", "-u", help="Belief update: 'bayes' (exact filter, default) or 'paper' (eq. 3)."
+)
 
 
 def _check_update(name: str) -> str:
     return check_belief_update(name, "--belief-update")
-
-
-def solve_summary(policy: TrustAwarePolicy, task: Task) -> dict:
-    """The machine-readable summary of a solved policy (what ``solve --json`` prints)."""
-    b0 = float(policy.model.initial[-1])
-    v1 = policy.q_values(1.0).max(axis=-1)
-    v0 = policy.q_values(b0).max(axis=-1)
-    return {
-        "policy": "trust-aware",
-        "belief_update": policy.belief_update,
-        "thresholds": policy.thresholds(),
-        "ask_intervals": {k: [list(iv) for iv in v] for k, v in policy.ask_intervals().items()},
-        "value_at_b1": {cn: float(v1[c]) for c, cn in enumerate(policy.complexities)},
-        "initial_belief": b0,
-        "value_at_initial_belief": float(v0 @ task.complexity_probs),
-        "solver": policy.info,
-    }
 
 
 @app.command(rich_help_panel="Plan")
@@ -53,74 +38,126 @@ def solve(
     grid: int = typer.Option(DEFAULT_GRID, "--grid", "-g", min=3, help="Number of belief grid points on [0, 1]."),
     method: str = typer.Option("policy-iteration", "--method", help=f"Grid solver method: {', '.join(METHODS)}."),
     tol: float = typer.Option(1e-9, "--tol", help="Value iteration: stop when the certified error bound is below this."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
     solver: str = typer.Option(
-        "grid", "--solver", help="grid (belief grid), alpha (certified alpha vectors, two trust levels) or point (point-based bounds, any number of trust levels)."
+        "grid",
+        "--solver",
+        help="grid (belief grid), alpha (certified alpha vectors, two trust levels), point (point-based bounds, "
+        "any number of trust levels), certified-grid (eq. 3, certified) or trust-agnostic.",
     ),
-    gap: Optional[float] = typer.Option(None, "--gap", help="alpha/point: target certified gap between the value bounds (default 1e-6 / 1e-3)."),
+    gap: float | None = typer.Option(
+        None, "--gap", help="alpha/point: target certified gap between the value bounds (default 1e-6 / 1e-3)."
+    ),
 ) -> None:
     """Solve the assistance-seeking POMDP for the optimal trust-aware policy (Section IV)."""
     _check_update(belief_update)
     if method not in METHODS:
         raise TrustseekError([f"--method must be one of {list(METHODS)}, got {method!r}"])
-    m, t = load_model(model), load_task(task)
-    pomdp = AssistancePOMDP(m, t)
-    if solver != "grid":
-        from .interop import certified_policy, report_certified
-
-        report_certified(certified_policy(solver, pomdp, belief_update, gap), t, out, as_json)
-        return
-    policy = GridSolver(grid=grid, belief_update=belief_update, method=method, tol=tol).solve(pomdp)
-    agn = trust_agnostic(m, t)
-    summary = solve_summary(policy, t)
-    summary["trust_agnostic"] = agn.to_dict()["p_ask"]
+    if solver not in solver_names():
+        raise TrustseekError([f"--solver must be one of {list(solver_names())}, got {solver!r}"])
+    if gap is not None and not gap > 0:
+        raise TrustseekError([f"--gap must be positive, got {gap}"])
+    pomdp = AssistancePOMDP(load_model(model), load_task(task))
+    policy = make_solver(solver, belief_update=belief_update, grid=grid, method=method, tol=tol, gap=gap).solve(pomdp)
+    summary = summarize(policy, pomdp)
     if out is not None:
         policy.save(out)
         summary["policy_file"] = str(out)
     if as_json:
         print_json(summary)
         return
-    table = Table(title=f"Trust-aware policy (belief update: {belief_update}, grid {grid})", title_justify="left")
+    if "certified_gap" in summary:
+        _print_certified(policy, summary)
+    else:
+        _print_solution(policy, summary)
+    if out is not None:
+        console.print(f"policy written to {out}")
+
+
+def _print_solution(policy: Policy, summary: dict) -> None:
+    """The table of ``solve`` for a solver without a certificate."""
+    info = policy.info
+    name = summary["policy"][:1].upper() + summary["policy"][1:]
+    grid = f", grid {info['grid_points']}" if "grid_points" in info else ""
+    table = Table(title=f"{name} policy (belief update: {policy.belief_update}{grid})", title_justify="left")
     table.add_column("complexity")
     table.add_column("asks when P(trust=high) in")
     table.add_column("threshold", justify="right")
     table.add_column("V(b=1, C)", justify="right")
     table.add_column("trust-agnostic", justify="left")
     for cn in policy.complexities:
-        iv = summary["ask_intervals"][cn]
+        iv = summary["ask_intervals"].get(cn, [])
         ivs = ", ".join(f"[{lo:.4f}, {hi:.4f})" for lo, hi in iv) or "never asks"
-        th = summary["thresholds"][cn]
+        th = (summary["thresholds"] or {}).get(cn)
         ths = "-" if th is None else ("none: see intervals" if th != th else f"{th:.4f}")
-        table.add_row(cn, ivs, ths, f"{summary['value_at_b1'][cn]:.3f}", "always ask" if summary["trust_agnostic"][cn] == 1 else "never ask")
+        v1 = summary.get("value_at_b1", {}).get(cn)
+        table.add_row(
+            cn, ivs, ths, "-" if v1 is None else f"{v1:.3f}", "always ask" if summary["trust_agnostic"][cn] == 1 else "never ask"
+        )
     console.print(table)
+    if "iterations" in info:
+        console.print(
+            f"V(b0 = {summary['initial_belief']:g}) = {summary['value_at_initial_belief']:.3f} over P(C); "
+            f"{info['method']}: {info['iterations']} iterations, Bellman residual {info['bellman_residual']:.1e}, "
+            f"{info['seconds'] * 1000:.1f} ms"
+        )
+    else:
+        console.print(policy.describe())
+
+
+def _print_certified(policy: Policy, summary: dict) -> None:
+    """The table of ``solve`` for a certified solver (any number of trust levels)."""
     info = policy.info
+    title = f"Trust-aware policy ({summary['solver']} solver, belief update: {policy.belief_update})"
+    if "thresholds" in summary:
+        table = Table(title=title, title_justify="left")
+        for col in ("complexity", "asks when P(trust=high) in", "threshold", "certified interval", "V(b=1, C)"):
+            table.add_column(col)
+        intervals = summary.get("threshold_intervals") or {}
+        for cn in policy.complexities:
+            iv = summary["ask_intervals"][cn]
+            ivs = ", ".join(f"[{lo:.6f}, {hi:.6f})" for lo, hi in iv) or "never asks"
+            th = summary["thresholds"][cn]
+            ci = intervals.get(cn)
+            table.add_row(
+                cn,
+                ivs,
+                "-" if th is None else f"{th:.6f}",
+                "-" if not ci else f"[{ci[0]:.6f}, {ci[1]:.6f}]",
+                f"{summary['value_at_b1'][cn]:.6f}",
+            )
+        console.print(table)
+    else:
+        console.print(f"{title}: {policy.describe()}")
+    lo, hi = summary["value_bounds_at_initial_belief"]
+    where = "at the initial belief" if info.get("gap_at") == "initial belief" else "over all beliefs"
     console.print(
-        f"V(b0 = {summary['initial_belief']:g}) = {summary['value_at_initial_belief']:.3f} over P(C); "
-        f"{info['method']}: {info['iterations']} iterations, Bellman residual {info['bellman_residual']:.1e}, "
-        f"{info['seconds'] * 1000:.1f} ms"
+        f"V(b0) in [{lo:.6f}, {hi:.6f}]; certified gap {summary['certified_gap']:.2e} ({where}); "
+        f"{info.get('method')}, {info['seconds'] * 1000:.1f} ms"
     )
-    if out is not None:
-        console.print(f"policy written to {out}")
+    target = info.get("target_gap")
+    if target is not None and summary["certified_gap"] > target:
+        console.print(f"[yellow]the target gap {target:g} was not reached (time or size limit)[/]")
 
 
 @app.command(rich_help_panel="Plan")
 def agnostic(
     model: str = ModelOpt,
     task: str = TaskOpt,
-    data: Optional[Path] = typer.Option(None, "--data", help="Estimate P(intervene | C) from this trial log instead of the model."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
+    data: Path | None = typer.Option(None, "--data", help="Estimate P(intervene | C) from this trial log instead of the model."),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
     """The optimal trust-agnostic policy (Section VI-A)."""
     t = load_task(task)
+    pol: Policy
     if data is not None:
-        from ..data.trials import read_trials  # provided by the data module
-        from ..policies.core import trust_agnostic_from_data
+        from ..data.trials import read_trials
 
         pol = trust_agnostic_from_data(read_trials(data), t)
     else:
-        pol = trust_agnostic(load_model(model), t)
+        pol = make_solver("trust-agnostic").solve(AssistancePOMDP(load_model(model), t))
     if out is not None:
         pol.save(out)
     if as_json:
@@ -129,9 +166,10 @@ def agnostic(
     table = Table(title="Trust-agnostic policy", title_justify="left")
     for col in ("complexity", "P(intervene | C, autonomous)", "E\\[r | autonomous]", "E\\[r | ask]", "action"):
         table.add_column(col)
-    for c, cn in enumerate(t.complexities):
+    for cn in t.complexities:
         er = pol.info["expected_reward"][cn]
-        table.add_row(cn, f"{pol.info['p_intervene'][cn]:.3f}", f"{er['autonomous']:.3f}", f"{er['ask']:.3f}", "ask" if pol.p_ask[c] == 1 else "autonomous")
+        action = ACTIONS[pol.action(None, cn)]
+        table.add_row(cn, f"{pol.info['p_intervene'][cn]:.3f}", f"{er['autonomous']:.3f}", f"{er['ask']:.3f}", action)
     console.print(table)
     console.print(f"P(intervene | C) from the {pol.info['source']}")
 
@@ -142,16 +180,17 @@ def plot_q_cmd(
     task: str = TaskOpt,
     belief_update: str = UpdateOpt,
     grid: int = typer.Option(DEFAULT_GRID, "--grid", "-g", min=3, help="Number of belief grid points."),
-    policy_file: Optional[Path] = typer.Option(None, "--policy", help="Plot a solved policy file instead of solving."),
+    policy_file: Path | None = typer.Option(None, "--policy", help="Plot a solved policy file instead of solving."),
     out: Path = typer.Option(Path("q.png"), "--out", "-o", help="PNG file to write."),
 ) -> None:
     """Plot Q(b, C, a) for both actions and complexities, with the threshold (Fig. 7)."""
     from ..plots.q import plot_q
 
     if policy_file is not None:
-        policy = load_policy(policy_file)
-        if not isinstance(policy, TrustAwarePolicy):
-            raise TrustseekError([f"{policy_file}: a {policy.kind} policy has no Q-function to plot"])
+        try:
+            policy = TrustAwarePolicy.tabulate(load_policy(policy_file))
+        except PolicyError as exc:
+            raise TrustseekError([f"{p} to plot" for p in exc.problems], str(policy_file)) from None
     else:
         _check_update(belief_update)
         policy = GridSolver(grid=grid, belief_update=belief_update).solve(AssistancePOMDP(load_model(model), load_task(task)))
@@ -162,8 +201,8 @@ def plot_q_cmd(
 @app.command(rich_help_panel="Files")
 def preset(
     name: str = typer.Argument("paper", help="Preset name."),
-    model_out: Optional[Path] = typer.Option(None, "--model-out", help="Write the preset's trust model here."),
-    task_out: Optional[Path] = typer.Option(None, "--task-out", help="Write the preset's task here."),
+    model_out: Path | None = typer.Option(None, "--model-out", help="Write the preset's trust model here."),
+    task_out: Path | None = typer.Option(None, "--task-out", help="Write the preset's task here."),
 ) -> None:
     """Print or export a built-in preset (model and task JSON), a starting point for your own files."""
     if name not in MODEL_PRESETS:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Optional
 
 import numpy as np
 import typer
@@ -14,30 +13,26 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..policies.core import PAPER_ASK_PROBABILITIES, TrustAwarePolicy, always_ask, load_policy, never_ask, randomized, trust_agnostic
+from ..model.core import Task, TrustModel, load_json
 from ..model.presets import load_model, load_task
+from ..policies.base import Policy
+from ..solvers import policy_from_spec
+from ..solvers.specs import SPEC_KINDS
+from ..vocab import PAPER_ASK_PROBABILITIES
 from ._app import app, console, err_console, print_json
 
-POLICY_CHOICES = ("trust-aware", "trust-agnostic", "randomized", "always-ask", "never-ask")
 
-
-def _policy(spec: str, model, task, belief_update: str, grid: int, ask_low: float, ask_high: float):
-    if spec == "trust-aware":
-        from ..solvers.grid import solve
-
-        return solve(model, task, belief_update=belief_update, grid=grid)
-    if spec == "trust-agnostic":
-        return trust_agnostic(model, task)
-    if spec == "randomized":
-        return randomized(dict(zip(task.complexities, [ask_low, ask_high])))
-    if spec == "always-ask":
-        return always_ask(task.complexities)
-    if spec == "never-ask":
-        return never_ask(task.complexities)
+def _policy(spec: str, model: TrustModel, task: Task, belief_update: str, grid: int, ask_low: float, ask_high: float) -> Policy:
+    """The policy ``--policy`` names: a kind (with the options of this command) or a policy JSON file."""
+    if spec in SPEC_KINDS:
+        p_ask = dict(zip(task.complexities, [ask_low, ask_high], strict=False))  # --ask-low, --ask-high: the first two
+        options = {"belief_update": belief_update, "grid": grid, "p_ask": p_ask}
+        return policy_from_spec({"kind": spec, **options}, model, task, where="--policy")
     p = Path(spec)
     if p.suffix.lower() == ".json" or p.exists():
-        return load_policy(p)
-    raise TrustseekError([f"--policy must be one of {list(POLICY_CHOICES)} or a policy JSON file, got {spec!r}"])
+        d, source = load_json(p)
+        return policy_from_spec(d, model, task, where=source)
+    raise TrustseekError([f"--policy must be one of {list(SPEC_KINDS)} or a policy JSON file, got {spec!r}"])
 
 
 def _counts(text: str, task) -> list[int]:
@@ -57,20 +52,62 @@ def _counts(text: str, task) -> list[int]:
 def simulate(
     model: str = typer.Option("paper", "--model", "-m", help="Supervisors' trust model: a preset name (paper) or a JSON file."),
     task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
-    policy: str = typer.Option("trust-aware", "--policy", "-p", help=f"Robot policy: {', '.join(POLICY_CHOICES)}, or a policy JSON file (e.g. from 'trustseek solve --out')."),
+    policy: str = typer.Option(
+        "trust-aware",
+        "--policy",
+        "-p",
+        help=f"Robot policy: {', '.join(SPEC_KINDS)}, or a policy JSON file (e.g. from 'trustseek solve --out').",
+    ),
     participants: int = typer.Option(9, "--participants", "-n", min=1, help="Number of simulated participants."),
-    counts: Optional[str] = typer.Option(None, "--counts", help="Trials per complexity in random order, e.g. 41,30 (the paper's design). Default: 41,30 unless --trials is given."),
-    trials: Optional[int] = typer.Option(None, "--trials", min=1, help="Number of trials with i.i.d. complexities from the task's probabilities (instead of --counts)."),
-    belief_update: str = typer.Option("bayes", "--belief-update", "-u", help="Belief update of the trust-aware policy: 'bayes' (exact filter, default) or 'paper' (eq. 3)."),
-    policy_model: Optional[str] = typer.Option(None, "--policy-model", help="Model the trust-aware policy is solved for (default: the supervisors' model)."),
+    counts: str | None = typer.Option(
+        None,
+        "--counts",
+        help="Trials per complexity in random order, e.g. 41,30 (the paper's design). Default: 41,30 unless --trials is given.",
+    ),
+    trials: int | None = typer.Option(
+        None,
+        "--trials",
+        min=1,
+        help="Number of trials with i.i.d. complexities from the task's probabilities (instead of --counts).",
+    ),
+    belief_update: str = typer.Option(
+        "bayes",
+        "--belief-update",
+        "-u",
+        help="Belief update of the trust-aware policy: 'bayes' (exact filter, default) or 'paper' (eq. 3).",
+    ),
+    policy_model: str | None = typer.Option(
+        None, "--policy-model", help="Model the trust-aware policy is solved for (default: the supervisors' model)."
+    ),
     grid: int = typer.Option(1001, "--grid", min=3, help="Belief grid points for solving the trust-aware policy."),
-    ask_low: float = typer.Option(PAPER_ASK_PROBABILITIES["low"], "--ask-low", min=0.0, max=1.0, help="Randomized policy: P(ask) in the first complexity."),
-    ask_high: float = typer.Option(PAPER_ASK_PROBABILITIES["high"], "--ask-high", min=0.0, max=1.0, help="Randomized policy: P(ask) in the second complexity."),
-    concentration: Optional[float] = typer.Option(None, "--concentration", help="Heterogeneous population: each participant's probability rows ~ Dirichlet(concentration x pooled row + pseudo)."),
-    pseudo: float = typer.Option(0.0, "--pseudo", min=0.0, help="Dirichlet pseudo-count added to every cell (with --concentration)."),
+    ask_low: float = typer.Option(
+        PAPER_ASK_PROBABILITIES["low"], "--ask-low", min=0.0, max=1.0, help="Randomized policy: P(ask) in the first complexity."
+    ),
+    ask_high: float = typer.Option(
+        PAPER_ASK_PROBABILITIES["high"],
+        "--ask-high",
+        min=0.0,
+        max=1.0,
+        help="Randomized policy: P(ask) in the second complexity.",
+    ),
+    concentration: float | None = typer.Option(
+        None,
+        "--concentration",
+        help="Heterogeneous population: each participant's probability rows ~ Dirichlet(concentration x pooled row + pseudo).",
+    ),
+    pseudo: float = typer.Option(
+        0.0, "--pseudo", min=0.0, help="Dirichlet pseudo-count added to every cell (with --concentration)."
+    ),
     seed: int = typer.Option(0, "--seed", help="Random seed (same seed, same supervisors and luck for any policy)."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write every trial (canonical trial log + true_trust, belief, reward, block, policy) to this CSV/Parquet file."),
-    summary_out: Optional[Path] = typer.Option(None, "--summary-out", help="Write the per-participant summary to this CSV/Parquet file."),
+    out: Path | None = typer.Option(
+        None,
+        "--out",
+        "-o",
+        help="Write every trial (canonical trial log + true_trust, belief, reward, block, policy) to this CSV/Parquet file.",
+    ),
+    summary_out: Path | None = typer.Option(
+        None, "--summary-out", help="Write the per-participant summary to this CSV/Parquet file."
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
 ) -> None:
     """Simulate supervisors from a trust model working with the robot under a policy."""
@@ -102,16 +139,33 @@ def simulate(
     if summary_out is not None:
         _write(summ, summary_out)
     cols = ["cumulative_reward", "discounted_reward", "autonomous_collections", "failures", "interventions", "asks"]
-    stats = {c: {"mean": float(summ[c].mean()), "median": float(summ[c].median()), "sd": float(summ[c].std(ddof=1)) if len(summ) > 1 else 0.0} for c in cols}
+    stats = {
+        c: {
+            "mean": float(summ[c].mean()),
+            "median": float(summ[c].median()),
+            "sd": float(summ[c].std(ddof=1)) if len(summ) > 1 else 0.0,
+        }
+        for c in cols
+    }
     n_trials = int(summ["trials"].sum())
     if as_json:
-        print_json({"policy": pol.to_dict() if not isinstance(pol, TrustAwarePolicy) else {"kind": pol.kind, "thresholds": pol.thresholds(), "belief_update": pol.belief_update},
-                    "participants": participants, "trials": n_trials, "seed": seed, "statistics": stats,
-                    "trials_file": str(out) if out else None, "summary_file": str(summary_out) if summary_out else None})
+        print_json(
+            {
+                "policy": pol.overview(),
+                "participants": participants,
+                "trials": n_trials,
+                "seed": seed,
+                "statistics": stats,
+                "trials_file": str(out) if out else None,
+                "summary_file": str(summary_out) if summary_out else None,
+            }
+        )
         return
-    desc = pol.describe() if not isinstance(pol, TrustAwarePolicy) else f"trust-aware ({pol.belief_update} belief, thresholds " + ", ".join(
-        f"{k}: {'never asks' if v is None else f'{v:.3f}'}" for k, v in pol.thresholds().items()) + ")"
-    table = Table(title=f"{participants:,} simulated participants, {n_trials // participants} trials each, policy {escape(desc)}", title_justify="left")
+    desc = pol.describe()
+    table = Table(
+        title=f"{participants:,} simulated participants, {n_trials // participants} trials each, policy {escape(desc)}",
+        title_justify="left",
+    )
     table.add_column("per participant")
     for h in ("mean", "median", "sd"):
         table.add_column(h, justify="right")
@@ -145,30 +199,52 @@ def reproduce(
     out: Path = typer.Option(Path("report"), "--out", "-o", help="Report folder (report.html, PNGs, summary.json, data)."),
     seed: int = typer.Option(0, "--seed", help="Random seed: the same seed gives the same numbers."),
     replicates: int = typer.Option(20, "--replicates", "-r", min=0, help="Replicate experiments of the whole pipeline."),
-    large_n: int = typer.Option(10_000, "--large-n", min=1, help="Participants of the large experiment 2 and of the cost studies."),
+    large_n: int = typer.Option(
+        10_000, "--large-n", min=1, help="Participants of the large experiment 2 and of the cost studies."
+    ),
     bootstrap: int = typer.Option(20, "--bootstrap", "-b", min=0, help="Bootstrap resamples for the fitted model's intervals."),
     restarts: int = typer.Option(10, "--restarts", min=1, help="EM restarts of the main fit."),
     replicate_restarts: int = typer.Option(4, "--replicate-restarts", min=1, help="EM restarts per replicate fit."),
-    replicate_large_n: int = typer.Option(2_000, "--replicate-large-n", min=1, help="Participants of each replicate's large experiment 2."),
-    belief_update: str = typer.Option("paper", "--belief-update", "-u", help="Belief update of the trust-aware policy: 'paper' (eq. 3, as in the paper) or 'bayes'."),
+    replicate_large_n: int = typer.Option(
+        2_000, "--replicate-large-n", min=1, help="Participants of each replicate's large experiment 2."
+    ),
+    belief_update: str = typer.Option(
+        "paper",
+        "--belief-update",
+        "-u",
+        help="Belief update of the trust-aware policy: 'paper' (eq. 3, as in the paper) or 'bayes'.",
+    ),
     jobs: int = typer.Option(2, "--jobs", "-j", min=1, help="Processes (bootstrap and replicates); numbers do not depend on it."),
     as_json: bool = typer.Option(False, "--json", help="Print summary.json to stdout instead of tables."),
 ) -> None:
     """Reproduce Sections V-VI of the paper on simulated supervisors and write a report."""
     from ..report import write_report
-    from ..reproduction.pipeline import ReproduceConfig, reproduce as run_reproduce
+    from ..reproduction.pipeline import ReproduceConfig
+    from ..reproduction.pipeline import reproduce as run_reproduce
 
     cfg = ReproduceConfig(
-        seed=seed, replicates=replicates, large_n=large_n, bootstrap=bootstrap, restarts=restarts,
-        replicate_restarts=replicate_restarts, replicate_large_n=replicate_large_n, belief_update=belief_update, jobs=jobs,
+        seed=seed,
+        replicates=replicates,
+        large_n=large_n,
+        bootstrap=bootstrap,
+        restarts=restarts,
+        replicate_restarts=replicate_restarts,
+        replicate_large_n=replicate_large_n,
+        belief_update=belief_update,
+        jobs=jobs,
     )
     problems = cfg.problems()
     if problems:
         raise TrustseekError(problems)
     t0 = time.perf_counter()
     with Progress(
-        TextColumn("[bold]{task.description:<44}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"), TimeElapsedColumn(),
-        console=err_console, transient=as_json, disable=False,
+        TextColumn("[bold]{task.description:<44}"),
+        BarColumn(),
+        TextColumn("{task.percentage:>3.0f}%"),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=as_json,
+        disable=False,
     ) as bar:
         task = bar.add_task("experiment 1", total=1000)
 
@@ -184,11 +260,12 @@ def reproduce(
         return
     print_comparison(rep.summary)
     s = rep.summary
-    e2 = s["experiment2"]
+    large, small = s["experiment2"]["large"], s["experiment2"]["small"]
+    lo, hi = large["mean_difference_ci"]
     console.print(
-        f"Experiment 2, {e2['large']['participants']:,} participants: mean aware − agnostic "
-        f"{e2['large']['mean_difference']:.2f} [{e2['large']['mean_difference_ci'][0]:.2f}, {e2['large']['mean_difference_ci'][1]:.2f}] per block; "
-        f"Wilcoxon p = {_p(e2['large']['wilcoxon']['p_value'])}; 5 participants: p = {_p(e2['small']['wilcoxon']['p_value'])}"
+        f"Experiment 2, {large['participants']:,} participants: mean aware − agnostic "
+        f"{large['mean_difference']:.2f} [{lo:.2f}, {hi:.2f}] per block; "
+        f"Wilcoxon p = {_p(large['wilcoxon']['p_value'])}; 5 participants: p = {_p(small['wilcoxon']['p_value'])}"
     )
     if s["disagreements"]:
         console.print("[bold red]Where the simulation disagrees with the paper:[/]")
@@ -220,8 +297,14 @@ def print_comparison(summary: dict) -> None:
     for r in summary["comparison"]:
         iv = r["interval"]
         ivs = f"[{fmt(iv[0])}, {fmt(iv[1])}]" if iv else (r["note"] or "–")
-        verdict = "[green]agrees[/]" if r["verdict"] == "agrees" else ("[bold red]DISAGREES[/]" if r["verdict"] == "DISAGREES" else r["verdict"])
+        verdict = (
+            "[green]agrees[/]"
+            if r["verdict"] == "agrees"
+            else ("[bold red]DISAGREES[/]" if r["verdict"] == "DISAGREES" else r["verdict"])
+        )
         table.add_row(escape(r["quantity"]), escape(fmt(r["paper"])), escape(fmt(r["ours"])), escape(ivs), verdict)
     out = console if console.is_terminal else Console(width=max(console.width, 150))
     out.print(table)
-    out.print(f"[dim]intervals: 2.5-97.5% over {summary['replicates']['n']} replicate experiments unless the note says otherwise[/]")
+    out.print(
+        f"[dim]intervals: 2.5-97.5% over {summary['replicates']['n']} replicate experiments unless the note says otherwise[/]"
+    )

@@ -1,9 +1,7 @@
-"""Standard POMDP files: a flat POMDP, Cassandra's ``.pomdp`` format and POMDPX.
+"""Standard POMDP files: Cassandra's ``.pomdp`` format and POMDPX.
 
-:class:`FlatPOMDP` is a plain discrete POMDP: ``transition[a, s, s2]``,
-``observation[a, s2, o]`` (the observation depends on the action and the NEXT
-state, as in the file formats), ``reward[a, s, s2, o]``, a discount and a start
-distribution.  :func:`read_pomdp` / :func:`write_pomdp` handle Cassandra's format
+Files are read into and written from a :class:`~trustseek.pomdp.flat.FlatPOMDP` (a plain
+discrete POMDP).  :func:`read_pomdp` / :func:`write_pomdp` handle Cassandra's format
 (``T:``, ``O:``, ``R:`` entries with names or indices, ``*`` wildcards, rows,
 matrices, ``uniform`` and ``identity``), so benchmark files such as Tiger can be
 solved with the point-based solver and checked against published values.
@@ -33,103 +31,33 @@ from __future__ import annotations
 
 import re
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
+from collections.abc import Sequence
 from itertools import product
 from pathlib import Path
-from typing import Sequence
+from typing import Any
 
 import numpy as np
 
-from ..errors import TrustseekError
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
+from ..pomdp.belief import to_vector
+from ..pomdp.flat import FlatPOMDP, FlatPOMDPError
 from ..pomdp.problem import AssistancePOMDP
 
+__all__ = [
+    "PomdpFileError",
+    "export_assistance",
+    "flat_belief",
+    "flat_from_assistance",
+    "flat_values_check",
+    "read_pomdp",
+    "read_pomdpx_tables",
+    "write_pomdp",
+    "write_pomdpx",
+]
 
-class PomdpFileError(TrustseekError, ValueError):
+
+class PomdpFileError(FlatPOMDPError):
     """A ``.pomdp`` or POMDPX file is malformed."""
-
-
-@dataclass(eq=False)
-class FlatPOMDP:
-    """A discrete POMDP over enumerated states, actions and observations."""
-
-    states: tuple[str, ...]
-    actions: tuple[str, ...]
-    observations: tuple[str, ...]
-    transition: np.ndarray  # [a, s, s2]
-    observation: np.ndarray  # [a, s2, o]
-    reward: np.ndarray  # [a, s, s2, o]
-    discount: float
-    start: np.ndarray  # [s]
-    notes: list[str] = field(default_factory=list)
-
-    def __post_init__(self) -> None:
-        self.states, self.actions, self.observations = tuple(self.states), tuple(self.actions), tuple(self.observations)
-        S, A, O = len(self.states), len(self.actions), len(self.observations)
-        self.transition = np.asarray(self.transition, dtype=float)
-        self.observation = np.asarray(self.observation, dtype=float)
-        self.reward = np.asarray(self.reward, dtype=float)
-        self.start = np.asarray(self.start, dtype=float)
-        problems = []
-        for name, arr, shape in (
-            ("transition", self.transition, (A, S, S)),
-            ("observation", self.observation, (A, S, O)),
-            ("reward", self.reward, (A, S, S, O)),
-            ("start", self.start, (S,)),
-        ):
-            if arr.shape != shape:
-                problems.append(f"{name} has shape {arr.shape}, expected {shape}")
-        if not problems:
-            for name, arr, labels in (
-                ("transition", self.transition, (self.actions, self.states)),
-                ("observation", self.observation, (self.actions, self.states)),
-            ):
-                sums = arr.sum(axis=-1)
-                bad = np.argwhere((np.abs(sums - 1.0) > 1e-6) | np.any(arr < 0, axis=-1))
-                for a, s in bad[:5]:
-                    problems.append(
-                        f"{name}[{labels[0][a]}, {labels[1][s]}] must be a probability row, sums to {sums[a, s]:.9g}"
-                    )
-            if abs(self.start.sum() - 1.0) > 1e-6 or np.any(self.start < 0):
-                problems.append(f"start must be a probability distribution, sums to {self.start.sum():.9g}")
-            if not 0.0 <= self.discount <= 1.0:
-                problems.append(f"discount = {self.discount} must lie in [0, 1]")
-        if problems:
-            raise PomdpFileError(problems)
-
-    @property
-    def expected_reward(self) -> np.ndarray:
-        """r[a, s] = Σ_{s2, o} T(s2 | s, a) O(o | s2, a) R(a, s, s2, o)."""
-        return np.einsum("aij,ajo,aijo->ai", self.transition, self.observation, self.reward)
-
-    @property
-    def branch_kernels(self) -> np.ndarray:
-        """M[a, o, s, s2] = T(s2 | s, a) O(o | s2, a): the unnormalized belief update."""
-        return np.einsum("aij,ajo->aoij", self.transition, self.observation)
-
-    def finite_horizon_value(self, belief, horizon: int) -> float:
-        """The exact optimal value of ``horizon`` steps from a belief (enumerating action and
-        observation branches; for small problems and short horizons)."""
-        b = np.asarray(belief, dtype=float)
-        r = self.expected_reward
-        M = self.branch_kernels
-
-        def v(b, h):
-            if h == 0:
-                return 0.0
-            best = -np.inf
-            for a in range(len(self.actions)):
-                q = float(r[a] @ b)
-                if h > 1:
-                    for o in range(len(self.observations)):
-                        nb = b @ M[a, o]
-                        p = nb.sum()
-                        if p > 1e-300:
-                            q += self.discount * p * v(nb / p, h - 1)
-                best = max(best, q)
-            return best
-
-        return v(b, horizon)
 
 
 # --------------------------------------------------------------------------- export of the assistance POMDP
@@ -145,7 +73,13 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
     kern = pomdp.kernel  # [c, a, t, o, e, u]
     pc = pomdp.complexity_probs
     T_, C_ = [_token(x) for x in pomdp.trust_levels], [_token(x) for x in pomdp.complexities]
-    states = [f"{T_[t]}.{EXPERIENCES[e]}.{C_[c]}.{HUMAN_ACTIONS[o]}" for t in range(K) for e in range(2) for c in range(N) for o in range(2)]
+    states = [
+        f"{T_[t]}.{EXPERIENCES[e]}.{C_[c]}.{HUMAN_ACTIONS[o]}"
+        for t in range(K)
+        for e in range(2)
+        for c in range(N)
+        for o in range(2)
+    ]
     obs = [f"{HUMAN_ACTIONS[o]}.{EXPERIENCES[e]}.{C_[c]}" for o in range(2) for e in range(2) for c in range(N)]
 
     def sidx(t, e, c, o):
@@ -154,10 +88,10 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
     def oidx(o, e, c):
         return (o * 2 + e) * N + c
 
-    S, O = len(states), len(obs)
-    Tm = np.zeros((2, S, S))
-    Om = np.zeros((2, S, O))
-    Rm = np.zeros((2, S, S, O))
+    n_s, n_o = len(states), len(obs)
+    Tm = np.zeros((2, n_s, n_s))
+    Om = np.zeros((2, n_s, n_o))
+    Rm = np.zeros((2, n_s, n_s, n_o))
     R = pomdp.expected_reward  # [c, a, t]
     for a in range(2):
         for t, e, c, o in product(range(K), range(2), range(N), range(2)):
@@ -166,7 +100,7 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
             Rm[a, s] = R[c, a, t]
             for o2, e2, u, c2 in product(range(2), range(2), range(K), range(N)):
                 Tm[a, s, sidx(u, e2, c2, o2)] += pc[c2] * kern[c, a, t, o2, e2, u]
-    start = np.zeros(S)
+    start = np.zeros(n_s)
     cw = pc if initial_complexity is None else np.eye(N)[initial_complexity]
     for t, c in product(range(K), range(N)):
         start[sidx(t, 1, c, 1)] = pomdp.model.initial[t] * cw[c]
@@ -176,13 +110,11 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
         "the human action of a trial depends on the trust at its start: it is drawn with the transition and "
         "stored in the next state, then observed",
     ]
-    return FlatPOMDP(states, ACTIONS, obs, Tm, Om, Rm, pomdp.discount, start, notes)
+    return FlatPOMDP(tuple(states), ACTIONS, tuple(obs), Tm, Om, Rm, pomdp.discount, start, notes)
 
 
 def flat_belief(pomdp: AssistancePOMDP, belief, complexity: int) -> np.ndarray:
     """The flat belief for a belief over trust and a known complexity (E = reliable, last = rely)."""
-    from ..pomdp.belief import to_vector
-
     b = to_vector(belief, pomdp.n_trust)
     K, N = pomdp.n_trust, pomdp.n_complexity
     out = np.zeros(K * 2 * N * 2)
@@ -226,7 +158,7 @@ def write_pomdp(flat: FlatPOMDP, path: str | Path | None = None) -> str:
                 if block.flat[0] != 0:
                     lines.append(f"R: {an} : {sn} : * : * {_num(block.flat[0])}")
                 continue
-            for s2, o in zip(*np.nonzero(block)):
+            for s2, o in zip(*np.nonzero(block), strict=True):
                 lines.append(f"R: {an} : {sn} : {flat.states[s2]} : {flat.observations[o]} {_num(block[s2, o])}")
     text = "\n".join(lines) + "\n"
     if path is not None:
@@ -283,7 +215,7 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
         return tuple(toks)
 
     states, actions, observations = names("states"), names("actions"), names("observations")
-    S, A, O = len(states), len(actions), len(observations)
+    n_s, n_a, n_o = len(states), len(actions), len(observations)
     no, disc = need("discount")
     try:
         discount = float(disc)
@@ -314,30 +246,30 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
             raise PomdpFileError([f"line {no}: {what} needs {count} numbers, got {len(vals)}"], label)
         return np.array(vals)
 
-    start = np.full(S, 1.0 / S)
+    start = np.full(n_s, 1.0 / n_s)
     if "start" in header:
         no, rest = header["start"]
         toks = rest.split()
         if toks == ["uniform"]:
             pass
         elif len(toks) == 1 and not _is_float(toks[0]):
-            start = np.zeros(S)
+            start = np.zeros(n_s)
             start[index("state", states, toks[0], no)[0]] = 1.0
         else:
-            start = numbers(toks, S, no, "start")
+            start = numbers(toks, n_s, no, "start")
     for k in ("start include", "start exclude"):
         if k in header:
             no, rest = header[k]
             sel = [i for t in rest.split() for i in index("state", states, t, no)]
-            mask = np.zeros(S, dtype=bool)
+            mask = np.zeros(n_s, dtype=bool)
             mask[sel] = True
             if k == "start exclude":
                 mask = ~mask
             start = np.where(mask, 1.0, 0.0) / mask.sum()
 
-    T = np.zeros((A, S, S))
-    Om = np.zeros((A, S, O))
-    R = np.zeros((A, S, S, O))
+    T = np.zeros((n_a, n_s, n_s))
+    Om = np.zeros((n_a, n_s, n_o))
+    R = np.zeros((n_a, n_s, n_s, n_o))
     for no, k, rest in groups:
         if k not in ("T", "O", "R"):
             continue
@@ -346,9 +278,9 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
         specs = fields[:-1] + ([last[0]] if last else [])
         vals = last[1:]
         if k in ("T", "O"):
-            second = ("state", states) if k == "T" else ("state", states)
+            second = ("state", states)
             third = ("state", states) if k == "T" else ("observation", observations)
-            width = S if k == "T" else O
+            width = n_s if k == "T" else n_o
             arr = T if k == "T" else Om
             if len(specs) == 3:
                 a_, s_, x_ = (index("action", actions, specs[0], no), index(*second, specs[1], no), index(*third, specs[2], no))
@@ -362,11 +294,11 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
             elif len(specs) == 1:
                 a_ = index("action", actions, specs[0], no)
                 if vals == ["uniform"]:
-                    mat = np.full((S, width), 1.0 / width)
+                    mat = np.full((n_s, width), 1.0 / width)
                 elif vals == ["identity"] and k == "T":
-                    mat = np.eye(S)
+                    mat = np.eye(n_s)
                 else:
-                    mat = numbers(vals, S * width, no, f"{k} matrix").reshape(S, width)
+                    mat = numbers(vals, n_s * width, no, f"{k} matrix").reshape(n_s, width)
                 for a in a_:
                     arr[a] = mat
             else:
@@ -381,16 +313,17 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
                 )
                 R[np.ix_(a_, s_, s2_, o_)] = sign * numbers(vals, 1, no, "R entry")[0]
             elif len(specs) == 3:
-                a_, s_, s2_ = index("action", actions, specs[0], no), index("state", states, specs[1], no), index("state", states, specs[2], no)
-                R[np.ix_(a_, s_, s2_)] = sign * numbers(vals, O, no, "R row")
+                a_ = index("action", actions, specs[0], no)
+                s_, s2_ = index("state", states, specs[1], no), index("state", states, specs[2], no)
+                R[np.ix_(a_, s_, s2_)] = sign * numbers(vals, n_o, no, "R row")
             elif len(specs) == 2:
                 a_, s_ = index("action", actions, specs[0], no), index("state", states, specs[1], no)
-                R[np.ix_(a_, s_)] = sign * numbers(vals, S * O, no, "R matrix").reshape(S, O)
+                R[np.ix_(a_, s_)] = sign * numbers(vals, n_s * n_o, no, "R matrix").reshape(n_s, n_o)
             else:
                 raise PomdpFileError([f"line {no}: malformed R entry"], label)
     try:
         return FlatPOMDP(states, actions, observations, T, Om, R, discount, start)
-    except PomdpFileError as exc:
+    except FlatPOMDPError as exc:
         raise PomdpFileError(exc.problems, label) from None
 
 
@@ -412,10 +345,8 @@ def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
     and ``human`` (the human action of the trial just played, as in the flat export; hidden
     as a state variable and revealed by the observation variable ``human_action``).
     """
-    K, N = pomdp.n_trust, pomdp.n_complexity
     T_ = [_token(x) for x in pomdp.trust_levels]
     C_ = [_token(x) for x in pomdp.complexities]
-    kern = pomdp.kernel  # [c, a, t, o, e, u]
     root = ET.Element("pomdpx", version="0.1", id="trustseek")
     ET.SubElement(root, "Description").text = "trustseek assistance POMDP (state augmented with the last human action)"
     ET.SubElement(root, "Discount").text = _num(pomdp.discount)
@@ -433,8 +364,7 @@ def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
     ET.SubElement(ov, "ValueEnum").text = " ".join(HUMAN_ACTIONS)
     av = ET.SubElement(var, "ActionVar", vname="robot")
     ET.SubElement(av, "ValueEnum").text = " ".join(ACTIONS)
-    rv = ET.SubElement(var, "RewardVar", vname="reward")
-    del rv
+    ET.SubElement(var, "RewardVar", vname="reward")
 
     def cond(parent, var_, parents, table):
         c = ET.SubElement(parent, "CondProb")
@@ -470,7 +400,6 @@ def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
     e = ET.SubElement(p, "Entry")
     ET.SubElement(e, "Instance").text = "- - -"
     ET.SubElement(e, "ValueTable").text = " ".join(_num(x) for x in R.ravel())
-    del kern
     ET.indent(root)
     text = '<?xml version="1.0" encoding="ISO-8859-1"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
     if path is not None:
@@ -482,25 +411,34 @@ def read_pomdpx_tables(text: str) -> dict[str, tuple[list[str], np.ndarray]]:
     """The conditional tables of a POMDPX file written by :func:`write_pomdpx`: variable ->
     (parents, table with one axis per parent and a last axis for the variable)."""
     root = ET.fromstring(text)
-    sizes = {}
+
+    def words(elem: ET.Element, path: str) -> list[str]:
+        found = elem.find(path)
+        if found is None or found.text is None:
+            raise PomdpFileError([f"POMDPX element <{elem.tag}> has no <{path}>"])
+        return found.text.split()
+
+    sizes: dict[str | None, int] = {}
     for sv in root.iter("StateVar"):
-        n = len(sv.find("ValueEnum").text.split())
-        sizes[sv.get("vnamePrev")] = sizes[sv.get("vnameCurr")] = n
+        sizes[sv.get("vnamePrev")] = sizes[sv.get("vnameCurr")] = len(words(sv, "ValueEnum"))
     for tag in ("ObsVar", "ActionVar"):
         for v in root.iter(tag):
-            sizes[v.get("vname")] = len(v.find("ValueEnum").text.split())
+            sizes[v.get("vname")] = len(words(v, "ValueEnum"))
     out = {}
     for section in ("InitialStateBelief", "StateTransitionFunction", "ObsFunction"):
-        for c in root.find(section).iter("CondProb"):
-            name = c.find("Var").text
-            parents = c.find("Parent").text.split()
-            shape = [sizes[p] for p in parents if p != "null"] + [sizes[name]]
-            vals = np.array([float(x) for x in c.find("Parameter/Entry/ProbTable").text.split()])
-            out[f"{section}/{name}"] = (parents, vals.reshape(shape))
+        for c in root.iter(section):
+            for cp in c.iter("CondProb"):
+                name = words(cp, "Var")[0]
+                parents = words(cp, "Parent")
+                shape = [sizes[p] for p in parents if p != "null"] + [sizes[name]]
+                vals = np.array([float(x) for x in words(cp, "Parameter/Entry/ProbTable")])
+                out[f"{section}/{name}"] = (parents, vals.reshape(shape))
     return out
 
 
-def export_assistance(pomdp: AssistancePOMDP, path: str | Path, fmt: str | None = None, initial_complexity: int | None = None) -> str:
+def export_assistance(
+    pomdp: AssistancePOMDP, path: str | Path, fmt: str | None = None, initial_complexity: int | None = None
+) -> str:
     """Export to ``.pomdp`` or ``.pomdpx`` (chosen by ``fmt`` or the file suffix)."""
     fmt = fmt or Path(path).suffix.lstrip(".")
     if fmt == "pomdp":
@@ -510,11 +448,11 @@ def export_assistance(pomdp: AssistancePOMDP, path: str | Path, fmt: str | None 
     raise PomdpFileError([f"unknown export format {fmt!r}; expected 'pomdp' or 'pomdpx'"], str(path))
 
 
-def flat_values_check(pomdp: AssistancePOMDP, horizons: Sequence[int] = (1, 2, 3)) -> list[dict]:
-    """Finite-horizon values of the exported flat POMDP next to the belief-MDP values."""
-    from ..solvers.alpha import finite_horizon_value
-
+def flat_values_check(pomdp: AssistancePOMDP, horizons: Sequence[int] = (1, 2, 3)) -> list[dict[str, Any]]:
+    """Finite-horizon values of the exported flat POMDP next to the belief-MDP values (both by
+    exact expansion of the belief tree; any number of trust levels)."""
     flat = flat_from_assistance(pomdp)
+    belief_mdp = pomdp.branch_model()
     rows = []
     b0 = pomdp.model.initial
     for h in horizons:
@@ -524,7 +462,7 @@ def flat_values_check(pomdp: AssistancePOMDP, horizons: Sequence[int] = (1, 2, 3
                     "horizon": h,
                     "complexity": cn,
                     "flat": flat.finite_horizon_value(flat_belief(pomdp, b0, c), h),
-                    "belief_mdp": finite_horizon_value(pomdp, h, b0, c),
+                    "belief_mdp": belief_mdp.finite_horizon_value(b0, h, c),
                 }
             )
     return rows

@@ -1,8 +1,7 @@
-"""Belief updaters: how the belief over trust moves after one trial.
+"""The belief filter, once: how the belief over trust moves after a trial, and where it can move.
 
-A belief is a probability vector over the model's trust levels (for the paper's
-two levels, ``b[-1]`` is P(trust = high)).  Both updaters are vectorized: ``b``
-may have shape (..., K) with integer arrays ``c, a, o, e`` of shape (...).
+A belief is a probability vector over the model's trust levels (for the paper's two
+levels, ``b[-1]`` is P(trust = high)).  Two updates are offered:
 
 * ``paper`` -- eq. (3) exactly as printed: b' = sum_T P(T' | T, E', C, a) b(T).
   It uses the experience E' but ignores the human action o.
@@ -13,22 +12,53 @@ may have shape (..., K) with integer arrays ``c, a, o, e`` of shape (...).
   outcome depends on trust only through the human action.  A human action that
   was not recorded (``o = -1``) or that the model deems impossible is not
   conditioned on.
+
+Three views of the same filter, for three kinds of callers:
+
+* :class:`BayesUpdate` / :class:`PaperUpdate` follow one *observed* trial (c, a, o, e),
+  vectorized over beliefs of shape (..., K), any number of trust levels (``PolicyRunner``,
+  the server, the simulator for K > 2);
+* :class:`ScalarBelief` is the same update for two trust levels on the number
+  x = P(trust = high), with the tables flattened for gathers (the simulator's fast path);
+* :class:`Branches` enumerates *every* successor of a belief after (C, a) with its
+  probability (what the belief-MDP solvers expand).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
+from ..errors import TrustseekError
 from ..model.core import TrustModel
 from ..vocab import BELIEF_UPDATES, UNOBSERVED, check_belief_update
 
-__all__ = ["BELIEF_UPDATES", "UNOBSERVED", "BayesUpdate", "BeliefUpdater", "PaperUpdate", "make_updater", "to_vector"]
+__all__ = [
+    "BELIEF_UPDATES",
+    "UNOBSERVED",
+    "BayesUpdate",
+    "BeliefError",
+    "BeliefUpdater",
+    "Branches",
+    "PaperUpdate",
+    "ScalarBelief",
+    "make_updater",
+    "to_vector",
+]
 
+
+# --------------------------------------------------------------------------- observed trials
+
+
+class BeliefError(TrustseekError, ValueError):
+    """A belief that does not fit the model (e.g. one number for more than two trust levels)."""
 
 
 class BeliefUpdater(Protocol):
+    """Follows the belief through observed trials."""
+
     name: str
     model: TrustModel
 
@@ -37,7 +67,7 @@ class BeliefUpdater(Protocol):
     def update(self, b: np.ndarray, c, a, o, e) -> np.ndarray: ...
 
 
-class _Base:
+class _Updater:
     name = ""
 
     def __init__(self, model: TrustModel):
@@ -54,16 +84,16 @@ class _Base:
         return f"{type(self).__name__}()"
 
 
-class PaperUpdate(_Base):
+class PaperUpdate(_Updater):
     """Eq. (3) of the paper: propagate through P(T' | T, E', C, a), ignoring the human action."""
 
     name = "paper"
 
-    def update(self, b, c, a, o, e):
+    def update(self, b, c, a, o, e) -> np.ndarray:
         return self._predict(np.asarray(b, dtype=float), c, a, e)
 
 
-class BayesUpdate(_Base):
+class BayesUpdate(_Updater):
     """The exact Bayes filter, conditioning on the human action before the transition."""
 
     name = "bayes"
@@ -79,11 +109,12 @@ class BayesUpdate(_Base):
         # impossible under the model: keep the prior rather than divide by zero
         return np.where(z > 0, post / np.where(z > 0, z, 1.0), b)
 
-    def update(self, b, c, a, o, e):
+    def update(self, b, c, a, o, e) -> np.ndarray:
         return self._predict(self.condition(b, c, a, o), c, a, e)
 
 
 def make_updater(name: str, model: TrustModel) -> BayesUpdate | PaperUpdate:
+    """The updater called ``name`` (``bayes`` or ``paper``) for ``model``."""
     return BayesUpdate(model) if check_belief_update(name) == "bayes" else PaperUpdate(model)
 
 
@@ -92,6 +123,112 @@ def to_vector(belief, n_trust: int) -> np.ndarray:
     arr = np.asarray(belief, dtype=float)
     if arr.ndim == 0:
         if n_trust != 2:
-            raise ValueError("a scalar belief is only meaningful for two trust levels")
+            raise BeliefError(["a scalar belief is only meaningful for two trust levels"])
         return np.array([1.0 - float(arr), float(arr)])
     return arr
+
+
+class ScalarBelief:
+    """The ``paper``/``bayes`` updates for two trust levels, on x = P(trust = high).
+
+    ``step(x, ca, o, e)`` takes ``ca = c * 2 + a`` and index arrays of the same shape as
+    ``x``.  The model's tables are flattened once so that a step is a few gathers and
+    multiply-adds; the result equals :class:`BayesUpdate` / :class:`PaperUpdate` on
+    (1 - x, x) (the tests check it)."""
+
+    def __init__(self, model: TrustModel, update: str):
+        if model.n_trust != 2:
+            raise BeliefError([f"the scalar belief needs two trust levels; this model has {model.n_trust}"])
+        self.update_name = check_belief_update(update)
+        tr = model.transition  # [c, a, e, t, u]
+        self.a0 = np.ascontiguousarray(tr[..., 0, 1]).reshape(-1)  # P(high | low)     [c, a, e]
+        self.slope = np.ascontiguousarray(tr[..., 1, 1] - tr[..., 0, 1]).reshape(-1)
+        em = model.emission  # [c, a, t, o]
+        self.lik_high = np.ascontiguousarray(em[:, :, 1, :]).reshape(-1)  # [c, a, o]
+        self.lik_low = np.ascontiguousarray(em[:, :, 0, :]).reshape(-1)
+        self.x0 = float(model.initial[1])
+
+    def step(self, x: np.ndarray, ca: np.ndarray, o: np.ndarray, e: np.ndarray) -> np.ndarray:
+        if self.update_name == "bayes":
+            ko = ca * 2 + o
+            num = x * self.lik_high[ko]
+            z = num + (1.0 - x) * self.lik_low[ko]
+            ok = z > 0
+            x = np.where(ok, num / np.where(ok, z, 1.0), x)
+        k = ca * 2 + e
+        return self.a0[k] + self.slope[k] * x
+
+
+# --------------------------------------------------------------------------- every successor
+
+
+@dataclass(frozen=True, eq=False)
+class Branches:
+    """Every successor of a belief after one trial of complexity C with robot action a.
+
+    A *branch* is what the robot learns from the trial: the pair (o, E') for ``bayes``
+    (branch index o * 2 + E'), the experience E' alone for ``paper`` (eq. 3 ignores o).
+    With ``prob[c, a, br, t]`` = P(branch | T = t, C, a) and ``move[c, a, br, t, u]``, a
+    belief b takes branch br with probability b @ prob[c, a, br] and moves to
+
+    * ``bayes``: b' = b @ move / (b @ move).sum(), where move[t, u] = P(o, E', T' = u | T = t)
+      (so the normalizer is the branch probability: this is Bayes' rule on (o, E'));
+    * ``paper``: b' = b @ move, where move[t, u] = P(T' = u | T = t, E', C, a) (eq. 3).
+
+    ``contexts`` and ``actions`` are the first two axes: the complexities and the robot
+    actions for the assistance POMDP, a single context for a flat POMDP.
+    """
+
+    update: str
+    prob: np.ndarray  # [c, a, br, t]
+    move: np.ndarray  # [c, a, br, t, u]
+
+    def __post_init__(self) -> None:
+        check_belief_update(self.update)
+
+    @classmethod
+    def from_kernels(cls, kernels: np.ndarray) -> Branches:
+        """The Bayes branches of unnormalized kernels M[c, a, br, t, u] = P(br, T' = u | T = t, c, a)."""
+        kernels = np.asarray(kernels, dtype=float)
+        return cls("bayes", kernels.sum(axis=-1), kernels)
+
+    @property
+    def n_branches(self) -> int:
+        return self.prob.shape[2]
+
+    @property
+    def n_hidden(self) -> int:
+        return self.prob.shape[3]
+
+    def successors(self, beliefs: np.ndarray, c: int | None = None, a: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(probabilities, next beliefs) of beliefs (n, K).
+
+        For one (c, a): shapes (n, branches) and (n, branches, K); with ``c`` and ``a`` left
+        out, every (c, a) at once: (n, C, A, branches) and (n, C, A, branches, K).  A branch
+        of probability zero leads to the uniform belief (any belief would do: it is never
+        reached), so every next belief is a distribution."""
+        B = np.asarray(beliefs, dtype=float)
+        move = self.move if c is None else self.move[c, a]  # (..., br, t, u)
+        K = B.shape[1]
+        # one matrix product for every (c, a, br) at once: b @ move
+        nb = (B @ np.moveaxis(move, -2, 0).reshape(K, -1)).reshape(len(B), *move.shape[:-2], move.shape[-1])
+        if self.update == "paper":
+            prob = self.prob if c is None else self.prob[c, a]  # (..., br, t)
+            return (B @ np.moveaxis(prob, -1, 0).reshape(K, -1)).reshape(len(B), *prob.shape[:-1]), nb
+        p = nb @ np.ones(nb.shape[-1])  # (a matrix product: much faster than a sum over a short axis)
+        impossible = p <= 0
+        nxt = nb / np.where(impossible, 1.0, p)[..., None]
+        if impossible.any():
+            nxt[impossible] = 1.0 / nb.shape[-1]
+        return p, nxt
+
+    def two_level(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """For two trust levels, each branch as functions of x = P(trust = high):
+        (p0, p1, m0, m1), arrays [c, a, br], with
+
+            P(branch | x) = p0 (1 - x) + p1 x,
+            x'(x) = (m0 (1 - x) + m1 x) / P(branch | x)   (bayes)   or   m0 (1 - x) + m1 x   (paper).
+        """
+        if self.n_hidden != 2:
+            raise BeliefError([f"two_level() needs two trust levels; these branches have {self.n_hidden}"])
+        return self.prob[..., 0], self.prob[..., 1], self.move[..., 0, 1], self.move[..., 1, 1]

@@ -32,7 +32,9 @@ from functools import cached_property
 import numpy as np
 
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
-
+from ..vocab import check_belief_update
+from .belief import Branches
+from .branch_model import BranchModel
 
 AXES = {
     "emission": ("complexity", "robot_action", "trust", "human_action"),
@@ -112,9 +114,7 @@ class AssistancePOMDP:
     @cached_property
     def kernel(self) -> np.ndarray:
         """Joint one-step kernel P(o, E', T' | T, C, a), axes [c, a, t, o, e, t2]."""
-        return np.einsum(
-            "cato,caoe,caetu->catoeu", self.emission, self.experience, self.trust_transition, optimize=True
-        )
+        return np.einsum("cato,caoe,caetu->catoeu", self.emission, self.experience, self.trust_transition, optimize=True)
 
     @cached_property
     def outcome_probs(self) -> np.ndarray:
@@ -126,13 +126,39 @@ class AssistancePOMDP:
         """R(S, a) of eq. (2) (it does not depend on E), axes [c, a, t]."""
         return np.einsum("catoe,aoe->cat", self.outcome_probs, self.trial_reward)
 
+    # -- the belief MDP ----------------------------------------------------
+    def branches(self, update: str) -> Branches:
+        """The successors of a belief after one trial, for the ``bayes`` or ``paper`` update."""
+        if check_belief_update(update) == "bayes":
+            return self._bayes_branches
+        return self._paper_branches
+
+    @cached_property
+    def _bayes_branches(self) -> Branches:
+        K, N = self.n_trust, self.n_complexity
+        # the joint kernel with the branch (o, E') in front of the trust axes: [c, a, (o, e), t, u]
+        return Branches.from_kernels(np.transpose(self.kernel, (0, 1, 3, 4, 2, 5)).reshape(N, 2, 4, K, K))
+
+    @cached_property
+    def _paper_branches(self) -> Branches:
+        pe = np.einsum("catoe->caet", self.outcome_probs)  # P(E' | T, C, a)
+        return Branches("paper", pe, np.asarray(self.trust_transition))
+
+    def branch_model(self) -> BranchModel:
+        """The problem in branch form (contexts = complexities, Bayes branches (o, E'))."""
+        return BranchModel(
+            self.complexity_probs.copy(),
+            self.expected_reward.copy(),
+            self.branches("bayes"),
+            self.discount,
+            self.model.initial.copy(),
+        )
+
     # -- flat arrays -------------------------------------------------------
     @cached_property
     def states(self) -> tuple[tuple[str, str, str], ...]:
         """Enumerated states (trust, experience, complexity); index = (t * 2 + e) * N + c."""
-        return tuple(
-            (tn, en, cn) for tn in self.trust_levels for en in EXPERIENCES for cn in self.complexities
-        )
+        return tuple((tn, en, cn) for tn in self.trust_levels for en in EXPERIENCES for cn in self.complexities)
 
     def state_index(self, t: int, e: int, c: int) -> int:
         return (t * 2 + e) * self.n_complexity + c

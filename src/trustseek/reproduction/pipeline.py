@@ -38,11 +38,12 @@ import numpy as np
 
 from ..errors import TrustseekError
 from ..model.core import ASK, AUTONOMOUS, FAULTY, INTERVENE, RELIABLE, RELY, Task, TrustModel
-from ..policies.core import always_ask, never_ask, randomized, trust_agnostic, trust_agnostic_from_data
+from ..policies import always_ask, ask_regions, never_ask, randomized
+from ..solvers.agnostic import trust_agnostic, trust_agnostic_from_data
 from ..pomdp.problem import AssistancePOMDP
 from ..model.presets import paper_model, paper_task
 from ..simulation.engine import Supervisors, crossover, simulate
-from ..solvers.grid import GridSolver
+from ..solvers.registry import make_solver
 from ..vocab import PAPER_BLOCK_COUNTS, PAPER_DATA_COUNTS, TRIAL_COLUMNS
 
 LOW, HIGH = 0, 1
@@ -143,16 +144,14 @@ def wilcoxon(aware: np.ndarray, agnostic: np.ndarray) -> dict[str, Any]:
 
 
 def _threshold(policy) -> float | None:
-    th = policy.thresholds()["high"]
+    """The high-complexity threshold of a policy that reads the belief (None when it never asks,
+    when its ask region is not [0, θ) or when it ignores the belief)."""
+    th = (policy.thresholds() or {}).get("high") if policy.belief_update is not None else None
     return None if th is None or not np.isfinite(th) else float(th)
 
 
 def _policy_summary(policy) -> dict[str, Any]:
-    return {
-        "thresholds": {k: (None if v is None else float(v)) for k, v in policy.thresholds().items()},
-        "ask_intervals": {k: [list(iv) for iv in v] for k, v in policy.ask_intervals().items()},
-        "belief_update": policy.belief_update,
-    }
+    return {**ask_regions(policy), "belief_update": policy.belief_update}
 
 
 def _agnostic_summary(pol) -> dict[str, Any]:
@@ -202,7 +201,7 @@ def _fit(frame, cfg: ReproduceConfig, restarts: int, seed: int, bootstrap: int, 
 
 
 def _solve(model: TrustModel, task: Task, update: str, grid: int):
-    return GridSolver(grid=grid, belief_update=update).solve(AssistancePOMDP(model, task))
+    return make_solver("grid", belief_update=update, grid=grid).solve(AssistancePOMDP(model, task))
 
 
 def _ask_policy(cfg: ReproduceConfig):

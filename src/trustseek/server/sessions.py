@@ -29,7 +29,7 @@ from sqlalchemy.orm import Session as DBSession
 
 from ..errors import TrustseekError
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
-from ..policies.core import PolicyRunner
+from ..policies import PolicyRunner
 from .orm import Base, Event, PolicyBlob, Report, Session, Study, Trial, utcnow
 from .studies import participant_plan, policy_object
 

@@ -15,26 +15,24 @@ study, so a study keeps behaving identically whatever the code later computes.
 
 from __future__ import annotations
 
+import json
 from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from ..errors import TrustseekError
 from ..model.core import ModelError, Task, TrustModel
-from ..policies.core import ComplexityPolicy, always_ask, never_ask, policy_from_dict, randomized, trust_agnostic
 from ..model.presets import MODEL_PRESETS, TASK_PRESETS
-from ..solvers.grid import solve
+from ..policies import policy_from_dict
+from ..solvers import policy_from_spec
 
-POLICY_KINDS = ("trust-aware", "trust-agnostic", "randomized", "always-ask", "never-ask")
 MAX_TRIALS_PER_BLOCK = 1000
+MAX_GRID = 20001  # the largest belief grid a study may ask the server to solve
 
 
-class ConfigError(ValueError):
+class ConfigError(TrustseekError, ValueError):
     """A study or deploy configuration is invalid; ``problems`` lists every reason."""
-
-    def __init__(self, problems: list[str]):
-        self.problems = problems
-        super().__init__("; ".join(problems))
 
 
 class Schedule(BaseModel):
@@ -98,63 +96,25 @@ def load_model_spec(spec: str | dict) -> TrustModel:
 
 
 def resolve_policy(spec: dict[str, Any], model: TrustModel, task: Task, where: str = "policy") -> dict[str, Any]:
-    """A policy spec to the core's policy JSON (solving the POMDP for ``trust-aware``)."""
+    """A policy spec (``trustseek.solvers.specs``) to the core's policy JSON, solving the POMDP
+    for ``trust-aware`` (cached: many sessions open with the same model, task and spec)."""
     if not isinstance(spec, dict):
         raise ConfigError([f"{where} must be an object"])
-    if "format" in spec:
-        try:
-            pol = policy_from_dict(spec, where)
-        except ModelError as exc:
-            raise ConfigError(exc.lines()) from None
-        if tuple(pol.complexities) != tuple(task.complexities):
-            raise ConfigError([f"{where}: complexities {list(pol.complexities)} differ from the task's {list(task.complexities)}"])
-        return pol.to_dict()
-    kind = spec.get("kind")
-    allowed = {"kind", "belief_update", "grid", "p_ask"}
-    extra = sorted(set(spec) - allowed)
-    if extra:
-        raise ConfigError([f"{where} has unknown entries {extra} (expected some of {sorted(allowed)})"])
-    if kind not in POLICY_KINDS:
-        raise ConfigError([f"{where}.kind is {kind!r}, expected one of {list(POLICY_KINDS)} (or give a full policy JSON)"])
-    cx = task.complexities
-    if kind == "trust-aware":
-        bu = spec.get("belief_update", "bayes")
-        grid = spec.get("grid", 2001)
-        if bu not in ("bayes", "paper"):
-            raise ConfigError([f"{where}.belief_update is {bu!r}, expected 'bayes' or 'paper'"])
-        if not isinstance(grid, int) or isinstance(grid, bool) or not 3 <= grid <= 20001:
-            raise ConfigError([f"{where}.grid is {grid!r}, expected an integer in [3, 20001]"])
-        if model.n_trust != 2:
-            raise ConfigError([f"{where}: the trust-aware solver needs a model with two trust levels"])
-        return _solved(model, task, bu, grid)
-    if kind == "trust-agnostic":
-        return trust_agnostic(model, task).to_dict()
-    if kind == "randomized":
-        p = spec.get("p_ask")
-        if p is None:
-            return randomized().to_dict() if cx == ("low", "high") else randomized({c: 0.25 for c in cx}).to_dict()
-        if not isinstance(p, dict) or set(p) != set(cx):
-            raise ConfigError([f"{where}.p_ask must map each complexity {list(cx)} to a probability, got {p!r}"])
-        try:
-            return ComplexityPolicy("randomized", cx, [p[c] for c in cx]).to_dict()
-        except ModelError as exc:
-            raise ConfigError([f"{where}: {x}" for x in exc.problems]) from None
-    return (always_ask(cx) if kind == "always-ask" else never_ask(cx)).to_dict()
+    key = None if "format" in spec else json.dumps([model.to_dict(), task.to_dict(), spec], sort_keys=True)
+    if key is not None and key in _RESOLVED:
+        return _RESOLVED[key]
+    try:
+        policy = policy_from_spec(spec, model, task, where, max_grid=MAX_GRID).to_dict()
+    except TrustseekError as exc:
+        raise ConfigError(exc.lines()) from None
+    if key is not None:
+        if len(_RESOLVED) > 64:
+            _RESOLVED.clear()
+        _RESOLVED[key] = policy
+    return policy
 
 
-_SOLVED: dict[str, dict[str, Any]] = {}
-
-
-def _solved(model: TrustModel, task: Task, bu: str, grid: int) -> dict[str, Any]:
-    """The solved trust-aware policy (cached: many sessions open with the same model and task)."""
-    import json
-
-    key = json.dumps([model.to_dict(), task.to_dict(), bu, grid], sort_keys=True)
-    if key not in _SOLVED:
-        if len(_SOLVED) > 64:
-            _SOLVED.clear()
-        _SOLVED[key] = solve(model, task, belief_update=bu, grid=grid).to_dict()
-    return _SOLVED[key]
+_RESOLVED: dict[str, dict[str, Any]] = {}
 
 
 def build_study_config(study: StudyIn) -> dict[str, Any]:
@@ -171,7 +131,7 @@ def build_study_config(study: StudyIn) -> dict[str, Any]:
         problems += exc.problems
     if task is not None and model is not None and tuple(model.complexities) != tuple(task.complexities):
         problems.append(f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}")
-    if problems:
+    if problems or task is None or model is None:
         raise ConfigError(problems)
     blocks = []
     for i, b in enumerate(study.blocks):
@@ -216,7 +176,7 @@ def participant_plan(cfg: dict[str, Any], index: int, seed: int) -> dict[str, An
     """Block order and each block's complexity sequence, drawn once per participant."""
     rng = np.random.default_rng([cfg["seed"], seed])
     order = block_order(cfg, index, rng)
-    trials = []
+    trials: list[dict[str, Any]] = []
     for b in order:
         sched = cfg["blocks"][b]["schedule"]
         if "trials" in sched:

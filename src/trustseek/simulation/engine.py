@@ -38,7 +38,8 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from ..pomdp.belief import make_updater
+from ..policies.regions import ask_bounds
+from ..pomdp.belief import ScalarBelief, make_updater
 from ..vocab import PAPER_BLOCK_COUNTS, TRIAL_COLUMNS, check_belief_update
 from ..errors import TrustseekError
 from ..model.core import ACTIONS, ASK, AUTONOMOUS, EXPERIENCES, HUMAN_ACTIONS, INTERVENE, RELIABLE, RELY, Task, TrustModel
@@ -373,62 +374,12 @@ class _Tables:
             self.trust_low = self.trust_cum[:, 0].copy()  # P(T' = low | ...)
 
 
-class _ScalarBelief:
-    """The ``paper``/``bayes`` updates of belief.py for two trust levels, on x = P(trust = high),
-    with the model's tables flattened for gathers (checked against belief.py in the tests)."""
-
-    def __init__(self, model: TrustModel, update: str):
-        self.update_name = update
-        tr = model.transition  # [c, a, e, t, u]
-        self.a0 = np.ascontiguousarray(tr[..., 0, 1]).reshape(-1)  # P(high | low)     [c, a, e]
-        self.slope = np.ascontiguousarray(tr[..., 1, 1] - tr[..., 0, 1]).reshape(-1)
-        em = model.emission  # [c, a, t, o]
-        self.lik_high = np.ascontiguousarray(em[:, :, 1, :]).reshape(-1)  # [c, a, o]
-        self.lik_low = np.ascontiguousarray(em[:, :, 0, :]).reshape(-1)
-        self.x0 = float(model.initial[1])
-
-    def step(self, x: np.ndarray, ca: np.ndarray, o: np.ndarray, e: np.ndarray) -> np.ndarray:
-        if self.update_name == "bayes":
-            ko = ca * 2 + o
-            num = x * self.lik_high[ko]
-            z = num + (1.0 - x) * self.lik_low[ko]
-            ok = z > 0
-            x = np.where(ok, num / np.where(ok, z, 1.0), x)
-        k = ca * 2 + e
-        return self.a0[k] + self.slope[k] * x
-
-
-def threshold_form(policy) -> np.ndarray | None:
-    """Per complexity index, the bound θ_C such that a trust-aware policy asks exactly when
-    P(trust = high) < θ_C (``-inf``: never asks, ``+inf``: always asks), or ``None`` when its
-    ask region is not an interval starting at 0 (then ``policy.actions`` is used as is).
-
-    This is ``TrustAwarePolicy.actions`` evaluated in two operations per trial; the bound is
-    where the interpolated advantage Q(ask) - Q(autonomous) crosses zero
-    (``TrustAwarePolicy.ask_intervals``), so both agree except for beliefs within rounding
-    error of the crossing itself."""
-    from ..policies.core import TrustAwarePolicy
-
-    if not isinstance(policy, TrustAwarePolicy) or policy.model is None or policy.model.n_trust != 2:
-        return None
-    out = []
-    for cn, iv in policy.ask_intervals().items():
-        if not iv:
-            out.append(-np.inf)
-        elif len(iv) == 1 and iv[0][0] == policy.grid[0]:
-            hi = iv[0][1]
-            out.append(np.inf if hi >= policy.grid[-1] else hi)
-        else:
-            return None
-    return np.array(out)
-
-
 def _policy_belief(block: Block):
     """(model, update name) of the robot's belief in a block, or (None, None)."""
     pol = block.policy
-    model = getattr(pol, "model", None) or block.belief_model
-    update = block.belief_update or getattr(pol, "belief_update", None) or "bayes"
-    if getattr(pol, "belief_update", None) is not None and model is None:
+    model = pol.model or block.belief_model
+    update = block.belief_update or pol.belief_update or "bayes"
+    if pol.belief_update is not None and model is None:
         raise SimulationError([f"the {pol.kind} policy needs a trust model for its belief"])
     check_belief_update(update)
     return (model, update) if model is not None else (None, None)
@@ -459,7 +410,7 @@ def _run_chunk(tab: _Tables, task: Task, rows: np.ndarray, blocks: list[Block], 
         policy = block.policy
         scalar = None
         if bmodel is not None and bmodel.n_trust == 2:
-            scalar = _ScalarBelief(bmodel, bupdate)
+            scalar = ScalarBelief(bmodel, bupdate)
             x = np.full(m, scalar.x0)
             B = np.empty((m, 2))
         elif bmodel is not None:
@@ -467,7 +418,7 @@ def _run_chunk(tab: _Tables, task: Task, rows: np.ndarray, blocks: list[Block], 
             B = np.broadcast_to(updater.initial(), (m, bmodel.n_trust)).copy()
         else:
             B = np.full((m, 2), np.nan)
-        bounds = threshold_form(policy) if scalar is not None else None
+        bounds = ask_bounds(policy) if scalar is not None else None
         for t in range(sched.shape[0]):
             c = sched[t]
             if bounds is not None:

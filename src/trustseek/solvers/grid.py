@@ -1,4 +1,4 @@
-"""Belief-MDP solvers (Section IV-C).
+"""The grid solver: the belief MDP of Section IV-C on a uniform grid of beliefs (two trust levels).
 
 The belief MDP has states (b, C): the belief over trust and the complexity of
 the coming trial (the last experience E does not matter, see Fig. 7).  Its
@@ -8,7 +8,7 @@ Q-function is
     W(b)       = Σ_C P(C) max_a Q(b, C, a),
 
 where a branch is (o, E') for the ``bayes`` update and E' alone for the ``paper``
-update (eq. 3 ignores o), and b' is the updated belief.
+update (eq. 3 ignores o), and b' is the updated belief (``pomdp.branches``).
 
 :class:`GridSolver` discretizes P(trust = high) on a uniform grid of two-level
 models and interpolates W linearly between grid points.  Interpolation weights
@@ -22,58 +22,43 @@ result is reported either way.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
-from ..vocab import check_belief_update
+from ..model.core import Task, TrustModel
+from ..policies.grid_q import TrustAwarePolicy
 from ..pomdp.problem import AssistancePOMDP
+from ..vocab import check_belief_update
+from .base import SolverBase, SolverError
+from .numerics import improve, policy_values
 
 DEFAULT_GRID = 2001
 METHODS = ("policy-iteration", "value-iteration")
 
-
-def belief_branches(pomdp: AssistancePOMDP, beliefs: np.ndarray, c: int, a: int, update: str):
-    """The successors of each belief after one trial with complexity c and action a.
-
-    ``beliefs`` has shape (G, K).  Returns a list of (probability (G,), next belief (G, K)).
-    """
-    em = pomdp.emission[c, a]  # [t, o]
-    ex = pomdp.experience[c, a]  # [o, e]
-    tr = pomdp.trust_transition[c, a]  # [e, t, u]
-    out = []
-    if update == "bayes":
-        for o in range(2):
-            joint = beliefs * em[None, :, o]
-            po = joint.sum(axis=1)
-            post = joint / np.where(po > 0, po, 1.0)[:, None]
-            for e in range(2):
-                w = po * ex[o, e]
-                if np.any(w > 0):
-                    out.append((w, post @ tr[e]))
-    elif update == "paper":
-        pe = beliefs @ em @ ex  # [G, e]
-        for e in range(2):
-            if np.any(pe[:, e] > 0):
-                out.append((pe[:, e], beliefs @ tr[e]))
-    else:
-        check_belief_update(update)
-    return out
+#: per complexity and action, a sparse transition matrix between grid points
+GridMatrices = list[list[sp.csr_matrix]]
 
 
 def interpolation_matrix(points: np.ndarray, grid: np.ndarray, weights: np.ndarray) -> sp.csr_matrix:
-    """Sparse (len(weights), len(grid)) matrix: row i spreads weights[i] linearly over the two
-    grid points that bracket points[i] (a uniform grid on [0, 1])."""
+    """Sparse (n, len(grid)) matrix from points and weights of shape (n, m): row i spreads each
+    weights[i, k] linearly over the two grid points that bracket points[i, k] (a uniform grid on
+    [0, 1]) and adds them up."""
     G = len(grid)
-    x = np.clip(points, 0.0, 1.0) * (G - 1)
+    n = points.shape[0]
+    x = np.clip(points, 0.0, 1.0).T.ravel() * (G - 1)
+    w = weights.T.ravel()
     j = np.minimum(np.floor(x).astype(np.int64), G - 2)
     f = x - j
-    rows = np.arange(len(points))
-    data = np.concatenate([weights * (1.0 - f), weights * f])
+    rows = np.tile(np.arange(n), points.shape[1])
+    data = np.concatenate([w * (1.0 - f), w * f])
     cols = np.concatenate([j, j + 1])
-    return sp.csr_matrix((data, (np.concatenate([rows, rows]), cols)), shape=(len(points), G))
+    m = sp.csr_matrix((data, (np.concatenate([rows, rows]), cols)), shape=(n, G))
+    m.eliminate_zeros()  # points on a grid point put weight 0 on its right neighbour
+    return m
 
 
 @dataclass
@@ -96,8 +81,12 @@ class GridSolution:
         return self.q.max(axis=2)
 
 
-class GridSolver:
+class GridSolver(SolverBase):
     """Value/policy iteration on a uniform belief grid, for models with two trust levels."""
+
+    name = "grid"
+    trust_levels = 2
+    belief_update: str
 
     def __init__(
         self,
@@ -108,10 +97,10 @@ class GridSolver:
         max_iter: int = 100_000,
     ):
         if grid < 3:
-            raise ValueError(f"grid must have at least 3 points, got {grid}")
+            raise SolverError([f"grid must have at least 3 points, got {grid}"])
         check_belief_update(belief_update)
         if method not in METHODS:
-            raise ValueError(f"unknown method {method!r}; expected one of {list(METHODS)}")
+            raise SolverError([f"unknown method {method!r}; expected one of {list(METHODS)}"])
         self.grid = int(grid)
         self.belief_update = belief_update
         self.method = method
@@ -119,68 +108,74 @@ class GridSolver:
         self.max_iter = int(max_iter)
 
     # -- the discretized belief MDP ------------------------------------------
-    def build(self, pomdp: AssistancePOMDP):
-        """Rewards r[c][a] (G,) and sparse transition matrices P[c][a] (G, G) on the grid."""
-        if pomdp.n_trust != 2:
-            raise ValueError(
-                f"the grid solver handles two trust levels; this model has {pomdp.n_trust}. "
-                "Use a point-based solver for larger models."
-            )
+    def build(self, pomdp: AssistancePOMDP) -> tuple[np.ndarray, np.ndarray, GridMatrices]:
+        """Grid, rewards r[c, a] (G,) and sparse transition matrices P[c][a] (G, G) on the grid."""
+        self.check(pomdp)
         grid = np.linspace(0.0, 1.0, self.grid)
         beliefs = np.stack([1.0 - grid, grid], axis=1)
-        N = pomdp.n_complexity
+        branches = pomdp.branches(self.belief_update)
         r = np.einsum("gk,cak->cag", beliefs, pomdp.expected_reward)
         P = []
-        for c in range(N):
+        for c in range(pomdp.n_complexity):
             row = []
             for a in range(2):
-                m = None
-                for w, nb in belief_branches(pomdp, beliefs, c, a, self.belief_update):
-                    part = interpolation_matrix(nb[:, 1], grid, w)
-                    m = part if m is None else m + part
-                row.append(m.tocsr())
+                p, nxt = branches.successors(beliefs, c, a)
+                live = np.any(p > 0, axis=0)  # branches that can happen at all
+                row.append(interpolation_matrix(nxt[:, live, 1], grid, p[:, live]))
             P.append(row)
         return grid, r, P
 
-    def solve(self, pomdp: AssistancePOMDP):
-        from ..policies.core import TrustAwarePolicy
-
-        return TrustAwarePolicy.from_solution(self.solve_grid(pomdp), pomdp.model, pomdp.task)
-
-    def operators(self, pomdp: AssistancePOMDP):
-        """(grid, q_of, bellman): q_of(W) -> Q (G, N, 2) and the Bellman operator W -> T W
+    def operators(
+        self, pomdp: AssistancePOMDP
+    ) -> tuple[np.ndarray, np.ndarray, GridMatrices, Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], np.ndarray]]:
+        """(grid, r, P, q_of, bellman): q_of(W) -> Q (G, N, 2) and the Bellman operator W -> T W
         of the discretized belief MDP, where W(b) = Σ_C P(C) max_a Q(b, C, a)."""
         grid, r, P = self.build(pomdp)
         N, gamma = pomdp.n_complexity, pomdp.discount
         pc = pomdp.complexity_probs
 
-        def q_of(W):
+        def q_of(W: np.ndarray) -> np.ndarray:
             return np.stack([np.stack([r[c, a] + gamma * (P[c][a] @ W) for a in range(2)], axis=1) for c in range(N)], axis=1)
 
-        def bellman(W):
+        def bellman(W: np.ndarray) -> np.ndarray:
             return q_of(W).max(axis=2) @ pc
 
         return grid, r, P, q_of, bellman
 
+    # -- solving ---------------------------------------------------------------
+    def solve(self, pomdp: AssistancePOMDP) -> TrustAwarePolicy:
+        """The trust-aware policy: greedy in Q on the grid (``info`` says how it was obtained)."""
+        sol = self.solve_grid(pomdp)
+        info: dict[str, Any] = {
+            "solver": self.name,
+            "method": sol.method,
+            "grid_points": len(sol.grid),
+            "iterations": sol.iterations,
+            "bellman_residual": sol.residual,
+            "error_bound": sol.error_bound,
+            "seconds": sol.seconds,
+            "discount": pomdp.discount,
+        }
+        return TrustAwarePolicy(sol.grid, sol.q, pomdp.model, pomdp.complexities, sol.belief_update, info)
+
     def solve_grid(self, pomdp: AssistancePOMDP) -> GridSolution:
+        """Q on the grid, with the iteration count, the Bellman residual and the error bound."""
         t0 = time.perf_counter()
         grid, r, P, q_of, bellman = self.operators(pomdp)
-        N, G, gamma = pomdp.n_complexity, len(grid), pomdp.discount
+        G, gamma = len(grid), pomdp.discount
         pc = pomdp.complexity_probs
 
         history: list[float] = []
         if self.method == "value-iteration":
             W = np.zeros(G)
             it = 0
-            bound = np.inf
             while it < self.max_iter:
                 W_new = bellman(W)
                 it += 1
                 delta = float(np.max(np.abs(W_new - W)))
                 history.append(delta)
                 W = W_new
-                bound = gamma / (1 - gamma) * delta
-                if bound <= self.tol:
+                if gamma / (1 - gamma) * delta <= self.tol:
                     break
         else:
             W, _, it = policy_iteration(r, P, pc, gamma, max_iter=self.max_iter)
@@ -189,7 +184,7 @@ class GridSolver:
         return GridSolution(
             grid=grid,
             q=q,
-            belief_update=self.belief_update,
+            belief_update=str(self.belief_update),
             method=self.method,
             iterations=it,
             residual=residual,
@@ -199,7 +194,9 @@ class GridSolver:
         )
 
 
-def policy_iteration(r: np.ndarray, P, pc: np.ndarray, gamma: float, policy: np.ndarray | None = None, max_iter: int = 1000):
+def policy_iteration(
+    r: np.ndarray, P: GridMatrices, pc: np.ndarray, gamma: float, policy: np.ndarray | None = None, max_iter: int = 1000
+) -> tuple[np.ndarray, np.ndarray, int]:
     """Howard's policy iteration on a finite belief MDP over G points.
 
     ``r[c, a]`` (G,) are the rewards, ``P[c][a]`` sparse (G, G) transition matrices to the
@@ -208,47 +205,33 @@ def policy_iteration(r: np.ndarray, P, pc: np.ndarray, gamma: float, policy: np.
     """
     N, G = len(pc), r.shape[-1]
     policy = r.argmax(axis=1) if policy is None else np.asarray(policy)
-    eye = sp.identity(G, format="csr")
     W = np.zeros(G)
     it = 0
     while it < max_iter:
         it += 1
-        M = None
+        M = sp.csr_matrix((G, G))
         rr = np.zeros(G)
         for c in range(N):
             sel = policy[c]
-            Pc = sp.diags((sel == 0).astype(float)) @ P[c][0] + sp.diags((sel == 1).astype(float)) @ P[c][1]
-            M = pc[c] * Pc if M is None else M + pc[c] * Pc
+            rows = sp.diags((sel == 0).astype(float)) @ P[c][0] + sp.diags((sel == 1).astype(float)) @ P[c][1]
+            M = M + (gamma * pc[c]) * rows
             rr += pc[c] * np.where(sel == 0, r[c, 0], r[c, 1])
-        W = _evaluate((eye - gamma * M).tocsr(), rr, W)
+        W = policy_values(M.tocsr(), rr, W)
         q = np.stack([np.stack([r[c, a] + gamma * (P[c][a] @ W) for a in range(2)]) for c in range(N)])  # [c, a, G]
-        # keep the current action on ties, so that the iteration terminates
-        cur = np.take_along_axis(q, policy[:, None, :], axis=1)[:, 0]
-        better = q.max(axis=1) > cur + 1e-12 * (1 + np.abs(cur))
-        new_policy = np.where(better, q.argmax(axis=1), policy)
-        if np.array_equal(new_policy, policy):
+        new_policy = improve(q, policy, axis=1)
+        if new_policy is None:
             break
         policy = new_policy
     return W, policy, it
 
 
-def _evaluate(A: sp.csr_matrix, rhs: np.ndarray, x0: np.ndarray) -> np.ndarray:
-    """Solve A x = rhs for a policy's value: BiCGSTAB (fast on these well-conditioned,
-    very sparse systems), falling back to a direct sparse solve if it does not converge."""
-    scale = max(1.0, float(np.max(np.abs(rhs))))
-    x, info = spla.bicgstab(A, rhs, x0=x0, rtol=1e-14, atol=1e-13 * scale, maxiter=10_000)
-    if info != 0 or not np.all(np.isfinite(x)) or np.max(np.abs(A @ x - rhs)) > 1e-9 * scale:
-        x = spla.spsolve(A.tocsc(), rhs)
-    return x
-
-
 def solve(
-    model,
-    task,
+    model: TrustModel,
+    task: Task,
     belief_update: str = "bayes",
     grid: int = DEFAULT_GRID,
     method: str = "policy-iteration",
     tol: float = 1e-9,
-):
+) -> TrustAwarePolicy:
     """Solve the assistance POMDP of ``model`` and ``task`` for the trust-aware policy."""
     return GridSolver(grid=grid, belief_update=belief_update, method=method, tol=tol).solve(AssistancePOMDP(model, task))

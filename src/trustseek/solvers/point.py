@@ -30,78 +30,22 @@ from __future__ import annotations
 import itertools
 import time
 from dataclasses import dataclass, field
+from math import comb
+from typing import Any, ClassVar
 
 import numpy as np
+import scipy.sparse as sp
 
+from ..policies.alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy
+from ..policies.base import Policy
+from ..pomdp.branch_model import BranchModel
+from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
+from ..vocab import check_belief_update
+from .base import SolverBase, SolverError
+from .numerics import evaluate_controller, improve, memoryless_controllers, policy_values
 
-
-@dataclass
-class BranchModel:
-    """context_probs[c], rewards[c, a, t], kernels[c, a, branch, t, t2], discount, initial[t]."""
-
-    context_probs: np.ndarray
-    rewards: np.ndarray
-    kernels: np.ndarray
-    discount: float
-    initial: np.ndarray
-
-    @classmethod
-    def from_assistance(cls, pomdp: AssistancePOMDP) -> "BranchModel":
-        k = pomdp.kernel  # [c, a, t, o, e, u]
-        N, K = pomdp.n_complexity, pomdp.n_trust
-        kern = np.transpose(k, (0, 1, 3, 4, 2, 5)).reshape(N, 2, 4, K, K)
-        return cls(pomdp.complexity_probs.copy(), pomdp.expected_reward.copy(), kern, pomdp.discount, pomdp.model.initial.copy())
-
-    @classmethod
-    def from_flat(cls, flat) -> "BranchModel":
-        return cls(np.ones(1), flat.expected_reward[None], flat.branch_kernels[None], flat.discount, flat.start.copy())
-
-    @property
-    def n_hidden(self) -> int:
-        return self.rewards.shape[2]
-
-    @property
-    def n_actions(self) -> int:
-        return self.rewards.shape[1]
-
-
-def evaluate_controller(model: BranchModel, actions: np.ndarray, successors: np.ndarray, guess: np.ndarray | None = None) -> np.ndarray:
-    """Exact values α[n, t] of a controller: node n takes actions[n, c] in context c and moves to
-    successors[n, c, branch] (-1: impossible branch).  Solves (I - γ P) α = r (sparse)."""
-    import scipy.sparse as sp
-    import scipy.sparse.linalg as spla
-
-    n, N = actions.shape
-    K = model.n_hidden
-    rhs = np.zeros((n, K))
-    g, pc = model.discount, model.context_probs
-    node_t = np.arange(n)[:, None] * K + np.arange(K)[None, :]
-    rows, cols, vals = [], [], []
-    for c in range(N):
-        a = actions[:, c]
-        rhs += pc[c] * model.rewards[c, a]
-        for br in range(model.kernels.shape[2]):
-            succ = successors[:, c, br]
-            ok = succ >= 0
-            if not np.any(ok):
-                continue
-            M = model.kernels[c, a[ok], br]  # (m, t, u)
-            rows.append(np.broadcast_to(node_t[ok][:, :, None], M.shape).ravel())
-            cols.append(np.broadcast_to((succ[ok][:, None] * K + np.arange(K)[None, :])[:, None, :], M.shape).ravel())
-            vals.append((g * pc[c] * M).ravel())
-    size = n * K
-    if rows:
-        P = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(size, size))
-    else:
-        P = sp.csr_matrix((size, size))
-    A = sp.identity(size, format="csr") - P
-    b = rhs.reshape(-1)
-    scale = max(1.0, float(np.max(np.abs(b))))
-    x, info = spla.bicgstab(A, b, x0=None if guess is None else guess.reshape(-1), rtol=1e-15, atol=1e-12 * scale, maxiter=5000)
-    if info != 0 or not np.all(np.isfinite(x)) or np.max(np.abs(A @ x - b)) > 1e-10 * scale:
-        x = spla.spsolve(A.tocsc(), b)
-    return np.asarray(x).reshape(n, K)
+__all__ = ["PointSolution", "PointSolver", "freudenthal_vertices", "freudenthal_weights"]
 
 
 @dataclass
@@ -159,8 +103,6 @@ def _find(sorted_codes: np.ndarray, codes: np.ndarray) -> np.ndarray:
 
 
 def _lattice_size(K: int, r: int) -> int:
-    from math import comb
-
     return comb(r + K - 1, K - 1)
 
 
@@ -173,7 +115,7 @@ def _vertex_code(verts: np.ndarray, r: int) -> np.ndarray:
     return np.where(ok, (np.clip(verts[..., 1:], 0, r) * mult).sum(axis=-1), 0)
 
 
-class PointSolver:
+class PointSolver(SolverBase):
     """Point-based lower bound and Freudenthal-grid upper bound, refined until the gap at b0 is small.
 
     * Lower bound: point-based policy iteration.  On a set of beliefs (the grid vertices, b0 and
@@ -186,11 +128,39 @@ class PointSolver:
       an upper bound, and it is certified against the rounding of the solve by its Bellman residual.
     * The resolution is doubled until U(b0) - L(b0) <= tol.  The vertex count grows like
       r^(K-1), which is what limits the number of trust levels.
+
+    It solves the assistance POMDP (an alpha-vector policy) and flat POMDPs read from standard
+    files (a flat alpha-vector policy).
     """
 
-    def __init__(self, tol: float = 1e-3, max_seconds: float = 60.0, resolution: int | None = None, max_resolution: int | None = None, depth: int = 2, lower_lattice: int | None = None, seed: int = 0):
+    name = "point"
+    belief_updates = ("bayes",)
+    # the state of the last solve: the problem, the lower-bound vectors, the upper bound
+    model: BranchModel
+    G: np.ndarray
+    r: int
+    u: np.ndarray
+    lookup: np.ndarray
+    V: np.ndarray
+    instead: ClassVar[dict[str, str]] = {
+        "belief_update": "the point solver bounds the value of the Bayes filter (belief update 'bayes'); "
+        "for the eq.-3 update use the alpha solver (two trust levels) or the grid solver",
+    }
+
+    def __init__(
+        self,
+        tol: float = 1e-3,
+        max_seconds: float = 60.0,
+        resolution: int | None = None,
+        max_resolution: int | None = None,
+        depth: int = 2,
+        lower_lattice: int | None = None,
+        seed: int = 0,
+        belief_update: str = "bayes",
+    ):
         if not tol > 0:
-            raise ValueError(f"tol must be positive, got {tol}")
+            raise SolverError([f"the target gap must be positive, got {tol}"])
+        self.belief_update = check_belief_update(belief_update)
         self.tol = float(tol)
         self.max_seconds = float(max_seconds)
         self.resolution = resolution
@@ -200,17 +170,18 @@ class PointSolver:
         self.max_vertices = 100_000
         self.lower_lattice = lower_lattice  # beliefs of the lower bound: this lattice and the reachable set
 
+    def unsupported(self, problem: Any) -> list[str]:
+        if isinstance(problem, FlatPOMDP):
+            return [] if problem.discount < 1.0 else [f"the point solver needs a discount below 1, got {problem.discount}"]
+        return super().unsupported(problem)
+
     # -- successors of a set of beliefs ------------------------------------------
-    def _successors(self, B):
-        m = self.model
-        nb = np.einsum("nt,cabtu->ncabu", B, m.kernels)  # (n, N, A, Br, K)
-        p = nb.sum(axis=-1)
-        S = np.where(p[..., None] > 0, nb / np.where(p > 0, p, 1.0)[..., None], 1.0 / m.n_hidden)
+    def _successors(self, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p, S = self.model.branches.successors(B)  # (n, N, A, Br), (n, N, A, Br, K)
         return S, p
 
-
     # -- lower bound: point-based controller evaluation -----------------------------
-    def _improve_lower(self, B, S, p, rounds: int = 30):
+    def _improve_lower(self, B: np.ndarray, S: np.ndarray, p: np.ndarray, rounds: int = 30) -> None:
         m = self.model
         n, N, A, Br, K = S.shape
         Sf = S.reshape(-1, K)
@@ -239,11 +210,8 @@ class PointSolver:
             prev = key
 
     # -- upper bound: Freudenthal grid, policy iteration ---------------------------------
-    def _upper(self, r: int):
+    def _upper(self, r: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Vertex beliefs, certified upper values and the code lookup at resolution r."""
-        import scipy.sparse as sp
-        import scipy.sparse.linalg as spla
-
         m = self.model
         K, N, gamma, pc = m.n_hidden, len(m.context_probs), m.discount, m.context_probs
         V = freudenthal_vertices(K, r)
@@ -262,25 +230,24 @@ class PointSolver:
         rows = np.broadcast_to(np.arange(nV)[:, None, None], (nV, Br, K))
         ii = np.arange(nV)
 
-        def q_of(u):
+        def q_of(u: np.ndarray) -> np.ndarray:
             return rew + gamma * np.einsum("ncabk,ncabk->nca", wt, u[col])
 
         acts = rew.argmax(axis=2)
+        u = np.zeros(nV)
         for _ in range(500):
             rr = np.zeros(nV)
-            Wm = None
+            Wm = sp.csr_matrix((nV, nV))
             for c in range(N):
                 a = acts[:, c]
                 rr += pc[c] * rew[ii, c, a]
-                part = sp.csr_matrix(((gamma * pc[c] * wt[ii, c, a]).ravel(), (rows.ravel(), col[ii, c, a].ravel())), shape=(nV, nV))
-                Wm = part if Wm is None else Wm + part
-            u = spla.spsolve((sp.identity(nV, format="csr") - Wm).tocsc(), rr)
-            q = q_of(u)
-            cur = np.take_along_axis(q, acts[:, :, None], axis=2)[:, :, 0]
-            better = q.max(axis=2) > cur + 1e-12 * (1 + np.abs(cur))
-            if not np.any(better):
+                entries = (gamma * pc[c] * wt[ii, c, a]).ravel(), (rows.ravel(), col[ii, c, a].ravel())
+                Wm = Wm + sp.csr_matrix(entries, shape=(nV, nV))
+            u = policy_values(Wm, rr, u)
+            new_acts = improve(q_of(u), acts, axis=2)
+            if new_acts is None:
                 break
-            acts = np.where(better, q.argmax(axis=2), acts)
+            acts = new_acts
         # H is monotone with modulus γ: u + max(H u - u)+ / (1 - γ) bounds its fixed point
         eta = max(0.0, float(np.max(q_of(u).max(axis=2) @ pc - u)))
         return V, u + eta / (1 - gamma), lookup
@@ -326,18 +293,22 @@ class PointSolver:
         return _unique_rows(np.vstack(out), K, decimals=9)
 
     # -- solve -------------------------------------------------------------------------
-    def solve_bounds(self, model: BranchModel, initial: np.ndarray | None = None) -> PointSolution:
+    def solve_bounds(self, problem: AssistancePOMDP | FlatPOMDP) -> PointSolution:
+        """Lower and upper bounds at the initial belief (the vectors and points behind them)."""
+        self.check(problem)
+        return self._bounds(problem.branch_model())
+
+    def _bounds(self, model: BranchModel) -> PointSolution:
+        """Lower and upper bounds at the initial belief of a problem in branch form."""
         t0 = time.perf_counter()
         self.model = model
-        K, N, A = model.n_hidden, len(model.context_probs), model.n_actions
-        b0 = np.asarray(model.initial if initial is None else initial, dtype=float)
-        combos = list(itertools.product(range(A), repeat=N)) if A**N <= 64 else [tuple([a] * N) for a in range(A)]
-        Br = model.kernels.shape[2]
-        self.G = np.array([evaluate_controller(model, np.array([cmb]), np.zeros((1, N, Br), dtype=np.int64))[0] for cmb in combos])
+        K = model.n_hidden
+        b0 = np.asarray(model.initial, dtype=float)
+        self.G = memoryless_controllers(model)
         r = self.resolution or {2: 64, 3: 16, 4: 8}.get(K, 4 if K <= 8 else 2)
         r_max = self.max_resolution or {2: 4096, 3: 512, 4: 64}.get(K, 16)
         if (r + 1) ** (K - 1) >= 2**62 or _lattice_size(K, r) > self.max_vertices:
-            raise ValueError(
+            raise SolverError(
                 f"{K} hidden states are too many for the grid upper bound of the point solver "
                 f"({_lattice_size(K, r)} vertices at resolution {r})"
             )
@@ -370,22 +341,21 @@ class PointSolver:
     def q_vectors(self, beliefs: np.ndarray) -> list[list[np.ndarray]]:
         """Q lower-bound vectors per (context, action): point backups of L at ``beliefs``."""
         m = self.model
-        S, p = self._successors(beliefs)
+        S = self._successors(beliefs)[0]
         n, N, A, Br, K = S.shape
         best = (S.reshape(-1, K) @ self.G.T).argmax(axis=1).reshape(n, N, A, Br)
         g = m.rewards[None] + m.discount * np.einsum("cabtu,ncabu->ncat", m.kernels, self.G[best])
         return [[_unique_rows(g[:, c, a], K, decimals=12) for a in range(A)] for c in range(N)]
 
-    def solve(self, pomdp: AssistancePOMDP):
-        """Solve the assistance POMDP (Bayes update); returns an AlphaVectorPolicy."""
-        from .alpha import AlphaVectorPolicy
-
-        sol = self.solve_bounds(BranchModel.from_assistance(pomdp))
-        K = pomdp.n_trust
-        beliefs = _unique_rows(np.vstack([sol.points, _simplex_lattice(K, 400 if K == 2 else 20 if K == 3 else 5)]), K)
-        qv = self.q_vectors(beliefs)
-        info = {
-            "solver": "point",
+    def solve(self, problem: AssistancePOMDP | FlatPOMDP) -> Policy:
+        """The policy of the lower bound's vectors, with the bounds at the initial belief in its
+        ``info``: an AlphaVectorPolicy for the assistance POMDP (Bayes update), a FlatAlphaPolicy
+        for a flat POMDP."""
+        sol = self.solve_bounds(problem)
+        K = sol.vectors.shape[1]
+        qv = self.q_vectors(_unique_rows(np.vstack([sol.points, _simplex_lattice(K, _q_lattice(K))]), K))
+        info: dict[str, Any] = {
+            "solver": self.name,
             "method": "point-based policy iteration + Freudenthal upper bound",
             "resolution": self.r,
             "iterations": sol.iterations,
@@ -395,15 +365,24 @@ class PointSolver:
             "gap_at": "initial belief",
             "target_gap": self.tol,
             "value_bounds_at_initial_belief": [sol.lower, sol.upper],
-            "vectors": int(len(sol.vectors)),
-            "upper_points": int(len(sol.points)),
+            "vectors": len(sol.vectors),
+            "upper_points": len(sol.points),
             "seconds": sol.seconds,
-            "discount": pomdp.discount,
+            "discount": problem.discount,
         }
-        pol = AlphaVectorPolicy(qv, sol.vectors, pomdp.model, pomdp.complexities, "bayes", info)
-        if K == 2:
-            info["thresholds"] = pol.thresholds()
-        return pol
+        if isinstance(problem, FlatPOMDP):
+            return FlatAlphaPolicy(qv[0], sol.vectors, problem.states, problem.actions, info)
+        return AlphaVectorPolicy(qv, sol.vectors, problem.model, problem.complexities, "bayes", info)
+
+
+def _q_lattice(K: int, max_points: int = 5_000) -> int:
+    """Resolution of the lattice of beliefs whose point backups give the policy's Q-vectors: 400
+    for two hidden states, 20 for three, 5 beyond, lowered until the lattice has at most
+    ``max_points`` beliefs (a flat POMDP may have many states)."""
+    r = 400 if K == 2 else 20 if K == 3 else 5
+    while r > 1 and _lattice_size(K, r) > max_points:
+        r -= 1
+    return r
 
 
 def _unique_rows(B: np.ndarray, K: int, decimals: int = 13) -> np.ndarray:
@@ -431,4 +410,4 @@ def _simplex_lattice(K: int, n: int) -> np.ndarray:
     return np.array(rows, dtype=float) / n
 
 
-__all__ = ["BranchModel", "PointSolver", "PointSolution", "evaluate_controller", "freudenthal_weights"]
+__all__ = ["PointSolution", "PointSolver", "evaluate_controller", "freudenthal_weights"]

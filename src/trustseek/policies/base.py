@@ -1,0 +1,154 @@
+"""The ``Policy`` interface, which every policy implements completely, and what policies share.
+
+A policy answers one question -- given the robot's belief over trust and the trial's
+complexity, ``autonomous`` or ``ask``? -- vectorized (``actions``) or for one trial
+(``action``).  Around it every policy also says where it asks (``ask_intervals`` /
+``thresholds``), gives its Q-function and value when it has one, and writes itself as
+JSON (``to_dict``; the ``kind`` field names the loader, see :mod:`.kinds`).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from ..errors import TrustseekError
+from ..model.core import TrustModel, json_safe
+from ..pomdp.belief import to_vector
+from .thresholds import Interval, threshold
+
+POLICY_FORMAT = "trustseek.policy/1"
+
+
+class PolicyError(TrustseekError, ValueError):
+    """A policy was asked for something it does not have (e.g. the Q-function of a policy
+    that ignores the belief, or thresholds of a model with more than two trust levels)."""
+
+
+class Policy(Protocol):
+    """What the robot does on the next trial.
+
+    ``belief_update`` names the belief the policy reads (``bayes`` or ``paper``; ``None`` for
+    a policy that ignores the belief) and ``model`` the trust model it is tracked with.
+    Beliefs are rows over the trust levels (for ``action``, P(trust = high) as one number is
+    accepted for two levels); complexities are indices (``action`` also takes names).
+    """
+
+    kind: str
+    complexities: tuple[str, ...]
+    belief_update: str | None
+    model: TrustModel | None
+    info: dict[str, Any]
+
+    def complexity_index(self, complexity: int | str) -> int:
+        """The index of a complexity given by name or index (KeyError when unknown)."""
+        ...
+
+    def actions(self, beliefs: np.ndarray | None, complexities: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
+        """Actions (0 = autonomous, 1 = ask) for beliefs (n, K) and complexity indices (n,)."""
+        ...
+
+    def action(self, belief: Any, complexity: int | str, rng: np.random.Generator | None = None) -> int:
+        """The action of one trial."""
+        ...
+
+    def ask_intervals(self) -> dict[str, list[Interval]] | None:
+        """Per complexity, the intervals of P(trust = high) where the policy asks (two trust
+        levels); ``None`` for a policy that asks at random."""
+        ...
+
+    def thresholds(self) -> dict[str, float | None] | None:
+        """Per complexity, the belief in high trust below which the policy asks (``None``:
+        never asks, 1.0: always asks, NaN: the ask region is not [0, θ)); ``None`` for a
+        policy that asks at random."""
+        ...
+
+    def q_values(self, b_high: Any) -> np.ndarray:
+        """Q(b, C, a) at P(trust = high) = b_high (two trust levels), shape (..., N, 2)."""
+        ...
+
+    def value(self, b_high: Any, complexity: int | str | None = None) -> np.ndarray:
+        """V(b, C) = max_a Q(b, C, a) at P(trust = high) = b_high: shape (..., N), or (...)
+        for one complexity."""
+        ...
+
+    def to_dict(self) -> dict[str, Any]:
+        """The policy JSON (format ``trustseek.policy/1``)."""
+        ...
+
+    def save(self, path: str | Path) -> None:
+        """Write the policy JSON to a file."""
+        ...
+
+    def describe(self) -> str:
+        """One line for people."""
+        ...
+
+    def overview(self) -> dict[str, Any]:
+        """A JSON object naming the policy, small enough to print with results."""
+        ...
+
+
+class PolicyBase:
+    """What every policy shares: complexity lookup, one decision from the vectorized ones,
+    thresholds from the ask intervals, JSON output, and the errors of what it lacks."""
+
+    kind = ""
+    complexities: tuple[str, ...] = ()
+    belief_update: str | None = None
+    model: TrustModel | None = None
+    info: dict[str, Any]
+
+    def complexity_index(self, complexity: int | str) -> int:
+        if isinstance(complexity, str):
+            try:
+                return self.complexities.index(complexity)
+            except ValueError:
+                raise KeyError(f"unknown complexity {complexity!r}; expected one of {list(self.complexities)}") from None
+        c = int(complexity)
+        if not 0 <= c < len(self.complexities):
+            raise KeyError(f"complexity index {c} out of range for {list(self.complexities)}")
+        return c
+
+    def actions(self, beliefs: np.ndarray | None, complexities: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
+        raise NotImplementedError
+
+    def action(self, belief: Any, complexity: int | str, rng: np.random.Generator | None = None) -> int:
+        n_trust = self.model.n_trust if self.model is not None else 2
+        b = to_vector(belief, n_trust)[None, :] if belief is not None else np.full((1, n_trust), np.nan)
+        return int(self.actions(b, np.array([self.complexity_index(complexity)]), rng)[0])
+
+    def ask_intervals(self) -> dict[str, list[Interval]] | None:
+        raise NotImplementedError
+
+    def thresholds(self) -> dict[str, float | None] | None:
+        intervals = self.ask_intervals()
+        return None if intervals is None else {cn: threshold(iv) for cn, iv in intervals.items()}
+
+    def q_values(self, b_high: Any) -> np.ndarray:
+        raise PolicyError([f"a {self.kind} policy has no Q-function"])
+
+    def value(self, b_high: Any, complexity: int | str | None = None) -> np.ndarray:
+        v = self.q_values(b_high).max(axis=-1)
+        return v if complexity is None else v[..., self.complexity_index(complexity)]
+
+    def to_dict(self) -> dict[str, Any]:
+        raise NotImplementedError
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(json_safe(self.to_dict()), indent=1, allow_nan=False) + "\n", encoding="utf-8")
+
+    def describe(self) -> str:
+        return self.kind
+
+    def overview(self) -> dict[str, Any]:
+        return self.to_dict()
+
+    def _need_two_levels(self) -> None:
+        if self.model is not None and self.model.n_trust != 2:
+            raise PolicyError(
+                [f"ask intervals, thresholds and Q(b_high) need two trust levels; this model has {self.model.n_trust}"]
+            )

@@ -1,0 +1,61 @@
+"""``PolicyRunner``: a policy with its live belief, one trial at a time.
+
+This is how the experiment server and a robot run a policy: ``decide`` before a trial,
+``observe`` its events after it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
+from ..pomdp.belief import UNOBSERVED, make_updater
+from .base import Policy, PolicyError
+
+
+@dataclass
+class PolicyRunner:
+    """A policy with its live belief: ``decide`` before a trial, ``observe`` after it.
+
+    For complexity-only policies the belief is still tracked when a model is given
+    (useful for logging), with the ``bayes`` update unless the policy names one.
+    """
+
+    policy: Policy
+    model: TrustModel | None = None
+    belief_update: str | None = None
+    rng: np.random.Generator = field(default_factory=np.random.default_rng)
+    belief: np.ndarray | None = None
+    trial: int = 0
+
+    def __post_init__(self) -> None:
+        self.model = self.model or self.policy.model
+        self.belief_update = self.belief_update or self.policy.belief_update or "bayes"
+        self._updater = make_updater(self.belief_update, self.model) if self.model is not None else None
+        if self.belief is None and self._updater is not None:
+            self.belief = self._updater.initial()
+        if self.policy.belief_update is not None and self._updater is None:
+            raise PolicyError(["this policy needs a trust model for its belief update"])
+
+    def decide(self, complexity: int | str) -> str:
+        """The robot action (``autonomous`` or ``ask``) for the next trial."""
+        c = self.policy.complexity_index(complexity)
+        return ACTIONS[self.policy.action(self.belief, c, self.rng)]
+
+    def observe(self, complexity: int | str, action: str, human_action: str | None, experience: str) -> np.ndarray | None:
+        """Update the belief from one trial's events; returns the new belief (or None without a model)."""
+        c = self.policy.complexity_index(complexity)
+        if action not in ACTIONS:
+            raise ValueError(f"robot action must be one of {list(ACTIONS)}, got {action!r}")
+        if human_action is not None and human_action not in HUMAN_ACTIONS:
+            raise ValueError(f"human action must be one of {list(HUMAN_ACTIONS)} or None, got {human_action!r}")
+        if experience not in EXPERIENCES:
+            raise ValueError(f"experience must be one of {list(EXPERIENCES)}, got {experience!r}")
+        self.trial += 1
+        if self._updater is None:
+            return None
+        o = UNOBSERVED if human_action is None else HUMAN_ACTIONS.index(human_action)
+        self.belief = self._updater.update(self.belief, c, ACTIONS.index(action), o, EXPERIENCES.index(experience))
+        return self.belief

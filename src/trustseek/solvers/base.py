@@ -1,0 +1,79 @@
+"""The ``Solver`` interface: ``solver.solve(problem) -> Policy`` (as POMDPs.jl's ``solve``).
+
+Every solver is configured when it is built (its options), says up front which problems it
+handles (``unsupported(problem)`` lists the reasons it cannot, each naming an alternative)
+and refuses the rest with :class:`UnsupportedProblem` before doing any work.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, Protocol
+
+from ..errors import TrustseekError
+from ..policies.base import Policy
+from ..pomdp.problem import AssistancePOMDP
+
+
+class SolverError(TrustseekError, ValueError):
+    """A solver cannot be built or run as asked (an unknown solver or option, a bad option value)."""
+
+
+class UnsupportedProblem(SolverError):
+    """A solver was given a problem it does not handle; each line names an alternative."""
+
+
+class Solver(Protocol):
+    """Turns a problem into a policy."""
+
+    name: str
+
+    def unsupported(self, problem: Any) -> list[str]:
+        """Why this solver cannot solve ``problem`` (empty when it can); each reason names an
+        alternative."""
+        ...
+
+    def solve(self, problem: Any) -> Policy:
+        """The solver's policy for ``problem`` (raises :class:`UnsupportedProblem` first)."""
+        ...
+
+
+class SolverBase:
+    """Checks shared by the solvers: the problem type, the number of trust levels, the belief
+    update.  Subclasses set what they handle and what to use instead."""
+
+    name = ""
+    trust_levels: int | None = None  # the number of trust levels handled (None: any)
+    belief_updates: tuple[str, ...] = ("bayes", "paper")
+    belief_update: str | None = None
+    #: what to use for a model with another number of trust levels / another belief update /
+    #: a problem that is not an assistance POMDP (default: the point solver, which takes any
+    #: number of trust levels and flat POMDPs)
+    instead: ClassVar[dict[str, str]] = {}
+
+    def unsupported(self, problem: Any) -> list[str]:
+        reasons = []
+        if not isinstance(problem, AssistancePOMDP):
+            reasons.append(
+                f"the {self.name} solver needs an assistance POMDP (a trust model and a task), got a "
+                f"{type(problem).__name__}: {self.instead.get('problem', 'use the point solver')}"
+            )
+            return reasons
+        if self.trust_levels is not None and problem.n_trust != self.trust_levels:
+            reasons.append(
+                f"the {self.name} solver needs {_count(self.trust_levels)} trust levels; this model has "
+                f"{problem.n_trust}: {self.instead.get('trust_levels', 'use the point solver')}"
+            )
+        if self.belief_update is not None and self.belief_update not in self.belief_updates:
+            default = f"the {self.name} solver does not handle the {self.belief_update!r} update"
+            reasons.append(self.instead.get("belief_update", default))
+        return reasons
+
+    def check(self, problem: Any) -> None:
+        """Raise :class:`UnsupportedProblem` with every reason the problem is not handled."""
+        reasons = self.unsupported(problem)
+        if reasons:
+            raise UnsupportedProblem(reasons)
+
+
+def _count(n: int) -> str:
+    return {1: "one", 2: "two", 3: "three"}.get(n, str(n))

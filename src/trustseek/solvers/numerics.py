@@ -1,0 +1,114 @@
+"""Numerics shared by the solvers: one policy evaluation, one Howard improvement step, one
+controller evaluation.
+
+* :func:`policy_values` -- the values x = r + P x of a fixed policy (P its discounted
+  transition matrix): BiCGSTAB started from a guess (these systems are well conditioned and
+  very sparse, and a warm start from the previous policy's values is close), checked against
+  the residual, with a direct sparse solve as the fallback;
+* :func:`improve` -- Howard's improvement step, keeping the current action unless another is
+  better by more than rounding, so that policy iteration terminates;
+* :func:`evaluate_controller` -- the exact value vectors of a finite-state controller on a
+  POMDP in branch form (any number of hidden states), and :func:`memoryless_controllers`.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..pomdp.branch_model import BranchModel
+
+__all__ = ["evaluate_controller", "improve", "memoryless_controllers", "policy_values"]
+
+
+def policy_values(
+    P: sp.csr_matrix,
+    rhs: np.ndarray,
+    guess: np.ndarray | None = None,
+    *,
+    tol: float | None = None,
+    check: float | None = None,
+    maxiter: int = 10_000,
+) -> np.ndarray:
+    """Solve x = rhs + P x.  BiCGSTAB on (I - P) x = rhs (as an operator: I - P is never formed),
+    started from ``guess``, stops when ‖rhs - (I - P) x‖₂ <= ``tol``; a result that is not finite
+    or whose largest residual exceeds ``check`` is replaced by a direct sparse solve.
+
+    By default both are near machine precision relative to the rewards (the values are about
+    1/(1-γ) times larger): tol = 1e-14 ‖rhs‖₂ + 1e-13 s and check = 1e-9 s, s = max(1, ‖rhs‖∞)."""
+    scale = max(1.0, float(np.max(np.abs(rhs))))
+    tol = 1e-14 * float(np.sqrt(rhs @ rhs)) + 1e-13 * scale if tol is None else tol
+    check = 1e-9 * scale if check is None else check
+    n = len(rhs)
+    A = spla.LinearOperator((n, n), matvec=lambda y: y - P @ y, dtype=float)
+    x0 = np.zeros(n) if guess is None else np.asarray(guess, dtype=float).reshape(-1)
+    x, _ = spla.bicgstab(A, rhs, x0=x0, rtol=0.0, atol=tol, maxiter=maxiter)
+    if not np.all(np.isfinite(x)) or np.max(np.abs(x - P @ x - rhs)) > check:
+        x = spla.spsolve(sp.identity(n, format="csc") - P.tocsc(), rhs)
+    return np.asarray(x)
+
+
+def improve(q: np.ndarray, policy: np.ndarray, axis: int) -> np.ndarray | None:
+    """One Howard improvement step: the greedy actions of ``q`` (actions along ``axis``; the
+    other axes as in ``policy``), keeping the current action unless another one is better by
+    more than rounding.  ``None`` when no action changes (the policy is optimal)."""
+    cur = np.take_along_axis(q, np.expand_dims(policy, axis), axis=axis).squeeze(axis)
+    better = q.max(axis=axis) > cur + 1e-12 * (1 + np.abs(cur))
+    if not np.any(better):
+        return None
+    return np.where(better, q.argmax(axis=axis), policy)
+
+
+def evaluate_controller(
+    model: BranchModel, actions: np.ndarray, successors: np.ndarray, guess: np.ndarray | None = None, rtol: float = 1e-15
+) -> np.ndarray:
+    """Exact values α[n, t] of a finite-state controller: node n takes actions[n, c] in context c
+    and moves to node successors[n, c, branch] after each branch (-1: no successor, for a branch
+    that cannot happen).  Solves (I - γ P) α = r: dense for small controllers, a sparse direct
+    solve for medium ones without a guess, otherwise :func:`policy_values` started from
+    ``guess``.  P is built directly in CSR form (rows (n, t) in order, the entries of a row in
+    (c, branch, t2) order), so no sorting or duplicate summing is needed."""
+    M = model.kernels  # [c, a, br, t, u]
+    n, N = actions.shape
+    k = model.n_hidden
+    cidx = np.arange(N)[None, :]
+    rhs = np.einsum("c,nct->nt", model.context_probs, model.rewards[cidx, actions])  # (n, k)
+    # weights [n, c, br, t, u] viewed as rows (n, t) with slots (c, br, u); zero slots
+    # (impossible branches, zero kernel entries, no successor) are dropped
+    Mg = M * (model.discount * model.context_probs)[:, None, None, None, None]
+    W = np.moveaxis(Mg[cidx, actions], 3, 1)  # (n, t, c, br, u)
+    nz = (W != 0) & (successors >= 0)[:, None, :, :, None]
+    data = W[nz]
+    cols = np.broadcast_to((successors.astype(np.int64) * k)[:, None, :, :, None] + np.arange(k), W.shape)[nz]
+    size = n * k
+    counts = nz.reshape(size, -1).sum(axis=1)
+    b = rhs.reshape(-1)
+    if size <= 200:  # small: dense
+        D = np.zeros((size, size))
+        np.add.at(D, (np.repeat(np.arange(size), counts), cols), -data)
+        D[np.diag_indices(size)] += 1.0
+        return np.linalg.solve(D, b).reshape(n, k)
+    indptr = np.zeros(size + 1, dtype=np.int64)
+    np.cumsum(counts, out=indptr[1:])
+    P = sp.csr_matrix((data, cols, indptr), shape=(size, size))
+    if guess is None and size <= 600:
+        return np.asarray(spla.spsolve(sp.identity(size, format="csc") - P.tocsc(), b)).reshape(n, k)
+    scale = max(1.0, float(np.max(np.abs(b))))
+    tol, check = max(rtol, 1e-15) * scale * np.sqrt(size), max(1e-10, 10 * rtol) * scale
+    x = policy_values(P, b, guess, tol=tol, check=check, maxiter=2000)
+    return x.reshape(n, k)
+
+
+def memoryless_controllers(model: BranchModel, limit: int = 64) -> np.ndarray:
+    """Values of the memoryless controllers "always take action a_c in context c", one vector
+    each (one controller of independent self-looping nodes, evaluated by one solve); with more
+    than ``limit`` combinations, only the controllers that take one action everywhere."""
+    N, A = model.n_contexts, model.n_actions
+    combos = list(itertools.product(range(A), repeat=N)) if limit >= A**N else [tuple([a] * N) for a in range(A)]
+    n = len(combos)
+    acts = np.array(combos, dtype=np.int64).reshape(n, N)
+    succ = np.broadcast_to(np.arange(n)[:, None, None], (n, N, model.kernels.shape[2])).copy()
+    return evaluate_controller(model, acts, succ)
