@@ -8,12 +8,15 @@ setup:
 reproduce: setup
 	.venv/bin/trustseek reproduce --out report
 
-test: setup
-	.venv/bin/python -m pytest -n 2 -q
+# the static checks first, then every test; one BLAS thread per test worker, so that the two
+# workers do not oversubscribe the cores
+test: setup lint
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 .venv/bin/python -m pytest -n 2 -q
 
 # static checks: lint and formatting, types, the layer contracts of docs/architecture.md,
 # and the front end's types
 lint: setup
+	@echo "lint: ruff, mypy, import contracts, front-end types"
 	.venv/bin/ruff check src tests benchmarks
 	.venv/bin/ruff format --check src tests benchmarks
 	.venv/bin/mypy

@@ -49,7 +49,7 @@ class Conn:
         self.port = port
         self.head = f"Host: 127.0.0.1:{port}\r\nAuthorization: Bearer {token}\r\nContent-Type: application/json\r\n".encode()
 
-    async def open(self) -> "Conn":
+    async def open(self) -> Conn:
         self.reader, self.writer = await asyncio.open_connection("127.0.0.1", self.port)
         return self
 
@@ -57,7 +57,9 @@ class Conn:
         """(status, JSON body, server time in s from Server-Timing, client round trip in s)."""
         data = json.dumps(body).encode()
         t0 = time.perf_counter()
-        self.writer.write(b"POST " + path.encode() + b" HTTP/1.1\r\n" + self.head + b"Content-Length: %d\r\n\r\n" % len(data) + data)
+        self.writer.write(
+            b"POST " + path.encode() + b" HTTP/1.1\r\n" + self.head + b"Content-Length: %d\r\n\r\n" % len(data) + data
+        )
         head = await self.reader.readuntil(b"\r\n\r\n")
         fields = dict(line.split(b":", 1) for line in head.split(b"\r\n")[1:] if b":" in line)
         fields = {k.strip().lower(): v.strip() for k, v in fields.items()}
@@ -91,7 +93,11 @@ async def run_session(port: int, info: dict, trials: int, think: float, seed: in
             body = {"trial": n}
         else:
             human = "intervene" if rng.random() < 0.1 else "rely"
-            body = {"trial": n, "human_action": human, "outcome": None if human == "intervene" else ("success" if rng.random() < 0.9 else "failure")}
+            body = {
+                "trial": n,
+                "human_action": human,
+                "outcome": None if human == "intervene" else ("success" if rng.random() < 0.9 else "failure"),
+            }
         status, out, _, _ = await conn.post(f"/api/deploy/sessions/{sid}/observe", body)
         if status >= 400:
             raise RuntimeError(f"observe failed: {status} {out}")
@@ -100,11 +106,15 @@ async def run_session(port: int, info: dict, trials: int, think: float, seed: in
     conn.close()
 
 
-async def load(port: int, sessions: int, trials: int, think: float, policy: dict, first_seed: int = 0) -> tuple[list, list, float, list]:
+async def load(
+    port: int, sessions: int, trials: int, think: float, policy: dict, first_seed: int = 0
+) -> tuple[list, list, float, list]:
     admin = await Conn(port, TOKEN).open()
     infos = []
     for i in range(sessions):
-        status, out, _, _ = await admin.post("/api/deploy/sessions", {"label": f"robot-{first_seed + i}", "policy": policy, "seed": first_seed + i})
+        status, out, _, _ = await admin.post(
+            "/api/deploy/sessions", {"label": f"robot-{first_seed + i}", "policy": policy, "seed": first_seed + i}
+        )
         if status != 201:
             raise RuntimeError(f"opening a session failed: {status} {out}")
         infos.append(out)
@@ -134,7 +144,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sessions", type=int, default=100)
     ap.add_argument("--trials", type=int, default=10)
-    ap.add_argument("--think-ms", type=float, default=1000.0, help="mean pause between a decision and its observation, and between trials")
+    ap.add_argument(
+        "--think-ms", type=float, default=1000.0, help="mean pause between a decision and its observation, and between trials"
+    )
     ap.add_argument("--baseline-trials", type=int, default=100, help="trials of each single-session baseline")
     ap.add_argument("--baseline-think-ms", type=float, default=50.0, help="think time of the paced single-session baseline")
     ap.add_argument("--policy", default="trust-aware", choices=["trust-aware", "trust-agnostic", "randomized"])
@@ -156,7 +168,9 @@ def main(argv: list[str] | None = None) -> int:
         try:
             asyncio.run(load(port, 1, 5, 0.0, policy, first_seed=10**6))  # warm-up: imports, caches, connections
             base_lat, base_srv, _, _ = asyncio.run(load(port, 1, args.baseline_trials, 0.0, policy, first_seed=10**6 + 1))
-            paced_lat, paced_srv, _, _ = asyncio.run(load(port, 1, args.baseline_trials, args.baseline_think_ms / 1000, policy, first_seed=10**6 + 2))
+            paced_lat, paced_srv, _, _ = asyncio.run(
+                load(port, 1, args.baseline_trials, args.baseline_think_ms / 1000, policy, first_seed=10**6 + 2)
+            )
             lat, srv, wall, ids = asyncio.run(load(port, args.sessions, args.trials, args.think_ms / 1000, policy))
         finally:
             proc.terminate()
@@ -172,19 +186,27 @@ def main(argv: list[str] | None = None) -> int:
     total = args.sessions * args.trials
     stored = sum(len(v) for v in per_session.values())
     backend = url.split(":", 1)[0].split("+")[0]
-    print(f"server decision API: {args.sessions} concurrent sessions x {args.trials} trials ({args.policy} policy, think time ~{args.think_ms:g} ms), {backend}, loopback")
+    print(
+        f"server decision API: {args.sessions} concurrent sessions x {args.trials} trials ({args.policy} policy, think time ~{args.think_ms:g} ms), {backend}, loopback"
+    )
     rows_out = [
         ("1 session, back to back", base_lat, base_srv),
         (f"1 session, paced {args.baseline_think_ms:g} ms", paced_lat, paced_srv),
         (f"{args.sessions} concurrent sessions", lat, srv),
     ]
     for label, c, v in rows_out:
-        print(f"  {label:<28} client p50 {pct(c, 50):6.2f} ms  p99 {pct(c, 99):6.2f} ms   server p50 {pct(v, 50):5.2f} ms  p99 {pct(v, 99):5.2f} ms")
-    print(f"  concurrent / paced single session: p50 client {pct(lat, 50) / pct(paced_lat, 50):.2f}x server {pct(srv, 50) / pct(paced_srv, 50):.2f}x; "
-          f"p99 client {pct(lat, 99) / pct(paced_lat, 99):.2f}x server {pct(srv, 99) / pct(paced_srv, 99):.2f}x")
+        print(
+            f"  {label:<28} client p50 {pct(c, 50):6.2f} ms  p99 {pct(c, 99):6.2f} ms   server p50 {pct(v, 50):5.2f} ms  p99 {pct(v, 99):5.2f} ms"
+        )
+    print(
+        f"  concurrent / paced single session: p50 client {pct(lat, 50) / pct(paced_lat, 50):.2f}x server {pct(srv, 50) / pct(paced_srv, 50):.2f}x; "
+        f"p99 client {pct(lat, 99) / pct(paced_lat, 99):.2f}x server {pct(srv, 99) / pct(paced_srv, 99):.2f}x"
+    )
     print(f"  target p99 < 10 ms (client round trip): {'met' if pct(lat, 99) < 10 else 'NOT met'}")
     print(f"  throughput {2 * total / wall:.0f} requests/s ({total} trials in {wall:.1f} s)")
-    print(f"  machine: {os.cpu_count()} cores, load average (1 min) {load_before[0]:.2f} before, {load_after[0]:.2f} after the run (other processes share the cores)")
+    print(
+        f"  machine: {os.cpu_count()} cores, load average (1 min) {load_before[0]:.2f} before, {load_after[0]:.2f} after the run (other processes share the cores)"
+    )
     print(f"  trials stored: {stored} of {total}; duplicates {dup}; every session complete and in order: {complete}")
     return 0 if complete and dup == 0 and stored == total else 1
 

@@ -1,7 +1,7 @@
 """Run every benchmark (benchmarks/bench_*.py) and print its figures.
 
-    python benchmarks/run.py            # all
-    python benchmarks/run.py solve fit  # only those whose name contains a word
+python benchmarks/run.py            # all
+python benchmarks/run.py solve fit  # only those whose name contains a word
 """
 
 from __future__ import annotations

@@ -20,8 +20,15 @@ from trustseek.testing.servers import ThreadServer
 pytestmark = pytest.mark.browser
 
 CHROMIUM = "/usr/bin/chromium"
-ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
-        "--disable-sync", "--no-first-run", "--disable-quic"]
+ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+    "--disable-quic",
+]
 TOKEN = "browser-test-token"
 
 
@@ -92,15 +99,17 @@ def test_participant_study_in_chromium(tmp_path):
     out = artifacts_dir(tmp_path)
     with ThreadServer(f"sqlite:///{tmp_path / 'e2e.sqlite'}", TOKEN) as url:
         c = Client(url, TOKEN)
-        study = c.create_study({
-            "name": "e2e",
-            "blocks": [
-                {"name": "watch", "policy": {"kind": "never-ask"}, "schedule": {"trials": ["high", "low"]}},
-                {"name": "help", "policy": {"kind": "always-ask"}, "schedule": {"trials": ["high"]}},
-            ],
-            "self_report": "block",
-            "animation_speed": 3.0,
-        })
+        study = c.create_study(
+            {
+                "name": "e2e",
+                "blocks": [
+                    {"name": "watch", "policy": {"kind": "never-ask"}, "schedule": {"trials": ["high", "low"]}},
+                    {"name": "help", "policy": {"kind": "always-ask"}, "schedule": {"trials": ["high"]}},
+                ],
+                "self_report": "block",
+                "animation_speed": 3.0,
+            }
+        )
         link = c.create_sessions(study["id"], participants=["chromium-1"])[0]["link"]
         with sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS, headless=True)
@@ -131,7 +140,9 @@ def test_participant_study_in_chromium(tmp_path):
             teleoperate(page)
 
             # trial 2: autonomous in low complexity; the participant relies and sees the outcome
-            page.wait_for_function("window.trustseek.state().trial === 2 && window.trustseek.state().phase === 'approach'", timeout=15000)
+            page.wait_for_function(
+                "window.trustseek.state().trial === 2 && window.trustseek.state().phase === 'approach'", timeout=15000
+            )
             page.wait_for_function("['outcome', 'result', 'report'].includes(window.trustseek.state().phase)", timeout=15000)
 
             # end of block 1: self-report
@@ -140,7 +151,9 @@ def test_participant_study_in_chromium(tmp_path):
             page.click("#report-btn")
 
             # trial 3: the robot asks; the participant teleoperates
-            page.wait_for_function("window.trustseek.state().trial === 3 && window.trustseek.state().phase === 'teleop'", timeout=15000)
+            page.wait_for_function(
+                "window.trustseek.state().trial === 3 && window.trustseek.state().phase === 'teleop'", timeout=15000
+            )
             assert page.inner_text("#mode") == "Asking for your help"
             teleoperate(page)
             page.wait_for_selector("#screen-report:not([hidden])", timeout=15000)
@@ -168,7 +181,7 @@ def test_participant_study_in_chromium(tmp_path):
             dash.screenshot(path=str(out / "browser_dashboard.png"))
             browser.close()
         assert not errors, errors
-        assert all(u.startswith(url) or u.startswith("data:") or u.startswith("blob:") for u in requests), [u for u in requests if not u.startswith(url)]
+        assert all(u.startswith((url, "data:", "blob:")) for u in requests), [u for u in requests if not u.startswith(url)]
         assert [s["name"] for s in c.studies()] == ["e2e", "pilot"]
 
         trials = pd.read_csv(io.BytesIO(c.export(study["id"])))

@@ -54,7 +54,10 @@ def test_example_file_is_shipped_and_valid():
         (lambda t: t.replace("A,3,high", "A,4,high"), ["participant 'A'", "trial index 3 missing"]),
         (lambda t: t.replace("B,1,high", ",1,high"), ["line 5", "column 'participant'", "empty participant"]),
         (lambda t: t.replace("A,2,high,ask,intervene", "A,2,high,ask,NaN"), ["line 3", "column 'human_action'", "NaN"]),
-        (lambda t: t.replace("A,1,low,autonomous,rely,reliable", "A,1,low,autonomous,rely,"), ["line 2", "column 'experience'", "empty value"]),
+        (
+            lambda t: t.replace("A,1,low,autonomous,rely,reliable", "A,1,low,autonomous,rely,"),
+            ["line 2", "column 'experience'", "empty value"],
+        ),
         (lambda t: t.replace("B,2,low", "B,two,low"), ["line 6", "column 'trial'", "'two'"]),
     ],
 )
@@ -69,7 +72,9 @@ def test_validation_names_file_row_column_value(tmp_path, edit, expected):
 
 
 def test_every_problem_is_reported_at_once(tmp_path):
-    bad = GOOD.replace("B,1,high,autonomous", "B,1,medium,autonomous").replace("A,1,low,autonomous,rely", "A,1,low,autopilot,rely")
+    bad = GOOD.replace("B,1,high,autonomous", "B,1,medium,autonomous").replace(
+        "A,1,low,autonomous,rely", "A,1,low,autopilot,rely"
+    )
     with pytest.raises(DataError) as exc:
         read_trials(write(tmp_path, bad))
     assert len(exc.value.problems) == 2
@@ -105,12 +110,21 @@ def test_column_and_label_mapping_by_flags_and_files(tmp_path):
     )
     pd.testing.assert_frame_equal(read_trials(path, toml, required=need), df)
     # the shipped example mapping works the same way
-    pd.testing.assert_frame_equal(read_trials(path, example_path("other_study_mapping.json").read_text() and ColumnMapping.load(example_path("other_study_mapping.json")), required=need), df)
+    pd.testing.assert_frame_equal(
+        read_trials(
+            path,
+            example_path("other_study_mapping.json").read_text() and ColumnMapping.load(example_path("other_study_mapping.json")),
+            required=need,
+        ),
+        df,
+    )
 
 
 def test_unmapped_label_is_an_unknown_category(tmp_path):
     path = write(tmp_path, OTHER, "other.csv")
-    m = ColumnMapping.from_flags(["participant=subject", "trial=trial_no", "experience=automation_correct", "human_action=rely"], ["experience:1=reliable"])
+    m = ColumnMapping.from_flags(
+        ["participant=subject", "trial=trial_no", "experience=automation_correct", "human_action=rely"], ["experience:1=reliable"]
+    )
     with pytest.raises(DataError) as exc:
         read_trials(path, m, required=("experience", "human_action"))
     text = problems(exc)
@@ -140,7 +154,9 @@ def test_parquet_roundtrip_with_unobserved_actions(tmp_path):
 
 
 def test_parquet_nan_and_float_labels(tmp_path):
-    raw = pd.DataFrame({"participant": ["a", "a"], "trial": [1.0, 2.0], "experience": [1.0, np.nan], "human_action": ["rely", None]})
+    raw = pd.DataFrame(
+        {"participant": ["a", "a"], "trial": [1.0, 2.0], "experience": [1.0, np.nan], "human_action": ["rely", None]}
+    )
     pq = tmp_path / "x.parquet"
     raw.to_parquet(pq)
     m = ColumnMapping(labels={"experience": {"1": "reliable", "0": "faulty"}})

@@ -39,12 +39,17 @@ def test_server_killed_mid_session_resumes(server):
     start, url = server
     proc = start()
     c = Client(url, TOKEN)
-    study = c.create_study({
-        "name": "kill",
-        "blocks": [
-            {"policy": {"kind": "randomized", "p_ask": {"low": 0.5, "high": 0.5}}, "schedule": {"counts": {"low": 4, "high": 4}}},
-        ],
-    })
+    study = c.create_study(
+        {
+            "name": "kill",
+            "blocks": [
+                {
+                    "policy": {"kind": "randomized", "p_ask": {"low": 0.5, "high": 0.5}},
+                    "schedule": {"counts": {"low": 4, "high": 4}},
+                },
+            ],
+        }
+    )
     s = c.create_sessions(study["id"])[0]
     ph = {"Authorization": f"Bearer {s['token']}"}
     base = f"{url}/api/sessions/{s['session_id']}"
@@ -75,7 +80,7 @@ def test_server_killed_mid_session_resumes(server):
     assert after["trials_done"] == 3 and after["score"] == before["score"]
     assert after["current"] == before["current"]  # the same trial, complexity and action
     # the retried submission of a committed trial is recognised, not stored twice
-    cur, human, t3 = committed[2]
+    _, human, t3 = committed[2]
     r = httpx.post(f"{base}/trials", json={"trial": 3, "submission_id": "sub-3", "human_action": human}, headers=ph)
     assert r.status_code == 200 and r.json()["duplicate"] is True and r.json()["trial"] == t3
     for n in range(4, 9):

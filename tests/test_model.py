@@ -181,7 +181,11 @@ def test_validation_catches_random_corruption(mutation, leaf, node, value):
 def _random_rows(draw, shape):
     k = shape[-1]
     n = int(np.prod(shape[:-1])) if len(shape) > 1 else 1
-    raw = np.array(draw(st.lists(st.floats(0.01, 1.0), min_size=n * k, max_size=n * k))).reshape(*shape[:-1], k) if len(shape) > 1 else np.array(draw(st.lists(st.floats(0.01, 1.0), min_size=k, max_size=k)))
+    raw = (
+        np.array(draw(st.lists(st.floats(0.01, 1.0), min_size=n * k, max_size=n * k))).reshape(*shape[:-1], k)
+        if len(shape) > 1
+        else np.array(draw(st.lists(st.floats(0.01, 1.0), min_size=k, max_size=k)))
+    )
     return raw / raw.sum(axis=-1, keepdims=True)
 
 

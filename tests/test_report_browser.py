@@ -13,15 +13,22 @@ from trustseek.reproduction.pipeline import ReproduceConfig, reproduce
 pytestmark = pytest.mark.browser
 
 CHROMIUM = "/usr/bin/chromium"
-ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
-        "--disable-sync", "--no-first-run"]
+ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
 
 
 def test_report_renders_with_figures(tmp_path):
     from playwright.sync_api import sync_playwright
 
-    cfg = ReproduceConfig(seed=1, replicates=2, large_n=300, bootstrap=0, restarts=2, replicate_restarts=1,
-                          replicate_large_n=150, grid=201, jobs=1)
+    cfg = ReproduceConfig(
+        seed=1, replicates=2, large_n=300, bootstrap=0, restarts=2, replicate_restarts=1, replicate_large_n=150, grid=201, jobs=1
+    )
     paths = write_report(reproduce(cfg), tmp_path / "report")
     html = paths["html"]
     # the HTML must stand alone: move it away from its PNGs before opening it

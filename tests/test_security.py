@@ -16,7 +16,11 @@ H = {"Authorization": f"Bearer {TOKEN}"}
 def env(tmp_path_factory):
     db = f"sqlite:///{tmp_path_factory.mktemp('sec') / 'sec.sqlite'}"
     with TestClient(create_app(db, token=TOKEN)) as c:
-        st = c.post("/api/studies", json={"name": "sec", "blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 3}}}]}, headers=H).json()
+        st = c.post(
+            "/api/studies",
+            json={"name": "sec", "blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 3}}}]},
+            headers=H,
+        ).json()
         a, b = c.post(f"/api/studies/{st['id']}/sessions", json={"participants": ["a", "b"]}, headers=H).json()
         robot = c.post("/api/deploy/sessions", json={"policy": {"kind": "never-ask"}}, headers=H).json()
         yield c, st, a, b, robot
@@ -26,7 +30,11 @@ def experimenter_requests(st):
     sid = st["id"]
     return [
         ("get", "/api/studies", None),
-        ("post", "/api/studies", {"name": "x", "blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 1}}}]}),
+        (
+            "post",
+            "/api/studies",
+            {"name": "x", "blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 1}}}]},
+        ),
         ("get", f"/api/studies/{sid}", None),
         ("post", f"/api/studies/{sid}/sessions", {"count": 1}),
         ("get", f"/api/studies/{sid}/dashboard", None),
@@ -41,7 +49,7 @@ def call(c, method, path, body, headers):
 
 
 def test_experimenter_endpoints_reject_missing_or_wrong_tokens(env):
-    c, st, a, b, robot = env
+    c, st, a, _, robot = env
     n_studies = len(c.get("/api/studies", headers=H).json())
     for method, path, body in experimenter_requests(st):
         assert call(c, method, path, body, {}).status_code == 401, path
@@ -68,7 +76,11 @@ def test_a_participant_token_cannot_read_or_write_another_session(env):
         ("post", f"/api/sessions/{other}/events", {"events": [{"type": "evil"}]}),
         ("get", f"/api/deploy/sessions/{robot['session_id']}", None),
         ("post", f"/api/deploy/sessions/{robot['session_id']}/decide", {"trial": 1, "complexity": "low"}),
-        ("post", f"/api/deploy/sessions/{robot['session_id']}/observe", {"trial": 1, "human_action": "rely", "outcome": "success"}),
+        (
+            "post",
+            f"/api/deploy/sessions/{robot['session_id']}/observe",
+            {"trial": 1, "human_action": "rely", "outcome": "success"},
+        ),
     ]
     for method, path, body in attempts:
         assert call(c, method, path, body, ha).status_code == 403, path
@@ -86,8 +98,16 @@ def test_a_participant_token_cannot_read_or_write_another_session(env):
     hr = {"Authorization": f"Bearer {robot['token']}"}
     assert c.get(f"/api/sessions/{a['session_id']}/state", headers=hr).status_code == 403
     assert c.get(f"/api/deploy/sessions/{robot['session_id']}", headers=hr).status_code == 200
-    assert c.post(f"/api/deploy/sessions/{a['session_id']}/decide", json={"trial": 1, "complexity": "low"}, headers=ha).status_code == 409
-    assert c.post(f"/api/deploy/sessions/{robot['session_id']}/decide", json={"trial": 1, "complexity": "low"}, headers=hr).status_code == 200
+    assert (
+        c.post(f"/api/deploy/sessions/{a['session_id']}/decide", json={"trial": 1, "complexity": "low"}, headers=ha).status_code
+        == 409
+    )
+    assert (
+        c.post(
+            f"/api/deploy/sessions/{robot['session_id']}/decide", json={"trial": 1, "complexity": "low"}, headers=hr
+        ).status_code
+        == 200
+    )
 
 
 def test_session_tokens_are_unguessable(env):

@@ -11,12 +11,11 @@ import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import create_engine, text
 
+from server_checks import check_concurrent_duplicate_submissions
 from trustseek import BayesUpdate, paper_model, paper_task, solve
 from trustseek.client import Client, ServerError
 from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from trustseek.server import create_app
-
-from server_checks import check_concurrent_duplicate_submissions
 
 TOKEN = "experimenter-secret"
 H = {"Authorization": f"Bearer {TOKEN}"}
@@ -58,7 +57,11 @@ def start(client, sid, ph):
 
 
 def submit(client, sid, ph, n, human, sub=None, **extra):
-    return client.post(f"/api/sessions/{sid}/trials", json={"trial": n, "submission_id": sub or f"s{n}", "human_action": human, **extra}, headers=ph)
+    return client.post(
+        f"/api/sessions/{sid}/trials",
+        json={"trial": n, "submission_id": sub or f"s{n}", "human_action": human, **extra},
+        headers=ph,
+    )
 
 
 def export(client, study_id, table="trials", fmt="csv"):
@@ -72,7 +75,12 @@ def export(client, study_id, table="trials", fmt="csv"):
 
 def test_openapi_is_served(client):
     spec = client.get("/openapi.json").json()
-    for path in ("/api/studies", "/api/studies/{study_id}/export", "/api/sessions/{session_id}/trials", "/api/deploy/sessions/{session_id}/decide"):
+    for path in (
+        "/api/studies",
+        "/api/studies/{study_id}/export",
+        "/api/sessions/{session_id}/trials",
+        "/api/deploy/sessions/{session_id}/decide",
+    ):
         assert path in spec["paths"]
 
 
@@ -81,10 +89,30 @@ def test_openapi_is_served(client):
     [
         ({"task": "nonsense"}, 422, ["unknown task preset"]),
         ({"blocks": []}, 422, ["blocks"]),
-        ({"blocks": [{"policy": {"kind": "sometimes"}, "schedule": {"counts": {"low": 1}}}]}, 400, ["blocks[0].policy.kind", "sometimes"]),
-        ({"blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"trials": ["low", "medium"]}}]}, 400, ["blocks[0].schedule", "medium"]),
-        ({"blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 1}, "trials": ["low"]}}]}, 422, ["exactly one"]),
-        ({"blocks": [{"policy": {"kind": "randomized", "p_ask": {"low": 2, "high": 0.1}}, "schedule": {"counts": {"low": 1}}}]}, 400, ["p_ask"]),
+        (
+            {"blocks": [{"policy": {"kind": "sometimes"}, "schedule": {"counts": {"low": 1}}}]},
+            400,
+            ["blocks[0].policy.kind", "sometimes"],
+        ),
+        (
+            {"blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"trials": ["low", "medium"]}}]},
+            400,
+            ["blocks[0].schedule", "medium"],
+        ),
+        (
+            {"blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 1}, "trials": ["low"]}}]},
+            422,
+            ["exactly one"],
+        ),
+        (
+            {
+                "blocks": [
+                    {"policy": {"kind": "randomized", "p_ask": {"low": 2, "high": 0.1}}, "schedule": {"counts": {"low": 1}}}
+                ]
+            },
+            400,
+            ["p_ask"],
+        ),
         ({"self_report": "sometimes"}, 422, ["self_report"]),
     ],
 )
@@ -98,10 +126,14 @@ def test_study_validation_gives_clear_4xx(client, body, status, words):
 
 
 def test_schedules_and_counterbalancing(client):
-    st = study(client, blocks=[
-        {"name": "A", "policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 4, "high": 3}}},
-        {"name": "B", "policy": {"kind": "always-ask"}, "schedule": {"trials": ["high", "low", "high"]}},
-    ], counterbalance="rotate")
+    st = study(
+        client,
+        blocks=[
+            {"name": "A", "policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 4, "high": 3}}},
+            {"name": "B", "policy": {"kind": "always-ask"}, "schedule": {"trials": ["high", "low", "high"]}},
+        ],
+        counterbalance="rotate",
+    )
     r = client.post(f"/api/studies/{st['id']}/sessions", json={"participants": ["x", "y", "z"]}, headers=H).json()
     assert [s["block_order"] for s in r] == [["A", "B"], ["B", "A"], ["A", "B"]]
     with Client("http://test", TOKEN, http=client) as c:
@@ -145,7 +177,7 @@ def test_trust_aware_policy_runs_live_with_the_exact_bayes_filter(client):
     upd = BayesUpdate(model)
     b = model.initial.copy()
     humans = ["intervene", "rely", "rely", "intervene", "rely", "rely", "rely", "intervene"]
-    for n, (cx, human) in enumerate(zip(sched, humans), start=1):
+    for n, (cx, human) in enumerate(zip(sched, humans, strict=True), start=1):
         cur = client.get(f"/api/sessions/{sid}/state", headers=ph).json()["current"]
         c = task.complexity_index(cx)
         expected = ACTIONS[pol.action(b, c)]
@@ -164,10 +196,13 @@ def test_trust_aware_policy_runs_live_with_the_exact_bayes_filter(client):
 def test_outcomes_experience_and_reward_follow_the_task(client):
     """Autonomous success is drawn with the task's probability; experience and reward follow
     Section III and eq. (1); the score is their sum."""
-    st = study(client, blocks=[
-        {"policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 100, "high": 100}}},
-        {"policy": {"kind": "always-ask"}, "schedule": {"counts": {"low": 2, "high": 2}}},
-    ])
+    st = study(
+        client,
+        blocks=[
+            {"policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 100, "high": 100}}},
+            {"policy": {"kind": "always-ask"}, "schedule": {"counts": {"low": 2, "high": 2}}},
+        ],
+    )
     sid, ph = participant(client, st["id"])
     start(client, sid, ph)
     for n in range(1, 205):
@@ -207,7 +242,9 @@ def test_submissions_are_validated_and_idempotent(client):
     assert r.status_code == 400 and "asked" in r.text
     assert submit(client, sid, ph, 2, "intervene").status_code == 409  # not the current trial
     assert submit(client, sid, ph, 1, "wave").status_code == 422
-    bad = client.post(f"/api/sessions/{sid}/trials", json={"trial": 1, "submission_id": "x y", "human_action": "intervene"}, headers=ph)
+    bad = client.post(
+        f"/api/sessions/{sid}/trials", json={"trial": 1, "submission_id": "x y", "human_action": "intervene"}, headers=ph
+    )
     assert bad.status_code == 422 and "submission_id" in bad.text
     first = submit(client, sid, ph, 1, "intervene", sub="abc", effort_ms=1234.5)
     assert first.status_code == 200 and first.json()["duplicate"] is False
@@ -222,10 +259,14 @@ def test_submissions_are_validated_and_idempotent(client):
 
 
 def test_self_reports_per_block(client):
-    st = study(client, self_report="block", blocks=[
-        {"policy": {"kind": "never-ask"}, "schedule": {"trials": ["low", "low"]}},
-        {"policy": {"kind": "never-ask"}, "schedule": {"trials": ["high"]}},
-    ])
+    st = study(
+        client,
+        self_report="block",
+        blocks=[
+            {"policy": {"kind": "never-ask"}, "schedule": {"trials": ["low", "low"]}},
+            {"policy": {"kind": "never-ask"}, "schedule": {"trials": ["high"]}},
+        ],
+    )
     sid, ph = participant(client, st["id"])
     start(client, sid, ph)
     s = submit(client, sid, ph, 1, "rely").json()["state"]
@@ -236,7 +277,9 @@ def test_self_reports_per_block(client):
     assert client.post(f"/api/sessions/{sid}/reports", json={"after_trial": 3, "value": 50}, headers=ph).status_code == 409
     r = client.post(f"/api/sessions/{sid}/reports", json={"after_trial": 2, "value": 64}, headers=ph)
     assert r.status_code == 200 and r.json()["state"]["report_due"] is None
-    assert client.post(f"/api/sessions/{sid}/reports", json={"after_trial": 2, "value": 64}, headers=ph).json()["report"]["duplicate"]
+    assert client.post(f"/api/sessions/{sid}/reports", json={"after_trial": 2, "value": 64}, headers=ph).json()["report"][
+        "duplicate"
+    ]
     assert client.post(f"/api/sessions/{sid}/reports", json={"after_trial": 2, "value": 10}, headers=ph).status_code == 409
     submit(client, sid, ph, 3, "rely", events=[{"t": 1700000000000.5, "type": "grasp", "data": {"by": "robot"}}])
     f = export(client, st["id"], fmt="parquet")
@@ -259,7 +302,9 @@ def test_export_is_read_by_the_data_module_and_cli(client, db_url, tmp_path):
     for n in range(1, 6):
         submit(client, sid, ph, n, "rely" if n != 2 else "intervene")
     out = tmp_path / "trials.csv"
-    res = CliRunner().invoke(app, ["export", st["id"], "--db", db_url, "--out", str(out), "--events", str(tmp_path / "ev.parquet"), "--json"])
+    res = CliRunner().invoke(
+        app, ["export", st["id"], "--db", db_url, "--out", str(out), "--events", str(tmp_path / "ev.parquet"), "--json"]
+    )
     assert res.exit_code == 0, res.output
     assert json.loads(res.output)["trials"] == 5
     frame = read_trials(out)
@@ -287,7 +332,13 @@ def test_deploy_api_through_the_client(client):
     model, task = paper_model(), paper_task()
     pol, upd = solve(model, task, grid=401), BayesUpdate(model)
     b = model.initial.copy()
-    events = [("high", "intervene", None), ("high", None, None), ("low", "rely", "success"), ("high", "rely", "failure"), ("high", None, None)]
+    events = [
+        ("high", "intervene", None),
+        ("high", None, None),
+        ("low", "rely", "success"),
+        ("high", "rely", "failure"),
+        ("high", None, None),
+    ]
     for cx, human, outcome in events:
         a = robot.decide(cx)
         cidx = task.complexity_index(cx)
@@ -345,7 +396,6 @@ def test_concurrent_duplicate_submissions_store_one_trial(tmp_path):
     check_concurrent_duplicate_submissions(f"sqlite:///{tmp_path / 'conc.sqlite'}", TOKEN)
 
 
-
 def test_migrations_render_for_postgresql():
     """The same migrations produce PostgreSQL DDL (rendered offline, no server needed)."""
     from trustseek.server.db import offline_sql
@@ -367,7 +417,9 @@ def test_database_errors_are_one_clear_line_without_the_password():
 
 
 def test_self_reports_per_trial(client):
-    st = study(client, self_report="trial", blocks=[{"policy": {"kind": "never-ask"}, "schedule": {"trials": ["low", "high", "low"]}}])
+    st = study(
+        client, self_report="trial", blocks=[{"policy": {"kind": "never-ask"}, "schedule": {"trials": ["low", "high", "low"]}}]
+    )
     sid, ph = participant(client, st["id"])
     assert start(client, sid, ph)["report_due"] is None
     for n in (1, 2, 3):
@@ -388,19 +440,28 @@ def test_self_reports_per_trial(client):
 def test_client_reads_local_task_model_and_policy_files(client, tmp_path):
     """Files stay on the experimenter's side: the client sends their JSON.  The solved policy
     from a file behaves exactly as the one solved by the server."""
-    from trustseek import paper_model, paper_task, solve as solve_policy
+    from trustseek import paper_model, paper_task
+    from trustseek import solve as solve_policy
 
     paper_task().save(tmp_path / "task.json")
     paper_model().save(tmp_path / "model.json")
     solve_policy(paper_model(), paper_task(), grid=301).save(tmp_path / "policy.json")
-    (tmp_path / "study.json").write_text(json.dumps({
-        "name": "files", "task": str(tmp_path / "task.json"), "model": str(tmp_path / "model.json"),
-        "blocks": [{"policy": str(tmp_path / "policy.json"), "schedule": {"trials": ["high"]}}],
-    }))
+    (tmp_path / "study.json").write_text(
+        json.dumps(
+            {
+                "name": "files",
+                "task": str(tmp_path / "task.json"),
+                "model": str(tmp_path / "model.json"),
+                "blocks": [{"policy": str(tmp_path / "policy.json"), "schedule": {"trials": ["high"]}}],
+            }
+        )
+    )
     c = Client("http://test", TOKEN, http=client)
     st = c.create_study(tmp_path / "study.json")
     assert st["blocks"][0]["policy"] == "trust-aware"
-    assert st["blocks"][0]["thresholds"]["high"] == pytest.approx(solve_policy(paper_model(), paper_task(), grid=301).thresholds()["high"])
+    assert st["blocks"][0]["thresholds"]["high"] == pytest.approx(
+        solve_policy(paper_model(), paper_task(), grid=301).thresholds()["high"]
+    )
     with pytest.raises(Exception) as ei:
         c.create_study({"name": "x", "task": str(tmp_path / "missing.json"), "blocks": []})
     assert "missing.json" in str(ei.value) and "not found" in str(ei.value)

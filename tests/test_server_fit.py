@@ -25,8 +25,11 @@ def test_exported_study_is_fitted(tmp_path):
     rng = np.random.default_rng(3)
     model = paper_model()
     with TestClient(create_app(db, token=TOKEN)) as c:
-        st = c.post("/api/studies", json={"name": "fit", "blocks": [
-            {"policy": {"kind": "randomized"}, "schedule": {"counts": {"low": 10, "high": 10}}}]}, headers=H).json()
+        st = c.post(
+            "/api/studies",
+            json={"name": "fit", "blocks": [{"policy": {"kind": "randomized"}, "schedule": {"counts": {"low": 10, "high": 10}}}]},
+            headers=H,
+        ).json()
         sessions = c.post(f"/api/studies/{st['id']}/sessions", json={"count": 4}, headers=H).json()
         for s in sessions:
             ph = {"Authorization": f"Bearer {s['token']}"}
@@ -40,7 +43,11 @@ def test_exported_study_is_fitted(tmp_path):
                     human = "intervene"
                 else:  # a simulated supervisor: intervene with the paper model's probability
                     human = "intervene" if rng.random() < model.emission[cx, 0, trust, 0] else "rely"
-                t = c.post(f"{base}/trials", json={"trial": n, "submission_id": f"{s['session_id']}-{n}", "human_action": human}, headers=ph).json()["trial"]
+                t = c.post(
+                    f"{base}/trials",
+                    json={"trial": n, "submission_id": f"{s['session_id']}-{n}", "human_action": human},
+                    headers=ph,
+                ).json()["trial"]
                 a = 0 if t["robot_action"] == "autonomous" else 1
                 e = 1 if t["experience"] == "reliable" else 0
                 trust = int(rng.random() < model.transition[cx, a, e, trust, 1])

@@ -20,13 +20,12 @@ import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import create_engine, text
 
+from server_checks import check_concurrent_duplicate_submissions
 from trustseek import BayesUpdate, paper_model, paper_task, solve
 from trustseek.client import Client, DeploySession
 from trustseek.data.trials import read_trials
 from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from trustseek.server import create_app
-
-from server_checks import check_concurrent_duplicate_submissions
 from trustseek.testing.servers import TemporaryPostgres, postgres_binaries
 
 TOKEN = "postgres-experimenter-secret"
@@ -37,7 +36,9 @@ H = {"Authorization": f"Bearer {TOKEN}"}
 def pg_url(request):
     """A fresh PostgreSQL cluster on 127.0.0.1:<free port>, stopped and removed at the end."""
     if postgres_binaries() is None:
-        pytest.skip("PostgreSQL server binaries (initdb, pg_ctl) not found; scripts/setup.sh installs Debian's postgresql package as root")
+        pytest.skip(
+            "PostgreSQL server binaries (initdb, pg_ctl) not found; scripts/setup.sh installs Debian's postgresql package as root"
+        )
     cluster = TemporaryPostgres()
     request.addfinalizer(cluster.stop)
     return cluster.start()
@@ -55,7 +56,11 @@ def test_migrations_create_the_schema_and_rerun_as_a_no_op(pg_url, app):
         assert c.execute(text("select version()")).scalar().startswith("PostgreSQL")
         assert c.execute(text("select version_num from alembic_version")).scalars().all() == ["0001"]
         tables = set(c.execute(text("select table_name from information_schema.tables where table_schema = 'public'")).scalars())
-        uniques = set(c.execute(text("select constraint_name from information_schema.table_constraints where constraint_type = 'UNIQUE'")).scalars())
+        uniques = set(
+            c.execute(
+                text("select constraint_name from information_schema.table_constraints where constraint_type = 'UNIQUE'")
+            ).scalars()
+        )
     eng.dispose()
     assert {"studies", "policies", "sessions", "trials", "reports", "events", "alembic_version"} <= tables
     assert {"uq_trial_session_number", "uq_session_study_participant", "uq_report_session_trial"} <= uniques
@@ -69,19 +74,29 @@ def test_study_with_a_trust_aware_block_round_trips_through_postgresql(pg_url, a
     sched = ["high", "high", "low", "high", "high", "low"]
     humans = ["intervene", "rely", "rely", "intervene", "rely", "rely"]
     with TestClient(app) as client:
-        r = client.post("/api/studies", headers=H, json={
-            "name": "pg", "self_report": "block",
-            "blocks": [
-                {"name": "aware", "policy": {"kind": "trust-aware", "grid": 401}, "schedule": {"trials": sched}},
-                {"name": "never", "policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 1, "high": 1}}},
-            ],
-        })
+        r = client.post(
+            "/api/studies",
+            headers=H,
+            json={
+                "name": "pg",
+                "self_report": "block",
+                "blocks": [
+                    {"name": "aware", "policy": {"kind": "trust-aware", "grid": 401}, "schedule": {"trials": sched}},
+                    {"name": "never", "policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 1, "high": 1}}},
+                ],
+            },
+        )
         assert r.status_code == 201, r.text
         st = r.json()
         (info,) = client.post(f"/api/studies/{st['id']}/sessions", json={"participants": ["P-pg"]}, headers=H).json()
         sid, ph = info["session_id"], {"Authorization": f"Bearer {info['token']}"}
         base = f"/api/sessions/{sid}"
-        assert client.post(f"{base}/consent", json={"agree": True, "events": [{"t": 5.0, "type": "consent"}]}, headers=ph).status_code == 200
+        assert (
+            client.post(
+                f"{base}/consent", json={"agree": True, "events": [{"t": 5.0, "type": "consent"}]}, headers=ph
+            ).status_code
+            == 200
+        )
 
         model, task = paper_model(), paper_task()
         pol, upd = solve(model, task, belief_update="bayes", grid=401), BayesUpdate(model)
@@ -97,15 +112,22 @@ def test_study_with_a_trust_aware_block_round_trips_through_postgresql(pg_url, a
             else:
                 assert (cur["block"], cur["robot_action"]) == (1, "autonomous")
                 human = "rely"
-            body = {"trial": n, "submission_id": f"sub-{n}", "human_action": human, "effort_ms": 100.0 * n,
-                    "events": [{"t": 1000.0 + n, "type": "trial-end", "data": {"n": n}}]}
+            body = {
+                "trial": n,
+                "submission_id": f"sub-{n}",
+                "human_action": human,
+                "effort_ms": 100.0 * n,
+                "events": [{"t": 1000.0 + n, "type": "trial-end", "data": {"n": n}}],
+            }
             res = client.post(f"{base}/trials", json=body, headers=ph)
             assert res.status_code == 200, res.text
             t = res.json()["trial"]
             assert res.json()["duplicate"] is False
             if n <= len(sched):
                 assert t["belief"] == pytest.approx(b[1], abs=1e-12)
-                b = upd.update(b, c, ACTIONS.index(cur["robot_action"]), HUMAN_ACTIONS.index(human), EXPERIENCES.index(t["experience"]))
+                b = upd.update(
+                    b, c, ACTIONS.index(cur["robot_action"]), HUMAN_ACTIONS.index(human), EXPERIENCES.index(t["experience"])
+                )
                 assert t["belief_after"] == pytest.approx(b[1], abs=1e-12)
             posted.append(t)
             if n == 2:  # the same submission again: answered from the database, nothing stored twice
@@ -146,7 +168,6 @@ def test_study_with_a_trust_aware_block_round_trips_through_postgresql(pg_url, a
 def test_concurrent_duplicate_submissions_store_one_trial(pg_url, app):
     """Simultaneous submissions contend for PostgreSQL's row lock: exactly one trial is stored."""
     check_concurrent_duplicate_submissions(pg_url, TOKEN)
-
 
 
 def test_deploy_api_on_postgresql_resumes_after_a_restart(pg_url, app):

@@ -24,7 +24,6 @@ from .policies import (
 from .pomdp.belief import BayesUpdate, PaperUpdate, make_updater
 from .pomdp.problem import AssistancePOMDP
 from .solvers import GridSolver, Solver, make_solver, solve, solver_names, trust_agnostic
-
 from .version import __version__ as __version__
 
 __all__ = [
