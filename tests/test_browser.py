@@ -15,20 +15,11 @@ import pytest
 
 from trustseek.client import Client
 from trustseek.server.app import STATIC
+from trustseek.testing.browser import CHROMIUM, launch_chromium
 from trustseek.testing.servers import ThreadServer
 
 pytestmark = pytest.mark.browser
 
-CHROMIUM = "/usr/bin/chromium"
-ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-    "--disable-quic",
-]
 TOKEN = "browser-test-token"
 
 
@@ -112,7 +103,7 @@ def test_participant_study_in_chromium(tmp_path):
         )
         link = c.create_sessions(study["id"], participants=["chromium-1"])[0]["link"]
         with sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS, headless=True)
+            browser = launch_chromium(p)
             page = browser.new_page(viewport={"width": 1320, "height": 900})
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))

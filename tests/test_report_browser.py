@@ -9,18 +9,9 @@ import pytest
 
 from trustseek.report import FIGURES, write_report
 from trustseek.reproduction.pipeline import ReproduceConfig, reproduce
+from trustseek.testing.browser import launch_chromium
 
 pytestmark = pytest.mark.browser
-
-CHROMIUM = "/usr/bin/chromium"
-ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-]
 
 
 def test_report_renders_with_figures(tmp_path):
@@ -38,7 +29,7 @@ def test_report_renders_with_figures(tmp_path):
     shots = Path(os.environ.get("TRUSTSEEK_ARTIFACTS", tmp_path))
     shots.mkdir(parents=True, exist_ok=True)
     with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        browser = launch_chromium(p)
         try:
             page = browser.new_page(viewport={"width": 1200, "height": 900})
             requests = []
