@@ -44,6 +44,7 @@ __all__ = [
     "TrustAwarePolicy",
     "TrustModel",
     "TrustseekError",
+    "__version__",
     "always_ask",
     "load_model",
     "load_policy",
