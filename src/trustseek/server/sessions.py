@@ -161,14 +161,26 @@ def create_participant(db: DBSession, study: Study, participant: str | None) -> 
     return s
 
 
+def canonical_policy(pol) -> dict[str, Any]:
+    """The stored form of a policy: the policy's own ``to_dict()`` (keys in the order the policy
+    writes them).  Stored policies also load whatever the order of their keys (rows written with
+    sorted keys, databases that reorder JSON objects): the loaders match keys by name."""
+    return pol.to_dict()
+
+
+def policy_sha256(policy: dict[str, Any]) -> str:
+    """The address of a policy JSON: the SHA-256 of its key-sorted serialization, the same for
+    any order of the keys."""
+    return hashlib.sha256(json.dumps(policy, sort_keys=True).encode()).hexdigest()
+
+
 def create_deploy(db: DBSession, label: str, task: Task, model: TrustModel, policy: dict[str, Any], seed: int) -> Session:
     sid = new_id()
-    blob = json.dumps(policy, sort_keys=True)
-    sha = hashlib.sha256(blob.encode()).hexdigest()
+    sha = policy_sha256(policy)
     pol = policy_object(f"policy:{sha}", policy)  # sessions with the same policy share one parsed copy
     pm = getattr(pol, "model", None) or model
     if db.get(PolicyBlob, sha) is None:
-        db.add(PolicyBlob(sha256=sha, policy=json.loads(blob)))
+        db.add(PolicyBlob(sha256=sha, policy=canonical_policy(pol)))
         try:
             db.flush()
         except IntegrityError:  # stored concurrently by another request
