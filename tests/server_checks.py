@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import signal
 from concurrent.futures import ThreadPoolExecutor
 
 import httpx
@@ -10,7 +11,7 @@ import pandas as pd
 
 from trustseek.client import Client
 from trustseek.data.trials import read_trials
-from trustseek.testing.servers import ThreadServer
+from trustseek.testing.servers import ThreadServer, free_port, serve_process
 
 
 def check_concurrent_duplicate_submissions(db_url: str, token: str) -> None:
@@ -37,3 +38,81 @@ def check_concurrent_duplicate_submissions(db_url: str, token: str) -> None:
         frame = read_trials(pd.read_csv(io.BytesIO(c.export(st["id"]))))
         c.close()
     assert frame["trial"].tolist() == [1, 2]
+
+
+POLICY_KINDS = [
+    {"kind": "trust-agnostic"},
+    {"kind": "randomized", "p_ask": {"low": 0.1, "high": 0.4}},
+    {"kind": "always-ask"},
+    {"kind": "never-ask"},
+]
+
+
+class Restartable:
+    """A ``trustseek serve`` process on a fixed port that can be killed and started again."""
+
+    def __init__(self, db_url: str, token: str):
+        self.db_url, self.token, self.port, self.procs = db_url, token, free_port(), []
+        self.url = f"http://127.0.0.1:{self.port}"
+
+    def start(self):
+        self.procs.append(serve_process(self.db_url, self.token, self.port))
+
+    def kill(self):
+        p = self.procs[-1]
+        p.send_signal(signal.SIGKILL)
+        p.wait(timeout=10)
+
+    def close(self):
+        for p in self.procs:
+            if p.poll() is None:
+                p.kill()
+            p.wait(timeout=10)
+
+
+def _open(url: str, token: str, policy: dict) -> dict:
+    r = httpx.post(
+        f"{url}/api/deploy/sessions", json={"policy": policy}, headers={"Authorization": f"Bearer {token}"}, timeout=60
+    )
+    assert r.status_code == 201, r.text
+    return r.json()
+
+
+def _decide(url: str, s: dict, trial: int, complexity: str = "high") -> httpx.Response:
+    return httpx.post(
+        f"{url}/api/deploy/sessions/{s['session_id']}/decide",
+        json={"trial": trial, "complexity": complexity},
+        headers={"Authorization": f"Bearer {s['token']}"},
+        timeout=30,
+    )
+
+
+def check_policies_decide_after_restart(db_url: str, token: str, rewrite=None) -> None:
+    """Deploy sessions of every non-trust-aware policy kind decide, get killed with their
+    server (SIGKILL), and decide and observe again in a new server process on the same
+    database; ``rewrite()`` runs on the database while no server runs."""
+    srv = Restartable(db_url, token)
+    try:
+        srv.start()
+        sessions = [_open(srv.url, token, p) for p in POLICY_KINDS]
+        for s in sessions:
+            assert _decide(srv.url, s, 1).status_code == 200
+        srv.kill()
+        if rewrite is not None:
+            rewrite()
+        srv.start()
+        for s, p in zip(sessions, POLICY_KINDS, strict=True):
+            again = _decide(srv.url, s, 1)  # the stored decision
+            assert again.status_code == 200, (p["kind"], again.text)
+            assert again.json()["committed"] is False
+            obs = httpx.post(
+                f"{srv.url}/api/deploy/sessions/{s['session_id']}/observe",
+                json={"trial": 1, "human_action": "intervene"},
+                headers={"Authorization": f"Bearer {s['token']}"},
+                timeout=30,
+            )
+            assert obs.status_code == 200, (p["kind"], obs.text)
+            nxt = _decide(srv.url, s, 2, "low")  # a new decision: the policy is loaded from the database
+            assert nxt.status_code == 200, (p["kind"], nxt.text)
+    finally:
+        srv.close()

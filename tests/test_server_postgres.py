@@ -20,7 +20,7 @@ import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import create_engine, text
 
-from server_checks import check_concurrent_duplicate_submissions
+from server_checks import check_concurrent_duplicate_submissions, check_policies_decide_after_restart
 from trustseek import BayesUpdate, paper_model, paper_task, solve
 from trustseek.client import Client, DeploySession
 from trustseek.data.trials import read_trials
@@ -196,6 +196,12 @@ def test_deploy_api_on_postgresql_resumes_after_a_restart(pg_url, app):
     assert [t["trial"] for t in state["trials"]] == [1, 2, 3, 4]
     assert state["trials"][:3] == first["trials"]
     assert state["belief"] == pytest.approx(b[1], abs=1e-12)
+
+
+def test_every_policy_kind_decides_after_a_server_process_restart(pg_url, app):
+    """Deploy sessions of the trust-agnostic, randomized, always-ask and never-ask policies keep
+    deciding after their ``trustseek serve`` process is killed and a new one starts."""
+    check_policies_decide_after_restart(pg_url, TOKEN)
 
 
 def _deploy_step(robot, pol, upd, task, b, cx, human, outcome):

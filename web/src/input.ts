@@ -5,7 +5,11 @@
 //   deposit:      B                          | B (button 1)
 //   intervene:    Space                      | X (button 2) or RB (button 5)
 
-export interface Command { vx: number; vy: number; arm: number; grasp: boolean; deposit: boolean; intervene: boolean; }
+export interface Command {
+  vx: number; vy: number; arm: number; grasp: boolean; deposit: boolean; intervene: boolean;
+  /** the device that asked to intervene this frame (logged as the intervention's `via`) */
+  interveneVia: "key" | "gamepad" | null;
+}
 
 const held = new Set<string>();
 const pressed = new Set<string>();
@@ -39,7 +43,9 @@ export function poll(): Command {
     grasp: once("g"),
     deposit: once("b"),
     intervene: once(" "),
+    interveneVia: null,
   };
+  if (cmd.intervene) cmd.interveneVia = "key";
   pressed.clear();
   const pads = navigator.getGamepads ? navigator.getGamepads() : [];
   for (const p of pads) {
@@ -52,7 +58,10 @@ export function poll(): Command {
     const edge = (i: number) => !!b[i] && !prevButtons[i];
     cmd.grasp ||= edge(0);
     cmd.deposit ||= edge(1);
-    cmd.intervene ||= edge(2) || edge(5);
+    if (edge(2) || edge(5)) {
+      cmd.intervene = true;
+      cmd.interveneVia ??= "gamepad";
+    }
     prevButtons = b;
     break;
   }

@@ -253,7 +253,7 @@ function frame(now: number) {
   robot.shake = Math.max(0, robot.shake - dt * 2);
 
   if (phase === "approach" || phase === "reach") {
-    if (cmd.intervene) intervene("key");
+    if (cmd.intervene) intervene(cmd.interveneVia ?? "key");
   }
   if (phase === "approach") {
     pathS = Math.min(pathL, pathS + 1.7 * k);

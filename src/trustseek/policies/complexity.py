@@ -84,7 +84,9 @@ class ComplexityPolicy(PolicyBase):
     def from_dict(cls, d: Mapping[str, Any], source: str | None = None) -> ComplexityPolicy:
         cx = list(d.get("complexities") or [])
         p = d.get("p_ask")
-        if not isinstance(p, Mapping) or list(p) != cx:
+        # the keys in any order (a JSON object has none: databases and sort_keys reorder them),
+        # but exactly the policy's complexities
+        if not isinstance(p, Mapping) or len(p) != len(cx) or set(p) != set(cx):
             raise ModelError([f"p_ask must map each of {cx} to a probability, got {p!r}"], source)
         try:
             return cls(str(d.get("kind")), cx, [p[c] for c in cx], d.get("info"))

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import logging
+import math
 import secrets
 from pathlib import Path
+from typing import Any
 
-from fastapi import FastAPI, HTTPException
-from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse
+from fastapi import FastAPI, HTTPException, Request
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 
 from ..version import __version__
@@ -18,6 +22,25 @@ from .routes import deploy, experimenter, own, participant
 STATIC = Path(__file__).resolve().parent.parent / "static" / "app"
 
 log = logging.getLogger(__name__)
+
+
+def json_safe(value: Any) -> Any:
+    """``value`` with every non-finite number replaced by its name (``"NaN"``, ``"Infinity"``),
+    so that it can be written as standard JSON."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [json_safe(v) for v in value]
+    return value
+
+
+async def validation_error(request: Request, exc: Exception) -> JSONResponse:
+    """422 with every problem, as FastAPI answers, but always serialisable: a refused ``NaN``
+    is echoed as the string ``"NaN"`` (FastAPI's own answer would fail to serialise, a 500)."""
+    errors = exc.errors() if isinstance(exc, RequestValidationError) else []
+    return JSONResponse(status_code=422, content={"detail": json_safe(jsonable_encoder(errors))})
 
 
 def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: str | None = None) -> FastAPI:
@@ -34,6 +57,7 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     app.state.token = token or secrets.token_urlsafe(24)
     app.state.public_url = public_url
     app.state.tokens = {}  # session token -> Caller
+    app.add_exception_handler(RequestValidationError, validation_error)
     app.add_middleware(RequestLog)
     app.add_middleware(ServerTiming)
     app.include_router(deploy)  # first: the decision API is matched without trying the others

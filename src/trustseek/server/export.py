@@ -38,6 +38,21 @@ EXTRA = [
 ]
 EVENT_COLUMNS = ["participant", "session", "trial", "client_time", "server_time", "type", "data"]
 
+#: a text cell starting with one of these is a formula to a spreadsheet (CSV injection)
+FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def escape_formulas(frame: pd.DataFrame) -> pd.DataFrame:
+    """A copy of ``frame`` in which every text cell that a spreadsheet would read as a formula
+    (starting with ``= + - @``, a tab or a carriage return) is prefixed with ``'``, the
+    spreadsheets' mark for literal text.  Numbers are left as they are.  Used for the CSV of
+    the events table, whose text comes from participants' browsers."""
+    out = frame.copy()
+    for col in out.columns:
+        if not pd.api.types.is_numeric_dtype(out[col]):
+            out[col] = out[col].map(lambda v: "'" + v if isinstance(v, str) and v.startswith(FORMULA_START) else v)
+    return out
+
 
 def trials_frame(db: DBSession, study: Study) -> pd.DataFrame:
     names = [b["name"] for b in study.config["blocks"]]
@@ -106,6 +121,13 @@ def events_frame(db: DBSession, study: Study) -> pd.DataFrame:
     frame = pd.DataFrame(data, columns=EVENT_COLUMNS)
     frame["trial"] = frame["trial"].astype("Int64")
     return frame
+
+
+def events_csv(frame: pd.DataFrame) -> bytes:
+    """The CSV of an events table: formulas escaped (:func:`escape_formulas`) and lines ended
+    with CRLF (RFC 4180), so that a carriage return inside a participant's text is quoted
+    instead of splitting the row."""
+    return escape_formulas(frame).to_csv(index=False, lineterminator="\r\n").encode()
 
 
 def to_bytes(frame: pd.DataFrame, fmt: str) -> bytes:

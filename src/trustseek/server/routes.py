@@ -14,9 +14,9 @@ from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 
 from .auth import Caller, bearer, require_experimenter, require_session, session_for_token, token_of
-from .export import events_frame, to_bytes, trials_frame
+from .export import events_csv, events_frame, to_bytes, trials_frame
 from .orm import Report, Session, Study, Trial, utcnow
-from .schemas import ConsentIn, DecideIn, DeployIn, EventsIn, ObserveIn, ReportIn, SessionsIn, TrialIn
+from .schemas import ConsentIn, DecideIn, DeployIn, ErrorOut, EventsIn, ObserveIn, ReportIn, SessionsIn, TrialIn
 from .sessions import (
     SessionError,
     add_events,
@@ -40,10 +40,26 @@ from .studies import ConfigError, StudyIn, build_study_config, load_model_spec, 
 
 log = logging.getLogger(__name__)
 
-experimenter = APIRouter(prefix="/api", tags=["experimenter"], dependencies=[Depends(require_experimenter)])
-participant = APIRouter(prefix="/api/sessions", tags=["participant"])
-deploy = APIRouter(prefix="/api/deploy", tags=["deploy"])
-own = APIRouter(prefix="/api", tags=["participant"])
+_WHY = {
+    400: "The request is well-formed but not allowed (an invalid configuration, an action the trial does not allow).",
+    401: "No token, or an unknown token.",
+    403: "The token is not the experimenter's, or belongs to another session.",
+    404: "No such study or session.",
+    409: "The session's state does not allow it (not the current trial, a conflicting repeat, the wrong kind of session).",
+}
+
+
+def errors(*codes: int) -> dict[int | str, dict[str, Any]]:
+    """OpenAPI ``responses`` for the refusals a route can answer (FastAPI declares 422 itself)."""
+    return {code: {"model": ErrorOut, "description": _WHY[code]} for code in codes}
+
+
+experimenter = APIRouter(
+    prefix="/api", tags=["experimenter"], dependencies=[Depends(require_experimenter)], responses=errors(401, 403)
+)
+participant = APIRouter(prefix="/api/sessions", tags=["participant"], responses=errors(401, 403, 409))
+deploy = APIRouter(prefix="/api/deploy", tags=["deploy"], responses=errors(401, 403))
+own = APIRouter(prefix="/api", tags=["participant"], responses=errors(401, 409))
 
 
 def _db(request: Request):
@@ -61,7 +77,7 @@ def _link(request: Request, s: Session) -> str:
 # --------------------------------------------------------------------------- experimenter
 
 
-@experimenter.post("/studies", status_code=201, summary="Create a study")
+@experimenter.post("/studies", status_code=201, summary="Create a study", responses=errors(400))
 def create_study(body: StudyIn, request: Request):
     try:
         cfg = build_study_config(body)
@@ -111,14 +127,19 @@ def _study(db, study_id: str) -> Study:
     return st
 
 
-@experimenter.get("/studies/{study_id}", summary="A study's configuration")
+@experimenter.get("/studies/{study_id}", summary="A study's configuration", responses=errors(404))
 def get_study(study_id: str, request: Request):
     with _db(request) as db:
         st = _study(db, study_id)
         return {**study_summary(db, st), "config": st.config}
 
 
-@experimenter.post("/studies/{study_id}/sessions", status_code=201, summary="Create participant sessions, one link each")
+@experimenter.post(
+    "/studies/{study_id}/sessions",
+    status_code=201,
+    summary="Create participant sessions, one link each",
+    responses=errors(400, 404, 409),
+)
 def create_sessions(study_id: str, body: SessionsIn, request: Request):
     labels = body.participants if body.participants is not None else [None] * body.count
     if body.participants is not None:
@@ -157,7 +178,7 @@ def create_sessions(study_id: str, body: SessionsIn, request: Request):
     return out
 
 
-@experimenter.get("/studies/{study_id}/dashboard", summary="Live state of every participant")
+@experimenter.get("/studies/{study_id}/dashboard", summary="Live state of every participant", responses=errors(404))
 def dashboard(study_id: str, request: Request):
     with _db(request) as db:
         st = _study(db, study_id)
@@ -202,7 +223,14 @@ def dashboard(study_id: str, request: Request):
         return {"study": study_summary(db, st), "participants": rows, "time": utcnow().isoformat() + "Z"}
 
 
-@experimenter.get("/studies/{study_id}/export", summary="Export trials (canonical trial log) or UI events")
+@experimenter.get(
+    "/studies/{study_id}/export",
+    summary="Export trials (canonical trial log) or UI events",
+    description="CSV or Parquet.  In the CSV of the events table, text cells that a spreadsheet would read as a "
+    "formula (starting with = + - @, a tab or a carriage return) are prefixed with ' (literal text), and "
+    "lines end with CRLF (RFC 4180).",
+    responses=errors(404),
+)
 def export(
     study_id: str,
     request: Request,
@@ -212,12 +240,19 @@ def export(
     with _db(request) as db:
         st = _study(db, study_id)
         frame = trials_frame(db, st) if table == "trials" else events_frame(db, st)
+    # the events' text comes from participants' browsers: formulas escaped, CR/LF quoted
+    content = events_csv(frame) if table == "events" and format == "csv" else to_bytes(frame, format)
     media = "text/csv" if format == "csv" else "application/vnd.apache.parquet"
     name = f"{st.id}-{table}.{format}"
-    return Response(to_bytes(frame, format), media_type=media, headers={"Content-Disposition": f'attachment; filename="{name}"'})
+    return Response(content, media_type=media, headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
 
 # --------------------------------------------------------------------------- participant
+
+
+def _study_session(s: Caller) -> None:
+    if s.kind != "study":
+        raise HTTPException(409, "this is a deploy session; use /api/deploy")
 
 
 def session_state(request: Request, s_id: str) -> dict:
@@ -258,11 +293,13 @@ def own_state(request: Request, creds: HTTPAuthorizationCredentials | None = Dep
 
 @participant.get("/{session_id}/state", summary="The participant's session: status, current trial, score")
 def get_state(session_id: str, request: Request, s: Caller = Depends(require_session)):
+    _study_session(s)
     return session_state(request, s.id)
 
 
 @participant.post("/{session_id}/consent", summary="Record consent and start the session")
 def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depends(require_session)):
+    _study_session(s)
     with _db(request) as db:
         row = lock(db, s.id)
         started = row.status == "new"
@@ -276,8 +313,9 @@ def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depe
     return session_state(request, s.id)
 
 
-@participant.post("/{session_id}/trials", summary="Submit the current trial (idempotent by submission_id)")
+@participant.post("/{session_id}/trials", summary="Submit the current trial (idempotent by submission_id)", responses=errors(400))
 def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Depends(require_session)):
+    _study_session(s)
     with _db(request) as db:
         try:
             t, dup = submit_trial(
@@ -292,6 +330,7 @@ def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Dep
 
 @participant.post("/{session_id}/reports", summary="Submit a trust self-report (0-100)")
 def post_report(session_id: str, body: ReportIn, request: Request, s: Caller = Depends(require_session)):
+    _study_session(s)
     with _db(request) as db:
         row = db.get(Session, s.id)
         cfg = study_config(db, row.study_id) if row.study_id else {}
@@ -319,6 +358,7 @@ def post_events(session_id: str, body: EventsIn, request: Request, s: Caller = D
     status_code=201,
     summary="Open a deploy session with a model and a policy",
     dependencies=[Depends(require_experimenter)],
+    responses=errors(400),
 )
 def open_deploy(body: DeployIn, request: Request):
     try:
@@ -349,7 +389,7 @@ def _deploy_session(s: Caller) -> None:
         raise HTTPException(409, "this is a participant session; use /api/sessions")
 
 
-@deploy.get("/sessions/{session_id}", summary="A deploy session's state and trials")
+@deploy.get("/sessions/{session_id}", summary="A deploy session's state and trials", responses=errors(409))
 def deploy_state(session_id: str, request: Request, s: Caller = Depends(require_session)):
     _deploy_session(s)
     with _db(request) as db:
@@ -390,7 +430,12 @@ def _json(out: dict) -> Response:
     return Response(json.dumps(out, allow_nan=False, separators=(",", ":")).encode(), media_type="application/json")
 
 
-@deploy.post("/sessions/{session_id}/decide", summary="Post a trial's complexity, get the robot action", openapi_extra=_BEARER)
+@deploy.post(
+    "/sessions/{session_id}/decide",
+    summary="Post a trial's complexity, get the robot action",
+    openapi_extra=_BEARER,
+    responses=errors(400, 404, 409),
+)
 async def decide(session_id: str, body: DecideIn, request: Request):
     # async on purpose: a short transaction run on the event loop, without a hop to a worker thread
     s = _robot(request, session_id)
@@ -406,6 +451,7 @@ async def decide(session_id: str, body: DecideIn, request: Request):
     "/sessions/{session_id}/observe",
     summary="Post the observed human action and outcome; updates the belief",
     openapi_extra=_BEARER,
+    responses=errors(400, 404, 409),
 )
 async def observe(session_id: str, body: ObserveIn, request: Request):
     s = _robot(request, session_id)

@@ -1,34 +1,79 @@
-"""Request bodies (validated by pydantic; FastAPI answers 422 with every problem)."""
+"""Request bodies (validated by pydantic; FastAPI answers 422 with every problem).
+
+Types are strict (``true`` is not a number, ``1`` is not a boolean, ``"3"`` is not an integer)
+and numbers finite (``NaN`` and ``Infinity``, which Python's JSON reader accepts, are refused);
+every integer has an upper bound, so that nothing overflows a database column.
+"""
 
 from __future__ import annotations
 
+import math
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from ..model.presets import MODEL_PRESETS, TASK_PRESETS
+
+#: the largest trial number the API accepts (a deploy session may run for a long time)
+MAX_TRIAL = 10**7
+
+STRICT = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+
+class ErrorOut(BaseModel):
+    """The body of every refused request (4xx other than 422): ``detail`` is a sentence, or an
+    object such as ``{"problems": [...]}`` listing every problem of a configuration."""
+
+    detail: str | dict[str, Any] | list[Any]
+
+
+def finite_json(value: Any, where: str = "data") -> Any:
+    """``value`` if it holds no NaN or infinite number (at any depth), else ValueError."""
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ValueError(f"{where} holds a non-finite number ({value!r}); numbers must be finite")
+    if isinstance(value, dict):
+        for k, v in value.items():
+            finite_json(v, f"{where}.{k}")
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            finite_json(v, f"{where}[{i}]")
+    return value
 
 
 class EventIn(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = STRICT
     t: float | None = Field(None, description="Client time, ms since the Unix epoch.")
     type: str = Field(..., min_length=1, max_length=40)
-    trial: int | None = Field(None, ge=1)
+    trial: int | None = Field(None, ge=1, le=MAX_TRIAL)
     data: dict[str, Any] = Field(default_factory=dict)
+
+    @field_validator("data")
+    @classmethod
+    def _finite(cls, v):
+        return finite_json(v)
 
 
 class SessionsIn(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = STRICT
     participants: list[str] | None = Field(None, max_length=1000, description="Participant ids; default P001, P002, ...")
     count: int = Field(1, ge=1, le=1000, description="How many sessions when participants is not given.")
 
 
 class ConsentIn(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = STRICT
     agree: Literal[True]
     events: list[EventIn] = Field(default_factory=list, max_length=5000)
 
+    @field_validator("agree", mode="before")
+    @classmethod
+    def _true(cls, v):
+        if v is not True:  # Literal[True] alone would take 1
+            raise ValueError("agree must be true")
+        return v
+
 
 class TrialIn(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = STRICT
     trial: int = Field(..., ge=1, le=100000)
     submission_id: str = Field(..., min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:-]+$")
     human_action: Literal["intervene", "rely"]
@@ -37,33 +82,46 @@ class TrialIn(BaseModel):
 
 
 class ReportIn(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = STRICT
     after_trial: int = Field(..., ge=1, le=100000)
     value: float = Field(..., ge=0, le=100, description="Trust self-report on a 0-100 slider.")
 
 
 class EventsIn(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = STRICT
     events: list[EventIn] = Field(..., min_length=1, max_length=5000)
 
 
+def check_preset(v: Any, field: str) -> Any:
+    """A preset name must name a preset (a JSON object is checked when it is loaded)."""
+    presets = TASK_PRESETS if field == "task" else MODEL_PRESETS
+    if isinstance(v, str) and v not in presets:
+        raise ValueError(f"unknown {field} preset {v!r}; presets: {sorted(presets)}, or give the JSON object")
+    return v
+
+
 class DeployIn(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = STRICT
     label: str = Field("robot", min_length=1, max_length=200)
     task: str | dict[str, Any] = "paper"
     model: str | dict[str, Any] = "paper"
     policy: dict[str, Any] = Field(default_factory=lambda: {"kind": "trust-aware"})
     seed: int = Field(0, ge=0, lt=2**31)
 
+    @field_validator("task", "model")
+    @classmethod
+    def _preset(cls, v, info):
+        return check_preset(v, info.field_name)
+
 
 class DecideIn(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-    trial: int = Field(..., ge=1, le=10**7)
+    model_config = STRICT
+    trial: int = Field(..., ge=1, le=MAX_TRIAL)
     complexity: str = Field(..., min_length=1, max_length=32)
 
 
 class ObserveIn(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-    trial: int = Field(..., ge=1, le=10**7)
+    model_config = STRICT
+    trial: int = Field(..., ge=1, le=MAX_TRIAL)
     human_action: Literal["intervene", "rely"] | None = None
     outcome: Literal["success", "failure", "collision", "dropped", "teleoperated"] | None = None

@@ -161,14 +161,26 @@ def create_participant(db: DBSession, study: Study, participant: str | None) -> 
     return s
 
 
+def canonical_policy(pol) -> dict[str, Any]:
+    """The stored form of a policy: the policy's own ``to_dict()`` (keys in the order the policy
+    writes them).  Stored policies also load whatever the order of their keys (rows written with
+    sorted keys, databases that reorder JSON objects): the loaders match keys by name."""
+    return pol.to_dict()
+
+
+def policy_sha256(policy: dict[str, Any]) -> str:
+    """The address of a policy JSON: the SHA-256 of its key-sorted serialization, the same for
+    any order of the keys."""
+    return hashlib.sha256(json.dumps(policy, sort_keys=True).encode()).hexdigest()
+
+
 def create_deploy(db: DBSession, label: str, task: Task, model: TrustModel, policy: dict[str, Any], seed: int) -> Session:
     sid = new_id()
-    blob = json.dumps(policy, sort_keys=True)
-    sha = hashlib.sha256(blob.encode()).hexdigest()
+    sha = policy_sha256(policy)
     pol = policy_object(f"policy:{sha}", policy)  # sessions with the same policy share one parsed copy
     pm = getattr(pol, "model", None) or model
     if db.get(PolicyBlob, sha) is None:
-        db.add(PolicyBlob(sha256=sha, policy=json.loads(blob)))
+        db.add(PolicyBlob(sha256=sha, policy=canonical_policy(pol)))
         try:
             db.flush()
         except IntegrityError:  # stored concurrently by another request
@@ -315,13 +327,13 @@ def submit_trial(
 ) -> tuple[Trial, bool]:
     """Commit trial ``n`` of a study session; returns (trial, duplicate)."""
     s = lock(db, session_id)
+    if s.kind != "study":
+        raise SessionError(409, "this is a deploy session: post its trials to /api/deploy/sessions/{id}/decide and /observe")
     # trials are committed in order together with trials_done, so trial n exists iff n <= trials_done
     old = _existing(db, s, n) if n <= s.trials_done else None
     if old is not None:
-        if old.submission_id == submission_id:
-            db.rollback()
-            return old, True
-        raise SessionError(409, f"trial {n} is already committed (by submission {old.submission_id!r})")
+        db.rollback()
+        return _replayed(old, n, submission_id, human_action), True
     if s.status != "running":
         raise SessionError(409, f"the session is {s.status!r}, not running" + (" (consent first)" if s.status == "new" else ""))
     if n != s.trials_done + 1:
@@ -361,9 +373,23 @@ def submit_trial(
     if committed is not None:
         return committed, False
     old = _existing(db, s, n)
-    if old is not None and old.submission_id == submission_id:
-        return old, True
-    raise SessionError(409, f"trial {n} was committed concurrently by another submission")
+    if old is None:
+        raise SessionError(409, f"trial {n} could not be committed; fetch the session state and retry")
+    return _replayed(old, n, submission_id, human_action), True
+
+
+def _replayed(old: Trial, n: int, submission_id: str, human_action: str | None) -> Trial:
+    """The committed trial ``n``, if a submission repeats the one that committed it (same
+    submission id and same human action); a conflicting submission is refused (409)."""
+    if old.submission_id != submission_id:
+        raise SessionError(409, f"trial {n} is already committed (by submission {old.submission_id!r})")
+    if old.human_action != human_action:
+        raise SessionError(
+            409,
+            f"submission {submission_id!r} committed trial {n} with human_action={old.human_action!r}, "
+            f"not {human_action!r}: a retry must repeat the submission",
+        )
+    return old
 
 
 def report_due(db: DBSession, s: Session, cfg: dict[str, Any]) -> int | None:

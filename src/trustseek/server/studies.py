@@ -19,13 +19,14 @@ import json
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, Field, field_validator, model_validator
 
 from ..errors import TrustseekError
 from ..model.core import ModelError, Task, TrustModel
 from ..model.presets import MODEL_PRESETS, TASK_PRESETS
 from ..policies import policy_from_dict
 from ..solvers import policy_from_spec
+from .schemas import STRICT, check_preset
 
 MAX_TRIALS_PER_BLOCK = 1000
 MAX_GRID = 20001  # the largest belief grid a study may ask the server to solve
@@ -36,7 +37,7 @@ class ConfigError(TrustseekError, ValueError):
 
 
 class Schedule(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = STRICT
     counts: dict[str, int] | None = Field(None, description="Trials per complexity, shuffled per participant.")
     trials: list[str] | None = Field(None, description="A fixed list of complexities, in order.")
 
@@ -53,14 +54,14 @@ class Schedule(BaseModel):
 
 
 class BlockIn(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = STRICT
     name: str | None = Field(None, max_length=100)
     policy: dict[str, Any] = Field(..., description="A policy spec ({'kind': ...}) or a full policy JSON.")
     schedule: Schedule
 
 
 class StudyIn(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = STRICT
     name: str = Field(..., min_length=1, max_length=200)
     task: str | dict[str, Any] = "paper"
     model: str | dict[str, Any] = "paper"
@@ -75,13 +76,16 @@ class StudyIn(BaseModel):
     @field_validator("task", "model")
     @classmethod
     def _preset(cls, v, info):
-        presets = TASK_PRESETS if info.field_name == "task" else MODEL_PRESETS
-        if isinstance(v, str) and v not in presets:
-            raise ValueError(f"unknown {info.field_name} preset {v!r}; presets: {sorted(presets)}, or give the JSON object")
-        return v
+        return check_preset(v, info.field_name)
+
+
+def _unknown_preset(field: str, spec: str, presets) -> ConfigError:
+    return ConfigError([f"unknown {field} preset {spec!r}; presets: {sorted(presets)}, or give the JSON object"])
 
 
 def load_task_spec(spec: str | dict) -> Task:
+    if isinstance(spec, str) and spec not in TASK_PRESETS:
+        raise _unknown_preset("task", spec, TASK_PRESETS)
     try:
         return TASK_PRESETS[spec]() if isinstance(spec, str) else Task.from_dict(spec, "task")
     except ModelError as exc:
@@ -89,6 +93,8 @@ def load_task_spec(spec: str | dict) -> Task:
 
 
 def load_model_spec(spec: str | dict) -> TrustModel:
+    if isinstance(spec, str) and spec not in MODEL_PRESETS:
+        raise _unknown_preset("model", spec, MODEL_PRESETS)
     try:
         return MODEL_PRESETS[spec]() if isinstance(spec, str) else TrustModel.from_dict(spec, "model")
     except ModelError as exc:
