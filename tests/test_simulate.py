@@ -8,7 +8,7 @@ from trustseek import AssistancePOMDP, TrustModel, always_ask, make_updater, nev
 from trustseek.model.core import ASK, AUTONOMOUS, INTERVENE, RELIABLE
 from trustseek.policies import TrustAwarePolicy, ask_bounds
 from trustseek.pomdp.belief import ScalarBelief
-from trustseek.simulation.engine import (
+from trustseek.simulation import (
     Block,
     SimulationError,
     Supervisors,

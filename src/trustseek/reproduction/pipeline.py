@@ -42,7 +42,7 @@ from ..policies import always_ask, ask_regions, never_ask, randomized
 from ..solvers.agnostic import trust_agnostic, trust_agnostic_from_data
 from ..pomdp.problem import AssistancePOMDP
 from ..model.presets import paper_model, paper_task
-from ..simulation.engine import Supervisors, crossover, simulate
+from ..simulation import Supervisors, crossover, simulate
 from ..solvers.registry import make_solver
 from ..vocab import PAPER_BLOCK_COUNTS, PAPER_DATA_COUNTS, TRIAL_COLUMNS
 
