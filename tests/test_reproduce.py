@@ -14,7 +14,8 @@ from typer.testing import CliRunner
 
 from trustseek import paper_model
 from trustseek.cli._app import app
-from trustseek.reproduction.pipeline import AGNOSTIC, AWARE, ReproduceConfig, reproduce, wilcoxon
+from trustseek.reproduction import AGNOSTIC, AWARE, ReproduceConfig, reproduce
+from trustseek.reproduction.statistics import wilcoxon
 from trustseek.report import FIGURES, write_report
 
 SMALL = dict(replicates=2, large_n=400, bootstrap=0, restarts=2, replicate_restarts=1, replicate_large_n=200, grid=201, jobs=1)
