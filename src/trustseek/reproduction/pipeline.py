@@ -279,6 +279,7 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, float
     true_pol = _solve(truth, task, cfg.belief_update, cfg.grid)
     agn = trust_agnostic_from_data(frame1, task)
     agn.kind = AGNOSTIC
+    plan = _Plan(truth, task, fitted, aware, true_pol, agn)
     summary["plan"] = {
         "belief_update": cfg.belief_update,
         "grid": cfg.grid,
@@ -303,9 +304,9 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, float
     step("costs of estimation and of the belief update", 1.0)
 
     # 6. costs (same participants for every policy)
-    summary["costs"] = _costs(cfg, truth, task, fitted, aware, true_pol, agn, scost)
+    summary["costs"] = _costs(cfg, plan, scost)
     step("heterogeneous population (Remark 1)", 1.0)
-    het = _heterogeneity(cfg, truth, task, aware, agn, fitted, shet)
+    het = _heterogeneity(cfg, plan, shet)
     summary["heterogeneity"] = het["summary"]
     step("replicates", 1.0)
 
@@ -341,18 +342,23 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, float
     )
 
 
-def _costs(
-    cfg: ReproduceConfig,
-    truth: TrustModel,
-    task: Task,
-    fitted: TrustModel,
-    aware: Policy,
-    true_pol: Policy,
-    agn: ComplexityPolicy,
-    seed: np.random.SeedSequence,
-) -> dict[str, Any]:
+@dataclass(frozen=True)
+class _Plan:
+    """The paper's model and task, the fitted model and the policies planned from both."""
+
+    truth: TrustModel
+    task: Task
+    fitted: TrustModel
+    aware: Policy
+    true_policy: Policy
+    agnostic: ComplexityPolicy
+
+
+def _costs(cfg: ReproduceConfig, plan: _Plan, seed: np.random.SeedSequence) -> dict[str, Any]:
     """Rewards of every policy variant on the same simulated participants: the cost of
     estimating the model and the gain of the other belief update."""
+    truth, task, fitted = plan.truth, plan.task, plan.fitted
+    aware, true_pol, agn = plan.aware, plan.true_policy, plan.agnostic
     n = cfg.large_n
     other = "bayes" if cfg.belief_update == "paper" else "paper"
     true_other = _solve(truth, task, other, cfg.grid)
@@ -409,17 +415,11 @@ def _costs(
     }
 
 
-def _heterogeneity(
-    cfg: ReproduceConfig,
-    truth: TrustModel,
-    task: Task,
-    aware: Policy,
-    agn: ComplexityPolicy,
-    fitted: TrustModel,
-    seed: np.random.SeedSequence,
-) -> dict[str, Any]:
+def _heterogeneity(cfg: ReproduceConfig, plan: _Plan, seed: np.random.SeedSequence) -> dict[str, Any]:
     """Experiment 2 on a heterogeneous population around the pooled model (Remark 1), by
     quartile of how easily and how conservatively low trust sets in."""
+    truth, task, fitted = plan.truth, plan.task, plan.fitted
+    aware, agn = plan.aware, plan.agnostic
     s_pop, s_run = seed.spawn(2)
     sup = Supervisors.dirichlet(truth, cfg.large_n, cfg.concentration, np.random.default_rng(s_pop), pseudo=cfg.pseudo)
     sim = crossover(sup, task, [aware, agn], cfg.large_n, counts=cfg.counts_2, seed=s_run, record=False, belief_model=fitted)
