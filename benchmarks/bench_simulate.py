@@ -22,12 +22,12 @@ import time
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from trustseek import PolicyRunner, paper_model, paper_task, solve  # noqa: E402
-from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS  # noqa: E402
-from trustseek.policies import ask_bounds  # noqa: E402
-from trustseek.simulation.engine import simulate  # noqa: E402
+from trustseek import PolicyRunner, paper_model, paper_task, solve
+from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
+from trustseek.policies import ask_bounds
+from trustseek.simulation import simulate
 
 COUNTS = (41, 30)  # Section V: 71 trials, 41 low and 30 high
 
@@ -91,15 +91,18 @@ def main(argv: list[str] | None = None) -> None:
     n = int(argv[0]) if argv else 1_000_000
     model, task = paper_model(), paper_task()
     T = sum(COUNTS)
-    print(f"paper model, {COUNTS[0]} low + {COUNTS[1]} high trials per participant, one core "
-          f"(rates per CPU-second of this process)")
+    print(
+        f"paper model, {COUNTS[0]} low + {COUNTS[1]} high trials per participant, one core (rates per CPU-second of this process)"
+    )
     results = {}
     for update in ("paper", "bayes"):
         policy = solve(model, task, belief_update=update)
         simulate(model, task, policy, 2000, counts=COUNTS, seed=0, record=False)  # warm-up
-        vec, dt = rate(lambda: simulate(model, task, policy, n, counts=COUNTS, seed=1, record=False), n * T)
+        vec, dt = rate(lambda policy=policy: simulate(model, task, policy, n, counts=COUNTS, seed=1, record=False), n * T)
         rec_n = min(n, 200_000)
-        vec_rec, dt_rec = rate(lambda: simulate(model, task, policy, rec_n, counts=COUNTS, seed=1, record=True), rec_n * T)
+        vec_rec, dt_rec = rate(
+            lambda policy=policy, rec_n=rec_n: simulate(model, task, policy, rec_n, counts=COUNTS, seed=1, record=True), rec_n * T
+        )
         results[update] = (vec, vec_rec, n, dt, rec_n, dt_rec)
     policy = solve(model, task, belief_update="paper")
     core, _ = rate(lambda: core_loop(model, task, policy, 60), 60 * T)

@@ -14,10 +14,20 @@ from typer.testing import CliRunner
 
 from trustseek import paper_model
 from trustseek.cli._app import app
-from trustseek.reproduction.pipeline import AGNOSTIC, AWARE, ReproduceConfig, reproduce, wilcoxon
 from trustseek.report import FIGURES, write_report
+from trustseek.reproduction import AGNOSTIC, AWARE, ReproduceConfig, reproduce
+from trustseek.reproduction.statistics import wilcoxon
 
-SMALL = dict(replicates=2, large_n=400, bootstrap=0, restarts=2, replicate_restarts=1, replicate_large_n=200, grid=201, jobs=1)
+SMALL = {
+    "replicates": 2,
+    "large_n": 400,
+    "bootstrap": 0,
+    "restarts": 2,
+    "replicate_restarts": 1,
+    "replicate_large_n": 200,
+    "grid": 201,
+    "jobs": 1,
+}
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +89,7 @@ def _exact_signed_rank_p(d):
     ranks = pd.Series(np.abs(d)).rank().to_numpy()
     w_plus = ranks[d > 0].sum()
     total = ranks.sum()
-    stats = [sum(r for r, s in zip(ranks, signs) if s) for signs in itertools.product([0, 1], repeat=len(d))]
+    stats = [sum(r for r, s in zip(ranks, signs, strict=True) if s) for signs in itertools.product([0, 1], repeat=len(d))]
     stats = np.array(stats)
     lo = min(w_plus, total - w_plus)
     return np.mean((stats <= lo + 1e-9) | (stats >= total - lo - 1e-9))
@@ -101,15 +111,34 @@ def test_report_folder(small_run, tmp_path):
     assert json.loads((out / "summary.json").read_text()) == small_run.summary
     html = paths["html"].read_text()
     assert html.count("data:image/png;base64,") == len(FIGURES)
-    assert "Paper vs reproduction" in html and "src=\"http" not in html
+    assert "Paper vs reproduction" in html and 'src="http' not in html
     f = pd.read_csv(out / "experiment2.csv")
     assert list(f.columns[:6]) == ["participant", "trial", "complexity", "robot_action", "human_action", "experience"]
 
 
 def test_reproduce_command(tmp_path):
-    res = CliRunner().invoke(app, ["reproduce", "--out", str(tmp_path / "r"), "--replicates", "1", "--large-n", "200",
-                                   "--bootstrap", "0", "--restarts", "1", "--replicate-restarts", "1",
-                                   "--replicate-large-n", "100", "--jobs", "1"])
+    res = CliRunner().invoke(
+        app,
+        [
+            "reproduce",
+            "--out",
+            str(tmp_path / "r"),
+            "--replicates",
+            "1",
+            "--large-n",
+            "200",
+            "--bootstrap",
+            "0",
+            "--restarts",
+            "1",
+            "--replicate-restarts",
+            "1",
+            "--replicate-large-n",
+            "100",
+            "--jobs",
+            "1",
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert "Paper vs reproduction" in res.output and "report:" in res.output
     assert (tmp_path / "r" / "report.html").exists()
@@ -117,7 +146,9 @@ def test_reproduce_command(tmp_path):
 
 def test_bad_options_give_one_line_errors(tmp_path):
     exe = Path(sys.executable).parent / "trustseek"
-    r = subprocess.run([str(exe), "reproduce", "--out", str(tmp_path), "--belief-update", "magic"], capture_output=True, text=True)
+    r = subprocess.run(
+        [str(exe), "reproduce", "--out", str(tmp_path), "--belief-update", "magic"], capture_output=True, text=True
+    )
     assert r.returncode == 2 and "belief-update" in r.stderr and "Traceback" not in r.stderr
     r = subprocess.run([str(exe), "simulate", "--counts", "4,x"], capture_output=True, text=True)
     assert r.returncode == 2 and "--counts" in r.stderr and "Traceback" not in r.stderr
@@ -134,7 +165,7 @@ def test_simulated_log_round_trips_through_fit(tmp_path):
     assert len(frame) == 150 * 71 and "true_trust" in frame.columns
     res = runner.invoke(app, ["fit", str(log), "--restarts", "3", "--seed", "1", "--json"])
     assert res.exit_code == 0, res.output
-    out = json.loads(res.output[res.output.index("{"):])
+    out = json.loads(res.output[res.output.index("{") :])
     fitted = out["model"]
     truth = paper_model()
     em = fitted["emission"]
@@ -146,8 +177,8 @@ def test_simulated_log_round_trips_through_fit(tmp_path):
     # maximum likelihood: the fitted model explains the log at least as well as the truth
     # (cells such as P(rely | low trust, high complexity) are weakly identified, so the
     # likelihood, not each cell, is the sharp check)
-    from trustseek.estimation.fit import from_trust_model
     from trustseek.estimation import encode, loglik
+    from trustseek.estimation.fit import from_trust_model
 
     spec, params = from_trust_model(truth)
     ll_truth = loglik(encode(frame[frame.columns[:6]], spec), spec, params)

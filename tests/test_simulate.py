@@ -8,7 +8,7 @@ from trustseek import AssistancePOMDP, TrustModel, always_ask, make_updater, nev
 from trustseek.model.core import ASK, AUTONOMOUS, INTERVENE, RELIABLE
 from trustseek.policies import TrustAwarePolicy, ask_bounds
 from trustseek.pomdp.belief import ScalarBelief
-from trustseek.simulation.engine import (
+from trustseek.simulation import (
     Block,
     SimulationError,
     Supervisors,
@@ -61,7 +61,7 @@ def test_emission_outcome_and_transition_frequencies(task, K):
     for cc in range(2):
         for aa in range(2):
             for t in range(K):
-                sel = (c == cc) & (act == aa) & (T == t)
+                sel = (c == cc) & (act == aa) & (t == T)
                 emp = np.mean(o[sel] == INTERVENE)
                 assert within(emp, model.emission[cc, aa, t, INTERVENE], sel.sum()), (cc, aa, t, emp)
     # P(E' | o, C, a): success rates of autonomous trials the human relied on; asks and interventions
@@ -77,7 +77,7 @@ def test_emission_outcome_and_transition_frequencies(task, K):
         for aa in range(2):
             for ee in range(2):
                 for t in range(K):
-                    sel = (c[:, :-1] == cc) & (act[:, :-1] == aa) & (e[:, :-1] == ee) & (T0 == t)
+                    sel = (c[:, :-1] == cc) & (act[:, :-1] == aa) & (e[:, :-1] == ee) & (t == T0)
                     if aa == ASK and ee != task.ask_experience[cc]:
                         assert sel.sum() == 0
                         continue
@@ -89,8 +89,14 @@ def test_emission_outcome_and_transition_frequencies(task, K):
 def test_rewards_follow_eq1(task):
     sim = simulate(paper_model(), task, randomized(), n_participants=2000, trials=20, seed=1)
     f = sim.trials()
-    expected = [task.rewards.of(["autonomous", "ask"].index(r.robot_action), ["intervene", "rely"].index(r.human_action),
-                                ["faulty", "reliable"].index(r.experience)) for r in f.head(3000).itertuples()]
+    expected = [
+        task.rewards.of(
+            ["autonomous", "ask"].index(r.robot_action),
+            ["intervene", "rely"].index(r.human_action),
+            ["faulty", "reliable"].index(r.experience),
+        )
+        for r in f.head(3000).itertuples()
+    ]
     np.testing.assert_array_equal(f["reward"].head(3000).to_numpy(), expected)
     s = sim.summary()
     np.testing.assert_allclose(s["cumulative_reward"].to_numpy(), f.groupby("participant", sort=False)["reward"].sum().to_numpy())
@@ -175,7 +181,10 @@ def test_trust_aware_simulation_uses_policy_decisions(task):
     acts = policy.actions(np.stack([1 - b, b], axis=1), a["complexity"].reshape(-1).astype(int))
     np.testing.assert_array_equal(acts, a["action"].reshape(-1))
     up = make_updater("paper", model)
-    nb = up.update(np.stack([1 - a["belief"][:, :-1], a["belief"][:, :-1]], axis=-1), *(a[k][:, :-1].astype(int) for k in ("complexity", "action", "human", "experience")))
+    nb = up.update(
+        np.stack([1 - a["belief"][:, :-1], a["belief"][:, :-1]], axis=-1),
+        *(a[k][:, :-1].astype(int) for k in ("complexity", "action", "human", "experience")),
+    )
     np.testing.assert_allclose(nb[..., 1], a["belief"][:, 1:], atol=1e-12)
     assert np.all(a["belief"][:, 0] == 1.0)
 
@@ -204,7 +213,7 @@ def test_heterogeneous_population_follows_each_participant(task):
         T, c, o = arr["trust"][who], arr["complexity"][who], arr["human"][who]
         for cc in range(2):
             for t in range(2):
-                sel = (c == cc) & (T == t)
+                sel = (c == cc) & (t == T)
                 assert within(np.mean(o[sel] == 0), m.emission[cc, AUTONOMOUS, t, 0], sel.sum())
 
 
@@ -233,7 +242,7 @@ def test_crossover_design_and_trial_log(task):
     assert {"true_trust", "belief", "reward", "block", "policy"} <= set(f.columns)
     for pid, g in f.groupby("participant"):
         assert g["trial"].tolist() == list(range(1, 69))
-        for pol, h in g.groupby("policy"):
+        for _, h in g.groupby("policy"):
             assert len(h) == 34 and (h["complexity"] == "low").sum() == 17
         assert (g[g["policy"] == "never-ask"]["robot_action"] == "autonomous").all()
         # the policy's reward in the summary is the sum over its block of the log
@@ -278,6 +287,8 @@ def test_non_threshold_policy_goes_through_policy_actions(task):
     sim = simulate(model, task, policy, n_participants=3000, trials=30, seed=8)
     a = sim.arrays
     b = a["belief"].reshape(-1)
-    np.testing.assert_array_equal(policy.actions(np.stack([1 - b, b], 1), a["complexity"].reshape(-1).astype(int)), a["action"].reshape(-1))
+    np.testing.assert_array_equal(
+        policy.actions(np.stack([1 - b, b], 1), a["complexity"].reshape(-1).astype(int)), a["action"].reshape(-1)
+    )
     asked = a["action"].reshape(-1) == ASK
     assert asked.any() and np.all((b[asked] > 0.29) & (b[asked] < 0.61))

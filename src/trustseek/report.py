@@ -15,7 +15,7 @@ import numpy as np
 from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
 from .model.presets import paper_model
-from .reproduction.pipeline import AGNOSTIC, AWARE, PAPER, Reproduction, write_summary
+from .reproduction import AGNOSTIC, AWARE, PAPER, Reproduction, write_summary
 from .version import __version__
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"

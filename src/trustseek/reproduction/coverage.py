@@ -43,6 +43,13 @@ def coverage_study(
             widths.setdefault(key, []).append(c["upper"] - c["lower"])
             ests.setdefault(key, []).append(c["estimate"])
     return [
-        {"cell": k, "truth": truth[k], "coverage": float(np.mean(v)), "datasets": len(v), "mean_width": float(np.mean(widths[k])), "mean_estimate": float(np.mean(ests[k]))}
+        {
+            "cell": k,
+            "truth": truth[k],
+            "coverage": float(np.mean(v)),
+            "datasets": len(v),
+            "mean_width": float(np.mean(widths[k])),
+            "mean_estimate": float(np.mean(ests[k])),
+        }
         for k, v in hits.items()
     ]

@@ -29,162 +29,83 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
+import pandas as pd
+from scipy.stats import spearmanr
 
 from ..errors import TrustseekError
-from ..model.core import ASK, AUTONOMOUS, FAULTY, INTERVENE, RELIABLE, RELY, Task, TrustModel
-from ..policies import always_ask, ask_regions, never_ask, randomized
-from ..solvers.agnostic import trust_agnostic, trust_agnostic_from_data
-from ..pomdp.problem import AssistancePOMDP
+from ..estimation.fit import FitResult, fit_trust_model
+from ..model.core import AUTONOMOUS, FAULTY, INTERVENE, Task, TrustModel
 from ..model.presets import paper_model, paper_task
-from ..simulation.engine import Supervisors, crossover, simulate
+from ..policies import ComplexityPolicy, Policy, always_ask, ask_regions, never_ask, randomized
+from ..pomdp.problem import AssistancePOMDP
+from ..simulation import CrossoverSimulation, Simulation, Supervisors, crossover, simulate
+from ..solvers.agnostic import trust_agnostic, trust_agnostic_from_data
 from ..solvers.registry import make_solver
-from ..vocab import PAPER_BLOCK_COUNTS, PAPER_DATA_COUNTS, TRIAL_COLUMNS
-
-LOW, HIGH = 0, 1
-AWARE, AGNOSTIC = "trust-aware", "trust-agnostic"
-
-PAPER = {
-    "threshold_high": 0.75,
-    "median_aware": 57.0,
-    "median_agnostic": 51.0,
-    "participants_1": 9,
-    "participants_2": 5,
-}
+from ..vocab import TRIAL_COLUMNS
+from .comparison import bootstrap_interval, comparison_rows, disagreements, param_specs, param_values
+from .config import AGNOSTIC, AWARE, LOW, ReproduceConfig
+from .statistics import distribution, mean_ci, wilcoxon
 
 CANONICAL = list(TRIAL_COLUMNS)
 
 
-@dataclass
-class ReproduceConfig:
-    """Every setting of the reproduction (the defaults are the paper's design)."""
-
-    seed: int = 0
-    replicates: int = 20
-    large_n: int = 10_000
-    participants_1: int = 9
-    counts_1: tuple[int, int] = PAPER_DATA_COUNTS
-    ask_low: float = 0.10
-    ask_high: float = 0.40
-    participants_2: int = 5
-    counts_2: tuple[int, int] = PAPER_BLOCK_COUNTS
-    restarts: int = 10
-    bootstrap: int = 20
-    replicate_restarts: int = 4
-    replicate_large_n: int = 2_000
-    belief_update: str = "paper"
-    grid: int = 1001
-    concentration: float = 20.0
-    pseudo: float = 0.5
-    jobs: int = 2
-
-    def problems(self) -> list[str]:
-        p = []
-        for name in ("replicates",):
-            if getattr(self, name) < 0:
-                p.append(f"--{name} must be >= 0, got {getattr(self, name)}")
-        for name in ("large_n", "participants_1", "participants_2", "restarts", "replicate_restarts", "replicate_large_n", "jobs"):
-            if getattr(self, name) < 1:
-                p.append(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
-        if self.bootstrap < 0:
-            p.append(f"--bootstrap must be >= 0, got {self.bootstrap}")
-        if self.belief_update not in ("paper", "bayes"):
-            p.append(f"--belief-update must be 'paper' or 'bayes', got {self.belief_update!r}")
-        if not (0 <= self.ask_low <= 1 and 0 <= self.ask_high <= 1):
-            p.append("ask probabilities must lie in [0, 1]")
-        if self.grid < 3:
-            p.append(f"--grid must be >= 3, got {self.grid}")
-        return p
-
-
-# --------------------------------------------------------------------------- helpers
-
-
-def _ci(v: np.ndarray) -> tuple[float, float, float]:
-    v = np.asarray(v, dtype=float)
-    m = float(v.mean())
-    h = 1.96 * float(v.std(ddof=1)) / math.sqrt(len(v)) if len(v) > 1 else float("nan")
-    return m, m - h, m + h
-
-
-def _pct(v, q) -> float | None:
-    v = np.asarray([x for x in v if x is not None and np.isfinite(x)], dtype=float)
-    return float(np.percentile(v, q)) if len(v) else None
-
-
-def _dist(v) -> dict[str, Any]:
-    vals = [x for x in v if x is not None and np.isfinite(x)]
-    return {
-        "n": len(vals),
-        "median": _pct(vals, 50),
-        "mean": float(np.mean(vals)) if vals else None,
-        "p2.5": _pct(vals, 2.5),
-        "p97.5": _pct(vals, 97.5),
-        "values": [None if x is None or not np.isfinite(x) else float(x) for x in v],
-    }
-
-
-def wilcoxon(aware: np.ndarray, agnostic: np.ndarray) -> dict[str, Any]:
-    """Two-sided Wilcoxon signed-rank test of the paired differences (scipy)."""
-    from scipy.stats import wilcoxon as _w
-
-    d = np.asarray(aware, float) - np.asarray(agnostic, float)
-    out: dict[str, Any] = {"n": int(len(d)), "nonzero": int(np.count_nonzero(d))}
-    if np.count_nonzero(d) == 0:
-        out.update(statistic=None, p_value=None, note="all paired differences are zero")
-        return out
-    res = _w(aware, agnostic, zero_method="wilcox", alternative="two-sided")
-    out.update(statistic=float(res.statistic), p_value=float(res.pvalue))
-    return out
-
-
-def _threshold(policy) -> float | None:
+def _threshold(policy: Policy) -> float | None:
     """The high-complexity threshold of a policy that reads the belief (None when it never asks,
     when its ask region is not [0, θ) or when it ignores the belief)."""
     th = (policy.thresholds() or {}).get("high") if policy.belief_update is not None else None
     return None if th is None or not np.isfinite(th) else float(th)
 
 
-def _policy_summary(policy) -> dict[str, Any]:
+def _policy_summary(policy: Policy) -> dict[str, Any]:
+    """Where a trust-aware policy asks, and with which belief update."""
     return {**ask_regions(policy), "belief_update": policy.belief_update}
 
 
-def _agnostic_summary(pol) -> dict[str, Any]:
+def _agnostic_summary(pol: ComplexityPolicy) -> dict[str, Any]:
+    """What a trust-agnostic policy does per complexity, and what its solver expected."""
     return {
-        "p_ask": {cn: float(p) for cn, p in zip(pol.complexities, pol.p_ask)},
-        "action": {cn: ("ask" if p == 1 else "autonomous") for cn, p in zip(pol.complexities, pol.p_ask)},
+        "p_ask": {cn: float(p) for cn, p in zip(pol.complexities, pol.p_ask, strict=True)},
+        "action": {cn: ("ask" if p == 1 else "autonomous") for cn, p in zip(pol.complexities, pol.p_ask, strict=True)},
         "p_intervene": pol.info.get("p_intervene"),
         "expected_reward": pol.info.get("expected_reward"),
     }
 
 
-def _per_policy(sim, keys=("cumulative_reward", "autonomous_collections", "interventions", "asks", "failures")):
-    out = {}
+PER_POLICY = ("cumulative_reward", "autonomous_collections", "interventions", "asks", "failures")
+
+
+def _per_policy(sim: Simulation, keys: tuple[str, ...] = PER_POLICY) -> dict[str, dict[str, dict[str, float]]]:
+    """Median, mean and sum of each quantity, per policy."""
+    out: dict[str, dict[str, dict[str, float]]] = {}
     for key in keys:
-        for lab, v in sim.by_policy(key).items():
-            v = np.asarray(v, dtype=float)
+        for lab, values in sim.by_policy(key).items():
+            v = np.asarray(values, dtype=float)
             out.setdefault(lab, {})[key] = {"median": float(np.median(v)), "mean": float(v.mean()), "sum": float(v.sum())}
     return out
 
 
-def _experiment2(sim) -> dict[str, Any]:
+def _experiment2(sim: Simulation) -> dict[str, Any]:
+    """Experiment 2's numbers: the medians and means of both policies, their paired
+    differences and the Wilcoxon test."""
     r = sim.by_policy("cumulative_reward")
     aware, agn = np.asarray(r[AWARE], float), np.asarray(r[AGNOSTIC], float)
     d = aware - agn
     return {
-        "participants": int(len(aware)),
+        "participants": len(aware),
         "median_aware": float(np.median(aware)),
         "median_agnostic": float(np.median(agn)),
         "mean_aware": float(aware.mean()),
         "mean_agnostic": float(agn.mean()),
         "median_difference": float(np.median(aware) - np.median(agn)),
         "mean_difference": float(d.mean()),
-        "mean_difference_ci": list(_ci(d)[1:]) if len(d) > 1 else None,
+        "mean_difference_ci": list(mean_ci(d)[1:]) if len(d) > 1 else None,
         "share_aware_better": float(np.mean(d > 0)),
         "share_tied": float(np.mean(d == 0)),
         "wilcoxon": wilcoxon(aware, agn),
@@ -192,19 +113,27 @@ def _experiment2(sim) -> dict[str, Any]:
     }
 
 
-def _fit(frame, cfg: ReproduceConfig, restarts: int, seed: int, bootstrap: int, n_jobs: int, progress=None):
-    from ..estimation.fit import fit_trust_model
-
+def _fit(
+    frame: pd.DataFrame,
+    restarts: int,
+    seed: int,
+    bootstrap: int,
+    n_jobs: int,
+    progress: Callable[[int, int], None] | None = None,
+) -> FitResult:
+    """The paper-structured IOHMM fitted to the canonical columns of ``frame``."""
     return fit_trust_model(
         frame[CANONICAL], preset="paper", restarts=restarts, seed=seed, bootstrap=bootstrap, n_jobs=n_jobs, progress=progress
     )
 
 
-def _solve(model: TrustModel, task: Task, update: str, grid: int):
+def _solve(model: TrustModel, task: Task, update: str, grid: int) -> Policy:
+    """The trust-aware policy of ``model`` on a belief grid."""
     return make_solver("grid", belief_update=update, grid=grid).solve(AssistancePOMDP(model, task))
 
 
-def _ask_policy(cfg: ReproduceConfig):
+def _ask_policy(cfg: ReproduceConfig) -> ComplexityPolicy:
+    """Experiment 1's data-collection policy."""
     return randomized({"low": cfg.ask_low, "high": cfg.ask_high})
 
 
@@ -215,7 +144,7 @@ def _seed_int(ss: np.random.SeedSequence) -> int:
 # --------------------------------------------------------------------------- one replicate
 
 
-def run_replicate(args) -> dict[str, Any]:
+def run_replicate(args: tuple[ReproduceConfig, int, np.random.SeedSequence]) -> dict[str, Any]:
     """Steps 1-4 with fresh participants (and the estimation cost), for the replicate study."""
     cfg, index, ss = args
     s1, sfit, s2, s3, scost = ss.spawn(5)
@@ -224,7 +153,7 @@ def run_replicate(args) -> dict[str, Any]:
     sim1 = simulate(truth, task, _ask_policy(cfg), cfg.participants_1, counts=cfg.counts_1, seed=s1)
     frame = sim1.trials()
     try:
-        fit = _fit(frame, cfg, cfg.replicate_restarts, _seed_int(sfit), 0, 1)
+        fit = _fit(frame, cfg.replicate_restarts, _seed_int(sfit), 0, 1)
     except TrustseekError as exc:
         out["error"] = "; ".join(exc.lines())
         return out
@@ -233,183 +162,47 @@ def run_replicate(args) -> dict[str, Any]:
     agn = trust_agnostic_from_data(frame, task)
     agn.kind = AGNOSTIC
     out["threshold"] = _threshold(aware)
-    out["asks_low"] = bool(aware.ask_intervals()["low"])
+    out["asks_low"] = bool((aware.ask_intervals() or {}).get("low"))
     out["agnostic"] = _agnostic_summary(agn)["action"]
-    out["params"] = _param_values(model)
-    small = crossover(truth, task, [aware, agn], cfg.participants_2, counts=cfg.counts_2, seed=s2, record=False, belief_model=model)
+    out["params"] = param_values(model)
+    small = crossover(
+        truth, task, [aware, agn], cfg.participants_2, counts=cfg.counts_2, seed=s2, record=False, belief_model=model
+    )
     e2 = _experiment2(small)
     out["median_aware"] = e2["median_aware"]
     out["median_agnostic"] = e2["median_agnostic"]
     out["median_diff_small"] = e2["median_difference"]
     out["wilcoxon_p_small"] = e2["wilcoxon"]["p_value"]
-    large = crossover(truth, task, [aware, agn], cfg.replicate_large_n, counts=cfg.counts_2, seed=s3, record=False, belief_model=model)
+    large = crossover(
+        truth, task, [aware, agn], cfg.replicate_large_n, counts=cfg.counts_2, seed=s3, record=False, belief_model=model
+    )
     e2l = _experiment2(large)
     out["mean_diff_large"] = e2l["mean_difference"]
     out["median_diff_large"] = e2l["median_difference"]
     # cost of estimation: the same participants under the true model's policy
     true_pol = _solve(truth, task, cfg.belief_update, cfg.grid)
     r_fit = simulate(truth, task, aware, cfg.replicate_large_n, counts=cfg.counts_2, seed=scost, record=False).by_policy()[AWARE]
-    r_true = simulate(truth, task, true_pol, cfg.replicate_large_n, counts=cfg.counts_2, seed=scost, record=False).by_policy()[AWARE]
+    r_true = simulate(truth, task, true_pol, cfg.replicate_large_n, counts=cfg.counts_2, seed=scost, record=False).by_policy()[
+        AWARE
+    ]
     out["estimation_loss"] = float(np.mean(r_true - r_fit))
     return out
 
 
-# --------------------------------------------------------------------------- parameters and the comparison table
-
-# (key, label, paper value, getter on a TrustModel)
-def _param_specs():
-    A, K = AUTONOMOUS, ASK
-    specs = [("initial_high", "P(T_1 = high)", 1.0, lambda m: m.initial[1], ("initial", (1,)))]
-    for c, cn in ((LOW, "low"), (HIGH, "high")):
-        for t, tn in ((0, "low"), (1, "high")):
-            specs.append((f"em_ask_{cn}_{tn}", f"Fig. 4a  P(intervene | T={tn}, C={cn}, ask)", 1.0,
-                          (lambda m, c=c, t=t: m.emission[c, K, t, INTERVENE]), ("emission", (c, K, t, INTERVENE))))
-    for c, cn, fig, vals in ((LOW, "low", "4b", (0.98, 1.0)), (HIGH, "high", "4c", (0.46, 0.95))):
-        for t, tn in ((0, "low"), (1, "high")):
-            specs.append((f"em_rely_{cn}_{tn}", f"Fig. {fig}  P(rely | T={tn}, C={cn}, autonomous)", vals[t],
-                          (lambda m, c=c, t=t: m.emission[c, A, t, RELY]), ("emission", (c, A, t, RELY))))
-    trans = [
-        ("5a", LOW, A, RELIABLE, [("high", "high", 1.0), ("low", "low", 1.0)]),
-        ("5b", LOW, A, FAULTY, [("high", "low", 0.39), ("low", "low", 0.99)]),
-        ("5c", LOW, K, FAULTY, [("high", "high", 1.0), ("low", "low", 1.0)]),
-        ("6a", HIGH, A, RELIABLE, [("high", "high", 1.0), ("low", "high", 1.0)]),
-        ("6b", HIGH, A, FAULTY, [("high", "low", 1.0), ("low", "low", 0.7)]),
-        ("6c", HIGH, K, RELIABLE, [("high", "high", 0.94), ("low", "high", 0.44)]),
-    ]
-    names = {"low": 0, "high": 1}
-    an = {A: "autonomous", K: "ask"}
-    en = {RELIABLE: "reliable", FAULTY: "faulty"}
-    for fig, c, a, e, cells in trans:
-        cn = "low" if c == LOW else "high"
-        for fr, to, val in cells:
-            t, u = names[fr], names[to]
-            specs.append((f"tr_{fig}_{fr}_{to}", f"Fig. {fig}  P(T'={to} | T={fr}, E'={en[e]}, C={cn}, {an[a]})", val,
-                          (lambda m, c=c, a=a, e=e, t=t, u=u: m.transition[c, a, e, t, u]), ("transition", (c, a, e, t, u))))
-    return specs
-
-
-def _param_values(model: TrustModel) -> dict[str, float]:
-    return {key: float(get(model)) for key, _, _, get, _ in _param_specs()}
-
-
-def _ci_of(fit, where) -> tuple[float, float] | None:
-    ci = getattr(fit, "ci", None)
-    if not ci:
-        return None
-    name, idx = where
-    try:
-        lo, hi = ci[name]
-        return float(np.asarray(lo)[idx]), float(np.asarray(hi)[idx])
-    except (KeyError, IndexError, TypeError, ValueError):
-        return None
-
-
-def _inside(v, lo, hi, tol=0.005) -> bool:
-    return lo is not None and hi is not None and lo - tol <= v <= hi + tol
-
-
-def _row(quantity, paper, ours, interval, kind, note=""):
-    if interval is None or interval[0] is None:
-        verdict = "no interval"
-    elif _inside(paper, *interval):
-        verdict = "agrees"
-    else:
-        verdict = "DISAGREES"
-    return {"quantity": quantity, "paper": paper, "ours": ours, "interval": list(interval) if interval else None,
-            "interval_kind": kind, "verdict": verdict, "note": note}
-
-
-def comparison_rows(summary: dict) -> list[dict]:
-    """Every number the paper reports, next to ours and an interval, with a verdict."""
-    rows = []
-    fitted = summary["fit"]["values"]
-    boot = summary["fit"].get("bootstrap_ci") or {}
-    reps = summary["replicates"]["params"]
-    cfg = summary["config"]
-    design = f"{cfg['participants_1']} × {sum(cfg['counts_1'])}"
-    for key, label, paper_val, _, _ in _param_specs():
-        rep = reps.get(key)
-        interval = (rep["p2.5"], rep["p97.5"]) if rep and rep["n"] else None
-        kind = "replicates 95%"
-        if interval is None and key in boot:
-            interval, kind = tuple(boot[key]), "bootstrap 95%"
-        notes = []
-        if interval is not None and interval[1] - interval[0] > 0.8:
-            notes.append(f"not identified by a {design} sample (the range spans most of [0, 1])")
-        if key in boot:
-            notes.append(f"bootstrap 95% [{boot[key][0]:.3f}, {boot[key][1]:.3f}]")
-        note = "; ".join(notes)
-        rows.append(_row(label, paper_val, fitted[key], interval, kind, note))
-    plan = summary["plan"]
-    th = summary["replicates"]["threshold"]
-    rows.append(_row("Threshold on P(T=high), high complexity (ask below)", PAPER["threshold_high"], plan["fitted"]["thresholds"]["high"],
-                     (th["p2.5"], th["p97.5"]) if th["n"] else None, "replicates 95%",
-                     f"true model: {plan['true_model']['thresholds']['high']:.3f}"))
-    share_low = summary["replicates"]["share_never_ask_low"]
-    rows.append({"quantity": "Trust-aware policy never asks in low complexity", "paper": "never asks",
-                 "ours": "never asks" if not plan["fitted"]["ask_intervals"]["low"] else "asks somewhere",
-                 "interval": None, "interval_kind": "share of replicates", "note": f"{share_low:.0%} of replicates",
-                 "verdict": "agrees" if not plan["fitted"]["ask_intervals"]["low"] else "DISAGREES"})
-    agn = plan["agnostic"]["action"]
-    rep_agn = summary["replicates"]["agnostic_share_paper"]
-    for cn, pv in (("low", "autonomous"), ("high", "ask")):
-        rows.append({"quantity": f"Trust-agnostic policy, {cn} complexity", "paper": pv, "ours": agn[cn], "interval": None,
-                     "interval_kind": "share of replicates", "note": f"{rep_agn[cn]:.0%} of replicates choose {pv}",
-                     "verdict": "agrees" if agn[cn] == pv else "DISAGREES"})
-    small, large = summary["experiment2"]["small"], summary["experiment2"]["large"]
-    rr = summary["replicates"]
-    for key, pk, lab in (("median_aware", "median_aware", "trust-aware"), ("median_agnostic", "median_agnostic", "trust-agnostic")):
-        d = rr[key]
-        rows.append(_row(f"Median cumulative reward, {lab} ({small['participants']} participants)", PAPER[pk], small[key],
-                         (d["p2.5"], d["p97.5"]) if d["n"] else None, "replicates 95%",
-                         f"{large['participants']:,} participants: {large[key]:g}"))
-    d = rr["median_diff_small"]
-    rows.append(_row("Median difference aware − agnostic", PAPER["median_aware"] - PAPER["median_agnostic"], small["median_difference"],
-                     (d["p2.5"], d["p97.5"]) if d["n"] else None, "replicates 95%",
-                     f"large N mean difference {large['mean_difference']:.2f} [{large['mean_difference_ci'][0]:.2f}, {large['mean_difference_ci'][1]:.2f}]"))
-    rows.append({"quantity": "Trust-aware better for most participants", "paper": "most (Fig. 8)",
-                 "ours": f"{large['share_aware_better']:.0%} of {large['participants']:,}", "interval": None,
-                 "interval_kind": "", "note": f"{large['share_tied']:.0%} tied; {small['share_aware_better']:.0%} of {small['participants']} in the paper-sized run",
-                 "verdict": "agrees" if large["share_aware_better"] > 0.5 else "DISAGREES"})
-    aw = large["per_policy"][AWARE]["autonomous_collections"]["mean"]
-    ag = large["per_policy"][AGNOSTIC]["autonomous_collections"]["mean"]
-    rows.append({"quantity": "More autonomous collections with the trust-aware policy", "paper": "more",
-                 "ours": f"{aw:.1f} vs {ag:.1f} per block", "interval": None, "interval_kind": "", "note": f"{large['participants']:,} participants",
-                 "verdict": "agrees" if aw > ag else "DISAGREES"})
-    return rows
-
-
-def disagreements(rows: list[dict]) -> list[str]:
-    out = []
-    for r in rows:
-        if r["verdict"] == "DISAGREES":
-            iv = r["interval"]
-            ivs = f" ({r['interval_kind']}: [{iv[0]:.3g}, {iv[1]:.3g}])" if iv else ""
-            out.append(f"{r['quantity']}: the paper reports {r['paper']}, the simulation gives {_fmt(r['ours'])}{ivs}.")
-    return out
-
-
-def _fmt(v) -> str:
-    if isinstance(v, float):
-        return f"{v:.3g}"
-    return str(v)
-
-
-# --------------------------------------------------------------------------- the pipeline
-
-
 @dataclass
 class Reproduction:
+    """What :func:`reproduce` produced: the JSON summary and the objects the report draws."""
+
     summary: dict[str, Any]
-    fit: Any
+    fit: FitResult
     fitted: TrustModel
-    aware: Any
-    agnostic: Any
-    true_policy: Any
-    experiment1: Any  # DataFrame
-    experiment2: Any  # CrossoverSimulation (small)
-    experiment2_large: Any
-    heterogeneity: Any
+    aware: Policy
+    agnostic: ComplexityPolicy
+    true_policy: Policy
+    experiment1: pd.DataFrame
+    experiment2: CrossoverSimulation  # the paper-sized run
+    experiment2_large: CrossoverSimulation
+    heterogeneity: dict[str, Any]
     seconds: float = 0.0
 
 
@@ -427,14 +220,14 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, float
     total = 1 + w_fit + 1 + 1 + 1 + w_rep
     done = [0.0]
 
-    def step(stage, w=0.0):
+    def step(stage: str, w: float = 0.0) -> None:
         done[0] += w
         say(stage, min(1.0, done[0] / total))
 
     ss = np.random.SeedSequence(cfg.seed)
     s1, sfit, s2, s2l, scost, shet, sreps = ss.spawn(7)
     truth, task = paper_model(), paper_task()
-    summary: dict[str, Any] = {"config": _config_dict(cfg)}
+    summary: dict[str, Any] = {"config": cfg.to_summary()}
 
     # 1. experiment 1
     step("experiment 1: data collection")
@@ -443,28 +236,30 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, float
     auto = frame1[frame1["robot_action"] == "autonomous"]
     summary["experiment1"] = {
         "participants": cfg.participants_1,
-        "trials": int(len(frame1)),
+        "trials": len(frame1),
         "trials_per_participant": {"low": cfg.counts_1[0], "high": cfg.counts_1[1]},
         "ask_probability": {"low": cfg.ask_low, "high": cfg.ask_high},
         "asks": int((frame1["robot_action"] == "ask").sum()),
         "interventions": int((auto["human_action"] == "intervene").sum()),
         "failures": int(((auto["human_action"] == "rely") & (auto["experience"] == "faulty")).sum()),
-        "p_intervene": {cn: float((auto[auto["complexity"] == cn]["human_action"] == "intervene").mean()) for cn in task.complexities},
+        "p_intervene": {
+            cn: float((auto[auto["complexity"] == cn]["human_action"] == "intervene").mean()) for cn in task.complexities
+        },
         "time_in_low_trust": float((frame1["true_trust"] == "low").mean()),
     }
     step("fit", 1.0)
 
     # 2. fit
-    def fit_progress(d, tot):
+    def fit_progress(d: int, tot: int) -> None:
         say(f"fit: {d}/{tot}", min(1.0, (done[0] + w_fit * d / max(tot, 1)) / total))
 
-    fit = _fit(frame1, cfg, cfg.restarts, _seed_int(sfit), cfg.bootstrap, cfg.jobs, progress=fit_progress)
+    fit = _fit(frame1, cfg.restarts, _seed_int(sfit), cfg.bootstrap, cfg.jobs, progress=fit_progress)
     fitted = fit.model
-    boot = {}
-    for key, _, _, _, where in _param_specs():
-        iv = _ci_of(fit, where)
+    boot: dict[str, list[float]] = {}
+    for spec in param_specs():
+        iv = bootstrap_interval(fit, spec)
         if iv is not None:
-            boot[key] = list(iv)
+            boot[spec.key] = list(iv)
     summary["fit"] = {
         "loglik": float(fit.loglik),
         "restart_logliks": [float(x) for x in fit.restart_logliks],
@@ -472,8 +267,8 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, float
         "aic": float(fit.aic),
         "bic": float(fit.bic),
         "bootstrap": cfg.bootstrap,
-        "values": _param_values(fitted),
-        "paper_values": _param_values(truth),
+        "values": param_values(fitted),
+        "paper_values": param_values(truth),
         "bootstrap_ci": boot,
         "model": fitted.to_dict(),
     }
@@ -484,6 +279,7 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, float
     true_pol = _solve(truth, task, cfg.belief_update, cfg.grid)
     agn = trust_agnostic_from_data(frame1, task)
     agn.kind = AGNOSTIC
+    plan = _Plan(truth, task, fitted, aware, true_pol, agn)
     summary["plan"] = {
         "belief_update": cfg.belief_update,
         "grid": cfg.grid,
@@ -498,21 +294,24 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, float
     small = crossover(truth, task, [aware, agn], cfg.participants_2, counts=cfg.counts_2, seed=s2, belief_model=fitted)
     large = crossover(truth, task, [aware, agn], cfg.large_n, counts=cfg.counts_2, seed=s2l, record=False, belief_model=fitted)
     summary["experiment2"] = {
-        "small": _experiment2(small) | {"rewards": {k: v.tolist() for k, v in small.by_policy().items()},
-                                        "first_policy": [small.block_labels[o[0]] for o in small.orders]},
+        "small": _experiment2(small)
+        | {
+            "rewards": {k: v.tolist() for k, v in small.by_policy().items()},
+            "first_policy": [small.block_labels[o[0]] for o in small.orders],
+        },
         "large": _experiment2(large),
     }
     step("costs of estimation and of the belief update", 1.0)
 
     # 6. costs (same participants for every policy)
-    summary["costs"] = _costs(cfg, truth, task, fitted, aware, true_pol, agn, scost)
+    summary["costs"] = _costs(cfg, plan, scost)
     step("heterogeneous population (Remark 1)", 1.0)
-    het = _heterogeneity(cfg, truth, task, aware, agn, fitted, shet)
+    het = _heterogeneity(cfg, plan, shet)
     summary["heterogeneity"] = het["summary"]
     step("replicates", 1.0)
 
     # 5. replicates
-    reps = []
+    reps: list[dict[str, Any]] = []
     if cfg.replicates:
         args = [(cfg, i, child) for i, child in enumerate(sreps.spawn(cfg.replicates))]
         if cfg.jobs > 1 and cfg.replicates > 1:
@@ -543,21 +342,29 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, float
     )
 
 
-def _config_dict(cfg: ReproduceConfig) -> dict[str, Any]:
-    d = asdict(cfg)
-    d["counts_1"] = list(cfg.counts_1)
-    d["counts_2"] = list(cfg.counts_2)
-    d.pop("jobs")  # does not change any number
-    return d
+@dataclass(frozen=True)
+class _Plan:
+    """The paper's model and task, the fitted model and the policies planned from both."""
+
+    truth: TrustModel
+    task: Task
+    fitted: TrustModel
+    aware: Policy
+    true_policy: Policy
+    agnostic: ComplexityPolicy
 
 
-def _costs(cfg, truth, task, fitted, aware, true_pol, agn, seed) -> dict[str, Any]:
+def _costs(cfg: ReproduceConfig, plan: _Plan, seed: np.random.SeedSequence) -> dict[str, Any]:
+    """Rewards of every policy variant on the same simulated participants: the cost of
+    estimating the model and the gain of the other belief update."""
+    truth, task, fitted = plan.truth, plan.task, plan.fitted
+    aware, true_pol, agn = plan.aware, plan.true_policy, plan.agnostic
     n = cfg.large_n
     other = "bayes" if cfg.belief_update == "paper" else "paper"
     true_other = _solve(truth, task, other, cfg.grid)
     fit_other = _solve(fitted, task, other, cfg.grid)
     agn_true = trust_agnostic(truth, task)
-    variants = [
+    variants: list[tuple[str, Policy, str]] = [
         (f"trust-aware, true model, {cfg.belief_update} update", true_pol, "true model"),
         (f"trust-aware, true model, {other} update", true_other, "true model"),
         (f"trust-aware, fitted model, {cfg.belief_update} update", aware, "fitted model"),
@@ -567,22 +374,31 @@ def _costs(cfg, truth, task, fitted, aware, true_pol, agn, seed) -> dict[str, An
         ("always ask", always_ask(task.complexities), "baselines"),
         ("never ask", never_ask(task.complexities), "baselines"),
     ]
-    rewards = {}
-    rows = []
+    rewards: dict[str, np.ndarray] = {}
+    rows: list[dict[str, Any]] = []
     for label, pol, group in variants:
         sim = simulate(truth, task, pol, n, counts=cfg.counts_2, seed=seed, record=False, belief_model=fitted)
         r = sim.summary_arrays["cumulative_reward"][:, 0]
         rewards[label] = r
-        m, lo, hi = _ci(r)
-        th = _threshold(pol) if hasattr(pol, "thresholds") else None
-        rows.append({"label": label, "group": group, "mean": m, "lo": lo, "hi": hi, "median": float(np.median(r)),
-                     "threshold_high": th,
-                     "autonomous_collections": float(sim.summary_arrays["autonomous_collections"][:, 0].mean()),
-                     "interventions": float(sim.summary_arrays["interventions"][:, 0].mean())})
+        m, lo, hi = mean_ci(r)
+        th = _threshold(pol)
+        rows.append(
+            {
+                "label": label,
+                "group": group,
+                "mean": m,
+                "lo": lo,
+                "hi": hi,
+                "median": float(np.median(r)),
+                "threshold_high": th,
+                "autonomous_collections": float(sim.summary_arrays["autonomous_collections"][:, 0].mean()),
+                "interventions": float(sim.summary_arrays["interventions"][:, 0].mean()),
+            }
+        )
     ref = rewards[variants[0][0]]
     for row in rows:
         d = rewards[row["label"]] - ref
-        m, lo, hi = _ci(d)
+        m, lo, hi = mean_ci(d)
         row["vs_true_policy"] = {"mean": m, "lo": lo, "hi": hi}
     est = rewards[variants[2][0]] - ref
     upd = rewards[variants[1][0]] - ref
@@ -590,12 +406,20 @@ def _costs(cfg, truth, task, fitted, aware, true_pol, agn, seed) -> dict[str, An
         "participants": n,
         "trials_per_block": int(sum(cfg.counts_2)),
         "rows": rows,
-        "estimation_cost": dict(zip(("mean", "lo", "hi"), _ci(-est))),
-        "belief_update_gain": {"from": cfg.belief_update, "to": other, **dict(zip(("mean", "lo", "hi"), _ci(upd)))},
+        "estimation_cost": dict(zip(("mean", "lo", "hi"), mean_ci(-est), strict=True)),
+        "belief_update_gain": {
+            "from": cfg.belief_update,
+            "to": other,
+            **dict(zip(("mean", "lo", "hi"), mean_ci(upd), strict=True)),
+        },
     }
 
 
-def _heterogeneity(cfg, truth, task, aware, agn, fitted, seed) -> dict[str, Any]:
+def _heterogeneity(cfg: ReproduceConfig, plan: _Plan, seed: np.random.SeedSequence) -> dict[str, Any]:
+    """Experiment 2 on a heterogeneous population around the pooled model (Remark 1), by
+    quartile of how easily and how conservatively low trust sets in."""
+    truth, task, fitted = plan.truth, plan.task, plan.fitted
+    aware, agn = plan.aware, plan.agnostic
     s_pop, s_run = seed.spawn(2)
     sup = Supervisors.dirichlet(truth, cfg.large_n, cfg.concentration, np.random.default_rng(s_pop), pseudo=cfg.pseudo)
     sim = crossover(sup, task, [aware, agn], cfg.large_n, counts=cfg.counts_2, seed=s_run, record=False, belief_model=fitted)
@@ -611,17 +435,17 @@ def _heterogeneity(cfg, truth, task, aware, agn, fitted, seed) -> dict[str, Any]
     rows = []
     for b in range(4):
         sel = bins == b
-        rows.append({
-            "quartile": b + 1,
-            "participants": int(sel.sum()),
-            "mean_aware": float(r[AWARE][sel].mean()),
-            "mean_agnostic": float(r[AGNOSTIC][sel].mean()),
-            "mean_difference": float((r[AWARE][sel] - r[AGNOSTIC][sel]).mean()),
-            "interventions_aware": float(ints[AWARE][sel].mean()),
-            "interventions_agnostic": float(ints[AGNOSTIC][sel].mean()),
-        })
-    from scipy.stats import spearmanr
-
+        rows.append(
+            {
+                "quartile": b + 1,
+                "participants": int(sel.sum()),
+                "mean_aware": float(r[AWARE][sel].mean()),
+                "mean_agnostic": float(r[AGNOSTIC][sel].mean()),
+                "mean_difference": float((r[AWARE][sel] - r[AGNOSTIC][sel]).mean()),
+                "interventions_aware": float(ints[AWARE][sel].mean()),
+                "interventions_agnostic": float(ints[AGNOSTIC][sel].mean()),
+            }
+        )
     rho = spearmanr(score, r[AWARE] + r[AGNOSTIC]).statistic
     return {
         "summary": {
@@ -639,33 +463,36 @@ def _heterogeneity(cfg, truth, task, aware, agn, fitted, seed) -> dict[str, Any]
     }
 
 
-def _replicate_summary(reps: list[dict]) -> dict[str, Any]:
+def _replicate_summary(reps: list[dict[str, Any]]) -> dict[str, Any]:
+    """Distributions over the replicates of every number a replicate records."""
     ok = [r for r in reps if "error" not in r]
-    keys = [k for k, *_ in _param_specs()]
+    keys = [spec.key for spec in param_specs()]
     out = {
         "n": len(reps),
         "failed": [{"index": r["index"], "error": r["error"]} for r in reps if "error" in r],
-        "threshold": _dist([r["threshold"] if r["threshold"] is not None else float("nan") for r in ok]),
+        "threshold": distribution([r["threshold"] if r["threshold"] is not None else float("nan") for r in ok]),
         "share_threshold_policy": float(np.mean([r["threshold"] is not None for r in ok])) if ok else None,
         "share_never_ask_low": float(np.mean([not r["asks_low"] for r in ok])) if ok else 0.0,
         "agnostic_share_paper": {
             "low": float(np.mean([r["agnostic"]["low"] == "autonomous" for r in ok])) if ok else 0.0,
             "high": float(np.mean([r["agnostic"]["high"] == "ask" for r in ok])) if ok else 0.0,
         },
-        "median_aware": _dist([r["median_aware"] for r in ok]),
-        "median_agnostic": _dist([r["median_agnostic"] for r in ok]),
-        "median_diff_small": _dist([r["median_diff_small"] for r in ok]),
-        "mean_diff_large": _dist([r["mean_diff_large"] for r in ok]),
-        "wilcoxon_p_small": _dist([r["wilcoxon_p_small"] if r["wilcoxon_p_small"] is not None else float("nan") for r in ok]),
+        "median_aware": distribution([r["median_aware"] for r in ok]),
+        "median_agnostic": distribution([r["median_agnostic"] for r in ok]),
+        "median_diff_small": distribution([r["median_diff_small"] for r in ok]),
+        "mean_diff_large": distribution([r["mean_diff_large"] for r in ok]),
+        "wilcoxon_p_small": distribution(
+            [r["wilcoxon_p_small"] if r["wilcoxon_p_small"] is not None else float("nan") for r in ok]
+        ),
         "share_aware_better_small": float(np.mean([r["median_diff_small"] > 0 for r in ok])) if ok else None,
         "share_aware_better_large": float(np.mean([r["mean_diff_large"] > 0 for r in ok])) if ok else None,
-        "estimation_loss": _dist([r["estimation_loss"] for r in ok]),
-        "params": {k: _dist([r["params"][k] for r in ok]) for k in keys},
+        "estimation_loss": distribution([r["estimation_loss"] for r in ok]),
+        "params": {k: distribution([r["params"][k] for r in ok]) for k in keys},
     }
     return out
 
 
-def _clean(o):
+def _clean(o: Any) -> Any:
     """JSON-safe: numpy scalars to Python, NaN/inf to None, tuples to lists."""
     if isinstance(o, dict):
         return {str(k): _clean(v) for k, v in o.items()}
@@ -683,5 +510,6 @@ def _clean(o):
     return o
 
 
-def write_summary(summary: dict, path: str | Path) -> None:
+def write_summary(summary: dict[str, Any], path: str | Path) -> None:
+    """``summary`` as indented JSON at ``path``."""
     Path(path).write_text(json.dumps(summary, indent=1, sort_keys=False) + "\n", encoding="utf-8")

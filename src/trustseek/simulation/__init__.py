@@ -1,5 +1,30 @@
-"""Simulated supervisors: populations, schedules, the vectorized engine and crossover designs."""
+"""Simulated supervisors: populations, schedules, the vectorized engine, results and designs.
 
-from .engine import Block, Simulation, Supervisors, crossover, run, simulate
+* :mod:`.populations` -- ``Supervisors``: who the participants are (pooled, Dirichlet, a list);
+* :mod:`.schedules`   -- which complexity each participant meets on each trial;
+* :mod:`.engine`      -- the vectorized kernel: ``Block``, ``run`` and ``simulate``;
+* :mod:`.results`     -- ``Simulation`` and ``CrossoverSimulation``: summaries and trial logs;
+* :mod:`.designs`     -- the paper's data collection and its counterbalanced crossover.
+"""
 
-__all__ = ["Block", "Simulation", "Supervisors", "crossover", "run", "simulate"]
+from .designs import crossover, simulate_design
+from .engine import Block, run, simulate
+from .populations import SimulationError, Supervisors
+from .results import CrossoverSimulation, Simulation, participant_ids, summarize
+from .schedules import schedule_counts, schedule_iid
+
+__all__ = [
+    "Block",
+    "CrossoverSimulation",
+    "Simulation",
+    "SimulationError",
+    "Supervisors",
+    "crossover",
+    "participant_ids",
+    "run",
+    "schedule_counts",
+    "schedule_iid",
+    "simulate",
+    "simulate_design",
+    "summarize",
+]

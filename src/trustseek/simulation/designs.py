@@ -1,17 +1,25 @@
-"""Experiment designs on simulated supervisors: the paper's data collection (Section V)."""
+"""Experiment designs on simulated supervisors.
+
+:func:`simulate_design` is the paper's data collection (Section V): trial logs under the
+randomized policy.  :func:`crossover` is its evaluation (Section VI-B): every participant
+meets every policy, one block each, in a counterbalanced order.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
 
 from ..model.core import Task, TrustModel
 from ..model.presets import paper_task
-from ..policies import randomized
-from ..vocab import PAPER_ASK_PROBABILITIES, PAPER_DATA_COUNTS, TRIAL_COLUMNS
-from .engine import SimulationError, simulate
+from ..policies import Policy, randomized
+from ..vocab import PAPER_ASK_PROBABILITIES, PAPER_BLOCK_COUNTS, PAPER_DATA_COUNTS, TRIAL_COLUMNS
+from .engine import Block, run, seed_sequence, simulate
+from .populations import SimulationError, Supervisors
+from .results import SUMMARY_QUANTITIES, CrossoverSimulation, Simulation, participant_ids
+from .schedules import schedule_counts
 
 
 def simulate_design(
@@ -43,3 +51,90 @@ def simulate_design(
         blank = np.random.default_rng(np.random.SeedSequence([seed, 1])).random(len(frame)) < p_unobserved
         frame.loc[blank, "human_action"] = None
     return frame
+
+
+def crossover(
+    model: TrustModel | Supervisors,
+    task: Task,
+    policies: Sequence[Policy],
+    n_participants: int,
+    counts: Sequence[int] | Mapping[str, int] = PAPER_BLOCK_COUNTS,
+    first: Sequence[int] | np.ndarray | None = None,
+    seed: int | np.random.SeedSequence = 0,
+    record: bool = True,
+    belief_model: TrustModel | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> CrossoverSimulation:
+    """The within-participant design of Section VI-B: every participant does one block per
+    policy (``counts`` trials of each complexity in random order, per block), in an order that
+    is counterbalanced across participants.
+
+    ``first[i]`` is the index of the policy participant ``i`` starts with; by default
+    participants take the policies' rotations in turn (with two policies and five
+    participants: 3 start with the first policy, 2 with the second, as in the paper).  Blocks
+    are labelled by policy, so ``by_policy`` gives paired values per participant; the
+    ``block`` column of the trials is the position (1 = first block done).
+    """
+    sup = model if isinstance(model, Supervisors) else Supervisors.pooled(model, n_participants)
+    n = sup.n
+    P = len(policies)
+    if P < 1:
+        raise SimulationError(["crossover needs at least one policy"])
+    starts = np.arange(n) % P if first is None else np.asarray(first, dtype=np.int64)
+    if starts.shape != (n,) or starts.min() < 0 or starts.max() >= P:
+        raise SimulationError([f"first must give, for each of the {n} participants, a policy index in 0..{P - 1}"])
+    s_sched, s_run = seed_sequence(seed).spawn(2)
+    rs = np.random.default_rng(s_sched)
+    scheds = [schedule_counts(n, counts, rs, task.complexities) for _ in range(P)]
+    labels = [getattr(p, "kind", f"policy {j + 1}") for j, p in enumerate(policies)]
+    if len(set(labels)) != len(labels):
+        labels = [f"{lab} {j + 1}" for j, lab in enumerate(labels)]
+    ids = participant_ids(n)
+    # one run per starting policy; participant streams come from one seed per order group
+    group_seeds = s_run.spawn(P)
+    parts = []
+    for g in range(P):
+        idx = np.flatnonzero(starts == g)
+        if len(idx) == 0:
+            continue
+        order = [(g + k) % P for k in range(P)]
+        blocks = [Block(policies[j], scheds[k][idx], name=labels[j], belief_model=belief_model) for k, j in enumerate(order)]
+        sim = run(task, sup.take(idx), blocks, seed=group_seeds[g], record=record, participants=ids[idx], progress=progress)
+        parts.append((idx, order, sim))
+    return _merge_crossover(task, sup, ids, labels, parts, record)
+
+
+def _merge_crossover(
+    task: Task,
+    sup: Supervisors,
+    ids: np.ndarray,
+    labels: list[str],
+    parts: list[tuple[np.ndarray, list[int], Simulation]],
+    record: bool,
+) -> CrossoverSimulation:
+    """One simulation from the runs of the order groups: summary columns per policy and the
+    participants in their original order."""
+    n, P = len(ids), len(labels)
+    summary = {k: np.zeros((n, P)) for k in SUMMARY_QUANTITIES}
+    arrays: dict[str, np.ndarray] = {}
+    lengths: list[int] = []
+    orders = np.zeros((n, P), dtype=np.int64)
+    for idx, order, sim in parts:
+        for k in summary:
+            summary[k][idx[:, None], np.array(order)[None, :]] = sim.summary_arrays[k]
+        orders[idx] = order
+        for k, v in (sim.arrays or {}).items():
+            if k not in arrays:
+                arrays[k] = np.empty((n, v.shape[1]), dtype=v.dtype)
+            arrays[k][idx] = v
+        lengths = sim.block_lengths
+    return CrossoverSimulation(
+        task=task,
+        trust_levels=tuple(sup.trust_levels),
+        participant_list=ids,
+        block_labels=list(labels),
+        block_lengths=list(lengths),
+        summary_arrays=summary,
+        arrays=arrays if record else None,
+        orders=orders,
+    )

@@ -1,0 +1,92 @@
+"""What the reproduction runs with, and what the paper reported.
+
+:class:`ReproduceConfig` holds every setting of :func:`~trustseek.reproduction.reproduce`
+(the defaults are the paper's design); :data:`PAPER` the numbers the paper reports that are
+not parameters of the trust model (those are in :mod:`.comparison`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from ..vocab import (
+    BELIEF_UPDATES,
+    PAPER_ASK_PROBABILITIES,
+    PAPER_BLOCK_COUNTS,
+    PAPER_DATA_COUNTS,
+    PAPER_DATA_PARTICIPANTS,
+    PAPER_EVALUATION_PARTICIPANTS,
+)
+
+# indices of the paper's two trust and complexity levels
+LOW, HIGH = 0, 1
+# labels of the two policies of experiment 2
+AWARE, AGNOSTIC = "trust-aware", "trust-agnostic"
+
+PAPER = {
+    "threshold_high": 0.75,
+    "median_aware": 57.0,
+    "median_agnostic": 51.0,
+    "participants_1": PAPER_DATA_PARTICIPANTS,
+    "participants_2": PAPER_EVALUATION_PARTICIPANTS,
+}
+
+
+@dataclass
+class ReproduceConfig:
+    """Every setting of the reproduction (the defaults are the paper's design)."""
+
+    seed: int = 0
+    replicates: int = 20
+    large_n: int = 10_000
+    participants_1: int = PAPER_DATA_PARTICIPANTS
+    counts_1: tuple[int, int] = PAPER_DATA_COUNTS
+    ask_low: float = PAPER_ASK_PROBABILITIES["low"]
+    ask_high: float = PAPER_ASK_PROBABILITIES["high"]
+    participants_2: int = PAPER_EVALUATION_PARTICIPANTS
+    counts_2: tuple[int, int] = PAPER_BLOCK_COUNTS
+    restarts: int = 10
+    bootstrap: int = 20
+    replicate_restarts: int = 4
+    replicate_large_n: int = 2_000
+    belief_update: str = "paper"
+    grid: int = 1001
+    concentration: float = 20.0
+    pseudo: float = 0.5
+    jobs: int = 2
+
+    def problems(self) -> list[str]:
+        """Every setting out of range, as a message naming its command-line option."""
+        p = []
+        if self.replicates < 0:
+            p.append(f"--replicates must be >= 0, got {self.replicates}")
+        at_least_one = (
+            "large_n",
+            "participants_1",
+            "participants_2",
+            "restarts",
+            "replicate_restarts",
+            "replicate_large_n",
+            "jobs",
+        )
+        for name in at_least_one:
+            if getattr(self, name) < 1:
+                p.append(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
+        if self.bootstrap < 0:
+            p.append(f"--bootstrap must be >= 0, got {self.bootstrap}")
+        if self.belief_update not in BELIEF_UPDATES:
+            p.append(f"--belief-update must be 'paper' or 'bayes', got {self.belief_update!r}")
+        if not (0 <= self.ask_low <= 1 and 0 <= self.ask_high <= 1):
+            p.append("ask probabilities must lie in [0, 1]")
+        if self.grid < 3:
+            p.append(f"--grid must be >= 3, got {self.grid}")
+        return p
+
+    def to_summary(self) -> dict[str, Any]:
+        """The settings as recorded in summary.json (``jobs`` left out: it changes no number)."""
+        d = asdict(self)
+        d["counts_1"] = list(self.counts_1)
+        d["counts_2"] = list(self.counts_2)
+        d.pop("jobs")
+        return d

@@ -1,0 +1,55 @@
+"""The statistics the reproduction reports: normal intervals of means, distributions over
+replicates and the paper's Wilcoxon signed-rank test."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import numpy as np
+from scipy.stats import wilcoxon as scipy_wilcoxon
+
+
+def mean_ci(values: Sequence[float] | np.ndarray) -> tuple[float, float, float]:
+    """Mean and its normal 95 % interval (NaN ends for fewer than two values)."""
+    v = np.asarray(values, dtype=float)
+    m = float(v.mean())
+    h = 1.96 * float(v.std(ddof=1)) / math.sqrt(len(v)) if len(v) > 1 else float("nan")
+    return m, m - h, m + h
+
+
+def _finite(values: Iterable[float | None]) -> list[float]:
+    return [float(x) for x in values if x is not None and np.isfinite(x)]
+
+
+def percentile(values: Iterable[float | None], q: float) -> float | None:
+    """The ``q``-th percentile of the finite values, or None when there are none."""
+    v = _finite(values)
+    return float(np.percentile(v, q)) if v else None
+
+
+def distribution(values: Sequence[float | None]) -> dict[str, Any]:
+    """Median, mean and central 95 % range of the finite values, and every value (None for
+    a missing or non-finite one)."""
+    vals = _finite(values)
+    return {
+        "n": len(vals),
+        "median": percentile(vals, 50),
+        "mean": float(np.mean(vals)) if vals else None,
+        "p2.5": percentile(vals, 2.5),
+        "p97.5": percentile(vals, 97.5),
+        "values": [None if x is None or not np.isfinite(x) else float(x) for x in values],
+    }
+
+
+def wilcoxon(aware: np.ndarray, agnostic: np.ndarray) -> dict[str, Any]:
+    """Two-sided Wilcoxon signed-rank test of the paired differences (scipy)."""
+    d = np.asarray(aware, float) - np.asarray(agnostic, float)
+    out: dict[str, Any] = {"n": len(d), "nonzero": int(np.count_nonzero(d))}
+    if np.count_nonzero(d) == 0:
+        out.update(statistic=None, p_value=None, note="all paired differences are zero")
+        return out
+    res = scipy_wilcoxon(aware, agnostic, zero_method="wilcox", alternative="two-sided")
+    out.update(statistic=float(res.statistic), p_value=float(res.pvalue))
+    return out

@@ -1,0 +1,140 @@
+"""Populations of simulated supervisors: who the participants are.
+
+Everyone shares one model (:meth:`Supervisors.pooled`), each participant draws their own
+rows around a pooled model (:meth:`Supervisors.dirichlet`; the paper's Remark 1 on
+conservative individuals), or participants take models from a list
+(:meth:`Supervisors.from_models`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import TrustseekError
+from ..model.core import TrustModel
+
+
+class SimulationError(TrustseekError, ValueError):
+    """Inconsistent simulation inputs (shapes, names, counts)."""
+
+
+def check_participants(n: int) -> None:
+    """Refuse a number of participants that is not a positive integer."""
+    if int(n) != n or n < 1:
+        raise SimulationError([f"the number of participants must be a positive integer, got {n!r}"])
+
+
+@dataclass(frozen=True, eq=False)
+class Supervisors:
+    """Per-participant supervisor parameters.
+
+    ``initial[p]``, ``emission[p]`` and ``transition[p]`` hold the arrays of a
+    :class:`TrustModel` for parameter row ``p``; participant ``i`` uses row ``index[i]``.
+    """
+
+    trust_levels: tuple[str, ...]
+    complexities: tuple[str, ...]
+    initial: np.ndarray  # (P, K)
+    emission: np.ndarray  # (P, N, 2, K, 2)
+    transition: np.ndarray  # (P, N, 2, 2, K, K)
+    index: np.ndarray  # (n,)
+
+    @property
+    def n(self) -> int:
+        return len(self.index)
+
+    @property
+    def n_rows(self) -> int:
+        return self.initial.shape[0]
+
+    @property
+    def n_trust(self) -> int:
+        return len(self.trust_levels)
+
+    @classmethod
+    def pooled(cls, model: TrustModel, n: int) -> Supervisors:
+        """``n`` participants who all behave like ``model``."""
+        check_participants(n)
+        return cls(
+            model.trust_levels,
+            model.complexities,
+            model.initial[None],
+            model.emission[None],
+            model.transition[None],
+            np.zeros(n, dtype=np.int64),
+        )
+
+    @classmethod
+    def from_models(cls, models: Sequence[TrustModel], n: int | None = None) -> Supervisors:
+        """Participant ``i`` behaves like ``models[i % len(models)]`` (``n`` defaults to ``len(models)``)."""
+        if not models:
+            raise SimulationError(["from_models needs at least one model"])
+        first = models[0]
+        for j, m in enumerate(models):
+            if m.trust_levels != first.trust_levels or m.complexities != first.complexities:
+                raise SimulationError(
+                    [
+                        f"model {j} has trust levels {list(m.trust_levels)} and complexities {list(m.complexities)}; "
+                        f"expected {list(first.trust_levels)} and {list(first.complexities)} like model 0"
+                    ]
+                )
+        n = len(models) if n is None else n
+        check_participants(n)
+        return cls(
+            first.trust_levels,
+            first.complexities,
+            np.stack([m.initial for m in models]),
+            np.stack([m.emission for m in models]),
+            np.stack([m.transition for m in models]),
+            np.arange(n, dtype=np.int64) % len(models),
+        )
+
+    @classmethod
+    def dirichlet(
+        cls,
+        model: TrustModel,
+        n: int,
+        concentration: float,
+        rng: np.random.Generator | int | None = 0,
+        pseudo: float = 0.0,
+    ) -> Supervisors:
+        """``n`` individuals drawn around a pooled ``model``: every probability row ``r`` of the
+        model (initial trust, each emission row, each transition row) becomes a draw from
+        Dirichlet(concentration * r + pseudo).  Larger ``concentration`` means a more homogeneous
+        population; cells with zero weight (``r = 0`` and ``pseudo = 0``) stay zero."""
+        check_participants(n)
+        if not (np.isfinite(concentration) and concentration > 0):
+            raise SimulationError([f"concentration must be a positive number, got {concentration!r}"])
+        if not (np.isfinite(pseudo) and pseudo >= 0):
+            raise SimulationError([f"pseudo must be a non-negative number, got {pseudo!r}"])
+        rng = np.random.default_rng(rng)
+
+        def draw(rows: np.ndarray) -> np.ndarray:
+            alpha = concentration * rows + pseudo
+            g = rng.gamma(np.broadcast_to(alpha, (n,) + alpha.shape))
+            s = g.sum(axis=-1, keepdims=True)
+            # a row whose draws all underflow to zero keeps the pooled row
+            return np.where(s > 0, g / np.where(s > 0, s, 1.0), rows)
+
+        return cls(
+            model.trust_levels,
+            model.complexities,
+            draw(model.initial),
+            draw(model.emission),
+            draw(model.transition),
+            np.arange(n, dtype=np.int64),
+        )
+
+    def model_of(self, participant: int) -> TrustModel:
+        """The TrustModel of participant ``participant`` (0-based)."""
+        p = int(self.index[participant])
+        return TrustModel(self.trust_levels, self.complexities, self.initial[p], self.emission[p], self.transition[p])
+
+    def take(self, idx: np.ndarray) -> Supervisors:
+        """The sub-population of participants ``idx`` (0-based indices)."""
+        return Supervisors(
+            self.trust_levels, self.complexities, self.initial, self.emission, self.transition, self.index[np.asarray(idx)]
+        )
