@@ -24,6 +24,29 @@ from trustseek.solvers.backup import finite_horizon_value
 pomdp_py = pytest.importorskip("pomdp_py")
 from pomdp_py.algorithms import value_function  # noqa: E402
 
+ENTRY_FORMS = """# every entry form
+discount: 0.9
+values: cost
+states: 2
+actions: go stay
+observations: beep quiet
+start include: 1
+T: * : 0 : 1 1.0
+T: * : 1 : 1 1.0
+T: stay : 0
+1 0
+O: * : * : beep 0.25
+O: * : * : quiet 0.75
+O: go : 1
+0.5 0.5
+R: go : 0 : 1
+4 6
+R: stay : *
+1 1
+1 1
+"""
+
+
 # --------------------------------------------------------------------------- pomdp-py adapters
 
 
@@ -176,11 +199,11 @@ def test_pomdpx_tables_reproduce_the_flat_transition(pomdp):
     tabs = read_pomdpx_tables(write_pomdpx(pomdp))
     for key, (_, table) in tabs.items():
         assert np.allclose(table.sum(axis=-1), 1.0), key
-    human = tabs["StateTransitionFunction/human_1"][1]  # [a, t, c, o]
-    exp = tabs["StateTransitionFunction/experience_1"][1]  # [a, c, o, e]
+    exp = tabs["StateTransitionFunction/experience_1"][1]  # [a, t, c, e]
+    human = tabs["StateTransitionFunction/human_1"][1]  # [a, t, c, e, o]
     trust = tabs["StateTransitionFunction/trust_1"][1]  # [a, c, e, t, u]
-    cx = tabs["StateTransitionFunction/complexity_1"][1]  # [c2]
-    joint = np.einsum("atco,acoe,acetu,d->atcoeud", human, exp, trust, cx)
+    cx = tabs["StateTransitionFunction/complexity_1"][1]  # [a, c2]
+    joint = np.einsum("atce,atceo,acetu,ad->atcoeud", exp, human, trust, cx)
     flat = flat_from_assistance(pomdp)
     K, N = pomdp.n_trust, pomdp.n_complexity
     T = flat.transition.reshape(2, K, 2, N, 2, K, 2, N, 2)  # [a, t, e, c, o_prev, u, e2, c2, o]
@@ -204,7 +227,7 @@ def test_cli_export_and_solve_file(tmp_path):
     proc = _run("export-pomdp", str(out), "--verify")
     assert proc.returncode == 0, proc.stderr
     assert "wrote" in proc.stdout and out.exists()
-    assert read_pomdp(out).states[0] == "low.faulty.low.intervene"
+    assert read_pomdp(out).states[0] == "low_faulty_low_intervene"
     tiger = tmp_path / "tiger.pomdp"
     tiger.write_text(TIGER)
     proc = _run("solve-pomdp-file", str(tiger), "--json")
@@ -234,27 +257,7 @@ def test_cli_solve_with_alpha_and_point_json():
 
 
 def test_entry_forms_rows_single_entries_indices_and_costs():
-    text = """# every entry form
-discount: 0.9
-values: cost
-states: 2
-actions: go stay
-observations: beep quiet
-start include: 1
-T: * : 0 : 1 1.0
-T: * : 1 : 1 1.0
-T: stay : 0
-1 0
-O: * : * : beep 0.25
-O: * : * : quiet 0.75
-O: go : 1
-0.5 0.5
-R: go : 0 : 1
-4 6
-R: stay : *
-1 1
-1 1
-"""
+    text = ENTRY_FORMS
     f = read_pomdp("forms.pomdp", text)
     assert f.states == ("0", "1") and np.array_equal(f.start, [0.0, 1.0])
     assert np.array_equal(f.transition[0], [[0, 1], [0, 1]]) and np.array_equal(f.transition[1], [[1, 0], [0, 1]])

@@ -6,6 +6,11 @@ discrete POMDP).  :func:`read_pomdp` / :func:`write_pomdp` handle Cassandra's fo
 matrices, ``uniform`` and ``identity``), so benchmark files such as Tiger can be
 solved with the point-based solver and checked against published values.
 
+Both writers follow the published formats so that other tools (pomdp-solve, SARSOP) load the
+files unpatched: ``.pomdp`` names are identifiers ``[a-zA-Z][a-zA-Z0-9_-]*`` (state names join
+their parts with ``_``), numbers are positional with a digit on each side of the point; the
+POMDPX file respects the mixed-observability rules of POMDPX 1.0 (see :func:`write_pomdpx`).
+
 Exporting the assistance POMDP (:func:`flat_from_assistance`).  In the paper
 the human action o_t depends on the state at the START of trial t, while a
 file's observation depends on the next state.  The export therefore augments the
@@ -49,6 +54,7 @@ __all__ = [
     "flat_belief",
     "flat_from_assistance",
     "flat_values_check",
+    "pomdpx_factors",
     "read_pomdp",
     "read_pomdpx_tables",
     "write_pomdp",
@@ -63,8 +69,49 @@ class PomdpFileError(FlatPOMDPError):
 # --------------------------------------------------------------------------- export of the assistance POMDP
 
 
+# Cassandra's grammar: an identifier is [a-zA-Z][a-zA-Z0-9_-]* and is not one of its keywords.
+# POMDPX value names are XML tokens; the same identifiers are used there, so one name works in both.
+_IDENT = re.compile(r"[A-Za-z][A-Za-z0-9_\-]*")
+_CASSANDRA_KEYWORDS = frozenset(
+    {
+        "discount",
+        "values",
+        "states",
+        "actions",
+        "observations",
+        "T",
+        "O",
+        "R",
+        "uniform",
+        "identity",
+        "reward",
+        "cost",
+        "start",
+        "include",
+        "exclude",
+        "reset",
+    }
+)
+
+
+def _is_identifier(name: str) -> bool:
+    return _IDENT.fullmatch(name) is not None and name not in _CASSANDRA_KEYWORDS
+
+
 def _token(name: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_\-]", "_", name)
+    """``name`` made into an identifier: other characters become ``_``, a leading non-letter gets ``v``."""
+    tok = re.sub(r"[^A-Za-z0-9_\-]", "_", name)
+    if not tok[:1].isalpha() or not tok[:1].isascii():
+        tok = "v" + tok
+    return tok + "_" if tok in _CASSANDRA_KEYWORDS else tok
+
+
+def _tokens(names: Sequence[str]) -> list[str]:
+    """Distinct identifiers for ``names`` (a position suffix where two would coincide)."""
+    toks = [_token(n) for n in names]
+    if len(set(toks)) < len(toks):
+        toks = [f"{t}_{i}" for i, t in enumerate(toks)]
+    return toks
 
 
 def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None = None) -> FlatPOMDP:
@@ -72,15 +119,17 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
     K, N = pomdp.n_trust, pomdp.n_complexity
     kern = pomdp.kernel  # [c, a, t, o, e, u]
     pc = pomdp.complexity_probs
-    T_, C_ = [_token(x) for x in pomdp.trust_levels], [_token(x) for x in pomdp.complexities]
-    states = [
-        f"{T_[t]}.{EXPERIENCES[e]}.{C_[c]}.{HUMAN_ACTIONS[o]}"
-        for t in range(K)
-        for e in range(2)
-        for c in range(N)
-        for o in range(2)
-    ]
-    obs = [f"{HUMAN_ACTIONS[o]}.{EXPERIENCES[e]}.{C_[c]}" for o in range(2) for e in range(2) for c in range(N)]
+    T_, C_ = _tokens(pomdp.trust_levels), _tokens(pomdp.complexities)
+    states = _tokens(
+        [
+            f"{T_[t]}_{EXPERIENCES[e]}_{C_[c]}_{HUMAN_ACTIONS[o]}"
+            for t in range(K)
+            for e in range(2)
+            for c in range(N)
+            for o in range(2)
+        ]
+    )
+    obs = _tokens([f"{HUMAN_ACTIONS[o]}_{EXPERIENCES[e]}_{C_[c]}" for o in range(2) for e in range(2) for c in range(N)])
 
     def sidx(t, e, c, o):
         return ((t * 2 + e) * N + c) * 2 + o
@@ -106,7 +155,8 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
         start[sidx(t, 1, c, 1)] = pomdp.model.initial[t] * cw[c]
     notes = [
         "trustseek assistance POMDP, flat form",
-        "state = trust.experience.complexity.last_human_action; observation = human_action.experience.complexity",
+        "state names: <trust>_<experience>_<complexity>_<last human action>; "
+        "observation names: <human action>_<experience>_<complexity>",
         "the human action of a trial depends on the trust at its start: it is drawn with the transition and "
         "stored in the next state, then observed",
     ]
@@ -127,39 +177,62 @@ def flat_belief(pomdp: AssistancePOMDP, belief, complexity: int) -> np.ndarray:
 
 
 def _num(x: float) -> str:
-    s = f"{x:.17g}"
-    return "0" if s == "-0" else s
+    """A number as both formats accept it: positional, with at least one digit on each side of
+    the point (Cassandra's rule), never an exponent; the shortest text that reads back exactly."""
+    s = np.format_float_positional(float(x), unique=True, trim="0")
+    return "0.0" if s == "-0.0" else s
+
+
+def _names_or_count(names: Sequence[str]) -> tuple[str, list[str]]:
+    """The header text for a list of names and how entries refer to each element: the names when
+    they are identifiers, the count and indices when they are the default names 0..n-1, otherwise
+    identifiers made from the names."""
+    names = list(names)
+    if all(_is_identifier(n) for n in names) and len(set(names)) == len(names):
+        return " ".join(names), names
+    if names == [str(i) for i in range(len(names))]:
+        return str(len(names)), names
+    toks = _tokens(names)
+    return " ".join(toks), toks
 
 
 def write_pomdp(flat: FlatPOMDP, path: str | Path | None = None) -> str:
-    """Write Cassandra's ``.pomdp`` format; returns the text (and writes it when ``path`` is given)."""
-    lines = [f"# {n}" for n in flat.notes]
+    """Write Cassandra's ``.pomdp`` format; returns the text (and writes it when ``path`` is given).
+
+    The file follows the published grammar: names are identifiers (``[a-zA-Z][a-zA-Z0-9_-]*``,
+    not a keyword; other names are made into identifiers), numbers have a digit on each side of
+    the point, the preamble comes first, then ``start:``, then the ``T:``, ``O:`` and ``R:``
+    entries."""
+    state_header, states = _names_or_count(flat.states)
+    action_header, actions = _names_or_count(flat.actions)
+    obs_header, observations = _names_or_count(flat.observations)
+    lines = [f"# {n}" for note in flat.notes for n in str(note).splitlines()]
     lines += [
         f"discount: {_num(flat.discount)}",
         "values: reward",
-        "states: " + " ".join(flat.states),
-        "actions: " + " ".join(flat.actions),
-        "observations: " + " ".join(flat.observations),
+        "states: " + state_header,
+        "actions: " + action_header,
+        "observations: " + obs_header,
         "start: " + " ".join(_num(x) for x in flat.start),
         "",
     ]
-    for a, an in enumerate(flat.actions):
+    for a, an in enumerate(actions):
         lines.append(f"T: {an}")
         lines += [" ".join(_num(x) for x in row) for row in flat.transition[a]]
         lines.append("")
-    for a, an in enumerate(flat.actions):
+    for a, an in enumerate(actions):
         lines.append(f"O: {an}")
         lines += [" ".join(_num(x) for x in row) for row in flat.observation[a]]
         lines.append("")
-    for a, an in enumerate(flat.actions):
-        for s, sn in enumerate(flat.states):
+    for a, an in enumerate(actions):
+        for s, sn in enumerate(states):
             block = flat.reward[a, s]
             if np.all(block == block.flat[0]):
                 if block.flat[0] != 0:
                     lines.append(f"R: {an} : {sn} : * : * {_num(block.flat[0])}")
                 continue
             for s2, o in zip(*np.nonzero(block), strict=True):
-                lines.append(f"R: {an} : {sn} : {flat.states[s2]} : {flat.observations[o]} {_num(block[s2, o])}")
+                lines.append(f"R: {an} : {sn} : {states[s2]} : {observations[o]} {_num(block[s2, o])}")
     text = "\n".join(lines) + "\n"
     if path is not None:
         Path(path).write_text(text, encoding="utf-8")
@@ -338,15 +411,49 @@ def _is_float(tok: str) -> bool:
 # --------------------------------------------------------------------------- POMDPX
 
 
+def pomdpx_factors(pomdp: AssistancePOMDP) -> dict[str, np.ndarray]:
+    """The conditional tables of the POMDPX export, axes in the order of their parents, last axis
+    the variable itself:
+
+    * ``experience``  P(E' | T, C, a) = sum_o P(o | T, C, a) P(E' | o, C, a), axes [a, t, c, e];
+    * ``human``       P(o | E', T, C, a) = P(o | T, C, a) P(E' | o, C, a) / P(E' | T, C, a),
+      axes [a, t, c, e, o] (where P(E' | T, C, a) = 0 the row is never reached and is P(o | T, C, a));
+    * ``trust``       P(T' | T, E', C, a), axes [a, c, e, t, u];
+    * ``complexity``  P(C'), repeated for each action, axes [a, c'].
+
+    P(E' | T, C, a) P(o | E', T, C, a) = P(o, E' | T, C, a): the product of the tables is the
+    model's kernel P(o, E', T' | T, C, a) P(C')."""
+    joint = np.einsum("cato,caoe->atceo", pomdp.emission, pomdp.experience)  # P(o, E' | T, C, a)
+    p_e = joint.sum(axis=-1)  # [a, t, c, e]
+    prior = np.broadcast_to(np.transpose(pomdp.emission, (1, 2, 0, 3))[:, :, :, None, :], joint.shape)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        human = np.where(p_e[..., None] > 0, joint / p_e[..., None], prior)
+    return {
+        "experience": p_e,
+        "human": human,
+        "trust": np.transpose(pomdp.trust_transition, (1, 0, 2, 3, 4)),
+        "complexity": np.tile(pomdp.complexity_probs, (len(ACTIONS), 1)),
+    }
+
+
 def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
-    """Write the assistance POMDP as a factored, mixed-observability POMDPX file.
+    """Write the assistance POMDP as a factored, mixed-observability POMDPX file (POMDPX 1.0, the
+    format of the APPL/SARSOP toolkit).
 
     State variables: ``trust`` (hidden), ``experience`` and ``complexity`` (fully observed)
     and ``human`` (the human action of the trial just played, as in the flat export; hidden
     as a state variable and revealed by the observation variable ``human_action``).
+
+    The mixed-observability model allows a fully observed variable only parents from the previous
+    time slice (and the action), and a hidden variable only fully observed parents in its own
+    slice.  The joint P(o, E' | T, C, a) is therefore written as P(E' | T, C, a) P(o | E', T, C, a)
+    -- the same distribution, see :func:`pomdpx_factors` -- and the trust transition as
+    P(T' | T, E', C, a).  Every table is written in full (``-`` for every parent and for the
+    variable; a ``null`` parent takes a single ``-``).
     """
-    T_ = [_token(x) for x in pomdp.trust_levels]
-    C_ = [_token(x) for x in pomdp.complexities]
+    T_ = _tokens(pomdp.trust_levels)
+    C_ = _tokens(pomdp.complexities)
+    f = pomdpx_factors(pomdp)
     root = ET.Element("pomdpx", version="0.1", id="trustseek")
     ET.SubElement(root, "Description").text = "trustseek assistance POMDP (state augmented with the last human action)"
     ET.SubElement(root, "Discount").text = _num(pomdp.discount)
@@ -366,14 +473,19 @@ def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
     ET.SubElement(av, "ValueEnum").text = " ".join(ACTIONS)
     ET.SubElement(var, "RewardVar", vname="reward")
 
-    def cond(parent, var_, parents, table):
-        c = ET.SubElement(parent, "CondProb")
+    def table(parent, tag, var_, parents, values, value_tag):
+        c = ET.SubElement(parent, tag)
         ET.SubElement(c, "Var").text = var_
         ET.SubElement(c, "Parent").text = " ".join(parents)
         p = ET.SubElement(c, "Parameter", type="TBL")
         e = ET.SubElement(p, "Entry")
-        ET.SubElement(e, "Instance").text = " ".join(["-"] * (len(parents) + 1))
-        ET.SubElement(e, "ProbTable").text = " ".join(_num(x) for x in np.asarray(table).ravel())
+        # one '-' per parent (a null parent has none) and, for a CondProb, one for the variable
+        n_dash = sum(1 for x in parents if x != "null") + (value_tag == "ProbTable")
+        ET.SubElement(e, "Instance").text = " ".join(["-"] * max(n_dash, 1))
+        ET.SubElement(e, value_tag).text = " ".join(_num(x) for x in np.asarray(values).ravel())
+
+    def cond(parent, var_, parents, values):
+        table(parent, "CondProb", var_, parents, values, "ProbTable")
 
     init = ET.SubElement(root, "InitialStateBelief")
     cond(init, "trust_0", ["null"], pomdp.model.initial)
@@ -381,27 +493,17 @@ def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
     cond(init, "complexity_0", ["null"], pomdp.complexity_probs)
     cond(init, "human_0", ["null"], [0.0, 1.0])
     st = ET.SubElement(root, "StateTransitionFunction")
-    # joint P(o, E', T' | T, C, a) factored as P(o | T, C, a) P(E' | o, C, a) P(T' | T, C, a, o, E')
-    em = np.transpose(pomdp.emission, (1, 2, 0, 3))  # [a, t, c, o]
-    cond(st, "human_1", ["robot", "trust_0", "complexity_0"], em)
-    ex = np.transpose(pomdp.experience, (1, 0, 2, 3))  # [a, c, o, e]
-    cond(st, "experience_1", ["robot", "complexity_0", "human_1"], ex)
-    tr = np.transpose(pomdp.trust_transition, (1, 0, 2, 3, 4))  # [a, c, e, t, u]
-    cond(st, "trust_1", ["robot", "complexity_0", "experience_1", "trust_0"], tr)
-    cond(st, "complexity_1", ["null"], pomdp.complexity_probs)
+    cond(st, "complexity_1", ["robot"], f["complexity"])
+    cond(st, "experience_1", ["robot", "trust_0", "complexity_0"], f["experience"])
+    cond(st, "human_1", ["robot", "trust_0", "complexity_0", "experience_1"], f["human"])
+    cond(st, "trust_1", ["robot", "complexity_0", "experience_1", "trust_0"], f["trust"])
     of = ET.SubElement(root, "ObsFunction")
     cond(of, "human_action", ["human_1"], np.eye(2))
     rf = ET.SubElement(root, "RewardFunction")
-    f = ET.SubElement(rf, "Func")
-    ET.SubElement(f, "Var").text = "reward"
-    ET.SubElement(f, "Parent").text = "robot complexity_0 trust_0"
-    p = ET.SubElement(f, "Parameter", type="TBL")
     R = np.transpose(pomdp.expected_reward, (1, 0, 2))  # [a, c, t]
-    e = ET.SubElement(p, "Entry")
-    ET.SubElement(e, "Instance").text = "- - -"
-    ET.SubElement(e, "ValueTable").text = " ".join(_num(x) for x in R.ravel())
+    table(rf, "Func", "reward", ["robot", "complexity_0", "trust_0"], R, "ValueTable")
     ET.indent(root)
-    text = '<?xml version="1.0" encoding="ISO-8859-1"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    text = '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
     if path is not None:
         Path(path).write_text(text, encoding="utf-8")
     return text
