@@ -161,13 +161,13 @@ def bootstrap(
     ``weights`` are passed to :func:`align` (the fit's expected events behind each row
     are a good choice).  Replicates run over ``n_jobs`` processes (default: all cores);
     ``progress()`` is called as each one finishes.  Fewer than :data:`MIN_REPLICATES`
-    resamples for a 95 % interval are allowed (tests, quick looks) but logged as a warning
+    resamples for a 95 % interval are allowed (tests, quick looks) but logged
     and named in :meth:`Intervals.notes`.
     """
     if replicates < 1:
         raise ValueError(f"the bootstrap needs at least one replicate, got {replicates}")
     if replicates < MIN_REPLICATES and level >= LEVEL:
-        log.warning(
+        log.info(
             "bootstrap: %d resamples are too few for %.0f%% intervals (at least %d)", replicates, 100 * level, MIN_REPLICATES
         )
     children = np.random.SeedSequence([seed, 1]).spawn(replicates)
