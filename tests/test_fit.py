@@ -307,3 +307,15 @@ def test_simulate_design_needs_one_ask_probability_per_complexity():
 
     with pytest.raises(TrustseekError, match="one probability per complexity"):
         simulate_design(paper_model(), 2, p_ask=(0.1,))
+
+
+def test_cli_fit_says_how_many_resamples_an_interval_rests_on():
+    log = str(example_path())
+    args = ("fit", log, "--restarts", "2", "--tol", "1e-6", "--jobs", "1")
+    text = " ".join(invoke(*args, "--bootstrap", "3").split())  # the table wraps long lines
+    assert "95% CI (3 resamples)" in text
+    assert "bootstrap over 3 resamples" in text
+    assert "3 resamples are too few for 95% intervals (at least 200" in text
+    d = json.loads(invoke(*args, "--bootstrap", "3", "--json"))
+    assert d["bootstrap"] == 3 and d["ci_level"] == 0.95 and "percentile" in d["ci_method"]
+    assert all(c["lower"] <= c["estimate"] <= c["upper"] for c in d["cells"])

@@ -87,7 +87,11 @@ def fit(
     ),
     restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Random restarts; the best is kept."),
     bootstrap: int = typer.Option(
-        0, "--bootstrap", "-b", min=0, help="Participant-level bootstrap replicates for 95% CIs (0 = none)."
+        0,
+        "--bootstrap",
+        "-b",
+        min=0,
+        help="Participant-level bootstrap resamples for 95% intervals (0 = none; at least 200 advised, fewer warn).",
     ),
     prior: float = typer.Option(
         0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."
@@ -155,13 +159,15 @@ def fit(
     )
     table.add_column("cell")
     table.add_column("estimate", justify="right")
-    if result.ci is not None:
-        table.add_column("95% CI", justify="right")
+    iv = result.intervals
+    if iv is not None:
+        table.add_column(f"{iv.level:.0%} CI ({iv.replicates} resamples)", justify="right")
     table.add_column("events", justify="right")
     for c in result.cells():
         row = [c["cell"], f"{c['estimate']:.3f}"]
-        if result.ci is not None:
-            row.append(escape(f"[{c['lower']:.3f}, {c['upper']:.3f}]"))
+        if iv is not None:
+            ci = escape(f"[{c['lower']:.3f}, {c['upper']:.3f}]")
+            row.append(f"{ci} [yellow]widened[/]" if c.get("widened") else ci)
         ev = f"{c['events']:.1f}"
         row.append(ev if c["events"] >= _fit().MIN_EVENTS else f"[yellow]{ev} (not identified)[/]")
         table.add_row(*row)
@@ -171,6 +177,8 @@ def fit(
         f"log-likelihood {result.loglik:.4f}; {result.n_params} free parameters; AIC {result.aic:.2f}; BIC {result.bic:.2f}\n"
         f"restarts (best first): {lls}"
     )
+    if iv is not None:
+        console.print(f"intervals: bootstrap over {iv.replicates} resamples of the participants ({iv.method})", highlight=False)
     for w in result.warnings:
         console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
     if out is not None:

@@ -21,7 +21,8 @@ import pandas as pd
 
 from ..model.core import TrustModel
 from ..vocab import ACTIONS, EXPERIENCES
-from .bootstrap import bootstrap_ci
+from .bootstrap import Intervals
+from .bootstrap import bootstrap as _bootstrap
 from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
@@ -45,6 +46,7 @@ class FitResult:
     bootstrap: int = 0
     seed: int = 0
     warnings: list[str] = field(default_factory=list)
+    intervals: Intervals | None = None
 
     @property
     def loglik(self) -> float:
@@ -90,6 +92,9 @@ class FitResult:
             "seconds": [r.seconds for r in runs],
             "seed": self.seed,
             "bootstrap": self.bootstrap,
+            "ci_level": None if self.intervals is None else self.intervals.level,
+            "ci_method": None if self.intervals is None else self.intervals.method,
+            "ci_other_maximum": None if self.intervals is None else self.intervals.other_maximum,
             "spec": spec.to_dict(),
             "counts": {k: v.tolist() for k, v in self.counts.items()},
             "estimated": {k: v.tolist() for k, v in self.estimated.items()},
@@ -125,6 +130,8 @@ class FitResult:
             }
             if self.ci is not None:
                 rec["lower"], rec["upper"] = float(self.ci[table][0][idx]), float(self.ci[table][1][idx])
+            if self.intervals is not None:
+                rec["widened"] = bool(self.intervals.widened[table][idx])
             out.append(rec)
 
         def cond(inputs: Sequence[str], values: dict[str, int]) -> str:
@@ -245,7 +252,7 @@ def fit_sequences(
     for w in result.warnings:
         log.info("%s", w)
     if bootstrap > 0:
-        result.ci = bootstrap_ci(
+        result.intervals = bootstrap_intervals = _bootstrap(
             seqs,
             spec,
             fit.params,
@@ -256,8 +263,11 @@ def fit_sequences(
             tol=tol,
             max_iter=max_iter,
             progress=tick,
+            weights=events,  # levels of a replicate are matched on the rows the data determine
         )
+        result.ci = bootstrap_intervals.intervals
         result.bootstrap = bootstrap
+        result.warnings += bootstrap_intervals.notes()
     return result
 
 
@@ -279,9 +289,11 @@ def fit_trust_model(
     ``preset`` is ``"paper"`` (optionally adjusted by ``levels``, ``transition_inputs``,
     ``emission_inputs``, ``complexities`` keyword options) or an :class:`IOHMMSpec`.
     ``prior`` adds that Dirichlet pseudo-count to every free cell (MAP).  With
-    ``bootstrap`` > 0, participants are resampled that many times and 95 % percentile
-    intervals are reported for every cell, computed over ``n_jobs`` processes
-    (default: all cores); results do not depend on ``n_jobs``.  ``progress(done, total)``
+    ``bootstrap`` > 0, participants are resampled that many times and a 95 % interval is
+    reported for every cell (:mod:`.bootstrap`: percentile, replicate levels aligned to
+    the estimate, widened to contain it; at least 200 resamples are advised, fewer add
+    a warning), computed over ``n_jobs`` processes (default: all cores); results do not
+    depend on ``n_jobs``.  ``progress(done, total)``
     is called after every restart and bootstrap replicate.
     """
     spec = preset_spec(preset, frame, prior=prior, **spec_options)
