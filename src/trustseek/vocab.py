@@ -55,6 +55,16 @@ def check_belief_update(name: object, what: str = "belief update") -> str:
     return str(name)
 
 
+# --------------------------------------------------------------------------- policy kinds
+
+#: the ``kind`` of a policy JSON: the robot's behaviour, by name
+TRUST_AWARE, TRUST_AGNOSTIC = "trust-aware", "trust-agnostic"
+RANDOMIZED, ALWAYS_ASK, NEVER_ASK = "randomized", "always-ask", "never-ask"
+#: the kinds that look only at the complexity (ask with a fixed probability per complexity)
+COMPLEXITY_POLICY_KINDS: Final = (TRUST_AGNOSTIC, RANDOMIZED, ALWAYS_ASK, NEVER_ASK)
+#: the kinds a short policy spec (``{"kind": ...}``) can name
+POLICY_SPEC_KINDS: Final = (TRUST_AWARE, *COMPLEXITY_POLICY_KINDS)
+
 # --------------------------------------------------------------------------- the paper's design
 
 #: Section V: trials per participant in each complexity (41 low, 30 high), 9 participants

@@ -16,11 +16,11 @@ from typing import Any
 import numpy as np
 
 from ..model.core import ModelError
-from ..vocab import PAPER_ASK_PROBABILITIES
+from ..vocab import COMPLEXITY_POLICY_KINDS, PAPER_ASK_PROBABILITIES
 from .base import POLICY_FORMAT, PolicyBase, PolicyError
 from .thresholds import Interval
 
-COMPLEXITY_KINDS = ("trust-agnostic", "randomized", "always-ask", "never-ask")
+COMPLEXITY_KINDS = COMPLEXITY_POLICY_KINDS
 
 
 class ComplexityPolicy(PolicyBase):

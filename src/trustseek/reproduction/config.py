@@ -17,12 +17,14 @@ from ..vocab import (
     PAPER_DATA_COUNTS,
     PAPER_DATA_PARTICIPANTS,
     PAPER_EVALUATION_PARTICIPANTS,
+    TRUST_AGNOSTIC,
+    TRUST_AWARE,
 )
 
 # indices of the paper's two trust and complexity levels
 LOW, HIGH = 0, 1
 # labels of the two policies of experiment 2
-AWARE, AGNOSTIC = "trust-aware", "trust-agnostic"
+AWARE, AGNOSTIC = TRUST_AWARE, TRUST_AGNOSTIC
 
 PAPER = {
     "threshold_high": 0.75,

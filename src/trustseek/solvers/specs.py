@@ -22,13 +22,13 @@ from ..policies.base import Policy
 from ..policies.complexity import ComplexityPolicy, always_ask, never_ask, randomized
 from ..policies.kinds import policy_from_dict
 from ..pomdp.problem import AssistancePOMDP
-from ..vocab import BELIEF_UPDATES, PAPER_ASK_PROBABILITIES
+from ..vocab import BELIEF_UPDATES, PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS
 from .grid import DEFAULT_GRID
 from .registry import make_solver
 
 __all__ = ["SPEC_KINDS", "PolicySpecError", "policy_from_spec"]
 
-SPEC_KINDS = ("trust-aware", "trust-agnostic", "randomized", "always-ask", "never-ask")
+SPEC_KINDS = POLICY_SPEC_KINDS
 SPEC_ENTRIES = ("kind", "belief_update", "grid", "p_ask")
 
 
