@@ -214,20 +214,3 @@ def bootstrap(
     if widened.any():
         log.info("bootstrap: %d cell interval(s) widened to contain the estimate", int(widened.sum()))
     return Intervals(intervals, replicates, level, wide, int(other), draws)
-
-
-def bootstrap_ci(
-    seqs: Sequences,
-    spec: IOHMMSpec,
-    params: Params,
-    replicates: int,
-    seed: int = 0,
-    restarts: int = 3,
-    n_jobs: int | None = None,
-    tol: float = 1e-8,
-    max_iter: int = 1000,
-    level: float = LEVEL,
-    progress: Callable[[], None] | None = None,
-) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """The ``(lower, upper)`` arrays of :func:`bootstrap` for every table."""
-    return bootstrap(seqs, spec, params, replicates, seed, restarts, n_jobs, tol, max_iter, level, progress).intervals
