@@ -146,10 +146,8 @@ def fit(
     """Estimate the supervisor's trust model from logged trials (extended Baum-Welch)."""
     check_outputs((out, "--out"), (posteriors, "--posteriors"))
     check_output(posteriors, "--posteriors", POSTERIOR_SUFFIXES)
-    if plots is not None:
-        if plots.exists() and not plots.is_dir():
-            raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
-        check_output(plots / "emissions.png", "--plots")
+    if plots is not None and plots.exists() and not plots.is_dir():
+        raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
     tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on)
     bar = progress_bar(quiet or as_json)
     with bar:

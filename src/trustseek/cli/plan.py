@@ -34,7 +34,7 @@ def need_two_levels(model: TrustModel, command: str) -> None:
     """The belief-grid solver handles two trust levels; say what to use for more."""
     if model.n_trust != 2:
         alternative = {
-            "solve": "use --solver point (or alpha for two levels)",
+            "solve": "use --solver point",
             "plot-q": "solve it with 'trustseek solve --solver point' (the plot needs a two-level model)",
             "simulate": "solve it with 'trustseek solve --solver point --out policy.json' and pass --policy policy.json",
         }[command]

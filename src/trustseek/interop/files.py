@@ -247,17 +247,17 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
     label = str(source)
     if text is None:
         try:
-            raw = Path(source).read_bytes()
+            content = Path(source).read_bytes()
         except FileNotFoundError:
             raise PomdpFileError(["file not found"], label) from None
         except IsADirectoryError:
             raise PomdpFileError(["is a directory, expected a .pomdp file"], label) from None
         except OSError as exc:
             raise PomdpFileError([f"cannot read file: {exc.strerror or exc}"], label) from None
-        if b"\x00" in raw:
+        if b"\x00" in content:
             raise PomdpFileError(["is a binary file, expected .pomdp text"], label)
         try:
-            text = raw.decode("utf-8")
+            text = content.decode("utf-8")
         except UnicodeDecodeError as exc:
             raise PomdpFileError([f"is not UTF-8 text (byte {exc.start})"], label) from None
     # group the lines into entries: an entry starts with a keyword followed by ':'

@@ -145,6 +145,8 @@ def _get(obj: Any, key: str, label: str, problems: list[str]) -> Any:
     if key not in obj:
         problems.append(f"{label} is missing")
         return None
+    if obj[key] is None:
+        problems.append(f"{label} is null")
     return obj[key]
 
 
@@ -396,7 +398,10 @@ class TrustModel:
             problems.append(f"notes must be a string, got {notes!r}")
         if problems:
             raise ModelError(problems, source)
-        return cls(tuple(T), tuple(C), initial, emission, transition, notes=notes)
+        try:
+            return cls(tuple(T), tuple(C), initial, emission, transition, notes=notes)
+        except ModelError as exc:
+            raise ModelError(exc.problems, source) from None
 
     def save(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
@@ -637,7 +642,10 @@ class Task:
             problems.append(f"discount = {disc!r} must be a number in [0, 1)")
         if problems:
             raise ModelError(problems, source)
-        return cls(tuple(names), np.array(probs), np.array(succ), tuple(askx), rewards, float(disc))
+        try:
+            return cls(tuple(names), np.array(probs), np.array(succ), tuple(askx), rewards, float(disc))
+        except ModelError as exc:
+            raise ModelError(exc.problems, source) from None
 
     def save(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
