@@ -248,3 +248,59 @@ def test_the_corruptions_are_invalid_for_the_loaders():
                 f.write_text(json.dumps(_set(VALID[kind], leaf, None)))
                 with pytest.raises(TrustseekError):
                     load(f)
+
+
+@pytest.mark.parametrize(
+    "args",
+    [["solve", "--tol", "nan"], ["solve", "--tol", "-1"], ["select", LOG, "--tol", "0"]],
+    ids=["nan", "negative", "zero"],
+)
+def test_a_tolerance_must_be_finite_and_positive(args):
+    code, output = run_cli(args)
+    assert code == 2 and "--tol" in output and "Traceback" not in output
+
+
+def test_options_a_policy_file_would_ignore_are_refused(tmp_path):
+    pol = tmp_path / "policy.json"
+    pol.write_text(json.dumps(VALID["policy"]))
+    for extra in (["-u", "paper"], ["--policy-model", "paper"]):
+        code, output = run_cli(["simulate", "-n", "1", "--policy", str(pol), *extra])
+        assert code == 2 and extra[0] in output and "policy.json" in output
+    assert run_cli(["simulate", "-n", "1", "--policy", str(pol)])[0] == 0
+
+
+def test_a_task_without_rewards_or_discount_is_refused(tmp_path):
+    for key in ("rewards", "discount"):
+        d = dict(VALID["task"])
+        del d[key]
+        f = tmp_path / f"no-{key}.json"
+        f.write_text(json.dumps(d))
+        code, output = run_cli(["check", str(f)])
+        assert code == 2 and f"{key} is missing" in output and f.name in output
+
+
+def test_export_refuses_a_missing_sqlite_file(tmp_path):
+    db = tmp_path / "mistyped.sqlite"
+    code, output = run_cli(["export", "s1", "--db", f"sqlite:///{db}", "-o", str(tmp_path / "t.csv")])
+    assert code == 2 and "does not exist" in output
+    assert not db.exists()
+
+
+def test_solve_pomdp_file_exits_3_above_its_target_gap(tmp_path):
+    f = tmp_path / "assist.pomdp"
+    assert run_cli(["export-pomdp", str(f)])[0] == 0
+    code, output = run_cli(["solve-pomdp-file", str(f), "--gap", "1e-12", "--max-seconds", "0.05"])
+    assert code == 3 and "above the target" in output
+
+
+def test_decode_needs_only_the_columns_the_model_uses(tmp_path):
+    import pandas as pd
+
+    log = tmp_path / "log.csv"
+    pd.read_csv(LOG).drop(columns=["complexity", "robot_action"]).to_csv(log, index=False)
+    model = tmp_path / "m.json"
+    fit = ["fit", str(log), "--transitions-on", "experience", "--emissions-on", "none", "-r", "1", "-o", str(model)]
+    assert run_cli(fit)[0] == 0
+    code, output = run_cli(["decode", str(log), "-m", str(model), "-o", str(tmp_path / "p.csv")])
+    assert code == 0, output
+    assert len(pd.read_csv(tmp_path / "p.csv")) == len(pd.read_csv(log))
