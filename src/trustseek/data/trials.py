@@ -22,6 +22,7 @@ import csv
 import io
 import json
 import math
+import sys
 import tomllib
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -231,9 +232,9 @@ def _as_text(v: Any) -> str | None:
 def _spellings(text: str) -> tuple[str, ...]:
     """The ways a label may be written in a mapping: a number as read ('1.0') and as an
     integer ('1'); a boolean as true/false and as 1/0."""
-    if text in ("true", "false"):
-        one = text == "true"
-        return (text, text.capitalize(), text.upper(), "1" if one else "0")
+    if text.lower() in ("true", "false"):
+        low = text.lower()
+        return tuple(dict.fromkeys((text, low, low.capitalize(), low.upper(), "1" if low == "true" else "0")))
     try:
         f = float(text)
     except ValueError:
@@ -371,11 +372,20 @@ def _load_csv(path: Path, name: str, theirs: set[str], sep: str | None) -> _Raw:
     bad_rows: list[tuple[int, int, str]] = []
 
     def invalid(row: Any) -> str:
-        bad_rows.append((row.expected_columns, row.actual_columns, row.text))
+        try:
+            text = str(row.text)
+        except UnicodeDecodeError:
+            text = "(not UTF-8 text)"
+        bad_rows.append((row.expected_columns, row.actual_columns, text))
         return "skip"
 
     dictionary = pa.dictionary(pa.int32(), pa.string())
     types = {c: (dictionary if c in theirs else pa.string()) for c in header}
+    # pyarrow decodes a malformed row's text for the handler; a row that is not UTF-8 fails there,
+    # outside any caller, so such failures are collected here instead of being printed
+    undecodable: list[Any] = []
+    hook = sys.unraisablehook
+    sys.unraisablehook = undecodable.append
     try:
         table = pcsv.read_csv(
             path,
@@ -390,6 +400,10 @@ def _load_csv(path: Path, name: str, theirs: set[str], sep: str | None) -> _Raw:
         if "UTF8" in msg or "UTF-8" in msg:
             raise DataError(["the file is not UTF-8 text (save it as UTF-8 CSV)"], name) from None
         raise DataError([f"cannot read the file as CSV (delimiter {sep!r}): {msg}"], name) from None
+    finally:
+        sys.unraisablehook = hook
+    if undecodable:
+        raise DataError(["the file is not UTF-8 text (save it as UTF-8 CSV)"], name)
     if bad_rows:
         p = _Problems()
         p.add(
