@@ -49,16 +49,16 @@ def test_example_file_is_shipped_and_valid():
     "edit, expected",
     [
         (lambda t: t.replace("complexity,", "cx,", 1), ["log.csv", "missing column 'complexity'"]),
-        (lambda t: t.replace("B,1,high,autonomous", "B,1,medium,autonomous"), ["line 5", "column 'complexity'", "'medium'"]),
-        (lambda t: t.replace("B,2,low", "B,1,low"), ["line 6", "duplicate trial index 1", "'B'"]),
+        (lambda t: t.replace("B,1,high,autonomous", "B,1,medium,autonomous"), ["row 4", "column 'complexity'", "'medium'"]),
+        (lambda t: t.replace("B,2,low", "B,1,low"), ["row 5", "duplicate trial index 1", "'B'", "first at row 4"]),
         (lambda t: t.replace("A,3,high", "A,4,high"), ["participant 'A'", "trial index 3 missing"]),
-        (lambda t: t.replace("B,1,high", ",1,high"), ["line 5", "column 'participant'", "empty participant"]),
-        (lambda t: t.replace("A,2,high,ask,intervene", "A,2,high,ask,NaN"), ["line 3", "column 'human_action'", "NaN"]),
+        (lambda t: t.replace("B,1,high", ",1,high"), ["row 4", "column 'participant'", "empty participant"]),
+        (lambda t: t.replace("A,2,high,ask,intervene", "A,2,high,ask,NaN"), ["row 2", "column 'human_action'", "NaN"]),
         (
             lambda t: t.replace("A,1,low,autonomous,rely,reliable", "A,1,low,autonomous,rely,"),
-            ["line 2", "column 'experience'", "empty value"],
+            ["row 1", "column 'experience'", "empty value"],
         ),
-        (lambda t: t.replace("B,2,low", "B,two,low"), ["line 6", "column 'trial'", "'two'"]),
+        (lambda t: t.replace("B,2,low", "B,two,low"), ["row 5", "column 'trial'", "'two'"]),
     ],
 )
 def test_validation_names_file_row_column_value(tmp_path, edit, expected):
@@ -128,7 +128,7 @@ def test_unmapped_label_is_an_unknown_category(tmp_path):
     with pytest.raises(DataError) as exc:
         read_trials(path, m, required=("experience", "human_action"))
     text = problems(exc)
-    assert "line 3" in text and "'automation_correct'" in text and "'0'" in text
+    assert "row 2" in text and "'automation_correct'" in text and "'0'" in text
 
 
 def test_bad_mapping_flags_are_reported():
@@ -162,7 +162,7 @@ def test_parquet_nan_and_float_labels(tmp_path):
     m = ColumnMapping(labels={"experience": {"1": "reliable", "0": "faulty"}})
     with pytest.raises(DataError) as exc:
         read_trials(pq, m, required=("experience", "human_action"))
-    assert "row 2, column 'experience': value is NaN" in problems(exc)
+    assert "column 'experience': value is NaN (expected one of ['faulty', 'reliable']): row 2" in problems(exc)
 
 
 def test_missing_file_and_dataframe_source(tmp_path):

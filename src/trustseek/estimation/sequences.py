@@ -1,7 +1,7 @@
 """Trial tables encoded for the IOHMM: one padded, time-major integer array per quantity.
 
 :func:`encode` turns a validated trial table (one row per trial, a participant and a
-1-based trial column) into :class:`Sequences`: the output code and the emission- and
+trial column counted from 1 or 0) into :class:`Sequences`: the output code and the emission- and
 transition-input combination of every trial, participants side by side.  Every
 E-step, M-step and bootstrap resample works on these arrays, never on the frame.
 """
@@ -30,6 +30,7 @@ class Sequences:
     ut: np.ndarray  # (T, N) transition-input combination of row t (t -> t+1), -1 = padding
     rows: np.ndarray  # (T, N) index of the source row in the frame, -1 = padding
     n_rows: int
+    base: int = 1  # the index of a participant's first trial (1, or 0 in a table counting from 0)
 
     @property
     def n_participants(self) -> int:
@@ -60,6 +61,7 @@ class Sequences:
             np.ascontiguousarray(self.ut[:T, idx]),
             np.ascontiguousarray(self.rows[:T, idx]),
             self.n_rows,
+            self.base,
         )
 
 
@@ -71,7 +73,11 @@ def _combination(codes: list[np.ndarray], sizes: list[int], n: int) -> np.ndarra
 
 
 def _codes(frame: pd.DataFrame, spec: IOHMMSpec) -> dict[str, np.ndarray]:
-    """Category codes of the model's columns (-1 = missing output); every bad value is reported."""
+    """Category codes of the model's columns (-1 = missing output); every bad value is reported.
+
+    A categorical column (as :func:`~trustseek.data.read_trials` returns) is recoded through
+    its few categories; any other column through its distinct values.
+    """
     problems: list[str] = []
     codes: dict[str, np.ndarray] = {}
     for col in dict.fromkeys((*spec.emission_inputs, *spec.transition_inputs, spec.output)):
@@ -80,13 +86,21 @@ def _codes(frame: pd.DataFrame, spec: IOHMMSpec) -> dict[str, np.ndarray]:
             continue
         cats = list(spec.output_categories if col == spec.output else spec.categories[col])
         values = frame[col]
-        missing = values.isna().to_numpy()
-        cat = pd.Categorical(values.astype(object).where(~missing, None), categories=cats)
-        c = np.asarray(cat.codes, dtype=np.int64)
-        for i in np.flatnonzero((c < 0) & ~missing)[:MAX_LISTED]:
+        raw, uniques = pd.factorize(values, use_na_sentinel=True)
+        lookup = np.full(len(uniques) + 1, -1, dtype=np.int64)  # the last entry: a missing value
+        unknown = np.zeros(len(uniques) + 1, dtype=bool)
+        for j, u in enumerate(np.asarray(uniques, dtype=object)):
+            if u in cats:
+                lookup[j] = cats.index(u)
+            else:
+                unknown[j] = True
+        raw = np.asarray(raw, dtype=np.int64)
+        raw[raw < 0] = len(uniques)
+        c = lookup[raw]
+        for i in np.flatnonzero(unknown[raw])[:MAX_LISTED]:
             problems.append(f"row {i + 1}, column {col!r}: value {values.iloc[i]!r} is not one of {cats}")
         if col != spec.output:
-            for i in np.flatnonzero(missing)[:MAX_LISTED]:
+            for i in np.flatnonzero(raw == len(uniques))[:MAX_LISTED]:
                 problems.append(f"row {i + 1}, column {col!r}: value is missing")
         codes[col] = c
     if problems:
@@ -98,19 +112,21 @@ def encode(frame: pd.DataFrame, spec: IOHMMSpec, participant: str = "participant
     """Encode a validated trial table (one row per trial) for ``spec``.
 
     Participants keep their order of first appearance; trials are placed by their
-    1-based index.  A missing output value is unobserved.
+    index, counted from 1 (or from 0 in a table whose smallest index is 0; ``base``
+    records which).  A missing output value is unobserved.
     """
     n = len(frame)
     codes = _codes(frame, spec)
-    pid = frame[participant].astype(str).to_numpy()
-    uniq, first = np.unique(pid, return_index=True)
-    order_p = uniq[np.argsort(first)]
-    pcode = pd.Categorical(pid, categories=order_p).codes.astype(np.int64)
-    tpos = frame[trial].to_numpy().astype(np.int64) - 1
-    lengths = np.bincount(pcode, minlength=len(order_p)).astype(np.int64)
-    T, N = int(lengths.max()) if n else 1, len(order_p)
+    pcode_raw, order_p = pd.factorize(frame[participant], use_na_sentinel=False)
+    pcode = np.asarray(pcode_raw, dtype=np.int64)
+    participants = [str(p) for p in np.asarray(order_p, dtype=object)]
+    trials = frame[trial].to_numpy().astype(np.int64)
+    base = 0 if n and int(trials.min()) == 0 else 1
+    tpos = trials - base
+    lengths = np.bincount(pcode, minlength=len(participants)).astype(np.int64)
+    T, N = int(lengths.max()) if n else 1, len(participants)
     if n and (tpos.min() < 0 or np.any(tpos >= lengths[pcode])):
-        raise FitError(["trial indices must run 1..n within each participant"])
+        raise FitError([f"trial indices must run {base}..n within each participant"])
 
     def combination(inputs: tuple[str, ...]) -> np.ndarray:
         return _combination([codes[c] for c in inputs], [len(spec.categories[c]) for c in inputs], n)
@@ -121,4 +137,6 @@ def encode(frame: pd.DataFrame, spec: IOHMMSpec, participant: str = "participant
         arr[tpos, pcode] = vals
         arrays.append(arr)
     y, ue, ut, rows = arrays
-    return Sequences([str(p) for p in order_p], lengths, y, ue, ut, rows, n)
+    if n and int((rows >= 0).sum()) != n:
+        raise FitError(["a participant has the same trial index twice"])
+    return Sequences(participants, lengths, y, ue, ut, rows, n, base)

@@ -1,0 +1,332 @@
+"""Trial logs that are wrong in a way the reader must refuse, and logs it must accept."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import sys
+import tempfile
+from pathlib import Path
+from unittest import mock
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from trustseek.data.trials import ColumnMapping, DataError, example_path, read_trials
+from trustseek.estimation import decode, encode, paper_spec
+from trustseek.model.presets import paper_model
+
+HEADER = "participant,trial,complexity,robot_action,human_action,experience"
+ROWS = [
+    "A,1,low,autonomous,rely,reliable",
+    "A,2,high,ask,intervene,reliable",
+    "A,3,low,ask,intervene,faulty",
+    "A,4,high,autonomous,intervene,faulty",
+    "B,1,high,autonomous,rely,faulty",
+    "B,2,low,autonomous,,reliable",
+    "B,3,high,autonomous,rely,reliable",
+]
+GOOD = "\n".join([HEADER, *ROWS]) + "\n"
+
+
+def write(tmp_path: Path, text: str, name: str = "log.csv") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def lines_of(exc: pytest.ExceptionInfo) -> list[str]:
+    return exc.value.lines()
+
+
+def test_the_good_log_is_accepted(tmp_path):
+    assert len(read_trials(write(tmp_path, GOOD))) == len(ROWS)
+
+
+@pytest.mark.parametrize(
+    "row, expected",
+    [
+        ("B,1,low,ask,intervene,reliable", "'reliable' after an ask in low complexity"),
+        ("B,1,high,ask,intervene,faulty", "'faulty' after an ask in high complexity"),
+        ("B,1,high,autonomous,intervene,reliable", "'reliable' after an intervention"),
+    ],
+)
+def test_a_row_contradicting_the_experience_rule_is_an_error(tmp_path, row, expected):
+    path = write(tmp_path, GOOD.replace("B,1,high,autonomous,rely,faulty", row))
+    with pytest.raises(DataError) as exc:
+        read_trials(path)
+    text = "\n".join(lines_of(exc))
+    assert expected in text and "column 'experience'" in text and "row 5" in text and str(path) in text
+    assert len(read_trials(path, check_experience=False)) == len(ROWS)
+
+
+def test_an_entirely_empty_human_action_column_is_an_error(tmp_path):
+    text = "\n".join([HEADER, *[",".join(r.split(",")[:4] + ["", r.split(",")[5]]) for r in ROWS]]) + "\n"
+    path = write(tmp_path, text)
+    with pytest.raises(DataError, match="no trial has a recorded human action"):
+        read_trials(path)
+    # some cells empty: "not recorded", as the format allows
+    assert read_trials(write(tmp_path, GOOD))["human_action"].isna().sum() == 1
+
+
+def test_trials_counted_from_zero_are_accepted_and_keep_their_numbers(tmp_path):
+    shifted = [",".join([r.split(",")[0], str(int(r.split(",")[1]) - 1), *r.split(",")[2:]]) for r in ROWS]
+    zero = read_trials(write(tmp_path, "\n".join([HEADER, *shifted]) + "\n", "zero.csv"))
+    one = read_trials(write(tmp_path, GOOD))
+    assert zero["trial"].tolist() == [t - 1 for t in one["trial"]]
+    a, b = encode(zero, paper_spec()), encode(one, paper_spec())
+    np.testing.assert_array_equal(a.y, b.y)
+    np.testing.assert_array_equal(a.ut, b.ut)
+    post = decode(zero, paper_model())
+    assert post["trial"].tolist() == zero["trial"].tolist()
+    np.testing.assert_allclose(post["p_trust_high"], decode(one, paper_model())["p_trust_high"])
+
+
+def test_a_gap_in_a_zero_based_log_is_named(tmp_path):
+    shifted = [",".join([r.split(",")[0], str(int(r.split(",")[1]) - 1), *r.split(",")[2:]]) for r in ROWS]
+    shifted[2] = shifted[2].replace("A,2,", "A,9,")
+    with pytest.raises(DataError) as exc:
+        read_trials(write(tmp_path, "\n".join([HEADER, *shifted]) + "\n"))
+    text = "\n".join(lines_of(exc))
+    assert "trials must run 0, 1, ... without gaps" in text
+    assert "participant 'A': trial index 2, 4, 5, 6, 7, 8 missing" in text
+
+
+@pytest.mark.parametrize("sep, name", [(";", "log.csv"), ("\t", "log.tsv"), ("\t", "log.csv"), ("|", "log.txt")])
+def test_the_delimiter_is_found(tmp_path, sep, name):
+    df = read_trials(write(tmp_path, GOOD.replace(",", sep), name))
+    pd.testing.assert_frame_equal(df, read_trials(write(tmp_path, GOOD)))
+
+
+def test_a_missing_column_says_how_to_map_it_and_which_model_needs_none(tmp_path):
+    path = write(tmp_path, GOOD.replace("complexity,", "cx,", 1))
+    with pytest.raises(DataError) as exc:
+        read_trials(path)
+    text = "\n".join(lines_of(exc))
+    assert "missing column 'complexity'" in text
+    assert "--column" in text and "--mapping" in text
+    assert "--transitions-on" in text and "--emissions-on" in text
+
+
+def test_an_unknown_delimiter_gets_a_hint(tmp_path):
+    with pytest.raises(DataError) as exc:
+        read_trials(write(tmp_path, GOOD.replace(",", ";")), delimiter=",")
+    text = "\n".join(lines_of(exc))
+    assert "single column" in text and "delimiter" in text
+    assert sum("missing column" in line for line in lines_of(exc)) == 6
+
+
+def test_several_kinds_of_problem_one_line_each_with_a_count(tmp_path):
+    rows = list(ROWS)
+    rows[0] = "A,1,medium,autonomous,rely,reliable"
+    rows[4] = "B,1,medium,autonomous,rely,faulty"
+    rows[5] = "B,2,mid,autonomous,,reliable"
+    rows[1] = "A,2,high,ask,trusts,reliable"
+    rows[6] = "B,2,high,autonomous,rely,reliable"
+    with pytest.raises(DataError) as exc:
+        read_trials(write(tmp_path, "\n".join([HEADER, *rows]) + "\n"))
+    got = lines_of(exc)
+    assert len(got) == 3, got
+    cx = next(line for line in got if "column 'complexity'" in line)
+    assert "in 3 rows" in cx and "row 1 'medium'" in cx and "row 6 'mid'" in cx
+    assert any("column 'human_action'" in line and "row 2 'trusts'" in line for line in got)
+    assert any("duplicate trial index 2 for participant 'B'" in line and "first at row 6" in line for line in got)
+
+
+def test_many_problems_of_one_kind_are_one_line(tmp_path):
+    rows = [f"P{i},1,medium,autonomous,rely,reliable" for i in range(500)]
+    with pytest.raises(DataError) as exc:
+        read_trials(write(tmp_path, "\n".join([HEADER, *rows]) + "\n"))
+    (line,) = lines_of(exc)
+    assert "in 500 rows" in line and "row 1 'medium'" in line and "(495 more)" in line
+
+
+def test_numbers_and_booleans_match_labels_in_every_format(tmp_path):
+    raw = pd.DataFrame(
+        {
+            "subject": ["s1", "s1", "s2"],
+            "trial_no": [1, 2, 1],
+            "automation_correct": [True, False, True],
+            "rely": [1.0, 0.0, 1.0],
+        }
+    )
+    pq = tmp_path / "other.parquet"
+    raw.to_parquet(pq)
+    csv = write(tmp_path, "subject,trial_no,automation_correct,rely\ns1,1.0,TRUE,1.0\ns1,2,false,0\ns2,1,True,\n")
+    need = ("experience", "human_action")
+    for labels in (("0", "1"), ("false", "true")):
+        m = ColumnMapping.from_flags(
+            ["participant=subject", "trial=trial_no", "experience=automation_correct", "human_action=rely"],
+            [
+                f"experience:{labels[0]}=faulty",
+                f"experience:{labels[1]}=reliable",
+                "human_action:0=intervene",
+                "human_action:1=rely",
+            ],
+        )
+        a = read_trials(pq, m, required=need)
+        assert a["experience"].tolist() == ["reliable", "faulty", "reliable"]
+        assert a["human_action"].tolist() == ["rely", "intervene", "rely"]
+        b = read_trials(csv, m, required=need)
+        pd.testing.assert_frame_equal(a[["participant", "trial", "experience"]], b[["participant", "trial", "experience"]])
+        assert pd.isna(b["human_action"].iloc[2])
+
+
+def test_the_shipped_mapping_names_the_complexities_as_the_docs_show():
+    d = json.loads(example_path("other_study_mapping.json").read_text())
+    assert d["complexities"] == ["low", "high"]
+    assert ColumnMapping.load(example_path("other_study_mapping.json")).complexities == ("low", "high")
+
+
+def test_rows_are_data_rows_in_every_format(tmp_path):
+    bad = GOOD.replace("B,2,low", "B,2,medium")
+    csv = write(tmp_path, bad)
+    pq = tmp_path / "log.parquet"
+    pd.read_csv(csv, dtype=str, keep_default_na=False).to_parquet(pq)
+    for path in (csv, pq):
+        with pytest.raises(DataError) as exc:
+            read_trials(path)
+        assert "row 6 'medium'" in "\n".join(lines_of(exc))
+    with pytest.raises(DataError) as exc:
+        read_trials(pd.read_csv(csv, dtype=str, keep_default_na=False))
+    assert "row 6 'medium'" in "\n".join(lines_of(exc))
+
+
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        (GOOD.replace("A,2,", "A,99999999999999999999,"), "not an integer"),
+        (GOOD.replace("A,2,", "A,-1,"), "not an integer"),
+        (GOOD.replace("A,2,", "A,2.5,"), "'2.5'"),
+        (GOOD.replace("A,2,", "A,nan,"), "value is NaN"),
+        (HEADER + "\n", "no trials"),
+        ("", "empty"),
+        (GOOD.replace("participant,trial", "participant,participant"), "appears 2 times"),
+        (GOOD + "C,1,low,autonomous,rely,reliable,extra\n", "number of fields"),
+    ],
+)
+def test_malformed_files_are_refused_with_a_located_message(tmp_path, text, expected):
+    path = write(tmp_path, text)
+    with pytest.raises(DataError) as exc:
+        read_trials(path)
+    text = "\n".join(lines_of(exc))
+    assert expected in text and str(path) in text
+
+
+def test_a_file_that_is_not_utf8_is_named(tmp_path):
+    path = tmp_path / "log.csv"
+    path.write_bytes(GOOD.replace("B,2,low", "B,2,l\xf6w").encode("latin-1"))
+    with pytest.raises(DataError, match="UTF-8") as exc:
+        read_trials(path)
+    assert str(path) in str(exc.value)
+
+
+# --------------------------------------------------------------------------- adversarial: every command that reads a log
+
+
+def _corrupt(kind: str, rng: np.random.Generator) -> bytes:
+    rows = [r.split(",") for r in ROWS]
+    header = HEADER.split(",")
+    i = int(rng.integers(len(rows)))
+    col = int(rng.integers(len(header)))
+    if kind == "bytes":
+        return bytes(rng.integers(0, 256, size=int(rng.integers(1, 200)), dtype=np.uint8))
+    if kind == "utf16":
+        return GOOD.encode("utf-16")
+    if kind == "delimiter":
+        return GOOD.replace(",", " ").encode()
+    if kind == "missing_column":
+        keep = [j for j in range(len(header)) if j != col]
+        return ("\n".join(",".join(r[j] for j in keep) for r in [header, *rows]) + "\n").encode()
+    if kind == "duplicate_column":
+        return ("\n".join(",".join([*r, r[col]]) for r in [header, *rows]) + "\n").encode()
+    if kind == "extra_field":
+        rows[i].append("x")
+    elif kind == "bad_label":
+        col = int(rng.integers(2, 6))
+        rows[i][col] = str(rng.choice(["medium", "Rely", "yes", "2", "-", "NaN", "null"]))
+    elif kind == "trial":
+        rows[i][1] = str(rng.choice(["0.5", "-3", "1e30", "99999999999999999999", "NaN", "", "x", "inf"]))
+    elif kind == "duplicate_row":
+        rows.insert(i, list(rows[i]))
+    elif kind == "gap":
+        rows[i][1] = str(int(rows[i][1]) + 10)
+    elif kind == "participant":
+        rows[i][0] = str(rng.choice(["", "NaN", "null"]))
+    elif kind == "no_human_action":
+        for r in rows:
+            r[4] = ""
+    elif kind == "experience_rule":
+        rows[1][5] = "faulty"  # an ask in high complexity ends reliable
+    elif kind == "header_only":
+        rows = []
+    return ("\n".join(",".join(r) for r in [header, *rows]) + "\n").encode()
+
+
+KINDS = [
+    "bytes",
+    "utf16",
+    "delimiter",
+    "missing_column",
+    "duplicate_column",
+    "extra_field",
+    "bad_label",
+    "trial",
+    "duplicate_row",
+    "gap",
+    "participant",
+    "no_human_action",
+    "experience_rule",
+    "header_only",
+]
+
+
+def _run_cli(argv: list[str]) -> tuple[int, str]:
+    from trustseek.cli import main
+
+    err = io.StringIO()
+    code = 0
+    with (
+        mock.patch.object(sys, "argv", ["trustseek", *argv]),
+        contextlib.redirect_stderr(err),
+        contextlib.redirect_stdout(io.StringIO()),
+    ):
+        try:
+            main()
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else 1
+    return code, err.getvalue()
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(kind=st.sampled_from(KINDS), seed=st.integers(0, 2**32 - 1), suffix=st.sampled_from([".csv", ".tsv", ".parquet"]))
+def test_every_command_refuses_a_corrupted_log(kind, seed, suffix):
+    rng = np.random.default_rng(seed)
+    data = _corrupt(kind, rng)
+    with tempfile.TemporaryDirectory() as d:
+        folder = Path(d)
+        log = folder / f"log{suffix}"
+        log.write_bytes(data.replace(b",", b"\t") if suffix == ".tsv" and kind != "delimiter" else data)
+        if suffix == ".parquet":
+            log.write_bytes(data)  # bytes that are no Parquet file at all
+        model = folder / "model.json"
+        paper_model().save(model)
+        with pytest.raises(DataError) as exc:
+            read_trials(log)
+        assert str(log) in str(exc.value)
+        for argv, out in (
+            (["fit", str(log), "--restarts", "1", "--out", str(folder / "fitted.json")], folder / "fitted.json"),
+            (["decode", str(log), "--model", str(model), "--out", str(folder / "post.csv")], folder / "post.csv"),
+            (["select", str(log), "--max-levels", "1", "--restarts", "1", "--folds", "2"], None),
+            (["agnostic", "--data", str(log), "--out", str(folder / "policy.json")], folder / "policy.json"),
+        ):
+            code, err = _run_cli(argv)
+            assert code == 2, (argv, err)
+            assert "Traceback" not in err
+            assert str(log) in err.replace("\n", ""), err
+            if out is not None:
+                assert not out.exists()
