@@ -95,5 +95,5 @@ def test_solvers_come_from_the_registry_and_refuse_cleanly():
     )
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert proc.stderr.strip().splitlines() == [
-        "error: the grid solver needs two trust levels; this model has 3: use the point solver"
+        "error: the default grid solver needs two trust levels; this model has 3: use --solver point"
     ]

@@ -3,11 +3,22 @@
 from __future__ import annotations
 
 import json
+import math
+import os
+import secrets
+import shutil
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 import typer
 from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from ..errors import TrustseekError
+from ..model.core import ModelError, load_json
 
 app = typer.Typer(
     name="trustseek",
@@ -37,3 +48,134 @@ def _json_default(o: Any):
     if isinstance(o, np.ndarray):
         return o.tolist()
     raise TypeError(f"not JSON serializable: {type(o).__name__}")
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+def check_output(path: Path | None, option: str, suffixes: tuple[str, ...] | None = None, directory: bool = False) -> None:
+    """Refuse, before any work, an output path that cannot be written: its folder must exist and
+    be writable, and the path must not be a folder (for ``directory`` outputs: not a file, and
+    an existing folder must be empty).  ``suffixes`` are the accepted file suffixes."""
+    if path is None:
+        return
+
+    def fail(what: str) -> None:
+        raise TrustseekError([f"{option} {path}: {what}"])
+
+    if suffixes is not None and path.suffix.lower() not in suffixes:
+        fail(f"expected a file ending in {' or '.join(suffixes)}")
+    parent = path.resolve().parent
+    if directory:
+        if path.exists() and not path.is_dir():
+            fail("exists and is not a folder; expected a new or empty folder")
+        if path.is_dir() and any(path.iterdir()):
+            fail("is a folder that is not empty; expected a new or empty folder (files would be overwritten)")
+    elif path.is_dir():
+        fail("is a folder; expected a file name")
+    if not parent.is_dir():
+        fail(f"the folder {parent} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        fail(f"the folder {parent} is not writable")
+    if path.exists() and not directory and not os.access(path, os.W_OK):
+        fail("exists and is not writable")
+
+
+def check_outputs(*outputs: tuple[Path | None, str]) -> None:
+    """:func:`check_output` for every (path, option), and no two options naming the same file."""
+    for path, option in outputs:
+        check_output(path, option)
+    seen: dict[Path, str] = {}
+
+    for path, option in outputs:
+        if path is None:
+            continue
+        key = path.resolve()
+        if key in seen:
+            raise TrustseekError([f"{seen[key]} and {option} name the same file {path}"])
+        seen[key] = option
+
+
+@contextmanager
+def atomic_output(path: Path, directory: bool = False) -> Iterator[Path]:
+    """A temporary path next to ``path`` (same suffix) to write to; it replaces ``path`` only
+    when the block finishes, so a failure leaves no half-written output (and no temporary)."""
+    parent = path.resolve().parent
+    tmp = parent / f".{path.stem}.{os.getpid()}.{secrets.token_hex(4)}.tmp{path.suffix}"
+    if directory:
+        tmp.mkdir()
+    try:
+        yield tmp
+        if directory and path.is_dir():
+            path.rmdir()  # checked empty before the work started
+        os.replace(tmp, path)
+    except BaseException:
+        if tmp.is_dir():
+            shutil.rmtree(tmp, ignore_errors=True)
+        else:
+            tmp.unlink(missing_ok=True)
+        raise
+
+
+# --------------------------------------------------------------------------- options
+
+
+def check_tol(value: float) -> float:
+    """A tolerance option (a typer callback): a finite number > 0."""
+    if not (math.isfinite(value) and value > 0):
+        raise typer.BadParameter(f"must be a finite number > 0, got {value}")
+    return value
+
+
+QuietOpt = typer.Option(False, "--quiet", "-q", help="No progress bar on stderr (there is none when stderr is not a terminal).")
+
+
+def progress_bar(quiet: bool, *columns: Any) -> Progress:
+    """The progress bar of a long run, on stderr: off with ``--quiet`` and when stderr is not a terminal."""
+    cols = columns or (
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+    )
+    return Progress(*cols, console=err_console, transient=True, disable=quiet or not err_console.is_terminal)
+
+
+# --------------------------------------------------------------------------- trial logs
+
+MappingOpt = typer.Option(None, "--mapping", help="Column/label mapping file (JSON or TOML) for a log with other names.")
+ColumnOpt = typer.Option(None, "--column", help="Map a column: canonical=theirs (e.g. human_action=rely). Repeatable.")
+LabelOpt = typer.Option(None, "--label", help="Map a label: column:theirs=canonical (e.g. human_action:1=rely). Repeatable.")
+
+
+def read_log(log: Path, mapping: Path | None, column: list[str] | None, label: list[str] | None, needed: tuple[str, ...]):
+    """The trial log with the --mapping/--column/--label options applied; ``needed`` are the
+    canonical columns the command uses beyond participant, trial and human_action."""
+    from ..data.trials import ColumnMapping, read_trials
+
+    check_mapping_file(mapping)
+    m = ColumnMapping.from_flags(column or [], label or [], mapping)
+    return read_trials(log, m, required=("participant", "trial", "human_action", *needed))
+
+
+def check_mapping_file(path: Path | None) -> None:
+    """Refuse a ``--mapping`` file that is not readable text (a folder, binary, not UTF-8) or,
+    for JSON, not a JSON object, naming the file; the mapping's content is checked by its reader."""
+    if path is None:
+        return
+    if path.suffix.lower() == ".toml":
+        try:
+            path.read_bytes().decode("utf-8")
+        except IsADirectoryError:
+            raise TrustseekError(["--mapping: is a directory, expected a JSON or TOML file"], str(path)) from None
+        except FileNotFoundError:
+            raise TrustseekError(["--mapping: file not found"], str(path)) from None
+        except OSError as exc:
+            raise TrustseekError([f"--mapping: cannot read file: {exc.strerror or exc}"], str(path)) from None
+        except UnicodeDecodeError:
+            raise TrustseekError(["--mapping: is not UTF-8 text: save it as UTF-8 TOML"], str(path)) from None
+        return
+    try:
+        load_json(path)
+    except ModelError as exc:
+        raise TrustseekError([f"--mapping: {p}" for p in exc.problems], str(path)) from None

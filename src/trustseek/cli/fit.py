@@ -4,14 +4,28 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import typer
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from ..errors import TrustseekError
 from ..model.core import TrustModel
-from ._app import app, console, err_console, print_json
+from ._app import (
+    ColumnOpt,
+    LabelOpt,
+    MappingOpt,
+    QuietOpt,
+    app,
+    atomic_output,
+    check_output,
+    check_outputs,
+    check_tol,
+    console,
+    print_json,
+    progress_bar,
+    read_log,
+)
 
 # The fit and data modules (pandas, numba) load only when a command of this group runs,
 # so that the rest of the CLI starts fast.
@@ -36,9 +50,7 @@ def _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on)
     return tr, em, _read(log, mapping, column, label, tuple(dict.fromkeys((*tr, *em))))
 
 
-MappingOpt = typer.Option(None, "--mapping", help="Column/label mapping file (JSON or TOML) for a log with other names.")
-ColumnOpt = typer.Option(None, "--column", help="Map a column: canonical=theirs (e.g. human_action=rely). Repeatable.")
-LabelOpt = typer.Option(None, "--label", help="Map a label: column:theirs=canonical (e.g. human_action:1=rely). Repeatable.")
+POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
 
 
 def _inputs(text: str | None, default: tuple[str, ...], flag: str) -> tuple[str, ...]:
@@ -54,20 +66,36 @@ def _inputs(text: str | None, default: tuple[str, ...], flag: str) -> tuple[str,
 
 
 def _read(log: Path, mapping: Path | None, column: list[str] | None, label: list[str] | None, needed: tuple[str, ...]):
-    m = _data().ColumnMapping.from_flags(column or [], label or [], mapping)
-    return _data().read_trials(log, m, required=("participant", "trial", "human_action", *needed))
+    return read_log(log, mapping, column, label, needed)
 
 
-def _progress(description: str, quiet: bool):
-    return Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=err_console,
-        transient=True,
-        disable=quiet,
-    ), description
+def model_inputs(model: TrustModel) -> tuple[str, ...]:
+    """The inputs whose value changes some probability of ``model`` (a model fitted with
+    fewer inputs has identical tables along the others): the log columns decoding needs."""
+    em = np.asarray(model.emission)  # [C, a, T, o]
+    tr = np.asarray(model.transition)  # [C, a, E, T, T']
+
+    def varies(arr: np.ndarray, axis: int) -> bool:
+        return bool(np.ptp(arr, axis=axis).max(initial=0.0) > 0.0) if arr.shape[axis] > 1 else False
+
+    used = []
+    if varies(em, 0) or varies(tr, 0):
+        used.append("complexity")
+    if varies(em, 1) or varies(tr, 1):
+        used.append("robot_action")
+    if varies(tr, 2):
+        used.append("experience")
+    return tuple(used)
+
+
+def _fill_unused(frame, model: TrustModel, used: tuple[str, ...]):
+    """The log with the inputs ``model`` ignores filled with one valid value where absent."""
+    fill = {"complexity": model.complexities[0], "robot_action": "autonomous", "experience": "reliable"}
+    frame = frame.copy()
+    for col, value in fill.items():
+        if col not in used and frame[col].isna().all():
+            frame[col] = value
+    return frame
 
 
 @app.command(rich_help_panel="Estimate")
@@ -97,7 +125,9 @@ def fit(
         0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."
     ),
     seed: int = typer.Option(0, "--seed", help="Random seed (restarts and bootstrap)."),
-    tol: float = typer.Option(1e-8, "--tol", help="Stop when the relative change of the log-likelihood is below this."),
+    tol: float = typer.Option(
+        1e-8, "--tol", callback=check_tol, help="Stop when the relative change of the log-likelihood is below this (> 0)."
+    ),
     max_iter: int = typer.Option(1000, "--max-iter", min=1, help="Iteration cap per restart (E-steps)."),
     jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Processes for the bootstrap (default: all cores)."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the fitted trust model (JSON, same format as the presets)."),
@@ -111,12 +141,17 @@ def fit(
     mapping: Path | None = MappingOpt,
     column: list[str] | None = ColumnOpt,
     label: list[str] | None = LabelOpt,
+    quiet: bool = QuietOpt,
 ) -> None:
     """Estimate the supervisor's trust model from logged trials (extended Baum-Welch)."""
+    check_outputs((out, "--out"), (posteriors, "--posteriors"))
+    check_output(posteriors, "--posteriors", POSTERIOR_SUFFIXES)
+    if plots is not None and plots.exists() and not plots.is_dir():
+        raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
     tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on)
-    bar, desc = _progress("fitting", as_json)
+    bar = progress_bar(quiet or as_json)
     with bar:
-        task = bar.add_task(desc, total=restarts + bootstrap)
+        task = bar.add_task("restarts", total=restarts + bootstrap)
 
         def progress(done: int, total: int) -> None:
             bar.update(task, completed=done, total=total, description="bootstrap" if done > restarts else "restarts")
@@ -137,9 +172,11 @@ def fit(
             emission_inputs=em,
         )
     if out is not None:
-        result.model.save(out)
+        with atomic_output(out) as tmp:
+            result.model.save(tmp)
     if posteriors is not None:
-        _data().write_trials(result.posteriors(), posteriors)
+        with atomic_output(posteriors) as tmp:
+            _data().write_trials(result.posteriors(), tmp)
     if plots is not None:
         from ..model.presets import paper_model
         from ..plots.model import plot_emissions, plot_transitions
@@ -198,11 +235,17 @@ def decode_cmd(
     column: list[str] | None = ColumnOpt,
     label: list[str] | None = LabelOpt,
 ) -> None:
-    """Per-trial smoothed P(trust | data) and the Viterbi trust path under a model."""
+    """Per-trial smoothed P(trust | data) and the Viterbi trust path under a model.
+
+    The log needs the columns the model depends on: a model fitted with fewer inputs
+    (--transitions-on/--emissions-on) decodes a log without the others."""
+    check_output(out, "--out", POSTERIOR_SUFFIXES)
     m = TrustModel.load(model)
-    frame = _read(log, mapping, column, label, ("complexity", "robot_action", "experience"))
+    used = model_inputs(m)
+    frame = _fill_unused(_read(log, mapping, column, label, used), m, used)
     post = _fit().decode(frame, m)
-    _data().write_trials(post, out)
+    with atomic_output(out) as tmp:
+        _data().write_trials(post, tmp)
     console.print(f"wrote {len(post)} trials to {out}")
 
 
@@ -214,19 +257,20 @@ def select(
     restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Random restarts per fit."),
     prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count (MAP)."),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
-    tol: float = typer.Option(1e-6, "--tol", help="Relative log-likelihood tolerance per fit."),
+    tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
     transitions_on: str | None = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit)."),
     emissions_on: str | None = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit)."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
     mapping: Path | None = MappingOpt,
     column: list[str] | None = ColumnOpt,
     label: list[str] | None = LabelOpt,
+    quiet: bool = QuietOpt,
 ) -> None:
     """Choose the number of trust levels: BIC and participant-held-out log-likelihood."""
     tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on)
-    bar, desc = _progress("model selection", as_json)
+    bar = progress_bar(quiet or as_json)
     with bar:
-        task = bar.add_task(desc, total=None)
+        task = bar.add_task("model selection", total=None)
         rows = _fit().select_levels(
             frame,
             levels=tuple(range(1, max_levels + 1)),
@@ -235,7 +279,7 @@ def select(
             seed=seed,
             prior=prior,
             tol=tol,
-            progress=lambda d, t: bar.update(task, completed=d, total=t),
+            progress=lambda what, d, t: bar.update(task, completed=d, total=t, description=what),
             transition_inputs=tr,
             emission_inputs=em,
         )

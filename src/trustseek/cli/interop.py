@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +14,10 @@ from ..interop.files import export_assistance, flat_values_check, read_pomdp
 from ..model.presets import load_model, load_task
 from ..pomdp.problem import AssistancePOMDP
 from ..solvers import UnsupportedProblem, make_solver
-from ._app import app, console, print_json
+from ._app import app, atomic_output, check_output, console, err_console, print_json
+
+#: exit code of solve-pomdp-file when the point solver stops before its target gap
+GAP_NOT_REACHED = 3
 
 
 @app.command("export-pomdp", rich_help_panel="Files")
@@ -30,6 +34,9 @@ def export_pomdp(
     ),
 ) -> None:
     """Export the assistance POMDP to a standard file (state augmented with the last human action)."""
+    if fmt is not None and fmt not in ("pomdp", "pomdpx"):
+        raise TrustseekError([f"--format must be 'pomdp' or 'pomdpx', got {fmt!r}"])
+    check_output(out, "OUT", None if fmt else (".pomdp", ".pomdpx"))
     m, t = load_model(model), load_task(task)
     pomdp = AssistancePOMDP(m, t)
     c0 = None
@@ -37,7 +44,8 @@ def export_pomdp(
         if initial_complexity not in t.complexities:
             raise TrustseekError([f"--initial-complexity must be one of {list(t.complexities)}, got {initial_complexity!r}"])
         c0 = t.complexities.index(initial_complexity)
-    export_assistance(pomdp, out, fmt, c0)
+    with atomic_output(out) as tmp:
+        export_assistance(pomdp, tmp, fmt or out.suffix.lower().lstrip("."), c0)
     console.print(f"wrote {out}")
     if verify:
         table = Table(title="Finite-horizon values from the initial belief", title_justify="left")
@@ -64,15 +72,20 @@ def solve_pomdp_file(
     max_seconds: float = typer.Option(60.0, "--max-seconds", help="Time limit for the point solver."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
 ) -> None:
-    """Solve a standard .pomdp file: certified lower and upper bounds at its start belief."""
+    """Solve a standard .pomdp file: certified lower and upper bounds at its start belief.
+
+    Exit code 3 when the solver stops (time or size limit) before the gap between the bounds
+    reaches --gap: the bounds printed are still valid, only looser than asked; 2 for bad input."""
+    if not (gap > 0 and math.isfinite(gap)):
+        raise TrustseekError([f"--gap must be a finite number > 0, got {gap}"])
+    if not (max_seconds > 0 and math.isfinite(max_seconds)):
+        raise TrustseekError([f"--max-seconds must be a finite number > 0, got {max_seconds}"])
     flat = read_pomdp(path)
     res: dict[str, Any]
     if horizon is not None:
         v = flat.finite_horizon_value(flat.start, horizon)
         res = {"file": str(path), "horizon": horizon, "value": v}
     else:
-        if not gap > 0:
-            raise TrustseekError([f"--gap must be positive, got {gap}"])
         try:
             info = make_solver("point", gap=gap, max_seconds=max_seconds).solve(flat).info
         except UnsupportedProblem as exc:
@@ -87,10 +100,13 @@ def solve_pomdp_file(
             "lower": lower,
             "upper": upper,
             "gap": info["certified_gap"],
+            "target_gap": gap,
+            "gap_reached": bool(info["certified_gap"] <= gap),
             "seconds": info["seconds"],
         }
     if as_json:
         print_json(res)
+        _exit_if_gap_not_reached(res)
         return
     if horizon is not None:
         console.print(f"{path}: optimal {horizon}-step value at the start belief = {res['value']:.9f}")
@@ -100,3 +116,16 @@ def solve_pomdp_file(
             f"discount {res['discount']:g}\nV(start) in [{res['lower']:.6f}, {res['upper']:.6f}] "
             f"(gap {res['gap']:.1e}, {res['seconds'] * 1000:.0f} ms)"
         )
+        _exit_if_gap_not_reached(res)
+
+
+def _exit_if_gap_not_reached(res: dict[str, Any]) -> None:
+    if res.get("gap_reached", True):
+        return
+    err_console.print(
+        f"[yellow]{res['file']}: the solver stopped at gap {res['gap']:.2e} above the target {res['target_gap']:g} "
+        "(time or size limit; raise --max-seconds)[/]",
+        highlight=False,
+        soft_wrap=True,
+    )
+    raise typer.Exit(GAP_NOT_REACHED)

@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import json
+import math
 from pathlib import Path
 
 import typer
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..model.core import ACTIONS, ModelError, Task, TrustModel
+from ..model.core import ACTIONS, ModelError, Task, TrustModel, load_json
 from ..model.presets import MODEL_PRESETS, TASK_PRESETS, load_model, load_task
 from ..policies import PolicyError, TrustAwarePolicy, load_policy
 from ..policies.base import Policy
@@ -17,7 +17,7 @@ from ..pomdp.problem import AssistancePOMDP
 from ..solvers import GridSolver, make_solver, solver_names, summarize, trust_agnostic_from_data
 from ..solvers.grid import DEFAULT_GRID, METHODS
 from ..vocab import check_belief_update
-from ._app import app, console, print_json
+from ._app import ColumnOpt, LabelOpt, MappingOpt, app, atomic_output, check_output, check_tol, console, print_json, read_log
 
 ModelOpt = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file.")
 TaskOpt = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file.")
@@ -30,6 +30,17 @@ def _check_update(name: str) -> str:
     return check_belief_update(name, "--belief-update")
 
 
+def need_two_levels(model: TrustModel, command: str) -> None:
+    """The belief-grid solver handles two trust levels; say what to use for more."""
+    if model.n_trust != 2:
+        alternative = {
+            "solve": "use --solver point",
+            "plot-q": "solve it with 'trustseek solve --solver point' (the plot needs a two-level model)",
+            "simulate": "solve it with 'trustseek solve --solver point --out policy.json' and pass --policy policy.json",
+        }[command]
+        raise TrustseekError([f"the default grid solver needs two trust levels; this model has {model.n_trust}: {alternative}"])
+
+
 @app.command(rich_help_panel="Plan")
 def solve(
     model: str = ModelOpt,
@@ -37,7 +48,9 @@ def solve(
     belief_update: str = UpdateOpt,
     grid: int = typer.Option(DEFAULT_GRID, "--grid", "-g", min=3, help="Number of belief grid points on [0, 1]."),
     method: str = typer.Option("policy-iteration", "--method", help=f"Grid solver method: {', '.join(METHODS)}."),
-    tol: float = typer.Option(1e-9, "--tol", help="Value iteration: stop when the certified error bound is below this."),
+    tol: float = typer.Option(
+        1e-9, "--tol", callback=check_tol, help="Value iteration: stop when the certified error bound is below this (> 0)."
+    ),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
     solver: str = typer.Option(
@@ -56,13 +69,17 @@ def solve(
         raise TrustseekError([f"--method must be one of {list(METHODS)}, got {method!r}"])
     if solver not in solver_names():
         raise TrustseekError([f"--solver must be one of {list(solver_names())}, got {solver!r}"])
-    if gap is not None and not gap > 0:
-        raise TrustseekError([f"--gap must be positive, got {gap}"])
+    if gap is not None and not (gap > 0 and math.isfinite(gap)):
+        raise TrustseekError([f"--gap must be a finite number > 0, got {gap}"])
+    check_output(out, "--out", (".json",))
     pomdp = AssistancePOMDP(load_model(model), load_task(task))
+    if solver == "grid":
+        need_two_levels(pomdp.model, "solve")
     policy = make_solver(solver, belief_update=belief_update, grid=grid, method=method, tol=tol, gap=gap).solve(pomdp)
     summary = summarize(policy, pomdp)
     if out is not None:
-        policy.save(out)
+        with atomic_output(out) as tmp:
+            policy.save(tmp)
         summary["policy_file"] = str(out)
     if as_json:
         print_json(summary)
@@ -148,18 +165,24 @@ def agnostic(
     data: Path | None = typer.Option(None, "--data", help="Estimate P(intervene | C) from this trial log instead of the model."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+    mapping: Path | None = MappingOpt,
+    column: list[str] | None = ColumnOpt,
+    label: list[str] | None = LabelOpt,
 ) -> None:
     """The optimal trust-agnostic policy (Section VI-A)."""
+    check_output(out, "--out", (".json",))
+    if data is None and (mapping is not None or column or label):
+        raise TrustseekError(["--mapping, --column and --label apply to a log: give it with --data"])
     t = load_task(task)
     pol: Policy
     if data is not None:
-        from ..data.trials import read_trials
-
-        pol = trust_agnostic_from_data(read_trials(data), t)
+        frame = read_log(data, mapping, column, label, ("complexity", "robot_action"))
+        pol = trust_agnostic_from_data(frame, t)
     else:
         pol = make_solver("trust-agnostic").solve(AssistancePOMDP(load_model(model), t))
     if out is not None:
-        pol.save(out)
+        with atomic_output(out) as tmp:
+            pol.save(tmp)
     if as_json:
         print_json(pol.to_dict())
         return
@@ -186,6 +209,7 @@ def plot_q_cmd(
     """Plot Q(b, C, a) for both actions and complexities, with the threshold (Fig. 7)."""
     from ..plots.q import plot_q
 
+    check_output(out, "--out", (".png", ".pdf", ".svg"))
     if policy_file is not None:
         try:
             policy = TrustAwarePolicy.tabulate(load_policy(policy_file))
@@ -193,8 +217,11 @@ def plot_q_cmd(
             raise TrustseekError([f"{p} to plot" for p in exc.problems], str(policy_file)) from None
     else:
         _check_update(belief_update)
-        policy = GridSolver(grid=grid, belief_update=belief_update).solve(AssistancePOMDP(load_model(model), load_task(task)))
-    plot_q(policy, out)
+        pomdp = AssistancePOMDP(load_model(model), load_task(task))
+        need_two_levels(pomdp.model, "plot-q")
+        policy = GridSolver(grid=grid, belief_update=belief_update).solve(pomdp)
+    with atomic_output(out) as tmp:
+        plot_q(policy, tmp)
     console.print(f"wrote {out}")
 
 
@@ -207,12 +234,16 @@ def preset(
     """Print or export a built-in preset (model and task JSON), a starting point for your own files."""
     if name not in MODEL_PRESETS:
         raise TrustseekError([f"unknown preset {name!r}; presets: {sorted(MODEL_PRESETS)}"])
+    check_output(model_out, "--model-out", (".json",))
+    check_output(task_out, "--task-out", (".json",))
     m, t = MODEL_PRESETS[name](), TASK_PRESETS[name]()
     if model_out:
-        m.save(model_out)
+        with atomic_output(model_out) as tmp:
+            m.save(tmp)
         console.print(f"wrote {model_out}")
     if task_out:
-        t.save(task_out)
+        with atomic_output(task_out) as tmp:
+            t.save(tmp)
         console.print(f"wrote {task_out}")
     if not model_out and not task_out:
         print_json({"model": m.to_dict(), "task": t.to_dict()})
@@ -226,14 +257,14 @@ def check(
     problems: list[str] = []
     for f in files:
         try:
-            text = json.loads(f.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            problems.append(f"{f}: file not found")
+            text, _ = load_json(f)
+        except ModelError as exc:
+            problems.extend(exc.lines())
             continue
-        except json.JSONDecodeError as exc:
-            problems.append(f"{f}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}")
+        fmt = text.get("format", "")
+        if not isinstance(fmt, str):
+            problems.append(f"{f}: format must be a string, got {fmt!r}")
             continue
-        fmt = text.get("format", "") if isinstance(text, dict) else ""
         try:
             if "task" in fmt:
                 Task.from_dict(text, str(f))

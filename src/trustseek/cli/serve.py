@@ -12,7 +12,7 @@ from pathlib import Path
 import typer
 
 from ..errors import TrustseekError
-from ._app import app, console, print_json
+from ._app import app, atomic_output, check_output, check_outputs, console, print_json
 
 
 def _check_db(db: str) -> str:
@@ -21,6 +21,26 @@ def _check_db(db: str) -> str:
             [f"--db must be a database URL such as sqlite:///study.sqlite or postgresql://user@host/db, got {db!r}"]
         )
     return db
+
+
+def _check_existing_sqlite(db: str) -> None:
+    """Reading from a SQLite file that does not exist would create an empty database: refuse it."""
+    from sqlalchemy.engine import make_url
+
+    try:
+        url = make_url(db)
+    except Exception:
+        raise TrustseekError([f"--db: cannot parse the database URL {db!r}"]) from None
+    if url.get_backend_name() != "sqlite":
+        return
+    name = url.database or ""
+    if name in ("", ":memory:") or name.startswith("file:"):
+        return
+    path = Path(name)
+    if not path.is_file():
+        raise TrustseekError(
+            [f"--db {db}: the SQLite file {path} does not exist (run 'trustseek serve --db {db}' to create a study database)"]
+        )
 
 
 @app.command(rich_help_panel="Experiments")
@@ -104,20 +124,23 @@ def export_cmd(
     from ..server.orm import Study
 
     _check_db(db)
-    for p in (out, events):
-        if p is not None and p.suffix not in (".csv", ".parquet"):
-            raise TrustseekError([f"{p}: unknown suffix {p.suffix!r}; expected .csv or .parquet"])
+    _check_existing_sqlite(db)
+    check_outputs((out, "--out"), (events, "--events"))
+    for p, option in ((out, "--out"), (events, "--events")):
+        check_output(p, option, (".csv", ".parquet"))
     maker = open_database(db)
     with maker() as s:
         st = s.get(Study, study)
         if st is None:
             raise TrustseekError([f"no study {study!r} in {db}"])
         trials = trials_frame(s, st)
-        write_frame(trials, out)
         n_events = None
-        if events is not None:
-            ev = events_frame(s, st)
-            write_frame(ev, events, trials=False)
+        ev = events_frame(s, st) if events is not None else None
+        with atomic_output(out) as tmp:
+            write_frame(trials, tmp)
+        if events is not None and ev is not None:
+            with atomic_output(events) as tmp:
+                write_frame(ev, tmp, trials=False)
             n_events = len(ev)
     summary = {
         "study": study,

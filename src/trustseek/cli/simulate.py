@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -19,11 +20,23 @@ from ..policies.base import Policy
 from ..solvers import policy_from_spec
 from ..solvers.specs import SPEC_KINDS
 from ..vocab import PAPER_ASK_PROBABILITIES
-from ._app import app, console, err_console, print_json
+from ._app import QuietOpt, app, atomic_output, check_output, check_outputs, console, err_console, print_json
 
 
-def _policy(spec: str, model: TrustModel, task: Task, belief_update: str, grid: int, ask_low: float, ask_high: float) -> Policy:
-    """The policy ``--policy`` names: a kind (with the options of this command) or a policy JSON file."""
+def _policy(
+    spec: str,
+    model: TrustModel,
+    task: Task,
+    belief_update: str,
+    grid: int,
+    ask_low: float,
+    ask_high: float,
+    given: Sequence[str] = (),
+) -> Policy:
+    """The policy ``--policy`` names: a kind (with the options of this command) or a policy JSON file.
+
+    A solved policy file fixes its belief update and model: the ``given`` options among
+    --belief-update and --policy-model are refused with it rather than ignored."""
     if spec in SPEC_KINDS:
         p_ask = dict(zip(task.complexities, [ask_low, ask_high], strict=False))  # --ask-low, --ask-high: the first two
         options = {"belief_update": belief_update, "grid": grid, "p_ask": p_ask}
@@ -31,6 +44,14 @@ def _policy(spec: str, model: TrustModel, task: Task, belief_update: str, grid: 
     p = Path(spec)
     if p.suffix.lower() == ".json" or p.exists():
         d, source = load_json(p)
+        if "format" in d and given:
+            raise TrustseekError(
+                [
+                    f"{option} does not apply to a solved policy file: it fixes its own belief update and model"
+                    for option in given
+                ],
+                source,
+            )
         return policy_from_spec(d, model, task, where=source)
     raise TrustseekError([f"--policy must be one of {list(SPEC_KINDS)} or a policy JSON file, got {spec!r}"])
 
@@ -50,6 +71,7 @@ def _counts(text: str, task) -> list[int]:
 
 @app.command(rich_help_panel="Simulate and reproduce")
 def simulate(
+    ctx: typer.Context,
     model: str = typer.Option("paper", "--model", "-m", help="Supervisors' trust model: a preset name (paper) or a JSON file."),
     task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
     policy: str = typer.Option(
@@ -118,13 +140,22 @@ def simulate(
         raise TrustseekError([f"--belief-update must be 'paper' or 'bayes', got {belief_update!r}"])
     if counts is not None and trials is not None:
         raise TrustseekError(["give either --counts or --trials, not both"])
-    for f in (out, summary_out):
-        if f is not None and f.suffix.lower() not in (".csv", ".parquet"):
-            raise TrustseekError([f"{f}: output files must end in .csv or .parquet"])
+    given = []  # options that a solved policy file would silently override
+    for name, option in (("belief_update", "--belief-update"), ("policy_model", "--policy-model")):
+        source = ctx.get_parameter_source(name)
+        if source is not None and source.name != "DEFAULT":
+            given.append(option)
+    check_outputs((out, "--out"), (summary_out, "--summary-out"))
+    for f, option in ((out, "--out"), (summary_out, "--summary-out")):
+        check_output(f, option, (".csv", ".parquet"))
     m, t = load_model(model), load_task(task)
     t.check_compatible(m)
     pm = load_model(policy_model) if policy_model else m
-    pol = _policy(policy, pm, t, belief_update, grid, ask_low, ask_high)
+    if policy == "trust-aware" and pm.n_trust != 2:
+        from .plan import need_two_levels
+
+        need_two_levels(pm, "simulate")
+    pol = _policy(policy, pm, t, belief_update, grid, ask_low, ask_high, given)
     sup = Supervisors.pooled(m, participants)
     if concentration is not None:
         sup = Supervisors.dirichlet(m, participants, concentration, np.random.default_rng([seed, 7]), pseudo=pseudo)
@@ -134,10 +165,12 @@ def simulate(
     sim = run_simulation(sup, t, pol, participants, counts=cnt, trials=trials, seed=seed, record=record, belief_model=pm)
     dt = time.perf_counter() - t0
     if out is not None:
-        _write(sim.trials(), out)
+        with atomic_output(out) as tmp:
+            _write(sim.trials(), tmp)
     summ = sim.summary()
     if summary_out is not None:
-        _write(summ, summary_out)
+        with atomic_output(summary_out) as tmp:
+            _write(summ, tmp)
     cols = ["cumulative_reward", "discounted_reward", "autonomous_collections", "failures", "interventions", "asks"]
     stats = {
         c: {
@@ -216,6 +249,7 @@ def reproduce(
     ),
     jobs: int = typer.Option(2, "--jobs", "-j", min=1, help="Processes (bootstrap and replicates); numbers do not depend on it."),
     as_json: bool = typer.Option(False, "--json", help="Print summary.json to stdout instead of tables."),
+    quiet: bool = QuietOpt,
 ) -> None:
     """Reproduce Sections V-VI of the paper on simulated supervisors and write a report."""
     from ..report import write_report
@@ -236,6 +270,7 @@ def reproduce(
     problems = cfg.problems()
     if problems:
         raise TrustseekError(problems)
+    check_output(out, "--out", directory=True)
     t0 = time.perf_counter()
     with Progress(
         TextColumn("[bold]{task.description:<44}"),
@@ -243,8 +278,8 @@ def reproduce(
         TextColumn("{task.percentage:>3.0f}%"),
         TimeElapsedColumn(),
         console=err_console,
-        transient=as_json,
-        disable=False,
+        transient=True,
+        disable=quiet or as_json or not err_console.is_terminal,
     ) as bar:
         task = bar.add_task("experiment 1", total=1000)
 
@@ -253,7 +288,8 @@ def reproduce(
 
         rep = run_reproduce(cfg, progress=progress)
         bar.update(task, description="report", completed=990)
-        paths = write_report(rep, out)
+        with atomic_output(out, directory=True) as tmp:
+            paths = {k: out / Path(v).relative_to(tmp) for k, v in write_report(rep, tmp).items()}
         bar.update(task, description="done", completed=1000)
     if as_json:
         print_json(rep.summary)

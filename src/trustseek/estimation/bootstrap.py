@@ -153,14 +153,14 @@ def bootstrap(
     tol: float = 1e-8,
     max_iter: int = 1000,
     level: float = LEVEL,
-    progress: Callable[[], None] | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
     weights: Mapping[str, np.ndarray] | None = None,
 ) -> Intervals:
     """Intervals at ``level`` for every TrustModel cell of the fit ``params``, over ``replicates`` resamples.
 
     ``weights`` are passed to :func:`align` (the fit's expected events behind each row
     are a good choice).  Replicates run over ``n_jobs`` processes (default: all cores);
-    ``progress()`` is called as each one finishes.  Fewer than :data:`MIN_REPLICATES`
+    ``progress("bootstrap", done, replicates)`` is called as each one finishes.  Fewer than :data:`MIN_REPLICATES`
     resamples for a 95 % interval are allowed (tests, quick looks) but logged
     and named in :meth:`Intervals.notes`.
     """
@@ -180,7 +180,7 @@ def bootstrap(
         results[i] = res
         log.debug("bootstrap replicate %d done (%d of %d)", i, len(results), replicates)
         if progress is not None:
-            progress()
+            progress("bootstrap", len(results), replicates)
 
     log.info(
         "bootstrap: %d replicates of %d participants over %d processes", replicates, seqs.n_participants, min(n_jobs, replicates)

@@ -263,7 +263,7 @@ def fit_sequences(
             n_jobs=n_jobs,
             tol=tol,
             max_iter=max_iter,
-            progress=tick,
+            progress=lambda label, d, t: tick(),
             weights=events,  # levels of a replicate are matched on the rows the data determine
         )
         result.ci = bootstrap_intervals.intervals

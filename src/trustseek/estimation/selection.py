@@ -29,13 +29,14 @@ def select_levels(
     prior: float = 0.0,
     tol: float = 1e-6,
     max_iter: int = 1000,
-    progress: Callable[[int, int], None] | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
     **spec_options: Any,
 ) -> list[dict[str, Any]]:
     """Compare numbers of trust levels: BIC on all data and k-fold participant-held-out log-likelihood.
 
     ``spec_options`` adjust the ``paper`` preset (as for :func:`~.fit.fit_trust_model`);
-    ``progress(done, total)`` is called after every fit.
+    ``progress(label, done, total)`` is called after every fit (``label`` names the number
+    of levels being compared).
     """
     base = preset_spec("paper", frame, prior=prior, **spec_options)
     seqs = encode(frame, base)
@@ -47,17 +48,17 @@ def select_levels(
     total = len(levels) * (folds + 1)
     done = 0
 
-    def tick() -> None:
+    def tick(label: str) -> None:
         nonlocal done
         done += 1
         if progress:
-            progress(done, total)
+            progress(label, done, total)
 
     rows: list[dict[str, Any]] = []
     for K in levels:
         spec = base.with_levels(level_names(K))
         full = fit_iohmm(seqs, spec, restarts=restarts, seed=np.random.SeedSequence([seed, 3, K]), tol=tol, max_iter=max_iter)
-        tick()
+        tick(f"{K} levels")
         per_fold = []
         for f in range(folds):
             train, test = np.flatnonzero(fold_of != f), np.flatnonzero(fold_of == f)
@@ -70,7 +71,7 @@ def select_levels(
                 max_iter=max_iter,
             )
             per_fold.append(heldout_loglik(seqs.subset(test), fit))
-            tick()
+            tick(f"{K} levels")
         held = float(sum(per_fold))
         log.info("%d levels: log-likelihood %.4f, BIC %.2f, held-out log-likelihood %.4f", K, full.loglik, full.bic, held)
         rows.append(

@@ -247,11 +247,19 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
     label = str(source)
     if text is None:
         try:
-            text = Path(source).read_text(encoding="utf-8")
+            content = Path(source).read_bytes()
         except FileNotFoundError:
             raise PomdpFileError(["file not found"], label) from None
+        except IsADirectoryError:
+            raise PomdpFileError(["is a directory, expected a .pomdp file"], label) from None
         except OSError as exc:
-            raise PomdpFileError([f"cannot read file: {exc.strerror}"], label) from None
+            raise PomdpFileError([f"cannot read file: {exc.strerror or exc}"], label) from None
+        if b"\x00" in content:
+            raise PomdpFileError(["is a binary file, expected .pomdp text"], label)
+        try:
+            text = content.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise PomdpFileError([f"is not UTF-8 text (byte {exc.start})"], label) from None
     # group the lines into entries: an entry starts with a keyword followed by ':'
     groups: list[tuple[int, str, str]] = []  # (line, keyword, rest)
     key_re = re.compile(r"^\s*(discount|values|states|actions|observations|start\s+include|start\s+exclude|start|T|O|R)\s*:(.*)$")

@@ -145,6 +145,8 @@ def _get(obj: Any, key: str, label: str, problems: list[str]) -> Any:
     if key not in obj:
         problems.append(f"{label} is missing")
         return None
+    if obj[key] is None:
+        problems.append(f"{label} is null")
     return obj[key]
 
 
@@ -214,18 +216,55 @@ def _check_row_array(arr: np.ndarray, label_of, problems: list[str]) -> None:
             problems.append(f"{label_of(idx)} sums to {_fmt(float(row.sum()))}")
 
 
-def load_json(path: str | Path) -> tuple[Any, str]:
+def _reject_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a valid JSON number (use a finite number or null where allowed)")
+
+
+def load_json(path: str | Path, expect: type | None = dict) -> tuple[Any, str]:
+    """The parsed JSON of the file at ``path`` and the file's name (for error messages).
+
+    Every way a file can fail to be JSON is a :class:`ModelError` naming the file: missing,
+    a directory, unreadable, not UTF-8 text (binary or another encoding), invalid JSON (with
+    line and column), the non-standard ``NaN``/``Infinity`` literals, and (with ``expect``,
+    an object by default) the wrong top-level type.
+    """
     path = Path(path)
+    source = str(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        raw = path.read_bytes()
     except FileNotFoundError:
-        raise ModelError(["file not found"], str(path)) from None
+        raise ModelError(["file not found"], source) from None
+    except IsADirectoryError:
+        raise ModelError(["is a directory, expected a JSON file"], source) from None
     except OSError as exc:
-        raise ModelError([f"cannot read file: {exc.strerror}"], str(path)) from None
+        raise ModelError([f"cannot read file: {exc.strerror or exc}"], source) from None
+    if b"\x00" in raw:
+        raise ModelError(["is a binary file, expected JSON text"], source)
     try:
-        return json.loads(text), str(path)
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ModelError([f"is not UTF-8 text (byte {exc.start}): save it as UTF-8 JSON"], source) from None
+    if not text.strip():
+        raise ModelError(["is empty, expected JSON"], source)
+    try:
+        data = json.loads(text, parse_constant=_reject_constant)
     except json.JSONDecodeError as exc:
-        raise ModelError([f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"], str(path)) from None
+        raise ModelError([f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"], source) from None
+    except ValueError as exc:  # NaN / Infinity
+        raise ModelError([f"invalid JSON: {exc}"], source) from None
+    except RecursionError:
+        raise ModelError(["invalid JSON: nested too deeply"], source) from None
+    if expect is not None and not isinstance(data, expect):
+        kind = "an object" if expect is dict else expect.__name__
+        raise ModelError([f"the top level must be {kind} ({{...}}), got {type(data).__name__}"], source)
+    return data, source
+
+
+def _paper_value(key: str) -> str:
+    """The default of a Task field, as the error for a task file that lacks it shows it."""
+    if key == "rewards":
+        return json.dumps(Rewards().to_dict())
+    return _fmt(Task.discount)
 
 
 # --------------------------------------------------------------------------- TrustModel
@@ -359,7 +398,10 @@ class TrustModel:
             problems.append(f"notes must be a string, got {notes!r}")
         if problems:
             raise ModelError(problems, source)
-        return cls(tuple(T), tuple(C), initial, emission, transition, notes=notes)
+        try:
+            return cls(tuple(T), tuple(C), initial, emission, transition, notes=notes)
+        except ModelError as exc:
+            raise ModelError(exc.problems, source) from None
 
     def save(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
@@ -574,10 +616,19 @@ class Task:
                     problems.append(f"complexity probabilities sum to {_fmt(sum(probs))}")
         rw = d.get("rewards", {})
         rewards = Rewards()
+        for key in ("rewards", "discount"):
+            if key not in d:
+                problems.append(
+                    f"{key} is missing (the paper's task has {key} = {_paper_value(key)}; 'trustseek preset "
+                    "--task-out task.json' writes a complete task to start from)"
+                )
         if not isinstance(rw, Mapping):
             problems.append(f"rewards must be an object, got {rw!r}")
         else:
             _unknown_keys(rw, Rewards().to_dict().keys(), "rewards", problems)
+            for k in Rewards().to_dict():
+                if "rewards" in d and k not in rw:
+                    problems.append(f"rewards[{k}] is missing")
             vals = {}
             for k, v in rw.items():
                 if k in Rewards().to_dict():
@@ -586,12 +637,15 @@ class Task:
                     else:
                         vals[k] = float(v)
             rewards = Rewards(**vals)
-        disc = d.get("discount", 0.987)
+        disc = d.get("discount", Task.discount)
         if isinstance(disc, bool) or not isinstance(disc, (int, float)) or not (0.0 <= float(disc) < 1.0):
             problems.append(f"discount = {disc!r} must be a number in [0, 1)")
         if problems:
             raise ModelError(problems, source)
-        return cls(tuple(names), np.array(probs), np.array(succ), tuple(askx), rewards, float(disc))
+        try:
+            return cls(tuple(names), np.array(probs), np.array(succ), tuple(askx), rewards, float(disc))
+        except ModelError as exc:
+            raise ModelError(exc.problems, source) from None
 
     def save(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")

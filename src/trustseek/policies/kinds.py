@@ -10,6 +10,8 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ..model.core import ModelError, load_json
 from .alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy
 from .base import POLICY_FORMAT, Policy
@@ -43,7 +45,38 @@ def policy_from_dict(d: Any, source: str | None = None) -> Policy:
     loader = POLICY_KINDS.get(kind) if isinstance(kind, str) else None
     if loader is None:
         raise ModelError([f"unknown policy kind {kind!r}; expected one of {list(POLICY_KINDS)}"], source)
-    return loader(d, source)
+    policy = loader(d, source)
+    bad = _non_finite(policy)
+    if bad:
+        raise ModelError(
+            [f"{name} has {n} null, NaN or infinite value(s); a policy needs finite numbers" for name, n in bad], source
+        )
+    return policy
+
+
+#: the numeric tables of the policy classes (attribute name -> name in the file)
+_TABLES = {"q": "q", "q_vectors": "q_vectors", "value_vectors": "value_vectors"}
+
+
+def _non_finite(policy: Policy) -> list[tuple[str, int]]:
+    """The numeric tables of ``policy`` that hold non-finite numbers (a null in the file reads
+    as NaN), with how many."""
+    out = []
+    for attr, name in _TABLES.items():
+        value = getattr(policy, attr, None)
+        if value is None:
+            continue
+        arrays = [np.asarray(a, dtype=float) for a in _leaves(value)]
+        n = sum(int(np.size(a) - np.count_nonzero(np.isfinite(a))) for a in arrays)
+        if n:
+            out.append((name, n))
+    return out
+
+
+def _leaves(value: Any) -> list[Any]:
+    if isinstance(value, (list, tuple)):
+        return [leaf for v in value for leaf in _leaves(v)]
+    return [value]
 
 
 def load_policy(path: str | Path) -> Policy:

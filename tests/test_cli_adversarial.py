@@ -1,0 +1,306 @@
+"""The CLI under corrupted input files and bad output paths, run in-process.
+
+Every command that reads a model, task, policy, mapping or .pomdp file is given a file
+corrupted in one way (random bytes, another encoding, truncated JSON, NaN/Infinity/null,
+out-of-range numbers, wrong types, a missing key, a folder); every command that writes
+is given an output path in a missing folder or that is a folder.  Each run must end with
+exit code 2, no traceback, a message naming the file, and no file left behind.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import random
+import sys
+import tempfile
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from trustseek.cli import main
+from trustseek.data.trials import example_path
+from trustseek.model.presets import paper_model, paper_task
+from trustseek.pomdp.problem import AssistancePOMDP
+from trustseek.solvers import make_solver
+
+LOG = str(example_path("paper_trials.csv"))
+
+VALID = {
+    "model": paper_model().to_dict(),
+    "task": paper_task().to_dict(),
+    "policy": make_solver("grid", grid=51).solve(AssistancePOMDP(paper_model(), paper_task())).to_dict(),
+    "mapping": {"columns": {"participant": "participant"}},
+}
+
+#: command lines reading a file of each kind; {f} is the corrupted file, {o} a fresh output path
+READERS = {
+    "model": [
+        ["check", "{f}"],
+        ["solve", "-m", "{f}", "--grid", "11", "-o", "{o}.json"],
+        ["simulate", "-m", "{f}", "-n", "1", "-o", "{o}.csv"],
+        ["decode", LOG, "--model", "{f}", "-o", "{o}.csv"],
+        ["export-pomdp", "{o}.pomdp", "-m", "{f}"],
+    ],
+    "task": [
+        ["check", "{f}"],
+        ["solve", "-t", "{f}", "--grid", "11", "-o", "{o}.json"],
+        ["agnostic", "-t", "{f}", "-o", "{o}.json"],
+        ["simulate", "-t", "{f}", "-n", "1", "--summary-out", "{o}.csv"],
+    ],
+    "policy": [
+        ["check", "{f}"],
+        ["simulate", "--policy", "{f}", "-n", "1", "-o", "{o}.csv"],
+        ["plot-q", "--policy", "{f}", "-o", "{o}.png"],
+    ],
+    "mapping": [
+        ["fit", LOG, "--mapping", "{f}", "-r", "1", "-o", "{o}.json"],
+        ["decode", LOG, "--model", "{model}", "--mapping", "{f}", "-o", "{o}.csv"],
+        ["agnostic", "--data", LOG, "--mapping", "{f}", "-o", "{o}.json"],
+    ],
+}
+
+#: command lines writing to {o}, which is made a bad path
+WRITERS = [
+    ["fit", LOG, "-r", "1", "--max-iter", "2", "-o", "{o}"],
+    ["fit", LOG, "-r", "1", "--max-iter", "2", "--posteriors", "{o}"],
+    ["decode", LOG, "--model", "{model}", "-o", "{o}"],
+    ["solve", "--grid", "11", "-o", "{o}"],
+    ["agnostic", "-o", "{o}"],
+    ["simulate", "-n", "1", "--grid", "11", "-o", "{o}"],
+    ["simulate", "-n", "1", "--grid", "11", "--summary-out", "{o}"],
+    ["plot-q", "--grid", "11", "-o", "{o}"],
+    ["preset", "--model-out", "{o}"],
+    ["preset", "--task-out", "{o}"],
+    ["export-pomdp", "{o}"],
+    ["reproduce", "--out", "{o}"],
+]
+
+
+def run_cli(args: list[str]) -> tuple[int, str]:
+    """Run the CLI in this process: exit code and everything it printed."""
+    out, err = io.StringIO(), io.StringIO()
+    argv = sys.argv
+    sys.argv = ["trustseek", *args]
+    code: int | str | None = 0
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            main()
+    except SystemExit as exc:
+        code = exc.code
+    finally:
+        sys.argv = argv
+    return (code if isinstance(code, int) else 1), out.getvalue() + err.getvalue()
+
+
+def _leaves(obj, path=()):
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            yield from _leaves(v, (*path, k))
+    elif isinstance(obj, list):
+        for i, v in enumerate(obj):
+            yield from _leaves(v, (*path, i))
+    elif isinstance(obj, (int, float)) and not isinstance(obj, bool):
+        yield path
+
+
+def _set(obj, path, value):
+    obj = json.loads(json.dumps(obj))
+    node = obj
+    for k in path[:-1]:
+        node = node[k]
+    node[path[-1]] = value
+    return obj
+
+
+#: numeric leaves whose corruption the loaders must refuse: every number of a model; the
+#: probabilities and discount of a task; the Q values and model of a policy
+def _checked_leaves(kind: str) -> list[tuple]:
+    leaves = list(_leaves(VALID[kind]))
+    if kind == "task":
+        return [p for p in leaves if p[0] in ("complexities", "discount")]
+    if kind == "policy":
+        return [p for p in leaves if p[0] in ("q", "model")]
+    return leaves
+
+
+SENTINEL = "__BAD__"
+BAD_VALUES = {"NaN": "NaN", "Infinity": "Infinity", "-Infinity": "-Infinity", "null": "null", "text": '"x"', "list": "[]"}
+REQUIRED_KEY = {"model": "emission", "task": "discount", "policy": "q"}
+
+
+@st.composite
+def corrupted(draw, kind: str) -> tuple[str, bytes | None]:
+    """(how, content) of a corrupted file of ``kind``; content None means a folder."""
+    text = json.dumps(VALID[kind], indent=2)
+    options = ["bytes", "latin-1", "utf-16", "truncated", "top-level", "folder", "empty"]
+    if kind != "mapping":
+        options += ["value", "missing-key"]
+        if kind == "model":
+            options.append("out-of-range")
+    how = draw(st.sampled_from(options))
+    if how == "bytes":
+        return how, b"\xff\x00" + draw(st.binary(max_size=64))
+    if how == "latin-1":
+        return how, text.replace('"', '"\u00e9', 1).encode("latin-1")
+    if how == "utf-16":
+        return how, text.encode("utf-16")
+    if how == "truncated":
+        return how, text[: draw(st.integers(0, text.rindex("}") - 1))].encode()
+    if how == "top-level":
+        return how, draw(st.sampled_from(["[]", "1", '"model"', "null", "[{}]"])).encode()
+    if how == "folder":
+        return how, None
+    if how == "empty":
+        return how, draw(st.sampled_from([b"", b"  \n"]))
+    if how == "missing-key":
+        d = dict(VALID[kind])
+        del d[REQUIRED_KEY[kind]]
+        return how, json.dumps(d).encode()
+    leaf = draw(st.sampled_from(_checked_leaves(kind)))
+    if how == "out-of-range":
+        value = draw(st.sampled_from([1.5, -0.25, 1e308]))
+        return how, json.dumps(_set(VALID[kind], leaf, value)).encode()
+    bad = draw(st.sampled_from(sorted(BAD_VALUES)))
+    return how, json.dumps(_set(VALID[kind], leaf, SENTINEL)).replace(f'"{SENTINEL}"', BAD_VALUES[bad]).encode()
+
+
+def _listing(folder: Path) -> set[str]:
+    return {str(p.relative_to(folder)) for p in folder.rglob("*")}
+
+
+def _assert_clean_refusal(code: int, output: str, name: str, before: set[str], folder: Path, args: list[str]) -> None:
+    assert code == 2, f"{args}: exit {code}\n{output}"
+    assert "Traceback" not in output, f"{args}:\n{output}"
+    assert name in output, f"{args}: the message does not name {name}:\n{output}"
+    assert _listing(folder) == before, f"{args}: left {sorted(_listing(folder) - before)}"
+
+
+CASES = [(kind, i) for kind, lines in READERS.items() for i in range(len(lines))]
+
+
+@pytest.mark.parametrize(("kind", "index"), CASES, ids=[f"{k}-{' '.join(READERS[k][i][:1])}-{i}" for k, i in CASES])
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True)
+@given(data=st.data())
+def test_a_corrupted_input_file_is_refused_cleanly(kind, index, data):
+    _how, content = data.draw(corrupted(kind), label="corruption")
+    with tempfile.TemporaryDirectory() as d:
+        folder = Path(d)
+        f = folder / f"input-{kind}.json"
+        if content is None:
+            f.mkdir()
+        else:
+            f.write_bytes(content)
+        model = folder / "model.json"
+        model.write_text(json.dumps(VALID["model"]))
+        before = _listing(folder)
+        args = [a.format(f=f, o=folder / "out", model=model) for a in READERS[kind][index]]
+        code, output = run_cli(args)
+        _assert_clean_refusal(code, output, f.name, before, folder, args)
+
+
+SUFFIX = {"fit": ".json", "decode": ".csv", "solve": ".json", "agnostic": ".json", "simulate": ".csv"}
+SUFFIX.update({"plot-q": ".png", "preset": ".json", "export-pomdp": ".pomdp", "reproduce": ""})
+
+
+@pytest.mark.parametrize("index", range(len(WRITERS)), ids=[" ".join(w[:1] + w[-2:-1]) for w in WRITERS])
+@settings(max_examples=4, deadline=None, derandomize=True)
+@given(bad=st.sampled_from(["missing-folder", "folder", "nested-missing"]), name=st.sampled_from(["out", "résultat", "a b"]))
+def test_a_bad_output_path_is_refused_before_any_work(index, bad, name):
+    args = WRITERS[index]
+    with tempfile.TemporaryDirectory() as d:
+        folder = Path(d)
+        model = folder / "model.json"
+        model.write_text(json.dumps(VALID["model"]))
+        suffix = ".csv" if "--posteriors" in args or "--summary-out" in args else SUFFIX[args[0]]
+        if bad == "folder":
+            target = folder / f"{name}{suffix}"
+            target.mkdir()
+            (target / "keep").write_text("x")  # a non-empty folder, for reproduce
+        elif bad == "missing-folder":
+            target = folder / "missing" / f"{name}{suffix}"
+        else:
+            target = folder / "a" / "b" / f"{name}{suffix}"
+        before = _listing(folder)
+        line = [a.format(o=target, model=model) for a in args]
+        code, output = run_cli(line)
+        _assert_clean_refusal(code, output, target.name if bad == "folder" else target.parent.name, before, folder, line)
+
+
+def test_the_corruptions_are_invalid_for_the_loaders():
+    """The generator's corruptions are refused by the library too (a check of the test itself:
+    a corruption that left a valid file would make the CLI test fail for the wrong reason)."""
+    from trustseek.errors import TrustseekError
+    from trustseek.model.core import Task, TrustModel
+    from trustseek.policies import load_policy
+
+    loaders = {"model": TrustModel.load, "task": Task.load, "policy": load_policy}
+    rng = random.Random(0)
+    with tempfile.TemporaryDirectory() as d:
+        for kind, load in loaders.items():
+            f = Path(d) / f"{kind}.json"
+            f.write_text(json.dumps(VALID[kind]))
+            load(f)  # the valid file loads
+            for leaf in rng.sample(_checked_leaves(kind), 5):
+                f.write_text(json.dumps(_set(VALID[kind], leaf, None)))
+                with pytest.raises(TrustseekError):
+                    load(f)
+
+
+@pytest.mark.parametrize(
+    "args",
+    [["solve", "--tol", "nan"], ["solve", "--tol", "-1"], ["select", LOG, "--tol", "0"]],
+    ids=["nan", "negative", "zero"],
+)
+def test_a_tolerance_must_be_finite_and_positive(args):
+    code, output = run_cli(args)
+    assert code == 2 and "--tol" in output and "Traceback" not in output
+
+
+def test_options_a_policy_file_would_ignore_are_refused(tmp_path):
+    pol = tmp_path / "policy.json"
+    pol.write_text(json.dumps(VALID["policy"]))
+    for extra in (["-u", "paper"], ["--policy-model", "paper"]):
+        code, output = run_cli(["simulate", "-n", "1", "--policy", str(pol), *extra])
+        assert code == 2 and extra[0] in output and "policy.json" in output
+    assert run_cli(["simulate", "-n", "1", "--policy", str(pol)])[0] == 0
+
+
+def test_a_task_without_rewards_or_discount_is_refused(tmp_path):
+    for key in ("rewards", "discount"):
+        d = dict(VALID["task"])
+        del d[key]
+        f = tmp_path / f"no-{key}.json"
+        f.write_text(json.dumps(d))
+        code, output = run_cli(["check", str(f)])
+        assert code == 2 and f"{key} is missing" in output and f.name in output
+
+
+def test_export_refuses_a_missing_sqlite_file(tmp_path):
+    db = tmp_path / "mistyped.sqlite"
+    code, output = run_cli(["export", "s1", "--db", f"sqlite:///{db}", "-o", str(tmp_path / "t.csv")])
+    assert code == 2 and "does not exist" in output
+    assert not db.exists()
+
+
+def test_solve_pomdp_file_exits_3_above_its_target_gap(tmp_path):
+    f = tmp_path / "assist.pomdp"
+    assert run_cli(["export-pomdp", str(f)])[0] == 0
+    code, output = run_cli(["solve-pomdp-file", str(f), "--gap", "1e-12", "--max-seconds", "0.05"])
+    assert code == 3 and "above the target" in output
+
+
+def test_decode_needs_only_the_columns_the_model_uses(tmp_path):
+    import pandas as pd
+
+    log = tmp_path / "log.csv"
+    pd.read_csv(LOG).drop(columns=["complexity", "robot_action"]).to_csv(log, index=False)
+    model = tmp_path / "m.json"
+    fit = ["fit", str(log), "--transitions-on", "experience", "--emissions-on", "none", "-r", "1", "-o", str(model)]
+    assert run_cli(fit)[0] == 0
+    code, output = run_cli(["decode", str(log), "-m", str(model), "-o", str(tmp_path / "p.csv")])
+    assert code == 0, output
+    assert len(pd.read_csv(tmp_path / "p.csv")) == len(pd.read_csv(log))
