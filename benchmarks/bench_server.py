@@ -151,6 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--baseline-think-ms", type=float, default=50.0, help="think time of the paced single-session baseline")
     ap.add_argument("--policy", default="trust-aware", choices=["trust-aware", "trust-agnostic", "randomized"])
     ap.add_argument("--db", default=None, help="database URL (default: a SQLite file in a temporary directory)")
+    ap.add_argument("--workers", type=int, default=1, help="server processes (trustseek serve --workers)")
     ap.add_argument("--postgres", action="store_true", help="run on a throwaway PostgreSQL cluster (Debian's postgresql package)")
     args = ap.parse_args(argv)
     try:
@@ -164,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as d, contextlib.ExitStack() as stack:
         url = stack.enter_context(TemporaryPostgres()) if args.postgres else args.db or f"sqlite:///{Path(d) / 'bench.sqlite'}"
         port = free_port()
-        proc = serve_process(url, TOKEN, port)
+        proc = serve_process(url, TOKEN, port, workers=args.workers)
         try:
             asyncio.run(load(port, 1, 5, 0.0, policy, first_seed=10**6))  # warm-up: imports, caches, connections
             base_lat, base_srv, _, _ = asyncio.run(load(port, 1, args.baseline_trials, 0.0, policy, first_seed=10**6 + 1))
@@ -187,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
     stored = sum(len(v) for v in per_session.values())
     backend = url.split(":", 1)[0].split("+")[0]
     print(
-        f"server decision API: {args.sessions} concurrent sessions x {args.trials} trials ({args.policy} policy, think time ~{args.think_ms:g} ms), {backend}, loopback"
+        f"server decision API: {args.sessions} concurrent sessions x {args.trials} trials ({args.policy} policy, think time ~{args.think_ms:g} ms), {backend}, {args.workers} server process(es), loopback"
     )
     rows_out = [
         ("1 session, back to back", base_lat, base_srv),

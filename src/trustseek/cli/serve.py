@@ -59,6 +59,14 @@ def serve(
     public_url: str | None = typer.Option(
         None, "--public-url", help="Base URL used in participant links (default: the request's)."
     ),
+    workers: int = typer.Option(
+        1,
+        "--workers",
+        min=1,
+        max=64,
+        help="Server processes sharing the port (e.g. the number of cores, for many robots at once); "
+        "they share the database, so sessions stay consistent.",
+    ),
     log_level: str = typer.Option(
         "warning",
         "--log-level",
@@ -79,7 +87,7 @@ def serve(
         raise TrustseekError(["--token must be at least 8 characters"])
     token = token or secrets.token_urlsafe(24)
     log_to_stderr(log_level)
-    application = create_app(db, token=token, public_url=public_url)
+    application = create_app(db, token=token, public_url=public_url)  # migrates the schema, once
     try:
         loopback = ipaddress.ip_address(host).is_loopback
     except ValueError:
@@ -96,7 +104,23 @@ def serve(
     # out of the garbage collector's full passes, which would otherwise pause requests
     gc.collect()
     gc.freeze()
-    uvicorn.run(application, host=host, port=port, log_level=log_level, access_log=False)
+    if workers == 1:
+        uvicorn.run(application, host=host, port=port, log_level=log_level, access_log=False)
+        return
+    # each worker builds its own app from the environment (the token never appears in argv)
+    from ..server.app import ENV_DB, ENV_PUBLIC_URL, ENV_TOKEN
+
+    os.environ.update({ENV_DB: db, ENV_TOKEN: token, ENV_PUBLIC_URL: public_url or ""})
+    console.print(f"  workers:     {workers} processes")
+    uvicorn.run(
+        "trustseek.server.app:from_environment",
+        factory=True,
+        workers=workers,
+        host=host,
+        port=port,
+        log_level=log_level,
+        access_log=False,
+    )
 
 
 def log_to_stderr(level: str) -> None:

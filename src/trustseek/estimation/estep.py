@@ -76,10 +76,11 @@ class Workspace:
 
     ``method``: ``numba`` (compiled), ``loop`` or ``scan`` (numpy), or ``auto``: compiled
     when numba is installed, and for posteriors (or without numba) the scan when the
-    sequences are few and long, else the loop.
+    sequences are few and long, else the loop.  ``threads``: how many threads a compiled
+    E-step may use (the result does not depend on it).
     """
 
-    def __init__(self, seqs: Sequences, K: int, M: int, Ue: int, Ut: int, method: str = "auto"):
+    def __init__(self, seqs: Sequences, K: int, M: int, Ue: int, Ut: int, method: str = "auto", threads: int = 1):
         if method not in METHODS:
             raise FitError([f"method must be one of {list(METHODS)}, got {method!r}"])
         if method == "numba" and not kernels.AVAILABLE:
@@ -94,7 +95,7 @@ class Workspace:
         self.compiled = method == "numba" or (method == "auto" and kernels.AVAILABLE)
         self.scan = method == "scan" or (method in ("auto", "numba") and self.T > 1 and self.T >= SCAN_RATIO * self.N)
         self._eye = np.eye(K)
-        self._kernel = kernels.Kernel(self.eidx, self.tidx, seqs.lengths, K, self.PE, Ut + 1) if self.compiled else None
+        self._kernel = kernels.Kernel(self.eidx, self.tidx, seqs.lengths, K, self.PE, Ut + 1, threads) if self.compiled else None
         self._numpy: dict[int, _NumpyEStep] = {}
 
     def lockstep(self, n: int) -> int:

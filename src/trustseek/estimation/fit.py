@@ -239,6 +239,7 @@ def fit_sequences(
         max_iter=max_iter,
         init=init,
         on_restart=lambda i, r: tick(),
+        n_jobs=n_jobs,
     )
     model = to_trust_model(
         spec,
@@ -292,8 +293,8 @@ def fit_trust_model(
     ``bootstrap`` > 0, participants are resampled that many times and a 95 % interval is
     reported for every cell (:mod:`.bootstrap`: percentile, replicate levels aligned to
     the estimate, widened to contain it; at least 200 resamples are advised, fewer add
-    a warning), computed over ``n_jobs`` processes (default: all cores); results do not
-    depend on ``n_jobs``.  ``progress(done, total)``
+    a warning), computed over ``n_jobs`` processes (default: all cores); the fit itself
+    shares its E-steps over ``n_jobs`` threads.  Results do not depend on ``n_jobs``.  ``progress(done, total)``
     is called after every restart and bootstrap replicate.
     """
     spec = preset_spec(preset, frame, prior=prior, **spec_options)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -95,6 +96,7 @@ def fit_iohmm(
     init: Sequence[Params] = (),
     on_restart: Callable[[int, RunResult], None] | None = None,
     quasi_newton: bool = True,
+    n_jobs: int | None = 1,
 ) -> IOHMMFit:
     """Fit ``spec`` to ``seqs``: the runs from ``init`` and ``restarts`` random starts; the best is kept.
 
@@ -105,9 +107,11 @@ def fit_iohmm(
     one more EM step gains at most ``tol`` (relative); until then it goes on
     (:func:`~.convergence.converge`).  ``max_iter`` caps the E-steps of a run.  Each
     run's outcome is logged (``trustseek.estimation``, debug) and passed to ``on_restart``.
+    ``n_jobs`` threads (None: all cores) share each E-step's work, over the starts and the
+    participants, when there is enough of it; the result does not depend on ``n_jobs``.
     """
     structure = Structure(spec, seqs)
-    work = Workspace(seqs, *structure.dims)
+    work = Workspace(seqs, *structure.dims, threads=n_jobs or os.cpu_count() or 1)
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     starts = [structure.project(p) for p in init]
     starts += [structure.random(np.random.default_rng(s)) for s in ss.spawn(restarts)]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import secrets
 from pathlib import Path
 from typing import Any
@@ -41,6 +42,20 @@ async def validation_error(request: Request, exc: Exception) -> JSONResponse:
     is echoed as the string ``"NaN"`` (FastAPI's own answer would fail to serialise, a 500)."""
     errors = exc.errors() if isinstance(exc, RequestValidationError) else []
     return JSONResponse(status_code=422, content={"detail": json_safe(jsonable_encoder(errors))})
+
+
+#: the environment variables :func:`from_environment` reads (``trustseek serve --workers N`` sets them)
+ENV_DB, ENV_TOKEN, ENV_PUBLIC_URL = "TRUSTSEEK_DB", "TRUSTSEEK_TOKEN", "TRUSTSEEK_PUBLIC_URL"
+
+
+def from_environment() -> FastAPI:
+    """The server configured by the environment: ``$TRUSTSEEK_DB`` (the database URL),
+    ``$TRUSTSEEK_TOKEN`` (the experimenter token) and ``$TRUSTSEEK_PUBLIC_URL``.  This is the
+    application factory each worker process of ``trustseek serve --workers N`` builds."""
+    token = os.environ.get(ENV_TOKEN)
+    if not token:
+        raise RuntimeError(f"${ENV_TOKEN} is not set")
+    return create_app(os.environ.get(ENV_DB, DEFAULT_URL), token=token, public_url=os.environ.get(ENV_PUBLIC_URL) or None)
 
 
 def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: str | None = None) -> FastAPI:

@@ -72,8 +72,9 @@ class ThreadServer:
         self.thread.join(timeout=10)
 
 
-def serve_process(db_url: str, token: str, port: int, log: Path | None = None) -> subprocess.Popen:
-    """Start ``trustseek serve`` as a child process on 127.0.0.1:port and wait until it answers."""
+def serve_process(db_url: str, token: str, port: int, log: Path | None = None, workers: int = 1) -> subprocess.Popen:
+    """Start ``trustseek serve`` (``workers`` processes) as a child process on 127.0.0.1:port and
+    wait until it answers.  The token goes through the environment, not the command line."""
     cmd = [
         sys.executable,
         "-c",
@@ -85,10 +86,10 @@ def serve_process(db_url: str, token: str, port: int, log: Path | None = None) -
         "127.0.0.1",
         "--port",
         str(port),
-        "--token",
-        token,
+        "--workers",
+        str(workers),
     ]
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    env = {**os.environ, "PYTHONUNBUFFERED": "1", "TRUSTSEEK_TOKEN": token}
     # the child keeps its own descriptors: this process closes its copies once the server answers
     with contextlib.ExitStack() as files:
         out = files.enter_context(open(log, "ab")) if log is not None else subprocess.DEVNULL
