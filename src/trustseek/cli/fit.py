@@ -129,7 +129,13 @@ def fit(
         1e-8, "--tol", callback=check_tol, help="Stop when the relative change of the log-likelihood is below this (> 0)."
     ),
     max_iter: int = typer.Option(1000, "--max-iter", min=1, help="Iteration cap per restart (E-steps)."),
-    jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Processes for the bootstrap (default: all cores)."),
+    jobs: int | None = typer.Option(
+        None,
+        "--jobs",
+        "-j",
+        min=1,
+        help="Threads for the fit and processes for the bootstrap (default: all cores); numbers do not depend on it.",
+    ),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the fitted trust model (JSON, same format as the presets)."),
     posteriors: Path | None = typer.Option(
         None, "--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet)."
