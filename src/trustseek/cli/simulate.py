@@ -202,7 +202,7 @@ def reproduce(
     large_n: int = typer.Option(
         10_000, "--large-n", min=1, help="Participants of the large experiment 2 and of the cost studies."
     ),
-    bootstrap: int = typer.Option(20, "--bootstrap", "-b", min=0, help="Bootstrap resamples for the fitted model's intervals."),
+    bootstrap: int = typer.Option(200, "--bootstrap", "-b", min=0, help="Bootstrap resamples for the fitted model's intervals."),
     restarts: int = typer.Option(10, "--restarts", min=1, help="EM restarts of the main fit."),
     replicate_restarts: int = typer.Option(4, "--replicate-restarts", min=1, help="EM restarts per replicate fit."),
     replicate_large_n: int = typer.Option(
@@ -301,5 +301,6 @@ def print_comparison(summary: dict) -> None:
     out = console if console.is_terminal else Console(width=max(console.width, 150))
     out.print(table)
     out.print(
-        f"[dim]intervals: 2.5-97.5% over {summary['replicates']['n']} replicate experiments unless the note says otherwise[/]"
+        f"[dim]intervals: bootstrap 95% for trust-model cells, else min–max of {summary['replicates']['n']} replicate "
+        "experiments (not a 95% interval); the report states how rows are judged[/]"
     )
