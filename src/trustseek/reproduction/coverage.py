@@ -35,21 +35,21 @@ def coverage_study(
     hits: dict[str, list[float]] = {}
     widths: dict[str, list[float]] = {}
     ests: dict[str, list[float]] = {}
-    truth: dict[str, float] = {}
+    truths: dict[str, float] = {}
     for d in range(datasets):
         df = simulate_design(model, n_participants, seed=int(np.random.SeedSequence([seed, 5, d]).generate_state(1)[0]))
         res = fit_trust_model(df, restarts=restarts, seed=seed + d, bootstrap=bootstrap, n_jobs=n_jobs, tol=tol)
         for c in res.cells():
             key = c["cell"]
             t = float(getattr(target, c["table"])[tuple(c["index"])])
-            truth[key] = t
+            truths[key] = t
             hits.setdefault(key, []).append(float(c["lower"] - 1e-9 <= t <= c["upper"] + 1e-9))
             widths.setdefault(key, []).append(c["upper"] - c["lower"])
             ests.setdefault(key, []).append(c["estimate"])
     return [
         {
             "cell": k,
-            "truth": truth[k],
+            "truth": truths[k],
             "coverage": float(np.mean(v)),
             "datasets": len(v),
             "mean_width": float(np.mean(widths[k])),
