@@ -129,7 +129,6 @@ def test_bayes_reference_values_with_certified_gap(paper_pomdp, bayes):
 def test_certified_bounds_contain_the_grid_solution_and_grid_converges(paper_pomdp, bayes):
     x = np.linspace(0, 1, 201)
     lower = bayes.value(paper_pomdp, x)
-    upper = lower + bayes.gap
     errors = []
     for G in (101, 401, 1601):
         sol = GridSolver(grid=G, belief_update="bayes").solve_grid(paper_pomdp)
@@ -139,7 +138,32 @@ def test_certified_bounds_contain_the_grid_solution_and_grid_converges(paper_pom
         errors.append(float(np.max(w - lower)))
     assert errors[0] > errors[1] > errors[2]
     assert errors[2] < 1e-3
-    assert np.all(upper >= lower)
+
+
+def test_certified_upper_bound_lies_above_value_iteration_on_a_fine_grid(paper_pomdp, bayes):
+    """The upper bound lower + gap against an independent evaluation: exact Bellman backups
+    T^k L of the certified lower bound L rise monotonically towards the value W, so on a fine
+    belief grid every iterate must stay at or below the upper bound (a gap that under-states
+    the error fails here), and must not fall below L (L is certified: T L >= L)."""
+    x = np.linspace(0, 1, 20001)
+    lower = bayes.value(paper_pomdp, x)
+    upper = lower + bayes.gap
+    vecs, xs = bayes.lower
+    shift = bayes.residuals[1] / (1 - paper_pomdp.discount)
+    v = np.asarray(vecs, dtype=float) - shift  # alpha vectors of L: values at P(high) = 0 and 1
+    assert envelope_values(v, xs, x) == pytest.approx(lower, abs=1e-12)
+    prev = lower
+    rise = 0.0
+    for _ in range(25):
+        b = exact_backup(paper_pomdp, v)
+        v = b.vectors
+        cur = envelope_values(v, b.xs, x)
+        assert np.all(cur >= prev - 1e-9)
+        assert np.all(cur <= upper + 1e-9)
+        rise = float(np.max(cur - lower))
+        prev = cur
+    # the backups do rise above L (by ~1e-8 here): a gap of zero, or one below that rise, fails the loop above
+    assert 1e-9 < rise <= bayes.gap + 1e-9
 
 
 def test_alpha_vector_policy_thresholds_json_and_runner(paper_pomdp, tmp_path):

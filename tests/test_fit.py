@@ -246,18 +246,26 @@ def test_cli_reports_bad_logs_cleanly(tmp_path):
 
 
 def test_small_coverage_study():
-    """The coverage report, cell by cell (the full study is in benchmarks/bench_fit.py)."""
+    """The coverage report, cell by cell (the full study is in benchmarks/bench_fit.py): on data
+    sets large enough to pin a well-identified cell down, its intervals cover the truth; scored
+    against a model whose cell is 0.2 away (a negative control), they never do."""
     from trustseek.reproduction.coverage import coverage_study
 
-    rows = coverage_study(paper_model(), n_participants=9, datasets=2, bootstrap=3, restarts=1, n_jobs=1, seed=4)
-    assert len(rows) >= 12
     truth = paper_model()
-    for r in rows:
-        assert r["coverage"] in (0.0, 0.5, 1.0)
-        assert 0.0 <= r["truth"] <= 1.0 and r["mean_width"] >= 0
-    # the initial-trust cell's truth matches the preset
-    init = next(r for r in rows if r["cell"] == "P(T1=high)")
-    assert init["truth"] == truth.initial[1]
+    cell = "P(rely | T=high, C=high, a=autonomous)"
+    kw = {"n_participants": 60, "datasets": 2, "bootstrap": 20, "restarts": 1, "n_jobs": 1, "seed": 4}
+    rows = {r["cell"]: r for r in coverage_study(truth, **kw)}
+    assert len(rows) >= 12
+    for r in rows.values():
+        assert r["datasets"] == 2 and 0.0 <= r["truth"] <= 1.0 and r["mean_width"] >= 0
+    assert rows["P(T1=high)"]["truth"] == truth.initial[1]
+    assert rows[cell]["truth"] == pytest.approx(0.95)
+    assert rows[cell]["coverage"] == 1.0 and rows[cell]["mean_width"] < 0.15
+    emission = truth.emission.copy()
+    emission[1, 0, 1] = [0.25, 0.75]  # P(rely | T=high, C=high, autonomous) = 0.75 instead of 0.95
+    wrong = truth.replace(emission=emission)
+    shifted = {r["cell"]: r for r in coverage_study(truth, truth=wrong, **kw)}
+    assert shifted[cell]["truth"] == pytest.approx(0.75) and shifted[cell]["coverage"] == 0.0
 
 
 def test_decode_names_participants_the_model_rules_out():

@@ -18,7 +18,16 @@ def test_report_renders_with_figures(tmp_path):
     from playwright.sync_api import sync_playwright
 
     cfg = ReproduceConfig(
-        seed=1, replicates=2, large_n=300, bootstrap=0, restarts=2, replicate_restarts=1, replicate_large_n=150, grid=201, jobs=1
+        seed=1,
+        replicates=2,
+        large_n=300,
+        bootstrap=0,
+        restarts=2,
+        replicate_restarts=1,
+        replicate_large_n=150,
+        grid=201,
+        jobs=1,
+        sensitivity_samples=8,
     )
     paths = write_report(reproduce(cfg), tmp_path / "report")
     html = paths["html"]

@@ -16,7 +16,17 @@ from trustseek import paper_model
 from trustseek.cli._app import app
 from trustseek.report import FIGURES, write_report
 from trustseek.reproduction import AGNOSTIC, AWARE, ReproduceConfig, reproduce
-from trustseek.reproduction.statistics import wilcoxon
+from trustseek.reproduction.comparison import (
+    AGREES,
+    DIRECTION_ONLY,
+    DISAGREES,
+    MAX_WIDTH,
+    NOT_TESTABLE,
+    VERDICTS,
+    comparison_rows,
+    judge,
+)
+from trustseek.reproduction.statistics import mean_ci, share_ci, wilcoxon
 
 SMALL = {
     "replicates": 2,
@@ -27,6 +37,7 @@ SMALL = {
     "replicate_large_n": 200,
     "grid": 201,
     "jobs": 1,
+    "sensitivity_samples": 8,
 }
 
 
@@ -67,13 +78,129 @@ def test_comparison_lists_every_paper_number(small_run):
     assert sum(1 for r in rows if r["quantity"].startswith("Fig. 4")) == 8
     assert sum(1 for r in rows if r["quantity"].startswith(("Fig. 5", "Fig. 6"))) == 12
     for r in rows:
-        assert r["verdict"] in ("agrees", "DISAGREES", "no interval")
-        if r["interval"] and r["verdict"] != "no interval":
-            lo, hi = r["interval"]
-            inside = lo - 0.005 <= r["paper"] <= hi + 0.005
-            assert (r["verdict"] == "agrees") == inside
+        assert r["verdict"] in VERDICTS and r["reason"]
+    # every numeric row's verdict is the rule's
+    for r in rows:
+        if isinstance(r["paper"], float) and r["quantity"].startswith("Fig."):
+            assert (r["verdict"], r["reason"]) == judge(
+                r["paper"], r["ours"], r["interval"], fixed=r["reason"].startswith("fixed"), max_width=MAX_WIDTH
+            )
+    # the Fig. 4a cells are fixed by the model's structure, not estimated
+    fig4a = [r for r in rows if r["quantity"].startswith("Fig. 4a")]
+    assert [r["verdict"] for r in fig4a] == [NOT_TESTABLE] * 4 and all(r["interval"] is None for r in fig4a)
+    counts = small_run.summary["verdict_counts"]
+    assert list(counts) == list(VERDICTS) and sum(counts.values()) == len(rows)
     dis = small_run.summary["disagreements"]
-    assert len(dis) == sum(r["verdict"] == "DISAGREES" for r in rows)
+    assert len(dis) == counts[DISAGREES]
+    assert not any("e-12" in d for d in dis)
+
+
+@pytest.mark.parametrize(
+    ("args", "verdict"),
+    [
+        # a probability inside its interval, within the paper's rounding of an end, outside, fixed, unidentified
+        ((0.46, 0.40, (0.30, 0.50)), AGREES),
+        ((0.505, 0.40, (0.30, 0.50)), AGREES),
+        ((0.39, 1e-12, (1e-12, 1e-12)), DISAGREES),
+        ((1.0, 1.0, (1.0, 1.0), {"fixed": True}), NOT_TESTABLE),
+        ((0.7, 0.47, (1e-12, 1.0), {"max_width": MAX_WIDTH}), NOT_TESTABLE),
+        ((0.7, 0.47, None), NOT_TESTABLE),
+        # a difference: the sign reversed disagrees even inside the interval; the same sign outside it is direction only
+        ((6.0, -4.0, (-7.0, 9.0), {"reference": 0.0}), DISAGREES),
+        ((6.0, 2.0, (-7.0, 9.0), {"reference": 0.0}), AGREES),
+        ((6.0, 2.0, (0.5, 3.0), {"reference": 0.0}), DIRECTION_ONLY),
+        ((6.0, 0.0, (-1.0, 1.0), {"reference": 0.0}), DISAGREES),
+        # a qualitative claim (a share above one half)
+        ((None, 0.6, (0.55, 0.65), {"reference": 0.5}), AGREES),
+        ((None, 0.52, (0.40, 0.52), {"reference": 0.5}), DIRECTION_ONLY),
+        ((None, 0.45, (0.40, 0.52), {"reference": 0.5}), DISAGREES),
+    ],
+)
+def test_verdict_rules_on_constructed_rows(args, verdict):
+    kw = args[3] if len(args) > 3 else {}
+    assert judge(*args[:3], **kw)[0] == verdict
+
+
+def test_seed_0_shows_the_sign_reversed_and_untestable_rows():
+    """The rows of the default seed-0 run that the old single rule called "agrees" (the summary of
+    that run is rebuilt here from its inputs: the comparison reads nothing else)."""
+    rows = comparison_rows(_seed0_like_summary())
+    by = {r["quantity"].split(" (")[0]: r for r in rows}
+    assert by["Median difference aware − agnostic"]["verdict"] == DISAGREES
+    assert by["Median difference aware − agnostic"]["reason"] == "the sign is reversed"
+    assert by["Trust-aware better for most participants"]["verdict"] == DIRECTION_ONLY
+    assert sum(r["verdict"] == NOT_TESTABLE for r in rows) >= 5
+
+
+def test_intervals_for_five_participants_are_t_intervals():
+    d = np.array([6.0, -4.0, 2.0, 0.0, 9.0])
+    m, lo, hi = mean_ci(d)
+    half = 2.7764451051977987 * d.std(ddof=1) / np.sqrt(5)  # t(0.975, 4), not 1.96
+    assert (m, lo, hi) == pytest.approx((d.mean(), d.mean() - half, d.mean() + half))
+    lo, hi = share_ci(3, 5)
+    # exact binomial: P(X >= 3 | p = lo) = 0.025 and P(X <= 3 | p = hi) = 0.025
+    from scipy.stats import binom
+
+    assert binom.sf(2, 5, lo) == pytest.approx(0.025) and binom.cdf(3, 5, hi) == pytest.approx(0.025)
+
+
+def _seed0_like_summary():
+    from trustseek.reproduction.comparison import param_specs, param_values
+
+    truth = paper_model()
+    values = param_values(truth)
+    keys = [s.key for s in param_specs()]
+    dist = {"n": 20, "min": 0.0, "max": 1.0, "median": 0.5}
+    fixed = [k for k in keys if k.startswith("em_ask")]
+    return {
+        "config": {"participants_1": 9, "counts_1": [41, 30], "replicate_large_n": 2000},
+        "fit": {
+            "values": values,
+            "bootstrap": 200,
+            "bootstrap_ci": {k: [1e-12, 1.0] for k in keys},
+            "fixed": fixed,
+        },
+        "replicates": {
+            "n": 20,
+            "params": dict.fromkeys(keys, dist),
+            "threshold": {"n": 20, "min": 0.47, "max": 0.99},
+            "share_never_ask_low": 1.0,
+            "agnostic_share_paper": {"low": 1.0, "high": 1.0},
+            "median_aware": {"n": 20, "min": 43.0, "max": 59.0},
+            "median_agnostic": {"n": 20, "min": 43.0, "max": 56.0},
+            "median_diff_small": {"n": 20, "min": -7.0, "max": 9.0},
+            "share_better_large": {"n": 20, "min": 0.40, "max": 0.52},
+        },
+        "plan": {
+            "fitted": {"thresholds": {"high": 0.66}, "ask_intervals": {"low": []}},
+            "true_model": {"thresholds": {"high": 0.7812}},
+            "agnostic": {"action": {"low": "autonomous", "high": "ask"}},
+        },
+        "experiment2": {
+            "small": {
+                "participants": 5,
+                "median_aware": 47.0,
+                "median_agnostic": 51.0,
+                "median_difference": -4.0,
+                "share_aware_better": 0.4,
+            },
+            "large": {
+                "participants": 10_000,
+                "median_aware": 49.0,
+                "median_agnostic": 51.0,
+                "mean_difference": 0.57,
+                "mean_difference_ci": [0.42, 0.73],
+                "share_aware_better": 0.517,
+                "share_aware_better_ci": [0.507, 0.527],
+                "share_tied": 0.1,
+                "per_policy": {
+                    AWARE: {"autonomous_collections": {"mean": 20.0}},
+                    AGNOSTIC: {"autonomous_collections": {"mean": 12.0}},
+                },
+                "autonomous_difference_ci": [7.9, 8.1],
+            },
+        },
+    }
 
 
 def test_same_seed_same_summary(small_run, tmp_path):

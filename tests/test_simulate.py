@@ -1,5 +1,7 @@
 """The simulator against analytic expectations: emissions, outcomes, trust dynamics, rewards."""
 
+import itertools
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -248,8 +250,34 @@ def test_crossover_design_and_trial_log(task):
         # the policy's reward in the summary is the sum over its block of the log
         for pol, h in g.groupby("policy"):
             assert s[(s.participant == pid) & (s.policy == pol)]["cumulative_reward"].item() == h["reward"].sum()
-    # hidden trust carries over between blocks: trial 35 starts where trial 34 ended (as a level)
     assert f["true_trust"].isin(["low", "high"]).all()
+
+
+def test_crossover_carries_trust_over_between_blocks(task):
+    """Block 2 starts from the trust block 1 left, not from the initial trust: under the paper's
+    model everyone starts high (P(T_1 = high) = 1), so a low trust at trial 35 exists only by
+    carry-over; and every step, the one between the blocks included, is a transition the model
+    allows, with as many low-trust starts of block 2 as the model predicts from trial 34."""
+    model = paper_model()
+    aware = solve(model, task, belief_update="paper", grid=201)
+    sim = crossover(model, task, [aware, never_ask()], n_participants=300, counts=(17, 17), seed=4)
+    f = sim.trials().sort_values(["participant", "trial"])
+    level = {"low": 0, "high": 1}
+    act = {"autonomous": 0, "ask": 1}
+    exp = {"faulty": 0, "reliable": 1}
+    assert (f[f["trial"] == 1]["true_trust"] == "high").all()
+    expected_low = 0.0
+    for _, g in f.groupby("participant"):
+        rows = g.to_dict("records")
+        for a, b in itertools.pairwise(rows):
+            cell = (level[a["complexity"]], act[a["robot_action"]], exp[a["experience"]], level[a["true_trust"]])
+            assert model.transition[cell][level[b["true_trust"]]] > 0, (a, b)
+            if b["trial"] == 35:
+                expected_low += model.transition[cell][0]
+    low_35 = int((f[f["trial"] == 35]["true_trust"] == "low").sum())
+    assert expected_low > 20  # the check has power: many participants end block 1 in low trust
+    # binomial-sum standard deviation is at most sqrt(n / 4); 4 of them is a loose but failing bound for a reset
+    assert abs(low_35 - expected_low) < 4 * (300 / 4) ** 0.5
 
 
 def test_common_random_numbers_and_determinism(task):

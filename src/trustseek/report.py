@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
-from .model.presets import paper_model
+from .model.presets import paper_model, paper_task
 from .reproduction import AGNOSTIC, AWARE, PAPER, Reproduction, write_summary
 from .version import __version__
 
@@ -36,6 +36,12 @@ FIGURES = [
         "replicates",
         "Distributions over replicate experiments of the estimated threshold and of the aware − agnostic reward difference.",
     ),
+    (
+        "sensitivity_tornado.png",
+        "sensitivity",
+        "The threshold in high complexity when each printed parameter moves alone by ± half a unit of its last "
+        "printed decimal (bars, the 12 largest effects), and jointly (grey band); the dashed line is the paper's ≈ 0.75.",
+    ),
     ("policies.png", "costs", "Mean cumulative reward per block of each policy on the same simulated participants."),
     (
         "remark1.png",
@@ -46,8 +52,13 @@ FIGURES = [
 ]
 
 
+#: below this a probability is the estimator's numerical floor (1e-12), shown as 0 (and 1 - it as 1)
+FLOOR = 1e-9
+
+
 def fmt(v: Any) -> str:
-    """Numbers for tables: integers plainly, others with 3 significant decimals."""
+    """Numbers for tables: integers plainly, others with 3 significant decimals; the numerical
+    floor of a probability (1e-12) shows as 0, and one minus it as 1."""
     if v is None:
         return "–"
     if isinstance(v, bool):
@@ -58,6 +69,10 @@ def fmt(v: Any) -> str:
         x = float(v)
         if not np.isfinite(x):
             return "–"
+        if abs(x) < FLOOR:
+            return "0"
+        if 0 < 1 - x < FLOOR:
+            return "1"
         if x.is_integer() and abs(x) < 1e6:
             return f"{int(x)}"
         if abs(x) >= 100:
@@ -70,21 +85,27 @@ def pct(v: Any) -> str:
     return "–" if v is None else f"{100 * float(v):.0f}%"
 
 
+def stat(v: Any) -> str:
+    """One format for every test statistic and p-value: 3 significant digits."""
+    return "–" if v is None else f"{float(v):.3g}"
+
+
 def make_figures(rep: Reproduction, out: Path) -> list[Path]:
     """Write the PNG figures into ``out``; returns their paths."""
     from .plots.model import plot_emissions, plot_transitions
     from .plots.q import plot_q
     from .plots.rewards import plot_heterogeneity, plot_policy_values, plot_replicates, plot_rewards
+    from .plots.sensitivity import plot_tornado
 
     s = rep.summary
     paper = paper_model()
     ci = getattr(rep.fit, "ci", None)
     paths = []
     p = out / "fig4_emissions.png"
-    plot_emissions(rep.fitted, p, ci=ci, reference=paper)
+    plot_emissions(rep.fitted, p, ci=ci, reference=paper, reference_label="paper")
     paths.append(p)
     p = out / "fig5_6_transitions.png"
-    plot_transitions(rep.fitted, p, ci=ci, reference=paper)
+    plot_transitions(rep.fitted, p, ci=ci, reference=paper, reference_label="paper", ask_experience=paper_task().ask_experience)
     paths.append(p)
     p = out / "fig7_q.png"
     plot_q(rep.aware, p, title=f"Action-value functions of the fitted model (belief update: {rep.aware.belief_update})")
@@ -110,6 +131,16 @@ def make_figures(rep: Reproduction, out: Path) -> list[Path]:
         design=f"{s['config']['participants_1']} × {sum(s['config']['counts_1'])}",
     )
     paths.append(p)
+    p = out / "sensitivity_tornado.png"
+    if rep.sensitivity is not None:
+        plot_tornado(
+            rep.sensitivity,
+            s["threshold_sensitivity"]["quantity"],
+            p,
+            paper_value=PAPER["threshold_high"],
+            title="Threshold in high complexity within the printed precision of the paper's parameters",
+        )
+        paths.append(p)
     p = out / "policies.png"
     plot_policy_values(
         s["costs"]["rows"],
@@ -129,9 +160,11 @@ def render_html(summary: dict, figure_dir: Path) -> str:
     figures = []
     for file, section, caption in FIGURES:
         path = figure_dir / file
+        if not path.exists():
+            continue
         data = base64.b64encode(path.read_bytes()).decode("ascii")
         figures.append({"file": file, "section": section, "caption": caption, "alt": caption.split(":")[0], "data": data})
-    return env.get_template("report.html.j2").render(s=summary, figures=figures, fmt=fmt, pct=pct, version=__version__)
+    return env.get_template("report.html.j2").render(s=summary, figures=figures, fmt=fmt, pct=pct, stat=stat, version=__version__)
 
 
 def write_report(rep: Reproduction, out: str | Path) -> dict[str, Path]:

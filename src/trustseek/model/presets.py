@@ -1,4 +1,15 @@
-"""Built-in presets.  ``paper`` holds exactly the numbers of Section V of the paper.
+"""Built-in presets.  ``paper`` holds the numbers of Section V of the paper as printed, plus
+one assumption the paper does not state.
+
+The paper prints its estimates rounded to two decimals, so these are not its exact values:
+the threshold of the optimal policy moves with that rounding (the printed values give
+0.7812 where the paper reports ≈ 0.75; ``trustseek sensitivity`` gives the range the
+printed precision allows, :mod:`trustseek.solvers.sensitivity`).
+
+**Assumption:** P(C = high) = 0.5 in :func:`paper_task`.  The paper names the probability
+(p_{C^H}, Section III) but never gives its value; its data collection had 30 high-complexity
+trials in 71 (30/71 ≈ 0.42), and its evaluation blocks 17 in 34 (0.5).  The reproduction
+report shows the threshold with 30/71 as well.
 
 Cells the paper never observes are set to the identity (trust does not change)
 and listed in :data:`PAPER_UNOBSERVED_CELLS`:
@@ -61,7 +72,9 @@ def paper_model() -> TrustModel:
 
 
 def paper_task() -> Task:
-    """The object-collection task of Sections III-V: rewards of eq. (1), gamma = 0.987."""
+    """The object-collection task of Sections III-V: rewards of eq. (1), gamma = 0.987,
+    success probabilities 0.97 / 0.83 as printed; P(C = high) = 0.5 is an assumption (see
+    the module docstring)."""
     return Task(
         complexities=("low", "high"),
         complexity_probs=np.array([0.5, 0.5]),

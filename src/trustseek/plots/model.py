@@ -2,7 +2,7 @@
 
 ``ci`` is the ``FitResult.ci`` dict ('emission'/'transition' -> (lower, upper)
 arrays of the TrustModel shapes); ``reference`` is a TrustModel (e.g. the paper
-preset) drawn as open markers.
+preset) drawn as open markers labelled ``reference_label`` ("paper" by default).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from . import save, style
 _LEVEL_COLORS = ("#c8102e", "#1f5fa8", "#2a9d3f", "#7b3294", "#e08214", "#666666", "#000000", "#8c510a")
 
 
-def _bars(ax, values, lower, upper, ref, labels, series):
+def _bars(ax, values, lower, upper, ref, labels, series, ref_label="paper"):
     n_groups, n_series = values.shape
     width = 0.8 / n_series
     x = np.arange(n_groups)
@@ -27,13 +27,13 @@ def _bars(ax, values, lower, upper, ref, labels, series):
             err = np.vstack([values[:, s] - lower[:, s], upper[:, s] - values[:, s]])
             ax.errorbar(pos, values[:, s], yerr=np.clip(err, 0, None), fmt="none", ecolor="0.15", elinewidth=0.8, capsize=2)
         if ref is not None:
-            ax.plot(pos, ref[:, s], ls="none", marker="o", mfc="white", mec="0.1", ms=4, label="reference" if s == 0 else None)
+            ax.plot(pos, ref[:, s], ls="none", marker="o", mfc="white", mec="0.1", ms=4, label=ref_label if s == 0 else None)
     ax.set_xticks(x)
     ax.set_xticklabels(labels)
     ax.set_ylim(0, 1.05)
 
 
-def plot_emissions(model, path=None, ci=None, reference=None):
+def plot_emissions(model, path=None, ci=None, reference=None, reference_label="paper"):
     """P(rely | T, C, a) per complexity and robot action (Fig. 4), one bar per trust level."""
     T, C = model.trust_levels, model.complexities
     groups = [(c, a) for a in range(2) for c in range(len(C))]
@@ -46,7 +46,7 @@ def plot_emissions(model, path=None, ci=None, reference=None):
         ref = np.array([[reference.emission[c, a, t, RELY] for t in range(len(T))] for c, a in groups])
     with style() as plt:
         fig, ax = plt.subplots(figsize=(4.6, 2.6))
-        _bars(ax, vals, lo, hi, ref, [f"C={C[c]}\na={ACTIONS[a]}" for c, a in groups], [f"T={t}" for t in T])
+        _bars(ax, vals, lo, hi, ref, [f"C={C[c]}\na={ACTIONS[a]}" for c, a in groups], [f"T={t}" for t in T], reference_label)
         ax.set_ylabel(r"$P(o = \mathrm{rely} \mid T, C, a)$")
         ax.set_title("Estimated probability of relying on the robot" + (" (95% CI)" if ci is not None else ""))
         ax.legend(loc="upper right", frameon=False, ncol=1)
@@ -56,13 +56,18 @@ def plot_emissions(model, path=None, ci=None, reference=None):
         return fig
 
 
-def plot_transitions(model, path=None, ci=None, reference=None):
-    """P(T' = highest | T, E', C, a) for each (C, a, E') (Figs. 5-6), one bar per current trust level."""
+def plot_transitions(model, path=None, ci=None, reference=None, reference_label="paper", ask_experience=None):
+    """P(T' = highest | T, E', C, a) for each (C, a, E') (Figs. 5-6), one bar per current trust level.
+
+    ``ask_experience`` (per complexity, the experience the design records after asking, as in
+    ``Task.ask_experience``) leaves out the (ask, E') groups the design never produces."""
     T, C = model.trust_levels, model.complexities
     top = len(T) - 1
     panels = []
     for c in range(len(C)):
         groups = [(a, e) for a in range(2) for e in range(2)]
+        if ask_experience is not None:
+            groups = [(a, e) for a, e in groups if ACTIONS[a] != "ask" or e == ask_experience[c]]
         panels.append((c, groups))
     ref_ok = (
         reference is not None and reference.trust_levels == model.trust_levels and reference.complexities == model.complexities
@@ -77,7 +82,8 @@ def plot_transitions(model, path=None, ci=None, reference=None):
                 hi = np.array([[ci["transition"][1][c, a, e, t, top] for t in range(len(T))] for a, e in groups])
             if ref_ok:
                 ref = np.array([[reference.transition[c, a, e, t, top] for t in range(len(T))] for a, e in groups])
-            _bars(ax, vals, lo, hi, ref, [f"{ACTIONS[a]}\nE'={EXPERIENCES[e]}" for a, e in groups], [f"T={t}" for t in T])
+            labels = [f"{ACTIONS[a]}\nE'={EXPERIENCES[e]}" for a, e in groups]
+            _bars(ax, vals, lo, hi, ref, labels, [f"T={t}" for t in T], reference_label)
             ax.set_title(f"complexity {C[c]}")
             ax.set_ylabel(rf"$P(T' = \mathrm{{{T[top]}}} \mid T, E', C, a)$")
             ax.tick_params(axis="x", labelsize=6.5)

@@ -122,8 +122,12 @@ def plot_replicates(
         fig, axes = plt.subplots(1, 2, figsize=(6.8, 2.6))
         ax = axes[0]
         if len(th):
-            lo, hi = min(th.min(), paper_threshold) - 0.02, max(th.max(), paper_threshold) + 0.02
+            lo = max(0.0, min(th.min(), paper_threshold) - 0.02)
+            hi = min(1.0, max(th.max(), paper_threshold) + 0.02)
             ax.hist(th, bins=np.linspace(lo, hi, 21), color=COLORS["autonomous"], alpha=0.55, edgecolor="white", linewidth=0.5)
+            ax.set_xlim(lo, hi)
+        else:
+            _no_data(ax, "no replicate has a threshold" if len(thresholds) else "no replicates were run")
         ax.axvline(paper_threshold, color=COLORS["ask"], ls="--", lw=1.0, label=f"paper ≈ {paper_threshold:g}")
         if true_threshold is not None:
             ax.axvline(true_threshold, color="black", ls=":", lw=1.0, label=f"true model {true_threshold:.3f}")
@@ -135,7 +139,10 @@ def plot_replicates(
         ax.legend(frameon=False, loc="upper left", ncols=2, fontsize=7)
         ax.yaxis.get_major_locator().set_params(integer=True)
         ax = axes[1]
-        ds, dl = np.asarray(diff_small, dtype=float), np.asarray(diff_large, dtype=float)
+        ds = np.asarray([np.nan if v is None else v for v in diff_small], dtype=float)
+        dl = np.asarray([np.nan if v is None else v for v in diff_large], dtype=float)
+        if not (np.isfinite(ds).any() or np.isfinite(dl).any()):
+            _no_data(ax, "no replicates were run")
         rows = [("large N:\nmean diff.", dl, COLORS["autonomous"]), ("5 participants:\nmedian diff.", ds, "0.45")]
         for y, (_, v, col) in enumerate(rows):
             v = v[np.isfinite(v)]
@@ -170,6 +177,11 @@ def plot_replicates(
         return fig
 
 
+def _no_data(ax, text: str) -> None:
+    """Say in the panel why it has nothing to show."""
+    ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center", fontsize=8, color="0.3")
+
+
 def plot_policy_values(rows: Sequence[Mapping], path=None, title: str | None = None):
     """Mean cumulative reward per block with 95% intervals, one bar per policy variant.
 
@@ -188,8 +200,9 @@ def plot_policy_values(rows: Sequence[Mapping], path=None, title: str | None = N
         ax.set_yticks(y, [r["label"] for r in rows])
         lo = min(r["lo"] for r in rows)
         hi = max(r["hi"] for r in rows)
-        ax.set_xlim(max(0.0, lo - 0.08 * (hi - lo) - 1), hi + 0.15 * (hi - lo) + 1)
-        ax.set_xlabel("mean cumulative reward per block (95% interval)")
+        ax.set_xlim(min(0.0, lo - 0.08 * (hi - lo) - 1), hi + 0.15 * (hi - lo) + 1)
+        ax.axvline(0.0, color="black", lw=0.6)
+        ax.set_xlabel("mean cumulative reward per block (t 95% interval)")
         ax.grid(axis="y", visible=False)
         ax.set_title(title or "Policies evaluated on the same simulated participants")
         fig.tight_layout()

@@ -2,7 +2,8 @@
 
 :func:`param_specs` lists the trust-model cells of Figs. 4-6 with the paper's values;
 :func:`comparison_rows` builds the table of the report from a summary; :func:`disagreements`
-says in words where the two differ.
+says in words where the two differ; :func:`judge` is the one rule every row's verdict follows
+(:data:`RULES` in words, as the report states them).
 """
 
 from __future__ import annotations
@@ -78,56 +79,142 @@ def bootstrap_interval(fit: Any, spec: ParamSpec) -> tuple[float, float] | None:
         return None
 
 
-def _inside(v: float, lo: float | None, hi: float | None, tol: float = 0.005) -> bool:
-    return lo is not None and hi is not None and lo - tol <= v <= hi + tol
+AGREES = "agrees"
+DISAGREES = "disagrees"
+NOT_TESTABLE = "not testable here"
+DIRECTION_ONLY = "consistent only in direction"
+#: every verdict, in the order the headline counts them
+VERDICTS = (AGREES, DISAGREES, DIRECTION_ONLY, NOT_TESTABLE)
+#: an interval of a probability wider than this says the design does not identify it
+MAX_WIDTH = 0.5
+#: the paper prints two decimals: a value within this of an interval's end counts as inside
+TOLERANCE = 0.005
+
+#: the rules of :func:`judge`, in words, as the report states them
+RULES = (
+    f"not testable here: the cell is fixed by design (not estimated), there is no interval, or a probability's "
+    f"interval is wider than {MAX_WIDTH} (the design does not identify it);",
+    "disagrees: the paper's effect has one sign and ours the opposite one (whatever the interval), or the paper's "
+    f"value lies outside the interval (by more than {TOLERANCE}, the paper's rounding) and ours is not on the same "
+    "side of the reference;",
+    "consistent only in direction: the paper's value lies outside the interval, but ours lies on the same side of "
+    "the reference as the paper's (a difference of the same sign; a share on the same side of one half); or a "
+    "qualitative claim holds for our estimate but the interval reaches the other side;",
+    f"agrees: the paper's value lies inside the interval (within {TOLERANCE}), with the same sign as ours where a "
+    "sign matters; or a qualitative claim holds over the whole interval.",
+)
+
+
+def _sign(x: float) -> int:
+    return 1 if x > 0 else -1 if x < 0 else 0
+
+
+def judge(
+    paper: float | None,
+    ours: float | None,
+    interval: tuple[float | None, float | None] | list[float | None] | None,
+    *,
+    fixed: bool = False,
+    max_width: float | None = None,
+    reference: float | None = None,
+    tol: float = TOLERANCE,
+) -> tuple[str, str]:
+    """The verdict of one row and the reason, by :data:`RULES`.
+
+    ``paper`` is the paper's number, or None for a qualitative claim that the quantity lies
+    above ``reference`` (such as "better for most participants": a share above one half);
+    ``reference`` (e.g. 0 for a difference) gives the row a direction; ``max_width`` is the
+    widest interval that still tests something (probabilities: :data:`MAX_WIDTH`).
+    """
+    if fixed:
+        return NOT_TESTABLE, "fixed by design, not estimated"
+    if interval is None or interval[0] is None or interval[1] is None:
+        return NOT_TESTABLE, "no interval"
+    lo, hi = float(interval[0]), float(interval[1])
+    if max_width is not None and hi - lo > max_width:
+        return NOT_TESTABLE, f"not identified: the interval is wider than {max_width:g}"
+    if paper is None:
+        if reference is None or ours is None:
+            raise ValueError("a qualitative claim needs our value and a reference")
+        if lo > reference:
+            return AGREES, f"the whole interval lies above {reference:g}"
+        if ours > reference:
+            return DIRECTION_ONLY, f"our value lies above {reference:g}, the interval reaches below it"
+        return DISAGREES, f"our value is not above {reference:g}"
+    same_side = False
+    if reference is not None and ours is not None:
+        sp, so = _sign(paper - reference), _sign(ours - reference)
+        if sp != 0 and so == -sp:
+            return DISAGREES, "the sign is reversed"
+        same_side = sp != 0 and so == sp
+    if lo - tol <= paper <= hi + tol:
+        return AGREES, "the paper's value lies inside the interval"
+    if same_side:
+        return DIRECTION_ONLY, "same sign as the paper's, but the paper's value lies outside the interval"
+    return DISAGREES, "the paper's value lies outside the interval"
 
 
 def _row(
     quantity: str,
-    paper: float,
+    paper: Any,
     ours: Any,
     interval: tuple[float | None, float | None] | None,
     kind: str,
     note: str = "",
+    verdict: tuple[str, str] | None = None,
+    **rule: Any,
 ) -> dict[str, Any]:
-    if interval is None or interval[0] is None:
-        verdict = "no interval"
-    elif _inside(paper, *interval):
-        verdict = "agrees"
-    else:
-        verdict = "DISAGREES"
+    if verdict is None:
+        verdict = judge(paper if isinstance(paper, (int, float)) else None, ours, interval, **rule)
     return {
         "quantity": quantity,
         "paper": paper,
         "ours": ours,
         "interval": list(interval) if interval else None,
         "interval_kind": kind,
-        "verdict": verdict,
+        "verdict": verdict[0],
+        "reason": verdict[1],
         "note": note,
     }
 
 
+def _categorical(quantity: str, paper: str, ours: str, note: str) -> dict[str, Any]:
+    v = (AGREES, "the same action") if ours == paper else (DISAGREES, "a different action")
+    return _row(quantity, paper, ours, None, "", note, verdict=v)
+
+
+def _replicate_range(d: dict[str, Any] | None) -> tuple[float | None, float | None] | None:
+    return (d["min"], d["max"]) if d and d.get("n") else None
+
+
 def comparison_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
-    """Every number the paper reports, next to ours and an interval, with a verdict."""
+    """Every number the paper reports, next to ours and an interval, with a verdict (:func:`judge`).
+
+    The parameter rows test whether the estimator is consistent: the simulated supervisors
+    *are* the paper's model, so the paper's values are the truth the fit should recover."""
     rows = []
     fitted = summary["fit"]["values"]
     boot = summary["fit"].get("bootstrap_ci") or {}
+    fixed = set(summary["fit"].get("fixed") or ())
     reps = summary["replicates"]["params"]
-    cfg = summary["config"]
-    design = f"{cfg['participants_1']} × {sum(cfg['counts_1'])}"
+    n_rep = summary["replicates"]["n"]
+    rep_kind = f"range of {n_rep} replicates (min–max)"
+    n_boot = summary["fit"].get("bootstrap", 0)
     for key, label, paper_val, _, _ in param_specs():
-        rep = reps.get(key)
-        interval = (rep["p2.5"], rep["p97.5"]) if rep and rep["n"] else None
-        kind = "replicates 95%"
-        if interval is None and key in boot:
-            interval, kind = tuple(boot[key]), "bootstrap 95%"
+        rep_range = _replicate_range(reps.get(key))
         notes = []
-        if interval is not None and interval[1] - interval[0] > 0.8:
-            notes.append(f"not identified by a {design} sample (the range spans most of [0, 1])")
-        if key in boot:
-            notes.append(f"bootstrap 95% [{boot[key][0]:.3f}, {boot[key][1]:.3f}]")
-        note = "; ".join(notes)
-        rows.append(_row(label, paper_val, fitted[key], interval, kind, note))
+        interval: tuple[float | None, float | None] | None
+        if key in boot and key not in fixed:
+            interval, kind = tuple(boot[key]), f"bootstrap 95% ({n_boot} resamples)"
+            if rep_range is not None:
+                notes.append(f"{rep_kind}: [{rep_range[0]:.3f}, {rep_range[1]:.3f}]")
+        else:
+            interval, kind = rep_range, rep_kind
+        if key in fixed:
+            interval, kind, notes = None, "", []
+        rows.append(
+            _row(label, paper_val, fitted[key], interval, kind, "; ".join(notes), fixed=key in fixed, max_width=MAX_WIDTH)
+        )
     plan = summary["plan"]
     th = summary["replicates"]["threshold"]
     rows.append(
@@ -135,106 +222,130 @@ def comparison_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
             "Threshold on P(T=high), high complexity (ask below)",
             PAPER["threshold_high"],
             plan["fitted"]["thresholds"]["high"],
-            (th["p2.5"], th["p97.5"]) if th["n"] else None,
-            "replicates 95%",
-            f"true model: {plan['true_model']['thresholds']['high']:.3f}",
+            _replicate_range(th),
+            rep_kind,
+            f"printed (true) model: {plan['true_model']['thresholds']['high']:.4f}",
+            max_width=MAX_WIDTH,
         )
     )
+    sens = summary.get("threshold_sensitivity")
+    if sens:
+        rows.append(
+            _row(
+                "Threshold of the printed parameters, high complexity",
+                PAPER["threshold_high"],
+                sens["nominal"],
+                tuple(sens["range"]),
+                "range under the printed precision (±0.005 each, jointly)",
+                "see 'Why 0.78 and not 0.75'",
+            )
+        )
     share_low = summary["replicates"]["share_never_ask_low"]
+    never = not plan["fitted"]["ask_intervals"]["low"]
     rows.append(
-        {
-            "quantity": "Trust-aware policy never asks in low complexity",
-            "paper": "never asks",
-            "ours": "never asks" if not plan["fitted"]["ask_intervals"]["low"] else "asks somewhere",
-            "interval": None,
-            "interval_kind": "share of replicates",
-            "note": f"{share_low:.0%} of replicates",
-            "verdict": "agrees" if not plan["fitted"]["ask_intervals"]["low"] else "DISAGREES",
-        }
+        _categorical(
+            "Trust-aware policy never asks in low complexity",
+            "never asks",
+            "never asks" if never else "asks somewhere",
+            f"{share_low:.0%} of replicates never ask",
+        )
     )
     agn = plan["agnostic"]["action"]
     rep_agn = summary["replicates"]["agnostic_share_paper"]
     for cn, pv in (("low", "autonomous"), ("high", "ask")):
         rows.append(
-            {
-                "quantity": f"Trust-agnostic policy, {cn} complexity",
-                "paper": pv,
-                "ours": agn[cn],
-                "interval": None,
-                "interval_kind": "share of replicates",
-                "note": f"{rep_agn[cn]:.0%} of replicates choose {pv}",
-                "verdict": "agrees" if agn[cn] == pv else "DISAGREES",
-            }
+            _categorical(f"Trust-agnostic policy, {cn} complexity", pv, agn[cn], f"{rep_agn[cn]:.0%} of replicates choose {pv}")
         )
     small, large = summary["experiment2"]["small"], summary["experiment2"]["large"]
     rr = summary["replicates"]
-    for key, pk, lab in (
-        ("median_aware", "median_aware", "trust-aware"),
-        ("median_agnostic", "median_agnostic", "trust-agnostic"),
-    ):
-        d = rr[key]
+    rr_large = summary["config"]["replicate_large_n"]
+    for key, lab in (("median_aware", "trust-aware"), ("median_agnostic", "trust-agnostic")):
         rows.append(
             _row(
                 f"Median cumulative reward, {lab} ({small['participants']} participants)",
-                PAPER[pk],
+                PAPER[key],
                 small[key],
-                (d["p2.5"], d["p97.5"]) if d["n"] else None,
-                "replicates 95%",
+                _replicate_range(rr[key]),
+                rep_kind,
                 f"{large['participants']:,} participants: {large[key]:g}",
             )
         )
-    d = rr["median_diff_small"]
+    lo, hi = large["mean_difference_ci"]
     rows.append(
         _row(
-            "Median difference aware − agnostic",
+            f"Median difference aware − agnostic ({small['participants']} participants)",
             PAPER["median_aware"] - PAPER["median_agnostic"],
             small["median_difference"],
-            (d["p2.5"], d["p97.5"]) if d["n"] else None,
-            "replicates 95%",
-            f"large N mean difference {large['mean_difference']:.2f} "
-            f"[{large['mean_difference_ci'][0]:.2f}, {large['mean_difference_ci'][1]:.2f}]",
+            _replicate_range(rr["median_diff_small"]),
+            rep_kind,
+            f"{large['participants']:,} participants: mean difference {large['mean_difference']:.2f} [{lo:.2f}, {hi:.2f}]",
+            reference=0.0,
         )
     )
+    share_rep = _replicate_range(rr.get("share_better_large"))
+    share_ci = large.get("share_aware_better_ci")
+    share_iv: tuple[float | None, float | None] | None
+    if share_rep is not None:
+        share_iv, share_kind = share_rep, f"range of {n_rep} replicates (min–max), {rr_large:,} participants each"
+        share_note = f"this run's exact binomial 95%: [{share_ci[0]:.3f}, {share_ci[1]:.3f}]; " if share_ci else ""
+    else:
+        share_iv, share_kind = ((share_ci[0], share_ci[1]) if share_ci else None), "exact binomial 95%"
+        share_note = ""
     rows.append(
-        {
-            "quantity": "Trust-aware better for most participants",
-            "paper": "most (Fig. 8)",
-            "ours": f"{large['share_aware_better']:.0%} of {large['participants']:,}",
-            "interval": None,
-            "interval_kind": "",
-            "note": f"{large['share_tied']:.0%} tied; "
-            f"{small['share_aware_better']:.0%} of {small['participants']} in the paper-sized run",
-            "verdict": "agrees" if large["share_aware_better"] > 0.5 else "DISAGREES",
-        }
+        _row(
+            f"Trust-aware better for most participants ({large['participants']:,} participants)",
+            "most (Fig. 8)",
+            large["share_aware_better"],
+            share_iv,
+            share_kind,
+            share_note + f"{large['share_tied']:.0%} tied; {small['share_aware_better']:.0%} of {small['participants']} "
+            "in the paper-sized run",
+            reference=0.5,
+        )
     )
     aw = large["per_policy"][AWARE]["autonomous_collections"]["mean"]
     ag = large["per_policy"][AGNOSTIC]["autonomous_collections"]["mean"]
+    dci = large.get("autonomous_difference_ci")
     rows.append(
-        {
-            "quantity": "More autonomous collections with the trust-aware policy",
-            "paper": "more",
-            "ours": f"{aw:.1f} vs {ag:.1f} per block",
-            "interval": None,
-            "interval_kind": "",
-            "note": f"{large['participants']:,} participants",
-            "verdict": "agrees" if aw > ag else "DISAGREES",
-        }
+        _row(
+            "More autonomous collections with the trust-aware policy (difference per block)",
+            "more",
+            aw - ag,
+            tuple(dci) if dci else None,
+            f"t 95% ({large['participants']:,} participants)",
+            f"{aw:.1f} vs {ag:.1f} per block",
+            reference=0.0,
+        )
     )
     return rows
 
 
+def verdict_counts(rows: list[dict[str, Any]]) -> dict[str, int]:
+    """How many rows carry each verdict, in the order of :data:`VERDICTS`."""
+    return {v: sum(r["verdict"] == v for r in rows) for v in VERDICTS}
+
+
 def disagreements(rows: list[dict[str, Any]]) -> list[str]:
-    """One sentence per row whose verdict is DISAGREES."""
+    """One sentence per row whose verdict is "disagrees"."""
     out = []
     for r in rows:
-        if r["verdict"] == "DISAGREES":
+        if r["verdict"] == DISAGREES:
             iv = r["interval"]
-            ivs = f" ({r['interval_kind']}: [{iv[0]:.3g}, {iv[1]:.3g}])" if iv else ""
-            out.append(f"{r['quantity']}: the paper reports {r['paper']}, the simulation gives {_fmt(r['ours'])}{ivs}.")
+            ivs = f" ({r['interval_kind']}: [{_fmt(iv[0])}, {_fmt(iv[1])}])" if iv else ""
+            ours = _fmt(r["ours"])
+            out.append(f"{r['quantity']}: the paper reports {r['paper']}, the simulation gives {ours}{ivs}: {r['reason']}.")
     return out
+
+
+#: a probability this close to 0 or 1 is the estimator's numerical floor, not a value
+FLOOR = 1e-9
 
 
 def _fmt(v: Any) -> str:
     if isinstance(v, float):
+        if abs(v) < FLOOR:
+            return "0"
+        if 0 < 1 - v < FLOOR:
+            return "1"
         return f"{v:.3g}"
     return str(v)

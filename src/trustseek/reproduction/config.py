@@ -49,7 +49,7 @@ class ReproduceConfig:
     participants_2: int = PAPER_EVALUATION_PARTICIPANTS
     counts_2: tuple[int, int] = PAPER_BLOCK_COUNTS
     restarts: int = 10
-    bootstrap: int = 20
+    bootstrap: int = 200
     replicate_restarts: int = 4
     replicate_large_n: int = 2_000
     belief_update: str = "paper"
@@ -57,6 +57,7 @@ class ReproduceConfig:
     concentration: float = 20.0
     pseudo: float = 0.5
     jobs: int = 2
+    sensitivity_samples: int = 200
 
     def problems(self) -> list[str]:
         """Every setting out of range, as a message naming its command-line option."""
@@ -75,6 +76,8 @@ class ReproduceConfig:
         for name in at_least_one:
             if getattr(self, name) < 1:
                 p.append(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
+        if self.sensitivity_samples < 0:
+            p.append(f"--sensitivity-samples must be >= 0, got {self.sensitivity_samples}")
         if self.bootstrap < 0:
             p.append(f"--bootstrap must be >= 0, got {self.bootstrap}")
         if self.belief_update not in BELIEF_UPDATES:

@@ -1,5 +1,5 @@
-"""The statistics the reproduction reports: normal intervals of means, distributions over
-replicates and the paper's Wilcoxon signed-rank test."""
+"""The statistics the reproduction reports: t intervals of means, exact binomial intervals of
+shares, distributions over replicates and the paper's Wilcoxon signed-rank test."""
 
 from __future__ import annotations
 
@@ -8,15 +8,25 @@ from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
+from scipy.stats import binomtest
+from scipy.stats import t as student_t
 from scipy.stats import wilcoxon as scipy_wilcoxon
 
 
-def mean_ci(values: Sequence[float] | np.ndarray) -> tuple[float, float, float]:
-    """Mean and its normal 95 % interval (NaN ends for fewer than two values)."""
+def mean_ci(values: Sequence[float] | np.ndarray, level: float = 0.95) -> tuple[float, float, float]:
+    """Mean and its Student-t interval (exact for normal data, also for n = 5; NaN ends for
+    fewer than two values)."""
     v = np.asarray(values, dtype=float)
     m = float(v.mean())
-    h = 1.96 * float(v.std(ddof=1)) / math.sqrt(len(v)) if len(v) > 1 else float("nan")
+    n = len(v)
+    h = float(student_t.ppf(0.5 + level / 2, n - 1)) * float(v.std(ddof=1)) / math.sqrt(n) if n > 1 else float("nan")
     return m, m - h, m + h
+
+
+def share_ci(successes: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    """Exact (Clopper-Pearson) interval of a share of ``successes`` out of ``n``."""
+    ci = binomtest(int(successes), int(n)).proportion_ci(confidence_level=level, method="exact")
+    return float(ci.low), float(ci.high)
 
 
 def _finite(values: Iterable[float | None]) -> list[float]:
@@ -30,11 +40,13 @@ def percentile(values: Iterable[float | None], q: float) -> float | None:
 
 
 def distribution(values: Sequence[float | None]) -> dict[str, Any]:
-    """Median, mean and central 95 % range of the finite values, and every value (None for
-    a missing or non-finite one)."""
+    """Median, mean, min and max (the replicate range), central 95 % percentiles (rough for
+    few values) of the finite values, and every value (None for a missing or non-finite one)."""
     vals = _finite(values)
     return {
         "n": len(vals),
+        "min": min(vals) if vals else None,
+        "max": max(vals) if vals else None,
         "median": percentile(vals, 50),
         "mean": float(np.mean(vals)) if vals else None,
         "p2.5": percentile(vals, 2.5),

@@ -1,0 +1,97 @@
+"""The sensitivity command: how far the threshold and V move within the parameters' printed precision."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+from rich.markup import escape
+from rich.table import Table
+
+from ..model.presets import load_model, load_task
+from ..solvers.sensitivity import sensitivity as run_sensitivity
+from ..vocab import check_belief_update
+from ._app import app, console, print_json
+
+
+@app.command(rich_help_panel="Plan")
+def sensitivity(
+    model: str = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file."),
+    task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
+    belief_update: str = typer.Option(
+        "paper", "--belief-update", "-u", help="Belief update of the policy: 'paper' (eq. 3, default) or 'bayes'."
+    ),
+    decimals: int = typer.Option(
+        2,
+        "--decimals",
+        "-d",
+        min=0,
+        max=12,
+        help="Printed decimals of each probability (each moves by ± half a unit of the last).",
+    ),
+    grid: int = typer.Option(401, "--grid", "-g", min=3, help="Belief grid points of each solve."),
+    samples: int = typer.Option(256, "--samples", min=0, help="Latin-hypercube points that check the optimised joint range."),
+    starts: int = typer.Option(2, "--starts", min=1, help="L-BFGS-B starts per extreme (the one-at-a-time corner first)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the sample and of random starts."),
+    model_only: bool = typer.Option(False, "--model-only", help="Leave the task's success probabilities and discount fixed."),
+    top: int = typer.Option(10, "--top", min=1, help="Parameters shown in the one-at-a-time table."),
+    plot: Path | None = typer.Option(None, "--plot", help="Write a tornado plot of the threshold to this PNG file."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
+) -> None:
+    """Range of the policy's threshold and of V when every reported parameter moves within its printed precision."""
+    check_belief_update(belief_update, "--belief-update")
+    m, t = load_model(model), load_task(task)
+    res = run_sensitivity(
+        m,
+        t,
+        decimals=decimals,
+        belief_update=belief_update,
+        grid=grid,
+        samples=samples,
+        starts=starts,
+        seed=seed,
+        include_task=not model_only,
+    )
+    if plot is not None:
+        from ..plots.sensitivity import plot_tornado
+
+        q = next(q for q in res.quantities if q.startswith("threshold"))
+        plot_tornado(res, q, plot)
+    if as_json:
+        d = res.to_dict()
+        if plot is not None:
+            d["plot"] = str(plot)
+        print_json(d)
+        return
+    h = 0.5 * 10.0**-decimals
+    console.print(
+        f"{len(res.parameters)} free parameters, each ± {h:g} around its value (clipped to [0, 1]); "
+        f"belief update {belief_update}, {grid}-point grid, {res.settings['evaluations']} solves."
+    )
+    summary = Table(title="Joint range over the box", title_justify="left")
+    for col in ("quantity", "printed values", "joint min", "joint max", f"sample of {samples}"):
+        summary.add_column(col, justify="left" if col == "quantity" else "right")
+    for q in res.quantities:
+        lo, hi = res.range_of(q)
+        s = res.sampled.get(q, {})
+        sample = escape(f"[{s['min']:.4f}, {s['max']:.4f}]") if s.get("n") else "–"
+        summary.add_row(escape(q), f"{res.nominal[q]:.4f}", f"{lo:.4f}", f"{hi:.4f}", sample)
+    console.print(summary)
+    for q in res.quantities:
+        if not q.startswith("threshold"):
+            continue
+        rows = sorted(res.one_at_a_time, key=lambda r: -abs(r["at_upper"][q] - r["at_lower"][q]))[:top]
+        table = Table(title=escape(f"One at a time: {q} (largest effects first)"), title_justify="left")
+        for col in ("parameter", "value", "box", escape(f"{q} at lower"), escape(f"{q} at upper")):
+            table.add_column(col, justify="left" if col == "parameter" else "right")
+        for r in rows:
+            table.add_row(
+                escape(r["name"]),
+                f"{r['value']:.4g}",
+                escape(f"[{r['lower']:.4g}, {r['upper']:.4g}]"),
+                f"{r['at_lower'][q]:.4f}",
+                f"{r['at_upper'][q]:.4f}",
+            )
+        console.print(table)
+    if plot is not None:
+        console.print(f"tornado plot written to {plot}")

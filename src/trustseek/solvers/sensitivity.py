@@ -1,0 +1,337 @@
+"""How much the threshold policy moves when the reported parameters move within their printed precision.
+
+A paper prints its estimates rounded (two decimals in Section V); the threshold of the optimal
+policy is a function of all of them at once, and rounding each one by up to half a unit of its
+last decimal moves it.  :func:`sensitivity` measures by how much, for any two-level trust model
+and task:
+
+* **one at a time** (a tornado): each free parameter at the lower and at the upper end of its
+  box, every other parameter at its printed value;
+* **jointly**: the smallest and largest threshold (and value) over the whole box, by L-BFGS-B
+  (:func:`scipy.optimize.minimize`, finite-difference gradients) started from the corner the
+  one-at-a-time signs point to and from the printed values, cross-checked by a Latin-hypercube
+  sample of the box (every sampled point must lie inside the optimised range).
+
+The free parameters (:func:`free_parameters`) are one probability per two-outcome row: P(T_1 =
+high); P(rely | T, C, autonomous); P(T' = high | T, E', C, a) for the experiences the task can
+produce after ``a`` (rows the design never produces, such as a reliable experience after asking
+in low complexity, are left out, and so are the ``ask`` emissions, which the design fixes: an
+asked human teleoperates); the robot's success probabilities and the discount.  Rewards are
+integers and P(C) is an assumption, not an estimate: neither moves.
+
+The quantities are the threshold on P(T = high) below which the policy asks, per complexity
+where the printed model's policy has one, and V = Σ_C P(C) V(b_1, C), the expected discounted
+reward from the initial belief.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from scipy.optimize import minimize
+from scipy.stats import qmc
+
+from ..errors import TrustseekError
+from ..model.core import ASK, AUTONOMOUS, RELY, Task, TrustModel
+from ..pomdp.problem import AssistancePOMDP
+from ..vocab import check_belief_update
+from .grid import GridSolver
+
+__all__ = [
+    "Parameter",
+    "Sensitivity",
+    "SensitivityError",
+    "evaluate",
+    "free_parameters",
+    "sensitivity",
+]
+
+#: the value quantity's name (the thresholds are ``threshold[<complexity>]``)
+VALUE = "V"
+
+
+class SensitivityError(TrustseekError, ValueError):
+    """The analysis cannot run on this model or with these settings."""
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One free printed parameter: where it lives, its printed value and its box."""
+
+    name: str
+    table: str  # "initial", "emission", "transition", "success" or "discount"
+    index: tuple[int, ...]  # the cell that holds the value (its row's other cell holds 1 - value)
+    value: float
+    lower: float
+    upper: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "table": self.table, "value": self.value, "lower": self.lower, "upper": self.upper}
+
+
+def _box(value: float, half: float, lo: float = 0.0, hi: float = 1.0) -> tuple[float, float]:
+    return max(lo, value - half), min(hi, value + half)
+
+
+def _half(decimals: int) -> float:
+    return 0.5 * 10.0 ** (-decimals)
+
+
+def free_parameters(
+    model: TrustModel,
+    task: Task,
+    decimals: int | Mapping[str, int] = 2,
+    discount_decimals: int = 3,
+    include_task: bool = True,
+) -> list[Parameter]:
+    """The free printed parameters of a two-level ``model`` and ``task`` with their boxes:
+    ± half a unit of the last printed decimal (``decimals``, per parameter name when a mapping;
+    names not in it get 2), clipped to [0, 1]."""
+    _check(model, task)
+
+    def dec(name: str) -> int:
+        return int(decimals.get(name, 2)) if isinstance(decimals, Mapping) else int(decimals)
+
+    out: list[Parameter] = []
+
+    def add(name: str, table: str, index: tuple[int, ...], value: float, half: float | None = None) -> None:
+        h = _half(dec(name)) if half is None else half
+        lo, hi = _box(value, h)
+        out.append(Parameter(name, table, index, value, lo, hi))
+
+    tl, cl = model.trust_levels, model.complexities
+    add(f"P(T1={tl[1]})", "initial", (1,), float(model.initial[1]))
+    for c, cn in enumerate(cl):
+        for t, tn in enumerate(tl):
+            add(
+                f"P(rely | T={tn}, C={cn}, autonomous)",
+                "emission",
+                (c, AUTONOMOUS, t, RELY),
+                float(model.emission[c, AUTONOMOUS, t, RELY]),
+            )
+    experience_names = ("faulty", "reliable")
+    for c, cn in enumerate(cl):
+        for a, an in ((AUTONOMOUS, "autonomous"), (ASK, "ask")):
+            experiences = (0, 1) if a == AUTONOMOUS else (task.ask_experience[c],)
+            for e in experiences:
+                for t, tn in enumerate(tl):
+                    cell = (c, a, e, t, 1)
+                    name = f"P(T'={tl[1]} | T={tn}, E'={experience_names[e]}, C={cn}, {an})"
+                    add(name, "transition", cell, float(model.transition[cell]))
+    if include_task:
+        for c, cn in enumerate(task.complexities):
+            add(f"p_suc(C={cn})", "success", (c,), float(task.success[c]))
+        g = float(task.discount)
+        lo, hi = _box(g, _half(discount_decimals), 0.0, 1.0 - 1e-9)
+        out.append(Parameter("discount", "discount", (), g, lo, hi))
+    return out
+
+
+def _check(model: TrustModel, task: Task) -> None:
+    problems = []
+    if model.n_trust != 2:
+        problems.append(
+            f"the sensitivity analysis needs a model with two trust levels (a threshold on P(trust = high)); "
+            f"this one has {model.n_trust}: {', '.join(model.trust_levels)}"
+        )
+    if tuple(model.complexities) != tuple(task.complexities):
+        problems.append(f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}")
+    if problems:
+        raise SensitivityError(problems)
+
+
+def apply(model: TrustModel, task: Task, params: Sequence[Parameter], x: Sequence[float] | np.ndarray) -> tuple[TrustModel, Task]:
+    """``model`` and ``task`` with each parameter set to the matching value of ``x``."""
+    tables = {"initial": model.initial.copy(), "emission": model.emission.copy(), "transition": model.transition.copy()}
+    success = task.success.copy()
+    discount = task.discount
+    for p, v in zip(params, x, strict=True):
+        v = float(v)
+        if p.table in tables:
+            arr = tables[p.table]
+            arr[p.index] = v
+            other = (*p.index[:-1], 1 - p.index[-1])
+            arr[other] = 1.0 - v
+        elif p.table == "success":
+            success[p.index] = v
+        elif p.table == "discount":
+            discount = v
+    m = model.replace(**tables)
+    t = replace(task, success=success, discount=discount)
+    return m, t
+
+
+def evaluate(model: TrustModel, task: Task, belief_update: str = "paper", grid: int = 401) -> dict[str, float]:
+    """The thresholds (``threshold[<complexity>]``: NaN when the policy never asks there or its ask
+    region is not [0, θ); 1 when it always asks) and V of the optimal policy of ``model`` and ``task``."""
+    policy = GridSolver(grid=grid, belief_update=belief_update).solve(AssistancePOMDP(model, task))
+    out: dict[str, float] = {}
+    for cn, th in (policy.thresholds() or {}).items():
+        out[f"threshold[{cn}]"] = float("nan") if th is None else float(th)
+    b1 = float(model.initial[1])
+    v = np.asarray(policy.value(b1), dtype=float)
+    out[VALUE] = float(np.dot(task.complexity_probs, v))
+    return out
+
+
+@dataclass
+class Sensitivity:
+    """What :func:`sensitivity` found.  ``quantities`` are the analysed names; ``nominal`` their values
+    at the printed parameters; ``one_at_a_time`` one record per parameter with each quantity at the
+    box's two ends; ``joint`` per quantity the optimised min and max with the parameters reaching
+    them; ``sampled`` per quantity the min and max over the Latin-hypercube sample."""
+
+    parameters: list[Parameter]
+    quantities: list[str]
+    nominal: dict[str, float]
+    one_at_a_time: list[dict[str, Any]]
+    joint: dict[str, dict[str, Any]]
+    sampled: dict[str, dict[str, float]]
+    settings: dict[str, Any] = field(default_factory=dict)
+
+    def range_of(self, quantity: str) -> tuple[float, float]:
+        """The joint range of ``quantity``: the optimised extremes widened by any sampled point beyond them."""
+        j, s = self.joint[quantity], self.sampled.get(quantity, {})
+        return min(j["min"], s.get("min", np.inf)), max(j["max"], s.get("max", -np.inf))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "settings": self.settings,
+            "parameters": [p.to_dict() for p in self.parameters],
+            "nominal": self.nominal,
+            "one_at_a_time": self.one_at_a_time,
+            "joint": {q: {**j, "range": list(self.range_of(q))} for q, j in self.joint.items()},
+            "sampled": self.sampled,
+        }
+
+
+def sensitivity(
+    model: TrustModel,
+    task: Task,
+    decimals: int | Mapping[str, int] = 2,
+    belief_update: str = "paper",
+    grid: int = 401,
+    samples: int = 256,
+    starts: int = 2,
+    seed: int = 0,
+    include_task: bool = True,
+    parameters: Sequence[Parameter] | None = None,
+) -> Sensitivity:
+    """The threshold(s) and V when each free parameter moves within its printed precision,
+    alone and jointly (see the module docstring).  ``samples`` Latin-hypercube points check the
+    optimiser; ``starts`` (>= 1) L-BFGS-B runs per extreme: the first from the corner the
+    one-at-a-time effects point to, the second from the printed values, further ones from
+    random points of the box."""
+    check_belief_update(belief_update)
+    if grid < 3 or samples < 0 or starts < 1:
+        raise SensitivityError([f"need grid >= 3, samples >= 0 and starts >= 1; got {grid}, {samples}, {starts}"])
+    params = list(parameters) if parameters is not None else free_parameters(model, task, decimals, include_task=include_task)
+    _check(model, task)
+    x0 = np.array([p.value for p in params])
+    lo = np.array([p.lower for p in params])
+    hi = np.array([p.upper for p in params])
+    cache: dict[bytes, dict[str, float]] = {}
+
+    def at(x: np.ndarray) -> dict[str, float]:
+        x = np.clip(x, lo, hi)
+        key = x.tobytes()
+        if key not in cache:
+            m, t = apply(model, task, params, x)
+            cache[key] = evaluate(m, t, belief_update, grid)
+        return cache[key]
+
+    nominal = at(x0)
+    quantities = [q for q, v in nominal.items() if q == VALUE or 0.0 < v < 1.0]
+    if len(quantities) == 1:
+        raise SensitivityError(
+            [
+                "the optimal policy of this model has no threshold in any complexity (it never asks, always asks, "
+                f"or asks outside an interval [0, θ)): {_fmt_thresholds(nominal)}; nothing to analyse"
+            ]
+        )
+
+    # one at a time
+    oat: list[dict[str, Any]] = []
+    for i, p in enumerate(params):
+        rec: dict[str, Any] = {"name": p.name, "value": p.value, "lower": p.lower, "upper": p.upper}
+        for end, v in (("at_lower", p.lower), ("at_upper", p.upper)):
+            x = x0.copy()
+            x[i] = v
+            r = at(x)
+            rec[end] = {q: r[q] for q in quantities}
+        oat.append(rec)
+
+    # joint: L-BFGS-B on the unit cube u -> lo + u (hi - lo)
+    width = hi - lo
+    free = width > 0
+    rng = np.random.default_rng(seed)
+
+    def to_x(u: np.ndarray) -> np.ndarray:
+        return lo + np.clip(u, 0.0, 1.0) * width
+
+    u_nominal = np.where(free, (x0 - lo) / np.where(free, width, 1.0), 0.0)
+    joint: dict[str, dict[str, Any]] = {}
+    for q in quantities:
+        effect = np.array([rec["at_upper"][q] - rec["at_lower"][q] for rec in oat])
+        effect = np.nan_to_num(effect)
+        res: dict[str, Any] = {}
+        for sense, sign in (("min", 1.0), ("max", -1.0)):
+            corner = (sign * effect < 0).astype(float)
+            inits = [corner, u_nominal] + [rng.random(len(params)) for _ in range(max(0, starts - 2))]
+            best_u, best = u_nominal, sign * nominal[q]
+            for u_init in inits[:starts]:
+
+                def f(u: np.ndarray, q: str = q, sign: float = sign) -> float:
+                    v = at(to_x(u))[q]
+                    return sign * v if np.isfinite(v) else np.inf
+
+                if np.isfinite(f(u_init)) and f(u_init) < best:
+                    best_u, best = u_init, f(u_init)
+                opt = minimize(
+                    f, u_init, method="L-BFGS-B", bounds=[(0.0, 1.0)] * len(params), options={"eps": 1e-3, "maxiter": 30}
+                )
+                if np.isfinite(opt.fun) and opt.fun < best:
+                    best_u, best = np.clip(opt.x, 0.0, 1.0), float(opt.fun)
+            x_best = to_x(best_u)
+            res[sense] = sign * best
+            res[f"{sense}_at"] = {p.name: float(v) for p, v in zip(params, x_best, strict=True)}
+        res["method"] = f"L-BFGS-B from {starts} start(s) per extreme (the one-at-a-time corner first)"
+        joint[q] = res
+
+    # Latin-hypercube check
+    sampled: dict[str, dict[str, float]] = {}
+    if samples:
+        pts = qmc.LatinHypercube(d=len(params), seed=rng).random(samples)
+        vals: dict[str, list[float]] = {q: [] for q in quantities}
+        for u in pts:
+            r = at(to_x(u))
+            for q in quantities:
+                vals[q].append(r[q])
+        for q in quantities:
+            arr = np.asarray(vals[q], dtype=float)
+            arr = arr[np.isfinite(arr)]
+            sampled[q] = {"n": len(arr), "min": float(arr.min()), "max": float(arr.max())} if len(arr) else {"n": 0}
+    return Sensitivity(
+        parameters=params,
+        quantities=quantities,
+        nominal={q: nominal[q] for q in quantities},
+        one_at_a_time=oat,
+        joint=joint,
+        sampled=sampled,
+        settings={
+            "belief_update": belief_update,
+            "grid": grid,
+            "samples": samples,
+            "starts": starts,
+            "seed": seed,
+            "decimals": dict(decimals) if isinstance(decimals, Mapping) else decimals,
+            "evaluations": len(cache),
+        },
+    )
+
+
+def _fmt_thresholds(values: Mapping[str, float]) -> str:
+    return ", ".join(f"{k} = {v:.4g}" for k, v in values.items())
