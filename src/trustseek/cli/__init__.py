@@ -22,9 +22,10 @@ from . import fit  # fit, decode, select
 from . import plan  # solve, agnostic, plot-q; preset, check
 from . import interop  # export-pomdp, solve-pomdp-file
 from . import serve  # serve, export
+from . import schedule  # schedule
 # isort: on
 
-COMMAND_MODULES = (simulate, fit, plan, interop, serve)
+COMMAND_MODULES = (simulate, fit, plan, interop, serve, schedule)
 
 #: the optional extras of pyproject.toml, by the top-level module of each of their packages
 EXTRAS = {

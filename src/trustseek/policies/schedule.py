@@ -216,17 +216,30 @@ class SchedulePolicy(PolicyBase):
             "value": self.info.get("value"),
         }
 
+    def _uniform_grid(self) -> int | None:
+        """The number of points when every Q is tabulated on the same uniform grid, else None."""
+        sizes = {len(fn.xs) for per_k in self.q.values() for fn in per_k.values()}
+        if len(sizes) != 1:
+            return None
+        g = np.linspace(0.0, 1.0, sizes.pop())
+        same = all(np.array_equal(fn.xs, g) for per_k in self.q.values() for fn in per_k.values())
+        return len(g) if same else None
+
     def to_dict(self) -> dict[str, Any]:
+        """The policy JSON; a Q tabulated on a uniform grid is written without its breakpoints
+        (``grid`` holds their number) and with values to 10 decimals."""
         assert self.model is not None
+        grid = self._uniform_grid()
         states = {}
         for s, per_k in self.q.items():
-            states[state_key(s)] = {
-                self.complexities[k]: {
-                    "x": fn.xs.tolist(),
-                    **{an: fn.values[:, a].tolist() for a, an in enumerate(ACTIONS)},
-                }
-                for k, fn in sorted(per_k.items())
-            }
+            entry = {}
+            for k, fn in sorted(per_k.items()):
+                t: dict[str, list[float]] = {} if grid is not None else {"x": fn.xs.tolist()}
+                for a, an in enumerate(ACTIONS):
+                    v = fn.values[:, a]
+                    t[an] = np.round(v, 10).tolist() if grid is not None else v.tolist()
+                entry[self.complexities[k]] = t
+            states[state_key(s)] = entry
         return {
             "format": POLICY_FORMAT,
             "kind": self.kind,
@@ -234,6 +247,7 @@ class SchedulePolicy(PolicyBase):
             "belief_update": self.belief_update,
             "counts": list(self.counts),
             "window": self.window,
+            "grid": grid,
             "info": self.info,
             "model": self.model.to_dict(),
             "states": states,
@@ -252,12 +266,16 @@ class SchedulePolicy(PolicyBase):
         if window is not None and (not isinstance(window, int) or window < 1):
             raise ModelError([f"window must be a positive integer or null, got {window!r}"], source)
         q: dict[State, dict[int, PieceQ]] = {}
+        grid = d.get("grid")
+        if grid is not None and (not isinstance(grid, int) or grid < 2):
+            raise ModelError([f"grid must be a number of points (at least 2) or null, got {grid!r}"], source)
+        uniform = None if grid is None else np.linspace(0.0, 1.0, grid)
         try:
             for key, per_k in dict(d["states"]).items():
                 s = parse_state_key(key)
                 q[s] = {}
                 for cn, t in per_k.items():
-                    xs = np.asarray(t["x"], dtype=float)
+                    xs = uniform if uniform is not None else np.asarray(t["x"], dtype=float)
                     vals = np.stack([np.asarray(t[an], dtype=float) for an in ACTIONS], axis=1)
                     if vals.shape != (len(xs), 2) or len(xs) < 2:
                         raise ValueError

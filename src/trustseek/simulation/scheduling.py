@@ -34,7 +34,7 @@ from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem
 from ..solvers.backup import finite_horizon_value
 from ..solvers.grid import GridSolver
-from ..solvers.schedule import ScheduleSolver
+from ..solvers.schedule import DEFAULT_SCHEDULE_GRID, ScheduleSolver
 from .populations import SimulationError, check_participants
 from .schedules import schedule_counts
 
@@ -55,7 +55,7 @@ def schedule_policies(
     counts: tuple[int, ...],
     belief_update: str = "bayes",
     representation: str = "grid",
-    grid: int = 1001,
+    grid: int = DEFAULT_SCHEDULE_GRID,
     names: tuple[str, ...] | None = None,
 ) -> dict[str, Policy]:
     """The policies of :data:`SCHEDULES` (or those named) for ``counts`` items."""

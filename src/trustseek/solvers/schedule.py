@@ -36,7 +36,7 @@ from .envelopes import cross_sum, max_of
 
 ORDERS = ("optimal", "easy-first", "hard-first", "alternating")
 REPRESENTATIONS = ("alpha", "grid")
-DEFAULT_SCHEDULE_GRID = 1001
+DEFAULT_SCHEDULE_GRID = 201
 #: Q of an action the rule forbids (stored finite so that policy files stay valid JSON)
 FORBIDDEN = -1e9
 
