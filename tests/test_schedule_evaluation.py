@@ -51,9 +51,12 @@ def test_window_policy_in_the_simulator_picks_only_visible_items():
 
 
 def test_report_section_numbers_and_figure(tmp_path):
+    from trustseek.plots.schedule import plot_scheduling_section
     from trustseek.reproduction.scheduling import scheduling_section
 
-    out = scheduling_section(counts=(4, 4), participants=2000, windows=(1, 2), figure=tmp_path / "s.png")
+    section = scheduling_section(counts=(4, 4), participants=2000, windows=(1, 2))
+    plot_scheduling_section(section, tmp_path / "s.png")
+    out = section.numbers
     rows = {r["schedule"]: r for r in out["schedules"]}
     assert (
         rows["optimal"]["exact_discounted"]

@@ -82,9 +82,13 @@ def schedule(
     if compare or figure is not None:
         from ..reproduction.scheduling import scheduling_section
 
-        summary["comparison"] = scheduling_section(
-            m, t, problem.counts, participants, seed, belief_update=belief_update, figure=figure
-        )
+        section = scheduling_section(m, t, problem.counts, participants, seed, belief_update=belief_update)
+        summary["comparison"] = section.numbers
+        if figure is not None:
+            from ..plots.schedule import plot_scheduling_section
+
+            plot_scheduling_section(section, figure)
+            section.numbers["figure"] = str(figure)
     if as_json:
         print_json(summary)
         return

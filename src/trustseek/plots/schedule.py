@@ -66,3 +66,11 @@ def plot_schedule(
         if path is not None:
             save(fig, path)
     return fig
+
+
+def plot_scheduling_section(section, path=None, title: str | None = None):
+    """The report section's figure: :func:`plot_schedule` of its optimal policy against the
+    paper's random order (``section``: a ``reproduction.scheduling.SchedulingSection``)."""
+    from ..reproduction.scheduling import BASELINE
+
+    return plot_schedule(section.optimal, section.runs, "optimal", BASELINE, path=path, title=title)

@@ -2,12 +2,14 @@
 of the low- and high-complexity items is worth, and what the optimal schedule does.
 
 :func:`scheduling_section` computes every number of the section for a model (the paper's by
-default, or a fitted one) and writes its figure; the report renders the returned dict.
+default, or a fitted one) and keeps the optimal policy and the simulated runs that its figure
+is drawn from (``trustseek.plots.schedule.plot_scheduling_section``; figures sit above this
+layer). The report renders ``numbers`` and the figure.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -17,7 +19,7 @@ from ..model.presets import paper_model, paper_task
 from ..policies.schedule import SchedulePolicy
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem
-from ..simulation.scheduling import exact_values, iid_value, schedule_policies, simulate_schedules
+from ..simulation.scheduling import ScheduleRuns, exact_values, iid_value, schedule_policies, simulate_schedules
 from ..solvers.schedule import ScheduleSolver
 from ..vocab import PAPER_BLOCK_COUNTS
 from .statistics import mean_ci
@@ -30,6 +32,15 @@ def _interval(v: np.ndarray) -> dict[str, float]:
     return {"mean": m, "low": lo, "high": hi}
 
 
+@dataclass
+class SchedulingSection:
+    """The section's numbers (JSON-ready), the optimal schedule policy and the simulated runs."""
+
+    numbers: dict[str, Any]
+    optimal: SchedulePolicy
+    runs: ScheduleRuns
+
+
 def scheduling_section(
     model: TrustModel | None = None,
     task: Task | None = None,
@@ -38,12 +49,11 @@ def scheduling_section(
     seed: int = 0,
     windows: tuple[int, ...] = (1, 2, 3, 5),
     belief_update: str = "bayes",
-    figure: str | Path | None = None,
-) -> dict[str, Any]:
+) -> SchedulingSection:
     """The section's numbers: exact finite-horizon values of every schedule, their simulated
     discounted and cumulative rewards on the same supervisors with 95 % intervals, the paired
     gains over the paper's random order with its trust-aware policy, the value of seeing a
-    window of w items, and a description of the optimal schedule (with ``figure`` written)."""
+    window of w items, and a description of the optimal schedule."""
     model = model or paper_model()
     task = task or paper_task()
     pomdp = AssistancePOMDP(model, task)
@@ -84,12 +94,7 @@ def scheduling_section(
         "iid_value": iid_value(pomdp, sum(counts)) if belief_update == "bayes" else None,
         "explanation": explain(optimal, runs),
     }
-    if figure is not None:
-        from ..plots.schedule import plot_schedule
-
-        plot_schedule(optimal, runs, "optimal", BASELINE, path=figure)
-        out["figure"] = str(figure)
-    return out
+    return SchedulingSection(out, optimal, runs)
 
 
 def explain(policy: SchedulePolicy, runs: Any, name: str = "optimal") -> str:
