@@ -2,6 +2,7 @@
 
 python benchmarks/run.py            # all
 python benchmarks/run.py solve fit  # only those whose name contains a word
+python benchmarks/run.py schedule   # trial scheduling, 17 + 17 (full control and a window of 3)
 """
 
 from __future__ import annotations

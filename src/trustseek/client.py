@@ -192,6 +192,19 @@ class DeploySession:
         self.action = out["robot_action"]
         return self.action
 
+    def choose(
+        self, remaining: dict[str, int], visible: dict[str, int] | None = None, trial: int | None = None
+    ) -> tuple[str, str]:
+        """For a ``schedule`` policy: tell the service which items remain (and which are visible,
+        when the policy sees a window); returns the (complexity, robot action) of the next trial."""
+        n = self.trial + 1 if trial is None else trial
+        body: dict[str, Any] = {"trial": n, "remaining": remaining}
+        if visible is not None:
+            body["visible"] = visible
+        out = _check(self.http.post(f"/api/deploy/sessions/{self.session_id}/decide", json=body, headers=self._auth()))
+        self.action = out["robot_action"]
+        return out["complexity"], out["robot_action"]
+
     def observe(self, human_action: str | None = None, outcome: str | None = None, trial: int | None = None) -> float | None:
         """Report the trial: ``human_action`` ``intervene``/``rely`` (omit when the robot asked)
         and, when the human relied, ``outcome`` ``success``/``failure``.  Returns the new belief."""

@@ -17,6 +17,7 @@ from .alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy
 from .base import POLICY_FORMAT, Policy
 from .complexity import COMPLEXITY_KINDS, ComplexityPolicy
 from .grid_q import TrustAwarePolicy
+from .schedule import SchedulePolicy
 
 Loader = Callable[[Mapping[str, Any], "str | None"], Policy]
 
@@ -26,6 +27,7 @@ POLICY_KINDS: dict[str, Loader] = {
     AlphaVectorPolicy.kind: AlphaVectorPolicy.from_dict,
     **dict.fromkeys(COMPLEXITY_KINDS, ComplexityPolicy.from_dict),
     FlatAlphaPolicy.kind: FlatAlphaPolicy.from_dict,
+    SchedulePolicy.kind: SchedulePolicy.from_dict,
 }
 
 

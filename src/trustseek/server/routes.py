@@ -432,7 +432,7 @@ def _json(out: dict) -> Response:
 
 @deploy.post(
     "/sessions/{session_id}/decide",
-    summary="Post a trial's complexity, get the robot action",
+    summary="Post a trial's complexity (or, for a schedule policy, the remaining items), get the robot action",
     openapi_extra=_BEARER,
     responses=errors(400, 404, 409),
 )
@@ -441,7 +441,7 @@ async def decide(session_id: str, body: DecideIn, request: Request):
     s = _robot(request, session_id)
     try:
         with request.app.state.engine.begin() as conn:
-            out = deploy_decide(conn, s.id, body.trial, body.complexity)
+            out = deploy_decide(conn, s.id, body.trial, body.complexity, body.remaining, body.visible)
     except SessionError as exc:
         _fail(exc)
     return _json(out)

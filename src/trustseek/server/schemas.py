@@ -115,9 +115,14 @@ class DeployIn(BaseModel):
 
 
 class DecideIn(BaseModel):
+    """A trial's complexity (the item is imposed), or, for a ``schedule`` policy, the items that
+    remain (and those visible, when the policy sees a window) so that the policy picks the item."""
+
     model_config = STRICT
     trial: int = Field(..., ge=1, le=MAX_TRIAL)
-    complexity: str = Field(..., min_length=1, max_length=32)
+    complexity: str | None = Field(None, min_length=1, max_length=32)
+    remaining: dict[str, int] | None = None
+    visible: dict[str, int] | None = None
 
 
 class ObserveIn(BaseModel):

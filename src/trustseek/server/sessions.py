@@ -29,7 +29,8 @@ from sqlalchemy.orm import Session as DBSession
 
 from ..errors import TrustseekError
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
-from ..policies import PolicyRunner
+from ..policies import PolicyError, PolicyRunner
+from ..policies.schedule import SchedulePolicy
 from .orm import Base, Event, PolicyBlob, Report, Session, Study, Trial, utcnow
 from .studies import participant_plan, policy_object
 
@@ -528,28 +529,88 @@ def deploy_context(conn: Connection, session_id: str) -> Context:
     return Context(task, model, kinds, [f"policy:{sha}"], load, None)
 
 
-def deploy_decide(conn: Connection, session_id: str, n: int, complexity: str) -> dict[str, Any]:
+def _counts(ctx: Context, counts: dict[str, int] | None, what: str) -> tuple[int, ...] | None:
+    if counts is None:
+        return None
+    unknown = sorted(set(counts) - set(ctx.task.complexities))
+    if unknown or any(not isinstance(v, int) or v < 0 for v in counts.values()):
+        raise SessionError(
+            400, f"{what} must map complexities {list(ctx.task.complexities)} to non-negative numbers, got {counts!r}"
+        )
+    return tuple(int(counts.get(c, 0)) for c in ctx.task.complexities)
+
+
+def _scheduled(ctx: Context, belief, complexity: str | None, remaining, visible) -> tuple[str, str]:
+    """(complexity, action) of a schedule policy: the policy's pick among the remaining (visible)
+    items, or the action for an imposed item in that state."""
+    pol = policy_object(ctx.keys[0], lambda: ctx.load_policy(0))
+    if not isinstance(pol, SchedulePolicy):
+        raise SessionError(400, f"remaining and visible items are for a schedule policy; this session runs a {pol.kind} policy")
+    rem = _counts(ctx, remaining, "remaining")
+    if rem is None:
+        raise SessionError(400, "a schedule policy needs the remaining items: post remaining (per complexity)")
+    vis = _counts(ctx, visible, "visible")
+    try:
+        if complexity is None:
+            k, a = pol.choose(belief, rem, vis)
+            return ctx.task.complexities[k], ACTIONS[a]
+        bound = pol.at(rem, vis)
+        return complexity, ACTIONS[bound.action(belief, ctx.task.complexity_index(complexity))]
+    except (PolicyError, KeyError) as exc:
+        raise SessionError(400, "; ".join(exc.problems) if isinstance(exc, PolicyError) else str(exc)) from None
+
+
+def deploy_decide(
+    conn: Connection,
+    session_id: str,
+    n: int,
+    complexity: str | None,
+    remaining: dict[str, int] | None = None,
+    visible: dict[str, int] | None = None,
+) -> dict[str, Any]:
     """The robot action for trial ``n`` (decided once, stored as the session's pending trial;
-    repeated calls return the stored decision).  Runs in the caller's transaction."""
+    repeated calls return the stored decision).  With ``remaining`` (a ``schedule`` policy)
+    the policy also picks the item's complexity when none is given.  Runs in the caller's
+    transaction."""
     s = _live(conn, session_id)
     ctx = deploy_context(conn, session_id)
-    if complexity not in ctx.task.complexities:
+    if complexity is not None and complexity not in ctx.task.complexities:
         raise SessionError(400, f"complexity must be one of {list(ctx.task.complexities)}, got {complexity!r}")
+    if complexity is None and remaining is None:
+        raise SessionError(400, "post the trial's complexity (or, for a schedule policy, the remaining items)")
     # trials are committed in order together with trials_done, so trial n exists iff n <= trials_done
     old = committed_trial(conn, session_id, n) if n <= s.trials_done else None
     if old is not None:
-        if old.complexity != complexity:
+        if complexity is not None and old.complexity != complexity:
             raise SessionError(409, f"trial {n} was committed with complexity {old.complexity!r}, not {complexity!r}")
-        return {"trial": n, "robot_action": old.robot_action, "belief": old.belief, "committed": True}
+        return {
+            "trial": n,
+            "complexity": old.complexity,
+            "robot_action": old.robot_action,
+            "belief": old.belief,
+            "committed": True,
+        }
     if n != s.trials_done + 1:
         raise SessionError(409, f"trial {n} is not the next trial; the next trial is {s.trials_done + 1}")
     if s.pending_trial == n:
-        if s.pending_complexity != complexity:
+        if complexity is not None and s.pending_complexity != complexity:
             raise SessionError(409, f"trial {n} was already decided for complexity {s.pending_complexity!r}, not {complexity!r}")
-        return {"trial": n, "robot_action": s.pending_action, "belief": p_high(s.belief), "committed": False}
-    action = ctx.runner(0, s.belief, s.seed, n).decide(complexity)
+        return {
+            "trial": n,
+            "complexity": s.pending_complexity,
+            "robot_action": s.pending_action,
+            "belief": p_high(s.belief),
+            "committed": False,
+        }
+    if remaining is None and ctx.kinds[0] == SchedulePolicy.kind:
+        raise SessionError(400, "a schedule policy needs the remaining items: post remaining (per complexity)")
+    if remaining is not None or visible is not None:
+        complexity, action = _scheduled(ctx, np.asarray(s.belief, dtype=float), complexity, remaining, visible)
+    else:
+        assert complexity is not None
+        action = ctx.runner(0, s.belief, s.seed, n).decide(complexity)
     conn.execute(_DECIDED, {"sid": session_id, "p_trial": n, "p_complexity": complexity, "p_action": action, "now": utcnow()})
-    return {"trial": n, "robot_action": action, "belief": p_high(s.belief), "committed": False}
+    return {"trial": n, "complexity": complexity, "robot_action": action, "belief": p_high(s.belief), "committed": False}
 
 
 def deploy_observe(

@@ -25,6 +25,7 @@ from .base import Solver, SolverError
 from .certified_grid import CertifiedGridSolver
 from .grid import DEFAULT_GRID, GridSolver
 from .point import PointSolver
+from .schedule import DEFAULT_SCHEDULE_GRID, ScheduleSolver
 
 __all__ = ["SOLVERS", "SolverEntry", "make_solver", "solve_with", "solver_names"]
 
@@ -63,6 +64,16 @@ def _trust_agnostic(horizon: int = PAPER_HORIZON) -> Solver:
     return TrustAgnosticSolver(horizon=horizon)
 
 
+def _schedule(
+    belief_update: str = "bayes",
+    representation: str = "grid",
+    schedule_grid: int = DEFAULT_SCHEDULE_GRID,
+    order: str = "optimal",
+    ask_first_hard: bool = False,
+) -> Solver:
+    return ScheduleSolver(belief_update, representation, schedule_grid, order, ask_first_hard)
+
+
 SOLVERS: dict[str, SolverEntry] = {
     e.name: e
     for e in (
@@ -71,6 +82,7 @@ SOLVERS: dict[str, SolverEntry] = {
         SolverEntry("certified-grid", _certified_grid, "certified adaptive grid for the eq.-3 update, two trust levels"),
         SolverEntry("point", _point, "point-based bounds at the initial belief, any number of trust levels, bayes update"),
         SolverEntry("trust-agnostic", _trust_agnostic, "the best policy that looks only at the complexity (Section VI-A)"),
+        SolverEntry("schedule", _schedule, "trial scheduling: the next item's complexity and the ask, finite horizon"),
     )
 }
 

@@ -1,0 +1,130 @@
+"""The ``schedule`` command: solve trial scheduling, and compare schedules."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import typer
+from rich.table import Table
+
+from ..errors import TrustseekError
+from ..model.presets import load_model, load_task
+from ..pomdp.problem import AssistancePOMDP
+from ..pomdp.scheduling import SchedulingProblem
+from ..solvers.schedule import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS, ScheduleSolver
+from ..vocab import PAPER_BLOCK_COUNTS, check_belief_update
+from ._app import app, console, print_json
+
+
+def parse_counts(text: str, complexities: tuple[str, ...]) -> tuple[int, ...]:
+    """``17,17`` (in the task's order) or ``low=17,high=17``."""
+    parts = [p.strip() for p in text.split(",") if p.strip()]
+    try:
+        if parts and all("=" in p for p in parts):
+            named = {k.strip(): int(v) for k, v in (p.split("=", 1) for p in parts)}
+            unknown = sorted(set(named) - set(complexities))
+            if unknown:
+                raise TrustseekError([f"--counts names unknown complexity {unknown[0]!r}; expected {list(complexities)}"])
+            return tuple(named.get(c, 0) for c in complexities)
+        return tuple(int(p) for p in parts)
+    except ValueError:
+        raise TrustseekError([f"--counts must be numbers like 17,17 or low=17,high=17, got {text!r}"]) from None
+
+
+@app.command(rich_help_panel="Plan")
+def schedule(
+    model: str = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file."),
+    task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
+    counts: str = typer.Option(
+        ",".join(map(str, PAPER_BLOCK_COUNTS)), "--counts", "-n", help="Items per complexity: 17,17 or low=17,high=17."
+    ),
+    window: int = typer.Option(0, "--window", "-w", min=0, help="Items the robot sees ahead (0: every item, full control)."),
+    belief_update: str = typer.Option("bayes", "--belief-update", "-u", help="Belief update: 'bayes' or 'paper' (eq. 3)."),
+    representation: str = typer.Option(
+        "grid", "--representation", help=f"Value functions: {' or '.join(REPRESENTATIONS)} (alpha: exact, bayes only)."
+    ),
+    grid: int = typer.Option(DEFAULT_SCHEDULE_GRID, "--grid", "-g", min=2, help="Belief grid points (grid representation)."),
+    order: str = typer.Option("optimal", "--order", help=f"Item order: {', '.join(ORDERS)}."),
+    ask_first_hard: bool = typer.Option(False, "--ask-first-hard", help="Always ask on the first high-complexity item."),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
+    compare: bool = typer.Option(
+        False, "--compare", help="Also compare the schedules (random order + trust-aware, optimal, heuristics)."
+    ),
+    participants: int = typer.Option(20000, "--participants", min=2, help="--compare: simulated participants."),
+    seed: int = typer.Option(0, "--seed", help="--compare: random seed."),
+    figure: Path | None = typer.Option(None, "--figure", help="--compare: write the schedule figure (PNG) here."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
+) -> None:
+    """Choose the next item's complexity jointly with asking (finite horizon, known item counts)."""
+    check_belief_update(belief_update, "--belief-update")
+    m, t = load_model(model), load_task(task)
+    pomdp = AssistancePOMDP(m, t)
+    n = parse_counts(counts, pomdp.complexities)
+    problem = SchedulingProblem.build(pomdp, n, window or None)
+    policy = ScheduleSolver(belief_update, representation, grid, order, ask_first_hard).solve(problem)
+    x0 = float(m.initial[-1])
+    first = None
+    if problem.full_control:
+        k, a = policy.choose(x0, problem.counts)
+        first = {"complexity": pomdp.complexities[k], "robot_action": ("autonomous", "ask")[a]}
+    summary: dict[str, Any] = {
+        "problem": problem.describe(),
+        "policy": policy.overview(),
+        "value": policy.info["value"],
+        "states": policy.info["states"],
+        "seconds": policy.info["seconds"],
+        "first_choice": first,
+    }
+    if out is not None:
+        policy.save(out)
+        summary["policy_file"] = str(out)
+    if compare or figure is not None:
+        from ..reproduction.scheduling import scheduling_section
+
+        section = scheduling_section(m, t, problem.counts, participants, seed, belief_update=belief_update)
+        summary["comparison"] = section.numbers
+        if figure is not None:
+            from ..plots.schedule import plot_scheduling_section
+
+            plot_scheduling_section(section, figure)
+            section.numbers["figure"] = str(figure)
+    if as_json:
+        print_json(summary)
+        return
+    console.print(f"{policy.describe()}")
+    console.print(
+        f"expected discounted reward from b0 = {x0:g}: {summary['value']:.4f} "
+        f"({summary['states']} states, {summary['seconds'] * 1000:.0f} ms)"
+    )
+    if first is not None:
+        console.print(f"first trial: a {first['complexity']} item, {first['robot_action']}")
+    if out is not None:
+        console.print(f"policy written to {out}")
+    if "comparison" in summary:
+        _print_comparison(summary["comparison"])
+
+
+def _print_comparison(sec: dict[str, Any]) -> None:
+    table = Table(
+        title=f"Schedules ({sec['participants']} simulated participants, same supervisors and queues)", title_justify="left"
+    )
+    for col in ("schedule", "exact", "discounted [95% CI]", "gain over random + trust-aware", "cumulative", "asks"):
+        table.add_column(col, justify="left" if col == "schedule" else "right")
+    for r in sec["schedules"]:
+        d, g, c = r["discounted"], r["gain_discounted"], r["cumulative"]
+        ex = "-" if r["exact_discounted"] is None else f"{r['exact_discounted']:.3f}"
+        table.add_row(
+            r["schedule"],
+            ex,
+            f"{d['mean']:.3f} [{d['low']:.3f}, {d['high']:.3f}]",
+            f"{g['mean']:+.3f} [{g['low']:+.3f}, {g['high']:+.3f}]",
+            f"{c['mean']:.2f}",
+            f"{r['asks']:.2f}",
+        )
+    console.print(table)
+    wv = ", ".join(f"w={w}: {v:.3f}" for w, v in sec["window_values"].items())
+    console.print(f"value by window: {wv}")
+    console.print(sec["explanation"])
+    if "figure" in sec:
+        console.print(f"figure written to {sec['figure']}")
