@@ -11,6 +11,8 @@ import json
 import pandas as pd
 import pytest
 from fastapi.testclient import TestClient
+from hypothesis import given, settings
+from hypothesis import strategies as st_
 
 from trustseek.data.trials import read_trials
 from trustseek.server import create_app
@@ -312,3 +314,54 @@ def test_unauthenticated_writes_are_refused_before_the_body_is_read(client):
         }
         asyncio.run(app(scope, receive, send))
         assert sent[0]["status"] == 401
+
+
+def test_migration_0002_gives_sessions_made_before_it_a_secret(tmp_path):
+    """A database at revision 0001 (no secrets) upgraded by the server: every study session gets
+    a secret of its own and goes on; the downgrade removes the new columns and table."""
+    from alembic import command
+    from alembic.config import Config
+    from sqlalchemy import create_engine, inspect, text
+
+    from trustseek.server.db import MIGRATIONS
+
+    url = f"sqlite:///{tmp_path / 'old.sqlite'}"
+    with TestClient(create_app(url, token=TOKEN)) as c:
+        st = make_study(c)
+        sids = [join(c, st["id"]) for _ in range(2)]
+    eng = create_engine(url)
+    cfg = Config()
+    cfg.set_main_option("script_location", str(MIGRATIONS))
+    with eng.begin() as conn:
+        cfg.attributes["connection"] = conn
+        command.downgrade(cfg, "0001")
+    assert "secret" not in {col["name"] for col in inspect(eng).get_columns("sessions")}
+    assert "answers" not in inspect(eng).get_table_names()
+    eng.dispose()
+    with TestClient(create_app(url, token=TOKEN)) as c:
+        with create_engine(url).connect() as conn:
+            secrets_ = conn.execute(text("select secret from sessions order by id")).scalars().all()
+        assert len(secrets_) == 2 and all(s and len(s) == 32 for s in secrets_) and len(set(secrets_)) == 2
+        sid, ph = sids[0]
+        state = c.post(f"/api/sessions/{sid}/consent", json={"agree": True}, headers=ph).json()
+        assert do_trial(c, sid, ph, state)["trial"]["trial"] == 1
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    lo=st_.integers(-5, 5),
+    width=st_.integers(1, 10),
+    n_items=st_.integers(1, 6),
+    answers=st_.dictionaries(
+        st_.sampled_from([f"i{k}" for k in range(8)]),
+        st_.one_of(st_.integers(-20, 20), st_.floats(-20, 20, allow_nan=False)),
+        max_size=8,
+    ),
+)
+def test_an_answer_is_accepted_iff_it_gives_every_item_a_point_of_the_scale(lo, width, n_items, answers):
+    from trustseek.server.sessions import answer_problems
+
+    q = {"name": "q", "items": [{"id": f"i{k}", "text": "t"} for k in range(n_items)], "scale": {"min": lo, "max": lo + width}}
+    complete = set(answers) == {f"i{k}" for k in range(n_items)}
+    on_scale = all(v in range(lo, lo + width + 1) for v in answers.values())
+    assert (answer_problems(q, answers) == []) == (complete and on_scale)

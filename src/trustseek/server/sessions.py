@@ -299,11 +299,11 @@ def trial_dict(t: Trial) -> dict[str, Any]:
 
 
 #: what a participant's page learns of a committed trial: never the belief or the experience
-PARTICIPANT_TRIAL = ("trial", "block", "complexity", "robot_action", "human_action", "outcome", "reward", "practice")
+PARTICIPANT_TRIAL = ("trial", "block", "complexity", "robot_action", "human_action", "outcome", "reward")
 
 
 def participant_trial(t: Trial) -> dict[str, Any]:
-    return {"trial": t.trial, **{k: getattr(t, k) for k in PARTICIPANT_TRIAL[1:]}, "practice": bool(t.practice)}
+    return {**{k: getattr(t, k) for k in PARTICIPANT_TRIAL}, "practice": bool(t.practice)}
 
 
 def _experience(task: Task, c: int, action: str, human: str | None, success: bool | None) -> str:
@@ -508,6 +508,21 @@ def ended(db: DBSession, s: Session, cfg: dict[str, Any]) -> bool:
     return s.status == "done" and report_due(db, s, cfg) is None and questionnaire_due(db, s, cfg) is None
 
 
+def answer_problems(q: dict[str, Any], answers: dict[str, float]) -> list[str]:
+    """Why ``answers`` is not a complete answer to questionnaire ``q`` (empty when it is): every
+    item answered, no other, each with a whole point of the scale."""
+    ids = [i["id"] for i in q["items"]]
+    problems = []
+    missing, unknown = [i for i in ids if i not in answers], sorted(set(answers) - set(ids))
+    if missing or unknown:
+        problems.append(f"answer every item of {q['name']!r}: missing {missing}, unknown {unknown}")
+    lo, hi = q["scale"]["min"], q["scale"]["max"]
+    bad = {k: v for k, v in answers.items() if k in ids and not (lo <= v <= hi and float(v).is_integer())}
+    if bad:
+        problems.append(f"answers must be whole points of the scale {lo}..{hi}, got {bad}")
+    return problems
+
+
 def add_answers(
     db: DBSession, s: Session, cfg: dict[str, Any], name: str, after_trial: int, answers: dict[str, float]
 ) -> tuple[list[Answer], bool]:
@@ -516,14 +531,10 @@ def add_answers(
     q = next((q for q in cfg.get("questionnaires") or () if q["name"] == name), None)
     if q is None:
         raise SessionError(404, f"this study has no questionnaire {name!r}")
+    problems = answer_problems(q, answers)
+    if problems:
+        raise SessionError(400, "; ".join(problems))
     ids = [i["id"] for i in q["items"]]
-    missing, unknown = [i for i in ids if i not in answers], sorted(set(answers) - set(ids))
-    if missing or unknown:
-        raise SessionError(400, f"answer every item of {name!r}: missing {missing}, unknown {unknown}")
-    lo, hi = q["scale"]["min"], q["scale"]["max"]
-    bad = {k: v for k, v in answers.items() if not (lo <= v <= hi and float(v).is_integer())}
-    if bad:
-        raise SessionError(400, f"answers must be whole points of the scale {lo}..{hi}, got {bad}")
     old = db.scalars(
         select(Answer).where(Answer.session_id == s.id, Answer.questionnaire == name, Answer.after_trial == after_trial)
     ).all()
