@@ -116,3 +116,12 @@ def check_policies_decide_after_restart(db_url: str, token: str, rewrite=None) -
             assert nxt.status_code == 200, (p["kind"], nxt.text)
     finally:
         srv.close()
+
+
+def experimenter_view(client, study_id: str, session_id: str, headers: dict) -> dict:
+    """The last committed trial of a session as the experimenter's dashboard shows it (with the
+    belief and the experience, which the participant's page never receives)."""
+    dash = client.get(f"/api/studies/{study_id}/dashboard", headers=headers)
+    assert dash.status_code == 200, dash.text
+    (row,) = [r for r in dash.json()["participants"] if r["session_id"] == session_id]
+    return row["last"]

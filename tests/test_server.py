@@ -11,7 +11,7 @@ import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import create_engine, text
 
-from server_checks import check_concurrent_duplicate_submissions
+from server_checks import check_concurrent_duplicate_submissions, experimenter_view
 from trustseek import BayesUpdate, paper_model, paper_task, solve
 from trustseek.client import Client, ServerError
 from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
@@ -184,8 +184,9 @@ def test_trust_aware_policy_runs_live_with_the_exact_bayes_filter(client):
         assert (cur["trial"], cur["complexity"], cur["robot_action"]) == (n, cx, expected)
         if expected == "ask":
             human = "intervene"
-        res = submit(client, sid, ph, n, human).json()["trial"]
-        assert res["belief"] == pytest.approx(b[1], abs=1e-12)
+        assert "belief" not in submit(client, sid, ph, n, human).json()["trial"]
+        res = experimenter_view(client, st["id"], sid, H)
+        assert res["trial"] == n and res["belief"] == pytest.approx(b[1], abs=1e-12)
         o = HUMAN_ACTIONS.index(human)
         b = upd.update(b, c, ACTIONS.index(expected), o, EXPERIENCES.index(res["experience"]))
         assert res["belief_after"] == pytest.approx(b[1], abs=1e-12)
@@ -318,7 +319,7 @@ def test_migrations_run_once_and_are_idempotent(db_url, tmp_path):
     create_app(db_url, token=TOKEN)  # a restart: nothing to do, nothing lost
     eng = create_engine(db_url)
     with eng.connect() as c:
-        assert c.execute(text("select version_num from alembic_version")).scalars().all() == ["0001"]
+        assert c.execute(text("select version_num from alembic_version")).scalars().all() == ["0002"]
         tables = set(c.execute(text("select name from sqlite_master where type='table'")).scalars())
     assert {"studies", "sessions", "trials", "reports", "events"} <= tables
 

@@ -49,7 +49,8 @@ def test_exported_study_is_fitted(tmp_path):
                     headers=ph,
                 ).json()["trial"]
                 a = 0 if t["robot_action"] == "autonomous" else 1
-                e = 1 if t["experience"] == "reliable" else 0
+                # the experience (Section III): success, or a request to help in high complexity
+                e = 1 if t["outcome"] == "success" or (a == 1 and cx == 1) else 0
                 trust = int(rng.random() < model.transition[cx, a, e, trust, 1])
     out = tmp_path / "study.parquet"
     res = CliRunner().invoke(app, ["export", st["id"], "--db", db, "--out", str(out)])

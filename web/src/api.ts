@@ -2,17 +2,24 @@
 // every call.  Trial submissions carry a client-made submission id, so a retry after a network
 // error cannot create a second trial.
 
-export interface Current { trial: number; block: number; block_position: number; complexity: string; robot_action: "autonomous" | "ask"; scene_seed: number; }
+export interface Current { trial: number; block: number; block_position: number; practice: boolean; complexity: string; robot_action: "autonomous" | "ask"; scene_seed: number; }
+export interface Questionnaire {
+  name: string; when: "trial" | "block" | "end"; title: string; after_trial: number;
+  scale: { min: number; max: number; anchors: string[] }; items: { id: string; text: string }[];
+}
 export interface State {
   session_id: string; participant: string; status: "new" | "running" | "done"; study: string;
   trials_total: number; trials_done: number; score: number; blocks: string[];
   current: Current | null; report_due: number | null; self_report: "none" | "trial" | "block";
+  questionnaire: Questionnaire | null; ended: boolean; completion: { code: string; redirect_url: string | null } | null;
+  panel_params: string[]; practice_trials: number;
   animation_speed: number; consent_text: string | null; instructions: string | null;
   rewards: { autonomous_success: number; ask: number; intervene: number; autonomous_failure: number };
 }
 export interface TrialResult {
+  // what the page learns of a committed trial: never the trust belief or the experience
   trial: number; complexity: string; robot_action: string; human_action: string | null; outcome: string;
-  experience: string; reward: number; belief: number | null; belief_after: number | null;
+  reward: number; practice: boolean;
 }
 export interface UIEvent { t: number; type: string; trial?: number; data?: Record<string, unknown>; }
 
@@ -62,12 +69,17 @@ export class Api {
   }
 
   state(): Promise<State> { return this.call("GET", `/api/sessions/${this.sessionId}/state`); }
-  consent(events: UIEvent[]): Promise<State> { return this.call("POST", `/api/sessions/${this.sessionId}/consent`, { agree: true, events }); }
+  consent(events: UIEvent[], panel: Record<string, string> = {}): Promise<State> {
+    return this.call("POST", `/api/sessions/${this.sessionId}/consent`, { agree: true, events, panel });
+  }
   submitTrial(body: { trial: number; submission_id: string; human_action: "intervene" | "rely"; effort_ms: number | null; events: UIEvent[] }) {
     return this.call<{ trial: TrialResult; duplicate: boolean; state: State }>("POST", `/api/sessions/${this.sessionId}/trials`, body, 8);
   }
   report(after_trial: number, value: number) {
     return this.call<{ state: State }>("POST", `/api/sessions/${this.sessionId}/reports`, { after_trial, value });
+  }
+  answer(questionnaire: string, after_trial: number, answers: Record<string, number>) {
+    return this.call<{ state: State }>("POST", `/api/sessions/${this.sessionId}/questionnaires`, { questionnaire, after_trial, answers });
   }
   events(events: UIEvent[]) { return this.call("POST", `/api/sessions/${this.sessionId}/events`, { events }); }
 }

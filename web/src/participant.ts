@@ -5,14 +5,14 @@
 // this page animates it, lets the participant intervene or teleoperate, and reports back.
 // `?speed=4` multiplies every motion (the study's animation_speed is multiplied in too).
 
-import { Api, ApiError, Current, State, TrialResult, UIEvent } from "./api";
+import { Api, ApiError, Current, Questionnaire, State, TrialResult, UIEvent } from "./api";
 import { gamepadName, installKeyboard, poll } from "./input";
 import {
   AISLE_H, ARM_MAX, BASE_H, REACH, SHELF_DEPTH, ItemState, Layout, RobotState, View, clampRobot, drawEndEffector, drawLocal, drawWorld,
   gripperPos, makeLayout, pathLength, pointAlong,
 } from "./scene";
 
-type Phase = "loading" | "consent" | "instructions" | "approach" | "reach" | "waiting" | "outcome" | "teleop" | "result" | "report" | "done" | "error";
+type Phase = "loading" | "consent" | "instructions" | "approach" | "reach" | "waiting" | "outcome" | "teleop" | "result" | "report" | "questionnaire" | "done" | "error";
 
 const $ = <T extends HTMLElement = HTMLElement>(id: string) => document.getElementById(id) as T;
 const token = decodeURIComponent(location.pathname.split("/").filter(Boolean).pop() ?? "");
@@ -20,6 +20,7 @@ const api = new Api(token);
 const speedParam = parseFloat(new URLSearchParams(location.search).get("speed") ?? "1");
 
 let st: State;
+let shownScore = 0; // the score on screen: it changes when the outcome is shown, not when it is known
 let speed = 1;
 let phase: Phase = "loading";
 let current: Current | null = null;
@@ -64,7 +65,8 @@ function setPhase(p: Phase) {
   else if (p === "done") $("screen-done").hidden = false;
   else if (p !== "loading" && p !== "error") $("screen-task").hidden = false;
   $("screen-report").hidden = p !== "report";
-  if (p === "report" || p === "done") hintUntil = 0;
+  $("screen-questionnaire").hidden = p !== "questionnaire";
+  if (p === "report" || p === "questionnaire" || p === "done") hintUntil = 0;
   renderStatus();
 }
 
@@ -92,6 +94,7 @@ async function boot() {
     return;
   }
   speed = (isFinite(speedParam) && speedParam > 0 ? speedParam : 1) * st.animation_speed;
+  shownScore = st.score;
   if (st.consent_text) $("consent-text").textContent = st.consent_text;
   if (st.instructions) $("instructions-text").textContent = st.instructions;
   const rw = st.rewards;
@@ -107,7 +110,12 @@ async function boot() {
   });
   $("intervene-btn").addEventListener("click", () => intervene("button"));
   $("report-btn").addEventListener("click", onReport);
-  $<HTMLInputElement>("report-slider").addEventListener("input", (e) => ($("report-value").textContent = (e.target as HTMLInputElement).value));
+  $("questionnaire-btn").addEventListener("click", onQuestionnaire);
+  $<HTMLInputElement>("report-slider").addEventListener("input", (e) => {
+    // an answer is required: the button is enabled once the slider has been moved
+    $("report-value").textContent = (e.target as HTMLInputElement).value;
+    $<HTMLButtonElement>("report-btn").disabled = false;
+  });
   requestAnimationFrame(frame);
   if (st.status === "new") setPhase("consent");
   else route();
@@ -119,21 +127,41 @@ function fmtReward(x: number) {
 
 async function onConsent() {
   $<HTMLButtonElement>("consent-btn").disabled = true;
-  st = await api.consent([{ t: Date.now(), type: "consent" }]);
+  // an online panel's ids arrive in the link's query (PROLIFIC_PID, STUDY_ID, SESSION_ID, ...)
+  const query = new URLSearchParams(location.search);
+  const panel: Record<string, string> = {};
+  for (const k of st.panel_params) {
+    const v = query.get(k);
+    if (v) panel[k] = v.slice(0, 200);
+  }
+  st = await api.consent([{ t: Date.now(), type: "consent" }], panel);
   setPhase("instructions");
 }
 
 function route() {
-  if (st.status === "done" && st.report_due === null) return finish();
+  shownScore = st.score;
+  if (st.ended) return finish();
   if (st.report_due !== null) return askReport();
+  if (st.questionnaire) return askQuestionnaire(st.questionnaire);
   if (st.current) return startTrial(st.current);
   finish();
 }
 
 function finish() {
   $("final-score").textContent = String(st.score);
-  $("final-trials").textContent = String(st.trials_done);
+  $("final-trials").textContent = String(st.trials_done - st.practice_trials);
   setPhase("done");
+  const c = st.completion;
+  if (c) {
+    $("completion-code").textContent = c.code;
+    $("completion").hidden = false;
+    if (c.redirect_url) {
+      const link = $<HTMLAnchorElement>("completion-link");
+      link.href = c.redirect_url;
+      link.hidden = false;
+      setTimeout(() => location.assign(c.redirect_url!), 4000);
+    }
+  }
 }
 
 function startTrial(cur: Current) {
@@ -143,6 +171,7 @@ function startTrial(cur: Current) {
   intervened = false;
   submissionId = `${api.sessionId}-${cur.trial}-${Math.random().toString(36).slice(2, 10)}`;
   layout = makeLayout(cur.scene_seed, cur.complexity === "high");
+  $("banner").className = "cut"; // the last trial's banner is gone before this trial starts
   const bin = robot.binCount;
   robot = freshRobot(layout);
   robot.binCount = bin;
@@ -210,19 +239,21 @@ function showBanner() {
     teleoperated: o.robot_action === "ask" ? "Collected with your help" : "You took over and collected the item",
   };
   const b = $("banner");
-  b.innerHTML = `<span class="pts ${o.reward > 0 ? "pos" : o.reward < 0 ? "neg" : ""}">${r}</span> ${text[o.outcome] ?? o.outcome}`;
+  b.innerHTML = `<span class="pts ${o.reward > 0 ? "pos" : o.reward < 0 ? "neg" : ""}">${r}</span> ${text[o.outcome] ?? o.outcome}${o.practice ? " (practice: not scored)" : ""}`;
   b.className = "show";
+  shownScore = st.score;
   api.events([{ t: Date.now(), type: "outcome_shown", trial: o.trial, data: { outcome: o.outcome, reward: o.reward } }]).catch(() => undefined);
 }
 
 function afterResult() {
-  $("banner").className = "";
+  $("banner").className = "cut";
   route();
 }
 
 function askReport() {
   $<HTMLInputElement>("report-slider").value = "50";
-  $("report-value").textContent = "50";
+  $("report-value").textContent = "\u2013";
+  $<HTMLButtonElement>("report-btn").disabled = true;
   $("report-scope").textContent = st.self_report === "block" ? "this block" : "this trial";
   setPhase("report");
 }
@@ -233,8 +264,79 @@ async function onReport() {
   try {
     const res = await api.report(st.report_due!, v);
     st = res.state;
-  } finally {
+  } catch (e) {
     $<HTMLButtonElement>("report-btn").disabled = false;
+    showError(`Could not save your answer: ${(e as Error).message}`);
+    return;
+  }
+  route();
+}
+
+let asked: Questionnaire | null = null;
+
+function askQuestionnaire(q: Questionnaire) {
+  asked = q;
+  $("questionnaire-title").textContent = q.title || "Please answer every question.";
+  const [lo, hi] = [q.scale.anchors[0] ?? String(q.scale.min), q.scale.anchors[1] ?? String(q.scale.max)];
+  const body = $("questionnaire-items");
+  body.replaceChildren();
+  for (const item of q.items) {
+    const row = document.createElement("fieldset");
+    row.className = "q-item";
+    const legend = document.createElement("legend");
+    legend.textContent = item.text;
+    row.append(legend);
+    const scale = document.createElement("div");
+    scale.className = "q-scale";
+    const left = document.createElement("span");
+    left.textContent = lo;
+    scale.append(left);
+    for (let v = q.scale.min; v <= q.scale.max; v++) {
+      const label = document.createElement("label");
+      const input = document.createElement("input");
+      input.type = "radio";
+      input.name = `q-${item.id}`;
+      input.value = String(v);
+      input.dataset.item = item.id;
+      input.addEventListener("change", updateQuestionnaireButton);
+      label.append(input, document.createTextNode(String(v)));
+      scale.append(label);
+    }
+    const right = document.createElement("span");
+    right.textContent = hi;
+    scale.append(right);
+    row.append(scale);
+    body.append(row);
+  }
+  updateQuestionnaireButton();
+  setPhase("questionnaire");
+}
+
+function questionnaireAnswers(): Record<string, number> {
+  const out: Record<string, number> = {};
+  for (const input of Array.from(document.querySelectorAll<HTMLInputElement>("#questionnaire-items input:checked"))) {
+    out[input.dataset.item!] = Number(input.value);
+  }
+  return out;
+}
+
+function updateQuestionnaireButton() {
+  const n = Object.keys(questionnaireAnswers()).length;
+  const total = asked ? asked.items.length : 0;
+  $<HTMLButtonElement>("questionnaire-btn").disabled = n < total;
+  $("questionnaire-progress").textContent = `${n} of ${total} answered`;
+}
+
+async function onQuestionnaire() {
+  const q = asked!;
+  $<HTMLButtonElement>("questionnaire-btn").disabled = true;
+  try {
+    const res = await api.answer(q.name, q.after_trial, questionnaireAnswers());
+    st = res.state;
+  } catch (e) {
+    updateQuestionnaireButton();
+    showError(`Could not save your answers: ${(e as Error).message}`);
+    return;
   }
   route();
 }
@@ -416,7 +518,7 @@ function renderStatus() {
   } else if (phase === "result") {
     mode = "Trial complete";
     cls = "idle";
-  } else if (phase === "report") {
+  } else if (phase === "report" || phase === "questionnaire") {
     mode = "Your rating, please";
     cls = "idle";
   }
@@ -428,16 +530,16 @@ function renderStatus() {
   }
   if (!h && (phase === "approach" || phase === "reach")) h = "Watch the robot. Intervene (Space) if you think it will fail.";
   const pad = gamepadName();
-  const key = [trial, st.trials_total, st.score, mode, cls, h, pad, phase, current?.complexity].join("|");
+  const key = [trial, st.trials_total, shownScore, mode, cls, h, pad, phase, current?.complexity].join("|");
   if (key === lastStatus) return;
   lastStatus = key;
   $("trial-no").textContent = `${trial} / ${st.trials_total}`;
-  $("score").textContent = String(st.score);
+  $("score").textContent = String(shownScore);
   const m = $("mode");
   m.textContent = mode;
   m.className = `mode ${cls}`;
   $("hint").textContent = h;
-  $("block-name").textContent = current ? `Block ${current.block_position} of ${st.blocks.length}` : "";
+  $("block-name").textContent = !current ? "" : current.practice ? "Practice trial" : `Block ${current.block_position} of ${st.blocks.length}`;
   $("gamepad").textContent = pad ? `Gamepad: ${pad.slice(0, 40)}` : "No gamepad (keyboard works)";
   $<HTMLButtonElement>("intervene-btn").disabled = !(phase === "approach" || phase === "reach");
 }
@@ -446,7 +548,8 @@ function renderStatus() {
   state: () => ({
     phase, trial: current?.trial ?? null, robot_action: current?.robot_action ?? null, complexity: current?.complexity ?? null,
     robot: { x: robot.x, y: robot.y, arm: robot.arm, holding: robot.holding }, item: { x: item.x, y: item.y, inBin: item.inBin },
-    gripper: gripperPos(robot, layout.side), reach: REACH, side: layout.side, score: st?.score ?? null,
+    gripper: gripperPos(robot, layout.side), reach: REACH, side: layout.side, score: st?.score ?? null, shown_score: shownScore,
+    practice: current?.practice ?? null,
   }),
 };
 

@@ -17,7 +17,7 @@ from fastapi.staticfiles import StaticFiles
 
 from ..version import __version__
 from .db import DEFAULT_URL, open_database, safe_url
-from .middleware import RequestLog, ServerTiming
+from .middleware import BodyGuard, RequestLog, ServerTiming
 from .routes import deploy, experimenter, own, participant
 
 STATIC = Path(__file__).resolve().parent.parent / "static" / "app"
@@ -73,6 +73,7 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     app.state.public_url = public_url
     app.state.tokens = {}  # session token -> Caller
     app.add_exception_handler(RequestValidationError, validation_error)
+    app.add_middleware(BodyGuard)
     app.add_middleware(RequestLog)
     app.add_middleware(ServerTiming)
     app.include_router(deploy)  # first: the decision API is matched without trying the others

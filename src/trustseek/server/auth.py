@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import secrets
 from dataclasses import dataclass
+from typing import Any
 
 from fastapi import Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
@@ -35,17 +36,25 @@ class Caller:
     kind: str
 
 
-def session_for_token(request: Request, token: str) -> Caller:
-    cache: dict[str, Caller] = request.app.state.tokens
+def caller_for_token(state: Any, token: str) -> Caller | None:
+    """The session of a session token, or None; ``state`` is the application's state."""
+    cache: dict[str, Caller] = state.tokens
     caller = cache.get(token)
     if caller is None:
-        with request.app.state.db() as db:
+        with state.db() as db:
             row = db.execute(select(Session.id, Session.kind).where(Session.token == token)).first()
         if row is None:
-            raise HTTPException(401, "unknown session token")
+            return None
         if len(cache) > 100_000:
             cache.clear()
         caller = cache[token] = Caller(row.id, row.kind)
+    return caller
+
+
+def session_for_token(request: Request, token: str) -> Caller:
+    caller = caller_for_token(request.app.state, token)
+    if caller is None:
+        raise HTTPException(401, "unknown session token")
     return caller
 
 

@@ -3,14 +3,22 @@ UI events to an events table.
 
 Trial columns: ``participant, trial, complexity, robot_action, human_action, experience``
 (canonical, in that order), then ``block, block_name, policy, outcome, reward, belief,
-belief_after, effort_ms, self_report, study, session, committed_at``.  ``belief`` is
-P(trust = high) when the action was decided, ``belief_after`` after the trial's update.
-When the robot asks, the human teleoperates, recorded as ``intervene``.
+belief_after, effort_ms, self_report, study, session, committed_at, practice, session_trial``.
+``belief`` is P(trust = high) when the action was decided, ``belief_after`` after the trial's
+update.  When the robot asks, the human teleoperates, recorded as ``intervene``.
+
+Practice trials are left out of the analysis log (the default), whose ``trial`` counts the
+analysed trials from 1; ``session_trial`` is the trial's number in the session (practice
+included), the numbering of the events, the full log (``practice=True``) and the reports.
+
+The reports table is long: one row per self-report or questionnaire item, with the analysed
+trial it follows (``trial``, empty after practice) so that it joins the trial log.
 """
 
 from __future__ import annotations
 
 import io
+import json
 from pathlib import Path
 
 import pandas as pd
@@ -19,7 +27,7 @@ from sqlalchemy.orm import Session as DBSession
 
 from ..data.trials import write_trials
 from ..vocab import TRIAL_COLUMNS
-from .orm import Event, Report, Session, Study, Trial
+from .orm import Answer, Event, Report, Session, Study, Trial
 
 CANONICAL = list(TRIAL_COLUMNS)
 EXTRA = [
@@ -35,6 +43,35 @@ EXTRA = [
     "study",
     "session",
     "committed_at",
+    "practice",
+    "session_trial",
+]
+REPORT_COLUMNS = [
+    "participant",
+    "trial",
+    "session_trial",
+    "block",
+    "block_name",
+    "questionnaire",
+    "when",
+    "item",
+    "value",
+    "reverse",
+    "study",
+    "session",
+    "answered_at",
+]
+SESSION_COLUMNS = [
+    "participant",
+    "session",
+    "status",
+    "trials_done",
+    "score",
+    "seed",
+    "secret",
+    "block_order",
+    "panel",
+    "created_at",
 ]
 EVENT_COLUMNS = ["participant", "session", "trial", "client_time", "server_time", "type", "data"]
 
@@ -54,12 +91,24 @@ def escape_formulas(frame: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
-def trials_frame(db: DBSession, study: Study) -> pd.DataFrame:
-    names = [b["name"] for b in study.config["blocks"]]
+def _block_names(study: Study) -> list[str]:
+    return [b["name"] for b in study.config["blocks"]] + ["practice"]
+
+
+def _practice_counts(db: DBSession, study: Study) -> dict[str, int]:
+    """Practice trials per session (they come first, so analysed trial = session trial - count)."""
+    n = len((study.config.get("practice") or {}).get("trials", []))
+    return dict.fromkeys(db.scalars(select(Session.id).where(Session.study_id == study.id)), n)
+
+
+def trials_frame(db: DBSession, study: Study, practice: bool = False) -> pd.DataFrame:
+    """The study's trial log: the analysed trials, or every trial with ``practice=True``."""
+    names = _block_names(study)
+    skip = _practice_counts(db, study)
     rows = db.execute(
         select(Trial, Session.participant)
         .join(Session, Trial.session_id == Session.id)
-        .where(Session.study_id == study.id)
+        .where(Session.study_id == study.id, *(() if practice else (Trial.practice.is_(False),)))
         .order_by(Session.participant, Trial.trial)
     ).all()
     reports = {
@@ -69,7 +118,7 @@ def trials_frame(db: DBSession, study: Study) -> pd.DataFrame:
     data = [
         {
             "participant": p,
-            "trial": t.trial,
+            "trial": t.trial if practice else t.trial - skip.get(t.session_id, 0),
             "complexity": t.complexity,
             "robot_action": t.robot_action,
             "human_action": t.human_action,
@@ -86,6 +135,8 @@ def trials_frame(db: DBSession, study: Study) -> pd.DataFrame:
             "study": study.id,
             "session": t.session_id,
             "committed_at": t.created_at.isoformat() + "Z",
+            "practice": bool(t.practice),
+            "session_trial": t.trial,
         }
         for t, p in rows
     ]
@@ -97,6 +148,68 @@ def trials_frame(db: DBSession, study: Study) -> pd.DataFrame:
     frame["self_report"] = frame["self_report"].astype("float64")
     frame["effort_ms"] = frame["effort_ms"].astype("float64")
     return frame
+
+
+def answers_frame(db: DBSession, study: Study) -> pd.DataFrame:
+    """Every self-report (0-100 slider, questionnaire ``self_report``, item ``trust``) and every
+    questionnaire item, one row each, next to the analysed trial each follows."""
+    names = _block_names(study)
+    skip = _practice_counts(db, study)
+    reverse = {(q["name"], i["id"]): bool(i.get("reverse")) for q in study.config.get("questionnaires") or () for i in q["items"]}
+    data: list[tuple[str, str, str, float, bool, Report | Answer, str]] = []
+    for r, p in db.execute(
+        select(Report, Session.participant).join(Session, Report.session_id == Session.id).where(Session.study_id == study.id)
+    ).all():
+        data.append(("self_report", r.scope, "trust", r.value, False, r, p))
+    for a, p in db.execute(
+        select(Answer, Session.participant).join(Session, Answer.session_id == Session.id).where(Session.study_id == study.id)
+    ).all():
+        data.append((a.questionnaire, a.when, a.item, a.value, reverse.get((a.questionnaire, a.item), False), a, p))
+    rows = [
+        {
+            "participant": p,
+            "trial": r.after_trial - skip.get(r.session_id, 0),
+            "session_trial": r.after_trial,
+            "block": r.block + 1,
+            "block_name": names[r.block],
+            "questionnaire": q,
+            "when": when,
+            "item": item,
+            "value": value,
+            "reverse": rev,
+            "study": study.id,
+            "session": r.session_id,
+            "answered_at": r.created_at.isoformat() + "Z",
+        }
+        for q, when, item, value, rev, r, p in data
+    ]
+    frame = pd.DataFrame(rows, columns=REPORT_COLUMNS)
+    frame = frame.sort_values(["participant", "session_trial", "questionnaire"], kind="stable").reset_index(drop=True)
+    frame["trial"] = frame["trial"].astype("int64")
+    frame["value"] = frame["value"].astype("float64")
+    return frame
+
+
+def sessions_frame(db: DBSession, study: Study) -> pd.DataFrame:
+    """One row per participant: status, the panel's ids (JSON) and the seed and secret that
+    reproduce the session's plan, actions, outcomes and scenes."""
+    names = _block_names(study)
+    rows = [
+        {
+            "participant": s.participant,
+            "session": s.id,
+            "status": s.status,
+            "trials_done": s.trials_done,
+            "score": s.score,
+            "seed": s.seed,
+            "secret": s.secret,
+            "block_order": json.dumps([names[b] for b in s.plan["block_order"]]),
+            "panel": json.dumps(s.panel or {}),
+            "created_at": s.created_at.isoformat() + "Z",
+        }
+        for s in db.scalars(select(Session).where(Session.study_id == study.id).order_by(Session.participant))
+    ]
+    return pd.DataFrame(rows, columns=SESSION_COLUMNS)
 
 
 def events_frame(db: DBSession, study: Study) -> pd.DataFrame:

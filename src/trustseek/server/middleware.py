@@ -1,4 +1,5 @@
-"""ASGI middleware of the experiment server: response timing and the request log.
+"""ASGI middleware of the experiment server: response timing, the request log, and the guard
+that authenticates writes and caps their size before any body is read.
 
 Both are plain ASGI wrappers (no per-request objects beyond a closure), so the latency-critical
 decision API pays next to nothing for them.
@@ -6,10 +7,14 @@ decision API pays next to nothing for them.
 
 from __future__ import annotations
 
+import json
 import logging
+import secrets
 import time
 from collections.abc import Awaitable, Callable, MutableMapping
 from typing import Any
+
+from .auth import caller_for_token
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]
@@ -78,3 +83,73 @@ class RequestLog:
             # the traceback is the ASGI server's to print; this line says which request it was
             log.error("%s failed: %s: %s", request_context(scope), type(exc).__name__, exc)
             raise
+
+
+#: the largest request body of a session (participant or robot) and of the experimenter
+SESSION_BODY_LIMIT = 256 * 1024
+EXPERIMENTER_BODY_LIMIT = 16 * 1024 * 1024
+_WRITES = frozenset({"POST", "PUT", "PATCH", "DELETE"})
+
+
+async def _refuse(send: Send, status: int, detail: str, headers: tuple = ()) -> None:
+    body = json.dumps({"detail": detail}).encode()
+    head = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode()), *headers]
+    await send({"type": "http.response.start", "status": status, "headers": head})
+    await send({"type": "http.response.body", "body": body})
+
+
+class BodyGuard:
+    """Every write to ``/api/`` is authenticated before its body is read: no bearer token is a
+    401, a token that is neither the experimenter's nor a session's is refused (401 on session
+    paths, 403 elsewhere) without reading the body.  Bodies are then read up to a bound (a
+    session's ``SESSION_BODY_LIMIT``, the experimenter's ``EXPERIMENTER_BODY_LIMIT``); a larger
+    one, declared or streamed, is a 413.  Which session a token may write to is the routes' check."""
+
+    def __init__(self, app: ASGIApp):
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http" or scope.get("method") not in _WRITES or not scope.get("path", "").startswith("/api/"):
+            return await self.app(scope, receive, send)
+        state = scope["app"].state
+        headers = dict(scope.get("headers") or ())
+        scheme, _, token = headers.get(b"authorization", b"").decode("latin-1").partition(" ")
+        token = token.strip()
+        if scheme.lower() != "bearer" or not token:
+            return await _refuse(
+                send, 401, "missing token: send 'Authorization: Bearer <token>'", ((b"www-authenticate", b"Bearer"),)
+            )
+        if secrets.compare_digest(token.encode(), state.token.encode()):
+            limit = EXPERIMENTER_BODY_LIMIT
+        elif caller_for_token(state, token) is not None:
+            limit = SESSION_BODY_LIMIT
+        else:
+            path = scope["path"]
+            on_session = path.startswith(("/api/sessions/", "/api/deploy/sessions/"))
+            return await _refuse(
+                send, 401 if on_session else 403, "unknown session token" if on_session else "wrong experimenter token"
+            )
+        declared = headers.get(b"content-length")
+        if declared is not None and (not declared.isdigit() or int(declared) > limit):
+            return await _refuse(send, 413, f"the request body must be at most {limit} bytes")
+        chunks, size = [], 0
+        while True:
+            message = await receive()
+            if message["type"] != "http.request":  # the client went away
+                return
+            size += len(message.get("body", b""))
+            if size > limit:
+                return await _refuse(send, 413, f"the request body must be at most {limit} bytes")
+            chunks.append(message.get("body", b""))
+            if not message.get("more_body"):
+                break
+        body, replayed = b"".join(chunks), False
+
+        async def replay() -> Message:
+            nonlocal replayed
+            if not replayed:
+                replayed = True
+                return {"type": "http.request", "body": body, "more_body": False}
+            return await receive()
+
+        await self.app(scope, replay, send)

@@ -7,6 +7,7 @@ migrations in ``migrations/``; these classes mirror it.
   live belief and the trial that is currently served.
 * ``Trial``    -- one committed trial; unique per (session, trial number).
 * ``Report``   -- a trust self-report (after a trial or a block).
+* ``Answer``   -- one item of a questionnaire answered after a trial, a block or the session.
 * ``Event``    -- a timestamped user-interface event.
 * ``PolicyBlob`` -- a policy JSON used by deploy sessions, stored once by its hash.
 """
@@ -15,7 +16,7 @@ from __future__ import annotations
 
 from datetime import UTC, datetime
 
-from sqlalchemy import JSON, Float, ForeignKey, Integer, String, Text, UniqueConstraint
+from sqlalchemy import JSON, Boolean, Float, ForeignKey, Integer, String, Text, UniqueConstraint
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 
@@ -56,6 +57,11 @@ class Session(Base):
     study_id: Mapped[str | None] = mapped_column(ForeignKey("studies.id"), index=True, nullable=True)
     participant: Mapped[str] = mapped_column(String(200))
     seed: Mapped[int] = mapped_column(Integer)
+    # study sessions: the secret (hex) that outcomes and scene layouts are drawn from; never sent
+    # to the participant's page (the experimenter's export holds it, to reproduce a session)
+    secret: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    # online panels: the panel's ids taken from the participant link's query (PROLIFIC_PID, ...)
+    panel: Mapped[dict | None] = mapped_column(JSON, nullable=True)
     # study sessions: block order and per-block complexity lists; deploy sessions: model/task/policy
     plan: Mapped[dict] = mapped_column(JSON, deferred=True)
     status: Mapped[str] = mapped_column(String(16), default="new")  # new, running, done
@@ -89,6 +95,7 @@ class Trial(Base):
     belief: Mapped[float | None] = mapped_column(Float, nullable=True)  # P(trust=high) at the decision
     belief_after: Mapped[float | None] = mapped_column(Float, nullable=True)
     effort_ms: Mapped[float | None] = mapped_column(Float, nullable=True)
+    practice: Mapped[bool] = mapped_column(Boolean, default=False)  # practice trials: logged, not analysed
     submission_id: Mapped[str] = mapped_column(String(64))
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
@@ -102,6 +109,23 @@ class Report(Base):
     after_trial: Mapped[int] = mapped_column(Integer)
     block: Mapped[int] = mapped_column(Integer)
     scope: Mapped[str] = mapped_column(String(8))  # "trial" or "block"
+    value: Mapped[float] = mapped_column(Float)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Answer(Base):
+    """One item of a questionnaire (``docs/experiments.md``), answered after trial ``after_trial``."""
+
+    __tablename__ = "answers"
+    __table_args__ = (UniqueConstraint("session_id", "questionnaire", "after_trial", "item", name="uq_answer"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    session_id: Mapped[str] = mapped_column(ForeignKey("sessions.id"), index=True)
+    questionnaire: Mapped[str] = mapped_column(String(100))
+    when: Mapped[str] = mapped_column(String(8))  # "trial", "block" or "end"
+    after_trial: Mapped[int] = mapped_column(Integer)
+    block: Mapped[int] = mapped_column(Integer)
+    item: Mapped[str] = mapped_column(String(100))
     value: Mapped[float] = mapped_column(Float)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 

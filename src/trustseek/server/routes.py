@@ -14,11 +14,12 @@ from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 
 from .auth import Caller, bearer, require_experimenter, require_session, session_for_token, token_of
-from .export import events_csv, events_frame, to_bytes, trials_frame
+from .export import answers_frame, events_csv, events_frame, sessions_frame, to_bytes, trials_frame
 from .orm import Report, Session, Study, Trial, utcnow
-from .schemas import ConsentIn, DecideIn, DeployIn, ErrorOut, EventsIn, ObserveIn, ReportIn, SessionsIn, TrialIn
+from .schemas import AnswersIn, ConsentIn, DecideIn, DeployIn, ErrorOut, EventsIn, ObserveIn, ReportIn, SessionsIn, TrialIn
 from .sessions import (
     SessionError,
+    add_answers,
     add_events,
     add_report,
     committed_trial,
@@ -26,9 +27,12 @@ from .sessions import (
     create_participant,
     deploy_decide,
     deploy_observe,
+    ended,
     lock,
     new_id,
     p_high,
+    participant_trial,
+    questionnaire_due,
     report_due,
     serve,
     study_config,
@@ -45,7 +49,9 @@ _WHY = {
     401: "No token, or an unknown token.",
     403: "The token is not the experimenter's, or belongs to another session.",
     404: "No such study or session.",
-    409: "The session's state does not allow it (not the current trial, a conflicting repeat, the wrong kind of session).",
+    409: "The session's state does not allow it (not the current trial, a conflicting repeat, the wrong kind of session, "
+    "a session that has ended).",
+    413: "The body is too large, or the session already holds as many events as it may.",
 }
 
 
@@ -57,7 +63,7 @@ def errors(*codes: int) -> dict[int | str, dict[str, Any]]:
 experimenter = APIRouter(
     prefix="/api", tags=["experimenter"], dependencies=[Depends(require_experimenter)], responses=errors(401, 403)
 )
-participant = APIRouter(prefix="/api/sessions", tags=["participant"], responses=errors(401, 403, 409))
+participant = APIRouter(prefix="/api/sessions", tags=["participant"], responses=errors(401, 403, 409, 413))
 deploy = APIRouter(prefix="/api/deploy", tags=["deploy"], responses=errors(401, 403))
 own = APIRouter(prefix="/api", tags=["participant"], responses=errors(401, 409))
 
@@ -225,23 +231,30 @@ def dashboard(study_id: str, request: Request):
 
 @experimenter.get(
     "/studies/{study_id}/export",
-    summary="Export trials (canonical trial log) or UI events",
-    description="CSV or Parquet.  In the CSV of the events table, text cells that a spreadsheet would read as a "
-    "formula (starting with = + - @, a tab or a carriage return) are prefixed with ' (literal text), and "
-    "lines end with CRLF (RFC 4180).",
+    summary="Export trials (canonical trial log), self-reports, sessions or UI events",
+    description="CSV or Parquet.  ``trials``: the analysis trial log (what ``trustseek fit`` reads), without "
+    "practice trials unless ``practice=true``; ``reports``: every self-report and questionnaire item, one row "
+    "each (long format), next to the trial it follows; ``sessions``: one row per participant with the panel ids "
+    "and the seed and secret that reproduce the session.  In the CSV of the events, reports and sessions tables, "
+    "text cells that a spreadsheet would read as a formula (starting with = + - @, a tab or a carriage return) "
+    "are prefixed with ' (literal text), and lines end with CRLF (RFC 4180).",
     responses=errors(404),
 )
 def export(
     study_id: str,
     request: Request,
-    table: str = Query("trials", pattern="^(trials|events)$"),
+    table: str = Query("trials", pattern="^(trials|events|reports|sessions)$"),
     format: str = Query("csv", pattern="^(csv|parquet)$"),
+    practice: bool = Query(False, description="Trials: include the practice trials (the full log)."),
 ):
     with _db(request) as db:
         st = _study(db, study_id)
-        frame = trials_frame(db, st) if table == "trials" else events_frame(db, st)
-    # the events' text comes from participants' browsers: formulas escaped, CR/LF quoted
-    content = events_csv(frame) if table == "events" and format == "csv" else to_bytes(frame, format)
+        if table == "trials":
+            frame = trials_frame(db, st, practice=practice)
+        else:
+            frame = {"events": events_frame, "reports": answers_frame, "sessions": sessions_frame}[table](db, st)
+    # text from participants' browsers: formulas escaped, CR/LF quoted
+    content = events_csv(frame) if table != "trials" and format == "csv" else to_bytes(frame, format)
     media = "text/csv" if format == "csv" else "application/vnd.apache.parquet"
     name = f"{st.id}-{table}.{format}"
     return Response(content, media_type=media, headers={"Content-Disposition": f'attachment; filename="{name}"'})
@@ -261,9 +274,18 @@ def session_state(request: Request, s_id: str) -> dict:
         if s.kind != "study":
             raise HTTPException(409, "this is a deploy session; use /api/deploy")
         cfg = study_config(db, s.study_id)
-        current = serve(db, s)
         due = report_due(db, s, cfg)
+        asked = questionnaire_due(db, s, cfg) if due is None else None
+        # the next trial is served once the self-report and questionnaires it follows are answered
+        current = serve(db, s) if due is None and asked is None else None
         blocks = s.plan["block_order"]
+        panel = cfg.get("panel")
+        over = s.status == "done" and due is None and asked is None
+        completion = None
+        if over and panel:
+            code = panel["completion_code"]
+            url = (panel.get("redirect_url") or "").replace("{completion_code}", code) or None
+            completion = {"code": code, "redirect_url": url}
         return {
             "session_id": s.id,
             "participant": s.participant,
@@ -275,6 +297,11 @@ def session_state(request: Request, s_id: str) -> dict:
             "blocks": [cfg["blocks"][b]["name"] for b in blocks],
             "current": current,
             "report_due": due,
+            "questionnaire": asked,
+            "ended": over,
+            "completion": completion,
+            "panel_params": panel["id_params"] if panel else [],
+            "practice_trials": len(cfg["practice"]["trials"]) if cfg.get("practice") else 0,
             "self_report": cfg["self_report"],
             "animation_speed": cfg["animation_speed"],
             "consent_text": cfg.get("consent_text"),
@@ -302,14 +329,25 @@ def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depe
     _study_session(s)
     with _db(request) as db:
         row = lock(db, s.id)
+        cfg = study_config(db, str(row.study_id))
         started = row.status == "new"
         if started:
+            wanted = (cfg.get("panel") or {}).get("id_params", [])
+            ids = {k: v for k, v in body.panel.items() if k in wanted}
             row.status, row.consented_at, row.updated_at = "running", utcnow(), utcnow()
+            row.panel = ids or None
+        elif ended(db, row, cfg):
+            db.rollback()
+            raise HTTPException(409, "this session has ended")
         db.commit()
         if started:
             log.info("session %s of study %s started (consent given)", row.id, row.study_id)
         if body.events:
-            add_events(db, row, [e.model_dump() for e in body.events])
+            try:
+                add_events(db, row, [e.model_dump() for e in body.events])
+            except SessionError as exc:
+                db.rollback()
+                _fail(exc)
     return session_state(request, s.id)
 
 
@@ -324,7 +362,7 @@ def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Dep
         except SessionError as exc:
             db.rollback()
             _fail(exc)
-        result = trial_dict(t)
+        result = participant_trial(t)
     return {"trial": result, "duplicate": dup, "state": session_state(request, s.id)}
 
 
@@ -335,6 +373,8 @@ def post_report(session_id: str, body: ReportIn, request: Request, s: Caller = D
         row = db.get(Session, s.id)
         cfg = study_config(db, row.study_id) if row.study_id else {}
         try:
+            if ended(db, row, cfg):
+                raise SessionError(409, "this session has ended")
             rep, dup = add_report(db, row, cfg, body.after_trial, body.value)
         except SessionError as exc:
             db.rollback()
@@ -343,10 +383,36 @@ def post_report(session_id: str, body: ReportIn, request: Request, s: Caller = D
     return {"report": out, "state": session_state(request, s.id)}
 
 
+@participant.post(
+    "/{session_id}/questionnaires", summary="Answer a questionnaire (every item, on its scale)", responses=errors(400, 404)
+)
+def post_answers(session_id: str, body: AnswersIn, request: Request, s: Caller = Depends(require_session)):
+    _study_session(s)
+    with _db(request) as db:
+        row = db.get(Session, s.id)
+        cfg = study_config(db, row.study_id)
+        try:
+            if ended(db, row, cfg):
+                raise SessionError(409, "this session has ended")
+            rows, dup = add_answers(db, row, cfg, body.questionnaire, body.after_trial, body.answers)
+        except SessionError as exc:
+            db.rollback()
+            _fail(exc)
+        out = {"questionnaire": body.questionnaire, "after_trial": body.after_trial, "items": len(rows), "duplicate": dup}
+    return {"answers": out, "state": session_state(request, s.id)}
+
+
 @participant.post("/{session_id}/events", summary="Log UI events")
 def post_events(session_id: str, body: EventsIn, request: Request, s: Caller = Depends(require_session)):
     with _db(request) as db:
-        n = add_events(db, db.get(Session, s.id), [e.model_dump() for e in body.events])
+        row = db.get(Session, s.id)
+        try:
+            if row.kind == "study" and ended(db, row, study_config(db, row.study_id)):
+                raise SessionError(409, "this session has ended")
+            n = add_events(db, row, [e.model_dump() for e in body.events])
+        except SessionError as exc:
+            db.rollback()
+            _fail(exc)
     return {"stored": n}
 
 

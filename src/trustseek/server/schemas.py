@@ -7,6 +7,7 @@ every integer has an upper bound, so that nothing overflows a database column.
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any, Literal
 
@@ -16,6 +17,8 @@ from ..model.presets import MODEL_PRESETS, TASK_PRESETS
 
 #: the largest trial number the API accepts (a deploy session may run for a long time)
 MAX_TRIAL = 10**7
+#: the largest ``data`` of one UI event, as compact JSON
+MAX_EVENT_DATA = 4096
 
 STRICT = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
 
@@ -50,7 +53,10 @@ class EventIn(BaseModel):
     @field_validator("data")
     @classmethod
     def _finite(cls, v):
-        return finite_json(v)
+        finite_json(v)
+        if len(json.dumps(v, separators=(",", ":"))) > MAX_EVENT_DATA:
+            raise ValueError(f"an event's data must be at most {MAX_EVENT_DATA} characters of JSON")
+        return v
 
 
 class SessionsIn(BaseModel):
@@ -63,6 +69,16 @@ class ConsentIn(BaseModel):
     model_config = STRICT
     agree: Literal[True]
     events: list[EventIn] = Field(default_factory=list, max_length=5000)
+    panel: dict[str, str] = Field(
+        default_factory=dict, max_length=10, description="An online panel's ids from the link's query (PROLIFIC_PID, ...)."
+    )
+
+    @field_validator("panel")
+    @classmethod
+    def _short(cls, v):
+        if any(not k or len(k) > 100 or len(x) > 200 for k, x in v.items()):
+            raise ValueError("panel ids: names of at most 100 characters, values of at most 200")
+        return v
 
     @field_validator("agree", mode="before")
     @classmethod
@@ -85,6 +101,13 @@ class ReportIn(BaseModel):
     model_config = STRICT
     after_trial: int = Field(..., ge=1, le=100000)
     value: float = Field(..., ge=0, le=100, description="Trust self-report on a 0-100 slider.")
+
+
+class AnswersIn(BaseModel):
+    model_config = STRICT
+    questionnaire: str = Field(..., min_length=1, max_length=100)
+    after_trial: int = Field(..., ge=1, le=100000)
+    answers: dict[str, float] = Field(..., min_length=1, max_length=100, description="Item id -> a point of the scale.")
 
 
 class EventsIn(BaseModel):

@@ -6,9 +6,11 @@ Integrity rules:
 
 * a trial is committed (one database transaction with the belief update) before the next
   trial is served;
-* the served trial is stored in the session row, and its action and outcome come from
-  generators seeded by (session seed, trial number), so a restarted server serves and
-  scores exactly what it would have before;
+* the served trial is stored in the session row; its action comes from a generator seeded by
+  (session seed, trial number) and its outcome and scene layout from keys derived from the
+  session's secret (HMAC-SHA256 with a different label each), so a restarted server serves and
+  scores exactly what it would have before, and nothing the participant's page receives
+  (the scene seed included) says anything about an outcome before it is shown;
 * trial numbers are unique per session: a repeated submission returns the stored trial,
   a conflicting one is refused.
 """
@@ -16,6 +18,7 @@ Integrity rules:
 from __future__ import annotations
 
 import hashlib
+import hmac
 import json
 import logging
 import secrets
@@ -31,13 +34,16 @@ from ..errors import TrustseekError
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
 from ..policies import PolicyError, PolicyRunner
 from ..policies.schedule import SchedulePolicy
-from .orm import Base, Event, PolicyBlob, Report, Session, Study, Trial, utcnow
+from .orm import Answer, Base, Event, PolicyBlob, Report, Session, Study, Trial, utcnow
 from .studies import participant_plan, policy_object
 
 log = logging.getLogger(__name__)
 
 OUTCOMES = ("success", "collision", "dropped", "teleoperated")
 MAX_EVENTS_PER_POST = 5000
+#: stored UI events per trial (events outside any trial count together) and per session
+MAX_EVENTS_PER_TRIAL = 2000
+MAX_EVENTS_PER_SESSION = 50_000
 
 
 class SessionError(TrustseekError):
@@ -55,6 +61,25 @@ def new_token() -> str:
 
 def new_id() -> str:
     return secrets.token_hex(8)
+
+
+def sealed(secret: str, label: str, n: int) -> int:
+    """A 128-bit number derived from the session's ``secret`` for ``label`` (``"outcome"``,
+    ``"scene"``) and trial ``n``: HMAC-SHA256, so that one label's numbers say nothing about
+    another's, and none can be computed without the secret."""
+    digest = hmac.new(bytes.fromhex(secret), f"{label}:{n}".encode(), hashlib.sha256).digest()
+    return int.from_bytes(digest[:16], "big")
+
+
+def scene_seed(s: Session, n: int) -> int:
+    """The seed of trial ``n``'s scene layout (sent to the page)."""
+    return sealed(s.secret, "scene", n) % 2**31 if s.secret else (s.seed * 1000003 + n) % 2**31
+
+
+def outcome_draws(s: Session, n: int) -> np.ndarray:
+    """The two uniform numbers of trial ``n``'s outcome (success, then the kind of failure)."""
+    rng = np.random.default_rng(sealed(s.secret, "outcome", n) if s.secret else [s.seed, n, 1])
+    return rng.random(2)
 
 
 def p_high(belief) -> float | None:
@@ -116,7 +141,7 @@ def context(db: DBSession, s: Session) -> Context:
             cached = _CONTEXTS[key] = (
                 Task.from_dict(cfg["task"]),
                 TrustModel.from_dict(cfg["model"]),
-                [b["policy"]["kind"] for b in cfg["blocks"]],
+                [_block_policy(cfg, b)["kind"] for b in range(len(cfg["blocks"]) + bool(cfg.get("practice")))],
             )
         task, model, kinds = cached
         return Context(
@@ -124,10 +149,15 @@ def context(db: DBSession, s: Session) -> Context:
             model,
             kinds,
             [f"{key}:{i}" for i in range(len(kinds))],
-            lambda b: study_config(db, study_id)["blocks"][b]["policy"],
+            lambda b: _block_policy(study_config(db, study_id), b),
             s.plan["trials"],
         )
     raise SessionError(409, "this is a deploy session; use /api/deploy")
+
+
+def _block_policy(cfg: dict[str, Any], b: int) -> dict[str, Any]:
+    """Block ``b``'s policy; the index after the study's blocks is the practice block's."""
+    return cfg["blocks"][b]["policy"] if b < len(cfg["blocks"]) else cfg["practice"]["policy"]
 
 
 def total_trials(s: Session) -> int | None:
@@ -152,6 +182,7 @@ def create_participant(db: DBSession, study: Study, participant: str | None) -> 
         study_id=study.id,
         participant=label,
         seed=seed,
+        secret=secrets.token_hex(16),
         plan=plan,
         status="new",
         belief=[float(x) for x in model.initial],
@@ -238,13 +269,15 @@ def served(s: Session, n: int) -> dict[str, Any]:
     """Trial ``n`` as served to the participant (``n`` is the session's pending trial)."""
     step = s.plan["trials"][n - 1]
     blocks = s.plan["block_order"]
+    practice = bool(step.get("practice"))
     return {
         "trial": n,
         "block": step["block"],
-        "block_position": blocks.index(step["block"]) + 1,
+        "block_position": 0 if practice else blocks.index(step["block"]) + 1,
+        "practice": practice,
         "complexity": s.pending_complexity,
         "robot_action": s.pending_action,
-        "scene_seed": (s.seed * 1000003 + n) % 2**31,
+        "scene_seed": scene_seed(s, n),
     }
 
 
@@ -266,6 +299,14 @@ def trial_dict(t: Trial) -> dict[str, Any]:
     }
 
 
+#: what a participant's page learns of a committed trial: never the belief or the experience
+PARTICIPANT_TRIAL = ("trial", "block", "complexity", "robot_action", "human_action", "outcome", "reward")
+
+
+def participant_trial(t: Trial) -> dict[str, Any]:
+    return {**{k: getattr(t, k) for k in PARTICIPANT_TRIAL}, "practice": bool(t.practice)}
+
+
 def _experience(task: Task, c: int, action: str, human: str | None, success: bool | None) -> str:
     if action == "ask":
         return EXPERIENCES[task.ask_experience[c]]
@@ -284,6 +325,8 @@ def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: in
     a = ACTIONS.index(row.robot_action)
     o = HUMAN_ACTIONS.index(row.human_action) if row.human_action is not None else 1
     row.reward = float(ctx.task.rewards.of(a, o, EXPERIENCES.index(row.experience)))
+    if row.practice:  # practice leaves the belief and the score as they were
+        after, row.belief_after = None, row.belief
     db.add(row)
     for ev in events or []:
         db.add(
@@ -297,7 +340,7 @@ def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: in
         )
     s.belief = [float(x) for x in after] if after is not None else s.belief
     s.trials_done = row.trial
-    s.score = float(s.score + row.reward)
+    s.score = float(s.score + (0.0 if row.practice else row.reward))
     s.pending_trial = s.pending_complexity = s.pending_action = None
     total = total_trials(s)
     if total is not None and row.trial >= total:
@@ -339,6 +382,9 @@ def submit_trial(
         raise SessionError(409, f"the session is {s.status!r}, not running" + (" (consent first)" if s.status == "new" else ""))
     if n != s.trials_done + 1:
         raise SessionError(409, f"trial {n} is not the current trial; the current trial is {s.trials_done + 1}")
+    cfg = study_config(db, s.study_id) if s.study_id else {}
+    if report_due(db, s, cfg) is not None or questionnaire_due(db, s, cfg) is not None:
+        raise SessionError(409, f"answer the questions after trial {s.trials_done} before trial {n}")
     action, complexity = s.pending_action, s.pending_complexity
     if s.pending_trial != n or action is None or complexity is None:
         raise SessionError(409, f"trial {n} has not been served yet; fetch the session state first")
@@ -352,7 +398,7 @@ def submit_trial(
     step = ctx.step(n)
     c = ctx.task.complexity_index(complexity)
     if action == "autonomous" and human_action == "rely":
-        r = np.random.default_rng([s.seed, n, 1]).random(2)
+        r = outcome_draws(s, n)
         success = bool(r[0] < ctx.task.success[c])
         outcome = "success" if success else ("collision" if r[1] < 0.5 else "dropped")
     else:
@@ -368,8 +414,10 @@ def submit_trial(
         outcome=outcome,
         experience=_experience(ctx.task, c, action, human_action, success),
         effort_ms=effort_ms,
+        practice=bool(step.get("practice")),
         submission_id=submission_id,
     )
+    check_event_room(db, s, events or [], n)
     committed = _commit_trial(db, s, row, ctx, step["block"], events)
     if committed is not None:
         return committed, False
@@ -393,16 +441,25 @@ def _replayed(old: Trial, n: int, submission_id: str, human_action: str | None) 
     return old
 
 
+def _asked_after(s: Session, when: str, n: int) -> bool:
+    """Whether a self-report or questionnaire asked ``when`` ("trial", "block", "end") is asked
+    after trial ``n`` (never after a practice trial)."""
+    trials = s.plan["trials"]
+    if when == "none" or not 1 <= n <= len(trials) or trials[n - 1].get("practice"):
+        return False
+    if when == "block":
+        return n == len(trials) or trials[n]["block"] != trials[n - 1]["block"]
+    if when == "end":
+        return n == len(trials)
+    return True
+
+
 def report_due(db: DBSession, s: Session, cfg: dict[str, Any]) -> int | None:
     """The trial after which a self-report is still expected, or None."""
     mode = cfg.get("self_report", "none")
     n = s.trials_done
-    if mode == "none" or n == 0:
+    if not _asked_after(s, mode, n):
         return None
-    if mode == "block":
-        trials = s.plan["trials"]
-        if n < len(trials) and trials[n]["block"] == trials[n - 1]["block"]:
-            return None
     if db.scalar(select(Report.id).where(Report.session_id == s.id, Report.after_trial == n)):
         return None
     return n
@@ -419,6 +476,8 @@ def add_report(db: DBSession, s: Session, cfg: dict[str, Any], after_trial: int,
         raise SessionError(409, f"a self-report after trial {after_trial} is already stored (value {old.value:g})")
     if not 1 <= after_trial <= s.trials_done:
         raise SessionError(409, f"after_trial must be a committed trial (1..{s.trials_done}), got {after_trial}")
+    if not _asked_after(s, mode, after_trial):
+        raise SessionError(409, f"no self-report is asked after trial {after_trial} (self_report: {mode!r})")
     block = s.plan["trials"][after_trial - 1]["block"]
     rep = Report(session_id=s.id, after_trial=after_trial, block=block, scope=mode, value=value)
     db.add(rep)
@@ -433,7 +492,107 @@ def add_report(db: DBSession, s: Session, cfg: dict[str, Any], after_trial: int,
     return rep, False
 
 
+def questionnaire_due(db: DBSession, s: Session, cfg: dict[str, Any]) -> dict[str, Any] | None:
+    """The first of the study's questionnaires still to be answered after the last committed
+    trial (with ``after_trial``), or None."""
+    n = s.trials_done
+    for q in cfg.get("questionnaires") or ():
+        if _asked_after(s, q["when"], n) and not db.scalar(
+            select(Answer.id).where(Answer.session_id == s.id, Answer.questionnaire == q["name"], Answer.after_trial == n)
+        ):
+            return {**q, "after_trial": n}
+    return None
+
+
+def ended(db: DBSession, s: Session, cfg: dict[str, Any]) -> bool:
+    """Whether the session is over: every trial committed and nothing left to answer."""
+    return s.status == "done" and report_due(db, s, cfg) is None and questionnaire_due(db, s, cfg) is None
+
+
+def answer_problems(q: dict[str, Any], answers: dict[str, float]) -> list[str]:
+    """Why ``answers`` is not a complete answer to questionnaire ``q`` (empty when it is): every
+    item answered, no other, each with a whole point of the scale."""
+    ids = [i["id"] for i in q["items"]]
+    problems = []
+    missing, unknown = [i for i in ids if i not in answers], sorted(set(answers) - set(ids))
+    if missing or unknown:
+        problems.append(f"answer every item of {q['name']!r}: missing {missing}, unknown {unknown}")
+    lo, hi = q["scale"]["min"], q["scale"]["max"]
+    bad = {k: v for k, v in answers.items() if k in ids and not (lo <= v <= hi and float(v).is_integer())}
+    if bad:
+        problems.append(f"answers must be whole points of the scale {lo}..{hi}, got {bad}")
+    return problems
+
+
+def add_answers(
+    db: DBSession, s: Session, cfg: dict[str, Any], name: str, after_trial: int, answers: dict[str, float]
+) -> tuple[list[Answer], bool]:
+    """Store a questionnaire's answers (every item, each a point of its scale); returns
+    (answers, duplicate).  A repeat of stored answers is a duplicate; different ones are refused."""
+    q = next((q for q in cfg.get("questionnaires") or () if q["name"] == name), None)
+    if q is None:
+        raise SessionError(404, f"this study has no questionnaire {name!r}")
+    problems = answer_problems(q, answers)
+    if problems:
+        raise SessionError(400, "; ".join(problems))
+    ids = [i["id"] for i in q["items"]]
+    old = db.scalars(
+        select(Answer).where(Answer.session_id == s.id, Answer.questionnaire == name, Answer.after_trial == after_trial)
+    ).all()
+    if old:
+        if {a.item: a.value for a in old} == {k: float(v) for k, v in answers.items()}:
+            return list(old), True
+        raise SessionError(409, f"{name!r} after trial {after_trial} is already answered, with other answers")
+    if not 1 <= after_trial <= s.trials_done or not _asked_after(s, q["when"], after_trial):
+        raise SessionError(409, f"{name!r} is not asked after trial {after_trial}")
+    block = s.plan["trials"][after_trial - 1]["block"]
+    rows = [
+        Answer(
+            session_id=s.id,
+            questionnaire=name,
+            when=q["when"],
+            after_trial=after_trial,
+            block=block,
+            item=i,
+            value=float(answers[i]),
+        )
+        for i in ids
+    ]
+    db.add_all(rows)
+    try:
+        db.commit()
+    except IntegrityError:
+        db.rollback()
+        raise SessionError(409, f"{name!r} after trial {after_trial} was answered concurrently; fetch the state") from None
+    return rows, False
+
+
+def check_event_room(db: DBSession, s: Session, events: list[dict], trial: int | None = None) -> None:
+    """Refuse (413) events beyond the per-trial and per-session bounds."""
+    if not events:
+        return
+    total = db.scalar(select(func.count()).select_from(Event).where(Event.session_id == s.id)) or 0
+    if total + len(events) > MAX_EVENTS_PER_SESSION:
+        raise SessionError(413, f"this session already holds {total} events; at most {MAX_EVENTS_PER_SESSION} are stored")
+    per: dict[int | None, int] = {}
+    for ev in events:
+        k = trial if trial is not None else ev.get("trial")
+        per[k] = per.get(k, 0) + 1
+    for k, m in per.items():
+        have = (
+            db.scalar(
+                select(func.count())
+                .select_from(Event)
+                .where(Event.session_id == s.id, Event.trial.is_(None) if k is None else Event.trial == k)
+            )
+            or 0
+        )
+        if have + m > MAX_EVENTS_PER_TRIAL:
+            raise SessionError(413, f"trial {k} already has {have} events; at most {MAX_EVENTS_PER_TRIAL} are stored per trial")
+
+
 def add_events(db: DBSession, s: Session, events: list[dict]) -> int:
+    check_event_room(db, s, events)
     for ev in events:
         db.add(
             Event(

@@ -16,6 +16,7 @@ study, so a study keeps behaving identically whatever the code later computes.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
@@ -60,6 +61,66 @@ class BlockIn(BaseModel):
     schedule: Schedule
 
 
+class PracticeIn(BaseModel):
+    """Practice trials before the first block: logged (``practice`` true), left out of the
+    analysis export, scored nowhere, and without effect on the trust belief."""
+
+    model_config = STRICT
+    trials: list[str] = Field(..., min_length=1, max_length=50, description="The practice trials' complexities, in order.")
+    policy: dict[str, Any] = Field(default_factory=lambda: {"kind": "never-ask"}, description="The robot's policy in practice.")
+
+
+class ScaleIn(BaseModel):
+    model_config = STRICT
+    min: int = Field(1, ge=-1000, le=1000)
+    max: int = Field(7, ge=-1000, le=1000)
+    anchors: list[str] = Field(default_factory=list, max_length=2, description="Labels of the two ends.")
+
+    @model_validator(mode="after")
+    def _range(self):
+        if not 1 <= self.max - self.min <= 100:
+            raise ValueError(f"a scale needs between 2 and 101 points, got {self.min}..{self.max}")
+        return self
+
+
+class ItemIn(BaseModel):
+    model_config = STRICT
+    id: str = Field(..., min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
+    text: str = Field(..., min_length=1, max_length=1000)
+    reverse: bool = False
+
+
+class QuestionnaireIn(BaseModel):
+    """A questionnaire asked after every trial, after every block or at the end; either its
+    items and scale, or ``template`` (a shipped questionnaire: ``questionnaire_templates()``)."""
+
+    model_config = STRICT
+    name: str | None = Field(None, min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
+    when: Literal["trial", "block", "end"] = "end"
+    template: str | None = None
+    title: str | None = Field(None, max_length=1000)
+    items: list[ItemIn] | None = Field(None, min_length=1, max_length=100)
+    scale: ScaleIn | None = None
+
+    @model_validator(mode="after")
+    def _one(self):
+        if (self.template is None) == (self.items is None):
+            raise ValueError("a questionnaire needs exactly one of 'template' or 'items'")
+        if self.items is not None and len({i.id for i in self.items}) != len(self.items):
+            raise ValueError("questionnaire item ids must be unique")
+        return self
+
+
+class PanelIn(BaseModel):
+    """An online panel (Prolific and the like): the completion code and the redirect shown at the
+    end, and the query parameters of the participant link that carry the panel's ids."""
+
+    model_config = STRICT
+    completion_code: str = Field(..., min_length=1, max_length=100)
+    redirect_url: str | None = Field(None, max_length=2000, pattern=r"^https?://")
+    id_params: list[str] = Field(default_factory=lambda: ["PROLIFIC_PID", "STUDY_ID", "SESSION_ID"], max_length=10)
+
+
 class StudyIn(BaseModel):
     model_config = STRICT
     name: str = Field(..., min_length=1, max_length=200)
@@ -72,6 +133,9 @@ class StudyIn(BaseModel):
     seed: int = Field(0, ge=0, lt=2**31)
     consent_text: str | None = Field(None, max_length=20000)
     instructions: str | None = Field(None, max_length=20000)
+    practice: PracticeIn | None = None
+    questionnaires: list[QuestionnaireIn] = Field(default_factory=list, max_length=20)
+    panel: PanelIn | None = None
 
     @field_validator("task", "model")
     @classmethod
@@ -159,11 +223,62 @@ def build_study_config(study: StudyIn) -> dict[str, Any]:
                 "schedule": {"counts": s.counts} if s.counts is not None else {"trials": s.trials},
             }
         )
+    practice = None
+    if study.practice is not None:
+        bad = sorted({c for c in study.practice.trials if c not in task.complexities})
+        if bad:
+            problems.append(f"practice.trials names unknown complexities {bad}; expected {list(task.complexities)}")
+        try:
+            practice = {
+                "trials": list(study.practice.trials),
+                "policy": resolve_policy(study.practice.policy, model, task, "practice.policy"),
+            }
+        except ConfigError as exc:
+            problems += exc.problems
+    questionnaires = []
+    for i, q in enumerate(study.questionnaires):
+        try:
+            questionnaires.append(resolve_questionnaire(q, f"questionnaires[{i}]"))
+        except ConfigError as exc:
+            problems += exc.problems
+    names = [q["name"] for q in questionnaires]
+    if len(set(names)) != len(names):
+        problems.append(f"questionnaire names must be unique, got {names}")
     if problems:
         raise ConfigError(problems)
-    cfg = study.model_dump(exclude={"blocks", "task", "model"})
-    cfg.update(task=task.to_dict(), model=model.to_dict(), blocks=blocks)
+    cfg = study.model_dump(exclude={"blocks", "task", "model", "practice", "questionnaires"})
+    cfg.update(task=task.to_dict(), model=model.to_dict(), blocks=blocks, practice=practice, questionnaires=questionnaires)
     return cfg
+
+
+QUESTIONNAIRES = Path(__file__).resolve().parent / "questionnaires"
+
+
+def questionnaire_templates() -> dict[str, dict[str, Any]]:
+    """The shipped questionnaires by template name (``server/questionnaires/*.json``)."""
+    return {p.stem: json.loads(p.read_text()) for p in sorted(QUESTIONNAIRES.glob("*.json"))}
+
+
+def resolve_questionnaire(q: QuestionnaireIn, where: str) -> dict[str, Any]:
+    """A questionnaire as stored with the study: name, when, title, scale and items."""
+    if q.template is not None:
+        templates = questionnaire_templates()
+        if q.template not in templates:
+            raise ConfigError([f"{where}.template: unknown template {q.template!r}; templates: {sorted(templates)}"])
+        t = templates[q.template]
+        out = {"name": q.name or t["name"], "when": q.when, "title": q.title or t["title"], "source": t.get("source")}
+        out.update(scale=t["scale"], items=t["items"])
+        return out
+    assert q.items is not None
+    scale = q.scale or ScaleIn(min=1, max=7)
+    return {
+        "name": q.name or f"questionnaire-{where.rsplit('[', 1)[-1].rstrip(']')}",
+        "when": q.when,
+        "title": q.title or "",
+        "source": None,
+        "scale": scale.model_dump(),
+        "items": [i.model_dump() for i in q.items],
+    }
 
 
 def block_order(cfg: dict[str, Any], index: int, rng: np.random.Generator) -> list[int]:
@@ -191,6 +306,10 @@ def participant_plan(cfg: dict[str, Any], index: int, seed: int) -> dict[str, An
             seq = [c for c, k in sched["counts"].items() for _ in range(k)]
             seq = [seq[i] for i in rng.permutation(len(seq))]
         trials.extend({"block": b, "complexity": c} for c in seq)
+    practice = cfg.get("practice")
+    if practice:
+        # the practice block's index follows the study's blocks
+        trials[:0] = [{"block": len(cfg["blocks"]), "complexity": c, "practice": True} for c in practice["trials"]]
     return {"block_order": order, "trials": trials}
 
 

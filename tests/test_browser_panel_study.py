@@ -1,0 +1,152 @@
+"""End-to-end: a full study run from an online panel's link in headless Chromium: practice, two
+blocks, a per-block questionnaire and the 12-item trust-in-automation questionnaire at the end,
+the completion code and the redirect to the panel.  The score changes only when the outcome is
+shown, and no banner is left over the next trial.  The export fits with ``trustseek fit``."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from test_browser import artifacts_dir, st, teleoperate
+from trustseek.client import Client
+from trustseek.server.app import STATIC
+from trustseek.testing.browser import CHROMIUM, launch_chromium
+from trustseek.testing.servers import ThreadServer
+
+pytestmark = pytest.mark.browser
+
+TOKEN = "browser-panel-token"
+PANEL = "https://panel.example/complete"
+
+
+def answer_questionnaire(page, value_of) -> list[str]:
+    """Tick one point per item; the submit button is enabled only when every item is answered."""
+    page.wait_for_selector("#screen-questionnaire:not([hidden])", timeout=15000)
+    items = page.eval_on_selector_all(".q-item input[type=radio][value='1']", "xs => xs.map(x => x.dataset.item)")
+    for k, item in enumerate(items):
+        assert page.is_disabled("#questionnaire-btn")
+        page.check(f"input[name='q-{item}'][value='{value_of(k)}']")
+    page.click("#questionnaire-btn")
+    # the overlay closes, or shows the next questionnaire with nothing ticked
+    page.wait_for_function(
+        "document.getElementById('screen-questionnaire').hidden"
+        " || document.querySelectorAll('#questionnaire-items input:checked').length === 0",
+        timeout=15000,
+    )
+    return items
+
+
+def test_panel_study_in_chromium(tmp_path):
+    if not Path(CHROMIUM).exists():
+        pytest.fail(f"{CHROMIUM} is missing: run scripts/setup.sh")
+    if not (STATIC / "participant.js").exists():
+        pytest.fail("front end not built: run scripts/setup.sh (npm ci && npm run build in web/)")
+    from playwright.sync_api import sync_playwright
+
+    out = artifacts_dir(tmp_path)
+    with ThreadServer(f"sqlite:///{tmp_path / 'panel.sqlite'}", TOKEN) as url:
+        c = Client(url, TOKEN)
+        study = c.create_study(
+            {
+                "name": "panel",
+                "practice": {"trials": ["low"]},
+                "blocks": [
+                    {"name": "watch", "policy": {"kind": "never-ask"}, "schedule": {"trials": ["low", "high"]}},
+                    {"name": "take-over", "policy": {"kind": "never-ask"}, "schedule": {"trials": ["high"]}},
+                ],
+                "questionnaires": [
+                    {
+                        "name": "quick",
+                        "when": "block",
+                        "items": [{"id": "trust", "text": "I trust the robot."}, {"id": "predict", "text": "I can predict it."}],
+                        "scale": {"min": 1, "max": 5, "anchors": ["disagree", "agree"]},
+                    },
+                    {"template": "jian2000", "when": "end"},
+                ],
+                "panel": {"completion_code": "E2E-CODE", "redirect_url": PANEL + "?cc={completion_code}"},
+                "animation_speed": 2.0,
+            }
+        )
+        link = c.create_sessions(study["id"], participants=["panel-1"])[0]["link"]
+        with sync_playwright() as p:
+            browser = launch_chromium(p)
+            page = browser.new_page(viewport={"width": 1320, "height": 900})
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.route(PANEL + "**", lambda route: route.fulfill(status=200, content_type="text/html", body="<p>panel</p>"))
+            page.goto(link + "?speed=1&PROLIFIC_PID=pp-42&STUDY_ID=st-7&SESSION_ID=se-9")
+
+            page.wait_for_selector("#screen-consent:not([hidden])")
+            page.check("#agree")
+            page.click("#consent-btn")
+            page.wait_for_selector("#screen-instructions:not([hidden])")
+            page.click("#start-btn")
+
+            # the practice trial: the robot works alone, nothing is scored
+            page.wait_for_function("window.trustseek.state().phase === 'approach'")
+            assert st(page)["practice"] is True and page.inner_text("#block-name") == "Practice trial"
+            page.wait_for_function(
+                "window.trustseek.state().trial === 2 && window.trustseek.state().phase === 'approach'", timeout=20000
+            )
+            assert st(page)["practice"] is False and page.inner_text("#score") == "0"
+            # no banner of the practice trial over this one
+            assert page.eval_on_selector("#banner", "b => getComputedStyle(b).opacity") == "0"
+
+            # while the outcome is animated, the score on screen is still the one before the trial
+            page.wait_for_function("window.trustseek.state().phase === 'outcome'", timeout=20000)
+            during = st(page)
+            shown = page.inner_text("#score")
+            assert during["score"] != 0 and during["shown_score"] == 0 and shown == "0", (during, shown)
+            page.wait_for_function("window.trustseek.state().phase === 'result'", timeout=20000)
+            assert page.inner_text("#score") == str(int(during["score"])) or float(page.inner_text("#score")) == during["score"]
+
+            # trial 3 in the same block, then the block's questionnaire
+            page.wait_for_function("window.trustseek.state().trial === 3", timeout=20000)
+            answer_questionnaire(page, lambda k: 4 - k)
+
+            # block 2: the participant takes over
+            page.wait_for_function(
+                "window.trustseek.state().trial === 4 && window.trustseek.state().phase === 'approach'", timeout=20000
+            )
+            page.keyboard.press(" ")
+            page.wait_for_function("window.trustseek.state().phase === 'teleop'")
+            teleoperate(page)
+            answer_questionnaire(page, lambda k: 3)
+            items = answer_questionnaire(page, lambda k: 1 + k % 7)
+            assert len(items) == 12
+
+            # the end: the completion code, then the panel
+            page.wait_for_selector("#screen-done:not([hidden])", timeout=15000)
+            assert page.inner_text("#completion-code") == "E2E-CODE"
+            assert page.inner_text("#final-trials") == "3"
+            page.screenshot(path=str(out / "browser_panel_done.png"))
+            page.wait_for_url(PANEL + "?cc=E2E-CODE", timeout=15000)
+            browser.close()
+        assert not errors, errors
+
+        trials = pd.read_csv(io.BytesIO(c.export(study["id"])))
+        reports = pd.read_csv(io.BytesIO(c.export(study["id"], table="reports")))
+        sessions = pd.read_csv(io.BytesIO(c.export(study["id"], table="sessions")))
+
+    assert trials["trial"].tolist() == [1, 2, 3] and trials["session_trial"].tolist() == [2, 3, 4]
+    assert trials["human_action"].tolist() == ["rely", "rely", "intervene"]
+    assert json.loads(sessions["panel"].iloc[0]) == {"PROLIFIC_PID": "pp-42", "STUDY_ID": "st-7", "SESSION_ID": "se-9"}
+    quick = reports[reports.questionnaire == "quick"].sort_values(["trial", "item"])
+    assert quick["trial"].tolist() == [2, 2, 3, 3]
+    assert dict(zip(quick["item"][:2], quick["value"][:2], strict=True)) == {"predict": 3.0, "trust": 4.0}
+    assert (reports.questionnaire == "trust-in-automation").sum() == 12
+
+    path = out / "browser_panel_trials.csv"
+    trials.to_csv(path, index=False)
+    from typer.testing import CliRunner
+
+    from trustseek.cli import app
+
+    res = CliRunner().invoke(app, ["fit", str(path), "--restarts", "2", "--json"])
+    assert res.exit_code == 0, res.output
+    assert "3 trials" in json.loads(res.output)["model"]["notes"]
