@@ -38,6 +38,7 @@ SMALL = {
     "grid": 201,
     "jobs": 1,
     "sensitivity_samples": 8,
+    "schedule_participants": 500,
 }
 
 
@@ -264,11 +265,31 @@ def test_reproduce_command(tmp_path):
             "100",
             "--jobs",
             "1",
+            "--schedule-participants",
+            "0",
         ],
     )
     assert res.exit_code == 0, res.output
     assert "Paper vs reproduction" in res.output and "report:" in res.output
     assert (tmp_path / "r" / "report.html").exists()
+    # the scheduling section left out on request: no numbers, no figure, no heading
+    assert "scheduling" not in json.loads((tmp_path / "r" / "summary.json").read_text())
+    assert not (tmp_path / "r" / "scheduling.png").exists()
+    assert "Future work: scheduling the items" not in (tmp_path / "r" / "report.html").read_text()
+
+
+def test_scheduling_section_of_the_report(small_run):
+    """The report's scheduling section: every schedule of the comparison, the optimal one worth at
+    least the paper's random order (exactly), the gains paired against that order."""
+    sc = small_run.summary["scheduling"]
+    assert sc["counts"] == {"low": 17, "high": 17} and sc["participants"] == 500
+    rows = {r["schedule"]: r for r in sc["schedules"]}
+    assert {"random + trust-aware", "optimal", "easy first", "hard first"} <= set(rows)
+    assert rows["optimal"]["exact_discounted"] >= rows["random + finite-horizon"]["exact_discounted"]
+    base = rows["random + trust-aware"]["gain_discounted"]
+    assert base["mean"] == base["low"] == base["high"] == 0.0
+    assert rows["optimal"]["gain_discounted"]["low"] > 0  # full control is worth something here (discounting)
+    assert sc["window_values"]["1"] <= sc["window_values"]["3"] <= sc["window_values"]["all"]
 
 
 def test_bad_options_give_one_line_errors(tmp_path):

@@ -42,6 +42,12 @@ FIGURES = [
         "The threshold in high complexity when each printed parameter moves alone by ± half a unit of its last "
         "printed decimal (bars, the 12 largest effects), and jointly (grey band); the dashed line is the paper's ≈ 0.75.",
     ),
+    (
+        "scheduling.png",
+        "scheduling",
+        "Trial scheduling under the paper's model: which item the optimal schedule collects at each trial and when it "
+        "asks, against the belief, compared with the paper's random order and its trust-aware policy.",
+    ),
     ("policies.png", "costs", "Mean cumulative reward per block of each policy on the same simulated participants."),
     (
         "remark1.png",
@@ -140,6 +146,12 @@ def make_figures(rep: Reproduction, out: Path) -> list[Path]:
             paper_value=PAPER["threshold_high"],
             title="Threshold in high complexity within the printed precision of the paper's parameters",
         )
+        paths.append(p)
+    if rep.scheduling is not None:
+        from .plots.schedule import plot_scheduling_section
+
+        p = out / "scheduling.png"
+        plot_scheduling_section(rep.scheduling, p)
         paths.append(p)
     p = out / "policies.png"
     plot_policy_values(

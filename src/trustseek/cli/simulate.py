@@ -248,6 +248,12 @@ def reproduce(
         help="Belief update of the trust-aware policy: 'paper' (eq. 3, as in the paper) or 'bayes'.",
     ),
     jobs: int = typer.Option(2, "--jobs", "-j", min=1, help="Processes (bootstrap and replicates); numbers do not depend on it."),
+    schedule_participants: int = typer.Option(
+        10_000,
+        "--schedule-participants",
+        min=0,
+        help="Simulated participants of the trial-scheduling section (0: leave the section out).",
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print summary.json to stdout instead of tables."),
     quiet: bool = QuietOpt,
 ) -> None:
@@ -266,6 +272,7 @@ def reproduce(
         replicate_large_n=replicate_large_n,
         belief_update=belief_update,
         jobs=jobs,
+        schedule_participants=schedule_participants,
     )
     problems = cfg.problems()
     if problems:

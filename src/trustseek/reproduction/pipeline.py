@@ -60,6 +60,7 @@ from .comparison import (
     verdict_counts,
 )
 from .config import AGNOSTIC, AWARE, LOW, PAPER, ReproduceConfig
+from .scheduling import SchedulingSection, scheduling_section
 from .statistics import distribution, mean_ci, share_ci, wilcoxon
 
 CANONICAL = list(TRIAL_COLUMNS)
@@ -218,6 +219,7 @@ class Reproduction:
     experiment2_large: CrossoverSimulation
     heterogeneity: dict[str, Any]
     sensitivity: Sensitivity | None = None
+    scheduling: SchedulingSection | None = None
     seconds: float = 0.0
 
 
@@ -230,6 +232,7 @@ STEP_NAMES = (
     "experiment 2",
     "costs",
     "heterogeneity",
+    "scheduling",
     "replicates",
 )
 
@@ -254,7 +257,7 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
         report(name, finished[0], len(STEP_NAMES))
 
     ss = np.random.SeedSequence(cfg.seed)
-    s1, sfit, s2, s2l, scost, shet, sreps = ss.spawn(7)
+    s1, sfit, s2, s2l, scost, shet, sreps, ssched = ss.spawn(8)
     truth, task = paper_model(), paper_task()
     summary: dict[str, Any] = {"config": cfg.to_summary()}
 
@@ -346,6 +349,15 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
     summary["heterogeneity"] = het["summary"]
     step("heterogeneity")
 
+    # the paper's future work: choosing the order of the items, under the paper's model
+    sched = None
+    if cfg.schedule_participants:
+        sched = scheduling_section(
+            truth, task, counts=cfg.counts_2, participants=cfg.schedule_participants, seed=int(ssched.generate_state(1)[0])
+        )
+        summary["scheduling"] = sched.numbers
+    step("scheduling")
+
     # 5. replicates
     reps: list[dict[str, Any]] = []
     if cfg.replicates:
@@ -378,6 +390,7 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
         experiment2_large=large,
         heterogeneity=het,
         sensitivity=sens,
+        scheduling=sched,
         seconds=time.perf_counter() - t0,
     )
 
