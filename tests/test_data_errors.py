@@ -262,8 +262,6 @@ def _corrupt(kind: str, rng: np.random.Generator) -> bytes:
         rows[i][1] = str(rng.choice(["0.5", "-3", "1e30", "99999999999999999999", "NaN", "", "x", "inf"]))
     elif kind == "duplicate_row":
         rows.insert(i, list(rows[i]))
-    elif kind == "gap":
-        rows[i][1] = str(int(rows[i][1]) + 10)
     elif kind == "participant":
         rows[i][0] = str(rng.choice(["", "NaN", "null"]))
     elif kind == "no_human_action":
@@ -286,7 +284,6 @@ KINDS = [
     "bad_label",
     "trial",
     "duplicate_row",
-    "gap",
     "participant",
     "no_human_action",
     "experience_rule",
