@@ -63,7 +63,8 @@ class ColumnMapping:
                      within block; or a timestamp): the canonical trial becomes 1, 2, ...
     ``derived``      new columns: ``{"name": {"equal": [a, b]}}`` (``true`` where the two
                      columns hold the same value) or ``{"name": {"shift": col, "by": 1}}``
-                     (the value ``by`` trials earlier of the same participant)
+                     (the value ``by`` trials earlier of the same participant; ``"fill"``
+                     is the value where there is no such trial, default empty)
     ``drop``         rows to leave out: ``[{"column": col, "values": [...]}, ...]``
     ``missing``      cell texts meaning "not recorded" (besides the empty cell), e.g. ``NA``
     ``delimiter``    a CSV's delimiter (default: sniffed from the header)
@@ -116,8 +117,8 @@ class ColumnMapping:
                     p.append(f"derived column {name!r}: 'equal' takes a list of two column names, got {eq!r}")
             else:
                 by = d.get("by", 1)
-                if set(d) - {"shift", "by"} or not isinstance(d["shift"], str) or not d["shift"]:
-                    p.append(f"derived column {name!r}: 'shift' takes a column name (and 'by'), got {dict(d)!r}")
+                if set(d) - {"shift", "by", "fill"} or not isinstance(d["shift"], str) or not d["shift"]:
+                    p.append(f"derived column {name!r}: 'shift' takes a column name (and 'by', 'fill'), got {dict(d)!r}")
                 elif not isinstance(by, int) or isinstance(by, bool) or by == 0:
                     p.append(f"derived column {name!r}: 'by' must be a non-zero integer (1 = the previous trial), got {by!r}")
             known.add(name)
@@ -838,7 +839,8 @@ def read_trials(
             a, b = (get(s) for s in d["equal"])
             cols[new] = _equal(a, b)
         elif perm is not None:
-            cols[new] = _shift(get(d["shift"]), pcode, perm, int(d.get("by", 1)))
+            fill = d.get("fill")
+            cols[new] = _shift(get(d["shift"]), pcode, perm, int(d.get("by", 1)), None if fill is None else _label_key(fill))
         else:  # the trial order is broken (reported above): nothing to shift by
             cols[new] = _Col(np.zeros(n, np.int32), [None])
 
@@ -1039,8 +1041,9 @@ def _equal(a: _Col, b: _Col) -> _Col:
     return _Col(codes, ["false", "true", None])
 
 
-def _shift(col: _Col, pcode: np.ndarray, perm: np.ndarray | slice, by: int) -> _Col:
-    """The value ``by`` trials earlier (later for ``by`` < 0) of the same participant; empty where there is none."""
+def _shift(col: _Col, pcode: np.ndarray, perm: np.ndarray | slice, by: int, fill: str | None = None) -> _Col:
+    """The value ``by`` trials earlier (later for ``by`` < 0) of the same participant; ``fill``
+    (default: empty) where there is none."""
     none = len(col.texts)
     ps = pcode[perm]
     cs = col.codes[perm]
@@ -1053,7 +1056,7 @@ def _shift(col: _Col, pcode: np.ndarray, perm: np.ndarray | slice, by: int) -> _
             out[:-k] = np.where(ps[:-k] == ps[k:], cs[k:], none)
     codes = np.empty_like(out)
     codes[perm] = out
-    return _Col(codes, [*col.texts, None])
+    return _Col(codes, [*col.texts, fill])
 
 
 def _check_experience(
