@@ -30,6 +30,9 @@ def canonical() -> pd.DataFrame:
     # cannot say more about it; see the shifted-feedback log)
     last = frame.groupby("participant", observed=True)["trial"].transform("max") == frame["trial"]
     frame.loc[last, ["robot_action", "human_action", "experience"]] = ["autonomous", "rely", "reliable"]
+    unrecorded = np.random.default_rng(11).random(len(frame)) < 0.05
+    frame.loc[unrecorded & ~last.to_numpy(), "human_action"] = np.nan  # not recorded ("NA" in the study logs)
+    assert frame["human_action"].isna().sum() > 10
     return frame
 
 
@@ -292,3 +295,88 @@ def test_bad_mappings_are_named(mapping, expected):
     with pytest.raises(DataError) as exc:
         ColumnMapping.from_dict(mapping)
     assert any(expected in line for line in exc.value.problems), exc.value.problems
+
+
+def run_cli(argv: list[str]) -> tuple[int, str]:
+    import contextlib
+    import io
+    import sys
+    from unittest import mock
+
+    from trustseek.cli import main
+
+    err = io.StringIO()
+    code = 0
+    with (
+        mock.patch.object(sys, "argv", ["trustseek", *argv]),
+        contextlib.redirect_stderr(err),
+        contextlib.redirect_stdout(io.StringIO()),
+    ):
+        try:
+            main()
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else 1
+    return code, err.getvalue()
+
+
+def test_cli_outputs_keep_the_study_names_and_carry_columns(canonical, tmp_path):
+    """decode and fit --posteriors write the log's participant and trial values (0-based, gaps) and
+    the --keep columns; the dropped rows are counted; --missing and --delimiter work as flags."""
+    from trustseek.model import paper_model
+
+    rng = np.random.default_rng(7)
+    log = zero_based_with_gaps(insert_checks(study_columns(canonical), rng))
+    path = tmp_path / "study.txt"
+    log.to_csv(path, sep="|", index=False)
+    mapping = {k: v for k, v in BASE_MAPPING.items() if k != "missing"}
+    mapping["drop"] = [{"column": "attention_check", "values": [1]}]
+    mfile = tmp_path / "mapping.json"
+    mfile.write_text(json.dumps(mapping))
+    model = tmp_path / "model.json"
+    paper_model().save(model)
+    kept = log[log["attention_check"] == 0]
+    flags = ["--mapping", str(mfile), "--missing", "NA", "--delimiter", "|"]
+    code, err = run_cli(
+        [
+            "decode",
+            str(path),
+            "--model",
+            str(model),
+            "--out",
+            str(tmp_path / "post.csv"),
+            *flags,
+            "--keep",
+            "condition",
+            "--keep",
+            "rating",
+        ]
+    )
+    assert code == 0, err
+    assert f"dropped {int((log['attention_check'] == 1).sum())} rows" in err.replace("\n", " ")
+    post = pd.read_csv(tmp_path / "post.csv")
+    assert post["participant"].tolist() == kept["subject"].tolist()
+    assert post["trial"].tolist() == kept["trial"].tolist()
+    assert post["condition"].tolist() == kept["condition"].tolist()
+    assert post["rating"].tolist() == kept["rating"].tolist()
+    code, err = run_cli(
+        [
+            "fit",
+            str(path),
+            "--restarts",
+            "1",
+            "--max-iter",
+            "5",
+            "--posteriors",
+            str(tmp_path / "fp.csv"),
+            *flags,
+            "--keep",
+            "condition",
+        ]
+    )
+    assert code == 0, err
+    fp = pd.read_csv(tmp_path / "fp.csv")
+    assert fp["trial"].tolist() == kept["trial"].tolist() and fp["condition"].tolist() == kept["condition"].tolist()
+    code, err = run_cli(["decode", str(path), "--model", str(model), "--out", str(tmp_path / "p2.csv"), *flags, "--keep", "nope"])
+    assert code == 2 and "--keep 'nope'" in err
+    code, err = run_cli(["decode", str(path), "--model", str(model), "--out", str(tmp_path / "p3.csv"), "--mapping", str(mfile)])
+    assert code == 2 and "NaN" in err  # without --missing NA, the NA cells are refused

@@ -1026,19 +1026,24 @@ def _order_trials(
 
 
 def _equal(a: _Col, b: _Col) -> _Col:
-    """``true`` where two columns hold the same value (numbers by value), empty where either is."""
+    """``true`` where two columns hold the same value (numbers by value); empty where either is
+    empty, NaN where either is NaN (an error where the column needs a value)."""
     keys: dict[str, int] = {}
 
     def ids(col: _Col) -> np.ndarray:
-        out = np.full(len(col.texts), -1, dtype=np.int64)
+        out = np.full(len(col.texts), -1, dtype=np.int64)  # -1 empty, -2 NaN
         for j, t in enumerate(col.texts):
-            if t is not None and t != _NAN:
+            if t == _NAN:
+                out[j] = -2
+            elif t is not None:
                 out[j] = keys.setdefault(_same_value_key(t), len(keys))
         return out
 
     va, vb = ids(a)[a.codes], ids(b)[b.codes]
-    codes = np.where((va < 0) | (vb < 0), 2, (va == vb).astype(np.int32)).astype(np.int32)
-    return _Col(codes, ["false", "true", None])
+    codes = (va == vb).astype(np.int32)
+    codes[(va == -1) | (vb == -1)] = 2
+    codes[(va == -2) | (vb == -2)] = 3
+    return _Col(codes, ["false", "true", None, _NAN])
 
 
 def _shift(col: _Col, pcode: np.ndarray, perm: np.ndarray | slice, by: int, fill: str | None = None) -> _Col:
