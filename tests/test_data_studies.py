@@ -380,3 +380,19 @@ def test_cli_outputs_keep_the_study_names_and_carry_columns(canonical, tmp_path)
     assert code == 2 and "--keep 'nope'" in err
     code, err = run_cli(["decode", str(path), "--model", str(model), "--out", str(tmp_path / "p3.csv"), "--mapping", str(mfile)])
     assert code == 2 and "NaN" in err  # without --missing NA, the NA cells are refused
+
+
+def test_the_shipped_study_mapping_fits_a_study_log(canonical, reference, tmp_path):
+    rng = np.random.default_rng(9)
+    log = study_columns(canonical)
+    log["block"] = (log["trial"] - 1) // 10 + 1
+    log["trial_in_block"] = (log["trial"] - 1) % 10 + 1
+    log = insert_checks(log.drop(columns="trial"), rng, every=11)
+    practice = log.groupby("subject", sort=False).head(3).assign(phase="practice", block=0)
+    log = pd.concat([practice, log.assign(phase="main")], ignore_index=True)
+    path = tmp_path / "study.csv"
+    log.to_csv(path, index=False)
+    frame = read_trials(path, example_path("study_mapping.json"))
+    assert_same(reference, encode(frame, paper_spec()), fit_trust_model(frame, restarts=1, seed=3, max_iter=60).loglik)
+    practice_only = (log["phase"] == "practice") & (log["attention_check"] == 0)  # each rule counts what is left
+    assert [k for _, k in frame.attrs["dropped"]] == [int(log["attention_check"].sum()), int(practice_only.sum())]
