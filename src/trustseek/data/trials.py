@@ -926,6 +926,9 @@ def _participant_codes(pc_: _Col) -> tuple[np.ndarray, list[str]]:
         t = pc_.texts[j]
         if valid[j] and first[j] < len(c):
             lookup[j] = ids.setdefault(str(t), len(ids))
+    used = int(c.max()) + 1 if len(c) else 0
+    if c.dtype == np.int32 and np.array_equal(lookup[:used], np.arange(used)):
+        return c, list(ids)  # the codes are the ids' indices already (a file's distinct values in order)
     return lookup[c], list(ids)
 
 

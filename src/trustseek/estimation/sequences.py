@@ -107,6 +107,9 @@ def _codes(frame: pd.DataFrame, spec: IOHMMSpec) -> dict[str, np.ndarray]:
         values = frame[col]
         if isinstance(values.dtype, pd.CategoricalDtype):  # codes into a few categories: no per-row hashing
             raw, uniques = values.cat.codes.to_numpy(), values.cat.categories
+            if list(uniques) == cats and (col == spec.output or not (raw < 0).any()):
+                codes[col] = raw.astype(np.int16)  # the model's categories already, in its order
+                continue
         else:
             raw, uniques = pd.factorize(values, use_na_sentinel=True)
         lookup = np.full(len(uniques) + 1, -1, dtype=np.int16)  # the last entry: a missing value
