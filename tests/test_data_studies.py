@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from trustseek.data import DataError, example_path, read_trials
 from trustseek.estimation import encode, fit_trust_model, paper_spec
@@ -396,3 +398,51 @@ def test_the_shipped_study_mapping_fits_a_study_log(canonical, reference, tmp_pa
     assert_same(reference, encode(frame, paper_spec()), fit_trust_model(frame, restarts=1, seed=3, max_iter=60).loglik)
     practice_only = (log["phase"] == "practice") & (log["attention_check"] == 0)  # each rule counts what is left
     assert [k for _, k in frame.attrs["dropped"]] == [int(log["attention_check"].sum()), int(practice_only.sum())]
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    block=st.integers(1, 12),
+    zero=st.booleans(),
+    gap=st.integers(0, 5),
+    shuffle=st.booleans(),
+    fmt=st.sampled_from(["csv", "tsv", "jsonl", "json", "parquet"]),
+)
+def test_any_trial_numbering_encodes_like_the_canonical_log(
+    canonical, reference, tmp_path_factory, seed, block, zero, gap, shuffle, fmt
+):
+    """Gapped numbers from 0 or 1, or a block/trial-within-block split, in any row order and
+    format: the same sequences as the canonical log."""
+    rng = np.random.default_rng(seed)
+    log = study_columns(canonical, seed % 7)
+    t = log["trial"].to_numpy() - 1
+    if gap:  # random gaps between consecutive trials
+        steps = 1 + rng.integers(0, gap + 1, len(t))
+        steps[t == 0] = 0
+        t = pd.Series(steps).groupby(log["subject"].to_numpy(), sort=False).cumsum().to_numpy()
+    log["trial"] = t + (0 if zero else 1)
+    mapping = dict(BASE_MAPPING)
+    if block > 1:
+        log["blk"], log["tib"] = log["trial"] // block, log["trial"] % block
+        log = log.drop(columns="trial")
+        mapping["order"] = ["blk", "tib"]
+    if shuffle:
+        log = log.sample(frac=1.0, random_state=int(seed % 1000))
+    folder = tmp_path_factory.mktemp("log")
+    path = folder / f"study.{fmt}"
+    if fmt in ("csv", "tsv"):
+        log.to_csv(path, sep="," if fmt == "csv" else "\t", index=False)
+    elif fmt == "parquet":
+        log.to_parquet(path, index=False)
+    else:
+        records = [{k: (v.item() if hasattr(v, "item") else v) for k, v in r.items()} for r in log.to_dict("records")]
+        text = "\n".join(json.dumps(r) for r in records) if fmt == "jsonl" else json.dumps(records)
+        path.write_text(text)
+    frame = read_trials(path, mapping)
+    seqs = encode(frame, paper_spec())
+    ref = reference[0]
+    seqs = seqs.subset([seqs.participants.index(p) for p in ref.participants])
+    np.testing.assert_array_equal(seqs.y, ref.y)
+    np.testing.assert_array_equal(seqs.ue, ref.ue)
+    np.testing.assert_array_equal(seqs.ut[:-1][seqs.has_successor()], ref.ut[:-1][ref.has_successor()])
