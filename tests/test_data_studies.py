@@ -446,3 +446,35 @@ def test_any_trial_numbering_encodes_like_the_canonical_log(
     np.testing.assert_array_equal(seqs.y, ref.y)
     np.testing.assert_array_equal(seqs.ue, ref.ue)
     np.testing.assert_array_equal(seqs.ut[:-1][seqs.has_successor()], ref.ut[:-1][ref.has_successor()])
+
+
+def test_broken_json_logs_are_located(tmp_path):
+    good = {
+        "participant": "A",
+        "trial": 1,
+        "complexity": "low",
+        "robot_action": "autonomous",
+        "human_action": "rely",
+        "experience": "reliable",
+    }
+    path = tmp_path / "log.jsonl"
+    path.write_text(json.dumps(good) + "\n{not json\n" + json.dumps({**good, "trial": 2}) + "\n[1, 2]\n")
+    with pytest.raises(DataError) as exc:
+        read_trials(path)
+    assert exc.value.problems == [
+        "lines that are not JSON: line 2: Expecting property name enclosed in double quotes",
+        "records that are not objects: line 4",
+    ]
+    path.write_text(json.dumps(good) + "\n[1, 2]\n")
+    with pytest.raises(DataError, match="records that are not objects: line 2"):
+        read_trials(path)
+    path = tmp_path / "log.json"
+    path.write_text(json.dumps([good, 3]))
+    with pytest.raises(DataError, match="records that are not objects: record 2"):
+        read_trials(path)
+    path.write_text(json.dumps(good))
+    with pytest.raises(DataError, match="must be an array of records"):
+        read_trials(path)
+    path.write_text(json.dumps([good, {**good, "trial": "two"}]))  # mixed types in a column
+    with pytest.raises(DataError, match=r"column 'trial': value is not an integer .*: row 2 'two'"):
+        read_trials(path)

@@ -481,7 +481,6 @@ class _Raw:
     columns: list[str]
     col: Any  # name -> _Col
     extras: Any  # list of names -> DataFrame of those columns
-    record: str = "row"  # what a data row is called in this format's messages
     release: Any = None  # list of names -> None: those columns are no longer needed (their memory goes)
 
 
@@ -532,15 +531,15 @@ def _load(source: Any, sep: str | None, missing: frozenset[str]) -> _Raw:
     raise DataError([f"unknown file type {suffix!r}: use .csv, .tsv, .parquet, .jsonl or .json"], name)
 
 
-def _arrow_raw(table: Any, name: str, missing: frozenset[str], record: str = "row") -> _Raw:
+def _arrow_raw(table: Any, name: str, missing: frozenset[str]) -> _Raw:
     names = [str(c) for c in table.column_names]
     dupes = sorted({c for c in names if names.count(c) > 1})
     if dupes:
         raise DataError([f"column {c!r} appears {names.count(c)} times" for c in dupes], name)
-    return _arrow_source(table, name, names, missing, record)
+    return _arrow_source(table, name, names, missing)
 
 
-def _arrow_source(table: Any, name: str, names: list[str], missing: frozenset[str], record: str = "row") -> _Raw:
+def _arrow_source(table: Any, name: str, names: list[str], missing: frozenset[str]) -> _Raw:
     import pyarrow as pa
 
     held = {"table": table}
@@ -555,7 +554,6 @@ def _arrow_source(table: Any, name: str, names: list[str], missing: frozenset[st
         names,
         lambda c: _col_from_arrow(held["table"].column(c), missing),
         lambda cs: held["table"].select(cs).to_pandas(),
-        record,
         release,
     )
 
@@ -582,7 +580,7 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str]) -> _
         import pyarrow.json as pjson
 
         try:
-            return _arrow_raw(pjson.read_json(path), name, missing, "record")
+            return _arrow_raw(pjson.read_json(path), name, missing)
         except (pa.ArrowException, OSError):
             pass  # mixed types in a column, or a bad line: read record by record to say where
     try:
@@ -593,6 +591,7 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str]) -> _
         raise DataError([f"cannot read the file: {exc.strerror or exc}"], name) from None
     p = _Problems()
     records: list[Any] = []
+    where: list[str] = []
     if lines:
         bad: list[str] = []
         for i, line in enumerate(text.splitlines(), 1):
@@ -600,6 +599,7 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str]) -> _
                 continue
             try:
                 records.append(json.loads(line))
+                where.append(f"line {i}")
             except json.JSONDecodeError as exc:
                 bad.append(f"line {i}: {exc.msg}")
         p.add("lines that are not JSON", bad, unit="lines")
@@ -611,7 +611,8 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str]) -> _
         if not isinstance(data, list):
             raise DataError(["a JSON trial log must be an array of records (objects), one per trial"], name)
         records = data
-    p.add("records that are not objects", [f"record {i}" for i, r in enumerate(records, 1) if not isinstance(r, dict)])
+        where = [f"record {i}" for i in range(1, len(data) + 1)]
+    p.add("records that are not objects", [w for w, r in zip(where, records, strict=True) if not isinstance(r, dict)])
     if p.lines:
         raise DataError(p.lines, name)
     columns: dict[str, list[Any]] = {}
@@ -628,7 +629,7 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str]) -> _
         except (pa.ArrowInvalid, pa.ArrowTypeError):  # mixed types: every value as the reader's text
             arrays[k] = pa.array([None if v is None else _as_text(v) for v in vals], type=pa.string())
     table = pa.table(arrays) if arrays else pa.table({})
-    return _arrow_raw(table, name, missing, "record")
+    return _arrow_raw(table, name, missing)
 
 
 def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -> _Raw:
