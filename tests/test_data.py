@@ -51,7 +51,6 @@ def test_example_file_is_shipped_and_valid():
         (lambda t: t.replace("complexity,", "cx,", 1), ["log.csv", "missing column 'complexity'"]),
         (lambda t: t.replace("B,1,high,autonomous", "B,1,medium,autonomous"), ["row 4", "column 'complexity'", "'medium'"]),
         (lambda t: t.replace("B,2,low", "B,1,low"), ["row 5", "duplicate trial index 1", "'B'", "first at row 4"]),
-        (lambda t: t.replace("A,3,high", "A,4,high"), ["participant 'A'", "trial index 3 missing"]),
         (lambda t: t.replace("B,1,high", ",1,high"), ["row 4", "column 'participant'", "empty participant"]),
         (lambda t: t.replace("A,2,high,ask,intervene", "A,2,high,ask,NaN"), ["row 2", "column 'human_action'", "NaN"]),
         (

@@ -15,6 +15,7 @@ from typing import Any
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from ..errors import TrustseekError
@@ -148,14 +149,45 @@ ColumnOpt = typer.Option(None, "--column", help="Map a column: canonical=theirs 
 LabelOpt = typer.Option(None, "--label", help="Map a label: column:theirs=canonical (e.g. human_action:1=rely). Repeatable.")
 
 
-def read_log(log: Path, mapping: Path | None, column: list[str] | None, label: list[str] | None, needed: tuple[str, ...]):
-    """The trial log with the --mapping/--column/--label options applied; ``needed`` are the
-    canonical columns the command uses beyond participant, trial and human_action."""
+DelimiterOpt = typer.Option(None, "--delimiter", help="A CSV's delimiter (default: sniffed from the header; 'tab' for TAB).")
+MissingOpt = typer.Option(None, "--missing", help="A cell text meaning not recorded, e.g. NA (besides empty). Repeatable.")
+KeepOpt = typer.Option(None, "--keep", help="Carry this column of the log into the output (e.g. a condition). Repeatable.")
+
+
+def read_log(
+    log: Path,
+    mapping: Path | None,
+    column: list[str] | None,
+    label: list[str] | None,
+    needed: tuple[str, ...],
+    missing: list[str] | None = None,
+    delimiter: str | None = None,
+):
+    """The trial log with the --mapping/--column/--label/--missing/--delimiter options applied;
+    ``needed`` are the canonical columns the command uses beyond participant, trial and
+    human_action.  Rows left out by the mapping's drop rules are counted on stderr."""
     from ..data.trials import ColumnMapping, read_trials
 
     check_mapping_file(mapping)
-    m = ColumnMapping.from_flags(column or [], label or [], mapping)
-    return read_trials(log, m, required=("participant", "trial", "human_action", *needed))
+    m = ColumnMapping.from_flags(column or [], label or [], mapping, missing, delimiter)
+    frame = read_trials(log, m, required=("participant", "trial", "human_action", *needed))
+    for rule, count in frame.attrs.get("dropped", []):
+        err_console.print(f"dropped {count} rows of {log} ({escape(rule)})", highlight=False)
+    return frame
+
+
+def keep_columns(out, frame, keep: list[str] | None):
+    """``out`` (one row per row of ``frame``, in its order) with the ``--keep`` columns of ``frame`` added."""
+    if not keep:
+        return out
+    absent = [c for c in keep if c not in frame.columns or c in out.columns]
+    if absent:
+        cols = list(frame.columns)
+        raise TrustseekError([f"--keep {c!r}: not an extra column of the log; its columns: {cols}" for c in absent])
+    out = out.copy()
+    for c in keep:
+        out[c] = frame[c].to_numpy()
+    return out
 
 
 def check_mapping_file(path: Path | None) -> None:

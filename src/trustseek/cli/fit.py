@@ -13,8 +13,11 @@ from ..errors import TrustseekError
 from ..model.core import TrustModel
 from ._app import (
     ColumnOpt,
+    DelimiterOpt,
+    KeepOpt,
     LabelOpt,
     MappingOpt,
+    MissingOpt,
     QuietOpt,
     app,
     atomic_output,
@@ -22,6 +25,7 @@ from ._app import (
     check_outputs,
     check_tol,
     console,
+    keep_columns,
     print_json,
     progress_bar,
     read_log,
@@ -43,11 +47,11 @@ def _data():
     return data
 
 
-def _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on):
+def _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing=None, delimiter=None):
     """The transition and emission inputs named by the flags, and the log with those columns."""
     tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on")
     em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on")
-    return tr, em, _read(log, mapping, column, label, tuple(dict.fromkeys((*tr, *em))))
+    return tr, em, _read(log, mapping, column, label, tuple(dict.fromkeys((*tr, *em))), missing, delimiter)
 
 
 POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
@@ -65,8 +69,16 @@ def _inputs(text: str | None, default: tuple[str, ...], flag: str) -> tuple[str,
     return cols
 
 
-def _read(log: Path, mapping: Path | None, column: list[str] | None, label: list[str] | None, needed: tuple[str, ...]):
-    return read_log(log, mapping, column, label, needed)
+def _read(
+    log: Path,
+    mapping: Path | None,
+    column: list[str] | None,
+    label: list[str] | None,
+    needed: tuple[str, ...],
+    missing: list[str] | None = None,
+    delimiter: str | None = None,
+):
+    return read_log(log, mapping, column, label, needed, missing, delimiter)
 
 
 def model_inputs(model: TrustModel) -> tuple[str, ...]:
@@ -147,6 +159,9 @@ def fit(
     mapping: Path | None = MappingOpt,
     column: list[str] | None = ColumnOpt,
     label: list[str] | None = LabelOpt,
+    missing: list[str] | None = MissingOpt,
+    delimiter: str | None = DelimiterOpt,
+    keep: list[str] | None = KeepOpt,
     quiet: bool = QuietOpt,
 ) -> None:
     """Estimate the supervisor's trust model from logged trials (extended Baum-Welch)."""
@@ -154,7 +169,9 @@ def fit(
     check_output(posteriors, "--posteriors", POSTERIOR_SUFFIXES)
     if plots is not None and plots.exists() and not plots.is_dir():
         raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
-    tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on)
+    if keep and posteriors is None:
+        raise TrustseekError(["--keep carries log columns into --posteriors: give --posteriors"])
+    tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter)
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("restarts", total=restarts + bootstrap)
@@ -182,7 +199,7 @@ def fit(
             result.model.save(tmp)
     if posteriors is not None:
         with atomic_output(posteriors) as tmp:
-            _data().write_trials(result.posteriors(), tmp)
+            _data().write_trials(keep_columns(result.posteriors(), frame, keep), tmp)
     if plots is not None:
         from ..model.presets import paper_model
         from ..plots.model import plot_emissions, plot_transitions
@@ -240,6 +257,9 @@ def decode_cmd(
     mapping: Path | None = MappingOpt,
     column: list[str] | None = ColumnOpt,
     label: list[str] | None = LabelOpt,
+    missing: list[str] | None = MissingOpt,
+    delimiter: str | None = DelimiterOpt,
+    keep: list[str] | None = KeepOpt,
 ) -> None:
     """Per-trial smoothed P(trust | data) and the Viterbi trust path under a model.
 
@@ -248,8 +268,8 @@ def decode_cmd(
     check_output(out, "--out", POSTERIOR_SUFFIXES)
     m = TrustModel.load(model)
     used = model_inputs(m)
-    frame = _fill_unused(_read(log, mapping, column, label, used), m, used)
-    post = _fit().decode(frame, m)
+    frame = _fill_unused(_read(log, mapping, column, label, used, missing, delimiter), m, used)
+    post = keep_columns(_fit().decode(frame, m), frame, keep)
     with atomic_output(out) as tmp:
         _data().write_trials(post, tmp)
     console.print(f"wrote {len(post)} trials to {out}")
@@ -270,10 +290,12 @@ def select(
     mapping: Path | None = MappingOpt,
     column: list[str] | None = ColumnOpt,
     label: list[str] | None = LabelOpt,
+    missing: list[str] | None = MissingOpt,
+    delimiter: str | None = DelimiterOpt,
     quiet: bool = QuietOpt,
 ) -> None:
     """Choose the number of trust levels: BIC and participant-held-out log-likelihood."""
-    tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on)
+    tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter)
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("model selection", total=None)

@@ -172,7 +172,7 @@ def posterior_frame(seqs: Sequences, spec: IOHMMSpec, params: Params) -> pd.Data
     tt, nn = tt[order], nn[order]
     out: dict[str, Any] = {
         "participant": [seqs.participants[i] for i in nn],
-        "trial": tt + seqs.base,
+        "trial": seqs.trial_numbers(tt, nn),
     }
     for k, name in enumerate(spec.levels):
         out[f"p_trust_{name}"] = gamma[tt, nn, k]

@@ -29,8 +29,10 @@ class Sequences:
     ue: np.ndarray  # (T, N) emission-input combination, -1 = padding
     ut: np.ndarray  # (T, N) transition-input combination of row t (t -> t+1), -1 = padding
     rows: np.ndarray  # (T, N) index of the source row in the frame, -1 = padding
+    # y, ue and ut hold int16 codes (int32 for very many input combinations), rows int32
     n_rows: int
     base: int = 1  # the index of a participant's first trial (1, or 0 in a table counting from 0)
+    trial_of_row: np.ndarray | None = None  # (n_rows,) every row's trial index, as in the table
 
     @property
     def n_participants(self) -> int:
@@ -62,14 +64,31 @@ class Sequences:
             np.ascontiguousarray(self.rows[:T, idx]),
             self.n_rows,
             self.base,
+            self.trial_of_row,
         )
+
+    def trial_numbers(self, t: np.ndarray, i: np.ndarray) -> np.ndarray:
+        """The table's trial index of position ``t`` of sequence ``i`` (arrays of positions)."""
+        if self.trial_of_row is None:
+            return np.asarray(t) + self.base
+        return self.trial_of_row[self.rows[t, i]]
+
+
+def _code_dtype(size: int) -> type[np.signedinteger]:
+    """The smallest signed integer type holding codes 0..size (and -1)."""
+    return np.int16 if size < 2**15 else np.int32
 
 
 def _combination(codes: list[np.ndarray], sizes: list[int], n: int) -> np.ndarray:
     """Per row, the index of the value combination of several coded columns (C order)."""
+    dtype = _code_dtype(int(np.prod(sizes)) if sizes else 1)
     if not codes:
-        return np.zeros(n, dtype=np.int64)
-    return np.ravel_multi_index(tuple(codes), tuple(sizes)).astype(np.int64)
+        return np.zeros(n, dtype=dtype)
+    out = np.zeros(n, dtype=np.int32)
+    for c, size in zip(codes, sizes, strict=True):
+        out *= size
+        out += c
+    return out.astype(dtype, copy=False)
 
 
 def _codes(frame: pd.DataFrame, spec: IOHMMSpec) -> dict[str, np.ndarray]:
@@ -86,16 +105,21 @@ def _codes(frame: pd.DataFrame, spec: IOHMMSpec) -> dict[str, np.ndarray]:
             continue
         cats = list(spec.output_categories if col == spec.output else spec.categories[col])
         values = frame[col]
-        raw, uniques = pd.factorize(values, use_na_sentinel=True)
-        lookup = np.full(len(uniques) + 1, -1, dtype=np.int64)  # the last entry: a missing value
+        if isinstance(values.dtype, pd.CategoricalDtype):  # codes into a few categories: no per-row hashing
+            raw, uniques = values.cat.codes.to_numpy(), values.cat.categories
+            if list(uniques) == cats and (col == spec.output or not (raw < 0).any()):
+                codes[col] = raw.astype(np.int16)  # the model's categories already, in its order
+                continue
+        else:
+            raw, uniques = pd.factorize(values, use_na_sentinel=True)
+        lookup = np.full(len(uniques) + 1, -1, dtype=np.int16)  # the last entry: a missing value
         unknown = np.zeros(len(uniques) + 1, dtype=bool)
         for j, u in enumerate(np.asarray(uniques, dtype=object)):
             if u in cats:
                 lookup[j] = cats.index(u)
             else:
                 unknown[j] = True
-        raw = np.asarray(raw, dtype=np.int64)
-        raw[raw < 0] = len(uniques)
+        raw = np.where(raw < 0, len(uniques), raw)
         c = lookup[raw]
         for i in np.flatnonzero(unknown[raw])[:MAX_LISTED]:
             problems.append(f"row {i + 1}, column {col!r}: value {values.iloc[i]!r} is not one of {cats}")
@@ -108,35 +132,81 @@ def _codes(frame: pd.DataFrame, spec: IOHMMSpec) -> dict[str, np.ndarray]:
     return codes
 
 
+def _participants(values: pd.Series) -> tuple[np.ndarray, list[str]]:
+    """Per row the participant's index, participants in order of first appearance."""
+    if isinstance(values.dtype, pd.CategoricalDtype) and not values.isna().any():
+        c = values.cat.codes.to_numpy()
+        k = len(values.cat.categories)
+        first = np.full(k, len(c), dtype=np.int64)
+        if len(c):  # the first row of each code: the rows where the code changes are enough
+            change = np.flatnonzero(np.r_[True, c[1:] != c[:-1]])
+            np.minimum.at(first, c[change], change)
+        used = np.flatnonzero(first < len(c))
+        used = used[np.argsort(first[used], kind="stable")]
+        remap = np.full(k, -1, dtype=np.int32)
+        remap[used] = np.arange(len(used), dtype=np.int32)
+        names = np.asarray(values.cat.categories, dtype=object)[used]
+        return remap[c], [str(p) for p in names]
+    codes, uniques = pd.factorize(values, use_na_sentinel=False)
+    return np.asarray(codes, dtype=np.int32), [str(p) for p in np.asarray(uniques, dtype=object)]
+
+
 def encode(frame: pd.DataFrame, spec: IOHMMSpec, participant: str = "participant", trial: str = "trial") -> Sequences:
     """Encode a validated trial table (one row per trial) for ``spec``.
 
-    Participants keep their order of first appearance; trials are placed by their
-    index, counted from 1 (or from 0 in a table whose smallest index is 0; ``base``
-    records which).  A missing output value is unobserved.
+    Participants keep their order of first appearance.  A participant's trials are
+    ordered by their index, and consecutive indices are consecutive trials: a gap
+    in the numbers (trials removed from the log) is not a trial of its own.  ``base``
+    records whether the table counts from 0 or 1; ``trial_of_row`` keeps every row's
+    index.  A missing output value is unobserved.  The arrays hold compact integers
+    (int16 codes, int32 rows).
     """
     n = len(frame)
     codes = _codes(frame, spec)
-    pcode_raw, order_p = pd.factorize(frame[participant], use_na_sentinel=False)
-    pcode = np.asarray(pcode_raw, dtype=np.int64)
-    participants = [str(p) for p in np.asarray(order_p, dtype=object)]
-    trials = frame[trial].to_numpy().astype(np.int64)
+    pcode, participants = _participants(frame[participant])
+    trials = frame[trial].to_numpy()
+    if trials.dtype.kind not in "iu":
+        trials = trials.astype(np.int64)
+    N = len(participants)
+    lengths = np.bincount(pcode, minlength=N).astype(np.int64)
+    T = int(lengths.max()) if n else 1
     base = 0 if n and int(trials.min()) == 0 else 1
-    tpos = trials - base
-    lengths = np.bincount(pcode, minlength=len(participants)).astype(np.int64)
-    T, N = int(lengths.max()) if n else 1, len(participants)
-    if n and (tpos.min() < 0 or np.any(tpos >= lengths[pcode])):
-        raise FitError([f"trial indices must run {base}..n within each participant"])
+    flat = np.zeros(0, dtype=np.int64)
+    if n:
+        lo = int(trials.min())
+        if lo < 0:
+            raise FitError(["trial indices must be integers >= 0"])
+        span = int(trials.max()) - lo + 1
+        key = pcode.astype(np.int64) * span + (trials - lo)
+        order = np.argsort(key, kind="stable") if np.any(key[1:] <= key[:-1]) else None
+        ks = key if order is None else key[order]
+        if np.any(ks[1:] == ks[:-1]):
+            raise FitError(["a participant has the same trial index twice"])
+        del key, ks
+        ps = pcode if order is None else pcode[order]
+        offsets = np.cumsum(lengths) - lengths
+        flat = (np.arange(n, dtype=np.int64) - offsets[ps]) * N + ps  # position within participant, time-major
+        if order is not None:
+            placed = np.empty(n, dtype=np.int64)
+            placed[order] = flat
+            flat = placed
+        del ps
 
     def combination(inputs: tuple[str, ...]) -> np.ndarray:
         return _combination([codes[c] for c in inputs], [len(spec.categories[c]) for c in inputs], n)
 
-    arrays = []
-    for vals in (codes[spec.output], combination(spec.emission_inputs), combination(spec.transition_inputs), np.arange(n)):
-        arr = np.full((T, N), -1, dtype=np.int64)
-        arr[tpos, pcode] = vals
-        arrays.append(arr)
-    y, ue, ut, rows = arrays
-    if n and int((rows >= 0).sum()) != n:
-        raise FitError(["a participant has the same trial index twice"])
-    return Sequences(participants, lengths, y, ue, ut, rows, n, base)
+    def spread(values: np.ndarray, dtype: type[np.signedinteger]) -> np.ndarray:
+        arr = np.full((T, N), -1, dtype=dtype)
+        arr.reshape(-1)[flat] = values
+        return arr
+
+    y = spread(codes[spec.output], _code_dtype(len(spec.output_categories)))
+    ue_codes = combination(spec.emission_inputs)
+    ue = spread(ue_codes, ue_codes.dtype.type)
+    del ue_codes
+    ut_codes = combination(spec.transition_inputs)
+    ut = spread(ut_codes, ut_codes.dtype.type)
+    del ut_codes
+    row_type = np.int32 if n < 2**31 else np.int64
+    rows = spread(np.arange(n, dtype=row_type), row_type)
+    return Sequences(participants, lengths, y, ue, ut, rows, n, base, np.asarray(trials, dtype=np.int64))
