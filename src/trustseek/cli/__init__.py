@@ -23,9 +23,10 @@ from . import plan  # solve, agnostic, plot-q; preset, check
 from . import interop  # export-pomdp, solve-pomdp-file
 from . import serve  # serve, export
 from . import sensitivity  # sensitivity
+from . import design  # design
 # isort: on
 
-COMMAND_MODULES = (simulate, fit, plan, interop, serve, sensitivity)
+COMMAND_MODULES = (simulate, fit, plan, interop, serve, sensitivity, design)
 
 #: the optional extras of pyproject.toml, by the top-level module of each of their packages
 EXTRAS = {
@@ -37,6 +38,8 @@ EXTRAS = {
     "psycopg": "server",
     "matplotlib": "plots",
     "jinja2": "plots",
+    "distributed": "design",
+    "dask": "design",
 }
 
 
