@@ -170,3 +170,27 @@ def test_config_problems_name_the_options():
     text = " ".join(exc.value.lines())
     for opt in ("--replicates", "--participants-2", "--alpha", "--test", "--ask-low"):
         assert opt in text
+
+
+@pytest.mark.parametrize("update", ["paper", "bayes"])
+def test_dense_plan_is_the_grid_solvers_policy(update):
+    from trustseek.design.replicate import plan
+
+    task = paper_task()
+    for model in (paper_model(), _other_model()):
+        fs = FitSettings(belief_update=update, grid=201)
+        ours = plan(model, task, fs)
+        ref = make_solver("grid", belief_update=update, grid=201).solve(AssistancePOMDP(model, task))
+        assert ours.thresholds() == pytest.approx(ref.thresholds(), abs=1e-9)
+        np.testing.assert_allclose(ours.q, ref.q, atol=1e-7)
+
+
+def test_agnostic_from_arrays_is_the_solvers():
+    from trustseek.design.replicate import _agnostic
+    from trustseek.solvers.agnostic import trust_agnostic_from_data
+
+    truth, task = paper_model(), paper_task()
+    for seed in range(5):
+        frame = simulate(truth, task, randomized({"low": 0.1, "high": 0.4}), 3, counts=(10, 8), seed=seed).trials()
+        ours, ref = _agnostic(frame, task), trust_agnostic_from_data(frame, task)
+        assert ours.p_ask.tolist() == ref.p_ask.tolist() and ours.info == ref.info
