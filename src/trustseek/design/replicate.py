@@ -224,6 +224,9 @@ def run_replicate(study: Study, point: int, design: Experiment1, replicate: int)
     value = evaluate_policy(aware, truth, task, grid=fs.evaluation_grid).value
     out["value"] = value
     out["regret"] = study.optimal_value - value
+    # what experiment 2 can detect at best: the estimated policy's exact advantage over the
+    # trust-agnostic one it is compared with (discounted, under the true model)
+    out["advantage"] = value - evaluate_policy(agnostic, truth, task, grid=fs.evaluation_grid).value
     th = high_threshold(aware)
     out["threshold"] = th
     out["threshold_error"] = abs(th - study.optimal_threshold)

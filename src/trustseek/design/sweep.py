@@ -238,6 +238,12 @@ def _interval(values: Sequence[float], level: float) -> dict[str, Any]:
     return {"n": len(v), "mean": m, "lo": lo, "hi": hi, "median": float(np.median(v))}
 
 
+def _share(flags: Sequence[bool], level: float) -> dict[str, Any]:
+    n, k = len(flags), int(sum(flags))
+    lo, hi = share_ci(k, n, level) if n else (float("nan"), float("nan"))
+    return {"share": k / n if n else None, "lo": lo, "hi": hi, "n": n}
+
+
 def _power(pvalues: Sequence[float], diffs: Sequence[float], alpha: float, level: float) -> dict[str, Any]:
     """Share of replicates whose test detects the trust-aware advantage (p < α and a positive
     mean paired difference), with its exact interval."""
@@ -267,6 +273,8 @@ def summarize(cfg: DesignConfig, study: Study, designs: list[Experiment1], reps:
             "relative_regret": rel,
             "threshold_error": _interval([r["threshold_error"] for r in ok], cfg.level),
             "threshold": _interval([r["threshold"] for r in ok], cfg.level),
+            "advantage": _interval([r["advantage"] for r in ok], cfg.level),
+            "share_positive_advantage": _share([r["advantage"] > 1e-9 for r in ok], cfg.level),
             "experiment2": [],
         }
         for k, trials in enumerate(study.trials_2):
@@ -326,6 +334,9 @@ def summarize(cfg: DesignConfig, study: Study, designs: list[Experiment1], reps:
         "notes": [
             "regret = V*(b0) - V(b0) of the estimated policy under the true model (exact evaluation), "
             "the estimated policy tracking trust with the fitted model",
+            "advantage = V(b0) of the estimated policy - V(b0) of the trust-agnostic policy estimated from the same data, "
+            "both exact under the true model; power cannot exceed the share of replicates with a positive advantage "
+            "by much as participants grow",
             "power = share of replicates with p < alpha and a positive mean paired difference; exact (Clopper-Pearson) intervals",
             "participants_for_power: smallest grid value whose power (estimate / upper end / lower end of its interval) "
             "reaches the target; lo and hi bracket the estimate",

@@ -40,6 +40,9 @@ def plot_power(summary: dict[str, Any], path=None, title: str | None = None):
                         ax.fill_between(n, lo, hi, color=color, alpha=0.15, lw=0)
                 k += 1
         ax.axhline(target, color="black", lw=0.8, ls=":", label=f"target power {target:g}")
+        ns = [c["participants"] for p in summary["points"] for e in p["experiment2"] for c in e["curve"]]
+        if ns and max(ns) > 20 * min(ns):
+            ax.set_xscale("log")
         ax.set_xlabel("participants in experiment 2")
         ax.set_ylabel(f"power (α = {summary['targets']['alpha']:g})")
         ax.set_ylim(0, 1)
