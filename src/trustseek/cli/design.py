@@ -221,5 +221,5 @@ def _print(s: dict[str, Any], search: dict[str, Any] | None) -> None:
         console.print(
             f"ask probabilities for {search['budget']['participants']} × {search['budget']['trials']} trials: best "
             f"{b['ask_low']:g}/{b['ask_high']:g} regret {_iv(b['regret'])}; paper 0.10/0.40 regret {_iv(pp['regret'])}"
-            + ("; the intervals overlap" if search["paper_near_best"] else "")
+            + ("; the paper's choice is near the best" if search["paper_near_best"] else "")
         )

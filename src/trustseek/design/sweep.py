@@ -23,6 +23,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.stats import ttest_ind
 
 from ..errors import TrustseekError
 from ..model.core import Task, TrustModel
@@ -354,7 +355,8 @@ def ask_search(
 ) -> dict[str, Any]:
     """The data-collection design search: every (ask_low, ask_high) at experiment 1's budget
     (the first of ``cfg``'s participants and trials), ranked by the mean regret of the estimated
-    policy; the best with its interval next to the paper's 0.10 / 0.40."""
+    policy; the best with its interval next to the paper's 0.10 / 0.40, and the Welch interval of
+    the paper's regret minus the best's (independent replicates: seeds differ by design point)."""
     grid = [(float(lo), float(hi)) for lo in ask_low for hi in ask_high]
     paper = (PAPER_ASK_PROBABILITIES["low"], PAPER_ASK_PROBABILITIES["high"])
     if paper not in grid:
@@ -390,11 +392,20 @@ def ask_search(
     ranked = sorted(rows, key=lambda r: math.inf if r["regret"]["mean"] is None else r["regret"]["mean"])
     best = ranked[0]
     at_paper = next(r for r in rows if (r["ask_low"], r["ask_high"]) == paper)
-    overlap = (
-        best["regret"]["hi"] is not None
-        and at_paper["regret"]["lo"] is not None
-        and at_paper["regret"]["lo"] <= best["regret"]["hi"]
-    )
+    regrets = {i: np.array([r["regret"] for r in reps if r["point"] == i and "error" not in r]) for i in range(len(designs))}
+    i_best, i_paper = rows.index(best), rows.index(at_paper)
+    difference: dict[str, Any] = {"mean": None, "lo": None, "hi": None}
+    if i_best != i_paper and len(regrets[i_best]) > 1 and len(regrets[i_paper]) > 1:
+        welch = ttest_ind(regrets[i_paper], regrets[i_best], equal_var=False)
+        ci = welch.confidence_interval(sub.level)
+        difference = {
+            "mean": float(regrets[i_paper].mean() - regrets[i_best].mean()),
+            "lo": float(ci.low),
+            "hi": float(ci.high),
+            "p_value": float(welch.pvalue),
+        }
+    # near the best: the paper's choice is the best, or the interval of (paper - best) reaches 0
+    near = i_best == i_paper or (difference["lo"] is not None and difference["lo"] <= 0)
     return _clean(
         {
             "budget": {"participants": sub.participants_1[0], "trials": sub.trials_1[0]},
@@ -405,7 +416,8 @@ def ask_search(
             "ranked": [(r["ask_low"], r["ask_high"]) for r in ranked],
             "best": best,
             "paper": at_paper,
-            "paper_near_best": bool(overlap),
+            "paper_minus_best": difference,
+            "paper_near_best": bool(near),
         }
     )
 
