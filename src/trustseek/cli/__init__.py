@@ -38,7 +38,6 @@ EXTRAS = {
     "psycopg": "server",
     "matplotlib": "plots",
     "jinja2": "plots",
-    "distributed": "design",
     "dask": "design",
 }
 

@@ -37,7 +37,7 @@ def _connect(scheduler: str | None) -> Any:
     if scheduler is None:
         return None
     try:
-        from distributed import Client
+        from dask.distributed import Client
     except ModuleNotFoundError:
         raise TrustseekError(
             ["--scheduler needs the optional 'design' dependencies (dask.distributed): pip install 'trustseek[design]'"]

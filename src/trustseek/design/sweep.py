@@ -193,7 +193,7 @@ def execute(
         size = chunk or max(1, min(8, math.ceil(total / (4 * workers))))
         parts = _chunks(items, size)
         if client is not None:
-            from distributed import as_completed as dask_completed
+            from dask.distributed import as_completed as dask_completed
 
             shared = client.scatter(study, broadcast=True)
             futures = client.map(run_chunk, [shared] * len(parts), parts, pure=False)
