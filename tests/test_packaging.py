@@ -111,4 +111,4 @@ def test_the_cli_knows_the_extras_of_pyproject():
         assert module in _requirement_names(extras[extra]), (module, extra)
         assert module not in core
     assert set(EXTRAS.values()) | {"all", "test"} == set(extras)
-    assert extras["all"] == ["trustseek[server,plots]"]
+    assert extras["all"] == ["trustseek[server,plots,design]"]

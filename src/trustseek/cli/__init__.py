@@ -24,9 +24,10 @@ from . import interop  # export-pomdp, solve-pomdp-file
 from . import serve  # serve, export
 from . import sensitivity  # sensitivity
 from . import schedule  # schedule
+from . import design  # design
 # isort: on
 
-COMMAND_MODULES = (simulate, fit, plan, interop, serve, sensitivity, schedule)
+COMMAND_MODULES = (simulate, fit, plan, interop, serve, sensitivity, schedule, design)
 
 #: the optional extras of pyproject.toml, by the top-level module of each of their packages
 EXTRAS = {
@@ -38,6 +39,7 @@ EXTRAS = {
     "psycopg": "server",
     "matplotlib": "plots",
     "jinja2": "plots",
+    "dask": "design",
 }
 
 

@@ -1,0 +1,257 @@
+"""One replicate of a study: simulate experiment 1 → fit → solve → exact evaluation → experiment 2
+→ the pre-registered tests.
+
+Everything a replicate draws comes from ``np.random.SeedSequence([sweep seed, design point,
+replicate])``, so a replicate's numbers do not depend on where or in which order it runs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.stats import norm, ttest_rel
+
+from ..errors import TrustseekError
+from ..estimation.fit import fit_trust_model
+from ..model.core import Task, TrustModel
+from ..policies import ComplexityPolicy, TrustAwarePolicy, randomized
+from ..pomdp.problem import AssistancePOMDP
+from ..simulation import crossover, simulate
+from ..solvers.agnostic import agnostic_from_intervention_rates, trust_agnostic_from_data
+from ..solvers.grid import GridSolver
+from ..solvers.numerics import improve
+from ..vocab import TRIAL_COLUMNS
+from .evaluation import EVALUATION_GRID, evaluate_policy, high_threshold
+
+__all__ = ["Experiment1", "FitSettings", "Study", "paired_tests", "replicate_seed", "run_replicate", "signed_rank_p"]
+
+#: up to this many nonzero differences the signed-rank p-value is exact
+EXACT_SIGNED_RANK = 60
+
+
+@dataclass(frozen=True)
+class Experiment1:
+    """A data-collection design: participants x trials (``high`` of them high complexity, the
+    rest low, in random order) under the randomized policy that asks with ``ask_low`` /
+    ``ask_high``."""
+
+    participants: int
+    trials: int
+    high: int
+    ask_low: float
+    ask_high: float
+
+    @property
+    def counts(self) -> tuple[int, int]:
+        return (self.trials - self.high, self.high)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "participants": self.participants,
+            "trials": self.trials,
+            "counts": list(self.counts),
+            "ask_low": self.ask_low,
+            "ask_high": self.ask_high,
+        }
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """How each replicate fits the IOHMM (the ``paper`` structure) and plans."""
+
+    restarts: int = 2
+    tol: float = 1e-8
+    max_iter: int = 1000
+    belief_update: str = "paper"
+    grid: int = 201
+    evaluation_grid: int = EVALUATION_GRID
+
+
+@dataclass(frozen=True)
+class Study:
+    """What every replicate shares: the true population, the task, the fit settings and
+    experiment 2's grid (participants are prefixes of one crossover of ``max(participants_2)``
+    participants per block length, so the power curve over participants uses common random
+    numbers)."""
+
+    truth: TrustModel
+    task: Task
+    fit: FitSettings
+    participants_2: tuple[int, ...]
+    trials_2: tuple[int, ...]  # trials per block, split evenly over the complexities
+    counterbalance: bool = True
+    alpha: float = 0.05
+    optimal_value: float = float("nan")  # V*(b0) under the truth
+    optimal_threshold: float = float("nan")
+    seed: int = 0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def replicate_seed(seed: int, point: int, replicate: int) -> np.random.SeedSequence:
+    """The seed of replicate ``replicate`` of design point ``point`` of a sweep seeded ``seed``."""
+    return np.random.SeedSequence([int(seed), int(point), int(replicate)])
+
+
+def block_counts(trials: int, n_complexity: int) -> tuple[int, ...]:
+    """``trials`` per block split as evenly as possible over the complexities (the paper: 17/17)."""
+    base, rest = divmod(int(trials), n_complexity)
+    return tuple(base + (1 if c < rest else 0) for c in range(n_complexity))
+
+
+def signed_rank_p(d: np.ndarray) -> float:
+    """Two-sided p-value of the Wilcoxon signed-rank test of the paired differences ``d``
+    (zeros dropped, ties given their mid-ranks).  Exact up to :data:`EXACT_SIGNED_RANK` nonzero
+    differences: the distribution of W+ over the 2^n sign patterns, by dynamic programming on
+    the doubled mid-ranks (integers); beyond, the normal approximation with the tie correction.
+    1 when every difference is zero."""
+    d = np.asarray(d, dtype=float)
+    d = d[d != 0]
+    n = len(d)
+    if n == 0:
+        return 1.0
+    a = np.abs(d)
+    order = np.argsort(a, kind="stable")
+    sa = a[order]
+    ranks = np.empty(n)
+    i = 0
+    while i < n:  # mid-ranks of tied |d|
+        j = i
+        while j + 1 < n and sa[j + 1] == sa[i]:
+            j += 1
+        ranks[order[i : j + 1]] = (i + j + 2) / 2.0
+        i = j + 1
+    w2 = round(float(2 * ranks[d > 0].sum()))  # doubled W+
+    if n > EXACT_SIGNED_RANK:
+        mean = n * (n + 1) / 4.0
+        _, tie_counts = np.unique(sa, return_counts=True)
+        var = n * (n + 1) * (2 * n + 1) / 24.0 - float(np.sum(tie_counts**3 - tie_counts)) / 48.0
+        z = (w2 / 2.0 - mean) / np.sqrt(var)
+        return float(min(1.0, 2 * norm.sf(abs(z))))
+    weights = np.rint(2 * ranks).astype(np.int64)
+    counts = np.zeros(int(weights.sum()) + 1)
+    counts[0] = 1.0
+    for w in weights:
+        counts[w:] = counts[w:] + counts[:-w].copy() if w else counts * 2
+    probs = counts / counts.sum()
+    low = float(probs[: w2 + 1].sum())
+    high = float(probs[w2:].sum())
+    return float(min(1.0, 2 * min(low, high)))
+
+
+def paired_tests(aware: np.ndarray, agnostic: np.ndarray) -> dict[str, float]:
+    """Two-sided p-values of the paired Wilcoxon signed-rank test and the paired t-test, and the
+    mean paired difference (p = 1 when every difference is zero: nothing to detect)."""
+    d = np.asarray(aware, float) - np.asarray(agnostic, float)
+    out = {"mean_difference": float(d.mean())}
+    if not np.any(d):
+        return out | {"wilcoxon": 1.0, "t": 1.0}
+    w = signed_rank_p(d)
+    # constant nonzero differences: the t statistic is infinite (p = 0 from two participants on)
+    constant = len(d) < 2 or bool(np.all(d == d[0]))
+    t = (0.0 if len(d) > 1 else 1.0) if constant else float(ttest_rel(aware, agnostic).pvalue)
+    return out | {"wilcoxon": w, "t": t}
+
+
+def _seed_int(ss: np.random.SeedSequence) -> int:
+    return int(ss.generate_state(1, dtype=np.uint32)[0])
+
+
+def plan(model: TrustModel, task: Task, settings: FitSettings) -> TrustAwarePolicy:
+    """The trust-aware policy of ``model``: the grid solver's discretized belief MDP
+    (:meth:`GridSolver.operators`), solved by Howard's policy iteration with dense linear
+    solves (a few hundred grid points: much faster than the sparse iterative path, the same
+    policy; the tests compare both)."""
+    solver = GridSolver(grid=settings.grid, belief_update=settings.belief_update)
+    pomdp = AssistancePOMDP(model, task)
+    grid, r, P, q_of, _ = solver.operators(pomdp)
+    G, N, gamma, pc = len(grid), pomdp.n_complexity, pomdp.discount, pomdp.complexity_probs
+    dense = np.stack([np.stack([P[c][a].toarray() for a in range(2)]) for c in range(N)])  # [c, a, G, G]
+    policy = r.argmax(axis=1)  # [c, G]
+    rows = np.arange(G)
+    W: np.ndarray = np.zeros(G)
+    for _ in range(1000):
+        M = np.zeros((G, G))
+        rr = np.zeros(G)
+        for c in range(N):
+            M += (gamma * pc[c]) * dense[c, policy[c], rows]
+            rr += pc[c] * r[c, policy[c], rows]
+        W = np.asarray(np.linalg.solve(np.eye(G) - M, rr), dtype=float)
+        q = r + gamma * (dense @ W)  # [c, a, G]
+        new = improve(q, policy, axis=1)
+        if new is None:
+            break
+        policy = new
+    info = {"solver": "grid", "method": "policy-iteration (dense)", "grid_points": G, "discount": gamma}
+    return TrustAwarePolicy(grid, q_of(W), model, task.complexities, settings.belief_update, info)
+
+
+def _agnostic(frame: Any, task: Task) -> ComplexityPolicy:
+    """The trust-agnostic policy from experiment 1's data (as
+    :func:`~trustseek.solvers.agnostic.trust_agnostic_from_data`: P(intervene | C, autonomous)
+    estimated by its share), on the columns' arrays."""
+    c = frame["complexity"].to_numpy()
+    auto = frame["robot_action"].to_numpy() == "autonomous"
+    human = frame["human_action"].to_numpy()
+    p_int = []
+    for cn in task.complexities:
+        sel = auto & (c == cn)
+        if not sel.any():
+            return trust_agnostic_from_data(frame, task)  # raises, naming the complexity
+        p_int.append(float(np.mean(human[sel] == "intervene")))
+    return agnostic_from_intervention_rates(task, p_int, source=f"data, {len(frame)} trials")
+
+
+def run_replicate(study: Study, point: int, design: Experiment1, replicate: int) -> dict[str, Any]:
+    """One replicate of ``design`` (design point ``point``): regret and threshold error of the
+    estimated policy under the truth, and per experiment-2 setting the p-values of both tests."""
+    s1, sfit, s2 = replicate_seed(study.seed, point, replicate).spawn(3)
+    truth, task, fs = study.truth, study.task, study.fit
+    out: dict[str, Any] = {"point": point, "replicate": replicate}
+    ask = randomized({task.complexities[0]: design.ask_low, task.complexities[-1]: design.ask_high})
+    frame = simulate(truth, task, ask, design.participants, counts=design.counts, seed=s1).trials()[list(TRIAL_COLUMNS)]
+    try:
+        fit = fit_trust_model(
+            frame, preset="paper", restarts=fs.restarts, seed=_seed_int(sfit), tol=fs.tol, max_iter=fs.max_iter, n_jobs=1
+        )
+        aware = plan(fit.model, task, fs)
+        agnostic = _agnostic(frame, task)
+    except TrustseekError as exc:
+        out["error"] = "; ".join(exc.lines())
+        return out
+    value = evaluate_policy(aware, truth, task, grid=fs.evaluation_grid).value
+    out["value"] = value
+    out["regret"] = study.optimal_value - value
+    # what experiment 2 can detect at best: the estimated policy's exact advantage over the
+    # trust-agnostic one it is compared with (discounted, under the true model)
+    out["advantage"] = value - evaluate_policy(agnostic, truth, task, grid=fs.evaluation_grid).value
+    th = high_threshold(aware)
+    out["threshold"] = th
+    out["threshold_error"] = abs(th - study.optimal_threshold)
+    tests: list[dict[str, Any]] = []
+    n_max = max(study.participants_2)
+    for k, (trials, ss) in enumerate(zip(study.trials_2, s2.spawn(len(study.trials_2)), strict=True)):
+        first = None if study.counterbalance else np.zeros(n_max, dtype=np.int64)
+        sim = crossover(
+            truth,
+            task,
+            [aware, agnostic],
+            n_max,
+            counts=block_counts(trials, task.n_complexity),
+            first=first,
+            seed=ss,
+            record=False,
+            belief_model=fit.model,
+        )
+        r = sim.summary_arrays["cumulative_reward"]  # (n, 2): aware, agnostic
+        for n in study.participants_2:
+            tests.append({"trials_2": k, "participants_2": n, **paired_tests(r[:n, 0], r[:n, 1])})
+    out["tests"] = tests
+    return out
+
+
+def run_chunk(study: Study, items: Sequence[tuple[int, Experiment1, int]]) -> list[dict[str, Any]]:
+    """Several replicates in one task (what an executor runs)."""
+    return [run_replicate(study, point, design, rep) for point, design, rep in items]

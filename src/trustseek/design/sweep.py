@@ -1,0 +1,440 @@
+"""Study design and power analysis: replicated pipelines over a grid of designs.
+
+:func:`run_design` takes a :class:`DesignConfig` (the true population, the task, grids over
+experiment 1 and experiment 2, the fit settings, R replicates, the targets) and runs every
+replicate (:func:`~.replicate.run_replicate`) in this process, in local processes
+(``jobs``) or on a Dask distributed cluster (``client``).  Replicate seeds depend only on the
+sweep seed, the design point and the replicate index, so the summary is the same whatever
+runs it.  The summary (JSON-ready) holds per design point the regret and the threshold error
+of the estimated policy with intervals, per experiment-2 setting the power of both tests with
+exact intervals, the participants needed for the target power, and the smallest design that
+meets the targets.  :func:`ask_search` is the data-collection design search: experiment 1's
+ask probabilities at a fixed budget of trials, ranked by regret.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.stats import ttest_ind
+
+from ..errors import TrustseekError
+from ..model.core import Task, TrustModel
+from ..model.presets import paper_model, paper_task
+from ..reproduction.statistics import mean_ci, share_ci
+from ..vocab import (
+    BELIEF_UPDATES,
+    PAPER_ASK_PROBABILITIES,
+    PAPER_BLOCK_COUNTS,
+    PAPER_DATA_COUNTS,
+    PAPER_DATA_PARTICIPANTS,
+    PAPER_EVALUATION_PARTICIPANTS,
+)
+from .evaluation import evaluate_policy, high_threshold
+from .replicate import Experiment1, FitSettings, Study, plan, run_chunk
+
+__all__ = ["TESTS", "DesignConfig", "DesignResult", "ask_search", "run_design"]
+
+TESTS = ("wilcoxon", "t")
+
+Progress = Callable[[int, int], None]
+
+
+@dataclass
+class DesignConfig:
+    """Every setting of a design sweep (the defaults are the paper's design and a power curve
+    over experiment 2's participants)."""
+
+    truth: TrustModel = field(default_factory=paper_model)
+    task: Task = field(default_factory=paper_task)
+    seed: int = 0
+    replicates: int = 100
+    # experiment 1 (every combination is a design point)
+    participants_1: tuple[int, ...] = (PAPER_DATA_PARTICIPANTS,)
+    trials_1: tuple[int, ...] = (sum(PAPER_DATA_COUNTS),)
+    share_high_1: tuple[float, ...] = (PAPER_DATA_COUNTS[1] / sum(PAPER_DATA_COUNTS),)
+    ask_low: tuple[float, ...] = (PAPER_ASK_PROBABILITIES["low"],)
+    ask_high: tuple[float, ...] = (PAPER_ASK_PROBABILITIES["high"],)
+    # experiment 2 (evaluated inside every replicate)
+    participants_2: tuple[int, ...] = (PAPER_EVALUATION_PARTICIPANTS, 10, 15, 20, 30, 40, 60)
+    trials_2: tuple[int, ...] = (sum(PAPER_BLOCK_COUNTS),)
+    counterbalance: bool = True
+    alpha: float = 0.05
+    test: str = "wilcoxon"  # the test the targets use
+    fit: FitSettings = field(default_factory=FitSettings)
+    # targets
+    power_target: float = 0.8
+    regret_target: float = 0.01  # mean regret at most this share of V*
+    level: float = 0.95
+
+    def problems(self) -> list[str]:
+        """Every setting out of range, as a message naming its option."""
+        p: list[str] = []
+        if self.replicates < 2:
+            p.append(f"--replicates must be >= 2, got {self.replicates}")
+        for name in ("participants_1", "trials_1", "participants_2", "trials_2"):
+            vals = getattr(self, name)
+            if not vals or min(vals) < 1:
+                p.append(f"--{name.replace('_', '-')} needs values >= 1, got {list(vals)}")
+        if self.participants_2 and min(self.participants_2) < 2:
+            p.append("--participants-2 needs at least 2 participants for a paired test")
+        for name in ("share_high_1", "ask_low", "ask_high"):
+            vals = getattr(self, name)
+            if not vals or any(not 0 <= v <= 1 for v in vals):
+                p.append(f"--{name.replace('_', '-')} needs values in [0, 1], got {list(vals)}")
+        if not 0 < self.alpha < 1:
+            p.append(f"--alpha must lie in (0, 1), got {self.alpha}")
+        if self.test not in TESTS:
+            p.append(f"--test must be one of {list(TESTS)}, got {self.test!r}")
+        if not 0 < self.power_target < 1:
+            p.append(f"--power-target must lie in (0, 1), got {self.power_target}")
+        if self.regret_target < 0:
+            p.append(f"--regret-target must be >= 0, got {self.regret_target}")
+        if self.fit.restarts < 1:
+            p.append(f"--restarts must be >= 1, got {self.fit.restarts}")
+        if self.fit.belief_update not in BELIEF_UPDATES:
+            p.append(f"--belief-update must be one of {list(BELIEF_UPDATES)}, got {self.fit.belief_update!r}")
+        if self.truth.n_trust != 2:
+            p.append(f"a design study needs a true model with two trust levels, got {self.truth.n_trust}")
+        if self.task.n_complexity != 2:
+            p.append(f"a design study needs a task with two complexities, got {self.task.n_complexity}")
+        return p
+
+    def designs(self) -> list[Experiment1]:
+        """Experiment 1's design points, in order (the index is the point's seed component)."""
+        out = []
+        for n, t, s, lo, hi in itertools.product(
+            self.participants_1, self.trials_1, self.share_high_1, self.ask_low, self.ask_high
+        ):
+            out.append(Experiment1(int(n), int(t), round(float(t) * float(s)), float(lo), float(hi)))
+        return out
+
+    def to_summary(self) -> dict[str, Any]:
+        """The settings as the JSON records them."""
+        return {
+            "seed": self.seed,
+            "replicates": self.replicates,
+            "participants_1": list(self.participants_1),
+            "trials_1": list(self.trials_1),
+            "share_high_1": list(self.share_high_1),
+            "ask_low": list(self.ask_low),
+            "ask_high": list(self.ask_high),
+            "participants_2": list(self.participants_2),
+            "trials_2": list(self.trials_2),
+            "counterbalance": self.counterbalance,
+            "alpha": self.alpha,
+            "test": self.test,
+            "fit": asdict(self.fit),
+            "power_target": self.power_target,
+            "regret_target": self.regret_target,
+            "level": self.level,
+            "truth": self.truth.to_dict(),
+            "task": self.task.to_dict(),
+        }
+
+
+@dataclass
+class DesignResult:
+    """What :func:`run_design` produced: the summary and every replicate's record."""
+
+    summary: dict[str, Any]
+    replicates: list[dict[str, Any]]
+    seconds: float = 0.0
+
+
+def study_of(cfg: DesignConfig) -> Study:
+    """What every replicate shares, with the true model's optimal policy's value and threshold."""
+    best = plan(cfg.truth, cfg.task, cfg.fit)
+    v_star = evaluate_policy(best, cfg.truth, cfg.task, grid=cfg.fit.evaluation_grid).value
+    return Study(
+        truth=cfg.truth,
+        task=cfg.task,
+        fit=cfg.fit,
+        participants_2=tuple(int(n) for n in cfg.participants_2),
+        trials_2=tuple(int(t) for t in cfg.trials_2),
+        counterbalance=cfg.counterbalance,
+        alpha=cfg.alpha,
+        optimal_value=v_star,
+        optimal_threshold=high_threshold(best),
+        seed=cfg.seed,
+    )
+
+
+def _chunks(items: list[Any], size: int) -> list[list[Any]]:
+    return [items[i : i + size] for i in range(0, len(items), size)]
+
+
+def execute(
+    study: Study,
+    items: list[tuple[int, Experiment1, int]],
+    jobs: int = 1,
+    client: Any = None,
+    progress: Progress | None = None,
+    chunk: int | None = None,
+) -> list[dict[str, Any]]:
+    """Every replicate of ``items`` (point, design, replicate), sorted by (point, replicate):
+    in this process (``jobs`` = 1), in ``jobs`` local processes, or on the Dask ``client``."""
+    total = len(items)
+    report = progress or (lambda done, tot: None)
+    out: list[dict[str, Any]] = []
+    if client is None and jobs <= 1:
+        for item in items:
+            out.extend(run_chunk(study, [item]))
+            report(len(out), total)
+    else:
+        workers = jobs if client is None else max(1, len(client.scheduler_info().get("workers", {})))
+        size = chunk or max(1, min(8, math.ceil(total / (4 * workers))))
+        parts = _chunks(items, size)
+        if client is not None:
+            from dask.distributed import as_completed as dask_completed
+
+            shared = client.scatter(study, broadcast=True)
+            futures = client.map(run_chunk, [shared] * len(parts), parts, pure=False)
+            for fut in dask_completed(futures):
+                out.extend(fut.result())
+                report(len(out), total)
+        else:
+            with ProcessPoolExecutor(max_workers=jobs) as ex:
+                futs = [ex.submit(run_chunk, study, part) for part in parts]
+                for f in as_completed(futs):
+                    out.extend(f.result())
+                    report(len(out), total)
+    out.sort(key=lambda r: (r["point"], r["replicate"]))
+    return out
+
+
+def run_design(
+    cfg: DesignConfig | None = None,
+    jobs: int = 1,
+    client: Any = None,
+    progress: Progress | None = None,
+) -> DesignResult:
+    """Run the sweep of ``cfg`` (``client``: a ``dask.distributed.Client`` to run it on a
+    cluster; else ``jobs`` local processes) and summarize it."""
+    cfg = cfg or DesignConfig()
+    problems = cfg.problems()
+    if problems:
+        raise TrustseekError(problems)
+    t0 = time.perf_counter()
+    study = study_of(cfg)
+    designs = cfg.designs()
+    items = [(i, d, r) for i, d in enumerate(designs) for r in range(cfg.replicates)]
+    reps = execute(study, items, jobs=jobs, client=client, progress=progress)
+    summary = summarize(cfg, study, designs, reps)
+    return DesignResult(summary=_clean(summary), replicates=_clean(reps), seconds=time.perf_counter() - t0)
+
+
+def _interval(values: Sequence[float], level: float) -> dict[str, Any]:
+    v = [x for x in values if x is not None and math.isfinite(x)]
+    if not v:
+        return {"n": 0, "mean": None, "lo": None, "hi": None}
+    m, lo, hi = mean_ci(v, level) if len(v) > 1 else (v[0], float("nan"), float("nan"))
+    return {"n": len(v), "mean": m, "lo": lo, "hi": hi, "median": float(np.median(v))}
+
+
+def _share(flags: Sequence[bool], level: float) -> dict[str, Any]:
+    n, k = len(flags), int(sum(flags))
+    lo, hi = share_ci(k, n, level) if n else (float("nan"), float("nan"))
+    return {"share": k / n if n else None, "lo": lo, "hi": hi, "n": n}
+
+
+def _power(pvalues: Sequence[float], diffs: Sequence[float], alpha: float, level: float) -> dict[str, Any]:
+    """Share of replicates whose test detects the trust-aware advantage (p < α and a positive
+    mean paired difference), with its exact interval."""
+    hits = sum(1 for p, d in zip(pvalues, diffs, strict=True) if p < alpha and d > 0)
+    n = len(pvalues)
+    lo, hi = share_ci(hits, n, level) if n else (float("nan"), float("nan"))
+    return {"power": hits / n if n else None, "lo": lo, "hi": hi, "detected": hits, "n": n}
+
+
+def summarize(cfg: DesignConfig, study: Study, designs: list[Experiment1], reps: list[dict[str, Any]]) -> dict[str, Any]:
+    """Per design point: regret, threshold error and power curves; the participants needed for
+    the target power; the smallest design meeting the targets."""
+    v_star = study.optimal_value
+    points: list[dict[str, Any]] = []
+    candidates: list[dict[str, Any]] = []
+    for i, d in enumerate(designs):
+        mine = [r for r in reps if r["point"] == i]
+        ok = [r for r in mine if "error" not in r]
+        regret = _interval([r["regret"] for r in ok], cfg.level)
+        rel = {k: (None if v is None else v / v_star) for k, v in regret.items() if k in ("mean", "lo", "hi", "median")}
+        point: dict[str, Any] = {
+            "index": i,
+            "experiment1": d.to_dict(),
+            "replicates": len(mine),
+            "failed": [{"replicate": r["replicate"], "error": r["error"]} for r in mine if "error" in r],
+            "regret": regret,
+            "relative_regret": rel,
+            "threshold_error": _interval([r["threshold_error"] for r in ok], cfg.level),
+            "threshold": _interval([r["threshold"] for r in ok], cfg.level),
+            "advantage": _interval([r["advantage"] for r in ok], cfg.level),
+            "share_positive_advantage": _share([r["advantage"] > 1e-9 for r in ok], cfg.level),
+            "experiment2": [],
+        }
+        for k, trials in enumerate(study.trials_2):
+            curve: list[dict[str, Any]] = []
+            for n in study.participants_2:
+                rows = [t for r in ok for t in r["tests"] if t["trials_2"] == k and t["participants_2"] == n]
+                diffs = [t["mean_difference"] for t in rows]
+                # a failed replicate detects nothing: it counts in the denominator
+                pad = len(mine) - len(ok)
+                entry: dict[str, Any] = {
+                    "participants": n,
+                    "mean_difference": _interval(diffs, cfg.level),
+                    **{
+                        test: _power([t[test] for t in rows] + [1.0] * pad, diffs + [0.0] * pad, cfg.alpha, cfg.level)
+                        for test in TESTS
+                    },
+                }
+                curve.append(entry)
+                meets_regret = rel["mean"] is not None and rel["mean"] <= cfg.regret_target
+                power = entry[cfg.test]["power"]
+                if meets_regret and power is not None and power >= cfg.power_target:
+                    candidates.append(
+                        {
+                            "point": i,
+                            "experiment1": d.to_dict(),
+                            "participants_2": n,
+                            "trials_2": trials,
+                            "power": entry[cfg.test],
+                            "relative_regret": rel,
+                            "cost_trials": d.participants * d.trials + 2 * n * trials,
+                        }
+                    )
+            needed = next((c["participants"] for c in curve if (c[cfg.test]["power"] or 0) >= cfg.power_target), None)
+            needed_lo = next((c["participants"] for c in curve if (c[cfg.test]["hi"] or 0) >= cfg.power_target), None)
+            needed_hi = next((c["participants"] for c in curve if (c[cfg.test]["lo"] or 0) >= cfg.power_target), None)
+            point["experiment2"].append(
+                {
+                    "trials_per_block": trials,
+                    "curve": curve,
+                    "participants_for_power": {"estimate": needed, "lo": needed_lo, "hi": needed_hi},
+                }
+            )
+        points.append(point)
+    smallest = min(candidates, key=lambda c: (c["cost_trials"], c["point"], c["participants_2"])) if candidates else None
+    return {
+        "config": cfg.to_summary(),
+        "optimal": {"value": v_star, "threshold": study.optimal_threshold},
+        "points": points,
+        "smallest_design": smallest,
+        "targets": {
+            "power": cfg.power_target,
+            "relative_regret": cfg.regret_target,
+            "test": cfg.test,
+            "alpha": cfg.alpha,
+            "met": smallest is not None,
+        },
+        "notes": [
+            "regret = V*(b0) - V(b0) of the estimated policy under the true model (exact evaluation), "
+            "the estimated policy tracking trust with the fitted model",
+            "advantage = V(b0) of the estimated policy - V(b0) of the trust-agnostic policy estimated from the same data, "
+            "both exact under the true model; power cannot exceed the share of replicates with a positive advantage "
+            "by much as participants grow",
+            "power = share of replicates with p < alpha and a positive mean paired difference; exact (Clopper-Pearson) intervals",
+            "participants_for_power: smallest grid value whose power (estimate / upper end / lower end of its interval) "
+            "reaches the target; lo and hi bracket the estimate",
+        ],
+    }
+
+
+def ask_search(
+    cfg: DesignConfig,
+    ask_low: Iterable[float],
+    ask_high: Iterable[float],
+    jobs: int = 1,
+    client: Any = None,
+    progress: Progress | None = None,
+) -> dict[str, Any]:
+    """The data-collection design search: every (ask_low, ask_high) at experiment 1's budget
+    (the first of ``cfg``'s participants and trials), ranked by the mean regret of the estimated
+    policy; the best with its interval next to the paper's 0.10 / 0.40, and the Welch interval of
+    the paper's regret minus the best's (independent replicates: seeds differ by design point)."""
+    grid = [(float(lo), float(hi)) for lo in ask_low for hi in ask_high]
+    paper = (PAPER_ASK_PROBABILITIES["low"], PAPER_ASK_PROBABILITIES["high"])
+    if paper not in grid:
+        grid.append(paper)
+    sub = DesignConfig(**{**cfg.__dict__, "participants_1": cfg.participants_1[:1], "trials_1": cfg.trials_1[:1]})
+    sub.share_high_1 = cfg.share_high_1[:1]
+    sub.participants_2 = cfg.participants_2[:1]
+    sub.trials_2 = cfg.trials_2[:1]
+    problems = sub.problems()
+    if problems:
+        raise TrustseekError(problems)
+    study = study_of(sub)
+    designs = [
+        Experiment1(sub.participants_1[0], sub.trials_1[0], round(sub.trials_1[0] * float(sub.share_high_1[0])), lo, hi)
+        for lo, hi in grid
+    ]
+    items = [(i, d, r) for i, d in enumerate(designs) for r in range(sub.replicates)]
+    reps = execute(study, items, jobs=jobs, client=client, progress=progress)
+    rows: list[dict[str, Any]] = []
+    for i, d in enumerate(designs):
+        ok = [r for r in reps if r["point"] == i and "error" not in r]
+        regret = _interval([r["regret"] for r in ok], sub.level)
+        rows.append(
+            {
+                "ask_low": d.ask_low,
+                "ask_high": d.ask_high,
+                "regret": regret,
+                "relative_regret": None if regret["mean"] is None else regret["mean"] / study.optimal_value,
+                "threshold_error": _interval([r["threshold_error"] for r in ok], sub.level),
+                "failed": sum(1 for r in reps if r["point"] == i and "error" in r),
+            }
+        )
+    ranked = sorted(rows, key=lambda r: math.inf if r["regret"]["mean"] is None else r["regret"]["mean"])
+    best = ranked[0]
+    at_paper = next(r for r in rows if (r["ask_low"], r["ask_high"]) == paper)
+    regrets = {i: np.array([r["regret"] for r in reps if r["point"] == i and "error" not in r]) for i in range(len(designs))}
+    i_best, i_paper = rows.index(best), rows.index(at_paper)
+    difference: dict[str, Any] = {"mean": None, "lo": None, "hi": None}
+    if i_best != i_paper and len(regrets[i_best]) > 1 and len(regrets[i_paper]) > 1:
+        welch = ttest_ind(regrets[i_paper], regrets[i_best], equal_var=False)
+        ci = welch.confidence_interval(sub.level)
+        difference = {
+            "mean": float(regrets[i_paper].mean() - regrets[i_best].mean()),
+            "lo": float(ci.low),
+            "hi": float(ci.high),
+            "p_value": float(welch.pvalue),
+        }
+    # near the best: the paper's choice is the best, or the interval of (paper - best) reaches 0
+    near = i_best == i_paper or (difference["lo"] is not None and difference["lo"] <= 0)
+    return _clean(
+        {
+            "budget": {"participants": sub.participants_1[0], "trials": sub.trials_1[0]},
+            "replicates": sub.replicates,
+            "seed": sub.seed,
+            "optimal_value": study.optimal_value,
+            "rows": rows,
+            "ranked": [(r["ask_low"], r["ask_high"]) for r in ranked],
+            "best": best,
+            "paper": at_paper,
+            "paper_minus_best": difference,
+            "paper_near_best": bool(near),
+        }
+    )
+
+
+def _clean(o: Any) -> Any:
+    """JSON-safe: numpy scalars to Python, NaN/inf to None, tuples to lists."""
+    if isinstance(o, dict):
+        return {str(k): _clean(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_clean(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return _clean(o.tolist())
+    if isinstance(o, (float, np.floating)):
+        v = float(o)
+        return v if math.isfinite(v) else None
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.bool_):
+        return bool(o)
+    return o

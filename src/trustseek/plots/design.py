@@ -1,0 +1,123 @@
+"""Figures of a design study: power curves of experiment 2, the regret of the policy estimated
+from each experiment-1 design, and the data-collection design search."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from . import COLORS, save, style
+
+TEST_LABELS = {"wilcoxon": "paired Wilcoxon", "t": "paired t-test"}
+
+
+def _label(point: dict[str, Any]) -> str:
+    e = point["experiment1"]
+    return f"{e['participants']} × {e['trials']} (ask {e['ask_low']:.2f}/{e['ask_high']:.2f})"
+
+
+def plot_power(summary: dict[str, Any], path=None, title: str | None = None):
+    """Power of experiment 2 against its participants, one line per test and experiment-1 design
+    and block length, with the exact 95 % intervals as bands and the target power as a line."""
+    target = summary["targets"]["power"]
+    with style() as plt:
+        fig, ax = plt.subplots(figsize=(5.6, 3.4))
+        colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+        k = 0
+        for point in summary["points"]:
+            for e2 in point["experiment2"]:
+                for test, ls in (("wilcoxon", "-"), ("t", "--")):
+                    curve = e2["curve"]
+                    n = [c["participants"] for c in curve]
+                    p = [c[test]["power"] for c in curve]
+                    lo = [c[test]["lo"] for c in curve]
+                    hi = [c[test]["hi"] for c in curve]
+                    color = colors[k % len(colors)]
+                    lab = f"{TEST_LABELS[test]}, exp. 1 {_label(point)}, {e2['trials_per_block']} trials/block"
+                    ax.plot(n, p, ls=ls, marker="o", ms=3, color=color, label=lab)
+                    if test == "wilcoxon":
+                        ax.fill_between(n, lo, hi, color=color, alpha=0.15, lw=0)
+                k += 1
+        ax.axhline(target, color="black", lw=0.8, ls=":", label=f"target power {target:g}")
+        ns = [c["participants"] for p in summary["points"] for e in p["experiment2"] for c in e["curve"]]
+        if ns and max(ns) > 20 * min(ns):
+            ax.set_xscale("log")
+        ax.set_xlabel("participants in experiment 2")
+        ax.set_ylabel(f"power (α = {summary['targets']['alpha']:g})")
+        ax.set_ylim(0, 1)
+        ax.set_title(title or "Experiment 2: power to detect the trust-aware advantage")
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
+        if path is not None:
+            save(fig, path)
+        return fig
+
+
+def plot_regret(summary: dict[str, Any], path=None, title: str | None = None):
+    """Mean regret of the estimated policy (share of V*) per experiment-1 design, with its 95 %
+    interval, and the regret target."""
+    pts = summary["points"]
+    target = summary["targets"]["relative_regret"]
+    with style() as plt:
+        fig, ax = plt.subplots(figsize=(5.6, 0.35 * len(pts) + 1.5))
+        for i, p in enumerate(pts):
+            r = p["relative_regret"]
+            if r["mean"] is None:
+                continue
+            lo = r["lo"] if r["lo"] is not None else r["mean"]
+            hi = r["hi"] if r["hi"] is not None else r["mean"]
+            ax.errorbar(
+                100 * r["mean"],
+                i,
+                xerr=[[100 * (r["mean"] - lo)], [100 * (hi - r["mean"])]],
+                fmt="o",
+                color=COLORS["high"],
+                capsize=3,
+            )
+        ax.axvline(100 * target, color="black", lw=0.8, ls=":", label=f"target {100 * target:g} % of V*")
+        ax.set_yticks(range(len(pts)), [_label(p) for p in pts])
+        ax.set_xlabel("regret of the estimated policy (% of V*, exact evaluation under the true model)")
+        ax.set_title(title or "Experiment 1: how close the estimated policy is to the optimal one")
+        ax.legend(loc="lower right", frameon=False)
+        if path is not None:
+            save(fig, path)
+        return fig
+
+
+def plot_ask_search(search: dict[str, Any], path=None, title: str | None = None):
+    """Mean regret (share of V*) of every (ask_low, ask_high) of the search, as a heat map, with
+    the best and the paper's choice marked."""
+    rows = search["rows"]
+    lows = sorted({r["ask_low"] for r in rows})
+    highs = sorted({r["ask_high"] for r in rows})
+    grid = np.full((len(highs), len(lows)), np.nan)
+    for r in rows:
+        if r["relative_regret"] is not None:
+            grid[highs.index(r["ask_high"]), lows.index(r["ask_low"])] = 100 * r["relative_regret"]
+    with style() as plt:
+        fig, ax = plt.subplots(figsize=(4.8, 3.6))
+        im = ax.imshow(grid, origin="lower", cmap="viridis_r", aspect="auto")
+        ax.set_xticks(range(len(lows)), [f"{v:.2f}" for v in lows])
+        ax.set_yticks(range(len(highs)), [f"{v:.2f}" for v in highs])
+        ax.set_xlabel("P(ask | low complexity) in experiment 1")
+        ax.set_ylabel("P(ask | high complexity)")
+        for key, marker, lab in (("best", "*", "best"), ("paper", "s", "paper (0.10 / 0.40)")):
+            b = search[key]
+            ax.plot(
+                lows.index(b["ask_low"]),
+                highs.index(b["ask_high"]),
+                marker=marker,
+                color="white",
+                mec="black",
+                ms=11,
+                ls="",
+                label=lab,
+            )
+        fig.colorbar(im, ax=ax, label="mean regret (% of V*)")
+        ax.grid(False)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.35, 1.0), frameon=False)
+        b = search["budget"]
+        ax.set_title(title or f"Data collection: {b['participants']} × {b['trials']} trials")
+        if path is not None:
+            save(fig, path)
+        return fig

@@ -1,0 +1,196 @@
+"""Study design and power analysis: exact policy evaluation against Monte-Carlo, the signed-rank
+test against scipy, and the same sweep whatever runs it (in process, local processes, a Dask
+LocalCluster)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.stats import wilcoxon
+
+from trustseek.design import DesignConfig, FitSettings, evaluate_policy, high_threshold, paired_tests, run_design
+from trustseek.design.replicate import signed_rank_p
+from trustseek.errors import TrustseekError
+from trustseek.model.presets import paper_model, paper_task
+from trustseek.policies import randomized
+from trustseek.pomdp.problem import AssistancePOMDP
+from trustseek.simulation import simulate
+from trustseek.solvers.agnostic import trust_agnostic
+from trustseek.solvers.registry import make_solver
+
+
+def _other_model():
+    """The paper's model with low trust set in more easily and kept longer: a stand-in for a fit."""
+    m = paper_model()
+    tr = m.transition.copy()
+    tr[..., 1, 0] = np.clip(tr[..., 1, 0] * 1.6 + 0.02, 0, 1)
+    tr[..., 1, 1] = 1 - tr[..., 1, 0]
+    tr[..., 0, 1] = tr[..., 0, 1] * 0.6
+    tr[..., 0, 0] = 1 - tr[..., 0, 1]
+    return type(m)(
+        trust_levels=m.trust_levels,
+        complexities=m.complexities,
+        initial=m.initial,
+        emission=m.emission,
+        transition=tr,
+    )
+
+
+def _monte_carlo(policy, truth, task, belief_model=None, n=20_000, trials=1_000, seed=5):
+    """Mean discounted reward over ``trials`` i.i.d. trials (γ^1000 ≈ 2e-6: the tail is negligible)
+    and its standard error."""
+    sim = simulate(truth, task, policy, n, trials=trials, seed=seed, record=False, belief_model=belief_model)
+    d = sim.summary_arrays["discounted_reward"][:, 0]
+    return float(d.mean()), float(d.std(ddof=1) / np.sqrt(n))
+
+
+@pytest.mark.parametrize("case", ["optimal", "mismatched belief", "agnostic", "randomized", "bayes"])
+def test_exact_evaluation_agrees_with_monte_carlo(case):
+    truth, task = paper_model(), paper_task()
+    if case == "optimal":
+        pol, bm = make_solver("grid", belief_update="paper", grid=201).solve(AssistancePOMDP(truth, task)), None
+    elif case == "mismatched belief":
+        other = _other_model()
+        pol, bm = make_solver("grid", belief_update="paper", grid=201).solve(AssistancePOMDP(other, task)), other
+    elif case == "bayes":
+        other = _other_model()
+        pol, bm = make_solver("grid", belief_update="bayes", grid=201).solve(AssistancePOMDP(other, task)), other
+    elif case == "agnostic":
+        pol, bm = trust_agnostic(truth, task), None
+    else:
+        pol, bm = randomized({"low": 0.3, "high": 0.7}), None
+    exact = evaluate_policy(pol, truth, task).value
+    mc, se = _monte_carlo(pol, truth, task, belief_model=bm)
+    assert abs(exact - mc) < 4 * se + 1e-3, (exact, mc, se)
+
+
+def test_exact_evaluation_tells_policies_and_beliefs_apart():
+    """The evaluation sees the difference the Monte-Carlo check must resolve: the optimal
+    policy beats the trust-agnostic one by more than the check's tolerance, and a policy tracking
+    trust with a wrong model loses value."""
+    truth, task = paper_model(), paper_task()
+    best = make_solver("grid", belief_update="paper", grid=201).solve(AssistancePOMDP(truth, task))
+    v_best = evaluate_policy(best, truth, task).value
+    v_agn = evaluate_policy(trust_agnostic(truth, task), truth, task).value
+    other = _other_model()
+    wrong = make_solver("grid", belief_update="paper", grid=201).solve(AssistancePOMDP(other, task))
+    v_wrong = evaluate_policy(wrong, truth, task).value
+    _, se = _monte_carlo(best, truth, task, n=20_000)
+    assert v_best - v_agn > 8 * se
+    assert v_best > v_wrong
+    # an evaluation that tracked the belief with the true model, or let the supervisors follow
+    # the policy's model, would miss the Monte-Carlo value by many standard errors
+    assert abs(evaluate_policy(wrong, truth, task, belief_model=truth).value - v_wrong) > 8 * se
+    assert abs(evaluate_policy(wrong, other, task).value - v_wrong) > 5 * se
+    assert 0 < high_threshold(best) < 1
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(-5, 5, allow_nan=False).filter(lambda x: abs(x) > 1e-3), min_size=1, max_size=18, unique=True))
+def test_signed_rank_matches_scipy_exact(values):
+    d = np.array(values)
+    if len(np.unique(np.abs(d))) < len(d):
+        return  # ties: covered below
+    assert signed_rank_p(d) == pytest.approx(wilcoxon(d, method="exact").pvalue, rel=1e-9)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.integers(-4, 4), min_size=2, max_size=10))
+def test_signed_rank_with_ties_and_zeros_is_the_exact_permutation_test(values):
+    d = np.array(values, dtype=float)
+    nz = d[d != 0]
+    if len(nz) == 0:
+        assert signed_rank_p(d) == 1.0
+        return
+    # brute force over the 2^n sign patterns of the nonzero differences, mid-ranks for ties
+    a = np.abs(nz)
+    ranks = np.array([np.sum(a < x) + (np.sum(a == x) + 1) / 2 for x in a])
+    obs = ranks[nz > 0].sum()
+    signs = (np.arange(2 ** len(nz))[:, None] >> np.arange(len(nz))) & 1
+    w = signs @ ranks
+    p = min(1.0, 2 * min(np.mean(w <= obs + 1e-9), np.mean(w >= obs - 1e-9)))
+    assert signed_rank_p(d) == pytest.approx(p, rel=1e-12)
+
+
+def test_paired_tests_edge_cases():
+    assert paired_tests(np.array([3.0, 3.0]), np.array([3.0, 3.0])) == {"mean_difference": 0.0, "wilcoxon": 1.0, "t": 1.0}
+    out = paired_tests(np.arange(10.0) + 2, np.arange(10.0))
+    assert out["t"] == 0.0 and out["wilcoxon"] == pytest.approx(2 / 2**10)
+
+
+def _small(seed: int = 3) -> DesignConfig:
+    return DesignConfig(
+        seed=seed,
+        replicates=3,
+        participants_1=(6, 9),
+        trials_1=(40,),
+        participants_2=(4, 8),
+        trials_2=(20,),
+        fit=FitSettings(restarts=1, grid=101, evaluation_grid=201),
+    )
+
+
+def test_sweep_is_the_same_in_process_and_in_local_processes():
+    a = run_design(_small(), jobs=1)
+    b = run_design(_small(), jobs=2)
+    assert json.dumps(a.summary, sort_keys=True) == json.dumps(b.summary, sort_keys=True)
+    assert json.dumps(a.replicates, sort_keys=True) == json.dumps(b.replicates, sort_keys=True)
+    c = run_design(_small(seed=4), jobs=1)
+    assert c.replicates != a.replicates  # the seed matters
+    s = a.summary
+    assert [p["experiment1"]["participants"] for p in s["points"]] == [6, 9]
+    curve = s["points"][1]["experiment2"][0]["curve"]
+    assert [c["participants"] for c in curve] == [4, 8]
+    for c in curve:
+        for test in ("wilcoxon", "t"):
+            assert c[test]["n"] == 3 and 0 <= c[test]["lo"] <= c[test]["power"] <= c[test]["hi"] <= 1
+
+
+def test_sweep_is_the_same_on_a_dask_local_cluster():
+    distributed = pytest.importorskip("distributed")
+    local = run_design(_small(), jobs=1)
+    with (
+        distributed.LocalCluster(
+            n_workers=2, processes=True, threads_per_worker=1, host="127.0.0.1", dashboard_address=None
+        ) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        remote = run_design(_small(), client=client)
+    assert json.dumps(remote.summary, sort_keys=True) == json.dumps(local.summary, sort_keys=True)
+
+
+def test_config_problems_name_the_options():
+    cfg = DesignConfig(replicates=1, participants_2=(1,), alpha=1.5, test="z", ask_low=(1.2,))
+    with pytest.raises(TrustseekError) as exc:
+        run_design(cfg)
+    text = " ".join(exc.value.lines())
+    for opt in ("--replicates", "--participants-2", "--alpha", "--test", "--ask-low"):
+        assert opt in text
+
+
+@pytest.mark.parametrize("update", ["paper", "bayes"])
+def test_dense_plan_is_the_grid_solvers_policy(update):
+    from trustseek.design.replicate import plan
+
+    task = paper_task()
+    for model in (paper_model(), _other_model()):
+        fs = FitSettings(belief_update=update, grid=201)
+        ours = plan(model, task, fs)
+        ref = make_solver("grid", belief_update=update, grid=201).solve(AssistancePOMDP(model, task))
+        assert ours.thresholds() == pytest.approx(ref.thresholds(), abs=1e-9)
+        np.testing.assert_allclose(ours.q, ref.q, atol=1e-7)
+
+
+def test_agnostic_from_arrays_is_the_solvers():
+    from trustseek.design.replicate import _agnostic
+    from trustseek.solvers.agnostic import trust_agnostic_from_data
+
+    truth, task = paper_model(), paper_task()
+    for seed in range(5):
+        frame = simulate(truth, task, randomized({"low": 0.1, "high": 0.4}), 3, counts=(10, 8), seed=seed).trials()
+        ours, ref = _agnostic(frame, task), trust_agnostic_from_data(frame, task)
+        assert ours.p_ask.tolist() == ref.p_ask.tolist() and ours.info == ref.info
