@@ -76,6 +76,8 @@ def _non_finite(policy: Policy) -> list[tuple[str, int]]:
 
 
 def _leaves(value: Any) -> list[Any]:
+    if isinstance(value, Mapping):  # a schedule policy's Q per state and complexity
+        return [leaf for v in value.values() for leaf in _leaves(v)]
     if isinstance(value, (list, tuple)):
         return [leaf for v in value for leaf in _leaves(v)]
     return [value]
