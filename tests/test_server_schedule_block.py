@@ -4,23 +4,30 @@ order, and the export is fitted with ``trustseek fit``; one short run in Chromiu
 
 from __future__ import annotations
 
+import io
 import json
+from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from fastapi.testclient import TestClient
 from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import strategies as hst
 from typer.testing import CliRunner
 
+from test_browser import artifacts_dir, st, teleoperate
 from trustseek import paper_model, paper_task
 from trustseek.cli import app
 from trustseek.client import Client
 from trustseek.data.trials import read_trials
 from trustseek.policies.schedule import ScheduleRunner
 from trustseek.server import create_app
+from trustseek.server.app import STATIC
 from trustseek.server.studies import block_items
 from trustseek.solvers.specs import policy_from_spec
+from trustseek.testing.browser import CHROMIUM, launch_chromium
+from trustseek.testing.servers import ThreadServer
 
 TOKEN = "schedule-block-token"
 H = {"Authorization": f"Bearer {TOKEN}"}
@@ -129,12 +136,12 @@ def test_window_picks_among_the_visible_items(client):
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.data())
+@given(hst.data())
 def test_block_items_follow_the_queue(data):
-    low, high = data.draw(st.integers(0, 5)), data.draw(st.integers(0, 5))
-    window = data.draw(st.one_of(st.none(), st.integers(1, 4)))
+    low, high = data.draw(hst.integers(0, 5)), data.draw(hst.integers(0, 5))
+    window = data.draw(hst.one_of(hst.none(), hst.integers(1, 4)))
     queue = ["low"] * low + ["high"] * high
-    queue = data.draw(st.permutations(queue))
+    queue = data.draw(hst.permutations(queue))
     cfg = {"blocks": [{"schedule": {"by": "policy", "counts": {"low": low, "high": high}, "window": window}}]}
     plan = {"queues": {"0": queue}}
     picks: list[str] = []
@@ -149,7 +156,7 @@ def test_block_items_follow_the_queue(data):
             front = model_queue[:window]
             assert vis == {c: front.count(c) for c in ("low", "high")}
             choices = sorted(set(front))
-        c = data.draw(st.sampled_from(choices))
+        c = data.draw(hst.sampled_from(choices))
         picks.append(c)
         if window is not None:
             model_queue.remove(c)  # the first of its kind: the items of one kind are alike
@@ -212,3 +219,61 @@ def test_exported_scheduled_study_is_fitted(client, tmp_path):
     res = CliRunner().invoke(app, ["fit", str(out), "--restarts", "2", "--json"])
     assert res.exit_code == 0, res.output
     assert "48 trials" in json.loads(res.output)["model"]["notes"]
+
+
+@pytest.mark.browser
+def test_scheduled_block_in_chromium(tmp_path):
+    """A participant does a block whose policy picks the items: the page shows the items left
+    with the next one marked, the served complexity is the policy's pick, the log keeps the order."""
+    if not Path(CHROMIUM).exists():
+        pytest.fail(f"{CHROMIUM} is missing: run scripts/setup.sh")
+    if not (STATIC / "participant.js").exists():
+        pytest.fail("front end not built: run scripts/setup.sh (npm ci && npm run build in web/)")
+    from playwright.sync_api import sync_playwright
+
+    spec = {**SPEC, "counts": {"low": 2, "high": 1}}
+    local = ScheduleRunner(policy_from_spec(spec, paper_model(), paper_task()))
+    out = artifacts_dir(tmp_path)
+    shown = []
+    with ThreadServer(f"sqlite:///{tmp_path / 'chosen.sqlite'}", TOKEN) as url:
+        c = Client(url, TOKEN)
+        study = c.create_study({"name": "chosen", "blocks": [{"policy": spec, "schedule": "policy"}], "animation_speed": 3.0})
+        link = c.create_sessions(study["id"], participants=["chromium-s"])[0]["link"]
+        with sync_playwright() as p:
+            browser = launch_chromium(p)
+            page = browser.new_page(viewport={"width": 1320, "height": 900})
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(link + "?speed=1")
+            page.wait_for_selector("#screen-consent:not([hidden])")
+            page.check("#agree")
+            page.click("#consent-btn")
+            page.wait_for_selector("#screen-instructions:not([hidden])")
+            page.click("#start-btn")
+            for n in (1, 2, 3):
+                page.wait_for_function(
+                    f"window.trustseek.state().trial === {n} && ['approach', 'teleop'].includes(window.trustseek.state().phase)",
+                    timeout=15000,
+                )
+                s = st(page)
+                picks = s["picks"]
+                assert len(picks) == 4 - n and all(t["visible"] for t in picks)
+                assert [t["complexity"] for t in picks if t["next"]] == [s["complexity"]]
+                shown.append((s["complexity"], s["robot_action"]))
+                if n == 1:
+                    page.wait_for_timeout(300)
+                    page.screenshot(path=str(out / "browser_schedule_block.png"))
+                if s["phase"] == "teleop":
+                    teleoperate(page)
+                else:  # the participant relies on the robot
+                    page.wait_for_function("window.trustseek.state().item.inBin || window.trustseek.state().phase !== 'approach'")
+            page.wait_for_selector("#screen-done:not([hidden])", timeout=20000)
+            browser.close()
+        assert not errors, errors
+        log = pd.read_csv(io.BytesIO(c.export(study["id"])))
+    assert log["complexity"].tolist() == [cx for cx, _ in shown]
+    assert sorted(log["complexity"]) == ["high", "low", "low"]
+    # each served pick is the schedule runner's, given the trials before it
+    for row in log.itertuples():
+        assert local.choose() == (row.complexity, row.robot_action)
+        local.observe(row.complexity, row.robot_action, row.human_action, row.experience)
