@@ -277,3 +277,16 @@ def test_scheduled_block_in_chromium(tmp_path):
     for row in log.itertuples():
         assert local.choose() == (row.complexity, row.robot_action)
         local.observe(row.complexity, row.robot_action, row.human_action, row.experience)
+
+
+def test_resolved_schedule_policies_cached_within_a_bound():
+    from trustseek.server import studies
+
+    model, task = paper_model(), paper_task()
+    studies._RESOLVED.clear()
+    first = studies.resolve_policy({**SPEC, "grid": 5}, model, task)
+    assert studies.resolve_policy({**SPEC, "grid": 5}, model, task) is first  # the same spec is solved once
+    for k in range(2 * studies.MAX_CACHED_SCHEDULES):
+        studies.resolve_policy({**SPEC, "counts": {"low": 1, "high": k}, "grid": 5}, model, task)
+        held = sum(p["kind"] == "schedule" for p in studies._RESOLVED.values())
+        assert 1 <= held <= studies.MAX_CACHED_SCHEDULES

@@ -191,13 +191,16 @@ def resolve_policy(spec: dict[str, Any], model: TrustModel, task: Task, where: s
     except TrustseekError as exc:
         raise ConfigError(exc.lines()) from None
     if key is not None:
-        if len(_RESOLVED) > 64:
+        schedules = sum(p["kind"] == SCHEDULE for p in _RESOLVED.values())
+        if len(_RESOLVED) > 64 or (policy["kind"] == SCHEDULE and schedules >= MAX_CACHED_SCHEDULES):
             _RESOLVED.clear()
         _RESOLVED[key] = policy
     return policy
 
 
 _RESOLVED: dict[str, dict[str, Any]] = {}
+#: schedule policies are large (megabytes of JSON each): the cache keeps only a few
+MAX_CACHED_SCHEDULES = 8
 
 
 def build_study_config(study: StudyIn) -> dict[str, Any]:
