@@ -290,3 +290,34 @@ def test_resolved_schedule_policies_cached_within_a_bound():
         studies.resolve_policy({**SPEC, "counts": {"low": 1, "high": k}, "grid": 5}, model, task)
         held = sum(p["kind"] == "schedule" for p in studies._RESOLVED.values())
         assert 1 <= held <= studies.MAX_CACHED_SCHEDULES
+
+
+def test_restarted_server_serves_the_same_picks(tmp_path):
+    """The picks come from the committed trials and the stored plan: a fresh process (empty
+    caches) on the same database serves the same trials."""
+    from trustseek.server import sessions, studies
+
+    db = f"sqlite:///{tmp_path / 'restart.sqlite'}"
+    spec = {**SPEC, "counts": {"low": 3, "high": 3}, "window": 2}
+
+    def fresh():
+        for cache in (studies._POLICIES, studies._RESOLVED, sessions._CONTEXTS, sessions._CONFIGS):
+            cache.clear()
+        return TestClient(create_app(db, token=TOKEN))
+
+    with fresh() as c:
+        sid = _study(c, [{"policy": spec, "schedule": "policy"}]).json()["id"]
+        s = c.post(f"/api/studies/{sid}/sessions", json={"count": 1}, headers=H).json()[0]
+        ph, base = {"Authorization": f"Bearer {s['token']}"}, f"/api/sessions/{s['session_id']}"
+        c.post(f"{base}/consent", json={"agree": True}, headers=ph)
+    served = []
+    for n in range(1, 7):
+        with fresh() as c:  # one process serves the trial ...
+            cur = c.get(f"{base}/state", headers=ph).json()["current"]
+        with fresh() as c:  # ... another serves it again, then commits it
+            assert c.get(f"{base}/state", headers=ph).json()["current"] == cur
+            human = "intervene" if cur["robot_action"] == "ask" else "rely"
+            body = {"trial": n, "submission_id": f"r-{n}", "human_action": human}
+            assert c.post(f"{base}/trials", json=body, headers=ph).status_code in (200, 201)
+        served.append(cur["items"])
+    assert [sum(i["remaining"].values()) for i in served] == [6, 5, 4, 3, 2, 1]
