@@ -2,7 +2,9 @@
 // every call.  Trial submissions carry a client-made submission id, so a retry after a network
 // error cannot create a second trial.
 
-export interface Current { trial: number; block: number; block_position: number; practice: boolean; complexity: string; robot_action: "autonomous" | "ask"; scene_seed: number; }
+export interface Current { trial: number; block: number; block_position: number; practice: boolean; complexity: string; robot_action: "autonomous" | "ask"; scene_seed: number;
+  items?: { remaining: Record<string, number>; visible: Record<string, number> | null }; // a block whose policy picks the items
+}
 export interface Questionnaire {
   name: string; when: "trial" | "block" | "end"; title: string; after_trial: number;
   scale: { min: number; max: number; anchors: string[] }; items: { id: string; text: string }[];

@@ -9,7 +9,7 @@ import { Api, ApiError, Current, Questionnaire, State, TrialResult, UIEvent } fr
 import { gamepadName, installKeyboard, poll } from "./input";
 import {
   AISLE_H, ARM_MAX, BASE_H, REACH, SHELF_DEPTH, ItemState, Layout, RobotState, View, clampRobot, drawEndEffector, drawLocal, drawWorld,
-  gripperPos, makeLayout, pathLength, pointAlong,
+  gripperPos, makeLayout, pathLength, pickTokens, pointAlong,
 } from "./scene";
 
 type Phase = "loading" | "consent" | "instructions" | "approach" | "reach" | "waiting" | "outcome" | "teleop" | "result" | "report" | "questionnaire" | "done" | "error";
@@ -493,7 +493,17 @@ function teleop(cmd: ReturnType<typeof poll>, k: number) {
 
 function view(): View {
   const asking = phase === "teleop" && !intervened && !robot.holding && !item.inBin;
-  return { layout, robot, item, showPath: phase === "approach", flash, highlight: !robot.holding && !item.inBin, time: clock, bubble: asking ? "Please help me!" : undefined, impact };
+  return { layout, robot, item, showPath: phase === "approach", flash, highlight: !robot.holding && !item.inBin, time: clock, bubble: asking ? "Please help me!" : undefined, impact, picks: picks() };
+}
+
+/** The items left in a block whose policy picks them, the one of this trial marked (until it is in the bin). */
+function picks() {
+  const items = current?.items;
+  if (!items) return undefined;
+  const tokens = pickTokens(items, current!.complexity, ["low", "high"]);
+  if (!item.inBin) return tokens;
+  const i = tokens.findIndex((t) => t.next);
+  return tokens.filter((_, k) => k !== i);
 }
 
 function draw() {
@@ -549,7 +559,7 @@ function renderStatus() {
     phase, trial: current?.trial ?? null, robot_action: current?.robot_action ?? null, complexity: current?.complexity ?? null,
     robot: { x: robot.x, y: robot.y, arm: robot.arm, holding: robot.holding }, item: { x: item.x, y: item.y, inBin: item.inBin },
     gripper: gripperPos(robot, layout.side), reach: REACH, side: layout.side, score: st?.score ?? null, shown_score: shownScore,
-    practice: current?.practice ?? null,
+    practice: current?.practice ?? null, picks: picks() ?? null,
   }),
 };
 

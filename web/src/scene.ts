@@ -138,6 +138,71 @@ export interface View {
   time: number;
   bubble?: string; // a speech bubble over the robot
   impact?: { x: number; y: number; t: number }; // a collision burst
+  picks?: PickToken[]; // a block whose policy picks the items: the items left, the next one marked
+}
+
+// --------------------------------------------------------------------------- the items left
+
+/** What the server sends with a trial of a block whose policy picks the items: the items that
+ * remain per complexity and, when the robot sees only the front of a queue, the visible ones. */
+export interface ScheduleItems { remaining: Record<string, number>; visible: Record<string, number> | null; }
+
+/** One item still to collect: its complexity, whether the robot sees it, whether it goes for it now. */
+export interface PickToken { complexity: string; visible: boolean; next: boolean; }
+
+/** The items left, in the order of `complexities` (easiest first), visible ones before hidden
+ * ones within a complexity, and the first visible item of the chosen complexity marked `next`. */
+export function pickTokens(items: ScheduleItems, chosen: string, complexities: string[]): PickToken[] {
+  const out: PickToken[] = [];
+  const names = [...complexities, ...Object.keys(items.remaining).filter((c) => !complexities.includes(c))];
+  for (const c of names) {
+    const left = items.remaining[c] ?? 0;
+    const seen = items.visible === null ? left : Math.min(left, items.visible[c] ?? 0);
+    for (let k = 0; k < left; k++) out.push({ complexity: c, visible: k < seen, next: c === chosen && k === 0 && seen > 0 });
+  }
+  return out;
+}
+
+/** The tray of items left, drawn in screen pixels at the top right of a canvas: low items as
+ * discs, the others as diamonds, items the robot cannot see yet faded, the next item ringed
+ * and named. */
+export function drawPickTray(g: CanvasRenderingContext2D, tokens: PickToken[], scale: number, time: number) {
+  if (tokens.length === 0) return;
+  const r = 7 * scale, gap = 5 * scale, pad = 8 * scale;
+  const perRow = Math.max(1, Math.min(tokens.length, 20));
+  const rows = Math.ceil(tokens.length / perRow);
+  const next = tokens.find((t) => t.next);
+  const title = `Items left: ${tokens.length}` + (next ? `  ·  next: ${next.complexity}` : "");
+  g.save();
+  g.font = `${11 * scale}px system-ui, sans-serif`;
+  const w = pad * 2 + Math.max(perRow * (2 * r + gap) - gap, g.measureText(title).width);
+  const h = pad * 2 + 16 * scale + rows * (2 * r + gap) - gap;
+  const x0 = g.canvas.width - w - pad, y0 = pad;
+  g.fillStyle = "rgba(29,35,48,0.85)";
+  roundRect(g, x0, y0, w, h, 6 * scale);
+  g.fill();
+  g.fillStyle = "#f4f6f8";
+  g.textBaseline = "top";
+  g.fillText(title, x0 + pad, y0 + pad);
+  tokens.forEach((t, i) => {
+    const cx = x0 + pad + r + (i % perRow) * (2 * r + gap);
+    const cy = y0 + pad + 16 * scale + r + Math.floor(i / perRow) * (2 * r + gap);
+    g.globalAlpha = t.visible ? 1 : 0.3;
+    g.fillStyle = t.complexity === "low" ? "#00c2a8" : "#ff7b00";
+    g.beginPath();
+    if (t.complexity === "low") g.arc(cx, cy, r * 0.8, 0, Math.PI * 2);
+    else { g.moveTo(cx, cy - r); g.lineTo(cx + r, cy); g.lineTo(cx, cy + r); g.lineTo(cx - r, cy); g.closePath(); }
+    g.fill();
+    g.globalAlpha = 1;
+    if (t.next) {
+      g.strokeStyle = "rgba(255,45,111,0.95)";
+      g.lineWidth = 2 * scale;
+      g.beginPath();
+      g.arc(cx, cy, r * (1.25 + 0.1 * Math.sin(time * 5)), 0, Math.PI * 2);
+      g.stroke();
+    }
+  });
+  g.restore();
 }
 
 function roundRect(g: CanvasRenderingContext2D, x: number, y: number, w: number, h: number, r: number) {
@@ -381,6 +446,10 @@ export function drawWorld(c: HTMLCanvasElement, v: View) {
   g.fillRect(0, 0, c.width, c.height);
   g.setTransform(px, 0, 0, px, (c.width - AISLE_W * px) / 2, (c.height - AISLE_H * px) / 2);
   drawAisle(g, v, px);
+  if (v.picks) {
+    g.setTransform(1, 0, 0, 1, 0, 0);
+    drawPickTray(g, v.picks, Math.max(0.75, Math.min(2, c.width / 900)), v.time);
+  }
 }
 
 export function drawLocal(c: HTMLCanvasElement, v: View) {

@@ -17,7 +17,7 @@ from .alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy
 from .base import POLICY_FORMAT, Policy
 from .complexity import COMPLEXITY_KINDS, ComplexityPolicy
 from .grid_q import TrustAwarePolicy
-from .schedule import PieceQ, SchedulePolicy
+from .schedule import SchedulePolicy
 
 Loader = Callable[[Mapping[str, Any], "str | None"], Policy]
 
@@ -76,12 +76,10 @@ def _non_finite(policy: Policy) -> list[tuple[str, int]]:
 
 
 def _leaves(value: Any) -> list[Any]:
-    if isinstance(value, dict):  # tables keyed by state (e.g. a schedule policy's remaining items)
+    if isinstance(value, Mapping):  # a schedule policy's Q per state and complexity
         return [leaf for v in value.values() for leaf in _leaves(v)]
     if isinstance(value, (list, tuple)):
         return [leaf for v in value for leaf in _leaves(v)]
-    if isinstance(value, PieceQ):  # a schedule policy's piecewise-linear Q: breakpoints and values
-        return [value.xs, value.values]
     return [value]
 
 

@@ -61,6 +61,11 @@ class PieceQ:
         """(len(x), 2)."""
         return np.stack([np.interp(x, self.xs, self.values[:, a]) for a in range(2)], axis=-1)
 
+    def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
+        """The breakpoints and the values side by side, (len(xs), 3): what a check of the numbers reads."""
+        out = np.column_stack([self.xs, self.values])
+        return out if dtype is None else out.astype(dtype)
+
 
 class SchedulePolicy(PolicyBase):
     """Greedy in Q(x, state, k, a) over the visible complexities k and the actions a (ties go to

@@ -1,5 +1,6 @@
 """What happens in a session, independent of HTTP: serving a trial (complexity from the plan,
-action from the block's policy), committing a trial (outcome, experience, reward, belief
+action from the block's policy; in a block whose schedule policy picks the items, both from
+the policy, given the items that remain), committing a trial (outcome, experience, reward, belief
 update), self-reports and events.
 
 Integrity rules:
@@ -35,7 +36,7 @@ from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
 from ..policies import PolicyError, PolicyRunner
 from ..policies.schedule import SchedulePolicy
 from .orm import Answer, Base, Event, PolicyBlob, Report, Session, Study, Trial, utcnow
-from .studies import participant_plan, policy_object
+from .studies import block_items, participant_plan, policy_object
 
 log = logging.getLogger(__name__)
 
@@ -106,6 +107,17 @@ class Context:
         if self.trials is None:
             raise SessionError(409, "a deploy session has no trial plan")
         return self.trials[n - 1]
+
+    def pick(self, block: int, belief, remaining: dict[str, int], visible: dict[str, int] | None) -> tuple[str, str]:
+        """(complexity, robot action) that block ``block``'s schedule policy picks for the
+        remaining (and visible) items."""
+        pol = policy_object(self.keys[block], lambda: self.load_policy(block))
+        if not isinstance(pol, SchedulePolicy):
+            raise SessionError(500, f"block {block} picks its items by policy but runs a {pol.kind} policy")
+        cx = self.task.complexities
+        vis = None if visible is None else [visible.get(c, 0) for c in cx]
+        k, a = pol.choose(np.asarray(belief, dtype=float), [remaining.get(c, 0) for c in cx], vis)
+        return cx[k], ACTIONS[a]
 
     def runner(self, block: int, belief, seed: int, trial: int) -> PolicyRunner:
         pol = policy_object(self.keys[block], lambda: self.load_policy(block))
@@ -254,23 +266,36 @@ def serve(db: DBSession, s: Session) -> dict[str, Any] | None:
     total = total_trials(s)
     if total is None or n > total:
         return None
+    step = s.plan["trials"][n - 1]
+    items = scheduled_items(db, s, step["block"]) if step["complexity"] is None else None
     if s.pending_trial != n:
         ctx = context(db, s)
-        step = ctx.step(n)
-        runner = ctx.runner(step["block"], s.belief, s.seed, n)
-        s.pending_trial, s.pending_complexity = n, step["complexity"]
-        s.pending_action = runner.decide(step["complexity"])
+        if items is None:
+            runner = ctx.runner(step["block"], s.belief, s.seed, n)
+            s.pending_complexity, s.pending_action = step["complexity"], runner.decide(step["complexity"])
+        else:
+            s.pending_complexity, s.pending_action = ctx.pick(step["block"], s.belief, *items)
+        s.pending_trial = n
         s.updated_at = utcnow()
         db.commit()
-    return served(s, n)
+    return served(s, n, items)
 
 
-def served(s: Session, n: int) -> dict[str, Any]:
-    """Trial ``n`` as served to the participant (``n`` is the session's pending trial)."""
+def scheduled_items(db: DBSession, s: Session, block: int) -> tuple[dict[str, int], dict[str, int] | None]:
+    """(remaining, visible) items of a block whose policy picks them, before the session's next
+    trial: the block's items less those of its committed trials, in their order."""
+    picks = db.scalars(select(Trial.complexity).where(Trial.session_id == s.id, Trial.block == block).order_by(Trial.trial)).all()
+    assert s.study_id is not None
+    return block_items(study_config(db, s.study_id), s.plan, block, [str(c) for c in picks])
+
+
+def served(s: Session, n: int, items: tuple[dict[str, int], dict[str, int] | None] | None = None) -> dict[str, Any]:
+    """Trial ``n`` as served to the participant (``n`` is the session's pending trial); in a block
+    whose policy picks the items, ``items`` (remaining, visible) before this trial's pick."""
     step = s.plan["trials"][n - 1]
     blocks = s.plan["block_order"]
     practice = bool(step.get("practice"))
-    return {
+    out = {
         "trial": n,
         "block": step["block"],
         "block_position": 0 if practice else blocks.index(step["block"]) + 1,
@@ -279,6 +304,9 @@ def served(s: Session, n: int) -> dict[str, Any]:
         "robot_action": s.pending_action,
         "scene_seed": scene_seed(s, n),
     }
+    if items is not None:
+        out["items"] = {"remaining": items[0], "visible": items[1]}
+    return out
 
 
 def trial_dict(t: Trial) -> dict[str, Any]:

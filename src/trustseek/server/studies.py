@@ -6,8 +6,15 @@ A study is created from a JSON object (see ``docs/experiments.md``)::
      "blocks": [{"name": "agnostic", "policy": {"kind": "trust-agnostic"},
                  "schedule": {"counts": {"low": 10, "high": 10}}},
                 {"name": "aware", "policy": {"kind": "trust-aware"},
-                 "schedule": {"trials": ["low", "high", "high"]}}],
+                 "schedule": {"trials": ["low", "high", "high"]}},
+                {"name": "scheduled", "schedule": "policy",
+                 "policy": {"kind": "schedule", "counts": {"low": 17, "high": 17}, "window": null}}],
      "counterbalance": "rotate", "self_report": "block", "animation_speed": 1.0, "seed": 7}
+
+A block with ``"schedule": "policy"`` runs a ``schedule`` policy: its items are the policy's
+counts, and before each trial the policy picks which kind of item comes next (among the next
+``window`` items of a queue shuffled per participant, or among all remaining ones) and whether
+to ask (``docs/scheduling.md``).
 
 Policies are resolved once, at creation, into the core's policy JSON and stored with the
 study, so a study keeps behaving identically whatever the code later computes.
@@ -26,11 +33,15 @@ from ..errors import TrustseekError
 from ..model.core import ModelError, Task, TrustModel
 from ..model.presets import MODEL_PRESETS, TASK_PRESETS
 from ..policies import policy_from_dict
+from ..policies.schedule import SCHEDULE
 from ..solvers import policy_from_spec
 from .schemas import STRICT, check_preset
 
 MAX_TRIALS_PER_BLOCK = 1000
 MAX_GRID = 20001  # the largest belief grid a study may ask the server to solve
+MAX_SCHEDULE_VALUES = 2_000_000  # the largest schedule policy (Q values) a study may ask the server to solve
+#: a block's schedule when its policy picks the items
+BY_POLICY = "policy"
 
 
 class ConfigError(TrustseekError, ValueError):
@@ -58,7 +69,9 @@ class BlockIn(BaseModel):
     model_config = STRICT
     name: str | None = Field(None, max_length=100)
     policy: dict[str, Any] = Field(..., description="A policy spec ({'kind': ...}) or a full policy JSON.")
-    schedule: Schedule
+    schedule: Schedule | Literal["policy"] = Field(
+        ..., description="The items: counts or a fixed list, or 'policy' (a schedule policy picks each next item)."
+    )
 
 
 class PracticeIn(BaseModel):
@@ -174,17 +187,20 @@ def resolve_policy(spec: dict[str, Any], model: TrustModel, task: Task, where: s
     if key is not None and key in _RESOLVED:
         return _RESOLVED[key]
     try:
-        policy = policy_from_spec(spec, model, task, where, max_grid=MAX_GRID).to_dict()
+        policy = policy_from_spec(spec, model, task, where, max_grid=MAX_GRID, max_values=MAX_SCHEDULE_VALUES).to_dict()
     except TrustseekError as exc:
         raise ConfigError(exc.lines()) from None
     if key is not None:
-        if len(_RESOLVED) > 64:
+        schedules = sum(p["kind"] == SCHEDULE for p in _RESOLVED.values())
+        if len(_RESOLVED) > 64 or (policy["kind"] == SCHEDULE and schedules >= MAX_CACHED_SCHEDULES):
             _RESOLVED.clear()
         _RESOLVED[key] = policy
     return policy
 
 
 _RESOLVED: dict[str, dict[str, Any]] = {}
+#: schedule policies are large (megabytes of JSON each): the cache keeps only a few
+MAX_CACHED_SCHEDULES = 8
 
 
 def build_study_config(study: StudyIn) -> dict[str, Any]:
@@ -207,6 +223,13 @@ def build_study_config(study: StudyIn) -> dict[str, Any]:
     for i, b in enumerate(study.blocks):
         where = f"blocks[{i}]"
         s = b.schedule
+        if not isinstance(s, Schedule):
+            try:
+                pol = resolve_policy(b.policy, model, task, f"{where}.policy")
+                blocks.append({"name": b.name or f"block {i + 1}", "policy": pol, "schedule": chosen_schedule(pol, where)})
+            except ConfigError as exc:
+                problems += exc.problems
+            continue
         names = list(s.counts) if s.counts is not None else list(s.trials or [])
         bad = sorted({c for c in names if c not in task.complexities})
         if bad:
@@ -215,6 +238,9 @@ def build_study_config(study: StudyIn) -> dict[str, Any]:
             pol = resolve_policy(b.policy, model, task, f"{where}.policy")
         except ConfigError as exc:
             problems += exc.problems
+            continue
+        if pol["kind"] == SCHEDULE:
+            problems.append(f'{where}: a schedule policy picks the items: give the block "schedule": "{BY_POLICY}"')
             continue
         blocks.append(
             {
@@ -229,10 +255,10 @@ def build_study_config(study: StudyIn) -> dict[str, Any]:
         if bad:
             problems.append(f"practice.trials names unknown complexities {bad}; expected {list(task.complexities)}")
         try:
-            practice = {
-                "trials": list(study.practice.trials),
-                "policy": resolve_policy(study.practice.policy, model, task, "practice.policy"),
-            }
+            practice_policy = resolve_policy(study.practice.policy, model, task, "practice.policy")
+            practice = {"trials": list(study.practice.trials), "policy": practice_policy}
+            if practice_policy["kind"] == SCHEDULE:
+                problems.append("practice.policy: practice trials are a fixed list; a schedule policy runs in a block")
         except ConfigError as exc:
             problems += exc.problems
     questionnaires = []
@@ -252,6 +278,21 @@ def build_study_config(study: StudyIn) -> dict[str, Any]:
 
 
 QUESTIONNAIRES = Path(__file__).resolve().parent / "questionnaires"
+
+
+def chosen_schedule(policy: dict[str, Any], where: str) -> dict[str, Any]:
+    """The stored schedule of a block whose ``schedule`` policy picks the items: its counts (by
+    complexity) and window."""
+    if policy.get("kind") != SCHEDULE:
+        kind = policy.get("kind")
+        raise ConfigError(
+            [f'{where}: "schedule": "{BY_POLICY}" needs a {SCHEDULE} policy (it picks the items), got a {kind} policy']
+        )
+    counts = dict(zip(policy["complexities"], policy["counts"], strict=True))
+    n = sum(counts.values())
+    if not 1 <= n <= MAX_TRIALS_PER_BLOCK:
+        raise ConfigError([f"{where}: a block needs between 1 and {MAX_TRIALS_PER_BLOCK} trials, got {n}"])
+    return {"by": BY_POLICY, "counts": counts, "window": policy.get("window")}
 
 
 def questionnaire_templates() -> dict[str, dict[str, Any]]:
@@ -298,8 +339,15 @@ def participant_plan(cfg: dict[str, Any], index: int, seed: int) -> dict[str, An
     rng = np.random.default_rng([cfg["seed"], seed])
     order = block_order(cfg, index, rng)
     trials: list[dict[str, Any]] = []
+    queues: dict[str, list[str]] = {}
     for b in order:
         sched = cfg["blocks"][b]["schedule"]
+        if sched.get("by") == BY_POLICY:  # the policy picks each item when it is served
+            seq = [c for c, k in sched["counts"].items() for _ in range(k)]
+            if sched.get("window") is not None:  # the queue the robot sees the front of
+                queues[str(b)] = [seq[i] for i in rng.permutation(len(seq))]
+            trials.extend({"block": b, "complexity": None} for _ in seq)
+            continue
         if "trials" in sched:
             seq = list(sched["trials"])
         else:
@@ -310,7 +358,33 @@ def participant_plan(cfg: dict[str, Any], index: int, seed: int) -> dict[str, An
     if practice:
         # the practice block's index follows the study's blocks
         trials[:0] = [{"block": len(cfg["blocks"]), "complexity": c, "practice": True} for c in practice["trials"]]
-    return {"block_order": order, "trials": trials}
+    plan: dict[str, Any] = {"block_order": order, "trials": trials}
+    if queues:
+        plan["queues"] = queues
+    return plan
+
+
+def block_items(
+    cfg: dict[str, Any], plan: dict[str, Any], block: int, picks: list[str]
+) -> tuple[dict[str, int], dict[str, int] | None]:
+    """(remaining, visible) items per complexity of a block whose policy picks the items, after
+    the complexities ``picks`` (in order); visible is None when the robot sees every item.
+    Each pick takes the first item of its complexity among the visible ones (the front of the
+    participant's queue), and the next queued item comes into view."""
+    sched = cfg["blocks"][block]["schedule"]
+    remaining = dict(sched["counts"])
+    for c in picks:
+        remaining[c] -= 1
+    window = sched.get("window")
+    if window is None:
+        return remaining, None
+    queue = list(plan["queues"][str(block)])
+    for c in picks:
+        del queue[queue.index(c, 0, window)]
+    visible = dict.fromkeys(remaining, 0)
+    for c in queue[:window]:
+        visible[c] += 1
+    return remaining, visible
 
 
 _POLICIES: dict[str, Any] = {}

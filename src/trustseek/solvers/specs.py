@@ -6,6 +6,9 @@ A spec is a JSON object::
     {"kind": "trust-agnostic"}                                         Section VI-A, from the model
     {"kind": "randomized", "p_ask": {"low": 0.1, "high": 0.4}}         (default: the paper's design)
     {"kind": "always-ask"} / {"kind": "never-ask"}
+    {"kind": "schedule", "counts": {"low": 17, "high": 17}, "window": null}
+                                    trial scheduling, solved by the schedule solver (options:
+                                    belief_update, grid, order, ask_first_hard)
 
 or a full policy JSON (with ``format``), taken as it is.  Every problem is reported at once,
 each line naming where in the spec it is (``where``).
@@ -21,26 +24,40 @@ from ..model.core import ModelError, Task, TrustModel
 from ..policies.base import Policy
 from ..policies.complexity import ComplexityPolicy, always_ask, never_ask, randomized
 from ..policies.kinds import policy_from_dict
+from ..policies.schedule import SCHEDULE
 from ..pomdp.problem import AssistancePOMDP
+from ..pomdp.scheduling import SchedulingError, SchedulingProblem
 from ..vocab import BELIEF_UPDATES, PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS
 from .grid import DEFAULT_GRID
 from .registry import make_solver
+from .schedule import DEFAULT_SCHEDULE_GRID, ORDERS
 
-__all__ = ["SPEC_KINDS", "PolicySpecError", "policy_from_spec"]
+__all__ = ["SCHEDULE", "SPEC_KINDS", "PolicySpecError", "policy_from_spec", "schedule_size"]
 
+#: the kinds of a plain policy (``trustseek simulate --policy`` names these)
 SPEC_KINDS = POLICY_SPEC_KINDS
 SPEC_ENTRIES = ("kind", "belief_update", "grid", "p_ask")
+SCHEDULE_ENTRIES = ("kind", "counts", "window", "belief_update", "grid", "order", "ask_first_hard")
 
 
 class PolicySpecError(TrustseekError, ValueError):
     """A policy spec that does not name a policy; one line per problem."""
 
 
-def policy_from_spec(spec: Any, model: TrustModel, task: Task, where: str = "policy", max_grid: int | None = None) -> Policy:
-    """The policy a spec names, for ``model`` and ``task`` (solving the POMDP for ``trust-aware``).
+def policy_from_spec(
+    spec: Any,
+    model: TrustModel,
+    task: Task,
+    where: str = "policy",
+    max_grid: int | None = None,
+    max_values: int | None = None,
+) -> Policy:
+    """The policy a spec names, for ``model`` and ``task`` (solving the POMDP for ``trust-aware``
+    and the scheduling problem for ``schedule``).
 
-    ``max_grid`` caps the grid of a trust-aware spec (a server limits the work a request can
-    ask for)."""
+    ``max_grid`` caps the grid of a trust-aware spec and ``max_values`` the size of a schedule
+    spec's policy (states x complexities x actions x grid points, bounded before solving): a
+    server limits the work a request can ask for."""
     if not isinstance(spec, Mapping):
         raise PolicySpecError([f"{where} must be an object"])
     if "format" in spec:
@@ -49,12 +66,15 @@ def policy_from_spec(spec: Any, model: TrustModel, task: Task, where: str = "pol
             ours, theirs = list(pol.complexities), list(task.complexities)
             raise PolicySpecError([f"{where}: complexities {ours} differ from the task's {theirs}"])
         return pol
+    kind = spec.get("kind")
+    if kind == SCHEDULE:
+        return _schedule(spec, model, task, where, max_values)
     extra = sorted(set(spec) - set(SPEC_ENTRIES))
     if extra:
         raise PolicySpecError([f"{where} has unknown entries {extra} (expected some of {sorted(SPEC_ENTRIES)})"])
-    kind = spec.get("kind")
     if kind not in SPEC_KINDS:
-        raise PolicySpecError([f"{where}.kind is {kind!r}, expected one of {list(SPEC_KINDS)} (or give a full policy JSON)"])
+        kinds = [*SPEC_KINDS, SCHEDULE]
+        raise PolicySpecError([f"{where}.kind is {kind!r}, expected one of {kinds} (or give a full policy JSON)"])
     cx = task.complexities
     if kind == "trust-aware":
         return _trust_aware(spec, model, task, where, max_grid)
@@ -94,3 +114,73 @@ def _randomized(p: Any, cx: tuple[str, ...], where: str) -> ComplexityPolicy:
         return ComplexityPolicy("randomized", cx, [p[c] for c in cx])
     except ModelError as exc:
         raise PolicySpecError([f"{where}: {x}" for x in exc.problems]) from None
+
+
+def schedule_size(counts: tuple[int, ...], window: int | None, grid: int) -> int:
+    """An upper bound on the number of Q values of a schedule policy (without enumerating its
+    states): prod(counts + 1) remaining states, times the visible compositions of a window,
+    times complexities, actions and grid points."""
+    n = sum(counts)
+    states = 1
+    for k in counts:
+        states *= k + 1
+    if window is not None and window < n:
+        states *= (window + 1) ** (len(counts) - 1)
+    return states * len(counts) * 2 * grid
+
+
+def _schedule(spec: Mapping[str, Any], model: TrustModel, task: Task, where: str, max_values: int | None) -> Policy:
+    problems = []
+    extra = sorted(set(spec) - set(SCHEDULE_ENTRIES))
+    if extra:
+        problems.append(f"{where} has unknown entries {extra} (expected some of {sorted(SCHEDULE_ENTRIES)})")
+    cx = task.complexities
+    counts = spec.get("counts")
+    if isinstance(counts, Mapping) and set(counts) <= set(cx):
+        counts = [counts.get(c, 0) for c in cx]
+    if not (
+        isinstance(counts, list | tuple)
+        and len(counts) == len(cx)
+        and all(isinstance(k, int) and not isinstance(k, bool) and k >= 0 for k in counts)
+        and sum(counts) >= 1
+    ):
+        problems.append(
+            f"{where}.counts must give a non-negative number of items for each complexity {list(cx)} "
+            f"(an object by name or a list), at least one item in all, got {spec.get('counts')!r}"
+        )
+        counts = None
+    window = spec.get("window")
+    if window is not None and (not isinstance(window, int) or isinstance(window, bool) or window < 1):
+        problems.append(f"{where}.window is {window!r}, expected a positive number of items or null (every item)")
+    bu = spec.get("belief_update", "bayes")
+    if bu not in BELIEF_UPDATES:
+        problems.append(f"{where}.belief_update is {bu!r}, expected {' or '.join(repr(b) for b in BELIEF_UPDATES)}")
+    grid = spec.get("grid", DEFAULT_SCHEDULE_GRID)
+    if not isinstance(grid, int) or isinstance(grid, bool) or grid < 3:
+        problems.append(f"{where}.grid is {grid!r}, expected an integer of at least 3")
+    order = spec.get("order", "optimal")
+    if order not in ORDERS:
+        problems.append(f"{where}.order is {order!r}, expected one of {list(ORDERS)}")
+    first = spec.get("ask_first_hard", False)
+    if not isinstance(first, bool):
+        problems.append(f"{where}.ask_first_hard is {first!r}, expected true or false")
+    if problems:
+        raise PolicySpecError(problems)
+    assert counts is not None
+    size = schedule_size(tuple(counts), window, grid)
+    if max_values is not None and size > max_values:
+        raise PolicySpecError(
+            [
+                f"{where}: a schedule policy for counts {list(counts)}, window {window} and grid {grid} could hold "
+                f"{size} values, more than the {max_values} allowed here: use fewer items, a smaller window or grid"
+            ]
+        )
+    try:
+        problem = SchedulingProblem(AssistancePOMDP(model, task), tuple(counts), window)
+    except SchedulingError as exc:
+        raise PolicySpecError([f"{where}: {x}" for x in exc.problems]) from None
+    solver = make_solver(SCHEDULE, belief_update=bu, schedule_grid=grid, order=order, ask_first_hard=first)
+    reasons = solver.unsupported(problem)
+    if reasons:
+        raise PolicySpecError([f"{where}: {r}" for r in reasons])
+    return solver.solve(problem)
