@@ -106,7 +106,9 @@ function forget() {
   }
 }
 
+let retries = 0; // requests repeated since the page was opened (the test of outages reads it)
 function onConnection(c: Connection) {
+  if (c === "retrying") retries++;
   $("connection").hidden = c === "ok";
 }
 
@@ -693,7 +695,7 @@ function renderStatus() {
     phase, trial: current?.trial ?? null, robot_action: current?.robot_action ?? null, complexity: current?.complexity ?? null,
     robot: { x: robot.x, y: robot.y, arm: robot.arm, holding: robot.holding }, item: { x: item.x, y: item.y, inBin: item.inBin },
     gripper: gripperPos(robot, layout.side), reach: REACH, side: layout.side, score: st?.score ?? null, shown_score: shownScore,
-    practice: current?.practice ?? null,
+    practice: current?.practice ?? null, retries, connection: $("connection").hidden ? "ok" : "retrying",
   }),
 };
 
