@@ -102,7 +102,7 @@ def serve(
     console.print(f"  dashboard:   http://{shown}:{port}/dashboard")
     console.print(f"  API docs:    http://{shown}:{port}/docs")
     # the token itself is never printed: only where it comes from
-    console.print(f"  experimenter token: {token_source}")
+    console.print(f"  experimenter token: {token_source}", soft_wrap=True)
     if not loopback:
         console.print("[yellow]  listening beyond loopback: put the server behind HTTPS[/]")
     # what start-up made (modules, the app, the schema) lives as long as the process: keep it
