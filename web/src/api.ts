@@ -29,36 +29,71 @@ export class ApiError extends Error {
   constructor(public status: number, message: string) { super(message); }
 }
 
+/** A readable sentence from an error body's `detail`: a string, `{problems: [...]}` (a study or
+ * a model that fails validation) or FastAPI's list of `{loc, msg}` (a malformed request). */
+export function describeDetail(detail: unknown): string[] {
+  if (typeof detail === "string") return [detail];
+  if (Array.isArray(detail)) {
+    return detail.map((d) => {
+      if (d && typeof d === "object" && "msg" in d) {
+        const loc = Array.isArray((d as { loc?: unknown }).loc) ? ((d as { loc: unknown[] }).loc).filter((x) => x !== "body").join(".") : "";
+        return loc ? `${loc}: ${String((d as { msg: unknown }).msg)}` : String((d as { msg: unknown }).msg);
+      }
+      return typeof d === "string" ? d : JSON.stringify(d);
+    });
+  }
+  if (detail && typeof detail === "object" && Array.isArray((detail as { problems?: unknown }).problems)) {
+    return ((detail as { problems: unknown[] }).problems).map((x) => String(x));
+  }
+  return detail === undefined || detail === null ? [] : [JSON.stringify(detail)];
+}
+
+/** The connection as the page should show it: `ok`, or retrying after an unreachable server or a 5xx. */
+export type Connection = "ok" | "retrying";
+
+export interface RetryPolicy {
+  /** first wait (ms), doubled after every failure up to `capMs` */
+  firstMs: number;
+  capMs: number;
+}
+
+const sleep = (ms: number) => new Promise((r) => setTimeout(r, ms));
+
 export class Api {
   sessionId = "";
+  /** Retries never stop while the page is open: the participant's work is kept until the server answers. */
+  retry: RetryPolicy = { firstMs: 300, capMs: 10000 };
+  onConnection: (c: Connection, attempt: number) => void = () => undefined;
+  private failing = 0; // calls now waiting for the server
+
   constructor(private token: string) {}
 
-  private async call<T>(method: string, path: string, body?: unknown, retries = 4): Promise<T> {
-    let delay = 300;
-    for (let attempt = 0; ; attempt++) {
-      let res: Response;
+  private async call<T>(method: string, path: string, body?: unknown): Promise<T> {
+    let delay = this.retry.firstMs;
+    let failed = false;
+    for (let attempt = 1; ; attempt++) {
+      let res: Response | null = null;
       try {
         res = await fetch(path, {
           method,
           headers: { Authorization: `Bearer ${this.token}`, ...(body ? { "Content-Type": "application/json" } : {}) },
           body: body ? JSON.stringify(body) : undefined,
         });
-      } catch (e) {
-        if (attempt >= retries) throw new ApiError(0, "the server cannot be reached");
-        await new Promise((r) => setTimeout(r, delay));
-        delay *= 2;
+      } catch {
+        res = null;
+      }
+      if (res === null || res.status >= 500 || res.status === 408 || res.status === 429) {
+        if (!failed) this.failing++;
+        failed = true;
+        this.onConnection("retrying", attempt);
+        // a little jitter, so that many pages do not come back in step
+        await sleep(delay * (0.8 + 0.4 * Math.random()));
+        delay = Math.min(this.retry.capMs, delay * 2);
         continue;
       }
-      if (res.status >= 500 && attempt < retries) {
-        await new Promise((r) => setTimeout(r, delay));
-        delay *= 2;
-        continue;
-      }
+      if (failed && --this.failing === 0) this.onConnection("ok", attempt);
       const data = await res.json().catch(() => ({}));
-      if (!res.ok) {
-        const d = (data as { detail?: unknown }).detail;
-        throw new ApiError(res.status, typeof d === "string" ? d : JSON.stringify(d));
-      }
+      if (!res.ok) throw new ApiError(res.status, describeDetail((data as { detail?: unknown }).detail).join("; ") || res.statusText);
       return data as T;
     }
   }
@@ -75,7 +110,7 @@ export class Api {
     return this.call("POST", `/api/sessions/${this.sessionId}/consent`, { agree: true, events, panel });
   }
   submitTrial(body: { trial: number; submission_id: string; human_action: "intervene" | "rely"; effort_ms: number | null; events: UIEvent[] }) {
-    return this.call<{ trial: TrialResult; duplicate: boolean; state: State }>("POST", `/api/sessions/${this.sessionId}/trials`, body, 8);
+    return this.call<{ trial: TrialResult; duplicate: boolean; state: State }>("POST", `/api/sessions/${this.sessionId}/trials`, body);
   }
   report(after_trial: number, value: number) {
     return this.call<{ state: State }>("POST", `/api/sessions/${this.sessionId}/reports`, { after_trial, value });

@@ -1,17 +1,43 @@
 // The experimenter's live dashboard: per participant, the trial, the robot action, the human
 // action, the outcome, the score and the current trust belief; refreshed every second.
 
+import { describeDetail } from "./api";
+
 const $ = <T extends HTMLElement = HTMLElement>(id: string) => document.getElementById(id) as T;
 let token = sessionStorage.getItem("trustseek-token") ?? "";
 let study = "";
 
+/** A refused request: its problems, one sentence each. */
+class Refused extends Error {
+  constructor(public status: number, public problems: string[]) { super(problems.join("; ") || `error ${status}`); }
+}
+
 async function call(path: string, init: RequestInit = {}): Promise<Response> {
-  const res = await fetch(path, { ...init, headers: { Authorization: `Bearer ${token}`, "Content-Type": "application/json" } });
+  let res: Response;
+  try {
+    res = await fetch(path, { ...init, headers: { Authorization: `Bearer ${token}`, "Content-Type": "application/json" } });
+  } catch {
+    throw new Refused(0, ["the server cannot be reached"]);
+  }
   if (!res.ok) {
     const d = await res.json().catch(() => ({ detail: res.statusText }));
-    throw new Error(`${res.status}: ${typeof d.detail === "string" ? d.detail : JSON.stringify(d.detail)}`);
+    const problems = describeDetail((d as { detail?: unknown }).detail);
+    throw new Refused(res.status, res.status === 401 ? ["the experimenter token is not valid"] : problems);
   }
   return res;
+}
+
+/** Show a refused study: a heading and one list item per problem. */
+function showProblems(el: HTMLElement, title: string, problems: string[]) {
+  const head = document.createElement("p");
+  head.textContent = title;
+  const list = document.createElement("ul");
+  for (const p of problems) {
+    const li = document.createElement("li");
+    li.textContent = p;
+    list.append(li);
+  }
+  el.replaceChildren(head, list);
 }
 
 function err(msg: string | null) {
@@ -117,7 +143,7 @@ $("create-study").addEventListener("click", async () => {
   try {
     body = JSON.parse($<HTMLTextAreaElement>("study-json").value);
   } catch (e) {
-    msg.textContent = `Not valid JSON: ${(e as Error).message}`;
+    showProblems(msg, "The study is not valid JSON:", [(e as Error).message]);
     return;
   }
   msg.textContent = "Creating (solving the policies)...";
@@ -128,7 +154,7 @@ $("create-study").addEventListener("click", async () => {
     $("new-study").hidden = true;
     loadStudies();
   } catch (e) {
-    msg.textContent = (e as Error).message;
+    showProblems(msg, "The study was not created:", e instanceof Refused ? e.problems : [(e as Error).message]);
   }
 });
 loadStudies();

@@ -15,10 +15,22 @@ const held = new Set<string>();
 const pressed = new Set<string>();
 let prevButtons: boolean[] = [];
 
-export function installKeyboard(target: Window) {
+/** Whether the key belongs to the focused control (a checkbox, a button, a slider, a radio
+ * group, a link): then the browser's own handling applies and the robot ignores the key. */
+export function ownedByControl(target: EventTarget | null, key: string): boolean {
+  if (!(target instanceof HTMLElement)) return false;
+  if (target.isContentEditable || target instanceof HTMLTextAreaElement || target instanceof HTMLSelectElement) return true;
+  if (target instanceof HTMLInputElement) return true; // text, checkbox, radio, range: every key is theirs
+  if (target instanceof HTMLButtonElement || target instanceof HTMLAnchorElement) return key === " " || key === "Enter";
+  return false;
+}
+
+export function installKeyboard(target: Window, active: () => boolean = () => true) {
   target.addEventListener("keydown", (e) => {
     const k = e.key.length === 1 ? e.key.toLowerCase() : e.key;
-    if (["ArrowUp", "ArrowDown", "ArrowLeft", "ArrowRight", " "].includes(k)) e.preventDefault();
+    if (ownedByControl(e.target, k)) return;
+    // the page does not scroll under the robot's controls, but only while the robot is on screen
+    if (active() && ["ArrowUp", "ArrowDown", "ArrowLeft", "ArrowRight", " "].includes(k)) e.preventDefault();
     if (!held.has(k)) pressed.add(k);
     held.add(k);
   });

@@ -4,8 +4,11 @@
 // The server decides everything that matters (complexity, robot action, outcome, score);
 // this page animates it, lets the participant intervene or teleoperate, and reports back.
 // `?speed=4` multiplies every motion (the study's animation_speed is multiplied in too).
+// `?retry_cap=ms` caps the wait between retries while the server is unreachable (default 10 s);
+// the page retries for as long as it stays open and keeps the trial in progress in
+// localStorage, so that a reload resumes it where it was.
 
-import { Api, ApiError, Current, Questionnaire, State, TrialResult, UIEvent } from "./api";
+import { Api, ApiError, Connection, Current, Questionnaire, State, TrialResult, UIEvent } from "./api";
 import { gamepadName, installKeyboard, poll } from "./input";
 import {
   AISLE_H, ARM_MAX, BASE_H, REACH, SHELF_DEPTH, ItemState, Layout, RobotState, View, clampRobot, drawEndEffector, drawLocal, drawWorld,
@@ -17,7 +20,10 @@ type Phase = "loading" | "consent" | "instructions" | "approach" | "reach" | "wa
 const $ = <T extends HTMLElement = HTMLElement>(id: string) => document.getElementById(id) as T;
 const token = decodeURIComponent(location.pathname.split("/").filter(Boolean).pop() ?? "");
 const api = new Api(token);
-const speedParam = parseFloat(new URLSearchParams(location.search).get("speed") ?? "1");
+const query = new URLSearchParams(location.search);
+const speedParam = parseFloat(query.get("speed") ?? "1");
+const retryCap = parseFloat(query.get("retry_cap") ?? "");
+if (isFinite(retryCap) && retryCap >= 50) api.retry = { firstMs: Math.min(api.retry.firstMs, retryCap), capMs: retryCap };
 
 let st: State;
 let shownScore = 0; // the score on screen: it changes when the outcome is shown, not when it is known
@@ -43,6 +49,8 @@ let impact: { x: number; y: number; t: number } | undefined;
 let driven = 0; // teleoperation: distance driven by the base (m)
 let armTravel = 0; // and by the arm
 let graspAttempts = 0;
+type Pending = { human: "intervene" | "rely"; effort: number | null };
+let pending: Pending | null = null; // a trial being saved
 
 function freshRobot(l: Layout): RobotState {
   return { x: l.start.x, y: l.start.y, heading: 0, arm: 0, jaw: 0.2, holding: false, binCount: 0, shake: 0 };
@@ -53,27 +61,94 @@ function freshItem(l: Layout): ItemState {
 
 function log(type: string, data: Record<string, unknown> = {}) {
   trialEvents.push({ t: Date.now(), type, trial: current?.trial, data });
+  save();
+}
+
+// --------------------------------------------------------------------------- the trial in progress, kept across reloads
+
+interface Saved {
+  trial: number; submissionId: string; events: UIEvent[]; intervened: boolean; phase: Phase;
+  teleopMs: number | null; robot: RobotState; item: ItemState; pending: Pending | null;
+  driven: number; armTravel: number; graspAttempts: number;
+}
+const savedKey = () => `trustseek-trial:${api.sessionId}`;
+let lastSave = 0;
+
+function save() {
+  if (!current || !api.sessionId) return;
+  lastSave = clock;
+  const s: Saved = {
+    trial: current.trial, submissionId, events: trialEvents, intervened, phase,
+    teleopMs: phase === "teleop" || pending?.human === "intervene" ? performance.now() - teleopStart : null,
+    robot, item, pending, driven, armTravel, graspAttempts,
+  };
+  try {
+    localStorage.setItem(savedKey(), JSON.stringify(s));
+  } catch {
+    // storage full or disabled: the trial still goes to the server when it ends
+  }
+}
+
+function savedFor(trial: number): Saved | null {
+  try {
+    const s = JSON.parse(localStorage.getItem(savedKey()) ?? "null") as Saved | null;
+    return s && s.trial === trial && typeof s.submissionId === "string" && Array.isArray(s.events) ? s : null;
+  } catch {
+    return null;
+  }
+}
+
+function forget() {
+  try {
+    localStorage.removeItem(savedKey());
+  } catch {
+    // nothing kept
+  }
+}
+
+let retries = 0; // requests repeated since the page was opened (the test of outages reads it)
+function onConnection(c: Connection) {
+  if (c === "retrying") retries++;
+  $("connection").hidden = c === "ok";
 }
 
 function setPhase(p: Phase) {
   phase = p;
   phaseT = 0;
   document.body.dataset.phase = p;
-  for (const s of ["consent", "instructions", "task", "done"]) $(`screen-${s}`).hidden = true;
+  for (const s of ["consent", "instructions", "task", "done", "error"]) $(`screen-${s}`).hidden = true;
   if (p === "consent") $("screen-consent").hidden = false;
   else if (p === "instructions") $("screen-instructions").hidden = false;
   else if (p === "done") $("screen-done").hidden = false;
-  else if (p !== "loading" && p !== "error") $("screen-task").hidden = false;
+  else if (p === "error") $("screen-error").hidden = false;
+  else if (p !== "loading") $("screen-task").hidden = false;
   $("screen-report").hidden = p !== "report";
   $("screen-questionnaire").hidden = p !== "questionnaire";
   if (p === "report" || p === "questionnaire" || p === "done") hintUntil = 0;
   renderStatus();
 }
 
+/** A problem the participant can act on (the page goes on). */
 function showError(msg: string) {
   const e = $("error");
   e.textContent = msg;
   e.hidden = false;
+}
+
+function clearError() {
+  $("error").hidden = true;
+}
+
+/** A problem that stops the study on this page: a screen of its own, not a blank page. */
+function showFatal(title: string, msg: string) {
+  $("error-title").textContent = title;
+  $("error-text").textContent = msg;
+  setPhase("error");
+}
+
+/** Phones and tablets without a keyboard or mouse cannot teleoperate the robot. */
+function touchOnly(): boolean {
+  return !!window.matchMedia && window.matchMedia("(any-pointer: coarse)").matches && !window.matchMedia("(any-pointer: fine)").matches;
 }
 
 function setHint(text: string, seconds = 2.5) {
@@ -83,14 +158,27 @@ function setHint(text: string, seconds = 2.5) {
 
 // --------------------------------------------------------------------------- flow
 
+const TASK_PHASES: Phase[] = ["approach", "reach", "waiting", "outcome", "teleop", "result"];
+
 async function boot() {
-  installKeyboard(window);
+  if (touchOnly()) {
+    showFatal(
+      "Please use a computer",
+      "Thank you for your interest. This study needs a keyboard (or a gamepad) and a screen of at least 1280 \u00d7 720 pixels: " +
+        "please open the same link on a laptop or desktop computer. Nothing has been recorded.",
+    );
+    return;
+  }
+  installKeyboard(window, () => TASK_PHASES.includes(phase));
+  api.onConnection = onConnection;
   window.addEventListener("gamepadconnected", (e) => log("gamepad_connected", { id: (e as GamepadEvent).gamepad.id }));
+  window.addEventListener("pagehide", save);
   try {
     st = await api.me();
   } catch (e) {
-    setPhase("error");
-    showError(e instanceof ApiError && e.status === 401 ? "This link is not valid. Please check the address you were given." : `Cannot start: ${(e as Error).message}`);
+    if (e instanceof ApiError && (e.status === 401 || e.status === 403 || e.status === 404)) {
+      showFatal("This link is not valid", "Please check the address you were given, or ask the experimenter for a new link.");
+    } else showFatal("The study cannot start", (e as Error).message);
     return;
   }
   speed = (isFinite(speedParam) && speedParam > 0 ? speedParam : 1) * st.animation_speed;
@@ -134,8 +222,19 @@ async function onConsent() {
     const v = query.get(k);
     if (v) panel[k] = v.slice(0, 200);
   }
-  st = await api.consent([{ t: Date.now(), type: "consent" }], panel);
+  $("consent-status").textContent = "Saving\u2026";
+  try {
+    st = await api.consent([{ t: Date.now(), type: "consent" }], panel);
+  } catch (e) {
+    $("consent-status").textContent = "";
+    $<HTMLButtonElement>("consent-btn").disabled = !$<HTMLInputElement>("agree").checked;
+    showError(`Could not save your consent: ${(e as Error).message}. Please try again.`);
+    return;
+  }
+  $("consent-status").textContent = "";
+  clearError();
   setPhase("instructions");
+  $("start-btn").focus();
 }
 
 function route() {
@@ -148,6 +247,7 @@ function route() {
 }
 
 function finish() {
+  forget();
   $("final-score").textContent = String(st.score);
   $("final-trials").textContent = String(st.trials_done - st.practice_trials);
   setPhase("done");
@@ -169,7 +269,9 @@ function startTrial(cur: Current) {
   trialEvents = [];
   outcome = null;
   intervened = false;
-  submissionId = `${api.sessionId}-${cur.trial}-${Math.random().toString(36).slice(2, 10)}`;
+  pending = null;
+  const saved = savedFor(cur.trial);
+  submissionId = saved?.submissionId ?? `${api.sessionId}-${cur.trial}-${Math.random().toString(36).slice(2, 10)}`;
   layout = makeLayout(cur.scene_seed, cur.complexity === "high");
   $("banner").className = "cut"; // the last trial's banner is gone before this trial starts
   const bin = robot.binCount;
@@ -179,6 +281,7 @@ function startTrial(cur: Current) {
   impact = undefined;
   pathS = 0;
   pathL = pathLength(layout.path);
+  if (saved) return resumeTrial(cur, saved);
   log("trial_start", { complexity: cur.complexity, robot_action: cur.robot_action, block: cur.block });
   if (cur.robot_action === "ask") {
     teleopStart = performance.now();
@@ -189,6 +292,33 @@ function startTrial(cur: Current) {
   } else {
     setPhase("approach");
   }
+}
+
+/** The page was reloaded during this trial: carry on from what was kept, with its events. */
+function resumeTrial(cur: Current, saved: Saved) {
+  trialEvents = saved.events;
+  intervened = saved.intervened;
+  log("resumed", { phase: saved.phase });
+  if (saved.pending) {
+    // the trial had ended and was being saved: send it again (the same submission id)
+    teleopStart = performance.now() - (saved.teleopMs ?? 0);
+    Object.assign(robot, saved.robot);
+    Object.assign(item, saved.item);
+    sendTrial(saved.pending.human, saved.pending.effort);
+    return;
+  }
+  if (saved.phase === "teleop" || saved.intervened) {
+    Object.assign(robot, saved.robot, { shake: 0 });
+    Object.assign(item, saved.item);
+    driven = saved.driven;
+    armTravel = saved.armTravel;
+    graspAttempts = saved.graspAttempts;
+    teleopStart = performance.now() - (saved.teleopMs ?? 0);
+    setPhase("teleop");
+    setHint(cur.robot_action === "ask" ? "Welcome back: carry on helping the robot." : "Welcome back: you are still in control.", 4);
+    return;
+  }
+  setPhase("approach"); // the robot had not finished its approach: it starts it again
 }
 
 function resetTeleop() {
@@ -208,19 +338,32 @@ function intervene(via: string) {
   setHint("You took over: drive to the item, grasp it (G) and deposit it in the bin (B).", 4);
 }
 
-async function submit(human: "intervene" | "rely") {
+function submit(human: "intervene" | "rely") {
+  sendTrial(human, human === "intervene" ? performance.now() - teleopStart : null);
+}
+
+async function sendTrial(human: "intervene" | "rely", effort: number | null) {
   const cur = current!;
-  const effort = human === "intervene" ? performance.now() - teleopStart : null;
+  pending = { human, effort };
   setPhase(human === "rely" ? "waiting" : "result");
+  save(); // a reload from here on sends the same trial again
   try {
+    // retried until the server answers; the submission id makes a repeat harmless
     const res = await api.submitTrial({ trial: cur.trial, submission_id: submissionId, human_action: human, effort_ms: effort, events: trialEvents });
     outcome = res.trial;
     st = res.state;
   } catch (e) {
-    showError(`Could not save the trial: ${(e as Error).message}. Please reload the page.`);
-    setPhase("error");
+    if (e instanceof ApiError && e.status === 409) {
+      // the server is ahead of this page (another tab, or an earlier save): follow it
+      forget();
+      st = await api.state().catch(() => st);
+      return route();
+    }
+    showFatal("Your trial could not be saved", `${(e as Error).message}. Please reload the page; what you did so far is kept.`);
     return;
   }
+  pending = null;
+  forget();
   if (human === "rely") setPhase("outcome");
   else {
     phaseT = 0;
@@ -266,9 +409,10 @@ async function onReport() {
     st = res.state;
   } catch (e) {
     $<HTMLButtonElement>("report-btn").disabled = false;
-    showError(`Could not save your answer: ${(e as Error).message}`);
+    showError(`Could not save your answer: ${(e as Error).message}. Please try again.`);
     return;
   }
+  clearError();
   route();
 }
 
@@ -335,9 +479,10 @@ async function onQuestionnaire() {
     st = res.state;
   } catch (e) {
     updateQuestionnaireButton();
-    showError(`Could not save your answers: ${(e as Error).message}`);
+    showError(`Could not save your answers: ${(e as Error).message}. Please try again.`);
     return;
   }
+  clearError();
   route();
 }
 
@@ -378,6 +523,7 @@ function frame(now: number) {
     animateOutcome(k);
   } else if (phase === "teleop") {
     teleop(cmd, k);
+    if (clock - lastSave > 0.5) save();
   } else if (phase === "result") {
     if (outcome && phaseT > 1.6) afterResult();
   }
@@ -559,7 +705,7 @@ function renderStatus() {
     phase, trial: current?.trial ?? null, robot_action: current?.robot_action ?? null, complexity: current?.complexity ?? null,
     robot: { x: robot.x, y: robot.y, arm: robot.arm, holding: robot.holding }, item: { x: item.x, y: item.y, inBin: item.inBin },
     gripper: gripperPos(robot, layout.side), reach: REACH, side: layout.side, score: st?.score ?? null, shown_score: shownScore,
-    practice: current?.practice ?? null, picks: picks() ?? null,
+    practice: current?.practice ?? null, picks: picks() ?? null, retries, connection: $("connection").hidden ? "ok" : "retrying",
   }),
 };
 

@@ -54,7 +54,14 @@ def serve(
         None,
         "--token",
         envvar="TRUSTSEEK_TOKEN",
-        help="Experimenter token (default: $TRUSTSEEK_TOKEN, else a random one, printed).",
+        help="Experimenter token (default: $TRUSTSEEK_TOKEN). Prefer the variable or --token-file: "
+        "a command line is visible to other users (ps).",
+    ),
+    token_file: Path | None = typer.Option(
+        None,
+        "--token-file",
+        help="Read the experimenter token from this file (its first line). Without a token, a random one is "
+        "written to ./trustseek-token (owner-only permissions) and its path printed.",
     ),
     public_url: str | None = typer.Option(
         None, "--public-url", help="Base URL used in participant links (default: the request's)."
@@ -83,9 +90,7 @@ def serve(
     from ..server import create_app
 
     _check_db(db)
-    if token is not None and len(token) < 8:
-        raise TrustseekError(["--token must be at least 8 characters"])
-    token = token or secrets.token_urlsafe(24)
+    token, token_source = _experimenter_token(token, token_file)
     log_to_stderr(log_level)
     application = create_app(db, token=token, public_url=public_url)  # migrates the schema, once
     try:
@@ -96,8 +101,8 @@ def serve(
     console.print(f"[bold]trustseek server[/] on http://{shown}:{port}  (database {db})")
     console.print(f"  dashboard:   http://{shown}:{port}/dashboard")
     console.print(f"  API docs:    http://{shown}:{port}/docs")
-    if not os.environ.get("TRUSTSEEK_TOKEN") or os.environ.get("TRUSTSEEK_TOKEN") != token:
-        console.print(f"  experimenter token: {token}")
+    # the token itself is never printed: only where it comes from
+    console.print(f"  experimenter token: {token_source}", soft_wrap=True)
     if not loopback:
         console.print("[yellow]  listening beyond loopback: put the server behind HTTPS[/]")
     # what start-up made (modules, the app, the schema) lives as long as the process: keep it
@@ -121,6 +126,47 @@ def serve(
         log_level=log_level,
         access_log=False,
     )
+
+
+GENERATED_TOKEN_FILE = Path("trustseek-token")
+
+
+def _experimenter_token(token: str | None, token_file: Path | None) -> tuple[str, str]:
+    """The experimenter token and a description of where it comes from (what start-up prints).
+
+    ``--token-file`` wins over ``--token`` / ``$TRUSTSEEK_TOKEN``; without either, a random token
+    is written to :data:`GENERATED_TOKEN_FILE` with owner-only permissions (0600)."""
+    if token_file is not None:
+        try:
+            lines = token_file.read_text(encoding="utf-8").splitlines()
+        except OSError as exc:
+            raise TrustseekError([f"--token-file {token_file}: cannot read it ({exc.strerror or exc})"]) from None
+        except UnicodeDecodeError:
+            raise TrustseekError([f"--token-file {token_file}: not a UTF-8 text file"]) from None
+        token = lines[0].strip() if lines else ""
+        if len(token) < 8:
+            raise TrustseekError([f"--token-file {token_file}: the token on its first line must be at least 8 characters"])
+        return token, f"read from {token_file}"
+    if token is not None:
+        if len(token) < 8:
+            raise TrustseekError(["--token must be at least 8 characters"])
+        from_env = os.environ.get("TRUSTSEEK_TOKEN") == token
+        return token, "from $TRUSTSEEK_TOKEN" if from_env else "from --token"
+    token = secrets.token_urlsafe(24)
+    path = GENERATED_TOKEN_FILE.resolve()
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(token + "\n")
+        os.chmod(tmp, 0o600)
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise TrustseekError(
+            [f"cannot write the generated token to {path} ({exc.strerror or exc}): pass --token-file or set $TRUSTSEEK_TOKEN"]
+        ) from None
+    return token, f"generated, in {path} (readable by you only; reuse it with --token-file {path})"
 
 
 def log_to_stderr(level: str) -> None:

@@ -91,11 +91,24 @@ EXPERIMENTER_BODY_LIMIT = 16 * 1024 * 1024
 _WRITES = frozenset({"POST", "PUT", "PATCH", "DELETE"})
 
 
-async def _refuse(send: Send, status: int, detail: str, headers: tuple = ()) -> None:
+async def _refuse(send: Send, status: int, detail: str | list[dict[str, Any]], headers: tuple = ()) -> None:
     body = json.dumps({"detail": detail}).encode()
     head = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode()), *headers]
     await send({"type": "http.response.start", "status": status, "headers": head})
     await send({"type": "http.response.body", "body": body})
+
+
+def _decodable_json_text(headers: dict[bytes, bytes], body: bytes) -> bool:
+    """Whether a body sent as JSON decodes as text in the encoding JSON detection finds (other
+    bodies are the routes' to judge)."""
+    kind = headers.get(b"content-type", b"").split(b";")[0].strip().lower()
+    if kind != b"application/json" and not kind.endswith(b"+json"):
+        return True
+    try:
+        body.decode(json.detect_encoding(body))
+    except (UnicodeDecodeError, LookupError):
+        return False
+    return True
 
 
 class BodyGuard:
@@ -144,6 +157,12 @@ class BodyGuard:
             if not message.get("more_body"):
                 break
         body, replayed = b"".join(chunks), False
+        if body and not _decodable_json_text(headers, body):
+            # FastAPI would answer a body it cannot decode with a 400 outside the documented
+            # refusals; it is a malformed body like any other invalid JSON: 422
+            return await _refuse(
+                send, 422, [{"type": "json_invalid", "loc": ["body"], "msg": "the body is not JSON text (UTF-8)", "input": None}]
+            )
 
         async def replay() -> Message:
             nonlocal replayed

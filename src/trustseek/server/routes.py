@@ -238,7 +238,17 @@ def dashboard(study_id: str, request: Request):
     "and the seed and secret that reproduce the session.  In the CSV of the events, reports and sessions tables, "
     "text cells that a spreadsheet would read as a formula (starting with = + - @, a tab or a carriage return) "
     "are prefixed with ' (literal text), and lines end with CRLF (RFC 4180).",
-    responses=errors(404),
+    response_class=Response,
+    responses={
+        200: {
+            "description": "The table as a file (an attachment).",
+            "content": {
+                "text/csv": {"schema": {"type": "string"}},
+                "application/vnd.apache.parquet": {"schema": {"type": "string", "format": "binary"}},
+            },
+        },
+        **errors(404),
+    },
 )
 def export(
     study_id: str,

@@ -1,0 +1,108 @@
+"""The participant page across a reload and a server outage longer than any retry budget: the
+trial in progress survives the reload, the page keeps retrying (well past the ~76 s, nine
+attempts, after which it used to give up), says that it is reconnecting, and resumes by
+itself when the server is back; the trial is stored once, with every event once."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from test_browser import hold, st, teleoperate
+from trustseek.client import Client
+from trustseek.server.app import STATIC
+from trustseek.testing.browser import CHROMIUM, launch_chromium
+from trustseek.testing.servers import free_port, serve_process
+
+pytestmark = pytest.mark.browser
+
+TOKEN = "outage-test-token"
+OLD_ATTEMPTS = 9  # a trial submission used to be tried 1 + 8 times (300 ms doubling: ~76 s), then abandoned
+
+
+def test_reload_and_outage_lose_nothing(tmp_path):
+    if not Path(CHROMIUM).exists():
+        pytest.fail(f"{CHROMIUM} is missing: run scripts/setup.sh")
+    if not (STATIC / "participant.js").exists():
+        pytest.fail("front end not built: run scripts/setup.sh (npm ci && npm run build in web/)")
+    from playwright.sync_api import sync_playwright
+
+    db = f"sqlite:///{tmp_path / 'outage.sqlite'}"
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    proc = serve_process(db, TOKEN, port, log=tmp_path / "server.log")
+    try:
+        c = Client(url, TOKEN)
+        study = c.create_study(
+            {
+                "name": "outage",
+                "blocks": [{"name": "help", "policy": {"kind": "always-ask"}, "schedule": {"trials": ["low", "low"]}}],
+                "animation_speed": 3.0,
+            }
+        )
+        link = c.create_sessions(study["id"], participants=["outage-1"])[0]["link"]
+        with sync_playwright() as p:
+            browser = launch_chromium(p)
+            page = browser.new_page(viewport={"width": 1280, "height": 720})
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(link + "?retry_cap=400")
+            page.wait_for_selector("#screen-consent:not([hidden])")
+            page.check("#agree")
+            page.click("#consent-btn")
+            page.click("#start-btn")
+            page.wait_for_function("window.trustseek.state().phase === 'teleop'")
+
+            # drive part of the way, then reload: the robot is where it was, the trial goes on
+            s0 = st(page)
+            key = "ArrowUp" if s0["side"] < 0 else "ArrowDown"
+            moved = hold(page, key, lambda s: abs(s["robot"]["y"] - s0["robot"]["y"]) > 0.5)
+            page.wait_for_timeout(800)
+            before = st(page)
+            assert abs(before["robot"]["y"] - moved["robot"]["y"]) < 0.2
+            page.reload()
+            page.wait_for_function("window.trustseek.state().phase === 'teleop'")
+            after = st(page)
+            assert after["trial"] == 1
+            assert abs(after["robot"]["y"] - before["robot"]["y"]) < 1e-6, (before["robot"], after["robot"])
+            assert abs(after["robot"]["x"] - before["robot"]["x"]) < 1e-6
+
+            # the server goes away; the participant finishes the trial; the page keeps it
+            proc.kill()
+            proc.wait(timeout=10)
+            teleoperate(page)
+            page.wait_for_selector("#connection:not([hidden])", timeout=5000)
+            page.wait_for_function(f"window.trustseek.state().retries > {2 * OLD_ATTEMPTS}", timeout=60000)
+            s = st(page)
+            assert s["phase"] == "result" and s["trial"] == 1 and s["connection"] == "retrying"
+            assert page.is_hidden("#screen-error")
+
+            # the server comes back: the page resumes by itself
+            proc = serve_process(db, TOKEN, port, log=tmp_path / "server.log")
+            page.wait_for_function(
+                "window.trustseek.state().trial === 2 && window.trustseek.state().phase === 'teleop'", timeout=30000
+            )
+            assert page.is_hidden("#connection")
+            assert not errors, errors
+            browser.close()
+
+        trials = pd.read_csv(io.BytesIO(c.export(study["id"])))
+        events = pd.read_csv(io.BytesIO(c.export(study["id"], table="events")))
+    finally:
+        proc.kill()
+        proc.wait(timeout=10)
+
+    assert trials["trial"].tolist() == [1]
+    assert trials["human_action"].tolist() == ["intervene"] and trials["effort_ms"].iloc[0] > 0
+    first = events[events.trial == 1]
+    kinds = first["type"].tolist()
+    # the events from before the reload are there, and each once
+    for k in ("trial_start", "teleop_start", "resumed", "grasp", "deposit"):
+        assert kinds.count(k) == 1, (k, kinds)
+    assert kinds.index("trial_start") < kinds.index("resumed") < kinds.index("deposit")
+    resumed = json.loads(first[first.type == "resumed"]["data"].iloc[0])
+    assert resumed == {"phase": "teleop"}
