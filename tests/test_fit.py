@@ -224,15 +224,26 @@ def test_cli_fit_decode_select(tmp_path):
     assert TrustModel.from_dict(d["model"]) == m
     assert len(d["restart_logliks"]) == 2 and d["n_params"] == 17
     text = invoke("fit", log, "--restarts", "1", "--tol", "1e-5", "--plots", tmp_path / "figs")
-    assert "log-likelihood" in text and "events" in text
+    assert "log-likelihood" in text and "events" in text and "1 of 1 within 0.01 of the best" in text
     assert (tmp_path / "figs" / "emissions.png").stat().st_size > 0
     assert (tmp_path / "figs" / "transitions.png").stat().st_size > 0
     post = tmp_path / "post.csv"
     invoke("decode", log, "--model", out, "--out", post)
     p = pd.read_csv(post)
     assert len(p) == 9 * 71 and set(p["viterbi_trust"]) <= {"low", "high"}
-    rows = json.loads(invoke("select", log, "--max-levels", "2", "--folds", "2", "--restarts", "1", "--json"))["levels"]
+    d = json.loads(invoke("select", log, "--max-levels", "2", "--folds", "2", "--restarts", "1", "--json"))
+    rows = d["levels"]
     assert [r["levels"] for r in rows] == [1, 2]
+    assert all(1 <= r["reached_best"] <= r["starts"] for r in rows) and rows[1]["starts"] == 1 + 2
+    assert d["warnings"] == _warnings_of(rows)
+    text = invoke("select", log, "--max-levels", "2", "--folds", "2", "--restarts", "1")
+    assert "reached best" in text and f"{rows[1]['reached_best']} of 3" in text
+
+
+def _warnings_of(rows):
+    from trustseek.estimation import selection_warnings
+
+    return selection_warnings(rows)
 
 
 def test_cli_reports_bad_logs_cleanly(tmp_path):

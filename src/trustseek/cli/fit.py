@@ -254,7 +254,8 @@ def fit(
     lls = ", ".join(f"{x:.3f}" for x in sorted(result.restart_logliks, reverse=True))
     console.print(
         f"log-likelihood {result.loglik:.4f}; {result.n_params} free parameters; AIC {result.aic:.2f}; BIC {result.bic:.2f}\n"
-        f"restarts (best first): {lls}"
+        f"restarts (best first): {lls}; {_fit().selection.reached_best(result.restart_logliks)} of "
+        f"{len(result.restart_logliks)} within 0.01 of the best"
     )
     if iv is not None:
         console.print(f"intervals: bootstrap over {iv.replicates} resamples of the participants ({iv.method})", highlight=False)
