@@ -224,15 +224,26 @@ def test_cli_fit_decode_select(tmp_path):
     assert TrustModel.from_dict(d["model"]) == m
     assert len(d["restart_logliks"]) == 2 and d["n_params"] == 17
     text = invoke("fit", log, "--restarts", "1", "--tol", "1e-5", "--plots", tmp_path / "figs")
-    assert "log-likelihood" in text and "events" in text
+    assert "log-likelihood" in text and "events" in text and "1 of 1 within 0.01 of the best" in text
     assert (tmp_path / "figs" / "emissions.png").stat().st_size > 0
     assert (tmp_path / "figs" / "transitions.png").stat().st_size > 0
     post = tmp_path / "post.csv"
     invoke("decode", log, "--model", out, "--out", post)
     p = pd.read_csv(post)
     assert len(p) == 9 * 71 and set(p["viterbi_trust"]) <= {"low", "high"}
-    rows = json.loads(invoke("select", log, "--max-levels", "2", "--folds", "2", "--restarts", "1", "--json"))["levels"]
+    d = json.loads(invoke("select", log, "--max-levels", "2", "--folds", "2", "--restarts", "1", "--json"))
+    rows = d["levels"]
     assert [r["levels"] for r in rows] == [1, 2]
+    assert all(1 <= r["reached_best"] <= r["starts"] for r in rows) and rows[1]["starts"] == 1 + 2
+    assert d["warnings"] == _warnings_of(rows)
+    text = invoke("select", log, "--max-levels", "2", "--folds", "2", "--restarts", "1")
+    assert "reached best" in text and f"{rows[1]['reached_best']} of 3" in text
+
+
+def _warnings_of(rows):
+    from trustseek.estimation import selection_warnings
+
+    return selection_warnings(rows)
 
 
 def test_cli_reports_bad_logs_cleanly(tmp_path):
@@ -327,3 +338,50 @@ def test_cli_fit_says_how_many_resamples_an_interval_rests_on():
     d = json.loads(invoke(*args, "--bootstrap", "3", "--json"))
     assert d["bootstrap"] == 3 and d["ci_level"] == 0.95 and "percentile" in d["ci_method"]
     assert all(c["lower"] <= c["estimate"] <= c["upper"] for c in d["cells"])
+
+
+def test_cli_model_of_a_study_without_asking_is_marked_checked_refused_and_filled(tmp_path):
+    """fit marks the ask rows a study without asking never estimated; check warns; solve refuses
+    naming them; fit --fill-from paper supplies them, and solve then plans; the figures leave
+    them out (before the marker, solve planned on identity ask transitions silently)."""
+    from typer.testing import CliRunner
+
+    from trustseek import ModelError
+    from trustseek.cli import app
+    from trustseek.data.trials import write_trials
+
+    log = tmp_path / "no_ask.csv"
+    write_trials(simulate_design(paper_model(), 30, seed=2, p_ask=(0.0, 0.0)).drop(columns="true_trust"), log)
+    model = tmp_path / "m.json"
+    invoke("fit", log, "--restarts", "1", "--tol", "1e-5", "--out", model)
+    d = json.loads(model.read_text())
+    assert {(r["a"], r.get("E")) for r in d["not_estimated"]} == {("ask", "faulty"), ("ask", "reliable")}
+    out = invoke("check", model)
+    assert "warning:" in out and "transition[C=high, a=ask, E=reliable]" in out and "ok" in out
+    res = CliRunner().invoke(app, ["solve", "--model", str(model)])
+    assert isinstance(res.exception, ModelError)  # main() prints each line on stderr and exits with 2
+    lines = res.exception.lines()
+    assert any("transition[C=low, a=ask, E=faulty] was never estimated" in ln for ln in lines)
+    assert any("transition[C=high, a=ask, E=reliable] was never estimated" in ln for ln in lines)
+    assert "--fill-from paper" in lines[-1]
+    filled = tmp_path / "filled.json"
+    text = invoke(
+        "fit", log, "--restarts", "1", "--tol", "1e-5", "--out", filled, "--fill-from", "paper", "--plots", tmp_path / "f"
+    )
+    assert "taken from paper" in text
+    m = TrustModel.load(filled)
+    assert m.not_estimated == ()
+    np.testing.assert_array_equal(m.transition[:, 1], paper_model().transition[:, 1])
+    invoke("solve", "--model", filled, "--json")
+    assert (tmp_path / "f" / "transitions.png").stat().st_size > 0
+
+
+def test_transition_figure_leaves_out_never_estimated_rows():
+    from trustseek.plots.model import plot_transitions
+
+    m = paper_model()
+    full = plot_transitions(m)
+    marked = plot_transitions(m.replace(not_estimated=(("transition", (0, 1, 0)), ("transition", (0, 1, 1)))))
+    ticks = [t.get_text() for t in marked.axes[0].get_xticklabels()]
+    assert len(ticks) == 2 and not any("ask" in t for t in ticks)
+    assert len(full.axes[0].get_xticklabels()) == 4

@@ -207,3 +207,88 @@ def random_models(draw):
 def test_valid_random_models_round_trip(m):
     again = TrustModel.from_dict(json.loads(json.dumps(m.to_dict())))
     assert again == m
+
+
+# --------------------------------------------------------------------------- never-estimated rows
+
+
+def _no_ask_fit():
+    from trustseek import paper_model
+    from trustseek.estimation import fit_trust_model
+    from trustseek.simulation.designs import simulate_design
+
+    df = simulate_design(paper_model(), 40, seed=0, p_ask=(0.0, 0.0))  # a study in which the robot never asks
+    return fit_trust_model(df, restarts=1, seed=0, tol=1e-5)
+
+
+def test_not_estimated_round_trips_and_absent_means_all_estimated(tmp_path, model):
+    assert model.not_estimated == () and "not_estimated" not in model.to_dict()
+    marked = model.replace(not_estimated=(("transition", (1, 1, 1)), ("emission", (0, 1))))
+    d = marked.to_dict()
+    assert d["not_estimated"] == [
+        {"table": "emission", "C": "low", "a": "ask"},
+        {"table": "transition", "C": "high", "a": "ask", "E": "reliable"},
+    ]
+    marked.save(tmp_path / "m.json")
+    back = TrustModel.load(tmp_path / "m.json")
+    assert back == marked and back != model
+    assert back.not_estimated_rows() == ["emission[C=low, a=ask]", "transition[C=high, a=ask, E=reliable]"]
+
+
+def test_bad_not_estimated_entries_are_each_reported(model):
+    d = model.to_dict()
+    d["not_estimated"] = [
+        {"table": "emission", "C": "medium", "a": "ask"},
+        {"table": "prior"},
+        {"table": "emission", "C": "low", "a": "ask", "E": "faulty"},
+    ]
+    with pytest.raises(ModelError) as exc:
+        TrustModel.from_dict(d)
+    text = str(exc.value)
+    assert (
+        "not_estimated[0]: C = 'medium'" in text and "not_estimated[1]" in text and "not_estimated[2]: unknown keys ['E']" in text
+    )
+
+
+def test_a_fit_without_asking_marks_the_ask_rows_and_planning_refuses_them(task):
+    """Before the marker, the ask transitions of such a fit were unmarked identity rows and
+    AssistancePOMDP planned with them silently."""
+    from trustseek import paper_model
+    from trustseek.pomdp.problem import AssistancePOMDP
+
+    res = _no_ask_fit()
+    rows = res.model.not_estimated_rows()
+    assert rows == [f"transition[C={c}, a=ask, E={e}]" for c in ("low", "high") for e in ("faulty", "reliable")]
+    assert any("never estimated" in w for w in res.warnings)
+    with pytest.raises(ModelError) as exc:
+        AssistancePOMDP(res.model, task)
+    lines = exc.value.problems
+    # only the rows the task reaches: asking records a faulty experience in low complexity, reliable in high
+    assert [ln.split(" was")[0] for ln in lines[:-1]] == [
+        "transition[C=low, a=ask, E=faulty]",
+        "transition[C=high, a=ask, E=reliable]",
+    ]
+    assert "--fill-from paper" in lines[-1]
+    filled = res.model.filled_from(paper_model())
+    assert filled.not_estimated == ()
+    np.testing.assert_array_equal(filled.transition[:, 1], paper_model().transition[:, 1])
+    np.testing.assert_array_equal(filled.transition[:, 0], res.model.transition[:, 0])
+    AssistancePOMDP(filled, task)
+
+
+def test_a_fit_of_the_paper_design_plans_without_filling(task):
+    from trustseek import paper_model
+    from trustseek.estimation import fit_trust_model
+    from trustseek.pomdp.problem import AssistancePOMDP
+    from trustseek.simulation.designs import simulate_design
+
+    res = fit_trust_model(simulate_design(paper_model(), 30, seed=1), restarts=1, seed=0, tol=1e-5)
+    # the design never produces these (the experience after asking is fixed by the complexity)
+    assert res.model.not_estimated_rows() == ["transition[C=low, a=ask, E=reliable]", "transition[C=high, a=ask, E=faulty]"]
+    AssistancePOMDP(res.model, task)
+
+
+def test_filling_needs_the_same_levels(model):
+    three = load_model(str(__import__("trustseek.data.trials", fromlist=["x"]).example_path("three_level_model.json")))
+    with pytest.raises(ModelError, match="cannot fill"):
+        model.replace(not_estimated=(("emission", (0, 1)),)).filled_from(three)

@@ -155,6 +155,12 @@ def fit(
     plots: Path | None = typer.Option(
         None, "--plots", help="Write emission/transition figures (Fig. 4-6 style) into this directory."
     ),
+    fill_from: str | None = typer.Option(
+        None,
+        "--fill-from",
+        help="Take the rows the data never estimated (e.g. every ask row of a study without asking) from this model "
+        "(a preset name, e.g. paper, or a JSON file with the same levels and complexities).",
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print the fitted model and diagnostics as one JSON object."),
     mapping: Path | None = MappingOpt,
     column: list[str] | None = ColumnOpt,
@@ -164,7 +170,10 @@ def fit(
     keep: list[str] | None = KeepOpt,
     quiet: bool = QuietOpt,
 ) -> None:
-    """Estimate the supervisor's trust model from logged trials (extended Baum-Welch)."""
+    """Estimate the supervisor's trust model from logged trials (extended Baum-Welch).
+
+    Rows no trial informs are marked "not_estimated" in the model file; solve, plot-q and
+    simulate refuse those a task can reach until they are supplied (--fill-from)."""
     check_outputs((out, "--out"), (posteriors, "--posteriors"))
     check_output(posteriors, "--posteriors", POSTERIOR_SUFFIXES)
     if plots is not None and plots.exists() and not plots.is_dir():
@@ -194,6 +203,13 @@ def fit(
             transition_inputs=tr,
             emission_inputs=em,
         )
+    drawn = result.model  # the figures show only what the data estimated
+    if fill_from is not None and result.model.not_estimated:
+        from ..model.presets import load_model
+
+        filled = result.model.not_estimated_rows()
+        result.model = result.model.filled_from(load_model(fill_from))
+        result.warnings.append(f"taken from {fill_from}: {', '.join(filled)}")
     if out is not None:
         with atomic_output(out) as tmp:
             result.model.save(tmp)
@@ -205,9 +221,12 @@ def fit(
         from ..plots.model import plot_emissions, plot_transitions
 
         plots.mkdir(parents=True, exist_ok=True)
-        ref = paper_model() if result.model.complexities == paper_model().complexities and result.model.n_trust == 2 else None
-        plot_emissions(result.model, plots / "emissions.png", ci=result.ci, reference=ref)
-        plot_transitions(result.model, plots / "transitions.png", ci=result.ci, reference=ref)
+        # the paper's values are a reference only for a model of the paper's structure
+        paper_like = preset == "paper" and tr == _fit().PAPER_TRANSITION_INPUTS and em == _fit().PAPER_EMISSION_INPUTS
+        same = result.model.complexities == paper_model().complexities and result.model.n_trust == 2
+        ref = paper_model() if paper_like and same else None
+        plot_emissions(drawn, plots / "emissions.png", ci=result.ci, reference=ref)
+        plot_transitions(drawn, plots / "transitions.png", ci=result.ci, reference=ref)
     if as_json:
         d = result.to_dict()
         d["cells"] = result.cells()
@@ -235,7 +254,8 @@ def fit(
     lls = ", ".join(f"{x:.3f}" for x in sorted(result.restart_logliks, reverse=True))
     console.print(
         f"log-likelihood {result.loglik:.4f}; {result.n_params} free parameters; AIC {result.aic:.2f}; BIC {result.bic:.2f}\n"
-        f"restarts (best first): {lls}"
+        f"restarts (best first): {lls}; {_fit().selection.reached_best(result.restart_logliks)} of "
+        f"{len(result.restart_logliks)} within 0.01 of the best"
     )
     if iv is not None:
         console.print(f"intervals: bootstrap over {iv.replicates} resamples of the participants ({iv.method})", highlight=False)
@@ -280,7 +300,14 @@ def select(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
     max_levels: int = typer.Option(4, "--max-levels", min=1, max=8, help="Compare 1..this many trust levels."),
     folds: int = typer.Option(5, "--folds", min=2, help="Folds over participants for the held-out log-likelihood."),
-    restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Random restarts per fit."),
+    restarts: int | None = typer.Option(
+        None,
+        "--restarts",
+        "-r",
+        min=1,
+        help="Random starts per fit (default: max(10, free parameters / 4)); each fit also starts from the "
+        "fit with one level fewer, each level split in two.",
+    ),
     prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count (MAP)."),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
     tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
@@ -311,20 +338,28 @@ def select(
             transition_inputs=tr,
             emission_inputs=em,
         )
+    warnings = _fit().selection_warnings(rows)
     if as_json:
-        print_json({"levels": rows})
+        print_json({"levels": rows, "warnings": warnings})
         return
     table = Table(title="Number of trust levels", title_justify="left")
-    for col in ("levels", "log-likelihood", "parameters", "AIC", "BIC", f"held-out LL ({folds}-fold)"):
+    for col in ("levels", "log-likelihood", "reached best", "parameters", "AIC", "BIC", f"held-out LL ({folds}-fold)"):
         table.add_column(col, justify="right")
     for r in rows:
         table.add_row(
             str(r["levels"]),
             f"{r['loglik']:.3f}",
+            f"{r['reached_best']} of {r['starts']}",
             str(r["n_params"]),
             f"{r['aic']:.2f}",
             f"{r['bic']:.2f}" + (" *" if r["best_bic"] else ""),
             f"{r['heldout_loglik']:.3f}" + (" *" if r["best_heldout"] else ""),
         )
     console.print(table)
-    console.print("* best by that criterion")
+    console.print(
+        "* best by that criterion; reached best: starts (random, and the fit with one level fewer split) "
+        "within 0.01 of the best log-likelihood",
+        highlight=False,
+    )
+    for w in warnings:
+        console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)

@@ -271,7 +271,16 @@ def check(
             elif "policy" in fmt:
                 load_policy(f)
             else:
-                TrustModel.from_dict(text, str(f))
+                m = TrustModel.from_dict(text, str(f))
+                rows = m.not_estimated_rows()
+                if rows:
+                    console.print(
+                        f"[yellow]warning:[/] {f}: never estimated (copies or defaults, not data): {', '.join(rows)}; "
+                        "solve, plot-q and simulate refuse the ones a task can reach until they are supplied "
+                        "('trustseek fit ... --fill-from paper', or by hand: docs/formats.md)",
+                        soft_wrap=True,
+                        highlight=False,
+                    )
             console.print(f"{f}: ok", soft_wrap=True, highlight=False)
         except ModelError as exc:
             problems.extend(exc.lines())

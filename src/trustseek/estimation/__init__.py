@@ -14,7 +14,7 @@
 
 from .fit import MIN_EVENTS, FitResult, decode, fit_trust_model
 from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
-from .selection import select_levels
+from .selection import select_levels, selection_warnings
 from .sequences import Sequences, encode
 from .spec import FitError, Fixed, IOHMMSpec, Params
 from .trust_iohmm import (
@@ -47,5 +47,6 @@ __all__ = [
     "paper_spec",
     "posteriors",
     "select_levels",
+    "selection_warnings",
     "to_trust_model",
 ]

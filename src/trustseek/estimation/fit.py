@@ -27,7 +27,15 @@ from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
 from .structure import Structure, describe_combination
-from .trust_iohmm import broadcast, check_convertible, from_trust_model, index_grid, preset_spec, to_trust_model
+from .trust_iohmm import (
+    broadcast,
+    check_convertible,
+    from_trust_model,
+    index_grid,
+    model_complexities,
+    preset_spec,
+    to_trust_model,
+)
 
 log = logging.getLogger(__name__)
 
@@ -298,7 +306,49 @@ def fit_trust_model(
     is called after every restart and bootstrap replicate.
     """
     spec = preset_spec(preset, frame, prior=prior, **spec_options)
-    return fit_sequences(encode(frame, spec), spec, restarts, seed, bootstrap, n_jobs, tol, max_iter, progress)
+    result = fit_sequences(encode(frame, spec), spec, restarts, seed, bootstrap, n_jobs, tol, max_iter, progress)
+    marked = never_estimated(frame, spec)
+    if marked:
+        result.model = result.model.replace(not_estimated=marked)
+        names = ", ".join(result.model.not_estimated_rows())
+        result.warnings.append(f"never estimated (no such trials in the data; marked in the model file): {names}")
+    return result
+
+
+def never_estimated(frame: pd.DataFrame, spec: IOHMMSpec) -> tuple[tuple[str, tuple[int, ...]], ...]:
+    """TrustModel rows no trial of ``frame`` informs: emission rows (c, a) with no observed human
+    action (unless the spec fixes the row, as the paper preset fixes P(intervene | ask) = 1), and
+    transition rows (c, a, e) with no trial of a participant followed by another.
+
+    Rows that inputs a table ignores repeat (e.g. the ask rows when transitions do not depend
+    on the robot action) are copies of other rows, not estimates: they are listed too."""
+    complexities = model_complexities(spec)
+    cx = frame["complexity"].map({c: i for i, c in enumerate(complexities)}) if "complexity" in frame else None
+    ac = frame["robot_action"].map({a: i for i, a in enumerate(ACTIONS)}) if "robot_action" in frame else None
+    ex = frame["experience"].map({e: i for i, e in enumerate(EXPERIENCES)}) if "experience" in frame else None
+    if cx is None or ac is None or ex is None or cx.isna().any() or ac.isna().any():
+        return ()  # a log without these columns: nothing to say per row
+    observed = frame["human_action"].notna().to_numpy()
+    order = frame.sort_values(["participant", "trial"], kind="stable")
+    has_next = pd.Series(order["participant"].shift(-1).to_numpy() == order["participant"].to_numpy(), index=order.index)
+    has_next = has_next.reindex(frame.index).to_numpy()
+    c, a = cx.to_numpy(dtype=np.int64), ac.to_numpy(dtype=np.int64)
+    e = ex.fillna(-1).to_numpy(dtype=np.int64)
+    em_seen = {(int(i), int(j)) for i, j in zip(c[observed], a[observed], strict=True)}
+    sel = has_next & (e >= 0)
+    tr_seen = {(int(i), int(j), int(k)) for i, j, k in zip(c[sel], a[sel], e[sel], strict=True)}
+    fixed_ask = "robot_action" in spec.emission_inputs and any(
+        dict(f.where) == {"robot_action": "ask"} for f in spec.fixed_emissions
+    )
+    out: list[tuple[str, tuple[int, ...]]] = []
+    for i in range(len(complexities)):
+        for j in range(2):
+            if (i, j) not in em_seen and not (fixed_ask and j == 1):
+                out.append(("emission", (i, j)))
+            for k in range(2):
+                if (i, j, k) not in tr_seen:
+                    out.append(("transition", (i, j, k)))
+    return tuple(out)
 
 
 def decode(frame: pd.DataFrame, model: TrustModel) -> pd.DataFrame:

@@ -1,9 +1,20 @@
-"""Choosing the number of trust levels: BIC on all data and participant-held-out log-likelihood."""
+"""Choosing the number of trust levels: BIC on all data and participant-held-out log-likelihood.
+
+The likelihood of a K-level model has many local maxima, more with every level, and
+random starts reach the best one ever more rarely.  Each K-level fit therefore starts
+both from random points (their number grows with the free parameters,
+:func:`default_restarts`) and from the (K-1)-level fit with one level split in two
+(:func:`split_starts`): a K-level model at least as likely as the (K-1)-level one, from
+which EM only climbs.  Every row reports how many starts reached the best
+log-likelihood (within :data:`BEST_TOLERANCE`).
+"""
 
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -12,31 +23,145 @@ import pandas as pd
 from .estep import Workspace
 from .iohmm import IOHMMFit, fit_iohmm
 from .sequences import Sequences, encode
-from .spec import Params
+from .spec import IOHMMSpec, Params
+from .structure import Structure
 from .trust_iohmm import level_names, preset_spec
 
 log = logging.getLogger(__name__)
 
 HELDOUT_PSEUDOCOUNT = 0.5  # added to every free cell's training counts before held-out scoring
+BEST_TOLERANCE = 0.01  # nats: a start within this of the best log-likelihood "reached the best"
+SPLITS_PER_LEVEL = 2  # split starts per level of the (K-1)-level fit (different perturbations)
+MIN_RESTARTS = 10  # random starts per fit at least ...
+RESTARTS_PER_PARAMETER = 0.25  # ... and this many per free parameter
+SPLIT_MIX = 0.05  # a split start mixes this much of a random row into every row (no exact zero)
+MOVE_ROUNDS = 3  # at most this many rounds of merge-and-split starts from the best fit
+
+
+def default_restarts(n_free: int) -> int:
+    """Random starts for a fit with ``n_free`` free parameters: ``max(10, n_free / 4)``."""
+    return max(MIN_RESTARTS, math.ceil(RESTARTS_PER_PARAMETER * n_free))
+
+
+def reached_best(logliks: Sequence[float], tol: float = BEST_TOLERANCE) -> int:
+    """How many of ``logliks`` lie within ``tol`` nats of their maximum."""
+    ll = np.asarray(logliks, dtype=float)
+    ll = ll[np.isfinite(ll)]
+    return int((ll >= ll.max() - tol).sum()) if ll.size else 0
+
+
+def split_starts(previous: Params, rng: np.random.Generator, per_level: int = SPLITS_PER_LEVEL) -> list[Params]:
+    """Starts with one more level: each level of ``previous`` split in two, ``per_level`` times.
+
+    The copy of level j takes a random share of j's initial probability and of every
+    transition into j, and j's rows out; the two halves' emission rows are pushed
+    apart (log-odds +/- a normal draw) and every row is mixed with :data:`SPLIT_MIX`
+    of a random row.  Fixed and tied cells are restored by the structure's projection
+    (:meth:`~.structure.Structure.project`) when the fit starts.
+    """
+    K0 = previous.initial.shape[-1]
+    out = []
+    for j in range(K0):
+        for _ in range(per_level):
+            f = rng.uniform(0.3, 0.7)
+            pi = np.append(previous.initial, previous.initial[j] * (1 - f))
+            pi[j] *= f
+            em = np.concatenate([previous.emission, previous.emission[:, j : j + 1]], axis=1)  # (U, K, M)
+            push = np.exp(rng.normal(0.0, 1.0, size=em[:, j].shape))
+            em[:, j] = em[:, j] * push
+            em[:, K0] = em[:, K0] / push
+            tr = previous.transition
+            tr = np.concatenate([tr, tr[:, :, j : j + 1] * (1 - f)], axis=2)  # (U, K0, K): column j split
+            tr[:, :, j] *= f
+            tr = np.concatenate([tr, tr[:, j : j + 1]], axis=1)  # (U, K, K): the copy's row is j's
+            out.append(Params(_mix(pi, rng), _mix(em, rng), _mix(tr, rng)))
+    return out
+
+
+def merge_levels(params: Params, i: int, j: int) -> Params:
+    """``params`` with level ``j`` merged into level ``i`` (one level fewer): initial and incoming
+    transition probabilities add up; ``i`` keeps its own rows out."""
+    keep = [k for k in range(params.initial.shape[-1]) if k != j]
+    pi = params.initial.copy()
+    pi[i] += pi[j]
+    tr = params.transition.copy()
+    tr[:, :, i] += tr[:, :, j]
+    return Params(pi[keep], params.emission[:, keep].copy(), tr[:, keep][:, :, keep])
+
+
+def split_merge_starts(params: Params, rng: np.random.Generator) -> list[Params]:
+    """Starts with as many levels as ``params``: every pair of levels merged, then every level of the
+    result split in two (:func:`merge_levels`, :func:`split_starts`): moves that EM itself cannot make."""
+    K = params.initial.shape[-1]
+    out: list[Params] = []
+    for i in range(K):
+        for j in range(i + 1, K):
+            out += split_starts(merge_levels(params, i, j), rng, per_level=1)
+    return out
+
+
+def fit_with_moves(
+    seqs: Sequences,
+    spec: IOHMMSpec,
+    previous: Params | None = None,
+    restarts: int | None = None,
+    seed: int | np.random.SeedSequence = 0,
+    splits: int = SPLITS_PER_LEVEL,
+    rounds: int = MOVE_ROUNDS,
+    **options: Any,
+) -> IOHMMFit:
+    """:func:`~.iohmm.fit_iohmm` from random starts (default :func:`default_restarts`) and from
+    ``previous`` (a fit with one level fewer) split (:func:`split_starts`); then up to ``rounds``
+    times from the best fit with two levels merged and one split (:func:`split_merge_starts`),
+    while that gains more than :data:`BEST_TOLERANCE`.  Every run is kept in the result's ``runs``."""
+    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    # the random starts are those fit_iohmm draws from ``seed`` (the first n of n + m are the
+    # same): more restarts only add starts; the split and merge moves draw from the seed's own state
+    rng = np.random.default_rng(ss.generate_state(4))
+    n_random = restarts if restarts is not None else default_restarts(Structure(spec, seqs).n_free)
+    init: list[Params] = []
+    K = spec.n_levels
+    if previous is not None and previous.initial.shape[-1] == K - 1 and splits > 0:
+        init = split_starts(previous, rng, splits)
+    fit = fit_iohmm(seqs, spec, restarts=n_random, seed=ss, init=init, **options)
+    for _ in range(rounds if K > 2 else 0):
+        more = fit_iohmm(seqs, spec, restarts=0, init=split_merge_starts(fit.params, rng), **options)
+        gain = more.objective - fit.objective
+        runs = fit.runs + more.runs
+        fit = replace(more, runs=runs, best=len(fit.runs) + more.best) if gain > 0 else replace(fit, runs=runs)
+        if gain <= BEST_TOLERANCE:
+            break
+    return fit
+
+
+def _mix(rows: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    rows = rows / rows.sum(-1, keepdims=True)
+    return (1 - SPLIT_MIX) * rows + SPLIT_MIX * rng.dirichlet(np.ones(rows.shape[-1]), size=rows.shape[:-1])
 
 
 def select_levels(
     frame: pd.DataFrame,
     levels: Sequence[int] = (1, 2, 3, 4),
     folds: int = 5,
-    restarts: int = 10,
+    restarts: int | None = None,
     seed: int = 0,
     prior: float = 0.0,
     tol: float = 1e-6,
     max_iter: int = 1000,
     progress: Callable[[str, int, int], None] | None = None,
+    splits: int = SPLITS_PER_LEVEL,
     **spec_options: Any,
 ) -> list[dict[str, Any]]:
     """Compare numbers of trust levels: BIC on all data and k-fold participant-held-out log-likelihood.
 
     ``spec_options`` adjust the ``paper`` preset (as for :func:`~.fit.fit_trust_model`);
     ``progress(label, done, total)`` is called after every fit (``label`` names the number
-    of levels being compared).
+    of levels being compared).  Each fit is :func:`fit_with_moves`: ``restarts`` random
+    starts (default: :func:`default_restarts` of its free parameters), ``splits`` split
+    starts per level of the fit with one level fewer (when it was compared just before),
+    then merge-and-split starts from the best.  Each row holds ``starts`` (all of them)
+    and ``reached_best`` (starts within :data:`BEST_TOLERANCE` of the best);
+    :func:`selection_warnings` says when the best number of levels is the largest compared.
     """
     base = preset_spec("paper", frame, prior=prior, **spec_options)
     seqs = encode(frame, base)
@@ -54,26 +179,44 @@ def select_levels(
         if progress:
             progress(label, done, total)
 
+    def one_fit(data: Sequences, spec: IOHMMSpec, previous: IOHMMFit | None, key: list[int]) -> IOHMMFit:
+        return fit_with_moves(
+            data,
+            spec,
+            None if previous is None else previous.params,
+            restarts=restarts,
+            seed=np.random.SeedSequence(key),
+            splits=splits,
+            tol=tol,
+            max_iter=max_iter,
+        )
+
     rows: list[dict[str, Any]] = []
+    prev_full: IOHMMFit | None = None
+    prev_fold: list[IOHMMFit | None] = [None] * folds
     for K in levels:
         spec = base.with_levels(level_names(K))
-        full = fit_iohmm(seqs, spec, restarts=restarts, seed=np.random.SeedSequence([seed, 3, K]), tol=tol, max_iter=max_iter)
+        full = one_fit(seqs, spec, prev_full, [seed, 3, K])
+        prev_full = full
         tick(f"{K} levels")
         per_fold = []
         for f in range(folds):
             train, test = np.flatnonzero(fold_of != f), np.flatnonzero(fold_of == f)
-            fit = fit_iohmm(
-                seqs.subset(train),
-                spec,
-                restarts=restarts,
-                seed=np.random.SeedSequence([seed, 4, K, f]),
-                tol=tol,
-                max_iter=max_iter,
-            )
+            fit = one_fit(seqs.subset(train), spec, prev_fold[f], [seed, 4, K, f])
+            prev_fold[f] = fit
             per_fold.append(heldout_loglik(seqs.subset(test), fit))
             tick(f"{K} levels")
         held = float(sum(per_fold))
-        log.info("%d levels: log-likelihood %.4f, BIC %.2f, held-out log-likelihood %.4f", K, full.loglik, full.bic, held)
+        hits = reached_best(full.restart_logliks)
+        log.info(
+            "%d levels: log-likelihood %.4f (reached by %d of %d starts), BIC %.2f, held-out log-likelihood %.4f",
+            K,
+            full.loglik,
+            hits,
+            len(full.runs),
+            full.bic,
+            held,
+        )
         rows.append(
             {
                 "levels": K,
@@ -84,6 +227,8 @@ def select_levels(
                 "heldout_loglik": held,
                 "heldout_per_fold": per_fold,
                 "restart_logliks": full.restart_logliks,
+                "starts": len(full.runs),
+                "reached_best": hits,
             }
         )
     best_bic = min(rows, key=lambda r: float(r["bic"]))["levels"]
@@ -91,7 +236,30 @@ def select_levels(
     for r in rows:
         r["best_bic"] = r["levels"] == best_bic
         r["best_heldout"] = r["levels"] == best_cv
+    for w in selection_warnings(rows):
+        log.warning("%s", w)
     return rows
+
+
+def selection_warnings(rows: Sequence[dict[str, Any]]) -> list[str]:
+    """Warnings on a :func:`select_levels` table: a best number of levels at the largest compared,
+    and fits whose best log-likelihood only one start reached."""
+    out = []
+    if len(rows) > 1:
+        top = max(int(r["levels"]) for r in rows)
+        for key, what in (("best_heldout", "held-out log-likelihood"), ("best_bic", "BIC")):
+            if any(r[key] and r["levels"] == top for r in rows):
+                out.append(
+                    f"the best {what} is at {top} levels, the largest compared: more levels may fit better "
+                    f"(compare more with --max-levels {top + 1})"
+                )
+    for r in rows:
+        if r["levels"] > 1 and r.get("reached_best", 2) < 2:
+            out.append(
+                f"{r['levels']} levels: only 1 of {r['starts']} starts reached the best log-likelihood; "
+                "the maximum may not have been found (more --restarts)"
+            )
+    return out
 
 
 def heldout_loglik(test: Sequences, fit: IOHMMFit) -> float:

@@ -241,14 +241,24 @@ class Structure:
         )
 
     def order(self, p: Params) -> np.ndarray:
-        """Permutation putting levels in ascending order of the spec's ``order_by`` emission."""
+        """Permutation putting levels in ascending order of the spec's ``order_by`` emission.
+
+        The key is P(category) averaged over the ``order_by`` rows the data reach (all
+        ``order_by`` rows if none is reached); levels that tie there (to 1e-9) are ordered by
+        P(category) averaged over every row the data reach that is not fixed, then by the
+        initial probability, then by their index.
+        """
         spec = self.spec
         if spec.order_by is None or self.K == 1:
             return np.arange(self.K)
         where, cat = spec.order_by
+        o = spec.output_categories.index(cat)
         rows = select_rows(where, spec.emission_inputs, spec.categories, "order_by")
         mask = rows & ~self.em.empty
         if not mask.any():
             mask = rows
-        score = p.emission[mask][:, :, spec.output_categories.index(cat)].mean(0)
-        return np.argsort(score, kind="stable")
+        score = p.emission[mask][:, :, o].mean(0)
+        free = ~self.em.empty & ~np.all(self.em.fixed, axis=(-2, -1))
+        overall = p.emission[free][:, :, o].mean(0) if free.any() else np.zeros(self.K)
+        keys = (np.arange(self.K), np.round(p.initial, 9), np.round(overall, 9), np.round(score, 9))
+        return np.lexsort(keys)

@@ -280,10 +280,16 @@ class TrustModel:
     emission: np.ndarray
     transition: np.ndarray
     notes: str = ""
+    # rows no data ever estimated (e.g. every ask row of a model fitted from a study without
+    # asking): ("emission", (c, a)) or ("transition", (c, a, e)); empty = all estimated
+    not_estimated: tuple[tuple[str, tuple[int, ...]], ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "trust_levels", tuple(self.trust_levels))
         object.__setattr__(self, "complexities", tuple(self.complexities))
+        object.__setattr__(
+            self, "not_estimated", tuple(sorted({(str(t), tuple(int(i) for i in idx)) for t, idx in self.not_estimated}))
+        )
         for name in ("initial", "emission", "transition"):
             arr = np.array(getattr(self, name), dtype=np.float64)
             arr.setflags(write=False)
@@ -332,6 +338,11 @@ class TrustModel:
             lambda i: f"transition[C={C[i[0]]}, a={ACTIONS[i[1]]}, E={EXPERIENCES[i[2]]}][T={T[i[3]]}]",
             problems,
         )
+        row_shapes: dict[str, tuple[int, ...]] = {"emission": (N, 2), "transition": (N, 2, 2)}
+        for table, idx in self.not_estimated:
+            rshape = row_shapes.get(table)
+            if rshape is None or len(idx) != len(rshape) or any(not 0 <= i < n for i, n in zip(idx, rshape, strict=False)):
+                problems.append(f"not_estimated: {table}{list(idx)} is not a row of the model")
         return problems
 
     # -- convenience -------------------------------------------------------
@@ -343,6 +354,32 @@ class TrustModel:
             return self.complexities.index(name)
         except ValueError:
             raise UnknownComplexityError([f"unknown complexity {name!r}; expected one of {list(self.complexities)}"]) from None
+
+    def row_name(self, table: str, idx: Sequence[int]) -> str:
+        """``emission[C=high, a=ask]`` or ``transition[C=high, a=ask, E=reliable]``."""
+        parts = [f"C={self.complexities[idx[0]]}", f"a={ACTIONS[idx[1]]}"]
+        if table == "transition":
+            parts.append(f"E={EXPERIENCES[idx[2]]}")
+        return f"{table}[{', '.join(parts)}]"
+
+    def not_estimated_rows(self) -> list[str]:
+        """The rows no data estimated, by name (:meth:`row_name`)."""
+        return [self.row_name(t, idx) for t, idx in self.not_estimated]
+
+    def filled_from(self, other: TrustModel) -> TrustModel:
+        """This model with every never-estimated row taken from ``other`` (same levels and complexities)."""
+        if other.trust_levels != self.trust_levels or other.complexities != self.complexities:
+            raise ModelError(
+                [
+                    f"cannot fill from a model with trust levels {list(other.trust_levels)} and complexities "
+                    f"{list(other.complexities)}: this one has {list(self.trust_levels)} and {list(self.complexities)}"
+                ]
+            )
+        em, tr = self.emission.copy(), self.transition.copy()
+        for table, idx in self.not_estimated:
+            (em if table == "emission" else tr)[idx] = (other.emission if table == "emission" else other.transition)[idx]
+        still = tuple(r for r in self.not_estimated if r in other.not_estimated)
+        return self.replace(emission=em, transition=tr, not_estimated=still)
 
     def p_intervene(self, belief: np.ndarray, c: int, a: int) -> float:
         """P(o = intervene | belief, C = c, a) for a belief vector over trust levels."""
@@ -359,6 +396,7 @@ class TrustModel:
             "initial": _nested(self.initial, [T]),
             "emission": _nested(self.emission, [C, ACTIONS, T, HUMAN_ACTIONS]),
             "transition": _nested(self.transition, [C, ACTIONS, EXPERIENCES, T, T]),
+            **({"not_estimated": [_row_dict(t, idx, C) for t, idx in self.not_estimated]} if self.not_estimated else {}),
         }
 
     @classmethod
@@ -370,7 +408,10 @@ class TrustModel:
         if fmt != MODEL_FORMAT:
             problems.append(f"format is {fmt!r}, expected {MODEL_FORMAT!r}")
         _unknown_keys(
-            d, ["format", "notes", "trust_levels", "complexities", "initial", "emission", "transition"], "model", problems
+            d,
+            ["format", "notes", "trust_levels", "complexities", "initial", "emission", "transition", "not_estimated"],
+            "model",
+            problems,
         )
         T = _check_names(_get(d, "trust_levels", "trust_levels", problems), "trust_levels", problems)
         C = _check_names(_get(d, "complexities", "complexities", problems), "complexities", problems)
@@ -396,10 +437,11 @@ class TrustModel:
         notes = d.get("notes", "")
         if not isinstance(notes, str):
             problems.append(f"notes must be a string, got {notes!r}")
+        not_estimated = _read_not_estimated(d.get("not_estimated", []), C, problems)
         if problems:
             raise ModelError(problems, source)
         try:
-            return cls(tuple(T), tuple(C), initial, emission, transition, notes=notes)
+            return cls(tuple(T), tuple(C), initial, emission, transition, notes=notes, not_estimated=not_estimated)
         except ModelError as exc:
             raise ModelError(exc.problems, source) from None
 
@@ -419,6 +461,7 @@ class TrustModel:
             "emission": self.emission,
             "transition": self.transition,
             "notes": self.notes,
+            "not_estimated": self.not_estimated,
         }
         kw.update(changes)
         return TrustModel(**kw)
@@ -432,7 +475,41 @@ class TrustModel:
             and np.array_equal(self.initial, other.initial)
             and np.array_equal(self.emission, other.emission)
             and np.array_equal(self.transition, other.transition)
+            and self.not_estimated == other.not_estimated
         )
+
+
+def _row_dict(table: str, idx: tuple[int, ...], C: Sequence[str]) -> dict[str, str]:
+    d = {"table": table, "C": C[idx[0]], "a": ACTIONS[idx[1]]}
+    if table == "transition":
+        d["E"] = EXPERIENCES[idx[2]]
+    return d
+
+
+def _read_not_estimated(raw: Any, C: Sequence[str], problems: list[str]) -> tuple[tuple[str, tuple[int, ...]], ...]:
+    """``not_estimated``: a list of rows ``{"table": "emission"|"transition", "C": .., "a": .., ["E": ..]}``."""
+    if not isinstance(raw, list):
+        problems.append(f"not_estimated must be a list of rows, got {raw!r}")
+        return ()
+    out = []
+    for i, row in enumerate(raw):
+        where = f"not_estimated[{i}]"
+        if not isinstance(row, Mapping) or row.get("table") not in ("emission", "transition"):
+            problems.append(f"{where}: expected {{'table': 'emission' or 'transition', 'C': ..., 'a': ...}}, got {row!r}")
+            continue
+        keys = [("C", list(C)), ("a", list(ACTIONS))] + ([("E", list(EXPERIENCES))] if row["table"] == "transition" else [])
+        extra = set(row) - {"table", *(k for k, _ in keys)}
+        if extra:
+            problems.append(f"{where}: unknown keys {sorted(extra)}")
+        idx = []
+        for k, names in keys:
+            if row.get(k) not in names:
+                problems.append(f"{where}: {k} = {row.get(k)!r} is not one of {names}")
+            else:
+                idx.append(names.index(row[k]))
+        if len(idx) == len(keys):
+            out.append((str(row["table"]), tuple(idx)))
+    return tuple(out)
 
 
 # --------------------------------------------------------------------------- Task
@@ -549,6 +626,7 @@ class Task:
         return out
 
     def check_compatible(self, model: TrustModel) -> None:
+        """Refuse a model whose complexities differ, or with never-estimated rows this task can reach."""
         if tuple(model.complexities) != tuple(self.complexities):
             raise ModelError(
                 [
@@ -556,6 +634,29 @@ class Task:
                     f"{list(self.complexities)} (names and order must match)"
                 ]
             )
+        used = self.unestimated_rows_used(model)
+        if used:
+            raise ModelError(
+                [
+                    f"{r} was never estimated (the data had no such trials) and planning or simulating with this task uses it"
+                    for r in used
+                ]
+                + [
+                    "supply those rows: refit with 'trustseek fit ... --fill-from paper' (or another model file), "
+                    'or write them into the model file and remove them from its "not_estimated" list '
+                    "(docs/formats.md)"
+                ]
+            )
+
+    def unestimated_rows_used(self, model: TrustModel) -> list[str]:
+        """Never-estimated rows of ``model`` a trial of this task can reach: every emission row, the
+        transitions after acting autonomously (either experience) and after asking (its experience)."""
+        out = []
+        for table, idx in model.not_estimated:
+            if table == "transition" and idx[1] == ASK and idx[2] != self.ask_experience[idx[0]]:
+                continue
+            out.append(model.row_name(table, idx))
+        return out
 
     # -- JSON --------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:

@@ -3,6 +3,7 @@
 ``ci`` is the ``FitResult.ci`` dict ('emission'/'transition' -> (lower, upper)
 arrays of the TrustModel shapes); ``reference`` is a TrustModel (e.g. the paper
 preset) drawn as open markers labelled ``reference_label`` ("paper" by default).
+Rows the model marks as never estimated (``TrustModel.not_estimated``) are not drawn.
 """
 
 from __future__ import annotations
@@ -36,7 +37,8 @@ def _bars(ax, values, lower, upper, ref, labels, series, ref_label="paper"):
 def plot_emissions(model, path=None, ci=None, reference=None, reference_label="paper"):
     """P(rely | T, C, a) per complexity and robot action (Fig. 4), one bar per trust level."""
     T, C = model.trust_levels, model.complexities
-    groups = [(c, a) for a in range(2) for c in range(len(C))]
+    skip = set(getattr(model, "not_estimated", ()))
+    groups = [(c, a) for a in range(2) for c in range(len(C)) if ("emission", (c, a)) not in skip]
     vals = np.array([[model.emission[c, a, t, RELY] for t in range(len(T))] for c, a in groups])
     lo = hi = ref = None
     if ci is not None:
@@ -63,18 +65,20 @@ def plot_transitions(model, path=None, ci=None, reference=None, reference_label=
     ``Task.ask_experience``) leaves out the (ask, E') groups the design never produces."""
     T, C = model.trust_levels, model.complexities
     top = len(T) - 1
+    skip = set(getattr(model, "not_estimated", ()))
     panels = []
     for c in range(len(C)):
-        groups = [(a, e) for a in range(2) for e in range(2)]
+        groups = [(a, e) for a in range(2) for e in range(2) if ("transition", (c, a, e)) not in skip]
         if ask_experience is not None:
             groups = [(a, e) for a, e in groups if ACTIONS[a] != "ask" or e == ask_experience[c]]
-        panels.append((c, groups))
+        if groups:
+            panels.append((c, groups))
     ref_ok = (
         reference is not None and reference.trust_levels == model.trust_levels and reference.complexities == model.complexities
     )
     with style() as plt:
-        fig, axes = plt.subplots(1, len(C), figsize=(3.4 * len(C), 2.7), squeeze=False)
-        for ax, (c, groups) in zip(axes[0], panels, strict=True):
+        fig, axes = plt.subplots(1, max(len(panels), 1), figsize=(3.4 * max(len(panels), 1), 2.7), squeeze=False)
+        for ax, (c, groups) in zip(axes[0], panels, strict=False):
             vals = np.array([[model.transition[c, a, e, t, top] for t in range(len(T))] for a, e in groups])
             lo = hi = ref = None
             if ci is not None:

@@ -1,0 +1,132 @@
+"""Choosing the number of trust levels: starts that find the maximum, restarts reaching it, warnings, level order."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from trustseek import TrustModel, paper_model
+from trustseek.data.trials import example_path
+from trustseek.estimation import selection
+from trustseek.estimation.iohmm import fit_iohmm, loglik
+from trustseek.estimation.selection import (
+    fit_with_moves,
+    merge_levels,
+    reached_best,
+    select_levels,
+    selection_warnings,
+    split_starts,
+)
+from trustseek.estimation.sequences import encode
+from trustseek.estimation.spec import Params
+from trustseek.estimation.structure import Structure
+from trustseek.estimation.trust_iohmm import level_names, preset_spec
+from trustseek.simulation.designs import simulate_design
+
+# The best log-likelihood of 3 levels on the data below that 200 random restarts reach
+# (fit_iohmm(..., restarts=200, seed=SeedSequence([9, 3]), tol=1e-6): 25 of 200 reach it).
+THREE_LEVEL_REFERENCE = -339.5443
+
+
+def three_level_data():
+    model = TrustModel.load(example_path("three_level_model.json"))
+    return simulate_design(model, 60, seed=2, n_trials=(20, 20))
+
+
+@pytest.mark.slow
+def test_select_fits_reach_the_maximum_that_200_restarts_find_where_the_old_defaults_did_not():
+    """select fits K levels with fit_with_moves and its defaults; the old default (10 random
+    restarts, same seed) ends 1.16 nats below the maximum on these data."""
+    df = three_level_data()
+    base = preset_spec("paper", df)
+    seqs = encode(df, base)
+    spec = base.with_levels(level_names(3))
+    old = fit_iohmm(seqs, spec, restarts=10, seed=np.random.SeedSequence([0, 3, 3]), tol=1e-6)
+    assert old.loglik < THREE_LEVEL_REFERENCE - 1.0
+    two = fit_with_moves(seqs, base.with_levels(level_names(2)), seed=np.random.SeedSequence([0, 3, 2]), tol=1e-6)
+    new = fit_with_moves(seqs, spec, two.params, seed=np.random.SeedSequence([0, 3, 3]), tol=1e-6)
+    assert new.loglik >= THREE_LEVEL_REFERENCE - selection.BEST_TOLERANCE
+    assert new.loglik >= two.loglik  # nested: a split start starts as likely as the 2-level fit
+    # the old default's random starts are among the new ones (more restarts only add starts)
+    assert sorted(old.restart_logliks)[-1] <= new.loglik
+    assert len(new.runs) > 10 and reached_best(new.restart_logliks) >= 1
+
+
+def _random_params(rng, K, Ue=4, Ut=8, M=2):
+    return Params(rng.dirichlet(np.ones(K)), rng.dirichlet(np.ones(M), size=(Ue, K)), rng.dirichlet(np.ones(K), size=(Ut, K)))
+
+
+@settings(max_examples=30, deadline=None)
+@given(K=st.integers(1, 5), seed=st.integers(0, 2**32 - 1))
+def test_split_starts_are_distributions_with_one_more_level_and_merge_back(K, seed):
+    rng = np.random.default_rng(seed)
+    p = _random_params(rng, K)
+    starts = split_starts(p, rng, per_level=2)
+    assert len(starts) == 2 * K
+    for s in starts:
+        assert s.initial.shape == (K + 1,) and s.emission.shape == (4, K + 1, 2) and s.transition.shape == (8, K + 1, K + 1)
+        for a in (s.initial, s.emission, s.transition):
+            assert np.all(a > 0)
+            np.testing.assert_allclose(a.sum(-1), 1.0)
+    # without the mixing, merging the copy back into its level gives the initial and transition rows back
+    old = selection.SPLIT_MIX
+    try:
+        selection.SPLIT_MIX = 0.0
+        j = int(rng.integers(K))
+        start = split_starts(p, rng, per_level=1)[j]
+    finally:
+        selection.SPLIT_MIX = old
+    back = merge_levels(start, j, K)
+    np.testing.assert_allclose(back.initial, p.initial)
+    np.testing.assert_allclose(back.transition, p.transition)
+
+
+def test_reached_best_counts_starts_within_the_tolerance():
+    assert reached_best([-10.0, -10.005, -10.02, -12.0, float("-inf")]) == 2
+    assert reached_best([]) == 0
+
+
+def _row(k, bic=False, held=False, hits=3):
+    return {"levels": k, "best_bic": bic, "best_heldout": held, "reached_best": hits, "starts": 12}
+
+
+def test_warnings_at_the_largest_number_of_levels_and_for_a_lone_best_start():
+    rows = [_row(1), _row(2, bic=True), _row(3, held=True)]
+    w = selection_warnings(rows)
+    assert len(w) == 1 and "held-out log-likelihood is at 3 levels, the largest compared" in w[0] and "--max-levels 4" in w[0]
+    assert selection_warnings([_row(1), _row(2, bic=True, held=True), _row(3)]) == []
+    w = selection_warnings([_row(1), _row(2, bic=True, held=True, hits=1), _row(3)])
+    assert len(w) == 1 and "2 levels: only 1 of 12 starts" in w[0]
+
+
+def test_select_levels_reports_starts_reaching_the_best_and_warns_at_the_limit(caplog):
+    df = simulate_design(paper_model(), 40, seed=3)
+    with caplog.at_level("WARNING", logger="trustseek.estimation"):
+        rows = select_levels(df, levels=(1, 2), folds=2, restarts=2, seed=0, tol=1e-5)
+    by = {r["levels"]: r for r in rows}
+    assert by[2]["starts"] >= 2 + 2  # 2 random + 2 splits of the single level
+    assert 1 <= by[2]["reached_best"] <= by[2]["starts"]
+    assert by[2]["reached_best"] == reached_best(by[2]["restart_logliks"])
+    assert by[2]["best_heldout"]  # two-level data: the best is the largest compared ...
+    assert any("largest compared" in r.getMessage() for r in caplog.records)  # ... and that is said
+
+
+def test_level_order_breaks_a_tie_in_the_ordering_row_by_the_other_rows():
+    """Two levels rely equally in high complexity (the ordering row) but not in low: the level
+    relying more over all rows is the higher one, whichever index the fit gave it."""
+    df = simulate_design(paper_model(), 5, seed=0)
+    spec = preset_spec("paper", df).with_levels(level_names(2))
+    s = Structure(spec, encode(df, spec))
+    rng = np.random.default_rng(0)
+    p = s.random(rng)
+    em = p.emission.copy()  # rows: (C, a) combinations; emissions (U, K, M), M = (intervene, rely)
+    hi_auto, lo_auto = 1 * 2 + 0, 0 * 2 + 0
+    em[hi_auto, :, 1] = 0.7
+    em[lo_auto, 0, 1], em[lo_auto, 1, 1] = 0.99, 0.6
+    em[..., 0] = 1 - em[..., 1]
+    em = np.where(s.em.fixed, s.em.values, em)
+    p = Params(p.initial, em, p.transition)
+    assert list(s.order(p)) == [1, 0]
+    swapped = p.permuted(np.array([1, 0]))
+    assert list(s.order(swapped)) == [0, 1]
+    assert loglik(encode(df, spec), spec, p) == pytest.approx(loglik(encode(df, spec), spec, swapped))
