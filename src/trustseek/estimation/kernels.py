@@ -275,6 +275,9 @@ def estep_items(first, last, C, chunk, initial, emit, trans, eidx, tidx, lengths
         c = item % C
         if active[r]:
             lo = c * chunk
+            pi[r, c] = 0.0
+            pe[r, c] = 0.0
+            pt[r, c] = 0.0
             ll[r, c] = _item(r, lo, min(N, lo + chunk), initial, emit, trans, eidx, tidx, lengths, pi[r, c], pe[r, c], pt[r, c])
 
 
@@ -296,6 +299,7 @@ class Kernel:
 
     ``threads``: how many threads an E-step may use; the work is split over them when it is
     at least :data:`PARALLEL_MIN` trials x parameter sets.  The result does not depend on it.
+    The items' sums live in buffers kept between calls: one kernel serves one caller at a time.
     """
 
     def __init__(self, eidx: np.ndarray, tidx: np.ndarray, lengths: np.ndarray, K: int, PE: int, P: int, threads: int = 1):
@@ -311,6 +315,7 @@ class Kernel:
         self.trials = int(self.lengths.sum())
         self.C = max((N + CHUNK - 1) // CHUNK, 1)  # items per parameter set
         self.every = np.ones(1, dtype=np.bool_)  # the default "all parameter sets active", grown as needed
+        self._partials: dict[int, tuple[np.ndarray, ...]] = {}
 
     def run(
         self, initial: np.ndarray, emit: np.ndarray, trans: np.ndarray, active: np.ndarray | None = None
@@ -324,6 +329,14 @@ class Kernel:
             act = self.every[:R]
         else:
             act = np.ascontiguousarray(active, dtype=np.bool_)
+        parts = self._partials.get(R)
+        if parts is None:  # each item's own sums, zeroed by the item itself: made once per number of parameter sets
+            parts = self._partials[R] = (
+                np.empty((R, C)),
+                np.empty((R, C, K)),
+                np.empty((R, C, self.PE, K)),
+                np.empty((R, C, self.P, K, K)),
+            )
         args = (
             np.ascontiguousarray(initial, dtype=np.float64),
             np.ascontiguousarray(emit, dtype=np.float64),
@@ -332,17 +345,14 @@ class Kernel:
             self.tidx,
             self.lengths,
             act,
-            np.zeros((R, C)),
-            np.zeros((R, C, K)),
-            np.zeros((R, C, self.PE, K)),
-            np.zeros((R, C, self.P, K, K)),
+            *parts,
         )
-        items = [r * C + c for r in np.flatnonzero(act) for c in range(C)]
-        parts = min(self.threads, len(items))
-        if parts > 1 and self.trials * int(act.sum()) >= PARALLEL_MIN:
+        n_active = int(act.sum())
+        if self.threads > 1 and n_active * C > 1 and self.trials * n_active >= PARALLEL_MIN:
             # contiguous runs of the active items, one per thread; each item writes only its own sums
-            bounds = np.linspace(0, len(items), parts + 1).astype(int)
-            pool = _pool(parts)
+            items = [r * C + c for r in np.flatnonzero(act) for c in range(C)]
+            bounds = np.linspace(0, len(items), min(self.threads, len(items)) + 1).astype(int)
+            pool = _pool(len(bounds) - 1)
             futures = [pool.submit(_run_items, items[a:b], C, args) for a, b in itertools.pairwise(bounds)]
             for f in futures:
                 f.result()
