@@ -269,6 +269,28 @@ def test_event_bounds_per_trial_and_per_event(client):
     assert client.post(f"/api/sessions/{sid}/events", json={"events": [{"type": "x", "trial": 2}]}, headers=ph).status_code == 200
 
 
+def test_a_retried_event_batch_is_stored_once(client):
+    """The page retries a batch whose answer was lost with the same batch id: stored once.
+    Without an id every post is stored (older pages)."""
+    st = make_study(client)
+    sid, ph = join(client, st["id"])
+    client.post(f"/api/sessions/{sid}/consent", json={"agree": True}, headers=ph)
+    body = {"events": [{"type": "outcome_shown", "trial": 1}, {"type": "note", "trial": 1}], "batch": "b-0123abcd"}
+    first = client.post(f"/api/sessions/{sid}/events", json=body, headers=ph).json()
+    again = client.post(f"/api/sessions/{sid}/events", json=body, headers=ph).json()
+    assert first == {"stored": 2, "duplicate": False} and again == {"stored": 0, "duplicate": True}
+    other = client.post(f"/api/sessions/{sid}/events", json={**body, "batch": "b-other"}, headers=ph).json()
+    assert other == {"stored": 2, "duplicate": False}
+    plain = {"events": [{"type": "note", "trial": 1}]}
+    assert [client.post(f"/api/sessions/{sid}/events", json=plain, headers=ph).json()["stored"] for _ in range(2)] == [1, 1]
+    ev = client.get(f"/api/studies/{st['id']}/export", params={"table": "events"}, headers=H)
+    assert ev.status_code == 200, ev.text
+    types = pd.read_csv(io.BytesIO(ev.content))["type"].tolist()
+    assert len(types) == 6 and types.count("outcome_shown") == 2  # first batch, the other batch; not the repeat
+    bad = client.post(f"/api/sessions/{sid}/events", json={**body, "batch": "no spaces allowed"}, headers=ph)
+    assert bad.status_code == 422
+
+
 def test_large_bodies_are_refused_with_413(client):
     st = make_study(client)
     sid, ph = join(client, st["id"])

@@ -59,6 +59,13 @@ export interface RetryPolicy {
 
 const sleep = (ms: number) => new Promise((r) => setTimeout(r, ms));
 
+/** 128 random bits as hex (crypto.getRandomValues works on plain-HTTP pages too, unlike randomUUID). */
+function batchId(): string {
+  const b = new Uint8Array(16);
+  crypto.getRandomValues(b);
+  return Array.from(b, (x) => x.toString(16).padStart(2, "0")).join("");
+}
+
 export class Api {
   sessionId = "";
   /** Retries never stop while the page is open: the participant's work is kept until the server answers. */
@@ -118,5 +125,8 @@ export class Api {
   answer(questionnaire: string, after_trial: number, answers: Record<string, number>) {
     return this.call<{ state: State }>("POST", `/api/sessions/${this.sessionId}/questionnaires`, { questionnaire, after_trial, answers });
   }
-  events(events: UIEvent[]) { return this.call("POST", `/api/sessions/${this.sessionId}/events`, { events }); }
+  /** A batch of UI events; its id is made once, so the retries of one batch are stored once. */
+  events(events: UIEvent[]) {
+    return this.call("POST", `/api/sessions/${this.sessionId}/events`, { events, batch: batchId() });
+  }
 }

@@ -140,3 +140,15 @@ class Event(Base):
     type: Mapped[str] = mapped_column(String(40))
     data: Mapped[str] = mapped_column(Text, default="{}")
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class EventBatch(Base):
+    """A batch of UI events posted with a client-made id: a batch posted again (a retry whose
+    first answer was lost) is stored once."""
+
+    __tablename__ = "event_batches"
+
+    session_id: Mapped[str] = mapped_column(ForeignKey("sessions.id"), primary_key=True)
+    batch: Mapped[str] = mapped_column(String(64), primary_key=True)
+    events: Mapped[int] = mapped_column(Integer)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)

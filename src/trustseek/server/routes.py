@@ -419,11 +419,11 @@ def post_events(session_id: str, body: EventsIn, request: Request, s: Caller = D
         try:
             if row.kind == "study" and ended(db, row, study_config(db, row.study_id)):
                 raise SessionError(409, "this session has ended")
-            n = add_events(db, row, [e.model_dump() for e in body.events])
+            n, dup = add_events(db, row, [e.model_dump() for e in body.events], body.batch)
         except SessionError as exc:
             db.rollback()
             _fail(exc)
-    return {"stored": n}
+    return {"stored": n, "duplicate": dup}
 
 
 # --------------------------------------------------------------------------- deploy

@@ -113,6 +113,13 @@ class AnswersIn(BaseModel):
 class EventsIn(BaseModel):
     model_config = STRICT
     events: list[EventIn] = Field(..., min_length=1, max_length=5000)
+    batch: str | None = Field(
+        None,
+        min_length=1,
+        max_length=64,
+        pattern=r"^[A-Za-z0-9_-]+$",
+        description="A client-made id of this batch: the same batch posted again (a retry) is stored once.",
+    )
 
 
 def check_preset(v: Any, field: str) -> Any:

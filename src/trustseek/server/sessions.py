@@ -35,7 +35,7 @@ from ..errors import TrustseekError
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
 from ..policies import PolicyError, PolicyRunner
 from ..policies.schedule import SchedulePolicy
-from .orm import Answer, Base, Event, PolicyBlob, Report, Session, Study, Trial, utcnow
+from .orm import Answer, Base, Event, EventBatch, PolicyBlob, Report, Session, Study, Trial, utcnow
 from .studies import block_items, participant_plan, policy_object
 
 log = logging.getLogger(__name__)
@@ -619,7 +619,13 @@ def check_event_room(db: DBSession, s: Session, events: list[dict], trial: int |
             raise SessionError(413, f"trial {k} already has {have} events; at most {MAX_EVENTS_PER_TRIAL} are stored per trial")
 
 
-def add_events(db: DBSession, s: Session, events: list[dict]) -> int:
+def add_events(db: DBSession, s: Session, events: list[dict], batch: str | None = None) -> tuple[int, bool]:
+    """Store ``events``; with a ``batch`` id, a batch already stored is not stored again.
+    Returns (events stored, whether the batch was a repeat)."""
+    if batch is not None:
+        if db.get(EventBatch, (s.id, batch)) is not None:
+            return 0, True
+        db.add(EventBatch(session_id=s.id, batch=batch, events=len(events)))
     check_event_room(db, s, events)
     for ev in events:
         db.add(
@@ -631,8 +637,14 @@ def add_events(db: DBSession, s: Session, events: list[dict]) -> int:
                 data=json.dumps(ev.get("data", {})),
             )
         )
-    db.commit()
-    return len(events)
+    try:
+        db.commit()
+    except IntegrityError:  # the same batch committed by a concurrent request in the meantime
+        db.rollback()
+        if batch is not None and db.get(EventBatch, (s.id, batch)) is not None:
+            return 0, True
+        raise
+    return len(events), False
 
 
 # --------------------------------------------------------------------------- deploy sessions
