@@ -9,11 +9,8 @@ exit code 2, no traceback, a message naming the file, and no file left behind.
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import random
-import sys
 import tempfile
 from pathlib import Path
 
@@ -21,7 +18,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from trustseek.cli import main
+from cli_runner import run_cli
 from trustseek.data.trials import example_path
 from trustseek.model.presets import paper_model, paper_task
 from trustseek.pomdp.problem import AssistancePOMDP
@@ -78,22 +75,6 @@ WRITERS = [
     ["export-pomdp", "{o}"],
     ["reproduce", "--out", "{o}"],
 ]
-
-
-def run_cli(args: list[str]) -> tuple[int, str]:
-    """Run the CLI in this process: exit code and everything it printed."""
-    out, err = io.StringIO(), io.StringIO()
-    argv = sys.argv
-    sys.argv = ["trustseek", *args]
-    code: int | str | None = 0
-    try:
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            main()
-    except SystemExit as exc:
-        code = exc.code
-    finally:
-        sys.argv = argv
-    return (code if isinstance(code, int) else 1), out.getvalue() + err.getvalue()
 
 
 def _leaves(obj, path=()):

@@ -2,13 +2,9 @@
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
-import sys
 import tempfile
 from pathlib import Path
-from unittest import mock
 
 import numpy as np
 import pandas as pd
@@ -16,6 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from cli_runner import run_cli
 from trustseek.data.trials import ColumnMapping, DataError, example_path, read_trials
 from trustseek.estimation import decode, encode, paper_spec
 from trustseek.model.presets import paper_model
@@ -291,23 +288,6 @@ KINDS = [
 ]
 
 
-def _run_cli(argv: list[str]) -> tuple[int, str]:
-    from trustseek.cli import main
-
-    err = io.StringIO()
-    code = 0
-    with (
-        mock.patch.object(sys, "argv", ["trustseek", *argv]),
-        contextlib.redirect_stderr(err),
-        contextlib.redirect_stdout(io.StringIO()),
-    ):
-        try:
-            main()
-        except SystemExit as exc:
-            code = exc.code if isinstance(exc.code, int) else 1
-    return code, err.getvalue()
-
-
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(kind=st.sampled_from(KINDS), seed=st.integers(0, 2**32 - 1), suffix=st.sampled_from([".csv", ".tsv", ".parquet"]))
 def test_every_command_refuses_a_corrupted_log(kind, seed, suffix):
@@ -330,7 +310,7 @@ def test_every_command_refuses_a_corrupted_log(kind, seed, suffix):
             (["select", str(log), "--max-levels", "1", "--restarts", "1", "--folds", "2"], None),
             (["agnostic", "--data", str(log), "--out", str(folder / "policy.json")], folder / "policy.json"),
         ):
-            code, err = _run_cli(argv)
+            code, err = run_cli(argv, stdout=False)
             assert code == 2, (argv, err)
             assert "Traceback" not in err
             assert str(log) in err.replace("\n", ""), err

@@ -19,6 +19,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from cli_runner import run_cli
 from trustseek.data import DataError, example_path, read_trials
 from trustseek.estimation import encode, fit_trust_model, paper_spec
 
@@ -299,28 +300,6 @@ def test_bad_mappings_are_named(mapping, expected):
     assert any(expected in line for line in exc.value.problems), exc.value.problems
 
 
-def run_cli(argv: list[str]) -> tuple[int, str]:
-    import contextlib
-    import io
-    import sys
-    from unittest import mock
-
-    from trustseek.cli import main
-
-    err = io.StringIO()
-    code = 0
-    with (
-        mock.patch.object(sys, "argv", ["trustseek", *argv]),
-        contextlib.redirect_stderr(err),
-        contextlib.redirect_stdout(io.StringIO()),
-    ):
-        try:
-            main()
-        except SystemExit as exc:
-            code = exc.code if isinstance(exc.code, int) else 1
-    return code, err.getvalue()
-
-
 def test_cli_outputs_keep_the_study_names_and_carry_columns(canonical, tmp_path):
     """decode and fit --posteriors write the log's participant and trial values (0-based, gaps) and
     the --keep columns; the dropped rows are counted; --missing and --delimiter work as flags."""
@@ -351,7 +330,8 @@ def test_cli_outputs_keep_the_study_names_and_carry_columns(canonical, tmp_path)
             "condition",
             "--keep",
             "rating",
-        ]
+        ],
+        stdout=False,
     )
     assert code == 0, err
     assert f"dropped {int((log['attention_check'] == 1).sum())} rows" in err.replace("\n", " ")
@@ -373,14 +353,19 @@ def test_cli_outputs_keep_the_study_names_and_carry_columns(canonical, tmp_path)
             *flags,
             "--keep",
             "condition",
-        ]
+        ],
+        stdout=False,
     )
     assert code == 0, err
     fp = pd.read_csv(tmp_path / "fp.csv")
     assert fp["trial"].tolist() == kept["trial"].tolist() and fp["condition"].tolist() == kept["condition"].tolist()
-    code, err = run_cli(["decode", str(path), "--model", str(model), "--out", str(tmp_path / "p2.csv"), *flags, "--keep", "nope"])
+    code, err = run_cli(
+        ["decode", str(path), "--model", str(model), "--out", str(tmp_path / "p2.csv"), *flags, "--keep", "nope"], stdout=False
+    )
     assert code == 2 and "--keep 'nope'" in err
-    code, err = run_cli(["decode", str(path), "--model", str(model), "--out", str(tmp_path / "p3.csv"), "--mapping", str(mfile)])
+    code, err = run_cli(
+        ["decode", str(path), "--model", str(model), "--out", str(tmp_path / "p3.csv"), "--mapping", str(mfile)], stdout=False
+    )
     assert code == 2 and "NaN" in err  # without --missing NA, the NA cells are refused
 
 

@@ -51,7 +51,7 @@ def _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on,
     """The transition and emission inputs named by the flags, and the log with those columns."""
     tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on")
     em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on")
-    return tr, em, _read(log, mapping, column, label, tuple(dict.fromkeys((*tr, *em))), missing, delimiter)
+    return tr, em, read_log(log, mapping, column, label, tuple(dict.fromkeys((*tr, *em))), missing, delimiter)
 
 
 POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
@@ -67,18 +67,6 @@ def _inputs(text: str | None, default: tuple[str, ...], flag: str) -> tuple[str,
     if bad:
         raise TrustseekError([f"{flag}: {c!r} is not one of {list(_fit().MODEL_INPUTS)} (or 'none')" for c in bad])
     return cols
-
-
-def _read(
-    log: Path,
-    mapping: Path | None,
-    column: list[str] | None,
-    label: list[str] | None,
-    needed: tuple[str, ...],
-    missing: list[str] | None = None,
-    delimiter: str | None = None,
-):
-    return read_log(log, mapping, column, label, needed, missing, delimiter)
 
 
 def model_inputs(model: TrustModel) -> tuple[str, ...]:
@@ -288,7 +276,7 @@ def decode_cmd(
     check_output(out, "--out", POSTERIOR_SUFFIXES)
     m = TrustModel.load(model)
     used = model_inputs(m)
-    frame = _fill_unused(_read(log, mapping, column, label, used, missing, delimiter), m, used)
+    frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), m, used)
     post = keep_columns(_fit().decode(frame, m), frame, keep)
     with atomic_output(out) as tmp:
         _data().write_trials(post, tmp)
