@@ -661,9 +661,12 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
     hook = sys.unraisablehook
     sys.unraisablehook = undecodable.append
     try:
+        # one thread: a process that has read a CSV on pyarrow's thread pool can abort at exit
+        # ("terminate called without an active exception") under load, instead of exiting with
+        # its status; the single-threaded parse costs ~0.5 s on 7.1 M rows (benchmarks/bench_read.py)
         table = pcsv.read_csv(
             path,
-            read_options=pcsv.ReadOptions(column_names=header, skip_rows=1, block_size=1 << 24),
+            read_options=pcsv.ReadOptions(column_names=header, skip_rows=1, block_size=1 << 24, use_threads=False),
             parse_options=pcsv.ParseOptions(delimiter=sep, invalid_row_handler=invalid, newlines_in_values=False),
             convert_options=pcsv.ConvertOptions(
                 column_types=types, null_values=[], strings_can_be_null=False, quoted_strings_can_be_null=False
