@@ -3,20 +3,37 @@
 the built-in presets."""
 
 from .core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, ModelError, Rewards, Task, TrustModel
-from .presets import MODEL_PRESETS, TASK_PRESETS, load_model, load_task, paper_model, paper_task
+from .mixture import TypeMixture
+from .presets import (
+    MIXTURE_PRESETS,
+    MODEL_PRESETS,
+    TASK_PRESETS,
+    conservative_model,
+    load_mixture,
+    load_model,
+    load_task,
+    paper_conservative_mixture,
+    paper_model,
+    paper_task,
+)
 
 __all__ = [
     "ACTIONS",
     "EXPERIENCES",
     "HUMAN_ACTIONS",
+    "MIXTURE_PRESETS",
     "MODEL_PRESETS",
     "TASK_PRESETS",
     "ModelError",
     "Rewards",
     "Task",
     "TrustModel",
+    "TypeMixture",
+    "conservative_model",
+    "load_mixture",
     "load_model",
     "load_task",
+    "paper_conservative_mixture",
     "paper_model",
     "paper_task",
 ]

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from .core import ASK, AUTONOMOUS, FAULTY, RELIABLE, ModelError, Rewards, Task, TrustModel
+from .mixture import TypeMixture
 
 PAPER_UNOBSERVED_CELLS = (
     "transition[C=low, a=ask, E=reliable]",
@@ -71,6 +72,49 @@ def paper_model() -> TrustModel:
     )
 
 
+def conservative_model() -> TrustModel:
+    """A conservative supervisor (the paper's Remark 1): not sure of the robot at the start,
+    often intervenes in low complexity when trust is low, loses trust after any failure and
+    repairs it slowly.  Same structure and fixed cells as :func:`paper_model`; the numbers are
+    illustrative, not estimated from data."""
+    emission = np.zeros((2, 2, 2, 2))
+    emission[LOW, AUTONOMOUS] = [[0.35, 0.65], [0.02, 0.98]]
+    emission[HIGH, AUTONOMOUS] = [[0.85, 0.15], [0.10, 0.90]]
+    emission[:, ASK] = [[1.0, 0.0], [1.0, 0.0]]
+
+    eye = [[1.0, 0.0], [0.0, 1.0]]
+    transition = np.zeros((2, 2, 2, 2, 2))
+    transition[LOW, AUTONOMOUS, RELIABLE] = [[0.95, 0.05], [0.0, 1.0]]
+    transition[LOW, AUTONOMOUS, FAULTY] = [[1.0, 0.0], [0.70, 0.30]]
+    transition[LOW, ASK, FAULTY] = eye
+    transition[LOW, ASK, RELIABLE] = eye  # never observed (identity)
+    transition[HIGH, AUTONOMOUS, RELIABLE] = [[0.80, 0.20], [0.0, 1.0]]
+    transition[HIGH, AUTONOMOUS, FAULTY] = [[1.0, 0.0], [1.0, 0.0]]
+    transition[HIGH, ASK, RELIABLE] = [[0.85, 0.15], [0.15, 0.85]]
+    transition[HIGH, ASK, FAULTY] = eye  # never observed (identity)
+    return TrustModel(
+        trust_levels=("low", "high"),
+        complexities=("low", "high"),
+        initial=np.array([0.5, 0.5]),
+        emission=emission,
+        transition=transition,
+        notes=(
+            "A conservative supervisor (Remark 1 of the paper): intervenes in low complexity when trust is low, "
+            "loses trust after failures and repairs it slowly. Illustrative numbers, not estimated."
+        ),
+    )
+
+
+def paper_conservative_mixture(conservative_share: float = 0.3) -> TypeMixture:
+    """A population of the paper's supervisor and the conservative one (30 % by default)."""
+    return TypeMixture(
+        ("paper", "conservative"),
+        np.array([1.0 - conservative_share, conservative_share]),
+        (paper_model(), conservative_model()),
+        notes="the paper's supervisor (Section V) and a conservative type (Remark 1)",
+    )
+
+
 def paper_task() -> Task:
     """The object-collection task of Sections III-V: rewards of eq. (1), gamma = 0.987,
     success probabilities 0.97 / 0.83 as printed; P(C = high) = 0.5 is an assumption (see
@@ -85,8 +129,13 @@ def paper_task() -> Task:
     )
 
 
-MODEL_PRESETS = {"paper": paper_model}
+MODEL_PRESETS = {"paper": paper_model, "conservative": conservative_model}
 TASK_PRESETS = {"paper": paper_task}
+MIXTURE_PRESETS = {
+    "paper": lambda: TypeMixture.single(paper_model(), "paper"),
+    "conservative": lambda: TypeMixture.single(conservative_model(), "conservative"),
+    "paper+conservative": paper_conservative_mixture,
+}
 
 
 def _resolve(spec: str | Path, presets: dict, loader, kind: str):
@@ -102,6 +151,12 @@ def _resolve(spec: str | Path, presets: dict, loader, kind: str):
 def load_model(spec: str | Path) -> TrustModel:
     """A trust model from a preset name (``paper``) or a JSON file path."""
     return _resolve(spec, MODEL_PRESETS, TrustModel.load, "model")
+
+
+def load_mixture(spec: str | Path) -> TypeMixture:
+    """Supervisor types from a preset name (``paper+conservative``; a model preset is one type) or a
+    JSON file: a mixture, or a plain trust model read as one type."""
+    return _resolve(spec, MIXTURE_PRESETS, TypeMixture.load, "mixture")
 
 
 def load_task(spec: str | Path) -> Task:

@@ -23,7 +23,7 @@ from .schedules import schedule_counts
 
 
 def simulate_design(
-    model: TrustModel,
+    model: TrustModel | Supervisors,
     n_participants: int,
     seed: int = 0,
     task: Task | None = None,
@@ -37,11 +37,14 @@ def simulate_design(
     the ``randomized`` policy that asks with probability ``p_ask[c]``; outcomes follow
     ``task`` (default: the paper task) and the experience rule of Section III.  This is
     the simulation engine's run of that policy; the hidden trust at the start of each
-    trial is kept in the extra column ``true_trust``.  ``p_unobserved`` blanks that
+    trial is kept in the extra column ``true_trust``.  ``model`` is one supervisor model or a
+    population (:class:`Supervisors`, e.g. :meth:`Supervisors.from_mixture`; participant ``i``
+    of the log is row ``i`` of the population).  ``p_unobserved`` blanks that
     fraction of human actions (not recorded).
     """
     task = task or paper_task()
-    task.check_compatible(model)
+    if isinstance(model, TrustModel):
+        task.check_compatible(model)
     if len(p_ask) != task.n_complexity:
         raise SimulationError([f"p_ask needs one probability per complexity {list(task.complexities)}, got {list(p_ask)}"])
     policy = randomized(dict(zip(task.complexities, p_ask, strict=True)))

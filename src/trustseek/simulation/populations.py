@@ -2,8 +2,9 @@
 
 Everyone shares one model (:meth:`Supervisors.pooled`), each participant draws their own
 rows around a pooled model (:meth:`Supervisors.dirichlet`; the paper's Remark 1 on
-conservative individuals), or participants take models from a list
-(:meth:`Supervisors.from_models`).
+conservative individuals), participants take models from a list
+(:meth:`Supervisors.from_models`), or each participant is one of a mixture's supervisor types
+(:meth:`Supervisors.from_mixture`; ``index`` is then the type).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import numpy as np
 
 from ..errors import TrustseekError
 from ..model.core import TrustModel
+from ..model.mixture import TypeMixture
 
 
 class SimulationError(TrustseekError, ValueError):
@@ -91,6 +93,20 @@ class Supervisors:
             np.stack([m.transition for m in models]),
             np.arange(n, dtype=np.int64) % len(models),
         )
+
+    @classmethod
+    def from_mixture(
+        cls, mixture: TypeMixture, n: int, rng: np.random.Generator | int | None = None, draw: bool = False
+    ) -> Supervisors:
+        """``n`` participants of a population of supervisor types: participant ``i`` has type
+        ``index[i]`` (an index into ``mixture.names``).  By default the shares are the mixture's
+        weights exactly (largest remainder, then shuffled with ``rng``); ``draw=True`` draws each
+        participant's type independently."""
+        check_participants(n)
+        g = np.random.default_rng(rng)
+        types = mixture.sample_types(n, g) if draw else g.permutation(mixture.counts(n))
+        sup = cls.from_models(mixture.models)
+        return cls(sup.trust_levels, sup.complexities, sup.initial, sup.emission, sup.transition, types.astype(np.int64))
 
     @classmethod
     def dirichlet(

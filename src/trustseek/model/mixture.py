@@ -1,0 +1,198 @@
+"""Supervisor types: a population of M trust models with the same structure, and each
+participant belonging to one of them (the paper's Remark 1: "low trust is easily triggered
+for some participants compared to others").
+
+A :class:`TypeMixture` holds the types' names, their weights (the share of the population)
+and one :class:`~trustseek.model.core.TrustModel` per type.  A plain model is the mixture of
+one type.  JSON::
+
+    {"format": "trustseek-mixture/1", "notes": "...",
+     "types": [{"name": "paper", "weight": 0.7, "model": {<trust model>}}, ...]}
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .core import ModelError, TrustModel, json_safe, load_json
+
+MIXTURE_FORMAT = "trustseek-mixture/1"
+
+
+@dataclass(frozen=True, eq=False)
+class TypeMixture:
+    """M supervisor types: ``names[m]`` with population share ``weights[m]`` behaves like ``models[m]``."""
+
+    names: tuple[str, ...]
+    weights: np.ndarray
+    models: tuple[TrustModel, ...]
+    notes: str = ""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "names", tuple(str(n) for n in self.names))
+        object.__setattr__(self, "models", tuple(self.models))
+        w = np.array(self.weights, dtype=np.float64).reshape(-1)
+        w.setflags(write=False)
+        object.__setattr__(self, "weights", w)
+        problems = self.problems()
+        if problems:
+            raise ModelError(problems)
+
+    @property
+    def n_types(self) -> int:
+        return len(self.models)
+
+    @property
+    def trust_levels(self) -> tuple[str, ...]:
+        return self.models[0].trust_levels
+
+    @property
+    def complexities(self) -> tuple[str, ...]:
+        return self.models[0].complexities
+
+    def problems(self) -> list[str]:
+        """Every violation of the mixture's constraints, as human-readable lines."""
+        problems: list[str] = []
+        M = len(self.models)
+        if M < 1:
+            return ["a mixture needs at least one type"]
+        if len(self.names) != M:
+            problems.append(f"{len(self.names)} type names for {M} models")
+        if len(set(self.names)) != len(self.names):
+            problems.append(f"type names must differ, got {list(self.names)}")
+        if self.weights.shape != (M,):
+            problems.append(f"{self.weights.size} weights for {M} types")
+        elif not np.all(np.isfinite(self.weights)) or np.any(self.weights < 0) or abs(self.weights.sum() - 1) > 1e-6:
+            problems.append(f"type weights must be non-negative and sum to 1, got {self.weights.tolist()}")
+        first = self.models[0]
+        for name, m in zip(self.names, self.models, strict=False):
+            if not isinstance(m, TrustModel):
+                problems.append(f"type {name!r}: expected a TrustModel, got {type(m).__name__}")
+            elif m.trust_levels != first.trust_levels or m.complexities != first.complexities:
+                problems.append(
+                    f"type {name!r} has trust levels {list(m.trust_levels)} and complexities {list(m.complexities)}; "
+                    f"type {self.names[0]!r} has {list(first.trust_levels)} and {list(first.complexities)}: "
+                    "every type must share them"
+                )
+        return problems
+
+    # -- constructors -------------------------------------------------------
+    @classmethod
+    def single(cls, model: TrustModel, name: str = "pooled") -> TypeMixture:
+        """The mixture of one type."""
+        return cls((name,), np.ones(1), (model,))
+
+    def type_index(self, name: str) -> int:
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise ModelError([f"unknown supervisor type {name!r}; types: {list(self.names)}"]) from None
+
+    def with_weights(self, weights: Sequence[float]) -> TypeMixture:
+        """The same types in other proportions (normalised; refused if negative or all zero)."""
+        w = np.asarray(weights, dtype=np.float64).reshape(-1)
+        if w.shape != (self.n_types,) or not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
+            raise ModelError([f"need {self.n_types} non-negative weights, not all zero; got {list(weights)}"])
+        return TypeMixture(self.names, w / w.sum(), self.models, self.notes)
+
+    def sample_types(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """The types of ``n`` participants drawn from the population (as type indices)."""
+        return rng.choice(self.n_types, size=int(n), p=self.weights)
+
+    def counts(self, n: int) -> np.ndarray:
+        """Type indices for ``n`` participants in the population's proportions, largest remainder first
+        (for designs that fix the shares rather than draw them)."""
+        exact = self.weights * n
+        base = np.floor(exact).astype(np.int64)
+        order = np.argsort(-(exact - base), kind="stable")
+        base[order[: n - int(base.sum())]] += 1
+        return np.repeat(np.arange(self.n_types), base)
+
+    # -- JSON ---------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "format": MIXTURE_FORMAT,
+            "notes": self.notes,
+            "types": [
+                {"name": n, "weight": float(w), "model": m.to_dict()}
+                for n, w, m in zip(self.names, self.weights, self.models, strict=True)
+            ],
+        }
+
+    @classmethod
+    def from_dict(cls, d: Any, source: str | None = None) -> TypeMixture:
+        """A mixture from its JSON form; a plain trust model is read as one type named ``pooled``."""
+        if isinstance(d, Mapping) and d.get("format", "") != MIXTURE_FORMAT and "types" not in d:
+            return cls.single(TrustModel.from_dict(d, source))
+        problems: list[str] = []
+        if not isinstance(d, Mapping):
+            raise ModelError([f"a mixture must be a JSON object, got {type(d).__name__}"], source)
+        if d.get("format") != MIXTURE_FORMAT:
+            problems.append(f"format is {d.get('format')!r}, expected {MIXTURE_FORMAT!r}")
+        unknown = sorted(set(d) - {"format", "notes", "types"})
+        if unknown:
+            problems.append(f"mixture: unknown keys {unknown}; allowed: format, notes, types")
+        types = d.get("types")
+        if not isinstance(types, list) or not types:
+            problems.append("types must be a non-empty list of {name, weight, model}")
+            raise ModelError(problems, source)
+        names: list[str] = []
+        weights: list[float] = []
+        models: list[TrustModel] = []
+        for i, t in enumerate(types):
+            where = f"types[{i}]"
+            if not isinstance(t, Mapping):
+                problems.append(f"{where} must be an object with name, weight and model")
+                continue
+            extra = sorted(set(t) - {"name", "weight", "model"})
+            if extra:
+                problems.append(f"{where}: unknown keys {extra}; allowed: name, weight, model")
+            name, weight = t.get("name"), t.get("weight")
+            if not isinstance(name, str) or not name:
+                problems.append(f"{where}.name must be a non-empty string, got {name!r}")
+                name = f"type{i}"
+            if isinstance(weight, bool) or not isinstance(weight, int | float) or not math.isfinite(weight) or weight < 0:
+                problems.append(f"{where}.weight must be a non-negative number, got {weight!r}")
+                weight = 0.0
+            try:
+                models.append(TrustModel.from_dict(t.get("model"), None))
+            except ModelError as exc:
+                problems.extend(f"{where}.model: {p}" for p in exc.problems)
+                continue
+            names.append(name)
+            weights.append(float(weight))
+        notes = d.get("notes", "")
+        if not isinstance(notes, str):
+            problems.append(f"notes must be a string, got {notes!r}")
+        if problems:
+            raise ModelError(problems, source)
+        try:
+            return cls(tuple(names), np.asarray(weights), tuple(models), notes)
+        except ModelError as exc:
+            raise ModelError(exc.problems, source) from None
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(json_safe(self.to_dict()), indent=2) + "\n", encoding="utf-8")
+
+    @classmethod
+    def load(cls, path: str | Path) -> TypeMixture:
+        d, source = load_json(path)
+        return cls.from_dict(d, source)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, TypeMixture):
+            return NotImplemented
+        return (
+            self.names == other.names
+            and np.array_equal(self.weights, other.weights)
+            and all(a == b for a, b in zip(self.models, other.models, strict=True))
+        )
+
+    __hash__ = None  # type: ignore[assignment]
