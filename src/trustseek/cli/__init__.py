@@ -25,9 +25,10 @@ from . import serve  # serve, export
 from . import sensitivity  # sensitivity
 from . import schedule  # schedule
 from . import design  # design
+from . import validate  # predict, validate
 # isort: on
 
-COMMAND_MODULES = (simulate, fit, plan, interop, serve, sensitivity, schedule, design)
+COMMAND_MODULES = (simulate, fit, plan, interop, serve, sensitivity, schedule, design, validate)
 
 #: the optional extras of pyproject.toml, by the top-level module of each of their packages
 EXTRAS = {
