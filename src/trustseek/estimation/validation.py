@@ -102,10 +102,10 @@ def parse_ratings(
         )
         more = f"; ... ({len(rows) - SHOWN} more)" if len(rows) > SHOWN else ""
         if labels is None:
-            what = "not a number (declare ordinal labels, lowest first, with --rating-labels, e.g. low,medium,high)"
+            what = "not numbers (declare ordinal labels, lowest first, with --rating-labels, e.g. low,medium,high)"
         else:
-            what = f"not one of the declared labels {labels}"
-        raise DataError([f"rating column {column!r}: {len(rows)} ratings {what}: {where}{more}"])
+            what = f"not among the declared labels {labels}"
+        raise DataError([f"rating column {column!r}: {len(rows)} ratings are {what}: {where}{more}"])
     out = parsed[inverse]
     if not np.isfinite(out).any():
         raise DataError([f"rating column {column!r}: no trial has a rating (every cell is empty)"])
