@@ -165,6 +165,15 @@ def bootstrap_counts(n_participants: int, replicates: int, seed: int) -> np.ndar
     return rng.multinomial(n_participants, np.full(n_participants, 1.0 / n_participants), size=replicates)
 
 
+CHUNK_CELLS = 4_000_000  # resamples x trials held in memory at once by the bootstrap of AUCs and correlations
+
+
+def chunks(replicates: int, n: int) -> list[slice]:
+    """Slices of the resamples, few enough at a time that a (resamples, n) array stays small."""
+    step = max(1, CHUNK_CELLS // max(n, 1))
+    return [slice(i, i + step) for i in range(0, replicates, step)]
+
+
 def score(
     predictions: dict[str, np.ndarray], y: np.ndarray, participant: np.ndarray, n_participants: int, bootstrap: int, seed: int
 ) -> tuple[dict[str, dict[str, dict[str, float]]], dict[str, dict[str, dict[str, Any]]]]:
@@ -172,7 +181,6 @@ def score(
     participant-bootstrap intervals, and the paired differences model - baseline."""
     counts = bootstrap_counts(n_participants, bootstrap, seed)
     ntr = np.bincount(participant, minlength=n_participants).astype(float)
-    w = counts[:, participant].astype(float)  # (B, n) trial weights per resample
     point: dict[str, dict[str, float]] = {}
     reps: dict[str, dict[str, np.ndarray]] = {}
     for name, p in predictions.items():
@@ -185,7 +193,9 @@ def score(
             reps[name] = {
                 "log_loss": (counts @ np.bincount(participant, ll, n_participants)) / total,
                 "brier": (counts @ np.bincount(participant, br, n_participants)) / total,
-                "auc": auc(p, y, w),
+                "auc": np.concatenate(
+                    [np.zeros(0), *(auc(p, y, counts[c][:, participant].astype(float)) for c in chunks(len(counts), len(p)))]
+                ),
             }
     metrics: dict[str, dict[str, dict[str, float]]] = {}
     for name in predictions:

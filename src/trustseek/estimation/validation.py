@@ -37,7 +37,7 @@ from ..data.trials import NAN_WORDS, DataError
 from ..model.core import TrustModel
 from ..vocab import EXPERIENCES
 from .iohmm import posteriors
-from .prediction import LEVEL, bootstrap_counts, filter_beliefs
+from .prediction import LEVEL, bootstrap_counts, chunks, filter_beliefs
 from .sequences import encode
 from .spec import FitError
 from .trust_iohmm import from_trust_model
@@ -301,7 +301,8 @@ def validate_ratings(
         corr[name], reps[name] = {}, {}
         for scope, (a, b, who) in data.items():
             point = correlations(a, b, ones[:, who])
-            boot = correlations(a, b, counts[:, who])
+            parts = [correlations(a, b, counts[c][:, who]) for c in chunks(len(counts), len(a))]
+            boot = {k: np.concatenate([np.zeros(0), *(q[k] for q in parts)]) for k in METHODS}
             if scope == "between":
                 few = (counts[:, who] > 0).sum(1) < MIN_BETWEEN
                 boot = {k: np.where(few, np.nan, r) for k, r in boot.items()}
