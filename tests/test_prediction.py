@@ -209,3 +209,11 @@ def test_cli_predict_bad_inputs_are_one_line_errors(tmp_path, args, message):
     assert code == 2
     lines = [x for x in text.splitlines() if x.strip()]
     assert len(lines) == 1 and message in lines[0] and "Traceback" not in text
+
+
+def test_without_resamples_there_is_no_judgement(study):
+    r = predict_in_sample(study, paper_model(), bootstrap=0)
+    assert np.isnan(r.metrics["model"]["auc"]["lower"])
+    assert r.statements() == [
+        "no bootstrap resamples (--bootstrap 0): no intervals, so no judgement whether the model beats a baseline"
+    ]

@@ -360,6 +360,8 @@ class PredictionReport:
 
     def statements(self) -> list[str]:
         """One line per baseline and metric where the model does not beat the baseline."""
+        if self.bootstrap == 0:
+            return ["no bootstrap resamples (--bootstrap 0): no intervals, so no judgement whether the model beats a baseline"]
         out = []
         names = {"log_loss": "log-loss", "brier": "Brier score", "auc": "AUC"}
         for base, per in self.differences.items():

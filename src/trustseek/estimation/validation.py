@@ -183,6 +183,8 @@ class ValidationReport:
 
     def statements(self) -> list[str]:
         """One line per trust measure and baseline the trust does not beat (Spearman) in some scope."""
+        if self.bootstrap == 0:
+            return ["no bootstrap resamples (--bootstrap 0): no intervals, so no judgement whether the trust beats a baseline"]
         out = []
         for m, per in self.differences.items():
             for base, scopes in per.items():
