@@ -26,9 +26,10 @@ from . import sensitivity  # sensitivity
 from . import schedule  # schedule
 from . import design  # design
 from . import compare  # compare-types
+from . import validate  # predict, validate
 # isort: on
 
-COMMAND_MODULES = (simulate, fit, plan, interop, serve, sensitivity, schedule, design, compare)
+COMMAND_MODULES = (simulate, fit, plan, interop, serve, sensitivity, schedule, design, compare, validate)
 
 #: the optional extras of pyproject.toml, by the top-level module of each of their packages
 EXTRAS = {
