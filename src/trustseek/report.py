@@ -161,7 +161,7 @@ def make_figures(rep: Reproduction, out: Path) -> list[Path]:
         plot_scheduling_section(rep.scheduling, p)
         paths.append(p)
     if rep.types is not None:
-        from .plots.types import plot_types_section
+        from .plots.type_comparison import plot_types_section
 
         p = out / "types.png"
         plot_types_section(rep.types.numbers, p)

@@ -74,7 +74,7 @@ def compare_types(
             progress=lambda _s: bar.advance(tid),
         )
     if plot is not None:
-        from ..plots.types import plot_types_section
+        from ..plots.type_comparison import plot_types_section
 
         plot_types_section(sec.numbers, plot)
     if as_json:
