@@ -23,7 +23,7 @@ def mixture():
 
 @pytest.fixture(scope="module")
 def policy(mixture):
-    return solve_type_aware(mixture, paper_task(), solver="point", max_seconds=0.5)
+    return solve_type_aware(mixture, paper_task(), max_seconds=1.0)
 
 
 def test_the_solve_returns_a_type_aware_policy_with_its_bounds(policy, mixture):
@@ -75,6 +75,6 @@ def test_a_returning_person_starts_from_their_type_posterior(policy, mixture):
     np.testing.assert_allclose(policy.type_belief(runner.belief), post)
     np.testing.assert_allclose(runner.belief, warm_start_belief(mixture, post))
     # the person's own policy: the same solve from their type belief
-    own = solve_type_aware(mixture, task, solver="point", max_seconds=0.5, type_belief=post)
+    own = solve_type_aware(mixture, task, max_seconds=1.0, type_belief=post)
     np.testing.assert_allclose(own.model.initial, warm_start_belief(mixture, post))
     assert own.info["type_weights"] == pytest.approx(list(post / post.sum()))

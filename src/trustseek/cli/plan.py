@@ -10,12 +10,15 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ..model.core import ACTIONS, ModelError, Task, TrustModel, load_json
-from ..model.presets import MODEL_PRESETS, TASK_PRESETS, load_model, load_task
+from ..model.mixture import MIXTURE_FORMAT, TypeMixture
+from ..model.presets import MIXTURE_PRESETS, MODEL_PRESETS, TASK_PRESETS, load_mixture, load_model, load_task
 from ..policies import PolicyError, TrustAwarePolicy, load_policy
 from ..policies.base import Policy
 from ..pomdp.problem import AssistancePOMDP
+from ..pomdp.types import type_aware_problem, type_belief_from_log, type_marginal
 from ..solvers import GridSolver, make_solver, solver_names, summarize, trust_agnostic_from_data
 from ..solvers.grid import DEFAULT_GRID, METHODS
+from ..solvers.type_aware import DEFAULT_TYPE_AWARE_SOLVER, solve_type_aware
 from ..vocab import check_belief_update
 from ._app import ColumnOpt, LabelOpt, MappingOpt, app, atomic_output, check_output, check_tol, console, print_json, read_log
 
@@ -28,6 +31,35 @@ UpdateOpt = typer.Option(
 
 def _check_update(name: str) -> str:
     return check_belief_update(name, "--belief-update")
+
+
+def mixture_of(spec: str) -> TypeMixture | None:
+    """The supervisor types ``spec`` names when it is a mixture (a mixture preset such as
+    paper+conservative, or a trustseek-mixture/1 file), else None (a plain trust model)."""
+    if spec in MODEL_PRESETS:
+        return None
+    if spec in MIXTURE_PRESETS:
+        return load_mixture(spec)
+    p = Path(spec)
+    if p.is_file():
+        d, _ = load_json(p)
+        if isinstance(d, dict) and (d.get("format") == MIXTURE_FORMAT or "types" in d):
+            return load_mixture(p)
+    return None
+
+
+def type_posterior(
+    mixture: TypeMixture,
+    history: Path,
+    participant: str | None,
+    session: str | None,
+    mapping: Path | None = None,
+    column: list[str] | None = None,
+    label: list[str] | None = None,
+):
+    """The type posterior of one person from their earlier trials (--history, --participant, --session)."""
+    frame = read_log(history, mapping, column, label, ("complexity", "robot_action", "experience"))
+    return type_belief_from_log(mixture, frame, participant=participant, session=session)
 
 
 def need_two_levels(model: TrustModel, command: str) -> None:
@@ -53,30 +85,70 @@ def solve(
     ),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
-    solver: str = typer.Option(
-        "grid",
+    solver: str | None = typer.Option(
+        None,
         "--solver",
-        help="grid (belief grid), alpha (certified alpha vectors, two trust levels), point (point-based bounds, "
-        "any number of trust levels), certified-grid (eq. 3, certified) or trust-agnostic.",
+        help="grid (belief grid, the default), alpha (certified alpha vectors, two trust levels), point (point-based "
+        "bounds, any number of trust levels), reachable (search over the beliefs reachable from the start, any number "
+        "of trust levels; the default with supervisor types), certified-grid (eq. 3, certified) or trust-agnostic.",
     ),
     gap: float | None = typer.Option(
-        None, "--gap", help="alpha/point: target certified gap between the value bounds (default 1e-6 / 1e-3)."
+        None, "--gap", help="alpha/point/reachable: target certified gap between the value bounds (default 1e-6 / 1e-3)."
+    ),
+    max_seconds: float | None = typer.Option(
+        None, "--max-seconds", help="point/reachable: stop after this many seconds (default 60) with the bounds reached."
+    ),
+    types: str | None = typer.Option(
+        None,
+        "--types",
+        help="Plan for a person whose supervisor type is unknown: a mixture preset (paper+conservative) or a mixture "
+        "JSON file; the belief is over (type, trust). A mixture given with --model does the same.",
+    ),
+    history: Path | None = typer.Option(
+        None,
+        "--history",
+        help="With types: the person's earlier trials (a trial log); the plan starts from their type belief.",
+    ),
+    participant: str | None = typer.Option(None, "--participant", help="With --history: the person's participant id."),
+    session: str | None = typer.Option(
+        None, "--session", help="With --history: the column that separates sessions (trust restarts in each)."
     ),
 ) -> None:
-    """Solve the assistance-seeking POMDP for the optimal trust-aware policy (Section IV)."""
+    """Solve the assistance-seeking POMDP for the optimal trust-aware policy (Section IV), or for a person of
+    unknown supervisor type (--types)."""
     _check_update(belief_update)
     if method not in METHODS:
         raise TrustseekError([f"--method must be one of {list(METHODS)}, got {method!r}"])
-    if solver not in solver_names():
+    if solver is not None and solver not in solver_names():
         raise TrustseekError([f"--solver must be one of {list(solver_names())}, got {solver!r}"])
     if gap is not None and not (gap > 0 and math.isfinite(gap)):
         raise TrustseekError([f"--gap must be a finite number > 0, got {gap}"])
+    if max_seconds is not None and not (max_seconds > 0 and math.isfinite(max_seconds)):
+        raise TrustseekError([f"--max-seconds must be a finite number > 0, got {max_seconds}"])
     check_output(out, "--out", (".json",))
-    pomdp = AssistancePOMDP(load_model(model), load_task(task))
-    if solver == "grid":
-        need_two_levels(pomdp.model, "solve")
-    policy = make_solver(solver, belief_update=belief_update, grid=grid, method=method, tol=tol, gap=gap).solve(pomdp)
+    mixture = load_mixture(types) if types is not None else mixture_of(model)
+    if mixture is None and (history is not None or participant is not None or session is not None):
+        raise TrustseekError(["--history, --participant and --session need supervisor types (--types or a mixture with --model)"])
+    if mixture is not None:
+        solver = solver or DEFAULT_TYPE_AWARE_SOLVER
+        prior = None if history is None else type_posterior(mixture, history, participant, session)
+        options = {"belief_update": belief_update, "grid": grid, "method": method, "tol": tol, "max_seconds": max_seconds}
+        policy = solve_type_aware(mixture, load_task(task), solver, gap or 1e-3, type_belief=prior, **options)
+        pomdp = type_aware_problem(mixture if prior is None else mixture.with_weights(list(prior)), load_task(task))
+    else:
+        solver = solver or "grid"
+        pomdp = AssistancePOMDP(load_model(model), load_task(task))
+        if solver == "grid":
+            need_two_levels(pomdp.model, "solve")
+        built = make_solver(
+            solver, belief_update=belief_update, grid=grid, method=method, tol=tol, gap=gap, max_seconds=max_seconds
+        )
+        policy = built.solve(pomdp)
     summary = summarize(policy, pomdp)
+    if mixture is not None:
+        summary["type_belief"] = dict(
+            zip(mixture.names, map(float, type_marginal(pomdp.model.initial, mixture.n_types)), strict=True)
+        )
     if out is not None:
         with atomic_output(out) as tmp:
             policy.save(tmp)
@@ -88,6 +160,9 @@ def solve(
         _print_certified(policy, summary)
     else:
         _print_solution(policy, summary)
+    if mixture is not None:
+        start = ", ".join(f"{name} {p:.3f}" for name, p in summary["type_belief"].items())
+        console.print(f"supervisor types at the start: {start}; the belief is over (type, trust)")
     if out is not None:
         console.print(f"policy written to {out}")
 

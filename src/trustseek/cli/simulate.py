@@ -17,10 +17,15 @@ from ..errors import TrustseekError
 from ..model.core import Task, TrustModel, load_json
 from ..model.presets import load_model, load_task
 from ..policies.base import Policy
+from ..pomdp.types import product_model
 from ..solvers import policy_from_spec
 from ..solvers.specs import SPEC_KINDS
+from ..solvers.type_aware import solve_type_aware
 from ..vocab import PAPER_ASK_PROBABILITIES
 from ._app import QuietOpt, app, atomic_output, check_output, check_outputs, console, err_console, print_json
+
+#: --policy for a person of unknown supervisor type (solved for the mixture of --model or --policy-model)
+TYPE_AWARE = "type-aware"
 
 
 def _policy(
@@ -72,13 +77,20 @@ def _counts(text: str, task) -> list[int]:
 @app.command(rich_help_panel="Simulate and reproduce")
 def simulate(
     ctx: typer.Context,
-    model: str = typer.Option("paper", "--model", "-m", help="Supervisors' trust model: a preset name (paper) or a JSON file."),
+    model: str = typer.Option(
+        "paper",
+        "--model",
+        "-m",
+        help="Supervisors' trust model: a preset name (paper) or a JSON file; a mixture of supervisor types "
+        "(paper+conservative or a mixture file) gives each participant a type in the mixture's shares.",
+    ),
     task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
     policy: str = typer.Option(
         "trust-aware",
         "--policy",
         "-p",
-        help=f"Robot policy: {', '.join(SPEC_KINDS)}, or a policy JSON file (e.g. from 'trustseek solve --out').",
+        help=f"Robot policy: {', '.join(SPEC_KINDS)}, {TYPE_AWARE} (for a mixture of supervisor types), "
+        "or a policy JSON file (e.g. from 'trustseek solve --out').",
     ),
     participants: int = typer.Option(9, "--participants", "-n", min=1, help="Number of simulated participants."),
     counts: str | None = typer.Option(
@@ -148,15 +160,29 @@ def simulate(
     check_outputs((out, "--out"), (summary_out, "--summary-out"))
     for f, option in ((out, "--out"), (summary_out, "--summary-out")):
         check_output(f, option, (".csv", ".parquet"))
-    m, t = load_model(model), load_task(task)
-    t.check_compatible(m)
-    pm = load_model(policy_model) if policy_model else m
-    if policy == "trust-aware" and pm.n_trust != 2:
-        from .plan import need_two_levels
+    from .plan import mixture_of, need_two_levels
 
-        need_two_levels(pm, "simulate")
-    pol = _policy(policy, pm, t, belief_update, grid, ask_low, ask_high, given)
-    sup = Supervisors.pooled(m, participants)
+    mixture = mixture_of(model)
+    policy_types = mixture_of(policy_model) if policy_model else mixture
+    if mixture is not None and concentration is not None:
+        raise TrustseekError(["--concentration draws around one model; the supervisor types of a mixture are fixed"])
+    m = mixture.models[0] if mixture is not None else load_model(model)
+    t = load_task(task)
+    t.check_compatible(m)
+    pm = product_model(policy_types) if policy_types is not None else (load_model(policy_model) if policy_model else m)
+    if policy == TYPE_AWARE:
+        if policy_types is None:
+            raise TrustseekError([f"--policy {TYPE_AWARE} needs supervisor types: a mixture with --model or --policy-model"])
+        pol = solve_type_aware(policy_types, t, belief_update=belief_update)
+    else:
+        if policy == "trust-aware" and policy_types is not None:
+            raise TrustseekError(
+                [f"the supervisors are a mixture of types: use --policy {TYPE_AWARE}, or --policy-model MODEL for one model"]
+            )
+        if policy == "trust-aware" and pm.n_trust != 2:
+            need_two_levels(pm, "simulate")
+        pol = _policy(policy, pm, t, belief_update, grid, ask_low, ask_high, given)
+    sup = Supervisors.pooled(m, participants) if mixture is None else Supervisors.from_mixture(mixture, participants, rng=seed)
     if concentration is not None:
         sup = Supervisors.dirichlet(m, participants, concentration, np.random.default_rng([seed, 7]), pseudo=pseudo)
     cnt = None if trials is not None else _counts(counts or "41,30", t)

@@ -25,6 +25,7 @@ from .base import Solver, SolverError
 from .certified_grid import CertifiedGridSolver
 from .grid import DEFAULT_GRID, GridSolver
 from .point import PointSolver
+from .reachable import ReachableSolver
 from .schedule import DEFAULT_SCHEDULE_GRID, ScheduleSolver
 
 __all__ = ["SOLVERS", "SolverEntry", "make_solver", "solve_with", "solver_names"]
@@ -60,6 +61,10 @@ def _point(belief_update: str = "bayes", gap: float = 1e-3, max_seconds: float =
     return PointSolver(tol=gap, max_seconds=max_seconds, belief_update=belief_update)
 
 
+def _reachable(belief_update: str = "bayes", gap: float = 1e-3, max_seconds: float = 60.0) -> Solver:
+    return ReachableSolver(tol=gap, max_seconds=max_seconds, belief_update=belief_update)
+
+
 def _trust_agnostic(horizon: int = PAPER_HORIZON) -> Solver:
     return TrustAgnosticSolver(horizon=horizon)
 
@@ -81,6 +86,9 @@ SOLVERS: dict[str, SolverEntry] = {
         SolverEntry("alpha", _alpha, "certified alpha vectors, two trust levels (bayes; paper via the certified grid)"),
         SolverEntry("certified-grid", _certified_grid, "certified adaptive grid for the eq.-3 update, two trust levels"),
         SolverEntry("point", _point, "point-based bounds at the initial belief, any number of trust levels, bayes update"),
+        SolverEntry(
+            "reachable", _reachable, "heuristic search over the beliefs reachable from b0, any number of trust levels, bayes"
+        ),
         SolverEntry("trust-agnostic", _trust_agnostic, "the best policy that looks only at the complexity (Section VI-A)"),
         SolverEntry("schedule", _schedule, "trial scheduling: the next item's complexity and the ask, finite horizon"),
     )

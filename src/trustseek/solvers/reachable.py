@@ -1,0 +1,678 @@
+"""Reachable-belief solver: heuristic search from the initial belief with certified bounds
+(in the manner of HSVI2 and SARSOP), for any number of hidden states.
+
+The point solver bounds the value on a triangulation of the whole belief simplex, whose
+vertex count grows like r^(K-1).  The beliefs that matter are those reachable from b0, and
+for many problems -- a supervisor of unknown type above all, whose (type, trust) belief
+mostly moves within a few directions -- they are few.  This solver only visits them:
+
+* **lower bound** L(b) = max_α α·b over a set Γ of alpha vectors.  Γ starts with the values of
+  the memoryless controllers ("take a_c in context c") and grows by point-based backups: at a
+  belief b, for each context c, action a and branch (o, E') the vector of Γ best at the next
+  belief, and per context the action best at b.  Each vector is the exact value of a
+  finite-state controller (take a_c now, then run the controller of the chosen vector), so
+  L(b0) is the value of an executable policy.  Vectors never best at a visited belief are pruned.
+* **upper bound** U(b): the sawtooth interpolation of belief–value points above the corner
+  values of the fast informed bound (FIB, solved by policy iteration and certified by its
+  residual), and never above the FIB function itself.  A point is added by the Bellman
+  backup of U at a visited belief; by convexity of the value every interpolation stays above it.
+* **search**: trials from b0; at each belief the action greedy in U for each context, then
+  the (context, branch) whose weighted excess gap, p · (U - L - ε γ^-d), is largest; the
+  trial ends where the excess is not positive; the beliefs of the trial are backed up in
+  reverse.  It stops when U(b0) - L(b0) <= ``tol`` or after ``max_seconds``.
+
+The problem is taken in branch form (:class:`~trustseek.pomdp.branch_model.BranchModel`):
+the context (complexity) is seen before acting and the branches (o, E') move the belief, so
+it solves the assistance POMDP with any number of trust levels -- the (type, trust) product
+of a supervisor-type mixture included -- and flat POMDPs.  The bounds rest on the convexity
+of the Bayes-filter value; for the eq.-3 update use the ``alpha`` or ``grid`` solver.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from math import comb
+from typing import Any, ClassVar
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from ..policies.alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy
+from ..policies.base import Policy
+from ..pomdp.belief import Branches
+from ..pomdp.branch_model import BranchModel
+from ..pomdp.flat import FlatPOMDP
+from ..pomdp.problem import AssistancePOMDP
+from ..vocab import check_belief_update
+from .base import SolverBase, SolverError
+from .numerics import evaluate_controller, improve, memoryless_controllers, policy_values
+from .point import PointSolver
+
+__all__ = ["ReachableSolution", "ReachableSolver", "fast_informed_bound"]
+
+
+@dataclass
+class ReachableSolution:
+    """Bounds at the initial belief, the lower bound's vectors, the upper bound's points."""
+
+    vectors: np.ndarray  # lower bound: L(b) = max_α α·b
+    points: np.ndarray  # upper bound: belief points ...
+    point_values: np.ndarray  # ... with their upper values (sawtooth interpolation)
+    corners: np.ndarray  # upper values at the corners of the simplex
+    lower: float
+    upper: float
+    trials: int
+    backups: int
+    seconds: float
+    beliefs: np.ndarray  # the beliefs the search visited
+    history: list[tuple[int, float, float, float]] = field(default_factory=list)  # (trial, seconds, lower, upper)
+
+    @property
+    def gap(self) -> float:
+        return self.upper - self.lower
+
+
+def fast_informed_bound(model: BranchModel, max_rounds: int = 200) -> np.ndarray:
+    """The fast informed bound (Hauskrecht 2000) of a problem in branch form, as Q-vectors
+    beta[c, a, t]: U(b) = Σ_c P(c) max_a beta[c, a]·b bounds the optimal value from above.
+
+    beta[c, a, t] = R[c, a, t] + γ Σ_branch Σ_c' P(c') max_a' Σ_u M[c, a, branch, t, u] beta[c', a', u]
+    (the next context is independent of the branch, so the choice of a' is per c').  Solved by
+    policy iteration on the choices; the result is raised by its Bellman residual / (1 - γ),
+    so that rounding cannot bring it below the fixed point."""
+    M, R, pc, g = model.kernels, model.rewards, model.context_probs, model.discount
+    N, A, Br, K, _ = M.shape
+    n = N * A * K
+    if not g < 1.0:
+        raise SolverError([f"the reachable solver needs a discount below 1, got {g}"])
+
+    def choices_of(beta: np.ndarray) -> np.ndarray:
+        # proj[c, a, br, t, c', a'] = Σ_u M[c, a, br, t, u] beta[c', a', u]
+        proj = np.einsum("cabtu,dfu->cabtdf", M, beta)
+        return proj.argmax(axis=-1)  # [c, a, br, t, c']
+
+    def apply(beta: np.ndarray) -> np.ndarray:
+        proj = np.einsum("cabtu,dfu->cabtdf", M, beta)
+        return R + g * np.einsum("cabtd,d->cat", proj.max(axis=-1), pc)
+
+    ch = np.zeros((N, A, Br, K, N), dtype=np.int64)
+    beta = np.zeros((N, A, K))
+    for _ in range(max_rounds):
+        # the linear system of fixed choices: beta = R + P beta
+        P = np.zeros((N, A, K, N, A, K))
+        w = g * np.einsum("cabtu,d->cabtdu", M, pc)  # [c, a, br, t, c', u]
+        onehot = ch[..., None] == np.arange(A)  # [c, a, br, t, c', a']
+        P += np.einsum("cabtdu,cabtdf->catdfu", w, onehot)
+        beta_new = np.linalg.solve(np.eye(n) - P.reshape(n, n), R.reshape(-1)).reshape(N, A, K)
+        new_ch = choices_of(beta_new)
+        # keep a choice unless another is better by more than rounding
+        proj = np.einsum("cabtu,dfu->cabtdf", M, beta_new)
+        cur = np.take_along_axis(proj, ch[..., None], axis=-1)[..., 0]
+        better = proj.max(axis=-1) > cur + 1e-12 * (1 + np.abs(cur))
+        beta = beta_new
+        if not np.any(better):
+            break
+        ch = np.where(better, new_ch, ch)
+    residual = float(np.max(apply(beta) - beta))
+    return beta + max(0.0, residual) / (1.0 - g)
+
+
+class ReachableSolver(SolverBase):
+    """Heuristic search over the beliefs reachable from b0 with a lower bound of alpha vectors
+    and a sawtooth upper bound, until the gap at b0 is at most ``tol`` (see the module)."""
+
+    name = "reachable"
+    belief_updates = ("bayes",)
+    instead: ClassVar[dict[str, str]] = {
+        "belief_update": "the reachable solver bounds the value of the Bayes filter (belief update 'bayes'); "
+        "for the eq.-3 update use the alpha solver (two trust levels) or the grid solver",
+    }
+
+    def __init__(
+        self,
+        tol: float = 1e-3,
+        max_seconds: float = 60.0,
+        belief_update: str = "bayes",
+        max_depth: int | None = None,
+        grid_vertices: int = 4000,
+        decimals: int = 3,
+        refine: int = 4,
+        seed_depth: int = 3,
+    ):
+        if not (tol > 0 and math.isfinite(tol)):
+            raise SolverError([f"the target gap must be a finite number > 0, got {tol}"])
+        if not max_seconds > 0:
+            raise SolverError([f"the time limit must be positive, got {max_seconds}"])
+        self.belief_update = check_belief_update(belief_update)
+        self.tol = float(tol)
+        self.max_seconds = float(max_seconds)
+        self.max_depth = max_depth
+        self.grid_vertices = int(grid_vertices)
+        self.refine = int(refine)  # points re-evaluated with the block bound beyond them
+        self.decimals = int(decimals)  # visited beliefs equal to this many decimals are one (the first met)
+        self.seed_depth = int(seed_depth)  # the search starts with every belief this many trials from b0
+
+    def unsupported(self, problem: Any) -> list[str]:
+        if isinstance(problem, FlatPOMDP):
+            return [] if problem.discount < 1.0 else [f"the reachable solver needs a discount below 1, got {problem.discount}"]
+        reasons = super().unsupported(problem)
+        if not reasons and not problem.discount < 1.0:
+            reasons.append(f"the reachable solver needs a discount below 1, got {problem.discount}: use the grid solver")
+        return reasons
+
+    # -- set-up ------------------------------------------------------------------------
+    def _setup(self, model: BranchModel) -> None:
+        self.model = model
+        M = model.kernels
+        N, A, Br, K, _ = M.shape
+        self.shape = (N, A, Br, K)
+        # b @ flat -> unnormalized next beliefs of every (c, a, branch)
+        self.flat = np.ascontiguousarray(np.moveaxis(M, 3, 0).reshape(K, -1))
+        self.R, self.pc, self.g = model.rewards, model.context_probs, model.discount
+        self.G = memoryless_controllers(model)
+        self.beta = fast_informed_bound(model)
+        self.corners = self.pc @ self.beta.max(axis=1)  # U at the corners
+        self.blocks = _grid_blocks(model, self.grid_vertices)
+        # several blocks: the grid over the whole simplex too (it sees what the blocks cannot: the
+        # value of not knowing the block), when a resolution of at least 4 fits the vertex budget
+        self.whole = None
+        if len(self.blocks) > 1 and comb(4 + K - 1, K - 1) <= self.grid_vertices:
+            self.whole = _BlockGrid(model, self.grid_vertices)
+        if self.blocks:
+            self.corners = np.minimum(self.corners, self._base(np.eye(K)))
+        self.P = np.zeros((0, K))
+        self.v = np.zeros(0)
+        self._refresh_points()
+
+    def _refresh_points(self) -> None:
+        """Cached forms of the upper bound's points for the sawtooth.  A point at a corner of the
+        simplex lowers that corner's value instead (every interpolation then uses it)."""
+        corner = np.isclose(self.P.max(axis=1), 1.0, rtol=0.0, atol=1e-15) if len(self.P) else np.zeros(0, dtype=bool)
+        if np.any(corner):
+            t = self.P[corner].argmax(axis=1)
+            np.minimum.at(self.corners, t, self.v[corner])
+            self.P, self.v = self.P[~corner], self.v[~corner]
+        P = self.P
+        self.inv = _inverse(P)
+        self.excess_v = self.v - P @ self.corners  # <= 0: how far below the corners' plane
+
+    # -- bounds at beliefs -------------------------------------------------------------
+    def lower_at(self, B: np.ndarray) -> np.ndarray:
+        return (np.atleast_2d(B) @ self.G.T).max(axis=1)
+
+    def upper_at(self, B: np.ndarray) -> np.ndarray:
+        B = np.atleast_2d(B)
+        out = self._basefun(B)
+        if len(self.P):
+            lin = B @ self.corners
+            saw = lin[:, None] + self._phi(B) * self.excess_v[None]  # through each point, corners beyond
+            out = np.minimum(out, saw.min(axis=1))
+            if self.blocks:
+                # the few best points again, with the block bound beyond them instead of the corners
+                k = min(self.refine, len(self.P))
+                idx = np.argpartition(saw, k - 1, axis=1)[:, :k] if k < len(self.P) else np.broadcast_to(np.arange(k), saw.shape)
+                phi = _phi_pairs(B, self.P, idx)
+                out = np.minimum(out, self._through(B, idx, phi, self.v[idx]).min(axis=1))
+        return out
+
+    def _basefun(self, B: np.ndarray) -> np.ndarray:
+        """The bound without points: the corners' plane, the fast informed bound and the block bound."""
+        fib = np.einsum("c,nc->n", self.pc, np.einsum("nt,cat->nca", B, self.beta).max(axis=2))
+        out = np.minimum(B @ self.corners, fib)
+        if self.whole is not None:
+            out = np.minimum(out, self.whole.upper_at(B))
+        return np.minimum(out, self._base(B)) if self.blocks else out
+
+    def _through(self, B: np.ndarray, idx: np.ndarray, phi: np.ndarray, vals: np.ndarray) -> np.ndarray:
+        """φ v_i + (1 - φ) U0(b') with b = φ b_i + (1 - φ) b': the bound at B[n] through point
+        P[idx[n, j]] of value vals[n, j] (φ = phi[n, j]), U0 the bound without points beyond it.
+        Convexity of the value makes it valid for any valid U0."""
+        n, k = idx.shape
+        rest = np.clip(1.0 - phi, 0.0, 1.0)
+        far = rest > 1e-9
+        Bp = np.where(
+            far[..., None], (B[:, None, :] - phi[..., None] * self.P[idx]) / np.where(far, rest, 1.0)[..., None], B[:, None, :]
+        )
+        Bp = np.clip(Bp, 0.0, None)
+        Bp /= Bp.sum(axis=2, keepdims=True)
+        u0 = self._basefun(Bp.reshape(-1, B.shape[1])).reshape(n, k)
+        return np.where(far, phi * vals + rest * u0, vals)
+
+    def _base(self, B: np.ndarray) -> np.ndarray:
+        """The block bound: Σ over the closed blocks of hidden states of the block's mass times the
+        block's grid upper bound at the belief within the block."""
+        out = np.zeros(len(B))
+        for idx, grid in self.blocks:
+            mass = B[:, idx].sum(axis=1)
+            ok = mass > 0
+            if np.any(ok):
+                out[ok] += mass[ok] * grid.upper_at(B[ok][:, idx] / mass[ok, None])
+        return out
+
+    def _phi(self, B: np.ndarray) -> np.ndarray:
+        """φ_i(b) for beliefs B (n, K) and the upper bound's points: (n, points)."""
+        return _phi(B, self.inv)
+
+    def _successors(self, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(p[c, a, br], next[c, a, br, t]) of one belief."""
+        N, A, Br, K = self.shape
+        nb = (b @ self.flat).reshape(N, A, Br, K)
+        p = nb.sum(axis=-1)
+        ok = p > 1e-300
+        nxt = np.where(ok[..., None], nb / np.where(ok, p, 1.0)[..., None], 1.0 / K)
+        return np.where(ok, p, 0.0), nxt
+
+    # -- backups -----------------------------------------------------------------------
+    def _backup(self, b: np.ndarray, p: np.ndarray, nxt: np.ndarray) -> tuple[np.ndarray, float]:
+        """(new lower-bound vector, new upper value) at b, from the successors (p, nxt)."""
+        N, A, Br, K = self.shape
+        S = nxt.reshape(-1, K)
+        best = (S @ self.G.T).argmax(axis=1).reshape(N, A, Br)
+        g = self.R + self.g * np.einsum("cabtu,cabu->cat", self.model.kernels, self.G[best])
+        acts = (g @ b).argmax(axis=1)
+        alpha = np.einsum("c,ct->t", self.pc, g[np.arange(N), acts])
+        q_up = self.R @ b + self.g * (p * self.upper_at(S).reshape(N, A, Br)).sum(axis=2)
+        return alpha, float(self.pc @ q_up.max(axis=1))
+
+    def _update(self, b: np.ndarray) -> None:
+        p, nxt = self._successors(b)
+        alpha, up = self._backup(b, p, nxt)
+        if alpha @ b > self.lower_at(b)[0] + 1e-12 * (1 + abs(alpha @ b)):
+            self.G = np.vstack([self.G, alpha])
+        if up < self.upper_at(b)[0] - 1e-12 * (1 + abs(up)):
+            self.P = np.vstack([self.P, b])
+            self.v = np.append(self.v, up)
+            self._refresh_points()
+
+    # -- consolidation over the visited beliefs ----------------------------------------------
+    def _improve_lower(self, B: np.ndarray, rounds: int = 20) -> None:
+        """Point-based policy iteration on the visited beliefs: every belief is a controller node
+        with its greedy actions and, per (context, branch), the node best at the next belief; the
+        controller is evaluated exactly (one sparse solve), so long loops of beliefs (a supervisor
+        who keeps relying) are valued at once rather than one discount factor per backup."""
+        N, A, Br, K = self.shape
+        n = len(B)
+        p, S = self._successors_many(B)  # (n, N, A, Br), (n, N, A, Br, K)
+        Sf = S.reshape(-1, K)
+        ii, cc = np.arange(n)[:, None], np.arange(N)[None, :]
+        # the actions greedy in the upper bound: near-optimal once the upper bound is close
+        q_up = np.einsum("cat,nt->nca", self.R, B) + self.g * (p * self.upper_at(Sf).reshape(n, N, A, Br)).sum(axis=3)
+        up_acts = q_up.argmax(axis=2)
+        prev = None
+        for _ in range(rounds):
+            best = (Sf @ self.G.T).argmax(axis=1).reshape(n, N, A, Br)
+            g = self.R[None] + self.g * np.einsum("cabtu,ncabu->ncat", self.model.kernels, self.G[best])
+            lo_acts = np.einsum("ncat,nt->nca", g, B).argmax(axis=2)
+            before = self.lower_at(B)
+            new = []
+            for acts in (lo_acts, up_acts):
+                alpha = np.einsum("c,nct->nt", self.pc, g[ii, cc, acts])
+                Sa = S[ii, cc, acts]  # (n, N, Br, K)
+                succ = (Sa.reshape(-1, K) @ alpha.T).argmax(axis=1).reshape(n, N, Br)
+                succ = np.where(p[ii, cc, acts] > 0, succ, -1)
+                ev = evaluate_controller(self.model, acts, succ, guess=alpha)
+                new.append(alpha)
+                if np.all(np.isfinite(ev)):
+                    new.append(ev)
+            key = lo_acts.tobytes()
+            G = np.vstack([self.G, *new])
+            self.G = G[np.unique((np.vstack([B, np.eye(K)]) @ G.T).argmax(axis=1))]
+            gain = float(np.max(self.lower_at(B) - before))
+            if key == prev or gain <= self.tol * 1e-3:
+                break
+            prev = key
+
+    def _improve_upper(self, B: np.ndarray, candidates: int = 8, rounds: int = 30) -> None:
+        """The upper values of the visited beliefs as the fixed point of the Bellman operator on
+        the sawtooth through them.  Each successor of a visited belief is bounded either by the
+        current upper bound (a constant) or through one of ``candidates`` visited beliefs
+        (affine in its value); with those choices fixed, the values solve a small MDP (policy
+        iteration over the actions, one sparse solve each), whose fixed point is above the
+        optimal value; the choices are then re-made at the new values, which can only lower
+        them.  The result is raised by its Bellman residual / (1 - γ) against rounding."""
+        N, A, Br, K = self.shape
+        n = len(B)
+        p, S = self._successors_many(B)
+        m = n * N * A * Br
+        Sf = S.reshape(m, K)
+        const = self.upper_at(Sf)  # the current bound: valid, and the fallback of every successor
+        base_s = Sf @ self.corners
+        base_b = B @ self.corners
+        inv = _inverse(B)
+        v = np.minimum(self.upper_at(B), np.inf)
+        # candidate points of every successor: those giving the smallest sawtooth at the start
+        cand = np.empty((m, candidates), dtype=np.int64)
+        phis = np.empty((m, candidates))
+        step = max(1, 2_000_000 // max(1, n * K))
+        for lo in range(0, m, step):
+            sl = slice(lo, min(m, lo + step))
+            phi = _phi(Sf[sl], inv)  # (chunk, n)
+            saw = base_s[sl, None] + phi * (v - base_b)[None]
+            k = min(candidates, n)
+            idx = np.argpartition(saw, k - 1, axis=1)[:, :k] if k < n else np.broadcast_to(np.arange(n), (len(phi), n))
+            cand[sl, :k] = idx
+            phis[sl, :k] = np.take_along_axis(phi, idx, axis=1)
+            if k < candidates:
+                cand[sl, k:] = idx[:, :1]
+                phis[sl, k:] = phis[sl, :1]
+        rew = np.einsum("cat,nt->nca", self.R, B)
+        # the affine bound of successor s through candidate point j: a0[s, j] + phis[s, j] v_j
+        if self.blocks:
+            save = self.P
+            self.P = B
+            u0 = np.empty((m, candidates))
+            for lo in range(0, m, 4096):
+                sl = slice(lo, min(m, lo + 4096))
+                u0[sl] = self._through(Sf[sl], cand[sl], phis[sl], np.zeros(cand[sl].shape))
+            self.P = save
+            a0c = u0
+        else:
+            a0c = base_s[:, None] - phis * base_b[cand]
+        # weight of successor s in the value of its belief: P(c) γ P(branch)
+        wt = (self.g * p * self.pc[None, :, None, None]).reshape(m)
+        rows_of = np.repeat(np.arange(n), N * A * Br)
+        ar = np.arange(m)
+
+        def choose(v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            """The affine bound a + b v[col] of every successor that is smallest at v (b = 0: the constant)."""
+            vals = a0c + phis * v[cand]
+            j = vals.argmin(axis=1)
+            use = vals[ar, j] < const
+            col = np.where(use, cand[ar, j], 0)
+            slope = np.where(use, phis[ar, j], 0.0)
+            return np.where(use, a0c[ar, j], const), slope, col
+
+        def q_of(v: np.ndarray, aff: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+            a0, slope, col = choose(v) if aff is None else aff
+            val = a0 + slope * v[col]
+            return rew + self.g * (p * val.reshape(n, N, A, Br)).sum(axis=3)
+
+        acts = q_of(v).argmax(axis=2)
+        for _ in range(rounds):
+            aff = choose(v)
+            a0, slope, col = aff
+            for _inner in range(50):
+                sel = np.zeros((n, N, A, Br), dtype=bool)
+                sel[np.arange(n)[:, None], np.arange(N)[None, :], acts] = True
+                sel = sel.reshape(m)
+                rhs = np.einsum("c,nc->n", self.pc, rew[np.arange(n)[:, None], np.arange(N)[None, :], acts])
+                rhs = rhs + np.bincount(rows_of[sel], weights=(wt * a0)[sel], minlength=n)
+                lin = sel & (slope > 0)
+                W = sp.csr_matrix(((wt * slope)[lin], (rows_of[lin], col[lin])), shape=(n, n))
+                v = policy_values(W, rhs, v)
+                new_acts = improve(q_of(v, aff), acts, axis=2)
+                if new_acts is None:
+                    break
+                acts = new_acts
+            again = choose(v)
+            if np.array_equal(again[2], col) and np.array_equal(again[1] > 0, slope > 0):
+                break
+        q = q_of(v)
+        eta = max(0.0, float(np.max(np.einsum("c,nc->n", self.pc, q.max(axis=2)) - v)))
+        v = v + eta / (1 - self.g)
+        better = v < self.upper_at(B) - 1e-12 * (1 + np.abs(v))
+        if np.any(better):
+            self.P = np.vstack([self.P, B[better]])
+            self.v = np.concatenate([self.v, v[better]])
+            self._refresh_points()
+
+    def _reachable(self, b0: np.ndarray, depth: int) -> np.ndarray:
+        """b0 and the beliefs reachable from it in up to ``depth`` trials (any context, action and
+        branch of positive probability), near-duplicates merged."""
+        K = self.shape[3]
+        out, front = [b0[None]], b0[None]
+        for _ in range(depth):
+            p, S = self._successors_many(front)
+            front = _unique_rows(S[p > 0].reshape(-1, K), self.decimals)
+            out.append(front)
+        return _unique_rows(np.vstack(out), self.decimals)
+
+    def _successors_many(self, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(p[n, c, a, br], next[n, c, a, br, t]) of beliefs B."""
+        N, A, Br, K = self.shape
+        nb = (B @ self.flat).reshape(len(B), N, A, Br, K)
+        p = nb.sum(axis=-1)
+        ok = p > 1e-300
+        nxt = np.where(ok[..., None], nb / np.where(ok, p, 1.0)[..., None], 1.0 / K)
+        return np.where(ok, p, 0.0), nxt
+
+    # -- pruning -----------------------------------------------------------------------
+    def _prune(self, B: np.ndarray) -> None:
+        """Keep the vectors best at some visited belief or corner, and the upper points that
+        improve on the others at their own belief."""
+        K = self.shape[3]
+        at = np.vstack([B, np.eye(K)])
+        self.G = self.G[np.unique((at @ self.G.T).argmax(axis=1))]
+        n = len(self.P)
+        if 1 < n <= 4000:
+            order = np.argsort(self.excess_v, kind="stable")  # deepest below the corners first
+            P, v, ex = self.P[order], self.v[order], self.excess_v[order]
+            base = P @ self.corners
+            saw = base[:, None] + self._phi(P)[:, order] * ex[None]  # [i, j]: the sawtooth of point j at point i
+            keep = np.zeros(n, dtype=bool)
+            for i in range(n):
+                others = saw[i, keep]
+                bound = others.min() if len(others) else np.inf
+                keep[i] = v[i] < bound - 1e-12 * (1 + abs(v[i]))
+            self.P, self.v = P[keep], v[keep]
+            self._refresh_points()
+
+    # -- search ------------------------------------------------------------------------
+    def _trial(self, b0: np.ndarray, eps: float, depth_cap: int, t_end: float) -> list[np.ndarray]:
+        """One trial from b0: the beliefs met, in order (the backups follow in reverse)."""
+        N, A, Br, K = self.shape
+        path = [b0]
+        b = b0
+        seen = {np.round(b0, self.decimals).tobytes()}
+        threshold = eps
+        for _d in range(depth_cap):
+            p, nxt = self._successors(b)
+            S = nxt.reshape(-1, K)
+            ub = self.upper_at(S).reshape(N, A, Br)
+            q_up = self.R @ b + self.g * (p * ub).sum(axis=2)
+            acts = q_up.argmax(axis=1)
+            ci = np.arange(N)
+            threshold /= self.g
+            lb = self.lower_at(S).reshape(N, A, Br)
+            excess = self.pc[:, None] * p[ci, acts] * (ub[ci, acts] - lb[ci, acts] - threshold)
+            if time.perf_counter() > t_end:
+                break
+            # the branch of largest weighted excess that does not close a loop of the trial
+            nxt_b = None
+            for k in np.argsort(-excess, axis=None):
+                c, br = np.unravel_index(int(k), excess.shape)
+                if excess[c, br] <= 0:
+                    break
+                cand = nxt[c, acts[c], br]
+                key = np.round(cand, self.decimals).tobytes()
+                if key not in seen:
+                    seen.add(key)
+                    nxt_b = cand
+                    break
+            if nxt_b is None:
+                break
+            b = nxt_b
+            path.append(b)
+        return path
+
+    def solve_bounds(self, problem: AssistancePOMDP | FlatPOMDP) -> ReachableSolution:
+        """Lower and upper bounds at the initial belief (the vectors and points behind them)."""
+        self.check(problem)
+        return self._bounds(problem.branch_model())
+
+    def _bounds(self, model: BranchModel) -> ReachableSolution:
+        t0 = time.perf_counter()
+        t_end = t0 + self.max_seconds
+        self._setup(model)
+        b0 = np.asarray(model.initial, dtype=float)
+        width = float(np.max(self.corners) - np.min(self.G.max(axis=0).min()))
+        span = max(width, self.tol)
+        depth_cap = self.max_depth or math.ceil(math.log(self.tol / (2 * span)) / math.log(self.g)) + 1
+        depth_cap = max(1, depth_cap)
+        visited: list[np.ndarray] = list(self._reachable(b0, self.seed_depth))
+        history = []
+        trials = backups = consolidated = 0
+        lo, up = float(self.lower_at(b0)[0]), float(self.upper_at(b0)[0])
+        while up - lo > self.tol and time.perf_counter() < t_end:
+            trials += 1
+            path = self._trial(b0, self.tol, depth_cap, t_end)
+            for b in reversed(path):
+                self._update(b)
+                backups += 1
+            visited.extend(path[1:])
+            B = _unique_rows(np.array(visited), self.decimals)
+            visited = list(B)
+            if len(B) >= 1.3 * consolidated and time.perf_counter() < t_end:
+                # values over the visited beliefs at once (loops of beliefs included)
+                self._improve_upper(B)
+                self._improve_lower(B)
+                self._prune(B)
+                consolidated = len(B)
+            lo, up = float(self.lower_at(b0)[0]), float(self.upper_at(b0)[0])
+            history.append((trials, time.perf_counter() - t0, lo, up))
+        B = _unique_rows(np.array(visited), self.decimals)
+        self._prune(B)
+        lo, up = float(self.lower_at(b0)[0]), float(self.upper_at(b0)[0])
+        self.visited = B
+        return ReachableSolution(
+            self.G.copy(),
+            self.P.copy(),
+            self.v.copy(),
+            self.corners.copy(),
+            lo,
+            up,
+            trials,
+            backups,
+            time.perf_counter() - t0,
+            B,
+            history,
+        )
+
+    def q_vectors(self, beliefs: np.ndarray) -> list[list[np.ndarray]]:
+        """Q lower-bound vectors per (context, action): point backups of L at ``beliefs``, each
+        set reduced to the vectors best at one of the beliefs."""
+        N, A, Br, K = self.shape
+        _, S = self._successors_many(beliefs)
+        best = (S.reshape(-1, K) @ self.G.T).argmax(axis=1).reshape(len(beliefs), N, A, Br)
+        g = self.R[None] + self.g * np.einsum("cabtu,ncabu->ncat", self.model.kernels, self.G[best])
+        res = []
+        for c in range(N):
+            row = []
+            for a in range(A):
+                V = _unique_rows(g[:, c, a], decimals=12)
+                row.append(V[np.unique((beliefs @ V.T).argmax(axis=1))])
+            res.append(row)
+        return res
+
+    def solve(self, problem: AssistancePOMDP | FlatPOMDP) -> Policy:
+        """The policy greedy in the lower bound's Q-vectors, with the bounds at the initial belief
+        in its ``info``: an AlphaVectorPolicy for the assistance POMDP, a FlatAlphaPolicy for a
+        flat POMDP."""
+        sol = self.solve_bounds(problem)
+        K = sol.vectors.shape[1]
+        at = _unique_rows(np.vstack([sol.beliefs, np.eye(K), np.full((1, K), 1.0 / K)]))
+        qv = self.q_vectors(at)
+        info: dict[str, Any] = {
+            "solver": self.name,
+            "method": "heuristic search over reachable beliefs: alpha-vector lower bound, sawtooth upper bound",
+            "trials": sol.trials,
+            "backups": sol.backups,
+            "iterations": sol.trials,
+            "bellman_residual": float("nan"),
+            "error_bound": sol.gap,
+            "certified_gap": sol.gap,
+            "gap_at": "initial belief",
+            "target_gap": self.tol,
+            "value_bounds_at_initial_belief": [sol.lower, sol.upper],
+            "vectors": len(sol.vectors),
+            "upper_points": len(sol.points),
+            "beliefs_visited": len(sol.beliefs),
+            "seconds": sol.seconds,
+            "discount": problem.discount,
+        }
+        if isinstance(problem, FlatPOMDP):
+            return FlatAlphaPolicy(qv[0], sol.vectors, problem.states, problem.actions, info)
+        return AlphaVectorPolicy(qv, sol.vectors, problem.model, problem.complexities, "bayes", info)
+
+
+class _BlockGrid:
+    """The grid upper bound of one closed block of hidden states (Lovejoy's bound on Freudenthal's
+    triangulation, certified, as the point solver computes it); one hidden state: its exact value."""
+
+    def __init__(self, model: BranchModel, vertices: int):
+        K = model.n_hidden
+        if K == 1:
+            # one hidden state: the belief never moves, the value is the best reward per context, discounted
+            self.value = float(model.context_probs @ model.rewards[:, :, 0].max(axis=1)) / (1.0 - model.discount)
+            self.solver = None
+            return
+        r = 2
+        while comb(2 * r + K - 1, K - 1) <= vertices:
+            r *= 2
+        self.solver = PointSolver()
+        self.solver.model = model
+        V, u, lookup = self.solver._upper(r)
+        self.solver.r, self.solver.u, self.solver.lookup, self.solver.V = r, u, lookup, V
+        # two hidden states: the triangulation is the grid on [0, 1], interpolation is np.interp
+        order = np.argsort(V[:, -1])
+        self.xs, self.us = V[order, -1], u[order]
+
+    def upper_at(self, B: np.ndarray) -> np.ndarray:
+        if self.solver is None:
+            return np.full(len(B), self.value)
+        if B.shape[1] == 2:
+            return np.interp(B[:, 1], self.xs, self.us)
+        return self.solver.upper_at(B)
+
+
+def _grid_blocks(model: BranchModel, vertices: int) -> list[tuple[np.ndarray, _BlockGrid]]:
+    """The closed blocks of hidden states (no transition between blocks: e.g. the supervisor types
+    of a type mixture), each with its grid upper bound; empty when a block is too large for a grid
+    of ``vertices`` vertices at resolution 2 (the bound is then the sawtooth alone)."""
+    M = model.kernels
+    K = model.n_hidden
+    link = (M.sum(axis=(0, 1, 2)) > 0) | np.eye(K, dtype=bool)
+    n, labels = connected_components(sp.csr_matrix(link | link.T), directed=False)
+    out = []
+    for k in range(n):
+        idx = np.flatnonzero(labels == k)
+        if comb(2 + len(idx) - 1, len(idx) - 1) > vertices:
+            return []
+        sub = Branches.from_kernels(M[..., idx, :][..., idx])
+        bm = BranchModel(model.context_probs, model.rewards[..., idx], sub, model.discount, np.full(len(idx), 1.0 / len(idx)))
+        out.append((idx, _BlockGrid(bm, vertices)))
+    return out
+
+
+def _inverse(P: np.ndarray) -> np.ndarray:
+    """1 / P[i, t] as (K, points), infinite outside each point's support."""
+    with np.errstate(divide="ignore"):
+        return np.ascontiguousarray(np.where(P > 0, 1.0 / np.where(P > 0, P, 1.0), np.inf).T)
+
+
+def _phi(B: np.ndarray, inv: np.ndarray) -> np.ndarray:
+    """φ_i(b) = min over the support of point i of b(t) / b_i(t) (at most 1), for beliefs B (n, K)
+    and points given by :func:`_inverse`: (n, points).  The sawtooth bound through point i is
+    U_corners(b) + φ_i(b) (v_i - U_corners(b_i))."""
+    phi = np.full((len(B), inv.shape[1]), np.inf)
+    with np.errstate(invalid="ignore"):
+        for t in range(B.shape[1]):
+            np.fmin(phi, B[:, t, None] * inv[t][None], out=phi)  # fmin: 0 * inf (outside the support) is skipped
+    return np.minimum(phi, 1.0)
+
+
+def _phi_pairs(B: np.ndarray, P: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """φ of belief B[n] and point P[idx[n, j]]: (n, k)."""
+    Pi = P[idx]  # (n, k, K)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(Pi > 0, B[:, None, :] / np.where(Pi > 0, Pi, 1.0), np.inf)
+    return np.minimum(r.min(axis=2), 1.0)
+
+
+def _unique_rows(B: np.ndarray, decimals: int = 13) -> np.ndarray:
+    """Rows of B without near-duplicates, keeping the first occurrence and the order."""
+    _, idx = np.unique(np.round(B, decimals), axis=0, return_index=True)
+    return B[np.sort(idx)]
