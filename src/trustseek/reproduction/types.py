@@ -261,7 +261,11 @@ def types_section(
         "participants": participants,
         "fit_participants": fit_participants,
         "seed": seed,
-        "type_aware_solver": {k: info[k] for k in ("solver", "lower", "upper", "gap", "seconds") if k in info},
+        "type_aware_solver": {
+            k: info[k]
+            for k in ("solver", "certified_gap", "target_gap", "value_bounds_at_initial_belief", "seconds")
+            if k in info
+        },
         "populations": numbers,
         "verdicts": _verdicts(numbers, conservative),
     }
