@@ -17,7 +17,13 @@ from trustseek.simulation.engine import simulate
 @pytest.fixture(scope="module")
 def section():
     return types_section(
-        paper_conservative_mixture(0.5), participants=300, block_counts=((10, 10),), fit_participants=40, restarts=1, seed=3
+        paper_conservative_mixture(0.5),
+        participants=300,
+        block_counts=((10, 10),),
+        fit_participants=40,
+        restarts=1,
+        seed=3,
+        gap=0.1,
     )
 
 
@@ -72,13 +78,15 @@ def test_a_one_type_mixture_makes_the_type_aware_policy_the_single_type_one():
     """With one type the type-aware policy plans for that type alone: on the one-type population it
     earns what that type's own (oracle) policy earns, person by person."""
     mix = TypeMixture.single(paper_conservative_mixture().models[0], "paper")
-    sec = types_section(mix, participants=200, block_counts=((8, 8),), fit_participants=30, restarts=1, seed=1)
+    sec = types_section(mix, participants=200, block_counts=((8, 8),), fit_participants=30, restarts=1, seed=1, gap=0.1)
     for runs in sec.runs:
         assert np.allclose(runs.rewards[TYPE_AWARE], runs.rewards[ORACLE])
 
 
 def test_compare_types_command():
-    code, out = run_cli(["compare-types", "-n", "100", "--fit-participants", "20", "--restarts", "1", "-b", "5/5", "--json"])
+    code, out = run_cli(
+        ["compare-types", "-n", "100", "--fit-participants", "20", "--restarts", "1", "-b", "5/5", "--gap", "0.1", "--json"]
+    )
     assert code == 0, out
     assert json.loads(out)["participants"] == 100
 

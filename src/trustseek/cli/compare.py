@@ -45,6 +45,10 @@ def compare_types(
         ["17/17", "68/68"], "--block", "-b", help="Trials per complexity in a block (repeat for several lengths)."
     ),
     restarts: int = typer.Option(4, "--restarts", min=1, help="EM restarts of the pooled fit."),
+    gap: float = typer.Option(
+        0.03, "--gap", min=0.0, help="Certified bound gap of each trust-aware solve at its initial belief."
+    ),
+    max_seconds: float = typer.Option(30.0, "--max-seconds", min=0.0, help="Time limit of each solve (the gap reached is kept)."),
     seed: int = typer.Option(0, "--seed", help="Seed of every simulation and fit."),
     plot: Path | None = typer.Option(None, "--plot", help="Write the figure to this PNG file."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
@@ -71,6 +75,8 @@ def compare_types(
             fit_participants=fit_participants,
             restarts=restarts,
             seed=seed,
+            gap=gap,
+            max_seconds=max_seconds,
             progress=lambda _s: bar.advance(tid),
         )
     if plot is not None:
