@@ -218,8 +218,9 @@ def types_section(
     # every trust-aware policy comes from the same solver, so that the paired differences are
     # those of the models planned for, not of the solvers
     def plan(m: TypeMixture | TrustModel) -> Policy:
-        options = {"gap": gap, "max_seconds": max_seconds}
-        return solve_type_aware(m, task, **options) if solver is None else solve_type_aware(m, task, solver=solver, **options)
+        if solver is None:
+            return solve_type_aware(m, task, gap=gap, max_seconds=max_seconds)
+        return solve_type_aware(m, task, solver=solver, gap=gap, max_seconds=max_seconds)
 
     pooled = plan(pooled_model)
     agnostic = trust_agnostic_from_data(frame, task)
