@@ -46,6 +46,7 @@ from . import kernels
 from .convergence import converge
 from .em import STATIONARY, RunResult, run_em
 from .estep import EStep, Workspace
+from .fit import never_estimated
 from .iohmm import FINISH_FTOL, FINISH_SWITCH, fit_iohmm
 from .quasi_newton import Sticks, _Part
 from .sequences import Sequences, encode
@@ -372,6 +373,7 @@ class MixtureFit:
     best: int
     names: tuple[str, ...]
     warnings: list[str] = field(default_factory=list)
+    not_estimated: tuple[tuple[str, tuple[int, ...]], ...] = ()  # TrustModel rows no trial informs (as the pooled fit)
 
     @property
     def n_types(self) -> int:
@@ -424,7 +426,8 @@ class MixtureFit:
 
     def models(self) -> list[TrustModel]:
         check_convertible(self.spec)
-        return [to_trust_model(self.spec, self.params.type_params(m)) for m in range(self.n_types)]
+        models = [to_trust_model(self.spec, self.params.type_params(m)) for m in range(self.n_types)]
+        return [m.replace(not_estimated=self.not_estimated) for m in models] if self.not_estimated else models
 
     def mixture(self, notes: str = "") -> TypeMixture:
         """The types as a :class:`~trustseek.model.mixture.TypeMixture` (JSON ``trustseek-mixture/1``)."""
@@ -612,7 +615,7 @@ def fit_types(
         if progress is not None:
             progress(done, restarts)
 
-    return fit_mixture(
+    fit = fit_mixture(
         seqs,
         spec,
         types,
@@ -625,6 +628,8 @@ def fit_types(
         n_jobs=n_jobs,
         on_restart=tick,
     )
+    fit.not_estimated = never_estimated(frame, spec)
+    return fit
 
 
 def mixture_params(mixture: TypeMixture) -> tuple[IOHMMSpec, MixtureParams]:

@@ -283,6 +283,9 @@ def personalize(
                 raise FitError([f"strength must be a finite number >= 0, got {value!r}"])
             s_tab[name], bound[name] = float(value), False
         params, runs = fit_with(s_tab)
+    # rows no trial of the log reaches are the structure's defaults during the fit: the centre's instead
+    params.emission[:, base.em.empty] = centre.emission[:, base.em.empty]
+    params.transition[:, base.tr.empty] = centre.transition[:, base.tr.empty]
     models = [to_trust_model(spec, params.take(n)) for n in range(N)]
     warnings = [
         f"{name}: the strength is at its bound ({s_tab[name]:.3g}): the data show no individual differences there"
