@@ -25,9 +25,10 @@ from . import serve  # serve, export
 from . import sensitivity  # sensitivity
 from . import schedule  # schedule
 from . import design  # design
+from . import types  # fit-types, select-types, personalize
 # isort: on
 
-COMMAND_MODULES = (simulate, fit, plan, interop, serve, sensitivity, schedule, design)
+COMMAND_MODULES = (simulate, fit, plan, interop, serve, sensitivity, schedule, design, types)
 
 #: the optional extras of pyproject.toml, by the top-level module of each of their packages
 EXTRAS = {
