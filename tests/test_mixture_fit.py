@@ -13,6 +13,7 @@ from trustseek.estimation.mixture import (
     MixtureParams,
     MixtureStructure,
     MixtureWorkspace,
+    bootstrap_types,
     decode_types,
     fit_mixture,
     fit_types,
@@ -216,3 +217,17 @@ def test_selection_warns_at_the_limit():
 def test_conservative_preset_differs_from_the_paper_in_low_complexity():
     assert conservative_model().emission[0, 0, 0, 1] < paper_model().emission[0, 0, 0, 1] - 0.2
     assert EMPTY < 1
+
+
+def test_bootstrap_intervals_contain_the_estimate_and_do_not_depend_on_processes():
+    df = mixed(30, seed=9)[2]
+    fit = fit_types(df, 2, restarts=2, seed=0, tol=1e-6)
+    one = bootstrap_types(fit, 3, seed=1, restarts=1, n_jobs=1)
+    two = bootstrap_types(fit, 3, seed=1, restarts=1, n_jobs=2)
+    for m, (name, model) in enumerate(zip(fit.names, fit.models(), strict=True)):
+        for table in ("initial", "emission", "transition"):
+            lo, hi = one.cells[name][table]
+            est = np.asarray(getattr(model, table))
+            assert np.all(lo <= est + 1e-12) and np.all(est <= hi + 1e-12)
+            np.testing.assert_array_equal(lo, two.cells[name][table][0])
+        assert one.weights[name][0] <= fit.weights[m] <= one.weights[name][1]
