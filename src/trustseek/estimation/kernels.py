@@ -61,7 +61,7 @@ def njit(**options: Any) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     return numba.njit(**options)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _forward(r, n, initial, emit, trans, eidx, tidx, L, alpha, scale):
     """Scaled forward pass of sequence ``n`` under parameter set ``r`` into ``alpha`` and ``scale``;
     its log-probability (-inf: zero)."""
@@ -107,7 +107,7 @@ def _forward(r, n, initial, emit, trans, eidx, tidx, L, alpha, scale):
     return total
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _backward(r, n, emit, trans, eidx, tidx, L, weight, c_init, c_emit, c_trans, alpha, beta, scale, tmp):
     """Backward pass of sequence ``n`` after :func:`_forward`: its posterior counts times ``weight`` added."""
     K = alpha.shape[1]
@@ -146,7 +146,7 @@ def _sequence(r, n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans
     return total
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _forward2(n, initial, emit, trans, eidx, tidx, L, alpha):
     """The forward pass of :func:`_sequence2` into ``alpha`` (unnormalised, rescaled by 2**RESCALE
     where needed); the log-probability of sequence ``n`` (-inf: zero)."""
@@ -180,7 +180,7 @@ def _forward2(n, initial, emit, trans, eidx, tidx, L, alpha):
     return math.log(a0 + a1) - shifts * LOG_HUGE
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _backward2(n, emit, trans, eidx, tidx, L, weight, c_init, c_emit, c_trans, alpha):
     """The backward pass of :func:`_sequence2` after :func:`_forward2`: the posterior counts of
     sequence ``n`` times ``weight`` added (the weight enters each trial's normaliser, so a
