@@ -260,7 +260,9 @@ def fit(
 @app.command("decode", rich_help_panel="Estimate")
 def decode_cmd(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
-    model: Path = typer.Option(..., "--model", "-m", help="Trust model JSON (e.g. from 'trustseek fit')."),
+    model: Path = typer.Option(
+        ..., "--model", "-m", help="Trust model JSON (from 'trustseek fit') or supervisor types (from 'trustseek fit-types')."
+    ),
     out: Path = typer.Option(Path("posteriors.csv"), "--out", "-o", help="Output file (.csv or .parquet)."),
     mapping: Path | None = MappingOpt,
     column: list[str] | None = ColumnOpt,
@@ -271,13 +273,24 @@ def decode_cmd(
 ) -> None:
     """Per-trial smoothed P(trust | data) and the Viterbi trust path under a model.
 
+    Under supervisor types, also each participant's most probable ``type`` and P(type | trials)
+    (``p_type_<name>``); the trust posteriors are averaged over the types.
+
     The log needs the columns the model depends on: a model fitted with fewer inputs
     (--transitions-on/--emissions-on) decodes a log without the others."""
     check_output(out, "--out", POSTERIOR_SUFFIXES)
-    m = TrustModel.load(model)
-    used = model_inputs(m)
+    from ..model.mixture import TypeMixture
+
+    types = TypeMixture.load(model)  # a plain model is one type
+    m = types.models[0]
+    used = tuple(dict.fromkeys(c for t in types.models for c in model_inputs(t)))
     frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), m, used)
-    post = keep_columns(_fit().decode(frame, m), frame, keep)
+    if types.n_types == 1:
+        post = keep_columns(_fit().decode(frame, m), frame, keep)
+    else:  # supervisor types: P(type | trials) per participant and the type-averaged trust posteriors
+        from ..estimation.mixture import decode_types
+
+        post = keep_columns(decode_types(frame, types), frame, keep)
     with atomic_output(out) as tmp:
         _data().write_trials(post, tmp)
     console.print(f"wrote {len(post)} trials to {out}")

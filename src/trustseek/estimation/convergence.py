@@ -19,7 +19,7 @@ from dataclasses import replace
 
 from .em import CAPPED, STATIONARY, RunResult, run_em
 from .estep import Workspace
-from .quasi_newton import finish
+from .quasi_newton import Sticks, finish
 from .spec import Params
 from .structure import Structure
 
@@ -49,6 +49,7 @@ def converge(
     finish_tol: float,
     quasi_newton: bool = True,
     accelerate: bool = True,
+    sticks: Sticks | None = None,
 ) -> RunResult:
     """Carry ``run`` (an EM run to ``em_tol``) to a stationary point or to ``max_iter`` E-steps.
 
@@ -56,13 +57,13 @@ def converge(
     ``quasi_newton``), then the check: when one EM step from the end point gains more
     than ``tol`` (relative), EM goes on from that step's point to ``em_tol`` and the
     next round begins.  ``ended`` is :data:`~.em.STATIONARY` (``converged``) or
-    :data:`~.em.CAPPED`; the objective history never decreases.
+    :data:`~.em.CAPPED`; the objective history never decreases.  ``sticks`` is passed to the finish.
     """
     t0 = time.perf_counter()
     seconds = run.seconds
     while True:
         if quasi_newton:
-            run = finish(structure, work, run, tol=finish_tol, max_iter=max_iter)
+            run = finish(structure, work, run, tol=finish_tol, max_iter=max_iter, sticks=sticks)
         if run.iterations + CHECK_STEPS > max_iter or not math.isfinite(run.objective):
             return _ended(run, CAPPED, seconds, t0)
         f, q, fq = em_step(structure, work, run.params)

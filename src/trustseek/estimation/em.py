@@ -117,7 +117,7 @@ def run_em(
     def small(fa: np.ndarray, fb: np.ndarray) -> np.ndarray:
         return (fb - fa) <= tol * np.abs(fa)
 
-    p0 = Params.stack(starts)
+    p0 = type(starts[0]).stack(starts)  # a subclass (e.g. a mixture's tables) stacks its own way
     st0, f0 = evaluate(p0)
     if not np.all(np.isfinite(f0)):
         raise FitError(["the initial values give the data probability zero"])

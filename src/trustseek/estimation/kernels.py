@@ -61,9 +61,10 @@ def njit(**options: Any) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     return numba.njit(**options)
 
 
-@njit(cache=True, nogil=True)
-def _sequence(r, n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans, alpha, beta, scale, tmp):
-    """Add the posterior counts of sequence ``n`` under parameter set ``r``; its log-probability (-inf: zero)."""
+@njit(cache=True, nogil=True, inline="always")
+def _forward(r, n, initial, emit, trans, eidx, tidx, L, alpha, scale):
+    """Scaled forward pass of sequence ``n`` under parameter set ``r`` into ``alpha`` and ``scale``;
+    its log-probability (-inf: zero)."""
     K = initial.shape[1]
     # forward, scaled: alpha[t] = P(S_t | y_1..t), 1 / scale[t] = P(y_t | y_<t) <= 1;
     # the scales are multiplied up and their log taken only before underflow
@@ -103,9 +104,16 @@ def _sequence(r, n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans
         for j in range(K):
             alpha[t, j] *= inv
     total += math.log(prod)
-    # backward, scaled like alpha: gamma_t = alpha_t * beta_t sums to 1
+    return total
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _backward(r, n, emit, trans, eidx, tidx, L, weight, c_init, c_emit, c_trans, alpha, beta, scale, tmp):
+    """Backward pass of sequence ``n`` after :func:`_forward`: its posterior counts times ``weight`` added."""
+    K = alpha.shape[1]
+    # backward, scaled like alpha: gamma_t = alpha_t * beta_t sums to ``weight``
     for k in range(K):
-        beta[L - 1, k] = 1.0
+        beta[L - 1, k] = weight
     for t in range(L - 1, 0, -1):
         e = eidx[n, t]
         u = tidx[n, t - 1]
@@ -126,18 +134,22 @@ def _sequence(r, n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans
             c_emit[e, k] += alpha[t, k] * beta[t, k]
     for k in range(K):
         c_init[k] += alpha[0, k] * beta[0, k]
-    return total
 
 
 @njit(cache=True, nogil=True)
-def _sequence2(n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans, alpha):
-    """:func:`_sequence` for K = 2 levels, with the 2-vectors and 2x2 matrices in registers.
+def _sequence(r, n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans, alpha, beta, scale, tmp):
+    """Add the posterior counts of sequence ``n`` under parameter set ``r``; its log-probability (-inf: zero)."""
+    total = _forward(r, n, initial, emit, trans, eidx, tidx, L, alpha, scale)
+    if not total > -math.inf:
+        return total
+    _backward(r, n, emit, trans, eidx, tidx, L, 1.0, c_init, c_emit, c_trans, alpha, beta, scale, tmp)
+    return total
 
-    The forward and backward vectors are not normalised at every trial (a division on
-    the path from one trial to the next) but multiplied by 2**RESCALE (exact) when the
-    forward sum, or the sum of forward times backward, falls below 2**-RESCALE; the
-    posteriors are normalised trial by trial off that path.
-    """
+
+@njit(cache=True, nogil=True, inline="always")
+def _forward2(n, initial, emit, trans, eidx, tidx, L, alpha):
+    """The forward pass of :func:`_sequence2` into ``alpha`` (unnormalised, rescaled by 2**RESCALE
+    where needed); the log-probability of sequence ``n`` (-inf: zero)."""
     e = eidx[n, 0]
     a0 = initial[0] * emit[e, 0]
     a1 = initial[1] * emit[e, 1]
@@ -165,11 +177,18 @@ def _sequence2(n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans, 
             shifts += 1
         alpha[t, 0] = a0
         alpha[t, 1] = a1
-    total = math.log(a0 + a1) - shifts * LOG_HUGE
+    return math.log(a0 + a1) - shifts * LOG_HUGE
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _backward2(n, emit, trans, eidx, tidx, L, weight, c_init, c_emit, c_trans, alpha):
+    """The backward pass of :func:`_sequence2` after :func:`_forward2`: the posterior counts of
+    sequence ``n`` times ``weight`` added (the weight enters each trial's normaliser, so a
+    weight of 1 adds exactly the unweighted counts)."""
     # backward: beta in (g0, g1), rescaled like alpha; gamma and xi normalised per trial
     g0 = 1.0
     g1 = 1.0
-    z = 1.0 / (a0 + a1)  # 1 / sum(alpha_t * beta_t) at t = L - 1
+    z = weight / (alpha[L - 1, 0] + alpha[L - 1, 1])  # weight / sum(alpha_t * beta_t) at t = L - 1
     for t in range(L - 1, 0, -1):
         e = eidx[n, t]
         u = tidx[n, t - 1]
@@ -196,7 +215,7 @@ def _sequence2(n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans, 
             w10 *= HUGE
             w11 *= HUGE
             z *= HUGE
-        z = 1.0 / z
+        z = weight / z
         p0 *= z
         p1 *= z
         c_trans[u, 0, 0] += p0 * w00
@@ -210,6 +229,21 @@ def _sequence2(n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans, 
     c_emit[e, 1] += q1
     c_init[0] += q0
     c_init[1] += q1
+
+
+@njit(cache=True, nogil=True)
+def _sequence2(n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans, alpha):
+    """:func:`_sequence` for K = 2 levels, with the 2-vectors and 2x2 matrices in registers.
+
+    The forward and backward vectors are not normalised at every trial (a division on
+    the path from one trial to the next) but multiplied by 2**RESCALE (exact) when the
+    forward sum, or the sum of forward times backward, falls below 2**-RESCALE; the
+    posteriors are normalised trial by trial off that path.
+    """
+    total = _forward2(n, initial, emit, trans, eidx, tidx, L, alpha)
+    if not total > -math.inf:
+        return total
+    _backward2(n, emit, trans, eidx, tidx, L, 1.0, c_init, c_emit, c_trans, alpha)
     return total
 
 
@@ -279,6 +313,105 @@ def estep_items(first, last, C, chunk, initial, emit, trans, eidx, tidx, lengths
             pe[r, c] = 0.0
             pt[r, c] = 0.0
             ll[r, c] = _item(r, lo, min(N, lo + chunk), initial, emit, trans, eidx, tidx, lengths, pi[r, c], pe[r, c], pt[r, c])
+
+
+@njit(cache=True, nogil=True)
+def _mixture_item(r, lo, hi, M, initial, emit, trans, eidx, tidx, lengths, c_init, c_emit, c_trans, seq_ll):
+    """Sequences ``lo:hi`` under the M types of parameter set ``r`` (sets ``r * M + m``): per sequence
+    the forward pass of every type, the type responsibilities, then each type's backward pass
+    with its responsibility as the weight.  A type's ``initial`` row is the joint P(type, S_1)
+    (it sums to the type's weight; all zero: an empty type, skipped), so the forward pass gives
+    log P(sequence, type).  Counts go to ``c_*[m]``; log P(sequence n, type m) to
+    ``seq_ll[m, n]``; returns the mixture log-probability of the sequences (-inf: zero)."""
+    K = initial.shape[1]
+    T = eidx.shape[1]
+    alpha = np.empty((M, max(T, 1), K))
+    beta = np.empty((max(T, 1), K))
+    scale = np.empty((M, max(T, 1)))
+    tmp = np.empty(K)
+    v = np.empty(M)
+    total = 0.0
+    for n in range(lo, hi):
+        L = lengths[n]
+        if L <= 0:
+            for m in range(M):
+                seq_ll[m, n] = 0.0
+            continue
+        best = -math.inf
+        for m in range(M):
+            q = r * M + m
+            if K == 2:
+                lm = _forward2(n, initial[q], emit[q], trans[q], eidx, tidx, L, alpha[m])
+            else:
+                lm = _forward(q, n, initial, emit, trans, eidx, tidx, L, alpha[m], scale[m])
+            seq_ll[m, n] = lm
+            v[m] = lm
+            if v[m] > best:
+                best = v[m]
+        if not best > -math.inf:
+            return -math.inf
+        s = 0.0
+        for m in range(M):
+            s += math.exp(v[m] - best)
+        lse = best + math.log(s)
+        total += lse
+        for m in range(M):
+            w = math.exp(v[m] - lse)
+            if w > 0.0:
+                q = r * M + m
+                if K == 2:
+                    _backward2(n, emit[q], trans[q], eidx, tidx, L, w, c_init[m], c_emit[m], c_trans[m], alpha[m])
+                else:
+                    cm = (c_init[m], c_emit[m], c_trans[m])
+                    _backward(q, n, emit, trans, eidx, tidx, L, w, cm[0], cm[1], cm[2], alpha[m], beta, scale[m], tmp)
+    return total
+
+
+@njit(cache=True, nogil=True)
+def mixture_items(first, last, C, chunk, M, initial, emit, trans, eidx, tidx, lengths, active, ll, pi, pe, pt, seq_ll):
+    """Items ``first:last`` of a mixture E-step (item = r * C + c) into their own sums: ``ll`` (R, C),
+    ``pi`` (R, C, M, K), ``pe`` (R, C, M, PE, K), ``pt`` (R, C, M, P, K, K); ``seq_ll`` (R, M, N)."""
+    N = eidx.shape[0]
+    for item in range(first, last):
+        r = item // C
+        c = item % C
+        if active[r]:
+            lo = c * chunk
+            pi[r, c] = 0.0
+            pe[r, c] = 0.0
+            pt[r, c] = 0.0
+            ll[r, c] = _mixture_item(
+                r, lo, min(N, lo + chunk), M, initial, emit, trans, eidx, tidx, lengths, pi[r, c], pe[r, c], pt[r, c], seq_ll[r]
+            )
+
+
+@njit(cache=True, nogil=True)
+def each_items(lo, hi, pidx, initial, emit, trans, eidx, tidx, lengths, active, ll, ci, ce, ct):
+    """Sequences ``lo:hi``, sequence n under parameter set ``pidx[n]``, each into its own counts
+    ``ci[n]``, ``ce[n]``, ``ct[n]`` and log-probability ``ll[n]`` (skipped where ``active[n]`` is false)."""
+    K = initial.shape[1]
+    T = eidx.shape[1]
+    alpha = np.empty((max(T, 1), K))
+    beta = np.empty((max(T, 1), K))
+    scale = np.empty(max(T, 1))
+    tmp = np.empty(K)
+    for n in range(lo, hi):
+        ci[n] = 0.0
+        ce[n] = 0.0
+        ct[n] = 0.0
+        ll[n] = 0.0
+        L = lengths[n]
+        if not active[n] or L <= 0:
+            continue
+        q = pidx[n]
+        if K == 2:
+            ll[n] = _sequence2(n, initial[q], emit[q], trans[q], eidx, tidx, L, ci[n], ce[n], ct[n], alpha)
+        else:
+            ll[n] = _sequence(q, n, initial, emit, trans, eidx, tidx, L, ci[n], ce[n], ct[n], alpha, beta, scale, tmp)
+        if not ll[n] > -math.inf:
+            ci[n] = 0.0
+            ce[n] = 0.0
+            ct[n] = 0.0
 
 
 _POOL: ThreadPoolExecutor | None = None
@@ -365,13 +498,109 @@ class Kernel:
         _reduce(act, *args[-4:], ll, ci, ce, ct)
         return ll, ci, ce, ct
 
+    def _active(self, R: int, active: np.ndarray | None) -> np.ndarray:
+        if active is None:
+            if len(self.every) < R:
+                self.every = np.ones(R, dtype=np.bool_)
+            return self.every[:R]
+        return np.ascontiguousarray(active, dtype=np.bool_)
 
-def _run_items(items: list[int], C: int, args: tuple) -> None:
+    def run_mixture(
+        self, initial: np.ndarray, emit: np.ndarray, trans: np.ndarray, M: int, active: np.ndarray | None = None
+    ) -> tuple[np.ndarray, ...]:
+        """The E-step of R mixtures of M types: tables with a leading axis R * M (type m of set r
+        at r * M + m; ``initial`` the joint P(type, S_1)).  Returns the mixture log-likelihood (R,),
+        the per-type counts weighted by the type responsibilities, initial (R, M, K), emission
+        (R, M, PE, K), transition (R, M, P, K, K), and log P(sequence n, type m), (R, M, N)."""
+        RM, K = initial.shape
+        R = RM // M
+        C = self.C
+        N = self.eidx.shape[0]
+        act = self._active(R, active)
+        key = -(R * 1000 + M)
+        parts = self._partials.get(key)
+        if parts is None:
+            parts = self._partials[key] = (
+                np.empty((R, C)),
+                np.empty((R, C, M, K)),
+                np.empty((R, C, M, self.PE, K)),
+                np.empty((R, C, M, self.P, K, K)),
+            )
+        seq_ll = np.zeros((R, M, N))
+        args = (
+            M,
+            np.ascontiguousarray(initial, dtype=np.float64),
+            np.ascontiguousarray(emit, dtype=np.float64),
+            np.ascontiguousarray(trans, dtype=np.float64),
+            self.eidx,
+            self.tidx,
+            self.lengths,
+            act,
+            *parts,
+            seq_ll,
+        )
+        n_active = int(act.sum())
+        if self.threads > 1 and n_active * C > 1 and self.trials * n_active * M >= PARALLEL_MIN:
+            items = [r * C + c for r in np.flatnonzero(act) for c in range(C)]
+            bounds = np.linspace(0, len(items), min(self.threads, len(items)) + 1).astype(int)
+            pool = _pool(len(bounds) - 1)
+            futures = [pool.submit(_run_items, items[a:b], C, args, mixture_items) for a, b in itertools.pairwise(bounds)]
+            for f in futures:
+                f.result()
+        else:
+            mixture_items(0, R * C, C, CHUNK, *args)
+        ll = np.empty(R)
+        ci = np.empty((R, M, K))
+        ce = np.empty((R, M, self.PE, K))
+        ct = np.empty((R, M, self.P, K, K))
+        _reduce(act, *parts, ll, ci, ce, ct)
+        return ll, ci, ce, ct, seq_ll
+
+    def run_each(
+        self, pidx: np.ndarray, initial: np.ndarray, emit: np.ndarray, trans: np.ndarray, active: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Sequence n under parameter set ``pidx[n]``, each with its own counts: log-likelihood (N,),
+        initial (N, K), emission (N, PE, K) and transition (N, P, K, K) counts (zero where
+        ``active[n]`` is false or the sequence has probability zero, with -inf)."""
+        N = self.eidx.shape[0]
+        K = initial.shape[1]
+        act = self._active(N, active)
+        ll = np.empty(N)
+        ci = np.empty((N, K))
+        ce = np.empty((N, self.PE, K))
+        ct = np.empty((N, self.P, K, K))
+        args = (
+            np.ascontiguousarray(pidx, dtype=np.int64),
+            np.ascontiguousarray(initial, dtype=np.float64),
+            np.ascontiguousarray(emit, dtype=np.float64),
+            np.ascontiguousarray(trans, dtype=np.float64),
+            self.eidx,
+            self.tidx,
+            self.lengths,
+            act,
+            ll,
+            ci,
+            ce,
+            ct,
+        )
+        work = int(self.lengths[act].sum()) if active is not None else self.trials
+        if self.threads > 1 and N > CHUNK and work >= PARALLEL_MIN:
+            bounds = np.linspace(0, N, min(self.threads, N) + 1).astype(int)
+            pool = _pool(len(bounds) - 1)
+            futures = [pool.submit(each_items, a, b, *args) for a, b in itertools.pairwise(bounds)]
+            for f in futures:
+                f.result()
+        else:
+            each_items(0, N, *args)
+        return ll, ci, ce, ct
+
+
+def _run_items(items: list[int], C: int, args: tuple, kernel: Callable[..., Any] = estep_items) -> None:
     """The items of one thread, as runs of consecutive items."""
     i = 0
     while i < len(items):
         j = i + 1
         while j < len(items) and items[j] == items[j - 1] + 1:
             j += 1
-        estep_items(items[i], items[j - 1] + 1, C, CHUNK, *args)
+        kernel(items[i], items[j - 1] + 1, C, CHUNK, *args)
         i = j

@@ -149,7 +149,9 @@ class _Best:
             self.objective, self.params, self.loglik = hit
 
 
-def finish(structure: Structure, work: Workspace, run: RunResult, tol: float = 1e-8, max_iter: int = 1000) -> RunResult:
+def finish(
+    structure: Structure, work: Workspace, run: RunResult, tol: float = 1e-8, max_iter: int = 1000, sticks: Sticks | None = None
+) -> RunResult:
     """Continue a run with L-BFGS-B on the stick-breaking fractions of the free cells.
 
     Every iterate of L-BFGS-B decreases the negated objective, and the result is kept
@@ -157,11 +159,12 @@ def finish(structure: Structure, work: Workspace, run: RunResult, tol: float = 1
     decreases.  It stops when the relative change per iteration falls below ``tol``,
     which on a badly scaled stretch of the likelihood can happen short of a stationary
     point (:mod:`.convergence` checks and goes on); iterations count E-steps, within
-    ``max_iter`` in total.
+    ``max_iter`` in total.  ``sticks``: the free cells' layout, when not the structure's own
+    (a mixture's tables).
     """
     t0 = time.perf_counter()
     budget = max_iter - run.iterations
-    sticks = Sticks(structure)
+    sticks = Sticks(structure) if sticks is None else sticks
     if budget < 2 or sticks.size == 0 or not math.isfinite(run.objective):
         return run
     base = run.params

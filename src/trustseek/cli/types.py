@@ -1,0 +1,296 @@
+"""Supervisor-type commands: fit-types, select-types, personalize."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+from rich.markup import escape
+from rich.table import Table
+
+from ..errors import TrustseekError
+from ._app import (
+    ColumnOpt,
+    DelimiterOpt,
+    LabelOpt,
+    MappingOpt,
+    MissingOpt,
+    QuietOpt,
+    app,
+    atomic_output,
+    check_output,
+    check_outputs,
+    check_tol,
+    console,
+    print_json,
+    progress_bar,
+    read_log,
+)
+
+POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
+DifferOpt = typer.Option(
+    "all",
+    "--differ",
+    help="What differs between types: 'all', or some of initial,emission,transition (the rest is shared by every type).",
+)
+
+
+def _mixture():
+    from ..estimation import mixture
+
+    return mixture
+
+
+def _log(log, mapping, column, label, missing, delimiter):
+    return read_log(log, mapping, column, label, ("complexity", "robot_action", "experience"), missing, delimiter)
+
+
+def parse_types(text: str) -> tuple[int, ...]:
+    """``1..4`` or ``1,2,3``: the numbers of types to compare."""
+    try:
+        if ".." in text:
+            a, b = text.split("..", 1)
+            values = tuple(range(int(a), int(b) + 1))
+        else:
+            values = tuple(int(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise TrustseekError([f"--types: expected e.g. 1..4 or 1,2,3, got {text!r}"]) from None
+    if not values or min(values) < 1 or max(values) > 12:
+        raise TrustseekError([f"--types: numbers of types between 1 and 12, e.g. 1..4; got {text!r}"])
+    return values
+
+
+@app.command("fit-types", rich_help_panel="Estimate")
+def fit_types(
+    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
+    types: int = typer.Option(2, "--types", "-m", min=1, max=12, help="Number of supervisor types."),
+    differ: str = DifferOpt,
+    restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Starts (half from the perturbed pooled fit, half random)."),
+    bootstrap: int = typer.Option(0, "--bootstrap", "-b", min=0, help="Participant bootstrap resamples for 95% intervals."),
+    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative log-likelihood tolerance (> 0)."),
+    max_iter: int = typer.Option(1000, "--max-iter", min=1, help="E-step cap per start."),
+    jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads (fit) and processes (bootstrap)."),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Write the types (JSON trustseek-mixture/1)."),
+    type_posteriors: Path | None = typer.Option(
+        None, "--type-posteriors", help="Write P(type | trials) per participant (CSV/Parquet)."
+    ),
+    plots: Path | None = typer.Option(None, "--plots", help="Write per-type figures into this directory."),
+    as_json: bool = typer.Option(False, "--json", help="Print the fit as one JSON object."),
+    mapping: Path | None = MappingOpt,
+    column: list[str] | None = ColumnOpt,
+    label: list[str] | None = LabelOpt,
+    missing: list[str] | None = MissingOpt,
+    delimiter: str | None = DelimiterOpt,
+    quiet: bool = QuietOpt,
+) -> None:
+    """Fit supervisor types: M trust models of the paper's structure, each participant one type."""
+    check_outputs((out, "--out"), (type_posteriors, "--type-posteriors"))
+    check_output(type_posteriors, "--type-posteriors", POSTERIOR_SUFFIXES)
+    if plots is not None and plots.exists() and not plots.is_dir():
+        raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
+    mx = _mixture()
+    mx.parse_differ(differ)
+    frame = _log(log, mapping, column, label, missing, delimiter)
+    bar = progress_bar(quiet or as_json)
+    with bar:
+        task = bar.add_task("starts", total=restarts)
+        fit = mx.fit_types(
+            frame,
+            types,
+            restarts=restarts,
+            seed=seed,
+            differ=differ,
+            tol=tol,
+            max_iter=max_iter,
+            n_jobs=jobs,
+            progress=lambda d, t: bar.update(task, completed=d, total=t),
+        )
+        intervals = None
+        if bootstrap > 0:
+            task = bar.add_task("bootstrap", total=bootstrap)
+            intervals = mx.bootstrap_types(
+                fit, bootstrap, seed=seed, n_jobs=jobs, progress=lambda d, t: bar.update(task, completed=d, total=t)
+            )
+    from ..estimation.selection import reached_best
+
+    mixture = fit.mixture()
+    if out is not None:
+        with atomic_output(out) as tmp:
+            mixture.save(tmp)
+    post = fit.posterior_frame()
+    if type_posteriors is not None:
+        from ..data.trials import write_trials
+
+        with atomic_output(type_posteriors) as tmp:
+            write_trials(post, tmp)
+    if plots is not None:
+        from ..plots.types import plot_types
+
+        written = plot_types(mixture, plots, None if intervals is None else intervals.cells)
+    if as_json:
+        d = fit.to_dict()
+        d["mixture"] = mixture.to_dict()
+        d["type_counts"] = post["type"].value_counts().reindex(list(fit.names), fill_value=0).to_dict()
+        if intervals is not None:
+            d["weight_intervals"] = intervals.weights
+            d["intervals"] = {
+                n: {t: {"lower": lo.tolist(), "upper": hi.tolist()} for t, (lo, hi) in c.items()}
+                for n, c in intervals.cells.items()
+            }
+        print_json(d)
+        return
+    table = Table(
+        title=f"{fit.n_types} supervisor types ({fit.seqs.n_participants} participants, {fit.seqs.n_trials} trials; "
+        f"{', '.join(fit.differ)} differ)",
+        title_justify="left",
+    )
+    m0 = mixture.models[0]
+    cells = [(i, k) for i in range(len(m0.complexities)) for k in range(len(m0.trust_levels))]
+    table.add_column("type")
+    for col in ("weight", "people", "P(T1=high)"):
+        table.add_column(col, justify="right")
+    for i, k in cells:
+        table.add_column(f"rely C={m0.complexities[i]} T={m0.trust_levels[k]}", justify="right")
+    counts = post["type"].value_counts()
+    for name, w, m in zip(fit.names, fit.weights, mixture.models, strict=True):
+        weight = f"{w:.3f}"
+        if intervals is not None:
+            lo, hi = intervals.weights[name]
+            weight += escape(f" [{lo:.2f}, {hi:.2f}]")
+        rely = [f"{m.emission[i, 0, k, 1]:.2f}" for i, k in cells]
+        table.add_row(name, weight, str(int(counts.get(name, 0))), f"{m.initial[-1]:.2f}", *rely)
+    console.print(table)
+    lls = ", ".join(f"{x:.3f}" for x in sorted(fit.restart_logliks, reverse=True))
+    console.print(
+        f"log-likelihood {fit.loglik:.4f}; {fit.n_params} free parameters; AIC {fit.aic:.2f}; BIC {fit.bic:.2f}\n"
+        f"starts (best first): {lls}; {reached_best(fit.restart_logliks)} of {len(fit.runs)} within 0.01 of the best",
+        highlight=False,
+    )
+    console.print(
+        "people: participants whose most probable type it is; rely: P(rely | T, C, autonomous); types are ordered "
+        "by their mean P(rely) over the estimated emission rows, lowest first",
+        highlight=False,
+    )
+    for w in fit.warnings:
+        console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
+    if out is not None:
+        console.print(f"types written to {out}")
+    if type_posteriors is not None:
+        console.print(f"type posteriors written to {type_posteriors}")
+    if plots is not None:
+        console.print(f"figures written to {', '.join(str(p) for p in written)}")
+
+
+@app.command("select-types", rich_help_panel="Estimate")
+def select_types(
+    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
+    types: str = typer.Option("1..4", "--types", help="Numbers of types to compare, e.g. 1..4 or 1,2,3."),
+    differ: str = DifferOpt,
+    folds: int = typer.Option(5, "--folds", min=2, help="Folds over participants for the held-out log-likelihood."),
+    restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Starts per fit (and the fit with one type fewer, split)."),
+    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
+    jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads per fit."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+    mapping: Path | None = MappingOpt,
+    column: list[str] | None = ColumnOpt,
+    label: list[str] | None = LabelOpt,
+    missing: list[str] | None = MissingOpt,
+    delimiter: str | None = DelimiterOpt,
+    quiet: bool = QuietOpt,
+) -> None:
+    """Choose the number of supervisor types: BIC and participant-held-out log-likelihood."""
+    values = parse_types(types)
+    mx = _mixture()
+    mx.parse_differ(differ)
+    from ..estimation import type_selection
+
+    frame = _log(log, mapping, column, label, missing, delimiter)
+    bar = progress_bar(quiet or as_json)
+    with bar:
+        task = bar.add_task("model selection", total=None)
+        rows = type_selection.select_types(
+            frame,
+            types=values,
+            folds=folds,
+            restarts=restarts,
+            seed=seed,
+            differ=differ,
+            tol=tol,
+            n_jobs=jobs,
+            progress=lambda what, d, t: bar.update(task, completed=d, total=t, description=what),
+        )
+    warnings = type_selection.type_selection_warnings(rows)
+    if as_json:
+        print_json({"types": rows, "warnings": warnings})
+        return
+    table = Table(title="Number of supervisor types", title_justify="left")
+    for col in ("types", "log-likelihood", "reached best", "parameters", "AIC", "BIC", f"held-out LL ({folds}-fold)", "weights"):
+        table.add_column(col, justify="right")
+    for r in rows:
+        table.add_row(
+            str(r["types"]),
+            f"{r['loglik']:.3f}",
+            f"{r['reached_best']} of {r['starts']}",
+            str(r["n_params"]),
+            f"{r['aic']:.2f}",
+            f"{r['bic']:.2f}" + (" *" if r["best_bic"] else ""),
+            f"{r['heldout_loglik']:.3f}" + (" *" if r["best_heldout"] else ""),
+            ", ".join(f"{w:.2f}" for w in r["weights"]),
+        )
+    console.print(table)
+    console.print("* best by that criterion; reached best: starts within 0.01 of the best log-likelihood", highlight=False)
+    for w in warnings:
+        console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
+
+
+@app.command("personalize", rich_help_panel="Estimate")
+def personalize(
+    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
+    model: str = typer.Option(
+        ..., "--model", "-m", help="The centre: a trust model or types JSON (e.g. from fit / fit-types), or a preset name."
+    ),
+    out: Path = typer.Option(..., "--out", "-o", help="A new or empty folder: a model JSON per participant, participants.csv."),
+    strength: float | None = typer.Option(
+        None, "--strength", min=0.0, help="Prior strength s (pseudo-counts per row); default: per table by empirical Bayes."
+    ),
+    tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative tolerance of each participant's EM (> 0)."),
+    as_json: bool = typer.Option(False, "--json", help="Print the strengths and the per-participant summary as JSON."),
+    mapping: Path | None = MappingOpt,
+    column: list[str] | None = ColumnOpt,
+    label: list[str] | None = LabelOpt,
+    missing: list[str] | None = MissingOpt,
+    delimiter: str | None = DelimiterOpt,
+) -> None:
+    """Per-person trust models: each participant's MAP estimate, shrunk toward the pooled model or their type."""
+    check_output(out, "--out", directory=True)
+    from ..estimation.personal import personalize as run
+    from ..model.presets import load_mixture
+
+    centre = load_mixture(model)
+    frame = _log(log, mapping, column, label, missing, delimiter)
+    res = run(frame, centre if centre.n_types > 1 else centre.models[0], strength=strength, tol=tol)
+    with atomic_output(out, directory=True) as tmp:
+        res.save(tmp)
+    if as_json:
+        print_json(
+            {
+                "strength": res.strength,
+                "at_bound": res.at_bound,
+                "participants": res.frame().to_dict(orient="records"),
+                "warnings": res.warnings,
+            }
+        )
+        return
+    s = ", ".join(f"{k} {v:.3g}" + (" (at bound)" if res.at_bound[k] else "") for k, v in res.strength.items())
+    console.print(f"prior strength per table: {s}", highlight=False)
+    gain = float((res.loglik - res.centre_loglik).sum())
+    console.print(
+        f"{len(res.models)} participants; log-likelihood under their own models {res.loglik.sum():.3f} "
+        f"(under the centre {res.centre_loglik.sum():.3f}, +{gain:.3f})",
+        highlight=False,
+    )
+    for w in res.warnings:
+        console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
+    console.print(f"models written to {out}/ (participants.csv lists each participant's file)")

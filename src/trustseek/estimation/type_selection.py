@@ -1,0 +1,174 @@
+"""Choosing the number of supervisor types: BIC on all data and participant-held-out log-likelihood.
+
+Each M-type fit (:func:`~.mixture.fit_mixture`) starts from random points, from the pooled
+fit with every row perturbed, and from the fit with one type fewer with each type split in
+two (:func:`~.mixture.split_type_starts`: as likely as that fit, so EM only climbs from it).
+Folds are over participants; a held-out participant's likelihood is the mixture's,
+sum_m w_m P(trials | type m), under the training fit smoothed by
+:data:`~.selection.HELDOUT_PSEUDOCOUNT` per free cell (as for the number of levels).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .mixture import MixtureFit, MixtureWorkspace, fit_mixture, split_type_starts
+from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, reached_best
+from .sequences import Sequences, encode
+from .spec import FitError
+from .trust_iohmm import preset_spec
+
+log = logging.getLogger(__name__)
+
+
+def heldout_mixture_loglik(test: Sequences, fit: MixtureFit) -> float:
+    """sum over the held-out participants of log sum_m w_m P(trials | type m), under the training fit
+    after one M-step with :data:`~.selection.HELDOUT_PSEUDOCOUNT` added to every free cell (so that a
+    cell the training folds put at 0 does not make it -inf)."""
+    st = fit.workspace().estep(fit.params)
+    smoothed = fit.structure.mstep(st, fit.params, prior=fit.spec.prior + HELDOUT_PSEUDOCOUNT)
+    return float(MixtureWorkspace(test, fit.structure).loglik(smoothed))
+
+
+def select_types(
+    frame: pd.DataFrame,
+    types: Sequence[int] = (1, 2, 3, 4),
+    folds: int = 5,
+    restarts: int = 10,
+    seed: int = 0,
+    differ: str | Sequence[str] = "all",
+    prior: float = 0.0,
+    tol: float = 1e-6,
+    max_iter: int = 1000,
+    n_jobs: int | None = 1,
+    progress: Callable[[str, int, int], None] | None = None,
+    **spec_options: Any,
+) -> list[dict[str, Any]]:
+    """Compare numbers of supervisor types (``types``, e.g. 1..4): per M the log-likelihood, how
+    many starts reached it (within :data:`~.selection.BEST_TOLERANCE`), free parameters, AIC, BIC,
+    the k-fold participant-held-out log-likelihood and the empty types; ``best_bic`` and
+    ``best_heldout`` mark the choices.  :func:`type_selection_warnings` says when a choice is the
+    largest M compared."""
+    types = sorted({int(m) for m in types})
+    if not types or types[0] < 1:
+        raise FitError([f"the numbers of types must be positive integers, got {list(types)}"])
+    spec = preset_spec("paper", frame, prior=prior, **spec_options)
+    seqs = encode(frame, spec)
+    N = seqs.n_participants
+    folds = max(2, min(folds, N))
+    perm = np.random.default_rng(np.random.SeedSequence([seed, 2])).permutation(N)
+    fold_of = np.empty(N, dtype=np.int64)
+    fold_of[perm] = np.arange(N) % folds
+    total = len(types) * (folds + 1)
+    done = 0
+
+    def tick(label: str) -> None:
+        nonlocal done
+        done += 1
+        if progress:
+            progress(label, done, total)
+
+    def one_fit(data: Sequences, M: int, previous: MixtureFit | None, pooled: MixtureFit | None, key: list[int]) -> MixtureFit:
+        ss = np.random.SeedSequence(key)
+        init = []
+        if previous is not None and previous.n_types == M - 1:
+            init = split_type_starts(previous.params, np.random.default_rng(ss.generate_state(4)), previous.structure)
+            # the split starts live in the previous fit's structure: re-projected by the new one in fit_mixture
+        return fit_mixture(
+            data,
+            spec,
+            M,
+            restarts=restarts,
+            seed=ss,
+            differ=differ,
+            tol=tol,
+            max_iter=max_iter,
+            pooled=None if pooled is None else pooled.params.type_params(0),
+            init=init,
+            n_jobs=n_jobs,
+        )
+
+    rows: list[dict[str, Any]] = []
+    prev_full: MixtureFit | None = None
+    prev_fold: list[MixtureFit | None] = [None] * folds
+    pooled_full: MixtureFit | None = None
+    pooled_fold: list[MixtureFit | None] = [None] * folds
+    for M in types:
+        full = one_fit(seqs, M, prev_full, pooled_full, [seed, 3, M])
+        prev_full = full
+        if M == 1:
+            pooled_full = full
+        tick(f"{M} types")
+        per_fold = []
+        for f in range(folds):
+            train, test = np.flatnonzero(fold_of != f), np.flatnonzero(fold_of == f)
+            fit = one_fit(seqs.subset(train), M, prev_fold[f], pooled_fold[f], [seed, 4, M, f])
+            prev_fold[f] = fit
+            if M == 1:
+                pooled_fold[f] = fit
+            per_fold.append(heldout_mixture_loglik(seqs.subset(test), fit))
+            tick(f"{M} types")
+        held = float(sum(per_fold))
+        hits = reached_best(full.restart_logliks)
+        log.info(
+            "%d types: log-likelihood %.4f (reached by %d of %d starts), BIC %.2f, held-out log-likelihood %.4f",
+            M,
+            full.loglik,
+            hits,
+            len(full.runs),
+            full.bic,
+            held,
+        )
+        rows.append(
+            {
+                "types": M,
+                "loglik": full.loglik,
+                "n_params": full.n_params,
+                "aic": full.aic,
+                "bic": full.bic,
+                "heldout_loglik": held,
+                "heldout_per_fold": per_fold,
+                "weights": full.weights.tolist(),
+                "empty_types": full.empty_types,
+                "restart_logliks": full.restart_logliks,
+                "starts": len(full.runs),
+                "reached_best": hits,
+            }
+        )
+    best_bic = min(rows, key=lambda r: float(r["bic"]))["types"]
+    best_cv = max(rows, key=lambda r: float(r["heldout_loglik"]))["types"]
+    for r in rows:
+        r["best_bic"] = r["types"] == best_bic
+        r["best_heldout"] = r["types"] == best_cv
+    for w in type_selection_warnings(rows):
+        log.warning("%s", w)
+    return rows
+
+
+def type_selection_warnings(rows: Sequence[dict[str, Any]]) -> list[str]:
+    """A best number of types at the largest compared, fits whose best only one start reached,
+    and fits with empty types."""
+    out = []
+    if len(rows) > 1:
+        top = max(int(r["types"]) for r in rows)
+        low = min(int(r["types"]) for r in rows)
+        for key, what in (("best_heldout", "held-out log-likelihood"), ("best_bic", "BIC")):
+            if any(r[key] and r["types"] == top for r in rows):
+                out.append(
+                    f"the best {what} is at {top} types, the largest compared: more types may fit better "
+                    f"(compare more with --types {low}..{top + 1})"
+                )
+    for r in rows:
+        if r["types"] > 1 and r.get("reached_best", 2) < 2:
+            out.append(
+                f"{r['types']} types: only 1 of {r['starts']} starts reached the best log-likelihood (within "
+                f"{BEST_TOLERANCE}); the maximum may not have been found (more --restarts)"
+            )
+        if r.get("empty_types"):
+            out.append(f"{r['types']} types: empty type(s) {', '.join(r['empty_types'])}: fewer types fit as well")
+    return out
