@@ -306,7 +306,9 @@ class RatingTable:
             problems.append(f"rating levels need at least 2 entries, got {len(self.levels)}")
         shape = (len(trust_levels), len(self.levels))
         if self.probs.shape != shape:
-            problems.append(f"rating probabilities have shape {self.probs.shape}, expected {shape} (trust levels x rating levels)")
+            problems.append(
+                f"rating probabilities have shape {self.probs.shape}, expected {shape} (trust levels x rating levels)"
+            )
             return problems
         _check_row_array(self.probs, lambda i: f"rating[T={trust_levels[i[0]]}]", problems)
         return problems
@@ -522,9 +524,7 @@ class TrustModel:
         if problems:
             raise ModelError(problems, source)
         try:
-            return cls(
-                tuple(T), tuple(C), initial, emission, transition, notes=notes, not_estimated=not_estimated, rating=rating
-            )
+            return cls(tuple(T), tuple(C), initial, emission, transition, notes=notes, not_estimated=not_estimated, rating=rating)
         except ModelError as exc:
             raise ModelError(exc.problems, source) from None
 

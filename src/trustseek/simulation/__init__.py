@@ -15,11 +15,11 @@ from .schedules import schedule_counts, schedule_iid
 
 __all__ = [
     "Block",
-    "add_ratings",
     "CrossoverSimulation",
     "Simulation",
     "SimulationError",
     "Supervisors",
+    "add_ratings",
     "crossover",
     "participant_ids",
     "run",
