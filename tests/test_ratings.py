@@ -334,6 +334,13 @@ def test_fit_and_validate_by_mapping_alone(tmp_path):
     code3, out3 = run_cli(["fit", str(log), *flags, "--ratings-only", "-r", "2", "--tol", "1e-6", "--json"])
     assert code3 == 0, out3
     assert json.loads(out3[: out3.rindex("}") + 1])["loglik"] > d["loglik"]  # the ratings alone: fewer events
+    # a ratings-only study need not have a human-action column
+    frame.drop(columns=["human_action"]).to_csv(tmp_path / "no_actions.csv", index=False)
+    code7, out7 = run_cli(
+        ["fit", str(tmp_path / "no_actions.csv"), *flags, "--ratings-only", "-r", "2", "--tol", "1e-6", "--json"]
+    )
+    assert code7 == 0, out7
+    assert json.loads(out7[: out7.rindex("}") + 1])["loglik"] == pytest.approx(json.loads(out3[: out3.rindex("}") + 1])["loglik"])
     code4, out4 = run_cli(["validate", str(log), "-m", str(model), "--mapping", str(mapping), "--bootstrap", "0", "--json"])
     assert code4 == 0, out4
     assert "rating" in out4

@@ -47,11 +47,15 @@ def _data():
     return data
 
 
-def _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing=None, delimiter=None, rating=None):
-    """The transition and emission inputs named by the flags, and the log with those columns."""
+def _read_with_inputs(
+    log, mapping, column, label, transitions_on, emissions_on, missing=None, delimiter=None, rating=None, actions=True
+):
+    """The transition and emission inputs named by the flags, and the log with those columns
+    (and the human actions unless not ``actions``)."""
     tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on")
     em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on")
-    return tr, em, read_log(log, mapping, column, label, tuple(dict.fromkeys((*tr, *em))), missing, delimiter, rating)
+    needed = tuple(dict.fromkeys((*tr, *em)))
+    return tr, em, read_log(log, mapping, column, label, needed, missing, delimiter, rating, actions)
 
 
 def _rating_flags(rating: str | None, levels: str | None, bins: str | None) -> dict | None:
@@ -212,6 +216,7 @@ def fit(
         missing,
         delimiter,
         _rating_flags(rating, rating_levels, rating_bins),
+        not ratings_only,
     )
     rated = "rating" if frame.attrs.get("rating_levels") else None
     if ratings_only and rated is None:
