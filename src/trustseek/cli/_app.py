@@ -162,15 +162,19 @@ def read_log(
     needed: tuple[str, ...],
     missing: list[str] | None = None,
     delimiter: str | None = None,
+    rating: dict | None = None,
+    actions: bool = True,
 ):
     """The trial log with the --mapping/--column/--label/--missing/--delimiter options applied;
     ``needed`` are the canonical columns the command uses beyond participant, trial and
-    human_action.  Rows left out by the mapping's drop rules are counted on stderr."""
+    human_action (not required without ``actions``); ``rating`` a rating entry of a mapping
+    (from --rating flags).  Rows left out by the mapping's drop rules are counted on stderr."""
     from ..data.trials import ColumnMapping, read_trials
 
     check_mapping_file(mapping)
-    m = ColumnMapping.from_flags(column or [], label or [], mapping, missing, delimiter)
-    frame = read_trials(log, m, required=("participant", "trial", "human_action", *needed))
+    m = ColumnMapping.from_flags(column or [], label or [], mapping, missing, delimiter, rating)
+    outputs = ("human_action",) if actions else ()
+    frame = read_trials(log, m, required=("participant", "trial", *outputs, *needed))
     for rule, count in frame.attrs.get("dropped", []):
         err_console.print(f"dropped {count} rows of {log} ({escape(rule)})", highlight=False)
     return frame

@@ -47,11 +47,32 @@ def _data():
     return data
 
 
-def _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing=None, delimiter=None):
-    """The transition and emission inputs named by the flags, and the log with those columns."""
+def _read_with_inputs(
+    log, mapping, column, label, transitions_on, emissions_on, missing=None, delimiter=None, rating=None, actions=True
+):
+    """The transition and emission inputs named by the flags, and the log with those columns
+    (and the human actions unless not ``actions``)."""
     tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on")
     em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on")
-    return tr, em, read_log(log, mapping, column, label, tuple(dict.fromkeys((*tr, *em))), missing, delimiter)
+    needed = tuple(dict.fromkeys((*tr, *em)))
+    return tr, em, read_log(log, mapping, column, label, needed, missing, delimiter, rating, actions)
+
+
+def _rating_flags(rating: str | None, levels: str | None, bins: str | None) -> dict | None:
+    """The mapping's rating entry from --rating, --rating-levels and --rating-bins (None without --rating)."""
+    if rating is None:
+        if levels is not None or bins is not None:
+            raise TrustseekError(["--rating-levels and --rating-bins describe the column named by --rating: give --rating"])
+        return None
+    entry: dict = {"column": rating}
+    if levels is not None:
+        entry["levels"] = [x.strip() for x in levels.split(",")]
+    if bins is not None:
+        try:
+            entry["bins"] = [float(x) for x in bins.split(",")]
+        except ValueError:
+            raise TrustseekError([f"--rating-bins {bins!r}: expected comma-separated numbers, e.g. 0,25,50,75,100"]) from None
+    return entry
 
 
 POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
@@ -150,6 +171,21 @@ def fit(
         "(a preset name, e.g. paper, or a JSON file with the same levels and complexities).",
     ),
     as_json: bool = typer.Option(False, "--json", help="Print the fitted model and diagnostics as one JSON object."),
+    rating: str | None = typer.Option(
+        None,
+        "--rating",
+        help="The log's self-reported trust rating column, fitted jointly as a second emission of the trust "
+        "(empty cells: no rating); or give 'rating' in the mapping file.",
+    ),
+    rating_levels: str | None = typer.Option(
+        None, "--rating-levels", help="The rating's levels, lowest first, comma-separated (e.g. 1,2,3,4,5,6,7 or low,mid,high)."
+    ),
+    rating_bins: str | None = typer.Option(
+        None, "--rating-bins", help="Bin a numeric rating at these edges, comma-separated (e.g. 0,25,50,75,100)."
+    ),
+    ratings_only: bool = typer.Option(
+        False, "--ratings-only", help="Leave the human actions out: fit the trust on the ratings alone."
+    ),
     mapping: Path | None = MappingOpt,
     column: list[str] | None = ColumnOpt,
     label: list[str] | None = LabelOpt,
@@ -161,14 +197,32 @@ def fit(
     """Estimate the supervisor's trust model from logged trials (extended Baum-Welch).
 
     Rows no trial informs are marked "not_estimated" in the model file; solve, plot-q and
-    simulate refuse those a task can reach until they are supplied (--fill-from)."""
+    simulate refuse those a task can reach until they are supplied (--fill-from).  With a
+    rating column (--rating or the mapping's 'rating') the fit is joint on the human actions
+    and the ratings, and the model file carries P(rating | trust)."""
     check_outputs((out, "--out"), (posteriors, "--posteriors"))
     check_output(posteriors, "--posteriors", POSTERIOR_SUFFIXES)
     if plots is not None and plots.exists() and not plots.is_dir():
         raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
     if keep and posteriors is None:
         raise TrustseekError(["--keep carries log columns into --posteriors: give --posteriors"])
-    tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter)
+    tr, em, frame = _read_with_inputs(
+        log,
+        mapping,
+        column,
+        label,
+        transitions_on,
+        emissions_on,
+        missing,
+        delimiter,
+        _rating_flags(rating, rating_levels, rating_bins),
+        not ratings_only,
+    )
+    rated = "rating" if frame.attrs.get("rating_levels") else None
+    if ratings_only and rated is None:
+        raise TrustseekError(
+            ["--ratings-only needs a rating column: --rating COLUMN --rating-levels ..., or the mapping's 'rating'"]
+        )
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("restarts", total=restarts + bootstrap)
@@ -190,6 +244,8 @@ def fit(
             levels=levels,
             transition_inputs=tr,
             emission_inputs=em,
+            rating=rated,
+            actions=not ratings_only,
         )
     drawn = result.model  # the figures show only what the data estimated
     if fill_from is not None and result.model.not_estimated:

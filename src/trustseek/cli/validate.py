@@ -180,7 +180,9 @@ def validate(
     log: Path = typer.Argument(..., help="Trial log with a self-reported trust rating column (every trial, or some)."),
     model: Path = typer.Option(..., "--model", "-m", help="Trust model JSON (e.g. from 'trustseek fit')."),
     rating: str | None = typer.Option(
-        None, "--rating", help="The log's rating column (default: a column named 'rating'); empty cells are no rating."
+        None,
+        "--rating",
+        help="The log's rating column (default: the mapping's rating, or a column named 'rating'); empty cells are no rating.",
     ),
     rating_labels: str | None = typer.Option(
         None,
@@ -214,6 +216,8 @@ def validate(
         if "rating" not in frame.columns:
             raise TrustseekError(["no rating column: name the log's self-reported trust column with --rating COLUMN"])
         rating = "rating"
+    if rating == "rating" and labels is None and frame.attrs.get("rating_levels"):
+        labels = list(frame.attrs["rating_levels"])  # the mapping's rating: its declared levels
     ratings = va.parse_ratings(frame, rating, labels, missing or ())
     report = va.validate_ratings(frame, m, ratings, rating, labels, bootstrap=bootstrap, seed=seed)
     if out is not None:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import csv
 import io
+import itertools
 import json
 import math
 import sys
@@ -68,6 +69,12 @@ class ColumnMapping:
     ``drop``         rows to leave out: ``[{"column": col, "values": [...]}, ...]``
     ``missing``      cell texts meaning "not recorded" (besides the empty cell), e.g. ``NA``
     ``delimiter``    a CSV's delimiter (default: sniffed from the header)
+    ``rating``       a self-reported trust rating (optional): ``{"column": theirs, "levels": [...]}``
+                     with the ordinal levels lowest first (numbers or labels; ``"labels"``
+                     maps the log's texts to levels), or ``{"column": theirs, "bins": [edges]}``
+                     for a numeric rating binned into ``[e0, e1), [e1, e2), ... [e_{n-1}, e_n]``
+                     (``"levels"`` then names the bins); an empty cell is no rating.  It
+                     becomes the ``rating`` column, an ordered categorical of the levels.
     """
 
     columns: dict[str, str] = field(default_factory=dict)
@@ -78,9 +85,12 @@ class ColumnMapping:
     drop: list[dict[str, Any]] = field(default_factory=list)
     missing: tuple[str, ...] | None = None
     delimiter: str | None = None
+    rating: dict[str, Any] | None = None
 
     def problems(self) -> list[str]:
         p = []
+        if self.rating is not None:
+            p += _rating_problems(self.rating)
         for canon, theirs in self.columns.items():
             if canon not in CANONICAL:
                 p.append(f"column mapping: {canon!r} is not a canonical column {list(CANONICAL)}")
@@ -152,6 +162,7 @@ class ColumnMapping:
             [*self.drop, *other.drop],
             other.missing if other.missing is not None else self.missing,
             other.delimiter or self.delimiter,
+            other.rating or self.rating,
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -168,7 +179,19 @@ class ColumnMapping:
             d["missing"] = list(self.missing)
         if self.delimiter:
             d["delimiter"] = self.delimiter
+        if self.rating is not None:
+            d["rating"] = dict(self.rating)
         return d
+
+    def rating_levels(self) -> tuple[str, ...]:
+        """The declared rating levels, lowest first (the bins' names for a binned rating)."""
+        if self.rating is None:
+            return ()
+        levels = self.rating.get("levels")
+        if levels is not None:
+            return tuple(_label_key(v) for v in levels)
+        edges = [float(e) for e in self.rating["bins"]]
+        return tuple(f"{_num(lo)}-{_num(hi)}" for lo, hi in itertools.pairwise(edges))
 
     @classmethod
     def from_dict(cls, d: Any, source: str | None = None) -> ColumnMapping:
@@ -217,6 +240,7 @@ class ColumnMapping:
             list(drop),
             tuple(missing) if missing is not None else None,
             d.get("delimiter"),
+            dict(d["rating"]) if isinstance(d.get("rating"), Mapping) else d.get("rating"),
         )
         problems += m.problems()
         if problems:
@@ -246,9 +270,11 @@ class ColumnMapping:
         file: str | Path | None = None,
         missing: Iterable[str] | None = None,
         delimiter: str | None = None,
+        rating: Mapping[str, Any] | None = None,
     ) -> ColumnMapping:
         """Command-line flags: ``--column canonical=theirs``, ``--label column:theirs=canonical``,
-        ``--missing TEXT`` and ``--delimiter CHAR``."""
+        ``--missing TEXT`` and ``--delimiter CHAR``; ``rating`` as in a mapping file (``--rating``
+        with ``--rating-levels`` or ``--rating-bins``)."""
         base = cls.load(file) if file else cls()
         problems = []
         cols: dict[str, str] = {}
@@ -270,14 +296,70 @@ class ColumnMapping:
             delimiter = {"\\t": "\t", "tab": "\t", "TAB": "\t"}.get(delimiter, delimiter)
         if problems:
             raise DataError(problems)
-        flags = cls(cols, labs, missing=tuple(missing) if missing else None, delimiter=delimiter)
+        flags = cls(
+            cols,
+            labs,
+            missing=tuple(missing) if missing else None,
+            delimiter=delimiter,
+            rating=dict(rating) if rating is not None else None,
+        )
         problems = flags.problems()
         if problems:
             raise DataError(problems)
         return base.merged(flags)
 
 
-MAPPING_KEYS = ("columns", "labels", "complexities", "order", "derived", "drop", "missing", "delimiter")
+MAPPING_KEYS = ("columns", "labels", "complexities", "order", "derived", "drop", "missing", "delimiter", "rating")
+RATING = "rating"  # the canonical name of the rating column a mapping declares
+
+
+def _num(x: float) -> str:
+    return str(int(x)) if float(x).is_integer() else repr(float(x))
+
+
+def _rating_problems(r: Any) -> list[str]:
+    """Everything wrong with a mapping's ``rating`` entry."""
+    head = "rating"
+    if not isinstance(r, Mapping):
+        return [f'{head}: expected {{"column": name, "levels": [...]}} or {{"column": name, "bins": [edges]}}, got {r!r}']
+    p = []
+    extra = set(r) - {"column", "levels", "labels", "bins"}
+    if extra:
+        p.append(f"{head}: unknown entries {sorted(extra)} (expected column, levels, labels, bins)")
+    col = r.get("column")
+    if not isinstance(col, str) or not col:
+        p.append(f"{head}: 'column' must name the log's rating column, got {col!r}")
+    levels, bins, labels = r.get("levels"), r.get("bins"), r.get("labels")
+    if levels is None and bins is None:
+        p.append(f"{head}: declare the levels, lowest first ('levels': [1, 2, 3, 4, 5]) or numeric bins ('bins': [edges])")
+    names: list[str] = []
+    if levels is not None:
+        ok = isinstance(levels, list) and all(isinstance(v, (str, int, float)) and not isinstance(v, bool) for v in levels)
+        names = [_label_key(v) for v in levels] if ok else []
+        if not ok or len(names) < 2 or len(set(names)) != len(names) or not all(n.strip() for n in names):
+            p.append(f"{head}: 'levels' must list at least 2 distinct levels, lowest first, got {levels!r}")
+    if bins is not None:
+        ok = isinstance(bins, list) and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in bins)
+        edges = [float(v) for v in bins] if ok else []
+        if (
+            not ok
+            or len(edges) < 3
+            or not all(math.isfinite(e) for e in edges)
+            or any(b <= a for a, b in itertools.pairwise(edges))
+        ):
+            p.append(f"{head}: 'bins' must list at least 3 increasing finite edges (2 bins), got {bins!r}")
+        elif levels is not None and names and len(names) != len(edges) - 1:
+            p.append(f"{head}: {len(edges) - 1} bins need {len(edges) - 1} level names, got {len(names)}")
+        if labels is not None:
+            p.append(f"{head}: 'labels' apply to declared levels, not to bins")
+    if labels is not None and bins is None:
+        if not isinstance(labels, Mapping):
+            p.append(f"{head}: 'labels' must map the log's texts to levels, got {labels!r}")
+        elif names:
+            for theirs, ours in labels.items():
+                if _label_key(ours) not in names:
+                    p.append(f"{head}: label {theirs}={ours!r} is not one of the levels {names}")
+    return p
 
 
 def _label_table(table: Mapping) -> dict[str, Any]:
@@ -770,6 +852,9 @@ def read_trials(
     for c in mapping.order or ():
         if c not in raw.columns:
             lines.append(f"order: no column {c!r}; columns present: {raw.columns}")
+    rating_col = mapping.rating["column"] if mapping.rating is not None else None
+    if rating_col is not None and rating_col not in known:
+        lines.append(f"missing column {rating_col!r} (the mapping's rating column); columns present: {raw.columns}")
     absent = [c for c in required if theirs[c] not in known]
     for c in absent:
         via = f" (mapped from canonical {c!r})" if theirs[c] != c else ""
@@ -889,6 +974,10 @@ def read_trials(
             f"{column('human_action')}: no trial has a recorded human action (every cell is empty): nothing to fit"
         )
 
+    rating_codes = None
+    if rating_col is not None:
+        rc = cols[rating_col] if rating_col in cols else get(rating_col)
+        rating_codes = _rating_codes(problems, rc, mapping, rating_col)
     if check_experience:
         _check_experience(problems, codes, mapping, present, column)
     if problems.lines:
@@ -906,6 +995,12 @@ def read_trials(
     used = {theirs[c] for c in present}
     if not ordered:
         used.add(theirs["trial"])
+    if rating_codes is not None and rating_col is not None:
+        levels = pd.Index(list(mapping.rating_levels()), dtype=object)
+        frame[RATING] = pd.Categorical.from_codes(rating_codes, categories=levels, ordered=True)
+        frame.attrs["rating_levels"] = tuple(levels)
+        frame.attrs["rating_column"] = rating_col
+        used.add(rating_col)
     extras = [c for c in raw.columns if c not in used and c not in frame.columns]
     if extras:
         more = raw.extras(extras)
@@ -914,6 +1009,50 @@ def read_trials(
             frame[c] = values.to_numpy() if isinstance(source, pd.DataFrame) else values.values
     frame.attrs["dropped"] = dropped
     return frame
+
+
+def _rating_codes(problems: _Problems, rc: _Col, mapping: ColumnMapping, name: str) -> np.ndarray:
+    """Per row the code of the rating's level (-1 = no rating); values outside the declared
+    levels or bins are reported with their rows."""
+    r = mapping.rating or {}
+    levels = mapping.rating_levels()
+    lookup = np.full(len(rc.texts) + 1, -1, dtype=np.int16)
+    bad = np.zeros(len(rc.texts) + 1, dtype=bool)
+    if "bins" in r:
+        edges = np.array([float(e) for e in r["bins"]])
+        for j, t in enumerate(rc.texts):
+            if t is None or t == _NAN:
+                continue
+            try:
+                x = float(t)
+            except ValueError:
+                x = math.nan
+            if not math.isfinite(x) or x < edges[0] or x > edges[-1]:
+                bad[j] = True
+            else:
+                lookup[j] = min(int(np.searchsorted(edges, x, side="right")) - 1, len(edges) - 2)
+        expected = f"a number in [{_num(edges[0])}, {_num(edges[-1])}] (the bins {[_num(e) for e in edges]})"
+    else:
+        table = {_label_key(k): _label_key(v) for k, v in (r.get("labels") or {}).items()}
+        by_spelling = {s: i for i, lv in enumerate(levels) for s in _spellings(lv)}
+        for j, t in enumerate(rc.texts):
+            if t is None or t == _NAN:
+                continue
+            label = next((table[s] for s in _spellings(t) if s in table), t)
+            hit = next((by_spelling[s] for s in _spellings(label) if s in by_spelling), None)
+            if hit is None:
+                bad[j] = True
+            else:
+                lookup[j] = hit
+        known = f"{sorted(table)} (mapped) or " if table else ""
+        expected = f"one of {known}the declared levels {list(levels)}"
+    codes = lookup[rc.codes]
+    problems.rows(
+        f"column {name!r}: rating outside the declared levels (expected {expected}; leave the cell empty for no rating)",
+        np.flatnonzero(bad[rc.codes]),
+        lambda row: repr(rc.texts[rc.codes[row]]),
+    )
+    return codes
 
 
 def _participant_codes(pc_: _Col) -> tuple[np.ndarray, list[str]]:

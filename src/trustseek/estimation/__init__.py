@@ -3,6 +3,7 @@
 * :mod:`.spec` -- what an IOHMM is made of (:class:`IOHMMSpec`, :class:`Params`);
 * :mod:`.sequences` -- trial tables encoded as integer arrays (:func:`encode`);
 * :mod:`.structure` -- a spec compiled against data: free, tied and fixed cells, M-step;
+* :mod:`.ratings` -- a self-reported rating as a second emission of the level (joint output);
 * :mod:`.estep` / :mod:`.kernels` -- the E-step (compiled, with the numpy reference);
 * :mod:`.em` / :mod:`.quasi_newton` -- EM for R starts with SQUAREM, and the L-BFGS-B finish;
 * :mod:`.convergence` -- a run has converged at a stationary point, checked by one more EM step;
@@ -12,7 +13,7 @@
   and the choice of the number of levels.
 """
 
-from .fit import MIN_EVENTS, FitResult, decode, fit_trust_model
+from .fit import MIN_EVENTS, FitResult, decode, fit_trust_model, trust_loglik
 from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
 from .selection import select_levels, selection_warnings
 from .sequences import Sequences, encode
@@ -49,4 +50,5 @@ __all__ = [
     "select_levels",
     "selection_warnings",
     "to_trust_model",
+    "trust_loglik",
 ]

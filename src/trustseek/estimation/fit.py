@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -24,6 +24,7 @@ from ..vocab import ACTIONS, EXPERIENCES
 from .bootstrap import Intervals
 from .bootstrap import bootstrap as _bootstrap
 from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
+from .ratings import RatingStructure
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
 from .structure import Structure, describe_combination
@@ -133,7 +134,7 @@ class FitResult:
                 "table": table,
                 "index": list(idx),
                 "cell": label,
-                "estimate": float(getattr(m, table)[idx]),
+                "estimate": float((m.rating.probs if table == "rating" and m.rating is not None else getattr(m, table))[idx]),
                 "events": float(self.counts[table][idx]),
             }
             if self.ci is not None:
@@ -168,6 +169,11 @@ class FitResult:
                                 f"P(T'={T[u]} | T={T[t]}{cond(spec.transition_inputs, v)})",
                                 ("t", int(tg[c, a, e]), t, u),
                             )
+        if m.rating is not None and "rating" in self.estimated:
+            levels = m.rating.levels
+            for t in range(m.n_trust):
+                for r in range(len(levels)):
+                    add("rating", (t, r), f"P(rating={levels[r]} | T={T[t]})", ("r", t, r))
         return out
 
 
@@ -212,6 +218,11 @@ def _warnings(fit: IOHMMFit, events: dict[str, np.ndarray]) -> list[str]:
                         f"{name}[{describe_combination(u, inputs, spec.categories)}][T={spec.levels[k]}]: "
                         f"{n:.1f} expected events, not identified by this data"
                     )
+    if "rating" in events:
+        for k in range(s.K):
+            n = float(events["rating"][k].sum())
+            if n < MIN_EVENTS:
+                out.append(f"rating[T={spec.levels[k]}]: {n:.1f} expected events, not identified by this data")
     return out
 
 
@@ -257,9 +268,17 @@ def fit_sequences(
     events = fit.expected_events()
     counts = broadcast(spec, events)
     estimated = {k: v.astype(bool) for k, v in broadcast(spec, _estimated_mask(fit.structure)).items()}
+    if isinstance(fit.structure, RatingStructure):
+        st = fit.workspace().estep(fit.params)
+        rc = fit.structure.rating_counts(st.emission)  # (K, R) expected events behind each rating cell
+        events["rating"] = rc
+        counts["rating"] = np.repeat(rc.sum(-1, keepdims=True), spec.n_ratings, axis=-1)
+        estimated["rating"] = np.ones_like(rc, dtype=bool)
     result = FitResult(model, fit, counts, estimated, seed=seed, warnings=_warnings(fit, events))
     for w in result.warnings:
         log.info("%s", w)
+    if bootstrap > 0 and spec.rating is not None:
+        raise FitError(["bootstrap intervals are not available for a fit with ratings (fit without --bootstrap)"])
     if bootstrap > 0:
         result.intervals = bootstrap_intervals = _bootstrap(
             seqs,
@@ -291,6 +310,9 @@ def fit_trust_model(
     tol: float = 1e-8,
     max_iter: int = 1000,
     progress: Callable[[int, int], None] | None = None,
+    rating: str | None = None,
+    rating_levels: Sequence[str] | None = None,
+    actions: bool = True,
     **spec_options: Any,
 ) -> FitResult:
     """Fit a trust model to a trial table (the canonical columns, e.g. from :func:`read_trials`).
@@ -304,8 +326,22 @@ def fit_trust_model(
     a warning), computed over ``n_jobs`` processes (default: all cores); the fit itself
     shares its E-steps over ``n_jobs`` threads.  Results do not depend on ``n_jobs``.  ``progress(done, total)``
     is called after every restart and bootstrap replicate.
+
+    ``rating`` names a column of self-reported trust ratings, a second emission of the hidden
+    trust (P(rating | trust), one free row per level; an empty cell contributes probability
+    1): the model is fitted on the human actions and the ratings jointly, and carries the
+    rating table.  Its ordinal levels, lowest first, are ``rating_levels``, or the categories
+    of the column when it is categorical (as :func:`~trustseek.data.read_trials` returns a
+    mapped rating).  ``actions=False`` leaves the human actions out (every one counted
+    missing): a fit on the ratings alone, whose emission rows are then never estimated.
     """
     spec = preset_spec(preset, frame, prior=prior, **spec_options)
+    if rating is not None:
+        spec = replace(spec, rating=rating, rating_levels=rating_levels_of(frame, rating, rating_levels))
+    if not actions:
+        if rating is None:
+            raise FitError(["a fit without the human actions needs a rating column"])
+        frame = frame.assign(human_action=pd.Series(pd.NA, index=frame.index, dtype=object))
     result = fit_sequences(encode(frame, spec), spec, restarts, seed, bootstrap, n_jobs, tol, max_iter, progress)
     marked = never_estimated(frame, spec)
     if marked:
@@ -313,6 +349,30 @@ def fit_trust_model(
         names = ", ".join(result.model.not_estimated_rows())
         result.warnings.append(f"never estimated (no such trials in the data; marked in the model file): {names}")
     return result
+
+
+def rating_levels_of(frame: pd.DataFrame, column: str, levels: Sequence[str] | None = None) -> tuple[str, ...]:
+    """The declared levels of a rating column: ``levels``, else its categories (a categorical column)."""
+    if column not in frame.columns:
+        raise FitError([f"rating column {column!r} is not in the log; its columns: {list(map(str, frame.columns))}"])
+    if levels is not None:
+        return tuple(str(x) for x in levels)
+    values = frame[column]
+    if isinstance(values.dtype, pd.CategoricalDtype):
+        return tuple(str(x) for x in values.cat.categories)
+    raise FitError(
+        [
+            f"rating column {column!r}: declare its levels, lowest first (e.g. --rating-levels 1,2,3,4,5,6,7, "
+            "or 'rating' in the mapping file)"
+        ]
+    )
+
+
+def trust_loglik(frame: pd.DataFrame, model: TrustModel, rating: str | None = None) -> float:
+    """Log-likelihood of the log under ``model``: the human actions, and with ``rating`` (a column)
+    the ratings too, through the model's rating table (an empty rating contributes probability 1)."""
+    spec, params = from_trust_model(model, rating)
+    return loglik(encode(frame, spec), spec, params)
 
 
 def never_estimated(frame: pd.DataFrame, spec: IOHMMSpec) -> tuple[tuple[str, tuple[int, ...]], ...]:
@@ -351,9 +411,10 @@ def never_estimated(frame: pd.DataFrame, spec: IOHMMSpec) -> tuple[tuple[str, tu
     return tuple(out)
 
 
-def decode(frame: pd.DataFrame, model: TrustModel) -> pd.DataFrame:
-    """Per-trial smoothed P(trust = level | all trials of the participant) and the Viterbi level."""
-    spec, params = from_trust_model(model)
+def decode(frame: pd.DataFrame, model: TrustModel, rating: str | None = None) -> pd.DataFrame:
+    """Per-trial smoothed P(trust = level | all trials of the participant) and the Viterbi level
+    (with ``rating``, a column, from the ratings too, through the model's rating table)."""
+    spec, params = from_trust_model(model, rating)
     seqs = encode(frame, spec)
     try:
         return posterior_frame(seqs, spec, params)

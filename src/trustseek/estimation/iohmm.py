@@ -21,6 +21,7 @@ import numpy as np
 from .convergence import converge
 from .em import STATIONARY, RunResult, run_em
 from .estep import Workspace
+from .ratings import make_structure
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec, Params
 from .structure import Structure
@@ -72,7 +73,7 @@ class IOHMMFit:
         st = self.workspace().estep(self.params)
         s = self.structure
         out = {"initial": np.full(s.K, float(self.seqs.n_participants))}
-        for name, table, counts in (("emission", s.em, st.emission), ("transition", s.tr, st.transition)):
+        for name, table, counts in (("emission", s.em, s.action_counts(st.emission)), ("transition", s.tr, st.transition)):
             out[name] = table.grouped(counts.sum(-1))[table.group]  # (U, K)
         return out
 
@@ -109,8 +110,11 @@ def fit_iohmm(
     run's outcome is logged (``trustseek.estimation``, debug) and passed to ``on_restart``.
     ``n_jobs`` threads (None: all cores) share each E-step's work, over the starts and the
     participants, when there is enough of it; the result does not depend on ``n_jobs``.
+    A spec with a rating (:mod:`.ratings`) is fitted by EM alone (no quasi-Newton finish),
+    to ``tol`` and the same stationarity check.
     """
-    structure = Structure(spec, seqs)
+    structure = make_structure(spec, seqs)
+    quasi_newton = quasi_newton and not structure.joint
     work = Workspace(seqs, *structure.dims, threads=n_jobs or os.cpu_count() or 1)
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     starts = [structure.project(p) for p in init]
@@ -141,7 +145,7 @@ def fit_iohmm(
 
 
 def _workspace(seqs: Sequences, spec: IOHMMSpec, params: Params) -> Workspace:
-    return Workspace(seqs, spec.n_levels, spec.n_outputs, params.emission.shape[0], params.transition.shape[0])
+    return Workspace(seqs, spec.n_levels, spec.n_emitted, params.emission.shape[0], params.transition.shape[0])
 
 
 def loglik(seqs: Sequences, spec: IOHMMSpec, params: Params) -> float:

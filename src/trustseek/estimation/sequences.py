@@ -99,15 +99,19 @@ def _codes(frame: pd.DataFrame, spec: IOHMMSpec) -> dict[str, np.ndarray]:
     """
     problems: list[str] = []
     codes: dict[str, np.ndarray] = {}
-    for col in dict.fromkeys((*spec.emission_inputs, *spec.transition_inputs, spec.output)):
+    outputs = (spec.output,) if spec.rating is None else (spec.output, spec.rating)
+    for col in dict.fromkeys((*spec.emission_inputs, *spec.transition_inputs, *outputs)):
         if col not in frame.columns:
             problems.append(f"column {col!r} is missing (needed by the model)")
             continue
-        cats = list(spec.output_categories if col == spec.output else spec.categories[col])
+        if col == spec.rating:
+            cats = list(spec.rating_levels)
+        else:
+            cats = list(spec.output_categories if col == spec.output else spec.categories[col])
         values = frame[col]
         if isinstance(values.dtype, pd.CategoricalDtype):  # codes into a few categories: no per-row hashing
             raw, uniques = values.cat.codes.to_numpy(), values.cat.categories
-            if list(uniques) == cats and (col == spec.output or not (raw < 0).any()):
+            if list(uniques) == cats and (col in outputs or not (raw < 0).any()):
                 codes[col] = raw.astype(np.int16)  # the model's categories already, in its order
                 continue
         else:
@@ -115,6 +119,8 @@ def _codes(frame: pd.DataFrame, spec: IOHMMSpec) -> dict[str, np.ndarray]:
         lookup = np.full(len(uniques) + 1, -1, dtype=np.int16)  # the last entry: a missing value
         unknown = np.zeros(len(uniques) + 1, dtype=bool)
         for j, u in enumerate(np.asarray(uniques, dtype=object)):
+            if col == spec.rating and not isinstance(u, str):  # a numeric rating matches its level by text
+                u = _level_text(u)
             if u in cats:
                 lookup[j] = cats.index(u)
             else:
@@ -123,13 +129,32 @@ def _codes(frame: pd.DataFrame, spec: IOHMMSpec) -> dict[str, np.ndarray]:
         c = lookup[raw]
         for i in np.flatnonzero(unknown[raw])[:MAX_LISTED]:
             problems.append(f"row {i + 1}, column {col!r}: value {values.iloc[i]!r} is not one of {cats}")
-        if col != spec.output:
+        if col not in outputs:
             for i in np.flatnonzero(raw == len(uniques))[:MAX_LISTED]:
                 problems.append(f"row {i + 1}, column {col!r}: value is missing")
         codes[col] = c
     if problems:
         raise FitError(problems)
     return codes
+
+
+def _level_text(v: object) -> object:
+    """A number as a rating level's text (7.0 -> '7'); anything else unchanged."""
+    if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)) and float(v).is_integer():
+        return str(int(v))
+    return str(v) if isinstance(v, (float, np.floating)) else v
+
+
+def joint_codes(action: np.ndarray, rating: np.ndarray, n_outputs: int, n_ratings: int) -> np.ndarray:
+    """The joint output code of (output, rating) codes, each -1 where missing: output * (R + 1) +
+    rating, with a missing output counted as category M and a missing rating as R; -1 where both
+    are missing (the trial then contributes probability 1, as any unobserved output)."""
+    a = np.where(action < 0, n_outputs, action).astype(np.int32)
+    r = np.where(rating < 0, n_ratings, rating).astype(np.int32)
+    out = a * (n_ratings + 1) + r
+    return np.where((action < 0) & (rating < 0), -1, out)
 
 
 def _participants(values: pd.Series) -> tuple[np.ndarray, list[str]]:
@@ -154,12 +179,13 @@ def _participants(values: pd.Series) -> tuple[np.ndarray, list[str]]:
 def encode(frame: pd.DataFrame, spec: IOHMMSpec, participant: str = "participant", trial: str = "trial") -> Sequences:
     """Encode a validated trial table (one row per trial) for ``spec``.
 
-    Participants keep their order of first appearance.  A participant's trials are
-    ordered by their index, and consecutive indices are consecutive trials: a gap
-    in the numbers (trials removed from the log) is not a trial of its own.  ``base``
-    records whether the table counts from 0 or 1; ``trial_of_row`` keeps every row's
-    index.  A missing output value is unobserved.  The arrays hold compact integers
-    (int16 codes, int32 rows).
+        Participants keep their order of first appearance.  A participant's trials are
+        ordered by their index, and consecutive indices are consecutive trials: a gap
+        in the numbers (trials removed from the log) is not a trial of its own.  ``base``
+        records whether the table counts from 0 or 1; ``trial_of_row`` keeps every row's
+        index.  A missing output value is unobserved.  With a rating (``spec.rating``) ``y`` holds
+    the joint code of output and rating (:func:`joint_codes`).  The arrays hold compact integers
+        (int16 codes, int32 rows).
     """
     n = len(frame)
     codes = _codes(frame, spec)
@@ -200,7 +226,10 @@ def encode(frame: pd.DataFrame, spec: IOHMMSpec, participant: str = "participant
         arr.reshape(-1)[flat] = values
         return arr
 
-    y = spread(codes[spec.output], _code_dtype(len(spec.output_categories)))
+    out = codes[spec.output]
+    if spec.rating is not None:
+        out = joint_codes(out, codes[spec.rating], spec.n_outputs, spec.n_ratings)
+    y = spread(out, _code_dtype(spec.n_emitted))
     ue_codes = combination(spec.emission_inputs)
     ue = spread(ue_codes, ue_codes.dtype.type)
     del ue_codes

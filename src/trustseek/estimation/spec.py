@@ -12,6 +12,11 @@ listed in the spec).  The transition from trial t to t+1 uses the inputs recorde
 in row t, so a variable known only after the trial (the paper's experience E_{t+1})
 is simply a column of row t.
 
+A spec may name a second output, ``rating`` (a self-reported rating with ordinal levels
+``rating_levels``), emitted by the hidden level alone: P(y, r | S = k, u) = P(y | k, u) P(r | k),
+either factor 1 where that output is missing.  The E-step then sees one joint output
+(:mod:`.ratings`); ``emission`` holds the joint table.
+
 Structure (:class:`IOHMMSpec`): fixed rows (e.g. P(intervene | ask) = 1), rows tied
 across input combinations, Dirichlet pseudo-counts ``prior`` (MAP), and the rule
 that names the levels.
@@ -69,6 +74,8 @@ class IOHMMSpec:
     tied_transitions: tuple[tuple[Mapping[str, str], ...], ...] = ()
     order_by: tuple[Mapping[str, str], str] | None = None
     prior: float = 0.0
+    rating: str | None = None  # the column of a second output emitted by the level alone (None: none)
+    rating_levels: tuple[str, ...] = ()  # its ordinal levels, lowest first
 
     @property
     def n_levels(self) -> int:
@@ -77,6 +84,18 @@ class IOHMMSpec:
     @property
     def n_outputs(self) -> int:
         return len(self.output_categories)
+
+    @property
+    def n_ratings(self) -> int:
+        return len(self.rating_levels) if self.rating is not None else 0
+
+    @property
+    def n_emitted(self) -> int:
+        """Categories of the output the E-step sees: the output's, or with a rating the joint
+        (output or missing) x (rating or missing) categories (see :mod:`.ratings`)."""
+        if self.rating is None:
+            return self.n_outputs
+        return (self.n_outputs + 1) * (self.n_ratings + 1)
 
     def n_combinations(self, inputs: Sequence[str]) -> int:
         """Number of value combinations of ``inputs`` (1 for no inputs)."""
@@ -97,6 +116,11 @@ class IOHMMSpec:
                 p.append(f"{name} inputs repeat a column: {list(cols)}")
             if self.output in cols:
                 p.append(f"the output {self.output!r} cannot also be a {name} input")
+        if self.rating is not None:
+            if len(self.rating_levels) < 2 or len(set(self.rating_levels)) != len(self.rating_levels):
+                p.append(f"the rating {self.rating!r} needs at least 2 distinct levels, got {list(self.rating_levels)}")
+            if self.rating == self.output or self.rating in (*self.emission_inputs, *self.transition_inputs):
+                p.append(f"the rating {self.rating!r} cannot also be the output or an input")
         if not (math.isfinite(self.prior) and self.prior >= 0):
             p.append(f"prior must be a finite pseudo-count >= 0, got {self.prior!r}")
         return p
@@ -118,6 +142,7 @@ class IOHMMSpec:
             "tied_transitions": [[dict(w) for w in g] for g in self.tied_transitions],
             "order_by": None if self.order_by is None else {"where": dict(self.order_by[0]), "category": self.order_by[1]},
             "prior": self.prior,
+            **({"rating": self.rating, "rating_levels": list(self.rating_levels)} if self.rating is not None else {}),
         }
 
 

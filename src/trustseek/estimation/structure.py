@@ -130,6 +130,8 @@ def describe_combination(u: int, inputs: Sequence[str], cats: Mapping[str, Seque
 class Structure:
     """An :class:`IOHMMSpec` compiled against data (which rows have events)."""
 
+    joint = False  # True for a spec with a rating: parameters carry the joint emission (:mod:`.ratings`)
+
     def __init__(self, spec: IOHMMSpec, seqs: Sequences):
         problems = spec.problems()
         if problems:
@@ -208,6 +210,10 @@ class Structure:
         if bad.sum() > 10:
             lines.append(f"... and {int(bad.sum()) - 10} more")
         raise FitError(lines)
+
+    def action_counts(self, counts: np.ndarray) -> np.ndarray:
+        """Expected counts of the output's emission table from the E-step's emission counts."""
+        return counts
 
     def random(self, rng: np.random.Generator) -> Params:
         """A random start inside the constraints, with no exact zero (EM could not leave it)."""

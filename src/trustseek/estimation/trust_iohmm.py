@@ -16,8 +16,9 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 
-from ..model.core import TrustModel
+from ..model.core import RatingTable, TrustModel
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, LEVELS
+from .ratings import compose_joint, split_joint
 from .spec import FitError, Fixed, IOHMMSpec, Params
 
 PAPER_TRANSITION_INPUTS = ("complexity", "robot_action", "experience")
@@ -131,17 +132,23 @@ def index_grid(spec: IOHMMSpec, inputs: Sequence[str], with_experience: bool) ->
 
 
 def to_trust_model(spec: IOHMMSpec, params: Params, notes: str = "") -> TrustModel:
-    """Broadcast IOHMM tables to the TrustModel arrays (inputs a table ignores repeat)."""
+    """Broadcast IOHMM tables to the TrustModel arrays (inputs a table ignores repeat); a spec
+    with a rating gives the model its rating table."""
     check_convertible(spec)
     eg = index_grid(spec, spec.emission_inputs, False)
     tg = index_grid(spec, spec.transition_inputs, True)
+    emission, rating = params.emission, None
+    if spec.rating is not None:
+        emission, probs = split_joint(emission, spec.n_outputs, spec.n_ratings)
+        rating = RatingTable(spec.rating_levels, probs)
     return TrustModel(
         trust_levels=spec.levels,
         complexities=model_complexities(spec),
         initial=params.initial,
-        emission=params.emission[eg],
+        emission=emission[eg],
         transition=params.transition[tg],
         notes=notes,
+        rating=rating,
     )
 
 
@@ -157,12 +164,21 @@ def broadcast(spec: IOHMMSpec, arrays: Mapping[str, np.ndarray]) -> dict[str, np
     }
 
 
-def from_trust_model(model: TrustModel) -> tuple[IOHMMSpec, Params]:
-    """The paper-structured spec and tables that reproduce ``model`` exactly (for decoding)."""
+def from_trust_model(model: TrustModel, rating: str | None = None) -> tuple[IOHMMSpec, Params]:
+    """The paper-structured spec and tables that reproduce ``model`` exactly (for decoding).
+
+    With ``rating`` (a column name) and a model with a rating table, the spec has that
+    rating and the tables are the joint ones (:mod:`.ratings`)."""
     K, C = model.n_trust, model.n_complexity
     spec = paper_spec(complexities=model.complexities, levels=model.trust_levels)
+    emission = np.array(model.emission, dtype=float).reshape(C * 2, K, 2)
+    if rating is not None:
+        if model.rating is None:
+            raise FitError(["the model has no rating table (P(rating | trust)): it cannot use ratings"])
+        spec = replace(spec, rating=rating, rating_levels=model.rating.levels)
+        emission = compose_joint(emission, np.array(model.rating.probs, dtype=float))
     return spec, Params(
         np.array(model.initial, dtype=float),
-        np.array(model.emission, dtype=float).reshape(C * 2, K, 2),
+        emission,
         np.array(model.transition, dtype=float).reshape(C * 4, K, K),
     )

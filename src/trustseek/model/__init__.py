@@ -2,7 +2,7 @@
 (complexities, success probabilities, rewards of eq. (1), discount), their JSON formats, and
 the built-in presets."""
 
-from .core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, ModelError, Rewards, Task, TrustModel
+from .core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, ModelError, RatingTable, Rewards, Task, TrustModel
 from .mixture import TypeMixture
 from .presets import (
     MIXTURE_PRESETS,
@@ -25,6 +25,7 @@ __all__ = [
     "MODEL_PRESETS",
     "TASK_PRESETS",
     "ModelError",
+    "RatingTable",
     "Rewards",
     "Task",
     "TrustModel",

@@ -14,6 +14,7 @@ Array layouts (all ``numpy.float64``):
 * ``TrustModel.initial[t]``                      P(T_1 = t)
 * ``TrustModel.emission[c, a, t, o]``             P(o_t = o | T_t = t, C_t = c, a_t = a)
 * ``TrustModel.transition[c, a, e, t, t2]``       P(T_{t+1} = t2 | T_t = t, E_{t+1} = e, C_t = c, a_t = a)
+* ``TrustModel.rating.probs[t, r]``               P(self-reported rating = r | T_t = t) (optional table)
 * ``Task.complexity_probs[c]``                   P(C = c), i.i.d. over trials
 * ``Task.success[c]``                            P(autonomous collection succeeds | C = c)
 * ``Task.ask_experience[c]``                     experience index recorded when the robot asks in complexity c
@@ -47,6 +48,7 @@ __all__ = [  # the vocabulary is re-exported for convenience
     "RELIABLE",
     "RELY",
     "ModelError",
+    "RatingTable",
     "Rewards",
     "Task",
     "TrustModel",
@@ -271,6 +273,78 @@ def _paper_value(key: str) -> str:
 
 
 @dataclass(frozen=True, eq=False)
+class RatingTable:
+    """A self-reported trust rating as a second emission of the hidden trust.
+
+    ``levels`` are the rating's ordinal levels, lowest first (e.g. ``"1"`` .. ``"7"``, or
+    labels); ``probs[t, r]`` is P(rating = levels[r] | trust level t), one free row per trust
+    level.  The rating depends on the trust only (not on complexity or the robot action),
+    and a trial without a rating contributes probability 1.
+    """
+
+    levels: tuple[str, ...]
+    probs: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "levels", tuple(self.levels))
+        arr = np.array(self.probs, dtype=np.float64)
+        arr.setflags(write=False)
+        object.__setattr__(self, "probs", arr)
+
+    @property
+    def n_levels(self) -> int:
+        return len(self.levels)
+
+    def problems(self, trust_levels: Sequence[str]) -> list[str]:
+        """Every violation of the table's constraints for a model with ``trust_levels``."""
+        problems: list[str] = []
+        if not all(isinstance(n, str) and n for n in self.levels):
+            problems.append(f"rating levels must be non-empty strings, got {list(self.levels)!r}")
+        if len(set(self.levels)) != len(self.levels):
+            problems.append(f"rating levels have duplicate names: {list(self.levels)}")
+        if len(self.levels) < 2:
+            problems.append(f"rating levels need at least 2 entries, got {len(self.levels)}")
+        shape = (len(trust_levels), len(self.levels))
+        if self.probs.shape != shape:
+            problems.append(
+                f"rating probabilities have shape {self.probs.shape}, expected {shape} (trust levels x rating levels)"
+            )
+            return problems
+        _check_row_array(self.probs, lambda i: f"rating[T={trust_levels[i[0]]}]", problems)
+        return problems
+
+    def to_dict(self, trust_levels: Sequence[str]) -> dict[str, Any]:
+        return {"levels": list(self.levels), "probs": _nested(self.probs, [trust_levels, self.levels])}
+
+    @classmethod
+    def read(cls, obj: Any, trust_levels: Sequence[str], problems: list[str]) -> RatingTable | None:
+        """The ``rating`` entry of a model file (``{"levels": [...], "probs": {T: {level: p}}}``);
+        every problem is appended to ``problems``."""
+        if not isinstance(obj, Mapping):
+            problems.append(f"rating must be an object with 'levels' and 'probs', got {obj!r}")
+            return None
+        _unknown_keys(obj, ["levels", "probs"], "rating", problems)
+        levels = _check_names(_get(obj, "levels", "rating.levels", problems), "rating.levels", problems)
+        raw = _get(obj, "probs", "rating.probs", problems)
+        if not levels or raw is None:
+            return None
+        probs = np.full((len(trust_levels), len(levels)), np.nan)
+        _unknown_keys(raw, trust_levels, "rating.probs", problems)
+        for t, name in enumerate(trust_levels):
+            cell = _get(raw, name, f"rating[T={name}]", problems)
+            if cell is not None:
+                row = _read_row(cell, levels, f"rating[T={name}]", problems)
+                if row is not None:
+                    probs[t] = row
+        return cls(tuple(levels), probs)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, RatingTable):
+            return NotImplemented
+        return self.levels == other.levels and np.array_equal(self.probs, other.probs)
+
+
+@dataclass(frozen=True, eq=False)
 class TrustModel:
     """The supervisor: hidden trust, its dynamics, and how it drives the human action."""
 
@@ -283,6 +357,8 @@ class TrustModel:
     # rows no data ever estimated (e.g. every ask row of a model fitted from a study without
     # asking): ("emission", (c, a)) or ("transition", (c, a, e)); empty = all estimated
     not_estimated: tuple[tuple[str, tuple[int, ...]], ...] = ()
+    # the optional second emission: a self-reported rating, P(rating | trust) (None: no ratings)
+    rating: RatingTable | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "trust_levels", tuple(self.trust_levels))
@@ -343,6 +419,11 @@ class TrustModel:
             rshape = row_shapes.get(table)
             if rshape is None or len(idx) != len(rshape) or any(not 0 <= i < n for i, n in zip(idx, rshape, strict=False)):
                 problems.append(f"not_estimated: {table}{list(idx)} is not a row of the model")
+        if self.rating is not None:
+            if not isinstance(self.rating, RatingTable):
+                problems.append(f"rating must be a RatingTable, got {type(self.rating).__name__}")
+            else:
+                problems += self.rating.problems(T)
         return problems
 
     # -- convenience -------------------------------------------------------
@@ -397,6 +478,7 @@ class TrustModel:
             "emission": _nested(self.emission, [C, ACTIONS, T, HUMAN_ACTIONS]),
             "transition": _nested(self.transition, [C, ACTIONS, EXPERIENCES, T, T]),
             **({"not_estimated": [_row_dict(t, idx, C) for t, idx in self.not_estimated]} if self.not_estimated else {}),
+            **({"rating": self.rating.to_dict(T)} if self.rating is not None else {}),
         }
 
     @classmethod
@@ -409,7 +491,7 @@ class TrustModel:
             problems.append(f"format is {fmt!r}, expected {MODEL_FORMAT!r}")
         _unknown_keys(
             d,
-            ["format", "notes", "trust_levels", "complexities", "initial", "emission", "transition", "not_estimated"],
+            ["format", "notes", "trust_levels", "complexities", "initial", "emission", "transition", "not_estimated", "rating"],
             "model",
             problems,
         )
@@ -438,10 +520,11 @@ class TrustModel:
         if not isinstance(notes, str):
             problems.append(f"notes must be a string, got {notes!r}")
         not_estimated = _read_not_estimated(d.get("not_estimated", []), C, problems)
+        rating = RatingTable.read(d["rating"], T, problems) if d.get("rating") is not None else None
         if problems:
             raise ModelError(problems, source)
         try:
-            return cls(tuple(T), tuple(C), initial, emission, transition, notes=notes, not_estimated=not_estimated)
+            return cls(tuple(T), tuple(C), initial, emission, transition, notes=notes, not_estimated=not_estimated, rating=rating)
         except ModelError as exc:
             raise ModelError(exc.problems, source) from None
 
@@ -462,6 +545,7 @@ class TrustModel:
             "transition": self.transition,
             "notes": self.notes,
             "not_estimated": self.not_estimated,
+            "rating": self.rating,
         }
         kw.update(changes)
         return TrustModel(**kw)
@@ -476,6 +560,7 @@ class TrustModel:
             and np.array_equal(self.emission, other.emission)
             and np.array_equal(self.transition, other.transition)
             and self.not_estimated == other.not_estimated
+            and self.rating == other.rating
         )
 
 

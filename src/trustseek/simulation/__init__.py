@@ -7,7 +7,7 @@
 * :mod:`.designs`     -- the paper's data collection and its counterbalanced crossover.
 """
 
-from .designs import crossover, simulate_design
+from .designs import add_ratings, crossover, simulate_design
 from .engine import Block, run, simulate
 from .populations import SimulationError, Supervisors
 from .results import CrossoverSimulation, Simulation, participant_ids, summarize
@@ -19,6 +19,7 @@ __all__ = [
     "Simulation",
     "SimulationError",
     "Supervisors",
+    "add_ratings",
     "crossover",
     "participant_ids",
     "run",

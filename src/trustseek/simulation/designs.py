@@ -30,6 +30,7 @@ def simulate_design(
     n_trials: Sequence[int] = PAPER_DATA_COUNTS,
     p_ask: Sequence[float] = tuple(PAPER_ASK_PROBABILITIES.values()),
     p_unobserved: float = 0.0,
+    rating_every: int = 0,
 ) -> pd.DataFrame:
     """Trial logs from ``model`` with the paper's design (Section V), in the canonical columns.
 
@@ -40,7 +41,9 @@ def simulate_design(
     trial is kept in the extra column ``true_trust``.  ``model`` is one supervisor model or a
     population (:class:`Supervisors`, e.g. :meth:`Supervisors.from_mixture`; participant ``i``
     of the log is row ``i`` of the population).  ``p_unobserved`` blanks that
-    fraction of human actions (not recorded).
+    fraction of human actions (not recorded).  ``rating_every`` > 0 adds a ``rating`` column
+    drawn from the model's rating table (:func:`add_ratings`) on every ``rating_every``-th
+    trial of each participant.
     """
     task = task or paper_task()
     if isinstance(model, TrustModel):
@@ -53,7 +56,44 @@ def simulate_design(
     if p_unobserved > 0:
         blank = np.random.default_rng(np.random.SeedSequence([seed, 1])).random(len(frame)) < p_unobserved
         frame.loc[blank, "human_action"] = None
+    if rating_every > 0:
+        if not isinstance(model, TrustModel):
+            raise SimulationError(["ratings are drawn from one trust model's rating table, not from a population"])
+        frame = add_ratings(frame, model, every=rating_every, seed=np.random.SeedSequence([seed, 2]))
     return frame
+
+
+def add_ratings(
+    frame: pd.DataFrame,
+    model: TrustModel,
+    every: int = 1,
+    seed: int | np.random.SeedSequence = 0,
+    column: str = "rating",
+    trust: str = "true_trust",
+) -> pd.DataFrame:
+    """``frame`` with a self-reported rating column drawn from ``model``'s rating table given the
+    hidden trust in column ``trust`` (P(rating | trust)), on every ``every``-th trial of each
+    participant (trials ``every``, ``2 every``, ... in the order of the trial column; empty
+    elsewhere).  The rating is an ordered categorical with the table's levels."""
+    if model.rating is None:
+        raise SimulationError(["the model has no rating table (P(rating | trust)) to draw ratings from"])
+    if every < 1:
+        raise SimulationError([f"every must be a positive number of trials, got {every}"])
+    if trust not in frame.columns:
+        raise SimulationError([f"the log has no hidden-trust column {trust!r} to draw ratings from"])
+    levels = model.rating.levels
+    k = pd.Series(frame[trust]).map({t: i for i, t in enumerate(model.trust_levels)})
+    if k.isna().any():
+        raise SimulationError([f"column {trust!r} holds values that are not trust levels {list(model.trust_levels)}"])
+    cum = np.cumsum(np.asarray(model.rating.probs), axis=1)
+    cum[:, -1] = 1.0
+    u = np.random.default_rng(seed).random(len(frame))
+    codes = (u[:, None] >= cum[k.to_numpy(dtype=np.int64)]).sum(axis=1)
+    position = frame.groupby("participant", sort=False, observed=True)["trial"].rank(method="first").to_numpy()
+    codes = np.where(position % every == 0, codes, -1)
+    out = frame.copy()
+    out[column] = pd.Categorical.from_codes(codes, categories=pd.Index(list(levels), dtype=object), ordered=True)
+    return out
 
 
 def crossover(
