@@ -515,6 +515,7 @@ class ReachableSolver(SolverBase):
         visited: list[np.ndarray] = list(self._reachable(b0, self.seed_depth))
         history = []
         trials = backups = consolidated = 0
+        cost = 0.0
         lo, up = float(self.lower_at(b0)[0]), float(self.upper_at(b0)[0])
         while up - lo > self.tol and time.perf_counter() < t_end:
             trials += 1
@@ -525,12 +526,15 @@ class ReachableSolver(SolverBase):
             visited.extend(path[1:])
             B = _unique_rows(np.array(visited), self.decimals)
             visited = list(B)
-            if len(B) >= 1.3 * consolidated and time.perf_counter() < t_end:
+            # the next consolidation costs about (size ratio)^2 x the last one: not started past the limit
+            expected = cost * (len(B) / max(consolidated, 1)) ** 2
+            if len(B) >= 1.3 * consolidated and time.perf_counter() + expected < t_end:
                 # values over the visited beliefs at once (loops of beliefs included)
+                c0 = time.perf_counter()
                 self._improve_upper(B)
                 self._improve_lower(B)
                 self._prune(B)
-                consolidated = len(B)
+                consolidated, cost = len(B), time.perf_counter() - c0
             lo, up = float(self.lower_at(b0)[0]), float(self.upper_at(b0)[0])
             history.append((trials, time.perf_counter() - t0, lo, up))
         B = _unique_rows(np.array(visited), self.decimals)
