@@ -64,7 +64,7 @@ def test_known_type_value_equals_the_single_type_value():
     task = paper_task()
     for m, model in enumerate(mixture.models):
         onehot = np.eye(2)[m]
-        aware = solve_type_aware(mixture, task, type_belief=onehot, gap=1e-3, max_seconds=30)
+        aware = solve_type_aware(mixture, task, "reachable", gap=1e-3, type_belief=onehot, max_seconds=30)
         single = make_solver("alpha", gap=1e-6).solve(AssistancePOMDP(model, task))
         lo, up = aware.info["value_bounds_at_initial_belief"]
         assert up - lo <= 1e-3

@@ -25,7 +25,7 @@ def solved(tmp_path_factory):
 
 def test_solve_on_a_mixture_gives_a_type_aware_policy(solved):
     summary, path = solved
-    assert summary["solver"] == "reachable"
+    assert summary["solver"] == "point"
     assert summary["type_belief"] == pytest.approx({"paper": 0.7, "conservative": 0.3})
     lo, up = summary["value_bounds_at_initial_belief"]
     assert lo <= up

@@ -419,6 +419,26 @@ class ReachableSolver(SolverBase):
             self.v = np.concatenate([self.v, v[better]])
             self._refresh_points()
 
+    def _sampled(self, b0: np.ndarray, rng: np.random.Generator, trajectories: int = 8, length: int = 60) -> np.ndarray:
+        """Beliefs met on trajectories from b0: context and branch drawn with their probabilities,
+        the action greedy in the upper bound."""
+        N, _, Br, K = self.shape
+        B = np.repeat(b0[None], trajectories, axis=0)
+        idx = np.arange(trajectories)
+        out = []
+        for _ in range(length):
+            p, S = self._successors_many(B)
+            ub = self.upper_at(S.reshape(-1, K)).reshape(p.shape)
+            q = np.einsum("cat,nt->nca", self.R, B) + self.g * (p * ub).sum(axis=3)
+            c = rng.choice(N, size=trajectories, p=self.pc)
+            a = q[idx, c].argmax(axis=1)
+            pb = p[idx, c, a]
+            u = rng.random(trajectories)[:, None] * pb.sum(axis=1, keepdims=True)
+            br = np.minimum((np.cumsum(pb, axis=1) < u).sum(axis=1), Br - 1)
+            B = S[idx, c, a, br]
+            out.append(B)
+        return np.vstack(out)
+
     def _reachable(self, b0: np.ndarray, depth: int) -> np.ndarray:
         """b0 and the beliefs reachable from it in up to ``depth`` trials (any context, action and
         branch of positive probability), near-duplicates merged."""
@@ -515,6 +535,8 @@ class ReachableSolver(SolverBase):
         visited: list[np.ndarray] = list(self._reachable(b0, self.seed_depth))
         history = []
         trials = backups = consolidated = 0
+        cost = 0.0
+        rng = np.random.default_rng(0)
         lo, up = float(self.lower_at(b0)[0]), float(self.upper_at(b0)[0])
         while up - lo > self.tol and time.perf_counter() < t_end:
             trials += 1
@@ -525,12 +547,18 @@ class ReachableSolver(SolverBase):
             visited.extend(path[1:])
             B = _unique_rows(np.array(visited), self.decimals)
             visited = list(B)
-            if len(B) >= 1.3 * consolidated and time.perf_counter() < t_end:
-                # values over the visited beliefs at once (loops of beliefs included)
+            # the next consolidation costs about (size ratio)^2 x the last one: not started past the limit
+            expected = cost * (len(B) / max(consolidated, 1)) ** 2
+            if len(B) >= 1.3 * consolidated and time.perf_counter() + expected < t_end:
+                # values over the visited beliefs at once (loops of beliefs included), with the
+                # beliefs met on a few trajectories of the greedy policy (what the lower bound needs)
+                c0 = time.perf_counter()
+                B = _unique_rows(np.vstack([B, self._sampled(b0, rng)]), self.decimals)
+                visited = list(B)
                 self._improve_upper(B)
                 self._improve_lower(B)
                 self._prune(B)
-                consolidated = len(B)
+                consolidated, cost = len(B), time.perf_counter() - c0
             lo, up = float(self.lower_at(b0)[0]), float(self.upper_at(b0)[0])
             history.append((trials, time.perf_counter() - t0, lo, up))
         B = _unique_rows(np.array(visited), self.decimals)

@@ -28,7 +28,7 @@ from .registry import make_solver
 __all__ = ["DEFAULT_TYPE_AWARE_SOLVER", "solve_type_aware"]
 
 #: the solver ``solve_type_aware`` uses unless told otherwise
-DEFAULT_TYPE_AWARE_SOLVER = "reachable"
+DEFAULT_TYPE_AWARE_SOLVER = "point"
 
 
 def solve_type_aware(

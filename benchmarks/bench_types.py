@@ -1,0 +1,100 @@
+"""Benchmark of planning for a person of unknown supervisor type, and of the reachable solver.
+
+    python benchmarks/bench_types.py             # time limit 60 s per solve
+    python benchmarks/bench_types.py --quick     # time limit 15 s per solve
+
+* the type-aware solve for M = 3 types (the paper's supervisor, the conservative one and
+  "midway", their average, in shares 0.5 / 0.3 / 0.2), K = 2 trust levels, to a bound gap of
+  1e-3 at b0 (target < 1 s) with the reachable solver, next to the point solver on the same
+  problem with the same time limit (the in-run baseline);
+* single-type models with K = 3 (the shipped three-level example) and K = 4 (a four-level chain
+  built from the paper's numbers, below), both solvers, same gap and time limit.
+
+Each line: solver, seconds (wall and CPU, one core), the bounds at b0 and the gap reached.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np
+
+from trustseek.data import example_path
+from trustseek.model import TypeMixture, conservative_model, paper_model, paper_task
+from trustseek.model.core import Task, TrustModel
+from trustseek.pomdp import AssistancePOMDP
+from trustseek.pomdp.types import type_aware_problem
+from trustseek.solvers import make_solver
+
+
+def midway() -> TrustModel:
+    """The average of the paper's and the conservative supervisor (a third type for the benchmark)."""
+    p, c = paper_model(), conservative_model()
+    return TrustModel(
+        p.trust_levels,
+        p.complexities,
+        (p.initial + c.initial) / 2,
+        (p.emission + c.emission) / 2,
+        (p.transition + c.transition) / 2,
+    )
+
+
+def chain_model(K: int) -> TrustModel:
+    """K trust levels from the paper's numbers: level t interpolates the emissions of low and high
+    trust; after each trial trust moves one level up with the paper's P(low -> high) and one level
+    down with its P(high -> low) (scaled to sum at most 1); it starts at the top."""
+    p = paper_model()
+    s = np.linspace(0.0, 1.0, K)
+    emission = (1 - s)[None, None, :, None] * p.emission[:, :, :1] + s[None, None, :, None] * p.emission[:, :, 1:]
+    up, down = p.transition[..., 0, 1], p.transition[..., 1, 0]  # [c, a, e]
+    total = np.maximum(up + down, 1.0)
+    up, down = up / total, down / total
+    transition = np.zeros((*up.shape, K, K))
+    for t in range(K):
+        transition[..., t, min(t + 1, K - 1)] += up
+        transition[..., t, max(t - 1, 0)] += down
+        transition[..., t, t] += 1 - up - down
+    initial = np.zeros(K)
+    initial[-1] = 1.0
+    names = tuple(f"level{t}" for t in range(K))
+    return TrustModel(names, p.complexities, initial, emission, transition)
+
+
+def run(name: str, pomdp: AssistancePOMDP, solver: str, limit: float) -> float:
+    t0, c0 = time.perf_counter(), time.process_time()
+    policy = make_solver(solver, gap=1e-3, max_seconds=limit).solve(pomdp)
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    lo, up = policy.info["value_bounds_at_initial_belief"]
+    print(f"  {name:<34} {solver:<10} {wall:8.2f} s wall {cpu:8.2f} s CPU   V(b0) in [{lo:.5f}, {up:.5f}]  gap {up - lo:.1e}")
+    return wall
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true", help="time limit 15 s per solve instead of 60 s")
+    limit = 15.0 if ap.parse_args().quick else 60.0
+    task = paper_task()
+    mixture = TypeMixture(
+        ("paper", "conservative", "midway"), np.array([0.5, 0.3, 0.2]), (paper_model(), conservative_model(), midway())
+    )
+    print(f"type-aware solve, M = 3 types x K = 2 levels, gap 1e-3 at b0 (target < 1 s); time limit {limit:g} s")
+    problem = type_aware_problem(mixture, task)
+    run("paper + conservative + midway", problem, "reachable", limit)
+    run("paper + conservative + midway", problem, "point", limit)
+    print(f"single-type models, gap 1e-3 at b0; time limit {limit:g} s")
+    three = AssistancePOMDP(
+        TrustModel.load(example_path("three_level_model.json")), Task.load(example_path("three_level_task.json"))
+    )
+    four = AssistancePOMDP(chain_model(4), task)
+    for label, pomdp in (("K = 3 (three-level example)", three), ("K = 4 (chain of the paper's numbers)", four)):
+        run(label, pomdp, "reachable", limit)
+        run(label, pomdp, "point", limit)
+
+
+if __name__ == "__main__":
+    main()
