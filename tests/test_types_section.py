@@ -9,7 +9,17 @@ import pytest
 
 from cli_runner import run_cli
 from trustseek.model import TypeMixture, paper_conservative_mixture, paper_task
-from trustseek.reproduction.types import AGNOSTIC, ORACLE, POOLED, TYPE_AWARE, PopulationRuns, _numbers, _verdicts, types_section
+from trustseek.reproduction.types import (
+    AGNOSTIC,
+    FITTED,
+    ORACLE,
+    POOLED,
+    TYPE_AWARE,
+    PopulationRuns,
+    _numbers,
+    _verdicts,
+    types_section,
+)
 from trustseek.simulation import Supervisors
 from trustseek.simulation.engine import simulate
 
@@ -33,7 +43,7 @@ def test_groups_and_counts(section):
     assert sum(g["participants"] for g in mix["groups"][:2]) == mix["groups"][2]["participants"] == 300
     assert [g["group"] for g in one["groups"]] == ["paper"]
     for g in mix["groups"]:
-        assert set(g["reward"]) == {POOLED, TYPE_AWARE, ORACLE, AGNOSTIC}
+        assert set(g["reward"]) == {POOLED, FITTED, TYPE_AWARE, ORACLE, AGNOSTIC}
         for r in g["reward"].values():
             assert r["low"] <= r["mean"] <= r["high"]
 
@@ -103,3 +113,11 @@ def test_compare_types_command():
 def test_compare_types_bad_input(args, needle):
     code, err = run_cli(["compare-types", *args], stdout=False)
     assert code == 2 and needle in err and "Traceback" not in err
+
+
+def test_fitted_types_on_a_one_type_population_cost_nothing(section):
+    """On the paper's supervisor alone BIC picks one type, and the fitted-types policy is the
+    pooled structure's own: it earns what the pooled policy earns, person by person."""
+    assert section.numbers["fitted_types"]["paper alone"]["chosen"] == 1
+    alone = section.runs[1]
+    assert np.array_equal(alone.rewards[FITTED], alone.rewards[POOLED])

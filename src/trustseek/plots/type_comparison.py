@@ -11,6 +11,7 @@ from . import save, style
 
 POLICY_COLORS = {
     "pooled trust-aware": "#1f5fa8",
+    "type-aware (fitted types)": "#98df8a",
     "type-aware": "#2ca02c",
     "oracle (type known)": "#7f7f7f",
     "trust-agnostic": "#c8102e",

@@ -3,19 +3,23 @@ population has types, and learns which one it is working with, rescue the conser
 supervisors that the pooled model lost?
 
 :func:`types_section` compares, on the same simulated people (common random numbers, so the
-differences are paired per participant), four policies:
+differences are paired per participant), five policies:
 
 * **pooled trust-aware**: the paper's approach: one model fitted to the pooled
   experiment-1 data of the population (paper design), its optimal policy;
-* **type-aware**: the optimal policy of the (type, trust) POMDP of the population's types; a
-  new person's type is unknown and learned from their interventions and outcomes;
+* **type-aware (fitted types)**: what a researcher would deploy: supervisor types fitted to the
+  same experiment-1 log (1 to 3 types, the number chosen by BIC), the optimal policy of their
+  (type, trust) POMDP; one type chosen makes it the pooled structure's own policy;
+* **type-aware**: the same for the population's true types; a new person's type is unknown and
+  learned from their interventions and outcomes;
 * **oracle**: each person's own type's optimal policy (the type known in advance); run for every
   type on everyone with the same random numbers, then each person's own type's run is kept;
 * **trust-agnostic**: the optimal policy of the intervention rates in the experiment-1 data.
 
 at the paper's block length (17 + 17 trials) and a longer one, per type and overall, and again
-on a one-type population (the paper's supervisor alone, with the type-aware policy still planning
-for the two types): knowing about types should cost nothing measurable there.
+on a one-type population (the paper's supervisor alone): there the fitted types should come out
+as one, and cost nothing; the type-aware policy of the true two types is run there too, to show
+what planning for types that are absent costs.
 
 Every trust-aware policy (pooled, type-aware, each oracle) is solved by the same solver
 (:func:`~trustseek.solvers.type_aware.solve_type_aware`, a one-type mixture for a single
@@ -24,13 +28,16 @@ model), so that the paired differences are those of the models planned for, not 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from ..estimation.fit import fit_trust_model
+from ..estimation.mixture import fit_types
 from ..model.core import Task, TrustModel
 from ..model.mixture import TypeMixture
 from ..model.presets import paper_conservative_mixture, paper_task
@@ -44,9 +51,18 @@ from ..vocab import PAPER_BLOCK_COUNTS, TRIAL_COLUMNS
 from .statistics import mean_ci
 
 POOLED, TYPE_AWARE, ORACLE, AGNOSTIC = "pooled trust-aware", "type-aware", "oracle (type known)", "trust-agnostic"
-POLICIES = (POOLED, TYPE_AWARE, ORACLE, AGNOSTIC)
+FITTED = "type-aware (fitted types)"
+POLICIES = (POOLED, FITTED, TYPE_AWARE, ORACLE, AGNOSTIC)
 # the paired differences the section reports: (policy, against)
-CONTRASTS = ((TYPE_AWARE, POOLED), (ORACLE, TYPE_AWARE), (ORACLE, POOLED), (POOLED, AGNOSTIC), (TYPE_AWARE, AGNOSTIC))
+CONTRASTS = (
+    (TYPE_AWARE, POOLED),
+    (FITTED, POOLED),
+    (ORACLE, TYPE_AWARE),
+    (ORACLE, POOLED),
+    (POOLED, AGNOSTIC),
+    (TYPE_AWARE, AGNOSTIC),
+)
+MAX_TYPES = 3  # the numbers of types compared (by BIC) for the fitted-types policy
 
 
 def _interval(v: np.ndarray) -> dict[str, float]:
@@ -87,6 +103,19 @@ def _pooled_fit(mixture: TypeMixture, task: Task, participants: int, seed: int, 
     frame = simulate_design(sup, participants, seed=seed, task=task)
     fit = fit_trust_model(frame[list(TRIAL_COLUMNS)], preset="paper", restarts=restarts, seed=seed)
     return fit.model, frame
+
+
+def _fitted_types(frame: pd.DataFrame, restarts: int, seed: int) -> tuple[TypeMixture, list[dict[str, float]]]:
+    """The supervisor types a researcher would fit to the experiment-1 log: 1..MAX_TYPES types,
+    the number with the lowest BIC (a one-type choice is the pooled structure's own fit)."""
+    rows, fits = [], []
+    for m in range(1, MAX_TYPES + 1):
+        fit = fit_types(frame[list(TRIAL_COLUMNS)], m, restarts=restarts, seed=seed)
+        bic = -2.0 * fit.loglik + fit.n_params * math.log(fit.n_observations)
+        rows.append({"types": m, "loglik": float(fit.loglik), "bic": float(bic)})
+        fits.append(fit)
+    best = min(range(len(rows)), key=lambda i: rows[i]["bic"])
+    return fits[best].mixture(), rows
 
 
 def _run(
@@ -163,16 +192,18 @@ def _verdicts(numbers: list[dict[str, Any]], conservative: str) -> list[str]:
     out = []
     for block in numbers:
         where = f"{block['population']}, {block['trials']}-trial blocks"
-        whole = diff(block, "all", TYPE_AWARE, POOLED) or diff(block, block["groups"][0]["group"], TYPE_AWARE, POOLED)
-        if whole is None:
-            continue
-        if whole["low"] > 0:
-            verdict = "gains"
-        elif whole["high"] < 0:
-            verdict = "loses"
-        else:
-            verdict = "neither gains nor loses measurably"
-        out.append(f"{where}: the type-aware policy {verdict} against the pooled one per block, {say(whole)} (paired 95 % CI).")
+        group = "all" if any(g["group"] == "all" for g in block["groups"]) else block["groups"][0]["group"]
+        for policy, label in ((TYPE_AWARE, "the type-aware policy (the true types)"), (FITTED, "the policy of the fitted types")):
+            whole = diff(block, group, policy, POOLED)
+            if whole is None:
+                continue
+            if whole["low"] > 0:
+                verdict = "gains"
+            elif whole["high"] < 0:
+                verdict = "loses"
+            else:
+                verdict = "neither gains nor loses measurably"
+            out.append(f"{where}: {label} {verdict} against the pooled one per block, {say(whole)} (paired 95 % CI).")
         cons = diff(block, conservative, TYPE_AWARE, POOLED)
         orc = diff(block, conservative, ORACLE, TYPE_AWARE)
         best = diff(block, conservative, ORACLE, POOLED)
@@ -226,12 +257,16 @@ def types_section(
     agnostic = trust_agnostic_from_data(frame, task)
     type_aware = plan(mixture)
     oracle = [plan(m) for m in mixture.models]
+    fitted_mixture, fitted_rows = _fitted_types(frame, restarts, int(seeds[0]))
+    fitted = plan(fitted_mixture)
     tick("policies")
     # the one-type population: the first type alone; its pooled policy is fitted from its own data
     alone = TypeMixture.single(mixture.models[0], mixture.names[0])
     alone_model, alone_frame = _pooled_fit(alone, task, fit_participants, int(seeds[1]), restarts)
     alone_pooled = plan(alone_model)
     alone_agnostic = trust_agnostic_from_data(alone_frame, task)
+    alone_mixture, alone_rows = _fitted_types(alone_frame, restarts, int(seeds[1]))
+    alone_fitted = plan(alone_mixture)
     tick("one-type policies")
     runs: list[PopulationRuns] = []
     for j, counts in enumerate(block_counts):
@@ -241,7 +276,7 @@ def types_section(
                 " + ".join(mixture.names),
                 mixture,
                 task,
-                {POOLED: pooled, TYPE_AWARE: type_aware, AGNOSTIC: agnostic},
+                {POOLED: pooled, FITTED: fitted, TYPE_AWARE: type_aware, AGNOSTIC: agnostic},
                 oracle,
                 counts,
                 participants,
@@ -253,7 +288,7 @@ def types_section(
                 f"{mixture.names[0]} alone",
                 alone,
                 task,
-                {POOLED: alone_pooled, TYPE_AWARE: type_aware, AGNOSTIC: alone_agnostic},
+                {POOLED: alone_pooled, FITTED: alone_fitted, TYPE_AWARE: type_aware, AGNOSTIC: alone_agnostic},
                 oracle[:1],
                 counts,
                 participants,
@@ -273,8 +308,21 @@ def types_section(
         "type_aware_solver": {
             k: info[k] for k in ("solver", "certified_gap", "target_gap", "value_bounds_at_initial_belief") if k in info
         },
+        # the numbers of types fitted to each population's experiment-1 log, and the one BIC chose
+        "fitted_types": {
+            " + ".join(mixture.names): {"chosen": fitted_mixture.n_types, "fits": fitted_rows},
+            f"{mixture.names[0]} alone": {"chosen": alone_mixture.n_types, "fits": alone_rows},
+        },
         "populations": numbers,
         "verdicts": _verdicts(numbers, conservative),
     }
-    policies = {POOLED: pooled, TYPE_AWARE: type_aware, AGNOSTIC: agnostic, "oracle": oracle, "pooled model": pooled_model}
+    policies = {
+        POOLED: pooled,
+        FITTED: fitted,
+        TYPE_AWARE: type_aware,
+        AGNOSTIC: agnostic,
+        "oracle": oracle,
+        "pooled model": pooled_model,
+        "fitted types": fitted_mixture,
+    }
     return TypesSection(out, policies, runs)
