@@ -17,8 +17,10 @@ from fastapi.staticfiles import StaticFiles
 
 from ..version import __version__
 from .db import DEFAULT_URL, open_database, safe_url
+from .fastpath import DeployFastPath
 from .middleware import BodyGuard, RequestLog, ServerTiming
 from .routes import deploy, experimenter, own, participant
+from .store import DeployStore
 
 STATIC = Path(__file__).resolve().parent.parent / "static" / "app"
 
@@ -72,7 +74,9 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     app.state.token = token or secrets.token_urlsafe(24)
     app.state.public_url = public_url
     app.state.tokens = {}  # session token -> Caller
+    app.state.deploy_store = DeployStore(app.state.engine)  # the decision API's connection
     app.add_exception_handler(RequestValidationError, validation_error)
+    app.add_middleware(DeployFastPath)  # innermost: after authentication and the body's bound
     app.add_middleware(BodyGuard)
     app.add_middleware(RequestLog)
     app.add_middleware(ServerTiming)
