@@ -147,8 +147,8 @@ class DeployStore:
                 cur = self._cursor()
                 if self.sqlite:
                     cur.execute("BEGIN IMMEDIATE")
-            except self._reconnect:
-                self._drop()
+            except BaseException:
+                self._drop()  # a closed or broken connection: the next transaction opens another
                 raise
             try:
                 yield self
