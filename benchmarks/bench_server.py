@@ -40,7 +40,7 @@ import numpy as np
 from sqlalchemy import create_engine, text
 
 from trustseek.server.db import driver_url
-from trustseek.testing.servers import TemporaryPostgres, free_port, serve_process
+from trustseek.testing.servers import TemporaryPostgres, free_port, serve_process, wait_ready
 
 TOKEN = "bench-token-0123456789"
 
@@ -111,9 +111,10 @@ async def run_session(port: int, info: dict, trials: int, think: float, seed: in
 
 async def load(
     port: int, sessions: int, trials: int, think: float, policy: dict, first_seed: int = 0, pid: int | None = None
-) -> tuple[list, list, float, list, float]:
+) -> tuple[list, list, float, list, float, float]:
     """Open the sessions, then run them concurrently: (client latencies, server latencies, wall
-    time, session ids, server CPU seconds (process ``pid`` and its children) while they ran)."""
+    time, session ids, server CPU seconds (process ``pid`` and its children) and this process's
+    CPU seconds while they ran)."""
     admin = await Conn(port, TOKEN).open()
     infos = []
     for i in range(sessions):
@@ -127,11 +128,13 @@ async def load(
     lat: list[float] = []
     srv: list[float] = []
     cpu0 = server_cpu(pid) if pid is not None else 0.0
+    own0 = time.process_time()
     t0 = time.perf_counter()
     await asyncio.gather(*(run_session(port, info, trials, think, first_seed + i, lat, srv) for i, info in enumerate(infos)))
     wall = time.perf_counter() - t0
     cpu = server_cpu(pid) - cpu0 if pid is not None else float("nan")
-    return lat, srv, wall, [i["session_id"] for i in infos], cpu
+    own = time.process_time() - own0
+    return lat, srv, wall, [i["session_id"] for i in infos], cpu, own
 
 
 def pct(x: list[float], q: float) -> float:
@@ -173,6 +176,35 @@ def source_of(rev: str, into: Path) -> Path:
     return into / "src"
 
 
+FLOOR = "floor"
+
+
+async def floor_app(scope, receive, send) -> None:
+    """The floor: an ASGI application that answers every request at once with a fixed body
+    (a session for the opening request, an autonomous decision for the others), served by
+    uvicorn as ``trustseek serve`` is.  What it costs is the HTTP server's, the event loop's
+    and the kernel's share of a request, which no change to the application can remove."""
+    if scope["type"] != "http":
+        return
+    t0 = time.perf_counter()
+    while (await receive()).get("more_body"):
+        pass
+    opening = scope["path"] == "/api/deploy/sessions"
+    body = b'{"session_id":"floor","token":"floor","robot_action":"autonomous"}'
+    timing = b"app;dur=%.3f" % ((time.perf_counter() - t0) * 1000)
+    head = [(b"content-length", b"%d" % len(body)), (b"content-type", b"application/json"), (b"server-timing", timing)]
+    await send({"type": "http.response.start", "status": 201 if opening else 200, "headers": head})
+    await send({"type": "http.response.body", "body": body})
+
+
+def floor_process(port: int) -> subprocess.Popen:
+    here = str(Path(__file__).resolve().parent)
+    cmd = [sys.executable, "-m", "uvicorn", "--app-dir", here, "bench_server:floor_app", "--host", "127.0.0.1"]
+    proc = subprocess.Popen([*cmd, "--port", str(port), "--log-level", "warning", "--no-access-log"])
+    wait_ready(f"http://127.0.0.1:{port}", proc=proc)
+    return proc
+
+
 def measure(url: str, src: Path | None, args, levels: list[int], policy: dict, seed0: int) -> dict:
     """Start a server (from ``src`` when given, else this checkout) and run the baselines and each
     level of concurrent sessions against it."""
@@ -181,7 +213,7 @@ def measure(url: str, src: Path | None, args, levels: list[int], policy: dict, s
     if src is not None:
         os.environ["PYTHONPATH"] = str(src)
     try:
-        proc = serve_process(url, TOKEN, port, workers=args.workers)
+        proc = floor_process(port) if url == FLOOR else serve_process(url, TOKEN, port, workers=args.workers)
     finally:
         if env is None:
             os.environ.pop("PYTHONPATH", None)
@@ -196,7 +228,7 @@ def measure(url: str, src: Path | None, args, levels: list[int], policy: dict, s
         )[:2]
         for k, n in enumerate(levels):
             load_before = os.getloadavg()[0]
-            lat, srv, wall, ids, cpu = asyncio.run(
+            lat, srv, wall, ids, cpu, own = asyncio.run(
                 load(port, n, args.trials, args.think_ms / 1000, policy, first_seed=seed0 + 100 + k * 100_000, pid=proc.pid)
             )
             out["levels"][n] = {
@@ -205,13 +237,14 @@ def measure(url: str, src: Path | None, args, levels: list[int], policy: dict, s
                 "wall": wall,
                 "ids": ids,
                 "cpu": cpu,
+                "client_cpu": own,
                 "load": (load_before, os.getloadavg()[0]),
             }
     finally:
         proc.terminate()
         proc.wait(timeout=30)
     for r in out["levels"].values():
-        r["rows"] = stored_trials(url, r["ids"])
+        r["rows"] = None if url == FLOOR else stored_trials(url, r["ids"])
     return out
 
 
@@ -244,6 +277,11 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="also measure the server of this git revision (e.g. HEAD~3), first, in the same run and on a fresh database of its own",
     )
+    ap.add_argument(
+        "--floor",
+        action="store_true",
+        help="also measure the floor: a trivial application under uvicorn (what HTTP, the event loop and the kernel cost)",
+    )
     args = ap.parse_args(argv)
     levels = [int(x) for x in args.sessions.split(",")]
     try:
@@ -254,24 +292,30 @@ def main(argv: list[str] | None = None) -> int:
         pass
     policy = {"kind": args.policy}
     results = []
+    backend = "none"
     with tempfile.TemporaryDirectory() as d, contextlib.ExitStack() as stack:
         variants: list[tuple[str, Path | None]] = [("this checkout", None)]
         if args.baseline_rev:
             variants.insert(0, (f"revision {args.baseline_rev}", source_of(args.baseline_rev, Path(d) / "baseline")))
+        if args.floor:
+            variants.append((FLOOR, None))
         for k, (name, src) in enumerate(variants):
-            if args.postgres:
+            if name == FLOOR:
+                url = FLOOR
+            elif args.postgres:
                 url = stack.enter_context(TemporaryPostgres())
             else:
                 url = args.db or f"sqlite:///{Path(d) / f'bench-{k}.sqlite'}"
             results.append((name, measure(url, src, args, levels, policy, seed0=10**6 * (k + 1))))
-            backend = url.split(":", 1)[0].split("+")[0]
+            if url != FLOOR:
+                backend = url.split(":", 1)[0].split("+")[0]
     print(
         f"server decision API: concurrent sessions x {args.trials} trials ({args.policy} policy, think time ~{args.think_ms:g} ms), "
         f"{backend}, {args.workers} server process(es), loopback; the load generator is this process"
     )
     ok = True
     for name, res in results:
-        print(f" server of {name}:")
+        print(f" server of {name}:" if name != FLOOR else " floor (an application that does nothing, under uvicorn):")
         rows_out = [
             ("1 session, back to back", *res["back"]),
             (f"1 session, paced {args.baseline_think_ms:g} ms", *res["paced"]),
@@ -282,16 +326,23 @@ def main(argv: list[str] | None = None) -> int:
             )
         for n, r in res["levels"].items():
             lat, srv, total = r["lat"], r["srv"], n * args.trials
-            stored, dup, complete = check(r["rows"], r["ids"], args.trials)
-            ok = ok and complete and dup == 0 and stored == total
+            if r["rows"] is None:
+                stored, dup, complete = total, 0, True
+            else:
+                stored, dup, complete = check(r["rows"], r["ids"], args.trials)
+                ok = ok and complete and dup == 0 and stored == total
             print(
                 f"  {f'{n} concurrent sessions':<30} client p50 {pct(lat, 50):7.2f} ms  p99 {pct(lat, 99):8.2f} ms   "
                 f"server p50 {pct(srv, 50):5.2f} ms  p99 {pct(srv, 99):6.2f} ms"
             )
             print(
-                f"  {'':<30} {2 * total / r['wall']:.0f} requests/s, server CPU {r['cpu'] / (2 * total) * 1000:.2f} ms per request, "
-                f"p99 < 10 ms {'met' if pct(lat, 99) < 10 else 'NOT met'}; load average {r['load'][0]:.2f} before, {r['load'][1]:.2f} after; "
-                f"trials stored {stored} of {total}, duplicates {dup}, complete and in order: {complete}"
+                f"  {'':<30} {2 * total / r['wall']:.0f} requests/s, CPU per request: server {r['cpu'] / (2 * total) * 1000:.2f} ms, load generator {r['client_cpu'] / (2 * total) * 1000:.2f} ms; "
+                f"p99 < 10 ms {'met' if pct(lat, 99) < 10 else 'NOT met'}; load average {r['load'][0]:.2f} before, {r['load'][1]:.2f} after"
+                + (
+                    ""
+                    if r["rows"] is None
+                    else f"; trials stored {stored} of {total}, duplicates {dup}, complete and in order: {complete}"
+                )
             )
     print(f"  machine: {os.cpu_count()} cores shared with other processes")
     return 0 if ok else 1
