@@ -26,9 +26,12 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import io
 import json
 import os
+import subprocess
 import sys
+import tarfile
 import tempfile
 import time
 from pathlib import Path
@@ -37,7 +40,7 @@ import numpy as np
 from sqlalchemy import create_engine, text
 
 from trustseek.server.db import driver_url
-from trustseek.testing.servers import TemporaryPostgres, free_port, serve_process
+from trustseek.testing.servers import TemporaryPostgres, free_port, serve_process, wait_ready
 
 TOKEN = "bench-token-0123456789"
 
@@ -107,8 +110,11 @@ async def run_session(port: int, info: dict, trials: int, think: float, seed: in
 
 
 async def load(
-    port: int, sessions: int, trials: int, think: float, policy: dict, first_seed: int = 0
-) -> tuple[list, list, float, list]:
+    port: int, sessions: int, trials: int, think: float, policy: dict, first_seed: int = 0, pid: int | None = None
+) -> tuple[list, list, float, list, float, float]:
+    """Open the sessions, then run them concurrently: (client latencies, server latencies, wall
+    time, session ids, server CPU seconds (process ``pid`` and its children) and this process's
+    CPU seconds while they ran)."""
     admin = await Conn(port, TOKEN).open()
     infos = []
     for i in range(sessions):
@@ -121,9 +127,14 @@ async def load(
     admin.close()
     lat: list[float] = []
     srv: list[float] = []
+    cpu0 = server_cpu(pid) if pid is not None else 0.0
+    own0 = time.process_time()
     t0 = time.perf_counter()
     await asyncio.gather(*(run_session(port, info, trials, think, first_seed + i, lat, srv) for i, info in enumerate(infos)))
-    return lat, srv, time.perf_counter() - t0, [i["session_id"] for i in infos]
+    wall = time.perf_counter() - t0
+    cpu = server_cpu(pid) - cpu0 if pid is not None else float("nan")
+    own = time.process_time() - own0
+    return lat, srv, wall, [i["session_id"] for i in infos], cpu, own
 
 
 def pct(x: list[float], q: float) -> float:
@@ -140,9 +151,117 @@ def stored_trials(url: str, ids: list[str]) -> list[tuple[str, int, int]]:
     return rows
 
 
+def server_cpu(pid: int) -> float:
+    """CPU seconds (user + system) used so far by a process and its children (the workers), from
+    /proc (Linux)."""
+    stats = {}
+    for f in Path("/proc").glob("[0-9]*/stat"):
+        with contextlib.suppress(OSError):
+            fields = f.read_text().rsplit(")", 1)[1].split()
+            stats[int(f.parent.name)] = (int(fields[1]), (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK"))
+    tree, grew = {pid}, True
+    while grew:
+        more = {p for p, (ppid, _) in stats.items() if ppid in tree} - tree
+        tree |= more
+        grew = bool(more)
+    return sum(stats[p][1] for p in tree if p in stats)
+
+
+def source_of(rev: str, into: Path) -> Path:
+    """The ``src`` folder of git revision ``rev`` of this repository, extracted under ``into``."""
+    repo = Path(__file__).resolve().parent.parent
+    data = subprocess.run(["git", "-C", str(repo), "archive", rev, "src"], check=True, capture_output=True).stdout
+    with tarfile.open(fileobj=io.BytesIO(data)) as tar:
+        tar.extractall(into, filter="data")
+    return into / "src"
+
+
+FLOOR = "floor"
+
+
+async def floor_app(scope, receive, send) -> None:
+    """The floor: an ASGI application that answers every request at once with a fixed body
+    (a session for the opening request, an autonomous decision for the others), served by
+    uvicorn as ``trustseek serve`` is.  What it costs is the HTTP server's, the event loop's
+    and the kernel's share of a request, which no change to the application can remove."""
+    if scope["type"] != "http":
+        return
+    t0 = time.perf_counter()
+    while (await receive()).get("more_body"):
+        pass
+    opening = scope["path"] == "/api/deploy/sessions"
+    body = b'{"session_id":"floor","token":"floor","robot_action":"autonomous"}'
+    timing = b"app;dur=%.3f" % ((time.perf_counter() - t0) * 1000)
+    head = [(b"content-length", b"%d" % len(body)), (b"content-type", b"application/json"), (b"server-timing", timing)]
+    await send({"type": "http.response.start", "status": 201 if opening else 200, "headers": head})
+    await send({"type": "http.response.body", "body": body})
+
+
+def floor_process(port: int) -> subprocess.Popen:
+    here = str(Path(__file__).resolve().parent)
+    cmd = [sys.executable, "-m", "uvicorn", "--app-dir", here, "bench_server:floor_app", "--host", "127.0.0.1"]
+    proc = subprocess.Popen([*cmd, "--port", str(port), "--log-level", "warning", "--no-access-log"])
+    wait_ready(f"http://127.0.0.1:{port}", proc=proc)
+    return proc
+
+
+def measure(url: str, src: Path | None, args, levels: list[int], policy: dict, seed0: int) -> dict:
+    """Start a server (from ``src`` when given, else this checkout) and run the baselines and each
+    level of concurrent sessions against it."""
+    port = free_port()
+    env = os.environ.get("PYTHONPATH")
+    if src is not None:
+        os.environ["PYTHONPATH"] = str(src)
+    try:
+        proc = floor_process(port) if url == FLOOR else serve_process(url, TOKEN, port, workers=args.workers)
+    finally:
+        if env is None:
+            os.environ.pop("PYTHONPATH", None)
+        else:
+            os.environ["PYTHONPATH"] = env
+    out: dict = {"levels": {}}
+    try:
+        asyncio.run(load(port, 1, 5, 0.0, policy, first_seed=seed0))  # warm-up: imports, caches, connections
+        out["back"] = asyncio.run(load(port, 1, args.baseline_trials, 0.0, policy, first_seed=seed0 + 1))[:2]
+        out["paced"] = asyncio.run(
+            load(port, 1, args.baseline_trials, args.baseline_think_ms / 1000, policy, first_seed=seed0 + 2)
+        )[:2]
+        for k, n in enumerate(levels):
+            load_before = os.getloadavg()[0]
+            lat, srv, wall, ids, cpu, own = asyncio.run(
+                load(port, n, args.trials, args.think_ms / 1000, policy, first_seed=seed0 + 100 + k * 100_000, pid=proc.pid)
+            )
+            out["levels"][n] = {
+                "lat": lat,
+                "srv": srv,
+                "wall": wall,
+                "ids": ids,
+                "cpu": cpu,
+                "client_cpu": own,
+                "load": (load_before, os.getloadavg()[0]),
+            }
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+    for r in out["levels"].values():
+        r["rows"] = None if url == FLOOR else stored_trials(url, r["ids"])
+    return out
+
+
+def check(rows: list, ids: list[str], trials: int) -> tuple[int, int, bool]:
+    """(trials stored, duplicated (session, trial) pairs, every session complete and in order)."""
+    per_session: dict[str, list[int]] = {}
+    dup = 0
+    for sid, trial, k in rows:
+        per_session.setdefault(sid, []).append(trial)
+        dup += k > 1
+    complete = all(sorted(per_session.get(s, [])) == list(range(1, trials + 1)) for s in ids)
+    return sum(len(v) for v in per_session.values()), dup, complete
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sessions", type=int, default=100)
+    ap.add_argument("--sessions", default="100", help="concurrent sessions; several levels separated by commas (100,300,1000)")
     ap.add_argument("--trials", type=int, default=10)
     ap.add_argument(
         "--think-ms", type=float, default=1000.0, help="mean pause between a decision and its observation, and between trials"
@@ -153,7 +272,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--db", default=None, help="database URL (default: a SQLite file in a temporary directory)")
     ap.add_argument("--workers", type=int, default=1, help="server processes (trustseek serve --workers)")
     ap.add_argument("--postgres", action="store_true", help="run on a throwaway PostgreSQL cluster (Debian's postgresql package)")
+    ap.add_argument(
+        "--baseline-rev",
+        default=None,
+        help="also measure the server of this git revision (e.g. HEAD~3), first, in the same run and on a fresh database of its own",
+    )
+    ap.add_argument(
+        "--floor",
+        action="store_true",
+        help="also measure the floor: a trivial application under uvicorn (what HTTP, the event loop and the kernel cost)",
+    )
     args = ap.parse_args(argv)
+    levels = [int(x) for x in args.sessions.split(",")]
     try:
         import uvloop
 
@@ -161,55 +291,61 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError:
         pass
     policy = {"kind": args.policy}
-    load_before = os.getloadavg()
+    results = []
+    backend = "none"
     with tempfile.TemporaryDirectory() as d, contextlib.ExitStack() as stack:
-        url = stack.enter_context(TemporaryPostgres()) if args.postgres else args.db or f"sqlite:///{Path(d) / 'bench.sqlite'}"
-        port = free_port()
-        proc = serve_process(url, TOKEN, port, workers=args.workers)
-        try:
-            asyncio.run(load(port, 1, 5, 0.0, policy, first_seed=10**6))  # warm-up: imports, caches, connections
-            base_lat, base_srv, _, _ = asyncio.run(load(port, 1, args.baseline_trials, 0.0, policy, first_seed=10**6 + 1))
-            paced_lat, paced_srv, _, _ = asyncio.run(
-                load(port, 1, args.baseline_trials, args.baseline_think_ms / 1000, policy, first_seed=10**6 + 2)
+        variants: list[tuple[str, Path | None]] = [("this checkout", None)]
+        if args.baseline_rev:
+            variants.insert(0, (f"revision {args.baseline_rev}", source_of(args.baseline_rev, Path(d) / "baseline")))
+        if args.floor:
+            variants.append((FLOOR, None))
+        for k, (name, src) in enumerate(variants):
+            if name == FLOOR:
+                url = FLOOR
+            elif args.postgres:
+                url = stack.enter_context(TemporaryPostgres())
+            else:
+                url = args.db or f"sqlite:///{Path(d) / f'bench-{k}.sqlite'}"
+            results.append((name, measure(url, src, args, levels, policy, seed0=10**6 * (k + 1))))
+            if url != FLOOR:
+                backend = url.split(":", 1)[0].split("+")[0]
+    print(
+        f"server decision API: concurrent sessions x {args.trials} trials ({args.policy} policy, think time ~{args.think_ms:g} ms), "
+        f"{backend}, {args.workers} server process(es), loopback; the load generator is this process"
+    )
+    ok = True
+    for name, res in results:
+        print(f" server of {name}:" if name != FLOOR else " floor (an application that does nothing, under uvicorn):")
+        rows_out = [
+            ("1 session, back to back", *res["back"]),
+            (f"1 session, paced {args.baseline_think_ms:g} ms", *res["paced"]),
+        ]
+        for label, c, v in rows_out:
+            print(
+                f"  {label:<30} client p50 {pct(c, 50):7.2f} ms  p99 {pct(c, 99):8.2f} ms   server p50 {pct(v, 50):5.2f} ms  p99 {pct(v, 99):6.2f} ms"
             )
-            lat, srv, wall, ids = asyncio.run(load(port, args.sessions, args.trials, args.think_ms / 1000, policy))
-        finally:
-            proc.terminate()
-            proc.wait(timeout=10)
-        load_after = os.getloadavg()
-        rows = stored_trials(url, ids)
-    per_session: dict[str, list[int]] = {}
-    dup = 0
-    for sid, trial, k in rows:
-        per_session.setdefault(sid, []).append(trial)
-        dup += k > 1
-    complete = all(sorted(per_session.get(s, [])) == list(range(1, args.trials + 1)) for s in ids)
-    total = args.sessions * args.trials
-    stored = sum(len(v) for v in per_session.values())
-    backend = url.split(":", 1)[0].split("+")[0]
-    print(
-        f"server decision API: {args.sessions} concurrent sessions x {args.trials} trials ({args.policy} policy, think time ~{args.think_ms:g} ms), {backend}, {args.workers} server process(es), loopback"
-    )
-    rows_out = [
-        ("1 session, back to back", base_lat, base_srv),
-        (f"1 session, paced {args.baseline_think_ms:g} ms", paced_lat, paced_srv),
-        (f"{args.sessions} concurrent sessions", lat, srv),
-    ]
-    for label, c, v in rows_out:
-        print(
-            f"  {label:<28} client p50 {pct(c, 50):6.2f} ms  p99 {pct(c, 99):6.2f} ms   server p50 {pct(v, 50):5.2f} ms  p99 {pct(v, 99):5.2f} ms"
-        )
-    print(
-        f"  concurrent / paced single session: p50 client {pct(lat, 50) / pct(paced_lat, 50):.2f}x server {pct(srv, 50) / pct(paced_srv, 50):.2f}x; "
-        f"p99 client {pct(lat, 99) / pct(paced_lat, 99):.2f}x server {pct(srv, 99) / pct(paced_srv, 99):.2f}x"
-    )
-    print(f"  target p99 < 10 ms (client round trip): {'met' if pct(lat, 99) < 10 else 'NOT met'}")
-    print(f"  throughput {2 * total / wall:.0f} requests/s ({total} trials in {wall:.1f} s)")
-    print(
-        f"  machine: {os.cpu_count()} cores, load average (1 min) {load_before[0]:.2f} before, {load_after[0]:.2f} after the run (other processes share the cores)"
-    )
-    print(f"  trials stored: {stored} of {total}; duplicates {dup}; every session complete and in order: {complete}")
-    return 0 if complete and dup == 0 and stored == total else 1
+        for n, r in res["levels"].items():
+            lat, srv, total = r["lat"], r["srv"], n * args.trials
+            if r["rows"] is None:
+                stored, dup, complete = total, 0, True
+            else:
+                stored, dup, complete = check(r["rows"], r["ids"], args.trials)
+                ok = ok and complete and dup == 0 and stored == total
+            print(
+                f"  {f'{n} concurrent sessions':<30} client p50 {pct(lat, 50):7.2f} ms  p99 {pct(lat, 99):8.2f} ms   "
+                f"server p50 {pct(srv, 50):5.2f} ms  p99 {pct(srv, 99):6.2f} ms"
+            )
+            print(
+                f"  {'':<30} {2 * total / r['wall']:.0f} requests/s, CPU per request: server {r['cpu'] / (2 * total) * 1000:.2f} ms, load generator {r['client_cpu'] / (2 * total) * 1000:.2f} ms; "
+                f"p99 < 10 ms {'met' if pct(lat, 99) < 10 else 'NOT met'}; load average {r['load'][0]:.2f} before, {r['load'][1]:.2f} after"
+                + (
+                    ""
+                    if r["rows"] is None
+                    else f"; trials stored {stored} of {total}, duplicates {dup}, complete and in order: {complete}"
+                )
+            )
+    print(f"  machine: {os.cpu_count()} cores shared with other processes")
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":

@@ -17,8 +17,10 @@ from fastapi.staticfiles import StaticFiles
 
 from ..version import __version__
 from .db import DEFAULT_URL, open_database, safe_url
+from .fastpath import DeployFastPath
 from .middleware import BodyGuard, RequestLog, ServerTiming
 from .routes import deploy, experimenter, own, participant
+from .store import DeployStore
 
 STATIC = Path(__file__).resolve().parent.parent / "static" / "app"
 
@@ -44,6 +46,20 @@ async def validation_error(request: Request, exc: Exception) -> JSONResponse:
     return JSONResponse(status_code=422, content={"detail": json_safe(jsonable_encoder(errors))})
 
 
+class ServerApp(FastAPI):
+    """The FastAPI application with the decision API's lean path in front of it: ``decide`` and
+    ``observe`` requests that are well-formed and succeed are answered before the framework's
+    stack (``fastpath``), everything else goes through it."""
+
+    def __init__(self, *args: Any, **kwargs: Any):
+        super().__init__(*args, **kwargs)
+        self._front = DeployFastPath(super().__call__)
+
+    async def __call__(self, scope, receive, send) -> None:
+        scope["app"] = self  # as Starlette sets it
+        await self._front(scope, receive, send)
+
+
 #: the environment variables :func:`from_environment` reads (``trustseek serve --workers N`` sets them)
 ENV_DB, ENV_TOKEN, ENV_PUBLIC_URL = "TRUSTSEEK_DB", "TRUSTSEEK_TOKEN", "TRUSTSEEK_PUBLIC_URL"
 
@@ -62,7 +78,7 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     """The experiment server.  ``token`` guards the experimenter endpoints (a random one is
     made when not given: read it from ``app.state.token``).  Migrations run here, before
     the first request."""
-    app = FastAPI(
+    app = ServerApp(
         title="trustseek experiment server",
         version=__version__,
         description="Human-in-the-loop experiments with a live assistance-seeking policy, and a decision API for robots.",
@@ -72,6 +88,7 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     app.state.token = token or secrets.token_urlsafe(24)
     app.state.public_url = public_url
     app.state.tokens = {}  # session token -> Caller
+    app.state.deploy_store = DeployStore(app.state.engine)  # the decision API's connection
     app.add_exception_handler(RequestValidationError, validation_error)
     app.add_middleware(BodyGuard)
     app.add_middleware(RequestLog)

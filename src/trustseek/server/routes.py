@@ -516,8 +516,8 @@ async def decide(session_id: str, body: DecideIn, request: Request):
     # async on purpose: a short transaction run on the event loop, without a hop to a worker thread
     s = _robot(request, session_id)
     try:
-        with request.app.state.engine.begin() as conn:
-            out = deploy_decide(conn, s.id, body.trial, body.complexity, body.remaining, body.visible)
+        with request.app.state.deploy_store.transaction() as tx:
+            out = deploy_decide(tx, s.id, body.trial, body.complexity, body.remaining, body.visible)
     except SessionError as exc:
         _fail(exc)
     return _json(out)
@@ -531,15 +531,15 @@ async def decide(session_id: str, body: DecideIn, request: Request):
 )
 async def observe(session_id: str, body: ObserveIn, request: Request):
     s = _robot(request, session_id)
-    engine = request.app.state.engine
+    store = request.app.state.deploy_store
     try:
-        with engine.begin() as conn:
-            t, dup = deploy_observe(conn, s.id, body.trial, body.human_action, body.outcome)
+        with store.transaction() as tx:
+            t, dup = deploy_observe(tx, s.id, body.trial, body.human_action, body.outcome)
     except SessionError as exc:
         _fail(exc)
-    except IntegrityError:  # committed by a concurrent request in the meantime
-        with engine.connect() as conn:
-            old = committed_trial(conn, s.id, body.trial)
+    except store.IntegrityError:  # committed by a concurrent request in the meantime
+        with store.transaction() as tx:
+            old = committed_trial(tx, s.id, body.trial)
         if old is None:
             raise
         t, dup = trial_dict(old), True

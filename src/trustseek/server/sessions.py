@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from sqlalchemy import Connection, bindparam, func, insert, select, update
+from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
@@ -35,7 +35,8 @@ from ..errors import TrustseekError
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
 from ..policies import PolicyError, PolicyRunner
 from ..policies.schedule import SchedulePolicy
-from .orm import Answer, Base, Event, EventBatch, PolicyBlob, Report, Session, Study, Trial, utcnow
+from .orm import Answer, Event, EventBatch, PolicyBlob, Report, Session, Study, Trial, utcnow
+from .store import DeployStore, LiveRow, TrialRow
 from .studies import block_items, participant_plan, policy_object
 
 log = logging.getLogger(__name__)
@@ -309,7 +310,7 @@ def served(s: Session, n: int, items: tuple[dict[str, int], dict[str, int] | Non
     return out
 
 
-def trial_dict(t: Trial) -> dict[str, Any]:
+def trial_dict(t: Trial | TrialRow) -> dict[str, Any]:
     return {
         "trial": t.trial,
         "block": t.block,
@@ -649,74 +650,32 @@ def add_events(db: DBSession, s: Session, events: list[dict], batch: str | None 
 
 # --------------------------------------------------------------------------- deploy sessions
 #
-# The decision API is the latency-critical path, so it runs on SQLAlchemy Core over one
-# connection: a locked SELECT of the session's live columns, then one UPDATE (decide) or one
-# INSERT and one UPDATE (observe), in one transaction.  The task, model and parsed policy of a
-# session are cached per process (they never change).
-
-_TRIALS = Base.metadata.tables[Trial.__tablename__]
-_SESSIONS = Base.metadata.tables[Session.__tablename__]
-# built once with bound parameters: constructing a statement costs more than running it
-_LIVE = (
-    select(
-        _SESSIONS.c.id,
-        _SESSIONS.c.kind,
-        _SESSIONS.c.seed,
-        _SESSIONS.c.belief,
-        _SESSIONS.c.trials_done,
-        _SESSIONS.c.score,
-        _SESSIONS.c.pending_trial,
-        _SESSIONS.c.pending_complexity,
-        _SESSIONS.c.pending_action,
-    )
-    .where(_SESSIONS.c.id == bindparam("sid"))
-    .with_for_update()
-)
-_COMMITTED = select(_TRIALS).where(_TRIALS.c.session_id == bindparam("sid"), _TRIALS.c.trial == bindparam("n"))
-_DECIDED = (
-    update(_SESSIONS)
-    .where(_SESSIONS.c.id == bindparam("sid"))
-    .values(
-        pending_trial=bindparam("p_trial"),
-        pending_complexity=bindparam("p_complexity"),
-        pending_action=bindparam("p_action"),
-        updated_at=bindparam("now"),
-    )
-)
-_OBSERVED = (
-    update(_SESSIONS)
-    .where(_SESSIONS.c.id == bindparam("sid"))
-    .values(
-        belief=bindparam("new_belief", type_=_SESSIONS.c.belief.type),
-        trials_done=bindparam("done"),
-        score=bindparam("new_score"),
-        pending_trial=None,
-        pending_complexity=None,
-        pending_action=None,
-        updated_at=bindparam("now"),
-    )
-)
-_INSERT_TRIAL = insert(_TRIALS)
+# The decision API is the latency-critical path, so it runs on the driver's own connection
+# (``store.DeployStore``): a locked read of the session's live columns, then one UPDATE (decide)
+# or one INSERT and one UPDATE (observe), in one transaction.  The task, model and parsed policy
+# of a session are cached per process (they never change).
 
 
-def _live(conn: Connection, session_id: str):
-    row = conn.execute(_LIVE, {"sid": session_id}).first()
+def _live(store: DeployStore, session_id: str) -> LiveRow:
+    row = store.live(session_id)
     if row is None:
         raise SessionError(404, "no such session")
     return row
 
 
-def committed_trial(conn: Connection, session_id: str, n: int):
-    return conn.execute(_COMMITTED, {"sid": session_id, "n": n}).first()
+def committed_trial(store: DeployStore, session_id: str, n: int) -> TrialRow | None:
+    return store.committed(session_id, n)
 
 
-def deploy_context(conn: Connection, session_id: str) -> Context:
+def deploy_context(store: DeployStore, session_id: str) -> Context:
     key = f"deploy:{session_id}"
     cached = _CONTEXTS.get(key)
     if cached is None:
+        plan = store.plan(session_id)
+        if plan is None:
+            raise SessionError(404, "no such session")
         if len(_CONTEXTS) > 4096:
             _CONTEXTS.clear()
-        plan = conn.execute(select(Session.plan).where(Session.id == session_id)).scalar_one()
         cached = _CONTEXTS[key] = (
             Task.from_dict(plan["task"]),
             TrustModel.from_dict(plan["model"]),
@@ -724,8 +683,7 @@ def deploy_context(conn: Connection, session_id: str) -> Context:
             plan["policy_sha256"],
         )
     task, model, kinds, sha = cached
-    load = lambda b: conn.execute(select(PolicyBlob.policy).where(PolicyBlob.sha256 == sha)).scalar_one()  # noqa: E731
-    return Context(task, model, kinds, [f"policy:{sha}"], load, None)
+    return Context(task, model, kinds, [f"policy:{sha}"], lambda b: store.policy(sha), None)
 
 
 def _counts(ctx: Context, counts: dict[str, int] | None, what: str) -> tuple[int, ...] | None:
@@ -760,7 +718,7 @@ def _scheduled(ctx: Context, belief, complexity: str | None, remaining, visible)
 
 
 def deploy_decide(
-    conn: Connection,
+    store: DeployStore,
     session_id: str,
     n: int,
     complexity: str | None,
@@ -770,15 +728,15 @@ def deploy_decide(
     """The robot action for trial ``n`` (decided once, stored as the session's pending trial;
     repeated calls return the stored decision).  With ``remaining`` (a ``schedule`` policy)
     the policy also picks the item's complexity when none is given.  Runs in the caller's
-    transaction."""
-    s = _live(conn, session_id)
-    ctx = deploy_context(conn, session_id)
+    transaction (``store.transaction()``)."""
+    s = _live(store, session_id)
+    ctx = deploy_context(store, session_id)
     if complexity is not None and complexity not in ctx.task.complexities:
         raise SessionError(400, f"complexity must be one of {list(ctx.task.complexities)}, got {complexity!r}")
     if complexity is None and remaining is None:
         raise SessionError(400, "post the trial's complexity (or, for a schedule policy, the remaining items)")
     # trials are committed in order together with trials_done, so trial n exists iff n <= trials_done
-    old = committed_trial(conn, session_id, n) if n <= s.trials_done else None
+    old = store.committed(session_id, n) if n <= s.trials_done else None
     if old is not None:
         if complexity is not None and old.complexity != complexity:
             raise SessionError(409, f"trial {n} was committed with complexity {old.complexity!r}, not {complexity!r}")
@@ -808,18 +766,18 @@ def deploy_decide(
     else:
         assert complexity is not None
         action = ctx.runner(0, s.belief, s.seed, n).decide(complexity)
-    conn.execute(_DECIDED, {"sid": session_id, "p_trial": n, "p_complexity": complexity, "p_action": action, "now": utcnow()})
+    store.decided(session_id, n, complexity, action, utcnow())
     return {"trial": n, "complexity": complexity, "robot_action": action, "belief": p_high(s.belief), "committed": False}
 
 
 def deploy_observe(
-    conn: Connection, session_id: str, n: int, human_action: str | None, outcome: str | None
+    store: DeployStore, session_id: str, n: int, human_action: str | None, outcome: str | None
 ) -> tuple[dict[str, Any], bool]:
     """Commit trial ``n`` from the observed human action and outcome; returns (trial, duplicate).
-    Runs in the caller's transaction."""
-    s = _live(conn, session_id)
+    Runs in the caller's transaction (``store.transaction()``)."""
+    s = _live(store, session_id)
     # trials are committed in order together with trials_done, so trial n exists iff n <= trials_done
-    old = committed_trial(conn, session_id, n) if n <= s.trials_done else None
+    old = store.committed(session_id, n) if n <= s.trials_done else None
     if old is not None:
         same_h = old.human_action == (human_action if human_action is not None or old.robot_action != "ask" else "intervene")
         same_o = outcome is None or old.outcome == outcome
@@ -830,9 +788,10 @@ def deploy_observe(
         raise SessionError(
             409, f"trial {n} has no decision yet; post its complexity to /decide first (next trial: {s.trials_done + 1})"
         )
-    action = s.pending_action
-    ctx = deploy_context(conn, session_id)
-    c = ctx.task.complexity_index(s.pending_complexity)
+    action, complexity = s.pending_action, s.pending_complexity
+    assert action is not None and complexity is not None  # stored together with pending_trial
+    ctx = deploy_context(store, session_id)
+    c = ctx.task.complexity_index(complexity)
     if action == "ask":
         if human_action not in (None, "intervene"):
             raise SessionError(
@@ -868,13 +827,13 @@ def deploy_observe(
     experience = _experience(ctx.task, c, action, human_action, success)
     runner = ctx.runner(0, s.belief, s.seed, n)
     before = runner.belief
-    after = runner.observe(s.pending_complexity, action, human_action, experience)
+    after = runner.observe(complexity, action, human_action, experience)
     a, o = ACTIONS.index(action), HUMAN_ACTIONS.index(human_action)
-    t = {
+    t: dict[str, Any] = {
         "trial": n,
         "block": 0,
         "policy": ctx.kinds[0],
-        "complexity": s.pending_complexity,
+        "complexity": complexity,
         "robot_action": action,
         "human_action": human_action,
         "outcome": outcome,
@@ -885,16 +844,6 @@ def deploy_observe(
         "effort_ms": None,
         "submission_id": f"deploy-{n}",
     }
-    now = utcnow()
-    conn.execute(_INSERT_TRIAL, {"session_id": session_id, "created_at": now, **t})
-    conn.execute(
-        _OBSERVED,
-        {
-            "sid": session_id,
-            "new_belief": [float(x) for x in after] if after is not None else s.belief,
-            "done": n,
-            "new_score": float(s.score + t["reward"]),
-            "now": now,
-        },
-    )
+    new_belief = [float(x) for x in after] if after is not None else list(s.belief)
+    store.observed(session_id, t, new_belief, float(s.score + t["reward"]), utcnow())
     return t, False
