@@ -207,6 +207,7 @@ def dashboard(study_id: str, request: Request):
         ):
             reports[r.session_id] = r.value
         rows = []
+        n_trust = len(study_config(db, st.id)["model"]["trust_levels"])
         for s in sessions:
             rows.append(
                 {
@@ -217,7 +218,7 @@ def dashboard(study_id: str, request: Request):
                     "trials_done": s.trials_done,
                     "trials_total": total_trials(s),
                     "score": s.score,
-                    "belief": p_high(s.belief),
+                    "belief": p_high(s.belief, n_trust),
                     "current": None
                     if s.pending_trial is None
                     else {"trial": s.pending_trial, "complexity": s.pending_complexity, "robot_action": s.pending_action},
@@ -454,7 +455,7 @@ def open_deploy(body: DeployIn, request: Request):
             "session_id": s.id,
             "token": s.token,
             "policy": policy["kind"],
-            "belief": p_high(s.belief),
+            "belief": p_high(s.belief, model.n_trust),
             "complexities": list(task.complexities),
             "thresholds": policy.get("thresholds"),
         }
@@ -476,7 +477,7 @@ def deploy_state(session_id: str, request: Request, s: Caller = Depends(require_
             "label": row.participant,
             "trials_done": row.trials_done,
             "score": row.score,
-            "belief": p_high(row.belief),
+            "belief": p_high(row.belief, len(row.plan["model"]["trust_levels"])),
             "pending": None
             if row.pending_trial is None
             else {"trial": row.pending_trial, "complexity": row.pending_complexity, "robot_action": row.pending_action},

@@ -84,8 +84,16 @@ def outcome_draws(s: Session, n: int) -> np.ndarray:
     return rng.random(2)
 
 
-def p_high(belief) -> float | None:
-    return None if belief is None else float(np.asarray(belief, dtype=float)[-1])
+def p_high(belief, n_trust: int | None = None) -> float | None:
+    """P(trust = the highest level) of a stored belief.  A type-aware policy's belief is over
+    (supervisor type, trust), type-major (``trustseek.pomdp.types``): given the model's
+    ``n_trust`` levels, its trust marginal sums over the types."""
+    if belief is None:
+        return None
+    b = np.asarray(belief, dtype=float)
+    if n_trust and b.size > n_trust and b.size % n_trust == 0:
+        b = b.reshape(-1, n_trust).sum(axis=0)
+    return float(b[-1])
 
 
 # --------------------------------------------------------------------------- session context
@@ -350,7 +358,7 @@ def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: in
     runner = ctx.runner(block, s.belief, s.seed, row.trial)
     before = runner.belief
     after = runner.observe(row.complexity, row.robot_action, row.human_action, row.experience)
-    row.belief, row.belief_after = p_high(before), p_high(after)
+    row.belief, row.belief_after = p_high(before, ctx.model.n_trust), p_high(after, ctx.model.n_trust)
     a = ACTIONS.index(row.robot_action)
     o = HUMAN_ACTIONS.index(row.human_action) if row.human_action is not None else 1
     row.reward = float(ctx.task.rewards.of(a, o, EXPERIENCES.index(row.experience)))
@@ -756,7 +764,7 @@ def deploy_decide(
             "trial": n,
             "complexity": s.pending_complexity,
             "robot_action": s.pending_action,
-            "belief": p_high(s.belief),
+            "belief": p_high(s.belief, ctx.model.n_trust),
             "committed": False,
         }
     if remaining is None and ctx.kinds[0] == SchedulePolicy.kind:
@@ -767,7 +775,13 @@ def deploy_decide(
         assert complexity is not None
         action = ctx.runner(0, s.belief, s.seed, n).decide(complexity)
     store.decided(session_id, n, complexity, action, utcnow())
-    return {"trial": n, "complexity": complexity, "robot_action": action, "belief": p_high(s.belief), "committed": False}
+    return {
+        "trial": n,
+        "complexity": complexity,
+        "robot_action": action,
+        "belief": p_high(s.belief, ctx.model.n_trust),
+        "committed": False,
+    }
 
 
 def deploy_observe(
@@ -839,8 +853,8 @@ def deploy_observe(
         "outcome": outcome,
         "experience": experience,
         "reward": float(ctx.task.rewards.of(a, o, EXPERIENCES.index(experience))),
-        "belief": p_high(before),
-        "belief_after": p_high(after),
+        "belief": p_high(before, ctx.model.n_trust),
+        "belief_after": p_high(after, ctx.model.n_trust),
         "effort_ms": None,
         "submission_id": f"deploy-{n}",
     }
