@@ -293,7 +293,8 @@ def test_types_section_of_the_report(small_run):
     assert [p["population"] for p in pops] == ["paper + conservative", "paper alone"] * 2
     assert [p["trials"] for p in pops] == [34, 34, 136, 136]
     assert [g["group"] for g in pops[0]["groups"]] == ["paper", "conservative", "all"]
-    assert all("type-aware" in v for v in ty["verdicts"])
+    assert ty["verdicts"] and all("pooled" in v and "[" in v for v in ty["verdicts"])
+    assert ty["fitted_types"]["paper alone"]["chosen"] >= 1
 
 
 def test_scheduling_section_of_the_report(small_run):
