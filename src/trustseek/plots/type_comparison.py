@@ -35,10 +35,11 @@ def _bars(ax, block: dict[str, Any], policies: list[str]) -> None:
 
 
 def plot_types_section(numbers: dict[str, Any], path=None, title: str | None = None):
-    """The report section's figure (``numbers``: ``TypesSection.numbers``).  Left: mean reward per
-    block of each policy, per type and overall, at the first block length on the mixture, with
-    95 % intervals.  Right: the paired difference type-aware − pooled trust-aware per type, for
-    every population and block length.  Returns the figure (written to ``path``)."""
+    """The report section's figure (``numbers``: ``TypesSection.numbers``).  Left: mean reward
+    per block of each policy, per type and overall, at the first block length on the mixture,
+    with 95 % intervals.  Right: the paired differences from the pooled trust-aware policy of
+    the type-aware policies (the true types, and the types fitted to the experiment-1 log), per
+    type, population and block length.  Returns the figure (written to ``path``)."""
     pops = numbers["populations"]
     policies = list(POLICY_COLORS)
     with style() as plt:
@@ -46,24 +47,22 @@ def plot_types_section(numbers: dict[str, Any], path=None, title: str | None = N
         _bars(axes[0], pops[0], policies)
         axes[0].legend(fontsize=6, loc="lower left", framealpha=0.9)
         ax = axes[1]
-        labels, means, lows, highs = [], [], [], []
-        for block in pops:
-            for g in block["groups"]:
-                pair = ("type-aware", "pooled trust-aware")
-                d = next((d for d in g["differences"] if (d["policy"], d["against"]) == pair), None)
-                if d is None:
-                    continue
-                labels.append(f"{g['group']} · {block['population']} · {block['trials']}")
-                means.append(d["mean"])
-                lows.append(d["low"])
-                highs.append(d["high"])
-        y = np.arange(len(labels))[::-1]
-        m = np.array(means)
-        ax.errorbar(m, y, xerr=[m - np.array(lows), np.array(highs) - m], fmt="o", color=POLICY_COLORS["type-aware"], ms=3,
-                    capsize=2, lw=0.9)  # fmt: skip
+        labels = [f"{g['group']} · {b['population']} · {b['trials']}" for b in pops for g in b["groups"]]
+        y = np.arange(len(labels))[::-1].astype(float)
+        for policy, offset in (("type-aware", 0.15), ("type-aware (fitted types)", -0.15)):
+            pts = []
+            for block in pops:
+                for g in block["groups"]:
+                    pair = (policy, "pooled trust-aware")
+                    d = next((d for d in g["differences"] if (d["policy"], d["against"]) == pair), None)
+                    pts.append((d["mean"], d["low"], d["high"]) if d else (np.nan, np.nan, np.nan))
+            m, lo, hi = (np.array(v) for v in zip(*pts, strict=True))
+            ax.errorbar(m, y + offset, xerr=[m - lo, hi - m], fmt="o", color=POLICY_COLORS[policy], ms=3, capsize=2, lw=0.9,
+                        label=policy)  # fmt: skip
+        ax.legend(fontsize=6, loc="upper right")
         ax.axvline(0, color="k", lw=0.6)
         ax.set_yticks(y, labels, fontsize=6)
-        ax.set_xlabel("type-aware − pooled trust-aware\n(reward per block, paired 95 % CI)")
+        ax.set_xlabel("difference from pooled trust-aware\n(reward per block, paired 95 % CI)")
         ax.set_title("gain of planning for types")
         if title:
             fig.suptitle(title)
