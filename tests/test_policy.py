@@ -174,4 +174,4 @@ def test_tabulated_q_keeps_the_decisions(aware):
 def test_every_policy_kind_has_a_loader():
     from trustseek.policies import COMPLEXITY_KINDS, POLICY_KINDS
 
-    assert {"trust-aware", "alpha-vector", "flat-alpha-vector", "schedule", *COMPLEXITY_KINDS} == set(POLICY_KINDS)
+    assert {"trust-aware", "alpha-vector", "flat-alpha-vector", "schedule", "type-aware", *COMPLEXITY_KINDS} == set(POLICY_KINDS)

@@ -39,6 +39,7 @@ SMALL = {
     "jobs": 1,
     "sensitivity_samples": 8,
     "schedule_participants": 500,
+    "types_participants": 300,
 }
 
 
@@ -240,6 +241,7 @@ def test_report_folder(small_run, tmp_path):
     html = paths["html"].read_text()
     assert html.count("data:image/png;base64,") == len(FIGURES)
     assert "Paper vs reproduction" in html and 'src="http' not in html
+    assert "Remark 1 with supervisor types" in html
     f = pd.read_csv(out / "experiment2.csv")
     assert list(f.columns[:6]) == ["participant", "trial", "complexity", "robot_action", "human_action", "experience"]
 
@@ -267,6 +269,8 @@ def test_reproduce_command(tmp_path):
             "1",
             "--schedule-participants",
             "0",
+            "--types-participants",
+            "0",
         ],
     )
     assert res.exit_code == 0, res.output
@@ -276,6 +280,20 @@ def test_reproduce_command(tmp_path):
     assert "scheduling" not in json.loads((tmp_path / "r" / "summary.json").read_text())
     assert not (tmp_path / "r" / "scheduling.png").exists()
     assert "Future work: scheduling the items" not in (tmp_path / "r" / "report.html").read_text()
+    assert "types" not in json.loads((tmp_path / "r" / "summary.json").read_text())
+    assert "supervisor types" not in (tmp_path / "r" / "report.html").read_text()
+
+
+def test_types_section_of_the_report(small_run):
+    """The report's supervisor-types section (Remark 1): both populations, every policy per type,
+    a verdict per population and block length (the HTML and figure: test_report_folder)."""
+    ty = small_run.summary["types"]
+    assert [t["name"] for t in ty["types"]] == ["paper", "conservative"] and ty["participants"] == 300
+    pops = ty["populations"]
+    assert [p["population"] for p in pops] == ["paper + conservative", "paper alone"] * 2
+    assert [p["trials"] for p in pops] == [34, 34, 136, 136]
+    assert [g["group"] for g in pops[0]["groups"]] == ["paper", "conservative", "all"]
+    assert all("type-aware" in v for v in ty["verdicts"])
 
 
 def test_scheduling_section_of_the_report(small_run):

@@ -48,6 +48,13 @@ FIGURES = [
         "Trial scheduling under the paper's model: which item the optimal schedule collects at each trial and when it "
         "asks, against the belief, compared with the paper's random order and its trust-aware policy.",
     ),
+    (
+        "types.png",
+        "types",
+        "Remark 1 with supervisor types: mean cumulative reward per block of each policy per type on the same simulated "
+        "people (left, 95 % intervals), and the paired gain of the type-aware policy over the pooled trust-aware one per "
+        "type, population and block length (right).",
+    ),
     ("policies.png", "costs", "Mean cumulative reward per block of each policy on the same simulated participants."),
     (
         "remark1.png",
@@ -152,6 +159,12 @@ def make_figures(rep: Reproduction, out: Path) -> list[Path]:
 
         p = out / "scheduling.png"
         plot_scheduling_section(rep.scheduling, p)
+        paths.append(p)
+    if rep.types is not None:
+        from .plots.type_comparison import plot_types_section
+
+        p = out / "types.png"
+        plot_types_section(rep.types.numbers, p)
         paths.append(p)
     p = out / "policies.png"
     plot_policy_values(

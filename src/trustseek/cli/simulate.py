@@ -254,6 +254,12 @@ def reproduce(
         min=0,
         help="Simulated participants of the trial-scheduling section (0: leave the section out).",
     ),
+    types_participants: int = typer.Option(
+        2_000,
+        "--types-participants",
+        min=0,
+        help="Simulated participants of the supervisor-types section (Remark 1; 0: leave the section out).",
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print summary.json to stdout instead of tables."),
     quiet: bool = QuietOpt,
 ) -> None:
@@ -273,6 +279,7 @@ def reproduce(
         belief_update=belief_update,
         jobs=jobs,
         schedule_participants=schedule_participants,
+        types_participants=types_participants,
     )
     problems = cfg.problems()
     if problems:

@@ -6,6 +6,7 @@
 * :mod:`.grid_q`       -- ``TrustAwarePolicy``: greedy in Q tabulated on a belief grid;
 * :mod:`.alpha_vector` -- ``AlphaVectorPolicy`` (and ``FlatAlphaPolicy`` for standard files);
 * :mod:`.complexity`   -- ``ComplexityPolicy``: trust-agnostic, randomized, always/never ask;
+* :mod:`.type_aware`   -- ``TypeAwarePolicy``: alpha vectors over (type, trust) for an unknown supervisor type;
 * :mod:`.kinds`        -- the policy JSON: one loader per kind, ``policy_from_dict``, ``load_policy``;
 * :mod:`.runner`       -- ``PolicyRunner``: a policy with its live belief, trial by trial.
 
@@ -20,6 +21,7 @@ from .kinds import POLICY_KINDS, load_policy, policy_from_dict
 from .regions import ask_bounds, ask_regions
 from .runner import PolicyRunner
 from .thresholds import ask_intervals, threshold
+from .type_aware import TypeAwarePolicy
 
 __all__ = [
     "COMPLEXITY_KINDS",
@@ -32,6 +34,7 @@ __all__ = [
     "PolicyError",
     "PolicyRunner",
     "TrustAwarePolicy",
+    "TypeAwarePolicy",
     "always_ask",
     "ask_bounds",
     "ask_intervals",

@@ -18,6 +18,7 @@ from .base import POLICY_FORMAT, Policy
 from .complexity import COMPLEXITY_KINDS, ComplexityPolicy
 from .grid_q import TrustAwarePolicy
 from .schedule import SchedulePolicy
+from .type_aware import TypeAwarePolicy
 
 Loader = Callable[[Mapping[str, Any], "str | None"], Policy]
 
@@ -28,6 +29,7 @@ POLICY_KINDS: dict[str, Loader] = {
     **dict.fromkeys(COMPLEXITY_KINDS, ComplexityPolicy.from_dict),
     FlatAlphaPolicy.kind: FlatAlphaPolicy.from_dict,
     SchedulePolicy.kind: SchedulePolicy.from_dict,
+    TypeAwarePolicy.kind: TypeAwarePolicy.from_dict,
 }
 
 

@@ -59,6 +59,7 @@ class ReproduceConfig:
     jobs: int = 2
     sensitivity_samples: int = 200
     schedule_participants: int = 10_000  # simulated participants of the scheduling section (0: no section)
+    types_participants: int = 2_000  # simulated participants of the supervisor-types section (0: no section)
 
     def problems(self) -> list[str]:
         """Every setting out of range, as a message naming its command-line option."""
@@ -81,6 +82,8 @@ class ReproduceConfig:
             p.append(f"--sensitivity-samples must be >= 0, got {self.sensitivity_samples}")
         if self.schedule_participants < 0:
             p.append(f"--schedule-participants must be >= 0, got {self.schedule_participants}")
+        if self.types_participants < 0:
+            p.append(f"--types-participants must be >= 0, got {self.types_participants}")
         if self.bootstrap < 0:
             p.append(f"--bootstrap must be >= 0, got {self.bootstrap}")
         if self.belief_update not in BELIEF_UPDATES:

@@ -62,6 +62,7 @@ from .comparison import (
 from .config import AGNOSTIC, AWARE, LOW, PAPER, ReproduceConfig
 from .scheduling import SchedulingSection, scheduling_section
 from .statistics import distribution, mean_ci, share_ci, wilcoxon
+from .types import TypesSection, types_section
 
 CANONICAL = list(TRIAL_COLUMNS)
 
@@ -220,6 +221,7 @@ class Reproduction:
     heterogeneity: dict[str, Any]
     sensitivity: Sensitivity | None = None
     scheduling: SchedulingSection | None = None
+    types: TypesSection | None = None
     seconds: float = 0.0
 
 
@@ -233,6 +235,7 @@ STEP_NAMES = (
     "costs",
     "heterogeneity",
     "scheduling",
+    "types",
     "replicates",
 )
 
@@ -257,7 +260,8 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
         report(name, finished[0], len(STEP_NAMES))
 
     ss = np.random.SeedSequence(cfg.seed)
-    s1, sfit, s2, s2l, scost, shet, sreps, ssched = ss.spawn(8)
+    # (a ninth child leaves the first eight, and so every earlier number, unchanged)
+    s1, sfit, s2, s2l, scost, shet, sreps, ssched, stypes = ss.spawn(9)
     truth, task = paper_model(), paper_task()
     summary: dict[str, Any] = {"config": cfg.to_summary()}
 
@@ -358,6 +362,13 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
         summary["scheduling"] = sched.numbers
     step("scheduling")
 
+    # Remark 1 with supervisor types: planning for a population of types
+    types = None
+    if cfg.types_participants:
+        types = types_section(participants=cfg.types_participants, seed=int(stypes.generate_state(1)[0]))
+        summary["types"] = types.numbers
+    step("types")
+
     # 5. replicates
     reps: list[dict[str, Any]] = []
     if cfg.replicates:
@@ -391,6 +402,7 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
         heterogeneity=het,
         sensitivity=sens,
         scheduling=sched,
+        types=types,
         seconds=time.perf_counter() - t0,
     )
 

@@ -1,0 +1,99 @@
+"""The compare-types command: pooled, type-aware, oracle and trust-agnostic policies on a
+population of supervisor types (the paper's Remark 1)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+from rich.markup import escape
+from rich.table import Table
+
+from ..errors import TrustseekError
+from ..model.presets import load_mixture, load_task
+from ..reproduction.types import types_section
+from ._app import QuietOpt, app, check_output, console, print_json, progress_bar
+
+
+def _counts(text: str) -> tuple[int, ...]:
+    try:
+        parts = tuple(int(x) for x in text.split("/"))
+    except ValueError:
+        parts = ()
+    if len(parts) < 2 or any(p < 0 for p in parts) or sum(parts) < 1:
+        raise TrustseekError([f"--block must be trials per complexity like 17/17, got {text!r}"])
+    return parts
+
+
+@app.command("compare-types", rich_help_panel="Simulate")
+def compare_types(
+    mixture: str = typer.Option(
+        "paper+conservative",
+        "--mixture",
+        "-m",
+        help="Supervisor types: a preset (paper+conservative) or a mixture JSON file (e.g. from fit --types).",
+    ),
+    share: float | None = typer.Option(
+        None, "--share", min=0.0, max=1.0, help="Share of the last type of two, e.g. 0.3 (default: the mixture's weights)."
+    ),
+    task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
+    participants: int = typer.Option(2000, "--participants", "-n", min=1, help="Simulated people per population and block."),
+    fit_participants: int = typer.Option(
+        200, "--fit-participants", min=2, help="People of experiment 1 that the pooled model is fitted to (paper design)."
+    ),
+    block: list[str] = typer.Option(
+        ["17/17", "68/68"], "--block", "-b", help="Trials per complexity in a block (repeat for several lengths)."
+    ),
+    restarts: int = typer.Option(4, "--restarts", min=1, help="EM restarts of the pooled fit."),
+    seed: int = typer.Option(0, "--seed", help="Seed of every simulation and fit."),
+    plot: Path | None = typer.Option(None, "--plot", help="Write the figure to this PNG file."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
+    quiet: bool = QuietOpt,
+) -> None:
+    """Does planning for supervisor types pay? Pooled, type-aware, oracle and trust-agnostic policies on the same people."""
+    counts = [_counts(b) for b in block]
+    mix = load_mixture(mixture)
+    if share is not None:
+        if mix.n_types != 2:
+            raise TrustseekError([f"--share needs a mixture of two types; {mixture} has {mix.n_types}"])
+        mix = mix.with_weights([1 - share, share])
+    t = load_task(task)
+    if plot is not None:
+        check_output(plot, "--plot")
+    steps = ["pooled fit", "policies", "one-type policies", *[f"blocks of {sum(c)} trials" for c in counts]]
+    with progress_bar(quiet or as_json) as bar:
+        tid = bar.add_task("compare-types", total=len(steps))
+        sec = types_section(
+            mix,
+            t,
+            participants=participants,
+            block_counts=counts,
+            fit_participants=fit_participants,
+            restarts=restarts,
+            seed=seed,
+            progress=lambda _s: bar.advance(tid),
+        )
+    if plot is not None:
+        from ..plots.type_comparison import plot_types_section
+
+        plot_types_section(sec.numbers, plot)
+    if as_json:
+        print_json(sec.numbers)
+        return
+    for pop in sec.numbers["populations"]:
+        tab = Table(title=f"{pop['population']}, {pop['trials']} trials: cumulative reward per block [95 % CI]")
+        tab.add_column("group")
+        policies = list(pop["groups"][0]["reward"])
+        for p in policies:
+            tab.add_column(p, justify="right")
+        tab.add_column("type-aware − pooled", justify="right")
+        for g in pop["groups"]:
+            d = next(d for d in g["differences"] if d["policy"] == "type-aware" and d["against"] == "pooled trust-aware")
+            tab.add_row(
+                f"{g['group']} (n = {g['participants']})",
+                *[f"{g['reward'][p]['mean']:.2f} [{g['reward'][p]['low']:.2f}, {g['reward'][p]['high']:.2f}]" for p in policies],
+                f"{d['mean']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]",
+            )
+        console.print(tab)
+    for v in sec.numbers["verdicts"]:
+        console.print(escape(v))

@@ -1,0 +1,253 @@
+"""Checking a trust model against data: predict (one-step-ahead reliance), validate (self-reports)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import typer
+from rich.markup import escape
+from rich.table import Table
+
+from ..errors import TrustseekError
+from ..model.core import TrustModel
+from ._app import (
+    ColumnOpt,
+    DelimiterOpt,
+    KeepOpt,
+    LabelOpt,
+    MappingOpt,
+    MissingOpt,
+    QuietOpt,
+    app,
+    atomic_output,
+    check_output,
+    check_tol,
+    console,
+    keep_columns,
+    print_json,
+    progress_bar,
+    read_log,
+)
+from .fit import POSTERIOR_SUFFIXES, _fill_unused, _read_with_inputs, model_inputs
+
+BootstrapOpt = typer.Option(
+    1000, "--bootstrap", "-b", min=0, help="Participant-bootstrap resamples for the 95% intervals (0 = none)."
+)
+
+
+def _prediction():
+    from ..estimation import prediction
+
+    return prediction
+
+
+def _validation():
+    from ..estimation import validation
+
+    return validation
+
+
+def _table(title: str, *columns: str) -> Table:
+    table = Table(title=title, title_justify="left", box=None, padding=(0, 2, 0, 0), header_style="bold underline")
+    for i, c in enumerate(columns):
+        table.add_column(c, justify="left" if i == 0 else "right", no_wrap=True)
+    return table
+
+
+def _pair(d: dict[str, Any], signed: bool) -> tuple[str, str]:
+    """An estimate and its interval as two cells (a difference coloured by which side is better)."""
+    f = "+.3f" if signed else ".3f"
+    est = f"{d['estimate']:{f}}" if math.isfinite(d["estimate"]) else "-"
+    ci = escape(f"[{d['lower']:{f}}, {d['upper']:{f}}]") if math.isfinite(d["lower"]) else ""
+    colour = {"model": "green", "trust": "green", "baseline": "red"}.get(d.get("better", ""))
+    return (f"[{colour}]{est}[/]", ci) if colour else (est, ci)
+
+
+def _ci(d: dict[str, Any], digits: int = 3) -> str:
+    est = f"{d['estimate']:.{digits}f}" if math.isfinite(d["estimate"]) else "-"
+    if not math.isfinite(d.get("lower", math.nan)):
+        return est
+    return escape(f"{est} [{d['lower']:.{digits}f}, {d['upper']:.{digits}f}]")
+
+
+@app.command(rich_help_panel="Estimate")
+def predict(
+    log: Path = typer.Argument(..., help="Trial log (CSV, Parquet, JSON), one row per trial."),
+    model: Path | None = typer.Option(
+        None, "--model", "-m", help="Score this trust model in-sample (JSON); without it, held-out participants by k-fold fits."
+    ),
+    folds: int | None = typer.Option(None, "--folds", min=2, help="Folds of participants for the held-out fits (default 5)."),
+    levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Trust levels of the held-out fits."),
+    transitions_on: str | None = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit)."),
+    emissions_on: str | None = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit)."),
+    restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Random restarts of each held-out fit."),
+    prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count of the held-out fits (as for fit)."),
+    seed: int = typer.Option(0, "--seed", help="Random seed (folds, restarts, bootstrap)."),
+    tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative log-likelihood tolerance of each fit (> 0)."),
+    max_iter: int = typer.Option(1000, "--max-iter", min=1, help="Iteration cap per restart (E-steps)."),
+    jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads for each fit (default: all cores)."),
+    bootstrap: int = BootstrapOpt,
+    out: Path | None = typer.Option(None, "--out", "-o", help="Write the per-trial predictions (CSV or Parquet)."),
+    as_json: bool = typer.Option(False, "--json", help="Print the scores as one JSON object."),
+    mapping: Path | None = MappingOpt,
+    column: list[str] | None = ColumnOpt,
+    label: list[str] | None = LabelOpt,
+    missing: list[str] | None = MissingOpt,
+    delimiter: str | None = DelimiterOpt,
+    keep: list[str] | None = KeepOpt,
+    quiet: bool = QuietOpt,
+) -> None:
+    """How well a trust model predicts each trial's human action from the trials before it
+    (filtering), against baselines: log-loss, Brier score, AUC with bootstrap intervals.
+
+    Trials whose action the model fixes (the robot asked: P(intervene) = 1) are no prediction
+    and are left out of the scores."""
+    check_output(out, "--out", POSTERIOR_SUFFIXES)
+    if keep and out is None:
+        raise TrustseekError(["--keep carries log columns into --out: give --out"])
+    pr = _prediction()
+    if model is not None:
+        if folds is not None:
+            raise TrustseekError(["--folds scores held-out fits; --model scores that model in-sample: give one of them"])
+        m = TrustModel.load(model)
+        used = model_inputs(m)
+        frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), m, used)
+        report = pr.predict_in_sample(frame, m, bootstrap=bootstrap, seed=seed)
+    else:
+        k = 5 if folds is None else folds
+        tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter)
+        bar = progress_bar(quiet or as_json)
+        with bar:
+            task = bar.add_task("held-out folds", total=k)
+            report = pr.predict_heldout(
+                frame,
+                folds=k,
+                restarts=restarts,
+                seed=seed,
+                bootstrap=bootstrap,
+                prior=prior,
+                n_jobs=jobs,
+                tol=tol,
+                max_iter=max_iter,
+                progress=lambda d, t: bar.update(task, completed=d, total=t),
+                levels=levels,
+                transition_inputs=tr,
+                emission_inputs=em,
+            )
+    if out is not None:
+        from ..data.trials import write_trials
+
+        with atomic_output(out) as tmp:
+            write_trials(keep_columns(report.trials, frame, keep), tmp)
+    if as_json:
+        print_json(report.to_dict())
+        return
+    how = (
+        f"in-sample under {model}"
+        if report.mode == "in-sample"
+        else f"held-out participants, {report.folds}-fold (each fold predicted by a fit to the others)"
+    )
+    console.print(
+        f"One-step-ahead P(rely), {how}: {report.n_scored} trials of {report.n_participants} participants", highlight=False
+    )
+    titles = {"log_loss": "log-loss (nats per trial; lower is better)", "brier": "Brier score (lower is better)"}
+    titles["auc"] = "AUC (higher is better)"
+    for m in pr.METRICS:
+        table = _table(titles[m], "predictor", "estimate", "95% CI", "model - this", "95% CI")
+        for name, per in report.metrics.items():
+            d = report.differences.get(name, {}).get(m)
+            table.add_row(name, *_pair(per[m], False), *(_pair(d, True) if d else ("", "")))
+        console.print(table)
+    if report.bootstrap:
+        console.print(f"intervals: 95% participant bootstrap, {report.bootstrap} resamples", highlight=False)
+    console.print(escape(report.excluded_note()), highlight=False)
+    note = report.misses_note()
+    if note:
+        console.print(f"[yellow]note:[/] {escape(note)}", highlight=False)
+    lines = report.statements()
+    for line in lines:
+        console.print(escape(line), highlight=False)
+    if not lines:
+        console.print("the model beats every baseline in every score (95% intervals of the differences exclude 0)")
+    if out is not None:
+        console.print(f"per-trial predictions written to {out}")
+
+
+@app.command(rich_help_panel="Estimate")
+def validate(
+    log: Path = typer.Argument(..., help="Trial log with a self-reported trust rating column (every trial, or some)."),
+    model: Path = typer.Option(..., "--model", "-m", help="Trust model JSON (e.g. from 'trustseek fit')."),
+    rating: str | None = typer.Option(
+        None, "--rating", help="The log's rating column (default: a column named 'rating'); empty cells are no rating."
+    ),
+    rating_labels: str | None = typer.Option(
+        None,
+        "--rating-labels",
+        help="Ordinal rating labels, lowest first, comma-separated (e.g. low,medium,high); default: numeric ratings.",
+    ),
+    bootstrap: int = BootstrapOpt,
+    seed: int = typer.Option(0, "--seed", help="Random seed of the bootstrap."),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Write per trial the rating, decoded trust and baselines."),
+    as_json: bool = typer.Option(False, "--json", help="Print the correlations as one JSON object."),
+    mapping: Path | None = MappingOpt,
+    column: list[str] | None = ColumnOpt,
+    label: list[str] | None = LabelOpt,
+    missing: list[str] | None = MissingOpt,
+    delimiter: str | None = DelimiterOpt,
+    keep: list[str] | None = KeepOpt,
+) -> None:
+    """Does the decoded trust track self-reported trust?  Spearman and Pearson correlations with
+    the ratings (pooled, within and between participants) next to simple baselines."""
+    check_output(out, "--out", POSTERIOR_SUFFIXES)
+    if keep and out is None:
+        raise TrustseekError(["--keep carries log columns into --out: give --out"])
+    labels = None
+    if rating_labels is not None:
+        labels = [x.strip() for x in rating_labels.split(",")]
+    m = TrustModel.load(model)
+    used = model_inputs(m)
+    frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), m, used)
+    va = _validation()
+    if rating is None:
+        if "rating" not in frame.columns:
+            raise TrustseekError(["no rating column: name the log's self-reported trust column with --rating COLUMN"])
+        rating = "rating"
+    ratings = va.parse_ratings(frame, rating, labels, missing or ())
+    report = va.validate_ratings(frame, m, ratings, rating, labels, bootstrap=bootstrap, seed=seed)
+    if out is not None:
+        from ..data.trials import write_trials
+
+        with atomic_output(out) as tmp:
+            write_trials(keep_columns(report.trials, frame, keep), tmp)
+    if as_json:
+        print_json(report.to_dict())
+        return
+    names = {
+        "smoothed": "smoothed trust",
+        "filtered": "filtered trust",
+        "reliable_fraction": "reliable so far",
+        "reliance": "reliance",
+        "reliance_rate": "reliance so far",
+    }
+    rated = f"{report.n_rated} rated trials of {report.n_participants_rated} participants"
+    for method in va.METHODS:
+        table = _table(f"{method.capitalize()} correlation with {rating!r} ({rated})", "measure", *va.SCOPES)
+        for key, per in report.correlations.items():
+            table.add_row(names.get(key, key), *(_ci(per[s][method], 2) for s in va.SCOPES))
+        console.print(table)
+    console.print(
+        "within: values and ratings centred on each participant's means, then pooled; between: participant means"
+        + (f"; intervals: 95% participant bootstrap, {report.bootstrap} resamples" if report.bootstrap else ""),
+        highlight=False,
+    )
+    lines = report.statements()
+    for line in lines:
+        console.print(escape(line), highlight=False)
+    if not lines:
+        console.print(
+            "the decoded trust beats every baseline in every scope (Spearman; 95% intervals of the differences exclude 0)"
+        )
+    if out is not None:
+        console.print(f"per-trial values written to {out}")

@@ -1,0 +1,582 @@
+"""How well a trust model predicts: one-step-ahead P(rely) by filtering, against simple baselines.
+
+For every trial t of a participant the model's prediction is
+
+    P(o_t = rely | trials 1..t-1, C_t, a_t) = sum_k P(T_t = k | trials 1..t-1) P(rely | T_t = k, C_t, a_t)
+
+with the belief from the participant's earlier trials only (the forward filter, never the
+smoothed posterior, which would look at the trial itself and later ones).  Baselines
+(:data:`BASELINES`) see the same past:
+
+* ``constant`` -- the rate of reliance in the training trials;
+* ``participant_rate`` -- the participant's reliance so far, a Beta prior of
+  :data:`PRIOR_WEIGHT` trials at the training rate (so the first trial gets the training rate);
+* ``last_action`` -- P(rely | the participant's previous action), estimated on the training
+  trials (the first trial gets the training rate);
+* ``reliable_fraction`` -- the fraction of the participant's earlier trials whose automation was
+  reliable (experience ``reliable``, Laplace-smoothed), turned into P(rely) by a logistic
+  regression on the training trials.
+
+Trials whose emission row gives every trust level the same certain P(rely), 0 or 1 (the paper
+preset fixes P(intervene | ask) = 1), are no prediction of behaviour: they are counted
+separately and left out of every score, for the model and the baselines alike.  Trials without
+a recorded human action are not scored either (the filter passes over them).
+
+Scores: log-loss (nats per trial, predictions clipped to [:data:`EPS`, 1 - EPS]), Brier score
+and AUC (rank formula, ties counted one half), each with a participant-bootstrap percentile
+interval, and the paired difference model - baseline on the same resamples.
+
+Evaluation is in-sample under a given model (:func:`predict_in_sample`) or by held-out
+participants (:func:`predict_heldout`): k folds of participants, seeded; each fold is predicted
+by a model fitted to the other folds with the given fit settings, and the baselines are
+estimated on the same training folds.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..model.core import TrustModel
+from ..vocab import EXPERIENCES, HUMAN_ACTIONS
+from .iohmm import fit_iohmm
+from .sequences import Sequences, encode
+from .spec import FitError, IOHMMSpec, Params
+from .trust_iohmm import from_trust_model, preset_spec
+
+log = logging.getLogger(__name__)
+
+EPS = 1e-9  # predictions are clipped to [EPS, 1 - EPS] for the log-loss
+CONFIDENT = 1e-6  # a scored trial whose action the model gave less than this probability: a confident miss
+PRIOR_WEIGHT = 2.0  # pseudo-trials at the training rate behind a participant's running rate
+BASELINES = ("constant", "participant_rate", "last_action", "reliable_fraction")
+PREDICTORS = ("model", *BASELINES)
+METRICS = ("log_loss", "brier", "auc")
+LOWER_IS_BETTER = {"log_loss": True, "brier": True, "auc": False}
+LEVEL = 0.95
+RELY = HUMAN_ACTIONS.index("rely")
+
+
+# --------------------------------------------------------------------------- the filter
+
+
+@dataclass
+class Filtered:
+    """The forward filter of every participant, time-major (T, N) like :class:`Sequences`.
+
+    ``prior[t, n]`` is P(T_t | trials before t), ``posterior[t, n]`` P(T_t | trials up to t);
+    ``p_rely[t, n]`` the predicted P(rely) of trial t; ``determined[t, n]`` marks trials whose
+    emission row gives every level the same certain P(rely) (no prediction)."""
+
+    prior: np.ndarray
+    posterior: np.ndarray
+    p_rely: np.ndarray
+    determined: np.ndarray
+
+
+def determined_rows(params: Params) -> np.ndarray:
+    """Per emission row: True when every level has the same P(rely), exactly 0 or 1."""
+    p = params.emission[:, :, RELY]  # (Ue, K)
+    same = np.all(p == p[:, :1], axis=1)
+    return same & ((p[:, 0] == 0.0) | (p[:, 0] == 1.0))
+
+
+def filter_beliefs(seqs: Sequences, params: Params) -> Filtered:
+    """Forward-filter every participant under ``params``: the belief before and after each trial
+    and the predicted P(rely).  An observed action that has probability zero under the belief
+    leaves the belief as it was."""
+    T, N = seqs.y.shape
+    K = params.initial.shape[-1]
+    valid = seqs.rows >= 0
+    ue = np.where(valid, seqs.ue, 0).astype(np.int64)
+    ut = np.where(valid, seqs.ut, 0).astype(np.int64)
+    prior = np.zeros((T, N, K))
+    posterior = np.zeros((T, N, K))
+    p_rely = np.full((T, N), np.nan)
+    b = np.broadcast_to(params.initial, (N, K)).astype(float)
+    cols = np.arange(N)
+    for t in range(T):
+        em = params.emission[ue[t]]  # (N, K, M)
+        prior[t] = b
+        p_rely[t] = np.einsum("nk,nk->n", b, em[:, :, RELY])
+        y = seqs.y[t].astype(np.int64)
+        lik = np.where((y >= 0)[:, None], em[cols, :, np.maximum(y, 0)], 1.0)
+        post = b * lik
+        s = post.sum(-1)
+        ok = s > 0
+        post = np.where(ok[:, None], post / np.where(ok, s, 1.0)[:, None], b)
+        posterior[t] = post
+        if t + 1 < T:
+            b = np.einsum("nk,nkj->nj", post, params.transition[ut[t]])
+    p_rely[~valid] = np.nan
+    prior[~valid] = np.nan
+    posterior[~valid] = np.nan
+    determined = determined_rows(params)[ue] & valid
+    return Filtered(prior, posterior, p_rely, determined)
+
+
+# --------------------------------------------------------------------------- scores
+
+
+def auc(scores: np.ndarray, labels: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+    """Area under the ROC curve by the rank formula (a tie between a positive and a negative
+    counts one half); ``weights`` (n,) or (B, n) weigh the trials (a bootstrap's counts):
+    one AUC per row of weights.  NaN when a class is absent."""
+    scores = np.asarray(scores, dtype=float)
+    y = np.asarray(labels, dtype=float)
+    w = np.ones_like(scores) if weights is None else np.asarray(weights, dtype=float)
+    if scores.size == 0:
+        return np.full(w.shape[:-1], np.nan)
+    order = np.argsort(scores, kind="stable")
+    s, y, w = scores[order], y[order], w[..., order]
+    starts = np.flatnonzero(np.r_[True, s[1:] != s[:-1]])
+    pos = np.add.reduceat(w * y, starts, axis=-1)
+    neg = np.add.reduceat(w * (1.0 - y), starts, axis=-1)
+    below = np.cumsum(neg, axis=-1) - neg
+    num = (pos * (below + 0.5 * neg)).sum(-1)
+    den = pos.sum(-1) * neg.sum(-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.nan)
+
+
+def _losses(p: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    q = np.clip(p, EPS, 1 - EPS)
+    return -(y * np.log(q) + (1 - y) * np.log1p(-q)), (p - y) ** 2
+
+
+def _interval(values: np.ndarray) -> tuple[float, float]:
+    v = values[np.isfinite(values)]
+    if v.size == 0:
+        return float("nan"), float("nan")
+    lo, hi = np.percentile(v, [100 * (1 - LEVEL) / 2, 100 * (1 + LEVEL) / 2])
+    return float(lo), float(hi)
+
+
+def bootstrap_counts(n_participants: int, replicates: int, seed: int) -> np.ndarray:
+    """(B, N): how often each participant is drawn in each participant-bootstrap resample."""
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 7]))
+    if replicates <= 0 or n_participants == 0:
+        return np.zeros((0, n_participants), dtype=np.int64)
+    return rng.multinomial(n_participants, np.full(n_participants, 1.0 / n_participants), size=replicates)
+
+
+CHUNK_CELLS = 4_000_000  # resamples x trials held in memory at once by the bootstrap of AUCs and correlations
+
+
+def chunks(replicates: int, n: int) -> list[slice]:
+    """Slices of the resamples, few enough at a time that a (resamples, n) array stays small."""
+    step = max(1, CHUNK_CELLS // max(n, 1))
+    return [slice(i, i + step) for i in range(0, replicates, step)]
+
+
+def score(
+    predictions: dict[str, np.ndarray], y: np.ndarray, participant: np.ndarray, n_participants: int, bootstrap: int, seed: int
+) -> tuple[dict[str, dict[str, dict[str, float]]], dict[str, dict[str, dict[str, Any]]]]:
+    """Metrics of every predictor on scored trials (``y`` 0/1, ``participant`` codes 0..N-1), with
+    participant-bootstrap intervals, and the paired differences model - baseline."""
+    counts = bootstrap_counts(n_participants, bootstrap, seed)
+    ntr = np.bincount(participant, minlength=n_participants).astype(float)
+    point: dict[str, dict[str, float]] = {}
+    reps: dict[str, dict[str, np.ndarray]] = {}
+    for name, p in predictions.items():
+        ll, br = _losses(p, y)
+        point[name] = {"log_loss": float(ll.mean()) if ll.size else float("nan")}
+        point[name]["brier"] = float(br.mean()) if br.size else float("nan")
+        point[name]["auc"] = float(auc(p, y))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            total = counts @ ntr
+            reps[name] = {
+                "log_loss": (counts @ np.bincount(participant, ll, n_participants)) / total,
+                "brier": (counts @ np.bincount(participant, br, n_participants)) / total,
+                "auc": np.concatenate(
+                    [np.zeros(0), *(auc(p, y, counts[c][:, participant].astype(float)) for c in chunks(len(counts), len(p)))]
+                ),
+            }
+    metrics: dict[str, dict[str, dict[str, float]]] = {}
+    for name in predictions:
+        metrics[name] = {}
+        for m in METRICS:
+            lo, hi = _interval(reps[name][m])
+            metrics[name][m] = {"estimate": point[name][m], "lower": lo, "upper": hi}
+    diffs: dict[str, dict[str, dict[str, Any]]] = {}
+    for base in (b for b in predictions if b != "model"):
+        diffs[base] = {}
+        for m in METRICS:
+            lo, hi = _interval(reps["model"][m] - reps[base][m])
+            est = point["model"][m] - point[base][m]
+            better = "neither"
+            if np.isfinite(lo) and np.isfinite(hi):
+                if LOWER_IS_BETTER[m]:
+                    better = "model" if hi < 0 else "baseline" if lo > 0 else "neither"
+                else:
+                    better = "model" if lo > 0 else "baseline" if hi < 0 else "neither"
+            diffs[base][m] = {"estimate": est, "lower": lo, "upper": hi, "better": better}
+    return metrics, diffs
+
+
+# --------------------------------------------------------------------------- baselines
+
+
+def _spread(values: np.ndarray, seqs: Sequences, fill: float = np.nan) -> np.ndarray:
+    """A per-row array of the frame laid out (T, N) like ``seqs``."""
+    out = np.full(seqs.rows.shape, fill, dtype=float)
+    valid = seqs.rows >= 0
+    out[valid] = values[seqs.rows[valid]]
+    return out
+
+
+def _exclusive_cumsum(a: np.ndarray) -> np.ndarray:
+    """Along trials: the sum over earlier trials (0 at the first)."""
+    c = np.cumsum(a, axis=0)
+    return c - a
+
+
+def _logistic(x: np.ndarray, y: np.ndarray, ridge: float = 1e-3, iterations: int = 50) -> np.ndarray:
+    """Intercept and slope of a logistic regression of ``y`` on ``x`` (Newton's method, a small ridge)."""
+    X = np.column_stack([np.ones_like(x), x])
+    beta = np.zeros(2)
+    for _ in range(iterations):
+        p = 1.0 / (1.0 + np.exp(-(X @ beta)))
+        g = X.T @ (y - p) - ridge * beta
+        H = (X * (p * (1 - p))[:, None]).T @ X + ridge * np.eye(2)
+        step = np.linalg.solve(H, g)
+        beta += step
+        if np.max(np.abs(step)) < 1e-10:
+            break
+    return beta
+
+
+@dataclass
+class _Features:
+    """Per trial, (T, N): what the baselines use, from the participant's earlier trials."""
+
+    rely: np.ndarray  # 1 rely, 0 intervene, NaN unrecorded or padding
+    scored: np.ndarray  # recorded and not determined
+    rate_n: np.ndarray  # scored trials before t
+    rate_k: np.ndarray  # of which relied
+    last: np.ndarray  # previous scored action (1 rely, 0 intervene, NaN none)
+    reliable_logit: np.ndarray  # logit of the Laplace-smoothed fraction of reliable automation before t
+
+
+def _features(frame: pd.DataFrame, seqs: Sequences, determined: np.ndarray) -> _Features:
+    ha = frame["human_action"]
+    rely_row = np.where(ha.isna().to_numpy(), np.nan, (ha.astype(object) == "rely").to_numpy(dtype=float))
+    rely = _spread(rely_row, seqs)
+    scored = np.isfinite(rely) & ~determined
+    r = np.where(scored, rely, 0.0)
+    rate_n = _exclusive_cumsum(scored.astype(float))
+    rate_k = _exclusive_cumsum(r)
+    # previous scored action: forward fill along trials
+    T, N = rely.shape
+    last = np.full((T, N), np.nan)
+    cur = np.full(N, np.nan)
+    for t in range(T):
+        last[t] = cur
+        cur = np.where(scored[t], rely[t], cur)
+    if "experience" in frame and frame["experience"].notna().any():
+        ex = frame["experience"]
+        rel_row = np.where(ex.isna().to_numpy(), np.nan, (ex.astype(object) == EXPERIENCES[1]).to_numpy(dtype=float))
+    else:
+        rel_row = np.full(len(frame), np.nan)
+    rel = _spread(rel_row, seqs)
+    known = np.isfinite(rel)
+    k = _exclusive_cumsum(np.where(known, rel, 0.0))
+    n = _exclusive_cumsum(known.astype(float))
+    f = (k + 1.0) / (n + 2.0)
+    return _Features(rely, scored, rate_n, rate_k, last, np.log(f) - np.log1p(-f))
+
+
+@dataclass
+class BaselineFit:
+    """The baselines' parameters, estimated on training trials."""
+
+    rate: float
+    after_rely: float
+    after_intervene: float
+    reliable_coef: tuple[float, float]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "rate": self.rate,
+            "after_rely": self.after_rely,
+            "after_intervene": self.after_intervene,
+            "reliable_fraction_logistic": list(self.reliable_coef),
+        }
+
+
+def fit_baselines(f: _Features, columns: np.ndarray) -> BaselineFit:
+    """The baselines' parameters from the scored trials of participants ``columns``."""
+    s = f.scored[:, columns]
+    y = f.rely[:, columns][s]
+    rate = (y.sum() + 1.0) / (y.size + 2.0)
+    last = f.last[:, columns][s]
+    q1 = (y[last == 1].sum() + 1.0) / ((last == 1).sum() + 2.0)
+    q0 = (y[last == 0].sum() + 1.0) / ((last == 0).sum() + 2.0)
+    beta = _logistic(f.reliable_logit[:, columns][s], y) if y.size else np.zeros(2)
+    return BaselineFit(float(rate), float(q1), float(q0), (float(beta[0]), float(beta[1])))
+
+
+def baseline_predictions(f: _Features, fit: BaselineFit) -> dict[str, np.ndarray]:
+    """Every baseline's P(rely), (T, N)."""
+    c = fit.rate
+    part = (f.rate_k + PRIOR_WEIGHT * c) / (f.rate_n + PRIOR_WEIGHT)
+    last = np.where(f.last == 1, fit.after_rely, np.where(f.last == 0, fit.after_intervene, c))
+    a, b = fit.reliable_coef
+    rel = 1.0 / (1.0 + np.exp(-(a + b * f.reliable_logit)))
+    return {
+        "constant": np.full(f.rely.shape, c),
+        "participant_rate": part,
+        "last_action": last,
+        "reliable_fraction": rel,
+    }
+
+
+# --------------------------------------------------------------------------- reports
+
+
+@dataclass
+class PredictionReport:
+    """The per-trial predictions, the scores with intervals, and the model-baseline differences."""
+
+    mode: str  # "in-sample" or "held-out"
+    trials: pd.DataFrame
+    metrics: dict[str, dict[str, dict[str, float]]]
+    differences: dict[str, dict[str, dict[str, Any]]]
+    n_participants: int
+    n_scored: int
+    n_determined: int
+    determined_matched: int
+    n_unrecorded: int
+    n_confident_misses: int
+    bootstrap: int
+    seed: int
+    folds: int | None = None
+    baselines: list[dict[str, Any]] = field(default_factory=list)
+
+    def statements(self) -> list[str]:
+        """One line per baseline and metric where the model does not beat the baseline."""
+        if self.bootstrap == 0:
+            return ["no bootstrap resamples (--bootstrap 0): no intervals, so no judgement whether the model beats a baseline"]
+        out = []
+        names = {"log_loss": "log-loss", "brier": "Brier score", "auc": "AUC"}
+        for base, per in self.differences.items():
+            for m, d in per.items():
+                if d["better"] == "model":
+                    continue
+                if not np.isfinite(d["lower"]):
+                    how, ci = "no bootstrap interval", ""
+                else:
+                    how = "the baseline is better" if d["better"] == "baseline" else "the interval includes 0"
+                    ci = f" [{d['lower']:+.4f}, {d['upper']:+.4f}]"
+                out.append(
+                    f"the model does not beat the {base} baseline in {names[m]}: difference {d['estimate']:+.4f}{ci} ({how})"
+                )
+        return out
+
+    def misses_note(self) -> str | None:
+        """A line when some scored actions had (nearly) probability zero under the model."""
+        if not self.n_confident_misses:
+            return None
+        return (
+            f"{self.n_confident_misses} scored trials had probability below {CONFIDENT:g} under the model "
+            f"(each adds up to {-np.log(EPS):.1f} nats to the log-loss): cells estimated at 0 or 1; "
+            "a fit with a prior (--prior 0.5) keeps them inside"
+        )
+
+    def excluded_note(self) -> str:
+        return (
+            f"{self.n_determined} trials whose P(rely) the model fixes (e.g. P(intervene | ask) = 1) are not scored: "
+            f"they are no prediction ({self.determined_matched} of them went as fixed); "
+            f"{self.n_unrecorded} trials without a recorded human action are not scored"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "mode": self.mode,
+            "folds": self.folds,
+            "n_participants": self.n_participants,
+            "n_scored": self.n_scored,
+            "n_determined": self.n_determined,
+            "determined_matched": self.determined_matched,
+            "n_unrecorded": self.n_unrecorded,
+            "n_confident_misses": self.n_confident_misses,
+            "bootstrap": self.bootstrap,
+            "ci_level": LEVEL,
+            "seed": self.seed,
+            "metrics": self.metrics,
+            "differences": self.differences,
+            "baselines": self.baselines,
+            "statements": self.statements(),
+            "excluded": self.excluded_note(),
+            "misses": self.misses_note(),
+        }
+
+
+def _report(
+    mode: str,
+    frame: pd.DataFrame,
+    seqs: Sequences,
+    p_model: np.ndarray,
+    determined: np.ndarray,
+    base: dict[str, np.ndarray],
+    feats: _Features,
+    bootstrap: int,
+    seed: int,
+    fold_of: np.ndarray | None,
+    baseline_fits: list[BaselineFit],
+) -> PredictionReport:
+    valid = seqs.rows >= 0
+    preds = {"model": p_model, **base}
+    s = feats.scored
+    nn = np.nonzero(s)[1]
+    y = feats.rely[s]
+    metrics, diffs = score({k: v[s] for k, v in preds.items()}, y, nn, seqs.n_participants, bootstrap, seed)
+    # per trial, in the frame's row order
+    rows = seqs.rows[valid]
+    n = len(frame)
+    out: dict[str, Any] = {}
+    vt, vn = np.nonzero(valid)
+    out["participant"] = np.empty(n, dtype=object)
+    out["participant"][rows] = np.asarray(seqs.participants, dtype=object)[vn]
+    out["trial"] = np.zeros(n, dtype=np.int64)
+    out["trial"][rows] = seqs.trial_numbers(vt, vn)
+    for c in ("complexity", "robot_action", "human_action"):
+        out[c] = frame[c].to_numpy() if c in frame else np.full(n, None)
+    out["scored"] = np.zeros(n, dtype=bool)
+    out["scored"][rows] = s[valid]
+    out["fixed_by_model"] = np.zeros(n, dtype=bool)
+    out["fixed_by_model"][rows] = determined[valid]
+    if fold_of is not None:
+        out["fold"] = np.zeros(n, dtype=np.int64)
+        out["fold"][rows] = fold_of[vn] + 1
+    for k, v in preds.items():
+        col = np.full(n, np.nan)
+        col[rows] = v[valid]
+        out[f"p_rely_{k}"] = col
+    trials = pd.DataFrame(out)
+    pm, ys = p_model[s], feats.rely[s]
+    misses = int((np.where(ys == 1, pm, 1 - pm) < CONFIDENT).sum())
+    unrecorded = int((valid & ~np.isfinite(feats.rely)).sum())
+    det_obs = determined & np.isfinite(feats.rely)
+    matched = int((det_obs & (feats.rely == np.where(np.isfinite(p_model), np.round(p_model), -1))).sum())
+    return PredictionReport(
+        mode=mode,
+        trials=trials,
+        metrics=metrics,
+        differences=diffs,
+        n_participants=seqs.n_participants,
+        n_scored=int(s.sum()),
+        n_determined=int(det_obs.sum()),
+        determined_matched=matched,
+        n_unrecorded=unrecorded,
+        n_confident_misses=misses,
+        bootstrap=bootstrap,
+        seed=seed,
+        folds=None if fold_of is None else int(fold_of.max()) + 1,
+        baselines=[b.to_dict() for b in baseline_fits],
+    )
+
+
+def _check_scored(feats: _Features) -> None:
+    if not feats.scored.any():
+        raise FitError(["no trial to score: every recorded human action is fixed by the model (or none is recorded)"])
+
+
+def predict_in_sample(frame: pd.DataFrame, model: TrustModel, bootstrap: int = 1000, seed: int = 0) -> PredictionReport:
+    """One-step-ahead predictions of every trial under ``model`` (in-sample when ``model`` was
+    fitted to ``frame``), scored against the baselines estimated on the same trials."""
+    spec, params = from_trust_model(model)
+    seqs = encode(frame, spec)
+    filt = filter_beliefs(seqs, params)
+    feats = _features(frame, seqs, filt.determined)
+    _check_scored(feats)
+    bfit = fit_baselines(feats, np.arange(seqs.n_participants))
+    return _report(
+        "in-sample",
+        frame,
+        seqs,
+        filt.p_rely,
+        filt.determined,
+        baseline_predictions(feats, bfit),
+        feats,
+        bootstrap,
+        seed,
+        None,
+        [bfit],
+    )
+
+
+def fold_assignment(n_participants: int, folds: int, seed: int = 0) -> np.ndarray:
+    """The fold (0..folds-1) of every participant: a seeded permutation dealt round-robin, so
+    fold sizes differ by at most one."""
+    if folds < 2:
+        raise FitError([f"--folds must be at least 2, got {folds}"])
+    if folds > n_participants:
+        raise FitError([f"--folds {folds} is more than the {n_participants} participants of the log (folds are by participant)"])
+    perm = np.random.default_rng(np.random.SeedSequence([seed, 6])).permutation(n_participants)
+    fold_of = np.empty(n_participants, dtype=np.int64)
+    fold_of[perm] = np.arange(n_participants) % folds
+    return fold_of
+
+
+def predict_heldout(
+    frame: pd.DataFrame,
+    folds: int = 5,
+    preset: str | IOHMMSpec = "paper",
+    restarts: int = 10,
+    seed: int = 0,
+    bootstrap: int = 1000,
+    prior: float = 0.0,
+    n_jobs: int | None = None,
+    tol: float = 1e-8,
+    max_iter: int = 1000,
+    progress: Callable[[int, int], None] | None = None,
+    **spec_options: Any,
+) -> PredictionReport:
+    """One-step-ahead predictions of held-out participants: ``folds`` folds of participants
+    (seeded by ``seed``); each is predicted by a model fitted to the others (the fit settings as
+    for :func:`~.fit.fit_trust_model`, the restarts seeded as a fit with ``seed`` would be) and
+    scored against baselines estimated on the same training folds.  ``progress(done, folds)``
+    is called after each fold."""
+    spec = preset_spec(preset, frame, prior=prior, **spec_options)
+    seqs = encode(frame, spec)
+    fold_of = fold_assignment(seqs.n_participants, folds, seed)
+    T, N = seqs.y.shape
+    p_model = np.full((T, N), np.nan)
+    determined = np.zeros((T, N), dtype=bool)
+    fits: list[tuple[np.ndarray, Params]] = []
+    for f in range(folds):
+        train, test = np.flatnonzero(fold_of != f), np.flatnonzero(fold_of == f)
+        fit = fit_iohmm(
+            seqs.subset(train),
+            spec,
+            restarts=restarts,
+            seed=np.random.SeedSequence([seed, 0]),
+            tol=tol,
+            max_iter=max_iter,
+            n_jobs=n_jobs,
+        )
+        held = filter_beliefs(seqs.subset(test), fit.params)
+        Tt = held.p_rely.shape[0]
+        p_model[:Tt, test] = held.p_rely
+        determined[:Tt, test] = held.determined
+        fits.append((test, fit.params))
+        log.info("fold %d of %d: %d training participants, log-likelihood %.4f", f + 1, folds, len(train), fit.loglik)
+        if progress is not None:
+            progress(f + 1, folds)
+    feats = _features(frame, seqs, determined)
+    _check_scored(feats)
+    base = {k: np.full((T, N), np.nan) for k in BASELINES}
+    bfits = []
+    for f in range(folds):
+        train, test = np.flatnonzero(fold_of != f), np.flatnonzero(fold_of == f)
+        bfit = fit_baselines(feats, train)
+        bfits.append(bfit)
+        for k, v in baseline_predictions(feats, bfit).items():
+            base[k][:, test] = v[:, test]
+    return _report("held-out", frame, seqs, p_model, determined, base, feats, bootstrap, seed, fold_of, bfits)

@@ -1,0 +1,269 @@
+"""The report section on supervisor types (the paper's Remark 1): does a robot that knows the
+population has types, and learns which one it is working with, rescue the conservative
+supervisors that the pooled model lost?
+
+:func:`types_section` compares, on the same simulated people (common random numbers, so the
+differences are paired per participant), four policies:
+
+* **pooled trust-aware**: the paper's approach: one model fitted to the pooled
+  experiment-1 data of the population (paper design), its optimal policy;
+* **type-aware**: the optimal policy of the (type, trust) POMDP of the population's types; a
+  new person's type is unknown and learned from their interventions and outcomes;
+* **oracle**: each person's own type's optimal policy (the type known in advance); run for every
+  type on everyone with the same random numbers, then each person's own type's run is kept;
+* **trust-agnostic**: the optimal policy of the intervention rates in the experiment-1 data.
+
+at the paper's block length (17 + 17 trials) and a longer one, per type and overall, and again
+on a one-type population (the paper's supervisor alone, with the type-aware policy still planning
+for the two types): knowing about types should cost nothing measurable there.
+
+Every trust-aware policy (pooled, type-aware, each oracle) is solved by the same solver
+(:func:`~trustseek.solvers.type_aware.solve_type_aware`, a one-type mixture for a single
+model), so that the paired differences are those of the models planned for, not of solvers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..estimation.fit import fit_trust_model
+from ..model.core import Task, TrustModel
+from ..model.mixture import TypeMixture
+from ..model.presets import paper_conservative_mixture, paper_task
+from ..policies.base import Policy
+from ..simulation.designs import simulate_design
+from ..simulation.engine import simulate
+from ..simulation.populations import Supervisors
+from ..solvers.agnostic import trust_agnostic_from_data
+from ..solvers.type_aware import solve_type_aware
+from ..vocab import PAPER_BLOCK_COUNTS, TRIAL_COLUMNS
+from .statistics import mean_ci
+
+POOLED, TYPE_AWARE, ORACLE, AGNOSTIC = "pooled trust-aware", "type-aware", "oracle (type known)", "trust-agnostic"
+POLICIES = (POOLED, TYPE_AWARE, ORACLE, AGNOSTIC)
+# the paired differences the section reports: (policy, against)
+CONTRASTS = ((TYPE_AWARE, POOLED), (ORACLE, TYPE_AWARE), (ORACLE, POOLED), (POOLED, AGNOSTIC), (TYPE_AWARE, AGNOSTIC))
+
+
+def _interval(v: np.ndarray) -> dict[str, float]:
+    m, lo, hi = mean_ci(v)
+    return {"mean": m, "low": lo, "high": hi}
+
+
+@dataclass
+class PopulationRuns:
+    """Cumulative reward per block of every participant under each policy (same people, same luck)."""
+
+    name: str
+    type_names: tuple[str, ...]
+    types: np.ndarray  # (n,) type index of each participant
+    counts: tuple[int, ...]  # trials per complexity in the block
+    rewards: dict[str, np.ndarray]  # policy -> (n,)
+    low_interventions: dict[str, np.ndarray] = field(default_factory=dict)  # policy -> (n,) interventions in low complexity
+
+    def groups(self) -> list[tuple[str, np.ndarray]]:
+        """(label, participant mask): each type present, then everyone."""
+        out = [(t, self.types == m) for m, t in enumerate(self.type_names) if (self.types == m).any()]
+        return [*out, ("all", np.ones(len(self.types), dtype=bool))] if len(out) > 1 else out
+
+
+@dataclass
+class TypesSection:
+    """The section's numbers (JSON-ready), the policies and the simulated runs behind the figure."""
+
+    numbers: dict[str, Any]
+    policies: dict[str, Any]
+    runs: list[PopulationRuns]
+
+
+def _pooled_fit(mixture: TypeMixture, task: Task, participants: int, seed: int, restarts: int) -> tuple[TrustModel, Any]:
+    """The paper's estimate for this population: experiment 1 (paper design) on ``participants``
+    people of the mixture, one pooled model fitted to all of it."""
+    sup = Supervisors.from_mixture(mixture, participants, rng=seed)
+    frame = simulate_design(sup, participants, seed=seed, task=task)
+    fit = fit_trust_model(frame[list(TRIAL_COLUMNS)], preset="paper", restarts=restarts, seed=seed)
+    return fit.model, frame
+
+
+def _run(
+    name: str,
+    population: TypeMixture,
+    task: Task,
+    policies: dict[str, Policy],
+    oracle: Sequence[Policy],
+    counts: tuple[int, ...],
+    participants: int,
+    seed: int,
+) -> PopulationRuns:
+    """Every policy on the same ``participants`` people of ``population`` (one block each, same seed)."""
+    sup = Supervisors.from_mixture(population, participants, rng=seed)
+    rewards: dict[str, np.ndarray] = {}
+    low: dict[str, np.ndarray] = {}
+    low_c = task.complexities.index("low") if "low" in task.complexities else 0
+
+    def one(pol: Policy) -> tuple[np.ndarray, np.ndarray]:
+        sim = simulate(sup, task, pol, counts=counts, seed=seed, record=True)
+        t = sim.trials()
+        inter = (
+            t.assign(x=(t["complexity"] == task.complexities[low_c]) & (t["human_action"] == "intervene"))
+            .groupby("participant", sort=False)["x"]
+            .sum()
+            .to_numpy(dtype=float)
+        )
+        return sim.reward_matrix()[:, 0], inter
+
+    for label, pol in policies.items():
+        rewards[label], low[label] = one(pol)
+    # the oracle: each type's own policy run on everyone with the same random numbers; each
+    # person keeps the run of their own type
+    per_type = [one(p) for p in oracle]
+    idx = sup.index
+    rewards[ORACLE] = np.choose(idx, [r for r, _ in per_type])
+    low[ORACLE] = np.choose(idx, [i for _, i in per_type])
+    return PopulationRuns(name, population.names, idx.copy(), counts, rewards, low)
+
+
+def _numbers(runs: PopulationRuns) -> dict[str, Any]:
+    out: dict[str, Any] = {"population": runs.name, "counts": list(runs.counts), "trials": int(sum(runs.counts))}
+    groups = []
+    for label, mask in runs.groups():
+        g: dict[str, Any] = {"group": label, "participants": int(mask.sum()), "reward": {}, "low_interventions": {}}
+        for p in POLICIES:
+            if p in runs.rewards:
+                g["reward"][p] = _interval(runs.rewards[p][mask])
+                g["low_interventions"][p] = float(runs.low_interventions[p][mask].mean())
+        g["differences"] = [
+            {"policy": a, "against": b, **_interval(runs.rewards[a][mask] - runs.rewards[b][mask])}
+            for a, b in CONTRASTS
+            if a in runs.rewards and b in runs.rewards
+        ]
+        groups.append(g)
+    out["groups"] = groups
+    return out
+
+
+def _verdicts(numbers: list[dict[str, Any]], conservative: str) -> list[str]:
+    """Plain sentences on the section's questions, from the paired intervals."""
+
+    def diff(block: dict[str, Any], group: str, a: str, b: str) -> dict[str, Any] | None:
+        for g in block["groups"]:
+            if g["group"] == group:
+                for d in g["differences"]:
+                    if d["policy"] == a and d["against"] == b:
+                        return d
+        return None
+
+    def say(d: dict[str, Any]) -> str:
+        return f"{d['mean']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]"
+
+    out = []
+    for block in numbers:
+        where = f"{block['population']}, {block['trials']}-trial blocks"
+        whole = diff(block, "all", TYPE_AWARE, POOLED) or diff(block, block["groups"][0]["group"], TYPE_AWARE, POOLED)
+        if whole is None:
+            continue
+        if whole["low"] > 0:
+            verdict = "gains"
+        elif whole["high"] < 0:
+            verdict = "loses"
+        else:
+            verdict = "neither gains nor loses measurably"
+        out.append(f"{where}: the type-aware policy {verdict} against the pooled one per block, {say(whole)} (paired 95 % CI).")
+        cons = diff(block, conservative, TYPE_AWARE, POOLED)
+        orc = diff(block, conservative, ORACLE, TYPE_AWARE)
+        best = diff(block, conservative, ORACLE, POOLED)
+        if cons is not None and orc is not None and best is not None:
+            if best["low"] <= 0 <= best["high"]:
+                room = f"no policy does measurably better for them than the pooled one (oracle − pooled {say(best)})"
+            else:
+                room = f"their own type's policy would change their reward by {say(best)} over the pooled one"
+            out.append(
+                f"{where}: for the {conservative} supervisors, type-aware − pooled is {say(cons)} and {room}; knowing the "
+                f"type in advance would add {say(orc)} to the type-aware policy."
+            )
+    return out
+
+
+def types_section(
+    mixture: TypeMixture | None = None,
+    task: Task | None = None,
+    participants: int = 2000,
+    block_counts: Sequence[tuple[int, ...]] = (PAPER_BLOCK_COUNTS, (68, 68)),
+    fit_participants: int = 200,
+    restarts: int = 4,
+    seed: int = 0,
+    solver: str | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> TypesSection:
+    """Every number of the section: per population (the mixture, then its first type alone), per
+    block length, per type and overall, the mean cumulative reward per block of each policy with
+    95 % intervals, the paired differences, and interventions in low complexity."""
+    mixture = mixture or paper_conservative_mixture()
+    task = task or paper_task()
+    tick = progress or (lambda _s: None)
+    seeds = np.random.SeedSequence(seed).generate_state(4)
+    pooled_model, frame = _pooled_fit(mixture, task, fit_participants, int(seeds[0]), restarts)
+    tick("pooled fit")
+
+    # every trust-aware policy comes from the same solver, so that the paired differences are
+    # those of the models planned for, not of the solvers
+    def plan(m: TypeMixture | TrustModel) -> Policy:
+        return solve_type_aware(m, task) if solver is None else solve_type_aware(m, task, solver=solver)
+
+    pooled = plan(pooled_model)
+    agnostic = trust_agnostic_from_data(frame, task)
+    type_aware = plan(mixture)
+    oracle = [plan(m) for m in mixture.models]
+    tick("policies")
+    # the one-type population: the first type alone; its pooled policy is fitted from its own data
+    alone = TypeMixture.single(mixture.models[0], mixture.names[0])
+    alone_model, alone_frame = _pooled_fit(alone, task, fit_participants, int(seeds[1]), restarts)
+    alone_pooled = plan(alone_model)
+    alone_agnostic = trust_agnostic_from_data(alone_frame, task)
+    tick("one-type policies")
+    runs: list[PopulationRuns] = []
+    for j, counts in enumerate(block_counts):
+        counts = tuple(int(c) for c in counts)
+        runs.append(
+            _run(
+                " + ".join(mixture.names),
+                mixture,
+                task,
+                {POOLED: pooled, TYPE_AWARE: type_aware, AGNOSTIC: agnostic},
+                oracle,
+                counts,
+                participants,
+                int(seeds[2]) + j,
+            )
+        )
+        runs.append(
+            _run(
+                f"{mixture.names[0]} alone",
+                alone,
+                task,
+                {POOLED: alone_pooled, TYPE_AWARE: type_aware, AGNOSTIC: alone_agnostic},
+                oracle[:1],
+                counts,
+                participants,
+                int(seeds[3]) + j,
+            )
+        )
+        tick(f"blocks of {sum(counts)} trials")
+    numbers = [_numbers(r) for r in runs]
+    conservative = mixture.names[-1]
+    info = getattr(type_aware, "info", {}) or {}
+    out: dict[str, Any] = {
+        "types": [{"name": n, "weight": float(w)} for n, w in zip(mixture.names, mixture.weights, strict=True)],
+        "participants": participants,
+        "fit_participants": fit_participants,
+        "seed": seed,
+        "type_aware_solver": {k: info[k] for k in ("solver", "lower", "upper", "gap", "seconds") if k in info},
+        "populations": numbers,
+        "verdicts": _verdicts(numbers, conservative),
+    }
+    policies = {POOLED: pooled, TYPE_AWARE: type_aware, AGNOSTIC: agnostic, "oracle": oracle, "pooled model": pooled_model}
+    return TypesSection(out, policies, runs)
