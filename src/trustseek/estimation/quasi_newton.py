@@ -10,11 +10,16 @@ exactly), and the gradient comes free with the E-step's expected counts.
 from __future__ import annotations
 
 import math
+import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize
+from threadpoolctl import ThreadpoolController
 
 from .em import CAPPED, RunResult
 from .estep import EStep, Workspace
@@ -122,6 +127,31 @@ class Sticks:
         return out
 
 
+_blas: dict[str, Any] = {"controller": None, "depth": 0, "limiter": None}
+_blas_lock = threading.Lock()
+
+
+@contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """BLAS limited to one thread while inside (reentrant, and shared by threads: the limit is set
+    by the first to enter and lifted by the last to leave).  L-BFGS-B makes a few tiny BLAS calls
+    per iteration, which a multithreaded BLAS slows by two orders of magnitude on a busy machine."""
+    with _blas_lock:
+        if _blas["depth"] == 0:
+            if _blas["controller"] is None:
+                _blas["controller"] = ThreadpoolController()
+            _blas["limiter"] = _blas["controller"].limit(limits=1, user_api="blas")
+        _blas["depth"] += 1
+    try:
+        yield
+    finally:
+        with _blas_lock:
+            _blas["depth"] -= 1
+            if _blas["depth"] == 0:
+                _blas["limiter"].restore_original_limits()
+                _blas["limiter"] = None
+
+
 class _Budget(Exception):
     """The finish ran out of E-steps."""
 
@@ -185,15 +215,16 @@ def finish(
         return -f, -sticks.gradient(theta, st)
 
     try:
-        res = minimize(
-            fun,
-            sticks.theta(base),
-            jac=True,
-            method="L-BFGS-B",
-            bounds=[(sticks.EPS, 1 - sticks.EPS)] * sticks.size,
-            callback=best.accept,
-            options={"ftol": tol, "gtol": 0.0, "maxfun": budget, "maxiter": budget, "maxcor": MEMORY},
-        )
+        with one_blas_thread():
+            res = minimize(
+                fun,
+                sticks.theta(base),
+                jac=True,
+                method="L-BFGS-B",
+                bounds=[(sticks.EPS, 1 - sticks.EPS)] * sticks.size,
+                callback=best.accept,
+                options={"ftol": tol, "gtol": 0.0, "maxfun": budget, "maxiter": budget, "maxcor": MEMORY},
+            )
         best.accept(res.x)
         success = calls < budget  # stopped by its tolerance (or at the limits of precision), not by the cap
     except _Budget:  # the E-step cap: keep the best accepted point
