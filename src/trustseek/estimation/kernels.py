@@ -584,6 +584,57 @@ def each_items(lo, hi, pidx, initial, emit, trans, eidx, tidx, lengths, active, 
             ct[n] = 0.0
 
 
+@njit(cache=True, nogil=True)
+def stick_values(theta, table, m, mass, tbase, tstride, coff, cptr, cdst, out0, out1, out2):
+    """The cells of stick-breaking rows from their fractions ``theta``: row i (``m[i]`` cells of
+    total ``mass[i]`` in table ``table[i]``: 0 initial, 1 emission, 2 transition) has fraction j
+    at ``theta[tbase[i] + j * tstride[i]]``; its cell j goes to the flat positions
+    ``cdst[cptr[c]:cptr[c + 1]]`` of that table's ``out*``, c = ``coff[i] + j``."""
+    for i in range(len(m)):
+        rem = mass[i]
+        for j in range(m[i]):
+            if j < m[i] - 1:
+                v = theta[tbase[i] + j * tstride[i]]
+                val = rem * v
+                rem = rem * (1 - v)
+            else:
+                val = rem
+            c = coff[i] + j
+            for q in range(cptr[c], cptr[c + 1]):
+                if table[i] == 0:
+                    out0[cdst[q]] = val
+                elif table[i] == 1:
+                    out1[cdst[q]] = val
+                else:
+                    out2[cdst[q]] = val
+
+
+@njit(cache=True, nogil=True)
+def stick_gradient(theta, prior, table, m, tbase, tstride, coff, cptr, cdst, w0, w1, w2, out):
+    """The gradient of the objective in the fractions of :func:`stick_values`' layout, from the
+    expected counts ``w*`` of the three tables (flat): w_j / v_j - (sum_{i>j} w_i) / (1 - v_j)
+    with w the row's counts plus ``prior``."""
+    w = np.empty(int(m.max()) if len(m) else 0)
+    for i in range(len(m)):
+        for j in range(m[i]):
+            c = coff[i] + j
+            acc = 0.0
+            for q in range(cptr[c], cptr[c + 1]):
+                if table[i] == 0:
+                    acc += w0[cdst[q]]
+                elif table[i] == 1:
+                    acc += w1[cdst[q]]
+                else:
+                    acc += w2[cdst[q]]
+            w[j] = acc + prior
+        tail = w[m[i] - 1]
+        for j in range(m[i] - 2, -1, -1):
+            k = tbase[i] + j * tstride[i]
+            v = theta[k]
+            out[k] = w[j] / v - tail / (1 - v)
+            tail = tail + w[j]
+
+
 _POOL: ThreadPoolExecutor | None = None
 
 
