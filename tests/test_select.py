@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 
 from trustseek import TrustModel, paper_model
 from trustseek.data.trials import example_path
-from trustseek.estimation import iohmm, selection
+from trustseek.estimation import selection
 from trustseek.estimation.iohmm import fit_iohmm, loglik
 from trustseek.estimation.selection import (
     fit_with_moves,
@@ -34,17 +34,14 @@ def three_level_data():
 
 
 @pytest.mark.slow
-def test_select_fits_reach_the_maximum_that_200_restarts_find_where_the_old_defaults_did_not(monkeypatch):
+def test_select_fits_reach_the_maximum_that_200_restarts_find_where_the_old_defaults_did_not():
     """select fits K levels with fit_with_moves and its defaults; the old default (10 random
-    restarts, same seed, EM handing over to the finish at 1e-5) ends 1.16 nats below the maximum
-    on these data."""
+    restarts, same seed) ends 1.16 nats below the maximum on these data."""
     df = three_level_data()
     base = preset_spec("paper", df)
     seqs = encode(df, base)
     spec = base.with_levels(level_names(3))
-    with monkeypatch.context() as m:
-        m.setattr(iohmm, "FINISH_SWITCH", 1e-5)
-        old = fit_iohmm(seqs, spec, restarts=10, seed=np.random.SeedSequence([0, 3, 3]), tol=1e-6)
+    old = fit_iohmm(seqs, spec, restarts=10, seed=np.random.SeedSequence([0, 3, 3]), tol=1e-6)
     assert old.loglik < THREE_LEVEL_REFERENCE - 1.0
     two = fit_with_moves(seqs, base.with_levels(level_names(2)), seed=np.random.SeedSequence([0, 3, 2]), tol=1e-6)
     new = fit_with_moves(seqs, spec, two.params, seed=np.random.SeedSequence([0, 3, 3]), tol=1e-6)

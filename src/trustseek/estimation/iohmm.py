@@ -30,10 +30,7 @@ from .structure import Structure
 
 log = logging.getLogger(__name__)
 
-# EM hands over to the L-BFGS-B finish at this relative change (or the fit's tol if looser): L-BFGS-B walks
-# the ridges EM crawls along from there in fewer E-steps in all (10-45% fewer from 9 to 1000 participants
-# than a hand-over at 1e-5, to the same maxima)
-FINISH_SWITCH = 1e-3
+FINISH_SWITCH = 1e-5  # EM hands over to the L-BFGS-B finish at this relative change (or the fit's tol if looser)
 FINISH_FTOL = 0.01  # the finish stops at this fraction of the fit's relative tolerance
 CONCURRENT_MIN = 10_000  # trials from which the starts' finishes run on several threads at once
 
@@ -108,7 +105,7 @@ def fit_iohmm(
     """Fit ``spec`` to ``seqs``: the runs from ``init`` and ``restarts`` random starts; the best is kept.
 
     Each run is EM with SQUAREM (the runs in lockstep) and, with ``quasi_newton``, EM
-    only to the relative tolerance ``max(tol, 1e-3)`` followed by the L-BFGS-B finish
+    only to the relative tolerance ``max(tol, 1e-5)`` followed by the L-BFGS-B finish
     to ``tol / 100``: on flat ridges of the likelihood EM's small steps would meet
     ``tol`` short of the maximum.  A run has converged only at a stationary point, where
     one more EM step gains at most ``tol`` (relative); until then it goes on
