@@ -9,9 +9,8 @@ Prints iterations (E-steps) and time per restart, the total against the targets
 (< 0.1 s and < 2 s on one core) as wall time and CPU time (the machine may be
 shared), the first-call time of the compiled E-step (compilation, or loading it
 from the cache), and, measured in the same run, the compiled E-step against the
-numpy E-step, SQUAREM against plain EM, the EM-to-finish hand-over at 1e-3 against
-the earlier 1e-5 (E-steps and time over 20 data sets of 9 x 71 and at 1000 x 71), and
-1 against 2 threads (target at 1000 x 71, 10 restarts: < 0.5 s wall on 2 cores).
+numpy E-step, SQUAREM against plain EM, and 1 against 2 threads (target at
+1000 x 71, 10 restarts: < 0.5 s wall on 2 cores).
 """
 
 from __future__ import annotations
@@ -26,7 +25,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 
-from trustseek.estimation import encode, fit_iohmm, fit_trust_model, from_trust_model, iohmm, kernels, loglik, paper_spec
+from trustseek.estimation import encode, fit_iohmm, fit_trust_model, from_trust_model, kernels, loglik, paper_spec
 from trustseek.estimation.em import run_em
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.structure import Structure
@@ -137,39 +136,6 @@ def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None =
     )
 
 
-def fit_totals(data: list, restarts: int, n_jobs: int = 1) -> tuple[float, float, float]:
-    """Best of 3 (wall, CPU) over fitting every data set once, and the mean E-steps per data set."""
-    spec = paper_spec()
-    best = None
-    for _ in range(3):
-        t = clocks()
-        steps = sum(sum(r.iterations for r in fit_iohmm(s, spec, restarts=restarts, seed=0, n_jobs=n_jobs).runs) for s in data)
-        w, c = since(t)
-        best = (w, c) if best is None or c < best[1] else best
-    return best[0], best[1], steps / len(data)
-
-
-def hand_over() -> None:
-    """EM handing over to the L-BFGS-B finish at 1e-3 (the default) against 1e-5 (before), in the same run."""
-    spec = paper_spec()
-    default = iohmm.FINISH_SWITCH
-    for n, sets, restarts in ((9, 20, 2), (1000, 1, 10)):
-        data = [encode(simulate_design(paper_model(), n, seed=d), spec) for d in range(1, sets + 1)]
-        out = {}
-        for switch in (1e-5, default):
-            iohmm.FINISH_SWITCH = switch
-            try:
-                out[switch] = fit_totals(data, restarts)
-            finally:
-                iohmm.FINISH_SWITCH = default
-        (_, c0, s0), (_, c1, s1) = out[1e-5], out[default]
-        print(
-            f"hand-over to the finish at {n} x 71, {restarts} restarts, {sets} data set(s) (one thread): "
-            f"at 1e-5 {s0:.0f} E-steps, {1000 * c0 / sets:.1f} ms CPU; at {default:g} {s1:.0f} E-steps, "
-            f"{1000 * c1 / sets:.1f} ms CPU per data set: x{c0 / c1:.2f} (CPU)"
-        )
-
-
 def big(n: int = 100_000) -> None:
     """100,000 x 71: one restart on one core (target < 8 s), 10 restarts on 2 threads (target < 40 s)."""
     spec = paper_spec()
@@ -245,7 +211,6 @@ def main(argv: list[str] | None = None) -> int:
     first_call()
     timing(9, target=0.1, numpy_fit=True)
     timing(1000, target=2.0)
-    hand_over()
     if args.big:
         big()
     if args.recovery:
