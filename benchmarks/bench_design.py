@@ -2,6 +2,7 @@
 
     python benchmarks/bench_design.py              # all figures
     python benchmarks/bench_design.py --quick      # fewer replicates
+    python benchmarks/bench_design.py --replicate  # only the stages of one replicate
 
 Prints, per stage, the time of one replicate at the paper's size (9 x 71: simulate experiment 1,
 fit, solve, exact evaluation, experiment 2 with its tests) and the replicates per second on one
@@ -138,7 +139,11 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--dask-only", action="store_true", help="only the LocalCluster speed-up")
+    ap.add_argument("--replicate", action="store_true", help="only the stages of one replicate")
     args = ap.parse_args()
+    if args.replicate:
+        stages(DesignConfig(), 10 if args.quick else 40)
+        return
     if args.dask_only:
         dask_speedup(20 if args.quick else 100)
         return

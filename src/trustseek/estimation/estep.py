@@ -19,6 +19,7 @@ The compiled pass keeps no per-trial posteriors; they come from a numpy method.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -86,6 +87,7 @@ class Workspace:
         if method == "numba" and not kernels.AVAILABLE:
             raise FitError(["method 'numba' needs the numba package"])
         self.seqs, self.K, self.M, self.Ue, self.Ut = seqs, K, M, Ue, Ut
+        self.threads = max(1, int(threads))
         self.T, self.N = seqs.y.shape
         self.PE = Ue * M + 1  # emission rows + "nothing observed"
         self.eidx = np.where(seqs.y >= 0, seqs.ue * M + seqs.y, Ue * M)  # (T, N)
@@ -97,6 +99,15 @@ class Workspace:
         self._eye = np.eye(K)
         self._kernel = kernels.Kernel(self.eidx, self.tidx, seqs.lengths, K, self.PE, Ut + 1, threads) if self.compiled else None
         self._numpy: dict[int, _NumpyEStep] = {}
+
+    def serial(self) -> Workspace:
+        """This workspace with its own buffers, each E-step on the calling thread: for one of
+        several threads that fit at once (the results are the same as this workspace's)."""
+        w = copy.copy(self)
+        w.threads = 1
+        w._kernel = None if self._kernel is None else self._kernel.serial()
+        w._numpy = {}
+        return w
 
     def lockstep(self, n: int) -> int:
         """How many of ``n`` parameter sets to run side by side (the rest in further groups)."""

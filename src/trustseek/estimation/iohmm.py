@@ -13,7 +13,9 @@ from __future__ import annotations
 import logging
 import math
 import os
+import threading
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +23,7 @@ import numpy as np
 from .convergence import converge
 from .em import STATIONARY, RunResult, run_em
 from .estep import Workspace
+from .quasi_newton import one_blas_thread
 from .ratings import make_structure
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec, Params
@@ -30,6 +33,7 @@ log = logging.getLogger(__name__)
 
 FINISH_SWITCH = 1e-5  # EM hands over to the L-BFGS-B finish at this relative change (or the fit's tol if looser)
 FINISH_FTOL = 0.01  # the finish stops at this fraction of the fit's relative tolerance
+CONCURRENT_MIN = 10_000  # trials from which the starts' finishes run on several threads at once
 
 
 @dataclass
@@ -131,13 +135,35 @@ def fit_iohmm(
     em_tol = max(tol, FINISH_SWITCH) if quasi_newton else tol
     group = work.lockstep(len(starts))
     runs: list[RunResult] = []
-    for g in range(0, len(starts), group):
-        for r in run_em(structure, work, starts[g : g + group], tol=em_tol, max_iter=max_iter, accelerate=accelerate):
-            r = converge(structure, work, r, tol, max_iter, em_tol, tol * FINISH_FTOL, quasi_newton, accelerate)
-            log.debug("%s", _describe(len(runs), r))
-            if on_restart is not None:
-                on_restart(len(runs), r)
-            runs.append(r)
+
+    def carry(r: RunResult, w: Workspace) -> RunResult:
+        return converge(structure, w, r, tol, max_iter, em_tol, tol * FINISH_FTOL, quasi_newton, accelerate)
+
+    def record(r: RunResult) -> None:
+        log.debug("%s", _describe(len(runs), r))
+        if on_restart is not None:
+            on_restart(len(runs), r)
+        runs.append(r)
+
+    local = threading.local()  # a thread's own buffers when the starts go on side by side
+
+    def alone(r: RunResult) -> RunResult:
+        if not hasattr(local, "work"):
+            local.work = work.serial()
+        return carry(r, local.work)
+
+    with one_blas_thread():
+        for g in range(0, len(starts), group):
+            ems = run_em(structure, work, starts[g : g + group], tol=em_tol, max_iter=max_iter, accelerate=accelerate)
+            if work.threads > 1 and len(ems) > 1 and seqs.n_trials >= CONCURRENT_MIN:
+                # each start's finish is a sequence of single E-steps with Python in between: the starts
+                # go on side by side, one per thread, each with its own buffers (the same numbers)
+                with ThreadPoolExecutor(min(work.threads, len(ems)), thread_name_prefix="trustseek-fit") as pool:
+                    for r in pool.map(alone, ems):
+                        record(r)
+            else:
+                for r in ems:
+                    record(carry(r, work))
     best = int(np.argmax([r.objective for r in runs]))
     p = runs[best].params
     log.info("best of %d starts: %s", len(runs), _describe(best, runs[best]))

@@ -31,6 +31,7 @@ set -inf, with zero counts.
 
 from __future__ import annotations
 
+import copy
 import itertools
 import math
 from collections.abc import Callable
@@ -248,19 +249,188 @@ def _sequence2(n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans, 
 
 
 @njit(cache=True, nogil=True)
+def _forward_pair(n, m, initial, emit, trans, eidx, tidx, L, alpha, alpha2):
+    """:func:`_forward2` of sequences ``n`` and ``m`` of the same length side by side (two independent
+    recursions in one loop keep the processor busy); the same numbers as two calls.  Their
+    log-probabilities (both -inf when either is zero)."""
+    e = eidx[n, 0]
+    f = eidx[m, 0]
+    a0 = initial[0] * emit[e, 0]
+    a1 = initial[1] * emit[e, 1]
+    b0 = initial[0] * emit[f, 0]
+    b1 = initial[1] * emit[f, 1]
+    sa = 0
+    sb = 0
+    if a0 + a1 < TINY:
+        if not a0 + a1 > 0.0:
+            return -math.inf, -math.inf
+        a0 *= HUGE
+        a1 *= HUGE
+        sa += 1
+    if b0 + b1 < TINY:
+        if not b0 + b1 > 0.0:
+            return -math.inf, -math.inf
+        b0 *= HUGE
+        b1 *= HUGE
+        sb += 1
+    alpha[0, 0] = a0
+    alpha[0, 1] = a1
+    alpha2[0, 0] = b0
+    alpha2[0, 1] = b1
+    for t in range(1, L):
+        e = eidx[n, t]
+        u = tidx[n, t - 1]
+        f = eidx[m, t]
+        v = tidx[m, t - 1]
+        x0 = (a0 * trans[u, 0, 0] + a1 * trans[u, 1, 0]) * emit[e, 0]
+        x1 = (a0 * trans[u, 0, 1] + a1 * trans[u, 1, 1]) * emit[e, 1]
+        y0 = (b0 * trans[v, 0, 0] + b1 * trans[v, 1, 0]) * emit[f, 0]
+        y1 = (b0 * trans[v, 0, 1] + b1 * trans[v, 1, 1]) * emit[f, 1]
+        a0 = x0
+        a1 = x1
+        b0 = y0
+        b1 = y1
+        if a0 + a1 < TINY:
+            if not a0 + a1 > 0.0:
+                return -math.inf, -math.inf
+            a0 *= HUGE
+            a1 *= HUGE
+            sa += 1
+        if b0 + b1 < TINY:
+            if not b0 + b1 > 0.0:
+                return -math.inf, -math.inf
+            b0 *= HUGE
+            b1 *= HUGE
+            sb += 1
+        alpha[t, 0] = a0
+        alpha[t, 1] = a1
+        alpha2[t, 0] = b0
+        alpha2[t, 1] = b1
+    return math.log(a0 + a1) - sa * LOG_HUGE, math.log(b0 + b1) - sb * LOG_HUGE
+
+
+@njit(cache=True, nogil=True)
+def _backward_pair(n, m, emit, trans, eidx, tidx, L, ci, ce, ct, alpha, di, de, dt, alpha2):
+    """:func:`_backward2` of sequences ``n`` (counts into ``ci``, ``ce``, ``ct``) and ``m`` (into
+    ``di``, ``de``, ``dt``) side by side, after :func:`_forward_pair`; the same numbers as two calls."""
+    g0 = 1.0
+    g1 = 1.0
+    h0 = 1.0
+    h1 = 1.0
+    z = 1.0 / (alpha[L - 1, 0] + alpha[L - 1, 1])
+    y = 1.0 / (alpha2[L - 1, 0] + alpha2[L - 1, 1])
+    for t in range(L - 1, 0, -1):
+        e = eidx[n, t]
+        u = tidx[n, t - 1]
+        f = eidx[m, t]
+        v = tidx[m, t - 1]
+        ce[e, 0] += alpha[t, 0] * g0 * z
+        ce[e, 1] += alpha[t, 1] * g1 * z
+        de[f, 0] += alpha2[t, 0] * h0 * y
+        de[f, 1] += alpha2[t, 1] * h1 * y
+        m0 = emit[e, 0] * g0
+        m1 = emit[e, 1] * g1
+        k0 = emit[f, 0] * h0
+        k1 = emit[f, 1] * h1
+        w00 = trans[u, 0, 0] * m0
+        w01 = trans[u, 0, 1] * m1
+        w10 = trans[u, 1, 0] * m0
+        w11 = trans[u, 1, 1] * m1
+        q00 = trans[v, 0, 0] * k0
+        q01 = trans[v, 0, 1] * k1
+        q10 = trans[v, 1, 0] * k0
+        q11 = trans[v, 1, 1] * k1
+        g0 = w00 + w01
+        g1 = w10 + w11
+        h0 = q00 + q01
+        h1 = q10 + q11
+        p0 = alpha[t - 1, 0]
+        p1 = alpha[t - 1, 1]
+        r0 = alpha2[t - 1, 0]
+        r1 = alpha2[t - 1, 1]
+        z = p0 * g0 + p1 * g1
+        y = r0 * h0 + r1 * h1
+        if z < TINY:
+            g0 *= HUGE
+            g1 *= HUGE
+            w00 *= HUGE
+            w01 *= HUGE
+            w10 *= HUGE
+            w11 *= HUGE
+            z *= HUGE
+        if y < TINY:
+            h0 *= HUGE
+            h1 *= HUGE
+            q00 *= HUGE
+            q01 *= HUGE
+            q10 *= HUGE
+            q11 *= HUGE
+            y *= HUGE
+        z = 1.0 / z
+        y = 1.0 / y
+        p0 *= z
+        p1 *= z
+        r0 *= y
+        r1 *= y
+        ct[u, 0, 0] += p0 * w00
+        ct[u, 0, 1] += p0 * w01
+        ct[u, 1, 0] += p1 * w10
+        ct[u, 1, 1] += p1 * w11
+        dt[v, 0, 0] += r0 * q00
+        dt[v, 0, 1] += r0 * q01
+        dt[v, 1, 0] += r1 * q10
+        dt[v, 1, 1] += r1 * q11
+    e = eidx[n, 0]
+    q0 = alpha[0, 0] * g0 * z
+    q1 = alpha[0, 1] * g1 * z
+    ce[e, 0] += q0
+    ce[e, 1] += q1
+    ci[0] += q0
+    ci[1] += q1
+    f = eidx[m, 0]
+    r0 = alpha2[0, 0] * h0 * y
+    r1 = alpha2[0, 1] * h1 * y
+    de[f, 0] += r0
+    de[f, 1] += r1
+    di[0] += r0
+    di[1] += r1
+
+
+@njit(cache=True, nogil=True)
 def _item(r, lo, hi, initial, emit, trans, eidx, tidx, lengths, c_init, c_emit, c_trans):
     """Sequences ``lo:hi`` under parameter set ``r`` into this item's counts; their log-probability."""
     K = initial.shape[1]
     T = eidx.shape[1]
     total = 0.0
     if K == 2:
+        # sequences of equal length go two at a time, the second's counts into their own sums
+        # (added to the item's at its end)
         buf = np.empty((max(T, 1), 2))
-        for n in range(lo, hi):
+        buf2 = np.empty((max(T, 1), 2))
+        d_init = np.zeros_like(c_init)
+        d_emit = np.zeros_like(c_emit)
+        d_trans = np.zeros_like(c_trans)
+        ini, em, tr = initial[r], emit[r], trans[r]
+        n = lo
+        while n < hi:
             L = lengths[n]
-            if L > 0:
-                total += _sequence2(n, initial[r], emit[r], trans[r], eidx, tidx, L, c_init, c_emit, c_trans, buf)
+            if L > 0 and n + 1 < hi and lengths[n + 1] == L:
+                la, lb = _forward_pair(n, n + 1, ini, em, tr, eidx, tidx, L, buf, buf2)
+                total += la
+                total += lb
                 if not total > -math.inf:
                     return -math.inf
+                _backward_pair(n, n + 1, em, tr, eidx, tidx, L, c_init, c_emit, c_trans, buf, d_init, d_emit, d_trans, buf2)
+                n += 2
+                continue
+            if L > 0:
+                total += _sequence2(n, ini, em, tr, eidx, tidx, L, c_init, c_emit, c_trans, buf)
+                if not total > -math.inf:
+                    return -math.inf
+            n += 1
+        c_init += d_init
+        c_emit += d_emit
+        c_trans += d_trans
     else:
         alpha = np.empty((max(T, 1), K))
         beta = np.empty((max(T, 1), K))
@@ -414,6 +584,57 @@ def each_items(lo, hi, pidx, initial, emit, trans, eidx, tidx, lengths, active, 
             ct[n] = 0.0
 
 
+@njit(cache=True, nogil=True)
+def stick_values(theta, table, m, mass, tbase, tstride, coff, cptr, cdst, out0, out1, out2):
+    """The cells of stick-breaking rows from their fractions ``theta``: row i (``m[i]`` cells of
+    total ``mass[i]`` in table ``table[i]``: 0 initial, 1 emission, 2 transition) has fraction j
+    at ``theta[tbase[i] + j * tstride[i]]``; its cell j goes to the flat positions
+    ``cdst[cptr[c]:cptr[c + 1]]`` of that table's ``out*``, c = ``coff[i] + j``."""
+    for i in range(len(m)):
+        rem = mass[i]
+        for j in range(m[i]):
+            if j < m[i] - 1:
+                v = theta[tbase[i] + j * tstride[i]]
+                val = rem * v
+                rem = rem * (1 - v)
+            else:
+                val = rem
+            c = coff[i] + j
+            for q in range(cptr[c], cptr[c + 1]):
+                if table[i] == 0:
+                    out0[cdst[q]] = val
+                elif table[i] == 1:
+                    out1[cdst[q]] = val
+                else:
+                    out2[cdst[q]] = val
+
+
+@njit(cache=True, nogil=True)
+def stick_gradient(theta, prior, table, m, tbase, tstride, coff, cptr, cdst, w0, w1, w2, out):
+    """The gradient of the objective in the fractions of :func:`stick_values`' layout, from the
+    expected counts ``w*`` of the three tables (flat): w_j / v_j - (sum_{i>j} w_i) / (1 - v_j)
+    with w the row's counts plus ``prior``."""
+    w = np.empty(int(m.max()) if len(m) else 0)
+    for i in range(len(m)):
+        for j in range(m[i]):
+            c = coff[i] + j
+            acc = 0.0
+            for q in range(cptr[c], cptr[c + 1]):
+                if table[i] == 0:
+                    acc += w0[cdst[q]]
+                elif table[i] == 1:
+                    acc += w1[cdst[q]]
+                else:
+                    acc += w2[cdst[q]]
+            w[j] = acc + prior
+        tail = w[m[i] - 1]
+        for j in range(m[i] - 2, -1, -1):
+            k = tbase[i] + j * tstride[i]
+            v = theta[k]
+            out[k] = w[j] / v - tail / (1 - v)
+            tail = tail + w[j]
+
+
 _POOL: ThreadPoolExecutor | None = None
 
 
@@ -449,6 +670,15 @@ class Kernel:
         self.C = max((N + CHUNK - 1) // CHUNK, 1)  # items per parameter set
         self.every = np.ones(1, dtype=np.bool_)  # the default "all parameter sets active", grown as needed
         self._partials: dict[int, tuple[np.ndarray, ...]] = {}
+
+    def serial(self) -> Kernel:
+        """A kernel on the same (shared, read-only) index arrays with its own buffers, running each
+        E-step on the calling thread: one per thread when several callers run at once."""
+        k = copy.copy(self)
+        k.threads = 1
+        k.every = self.every.copy()
+        k._partials = {}
+        return k
 
     def run(
         self, initial: np.ndarray, emit: np.ndarray, trans: np.ndarray, active: np.ndarray | None = None

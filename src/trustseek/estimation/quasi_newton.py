@@ -10,12 +10,18 @@ exactly), and the gradient comes free with the E-step's expected counts.
 from __future__ import annotations
 
 import math
+import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize
+from threadpoolctl import ThreadpoolController
 
+from . import kernels
 from .em import CAPPED, RunResult
 from .estep import EStep, Workspace
 from .spec import Params
@@ -76,6 +82,7 @@ class Sticks:
                     _Part(name, len(lst), m, mass, np.concatenate(dst).astype(np.int64), np.concatenate(src).astype(np.int64))
                 )
         self.size = sum(p.rows * (p.m - 1) for p in self.parts)
+        self._built: tuple[list[_Part], tuple[np.ndarray, ...]] | None = None
 
     def theta(self, p: Params) -> np.ndarray:
         """The fractions of the free cells of ``p``."""
@@ -90,36 +97,108 @@ class Sticks:
                 rem = rem - vals[:, j]
         return np.concatenate(out) if out else np.zeros(0)
 
+    def _layout(self) -> tuple[np.ndarray, ...]:
+        """The parts as per-row arrays for the compiled :func:`~.kernels.stick_values` and
+        :func:`~.kernels.stick_gradient` (built on first use; ``parts`` may be set after construction)."""
+        if self._built is not None and self._built[0] is self.parts:
+            return self._built[1]
+        codes = {"initial": 0, "emission": 1, "transition": 2}
+        table, m, mass, tbase, tstride, coff = [], [], [], [], [], []
+        counts: list[int] = []
+        dsts: list[np.ndarray] = []
+        pos = cells = 0
+        for part in self.parts:
+            order = np.argsort(part.src, kind="stable")  # each value's positions, in their order in dst
+            counts.extend(np.bincount(part.src, minlength=part.rows * part.m).tolist())
+            dsts.append(part.dst[order])
+            for r in range(part.rows):
+                table.append(codes[part.table])
+                m.append(part.m)
+                mass.append(part.mass[r])
+                tbase.append(pos + r)
+                tstride.append(part.rows)
+                coff.append(cells)
+                cells += part.m
+            pos += part.rows * (part.m - 1)
+        i64 = np.int64
+        layout = (
+            np.array(table, dtype=i64),
+            np.array(m, dtype=i64),
+            np.array(mass, dtype=float),
+            np.array(tbase, dtype=i64),
+            np.array(tstride, dtype=i64),
+            np.array(coff, dtype=i64),
+            np.concatenate([[0], np.cumsum(counts)]).astype(i64),
+            np.concatenate(dsts).astype(i64) if dsts else np.zeros(0, dtype=i64),
+        )
+        self._built = (self.parts, layout)
+        return layout
+
     def params(self, theta: np.ndarray, base: Params) -> Params:
         """``base`` with its free cells set from the fractions ``theta``."""
-        arrays = {"initial": base.initial.copy(), "emission": base.emission.copy(), "transition": base.transition.copy()}
-        pos = 0
-        for part in self.parts:
-            R, m = part.rows, part.m
-            v = theta[pos : pos + R * (m - 1)].reshape(m - 1, R)
-            pos += R * (m - 1)
-            rem = part.mass.copy()
-            vals = np.empty((R, m))
-            for j in range(m - 1):
-                vals[:, j] = rem * v[j]
-                rem = rem * (1 - v[j])
-            vals[:, m - 1] = rem
-            arrays[part.table].ravel()[part.dst] = vals.ravel()[part.src]
-        return Params(arrays["initial"], arrays["emission"], arrays["transition"])
+        out = Params(base.initial.copy(), base.emission.copy(), base.transition.copy())
+        table, m, mass, tbase, tstride, coff, cptr, cdst = self._layout()
+        kernels.stick_values(
+            np.ascontiguousarray(theta, dtype=float),
+            table,
+            m,
+            mass,
+            tbase,
+            tstride,
+            coff,
+            cptr,
+            cdst,
+            out.initial.reshape(-1),
+            out.emission.reshape(-1),
+            out.transition.reshape(-1),
+        )
+        return out
 
     def gradient(self, theta: np.ndarray, st: EStep) -> np.ndarray:
         """Gradient of the objective with respect to ``theta`` from the E-step at that point."""
-        a = self.structure.spec.prior
-        out = np.empty_like(theta)
-        pos = 0
-        for part in self.parts:
-            R, m = part.rows, part.m
-            w = np.bincount(part.src, weights=getattr(st, part.table).ravel()[part.dst], minlength=R * m).reshape(R, m) + a
-            v = theta[pos : pos + R * (m - 1)].reshape(m - 1, R)
-            tail = np.cumsum(w[:, ::-1], axis=1)[:, ::-1]  # tail[:, j] = sum_{i>=j} w_i
-            out[pos : pos + R * (m - 1)] = (w[:, : m - 1].T / v - tail[:, 1:].T / (1 - v)).ravel()
-            pos += R * (m - 1)
+        table, m, _mass, tbase, tstride, coff, cptr, cdst = self._layout()
+        out = np.empty(len(theta))
+        kernels.stick_gradient(
+            np.ascontiguousarray(theta, dtype=float),
+            float(self.structure.spec.prior),
+            table,
+            m,
+            tbase,
+            tstride,
+            coff,
+            cptr,
+            cdst,
+            np.ascontiguousarray(st.initial, dtype=float).reshape(-1),
+            np.ascontiguousarray(st.emission, dtype=float).reshape(-1),
+            np.ascontiguousarray(st.transition, dtype=float).reshape(-1),
+            out,
+        )
         return out
+
+
+_blas: dict[str, Any] = {"controller": None, "depth": 0, "limiter": None}
+_blas_lock = threading.Lock()
+
+
+@contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """BLAS limited to one thread while inside (reentrant, and shared by threads: the limit is set
+    by the first to enter and lifted by the last to leave).  L-BFGS-B makes a few tiny BLAS calls
+    per iteration, which a multithreaded BLAS slows by two orders of magnitude on a busy machine."""
+    with _blas_lock:
+        if _blas["depth"] == 0:
+            if _blas["controller"] is None:
+                _blas["controller"] = ThreadpoolController()
+            _blas["limiter"] = _blas["controller"].limit(limits=1, user_api="blas")
+        _blas["depth"] += 1
+    try:
+        yield
+    finally:
+        with _blas_lock:
+            _blas["depth"] -= 1
+            if _blas["depth"] == 0:
+                _blas["limiter"].restore_original_limits()
+                _blas["limiter"] = None
 
 
 class _Budget(Exception):
@@ -185,15 +264,16 @@ def finish(
         return -f, -sticks.gradient(theta, st)
 
     try:
-        res = minimize(
-            fun,
-            sticks.theta(base),
-            jac=True,
-            method="L-BFGS-B",
-            bounds=[(sticks.EPS, 1 - sticks.EPS)] * sticks.size,
-            callback=best.accept,
-            options={"ftol": tol, "gtol": 0.0, "maxfun": budget, "maxiter": budget, "maxcor": MEMORY},
-        )
+        with one_blas_thread():
+            res = minimize(
+                fun,
+                sticks.theta(base),
+                jac=True,
+                method="L-BFGS-B",
+                bounds=[(sticks.EPS, 1 - sticks.EPS)] * sticks.size,
+                callback=best.accept,
+                options={"ftol": tol, "gtol": 0.0, "maxfun": budget, "maxiter": budget, "maxcor": MEMORY},
+            )
         best.accept(res.x)
         success = calls < budget  # stopped by its tolerance (or at the limits of precision), not by the cap
     except _Budget:  # the E-step cap: keep the best accepted point

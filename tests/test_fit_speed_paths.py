@@ -1,0 +1,144 @@
+"""The fit's faster paths give the numbers of the plain ones: sequences two at a time in the
+compiled E-step, the starts' finishes side by side on threads, BLAS held to one thread."""
+
+import numpy as np
+import pytest
+from threadpoolctl import threadpool_info, threadpool_limits
+
+from trustseek.estimation import Params, encode, fit_iohmm, iohmm, kernels, paper_spec
+from trustseek.estimation.estep import Workspace
+from trustseek.estimation.quasi_newton import one_blas_thread
+from trustseek.estimation.structure import Structure
+from trustseek.model.presets import paper_model
+from trustseek.simulation.designs import simulate_design
+
+pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
+
+
+def ragged(n: int, seed: int):
+    """``n`` participants with trials cut off at random, so equal and unequal neighbours alternate
+    (and one participant keeps a single trial)."""
+    df = simulate_design(paper_model(), n, seed=seed, n_trials=(20, 15))
+    rng = np.random.default_rng(seed)
+    keep = {p: int(rng.choice([35, 35, 20, 7])) for p in df["participant"].unique()}
+    keep[df["participant"].iloc[0]] = 1
+    df = df[df["trial"] <= df["participant"].map(keep)]
+    spec = paper_spec()
+    seqs = encode(df, spec)
+    return spec, seqs, Structure(spec, seqs)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_sequences_two_at_a_time_match_the_numpy_estep(seed):
+    _spec, seqs, s = ragged(300, seed)  # more than one chunk of sequences
+    assert len(set(seqs.lengths.tolist())) > 2
+    p = Params.stack([s.random(np.random.default_rng(seed + r)) for r in range(2)])
+    ref = Workspace(seqs, *s.dims, method="loop").estep(p)
+    got = Workspace(seqs, *s.dims, method="numba").estep(p)
+    np.testing.assert_allclose(got.loglik, ref.loglik, rtol=1e-12)
+    for name in ("initial", "emission", "transition"):
+        np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=1e-10, atol=1e-10)
+
+
+def test_a_pair_with_zero_probability_makes_the_set_impossible():
+    _spec, seqs, s = ragged(20, 3)
+    p = s.random(np.random.default_rng(0))
+    em = p.emission.copy()
+    em[:, :, 0] = 0.0  # no output can be the first category
+    em[:, :, 1] = 1.0
+    st = Workspace(seqs, *s.dims, method="numba").estep(Params(p.initial, em, p.transition))
+    assert st.loglik == -np.inf and not st.emission.any() and not st.transition.any()
+
+
+def test_finishes_side_by_side_give_the_numbers_of_one_thread(monkeypatch):
+    monkeypatch.setattr(iohmm, "CONCURRENT_MIN", 0)
+    spec = paper_spec()
+    seqs = encode(simulate_design(paper_model(), 30, seed=4), spec)
+    seen: list[int] = []
+    fits = [fit_iohmm(seqs, spec, restarts=5, seed=2, n_jobs=j, on_restart=lambda i, r: seen.append(i)) for j in (1, 2, 3)]
+    assert seen == list(range(5)) * 3  # reported in order, whatever finished first
+    for other in fits[1:]:
+        assert other.best == fits[0].best and other.loglik == fits[0].loglik
+        for a, b in zip(fits[0].runs, other.runs, strict=True):
+            assert np.array_equal(a.params.vector(), b.params.vector())
+            assert (a.iterations, a.finishes, a.ended, a.history) == (b.iterations, b.finishes, b.ended, b.history)
+    assert all(r.ended == "stationary" for r in fits[1].runs)
+
+
+def blas_threads() -> list[int]:
+    return [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+
+
+def test_one_blas_thread_is_lifted_by_the_last_thread_to_leave():
+    with threadpool_limits(limits=2, user_api="blas"):
+        left_as_found()
+
+
+def left_as_found() -> None:
+    before = blas_threads()
+    assert set(before) == {2}
+    seen: list[list[int]] = []
+    with one_blas_thread():
+        seen.append(blas_threads())
+        with one_blas_thread():  # nested
+            seen.append(blas_threads())
+        seen.append(blas_threads())
+    assert blas_threads() == before
+    # two threads' finishes overlapping in time: the first leaves while the second is still inside
+    first, second = one_blas_thread(), one_blas_thread()
+    first.__enter__()
+    second.__enter__()
+    first.__exit__(None, None, None)
+    seen.append(blas_threads())
+    second.__exit__(None, None, None)
+    assert all(set(x) == {1} for x in seen), seen
+    assert blas_threads() == before
+
+
+def sticks_reference(sticks, theta, base, st):
+    """The stick-breaking values and gradient by the numpy formulas, part by part."""
+    arrays = {"initial": base.initial.copy(), "emission": base.emission.copy(), "transition": base.transition.copy()}
+    grad = np.empty_like(theta)
+    pos = 0
+    for part in sticks.parts:
+        R, m = part.rows, part.m
+        v = theta[pos : pos + R * (m - 1)].reshape(m - 1, R)
+        rem = part.mass.copy()
+        vals = np.empty((R, m))
+        for j in range(m - 1):
+            vals[:, j] = rem * v[j]
+            rem = rem * (1 - v[j])
+        vals[:, m - 1] = rem
+        arrays[part.table].ravel()[part.dst] = vals.ravel()[part.src]
+        counts = getattr(st, part.table).ravel()[part.dst]
+        w = np.bincount(part.src, weights=counts, minlength=R * m).reshape(R, m) + sticks.structure.spec.prior
+        tail = np.cumsum(w[:, ::-1], axis=1)[:, ::-1]
+        grad[pos : pos + R * (m - 1)] = (w[:, : m - 1].T / v - tail[:, 1:].T / (1 - v)).ravel()
+        pos += R * (m - 1)
+    return arrays, grad
+
+
+@pytest.mark.parametrize("types", [0, 2])
+def test_compiled_sticks_equal_the_numpy_formulas(types):
+    from trustseek.estimation.mixture import MixtureStructure, MixtureWorkspace
+    from trustseek.estimation.quasi_newton import Sticks
+
+    spec = paper_spec()
+    seqs = encode(simulate_design(paper_model(), 12, seed=5), spec)
+    if types:
+        s = MixtureStructure(spec, seqs, types)
+        sticks, work = s.sticks(), MixtureWorkspace(seqs, s)
+    else:
+        s = Structure(spec, seqs)
+        sticks, work = Sticks(s), Workspace(seqs, *s.dims)
+    rng = np.random.default_rng(types)
+    base = s.random(rng)
+    for _ in range(3):
+        theta = rng.uniform(0.01, 0.99, sticks.size)
+        p = sticks.params(theta, base)
+        st = work.estep(p)
+        arrays, grad = sticks_reference(sticks, theta, base, st)
+        for name, a in arrays.items():
+            assert np.array_equal(getattr(p, name), a)
+        assert np.array_equal(sticks.gradient(theta, st), grad)
+        assert np.allclose(sticks.theta(p), theta)
