@@ -63,6 +63,9 @@ CONTRASTS = (
     (TYPE_AWARE, AGNOSTIC),
 )
 MAX_TYPES = 3  # the numbers of types compared (by BIC) for the fitted-types policy
+# the point solver's finest grid by number of hidden states (type x trust levels): its stop when
+# the gap is not reached, instead of a time limit
+POINT_RESOLUTION = {2: 4096, 3: 512, 4: 32, 6: 16}
 
 
 def _interval(v: np.ndarray) -> dict[str, float]:
@@ -229,16 +232,18 @@ def types_section(
     seed: int = 0,
     solver: str | None = None,
     gap: float = 0.03,
-    max_seconds: float = 30.0,
+    max_seconds: float = 600.0,
     progress: Callable[[str], None] | None = None,
 ) -> TypesSection:
     """Every number of the section: per population (the mixture, then its first type alone), per
     block length, per type and overall, the mean cumulative reward per block of each policy with
     95 % intervals, the paired differences, and interventions in low complexity.
 
-    Every trust-aware policy is solved to a certified ``gap`` at its initial belief (or for
-    ``max_seconds``, then the gap reached is recorded): 0.03 is 0.03 % of the value of a
-    discounted block here, below any difference the simulated rewards can show."""
+    Every trust-aware policy is solved to a certified ``gap`` at its initial belief, or to the
+    point solver's finest grid of :data:`POINT_RESOLUTION` (then the gap reached is recorded; a
+    fixed grid, not a clock, so that the same seed gives the same numbers): 0.03 is 0.03 % of
+    the value of a discounted block here, below any difference the simulated rewards can show.
+    ``max_seconds`` is only a safety net."""
     mixture = mixture or paper_conservative_mixture()
     task = task or paper_task()
     tick = progress or (lambda _s: None)
@@ -249,10 +254,14 @@ def types_section(
     # every trust-aware policy comes from the same solver, so that the paired differences are
     # those of the models planned for, not of the solvers
     def plan(m: TypeMixture | TrustModel) -> Policy:
-        if solver is None:
-            return solve_type_aware(m, task, gap=gap, max_seconds=max_seconds)
-        return solve_type_aware(m, task, solver=solver, gap=gap, max_seconds=max_seconds)
+        if solver is not None:
+            return solve_type_aware(m, task, solver=solver, gap=gap, max_seconds=max_seconds)
+        # the point solver refines its grid until the gap, or a fixed resolution (not a clock:
+        # the same seed gives the same policies on a loaded machine); the time limit is a safety net
+        levels = (m.n_types if isinstance(m, TypeMixture) else 1) * task_levels
+        return solve_type_aware(m, task, gap=gap, max_seconds=max_seconds, max_resolution=POINT_RESOLUTION.get(levels, 16))
 
+    task_levels = mixture.models[0].n_trust
     pooled = plan(pooled_model)
     agnostic = trust_agnostic_from_data(frame, task)
     type_aware = plan(mixture)

@@ -57,8 +57,10 @@ def _certified_grid(belief_update: str = "paper", gap: float = 1e-6) -> Solver:
     return CertifiedGridSolver(belief_update=belief_update, tol=gap)
 
 
-def _point(belief_update: str = "bayes", gap: float = 1e-3, max_seconds: float = 60.0) -> Solver:
-    return PointSolver(tol=gap, max_seconds=max_seconds, belief_update=belief_update)
+def _point(
+    belief_update: str = "bayes", gap: float = 1e-3, max_seconds: float = 60.0, max_resolution: int | None = None
+) -> Solver:
+    return PointSolver(tol=gap, max_seconds=max_seconds, belief_update=belief_update, max_resolution=max_resolution)
 
 
 def _reachable(belief_update: str = "bayes", gap: float = 1e-3, max_seconds: float = 60.0) -> Solver:
