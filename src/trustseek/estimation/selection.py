@@ -5,7 +5,8 @@ random starts reach the best one ever more rarely.  Each K-level fit therefore s
 both from random points (their number grows with the free parameters,
 :func:`default_restarts`) and from the (K-1)-level fit with one level split in two
 (:func:`split_starts`): a K-level model at least as likely as the (K-1)-level one, from
-which EM only climbs.  Every row reports how many starts reached the best
+which EM only climbs; then from the best local maxima found with two levels merged and
+one split (:func:`split_merge_starts`).  Every row reports how many starts reached the best
 log-likelihood (within :data:`BEST_TOLERANCE`).
 """
 
@@ -38,6 +39,7 @@ RESTARTS_PER_PARAMETER = 0.25  # ... and this many per free parameter
 SPLIT_MIX = 0.05  # a split start mixes this much of a random row into every row (no exact zero)
 MOVE_ROUNDS = 3  # at most this many rounds of merge-and-split starts ...
 MOVE_SOURCES = 3  # ... each from this many of the best distinct local maxima not moved from before
+FOLD_MOVE_SOURCES = 1  # ... in select's training folds (the held-out score needs no last nat)
 
 
 def default_restarts(n_free: int) -> int:
@@ -115,8 +117,10 @@ def fit_with_moves(
 ) -> IOHMMFit:
     """:func:`~.iohmm.fit_iohmm` from random starts (default :func:`default_restarts`) and from
     ``previous`` (a fit with one level fewer) split (:func:`split_starts`); then up to ``rounds``
-    times from the best fit with two levels merged and one split (:func:`split_merge_starts`),
-    while that gains more than :data:`BEST_TOLERANCE`.  Every run is kept in the result's ``runs``."""
+    times from the ``sources_per_round`` best distinct local maxima not moved from before
+    (:func:`move_sources`; a lower maximum's moves can lead past the best) with two levels
+    merged and one split (:func:`split_merge_starts`), while that gains more than
+    :data:`BEST_TOLERANCE`.  Every run is kept in the result's ``runs``."""
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     # the random starts are those fit_iohmm draws from ``seed`` (the first n of n + m are the
     # same): more restarts only add starts; the split and merge moves draw from the seed's own state
@@ -187,7 +191,9 @@ def select_levels(
     of levels being compared).  Each fit is :func:`fit_with_moves`: ``restarts`` random
     starts (default: :func:`default_restarts` of its free parameters), ``splits`` split
     starts per level of the fit with one level fewer (when it was compared just before),
-    then merge-and-split starts from the best.  Each row holds ``starts`` (all of them)
+    then merge-and-split starts from the :data:`MOVE_SOURCES` best distinct maxima (the
+    fit on all participants, whose log-likelihood and BIC are reported) or from the best
+    (:data:`FOLD_MOVE_SOURCES`, the training folds: three times fewer starts).  Each row holds ``starts`` (all of them)
     and ``reached_best`` (starts within :data:`BEST_TOLERANCE` of the best);
     :func:`selection_warnings` says when the best number of levels is the largest compared.
     """
@@ -207,7 +213,7 @@ def select_levels(
         if progress:
             progress(label, done, total)
 
-    def one_fit(data: Sequences, spec: IOHMMSpec, previous: IOHMMFit | None, key: list[int]) -> IOHMMFit:
+    def one_fit(data: Sequences, spec: IOHMMSpec, previous: IOHMMFit | None, key: list[int], sources: int) -> IOHMMFit:
         return fit_with_moves(
             data,
             spec,
@@ -215,6 +221,7 @@ def select_levels(
             restarts=restarts,
             seed=np.random.SeedSequence(key),
             splits=splits,
+            sources_per_round=sources,
             tol=tol,
             max_iter=max_iter,
         )
@@ -224,13 +231,13 @@ def select_levels(
     prev_fold: list[IOHMMFit | None] = [None] * folds
     for K in levels:
         spec = base.with_levels(level_names(K))
-        full = one_fit(seqs, spec, prev_full, [seed, 3, K])
+        full = one_fit(seqs, spec, prev_full, [seed, 3, K], MOVE_SOURCES)
         prev_full = full
         tick(f"{K} levels")
         per_fold = []
         for f in range(folds):
             train, test = np.flatnonzero(fold_of != f), np.flatnonzero(fold_of == f)
-            fit = one_fit(seqs.subset(train), spec, prev_fold[f], [seed, 4, K, f])
+            fit = one_fit(seqs.subset(train), spec, prev_fold[f], [seed, 4, K, f], FOLD_MOVE_SOURCES)
             prev_fold[f] = fit
             per_fold.append(heldout_loglik(seqs.subset(test), fit))
             tick(f"{K} levels")
