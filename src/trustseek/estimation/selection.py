@@ -30,7 +30,7 @@ from .trust_iohmm import level_names, preset_spec
 
 log = logging.getLogger(__name__)
 
-HELDOUT_PSEUDOCOUNT = 0.5  # added to a zero row's training counts before held-out scoring
+HELDOUT_PSEUDOCOUNT = 0.5  # per free cell of a row smoothed for held-out scoring (training counts + this)
 ZERO_CELL = 1e-9  # a fitted probability at most this is a zero (the fit clips such cells to 1e-12)
 BEST_TOLERANCE = 0.01  # nats: a start within this of the best log-likelihood "reached the best"
 SPLITS_PER_LEVEL = 2  # split starts per level of the (K-1)-level fit (different perturbations)
