@@ -1,5 +1,7 @@
 """Choosing the number of trust levels: starts that find the maximum, restarts reaching it, warnings, level order."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -130,3 +132,17 @@ def test_level_order_breaks_a_tie_in_the_ordering_row_by_the_other_rows():
     swapped = p.permuted(np.array([1, 0]))
     assert list(s.order(swapped)) == [0, 1]
     assert loglik(encode(df, spec), spec, p) == pytest.approx(loglik(encode(df, spec), spec, swapped))
+
+
+def test_moves_start_from_the_best_distinct_maxima_not_moved_from_before():
+    """Merge-and-split rounds start from several local maxima (a lower one can lead to the best),
+    each once: runs within the tolerance of one another are one maximum."""
+    df = simulate_design(paper_model(), 10, seed=0, n_trials=(6, 6))
+    spec = preset_spec("paper", df).with_levels(level_names(2))
+    fit = fit_iohmm(encode(df, spec), spec, restarts=1, seed=0, tol=1e-4)
+    run = fit.runs[0]
+    objectives = [-10.0, -12.0, -10.005, -11.0, float("-inf"), -12.0 + 0.02]
+    fit = replace(fit, runs=[replace(run, objective=o) for o in objectives])
+    assert selection.move_sources(fit, [], 3) == [0, 3, 5]
+    assert selection.move_sources(fit, [-10.0, -11.004], 3) == [5, 1]
+    assert selection.move_sources(fit, [], 1) == [0]

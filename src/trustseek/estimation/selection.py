@@ -5,7 +5,8 @@ random starts reach the best one ever more rarely.  Each K-level fit therefore s
 both from random points (their number grows with the free parameters,
 :func:`default_restarts`) and from the (K-1)-level fit with one level split in two
 (:func:`split_starts`): a K-level model at least as likely as the (K-1)-level one, from
-which EM only climbs.  Every row reports how many starts reached the best
+which EM only climbs; then from the best local maxima found with two levels merged and
+one split (:func:`split_merge_starts`).  Every row reports how many starts reached the best
 log-likelihood (within :data:`BEST_TOLERANCE`).
 """
 
@@ -29,13 +30,16 @@ from .trust_iohmm import level_names, preset_spec
 
 log = logging.getLogger(__name__)
 
-HELDOUT_PSEUDOCOUNT = 0.5  # added to every free cell's training counts before held-out scoring
+HELDOUT_PSEUDOCOUNT = 0.5  # per free cell of a row smoothed for held-out scoring (training counts + this)
+ZERO_CELL = 1e-9  # a fitted probability at most this is a zero (the fit clips such cells to 1e-12)
 BEST_TOLERANCE = 0.01  # nats: a start within this of the best log-likelihood "reached the best"
 SPLITS_PER_LEVEL = 2  # split starts per level of the (K-1)-level fit (different perturbations)
 MIN_RESTARTS = 10  # random starts per fit at least ...
 RESTARTS_PER_PARAMETER = 0.25  # ... and this many per free parameter
 SPLIT_MIX = 0.05  # a split start mixes this much of a random row into every row (no exact zero)
-MOVE_ROUNDS = 3  # at most this many rounds of merge-and-split starts from the best fit
+MOVE_ROUNDS = 3  # at most this many rounds of merge-and-split starts ...
+MOVE_SOURCES = 3  # ... each from this many of the best distinct local maxima not moved from before
+FOLD_MOVE_SOURCES = 1  # ... in select's training folds (the held-out score needs no last nat)
 
 
 def default_restarts(n_free: int) -> int:
@@ -108,12 +112,15 @@ def fit_with_moves(
     seed: int | np.random.SeedSequence = 0,
     splits: int = SPLITS_PER_LEVEL,
     rounds: int = MOVE_ROUNDS,
+    sources_per_round: int = MOVE_SOURCES,
     **options: Any,
 ) -> IOHMMFit:
     """:func:`~.iohmm.fit_iohmm` from random starts (default :func:`default_restarts`) and from
     ``previous`` (a fit with one level fewer) split (:func:`split_starts`); then up to ``rounds``
-    times from the best fit with two levels merged and one split (:func:`split_merge_starts`),
-    while that gains more than :data:`BEST_TOLERANCE`.  Every run is kept in the result's ``runs``."""
+    times from the ``sources_per_round`` best distinct local maxima not moved from before
+    (:func:`move_sources`; a lower maximum's moves can lead past the best) with two levels
+    merged and one split (:func:`split_merge_starts`), while that gains more than
+    :data:`BEST_TOLERANCE`.  Every run is kept in the result's ``runs``."""
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     # the random starts are those fit_iohmm draws from ``seed`` (the first n of n + m are the
     # same): more restarts only add starts; the split and merge moves draw from the seed's own state
@@ -124,14 +131,39 @@ def fit_with_moves(
     if previous is not None and previous.initial.shape[-1] == K - 1 and splits > 0:
         init = split_starts(previous, rng, splits)
     fit = fit_iohmm(seqs, spec, restarts=n_random, seed=ss, init=init, **options)
+    used: list[float] = []  # objectives of the fits already moved from
     for _ in range(rounds if K > 2 else 0):
-        more = fit_iohmm(seqs, spec, restarts=0, init=split_merge_starts(fit.params, rng), **options)
+        sources = move_sources(fit, used, sources_per_round)
+        if not sources:
+            break
+        used += [fit.runs[i].objective for i in sources]
+        more = fit_iohmm(
+            seqs, spec, restarts=0, init=[p for i in sources for p in split_merge_starts(fit.runs[i].params, rng)], **options
+        )
         gain = more.objective - fit.objective
         runs = fit.runs + more.runs
         fit = replace(more, runs=runs, best=len(fit.runs) + more.best) if gain > 0 else replace(fit, runs=runs)
         if gain <= BEST_TOLERANCE:
             break
     return fit
+
+
+def move_sources(fit: IOHMMFit, used: Sequence[float], n: int) -> list[int]:
+    """Indices of the ``n`` best distinct local maxima among ``fit``'s runs not moved from yet.
+
+    Runs within :data:`BEST_TOLERANCE` of each other (or of an objective in ``used``) count
+    as one maximum."""
+    out: list[int] = []
+    seen = [float(u) for u in used]
+    for i in sorted(range(len(fit.runs)), key=lambda i: -fit.runs[i].objective):
+        r = fit.runs[i]
+        if len(out) >= n:
+            break
+        if not np.isfinite(r.objective) or any(abs(r.objective - u) <= BEST_TOLERANCE for u in seen):
+            continue
+        out.append(i)
+        seen.append(r.objective)
+    return out
 
 
 def _mix(rows: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -159,7 +191,9 @@ def select_levels(
     of levels being compared).  Each fit is :func:`fit_with_moves`: ``restarts`` random
     starts (default: :func:`default_restarts` of its free parameters), ``splits`` split
     starts per level of the fit with one level fewer (when it was compared just before),
-    then merge-and-split starts from the best.  Each row holds ``starts`` (all of them)
+    then merge-and-split starts from the :data:`MOVE_SOURCES` best distinct maxima (the
+    fit on all participants, whose log-likelihood and BIC are reported) or from the best
+    (:data:`FOLD_MOVE_SOURCES`, the training folds: three times fewer starts).  Each row holds ``starts`` (all of them)
     and ``reached_best`` (starts within :data:`BEST_TOLERANCE` of the best);
     :func:`selection_warnings` says when the best number of levels is the largest compared.
     """
@@ -179,7 +213,7 @@ def select_levels(
         if progress:
             progress(label, done, total)
 
-    def one_fit(data: Sequences, spec: IOHMMSpec, previous: IOHMMFit | None, key: list[int]) -> IOHMMFit:
+    def one_fit(data: Sequences, spec: IOHMMSpec, previous: IOHMMFit | None, key: list[int], sources: int) -> IOHMMFit:
         return fit_with_moves(
             data,
             spec,
@@ -187,6 +221,7 @@ def select_levels(
             restarts=restarts,
             seed=np.random.SeedSequence(key),
             splits=splits,
+            sources_per_round=sources,
             tol=tol,
             max_iter=max_iter,
         )
@@ -196,13 +231,13 @@ def select_levels(
     prev_fold: list[IOHMMFit | None] = [None] * folds
     for K in levels:
         spec = base.with_levels(level_names(K))
-        full = one_fit(seqs, spec, prev_full, [seed, 3, K])
+        full = one_fit(seqs, spec, prev_full, [seed, 3, K], MOVE_SOURCES)
         prev_full = full
         tick(f"{K} levels")
         per_fold = []
         for f in range(folds):
             train, test = np.flatnonzero(fold_of != f), np.flatnonzero(fold_of == f)
-            fit = one_fit(seqs.subset(train), spec, prev_fold[f], [seed, 4, K, f])
+            fit = one_fit(seqs.subset(train), spec, prev_fold[f], [seed, 4, K, f], FOLD_MOVE_SOURCES)
             prev_fold[f] = fit
             per_fold.append(heldout_loglik(seqs.subset(test), fit))
             tick(f"{K} levels")
@@ -263,20 +298,37 @@ def selection_warnings(rows: Sequence[dict[str, Any]]) -> list[str]:
 
 
 def heldout_loglik(test: Sequences, fit: IOHMMFit) -> float:
-    """Held-out log-likelihood under the training fit, smoothed so that it stays finite.
+    """Held-out log-likelihood of ``test`` under the training fit, smoothed only where it would be -inf.
 
-    A training fold can drive a cell to exactly 0 (no training participant ever did
-    that) while a held-out participant does it: the held-out log-likelihood would be
-    -inf, and every number of levels would tie at -inf.  The model is therefore scored
-    with the training fit's expected counts plus :data:`HELDOUT_PSEUDOCOUNT` per free
-    cell (one smoothed M-step from the maximum-likelihood point).  Input rows unseen in
-    training keep their defaults.
+    The held-out score compares the fitted models themselves: every row of the fit (the
+    initial distribution, each emission and transition row) is scored as fitted, except a
+    row that puts probability 0 (at most :data:`ZERO_CELL`: the fit keeps such cells at
+    1e-12) on a free cell.  A training fold can do that (no
+    training participant ever did it) while a held-out participant does it, and the
+    held-out log-likelihood would be -inf (about -27.6 per such event at 1e-12) for
+    every number of levels alike.  Such a row
+    is replaced by its smoothed estimate: the training fit's expected counts plus
+    :data:`HELDOUT_PSEUDOCOUNT` per free cell (on top of the spec's prior).  Smoothing
+    every row instead would pull the many sparsely visited transition rows of a larger
+    model towards uniform, a cost that grows with the number of levels
+    (docs/fitting.md, "Choosing the number of levels").  Input rows unseen in training
+    keep their defaults.
     """
+    return float(Workspace(test, *fit.structure.dims).loglik(heldout_params(fit)))
+
+
+def heldout_params(fit: IOHMMFit, pseudocount: float = HELDOUT_PSEUDOCOUNT) -> Params:
+    """The parameters :func:`heldout_loglik` scores with: ``fit``'s, with every row holding a free
+    cell at 0 (at most :data:`ZERO_CELL`) replaced by the smoothed row (expected counts + ``pseudocount`` per free cell)."""
     s = fit.structure
-    st = fit.workspace().estep(fit.params)
-    a = fit.spec.prior + HELDOUT_PSEUDOCOUNT
+    p = fit.params
+    st = fit.workspace().estep(p)
+    a = fit.spec.prior + pseudocount
     c0 = st.initial + a
-    params = Params(
-        c0 / c0.sum(), s.em.mstep(st.emission, a, fit.params.emission), s.tr.mstep(st.transition, a, fit.params.transition)
-    )
-    return float(Workspace(test, *s.dims).loglik(params))
+    smooth = Params(c0 / c0.sum(), s.em.mstep(st.emission, a, p.emission), s.tr.mstep(st.transition, a, p.transition))
+
+    def rows(fitted: np.ndarray, smoothed: np.ndarray) -> np.ndarray:
+        zero = ((fitted <= ZERO_CELL) & (smoothed > fitted)).any(-1, keepdims=True)
+        return np.where(zero, smoothed, fitted)
+
+    return Params(rows(p.initial, smooth.initial), rows(p.emission, smooth.emission), rows(p.transition, smooth.transition))
