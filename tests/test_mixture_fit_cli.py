@@ -53,7 +53,7 @@ def test_fit_types_json(log):
     assert code == 0, text
     d = json.loads(text)
     assert d["differ"] == ["emission"] and len(d["restart_logliks"]) == 2
-    assert d["mixture"]["format"] == "trustseek-mixture/1"
+    assert d["mixture"]["format"] == "trustseek.mixture/1"
 
 
 def test_select_types_and_personalize(log, tmp_path):

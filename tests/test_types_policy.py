@@ -38,7 +38,7 @@ def test_the_solve_returns_a_type_aware_policy_with_its_bounds(policy, mixture):
 
 def test_json_round_trip(policy, tmp_path):
     d = policy.to_dict()
-    assert d["kind"] == "type-aware" and "model" not in d and d["mixture"]["format"] == "trustseek-mixture/1"
+    assert d["kind"] == "type-aware" and "model" not in d and d["mixture"]["format"] == "trustseek.mixture/1"
     again = policy_from_dict(json.loads(json.dumps(json_safe(d), allow_nan=False)), "round trip")
     assert isinstance(again, TypeAwarePolicy) and again.mixture == policy.mixture
     path = tmp_path / "policy.json"

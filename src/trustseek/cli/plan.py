@@ -35,7 +35,7 @@ def _check_update(name: str) -> str:
 
 def mixture_of(spec: str) -> TypeMixture | None:
     """The supervisor types ``spec`` names when it is a mixture (a mixture preset such as
-    paper+conservative, or a trustseek-mixture/1 file), else None (a plain trust model)."""
+    paper+conservative, or a trustseek.mixture/1 file), else None (a plain trust model)."""
     if spec in MODEL_PRESETS:
         return None
     if spec in MIXTURE_PRESETS:

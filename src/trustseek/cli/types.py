@@ -71,7 +71,7 @@ def fit_types(
     tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative log-likelihood tolerance (> 0)."),
     max_iter: int = typer.Option(1000, "--max-iter", min=1, help="E-step cap per start."),
     jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads (fit) and processes (bootstrap)."),
-    out: Path | None = typer.Option(None, "--out", "-o", help="Write the types (JSON trustseek-mixture/1)."),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Write the types (JSON trustseek.mixture/1)."),
     type_posteriors: Path | None = typer.Option(
         None, "--type-posteriors", help="Write P(type | trials) per participant (CSV/Parquet)."
     ),

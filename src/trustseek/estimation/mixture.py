@@ -433,7 +433,7 @@ class MixtureFit:
         return [m.replace(not_estimated=self.not_estimated) for m in models] if self.not_estimated else models
 
     def mixture(self, notes: str = "") -> TypeMixture:
-        """The types as a :class:`~trustseek.model.mixture.TypeMixture` (JSON ``trustseek-mixture/1``)."""
+        """The types as a :class:`~trustseek.model.mixture.TypeMixture` (JSON ``trustseek.mixture/1``)."""
         w = np.clip(self.weights, 0.0, None)
         note = notes or (
             f"fitted by trustseek: {self.n_types} types ({', '.join(self.differ)} differ), {self.seqs.n_participants} "

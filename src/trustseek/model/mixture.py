@@ -6,7 +6,7 @@ A :class:`TypeMixture` holds the types' names, their weights (the share of the p
 and one :class:`~trustseek.model.core.TrustModel` per type.  A plain model is the mixture of
 one type.  JSON::
 
-    {"format": "trustseek-mixture/1", "notes": "...",
+    {"format": "trustseek.mixture/1", "notes": "...",
      "types": [{"name": "paper", "weight": 0.7, "model": {<trust model>}}, ...]}
 """
 
@@ -23,7 +23,7 @@ import numpy as np
 
 from .core import ModelError, TrustModel, json_safe, load_json
 
-MIXTURE_FORMAT = "trustseek-mixture/1"
+MIXTURE_FORMAT = "trustseek.mixture/1"
 
 
 @dataclass(frozen=True, eq=False)

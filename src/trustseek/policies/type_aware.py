@@ -9,7 +9,7 @@ keeps the mixture, so the type belief and the trust belief can be read off its b
 JSON (kind ``type-aware``): the alpha-vector fields without ``model``, and the mixture::
 
     {"format": "trustseek.policy/1", "kind": "type-aware", "complexities": [...],
-     "belief_update": "bayes", "mixture": {<trustseek-mixture/1>},
+     "belief_update": "bayes", "mixture": {<trustseek.mixture/1>},
      "q_vectors": {C: {a: [[... M·K numbers ...], ...]}}, "value_vectors": [...], "info": {...}}
 """
 
