@@ -89,8 +89,8 @@ def solve(
         None,
         "--solver",
         help="grid (belief grid, the default), alpha (certified alpha vectors, two trust levels), point (point-based "
-        "bounds, any number of trust levels), reachable (search over the beliefs reachable from the start, any number "
-        "of trust levels); point is the default with supervisor types, certified-grid (eq. 3, certified) or trust-agnostic.",
+        "bounds, any number of trust levels; the default with supervisor types), reachable (search over the beliefs "
+        "reachable from the start, any number of trust levels), certified-grid (eq. 3, certified) or trust-agnostic.",
     ),
     gap: float | None = typer.Option(
         None, "--gap", help="alpha/point/reachable: target certified gap between the value bounds (default 1e-6 / 1e-3)."
