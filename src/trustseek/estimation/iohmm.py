@@ -36,18 +36,14 @@ FINISH_FTOL = 0.01  # the finish stops at this fraction of the fit's relative to
 CONCURRENT_MIN = 10_000  # trials from which the starts' finishes run on several threads at once
 
 
-@dataclass
-class IOHMMFit:
-    """Result of :func:`fit_iohmm`; levels are ordered by the spec's ``order_by`` rule."""
+class FitCriteria:
+    """What every fit result derives from its structure, data, log-likelihood and runs: free
+    parameters, observations, AIC, BIC and each start's log-likelihood."""
 
-    spec: IOHMMSpec
     structure: Structure
     seqs: Sequences
-    params: Params
     loglik: float
-    objective: float
     runs: list[RunResult]
-    best: int
 
     @property
     def n_params(self) -> int:
@@ -68,6 +64,20 @@ class IOHMMFit:
     @property
     def restart_logliks(self) -> list[float]:
         return [r.loglik for r in self.runs]
+
+
+@dataclass
+class IOHMMFit(FitCriteria):
+    """Result of :func:`fit_iohmm`; levels are ordered by the spec's ``order_by`` rule."""
+
+    spec: IOHMMSpec
+    structure: Structure
+    seqs: Sequences
+    params: Params
+    loglik: float
+    objective: float
+    runs: list[RunResult]
+    best: int
 
     def workspace(self) -> Workspace:
         return Workspace(self.seqs, *self.structure.dims)

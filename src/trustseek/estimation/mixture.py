@@ -31,7 +31,6 @@ initial row (undefined at weight zero) is written uniform.
 from __future__ import annotations
 
 import logging
-import math
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -49,7 +48,7 @@ from .convergence import converge
 from .em import STATIONARY, RunResult, run_em
 from .estep import EStep, Workspace
 from .fit import never_estimated
-from .iohmm import FINISH_FTOL, FINISH_SWITCH, fit_iohmm
+from .iohmm import FINISH_FTOL, FINISH_SWITCH, FitCriteria, fit_iohmm
 from .quasi_newton import Sticks, _Part
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
@@ -363,7 +362,7 @@ class MixtureWorkspace(Workspace):
 
 
 @dataclass
-class MixtureFit:
+class MixtureFit(FitCriteria):
     """Result of :func:`fit_mixture`: ``params`` with the types in the stated order (``type1`` first)."""
 
     spec: IOHMMSpec
@@ -389,26 +388,6 @@ class MixtureFit:
     @property
     def weights(self) -> np.ndarray:
         return self.params.weights
-
-    @property
-    def n_params(self) -> int:
-        return self.structure.n_free
-
-    @property
-    def n_observations(self) -> int:
-        return self.seqs.n_observed
-
-    @property
-    def aic(self) -> float:
-        return 2 * self.n_params - 2 * self.loglik
-
-    @property
-    def bic(self) -> float:
-        return self.n_params * math.log(max(self.n_observations, 1)) - 2 * self.loglik
-
-    @property
-    def restart_logliks(self) -> list[float]:
-        return [r.loglik for r in self.runs]
 
     @property
     def empty_types(self) -> list[str]:

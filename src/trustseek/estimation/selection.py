@@ -266,14 +266,20 @@ def select_levels(
                 "reached_best": hits,
             }
         )
-    best_bic = min(rows, key=lambda r: float(r["bic"]))["levels"]
-    best_cv = max(rows, key=lambda r: float(r["heldout_loglik"]))["levels"]
-    for r in rows:
-        r["best_bic"] = r["levels"] == best_bic
-        r["best_heldout"] = r["levels"] == best_cv
+    mark_choices(rows, "levels")
     for w in selection_warnings(rows):
         log.warning("%s", w)
     return rows
+
+
+def mark_choices(rows: Sequence[dict[str, Any]], key: str) -> None:
+    """Mark in a selection table (one row per value of ``key``) the row of lowest BIC
+    (``best_bic``) and of highest held-out log-likelihood (``best_heldout``)."""
+    best_bic = min(rows, key=lambda r: float(r["bic"]))[key]
+    best_cv = max(rows, key=lambda r: float(r["heldout_loglik"]))[key]
+    for r in rows:
+        r["best_bic"] = r[key] == best_bic
+        r["best_heldout"] = r[key] == best_cv
 
 
 def selection_warnings(rows: Sequence[dict[str, Any]]) -> list[str]:

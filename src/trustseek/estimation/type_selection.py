@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from .mixture import MixtureFit, MixtureWorkspace, fit_mixture, split_type_starts
-from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, reached_best
+from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, mark_choices, reached_best
 from .sequences import Sequences, encode
 from .spec import FitError
 from .trust_iohmm import preset_spec
@@ -140,11 +140,7 @@ def select_types(
                 "reached_best": hits,
             }
         )
-    best_bic = min(rows, key=lambda r: float(r["bic"]))["types"]
-    best_cv = max(rows, key=lambda r: float(r["heldout_loglik"]))["types"]
-    for r in rows:
-        r["best_bic"] = r["types"] == best_bic
-        r["best_heldout"] = r["types"] == best_cv
+    mark_choices(rows, "types")
     for w in type_selection_warnings(rows):
         log.warning("%s", w)
     return rows

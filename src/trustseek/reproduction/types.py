@@ -28,7 +28,6 @@ model), so that the paired differences are those of the models planned for, not 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -114,8 +113,7 @@ def _fitted_types(frame: pd.DataFrame, restarts: int, seed: int) -> tuple[TypeMi
     rows, fits = [], []
     for m in range(1, MAX_TYPES + 1):
         fit = fit_types(frame[list(TRIAL_COLUMNS)], m, restarts=restarts, seed=seed)
-        bic = -2.0 * fit.loglik + fit.n_params * math.log(fit.n_observations)
-        rows.append({"types": m, "loglik": float(fit.loglik), "bic": float(bic)})
+        rows.append({"types": m, "loglik": float(fit.loglik), "bic": float(fit.bic)})
         fits.append(fit)
     best = min(range(len(rows)), key=lambda i: rows[i]["bic"])
     return fits[best].mixture(), rows
