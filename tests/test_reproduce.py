@@ -208,7 +208,9 @@ def _seed0_like_summary():
 def test_same_seed_same_summary(small_run, tmp_path):
     again = reproduce(ReproduceConfig(seed=3, **SMALL))
     assert json.dumps(again.summary, sort_keys=True) == json.dumps(small_run.summary, sort_keys=True)
-    other = reproduce(ReproduceConfig(seed=4, **SMALL))
+    # another seed gives other data (the costly sections, off here, do not change that)
+    lean = {**SMALL, "schedule_participants": 0, "types_participants": 0, "sensitivity_samples": 0}
+    other = reproduce(ReproduceConfig(seed=4, **lean))
     assert other.summary["experiment1"] != small_run.summary["experiment1"]
 
 
