@@ -12,7 +12,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.stats import norm, ttest_rel
 
 from ..errors import TrustseekError
 from ..estimation.fit import fit_trust_model
@@ -129,6 +128,8 @@ def signed_rank_p(d: np.ndarray) -> float:
         _, tie_counts = np.unique(sa, return_counts=True)
         var = n * (n + 1) * (2 * n + 1) / 24.0 - float(np.sum(tie_counts**3 - tie_counts)) / 48.0
         z = (w2 / 2.0 - mean) / np.sqrt(var)
+        from scipy.stats import norm  # slow to import: only where it is used
+
         return float(min(1.0, 2 * norm.sf(abs(z))))
     weights = np.rint(2 * ranks).astype(np.int64)
     counts = np.zeros(int(weights.sum()) + 1)
@@ -151,6 +152,8 @@ def paired_tests(aware: np.ndarray, agnostic: np.ndarray) -> dict[str, float]:
     w = signed_rank_p(d)
     # constant nonzero differences: the t statistic is infinite (p = 0 from two participants on)
     constant = len(d) < 2 or bool(np.all(d == d[0]))
+    from scipy.stats import ttest_rel
+
     t = (0.0 if len(d) > 1 else 1.0) if constant else float(ttest_rel(aware, agnostic).pvalue)
     return out | {"wilcoxon": w, "t": t}
 

@@ -23,7 +23,6 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.stats import ttest_ind
 
 from ..errors import TrustseekError
 from ..model.core import Task, TrustModel
@@ -396,6 +395,8 @@ def ask_search(
     i_best, i_paper = rows.index(best), rows.index(at_paper)
     difference: dict[str, Any] = {"mean": None, "lo": None, "hi": None}
     if i_best != i_paper and len(regrets[i_best]) > 1 and len(regrets[i_paper]) > 1:
+        from scipy.stats import ttest_ind  # slow to import: only where it is used
+
         welch = ttest_ind(regrets[i_paper], regrets[i_best], equal_var=False)
         ci = welch.confidence_interval(sub.level)
         difference = {

@@ -37,7 +37,6 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy.stats import spearmanr
 
 from ..errors import TrustseekError
 from ..estimation.fit import FitResult, fit_trust_model
@@ -603,6 +602,8 @@ def _heterogeneity(cfg: ReproduceConfig, plan: _Plan, seed: np.random.SeedSequen
                 "interventions_agnostic": float(ints[AGNOSTIC][sel].mean()),
             }
         )
+    from scipy.stats import spearmanr  # slow to import: only where it is used
+
     rho = spearmanr(score, r[AWARE] + r[AGNOSTIC]).statistic
     return {
         "summary": {

@@ -8,14 +8,16 @@ from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
-from scipy.stats import binomtest
-from scipy.stats import t as student_t
-from scipy.stats import wilcoxon as scipy_wilcoxon
+
+# scipy.stats takes about a second to import: it is imported where it is used, so that the
+# command line starts fast
 
 
 def mean_ci(values: Sequence[float] | np.ndarray, level: float = 0.95) -> tuple[float, float, float]:
     """Mean and its Student-t interval (exact for normal data, also for n = 5; NaN ends for
     fewer than two values)."""
+    from scipy.stats import t as student_t
+
     v = np.asarray(values, dtype=float)
     m = float(v.mean())
     n = len(v)
@@ -25,6 +27,8 @@ def mean_ci(values: Sequence[float] | np.ndarray, level: float = 0.95) -> tuple[
 
 def share_ci(successes: int, n: int, level: float = 0.95) -> tuple[float, float]:
     """Exact (Clopper-Pearson) interval of a share of ``successes`` out of ``n``."""
+    from scipy.stats import binomtest
+
     ci = binomtest(int(successes), int(n)).proportion_ci(confidence_level=level, method="exact")
     return float(ci.low), float(ci.high)
 
@@ -62,6 +66,8 @@ def wilcoxon(aware: np.ndarray, agnostic: np.ndarray) -> dict[str, Any]:
     if np.count_nonzero(d) == 0:
         out.update(statistic=None, p_value=None, note="all paired differences are zero")
         return out
+    from scipy.stats import wilcoxon as scipy_wilcoxon
+
     res = scipy_wilcoxon(aware, agnostic, zero_method="wilcox", alternative="two-sided")
     out.update(statistic=float(res.statistic), p_value=float(res.pvalue))
     return out

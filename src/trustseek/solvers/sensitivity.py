@@ -32,7 +32,6 @@ from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize
-from scipy.stats import qmc
 
 from ..errors import TrustseekError
 from ..model.core import ASK, AUTONOMOUS, RELY, Task, TrustModel
@@ -304,6 +303,8 @@ def sensitivity(
     # Latin-hypercube check
     sampled: dict[str, dict[str, float]] = {}
     if samples:
+        from scipy.stats import qmc  # scipy.stats is slow to import: only where it is used
+
         pts = qmc.LatinHypercube(d=len(params), seed=rng).random(samples)
         vals: dict[str, list[float]] = {q: [] for q in quantities}
         for u in pts:
