@@ -28,6 +28,8 @@ def test_report_renders_with_figures(tmp_path):
         grid=201,
         jobs=1,
         sensitivity_samples=8,
+        schedule_participants=300,  # every section and figure, on few simulated people
+        types_participants=300,
     )
     paths = write_report(reproduce(cfg), tmp_path / "report")
     html = paths["html"]
