@@ -4,10 +4,13 @@ import json
 
 import numpy as np
 import pytest
+from scipy.optimize import minimize_scalar
+from scipy.special import gammaln
 
-from trustseek.estimation import encode, fit_trust_model, kernels, loglik
-from trustseek.estimation.personal import dirichlet_multinomial, estimate_strength, personalize
+from trustseek.estimation import encode, fit_trust_model, kernels, loglik, personal
+from trustseek.estimation.personal import EB, NOTHING, personalize
 from trustseek.estimation.trust_iohmm import from_trust_model
+from trustseek.model.core import TrustModel
 from trustseek.model.presets import paper_conservative_mixture, paper_model
 from trustseek.simulation.designs import simulate_design
 from trustseek.simulation.populations import Supervisors
@@ -22,27 +25,95 @@ def pooled_data():
     return df, fit_trust_model(df, restarts=2).model
 
 
-@pytest.mark.parametrize("s", [2.0, 20.0, 200.0])
-def test_strength_is_recovered_from_dirichlet_multinomial_counts(s):
-    rng = np.random.default_rng(int(s))
-    t = np.array([0.2, 0.3, 0.5])
-    p = rng.dirichlet(s * t, size=800)
-    c = np.array([rng.multinomial(40, q) for q in p], dtype=float)
-    est, at_bound = estimate_strength(c, np.broadcast_to(t, c.shape), np.ones(c.shape, dtype=bool))
-    assert not at_bound
-    assert est == pytest.approx(s, rel=0.35)
+def known_levels_model() -> TrustModel:
+    """The paper's emissions at high trust made positive, trust high from the start and never
+    changing: the levels are known, so the variational bound is the evidence itself."""
+    p = paper_model()
+    em = p.emission.copy()
+    em[0, 0, 1] = [0.3, 0.7]
+    em[1, 0, 1] = [0.2, 0.8]
+    tr = np.broadcast_to(np.eye(2), p.transition.shape).copy()
+    return TrustModel(p.trust_levels, p.complexities, np.array([0.0, 1.0]), em, tr)
 
 
-def test_homogeneous_counts_put_the_strength_at_its_bound():
-    rng = np.random.default_rng(1)
-    t = np.array([0.4, 0.6])
-    c = rng.multinomial(30, t, size=500).astype(float)
-    est, at_bound = estimate_strength(c, np.broadcast_to(t, c.shape), np.ones(c.shape, dtype=bool))
-    assert at_bound and est > 1e4
-    # rows with fewer than two usable cells, or no counts, add nothing
-    mask = np.zeros(c.shape, dtype=bool)
-    mask[:, 0] = True
-    assert dirichlet_multinomial(3.0, c, np.broadcast_to(t, c.shape), mask) == 0.0
+def dirichlet_multinomial(s: float, counts: np.ndarray, t: np.ndarray) -> float:
+    """sum over rows of log p(sequence with these counts | Dirichlet(s t)) (no multinomial coefficient)."""
+    a = s * t
+    return float((gammaln(s) - gammaln(s + counts.sum(-1)) + (gammaln(a + counts) - gammaln(a)).sum(-1)).sum())
+
+
+def test_with_known_levels_the_bound_is_the_evidence_and_its_maximum_is_found():
+    m = known_levels_model()
+    df = simulate_design(Supervisors.dirichlet(m, 30, 5.0, rng=0), 30, seed=1)
+    res = personalize(df, m)
+    auto = df[df["robot_action"] == "autonomous"]
+    c = auto.groupby(["participant", "complexity", "human_action"]).size().unstack(fill_value=0)
+    c = c.reindex(columns=["intervene", "rely"], fill_value=0)
+
+    def evidence(s: float) -> float:
+        return sum(
+            dirichlet_multinomial(s, g.to_numpy(float), m.emission[["low", "high"].index(cx), 0, 1])
+            for cx, g in c.groupby(level=1)
+        )
+
+    best = minimize_scalar(lambda x: -evidence(np.exp(x)), bounds=(np.log(1e-2), np.log(1e6)), method="bounded")
+    assert res.strength["emission"] == pytest.approx(np.exp(best.x), rel=1e-3)
+    assert res.evidence_bound == pytest.approx(-best.fun, abs=1e-6)
+    assert res.evidence_bound_centre == pytest.approx(evidence(1e6), abs=1e-3)
+    assert res.method == {"initial": NOTHING, "emission": EB, "transition": NOTHING}
+    assert not res.at_bound["emission"] and res.at_bound["transition"]
+    # the truth is s = 5: within the spread of 30 participants' estimate
+    assert 1.5 < res.strength["emission"] < 20
+
+
+def test_variational_steps_never_lose_and_the_gradient_is_the_bound_s():
+    pm = paper_model()
+    df = simulate_design(Supervisors.dirichlet(pm, 12, 5.0, rng=2), 12, seed=3)
+    prep = personal._Prepared.of(df, pm)
+    evidence = prep.evidence()
+    start = evidence.counts(prep.first)
+    s = {"initial": 1e6, "emission": 8.0, "transition": 30.0}
+    bounds = [evidence.run(s, start, 0.0, k).bound.sum() for k in range(1, 8)]
+    assert np.all(np.diff(bounds) >= -1e-9) and bounds[-1] > bounds[0]
+    done = evidence.run(s, start, 1e-13, 5000)
+    for name in ("emission", "transition"):
+        h = 1e-4
+        up = evidence.run({**s, name: s[name] * np.exp(h)}, done.counts, 1e-13, 5000).bound.sum()
+        down = evidence.run({**s, name: s[name] * np.exp(-h)}, done.counts, 1e-13, 5000).bound.sum()
+        grad = evidence.rows[name].gradient(done.alpha[name], s[name]) * s[name]
+        assert grad == pytest.approx((up - down) / (2 * h), rel=1e-3, abs=1e-4)
+
+
+def mean_error(models, truth, rows):
+    """Mean absolute error of P(rely | trust, complexity, autonomous) over the participants."""
+    return float(
+        np.mean(
+            [np.abs(m.emission[..., 0, :, 1] - t.emission[..., 0, :, 1])[rows].mean() for m, t in zip(models, truth, strict=True)]
+        )
+    )
+
+
+def test_no_individual_differences_keep_the_centre():
+    pm = paper_model()
+    df = simulate_design(pm, 40, seed=5)
+    res = personalize(df, pm)
+    assert all(res.at_bound.values()) and res.strength["emission"] >= 1e5
+    for m in res.models:
+        np.testing.assert_allclose(m.emission, pm.emission, atol=1e-3)
+    assert res.evidence_bound == pytest.approx(res.evidence_bound_centre, abs=1e-3)
+
+
+def test_individual_differences_give_a_finite_strength_and_models_nearer_each_person():
+    pm = paper_model()
+    sup = Supervisors.dirichlet(pm, 40, 5.0, rng=6)
+    df = simulate_design(sup, 40, seed=7)
+    res = personalize(df, pm)
+    assert not res.at_bound["emission"] and 1.0 < res.strength["emission"] < 100.0
+    assert res.evidence_bound > res.evidence_bound_centre + 1.0
+    truth = [sup.model_of(n) for n in range(40)]
+    rows = pm.emission[..., 0, :, 1] > 0  # P(rely) not fixed by a zero of the centre
+    rows &= pm.emission[..., 0, :, 1] < 1
+    assert mean_error(res.models, truth, rows) < mean_error([pm] * 40, truth, rows) - 0.005
 
 
 def test_strong_prior_keeps_the_centre_and_none_moves_each_participant_toward_their_data(pooled_data):
