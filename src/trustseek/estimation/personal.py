@@ -42,7 +42,7 @@ import logging
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -54,7 +54,7 @@ from scipy.special import digamma, gammaln
 from ..model.core import TrustModel, json_safe
 from ..model.mixture import TypeMixture
 from . import kernels
-from .em import run_em
+from .em import RunResult, run_em
 from .estep import EStep, Workspace
 from .mixture import MixtureStructure, MixtureWorkspace, mixture_params, type_posteriors
 from .sequences import Sequences, encode
@@ -69,8 +69,13 @@ S_MIN, S_MAX = 1e-2, 1e6
 GRID = 9  # strengths tried per table from S_MAX down to S_MIN (log-spaced) before the joint search
 INNER_TOL = 1e-10  # relative gain of the summed bound below which the variational E-steps stop
 TINY = 1e-300  # the prior's parameters are at least this
+ESTIMATES = ("held-out", "variational")  # how personalize estimates s
+FOLDS = 5  # cross-validation: blocks of consecutive trials per participant
+NEGLIGIBLE = 1e-3  # cross-validation: a difference in held-out log-likelihood this small per participant is none
+HELD_FLOOR = 1e6  # a held-out block of probability zero scores -HELD_FLOOR
 # how a table's strength was chosen (PersonalModels.method)
 EB = "variational empirical Bayes"
+CV = "held-out log-likelihood, {folds} blocks of trials per participant"
 NOTHING = "no free row the trials reach"
 GIVEN = "given"
 
@@ -288,9 +293,10 @@ class PersonalModels:
     centre: list[str]
     strength: dict[str, float]
     at_bound: dict[str, bool]
-    method: dict[str, str]
-    evidence_bound: float
-    evidence_bound_centre: float
+    method: dict[str, str]  # how each table's s was chosen
+    estimate: str  # "held-out", "variational" or "given"
+    score: float  # the criterion at the chosen strengths (held-out log-likelihood, or variational bound)
+    score_centre: float  # the same at s = S_MAX in every table (the centre)
     loglik: np.ndarray
     centre_loglik: np.ndarray
     iterations: np.ndarray
@@ -338,6 +344,18 @@ class PersonalModels:
             out.append(f"{name}.json")
         return out
 
+    def summary(self) -> dict[str, Any]:
+        """The strengths, how they were chosen and the criterion (as ``strength.json`` holds them)."""
+        return {
+            "strength": self.strength,
+            "at_bound": self.at_bound,
+            "method": self.method,
+            "estimate": self.estimate,
+            "score": self.score,
+            "score_centre": self.score_centre,
+            "warnings": self.warnings,
+        }
+
     def save(self, folder: str | Path) -> None:
         """``<participant>.json`` per participant, ``participants.csv`` (with the file of each) and
         ``strength.json``, into ``folder`` (created)."""
@@ -350,8 +368,7 @@ class PersonalModels:
         table.insert(1, "file", names)
         table.to_csv(folder / "participants.csv", index=False)
         (folder / "strength.json").write_text(
-            json.dumps(json_safe({"strength": self.strength, "at_bound": self.at_bound, "warnings": self.warnings}), indent=2)
-            + "\n",
+            json.dumps(json_safe(self.summary()), indent=2) + "\n",
             encoding="utf-8",
         )
 
@@ -404,6 +421,104 @@ class _Prepared:
     def evidence(self) -> _Evidence:
         return _Evidence(self.work, self.rows)
 
+    def structure(self, s: Mapping[str, float]) -> _PersonalStructure:
+        """The MAP structure with pseudo-counts s t on the usable cells, at each tie group's
+        representative row (empty elsewhere)."""
+        structure = _PersonalStructure(self.spec, self.seqs)
+        structure.pseudo = {"initial": self.rows["initial"].prior(s["initial"])[:, 0, 0]}
+        for name, table in (("emission", self.base.em), ("transition", self.base.tr)):
+            pseudo = np.zeros(getattr(self.centre, name).shape)
+            pseudo[:, table.rep] = self.rows[name].prior(s[name])
+            structure.pseudo[name] = pseudo
+        return structure
+
+    def fit(self, s: Mapping[str, float], work: Workspace, starts: Params, tol: float, max_iter: int) -> list[RunResult]:
+        """Each participant's MAP at strengths ``s`` on the trials of ``work``, from ``starts``."""
+        N = self.seqs.n_participants
+        return run_em(self.structure(s), work, [starts.take(n) for n in range(N)], tol=tol, max_iter=max_iter)
+
+
+def blocks(lengths: np.ndarray, T: int, folds: int) -> np.ndarray:
+    """(T, N): the block (0 .. folds - 1) of each position of each sequence, ``folds`` runs of
+    consecutive trials of sizes differing by at most one (a sequence shorter than ``folds`` leaves
+    some blocks empty); padding positions get ``folds`` or more."""
+    L = np.asarray(lengths, dtype=np.int64)[None, :]
+    return np.where(np.arange(T)[:, None] < L, (np.arange(T)[:, None] * folds) // np.maximum(L, 1), folds)
+
+
+class _CrossValidation:
+    """Held-out log-likelihood of each participant's MAP: the trials of each participant split into
+    ``folds`` consecutive blocks; fold f's models are fitted with block f's actions unobserved, and
+    score log p(all actions) - log p(the others'), i.e. log p(block f | the other blocks)."""
+
+    def __init__(self, prep: _Prepared, folds: int, tol: float, max_iter: int):
+        self.prep, self.tol, self.max_iter = prep, tol, max_iter
+        seqs = prep.seqs
+        block = blocks(seqs.lengths, seqs.y.shape[0], folds)
+        self.works = [
+            _PersonalWorkspace(
+                replace(seqs, y=np.where(block == f, -1, seqs.y).astype(seqs.y.dtype)),
+                *prep.base.dims,
+                method="numba",
+                threads=prep.work.threads,
+            )
+            for f in range(folds)
+        ]
+        self.starts = [prep.start] * folds  # each fold's last fit: the next one starts there
+
+    def score(self, s: Mapping[str, float]) -> np.ndarray:
+        """Each participant's held-out log-likelihood at strengths ``s``, summed over the folds (N,)."""
+        total = np.zeros(self.prep.seqs.n_participants)
+        for f, work in enumerate(self.works):
+            runs = self.prep.fit(s, work, self.starts[f], self.tol, self.max_iter)
+            params = Params.stack([r.params for r in runs])
+            held = self.prep.work.estep(params).loglik - np.array([r.loglik for r in runs])
+            total += np.where(np.isfinite(held), held, -HELD_FLOOR)
+            self.starts[f] = params
+        return total
+
+
+def _cv_strengths(
+    prep: _Prepared, folds: int, tol: float, max_iter: int
+) -> tuple[dict[str, float], dict[str, bool], dict[str, str], float, float]:
+    """Each table's s by the held-out log-likelihood (:class:`_CrossValidation`), one table at a time
+    (the others at their choice so far): a decade grid from S_MAX down to S_MIN, refined by half and
+    quarter decades around the best, then the largest s tried whose score is within one standard
+    error of the best's (the paired differences over participants; the one-standard-error rule).
+    Whether each is at S_MAX, how it was chosen, the score there and at s = S_MAX everywhere."""
+    start = prep.evidence().counts(prep.first)
+    free = [k for k in TABLES if np.where(prep.rows[k].dirichlet[..., None], start[k], 0.0).sum() > 0]
+    cv = _CrossValidation(prep, folds, tol, max_iter)
+    s = dict.fromkeys(TABLES, S_MAX)
+    how = {k: (CV.format(folds=folds) if k in free else NOTHING) for k in TABLES}
+    current = cv.score(s)
+    centre = float(current.sum())
+    lo, hi = math.log10(S_MIN), math.log10(S_MAX)
+    N = len(current)
+    for k in free:
+        tried = {hi: current}
+        grid = [float(x) for x in np.linspace(hi, lo, GRID)[1:]]
+        for step in (None, 0.5, 0.25):  # the decade grid, then half and quarter decades either side of the best
+            x_best = max(tried, key=lambda x: (tried[x].sum(), x))
+            for v in grid if step is None else [x_best + step, x_best - step]:
+                if lo <= v <= hi and v not in tried:
+                    tried[v] = cv.score({**s, k: 10.0**v})
+        x_best = max(tried, key=lambda x: (tried[x].sum(), x))
+        best = tried[x_best]
+
+        # the largest s no worse than the best by more than one standard error of the difference
+        # (or than NEGLIGIBLE per participant)
+        x_pick = x_best
+        for x in sorted(tried, reverse=True):
+            d = best - tried[x]
+            se = math.sqrt(N) * float(np.std(d, ddof=1)) if N > 1 else 0.0
+            if x > x_best and d.sum() <= max(se, NEGLIGIBLE * N):
+                x_pick = x
+                break
+        s[k], current = 10.0**x_pick, tried[x_pick]
+    bound = {k: (k not in free) or s[k] >= S_MAX for k in TABLES}
+    return s, bound, how, float(current.sum()), centre
+
 
 def personalize(
     frame: pd.DataFrame,
@@ -412,43 +527,39 @@ def personalize(
     tol: float = 1e-8,
     max_iter: int = 1000,
     n_jobs: int | None = 1,
+    estimate: str = "held-out",
+    folds: int = FOLDS,
 ) -> PersonalModels:
     """Per-participant MAP models shrunk toward ``model`` (the pooled model, or a mixture: each
     participant's most probable type).  ``strength``: one s for every table, or per table
-    (``initial``, ``emission``, ``transition``); None estimates each table's s by variational
-    empirical Bayes."""
+    (``initial``, ``emission``, ``transition``); None estimates each table's s, by ``estimate``:
+    ``held-out`` (the held-out log-likelihood over ``folds`` blocks of each participant's trials)
+    or ``variational`` (variational empirical Bayes)."""
     prep = _Prepared.of(frame, model, n_jobs)
-    spec, seqs, base, centre, work, start, rows = prep.spec, prep.seqs, prep.base, prep.centre, prep.work, prep.start, prep.rows
+    spec, seqs, base, centre, work, start = prep.spec, prep.seqs, prep.base, prep.centre, prep.work, prep.start
     N = seqs.n_participants
-    structure = _PersonalStructure(spec, seqs)
     warnings: list[str] = []
-
-    def fit_with(s_tab: Mapping[str, float]) -> tuple[Params, list]:
-        # pseudo-counts s * centre row on the usable cells, at each tie group's representative row
-        structure.pseudo = {"initial": rows["initial"].prior(s_tab["initial"])[:, 0, 0]}
-        for name, table in (("emission", base.em), ("transition", base.tr)):
-            pseudo = np.zeros(getattr(centre, name).shape)
-            pseudo[:, table.rep] = rows[name].prior(s_tab[name])
-            structure.pseudo[name] = pseudo
-        runs = run_em(structure, work, [start.take(n) for n in range(N)], tol=tol, max_iter=max_iter)
-        return Params.stack([r.params for r in runs]), runs
-
-    bound_at = {"estimate": math.nan, "centre": math.nan}
+    scores = {"estimate": math.nan, "centre": math.nan}
     if strength is None:
+        if estimate not in ESTIMATES:
+            raise FitError([f"estimate must be one of {list(ESTIMATES)}, got {estimate!r}"])
         evidence = prep.evidence()
         left_out = int(N - np.count_nonzero(evidence.active))
-        if left_out:
+        if left_out and estimate == "variational":
             warnings.append(
                 f"{left_out} of {N} participants' trials are impossible where the centre has "
                 "a zero: they are left out of the strength estimate"
             )
-        s_tab, bound, method, bound_at["estimate"], bound_at["centre"] = _strengths(
-            evidence, evidence.counts(prep.first), tol, max_iter
-        )
+        if estimate == "variational":
+            s_tab, bound, method, scores["estimate"], scores["centre"] = _strengths(
+                evidence, evidence.counts(prep.first), tol, max_iter
+            )
+        else:
+            s_tab, bound, method, scores["estimate"], scores["centre"] = _cv_strengths(prep, folds, tol, max_iter)
         warnings += [
             f"{name}: the strength is at its bound ({s_tab[name]:.3g}): the data show no individual differences there"
             for name in TABLES
-            if bound[name] and method[name] == EB
+            if bound[name] and method[name] != NOTHING
         ]
     else:
         s_tab, bound, method = {}, {}, {}
@@ -457,7 +568,8 @@ def personalize(
             if not (math.isfinite(value) and value >= 0):
                 raise FitError([f"strength must be a finite number >= 0, got {value!r}"])
             s_tab[name], bound[name], method[name] = float(value), False, GIVEN
-    params, runs = fit_with(s_tab)
+    runs = prep.fit(s_tab, work, start, tol, max_iter)
+    params = Params.stack([r.params for r in runs])
     # rows no trial of the log reaches are the structure's defaults during the fit: the centre's instead
     params.emission[:, base.em.empty] = centre.emission[:, base.em.empty]
     params.transition[:, base.tr.empty] = centre.transition[:, base.tr.empty]
@@ -472,8 +584,9 @@ def personalize(
         strength=s_tab,
         at_bound=bound,
         method=method,
-        evidence_bound=bound_at["estimate"],
-        evidence_bound_centre=bound_at["centre"],
+        estimate=estimate if strength is None else GIVEN,
+        score=scores["estimate"],
+        score_centre=scores["centre"],
         loglik=work.estep(params).loglik,
         centre_loglik=prep.first.loglik,
         iterations=np.array([r.iterations for r in runs]),
