@@ -4,30 +4,40 @@ The centre is the pooled model, or with supervisor types (a
 :class:`~trustseek.model.mixture.TypeMixture`) the participant's most probable type.  Every
 free row of participant n's model gets a Dirichlet prior Dirichlet(s t) with t the centre's
 row (over the row's usable cells: free, and positive in the centre, renormalised), so the
-M-step is ``(expected counts + s t) / total``: a row the participant's trials never reach
+M-step is ``(expected counts + s t) / total`` (for a row with observed counts, the posterior
+mean under Dirichlet(s t)): a row the participant's trials never reach
 stays the centre's, and a row they reach often moves toward their own counts.  Tied rows
 share one prior and one estimate; fixed cells stay fixed; a zero of the centre stays zero.
 
 **The strength s** is estimated from the data, **one s per table** (initial, emission,
-transition), by variational empirical Bayes (MacKay 1997; Beal 2003, ch. 3): for given
-strengths, each participant's posterior is approximated by q(theta_n) q(levels_n), with
-q(theta_n) a Dirichlet per row whose parameters are ``s t + expected counts`` and q(levels_n)
-the forward-backward posterior under the sub-normalised tables exp(E_q[log theta_n]); the
-bound on log p(trials of n | s),
+transition), in one of two ways.
+
+``held-out`` (the default): each participant's trials are split into :data:`FOLDS` blocks of
+consecutive trials; for each block, every participant's MAP is fitted with that block's
+actions unobserved and scores log p(block | the other blocks) (the forward-backward
+likelihood of all actions minus that of the others).  Summed over blocks and participants,
+this held-out log-likelihood is maximised over a log grid of s per table (decades from
+:data:`S_MAX` down to :data:`S_MIN`, refined by half and quarter decades, one table at a
+time), and the largest s within one standard error of the best is kept (the paired
+differences over participants): a noisy gain does not personalise.  At :data:`S_MAX` the
+table is reported as at the bound (the personal models are the centre there).
+
+``variational``: variational empirical Bayes (MacKay 1997; Beal 2003, ch. 3).  For given
+strengths each participant's posterior is approximated by q(theta_n) q(levels_n), with
+q(theta_n) a Dirichlet per row whose parameters are ``s t + expected counts`` and
+q(levels_n) the forward-backward posterior under the sub-normalised tables
+exp(E_q[log theta_n]); the bound on log p(trials of n | s),
 
     F_n(s) = log Z_n - KL(q(theta_n) || Dirichlet(s t)),
 
 (Z_n: the forward-backward normaliser under those tables) is maximised over q by alternating
-the two updates (it never decreases), and ``sum_n F_n`` over log s in [:data:`S_MIN`,
-:data:`S_MAX`]: a coarse grid of common strengths, then L-BFGS-B on each table's own s with
-the gradient sum_n dE_q[log Dirichlet(theta_n | s t)]/ds (exact at the converged q).  Unlike
-a marginal likelihood of counts computed under the centre, the bound sees a participant's
-differences through their own q(theta_n): a participant who relies more than the centre gets
-rows that explain it, not more time at a level.  A large s says the participants do not
-differ from the centre beyond what their trials can show; at :data:`S_MAX` the result is
-reported as at the bound (and the personal models are the centre).  The bound is below the
-evidence by a gap that grows as s gets small (the approximation ignores how the levels and
-the rows depend on each other), so it errs toward shrinking more.  Give ``strength`` to set s.
+the two updates (it never decreases) and ``sum_n F_n`` over log s (a grid per table, then
+L-BFGS-B with the exact gradient at the converged q).  With known levels the bound is the
+evidence.  With hidden levels it is below the evidence by a gap that grows as s gets small
+(q ignores how the levels and the rows depend on each other), so it shrinks more than the
+data call for; measured (docs/types.md): on two supervisor types around their pooled fit it
+keeps every s at the bound while the held-out estimate finds finite s and models that
+predict new trials better.
 
 Each participant's MAP is the EM of the pooled fit (:func:`~.em.run_em`, SQUAREM), one
 parameter set per participant, each run on that participant's trials only (the compiled
@@ -76,7 +86,7 @@ HELD_FLOOR = 1e6  # a held-out block of probability zero scores -HELD_FLOOR
 # how a table's strength was chosen (PersonalModels.method)
 EB = "variational empirical Bayes"
 CV = "held-out log-likelihood, {folds} blocks of trials per participant"
-NOTHING = "no free row the trials reach"
+NOTHING = "nothing to estimate (no row with two or more free cells that the trials reach)"
 GIVEN = "given"
 
 
@@ -543,6 +553,8 @@ def personalize(
     if strength is None:
         if estimate not in ESTIMATES:
             raise FitError([f"estimate must be one of {list(ESTIMATES)}, got {estimate!r}"])
+        if estimate == "held-out" and not (isinstance(folds, int) and folds >= 2):
+            raise FitError([f"folds must be an integer >= 2, got {folds!r}"])
         evidence = prep.evidence()
         left_out = int(N - np.count_nonzero(evidence.active))
         if left_out and estimate == "variational":
