@@ -9,8 +9,10 @@ mean under Dirichlet(s t)): a row the participant's trials never reach
 stays the centre's, and a row they reach often moves toward their own counts.  Tied rows
 share one prior and one estimate; fixed cells stay fixed; a zero of the centre stays zero.
 
-**The strength s** is estimated from the data, **one s per table** (initial, emission,
-transition), in one of two ways.
+**The strength s** is estimated from the data, **one s per table** (emission, transition),
+in one of two ways.  The initial table keeps the centre's row (s = :data:`S_MAX`) unless s is
+given: each participant's trials are a single draw from their initial row, and a single draw
+has the centre's probabilities whatever s is, so the data carry no information on it.
 
 ``held-out`` (the default): each participant's trials are split into :data:`FOLDS` blocks of
 consecutive trials; for each block, every participant's MAP is fitted with that block's
@@ -88,6 +90,7 @@ EB = "variational empirical Bayes"
 CV = "held-out log-likelihood, {folds} blocks of trials per participant"
 NOTHING = "nothing to estimate (no row with two or more free cells that the trials reach)"
 GIVEN = "given"
+ONE_DRAW = "the centre's (one sequence per participant is one draw from it: no information on s)"
 
 
 class _PersonalWorkspace(Workspace):
@@ -251,6 +254,17 @@ class _Evidence:
             previous = total
 
 
+def _estimable(rows: Mapping[str, _Rows], counts: Mapping[str, np.ndarray]) -> list[str]:
+    """The tables whose s the data inform: a Dirichlet row some participant's trials reach, and not
+    the initial table (each participant's trials are one draw from their initial row, and the
+    probability of a single draw is the centre's whatever s is)."""
+    return [k for k in TABLES if k != "initial" and np.where(rows[k].dirichlet[..., None], counts[k], 0.0).sum() > 0]
+
+
+def _not_estimated(table: str) -> str:
+    return ONE_DRAW if table == "initial" else NOTHING
+
+
 def _strengths(
     evidence: _Evidence, start: dict[str, np.ndarray], tol: float, max_iter: int
 ) -> tuple[dict[str, float], dict[str, bool], dict[str, str], float, float]:
@@ -258,9 +272,9 @@ def _strengths(
     each is at a bound, how it was chosen, the bound there and at s = S_MAX (the centre itself)."""
     rows = evidence.rows
     # a table whose Dirichlet rows no participant's trials reach: the data say nothing about its s
-    free = [k for k in TABLES if (np.where(rows[k].dirichlet[..., None], start[k], 0.0).sum() > 0)]
+    free = _estimable(rows, start)
     s = dict.fromkeys(TABLES, S_MAX)
-    how = {k: (EB if k in free else NOTHING) for k in TABLES}
+    how = {k: (EB if k in free else _not_estimated(k)) for k in TABLES}
     lo, hi = math.log(S_MIN), math.log(S_MAX)
     state = {"counts": dict(start)}
 
@@ -497,10 +511,10 @@ def _cv_strengths(
     error of the best's (the paired differences over participants; the one-standard-error rule).
     Whether each is at S_MAX, how it was chosen, the score there and at s = S_MAX everywhere."""
     start = prep.evidence().counts(prep.first)
-    free = [k for k in TABLES if np.where(prep.rows[k].dirichlet[..., None], start[k], 0.0).sum() > 0]
+    free = _estimable(prep.rows, start)
     cv = _CrossValidation(prep, folds, tol, max_iter)
     s = dict.fromkeys(TABLES, S_MAX)
-    how = {k: (CV.format(folds=folds) if k in free else NOTHING) for k in TABLES}
+    how = {k: (CV.format(folds=folds) if k in free else _not_estimated(k)) for k in TABLES}
     current = cv.score(s)
     centre = float(current.sum())
     lo, hi = math.log10(S_MIN), math.log10(S_MAX)
@@ -571,7 +585,7 @@ def personalize(
         warnings += [
             f"{name}: the strength is at its bound ({s_tab[name]:.3g}): the data show no individual differences there"
             for name in TABLES
-            if bound[name] and method[name] != NOTHING
+            if bound[name] and method[name] not in (NOTHING, ONE_DRAW)
         ]
     else:
         s_tab, bound, method = {}, {}, {}
