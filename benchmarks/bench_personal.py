@@ -2,6 +2,7 @@
 
     python benchmarks/bench_personal.py            # 100 participants x 71 trials, 3 draws per population
     python benchmarks/bench_personal.py --reps 1   # one draw
+    python benchmarks/bench_personal.py c5 types   # some populations
 
 Populations (``simulate_design``, the paper's design, 71 trials each), all with the pooled fit
 of the log (3 restarts) as the centre:
@@ -9,7 +10,8 @@ of the log (3 restarts) as the centre:
 * ``none``: every participant is the paper's model (no individual differences);
 * ``c50`` / ``c5``: ``Supervisors.dirichlet`` around the paper's model, concentration 50 and 5
   (every row of each person drawn from Dirichlet(c * the paper's row): c is the true s);
-* ``types``: ``paper_conservative_mixture(0.5)`` (two supervisor types, half each).
+* ``types``: ``paper_conservative_mixture(0.5)`` (two supervisor types, half each);
+* ``c50x4``: ``c50`` with four times the trials (284 each): small differences need more trials.
 
 Each line: the estimate (held-out or variational), s per table (``*``: at the bound), the
 criterion's gain over the centre, the CPU seconds of ``personalize`` (the pooled fit's are the
@@ -39,10 +41,12 @@ from trustseek.model.core import TrustModel
 from trustseek.model.presets import paper_conservative_mixture, paper_model
 from trustseek.simulation.designs import simulate_design
 from trustseek.simulation.populations import Supervisors
+from trustseek.vocab import PAPER_DATA_COUNTS
 
 
 def population(name: str, n: int, seed: int) -> Supervisors:
     pm = paper_model()
+    name = name.removesuffix("x4")
     if name == "none":
         return Supervisors.dirichlet(pm, n, 1e12, rng=seed)
     if name == "types":
@@ -70,15 +74,17 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--participants", type=int, default=100)
     ap.add_argument("--reps", type=int, default=3, help="draws of each population")
+    ap.add_argument("populations", nargs="*", default=["none", "c50", "c5", "types", "c50x4"])
     args = ap.parse_args()
     n = args.participants
     personalize(simulate_design(paper_model(), 3, seed=0), paper_model(), strength=1.0)  # load the compiled passes
-    print(f"{n} participants x 71 trials, the pooled fit as the centre, one thread; load {os.getloadavg()[0]:.1f}")
-    for name in ("none", "c50", "c5", "types"):
+    print(f"{n} participants, the pooled fit as the centre, one thread; load {os.getloadavg()[0]:.1f}")
+    for name in args.populations:
+        trials = [4 * c for c in PAPER_DATA_COUNTS] if name.endswith("x4") else PAPER_DATA_COUNTS
         for rep in range(args.reps):
             sup = population(name, n, 100 * rep + 1)
-            df = simulate_design(sup, n, seed=100 * rep + 2)
-            new = simulate_design(sup, n, seed=100 * rep + 3)
+            df = simulate_design(sup, n, seed=100 * rep + 2, n_trials=trials)
+            new = simulate_design(sup, n, seed=100 * rep + 3, n_trials=trials)
             truth = [sup.model_of(i) for i in range(n)]
             t = time.process_time()
             pooled = fit_trust_model(df, restarts=3).model
