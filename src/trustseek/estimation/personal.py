@@ -83,7 +83,7 @@ INNER_TOL = 1e-10  # relative gain of the summed bound below which the variation
 TINY = 1e-300  # the prior's parameters are at least this
 ESTIMATES = ("held-out", "variational")  # how personalize estimates s
 FOLDS = 5  # cross-validation: blocks of consecutive trials per participant
-NEGLIGIBLE = 1e-3  # cross-validation: a difference in held-out log-likelihood this small per participant is none
+NEGLIGIBLE = 1e-3  # a gain in the criterion this small per participant is none (s stays at S_MAX)
 HELD_FLOOR = 1e6  # a held-out block of probability zero scores -HELD_FLOOR
 # how a table's strength was chosen (PersonalModels.method)
 EB = "variational empirical Bayes"
@@ -302,9 +302,17 @@ def _strengths(
     res = minimize(evaluate, x0, jac=True, method="L-BFGS-B", bounds=[(lo, hi)] * len(free), options={"ftol": tol})
     x = np.asarray(res.x, dtype=float)
     value, _ = evaluate(x)
-    near = 0.01 * (hi - lo)
+    # a table whose s gains next to nothing over S_MAX (NEGLIGIBLE per participant) keeps the centre
+    for i in range(len(free)):
+        at_top = x.copy()
+        at_top[i] = hi
+        top, _ = evaluate(at_top)
+        if top - value <= NEGLIGIBLE * int(np.count_nonzero(evidence.active)):
+            x, value = at_top, top
+    value, _ = evaluate(x)
     bound = dict.fromkeys(TABLES, True)
-    bound.update({k: bool(v <= lo + near or v >= hi - near) for k, v in zip(free, x, strict=True)})
+    bound.update({k: bool(v >= hi - 1e-9) for k, v in zip(free, x, strict=True)})
+    s.update({k: S_MAX for k in free if bound[k]})
     return s, bound, how, -value, -at_max
 
 
@@ -586,6 +594,11 @@ def personalize(
             f"{name}: the strength is at its bound ({s_tab[name]:.3g}): the data show no individual differences there"
             for name in TABLES
             if bound[name] and method[name] not in (NOTHING, ONE_DRAW)
+        ]
+        warnings += [
+            f"{name}: the strength is at its lower bound ({s_tab[name]:.3g}): each participant's rows are their own counts"
+            for name in TABLES
+            if s_tab[name] <= S_MIN * (1 + 1e-9)
         ]
     else:
         s_tab, bound, method = {}, {}, {}
