@@ -253,7 +253,13 @@ def personalize(
     ),
     out: Path = typer.Option(..., "--out", "-o", help="A new or empty folder: a model JSON per participant, participants.csv."),
     strength: float | None = typer.Option(
-        None, "--strength", min=0.0, help="Prior strength s (pseudo-counts per row); default: per table by empirical Bayes."
+        None, "--strength", min=0.0, help="Prior strength s (pseudo-counts per row); default: estimated per table."
+    ),
+    estimate: str = typer.Option(
+        "held-out",
+        "--estimate",
+        help="How s is estimated: held-out (log-likelihood of blocks of each participant's trials) or variational "
+        "(variational empirical Bayes, which shrinks more).",
     ),
     tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative tolerance of each participant's EM (> 0)."),
     as_json: bool = typer.Option(False, "--json", help="Print the strengths and the per-participant summary as JSON."),
@@ -264,27 +270,31 @@ def personalize(
     delimiter: str | None = DelimiterOpt,
 ) -> None:
     """Per-person trust models: each participant's MAP estimate, shrunk toward the pooled model or their type."""
+    if estimate not in ("held-out", "variational"):
+        raise TrustseekError([f"--estimate must be held-out or variational, got {estimate!r}"])
     check_output(out, "--out", directory=True)
     from ..estimation.personal import personalize as run
     from ..model.presets import load_mixture
 
     centre = load_mixture(model)
     frame = _log(log, mapping, column, label, missing, delimiter)
-    res = run(frame, centre if centre.n_types > 1 else centre.models[0], strength=strength, tol=tol)
+    res = run(frame, centre if centre.n_types > 1 else centre.models[0], strength=strength, tol=tol, estimate=estimate)
     with atomic_output(out, directory=True) as tmp:
         res.save(tmp)
     if as_json:
-        print_json(
-            {
-                "strength": res.strength,
-                "at_bound": res.at_bound,
-                "participants": res.frame().to_dict(orient="records"),
-                "warnings": res.warnings,
-            }
-        )
+        print_json({**res.summary(), "participants": res.frame().to_dict(orient="records")})
         return
     s = ", ".join(f"{k} {v:.3g}" + (" (at bound)" if res.at_bound[k] else "") for k, v in res.strength.items())
     console.print(f"prior strength per table: {s}", highlight=False)
+    for k, how in res.method.items():
+        console.print(f"  {k}: {how}", highlight=False)
+    if res.estimate != "given":
+        what = "held-out log-likelihood" if res.estimate == "held-out" else "variational bound on the log evidence"
+        console.print(
+            f"{what}: {res.score:.3f} at these strengths, {res.score_centre:.3f} at the centre "
+            f"({res.score - res.score_centre:+.3f})",
+            highlight=False,
+        )
     gain = float((res.loglik - res.centre_loglik).sum())
     console.print(
         f"{len(res.models)} participants; log-likelihood under their own models {res.loglik.sum():.3f} "

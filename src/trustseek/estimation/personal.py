@@ -2,31 +2,49 @@
 
 The centre is the pooled model, or with supervisor types (a
 :class:`~trustseek.model.mixture.TypeMixture`) the participant's most probable type.  Every
-free row of participant n's model gets a Dirichlet prior whose pseudo-counts are
-``s * (the centre's row)`` (over the row's free cells, renormalised to sum to s), so the
-M-step is ``(expected counts + s * centre row) / total``: a row the participant's trials
-never reach stays the centre's, and a row they reach often moves toward their own counts.
+free row of participant n's model gets a Dirichlet prior Dirichlet(s t) with t the centre's
+row (over the row's usable cells: free, and positive in the centre, renormalised), so the
+M-step is ``(expected counts + s t) / total`` (for a row with observed counts, the posterior
+mean under Dirichlet(s t)): a row the participant's trials never reach
+stays the centre's, and a row they reach often moves toward their own counts.  Tied rows
+share one prior and one estimate; fixed cells stay fixed; a zero of the centre stays zero.
 
-**The strength s** is estimated from the data by empirical Bayes, **one s per table**
-(initial, emission, transition): the value that maximises the Dirichlet-multinomial marginal
-likelihood of every participant's expected counts (under the centre) given the centre rows,
+**The strength s** is estimated from the data, **one s per table** (emission, transition),
+in one of two ways.  The initial table keeps the centre's row (s = :data:`S_MAX`) unless s is
+given: each participant's trials are a single draw from their initial row, and a single draw
+has the centre's probabilities whatever s is, so the data carry no information on it.
 
-    sum_n sum_rows  lgamma(s) - lgamma(s + c) + sum_j [lgamma(s t_j + c_j) - lgamma(s t_j)],
+``held-out`` (the default): each participant's trials are split into :data:`FOLDS` blocks of
+consecutive trials; for each block, every participant's MAP is fitted with that block's
+actions unobserved and scores log p(block | the other blocks) (the forward-backward
+likelihood of all actions minus that of the others).  Summed over blocks and participants,
+this held-out log-likelihood is maximised over a log grid of s per table (decades from
+:data:`S_MAX` down to :data:`S_MIN`, refined by half and quarter decades, one table at a
+time), and the largest s within one standard error of the best is kept (the paired
+differences over participants): a noisy gain does not personalise.  At :data:`S_MAX` the
+table is reported as at the bound (the personal models are the centre there).
 
-over s in [:data:`S_MIN`, :data:`S_MAX`] (log scale).  A large s says the participants do
-not differ from the centre beyond chance; at :data:`S_MAX` the result is reported as at the
-bound (the data show no individual differences in that table).
+``variational``: variational empirical Bayes (MacKay 1997; Beal 2003, ch. 3).  For given
+strengths each participant's posterior is approximated by q(theta_n) q(levels_n), with
+q(theta_n) a Dirichlet per row whose parameters are ``s t + expected counts`` and
+q(levels_n) the forward-backward posterior under the sub-normalised tables
+exp(E_q[log theta_n]); the bound on log p(trials of n | s),
 
-A limit of this estimate, measured (docs/types.md): the expected counts are split over the
-hidden levels by the centre's posterior, which puts a participant who relies more than the
-centre into its high level rather than into a different high-level row; so differences
-between people largely show as differences in time spent at each level, not as
-overdispersed rows, and s tends to the bound even on a population drawn around the pooled
-model (``Supervisors.dirichlet`` with concentration 5).  Give ``strength`` to shrink less.
+    F_n(s) = log Z_n - KL(q(theta_n) || Dirichlet(s t)),
+
+(Z_n: the forward-backward normaliser under those tables) is maximised over q by alternating
+the two updates (it never decreases) and ``sum_n F_n`` over log s (a grid per table, then
+L-BFGS-B with the exact gradient at the converged q).  With known levels the bound is the
+evidence.  With hidden levels it is below the evidence by a gap that grows as s gets small
+(q ignores how the levels and the rows depend on each other), so it shrinks more than the
+data call for; measured (docs/types.md): on two supervisor types around their pooled fit it
+keeps every s at the bound while the held-out estimate finds finite s and models that
+predict new trials better.
 
 Each participant's MAP is the EM of the pooled fit (:func:`~.em.run_em`, SQUAREM), one
 parameter set per participant, each run on that participant's trials only (the compiled
-pass :meth:`~.kernels.Kernel.run_each`), from the centre.
+pass :meth:`~.kernels.Kernel.run_each`), from the centre; the variational E-steps use the
+same pass.
 """
 
 from __future__ import annotations
@@ -36,23 +54,23 @@ import logging
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import minimize_scalar
-from scipy.special import gammaln
+from scipy.optimize import minimize
+from scipy.special import digamma, gammaln
 
 from ..model.core import TrustModel, json_safe
 from ..model.mixture import TypeMixture
 from . import kernels
-from .em import run_em
+from .em import RunResult, run_em
 from .estep import EStep, Workspace
 from .mixture import MixtureStructure, MixtureWorkspace, mixture_params, type_posteriors
-from .sequences import encode
-from .spec import FitError, Params
+from .sequences import Sequences, encode
+from .spec import FitError, IOHMMSpec, Params
 from .structure import FLOOR, Structure, Table
 from .trust_iohmm import to_trust_model
 
@@ -60,6 +78,19 @@ log = logging.getLogger(__name__)
 
 TABLES = ("initial", "emission", "transition")
 S_MIN, S_MAX = 1e-2, 1e6
+GRID = 9  # strengths tried per table from S_MAX down to S_MIN (log-spaced) before the joint search
+INNER_TOL = 1e-10  # relative gain of the summed bound below which the variational E-steps stop
+TINY = 1e-300  # the prior's parameters are at least this
+ESTIMATES = ("held-out", "variational")  # how personalize estimates s
+FOLDS = 5  # cross-validation: blocks of consecutive trials per participant
+NEGLIGIBLE = 1e-3  # a gain in the criterion this small per participant is none (s stays at S_MAX)
+HELD_FLOOR = 1e6  # a held-out block of probability zero scores -HELD_FLOOR
+# how a table's strength was chosen (PersonalModels.method)
+EB = "variational empirical Bayes"
+CV = "held-out log-likelihood, {folds} blocks of trials per participant"
+NOTHING = "nothing to estimate (no row with two or more free cells that the trials reach)"
+GIVEN = "given"
+ONE_DRAW = "the centre's (one sequence per participant is one draw from it: no information on s)"
 
 
 class _PersonalWorkspace(Workspace):
@@ -100,39 +131,189 @@ class _PersonalStructure(Structure):
         return out
 
 
-def _free_rows(table: Table, counts: np.ndarray, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per participant and free row (tie groups summed): counts (N, G, K, X), the centre's row
-    renormalised over the usable cells, and the usable-cell mask (free, centre > 0, group reached)."""
-    cg = np.einsum("nukx,ug->ngkx", counts, table.onehot)
-    rows = centre[:, table.rep]  # (N, G, K, X)
-    reached = ~table.empty[table.rep]
-    mask = ~table.gfixed[None] & (rows > 0) & reached[None, :, None, None]
-    t = np.where(mask, rows, 0.0)
-    s = t.sum(-1, keepdims=True)
-    t = t / np.where(s > 0, s, 1.0)
-    return cg, t, mask
+class _Rows:
+    """The Dirichlet rows of one table for N participants, tie groups as one row (the representative's).
+
+    A row's usable cells are its free cells where the centre is positive (a zero of the centre is a
+    zero of every personal model); a row with two or more usable cells, in a group the log reaches,
+    gets the prior Dirichlet(s t) with t the centre's row renormalised over those cells, scaled to
+    the row's free mass.  A row with one usable cell is that cell at the free mass; fixed cells keep
+    their values.  ``centre``: (N, U, K, X), or (N, K) for the initial table (``table`` None).
+    """
+
+    def __init__(self, centre: np.ndarray, table: Table | None):
+        if table is None:
+            rows = centre[:, None, None, :]
+            X = centre.shape[-1]
+            self.group, self.onehot = np.zeros(1, dtype=np.int64), np.ones((1, 1))
+            fixed, values = np.zeros((1, 1, X), dtype=bool), np.zeros((1, 1, X))
+            mass, reached = np.ones((1, 1)), np.ones(1, dtype=bool)
+        else:
+            rows = centre[:, table.rep]
+            self.group, self.onehot = table.group, table.onehot
+            fixed, values, mass, reached = table.gfixed, table.gvalues, table.mass, ~table.empty[table.rep]
+        usable = ~fixed[None] & (rows > 0) & reached[None, :, None, None]
+        self.dirichlet = usable.sum(-1) >= 2  # (N, G, K)
+        self.mask = usable & self.dirichlet[..., None]
+        t = np.where(self.mask, rows, 0.0)
+        total = t.sum(-1, keepdims=True)
+        self.t = t / np.where(total > 0, total, 1.0)
+        self.single = usable & ~self.dirichlet[..., None]
+        self.fixed = np.where(fixed, values, 0.0)
+        self.mass = mass[..., None]
+
+    def grouped(self, counts: np.ndarray) -> np.ndarray:
+        """Expected counts (N, U, K, X) summed over each tie group: (N, G, K, X) on the usable cells."""
+        return np.where(self.mask, np.einsum("nukx,ug->ngkx", counts, self.onehot), 0.0)
+
+    def prior(self, s: float) -> np.ndarray:
+        """The prior's Dirichlet parameters s t (N, G, K, X), zero off the usable cells."""
+        return np.where(self.mask, np.maximum(s * self.t, TINY), 0.0)
+
+    def expected_log(self, alpha: np.ndarray) -> np.ndarray:
+        """E[log phi] under Dirichlet(alpha) on the usable cells (0 elsewhere)."""
+        a = np.where(self.mask, alpha, 1.0)
+        total = np.where(self.mask, alpha, 0.0).sum(-1, keepdims=True)
+        return np.where(self.mask, digamma(a) - digamma(np.where(self.dirichlet[..., None], total, 1.0)), 0.0)
+
+    def tilde(self, alpha: np.ndarray) -> np.ndarray:
+        """The sub-normalised table exp(E[log theta]) under q = Dirichlet(alpha), rows (N, U, K, X)."""
+        g = np.where(self.mask, self.mass * np.exp(self.expected_log(alpha)), np.where(self.single, self.mass, self.fixed))
+        return g[:, self.group]
+
+    def kl(self, alpha: np.ndarray, beta: np.ndarray) -> np.ndarray:
+        """KL(Dirichlet(alpha) || Dirichlet(beta)) summed over the rows of each participant (N,)."""
+        m, d = self.mask, self.dirichlet
+        a, b = np.where(m, alpha, 1.0), np.where(m, beta, 1.0)
+        A = np.where(d, np.where(m, alpha, 0.0).sum(-1), 1.0)
+        B = np.where(d, np.where(m, beta, 0.0).sum(-1), 1.0)
+        cells = np.where(m, gammaln(b) - gammaln(a) + (a - b) * (digamma(a) - digamma(A)[..., None]), 0.0).sum(-1)
+        return np.where(d, gammaln(A) - gammaln(B) + cells, 0.0).sum((-2, -1))
+
+    def gradient(self, alpha: np.ndarray, s: float) -> float:
+        """d/ds of sum_n E_q[log Dirichlet(theta_n | s t)] (rows where q is the prior add zero)."""
+        m, d = self.mask, self.dirichlet
+        st = np.where(m, np.maximum(s * self.t, TINY), 1.0)
+        cells = np.where(m, self.t * (self.expected_log(alpha) - digamma(st)), 0.0).sum(-1)
+        return float(np.where(d, digamma(s) + cells, 0.0).sum())
 
 
-def dirichlet_multinomial(s: float, counts: np.ndarray, means: np.ndarray, mask: np.ndarray) -> float:
-    """sum over rows of log DirMult(counts | s * means), up to the multinomial coefficient; rows
-    (last axis = cells) with fewer than 2 usable cells or no counts add nothing."""
-    use = (mask.sum(-1) >= 2) & (np.where(mask, counts, 0.0).sum(-1) > 0)
-    c = np.where(mask, counts, 0.0)[use]
-    t = means[use]
-    m = mask[use]
-    a = s * t
-    cell = np.where(m, gammaln(np.where(m, a + c, 1.0)) - gammaln(np.where(m, a, 1.0)), 0.0).sum(-1)
-    return float((gammaln(s) - gammaln(s + c.sum(-1)) + cell).sum())
+@dataclass
+class _Variational:
+    """Where the variational E-steps of one set of strengths ended."""
+
+    bound: np.ndarray  # (N,) each participant's lower bound on log p(trials | s)
+    alpha: dict[str, np.ndarray]  # q(theta_n) per table
+    counts: dict[str, np.ndarray]  # the expected counts that q(theta_n) came from (warm start)
+    iterations: int
 
 
-def estimate_strength(counts: np.ndarray, means: np.ndarray, mask: np.ndarray) -> tuple[float, bool]:
-    """The s in [S_MIN, S_MAX] maximising :func:`dirichlet_multinomial`; and whether it is at a bound."""
-    if not ((mask.sum(-1) >= 2) & (np.where(mask, counts, 0.0).sum(-1) > 0)).any():
-        return S_MAX, True
+class _Evidence:
+    """Variational Bayes (MacKay 1997; Beal 2003, ch. 3) for every participant's model at once.
+
+    For strengths s (per table), q(theta_n) is Dirichlet(s t + expected counts) per row and
+    q(levels of n) the forward-backward posterior under the sub-normalised tables
+    exp(E_q[log theta_n]); the bound ``log Z_n - KL(q(theta_n) || prior)`` (Z_n: the
+    forward-backward normaliser under those tables) never decreases along the updates and is
+    at most log p(trials of n | s).
+    """
+
+    def __init__(self, work: _PersonalWorkspace, rows: dict[str, _Rows]):
+        self.work, self.rows = work, rows
+        self.active = np.ones(work.N, dtype=bool)
+        # participants whose trials the centre's zeros make impossible take no part
+        self.active = np.isfinite(self.estep({k: rows[k].prior(S_MAX) for k in TABLES}).loglik)
+
+    def estep(self, alpha: Mapping[str, np.ndarray]) -> EStep:
+        """The forward-backward pass under the sub-normalised tables of q(theta_n) = Dirichlet(alpha)."""
+        tilde = {k: self.rows[k].tilde(alpha[k]) for k in TABLES}
+        return self.work.estep(Params(tilde["initial"][:, 0, 0], tilde["emission"], tilde["transition"]), self.active)
+
+    def counts(self, st: EStep) -> dict[str, np.ndarray]:
+        return {
+            "initial": self.rows["initial"].grouped(st.initial[:, None, None, :]),
+            "emission": self.rows["emission"].grouped(st.emission),
+            "transition": self.rows["transition"].grouped(st.transition),
+        }
+
+    def run(self, s: Mapping[str, float], counts: Mapping[str, np.ndarray], tol: float, max_iter: int) -> _Variational:
+        """Variational E-steps from q(theta_n) = Dirichlet(s t + ``counts``) until the summed bound
+        gains less than ``tol`` (relative) in a step, or ``max_iter`` steps."""
+        previous = -math.inf
+        it = 0
+        while True:
+            it += 1
+            alpha = {k: self.rows[k].prior(s[k]) + counts[k] for k in TABLES}
+            st = self.estep(alpha)
+            kl = sum(self.rows[k].kl(alpha[k], self.rows[k].prior(s[k])) for k in TABLES)
+            bound = np.where(np.isfinite(st.loglik), st.loglik - kl, 0.0)
+            counts = self.counts(st)
+            total = float(bound.sum())
+            if it >= max_iter or total - previous <= tol * abs(total):
+                return _Variational(bound, alpha, counts, it)
+            previous = total
+
+
+def _estimable(rows: Mapping[str, _Rows], counts: Mapping[str, np.ndarray]) -> list[str]:
+    """The tables whose s the data inform: a Dirichlet row some participant's trials reach, and not
+    the initial table (each participant's trials are one draw from their initial row, and the
+    probability of a single draw is the centre's whatever s is)."""
+    return [k for k in TABLES if k != "initial" and np.where(rows[k].dirichlet[..., None], counts[k], 0.0).sum() > 0]
+
+
+def _not_estimated(table: str) -> str:
+    return ONE_DRAW if table == "initial" else NOTHING
+
+
+def _strengths(
+    evidence: _Evidence, start: dict[str, np.ndarray], tol: float, max_iter: int
+) -> tuple[dict[str, float], dict[str, bool], dict[str, str], float, float]:
+    """The strengths maximising the summed variational bound (log scale, within [S_MIN, S_MAX]); whether
+    each is at a bound, how it was chosen, the bound there and at s = S_MAX (the centre itself)."""
+    rows = evidence.rows
+    # a table whose Dirichlet rows no participant's trials reach: the data say nothing about its s
+    free = _estimable(rows, start)
+    s = dict.fromkeys(TABLES, S_MAX)
+    how = {k: (EB if k in free else _not_estimated(k)) for k in TABLES}
     lo, hi = math.log(S_MIN), math.log(S_MAX)
-    res = minimize_scalar(lambda x: -dirichlet_multinomial(math.exp(x), counts, means, mask), bounds=(lo, hi), method="bounded")
-    x = float(res.x)
-    return math.exp(x), bool(x <= lo + 0.01 * (hi - lo) or x >= hi - 0.01 * (hi - lo))
+    state = {"counts": dict(start)}
+
+    def evaluate(x: np.ndarray) -> tuple[float, np.ndarray]:
+        for k, v in zip(free, x, strict=True):
+            s[k] = math.exp(float(v))
+        res = evidence.run(s, state["counts"], INNER_TOL, max_iter)
+        state["counts"] = res.counts
+        grad = np.array([rows[k].gradient(res.alpha[k], s[k]) * s[k] for k in free])
+        return -float(res.bound.sum()), -grad
+
+    at_max, _ = evaluate(np.full(len(free), hi))
+    if not free:
+        return s, dict.fromkeys(TABLES, True), how, -at_max, -at_max
+    # a coarse grid for each table in turn (the others at their best so far), from the centre down;
+    # then all tables' s together by L-BFGS-B from there
+    x0 = np.full(len(free), hi)
+    for i in range(len(free)):
+        tried = []
+        for v in np.linspace(hi, lo, GRID):
+            x0[i] = v
+            tried.append((evaluate(x0)[0], v))
+        x0[i] = min(tried)[1]
+    evaluate(x0)
+    res = minimize(evaluate, x0, jac=True, method="L-BFGS-B", bounds=[(lo, hi)] * len(free), options={"ftol": tol})
+    x = np.asarray(res.x, dtype=float)
+    value, _ = evaluate(x)
+    # a table whose s gains next to nothing over S_MAX (NEGLIGIBLE per participant) keeps the centre
+    for i in range(len(free)):
+        at_top = x.copy()
+        at_top[i] = hi
+        top, _ = evaluate(at_top)
+        if top - value <= NEGLIGIBLE * int(np.count_nonzero(evidence.active)):
+            x, value = at_top, top
+    value, _ = evaluate(x)
+    bound = dict.fromkeys(TABLES, True)
+    bound.update({k: bool(v >= hi - 1e-9) for k, v in zip(free, x, strict=True)})
+    s.update({k: S_MAX for k in free if bound[k]})
+    return s, bound, how, -value, -at_max
 
 
 @dataclass
@@ -144,6 +325,10 @@ class PersonalModels:
     centre: list[str]
     strength: dict[str, float]
     at_bound: dict[str, bool]
+    method: dict[str, str]  # how each table's s was chosen
+    estimate: str  # "held-out", "variational" or "given"
+    score: float  # the criterion at the chosen strengths (held-out log-likelihood, or variational bound)
+    score_centre: float  # the same at s = S_MAX in every table (the centre)
     loglik: np.ndarray
     centre_loglik: np.ndarray
     iterations: np.ndarray
@@ -191,6 +376,18 @@ class PersonalModels:
             out.append(f"{name}.json")
         return out
 
+    def summary(self) -> dict[str, Any]:
+        """The strengths, how they were chosen and the criterion (as ``strength.json`` holds them)."""
+        return {
+            "strength": self.strength,
+            "at_bound": self.at_bound,
+            "method": self.method,
+            "estimate": self.estimate,
+            "score": self.score,
+            "score_centre": self.score_centre,
+            "warnings": self.warnings,
+        }
+
     def save(self, folder: str | Path) -> None:
         """``<participant>.json`` per participant, ``participants.csv`` (with the file of each) and
         ``strength.json``, into ``folder`` (created)."""
@@ -203,10 +400,156 @@ class PersonalModels:
         table.insert(1, "file", names)
         table.to_csv(folder / "participants.csv", index=False)
         (folder / "strength.json").write_text(
-            json.dumps(json_safe({"strength": self.strength, "at_bound": self.at_bound, "warnings": self.warnings}), indent=2)
-            + "\n",
+            json.dumps(json_safe(self.summary()), indent=2) + "\n",
             encoding="utf-8",
         )
+
+
+@dataclass
+class _Prepared:
+    """The log encoded against the centre: each participant's centre (the pooled model, or their most
+    probable type), the E-step of every participant under it, and the rows of the priors."""
+
+    spec: IOHMMSpec
+    seqs: Sequences
+    base: Structure
+    mixture: TypeMixture
+    types: np.ndarray  # (N,) each participant's type
+    centre: Params  # (N, ...) each participant's centre
+    work: _PersonalWorkspace
+    start: Params  # the centre, projected (no exact zero): where each participant's EM starts
+    first: EStep  # each participant's E-step under ``start``
+    rows: dict[str, _Rows]
+
+    @classmethod
+    def of(cls, frame: pd.DataFrame, model: TrustModel | TypeMixture, n_jobs: int | None = 1) -> _Prepared:
+        if not kernels.AVAILABLE:
+            raise FitError(["per-person models need the numba package"])
+        mixture = model if isinstance(model, TypeMixture) else TypeMixture.single(model)
+        spec, mp = mixture_params(mixture)
+        seqs = encode(frame, spec)
+        base = Structure(spec, seqs)
+        N = seqs.n_participants
+        if mixture.n_types > 1:
+            mstruct = MixtureStructure(spec, seqs, mixture.n_types)
+            types = type_posteriors(MixtureWorkspace(seqs, mstruct), mp).argmax(1)
+        else:
+            types = np.zeros(N, dtype=np.int64)
+        each = [mp.type_params(m) for m in range(mixture.n_types)]
+        centre = Params(
+            np.stack([each[i].initial for i in types]),
+            np.stack([each[i].emission for i in types]),
+            np.stack([each[i].transition for i in types]),
+        )
+        work = _PersonalWorkspace(seqs, *base.dims, method="numba", threads=n_jobs or 1)
+        start = base.project(centre)
+        rows = {
+            "initial": _Rows(centre.initial, None),
+            "emission": _Rows(centre.emission, base.em),
+            "transition": _Rows(centre.transition, base.tr),
+        }
+        return cls(spec, seqs, base, mixture, types, centre, work, start, work.estep(start), rows)
+
+    def evidence(self) -> _Evidence:
+        return _Evidence(self.work, self.rows)
+
+    def structure(self, s: Mapping[str, float]) -> _PersonalStructure:
+        """The MAP structure with pseudo-counts s t on the usable cells, at each tie group's
+        representative row (empty elsewhere)."""
+        structure = _PersonalStructure(self.spec, self.seqs)
+        structure.pseudo = {"initial": self.rows["initial"].prior(s["initial"])[:, 0, 0]}
+        for name, table in (("emission", self.base.em), ("transition", self.base.tr)):
+            pseudo = np.zeros(getattr(self.centre, name).shape)
+            pseudo[:, table.rep] = self.rows[name].prior(s[name])
+            structure.pseudo[name] = pseudo
+        return structure
+
+    def fit(self, s: Mapping[str, float], work: Workspace, starts: Params, tol: float, max_iter: int) -> list[RunResult]:
+        """Each participant's MAP at strengths ``s`` on the trials of ``work``, from ``starts``."""
+        N = self.seqs.n_participants
+        return run_em(self.structure(s), work, [starts.take(n) for n in range(N)], tol=tol, max_iter=max_iter)
+
+
+def blocks(lengths: np.ndarray, T: int, folds: int) -> np.ndarray:
+    """(T, N): the block (0 .. folds - 1) of each position of each sequence, ``folds`` runs of
+    consecutive trials of sizes differing by at most one (a sequence shorter than ``folds`` leaves
+    some blocks empty); padding positions get ``folds`` or more."""
+    L = np.asarray(lengths, dtype=np.int64)[None, :]
+    return np.where(np.arange(T)[:, None] < L, (np.arange(T)[:, None] * folds) // np.maximum(L, 1), folds)
+
+
+class _CrossValidation:
+    """Held-out log-likelihood of each participant's MAP: the trials of each participant split into
+    ``folds`` consecutive blocks; fold f's models are fitted with block f's actions unobserved, and
+    score log p(all actions) - log p(the others'), i.e. log p(block f | the other blocks)."""
+
+    def __init__(self, prep: _Prepared, folds: int, tol: float, max_iter: int):
+        self.prep, self.tol, self.max_iter = prep, tol, max_iter
+        seqs = prep.seqs
+        block = blocks(seqs.lengths, seqs.y.shape[0], folds)
+        self.works = [
+            _PersonalWorkspace(
+                replace(seqs, y=np.where(block == f, -1, seqs.y).astype(seqs.y.dtype)),
+                *prep.base.dims,
+                method="numba",
+                threads=prep.work.threads,
+            )
+            for f in range(folds)
+        ]
+        self.starts = [prep.start] * folds  # each fold's last fit: the next one starts there
+
+    def score(self, s: Mapping[str, float]) -> np.ndarray:
+        """Each participant's held-out log-likelihood at strengths ``s``, summed over the folds (N,)."""
+        total = np.zeros(self.prep.seqs.n_participants)
+        for f, work in enumerate(self.works):
+            runs = self.prep.fit(s, work, self.starts[f], self.tol, self.max_iter)
+            params = Params.stack([r.params for r in runs])
+            held = self.prep.work.estep(params).loglik - np.array([r.loglik for r in runs])
+            total += np.where(np.isfinite(held), held, -HELD_FLOOR)
+            self.starts[f] = params
+        return total
+
+
+def _cv_strengths(
+    prep: _Prepared, folds: int, tol: float, max_iter: int
+) -> tuple[dict[str, float], dict[str, bool], dict[str, str], float, float]:
+    """Each table's s by the held-out log-likelihood (:class:`_CrossValidation`), one table at a time
+    (the others at their choice so far): a decade grid from S_MAX down to S_MIN, refined by half and
+    quarter decades around the best, then the largest s tried whose score is within one standard
+    error of the best's (the paired differences over participants; the one-standard-error rule).
+    Whether each is at S_MAX, how it was chosen, the score there and at s = S_MAX everywhere."""
+    start = prep.evidence().counts(prep.first)
+    free = _estimable(prep.rows, start)
+    cv = _CrossValidation(prep, folds, tol, max_iter)
+    s = dict.fromkeys(TABLES, S_MAX)
+    how = {k: (CV.format(folds=folds) if k in free else _not_estimated(k)) for k in TABLES}
+    current = cv.score(s)
+    centre = float(current.sum())
+    lo, hi = math.log10(S_MIN), math.log10(S_MAX)
+    N = len(current)
+    for k in free:
+        tried = {hi: current}
+        grid = [float(x) for x in np.linspace(hi, lo, GRID)[1:]]
+        for step in (None, 0.5, 0.25):  # the decade grid, then half and quarter decades either side of the best
+            x_best = max(tried, key=lambda x: (tried[x].sum(), x))
+            for v in grid if step is None else [x_best + step, x_best - step]:
+                if lo <= v <= hi and v not in tried:
+                    tried[v] = cv.score({**s, k: 10.0**v})
+        x_best = max(tried, key=lambda x: (tried[x].sum(), x))
+        best = tried[x_best]
+
+        # the largest s no worse than the best by more than one standard error of the difference
+        # (or than NEGLIGIBLE per participant)
+        x_pick = x_best
+        for x in sorted(tried, reverse=True):
+            d = best - tried[x]
+            se = math.sqrt(N) * float(np.std(d, ddof=1)) if N > 1 else 0.0
+            if x > x_best and d.sum() <= max(se, NEGLIGIBLE * N):
+                x_pick = x
+                break
+        s[k], current = 10.0**x_pick, tried[x_pick]
+    bound = {k: (k not in free) or s[k] >= S_MAX for k in TABLES}
+    return s, bound, how, float(current.sum()), centre
 
 
 def personalize(
@@ -216,93 +559,75 @@ def personalize(
     tol: float = 1e-8,
     max_iter: int = 1000,
     n_jobs: int | None = 1,
+    estimate: str = "held-out",
+    folds: int = FOLDS,
 ) -> PersonalModels:
     """Per-participant MAP models shrunk toward ``model`` (the pooled model, or a mixture: each
     participant's most probable type).  ``strength``: one s for every table, or per table
-    (``initial``, ``emission``, ``transition``); None estimates each table's s by empirical Bayes."""
-    if not kernels.AVAILABLE:
-        raise FitError(["per-person models need the numba package"])
-    mixture = model if isinstance(model, TypeMixture) else TypeMixture.single(model)
-    spec, mp = mixture_params(mixture)
-    seqs = encode(frame, spec)
-    base = Structure(spec, seqs)
+    (``initial``, ``emission``, ``transition``); None estimates each table's s, by ``estimate``:
+    ``held-out`` (the held-out log-likelihood over ``folds`` blocks of each participant's trials)
+    or ``variational`` (variational empirical Bayes)."""
+    prep = _Prepared.of(frame, model, n_jobs)
+    spec, seqs, base, centre, work, start = prep.spec, prep.seqs, prep.base, prep.centre, prep.work, prep.start
     N = seqs.n_participants
-    if mixture.n_types > 1:
-        mstruct = MixtureStructure(spec, seqs, mixture.n_types)
-        pidx = type_posteriors(MixtureWorkspace(seqs, mstruct), mp).argmax(1)
-    else:
-        pidx = np.zeros(N, dtype=np.int64)
-    types = [mp.type_params(m) for m in range(mixture.n_types)]
-    centre = Params(
-        np.stack([types[i].initial for i in pidx]),
-        np.stack([types[i].emission for i in pidx]),
-        np.stack([types[i].transition for i in pidx]),
-    )
-    work = _PersonalWorkspace(seqs, *base.dims, method="numba", threads=n_jobs or 1)
-    start = base.project(centre)
-    centre_ll = work.estep(start).loglik
-    structure = _PersonalStructure(spec, seqs)
-    init_mask = (centre.initial > 0) & (base.K > 1)
-    it = np.where(init_mask, centre.initial, 0.0)
-    means = {
-        "initial": (it / it.sum(-1, keepdims=True), init_mask),
-        "emission": _free_rows(base.em, np.zeros_like(centre.emission), centre.emission)[1:],
-        "transition": _free_rows(base.tr, np.zeros_like(centre.transition), centre.transition)[1:],
-    }
-
-    def fit_with(s_tab: Mapping[str, float]) -> tuple[Params, list]:
-        # pseudo-counts s * centre row on the usable free cells, at each tie group's representative row
-        t, mask = means["initial"]
-        structure.pseudo = {"initial": s_tab["initial"] * np.where(mask, t, 0.0)}
-        for name, table in (("emission", base.em), ("transition", base.tr)):
-            t, mask = means[name]
-            pseudo = np.zeros(getattr(centre, name).shape)
-            pseudo[:, table.rep] = s_tab[name] * np.where(mask, t, 0.0)
-            structure.pseudo[name] = pseudo
-        runs = run_em(structure, work, [start.take(n) for n in range(N)], tol=tol, max_iter=max_iter)
-        return Params.stack([r.params for r in runs]), runs
-
-    def strengths(params: Params) -> tuple[dict[str, float], dict[str, bool]]:
-        st = work.estep(params)
-        rows = {
-            "initial": (st.initial, *means["initial"]),
-            "emission": _free_rows(base.em, st.emission, centre.emission),
-            "transition": _free_rows(base.tr, st.transition, centre.transition),
-        }
-        out = {name: estimate_strength(*rows[name]) for name in TABLES}
-        return {k: v[0] for k, v in out.items()}, {k: v[1] for k, v in out.items()}
-
+    warnings: list[str] = []
+    scores = {"estimate": math.nan, "centre": math.nan}
     if strength is None:
-        s_tab, bound = strengths(start)
-        params, runs = fit_with(s_tab)
+        if estimate not in ESTIMATES:
+            raise FitError([f"estimate must be one of {list(ESTIMATES)}, got {estimate!r}"])
+        if estimate == "held-out" and not (isinstance(folds, int) and folds >= 2):
+            raise FitError([f"folds must be an integer >= 2, got {folds!r}"])
+        evidence = prep.evidence()
+        left_out = int(N - np.count_nonzero(evidence.active))
+        if left_out and estimate == "variational":
+            warnings.append(
+                f"{left_out} of {N} participants' trials are impossible where the centre has "
+                "a zero: they are left out of the strength estimate"
+            )
+        if estimate == "variational":
+            s_tab, bound, method, scores["estimate"], scores["centre"] = _strengths(
+                evidence, evidence.counts(prep.first), tol, max_iter
+            )
+        else:
+            s_tab, bound, method, scores["estimate"], scores["centre"] = _cv_strengths(prep, folds, tol, max_iter)
+        warnings += [
+            f"{name}: the strength is at its bound ({s_tab[name]:.3g}): the data show no individual differences there"
+            for name in TABLES
+            if bound[name] and method[name] not in (NOTHING, ONE_DRAW)
+        ]
+        warnings += [
+            f"{name}: the strength is at its lower bound ({s_tab[name]:.3g}): each participant's rows are their own counts"
+            for name in TABLES
+            if s_tab[name] <= S_MIN * (1 + 1e-9)
+        ]
     else:
-        s_tab, bound = {}, {}
+        s_tab, bound, method = {}, {}, {}
         for name in TABLES:
             value = strength[name] if isinstance(strength, Mapping) else strength
             if not (math.isfinite(value) and value >= 0):
                 raise FitError([f"strength must be a finite number >= 0, got {value!r}"])
-            s_tab[name], bound[name] = float(value), False
-        params, runs = fit_with(s_tab)
+            s_tab[name], bound[name], method[name] = float(value), False, GIVEN
+    runs = prep.fit(s_tab, work, start, tol, max_iter)
+    params = Params.stack([r.params for r in runs])
     # rows no trial of the log reaches are the structure's defaults during the fit: the centre's instead
     params.emission[:, base.em.empty] = centre.emission[:, base.em.empty]
     params.transition[:, base.tr.empty] = centre.transition[:, base.tr.empty]
     models = [to_trust_model(spec, params.take(n)) for n in range(N)]
-    warnings = [
-        f"{name}: the strength is at its bound ({s_tab[name]:.3g}): the data show no individual differences there"
-        for name in TABLES
-        if bound[name] and strength is None
-    ]
     unconverged = sum(not r.converged for r in runs)
     if unconverged:
         warnings.append(f"{unconverged} of {N} participants' fits stopped at the E-step cap")
     return PersonalModels(
         participants=list(seqs.participants),
         models=models,
-        centre=[mixture.names[i] for i in pidx],
+        centre=[prep.mixture.names[i] for i in prep.types],
         strength=s_tab,
         at_bound=bound,
+        method=method,
+        estimate=estimate if strength is None else GIVEN,
+        score=scores["estimate"],
+        score_centre=scores["centre"],
         loglik=work.estep(params).loglik,
-        centre_loglik=centre_ll,
+        centre_loglik=prep.first.loglik,
         iterations=np.array([r.iterations for r in runs]),
         converged=np.array([r.converged for r in runs]),
         trials=seqs.lengths.astype(np.int64),
