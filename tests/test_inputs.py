@@ -9,9 +9,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from cli_runner import run_cli
-from trustseek.data import example_path, read_trials
+from trustseek.data import ColumnMapping, DataError, example_path, read_trials
 
 RENAME = {"low": "simple", "high": "complex"}  # "complex" sorts before "simple": the declared order must win
 
@@ -249,3 +251,127 @@ def test_planning_commands_refuse_a_general_model_in_one_line(study, tmp_path):
     post = pd.read_csv(tmp_path / "p.csv")
     expected = result.posteriors()
     np.testing.assert_allclose(post["p_trust_high"], expected["p_trust_high"], atol=1e-12)
+
+
+# --------------------------------------------------------------------------- the mapping's inputs
+
+LEVEL_NAMES = st.text(alphabet="abcdefgh", min_size=1, max_size=3)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    levels=st.lists(LEVEL_NAMES, min_size=1, max_size=4, unique=True),
+    values=st.lists(st.one_of(LEVEL_NAMES, st.just("")), min_size=1, max_size=30),
+)
+def test_input_values_outside_the_levels_are_reported_by_row(levels, values):
+    """Any cells against any declared levels: the values outside them are one line with their count,
+    first rows and values; empty cells another; otherwise the column holds the levels in the declared order."""
+    n = len(values)
+    frame = pd.DataFrame(
+        {
+            "participant": ["p"] * n,
+            "trial": range(1, n + 1),
+            "human_action": ["rely"] * n,
+            "grp": values,
+        }
+    )
+    mapping = {"inputs": {"group": {"column": "grp", "levels": levels}}}
+    outside = [i for i, v in enumerate(values) if v and v not in levels]
+    empty = [i for i, v in enumerate(values) if not v]
+    if not outside and not empty:
+        got = read_trials(frame, mapping)["group"]
+        assert list(got.cat.categories) == levels
+        assert got.astype(str).tolist() == values
+        return
+    with pytest.raises(DataError) as err:
+        read_trials(frame, mapping)
+    lines = err.value.lines()
+    assert len(lines) == bool(outside) + bool(empty), lines
+    if outside:
+        (line,) = [x for x in lines if "outside the declared levels" in x]
+        assert line.startswith("<table>: column 'grp' (input 'group')")
+        assert f"the levels {levels}" in line
+        first = outside[0]
+        shown = f"row {first + 1} {values[first]!r}"
+        assert (f"in {len(outside)} rows: " if len(outside) > 1 else ": ") + shown in line
+    if empty:
+        (line,) = [x for x in lines if "empty" in x]
+        assert f"row {empty[0] + 1}" in line
+
+
+def test_input_mapping_problems_are_named(tmp_path):
+    bad = {
+        "inputs": {
+            "complexity": {"column": "c", "levels": ["a", "b"]},
+            "advice": {"column": "a", "levels": ["x", "x"]},
+            "cond": {"levels": ["a"], "labels": {"z": "b"}, "colour": 1},
+            "grp": "g",
+        }
+    }
+    with pytest.raises(DataError) as err:
+        ColumnMapping.from_dict(bad)
+    text = "\n".join(err.value.lines())
+    assert "input 'complexity': the name is taken" in text
+    assert "input 'advice': 'levels' must list its distinct levels in their order" in text
+    assert "input 'cond': unknown entries ['colour']" in text
+    assert "input 'cond': label z='b' is not one of the levels ['a']" in text
+    assert "input 'grp': expected" in text
+    path = tmp_path / "log.csv"
+    path.write_text("participant,trial,human_action,g\np,1,rely,x\n")
+    with pytest.raises(DataError) as err:
+        read_trials(path, {"inputs": {"cond": {"column": "condition", "levels": ["a"]}}})
+    assert "missing column 'condition' (the mapping's input 'cond')" in str(err.value)
+    assert ColumnMapping.from_dict({"inputs": {"cond": {"column": "g", "levels": ["x"]}}}).to_dict()["inputs"] == {
+        "cond": {"column": "g", "levels": ["x"]}
+    }
+
+
+# --------------------------------------------------------------------------- a study's log with a condition as an input
+
+
+def test_study_log_with_a_condition_input_fits_like_the_canonical_log(tmp_path):
+    """Block-wise trial order, decision/advice/truth columns, JSON lines with nulls, NA cells, practice
+    rows to drop, per-trial ratings and a between-subject condition declared as an input: read by a
+    mapping file alone, it encodes and fits as the canonical log with the condition column does."""
+    from test_data_studies import BASE_MAPPING, study_columns
+    from trustseek.estimation import PAPER_EMISSION_INPUTS, PAPER_TRANSITION_INPUTS
+    from trustseek.estimation.fit import fit_model
+
+    canonical = read_trials(example_path())
+    log = study_columns(canonical)
+    canonical = canonical.assign(
+        condition=pd.Categorical(log["condition"], categories=["transparent", "opaque"]),
+        rating=pd.Categorical(log["rating"].astype(str), categories=[str(i) for i in range(1, 8)], ordered=True),
+    )
+    log["block"] = (log["trial"] - 1) // 10
+    log["trial_in_block"] = (log["trial"] - 1) % 10
+    practice = log.groupby("subject", sort=False).head(2).assign(practice="yes", block=-1)
+    log = pd.concat([practice, log.assign(practice="no")]).drop(columns="trial").sample(frac=1.0, random_state=3)
+    log["condition"] = log["condition"].map({"transparent": "T", "opaque": "O"})
+    path = tmp_path / "study.jsonl"
+    with path.open("w") as fh:
+        for rec in log.to_dict(orient="records"):
+            rec = {k: (v.item() if hasattr(v, "item") else v) for k, v in rec.items()}
+            fh.write(json.dumps({**rec, "decision": None if rec["decision"] == "NA" else rec["decision"]}) + "\n")
+    mapping = {
+        **BASE_MAPPING,
+        "order": ["block", "trial_in_block"],
+        "drop": [{"column": "practice", "values": ["yes"]}],
+        "inputs": {
+            "group": {"column": "condition", "levels": ["transparent", "opaque"], "labels": {"T": "transparent", "O": "opaque"}}
+        },
+        "rating": {"column": "rating", "levels": [1, 2, 3, 4, 5, 6, 7]},
+    }
+    mfile = tmp_path / "mapping.json"
+    mfile.write_text(json.dumps(mapping))
+    frame = read_trials(path, mfile)
+    assert list(frame["group"].cat.categories) == ["transparent", "opaque"]
+    tr = (*PAPER_TRANSITION_INPUTS, "group")
+    fits = []
+    for f, group in ((frame, "group"), (canonical, "condition")):
+        f = f.rename(columns={group: "group"}) if group != "group" else f
+        fits.append(fit_model(f, PAPER_EMISSION_INPUTS, tr, restarts=1, seed=3, max_iter=40, rating="rating"))
+    mapped, reference = fits
+    assert mapped.model.inputs["group"] == ("transparent", "opaque")
+    assert mapped.fit.seqs.n_trials == reference.fit.seqs.n_trials == len(canonical)
+    assert mapped.loglik == pytest.approx(reference.loglik, rel=1e-9, abs=1e-9)
