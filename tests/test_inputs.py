@@ -244,6 +244,12 @@ def test_planning_commands_refuse_a_general_model_in_one_line(study, tmp_path):
         assert code == 2, err
         lines = [x for x in err.splitlines() if x.strip()]
         assert len(lines) == 1 and "needs a trust model" in lines[0] and "complexity, robot_action, experience" in lines[0], err
+    code, out = run_cli(
+        ["fit", str(path), "--mapping", str(mapping), "--emissions-on", "advice", "--transitions-on", "condition"]
+        + ["-r", "1", "--max-iter", "20", "--plots", str(tmp_path / "figs"), "--quiet"]
+    )
+    assert code == 0 and "the tables by combination of the inputs" in out, out
+    assert {p.name for p in (tmp_path / "figs").iterdir()} == {"emissions.png", "transitions.png"}
     code, out = run_cli(["check", str(f)])
     assert code == 0 and "a general model, inputs: advice, condition" in out, out
     code, _ = run_cli(["decode", str(path), "--model", str(f), "--mapping", str(mapping), "-o", str(tmp_path / "p.csv")])
@@ -251,6 +257,9 @@ def test_planning_commands_refuse_a_general_model_in_one_line(study, tmp_path):
     post = pd.read_csv(tmp_path / "p.csv")
     expected = result.posteriors()
     np.testing.assert_allclose(post["p_trust_high"], expected["p_trust_high"], atol=1e-12)
+    code, out = run_cli(["predict", str(path), "--model", str(f), "--mapping", str(mapping), "-b", "0", "--json"])
+    assert code == 0, out
+    assert json.loads(out)["n_scored"] == int((study_log()[1]["y"] >= 0).sum())
 
 
 # --------------------------------------------------------------------------- the mapping's inputs

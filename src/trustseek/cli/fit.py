@@ -375,15 +375,15 @@ def _fit_general(
     if posteriors is not None:
         with atomic_output(posteriors) as tmp:
             _data().write_trials(keep_columns(result.posteriors(), frame, keep), tmp)
-    not_drawn = (
-        f"figures not drawn: the emission/transition figures are those of a trust model (complexity, robot action, "
-        f"experience); this model's inputs are {named} (its tables are in the model file and the table above)"
-    )
+    if plots is not None:
+        from ..plots.iohmm import plot_iohmm_emissions, plot_iohmm_transitions
+
+        plots.mkdir(parents=True, exist_ok=True)
+        plot_iohmm_emissions(result.model, plots / "emissions.png")
+        plot_iohmm_transitions(result.model, plots / "transitions.png")
     if as_json:
         d = result.to_dict()
         d["cells"] = result.cells()
-        if plots is not None:
-            d["warnings"].append(not_drawn)
         print_json(d)
         return
     table = Table(
@@ -411,7 +411,9 @@ def _fit_general(
     for w in result.warnings:
         console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
     if plots is not None:
-        console.print(f"[yellow]note:[/] {escape(not_drawn)}", highlight=False)
+        console.print(
+            f"figures written to {plots}/emissions.png, {plots}/transitions.png (the tables by combination of the inputs)"
+        )
     if out is not None:
         console.print(f"general model (trustseek.iohmm/1) written to {out}; decode, predict and validate read it")
     if posteriors is not None:
