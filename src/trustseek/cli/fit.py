@@ -146,12 +146,14 @@ def fit(
     transitions_on: str | None = typer.Option(
         None,
         "--transitions-on",
-        help="Comma-separated inputs of the trust transitions (default: complexity,robot_action,experience; 'none' for none).",
+        help="Comma-separated inputs of the trust transitions (default: complexity,robot_action,experience; 'none' for "
+        "none); the mapping's 'inputs' may be named too: the fit is then a general model (trustseek.iohmm/1).",
     ),
     emissions_on: str | None = typer.Option(
         None,
         "--emissions-on",
-        help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for none).",
+        help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for "
+        "none); the mapping's 'inputs' may be named too.",
     ),
     restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Random restarts; the best is kept."),
     bootstrap: int = typer.Option(
@@ -176,7 +178,12 @@ def fit(
         min=1,
         help="Threads for the fit and processes for the bootstrap (default: all cores); numbers do not depend on it.",
     ),
-    out: Path | None = typer.Option(None, "--out", "-o", help="Write the fitted trust model (JSON, same format as the presets)."),
+    out: Path | None = typer.Option(
+        None,
+        "--out",
+        "-o",
+        help="Write the fitted trust model (JSON, same format as the presets; a general model for other inputs).",
+    ),
     posteriors: Path | None = typer.Option(
         None, "--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet)."
     ),
@@ -453,7 +460,10 @@ def read_for_model(log, model, mapping, column, label, missing, delimiter):
 def decode_cmd(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
     model: Path = typer.Option(
-        ..., "--model", "-m", help="Trust model JSON (from 'trustseek fit') or supervisor types (from 'trustseek fit-types')."
+        ...,
+        "--model",
+        "-m",
+        help="Trust model or general model JSON (from 'trustseek fit') or supervisor types (from 'trustseek fit-types').",
     ),
     out: Path = typer.Option(Path("posteriors.csv"), "--out", "-o", help="Output file (.csv or .parquet)."),
     mapping: Path | None = MappingOpt,

@@ -91,7 +91,10 @@ def _read_for(log, m, mapping, column, label, missing, delimiter):
 def predict(
     log: Path = typer.Argument(..., help="Trial log (CSV, Parquet, JSON), one row per trial."),
     model: Path | None = typer.Option(
-        None, "--model", "-m", help="Score this trust model in-sample (JSON); without it, held-out participants by k-fold fits."
+        None,
+        "--model",
+        "-m",
+        help="Score this trust (or general) model in-sample (JSON); without it, held-out participants by k-fold fits.",
     ),
     folds: int | None = typer.Option(None, "--folds", min=2, help="Folds of participants for the held-out fits (default 5)."),
     levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Trust levels of the held-out fits."),
@@ -198,7 +201,7 @@ def predict(
 @app.command(rich_help_panel="Estimate")
 def validate(
     log: Path = typer.Argument(..., help="Trial log with a self-reported trust rating column (every trial, or some)."),
-    model: Path = typer.Option(..., "--model", "-m", help="Trust model JSON (e.g. from 'trustseek fit')."),
+    model: Path = typer.Option(..., "--model", "-m", help="Trust model or general model JSON (e.g. from 'trustseek fit')."),
     rating: str | None = typer.Option(
         None,
         "--rating",

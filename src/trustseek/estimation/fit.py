@@ -466,9 +466,6 @@ class ModelFitResult:
     def bic(self) -> float:
         return self.fit.bic
 
-    ci = None  # no bootstrap intervals for a general model
-    intervals = None
-
     def posteriors(self) -> pd.DataFrame:
         """Smoothed P(level | all trials of the participant) and the Viterbi level, one row per trial."""
         return posterior_frame(self.fit.seqs, self.fit.spec, self.fit.params)
