@@ -217,7 +217,7 @@ def test_existing_trust_model_files_still_load_and_the_paper_model_is_the_preset
     """A trust model file loads as before, through the general loader too; the paper's structure is
     the general model's preset: the same spec, and a trust model decodes like its general form."""
     from trustseek.estimation import PAPER_EMISSION_INPUTS, PAPER_TRANSITION_INPUTS, decode, paper_spec
-    from trustseek.estimation.trust_iohmm import from_trust_model, general_spec, to_iohmm_model
+    from trustseek.estimation.trust_iohmm import from_trust_model, general_spec, spec_of, to_iohmm_model
     from trustseek.model import TrustModel, paper_model
     from trustseek.model.iohmm import load_any_model
 
@@ -229,7 +229,11 @@ def test_existing_trust_model_files_still_load_and_the_paper_model_is_the_preset
     frame = read_trials(example_path())
     assert general_spec(frame, PAPER_EMISSION_INPUTS, PAPER_TRANSITION_INPUTS) == paper_spec()
     general = to_iohmm_model(*from_trust_model(paper))
-    pd.testing.assert_frame_equal(decode(frame, general), decode(frame, paper))
+    general.save(tmp_path / "general.json")
+    again = load_any_model(tmp_path / "general.json")
+    assert again == general  # the fixed row P(intervene | ask) = 1 and the level-naming rule kept
+    assert spec_of(again) == paper_spec()
+    pd.testing.assert_frame_equal(decode(frame, again), decode(frame, paper))
 
 
 def test_planning_commands_refuse_a_general_model_in_one_line(study, tmp_path):
