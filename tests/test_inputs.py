@@ -173,9 +173,9 @@ def test_named_inputs_fit_equals_an_independent_em(study, tmp_path):
     ours_rely = np.array([[[d["emission"][a][f][k]["rely"] for k in levels] for f in DIFFICULTY] for a in ADVICE])
     ours_A = np.array([[[d["transition"][c][k][j] for j in levels] for k in levels] for c in CONDITIONS])
     perm = [0, 1] if abs(ours_rely[..., 0] - rely[..., 0]).max() < abs(ours_rely[..., 0] - rely[..., 1]).max() else [1, 0]
-    np.testing.assert_allclose(ours_rely, rely[..., perm], atol=2e-4)
-    np.testing.assert_allclose(ours_A, A[:, perm][:, :, perm], atol=2e-4)
-    np.testing.assert_allclose([d["initial"][k] for k in levels], pi[perm], atol=2e-4)
+    np.testing.assert_allclose(ours_rely, rely[..., perm], atol=5e-5)
+    np.testing.assert_allclose(ours_A, A[:, perm][:, :, perm], atol=5e-5)
+    np.testing.assert_allclose([d["initial"][k] for k in levels], pi[perm], atol=5e-5)
 
 
 # --------------------------------------------------------------------------- the general model file
