@@ -21,6 +21,7 @@ from ._app import (
     QuietOpt,
     app,
     atomic_output,
+    check_mapping_file,
     check_output,
     check_outputs,
     check_tol,
@@ -47,15 +48,29 @@ def _data():
     return data
 
 
+def _mapping_inputs(mapping: Path | None) -> tuple[str, ...]:
+    """The names of the inputs a --mapping file declares (its ``inputs`` entry)."""
+    if mapping is None:
+        return ()
+    check_mapping_file(mapping)
+    return tuple(_data().ColumnMapping.load(mapping).inputs)
+
+
 def _read_with_inputs(
     log, mapping, column, label, transitions_on, emissions_on, missing=None, delimiter=None, rating=None, actions=True
 ):
-    """The transition and emission inputs named by the flags, and the log with those columns
-    (and the human actions unless not ``actions``)."""
-    tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on")
-    em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on")
-    needed = tuple(dict.fromkeys((*tr, *em)))
+    """The transition and emission inputs named by the flags (canonical ones or the mapping's
+    ``inputs``), and the log with those columns (and the human actions unless not ``actions``)."""
+    declared = _mapping_inputs(mapping)
+    tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on", declared)
+    em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on", declared)
+    needed = tuple(c for c in dict.fromkeys((*tr, *em)) if c in _fit().MODEL_INPUTS)
     return tr, em, read_log(log, mapping, column, label, needed, missing, delimiter, rating, actions)
+
+
+def _general(tr: tuple[str, ...], em: tuple[str, ...]) -> bool:
+    """True when the inputs are not a trust model's: the fit is a general model (trustseek.iohmm/1)."""
+    return not _fit().trust_iohmm.is_trust_structure(tr, em)
 
 
 def _rating_flags(rating: str | None, levels: str | None, bins: str | None) -> dict | None:
@@ -78,15 +93,19 @@ def _rating_flags(rating: str | None, levels: str | None, bins: str | None) -> d
 POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
 
 
-def _inputs(text: str | None, default: tuple[str, ...], flag: str) -> tuple[str, ...]:
+def _inputs(text: str | None, default: tuple[str, ...], flag: str, declared: tuple[str, ...] = ()) -> tuple[str, ...]:
     if text is None:
         return default
     if text.strip().lower() in ("", "none", "-"):
         return ()
     cols = tuple(c.strip() for c in text.split(",") if c.strip())
-    bad = [c for c in cols if c not in _fit().MODEL_INPUTS]
+    allowed = [*_fit().MODEL_INPUTS, *declared]
+    bad = [c for c in cols if c not in allowed]
     if bad:
-        raise TrustseekError([f"{flag}: {c!r} is not one of {list(_fit().MODEL_INPUTS)} (or 'none')" for c in bad])
+        where = f"the mapping's inputs {list(declared)}" if declared else "the inputs a --mapping file declares ('inputs')"
+        raise TrustseekError([f"{flag}: {c!r} is not one of {list(_fit().MODEL_INPUTS)}, {where} (or 'none')" for c in bad])
+    if len(set(cols)) != len(cols):
+        raise TrustseekError([f"{flag}: an input is named twice: {list(cols)}"])
     return cols
 
 
@@ -127,12 +146,14 @@ def fit(
     transitions_on: str | None = typer.Option(
         None,
         "--transitions-on",
-        help="Comma-separated inputs of the trust transitions (default: complexity,robot_action,experience; 'none' for none).",
+        help="Comma-separated inputs of the trust transitions (default: complexity,robot_action,experience; 'none' for "
+        "none); the mapping's 'inputs' may be named too: the fit is then a general model (trustseek.iohmm/1).",
     ),
     emissions_on: str | None = typer.Option(
         None,
         "--emissions-on",
-        help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for none).",
+        help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for "
+        "none); the mapping's 'inputs' may be named too.",
     ),
     restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Random restarts; the best is kept."),
     bootstrap: int = typer.Option(
@@ -157,7 +178,12 @@ def fit(
         min=1,
         help="Threads for the fit and processes for the bootstrap (default: all cores); numbers do not depend on it.",
     ),
-    out: Path | None = typer.Option(None, "--out", "-o", help="Write the fitted trust model (JSON, same format as the presets)."),
+    out: Path | None = typer.Option(
+        None,
+        "--out",
+        "-o",
+        help="Write the fitted trust model (JSON, same format as the presets; a general model for other inputs).",
+    ),
     posteriors: Path | None = typer.Option(
         None, "--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet)."
     ),
@@ -223,6 +249,12 @@ def fit(
         raise TrustseekError(
             ["--ratings-only needs a rating column: --rating COLUMN --rating-levels ..., or the mapping's 'rating'"]
         )
+    if _general(tr, em):
+        _fit_general(
+            frame, tr, em, levels, restarts, seed, bootstrap, prior, jobs, tol, max_iter, out, posteriors, plots, fill_from,
+            as_json, rated, ratings_only, keep, quiet,
+        )  # fmt: skip
+        return
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("restarts", total=restarts + bootstrap)
@@ -313,11 +345,125 @@ def fit(
         console.print(f"figures written to {plots}/emissions.png, {plots}/transitions.png")
 
 
+def _fit_general(
+    frame, tr, em, levels, restarts, seed, bootstrap, prior, jobs, tol, max_iter, out, posteriors, plots, fill_from,
+    as_json, rated, ratings_only, keep, quiet,
+) -> None:  # fmt: skip
+    """``fit`` with inputs a trust model does not have: a general model (trustseek.iohmm/1)."""
+    named = ", ".join(dict.fromkeys((*em, *tr)))
+    refused = [
+        f"{flag} is for a trust model; a general model (inputs: {named}) has none"
+        for flag, given in (("--bootstrap", bootstrap > 0), ("--fill-from", fill_from is not None))
+        if given
+    ]
+    if refused:
+        raise TrustseekError(refused)
+    bar = progress_bar(quiet or as_json)
+    with bar:
+        task = bar.add_task("restarts", total=restarts)
+        result = _fit().fit.fit_model(
+            frame,
+            em,
+            tr,
+            levels=levels,
+            restarts=restarts,
+            seed=seed,
+            prior=prior,
+            n_jobs=jobs,
+            tol=tol,
+            max_iter=max_iter,
+            progress=lambda done, total: bar.update(task, completed=done, total=total),
+            rating=rated,
+            actions=not ratings_only,
+        )
+    if out is not None:
+        with atomic_output(out) as tmp:
+            result.model.save(tmp)
+    if posteriors is not None:
+        with atomic_output(posteriors) as tmp:
+            _data().write_trials(keep_columns(result.posteriors(), frame, keep), tmp)
+    if plots is not None:
+        from ..plots.iohmm import plot_iohmm_emissions, plot_iohmm_transitions
+
+        plots.mkdir(parents=True, exist_ok=True)
+        plot_iohmm_emissions(result.model, plots / "emissions.png")
+        plot_iohmm_transitions(result.model, plots / "transitions.png")
+    if as_json:
+        d = result.to_dict()
+        d["cells"] = result.cells()
+        print_json(d)
+        return
+    table = Table(
+        title=f"Fitted model (inputs: emissions on {', '.join(em) or 'none'}; transitions on {', '.join(tr) or 'none'}; "
+        f"{result.fit.seqs.n_participants} participants, {result.fit.seqs.n_trials} trials)",
+        title_justify="left",
+    )
+    for col, justify in (("cell", "left"), ("estimate", "right"), ("events", "right")):
+        table.add_column(col, justify=justify)  # type: ignore[arg-type]
+    for c in result.cells():
+        ev = f"{c['events']:.1f}"
+        table.add_row(
+            escape(c["cell"]),
+            f"{c['estimate']:.3f}",
+            ev if c["events"] >= _fit().MIN_EVENTS else f"[yellow]{ev} (not identified)[/]",
+        )
+    console.print(table)
+    lls = ", ".join(f"{x:.3f}" for x in sorted(result.restart_logliks, reverse=True))
+    console.print(
+        f"log-likelihood {result.loglik:.4f}; {result.n_params} free parameters; AIC {result.aic:.2f}; BIC {result.bic:.2f}\n"
+        f"restarts (best first): {lls}; {_fit().selection.reached_best(result.restart_logliks)} of "
+        f"{len(result.restart_logliks)} within 0.01 of the best",
+        highlight=False,
+    )
+    for w in result.warnings:
+        console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
+    if plots is not None:
+        console.print(
+            f"figures written to {plots}/emissions.png, {plots}/transitions.png (the tables by combination of the inputs)"
+        )
+    if out is not None:
+        console.print(f"general model (trustseek.iohmm/1) written to {out}; decode, predict and validate read it")
+    if posteriors is not None:
+        console.print(f"posteriors written to {posteriors}")
+
+
+def load_for_decoding(path: Path):
+    """A trust model, supervisor types (a mixture) or a general model, by the file's format."""
+    from ..model.core import load_json
+    from ..model.iohmm import IOHMMModel, is_iohmm_file
+    from ..model.mixture import TypeMixture
+
+    d, source = load_json(path)
+    if is_iohmm_file(d):
+        return IOHMMModel.from_dict(d, source)
+    return TypeMixture.from_dict(d, source)
+
+
+def read_for_model(log, model, mapping, column, label, missing, delimiter):
+    """The log read with the columns a general model's inputs need: the canonical ones it uses,
+    and the others declared as the mapping's ``inputs``."""
+    canonical = tuple(c for c in model.used_inputs if c in _fit().MODEL_INPUTS)
+    frame = read_log(log, mapping, column, label, canonical, missing, delimiter)
+    absent = [c for c in model.used_inputs if c not in frame.columns]
+    if absent:
+        raise TrustseekError(
+            [
+                f"the model's input {c!r} is not a column of the log: declare it in the mapping's 'inputs' "
+                f'(e.g. "inputs": {{"{c}": {{"column": "...", "levels": {list(model.inputs[c])}}}}})'
+                for c in absent
+            ]
+        )
+    return frame
+
+
 @app.command("decode", rich_help_panel="Estimate")
 def decode_cmd(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
     model: Path = typer.Option(
-        ..., "--model", "-m", help="Trust model JSON (from 'trustseek fit') or supervisor types (from 'trustseek fit-types')."
+        ...,
+        "--model",
+        "-m",
+        help="Trust model or general model JSON (from 'trustseek fit') or supervisor types (from 'trustseek fit-types').",
     ),
     out: Path = typer.Option(Path("posteriors.csv"), "--out", "-o", help="Output file (.csv or .parquet)."),
     mapping: Path | None = MappingOpt,
@@ -335,9 +481,16 @@ def decode_cmd(
     The log needs the columns the model depends on: a model fitted with fewer inputs
     (--transitions-on/--emissions-on) decodes a log without the others."""
     check_output(out, "--out", POSTERIOR_SUFFIXES)
-    from ..model.mixture import TypeMixture
+    from ..model.iohmm import IOHMMModel
 
-    types = TypeMixture.load(model)  # a plain model is one type
+    types = load_for_decoding(model)  # a plain model is one type
+    if isinstance(types, IOHMMModel):
+        frame = read_for_model(log, types, mapping, column, label, missing, delimiter)
+        post = keep_columns(_fit().decode(frame, types), frame, keep)
+        with atomic_output(out) as tmp:
+            _data().write_trials(post, tmp)
+        console.print(f"wrote {len(post)} trials to {out}")
+        return
     m = types.models[0]
     used = tuple(dict.fromkeys(c for t in types.models for c in model_inputs(t)))
     frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), m, used)
@@ -380,6 +533,11 @@ def select(
 ) -> None:
     """Choose the number of trust levels: BIC and participant-held-out log-likelihood."""
     tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter)
+    if _general(tr, em):
+        raise TrustseekError(
+            ["select compares trust models (inputs among complexity, robot_action, experience); "
+             "for other inputs compare the BIC of 'trustseek fit --json' with each --levels"]
+        )  # fmt: skip
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("model selection", total=None)

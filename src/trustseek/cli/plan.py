@@ -10,6 +10,7 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ..model.core import ACTIONS, ModelError, Task, TrustModel, load_json
+from ..model.iohmm import IOHMM_FORMAT, IOHMMModel
 from ..model.mixture import MIXTURE_FORMAT, TypeMixture
 from ..model.presets import MIXTURE_PRESETS, MODEL_PRESETS, TASK_PRESETS, load_mixture, load_model, load_task
 from ..policies import PolicyError, TrustAwarePolicy, load_policy
@@ -328,7 +329,7 @@ def preset(
 def check(
     files: list[Path] = typer.Argument(..., help="Trust model, task or policy JSON files."),
 ) -> None:
-    """Validate model, task and policy files; print every problem found."""
+    """Validate model (trust or general), task and policy files; print every problem found."""
     problems: list[str] = []
     for f in files:
         try:
@@ -345,6 +346,14 @@ def check(
                 Task.from_dict(text, str(f))
             elif "policy" in fmt:
                 load_policy(f)
+            elif fmt == IOHMM_FORMAT:
+                g = IOHMMModel.from_dict(text, str(f))
+                console.print(
+                    f"{f}: a general model, inputs: {', '.join(g.used_inputs) or 'none'} (decode, predict and validate "
+                    "read it; solve and simulate need a trust model)",
+                    soft_wrap=True,
+                    highlight=False,
+                )
             else:
                 m = TrustModel.from_dict(text, str(f))
                 rows = m.not_estimated_rows()

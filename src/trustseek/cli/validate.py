@@ -30,7 +30,7 @@ from ._app import (
     progress_bar,
     read_log,
 )
-from .fit import POSTERIOR_SUFFIXES, _fill_unused, _read_with_inputs, model_inputs
+from .fit import POSTERIOR_SUFFIXES, _fill_unused, _general, _read_with_inputs, model_inputs, read_for_model
 
 BootstrapOpt = typer.Option(
     1000, "--bootstrap", "-b", min=0, help="Participant-bootstrap resamples for the 95% intervals (0 = none)."
@@ -72,11 +72,29 @@ def _ci(d: dict[str, Any], digits: int = 3) -> str:
     return escape(f"{est} [{d['lower']:.{digits}f}, {d['upper']:.{digits}f}]")
 
 
+def _load(path: Path) -> Any:
+    """A trust model or a general model (trustseek.iohmm/1), by the file's format."""
+    from ..model.iohmm import load_any_model
+
+    return load_any_model(path)
+
+
+def _read_for(log, m, mapping, column, label, missing, delimiter):
+    """The log with the columns ``m`` needs (a trust model: the inputs it uses, the others filled)."""
+    if isinstance(m, TrustModel):
+        used = model_inputs(m)
+        return _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), m, used)
+    return read_for_model(log, m, mapping, column, label, missing, delimiter)
+
+
 @app.command(rich_help_panel="Estimate")
 def predict(
     log: Path = typer.Argument(..., help="Trial log (CSV, Parquet, JSON), one row per trial."),
     model: Path | None = typer.Option(
-        None, "--model", "-m", help="Score this trust model in-sample (JSON); without it, held-out participants by k-fold fits."
+        None,
+        "--model",
+        "-m",
+        help="Score this trust (or general) model in-sample (JSON); without it, held-out participants by k-fold fits.",
     ),
     folds: int | None = typer.Option(None, "--folds", min=2, help="Folds of participants for the held-out fits (default 5)."),
     levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Trust levels of the held-out fits."),
@@ -111,18 +129,23 @@ def predict(
     if model is not None:
         if folds is not None:
             raise TrustseekError(["--folds scores held-out fits; --model scores that model in-sample: give one of them"])
-        m = TrustModel.load(model)
-        used = model_inputs(m)
-        frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), m, used)
+        m = _load(model)
+        frame = _read_for(log, m, mapping, column, label, missing, delimiter)
         report = pr.predict_in_sample(frame, m, bootstrap=bootstrap, seed=seed)
     else:
         k = 5 if folds is None else folds
         tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter)
         bar = progress_bar(quiet or as_json)
+        preset: Any = "paper"
+        if _general(tr, em):  # inputs a trust model does not have: the general model's structure
+            from ..estimation.trust_iohmm import general_spec
+
+            preset = general_spec(frame, em, tr, levels, prior)
         with bar:
             task = bar.add_task("held-out folds", total=k)
             report = pr.predict_heldout(
                 frame,
+                preset=preset,
                 folds=k,
                 restarts=restarts,
                 seed=seed,
@@ -178,7 +201,7 @@ def predict(
 @app.command(rich_help_panel="Estimate")
 def validate(
     log: Path = typer.Argument(..., help="Trial log with a self-reported trust rating column (every trial, or some)."),
-    model: Path = typer.Option(..., "--model", "-m", help="Trust model JSON (e.g. from 'trustseek fit')."),
+    model: Path = typer.Option(..., "--model", "-m", help="Trust model or general model JSON (e.g. from 'trustseek fit')."),
     rating: str | None = typer.Option(
         None,
         "--rating",
@@ -208,9 +231,8 @@ def validate(
     labels = None
     if rating_labels is not None:
         labels = [x.strip() for x in rating_labels.split(",")]
-    m = TrustModel.load(model)
-    used = model_inputs(m)
-    frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), m, used)
+    m = _load(model)
+    frame = _read_for(log, m, mapping, column, label, missing, delimiter)
     va = _validation()
     if rating is None:
         if "rating" not in frame.columns:

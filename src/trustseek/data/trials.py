@@ -75,6 +75,12 @@ class ColumnMapping:
                      for a numeric rating binned into ``[e0, e1), [e1, e2), ... [e_{n-1}, e_n]``
                      (``"levels"`` then names the bins); an empty cell is no rating.  It
                      becomes the ``rating`` column, an ordered categorical of the levels.
+    ``inputs``       named discrete inputs of a model (optional): ``{"condition": {"column": theirs,
+                     "levels": ["control", "aid"]}}`` with the levels in their order (``"labels"``
+                     maps the log's texts to levels, as for ``labels``; ``"column"`` defaults to the
+                     input's name and may be a derived column).  Each becomes a column named by
+                     the input, a categorical of its levels in the declared order; an empty cell
+                     or a value outside the levels is an error.
     """
 
     columns: dict[str, str] = field(default_factory=dict)
@@ -86,11 +92,14 @@ class ColumnMapping:
     missing: tuple[str, ...] | None = None
     delimiter: str | None = None
     rating: dict[str, Any] | None = None
+    inputs: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def problems(self) -> list[str]:
         p = []
         if self.rating is not None:
             p += _rating_problems(self.rating)
+        for name, entry in self.inputs.items():
+            p += _input_problems(name, entry)
         for canon, theirs in self.columns.items():
             if canon not in CANONICAL:
                 p.append(f"column mapping: {canon!r} is not a canonical column {list(CANONICAL)}")
@@ -163,6 +172,7 @@ class ColumnMapping:
             other.missing if other.missing is not None else self.missing,
             other.delimiter or self.delimiter,
             other.rating or self.rating,
+            {**self.inputs, **other.inputs},
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -181,7 +191,17 @@ class ColumnMapping:
             d["delimiter"] = self.delimiter
         if self.rating is not None:
             d["rating"] = dict(self.rating)
+        if self.inputs:
+            d["inputs"] = {k: dict(v) for k, v in self.inputs.items()}
         return d
+
+    def input_levels(self) -> dict[str, tuple[str, ...]]:
+        """Every declared input's levels, in their declared order."""
+        return {name: tuple(_label_key(v) for v in entry["levels"]) for name, entry in self.inputs.items()}
+
+    def input_column(self, name: str) -> str:
+        """The log's (or a derived) column an input is read from."""
+        return str(self.inputs[name].get("column", name))
 
     def rating_levels(self) -> tuple[str, ...]:
         """The declared rating levels, lowest first (the bins' names for a binned rating)."""
@@ -206,6 +226,10 @@ class ColumnMapping:
         derived = d.get("derived", {})
         drop = d.get("drop", [])
         missing = d.get("missing")
+        inputs = d.get("inputs", {})
+        if not isinstance(inputs, Mapping):
+            problems.append(f"'inputs' must map input names to {{'column': ..., 'levels': [...]}}, got {inputs!r}")
+            inputs = {}
         if not isinstance(cols, Mapping):
             problems.append(f"'columns' must map canonical names to the log's names, got {cols!r}")
             cols = {}
@@ -241,6 +265,7 @@ class ColumnMapping:
             tuple(missing) if missing is not None else None,
             d.get("delimiter"),
             dict(d["rating"]) if isinstance(d.get("rating"), Mapping) else d.get("rating"),
+            {str(k): (_input_entry(v) if isinstance(v, Mapping) else v) for k, v in inputs.items()},
         )
         problems += m.problems()
         if problems:
@@ -309,7 +334,7 @@ class ColumnMapping:
         return base.merged(flags)
 
 
-MAPPING_KEYS = ("columns", "labels", "complexities", "order", "derived", "drop", "missing", "delimiter", "rating")
+MAPPING_KEYS = ("columns", "labels", "complexities", "order", "derived", "drop", "missing", "delimiter", "rating", "inputs")
 RATING = "rating"  # the canonical name of the rating column a mapping declares
 
 
@@ -353,6 +378,44 @@ def _rating_problems(r: Any) -> list[str]:
         if labels is not None:
             p.append(f"{head}: 'labels' apply to declared levels, not to bins")
     if labels is not None and bins is None:
+        if not isinstance(labels, Mapping):
+            p.append(f"{head}: 'labels' must map the log's texts to levels, got {labels!r}")
+        elif names:
+            for theirs, ours in labels.items():
+                if _label_key(ours) not in names:
+                    p.append(f"{head}: label {theirs}={ours!r} is not one of the levels {names}")
+    return p
+
+
+def _input_entry(entry: Mapping) -> dict[str, Any]:
+    """An ``inputs`` entry with its label table read like ``labels`` (set entries turned around)."""
+    out = dict(entry)
+    if isinstance(out.get("labels"), Mapping):
+        out["labels"] = _label_table(out["labels"])
+    return out
+
+
+def _input_problems(name: str, entry: Any) -> list[str]:
+    """Everything wrong with one entry of a mapping's ``inputs``."""
+    head = f"input {name!r}"
+    if not isinstance(entry, Mapping):
+        return [f'{head}: expected {{"column": name, "levels": [...]}}, got {entry!r}']
+    p = []
+    if name in CANONICAL or name == RATING or not name:
+        p.append(f"{head}: the name is taken (canonical columns and 'rating'); name the input otherwise")
+    extra = set(entry) - {"column", "levels", "labels"}
+    if extra:
+        p.append(f"{head}: unknown entries {sorted(extra)} (expected column, levels, labels)")
+    col = entry.get("column", name)
+    if not isinstance(col, str) or not col:
+        p.append(f"{head}: 'column' must name the log's column, got {col!r}")
+    levels = entry.get("levels")
+    ok = isinstance(levels, list) and all(isinstance(v, (str, int, float, bool)) for v in levels)
+    names = [_label_key(v) for v in levels] if ok and isinstance(levels, list) else []
+    if not names or len(set(names)) != len(names) or not all(n.strip() for n in names):
+        p.append(f"{head}: 'levels' must list its distinct levels in their order, got {levels!r}")
+    labels = entry.get("labels")
+    if labels is not None:
         if not isinstance(labels, Mapping):
             p.append(f"{head}: 'labels' must map the log's texts to levels, got {labels!r}")
         elif names:
@@ -817,7 +880,10 @@ def read_trials(
     Rows keep the file's order, less the rows a drop rule of the mapping leaves out
     (their counts are in ``frame.attrs["dropped"]``: one ``(rule, rows)`` pair per rule).
     ``required`` names the canonical columns that must be present (default: all
-    six); an absent optional column comes back empty.  A CSV's delimiter is taken
+    six; participant, trial and human_action for a mapping that declares ``inputs``); an
+    absent optional column comes back empty.  Each of the mapping's ``inputs`` becomes a
+    column named by the input (a categorical of its declared levels; ``frame.attrs["inputs"]``
+    holds every input's levels).  A CSV's delimiter is taken
     from ``delimiter`` (or the mapping's), else ``.tsv`` means tab, else the most
     frequent of ``, ; TAB |`` in the header.  ``check_experience`` checks the
     experience rule of the data format where the columns it needs are present.
@@ -825,7 +891,9 @@ def read_trials(
     """
     mapping = _as_mapping(mapping)
     ordered = mapping.order is not None
-    required = tuple(CANONICAL if required is None else required)
+    if required is None:  # a mapping that declares inputs is for a model of those: the canonical inputs are optional
+        required = ("participant", "trial", "human_action") if mapping.inputs else CANONICAL
+    required = tuple(required)
     for col in ("trial", "participant"):
         if col not in required:
             required = (col, *required)
@@ -855,6 +923,12 @@ def read_trials(
     rating_col = mapping.rating["column"] if mapping.rating is not None else None
     if rating_col is not None and rating_col not in known:
         lines.append(f"missing column {rating_col!r} (the mapping's rating column); columns present: {raw.columns}")
+    for inp in mapping.inputs:
+        src = mapping.input_column(inp)
+        if src not in known:
+            lines.append(f"missing column {src!r} (the mapping's input {inp!r}); columns present: {raw.columns}")
+        elif inp != src and inp in raw.columns:
+            lines.append(f"input {inp!r}: the log has a column {inp!r} too; give the input another name")
     absent = [c for c in required if theirs[c] not in known]
     for c in absent:
         via = f" (mapped from canonical {c!r})" if theirs[c] != c else ""
@@ -978,6 +1052,11 @@ def read_trials(
     if rating_col is not None:
         rc = cols[rating_col] if rating_col in cols else get(rating_col)
         rating_codes = _rating_codes(problems, rc, mapping, rating_col)
+    input_codes = {
+        inp: _input_codes(problems, cols[src] if src in cols else get(src), mapping, inp, src)
+        for inp in mapping.inputs
+        for src in (mapping.input_column(inp),)
+    }
     if check_experience:
         _check_experience(problems, codes, mapping, present, column)
     if problems.lines:
@@ -1001,6 +1080,11 @@ def read_trials(
         frame.attrs["rating_levels"] = tuple(levels)
         frame.attrs["rating_column"] = rating_col
         used.add(rating_col)
+    for inp, levels in mapping.input_levels().items():
+        frame[inp] = pd.Categorical.from_codes(input_codes[inp], categories=pd.Index(list(levels), dtype=object))
+        used.add(mapping.input_column(inp))
+    if mapping.inputs:
+        frame.attrs["inputs"] = mapping.input_levels()
     extras = [c for c in raw.columns if c not in used and c not in frame.columns]
     if extras:
         more = raw.extras(extras)
@@ -1009,6 +1093,42 @@ def read_trials(
             frame[c] = values.to_numpy() if isinstance(source, pd.DataFrame) else values.values
     frame.attrs["dropped"] = dropped
     return frame
+
+
+def _input_codes(problems: _Problems, cc: _Col, mapping: ColumnMapping, name: str, src: str) -> np.ndarray:
+    """Per row the code of an input's level; an empty cell, a NaN or a value outside the declared
+    levels is reported with its rows (every row of a model's input needs a level)."""
+    entry = mapping.inputs[name]
+    levels = mapping.input_levels()[name]
+    table = {_label_key(k): _label_key(v) for k, v in (entry.get("labels") or {}).items()}
+    by_spelling = {s: i for i, lv in enumerate(levels) for s in _spellings(lv)}
+    lookup = np.full(len(cc.texts), -1, dtype=np.int16 if len(levels) < 2**15 else np.int32)
+    kind = np.zeros(len(cc.texts), dtype=np.int8)  # 0 ok, 1 empty, 2 NaN, 3 outside the levels
+    for j, t in enumerate(cc.texts):
+        if t is None:
+            kind[j] = 1
+            continue
+        if t == _NAN:
+            kind[j] = 2
+            continue
+        label = next((table[s] for s in _spellings(t) if s in table), t)
+        hit = next((by_spelling[s] for s in _spellings(label) if s in by_spelling), None)
+        if hit is None:
+            kind[j] = 3
+        else:
+            lookup[j] = hit
+    k = kind[cc.codes]
+    known = f"{sorted(table)} (mapped) or " if table else ""
+    expected = f"expected one of {known}the levels {list(levels)}"
+    head = f"column {src!r} (input {name!r})"
+    problems.rows(f"{head}: empty value ({expected})", np.flatnonzero(k == 1))
+    problems.rows(f"{head}: value is NaN ({expected})", np.flatnonzero(k == 2))
+    problems.rows(
+        f"{head}: value outside the declared levels ({expected})",
+        np.flatnonzero(k == 3),
+        lambda r: repr(cc.texts[cc.codes[r]]),
+    )
+    return lookup[cc.codes]
 
 
 def _rating_codes(problems: _Problems, rc: _Col, mapping: ColumnMapping, name: str) -> np.ndarray:

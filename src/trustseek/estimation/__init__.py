@@ -10,10 +10,11 @@
 * :mod:`.iohmm` -- :func:`fit_iohmm`, log-likelihood, posteriors, Viterbi;
 * :mod:`.trust_iohmm` -- the paper's structure, tables to and from a TrustModel;
 * :mod:`.fit`, :mod:`.bootstrap`, :mod:`.selection` -- the trust-model fit, its intervals,
-  and the choice of the number of levels.
+  and the choice of the number of levels; :func:`fit_model`, the same fit with any named
+  inputs (a general model, :class:`~trustseek.model.IOHMMModel`).
 """
 
-from .fit import MIN_EVENTS, FitResult, decode, fit_trust_model, trust_loglik
+from .fit import MIN_EVENTS, FitResult, ModelFitResult, decode, fit_model, fit_trust_model, trust_loglik
 from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
 from .selection import select_levels, selection_warnings
 from .sequences import Sequences, encode
@@ -23,6 +24,7 @@ from .trust_iohmm import (
     PAPER_EMISSION_INPUTS,
     PAPER_TRANSITION_INPUTS,
     from_trust_model,
+    general_spec,
     paper_spec,
     to_trust_model,
 )
@@ -37,13 +39,16 @@ __all__ = [
     "Fixed",
     "IOHMMFit",
     "IOHMMSpec",
+    "ModelFitResult",
     "Params",
     "Sequences",
     "decode",
     "encode",
     "fit_iohmm",
+    "fit_model",
     "fit_trust_model",
     "from_trust_model",
+    "general_spec",
     "loglik",
     "paper_spec",
     "posteriors",

@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 from ..model.core import TrustModel
+from ..model.iohmm import IOHMMModel
 from ..vocab import ACTIONS, EXPERIENCES
 from .bootstrap import Intervals
 from .bootstrap import bootstrap as _bootstrap
@@ -32,9 +33,11 @@ from .trust_iohmm import (
     broadcast,
     check_convertible,
     from_trust_model,
+    general_spec,
     index_grid,
     model_complexities,
     preset_spec,
+    to_iohmm_model,
     to_trust_model,
 )
 
@@ -368,7 +371,7 @@ def rating_levels_of(frame: pd.DataFrame, column: str, levels: Sequence[str] | N
     )
 
 
-def trust_loglik(frame: pd.DataFrame, model: TrustModel, rating: str | None = None) -> float:
+def trust_loglik(frame: pd.DataFrame, model: TrustModel | IOHMMModel, rating: str | None = None) -> float:
     """Log-likelihood of the log under ``model``: the human actions, and with ``rating`` (a column)
     the ratings too, through the model's rating table (an empty rating contributes probability 1)."""
     spec, params = from_trust_model(model, rating)
@@ -411,9 +414,10 @@ def never_estimated(frame: pd.DataFrame, spec: IOHMMSpec) -> tuple[tuple[str, tu
     return tuple(out)
 
 
-def decode(frame: pd.DataFrame, model: TrustModel, rating: str | None = None) -> pd.DataFrame:
+def decode(frame: pd.DataFrame, model: TrustModel | IOHMMModel, rating: str | None = None) -> pd.DataFrame:
     """Per-trial smoothed P(trust = level | all trials of the participant) and the Viterbi level
-    (with ``rating``, a column, from the ratings too, through the model's rating table)."""
+    (with ``rating``, a column, from the ratings too, through the model's rating table); a
+    general model decodes from its own inputs."""
     spec, params = from_trust_model(model, rating)
     seqs = encode(frame, spec)
     try:
@@ -426,3 +430,200 @@ def decode(frame: pd.DataFrame, model: TrustModel, rating: str | None = None) ->
             [f"participant {p!r}: the trials have probability zero under this model" for p in bad]
             or ["the data have probability zero under this model"]
         ) from None
+
+
+# --------------------------------------------------------------------------- a model with any named inputs
+
+
+@dataclass
+class ModelFitResult:
+    """A fitted general model (:class:`~trustseek.model.iohmm.IOHMMModel`, any named inputs) with
+    its diagnostics: expected events behind every row, warnings for rows the data do not identify."""
+
+    model: IOHMMModel
+    fit: IOHMMFit
+    events: dict[str, np.ndarray]
+    warnings: list[str] = field(default_factory=list)
+    seed: int = 0
+
+    @property
+    def loglik(self) -> float:
+        return self.fit.loglik
+
+    @property
+    def restart_logliks(self) -> list[float]:
+        return self.fit.restart_logliks
+
+    @property
+    def n_params(self) -> int:
+        return self.fit.n_params
+
+    @property
+    def aic(self) -> float:
+        return self.fit.aic
+
+    @property
+    def bic(self) -> float:
+        return self.fit.bic
+
+    def posteriors(self) -> pd.DataFrame:
+        """Smoothed P(level | all trials of the participant) and the Viterbi level, one row per trial."""
+        return posterior_frame(self.fit.seqs, self.fit.spec, self.fit.params)
+
+    def cells(self) -> list[dict[str, Any]]:
+        """One record per estimated row cell: label, table, input levels, estimate, expected events
+        (tied rows once, fixed and never-reached rows left out; of two categories the second only)."""
+        m, s = self.model, self.fit.structure
+        L = m.levels
+        out: list[dict[str, Any]] = []
+        for k in range(1, m.n_levels) if m.n_levels == 2 else range(m.n_levels):
+            out.append(
+                {
+                    "table": "initial",
+                    "where": {},
+                    "cell": f"P(S1={L[k]})",
+                    "estimate": float(m.initial[k]),
+                    "events": float(self.events["initial"][k]),
+                }
+            )
+        for name, table, arr, cats in (
+            ("emission", s.em, m.emission, m.output_categories),
+            ("transition", s.tr, m.transition, L),
+        ):
+            for g in range(table.G):
+                u = int(table.rep[g])
+                if table.empty[u]:
+                    continue
+                where = m.combination(name, u)
+                cond = "".join(f", {c}={v}" for c, v in where.items())
+                for k in range(m.n_levels):
+                    if np.all(table.fixed[u, k]):
+                        continue
+                    for j in range(1, len(cats)) if len(cats) == 2 else range(len(cats)):
+                        head = f"{m.output}={cats[j]}" if name == "emission" else f"S'={cats[j]}"
+                        out.append(
+                            {
+                                "table": name,
+                                "where": where,
+                                "level": L[k],
+                                "category": cats[j],
+                                "cell": f"P({head} | S={L[k]}{cond})",
+                                "estimate": float(arr[u, k, j]),
+                                "events": float(self.events[name][u, k]),
+                            }
+                        )
+        if m.rating is not None and "rating" in self.events:
+            for k in range(m.n_levels):
+                for r, lv in enumerate(m.rating.levels):
+                    out.append(
+                        {
+                            "table": "rating",
+                            "where": {},
+                            "level": L[k],
+                            "category": lv,
+                            "cell": f"P(rating={lv} | S={L[k]})",
+                            "estimate": float(m.rating.probs[k, r]),
+                            "events": float(self.events["rating"][k].sum()),
+                        }
+                    )
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        runs = self.fit.runs
+        return {
+            "model": self.model.to_dict(),
+            "loglik": self.loglik,
+            "n_params": self.n_params,
+            "aic": self.aic,
+            "bic": self.bic,
+            "n_participants": self.fit.seqs.n_participants,
+            "n_trials": self.fit.seqs.n_trials,
+            "n_observations": self.fit.n_observations,
+            "restart_logliks": self.restart_logliks,
+            "best_restart": self.fit.best,
+            "iterations": [r.iterations for r in runs],
+            "converged": [r.converged for r in runs],
+            "ended": [r.ended for r in runs],
+            "seconds": [r.seconds for r in runs],
+            "seed": self.seed,
+            "bootstrap": 0,
+            "spec": self.fit.spec.to_dict(),
+            "warnings": list(self.warnings),
+        }
+
+
+def fit_model(
+    frame: pd.DataFrame,
+    emission_inputs: Sequence[str],
+    transition_inputs: Sequence[str],
+    levels: Sequence[str] | int = ("low", "high"),
+    restarts: int = 10,
+    seed: int = 0,
+    prior: float = 0.0,
+    n_jobs: int | None = None,
+    tol: float = 1e-8,
+    max_iter: int = 1000,
+    progress: Callable[[int, int], None] | None = None,
+    rating: str | None = None,
+    rating_levels: Sequence[str] | None = None,
+    actions: bool = True,
+    spec: IOHMMSpec | None = None,
+) -> ModelFitResult:
+    """Fit the human action's IOHMM with any named inputs (columns of ``frame``, e.g. a mapping's
+    ``inputs`` and the canonical complexity, robot_action, experience) to a general model.
+
+    Each input's levels keep their declared order (a categorical column's categories: the
+    mapping's).  The structure is :func:`~.trust_iohmm.general_spec` (or ``spec``); restarts,
+    seeding, tolerance, ratings and ``actions`` are as for :func:`fit_trust_model`, which fits
+    the same model with the paper's inputs as a :class:`~trustseek.model.TrustModel`."""
+    if spec is None:
+        spec = general_spec(frame, emission_inputs, transition_inputs, levels, prior)
+    if rating is not None:
+        spec = replace(spec, rating=rating, rating_levels=rating_levels_of(frame, rating, rating_levels))
+    if not actions:
+        if rating is None:
+            raise FitError(["a fit without the human actions needs a rating column"])
+        frame = frame.assign(human_action=pd.Series(pd.NA, index=frame.index, dtype=object))
+    problems = spec.problems()
+    if problems:
+        raise FitError(problems)
+    seqs = encode(frame, spec)
+    done = 0
+
+    def tick(i: int, r: Any) -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, restarts)
+
+    fit = fit_iohmm(
+        seqs,
+        spec,
+        restarts=restarts,
+        seed=np.random.SeedSequence([seed, 0]),
+        tol=tol,
+        max_iter=max_iter,
+        on_restart=tick,
+        n_jobs=n_jobs,
+    )
+    notes = f"fitted by trustseek: {seqs.n_participants} participants, {seqs.n_trials} trials, log-likelihood {fit.loglik:.4f}"
+    model = to_iohmm_model(spec, fit.params, notes)
+    events = fit.expected_events()
+    if isinstance(fit.structure, RatingStructure):
+        st = fit.workspace().estep(fit.params)
+        events["rating"] = fit.structure.rating_counts(st.emission)
+    warnings = _warnings(fit, events)
+    never = [
+        f"{name}[{describe_combination(int(u), inputs, spec.categories)}]"
+        for name, table, inputs in (
+            ("emission", fit.structure.em, spec.emission_inputs),
+            ("transition", fit.structure.tr, spec.transition_inputs),
+        )
+        for u in table.rep[table.empty[table.rep]]
+        if not np.all(table.fixed[u])
+    ]
+    if never:
+        warnings.append(f"never estimated (no such trials in the data; the model file holds defaults): {', '.join(never)}")
+    for w in warnings:
+        log.info("%s", w)
+    return ModelFitResult(model, fit, events, warnings, seed)

@@ -5,7 +5,10 @@
   emissions on (complexity, robot action), P(intervene | ask) = 1 fixed, levels
   labelled so that ``high`` relies more in high complexity;
 * :func:`to_trust_model` / :func:`from_trust_model` -- IOHMM tables, whatever inputs they
-  depend on, broadcast to the :class:`~trustseek.model.TrustModel` arrays, and back.
+  depend on, broadcast to the :class:`~trustseek.model.TrustModel` arrays, and back;
+* :func:`general_spec` / :func:`to_iohmm_model` / :func:`from_iohmm_model` -- the same model
+  with any named inputs (a mapping's ``inputs``), kept as a general model file
+  (:class:`~trustseek.model.iohmm.IOHMMModel`); the paper's structure is its preset.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 from ..model.core import RatingTable, TrustModel
+from ..model.iohmm import IOHMMModel
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, LEVELS
 from .ratings import compose_joint, split_joint
 from .spec import FitError, Fixed, IOHMMSpec, Params
@@ -85,18 +89,35 @@ def preset_spec(
     """The spec named by ``preset`` (an :class:`IOHMMSpec` is returned as is, with ``prior`` if given).
 
     The ``paper`` preset takes the options of :func:`paper_spec`, and its complexities
-    from ``frame`` when not given: the paper's levels in their order, then any others
-    in sorted order.
+    from ``frame`` when not given (:func:`declared_levels`: a categorical column's
+    categories in their declared order).
     """
     if isinstance(preset, IOHMMSpec):
         return replace(preset, prior=float(prior)) if prior else preset
     if preset != "paper":
         raise FitError([f"unknown preset {preset!r}; presets: {list(PRESETS)}"])
-    if complexities is None and frame is not None and frame["complexity"].notna().any():
-        present = set(frame["complexity"].dropna())
-        extra = sorted(present - set(LEVELS))
-        complexities = tuple(LEVELS) if not extra else tuple([c for c in LEVELS if c in present] + extra)
+    if complexities is None and frame is not None:
+        complexities = declared_levels(frame, "complexity", LEVELS)
     return paper_spec(complexities or LEVELS, prior, levels, transition_inputs, emission_inputs)
+
+
+def declared_levels(frame: pd.DataFrame, column: str, default: Sequence[str] = ()) -> tuple[str, ...] | None:
+    """The levels of an input column, in order: a categorical column's categories as declared
+    (:func:`~trustseek.data.read_trials` keeps a mapping's order), else ``default``'s levels
+    in their order followed by any other values present in sorted order; None for a column
+    absent or empty."""
+    if column not in frame.columns:
+        return None
+    values = frame[column]
+    if isinstance(values.dtype, pd.CategoricalDtype):
+        cats = tuple(str(c) for c in values.cat.categories)
+        return cats or None
+    if not values.notna().any():
+        return None
+    present = {str(v) for v in values.dropna().unique()}
+    known = [c for c in default if c in present]
+    extra = sorted(present - set(default))
+    return tuple(default) if not extra else tuple(known + extra)
 
 
 def model_complexities(spec: IOHMMSpec) -> tuple[str, ...]:
@@ -164,11 +185,14 @@ def broadcast(spec: IOHMMSpec, arrays: Mapping[str, np.ndarray]) -> dict[str, np
     }
 
 
-def from_trust_model(model: TrustModel, rating: str | None = None) -> tuple[IOHMMSpec, Params]:
-    """The paper-structured spec and tables that reproduce ``model`` exactly (for decoding).
+def from_trust_model(model: TrustModel | IOHMMModel, rating: str | None = None) -> tuple[IOHMMSpec, Params]:
+    """The paper-structured spec and tables that reproduce ``model`` exactly (for decoding);
+    a general model (:class:`~trustseek.model.iohmm.IOHMMModel`) gives its own spec and tables.
 
     With ``rating`` (a column name) and a model with a rating table, the spec has that
     rating and the tables are the joint ones (:mod:`.ratings`)."""
+    if isinstance(model, IOHMMModel):
+        return from_iohmm_model(model, rating)
     K, C = model.n_trust, model.n_complexity
     spec = paper_spec(complexities=model.complexities, levels=model.trust_levels)
     emission = np.array(model.emission, dtype=float).reshape(C * 2, K, 2)
@@ -182,3 +206,148 @@ def from_trust_model(model: TrustModel, rating: str | None = None) -> tuple[IOHM
         emission,
         np.array(model.transition, dtype=float).reshape(C * 4, K, K),
     )
+
+
+# --------------------------------------------------------------------------- the general model: any named inputs
+
+CANONICAL_CATEGORIES = {"complexity": LEVELS, "robot_action": ACTIONS, "experience": EXPERIENCES}
+
+
+def is_trust_structure(transition_inputs: Sequence[str], emission_inputs: Sequence[str]) -> bool:
+    """True when every input is one a trust model has (the paper's preset and its variants)."""
+    return all(c in MODEL_INPUTS for c in (*transition_inputs, *emission_inputs))
+
+
+def input_levels(frame: pd.DataFrame, inputs: Sequence[str]) -> dict[str, tuple[str, ...]]:
+    """Every input's levels in their order (:func:`declared_levels`; the canonical inputs' own
+    names first); an input absent from ``frame`` or without values is an error."""
+    out, problems = {}, []
+    for c in dict.fromkeys(inputs):
+        levels = declared_levels(frame, c, CANONICAL_CATEGORIES.get(c, ()))
+        if levels is None:
+            problems.append(f"input {c!r}: no such column with values in the log")
+        else:
+            out[c] = levels
+    if problems:
+        raise FitError(problems)
+    return out
+
+
+def general_spec(
+    frame: pd.DataFrame,
+    emission_inputs: Sequence[str],
+    transition_inputs: Sequence[str],
+    levels: Sequence[str] | int = ("low", "high"),
+    prior: float = 0.0,
+    categories: Mapping[str, Sequence[str]] | None = None,
+) -> IOHMMSpec:
+    """The IOHMM of the human action with any named inputs: the paper preset's rules where its
+    inputs are present (P(intervene | ask) = 1 when emissions depend on the robot action; levels
+    named by P(rely) without asking in the last complexity), every other input free.  The
+    inputs' levels are ``categories``, else the frame's (:func:`input_levels`)."""
+    if isinstance(levels, int):
+        levels = level_names(levels)
+    cats = dict(categories) if categories is not None else input_levels(frame, (*emission_inputs, *transition_inputs))
+    cats = {c: tuple(v) for c, v in cats.items()}
+    fixed: tuple[Fixed, ...] = ()
+    if "robot_action" in emission_inputs and "ask" in cats["robot_action"]:
+        fixed = (Fixed({"robot_action": "ask"}, {"intervene": 1.0, "rely": 0.0}),)
+    where = {}
+    if "complexity" in emission_inputs:
+        where["complexity"] = cats["complexity"][-1]
+    if "robot_action" in emission_inputs and "autonomous" in cats["robot_action"]:
+        where["robot_action"] = "autonomous"
+    return IOHMMSpec(
+        levels=tuple(levels),
+        output="human_action",
+        output_categories=HUMAN_ACTIONS,
+        emission_inputs=tuple(emission_inputs),
+        transition_inputs=tuple(transition_inputs),
+        categories={c: cats[c] for c in (*transition_inputs, *emission_inputs)},
+        fixed_emissions=fixed,
+        order_by=(where, "rely"),
+        prior=float(prior),
+    )
+
+
+def to_iohmm_model(spec: IOHMMSpec, params: Params, notes: str = "") -> IOHMMModel:
+    """The fitted tables as a general model file (the spec's structure kept with them)."""
+    emission, rating = params.emission, None
+    if spec.rating is not None:
+        emission, probs = split_joint(emission, spec.n_outputs, spec.n_ratings)
+        rating = RatingTable(spec.rating_levels, probs)
+    d = spec.to_dict()
+    structure = {
+        k: d[k] for k in ("fixed_emissions", "fixed_transitions", "tied_emissions", "tied_transitions", "order_by", "prior")
+    }
+    return IOHMMModel(
+        levels=spec.levels,
+        output=spec.output,
+        output_categories=spec.output_categories,
+        inputs={c: tuple(spec.categories[c]) for c in dict.fromkeys((*spec.emission_inputs, *spec.transition_inputs))},
+        emission_inputs=spec.emission_inputs,
+        transition_inputs=spec.transition_inputs,
+        initial=params.initial,
+        emission=emission,
+        transition=params.transition,
+        structure=structure,
+        rating=rating,
+        rating_column=spec.rating,
+        notes=notes,
+    )
+
+
+def _where(raw: object) -> dict[str, str]:
+    return {str(k): str(v) for k, v in raw.items()} if isinstance(raw, Mapping) else {}
+
+
+def spec_of(model: IOHMMModel) -> IOHMMSpec:
+    """The spec a general model file was fitted with (its structure read back)."""
+    st = model.structure
+    try:
+        fixed = {
+            name: tuple(
+                Fixed(_where(f.get("where", {})), f["probs"] if isinstance(f["probs"], str) else dict(f["probs"]))
+                for f in st.get(name, [])
+            )
+            for name in ("fixed_emissions", "fixed_transitions")
+        }
+        tied = {
+            name: tuple(tuple(_where(w) for w in g) for g in st.get(name, [])) for name in ("tied_emissions", "tied_transitions")
+        }
+        ob = st.get("order_by")
+        order_by = None if ob is None else (_where(ob.get("where", {})), str(ob["category"]))
+        prior = float(st.get("prior", 0.0))
+    except (KeyError, TypeError, AttributeError, ValueError) as exc:
+        raise FitError([f"the model's structure cannot be read: {exc!r}"]) from None
+    spec = IOHMMSpec(
+        levels=model.levels,
+        output=model.output,
+        output_categories=model.output_categories,
+        emission_inputs=model.emission_inputs,
+        transition_inputs=model.transition_inputs,
+        categories=dict(model.inputs),
+        fixed_emissions=fixed["fixed_emissions"],
+        fixed_transitions=fixed["fixed_transitions"],
+        tied_emissions=tied["tied_emissions"],
+        tied_transitions=tied["tied_transitions"],
+        order_by=order_by,
+        prior=prior,
+    )
+    problems = spec.problems()
+    if problems:
+        raise FitError(problems)
+    return spec
+
+
+def from_iohmm_model(model: IOHMMModel, rating: str | None = None) -> tuple[IOHMMSpec, Params]:
+    """The spec and tables of a general model (with ``rating``, a column, the joint tables of the
+    human action and the rating through the model's rating table)."""
+    spec = spec_of(model)
+    emission = np.array(model.emission, dtype=float)
+    if rating is not None:
+        if model.rating is None:
+            raise FitError(["the model has no rating table (P(rating | level)): it cannot use ratings"])
+        spec = replace(spec, rating=rating, rating_levels=model.rating.levels)
+        emission = compose_joint(emission, np.array(model.rating.probs, dtype=float))
+    return spec, Params(np.array(model.initial, dtype=float), emission, np.array(model.transition, dtype=float))

@@ -1,8 +1,10 @@
-"""The supervisor and the task: ``TrustModel`` (trust dynamics and human actions), ``Task``
+"""The supervisor and the task: ``TrustModel`` (trust dynamics and human actions; ``IOHMMModel``
+is the same model with any named inputs), ``Task``
 (complexities, success probabilities, rewards of eq. (1), discount), their JSON formats, and
 the built-in presets."""
 
 from .core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, ModelError, RatingTable, Rewards, Task, TrustModel
+from .iohmm import IOHMM_FORMAT, IOHMMModel, load_any_model
 from .mixture import TypeMixture
 from .presets import (
     MIXTURE_PRESETS,
@@ -21,9 +23,11 @@ __all__ = [
     "ACTIONS",
     "EXPERIENCES",
     "HUMAN_ACTIONS",
+    "IOHMM_FORMAT",
     "MIXTURE_PRESETS",
     "MODEL_PRESETS",
     "TASK_PRESETS",
+    "IOHMMModel",
     "ModelError",
     "RatingTable",
     "Rewards",
@@ -31,6 +35,7 @@ __all__ = [
     "TrustModel",
     "TypeMixture",
     "conservative_model",
+    "load_any_model",
     "load_mixture",
     "load_model",
     "load_task",

@@ -60,6 +60,20 @@ __all__ = [  # the vocabulary is re-exported for convenience
 ATOL = 1e-9  # tolerance for a probability row to sum to one
 
 MODEL_FORMAT = "trustseek.trust-model/1"
+IOHMM_FORMAT = "trustseek.iohmm/1"  # a general model with named inputs (model/iohmm.py)
+PLANNING_INPUTS = ("complexity", "robot_action", "experience")  # the inputs of a trust model, which planning needs
+
+
+def planning_refusal(inputs: Sequence[str]) -> str:
+    """The one line said where a trust model is needed and a general model (with ``inputs``) is given."""
+    named = ", ".join(inputs) if inputs else "none"
+    return (
+        f"a general IOHMM model ({IOHMM_FORMAT}, inputs: {named}) is not a trust model: planning "
+        f"(solve, simulate, policies) needs a trust model ({MODEL_FORMAT}) whose inputs are among "
+        f"{', '.join(PLANNING_INPUTS)} (fit with --transitions-on/--emissions-on naming only those)"
+    )
+
+
 TASK_FORMAT = "trustseek.task/1"
 
 
@@ -487,6 +501,9 @@ class TrustModel:
         if not isinstance(d, Mapping):
             raise ModelError([f"a trust model must be a JSON object, got {type(d).__name__}"], source)
         fmt = d.get("format", MODEL_FORMAT)
+        if fmt == IOHMM_FORMAT:
+            inputs = [*d.get("emission_inputs", []), *d.get("transition_inputs", [])]
+            raise ModelError([planning_refusal([str(c) for c in dict.fromkeys(inputs)])], source)
         if fmt != MODEL_FORMAT:
             problems.append(f"format is {fmt!r}, expected {MODEL_FORMAT!r}")
         _unknown_keys(

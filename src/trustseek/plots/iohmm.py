@@ -1,0 +1,54 @@
+"""A general model's tables (``IOHMMModel``, named inputs) by input combination.
+
+Emissions: P(output = its last category | level, emission inputs), one group of bars per
+combination of the emission inputs' levels, one bar per level.  Transitions: P(next level
+= the highest | level, transition inputs), one group per combination of the transition
+inputs' levels.  The inputs' levels keep their declared order; rows the data never
+reached are drawn as the fit left them (the model file holds them too).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model.iohmm import IOHMMModel
+from . import save, style
+from .model import _bars
+
+
+def _labels(model: IOHMMModel, table: str, n: int) -> list[str]:
+    return ["\n".join(f"{c}={v}" for c, v in model.combination(table, u).items()) or "(all trials)" for u in range(n)]
+
+
+def plot_iohmm_emissions(model: IOHMMModel, path=None):
+    """P(output = last category | level, emission inputs), by combination of the inputs."""
+    cat = model.output_categories[-1]
+    vals = model.emission[:, :, -1]
+    with style() as plt:
+        fig, ax = plt.subplots(figsize=(max(4.6, 1.3 * len(vals) + 1.5), 2.8))
+        _bars(ax, vals, None, None, None, _labels(model, "emission", len(vals)), [f"S={k}" for k in model.levels])
+        ax.set_ylabel(f"P({model.output} = {cat} | S, inputs)")
+        ax.set_title(f"Estimated P({cat}) by {', '.join(model.emission_inputs) or 'level only'}")
+        ax.set_ylim(0, 1.25)  # room for the legend above the bars
+        ax.legend(loc="upper left", frameon=False, ncol=model.n_levels)
+        fig.tight_layout()
+        if path is not None:
+            save(fig, path)
+        return fig
+
+
+def plot_iohmm_transitions(model: IOHMMModel, path=None):
+    """P(next level = the highest | level, transition inputs), by combination of the inputs."""
+    top = model.levels[-1]
+    vals = np.asarray(model.transition[:, :, -1])
+    with style() as plt:
+        fig, ax = plt.subplots(figsize=(max(4.6, 1.3 * len(vals) + 1.5), 2.8))
+        _bars(ax, vals, None, None, None, _labels(model, "transition", len(vals)), [f"S={k}" for k in model.levels])
+        ax.set_ylabel(f"P(S' = {top} | S, inputs)")
+        ax.set_title(f"Estimated P(S' = {top}) by {', '.join(model.transition_inputs) or 'level only'}")
+        ax.set_ylim(0, 1.25)  # room for the legend above the bars
+        ax.legend(loc="upper left", frameon=False, ncol=model.n_levels)
+        fig.tight_layout()
+        if path is not None:
+            save(fig, path)
+        return fig
