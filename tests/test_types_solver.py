@@ -61,6 +61,9 @@ def test_the_upper_bounds_are_above_an_independent_lower_bound_everywhere(seed, 
     solver = TypeAwareSolver(tol=1e-9, resolution=8, max_resolution=8)
     sol = solver.solve_bounds(problem)
     assert np.all(solver.upper_at(B) >= lower - 1e-9)
+    # the bound looked ahead from a belief (what the solver reports at b0) too
+    for k in (-1, 0, 1, 2):
+        assert solver.lookahead_upper(B[k], max_nodes=300) >= lower[k] - 1e-9
     # and the solver's own lower bound is below the point solver's upper bound
     assert sol.lower <= point.upper + 1e-9 and point.lower <= sol.upper + 1e-9
 

@@ -230,6 +230,34 @@ class TypeAwareSolver(PointSolver):
             out = np.minimum(out, super().upper_at(B))
         return out
 
+    def lookahead_upper(self, b0: np.ndarray, max_nodes: int = 5000) -> float:
+        """The upper bound at b0 improved by looking ahead: the beliefs reachable from b0 are
+        expanded level by level (equal beliefs merged) while a level has at most ``max_nodes``
+        beliefs; each belief's bound is then min(U(b), H U(b)) from the deepest level up, where
+        H is the Bellman backup over its successors.  H is monotone and U is above the optimal
+        value, so every such value is too."""
+        m = self.model
+        fan = int(np.prod(m.kernels.shape[:3]))  # successors of one belief: contexts x actions x branches
+        levels = [np.atleast_2d(np.asarray(b0, dtype=float))]
+        links = []
+        while len(levels[-1]) * fan <= 40 * max_nodes:
+            p, S = m.branches.successors(levels[-1])  # (n, N, A, Br), (n, N, A, Br, K)
+            live = p > 1e-300
+            nxt, inverse = np.unique(np.round(S[live], 12), axis=0, return_inverse=True)
+            if len(nxt) > max_nodes:
+                break
+            links.append((p, live, inverse.reshape(-1)))
+            levels.append(S[live][np.unique(inverse.reshape(-1), return_index=True)[1]])
+        values = self.upper_at(levels[-1])
+        for depth in range(len(links) - 1, -1, -1):
+            B = levels[depth]
+            p, live, inverse = links[depth]
+            succ = np.zeros(p.shape)
+            succ[live] = values[inverse]
+            q = np.einsum("cat,nt->nca", m.rewards, B) + m.discount * (p * succ).sum(axis=3)
+            values = np.minimum(self.upper_at(B), q.max(axis=2) @ m.context_probs)
+        return float(values[0])
+
     def _upper(self, r: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Vertex beliefs, certified upper values and the code lookup at resolution r: the fixed
         point of the Bellman operator whose successor values are min(interpolation, base bound),
@@ -317,7 +345,7 @@ class TypeAwareSolver(PointSolver):
             S, p = self._successors(B)
             self._improve_lower(B, S, p)
             lo = float(self.lower_at(b0)[0])
-            up = float(self.upper_at(b0)[0])
+            up = self.lookahead_upper(b0)
             history.append((len(V), time.perf_counter() - t0, lo, up))
             self.history = history
             too_big = _lattice_size(K, 2 * r) > self.max_vertices or (2 * r + 1) ** (K - 1) >= 2**62
