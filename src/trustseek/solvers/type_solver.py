@@ -21,6 +21,7 @@ benefits, whatever its level names) and uses them on both sides:
   then nearly that type's value.  Point-based policy iteration (the point solver's) builds on
   these and on the memoryless controllers.
 
+The upper bound reported at b0 looks a few trials ahead (:meth:`TypeAwareSolver.lookahead_upper`).
 The grid resolution is doubled until U(b0) - L(b0) <= ``tol`` or the time limit, as in the
 point solver.  A problem without two-state blocks (one type with K > 2 levels, a flat POMDP)
 is solved with the fast informed bound as the only cap: the point solver plus that cap.
