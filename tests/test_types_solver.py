@@ -10,6 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from test_point import TIGER
+from trustseek.interop.files import read_pomdp
 from trustseek.model import TypeMixture, paper_conservative_mixture, paper_model, paper_task
 from trustseek.model.core import TrustModel
 from trustseek.pomdp import AssistancePOMDP
@@ -143,4 +145,12 @@ def test_a_problem_without_types_falls_back_to_the_fast_informed_bound(pomdp):
     lo, up = policy.info["value_bounds_at_initial_belief"]
     alpha = make_solver("alpha", gap=1e-6).solve(pomdp).info["value_bounds_at_initial_belief"]
     assert up - lo <= 1e-3 and _overlap((lo, up), alpha)
+    assert policy.info["type_blocks"] == 0
+
+
+def test_a_flat_pomdp_is_solved_with_a_bounded_look_ahead():
+    """Tiger's beliefs, merged, grow by two a trial: the look-ahead stops at its depth limit."""
+    policy = make_solver("types", gap=1e-4).solve(read_pomdp("tiger.pomdp", TIGER))
+    lo, up = policy.info["value_bounds_at_initial_belief"]
+    assert up - lo <= 1e-4 and lo - 1e-6 <= 19.371368 <= up + 1e-6
     assert policy.info["type_blocks"] == 0

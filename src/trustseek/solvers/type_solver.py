@@ -231,17 +231,17 @@ class TypeAwareSolver(PointSolver):
             out = np.minimum(out, super().upper_at(B))
         return out
 
-    def lookahead_upper(self, b0: np.ndarray, max_nodes: int = 5000) -> float:
+    def lookahead_upper(self, b0: np.ndarray, max_nodes: int = 5000, max_depth: int = 6) -> float:
         """The upper bound at b0 improved by looking ahead: the beliefs reachable from b0 are
         expanded level by level (equal beliefs merged) while a level has at most ``max_nodes``
-        beliefs; each belief's bound is then min(U(b), H U(b)) from the deepest level up, where
+        beliefs, to at most ``max_depth`` trials; each belief's bound is then min(U(b), H U(b)) from the deepest level up, where
         H is the Bellman backup over its successors.  H is monotone and U is above the optimal
         value, so every such value is too."""
         m = self.model
         fan = int(np.prod(m.kernels.shape[:3]))  # successors of one belief: contexts x actions x branches
         levels = [np.atleast_2d(np.asarray(b0, dtype=float))]
         links = []
-        while len(levels[-1]) * fan <= 40 * max_nodes:
+        while len(levels) <= max_depth and len(levels[-1]) * fan <= 40 * max_nodes:
             p, S = m.branches.successors(levels[-1])  # (n, N, A, Br), (n, N, A, Br, K)
             live = p > 1e-300
             nxt, inverse = np.unique(np.round(S[live], 12), axis=0, return_inverse=True)
