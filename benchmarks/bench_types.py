@@ -5,12 +5,16 @@
 
 * the type-aware solve for M = 3 types (the paper's supervisor, the conservative one and
   "midway", their average, in shares 0.5 / 0.3 / 0.2), K = 2 trust levels, to a bound gap of
-  1e-3 at b0 (target < 1 s) with the reachable solver, next to the point solver on the same
-  problem with the same time limit (the in-run baseline);
+  1e-3 at b0 (target < 1 s) with the types solver (its gap against time: one line per grid
+  resolution) and the reachable solver, next to the point solver on the same problem with the
+  same time limit (the in-run baseline);
+* the same for M = 2 (the ``paper+conservative`` preset);
 * single-type models with K = 3 (the shipped three-level example) and K = 4 (a four-level chain
-  built from the paper's numbers, below), both solvers, same gap and time limit.
+  built from the paper's numbers, below): no type structure, so the types solver's cap is the
+  fast informed bound alone; same gap and time limit.
 
 Each line: solver, seconds (wall and CPU, one core), the bounds at b0 and the gap reached.
+The types solver is run once before timing (its compiled bound is cached on disk).
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from typing import Any
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -25,7 +30,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 
 from trustseek.data import example_path
-from trustseek.model import TypeMixture, conservative_model, paper_model, paper_task
+from trustseek.model import TypeMixture, conservative_model, paper_conservative_mixture, paper_model, paper_task
 from trustseek.model.core import Task, TrustModel
 from trustseek.pomdp import AssistancePOMDP
 from trustseek.pomdp.types import type_aware_problem
@@ -65,13 +70,22 @@ def chain_model(K: int) -> TrustModel:
     return TrustModel(names, p.complexities, initial, emission, transition)
 
 
-def run(name: str, pomdp: AssistancePOMDP, solver: str, limit: float) -> float:
+def run(name: str, pomdp: AssistancePOMDP, solver: str, limit: float, **options: Any) -> float:
     t0, c0 = time.perf_counter(), time.process_time()
-    policy = make_solver(solver, gap=1e-3, max_seconds=limit).solve(pomdp)
+    policy = make_solver(solver, gap=1e-3, max_seconds=limit, **options).solve(pomdp)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     lo, up = policy.info["value_bounds_at_initial_belief"]
-    print(f"  {name:<34} {solver:<10} {wall:8.2f} s wall {cpu:8.2f} s CPU   V(b0) in [{lo:.5f}, {up:.5f}]  gap {up - lo:.1e}")
+    label = f"{solver}" + (f" r<={options['max_resolution']}" if "max_resolution" in options else "")
+    print(f"  {name:<34} {label:<14} {wall:8.2f} s wall {cpu:8.2f} s CPU   V(b0) in [{lo:.5f}, {up:.5f}]  gap {up - lo:.1e}")
     return wall
+
+
+def curve(name: str, pomdp: AssistancePOMDP, solvers: tuple[str, ...], resolutions: tuple[int, ...], limit: float) -> None:
+    """Gap against time: each solver stopped at each grid resolution (not by the clock, which a
+    loaded machine stretches)."""
+    for r in resolutions:
+        for solver in solvers:
+            run(name, pomdp, solver, 10 * limit, max_resolution=r)
 
 
 def main() -> None:
@@ -84,14 +98,25 @@ def main() -> None:
     )
     print(f"type-aware solve, M = 3 types x K = 2 levels, gap 1e-3 at b0 (target < 1 s); time limit {limit:g} s")
     problem = type_aware_problem(mixture, task)
+    make_solver("types", gap=1.0).solve(type_aware_problem(paper_conservative_mixture(), task))  # compile, load caches
+    run("paper + conservative + midway", problem, "types", limit)
     run("paper + conservative + midway", problem, "reachable", limit)
     run("paper + conservative + midway", problem, "point", limit)
+    print("  gap against time, the grid solvers stopped at a resolution:")
+    curve("paper + conservative + midway", problem, ("types", "point"), (4, 8, 16), limit)
+    print(f"type-aware solve, M = 2 types (paper+conservative) x K = 2 levels, gap 1e-3 at b0; time limit {limit:g} s")
+    pair = type_aware_problem(paper_conservative_mixture(), task)
+    run("paper + conservative", pair, "types", limit)
+    run("paper + conservative", pair, "point", limit)
+    print("  gap against time, the grid solvers stopped at a resolution:")
+    curve("paper + conservative", pair, ("types", "point"), (8, 16, 32, 64), limit)
     print(f"single-type models, gap 1e-3 at b0; time limit {limit:g} s")
     three = AssistancePOMDP(
         TrustModel.load(example_path("three_level_model.json")), Task.load(example_path("three_level_task.json"))
     )
     four = AssistancePOMDP(chain_model(4), task)
     for label, pomdp in (("K = 3 (three-level example)", three), ("K = 4 (chain of the paper's numbers)", four)):
+        run(label, pomdp, "types", limit)
         run(label, pomdp, "reachable", limit)
         run(label, pomdp, "point", limit)
 

@@ -91,13 +91,14 @@ def solve(
         "--solver",
         help="grid (belief grid, the default), alpha (certified alpha vectors, two trust levels), point (point-based "
         "bounds, any number of trust levels; the default with supervisor types), reachable (search over the beliefs "
-        "reachable from the start, any number of trust levels), certified-grid (eq. 3, certified) or trust-agnostic.",
+        "reachable from the start, any number of trust levels), types (point with the supervisor types' bounds), "
+        "certified-grid (eq. 3, certified) or trust-agnostic.",
     ),
     gap: float | None = typer.Option(
-        None, "--gap", help="alpha/point/reachable: target certified gap between the value bounds (default 1e-6 / 1e-3)."
+        None, "--gap", help="alpha/point/types/reachable: target certified gap between the value bounds (default 1e-6 / 1e-3)."
     ),
     max_seconds: float | None = typer.Option(
-        None, "--max-seconds", help="point/reachable: stop after this many seconds (default 60) with the bounds reached."
+        None, "--max-seconds", help="point/types/reachable: stop after this many seconds (default 60) with the bounds reached."
     ),
     types: str | None = typer.Option(
         None,

@@ -7,6 +7,7 @@
 * :mod:`.certified_grid` -- the certified adaptive grid for the eq.-3 update;
 * :mod:`.point`          -- point-based bounds (any number of trust levels, flat POMDPs too);
 * :mod:`.agnostic`       -- the trust-agnostic optimum (Section VI-A);
+* :mod:`.type_solver`    -- point-based bounds that use the supervisor types of a product problem;
 * :mod:`.type_aware`     -- ``solve_type_aware``: the policy for a person of unknown supervisor type;
 * :mod:`.specs`          -- one policy from a short spec (``policy_from_spec``);
 * :mod:`.summary`        -- the machine-readable summary of a solved policy.
@@ -26,6 +27,7 @@ from .registry import SOLVERS, make_solver, solve_with, solver_names
 from .specs import PolicySpecError, policy_from_spec
 from .summary import summarize
 from .type_aware import solve_type_aware
+from .type_solver import TypeAwareSolver
 
 __all__ = [
     "SOLVERS",
@@ -37,6 +39,7 @@ __all__ = [
     "Solver",
     "SolverError",
     "TrustAgnosticSolver",
+    "TypeAwareSolver",
     "UnsupportedProblem",
     "make_solver",
     "policy_from_spec",

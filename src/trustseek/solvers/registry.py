@@ -27,6 +27,7 @@ from .grid import DEFAULT_GRID, GridSolver
 from .point import PointSolver
 from .reachable import ReachableSolver
 from .schedule import DEFAULT_SCHEDULE_GRID, ScheduleSolver
+from .type_solver import TypeAwareSolver
 
 __all__ = ["SOLVERS", "SolverEntry", "make_solver", "solve_with", "solver_names"]
 
@@ -67,6 +68,12 @@ def _reachable(belief_update: str = "bayes", gap: float = 1e-3, max_seconds: flo
     return ReachableSolver(tol=gap, max_seconds=max_seconds, belief_update=belief_update)
 
 
+def _types(
+    belief_update: str = "bayes", gap: float = 1e-3, max_seconds: float = 60.0, max_resolution: int | None = None
+) -> Solver:
+    return TypeAwareSolver(tol=gap, max_seconds=max_seconds, belief_update=belief_update, max_resolution=max_resolution)
+
+
 def _trust_agnostic(horizon: int = PAPER_HORIZON) -> Solver:
     return TrustAgnosticSolver(horizon=horizon)
 
@@ -90,6 +97,11 @@ SOLVERS: dict[str, SolverEntry] = {
         SolverEntry("point", _point, "point-based bounds at the initial belief, any number of trust levels, bayes update"),
         SolverEntry(
             "reachable", _reachable, "heuristic search over the beliefs reachable from b0, any number of trust levels, bayes"
+        ),
+        SolverEntry(
+            "types",
+            _types,
+            "point-based bounds capped by the supervisor types' values (type revealed), any number of trust levels, bayes",
         ),
         SolverEntry("trust-agnostic", _trust_agnostic, "the best policy that looks only at the complexity (Section VI-A)"),
         SolverEntry("schedule", _schedule, "trial scheduling: the next item's complexity and the ask, finite horizon"),
