@@ -388,3 +388,25 @@ def test_study_log_with_a_condition_input_fits_like_the_canonical_log(tmp_path):
     assert mapped.model.inputs["group"] == ("transparent", "opaque")
     assert mapped.fit.seqs.n_trials == reference.fit.seqs.n_trials == len(canonical)
     assert mapped.loglik == pytest.approx(reference.loglik, rel=1e-9, abs=1e-9)
+
+
+def test_select_compares_levels_of_a_model_of_named_inputs(study):
+    """select on named inputs compares the general model: its one-level row is the independent
+    count-based maximum (a single level: P(rely | advice) = the share of relying per advice)."""
+    path, mapping, codes = study
+    code, out = run_cli(
+        ["select", str(path), "--mapping", str(mapping), "--emissions-on", "advice", "--transitions-on", "condition"]
+        + ["--max-levels", "2", "--folds", "2", "-r", "2", "--json", "--quiet"]
+    )
+    assert code == 0, out
+    rows = json.loads(out)["levels"]
+    assert [r["levels"] for r in rows] == [1, 2]
+    y, adv = codes["y"], codes["adv"]
+    seen = y >= 0
+    ll = 0.0
+    for a in np.unique(adv[seen]):
+        yy = y[seen & (adv == a)]
+        p = yy.mean()
+        ll += float(np.sum(yy * np.log(p) + (1 - yy) * np.log(1 - p)))
+    assert rows[0]["loglik"] == pytest.approx(ll, abs=1e-6)
+    assert rows[1]["loglik"] >= rows[0]["loglik"] - 1e-6

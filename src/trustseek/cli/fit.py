@@ -533,11 +533,6 @@ def select(
 ) -> None:
     """Choose the number of trust levels: BIC and participant-held-out log-likelihood."""
     tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter)
-    if _general(tr, em):
-        raise TrustseekError(
-            ["select compares trust models (inputs among complexity, robot_action, experience); "
-             "for other inputs compare the BIC of 'trustseek fit --json' with each --levels"]
-        )  # fmt: skip
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("model selection", total=None)

@@ -26,7 +26,14 @@ from .iohmm import IOHMMFit, fit_iohmm
 from .sequences import Sequences, encode
 from .spec import IOHMMSpec, Params
 from .structure import Structure
-from .trust_iohmm import level_names, preset_spec
+from .trust_iohmm import (
+    PAPER_EMISSION_INPUTS,
+    PAPER_TRANSITION_INPUTS,
+    general_spec,
+    is_trust_structure,
+    level_names,
+    preset_spec,
+)
 
 log = logging.getLogger(__name__)
 
@@ -186,7 +193,9 @@ def select_levels(
 ) -> list[dict[str, Any]]:
     """Compare numbers of trust levels: BIC on all data and k-fold participant-held-out log-likelihood.
 
-    ``spec_options`` adjust the ``paper`` preset (as for :func:`~.fit.fit_trust_model`);
+    ``spec_options`` adjust the ``paper`` preset (as for :func:`~.fit.fit_trust_model`); with
+    ``transition_inputs`` / ``emission_inputs`` other than a trust model's, the general model of
+    those named inputs (:func:`~.trust_iohmm.general_spec`) is compared;
     ``progress(label, done, total)`` is called after every fit (``label`` names the number
     of levels being compared).  Each fit is :func:`fit_with_moves`: ``restarts`` random
     starts (default: :func:`default_restarts` of its free parameters), ``splits`` split
@@ -197,7 +206,15 @@ def select_levels(
     and ``reached_best`` (starts within :data:`BEST_TOLERANCE` of the best);
     :func:`selection_warnings` says when the best number of levels is the largest compared.
     """
-    base = preset_spec("paper", frame, prior=prior, **spec_options)
+    tr = tuple(spec_options.get("transition_inputs", PAPER_TRANSITION_INPUTS))
+    em = tuple(spec_options.get("emission_inputs", PAPER_EMISSION_INPUTS))
+    if is_trust_structure(tr, em):
+        base = preset_spec("paper", frame, prior=prior, **spec_options)
+    else:
+        extra = sorted(set(spec_options) - {"transition_inputs", "emission_inputs"})
+        if extra:
+            raise ValueError(f"options {extra} apply to the paper preset only, not to a model of named inputs")
+        base = general_spec(frame, em, tr, prior=prior)
     seqs = encode(frame, base)
     N = seqs.n_participants
     folds = max(2, min(folds, N))
