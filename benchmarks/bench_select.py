@@ -1,7 +1,7 @@
 """Benchmark of ``trustseek select`` (the number of trust levels) and its acceptance figures.
 
     python benchmarks/bench_select.py               # timing: three-level model, 60 x 40, K = 1..3, 2 folds
-    python benchmarks/bench_select.py --acceptance  # the three- and four-level models, 300 x 60, K = 1..4, defaults
+    python benchmarks/bench_select.py --acceptance  # three- and four-level models, 300 x 60, K = 1..K+1, defaults
 
 Acceptance (per generating model; seeded): the number of levels chosen by BIC and by the
 5-fold participant-held-out log-likelihood with select's defaults; the best
@@ -61,6 +61,42 @@ def three_level_model() -> TrustModel:
     return TrustModel.load(example_path("three_level_model.json"))
 
 
+def chain(rely_high: list[float], rely_low: list[float], up: tuple[float, float], down: tuple[float, float]) -> TrustModel:
+    """Levels in a chain: P(rely | autonomous) per level in high and low complexity; a reliable
+    experience moves trust one level up with probability ``up[complexity]`` (low, high), a faulty
+    one one level down with ``down[robot action]`` (autonomous, ask); every level equally likely
+    at the start."""
+    K = len(rely_high)
+    em = np.zeros((2, 2, K, 2))
+    em[0, 0, :, 1], em[1, 0, :, 1] = rely_low, rely_high
+    em[:, 0, :, 0] = 1 - em[:, 0, :, 1]
+    em[:, 1, :, 0] = 1.0
+    tr = np.zeros((2, 2, 2, K, K))
+    for c, a, e, t in np.ndindex(2, 2, 2, K):
+        p, to = (up[c], min(t + 1, K - 1)) if e == 1 else (down[a], max(t - 1, 0))
+        tr[c, a, e, t, to] += p
+        tr[c, a, e, t, t] += 1 - p
+    return TrustModel(level_names(K), ("low", "high"), np.full(K, 1.0 / K), em, tr)
+
+
+def separated_three() -> TrustModel:
+    """Three levels that 300 x 60 trials resolve: P(rely | high complexity) 0.02, 0.5, 0.98."""
+    return chain([0.02, 0.5, 0.98], [0.1, 0.6, 0.99], up=(0.05, 0.12), down=(0.2, 0.08))
+
+
+def separated_four() -> TrustModel:
+    """Four levels, P(rely | high complexity) 0.02, 0.3, 0.7, 0.98, moving slowly."""
+    return chain([0.02, 0.3, 0.7, 0.98], [0.05, 0.4, 0.8, 0.99], up=(0.03, 0.06), down=(0.06, 0.03))
+
+
+MODELS = {
+    "three": three_level_model,
+    "four": four_level_model,
+    "three-separated": separated_three,
+    "four-separated": separated_four,
+}
+
+
 def table(model: TrustModel, n: int, trials: int, levels: tuple[int, ...], folds: int, reference: int, seed: int) -> None:
     K = model.n_trust
     df = simulate_design(model, n, seed=seed, n_trials=(trials // 2, trials - trials // 2))
@@ -108,15 +144,22 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--acceptance", action="store_true", help="the 300 x 60 table for the three- and four-level models")
     ap.add_argument("--reference", type=int, default=200, help="random restarts of the reference fit (0: none)")
-    ap.add_argument("--models", default="3,4", help="generating numbers of levels (acceptance)")
+    ap.add_argument(
+        "--models",
+        default="three-separated,four-separated,three,four",
+        help=f"generating models (acceptance), comma-separated among {', '.join(MODELS)}",
+    )
     args = ap.parse_args()
     print(f"load average: {os.getloadavg()[0]:.1f}")
     if not args.acceptance:
         table(three_level_model(), 60, 40, (1, 2, 3), folds=2, reference=min(args.reference, 20), seed=2)
         return
-    for K in (int(k) for k in args.models.split(",")):
-        model = three_level_model() if K == 3 else four_level_model()
-        table(model, 300, 60, (1, 2, 3, 4), folds=5, reference=args.reference, seed=0)
+    for name in args.models.split(","):
+        if name not in MODELS:
+            ap.error(f"unknown model {name!r}; models: {', '.join(MODELS)}")
+        model = MODELS[name]()
+        print(f"model {name}:")
+        table(model, 300, 60, tuple(range(1, model.n_trust + 2)), folds=5, reference=args.reference, seed=0)
 
 
 if __name__ == "__main__":
