@@ -410,3 +410,24 @@ def test_select_compares_levels_of_a_model_of_named_inputs(study):
         ll += float(np.sum(yy * np.log(p) + (1 - yy) * np.log(1 - p)))
     assert rows[0]["loglik"] == pytest.approx(ll, abs=1e-6)
     assert rows[1]["loglik"] >= rows[0]["loglik"] - 1e-6
+
+
+def test_bootstrap_intervals_for_a_model_of_named_inputs(study):
+    """--bootstrap on named inputs: every estimated cell gets an interval that holds its estimate,
+    the same resamples give the same intervals, and the table shows them."""
+    path, mapping, _ = study
+    argv = ["fit", str(path), "--mapping", str(mapping), "--emissions-on", "advice", "--transitions-on", "condition"]
+    argv += ["-r", "2", "--bootstrap", "6", "--jobs", "1", "--quiet"]
+    code, text = run_cli([*argv, "--json"])
+    assert code == 0, text
+    d = json.loads(text)
+    assert d["bootstrap"] == 6 and d["ci_level"] == 0.95
+    cells = d["cells"]
+    assert {c["table"] for c in cells} == {"initial", "emission", "transition"}
+    for c in cells:
+        assert c["lower"] <= c["estimate"] <= c["upper"], c
+    assert any(c["upper"] - c["lower"] > 1e-3 for c in cells)  # resampling moves the estimates
+    code, again = run_cli([*argv, "--json"])
+    assert json.loads(again)["cells"] == cells
+    code, table = run_cli(argv)
+    assert code == 0 and "95% CI (6 resamples)" in table, table

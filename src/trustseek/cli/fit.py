@@ -351,16 +351,11 @@ def _fit_general(
 ) -> None:  # fmt: skip
     """``fit`` with inputs a trust model does not have: a general model (trustseek.iohmm/1)."""
     named = ", ".join(dict.fromkeys((*em, *tr)))
-    refused = [
-        f"{flag} is for a trust model; a general model (inputs: {named}) has none"
-        for flag, given in (("--bootstrap", bootstrap > 0), ("--fill-from", fill_from is not None))
-        if given
-    ]
-    if refused:
-        raise TrustseekError(refused)
+    if fill_from is not None:
+        raise TrustseekError([f"--fill-from is for a trust model; a general model (inputs: {named}) has none"])
     bar = progress_bar(quiet or as_json)
     with bar:
-        task = bar.add_task("restarts", total=restarts)
+        task = bar.add_task("restarts", total=restarts + bootstrap)
         result = _fit().fit.fit_model(
             frame,
             em,
@@ -372,9 +367,12 @@ def _fit_general(
             n_jobs=jobs,
             tol=tol,
             max_iter=max_iter,
-            progress=lambda done, total: bar.update(task, completed=done, total=total),
+            progress=lambda done, total: bar.update(
+                task, completed=done, total=total, description="bootstrap" if done > restarts else "restarts"
+            ),
             rating=rated,
             actions=not ratings_only,
+            bootstrap=bootstrap,
         )
     if out is not None:
         with atomic_output(out) as tmp:
@@ -398,16 +396,23 @@ def _fit_general(
         f"{result.fit.seqs.n_participants} participants, {result.fit.seqs.n_trials} trials)",
         title_justify="left",
     )
-    for col, justify in (("cell", "left"), ("estimate", "right"), ("events", "right")):
-        table.add_column(col, justify=justify)  # type: ignore[arg-type]
+    iv = result.intervals
+    table.add_column("cell")
+    table.add_column("estimate", justify="right")
+    if iv is not None:
+        table.add_column(f"{iv.level:.0%} CI ({iv.replicates} resamples)", justify="right")
+    table.add_column("events", justify="right")
     for c in result.cells():
+        row = [escape(c["cell"]), f"{c['estimate']:.3f}"]
+        if iv is not None:
+            ci = escape(f"[{c['lower']:.3f}, {c['upper']:.3f}]")
+            row.append(f"{ci} [yellow]widened[/]" if c.get("widened") else ci)
         ev = f"{c['events']:.1f}"
-        table.add_row(
-            escape(c["cell"]),
-            f"{c['estimate']:.3f}",
-            ev if c["events"] >= _fit().MIN_EVENTS else f"[yellow]{ev} (not identified)[/]",
-        )
+        row.append(ev if c["events"] >= _fit().MIN_EVENTS else f"[yellow]{ev} (not identified)[/]")
+        table.add_row(*row)
     console.print(table)
+    if iv is not None:
+        console.print(f"intervals: bootstrap over {iv.replicates} resamples of the participants ({iv.method})", highlight=False)
     lls = ", ".join(f"{x:.3f}" for x in sorted(result.restart_logliks, reverse=True))
     console.print(
         f"log-likelihood {result.loglik:.4f}; {result.n_params} free parameters; AIC {result.aic:.2f}; BIC {result.bic:.2f}\n"

@@ -1,4 +1,7 @@
-"""Participant-level bootstrap of a trust-model fit: an interval for every TrustModel cell.
+"""Participant-level bootstrap of a fit: an interval for every cell of the model's tables.
+
+The cells are a TrustModel's (a fit with the paper's inputs) or, for a model of other named
+inputs, the IOHMM's own tables (:func:`cell_tables`).
 
 Each replicate resamples participants with replacement and refits from the point
 estimate and a few random starts (the estimator of the point estimate: the best of
@@ -26,8 +29,8 @@ from scipy.optimize import linear_sum_assignment
 
 from .iohmm import fit_iohmm
 from .sequences import Sequences
-from .spec import IOHMMSpec, Params
-from .trust_iohmm import to_trust_model
+from .spec import FitError, IOHMMSpec, Params
+from .trust_iohmm import check_convertible, to_trust_model
 
 log = logging.getLogger(__name__)
 
@@ -65,6 +68,17 @@ def align(reference: Params, params: Params, weights: Mapping[str, np.ndarray] |
     return perm
 
 
+def cell_tables(spec: IOHMMSpec, params: Params) -> dict[str, np.ndarray]:
+    """The tables whose cells get intervals: a trust model's TrustModel arrays, or for a model of
+    other named inputs its own ``initial`` (K,), ``emission`` (Ue, K, Y), ``transition`` (Ut, K, K)."""
+    try:
+        check_convertible(spec)
+    except FitError:
+        return {"initial": params.initial, "emission": params.emission, "transition": params.transition}
+    m = to_trust_model(spec, params)
+    return {name: getattr(m, name) for name in TABLES}
+
+
 @dataclass(frozen=True)
 class _Replicate:
     """One bootstrap replicate, sent whole to a worker process."""
@@ -79,7 +93,7 @@ class _Replicate:
     max_iter: int
 
     def run(self) -> tuple[np.ndarray, bool]:
-        """The refitted TrustModel's cells, flattened table after table, levels aligned to the estimate;
+        """The refitted model's cells (:func:`cell_tables`), flattened table after table, levels aligned to the estimate;
         and whether a random start found a higher maximum than the refit continued from the estimate."""
         rng = np.random.default_rng(self.seed)
         n = self.seqs.n_participants
@@ -94,14 +108,14 @@ class _Replicate:
             init=[self.params],
         )
         p = fit.params.permuted(align(self.params, fit.params, self.weights))
-        m = to_trust_model(self.spec, p)
+        tables = cell_tables(self.spec, p)
         other = fit.runs[fit.best].objective - fit.runs[0].objective > OTHER_MAXIMUM
-        return np.concatenate([getattr(m, name).ravel() for name in TABLES]), bool(other)
+        return np.concatenate([tables[name].ravel() for name in TABLES]), bool(other)
 
 
 @dataclass
 class Intervals:
-    """Bootstrap intervals for every TrustModel cell, and what they rest on.
+    """Bootstrap intervals for every cell of the model's tables, and what they rest on.
 
     ``intervals[table] = (lower, upper)``: the percentile interval at ``level`` of the
     ``replicates`` refits, widened to contain the point estimate where it did not
@@ -156,7 +170,7 @@ def bootstrap(
     progress: Callable[[str, int, int], None] | None = None,
     weights: Mapping[str, np.ndarray] | None = None,
 ) -> Intervals:
-    """Intervals at ``level`` for every TrustModel cell of the fit ``params``, over ``replicates`` resamples.
+    """Intervals at ``level`` for every cell (:func:`cell_tables`) of the fit ``params``, over ``replicates`` resamples.
 
     ``weights`` are passed to :func:`align` (the fit's expected events behind each row
     are a good choice).  Replicates run over ``n_jobs`` processes (default: all cores);
@@ -197,14 +211,14 @@ def bootstrap(
     other = sum(results[i][1] for i in range(replicates))
     alpha = (1 - level) / 2
     lo, hi = np.quantile(flat, [alpha, 1 - alpha], axis=0)
-    ref = to_trust_model(spec, params)
-    est = np.concatenate([getattr(ref, name).ravel() for name in TABLES])
+    ref = cell_tables(spec, params)
+    est = np.concatenate([ref[name].ravel() for name in TABLES])
     widened = (est < lo) | (est > hi)
     lo, hi = np.minimum(lo, est), np.maximum(hi, est)
     intervals, wide, draws = {}, {}, {}
     pos = 0
     for name in TABLES:
-        shape = getattr(ref, name).shape
+        shape = ref[name].shape
         size = int(np.prod(shape))
         cut = slice(pos, pos + size)
         intervals[name] = (lo[cut].reshape(shape), hi[cut].reshape(shape))

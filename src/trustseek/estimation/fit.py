@@ -445,6 +445,7 @@ class ModelFitResult:
     events: dict[str, np.ndarray]
     warnings: list[str] = field(default_factory=list)
     seed: int = 0
+    intervals: Intervals | None = None  # bootstrap intervals of every table cell (fit_model's ``bootstrap``)
 
     @property
     def loglik(self) -> float:
@@ -476,16 +477,23 @@ class ModelFitResult:
         m, s = self.model, self.fit.structure
         L = m.levels
         out: list[dict[str, Any]] = []
+        iv = self.intervals
+
+        def with_interval(rec: dict[str, Any], table: str, idx: tuple[int, ...]) -> dict[str, Any]:
+            if iv is not None:
+                rec["lower"], rec["upper"] = float(iv.intervals[table][0][idx]), float(iv.intervals[table][1][idx])
+                rec["widened"] = bool(iv.widened[table][idx])
+            return rec
+
         for k in range(1, m.n_levels) if m.n_levels == 2 else range(m.n_levels):
-            out.append(
-                {
-                    "table": "initial",
-                    "where": {},
-                    "cell": f"P(S1={L[k]})",
-                    "estimate": float(m.initial[k]),
-                    "events": float(self.events["initial"][k]),
-                }
-            )
+            rec = {
+                "table": "initial",
+                "where": {},
+                "cell": f"P(S1={L[k]})",
+                "estimate": float(m.initial[k]),
+                "events": float(self.events["initial"][k]),
+            }
+            out.append(with_interval(rec, "initial", (k,)))
         for name, table, arr, cats in (
             ("emission", s.em, m.emission, m.output_categories),
             ("transition", s.tr, m.transition, L),
@@ -501,17 +509,16 @@ class ModelFitResult:
                         continue
                     for j in range(1, len(cats)) if len(cats) == 2 else range(len(cats)):
                         head = f"{m.output}={cats[j]}" if name == "emission" else f"S'={cats[j]}"
-                        out.append(
-                            {
-                                "table": name,
-                                "where": where,
-                                "level": L[k],
-                                "category": cats[j],
-                                "cell": f"P({head} | S={L[k]}{cond})",
-                                "estimate": float(arr[u, k, j]),
-                                "events": float(self.events[name][u, k]),
-                            }
-                        )
+                        rec = {
+                            "table": name,
+                            "where": where,
+                            "level": L[k],
+                            "category": cats[j],
+                            "cell": f"P({head} | S={L[k]}{cond})",
+                            "estimate": float(arr[u, k, j]),
+                            "events": float(self.events[name][u, k]),
+                        }
+                        out.append(with_interval(rec, name, (u, k, j)))
         if m.rating is not None and "rating" in self.events:
             for k in range(m.n_levels):
                 for r, lv in enumerate(m.rating.levels):
@@ -546,7 +553,10 @@ class ModelFitResult:
             "ended": [r.ended for r in runs],
             "seconds": [r.seconds for r in runs],
             "seed": self.seed,
-            "bootstrap": 0,
+            "bootstrap": 0 if self.intervals is None else self.intervals.replicates,
+            "ci_level": None if self.intervals is None else self.intervals.level,
+            "ci_method": None if self.intervals is None else self.intervals.method,
+            "ci_other_maximum": None if self.intervals is None else self.intervals.other_maximum,
             "spec": self.fit.spec.to_dict(),
             "warnings": list(self.warnings),
         }
@@ -568,6 +578,7 @@ def fit_model(
     rating_levels: Sequence[str] | None = None,
     actions: bool = True,
     spec: IOHMMSpec | None = None,
+    bootstrap: int = 0,
 ) -> ModelFitResult:
     """Fit the human action's IOHMM with any named inputs (columns of ``frame``, e.g. a mapping's
     ``inputs`` and the canonical complexity, robot_action, experience) to a general model.
@@ -575,7 +586,9 @@ def fit_model(
     Each input's levels keep their declared order (a categorical column's categories: the
     mapping's).  The structure is :func:`~.trust_iohmm.general_spec` (or ``spec``); restarts,
     seeding, tolerance, ratings and ``actions`` are as for :func:`fit_trust_model`, which fits
-    the same model with the paper's inputs as a :class:`~trustseek.model.TrustModel`."""
+    the same model with the paper's inputs as a :class:`~trustseek.model.TrustModel`.
+    ``bootstrap`` > 0 resamples participants that many times for an interval of every table
+    cell (:mod:`.bootstrap`, as for the trust model); ``progress`` then counts its replicates too."""
     if spec is None:
         spec = general_spec(frame, emission_inputs, transition_inputs, levels, prior)
     if rating is not None:
@@ -588,13 +601,15 @@ def fit_model(
     if problems:
         raise FitError(problems)
     seqs = encode(frame, spec)
+    if bootstrap > 0 and spec.rating is not None:
+        raise FitError(["bootstrap intervals are not available for a fit with ratings (fit without --bootstrap)"])
     done = 0
 
-    def tick(i: int, r: Any) -> None:
+    def tick(i: int = 0, r: Any = None) -> None:
         nonlocal done
         done += 1
         if progress is not None:
-            progress(done, restarts)
+            progress(done, restarts + bootstrap)
 
     fit = fit_iohmm(
         seqs,
@@ -626,4 +641,20 @@ def fit_model(
         warnings.append(f"never estimated (no such trials in the data; the model file holds defaults): {', '.join(never)}")
     for w in warnings:
         log.info("%s", w)
-    return ModelFitResult(model, fit, events, warnings, seed)
+    result = ModelFitResult(model, fit, events, warnings, seed)
+    if bootstrap > 0:
+        result.intervals = _bootstrap(
+            seqs,
+            spec,
+            fit.params,
+            bootstrap,
+            seed=seed,
+            restarts=min(restarts, 3),
+            n_jobs=n_jobs,
+            tol=tol,
+            max_iter=max_iter,
+            progress=lambda label, d, t: tick(),
+            weights={k: v for k, v in events.items() if k in ("initial", "emission", "transition")},
+        )
+        result.warnings += result.intervals.notes()
+    return result
