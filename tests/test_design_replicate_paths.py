@@ -1,0 +1,34 @@
+"""A replicate's shorter paths give the numbers of the general ones: the fitted model of
+fit_trust_model, the paired t-test of scipy."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.stats import ttest_rel
+
+from trustseek.design.replicate import FitSettings, fit_model, paired_tests
+from trustseek.estimation.fit import fit_trust_model
+from trustseek.model.presets import paper_model
+from trustseek.simulation.designs import simulate_design
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(-50, 50, allow_nan=False), min_size=2, max_size=40), st.integers(0, 2**31 - 1))
+def test_paired_t_is_scipys(values, seed):
+    a = np.asarray(values)
+    b = a + np.random.default_rng(seed).normal(0.3, 2.0, len(a))
+    d = a - b
+    if np.all(d == d[0]):
+        return
+    expected = float(ttest_rel(a, b).pvalue)
+    assert paired_tests(a, b)["t"] == pytest.approx(expected, rel=1e-9, abs=1e-300)
+
+
+def test_the_replicate_fit_is_fit_trust_models_model():
+    frame = simulate_design(paper_model(), 9, seed=3)
+    fs = FitSettings(restarts=2)
+    got = fit_model(frame, fs, 17)
+    ref = fit_trust_model(frame, restarts=2, seed=17, tol=fs.tol, max_iter=fs.max_iter, n_jobs=1).model
+    for name in ("initial", "emission", "transition"):
+        assert np.array_equal(getattr(got, name), getattr(ref, name))
