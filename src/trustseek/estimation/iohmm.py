@@ -171,7 +171,16 @@ def fit_iohmm(
 
     if compiled and compiled_run.applies(structure, work):  # (a spec with a rating goes the lockstep way below)
         for r in compiled_run.run_starts(
-            structure, work, starts, tol, max_iter, em_tol, tol * compiled_run.FINISH_FTOL, quasi_newton, accelerate, work.threads
+            structure,
+            work,
+            starts,
+            tol,
+            max_iter,
+            max(tol, compiled_run.FINISH_SWITCH) if quasi_newton else tol,
+            tol * compiled_run.FINISH_FTOL,
+            quasi_newton,
+            accelerate,
+            work.threads,
         ):
             record(r)
     with one_blas_thread():
