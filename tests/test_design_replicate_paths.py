@@ -32,3 +32,21 @@ def test_the_replicate_fit_is_fit_trust_models_model():
     ref = fit_trust_model(frame, restarts=2, seed=17, tol=fs.tol, max_iter=fs.max_iter, n_jobs=1).model
     for name in ("initial", "emission", "transition"):
         assert np.array_equal(getattr(got, name), getattr(ref, name))
+
+
+@pytest.mark.parametrize("p_ask", [(0.0, 1.0), (0.1, 0.4), (1.0, 1.0)])
+def test_a_belief_free_policy_has_the_value_of_the_grid_chain(p_ask):
+    from trustseek.design import evaluation
+    from trustseek.model.presets import paper_task
+    from trustseek.policies import randomized
+
+    task = paper_task()
+    policy = randomized(dict(zip(task.complexities, p_ask, strict=True)))
+    got = evaluation.evaluate_policy(policy, paper_model(), task, grid=101)
+    # the grid chain, as for a policy that reads the belief: P(ask | x, C) at every grid point
+    probs = np.asarray(p_ask, dtype=float)
+    hidden = type("Hidden", (), {"belief_update": None, "model": None})()
+    hidden.actions = lambda beliefs, c, rng: probs[c]
+    ref = evaluation.evaluate_policy(hidden, paper_model(), task, grid=101)
+    assert got.value == pytest.approx(ref.value, rel=1e-9)
+    assert got.by_trust == pytest.approx(ref.by_trust, rel=1e-9)
