@@ -50,3 +50,17 @@ def test_a_belief_free_policy_has_the_value_of_the_grid_chain(p_ask):
     ref = evaluation.evaluate_policy(hidden, paper_model(), task, grid=101)
     assert got.value == pytest.approx(ref.value, rel=1e-9)
     assert got.by_trust == pytest.approx(ref.by_trust, rel=1e-9)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(1, 500), st.integers(1, 16))
+def test_even_parts_give_every_worker_as_many_tasks_of_about_one_length(n, workers):
+    from trustseek.design.sweep import _even_parts
+
+    items = list(range(n))
+    parts = _even_parts(items, workers)
+    assert [x for p in parts for x in p] == items
+    sizes = [len(p) for p in parts]
+    assert max(sizes) <= 8 and max(sizes) - min(sizes) <= 1 and min(sizes) >= 1
+    if n >= workers:
+        assert len(parts) % workers == 0

@@ -42,7 +42,6 @@ njit = kernels.njit
 CHUNK = kernels.CHUNK
 STICK_EPS = Sticks.EPS
 ARMIJO = 1e-4  # sufficient decrease of the finish's line search
-FINISH_SWITCH = 1e-4  # EM hands over to the finish at this relative change (or the fit's tol if looser)
 FINISH_FTOL = 1e-4  # the finish stops at this fraction of the fit's relative tolerance (a full step gaining less)
 BACKTRACKS = 30  # halvings of the step before the line search gives up
 ENDED_STATIONARY, ENDED_CAPPED, ENDED_ZERO = 0, 1, 2  # how a compiled run ended

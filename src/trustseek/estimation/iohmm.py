@@ -176,7 +176,7 @@ def fit_iohmm(
             starts,
             tol,
             max_iter,
-            max(tol, compiled_run.FINISH_SWITCH) if quasi_newton else tol,
+            em_tol,
             tol * compiled_run.FINISH_FTOL,
             quasi_newton,
             accelerate,
