@@ -8,7 +8,9 @@
 Prints iterations (E-steps) and time per restart, the total against the targets
 (< 0.1 s and < 2 s on one core) as wall time and CPU time (the machine may be
 shared), the first-call time of the compiled E-step (compilation, or loading it
-from the cache), and, measured in the same run, the compiled E-step against the
+from the cache), and, measured in the same run: the compiled whole run
+(``fit_iohmm``'s default) against the lockstep path with scipy's L-BFGS-B finish
+(``compiled=False``, the previous implementation), the compiled E-step against the
 numpy E-step, SQUAREM against plain EM, and 1 against 2 threads (target at
 1000 x 71, 10 restarts: < 0.5 s wall on 2 cores).
 """
@@ -74,17 +76,23 @@ def estep_speed(seqs, s, p, reps: int) -> None:
     )
 
 
+def best_of(runs):
+    """(wall, CPU) of the run with the least CPU time, and the median CPU time."""
+    wall, cpu = min(runs, key=lambda x: x[1])
+    return wall, cpu, sorted(c for _, c in runs)[len(runs) // 2]
+
+
 def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None = None, numpy_fit: bool = False) -> None:
     df = simulate_design(paper_model(), n, seed=1)
     spec = paper_spec()
     seqs = encode(df, spec)
-    runs = []
-    for _ in range(3):  # the same fit three times: best and median, to see through a shared machine's noise
+    fits, times = {}, {}
+    for compiled in (True, False, True, False, True, False):  # interleaved, best of 3: a shared machine's noise
         t = clocks()
-        fit = fit_iohmm(seqs, spec, restarts=restarts, seed=0, tol=tol, n_jobs=1)
-        runs.append(since(t))
-    wall, cpu = min(runs, key=lambda x: x[1])
-    median_cpu = sorted(c for _, c in runs)[1]
+        fits[compiled] = fit_iohmm(seqs, spec, restarts=restarts, seed=0, tol=tol, n_jobs=1, compiled=compiled)
+        times.setdefault(compiled, []).append(since(t))
+    fit, old = fits[True], fits[False]
+    wall, cpu, median_cpu = best_of(times[True])
     print(
         f"{n} participants x 71 trials, {restarts} restarts, tol {tol:g} (one thread; best of 3 runs; median CPU {median_cpu:.3f} s)"
     )
@@ -97,6 +105,14 @@ def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None =
     its = sum(r.iterations for r in fit.runs)
     verdict = f" (target < {target:g} s: {'met' if cpu < target else 'not met'} on CPU time)" if target else ""
     print(f"  total {wall:.3f} s wall, {cpu:.3f} s CPU{verdict}; {cpu / its * 1000:.3f} ms CPU per iteration")
+    w0, c0, _ = best_of(times[False])
+    its0 = sum(r.iterations for r in old.runs)
+    print(
+        f"  lockstep path with L-BFGS-B (compiled=False): {w0:.3f} s wall, {c0:.3f} s CPU, {its0} E-steps; "
+        f"compiled run x{c0 / cpu:.1f} (CPU), {its} E-steps; best log-likelihood {fit.loglik:.9f} vs {old.loglik:.9f} "
+        f"(difference {fit.loglik - old.loglik:+.1e}); every start at least as high: "
+        f"{all(a.loglik >= b.loglik - 1e-9 * abs(b.loglik) for a, b in zip(fit.runs, old.runs, strict=True))}"
+    )
     s = Structure(spec, seqs)
     p = s.random(np.random.default_rng(0))
     estep_speed(seqs, s, p, reps=max(5, min(200, 20000 // n)))
@@ -112,17 +128,20 @@ def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None =
             f"  numpy E-step fit: {w2:.3f} s wall, {c2:.3f} s CPU; compiled x{c2 / cpu:.1f} (CPU); "
             f"same best log-likelihood: {abs(ref.loglik - fit.loglik) < 1e-6}"
         )
-    if n >= 1000:  # the E-step's work over 2 threads, against 1 thread in the same run
-        walls = {}
-        for jobs in (1, 2, 1, 2):
+    if n >= 1000:  # the starts over 2 threads, against 1 thread in the same run
+        walls, cpus = {}, {}
+        for jobs, compiled in ((1, True), (2, True), (2, False)) * 3:
             t = clocks()
-            two = fit_iohmm(seqs, spec, restarts=restarts, seed=0, tol=tol, n_jobs=jobs)
-            w_, _ = since(t)
-            walls[jobs] = min(walls.get(jobs, w_), w_)
-            assert two.loglik == fit.loglik  # the same numbers whatever the threads
+            two = fit_iohmm(seqs, spec, restarts=restarts, seed=0, tol=tol, n_jobs=jobs, compiled=compiled)
+            w_, c_ = since(t)
+            walls[jobs, compiled] = min(walls.get((jobs, compiled), w_), w_)
+            cpus[jobs, compiled] = min(cpus.get((jobs, compiled), c_), c_)
+            assert two.loglik == (fit if compiled else old).loglik  # the same numbers whatever the threads
+        w1, w2 = walls[1, True], walls[2, True]
         print(
-            f"  threads: 1 thread {walls[1]:.3f} s wall, 2 threads {walls[2]:.3f} s wall: x{walls[1] / walls[2]:.2f} "
-            f"(target 10 restarts < 0.5 s on 2 cores: {'met' if walls[2] < 0.5 else 'not met'}); same log-likelihood"
+            f"  threads: 1 thread {w1:.3f} s wall, 2 threads {w2:.3f} s wall ({cpus[2, True]:.3f} s CPU): x{w1 / w2:.2f} "
+            f"(target 10 restarts < 0.5 s on 2 cores: {'met' if w2 < 0.5 else 'not met'}); same log-likelihood; "
+            f"lockstep path on 2 threads {walls[2, False]:.3f} s wall ({cpus[2, False]:.3f} s CPU)"
         )
     # SQUAREM vs plain EM from the same start
     w = Workspace(seqs, s.K, s.M, s.Ue, s.Ut)
@@ -144,15 +163,17 @@ def big(n: int = 100_000) -> None:
     w, c = since(t)
     print(f"{n} x 71: simulated and encoded in {w:.1f} s wall")
     for restarts, jobs, target in ((1, 1, 8.0), (10, 2, 40.0)):
-        t = clocks()
-        fit = fit_iohmm(seqs, spec, restarts=restarts, seed=0, n_jobs=jobs)
-        w, c = since(t)
-        its = sum(r.iterations for r in fit.runs)
-        print(
-            f"  {restarts} restart(s), {jobs} thread(s): {w:.1f} s wall, {c:.1f} s CPU, {its} E-steps "
-            f"({1000 * c / its:.0f} ms CPU each), log-likelihood {fit.loglik:.3f} "
-            f"(target < {target:g} s wall: {'met' if w < target else 'not met'})"
-        )
+        for compiled in (True, False):
+            t = clocks()
+            fit = fit_iohmm(seqs, spec, restarts=restarts, seed=0, n_jobs=jobs, compiled=compiled)
+            w, c = since(t)
+            its = sum(r.iterations for r in fit.runs)
+            name = "compiled run" if compiled else "lockstep path (before)"
+            print(
+                f"  {restarts} restart(s), {jobs} thread(s), {name}: {w:.1f} s wall, {c:.1f} s CPU, {its} E-steps "
+                f"({1000 * c / its:.0f} ms CPU each), log-likelihood {fit.loglik:.6f} "
+                f"(target < {target:g} s wall: {'met' if w < target else 'not met'})"
+            )
 
 
 def recovery(datasets: int, n: int = 1000, restarts: int = 10) -> None:

@@ -73,6 +73,9 @@ def evaluate_policy(
     ignores the belief (trust-agnostic, randomized) only needs ``truth``.  Two trust levels."""
     if truth.n_trust != 2:
         raise TrustseekError([f"exact evaluation needs two trust levels; the true model has {truth.n_trust}"])
+    p_ask_fixed = getattr(policy, "p_ask", None)
+    if policy.belief_update is None and p_ask_fixed is not None:
+        return _evaluate_belief_free(np.asarray(p_ask_fixed, dtype=float), truth, task, grid)
     model = belief_model or policy.model or truth
     update = belief_update or policy.belief_update or "bayes"
     pomdp = AssistancePOMDP(truth, task)
@@ -118,6 +121,21 @@ def evaluate_policy(
     at_x0 = V[:, j] * (1 - f) + V[:, j + 1] * f
     value = float(truth.initial @ at_x0)
     return Evaluation(value=value, by_trust=tuple(float(v) for v in at_x0), grid=G)
+
+
+def _evaluate_belief_free(p_ask: np.ndarray, truth: TrustModel, task: Task, grid: int) -> Evaluation:
+    """The value of a policy that asks with ``p_ask[C]`` whatever the belief: the chain's value does
+    not depend on x, so it is the solution of the two-state system V = r + γ P V on the true trust
+    (what the grid chain gives at every x, without the grid)."""
+    pomdp = AssistancePOMDP(truth, task)
+    gamma, pc = pomdp.discount, pomdp.complexity_probs
+    K = pomdp.kernel  # [c, a, t, o, e, u]
+    R = pomdp.expected_reward  # [c, a, t]
+    w = pc[:, None] * np.stack([1.0 - p_ask, p_ask], axis=1)  # [c, a]
+    P = np.einsum("ca,catoeu->tu", w, K)
+    r = np.einsum("ca,cat->t", w, R)
+    V = np.linalg.solve(np.eye(len(r)) - gamma * P, r)
+    return Evaluation(value=float(truth.initial @ V), by_trust=tuple(float(v) for v in V), grid=grid)
 
 
 def high_threshold(policy: Policy) -> float:

@@ -12,9 +12,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.special import stdtr
 
 from ..errors import TrustseekError
-from ..estimation.fit import fit_trust_model
+from ..estimation.fit import fit_sequences
+from ..estimation.sequences import encode
+from ..estimation.trust_iohmm import preset_spec
 from ..model.core import Task, TrustModel
 from ..policies import ComplexityPolicy, TrustAwarePolicy, randomized
 from ..pomdp.problem import AssistancePOMDP
@@ -152,10 +155,27 @@ def paired_tests(aware: np.ndarray, agnostic: np.ndarray) -> dict[str, float]:
     w = signed_rank_p(d)
     # constant nonzero differences: the t statistic is infinite (p = 0 from two participants on)
     constant = len(d) < 2 or bool(np.all(d == d[0]))
-    from scipy.stats import ttest_rel
-
-    t = (0.0 if len(d) > 1 else 1.0) if constant else float(ttest_rel(aware, agnostic).pvalue)
+    t = (0.0 if len(d) > 1 else 1.0) if constant else _t_p(d)
     return out | {"wilcoxon": w, "t": t}
+
+
+def _t_p(d: np.ndarray) -> float:
+    """Two-sided p-value of the paired t-test on the differences ``d`` (at least two, not all equal):
+    ``scipy.stats.ttest_rel``'s, from Student's t distribution directly."""
+    n = len(d)
+    t = float(d.mean()) / (float(d.std(ddof=1)) / np.sqrt(n))
+    return float(2.0 * stdtr(n - 1, -abs(t)))
+
+
+def fit_model(frame: Any, settings: FitSettings, seed: int) -> TrustModel:
+    """The model a replicate fits to experiment 1's trials: :func:`~trustseek.estimation.fit_trust_model`'s
+    (the ``paper`` preset, one thread), without marking the rows no trial informs (neither the
+    plan nor the simulation reads them)."""
+    spec = preset_spec("paper", frame)
+    fit = fit_sequences(
+        encode(frame, spec), spec, restarts=settings.restarts, seed=seed, tol=settings.tol, max_iter=settings.max_iter, n_jobs=1
+    )
+    return fit.model
 
 
 def _seed_int(ss: np.random.SeedSequence) -> int:
@@ -216,10 +236,8 @@ def run_replicate(study: Study, point: int, design: Experiment1, replicate: int)
     ask = randomized({task.complexities[0]: design.ask_low, task.complexities[-1]: design.ask_high})
     frame = simulate(truth, task, ask, design.participants, counts=design.counts, seed=s1).trials()[list(TRIAL_COLUMNS)]
     try:
-        fit = fit_trust_model(
-            frame, preset="paper", restarts=fs.restarts, seed=_seed_int(sfit), tol=fs.tol, max_iter=fs.max_iter, n_jobs=1
-        )
-        aware = plan(fit.model, task, fs)
+        model = fit_model(frame, fs, _seed_int(sfit))
+        aware = plan(model, task, fs)
         agnostic = _agnostic(frame, task)
     except TrustseekError as exc:
         out["error"] = "; ".join(exc.lines())
@@ -246,7 +264,7 @@ def run_replicate(study: Study, point: int, design: Experiment1, replicate: int)
             first=first,
             seed=ss,
             record=False,
-            belief_model=fit.model,
+            belief_model=model,
         )
         r = sim.summary_arrays["cumulative_reward"]  # (n, 2): aware, agnostic
         for n in study.participants_2:

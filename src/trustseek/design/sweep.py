@@ -170,6 +170,21 @@ def _chunks(items: list[Any], size: int) -> list[list[Any]]:
     return [items[i : i + size] for i in range(0, len(items), size)]
 
 
+def _even_parts(items: list[Any], workers: int, most: int = 8) -> list[list[Any]]:
+    """``items`` in a multiple of ``workers`` parts of at most ``most`` items, as even as possible
+    (sizes differ by at most one): every worker gets the same number of tasks of about the same
+    length, where fixed-size chunks would leave one worker a task more than the other."""
+    n = workers * max(1, math.ceil(len(items) / (most * workers)))
+    n = min(n, len(items))
+    base, extra = divmod(len(items), n)
+    out, i = [], 0
+    for k in range(n):
+        j = i + base + (1 if k < extra else 0)
+        out.append(items[i:j])
+        i = j
+    return out
+
+
 def execute(
     study: Study,
     items: list[tuple[int, Experiment1, int]],
@@ -189,8 +204,7 @@ def execute(
             report(len(out), total)
     else:
         workers = jobs if client is None else max(1, len(client.scheduler_info().get("workers", {})))
-        size = chunk or max(1, min(8, math.ceil(total / (4 * workers))))
-        parts = _chunks(items, size)
+        parts = _chunks(items, chunk) if chunk else _even_parts(items, workers)
         if client is not None:
             from dask.distributed import as_completed as dask_completed
 

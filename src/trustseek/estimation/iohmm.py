@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import compiled_run
 from .convergence import converge
 from .em import STATIONARY, RunResult, run_em
 from .estep import Workspace
@@ -112,6 +113,7 @@ def fit_iohmm(
     on_restart: Callable[[int, RunResult], None] | None = None,
     quasi_newton: bool = True,
     n_jobs: int | None = 1,
+    compiled: bool = True,
 ) -> IOHMMFit:
     """Fit ``spec`` to ``seqs``: the runs from ``init`` and ``restarts`` random starts; the best is kept.
 
@@ -126,6 +128,11 @@ def fit_iohmm(
     participants, when there is enough of it; the result does not depend on ``n_jobs``.
     A spec with a rating (:mod:`.ratings`) is fitted by EM alone (no quasi-Newton finish),
     to ``tol`` and the same stationarity check.
+
+    With ``compiled`` (and numba, and no rating) each start runs from its first E-step to its
+    end in compiled code (:mod:`.compiled_run`: the same EM and SQUAREM decisions, its own
+    quasi-Newton finish, the same check), the starts side by side on the ``n_jobs`` threads;
+    else EM runs the starts in lockstep and scipy's L-BFGS-B finishes them.
     """
     structure = make_structure(spec, seqs)
     quasi_newton = quasi_newton and not structure.joint
@@ -162,8 +169,22 @@ def fit_iohmm(
             local.work = work.serial()
         return carry(r, local.work)
 
+    if compiled and compiled_run.applies(structure, work):  # (a spec with a rating goes the lockstep way below)
+        for r in compiled_run.run_starts(
+            structure,
+            work,
+            starts,
+            tol,
+            max_iter,
+            em_tol,
+            tol * compiled_run.FINISH_FTOL,
+            quasi_newton,
+            accelerate,
+            work.threads,
+        ):
+            record(r)
     with one_blas_thread():
-        for g in range(0, len(starts), group):
+        for g in range(len(runs), len(starts), group):
             ems = run_em(structure, work, starts[g : g + group], tol=em_tol, max_iter=max_iter, accelerate=accelerate)
             if work.threads > 1 and len(ems) > 1 and seqs.n_trials >= CONCURRENT_MIN:
                 # each start's finish is a sequence of single E-steps with Python in between: the starts

@@ -1,0 +1,627 @@
+"""A whole run compiled: EM with SQUAREM, the quasi-Newton finish and the stationarity check in one call.
+
+For a small problem (a few thousand trials) the E-step itself takes microseconds and a run
+spends most of its time in Python between E-steps: the M-step, the SQUAREM step, scipy's
+L-BFGS-B driver.  :func:`run_starts` runs each start from its first E-step to its end in
+compiled code (numba), with the decisions of :func:`~.em.run_em` and
+:func:`~.convergence.converge`:
+
+* EM with SQUAREM (two EM steps, the extrapolated point kept only when its objective is at
+  least the second step's) to the hand-over tolerance;
+* the finish: a projected limited-memory BFGS on the stick-breaking fractions of the free
+  cells (:class:`~.quasi_newton.Sticks`, the same box and the same gradient by Fisher's
+  identity), with a backtracking line search along the projection onto the box, to the
+  finish tolerance (relative change of an iteration, as L-BFGS-B's ``ftol``);
+* the check: one EM step from the end point gains at most ``tol`` (relative), else EM goes
+  on from that step's point and the next round begins.  The end point's expected counts
+  are those of its own E-step, so the check costs one E-step (the point one step on).
+
+Every start runs on one thread from start to end (starts go side by side on several
+threads), so the result does not depend on the number of threads.  The E-step is the
+compiled pass of :mod:`.kernels` over the same items in the same order: its numbers are
+those of :meth:`~.estep.Workspace.estep`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from . import kernels
+from .em import CAPPED, SHRINK, STATIONARY, RunResult
+from .estep import Workspace
+from .quasi_newton import Sticks
+from .spec import FitError, Params
+from .structure import FLOOR, PROJECT_FLOOR, Structure, Table
+
+njit = kernels.njit
+CHUNK = kernels.CHUNK
+STICK_EPS = Sticks.EPS
+ARMIJO = 1e-4  # sufficient decrease of the finish's line search
+FINISH_FTOL = 1e-4  # the finish stops at this fraction of the fit's relative tolerance (a full step gaining less)
+BACKTRACKS = 30  # halvings of the step before the line search gives up
+ENDED_STATIONARY, ENDED_CAPPED, ENDED_ZERO = 0, 1, 2  # how a compiled run ended
+
+
+@njit(cache=True, nogil=True)
+def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
+    """E-step of one parameter set: counts into ``ci`` (K,), ``cem`` (Ue, K, M), ``ctr`` (Ut, K, K);
+    the log-likelihood (-inf: probability zero, counts zero).  Items of :data:`CHUNK` sequences
+    summed in item order, as :meth:`.kernels.Kernel.run` does."""
+    eidx, tidx, lengths = data
+    ini, emit, trans, ll, pin, pe, pt = bufs
+    Ue, K, M = em.shape
+    Ut = tr.shape[0]
+    for u in range(Ue):
+        for k in range(K):
+            for m in range(M):
+                emit[0, u * M + m, k] = em[u, k, m]
+    for k in range(K):
+        ini[0, k] = pi[k]
+        emit[0, Ue * M, k] = 1.0
+    for u in range(Ut):
+        trans[0, u] = tr[u]
+    N = eidx.shape[0]
+    C = ll.shape[0]
+    for c in range(C):
+        lo = c * CHUNK
+        pin[c] = 0.0
+        pe[c] = 0.0
+        pt[c] = 0.0
+        ll[c] = kernels._item(0, lo, min(N, lo + CHUNK), ini, emit, trans, eidx, tidx, lengths, pin[c], pe[c], pt[c])
+    ci[:] = 0.0
+    cem[:] = 0.0
+    ctr[:] = 0.0
+    for c in range(C):
+        if not ll[c] > -math.inf:
+            return -math.inf
+    total = 0.0
+    tot_i = np.zeros(K)
+    tot_e = np.zeros((Ue * M + 1, K))
+    tot_t = np.zeros((Ut + 1, K, K))
+    for c in range(C):
+        total += ll[c]
+        tot_i += pin[c]
+        tot_e += pe[c]
+        tot_t += pt[c]
+    ci[:] = tot_i
+    for u in range(Ue):
+        for k in range(K):
+            for m in range(M):
+                cem[u, k, m] = tot_e[u * M + m, k]
+    ctr[:] = tot_t[:Ut]
+    return total
+
+
+@njit(cache=True, nogil=True)
+def _table_mstep(counts, prior, prev, tab, out):
+    """:meth:`.structure.Table.mstep` of one table into ``out``."""
+    group, rep, gfixed, gvalues, mass = tab
+    U, K, M = counts.shape
+    G = rep.shape[0]
+    cg = np.zeros((G, K, M))
+    for u in range(U):
+        cg[group[u]] += counts[u]
+    rows = np.empty((G, K, M))
+    for g in range(G):
+        for k in range(K):
+            tot = 0.0
+            for m in range(M):
+                if not gfixed[g, k, m]:
+                    tot += cg[g, k, m] + prior
+            for m in range(M):
+                if gfixed[g, k, m]:
+                    rows[g, k, m] = gvalues[g, k, m]
+                elif tot > 0:
+                    rows[g, k, m] = (cg[g, k, m] + prior) / tot * mass[g, k]
+                else:
+                    rows[g, k, m] = prev[rep[g], k, m]
+    for u in range(U):
+        out[u] = rows[group[u]]
+
+
+@njit(cache=True, nogil=True)
+def _mstep(ci, cem, ctr, prior, pi, em, tr, emt, trt, qpi, qem, qtr):
+    """The M-step (:meth:`.structure.Structure.mstep`) from the counts at (``pi``, ``em``, ``tr``) into ``q*``."""
+    tot = 0.0
+    for k in range(len(ci)):
+        tot += ci[k] + prior
+    for k in range(len(ci)):
+        qpi[k] = (ci[k] + prior) / tot if tot > 0 else pi[k]
+    _table_mstep(cem, prior, em, emt, qem)
+    _table_mstep(ctr, prior, tr, trt, qtr)
+
+
+@njit(cache=True, nogil=True)
+def _table_project(p, tab, out):
+    """:meth:`.structure.Table.project` of one table into ``out``."""
+    group, rep, gfixed, gvalues, mass = tab
+    U, K, M = p.shape
+    G = rep.shape[0]
+    rows = np.empty((G, K, M))
+    for g in range(G):
+        for k in range(K):
+            s = 0.0
+            for m in range(M):
+                if not gfixed[g, k, m]:
+                    s += max(p[rep[g], k, m], PROJECT_FLOOR)
+            d = s if s > 0 else 1.0
+            for m in range(M):
+                if gfixed[g, k, m]:
+                    rows[g, k, m] = gvalues[g, k, m]
+                else:
+                    rows[g, k, m] = max(p[rep[g], k, m], PROJECT_FLOOR) / d * mass[g, k]
+    for u in range(U):
+        out[u] = rows[group[u]]
+
+
+@njit(cache=True, nogil=True)
+def _table_log_prior(p, prior, tab):
+    _group, rep, gfixed, _gvalues, _mass = tab
+    G, K, M = gfixed.shape
+    s = 0.0
+    for g in range(G):
+        for k in range(K):
+            for m in range(M):
+                if not gfixed[g, k, m]:
+                    s += math.log(max(p[rep[g], k, m], FLOOR))
+    return prior * s
+
+
+@njit(cache=True, nogil=True)
+def _log_prior(pi, em, tr, prior, emt, trt):
+    """:meth:`.structure.Structure.log_prior`."""
+    if prior == 0:
+        return 0.0
+    s = 0.0
+    for k in range(len(pi)):
+        s += math.log(max(pi[k], FLOOR))
+    return prior * s + _table_log_prior(em, prior, emt) + _table_log_prior(tr, prior, trt)
+
+
+@njit(cache=True, nogil=True)
+def _extrapolate(p0, p1, p2, K, emt, trt, Ue, M, Ut, out):
+    """The SQUAREM point of :func:`.em._extrapolate` from the flat cells ``p0 -> p1 -> p2`` into the
+    flat ``out`` (projected); whether it is worth trying (step length below -1)."""
+    rr = 0.0
+    vv = 0.0
+    for i in range(len(p0)):
+        r = p1[i] - p0[i]
+        v = p2[i] - 2 * p1[i] + p0[i]
+        rr += r * r
+        vv += v * v
+    nv = math.sqrt(vv)
+    step = -math.sqrt(rr) / nv if nv > 0 else -1.0
+    if not step < -1.0:
+        return False
+    x = np.empty(len(p0))
+    for i in range(len(p0)):
+        r = p1[i] - p0[i]
+        v = p2[i] - 2 * p1[i] + p0[i]
+        x[i] = max(p0[i] - 2 * step * r + step * step * v, SHRINK * p2[i])
+    s = 0.0
+    for k in range(K):
+        s += max(x[k], PROJECT_FLOOR)
+    for k in range(K):
+        out[k] = max(x[k], PROJECT_FLOOR) / s
+    a, b = K, K + Ue * K * M
+    _table_project(x[a:b].reshape((Ue, K, M)), emt, out[a:b].reshape((Ue, K, M)))
+    _table_project(x[b:].reshape((Ut, K, K)), trt, out[b:].reshape((Ut, K, K)))
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _views(flat, K, Ue, M, Ut):
+    a, b = K, K + Ue * K * M
+    return flat[:a], flat[a:b].reshape((Ue, K, M)), flat[b:].reshape((Ut, K, K))
+
+
+@njit(cache=True, nogil=True)
+def _evaluate(flat, K, Ue, M, Ut, prior, emt, trt, data, bufs, counts):
+    """E-step at the flat cells ``flat`` into ``counts`` (flat, the layout of the cells); (log-likelihood, objective)."""
+    pi, em, tr = _views(flat, K, Ue, M, Ut)
+    ci, cem, ctr = _views(counts, K, Ue, M, Ut)
+    ll = _estep(pi, em, tr, data, bufs, ci, cem, ctr)
+    return ll, ll + _log_prior(pi, em, tr, prior, emt, trt)
+
+
+@njit(cache=True, nogil=True)
+def _em_step(flat, counts, K, Ue, M, Ut, prior, emt, trt, out):
+    """The point one EM step on from ``flat`` with E-step counts ``counts``, into ``out``."""
+    pi, em, tr = _views(flat, K, Ue, M, Ut)
+    ci, cem, ctr = _views(counts, K, Ue, M, Ut)
+    qpi, qem, qtr = _views(out, K, Ue, M, Ut)
+    _mstep(ci, cem, ctr, prior, pi, em, tr, emt, trt, qpi, qem, qtr)
+
+
+@njit(cache=True, nogil=True)
+def _theta(flat, K, Ue, M, Ut, sticks, n):
+    """:meth:`.quasi_newton.Sticks.theta` of the flat cells."""
+    table, m, mass, tbase, tstride, coff, cptr, cdst = sticks
+    a, b = K, K + Ue * K * M
+    f0, f1, f2 = flat[:a], flat[a:b], flat[b:]
+    out = np.empty(n)
+    for i in range(len(m)):
+        rem = mass[i]
+        for j in range(m[i] - 1):
+            q = cdst[cptr[coff[i] + j]]
+            val = f0[q] if table[i] == 0 else (f1[q] if table[i] == 1 else f2[q])
+            out[tbase[i] + j * tstride[i]] = min(max(val / max(rem, FLOOR), STICK_EPS), 1 - STICK_EPS)
+            rem = rem - val
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _fg(theta, base, flat, counts, K, Ue, M, Ut, prior, emt, trt, sticks, data, bufs, grad):
+    """The cells of ``theta`` (on ``base``) into ``flat``, their E-step counts into ``counts`` and
+    the gradient of the objective into ``grad``; (log-likelihood, objective)."""
+    table, m, mass, tbase, tstride, coff, cptr, cdst = sticks
+    a, b = K, K + Ue * K * M
+    flat[:] = base
+    kernels.stick_values(theta, table, m, mass, tbase, tstride, coff, cptr, cdst, flat[:a], flat[a:b], flat[b:])
+    ll, f = _evaluate(flat, K, Ue, M, Ut, prior, emt, trt, data, bufs, counts)
+    if math.isfinite(f):
+        kernels.stick_gradient(
+            theta, prior, table, m, tbase, tstride, coff, cptr, cdst, counts[:a], counts[a:b], counts[b:], grad
+        )
+    return ll, f
+
+
+@njit(cache=True, nogil=True)
+def _box_qp(g, B, lo, hi, d):
+    """Minimise g.d + d'Bd / 2 over lo <= d <= hi (B positive definite) into ``d``: a primal
+    active-set method from d = 0 (feasible: lo <= 0 <= hi)."""
+    n = len(g)
+    d[:] = 0.0
+    bound = np.zeros(n, dtype=np.int64)  # -1 at lo, +1 at hi, 0 free
+    for i in range(n):
+        if lo[i] == 0.0 and g[i] > 0.0:
+            bound[i] = -1
+        elif hi[i] == 0.0 and g[i] < 0.0:
+            bound[i] = 1
+    for _ in range(4 * n + 10):
+        free = np.flatnonzero(bound == 0)
+        nf = len(free)
+        target = d.copy()
+        if nf > 0:
+            # B_FF d_F = -(g_F + B_FA d_A)
+            A = np.empty((nf, nf))
+            r = np.empty(nf)
+            for a in range(nf):
+                i = free[a]
+                acc = g[i]
+                for j in range(n):
+                    if bound[j] != 0:
+                        acc += B[i, j] * d[j]
+                r[a] = -acc
+                for c in range(nf):
+                    A[a, c] = B[i, free[c]]
+            sol = np.linalg.solve(A, r)
+            for a in range(nf):
+                target[free[a]] = sol[a]
+        # the step from d to target, cut at the first bound it crosses
+        t = 1.0
+        hit = -1
+        for a in range(nf):
+            i = free[a]
+            if target[i] < lo[i] and target[i] < d[i]:
+                ti = (lo[i] - d[i]) / (target[i] - d[i])
+                if ti < t:
+                    t, hit = ti, i
+            elif target[i] > hi[i] and target[i] > d[i]:
+                ti = (hi[i] - d[i]) / (target[i] - d[i])
+                if ti < t:
+                    t, hit = ti, i
+        for a in range(nf):
+            i = free[a]
+            d[i] = min(max(d[i] + t * (target[i] - d[i]), lo[i]), hi[i])
+        if hit >= 0:
+            if target[hit] < lo[hit]:
+                d[hit], bound[hit] = lo[hit], -1
+            else:
+                d[hit], bound[hit] = hi[hit], 1
+            continue
+        # optimal on this face: release the bound variable whose multiplier has the wrong sign
+        worst = 0.0
+        rel = -1
+        for i in range(n):
+            if bound[i] != 0:
+                gi = g[i] + np.dot(B[i], d)
+                v = -gi if bound[i] < 0 else gi  # positive: the objective decreases moving inward
+                if v > worst:
+                    worst, rel = v, i
+        if rel < 0:
+            return
+        bound[rel] = 0
+
+
+@njit(cache=True, nogil=True)
+def _finish(state, budget, ftol, n, K, Ue, M, Ut, prior, emt, trt, sticks, data, bufs, history, nh):
+    """The quasi-Newton finish from the run's point ``state`` (flat cells, counts, log-likelihood,
+    objective; updated in place to the best accepted point).  Maximises the objective over the
+    stick-breaking fractions in the box [EPS, 1 - EPS]: a BFGS model of the objective (dense,
+    its Hessian updated from each step's gradient change), the step that is best for the model
+    inside the box (a small bound-constrained quadratic programme, no E-steps), a backtracking
+    line search along it; stops when an iteration changes the objective by at most ``ftol``
+    (relative, as L-BFGS-B's ``ftol``), when no step decreases it, or at ``budget`` E-steps.
+    (E-steps, stopped by the budget, entries in ``history``)."""
+    flat, counts, stat = state
+    lo, hi = STICK_EPS, 1 - STICK_EPS
+    base = flat.copy()
+    x = _theta(base, K, Ue, M, Ut, sticks, n)
+    g = np.empty(n)
+    fl = np.empty(len(flat))
+    cn = np.empty(len(flat))
+    _ll, f = _fg(x, base, fl, cn, K, Ue, M, Ut, prior, emt, trt, sticks, data, bufs, g)
+    calls = 1
+    if not math.isfinite(f):
+        return calls, False, nh
+    F = -f
+    g *= -1.0
+    B = np.zeros((n, n))
+    scaled = False
+    d = np.empty(n)
+    dl = np.empty(n)
+    dh = np.empty(n)
+    xn = np.empty(n)
+    gn = np.empty(n)
+    fln = np.empty(len(flat))
+    cnn = np.empty(len(flat))
+    while True:
+        if not scaled:  # before the first pair: a steepest-descent step of length at most 1
+            gg = math.sqrt(np.dot(g, g))
+            if gg == 0.0:
+                break
+            for i in range(n):
+                B[i, :] = 0.0
+                B[i, i] = max(gg, 1e-300)
+        for i in range(n):
+            dl[i] = lo - x[i]
+            dh[i] = hi - x[i]
+        _box_qp(g, B, dl, dh, d)
+        slope = np.dot(g, d)
+        if not slope < 0.0:
+            break
+        step = 1.0
+        accepted = False
+        Fn = 0.0
+        lln = 0.0
+        for _ in range(BACKTRACKS):
+            if calls >= budget:
+                return calls, True, nh
+            for i in range(n):
+                xn[i] = min(max(x[i] + step * d[i], lo), hi)
+            lln, fn = _fg(xn, base, fln, cnn, K, Ue, M, Ut, prior, emt, trt, sticks, data, bufs, gn)
+            calls += 1
+            Fn = -fn
+            if math.isfinite(Fn) and Fn <= F + ARMIJO * step * slope:
+                accepted = True
+                break
+            step *= 0.5
+        if not accepted:
+            break
+        gn *= -1.0
+        s_ = xn - x
+        y_ = gn - g
+        sy = np.dot(s_, y_)
+        if sy > 1e-12 * math.sqrt(np.dot(s_, s_) * np.dot(y_, y_)):
+            if not scaled:
+                for i in range(n):
+                    B[i, :] = 0.0
+                    B[i, i] = np.dot(y_, y_) / sy
+                scaled = True
+            Bs = B @ s_
+            sBs = np.dot(s_, Bs)
+            if sBs > 0.0:
+                for i in range(n):
+                    for j in range(n):
+                        B[i, j] += y_[i] * y_[j] / sy - Bs[i] * Bs[j] / sBs
+        # a shortened step's small change says little about the distance to the maximum
+        small = step == 1.0 and F - Fn <= ftol * max(abs(F), abs(Fn), 1.0)
+        x[:] = xn
+        g[:] = gn
+        F = Fn
+        if -Fn > stat[1]:
+            flat[:] = fln
+            counts[:] = cnn
+            stat[0] = lln
+            stat[1] = -Fn
+            history[nh] = -Fn
+            nh += 1
+        if small:
+            break
+    return calls, False, nh
+
+
+@njit(cache=True, nogil=True)
+def _em(state, tol, max_iter, its, K, Ue, M, Ut, prior, emt, trt, data, bufs, accelerate, history, nh):
+    """EM with SQUAREM from the point ``state`` (its counts known) until a step gains less than
+    ``tol`` (relative), rounding makes a step lose, or ``max_iter`` E-steps; updated in place.
+    (E-steps so far, converged, entries in ``history``), as :func:`.em.run_em` decides."""
+    flat, counts, stat = state
+    L = len(flat)
+    p1 = np.empty(L)
+    c1 = np.empty(L)
+    p2 = np.empty(L)
+    c2 = np.empty(L)
+    pe = np.empty(L)
+    ce = np.empty(L)
+    p0 = flat.copy()
+    while True:
+        if its >= max_iter:
+            return its, False, nh
+        f0 = stat[1]
+        _em_step(flat, counts, K, Ue, M, Ut, prior, emt, trt, p1)
+        ll1, f1 = _evaluate(p1, K, Ue, M, Ut, prior, emt, trt, data, bufs, c1)
+        its += 1
+        if not f1 >= f0:  # only rounding does this at a fixed point: keep the better point
+            return its, True, nh
+        history[nh] = f1
+        nh += 1
+        if f1 - f0 <= tol * abs(f0):
+            flat[:] = p1
+            counts[:] = c1
+            stat[0], stat[1] = ll1, f1
+            return its, True, nh
+        if not accelerate:
+            flat[:] = p1
+            counts[:] = c1
+            stat[0], stat[1] = ll1, f1
+            continue
+        if its >= max_iter:
+            flat[:] = p1
+            counts[:] = c1
+            stat[0], stat[1] = ll1, f1
+            return its, False, nh
+        p0[:] = flat
+        _em_step(p1, c1, K, Ue, M, Ut, prior, emt, trt, p2)
+        ll2, f2 = _evaluate(p2, K, Ue, M, Ut, prior, emt, trt, data, bufs, c2)
+        its += 1
+        if not f2 >= f1:
+            flat[:] = p1
+            counts[:] = c1
+            stat[0], stat[1] = ll1, f1
+            return its, True, nh
+        history[nh] = f2
+        nh += 1
+        flat[:] = p2
+        counts[:] = c2
+        stat[0], stat[1] = ll2, f2
+        if f2 - f1 <= tol * abs(f1):
+            return its, True, nh
+        if its < max_iter and _extrapolate(p0, p1, p2, K, emt, trt, Ue, M, Ut, pe):
+            lle, fe = _evaluate(pe, K, Ue, M, Ut, prior, emt, trt, data, bufs, ce)
+            its += 1
+            if fe >= f2 and math.isfinite(fe):
+                history[nh] = fe
+                nh += 1
+                flat[:] = pe
+                counts[:] = ce
+                stat[0], stat[1] = lle, fe
+
+
+@njit(cache=True, nogil=True)
+def run_one(start, K, Ue, M, Ut, prior, emt, trt, sticks, n, data, C, PE, tol, max_iter, em_tol, finish_tol, qn, accelerate):
+    """One start from its first E-step to its end (see the module).  Returns the end point's
+    flat cells, (log-likelihood, objective), E-steps, how it ended, finishes, and the history."""
+    L = len(start)
+    bufs = (
+        np.empty((1, K)),
+        np.empty((1, PE, K)),
+        np.empty((1, Ut + 1, K, K)),
+        np.empty(C),
+        np.empty((C, K)),
+        np.empty((C, PE, K)),
+        np.empty((C, Ut + 1, K, K)),
+    )
+    for k in range(K):
+        for j in range(K):
+            bufs[2][0, Ut, k, j] = 1.0 if k == j else 0.0
+    flat = start.copy()
+    counts = np.empty(L)
+    stat = np.empty(2)
+    history = np.empty(max_iter + 2)
+    stat[0], stat[1] = _evaluate(flat, K, Ue, M, Ut, prior, emt, trt, data, bufs, counts)
+    if not math.isfinite(stat[1]):
+        return flat, stat, 1, ENDED_ZERO, 0, history[:0]
+    history[0] = stat[1]
+    nh = 1
+    state = (flat, counts, stat)
+    its, converged, nh = _em(state, em_tol, max_iter, 1, K, Ue, M, Ut, prior, emt, trt, data, bufs, accelerate, history, nh)
+    finishes = 0
+    q = np.empty(L)
+    cq = np.empty(L)
+    while True:
+        if not converged:
+            return flat, stat, its, ENDED_CAPPED, finishes, history[:nh]
+        if qn and n > 0 and max_iter - its >= 2 and math.isfinite(stat[1]):
+            calls, capped, nh = _finish(
+                state, max_iter - its, finish_tol, n, K, Ue, M, Ut, prior, emt, trt, sticks, data, bufs, history, nh
+            )
+            its += calls
+            finishes += 1
+            if capped:
+                return flat, stat, its, ENDED_CAPPED, finishes, history[:nh]
+        if its + 1 > max_iter or not math.isfinite(stat[1]):
+            return flat, stat, its, ENDED_CAPPED, finishes, history[:nh]
+        # the check: one EM step from the end point (its counts are known)
+        _em_step(flat, counts, K, Ue, M, Ut, prior, emt, trt, q)
+        llq, fq = _evaluate(q, K, Ue, M, Ut, prior, emt, trt, data, bufs, cq)
+        its += 1
+        f = stat[1]
+        if not fq - f > tol * abs(f):
+            return flat, stat, its, ENDED_STATIONARY, finishes, history[:nh]
+        flat[:] = q
+        counts[:] = cq
+        stat[0], stat[1] = llq, fq
+        history[nh] = fq
+        nh += 1
+        its, converged, nh = _em(state, em_tol, max_iter, its, K, Ue, M, Ut, prior, emt, trt, data, bufs, accelerate, history, nh)
+
+
+def _table(t: Table) -> tuple[np.ndarray, ...]:
+    return (
+        np.ascontiguousarray(t.group, dtype=np.int64),
+        np.ascontiguousarray(t.rep, dtype=np.int64),
+        np.ascontiguousarray(t.gfixed, dtype=np.bool_),
+        np.ascontiguousarray(t.gvalues, dtype=float),
+        np.ascontiguousarray(t.mass, dtype=float),
+    )
+
+
+def applies(structure: Structure, work: Workspace) -> bool:
+    """Whether :func:`run_starts` can run this fit: the plain structure (no rating) and the compiled E-step."""
+    return kernels.AVAILABLE and work.compiled and type(structure) is Structure and work.seqs.n_trials > 0
+
+
+def run_starts(
+    structure: Structure,
+    work: Workspace,
+    starts: Sequence[Params],
+    tol: float,
+    max_iter: int,
+    em_tol: float,
+    finish_tol: float,
+    quasi_newton: bool = True,
+    accelerate: bool = True,
+    threads: int = 1,
+) -> list[RunResult]:
+    """Each start carried to a stationary point or to ``max_iter`` E-steps, compiled (see the
+    module); ``threads`` run starts side by side (the numbers do not depend on it)."""
+    K, M, Ue, Ut = structure.dims
+    kern = work._kernel
+    assert kern is not None
+    sticks = Sticks(structure)
+    layout = sticks._layout()
+    data = (kern.eidx, kern.tidx, kern.lengths)
+    emt, trt = _table(structure.em), _table(structure.tr)
+    prior = float(structure.spec.prior)
+    args = (K, Ue, M, Ut, prior, emt, trt, layout, sticks.size, data, kern.C, work.PE)
+    settings = (float(tol), int(max_iter), float(em_tol), float(finish_tol), bool(quasi_newton), bool(accelerate))
+    template = starts[0]
+
+    def one(p: Params) -> RunResult:
+        t0 = time.perf_counter()
+        flat, stat, its, ended, finishes, history = run_one(np.ascontiguousarray(p.vector(), dtype=float), *args, *settings)
+        if ended == ENDED_ZERO:
+            raise FitError(["the initial values give the data probability zero"])
+        return RunResult(
+            template.from_vector(flat),
+            float(stat[0]),
+            float(stat[1]),
+            [float(x) for x in history],
+            int(its),
+            ended == ENDED_STATIONARY,
+            time.perf_counter() - t0,
+            STATIONARY if ended == ENDED_STATIONARY else CAPPED,
+            int(finishes),
+        )
+
+    if threads > 1 and len(starts) > 1:
+        with ThreadPoolExecutor(min(threads, len(starts)), thread_name_prefix="trustseek-fit") as pool:
+            return list(pool.map(one, starts))
+    return [one(p) for p in starts]
