@@ -15,10 +15,21 @@ the same run against the same server) and for the concurrent sessions:
 * throughput, the machine's load average, and a check that every trial is stored exactly
   once (read back from the database).
 
-The load generator is one asyncio event loop with one keep-alive connection per session and
-a minimal HTTP/1.1 exchange, so that its own overhead stays small against what it measures.
+The load model: each session is one robot with its own keep-alive connection; it starts after
+a pause drawn uniformly in [0, 2] think times, then per trial posts ``decide``, pauses
+U(0.5, 1.5) think times, posts ``observe``, pauses U(0.5, 1.5) think times: with the default
+1000 ms, one request per second per session, so N sessions offer about N requests/s.  The
+pause is counted from the answer, so a slow server is offered less (the throughput printed is
+what was served).  The load generator is one asyncio event loop (uvloop) in this process, the
+server another process; it uses a minimal HTTP/1.1 exchange, so that its own overhead stays
+small against what it measures, and its CPU time per request is printed.
 
-    python benchmarks/bench_server.py [--sessions 100] [--trials 10] [--think-ms 1000] [--db URL | --postgres]
+``--profile`` runs the server under cProfile (its main thread's CPU time) and prints where the
+server's CPU time per request goes: event loop and sockets, HTTP parsing and the ASGI server,
+JSON, the policy, SQLite, the lean path's own code, and the full application (which opens the
+sessions).  Profiling slows the server about twice: its latencies are not the figures to quote.
+
+    python benchmarks/bench_server.py [--sessions 100] [--trials 10] [--think-ms 1000] [--db URL | --postgres] [--profile]
 """
 
 from __future__ import annotations
@@ -29,6 +40,7 @@ import contextlib
 import io
 import json
 import os
+import signal
 import subprocess
 import sys
 import tarfile
@@ -178,6 +190,62 @@ def source_of(rev: str, into: Path) -> Path:
 
 FLOOR = "floor"
 
+CATEGORIES = [
+    ("event loop, sockets (uvloop and the kernel)", ("asyncio", "uvloop", "selectors")),
+    ("HTTP parsing, ASGI server (uvicorn, httptools)", ("uvicorn", "httptools")),
+    ("JSON (json)", ("/json/",)),
+    ("SQLite statements and commits (store)", ("sqlite3", "store.py")),
+    ("policy decision and belief update", ("/policies/", "/pomdp/", "numpy", "/model/")),
+    ("lean path: auth, checks, trial record", ("fastpath.py", "sessions.py", "auth.py", "server/app.py", "orm.py")),
+    ("full application (opening the sessions)", ("fastapi", "starlette", "sqlalchemy", "pydantic", "routes.py", "middleware.py")),
+]
+
+
+def serve_profiled(db: str, port: int, out: str) -> None:
+    """``trustseek serve``'s application and server settings, under cProfile (main thread CPU
+    time); the statistics go to ``out`` when the server stops (SIGINT)."""
+    import cProfile
+
+    import uvicorn
+
+    from trustseek.server.app import create_app, settle_memory
+
+    app = create_app(db, token=TOKEN)
+    settle_memory()
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning", access_log=False))
+    prof = cProfile.Profile(time.thread_time)
+    prof.enable()
+    with contextlib.suppress(KeyboardInterrupt):
+        server.run()
+    prof.disable()
+    prof.dump_stats(out)
+
+
+def profiled_process(db: str, port: int, out: Path) -> subprocess.Popen:
+    cmd = [sys.executable, __file__, "--serve-profiled", db, str(port), str(out)]
+    proc = subprocess.Popen(cmd, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    wait_ready(f"http://127.0.0.1:{port}", proc=proc)
+    return proc
+
+
+def cpu_split(stats_file: Path, requests: int) -> list[tuple[str, float]]:
+    """(category, profiled CPU ms per request) from the server's cProfile statistics."""
+    import pstats
+
+    def category(file: str, name: str) -> str:
+        where = f"{file} {name}"
+        return next((c for c, keys in CATEGORIES if any(k in where for k in keys)), "other")
+
+    by: dict[str, float] = {}
+    for (file, _, name), (_, _, own, _, callers) in pstats.Stats(str(stats_file)).stats.items():  # type: ignore[attr-defined]
+        label = category(file, name)
+        if file == "~" and label == "other" and callers:  # a built-in: its callers' part, per call edge
+            for (cfile, _, cname), edge in callers.items():
+                by[category(cfile, cname)] = by.get(category(cfile, cname), 0.0) + edge[2]
+            continue
+        by[label] = by.get(label, 0.0) + own
+    return [(c, by.get(c, 0.0) / requests * 1000) for c, _ in [*CATEGORIES, ("other", ())]]
+
 
 async def floor_app(scope, receive, send) -> None:
     """The floor: an ASGI application that answers every request at once with a fixed body
@@ -205,15 +273,21 @@ def floor_process(port: int) -> subprocess.Popen:
     return proc
 
 
-def measure(url: str, src: Path | None, args, levels: list[int], policy: dict, seed0: int) -> dict:
-    """Start a server (from ``src`` when given, else this checkout) and run the baselines and each
-    level of concurrent sessions against it."""
+def measure(url: str, src: Path | None, args, levels: list[int], policy: dict, seed0: int, profile: Path | None = None) -> dict:
+    """Start a server (from ``src`` when given, else this checkout; under the profiler when
+    ``profile`` names the statistics file) and run the baselines and each level of concurrent
+    sessions against it."""
     port = free_port()
     env = os.environ.get("PYTHONPATH")
     if src is not None:
         os.environ["PYTHONPATH"] = str(src)
     try:
-        proc = floor_process(port) if url == FLOOR else serve_process(url, TOKEN, port, workers=args.workers)
+        if url == FLOOR:
+            proc = floor_process(port)
+        elif profile is not None:
+            proc = profiled_process(url, port, profile)
+        else:
+            proc = serve_process(url, TOKEN, port, workers=args.workers)
     finally:
         if env is None:
             os.environ.pop("PYTHONPATH", None)
@@ -241,8 +315,8 @@ def measure(url: str, src: Path | None, args, levels: list[int], policy: dict, s
                 "load": (load_before, os.getloadavg()[0]),
             }
     finally:
-        proc.terminate()
-        proc.wait(timeout=30)
+        proc.send_signal(signal.SIGINT) if profile is not None else proc.terminate()
+        proc.wait(timeout=60)
     for r in out["levels"].values():
         r["rows"] = None if url == FLOOR else stored_trials(url, r["ids"])
     return out
@@ -282,7 +356,15 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="also measure the floor: a trivial application under uvicorn (what HTTP, the event loop and the kernel cost)",
     )
+    ap.add_argument(
+        "--profile", action="store_true", help="also run this checkout's server under cProfile: its CPU time per request, by part"
+    )
+    ap.add_argument("--serve-profiled", nargs=3, metavar=("DB", "PORT", "OUT"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.serve_profiled:
+        db, port, out = args.serve_profiled
+        serve_profiled(db, int(port), out)
+        return 0
     levels = [int(x) for x in args.sessions.split(",")]
     try:
         import uvloop
@@ -291,6 +373,7 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError:
         pass
     policy = {"kind": args.policy}
+    start_load = os.getloadavg()
     results = []
     backend = "none"
     with tempfile.TemporaryDirectory() as d, contextlib.ExitStack() as stack:
@@ -299,6 +382,8 @@ def main(argv: list[str] | None = None) -> int:
             variants.insert(0, (f"revision {args.baseline_rev}", source_of(args.baseline_rev, Path(d) / "baseline")))
         if args.floor:
             variants.append((FLOOR, None))
+        if args.profile:
+            variants.append(("this checkout, profiled", None))
         for k, (name, src) in enumerate(variants):
             if name == FLOOR:
                 url = FLOOR
@@ -306,13 +391,24 @@ def main(argv: list[str] | None = None) -> int:
                 url = stack.enter_context(TemporaryPostgres())
             else:
                 url = args.db or f"sqlite:///{Path(d) / f'bench-{k}.sqlite'}"
-            results.append((name, measure(url, src, args, levels, policy, seed0=10**6 * (k + 1))))
+            prof = Path(d) / "server.prof" if name.endswith("profiled") else None
+            res = measure(url, src, args, levels, policy, seed0=10**6 * (k + 1), profile=prof)
+            if prof is not None:
+                served = sum(len(r["lat"]) * 2 for r in res["levels"].values()) + 2 * (5 + 2 * args.baseline_trials)
+                res["split"] = cpu_split(prof, served)
+            results.append((name, res))
             if url != FLOOR:
                 backend = url.split(":", 1)[0].split("+")[0]
     print(
         f"server decision API: concurrent sessions x {args.trials} trials ({args.policy} policy, think time ~{args.think_ms:g} ms), "
         f"{backend}, {args.workers} server process(es), loopback; the load generator is this process"
     )
+    print(
+        f"  load model: per session (robot) one keep-alive connection, a start within [0, {2 * args.think_ms:g}] ms, then per trial "
+        f"decide, pause U(0.5, 1.5) x {args.think_ms:g} ms, observe, pause U(0.5, 1.5) x {args.think_ms:g} ms: "
+        f"~{1000 / args.think_ms:.2g} request/s per session offered"
+    )
+    print(f"  machine load (1, 5, 15 min) at the start: {' '.join(f'{x:.2f}' for x in start_load)}")
     ok = True
     for name, res in results:
         print(f" server of {name}:" if name != FLOOR else " floor (an application that does nothing, under uvicorn):")
@@ -344,7 +440,15 @@ def main(argv: list[str] | None = None) -> int:
                     else f"; trials stored {stored} of {total}, duplicates {dup}, complete and in order: {complete}"
                 )
             )
-    print(f"  machine: {os.cpu_count()} cores shared with other processes")
+        if "split" in res:
+            print("  server CPU per decide/observe under the profiler (main thread; profiling inflates Python code ~2x):")
+            for label, ms in res["split"]:
+                print(f"    {label:<50} {ms:6.3f} ms")
+            print(f"    {'total':<50} {sum(ms for _, ms in res['split']):6.3f} ms")
+    print(
+        f"  machine: {os.cpu_count()} cores shared with other processes; load (1, 5, 15 min) at the end: "
+        + " ".join(f"{x:.2f}" for x in os.getloadavg())
+    )
     return 0 if ok else 1
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import gc
 import ipaddress
 import logging
 import os
@@ -88,6 +87,7 @@ def serve(
     import uvicorn
 
     from ..server import create_app
+    from ..server.app import settle_memory
 
     _check_db(db)
     token, token_source = _experimenter_token(token, token_file)
@@ -105,10 +105,7 @@ def serve(
     console.print(f"  experimenter token: {token_source}", soft_wrap=True)
     if not loopback:
         console.print("[yellow]  listening beyond loopback: put the server behind HTTPS[/]")
-    # what start-up made (modules, the app, the schema) lives as long as the process: keep it
-    # out of the garbage collector's full passes, which would otherwise pause requests
-    gc.collect()
-    gc.freeze()
+    settle_memory()  # garbage-collector pauses out of request latencies
     if workers == 1:
         uvicorn.run(application, host=host, port=port, log_level=log_level, access_log=False)
         return

@@ -45,9 +45,16 @@ def caller_for_token(state: Any, token: str) -> Caller | None:
             row = db.execute(select(Session.id, Session.kind).where(Session.token == token)).first()
         if row is None:
             return None
-        if len(cache) > 100_000:
-            cache.clear()
-        caller = cache[token] = Caller(row.id, row.kind)
+        caller = remember_token(state, token, Caller(row.id, row.kind))
+    return caller
+
+
+def remember_token(state: Any, token: str, caller: Caller) -> Caller:
+    """Cache the session of a token (``state`` is the application's state)."""
+    cache: dict[str, Caller] = state.tokens
+    if len(cache) > 100_000:
+        cache.clear()
+    cache[token] = caller
     return caller
 
 

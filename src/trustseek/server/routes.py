@@ -13,7 +13,7 @@ from fastapi.security import HTTPAuthorizationCredentials
 from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 
-from .auth import Caller, bearer, require_experimenter, require_session, session_for_token, token_of
+from .auth import Caller, bearer, remember_token, require_experimenter, require_session, session_for_token, token_of
 from .export import answers_frame, events_csv, events_frame, sessions_frame, to_bytes, trials_frame
 from .orm import Report, Session, Study, Trial, utcnow
 from .schemas import AnswersIn, ConsentIn, DecideIn, DeployIn, ErrorOut, EventsIn, ObserveIn, ReportIn, SessionsIn, TrialIn
@@ -33,6 +33,7 @@ from .sessions import (
     p_high,
     participant_trial,
     questionnaire_due,
+    remember_deploy,
     report_due,
     serve,
     study_config,
@@ -450,6 +451,9 @@ def open_deploy(body: DeployIn, request: Request):
     with _db(request) as db:
         s = create_deploy(db, body.label, task, model, policy, body.seed)
         db.commit()
+        # this process answers the session's first requests without reading it back
+        remember_token(request.app.state, s.token, Caller(s.id, s.kind))
+        remember_deploy(s, task, model)
         log.info("deploy session %s opened: %s policy", s.id, policy["kind"])
         return {
             "session_id": s.id,

@@ -35,6 +35,7 @@ from ..errors import TrustseekError
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
 from ..policies import PolicyError, PolicyRunner
 from ..policies.schedule import SchedulePolicy
+from ..pomdp.belief import make_updater
 from .orm import Answer, Event, EventBatch, PolicyBlob, Report, Session, Study, Trial, utcnow
 from .store import DeployStore, LiveRow, TrialRow
 from .studies import block_items, participant_plan, policy_object
@@ -675,23 +676,148 @@ def committed_trial(store: DeployStore, session_id: str, n: int) -> TrialRow | N
     return store.committed(session_id, n)
 
 
-def deploy_context(store: DeployStore, session_id: str) -> Context:
-    key = f"deploy:{session_id}"
-    cached = _CONTEXTS.get(key)
-    if cached is None:
-        plan = store.plan(session_id)
-        if plan is None:
+class _LazyRng:
+    """The generator ``np.random.default_rng(seed)``, made only when a policy draws from it
+    (most policies never do, and making one costs more than the decision): ``used`` tells
+    whether the decision depended on it."""
+
+    __slots__ = ("_rng", "_seed")
+
+    def __init__(self, seed: list[int]):
+        self._seed = seed
+        self._rng: np.random.Generator | None = None
+
+    @property
+    def used(self) -> bool:
+        return self._rng is not None
+
+    def __getattr__(self, name: str) -> Any:
+        if self._rng is None:
+            self._rng = np.random.default_rng(self._seed)
+        return getattr(self._rng, name)
+
+
+class DeployPlan:
+    """What never changes in a deploy session: its task, model and policy (``plan`` of the
+    session row), shared by every session opened with the same ones, with the policy object and
+    its belief updater built once.  Decisions and belief updates are deterministic functions of
+    (belief, complexity[, action, human action, experience]), except a decision that draws from
+    the generator of (seed, trial): the others are remembered, so a belief that many robots
+    reach (every robot's first trials start from the same prior) is decided and updated once."""
+
+    MEMO = 50_000  # remembered decisions and updates per plan (then forgotten at once)
+
+    def __init__(self, task: Task, model: TrustModel, kind: str, sha: str):
+        self.task, self.model, self.kind, self.sha = task, model, kind, sha
+        self.key = f"policy:{sha}"
+        self.n_trust = model.n_trust
+        self._policy: Any = None
+        self._updater: Any = None
+        self._decided: dict[tuple, int] = {}
+        self._updated: dict[tuple, list[float]] = {}
+
+    def context(self, store: DeployStore) -> Context:
+        return Context(self.task, self.model, [self.kind], [self.key], lambda b: store.policy(self.sha), None)
+
+    def policy(self, store: DeployStore) -> Any:
+        if self._policy is None:
+            self._policy = policy_object(self.key, lambda: store.policy(self.sha))
+        return self._policy
+
+    def decide(self, store: DeployStore, belief: list, seed: int, n: int, complexity: str) -> str:
+        """The action of ``PolicyRunner(policy, belief, rng=default_rng([seed, n, 0])).decide``."""
+        key = (tuple(belief), complexity)
+        a = self._decided.get(key)
+        if a is None:
+            pol = self.policy(store)
+            rng = _LazyRng([seed, n, 0])
+            a = pol.action(np.asarray(belief, dtype=float), pol.complexity_index(complexity), rng)
+            if not rng.used:
+                if len(self._decided) >= self.MEMO:
+                    self._decided.clear()
+                self._decided[key] = a
+        return ACTIONS[a]
+
+    def update(self, store: DeployStore, belief: list, complexity: str, action: str, human: str, experience: str) -> list | None:
+        """The belief after a trial, as ``PolicyRunner.observe`` updates it (None: the policy
+        tracks no belief)."""
+        key = (tuple(belief), complexity, action, human, experience)
+        after = self._updated.get(key)
+        if after is None:
+            pol = self.policy(store)
+            if self._updater is None:  # as PolicyRunner makes it
+                model = getattr(pol, "model", None) or self.model
+                self._updater = make_updater(pol.belief_update or "bayes", model) if model is not None else False
+            if self._updater is False:
+                return None
+            new = self._updater.update(
+                np.asarray(belief, dtype=float),
+                pol.complexity_index(complexity),
+                ACTIONS.index(action),
+                HUMAN_ACTIONS.index(human),
+                EXPERIENCES.index(experience),
+            )
+            after = [float(x) for x in new]
+            if len(self._updated) >= self.MEMO:
+                self._updated.clear()
+            self._updated[key] = after
+        return after
+
+
+_DEPLOY_PLANS: dict[str, DeployPlan] = {}  # session id -> its plan
+_SHARED_PLANS: dict[str, DeployPlan] = {}  # the plan's content -> the one parsed copy
+
+
+def _plan_key(task: dict[str, Any], model: dict[str, Any], sha: str, kind: str) -> str:
+    return json.dumps([task, model, sha, kind], sort_keys=True)
+
+
+def _shared_plan(key: str, make) -> DeployPlan:
+    plan = _SHARED_PLANS.get(key)
+    if plan is None:
+        if len(_SHARED_PLANS) > 256:
+            _SHARED_PLANS.clear()
+        plan = _SHARED_PLANS[key] = make()
+    return plan
+
+
+def _remember(session_id: str, plan: DeployPlan) -> DeployPlan:
+    if len(_DEPLOY_PLANS) > 200_000:
+        _DEPLOY_PLANS.clear()
+    _DEPLOY_PLANS[session_id] = plan
+    return plan
+
+
+def deploy_plan(store: DeployStore, session_id: str) -> DeployPlan:
+    """The deploy session's plan (read from the database once per process)."""
+    plan = _DEPLOY_PLANS.get(session_id)
+    if plan is None:
+        d = store.plan(session_id)
+        if d is None:
             raise SessionError(404, "no such session")
-        if len(_CONTEXTS) > 4096:
-            _CONTEXTS.clear()
-        cached = _CONTEXTS[key] = (
-            Task.from_dict(plan["task"]),
-            TrustModel.from_dict(plan["model"]),
-            [plan["policy_kind"]],
-            plan["policy_sha256"],
+        key = _plan_key(d["task"], d["model"], d["policy_sha256"], d["policy_kind"])
+        plan = _remember(
+            session_id,
+            _shared_plan(
+                key,
+                lambda: DeployPlan(
+                    Task.from_dict(d["task"]), TrustModel.from_dict(d["model"]), d["policy_kind"], d["policy_sha256"]
+                ),
+            ),
         )
-    task, model, kinds, sha = cached
-    return Context(task, model, kinds, [f"policy:{sha}"], lambda b: store.policy(sha), None)
+    return plan
+
+
+def remember_deploy(s: Session, task: Task, model: TrustModel) -> None:
+    """Register a session just opened by this process, so that its first decision needs no
+    database read nor parsing (``create_deploy``'s objects are the ones its plan describes)."""
+    p = s.plan
+    key = _plan_key(p["task"], p["model"], p["policy_sha256"], p["policy_kind"])
+    _remember(s.id, _shared_plan(key, lambda: DeployPlan(task, model, p["policy_kind"], p["policy_sha256"])))
+
+
+def deploy_context(store: DeployStore, session_id: str) -> Context:
+    return deploy_plan(store, session_id).context(store)
 
 
 def _counts(ctx: Context, counts: dict[str, int] | None, what: str) -> tuple[int, ...] | None:
@@ -738,9 +864,9 @@ def deploy_decide(
     the policy also picks the item's complexity when none is given.  Runs in the caller's
     transaction (``store.transaction()``)."""
     s = _live(store, session_id)
-    ctx = deploy_context(store, session_id)
-    if complexity is not None and complexity not in ctx.task.complexities:
-        raise SessionError(400, f"complexity must be one of {list(ctx.task.complexities)}, got {complexity!r}")
+    plan = deploy_plan(store, session_id)
+    if complexity is not None and complexity not in plan.task.complexities:
+        raise SessionError(400, f"complexity must be one of {list(plan.task.complexities)}, got {complexity!r}")
     if complexity is None and remaining is None:
         raise SessionError(400, "post the trial's complexity (or, for a schedule policy, the remaining items)")
     # trials are committed in order together with trials_done, so trial n exists iff n <= trials_done
@@ -764,22 +890,22 @@ def deploy_decide(
             "trial": n,
             "complexity": s.pending_complexity,
             "robot_action": s.pending_action,
-            "belief": p_high(s.belief, ctx.model.n_trust),
+            "belief": p_high(s.belief, plan.n_trust),
             "committed": False,
         }
-    if remaining is None and ctx.kinds[0] == SchedulePolicy.kind:
+    if remaining is None and plan.kind == SchedulePolicy.kind:
         raise SessionError(400, "a schedule policy needs the remaining items: post remaining (per complexity)")
     if remaining is not None or visible is not None:
-        complexity, action = _scheduled(ctx, np.asarray(s.belief, dtype=float), complexity, remaining, visible)
+        complexity, action = _scheduled(plan.context(store), np.asarray(s.belief, dtype=float), complexity, remaining, visible)
     else:
         assert complexity is not None
-        action = ctx.runner(0, s.belief, s.seed, n).decide(complexity)
+        action = plan.decide(store, s.belief, s.seed, n, complexity)
     store.decided(session_id, n, complexity, action, utcnow())
     return {
         "trial": n,
         "complexity": complexity,
         "robot_action": action,
-        "belief": p_high(s.belief, ctx.model.n_trust),
+        "belief": p_high(s.belief, plan.n_trust),
         "committed": False,
     }
 
@@ -804,8 +930,9 @@ def deploy_observe(
         )
     action, complexity = s.pending_action, s.pending_complexity
     assert action is not None and complexity is not None  # stored together with pending_trial
-    ctx = deploy_context(store, session_id)
-    c = ctx.task.complexity_index(complexity)
+    plan = deploy_plan(store, session_id)
+    task = plan.task
+    c = task.complexity_index(complexity)
     if action == "ask":
         if human_action not in (None, "intervene"):
             raise SessionError(
@@ -838,26 +965,24 @@ def deploy_observe(
                     f"outcome must be 'success' or 'failure' (or 'collision'/'dropped') when the human relied, got {outcome!r}",
                 )
             success = outcome == "success"
-    experience = _experience(ctx.task, c, action, human_action, success)
-    runner = ctx.runner(0, s.belief, s.seed, n)
-    before = runner.belief
-    after = runner.observe(complexity, action, human_action, experience)
+    experience = _experience(task, c, action, human_action, success)
+    after = plan.update(store, s.belief, complexity, action, human_action, experience)
     a, o = ACTIONS.index(action), HUMAN_ACTIONS.index(human_action)
     t: dict[str, Any] = {
         "trial": n,
         "block": 0,
-        "policy": ctx.kinds[0],
+        "policy": plan.kind,
         "complexity": complexity,
         "robot_action": action,
         "human_action": human_action,
         "outcome": outcome,
         "experience": experience,
-        "reward": float(ctx.task.rewards.of(a, o, EXPERIENCES.index(experience))),
-        "belief": p_high(before, ctx.model.n_trust),
-        "belief_after": p_high(after, ctx.model.n_trust),
+        "reward": float(task.rewards.of(a, o, EXPERIENCES.index(experience))),
+        "belief": p_high(s.belief, plan.n_trust),
+        "belief_after": p_high(after, plan.n_trust),
         "effort_ms": None,
         "submission_id": f"deploy-{n}",
     }
-    new_belief = [float(x) for x in after] if after is not None else list(s.belief)
+    new_belief = list(after) if after is not None else list(s.belief)
     store.observed(session_id, t, new_belief, float(s.score + t["reward"]), utcnow())
     return t, False
