@@ -1,0 +1,61 @@
+"""Compile the fit's numba kernels into numba's on-disk cache, once.
+
+The compiled E-step (:mod:`.kernels`) and the compiled run of a restart (:mod:`.compiled_run`)
+take about a minute of CPU to compile on their first use after installation; later processes
+load them from the cache in a fraction of a second.  ``python -m trustseek.estimation.warm``
+does that first use on a tiny made-up log (both fit paths, a rating, two supervisor types), so
+that the first real fit does not pay it.  ``make test`` runs it next to the static checks.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pandas as pd
+
+from .fit import fit_trust_model
+from .iohmm import fit_iohmm
+from .mixture import fit_types
+from .sequences import encode
+from .trust_iohmm import preset_spec
+
+
+def tiny_log(participants: int = 4, trials: int = 12, seed: int = 0) -> pd.DataFrame:
+    """A made-up trial log in the canonical columns (with a rating), only for compiling."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for p in range(participants):
+        for t in range(1, trials + 1):
+            ask = rng.random() < 0.3
+            rows.append(
+                {
+                    "participant": f"P{p}",
+                    "trial": t,
+                    "complexity": ("low", "high")[int(rng.integers(2))],
+                    "robot_action": "ask" if ask else "autonomous",
+                    "human_action": "intervene" if ask or rng.random() < 0.3 else "rely",
+                    "experience": ("faulty", "reliable")[int(rng.integers(2))],
+                    "rating": str(int(rng.integers(1, 4))),
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def warm() -> float:
+    """Run every compiled path once on :func:`tiny_log`; the seconds it took."""
+    t = time.perf_counter()
+    frame = tiny_log()
+    spec = preset_spec("paper", frame)
+    seqs = encode(frame, spec)
+    for compiled in (True, False):
+        fit_iohmm(seqs, spec, restarts=1, max_iter=5, compiled=compiled, n_jobs=1)
+    fit_trust_model(frame, restarts=1, max_iter=5, n_jobs=1, rating="rating", rating_levels=("1", "2", "3"))
+    fit_types(frame, 2, restarts=1, max_iter=5, n_jobs=1)
+    return time.perf_counter() - t
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.stdout.write(f"compiled the fit's kernels in {warm():.1f} s\n")
