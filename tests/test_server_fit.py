@@ -64,6 +64,7 @@ def test_exported_study_is_fitted(tmp_path):
     # the maximum-likelihood fit explains the exported trials at least as well as the model
     # that generated them (the sessions' schedules are random, so no fixed value is asserted)
     spec, p_true = from_trust_model(model)
-    assert np.isfinite(fit.loglik) and fit.loglik <= 0.0
+    # (a log-likelihood of 0 up to rounding when every exported action had probability 1)
+    assert np.isfinite(fit.loglik) and fit.loglik <= 1e-9
     assert fit.loglik >= loglik(fit.fit.seqs, spec, p_true) - 1e-6
     assert fit.counts["emission"].sum() > 0
