@@ -72,9 +72,13 @@ class ThreadServer:
         self.thread.join(timeout=10)
 
 
-def serve_process(db_url: str, token: str, port: int, log: Path | None = None, workers: int = 1) -> subprocess.Popen:
+def serve_process(
+    db_url: str, token: str, port: int, log: Path | None = None, workers: int = 1, timeout: float = 30.0
+) -> subprocess.Popen:
     """Start ``trustseek serve`` (``workers`` processes) as a child process on 127.0.0.1:port and
-    wait until it answers.  The token goes through the environment, not the command line."""
+    wait until it answers (at most ``timeout`` seconds).  The token goes through the environment,
+    not the command line.  A server that does not answer in time is stopped before the error is
+    raised, so that it does not live on (holding the port and the database) after the test."""
     cmd = [
         sys.executable,
         "-c",
@@ -97,11 +101,24 @@ def serve_process(db_url: str, token: str, port: int, log: Path | None = None, w
         err = files.enter_context(tempfile.TemporaryFile())
         proc = subprocess.Popen(cmd, stdout=out, stderr=err, env=env)
         try:
-            wait_ready(f"http://127.0.0.1:{port}", proc=proc)
+            wait_ready(f"http://127.0.0.1:{port}", timeout=timeout, proc=proc)
         except ServerStartError as exc:
+            stop_process(proc)
             err.seek(0)
             raise ServerStartError(f"{exc}\n{err.read().decode(errors='replace')[-4000:]}") from None
     return proc
+
+
+def stop_process(proc: subprocess.Popen, grace: float = 10.0) -> None:
+    """Stop a server process: SIGTERM (its workers stop with it), then SIGKILL after ``grace`` s."""
+    if proc.poll() is not None:
+        return
+    proc.terminate()
+    try:
+        proc.wait(timeout=grace)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
 
 
 def postgres_binaries() -> Path | None:
