@@ -46,19 +46,14 @@ log = logging.getLogger(__name__)
 MIN_EVENTS = 5  # fewer expected events than this behind a row: "not identified by this data"
 
 
-@dataclass
-class FitResult:
-    """A fitted trust model with its diagnostics (see :func:`fit_trust_model`)."""
+class Fitted:
+    """What a fitted model's result derives from its fit: the criteria, the posteriors and the
+    fit's record for JSON (shared by :class:`FitResult` and :class:`ModelFitResult`)."""
 
-    model: TrustModel
     fit: IOHMMFit
-    counts: dict[str, np.ndarray]
-    estimated: dict[str, np.ndarray]
-    ci: dict[str, tuple[np.ndarray, np.ndarray]] | None = None
-    bootstrap: int = 0
-    seed: int = 0
-    warnings: list[str] = field(default_factory=list)
-    intervals: Intervals | None = None
+    seed: int
+    warnings: list[str]
+    intervals: Intervals | None
 
     @property
     def loglik(self) -> float:
@@ -81,14 +76,13 @@ class FitResult:
         return self.fit.bic
 
     def posteriors(self) -> pd.DataFrame:
-        """Smoothed P(trust | all trials of the participant) and the Viterbi level, one row per trial."""
+        """Smoothed P(level | all trials of the participant) and the Viterbi level, one row per trial."""
         return posterior_frame(self.fit.seqs, self.fit.spec, self.fit.params)
 
-    def to_dict(self) -> dict[str, Any]:
-        spec = self.fit.spec
-        runs = self.fit.runs
+    def fit_record(self, bootstrap: int) -> dict[str, Any]:
+        """The fit's figures, each start's run, the seed, the bootstrap and the spec, for ``to_dict``."""
+        runs, iv = self.fit.runs, self.intervals
         return {
-            "model": self.model.to_dict(),
             "loglik": self.loglik,
             "n_params": self.n_params,
             "aic": self.aic,
@@ -103,11 +97,32 @@ class FitResult:
             "ended": [r.ended for r in runs],
             "seconds": [r.seconds for r in runs],
             "seed": self.seed,
-            "bootstrap": self.bootstrap,
-            "ci_level": None if self.intervals is None else self.intervals.level,
-            "ci_method": None if self.intervals is None else self.intervals.method,
-            "ci_other_maximum": None if self.intervals is None else self.intervals.other_maximum,
-            "spec": spec.to_dict(),
+            "bootstrap": bootstrap,
+            "ci_level": None if iv is None else iv.level,
+            "ci_method": None if iv is None else iv.method,
+            "ci_other_maximum": None if iv is None else iv.other_maximum,
+            "spec": self.fit.spec.to_dict(),
+        }
+
+
+@dataclass
+class FitResult(Fitted):
+    """A fitted trust model with its diagnostics (see :func:`fit_trust_model`)."""
+
+    model: TrustModel
+    fit: IOHMMFit
+    counts: dict[str, np.ndarray]
+    estimated: dict[str, np.ndarray]
+    ci: dict[str, tuple[np.ndarray, np.ndarray]] | None = None
+    bootstrap: int = 0
+    seed: int = 0
+    warnings: list[str] = field(default_factory=list)
+    intervals: Intervals | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "model": self.model.to_dict(),
+            **self.fit_record(self.bootstrap),
             "counts": {k: v.tolist() for k, v in self.counts.items()},
             "estimated": {k: v.tolist() for k, v in self.estimated.items()},
             "ci": None
@@ -436,7 +451,7 @@ def decode(frame: pd.DataFrame, model: TrustModel | IOHMMModel, rating: str | No
 
 
 @dataclass
-class ModelFitResult:
+class ModelFitResult(Fitted):
     """A fitted general model (:class:`~trustseek.model.iohmm.IOHMMModel`, any named inputs) with
     its diagnostics: expected events behind every row, warnings for rows the data do not identify."""
 
@@ -446,30 +461,6 @@ class ModelFitResult:
     warnings: list[str] = field(default_factory=list)
     seed: int = 0
     intervals: Intervals | None = None  # bootstrap intervals of every table cell (fit_model's ``bootstrap``)
-
-    @property
-    def loglik(self) -> float:
-        return self.fit.loglik
-
-    @property
-    def restart_logliks(self) -> list[float]:
-        return self.fit.restart_logliks
-
-    @property
-    def n_params(self) -> int:
-        return self.fit.n_params
-
-    @property
-    def aic(self) -> float:
-        return self.fit.aic
-
-    @property
-    def bic(self) -> float:
-        return self.fit.bic
-
-    def posteriors(self) -> pd.DataFrame:
-        """Smoothed P(level | all trials of the participant) and the Viterbi level, one row per trial."""
-        return posterior_frame(self.fit.seqs, self.fit.spec, self.fit.params)
 
     def cells(self) -> list[dict[str, Any]]:
         """One record per estimated row cell: label, table, input levels, estimate, expected events
@@ -536,30 +527,8 @@ class ModelFitResult:
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        runs = self.fit.runs
-        return {
-            "model": self.model.to_dict(),
-            "loglik": self.loglik,
-            "n_params": self.n_params,
-            "aic": self.aic,
-            "bic": self.bic,
-            "n_participants": self.fit.seqs.n_participants,
-            "n_trials": self.fit.seqs.n_trials,
-            "n_observations": self.fit.n_observations,
-            "restart_logliks": self.restart_logliks,
-            "best_restart": self.fit.best,
-            "iterations": [r.iterations for r in runs],
-            "converged": [r.converged for r in runs],
-            "ended": [r.ended for r in runs],
-            "seconds": [r.seconds for r in runs],
-            "seed": self.seed,
-            "bootstrap": 0 if self.intervals is None else self.intervals.replicates,
-            "ci_level": None if self.intervals is None else self.intervals.level,
-            "ci_method": None if self.intervals is None else self.intervals.method,
-            "ci_other_maximum": None if self.intervals is None else self.intervals.other_maximum,
-            "spec": self.fit.spec.to_dict(),
-            "warnings": list(self.warnings),
-        }
+        bootstrap = 0 if self.intervals is None else self.intervals.replicates
+        return {"model": self.model.to_dict(), **self.fit_record(bootstrap), "warnings": list(self.warnings)}
 
 
 def fit_model(
