@@ -298,22 +298,31 @@ class PointSolver(SolverBase):
         self.check(problem)
         return self._bounds(problem.branch_model())
 
-    def _bounds(self, model: BranchModel) -> PointSolution:
-        """Lower and upper bounds at the initial belief of a problem in branch form."""
-        t0 = time.perf_counter()
+    def _start(self, model: BranchModel, b0: np.ndarray, reach: np.ndarray) -> np.ndarray:
+        """The lower bound's first vectors: the memoryless controllers' values."""
+        return memoryless_controllers(model)
+
+    def _upper_at_start(self, b0: np.ndarray) -> float:
+        """The upper bound reported at b0 after a round (the grid's interpolation there)."""
+        return float(self.upper_at(b0)[0])
+
+    def _bounds(self, model: BranchModel, t0: float | None = None) -> PointSolution:
+        """Lower and upper bounds at the initial belief of a problem in branch form (the clock
+        started at ``t0``, default now)."""
+        t0 = time.perf_counter() if t0 is None else t0
         self.model = model
         K = model.n_hidden
         b0 = np.asarray(model.initial, dtype=float)
-        self.G = memoryless_controllers(model)
+        reach = self._reachable(b0, self.depth)
+        self.G = self._start(model, b0, reach)
         r = self.resolution or {2: 64, 3: 16, 4: 8}.get(K, 4 if K <= 8 else 2)
         r_max = self.max_resolution or {2: 4096, 3: 512, 4: 64}.get(K, 16)
         if (r + 1) ** (K - 1) >= 2**62 or _lattice_size(K, r) > self.max_vertices:
             raise SolverError(
-                f"{K} hidden states are too many for the grid upper bound of the point solver "
+                f"{K} hidden states are too many for the grid upper bound of the {self.name} solver "
                 f"({_lattice_size(K, r)} vertices at resolution {r})"
             )
         lat = self.lower_lattice or {2: 256, 3: 16, 4: 6}.get(K, 3)
-        reach = self._reachable(b0, self.depth)
         rng = np.random.default_rng(self.seed)
         history = []
         rounds = 0
@@ -325,7 +334,7 @@ class PointSolver(SolverBase):
             S, p = self._successors(B)
             self._improve_lower(B, S, p)
             lo = float(self.lower_at(b0)[0])
-            up = float(self.upper_at(b0)[0])
+            up = self._upper_at_start(b0)
             history.append((len(V), time.perf_counter() - t0, lo, up))
             too_big = _lattice_size(K, 2 * r) > self.max_vertices or (2 * r + 1) ** (K - 1) >= 2**62
             now = time.perf_counter() - t0

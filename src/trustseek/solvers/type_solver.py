@@ -46,15 +46,11 @@ from ..pomdp.branch_model import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from .alpha import AlphaSolver
-from .base import SolverError
 from .numerics import evaluate_controller, improve, memoryless_controllers, policy_values
 from .point import (
     PointSolution,
     PointSolver,
     _find,
-    _lattice_size,
-    _simplex_lattice,
-    _unique_rows,
     _vertex_code,
     freudenthal_vertices,
     freudenthal_weights,
@@ -317,47 +313,16 @@ class TypeAwareSolver(PointSolver):
         eta = max(0.0, float(np.max(q_of(u).max(axis=2) @ pc - u)))
         return V, u + eta / (1 - gamma), lookup
 
-    def _bounds(self, model: BranchModel, t0: float | None = None) -> PointSolution:
-        t0 = time.perf_counter() if t0 is None else t0
-        self.model = model
-        self.u = np.zeros(0)
+    def _start(self, model: BranchModel, b0: np.ndarray, reach: np.ndarray) -> np.ndarray:
+        """The memoryless controllers and each type's own controller, keeping the vectors best at
+        some belief reachable from b0 or at a corner."""
+        self.u = np.zeros(0)  # no grid bound yet: upper_at is the types' bound alone
+        G = np.vstack([memoryless_controllers(model), *self.bound.controllers])
         K = model.n_hidden
-        b0 = np.asarray(model.initial, dtype=float)
-        seeds = [memoryless_controllers(model), *self.bound.controllers]
-        reach = self._reachable(b0, self.depth)
-        G = np.vstack(seeds)
-        self.G = G[np.unique((np.vstack([reach, np.eye(K)]) @ G.T).argmax(axis=1))] if len(G) > 1 else G
-        r = self.resolution or {2: 64, 3: 16, 4: 8}.get(K, 4 if K <= 8 else 2)
-        r_max = self.max_resolution or {2: 4096, 3: 512, 4: 64}.get(K, 16)
-        if (r + 1) ** (K - 1) >= 2**62 or _lattice_size(K, r) > self.max_vertices:
-            raise SolverError(
-                f"{K} hidden states are too many for the grid upper bound of the types solver "
-                f"({_lattice_size(K, r)} vertices at resolution {r})"
-            )
-        lat = self.lower_lattice or {2: 256, 3: 16, 4: 6}.get(K, 3)
-        rng = np.random.default_rng(self.seed)
-        history = []
-        rounds = 0
-        while True:
-            rounds += 1
-            V, u, lookup = self._upper(r)
-            self.r, self.u, self.lookup, self.V = r, u, lookup, V
-            B = _unique_rows(np.vstack([_simplex_lattice(K, min(r, lat)), reach, self._sampled(b0, rng)]), K)
-            S, p = self._successors(B)
-            self._improve_lower(B, S, p)
-            lo = float(self.lower_at(b0)[0])
-            up = self.lookahead_upper(b0)
-            history.append((len(V), time.perf_counter() - t0, lo, up))
-            self.history = history
-            too_big = _lattice_size(K, 2 * r) > self.max_vertices or (2 * r + 1) ** (K - 1) >= 2**62
-            now = time.perf_counter() - t0
-            last = now - (history[-2][1] if len(history) > 1 else 0.0)
-            growth = _lattice_size(K, 2 * r) / _lattice_size(K, r)
-            late = now + 1.5 * growth * last > self.max_seconds
-            if up - lo <= self.tol or r * 2 > r_max or too_big or late:
-                break
-            r *= 2
-        return PointSolution(self.G.copy(), V.copy(), u.copy(), lo, up, rounds, time.perf_counter() - t0, history)
+        return G[np.unique((np.vstack([reach, np.eye(K)]) @ G.T).argmax(axis=1))] if len(G) > 1 else G
+
+    def _upper_at_start(self, b0: np.ndarray) -> float:
+        return self.lookahead_upper(b0)
 
 
 @njit(cache=True, nogil=True, inline="always")
