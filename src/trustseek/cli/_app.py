@@ -17,6 +17,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
 
 from ..errors import TrustseekError
 from ..model.core import ModelError, load_json
@@ -129,6 +130,28 @@ def check_tol(value: float) -> float:
 
 
 QuietOpt = typer.Option(False, "--quiet", "-q", help="No progress bar on stderr (there is none when stderr is not a terminal).")
+
+
+def selection_table(title: str, key: str, rows: list[dict[str, Any]], folds: int, extra: dict[str, Any] | None = None) -> Table:
+    """The table of a model selection (``select``, ``select-types``): per compared size ``key``
+    its log-likelihood, starts that reached the best, parameters, AIC, BIC and held-out score,
+    the best by each criterion starred; ``extra`` maps further column names to a cell function."""
+    extra = extra or {}
+    table = Table(title=title, title_justify="left")
+    for col in (key, "log-likelihood", "reached best", "parameters", "AIC", "BIC", f"held-out LL ({folds}-fold)", *extra):
+        table.add_column(col, justify="right")
+    for r in rows:
+        table.add_row(
+            str(r[key]),
+            f"{r['loglik']:.3f}",
+            f"{r['reached_best']} of {r['starts']}",
+            str(r["n_params"]),
+            f"{r['aic']:.2f}",
+            f"{r['bic']:.2f}" + (" *" if r["best_bic"] else ""),
+            f"{r['heldout_loglik']:.3f}" + (" *" if r["best_heldout"] else ""),
+            *(cell(r) for cell in extra.values()),
+        )
+    return table
 
 
 def progress_bar(quiet: bool, *columns: Any) -> Progress:

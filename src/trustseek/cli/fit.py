@@ -30,6 +30,7 @@ from ._app import (
     print_json,
     progress_bar,
     read_log,
+    selection_table,
 )
 
 # The fit and data modules (pandas, numba) load only when a command of this group runs,
@@ -557,20 +558,7 @@ def select(
     if as_json:
         print_json({"levels": rows, "warnings": warnings})
         return
-    table = Table(title="Number of trust levels", title_justify="left")
-    for col in ("levels", "log-likelihood", "reached best", "parameters", "AIC", "BIC", f"held-out LL ({folds}-fold)"):
-        table.add_column(col, justify="right")
-    for r in rows:
-        table.add_row(
-            str(r["levels"]),
-            f"{r['loglik']:.3f}",
-            f"{r['reached_best']} of {r['starts']}",
-            str(r["n_params"]),
-            f"{r['aic']:.2f}",
-            f"{r['bic']:.2f}" + (" *" if r["best_bic"] else ""),
-            f"{r['heldout_loglik']:.3f}" + (" *" if r["best_heldout"] else ""),
-        )
-    console.print(table)
+    console.print(selection_table("Number of trust levels", "levels", rows, folds))
     console.print(
         "* best by that criterion; reached best: starts (random, and the fit with one level fewer split) "
         "within 0.01 of the best log-likelihood",

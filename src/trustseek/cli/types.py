@@ -25,6 +25,7 @@ from ._app import (
     print_json,
     progress_bar,
     read_log,
+    selection_table,
 )
 
 POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
@@ -225,21 +226,8 @@ def select_types(
     if as_json:
         print_json({"types": rows, "warnings": warnings})
         return
-    table = Table(title="Number of supervisor types", title_justify="left")
-    for col in ("types", "log-likelihood", "reached best", "parameters", "AIC", "BIC", f"held-out LL ({folds}-fold)", "weights"):
-        table.add_column(col, justify="right")
-    for r in rows:
-        table.add_row(
-            str(r["types"]),
-            f"{r['loglik']:.3f}",
-            f"{r['reached_best']} of {r['starts']}",
-            str(r["n_params"]),
-            f"{r['aic']:.2f}",
-            f"{r['bic']:.2f}" + (" *" if r["best_bic"] else ""),
-            f"{r['heldout_loglik']:.3f}" + (" *" if r["best_heldout"] else ""),
-            ", ".join(f"{w:.2f}" for w in r["weights"]),
-        )
-    console.print(table)
+    weights = {"weights": lambda r: ", ".join(f"{w:.2f}" for w in r["weights"])}
+    console.print(selection_table("Number of supervisor types", "types", rows, folds, weights))
     console.print("* best by that criterion; reached best: starts within 0.01 of the best log-likelihood", highlight=False)
     for w in warnings:
         console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
