@@ -4,8 +4,9 @@ Each M-type fit (:func:`~.mixture.fit_mixture`) starts from random points, from 
 fit with every row perturbed, and from the fit with one type fewer with each type split in
 two (:func:`~.mixture.split_type_starts`: as likely as that fit, so EM only climbs from it).
 Folds are over participants; a held-out participant's likelihood is the mixture's,
-sum_m w_m P(trials | type m), under the training fit smoothed by
-:data:`~.selection.HELDOUT_PSEUDOCOUNT` per free cell (as for the number of levels).
+sum_m w_m P(trials | type m), under the training fit as fitted, except the rows that hold a
+free cell at 0, smoothed by :data:`~.selection.HELDOUT_PSEUDOCOUNT` per free cell (as for the
+number of levels: :func:`~.selection.heldout_loglik`).
 """
 
 from __future__ import annotations
@@ -17,8 +18,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .mixture import MixtureFit, MixtureWorkspace, fit_mixture, split_type_starts
-from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, mark_choices, reached_best
+from .mixture import MixtureFit, MixtureParams, MixtureWorkspace, fit_mixture, split_type_starts
+from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, ZERO_CELL, mark_choices, reached_best
 from .sequences import Sequences, encode
 from .spec import FitError
 from .trust_iohmm import preset_spec
@@ -27,12 +28,29 @@ log = logging.getLogger(__name__)
 
 
 def heldout_mixture_loglik(test: Sequences, fit: MixtureFit) -> float:
-    """sum over the held-out participants of log sum_m w_m P(trials | type m), under the training fit
-    after one M-step with :data:`~.selection.HELDOUT_PSEUDOCOUNT` added to every free cell (so that a
-    cell the training folds put at 0 does not make it -inf)."""
-    st = fit.workspace().estep(fit.params)
-    smoothed = fit.structure.mstep(st, fit.params, prior=fit.spec.prior + HELDOUT_PSEUDOCOUNT)
-    return float(MixtureWorkspace(test, fit.structure).loglik(smoothed))
+    """sum over the held-out participants of log sum_m w_m P(trials | type m), under
+    :func:`heldout_mixture_params` of the training fit."""
+    return float(MixtureWorkspace(test, fit.structure).loglik(heldout_mixture_params(fit)))
+
+
+def heldout_mixture_params(fit: MixtureFit, pseudocount: float = HELDOUT_PSEUDOCOUNT) -> MixtureParams:
+    """The tables the held-out score uses: ``fit``'s as fitted, except a row holding a free cell
+    at 0 (at most :data:`~.selection.ZERO_CELL`), replaced by the smoothed row (one M-step from the
+    training fit's expected counts plus ``pseudocount`` per free cell), so that an event no
+    training participant showed does not make a held-out participant's score -inf.  The
+    initial table is one distribution over (type, first trust), smoothed as a whole.  Smoothing
+    every row would pull rarely visited rows towards uniform, more so the more types there are."""
+    p = fit.params
+    st = fit.workspace().estep(p)
+    smooth = fit.structure.mstep(st, p, prior=fit.spec.prior + pseudocount)
+
+    def rows(fitted: np.ndarray, smoothed: np.ndarray, axes: tuple[int, ...] = (-1,)) -> np.ndarray:
+        zero = ((fitted <= ZERO_CELL) & (smoothed > fitted)).any(axis=axes, keepdims=True)
+        return np.where(zero, smoothed, fitted)
+
+    return MixtureParams(
+        rows(p.initial, smooth.initial, (-2, -1)), rows(p.emission, smooth.emission), rows(p.transition, smooth.transition)
+    )
 
 
 def select_types(
