@@ -192,7 +192,7 @@ def read_log(
     ``needed`` are the canonical columns the command uses beyond participant, trial and
     human_action (not required without ``actions``); ``rating`` a rating entry of a mapping
     (from --rating flags).  Rows left out by the mapping's drop rules are counted on stderr."""
-    from ..data.trials import ColumnMapping, read_trials
+    from ..data import ColumnMapping, read_trials
 
     check_mapping_file(mapping)
     m = ColumnMapping.from_flags(column or [], label or [], mapping, missing, delimiter, rating)

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..data.trials import NAN_WORDS, DataError
+from ..data.cells import NAN_WORDS, DataError
 from ..model.core import TrustModel
 from ..vocab import EXPERIENCES
 from .iohmm import posteriors

@@ -1,0 +1,200 @@
+"""The cells of a log: texts, codes and located problems.
+
+Every column of a log is read as integer codes into its few distinct texts (:class:`Column`),
+so each distinct value is checked once; :class:`Problems` collects what is wrong, one line per
+kind of problem with the file, the column, how many rows and the first few of them.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..errors import TrustseekError
+
+SHOWN = 5  # locations shown per kind of problem
+
+
+NAN_WORDS = ("nan", "na", "n/a", "null", "none")
+
+
+NAN_MARK = "\x00nan"  # marker of a NaN cell among the texts of a column
+
+
+NAN_SET = frozenset(NAN_WORDS)
+
+
+class DataError(TrustseekError, ValueError):
+    """A trial log is malformed.  ``problems`` holds one line per kind of problem (file, column, rows, values)."""
+
+
+class Problems:
+    """Problems grouped by kind: one line per kind with the count and the first locations.
+
+    ``rowid`` maps the rows being checked to the file's data rows (rows left out by a
+    drop rule are not checked, and locations still name the file's rows)."""
+
+    def __init__(self, rowid: np.ndarray | None = None) -> None:
+        self.lines: list[str] = []
+        self.rowid = rowid
+
+    def row(self, r: int) -> int:
+        """The file's data row (1-based) of checked row ``r`` (0-based)."""
+        return int(self.rowid[r] if self.rowid is not None else r) + 1
+
+    def add(self, head: str, items: Sequence[str], count: int | None = None, unit: str = "rows") -> None:
+        count = len(items) if count is None else count
+        if count == 0:
+            return
+        if count == 1:
+            self.lines.append(f"{head}: {items[0]}")
+            return
+        shown = "; ".join(items[:SHOWN])
+        more = f"; ... ({count - SHOWN} more)" if count > SHOWN else ""
+        self.lines.append(f"{head} in {count} {unit}: {shown}{more}")
+
+    def rows(self, head: str, rows: np.ndarray, describe: Any = None) -> None:
+        """A kind of problem at checked rows ``rows`` (0-based), each described by ``describe(row)``."""
+        if len(rows) == 0:
+            return
+        first = rows[:SHOWN]
+        items = [f"row {self.row(int(r))}" + (f" {describe(int(r))}" if describe else "") for r in first]
+        self.add(head, items, len(rows))
+
+
+def _clean(s: str | None, missing: frozenset[str]) -> str | None:
+    """A cell's text: None for an empty cell or a missing-value marker, the NaN marker for a NaN word."""
+    if s is None:
+        return None
+    s = s.strip()
+    if s == "":
+        return None
+    low = s.lower()
+    if low in missing:
+        return None
+    if low in NAN_WORDS:
+        return NAN_MARK
+    return s
+
+
+def as_text(v: Any, missing: frozenset[str] = frozenset()) -> str | None:
+    """A distinct cell value as text: None for an empty cell, the NaN marker for a NaN."""
+    if v is None or v is pd.NA:
+        return None
+    if isinstance(v, (bool, np.bool_)):
+        return "true" if v else "false"
+    if isinstance(v, (float, np.floating)):
+        f = float(v)
+        if math.isnan(f):
+            return None if missing & NAN_SET else NAN_MARK
+        if f.is_integer() and abs(f) < 2**63:
+            return str(int(f))
+        return repr(f)
+    if isinstance(v, (np.integer, int)):
+        return str(int(v))
+    if isinstance(v, bytes):
+        v = v.decode("utf-8", "replace")
+    if isinstance(v, (dict, list)):
+        return json.dumps(v)
+    return _clean(str(v), missing)
+
+
+def spellings(text: str) -> tuple[str, ...]:
+    """The ways a label may be written in a mapping: a number as read ('1.0') and as an
+    integer ('1'); a boolean as true/false and as 1/0."""
+    if text.lower() in ("true", "false"):
+        low = text.lower()
+        return tuple(dict.fromkeys((text, low, low.capitalize(), low.upper(), "1" if low == "true" else "0")))
+    try:
+        f = float(text)
+    except ValueError:
+        return (text,)
+    if f.is_integer() and abs(f) < 2**63 and str(int(f)) != text:
+        return (text, str(int(f)))
+    return (text,)
+
+
+def same_value_key(text: str) -> str:
+    """The text two cells are compared by: numbers by value ('1.0' = '1'), booleans in any case."""
+    low = text.lower()
+    if low in ("true", "false"):
+        return low
+    try:
+        f = float(text)
+    except ValueError:
+        return text
+    if math.isfinite(f) and f.is_integer():
+        return str(int(f))
+    return repr(f)
+
+
+@dataclass
+class Column:
+    """One column: per row a code into ``texts`` (the distinct values as text: None = an empty
+    cell or a missing-value marker, the NaN marker = a NaN)."""
+
+    codes: np.ndarray
+    texts: list[str | None]
+
+    def take(self, rows: np.ndarray) -> Column:
+        return Column(self.codes[rows], self.texts)
+
+    def mask(self, flags: Sequence[bool] | np.ndarray) -> np.ndarray:
+        """Per row, ``flags`` of its distinct value (one flag per entry of ``texts``)."""
+        return np.asarray(flags, dtype=bool)[self.codes]
+
+
+def column_from_pandas(values: pd.Series, missing: frozenset[str]) -> Column:
+    numeric = pd.api.types.is_numeric_dtype(values.dtype) and not pd.api.types.is_bool_dtype(values.dtype)
+    if isinstance(values.dtype, pd.CategoricalDtype):
+        codes, uniques = values.cat.codes.to_numpy(), values.cat.categories
+    else:
+        codes, uniques = pd.factorize(values, use_na_sentinel=True)
+    texts = [as_text(u, missing) for u in np.asarray(uniques, dtype=object)]
+    null = NAN_MARK if numeric and not missing & NAN_SET else None
+    codes = np.asarray(codes, dtype=np.int32)
+    codes = np.where(codes < 0, np.int32(len(texts)), codes)
+    return Column(codes, [*texts, null])
+
+
+def _arrow_texts(dictionary: Any, missing: frozenset[str]) -> list[str | None]:
+    """The texts of a column's distinct values, each computed once (array operations for text and integers)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    typ = dictionary.type
+    if pa.types.is_string(typ) or pa.types.is_large_string(typ):
+        return [_clean(v, missing) for v in dictionary.to_pylist()]
+    if pa.types.is_integer(typ):
+        return list(pc.cast(dictionary, pa.string()).to_pylist())
+    return [as_text(v, missing) for v in dictionary.to_pylist()]
+
+
+def column_from_arrow(chunked: Any, missing: frozenset[str]) -> Column:
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    typ = chunked.type
+    if pa.types.is_dictionary(typ):
+        chunked = chunked.unify_dictionaries()
+        value_type = typ.value_type
+    else:
+        value_type = typ
+        chunked = pc.dictionary_encode(chunked)
+    numeric = pa.types.is_integer(value_type) or pa.types.is_floating(value_type) or pa.types.is_decimal(value_type)
+    null = NAN_MARK if numeric and not missing & NAN_SET else None
+    if chunked.num_chunks == 0:
+        return Column(np.zeros(0, dtype=np.int32), [null])
+    texts = _arrow_texts(chunked.chunk(0).dictionary, missing)
+    parts = []
+    for chunk in chunked.chunks:
+        idx = chunk.indices.fill_null(len(texts)) if chunk.null_count else chunk.indices
+        parts.append(idx.to_numpy(zero_copy_only=False).astype(np.int32, copy=False))
+    codes = parts[0] if len(parts) == 1 else np.concatenate(parts)
+    return Column(codes, [*texts, null])

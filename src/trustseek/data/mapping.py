@@ -1,0 +1,435 @@
+"""How another study's log maps onto the canonical columns and labels (:class:`ColumnMapping`).
+
+A mapping names the log's columns (``columns``: canonical -> theirs), its labels (``labels``),
+the declared complexities, derived and dropped rows, a rating column and other named inputs;
+it is checked as a whole and reports every problem at once (``docs/data-format.md``).
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import tomllib
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..vocab import ACTIONS, CATEGORICAL_COLUMNS, EXPERIENCES, HUMAN_ACTIONS, TRIAL_COLUMNS
+from .cells import DataError
+
+CANONICAL = TRIAL_COLUMNS
+
+
+CATEGORICAL = CATEGORICAL_COLUMNS
+
+
+DEFAULT_COMPLEXITIES = ("low", "high")
+
+
+@dataclass
+class ColumnMapping:
+    """How another study's log maps onto the canonical columns and labels.
+
+    ``columns``      canonical name -> the log's column name (or a derived column's name)
+    ``labels``       canonical column -> {the log's label: canonical label}; a list value
+                     maps a set of the log's labels to the canonical label named by its key
+    ``complexities`` the complexity names, lowest first (default ``low``, ``high``)
+    ``order``        columns that order the trials within a participant (block, then trial
+                     within block; or a timestamp): the canonical trial becomes 1, 2, ...
+    ``derived``      new columns: ``{"name": {"equal": [a, b]}}`` (``true`` where the two
+                     columns hold the same value) or ``{"name": {"shift": col, "by": 1}}``
+                     (the value ``by`` trials earlier of the same participant; ``"fill"``
+                     is the value where there is no such trial, default empty)
+    ``drop``         rows to leave out: ``[{"column": col, "values": [...]}, ...]``
+    ``missing``      cell texts meaning "not recorded" (besides the empty cell), e.g. ``NA``
+    ``delimiter``    a CSV's delimiter (default: sniffed from the header)
+    ``rating``       a self-reported trust rating (optional): ``{"column": theirs, "levels": [...]}``
+                     with the ordinal levels lowest first (numbers or labels; ``"labels"``
+                     maps the log's texts to levels), or ``{"column": theirs, "bins": [edges]}``
+                     for a numeric rating binned into ``[e0, e1), [e1, e2), ... [e_{n-1}, e_n]``
+                     (``"levels"`` then names the bins); an empty cell is no rating.  It
+                     becomes the ``rating`` column, an ordered categorical of the levels.
+    ``inputs``       named discrete inputs of a model (optional): ``{"condition": {"column": theirs,
+                     "levels": ["control", "aid"]}}`` with the levels in their order (``"labels"``
+                     maps the log's texts to levels, as for ``labels``; ``"column"`` defaults to the
+                     input's name and may be a derived column).  Each becomes a column named by
+                     the input, a categorical of its levels in the declared order; an empty cell
+                     or a value outside the levels is an error.
+    """
+
+    columns: dict[str, str] = field(default_factory=dict)
+    labels: dict[str, dict[str, str]] = field(default_factory=dict)
+    complexities: tuple[str, ...] | None = None
+    order: tuple[str, ...] | None = None
+    derived: dict[str, dict[str, Any]] = field(default_factory=dict)
+    drop: list[dict[str, Any]] = field(default_factory=list)
+    missing: tuple[str, ...] | None = None
+    delimiter: str | None = None
+    rating: dict[str, Any] | None = None
+    inputs: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    def problems(self) -> list[str]:
+        p = []
+        if self.rating is not None:
+            p += _rating_problems(self.rating)
+        for name, entry in self.inputs.items():
+            p += _input_problems(name, entry)
+        for canon, theirs in self.columns.items():
+            if canon not in CANONICAL:
+                p.append(f"column mapping: {canon!r} is not a canonical column {list(CANONICAL)}")
+            if not isinstance(theirs, str) or not theirs:
+                p.append(f"column mapping: {canon} must map to a column name, got {theirs!r}")
+        for canon, table in self.labels.items():
+            if canon not in CATEGORICAL:
+                p.append(f"label mapping: {canon!r} is not a categorical column {list(CATEGORICAL)}")
+                continue
+            if not isinstance(table, Mapping):
+                p.append(f"label mapping: {canon} must map labels to labels, got {table!r}")
+                continue
+            allowed = self.categories(canon)
+            for theirs, ours in table.items():
+                if ours not in allowed:
+                    p.append(f"label mapping: {canon}:{theirs}={ours!r} is not one of {list(allowed)}")
+        if self.order is not None:
+            if not self.order or not all(isinstance(c, str) and c for c in self.order):
+                p.append(f"order: expected a column name or a list of column names, got {list(self.order)!r}")
+            if "trial" in self.columns:
+                p.append("order: give either 'order' or a 'trial' column, not both")
+        known: set[str] = set()
+        for name, d in self.derived.items():
+            if not isinstance(d, Mapping) or len(set(d) & {"equal", "shift"}) != 1:
+                p.append(f"derived column {name!r}: expected {{'equal': [a, b]}} or {{'shift': column, 'by': 1}}, got {d!r}")
+            elif "equal" in d:
+                eq = d["equal"]
+                if (
+                    set(d) != {"equal"}
+                    or not isinstance(eq, list)
+                    or len(eq) != 2
+                    or not all(isinstance(c, str) and c for c in eq)
+                ):
+                    p.append(f"derived column {name!r}: 'equal' takes a list of two column names, got {eq!r}")
+            else:
+                by = d.get("by", 1)
+                if set(d) - {"shift", "by", "fill"} or not isinstance(d["shift"], str) or not d["shift"]:
+                    p.append(f"derived column {name!r}: 'shift' takes a column name (and 'by', 'fill'), got {dict(d)!r}")
+                elif not isinstance(by, int) or isinstance(by, bool) or by == 0:
+                    p.append(f"derived column {name!r}: 'by' must be a non-zero integer (1 = the previous trial), got {by!r}")
+            known.add(name)
+        for i, rule in enumerate(self.drop, 1):
+            ok = isinstance(rule, Mapping) and set(rule) == {"column", "values"}
+            ok = ok and isinstance(rule["column"], str) and isinstance(rule["values"], list) and bool(rule["values"])
+            if not ok:
+                p.append(f"drop rule {i}: expected {{'column': name, 'values': [value, ...]}}, got {rule!r}")
+        if self.missing is not None and not all(isinstance(m, str) for m in self.missing):
+            p.append(f'missing: expected a list of texts (e.g. ["NA", "null"]), got {list(self.missing)!r}')
+        if self.delimiter is not None and (not isinstance(self.delimiter, str) or len(self.delimiter) != 1):
+            p.append(f"delimiter: expected one character, got {self.delimiter!r}")
+        return p
+
+    def categories(self, column: str) -> tuple[str, ...]:
+        if column == "complexity":
+            return tuple(self.complexities or DEFAULT_COMPLEXITIES)
+        return {"robot_action": ACTIONS, "human_action": HUMAN_ACTIONS, "experience": EXPERIENCES}[column]
+
+    def merged(self, other: ColumnMapping) -> ColumnMapping:
+        """This mapping overridden by ``other`` (e.g. a file overridden by command-line flags)."""
+        labels = {k: dict(v) for k, v in self.labels.items()}
+        for k, v in other.labels.items():
+            labels.setdefault(k, {}).update(v)
+        return ColumnMapping(
+            {**self.columns, **other.columns},
+            labels,
+            other.complexities or self.complexities,
+            other.order or self.order,
+            {**self.derived, **other.derived},
+            [*self.drop, *other.drop],
+            other.missing if other.missing is not None else self.missing,
+            other.delimiter or self.delimiter,
+            other.rating or self.rating,
+            {**self.inputs, **other.inputs},
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        d: dict[str, Any] = {"columns": dict(self.columns), "labels": {k: dict(v) for k, v in self.labels.items()}}
+        if self.complexities:
+            d["complexities"] = list(self.complexities)
+        if self.order:
+            d["order"] = list(self.order)
+        if self.derived:
+            d["derived"] = {k: dict(v) for k, v in self.derived.items()}
+        if self.drop:
+            d["drop"] = [dict(r) for r in self.drop]
+        if self.missing is not None:
+            d["missing"] = list(self.missing)
+        if self.delimiter:
+            d["delimiter"] = self.delimiter
+        if self.rating is not None:
+            d["rating"] = dict(self.rating)
+        if self.inputs:
+            d["inputs"] = {k: dict(v) for k, v in self.inputs.items()}
+        return d
+
+    def input_levels(self) -> dict[str, tuple[str, ...]]:
+        """Every declared input's levels, in their declared order."""
+        return {name: tuple(label_key(v) for v in entry["levels"]) for name, entry in self.inputs.items()}
+
+    def input_column(self, name: str) -> str:
+        """The log's (or a derived) column an input is read from."""
+        return str(self.inputs[name].get("column", name))
+
+    def rating_levels(self) -> tuple[str, ...]:
+        """The declared rating levels, lowest first (the bins' names for a binned rating)."""
+        if self.rating is None:
+            return ()
+        levels = self.rating.get("levels")
+        if levels is not None:
+            return tuple(label_key(v) for v in levels)
+        edges = [float(e) for e in self.rating["bins"]]
+        return tuple(f"{format_number(lo)}-{format_number(hi)}" for lo, hi in itertools.pairwise(edges))
+
+    @classmethod
+    def from_dict(cls, d: Any, source: str | None = None) -> ColumnMapping:
+        if not isinstance(d, Mapping):
+            raise DataError(["a mapping must be an object with 'columns' and/or 'labels'"], source)
+        unknown = set(d) - set(MAPPING_KEYS)
+        problems = [f"unknown entry {k!r} (expected {', '.join(MAPPING_KEYS)})" for k in sorted(unknown)]
+        cols = d.get("columns", {})
+        labels = d.get("labels", {})
+        cx = d.get("complexities")
+        order = d.get("order")
+        derived = d.get("derived", {})
+        drop = d.get("drop", [])
+        missing = d.get("missing")
+        inputs = d.get("inputs", {})
+        if not isinstance(inputs, Mapping):
+            problems.append(f"'inputs' must map input names to {{'column': ..., 'levels': [...]}}, got {inputs!r}")
+            inputs = {}
+        if not isinstance(cols, Mapping):
+            problems.append(f"'columns' must map canonical names to the log's names, got {cols!r}")
+            cols = {}
+        if not isinstance(labels, Mapping):
+            problems.append(f"'labels' must map canonical columns to label tables, got {labels!r}")
+            labels = {}
+        if cx is not None and (not isinstance(cx, list) or not all(isinstance(c, str) and c for c in cx) or len(cx) < 2):
+            problems.append(f"'complexities' must list at least 2 names, got {cx!r}")
+            cx = None
+        if isinstance(order, str):
+            order = [order]
+        if order is not None and not isinstance(order, list):
+            problems.append(f"'order' must be a column name or a list of them, got {order!r}")
+            order = None
+        if not isinstance(derived, Mapping):
+            problems.append(f"'derived' must map new column names to their definitions, got {derived!r}")
+            derived = {}
+        if not isinstance(drop, list):
+            problems.append(f"'drop' must be a list of rules, got {drop!r}")
+            drop = []
+        if isinstance(missing, str):
+            missing = [missing]
+        if missing is not None and not isinstance(missing, list):
+            problems.append(f"'missing' must list texts, got {missing!r}")
+            missing = None
+        m = cls(
+            {str(k): v for k, v in cols.items()},
+            {str(k): (_label_table(v) if isinstance(v, Mapping) else v) for k, v in labels.items()},
+            tuple(cx) if cx else None,
+            tuple(order) if order is not None else None,
+            {str(k): v for k, v in derived.items()},
+            list(drop),
+            tuple(missing) if missing is not None else None,
+            d.get("delimiter"),
+            dict(d["rating"]) if isinstance(d.get("rating"), Mapping) else d.get("rating"),
+            {str(k): (_input_entry(v) if isinstance(v, Mapping) else v) for k, v in inputs.items()},
+        )
+        problems += m.problems()
+        if problems:
+            raise DataError(problems, source)
+        return m
+
+    @classmethod
+    def load(cls, path: str | Path) -> ColumnMapping:
+        """A mapping file: JSON (``.json``) or TOML (``.toml``)."""
+        path = Path(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+            raise DataError([f"cannot read mapping file: {reason}"], str(path)) from None
+        try:
+            d = tomllib.loads(text) if path.suffix.lower() == ".toml" else json.loads(text)
+        except (json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
+            raise DataError([f"invalid {'TOML' if path.suffix.lower() == '.toml' else 'JSON'}: {exc}"], str(path)) from None
+        return cls.from_dict(d, str(path))
+
+    @classmethod
+    def from_flags(
+        cls,
+        columns: Iterable[str] = (),
+        labels: Iterable[str] = (),
+        file: str | Path | None = None,
+        missing: Iterable[str] | None = None,
+        delimiter: str | None = None,
+        rating: Mapping[str, Any] | None = None,
+    ) -> ColumnMapping:
+        """Command-line flags: ``--column canonical=theirs``, ``--label column:theirs=canonical``,
+        ``--missing TEXT`` and ``--delimiter CHAR``; ``rating`` as in a mapping file (``--rating``
+        with ``--rating-levels`` or ``--rating-bins``)."""
+        base = cls.load(file) if file else cls()
+        problems = []
+        cols: dict[str, str] = {}
+        labs: dict[str, dict[str, str]] = {}
+        for item in columns:
+            canon, sep, theirs = item.partition("=")
+            if not sep or not canon or not theirs:
+                problems.append(f"--column {item!r}: expected canonical=theirs, e.g. human_action=rely")
+                continue
+            cols[canon.strip()] = theirs.strip()
+        for item in labels:
+            head, sep, ours = item.partition("=")
+            canon, sep2, theirs = head.partition(":")
+            if not sep or not sep2 or not canon or not ours:
+                problems.append(f"--label {item!r}: expected column:theirs=canonical, e.g. human_action:1=rely")
+                continue
+            labs.setdefault(canon.strip(), {})[theirs.strip()] = ours.strip()
+        if delimiter is not None:
+            delimiter = {"\\t": "\t", "tab": "\t", "TAB": "\t"}.get(delimiter, delimiter)
+        if problems:
+            raise DataError(problems)
+        flags = cls(
+            cols,
+            labs,
+            missing=tuple(missing) if missing else None,
+            delimiter=delimiter,
+            rating=dict(rating) if rating is not None else None,
+        )
+        problems = flags.problems()
+        if problems:
+            raise DataError(problems)
+        return base.merged(flags)
+
+
+MAPPING_KEYS = ("columns", "labels", "complexities", "order", "derived", "drop", "missing", "delimiter", "rating", "inputs")
+
+
+RATING = "rating"  # the canonical name of the rating column a mapping declares
+
+
+def format_number(x: float) -> str:
+    return str(int(x)) if float(x).is_integer() else repr(float(x))
+
+
+def _rating_problems(r: Any) -> list[str]:
+    """Everything wrong with a mapping's ``rating`` entry."""
+    head = "rating"
+    if not isinstance(r, Mapping):
+        return [f'{head}: expected {{"column": name, "levels": [...]}} or {{"column": name, "bins": [edges]}}, got {r!r}']
+    p = []
+    extra = set(r) - {"column", "levels", "labels", "bins"}
+    if extra:
+        p.append(f"{head}: unknown entries {sorted(extra)} (expected column, levels, labels, bins)")
+    col = r.get("column")
+    if not isinstance(col, str) or not col:
+        p.append(f"{head}: 'column' must name the log's rating column, got {col!r}")
+    levels, bins, labels = r.get("levels"), r.get("bins"), r.get("labels")
+    if levels is None and bins is None:
+        p.append(f"{head}: declare the levels, lowest first ('levels': [1, 2, 3, 4, 5]) or numeric bins ('bins': [edges])")
+    names: list[str] = []
+    if levels is not None:
+        ok = isinstance(levels, list) and all(isinstance(v, (str, int, float)) and not isinstance(v, bool) for v in levels)
+        names = [label_key(v) for v in levels] if ok else []
+        if not ok or len(names) < 2 or len(set(names)) != len(names) or not all(n.strip() for n in names):
+            p.append(f"{head}: 'levels' must list at least 2 distinct levels, lowest first, got {levels!r}")
+    if bins is not None:
+        ok = isinstance(bins, list) and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in bins)
+        edges = [float(v) for v in bins] if ok else []
+        if (
+            not ok
+            or len(edges) < 3
+            or not all(math.isfinite(e) for e in edges)
+            or any(b <= a for a, b in itertools.pairwise(edges))
+        ):
+            p.append(f"{head}: 'bins' must list at least 3 increasing finite edges (2 bins), got {bins!r}")
+        elif levels is not None and names and len(names) != len(edges) - 1:
+            p.append(f"{head}: {len(edges) - 1} bins need {len(edges) - 1} level names, got {len(names)}")
+        if labels is not None:
+            p.append(f"{head}: 'labels' apply to declared levels, not to bins")
+    if labels is not None and bins is None:
+        if not isinstance(labels, Mapping):
+            p.append(f"{head}: 'labels' must map the log's texts to levels, got {labels!r}")
+        elif names:
+            for theirs, ours in labels.items():
+                if label_key(ours) not in names:
+                    p.append(f"{head}: label {theirs}={ours!r} is not one of the levels {names}")
+    return p
+
+
+def _input_entry(entry: Mapping) -> dict[str, Any]:
+    """An ``inputs`` entry with its label table read like ``labels`` (set entries turned around)."""
+    out = dict(entry)
+    if isinstance(out.get("labels"), Mapping):
+        out["labels"] = _label_table(out["labels"])
+    return out
+
+
+def _input_problems(name: str, entry: Any) -> list[str]:
+    """Everything wrong with one entry of a mapping's ``inputs``."""
+    head = f"input {name!r}"
+    if not isinstance(entry, Mapping):
+        return [f'{head}: expected {{"column": name, "levels": [...]}}, got {entry!r}']
+    p = []
+    if name in CANONICAL or name == RATING or not name:
+        p.append(f"{head}: the name is taken (canonical columns and 'rating'); name the input otherwise")
+    extra = set(entry) - {"column", "levels", "labels"}
+    if extra:
+        p.append(f"{head}: unknown entries {sorted(extra)} (expected column, levels, labels)")
+    col = entry.get("column", name)
+    if not isinstance(col, str) or not col:
+        p.append(f"{head}: 'column' must name the log's column, got {col!r}")
+    levels = entry.get("levels")
+    ok = isinstance(levels, list) and all(isinstance(v, (str, int, float, bool)) for v in levels)
+    names = [label_key(v) for v in levels] if ok and isinstance(levels, list) else []
+    if not names or len(set(names)) != len(names) or not all(n.strip() for n in names):
+        p.append(f"{head}: 'levels' must list its distinct levels in their order, got {levels!r}")
+    labels = entry.get("labels")
+    if labels is not None:
+        if not isinstance(labels, Mapping):
+            p.append(f"{head}: 'labels' must map the log's texts to levels, got {labels!r}")
+        elif names:
+            for theirs, ours in labels.items():
+                if label_key(ours) not in names:
+                    p.append(f"{head}: label {theirs}={ours!r} is not one of the levels {names}")
+    return p
+
+
+def _label_table(table: Mapping) -> dict[str, Any]:
+    """A label table with its set entries (canonical -> [their labels]) turned into their -> canonical."""
+    out: dict[str, Any] = {}
+    for k, v in table.items():
+        if isinstance(v, list):
+            for theirs in v:
+                out[label_key(theirs)] = str(k)
+        else:
+            out[label_key(k)] = v
+    return out
+
+
+def label_key(v: Any) -> str:
+    """A label written in a mapping file as text (a TOML/JSON number or boolean as the reader's text)."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    return str(v)
+
+
+def as_mapping(mapping: ColumnMapping | Mapping | str | Path | None) -> ColumnMapping:
+    if mapping is None:
+        return ColumnMapping()
+    if isinstance(mapping, (str, Path)):
+        return ColumnMapping.load(mapping)
+    if not isinstance(mapping, ColumnMapping):
+        return ColumnMapping.from_dict(mapping)
+    p = mapping.problems()
+    if p:
+        raise DataError(p)
+    return mapping

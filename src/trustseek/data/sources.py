@@ -1,0 +1,256 @@
+"""The sources a log is read from: CSV (delimiter sniffed), Parquet, JSON lines, JSON and data frames.
+
+Each source becomes a :class:`RawLog`: its columns as :class:`~.cells.Column` codes, read
+column by column (pyarrow where it can), with the rows numbered as in the file.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from .cells import Column, DataError, Problems, as_text, column_from_arrow, column_from_pandas
+
+DELIMITERS = (",", ";", "\t", "|")
+
+
+@dataclass
+class RawLog:
+    name: str
+    n: int
+    columns: list[str]
+    col: Any  # name -> Column
+    extras: Any  # list of names -> DataFrame of those columns
+    release: Any = None  # list of names -> None: those columns are no longer needed (their memory goes)
+
+
+def _sniff(path: Path, sep: str | None) -> tuple[str, list[str]]:
+    """The delimiter (given, by suffix, or the most frequent candidate in the header) and the header names."""
+    with path.open("rb") as fh:
+        head = fh.read(1 << 16)
+    text = head.decode("utf-8", "replace").lstrip("\ufeff")
+    first = text.splitlines()[0] if text.strip() else ""
+    if sep is None:
+        if path.suffix.lower() == ".tsv":
+            sep = "\t"
+        else:
+            counts = {d: first.count(d) for d in DELIMITERS}
+            best = max(counts, key=lambda d: counts[d])
+            sep = best if counts[best] > 0 else ","
+    names = next(csv.reader(io.StringIO(first), delimiter=sep), []) if first else []
+    return sep, [n.strip() for n in names]
+
+
+CSV_SUFFIXES = (".csv", ".txt", ".tsv")
+
+
+PARQUET_SUFFIXES = (".parquet", ".pq")
+
+
+JSONL_SUFFIXES = (".jsonl", ".ndjson")
+
+
+JSON_SUFFIXES = (".json",)
+
+
+def load_source(source: Any, sep: str | None, missing: frozenset[str]) -> RawLog:
+    if isinstance(source, pd.DataFrame):
+        frame = source
+
+        def col(c: str) -> Column:
+            return column_from_pandas(frame[c], missing)
+
+        return RawLog("<table>", len(frame), [str(c) for c in frame.columns], col, lambda cs: frame[cs].reset_index(drop=True))
+    path = Path(source)
+    name = str(path)
+    if not path.exists():
+        raise DataError(["file not found"], name)
+    if path.is_dir():
+        raise DataError(["is a directory, not a trial log"], name)
+    suffix = path.suffix.lower()
+    if suffix in PARQUET_SUFFIXES:
+        return _load_parquet(path, name, missing)
+    if suffix in CSV_SUFFIXES:
+        return _load_csv(path, name, sep, missing)
+    if suffix in JSONL_SUFFIXES + JSON_SUFFIXES:
+        return _load_json(path, name, suffix in JSONL_SUFFIXES, missing)
+    raise DataError([f"unknown file type {suffix!r}: use .csv, .tsv, .parquet, .jsonl or .json"], name)
+
+
+def _arrow_raw(table: Any, name: str, missing: frozenset[str]) -> RawLog:
+    names = [str(c) for c in table.column_names]
+    dupes = sorted({c for c in names if names.count(c) > 1})
+    if dupes:
+        raise DataError([f"column {c!r} appears {names.count(c)} times" for c in dupes], name)
+    return _arrow_source(table, name, names, missing)
+
+
+def _arrow_source(table: Any, name: str, names: list[str], missing: frozenset[str]) -> RawLog:
+    import pyarrow as pa
+
+    held = {"table": table}
+
+    def release(cs: list[str]) -> None:
+        held["table"] = held["table"].drop_columns([c for c in cs if c in held["table"].column_names])
+        pa.default_memory_pool().release_unused()
+
+    return RawLog(
+        name,
+        table.num_rows,
+        names,
+        lambda c: column_from_arrow(held["table"].column(c), missing),
+        lambda cs: held["table"].select(cs).to_pandas(),
+        release,
+    )
+
+
+def _load_parquet(path: Path, name: str, missing: frozenset[str]) -> RawLog:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        schema = pq.read_schema(path)
+        texts = [f.name for f in schema if pa.types.is_string(f.type) or pa.types.is_large_string(f.type)]
+        # text columns come as codes into their distinct values (no string per row)
+        table = pq.read_table(path, read_dictionary=texts)
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise DataError([f"cannot read the file as Parquet: {exc}"], name) from None
+    return _arrow_raw(table, name, missing)
+
+
+def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str]) -> RawLog:
+    """JSON lines (one object per line) or a JSON array of objects; row N is the N-th record."""
+    import pyarrow as pa
+
+    if lines:
+        import pyarrow.json as pjson
+
+        try:
+            return _arrow_raw(pjson.read_json(path), name, missing)
+        except (pa.ArrowException, OSError):
+            pass  # mixed types in a column, or a bad line: read record by record to say where
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise DataError(["the file is not UTF-8 text"], name) from None
+    except OSError as exc:
+        raise DataError([f"cannot read the file: {exc.strerror or exc}"], name) from None
+    p = Problems()
+    records: list[Any] = []
+    where: list[str] = []
+    if lines:
+        bad: list[str] = []
+        for i, line in enumerate(text.splitlines(), 1):
+            if not line.strip():
+                continue
+            try:
+                records.append(json.loads(line))
+                where.append(f"line {i}")
+            except json.JSONDecodeError as exc:
+                bad.append(f"line {i}: {exc.msg}")
+        p.add("lines that are not JSON", bad, unit="lines")
+    else:
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise DataError([f"invalid JSON: {exc}"], name) from None
+        if not isinstance(data, list):
+            raise DataError(["a JSON trial log must be an array of records (objects), one per trial"], name)
+        records = data
+        where = [f"record {i}" for i in range(1, len(data) + 1)]
+    p.add("records that are not objects", [w for w, r in zip(where, records, strict=True) if not isinstance(r, dict)])
+    if p.lines:
+        raise DataError(p.lines, name)
+    columns: dict[str, list[Any]] = {}
+    for i, r in enumerate(records):
+        for k in r:
+            if k not in columns:
+                columns[k] = [None] * i
+        for k, vals in columns.items():
+            vals.append(r.get(k))
+    arrays = {}
+    for k, vals in columns.items():
+        try:
+            arrays[k] = pa.array(vals)
+        except (pa.ArrowInvalid, pa.ArrowTypeError):  # mixed types: every value as the reader's text
+            arrays[k] = pa.array([None if v is None else as_text(v) for v in vals], type=pa.string())
+    table = pa.table(arrays) if arrays else pa.table({})
+    return _arrow_raw(table, name, missing)
+
+
+def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -> RawLog:
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    sep, header = _sniff(path, sep)
+    if not header:
+        raise DataError(["the file is empty (expected a header line naming the columns)"], name)
+    dupes = sorted({c for c in header if header.count(c) > 1})
+    if dupes:
+        raise DataError([f"column {c!r} appears {header.count(c)} times in the header" for c in dupes], name)
+    bad_rows: list[tuple[int, int, str]] = []
+
+    def invalid(row: Any) -> str:
+        try:
+            text = str(row.text)
+        except UnicodeDecodeError:
+            text = "(not UTF-8 text)"
+        bad_rows.append((row.expected_columns, row.actual_columns, text))
+        return "skip"
+
+    # every column as codes into its distinct texts: no Python string per cell
+    dictionary = pa.dictionary(pa.int32(), pa.string())
+    types = dict.fromkeys(header, dictionary)
+    # pyarrow decodes a malformed row's text for the handler; a row that is not UTF-8 fails there,
+    # outside any caller, so such failures are collected here instead of being printed
+    undecodable: list[Any] = []
+    hook = sys.unraisablehook
+    sys.unraisablehook = undecodable.append
+    try:
+        # one thread: a process that has read a CSV on pyarrow's thread pool can abort at exit
+        # ("terminate called without an active exception") under load, instead of exiting with
+        # its status; the single-threaded parse costs ~0.5 s on 7.1 M rows (benchmarks/bench_read.py)
+        table = pcsv.read_csv(
+            path,
+            read_options=pcsv.ReadOptions(column_names=header, skip_rows=1, block_size=1 << 24, use_threads=False),
+            parse_options=pcsv.ParseOptions(delimiter=sep, invalid_row_handler=invalid, newlines_in_values=False),
+            convert_options=pcsv.ConvertOptions(
+                column_types=types, null_values=[], strings_can_be_null=False, quoted_strings_can_be_null=False
+            ),
+        )
+    except (pa.ArrowException, OSError) as exc:
+        msg = str(exc)
+        if "UTF8" in msg or "UTF-8" in msg:
+            raise DataError(["the file is not UTF-8 text (save it as UTF-8 CSV)"], name) from None
+        raise DataError([f"cannot read the file as CSV (delimiter {sep!r}): {msg}"], name) from None
+    finally:
+        sys.unraisablehook = hook
+    if undecodable:
+        raise DataError(["the file is not UTF-8 text (save it as UTF-8 CSV)"], name)
+    if bad_rows:
+        p = Problems()
+        p.add(
+            f"rows whose number of fields differs from the header's {len(header)} (delimiter {sep!r})",
+            [f"{got} fields: {text[:60]!r}" for _, got, text in bad_rows],
+        )
+        raise DataError(p.lines, name)
+    return _arrow_source(table, name, header, missing)
+
+
+def missing_column_hint(missing: list[str], present: list[str], sep: str | None) -> list[str]:
+    hints = ["name another column with --column canonical=theirs or a --mapping file (Python: ColumnMapping)"]
+    if {"complexity", "robot_action"} & set(missing):
+        hints.append(
+            "a log without complexity/robot_action can be fitted by a model that does not use them: "
+            "--transitions-on experience --emissions-on none"
+        )
+    if len(present) == 1 and any(d in present[0] for d in DELIMITERS if d != sep):
+        hints.append(f"the header has a single column {present[0]!r}: is the file separated by another delimiter?")
+    return [f"hint: {h}" for h in hints]
