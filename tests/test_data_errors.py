@@ -125,6 +125,28 @@ def test_an_unknown_delimiter_gets_a_hint(tmp_path):
     assert sum("missing column" in line for line in lines_of(exc)) == 6
 
 
+def test_labels_in_another_case_get_the_flags_that_map_them(tmp_path):
+    text = GOOD.replace("A,1,low,", "A,1,Low,").replace("B,1,high,autonomous,rely,", "B,1,high,autonomous, RELY ,")
+    with pytest.raises(DataError) as exc:
+        read_trials(write(tmp_path, text))
+    lines = lines_of(exc)
+    assert any("unknown category" in x and "'Low'" in x for x in lines)
+    hints = [x for x in lines if "hint:" in x]
+    assert len(hints) == 2
+    assert any("--label complexity:Low=low" in x for x in hints)
+    assert any("--label human_action:RELY=rely" in x for x in hints)
+    # the flags the hint gives read the log
+    m = ColumnMapping.from_flags([], ["complexity:Low=low", "human_action:RELY=rely"])
+    df = read_trials(write(tmp_path, text), m)
+    assert df["complexity"].iloc[0] == "low" and df["human_action"].iloc[4] == "rely"
+
+
+def test_an_unknown_label_unlike_any_label_gets_no_hint(tmp_path):
+    with pytest.raises(DataError) as exc:
+        read_trials(write(tmp_path, GOOD.replace("A,1,low,", "A,1,easy,")))
+    assert not any("hint:" in x for x in lines_of(exc))
+
+
 def test_several_kinds_of_problem_one_line_each_with_a_count(tmp_path):
     rows = list(ROWS)
     rows[0] = "A,1,medium,autonomous,rely,reliable"

@@ -214,6 +214,14 @@ def read_trials(
             np.flatnonzero(k == 3),
             lambda r, cc=cc: repr(cc.texts[cc.codes[r]]),
         )
+        near = {t: a for j, t in enumerate(cc.texts) if kind[j] == 3 for a in allowed if t.strip().lower() == a.lower()}
+        if near and (k == 3).any():
+            flags = " ".join(f"--label {c}:{t.strip()}={a}" for t, a in list(near.items())[:SHOWN])
+            one = len(near) == 1
+            problems.lines.append(
+                f"hint: {', '.join(repr(t) for t in list(near)[:SHOWN])} {'is a label' if one else 'are labels'} written "
+                f"in another case or with spaces: map {'it' if one else 'them'} with {flags} (or a mapping file's labels)"
+            )
         del k
     nothing_recorded = "human_action" in present and not (codes["human_action"] >= 0).any()
     if "human_action" in required and nothing_recorded and not any(column("human_action") in x for x in problems.lines):
