@@ -27,7 +27,15 @@ import numpy as np
 
 from trustseek.design import DesignConfig, FitSettings, run_design
 from trustseek.design.evaluation import evaluate_policy
-from trustseek.design.replicate import _agnostic, fit_model, paired_tests, plan, replicate_seed, run_replicate
+from trustseek.design.replicate import (
+    agnostic_of,
+    experiment1_sequences,
+    fit_encoded,
+    paired_tests,
+    plan,
+    replicate_seed,
+    run_replicate,
+)
 from trustseek.design.sweep import study_of
 from trustseek.estimation import fit as fit_module
 from trustseek.estimation.fit import fit_trust_model
@@ -60,11 +68,13 @@ def stages(cfg: DesignConfig, n: int) -> None:
         s1, _, s2 = replicate_seed(cfg.seed, 0, r).spawn(3)
         c = time.process_time()
         ask = randomized({"low": design.ask_low, "high": design.ask_high})
-        frame = simulate(truth, task, ask, design.participants, counts=design.counts, seed=s1).trials()[list(TRIAL_COLUMNS)]
+        sim1 = simulate(truth, task, ask, design.participants, counts=design.counts, seed=s1)
+        seqs, spec = experiment1_sequences(sim1)
         t["experiment 1"] += time.process_time() - c
         c = time.process_time()
-        model = fit_model(frame, fs, r)
+        model = fit_encoded(seqs, spec, fs, r)
         t["fit"] += time.process_time() - c
+        frame = sim1.trials()[list(TRIAL_COLUMNS)]
         c = time.process_time()
         old_fit(frame, r)
         before += time.process_time() - c
@@ -72,7 +82,7 @@ def stages(cfg: DesignConfig, n: int) -> None:
         aware = plan(model, task, fs)
         t["solve"] += time.process_time() - c
         c = time.process_time()
-        agn = _agnostic(frame, task)
+        agn = agnostic_of(sim1)
         t["agnostic"] += time.process_time() - c
         c = time.process_time()
         evaluate_policy(aware, truth, task, grid=fs.evaluation_grid)

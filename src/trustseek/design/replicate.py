@@ -16,16 +16,17 @@ from scipy.special import stdtr
 
 from ..errors import TrustseekError
 from ..estimation.fit import fit_sequences
-from ..estimation.sequences import encode
+from ..estimation.sequences import Sequences, encode
+from ..estimation.spec import IOHMMSpec
 from ..estimation.trust_iohmm import preset_spec
-from ..model.core import Task, TrustModel
+from ..model.core import AUTONOMOUS, INTERVENE, Task, TrustModel
 from ..policies import ComplexityPolicy, TrustAwarePolicy, randomized
 from ..pomdp.problem import AssistancePOMDP
-from ..simulation import crossover, simulate
+from ..simulation import Simulation, crossover, simulate
 from ..solvers.agnostic import agnostic_from_intervention_rates, trust_agnostic_from_data
 from ..solvers.grid import GridSolver
 from ..solvers.numerics import improve
-from ..vocab import TRIAL_COLUMNS
+from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, LEVELS
 from .evaluation import EVALUATION_GRID, evaluate_policy, high_threshold
 
 __all__ = ["Experiment1", "FitSettings", "Study", "paired_tests", "replicate_seed", "run_replicate", "signed_rank_p"]
@@ -172,10 +173,62 @@ def fit_model(frame: Any, settings: FitSettings, seed: int) -> TrustModel:
     (the ``paper`` preset, one thread), without marking the rows no trial informs (neither the
     plan nor the simulation reads them)."""
     spec = preset_spec("paper", frame)
-    fit = fit_sequences(
-        encode(frame, spec), spec, restarts=settings.restarts, seed=seed, tol=settings.tol, max_iter=settings.max_iter, n_jobs=1
-    )
+    return fit_encoded(encode(frame, spec), spec, settings, seed)
+
+
+def fit_encoded(seqs: Sequences, spec: IOHMMSpec, settings: FitSettings, seed: int) -> TrustModel:
+    """:func:`fit_model` on trials already encoded for ``spec``."""
+    fit = fit_sequences(seqs, spec, restarts=settings.restarts, seed=seed, tol=settings.tol, max_iter=settings.max_iter, n_jobs=1)
     return fit.model
+
+
+def experiment1_sequences(sim: Simulation) -> tuple[Sequences, IOHMMSpec]:
+    """The ``paper`` spec and the encoded trials of a recorded one-block simulation, straight from
+    its integer arrays: what :func:`~trustseek.estimation.sequences.encode` makes of
+    ``sim.trials()`` with ``preset_spec("paper", frame)``, without the frame of strings (the
+    tests check that both are equal)."""
+    if sim.arrays is None:
+        raise TrustseekError(["experiment 1 must record its trials"])
+    arr = sim.arrays
+    n, T = arr["complexity"].shape
+    cx = tuple(sim.task.complexities)
+    used = np.flatnonzero(np.bincount(arr["complexity"].reshape(-1).astype(np.int64), minlength=len(cx)))
+    present = {cx[k] for k in used}
+    extra = sorted(present - set(LEVELS))  # preset_spec's complexities for a column of these values
+    spec = preset_spec("paper", None, complexities=LEVELS if not extra else [c for c in LEVELS if c in present] + extra)
+    lookups = {
+        "complexity": (cx, arr["complexity"]),
+        "robot_action": (ACTIONS, arr["action"]),
+        "experience": (EXPERIENCES, arr["experience"]),
+        spec.output: (HUMAN_ACTIONS, arr["human"]),
+    }
+
+    def code(col: str) -> np.ndarray:  # (T, n) codes of a column in the spec's categories
+        names, values = lookups[col]
+        cats = spec.output_categories if col == spec.output else spec.categories[col]
+        lookup = np.array([list(cats).index(v) for v in names], dtype=np.int32)
+        return np.ascontiguousarray(lookup[values.astype(np.int64)].T)
+
+    def combination(inputs: tuple[str, ...]) -> np.ndarray:
+        out = np.zeros((T, n), dtype=np.int32)
+        for col in inputs:
+            out *= len(spec.categories[col])
+            out += code(col)
+        return out.astype(np.int16 if np.prod([len(spec.categories[c]) for c in inputs]) < 2**15 else np.int32)
+
+    rows = np.arange(n * T, dtype=np.int32).reshape(n, T).T.copy()
+    seqs = Sequences(
+        participants=[str(p) for p in sim.participants],
+        lengths=np.full(n, T, dtype=np.int64),
+        y=code(spec.output).astype(np.int16),
+        ue=combination(spec.emission_inputs),
+        ut=combination(spec.transition_inputs),
+        rows=rows,
+        n_rows=n * T,
+        base=1,
+        trial_of_row=np.tile(np.arange(1, T + 1, dtype=np.int64), n),
+    )
+    return seqs, spec
 
 
 def _seed_int(ss: np.random.SeedSequence) -> int:
@@ -227,6 +280,22 @@ def _agnostic(frame: Any, task: Task) -> ComplexityPolicy:
     return agnostic_from_intervention_rates(task, p_int, source=f"data, {len(frame)} trials")
 
 
+def agnostic_of(sim: Simulation) -> ComplexityPolicy:
+    """:func:`_agnostic` of ``sim.trials()``, on the simulation's integer arrays."""
+    if sim.arrays is None:
+        raise TrustseekError(["experiment 1 must record its trials"])
+    c = sim.arrays["complexity"].reshape(-1)
+    auto = sim.arrays["action"].reshape(-1) == AUTONOMOUS
+    intervene = sim.arrays["human"].reshape(-1) == INTERVENE
+    p_int = []
+    for k in range(sim.task.n_complexity):
+        sel = auto & (c == k)
+        if not sel.any():
+            return _agnostic(sim.trials(), sim.task)  # raises, naming the complexity
+        p_int.append(float(np.mean(intervene[sel])))
+    return agnostic_from_intervention_rates(sim.task, p_int, source=f"data, {len(c)} trials")
+
+
 def run_replicate(study: Study, point: int, design: Experiment1, replicate: int) -> dict[str, Any]:
     """One replicate of ``design`` (design point ``point``): regret and threshold error of the
     estimated policy under the truth, and per experiment-2 setting the p-values of both tests."""
@@ -234,11 +303,11 @@ def run_replicate(study: Study, point: int, design: Experiment1, replicate: int)
     truth, task, fs = study.truth, study.task, study.fit
     out: dict[str, Any] = {"point": point, "replicate": replicate}
     ask = randomized({task.complexities[0]: design.ask_low, task.complexities[-1]: design.ask_high})
-    frame = simulate(truth, task, ask, design.participants, counts=design.counts, seed=s1).trials()[list(TRIAL_COLUMNS)]
+    sim1 = simulate(truth, task, ask, design.participants, counts=design.counts, seed=s1)
     try:
-        model = fit_model(frame, fs, _seed_int(sfit))
+        model = fit_encoded(*experiment1_sequences(sim1), fs, _seed_int(sfit))
         aware = plan(model, task, fs)
-        agnostic = _agnostic(frame, task)
+        agnostic = agnostic_of(sim1)
     except TrustseekError as exc:
         out["error"] = "; ".join(exc.lines())
         return out
