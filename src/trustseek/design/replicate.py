@@ -237,17 +237,23 @@ def _seed_int(ss: np.random.SeedSequence) -> int:
 
 def plan(model: TrustModel, task: Task, settings: FitSettings) -> TrustAwarePolicy:
     """The trust-aware policy of ``model``: the grid solver's discretized belief MDP
-    (:meth:`GridSolver.operators`), solved by Howard's policy iteration with dense linear
+    (:class:`GridSolver`: a uniform grid of beliefs, successors spread linearly over the two
+    grid points that bracket them), solved by Howard's policy iteration with dense linear
     solves (a few hundred grid points: much faster than the sparse iterative path, the same
-    policy; the tests compare both)."""
+    policy; the tests compare both).  The transition matrices are built dense, every (C, a)
+    at once."""
     solver = GridSolver(grid=settings.grid, belief_update=settings.belief_update)
     pomdp = AssistancePOMDP(model, task)
-    grid, r, P, q_of, _ = solver.operators(pomdp)
-    G, N, gamma, pc = len(grid), pomdp.n_complexity, pomdp.discount, pomdp.complexity_probs
-    dense = np.stack([np.stack([P[c][a].toarray() for a in range(2)]) for c in range(N)])  # [c, a, G, G]
+    solver.check(pomdp)
+    G, N, gamma, pc = solver.grid, pomdp.n_complexity, pomdp.discount, pomdp.complexity_probs
+    grid = np.linspace(0.0, 1.0, G)
+    beliefs = np.stack([1.0 - grid, grid], axis=1)
+    r = np.einsum("gk,cak->cag", beliefs, pomdp.expected_reward)  # [c, a, G]
+    dense = _dense_transitions(pomdp, settings.belief_update, beliefs)  # [c, a, G, G]
     policy = r.argmax(axis=1)  # [c, G]
     rows = np.arange(G)
     W: np.ndarray = np.zeros(G)
+    q = r
     for _ in range(1000):
         M = np.zeros((G, G))
         rr = np.zeros(G)
@@ -261,7 +267,22 @@ def plan(model: TrustModel, task: Task, settings: FitSettings) -> TrustAwarePoli
             break
         policy = new
     info = {"solver": "grid", "method": "policy-iteration (dense)", "grid_points": G, "discount": gamma}
-    return TrustAwarePolicy(grid, q_of(W), model, task.complexities, settings.belief_update, info)
+    return TrustAwarePolicy(grid, np.moveaxis(q, 2, 0), model, task.complexities, settings.belief_update, info)
+
+
+def _dense_transitions(pomdp: AssistancePOMDP, update: str, beliefs: np.ndarray) -> np.ndarray:
+    """P[c, a, g, g']: from grid point g, the probability of each branch after (C, a) spread over
+    the two grid points that bracket its successor (:func:`~trustseek.solvers.grid.interpolation_matrix`'s
+    weights, dense, summed by one ``bincount`` for every (C, a))."""
+    G, N = len(beliefs), pomdp.n_complexity
+    p, nxt = pomdp.branches(update).successors(beliefs)  # (G, c, a, br), (G, c, a, br, K)
+    x = np.clip(nxt[..., 1], 0.0, 1.0) * (G - 1)
+    j = np.minimum(np.floor(x).astype(np.int64), G - 2)
+    f = x - j
+    start = ((np.arange(N)[:, None] * 2 + np.arange(2)) * G)[None, :, :, None] + np.arange(G)[:, None, None, None]
+    at = (start * G + j).reshape(-1)  # row (c, a, g), column j
+    weights = np.concatenate([(p * (1.0 - f)).reshape(-1), (p * f).reshape(-1)])
+    return np.bincount(np.concatenate([at, at + 1]), weights, N * 2 * G * G).reshape(N, 2, G, G)
 
 
 def _agnostic(frame: Any, task: Task) -> ComplexityPolicy:
