@@ -28,6 +28,7 @@ from ..solvers.grid import GridSolver
 from ..solvers.numerics import improve
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, LEVELS
 from .evaluation import EVALUATION_GRID, evaluate_policy, high_threshold
+from .kernels import signed_rank_counts
 
 __all__ = ["Experiment1", "FitSettings", "Study", "paired_tests", "replicate_seed", "run_replicate", "signed_rank_p"]
 
@@ -118,18 +119,14 @@ def signed_rank_p(d: np.ndarray) -> float:
     a = np.abs(d)
     order = np.argsort(a, kind="stable")
     sa = a[order]
+    first = np.flatnonzero(np.concatenate(([True], sa[1:] != sa[:-1])))  # where each run of tied |d| starts
+    last = np.append(first[1:], n) - 1
     ranks = np.empty(n)
-    i = 0
-    while i < n:  # mid-ranks of tied |d|
-        j = i
-        while j + 1 < n and sa[j + 1] == sa[i]:
-            j += 1
-        ranks[order[i : j + 1]] = (i + j + 2) / 2.0
-        i = j + 1
+    ranks[order] = np.repeat((first + last + 2) / 2.0, last - first + 1)  # mid-ranks
     w2 = round(float(2 * ranks[d > 0].sum()))  # doubled W+
     if n > EXACT_SIGNED_RANK:
         mean = n * (n + 1) / 4.0
-        _, tie_counts = np.unique(sa, return_counts=True)
+        tie_counts = last - first + 1
         var = n * (n + 1) * (2 * n + 1) / 24.0 - float(np.sum(tie_counts**3 - tie_counts)) / 48.0
         z = (w2 / 2.0 - mean) / np.sqrt(var)
         from scipy.stats import norm  # slow to import: only where it is used
@@ -138,8 +135,7 @@ def signed_rank_p(d: np.ndarray) -> float:
     weights = np.rint(2 * ranks).astype(np.int64)
     counts = np.zeros(int(weights.sum()) + 1)
     counts[0] = 1.0
-    for w in weights:
-        counts[w:] = counts[w:] + counts[:-w].copy() if w else counts * 2
+    signed_rank_counts(weights, counts)
     probs = counts / counts.sum()
     low = float(probs[: w2 + 1].sum())
     high = float(probs[w2:].sum())

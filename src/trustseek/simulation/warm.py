@@ -3,7 +3,8 @@
 ``python -m trustseek.simulation.warm`` runs every compiled path once on a few made-up
 participants (the urn schedule, a threshold policy with each belief update, a complexity
 policy with and without a belief, recorded or not), so that later processes, test workers
-among them, load the kernels from the cache.  ``make test`` runs it next to the static checks.
+among them, load the kernels from the cache.  ``make test`` runs it (through
+:mod:`trustseek.design.warm`) next to the static checks.
 """
 
 from __future__ import annotations
