@@ -43,6 +43,7 @@ from .results import SUMMARY_QUANTITIES, Simulation
 from .schedules import schedule_counts, schedule_iid
 
 CHUNK = 1 << 14  # participants simulated together (fits the working set in cache)
+WINDOW = 1 << 15  # trials x participants whose uniforms the compiled kernel draws at once
 
 # outcome code of a trial: (a * 2 + o) * 2 + e
 CODE_INTERVENE = (AUTONOMOUS * 2 + INTERVENE) * 2 + 0
@@ -182,22 +183,25 @@ def _run_chunk(
             if mode == kernels.FIXED:
                 pv = act[sched]
                 draws = ~np.all((pv == 0) | (pv == 1), axis=1)  # the trials where actions() draws
-                upol = rng_pol.random((int(draws.sum()), m))  # = one random(m) per such trial
             else:
                 draws = np.zeros(T, dtype=bool)
-                upol = np.zeros((0, m))
-            u = rng_sup.random((T, 3, m))  # = T successive random((3, m))
             if scalar is not None:
                 bel = kernels.BAYES if scalar.update_name == "bayes" else kernels.PAPER
                 sb = (scalar.a0, scalar.slope, scalar.lik_high, scalar.lik_low)
             else:
                 bel, sb, x = kernels.NO_BELIEF, (_EMPTY,) * 4, np.zeros(m)
             into = rec if record else {k: np.zeros((0, 0), dtype=np.int8) for k in RECORDED} | {"belief": np.zeros((0, 0))}
-            kernels.run_block(
-                sched, u, upol, draws, mode, act, bel, *sb, x, tab.p_int, tab.p_reliable, tab.trust_low,
-                np.zeros(m, dtype=np.int64) if poff is None else poff.astype(np.int64), trust, codes, t_global, record,
-                into["complexity"], into["action"], into["human"], into["experience"], into["trust"], into["belief"],
-            )  # fmt: skip
+            offsets = np.zeros(m, dtype=np.int64) if poff is None else poff.astype(np.int64)
+            span = max(1, WINDOW // m)
+            for t0 in range(0, T, span):  # the uniforms of ``span`` trials at a time
+                t1 = min(T, t0 + span)
+                upol = rng_pol.random((int(draws[t0:t1].sum()), m))  # = one random(m) per trial that draws
+                u = rng_sup.random((t1 - t0, 3, m))  # = successive random((3, m))
+                kernels.run_block(
+                    sched[t0:t1], u, upol, draws[t0:t1], mode, act, bel, *sb, x, tab.p_int, tab.p_reliable, tab.trust_low,
+                    offsets, trust, codes, t_global + t0, record,
+                    into["complexity"], into["action"], into["human"], into["experience"], into["trust"], into["belief"],
+                )  # fmt: skip
             t_global += T
             if progress is not None:
                 progress(m * T)
