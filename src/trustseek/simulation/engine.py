@@ -20,6 +20,11 @@ generator separate from the policy's, so two runs with the same seed and differe
 policies face the *same* supervisors, schedules and luck (common random numbers):
 differences between policies are paired.
 
+The common cases (two trust levels; a threshold policy on the scalar belief, or a policy that
+asks with fixed probabilities per complexity) run in a compiled loop (:mod:`.kernels`) that
+draws the same uniforms in the same order and gives the same simulation to the last bit;
+``compiled=False`` runs the numpy loop for every block.
+
 Populations live in :mod:`.populations`, schedules in :mod:`.schedules`, what a run
 produces in :mod:`.results` and the paper's designs in :mod:`.designs`.
 """
