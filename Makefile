@@ -8,11 +8,11 @@ setup:
 reproduce: setup
 	.venv/bin/trustseek reproduce --out report
 
-# the static checks first (while the fit's numba kernels compile into their cache, once, on the
-# other core: trustseek.estimation.warm), then every test; one BLAS thread per test worker, so
-# that the two workers do not oversubscribe the cores
+# the static checks first (while the numba kernels of the fit, the simulation and the design study
+# compile into their cache, once, on the other core: trustseek.estimation.warm, trustseek.design.warm),
+# then every test; one BLAS thread per test worker, so that the two workers do not oversubscribe the cores
 test: setup
-	@.venv/bin/python -m trustseek.estimation.warm & warm=$$!; status=0; \
+	@(.venv/bin/python -m trustseek.estimation.warm && .venv/bin/python -m trustseek.design.warm) & warm=$$!; status=0; \
 	  $(MAKE) --no-print-directory lint || status=$$?; \
 	  wait $$warm || status=$$?; exit $$status
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 .venv/bin/python -m pytest -n 2 -q

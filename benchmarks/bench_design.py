@@ -27,10 +27,20 @@ import numpy as np
 
 from trustseek.design import DesignConfig, FitSettings, run_design
 from trustseek.design.evaluation import evaluate_policy
-from trustseek.design.replicate import _agnostic, fit_model, paired_tests, plan, replicate_seed, run_replicate
+from trustseek.design.replicate import (
+    agnostic_of,
+    experiment1_sequences,
+    fit_encoded,
+    paired_tests,
+    plan,
+    replicate_seed,
+    run_replicate,
+)
 from trustseek.design.sweep import study_of
 from trustseek.estimation import fit as fit_module
 from trustseek.estimation.fit import fit_trust_model
+from trustseek.estimation.sequences import encode
+from trustseek.estimation.trust_iohmm import preset_spec
 from trustseek.policies import randomized
 from trustseek.simulation import crossover, simulate
 from trustseek.vocab import TRIAL_COLUMNS
@@ -38,7 +48,8 @@ from trustseek.vocab import TRIAL_COLUMNS
 
 def stages(cfg: DesignConfig, n: int) -> None:
     """CPU time of each stage of one replicate, averaged over ``n`` replicates, with the fit as the
-    replicate runs it and, in the same run, as before (fit_trust_model on the lockstep path)."""
+    replicate runs it and, in the same run (after the stages), as before (fit_trust_model on the
+    lockstep path)."""
     study = study_of(cfg)
     design = cfg.designs()[0]
     truth, task, fs = study.truth, study.task, study.fit
@@ -56,23 +67,22 @@ def stages(cfg: DesignConfig, n: int) -> None:
             fit_module.fit_iohmm = lockstep
 
     old_fit(simulate(truth, task, randomized({"low": 0.1, "high": 0.4}), 2, counts=design.counts, seed=0).trials(), 0)
+    frames = []
     for r in range(n):
         s1, _, s2 = replicate_seed(cfg.seed, 0, r).spawn(3)
         c = time.process_time()
         ask = randomized({"low": design.ask_low, "high": design.ask_high})
-        frame = simulate(truth, task, ask, design.participants, counts=design.counts, seed=s1).trials()[list(TRIAL_COLUMNS)]
+        sim1 = simulate(truth, task, ask, design.participants, counts=design.counts, seed=s1)
+        seqs, spec = experiment1_sequences(sim1)
         t["experiment 1"] += time.process_time() - c
         c = time.process_time()
-        model = fit_model(frame, fs, r)
+        model = fit_encoded(seqs, spec, fs, r)
         t["fit"] += time.process_time() - c
-        c = time.process_time()
-        old_fit(frame, r)
-        before += time.process_time() - c
         c = time.process_time()
         aware = plan(model, task, fs)
         t["solve"] += time.process_time() - c
         c = time.process_time()
-        agn = _agnostic(frame, task)
+        agn = agnostic_of(sim1)
         t["agnostic"] += time.process_time() - c
         c = time.process_time()
         evaluate_policy(aware, truth, task, grid=fs.evaluation_grid)
@@ -84,12 +94,36 @@ def stages(cfg: DesignConfig, n: int) -> None:
         for k in cfg.participants_2:
             paired_tests(rr[:k, 0], rr[:k, 1])
         t["experiment 2 + tests"] += time.process_time() - c
+        frames.append((sim1.trials()[list(TRIAL_COLUMNS)], s1, s2, model, aware, agn))
+    # as before, apart from the stages (whose caches they would evict): the fit, and experiment 1
+    # and 2 through the numpy loop (compiled=False), experiment 1 with its trial log and encode()
+    exp1_before = exp2_before = 0.0
+    for r, (frame, s1, s2, model, aware, agn) in enumerate(frames):
+        c = time.process_time()
+        old_fit(frame, r)
+        before += time.process_time() - c
+        c = time.process_time()
+        ask = randomized({"low": design.ask_low, "high": design.ask_high})
+        f1 = simulate(truth, task, ask, design.participants, counts=design.counts, seed=s1, compiled=False).trials()
+        f1 = f1[list(TRIAL_COLUMNS)]
+        encode(f1, preset_spec("paper", f1))
+        exp1_before += time.process_time() - c
+        c = time.process_time()
+        sim = crossover(
+            truth, task, [aware, agn], max(cfg.participants_2), seed=s2, record=False, belief_model=model, compiled=False
+        )
+        rr = sim.summary_arrays["cumulative_reward"]
+        for k in cfg.participants_2:
+            paired_tests(rr[:k, 0], rr[:k, 1])
+        exp2_before += time.process_time() - c
     total = sum(t.values())
     print(f"one replicate at 9 x 71 ({fs.restarts} restart(s)), mean CPU time of {n}:")
     for k, v in t.items():
         print(f"  {k:22s} {1000 * v / n:7.1f} ms")
     print(f"  {'total':22s} {1000 * total / n:7.1f} ms  (target < 20 ms)")
     print(f"  fit as before (fit_trust_model, lockstep path with L-BFGS-B): {1000 * before / n:.1f} ms")
+    print(f"  experiment 1 through the numpy loop, its trial log and encode(): {1000 * exp1_before / n:.1f} ms")
+    print(f"  experiment 2 + tests, the simulation through the numpy loop: {1000 * exp2_before / n:.1f} ms")
     c, w = time.process_time(), time.perf_counter()
     for r in range(n):
         run_replicate(study, 0, design, r)

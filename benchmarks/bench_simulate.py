@@ -1,7 +1,11 @@
 """Simulator throughput: trials per second on one core, paper model, trust-aware policy.
 
-The vectorized simulator (``trustseek.simulate``) is compared with two plain per-trial
-Python loops measured in the same run on the same model and policy:
+The simulator (``trustseek.simulate``: its compiled kernel for the common cases) is compared
+with its own numpy loop (``compiled=False``, vectorized over participants, the reference the
+kernel is tested against) and two plain per-trial Python loops, measured in the same run on
+the same model and policy; and, at the design study's size (9 participants x 71 trials under
+the randomized policy, where the numpy loop's per-trial overhead dominates), the time of one
+simulation both ways.  The plain loops:
 
 * ``core loop``: one participant and one trial at a time through the core API
   (``PolicyRunner.decide`` / ``observe``), sampling with a numpy Generator;
@@ -24,7 +28,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 
-from trustseek import PolicyRunner, paper_model, paper_task, solve
+from trustseek import PolicyRunner, paper_model, paper_task, randomized, solve
 from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from trustseek.policies import ask_bounds
 from trustseek.simulation import simulate
@@ -86,6 +90,21 @@ def rate(fn, trials: int) -> tuple[float, float]:
     return trials / cpu, wall
 
 
+def small(reps: int = 300) -> None:
+    """One recorded simulation at the design study's size, compiled and numpy loop."""
+    model, task = paper_model(), paper_task()
+    ask = randomized({"low": 0.1, "high": 0.4})
+    for compiled in (True, False):
+        simulate(model, task, ask, 9, counts=COUNTS, seed=0, compiled=compiled)  # warm-up
+        c = time.process_time()
+        for r in range(reps):
+            simulate(model, task, ask, 9, counts=COUNTS, seed=r, compiled=compiled)
+        ms = 1000 * (time.process_time() - c) / reps
+        print(
+            f"  9 participants x 71 trials, recorded, {'compiled  ' if compiled else 'numpy loop'}: {ms:6.2f} ms CPU per simulation"
+        )
+
+
 def main(argv: list[str] | None = None) -> None:
     argv = sys.argv[1:] if argv is None else argv
     n = int(argv[0]) if argv else 1_000_000
@@ -103,13 +122,20 @@ def main(argv: list[str] | None = None) -> None:
         vec_rec, dt_rec = rate(
             lambda policy=policy, rec_n=rec_n: simulate(model, task, policy, rec_n, counts=COUNTS, seed=1, record=True), rec_n * T
         )
-        results[update] = (vec, vec_rec, n, dt, rec_n, dt_rec)
+        loop_n = min(n, 200_000)
+        loop, _ = rate(
+            lambda policy=policy, loop_n=loop_n: simulate(
+                model, task, policy, loop_n, counts=COUNTS, seed=1, record=False, compiled=False
+            ),
+            loop_n * T,
+        )
+        results[update] = (vec, vec_rec, n, dt, rec_n, dt_rec, loop)
     policy = solve(model, task, belief_update="paper")
     core, _ = rate(lambda: core_loop(model, task, policy, 60), 60 * T)
     tight, _ = rate(lambda: tight_loop(model, task, policy, 3000), 3000 * T)
     print(f"  core loop (PolicyRunner per trial)      {core / 1e6:10.4f} M trials/s")
     print(f"  tight loop (plain Python, eq. 3)         {tight / 1e6:10.4f} M trials/s")
-    for update, (vec, vec_rec, n_, dt, rec_n, dt_rec) in results.items():
+    for update, (vec, vec_rec, n_, dt, rec_n, dt_rec, loop) in results.items():
         print(
             f"  vectorized, trust-aware ({update:5s} belief) {vec / 1e6:10.2f} M trials/s "
             f"({n_:,} participants, {dt:.2f} s wall)  = {vec / tight:6.0f}x tight loop, {vec / core:8.0f}x core loop"
@@ -118,6 +144,8 @@ def main(argv: list[str] | None = None) -> None:
             f"  vectorized, recording every trial ({update:5s}) {vec_rec / 1e6:7.2f} M trials/s "
             f"({rec_n:,} participants, {dt_rec:.2f} s wall)"
         )
+        print(f"  numpy loop (compiled=False, {update:5s})      {loop / 1e6:10.2f} M trials/s (same run)")
+    small()
     best = results["paper"][0]
     print(f"target >= 10 M trials/s: {'met' if best >= 10e6 else 'NOT met'} ({best / 1e6:.1f} M trials/s)")
 

@@ -83,36 +83,14 @@ def evaluate_policy(
     xs = np.linspace(0.0, 1.0, grid)
     p_ask = _ask_probabilities(policy, xs, N)  # (N, G)
     step = ScalarBelief(model, update)
-    K = pomdp.kernel  # [c, a, t, o, e, u]
-    R = pomdp.expected_reward  # [c, a, t]
     G = grid
-    rows: list[np.ndarray] = []
-    cols: list[np.ndarray] = []
-    vals: list[np.ndarray] = []
+    w = pc[:, None, None] * np.stack([1.0 - p_ask, p_ask], axis=1)  # [c, a, G]: P(C) P(a | x, C)
+    live = w.any(axis=2)  # the (C, a) the policy takes somewhere
+    R = pomdp.expected_reward  # [c, a, t]
     rhs = np.zeros((2, G))
-    idx = np.arange(G)
-    for c in range(N):
-        for a in range(2):
-            w = pc[c] * (p_ask[c] if a == 1 else 1.0 - p_ask[c])  # (G,)
-            if not np.any(w):
-                continue
-            rhs += w * R[c, a][:, None]
-            ca = np.full(G, c * 2 + a, dtype=np.int64)
-            for o in range(2):
-                for e in range(2):
-                    nxt = step.step(xs, ca, np.full(G, o, dtype=np.int64), np.full(G, e, dtype=np.int64))
-                    pos = np.clip(nxt, 0.0, 1.0) * (G - 1)
-                    j = np.minimum(np.floor(pos).astype(np.int64), G - 2)
-                    f = pos - j
-                    for t in range(2):
-                        for u in range(2):
-                            p = K[c, a, t, o, e, u]
-                            if p > 0:
-                                base = gamma * p * w
-                                rows += [t * G + idx, t * G + idx]
-                                cols += [u * G + j, u * G + j + 1]
-                                vals += [base * (1.0 - f), base * f]
-    P = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(2 * G, 2 * G))
+    for c, a in zip(*np.nonzero(live), strict=True):
+        rhs += w[c, a] * R[c, a][:, None]
+    P = _chain_matrix(step, pomdp.kernel, w, live, gamma, xs)
     V = policy_values(P, rhs.reshape(-1)).reshape(2, G)
     x0 = float(model.initial[1])
     pos = x0 * (G - 1)
@@ -121,6 +99,33 @@ def evaluate_policy(
     at_x0 = V[:, j] * (1 - f) + V[:, j + 1] * f
     value = float(truth.initial @ at_x0)
     return Evaluation(value=value, by_trust=tuple(float(v) for v in at_x0), grid=G)
+
+
+def _chain_matrix(
+    step: ScalarBelief, kernel: np.ndarray, w: np.ndarray, live: np.ndarray, gamma: float, xs: np.ndarray
+) -> sp.csr_matrix:
+    """The chain's discounted transition matrix on the states (T, x) (row T * G + x's index): from
+    (T, x) with weight γ P(C) P(a | x, C) P(o, E', T' | T, C, a) to the two grid points that
+    bracket x'(x, C, a, o, E') in the block of T', split linearly.
+
+    The entries are made all at once, in the order (C, a, o, E', T, T', left/right point, x),
+    leaving out the (C, a) the policy never takes and the zero kernel entries, and scipy sums
+    them into CSR form; one belief step for every (C, a, o, E') on the grid."""
+    N, G = w.shape[0], len(xs)
+    grid = (N, 2, 2, 2)  # c, a, o, e
+    c, a, o, e = (ix.reshape(*grid, 1) for ix in np.indices(grid))
+    nxt = step.step(xs, c * 2 + a, o, e)  # [c, a, o, e, G]
+    pos = np.clip(nxt, 0.0, 1.0) * (G - 1)
+    j = np.minimum(np.floor(pos).astype(np.int64), G - 2)
+    f = pos - j
+    K = np.moveaxis(kernel, 2, 4)  # [c, a, o, e, t, u]
+    ci, ai, oi, ei, ti, ui = np.nonzero(live[:, :, None, None, None, None] & (K > 0))  # in C order
+    base = (gamma * K[ci, ai, oi, ei, ti, ui])[:, None] * w[ci, ai]  # (entries, G)
+    fk = f[ci, ai, oi, ei]
+    vals = np.stack([base * (1.0 - fk), base * fk], axis=1)  # (entries, side, G)
+    rows = np.broadcast_to((ti * G)[:, None, None] + np.arange(G), vals.shape)
+    cols = (ui * G)[:, None, None] + np.arange(2)[:, None] + j[ci, ai, oi, ei][:, None, :]
+    return sp.csr_matrix((vals.reshape(-1), (rows.reshape(-1), cols.reshape(-1))), shape=(2 * G, 2 * G))
 
 
 def _evaluate_belief_free(p_ask: np.ndarray, truth: TrustModel, task: Task, grid: int) -> Evaluation:

@@ -16,17 +16,19 @@ from scipy.special import stdtr
 
 from ..errors import TrustseekError
 from ..estimation.fit import fit_sequences
-from ..estimation.sequences import encode
+from ..estimation.sequences import Sequences, encode
+from ..estimation.spec import IOHMMSpec
 from ..estimation.trust_iohmm import preset_spec
-from ..model.core import Task, TrustModel
+from ..model.core import AUTONOMOUS, INTERVENE, Task, TrustModel
 from ..policies import ComplexityPolicy, TrustAwarePolicy, randomized
 from ..pomdp.problem import AssistancePOMDP
-from ..simulation import crossover, simulate
+from ..simulation import Simulation, crossover, simulate
 from ..solvers.agnostic import agnostic_from_intervention_rates, trust_agnostic_from_data
 from ..solvers.grid import GridSolver
 from ..solvers.numerics import improve
-from ..vocab import TRIAL_COLUMNS
+from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, LEVELS
 from .evaluation import EVALUATION_GRID, evaluate_policy, high_threshold
+from .kernels import signed_rank_counts
 
 __all__ = ["Experiment1", "FitSettings", "Study", "paired_tests", "replicate_seed", "run_replicate", "signed_rank_p"]
 
@@ -117,18 +119,14 @@ def signed_rank_p(d: np.ndarray) -> float:
     a = np.abs(d)
     order = np.argsort(a, kind="stable")
     sa = a[order]
+    first = np.flatnonzero(np.concatenate(([True], sa[1:] != sa[:-1])))  # where each run of tied |d| starts
+    last = np.append(first[1:], n) - 1
     ranks = np.empty(n)
-    i = 0
-    while i < n:  # mid-ranks of tied |d|
-        j = i
-        while j + 1 < n and sa[j + 1] == sa[i]:
-            j += 1
-        ranks[order[i : j + 1]] = (i + j + 2) / 2.0
-        i = j + 1
+    ranks[order] = np.repeat((first + last + 2) / 2.0, last - first + 1)  # mid-ranks
     w2 = round(float(2 * ranks[d > 0].sum()))  # doubled W+
     if n > EXACT_SIGNED_RANK:
         mean = n * (n + 1) / 4.0
-        _, tie_counts = np.unique(sa, return_counts=True)
+        tie_counts = last - first + 1
         var = n * (n + 1) * (2 * n + 1) / 24.0 - float(np.sum(tie_counts**3 - tie_counts)) / 48.0
         z = (w2 / 2.0 - mean) / np.sqrt(var)
         from scipy.stats import norm  # slow to import: only where it is used
@@ -137,8 +135,7 @@ def signed_rank_p(d: np.ndarray) -> float:
     weights = np.rint(2 * ranks).astype(np.int64)
     counts = np.zeros(int(weights.sum()) + 1)
     counts[0] = 1.0
-    for w in weights:
-        counts[w:] = counts[w:] + counts[:-w].copy() if w else counts * 2
+    signed_rank_counts(weights, counts)
     probs = counts / counts.sum()
     low = float(probs[: w2 + 1].sum())
     high = float(probs[w2:].sum())
@@ -172,29 +169,108 @@ def fit_model(frame: Any, settings: FitSettings, seed: int) -> TrustModel:
     (the ``paper`` preset, one thread), without marking the rows no trial informs (neither the
     plan nor the simulation reads them)."""
     spec = preset_spec("paper", frame)
-    fit = fit_sequences(
-        encode(frame, spec), spec, restarts=settings.restarts, seed=seed, tol=settings.tol, max_iter=settings.max_iter, n_jobs=1
-    )
+    return fit_encoded(encode(frame, spec), spec, settings, seed)
+
+
+def fit_encoded(seqs: Sequences, spec: IOHMMSpec, settings: FitSettings, seed: int) -> TrustModel:
+    """:func:`fit_model` on trials already encoded for ``spec``."""
+    fit = fit_sequences(seqs, spec, restarts=settings.restarts, seed=seed, tol=settings.tol, max_iter=settings.max_iter, n_jobs=1)
     return fit.model
+
+
+def experiment1_sequences(sim: Simulation) -> tuple[Sequences, IOHMMSpec]:
+    """The ``paper`` spec and the encoded trials of a recorded one-block simulation, straight from
+    its integer arrays: what :func:`~trustseek.estimation.sequences.encode` makes of
+    ``sim.trials()`` with ``preset_spec("paper", frame)``, without the frame of strings (the
+    tests check that both are equal)."""
+    if sim.arrays is None:
+        raise TrustseekError(["experiment 1 must record its trials"])
+    arr = sim.arrays
+    n, T = arr["complexity"].shape
+    cx = tuple(sim.task.complexities)
+    used = np.flatnonzero(np.bincount(arr["complexity"].reshape(-1).astype(np.int64), minlength=len(cx)))
+    present = {cx[k] for k in used}
+    extra = sorted(present - set(LEVELS))  # preset_spec's complexities for a column of these values
+    spec = preset_spec("paper", None, complexities=LEVELS if not extra else [c for c in LEVELS if c in present] + extra)
+    lookups = {
+        "complexity": (cx, arr["complexity"]),
+        "robot_action": (ACTIONS, arr["action"]),
+        "experience": (EXPERIENCES, arr["experience"]),
+        spec.output: (HUMAN_ACTIONS, arr["human"]),
+    }
+
+    def code(col: str) -> np.ndarray:  # (T, n) codes of a column in the spec's categories
+        names, values = lookups[col]
+        cats = spec.output_categories if col == spec.output else spec.categories[col]
+        lookup = np.array([list(cats).index(v) for v in names], dtype=np.int32)
+        return np.ascontiguousarray(lookup[values.astype(np.int64)].T)
+
+    def combination(inputs: tuple[str, ...]) -> np.ndarray:
+        out = np.zeros((T, n), dtype=np.int32)
+        for col in inputs:
+            out *= len(spec.categories[col])
+            out += code(col)
+        return out.astype(np.int16 if np.prod([len(spec.categories[c]) for c in inputs]) < 2**15 else np.int32)
+
+    rows = np.arange(n * T, dtype=np.int32).reshape(n, T).T.copy()
+    seqs = Sequences(
+        participants=[str(p) for p in sim.participants],
+        lengths=np.full(n, T, dtype=np.int64),
+        y=code(spec.output).astype(np.int16),
+        ue=combination(spec.emission_inputs),
+        ut=combination(spec.transition_inputs),
+        rows=rows,
+        n_rows=n * T,
+        base=1,
+        trial_of_row=np.tile(np.arange(1, T + 1, dtype=np.int64), n),
+    )
+    return seqs, spec
 
 
 def _seed_int(ss: np.random.SeedSequence) -> int:
     return int(ss.generate_state(1, dtype=np.uint32)[0])
 
 
+#: plan() first solves a grid of about a quarter of the points (at least this many) for a start
+COARSE_MIN = 21
+
+
 def plan(model: TrustModel, task: Task, settings: FitSettings) -> TrustAwarePolicy:
     """The trust-aware policy of ``model``: the grid solver's discretized belief MDP
-    (:meth:`GridSolver.operators`), solved by Howard's policy iteration with dense linear
+    (:class:`GridSolver`: a uniform grid of beliefs, successors spread linearly over the two
+    grid points that bracket them), solved by Howard's policy iteration with dense linear
     solves (a few hundred grid points: much faster than the sparse iterative path, the same
-    policy; the tests compare both)."""
+    policy; the tests compare both).  The transition matrices are built dense, every (C, a)
+    at once.  Policy iteration starts from the policy of the same problem on a coarser grid
+    (its Q interpolated), which saves a few of the large solves; where it starts does not
+    change where it ends, the optimal policy of the grid MDP, nor its values."""
     solver = GridSolver(grid=settings.grid, belief_update=settings.belief_update)
     pomdp = AssistancePOMDP(model, task)
-    grid, r, P, q_of, _ = solver.operators(pomdp)
-    G, N, gamma, pc = len(grid), pomdp.n_complexity, pomdp.discount, pomdp.complexity_probs
-    dense = np.stack([np.stack([P[c][a].toarray() for a in range(2)]) for c in range(N)])  # [c, a, G, G]
-    policy = r.argmax(axis=1)  # [c, G]
+    solver.check(pomdp)
+    G = solver.grid
+    coarse = (G - 1) // 4 + 1
+    start = None
+    if coarse >= COARSE_MIN:
+        grid_c, q_c = _policy_iteration(pomdp, settings.belief_update, coarse, None)
+        grid = np.linspace(0.0, 1.0, G)
+        q0 = np.stack([[np.interp(grid, grid_c, q_c[c, a]) for a in range(2)] for c in range(pomdp.n_complexity)])
+        start = q0.argmax(axis=1)
+    grid, q = _policy_iteration(pomdp, settings.belief_update, G, start)
+    info = {"solver": "grid", "method": "policy-iteration (dense)", "grid_points": G, "discount": pomdp.discount}
+    return TrustAwarePolicy(grid, np.moveaxis(q, 2, 0), model, task.complexities, settings.belief_update, info)
+
+
+def _policy_iteration(pomdp: AssistancePOMDP, update: str, G: int, policy: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """(grid, Q[c, a, G]) of the grid MDP on ``G`` points by Howard's policy iteration from
+    ``policy`` [c, G] (default: the greedy one of the rewards)."""
+    N, gamma, pc = pomdp.n_complexity, pomdp.discount, pomdp.complexity_probs
+    grid = np.linspace(0.0, 1.0, G)
+    beliefs = np.stack([1.0 - grid, grid], axis=1)
+    r = np.einsum("gk,cak->cag", beliefs, pomdp.expected_reward)  # [c, a, G]
+    dense = _dense_transitions(pomdp, update, beliefs)  # [c, a, G, G]
+    policy = r.argmax(axis=1) if policy is None else policy  # [c, G]
     rows = np.arange(G)
-    W: np.ndarray = np.zeros(G)
+    q = r
     for _ in range(1000):
         M = np.zeros((G, G))
         rr = np.zeros(G)
@@ -207,8 +283,22 @@ def plan(model: TrustModel, task: Task, settings: FitSettings) -> TrustAwarePoli
         if new is None:
             break
         policy = new
-    info = {"solver": "grid", "method": "policy-iteration (dense)", "grid_points": G, "discount": gamma}
-    return TrustAwarePolicy(grid, q_of(W), model, task.complexities, settings.belief_update, info)
+    return grid, q
+
+
+def _dense_transitions(pomdp: AssistancePOMDP, update: str, beliefs: np.ndarray) -> np.ndarray:
+    """P[c, a, g, g']: from grid point g, the probability of each branch after (C, a) spread over
+    the two grid points that bracket its successor (:func:`~trustseek.solvers.grid.interpolation_matrix`'s
+    weights, dense, summed by one ``bincount`` for every (C, a))."""
+    G, N = len(beliefs), pomdp.n_complexity
+    p, nxt = pomdp.branches(update).successors(beliefs)  # (G, c, a, br), (G, c, a, br, K)
+    x = np.clip(nxt[..., 1], 0.0, 1.0) * (G - 1)
+    j = np.minimum(np.floor(x).astype(np.int64), G - 2)
+    f = x - j
+    start = ((np.arange(N)[:, None] * 2 + np.arange(2)) * G)[None, :, :, None] + np.arange(G)[:, None, None, None]
+    at = (start * G + j).reshape(-1)  # row (c, a, g), column j
+    weights = np.concatenate([(p * (1.0 - f)).reshape(-1), (p * f).reshape(-1)])
+    return np.bincount(np.concatenate([at, at + 1]), weights, N * 2 * G * G).reshape(N, 2, G, G)
 
 
 def _agnostic(frame: Any, task: Task) -> ComplexityPolicy:
@@ -227,6 +317,22 @@ def _agnostic(frame: Any, task: Task) -> ComplexityPolicy:
     return agnostic_from_intervention_rates(task, p_int, source=f"data, {len(frame)} trials")
 
 
+def agnostic_of(sim: Simulation) -> ComplexityPolicy:
+    """:func:`_agnostic` of ``sim.trials()``, on the simulation's integer arrays."""
+    if sim.arrays is None:
+        raise TrustseekError(["experiment 1 must record its trials"])
+    c = sim.arrays["complexity"].reshape(-1)
+    auto = sim.arrays["action"].reshape(-1) == AUTONOMOUS
+    intervene = sim.arrays["human"].reshape(-1) == INTERVENE
+    p_int = []
+    for k in range(sim.task.n_complexity):
+        sel = auto & (c == k)
+        if not sel.any():
+            return _agnostic(sim.trials(), sim.task)  # raises, naming the complexity
+        p_int.append(float(np.mean(intervene[sel])))
+    return agnostic_from_intervention_rates(sim.task, p_int, source=f"data, {len(c)} trials")
+
+
 def run_replicate(study: Study, point: int, design: Experiment1, replicate: int) -> dict[str, Any]:
     """One replicate of ``design`` (design point ``point``): regret and threshold error of the
     estimated policy under the truth, and per experiment-2 setting the p-values of both tests."""
@@ -234,11 +340,11 @@ def run_replicate(study: Study, point: int, design: Experiment1, replicate: int)
     truth, task, fs = study.truth, study.task, study.fit
     out: dict[str, Any] = {"point": point, "replicate": replicate}
     ask = randomized({task.complexities[0]: design.ask_low, task.complexities[-1]: design.ask_high})
-    frame = simulate(truth, task, ask, design.participants, counts=design.counts, seed=s1).trials()[list(TRIAL_COLUMNS)]
+    sim1 = simulate(truth, task, ask, design.participants, counts=design.counts, seed=s1)
     try:
-        model = fit_model(frame, fs, _seed_int(sfit))
+        model = fit_encoded(*experiment1_sequences(sim1), fs, _seed_int(sfit))
         aware = plan(model, task, fs)
-        agnostic = _agnostic(frame, task)
+        agnostic = agnostic_of(sim1)
     except TrustseekError as exc:
         out["error"] = "; ".join(exc.lines())
         return out

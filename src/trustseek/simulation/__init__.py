@@ -3,6 +3,8 @@
 * :mod:`.populations` -- ``Supervisors``: who the participants are (pooled, Dirichlet, a list);
 * :mod:`.schedules`   -- which complexity each participant meets on each trial;
 * :mod:`.engine`      -- the vectorized kernel: ``Block``, ``run`` and ``simulate``;
+* :mod:`.kernels`     -- the engine's common cases and the urn schedule compiled (numba);
+  :mod:`.warm` compiles them into numba's cache once;
 * :mod:`.results`     -- ``Simulation`` and ``CrossoverSimulation``: summaries and trial logs;
 * :mod:`.designs`     -- the paper's data collection and its counterbalanced crossover.
 """

@@ -107,6 +107,7 @@ def crossover(
     record: bool = True,
     belief_model: TrustModel | None = None,
     progress: Callable[[int], None] | None = None,
+    compiled: bool = True,
 ) -> CrossoverSimulation:
     """The within-participant design of Section VI-B: every participant does one block per
     policy (``counts`` trials of each complexity in random order, per block), in an order that
@@ -116,7 +117,8 @@ def crossover(
     participants take the policies' rotations in turn (with two policies and five
     participants: 3 start with the first policy, 2 with the second, as in the paper).  Blocks
     are labelled by policy, so ``by_policy`` gives paired values per participant; the
-    ``block`` column of the trials is the position (1 = first block done).
+    ``block`` column of the trials is the position (1 = first block done).  ``compiled`` as in
+    :func:`~trustseek.simulation.engine.run`.
     """
     sup = model if isinstance(model, Supervisors) else Supervisors.pooled(model, n_participants)
     n = sup.n
@@ -128,7 +130,7 @@ def crossover(
         raise SimulationError([f"first must give, for each of the {n} participants, a policy index in 0..{P - 1}"])
     s_sched, s_run = seed_sequence(seed).spawn(2)
     rs = np.random.default_rng(s_sched)
-    scheds = [schedule_counts(n, counts, rs, task.complexities) for _ in range(P)]
+    scheds = [schedule_counts(n, counts, rs, task.complexities, compiled=compiled) for _ in range(P)]
     labels = [getattr(p, "kind", f"policy {j + 1}") for j, p in enumerate(policies)]
     if len(set(labels)) != len(labels):
         labels = [f"{lab} {j + 1}" for j, lab in enumerate(labels)]
@@ -142,7 +144,16 @@ def crossover(
             continue
         order = [(g + k) % P for k in range(P)]
         blocks = [Block(policies[j], scheds[k][idx], name=labels[j], belief_model=belief_model) for k, j in enumerate(order)]
-        sim = run(task, sup.take(idx), blocks, seed=group_seeds[g], record=record, participants=ids[idx], progress=progress)
+        sim = run(
+            task,
+            sup.take(idx),
+            blocks,
+            seed=group_seeds[g],
+            record=record,
+            participants=ids[idx],
+            progress=progress,
+            compiled=compiled,
+        )
         parts.append((idx, order, sim))
     return _merge_crossover(task, sup, ids, labels, parts, record)
 

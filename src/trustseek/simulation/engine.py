@@ -20,6 +20,11 @@ generator separate from the policy's, so two runs with the same seed and differe
 policies face the *same* supervisors, schedules and luck (common random numbers):
 differences between policies are paired.
 
+The common cases (two trust levels; a threshold policy on the scalar belief, or a policy that
+asks with fixed probabilities per complexity) run in a compiled loop (:mod:`.kernels`) that
+draws the same uniforms in the same order and gives the same simulation to the last bit;
+``compiled=False`` runs the numpy loop for every block.
+
 Populations live in :mod:`.populations`, schedules in :mod:`.schedules`, what a run
 produces in :mod:`.results` and the paper's designs in :mod:`.designs`.
 """
@@ -33,14 +38,17 @@ import numpy as np
 
 from ..model.core import ASK, AUTONOMOUS, INTERVENE, RELIABLE, RELY, Task, TrustModel
 from ..policies.base import Policy
+from ..policies.complexity import ComplexityPolicy
 from ..policies.regions import ask_bounds
 from ..pomdp.belief import ScalarBelief, make_updater
 from ..vocab import check_belief_update
+from . import kernels
 from .populations import SimulationError, Supervisors
 from .results import SUMMARY_QUANTITIES, Simulation
 from .schedules import schedule_counts, schedule_iid
 
 CHUNK = 1 << 14  # participants simulated together (fits the working set in cache)
+WINDOW = 1 << 15  # trials x participants whose uniforms the compiled kernel draws at once
 
 # outcome code of a trial: (a * 2 + o) * 2 + e
 CODE_INTERVENE = (AUTONOMOUS * 2 + INTERVENE) * 2 + 0
@@ -105,6 +113,22 @@ def _policy_belief(block: Block) -> tuple[TrustModel, str] | None:
 RECORDED = ("complexity", "action", "human", "experience", "trust")  # int8 arrays of a recorded run
 
 
+def _compiled_action(policy: Policy, bounds: np.ndarray | None, scalar: bool) -> tuple[int, np.ndarray] | None:
+    """How the compiled block chooses the robot's action under ``policy``: (THRESHOLD, bounds)
+    on a scalar belief, (FIXED, p_ask) for a complexity policy; None when only the numpy loop
+    can run it (``scalar``: the belief, if any, is a scalar one)."""
+    if not kernels.AVAILABLE or not scalar:
+        return None
+    if bounds is not None:
+        return kernels.THRESHOLD, np.ascontiguousarray(bounds, dtype=np.float64)
+    if type(policy) is ComplexityPolicy:
+        return kernels.FIXED, np.ascontiguousarray(policy.p_ask, dtype=np.float64)
+    return None
+
+
+_EMPTY = np.zeros(0)
+
+
 def _run_chunk(
     tab: _Tables,
     rows: np.ndarray,
@@ -114,9 +138,15 @@ def _run_chunk(
     record: bool,
     gamma: float,
     progress: Callable[[int], None] | None,
+    compiled: bool = True,
 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Participants ``sl`` (parameter rows ``rows``) through every block: the per-block
-    summaries and, when ``record``, every trial (participant-major arrays)."""
+    summaries and, when ``record``, every trial (participant-major arrays).
+
+    A block runs in the compiled kernel (:func:`.kernels.run_block`) when ``compiled`` and the
+    case is a common one (two trust levels; a threshold policy on a scalar belief, or a
+    complexity policy), else in the numpy loop below; both draw the same uniforms in the same
+    order and give the same trials."""
     m = sl.stop - sl.start
     K = tab.K
     rng_sup = np.random.default_rng(seeds[0])
@@ -137,6 +167,7 @@ def _run_chunk(
     t_global = 0
     for block in blocks:
         sched = np.ascontiguousarray(block.schedule[sl].T).astype(np.int64)  # (T, m)
+        T = sched.shape[0]
         belief = _policy_belief(block)
         policy = block.policy
         scalar = None
@@ -151,7 +182,36 @@ def _run_chunk(
         else:
             B = np.full((m, 2), np.nan)
         bounds = ask_bounds(policy) if scalar is not None else None
-        for t in range(sched.shape[0]):
+        fast = _compiled_action(policy, bounds, updater is None) if compiled and two else None
+        if fast is not None:
+            mode, act = fast
+            if mode == kernels.FIXED:
+                pv = act[sched]
+                draws = ~np.all((pv == 0) | (pv == 1), axis=1)  # the trials where actions() draws
+            else:
+                draws = np.zeros(T, dtype=bool)
+            if scalar is not None:
+                bel = kernels.BAYES if scalar.update_name == "bayes" else kernels.PAPER
+                sb = (scalar.a0, scalar.slope, scalar.lik_high, scalar.lik_low)
+            else:
+                bel, sb, x = kernels.NO_BELIEF, (_EMPTY,) * 4, np.zeros(m)
+            into = rec if record else {k: np.zeros((0, 0), dtype=np.int8) for k in RECORDED} | {"belief": np.zeros((0, 0))}
+            offsets = np.zeros(m, dtype=np.int64) if poff is None else poff.astype(np.int64)
+            span = max(1, WINDOW // m)
+            for t0 in range(0, T, span):  # the uniforms of ``span`` trials at a time
+                t1 = min(T, t0 + span)
+                upol = rng_pol.random((int(draws[t0:t1].sum()), m))  # = one random(m) per trial that draws
+                u = rng_sup.random((t1 - t0, 3, m))  # = successive random((3, m))
+                kernels.run_block(
+                    sched[t0:t1], u, upol, draws[t0:t1], mode, act, bel, *sb, x, tab.p_int, tab.p_reliable, tab.trust_low,
+                    offsets, trust, codes, t_global + t0, record,
+                    into["complexity"], into["action"], into["human"], into["experience"], into["trust"], into["belief"],
+                )  # fmt: skip
+            t_global += T
+            if progress is not None:
+                progress(m * T)
+            continue
+        for t in range(T):
             c = sched[t]
             if bounds is not None:
                 a = (x < bounds[c]).astype(np.int64)
@@ -182,7 +242,7 @@ def _run_chunk(
                 B = updater.update(B, c, a, o, e)
             t_global += 1
         if progress is not None:
-            progress(m * sched.shape[0])
+            progress(m * T)
     # summaries per block
     nb = len(blocks)
     summ = {k: np.zeros((m, nb)) for k in SUMMARY_QUANTITIES}
@@ -218,13 +278,15 @@ def run(
     record: bool = True,
     participants: Sequence[str] | np.ndarray | None = None,
     progress: Callable[[int], None] | None = None,
+    compiled: bool = True,
 ) -> Simulation:
     """Simulate every participant of ``supervisors`` through ``blocks`` in order.
 
     ``seed`` fixes every draw (supervisors' luck in chunks of :data:`CHUNK` participants, and
     the policies' own draws on a separate stream).  ``record=False`` keeps only the
     per-participant summaries (what large runs need).  ``progress(k)`` is called with the
-    number of trials just simulated.
+    number of trials just simulated.  ``compiled=False`` runs every block in the numpy loop
+    (the reference the compiled kernel is tested against; the same simulation).
     """
     blocks = list(blocks)
     n = supervisors.n
@@ -255,7 +317,7 @@ def run(
         arrays["reward"] = np.empty((n, T_total))
     for i in range(n_chunks):
         sl = slice(i * CHUNK, min(n, (i + 1) * CHUNK))
-        summ, rec = _run_chunk(tab, supervisors.index[sl], blocks, sl, chunk_seeds[i], record, task.discount, progress)
+        summ, rec = _run_chunk(tab, supervisors.index[sl], blocks, sl, chunk_seeds[i], record, task.discount, progress, compiled)
         for k, v in summ.items():
             summary[k][sl] = v
         for k, v in rec.items():
@@ -305,21 +367,23 @@ def simulate(
     belief_update: str | None = None,
     belief_model: TrustModel | None = None,
     progress: Callable[[int], None] | None = None,
+    compiled: bool = True,
 ) -> Simulation:
     """One block per participant under ``policy``.
 
     The trial sequence is either ``counts`` trials of each complexity in random order or
     ``trials`` i.i.d. complexities from ``task.complexity_probs``.  ``model`` is a pooled
     TrustModel or a :class:`Supervisors` population (then ``n_participants`` is its size).
+    ``compiled`` as in :func:`run`.
     """
     sup = model if isinstance(model, Supervisors) else Supervisors.pooled(model, n_participants)
     ss = seed_sequence(seed)
     s_sched, s_run = ss.spawn(2)
     if counts is not None and trials is None:
-        sched = schedule_counts(sup.n, counts, np.random.default_rng(s_sched), task.complexities)
+        sched = schedule_counts(sup.n, counts, np.random.default_rng(s_sched), task.complexities, compiled=compiled)
     elif trials is not None and counts is None:
         sched = schedule_iid(sup.n, trials, task.complexity_probs, np.random.default_rng(s_sched))
     else:
         raise SimulationError(["give either counts (trials per complexity, in random order) or trials (i.i.d. complexities)"])
     block = Block(policy, sched, belief_update=belief_update, belief_model=belief_model)
-    return run(task, sup, [block], seed=s_run, record=record, progress=progress)
+    return run(task, sup, [block], seed=s_run, record=record, progress=progress, compiled=compiled)

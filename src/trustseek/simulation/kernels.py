@@ -1,0 +1,135 @@
+"""Compiled loops of the simulation engine (numba): the common case of a block, and the urn schedule.
+
+:func:`run_block` runs one block of trials for the participants of a chunk when the supervisors
+have two trust levels and the robot's action is one of
+
+* a threshold on its scalar belief x = P(trust = high) (``mode`` :data:`THRESHOLD`, the bounds of
+  :func:`~trustseek.policies.regions.ask_bounds`), the belief following the ``paper`` or ``bayes``
+  update of :class:`~trustseek.pomdp.belief.ScalarBelief`;
+* a fixed probability of asking per complexity (``mode`` :data:`FIXED`, a
+  :class:`~trustseek.policies.ComplexityPolicy`), with or without a tracked belief.
+
+It does per participant exactly the arithmetic of the engine's numpy loop (the same
+comparisons, the same products and sums in the same order) on uniforms drawn beforehand in the
+order the numpy loop draws them, so both give the same simulation to the last bit (the tests
+compare them).  :func:`urn_schedule` is :func:`~trustseek.simulation.schedules.schedule_counts`'s
+urn for two complexities.  Without numba the functions run as plain Python (slowly); the engine
+then keeps its numpy loop.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+try:  # numba is a declared dependency; without it the engine keeps its numpy loop
+    import numba
+
+    AVAILABLE = True
+except ImportError:  # pragma: no cover - exercised only without numba
+    AVAILABLE = False
+
+THRESHOLD = 0  # ask when x < bounds[C]
+FIXED = 1  # ask with probability p_ask[C]
+
+NO_BELIEF = 0  # nothing tracks the belief (recorded as NaN)
+PAPER = 1
+BAYES = 2
+
+
+def njit(**options: Any) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """numba's ``njit(**options)`` when numba is installed, else the plain Python function."""
+    if not AVAILABLE:  # pragma: no cover - exercised only without numba
+        return lambda f: f
+    return numba.njit(**options)
+
+
+@njit(cache=True, nogil=True)
+def run_block(
+    sched,  # (T, m) int64 complexity indices
+    u,  # (T, 3, m) the supervisors' uniforms: human action, experience, next trust
+    upol,  # (D, m) the policy's uniforms, one row per trial that draws (FIXED mode)
+    draws,  # (T,) bool: whether trial t draws a row of upol
+    mode,  # THRESHOLD or FIXED
+    act,  # (N,) bounds (THRESHOLD) or ask probabilities (FIXED)
+    belief,  # NO_BELIEF, PAPER or BAYES
+    a0,  # ScalarBelief tables (unused without a belief)
+    slope,
+    lik_high,
+    lik_low,
+    x,  # (m,) the robot's belief, updated in place
+    p_int,  # the engine's flat tables (two trust levels)
+    p_reliable,
+    trust_low,
+    poff,  # (m,) parameter-row offsets (zeros for a pooled population)
+    trust,  # (m,) int64 hidden trust, updated in place
+    codes,  # (T_total, m) int8 outcome codes, rows t0.. written
+    t0,
+    record,
+    rc,  # (T_total, m) records (written when ``record``)
+    ra,
+    rh,
+    re,
+    rt,
+    rb,
+):
+    T, m = sched.shape
+    k = 0
+    for t in range(T):
+        tg = t0 + t
+        draw = draws[t]
+        for i in range(m):
+            c = sched[t, i]
+            xi = x[i]
+            if mode == THRESHOLD:
+                a = 1 if xi < act[c] else 0
+            elif draw:
+                a = 1 if upol[k, i] < act[c] else 0
+            else:
+                a = 1 if act[c] == 1.0 else 0
+            ca = c * 2 + a
+            cap = ca + poff[i]
+            tr = trust[i]
+            o = 1 if u[t, 0, i] >= p_int[cap * 2 + tr] else 0
+            e = 1 if u[t, 1, i] < p_reliable[ca * 2 + o] else 0
+            kt = (cap * 2 + e) * 2 + tr
+            if record:
+                rc[tg, i] = c
+                ra[tg, i] = a
+                rh[tg, i] = o
+                re[tg, i] = e
+                rt[tg, i] = tr
+                rb[tg, i] = xi if belief != NO_BELIEF else np.nan
+            codes[tg, i] = (a * 2 + o) * 2 + e
+            trust[i] = 1 if u[t, 2, i] >= trust_low[kt] else 0
+            if belief != NO_BELIEF:
+                if belief == BAYES:
+                    ko = ca * 2 + o
+                    num = xi * lik_high[ko]
+                    z = num + (1.0 - xi) * lik_low[ko]
+                    if z > 0:
+                        xi = num / z
+                kb = ca * 2 + e
+                x[i] = a0[kb] + slope[kb] * xi
+        if draw:
+            k += 1
+
+
+@njit(cache=True, nogil=True)
+def urn_schedule(u, first, out):
+    """Two complexities: trial t of participant i is complexity 1 when ``u[t, i]`` times the
+    number of trials left is at least the number of complexity-0 trials left (``first`` at the
+    start); ``out`` (T, n) int8."""
+    T, n = u.shape
+    for i in range(n):
+        remaining = first
+        left = T
+        for t in range(T):
+            if u[t, i] * left >= remaining:
+                out[t, i] = 1
+            else:
+                out[t, i] = 0
+                remaining -= 1.0
+            left -= 1
