@@ -52,7 +52,7 @@ def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
     """E-step of one parameter set: counts into ``ci`` (K,), ``cem`` (Ue, K, M), ``ctr`` (Ut, K, K);
     the log-likelihood (-inf: probability zero, counts zero).  Items of :data:`CHUNK` sequences
     summed in item order, as :meth:`.kernels.Kernel.run` does."""
-    eidx, tidx, lengths = data
+    eidx, tidx, code, lengths = data
     ini, emit, trans, ll, pin, pe, pt = bufs
     Ue, K, M = em.shape
     Ut = tr.shape[0]
@@ -72,7 +72,7 @@ def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
         pin[c] = 0.0
         pe[c] = 0.0
         pt[c] = 0.0
-        ll[c] = kernels._item(0, lo, min(N, lo + CHUNK), ini, emit, trans, eidx, tidx, lengths, pin[c], pe[c], pt[c])
+        ll[c] = kernels._item(0, lo, min(N, lo + CHUNK), ini, emit, trans, eidx, tidx, code, lengths, pin[c], pe[c], pt[c])
     ci[:] = 0.0
     cem[:] = 0.0
     ctr[:] = 0.0
@@ -597,7 +597,7 @@ def run_starts(
     assert kern is not None
     sticks = Sticks(structure)
     layout = sticks._layout()
-    data = (kern.eidx, kern.tidx, kern.lengths)
+    data = (kern.eidx, kern.tidx, kern.code, kern.lengths)
     emt, trt = _table(structure.em), _table(structure.tr)
     prior = float(structure.spec.prior)
     args = (K, Ue, M, Ut, prior, emt, trt, layout, sticks.size, data, kern.C, work.PE)
