@@ -587,17 +587,17 @@ def subsample(kern: kernels.Kernel, every: int = SUBSAMPLE_EVERY) -> np.ndarray 
     if kern.trials < SUBSAMPLE_MIN:
         return None
     idx = np.arange(0, kern.eidx.shape[0], every)
+    PE, U1, T = kern.PE, kern.P, kern.eidx.shape[1]
 
-    def rows(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        L = kern.lengths[n]
-        T = kern.eidx.shape[1]
-        inside = np.arange(T)[None, :] < L[:, None]
-        step = np.arange(T)[None, :] < L[:, None] - 1
-        return np.unique(kern.eidx[n][inside]), np.unique(kern.tidx[n][step])
+    def rows(e: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Which emission rows with an observed output and which transition rows occur (padding
+        and unobserved outputs read the last emission row, a trial without successor the last
+        transition row: neither has parameters)."""
+        seen_e = np.bincount(e.ravel(), minlength=PE)[: PE - 1] > 0
+        seen_t = np.bincount(t.ravel(), minlength=U1)[: U1 - 1] > 0
+        return np.concatenate([seen_e, seen_t])
 
-    every_row = rows(np.arange(kern.eidx.shape[0]))
-    sub_rows = rows(idx)
-    if any(len(a) != len(b) for a, b in zip(every_row, sub_rows, strict=True)):
+    if np.any(rows(kern.eidx, kern.tidx[:, : T - 1]) & ~rows(kern.eidx[idx], kern.tidx[idx, : T - 1])):
         return None
     return idx
 
