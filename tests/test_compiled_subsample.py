@@ -36,6 +36,7 @@ def test_a_subsample_lacking_a_row_of_the_data_is_not_used(monkeypatch, table):
     assert kern is not None
     idx = cr.subsample(kern, 3)
     assert idx is not None and idx.tolist() == list(range(0, 30, 3))
+    assert cr.subsample(kern, 1) is None  # every sequence: the data again
     # a row seen only outside every third sequence: the subsample would estimate it impossible
     a = kern.eidx if table == "emission" else kern.tidx[:, : kern.eidx.shape[1] - 1]
     row, pad = a[1, 0], (kern.PE - 1 if table == "emission" else kern.P - 1)

@@ -587,6 +587,8 @@ def subsample(kern: kernels.Kernel, every: int = SUBSAMPLE_EVERY) -> np.ndarray 
     if kern.trials < SUBSAMPLE_MIN:
         return None
     idx = np.arange(0, kern.eidx.shape[0], every)
+    if len(idx) == kern.eidx.shape[0]:  # one sequence (or every one): the subsample would be the data
+        return None
     PE, U1, T = kern.PE, kern.P, kern.eidx.shape[1]
 
     def rows(e: np.ndarray, t: np.ndarray) -> np.ndarray:
