@@ -4,6 +4,7 @@
     python benchmarks/bench_fit.py --recovery 20   # + parameter recovery at 1000 x 71 over 20 data sets
     python benchmarks/bench_fit.py --coverage 20   # + bootstrap CI coverage at 9 x 71 over 20 data sets
     python benchmarks/bench_fit.py --big           # + 100,000 x 71: one restart on one core, 10 on 2 threads
+                                                   #   (with the subsample phase and, in the same run, without)
 
 Prints iterations (E-steps) and time per restart, the total against the targets
 (< 0.1 s and < 2 s on one core) as wall time and CPU time (the machine may be
@@ -12,7 +13,10 @@ from the cache), and, measured in the same run: the compiled whole run
 (``fit_iohmm``'s default) against the lockstep path with scipy's L-BFGS-B finish
 (``compiled=False``, the previous implementation), the compiled E-step against the
 numpy E-step, SQUAREM against plain EM, and 1 against 2 threads (target at
-1000 x 71, 10 restarts: < 0.5 s wall on 2 cores).
+1000 x 71, 10 restarts: < 0.5 s wall on 2 cores).  With ``--big``, 100,000 x 71 (targets:
+one restart < 8 s on one core, 10 restarts < 40 s on 2 cores) with the compiled run's
+subsample phase (its default from 500,000 trials) and without it (``SUBSAMPLE_MIN`` raised),
+per restart the E-steps on the subsample and on the whole data and how it ended.
 """
 
 from __future__ import annotations
@@ -27,7 +31,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 
-from trustseek.estimation import encode, fit_iohmm, fit_trust_model, from_trust_model, kernels, loglik, paper_spec
+from trustseek.estimation import compiled_run, encode, fit_iohmm, fit_trust_model, from_trust_model, kernels, loglik, paper_spec
 from trustseek.estimation.em import run_em
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.structure import Structure
@@ -102,6 +106,7 @@ def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None =
             f"  restart {i:2d}: {r.iterations:4d} iterations, {r.finishes} finishes, {r.seconds * 1000:8.1f} ms, "
             f"log-likelihood {r.loglik:.6f}, {r.ended}{mark}"
         )
+    assert all(r.subsample_iterations == 0 for r in fit.runs)  # small data: the whole data from the start
     its = sum(r.iterations for r in fit.runs)
     verdict = f" (target < {target:g} s: {'met' if cpu < target else 'not met'} on CPU time)" if target else ""
     print(f"  total {wall:.3f} s wall, {cpu:.3f} s CPU{verdict}; {cpu / its * 1000:.3f} ms CPU per iteration")
@@ -156,24 +161,40 @@ def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None =
 
 
 def big(n: int = 100_000) -> None:
-    """100,000 x 71: one restart on one core (target < 8 s), 10 restarts on 2 threads (target < 40 s)."""
+    """100,000 x 71: one restart on one core (target < 8 s), 10 restarts on 2 threads (target < 40 s),
+    with the subsample phase (the default) and without it, in the same run."""
     spec = paper_spec()
     t = clocks()
     seqs = encode(simulate_design(paper_model(), n, seed=1), spec)
     w, c = since(t)
-    print(f"{n} x 71: simulated and encoded in {w:.1f} s wall")
+    print(f"{n} x 71: simulated and encoded in {w:.1f} s wall; load average {os.getloadavg()[0]:.1f}")
+    default_min = compiled_run.SUBSAMPLE_MIN
+    best = {}
     for restarts, jobs, target in ((1, 1, 8.0), (10, 2, 40.0)):
-        for compiled in (True, False):
-            t = clocks()
-            fit = fit_iohmm(seqs, spec, restarts=restarts, seed=0, n_jobs=jobs, compiled=compiled)
-            w, c = since(t)
+        for phase in (True, False):
+            compiled_run.SUBSAMPLE_MIN = default_min if phase else 10**15
+            try:
+                t = clocks()
+                fit = fit_iohmm(seqs, spec, restarts=restarts, seed=0, n_jobs=jobs)
+                w, c = since(t)
+            finally:
+                compiled_run.SUBSAMPLE_MIN = default_min
             its = sum(r.iterations for r in fit.runs)
-            name = "compiled run" if compiled else "lockstep path (before)"
+            sub = sum(r.subsample_iterations for r in fit.runs)
+            name = "subsample phase" if phase else "whole data only (before)"
             print(
-                f"  {restarts} restart(s), {jobs} thread(s), {name}: {w:.1f} s wall, {c:.1f} s CPU, {its} E-steps "
-                f"({1000 * c / its:.0f} ms CPU each), log-likelihood {fit.loglik:.6f} "
-                f"(target < {target:g} s wall: {'met' if w < target else 'not met'})"
+                f"  {restarts} restart(s), {jobs} thread(s), {name}: {w:.1f} s wall, {c:.1f} s CPU, {its} E-steps on the "
+                f"whole data + {sub} on a tenth, log-likelihood {fit.loglik:.9f} "
+                f"(target < {target:g} s wall: {'met' if w < target else 'not met'}); load {os.getloadavg()[0]:.1f}"
             )
+            for i, r in enumerate(fit.runs):
+                print(
+                    f"    restart {i}: {r.subsample_iterations:3d} + {r.iterations:3d} E-steps, {r.finishes} finishes, "
+                    f"{r.seconds:5.1f} s, log-likelihood {r.loglik:.9f}, {r.ended}"
+                )
+            best[restarts, phase] = fit.loglik
+        d = (best[restarts, True] - best[restarts, False]) / abs(best[restarts, False])
+        print(f"  best maximum with against without the subsample phase: {d:+.1e} relative")
 
 
 def recovery(datasets: int, n: int = 1000, restarts: int = 10) -> None:

@@ -35,7 +35,7 @@ def pieces(s: Structure, w: Workspace):
         np.empty((kern.C, Ut + 1, K, K)),
     )
     bufs[2][0, Ut] = np.eye(K)
-    return (K, Ue, M, Ut), (kern.eidx, kern.tidx, kern.lengths), bufs, cr._table(s.em), cr._table(s.tr)
+    return (K, Ue, M, Ut), (kern.eidx, kern.tidx, kern.code, kern.lengths), bufs, cr._table(s.em), cr._table(s.tr)
 
 
 @pytest.mark.parametrize("levels, prior", [(2, 0.0), (3, 0.3)])

@@ -44,6 +44,8 @@ STICK_EPS = Sticks.EPS
 ARMIJO = 1e-4  # sufficient decrease of the finish's line search
 FINISH_FTOL = 1e-4  # the finish stops at this fraction of the fit's relative tolerance (a full step gaining less)
 BACKTRACKS = 30  # halvings of the step before the line search gives up
+SUBSAMPLE_MIN = 500_000  # trials from which a start runs on a subsample of the sequences first
+SUBSAMPLE_EVERY = 10  # the subsample: every SUBSAMPLE_EVERY-th sequence
 ENDED_STATIONARY, ENDED_CAPPED, ENDED_ZERO = 0, 1, 2  # how a compiled run ended
 
 
@@ -52,7 +54,7 @@ def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
     """E-step of one parameter set: counts into ``ci`` (K,), ``cem`` (Ue, K, M), ``ctr`` (Ut, K, K);
     the log-likelihood (-inf: probability zero, counts zero).  Items of :data:`CHUNK` sequences
     summed in item order, as :meth:`.kernels.Kernel.run` does."""
-    eidx, tidx, lengths = data
+    eidx, tidx, code, lengths = data
     ini, emit, trans, ll, pin, pe, pt = bufs
     Ue, K, M = em.shape
     Ut = tr.shape[0]
@@ -72,7 +74,7 @@ def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
         pin[c] = 0.0
         pe[c] = 0.0
         pt[c] = 0.0
-        ll[c] = kernels._item(0, lo, min(N, lo + CHUNK), ini, emit, trans, eidx, tidx, lengths, pin[c], pe[c], pt[c])
+        ll[c] = kernels._item(0, lo, min(N, lo + CHUNK), ini, emit, trans, eidx, tidx, code, lengths, pin[c], pe[c], pt[c])
     ci[:] = 0.0
     cem[:] = 0.0
     ctr[:] = 0.0
@@ -340,7 +342,7 @@ def _box_qp(g, B, lo, hi, d):
 
 
 @njit(cache=True, nogil=True)
-def _finish(state, budget, ftol, n, K, Ue, M, Ut, prior, emt, trt, sticks, data, bufs, history, nh):
+def _finish(state, budget, ftol, n, K, Ue, M, Ut, prior, emt, trt, sticks, data, bufs, history, nh, B, warm):
     """The quasi-Newton finish from the run's point ``state`` (flat cells, counts, log-likelihood,
     objective; updated in place to the best accepted point).  Maximises the objective over the
     stick-breaking fractions in the box [EPS, 1 - EPS]: a BFGS model of the objective (dense,
@@ -348,6 +350,8 @@ def _finish(state, budget, ftol, n, K, Ue, M, Ut, prior, emt, trt, sticks, data,
     inside the box (a small bound-constrained quadratic programme, no E-steps), a backtracking
     line search along it; stops when an iteration changes the objective by at most ``ftol``
     (relative, as L-BFGS-B's ``ftol``), when no step decreases it, or at ``budget`` E-steps.
+    The model's matrix is ``B`` (n, n), left there at the end; with ``warm`` the finish starts
+    from the matrix it holds, else from a multiple of the identity.
     (E-steps, stopped by the budget, entries in ``history``)."""
     flat, counts, stat = state
     lo, hi = STICK_EPS, 1 - STICK_EPS
@@ -362,8 +366,7 @@ def _finish(state, budget, ftol, n, K, Ue, M, Ut, prior, emt, trt, sticks, data,
         return calls, False, nh
     F = -f
     g *= -1.0
-    B = np.zeros((n, n))
-    scaled = False
+    scaled = warm
     d = np.empty(n)
     dl = np.empty(n)
     dh = np.empty(n)
@@ -505,9 +508,13 @@ def _em(state, tol, max_iter, its, K, Ue, M, Ut, prior, emt, trt, data, bufs, ac
 
 
 @njit(cache=True, nogil=True)
-def run_one(start, K, Ue, M, Ut, prior, emt, trt, sticks, n, data, C, PE, tol, max_iter, em_tol, finish_tol, qn, accelerate):
+def run_one(
+    start, K, Ue, M, Ut, prior, emt, trt, sticks, n, data, C, PE, tol, max_iter, em_tol, finish_tol, qn, accelerate, B, warm
+):
     """One start from its first E-step to its end (see the module).  Returns the end point's
-    flat cells, (log-likelihood, objective), E-steps, how it ended, finishes, and the history."""
+    flat cells, (log-likelihood, objective), E-steps, how it ended, finishes, and the history.
+    ``B`` (n, n) holds the finish's quasi-Newton matrix at the end; with ``warm`` the finishes
+    start from the matrix ``B`` holds, else each from a multiple of the identity."""
     L = len(start)
     bufs = (
         np.empty((1, K)),
@@ -540,7 +547,7 @@ def run_one(start, K, Ue, M, Ut, prior, emt, trt, sticks, n, data, C, PE, tol, m
             return flat, stat, its, ENDED_CAPPED, finishes, history[:nh]
         if qn and n > 0 and max_iter - its >= 2 and math.isfinite(stat[1]):
             calls, capped, nh = _finish(
-                state, max_iter - its, finish_tol, n, K, Ue, M, Ut, prior, emt, trt, sticks, data, bufs, history, nh
+                state, max_iter - its, finish_tol, n, K, Ue, M, Ut, prior, emt, trt, sticks, data, bufs, history, nh, B, warm
             )
             its += calls
             finishes += 1
@@ -573,6 +580,30 @@ def _table(t: Table) -> tuple[np.ndarray, ...]:
     )
 
 
+def subsample(kern: kernels.Kernel, every: int = SUBSAMPLE_EVERY) -> np.ndarray | None:
+    """The sequences of the subsample phase: every ``every``-th one from the first, when the data
+    have at least :data:`SUBSAMPLE_MIN` trials and the subsample has every emission row and every
+    transition row the data have (a row it lacks would be estimated as zero); else None."""
+    if kern.trials < SUBSAMPLE_MIN:
+        return None
+    idx = np.arange(0, kern.eidx.shape[0], every)
+    if len(idx) == kern.eidx.shape[0]:  # one sequence (or every one): the subsample would be the data
+        return None
+    PE, U1, T = kern.PE, kern.P, kern.eidx.shape[1]
+
+    def rows(e: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Which emission rows with an observed output and which transition rows occur (padding
+        and unobserved outputs read the last emission row, a trial without successor the last
+        transition row: neither has parameters)."""
+        seen_e = np.bincount(e.ravel(), minlength=PE)[: PE - 1] > 0
+        seen_t = np.bincount(t.ravel(), minlength=U1)[: U1 - 1] > 0
+        return np.concatenate([seen_e, seen_t])
+
+    if np.any(rows(kern.eidx, kern.tidx[:, : T - 1]) & ~rows(kern.eidx[idx], kern.tidx[idx, : T - 1])):
+        return None
+    return idx
+
+
 def applies(structure: Structure, work: Workspace) -> bool:
     """Whether :func:`run_starts` can run this fit: the plain structure (no rating) and the compiled E-step."""
     return kernels.AVAILABLE and work.compiled and type(structure) is Structure and work.seqs.n_trials > 0
@@ -591,24 +622,55 @@ def run_starts(
     threads: int = 1,
 ) -> list[RunResult]:
     """Each start carried to a stationary point or to ``max_iter`` E-steps, compiled (see the
-    module); ``threads`` run starts side by side (the numbers do not depend on it)."""
+    module); ``threads`` run starts side by side (the numbers do not depend on it).
+
+    From :data:`SUBSAMPLE_MIN` trials on (:func:`subsample`) each start runs first on every
+    :data:`SUBSAMPLE_EVERY`-th sequence to its own stationary point (or ``max_iter`` E-steps),
+    then on the whole data from there to a stationary point of the whole data (or ``max_iter``
+    more E-steps), its finish starting from the subsample's quasi-Newton matrix scaled by the
+    ratio of trials: the whole data's curvature is about that.  ``RunResult.iterations``
+    counts the whole data's E-steps, ``subsample_iterations`` the subsample's; the history is
+    the whole data's.  A start whose subsample end gives the whole data probability zero is
+    run again from its start on the whole data."""
     K, M, Ue, Ut = structure.dims
     kern = work._kernel
     assert kern is not None
     sticks = Sticks(structure)
     layout = sticks._layout()
-    data = (kern.eidx, kern.tidx, kern.lengths)
+    data = (kern.eidx, kern.tidx, kern.code, kern.lengths)
     emt, trt = _table(structure.em), _table(structure.tr)
     prior = float(structure.spec.prior)
     args = (K, Ue, M, Ut, prior, emt, trt, layout, sticks.size, data, kern.C, work.PE)
     settings = (float(tol), int(max_iter), float(em_tol), float(finish_tol), bool(quasi_newton), bool(accelerate))
     template = starts[0]
+    idx = subsample(kern) if quasi_newton and sticks.size > 0 else None
+    if idx is not None:
+        sub = tuple(np.ascontiguousarray(a[idx]) for a in data)
+        sub_args = (*args[:9], sub, max((len(idx) + CHUNK - 1) // CHUNK, 1), work.PE)
+        ratio = kern.trials / float(sub[3].sum())
 
     def one(p: Params) -> RunResult:
         t0 = time.perf_counter()
-        flat, stat, its, ended, finishes, history = run_one(np.ascontiguousarray(p.vector(), dtype=float), *args, *settings)
+        x = np.ascontiguousarray(p.vector(), dtype=float)
+        B = np.zeros((sticks.size, sticks.size))
+        sub_its = 0
+        if idx is not None:
+            y, _stat, sub_its, sub_ended, _f, _h = run_one(x, *sub_args, *settings, B, False)
+            if sub_ended == ENDED_ZERO:
+                raise FitError(["the initial values give the data probability zero"])
+            B *= ratio
+            flat, stat, its, ended, finishes, history = run_one(y, *args, *settings, B, True)
+            if ended != ENDED_ZERO:
+                return result(flat, stat, its, ended, finishes, history, sub_its, t0)
+            sub_its = 0  # the subsample's end is impossible for the whole data: from the start again
+        flat, stat, its, ended, finishes, history = run_one(x, *args, *settings, B, False)
         if ended == ENDED_ZERO:
             raise FitError(["the initial values give the data probability zero"])
+        return result(flat, stat, its, ended, finishes, history, sub_its, t0)
+
+    def result(
+        flat: np.ndarray, stat: np.ndarray, its: int, ended: int, finishes: int, history: np.ndarray, sub_its: int, t0: float
+    ) -> RunResult:
         return RunResult(
             template.from_vector(flat),
             float(stat[0]),
@@ -619,6 +681,7 @@ def run_starts(
             time.perf_counter() - t0,
             STATIONARY if ended == ENDED_STATIONARY else CAPPED,
             int(finishes),
+            int(sub_its),
         )
 
     if threads > 1 and len(starts) > 1:

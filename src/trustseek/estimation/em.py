@@ -34,7 +34,9 @@ class RunResult:
     decreases); ``iterations`` counts E-steps; ``converged`` is false when the run
     stopped at the cap on E-steps; ``ended`` says how it ended (:data:`SMALL_STEP`,
     :data:`CAPPED` or :data:`STATIONARY`) and ``finishes`` how many quasi-Newton
-    finishes it took.
+    finishes it took.  ``subsample_iterations`` counts the E-steps of a first phase on a
+    subsample of the sequences (:func:`.compiled_run.run_starts` on large data; not in
+    ``iterations`` nor ``history``).
     """
 
     params: Params
@@ -46,6 +48,7 @@ class RunResult:
     seconds: float
     ended: str = SMALL_STEP
     finishes: int = 0
+    subsample_iterations: int = 0
 
 
 class _Lockstep:

@@ -16,14 +16,23 @@ Tables (leading axis R = parameter sets):
 * ``trans`` (R, Ut + 1, K, K): transition matrices, the last one unused padding.
 
 Data: ``eidx`` (N, T) emission row per trial, ``tidx`` (N, T) transition row of
-trial t (t -> t+1), ``lengths`` (N,).  Inactive parameter sets (``active[r]`` false)
-are skipped and report log-likelihood 0 and zero counts.
+trial t (t -> t+1), ``lengths`` (N,), and for the two-level pass ``code`` (N, T), the
+step code ``tidx[n, t - 1] * PE + eidx[n, t]`` of trial t (:func:`step_codes`).  Inactive
+parameter sets (``active[r]`` false) are skipped and report log-likelihood 0 and zero counts.
 
 The work is cut into items of one parameter set and :data:`CHUNK` consecutive
 sequences; each item sums into its own counts, and the items' sums are added in a
 fixed order.  The items run on one thread or are split over several (Python threads:
 the compiled code releases the GIL), with the same grouping, so the result is the same
 to the last bit whatever the number of threads.
+
+With K = 2 the pass works on step codes: per code one 2 x 2 matrix ``trans[u, i, j] *
+emit[e, j]`` (one load per cell instead of a transition and an emission cell), the posterior
+of each step (t - 1, t) added to its code's four sums, and trial t's emission counts taken
+from those sums at the end of the item (the posterior of trial t is that of the step summed
+over its first level); the forward-backward normaliser is carried from the last trial instead
+of divided out at every trial (it changes only by the exact rescalings).  The numbers equal
+the numpy reference's to rounding (about 1e-15 relative).
 
 A sequence whose probability is zero makes the log-likelihood of its parameter
 set -inf, with zero counts.
@@ -249,12 +258,127 @@ def _sequence2(n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans, 
 
 
 @njit(cache=True, nogil=True)
-def _forward_pair(n, m, initial, emit, trans, eidx, tidx, L, alpha, alpha2):
-    """:func:`_forward2` of sequences ``n`` and ``m`` of the same length side by side (two independent
-    recursions in one loop keep the processor busy); the same numbers as two calls.  Their
-    log-probabilities (both -inf when either is zero)."""
-    e = eidx[n, 0]
-    f = eidx[m, 0]
+def step_codes(eidx, tidx, PE):
+    """The step code of every trial, (N, T): ``tidx[n, t - 1] * PE + eidx[n, t]`` (the transition
+    into trial t and trial t's emission row) for t >= 1 and ``eidx[n, 0]`` for the first trial."""
+    N, T = eidx.shape
+    code = np.empty((N, T), dtype=np.int32)
+    for n in range(N):
+        if T > 0:
+            code[n, 0] = eidx[n, 0]
+        for t in range(1, T):
+            code[n, t] = tidx[n, t - 1] * PE + eidx[n, t]
+    return code
+
+
+@njit(cache=True, nogil=True)
+def _step_table(emit, trans, PE, A):
+    """``A[u * PE + e] = (trans[u, 0, 0] emit[e, 0], trans[u, 0, 1] emit[e, 1], trans[u, 1, 0] emit[e, 0],
+    trans[u, 1, 1] emit[e, 1])``: the 2 x 2 step matrix of every step code (K = 2)."""
+    for u in range(trans.shape[0]):
+        for e in range(PE):
+            c = u * PE + e
+            A[c, 0] = trans[u, 0, 0] * emit[e, 0]
+            A[c, 1] = trans[u, 0, 1] * emit[e, 1]
+            A[c, 2] = trans[u, 1, 0] * emit[e, 0]
+            A[c, 3] = trans[u, 1, 1] * emit[e, 1]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _forward_codes(n, initial, emit, A, code, L, alpha, marks):
+    """:func:`_forward2` on the step codes: ``alpha`` unnormalised, multiplied by 2**RESCALE
+    where its sum falls below 2**-RESCALE (the trials where it was go to ``marks``); the
+    log-probability of sequence ``n`` (-inf: zero) and the number of marks."""
+    e = code[n, 0]
+    a0 = initial[0] * emit[e, 0]
+    a1 = initial[1] * emit[e, 1]
+    s = 0
+    if a0 + a1 < TINY:
+        if not a0 + a1 > 0.0:
+            return -math.inf, 0
+        a0 *= HUGE
+        a1 *= HUGE
+        marks[s] = 0
+        s += 1
+    alpha[0, 0] = a0
+    alpha[0, 1] = a1
+    for t in range(1, L):
+        c = code[n, t]
+        x0 = a0 * A[c, 0] + a1 * A[c, 2]
+        x1 = a0 * A[c, 1] + a1 * A[c, 3]
+        a0 = x0
+        a1 = x1
+        if a0 + a1 < TINY:
+            if not a0 + a1 > 0.0:
+                return -math.inf, 0
+            a0 *= HUGE
+            a1 *= HUGE
+            marks[s] = t
+            s += 1
+        alpha[t, 0] = a0
+        alpha[t, 1] = a1
+    return math.log(a0 + a1) - s * LOG_HUGE, s
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _backward_codes(n, A, code, L, c_first, c_step, alpha, marks, s):
+    """The backward pass after :func:`_forward_codes`: the posterior of every step (t - 1, t),
+    xi, added to ``c_step[code[n, t]]`` (4 cells, row-major 2 x 2) and the first trial's
+    posterior to ``c_first[2 + 2 e + k]`` and ``c_first[k]`` (the initial counts).
+
+    sum_k alpha_t(k) beta_t(k) is the probability of the sequence times the scale factors, so
+    its inverse ``z`` is known from the last trial and changes only by powers of 2: by
+    2**RESCALE where ``alpha`` was rescaled (``marks``) and by 2**-RESCALE where ``beta`` is
+    (when ``z`` exceeds 2**RESCALE: the forward-backward sum below 2**-RESCALE).  Trial t's
+    posterior is the sum of the step's over its first level: the emission counts come from
+    ``c_step`` (see :func:`_fold`)."""
+    g0 = 1.0
+    g1 = 1.0
+    z = 1.0 / (alpha[L - 1, 0] + alpha[L - 1, 1])
+    j = s - 1
+    mark = marks[j] if j >= 0 else -1
+    for t in range(L - 1, 0, -1):
+        c = code[n, t]
+        w00 = A[c, 0] * g0
+        w01 = A[c, 1] * g1
+        w10 = A[c, 2] * g0
+        w11 = A[c, 3] * g1
+        g0 = w00 + w01
+        g1 = w10 + w11
+        if t == mark:  # alpha[t] was multiplied by 2**RESCALE, alpha[t - 1] not
+            z *= HUGE
+            j -= 1
+            mark = marks[j] if j >= 0 else -1
+        if z > HUGE:
+            g0 *= HUGE
+            g1 *= HUGE
+            w00 *= HUGE
+            w01 *= HUGE
+            w10 *= HUGE
+            w11 *= HUGE
+            z *= TINY
+        p0 = alpha[t - 1, 0] * z
+        p1 = alpha[t - 1, 1] * z
+        c_step[c, 0] += p0 * w00
+        c_step[c, 1] += p0 * w01
+        c_step[c, 2] += p1 * w10
+        c_step[c, 3] += p1 * w11
+    e = code[n, 0]
+    q0 = alpha[0, 0] * g0 * z
+    q1 = alpha[0, 1] * g1 * z
+    c_first[2 + 2 * e] += q0
+    c_first[3 + 2 * e] += q1
+    c_first[0] += q0
+    c_first[1] += q1
+
+
+@njit(cache=True, nogil=True)
+def _forward_pair(n, m, initial, emit, A, code, L, alpha, alpha2, marks, marks2):
+    """:func:`_forward_codes` of sequences ``n`` and ``m`` of the same length side by side (two
+    independent recursions in one loop keep the processor busy); the same numbers as two calls.
+    Their log-probabilities (both -inf when either is zero) and numbers of marks."""
+    e = code[n, 0]
+    f = code[m, 0]
     a0 = initial[0] * emit[e, 0]
     a1 = initial[1] * emit[e, 1]
     b0 = initial[0] * emit[f, 0]
@@ -263,174 +387,200 @@ def _forward_pair(n, m, initial, emit, trans, eidx, tidx, L, alpha, alpha2):
     sb = 0
     if a0 + a1 < TINY:
         if not a0 + a1 > 0.0:
-            return -math.inf, -math.inf
+            return -math.inf, -math.inf, 0, 0
         a0 *= HUGE
         a1 *= HUGE
+        marks[sa] = 0
         sa += 1
     if b0 + b1 < TINY:
         if not b0 + b1 > 0.0:
-            return -math.inf, -math.inf
+            return -math.inf, -math.inf, 0, 0
         b0 *= HUGE
         b1 *= HUGE
+        marks2[sb] = 0
         sb += 1
     alpha[0, 0] = a0
     alpha[0, 1] = a1
     alpha2[0, 0] = b0
     alpha2[0, 1] = b1
     for t in range(1, L):
-        e = eidx[n, t]
-        u = tidx[n, t - 1]
-        f = eidx[m, t]
-        v = tidx[m, t - 1]
-        x0 = (a0 * trans[u, 0, 0] + a1 * trans[u, 1, 0]) * emit[e, 0]
-        x1 = (a0 * trans[u, 0, 1] + a1 * trans[u, 1, 1]) * emit[e, 1]
-        y0 = (b0 * trans[v, 0, 0] + b1 * trans[v, 1, 0]) * emit[f, 0]
-        y1 = (b0 * trans[v, 0, 1] + b1 * trans[v, 1, 1]) * emit[f, 1]
+        c = code[n, t]
+        d = code[m, t]
+        x0 = a0 * A[c, 0] + a1 * A[c, 2]
+        x1 = a0 * A[c, 1] + a1 * A[c, 3]
+        y0 = b0 * A[d, 0] + b1 * A[d, 2]
+        y1 = b0 * A[d, 1] + b1 * A[d, 3]
         a0 = x0
         a1 = x1
         b0 = y0
         b1 = y1
         if a0 + a1 < TINY:
             if not a0 + a1 > 0.0:
-                return -math.inf, -math.inf
+                return -math.inf, -math.inf, 0, 0
             a0 *= HUGE
             a1 *= HUGE
+            marks[sa] = t
             sa += 1
         if b0 + b1 < TINY:
             if not b0 + b1 > 0.0:
-                return -math.inf, -math.inf
+                return -math.inf, -math.inf, 0, 0
             b0 *= HUGE
             b1 *= HUGE
+            marks2[sb] = t
             sb += 1
         alpha[t, 0] = a0
         alpha[t, 1] = a1
         alpha2[t, 0] = b0
         alpha2[t, 1] = b1
-    return math.log(a0 + a1) - sa * LOG_HUGE, math.log(b0 + b1) - sb * LOG_HUGE
+    return math.log(a0 + a1) - sa * LOG_HUGE, math.log(b0 + b1) - sb * LOG_HUGE, sa, sb
 
 
 @njit(cache=True, nogil=True)
-def _backward_pair(n, m, emit, trans, eidx, tidx, L, ci, ce, ct, alpha, di, de, dt, alpha2):
-    """:func:`_backward2` of sequences ``n`` (counts into ``ci``, ``ce``, ``ct``) and ``m`` (into
-    ``di``, ``de``, ``dt``) side by side, after :func:`_forward_pair`; the same numbers as two calls."""
+def _backward_pair(n, m, A, code, L, ci, cs, alpha, marks, sa, di, ds, alpha2, marks2, sb):
+    """:func:`_backward_codes` of sequences ``n`` (counts into ``ci``, ``cs``) and ``m`` (into
+    ``di``, ``ds``) side by side, after :func:`_forward_pair`; the same numbers as two calls."""
     g0 = 1.0
     g1 = 1.0
     h0 = 1.0
     h1 = 1.0
     z = 1.0 / (alpha[L - 1, 0] + alpha[L - 1, 1])
     y = 1.0 / (alpha2[L - 1, 0] + alpha2[L - 1, 1])
+    ja = sa - 1
+    jb = sb - 1
+    ma = marks[ja] if ja >= 0 else -1
+    mb = marks2[jb] if jb >= 0 else -1
     for t in range(L - 1, 0, -1):
-        e = eidx[n, t]
-        u = tidx[n, t - 1]
-        f = eidx[m, t]
-        v = tidx[m, t - 1]
-        ce[e, 0] += alpha[t, 0] * g0 * z
-        ce[e, 1] += alpha[t, 1] * g1 * z
-        de[f, 0] += alpha2[t, 0] * h0 * y
-        de[f, 1] += alpha2[t, 1] * h1 * y
-        m0 = emit[e, 0] * g0
-        m1 = emit[e, 1] * g1
-        k0 = emit[f, 0] * h0
-        k1 = emit[f, 1] * h1
-        w00 = trans[u, 0, 0] * m0
-        w01 = trans[u, 0, 1] * m1
-        w10 = trans[u, 1, 0] * m0
-        w11 = trans[u, 1, 1] * m1
-        q00 = trans[v, 0, 0] * k0
-        q01 = trans[v, 0, 1] * k1
-        q10 = trans[v, 1, 0] * k0
-        q11 = trans[v, 1, 1] * k1
+        c = code[n, t]
+        d = code[m, t]
+        w00 = A[c, 0] * g0
+        w01 = A[c, 1] * g1
+        w10 = A[c, 2] * g0
+        w11 = A[c, 3] * g1
+        q00 = A[d, 0] * h0
+        q01 = A[d, 1] * h1
+        q10 = A[d, 2] * h0
+        q11 = A[d, 3] * h1
         g0 = w00 + w01
         g1 = w10 + w11
         h0 = q00 + q01
         h1 = q10 + q11
-        p0 = alpha[t - 1, 0]
-        p1 = alpha[t - 1, 1]
-        r0 = alpha2[t - 1, 0]
-        r1 = alpha2[t - 1, 1]
-        z = p0 * g0 + p1 * g1
-        y = r0 * h0 + r1 * h1
-        if z < TINY:
+        if t == ma:
+            z *= HUGE
+            ja -= 1
+            ma = marks[ja] if ja >= 0 else -1
+        if t == mb:
+            y *= HUGE
+            jb -= 1
+            mb = marks2[jb] if jb >= 0 else -1
+        if z > HUGE:
             g0 *= HUGE
             g1 *= HUGE
             w00 *= HUGE
             w01 *= HUGE
             w10 *= HUGE
             w11 *= HUGE
-            z *= HUGE
-        if y < TINY:
+            z *= TINY
+        if y > HUGE:
             h0 *= HUGE
             h1 *= HUGE
             q00 *= HUGE
             q01 *= HUGE
             q10 *= HUGE
             q11 *= HUGE
-            y *= HUGE
-        z = 1.0 / z
-        y = 1.0 / y
-        p0 *= z
-        p1 *= z
-        r0 *= y
-        r1 *= y
-        ct[u, 0, 0] += p0 * w00
-        ct[u, 0, 1] += p0 * w01
-        ct[u, 1, 0] += p1 * w10
-        ct[u, 1, 1] += p1 * w11
-        dt[v, 0, 0] += r0 * q00
-        dt[v, 0, 1] += r0 * q01
-        dt[v, 1, 0] += r1 * q10
-        dt[v, 1, 1] += r1 * q11
-    e = eidx[n, 0]
+            y *= TINY
+        p0 = alpha[t - 1, 0] * z
+        p1 = alpha[t - 1, 1] * z
+        r0 = alpha2[t - 1, 0] * y
+        r1 = alpha2[t - 1, 1] * y
+        cs[c, 0] += p0 * w00
+        cs[c, 1] += p0 * w01
+        cs[c, 2] += p1 * w10
+        cs[c, 3] += p1 * w11
+        ds[d, 0] += r0 * q00
+        ds[d, 1] += r0 * q01
+        ds[d, 2] += r1 * q10
+        ds[d, 3] += r1 * q11
+    e = code[n, 0]
     q0 = alpha[0, 0] * g0 * z
     q1 = alpha[0, 1] * g1 * z
-    ce[e, 0] += q0
-    ce[e, 1] += q1
+    ci[2 + 2 * e] += q0
+    ci[3 + 2 * e] += q1
     ci[0] += q0
     ci[1] += q1
-    f = eidx[m, 0]
+    f = code[m, 0]
     r0 = alpha2[0, 0] * h0 * y
     r1 = alpha2[0, 1] * h1 * y
-    de[f, 0] += r0
-    de[f, 1] += r1
+    di[2 + 2 * f] += r0
+    di[3 + 2 * f] += r1
     di[0] += r0
     di[1] += r1
 
 
 @njit(cache=True, nogil=True)
-def _item(r, lo, hi, initial, emit, trans, eidx, tidx, lengths, c_init, c_emit, c_trans):
+def _fold(ci, cs, PE, c_init, c_emit, c_trans):
+    """The per-code sums of :func:`_backward_codes` added to the tables: the step (u, e)'s
+    posterior to transition u, its sum over the first level to emission row e."""
+    c_init[0] += ci[0]
+    c_init[1] += ci[1]
+    for e in range(PE):
+        c_emit[e, 0] += ci[2 + 2 * e]
+        c_emit[e, 1] += ci[3 + 2 * e]
+    for u in range(c_trans.shape[0]):
+        for e in range(PE):
+            c = u * PE + e
+            c_emit[e, 0] += cs[c, 0] + cs[c, 2]
+            c_emit[e, 1] += cs[c, 1] + cs[c, 3]
+            c_trans[u, 0, 0] += cs[c, 0]
+            c_trans[u, 0, 1] += cs[c, 1]
+            c_trans[u, 1, 0] += cs[c, 2]
+            c_trans[u, 1, 1] += cs[c, 3]
+
+
+@njit(cache=True, nogil=True)
+def _item(r, lo, hi, initial, emit, trans, eidx, tidx, code, lengths, c_init, c_emit, c_trans):
     """Sequences ``lo:hi`` under parameter set ``r`` into this item's counts; their log-probability."""
     K = initial.shape[1]
     T = eidx.shape[1]
     total = 0.0
     if K == 2:
-        # sequences of equal length go two at a time, the second's counts into their own sums
-        # (added to the item's at its end)
+        # on the step codes (one 2 x 2 matrix per code, the counts per code, folded into the
+        # tables at the end); sequences of equal length go two at a time, the second's counts
+        # into their own sums
+        PE = emit.shape[1]
+        NC = trans.shape[1] * PE
+        A = np.empty((NC, 4))
+        _step_table(emit[r], trans[r], PE, A)
         buf = np.empty((max(T, 1), 2))
         buf2 = np.empty((max(T, 1), 2))
-        d_init = np.zeros_like(c_init)
-        d_emit = np.zeros_like(c_emit)
-        d_trans = np.zeros_like(c_trans)
-        ini, em, tr = initial[r], emit[r], trans[r]
+        marks = np.empty(max(T, 1), dtype=np.int64)
+        marks2 = np.empty(max(T, 1), dtype=np.int64)
+        ci = np.zeros(2 + 2 * PE)
+        cs = np.zeros((NC, 4))
+        di = np.zeros(2 + 2 * PE)
+        ds = np.zeros((NC, 4))
+        ini, em = initial[r], emit[r]
         n = lo
         while n < hi:
             L = lengths[n]
             if L > 0 and n + 1 < hi and lengths[n + 1] == L:
-                la, lb = _forward_pair(n, n + 1, ini, em, tr, eidx, tidx, L, buf, buf2)
+                la, lb, sa, sb = _forward_pair(n, n + 1, ini, em, A, code, L, buf, buf2, marks, marks2)
                 total += la
                 total += lb
                 if not total > -math.inf:
                     return -math.inf
-                _backward_pair(n, n + 1, em, tr, eidx, tidx, L, c_init, c_emit, c_trans, buf, d_init, d_emit, d_trans, buf2)
+                _backward_pair(n, n + 1, A, code, L, ci, cs, buf, marks, sa, di, ds, buf2, marks2, sb)
                 n += 2
                 continue
             if L > 0:
-                total += _sequence2(n, ini, em, tr, eidx, tidx, L, c_init, c_emit, c_trans, buf)
+                la, sa = _forward_codes(n, ini, em, A, code, L, buf, marks)
+                total += la
                 if not total > -math.inf:
                     return -math.inf
+                _backward_codes(n, A, code, L, ci, cs, buf, marks, sa)
             n += 1
-        c_init += d_init
-        c_emit += d_emit
-        c_trans += d_trans
+        ci += di
+        cs += ds
+        _fold(ci, cs, PE, c_init, c_emit, c_trans)
     else:
         alpha = np.empty((max(T, 1), K))
         beta = np.empty((max(T, 1), K))
@@ -471,7 +621,7 @@ def _reduce(active, ll, pi, pe, pt, loglik, c_init, c_emit, c_trans):
 
 
 @njit(cache=True, nogil=True)
-def estep_items(first, last, C, chunk, initial, emit, trans, eidx, tidx, lengths, active, ll, pi, pe, pt):
+def estep_items(first, last, C, chunk, initial, emit, trans, eidx, tidx, code, lengths, active, ll, pi, pe, pt):
     """Items ``first:last`` (item = r * C + c: parameter set r, sequences c*chunk onwards) into their own sums."""
     N = eidx.shape[0]
     for item in range(first, last):
@@ -482,7 +632,9 @@ def estep_items(first, last, C, chunk, initial, emit, trans, eidx, tidx, lengths
             pi[r, c] = 0.0
             pe[r, c] = 0.0
             pt[r, c] = 0.0
-            ll[r, c] = _item(r, lo, min(N, lo + chunk), initial, emit, trans, eidx, tidx, lengths, pi[r, c], pe[r, c], pt[r, c])
+            ll[r, c] = _item(
+                r, lo, min(N, lo + chunk), initial, emit, trans, eidx, tidx, code, lengths, pi[r, c], pe[r, c], pt[r, c]
+            )
 
 
 @njit(cache=True, nogil=True)
@@ -665,6 +817,7 @@ class Kernel:
         t = np.zeros((N, max(T, 1)), dtype=np.int32)
         t[:, : T - 1] = tidx.T
         self.tidx = t
+        self.code = step_codes(self.eidx, self.tidx, PE)  # the two-level pass reads these
         self.lengths = np.ascontiguousarray(lengths, dtype=np.int64)
         self.trials = int(self.lengths.sum())
         self.C = max((N + CHUNK - 1) // CHUNK, 1)  # items per parameter set
@@ -706,6 +859,7 @@ class Kernel:
             np.ascontiguousarray(trans, dtype=np.float64),
             self.eidx,
             self.tidx,
+            self.code,
             self.lengths,
             act,
             *parts,
