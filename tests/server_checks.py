@@ -125,3 +125,58 @@ def experimenter_view(client, study_id: str, session_id: str, headers: dict) -> 
     assert dash.status_code == 200, dash.text
     (row,) = [r for r in dash.json()["participants"] if r["session_id"] == session_id]
     return row["last"]
+
+
+def check_two_processes_serve_one_robot(db_url: str, token: str) -> None:
+    """A robot's requests reach two applications on one database (two worker processes),
+    each of which answers from the session's state as it last knew it: when the other one has
+    served the session in the meantime, the answer is still the one a single application
+    gives (the same status and bytes, request by request), and the stored trials are those of
+    a single application."""
+    from fastapi.testclient import TestClient
+
+    from trustseek.server.app import create_app
+
+    policy = {"kind": "never-ask"}  # the robot acts: every observation below is one it allows
+    rely = {"human_action": "rely", "outcome": "success"}
+    steps = [
+        ("a", "decide", {"trial": 1, "complexity": "high"}),
+        ("a", "observe", {"trial": 1, **rely}),
+        ("b", "decide", {"trial": 2, "complexity": "high"}),
+        ("a", "decide", {"trial": 2, "complexity": "low"}),  # 409: decided by the other for "high"
+        ("a", "decide", {"trial": 2, "complexity": "high"}),  # the other's decision
+        ("b", "observe", {"trial": 2, **rely}),
+        ("b", "decide", {"trial": 3, "complexity": "low"}),
+        ("b", "observe", {"trial": 3, "human_action": "intervene"}),
+        ("a", "observe", {"trial": 2, **rely}),  # a retry: the stored trial
+        ("a", "observe", {"trial": 3, "human_action": "intervene"}),
+        ("a", "decide", {"trial": 3, "complexity": "low"}),  # committed
+        ("a", "decide", {"trial": 4, "complexity": "high"}),
+        ("b", "decide", {"trial": 4, "complexity": "high"}),
+        ("a", "observe", {"trial": 4, "human_action": "intervene"}),
+        ("b", "decide", {"trial": 5, "complexity": "low"}),
+        ("a", "observe", {"trial": 5, **rely}),
+    ]
+
+    def run(two: bool) -> tuple[list, dict]:
+        apps = [create_app(db_url, token=token), create_app(db_url, token=token)]
+        with TestClient(apps[0]) as a, TestClient(apps[1] if two else apps[0]) as b:
+            r = a.post("/api/deploy/sessions", json={"policy": policy, "seed": 5}, headers={"Authorization": f"Bearer {token}"})
+            assert r.status_code == 201, r.text
+            sid, h = r.json()["session_id"], {"Authorization": f"Bearer {r.json()['token']}"}
+            out = []
+            for who, what, body in steps:
+                res = (a if who == "a" else b).post(f"/api/deploy/sessions/{sid}/{what}", json=body, headers=h)
+                out.append((res.status_code, res.content))
+            state = a.get(f"/api/deploy/sessions/{sid}", headers=h).json()
+        for app in apps:
+            app.state.deploy_store.close()
+        return out, state
+
+    two, state = run(True)
+    one, ref = run(False)
+    for k, (x, y) in enumerate(zip(two, one, strict=True)):
+        assert x == y, (k, steps[k], x, y)
+    assert [s for s, _ in two] == [200, 200, 200, 409] + [200] * 12, two
+    assert {k: v for k, v in state.items() if k not in ("session_id",)} == {k: v for k, v in ref.items() if k != "session_id"}
+    assert [t["trial"] for t in state["trials"]] == [1, 2, 3, 4, 5]
