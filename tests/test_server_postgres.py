@@ -290,3 +290,53 @@ def _counted(execute, sent: list):
 
 def test_two_server_processes_answer_a_robot_as_one_on_postgresql(pg_url):
     check_two_processes_serve_one_robot(pg_url, TOKEN)
+
+
+def test_a_broken_connection_of_the_conditional_writes_is_replaced(pg_app):
+    from test_server_fastpath import open_session, post
+
+    sid, token = open_session(pg_app)
+    assert post(pg_app, False, sid, token, "decide", {"trial": 1, "complexity": "low"})[0] == 200
+    store = pg_app.state.deploy_store
+    assert len(store._idle) == 1
+    store._idle[0].pgconn.finish()  # the connection breaks
+    status, _, out = post(pg_app, False, sid, token, "observe", {"trial": 1, "human_action": "intervene"})
+    assert status == 200, out
+    assert json.loads(out)["trial"]["trial"] == 1
+    assert post(pg_app, False, sid, token, "decide", {"trial": 2, "complexity": "high"})[0] == 200
+    assert len(store._idle) == 1 and not store._idle[0].closed  # a new one
+
+
+def test_requests_wait_for_a_connection_of_the_conditional_writes(pg_app, monkeypatch):
+    """More robots at once than the connections of the conditional writes: the requests wait
+    for one (no more are opened) and are all answered by a conditional write."""
+    from test_server_concurrency import post as post_async
+    from test_server_fastpath import open_session
+    from trustseek.server import store as store_module
+
+    monkeypatch.setattr(store_module, "ASYNC_CONNECTIONS", 2)
+    robots = [open_session(pg_app, seed=i) for i in range(12)]
+    store = pg_app.state.deploy_store
+
+    def no_transaction():
+        raise AssertionError("a request ran in a transaction")
+
+    monkeypatch.setattr(store, "transaction", no_transaction)
+    waited = []
+    checkout = store._checkout
+
+    async def counted_checkout():
+        waited.append(len(store._waiters))
+        return await checkout()
+
+    monkeypatch.setattr(store, "_checkout", counted_checkout)
+
+    async def decide_all():
+        body = {"trial": 1, "complexity": "low"}
+        return await asyncio.gather(*(post_async(pg_app, f"/api/deploy/sessions/{sid}/decide", body, tok) for sid, tok in robots))
+
+    out = asyncio.run(decide_all())
+    assert [status for status, _ in out] == [200] * 12
+    assert max(waited) > 0  # requests waited
+    assert store._opened == 2 and len(store._idle) == 2 and not store._waiters
+    assert all(store.known[sid].pending_trial == 1 for sid, _ in robots)

@@ -14,7 +14,9 @@ well-formed request that succeeds:
   ``DecideIn`` (without the schedule fields) or ``ObserveIn``, with exactly the types and
   bounds those models accept;
 * the decision (``sessions.deploy_decide`` / ``deploy_observe``, the same functions the routes
-  call, in one committed transaction of ``store.DeployStore``) succeeds.
+  call) succeeds, committed: from the session's state this process knows, with one conditional
+  write (``store.Known``; on PostgreSQL one statement, awaited), or else in one transaction of
+  ``store.DeployStore`` that reads the session.
 
 Anything else -- a malformed or unusual body, another token, a refusal of the session's state,
 a database error -- is rolled back (nothing is written) and handed to the full application

@@ -1,30 +1,42 @@
-"""The deploy sessions' live state on one held database connection, without an ORM.
+"""The deploy sessions' live state on the database driver's own connections, without an ORM.
 
-The decision API is the latency-critical path: each request is one short transaction of a
-handful of statements by primary key.  Going through SQLAlchemy (a pooled connection checked
-out and in, statement compilation-cache lookups, result objects, events) costs several times
-what the database itself spends, so this store runs those statements on the driver's own
-connection (``sqlite3`` or ``psycopg``), held by the process and reused:
+The decision API is the latency-critical path: each request is one short write by primary key.
+Going through SQLAlchemy (a pooled connection checked out and in, statement compilation-cache
+lookups, result objects, events) costs several times what the database itself spends, so this
+store runs its statements on the driver's own connection (``sqlite3`` or ``psycopg``), held by
+the process and reused; the statements are written once per dialect and prepared by the driver
+(``sqlite3`` keeps a per-connection statement cache; ``psycopg`` prepares a statement on the
+server once it has run a few times).
 
-* the statements are written once per dialect and prepared by the driver (``sqlite3`` keeps a
-  per-connection statement cache; ``psycopg`` prepares a statement on the server once it has
-  run a few times);
-* a transaction is ``BEGIN IMMEDIATE`` (SQLite: the write lock is taken at the start, so
-  concurrent requests on one session, from any process, serialize) or a ``SELECT ... FOR
-  UPDATE`` of the session row (PostgreSQL), and is committed before the response is sent: what
-  the server acknowledged is on disk (WAL) and survives a killed process;
-* the session's state is read inside every transaction, never cached: with several worker
-  processes a session's requests may reach any of them, and a primary-key read inside the
-  transaction that is open anyway costs less than any check that a cached copy is current.
-  What never changes (a session's task, model and parsed policy) is cached by ``sessions``.
+A request is answered in one of two ways, both committed before the response is sent (what the
+server acknowledged is in the database's log and survives a killed server process):
 
-A lock serializes the transactions of one process (the event loop runs them one at a time
-anyway; the lock matters only when the application is driven from several threads, as test
-clients do).  A connection that fails is dropped and the next transaction opens a new one.
+* **From the known state** (``Known``), the usual way: the process keeps each session's live
+  columns as it last committed or read them (``DeployStore.known``), computes the answer from
+  them, and makes its one write conditional on the row still holding them
+  (``UPDATE ... WHERE id = ... AND trials_done = ... AND pending_trial ...``).  On PostgreSQL
+  that is one statement per request (an observation's trial is inserted by the same statement,
+  ``WITH advanced AS (UPDATE ... RETURNING id) INSERT ... SELECT ... FROM advanced``), committed
+  by itself, and awaited on the event loop on a few connections of its own (``apply_async``),
+  so the process serves other requests while PostgreSQL works and concurrent commits share
+  PostgreSQL's flushes of its log.  With several worker processes a session's requests may
+  reach any of them: a row another process has moved on fails the condition, nothing is
+  written, and the request runs in a transaction instead.
+* **In a transaction** that reads the row: ``BEGIN IMMEDIATE`` (SQLite: the write lock is taken
+  at the start, so concurrent requests on one session, from any process, serialize) or
+  ``BEGIN`` and ``SELECT ... FOR UPDATE`` of the session row (PostgreSQL), on the held
+  connection: when the process does not know the session or its known state is out of date,
+  and for everything that writes nothing (a repeated request, a refusal).
+
+A lock serializes the use of the held connection (the event loop runs its transactions one at
+a time anyway; the lock matters only when the application is driven from several threads, as
+test clients do).  A connection that fails is dropped and the next use opens a new one.
 """
 
 from __future__ import annotations
 
+import asyncio
+import collections
 import contextlib
 import json
 import threading
@@ -189,7 +201,8 @@ class DeployStore:
         self.known: dict[str, LiveRow] = {}
         self._seen: LiveRow | None = None  # the transaction's session, as it will be after the commit
         self._idle: list[Any] = []  # PostgreSQL: idle connections of apply_async
-        self._opened = 0
+        self._opened = 0  # ... and those in use
+        self._waiters: collections.deque[asyncio.Future] = collections.deque()  # requests waiting for one
 
     def _cursor(self) -> Any:
         if self._cur is None:
@@ -337,19 +350,13 @@ class DeployStore:
 
     async def apply_async(self, w: Write) -> bool:
         """``apply``, awaited on the event loop (PostgreSQL), on one of up to ``ASYNC_CONNECTIONS``
-        connections of its own, so that other requests are served while the database works;
-        on the held connection when the database is SQLite (in process: nothing to wait for)
-        or every such connection is busy."""
+        connections of its own, so that other requests are served while the database works
+        (and commits made at once share PostgreSQL's flushes of its log); when all of them are
+        busy, the request waits for one.  On SQLite, ``apply`` (in process: nothing to wait for)."""
         if self.sqlite:
             return self.apply(w)
-        with self._lock:
-            conn: Any = self._idle.pop() if self._idle else None
-            busy = conn is None and self._opened >= ASYNC_CONNECTIONS
-            if conn is None and not busy:
-                self._opened += 1
-        if busy:
-            return self.apply(w)
         sid = w.params["sid"]
+        conn = await self._checkout()
         try:
             if conn is None:
                 conn = await self._connect_async()
@@ -358,16 +365,51 @@ class DeployStore:
             done = cur.rowcount == 1
         except BaseException:
             self.known.pop(sid, None)
-            with self._lock:
-                self._opened -= 1
             if conn is not None:
                 with contextlib.suppress(Exception):
                     conn.pgconn.finish()
+            self._checkin(None)
             raise
-        with self._lock:
-            self._idle.append(conn)
+        self._checkin(conn)
         self._settle(sid, w.after if done else None)
         return done
+
+    async def _checkout(self) -> Any:
+        """An idle connection of ``apply_async``, or None: open one (a free place)."""
+        with self._lock:
+            if self._idle:
+                return self._idle.pop()
+            if self._opened < ASYNC_CONNECTIONS:
+                self._opened += 1
+                return None
+            waiter = asyncio.get_running_loop().create_future()
+            self._waiters.append(waiter)
+        try:
+            return await waiter
+        except BaseException:  # cancelled
+            with self._lock, contextlib.suppress(ValueError):
+                self._waiters.remove(waiter)
+            if waiter.done() and not waiter.cancelled():  # handed over just before: pass it on
+                self._checkin(waiter.result())
+            raise
+
+    def _checkin(self, conn: Any) -> None:
+        """Give back a connection (None: its place, the connection having been closed) to the
+        first waiting request, else to the idle ones."""
+        with self._lock:
+            if self._waiters:
+                waiter = self._waiters.popleft()
+                waiter.get_loop().call_soon_threadsafe(self._hand, waiter, conn)
+            elif conn is None:
+                self._opened -= 1
+            else:
+                self._idle.append(conn)
+
+    def _hand(self, waiter: asyncio.Future, conn: Any) -> None:
+        if waiter.done():  # the request went away meanwhile: the next one gets it
+            self._checkin(conn)
+        else:
+            waiter.set_result(conn)
 
     async def _connect_async(self) -> Any:
         import psycopg
