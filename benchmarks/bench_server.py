@@ -26,7 +26,7 @@ small against what it measures, and its CPU time per request is printed.
 
 ``--profile`` runs the server under cProfile (its main thread's CPU time) and prints where the
 server's CPU time per request goes: event loop and sockets, HTTP parsing and the ASGI server,
-JSON, the policy, SQLite, the lean path's own code, and the full application (which opens the
+JSON, the policy, the database driver, the lean path's own code, and the full application (which opens the
 sessions).  Profiling slows the server about twice: its latencies are not the figures to quote.
 
     python benchmarks/bench_server.py [--sessions 100] [--trials 10] [--think-ms 1000] [--db URL | --postgres] [--profile]
@@ -204,7 +204,7 @@ CATEGORIES = [
     ("event loop, sockets (uvloop and the kernel)", ("asyncio", "uvloop", "selectors")),
     ("HTTP parsing, ASGI server (uvicorn, httptools)", ("uvicorn", "httptools")),
     ("JSON (json)", ("/json/",)),
-    ("SQLite statements and commits (store)", ("sqlite3", "store.py")),
+    ("database statements and commits (store, sqlite3, psycopg)", ("sqlite3", "store.py", "psycopg")),
     ("policy decision and belief update", ("/policies/", "/pomdp/", "numpy", "/model/")),
     ("lean path: auth, checks, trial record", ("fastpath.py", "sessions.py", "auth.py", "server/app.py", "orm.py")),
     ("full application (opening the sessions)", ("fastapi", "starlette", "sqlalchemy", "pydantic", "routes.py", "middleware.py")),
