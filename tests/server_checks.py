@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import io
 import signal
+import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 import httpx
@@ -180,3 +182,83 @@ def check_two_processes_serve_one_robot(db_url: str, token: str) -> None:
     assert [s for s, _ in two] == [200, 200, 200, 409] + [200] * 12, two
     assert {k: v for k, v in state.items() if k not in ("session_id",)} == {k: v for k, v in ref.items() if k != "session_id"}
     assert [t["trial"] for t in state["trials"]] == [1, 2, 3, 4, 5]
+
+
+def check_acknowledged_trials_survive(db: str, stored, token: str = "durability-token-0123") -> None:
+    """Robots post to a ``trustseek serve`` process on database ``db``, which is killed while
+    their requests are in flight; ``stored(session id)`` reads a session's trials back."""
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    proc = serve_process(db, token, port)
+    try:
+        admin = {"Authorization": f"Bearer {token}"}
+        robots = []
+        for i in range(4):
+            r = httpx.post(
+                f"{url}/api/deploy/sessions", json={"policy": {"kind": "trust-aware", "grid": 51}, "seed": i}, headers=admin
+            )
+            assert r.status_code == 201, r.text
+            robots.append(r.json())
+        acked: dict[str, list] = {r["session_id"]: [] for r in robots}  # (what, trial, answer)
+        stop = threading.Event()
+
+        def robot(info: dict) -> None:
+            h = {"Authorization": f"Bearer {info['token']}"}
+            base = f"{url}/api/deploy/sessions/{info['session_id']}"
+            with httpx.Client(headers=h, timeout=5.0) as c:
+                n = 1
+                while not stop.is_set():
+                    try:
+                        d = c.post(f"{base}/decide", json={"trial": n, "complexity": "high" if n % 3 else "low"})
+                        if d.status_code != 200:
+                            return
+                        acked[info["session_id"]].append(("decide", n, d.json()))
+                        body = (
+                            {"trial": n}
+                            if d.json()["robot_action"] == "ask"
+                            else {"trial": n, "human_action": "rely", "outcome": "success"}
+                        )
+                        o = c.post(f"{base}/observe", json=body)
+                        if o.status_code != 200:
+                            return
+                        acked[info["session_id"]].append(("observe", n, o.json()))
+                    except httpx.TransportError:  # the server is gone
+                        return
+                    n += 1
+
+        threads = [threading.Thread(target=robot, args=(r,)) for r in robots]
+        for t in threads:
+            t.start()
+        deadline = time.monotonic() + 30
+        while sum(len(v) for v in acked.values()) < 60 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        proc.send_signal(signal.SIGKILL)  # requests in flight
+        proc.wait(timeout=10)
+        stop.set()
+        for t in threads:
+            t.join(timeout=10)
+        assert sum(len(v) for v in acked.values()) >= 20
+        proc = serve_process(db, token, port)
+        for info in robots:
+            sid = info["session_id"]
+            rows = stored(sid)
+            done = [n for what, n, _ in acked[sid] if what == "observe"]
+            assert set(done) <= set(rows)  # every acknowledged trial is stored (once: the primary key)
+            assert sorted(rows) == list(range(1, len(rows) + 1))
+            for what, n, out in acked[sid]:
+                if what == "observe":
+                    t = out["trial"]
+                    assert {k: rows[n][k] for k in t} == t
+            last = acked[sid][-1] if acked[sid] else None
+            if last is not None and last[0] == "decide" and last[1] not in rows:
+                # an acknowledged decision without its observation: answered again as it was
+                r = httpx.post(
+                    f"{url}/api/deploy/sessions/{sid}/decide",
+                    json={"trial": last[1], "complexity": last[2]["complexity"]},
+                    headers={"Authorization": f"Bearer {info['token']}"},
+                )
+                assert r.status_code == 200 and r.json() == last[2]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(timeout=10)

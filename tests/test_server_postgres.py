@@ -23,6 +23,7 @@ from fastapi.testclient import TestClient
 from sqlalchemy import create_engine, text
 
 from server_checks import (
+    check_acknowledged_trials_survive,
     check_concurrent_duplicate_submissions,
     check_policies_decide_after_restart,
     check_two_processes_serve_one_robot,
@@ -340,3 +341,19 @@ def test_requests_wait_for_a_connection_of_the_conditional_writes(pg_app, monkey
     assert max(waited) > 0  # requests waited
     assert store._opened == 2 and len(store._idle) == 2 and not store._waiters
     assert all(store.known[sid].pending_trial == 1 for sid, _ in robots)
+
+
+def test_acknowledged_trials_survive_a_killed_server_on_postgresql(pg_url):
+    """``tests/test_server_durability.py`` on PostgreSQL: acknowledged decisions and trials are
+    committed (one statement each, committed by itself) before the answer."""
+    engine = create_engine(pg_url.replace("postgresql://", "postgresql+psycopg://"))
+
+    def stored(sid: str) -> dict[int, dict]:
+        with engine.connect() as c:
+            rows = c.execute(text("SELECT * FROM trials WHERE session_id = :sid"), {"sid": sid}).mappings()
+            return {r["trial"]: dict(r) for r in rows}
+
+    try:
+        check_acknowledged_trials_survive(pg_url, stored, TOKEN)
+    finally:
+        engine.dispose()

@@ -46,6 +46,8 @@ from typing import Any, NamedTuple, Protocol
 
 from sqlalchemy.engine import Engine
 
+from ..errors import TrustseekError
+
 
 class LiveRow(NamedTuple):
     """A deploy session's live columns (``belief`` as a list)."""
@@ -157,9 +159,10 @@ class Statements(Protocol):
     def policy(self, sha: str) -> dict[str, Any]: ...
 
 
-class Stale(Exception):
+class Stale(TrustseekError):
     """The state this process knows of a session cannot answer the request by a conditional
-    write alone: the request runs in a transaction that reads the session instead."""
+    write alone: the request runs in a transaction that reads the session instead (never seen
+    by a client)."""
 
 
 class Write(NamedTuple):
@@ -448,17 +451,17 @@ class Known:
     def live(self, sid: str) -> LiveRow | None:
         row = self.row = self.store.known.get(sid)
         if row is None:
-            raise Stale(sid)
+            raise Stale(f"session {sid}: not known here")
         return row
 
     def committed(self, sid: str, n: int) -> TrialRow | None:
-        raise Stale(sid)
+        raise Stale(f"session {sid}: answered only after a read")
 
     def plan(self, sid: str) -> dict[str, Any] | None:
-        raise Stale(sid)
+        raise Stale(f"session {sid}: answered only after a read")
 
     def policy(self, sha: str) -> dict[str, Any]:
-        raise Stale(sha)
+        raise Stale(f"policy {sha}: answered only after a read")
 
     def decided(self, sid: str, n: int, complexity: str, action: str, now: datetime) -> None:
         row = self.row
