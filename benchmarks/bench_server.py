@@ -26,7 +26,7 @@ small against what it measures, and its CPU time per request is printed.
 
 ``--profile`` runs the server under cProfile (its main thread's CPU time) and prints where the
 server's CPU time per request goes: event loop and sockets, HTTP parsing and the ASGI server,
-JSON, the policy, SQLite, the lean path's own code, and the full application (which opens the
+JSON, the policy, the database driver, the lean path's own code, and the full application (which opens the
 sessions).  Profiling slows the server about twice: its latencies are not the figures to quote.
 
     python benchmarks/bench_server.py [--sessions 100] [--trials 10] [--think-ms 1000] [--db URL | --postgres] [--profile]
@@ -122,11 +122,19 @@ async def run_session(port: int, info: dict, trials: int, think: float, seed: in
 
 
 async def load(
-    port: int, sessions: int, trials: int, think: float, policy: dict, first_seed: int = 0, pid: int | None = None
-) -> tuple[list, list, float, list, float, float]:
+    port: int,
+    sessions: int,
+    trials: int,
+    think: float,
+    policy: dict,
+    first_seed: int = 0,
+    pid: int | None = None,
+    db_pid: int | None = None,
+) -> tuple[list, list, float, list, float, float, float]:
     """Open the sessions, then run them concurrently: (client latencies, server latencies, wall
-    time, session ids, server CPU seconds (process ``pid`` and its children) and this process's
-    CPU seconds while they ran)."""
+    time, session ids, server CPU seconds (process ``pid`` and its children), this process's
+    CPU seconds and the database's (PostgreSQL: the postmaster ``db_pid`` and its backends)
+    while they ran)."""
     admin = await Conn(port, TOKEN).open()
     infos = []
     for i in range(sessions):
@@ -140,13 +148,15 @@ async def load(
     lat: list[float] = []
     srv: list[float] = []
     cpu0 = server_cpu(pid) if pid is not None else 0.0
+    db0 = server_cpu(db_pid) if db_pid is not None else 0.0
     own0 = time.process_time()
     t0 = time.perf_counter()
     await asyncio.gather(*(run_session(port, info, trials, think, first_seed + i, lat, srv) for i, info in enumerate(infos)))
     wall = time.perf_counter() - t0
     cpu = server_cpu(pid) - cpu0 if pid is not None else float("nan")
     own = time.process_time() - own0
-    return lat, srv, wall, [i["session_id"] for i in infos], cpu, own
+    db = server_cpu(db_pid) - db0 if db_pid is not None else float("nan")
+    return lat, srv, wall, [i["session_id"] for i in infos], cpu, own, db
 
 
 def pct(x: list[float], q: float) -> float:
@@ -194,7 +204,7 @@ CATEGORIES = [
     ("event loop, sockets (uvloop and the kernel)", ("asyncio", "uvloop", "selectors")),
     ("HTTP parsing, ASGI server (uvicorn, httptools)", ("uvicorn", "httptools")),
     ("JSON (json)", ("/json/",)),
-    ("SQLite statements and commits (store)", ("sqlite3", "store.py")),
+    ("database statements and commits (store, sqlite3, psycopg)", ("sqlite3", "store.py", "psycopg")),
     ("policy decision and belief update", ("/policies/", "/pomdp/", "numpy", "/model/")),
     ("lean path: auth, checks, trial record", ("fastpath.py", "sessions.py", "auth.py", "server/app.py", "orm.py")),
     ("full application (opening the sessions)", ("fastapi", "starlette", "sqlalchemy", "pydantic", "routes.py", "middleware.py")),
@@ -273,10 +283,19 @@ def floor_process(port: int) -> subprocess.Popen:
     return proc
 
 
-def measure(url: str, src: Path | None, args, levels: list[int], policy: dict, seed0: int, profile: Path | None = None) -> dict:
+def measure(
+    url: str,
+    src: Path | None,
+    args,
+    levels: list[int],
+    policy: dict,
+    seed0: int,
+    profile: Path | None = None,
+    db_pid: int | None = None,
+) -> dict:
     """Start a server (from ``src`` when given, else this checkout; under the profiler when
     ``profile`` names the statistics file) and run the baselines and each level of concurrent
-    sessions against it."""
+    sessions against it (``db_pid``: the PostgreSQL cluster's postmaster, whose CPU is counted)."""
     port = free_port()
     env = os.environ.get("PYTHONPATH")
     if src is not None:
@@ -302,8 +321,17 @@ def measure(url: str, src: Path | None, args, levels: list[int], policy: dict, s
         )[:2]
         for k, n in enumerate(levels):
             load_before = os.getloadavg()[0]
-            lat, srv, wall, ids, cpu, own = asyncio.run(
-                load(port, n, args.trials, args.think_ms / 1000, policy, first_seed=seed0 + 100 + k * 100_000, pid=proc.pid)
+            lat, srv, wall, ids, cpu, own, db = asyncio.run(
+                load(
+                    port,
+                    n,
+                    args.trials,
+                    args.think_ms / 1000,
+                    policy,
+                    first_seed=seed0 + 100 + k * 100_000,
+                    pid=proc.pid,
+                    db_pid=db_pid,
+                )
             )
             out["levels"][n] = {
                 "lat": lat,
@@ -312,6 +340,7 @@ def measure(url: str, src: Path | None, args, levels: list[int], policy: dict, s
                 "ids": ids,
                 "cpu": cpu,
                 "client_cpu": own,
+                "db_cpu": db,
                 "load": (load_before, os.getloadavg()[0]),
             }
     finally:
@@ -346,6 +375,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--db", default=None, help="database URL (default: a SQLite file in a temporary directory)")
     ap.add_argument("--workers", type=int, default=1, help="server processes (trustseek serve --workers)")
     ap.add_argument("--postgres", action="store_true", help="run on a throwaway PostgreSQL cluster (Debian's postgresql package)")
+    ap.add_argument(
+        "--pg-fsync",
+        action="store_true",
+        help="the throwaway cluster with fsync on, as a real database runs (by default off: its commits do not wait for the disk)",
+    )
     ap.add_argument(
         "--baseline-rev",
         default=None,
@@ -385,14 +419,18 @@ def main(argv: list[str] | None = None) -> int:
         if args.profile:
             variants.append(("this checkout, profiled", None))
         for k, (name, src) in enumerate(variants):
+            db_pid = None
             if name == FLOOR:
                 url = FLOOR
             elif args.postgres:
-                url = stack.enter_context(TemporaryPostgres())
+                cluster = TemporaryPostgres(fsync=args.pg_fsync)
+                url = stack.enter_context(cluster)
+                assert cluster.root is not None
+                db_pid = int((cluster.root / "data" / "postmaster.pid").read_text().split()[0])
             else:
                 url = args.db or f"sqlite:///{Path(d) / f'bench-{k}.sqlite'}"
             prof = Path(d) / "server.prof" if name.endswith("profiled") else None
-            res = measure(url, src, args, levels, policy, seed0=10**6 * (k + 1), profile=prof)
+            res = measure(url, src, args, levels, policy, seed0=10**6 * (k + 1), profile=prof, db_pid=db_pid)
             if prof is not None:
                 served = sum(len(r["lat"]) * 2 for r in res["levels"].values()) + 2 * (5 + 2 * args.baseline_trials)
                 res["split"] = cpu_split(prof, served)
@@ -432,7 +470,9 @@ def main(argv: list[str] | None = None) -> int:
                 f"server p50 {pct(srv, 50):5.2f} ms  p99 {pct(srv, 99):6.2f} ms"
             )
             print(
-                f"  {'':<30} {2 * total / r['wall']:.0f} requests/s, CPU per request: server {r['cpu'] / (2 * total) * 1000:.2f} ms, load generator {r['client_cpu'] / (2 * total) * 1000:.2f} ms; "
+                f"  {'':<30} {2 * total / r['wall']:.0f} requests/s, CPU per request: server {r['cpu'] / (2 * total) * 1000:.2f} ms, load generator {r['client_cpu'] / (2 * total) * 1000:.2f} ms"
+                + ("" if r["db_cpu"] != r["db_cpu"] else f", PostgreSQL {r['db_cpu'] / (2 * total) * 1000:.2f} ms")
+                + "; "
                 f"p99 < 10 ms {'met' if pct(lat, 99) < 10 else 'NOT met'}; load average {r['load'][0]:.2f} before, {r['load'][1]:.2f} after"
                 + (
                     ""

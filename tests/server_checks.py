@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import io
 import signal
+import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 import httpx
@@ -125,3 +127,138 @@ def experimenter_view(client, study_id: str, session_id: str, headers: dict) -> 
     assert dash.status_code == 200, dash.text
     (row,) = [r for r in dash.json()["participants"] if r["session_id"] == session_id]
     return row["last"]
+
+
+def check_two_processes_serve_one_robot(db_url: str, token: str) -> None:
+    """A robot's requests reach two applications on one database (two worker processes),
+    each of which answers from the session's state as it last knew it: when the other one has
+    served the session in the meantime, the answer is still the one a single application
+    gives (the same status and bytes, request by request), and the stored trials are those of
+    a single application."""
+    from fastapi.testclient import TestClient
+
+    from trustseek.server.app import create_app
+
+    policy = {"kind": "never-ask"}  # the robot acts: every observation below is one it allows
+    rely = {"human_action": "rely", "outcome": "success"}
+    steps = [
+        ("a", "decide", {"trial": 1, "complexity": "high"}),
+        ("a", "observe", {"trial": 1, **rely}),
+        ("b", "decide", {"trial": 2, "complexity": "high"}),
+        ("a", "decide", {"trial": 2, "complexity": "low"}),  # 409: decided by the other for "high"
+        ("a", "decide", {"trial": 2, "complexity": "high"}),  # the other's decision
+        ("b", "observe", {"trial": 2, **rely}),
+        ("b", "decide", {"trial": 3, "complexity": "low"}),
+        ("b", "observe", {"trial": 3, "human_action": "intervene"}),
+        ("a", "observe", {"trial": 2, **rely}),  # a retry: the stored trial
+        ("a", "observe", {"trial": 3, "human_action": "intervene"}),
+        ("a", "decide", {"trial": 3, "complexity": "low"}),  # committed
+        ("a", "decide", {"trial": 4, "complexity": "high"}),
+        ("b", "decide", {"trial": 4, "complexity": "high"}),
+        ("a", "observe", {"trial": 4, "human_action": "intervene"}),
+        ("b", "decide", {"trial": 5, "complexity": "low"}),
+        ("a", "observe", {"trial": 5, **rely}),
+    ]
+
+    def run(two: bool) -> tuple[list, dict]:
+        apps = [create_app(db_url, token=token), create_app(db_url, token=token)]
+        with TestClient(apps[0]) as a, TestClient(apps[1] if two else apps[0]) as b:
+            r = a.post("/api/deploy/sessions", json={"policy": policy, "seed": 5}, headers={"Authorization": f"Bearer {token}"})
+            assert r.status_code == 201, r.text
+            sid, h = r.json()["session_id"], {"Authorization": f"Bearer {r.json()['token']}"}
+            out = []
+            for who, what, body in steps:
+                res = (a if who == "a" else b).post(f"/api/deploy/sessions/{sid}/{what}", json=body, headers=h)
+                out.append((res.status_code, res.content))
+            state = a.get(f"/api/deploy/sessions/{sid}", headers=h).json()
+        for app in apps:
+            app.state.deploy_store.close()
+        return out, state
+
+    two, state = run(True)
+    one, ref = run(False)
+    for k, (x, y) in enumerate(zip(two, one, strict=True)):
+        assert x == y, (k, steps[k], x, y)
+    assert [s for s, _ in two] == [200, 200, 200, 409] + [200] * 12, two
+    assert {k: v for k, v in state.items() if k not in ("session_id",)} == {k: v for k, v in ref.items() if k != "session_id"}
+    assert [t["trial"] for t in state["trials"]] == [1, 2, 3, 4, 5]
+
+
+def check_acknowledged_trials_survive(db: str, stored, token: str = "durability-token-0123") -> None:
+    """Robots post to a ``trustseek serve`` process on database ``db``, which is killed while
+    their requests are in flight; ``stored(session id)`` reads a session's trials back."""
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    proc = serve_process(db, token, port)
+    try:
+        admin = {"Authorization": f"Bearer {token}"}
+        robots = []
+        for i in range(4):
+            r = httpx.post(
+                f"{url}/api/deploy/sessions", json={"policy": {"kind": "trust-aware", "grid": 51}, "seed": i}, headers=admin
+            )
+            assert r.status_code == 201, r.text
+            robots.append(r.json())
+        acked: dict[str, list] = {r["session_id"]: [] for r in robots}  # (what, trial, answer)
+        stop = threading.Event()
+
+        def robot(info: dict) -> None:
+            h = {"Authorization": f"Bearer {info['token']}"}
+            base = f"{url}/api/deploy/sessions/{info['session_id']}"
+            with httpx.Client(headers=h, timeout=5.0) as c:
+                n = 1
+                while not stop.is_set():
+                    try:
+                        d = c.post(f"{base}/decide", json={"trial": n, "complexity": "high" if n % 3 else "low"})
+                        if d.status_code != 200:
+                            return
+                        acked[info["session_id"]].append(("decide", n, d.json()))
+                        body = (
+                            {"trial": n}
+                            if d.json()["robot_action"] == "ask"
+                            else {"trial": n, "human_action": "rely", "outcome": "success"}
+                        )
+                        o = c.post(f"{base}/observe", json=body)
+                        if o.status_code != 200:
+                            return
+                        acked[info["session_id"]].append(("observe", n, o.json()))
+                    except httpx.TransportError:  # the server is gone
+                        return
+                    n += 1
+
+        threads = [threading.Thread(target=robot, args=(r,)) for r in robots]
+        for t in threads:
+            t.start()
+        deadline = time.monotonic() + 30
+        while sum(len(v) for v in acked.values()) < 60 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        proc.send_signal(signal.SIGKILL)  # requests in flight
+        proc.wait(timeout=10)
+        stop.set()
+        for t in threads:
+            t.join(timeout=10)
+        assert sum(len(v) for v in acked.values()) >= 20
+        proc = serve_process(db, token, port)
+        for info in robots:
+            sid = info["session_id"]
+            rows = stored(sid)
+            done = [n for what, n, _ in acked[sid] if what == "observe"]
+            assert set(done) <= set(rows)  # every acknowledged trial is stored (once: the primary key)
+            assert sorted(rows) == list(range(1, len(rows) + 1))
+            for what, n, out in acked[sid]:
+                if what == "observe":
+                    t = out["trial"]
+                    assert {k: rows[n][k] for k in t} == t
+            last = acked[sid][-1] if acked[sid] else None
+            if last is not None and last[0] == "decide" and last[1] not in rows:
+                # an acknowledged decision without its observation: answered again as it was
+                r = httpx.post(
+                    f"{url}/api/deploy/sessions/{sid}/decide",
+                    json={"trial": last[1], "complexity": last[2]["complexity"]},
+                    headers={"Authorization": f"Bearer {info['token']}"},
+                )
+                assert r.status_code == 200 and r.json() == last[2]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait(timeout=10)

@@ -12,6 +12,7 @@ from fastapi import FastAPI
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from server_checks import check_two_processes_serve_one_robot
 from trustseek.server.app import ServerApp, create_app
 
 TOKEN = "fast-path-experimenter-token"
@@ -197,3 +198,7 @@ def test_a_broken_connection_is_replaced(app):
     assert status == 200, out
     assert json.loads(out)["trial"]["trial"] == 1
     assert post(app, False, sid, token, "decide", {"trial": 2, "complexity": "high"})[0] == 200
+
+
+def test_two_applications_on_one_database_answer_as_one(tmp_path):
+    check_two_processes_serve_one_robot(f"sqlite:///{tmp_path / 'two.sqlite'}", TOKEN)

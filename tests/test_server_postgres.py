@@ -12,7 +12,9 @@ Debian's ``postgresql`` package when run as root).
 
 from __future__ import annotations
 
+import asyncio
 import io
+import json
 
 import numpy as np
 import pandas as pd
@@ -20,7 +22,13 @@ import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import create_engine, text
 
-from server_checks import check_concurrent_duplicate_submissions, check_policies_decide_after_restart, experimenter_view
+from server_checks import (
+    check_acknowledged_trials_survive,
+    check_concurrent_duplicate_submissions,
+    check_policies_decide_after_restart,
+    check_two_processes_serve_one_robot,
+    experimenter_view,
+)
 from trustseek import BayesUpdate, paper_model, paper_task, solve
 from trustseek.client import Client, DeploySession
 from trustseek.data.trials import read_trials
@@ -47,6 +55,16 @@ def pg_url(request):
 @pytest.fixture(scope="module")
 def app(pg_url):
     return create_app(pg_url, token=TOKEN)
+
+
+@pytest.fixture
+def pg_app(pg_url):
+    """An application of the lean path's tests (``test_server_fastpath``'s token)."""
+    from test_server_fastpath import TOKEN as FAST_TOKEN
+
+    app = create_app(pg_url, token=FAST_TOKEN)
+    yield app
+    app.state.deploy_store.close()
 
 
 def test_migrations_create_the_schema_and_rerun_as_a_no_op(pg_url, app):
@@ -219,3 +237,123 @@ def _deploy_step(robot, pol, upd, task, b, cx, human, outcome):
     b = upd.update(b, c, ACTIONS.index(a), 0 if a == "ask" or human == "intervene" else 1, e)
     assert belief == pytest.approx(b[1], abs=1e-12)
     return b, human, outcome
+
+
+def test_each_decision_and_observation_is_one_statement_on_postgresql(pg_app, monkeypatch):
+    """After a session is opened, the lean path answers each new decision and observation with
+    one statement sent to PostgreSQL (a write conditional on the session's row, committed by
+    itself), and with the full application's bytes; repeats are answered from the database."""
+    import psycopg
+
+    from test_server_fastpath import Counting, open_session, post
+
+    sent = []
+    for cls in (psycopg.Cursor, psycopg.AsyncCursor):
+        monkeypatch.setattr(cls, "execute", _counted(cls.execute, sent))
+    lean, full = open_session(pg_app), open_session(pg_app)
+    counting = Counting(pg_app)
+    for n in range(1, 6):
+        d = {"trial": n, "complexity": "high" if n % 2 else "low"}
+        sent.clear()
+        a = post(pg_app, False, *lean, "decide", d)
+        assert len(sent) == 1 and sent[0].startswith("UPDATE sessions"), sent
+        assert a == post(pg_app, True, *full, "decide", d) and a[0] == 200
+        o = (
+            {"trial": n}
+            if json.loads(a[2])["robot_action"] == "ask"
+            else {"trial": n, "human_action": "rely", "outcome": "success"}
+        )
+        sent.clear()
+        a = post(pg_app, False, *lean, "observe", o)
+        assert len(sent) == 1 and sent[0].startswith("WITH advanced AS (UPDATE sessions"), sent
+        assert a == post(pg_app, True, *full, "observe", o) and a[0] == 200
+        sent.clear()
+        again = post(pg_app, False, *lean, "observe", o)  # a repeat: read in a transaction
+        assert json.loads(again[2])["duplicate"] is True and len(sent) > 1
+    assert counting.calls == 0
+
+
+def _counted(execute, sent: list):
+    if asyncio.iscoroutinefunction(execute):
+
+        async def counted_async(self, query, *args, **kwargs):
+            sent.append(str(query))
+            return await execute(self, query, *args, **kwargs)
+
+        return counted_async
+
+    def counted(self, query, *args, **kwargs):
+        sent.append(str(query))
+        return execute(self, query, *args, **kwargs)
+
+    return counted
+
+
+def test_two_server_processes_answer_a_robot_as_one_on_postgresql(pg_url):
+    check_two_processes_serve_one_robot(pg_url, TOKEN)
+
+
+def test_a_broken_connection_of_the_conditional_writes_is_replaced(pg_app):
+    from test_server_fastpath import open_session, post
+
+    sid, token = open_session(pg_app)
+    assert post(pg_app, False, sid, token, "decide", {"trial": 1, "complexity": "low"})[0] == 200
+    store = pg_app.state.deploy_store
+    assert len(store._idle) == 1
+    store._idle[0].pgconn.finish()  # the connection breaks
+    status, _, out = post(pg_app, False, sid, token, "observe", {"trial": 1, "human_action": "intervene"})
+    assert status == 200, out
+    assert json.loads(out)["trial"]["trial"] == 1
+    assert post(pg_app, False, sid, token, "decide", {"trial": 2, "complexity": "high"})[0] == 200
+    assert len(store._idle) == 1 and not store._idle[0].closed  # a new one
+
+
+def test_requests_wait_for_a_connection_of_the_conditional_writes(pg_app, monkeypatch):
+    """More robots at once than the connections of the conditional writes: the requests wait
+    for one (no more are opened) and are all answered by a conditional write."""
+    from test_server_concurrency import post as post_async
+    from test_server_fastpath import open_session
+    from trustseek.server import store as store_module
+
+    monkeypatch.setattr(store_module, "ASYNC_CONNECTIONS", 2)
+    robots = [open_session(pg_app, seed=i) for i in range(12)]
+    store = pg_app.state.deploy_store
+
+    def no_transaction():
+        raise AssertionError("a request ran in a transaction")
+
+    monkeypatch.setattr(store, "transaction", no_transaction)
+    waited = []
+    checkout = store._checkout
+
+    async def counted_checkout():
+        waited.append(len(store._waiters))
+        return await checkout()
+
+    monkeypatch.setattr(store, "_checkout", counted_checkout)
+
+    async def decide_all():
+        body = {"trial": 1, "complexity": "low"}
+        return await asyncio.gather(*(post_async(pg_app, f"/api/deploy/sessions/{sid}/decide", body, tok) for sid, tok in robots))
+
+    out = asyncio.run(decide_all())
+    assert [status for status, _ in out] == [200] * 12
+    assert max(waited) > 0  # requests waited
+    assert store._opened == 2 and len(store._idle) == 2 and not store._waiters
+    assert all(store.known[sid].pending_trial == 1 for sid, _ in robots)
+
+
+def test_acknowledged_trials_survive_a_killed_server_on_postgresql(pg_url):
+    """``tests/test_server_durability.py`` on PostgreSQL: acknowledged decisions and trials are
+    committed (one statement each, committed by itself) before the answer."""
+    engine = create_engine(pg_url.replace("postgresql://", "postgresql+psycopg://"))
+
+    def stored(sid: str) -> dict[int, dict]:
+        with engine.connect() as c:
+            rows = c.execute(text("SELECT * FROM trials WHERE session_id = :sid"), {"sid": sid}).mappings()
+            return {r["trial"]: dict(r) for r in rows}
+
+    try:
+        check_acknowledged_trials_survive(pg_url, stored, TOKEN)
+    finally:
+        engine.dispose()

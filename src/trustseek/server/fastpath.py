@@ -14,7 +14,9 @@ well-formed request that succeeds:
   ``DecideIn`` (without the schedule fields) or ``ObserveIn``, with exactly the types and
   bounds those models accept;
 * the decision (``sessions.deploy_decide`` / ``deploy_observe``, the same functions the routes
-  call, in one committed transaction of ``store.DeployStore``) succeeds.
+  call) succeeds, committed: from the session's state this process knows, with one conditional
+  write (``store.Known``; on PostgreSQL one statement, awaited), or else in one transaction of
+  ``store.DeployStore`` that reads the session.
 
 Anything else -- a malformed or unusual body, another token, a refusal of the session's state,
 a database error -- is rolled back (nothing is written) and handed to the full application
@@ -29,12 +31,14 @@ import json
 import logging
 import secrets
 import time
+from collections.abc import Callable
 from typing import Any
 
 from .auth import Caller, caller_for_token
 from .middleware import SESSION_BODY_LIMIT, ASGIApp, Message, Receive, Scope, Send
 from .schemas import MAX_TRIAL
 from .sessions import SessionError, deploy_decide, deploy_observe
+from .store import Known, Stale, Statements
 
 log = logging.getLogger(__name__)
 
@@ -102,7 +106,7 @@ class DeployFastPath:
             if not message.get("more_body"):
                 break
         body = b"".join(chunks)
-        out = answer(scope["app"].state, caller.id, what, body)
+        out = await answer(scope["app"].state, caller.id, what, body)
         if out is not None:
             timing = b"app;dur=%.3f" % ((time.perf_counter() - t0) * 1000)
             head = [(b"content-length", b"%d" % len(out)), _JSON, (b"server-timing", timing)]
@@ -152,31 +156,58 @@ def _caller(scope: Scope, sid: str) -> Caller | None:
     return caller
 
 
-def answer(state: Any, sid: str, what: str, raw: bytes) -> bytes | None:
+async def answer(state: Any, sid: str, what: str, raw: bytes) -> bytes | None:
     """The response body of a request this path answers (``what`` is ``decide`` or
-    ``observe`` of deploy session ``sid``, whose token the request carries), or None to hand it on."""
+    ``observe`` of deploy session ``sid``, whose token the request carries), or None to hand it on.
+
+    First from the session's state as this process knows it, with one conditional write
+    (``store.Known``: one statement on PostgreSQL, awaited on the event loop); when that cannot
+    answer, in a transaction that reads the session (``store.DeployStore.transaction``)."""
     try:
         body = json.loads(raw)
     except ValueError:
         return None
     if type(body) is not dict:
         return None
+    run = _request(what, sid, body)
+    if run is None:
+        return None
+    store = state.deploy_store
     try:
-        if what == "decide":
-            args = _decide_args(body)
-            if args is None:
-                return None
-            with state.deploy_store.transaction() as tx:
-                out = deploy_decide(tx, sid, args[0], args[1])
+        known = Known(store)
+        out = run(known)
+        if known.write is not None and await store.apply_async(known.write):
             return _dump(out)
-        oargs = _observe_args(body)
-        if oargs is None:
-            return None
-        with state.deploy_store.transaction() as tx:
-            t, dup = deploy_observe(tx, sid, *oargs)
-        return _dump({"trial": t, "duplicate": dup, "belief": t["belief_after"]})
+    except (Stale, SessionError):
+        pass  # the transaction below reads the session
+    except Exception as exc:
+        log.debug("deploy %s of session %s: conditional write failed: %s: %s", what, sid, type(exc).__name__, exc)
+    try:
+        with store.transaction() as tx:
+            out = run(tx)
+        return _dump(out)
     except SessionError:
         return None  # rolled back: the full application answers the refusal
     except Exception as exc:
         log.debug("deploy %s of session %s handed to the full application: %s: %s", what, sid, type(exc).__name__, exc)
         return None
+
+
+def _request(what: str, sid: str, body: dict[str, Any]) -> Callable[[Statements], dict[str, Any]] | None:
+    """The request as a function of the statements it runs with, or None when the body is one
+    this path does not answer."""
+    if what == "decide":
+        args = _decide_args(body)
+        if args is None:
+            return None
+        n, complexity = args
+        return lambda tx: deploy_decide(tx, sid, n, complexity)
+    oargs = _observe_args(body)
+    if oargs is None:
+        return None
+
+    def observe(tx: Statements) -> dict[str, Any]:
+        t, dup = deploy_observe(tx, sid, *oargs)
+        return {"trial": t, "duplicate": dup, "belief": t["belief_after"]}
+
+    return observe

@@ -41,6 +41,7 @@ from .sessions import (
     total_trials,
     trial_dict,
 )
+from .store import LiveRow
 from .studies import ConfigError, StudyIn, build_study_config, load_model_spec, load_task_spec, resolve_policy
 
 log = logging.getLogger(__name__)
@@ -454,6 +455,9 @@ def open_deploy(body: DeployIn, request: Request):
         # this process answers the session's first requests without reading it back
         remember_token(request.app.state, s.token, Caller(s.id, s.kind))
         remember_deploy(s, task, model)
+        request.app.state.deploy_store.remember(
+            LiveRow(s.id, s.kind, s.seed, list(s.belief), s.trials_done, s.score, None, None, None)
+        )
         log.info("deploy session %s opened: %s policy", s.id, policy["kind"])
         return {
             "session_id": s.id,

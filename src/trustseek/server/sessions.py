@@ -37,7 +37,7 @@ from ..policies import PolicyError, PolicyRunner
 from ..policies.schedule import SchedulePolicy
 from ..pomdp.belief import make_updater
 from .orm import Answer, Event, EventBatch, PolicyBlob, Report, Session, Study, Trial, utcnow
-from .store import DeployStore, LiveRow, TrialRow
+from .store import LiveRow, Statements, TrialRow
 from .studies import block_items, participant_plan, policy_object
 
 log = logging.getLogger(__name__)
@@ -661,18 +661,19 @@ def add_events(db: DBSession, s: Session, events: list[dict], batch: str | None 
 #
 # The decision API is the latency-critical path, so it runs on the driver's own connection
 # (``store.DeployStore``): a locked read of the session's live columns, then one UPDATE (decide)
-# or one INSERT and one UPDATE (observe), in one transaction.  The task, model and parsed policy
-# of a session are cached per process (they never change).
+# or one INSERT and one UPDATE (observe), in one transaction; or, from the live columns this
+# process knows, the same write made conditional on the row being unchanged (``store.Known``).
+# The task, model and parsed policy of a session are cached per process (they never change).
 
 
-def _live(store: DeployStore, session_id: str) -> LiveRow:
+def _live(store: Statements, session_id: str) -> LiveRow:
     row = store.live(session_id)
     if row is None:
         raise SessionError(404, "no such session")
     return row
 
 
-def committed_trial(store: DeployStore, session_id: str, n: int) -> TrialRow | None:
+def committed_trial(store: Statements, session_id: str, n: int) -> TrialRow | None:
     return store.committed(session_id, n)
 
 
@@ -716,15 +717,15 @@ class DeployPlan:
         self._decided: dict[tuple, int] = {}
         self._updated: dict[tuple, list[float]] = {}
 
-    def context(self, store: DeployStore) -> Context:
+    def context(self, store: Statements) -> Context:
         return Context(self.task, self.model, [self.kind], [self.key], lambda b: store.policy(self.sha), None)
 
-    def policy(self, store: DeployStore) -> Any:
+    def policy(self, store: Statements) -> Any:
         if self._policy is None:
             self._policy = policy_object(self.key, lambda: store.policy(self.sha))
         return self._policy
 
-    def decide(self, store: DeployStore, belief: list, seed: int, n: int, complexity: str) -> str:
+    def decide(self, store: Statements, belief: list, seed: int, n: int, complexity: str) -> str:
         """The action of ``PolicyRunner(policy, belief, rng=default_rng([seed, n, 0])).decide``."""
         key = (tuple(belief), complexity)
         a = self._decided.get(key)
@@ -738,7 +739,7 @@ class DeployPlan:
                 self._decided[key] = a
         return ACTIONS[a]
 
-    def update(self, store: DeployStore, belief: list, complexity: str, action: str, human: str, experience: str) -> list | None:
+    def update(self, store: Statements, belief: list, complexity: str, action: str, human: str, experience: str) -> list | None:
         """The belief after a trial, as ``PolicyRunner.observe`` updates it (None: the policy
         tracks no belief)."""
         key = (tuple(belief), complexity, action, human, experience)
@@ -788,7 +789,7 @@ def _remember(session_id: str, plan: DeployPlan) -> DeployPlan:
     return plan
 
 
-def deploy_plan(store: DeployStore, session_id: str) -> DeployPlan:
+def deploy_plan(store: Statements, session_id: str) -> DeployPlan:
     """The deploy session's plan (read from the database once per process)."""
     plan = _DEPLOY_PLANS.get(session_id)
     if plan is None:
@@ -816,7 +817,7 @@ def remember_deploy(s: Session, task: Task, model: TrustModel) -> None:
     _remember(s.id, _shared_plan(key, lambda: DeployPlan(task, model, p["policy_kind"], p["policy_sha256"])))
 
 
-def deploy_context(store: DeployStore, session_id: str) -> Context:
+def deploy_context(store: Statements, session_id: str) -> Context:
     return deploy_plan(store, session_id).context(store)
 
 
@@ -852,7 +853,7 @@ def _scheduled(ctx: Context, belief, complexity: str | None, remaining, visible)
 
 
 def deploy_decide(
-    store: DeployStore,
+    store: Statements,
     session_id: str,
     n: int,
     complexity: str | None,
@@ -911,7 +912,7 @@ def deploy_decide(
 
 
 def deploy_observe(
-    store: DeployStore, session_id: str, n: int, human_action: str | None, outcome: str | None
+    store: Statements, session_id: str, n: int, human_action: str | None, outcome: str | None
 ) -> tuple[dict[str, Any], bool]:
     """Commit trial ``n`` from the observed human action and outcome; returns (trial, duplicate).
     Runs in the caller's transaction (``store.transaction()``)."""

@@ -143,7 +143,8 @@ def postgres_binaries() -> Path | None:
 class TemporaryPostgres:
     """A throwaway PostgreSQL cluster: ``initdb`` in a temporary directory, the server on
     127.0.0.1:<free port> with its socket in that directory, trust authentication for the
-    ``postgres`` role, no fsync (test data).  PostgreSQL refuses to run as root, so as root its
+    ``postgres`` role, no fsync (test data; ``fsync=True``: PostgreSQL's defaults, every commit on
+    disk before it is acknowledged, as a real database runs).  PostgreSQL refuses to run as root, so as root its
     programs run as the ``postgres`` user (through ``runuser``).
 
         with TemporaryPostgres() as url:    # postgresql://postgres@127.0.0.1:<port>/postgres
@@ -152,7 +153,8 @@ class TemporaryPostgres:
     ``start()`` / ``stop()`` for fixtures; ``stop()`` always removes the directory.
     """
 
-    def __init__(self, bindir: Path | None = None):
+    def __init__(self, bindir: Path | None = None, fsync: bool = False):
+        self.fsync = fsync
         found = bindir or postgres_binaries()
         if found is None:
             raise ServerStartError("PostgreSQL server binaries (initdb, pg_ctl) not found: install Debian's postgresql package")
@@ -197,7 +199,9 @@ class TemporaryPostgres:
             "--no-sync",
             "--no-instructions",
         )
-        opts = f"-k {root} -p {port} -c listen_addresses=127.0.0.1 -c fsync=off -c full_page_writes=off"
+        opts = f"-k {root} -p {port} -c listen_addresses=127.0.0.1"
+        if not self.fsync:
+            opts += " -c fsync=off -c full_page_writes=off"
         self.started = True  # from here on stop() runs pg_ctl stop, even if the start fails half-way
         self._run(
             str(self.bindir / "pg_ctl"),
