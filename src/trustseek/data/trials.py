@@ -214,7 +214,13 @@ def read_trials(
             np.flatnonzero(k == 3),
             lambda r, cc=cc: repr(cc.texts[cc.codes[r]]),
         )
-        near = {t: a for j, t in enumerate(cc.texts) if kind[j] == 3 for a in allowed if t.strip().lower() == a.lower()}
+        near = {
+            t: a
+            for j, t in enumerate(cc.texts)
+            if kind[j] == 3 and t is not None
+            for a in allowed
+            if t.strip().lower() == a.lower()
+        }
         if near and (k == 3).any():
             flags = " ".join(f"--label {c}:{t.strip()}={a}" for t, a in list(near.items())[:SHOWN])
             one = len(near) == 1
