@@ -202,3 +202,19 @@ def test_a_broken_connection_is_replaced(app):
 
 def test_two_applications_on_one_database_answer_as_one(tmp_path):
     check_two_processes_serve_one_robot(f"sqlite:///{tmp_path / 'two.sqlite'}", TOKEN)
+
+
+def test_the_decision_store_closes_its_connections_when_the_server_stops(tmp_path, monkeypatch):
+    """Before, the decision API's connections stayed open after shutdown (PostgreSQL kept their backends)."""
+    from fastapi.testclient import TestClient
+
+    from trustseek.server.store import DeployStore
+
+    closed: list[DeployStore] = []
+    real = DeployStore.close
+    monkeypatch.setattr(DeployStore, "close", lambda self: (closed.append(self), real(self))[1])
+    app = create_app(f"sqlite:///{tmp_path / 'stop.sqlite'}", token=TOKEN)
+    with TestClient(app):
+        open_session(app)
+        assert not closed
+    assert closed == [app.state.deploy_store]

@@ -109,6 +109,7 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     app.state.public_url = public_url
     app.state.tokens = {}  # session token -> Caller
     app.state.deploy_store = DeployStore(app.state.engine)  # the decision API's connection
+    app.router.add_event_handler("shutdown", app.state.deploy_store.close)  # its connections end with the server
     app.add_exception_handler(RequestValidationError, validation_error)
     app.add_middleware(BodyGuard)
     app.add_middleware(RequestLog)
