@@ -478,11 +478,6 @@ def test_sqlite_checkpoints_run_in_the_background(tmp_path):
 
     path = tmp_path / "wal.sqlite"
     app = create_app(f"sqlite:///{path}", token=TOKEN)
-    with TestClient(app) as http:
-        robot = Client("http://test", TOKEN, http=http).open_deploy(policy={"kind": "never-ask"})
-        for _ in range(20):
-            robot.decide("low")
-            robot.observe("rely", "success")
 
     def in_main_file() -> int | None:  # read the main file alone, ignoring the log
         try:
@@ -494,9 +489,14 @@ def test_sqlite_checkpoints_run_in_the_background(tmp_path):
         except sqlite3.DatabaseError:  # caught mid-checkpoint: look again
             return None
 
-    deadline = time.monotonic() + 30
-    while in_main_file() != 20 and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert in_main_file() == 20
-    assert (path.parent / "wal.sqlite-wal").stat().st_size < BACKSTOP_CHECKPOINT_PAGES * 4096
+    with TestClient(app) as http:  # looked at while the server runs (stopping it closes the log)
+        robot = Client("http://test", TOKEN, http=http).open_deploy(policy={"kind": "never-ask"})
+        for _ in range(20):
+            robot.decide("low")
+            robot.observe("rely", "success")
+        deadline = time.monotonic() + 30
+        while in_main_file() != 20 and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert in_main_file() == 20
+        assert (path.parent / "wal.sqlite-wal").stat().st_size < BACKSTOP_CHECKPOINT_PAGES * 4096
     del app
