@@ -66,3 +66,21 @@ def test_every_start_ends_stationary_on_the_whole_data_at_the_whole_data_maximum
     for a, b in zip(fast.runs, two.runs, strict=True):
         assert np.array_equal(a.params.vector(), b.params.vector())
         assert (a.iterations, a.subsample_iterations, a.history) == (b.iterations, b.subsample_iterations, b.history)
+
+
+def test_the_fit_record_and_the_log_say_how_many_e_steps_ran_on_the_subsample(monkeypatch, caplog):
+    import logging
+
+    from trustseek.estimation.fit import fit_trust_model
+    from trustseek.model.presets import paper_model
+    from trustseek.simulation.designs import simulate_design
+
+    monkeypatch.setattr(cr, "SUBSAMPLE_MIN", 0)
+    monkeypatch.setattr(cr, "SUBSAMPLE_EVERY", 4)
+    frame = simulate_design(paper_model(), 40, seed=3)
+    with caplog.at_level(logging.INFO, logger="trustseek"):
+        res = fit_trust_model(frame, restarts=2, seed=0, n_jobs=1)
+    record = res.fit_record(0)
+    assert record["subsample_iterations"] == [r.subsample_iterations for r in res.fit.runs]
+    assert all(n > 0 for n in record["subsample_iterations"])
+    assert "on a subsample" in caplog.text

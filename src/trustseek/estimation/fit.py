@@ -93,6 +93,7 @@ class Fitted:
             "restart_logliks": self.restart_logliks,
             "best_restart": self.fit.best,
             "iterations": [r.iterations for r in runs],
+            "subsample_iterations": [r.subsample_iterations for r in runs],
             "converged": [r.converged for r in runs],
             "ended": [r.ended for r in runs],
             "seconds": [r.seconds for r in runs],

@@ -95,8 +95,9 @@ class IOHMMFit(FitCriteria):
 
 def _describe(i: int, r: RunResult) -> str:
     state = "converged: stationary" if r.ended == STATIONARY else f"not converged: {r.ended}"
+    sub = f" (after {r.subsample_iterations} on a subsample)" if r.subsample_iterations else ""
     return (
-        f"start {i}: log-likelihood {r.loglik:.6f} after {r.iterations} E-steps and {r.finishes} finishes "
+        f"start {i}: log-likelihood {r.loglik:.6f} after {r.iterations} E-steps{sub} and {r.finishes} finishes "
         f"({state}, {r.seconds:.3f} s)"
     )
 
