@@ -356,13 +356,19 @@ def _rating_problems(r: Any) -> list[str]:
         if labels is not None:
             p.append(f"{head}: 'labels' apply to declared levels, not to bins")
     if labels is not None and bins is None:
-        if not isinstance(labels, Mapping):
-            p.append(f"{head}: 'labels' must map the log's texts to levels, got {labels!r}")
-        elif names:
-            for theirs, ours in labels.items():
-                if label_key(ours) not in names:
-                    p.append(f"{head}: label {theirs}={ours!r} is not one of the levels {names}")
+        p += _level_label_problems(head, labels, names)
     return p
+
+
+def _level_label_problems(head: str, labels: Any, names: list[str]) -> list[str]:
+    """What is wrong with a label table (the log's texts -> levels) of declared ``names``."""
+    if not isinstance(labels, Mapping):
+        return [f"{head}: 'labels' must map the log's texts to levels, got {labels!r}"]
+    return [
+        f"{head}: label {theirs}={ours!r} is not one of the levels {names}"
+        for theirs, ours in labels.items()
+        if names and label_key(ours) not in names
+    ]
 
 
 def _input_entry(entry: Mapping) -> dict[str, Any]:
@@ -394,12 +400,7 @@ def _input_problems(name: str, entry: Any) -> list[str]:
         p.append(f"{head}: 'levels' must list its distinct levels in their order, got {levels!r}")
     labels = entry.get("labels")
     if labels is not None:
-        if not isinstance(labels, Mapping):
-            p.append(f"{head}: 'labels' must map the log's texts to levels, got {labels!r}")
-        elif names:
-            for theirs, ours in labels.items():
-                if label_key(ours) not in names:
-                    p.append(f"{head}: label {theirs}={ours!r} is not one of the levels {names}")
+        p += _level_label_problems(head, labels, names)
     return p
 
 

@@ -350,8 +350,15 @@ def heldout_params(fit: IOHMMFit, pseudocount: float = HELDOUT_PSEUDOCOUNT) -> P
     c0 = st.initial + a
     smooth = Params(c0 / c0.sum(), s.em.mstep(st.emission, a, p.emission), s.tr.mstep(st.transition, a, p.transition))
 
-    def rows(fitted: np.ndarray, smoothed: np.ndarray) -> np.ndarray:
-        zero = ((fitted <= ZERO_CELL) & (smoothed > fitted)).any(-1, keepdims=True)
-        return np.where(zero, smoothed, fitted)
+    return Params(
+        smooth_zero_rows(p.initial, smooth.initial),
+        smooth_zero_rows(p.emission, smooth.emission),
+        smooth_zero_rows(p.transition, smooth.transition),
+    )
 
-    return Params(rows(p.initial, smooth.initial), rows(p.emission, smooth.emission), rows(p.transition, smooth.transition))
+
+def smooth_zero_rows(fitted: np.ndarray, smoothed: np.ndarray, axes: tuple[int, ...] = (-1,)) -> np.ndarray:
+    """``fitted`` with every row (over ``axes``) that holds a free cell at 0 (at most
+    :data:`ZERO_CELL`, where ``smoothed`` is above it: fixed zeros stay) taken from ``smoothed``."""
+    zero = ((fitted <= ZERO_CELL) & (smoothed > fitted)).any(axis=axes, keepdims=True)
+    return np.where(zero, smoothed, fitted)

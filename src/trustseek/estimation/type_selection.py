@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from .mixture import MixtureFit, MixtureParams, MixtureWorkspace, fit_mixture, split_type_starts
-from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, ZERO_CELL, mark_choices, reached_best
+from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, mark_choices, reached_best, smooth_zero_rows
 from .sequences import Sequences, encode
 from .spec import FitError
 from .trust_iohmm import preset_spec
@@ -43,13 +43,10 @@ def heldout_mixture_params(fit: MixtureFit, pseudocount: float = HELDOUT_PSEUDOC
     p = fit.params
     st = fit.workspace().estep(p)
     smooth = fit.structure.mstep(st, p, prior=fit.spec.prior + pseudocount)
-
-    def rows(fitted: np.ndarray, smoothed: np.ndarray, axes: tuple[int, ...] = (-1,)) -> np.ndarray:
-        zero = ((fitted <= ZERO_CELL) & (smoothed > fitted)).any(axis=axes, keepdims=True)
-        return np.where(zero, smoothed, fitted)
-
     return MixtureParams(
-        rows(p.initial, smooth.initial, (-2, -1)), rows(p.emission, smooth.emission), rows(p.transition, smooth.transition)
+        smooth_zero_rows(p.initial, smooth.initial, (-2, -1)),
+        smooth_zero_rows(p.emission, smooth.emission),
+        smooth_zero_rows(p.transition, smooth.transition),
     )
 
 
