@@ -9,22 +9,7 @@ as plain Python.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
-
-try:  # numba is a declared dependency
-    import numba
-
-    AVAILABLE = True
-except ImportError:  # pragma: no cover - exercised only without numba
-    AVAILABLE = False
-
-
-def njit(**options: Any) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """numba's ``njit(**options)`` when numba is installed, else the plain Python function."""
-    if not AVAILABLE:  # pragma: no cover - exercised only without numba
-        return lambda f: f
-    return numba.njit(**options)
+from ..compiled import njit
 
 
 @njit(cache=True, nogil=True)

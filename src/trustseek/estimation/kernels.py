@@ -49,12 +49,8 @@ from typing import Any
 
 import numpy as np
 
-try:  # numba is a declared dependency; without it the numpy E-step is used
-    import numba
-
-    AVAILABLE = True
-except ImportError:  # pragma: no cover - exercised only without numba
-    AVAILABLE = False
+from ..compiled import AVAILABLE as AVAILABLE  # callers read kernels.AVAILABLE
+from ..compiled import njit
 
 CHUNK = 128  # sequences per work item (a fixed grouping of the sums)
 RESCALE = 200  # forward and backward vectors are multiplied by 2**RESCALE when below 2**-RESCALE (exact)
@@ -62,13 +58,6 @@ TINY = 2.0**-RESCALE
 HUGE = 2.0**RESCALE
 LOG_HUGE = RESCALE * math.log(2.0)
 PARALLEL_MIN = 40_000  # trials x parameter sets from which an E-step is split over threads
-
-
-def njit(**options: Any) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """numba's ``njit(**options)`` when numba is installed, else the plain Python function."""
-    if not AVAILABLE:  # pragma: no cover - exercised only without numba
-        return lambda f: f
-    return numba.njit(**options)
 
 
 @njit(cache=True, nogil=True, inline="always")

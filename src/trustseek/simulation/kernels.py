@@ -19,17 +19,10 @@ then keeps its numpy loop.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
-
 import numpy as np
 
-try:  # numba is a declared dependency; without it the engine keeps its numpy loop
-    import numba
-
-    AVAILABLE = True
-except ImportError:  # pragma: no cover - exercised only without numba
-    AVAILABLE = False
+from ..compiled import AVAILABLE as AVAILABLE  # callers read kernels.AVAILABLE
+from ..compiled import njit
 
 THRESHOLD = 0  # ask when x < bounds[C]
 FIXED = 1  # ask with probability p_ask[C]
@@ -37,13 +30,6 @@ FIXED = 1  # ask with probability p_ask[C]
 NO_BELIEF = 0  # nothing tracks the belief (recorded as NaN)
 PAPER = 1
 BAYES = 2
-
-
-def njit(**options: Any) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """numba's ``njit(**options)`` when numba is installed, else the plain Python function."""
-    if not AVAILABLE:  # pragma: no cover - exercised only without numba
-        return lambda f: f
-    return numba.njit(**options)
 
 
 @njit(cache=True, nogil=True)
