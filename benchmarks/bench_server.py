@@ -206,7 +206,7 @@ CATEGORIES = [
     ("JSON (json)", ("/json/",)),
     ("database statements and commits (store, sqlite3, psycopg)", ("sqlite3", "store.py", "psycopg")),
     ("policy decision and belief update", ("/policies/", "/pomdp/", "numpy", "/model/")),
-    ("lean path: auth, checks, trial record", ("fastpath.py", "sessions.py", "auth.py", "server/app.py", "orm.py")),
+    ("lean path: auth, checks, trial record", ("fastpath.py", "deploy.py", "sessions.py", "auth.py", "server/app.py", "orm.py")),
     ("full application (opening the sessions)", ("fastapi", "starlette", "sqlalchemy", "pydantic", "routes.py", "middleware.py")),
 ]
 

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from trustseek.model.core import Task, TrustModel
 from trustseek.policies import PolicyRunner, policy_from_dict
-from trustseek.server import sessions
+from trustseek.server import deploy
 from trustseek.server.app import create_app
 
 TOKEN = "concurrency-experimenter-token"
@@ -72,8 +72,8 @@ async def post(app, path: str, body: dict, token: str) -> tuple[int, dict]:
 
 def forget_caches() -> None:
     """As a process that did not open the sessions (another worker, or after a restart)."""
-    sessions._DEPLOY_PLANS.clear()
-    sessions._SHARED_PLANS.clear()
+    deploy._DEPLOY_PLANS.clear()
+    deploy._SHARED_PLANS.clear()
 
 
 def replay(plan: dict, policy_json: dict, seed: int, history: list[dict]) -> list[tuple[str, float | None, float | None]]:
@@ -189,12 +189,12 @@ def test_a_deploy_plan_is_shared_by_sessions_with_the_same_task_model_and_policy
         for k in (0, 0, 1)
         for i in range(2)
     ]
-    plans = [sessions._DEPLOY_PLANS[o["session_id"]] for o in opened]
+    plans = [deploy._DEPLOY_PLANS[o["session_id"]] for o in opened]
     assert len({id(p) for p in plans[:4]}) == 1 and len({id(p) for p in plans}) == 2
     forget_caches()  # read back from the database: shared again, and the same task and model
     store = app.state.deploy_store
     with store.transaction() as tx:
-        back = [sessions.deploy_plan(tx, o["session_id"]) for o in opened]
+        back = [deploy.deploy_plan(tx, o["session_id"]) for o in opened]
     assert len({id(p) for p in back[:4]}) == 1 and back[4] is back[5] and back[0] is not back[4]
     assert isinstance(back[0].task, Task) and back[0].task.to_dict() == plans[0].task.to_dict()
     assert back[0].model.to_dict() == plans[0].model.to_dict() and back[0].sha == plans[0].sha
@@ -207,7 +207,7 @@ def test_remembered_decisions_equal_fresh_ones(tmp_path, policy):
     app = create_app(f"sqlite:///{tmp_path / 'memo.sqlite'}", token=TOKEN)
     forget_caches()
     _, info = asyncio.run(post(app, "/api/deploy/sessions", {"policy": policy, "seed": 5}, TOKEN))
-    plan = sessions._DEPLOY_PLANS[info["session_id"]]
+    plan = deploy._DEPLOY_PLANS[info["session_id"]]
     store = app.state.deploy_store
     pol = plan.policy(store)
     pm = getattr(pol, "model", None) or plan.model

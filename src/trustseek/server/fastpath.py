@@ -13,7 +13,7 @@ well-formed request that succeeds:
 * the body is JSON (``Content-Type: application/json``) holding only the fields of
   ``DecideIn`` (without the schedule fields) or ``ObserveIn``, with exactly the types and
   bounds those models accept;
-* the decision (``sessions.deploy_decide`` / ``deploy_observe``, the same functions the routes
+* the decision (``deploy.deploy_decide`` / ``deploy_observe``, the same functions the routes
   call) succeeds, committed: from the session's state this process knows, with one conditional
   write (``store.Known``; on PostgreSQL one statement, awaited), or else in one transaction of
   ``store.DeployStore`` that reads the session.
@@ -35,9 +35,10 @@ from collections.abc import Callable
 from typing import Any
 
 from .auth import Caller, caller_for_token
+from .deploy import deploy_decide, deploy_observe
 from .middleware import SESSION_BODY_LIMIT, ASGIApp, Message, Receive, Scope, Send
 from .schemas import MAX_TRIAL
-from .sessions import SessionError, deploy_decide, deploy_observe
+from .sessions import SessionError
 from .store import Known, Stale, Statements
 
 log = logging.getLogger(__name__)

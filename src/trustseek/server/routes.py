@@ -14,6 +14,7 @@ from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 
 from .auth import Caller, bearer, remember_token, require_experimenter, require_session, session_for_token, token_of
+from .deploy import committed_trial, create_deploy, deploy_decide, deploy_observe, remember_deploy
 from .export import answers_frame, events_csv, events_frame, sessions_frame, to_bytes, trials_frame
 from .orm import Report, Session, Study, Trial, utcnow
 from .schemas import AnswersIn, ConsentIn, DecideIn, DeployIn, ErrorOut, EventsIn, ObserveIn, ReportIn, SessionsIn, TrialIn
@@ -22,18 +23,13 @@ from .sessions import (
     add_answers,
     add_events,
     add_report,
-    committed_trial,
-    create_deploy,
     create_participant,
-    deploy_decide,
-    deploy_observe,
     ended,
     lock,
     new_id,
     p_high,
     participant_trial,
     questionnaire_due,
-    remember_deploy,
     report_due,
     serve,
     study_config,

@@ -143,7 +143,7 @@ def _json_value(v: Any) -> Any:
 
 
 class Statements(Protocol):
-    """What the decision API's functions (``sessions.deploy_decide`` and the others) run their
+    """What the decision API's functions (``deploy.deploy_decide`` and the others) run their
     request with: ``DeployStore`` in a transaction, or ``Known``."""
 
     def live(self, sid: str) -> LiveRow | None: ...
