@@ -2,6 +2,7 @@
 
     python benchmarks/bench_types.py             # time limit 60 s per solve
     python benchmarks/bench_types.py --quick     # time limit 15 s per solve
+    python benchmarks/bench_types.py --sarsop /path/to/pomdpsol   # also SARSOP on the same problems
 
 * the type-aware solve for M = 3 types (the paper's supervisor, the conservative one and
   "midway", their average, in shares 0.5 / 0.3 / 0.2), K = 2 trust levels, to a bound gap of
@@ -15,13 +16,21 @@
 
 Each line: solver, seconds (wall and CPU, one core), the bounds at b0 and the gap reached.
 The types solver is run once before timing (its compiled bound is cached on disk).
+With ``--sarsop``, each type-aware problem is also written as POMDPX (``write_pomdpx``) and
+solved by SARSOP's ``pomdpsol`` (built from its public source; not a dependency) with the same
+target precision and time limit; its bounds are at the same b0 (complexity a state variable
+with P(C) at the start, so its value is Σ_C P(C) V(b0, C), as ours).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import re
+import subprocess
+import tempfile
 import time
+from pathlib import Path
 from typing import Any
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -30,6 +39,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 
 from trustseek.data import example_path
+from trustseek.interop.files import write_pomdpx
 from trustseek.model import TypeMixture, conservative_model, paper_conservative_mixture, paper_model, paper_task
 from trustseek.model.core import Task, TrustModel
 from trustseek.pomdp import AssistancePOMDP
@@ -80,6 +90,27 @@ def run(name: str, pomdp: AssistancePOMDP, solver: str, limit: float, **options:
     return wall
 
 
+def sarsop(name: str, pomdp: AssistancePOMDP, pomdpsol: str, limit: float) -> None:
+    """SARSOP on the same problem: the last row of its progress table (time, bounds, precision)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "problem.pomdpx"
+        write_pomdpx(pomdp, path)
+        out = subprocess.run(
+            [pomdpsol, "--timeout", f"{limit:g}", "--precision", "1e-3", "--output", str(Path(tmp) / "out.policy"), str(path)],
+            capture_output=True,
+            text=True,
+            check=False,
+        ).stdout
+    rows = re.findall(r"^\s*([0-9.]+)\s+\d+\s+\d+\s+(-?[0-9.]+)\s+(-?[0-9.]+)\s+([0-9.e+-]+)\s", out, re.MULTILINE)
+    if not rows:
+        print(f"  {name:<34} {'sarsop':<14} no progress table in pomdpsol's output:\n{out[-2000:]}")
+        return
+    t, lo, up, _ = rows[-1]
+    print(
+        f"  {name:<34} {'sarsop':<14} {float(t):8.2f} s (its clock)           V(b0) in [{lo}, {up}]  gap {float(up) - float(lo):.1e}"
+    )
+
+
 def curve(name: str, pomdp: AssistancePOMDP, solvers: tuple[str, ...], resolutions: tuple[int, ...], limit: float) -> None:
     """Gap against time: each solver stopped at each grid resolution (not by the clock, which a
     loaded machine stretches)."""
@@ -91,7 +122,9 @@ def curve(name: str, pomdp: AssistancePOMDP, solvers: tuple[str, ...], resolutio
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="time limit 15 s per solve instead of 60 s")
-    limit = 15.0 if ap.parse_args().quick else 60.0
+    ap.add_argument("--sarsop", metavar="POMDPSOL", help="also run SARSOP's pomdpsol on the type-aware problems")
+    args = ap.parse_args()
+    limit = 15.0 if args.quick else 60.0
     task = paper_task()
     mixture = TypeMixture(
         ("paper", "conservative", "midway"), np.array([0.5, 0.3, 0.2]), (paper_model(), conservative_model(), midway())
@@ -102,12 +135,16 @@ def main() -> None:
     run("paper + conservative + midway", problem, "types", limit)
     run("paper + conservative + midway", problem, "reachable", limit)
     run("paper + conservative + midway", problem, "point", limit)
+    if args.sarsop:
+        sarsop("paper + conservative + midway", problem, args.sarsop, limit)
     print("  gap against time, the grid solvers stopped at a resolution:")
     curve("paper + conservative + midway", problem, ("types", "point"), (4, 8, 16), limit)
     print(f"type-aware solve, M = 2 types (paper+conservative) x K = 2 levels, gap 1e-3 at b0; time limit {limit:g} s")
     pair = type_aware_problem(paper_conservative_mixture(), task)
     run("paper + conservative", pair, "types", limit)
     run("paper + conservative", pair, "point", limit)
+    if args.sarsop:
+        sarsop("paper + conservative", pair, args.sarsop, limit)
     print("  gap against time, the grid solvers stopped at a resolution:")
     curve("paper + conservative", pair, ("types", "point"), (8, 16, 32, 64), limit)
     print(f"single-type models, gap 1e-3 at b0; time limit {limit:g} s")
