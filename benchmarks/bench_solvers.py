@@ -20,7 +20,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import trustseek
 from trustseek import AssistancePOMDP, GridSolver, paper_model, paper_task
-from trustseek.model.core import Task, TrustModel
+from trustseek.model.core import TrustModel
+from trustseek.model.task import Task
 from trustseek.solvers import AlphaSolver, PointSolver
 
 CPU = {}

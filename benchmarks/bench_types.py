@@ -41,7 +41,8 @@ import numpy as np
 from trustseek.data import example_path
 from trustseek.interop.files import write_pomdpx
 from trustseek.model import TypeMixture, conservative_model, paper_conservative_mixture, paper_model, paper_task
-from trustseek.model.core import Task, TrustModel
+from trustseek.model.core import TrustModel
+from trustseek.model.task import Task
 from trustseek.pomdp import AssistancePOMDP
 from trustseek.pomdp.types import type_aware_problem
 from trustseek.solvers import make_solver

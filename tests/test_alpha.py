@@ -221,7 +221,8 @@ def test_paper_residual_is_exact_on_a_coarse_grid(paper_pomdp):
 
 def test_alpha_needs_two_trust_levels():
     from trustseek.data import example_path
-    from trustseek.model.core import Task, TrustModel
+    from trustseek.model.core import TrustModel
+    from trustseek.model.task import Task
 
     model = TrustModel.load(example_path("three_level_model.json"))
     p3 = AssistancePOMDP(model, Task.load(example_path("three_level_task.json")))

@@ -215,7 +215,8 @@ def test_the_corruptions_are_invalid_for_the_loaders():
     """The generator's corruptions are refused by the library too (a check of the test itself:
     a corruption that left a valid file would make the CLI test fail for the wrong reason)."""
     from trustseek.errors import TrustseekError
-    from trustseek.model.core import Task, TrustModel
+    from trustseek.model.core import TrustModel
+    from trustseek.model.task import Task
     from trustseek.policies import load_policy
 
     loaders = {"model": TrustModel.load, "task": Task.load, "policy": load_policy}

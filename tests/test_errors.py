@@ -12,7 +12,7 @@ import pytest
 import trustseek
 from trustseek import paper_model, paper_task
 from trustseek.errors import TrustseekError
-from trustseek.model.core import ModelError, UnknownComplexityError
+from trustseek.model.jsonfile import ModelError, UnknownComplexityError
 from trustseek.server.sessions import SessionError
 
 # modules that only make sense as a program or inside Alembic

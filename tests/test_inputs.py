@@ -183,8 +183,8 @@ def test_named_inputs_fit_equals_an_independent_em(study, tmp_path):
 
 def test_general_model_file_round_trip_and_problems(study, tmp_path):
     from trustseek.estimation.fit import fit_model
-    from trustseek.model.core import ModelError
     from trustseek.model.iohmm import IOHMMModel, load_any_model
+    from trustseek.model.jsonfile import ModelError
 
     path, mapping, _ = study
     frame = read_trials(path, mapping)

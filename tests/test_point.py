@@ -8,7 +8,8 @@ import pytest
 import trustseek
 from trustseek import AssistancePOMDP, GridSolver
 from trustseek.interop.files import read_pomdp
-from trustseek.model.core import Task, TrustModel
+from trustseek.model.core import TrustModel
+from trustseek.model.task import Task
 from trustseek.policies import AlphaVectorPolicy
 from trustseek.solvers.alpha import AlphaSolver
 from trustseek.solvers.point import PointSolver, _simplex_lattice, freudenthal_weights

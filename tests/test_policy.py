@@ -15,7 +15,8 @@ from trustseek import (
     solve,
     trust_agnostic,
 )
-from trustseek.model.core import ASK, AUTONOMOUS, ModelError
+from trustseek.model.core import ASK, AUTONOMOUS
+from trustseek.model.jsonfile import ModelError
 from trustseek.solvers.agnostic import agnostic_from_intervention_rates, trust_agnostic_from_data
 
 

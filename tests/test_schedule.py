@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from trustseek import AssistancePOMDP, paper_model, paper_task
-from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel, json_safe
+from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
+from trustseek.model.jsonfile import json_safe
 from trustseek.policies import policy_from_dict
 from trustseek.policies.schedule import SchedulePolicy, ScheduleRunner
 from trustseek.pomdp.scheduling import SchedulingError, SchedulingProblem
@@ -193,7 +194,7 @@ def test_a_schedule_policy_file_with_a_nan_is_refused(tmp_path):
     """The policy-file check for finite numbers reaches into a schedule policy's Q pieces."""
     import json
 
-    from trustseek.model.core import ModelError
+    from trustseek.model.jsonfile import ModelError
     from trustseek.model.presets import paper_model, paper_task
     from trustseek.policies.kinds import load_policy
     from trustseek.pomdp.problem import AssistancePOMDP

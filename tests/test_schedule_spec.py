@@ -70,7 +70,7 @@ def test_schedule_spec_bounded_before_solving():
 def test_schedule_policy_json_is_checked_for_finite_numbers():
     """A schedule policy JSON loads through the policy kinds registry, which checks its Q values
     (before, the finiteness check failed with a TypeError on the schedule policy's table)."""
-    from trustseek.model.core import ModelError
+    from trustseek.model.jsonfile import ModelError
     from trustseek.policies.kinds import policy_from_dict
 
     d = policy_from_spec({"kind": "schedule", "counts": [2, 1], "grid": 5}, paper_model(), paper_task()).to_dict()

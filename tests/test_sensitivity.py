@@ -13,8 +13,9 @@ from typer.testing import CliRunner
 
 from trustseek.cli import main
 from trustseek.cli._app import app
-from trustseek.model.core import Task, TrustModel
+from trustseek.model.core import TrustModel
 from trustseek.model.presets import paper_model, paper_task
+from trustseek.model.task import Task
 from trustseek.solvers.sensitivity import SensitivityError, apply, evaluate, free_parameters, sensitivity
 
 THRESHOLD = "threshold[high]"

@@ -15,7 +15,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from trustseek.model.core import Task, TrustModel
+from trustseek.model.core import TrustModel
+from trustseek.model.task import Task
 from trustseek.policies import PolicyRunner, policy_from_dict
 from trustseek.server import deploy
 from trustseek.server.app import create_app

@@ -9,8 +9,10 @@ The Python API, by package:
 """
 
 from .errors import TrustseekError
-from .model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, ModelError, Rewards, Task, TrustModel
+from .model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
+from .model.jsonfile import ModelError
 from .model.presets import load_model, load_task, paper_model, paper_task
+from .model.task import Rewards, Task
 from .policies import (
     ComplexityPolicy,
     Policy,

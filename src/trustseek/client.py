@@ -44,7 +44,7 @@ class ServerError(TrustseekError):
 
 
 def _read_json(path: str | Path) -> Any:
-    from .model.core import load_json
+    from .model.jsonfile import load_json
 
     return load_json(path)[0]
 

@@ -20,7 +20,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..model.core import ModelError, load_json
+from ..model.jsonfile import ModelError, load_json
 
 app = typer.Typer(
     name="trustseek",
@@ -37,7 +37,7 @@ err_console = Console(stderr=True)
 
 def print_json(obj: Any) -> None:
     """Machine-readable output: one JSON object on stdout, nothing else."""
-    from ..model.core import json_safe
+    from ..model.jsonfile import json_safe
 
     sys.stdout.write(json.dumps(json_safe(obj), indent=2, default=_json_default, allow_nan=False) + "\n")
 

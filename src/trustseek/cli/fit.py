@@ -435,8 +435,8 @@ def _fit_general(
 
 def load_for_decoding(path: Path):
     """A trust model, supervisor types (a mixture) or a general model, by the file's format."""
-    from ..model.core import load_json
     from ..model.iohmm import IOHMMModel, is_iohmm_file
+    from ..model.jsonfile import load_json
     from ..model.mixture import TypeMixture
 
     d, source = load_json(path)

@@ -9,10 +9,12 @@ import typer
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..model.core import ACTIONS, ModelError, Task, TrustModel, load_json
+from ..model.core import ACTIONS, TrustModel
 from ..model.iohmm import IOHMM_FORMAT, IOHMMModel
+from ..model.jsonfile import ModelError, load_json
 from ..model.mixture import MIXTURE_FORMAT, TypeMixture
 from ..model.presets import MIXTURE_PRESETS, MODEL_PRESETS, TASK_PRESETS, load_mixture, load_model, load_task
+from ..model.task import Task
 from ..policies import PolicyError, TrustAwarePolicy, load_policy
 from ..policies.base import Policy
 from ..pomdp.problem import AssistancePOMDP

@@ -14,8 +14,10 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..model.core import Task, TrustModel, load_json
+from ..model.core import TrustModel
+from ..model.jsonfile import load_json
 from ..model.presets import load_model, load_task
+from ..model.task import Task
 from ..policies.base import Policy
 from ..pomdp.types import product_model
 from ..solvers import policy_from_spec

@@ -25,7 +25,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import TrustseekError
-from ..model.core import Task, TrustModel
+from ..model.core import TrustModel
+from ..model.task import Task
 from ..policies import Policy
 from ..pomdp.belief import ScalarBelief
 from ..pomdp.problem import AssistancePOMDP

@@ -19,7 +19,8 @@ from ..estimation.fit import fit_sequences
 from ..estimation.sequences import Sequences, encode
 from ..estimation.spec import IOHMMSpec
 from ..estimation.trust_iohmm import preset_spec
-from ..model.core import AUTONOMOUS, INTERVENE, Task, TrustModel
+from ..model.core import AUTONOMOUS, INTERVENE, TrustModel
+from ..model.task import Task
 from ..policies import ComplexityPolicy, TrustAwarePolicy, randomized
 from ..pomdp.problem import AssistancePOMDP
 from ..simulation import Simulation, crossover, simulate

@@ -25,8 +25,9 @@ from typing import Any
 import numpy as np
 
 from ..errors import TrustseekError
-from ..model.core import Task, TrustModel
+from ..model.core import TrustModel
 from ..model.presets import paper_model, paper_task
+from ..model.task import Task
 from ..reproduction.statistics import mean_ci, share_ci
 from ..vocab import (
     BELIEF_UPDATES,

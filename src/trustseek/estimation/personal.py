@@ -63,7 +63,8 @@ import pandas as pd
 from scipy.optimize import minimize
 from scipy.special import digamma, gammaln
 
-from ..model.core import TrustModel, json_safe
+from ..model.core import TrustModel
+from ..model.jsonfile import json_safe
 from ..model.mixture import TypeMixture
 from . import kernels
 from .em import RunResult, run_em

@@ -3,8 +3,9 @@ is the same model with any named inputs), ``Task``
 (complexities, success probabilities, rewards of eq. (1), discount), their JSON formats, and
 the built-in presets."""
 
-from .core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, ModelError, RatingTable, Rewards, Task, TrustModel
+from .core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, RatingTable, TrustModel
 from .iohmm import IOHMM_FORMAT, IOHMMModel, load_any_model
+from .jsonfile import ModelError
 from .mixture import TypeMixture
 from .presets import (
     MIXTURE_PRESETS,
@@ -18,6 +19,7 @@ from .presets import (
     paper_model,
     paper_task,
 )
+from .task import Rewards, Task
 
 __all__ = [
     "ACTIONS",

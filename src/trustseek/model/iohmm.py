@@ -30,22 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from .core import (
-    IOHMM_FORMAT,
-    PLANNING_INPUTS,
-    ModelError,
-    RatingTable,
-    TrustModel,
-    _check_names,
-    _check_row_array,
-    _get,
-    _nested,
-    _read_row,
-    _read_table,
-    _unknown_keys,
-    load_json,
-    planning_refusal,
-)
+from .core import IOHMM_FORMAT, PLANNING_INPUTS, RatingTable, TrustModel, planning_refusal
+from .jsonfile import ModelError, check_names, check_row_array, get_key, load_json, nested, read_row, read_table, unknown_keys
 
 __all__ = ["IOHMM_FORMAT", "PLANNING_INPUTS", "IOHMMModel", "is_iohmm_file", "load_any_model", "planning_refusal"]
 
@@ -140,9 +126,9 @@ class IOHMMModel:
                 p.append(f"{name} has shape {getattr(self, name).shape}, expected {shape}")
         if p:
             return p
-        _check_row_array(self.initial[None, :], lambda i: "initial", p)
-        _check_row_array(self.emission, lambda i: self.row_name("emission", i[0], i[1]), p)
-        _check_row_array(self.transition, lambda i: self.row_name("transition", i[0], i[1]), p)
+        check_row_array(self.initial[None, :], lambda i: "initial", p)
+        check_row_array(self.emission, lambda i: self.row_name("emission", i[0], i[1]), p)
+        check_row_array(self.transition, lambda i: self.row_name("transition", i[0], i[1]), p)
         if self.rating is not None:
             p += self.rating.problems(self.levels)
         return p
@@ -177,9 +163,9 @@ class IOHMMModel:
             "emission_inputs": list(self.emission_inputs),
             "transition_inputs": list(self.transition_inputs),
             "structure": json.loads(json.dumps(self.structure)),
-            "initial": _nested(self.initial, [L]),
-            "emission": _nested(self.emission.reshape(shape_e), [*em_axes, L, self.output_categories]),
-            "transition": _nested(self.transition.reshape(shape_t), [*tr_axes, L, L]),
+            "initial": nested(self.initial, [L]),
+            "emission": nested(self.emission.reshape(shape_e), [*em_axes, L, self.output_categories]),
+            "transition": nested(self.transition.reshape(shape_t), [*tr_axes, L, L]),
         }
         if self.rating is not None:
             d["rating"] = {"column": self.rating_column or "rating", **self.rating.to_dict(L)}
@@ -192,16 +178,16 @@ class IOHMMModel:
             raise ModelError([f"a model must be a JSON object, got {type(d).__name__}"], source)
         if d.get("format") != IOHMM_FORMAT:
             problems.append(f"format is {d.get('format')!r}, expected {IOHMM_FORMAT!r}")
-        _unknown_keys(d, KEYS, "model", problems)
-        levels = _check_names(_get(d, "levels", "levels", problems), "levels", problems, minimum=1)
-        out = _get(d, "output", "output", problems)
+        unknown_keys(d, KEYS, "model", problems)
+        levels = check_names(get_key(d, "levels", "levels", problems), "levels", problems, minimum=1)
+        out = get_key(d, "output", "output", problems)
         out_name, out_cats = None, []
         if isinstance(out, Mapping):
-            _unknown_keys(out, ["name", "categories"], "output", problems)
+            unknown_keys(out, ["name", "categories"], "output", problems)
             out_name = out.get("name")
             if not isinstance(out_name, str) or not out_name:
                 problems.append(f"output.name must name the output column, got {out_name!r}")
-            out_cats = _check_names(_get(out, "categories", "output.categories", problems), "output.categories", problems)
+            out_cats = check_names(get_key(out, "categories", "output.categories", problems), "output.categories", problems)
         elif out is not None:
             problems.append(f"output must be an object with 'name' and 'categories', got {out!r}")
         raw_inputs = d.get("inputs", {})
@@ -210,14 +196,14 @@ class IOHMMModel:
             problems.append(f"inputs must map each input's name to its levels, got {raw_inputs!r}")
         else:
             for c, lv in raw_inputs.items():
-                inputs[str(c)] = _check_names(lv, f"inputs.{c}", problems, minimum=1)
+                inputs[str(c)] = check_names(lv, f"inputs.{c}", problems, minimum=1)
         em_in = _input_list(d.get("emission_inputs", []), "emission_inputs", inputs, problems)
         tr_in = _input_list(d.get("transition_inputs", []), "transition_inputs", inputs, problems)
         structure = d.get("structure", {})
         if not isinstance(structure, Mapping):
             problems.append(f"structure must be an object, got {structure!r}")
             structure = {}
-        _unknown_keys(structure, STRUCTURE_KEYS, "structure", problems)
+        unknown_keys(structure, STRUCTURE_KEYS, "structure", problems)
         notes = d.get("notes", "")
         if not isinstance(notes, str):
             problems.append(f"notes must be a string, got {notes!r}")
@@ -229,18 +215,18 @@ class IOHMMModel:
         initial = np.full(K, np.nan)
         emission = np.full((*[len(inputs[c]) for c in em_in], K, M), np.nan)
         transition = np.full((*[len(inputs[c]) for c in tr_in], K, K), np.nan)
-        init = _get(d, "initial", "initial", problems)
+        init = get_key(d, "initial", "initial", problems)
         if init is not None:
-            row = _read_row(init, levels, "initial", problems)
+            row = read_row(init, levels, "initial", problems)
             if row is not None:
                 initial[:] = row
         for name, axes, arr, keys in (
             ("emission", em_in, emission, out_cats),
             ("transition", tr_in, transition, levels),
         ):
-            node = _get(d, name, name, problems)
+            node = get_key(d, name, name, problems)
             if node is not None:
-                _read_table(node, name, [(c, inputs[c]) for c in axes], ("level", levels), keys, arr, problems)
+                read_table(node, name, [(c, inputs[c]) for c in axes], ("level", levels), keys, arr, problems)
         rating, rating_column = None, None
         if d.get("rating") is not None:
             r = d["rating"]

@@ -21,7 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from .core import ModelError, TrustModel, json_safe, load_json
+from .core import TrustModel
+from .jsonfile import ModelError, json_safe, load_json
 
 MIXTURE_FORMAT = "trustseek.mixture/1"
 

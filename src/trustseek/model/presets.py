@@ -29,8 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .core import ASK, AUTONOMOUS, FAULTY, RELIABLE, ModelError, Rewards, Task, TrustModel
+from .core import ASK, AUTONOMOUS, FAULTY, RELIABLE, TrustModel
+from .jsonfile import ModelError
 from .mixture import TypeMixture
+from .task import Rewards, Task
 
 PAPER_UNOBSERVED_CELLS = (
     "transition[C=low, a=ask, E=reliable]",

@@ -13,7 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import ACTIONS, ASK, AUTONOMOUS, ModelError, TrustModel
+from ..model.core import ACTIONS, ASK, AUTONOMOUS, TrustModel
+from ..model.jsonfile import ModelError
 from ..pomdp.belief import to_vector
 from ..vocab import BELIEF_UPDATES
 from .base import POLICY_FORMAT, PolicyBase, PolicyError

@@ -16,7 +16,8 @@ from typing import Any, Protocol
 import numpy as np
 
 from ..errors import TrustseekError
-from ..model.core import TrustModel, json_safe
+from ..model.core import TrustModel
+from ..model.jsonfile import json_safe
 from ..pomdp.belief import to_vector
 from .thresholds import Interval, threshold
 

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import ModelError
+from ..model.jsonfile import ModelError
 from ..vocab import COMPLEXITY_POLICY_KINDS, PAPER_ASK_PROBABILITIES
 from .base import POLICY_FORMAT, PolicyBase, PolicyError
 from .thresholds import Interval

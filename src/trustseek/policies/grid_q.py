@@ -12,7 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import ACTIONS, ASK, AUTONOMOUS, ModelError, TrustModel
+from ..model.core import ACTIONS, ASK, AUTONOMOUS, TrustModel
+from ..model.jsonfile import ModelError
 from ..vocab import BELIEF_UPDATES
 from .base import POLICY_FORMAT, Policy, PolicyBase, PolicyError
 from .thresholds import Interval, ask_intervals

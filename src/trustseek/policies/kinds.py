@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import ModelError, load_json
+from ..model.jsonfile import ModelError, load_json
 from .alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy
 from .base import POLICY_FORMAT, Policy
 from .complexity import COMPLEXITY_KINDS, ComplexityPolicy

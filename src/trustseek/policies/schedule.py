@@ -21,7 +21,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ..model.core import ACTIONS, ASK, AUTONOMOUS, ModelError, TrustModel
+from ..model.core import ACTIONS, ASK, AUTONOMOUS, TrustModel
+from ..model.jsonfile import ModelError
 from ..pomdp.belief import to_vector
 from ..pomdp.scheduling import Counts, State, parse_state_key, state_key
 from ..vocab import BELIEF_UPDATES

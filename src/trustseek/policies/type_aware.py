@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import ModelError
+from ..model.jsonfile import ModelError
 from ..model.mixture import TypeMixture
 from ..pomdp.types import product_model, trust_marginal, type_marginal, warm_start_belief
 from .alpha_vector import AlphaVectorPolicy

@@ -31,7 +31,8 @@ from functools import cached_property
 
 import numpy as np
 
-from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
+from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
+from ..model.task import Task
 from ..vocab import check_belief_update
 from .belief import Branches
 from .branch_model import BranchModel

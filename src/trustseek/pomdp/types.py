@@ -30,8 +30,9 @@ import numpy as np
 import pandas as pd
 
 from ..errors import TrustseekError
-from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
+from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 from ..model.mixture import TypeMixture
+from ..model.task import Task
 from ..vocab import UNOBSERVED
 from .belief import BayesUpdate
 from .problem import AssistancePOMDP

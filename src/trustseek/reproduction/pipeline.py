@@ -40,8 +40,9 @@ import pandas as pd
 
 from ..errors import TrustseekError
 from ..estimation.fit import FitResult, fit_trust_model
-from ..model.core import AUTONOMOUS, FAULTY, INTERVENE, Task, TrustModel
+from ..model.core import AUTONOMOUS, FAULTY, INTERVENE, TrustModel
 from ..model.presets import paper_model, paper_task
+from ..model.task import Task
 from ..policies import ComplexityPolicy, Policy, always_ask, ask_regions, never_ask, randomized
 from ..pomdp.problem import AssistancePOMDP
 from ..simulation import CrossoverSimulation, Simulation, Supervisors, crossover, simulate

@@ -14,8 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import Task, TrustModel
+from ..model.core import TrustModel
 from ..model.presets import paper_model, paper_task
+from ..model.task import Task
 from ..policies.schedule import SchedulePolicy
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem

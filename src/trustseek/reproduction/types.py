@@ -37,9 +37,10 @@ import pandas as pd
 
 from ..estimation.fit import fit_trust_model
 from ..estimation.mixture import fit_types
-from ..model.core import Task, TrustModel
+from ..model.core import TrustModel
 from ..model.mixture import TypeMixture
 from ..model.presets import paper_conservative_mixture, paper_task
+from ..model.task import Task
 from ..policies.base import Policy
 from ..simulation.designs import simulate_design
 from ..simulation.engine import simulate

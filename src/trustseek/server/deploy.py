@@ -20,7 +20,8 @@ import numpy as np
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
-from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
+from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
+from ..model.task import Task
 from ..policies import PolicyError
 from ..policies.schedule import SchedulePolicy
 from ..pomdp.belief import make_updater
@@ -44,6 +45,9 @@ def policy_sha256(policy: dict[str, Any]) -> str:
 
 
 def create_deploy(db: DBSession, label: str, task: Task, model: TrustModel, policy: dict[str, Any], seed: int) -> Session:
+    """A new deploy session (added to ``db``, not committed): its plan (task, model, and the policy
+    by its SHA-256, the policy itself stored once per content) and its belief at the start
+    (the initial trust of the policy's own model, else of ``model``)."""
     sid = new_id()
     sha = policy_sha256(policy)
     pol = policy_object(f"policy:{sha}", policy)  # sessions with the same policy share one parsed copy

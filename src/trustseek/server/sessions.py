@@ -32,7 +32,8 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
 from ..errors import TrustseekError
-from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task, TrustModel
+from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
+from ..model.task import Task
 from ..policies import PolicyRunner
 from ..policies.schedule import SchedulePolicy
 from .orm import Answer, Event, EventBatch, Report, Session, Study, Trial, utcnow

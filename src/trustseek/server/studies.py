@@ -30,8 +30,10 @@ import numpy as np
 from pydantic import BaseModel, Field, field_validator, model_validator
 
 from ..errors import TrustseekError
-from ..model.core import ModelError, Task, TrustModel
+from ..model.core import TrustModel
+from ..model.jsonfile import ModelError
 from ..model.presets import MODEL_PRESETS, TASK_PRESETS
+from ..model.task import Task
 from ..policies import policy_from_dict
 from ..policies.schedule import SCHEDULE
 from ..solvers import policy_from_spec

@@ -12,8 +12,9 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from ..model.core import Task, TrustModel
+from ..model.core import TrustModel
 from ..model.presets import paper_task
+from ..model.task import Task
 from ..policies import Policy, randomized
 from ..vocab import PAPER_ASK_PROBABILITIES, PAPER_BLOCK_COUNTS, PAPER_DATA_COUNTS, TRIAL_COLUMNS
 from .engine import Block, run, seed_sequence, simulate

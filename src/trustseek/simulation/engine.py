@@ -36,7 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.core import ASK, AUTONOMOUS, INTERVENE, RELIABLE, RELY, Task, TrustModel
+from ..model.core import ASK, AUTONOMOUS, INTERVENE, RELIABLE, RELY, TrustModel
+from ..model.task import Task
 from ..policies.base import Policy
 from ..policies.complexity import ComplexityPolicy
 from ..policies.regions import ask_bounds

@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, Task
+from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
+from ..model.task import Task
 from .populations import SimulationError
 
 EXTRA_COLUMNS = ("block", "policy", "true_trust", "belief", "reward")

@@ -26,7 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.core import INTERVENE, RELIABLE, Task, TrustModel
+from ..model.core import INTERVENE, RELIABLE, TrustModel
+from ..model.task import Task
 from ..policies.base import Policy
 from ..policies.schedule import SchedulePolicy
 from ..pomdp.belief import ScalarBelief

@@ -14,7 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import AUTONOMOUS, INTERVENE, Task, TrustModel
+from ..model.core import AUTONOMOUS, INTERVENE, TrustModel
+from ..model.task import Task
 from ..policies.complexity import ComplexityPolicy, randomized
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import PAPER_ASK_PROBABILITIES, PAPER_DATA_COUNTS

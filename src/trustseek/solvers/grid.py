@@ -29,7 +29,8 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from ..model.core import Task, TrustModel
+from ..model.core import TrustModel
+from ..model.task import Task
 from ..policies.grid_q import TrustAwarePolicy
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update

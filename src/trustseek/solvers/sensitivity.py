@@ -34,7 +34,8 @@ import numpy as np
 from scipy.optimize import minimize
 
 from ..errors import TrustseekError
-from ..model.core import ASK, AUTONOMOUS, RELY, Task, TrustModel
+from ..model.core import ASK, AUTONOMOUS, RELY, TrustModel
+from ..model.task import Task
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
 from .grid import GridSolver

@@ -20,7 +20,9 @@ from collections.abc import Mapping
 from typing import Any
 
 from ..errors import TrustseekError
-from ..model.core import ModelError, Task, TrustModel
+from ..model.core import TrustModel
+from ..model.jsonfile import ModelError
+from ..model.task import Task
 from ..policies.base import Policy
 from ..policies.complexity import ComplexityPolicy, always_ask, never_ask, randomized
 from ..policies.kinds import policy_from_dict

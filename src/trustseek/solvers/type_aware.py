@@ -17,8 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import Task, TrustModel
+from ..model.core import TrustModel
 from ..model.mixture import TypeMixture
+from ..model.task import Task
 from ..policies.alpha_vector import AlphaVectorPolicy
 from ..policies.base import Policy
 from ..policies.type_aware import TypeAwarePolicy

@@ -1,0 +1,229 @@
+"""Reading trustseek's JSON files with every problem reported at once: ``load_json`` (the file
+itself), the checks of names, probability rows and nested tables that the model, task and
+mixture readers share, and ``ModelError``, which carries all the problems found."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import TrustseekError
+
+__all__ = [
+    "ATOL",
+    "ModelError",
+    "UnknownComplexityError",
+    "check_names",
+    "check_row_array",
+    "fmt_number",
+    "get_key",
+    "json_safe",
+    "load_json",
+    "nested",
+    "read_row",
+    "read_table",
+    "unknown_keys",
+]
+
+ATOL = 1e-9  # tolerance for a probability row to sum to one
+
+
+class ModelError(TrustseekError, ValueError):
+    """A model, task or policy file is malformed.  ``problems`` lists every violation."""
+
+
+class UnknownComplexityError(ModelError, KeyError):
+    """A complexity name that the model or task does not have (a ``KeyError`` too: it is a
+    failed lookup by name)."""
+
+
+def json_safe(obj: Any) -> Any:
+    """``obj`` with every NaN or infinite float replaced by None, so that it is valid JSON
+    (e.g. a threshold that does not exist because a policy's ask region is not an interval)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, Mapping):
+        return {k: json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    return obj
+
+
+def fmt_number(x: float) -> str:
+    return f"{x:.12g}"
+
+
+def check_names(names: Any, what: str, problems: list[str], minimum: int = 2) -> list[str]:
+    if names is None:  # already reported as missing
+        return []
+    if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
+        problems.append(f"{what} must be a list of non-empty strings, got {names!r}")
+        return []
+    if len(set(names)) != len(names):
+        problems.append(f"{what} has duplicate names: {names!r}")
+    if len(names) < minimum:
+        problems.append(f"{what} needs at least {minimum} entries, got {len(names)}")
+    return names
+
+
+def read_row(obj: Any, keys: Sequence[str], label: str, problems: list[str]) -> np.ndarray | None:
+    """Read a probability row {key: p} and validate it; returns None if unusable."""
+    if not isinstance(obj, Mapping):
+        problems.append(f"{label} must be an object mapping {list(keys)} to probabilities, got {obj!r}")
+        return None
+    row = np.full(len(keys), np.nan)
+    ok = True
+    for k in obj:
+        if k not in keys:
+            problems.append(f"{label} has unknown entry {k!r} (expected one of {list(keys)})")
+            ok = False
+    for i, k in enumerate(keys):
+        if k not in obj:
+            problems.append(f"{label}[{k}] is missing")
+            ok = False
+            continue
+        v = obj[k]
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            problems.append(f"{label}[{k}] must be a number, got {v!r}")
+            ok = False
+            continue
+        v = float(v)
+        if not math.isfinite(v) or v < 0.0 or v > 1.0:
+            problems.append(f"{label}[{k}] = {fmt_number(v)} is outside [0, 1]")
+            ok = False
+            continue
+        row[i] = v
+    if not ok:
+        return None
+    s = float(row.sum())
+    if abs(s - 1.0) > ATOL:
+        problems.append(f"{label} sums to {fmt_number(s)}")
+        return None
+    return row
+
+
+def get_key(obj: Any, key: str, label: str, problems: list[str]) -> Any:
+    if not isinstance(obj, Mapping):
+        problems.append(f"{label} must be an object, got {obj!r}")
+        return None
+    if key not in obj:
+        problems.append(f"{label} is missing")
+        return None
+    if obj[key] is None:
+        problems.append(f"{label} is null")
+    return obj[key]
+
+
+def unknown_keys(obj: Any, allowed: Iterable[str], label: str, problems: list[str]) -> None:
+    if isinstance(obj, Mapping):
+        allowed = list(allowed)
+        for k in obj:
+            if k not in allowed:
+                problems.append(f"{label} has unknown entry {k!r} (expected one of {allowed})")
+
+
+def nested(arr: np.ndarray, levels: Sequence[Sequence[str]]) -> dict[str, Any]:
+    """An array as nested {name: ...} objects, one level per axis."""
+    if len(levels) == 1:
+        return {n: float(arr[i]) for i, n in enumerate(levels[0])}
+    return {n: nested(arr[i], levels[1:]) for i, n in enumerate(levels[0])}
+
+
+def read_table(
+    obj: Any,
+    base: str,
+    outer: Sequence[tuple[str, Sequence[str]]],
+    inner: tuple[str, Sequence[str]],
+    row_keys: Sequence[str],
+    out: np.ndarray,
+    problems: list[str],
+) -> None:
+    """Read nested probability rows into ``out``, naming each cell like
+    ``transition[C=high, a=ask, E=reliable][T=low]``: the ``outer`` axes inside the first
+    brackets, the ``inner`` (conditioning trust) axis in the second, then the row's keys."""
+    sym_in, names_in = inner
+
+    def label(parts: list[str], t: str | None = None) -> str:
+        s = f"{base}[{', '.join(parts)}]" if parts else base
+        return s if t is None else f"{s}[{sym_in}={t}]"
+
+    def walk(node: Any, depth: int, parts: list[str], idx: tuple[int, ...]) -> None:
+        if depth == len(outer):
+            unknown_keys(node, names_in, label(parts), problems)
+            for t, tn in enumerate(names_in):
+                cell = get_key(node, tn, label(parts, tn), problems)
+                if cell is not None:
+                    row = read_row(cell, row_keys, label(parts, tn), problems)
+                    if row is not None:
+                        out[idx + (t,)] = row
+            return
+        sym, names = outer[depth]
+        unknown_keys(node, names, label(parts), problems)
+        for i, n in enumerate(names):
+            child = get_key(node, n, label(parts + [f"{sym}={n}"]), problems)
+            if child is not None:
+                walk(child, depth + 1, parts + [f"{sym}={n}"], idx + (i,))
+
+    walk(obj, 0, [], ())
+
+
+def check_row_array(arr: np.ndarray, label_of, problems: list[str]) -> None:
+    """Validate the last axis of ``arr`` as probability rows (for arrays built in Python)."""
+    if not np.all(np.isfinite(arr)):
+        problems.append("contains NaN or infinite values")
+        return
+    for idx in np.ndindex(arr.shape[:-1]):
+        row = arr[idx]
+        if np.any(row < 0) or np.any(row > 1):
+            problems.append(f"{label_of(idx)} has entries outside [0, 1]: {row.tolist()}")
+        elif abs(row.sum() - 1.0) > ATOL:
+            problems.append(f"{label_of(idx)} sums to {fmt_number(float(row.sum()))}")
+
+
+def _reject_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a valid JSON number (use a finite number or null where allowed)")
+
+
+def load_json(path: str | Path, expect: type | None = dict) -> tuple[Any, str]:
+    """The parsed JSON of the file at ``path`` and the file's name (for error messages).
+
+    Every way a file can fail to be JSON is a :class:`ModelError` naming the file: missing,
+    a directory, unreadable, not UTF-8 text (binary or another encoding), invalid JSON (with
+    line and column), the non-standard ``NaN``/``Infinity`` literals, and (with ``expect``,
+    an object by default) the wrong top-level type.
+    """
+    path = Path(path)
+    source = str(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise ModelError(["file not found"], source) from None
+    except IsADirectoryError:
+        raise ModelError(["is a directory, expected a JSON file"], source) from None
+    except OSError as exc:
+        raise ModelError([f"cannot read file: {exc.strerror or exc}"], source) from None
+    if b"\x00" in raw:
+        raise ModelError(["is a binary file, expected JSON text"], source)
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ModelError([f"is not UTF-8 text (byte {exc.start}): save it as UTF-8 JSON"], source) from None
+    if not text.strip():
+        raise ModelError(["is empty, expected JSON"], source)
+    try:
+        data = json.loads(text, parse_constant=_reject_constant)
+    except json.JSONDecodeError as exc:
+        raise ModelError([f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"], source) from None
+    except ValueError as exc:  # NaN / Infinity
+        raise ModelError([f"invalid JSON: {exc}"], source) from None
+    except RecursionError:
+        raise ModelError(["invalid JSON: nested too deeply"], source) from None
+    if expect is not None and not isinstance(data, expect):
+        kind = "an object" if expect is dict else expect.__name__
+        raise ModelError([f"the top level must be {kind} ({{...}}), got {type(data).__name__}"], source)
+    return data, source
