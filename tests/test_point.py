@@ -4,6 +4,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import trustseek
 from trustseek import AssistancePOMDP, GridSolver
@@ -12,7 +14,8 @@ from trustseek.model.core import TrustModel
 from trustseek.model.task import Task
 from trustseek.policies import AlphaVectorPolicy
 from trustseek.solvers.alpha import AlphaSolver
-from trustseek.solvers.point import PointSolver, _simplex_lattice, freudenthal_weights
+from trustseek.solvers.numerics import best_vectors
+from trustseek.solvers.point import PointSolver, _simplex_lattice, freudenthal_weights, next_round_seconds
 
 EXAMPLES = Path(trustseek.__file__).parent / "examples"
 
@@ -147,3 +150,67 @@ def test_three_level_example_solves_with_reported_gap(tmp_path):
     B = np.random.default_rng(3).dirichlet(np.ones(3), size=200)
     cx = np.arange(200) % 2
     assert np.array_equal(back.actions(B, cx), pol.actions(B, cx))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.integers(0, 120),
+    K=st.integers(2, 5),
+    m=st.integers(1, 25),
+    rows=st.integers(1, 50),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_best_vectors_in_blocks_is_the_argmax_of_the_whole_product(n, K, m, rows, seed):
+    rng = np.random.default_rng(seed)
+    X = rng.dirichlet(np.ones(K), size=n) if n else np.zeros((0, K))
+    G = rng.normal(size=(m, K)).round(1)  # rounded: ties, which argmax breaks by the first index
+    got = best_vectors(X, G, rows=rows)
+    assert got.dtype == np.intp and got.shape == (n,)
+    if n:
+        assert np.array_equal(got, (X @ G.T).argmax(axis=1))
+
+
+def test_next_round_time_grows_with_the_part_that_grows():
+    # K = 4 at resolution 8 (lattice of the lower bound 6): the vertices grow 5.9x, the lower
+    # bound's beliefs not at all
+    assert next_round_seconds(4, 8, 6, t_upper=0.0, t_lower=0.45) == pytest.approx(0.45)
+    assert next_round_seconds(4, 8, 6, t_upper=1.0, t_lower=0.0) == pytest.approx(969 / 165)
+    # two states: the lower bound's lattice doubles with the grid until it stops at 256
+    assert next_round_seconds(2, 64, 256, t_upper=0.0, t_lower=1.0) == pytest.approx(129 / 65)
+    assert next_round_seconds(2, 256, 256, t_upper=0.0, t_lower=1.0) == pytest.approx(1.0)
+
+
+def test_a_time_limit_is_used_when_the_rounds_are_cheaper_than_the_vertex_growth(monkeypatch):
+    """On a fake clock where the upper bound costs 10 us per grid vertex and the lower bound 0.45 s
+    a round (as measured on two supervisor types), a 5 s limit reaches the finest grid (64) in
+    about 2.5 s.  Predicting the next round as (vertex growth) x the whole last round stopped
+    at resolution 16 after 0.9 s."""
+    from trustseek.model import paper_conservative_mixture, paper_task
+    from trustseek.pomdp.types import type_aware_problem
+    from trustseek.solvers import point as point_module
+
+    clock = [0.0]
+
+    class FakeTime:
+        @staticmethod
+        def perf_counter() -> float:
+            return clock[0]
+
+    monkeypatch.setattr(point_module, "time", FakeTime)
+    solver = PointSolver(tol=1e-9, max_seconds=5.0)
+    upper, lower = solver._upper, solver._improve_lower
+
+    def timed_upper(r):
+        out = upper(r)
+        clock[0] += 1e-5 * len(out[0])
+        return out
+
+    def timed_lower(*args, **kwargs):
+        lower(*args, **kwargs)
+        clock[0] += 0.45
+
+    monkeypatch.setattr(solver, "_upper", timed_upper)
+    monkeypatch.setattr(solver, "_improve_lower", timed_lower)
+    sol = solver.solve_bounds(type_aware_problem(paper_conservative_mixture(), paper_task()))
+    assert solver.r == 64
+    assert [len(h) for h in sol.history] == [4] * 4 and sol.history[-1][1] < 5.0

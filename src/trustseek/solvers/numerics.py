@@ -7,6 +7,8 @@ controller evaluation.
   the residual, with a direct sparse solve as the fallback;
 * :func:`improve` -- Howard's improvement step, keeping the current action unless another is
   better by more than rounding, so that policy iteration terminates;
+* :func:`best_vectors` -- which of a set of vectors is best at each of many beliefs, in
+  blocks, so that a fine grid's successors never need the whole product in memory;
 * :func:`evaluate_controller` -- the exact value vectors of a finite-state controller on a
   POMDP in branch form (any number of hidden states), and :func:`memoryless_controllers`.
 """
@@ -21,7 +23,20 @@ import scipy.sparse.linalg as spla
 
 from ..pomdp.branch_model import BranchModel
 
-__all__ = ["evaluate_controller", "improve", "memoryless_controllers", "policy_values"]
+__all__ = ["best_vectors", "evaluate_controller", "improve", "memoryless_controllers", "policy_values"]
+
+BLOCK_ROWS = 1 << 15  # beliefs per block of best_vectors (with 500 vectors: 130 MB of products)
+
+
+def best_vectors(X: np.ndarray, G: np.ndarray, rows: int = BLOCK_ROWS) -> np.ndarray:
+    """``(X @ G.T).argmax(axis=1)``: the index of the vector of ``G`` best at each row of ``X``,
+    computed ``rows`` rows at a time.  The whole product would hold len(X) x len(G) numbers at
+    once (2.7 GB for the 767,000 successors of a 4-state grid at resolution 64 against 447
+    vectors), and allocating that much costs more than the arithmetic."""
+    out = np.empty(len(X), dtype=np.intp)
+    for start in range(0, len(X), rows):
+        out[start : start + rows] = (X[start : start + rows] @ G.T).argmax(axis=1)
+    return out
 
 
 def policy_values(

@@ -43,7 +43,7 @@ from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
 from .base import SolverBase, SolverError
-from .numerics import evaluate_controller, improve, memoryless_controllers, policy_values
+from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, policy_values
 
 __all__ = ["PointSolution", "PointSolver", "freudenthal_vertices", "freudenthal_weights"]
 
@@ -328,7 +328,9 @@ class PointSolver(SolverBase):
         rounds = 0
         while True:
             rounds += 1
+            t_round = time.perf_counter()
             V, u, lookup = self._upper(r)
+            t_upper = time.perf_counter() - t_round
             self.r, self.u, self.lookup, self.V = r, u, lookup, V
             B = _unique_rows(np.vstack([_simplex_lattice(K, min(r, lat)), reach, self._sampled(b0, rng)]), K)
             S, p = self._successors(B)
@@ -338,10 +340,9 @@ class PointSolver(SolverBase):
             history.append((len(V), time.perf_counter() - t0, lo, up))
             too_big = _lattice_size(K, 2 * r) > self.max_vertices or (2 * r + 1) ** (K - 1) >= 2**62
             now = time.perf_counter() - t0
-            last = now - (history[-2][1] if len(history) > 1 else 0.0)
-            # the next round costs about (vertex growth) x this one: do not start it past the limit
-            growth = _lattice_size(K, 2 * r) / _lattice_size(K, r)
-            late = now + 1.5 * growth * last > self.max_seconds
+            # do not start the next round past the limit (with a margin of 1.5)
+            t_lower = time.perf_counter() - t_round - t_upper
+            late = now + 1.5 * next_round_seconds(K, r, lat, t_upper, t_lower) > self.max_seconds
             if up - lo <= self.tol or r * 2 > r_max or too_big or late:
                 break
             r *= 2
@@ -352,7 +353,7 @@ class PointSolver(SolverBase):
         m = self.model
         S = self._successors(beliefs)[0]
         n, N, A, Br, K = S.shape
-        best = (S.reshape(-1, K) @ self.G.T).argmax(axis=1).reshape(n, N, A, Br)
+        best = best_vectors(S.reshape(-1, K), self.G).reshape(n, N, A, Br)
         g = m.rewards[None] + m.discount * np.einsum("cabtu,ncabu->ncat", m.kernels, self.G[best])
         return [[_unique_rows(g[:, c, a], K, decimals=12) for a in range(A)] for c in range(N)]
 
@@ -382,6 +383,17 @@ class PointSolver(SolverBase):
         if isinstance(problem, FlatPOMDP):
             return FlatAlphaPolicy(qv[0], sol.vectors, problem.states, problem.actions, info)
         return AlphaVectorPolicy(qv, sol.vectors, problem.model, problem.complexities, "bayes", info)
+
+
+def next_round_seconds(K: int, r: int, lattice: int, t_upper: float, t_lower: float) -> float:
+    """The expected time of the point solver's next round (resolution 2r) from this round's:
+    its upper bound costs about (vertex growth) x this one's ``t_upper``, its lower bound about
+    (growth of its belief lattice, which stops at resolution ``lattice``) x ``t_lower``.  The
+    lower bound's beliefs do not grow with the grid, so a round whose time is mostly the lower
+    bound is not expected to grow with the vertices."""
+    growth = _lattice_size(K, 2 * r) / _lattice_size(K, r)
+    growth_lower = _lattice_size(K, min(2 * r, lattice)) / _lattice_size(K, min(r, lattice))
+    return growth * t_upper + growth_lower * t_lower
 
 
 def _q_lattice(K: int, max_points: int = 5_000) -> int:
@@ -419,4 +431,4 @@ def _simplex_lattice(K: int, n: int) -> np.ndarray:
     return np.array(rows, dtype=float) / n
 
 
-__all__ = ["PointSolution", "PointSolver", "evaluate_controller", "freudenthal_weights"]
+__all__ = ["PointSolution", "PointSolver", "evaluate_controller", "freudenthal_weights", "next_round_seconds"]

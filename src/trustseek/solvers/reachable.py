@@ -48,7 +48,7 @@ from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
 from .base import SolverBase, SolverError
-from .numerics import evaluate_controller, improve, memoryless_controllers, policy_values
+from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, policy_values
 from .point import PointSolver
 
 __all__ = ["ReachableSolution", "ReachableSolver", "fast_informed_bound"]
@@ -584,7 +584,7 @@ class ReachableSolver(SolverBase):
         set reduced to the vectors best at one of the beliefs."""
         N, A, Br, K = self.shape
         _, S = self._successors_many(beliefs)
-        best = (S.reshape(-1, K) @ self.G.T).argmax(axis=1).reshape(len(beliefs), N, A, Br)
+        best = best_vectors(S.reshape(-1, K), self.G).reshape(len(beliefs), N, A, Br)
         g = self.R[None] + self.g * np.einsum("cabtu,ncabu->ncat", self.model.kernels, self.G[best])
         res = []
         for c in range(N):
