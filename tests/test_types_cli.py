@@ -66,6 +66,23 @@ def test_simulate_a_population_of_types_and_warm_start_a_returning_person(solved
     assert code == 2 and "type-aware" in text
 
 
+def test_simulate_takes_the_types_as_solve_does(solved, tmp_path):
+    """``simulate --types`` is ``simulate --model`` with a mixture, as in ``solve``."""
+    _, path = solved
+    mix = tmp_path / "mix.json"
+    paper_conservative_mixture().save(mix)
+    common = ["--policy", str(path), "-n", "6", "--trials", "20", "--json"]
+    code, by_types = run_cli(["simulate", "--types", str(mix), *common])
+    assert code == 0, by_types
+    code, by_model = run_cli(["simulate", "-m", "paper+conservative", *common])
+    assert code == 0, by_model
+    assert json.loads(by_types) == json.loads(by_model)
+    code, text = run_cli(["simulate", "--types", str(mix), "-m", "paper", *common])
+    assert code == 2 and "--model or with --types, not both" in text
+    code, text = run_cli(["simulate", "--types", str(tmp_path / "missing.json"), *common])
+    assert code == 2 and "missing.json" in text
+
+
 def test_the_deploy_api_runs_a_type_aware_policy(solved, tmp_path):
     """The server's deploy sessions take the policy JSON as it is (its own product model)."""
     TestClient = pytest.importorskip("fastapi.testclient").TestClient

@@ -16,7 +16,7 @@ from rich.table import Table
 from ..errors import TrustseekError
 from ..model.core import TrustModel
 from ..model.jsonfile import load_json
-from ..model.presets import load_model, load_task
+from ..model.presets import load_mixture, load_model, load_task
 from ..model.task import Task
 from ..policies.base import Policy
 from ..pomdp.types import product_model
@@ -85,6 +85,12 @@ def simulate(
         "-m",
         help="Supervisors' trust model: a preset name (paper) or a JSON file; a mixture of supervisor types "
         "(paper+conservative or a mixture file) gives each participant a type in the mixture's shares.",
+    ),
+    types: str | None = typer.Option(
+        None,
+        "--types",
+        help="Supervisors of several types, as 'solve --types' takes them: a mixture preset (paper+conservative) "
+        "or a mixture JSON file (the same as giving the mixture with --model).",
     ),
     task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
     policy: str = typer.Option(
@@ -164,7 +170,12 @@ def simulate(
         check_output(f, option, (".csv", ".parquet"))
     from .plan import mixture_of, need_two_levels
 
-    mixture = mixture_of(model)
+    if types is not None:
+        source = ctx.get_parameter_source("model")
+        if source is not None and source.name != "DEFAULT":
+            raise TrustseekError(["give the supervisors with --model or with --types, not both"])
+        model = types
+    mixture = load_mixture(types) if types is not None else mixture_of(model)
     policy_types = mixture_of(policy_model) if policy_model else mixture
     if mixture is not None and concentration is not None:
         raise TrustseekError(["--concentration draws around one model; the supervisor types of a mixture are fixed"])
