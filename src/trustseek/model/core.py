@@ -22,22 +22,20 @@ cell and reports every problem at once through :class:`~trustseek.model.jsonfile
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..vocab import ACTIONS, ASK, AUTONOMOUS, EXPERIENCES, FAULTY, HUMAN_ACTIONS, INTERVENE, RELIABLE, RELY
 from .jsonfile import (
+    JsonFile,
     ModelError,
     UnknownComplexityError,
     check_names,
     check_row_array,
     get_key,
-    load_json,
     nested,
     read_row,
     read_table,
@@ -153,7 +151,7 @@ class RatingTable:
 
 
 @dataclass(frozen=True, eq=False)
-class TrustModel:
+class TrustModel(JsonFile):
     """The supervisor: hidden trust, its dynamics, and how it drives the human action."""
 
     trust_levels: tuple[str, ...]
@@ -338,14 +336,6 @@ class TrustModel:
             return cls(tuple(T), tuple(C), initial, emission, transition, notes=notes, not_estimated=not_estimated, rating=rating)
         except ModelError as exc:
             raise ModelError(exc.problems, source) from None
-
-    def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
-
-    @classmethod
-    def load(cls, path: str | Path) -> TrustModel:
-        d, source = load_json(path)
-        return cls.from_dict(d, source)
 
     def replace(self, **changes: Any) -> TrustModel:
         kw: dict[str, Any] = {

@@ -31,7 +31,18 @@ from typing import Any
 import numpy as np
 
 from .core import IOHMM_FORMAT, PLANNING_INPUTS, RatingTable, TrustModel, planning_refusal
-from .jsonfile import ModelError, check_names, check_row_array, get_key, load_json, nested, read_row, read_table, unknown_keys
+from .jsonfile import (
+    JsonFile,
+    ModelError,
+    check_names,
+    check_row_array,
+    get_key,
+    load_json,
+    nested,
+    read_row,
+    read_table,
+    unknown_keys,
+)
 
 __all__ = ["IOHMM_FORMAT", "PLANNING_INPUTS", "IOHMMModel", "is_iohmm_file", "load_any_model", "planning_refusal"]
 
@@ -53,7 +64,7 @@ KEYS = (
 
 
 @dataclass(frozen=True, eq=False)
-class IOHMMModel:
+class IOHMMModel(JsonFile):
     """A fitted IOHMM with named inputs (see the module docstring)."""
 
     levels: tuple[str, ...]
@@ -256,14 +267,6 @@ class IOHMMModel:
             )
         except ModelError as exc:
             raise ModelError(exc.problems, source) from None
-
-    def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
-
-    @classmethod
-    def load(cls, path: str | Path) -> IOHMMModel:
-        d, source = load_json(path)
-        return cls.from_dict(d, source)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, IOHMMModel):

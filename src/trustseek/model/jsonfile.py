@@ -8,7 +8,7 @@ import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 
@@ -16,6 +16,7 @@ from ..errors import TrustseekError
 
 __all__ = [
     "ATOL",
+    "JsonFile",
     "ModelError",
     "UnknownComplexityError",
     "check_names",
@@ -227,3 +228,24 @@ def load_json(path: str | Path, expect: type | None = dict) -> tuple[Any, str]:
         kind = "an object" if expect is dict else expect.__name__
         raise ModelError([f"the top level must be {kind} ({{...}}), got {type(data).__name__}"], source)
     return data, source
+
+
+class JsonFile:
+    """``save`` and ``load`` for a class with ``to_dict()`` and ``from_dict(d, source)``: the JSON
+    written with two-space indents (NaN and infinities as null), and read with every problem
+    located in the file (``load_json``, then ``from_dict`` naming the file)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        raise NotImplementedError
+
+    @classmethod
+    def from_dict(cls, d: Any, source: str | None = None) -> Self:
+        raise NotImplementedError
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(json_safe(self.to_dict()), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+
+    @classmethod
+    def load(cls, path: str | Path) -> Self:
+        d, source = load_json(path)
+        return cls.from_dict(d, source)

@@ -12,23 +12,21 @@ one type.  JSON::
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .core import TrustModel
-from .jsonfile import ModelError, json_safe, load_json
+from .jsonfile import JsonFile, ModelError
 
 MIXTURE_FORMAT = "trustseek.mixture/1"
 
 
 @dataclass(frozen=True, eq=False)
-class TypeMixture:
+class TypeMixture(JsonFile):
     """M supervisor types: ``names[m]`` with population share ``weights[m]`` behaves like ``models[m]``."""
 
     names: tuple[str, ...]
@@ -178,14 +176,6 @@ class TypeMixture:
             return cls(tuple(names), np.asarray(weights), tuple(models), notes)
         except ModelError as exc:
             raise ModelError(exc.problems, source) from None
-
-    def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(json_safe(self.to_dict()), indent=2) + "\n", encoding="utf-8")
-
-    @classmethod
-    def load(cls, path: str | Path) -> TypeMixture:
-        d, source = load_json(path)
-        return cls.from_dict(d, source)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, TypeMixture):

@@ -13,14 +13,22 @@ import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..vocab import ASK, EXPERIENCES, FAULTY, INTERVENE, RELIABLE
 from .core import TrustModel
-from .jsonfile import ATOL, ModelError, UnknownComplexityError, check_row_array, fmt_number, get_key, load_json, unknown_keys
+from .jsonfile import (
+    ATOL,
+    JsonFile,
+    ModelError,
+    UnknownComplexityError,
+    check_row_array,
+    fmt_number,
+    get_key,
+    unknown_keys,
+)
 
 __all__ = ["TASK_FORMAT", "Rewards", "Task"]
 
@@ -64,7 +72,7 @@ class Rewards:
 
 
 @dataclass(frozen=True, eq=False)
-class Task:
+class Task(JsonFile):
     """The object-collection task: complexity distribution, robot skill, rewards, discount."""
 
     complexities: tuple[str, ...]
@@ -269,14 +277,6 @@ class Task:
             return cls(tuple(names), np.array(probs), np.array(succ), tuple(askx), rewards, float(disc))
         except ModelError as exc:
             raise ModelError(exc.problems, source) from None
-
-    def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
-
-    @classmethod
-    def load(cls, path: str | Path) -> Task:
-        d, source = load_json(path)
-        return cls.from_dict(d, source)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Task):
