@@ -81,6 +81,13 @@ def test_simulate_takes_the_types_as_solve_does(solved, tmp_path):
     assert code == 2 and "--model or with --types, not both" in text
     code, text = run_cli(["simulate", "--types", str(tmp_path / "missing.json"), *common])
     assert code == 2 and "missing.json" in text
+    # one supervisor type is a trust model: the same simulation as the model itself
+    plain = ["-n", "4", "--trials", "15", "--json"]
+    code, one = run_cli(["simulate", "--types", "paper", *plain])
+    assert code == 0, one
+    code, model = run_cli(["simulate", "-m", "paper", *plain])
+    assert code == 0, model
+    assert json.loads(one) == json.loads(model)
 
 
 def test_the_deploy_api_runs_a_type_aware_policy(solved, tmp_path):
