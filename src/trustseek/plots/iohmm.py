@@ -23,29 +23,38 @@ def _labels(model: IOHMMModel, table: str, n: int) -> list[str]:
 def plot_iohmm_emissions(model: IOHMMModel, path=None):
     """P(output = last category | level, emission inputs), by combination of the inputs."""
     cat = model.output_categories[-1]
-    vals = model.emission[:, :, -1]
-    with style() as plt:
-        fig, ax = plt.subplots(figsize=(max(4.6, 1.3 * len(vals) + 1.5), 2.8))
-        _bars(ax, vals, None, None, None, _labels(model, "emission", len(vals)), [f"S={k}" for k in model.levels])
-        ax.set_ylabel(f"P({model.output} = {cat} | S, inputs)")
-        ax.set_title(f"Estimated P({cat}) by {', '.join(model.emission_inputs) or 'level only'}")
-        ax.set_ylim(0, 1.25)  # room for the legend above the bars
-        ax.legend(loc="upper left", frameon=False, ncol=model.n_levels)
-        fig.tight_layout()
-        if path is not None:
-            save(fig, path)
-        return fig
+    inputs = ", ".join(model.emission_inputs) or "level only"
+    return _plot_table(
+        model,
+        "emission",
+        model.emission[:, :, -1],
+        f"P({model.output} = {cat} | S, inputs)",
+        f"Estimated P({cat}) by {inputs}",
+        path,
+    )
 
 
 def plot_iohmm_transitions(model: IOHMMModel, path=None):
     """P(next level = the highest | level, transition inputs), by combination of the inputs."""
     top = model.levels[-1]
-    vals = np.asarray(model.transition[:, :, -1])
+    inputs = ", ".join(model.transition_inputs) or "level only"
+    return _plot_table(
+        model,
+        "transition",
+        np.asarray(model.transition[:, :, -1]),
+        f"P(S' = {top} | S, inputs)",
+        f"Estimated P(S' = {top}) by {inputs}",
+        path,
+    )
+
+
+def _plot_table(model: IOHMMModel, table: str, vals: np.ndarray, ylabel: str, title: str, path):
+    """Bars of one probability per (combination of the table's inputs, level)."""
     with style() as plt:
         fig, ax = plt.subplots(figsize=(max(4.6, 1.3 * len(vals) + 1.5), 2.8))
-        _bars(ax, vals, None, None, None, _labels(model, "transition", len(vals)), [f"S={k}" for k in model.levels])
-        ax.set_ylabel(f"P(S' = {top} | S, inputs)")
-        ax.set_title(f"Estimated P(S' = {top}) by {', '.join(model.transition_inputs) or 'level only'}")
+        _bars(ax, vals, None, None, None, _labels(model, table, len(vals)), [f"S={k}" for k in model.levels])
+        ax.set_ylabel(ylabel)
+        ax.set_title(title)
         ax.set_ylim(0, 1.25)  # room for the legend above the bars
         ax.legend(loc="upper left", frameon=False, ncol=model.n_levels)
         fig.tight_layout()
