@@ -101,3 +101,34 @@ def test_flat_bounds_bracket_pomdp_py_exact_recursion(seed):
 def test_refuses_the_eq3_update_and_names_alternatives(pomdp):
     reasons = ReachableSolver(belief_update="paper").unsupported(pomdp)
     assert reasons and "alpha" in reasons[0] and "grid" in reasons[0]
+
+
+def test_a_consolidation_cut_by_the_clock_keeps_both_bounds(pomdp):
+    """Past its deadline a consolidation stops after one round (lower) or one evaluation (upper);
+    its vectors are still controllers' values and its points, raised by the Bellman residual,
+    still lie above the value: checked against the alpha solver's value at every belief."""
+    exact = make_solver("alpha", gap=1e-6).solve(pomdp)
+    solver = ReachableSolver(tol=1e-3)
+    solver._setup(pomdp.branch_model())
+    B = solver._reachable(np.asarray(pomdp.model.initial, dtype=float), 3)
+    value = np.array([exact.value_bound(b) for b in B])
+    up_before, lo_before = solver.upper_at(B), solver.lower_at(B)
+    solver._improve_upper(B, t_end=0.0)
+    solver._improve_lower(B, t_end=0.0)
+    up, lo = solver.upper_at(B), solver.lower_at(B)
+    assert np.all(up >= value - 2e-6) and np.all(lo <= value + 2e-6)
+    assert np.all(up <= up_before + 1e-12) and np.all(lo >= lo_before - 1e-12)
+    # two supervisor types, where the first consolidation moves both bounds: they stay within
+    # the point solver's certified bounds at every belief
+    problem = type_aware_problem(paper_conservative_mixture(), paper_task())
+    point = make_solver("point", gap=1e-3, max_seconds=60)
+    point.solve_bounds(problem)
+    solver = ReachableSolver(tol=1e-3)
+    solver._setup(problem.branch_model())
+    B = solver._reachable(np.asarray(problem.model.initial, dtype=float), 2)
+    up_before, lo_before = solver.upper_at(B), solver.lower_at(B)
+    solver._improve_upper(B, t_end=0.0)
+    solver._improve_lower(B, t_end=0.0)
+    up, lo = solver.upper_at(B), solver.lower_at(B)
+    assert np.all(up >= point.lower_at(B) - 1e-9) and np.all(lo <= point.upper_at(B) + 1e-9)
+    assert np.any(up < up_before - 1e-6) and np.any(lo > lo_before + 1e-6)  # one step did something

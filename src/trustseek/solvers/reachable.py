@@ -288,11 +288,13 @@ class ReachableSolver(SolverBase):
             self._refresh_points()
 
     # -- consolidation over the visited beliefs ----------------------------------------------
-    def _improve_lower(self, B: np.ndarray, rounds: int = 20) -> None:
+    def _improve_lower(self, B: np.ndarray, rounds: int = 20, t_end: float = math.inf) -> None:
         """Point-based policy iteration on the visited beliefs: every belief is a controller node
         with its greedy actions and, per (context, branch), the node best at the next belief; the
         controller is evaluated exactly (one sparse solve), so long loops of beliefs (a supervisor
-        who keeps relying) are valued at once rather than one discount factor per backup."""
+        who keeps relying) are valued at once rather than one discount factor per backup.  Stops
+        after the round that ends past ``t_end`` (every vector is a controller's value, so the
+        bound holds whenever it stops)."""
         N, A, Br, K = self.shape
         n = len(B)
         p, S = self._successors_many(B)  # (n, N, A, Br), (n, N, A, Br, K)
@@ -321,18 +323,19 @@ class ReachableSolver(SolverBase):
             G = np.vstack([self.G, *new])
             self.G = G[np.unique((np.vstack([B, np.eye(K)]) @ G.T).argmax(axis=1))]
             gain = float(np.max(self.lower_at(B) - before))
-            if key == prev or gain <= self.tol * 1e-3:
+            if key == prev or gain <= self.tol * 1e-3 or time.perf_counter() > t_end:
                 break
             prev = key
 
-    def _improve_upper(self, B: np.ndarray, candidates: int = 8, rounds: int = 30) -> None:
+    def _improve_upper(self, B: np.ndarray, candidates: int = 8, rounds: int = 30, t_end: float = math.inf) -> None:
         """The upper values of the visited beliefs as the fixed point of the Bellman operator on
         the sawtooth through them.  Each successor of a visited belief is bounded either by the
         current upper bound (a constant) or through one of ``candidates`` visited beliefs
         (affine in its value); with those choices fixed, the values solve a small MDP (policy
         iteration over the actions, one sparse solve each), whose fixed point is above the
         optimal value; the choices are then re-made at the new values, which can only lower
-        them.  The result is raised by its Bellman residual / (1 - γ) against rounding."""
+        them.  The result is raised by its Bellman residual / (1 - γ) against rounding, which
+        also makes it a bound when the iterations stop early: after ``t_end``."""
         N, A, Br, K = self.shape
         n = len(B)
         p, S = self._successors_many(B)
@@ -404,11 +407,11 @@ class ReachableSolver(SolverBase):
                 W = sp.csr_matrix(((wt * slope)[lin], (rows_of[lin], col[lin])), shape=(n, n))
                 v = policy_values(W, rhs, v)
                 new_acts = improve(q_of(v, aff), acts, axis=2)
-                if new_acts is None:
+                if new_acts is None or time.perf_counter() > t_end:
                     break
                 acts = new_acts
             again = choose(v)
-            if np.array_equal(again[2], col) and np.array_equal(again[1] > 0, slope > 0):
+            if (np.array_equal(again[2], col) and np.array_equal(again[1] > 0, slope > 0)) or time.perf_counter() > t_end:
                 break
         q = q_of(v)
         eta = max(0.0, float(np.max(np.einsum("c,nc->n", self.pc, q.max(axis=2)) - v)))
@@ -535,28 +538,32 @@ class ReachableSolver(SolverBase):
         visited: list[np.ndarray] = list(self._reachable(b0, self.seed_depth))
         history = []
         trials = backups = consolidated = 0
-        cost = 0.0
+        cost = backup_seconds = 0.0
         rng = np.random.default_rng(0)
         lo, up = float(self.lower_at(b0)[0]), float(self.upper_at(b0)[0])
         while up - lo > self.tol and time.perf_counter() < t_end:
             trials += 1
             path = self._trial(b0, self.tol, depth_cap, t_end)
+            b_start = time.perf_counter()
             for b in reversed(path):
                 self._update(b)
                 backups += 1
+            backup_seconds += time.perf_counter() - b_start
             visited.extend(path[1:])
             B = _unique_rows(np.array(visited), self.decimals)
             visited = list(B)
-            # the next consolidation costs about (size ratio)^2 x the last one: not started past the limit
-            expected = cost * (len(B) / max(consolidated, 1)) ** 2
+            # a consolidation is not started past the limit: the next one costs about (size
+            # ratio)^2 x the last one; the first, about two backups per visited belief (each
+            # bounds the successors of its belief, as the consolidation does for all at once)
+            expected = cost * (len(B) / consolidated) ** 2 if consolidated else 2 * len(B) * backup_seconds / max(backups, 1)
             if len(B) >= 1.3 * consolidated and time.perf_counter() + expected < t_end:
                 # values over the visited beliefs at once (loops of beliefs included), with the
                 # beliefs met on a few trajectories of the greedy policy (what the lower bound needs)
                 c0 = time.perf_counter()
                 B = _unique_rows(np.vstack([B, self._sampled(b0, rng)]), self.decimals)
                 visited = list(B)
-                self._improve_upper(B)
-                self._improve_lower(B)
+                self._improve_upper(B, t_end=t_end)
+                self._improve_lower(B, t_end=t_end)
                 self._prune(B)
                 consolidated, cost = len(B), time.perf_counter() - c0
             lo, up = float(self.lower_at(b0)[0]), float(self.upper_at(b0)[0])
