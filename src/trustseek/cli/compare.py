@@ -25,7 +25,7 @@ def _counts(text: str) -> tuple[int, ...]:
     return parts
 
 
-@app.command("compare-types", rich_help_panel="Simulate")
+@app.command("compare-types", rich_help_panel="Simulate and reproduce")
 def compare_types(
     mixture: str = typer.Option(
         "paper+conservative",

@@ -48,7 +48,7 @@ def _connect(scheduler: str | None) -> Any:
         raise TrustseekError([f"--scheduler {scheduler}: cannot connect ({exc})"]) from None
 
 
-@app.command(rich_help_panel="Simulate")
+@app.command(rich_help_panel="Simulate and reproduce")
 def design(
     model: str = typer.Option(
         "paper", "--model", "-m", help="True population: a preset name (paper) or a trust-model JSON file."
