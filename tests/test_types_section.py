@@ -109,6 +109,7 @@ def test_compare_types_command():
         (["-b", "x/y"], "--block must be trials per complexity"),
         (["-m", "paper", "--share", "0.3"], "--share needs a mixture of two types"),
         (["-m", "nobody"], "unknown mixture preset"),
+        (["--types", "nobody"], "unknown mixture preset"),  # --types names the mixture, as in solve and simulate
     ],
 )
 def test_compare_types_bad_input(args, needle):

@@ -30,8 +30,10 @@ def compare_types(
     mixture: str = typer.Option(
         "paper+conservative",
         "--mixture",
+        "--types",
         "-m",
-        help="Supervisor types: a preset (paper+conservative) or a mixture JSON file (e.g. from fit --types).",
+        help="Supervisor types: a preset (paper+conservative) or a mixture JSON file (e.g. from 'trustseek fit-types'); "
+        "--types as in solve and simulate.",
     ),
     share: float | None = typer.Option(
         None, "--share", min=0.0, max=1.0, help="Share of the last type of two, e.g. 0.3 (default: the mixture's weights)."
