@@ -58,3 +58,34 @@ def test_a_drifted_command_line_is_caught():
     assert problems_of("trustseek simulate --no-such-flag 3", group) == ["simulate has no option '--no-such-flag'"]
     assert problems_of("trustseek nonsense", group) == ["no command 'nonsense'"]
     assert problems_of("trustseek solve --types mix.json --max-seconds 5", group) == []
+
+
+def help_problems(group) -> list[str]:
+    """Commands and options that the CLI's own help texts name ('trustseek X', 'X --option' or
+    'solve --types') but that do not exist."""
+    out = []
+    for name, command in group.commands.items():
+        for text in [command.help or ""] + [getattr(p, "help", None) or "" for p in command.params]:
+            for m in re.finditer(r"trustseek ([a-z][a-z-]*)", text):
+                if m.group(1) not in group.commands:
+                    out.append(f"{name}: {m.group(0)!r} is no command")
+            for m in re.finditer(r"\b([a-z][a-z-]+) (--[a-z][a-z-]*)", text):
+                other, option = m.groups()
+                if other in group.commands and option not in {o for p in group.commands[other].params for o in p.opts}:
+                    out.append(f"{name}: {m.group(0)!r} is no option of {other}")
+    return out
+
+
+def test_the_help_texts_name_real_commands_and_options():
+    group = typer.main.get_command(app)
+    assert help_problems(group) == []
+    # the defect this caught: compare-types' help sent people to 'fit --types' (it is fit-types)
+    fake = typer.Typer()
+
+    @fake.command("fit")
+    def fit(out: str = typer.Option("", "--out")) -> None: ...
+
+    @fake.command("compare", help="Types (e.g. from fit --types).")
+    def compare() -> None: ...
+
+    assert help_problems(typer.main.get_command(fake)) == ["compare: 'fit --types' is no option of fit"]
