@@ -15,6 +15,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from asgi_client import asgi_post
 from trustseek.model.core import TrustModel
 from trustseek.model.task import Task
 from trustseek.policies import PolicyRunner, policy_from_dict
@@ -31,44 +32,9 @@ POLICIES = [
 
 async def post(app, path: str, body: dict, token: str) -> tuple[int, dict]:
     raw = json.dumps(body).encode()
-    head = [
-        (b"host", b"test"),
-        (b"authorization", b"Bearer " + token.encode()),
-        (b"content-type", b"application/json"),
-        (b"content-length", str(len(raw)).encode()),
-    ]
-    scope = {
-        "type": "http",
-        "asgi": {"version": "3.0"},
-        "http_version": "1.1",
-        "method": "POST",
-        "scheme": "http",
-        "path": path,
-        "raw_path": path.encode(),
-        "query_string": b"",
-        "root_path": "",
-        "headers": head,
-        "client": ("127.0.0.1", 1),
-        "server": ("127.0.0.1", 80),
-    }
-    sent = False
-    out: dict = {"body": b""}
-
-    async def receive():
-        nonlocal sent
-        if not sent:
-            sent = True
-            return {"type": "http.request", "body": raw, "more_body": False}
-        await asyncio.sleep(3600)
-
-    async def send(message):
-        if message["type"] == "http.response.start":
-            out["status"] = message["status"]
-        else:
-            out["body"] += message.get("body", b"")
-
-    await app(scope, receive, send)
-    return out["status"], json.loads(out["body"])
+    headers = {"authorization": f"Bearer {token}", "content-type": "application/json", "content-length": str(len(raw))}
+    status, _, out = await asgi_post(app, path, raw, headers, disconnect=False)
+    return status, json.loads(out)
 
 
 def forget_caches() -> None:

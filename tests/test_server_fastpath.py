@@ -12,6 +12,7 @@ from fastapi import FastAPI
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from asgi_client import asgi_post
 from server_checks import check_two_processes_serve_one_robot
 from trustseek.server.app import ServerApp, create_app
 
@@ -22,52 +23,19 @@ POLICY = {"kind": "randomized", "p_ask": {"low": 0.3, "high": 0.6}}
 def call(app: ServerApp, full: bool, path: str, body: bytes, token: str | None, headers: dict | None = None):
     """(status, content type, body) of one POST through the application's front (the lean path
     first) or, with ``full``, straight through the FastAPI application."""
-    head = [(b"host", b"test")]
-    if token is not None:
-        head.append((b"authorization", b"Bearer " + token.encode()))
     fields = {"content-type": "application/json", "content-length": str(len(body)), **(headers or {})}
-    head += [(k.encode(), v.encode()) for k, v in fields.items() if v is not None]
-    scope = {
-        "type": "http",
-        "asgi": {"version": "3.0"},
-        "http_version": "1.1",
-        "method": "POST",
-        "scheme": "http",
-        "path": path,
-        "raw_path": path.encode(),
-        "query_string": b"",
-        "root_path": "",
-        "headers": head,
-        "client": ("127.0.0.1", 1),
-        "server": ("127.0.0.1", 80),
-    }
-    out: dict = {"body": b""}
-    sent = False
+    if token is not None:
+        fields = {"authorization": f"Bearer {token}", **fields}
 
-    async def receive():
-        nonlocal sent
-        if not sent:
-            sent = True
-            return {"type": "http.request", "body": body, "more_body": False}
-        return {"type": "http.disconnect"}
-
-    async def send(message):
-        if message["type"] == "http.response.start":
-            out["status"] = message["status"]
-            out["headers"] = dict(message["headers"])
-        else:
-            out["body"] += message.get("body", b"")
-
-    async def run():
+    async def front(scope, receive, send):
         if full:
-            scope["app"] = app
-            await FastAPI.__call__(app, scope, receive, send)
+            await FastAPI.__call__(app, {**scope, "app": app}, receive, send)
         else:
             await app(scope, receive, send)
 
-    asyncio.run(run())
-    assert b"server-timing" in out["headers"]
-    return out["status"], out["headers"].get(b"content-type"), out["body"]
+    status, out_headers, out = asyncio.run(asgi_post(front, path, body, fields))
+    assert b"server-timing" in out_headers
+    return status, out_headers.get(b"content-type"), out
 
 
 class Counting:
