@@ -26,7 +26,7 @@ from ..pomdp.problem import AssistancePOMDP
 from ..simulation import Simulation, crossover, simulate
 from ..solvers.agnostic import agnostic_from_intervention_rates, trust_agnostic_from_data
 from ..solvers.grid import GridSolver
-from ..solvers.numerics import improve
+from ..solvers.numerics import improve, one_blas_thread
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, LEVELS
 from .evaluation import EVALUATION_GRID, evaluate_policy, high_threshold
 from .kernels import signed_rank_counts
@@ -380,6 +380,7 @@ def run_replicate(study: Study, point: int, design: Experiment1, replicate: int)
     return out
 
 
+@one_blas_thread
 def run_chunk(study: Study, items: Sequence[tuple[int, Experiment1, int]]) -> list[dict[str, Any]]:
     """Several replicates in one task (what an executor runs)."""
     return [run_replicate(study, point, design, rep) for point, design, rep in items]

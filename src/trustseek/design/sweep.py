@@ -29,6 +29,7 @@ from ..model.core import TrustModel
 from ..model.presets import paper_model, paper_task
 from ..model.task import Task
 from ..reproduction.statistics import mean_ci, share_ci
+from ..solvers.numerics import one_blas_thread
 from ..vocab import (
     BELIEF_UPDATES,
     PAPER_ASK_PROBABILITIES,
@@ -224,6 +225,7 @@ def execute(
     return out
 
 
+@one_blas_thread
 def run_design(
     cfg: DesignConfig | None = None,
     jobs: int = 1,
@@ -359,6 +361,7 @@ def summarize(cfg: DesignConfig, study: Study, designs: list[Experiment1], reps:
     }
 
 
+@one_blas_thread
 def ask_search(
     cfg: DesignConfig,
     ask_low: Iterable[float],

@@ -20,6 +20,7 @@ from ..policies.complexity import ComplexityPolicy, randomized
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import PAPER_ASK_PROBABILITIES, PAPER_DATA_COUNTS
 from .base import SolverBase, SolverError
+from .numerics import one_blas_thread
 
 #: trials per participant of the paper's data collection (41 low + 30 high)
 PAPER_HORIZON = sum(PAPER_DATA_COUNTS)
@@ -107,6 +108,7 @@ class TrustAgnosticSolver(SolverBase):
         self.horizon = int(horizon)
         self.data_policy = data_policy
 
+    @one_blas_thread
     def solve(self, pomdp: AssistancePOMDP) -> ComplexityPolicy:
         """The trust-agnostic policy; ``info`` says where P(intervene | C) came from."""
         self.check(pomdp)

@@ -44,7 +44,7 @@ from .certificate import CertifiedSolution, policy_from_solution
 from .certified_grid import CertifiedGridSolver
 from .envelopes import difference_extrema, refit, thin, thin_mask
 from .grid import GridSolver
-from .numerics import evaluate_controller, memoryless_controllers
+from .numerics import evaluate_controller, memoryless_controllers, one_blas_thread
 
 __all__ = ["AlphaSolver"]
 
@@ -85,11 +85,13 @@ class AlphaSolver(SolverBase):
         self.seed_rounds = int(seed_rounds)  # its rounds of greedy improvement
         self.thin = float(thin)  # lines worth less than thin * tol * (1 - γ) are dropped from L
 
+    @one_blas_thread
     def solve(self, pomdp: AssistancePOMDP) -> Policy:
         """The optimal policy: an AlphaVectorPolicy (bayes) or a certified TrustAwarePolicy on a
         fine grid (paper); ``info`` holds the certificate."""
         return policy_from_solution(self.solve_bounds(pomdp), pomdp, self.name, self.tol)
 
+    @one_blas_thread
     def solve_bounds(self, pomdp: AssistancePOMDP) -> CertifiedSolution:
         """The certified solution (lower bound, Q envelopes, gap)."""
         self.check(pomdp)

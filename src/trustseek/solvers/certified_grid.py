@@ -27,6 +27,7 @@ from ..vocab import check_belief_update
 from .base import SolverBase, SolverError
 from .certificate import CertifiedSolution, policy_from_solution
 from .eq3 import paper_grid_values, residual_pieces
+from .numerics import one_blas_thread
 
 __all__ = ["CertifiedGridSolver"]
 
@@ -51,10 +52,12 @@ class CertifiedGridSolver(SolverBase):
         self.grid = int(grid)  # the starting grid (refined adaptively)
         self.max_grid = int(max_grid)
 
+    @one_blas_thread
     def solve(self, pomdp: AssistancePOMDP) -> Policy:
         """A grid-Q policy from the certified value; ``info`` holds the certificate."""
         return policy_from_solution(self.solve_bounds(pomdp), pomdp, self.name, self.tol)
 
+    @one_blas_thread
     def solve_bounds(self, pomdp: AssistancePOMDP) -> CertifiedSolution:
         """The certified grid values, refined until the gap meets the tolerance."""
         self.check(pomdp)

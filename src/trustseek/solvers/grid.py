@@ -35,7 +35,7 @@ from ..policies.grid_q import TrustAwarePolicy
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
 from .base import SolverBase, SolverError
-from .numerics import improve, policy_values
+from .numerics import improve, one_blas_thread, policy_values
 
 DEFAULT_GRID = 2001
 METHODS = ("policy-iteration", "value-iteration")
@@ -144,6 +144,7 @@ class GridSolver(SolverBase):
         return grid, r, P, q_of, bellman
 
     # -- solving ---------------------------------------------------------------
+    @one_blas_thread
     def solve(self, pomdp: AssistancePOMDP) -> TrustAwarePolicy:
         """The trust-aware policy: greedy in Q on the grid (``info`` says how it was obtained)."""
         sol = self.solve_grid(pomdp)

@@ -7,6 +7,8 @@ controller evaluation.
   the residual, with a direct sparse solve as the fallback;
 * :func:`improve` -- Howard's improvement step, keeping the current action unless another is
   better by more than rounding, so that policy iteration terminates;
+* :func:`one_blas_thread` -- runs a solver's work with BLAS on one thread, so that its
+  numbers do not depend on the machine's cores;
 * :func:`best_vectors` -- which of a set of vectors is best at each of many beliefs, in
   blocks, so that a fine grid's successors never need the whole product in memory;
 * :func:`evaluate_controller` -- the exact value vectors of a finite-state controller on a
@@ -15,15 +17,38 @@ controller evaluation.
 
 from __future__ import annotations
 
+import functools
 import itertools
+from collections.abc import Callable
+from typing import Any, TypeVar
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from threadpoolctl import threadpool_limits
 
 from ..pomdp.branch_model import BranchModel
 
-__all__ = ["best_vectors", "evaluate_controller", "improve", "memoryless_controllers", "policy_values"]
+__all__ = ["best_vectors", "evaluate_controller", "improve", "memoryless_controllers", "one_blas_thread", "policy_values"]
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def one_blas_thread(method: F) -> F:
+    """Run ``method`` with the BLAS library (OpenBLAS, MKL) on one thread.  A threaded BLAS
+    splits products and sums differently with the number of cores, so their last bits differ;
+    a solver then picks another vector at a near tie and the policy changes (the type-aware
+    policy of the reproduction's fitted types moved its lower bound by 1.4e-4 between one and
+    two threads).  The solvers' products are thin (K <= a few dozen columns), so one thread
+    costs them little."""
+
+    @functools.wraps(method)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        with threadpool_limits(limits=1, user_api="blas"):
+            return method(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]
+
 
 BLOCK_ROWS = 1 << 15  # beliefs per block of best_vectors (with 500 vectors: 130 MB of products)
 

@@ -43,7 +43,7 @@ from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
 from .base import SolverBase, SolverError
-from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, policy_values
+from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, one_blas_thread, policy_values
 
 __all__ = ["PointSolution", "PointSolver", "freudenthal_vertices", "freudenthal_weights"]
 
@@ -293,6 +293,7 @@ class PointSolver(SolverBase):
         return _unique_rows(np.vstack(out), K, decimals=9)
 
     # -- solve -------------------------------------------------------------------------
+    @one_blas_thread
     def solve_bounds(self, problem: AssistancePOMDP | FlatPOMDP) -> PointSolution:
         """Lower and upper bounds at the initial belief (the vectors and points behind them)."""
         self.check(problem)
@@ -357,6 +358,7 @@ class PointSolver(SolverBase):
         g = m.rewards[None] + m.discount * np.einsum("cabtu,ncabu->ncat", m.kernels, self.G[best])
         return [[_unique_rows(g[:, c, a], K, decimals=12) for a in range(A)] for c in range(N)]
 
+    @one_blas_thread
     def solve(self, problem: AssistancePOMDP | FlatPOMDP) -> Policy:
         """The policy of the lower bound's vectors, with the bounds at the initial belief in its
         ``info``: an AlphaVectorPolicy for the assistance POMDP (Bayes update), a FlatAlphaPolicy

@@ -48,7 +48,7 @@ from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
 from .base import SolverBase, SolverError
-from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, policy_values
+from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, one_blas_thread, policy_values
 from .point import PointSolver
 
 __all__ = ["ReachableSolution", "ReachableSolver", "fast_informed_bound"]
@@ -521,6 +521,7 @@ class ReachableSolver(SolverBase):
             path.append(b)
         return path
 
+    @one_blas_thread
     def solve_bounds(self, problem: AssistancePOMDP | FlatPOMDP) -> ReachableSolution:
         """Lower and upper bounds at the initial belief (the vectors and points behind them)."""
         self.check(problem)
@@ -602,6 +603,7 @@ class ReachableSolver(SolverBase):
             res.append(row)
         return res
 
+    @one_blas_thread
     def solve(self, problem: AssistancePOMDP | FlatPOMDP) -> Policy:
         """The policy greedy in the lower bound's Q-vectors, with the bounds at the initial belief
         in its ``info``: an AlphaVectorPolicy for the assistance POMDP, a FlatAlphaPolicy for a

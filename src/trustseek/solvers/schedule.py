@@ -33,6 +33,7 @@ from ..pomdp.scheduling import SchedulingProblem, State, state_key
 from .backup import exact_backup
 from .base import SolverBase, SolverError
 from .envelopes import cross_sum, max_of
+from .numerics import one_blas_thread
 
 ORDERS = ("optimal", "easy-first", "hard-first", "alternating")
 REPRESENTATIONS = ("alpha", "grid")
@@ -117,6 +118,7 @@ class ScheduleSolver(SolverBase):
         reasons += [r for r in super().unsupported(problem.pomdp) if "trust levels" not in r]
         return reasons
 
+    @one_blas_thread
     def solve(self, problem: SchedulingProblem) -> SchedulePolicy:
         self.check(problem)
         t0 = time.perf_counter()

@@ -46,7 +46,7 @@ from ..pomdp.branch_model import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from .alpha import AlphaSolver
-from .numerics import evaluate_controller, improve, memoryless_controllers, policy_values
+from .numerics import evaluate_controller, improve, memoryless_controllers, one_blas_thread, policy_values
 from .point import (
     PointSolution,
     PointSolver,
@@ -203,6 +203,7 @@ class TypeAwareSolver(PointSolver):
             reasons.append(f"the types solver needs a discount below 1, got {problem.discount}: use the grid solver")
         return reasons
 
+    @one_blas_thread
     def solve_bounds(self, problem: AssistancePOMDP | FlatPOMDP) -> PointSolution:
         self.check(problem)
         t0 = time.perf_counter()
@@ -211,6 +212,7 @@ class TypeAwareSolver(PointSolver):
         self.setup_seconds = time.perf_counter() - t0
         return self._bounds(model, t0)
 
+    @one_blas_thread
     def solve(self, problem: AssistancePOMDP | FlatPOMDP) -> Policy:
         """The point solver's policy of the lower bound's vectors; ``info`` also says how many
         closed blocks (types) the upper bound used and the seconds spent on them."""
