@@ -174,21 +174,21 @@ def simulate(
         source = ctx.get_parameter_source("model")
         if source is not None and source.name != "DEFAULT":
             raise TrustseekError(["give the supervisors with --model or with --types, not both"])
-        model = types
     mixture = load_mixture(types) if types is not None else mixture_of(model)
-    one_type = mixture.models[0] if mixture is not None and mixture.n_types == 1 else None
-    if one_type is not None:  # one supervisor type is a trust model
+    m = mixture.models[0] if mixture is not None else load_model(model)
+    if mixture is not None and mixture.n_types == 1:  # one supervisor type is a trust model
         mixture = None
     policy_types = mixture_of(policy_model) if policy_model else mixture
     if mixture is not None and concentration is not None:
         raise TrustseekError(["--concentration draws around one model; the supervisor types of a mixture are fixed"])
-    m = mixture.models[0] if mixture is not None else one_type if one_type is not None else load_model(model)
     t = load_task(task)
     t.check_compatible(m)
     pm = product_model(policy_types) if policy_types is not None else (load_model(policy_model) if policy_model else m)
     if policy == TYPE_AWARE:
         if policy_types is None:
-            raise TrustseekError([f"--policy {TYPE_AWARE} needs supervisor types: a mixture with --model or --policy-model"])
+            raise TrustseekError(
+                [f"--policy {TYPE_AWARE} needs supervisor types: a mixture with --types, --model or --policy-model"]
+            )
         pol = solve_type_aware(policy_types, t, belief_update=belief_update)
     else:
         if policy == "trust-aware" and policy_types is not None:
