@@ -275,6 +275,26 @@ def test_solve_pomdp_file_exits_3_above_its_target_gap(tmp_path):
     assert code == 3 and "above the target" in output
 
 
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (None, "file not found"),
+        ("folder", "is a directory, expected a .pomdp file"),
+        (b"discount: 0.9\x00", "is a binary file, expected .pomdp text"),
+        ("discount: 0.9 # \u00e9".encode("latin-1"), f"is not UTF-8 text (byte {len('discount: 0.9 # ')})"),
+    ],
+)
+def test_solve_pomdp_file_refuses_an_unreadable_file_naming_it(tmp_path, content, message):
+    f = tmp_path / "problem.pomdp"
+    if content == "folder":
+        f.mkdir()
+    elif content is not None:
+        f.write_bytes(content)
+    code, output = run_cli(["solve-pomdp-file", str(f)])
+    assert code == 2 and "Traceback" not in output
+    assert f"{f}: {message}" in " ".join(output.split()), output
+
+
 def test_decode_needs_only_the_columns_the_model_uses(tmp_path):
     import pandas as pd
 

@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
+from ..model.jsonfile import read_text
 from ..pomdp.belief import to_vector
 from ..pomdp.flat import FlatPOMDP, FlatPOMDPError
 from ..pomdp.problem import AssistancePOMDP
@@ -246,20 +247,7 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
     """Parse Cassandra's ``.pomdp`` format from a file (or from ``text``, with ``source`` as its label)."""
     label = str(source)
     if text is None:
-        try:
-            content = Path(source).read_bytes()
-        except FileNotFoundError:
-            raise PomdpFileError(["file not found"], label) from None
-        except IsADirectoryError:
-            raise PomdpFileError(["is a directory, expected a .pomdp file"], label) from None
-        except OSError as exc:
-            raise PomdpFileError([f"cannot read file: {exc.strerror or exc}"], label) from None
-        if b"\x00" in content:
-            raise PomdpFileError(["is a binary file, expected .pomdp text"], label)
-        try:
-            text = content.decode("utf-8")
-        except UnicodeDecodeError as exc:
-            raise PomdpFileError([f"is not UTF-8 text (byte {exc.start})"], label) from None
+        text = read_text(source, ".pomdp", PomdpFileError)
     # group the lines into entries: an entry starts with a keyword followed by ':'
     groups: list[tuple[int, str, str]] = []  # (line, keyword, rest)
     key_re = re.compile(r"^\s*(discount|values|states|actions|observations|start\s+include|start\s+exclude|start|T|O|R)\s*:(.*)$")

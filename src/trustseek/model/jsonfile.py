@@ -28,6 +28,7 @@ __all__ = [
     "nested",
     "read_row",
     "read_table",
+    "read_text",
     "unknown_keys",
 ]
 
@@ -190,6 +191,27 @@ def _reject_constant(name: str) -> Any:
     raise ValueError(f"{name} is not a valid JSON number (use a finite number or null where allowed)")
 
 
+def read_text(path: str | Path, kind: str, error: type[TrustseekError], encoding: str = "utf-8", hint: str = "") -> str:
+    """The text of the file at ``path``, or ``error`` naming the file and what is wrong with it:
+    missing, a directory, unreadable, binary (a NUL byte), or not text in ``encoding`` (with the
+    byte, then ``hint``).  ``kind`` names what was expected ("JSON", ".pomdp")."""
+    source = str(path)
+    try:
+        raw = Path(path).read_bytes()
+    except FileNotFoundError:
+        raise error(["file not found"], source) from None
+    except IsADirectoryError:
+        raise error([f"is a directory, expected a {kind} file"], source) from None
+    except OSError as exc:
+        raise error([f"cannot read file: {exc.strerror or exc}"], source) from None
+    if b"\x00" in raw:
+        raise error([f"is a binary file, expected {kind} text"], source)
+    try:
+        return raw.decode(encoding)
+    except UnicodeDecodeError as exc:
+        raise error([f"is not UTF-8 text (byte {exc.start}){hint}"], source) from None
+
+
 def load_json(path: str | Path, expect: type | None = dict) -> tuple[Any, str]:
     """The parsed JSON of the file at ``path`` and the file's name (for error messages).
 
@@ -198,22 +220,8 @@ def load_json(path: str | Path, expect: type | None = dict) -> tuple[Any, str]:
     line and column), the non-standard ``NaN``/``Infinity`` literals, and (with ``expect``,
     an object by default) the wrong top-level type.
     """
-    path = Path(path)
     source = str(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise ModelError(["file not found"], source) from None
-    except IsADirectoryError:
-        raise ModelError(["is a directory, expected a JSON file"], source) from None
-    except OSError as exc:
-        raise ModelError([f"cannot read file: {exc.strerror or exc}"], source) from None
-    if b"\x00" in raw:
-        raise ModelError(["is a binary file, expected JSON text"], source)
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise ModelError([f"is not UTF-8 text (byte {exc.start}): save it as UTF-8 JSON"], source) from None
+    text = read_text(path, "JSON", ModelError, encoding="utf-8-sig", hint=": save it as UTF-8 JSON")
     if not text.strip():
         raise ModelError(["is empty, expected JSON"], source)
     try:
