@@ -172,19 +172,6 @@ def test_config_problems_name_the_options():
         assert opt in text
 
 
-@pytest.mark.parametrize("update", ["paper", "bayes"])
-def test_dense_plan_is_the_grid_solvers_policy(update):
-    from trustseek.design.replicate import plan
-
-    task = paper_task()
-    for model in (paper_model(), _other_model()):
-        fs = FitSettings(belief_update=update, grid=201)
-        ours = plan(model, task, fs)
-        ref = make_solver("grid", belief_update=update, grid=201).solve(AssistancePOMDP(model, task))
-        assert ours.thresholds() == pytest.approx(ref.thresholds(), abs=1e-9)
-        np.testing.assert_allclose(ours.q, ref.q, atol=1e-7)
-
-
 def test_agnostic_from_arrays_is_the_solvers():
     from trustseek.design.replicate import _agnostic
     from trustseek.solvers.agnostic import trust_agnostic_from_data

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from scipy.special import stdtr
@@ -23,10 +23,11 @@ from ..model.core import AUTONOMOUS, INTERVENE, TrustModel
 from ..model.task import Task
 from ..policies import ComplexityPolicy, TrustAwarePolicy, randomized
 from ..pomdp.problem import AssistancePOMDP
+from ..reproduction.config import seed_int
 from ..simulation import Simulation, crossover, simulate
 from ..solvers.agnostic import agnostic_from_intervention_rates, trust_agnostic_from_data
-from ..solvers.grid import GridSolver
-from ..solvers.numerics import improve, one_blas_thread
+from ..solvers.numerics import one_blas_thread
+from ..solvers.registry import make_solver
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, LEVELS
 from .evaluation import EVALUATION_GRID, evaluate_policy, high_threshold
 from .kernels import signed_rank_counts
@@ -228,78 +229,11 @@ def experiment1_sequences(sim: Simulation) -> tuple[Sequences, IOHMMSpec]:
     return seqs, spec
 
 
-def _seed_int(ss: np.random.SeedSequence) -> int:
-    return int(ss.generate_state(1, dtype=np.uint32)[0])
-
-
-#: plan() first solves a grid of about a quarter of the points (at least this many) for a start
-COARSE_MIN = 21
-
-
 def plan(model: TrustModel, task: Task, settings: FitSettings) -> TrustAwarePolicy:
-    """The trust-aware policy of ``model``: the grid solver's discretized belief MDP
-    (:class:`GridSolver`: a uniform grid of beliefs, successors spread linearly over the two
-    grid points that bracket them), solved by Howard's policy iteration with dense linear
-    solves (a few hundred grid points: much faster than the sparse iterative path, the same
-    policy; the tests compare both).  The transition matrices are built dense, every (C, a)
-    at once.  Policy iteration starts from the policy of the same problem on a coarser grid
-    (its Q interpolated), which saves a few of the large solves; where it starts does not
-    change where it ends, the optimal policy of the grid MDP, nor its values."""
-    solver = GridSolver(grid=settings.grid, belief_update=settings.belief_update)
-    pomdp = AssistancePOMDP(model, task)
-    solver.check(pomdp)
-    G = solver.grid
-    coarse = (G - 1) // 4 + 1
-    start = None
-    if coarse >= COARSE_MIN:
-        grid_c, q_c = _policy_iteration(pomdp, settings.belief_update, coarse, None)
-        grid = np.linspace(0.0, 1.0, G)
-        q0 = np.stack([[np.interp(grid, grid_c, q_c[c, a]) for a in range(2)] for c in range(pomdp.n_complexity)])
-        start = q0.argmax(axis=1)
-    grid, q = _policy_iteration(pomdp, settings.belief_update, G, start)
-    info = {"solver": "grid", "method": "policy-iteration (dense)", "grid_points": G, "discount": pomdp.discount}
-    return TrustAwarePolicy(grid, np.moveaxis(q, 2, 0), model, task.complexities, settings.belief_update, info)
-
-
-def _policy_iteration(pomdp: AssistancePOMDP, update: str, G: int, policy: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """(grid, Q[c, a, G]) of the grid MDP on ``G`` points by Howard's policy iteration from
-    ``policy`` [c, G] (default: the greedy one of the rewards)."""
-    N, gamma, pc = pomdp.n_complexity, pomdp.discount, pomdp.complexity_probs
-    grid = np.linspace(0.0, 1.0, G)
-    beliefs = np.stack([1.0 - grid, grid], axis=1)
-    r = np.einsum("gk,cak->cag", beliefs, pomdp.expected_reward)  # [c, a, G]
-    dense = _dense_transitions(pomdp, update, beliefs)  # [c, a, G, G]
-    policy = r.argmax(axis=1) if policy is None else policy  # [c, G]
-    rows = np.arange(G)
-    q = r
-    for _ in range(1000):
-        M = np.zeros((G, G))
-        rr = np.zeros(G)
-        for c in range(N):
-            M += (gamma * pc[c]) * dense[c, policy[c], rows]
-            rr += pc[c] * r[c, policy[c], rows]
-        W = np.asarray(np.linalg.solve(np.eye(G) - M, rr), dtype=float)
-        q = r + gamma * (dense @ W)  # [c, a, G]
-        new = improve(q, policy, axis=1)
-        if new is None:
-            break
-        policy = new
-    return grid, q
-
-
-def _dense_transitions(pomdp: AssistancePOMDP, update: str, beliefs: np.ndarray) -> np.ndarray:
-    """P[c, a, g, g']: from grid point g, the probability of each branch after (C, a) spread over
-    the two grid points that bracket its successor (:func:`~trustseek.solvers.grid.interpolation_matrix`'s
-    weights, dense, summed by one ``bincount`` for every (C, a))."""
-    G, N = len(beliefs), pomdp.n_complexity
-    p, nxt = pomdp.branches(update).successors(beliefs)  # (G, c, a, br), (G, c, a, br, K)
-    x = np.clip(nxt[..., 1], 0.0, 1.0) * (G - 1)
-    j = np.minimum(np.floor(x).astype(np.int64), G - 2)
-    f = x - j
-    start = ((np.arange(N)[:, None] * 2 + np.arange(2)) * G)[None, :, :, None] + np.arange(G)[:, None, None, None]
-    at = (start * G + j).reshape(-1)  # row (c, a, g), column j
-    weights = np.concatenate([(p * (1.0 - f)).reshape(-1), (p * f).reshape(-1)])
-    return np.bincount(np.concatenate([at, at + 1]), weights, N * 2 * G * G).reshape(N, 2, G, G)
+    """The trust-aware policy of ``model``: the registry's grid solver on ``settings.grid``
+    points (a few hundred: its dense policy iteration)."""
+    solver = make_solver("grid", grid=settings.grid, belief_update=settings.belief_update)
+    return cast(TrustAwarePolicy, solver.solve(AssistancePOMDP(model, task)))
 
 
 def _agnostic(frame: Any, task: Task) -> ComplexityPolicy:
@@ -343,7 +277,7 @@ def run_replicate(study: Study, point: int, design: Experiment1, replicate: int)
     ask = randomized({task.complexities[0]: design.ask_low, task.complexities[-1]: design.ask_high})
     sim1 = simulate(truth, task, ask, design.participants, counts=design.counts, seed=s1)
     try:
-        model = fit_encoded(*experiment1_sequences(sim1), fs, _seed_int(sfit))
+        model = fit_encoded(*experiment1_sequences(sim1), fs, seed_int(sfit))
         aware = plan(model, task, fs)
         agnostic = agnostic_of(sim1)
     except TrustseekError as exc:

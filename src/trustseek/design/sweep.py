@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import TrustseekError
 from ..model.core import TrustModel
+from ..model.jsonfile import json_safe
 from ..model.presets import paper_model, paper_task
 from ..model.task import Task
 from ..reproduction.statistics import mean_ci, share_ci
@@ -244,7 +245,7 @@ def run_design(
     items = [(i, d, r) for i, d in enumerate(designs) for r in range(cfg.replicates)]
     reps = execute(study, items, jobs=jobs, client=client, progress=progress)
     summary = summarize(cfg, study, designs, reps)
-    return DesignResult(summary=_clean(summary), replicates=_clean(reps), seconds=time.perf_counter() - t0)
+    return DesignResult(summary=json_safe(summary), replicates=json_safe(reps), seconds=time.perf_counter() - t0)
 
 
 def _interval(values: Sequence[float], level: float) -> dict[str, Any]:
@@ -425,7 +426,7 @@ def ask_search(
         }
     # near the best: the paper's choice is the best, or the interval of (paper - best) reaches 0
     near = i_best == i_paper or (difference["lo"] is not None and difference["lo"] <= 0)
-    return _clean(
+    return json_safe(
         {
             "budget": {"participants": sub.participants_1[0], "trials": sub.trials_1[0]},
             "replicates": sub.replicates,
@@ -439,21 +440,3 @@ def ask_search(
             "paper_near_best": bool(near),
         }
     )
-
-
-def _clean(o: Any) -> Any:
-    """JSON-safe: numpy scalars to Python, NaN/inf to None, tuples to lists."""
-    if isinstance(o, dict):
-        return {str(k): _clean(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_clean(v) for v in o]
-    if isinstance(o, np.ndarray):
-        return _clean(o.tolist())
-    if isinstance(o, (float, np.floating)):
-        v = float(o)
-        return v if math.isfinite(v) else None
-    if isinstance(o, np.integer):
-        return int(o)
-    if isinstance(o, np.bool_):
-        return bool(o)
-    return o

@@ -45,14 +45,22 @@ class UnknownComplexityError(ModelError, KeyError):
 
 
 def json_safe(obj: Any) -> Any:
-    """``obj`` with every NaN or infinite float replaced by None, so that it is valid JSON
-    (e.g. a threshold that does not exist because a policy's ask region is not an interval)."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
+    """``obj`` as plain JSON values: every NaN or infinite float becomes None (e.g. a threshold
+    that does not exist because a policy's ask region is not an interval), numpy scalars and
+    arrays become Python numbers and lists, tuples become lists and mapping keys strings."""
+    if isinstance(obj, (float, np.floating)):
+        v = float(obj)
+        return v if math.isfinite(v) else None
     if isinstance(obj, Mapping):
-        return {k: json_safe(v) for k, v in obj.items()}
+        return {str(k): json_safe(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [json_safe(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return json_safe(obj.tolist())
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, np.integer):
+        return int(obj)
     return obj
 
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any
 
+import numpy as np
+
 from ..vocab import (
     BELIEF_UPDATES,
     PAPER_ASK_PROBABILITIES,
@@ -101,3 +103,8 @@ class ReproduceConfig:
         d["counts_2"] = list(self.counts_2)
         d.pop("jobs")
         return d
+
+
+def seed_int(ss: np.random.SeedSequence) -> int:
+    """One 32-bit integer seed drawn from ``ss`` (for the functions that take an integer seed)."""
+    return int(ss.generate_state(1, dtype=np.uint32)[0])

@@ -27,7 +27,6 @@ writes the HTML report and figures.
 from __future__ import annotations
 
 import json
-import math
 import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
@@ -41,6 +40,7 @@ import pandas as pd
 from ..errors import TrustseekError
 from ..estimation.fit import FitResult, fit_trust_model
 from ..model.core import AUTONOMOUS, FAULTY, INTERVENE, TrustModel
+from ..model.jsonfile import json_safe
 from ..model.presets import paper_model, paper_task
 from ..model.task import Task
 from ..policies import ComplexityPolicy, Policy, always_ask, ask_regions, never_ask, randomized
@@ -59,7 +59,7 @@ from .comparison import (
     param_values,
     verdict_counts,
 )
-from .config import AGNOSTIC, AWARE, LOW, PAPER, ReproduceConfig
+from .config import AGNOSTIC, AWARE, LOW, PAPER, ReproduceConfig, seed_int
 from .scheduling import SchedulingSection, scheduling_section
 from .statistics import distribution, mean_ci, share_ci, wilcoxon
 from .types import TypesSection, types_section
@@ -152,10 +152,6 @@ def _ask_policy(cfg: ReproduceConfig) -> ComplexityPolicy:
     return randomized({"low": cfg.ask_low, "high": cfg.ask_high})
 
 
-def _seed_int(ss: np.random.SeedSequence) -> int:
-    return int(ss.generate_state(1, dtype=np.uint32)[0])
-
-
 # --------------------------------------------------------------------------- one replicate
 
 
@@ -168,7 +164,7 @@ def run_replicate(args: tuple[ReproduceConfig, int, np.random.SeedSequence]) -> 
     sim1 = simulate(truth, task, _ask_policy(cfg), cfg.participants_1, counts=cfg.counts_1, seed=s1)
     frame = sim1.trials()
     try:
-        fit = _fit(frame, cfg.replicate_restarts, _seed_int(sfit), 0, 1)
+        fit = _fit(frame, cfg.replicate_restarts, seed_int(sfit), 0, 1)
     except TrustseekError as exc:
         out["error"] = "; ".join(exc.lines())
         return out
@@ -288,7 +284,7 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
     def fit_progress(d: int, tot: int) -> None:
         report("bootstrap", d, tot)
 
-    fit = _fit(frame1, cfg.restarts, _seed_int(sfit), cfg.bootstrap, cfg.jobs, progress=fit_progress)
+    fit = _fit(frame1, cfg.restarts, seed_int(sfit), cfg.bootstrap, cfg.jobs, progress=fit_progress)
     fitted = fit.model
     boot: dict[str, list[float]] = {}
     fixed: list[str] = []
@@ -390,7 +386,7 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
     summary["disagreements"] = disagreements(summary["comparison"])
     step("replicates")
     return Reproduction(
-        summary=_clean(summary),
+        summary=json_safe(summary),
         fit=fit,
         fitted=fitted,
         aware=aware,
@@ -650,24 +646,6 @@ def _replicate_summary(reps: list[dict[str, Any]]) -> dict[str, Any]:
         "params": {k: distribution([r["params"][k] for r in ok]) for k in keys},
     }
     return out
-
-
-def _clean(o: Any) -> Any:
-    """JSON-safe: numpy scalars to Python, NaN/inf to None, tuples to lists."""
-    if isinstance(o, dict):
-        return {str(k): _clean(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_clean(v) for v in o]
-    if isinstance(o, np.ndarray):
-        return _clean(o.tolist())
-    if isinstance(o, (np.floating, float)):
-        v = float(o)
-        return v if math.isfinite(v) else None
-    if isinstance(o, (np.integer,)):
-        return int(o)
-    if isinstance(o, np.bool_):
-        return bool(o)
-    return o
 
 
 def write_summary(summary: dict[str, Any], path: str | Path) -> None:

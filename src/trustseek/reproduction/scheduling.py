@@ -23,14 +23,9 @@ from ..pomdp.scheduling import SchedulingProblem
 from ..simulation.scheduling import ScheduleRuns, exact_values, iid_value, schedule_policies, simulate_schedules
 from ..solvers.schedule import ScheduleSolver
 from ..vocab import PAPER_BLOCK_COUNTS
-from .statistics import mean_ci
+from .statistics import mean_interval
 
 BASELINE = "random + trust-aware"
-
-
-def _interval(v: np.ndarray) -> dict[str, float]:
-    m, lo, hi = mean_ci(v)
-    return {"mean": m, "low": lo, "high": hi}
 
 
 @dataclass
@@ -69,10 +64,10 @@ def scheduling_section(
             {
                 "schedule": name,
                 "exact_discounted": exact[name],
-                "discounted": _interval(runs.discounted[:, j]),
-                "cumulative": _interval(runs.cumulative[:, j]),
-                "gain_discounted": _interval(runs.discounted[:, j] - runs.discounted[:, base]),
-                "gain_cumulative": _interval(runs.cumulative[:, j] - runs.cumulative[:, base]),
+                "discounted": mean_interval(runs.discounted[:, j]),
+                "cumulative": mean_interval(runs.cumulative[:, j]),
+                "gain_discounted": mean_interval(runs.discounted[:, j] - runs.discounted[:, base]),
+                "gain_cumulative": mean_interval(runs.cumulative[:, j] - runs.cumulative[:, base]),
                 "asks": float(runs.action[j].sum(axis=1).mean()),
             }
         )

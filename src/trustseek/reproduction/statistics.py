@@ -25,6 +25,12 @@ def mean_ci(values: Sequence[float] | np.ndarray, level: float = 0.95) -> tuple[
     return m, m - h, m + h
 
 
+def mean_interval(values: Sequence[float] | np.ndarray, level: float = 0.95) -> dict[str, float]:
+    """:func:`mean_ci` as ``{"mean", "low", "high"}``."""
+    m, lo, hi = mean_ci(values, level)
+    return {"mean": m, "low": lo, "high": hi}
+
+
 def share_ci(successes: int, n: int, level: float = 0.95) -> tuple[float, float]:
     """Exact (Clopper-Pearson) interval of a share of ``successes`` out of ``n``."""
     from scipy.stats import binomtest

@@ -48,7 +48,7 @@ from ..simulation.populations import Supervisors
 from ..solvers.agnostic import trust_agnostic_from_data
 from ..solvers.type_aware import solve_type_aware
 from ..vocab import PAPER_BLOCK_COUNTS, TRIAL_COLUMNS
-from .statistics import mean_ci
+from .statistics import mean_interval
 
 POOLED, TYPE_AWARE, ORACLE, AGNOSTIC = "pooled trust-aware", "type-aware", "oracle (type known)", "trust-agnostic"
 FITTED = "type-aware (fitted types)"
@@ -66,11 +66,6 @@ MAX_TYPES = 3  # the numbers of types compared (by BIC) for the fitted-types pol
 # the point solver's finest grid by number of hidden states (type x trust levels): its stop when
 # the gap is not reached, instead of a time limit
 POINT_RESOLUTION = {2: 4096, 3: 512, 4: 32, 6: 16}
-
-
-def _interval(v: np.ndarray) -> dict[str, float]:
-    m, lo, hi = mean_ci(v)
-    return {"mean": m, "low": lo, "high": hi}
 
 
 @dataclass
@@ -165,10 +160,10 @@ def _numbers(runs: PopulationRuns) -> dict[str, Any]:
         g: dict[str, Any] = {"group": label, "participants": int(mask.sum()), "reward": {}, "low_interventions": {}}
         for p in POLICIES:
             if p in runs.rewards:
-                g["reward"][p] = _interval(runs.rewards[p][mask])
+                g["reward"][p] = mean_interval(runs.rewards[p][mask])
                 g["low_interventions"][p] = float(runs.low_interventions[p][mask].mean())
         g["differences"] = [
-            {"policy": a, "against": b, **_interval(runs.rewards[a][mask] - runs.rewards[b][mask])}
+            {"policy": a, "against": b, **mean_interval(runs.rewards[a][mask] - runs.rewards[b][mask])}
             for a, b in CONTRASTS
             if a in runs.rewards and b in runs.rewards
         ]

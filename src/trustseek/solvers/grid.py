@@ -39,6 +39,13 @@ from .numerics import improve, one_blas_thread, policy_values
 
 DEFAULT_GRID = 2001
 METHODS = ("policy-iteration", "value-iteration")
+#: policy iteration on grids of up to this many points uses dense linear algebra: the transition
+#: matrices built dense for every (C, a) at once and dense linear solves (a few hundred points:
+#: much faster than the sparse path, the same policy; the tests compare both)
+DENSE_MAX = 256
+#: the dense path first solves a grid of about a quarter of the points (at least this many) and
+#: starts from its policy, which saves a few of the large solves without changing where it ends
+COARSE_MIN = 21
 
 #: per complexity and action, a sparse transition matrix between grid points
 GridMatrices = list[list[sp.csr_matrix]]
@@ -96,6 +103,7 @@ class GridSolver(SolverBase):
         method: str = "policy-iteration",
         tol: float = 1e-9,
         max_iter: int = 100_000,
+        dense_max: int = DENSE_MAX,
     ):
         if grid < 3:
             raise SolverError([f"grid must have at least 3 points, got {grid}"])
@@ -107,6 +115,7 @@ class GridSolver(SolverBase):
         self.method = method
         self.tol = float(tol)
         self.max_iter = int(max_iter)
+        self.dense_max = int(dense_max)
 
     # -- the discretized belief MDP ------------------------------------------
     def build(self, pomdp: AssistancePOMDP) -> tuple[np.ndarray, np.ndarray, GridMatrices]:
@@ -163,37 +172,101 @@ class GridSolver(SolverBase):
     def solve_grid(self, pomdp: AssistancePOMDP) -> GridSolution:
         """Q on the grid, with the iteration count, the Bellman residual and the error bound."""
         t0 = time.perf_counter()
-        grid, r, P, q_of, bellman = self.operators(pomdp)
-        G, gamma = len(grid), pomdp.discount
-        pc = pomdp.complexity_probs
-
+        gamma, pc = pomdp.discount, pomdp.complexity_probs
         history: list[float] = []
-        if self.method == "value-iteration":
-            W = np.zeros(G)
-            it = 0
-            while it < self.max_iter:
-                W_new = bellman(W)
-                it += 1
-                delta = float(np.max(np.abs(W_new - W)))
-                history.append(delta)
-                W = W_new
-                if gamma / (1 - gamma) * delta <= self.tol:
-                    break
+        method = self.method
+        if method == "policy-iteration" and self.grid <= self.dense_max:
+            self.check(pomdp)
+            method = "policy-iteration (dense)"
+            grid, q_cag, W, it = dense_policy_iteration(pomdp, self.belief_update, self.grid)
+            q = np.moveaxis(q_cag, 2, 0)  # (G, N, 2)
         else:
-            W, _, it = policy_iteration(r, P, pc, gamma, max_iter=self.max_iter)
-        q = q_of(W)
+            grid, r, P, q_of, bellman = self.operators(pomdp)
+            if method == "value-iteration":
+                W = np.zeros(len(grid))
+                it = 0
+                while it < self.max_iter:
+                    W_new = bellman(W)
+                    it += 1
+                    delta = float(np.max(np.abs(W_new - W)))
+                    history.append(delta)
+                    W = W_new
+                    if gamma / (1 - gamma) * delta <= self.tol:
+                        break
+            else:
+                W, _, it = policy_iteration(r, P, pc, gamma, max_iter=self.max_iter)
+            q = q_of(W)
         residual = float(np.max(np.abs(q.max(axis=2) @ pc - W)))
         return GridSolution(
             grid=grid,
             q=q,
             belief_update=str(self.belief_update),
-            method=self.method,
+            method=method,
             iterations=it,
             residual=residual,
             error_bound=gamma / (1 - gamma) * residual,
             seconds=time.perf_counter() - t0,
             history=history,
         )
+
+
+def dense_policy_iteration(pomdp: AssistancePOMDP, update: str, G: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """(grid, Q[c, a, G], W, iterations) of the grid MDP on ``G`` points by Howard's policy
+    iteration with dense matrices, started from the policy of a grid of about G/4 points (its Q
+    interpolated) when that grid has at least :data:`COARSE_MIN` points."""
+    coarse = (G - 1) // 4 + 1
+    start = None
+    if coarse >= COARSE_MIN:
+        grid_c, q_c, _, _ = _dense_howard(pomdp, update, coarse, None)
+        grid = np.linspace(0.0, 1.0, G)
+        q0 = np.stack([[np.interp(grid, grid_c, q_c[c, a]) for a in range(2)] for c in range(pomdp.n_complexity)])
+        start = q0.argmax(axis=1)
+    return _dense_howard(pomdp, update, G, start)
+
+
+def _dense_howard(
+    pomdp: AssistancePOMDP, update: str, G: int, policy: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """(grid, Q[c, a, G], W, iterations) by Howard's policy iteration from ``policy`` [c, G]
+    (default: the greedy one of the rewards), with dense linear solves."""
+    N, gamma, pc = pomdp.n_complexity, pomdp.discount, pomdp.complexity_probs
+    grid = np.linspace(0.0, 1.0, G)
+    beliefs = np.stack([1.0 - grid, grid], axis=1)
+    r = np.einsum("gk,cak->cag", beliefs, pomdp.expected_reward)  # [c, a, G]
+    dense = dense_transitions(pomdp, update, beliefs)  # [c, a, G, G]
+    policy = r.argmax(axis=1) if policy is None else policy  # [c, G]
+    rows = np.arange(G)
+    q, W = r, np.zeros(G)
+    it = 0
+    while it < 1000:
+        it += 1
+        M = np.zeros((G, G))
+        rr = np.zeros(G)
+        for c in range(N):
+            M += (gamma * pc[c]) * dense[c, policy[c], rows]
+            rr += pc[c] * r[c, policy[c], rows]
+        W = np.asarray(np.linalg.solve(np.eye(G) - M, rr), dtype=float)
+        q = r + gamma * (dense @ W)  # [c, a, G]
+        new = improve(q, policy, axis=1)
+        if new is None:
+            break
+        policy = new
+    return grid, q, W, it
+
+
+def dense_transitions(pomdp: AssistancePOMDP, update: str, beliefs: np.ndarray) -> np.ndarray:
+    """P[c, a, g, g']: from grid point g, the probability of each branch after (C, a) spread over
+    the two grid points that bracket its successor (:func:`interpolation_matrix`'s weights,
+    dense, summed by one ``bincount`` for every (C, a))."""
+    G, N = len(beliefs), pomdp.n_complexity
+    p, nxt = pomdp.branches(update).successors(beliefs)  # (G, c, a, br), (G, c, a, br, K)
+    x = np.clip(nxt[..., 1], 0.0, 1.0) * (G - 1)
+    j = np.minimum(np.floor(x).astype(np.int64), G - 2)
+    f = x - j
+    start = ((np.arange(N)[:, None] * 2 + np.arange(2)) * G)[None, :, :, None] + np.arange(G)[:, None, None, None]
+    at = (start * G + j).reshape(-1)  # row (c, a, g), column j
+    weights = np.concatenate([(p * (1.0 - f)).reshape(-1), (p * f).reshape(-1)])
+    return np.bincount(np.concatenate([at, at + 1]), weights, N * 2 * G * G).reshape(N, 2, G, G)
 
 
 def policy_iteration(
