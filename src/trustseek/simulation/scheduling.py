@@ -34,7 +34,7 @@ from ..pomdp.belief import ScalarBelief
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem
 from ..solvers.backup import finite_horizon_value
-from ..solvers.grid import GridSolver
+from ..solvers.registry import make_solver
 from ..solvers.schedule import DEFAULT_SCHEDULE_GRID, ScheduleSolver
 from .populations import SimulationError, check_participants
 from .schedules import schedule_counts
@@ -66,7 +66,7 @@ def schedule_policies(
             raise SimulationError([f"unknown schedule {name!r}; expected one of {list(SCHEDULES)}"])
         spec = SCHEDULES[name]
         if spec is None:
-            out[name] = GridSolver(belief_update=belief_update).solve(pomdp)
+            out[name] = make_solver("grid", belief_update=belief_update).solve(pomdp)
             continue
         window, order, ask_first = spec
         problem = SchedulingProblem(pomdp, counts, window or None)

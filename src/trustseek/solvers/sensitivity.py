@@ -38,7 +38,7 @@ from ..model.core import ASK, AUTONOMOUS, RELY, TrustModel
 from ..model.task import Task
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
-from .grid import GridSolver
+from .registry import make_solver
 
 __all__ = [
     "Parameter",
@@ -167,7 +167,7 @@ def apply(model: TrustModel, task: Task, params: Sequence[Parameter], x: Sequenc
 def evaluate(model: TrustModel, task: Task, belief_update: str = "paper", grid: int = 401) -> dict[str, float]:
     """The thresholds (``threshold[<complexity>]``: NaN when the policy never asks there or its ask
     region is not [0, θ); 1 when it always asks) and V of the optimal policy of ``model`` and ``task``."""
-    policy = GridSolver(grid=grid, belief_update=belief_update).solve(AssistancePOMDP(model, task))
+    policy = make_solver("grid", grid=grid, belief_update=belief_update).solve(AssistancePOMDP(model, task))
     out: dict[str, float] = {}
     for cn, th in (policy.thresholds() or {}).items():
         out[f"threshold[{cn}]"] = float("nan") if th is None else float(th)
