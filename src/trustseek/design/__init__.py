@@ -6,8 +6,9 @@
   summary, the smallest design meeting the targets, the data-collection design search.
 """
 
+from ..reproduction.statistics import paired_tests
 from .evaluation import EVALUATION_GRID, Evaluation, evaluate_policy, high_threshold
-from .replicate import Experiment1, FitSettings, Study, paired_tests, replicate_seed, run_replicate
+from .replicate import Experiment1, FitSettings, Study, replicate_seed, run_replicate
 from .sweep import TESTS, DesignConfig, DesignResult, ask_search, run_design
 
 __all__ = [

@@ -12,7 +12,6 @@ from dataclasses import dataclass, field
 from typing import Any, cast
 
 import numpy as np
-from scipy.special import stdtr
 
 from ..errors import TrustseekError
 from ..estimation.fit import fit_sequences
@@ -24,18 +23,15 @@ from ..model.task import Task
 from ..policies import ComplexityPolicy, TrustAwarePolicy, randomized
 from ..pomdp.problem import AssistancePOMDP
 from ..reproduction.config import seed_int
+from ..reproduction.statistics import paired_tests
 from ..simulation import Simulation, crossover, simulate
 from ..solvers.agnostic import agnostic_from_intervention_rates, trust_agnostic_from_data
 from ..solvers.numerics import one_blas_thread
 from ..solvers.registry import make_solver
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, LEVELS
 from .evaluation import EVALUATION_GRID, evaluate_policy, high_threshold
-from .kernels import signed_rank_counts
 
-__all__ = ["Experiment1", "FitSettings", "Study", "paired_tests", "replicate_seed", "run_replicate", "signed_rank_p"]
-
-#: up to this many nonzero differences the signed-rank p-value is exact
-EXACT_SIGNED_RANK = 60
+__all__ = ["Experiment1", "FitSettings", "Study", "replicate_seed", "run_replicate"]
 
 
 @dataclass(frozen=True)
@@ -105,65 +101,6 @@ def block_counts(trials: int, n_complexity: int) -> tuple[int, ...]:
     """``trials`` per block split as evenly as possible over the complexities (the paper: 17/17)."""
     base, rest = divmod(int(trials), n_complexity)
     return tuple(base + (1 if c < rest else 0) for c in range(n_complexity))
-
-
-def signed_rank_p(d: np.ndarray) -> float:
-    """Two-sided p-value of the Wilcoxon signed-rank test of the paired differences ``d``
-    (zeros dropped, ties given their mid-ranks).  Exact up to :data:`EXACT_SIGNED_RANK` nonzero
-    differences: the distribution of W+ over the 2^n sign patterns, by dynamic programming on
-    the doubled mid-ranks (integers); beyond, the normal approximation with the tie correction.
-    1 when every difference is zero."""
-    d = np.asarray(d, dtype=float)
-    d = d[d != 0]
-    n = len(d)
-    if n == 0:
-        return 1.0
-    a = np.abs(d)
-    order = np.argsort(a, kind="stable")
-    sa = a[order]
-    first = np.flatnonzero(np.concatenate(([True], sa[1:] != sa[:-1])))  # where each run of tied |d| starts
-    last = np.append(first[1:], n) - 1
-    ranks = np.empty(n)
-    ranks[order] = np.repeat((first + last + 2) / 2.0, last - first + 1)  # mid-ranks
-    w2 = round(float(2 * ranks[d > 0].sum()))  # doubled W+
-    if n > EXACT_SIGNED_RANK:
-        mean = n * (n + 1) / 4.0
-        tie_counts = last - first + 1
-        var = n * (n + 1) * (2 * n + 1) / 24.0 - float(np.sum(tie_counts**3 - tie_counts)) / 48.0
-        z = (w2 / 2.0 - mean) / np.sqrt(var)
-        from scipy.stats import norm  # slow to import: only where it is used
-
-        return float(min(1.0, 2 * norm.sf(abs(z))))
-    weights = np.rint(2 * ranks).astype(np.int64)
-    counts = np.zeros(int(weights.sum()) + 1)
-    counts[0] = 1.0
-    signed_rank_counts(weights, counts)
-    probs = counts / counts.sum()
-    low = float(probs[: w2 + 1].sum())
-    high = float(probs[w2:].sum())
-    return float(min(1.0, 2 * min(low, high)))
-
-
-def paired_tests(aware: np.ndarray, agnostic: np.ndarray) -> dict[str, float]:
-    """Two-sided p-values of the paired Wilcoxon signed-rank test and the paired t-test, and the
-    mean paired difference (p = 1 when every difference is zero: nothing to detect)."""
-    d = np.asarray(aware, float) - np.asarray(agnostic, float)
-    out = {"mean_difference": float(d.mean())}
-    if not np.any(d):
-        return out | {"wilcoxon": 1.0, "t": 1.0}
-    w = signed_rank_p(d)
-    # constant nonzero differences: the t statistic is infinite (p = 0 from two participants on)
-    constant = len(d) < 2 or bool(np.all(d == d[0]))
-    t = (0.0 if len(d) > 1 else 1.0) if constant else _t_p(d)
-    return out | {"wilcoxon": w, "t": t}
-
-
-def _t_p(d: np.ndarray) -> float:
-    """Two-sided p-value of the paired t-test on the differences ``d`` (at least two, not all equal):
-    ``scipy.stats.ttest_rel``'s, from Student's t distribution directly."""
-    n = len(d)
-    t = float(d.mean()) / (float(d.std(ddof=1)) / np.sqrt(n))
-    return float(2.0 * stdtr(n - 1, -abs(t)))
 
 
 def fit_model(frame: Any, settings: FitSettings, seed: int) -> TrustModel:

@@ -5,7 +5,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trustseek.design.replicate import EXACT_SIGNED_RANK, signed_rank_p
+from trustseek.reproduction.statistics import EXACT_SIGNED_RANK, signed_rank_p
 
 
 def reference(d):
