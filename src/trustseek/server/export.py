@@ -64,14 +64,20 @@ REPORT_COLUMNS = [
 SESSION_COLUMNS = [
     "participant",
     "session",
+    "role",
     "status",
     "trials_done",
     "score",
     "seed",
     "secret",
     "block_order",
+    "panel_id",
     "panel",
+    "speed",
     "created_at",
+    "started_at",
+    "ended_at",
+    "revoked_at",
 ]
 EVENT_COLUMNS = ["participant", "session", "trial", "client_time", "server_time", "type", "data"]
 
@@ -91,6 +97,16 @@ def escape_formulas(frame: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
+def exported(study: Study, pilot: bool = False) -> tuple:
+    """The conditions of the sessions a table holds: the study's participants, and its pilots
+    when asked for (``pilot``); preview sessions never."""
+    return (Session.study_id == study.id, Session.role.in_(("participant", "pilot") if pilot else ("participant",)))
+
+
+def _iso(t) -> str | None:
+    return None if t is None else t.isoformat() + "Z"
+
+
 def _block_names(study: Study) -> list[str]:
     return [b["name"] for b in study.config["blocks"]] + ["practice"]
 
@@ -101,19 +117,20 @@ def _practice_counts(db: DBSession, study: Study) -> dict[str, int]:
     return dict.fromkeys(db.scalars(select(Session.id).where(Session.study_id == study.id)), n)
 
 
-def trials_frame(db: DBSession, study: Study, practice: bool = False) -> pd.DataFrame:
-    """The study's trial log: the analysed trials, or every trial with ``practice=True``."""
+def trials_frame(db: DBSession, study: Study, practice: bool = False, pilot: bool = False) -> pd.DataFrame:
+    """The study's trial log: the analysed trials, or every trial with ``practice=True``; pilot
+    sessions with ``pilot=True``."""
     names = _block_names(study)
     skip = _practice_counts(db, study)
     rows = db.execute(
         select(Trial, Session.participant)
         .join(Session, Trial.session_id == Session.id)
-        .where(Session.study_id == study.id, *(() if practice else (Trial.practice.is_(False),)))
+        .where(*exported(study, pilot), *(() if practice else (Trial.practice.is_(False),)))
         .order_by(Session.participant, Trial.trial)
     ).all()
     reports = {
         (r.session_id, r.after_trial): r.value
-        for r in db.scalars(select(Report).join(Session, Report.session_id == Session.id).where(Session.study_id == study.id))
+        for r in db.scalars(select(Report).join(Session, Report.session_id == Session.id).where(*exported(study, pilot)))
     }
     data = [
         {
@@ -150,7 +167,7 @@ def trials_frame(db: DBSession, study: Study, practice: bool = False) -> pd.Data
     return frame
 
 
-def answers_frame(db: DBSession, study: Study) -> pd.DataFrame:
+def answers_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame:
     """Every self-report (0-100 slider, questionnaire ``self_report``, item ``trust``) and every
     questionnaire item, one row each, next to the analysed trial each follows."""
     names = _block_names(study)
@@ -158,11 +175,11 @@ def answers_frame(db: DBSession, study: Study) -> pd.DataFrame:
     reverse = {(q["name"], i["id"]): bool(i.get("reverse")) for q in study.config.get("questionnaires") or () for i in q["items"]}
     data: list[tuple[str, str, str, float, bool, Report | Answer, str]] = []
     for r, p in db.execute(
-        select(Report, Session.participant).join(Session, Report.session_id == Session.id).where(Session.study_id == study.id)
+        select(Report, Session.participant).join(Session, Report.session_id == Session.id).where(*exported(study, pilot))
     ).all():
         data.append(("self_report", r.scope, "trust", r.value, False, r, p))
     for a, p in db.execute(
-        select(Answer, Session.participant).join(Session, Answer.session_id == Session.id).where(Session.study_id == study.id)
+        select(Answer, Session.participant).join(Session, Answer.session_id == Session.id).where(*exported(study, pilot))
     ).all():
         data.append((a.questionnaire, a.when, a.item, a.value, reverse.get((a.questionnaire, a.item), False), a, p))
     rows = [
@@ -190,7 +207,7 @@ def answers_frame(db: DBSession, study: Study) -> pd.DataFrame:
     return frame
 
 
-def sessions_frame(db: DBSession, study: Study) -> pd.DataFrame:
+def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame:
     """One row per participant: status, the panel's ids (JSON) and the seed and secret that
     reproduce the session's plan, actions, outcomes and scenes."""
     names = _block_names(study)
@@ -198,25 +215,31 @@ def sessions_frame(db: DBSession, study: Study) -> pd.DataFrame:
         {
             "participant": s.participant,
             "session": s.id,
+            "role": s.role,
             "status": s.status,
             "trials_done": s.trials_done,
             "score": s.score,
             "seed": s.seed,
             "secret": s.secret,
             "block_order": json.dumps([names[b] for b in s.plan["block_order"]]),
+            "panel_id": s.panel_id,
             "panel": json.dumps(s.panel or {}),
-            "created_at": s.created_at.isoformat() + "Z",
+            "speed": s.speed,
+            "created_at": _iso(s.created_at),
+            "started_at": _iso(s.consented_at),
+            "ended_at": _iso(s.ended_at),
+            "revoked_at": _iso(s.revoked_at),
         }
-        for s in db.scalars(select(Session).where(Session.study_id == study.id).order_by(Session.participant))
+        for s in db.scalars(select(Session).where(*exported(study, pilot)).order_by(Session.participant))
     ]
     return pd.DataFrame(rows, columns=SESSION_COLUMNS)
 
 
-def events_frame(db: DBSession, study: Study) -> pd.DataFrame:
+def events_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame:
     rows = db.execute(
         select(Event, Session.participant)
         .join(Session, Event.session_id == Session.id)
-        .where(Session.study_id == study.id)
+        .where(*exported(study, pilot))
         .order_by(Session.participant, Event.id)
     ).all()
     data = [

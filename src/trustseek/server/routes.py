@@ -10,20 +10,20 @@ from typing import Any
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from fastapi.security import HTTPAuthorizationCredentials
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 
 from .auth import Caller, bearer, remember_token, require_experimenter, require_session, session_for_token, token_of
 from .deploy import committed_trial, create_deploy, deploy_decide, deploy_observe, remember_deploy
 from .export import answers_frame, events_csv, events_frame, sessions_frame, to_bytes, trials_frame
-from .orm import Report, Session, Study, Trial, utcnow
+from .lifecycle import create_participant, panel_ids, refusal
+from .orm import Event, Report, Session, Study, Trial, utcnow
 from .schemas import AnswersIn, ConsentIn, DecideIn, DeployIn, ErrorOut, EventsIn, ObserveIn, ReportIn, SessionsIn, TrialIn
 from .sessions import (
     SessionError,
     add_answers,
     add_events,
     add_report,
-    create_participant,
     ended,
     lock,
     new_id,
@@ -49,6 +49,7 @@ _WHY = {
     404: "No such study or session.",
     409: "The session's state does not allow it (not the current trial, a conflicting repeat, the wrong kind of session, "
     "a session that has ended).",
+    410: "The experimenter has revoked this session's link.",
     413: "The body is too large, or the session already holds as many events as it may.",
 }
 
@@ -61,9 +62,9 @@ def errors(*codes: int) -> dict[int | str, dict[str, Any]]:
 experimenter = APIRouter(
     prefix="/api", tags=["experimenter"], dependencies=[Depends(require_experimenter)], responses=errors(401, 403)
 )
-participant = APIRouter(prefix="/api/sessions", tags=["participant"], responses=errors(401, 403, 409, 413))
+participant = APIRouter(prefix="/api/sessions", tags=["participant"], responses=errors(401, 403, 409, 410, 413))
 deploy = APIRouter(prefix="/api/deploy", tags=["deploy"], responses=errors(401, 403))
-own = APIRouter(prefix="/api", tags=["participant"], responses=errors(401, 409))
+own = APIRouter(prefix="/api", tags=["participant"], responses=errors(401, 409, 410))
 
 
 def _db(request: Request):
@@ -81,28 +82,43 @@ def _link(request: Request, s: Session) -> str:
 # --------------------------------------------------------------------------- experimenter
 
 
-@experimenter.post("/studies", status_code=201, summary="Create a study", responses=errors(400))
-def create_study(body: StudyIn, request: Request):
+@experimenter.post(
+    "/studies",
+    status_code=201,
+    summary="Create a study",
+    description="Open at once, or a draft with ``status=draft`` (links made in a draft are pilots; the study link "
+    "takes no one until the study is opened).",
+    responses=errors(400),
+)
+def create_study(body: StudyIn, request: Request, status: str = Query("open", pattern="^(draft|open)$")):
     try:
         cfg = build_study_config(body)
     except ConfigError as exc:
         raise HTTPException(400, {"problems": exc.problems}) from None
     with _db(request) as db:
-        st = Study(id=new_id(), name=body.name, config=cfg)
+        st = Study(id=new_id(), name=body.name, config=cfg, status=status, link_token=secrets.token_urlsafe(24))
         db.add(st)
         db.commit()
         log.info("study %s created: %r, %d blocks", st.id, st.name, len(cfg["blocks"]))
-        return study_summary(db, st)
+        return study_summary(db, st, request)
 
 
-def study_summary(db, st: Study) -> dict:
-    n = len(db.scalars(select(Session.id).where(Session.study_id == st.id)).all())
+def study_summary(db, st: Study, request: Request) -> dict:
+    counts: dict[str, int] = {}
+    for role, status in db.execute(select(Session.role, Session.status).where(Session.study_id == st.id)).all():
+        key = status if role == "participant" else role
+        counts[key] = counts.get(key, 0) + 1
     cfg = st.config
+    base = request.app.state.public_url or str(request.base_url).rstrip("/")
     return {
         "id": st.id,
         "name": st.name,
         "created_at": st.created_at.isoformat() + "Z",
-        "participants": n,
+        "status": st.status,
+        "link": f"{base}/join/{st.link_token}" if st.link_token else None,
+        "quota": cfg.get("quota"),
+        "participants": sum(v for k, v in counts.items() if k not in ("pilot", "preview")),
+        "progress": {k: counts.get(k, 0) for k in ("new", "running", "done", "pilot", "preview")},
         "blocks": [
             {
                 "name": b["name"],
@@ -121,7 +137,7 @@ def study_summary(db, st: Study) -> dict:
 @experimenter.get("/studies", summary="List studies")
 def list_studies(request: Request):
     with _db(request) as db:
-        return [study_summary(db, st) for st in db.scalars(select(Study).order_by(Study.created_at))]
+        return [study_summary(db, st, request) for st in db.scalars(select(Study).order_by(Study.created_at))]
 
 
 def _study(db, study_id: str) -> Study:
@@ -135,7 +151,7 @@ def _study(db, study_id: str) -> Study:
 def get_study(study_id: str, request: Request):
     with _db(request) as db:
         st = _study(db, study_id)
-        return {**study_summary(db, st), "config": st.config}
+        return {**study_summary(db, st, request), "config": st.config}
 
 
 @experimenter.post(
@@ -153,14 +169,18 @@ def create_sessions(study_id: str, body: SessionsIn, request: Request):
     out = []
     with _db(request) as db:
         st = _study(db, study_id)
+        if st.status == "closed":
+            raise HTTPException(409, f"study {study_id} is closed: it takes no new participants")
+        role = "pilot" if body.pilot or st.status == "draft" else "participant"
         try:
             for label in labels:
-                s = create_participant(db, st, label)
+                s = create_participant(db, st, label, role=role)
                 db.flush()
                 out.append(
                     {
                         "participant": s.participant,
                         "session_id": s.id,
+                        "role": s.role,
                         "token": s.token,
                         "link": _link(request, s),
                         "block_order": [st.config["blocks"][b]["name"] for b in s.plan["block_order"]],
@@ -187,8 +207,18 @@ def dashboard(study_id: str, request: Request):
     with _db(request) as db:
         st = _study(db, study_id)
         sessions = db.scalars(
-            select(Session).where(Session.study_id == st.id).order_by(Session.created_at, Session.participant)
+            select(Session)
+            .where(Session.study_id == st.id, Session.role != "preview")
+            .order_by(Session.created_at, Session.participant)
         ).all()
+        seen = dict(
+            db.execute(
+                select(Event.session_id, func.max(Event.created_at))
+                .join(Session, Event.session_id == Session.id)
+                .where(Session.study_id == st.id)
+                .group_by(Event.session_id)
+            ).all()
+        )
         last = {}
         for t in db.scalars(
             select(Trial)
@@ -223,9 +253,24 @@ def dashboard(study_id: str, request: Request):
                     "last": last.get(s.id),
                     "last_self_report": reports.get(s.id),
                     "updated_at": s.updated_at.isoformat() + "Z",
+                    "role": s.role,
+                    "panel_id": s.panel_id or _first_panel_id(s.panel),
+                    "created_at": _iso(s.created_at),
+                    "started_at": _iso(s.consented_at),
+                    "ended_at": _iso(s.ended_at),
+                    "last_activity": _iso(max(t for t in (s.updated_at, seen.get(s.id)) if t is not None)),
+                    "revoked": s.revoked_at is not None,
                 }
             )
-        return {"study": study_summary(db, st), "participants": rows, "time": utcnow().isoformat() + "Z"}
+        return {"study": study_summary(db, st, request), "participants": rows, "time": utcnow().isoformat() + "Z"}
+
+
+def _iso(t) -> str | None:
+    return None if t is None else t.isoformat() + "Z"
+
+
+def _first_panel_id(panel: dict | None) -> str | None:
+    return next(iter(panel.values()), None) if panel else None
 
 
 @experimenter.get(
@@ -255,13 +300,14 @@ def export(
     table: str = Query("trials", pattern="^(trials|events|reports|sessions)$"),
     format: str = Query("csv", pattern="^(csv|parquet)$"),
     practice: bool = Query(False, description="Trials: include the practice trials (the full log)."),
+    pilot: bool = Query(False, description="Include the pilot sessions (left out of the analysis export by default)."),
 ):
     with _db(request) as db:
         st = _study(db, study_id)
         if table == "trials":
-            frame = trials_frame(db, st, practice=practice)
+            frame = trials_frame(db, st, practice=practice, pilot=pilot)
         else:
-            frame = {"events": events_frame, "reports": answers_frame, "sessions": sessions_frame}[table](db, st)
+            frame = {"events": events_frame, "reports": answers_frame, "sessions": sessions_frame}[table](db, st, pilot)
     # text from participants' browsers: formulas escaped, CR/LF quoted
     content = events_csv(frame) if table != "trials" and format == "csv" else to_bytes(frame, format)
     media = "text/csv" if format == "csv" else "application/vnd.apache.parquet"
@@ -277,11 +323,17 @@ def _study_session(s: Caller) -> None:
         raise HTTPException(409, "this is a deploy session; use /api/deploy")
 
 
+def _not_revoked(row: Session) -> None:
+    if row.revoked_at is not None:
+        raise HTTPException(410, "this link has been revoked by the experimenter")
+
+
 def session_state(request: Request, s_id: str) -> dict:
     with _db(request) as db:
         s = db.get(Session, s_id)
         if s.kind != "study":
             raise HTTPException(409, "this is a deploy session; use /api/deploy")
+        _not_revoked(s)
         cfg = study_config(db, s.study_id)
         due = report_due(db, s, cfg)
         asked = questionnaire_due(db, s, cfg) if due is None else None
@@ -290,6 +342,9 @@ def session_state(request: Request, s_id: str) -> dict:
         blocks = s.plan["block_order"]
         panel = cfg.get("panel")
         over = s.status == "done" and due is None and asked is None
+        if over and s.ended_at is None:
+            s.ended_at = utcnow()
+            db.commit()
         completion = None
         if over and panel:
             code = panel["completion_code"]
@@ -312,7 +367,8 @@ def session_state(request: Request, s_id: str) -> dict:
             "panel_params": panel["id_params"] if panel else [],
             "practice_trials": len(cfg["practice"]["trials"]) if cfg.get("practice") else 0,
             "self_report": cfg["self_report"],
-            "animation_speed": cfg["animation_speed"],
+            "animation_speed": s.speed or cfg["animation_speed"],
+            "preview": s.role == "preview",
             "consent_text": cfg.get("consent_text"),
             "instructions": cfg.get("instructions"),
             "rewards": cfg["task"].get("rewards"),
@@ -338,17 +394,26 @@ def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depe
     _study_session(s)
     with _db(request) as db:
         row = lock(db, s.id)
+        _not_revoked(row)
         cfg = study_config(db, str(row.study_id))
         started = row.status == "new"
         if started:
-            wanted = (cfg.get("panel") or {}).get("id_params", [])
-            ids = {k: v for k, v in body.panel.items() if k in wanted}
+            why = refusal(db, row)
+            if why is not None:
+                db.rollback()
+                raise HTTPException(409, f"the study is {why}: it takes no new participants")
+            key, ids = panel_ids(cfg, body.panel) if cfg.get("panel") else (None, {})
             row.status, row.consented_at, row.updated_at = "running", utcnow(), utcnow()
-            row.panel = ids or None
+            row.panel = {**ids, **(row.panel or {})} or None
+            row.panel_id = row.panel_id or key
         elif ended(db, row, cfg):
             db.rollback()
             raise HTTPException(409, "this session has ended")
-        db.commit()
+        try:
+            db.commit()
+        except IntegrityError:  # the same panel id already has a session of this study
+            db.rollback()
+            raise HTTPException(409, "this panel id already has a session in this study: use that session's link") from None
         if started:
             log.info("session %s of study %s started (consent given)", row.id, row.study_id)
         if body.events:
@@ -364,6 +429,7 @@ def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depe
 def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Depends(require_session)):
     _study_session(s)
     with _db(request) as db:
+        _not_revoked(db.get(Session, s.id))
         try:
             t, dup = submit_trial(
                 db, s.id, body.trial, body.submission_id, body.human_action, body.effort_ms, [e.model_dump() for e in body.events]
@@ -380,6 +446,7 @@ def post_report(session_id: str, body: ReportIn, request: Request, s: Caller = D
     _study_session(s)
     with _db(request) as db:
         row = db.get(Session, s.id)
+        _not_revoked(row)
         cfg = study_config(db, row.study_id) if row.study_id else {}
         try:
             if ended(db, row, cfg):
@@ -399,6 +466,7 @@ def post_answers(session_id: str, body: AnswersIn, request: Request, s: Caller =
     _study_session(s)
     with _db(request) as db:
         row = db.get(Session, s.id)
+        _not_revoked(row)
         cfg = study_config(db, row.study_id)
         try:
             if ended(db, row, cfg):
@@ -415,10 +483,14 @@ def post_answers(session_id: str, body: AnswersIn, request: Request, s: Caller =
 def post_events(session_id: str, body: EventsIn, request: Request, s: Caller = Depends(require_session)):
     with _db(request) as db:
         row = db.get(Session, s.id)
+        _not_revoked(row)
         try:
-            if row.kind == "study" and ended(db, row, study_config(db, row.study_id)):
+            events = [e.model_dump() for e in body.events]
+            # after the end, the last trial's outcome shown on the page is still taken
+            late = all(e["trial"] == row.trials_done and e["type"] == "outcome_shown" for e in events)
+            if row.kind == "study" and not late and ended(db, row, study_config(db, row.study_id)):
                 raise SessionError(409, "this session has ended")
-            n, dup = add_events(db, row, [e.model_dump() for e in body.events], body.batch)
+            n, dup = add_events(db, row, events, body.batch)
         except SessionError as exc:
             db.rollback()
             _fail(exc)

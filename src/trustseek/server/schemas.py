@@ -63,6 +63,12 @@ class SessionsIn(BaseModel):
     model_config = STRICT
     participants: list[str] | None = Field(None, max_length=1000, description="Participant ids; default P001, P002, ...")
     count: int = Field(1, ge=1, le=1000, description="How many sessions when participants is not given.")
+    pilot: bool = Field(False, description="Pilot sessions: flagged, left out of the analysis export unless asked for.")
+
+
+class StatusIn(BaseModel):
+    model_config = STRICT
+    status: Literal["draft", "open", "paused", "closed"]
 
 
 class ConsentIn(BaseModel):

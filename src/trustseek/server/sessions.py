@@ -38,7 +38,7 @@ from ..policies import PolicyRunner
 from ..policies.schedule import SchedulePolicy
 from .orm import Answer, Event, EventBatch, Report, Session, Study, Trial, utcnow
 from .store import TrialRow
-from .studies import block_items, participant_plan, policy_object
+from .studies import block_items, policy_object
 
 log = logging.getLogger(__name__)
 
@@ -184,35 +184,6 @@ def _block_policy(cfg: dict[str, Any], b: int) -> dict[str, Any]:
 
 def total_trials(s: Session) -> int | None:
     return len(s.plan["trials"]) if s.kind == "study" else None
-
-
-# --------------------------------------------------------------------------- creation
-
-
-def create_participant(db: DBSession, study: Study, participant: str | None) -> Session:
-    index = db.scalar(select(func.count()).select_from(Session).where(Session.study_id == study.id)) or 0
-    label = participant or f"P{index + 1:03d}"
-    if db.scalar(select(Session.id).where(Session.study_id == study.id, Session.participant == label)):
-        raise SessionError(409, f"participant {label!r} already exists in study {study.id}")
-    seed = int(np.random.default_rng().integers(0, 2**31 - 1))
-    plan = participant_plan(study.config, index, seed)
-    model = TrustModel.from_dict(study.config["model"])
-    s = Session(
-        id=new_id(),
-        token=new_token(),
-        kind="study",
-        study_id=study.id,
-        participant=label,
-        seed=seed,
-        secret=secrets.token_hex(16),
-        plan=plan,
-        status="new",
-        belief=[float(x) for x in model.initial],
-        trials_done=0,
-        score=0.0,
-    )
-    db.add(s)
-    return s
 
 
 # --------------------------------------------------------------------------- serving

@@ -151,6 +151,7 @@ class StudyIn(BaseModel):
     practice: PracticeIn | None = None
     questionnaires: list[QuestionnaireIn] = Field(default_factory=list, max_length=20)
     panel: PanelIn | None = None
+    quota: int | None = Field(None, ge=1, le=100_000, description="Participants the study link takes; then it closes.")
 
     @field_validator("task", "model")
     @classmethod
