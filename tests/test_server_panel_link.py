@@ -221,3 +221,25 @@ def test_the_last_outcome_shown_is_stored_after_the_end(client):
     r = client.post(f"/api/sessions/{st['session_id']}/events", json=ev, headers=h)
     assert r.status_code == 200, r.text
     assert "outcome_shown" in set(export(client, study["id"], "events")["type"])
+
+
+def test_the_default_practice_has_one_asked_trial_labelled_practice(client):
+    study = make_study(client, practice={"trials": ["low", "high"]})
+    token = token_of(join(client, study, "practice"))
+    h = {"Authorization": f"Bearer {token}"}
+    sid = client.get("/api/session", headers=h).json()["session_id"]
+    st = client.post(f"/api/sessions/{sid}/consent", json={"agree": True}, headers=h).json()
+    seen = []
+    while st["current"] and st["current"]["practice"]:
+        cur = st["current"]
+        seen.append(cur["robot_action"])
+        human = "intervene" if cur["robot_action"] == "ask" else "rely"
+        body = {"trial": cur["trial"], "submission_id": f"s{cur['trial']}", "human_action": human}
+        st = client.post(f"/api/sessions/{sid}/trials", json=body, headers=h).json()["state"]
+    assert seen == ["autonomous", "ask"]  # the never-ask practice policy, and the last practice trial asks
+    none = make_study(client, practice={"trials": ["low"], "asks": []})
+    assert none["id"]
+    bad = client.post(
+        "/api/studies", json={"name": "x", "blocks": BLOCKS, "practice": {"trials": ["low"], "asks": [2]}}, headers=H
+    )
+    assert bad.status_code == 422 and "practice.asks" in bad.text

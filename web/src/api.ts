@@ -15,7 +15,7 @@ export interface State {
   current: Current | null; report_due: number | null; self_report: "none" | "trial" | "block";
   questionnaire: Questionnaire | null; ended: boolean; completion: { code: string; redirect_url: string | null } | null;
   panel_params: string[]; practice_trials: number;
-  animation_speed: number; consent_text: string | null; instructions: string | null;
+  animation_speed: number; preview: boolean; consent_text: string | null; instructions: string | null;
   rewards: { autonomous_success: number; ask: number; intervene: number; autonomous_failure: number };
 }
 export interface TrialResult {

@@ -3,7 +3,8 @@
 //
 // The server decides everything that matters (complexity, robot action, outcome, score);
 // this page animates it, lets the participant intervene or teleoperate, and reports back.
-// `?speed=4` multiplies every motion (the study's animation_speed is multiplied in too).
+// Only the study sets the pace (its animation_speed, recorded with the session); `?speed=4`
+// multiplies every motion in a preview only, never on a participant's link.
 // `?retry_cap=ms` caps the wait between retries while the server is unreachable (default 10 s);
 // the page retries for as long as it stays open and keeps the trial in progress in
 // localStorage, so that a reload resumes it where it was.
@@ -181,7 +182,9 @@ async function boot() {
     } else showFatal("The study cannot start", (e as Error).message);
     return;
   }
-  speed = (isFinite(speedParam) && speedParam > 0 ? speedParam : 1) * st.animation_speed;
+  speed = (st.preview && isFinite(speedParam) && speedParam > 0 ? speedParam : 1) * st.animation_speed;
+  $("preview-tag").hidden = !st.preview;
+  $("consent-trials").textContent = String(st.trials_total - st.practice_trials);
   shownScore = st.score;
   if (st.consent_text) $("consent-text").textContent = st.consent_text;
   if (st.instructions) $("instructions-text").textContent = st.instructions;
@@ -288,7 +291,8 @@ function startTrial(cur: Current) {
     resetTeleop();
     log("teleop_start", { reason: "asked" });
     setPhase("teleop");
-    setHint("The robot asks for your help: drive it to the item, grasp it and put it in the bin.", 5);
+    const why = cur.practice ? "Practice: the robot asks for your help, as it will in the study." : "The robot asks for your help:";
+    setHint(`${why} Drive it to the item, grasp it and put it in the bin.`, 5);
   } else {
     setPhase("approach");
   }
@@ -689,13 +693,16 @@ function renderStatus() {
   const key = [trial, st.trials_total, shownScore, mode, cls, h, pad, phase, current?.complexity].join("|");
   if (key === lastStatus) return;
   lastStatus = key;
-  $("trial-no").textContent = `${trial} / ${st.trials_total}`;
+  // practice trials are counted apart: the study's trials run 1..N as the end page counts them
+  const np = st.practice_trials;
+  const practice = current ? current.practice : trial <= np;
+  $("trial-no").textContent = practice ? `${trial} / ${np}` : `${Math.max(0, trial - np)} / ${st.trials_total - np}`;
   $("score").textContent = String(shownScore);
   const m = $("mode");
   m.textContent = mode;
   m.className = `mode ${cls}`;
   $("hint").textContent = h;
-  $("block-name").textContent = !current ? "" : current.practice ? "Practice trial" : `Block ${current.block_position} of ${st.blocks.length}`;
+  $("block-name").textContent = !current ? "" : current.practice ? "Practice trial (not scored)" : `Block ${current.block_position} of ${st.blocks.length}`;
   $("gamepad").textContent = pad ? `Gamepad: ${pad.slice(0, 40)}` : "No gamepad (keyboard works)";
   $<HTMLButtonElement>("intervene-btn").disabled = !(phase === "approach" || phase === "reach");
 }
@@ -705,7 +712,7 @@ function renderStatus() {
     phase, trial: current?.trial ?? null, robot_action: current?.robot_action ?? null, complexity: current?.complexity ?? null,
     robot: { x: robot.x, y: robot.y, arm: robot.arm, holding: robot.holding }, item: { x: item.x, y: item.y, inBin: item.inBin },
     gripper: gripperPos(robot, layout.side), reach: REACH, side: layout.side, score: st?.score ?? null, shown_score: shownScore,
-    practice: current?.practice ?? null, picks: picks() ?? null, retries, connection: $("connection").hidden ? "ok" : "retrying",
+    practice: current?.practice ?? null, picks: picks() ?? null, speed, trial_label: $("trial-no").textContent, retries, connection: $("connection").hidden ? "ok" : "retrying",
   }),
 };
 

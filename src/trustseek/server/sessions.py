@@ -210,7 +210,9 @@ def serve(db: DBSession, s: Session) -> dict[str, Any] | None:
     items = scheduled_items(db, s, step["block"]) if step["complexity"] is None else None
     if s.pending_trial != n:
         ctx = context(db, s)
-        if items is None:
+        if step.get("action"):  # a practice trial in which the robot asks, whatever the policy
+            s.pending_complexity, s.pending_action = step["complexity"], step["action"]
+        elif items is None:
             runner = ctx.runner(step["block"], s.belief, s.seed, n)
             s.pending_complexity, s.pending_action = step["complexity"], runner.decide(step["complexity"])
         else:

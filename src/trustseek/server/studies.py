@@ -78,11 +78,23 @@ class BlockIn(BaseModel):
 
 class PracticeIn(BaseModel):
     """Practice trials before the first block: logged (``practice`` true), left out of the
-    analysis export, scored nowhere, and without effect on the trust belief."""
+    analysis export, scored nowhere, and without effect on the trust belief.  The robot asks
+    (the participant teleoperates) in the practice trials ``asks`` (numbers from 1; by default
+    the last one), and follows ``policy`` in the others."""
 
     model_config = STRICT
     trials: list[str] = Field(..., min_length=1, max_length=50, description="The practice trials' complexities, in order.")
     policy: dict[str, Any] = Field(default_factory=lambda: {"kind": "never-ask"}, description="The robot's policy in practice.")
+    asks: list[int] | None = Field(
+        None, max_length=50, description="Practice trials (from 1) in which the robot asks; default: the last."
+    )
+
+    @model_validator(mode="after")
+    def _asks(self):
+        bad = [k for k in self.asks or () if not 1 <= k <= len(self.trials)]
+        if bad:
+            raise ValueError(f"practice.asks names trials {bad}; the practice has trials 1..{len(self.trials)}")
+        return self
 
 
 class ScaleIn(BaseModel):
@@ -259,7 +271,8 @@ def build_study_config(study: StudyIn) -> dict[str, Any]:
             problems.append(f"practice.trials names unknown complexities {bad}; expected {list(task.complexities)}")
         try:
             practice_policy = resolve_policy(study.practice.policy, model, task, "practice.policy")
-            practice = {"trials": list(study.practice.trials), "policy": practice_policy}
+            asks = study.practice.asks if study.practice.asks is not None else [len(study.practice.trials)]
+            practice = {"trials": list(study.practice.trials), "policy": practice_policy, "asks": sorted(set(asks))}
             if practice_policy["kind"] == SCHEDULE:
                 problems.append("practice.policy: practice trials are a fixed list; a schedule policy runs in a block")
         except ConfigError as exc:
@@ -360,7 +373,11 @@ def participant_plan(cfg: dict[str, Any], index: int, seed: int) -> dict[str, An
     practice = cfg.get("practice")
     if practice:
         # the practice block's index follows the study's blocks
-        trials[:0] = [{"block": len(cfg["blocks"]), "complexity": c, "practice": True} for c in practice["trials"]]
+        asks = practice.get("asks") or ()
+        trials[:0] = [
+            {"block": len(cfg["blocks"]), "complexity": c, "practice": True, **({"action": "ask"} if k + 1 in asks else {})}
+            for k, c in enumerate(practice["trials"])
+        ]
     plan: dict[str, Any] = {"block_order": order, "trials": trials}
     if queues:
         plan["queues"] = queues
