@@ -20,7 +20,8 @@ from .db import DEFAULT_URL, open_database, safe_url
 from .fastpath import DeployFastPath
 from .link_routes import STATIC, lifecycle, pages, static_page
 from .middleware import BodyGuard, RequestLog, ServerTiming
-from .routes import deploy, experimenter, own, participant
+from .participant_routes import own, participant
+from .routes import deploy, experimenter
 from .store import DeployStore
 
 log = logging.getLogger(__name__)

@@ -27,6 +27,7 @@ from sqlalchemy.orm import Session as DBSession
 
 from ..data.trials import write_trials
 from ..vocab import TRIAL_COLUMNS
+from .checks import check_passed
 from .orm import Answer, Event, Report, Session, Study, Trial
 
 CANONICAL = list(TRIAL_COLUMNS)
@@ -57,6 +58,8 @@ REPORT_COLUMNS = [
     "item",
     "value",
     "reverse",
+    "check",
+    "check_passed",
     "study",
     "session",
     "answered_at",
@@ -78,6 +81,9 @@ SESSION_COLUMNS = [
     "started_at",
     "ended_at",
     "revoked_at",
+    "quiz_attempts",
+    "quiz_outcome",
+    "checks_failed",
 ]
 EVENT_COLUMNS = ["participant", "session", "trial", "client_time", "server_time", "type", "data"]
 
@@ -172,16 +178,16 @@ def answers_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFr
     questionnaire item, one row each, next to the analysed trial each follows."""
     names = _block_names(study)
     skip = _practice_counts(db, study)
-    reverse = {(q["name"], i["id"]): bool(i.get("reverse")) for q in study.config.get("questionnaires") or () for i in q["items"]}
-    data: list[tuple[str, str, str, float, bool, Report | Answer, str]] = []
+    items = {(q["name"], i["id"]): i for q in study.config.get("questionnaires") or () for i in q["items"]}
+    data: list[tuple[str, str, str, float, dict, Report | Answer, str]] = []
     for r, p in db.execute(
         select(Report, Session.participant).join(Session, Report.session_id == Session.id).where(*exported(study, pilot))
     ).all():
-        data.append(("self_report", r.scope, "trust", r.value, False, r, p))
+        data.append(("self_report", r.scope, "trust", r.value, {}, r, p))
     for a, p in db.execute(
         select(Answer, Session.participant).join(Session, Answer.session_id == Session.id).where(*exported(study, pilot))
     ).all():
-        data.append((a.questionnaire, a.when, a.item, a.value, reverse.get((a.questionnaire, a.item), False), a, p))
+        data.append((a.questionnaire, a.when, a.item, a.value, items.get((a.questionnaire, a.item), {}), a, p))
     rows = [
         {
             "participant": p,
@@ -193,17 +199,21 @@ def answers_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFr
             "when": when,
             "item": item,
             "value": value,
-            "reverse": rev,
+            "reverse": bool(item_.get("reverse")),
+            "check": item_.get("check"),
+            "check_passed": check_passed(item_, value),
             "study": study.id,
             "session": r.session_id,
             "answered_at": r.created_at.isoformat() + "Z",
         }
-        for q, when, item, value, rev, r, p in data
+        for q, when, item, value, item_, r, p in data
     ]
     frame = pd.DataFrame(rows, columns=REPORT_COLUMNS)
     frame = frame.sort_values(["participant", "session_trial", "questionnaire"], kind="stable").reset_index(drop=True)
     frame["trial"] = frame["trial"].astype("int64")
     frame["value"] = frame["value"].astype("float64")
+    frame["check"] = frame["check"].astype("Int64")
+    frame["check_passed"] = frame["check_passed"].astype("boolean")
     return frame
 
 
@@ -211,6 +221,12 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
     """One row per participant: status, the panel's ids (JSON) and the seed and secret that
     reproduce the session's plan, actions, outcomes and scenes."""
     names = _block_names(study)
+    checks = study.config.get("questionnaires") or ()
+    items = {(q["name"], i["id"]): i for q in checks for i in q["items"] if i.get("check") is not None}
+    failed: dict[str, int] = {}
+    for a in db.scalars(select(Answer).join(Session, Answer.session_id == Session.id).where(*exported(study, pilot))):
+        if (a.questionnaire, a.item) in items and not check_passed(items[(a.questionnaire, a.item)], a.value):
+            failed[a.session_id] = failed.get(a.session_id, 0) + 1
     rows = [
         {
             "participant": s.participant,
@@ -229,6 +245,9 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
             "started_at": _iso(s.consented_at),
             "ended_at": _iso(s.ended_at),
             "revoked_at": _iso(s.revoked_at),
+            "quiz_attempts": len((s.quiz or {}).get("attempts", [])),
+            "quiz_outcome": (s.quiz or {}).get("outcome"),
+            "checks_failed": failed.get(s.id, 0),
         }
         for s in db.scalars(select(Session).where(*exported(study, pilot)).order_by(Session.participant))
     ]

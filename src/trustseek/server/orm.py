@@ -91,6 +91,8 @@ class Session(Base):
     speed: Mapped[float | None] = mapped_column(Float, nullable=True)  # the animation speed it ran at
     revoked_at: Mapped[datetime | None] = mapped_column(nullable=True)
     ended_at: Mapped[datetime | None] = mapped_column(nullable=True)
+    # the comprehension quiz: {"attempts": [{"answers", "wrong", "at"}], "outcome": passed | failed | None}
+    quiz: Mapped[dict | None] = mapped_column(JSON, nullable=True)
 
 
 class Trial(Base):

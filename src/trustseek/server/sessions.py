@@ -36,6 +36,7 @@ from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 from ..model.task import Task
 from ..policies import PolicyRunner
 from ..policies.schedule import SchedulePolicy
+from .checks import SCREENED, quiz_due
 from .orm import Answer, Event, EventBatch, Report, Session, Study, Trial, utcnow
 from .store import TrialRow
 from .studies import block_items, policy_object
@@ -353,6 +354,8 @@ def submit_trial(
     if n != s.trials_done + 1:
         raise SessionError(409, f"trial {n} is not the current trial; the current trial is {s.trials_done + 1}")
     cfg = study_config(db, s.study_id) if s.study_id else {}
+    if quiz_due(s, cfg) is not None:
+        raise SessionError(409, "answer the comprehension quiz before the first trial")
     if report_due(db, s, cfg) is not None or questionnaire_due(db, s, cfg) is not None:
         raise SessionError(409, f"answer the questions after trial {s.trials_done} before trial {n}")
     action, complexity = s.pending_action, s.pending_complexity
@@ -476,6 +479,8 @@ def questionnaire_due(db: DBSession, s: Session, cfg: dict[str, Any]) -> dict[st
 
 def ended(db: DBSession, s: Session, cfg: dict[str, Any]) -> bool:
     """Whether the session is over: every trial committed and nothing left to answer."""
+    if s.status == SCREENED:
+        return True
     return s.status == "done" and report_due(db, s, cfg) is None and questionnaire_due(db, s, cfg) is None
 
 

@@ -115,6 +115,39 @@ class ItemIn(BaseModel):
     id: str = Field(..., min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
     text: str = Field(..., min_length=1, max_length=1000)
     reverse: bool = False
+    check: int | None = Field(None, description="An attention check: the point of the scale the item instructs.")
+
+
+class QuizQuestionIn(BaseModel):
+    model_config = STRICT
+    id: str = Field(..., min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
+    text: str = Field(..., min_length=1, max_length=1000)
+    options: list[str] = Field(..., min_length=2, max_length=10)
+    answer: int = Field(..., ge=0, description="The index of the right option (from 0).")
+
+    @model_validator(mode="after")
+    def _answer(self):
+        if self.answer >= len(self.options):
+            raise ValueError(f"answer {self.answer} is not an option of {self.id!r} (0..{len(self.options) - 1})")
+        return self
+
+
+class QuizIn(BaseModel):
+    """A comprehension quiz after the instructions: every question right to go on, within
+    ``attempts`` attempts; then ``on_fail``: ``end`` (the session ends, with ``fail_code`` as the
+    panel's code when given) or ``continue`` (the session goes on, the failure recorded)."""
+
+    model_config = STRICT
+    questions: list[QuizQuestionIn] = Field(..., min_length=1, max_length=20)
+    attempts: int = Field(2, ge=1, le=10)
+    on_fail: Literal["end", "continue"] = "end"
+    fail_code: str | None = Field(None, min_length=1, max_length=100)
+
+    @model_validator(mode="after")
+    def _unique(self):
+        if len({q.id for q in self.questions}) != len(self.questions):
+            raise ValueError("quiz question ids must be unique")
+        return self
 
 
 class QuestionnaireIn(BaseModel):
@@ -164,6 +197,7 @@ class StudyIn(BaseModel):
     questionnaires: list[QuestionnaireIn] = Field(default_factory=list, max_length=20)
     panel: PanelIn | None = None
     quota: int | None = Field(None, ge=1, le=100_000, description="Participants the study link takes; then it closes.")
+    quiz: QuizIn | None = None
 
     @field_validator("task", "model")
     @classmethod
@@ -328,6 +362,9 @@ def resolve_questionnaire(q: QuestionnaireIn, where: str) -> dict[str, Any]:
         return out
     assert q.items is not None
     scale = q.scale or ScaleIn(min=1, max=7)
+    off = [i.id for i in q.items if i.check is not None and not scale.min <= i.check <= scale.max]
+    if off:
+        raise ConfigError([f"{where}.items {off}: an attention check must be a point of the scale {scale.min}..{scale.max}"])
     return {
         "name": q.name or f"questionnaire-{where.rsplit('[', 1)[-1].rstrip(']')}",
         "when": q.when,

@@ -8,7 +8,7 @@
   counted); ``sessions.panel_id``: the panel's participant id of a session made through the
   study link, unique per study (one session per panel id, also under concurrent arrivals);
   ``sessions.speed``: the animation speed the session ran at; ``sessions.revoked_at``,
-  ``sessions.ended_at``.
+  ``sessions.ended_at``; ``sessions.quiz``: the comprehension quiz's attempts and outcome.
 
 Revision ID: 0004
 Revises: 0003
@@ -35,6 +35,7 @@ def upgrade() -> None:
     op.add_column("sessions", sa.Column("speed", sa.Float(), nullable=True))
     op.add_column("sessions", sa.Column("revoked_at", sa.DateTime(), nullable=True))
     op.add_column("sessions", sa.Column("ended_at", sa.DateTime(), nullable=True))
+    op.add_column("sessions", sa.Column("quiz", sa.JSON(), nullable=True))
     op.create_index("uq_session_study_panel_id", "sessions", ["study_id", "panel_id"], unique=True)
     if not context.is_offline_mode():
         conn = op.get_bind()
@@ -47,7 +48,7 @@ def downgrade() -> None:
     op.drop_index("uq_session_study_panel_id", "sessions")
     op.drop_index("uq_study_link_token", "studies")
     with op.batch_alter_table("sessions") as batch:
-        for col in ("ended_at", "revoked_at", "speed", "panel_id", "role"):
+        for col in ("quiz", "ended_at", "revoked_at", "speed", "panel_id", "role"):
             batch.drop_column(col)
     with op.batch_alter_table("studies") as batch:
         batch.drop_column("link_token")
