@@ -56,6 +56,16 @@ def counted(study_id: str):
     return (Session.study_id == study_id, Session.role == "participant", Session.revoked_at.is_(None))
 
 
+def progress(db: DBSession, study_id: str) -> dict[str, int]:
+    """Sessions of a study: participants by status (new, running, done, screened), then pilots
+    and previews."""
+    counts = dict.fromkeys(("new", "running", "done", "screened", "pilot", "preview"), 0)
+    for role, status in db.execute(select(Session.role, Session.status).where(Session.study_id == study_id)).all():
+        key = status if role == "participant" else role
+        counts[key] = counts.get(key, 0) + 1
+    return counts
+
+
 def balanced_index(db: DBSession, study: Study) -> int:
     """The rotation (0-based) that the fewest counted sessions started with; ties go to the
     lowest, so links made one by one rotate as before."""

@@ -13,9 +13,10 @@ from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 
 from .auth import Caller, remember_token, require_experimenter, require_session, session_for_token
+from .bundle import bundle_files, bundle_zip
 from .deploy import committed_trial, create_deploy, deploy_decide, deploy_observe, remember_deploy
 from .export import answers_frame, events_csv, events_frame, sessions_frame, to_bytes, trials_frame
-from .lifecycle import create_participant
+from .lifecycle import create_participant, progress
 from .orm import Event, Report, Session, Study, Trial, utcnow
 from .schemas import (
     DecideIn,
@@ -97,10 +98,7 @@ def create_study(body: StudyIn, request: Request, status: str = Query("open", pa
 
 
 def study_summary(db, st: Study, request: Request) -> dict:
-    counts: dict[str, int] = {}
-    for role, status in db.execute(select(Session.role, Session.status).where(Session.study_id == st.id)).all():
-        key = status if role == "participant" else role
-        counts[key] = counts.get(key, 0) + 1
+    counts = progress(db, st.id)
     cfg = st.config
     base = request.app.state.public_url or str(request.base_url).rstrip("/")
     return {
@@ -111,7 +109,7 @@ def study_summary(db, st: Study, request: Request) -> dict:
         "link": f"{base}/join/{st.link_token}" if st.link_token else None,
         "quota": cfg.get("quota"),
         "participants": sum(v for k, v in counts.items() if k not in ("pilot", "preview")),
-        "progress": {k: counts.get(k, 0) for k in ("new", "running", "done", "pilot", "preview")},
+        "progress": counts,
         "blocks": [
             {
                 "name": b["name"],
@@ -306,6 +304,26 @@ def export(
     media = "text/csv" if format == "csv" else "application/vnd.apache.parquet"
     name = f"{st.id}-{table}.{format}"
     return Response(content, media_type=media, headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
+
+@experimenter.get(
+    "/studies/{study_id}/bundle",
+    summary="Every table of a study in CSV and Parquet, its configuration and a data dictionary (a zip file)",
+    response_class=Response,
+    responses={
+        200: {
+            "description": "The bundle (a zip file).",
+            "content": {"application/zip": {"schema": {"type": "string", "format": "binary"}}},
+        },
+        **errors(404),
+    },
+)
+def bundle(study_id: str, request: Request, pilot: bool = Query(False, description="Include the pilot sessions.")):
+    with _db(request) as db:
+        st = _study(db, study_id)
+        content = bundle_zip(bundle_files(db, st, pilot), f"{st.id}-bundle")
+    name = f"{st.id}-bundle.zip"
+    return Response(content, media_type="application/zip", headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
 
 # --------------------------------------------------------------------------- deploy
