@@ -1,7 +1,10 @@
-"""End-to-end: a full study run from an online panel's link in headless Chromium: practice, two
-blocks, a per-block questionnaire and the 12-item trust-in-automation questionnaire at the end,
-the completion code and the redirect to the panel.  The score changes only when the outcome is
-shown, and no banner is left over the next trial.  The export fits with ``trustseek fit``."""
+"""End-to-end: a full study run from an online panel's study link in headless Chromium: the
+comprehension quiz (a wrong attempt sends the participant back to the instructions), practice
+with one asked trial, two blocks, a per-block questionnaire with an attention check and the
+12-item trust-in-automation questionnaire at the end, the completion code and the redirect to the
+panel; the same panel id back at the link gets a page saying it completed.  ``&speed=`` on the
+link changes nothing.  The score changes only when the outcome is shown, and no banner is left
+over the next trial.  The export fits with ``trustseek fit``."""
 
 from __future__ import annotations
 
@@ -54,7 +57,17 @@ def test_panel_study_in_chromium(tmp_path):
         study = c.create_study(
             {
                 "name": "panel",
-                "practice": {"trials": ["low"]},
+                "practice": {"trials": ["low", "low"]},
+                "quiz": {
+                    "questions": [
+                        {
+                            "id": "ask",
+                            "text": "When the robot asks for help, you...",
+                            "options": ["watch", "drive it"],
+                            "answer": 1,
+                        }
+                    ]
+                },
                 "blocks": [
                     {"name": "watch", "policy": {"kind": "never-ask"}, "schedule": {"trials": ["low", "high"]}},
                     {"name": "take-over", "policy": {"kind": "never-ask"}, "schedule": {"trials": ["high"]}},
@@ -63,7 +76,11 @@ def test_panel_study_in_chromium(tmp_path):
                     {
                         "name": "quick",
                         "when": "block",
-                        "items": [{"id": "trust", "text": "I trust the robot."}, {"id": "predict", "text": "I can predict it."}],
+                        "items": [
+                            {"id": "trust", "text": "I trust the robot."},
+                            {"id": "predict", "text": "I can predict it."},
+                            {"id": "attention", "text": "To show that you read this, choose 2.", "check": 2},
+                        ],
                         "scale": {"min": 1, "max": 5, "anchors": ["disagree", "agree"]},
                     },
                     {"template": "jian2000", "when": "end"},
@@ -72,28 +89,53 @@ def test_panel_study_in_chromium(tmp_path):
                 "animation_speed": 2.0,
             }
         )
-        link = c.create_sessions(study["id"], participants=["panel-1"])[0]["link"]
+        link = study["link"]  # one link for every participant of the panel
         with sync_playwright() as p:
             browser = launch_chromium(p)
             page = browser.new_page(viewport={"width": 1320, "height": 900})
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
             page.route(PANEL + "**", lambda route: route.fulfill(status=200, content_type="text/html", body="<p>panel</p>"))
-            page.goto(link + "?speed=1&PROLIFIC_PID=pp-42&STUDY_ID=st-7&SESSION_ID=se-9")
+            # &speed= on a participant's link changes nothing: the study's speed is the page's
+            page.goto(link + "?speed=50&PROLIFIC_PID=pp-42&STUDY_ID=st-7&SESSION_ID=se-9")
 
             page.wait_for_selector("#screen-consent:not([hidden])")
+            assert "3 trials" in page.inner_text("#consent-text")  # not a fixed duration
             page.check("#agree")
             page.click("#consent-btn")
             page.wait_for_selector("#screen-instructions:not([hidden])")
             page.click("#start-btn")
 
-            # the practice trial: the robot works alone, nothing is scored
+            # the comprehension quiz: a wrong answer, the instructions again, then the right one
+            page.wait_for_selector("#screen-quiz:not([hidden])")
+            assert page.is_disabled("#quiz-btn")
+            page.check("input[name='quiz-ask'][value='0']")
+            page.screenshot(path=str(out / "browser_panel_quiz.png"))
+            page.click("#quiz-btn")
+            page.wait_for_selector("#instructions-again:not([hidden])")
+            page.screenshot(path=str(out / "browser_panel_quiz_again.png"))
+            page.click("#start-btn")
+            page.wait_for_selector("#screen-quiz:not([hidden])")
+            assert "Attempt 2 of 2" in page.inner_text("#quiz-attempt")
+            page.check("input[name='quiz-ask'][value='1']")
+            page.click("#quiz-btn")
+
+            # practice: the robot works alone, then asks; nothing is scored, and it is counted apart
             page.wait_for_function("window.trustseek.state().phase === 'approach'")
-            assert st(page)["practice"] is True and page.inner_text("#block-name") == "Practice trial"
+            s = st(page)
+            assert s["practice"] is True and page.inner_text("#block-name") == "Practice trial (not scored)"
+            assert s["speed"] == 2.0 and s["trial_label"] == "1 / 2"
             page.wait_for_function(
-                "window.trustseek.state().trial === 2 && window.trustseek.state().phase === 'approach'", timeout=20000
+                "window.trustseek.state().trial === 2 && window.trustseek.state().phase === 'teleop'", timeout=20000
+            )
+            assert st(page)["robot_action"] == "ask" and "Practice" in page.inner_text("#hint")
+            page.screenshot(path=str(out / "browser_panel_practice_ask.png"))
+            teleoperate(page)
+            page.wait_for_function(
+                "window.trustseek.state().trial === 3 && window.trustseek.state().phase === 'approach'", timeout=20000
             )
             assert st(page)["practice"] is False and page.inner_text("#score") == "0"
+            assert page.inner_text("#trial-no") == "1 / 3"
             # no banner of the practice trial over this one
             assert page.eval_on_selector("#banner", "b => getComputedStyle(b).opacity") == "0"
 
@@ -105,13 +147,13 @@ def test_panel_study_in_chromium(tmp_path):
             page.wait_for_function("window.trustseek.state().phase === 'result'", timeout=20000)
             assert page.inner_text("#score") == str(int(during["score"])) or float(page.inner_text("#score")) == during["score"]
 
-            # trial 3 in the same block, then the block's questionnaire
-            page.wait_for_function("window.trustseek.state().trial === 3", timeout=20000)
+            # trial 2 of the study in the same block, then the block's questionnaire
+            page.wait_for_function("window.trustseek.state().trial === 4", timeout=20000)
             answer_questionnaire(page, lambda k: 4 - k)
 
             # block 2: the participant takes over
             page.wait_for_function(
-                "window.trustseek.state().trial === 4 && window.trustseek.state().phase === 'approach'", timeout=20000
+                "window.trustseek.state().trial === 5 && window.trustseek.state().phase === 'approach'", timeout=20000
             )
             page.keyboard.press(" ")
             page.wait_for_function("window.trustseek.state().phase === 'teleop'")
@@ -126,6 +168,10 @@ def test_panel_study_in_chromium(tmp_path):
             assert page.inner_text("#final-trials") == "3"
             page.screenshot(path=str(out / "browser_panel_done.png"))
             page.wait_for_url(PANEL + "?cc=E2E-CODE", timeout=15000)
+            # back at the study link with the same panel id: a page says so, and no new session
+            page.goto(link + "?PROLIFIC_PID=pp-42&STUDY_ID=st-7&SESSION_ID=se-10")
+            assert page.get_attribute("body", "data-page") == "completed"
+            page.screenshot(path=str(out / "browser_panel_completed.png"))
             browser.close()
         assert not errors, errors
 
@@ -133,12 +179,16 @@ def test_panel_study_in_chromium(tmp_path):
         reports = pd.read_csv(io.BytesIO(c.export(study["id"], table="reports")))
         sessions = pd.read_csv(io.BytesIO(c.export(study["id"], table="sessions")))
 
-    assert trials["trial"].tolist() == [1, 2, 3] and trials["session_trial"].tolist() == [2, 3, 4]
+    assert trials["trial"].tolist() == [1, 2, 3] and trials["session_trial"].tolist() == [3, 4, 5]
+    assert len(sessions) == 1 and sessions["panel_id"].tolist() == ["pp-42"] and sessions["speed"].tolist() == [2.0]
+    assert sessions[["quiz_attempts", "quiz_outcome"]].values.tolist() == [[2, "passed"]]
     assert trials["human_action"].tolist() == ["rely", "rely", "intervene"]
     assert json.loads(sessions["panel"].iloc[0]) == {"PROLIFIC_PID": "pp-42", "STUDY_ID": "st-7", "SESSION_ID": "se-9"}
     quick = reports[reports.questionnaire == "quick"].sort_values(["trial", "item"])
-    assert quick["trial"].tolist() == [2, 2, 3, 3]
-    assert dict(zip(quick["item"][:2], quick["value"][:2], strict=True)) == {"predict": 3.0, "trust": 4.0}
+    assert quick["trial"].tolist() == [2, 2, 2, 3, 3, 3]
+    assert dict(zip(quick["item"][:3], quick["value"][:3], strict=True)) == {"attention": 2.0, "predict": 3.0, "trust": 4.0}
+    attention = quick[quick["item"] == "attention"]
+    assert attention["check_passed"].tolist() == [True, False]  # 2 (4 - k at k = 2), then 3
     assert (reports.questionnaire == "trust-in-automation").sum() == 12
 
     path = out / "browser_panel_trials.csv"

@@ -319,7 +319,7 @@ def test_migrations_run_once_and_are_idempotent(db_url, tmp_path):
     create_app(db_url, token=TOKEN)  # a restart: nothing to do, nothing lost
     eng = create_engine(db_url)
     with eng.connect() as c:
-        assert c.execute(text("select version_num from alembic_version")).scalars().all() == ["0003"]
+        assert c.execute(text("select version_num from alembic_version")).scalars().all() == ["0004"]
         tables = set(c.execute(text("select name from sqlite_master where type='table'")).scalars())
     assert {"studies", "sessions", "trials", "reports", "events"} <= tables
 

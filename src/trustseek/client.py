@@ -90,12 +90,14 @@ class Client:
     def _get(self, path: str, **params) -> Any:
         return _check(self.http.get(path, params=params or None, headers=self._auth()))
 
-    def _post(self, path: str, body: dict) -> Any:
-        return _check(self.http.post(path, json=body, headers=self._auth()))
+    def _post(self, path: str, body: dict | None = None, **params) -> Any:
+        return _check(self.http.post(path, json=body, params=params or None, headers=self._auth()))
 
     # -- experimenter ------------------------------------------------------
-    def create_study(self, config: dict[str, Any] | str | Path) -> dict[str, Any]:
-        """Create a study from its configuration (see docs/experiments.md); returns its summary.
+    def create_study(self, config: dict[str, Any] | str | Path, status: str = "open") -> dict[str, Any]:
+        """Create a study from its configuration (see docs/experiments.md); returns its summary
+        (with ``link``, the study link for an online panel).  ``status="draft"`` makes a draft:
+        links made in a draft are pilots, and the study link takes no one until it is opened.
 
         ``config`` may be a path to the study JSON.  Local files are read here and sent as
         JSON: ``task`` and ``model`` may be paths to task / trust-model JSON files (anything
@@ -115,15 +117,38 @@ class Client:
             blocks.append(b)
         if "blocks" in config:
             config["blocks"] = blocks
-        return self._post("/api/studies", config)
+        return self._post("/api/studies", config, status=status)
 
     def studies(self) -> list[dict[str, Any]]:
         return self._get("/api/studies")
 
-    def create_sessions(self, study_id: str, participants: list[str] | None = None, count: int = 1) -> list[dict[str, Any]]:
-        """Participant sessions: each with its ``link`` (the unguessable URL to hand out) and ``token``."""
+    def create_sessions(
+        self, study_id: str, participants: list[str] | None = None, count: int = 1, pilot: bool = False
+    ) -> list[dict[str, Any]]:
+        """Participant sessions: each with its ``link`` (the unguessable URL to hand out) and ``token``;
+        ``pilot`` sessions are left out of the analysis export unless asked for."""
         body: dict[str, Any] = {"participants": participants} if participants is not None else {"count": count}
-        return self._post(f"/api/studies/{study_id}/sessions", body)
+        return self._post(f"/api/studies/{study_id}/sessions", {**body, "pilot": pilot})
+
+    def set_status(self, study_id: str, status: str) -> dict[str, Any]:
+        """Open, pause or close a study (``"open"``, ``"paused"``, ``"closed"``)."""
+        return self._post(f"/api/studies/{study_id}/status", {"status": status})
+
+    def preview(self, study_id: str) -> str:
+        """The link of a preview: the participant's view, kept out of the data."""
+        return self._post(f"/api/studies/{study_id}/preview")["link"]
+
+    def revoke(self, study_id: str, session_id: str) -> dict[str, Any]:
+        """Revoke a participant's link: it shows a page saying so, and its session takes nothing more."""
+        return self._post(f"/api/studies/{study_id}/sessions/{session_id}/revoke")
+
+    def bundle(self, study_id: str, path: str | Path | None = None, pilot: bool = False) -> bytes:
+        """The study's data bundle as a zip file (every table in CSV and Parquet, the study's
+        configuration, a data dictionary); written to ``path`` when given."""
+        data = self._get(f"/api/studies/{study_id}/bundle", pilot=pilot)
+        if path is not None:
+            Path(path).write_bytes(data)
+        return data
 
     def dashboard(self, study_id: str) -> dict[str, Any]:
         return self._get(f"/api/studies/{study_id}/dashboard")
@@ -132,7 +157,7 @@ class Client:
         """The study's trials (canonical trial log) or ``table="events"``; CSV or Parquet by the
         suffix of ``path`` (CSV without a path).  Returns the bytes, and writes them to ``path``."""
         fmt = "parquet" if path is not None and Path(path).suffix == ".parquet" else "csv"
-        data = self._get(f"/api/studies/{study_id}/export", table=table, format=fmt)
+        data = self._get(f"/api/studies/{study_id}/export", table=table, format=fmt)  # trials, events, reports, sessions
         if path is not None:
             Path(path).write_bytes(data)
         return data

@@ -9,13 +9,16 @@ export interface Questionnaire {
   name: string; when: "trial" | "block" | "end"; title: string; after_trial: number;
   scale: { min: number; max: number; anchors: string[] }; items: { id: string; text: string }[];
 }
+export interface Quiz {
+  attempt: number; attempts: number; wrong: string[]; questions: { id: string; text: string; options: string[] }[];
+}
 export interface State {
   session_id: string; participant: string; status: "new" | "running" | "done"; study: string;
   trials_total: number; trials_done: number; score: number; blocks: string[];
   current: Current | null; report_due: number | null; self_report: "none" | "trial" | "block";
-  questionnaire: Questionnaire | null; ended: boolean; completion: { code: string; redirect_url: string | null } | null;
+  questionnaire: Questionnaire | null; quiz: Quiz | null; screened: boolean; ended: boolean; completion: { code: string; redirect_url: string | null } | null;
   panel_params: string[]; practice_trials: number;
-  animation_speed: number; consent_text: string | null; instructions: string | null;
+  animation_speed: number; preview: boolean; consent_text: string | null; instructions: string | null;
   rewards: { autonomous_success: number; ask: number; intervene: number; autonomous_failure: number };
 }
 export interface TrialResult {
@@ -121,6 +124,9 @@ export class Api {
   }
   report(after_trial: number, value: number) {
     return this.call<{ state: State }>("POST", `/api/sessions/${this.sessionId}/reports`, { after_trial, value });
+  }
+  quiz(attempt: number, answers: Record<string, number>) {
+    return this.call<{ wrong: string[]; state: State }>("POST", `/api/sessions/${this.sessionId}/quiz`, { attempt, answers });
   }
   answer(questionnaire: string, after_trial: number, answers: Record<string, number>) {
     return this.call<{ state: State }>("POST", `/api/sessions/${this.sessionId}/questionnaires`, { questionnaire, after_trial, answers });

@@ -3,19 +3,20 @@
 //
 // The server decides everything that matters (complexity, robot action, outcome, score);
 // this page animates it, lets the participant intervene or teleoperate, and reports back.
-// `?speed=4` multiplies every motion (the study's animation_speed is multiplied in too).
+// Only the study sets the pace (its animation_speed, recorded with the session); `?speed=4`
+// multiplies every motion in a preview only, never on a participant's link.
 // `?retry_cap=ms` caps the wait between retries while the server is unreachable (default 10 s);
 // the page retries for as long as it stays open and keeps the trial in progress in
 // localStorage, so that a reload resumes it where it was.
 
-import { Api, ApiError, Connection, Current, Questionnaire, State, TrialResult, UIEvent } from "./api";
+import { Api, ApiError, Connection, Current, Questionnaire, Quiz, State, TrialResult, UIEvent } from "./api";
 import { gamepadName, installKeyboard, poll } from "./input";
 import {
   AISLE_H, ARM_MAX, BASE_H, REACH, SHELF_DEPTH, ItemState, Layout, RobotState, View, clampRobot, drawEndEffector, drawLocal, drawWorld,
   gripperPos, makeLayout, pathLength, pickTokens, pointAlong,
 } from "./scene";
 
-type Phase = "loading" | "consent" | "instructions" | "approach" | "reach" | "waiting" | "outcome" | "teleop" | "result" | "report" | "questionnaire" | "done" | "error";
+type Phase = "loading" | "consent" | "instructions" | "quiz" | "approach" | "reach" | "waiting" | "outcome" | "teleop" | "result" | "report" | "questionnaire" | "done" | "error";
 
 const $ = <T extends HTMLElement = HTMLElement>(id: string) => document.getElementById(id) as T;
 const token = decodeURIComponent(location.pathname.split("/").filter(Boolean).pop() ?? "");
@@ -116,9 +117,10 @@ function setPhase(p: Phase) {
   phase = p;
   phaseT = 0;
   document.body.dataset.phase = p;
-  for (const s of ["consent", "instructions", "task", "done", "error"]) $(`screen-${s}`).hidden = true;
+  for (const s of ["consent", "instructions", "quiz", "task", "done", "error"]) $(`screen-${s}`).hidden = true;
   if (p === "consent") $("screen-consent").hidden = false;
   else if (p === "instructions") $("screen-instructions").hidden = false;
+  else if (p === "quiz") $("screen-quiz").hidden = false;
   else if (p === "done") $("screen-done").hidden = false;
   else if (p === "error") $("screen-error").hidden = false;
   else if (p !== "loading") $("screen-task").hidden = false;
@@ -181,7 +183,9 @@ async function boot() {
     } else showFatal("The study cannot start", (e as Error).message);
     return;
   }
-  speed = (isFinite(speedParam) && speedParam > 0 ? speedParam : 1) * st.animation_speed;
+  speed = (st.preview && isFinite(speedParam) && speedParam > 0 ? speedParam : 1) * st.animation_speed;
+  $("preview-tag").hidden = !st.preview;
+  $("consent-trials").textContent = String(st.trials_total - st.practice_trials);
   shownScore = st.score;
   if (st.consent_text) $("consent-text").textContent = st.consent_text;
   if (st.instructions) $("instructions-text").textContent = st.instructions;
@@ -198,6 +202,7 @@ async function boot() {
   });
   $("intervene-btn").addEventListener("click", () => intervene("button"));
   $("report-btn").addEventListener("click", onReport);
+  $("quiz-btn").addEventListener("click", onQuiz);
   $("questionnaire-btn").addEventListener("click", onQuestionnaire);
   $<HTMLInputElement>("report-slider").addEventListener("input", (e) => {
     // an answer is required: the button is enabled once the slider has been moved
@@ -240,6 +245,7 @@ async function onConsent() {
 function route() {
   shownScore = st.score;
   if (st.ended) return finish();
+  if (st.quiz) return askQuiz(st.quiz);
   if (st.report_due !== null) return askReport();
   if (st.questionnaire) return askQuestionnaire(st.questionnaire);
   if (st.current) return startTrial(st.current);
@@ -250,6 +256,10 @@ function finish() {
   forget();
   $("final-score").textContent = String(st.score);
   $("final-trials").textContent = String(st.trials_done - st.practice_trials);
+  if (st.screened) {
+    $("done-title").textContent = "Thank you for your time";
+    $("done-text").textContent = "The study needs every answer of the check after the instructions right, so it ends here.";
+  }
   setPhase("done");
   const c = st.completion;
   if (c) {
@@ -288,7 +298,8 @@ function startTrial(cur: Current) {
     resetTeleop();
     log("teleop_start", { reason: "asked" });
     setPhase("teleop");
-    setHint("The robot asks for your help: drive it to the item, grasp it and put it in the bin.", 5);
+    const why = cur.practice ? "Practice: the robot asks for your help, as it will in the study." : "The robot asks for your help:";
+    setHint(`${why} Drive it to the item, grasp it and put it in the bin.`, 5);
   } else {
     setPhase("approach");
   }
@@ -413,6 +424,68 @@ async function onReport() {
     return;
   }
   clearError();
+  route();
+}
+
+// --------------------------------------------------------------------------- the comprehension quiz
+
+function askQuiz(q: Quiz) {
+  const body = $("quiz-items");
+  body.replaceChildren();
+  for (const item of q.questions) {
+    const row = document.createElement("fieldset");
+    row.className = "quiz-item";
+    const legend = document.createElement("legend");
+    legend.textContent = item.text;
+    row.append(legend);
+    item.options.forEach((text, k) => {
+      const label = document.createElement("label");
+      const input = document.createElement("input");
+      input.type = "radio";
+      input.name = `quiz-${item.id}`;
+      input.value = String(k);
+      input.dataset.item = item.id;
+      input.addEventListener("change", updateQuizButton);
+      label.append(input, document.createTextNode(` ${text}`));
+      row.append(label);
+    });
+    body.append(row);
+  }
+  $("quiz-attempt").textContent = q.attempt > 1
+    ? `Some answers were not right: please read the instructions again. Attempt ${q.attempt} of ${q.attempts}.`
+    : `Attempt 1 of ${q.attempts}.`;
+  updateQuizButton();
+  setPhase("quiz");
+}
+
+function quizAnswers(): Record<string, number> {
+  const out: Record<string, number> = {};
+  for (const input of Array.from(document.querySelectorAll<HTMLInputElement>("#quiz-items input:checked"))) out[input.dataset.item!] = Number(input.value);
+  return out;
+}
+
+function updateQuizButton() {
+  $<HTMLButtonElement>("quiz-btn").disabled = Object.keys(quizAnswers()).length < (st.quiz?.questions.length ?? 0);
+}
+
+async function onQuiz() {
+  const q = st.quiz!;
+  $<HTMLButtonElement>("quiz-btn").disabled = true;
+  try {
+    const res = await api.quiz(q.attempt, quizAnswers());
+    st = res.state;
+  } catch (e) {
+    updateQuizButton();
+    showError(`Could not save your answers: ${(e as Error).message}. Please try again.`);
+    return;
+  }
+  clearError();
+  // a wrong answer with attempts left: the instructions again, then the quiz
+  if (st.quiz) {
+    setPhase("instructions");
+    $("instructions-again").hidden = false;
+    return;
+  }
   route();
 }
 
@@ -689,13 +762,16 @@ function renderStatus() {
   const key = [trial, st.trials_total, shownScore, mode, cls, h, pad, phase, current?.complexity].join("|");
   if (key === lastStatus) return;
   lastStatus = key;
-  $("trial-no").textContent = `${trial} / ${st.trials_total}`;
+  // practice trials are counted apart: the study's trials run 1..N as the end page counts them
+  const np = st.practice_trials;
+  const practice = current ? current.practice : trial <= np;
+  $("trial-no").textContent = practice ? `${trial} / ${np}` : `${Math.max(0, trial - np)} / ${st.trials_total - np}`;
   $("score").textContent = String(shownScore);
   const m = $("mode");
   m.textContent = mode;
   m.className = `mode ${cls}`;
   $("hint").textContent = h;
-  $("block-name").textContent = !current ? "" : current.practice ? "Practice trial" : `Block ${current.block_position} of ${st.blocks.length}`;
+  $("block-name").textContent = !current ? "" : current.practice ? "Practice trial (not scored)" : `Block ${current.block_position} of ${st.blocks.length}`;
   $("gamepad").textContent = pad ? `Gamepad: ${pad.slice(0, 40)}` : "No gamepad (keyboard works)";
   $<HTMLButtonElement>("intervene-btn").disabled = !(phase === "approach" || phase === "reach");
 }
@@ -705,7 +781,7 @@ function renderStatus() {
     phase, trial: current?.trial ?? null, robot_action: current?.robot_action ?? null, complexity: current?.complexity ?? null,
     robot: { x: robot.x, y: robot.y, arm: robot.arm, holding: robot.holding }, item: { x: item.x, y: item.y, inBin: item.inBin },
     gripper: gripperPos(robot, layout.side), reach: REACH, side: layout.side, score: st?.score ?? null, shown_score: shownScore,
-    practice: current?.practice ?? null, picks: picks() ?? null, retries, connection: $("connection").hidden ? "ok" : "retrying",
+    practice: current?.practice ?? null, picks: picks() ?? null, speed, trial_label: $("trial-no").textContent, retries, connection: $("connection").hidden ? "ok" : "retrying",
   }),
 };
 

@@ -1,4 +1,4 @@
-"""Experiment server commands: serve, export."""
+"""Experiment server commands: serve, export, study (the lifecycle)."""
 
 from __future__ import annotations
 
@@ -179,48 +179,105 @@ def log_to_stderr(level: str) -> None:
 def export_cmd(
     study: str = typer.Argument(..., help="Study id."),
     db: str = typer.Option("sqlite:///trustseek.sqlite", "--db", help="Database URL."),
-    out: Path = typer.Option(
-        ..., "--out", "-o", help="Trial log to write (.csv or .parquet): the canonical format `trustseek fit` reads."
+    out: Path | None = typer.Option(
+        None, "--out", "-o", help="Trial log to write (.csv or .parquet): the canonical format `trustseek fit` reads."
     ),
     events: Path | None = typer.Option(None, "--events", help="Also write the UI events table (.csv or .parquet)."),
+    bundle: Path | None = typer.Option(
+        None,
+        "--bundle",
+        help="Write every table (trials, reports, questionnaires, quiz, sessions, events) in CSV and Parquet, "
+        "the study's configuration and a data dictionary into this new (or empty) folder.",
+    ),
+    pilot: bool = typer.Option(False, "--pilot", help="Include the pilot sessions (left out by default)."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ) -> None:
-    """Export a study's trials (canonical trial log) and, optionally, its UI events."""
+    """Export a study's trials (canonical trial log), its UI events, or its whole data bundle."""
+    from ..server.bundle import bundle_files, write_bundle
     from ..server.db import open_database
     from ..server.export import events_frame, trials_frame, write_frame
-    from ..server.orm import Study
 
     _check_db(db)
     _check_existing_sqlite(db)
+    if out is None and bundle is None:
+        raise TrustseekError(["give --out FILE (the trial log) or --bundle DIR (every table)"])
     check_outputs((out, "--out"), (events, "--events"))
     for p, option in ((out, "--out"), (events, "--events")):
         check_output(p, option, (".csv", ".parquet"))
-    maker = open_database(db)
-    with maker() as s:
-        st = s.get(Study, study)
-        if st is None:
-            raise TrustseekError([f"no study {study!r} in {db}"])
-        trials = trials_frame(s, st)
-        n_events = None
-        ev = events_frame(s, st) if events is not None else None
+    check_output(bundle, "--bundle", directory=True)
+    with open_database(db)() as s:
+        st = _stored_study(s, study, db)
+        trials = trials_frame(s, st, pilot=pilot)
+        ev = events_frame(s, st, pilot) if events is not None else None
+        files = bundle_files(s, st, pilot) if bundle is not None else None
+    if out is not None:
         with atomic_output(out) as tmp:
             write_frame(trials, tmp)
-        if events is not None and ev is not None:
-            with atomic_output(events) as tmp:
-                write_frame(ev, tmp, trials=False)
-            n_events = len(ev)
+    if events is not None and ev is not None:
+        with atomic_output(events) as tmp:
+            write_frame(ev, tmp, trials=False)
+    if bundle is not None and files is not None:
+        with atomic_output(bundle, directory=True) as tmp:
+            write_bundle(files, tmp)
     summary = {
         "study": study,
         "trials": len(trials),
         "participants": int(trials["participant"].nunique()),
-        "out": str(out),
-        "events": n_events,
+        "out": None if out is None else str(out),
+        "events": None if ev is None else len(ev),
         "events_out": None if events is None else str(events),
+        "bundle": None if bundle is None else str(bundle),
+        "files": None if files is None else sorted(files),
     }
     if as_json:
         print_json(summary)
-    else:
-        console.print(
-            f"wrote {summary['trials']} trials of {summary['participants']} participants to {out}"
-            + (f"; {n_events} events to {events}" if events is not None else "")
-        )
+        return
+    where = [str(p) for p in (out, bundle) if p is not None]
+    console.print(
+        f"wrote {summary['trials']} trials of {summary['participants']} participants to {' and '.join(where)}"
+        + (f"; {summary['events']} events to {events}" if events is not None else "")
+    )
+
+
+def _stored_study(s, study: str, db: str):
+    from ..server.orm import Study
+
+    st = s.get(Study, study)
+    if st is None:
+        raise TrustseekError([f"no study {study!r} in {db}"])
+    return st
+
+
+@app.command("study", rich_help_panel="Experiments")
+def study_cmd(
+    study: str = typer.Argument(..., help="Study id."),
+    db: str = typer.Option("sqlite:///trustseek.sqlite", "--db", help="Database URL."),
+    status: str | None = typer.Option(
+        None, "--status", help="Move the study to open, paused or closed (a draft opens; a closed study stays closed)."
+    ),
+    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+) -> None:
+    """A study's lifecycle: its status, study link and progress; --status opens, pauses or closes it."""
+    from ..server.db import open_database
+    from ..server.lifecycle import STATUSES, progress, set_status
+    from ..server.sessions import SessionError
+
+    _check_db(db)
+    _check_existing_sqlite(db)
+    if status is not None and status not in STATUSES:
+        raise TrustseekError([f"--status {status!r}: expected one of {', '.join(STATUSES)}"])
+    with open_database(db)() as s:
+        st = _stored_study(s, study, db)
+        if status is not None:
+            try:
+                set_status(s, st, status)
+            except SessionError as exc:
+                raise TrustseekError([f"--status {status}: {exc.message}"]) from None
+        counts = progress(s, st.id)
+        summary = {"study": st.id, "name": st.name, "status": st.status, "link_path": f"/join/{st.link_token}"}
+        summary["sessions"] = counts
+    if as_json:
+        print_json(summary)
+        return
+    console.print(f"study {st.id} ({st.name}): {summary['status']}; study link path {summary['link_path']}")
+    console.print("  sessions: " + ", ".join(f"{v} {k}" for k, v in counts.items()))

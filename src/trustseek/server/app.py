@@ -7,23 +7,22 @@ import logging
 import math
 import os
 import secrets
-from pathlib import Path
 from typing import Any
 
-from fastapi import FastAPI, HTTPException, Request
+from fastapi import FastAPI, Request
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse
+from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 
 from ..version import __version__
 from .db import DEFAULT_URL, open_database, safe_url
 from .fastpath import DeployFastPath
+from .link_routes import STATIC, lifecycle, pages, static_page
 from .middleware import BodyGuard, RequestLog, ServerTiming
-from .routes import deploy, experimenter, own, participant
+from .participant_routes import own, participant
+from .routes import deploy, experimenter
 from .store import DeployStore
-
-STATIC = Path(__file__).resolve().parent.parent / "static" / "app"
 
 log = logging.getLogger(__name__)
 
@@ -118,20 +117,12 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     app.include_router(experimenter)
     app.include_router(own)
     app.include_router(participant)
-
-    def page(name: str) -> FileResponse:
-        path = STATIC / name
-        if not path.exists():
-            raise HTTPException(503, "the web front end is not built: run scripts/setup.sh (npm ci && npm run build in web/)")
-        return FileResponse(path, media_type="text/html", headers={"Cache-Control": "no-store", "Referrer-Policy": "no-referrer"})
-
-    @app.get("/s/{token}", include_in_schema=False)
-    def participant_page(token: str):
-        return page("participant.html")
+    app.include_router(lifecycle)
+    app.include_router(pages)
 
     @app.get("/dashboard", include_in_schema=False)
     def dashboard_page():
-        return page("dashboard.html")
+        return static_page("dashboard.html")
 
     @app.get("/", include_in_schema=False)
     def index():

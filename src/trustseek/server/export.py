@@ -27,6 +27,7 @@ from sqlalchemy.orm import Session as DBSession
 
 from ..data.trials import write_trials
 from ..vocab import TRIAL_COLUMNS
+from .checks import check_passed
 from .orm import Answer, Event, Report, Session, Study, Trial
 
 CANONICAL = list(TRIAL_COLUMNS)
@@ -57,6 +58,8 @@ REPORT_COLUMNS = [
     "item",
     "value",
     "reverse",
+    "check",
+    "check_passed",
     "study",
     "session",
     "answered_at",
@@ -64,14 +67,23 @@ REPORT_COLUMNS = [
 SESSION_COLUMNS = [
     "participant",
     "session",
+    "role",
     "status",
     "trials_done",
     "score",
     "seed",
     "secret",
     "block_order",
+    "panel_id",
     "panel",
+    "speed",
     "created_at",
+    "started_at",
+    "ended_at",
+    "revoked_at",
+    "quiz_attempts",
+    "quiz_outcome",
+    "checks_failed",
 ]
 EVENT_COLUMNS = ["participant", "session", "trial", "client_time", "server_time", "type", "data"]
 
@@ -91,6 +103,16 @@ def escape_formulas(frame: pd.DataFrame) -> pd.DataFrame:
     return out
 
 
+def exported(study: Study, pilot: bool = False) -> tuple:
+    """The conditions of the sessions a table holds: the study's participants, and its pilots
+    when asked for (``pilot``); preview sessions never."""
+    return (Session.study_id == study.id, Session.role.in_(("participant", "pilot") if pilot else ("participant",)))
+
+
+def _iso(t) -> str | None:
+    return None if t is None else t.isoformat() + "Z"
+
+
 def _block_names(study: Study) -> list[str]:
     return [b["name"] for b in study.config["blocks"]] + ["practice"]
 
@@ -101,19 +123,20 @@ def _practice_counts(db: DBSession, study: Study) -> dict[str, int]:
     return dict.fromkeys(db.scalars(select(Session.id).where(Session.study_id == study.id)), n)
 
 
-def trials_frame(db: DBSession, study: Study, practice: bool = False) -> pd.DataFrame:
-    """The study's trial log: the analysed trials, or every trial with ``practice=True``."""
+def trials_frame(db: DBSession, study: Study, practice: bool = False, pilot: bool = False) -> pd.DataFrame:
+    """The study's trial log: the analysed trials, or every trial with ``practice=True``; pilot
+    sessions with ``pilot=True``."""
     names = _block_names(study)
     skip = _practice_counts(db, study)
     rows = db.execute(
         select(Trial, Session.participant)
         .join(Session, Trial.session_id == Session.id)
-        .where(Session.study_id == study.id, *(() if practice else (Trial.practice.is_(False),)))
+        .where(*exported(study, pilot), *(() if practice else (Trial.practice.is_(False),)))
         .order_by(Session.participant, Trial.trial)
     ).all()
     reports = {
         (r.session_id, r.after_trial): r.value
-        for r in db.scalars(select(Report).join(Session, Report.session_id == Session.id).where(Session.study_id == study.id))
+        for r in db.scalars(select(Report).join(Session, Report.session_id == Session.id).where(*exported(study, pilot)))
     }
     data = [
         {
@@ -150,21 +173,21 @@ def trials_frame(db: DBSession, study: Study, practice: bool = False) -> pd.Data
     return frame
 
 
-def answers_frame(db: DBSession, study: Study) -> pd.DataFrame:
+def answers_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame:
     """Every self-report (0-100 slider, questionnaire ``self_report``, item ``trust``) and every
     questionnaire item, one row each, next to the analysed trial each follows."""
     names = _block_names(study)
     skip = _practice_counts(db, study)
-    reverse = {(q["name"], i["id"]): bool(i.get("reverse")) for q in study.config.get("questionnaires") or () for i in q["items"]}
-    data: list[tuple[str, str, str, float, bool, Report | Answer, str]] = []
+    items = {(q["name"], i["id"]): i for q in study.config.get("questionnaires") or () for i in q["items"]}
+    data: list[tuple[str, str, str, float, dict, Report | Answer, str]] = []
     for r, p in db.execute(
-        select(Report, Session.participant).join(Session, Report.session_id == Session.id).where(Session.study_id == study.id)
+        select(Report, Session.participant).join(Session, Report.session_id == Session.id).where(*exported(study, pilot))
     ).all():
-        data.append(("self_report", r.scope, "trust", r.value, False, r, p))
+        data.append(("self_report", r.scope, "trust", r.value, {}, r, p))
     for a, p in db.execute(
-        select(Answer, Session.participant).join(Session, Answer.session_id == Session.id).where(Session.study_id == study.id)
+        select(Answer, Session.participant).join(Session, Answer.session_id == Session.id).where(*exported(study, pilot))
     ).all():
-        data.append((a.questionnaire, a.when, a.item, a.value, reverse.get((a.questionnaire, a.item), False), a, p))
+        data.append((a.questionnaire, a.when, a.item, a.value, items.get((a.questionnaire, a.item), {}), a, p))
     rows = [
         {
             "participant": p,
@@ -176,47 +199,66 @@ def answers_frame(db: DBSession, study: Study) -> pd.DataFrame:
             "when": when,
             "item": item,
             "value": value,
-            "reverse": rev,
+            "reverse": bool(item_.get("reverse")),
+            "check": item_.get("check"),
+            "check_passed": check_passed(item_, value),
             "study": study.id,
             "session": r.session_id,
             "answered_at": r.created_at.isoformat() + "Z",
         }
-        for q, when, item, value, rev, r, p in data
+        for q, when, item, value, item_, r, p in data
     ]
     frame = pd.DataFrame(rows, columns=REPORT_COLUMNS)
     frame = frame.sort_values(["participant", "session_trial", "questionnaire"], kind="stable").reset_index(drop=True)
     frame["trial"] = frame["trial"].astype("int64")
     frame["value"] = frame["value"].astype("float64")
+    frame["check"] = frame["check"].astype("Int64")
+    frame["check_passed"] = frame["check_passed"].astype("boolean")
     return frame
 
 
-def sessions_frame(db: DBSession, study: Study) -> pd.DataFrame:
+def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame:
     """One row per participant: status, the panel's ids (JSON) and the seed and secret that
     reproduce the session's plan, actions, outcomes and scenes."""
     names = _block_names(study)
+    checks = study.config.get("questionnaires") or ()
+    items = {(q["name"], i["id"]): i for q in checks for i in q["items"] if i.get("check") is not None}
+    failed: dict[str, int] = {}
+    for a in db.scalars(select(Answer).join(Session, Answer.session_id == Session.id).where(*exported(study, pilot))):
+        if (a.questionnaire, a.item) in items and not check_passed(items[(a.questionnaire, a.item)], a.value):
+            failed[a.session_id] = failed.get(a.session_id, 0) + 1
     rows = [
         {
             "participant": s.participant,
             "session": s.id,
+            "role": s.role,
             "status": s.status,
             "trials_done": s.trials_done,
             "score": s.score,
             "seed": s.seed,
             "secret": s.secret,
             "block_order": json.dumps([names[b] for b in s.plan["block_order"]]),
+            "panel_id": s.panel_id,
             "panel": json.dumps(s.panel or {}),
-            "created_at": s.created_at.isoformat() + "Z",
+            "speed": s.speed,
+            "created_at": _iso(s.created_at),
+            "started_at": _iso(s.consented_at),
+            "ended_at": _iso(s.ended_at),
+            "revoked_at": _iso(s.revoked_at),
+            "quiz_attempts": len((s.quiz or {}).get("attempts", [])),
+            "quiz_outcome": (s.quiz or {}).get("outcome"),
+            "checks_failed": failed.get(s.id, 0),
         }
-        for s in db.scalars(select(Session).where(Session.study_id == study.id).order_by(Session.participant))
+        for s in db.scalars(select(Session).where(*exported(study, pilot)).order_by(Session.participant))
     ]
     return pd.DataFrame(rows, columns=SESSION_COLUMNS)
 
 
-def events_frame(db: DBSession, study: Study) -> pd.DataFrame:
+def events_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame:
     rows = db.execute(
         select(Event, Session.participant)
         .join(Session, Event.session_id == Session.id)
-        .where(Session.study_id == study.id)
+        .where(*exported(study, pilot))
         .order_by(Session.participant, Event.id)
     ).all()
     data = [

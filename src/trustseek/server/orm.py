@@ -1,10 +1,12 @@
 """Database schema (SQLAlchemy 2 ORM).  The schema itself is created by the Alembic
 migrations in ``migrations/``; these classes mirror it.
 
-* ``Study``    -- an experiment: task, trust model, blocks (policy + schedule), options.
-* ``Session``  -- one participant of a study (``kind = "study"``) or one robot run of the
-  deploy API (``kind = "deploy"``); reached through its unguessable ``token``.  Holds the
-  live belief and the trial that is currently served.
+* ``Study``    -- an experiment: task, trust model, blocks (policy + schedule), options; its
+  lifecycle (``status``: draft, open, paused, closed) and the token of
+  its panel link (``/join/<link_token>``).
+* ``Session``  -- one participant of a study (``kind = "study"``; ``role``: participant, pilot
+  or preview) or one robot run of the deploy API (``kind = "deploy"``); reached through its
+  unguessable ``token``.  Holds the live belief and the trial that is currently served.
 * ``Trial``    -- one committed trial; unique per (session, trial number).
 * ``Report``   -- a trust self-report (after a trial or a block).
 * ``Answer``   -- one item of a questionnaire answered after a trial, a block or the session.
@@ -16,7 +18,7 @@ from __future__ import annotations
 
 from datetime import UTC, datetime
 
-from sqlalchemy import JSON, Boolean, Float, ForeignKey, Integer, String, Text, UniqueConstraint
+from sqlalchemy import JSON, Boolean, Float, ForeignKey, Index, Integer, String, Text, UniqueConstraint
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 
@@ -35,6 +37,10 @@ class Study(Base):
     name: Mapped[str] = mapped_column(String(200))
     config: Mapped[dict] = mapped_column(JSON, deferred=True)  # large (solved policies): loaded on use
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    status: Mapped[str] = mapped_column(String(8), default="open")  # draft, open, paused, closed
+    # the study link an online panel gives every participant: /join/<link_token>
+    link_token: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    __table_args__ = (Index("uq_study_link_token", "link_token", unique=True),)
 
 
 class PolicyBlob(Base):
@@ -49,7 +55,10 @@ class PolicyBlob(Base):
 
 class Session(Base):
     __tablename__ = "sessions"
-    __table_args__ = (UniqueConstraint("study_id", "participant", name="uq_session_study_participant"),)
+    __table_args__ = (
+        UniqueConstraint("study_id", "participant", name="uq_session_study_participant"),
+        Index("uq_session_study_panel_id", "study_id", "panel_id", unique=True),
+    )
 
     id: Mapped[str] = mapped_column(String(32), primary_key=True)
     token: Mapped[str] = mapped_column(String(64), unique=True, index=True)
@@ -75,6 +84,15 @@ class Session(Base):
     pending_action: Mapped[str | None] = mapped_column(String(16), nullable=True)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     updated_at: Mapped[datetime] = mapped_column(default=utcnow)
+    # participant, pilot (left out of the analysis export unless asked for) or preview (never exported)
+    role: Mapped[str] = mapped_column(String(12), default="participant")
+    # the panel's participant id of a session made through the study link (one session per id)
+    panel_id: Mapped[str | None] = mapped_column(String(200), nullable=True)
+    speed: Mapped[float | None] = mapped_column(Float, nullable=True)  # the animation speed it ran at
+    revoked_at: Mapped[datetime | None] = mapped_column(nullable=True)
+    ended_at: Mapped[datetime | None] = mapped_column(nullable=True)
+    # the comprehension quiz: {"attempts": [{"answers", "wrong", "at"}], "outcome": passed | failed | None}
+    quiz: Mapped[dict | None] = mapped_column(JSON, nullable=True)
 
 
 class Trial(Base):

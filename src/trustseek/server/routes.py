@@ -1,5 +1,5 @@
-"""HTTP routes: experimenter (studies, sessions, dashboard, export), participant (one session
-through its token) and deploy (decisions for a real robot)."""
+"""HTTP routes: experimenter (studies, sessions, dashboard, export) and deploy (decisions for a
+real robot); the participant's are in ``participant_routes``."""
 
 from __future__ import annotations
 
@@ -9,31 +9,27 @@ import secrets
 from typing import Any
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
-from fastapi.security import HTTPAuthorizationCredentials
-from sqlalchemy import select
+from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 
-from .auth import Caller, bearer, remember_token, require_experimenter, require_session, session_for_token, token_of
+from .auth import Caller, remember_token, require_experimenter, require_session, session_for_token
+from .bundle import bundle_files, bundle_zip
 from .deploy import committed_trial, create_deploy, deploy_decide, deploy_observe, remember_deploy
 from .export import answers_frame, events_csv, events_frame, sessions_frame, to_bytes, trials_frame
-from .orm import Report, Session, Study, Trial, utcnow
-from .schemas import AnswersIn, ConsentIn, DecideIn, DeployIn, ErrorOut, EventsIn, ObserveIn, ReportIn, SessionsIn, TrialIn
+from .lifecycle import create_participant, progress
+from .orm import Event, Report, Session, Study, Trial, utcnow
+from .schemas import (
+    DecideIn,
+    DeployIn,
+    ErrorOut,
+    ObserveIn,
+    SessionsIn,
+)
 from .sessions import (
     SessionError,
-    add_answers,
-    add_events,
-    add_report,
-    create_participant,
-    ended,
-    lock,
     new_id,
     p_high,
-    participant_trial,
-    questionnaire_due,
-    report_due,
-    serve,
     study_config,
-    submit_trial,
     total_trials,
     trial_dict,
 )
@@ -49,6 +45,7 @@ _WHY = {
     404: "No such study or session.",
     409: "The session's state does not allow it (not the current trial, a conflicting repeat, the wrong kind of session, "
     "a session that has ended).",
+    410: "The experimenter has revoked this session's link.",
     413: "The body is too large, or the session already holds as many events as it may.",
 }
 
@@ -61,9 +58,7 @@ def errors(*codes: int) -> dict[int | str, dict[str, Any]]:
 experimenter = APIRouter(
     prefix="/api", tags=["experimenter"], dependencies=[Depends(require_experimenter)], responses=errors(401, 403)
 )
-participant = APIRouter(prefix="/api/sessions", tags=["participant"], responses=errors(401, 403, 409, 413))
 deploy = APIRouter(prefix="/api/deploy", tags=["deploy"], responses=errors(401, 403))
-own = APIRouter(prefix="/api", tags=["participant"], responses=errors(401, 409))
 
 
 def _db(request: Request):
@@ -81,28 +76,40 @@ def _link(request: Request, s: Session) -> str:
 # --------------------------------------------------------------------------- experimenter
 
 
-@experimenter.post("/studies", status_code=201, summary="Create a study", responses=errors(400))
-def create_study(body: StudyIn, request: Request):
+@experimenter.post(
+    "/studies",
+    status_code=201,
+    summary="Create a study",
+    description="Open at once, or a draft with ``status=draft`` (links made in a draft are pilots; the study link "
+    "takes no one until the study is opened).",
+    responses=errors(400),
+)
+def create_study(body: StudyIn, request: Request, status: str = Query("open", pattern="^(draft|open)$")):
     try:
         cfg = build_study_config(body)
     except ConfigError as exc:
         raise HTTPException(400, {"problems": exc.problems}) from None
     with _db(request) as db:
-        st = Study(id=new_id(), name=body.name, config=cfg)
+        st = Study(id=new_id(), name=body.name, config=cfg, status=status, link_token=secrets.token_urlsafe(24))
         db.add(st)
         db.commit()
         log.info("study %s created: %r, %d blocks", st.id, st.name, len(cfg["blocks"]))
-        return study_summary(db, st)
+        return study_summary(db, st, request)
 
 
-def study_summary(db, st: Study) -> dict:
-    n = len(db.scalars(select(Session.id).where(Session.study_id == st.id)).all())
+def study_summary(db, st: Study, request: Request) -> dict:
+    counts = progress(db, st.id)
     cfg = st.config
+    base = request.app.state.public_url or str(request.base_url).rstrip("/")
     return {
         "id": st.id,
         "name": st.name,
         "created_at": st.created_at.isoformat() + "Z",
-        "participants": n,
+        "status": st.status,
+        "link": f"{base}/join/{st.link_token}" if st.link_token else None,
+        "quota": cfg.get("quota"),
+        "participants": sum(v for k, v in counts.items() if k not in ("pilot", "preview")),
+        "progress": counts,
         "blocks": [
             {
                 "name": b["name"],
@@ -121,7 +128,7 @@ def study_summary(db, st: Study) -> dict:
 @experimenter.get("/studies", summary="List studies")
 def list_studies(request: Request):
     with _db(request) as db:
-        return [study_summary(db, st) for st in db.scalars(select(Study).order_by(Study.created_at))]
+        return [study_summary(db, st, request) for st in db.scalars(select(Study).order_by(Study.created_at))]
 
 
 def _study(db, study_id: str) -> Study:
@@ -135,7 +142,7 @@ def _study(db, study_id: str) -> Study:
 def get_study(study_id: str, request: Request):
     with _db(request) as db:
         st = _study(db, study_id)
-        return {**study_summary(db, st), "config": st.config}
+        return {**study_summary(db, st, request), "config": st.config}
 
 
 @experimenter.post(
@@ -153,14 +160,18 @@ def create_sessions(study_id: str, body: SessionsIn, request: Request):
     out = []
     with _db(request) as db:
         st = _study(db, study_id)
+        if st.status == "closed":
+            raise HTTPException(409, f"study {study_id} is closed: it takes no new participants")
+        role = "pilot" if body.pilot or st.status == "draft" else "participant"
         try:
             for label in labels:
-                s = create_participant(db, st, label)
+                s = create_participant(db, st, label, role=role)
                 db.flush()
                 out.append(
                     {
                         "participant": s.participant,
                         "session_id": s.id,
+                        "role": s.role,
                         "token": s.token,
                         "link": _link(request, s),
                         "block_order": [st.config["blocks"][b]["name"] for b in s.plan["block_order"]],
@@ -187,8 +198,18 @@ def dashboard(study_id: str, request: Request):
     with _db(request) as db:
         st = _study(db, study_id)
         sessions = db.scalars(
-            select(Session).where(Session.study_id == st.id).order_by(Session.created_at, Session.participant)
+            select(Session)
+            .where(Session.study_id == st.id, Session.role != "preview")
+            .order_by(Session.created_at, Session.participant)
         ).all()
+        seen = dict(
+            db.execute(
+                select(Event.session_id, func.max(Event.created_at))
+                .join(Session, Event.session_id == Session.id)
+                .where(Session.study_id == st.id)
+                .group_by(Event.session_id)
+            ).all()
+        )
         last = {}
         for t in db.scalars(
             select(Trial)
@@ -223,9 +244,24 @@ def dashboard(study_id: str, request: Request):
                     "last": last.get(s.id),
                     "last_self_report": reports.get(s.id),
                     "updated_at": s.updated_at.isoformat() + "Z",
+                    "role": s.role,
+                    "panel_id": s.panel_id or _first_panel_id(s.panel),
+                    "created_at": _iso(s.created_at),
+                    "started_at": _iso(s.consented_at),
+                    "ended_at": _iso(s.ended_at),
+                    "last_activity": _iso(max(t for t in (s.updated_at, seen.get(s.id)) if t is not None)),
+                    "revoked": s.revoked_at is not None,
                 }
             )
-        return {"study": study_summary(db, st), "participants": rows, "time": utcnow().isoformat() + "Z"}
+        return {"study": study_summary(db, st, request), "participants": rows, "time": utcnow().isoformat() + "Z"}
+
+
+def _iso(t) -> str | None:
+    return None if t is None else t.isoformat() + "Z"
+
+
+def _first_panel_id(panel: dict | None) -> str | None:
+    return next(iter(panel.values()), None) if panel else None
 
 
 @experimenter.get(
@@ -255,13 +291,14 @@ def export(
     table: str = Query("trials", pattern="^(trials|events|reports|sessions)$"),
     format: str = Query("csv", pattern="^(csv|parquet)$"),
     practice: bool = Query(False, description="Trials: include the practice trials (the full log)."),
+    pilot: bool = Query(False, description="Include the pilot sessions (left out of the analysis export by default)."),
 ):
     with _db(request) as db:
         st = _study(db, study_id)
         if table == "trials":
-            frame = trials_frame(db, st, practice=practice)
+            frame = trials_frame(db, st, practice=practice, pilot=pilot)
         else:
-            frame = {"events": events_frame, "reports": answers_frame, "sessions": sessions_frame}[table](db, st)
+            frame = {"events": events_frame, "reports": answers_frame, "sessions": sessions_frame}[table](db, st, pilot)
     # text from participants' browsers: formulas escaped, CR/LF quoted
     content = events_csv(frame) if table != "trials" and format == "csv" else to_bytes(frame, format)
     media = "text/csv" if format == "csv" else "application/vnd.apache.parquet"
@@ -269,160 +306,24 @@ def export(
     return Response(content, media_type=media, headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
 
-# --------------------------------------------------------------------------- participant
-
-
-def _study_session(s: Caller) -> None:
-    if s.kind != "study":
-        raise HTTPException(409, "this is a deploy session; use /api/deploy")
-
-
-def session_state(request: Request, s_id: str) -> dict:
-    with _db(request) as db:
-        s = db.get(Session, s_id)
-        if s.kind != "study":
-            raise HTTPException(409, "this is a deploy session; use /api/deploy")
-        cfg = study_config(db, s.study_id)
-        due = report_due(db, s, cfg)
-        asked = questionnaire_due(db, s, cfg) if due is None else None
-        # the next trial is served once the self-report and questionnaires it follows are answered
-        current = serve(db, s) if due is None and asked is None else None
-        blocks = s.plan["block_order"]
-        panel = cfg.get("panel")
-        over = s.status == "done" and due is None and asked is None
-        completion = None
-        if over and panel:
-            code = panel["completion_code"]
-            url = (panel.get("redirect_url") or "").replace("{completion_code}", code) or None
-            completion = {"code": code, "redirect_url": url}
-        return {
-            "session_id": s.id,
-            "participant": s.participant,
-            "status": s.status,
-            "study": cfg["name"],
-            "trials_total": total_trials(s),
-            "trials_done": s.trials_done,
-            "score": s.score,
-            "blocks": [cfg["blocks"][b]["name"] for b in blocks],
-            "current": current,
-            "report_due": due,
-            "questionnaire": asked,
-            "ended": over,
-            "completion": completion,
-            "panel_params": panel["id_params"] if panel else [],
-            "practice_trials": len(cfg["practice"]["trials"]) if cfg.get("practice") else 0,
-            "self_report": cfg["self_report"],
-            "animation_speed": cfg["animation_speed"],
-            "consent_text": cfg.get("consent_text"),
-            "instructions": cfg.get("instructions"),
-            "rewards": cfg["task"].get("rewards"),
-        }
-
-
-@own.get("/session", summary="The state of the session that the bearer token belongs to")
-def own_state(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)):
-    s = session_for_token(request, token_of(creds))
-    if s.kind != "study":
-        raise HTTPException(409, "this is a deploy session; use /api/deploy")
-    return session_state(request, s.id)
-
-
-@participant.get("/{session_id}/state", summary="The participant's session: status, current trial, score")
-def get_state(session_id: str, request: Request, s: Caller = Depends(require_session)):
-    _study_session(s)
-    return session_state(request, s.id)
-
-
-@participant.post("/{session_id}/consent", summary="Record consent and start the session")
-def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depends(require_session)):
-    _study_session(s)
-    with _db(request) as db:
-        row = lock(db, s.id)
-        cfg = study_config(db, str(row.study_id))
-        started = row.status == "new"
-        if started:
-            wanted = (cfg.get("panel") or {}).get("id_params", [])
-            ids = {k: v for k, v in body.panel.items() if k in wanted}
-            row.status, row.consented_at, row.updated_at = "running", utcnow(), utcnow()
-            row.panel = ids or None
-        elif ended(db, row, cfg):
-            db.rollback()
-            raise HTTPException(409, "this session has ended")
-        db.commit()
-        if started:
-            log.info("session %s of study %s started (consent given)", row.id, row.study_id)
-        if body.events:
-            try:
-                add_events(db, row, [e.model_dump() for e in body.events])
-            except SessionError as exc:
-                db.rollback()
-                _fail(exc)
-    return session_state(request, s.id)
-
-
-@participant.post("/{session_id}/trials", summary="Submit the current trial (idempotent by submission_id)", responses=errors(400))
-def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Depends(require_session)):
-    _study_session(s)
-    with _db(request) as db:
-        try:
-            t, dup = submit_trial(
-                db, s.id, body.trial, body.submission_id, body.human_action, body.effort_ms, [e.model_dump() for e in body.events]
-            )
-        except SessionError as exc:
-            db.rollback()
-            _fail(exc)
-        result = participant_trial(t)
-    return {"trial": result, "duplicate": dup, "state": session_state(request, s.id)}
-
-
-@participant.post("/{session_id}/reports", summary="Submit a trust self-report (0-100)")
-def post_report(session_id: str, body: ReportIn, request: Request, s: Caller = Depends(require_session)):
-    _study_session(s)
-    with _db(request) as db:
-        row = db.get(Session, s.id)
-        cfg = study_config(db, row.study_id) if row.study_id else {}
-        try:
-            if ended(db, row, cfg):
-                raise SessionError(409, "this session has ended")
-            rep, dup = add_report(db, row, cfg, body.after_trial, body.value)
-        except SessionError as exc:
-            db.rollback()
-            _fail(exc)
-        out = {"after_trial": rep.after_trial, "value": rep.value, "scope": rep.scope, "duplicate": dup}
-    return {"report": out, "state": session_state(request, s.id)}
-
-
-@participant.post(
-    "/{session_id}/questionnaires", summary="Answer a questionnaire (every item, on its scale)", responses=errors(400, 404)
+@experimenter.get(
+    "/studies/{study_id}/bundle",
+    summary="Every table of a study in CSV and Parquet, its configuration and a data dictionary (a zip file)",
+    response_class=Response,
+    responses={
+        200: {
+            "description": "The bundle (a zip file).",
+            "content": {"application/zip": {"schema": {"type": "string", "format": "binary"}}},
+        },
+        **errors(404),
+    },
 )
-def post_answers(session_id: str, body: AnswersIn, request: Request, s: Caller = Depends(require_session)):
-    _study_session(s)
+def bundle(study_id: str, request: Request, pilot: bool = Query(False, description="Include the pilot sessions.")):
     with _db(request) as db:
-        row = db.get(Session, s.id)
-        cfg = study_config(db, row.study_id)
-        try:
-            if ended(db, row, cfg):
-                raise SessionError(409, "this session has ended")
-            rows, dup = add_answers(db, row, cfg, body.questionnaire, body.after_trial, body.answers)
-        except SessionError as exc:
-            db.rollback()
-            _fail(exc)
-        out = {"questionnaire": body.questionnaire, "after_trial": body.after_trial, "items": len(rows), "duplicate": dup}
-    return {"answers": out, "state": session_state(request, s.id)}
-
-
-@participant.post("/{session_id}/events", summary="Log UI events")
-def post_events(session_id: str, body: EventsIn, request: Request, s: Caller = Depends(require_session)):
-    with _db(request) as db:
-        row = db.get(Session, s.id)
-        try:
-            if row.kind == "study" and ended(db, row, study_config(db, row.study_id)):
-                raise SessionError(409, "this session has ended")
-            n, dup = add_events(db, row, [e.model_dump() for e in body.events], body.batch)
-        except SessionError as exc:
-            db.rollback()
-            _fail(exc)
-    return {"stored": n, "duplicate": dup}
+        st = _study(db, study_id)
+        content = bundle_zip(bundle_files(db, st, pilot), f"{st.id}-bundle")
+    name = f"{st.id}-bundle.zip"
+    return Response(content, media_type="application/zip", headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
 
 # --------------------------------------------------------------------------- deploy

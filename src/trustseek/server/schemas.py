@@ -63,6 +63,12 @@ class SessionsIn(BaseModel):
     model_config = STRICT
     participants: list[str] | None = Field(None, max_length=1000, description="Participant ids; default P001, P002, ...")
     count: int = Field(1, ge=1, le=1000, description="How many sessions when participants is not given.")
+    pilot: bool = Field(False, description="Pilot sessions: flagged, left out of the analysis export unless asked for.")
+
+
+class StatusIn(BaseModel):
+    model_config = STRICT
+    status: Literal["draft", "open", "paused", "closed"]
 
 
 class ConsentIn(BaseModel):
@@ -108,6 +114,12 @@ class AnswersIn(BaseModel):
     questionnaire: str = Field(..., min_length=1, max_length=100)
     after_trial: int = Field(..., ge=1, le=100000)
     answers: dict[str, float] = Field(..., min_length=1, max_length=100, description="Item id -> a point of the scale.")
+
+
+class QuizIn(BaseModel):
+    model_config = STRICT
+    attempt: int = Field(..., ge=1, le=10, description="The attempt's number, from 1 (a retry repeats it).")
+    answers: dict[str, int] = Field(..., min_length=1, max_length=20, description="Question id -> option index.")
 
 
 class EventsIn(BaseModel):

@@ -36,9 +36,10 @@ from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 from ..model.task import Task
 from ..policies import PolicyRunner
 from ..policies.schedule import SchedulePolicy
+from .checks import SCREENED, quiz_due
 from .orm import Answer, Event, EventBatch, Report, Session, Study, Trial, utcnow
 from .store import TrialRow
-from .studies import block_items, participant_plan, policy_object
+from .studies import block_items, policy_object
 
 log = logging.getLogger(__name__)
 
@@ -186,35 +187,6 @@ def total_trials(s: Session) -> int | None:
     return len(s.plan["trials"]) if s.kind == "study" else None
 
 
-# --------------------------------------------------------------------------- creation
-
-
-def create_participant(db: DBSession, study: Study, participant: str | None) -> Session:
-    index = db.scalar(select(func.count()).select_from(Session).where(Session.study_id == study.id)) or 0
-    label = participant or f"P{index + 1:03d}"
-    if db.scalar(select(Session.id).where(Session.study_id == study.id, Session.participant == label)):
-        raise SessionError(409, f"participant {label!r} already exists in study {study.id}")
-    seed = int(np.random.default_rng().integers(0, 2**31 - 1))
-    plan = participant_plan(study.config, index, seed)
-    model = TrustModel.from_dict(study.config["model"])
-    s = Session(
-        id=new_id(),
-        token=new_token(),
-        kind="study",
-        study_id=study.id,
-        participant=label,
-        seed=seed,
-        secret=secrets.token_hex(16),
-        plan=plan,
-        status="new",
-        belief=[float(x) for x in model.initial],
-        trials_done=0,
-        score=0.0,
-    )
-    db.add(s)
-    return s
-
-
 # --------------------------------------------------------------------------- serving
 
 
@@ -239,7 +211,9 @@ def serve(db: DBSession, s: Session) -> dict[str, Any] | None:
     items = scheduled_items(db, s, step["block"]) if step["complexity"] is None else None
     if s.pending_trial != n:
         ctx = context(db, s)
-        if items is None:
+        if step.get("action"):  # a practice trial in which the robot asks, whatever the policy
+            s.pending_complexity, s.pending_action = step["complexity"], step["action"]
+        elif items is None:
             runner = ctx.runner(step["block"], s.belief, s.seed, n)
             s.pending_complexity, s.pending_action = step["complexity"], runner.decide(step["complexity"])
         else:
@@ -380,6 +354,8 @@ def submit_trial(
     if n != s.trials_done + 1:
         raise SessionError(409, f"trial {n} is not the current trial; the current trial is {s.trials_done + 1}")
     cfg = study_config(db, s.study_id) if s.study_id else {}
+    if quiz_due(s, cfg) is not None:
+        raise SessionError(409, "answer the comprehension quiz before the first trial")
     if report_due(db, s, cfg) is not None or questionnaire_due(db, s, cfg) is not None:
         raise SessionError(409, f"answer the questions after trial {s.trials_done} before trial {n}")
     action, complexity = s.pending_action, s.pending_complexity
@@ -503,6 +479,8 @@ def questionnaire_due(db: DBSession, s: Session, cfg: dict[str, Any]) -> dict[st
 
 def ended(db: DBSession, s: Session, cfg: dict[str, Any]) -> bool:
     """Whether the session is over: every trial committed and nothing left to answer."""
+    if s.status == SCREENED:
+        return True
     return s.status == "done" and report_due(db, s, cfg) is None and questionnaire_due(db, s, cfg) is None
 
 

@@ -78,11 +78,23 @@ class BlockIn(BaseModel):
 
 class PracticeIn(BaseModel):
     """Practice trials before the first block: logged (``practice`` true), left out of the
-    analysis export, scored nowhere, and without effect on the trust belief."""
+    analysis export, scored nowhere, and without effect on the trust belief.  The robot asks
+    (the participant teleoperates) in the practice trials ``asks`` (numbers from 1; by default
+    the last one), and follows ``policy`` in the others."""
 
     model_config = STRICT
     trials: list[str] = Field(..., min_length=1, max_length=50, description="The practice trials' complexities, in order.")
     policy: dict[str, Any] = Field(default_factory=lambda: {"kind": "never-ask"}, description="The robot's policy in practice.")
+    asks: list[int] | None = Field(
+        None, max_length=50, description="Practice trials (from 1) in which the robot asks; default: the last."
+    )
+
+    @model_validator(mode="after")
+    def _asks(self):
+        bad = [k for k in self.asks or () if not 1 <= k <= len(self.trials)]
+        if bad:
+            raise ValueError(f"practice.asks names trials {bad}; the practice has trials 1..{len(self.trials)}")
+        return self
 
 
 class ScaleIn(BaseModel):
@@ -103,6 +115,39 @@ class ItemIn(BaseModel):
     id: str = Field(..., min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
     text: str = Field(..., min_length=1, max_length=1000)
     reverse: bool = False
+    check: int | None = Field(None, description="An attention check: the point of the scale the item instructs.")
+
+
+class QuizQuestionIn(BaseModel):
+    model_config = STRICT
+    id: str = Field(..., min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
+    text: str = Field(..., min_length=1, max_length=1000)
+    options: list[str] = Field(..., min_length=2, max_length=10)
+    answer: int = Field(..., ge=0, description="The index of the right option (from 0).")
+
+    @model_validator(mode="after")
+    def _answer(self):
+        if self.answer >= len(self.options):
+            raise ValueError(f"answer {self.answer} is not an option of {self.id!r} (0..{len(self.options) - 1})")
+        return self
+
+
+class QuizIn(BaseModel):
+    """A comprehension quiz after the instructions: every question right to go on, within
+    ``attempts`` attempts; then ``on_fail``: ``end`` (the session ends, with ``fail_code`` as the
+    panel's code when given) or ``continue`` (the session goes on, the failure recorded)."""
+
+    model_config = STRICT
+    questions: list[QuizQuestionIn] = Field(..., min_length=1, max_length=20)
+    attempts: int = Field(2, ge=1, le=10)
+    on_fail: Literal["end", "continue"] = "end"
+    fail_code: str | None = Field(None, min_length=1, max_length=100)
+
+    @model_validator(mode="after")
+    def _unique(self):
+        if len({q.id for q in self.questions}) != len(self.questions):
+            raise ValueError("quiz question ids must be unique")
+        return self
 
 
 class QuestionnaireIn(BaseModel):
@@ -151,6 +196,8 @@ class StudyIn(BaseModel):
     practice: PracticeIn | None = None
     questionnaires: list[QuestionnaireIn] = Field(default_factory=list, max_length=20)
     panel: PanelIn | None = None
+    quota: int | None = Field(None, ge=1, le=100_000, description="Participants the study link takes; then it closes.")
+    quiz: QuizIn | None = None
 
     @field_validator("task", "model")
     @classmethod
@@ -258,7 +305,8 @@ def build_study_config(study: StudyIn) -> dict[str, Any]:
             problems.append(f"practice.trials names unknown complexities {bad}; expected {list(task.complexities)}")
         try:
             practice_policy = resolve_policy(study.practice.policy, model, task, "practice.policy")
-            practice = {"trials": list(study.practice.trials), "policy": practice_policy}
+            asks = study.practice.asks if study.practice.asks is not None else [len(study.practice.trials)]
+            practice = {"trials": list(study.practice.trials), "policy": practice_policy, "asks": sorted(set(asks))}
             if practice_policy["kind"] == SCHEDULE:
                 problems.append("practice.policy: practice trials are a fixed list; a schedule policy runs in a block")
         except ConfigError as exc:
@@ -314,6 +362,9 @@ def resolve_questionnaire(q: QuestionnaireIn, where: str) -> dict[str, Any]:
         return out
     assert q.items is not None
     scale = q.scale or ScaleIn(min=1, max=7)
+    off = [i.id for i in q.items if i.check is not None and not scale.min <= i.check <= scale.max]
+    if off:
+        raise ConfigError([f"{where}.items {off}: an attention check must be a point of the scale {scale.min}..{scale.max}"])
     return {
         "name": q.name or f"questionnaire-{where.rsplit('[', 1)[-1].rstrip(']')}",
         "when": q.when,
@@ -359,7 +410,11 @@ def participant_plan(cfg: dict[str, Any], index: int, seed: int) -> dict[str, An
     practice = cfg.get("practice")
     if practice:
         # the practice block's index follows the study's blocks
-        trials[:0] = [{"block": len(cfg["blocks"]), "complexity": c, "practice": True} for c in practice["trials"]]
+        asks = practice.get("asks") or ()
+        trials[:0] = [
+            {"block": len(cfg["blocks"]), "complexity": c, "practice": True, **({"action": "ask"} if k + 1 in asks else {})}
+            for k, c in enumerate(practice["trials"])
+        ]
     plan: dict[str, Any] = {"block_order": order, "trials": trials}
     if queues:
         plan["queues"] = queues

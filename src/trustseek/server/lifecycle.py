@@ -1,0 +1,199 @@
+"""A study's lifecycle and its participants' arrival.
+
+* A study is ``draft`` (links made now are pilots; the study link refuses arrivals), ``open``,
+  ``paused`` (no new arrivals; started sessions go on) or ``closed`` (for good: no new
+  arrivals, started sessions may finish).  ``open`` and ``paused`` alternate; any state may
+  close.
+* Sessions are ``participant`` sessions, ``pilot`` sessions (flagged, left out of the analysis
+  export unless asked for) or ``preview`` sessions (the experimenter's look at the participant's
+  view: never exported, counted or balanced).
+* The study link (``/join/<link token>``) gives every panel participant one session, keyed by
+  the panel's participant id: a database unique constraint on (study, panel id) keeps it one
+  under concurrent arrivals; the study row is locked while an arrival is placed, so that block
+  orders stay balanced and the quota is exact.
+"""
+
+from __future__ import annotations
+
+import secrets
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from sqlalchemy import func, select
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session as DBSession
+
+from ..model.core import TrustModel
+from .orm import Session, Study, utcnow
+from .sessions import SessionError, ended, new_id, new_token, study_config
+from .studies import participant_plan
+
+STATUSES = ("draft", "open", "paused", "closed")
+#: the states each state may move to
+MOVES = {"draft": ("open", "closed"), "open": ("paused", "closed"), "paused": ("open", "closed"), "closed": ()}
+ROLES = ("participant", "pilot", "preview")
+#: the panels' names of a participant's id in a study link's query, first found wins when the
+#: study names none (Prolific, MTurk, SONA)
+PANEL_ID_PARAMS = ("PROLIFIC_PID", "workerId", "id")
+
+
+def set_status(db: DBSession, study: Study, status: str) -> Study:
+    """Move ``study`` to ``status`` (a move its lifecycle allows); commits."""
+    if status not in STATUSES:
+        raise SessionError(400, f"status must be one of {list(STATUSES)}, got {status!r}")
+    if status != study.status and status not in MOVES[study.status]:
+        allowed = list(MOVES[study.status]) or "none (a closed study stays closed)"
+        raise SessionError(409, f"a {study.status} study cannot become {status}; allowed: {allowed}")
+    study.status = status
+    db.commit()
+    return study
+
+
+def counted(study_id: str):
+    """The conditions of the sessions that count: participants of the study, not revoked."""
+    return (Session.study_id == study_id, Session.role == "participant", Session.revoked_at.is_(None))
+
+
+def progress(db: DBSession, study_id: str) -> dict[str, int]:
+    """Sessions of a study: participants by status (new, running, done, screened), then pilots
+    and previews."""
+    counts = dict.fromkeys(("new", "running", "done", "screened", "pilot", "preview"), 0)
+    for role, status in db.execute(select(Session.role, Session.status).where(Session.study_id == study_id)).all():
+        key = status if role == "participant" else role
+        counts[key] = counts.get(key, 0) + 1
+    return counts
+
+
+def balanced_index(db: DBSession, study: Study) -> int:
+    """The rotation (0-based) that the fewest counted sessions started with; ties go to the
+    lowest, so links made one by one rotate as before."""
+    cfg = study_config(db, study.id)
+    n = len(cfg["blocks"])
+    plans = db.scalars(select(Session.plan).where(*counted(study.id))).all()
+    used = Counter(p["block_order"][0] for p in plans)
+    return min(range(n), key=lambda k: (used[k], k))
+
+
+def create_participant(
+    db: DBSession,
+    study: Study,
+    participant: str | None,
+    role: str = "participant",
+    panel_id: str | None = None,
+    panel: dict[str, str] | None = None,
+) -> Session:
+    """A new session of ``study`` (not committed): its block order balanced over the counted
+    sessions (participants; a pilot or preview takes the next order without counting)."""
+    index = db.scalar(select(func.count()).select_from(Session).where(Session.study_id == study.id)) or 0
+    label = participant or f"P{index + 1:03d}"
+    if db.scalar(select(Session.id).where(Session.study_id == study.id, Session.participant == label)):
+        raise SessionError(409, f"participant {label!r} already exists in study {study.id}")
+    cfg = study_config(db, study.id)
+    seed = int(np.random.default_rng().integers(0, 2**31 - 1))
+    plan = participant_plan(cfg, balanced_index(db, study), seed)
+    model = TrustModel.from_dict(cfg["model"])
+    s = Session(
+        id=new_id(),
+        token=new_token(),
+        kind="study",
+        study_id=study.id,
+        participant=label,
+        seed=seed,
+        secret=secrets.token_hex(16),
+        plan=plan,
+        status="new",
+        belief=[float(x) for x in model.initial],
+        trials_done=0,
+        score=0.0,
+        role=role,
+        panel_id=panel_id,
+        panel=panel or None,
+        speed=cfg["animation_speed"],
+    )
+    db.add(s)
+    return s
+
+
+def panel_ids(cfg: dict[str, Any], query: dict[str, str]) -> tuple[str | None, dict[str, str]]:
+    """(the participant's panel id, every panel id of the query that the study keeps)."""
+    names = list((cfg.get("panel") or {}).get("id_params") or PANEL_ID_PARAMS)
+    ids = {k: query[k][:200] for k in names if query.get(k)}
+    key = next((ids[k] for k in names if k in ids), None)
+    return key, ids
+
+
+@dataclass
+class Arrival:
+    """Where an arrival through the study link goes: a session to run, or a page (``page`` is
+    ``completed``, ``closed``, ``paused``, ``draft``, ``full``, ``no-id`` or ``revoked``)."""
+
+    session: Session | None = None
+    page: str | None = None
+
+
+def arrive(db: DBSession, study_id: str, panel_id: str | None, ids: dict[str, str]) -> Arrival:
+    """Place an arrival through the study link: resume the panel id's session, or make one."""
+    st = db.execute(select(Study).where(Study.id == study_id).with_for_update()).scalar_one()
+    if not panel_id:
+        db.rollback()
+        return Arrival(page="no-id")
+    old = _by_panel_id(db, study_id, panel_id)
+    if old is not None:
+        db.rollback()
+        return _resumed(db, old)
+    if st.status != "open":
+        db.rollback()
+        return Arrival(page=st.status)
+    cfg = study_config(db, study_id)
+    quota = cfg.get("quota")
+    n = db.scalar(select(func.count()).select_from(Session).where(*counted(study_id))) or 0
+    if quota is not None and n >= quota:
+        st.status = "closed"
+        db.commit()
+        return Arrival(page="full")
+    s = create_participant(db, st, None, panel_id=panel_id, panel=ids)
+    if quota is not None and n + 1 >= quota:
+        st.status = "closed"  # the last place is taken: the study closes
+    try:
+        db.commit()
+    except IntegrityError:  # the same panel id arrived concurrently: take its session
+        db.rollback()
+        old = _by_panel_id(db, study_id, panel_id)
+        if old is None:
+            raise
+        return _resumed(db, old)
+    return Arrival(session=s)
+
+
+def _by_panel_id(db: DBSession, study_id: str, panel_id: str) -> Session | None:
+    return db.scalar(select(Session).where(Session.study_id == study_id, Session.panel_id == panel_id))
+
+
+def _resumed(db: DBSession, s: Session) -> Arrival:
+    if s.revoked_at is not None:
+        return Arrival(page="revoked")
+    assert s.study_id is not None
+    if ended(db, s, study_config(db, s.study_id)):
+        return Arrival(page="completed")
+    return Arrival(session=s)
+
+
+def refusal(db: DBSession, s: Session) -> str | None:
+    """Why a session's link shows a page instead of the study (``revoked``, ``paused``,
+    ``closed``), or None: a revoked link, or a study that takes no new arrivals for a session
+    that has not started (started sessions go on)."""
+    if s.revoked_at is not None:
+        return "revoked"
+    if s.status != "new" or s.role == "preview" or s.study_id is None:
+        return None
+    status = db.scalar(select(Study.status).where(Study.id == s.study_id))
+    return status if status in ("paused", "closed") else None
+
+
+def revoke(db: DBSession, s: Session) -> Session:
+    if s.revoked_at is None:
+        s.revoked_at = s.updated_at = utcnow()
+        db.commit()
+    return s

@@ -1,0 +1,255 @@
+"""HTTP routes of the participant: one session through its token (state, consent, quiz, trials,
+self-reports, questionnaires, events)."""
+
+from __future__ import annotations
+
+import logging
+
+from fastapi import APIRouter, Depends, HTTPException, Request
+from fastapi.security import HTTPAuthorizationCredentials
+from sqlalchemy.exc import IntegrityError
+
+from .auth import Caller, bearer, require_session, session_for_token, token_of
+from .checks import SCREENED, grade_quiz, quiz_due, quiz_problems
+from .lifecycle import panel_ids, refusal
+from .orm import Session, utcnow
+from .routes import _db, _fail, errors
+from .schemas import AnswersIn, ConsentIn, EventsIn, QuizIn, ReportIn, TrialIn
+from .sessions import (
+    SessionError,
+    add_answers,
+    add_events,
+    add_report,
+    ended,
+    lock,
+    participant_trial,
+    questionnaire_due,
+    report_due,
+    serve,
+    study_config,
+    submit_trial,
+    total_trials,
+)
+
+log = logging.getLogger(__name__)
+
+participant = APIRouter(prefix="/api/sessions", tags=["participant"], responses=errors(401, 403, 409, 410, 413))
+own = APIRouter(prefix="/api", tags=["participant"], responses=errors(401, 409, 410))
+
+
+# --------------------------------------------------------------------------- participant
+
+
+def _study_session(s: Caller) -> None:
+    if s.kind != "study":
+        raise HTTPException(409, "this is a deploy session; use /api/deploy")
+
+
+def _not_revoked(row: Session) -> None:
+    if row.revoked_at is not None:
+        raise HTTPException(410, "this link has been revoked by the experimenter")
+
+
+def session_state(request: Request, s_id: str) -> dict:
+    with _db(request) as db:
+        s = db.get(Session, s_id)
+        if s.kind != "study":
+            raise HTTPException(409, "this is a deploy session; use /api/deploy")
+        _not_revoked(s)
+        cfg = study_config(db, s.study_id)
+        quiz = quiz_due(s, cfg)
+        due = report_due(db, s, cfg)
+        asked = questionnaire_due(db, s, cfg) if due is None else None
+        # the next trial is served once the quiz, and the self-report and questionnaires it follows, are answered
+        current = serve(db, s) if due is None and asked is None and quiz is None else None
+        blocks = s.plan["block_order"]
+        over = ended(db, s, cfg)
+        if over and s.ended_at is None:
+            s.ended_at = utcnow()
+            db.commit()
+        completion = _completion(cfg, s) if over else None
+        return {
+            "session_id": s.id,
+            "participant": s.participant,
+            "status": s.status,
+            "study": cfg["name"],
+            "trials_total": total_trials(s),
+            "trials_done": s.trials_done,
+            "score": s.score,
+            "blocks": [cfg["blocks"][b]["name"] for b in blocks],
+            "current": current,
+            "report_due": due,
+            "questionnaire": asked,
+            "quiz": quiz,
+            "screened": s.status == SCREENED,
+            "ended": over,
+            "completion": completion,
+            "panel_params": cfg["panel"]["id_params"] if cfg.get("panel") else [],
+            "practice_trials": len(cfg["practice"]["trials"]) if cfg.get("practice") else 0,
+            "self_report": cfg["self_report"],
+            "animation_speed": s.speed or cfg["animation_speed"],
+            "preview": s.role == "preview",
+            "consent_text": cfg.get("consent_text"),
+            "instructions": cfg.get("instructions"),
+            "rewards": cfg["task"].get("rewards"),
+        }
+
+
+def _completion(cfg: dict, s: Session) -> dict | None:
+    """The panel's code at the end: the completion code, or after a failed quiz that ended the
+    session, the study's ``fail_code`` (none when it has none)."""
+    panel = cfg.get("panel")
+    code = (cfg.get("quiz") or {}).get("fail_code") if s.status == SCREENED else (panel or {}).get("completion_code")
+    if not panel or not code:
+        return None
+    url = (panel.get("redirect_url") or "").replace("{completion_code}", code) or None
+    return {"code": code, "redirect_url": url}
+
+
+@own.get("/session", summary="The state of the session that the bearer token belongs to")
+def own_state(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)):
+    s = session_for_token(request, token_of(creds))
+    if s.kind != "study":
+        raise HTTPException(409, "this is a deploy session; use /api/deploy")
+    return session_state(request, s.id)
+
+
+@participant.get("/{session_id}/state", summary="The participant's session: status, current trial, score")
+def get_state(session_id: str, request: Request, s: Caller = Depends(require_session)):
+    _study_session(s)
+    return session_state(request, s.id)
+
+
+@participant.post("/{session_id}/consent", summary="Record consent and start the session")
+def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depends(require_session)):
+    _study_session(s)
+    with _db(request) as db:
+        row = lock(db, s.id)
+        _not_revoked(row)
+        cfg = study_config(db, str(row.study_id))
+        started = row.status == "new"
+        if started:
+            why = refusal(db, row)
+            if why is not None:
+                db.rollback()
+                raise HTTPException(409, f"the study is {why}: it takes no new participants")
+            key, ids = panel_ids(cfg, body.panel) if cfg.get("panel") else (None, {})
+            row.status, row.consented_at, row.updated_at = "running", utcnow(), utcnow()
+            row.panel = {**ids, **(row.panel or {})} or None
+            row.panel_id = row.panel_id or key
+        elif ended(db, row, cfg):
+            db.rollback()
+            raise HTTPException(409, "this session has ended")
+        try:
+            db.commit()
+        except IntegrityError:  # the same panel id already has a session of this study
+            db.rollback()
+            raise HTTPException(409, "this panel id already has a session in this study: use that session's link") from None
+        if started:
+            log.info("session %s of study %s started (consent given)", row.id, row.study_id)
+        if body.events:
+            try:
+                add_events(db, row, [e.model_dump() for e in body.events])
+            except SessionError as exc:
+                db.rollback()
+                _fail(exc)
+    return session_state(request, s.id)
+
+
+@participant.post("/{session_id}/trials", summary="Submit the current trial (idempotent by submission_id)", responses=errors(400))
+def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Depends(require_session)):
+    _study_session(s)
+    with _db(request) as db:
+        _not_revoked(db.get(Session, s.id))
+        try:
+            t, dup = submit_trial(
+                db, s.id, body.trial, body.submission_id, body.human_action, body.effort_ms, [e.model_dump() for e in body.events]
+            )
+        except SessionError as exc:
+            db.rollback()
+            _fail(exc)
+        result = participant_trial(t)
+    return {"trial": result, "duplicate": dup, "state": session_state(request, s.id)}
+
+
+@participant.post("/{session_id}/quiz", summary="Answer the comprehension quiz (one attempt)", responses=errors(400))
+def post_quiz(session_id: str, body: QuizIn, request: Request, s: Caller = Depends(require_session)):
+    _study_session(s)
+    with _db(request) as db:
+        row = lock(db, s.id)
+        _not_revoked(row)
+        cfg = study_config(db, str(row.study_id))
+        due = quiz_due(row, cfg)
+        done = (row.quiz or {}).get("attempts", [])
+        if body.attempt <= len(done):  # a repeat of a stored attempt (a retry after a lost answer)
+            db.rollback()
+            if done[body.attempt - 1]["answers"] != body.answers:
+                raise HTTPException(409, f"attempt {body.attempt} is already answered, with other answers")
+            wrong, dup = done[body.attempt - 1]["wrong"], True
+        elif due is None or body.attempt != due["attempt"]:
+            db.rollback()
+            raise HTTPException(409, "no quiz attempt is due" if due is None else f"the attempt due is {due['attempt']}")
+        else:
+            problems = quiz_problems(cfg, body.answers)
+            if problems:
+                db.rollback()
+                raise HTTPException(400, "; ".join(problems))
+            wrong, dup = grade_quiz(row, cfg, body.answers), False
+            db.commit()
+    return {"wrong": wrong, "duplicate": dup, "state": session_state(request, s.id)}
+
+
+@participant.post("/{session_id}/reports", summary="Submit a trust self-report (0-100)")
+def post_report(session_id: str, body: ReportIn, request: Request, s: Caller = Depends(require_session)):
+    _study_session(s)
+    with _db(request) as db:
+        row = db.get(Session, s.id)
+        _not_revoked(row)
+        cfg = study_config(db, row.study_id) if row.study_id else {}
+        try:
+            if ended(db, row, cfg):
+                raise SessionError(409, "this session has ended")
+            rep, dup = add_report(db, row, cfg, body.after_trial, body.value)
+        except SessionError as exc:
+            db.rollback()
+            _fail(exc)
+        out = {"after_trial": rep.after_trial, "value": rep.value, "scope": rep.scope, "duplicate": dup}
+    return {"report": out, "state": session_state(request, s.id)}
+
+
+@participant.post(
+    "/{session_id}/questionnaires", summary="Answer a questionnaire (every item, on its scale)", responses=errors(400, 404)
+)
+def post_answers(session_id: str, body: AnswersIn, request: Request, s: Caller = Depends(require_session)):
+    _study_session(s)
+    with _db(request) as db:
+        row = db.get(Session, s.id)
+        _not_revoked(row)
+        cfg = study_config(db, row.study_id)
+        try:
+            if ended(db, row, cfg):
+                raise SessionError(409, "this session has ended")
+            rows, dup = add_answers(db, row, cfg, body.questionnaire, body.after_trial, body.answers)
+        except SessionError as exc:
+            db.rollback()
+            _fail(exc)
+        out = {"questionnaire": body.questionnaire, "after_trial": body.after_trial, "items": len(rows), "duplicate": dup}
+    return {"answers": out, "state": session_state(request, s.id)}
+
+
+@participant.post("/{session_id}/events", summary="Log UI events")
+def post_events(session_id: str, body: EventsIn, request: Request, s: Caller = Depends(require_session)):
+    with _db(request) as db:
+        row = db.get(Session, s.id)
+        _not_revoked(row)
+        try:
+            events = [e.model_dump() for e in body.events]
+            # after the end, the last trial's outcome shown on the page is still taken
+            late = all(e["trial"] == row.trials_done and e["type"] == "outcome_shown" for e in events)
+            if row.kind == "study" and not late and ended(db, row, study_config(db, row.study_id)):
+                raise SessionError(409, "this session has ended")
+            n, dup = add_events(db, row, events, body.batch)
+        except SessionError as exc:
+            db.rollback()
+            _fail(exc)
+    return {"stored": n, "duplicate": dup}
