@@ -21,6 +21,7 @@ from .db import DEFAULT_URL, open_database, safe_url
 from .fastpath import DeployFastPath
 from .middleware import BodyGuard, RequestLog, ServerTiming
 from .routes import deploy, experimenter, own, participant
+from .schemas import ErrorOut
 from .store import DeployStore
 
 STATIC = Path(__file__).resolve().parent.parent / "static" / "app"
@@ -59,6 +60,15 @@ class ServerApp(FastAPI):
     async def __call__(self, scope, receive, send) -> None:
         scope["app"] = self  # as Starlette sets it
         await self._front(scope, receive, send)
+
+
+#: every route may refuse a NUL character in its path, query or JSON body (``middleware.BodyGuard``)
+NUL_REFUSAL: dict[int | str, dict[str, Any]] = {
+    400: {
+        "model": ErrorOut,
+        "description": "The request is not allowed (a NUL character in its path, query or a string of its body).",
+    }
+}
 
 
 #: the garbage collector's thresholds of a server process (Python's default: 700, 10, 10)
@@ -114,10 +124,8 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     app.add_middleware(BodyGuard)
     app.add_middleware(RequestLog)
     app.add_middleware(ServerTiming)
-    app.include_router(deploy)  # first: the decision API is matched without trying the others
-    app.include_router(experimenter)
-    app.include_router(own)
-    app.include_router(participant)
+    for router in (deploy, experimenter, own, participant):  # deploy first: the decision API is matched without trying the others
+        app.include_router(router, responses=NUL_REFUSAL)
 
     def page(name: str) -> FileResponse:
         path = STATIC / name

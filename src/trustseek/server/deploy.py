@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
+import sys
 from typing import Any
 
 import numpy as np
@@ -26,6 +28,7 @@ from ..policies import PolicyError
 from ..policies.schedule import SchedulePolicy
 from ..pomdp.belief import make_updater
 from .orm import PolicyBlob, Session, utcnow
+from .schemas import MAX_TRIAL
 from .sessions import Context, SessionError, new_id, new_token, p_high, trial_dict, trial_experience
 from .store import LiveRow, Statements, TrialRow
 from .studies import policy_object
@@ -42,6 +45,18 @@ def policy_sha256(policy: dict[str, Any]) -> str:
     """The address of a policy JSON: the SHA-256 of its key-sorted serialization, the same for
     any order of the keys."""
     return hashlib.sha256(json.dumps(policy, sort_keys=True).encode()).hexdigest()
+
+
+def score_problem(task: Task) -> str | None:
+    """Why a deploy session of ``task`` could not keep its score, a sum of up to ``MAX_TRIAL``
+    rewards, as a finite number (nor a policy its values), or None."""
+    largest = max(abs(v) for v in task.rewards.to_dict().values())
+    if math.isfinite(largest * MAX_TRIAL):
+        return None
+    return (
+        f"task rewards: the largest reward in magnitude, {largest:g}, overflows a session's score over {MAX_TRIAL} trials; "
+        f"keep every reward within +-{sys.float_info.max / MAX_TRIAL:.3g}"
+    )
 
 
 def create_deploy(db: DBSession, label: str, task: Task, model: TrustModel, policy: dict[str, Any], seed: int) -> Session:

@@ -166,7 +166,7 @@ async def answer(state: Any, sid: str, what: str, raw: bytes) -> bytes | None:
     answer, in a transaction that reads the session (``store.DeployStore.transaction``)."""
     try:
         body = json.loads(raw)
-    except ValueError:
+    except (ValueError, RecursionError):  # the full application refuses it (middleware.json_body_problem)
         return None
     if type(body) is not dict:
         return None

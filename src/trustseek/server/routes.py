@@ -13,8 +13,9 @@ from fastapi.security import HTTPAuthorizationCredentials
 from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 
+from ..errors import TrustseekError
 from .auth import Caller, bearer, remember_token, require_experimenter, require_session, session_for_token, token_of
-from .deploy import committed_trial, create_deploy, deploy_decide, deploy_observe, remember_deploy
+from .deploy import committed_trial, create_deploy, deploy_decide, deploy_observe, remember_deploy, score_problem
 from .export import answers_frame, events_csv, events_frame, sessions_frame, to_bytes, trials_frame
 from .orm import Report, Session, Study, Trial, utcnow
 from .schemas import AnswersIn, ConsentIn, DecideIn, DeployIn, ErrorOut, EventsIn, ObserveIn, ReportIn, SessionsIn, TrialIn
@@ -442,11 +443,17 @@ def open_deploy(body: DeployIn, request: Request):
             raise ConfigError(
                 [f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}"]
             )
+        overflow = score_problem(task)
+        if overflow is not None:
+            raise ConfigError([overflow])
         policy = resolve_policy(body.policy, model, task)
     except ConfigError as exc:
         raise HTTPException(400, {"problems": exc.problems}) from None
     with _db(request) as db:
-        s = create_deploy(db, body.label, task, model, policy, body.seed)
+        try:
+            s = create_deploy(db, body.label, task, model, policy, body.seed)
+        except TrustseekError as exc:  # a policy that does not load (non-finite values)
+            raise HTTPException(400, {"problems": exc.lines()}) from None
         db.commit()
         # this process answers the session's first requests without reading it back
         remember_token(request.app.state, s.token, Caller(s.id, s.kind))
