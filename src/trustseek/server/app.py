@@ -18,11 +18,13 @@ from fastapi.staticfiles import StaticFiles
 
 from ..version import __version__
 from .db import DEFAULT_URL, open_database, safe_url
-from .fastpath import DeployFastPath
+from .deploy.http import DeployFront
+from .deploy.plan import Plans
+from .deploy.routes import deploy
+from .deploy.store import DeployStore
 from .middleware import BodyGuard, RequestLog, ServerTiming
-from .routes import deploy, experimenter, own, participant
+from .routes import experimenter, own, participant
 from .schemas import ErrorOut
-from .store import DeployStore
 
 STATIC = Path(__file__).resolve().parent.parent / "static" / "app"
 
@@ -49,13 +51,13 @@ async def validation_error(request: Request, exc: Exception) -> JSONResponse:
 
 
 class ServerApp(FastAPI):
-    """The FastAPI application with the decision API's lean path in front of it: ``decide`` and
-    ``observe`` requests that are well-formed and succeed are answered before the framework's
-    stack (``fastpath``), everything else goes through it."""
+    """The FastAPI application with the decision API's front in front of it: well-formed
+    ``decide`` and ``observe`` requests are answered before the framework's stack
+    (``deploy.http``), everything else goes through it."""
 
     def __init__(self, *args: Any, **kwargs: Any):
         super().__init__(*args, **kwargs)
-        self._front = DeployFastPath(super().__call__)
+        self._front = DeployFront(super().__call__)
 
     async def __call__(self, scope, receive, send) -> None:
         scope["app"] = self  # as Starlette sets it
@@ -118,7 +120,9 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     app.state.token = token or secrets.token_urlsafe(24)
     app.state.public_url = public_url
     app.state.tokens = {}  # session token -> Caller
-    app.state.deploy_store = DeployStore(app.state.engine)  # the decision API's connection
+    # what the application remembers is the application's: nothing is cached in a module
+    app.state.deploy_store = DeployStore(app.state.engine)  # the decision API's connections and sessions' live rows
+    app.state.deploy_plans = Plans()  # the deploy sessions' plans, one parsed copy per content
     app.router.add_event_handler("shutdown", app.state.deploy_store.close)  # its connections end with the server
     app.add_exception_handler(RequestValidationError, validation_error)
     app.add_middleware(BodyGuard)

@@ -37,7 +37,6 @@ from ..model.task import Task
 from ..policies import PolicyRunner
 from ..policies.schedule import SchedulePolicy
 from .orm import Answer, Event, EventBatch, Report, Session, Study, Trial, utcnow
-from .store import TrialRow
 from .studies import block_items, participant_plan, policy_object
 
 log = logging.getLogger(__name__)
@@ -278,7 +277,8 @@ def served(s: Session, n: int, items: tuple[dict[str, int], dict[str, int] | Non
     return out
 
 
-def trial_dict(t: Trial | TrialRow) -> dict[str, Any]:
+def trial_dict(t: Trial | Any) -> dict[str, Any]:
+    # a trial row, or the decision API's TrialRow (deploy.store) with the same columns
     return {
         "trial": t.trial,
         "block": t.block,

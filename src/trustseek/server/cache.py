@@ -1,0 +1,49 @@
+"""``Bounded``: the one bounded mapping of the server (least recently used entries are forgotten
+first), for what it remembers, always in objects the application owns (``app.state``), never
+in a module: the deploy sessions' plans (``deploy.plan.Plans``), their decisions and belief
+updates, the sessions' live rows (``deploy.store.DeployStore``)."""
+
+from __future__ import annotations
+
+import contextlib
+from collections import OrderedDict
+from typing import Generic, TypeVar
+
+K = TypeVar("K")
+V = TypeVar("V")
+
+
+class Bounded(Generic[K, V]):
+    """A mapping of at most ``size`` entries: adding one beyond forgets the least recently used."""
+
+    __slots__ = ("_items", "size")
+
+    def __init__(self, size: int):
+        self.size = size
+        self._items: OrderedDict[K, V] = OrderedDict()
+
+    def get(self, key: K) -> V | None:
+        value = self._items.get(key)
+        if value is not None:
+            with contextlib.suppress(KeyError):  # forgotten meanwhile by another thread
+                self._items.move_to_end(key)
+        return value
+
+    def put(self, key: K, value: V) -> V:
+        self._items[key] = value
+        self._items.move_to_end(key)
+        if len(self._items) > self.size:
+            self._items.popitem(last=False)
+        return value
+
+    def pop(self, key: K) -> None:
+        self._items.pop(key, None)
+
+    def clear(self) -> None:
+        self._items.clear()
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __contains__(self, key: object) -> bool:
+        return key in self._items
