@@ -66,15 +66,9 @@ def test_the_scan_finds_module_level_caches():
     assert module_caches("class A:\n    def __init__(self):\n        self.c = {}\n        self.c[1] = 2\n") == []
 
 
-#: the study sessions' caches, still kept by their modules (to be moved onto app.state like the
-#: decision API's): the scan fails when one more appears, or when one goes without this list changing
-STUDY_SIDE = {"sessions.py": ["_CONFIGS", "_CONTEXTS"], "studies.py": ["_POLICIES", "_RESOLVED"]}
-
-
 @pytest.mark.parametrize("path", sorted(SERVER.rglob("*.py")), ids=lambda p: str(p.relative_to(SERVER)))
 def test_no_module_level_cache_in_the_server(path):
-    name = str(path.relative_to(SERVER))
-    assert module_caches(path.read_text()) == STUDY_SIDE.get(name, []), f"{name}: keep what it remembers on app.state"
+    assert module_caches(path.read_text()) == [], f"{path.relative_to(SERVER)}: keep what it remembers on app.state"
 
 
 def test_bounded_forgets_the_least_recently_used():
@@ -87,3 +81,30 @@ def test_bounded_forgets_the_least_recently_used():
     b.pop("a")
     b.pop("missing")
     assert len(b) == 1 and b.get("a") is None
+
+
+def test_the_application_remembers_what_its_sessions_need(tmp_path):
+    """Two applications remember apart (as two worker processes): each its own studies'
+    configurations, contexts and policies, and its own deploy plans."""
+    from fastapi.testclient import TestClient
+
+    from trustseek.server.app import create_app
+
+    url = f"sqlite:///{tmp_path / 'caches.sqlite'}"
+    apps = [create_app(url, token="t"), create_app(url, token="t")]
+    h = {"Authorization": "Bearer t"}
+    with TestClient(apps[0]) as c:
+        blocks = [{"policy": {"kind": "trust-aware", "grid": 21}, "schedule": {"counts": {"low": 2}}}]
+        study = c.post("/api/studies", json={"name": "c", "blocks": blocks}, headers=h).json()
+        s = c.post(f"/api/studies/{study['id']}/sessions", json={"count": 1}, headers=h).json()[0]
+        ph = {"Authorization": f"Bearer {s['token']}"}
+        assert c.post(f"/api/sessions/{s['session_id']}/consent", json={"agree": True}, headers=ph).status_code == 200
+        assert c.get(f"/api/sessions/{s['session_id']}/state", headers=ph).status_code == 200
+        robot = c.post("/api/deploy/sessions", json={"policy": {"kind": "never-ask"}}, headers=h).json()
+    first, second = apps[0].state, apps[1].state
+    assert study["id"] in first.study_caches.configs and len(first.study_caches.contexts) == 1
+    assert len(first.study_caches.policies) == 1 and len(first.study_caches.resolved) == 2  # the study's and the robot's
+    assert first.deploy_plans.by_session.get(robot["session_id"]) is not None
+    assert len(second.study_caches.configs) == len(second.deploy_plans.by_session) == 0
+    for app in apps:
+        app.state.deploy_store.close()

@@ -17,6 +17,7 @@ from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, Redirect
 from fastapi.staticfiles import StaticFiles
 
 from ..version import __version__
+from .cache import StudyCaches
 from .db import DEFAULT_URL, open_database, safe_url
 from .deploy.http import DeployFront
 from .deploy.plan import Plans
@@ -123,6 +124,8 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     # what the application remembers is the application's: nothing is cached in a module
     app.state.deploy_store = DeployStore(app.state.engine)  # the decision API's connections and sessions' live rows
     app.state.deploy_plans = Plans()  # the deploy sessions' plans, one parsed copy per content
+    app.state.study_caches = StudyCaches()  # the studies' configurations and policies ...
+    app.state.db.configure(info={"caches": app.state.study_caches})  # ... reached from the database sessions
     app.router.add_event_handler("shutdown", app.state.deploy_store.close)  # its connections end with the server
     app.add_exception_handler(RequestValidationError, validation_error)
     app.add_middleware(BodyGuard)

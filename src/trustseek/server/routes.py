@@ -79,7 +79,7 @@ def _link(request: Request, s: Session) -> str:
 @experimenter.post("/studies", status_code=201, summary="Create a study", responses=errors(400))
 def create_study(body: StudyIn, request: Request):
     try:
-        cfg = build_study_config(body)
+        cfg = build_study_config(body, request.app.state.study_caches)
     except ConfigError as exc:
         raise HTTPException(400, {"problems": exc.problems}) from None
     with _db(request) as db:

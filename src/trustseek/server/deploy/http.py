@@ -2,8 +2,9 @@
 of FastAPI (``DeployFront``).
 
 Under many robots at once the server's capacity is its CPU time per request, and most of it
-went to the framework, not to the decision (measured in process: 0.30 ms of CPU per request
-through FastAPI's routing, dependency solving and pydantic, 0.11 ms in plain ASGI).  So
+went to the framework, not to the decision (measured in process, with the same ``answer``:
+0.24-0.26 ms of CPU per request through FastAPI's routing, dependency solving and pydantic,
+0.10-0.11 ms in plain ASGI).  So
 ``decide`` and ``observe`` are answered by ``DeployFront``, the outermost layer of the
 application (``app.ServerApp``), whenever:
 

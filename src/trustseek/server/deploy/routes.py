@@ -45,7 +45,7 @@ def open_deploy(body: DeployIn, request: Request):
         overflow = score_problem(task)
         if overflow is not None:
             raise ConfigError([overflow])
-        policy = resolve_policy(body.policy, model, task)
+        policy = resolve_policy(body.policy, model, task, caches=request.app.state.study_caches)
     except ConfigError as exc:
         raise HTTPException(400, {"problems": exc.problems}) from None
     state = request.app.state
