@@ -204,9 +204,12 @@ CATEGORIES = [
     ("event loop, sockets (uvloop and the kernel)", ("asyncio", "uvloop", "selectors")),
     ("HTTP parsing, ASGI server (uvicorn, httptools)", ("uvicorn", "httptools")),
     ("JSON (json)", ("/json/",)),
-    ("database statements and commits (store, sqlite3, psycopg)", ("sqlite3", "store.py", "psycopg")),
+    ("database statements and commits (store, sqlite3, psycopg)", ("sqlite3", "deploy/store.py", "psycopg")),
     ("policy decision and belief update", ("/policies/", "/pomdp/", "numpy", "/model/")),
-    ("lean path: auth, checks, trial record", ("fastpath.py", "deploy.py", "sessions.py", "auth.py", "server/app.py", "orm.py")),
+    (
+        "decision API: auth, checks, trial record",
+        ("server/deploy/", "server/cache.py", "sessions.py", "auth.py", "server/app.py", "orm.py"),
+    ),
     ("full application (opening the sessions)", ("fastapi", "starlette", "sqlalchemy", "pydantic", "routes.py", "middleware.py")),
 ]
 

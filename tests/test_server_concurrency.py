@@ -19,7 +19,6 @@ from asgi_client import asgi_post
 from trustseek.model.core import TrustModel
 from trustseek.model.task import Task
 from trustseek.policies import PolicyRunner, policy_from_dict
-from trustseek.server import deploy
 from trustseek.server.app import create_app
 
 TOKEN = "concurrency-experimenter-token"
@@ -37,10 +36,10 @@ async def post(app, path: str, body: dict, token: str) -> tuple[int, dict]:
     return status, json.loads(out)
 
 
-def forget_caches() -> None:
+def forget_caches(*apps) -> None:
     """As a process that did not open the sessions (another worker, or after a restart)."""
-    deploy._DEPLOY_PLANS.clear()
-    deploy._SHARED_PLANS.clear()
+    for app in apps:
+        app.state.deploy_plans.clear()
 
 
 def replay(plan: dict, policy_json: dict, seed: int, history: list[dict]) -> list[tuple[str, float | None, float | None]]:
@@ -101,7 +100,6 @@ def test_interleaved_robots_on_two_applications_match_the_in_process_policy(tmp_
     path = tmp_path_factory.mktemp("conc") / "conc.sqlite"
     url = f"sqlite:///{path}"
     apps = [create_app(url, token=TOKEN), create_app(url, token=TOKEN)]  # as two worker processes
-    forget_caches()
     rng = random.Random(seed)
     robots = []
     for i in range(12):
@@ -112,7 +110,7 @@ def test_interleaved_robots_on_two_applications_match_the_in_process_policy(tmp_
         assert status == 201, info
         robots.append((info, robot_plan(rng, trials)))
     if rng.random() < 0.5:
-        forget_caches()  # the sessions' first requests read their plans back from the database
+        forget_caches(*apps)  # the sessions' first requests read their plans back from the database
     acked: dict[str, list] = {info["session_id"]: [] for info, _ in robots}
 
     async def everyone():
@@ -150,18 +148,18 @@ def test_interleaved_robots_on_two_applications_match_the_in_process_policy(tmp_
 
 def test_a_deploy_plan_is_shared_by_sessions_with_the_same_task_model_and_policy(tmp_path):
     app = create_app(f"sqlite:///{tmp_path / 'plans.sqlite'}", token=TOKEN)
-    forget_caches()
+    plans_of = app.state.deploy_plans
     opened = [
         asyncio.run(post(app, "/api/deploy/sessions", {"policy": POLICIES[k], "seed": i}, TOKEN))[1]
         for k in (0, 0, 1)
         for i in range(2)
     ]
-    plans = [deploy._DEPLOY_PLANS[o["session_id"]] for o in opened]
+    plans = [plans_of.by_session.get(o["session_id"]) for o in opened]
     assert len({id(p) for p in plans[:4]}) == 1 and len({id(p) for p in plans}) == 2
-    forget_caches()  # read back from the database: shared again, and the same task and model
+    forget_caches(app)  # read back from the database: shared again, and the same task and model
     store = app.state.deploy_store
     with store.transaction() as tx:
-        back = [deploy.deploy_plan(tx, o["session_id"]) for o in opened]
+        back = [plans_of.of(tx, o["session_id"]) for o in opened]
     assert len({id(p) for p in back[:4]}) == 1 and back[4] is back[5] and back[0] is not back[4]
     assert isinstance(back[0].task, Task) and back[0].task.to_dict() == plans[0].task.to_dict()
     assert back[0].model.to_dict() == plans[0].model.to_dict() and back[0].sha == plans[0].sha
@@ -172,20 +170,61 @@ def test_remembered_decisions_equal_fresh_ones(tmp_path, policy):
     """A decision a plan remembers is the one the policy would make again; a decision that
     drew from the session's generator is never remembered."""
     app = create_app(f"sqlite:///{tmp_path / 'memo.sqlite'}", token=TOKEN)
-    forget_caches()
     _, info = asyncio.run(post(app, "/api/deploy/sessions", {"policy": policy, "seed": 5}, TOKEN))
-    plan = deploy._DEPLOY_PLANS[info["session_id"]]
+    plan = app.state.deploy_plans.by_session.get(info["session_id"])
     store = app.state.deploy_store
-    pol = plan.policy(store)
+
+    def load():
+        with store.transaction() as tx:
+            return tx.policy(plan.sha)
+
+    pol = plan.policy(load)
     pm = getattr(pol, "model", None) or plan.model
     beliefs = [[1 - x, x] for x in np.linspace(0.0, 1.0, 21)]
     for b in beliefs:
         for n in (1, 2, 3):
             for cx in ("low", "high"):
-                a = plan.decide(store, b, 5, n, cx)
+                a = plan.decide(load, b, 5, n, cx)
                 fresh = PolicyRunner(pol, model=pm, rng=np.random.default_rng([5, n, 0]), belief=np.asarray(b)).decide(cx)
                 assert a == fresh
     if policy["kind"] == "randomized":
-        assert plan._decided == {}
+        assert len(plan._decided) == 0
     else:
         assert len(plan._decided) == 2 * len(beliefs)
+
+
+@pytest.mark.parametrize("policy", POLICIES)
+def test_a_plans_step_is_policy_runners_step(tmp_path, policy):
+    """The decision API decides and updates with ``PolicyRunner``'s own step: for any belief,
+    trial and events, the same action and the same belief as a runner with that belief and the
+    session's generator of (seed, trial), remembered or not."""
+    app = create_app(f"sqlite:///{tmp_path / 'step.sqlite'}", token=TOKEN)
+    _, info = asyncio.run(post(app, "/api/deploy/sessions", {"policy": policy, "seed": 11}, TOKEN))
+    plan = app.state.deploy_plans.by_session.get(info["session_id"])
+    store = app.state.deploy_store
+
+    def load():
+        with store.transaction() as tx:
+            return tx.policy(plan.sha)
+
+    pol = plan.policy(load)
+    pm = getattr(pol, "model", None) or plan.model
+    rng = random.Random(3)
+    cases = [
+        (
+            [1 - (x := rng.random()), x],
+            1 + k % 5,
+            rng.choice(["low", "high"]),
+            rng.choice(["autonomous", "ask"]),
+            rng.choice(["intervene", "rely"]),
+            rng.choice(["faulty", "reliable"]),
+        )
+        for k in range(40)
+    ]
+    for _ in range(2):  # the second time from what the plan remembers
+        for b, n, cx, a, h, e in cases:
+            runner = PolicyRunner(pol, model=pm, rng=np.random.default_rng([11, n, 0]), belief=np.asarray(b))
+            assert plan.decide(load, b, 11, n, cx) == runner.decide(cx)
+            after = runner.observe(cx, a, h, e)
+            assert plan.update(load, b, cx, a, h, e) == [float(v) for v in after]
+    app.state.deploy_store.close()

@@ -1,6 +1,6 @@
-"""The decision API's lean path (``server.fastpath``) answers exactly as the full FastAPI
-application does: the same status and bytes for every request, successes from the lean path,
-everything else handed on; its held database connection recovers when it breaks."""
+"""The decision API's front (``server.deploy.http``) answers exactly as the FastAPI application
+does: the same status and bytes for every request, successes and the session's refusals from
+the front, malformed requests handed on; its held database connection recovers when it breaks."""
 
 from __future__ import annotations
 
@@ -95,40 +95,45 @@ def test_successes_are_answered_by_the_lean_path_with_the_full_applications_byte
     assert counting.calls == 0
 
 
-def test_refusals_and_unusual_requests_are_handed_to_the_full_application(app):
+def test_refusals_are_answered_by_the_front_and_malformed_requests_by_fastapi(app):
+    """The session's refusals (400, 404, 409) come from the one answer of the request, through
+    the front as through FastAPI; a request the schema refuses, or with another token, is handed
+    to FastAPI (401, 403, 413, 422)."""
     sid, token = open_session(app)
     other_sid, other_token = open_session(app, seed=8)
     counting = Counting(app)
+    answered, handed = True, False
     cases = [
-        ("decide", {"trial": 1.0, "complexity": "low"}, token, None),
-        ("decide", {"trial": True, "complexity": "low"}, token, None),
-        ("decide", {"trial": 0, "complexity": "low"}, token, None),
-        ("decide", {"trial": 1, "complexity": "low", "extra": 1}, token, None),
-        ("decide", {"trial": 1, "complexity": ""}, token, None),
-        ("decide", {"trial": 1, "complexity": "medium"}, token, None),  # 400: not a complexity of the task
-        ("decide", {"trial": 2, "complexity": "low"}, token, None),  # 409: not the next trial
-        ("decide", {"trial": 1}, token, None),  # 400: no complexity
-        ("decide", {"trial": 1, "remaining": {"low": 1}}, token, None),  # 400: not a schedule policy
-        ("decide", {"trial": 1, "complexity": "low"}, other_token, None),  # 403: another session's token
-        ("decide", {"trial": 1, "complexity": "low"}, TOKEN, None),  # 401: the experimenter's token
-        ("decide", {"trial": 1, "complexity": "low"}, "no-such-token", None),  # 401
-        ("decide", {"trial": 1, "complexity": "low"}, None, None),  # 401: no token
-        ("decide", {"trial": 1, "complexity": "low"}, token, {"content-length": str(10**7)}),  # 413
-        ("decide", {"trial": 1, "complexity": "low"}, token, {"content-type": "text/plain"}),
-        ("decide", b'{"trial": 1, "complexity": "lo', token, None),  # 422: not JSON
-        ("decide", b"\xff\xfe\x00", token, None),
-        ("decide", [1, 2], token, None),
-        ("observe", {"trial": 1, "human_action": "rely", "outcome": "success"}, token, None),  # 409: no decision yet
-        ("observe", {"trial": 1, "human_action": "maybe"}, token, None),
-        ("observe", {"trial": 1, "outcome": 3}, token, None),
+        ("decide", {"trial": 1.0, "complexity": "low"}, token, None, handed),
+        ("decide", {"trial": True, "complexity": "low"}, token, None, handed),
+        ("decide", {"trial": 0, "complexity": "low"}, token, None, handed),
+        ("decide", {"trial": 1, "complexity": "low", "extra": 1}, token, None, handed),
+        ("decide", {"trial": 1, "complexity": ""}, token, None, handed),
+        ("decide", {"trial": 1, "complexity": "medium"}, token, None, answered),  # 400: not a complexity of the task
+        ("decide", {"trial": 2, "complexity": "low"}, token, None, answered),  # 409: not the next trial
+        ("decide", {"trial": 1}, token, None, answered),  # 400: no complexity
+        ("decide", {"trial": 1, "remaining": {"low": 1}}, token, None, answered),  # 400: not a schedule policy
+        ("decide", {"trial": 1, "remaining": {"low": True}}, token, None, handed),  # 422: not a count
+        ("decide", {"trial": 1, "complexity": "low"}, other_token, None, handed),  # 403: another session's token
+        ("decide", {"trial": 1, "complexity": "low"}, TOKEN, None, handed),  # 401: the experimenter's token
+        ("decide", {"trial": 1, "complexity": "low"}, "no-such-token", None, handed),  # 401
+        ("decide", {"trial": 1, "complexity": "low"}, None, None, handed),  # 401: no token
+        ("decide", {"trial": 1, "complexity": "low"}, token, {"content-length": str(10**7)}, handed),  # 413
+        ("decide", {"trial": 1, "complexity": "low"}, token, {"content-type": "text/plain"}, handed),
+        ("decide", b'{"trial": 1, "complexity": "lo', token, None, handed),  # 422: not JSON
+        ("decide", b"\xff\xfe\x00", token, None, handed),
+        ("decide", [1, 2], token, None, handed),
+        ("observe", {"trial": 1, "human_action": "rely", "outcome": "success"}, token, None, answered),  # 409: no decision
+        ("observe", {"trial": 1, "human_action": "maybe"}, token, None, handed),
+        ("observe", {"trial": 1, "outcome": 3}, token, None, handed),
     ]
-    for what, body, tok, headers in cases:
+    for what, body, tok, headers, by_front in cases:
         before = counting.calls
         a = post(app, False, sid, tok, what, body, headers)
         b = post(app, True, sid, tok, what, body, headers)
         assert a == b, (what, body)
         assert a[0] >= 400, (what, body, a)
-        assert counting.calls == before + 1, (what, body)
+        assert counting.calls == before + (0 if by_front else 1), (what, body)
     # nothing was written: the session's first trial is still to be decided
     assert post(app, False, sid, token, "decide", {"trial": 1, "complexity": "low"})[0] == 200
     assert other_sid != sid
@@ -176,7 +181,7 @@ def test_the_decision_store_closes_its_connections_when_the_server_stops(tmp_pat
     """Before, the decision API's connections stayed open after shutdown (PostgreSQL kept their backends)."""
     from fastapi.testclient import TestClient
 
-    from trustseek.server.store import DeployStore
+    from trustseek.server.deploy.store import DeployStore
 
     closed: list[DeployStore] = []
     real = DeployStore.close

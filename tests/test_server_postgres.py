@@ -313,7 +313,7 @@ def test_requests_wait_for_a_connection_of_the_conditional_writes(pg_app, monkey
     for one (no more are opened) and are all answered by a conditional write."""
     from test_server_concurrency import post as post_async
     from test_server_fastpath import open_session
-    from trustseek.server import store as store_module
+    from trustseek.server.deploy import store as store_module
 
     monkeypatch.setattr(store_module, "ASYNC_CONNECTIONS", 2)
     robots = [open_session(pg_app, seed=i) for i in range(12)]
@@ -340,7 +340,7 @@ def test_requests_wait_for_a_connection_of_the_conditional_writes(pg_app, monkey
     assert [status for status, _ in out] == [200] * 12
     assert max(waited) > 0  # requests waited
     assert store._opened == 2 and len(store._idle) == 2 and not store._waiters
-    assert all(store.known[sid].pending_trial == 1 for sid, _ in robots)
+    assert all(store.known.get(sid).pending_trial == 1 for sid, _ in robots)
 
 
 def test_acknowledged_trials_survive_a_killed_server_on_postgresql(pg_url):

@@ -281,28 +281,24 @@ def test_scheduled_block_in_chromium(tmp_path):
 
 def test_resolved_schedule_policies_cached_within_a_bound():
     from trustseek.server import studies
+    from trustseek.server.cache import MAX_CACHED_SCHEDULES, StudyCaches
 
     model, task = paper_model(), paper_task()
-    studies._RESOLVED.clear()
-    first = studies.resolve_policy({**SPEC, "grid": 5}, model, task)
-    assert studies.resolve_policy({**SPEC, "grid": 5}, model, task) is first  # the same spec is solved once
-    for k in range(2 * studies.MAX_CACHED_SCHEDULES):
-        studies.resolve_policy({**SPEC, "counts": {"low": 1, "high": k}, "grid": 5}, model, task)
-        held = sum(p["kind"] == "schedule" for p in studies._RESOLVED.values())
-        assert 1 <= held <= studies.MAX_CACHED_SCHEDULES
+    caches = StudyCaches()
+    first = studies.resolve_policy({**SPEC, "grid": 5}, model, task, caches=caches)
+    assert studies.resolve_policy({**SPEC, "grid": 5}, model, task, caches=caches) is first  # the same spec is solved once
+    for k in range(2 * MAX_CACHED_SCHEDULES):
+        studies.resolve_policy({**SPEC, "counts": {"low": 1, "high": k}, "grid": 5}, model, task, caches=caches)
+        assert 1 <= len(caches.schedules) <= MAX_CACHED_SCHEDULES
 
 
 def test_restarted_server_serves_the_same_picks(tmp_path):
     """The picks come from the committed trials and the stored plan: a fresh process (empty
     caches) on the same database serves the same trials."""
-    from trustseek.server import sessions, studies
-
     db = f"sqlite:///{tmp_path / 'restart.sqlite'}"
     spec = {**SPEC, "counts": {"low": 3, "high": 3}, "window": 2}
 
-    def fresh():
-        for cache in (studies._POLICIES, studies._RESOLVED, sessions._CONTEXTS, sessions._CONFIGS):
-            cache.clear()
+    def fresh():  # a new application remembers nothing
         return TestClient(create_app(db, token=TOKEN))
 
     with fresh() as c:

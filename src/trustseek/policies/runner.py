@@ -41,11 +41,28 @@ class PolicyRunner:
 
     def decide(self, complexity: int | str) -> str:
         """The robot action (``autonomous`` or ``ask``) for the next trial."""
-        c = self.policy.complexity_index(complexity)
-        return ACTIONS[self.policy.action(self.belief, c, self.rng)]
+        return self.action_at(self.belief, complexity)
 
     def observe(self, complexity: int | str, action: str, human_action: str | None, experience: str) -> np.ndarray | None:
         """Update the belief from one trial's events; returns the new belief (or None without a model)."""
+        after = self.belief_after(self.belief, complexity, action, human_action, experience)
+        self.trial += 1
+        if after is not None:
+            self.belief = after
+        return after
+
+    # the step itself, at any belief: ``decide`` and ``observe`` apply it to the live belief, and
+    # a service that keeps many beliefs (the server's decision API) applies it to each of them
+
+    def action_at(self, belief: np.ndarray | None, complexity: int | str, rng: np.random.Generator | None = None) -> str:
+        """The robot action the policy takes at ``belief`` (drawing from ``rng``, else the runner's own)."""
+        c = self.policy.complexity_index(complexity)
+        return ACTIONS[self.policy.action(belief, c, self.rng if rng is None else rng)]
+
+    def belief_after(
+        self, belief: np.ndarray | None, complexity: int | str, action: str, human_action: str | None, experience: str
+    ) -> np.ndarray | None:
+        """The belief after one trial's events from ``belief`` (None without a model)."""
         c = self.policy.complexity_index(complexity)
         if action not in ACTIONS:
             raise ValueError(f"robot action must be one of {list(ACTIONS)}, got {action!r}")
@@ -53,9 +70,7 @@ class PolicyRunner:
             raise ValueError(f"human action must be one of {list(HUMAN_ACTIONS)} or None, got {human_action!r}")
         if experience not in EXPERIENCES:
             raise ValueError(f"experience must be one of {list(EXPERIENCES)}, got {experience!r}")
-        self.trial += 1
         if self._updater is None:
             return None
         o = UNOBSERVED if human_action is None else HUMAN_ACTIONS.index(human_action)
-        self.belief = self._updater.update(self.belief, c, ACTIONS.index(action), o, EXPERIENCES.index(experience))
-        return self.belief
+        return self._updater.update(belief, c, ACTIONS.index(action), o, EXPERIENCES.index(experience))

@@ -16,13 +16,17 @@ from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 
 from ..version import __version__
+from .cache import StudyCaches
 from .db import DEFAULT_URL, open_database, safe_url
-from .fastpath import DeployFastPath
+from .deploy.http import DeployFront
+from .deploy.plan import Plans
+from .deploy.routes import deploy
+from .deploy.store import DeployStore
 from .link_routes import STATIC, lifecycle, pages, static_page
 from .middleware import BodyGuard, RequestLog, ServerTiming
 from .participant_routes import own, participant
-from .routes import deploy, experimenter
-from .store import DeployStore
+from .routes import experimenter
+from .schemas import ErrorOut
 
 log = logging.getLogger(__name__)
 
@@ -47,17 +51,26 @@ async def validation_error(request: Request, exc: Exception) -> JSONResponse:
 
 
 class ServerApp(FastAPI):
-    """The FastAPI application with the decision API's lean path in front of it: ``decide`` and
-    ``observe`` requests that are well-formed and succeed are answered before the framework's
-    stack (``fastpath``), everything else goes through it."""
+    """The FastAPI application with the decision API's front in front of it: well-formed
+    ``decide`` and ``observe`` requests are answered before the framework's stack
+    (``deploy.http``), everything else goes through it."""
 
     def __init__(self, *args: Any, **kwargs: Any):
         super().__init__(*args, **kwargs)
-        self._front = DeployFastPath(super().__call__)
+        self._front = DeployFront(super().__call__)
 
     async def __call__(self, scope, receive, send) -> None:
         scope["app"] = self  # as Starlette sets it
         await self._front(scope, receive, send)
+
+
+#: every route may refuse a NUL character in its path, query or JSON body (``middleware.BodyGuard``)
+NUL_REFUSAL: dict[int | str, dict[str, Any]] = {
+    400: {
+        "model": ErrorOut,
+        "description": "The request is not allowed (a NUL character in its path, query or a string of its body).",
+    }
+}
 
 
 #: the garbage collector's thresholds of a server process (Python's default: 700, 10, 10)
@@ -107,18 +120,19 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     app.state.token = token or secrets.token_urlsafe(24)
     app.state.public_url = public_url
     app.state.tokens = {}  # session token -> Caller
-    app.state.deploy_store = DeployStore(app.state.engine)  # the decision API's connection
+    # what the application remembers is the application's: nothing is cached in a module
+    app.state.deploy_store = DeployStore(app.state.engine)  # the decision API's connections and sessions' live rows
+    app.state.deploy_plans = Plans()  # the deploy sessions' plans, one parsed copy per content
+    app.state.study_caches = StudyCaches()  # the studies' configurations and policies ...
+    app.state.db.configure(info={"caches": app.state.study_caches})  # ... reached from the database sessions
     app.router.add_event_handler("shutdown", app.state.deploy_store.close)  # its connections end with the server
     app.add_exception_handler(RequestValidationError, validation_error)
     app.add_middleware(BodyGuard)
     app.add_middleware(RequestLog)
     app.add_middleware(ServerTiming)
-    app.include_router(deploy)  # first: the decision API is matched without trying the others
-    app.include_router(experimenter)
-    app.include_router(own)
-    app.include_router(participant)
-    app.include_router(lifecycle)
-    app.include_router(pages)
+    # deploy first: the decision API is matched without trying the others
+    for router in (deploy, experimenter, own, participant, lifecycle, pages):
+        app.include_router(router, responses=NUL_REFUSAL)
 
     @app.get("/dashboard", include_in_schema=False)
     def dashboard_page():

@@ -9,10 +9,13 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import secrets
 import time
 from collections.abc import Awaitable, Callable, MutableMapping
 from typing import Any
+
+import numpy as np
 
 from .auth import caller_for_token
 
@@ -98,17 +101,52 @@ async def _refuse(send: Send, status: int, detail: str | list[dict[str, Any]], h
     await send({"type": "http.response.body", "body": body})
 
 
-def _decodable_json_text(headers: dict[bytes, bytes], body: bytes) -> bool:
-    """Whether a body sent as JSON decodes as text in the encoding JSON detection finds (other
-    bodies are the routes' to judge)."""
+#: the deepest nesting of arrays and objects a JSON body may have (the API's own bodies nest a
+#: few levels; a deeper one is refused before it is parsed, so that no parser, validator or
+#: error message recurses through it)
+MAX_JSON_DEPTH = 64
+_STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.DOTALL)
+_NUL = re.compile(r"(?<!\\)(?:\\\\)*\\u0000")
+
+
+def json_depth(text: str) -> int:
+    """The deepest nesting of arrays and objects in JSON ``text`` (brackets inside strings do
+    not count), without recursion."""
+    code = np.frombuffer(_STRING.sub("", text).encode("utf-8", "replace"), dtype=np.uint8)
+    step = np.isin(code, _OPEN).astype(np.int64) - np.isin(code, _CLOSE)
+    return int(np.cumsum(step).max(initial=0))
+
+
+_OPEN = np.frombuffer(b"[{", dtype=np.uint8)
+_CLOSE = np.frombuffer(b"]}", dtype=np.uint8)
+
+
+def json_body_problem(headers: dict[bytes, bytes], body: bytes) -> tuple[int, Any] | None:
+    """(status, detail) of a body sent as JSON that no route may be given: one that is not text
+    in the encoding JSON detection finds (422), one nested deeper than ``MAX_JSON_DEPTH`` (422),
+    or one holding a NUL character in a string (400: PostgreSQL's text cannot hold it, so it is
+    refused on every database and for every field alike).  None for any other body, and for
+    bodies not sent as JSON (the routes' to judge)."""
     kind = headers.get(b"content-type", b"").split(b";")[0].strip().lower()
-    if kind != b"application/json" and not kind.endswith(b"+json"):
-        return True
+    if not body or (kind != b"application/json" and not kind.endswith(b"+json")):
+        return None
     try:
-        body.decode(json.detect_encoding(body))
+        text = body.decode(json.detect_encoding(body))
     except (UnicodeDecodeError, LookupError):
-        return False
-    return True
+        return 422, [_invalid("the body is not JSON text (UTF-8)")]
+    if text.count("[") + text.count("{") > MAX_JSON_DEPTH and json_depth(text) > MAX_JSON_DEPTH:
+        return 422, [_invalid(f"the body is nested deeper than {MAX_JSON_DEPTH} levels of arrays and objects")]
+    found = _NUL.search(text) if "\\u0000" in text else None
+    if found is not None:
+        return (
+            400,
+            f"the body holds a NUL character (\\u0000) in a string at character {found.end() - 6}: text may not contain NUL",
+        )
+    return None
+
+
+def _invalid(msg: str) -> dict[str, Any]:
+    return {"type": "json_invalid", "loc": ["body"], "msg": msg, "input": None}
 
 
 class BodyGuard:
@@ -116,13 +154,19 @@ class BodyGuard:
     401, a token that is neither the experimenter's nor a session's is refused (401 on session
     paths, 403 elsewhere) without reading the body.  Bodies are then read up to a bound (a
     session's ``SESSION_BODY_LIMIT``, the experimenter's ``EXPERIMENTER_BODY_LIMIT``); a larger
-    one, declared or streamed, is a 413.  Which session a token may write to is the routes' check."""
+    one, declared or streamed, is a 413.  A JSON body is then checked once for every route
+    (``json_body_problem``: text, nesting, no NUL character), as are the path and query of every
+    request to ``/api/`` (no NUL character).  Which session a token may write to is the routes' check."""
 
     def __init__(self, app: ASGIApp):
         self.app = app
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http" or scope.get("method") not in _WRITES or not scope.get("path", "").startswith("/api/"):
+        if scope["type"] != "http" or not scope.get("path", "").startswith("/api/"):
+            return await self.app(scope, receive, send)
+        if "\x00" in scope["path"] or b"%00" in scope.get("query_string", b""):
+            return await _refuse(send, 400, "the path or the query holds a NUL character (%00): text may not contain NUL")
+        if scope.get("method") not in _WRITES:
             return await self.app(scope, receive, send)
         state = scope["app"].state
         headers = dict(scope.get("headers") or ())
@@ -157,12 +201,11 @@ class BodyGuard:
             if not message.get("more_body"):
                 break
         body, replayed = b"".join(chunks), False
-        if body and not _decodable_json_text(headers, body):
+        problem = json_body_problem(headers, body)
+        if problem is not None:
             # FastAPI would answer a body it cannot decode with a 400 outside the documented
             # refusals; it is a malformed body like any other invalid JSON: 422
-            return await _refuse(
-                send, 422, [{"type": "json_invalid", "loc": ["body"], "msg": "the body is not JSON text (UTF-8)", "input": None}]
-            )
+            return await _refuse(send, *problem)
 
         async def replay() -> Message:
             nonlocal replayed

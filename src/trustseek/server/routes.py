@@ -1,9 +1,8 @@
-"""HTTP routes: experimenter (studies, sessions, dashboard, export) and deploy (decisions for a
-real robot); the participant's are in ``participant_routes``."""
+"""HTTP routes: experimenter (studies, sessions, dashboard, export); the participant's are in
+``participant_routes``, the decision API's in ``deploy.routes``."""
 
 from __future__ import annotations
 
-import json
 import logging
 import secrets
 from typing import Any
@@ -12,17 +11,13 @@ from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 
-from .auth import Caller, remember_token, require_experimenter, require_session, session_for_token
+from .auth import require_experimenter
 from .bundle import bundle_files, bundle_zip
-from .deploy import committed_trial, create_deploy, deploy_decide, deploy_observe, remember_deploy
 from .export import answers_frame, events_csv, events_frame, sessions_frame, to_bytes, trials_frame
 from .lifecycle import create_participant, progress
 from .orm import Event, Report, Session, Study, Trial, utcnow
 from .schemas import (
-    DecideIn,
-    DeployIn,
     ErrorOut,
-    ObserveIn,
     SessionsIn,
 )
 from .sessions import (
@@ -33,8 +28,7 @@ from .sessions import (
     total_trials,
     trial_dict,
 )
-from .store import LiveRow
-from .studies import ConfigError, StudyIn, build_study_config, load_model_spec, load_task_spec, resolve_policy
+from .studies import ConfigError, StudyIn, build_study_config
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +52,6 @@ def errors(*codes: int) -> dict[int | str, dict[str, Any]]:
 experimenter = APIRouter(
     prefix="/api", tags=["experimenter"], dependencies=[Depends(require_experimenter)], responses=errors(401, 403)
 )
-deploy = APIRouter(prefix="/api/deploy", tags=["deploy"], responses=errors(401, 403))
 
 
 def _db(request: Request):
@@ -86,7 +79,7 @@ def _link(request: Request, s: Session) -> str:
 )
 def create_study(body: StudyIn, request: Request, status: str = Query("open", pattern="^(draft|open)$")):
     try:
-        cfg = build_study_config(body)
+        cfg = build_study_config(body, request.app.state.study_caches)
     except ConfigError as exc:
         raise HTTPException(400, {"problems": exc.problems}) from None
     with _db(request) as db:
@@ -324,129 +317,3 @@ def bundle(study_id: str, request: Request, pilot: bool = Query(False, descripti
         content = bundle_zip(bundle_files(db, st, pilot), f"{st.id}-bundle")
     name = f"{st.id}-bundle.zip"
     return Response(content, media_type="application/zip", headers={"Content-Disposition": f'attachment; filename="{name}"'})
-
-
-# --------------------------------------------------------------------------- deploy
-
-
-@deploy.post(
-    "/sessions",
-    status_code=201,
-    summary="Open a deploy session with a model and a policy",
-    dependencies=[Depends(require_experimenter)],
-    responses=errors(400),
-)
-def open_deploy(body: DeployIn, request: Request):
-    try:
-        task, model = load_task_spec(body.task), load_model_spec(body.model)
-        if tuple(model.complexities) != tuple(task.complexities):
-            raise ConfigError(
-                [f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}"]
-            )
-        policy = resolve_policy(body.policy, model, task)
-    except ConfigError as exc:
-        raise HTTPException(400, {"problems": exc.problems}) from None
-    with _db(request) as db:
-        s = create_deploy(db, body.label, task, model, policy, body.seed)
-        db.commit()
-        # this process answers the session's first requests without reading it back
-        remember_token(request.app.state, s.token, Caller(s.id, s.kind))
-        remember_deploy(s, task, model)
-        request.app.state.deploy_store.remember(
-            LiveRow(s.id, s.kind, s.seed, list(s.belief), s.trials_done, s.score, None, None, None)
-        )
-        log.info("deploy session %s opened: %s policy", s.id, policy["kind"])
-        return {
-            "session_id": s.id,
-            "token": s.token,
-            "policy": policy["kind"],
-            "belief": p_high(s.belief, model.n_trust),
-            "complexities": list(task.complexities),
-            "thresholds": policy.get("thresholds"),
-        }
-
-
-def _deploy_session(s: Caller) -> None:
-    if s.kind != "deploy":
-        raise HTTPException(409, "this is a participant session; use /api/sessions")
-
-
-@deploy.get("/sessions/{session_id}", summary="A deploy session's state and trials", responses=errors(409))
-def deploy_state(session_id: str, request: Request, s: Caller = Depends(require_session)):
-    _deploy_session(s)
-    with _db(request) as db:
-        row = db.get(Session, s.id)
-        trials = db.scalars(select(Trial).where(Trial.session_id == s.id).order_by(Trial.trial)).all()
-        return {
-            "session_id": row.id,
-            "label": row.participant,
-            "trials_done": row.trials_done,
-            "score": row.score,
-            "belief": p_high(row.belief, len(row.plan["model"]["trust_levels"])),
-            "pending": None
-            if row.pending_trial is None
-            else {"trial": row.pending_trial, "complexity": row.pending_complexity, "robot_action": row.pending_action},
-            "trials": [trial_dict(t) for t in trials],
-        }
-
-
-def _robot(request: Request, session_id: str) -> Caller:
-    """The deploy session named in the path, if the bearer token is its token (the check of
-    ``require_session``, made inline: the decision API is latency-critical)."""
-    header = request.headers.get("authorization", "")
-    scheme, _, token = header.partition(" ")
-    if scheme.lower() != "bearer" or not token:
-        raise HTTPException(401, "missing token: send 'Authorization: Bearer <token>'", headers={"WWW-Authenticate": "Bearer"})
-    s = session_for_token(request, token.strip())
-    if not secrets.compare_digest(s.id.encode(), session_id.encode()):
-        raise HTTPException(403, "this token belongs to another session")
-    _deploy_session(s)
-    return s
-
-
-_BEARER: dict[str, Any] = {"security": [{"HTTPBearer": []}]}
-
-
-def _json(out: dict) -> Response:
-    """A JSON response of plain values (str, int, float, None), serialized directly."""
-    return Response(json.dumps(out, allow_nan=False, separators=(",", ":")).encode(), media_type="application/json")
-
-
-@deploy.post(
-    "/sessions/{session_id}/decide",
-    summary="Post a trial's complexity (or, for a schedule policy, the remaining items), get the robot action",
-    openapi_extra=_BEARER,
-    responses=errors(400, 404, 409),
-)
-async def decide(session_id: str, body: DecideIn, request: Request):
-    # async on purpose: a short transaction run on the event loop, without a hop to a worker thread
-    s = _robot(request, session_id)
-    try:
-        with request.app.state.deploy_store.transaction() as tx:
-            out = deploy_decide(tx, s.id, body.trial, body.complexity, body.remaining, body.visible)
-    except SessionError as exc:
-        _fail(exc)
-    return _json(out)
-
-
-@deploy.post(
-    "/sessions/{session_id}/observe",
-    summary="Post the observed human action and outcome; updates the belief",
-    openapi_extra=_BEARER,
-    responses=errors(400, 404, 409),
-)
-async def observe(session_id: str, body: ObserveIn, request: Request):
-    s = _robot(request, session_id)
-    store = request.app.state.deploy_store
-    try:
-        with store.transaction() as tx:
-            t, dup = deploy_observe(tx, s.id, body.trial, body.human_action, body.outcome)
-    except SessionError as exc:
-        _fail(exc)
-    except store.IntegrityError:  # committed by a concurrent request in the meantime
-        with store.transaction() as tx:
-            old = committed_trial(tx, s.id, body.trial)
-        if old is None:
-            raise
-        t, dup = trial_dict(old), True
-    return _json({"trial": t, "duplicate": dup, "belief": t["belief_after"]})

@@ -36,9 +36,9 @@ from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 from ..model.task import Task
 from ..policies import PolicyRunner
 from ..policies.schedule import SchedulePolicy
+from .cache import Bounded, caches_of
 from .checks import SCREENED, quiz_due
 from .orm import Answer, Event, EventBatch, Report, Session, Study, Trial, utcnow
-from .store import TrialRow
 from .studies import block_items, policy_object
 
 log = logging.getLogger(__name__)
@@ -112,6 +112,7 @@ class Context:
     keys: list[str]
     load_policy: Any  # callable(block) -> policy JSON, used when the policy is not cached
     trials: list[dict[str, Any]] | None
+    policies: Bounded[str, Any] | None = None  # the application's parsed policies (StudyCaches.policies)
 
     def step(self, n: int) -> dict[str, Any]:
         """The plan of trial ``n`` (block, complexity); only study sessions have one."""
@@ -122,7 +123,7 @@ class Context:
     def pick(self, block: int, belief, remaining: dict[str, int], visible: dict[str, int] | None) -> tuple[str, str]:
         """(complexity, robot action) that block ``block``'s schedule policy picks for the
         remaining (and visible) items."""
-        pol = policy_object(self.keys[block], lambda: self.load_policy(block))
+        pol = policy_object(self.policies, self.keys[block], lambda: self.load_policy(block))
         if not isinstance(pol, SchedulePolicy):
             raise SessionError(500, f"block {block} picks its items by policy but runs a {pol.kind} policy")
         cx = self.task.complexities
@@ -131,40 +132,39 @@ class Context:
         return cx[k], ACTIONS[a]
 
     def runner(self, block: int, belief, seed: int, trial: int) -> PolicyRunner:
-        pol = policy_object(self.keys[block], lambda: self.load_policy(block))
+        pol = policy_object(self.policies, self.keys[block], lambda: self.load_policy(block))
         model = getattr(pol, "model", None) or self.model
         return PolicyRunner(pol, model=model, rng=np.random.default_rng([seed, trial, 0]), belief=np.asarray(belief, dtype=float))
 
 
-_CONTEXTS: dict[str, tuple] = {}
-_CONFIGS: dict[str, dict[str, Any]] = {}
-
-
 def study_config(db: DBSession, study_id: str) -> dict[str, Any]:
-    """A study's configuration (immutable once created, so cached per process)."""
-    cfg = _CONFIGS.get(study_id)
+    """A study's configuration (immutable once created, so remembered by the application)."""
+    configs = caches_of(db).configs
+    cfg = configs.get(study_id)
     if cfg is None:
-        if len(_CONFIGS) > 256:
-            _CONFIGS.clear()
         study = db.get(Study, study_id)
         if study is None:
             raise SessionError(404, "no such study")
-        cfg = _CONFIGS[study_id] = study.config
+        cfg = configs.put(study_id, study.config)
     return cfg
 
 
 def context(db: DBSession, s: Session) -> Context:
-    """The context of a study session (deploy sessions: ``deploy.deploy_context``)."""
+    """The context of a study session (deploy sessions: ``deploy.plan.DeployPlan``)."""
     if s.kind == "study" and s.study_id is not None:
         study_id = s.study_id
         key = f"study:{study_id}"
-        cached = _CONTEXTS.get(key)
+        caches = caches_of(db)
+        cached = caches.contexts.get(key)
         if cached is None:
             cfg = study_config(db, study_id)
-            cached = _CONTEXTS[key] = (
-                Task.from_dict(cfg["task"]),
-                TrustModel.from_dict(cfg["model"]),
-                [_block_policy(cfg, b)["kind"] for b in range(len(cfg["blocks"]) + bool(cfg.get("practice")))],
+            cached = caches.contexts.put(
+                key,
+                (
+                    Task.from_dict(cfg["task"]),
+                    TrustModel.from_dict(cfg["model"]),
+                    [_block_policy(cfg, b)["kind"] for b in range(len(cfg["blocks"]) + bool(cfg.get("practice")))],
+                ),
             )
         task, model, kinds = cached
         return Context(
@@ -174,6 +174,7 @@ def context(db: DBSession, s: Session) -> Context:
             [f"{key}:{i}" for i in range(len(kinds))],
             lambda b: _block_policy(study_config(db, study_id), b),
             s.plan["trials"],
+            caches.policies,
         )
     raise SessionError(409, "this is a deploy session; use /api/deploy")
 
@@ -252,7 +253,8 @@ def served(s: Session, n: int, items: tuple[dict[str, int], dict[str, int] | Non
     return out
 
 
-def trial_dict(t: Trial | TrialRow) -> dict[str, Any]:
+def trial_dict(t: Trial | Any) -> dict[str, Any]:
+    # a trial row, or the decision API's TrialRow (deploy.store) with the same columns
     return {
         "trial": t.trial,
         "block": t.block,

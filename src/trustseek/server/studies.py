@@ -37,6 +37,7 @@ from ..model.task import Task
 from ..policies import policy_from_dict
 from ..policies.schedule import SCHEDULE
 from ..solvers import policy_from_spec
+from .cache import Bounded, StudyCaches
 from .schemas import STRICT, check_preset
 
 MAX_TRIALS_PER_BLOCK = 1000
@@ -227,32 +228,29 @@ def load_model_spec(spec: str | dict) -> TrustModel:
         raise ConfigError(exc.lines()) from None
 
 
-def resolve_policy(spec: dict[str, Any], model: TrustModel, task: Task, where: str = "policy") -> dict[str, Any]:
+def resolve_policy(
+    spec: dict[str, Any], model: TrustModel, task: Task, where: str = "policy", caches: StudyCaches | None = None
+) -> dict[str, Any]:
     """A policy spec (``trustseek.solvers.specs``) to the core's policy JSON, solving the POMDP
-    for ``trust-aware`` (cached: many sessions open with the same model, task and spec)."""
+    for ``trust-aware`` (remembered in the application's ``caches``: many sessions open with
+    the same model, task and spec)."""
     if not isinstance(spec, dict):
         raise ConfigError([f"{where} must be an object"])
-    key = None if "format" in spec else json.dumps([model.to_dict(), task.to_dict(), spec], sort_keys=True)
-    if key is not None and key in _RESOLVED:
-        return _RESOLVED[key]
+    key = None if "format" in spec or caches is None else json.dumps([model.to_dict(), task.to_dict(), spec], sort_keys=True)
+    if key is not None and caches is not None:
+        found = caches.resolved.get(key) or caches.schedules.get(key)
+        if found is not None:
+            return found
     try:
         policy = policy_from_spec(spec, model, task, where, max_grid=MAX_GRID, max_values=MAX_SCHEDULE_VALUES).to_dict()
     except TrustseekError as exc:
         raise ConfigError(exc.lines()) from None
-    if key is not None:
-        schedules = sum(p["kind"] == SCHEDULE for p in _RESOLVED.values())
-        if len(_RESOLVED) > 64 or (policy["kind"] == SCHEDULE and schedules >= MAX_CACHED_SCHEDULES):
-            _RESOLVED.clear()
-        _RESOLVED[key] = policy
+    if key is not None and caches is not None:
+        (caches.schedules if policy["kind"] == SCHEDULE else caches.resolved).put(key, policy)
     return policy
 
 
-_RESOLVED: dict[str, dict[str, Any]] = {}
-#: schedule policies are large (megabytes of JSON each): the cache keeps only a few
-MAX_CACHED_SCHEDULES = 8
-
-
-def build_study_config(study: StudyIn) -> dict[str, Any]:
+def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dict[str, Any]:
     """Validate every part of a study and return the stored configuration."""
     problems: list[str] = []
     task = model = None
@@ -274,7 +272,7 @@ def build_study_config(study: StudyIn) -> dict[str, Any]:
         s = b.schedule
         if not isinstance(s, Schedule):
             try:
-                pol = resolve_policy(b.policy, model, task, f"{where}.policy")
+                pol = resolve_policy(b.policy, model, task, f"{where}.policy", caches)
                 blocks.append({"name": b.name or f"block {i + 1}", "policy": pol, "schedule": chosen_schedule(pol, where)})
             except ConfigError as exc:
                 problems += exc.problems
@@ -284,7 +282,7 @@ def build_study_config(study: StudyIn) -> dict[str, Any]:
         if bad:
             problems.append(f"{where}.schedule names unknown complexities {bad}; expected {list(task.complexities)}")
         try:
-            pol = resolve_policy(b.policy, model, task, f"{where}.policy")
+            pol = resolve_policy(b.policy, model, task, f"{where}.policy", caches)
         except ConfigError as exc:
             problems += exc.problems
             continue
@@ -304,7 +302,7 @@ def build_study_config(study: StudyIn) -> dict[str, Any]:
         if bad:
             problems.append(f"practice.trials names unknown complexities {bad}; expected {list(task.complexities)}")
         try:
-            practice_policy = resolve_policy(study.practice.policy, model, task, "practice.policy")
+            practice_policy = resolve_policy(study.practice.policy, model, task, "practice.policy", caches)
             asks = study.practice.asks if study.practice.asks is not None else [len(study.practice.trials)]
             practice = {"trials": list(study.practice.trials), "policy": practice_policy, "asks": sorted(set(asks))}
             if practice_policy["kind"] == SCHEDULE:
@@ -444,17 +442,15 @@ def block_items(
     return remaining, visible
 
 
-_POLICIES: dict[str, Any] = {}
-
-
-def policy_object(key: str, policy_json):
-    """The policy object of a stored (immutable) policy JSON, cached by ``key``: parsing a
-    solved policy is not free, and stored policies never change.  ``policy_json`` may be a
-    callable returning the JSON, called only when the policy is not cached."""
-    pol = _POLICIES.get(key)
+def policy_object(policies: Bounded[str, Any] | None, key: str, policy_json):
+    """The policy object of a stored (immutable) policy JSON, remembered by ``key`` in the
+    application's ``policies``: parsing a solved policy is not free, and stored policies never
+    change.  ``policy_json`` may be a callable returning the JSON, called only when the policy
+    is not remembered."""
+    pol = None if policies is None else policies.get(key)
     if pol is None:
-        if len(_POLICIES) > 4096:
-            _POLICIES.clear()
         d = policy_json() if callable(policy_json) else policy_json
-        pol = _POLICIES[key] = policy_from_dict(d, key)
+        pol = policy_from_dict(d, key)
+        if policies is not None:
+            policies.put(key, pol)
     return pol

@@ -46,7 +46,8 @@ from typing import Any, NamedTuple, Protocol
 
 from sqlalchemy.engine import Engine
 
-from ..errors import TrustseekError
+from ...errors import TrustseekError
+from ..cache import Bounded
 
 
 class LiveRow(NamedTuple):
@@ -113,7 +114,7 @@ def _statements(dialect: str) -> dict[str, str]:
 
     from sqlalchemy.dialects import postgresql
 
-    from .orm import Trial
+    from ..orm import Trial
 
     out = {
         k: v.format(lock=" FOR UPDATE", belief="CAST(:belief AS JSON)", belief_json="CAST(:belief_json AS JSON)")
@@ -175,7 +176,7 @@ class Write(NamedTuple):
     insert: dict[str, Any] | None  # SQLite: the trial inserted once the row has advanced
 
 
-MAX_KNOWN = 200_000  # sessions whose state is remembered (then forgotten at once)
+MAX_KNOWN = 200_000  # sessions whose state is remembered (the least recently used forgotten first)
 ASYNC_CONNECTIONS = 8  # PostgreSQL: connections for conditional writes awaited on the event loop
 
 
@@ -201,7 +202,7 @@ class DeployStore:
         self._fairy: Any = None  # the pool's wrapper of the held connection
         self._cur: Any = None
         #: session id -> its live columns as this process last read or committed them
-        self.known: dict[str, LiveRow] = {}
+        self.known: Bounded[str, LiveRow] = Bounded(MAX_KNOWN)
         self._seen: LiveRow | None = None  # the transaction's session, as it will be after the commit
         self._idle: list[Any] = []  # PostgreSQL: idle connections of apply_async
         self._opened = 0  # ... and those in use
@@ -232,13 +233,11 @@ class DeployStore:
 
     def remember(self, row: LiveRow) -> None:
         """Record a session's live columns as just committed (a session opened by this process)."""
-        if len(self.known) >= MAX_KNOWN:
-            self.known.clear()
-        self.known[row.id] = row
+        self.known.put(row.id, row)
 
     def _settle(self, sid: str, after: LiveRow | None) -> None:
         if after is None:
-            self.known.pop(sid, None)
+            self.known.pop(sid)
         else:
             self.remember(after)
 
@@ -256,7 +255,7 @@ class DeployStore:
                 yield self
             except BaseException as exc:
                 if self._seen is not None:
-                    self.known.pop(self._seen.id, None)
+                    self.known.pop(self._seen.id)
                 try:
                     self._fairy.driver_connection.rollback()
                 except Exception:
@@ -269,7 +268,7 @@ class DeployStore:
                 self._fairy.driver_connection.commit()
             except BaseException:
                 if self._seen is not None:
-                    self.known.pop(self._seen.id, None)
+                    self.known.pop(self._seen.id)
                 self._drop()
                 raise
             if self._seen is not None:
@@ -343,7 +342,7 @@ class DeployStore:
                     cur.execute(w.sql, w.params)  # one statement, committed by itself
                     done = cur.rowcount == 1
             except BaseException:
-                self.known.pop(sid, None)
+                self.known.pop(sid)
                 with contextlib.suppress(Exception):
                     self._fairy.driver_connection.rollback()
                 self._drop()
@@ -367,7 +366,7 @@ class DeployStore:
             await cur.execute(w.sql, w.params)
             done = cur.rowcount == 1
         except BaseException:
-            self.known.pop(sid, None)
+            self.known.pop(sid)
             if conn is not None:
                 with contextlib.suppress(Exception):
                     conn.pgconn.finish()

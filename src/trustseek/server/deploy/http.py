@@ -1,0 +1,245 @@
+"""The decision API over HTTP: one answer per request (``answer``), served in plain ASGI in front
+of FastAPI (``DeployFront``).
+
+Under many robots at once the server's capacity is its CPU time per request, and most of it
+went to the framework, not to the decision (measured in process, with the same ``answer``:
+0.24-0.26 ms of CPU per request through FastAPI's routing, dependency solving and pydantic,
+0.10-0.11 ms in plain ASGI).  So
+``decide`` and ``observe`` are answered by ``DeployFront``, the outermost layer of the
+application (``app.ServerApp``), whenever:
+
+* the path is ``/api/deploy/sessions/{id}/decide`` or ``.../observe``;
+* the bearer token is the token of that deploy session (the check of ``middleware.BodyGuard``
+  and the routes), and the declared body length is within ``SESSION_BODY_LIMIT`` (the body is
+  read only then);
+* the body is JSON (``Content-Type: application/json``) holding only the fields of ``DecideIn``
+  or ``ObserveIn``, with exactly the types and bounds those models accept.
+
+It answers successes and the session's refusals (400, 404, 409: the domain errors of
+``errors``, given their status here, in ``STATUS``) alike.  Anything else -- a malformed body,
+another token, a body above the limit -- is handed, body and all, to FastAPI, which refuses it
+(401, 403, 413, 422: ``middleware.BodyGuard`` and pydantic) or, for a body its validation takes,
+calls the same ``answer`` (``routes``).  Both return the same bytes, with the ``Server-Timing``
+header of ``middleware.ServerTiming``.
+
+``answer`` runs the request first from the session's state this process knows, with one
+conditional write (``store.Known``; on PostgreSQL one statement, awaited), else in one
+transaction of ``store.DeployStore`` that reads the session.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import secrets
+import time
+from collections.abc import Callable
+from typing import Any
+
+from ..auth import Caller, caller_for_token
+from ..middleware import SESSION_BODY_LIMIT, ASGIApp, Message, Receive, Scope, Send
+from ..schemas import MAX_TRIAL
+from ..sessions import trial_dict
+from .errors import Conflict, DeployError, NoSession, NotAllowed
+from .service import deploy_decide, deploy_observe
+from .store import Known, Stale, Statements
+
+log = logging.getLogger(__name__)
+
+#: the HTTP status of each refusal of a deploy session
+STATUS: dict[type[DeployError], int] = {NotAllowed: 400, NoSession: 404, Conflict: 409}
+
+PREFIX = "/api/deploy/sessions/"
+_DECIDE = frozenset({"trial", "complexity", "remaining", "visible"})
+_OBSERVE = frozenset({"trial", "human_action", "outcome"})
+_HUMAN = frozenset({"intervene", "rely"})
+_OUTCOME = frozenset({"success", "failure", "collision", "dropped", "teleoperated"})
+_JSON = (b"content-type", b"application/json")
+
+#: (trial, complexity, remaining, visible) of ``decide``; (trial, human action, outcome) of ``observe``
+Args = tuple[Any, ...]
+
+
+def _trial(body: dict[str, Any]) -> int | None:
+    n = body.get("trial")
+    return n if type(n) is int and 1 <= n <= MAX_TRIAL else None
+
+
+def _text(v: Any) -> bool:
+    return type(v) is str and "\x00" not in v  # a NUL character is the body guard's 400
+
+
+def _counts(v: Any) -> bool:
+    return v is None or (type(v) is dict and all(_text(k) and type(n) is int for k, n in v.items()))
+
+
+def decide_args(body: dict[str, Any]) -> Args | None:
+    """(trial, complexity, remaining, visible) of a body ``DecideIn`` accepts, else None."""
+    if not body.keys() <= _DECIDE:
+        return None
+    n, c, remaining, visible = _trial(body), body.get("complexity"), body.get("remaining"), body.get("visible")
+    if n is None or not (c is None or (_text(c) and 1 <= len(c) <= 32)) or not (_counts(remaining) and _counts(visible)):
+        return None
+    return n, c, remaining, visible
+
+
+def observe_args(body: dict[str, Any]) -> Args | None:
+    """(trial, human action, outcome) of a body ``ObserveIn`` accepts, else None."""
+    if not body.keys() <= _OBSERVE:
+        return None
+    n, h, o = _trial(body), body.get("human_action"), body.get("outcome")
+    if n is None or not (h is None or (type(h) is str and h in _HUMAN)) or not (o is None or (type(o) is str and o in _OUTCOME)):
+        return None
+    return n, h, o
+
+
+def _dump(out: dict[str, Any]) -> bytes:
+    return json.dumps(out, allow_nan=False, separators=(",", ":")).encode()
+
+
+def refusal(exc: DeployError) -> tuple[int, bytes]:
+    """(status, body) of a refusal, the bytes of FastAPI's ``HTTPException`` answer."""
+    body = json.dumps({"detail": exc.message}, ensure_ascii=False, allow_nan=False, indent=None, separators=(",", ":"))
+    return STATUS[type(exc)], body.encode("utf-8")
+
+
+def _request(plans: Any, sid: str, what: str, args: Args) -> Callable[[Statements], dict[str, Any]]:
+    if what == "decide":
+        return lambda tx: deploy_decide(tx, plans, sid, *args)
+
+    def observe(tx: Statements) -> dict[str, Any]:
+        t, dup = deploy_observe(tx, plans, sid, *args)
+        return {"trial": t, "duplicate": dup, "belief": t["belief_after"]}
+
+    return observe
+
+
+async def answer(state: Any, sid: str, what: str, args: Args) -> tuple[int, bytes]:
+    """(status, body) of ``what`` (``decide`` or ``observe``) of deploy session ``sid`` with
+    ``args`` (``decide_args`` / ``observe_args``), the caller holding the session's token.
+
+    First from the session's state as this process knows it, with one conditional write
+    (``store.Known``: one statement on PostgreSQL, awaited on the event loop); when that cannot
+    answer, in a transaction that reads the session (``store.DeployStore.transaction``), tried
+    again once on a new connection when the database fails."""
+    store = state.deploy_store
+    run = _request(state.deploy_plans, sid, what, args)
+    try:
+        known = Known(store)
+        out = run(known)
+        if known.write is not None and await store.apply_async(known.write):
+            return 200, _dump(out)
+    except (Stale, DeployError):
+        pass  # the transaction below reads the session
+    except Exception as exc:
+        log.debug("deploy %s of session %s: conditional write failed: %s: %s", what, sid, type(exc).__name__, exc)
+    for attempt in (1, 2):
+        try:
+            with store.transaction() as tx:
+                return 200, _dump(run(tx))
+        except DeployError as exc:
+            return refusal(exc)
+        except store.IntegrityError:
+            if what != "observe":
+                raise
+            with store.transaction() as tx:  # the trial was committed by a concurrent request meanwhile
+                old = tx.committed(sid, args[0])
+            if old is None:
+                raise
+            t = trial_dict(old)
+            return 200, _dump({"trial": t, "duplicate": True, "belief": t["belief_after"]})
+        except store.Error as exc:
+            if attempt == 2:
+                raise
+            log.warning("deploy %s of session %s: database error, tried again: %s: %s", what, sid, type(exc).__name__, exc)
+    raise AssertionError("unreachable")
+
+
+class DeployFront:
+    """See the module's docstring; ``app`` is the FastAPI application."""
+
+    def __init__(self, app: ASGIApp):
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        path = scope.get("path", "") if scope["type"] == "http" else ""
+        if scope.get("method") != "POST" or not path.startswith(PREFIX):
+            return await self.app(scope, receive, send)
+        t0 = time.perf_counter()
+        sid, _, what = path[len(PREFIX) :].partition("/")
+        if not sid or what not in ("decide", "observe"):
+            return await self.app(scope, receive, send)
+        caller = _caller(scope, sid)
+        if caller is None:
+            return await self.app(scope, receive, send)  # nothing read: the guard and the routes answer
+        chunks = []
+        while True:
+            message = await receive()
+            if message["type"] != "http.request":  # the client went away
+                return
+            chunks.append(message.get("body", b""))
+            if not message.get("more_body"):
+                break
+        body = b"".join(chunks)
+        args = _args(what, body)
+        if args is not None:
+            status, out = await answer(scope["app"].state, caller.id, what, args)
+            if status >= 400:
+                log.info("POST %s{session_id}/%s session_id=%s -> %d", PREFIX, what, caller.id, status)
+            timing = b"app;dur=%.3f" % ((time.perf_counter() - t0) * 1000)
+            head = [(b"content-length", b"%d" % len(out)), _JSON, (b"server-timing", timing)]
+            await send({"type": "http.response.start", "status": status, "headers": head})
+            await send({"type": "http.response.body", "body": out})
+            return
+        replayed = False
+
+        async def replay() -> Message:
+            nonlocal replayed
+            if not replayed:
+                replayed = True
+                return {"type": "http.request", "body": body, "more_body": False}
+            return await receive()
+
+        await self.app(scope, replay, send)
+
+
+def _args(what: str, raw: bytes) -> Args | None:
+    """The request's arguments, or None when the body is not one the request schema takes."""
+    try:
+        body = json.loads(raw)
+    except (ValueError, RecursionError):  # FastAPI refuses it (middleware.json_body_problem)
+        return None
+    if type(body) is not dict:
+        return None
+    return decide_args(body) if what == "decide" else observe_args(body)
+
+
+def _caller(scope: Scope, sid: str) -> Caller | None:
+    """The deploy session ``sid`` if the request's bearer token is its token, its body is
+    declared as JSON and its declared length is within the session limit; else None."""
+    auth = kind = length = None
+    for k, v in scope.get("headers") or ():
+        if k == b"authorization":
+            if auth is not None:
+                return None
+            auth = v
+        elif k == b"content-type":
+            if kind is not None:
+                return None
+            kind = v
+        elif k == b"content-length":
+            if length is not None:
+                return None
+            length = v
+    if auth is None or kind is None or length is None or kind.split(b";")[0].strip().lower() != b"application/json":
+        return None
+    if not length.isdigit() or int(length) > SESSION_BODY_LIMIT:
+        return None
+    scheme, _, token = auth.decode("latin-1").partition(" ")
+    token = token.strip()
+    if scheme.lower() != "bearer" or not token:
+        return None
+    caller = caller_for_token(scope["app"].state, token)
+    if caller is None or caller.kind != "deploy" or not secrets.compare_digest(caller.id.encode(), sid.encode()):
+        return None
+    return caller

@@ -1,0 +1,249 @@
+"""The decision API's sessions, independent of HTTP: a robot opens a deploy session with a task,
+a model and a policy (``create_deploy``); then, trial by trial, it posts the complexity and gets
+the action (``deploy_decide``), and posts what the human did and the outcome
+(``deploy_observe``), which commits the trial and updates the belief with ``PolicyRunner``'s step.
+
+Each runs with the statements of ``store`` (a transaction of ``store.DeployStore``, or
+``store.Known``: a conditional write from the state this process knows) and the application's
+``plan.Plans``; refusals are the domain errors of ``errors``.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from typing import Any
+
+import numpy as np
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session as DBSession
+
+from ...model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
+from ...model.task import Task
+from ...policies import PolicyError
+from ...policies.schedule import SchedulePolicy
+from ..orm import PolicyBlob, Session, utcnow
+from ..schemas import MAX_TRIAL
+from ..sessions import new_id, new_token, p_high, trial_dict, trial_experience
+from .errors import Conflict, NoSession, NotAllowed
+from .plan import DeployPlan, Plans, policy_sha256
+from .store import LiveRow, Statements
+
+
+def score_problem(task: Task) -> str | None:
+    """Why a deploy session of ``task`` could not keep its score, a sum of up to ``MAX_TRIAL``
+    rewards, as a finite number (nor a policy its values), or None."""
+    largest = max(abs(v) for v in task.rewards.to_dict().values())
+    if math.isfinite(largest * MAX_TRIAL):
+        return None
+    return (
+        f"task rewards: the largest reward in magnitude, {largest:g}, overflows a session's score over {MAX_TRIAL} trials; "
+        f"keep every reward within +-{sys.float_info.max / MAX_TRIAL:.3g}"
+    )
+
+
+def create_deploy(
+    db: DBSession, plans: Plans, label: str, task: Task, model: TrustModel, policy: dict[str, Any], seed: int
+) -> Session:
+    """A new deploy session (added to ``db``, not committed, and registered in ``plans``): its plan
+    (task, model, and the policy by its SHA-256, the policy itself stored once per content) and
+    its belief at the start (the initial trust of the policy's own model, else of ``model``).
+    A policy that does not load raises its ``ModelError``."""
+    sha = policy_sha256(policy)
+    content = {"task": task.to_dict(), "model": model.to_dict(), "policy_sha256": sha, "policy_kind": policy["kind"]}
+    plan = plans.shared(content, lambda: DeployPlan(task, model, policy["kind"], sha))
+    pol = plan.policy(lambda: policy)  # sessions with the same plan share one parsed copy
+    pm = getattr(pol, "model", None) or model
+    if db.get(PolicyBlob, sha) is None:
+        # the stored form: the policy's own to_dict() (its loaders match keys by name, so rows
+        # with sorted keys and databases that reorder JSON objects load alike)
+        db.add(PolicyBlob(sha256=sha, policy=pol.to_dict()))
+        try:
+            db.flush()
+        except IntegrityError:  # stored concurrently by another request
+            db.rollback()
+    s = Session(
+        id=new_id(),
+        token=new_token(),
+        kind="deploy",
+        study_id=None,
+        participant=label,
+        seed=seed,
+        plan=content,
+        status="running",
+        belief=[float(x) for x in pm.initial],
+        trials_done=0,
+        score=0.0,
+    )
+    db.add(s)
+    plans.by_session.put(s.id, plan)
+    return s
+
+
+def _live(store: Statements, session_id: str) -> LiveRow:
+    row = store.live(session_id)
+    if row is None:
+        raise NoSession("no such session")
+    return row
+
+
+def _counts(task: Task, counts: dict[str, int] | None, what: str) -> tuple[int, ...] | None:
+    if counts is None:
+        return None
+    unknown = sorted(set(counts) - set(task.complexities))
+    if unknown or any(not isinstance(v, int) or v < 0 for v in counts.values()):
+        raise NotAllowed(f"{what} must map complexities {list(task.complexities)} to non-negative numbers, got {counts!r}")
+    return tuple(int(counts.get(c, 0)) for c in task.complexities)
+
+
+def _scheduled(pol: Any, task: Task, belief, complexity: str | None, remaining, visible) -> tuple[str, str]:
+    """(complexity, action) of a schedule policy: the policy's pick among the remaining (visible)
+    items, or the action for an imposed item in that state."""
+    if not isinstance(pol, SchedulePolicy):
+        raise NotAllowed(f"remaining and visible items are for a schedule policy; this session runs a {pol.kind} policy")
+    rem = _counts(task, remaining, "remaining")
+    if rem is None:
+        raise NotAllowed("a schedule policy needs the remaining items: post remaining (per complexity)")
+    vis = _counts(task, visible, "visible")
+    try:
+        if complexity is None:
+            k, a = pol.choose(belief, rem, vis)
+            return task.complexities[k], ACTIONS[a]
+        bound = pol.at(rem, vis)
+        return complexity, ACTIONS[bound.action(belief, task.complexity_index(complexity))]
+    except (PolicyError, KeyError) as exc:
+        raise NotAllowed("; ".join(exc.problems) if isinstance(exc, PolicyError) else str(exc)) from None
+
+
+def deploy_decide(
+    store: Statements,
+    plans: Plans,
+    session_id: str,
+    n: int,
+    complexity: str | None,
+    remaining: dict[str, int] | None = None,
+    visible: dict[str, int] | None = None,
+) -> dict[str, Any]:
+    """The robot action for trial ``n`` (decided once, stored as the session's pending trial;
+    repeated calls return the stored decision).  With ``remaining`` (a ``schedule`` policy)
+    the policy also picks the item's complexity when none is given.  Runs in the caller's
+    transaction (``store.transaction()``)."""
+    s = _live(store, session_id)
+    plan = plans.of(store, session_id)
+    if complexity is not None and complexity not in plan.task.complexities:
+        raise NotAllowed(f"complexity must be one of {list(plan.task.complexities)}, got {complexity!r}")
+    if complexity is None and remaining is None:
+        raise NotAllowed("post the trial's complexity (or, for a schedule policy, the remaining items)")
+    # trials are committed in order together with trials_done, so trial n exists iff n <= trials_done
+    old = store.committed(session_id, n) if n <= s.trials_done else None
+    if old is not None:
+        if complexity is not None and old.complexity != complexity:
+            raise Conflict(f"trial {n} was committed with complexity {old.complexity!r}, not {complexity!r}")
+        return {
+            "trial": n,
+            "complexity": old.complexity,
+            "robot_action": old.robot_action,
+            "belief": old.belief,
+            "committed": True,
+        }
+    if n != s.trials_done + 1:
+        raise Conflict(f"trial {n} is not the next trial; the next trial is {s.trials_done + 1}")
+    if s.pending_trial == n:
+        if complexity is not None and s.pending_complexity != complexity:
+            raise Conflict(f"trial {n} was already decided for complexity {s.pending_complexity!r}, not {complexity!r}")
+        return {
+            "trial": n,
+            "complexity": s.pending_complexity,
+            "robot_action": s.pending_action,
+            "belief": p_high(s.belief, plan.n_trust),
+            "committed": False,
+        }
+    load = lambda: store.policy(plan.sha)  # noqa: E731
+    if remaining is None and plan.kind == SchedulePolicy.kind:
+        raise NotAllowed("a schedule policy needs the remaining items: post remaining (per complexity)")
+    if remaining is not None or visible is not None:
+        pol = plan.policy(load)
+        complexity, action = _scheduled(pol, plan.task, np.asarray(s.belief, dtype=float), complexity, remaining, visible)
+    else:
+        assert complexity is not None
+        action = plan.decide(load, s.belief, s.seed, n, complexity)
+    store.decided(session_id, n, complexity, action, utcnow())
+    return {
+        "trial": n,
+        "complexity": complexity,
+        "robot_action": action,
+        "belief": p_high(s.belief, plan.n_trust),
+        "committed": False,
+    }
+
+
+def deploy_observe(
+    store: Statements, plans: Plans, session_id: str, n: int, human_action: str | None, outcome: str | None
+) -> tuple[dict[str, Any], bool]:
+    """Commit trial ``n`` from the observed human action and outcome; returns (trial, duplicate).
+    Runs in the caller's transaction (``store.transaction()``)."""
+    s = _live(store, session_id)
+    # trials are committed in order together with trials_done, so trial n exists iff n <= trials_done
+    old = store.committed(session_id, n) if n <= s.trials_done else None
+    if old is not None:
+        same_h = old.human_action == (human_action if human_action is not None or old.robot_action != "ask" else "intervene")
+        same_o = outcome is None or old.outcome == outcome
+        if same_h and same_o:
+            return trial_dict(old), True
+        raise Conflict(f"trial {n} is already committed with human_action={old.human_action!r}, outcome={old.outcome!r}")
+    if s.pending_trial != n:
+        raise Conflict(f"trial {n} has no decision yet; post its complexity to /decide first (next trial: {s.trials_done + 1})")
+    action, complexity = s.pending_action, s.pending_complexity
+    assert action is not None and complexity is not None  # stored together with pending_trial
+    plan = plans.of(store, session_id)
+    task = plan.task
+    c = task.complexity_index(complexity)
+    if action == "ask":
+        if human_action not in (None, "intervene"):
+            raise NotAllowed(
+                f"the robot asked in trial {n}: human_action must be 'intervene' (teleoperation) or omitted, "
+                f"got {human_action!r}",
+            )
+        if outcome not in (None, "teleoperated"):
+            raise NotAllowed(
+                f"the robot asked in trial {n}: the human teleoperated, so outcome must be 'teleoperated' or omitted, "
+                f"got {outcome!r}",
+            )
+        human_action, success, outcome = "intervene", None, "teleoperated"
+    else:
+        if human_action not in HUMAN_ACTIONS:
+            raise NotAllowed(f"human_action must be one of {list(HUMAN_ACTIONS)}, got {human_action!r}")
+        if human_action == "intervene":
+            if outcome not in (None, "teleoperated"):
+                raise NotAllowed(
+                    f"the human intervened in trial {n} and teleoperated: outcome must be 'teleoperated' or omitted, "
+                    f"got {outcome!r}",
+                )
+            success, outcome = None, "teleoperated"
+        else:
+            if outcome not in ("success", "failure", "collision", "dropped"):
+                raise NotAllowed(
+                    f"outcome must be 'success' or 'failure' (or 'collision'/'dropped') when the human relied, got {outcome!r}",
+                )
+            success = outcome == "success"
+    experience = trial_experience(task, c, action, human_action, success)
+    after = plan.update(lambda: store.policy(plan.sha), s.belief, complexity, action, human_action, experience)
+    a, o = ACTIONS.index(action), HUMAN_ACTIONS.index(human_action)
+    t: dict[str, Any] = {
+        "trial": n,
+        "block": 0,
+        "policy": plan.kind,
+        "complexity": complexity,
+        "robot_action": action,
+        "human_action": human_action,
+        "outcome": outcome,
+        "experience": experience,
+        "reward": float(task.rewards.of(a, o, EXPERIENCES.index(experience))),
+        "belief": p_high(s.belief, plan.n_trust),
+        "belief_after": p_high(after, plan.n_trust),
+        "effort_ms": None,
+        "submission_id": f"deploy-{n}",
+    }
+    new_belief = list(after) if after is not None else list(s.belief)
+    store.observed(session_id, t, new_belief, float(s.score + t["reward"]), utcnow())
+    return t, False
