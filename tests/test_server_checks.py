@@ -109,3 +109,18 @@ def test_attention_checks_are_recorded_with_their_answers(client):
         headers=H,
     )
     assert r.status_code == 400 and "attention check" in r.text
+
+
+def test_a_repeat_of_the_last_answers_after_the_end_is_a_duplicate_not_a_refusal(client):
+    """The answers that end a session, posted again (a retry whose answer was lost, or a second
+    tab), get the stored answers back; before, the repeat was refused (409) and the page stuck."""
+    q = {"name": "end", "items": [{"id": "a", "text": "A."}], "scale": {"min": 1, "max": 5}}
+    sid, h, _, _ = start(client, questionnaires=[q])
+    client.post(f"/api/sessions/{sid}/trials", json={"trial": 1, "submission_id": "a", "human_action": "rely"}, headers=h)
+    body = {"questionnaire": "end", "after_trial": 1, "answers": {"a": 4}}
+    first = client.post(f"/api/sessions/{sid}/questionnaires", json=body, headers=h)
+    assert first.status_code == 200 and first.json()["state"]["ended"]
+    again = client.post(f"/api/sessions/{sid}/questionnaires", json=body, headers=h)
+    assert again.status_code == 200 and again.json()["answers"]["duplicate"] is True
+    other = client.post(f"/api/sessions/{sid}/questionnaires", json={**body, "answers": {"a": 2}}, headers=h)
+    assert other.status_code == 409
