@@ -124,3 +124,38 @@ def test_a_repeat_of_the_last_answers_after_the_end_is_a_duplicate_not_a_refusal
     assert again.status_code == 200 and again.json()["answers"]["duplicate"] is True
     other = client.post(f"/api/sessions/{sid}/questionnaires", json={**body, "answers": {"a": 2}}, headers=h)
     assert other.status_code == 409
+
+
+@pytest.mark.parametrize(
+    ("body", "status", "wanted"),
+    [
+        # a field's problem and a block's: both named (before: only the field's)
+        (
+            {"task": "nope", "blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"trials": ["medium"]}}]},
+            422,
+            ["unknown task preset", "blocks[0].schedule names unknown complexities ['medium']"],
+        ),
+        (
+            {"animation_speed": 0, "blocks": [{"policy": {"kind": "bogus"}, "schedule": {"trials": ["low"]}}]},
+            422,
+            ["greater than 0.05", "blocks[0].policy.kind is 'bogus'"],
+        ),
+        # an invalid model and a block: both (before: the model's only)
+        (
+            {"model": {"format": "x"}, "blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"trials": ["medium"]}}]},
+            400,
+            ["model: format is 'x'", "blocks[0].schedule names unknown complexities"],
+        ),
+        # a schedule with two problems: both
+        (
+            {"blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": -1}, "trials": ["low"]}}]},
+            422,
+            ["exactly one of 'counts' or 'trials'", "counts must be non-negative"],
+        ),
+    ],
+)
+def test_a_study_with_several_problems_is_refused_naming_them_all(client, body, status, wanted):
+    r = client.post("/api/studies", json={"name": "several", **body}, headers=H)
+    assert r.status_code == status, r.text
+    for w in wanted:
+        assert w in r.text, (w, r.text)
