@@ -198,6 +198,11 @@ def test_dashboard_and_the_pages_of_a_paused_closed_or_revoked_link(tmp_path):
             assert "revoked" in dash.inner_text("#rows") and "pilot" in dash.inner_text("#rows")
             assert "of a quota of 40" in dash.inner_text("#progress")
             dash.screenshot(path=str(out / "dashboard_study.png"))
+            # a preview: the participant's view, where ?speed= works (and only there)
+            page.goto(c.preview(study["id"]) + "?speed=3")
+            page.wait_for_selector("#preview-tag:not([hidden])")
+            assert page.evaluate("window.trustseek.state().speed") == 3 * STUDY["animation_speed"]
+            page.screenshot(path=str(out / "page_preview.png"))
             dash.on("dialog", lambda d: d.accept())
             dash.click("#close-study")
             dash.wait_for_function("document.getElementById('study-status').textContent === 'closed'")
