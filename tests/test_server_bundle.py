@@ -118,3 +118,19 @@ def test_the_dashboard_download_is_the_same_bundle_and_an_existing_folder_is_not
     assert code == 2 and "--bundle" in text and (full / "keep.txt").read_text() == "mine"
     code, text = run_cli(["export", study, "--db", db])
     assert code == 2 and "--bundle" in text
+
+
+def test_the_study_command_shows_and_moves_the_lifecycle(finished):
+    _, db, study = finished
+    code, text = run_cli(["study", study, "--db", db, "--json"])
+    assert code == 0, text
+    shown = json.loads(text[: text.rindex("}") + 1])
+    assert shown["status"] == "open" and shown["link_path"].startswith("/join/") and shown["sessions"]["done"] == 4
+    assert shown["sessions"]["pilot"] == 1
+    assert run_cli(["study", study, "--db", db, "--status", "paused"])[0] == 0
+    code, text = run_cli(["study", study, "--db", db, "--status", "draft"])
+    assert code == 2 and "a paused study cannot become draft" in text
+    code, text = run_cli(["study", study, "--db", db, "--status", "shut"])
+    assert code == 2 and "--status 'shut'" in text
+    assert run_cli(["study", study, "--db", db, "--status", "closed"])[0] == 0
+    assert "closed" in run_cli(["study", study, "--db", db])[1]

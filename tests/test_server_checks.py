@@ -109,3 +109,53 @@ def test_attention_checks_are_recorded_with_their_answers(client):
         headers=H,
     )
     assert r.status_code == 400 and "attention check" in r.text
+
+
+def test_a_repeat_of_the_last_answers_after_the_end_is_a_duplicate_not_a_refusal(client):
+    """The answers that end a session, posted again (a retry whose answer was lost, or a second
+    tab), get the stored answers back; before, the repeat was refused (409) and the page stuck."""
+    q = {"name": "end", "items": [{"id": "a", "text": "A."}], "scale": {"min": 1, "max": 5}}
+    sid, h, _, _ = start(client, questionnaires=[q])
+    client.post(f"/api/sessions/{sid}/trials", json={"trial": 1, "submission_id": "a", "human_action": "rely"}, headers=h)
+    body = {"questionnaire": "end", "after_trial": 1, "answers": {"a": 4}}
+    first = client.post(f"/api/sessions/{sid}/questionnaires", json=body, headers=h)
+    assert first.status_code == 200 and first.json()["state"]["ended"]
+    again = client.post(f"/api/sessions/{sid}/questionnaires", json=body, headers=h)
+    assert again.status_code == 200 and again.json()["answers"]["duplicate"] is True
+    other = client.post(f"/api/sessions/{sid}/questionnaires", json={**body, "answers": {"a": 2}}, headers=h)
+    assert other.status_code == 409
+
+
+@pytest.mark.parametrize(
+    ("body", "status", "wanted"),
+    [
+        # a field's problem and a block's: both named (before: only the field's)
+        (
+            {"task": "nope", "blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"trials": ["medium"]}}]},
+            422,
+            ["unknown task preset", "blocks[0].schedule names unknown complexities ['medium']"],
+        ),
+        (
+            {"animation_speed": 0, "blocks": [{"policy": {"kind": "bogus"}, "schedule": {"trials": ["low"]}}]},
+            422,
+            ["greater than 0.05", "blocks[0].policy.kind is 'bogus'"],
+        ),
+        # an invalid model and a block: both (before: the model's only)
+        (
+            {"model": {"format": "x"}, "blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"trials": ["medium"]}}]},
+            400,
+            ["model: format is 'x'", "blocks[0].schedule names unknown complexities"],
+        ),
+        # a schedule with two problems: both
+        (
+            {"blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": -1}, "trials": ["low"]}}]},
+            422,
+            ["exactly one of 'counts' or 'trials'", "counts must be non-negative"],
+        ),
+    ],
+)
+def test_a_study_with_several_problems_is_refused_naming_them_all(client, body, status, wanted):
+    r = client.post("/api/studies", json={"name": "several", **body}, headers=H)
+    assert r.status_code == status, r.text
+    for w in wanted:
+        assert w in r.text, (w, r.text)

@@ -146,7 +146,7 @@ def test_a_quota_closes_the_study(client):
     token_of(join(client, study, "a"))
     token_of(join(client, study, "b"))
     r = join(client, study, "c")
-    assert r.status_code == 409 and "closed" in r.text
+    assert r.status_code == 409 and "The study is full" in r.text
     assert client.get(f"/api/studies/{study['id']}", headers=H).json()["status"] == "closed"
     assert token_of(join(client, study, "a"))  # an arrived participant may still finish
 

@@ -113,7 +113,7 @@ function renderSummary(s: Summary) {
   $<HTMLAnchorElement>("study-link").textContent = s.link ?? "";
   $<HTMLAnchorElement>("study-link").href = s.link ?? "#";
   $("progress").innerHTML = `<span class="bar wide"><i style="width:${pct}%"></i></span>
-    <b>${p.done}</b> done, <b>${p.running}</b> running, <b>${p.new}</b> arrived${s.quota ? ` of a quota of <b>${s.quota}</b>` : ""}${p.screened ? `, ${p.screened} screened out` : ""}; ${p.pilot} pilot, ${p.preview} preview`;
+    <b>${p.done}</b> done, <b>${p.running}</b> running, <b>${p.new}</b> not yet started${s.quota ? ` of a quota of <b>${s.quota}</b>` : ""}${p.screened ? `, ${p.screened} screened out` : ""}; ${p.pilot} pilot, ${p.preview} preview`;
   $("summary").textContent = `${s.name}: ${s.blocks.map((b) => `${b.name} (${b.policy})`).join(", ")}; counterbalance ${s.counterbalance}; self-report ${s.self_report}`;
   for (const [id, to] of [["open-study", "open"], ["pause-study", "paused"], ["close-study", "closed"]] as const) {
     const allowed: Record<string, string[]> = { draft: ["open", "closed"], open: ["paused", "closed"], paused: ["open", "closed"], closed: [] };

@@ -14,6 +14,7 @@ from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
+from starlette.concurrency import run_in_threadpool
 
 from ..version import __version__
 from .cache import StudyCaches
@@ -27,6 +28,7 @@ from .middleware import BodyGuard, RequestLog, ServerTiming
 from .participant_routes import own, participant
 from .routes import experimenter
 from .schemas import ErrorOut
+from .studies import more_problems
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +48,11 @@ def json_safe(value: Any) -> Any:
 async def validation_error(request: Request, exc: Exception) -> JSONResponse:
     """422 with every problem, as FastAPI answers, but always serialisable: a refused ``NaN``
     is echoed as the string ``"NaN"`` (FastAPI's own answer would fail to serialise, a 500)."""
-    errors = exc.errors() if isinstance(exc, RequestValidationError) else []
+    errors = list(exc.errors()) if isinstance(exc, RequestValidationError) else []
+    if isinstance(exc, RequestValidationError) and request.method == "POST" and request.url.path == "/api/studies":
+        # a study's other problems too, not only its fields' (solving a policy may take a moment)
+        more = await run_in_threadpool(more_problems, exc.body, errors)
+        errors += [{"type": "study", "loc": ["body"], "msg": p} for p in more]
     return JSONResponse(status_code=422, content={"detail": json_safe(jsonable_encoder(errors))})
 
 

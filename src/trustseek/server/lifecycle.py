@@ -143,16 +143,16 @@ def arrive(db: DBSession, study_id: str, panel_id: str | None, ids: dict[str, st
     if old is not None:
         db.rollback()
         return _resumed(db, old)
-    if st.status != "open":
-        db.rollback()
-        return Arrival(page=st.status)
     cfg = study_config(db, study_id)
     quota = cfg.get("quota")
     n = db.scalar(select(func.count()).select_from(Session).where(*counted(study_id))) or 0
-    if quota is not None and n >= quota:
+    if quota is not None and n >= quota:  # every place taken: the study is full (and closed)
         st.status = "closed"
         db.commit()
         return Arrival(page="full")
+    if st.status != "open":
+        db.rollback()
+        return Arrival(page=st.status)
     s = create_participant(db, st, None, panel_id=panel_id, panel=ids)
     if quota is not None and n + 1 >= quota:
         st.status = "closed"  # the last place is taken: the study closes

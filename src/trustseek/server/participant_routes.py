@@ -207,9 +207,10 @@ def post_report(session_id: str, body: ReportIn, request: Request, s: Caller = D
         _not_revoked(row)
         cfg = study_config(db, row.study_id) if row.study_id else {}
         try:
-            if ended(db, row, cfg):
-                raise SessionError(409, "this session has ended")
+            over = ended(db, row, cfg)
             rep, dup = add_report(db, row, cfg, body.after_trial, body.value)
+            if over and not dup:  # after the end only a repeat of a stored answer (a retry) is taken
+                raise SessionError(409, "this session has ended")
         except SessionError as exc:
             db.rollback()
             _fail(exc)
@@ -227,9 +228,10 @@ def post_answers(session_id: str, body: AnswersIn, request: Request, s: Caller =
         _not_revoked(row)
         cfg = study_config(db, row.study_id)
         try:
-            if ended(db, row, cfg):
-                raise SessionError(409, "this session has ended")
+            over = ended(db, row, cfg)
             rows, dup = add_answers(db, row, cfg, body.questionnaire, body.after_trial, body.answers)
+            if over and not dup:  # after the end only a repeat of stored answers (a retry) is taken
+                raise SessionError(409, "this session has ended")
         except SessionError as exc:
             db.rollback()
             _fail(exc)

@@ -58,13 +58,16 @@ class Schedule(BaseModel):
 
     @model_validator(mode="after")
     def _one(self):
+        problems = []  # every problem at once
         if (self.counts is None) == (self.trials is None):
-            raise ValueError("a schedule needs exactly one of 'counts' or 'trials'")
+            problems.append("a schedule needs exactly one of 'counts' or 'trials'")
         if self.counts is not None and any(v < 0 for v in self.counts.values()):
-            raise ValueError(f"counts must be non-negative, got {self.counts}")
+            problems.append(f"counts must be non-negative, got {self.counts}")
         n = sum(self.counts.values()) if self.counts is not None else len(self.trials or [])
         if not 1 <= n <= MAX_TRIALS_PER_BLOCK:
-            raise ValueError(f"a block needs between 1 and {MAX_TRIALS_PER_BLOCK} trials, got {n}")
+            problems.append(f"a block needs between 1 and {MAX_TRIALS_PER_BLOCK} trials, got {n}")
+        if problems:
+            raise ValueError("; ".join(problems))
         return self
 
 
@@ -265,6 +268,9 @@ def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dic
     if task is not None and model is not None and tuple(model.complexities) != tuple(task.complexities):
         problems.append(f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}")
     if problems or task is None or model is None:
+        # the other parts are still checked against what is known, so that every problem is named at once
+        known = task or model
+        problems += [] if known is None else unknown_complexities(study, tuple(known.complexities))
         raise ConfigError(problems)
     blocks = []
     for i, b in enumerate(study.blocks):
@@ -323,6 +329,43 @@ def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dic
     cfg = study.model_dump(exclude={"blocks", "task", "model", "practice", "questionnaires"})
     cfg.update(task=task.to_dict(), model=model.to_dict(), blocks=blocks, practice=practice, questionnaires=questionnaires)
     return cfg
+
+
+def unknown_complexities(study: StudyIn, complexities: tuple[str, ...]) -> list[str]:
+    """The blocks' and the practice's complexities that are not among ``complexities``."""
+    problems = []
+    for i, b in enumerate(study.blocks):
+        if isinstance(b.schedule, Schedule):
+            names = list(b.schedule.counts) if b.schedule.counts is not None else list(b.schedule.trials or [])
+            bad = sorted({c for c in names if c not in complexities})
+            if bad:
+                problems.append(f"blocks[{i}].schedule names unknown complexities {bad}; expected {list(complexities)}")
+    if study.practice is not None:
+        bad = sorted({c for c in study.practice.trials if c not in complexities})
+        if bad:
+            problems.append(f"practice.trials names unknown complexities {bad}; expected {list(complexities)}")
+    return problems
+
+
+def more_problems(body: Any, errors: list[dict[str, Any]]) -> list[str]:
+    """The problems of a study body beyond those its fields' validation found (``errors``):
+    the body without its refused top-level fields (their defaults instead) is checked as a study
+    is, so that a study with several problems is refused naming them all."""
+    if not isinstance(body, dict):
+        return []
+    refused = {e["loc"][1] for e in errors if len(e.get("loc", ())) > 1 and e["loc"][0] == "body"}
+    rest = {k: v for k, v in body.items() if k not in refused}
+    if "blocks" in refused or "name" in refused:  # required: something to check the others against
+        rest.setdefault("name", "x")
+        rest.setdefault("blocks", [{"policy": {"kind": "never-ask"}, "schedule": {"trials": ["low"]}}])
+    try:
+        study = StudyIn.model_validate(rest)
+        build_study_config(study)
+    except ConfigError as exc:
+        return exc.problems
+    except ValueError:
+        return []
+    return []
 
 
 QUESTIONNAIRES = Path(__file__).resolve().parent / "questionnaires"
