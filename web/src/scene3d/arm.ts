@@ -19,7 +19,7 @@ export interface Joints { lift: number; yaw: number; q1: number; q2: number; q3:
 type V3 = [number, number, number];
 
 /** The arm folded over the base, as it drives. */
-export const STOW: Joints = { lift: 0.8, yaw: 0, q1: 1.25, q2: 2.5, q3: -0.9, jaw: 0.3 };
+export const STOW: Joints = { lift: 0.8, yaw: 0, q1: 1.25, q2: 2.5, q3: 0.45, jaw: 0.3 };
 
 export interface Links {
   yawAxis: V3; shoulder: V3; elbow: V3; wrist: V3; grasp: V3; palm: V3;
@@ -51,8 +51,9 @@ export function forward(p: Pose, j: Joints): Links {
 }
 
 /** The joints that put the grasp point at `target` with the gripper pitched by `pitch`
- * (0: level, negative: down), the torso at `lift`; null when out of reach. */
-export function inverse(p: Pose, target: readonly number[], pitch: number, lift: number, jaw: number): Joints | null {
+ * (0: level, negative: down), the torso at `lift`, the elbow up (`elbow` 1) or down (-1); null
+ * when out of reach. */
+export function inverse(p: Pose, target: readonly number[], pitch: number, lift: number, jaw: number, elbow = 1): Joints | null {
   const c = Math.cos(p.heading), s = Math.sin(p.heading);
   const ax = [p.x + c * TORSO_X, p.y + s * TORSO_X];
   const dx = target[0] - ax[0], dy = target[1] - ax[1];
@@ -62,7 +63,7 @@ export function inverse(p: Pose, target: readonly number[], pitch: number, lift:
   const hw = target[2] - L3 * Math.sin(pitch) - lift;
   const d = Math.hypot(rw, hw);
   if (d > L1 + L2 - 1e-6 || d < Math.abs(L1 - L2) + 1e-6) return null;
-  const q2 = Math.acos(Math.max(-1, Math.min(1, (d * d - L1 * L1 - L2 * L2) / (2 * L1 * L2))));
+  const q2 = elbow * Math.acos(Math.max(-1, Math.min(1, (d * d - L1 * L1 - L2 * L2) / (2 * L1 * L2))));
   const q1 = Math.atan2(hw, rw) + Math.atan2(L2 * Math.sin(q2), L1 + L2 * Math.cos(q2));
   return { lift, yaw, q1, q2, q3: pitch - (q1 - q2), jaw };
 }

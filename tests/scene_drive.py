@@ -1,0 +1,85 @@
+"""Driving the participant page by its state, not by the wall clock: the page is opened with
+``?manual=1`` (its clock stops) and moved on with ``window.__scene.step(seconds, frames)``; a key
+is held for as many simulated frames as the goal needs, however busy the machine is."""
+
+from __future__ import annotations
+
+STEP_UNTIL = """
+async ({ cond, dt, frames, limit }) => {
+  const f = new Function("s", "g", "return " + cond);
+  for (let i = 0; i < limit; i++) {
+    const g = window.__scene.step(dt, frames);
+    const s = window.trustseek.state();
+    if (f(s, g)) return { s, g };
+    await new Promise((r) => setTimeout(r, 5)); // lets the page's requests answer
+  }
+  return { s: window.trustseek.state(), g: window.__scene.state(), failed: true };
+}
+"""
+
+
+def step_until(page, cond: str, dt: float = 0.04, frames: int = 5, limit: int = 600) -> dict:
+    """Step the page until the JS expression ``cond`` (of ``s``, the page's state, and ``g``, the
+    3-D scene's) holds; the states then."""
+    r = page.evaluate(STEP_UNTIL, {"cond": cond, "dt": dt, "frames": frames, "limit": limit})
+    if r.get("failed"):
+        raise AssertionError(f"never reached {cond}; state {r['s']}")
+    return r
+
+
+def hold(page, key: str, cond: str, limit: int = 600) -> dict:
+    """Hold ``key`` for as many 20 ms frames as ``cond`` needs (one frame per step)."""
+    page.keyboard.down(key)
+    try:
+        return step_until(page, cond, dt=0.02, frames=1, limit=limit)
+    finally:
+        page.keyboard.up(key)
+
+
+def start(page, link: str, query: str = "?manual=1&quality=0") -> None:
+    """Open the link, consent, read the instructions: the first trial starts."""
+    page.goto(link + query)
+    page.wait_for_selector("#screen-consent:not([hidden])")
+    page.check("#agree")
+    page.click("#consent-btn")
+    page.wait_for_selector("#screen-instructions:not([hidden])")
+    page.click("#start-btn")
+    page.wait_for_function("['approach', 'teleop'].includes(window.trustseek.state().phase)")
+
+
+def teleoperate(page) -> dict:
+    """Drive to the item's shelf side (up to it: a contact), line the gripper
+    up with the item, extend the arm, grasp, retract, deposit. The states at the deposit."""
+    page.evaluate("window.__scene.manual(true)")  # the page's clock stops while the test drives
+    try:
+        return _teleoperate(page)
+    finally:
+        if "manual=1" not in page.url:
+            page.evaluate("window.__scene.manual(false)")
+
+
+def _teleoperate(page) -> dict:
+    s = page.evaluate("window.trustseek.state()")
+    side = s["side"]
+    toward = "ArrowUp" if side < 0 else "ArrowDown"
+    edge = 1.6 if side < 0 else 4.4  # the base stops 5 cm from the shelf (scene.ts clampRobot)
+    hold(page, toward, f"Math.abs(s.robot.y - {edge}) < 0.02")  # the shelf stops the base: a contact
+    for _ in range(8):  # line the gripper up with the item; correct any overshoot
+        s = page.evaluate("window.trustseek.state()")
+        dx = s["item"]["x"] - s["gripper"]["x"]
+        dy = (s["item"]["y"] - s["gripper"]["y"]) * side  # > 0: the arm must extend further
+        if abs(dx) < 0.04 and abs(dy) < 0.04:
+            break
+        if dx > 0.04:
+            hold(page, "ArrowRight", "s.gripper.x >= s.item.x - 0.03")
+        elif dx < -0.04:
+            hold(page, "ArrowLeft", "s.gripper.x <= s.item.x + 0.03")
+        elif dy > 0.04:
+            hold(page, "z", f"(s.item.y - s.gripper.y) * {side} <= 0.02")
+        else:
+            hold(page, "x", f"(s.item.y - s.gripper.y) * {side} >= -0.02")
+    page.keyboard.press("g")
+    step_until(page, "s.robot.holding", limit=20)
+    hold(page, "x", "s.robot.arm < 0.1")
+    page.keyboard.press("b")
+    return step_until(page, "s.phase !== 'teleop'", limit=50)
