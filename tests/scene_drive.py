@@ -36,6 +36,47 @@ def hold(page, key: str, cond: str, limit: int = 600) -> dict:
         page.keyboard.up(key)
 
 
+# a scripted standard-mapping gamepad (an init script): window.__pad.axes and .buttons are what
+# navigator.getGamepads() reports
+FAKE_GAMEPAD = """
+window.__pad = { axes: [0, 0, 0, 0], buttons: [] };
+Object.defineProperty(Navigator.prototype, "getGamepads", {
+  configurable: true,
+  value: () => [{
+    id: "Scripted pad (STANDARD GAMEPAD)", index: 0, connected: true, mapping: "standard",
+    timestamp: performance.now(), axes: window.__pad.axes.slice(),
+    buttons: Array.from({ length: 17 }, (_, i) => ({ pressed: !!window.__pad.buttons[i], touched: false, value: 0 })),
+  }],
+});
+"""
+# the keys of the keyboard's teleoperation as the gamepad's stick deflections and buttons
+PAD_STICK = {"ArrowUp": (1, -1), "ArrowDown": (1, 1), "ArrowLeft": (0, -1), "ArrowRight": (0, 1), "z": (3, -1), "x": (3, 1)}
+PAD_BUTTON = {"g": 0, "b": 1, " ": 2}
+
+
+class Keyboard:
+    def hold(self, page, key: str, cond: str) -> dict:
+        return hold(page, key, cond)
+
+    def press(self, page, key: str) -> None:
+        page.keyboard.press(key)
+
+
+class Gamepad:
+    def hold(self, page, key: str, cond: str) -> dict:
+        axis, v = PAD_STICK[key]
+        page.evaluate(f"window.__pad.axes[{axis}] = {v}")
+        try:
+            return step_until(page, cond, dt=0.02, frames=1)
+        finally:
+            page.evaluate(f"window.__pad.axes[{axis}] = 0")
+
+    def press(self, page, key: str) -> None:
+        page.evaluate(f"window.__pad.buttons[{PAD_BUTTON[key]}] = true")
+        step_until(page, "true", dt=0.02, frames=1, limit=1)
+        page.evaluate(f"window.__pad.buttons[{PAD_BUTTON[key]}] = false")
+
+
 def start(page, link: str, query: str = "?manual=1&quality=0") -> None:
     """Open the link, consent, read the instructions: the first trial starts."""
     page.goto(link + query)
@@ -47,23 +88,23 @@ def start(page, link: str, query: str = "?manual=1&quality=0") -> None:
     page.wait_for_function("['approach', 'teleop'].includes(window.trustseek.state().phase)")
 
 
-def teleoperate(page) -> dict:
+def teleoperate(page, device: Keyboard | Gamepad | None = None) -> dict:
     """Drive to the item's shelf side (up to it: a contact), line the gripper
     up with the item, extend the arm, grasp, retract, deposit. The states at the deposit."""
     page.evaluate("window.__scene.manual(true)")  # the page's clock stops while the test drives
     try:
-        return _teleoperate(page)
+        return _teleoperate(page, device or Keyboard())
     finally:
         if "manual=1" not in page.url:
             page.evaluate("window.__scene.manual(false)")
 
 
-def _teleoperate(page) -> dict:
+def _teleoperate(page, dev: Keyboard | Gamepad) -> dict:
     s = page.evaluate("window.trustseek.state()")
     side = s["side"]
     toward = "ArrowUp" if side < 0 else "ArrowDown"
     edge = 1.6 if side < 0 else 4.4  # the base stops 5 cm from the shelf (scene.ts clampRobot)
-    hold(page, toward, f"Math.abs(s.robot.y - {edge}) < 0.02")  # the shelf stops the base: a contact
+    dev.hold(page, toward, f"Math.abs(s.robot.y - {edge}) < 0.02")  # the shelf stops the base: a contact
     for _ in range(8):  # line the gripper up with the item; correct any overshoot
         s = page.evaluate("window.trustseek.state()")
         dx = s["item"]["x"] - s["gripper"]["x"]
@@ -71,15 +112,15 @@ def _teleoperate(page) -> dict:
         if abs(dx) < 0.04 and abs(dy) < 0.04:
             break
         if dx > 0.04:
-            hold(page, "ArrowRight", "s.gripper.x >= s.item.x - 0.03")
+            dev.hold(page, "ArrowRight", "s.gripper.x >= s.item.x - 0.03")
         elif dx < -0.04:
-            hold(page, "ArrowLeft", "s.gripper.x <= s.item.x + 0.03")
+            dev.hold(page, "ArrowLeft", "s.gripper.x <= s.item.x + 0.03")
         elif dy > 0.04:
-            hold(page, "z", f"(s.item.y - s.gripper.y) * {side} <= 0.02")
+            dev.hold(page, "z", f"(s.item.y - s.gripper.y) * {side} <= 0.02")
         else:
-            hold(page, "x", f"(s.item.y - s.gripper.y) * {side} >= -0.02")
-    page.keyboard.press("g")
+            dev.hold(page, "x", f"(s.item.y - s.gripper.y) * {side} >= -0.02")
+    dev.press(page, "g")
     step_until(page, "s.robot.holding", limit=20)
-    hold(page, "x", "s.robot.arm < 0.1")
-    page.keyboard.press("b")
+    dev.hold(page, "x", "s.robot.arm < 0.1")
+    dev.press(page, "b")
     return step_until(page, "s.phase !== 'teleop'", limit=50)
