@@ -27,11 +27,11 @@ def step_until(page, cond: str, dt: float = 0.04, frames: int = 5, limit: int = 
     return r
 
 
-def hold(page, key: str, cond: str, limit: int = 600) -> dict:
-    """Hold ``key`` for as many 20 ms frames as ``cond`` needs (one frame per step)."""
+def hold(page, key: str, cond: str, dt: float = 0.02, limit: int = 2000) -> dict:
+    """Hold ``key`` for as many frames of ``dt`` seconds as ``cond`` needs (one frame per step)."""
     page.keyboard.down(key)
     try:
-        return step_until(page, cond, dt=0.02, frames=1, limit=limit)
+        return step_until(page, cond, dt=dt, frames=1, limit=limit)
     finally:
         page.keyboard.up(key)
 
@@ -55,19 +55,19 @@ PAD_BUTTON = {"g": 0, "b": 1, " ": 2}
 
 
 class Keyboard:
-    def hold(self, page, key: str, cond: str) -> dict:
-        return hold(page, key, cond)
+    def hold(self, page, key: str, cond: str, dt: float = 0.02) -> dict:
+        return hold(page, key, cond, dt)
 
     def press(self, page, key: str) -> None:
         page.keyboard.press(key)
 
 
 class Gamepad:
-    def hold(self, page, key: str, cond: str) -> dict:
+    def hold(self, page, key: str, cond: str, dt: float = 0.02) -> dict:
         axis, v = PAD_STICK[key]
         page.evaluate(f"window.__pad.axes[{axis}] = {v}")
         try:
-            return step_until(page, cond, dt=0.02, frames=1)
+            return step_until(page, cond, dt=dt, frames=1, limit=2000)
         finally:
             page.evaluate(f"window.__pad.axes[{axis}] = 0")
 
@@ -112,13 +112,13 @@ def _teleoperate(page, dev: Keyboard | Gamepad) -> dict:
         if abs(dx) < 0.04 and abs(dy) < 0.04:
             break
         if dx > 0.04:
-            dev.hold(page, "ArrowRight", "s.gripper.x >= s.item.x - 0.03")
+            dev.hold(page, "ArrowRight", "s.gripper.x >= s.item.x - 0.03", dt=0.004)
         elif dx < -0.04:
-            dev.hold(page, "ArrowLeft", "s.gripper.x <= s.item.x + 0.03")
+            dev.hold(page, "ArrowLeft", "s.gripper.x <= s.item.x + 0.03", dt=0.004)
         elif dy > 0.04:
-            dev.hold(page, "z", f"(s.item.y - s.gripper.y) * {side} <= 0.02")
+            dev.hold(page, "z", f"(s.item.y - s.gripper.y) * {side} <= 0.02", dt=0.004)
         else:
-            dev.hold(page, "x", f"(s.item.y - s.gripper.y) * {side} >= -0.02")
+            dev.hold(page, "x", f"(s.item.y - s.gripper.y) * {side} >= -0.02", dt=0.004)
     dev.press(page, "g")
     step_until(page, "s.robot.holding", limit=20)
     dev.hold(page, "x", "s.robot.arm < 0.1")

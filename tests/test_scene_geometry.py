@@ -103,7 +103,7 @@ def test_the_base_drives_around_the_obstacles_and_accelerates(probe, seeds):
     rows = run(probe, seeds)
     for r in rows:
         assert r["overlap"] == 0, r
-        assert r["maxStep"] <= 1.2 + 1e-6, r  # never faster than V_MAX (m/s)
-        assert r["maxTurn"] <= 1.4 + 1e-6, r  # nor turning faster than W_MAX (rad/s)
+        assert r["maxStep"] <= 1.6 + 1e-6, r  # never faster than V_MAX (m/s)
+        assert r["maxTurn"] <= 2.0 + 1e-6, r  # nor turning faster than W_MAX (rad/s)
         assert r["v0"] < 0.1, r  # it sets off from rest
         assert max(abs(x) for x in r["end"]) < 1e-6, r  # and stops at the pregrasp point, facing along the aisle

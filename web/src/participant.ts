@@ -497,7 +497,7 @@ async function onQuestionnaire() {
 
 let last = performance.now();
 function frame(now: number) {
-  const dt = Math.min(0.05, (now - last) / 1000);
+  const dt = Math.min(0.1, (now - last) / 1000); // a slow frame (software WebGL) still keeps time
   last = now;
   if (!manual) {
     tick(dt);

@@ -10,10 +10,10 @@ type P2 = { x: number; y: number };
 // radius along it (the base turns on the spot at their corners)
 const GROW = BASE_H / 2 + 0.1;
 const GROW_X = Math.hypot(BASE_W / 2, BASE_H / 2) + 0.05;
-export const V_MAX = 1.2;      // m/s
-export const A_MAX = 0.8;      // m/s²
-export const W_MAX = 1.4;      // rad/s
-export const ALPHA = 2.5;      // rad/s²
+export const V_MAX = 1.6;      // m/s
+export const A_MAX = 1.0;      // m/s²
+export const W_MAX = 2.0;      // rad/s
+export const ALPHA = 3.0;      // rad/s²
 
 interface Rect { x0: number; y0: number; x1: number; y1: number; }
 
