@@ -13,6 +13,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+import scene_drive
 from trustseek.client import Client
 from trustseek.server.app import STATIC
 from trustseek.testing.browser import CHROMIUM, launch_chromium
@@ -49,35 +50,9 @@ def hold(page, key: str, until, timeout: float = 15.0) -> dict:
 
 
 def teleoperate(page) -> None:
-    """Drive to the item's shelf side, line up, extend the arm, grasp, retract, deposit."""
-    s = st(page)
-    side = s["side"]
-    # towards the shelf that holds the item
-    key = "ArrowUp" if side < 0 else "ArrowDown"
-    edge = 1.6 if side < 0 else 4.4  # the base stops 5 cm from the shelf (scene.ts clampRobot)
-
-    hold(page, key, lambda s: abs(s["robot"]["y"] - edge) < 1e-6)
-    for _ in range(8):  # line up the gripper with the item; correct any overshoot
-        s = st(page)
-        dx = s["item"]["x"] - s["gripper"]["x"]
-        dy = (s["item"]["y"] - s["gripper"]["y"]) * side  # > 0: the arm must extend further
-        if abs(dx) < 0.15 and abs(dy) < 0.15:
-            break
-        if dx > 0.15:
-            hold(page, "ArrowRight", lambda s: s["gripper"]["x"] >= s["item"]["x"] - 0.05)
-        elif dx < -0.15:
-            hold(page, "ArrowLeft", lambda s: s["gripper"]["x"] <= s["item"]["x"] + 0.05)
-        elif dy > 0.15:
-            hold(page, "z", lambda s: (s["item"]["y"] - s["gripper"]["y"]) * side <= 0.05)
-        else:
-            hold(page, "x", lambda s: (s["item"]["y"] - s["gripper"]["y"]) * side >= -0.05)
-    page.keyboard.press("g")
-    try:
-        page.wait_for_function("window.trustseek.state().robot.holding", timeout=5000)
-    except Exception:
-        raise AssertionError(f"grasp failed; state {st(page)}") from None
-    hold(page, "x", lambda s: s["robot"]["arm"] < 0.1)
-    page.keyboard.press("b")
+    """Drive to the item's shelf side, line up, extend the arm, grasp, retract, deposit: by the
+    page's state, with its clock stopped (scene_drive.teleoperate), never by timed key holds."""
+    scene_drive.teleoperate(page)
 
 
 def test_participant_study_in_chromium(tmp_path):

@@ -1,5 +1,7 @@
-"""An intervention made with a gamepad button is logged as ``via: "gamepad"`` (headless Chromium
-with a scripted standard-mapping gamepad; the keyboard does the teleoperation)."""
+"""An intervention made with a gamepad button is logged as ``via: "gamepad"``, and a
+teleoperation by the gamepad's sticks and buttons alone reaches the bin (headless Chromium with
+a scripted standard-mapping gamepad). The page is driven by its state (``?manual=1``): a button
+or a stick is held for as many frames as the goal needs, never for a fixed time."""
 
 from __future__ import annotations
 
@@ -10,7 +12,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-import test_browser
+from scene_drive import FAKE_GAMEPAD, Gamepad, start, step_until, teleoperate
 from trustseek.client import Client
 from trustseek.server.app import STATIC
 from trustseek.testing.browser import CHROMIUM, launch_chromium
@@ -19,20 +21,6 @@ from trustseek.testing.servers import ThreadServer
 pytestmark = pytest.mark.browser
 
 TOKEN = "gamepad-test-token"
-
-# navigator.getGamepads() returns one connected standard gamepad whose X button (index 2) is
-# held while window.__padX is true
-FAKE_GAMEPAD = """
-window.__padX = false;
-Object.defineProperty(Navigator.prototype, "getGamepads", {
-  configurable: true,
-  value: () => [{
-    id: "Scripted pad (STANDARD GAMEPAD)", index: 0, connected: true, mapping: "standard",
-    timestamp: performance.now(), axes: [0, 0, 0, 0],
-    buttons: Array.from({ length: 17 }, (_, i) => ({ pressed: i === 2 && window.__padX, touched: false, value: 0 })),
-  }],
-});
-"""
 
 
 def test_gamepad_intervention_is_logged_as_gamepad(tmp_path):
@@ -58,22 +46,19 @@ def test_gamepad_intervention_is_logged_as_gamepad(tmp_path):
             page.add_init_script(FAKE_GAMEPAD)
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(link + "?speed=1")
-            page.wait_for_selector("#screen-consent:not([hidden])")
-            page.check("#agree")
-            page.click("#consent-btn")
-            page.wait_for_selector("#screen-instructions:not([hidden])")
-            page.click("#start-btn")
-            page.wait_for_function("window.trustseek.state().phase === 'approach'")
-            page.wait_for_timeout(200)  # frames polled with the button up
-            page.evaluate("window.__padX = true")
-            page.wait_for_function("window.trustseek.state().phase === 'teleop'", timeout=5000)
-            page.evaluate("window.__padX = false")
-            test_browser.teleoperate(page)
-            page.wait_for_selector("#screen-done:not([hidden])", timeout=20000)
+            # the page's clock stops (?manual=1): every frame below is a step of the test's
+            start(page, link, "?speed=1&manual=1&quality=0")
+            step_until(page, "s.phase === 'approach'", frames=1, limit=3)  # frames polled with the button up
+            page.evaluate("window.__pad.buttons[2] = true")  # X
+            step_until(page, "s.phase === 'teleop'", frames=1, limit=3)
+            page.evaluate("window.__pad.buttons[2] = false")
+            teleoperate(page, Gamepad())  # the sticks drive, A grasps, B deposits
+            step_until(page, "s.phase === 'done'")
             browser.close()
         assert errors == []
         events = pd.read_csv(io.BytesIO(c.export(study["id"], table="events")))
         c.close()
     data = [json.loads(d) for d in events[events["type"] == "intervene"]["data"]]
     assert [d["via"] for d in data] == ["gamepad"]
+    deposit = [json.loads(d) for d in events[events["type"] == "deposit"]["data"]]
+    assert len(deposit) == 1 and deposit[0]["gamepad"].startswith("Scripted pad") and deposit[0]["inputs"] > 10

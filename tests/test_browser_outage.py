@@ -12,7 +12,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from test_browser import hold, st, teleoperate
+import scene_drive
+from test_browser import st, teleoperate
 from trustseek.client import Client
 from trustseek.server.app import STATIC
 from trustseek.testing.browser import CHROMIUM, launch_chromium
@@ -60,10 +61,10 @@ def test_reload_and_outage_lose_nothing(tmp_path):
             # drive part of the way, then reload: the robot is where it was, the trial goes on
             s0 = st(page)
             key = "ArrowUp" if s0["side"] < 0 else "ArrowDown"
-            moved = hold(page, key, lambda s: abs(s["robot"]["y"] - s0["robot"]["y"]) > 0.5)
-            page.wait_for_timeout(800)
+            page.evaluate("window.__scene.manual(true)")  # driven by the page's state, its clock stopped
+            moved = scene_drive.hold(page, key, f"Math.abs(s.robot.y - {s0['robot']['y']}) > 0.5")["s"]
             before = st(page)
-            assert abs(before["robot"]["y"] - moved["robot"]["y"]) < 0.2
+            assert abs(before["robot"]["y"] - moved["robot"]["y"]) < 1e-9
             page.reload()
             page.wait_for_function("window.trustseek.state().phase === 'teleop'")
             after = st(page)

@@ -15,6 +15,7 @@ import {
   AISLE_H, ARM_MAX, BASE_H, REACH, SHELF_DEPTH, ItemState, Layout, RobotState, View, clampRobot, drawEndEffector, drawLocal, drawWorld,
   gripperPos, makeLayout, pathLength, pickTokens, pointAlong,
 } from "./scene";
+import { Scene3D, webglAvailable } from "./scene3d";
 
 type Phase = "loading" | "consent" | "instructions" | "quiz" | "approach" | "reach" | "waiting" | "outcome" | "teleop" | "result" | "report" | "questionnaire" | "done" | "error";
 
@@ -70,7 +71,7 @@ function log(type: string, data: Record<string, unknown> = {}) {
 interface Saved {
   trial: number; submissionId: string; events: UIEvent[]; intervened: boolean; phase: Phase;
   teleopMs: number | null; robot: RobotState; item: ItemState; pending: Pending | null;
-  driven: number; armTravel: number; graspAttempts: number;
+  driven: number; armTravel: number; graspAttempts: number; contacts?: number; inputs?: number;
 }
 const savedKey = () => `trustseek-trial:${api.sessionId}`;
 let lastSave = 0;
@@ -81,7 +82,7 @@ function save() {
   const s: Saved = {
     trial: current.trial, submissionId, events: trialEvents, intervened, phase,
     teleopMs: phase === "teleop" || pending?.human === "intervene" ? performance.now() - teleopStart : null,
-    robot, item, pending, driven, armTravel, graspAttempts,
+    robot, item, pending, driven, armTravel, graspAttempts, contacts, inputs,
   };
   try {
     localStorage.setItem(savedKey(), JSON.stringify(s));
@@ -186,6 +187,7 @@ async function boot() {
   speed = (st.preview && isFinite(speedParam) && speedParam > 0 ? speedParam : 1) * st.animation_speed;
   $("preview-tag").hidden = !st.preview;
   $("consent-trials").textContent = String(st.trials_total - st.practice_trials);
+  chooseScene((st as { scene?: string }).scene);
   shownScore = st.score;
   if (st.consent_text) $("consent-text").textContent = st.consent_text;
   if (st.instructions) $("instructions-text").textContent = st.instructions;
@@ -290,7 +292,7 @@ function startTrial(cur: Current) {
   item = freshItem(layout);
   impact = undefined;
   pathS = 0;
-  pathL = pathLength(layout.path);
+  pathL = approachLength(cur.scene_seed);
   if (saved) return resumeTrial(cur, saved);
   log("trial_start", { complexity: cur.complexity, robot_action: cur.robot_action, block: cur.block });
   if (cur.robot_action === "ask") {
@@ -324,6 +326,8 @@ function resumeTrial(cur: Current, saved: Saved) {
     driven = saved.driven;
     armTravel = saved.armTravel;
     graspAttempts = saved.graspAttempts;
+    contacts = saved.contacts ?? 0;
+    inputs = saved.inputs ?? 0;
     teleopStart = performance.now() - (saved.teleopMs ?? 0);
     setPhase("teleop");
     setHint(cur.robot_action === "ask" ? "Welcome back: carry on helping the robot." : "Welcome back: you are still in control.", 4);
@@ -336,6 +340,9 @@ function resetTeleop() {
   driven = 0;
   armTravel = 0;
   graspAttempts = 0;
+  contacts = 0;
+  inputs = 0;
+  touching = null;
 }
 
 function intervene(via: string) {
@@ -563,8 +570,18 @@ async function onQuestionnaire() {
 
 let last = performance.now();
 function frame(now: number) {
-  const dt = Math.min(0.05, (now - last) / 1000);
+  const dt = Math.min(0.1, (now - last) / 1000); // a slow frame (software WebGL) still keeps time
   last = now;
+  if (!manual) {
+    tick(dt);
+    draw();
+    renderStatus();
+  }
+  requestAnimationFrame(frame);
+}
+
+/** The page's state `dt` seconds on (the clock of the animations and of the teleoperation). */
+function tick(dt: number) {
   clock += dt;
   const cmd = poll();
   const k = dt * speed;
@@ -577,7 +594,7 @@ function frame(now: number) {
   }
   if (phase === "approach") {
     pathS = Math.min(pathL, pathS + 1.7 * k);
-    const p = pointAlong(layout.path, pathS);
+    const p = approachPose(pathS);
     robot.x = p.x;
     robot.y = p.y;
     robot.heading = p.heading;
@@ -593,16 +610,14 @@ function frame(now: number) {
       submit("rely");
     }
   } else if (phase === "outcome") {
-    animateOutcome(k);
+    if (!scene3d) animateOutcome(k);
+    else if (scene3d.outcome(outcome!.outcome, phaseT, k, robot, item)) toResult();
   } else if (phase === "teleop") {
     teleop(cmd, k);
     if (clock - lastSave > 0.5) save();
   } else if (phase === "result") {
     if (outcome && phaseT > 1.6) afterResult();
   }
-  draw();
-  renderStatus();
-  requestAnimationFrame(frame);
 }
 
 function animateOutcome(k: number) {
@@ -667,12 +682,16 @@ function toResult() {
 
 function teleop(cmd: ReturnType<typeof poll>, k: number) {
   const v = 1.8;
-  if (cmd.vx || cmd.vy) robot.heading = Math.atan2(cmd.vy, cmd.vx);
+  // the 2-D robot faces where it drives; the 3-D one drives sideways too (its wheels are omnidirectional)
+  if (cmd.vx || cmd.vy) robot.heading = scene3d ? 0 : Math.atan2(cmd.vy, cmd.vx);
   const x0 = robot.x, y0 = robot.y, a0 = robot.arm;
   robot.x += cmd.vx * v * k;
   robot.y += cmd.vy * v * k;
-  clampRobot(robot, layout);
+  let hit = clampRobot(robot, layout);
   robot.arm = Math.max(0, Math.min(ARM_MAX, robot.arm + cmd.arm * 1.0 * k));
+  hit = contactOfArm(a0) ?? hit;
+  if (cmd.vx || cmd.vy || cmd.arm) inputs++;
+  touch(hit, cmd.vx, cmd.vy);
   driven += Math.hypot(robot.x - x0, robot.y - y0);
   armTravel += Math.abs(robot.arm - a0);
   const gp = gripperPos(robot, layout.side);
@@ -683,7 +702,7 @@ function teleop(cmd: ReturnType<typeof poll>, k: number) {
   if (cmd.grasp) {
     graspAttempts++;
     if (robot.holding) setHint("Already holding the item: retract the arm (X) and deposit it (B).");
-    else if (Math.hypot(gp.x - item.x, gp.y - item.y) <= REACH) {
+    else if (Math.hypot(gp.x - item.x, gp.y - item.y) <= REACH && (scene3d?.around(item) ?? true)) {
       robot.holding = true;
       robot.jaw = 0;
       log("grasp", { by: "human" });
@@ -702,11 +721,94 @@ function teleop(cmd: ReturnType<typeof poll>, k: number) {
       robot.holding = false;
       item.inBin = true;
       robot.binCount++;
-      log("deposit", { seconds: (performance.now() - teleopStart) / 1000, driven_m: +driven.toFixed(3), arm_m: +armTravel.toFixed(3), grasp_attempts: graspAttempts, gamepad: gamepadName() });
+      log("deposit", { seconds: (performance.now() - teleopStart) / 1000, driven_m: +driven.toFixed(3), arm_m: +armTravel.toFixed(3), grasp_attempts: graspAttempts, contacts, inputs, gamepad: gamepadName() });
       submit("intervene");
     }
   }
 }
+
+// --------------------------------------------------------------------------- the 3-D scene (scene3d/)
+// The views are drawn in 3-D where WebGL works and the study does not ask for the 2-D scene
+// (`"scene": "2d"`, or `?scene=2d`); the session records which scene ran (a "scene" event).
+// `?quality=0..4` fixes the 3-D detail; `?manual=1` stops the page's clock: the tests then move
+// it with window.__scene.step(seconds, frames), never by the wall clock.
+
+let scene3d: Scene3D | null = null;
+let manual = query.get("manual") === "1";
+const APPROACH_V = 1.7; // the rate of pathS (m/s), as the 2-D scene drives
+let contacts = 0; // teleoperation: contacts with shelves, products and obstacles
+let inputs = 0; // and frames with a drive or arm input
+let touching: string | null = null;
+let touchAt = 0;
+
+function chooseScene(asked: string | undefined) {
+  const want = query.get("scene") ?? asked ?? "3d";
+  let ran = "2d", reason = want === "2d" ? "asked" : "no webgl";
+  if (want !== "2d" && webglAvailable()) {
+    try {
+      const q = parseInt(query.get("quality") ?? "", 10);
+      const canvases = { world: $<HTMLCanvasElement>("world"), local: $<HTMLCanvasElement>("local"), ee: $<HTMLCanvasElement>("ee") };
+      scene3d = new Scene3D(canvases, q >= 0 && q <= 4 ? q : null);
+      ran = "3d";
+      reason = "webgl";
+    } catch (e) {
+      reason = `webgl failed: ${(e as Error).message}`.slice(0, 200);
+    }
+  }
+  document.body.dataset.scene = ran;
+  api.events([{ t: Date.now(), type: "scene", data: { scene: ran, asked: want, reason } }]).catch(() => undefined);
+}
+
+function approachLength(seed: number): number {
+  if (!scene3d) return pathLength(layout.path);
+  scene3d.setTrial(layout, seed, item);
+  return scene3d.drive.duration * APPROACH_V;
+}
+
+function approachPose(s: number) {
+  return scene3d ? scene3d.drivePose(s / APPROACH_V) : pointAlong(layout.path, s);
+}
+
+/** In 3-D, an arm that would strike a shelf or a product stays where it was. */
+function contactOfArm(a0: number): string | null {
+  const hit = scene3d?.teleopArm(robot, item) ?? null;
+  if (hit) robot.arm = a0;
+  return hit;
+}
+
+/** A contact is logged when it begins (a contact that lasts, or repeats within half a second,
+ * is one), and pushes the base 5 cm back from where it was driven. */
+function touch(hit: string | null, vx: number, vy: number) {
+  if (hit && hit !== touching) {
+    contacts++;
+    log("contact", { with: hit, x: +robot.x.toFixed(3), y: +robot.y.toFixed(3), arm: +robot.arm.toFixed(3) });
+    const n = Math.hypot(vx, vy);
+    if (!hit.startsWith("arm") && n > 0) {
+      robot.x -= (0.05 * vx) / n;
+      robot.y -= (0.05 * vy) / n;
+      clampRobot(robot, layout);
+    }
+    if (scene3d) robot.shake = 0.6;
+  }
+  if (hit) touchAt = clock;
+  touching = hit ?? (clock - touchAt > 0.5 ? null : touching);
+}
+
+(window as unknown as { __scene: unknown }).__scene = {
+  scene: () => (scene3d ? "3d" : "2d"),
+  /** Stop (true) or restart (false) the page's own clock. */
+  manual: (on: boolean) => {
+    manual = on;
+    last = performance.now();
+  },
+  step: (dt: number, frames = 1) => {
+    for (let i = 0; i < frames; i++) tick(dt);
+    draw();
+    renderStatus();
+    return scene3d?.state() ?? null;
+  },
+  state: () => scene3d?.state() ?? null,
+};
 
 // --------------------------------------------------------------------------- drawing and status
 
@@ -727,6 +829,7 @@ function picks() {
 
 function draw() {
   const v = view();
+  if (scene3d) return scene3d.draw(v, phase);
   drawWorld($<HTMLCanvasElement>("world"), v);
   drawLocal($<HTMLCanvasElement>("local"), v);
   drawEndEffector($<HTMLCanvasElement>("ee"), v);

@@ -111,19 +111,27 @@ export function pointAlong(p: { x: number; y: number }[], s: number): { x: numbe
   return { ...p[p.length - 1], heading: 0 };
 }
 
-/** Keep the robot base in the aisle and out of obstacles (teleoperation never fails, it is blocked). */
-export function clampRobot(rb: RobotState, layout: Layout): void {
+/** Keep the robot base in the aisle and out of obstacles (teleoperation never fails, it is
+ * blocked); what it ran into ("aisle end", "shelf" or the obstacle's kind), or null. */
+export function clampRobot(rb: RobotState, layout: Layout): string | null {
   const hx = BASE_W / 2, hy = BASE_H / 2;
-  rb.x = Math.min(AISLE_W - hx - 0.05, Math.max(hx + 0.05, rb.x));
-  rb.y = Math.min(AISLE_H - SHELF_DEPTH - hy - 0.05, Math.max(SHELF_DEPTH + hy + 0.05, rb.y));
+  let hit: string | null = null;
+  const x = Math.min(AISLE_W - hx - 0.05, Math.max(hx + 0.05, rb.x));
+  const y = Math.min(AISLE_H - SHELF_DEPTH - hy - 0.05, Math.max(SHELF_DEPTH + hy + 0.05, rb.y));
+  if (x !== rb.x) hit = "aisle end";
+  if (y !== rb.y) hit = "shelf";
+  rb.x = x;
+  rb.y = y;
   for (const o of layout.obstacles) {
     const dx = rb.x - (o.x + o.w / 2), dy = rb.y - (o.y + o.h / 2);
     const px = hx + o.w / 2 - Math.abs(dx), py = hy + o.h / 2 - Math.abs(dy);
     if (px > 0 && py > 0) {
+      hit = o.kind;
       if (px < py) rb.x += Math.sign(dx || 1) * px;
       else rb.y += Math.sign(dy || 1) * py;
     }
   }
+  return hit;
 }
 
 // --------------------------------------------------------------------------- drawing

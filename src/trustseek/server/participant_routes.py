@@ -88,6 +88,7 @@ def session_state(request: Request, s_id: str) -> dict:
             "practice_trials": len(cfg["practice"]["trials"]) if cfg.get("practice") else 0,
             "self_report": cfg["self_report"],
             "animation_speed": s.speed or cfg["animation_speed"],
+            "scene": cfg.get("scene", "3d"),
             "preview": s.role == "preview",
             "consent_text": cfg.get("consent_text"),
             "instructions": cfg.get("instructions"),

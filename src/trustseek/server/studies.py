@@ -194,6 +194,8 @@ class StudyIn(BaseModel):
     counterbalance: Literal["none", "rotate", "random"] = "none"
     self_report: Literal["none", "trial", "block"] = "none"
     animation_speed: float = Field(1.0, gt=0.05, le=50.0)
+    # the participant's views: "3d" (WebGL; the 2-D scene where the browser has none) or "2d"
+    scene: Literal["3d", "2d"] = "3d"
     seed: int = Field(0, ge=0, lt=2**31)
     consent_text: str | None = Field(None, max_length=20000)
     instructions: str | None = Field(None, max_length=20000)
