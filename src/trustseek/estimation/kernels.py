@@ -58,6 +58,10 @@ TINY = 2.0**-RESCALE
 HUGE = 2.0**RESCALE
 LOG_HUGE = RESCALE * math.log(2.0)
 PARALLEL_MIN = 40_000  # trials x parameter sets from which an E-step is split over threads
+# trials from which the fit's E-steps run compiled ("auto"): below, the numpy E-step's whole fit
+# (10 starts) takes less time than importing numba and loading the compiled code from its cache
+# (~1 s), let alone compiling it on a first use after installation (~1 min)
+COMPILE_MIN = 5_000
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -1,0 +1,23 @@
+"""The public names of :mod:`trustseek.design`: read by type checkers, and by ``__init__.py`` to load each on first use."""
+
+from .evaluation import EVALUATION_GRID, Evaluation, evaluate_policy, high_threshold
+from .replicate import Experiment1, FitSettings, Study, paired_tests, replicate_seed, run_replicate
+from .sweep import TESTS, DesignConfig, DesignResult, ask_search, run_design
+
+__all__ = [
+    "EVALUATION_GRID",
+    "TESTS",
+    "DesignConfig",
+    "DesignResult",
+    "Evaluation",
+    "Experiment1",
+    "FitSettings",
+    "Study",
+    "ask_search",
+    "evaluate_policy",
+    "high_threshold",
+    "paired_tests",
+    "replicate_seed",
+    "run_design",
+    "run_replicate",
+]
