@@ -100,10 +100,14 @@ def test_the_fit_compiles_from_compile_min_trials():
     frame = pd.DataFrame(rows).assign(experience="reliable")
     spec = paper_spec()
     seqs = encode(frame, spec)
-    small = Workspace(seqs, *Structure(spec, seqs).dims)
-    assert not small.compiled and small._kernel is None
     with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(kernels, "loaded", lambda: False)  # as in a fresh process
+        small = Workspace(seqs, *Structure(spec, seqs).dims)
+        assert not small.compiled and small._kernel is None
         mp.setattr(kernels, "COMPILE_MIN", seqs.n_trials)
+        assert Workspace(seqs, *Structure(spec, seqs).dims).compiled == kernels.AVAILABLE
+        mp.setattr(kernels, "COMPILE_MIN", seqs.n_trials + 1)
+        mp.setattr(kernels, "loaded", lambda: True)  # numba loaded already (many fits): compiled at any size
         assert Workspace(seqs, *Structure(spec, seqs).dims).compiled == kernels.AVAILABLE
 
 

@@ -20,7 +20,7 @@ import threading
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-__all__ = ["AVAILABLE", "loaded", "njit", "python"]
+__all__ = ["AVAILABLE", "load", "loaded", "njit", "python"]
 
 AVAILABLE = importlib.util.find_spec("numba") is not None  # numba is a declared dependency
 
@@ -51,13 +51,18 @@ class _Lazy:
         return f"<compiled on first call: {self.__module__}.{self.__qualname__}>"
 
 
+def load() -> None:
+    """Import numba now (a no-op without it): a caller about to do enough compiled work that
+    every path should take the compiled code (see :func:`loaded`)."""
+    if AVAILABLE:
+        _load()
+
+
 def _load() -> None:
     """Hand every pending function to numba, and point the module attributes that name a
     stand-in at numba's function."""
     global _LOADED
     with _LOCK:
-        if not _PENDING:
-            return
         import numba
 
         done = {id(lazy): lazy for lazy in _PENDING}
@@ -74,7 +79,8 @@ def _load() -> None:
 
 
 def loaded() -> bool:
-    """Whether this process has loaded numba's compiled code (some compiled function was called)."""
+    """Whether this process has imported numba for its compiled code (a compiled function was
+    called, or :func:`load`): from then on the compiled paths cost no more start-up."""
     return _LOADED
 
 
