@@ -75,6 +75,9 @@ def main(argv: list[str] | None = None) -> int:
     slowest = max(helps, key=helps.__getitem__)
     met = sum(t < 0.3 for t, _ in helps.values())
     row(f"trustseek CMD --help, slowest of {len(helps)} ({slowest}; {met} under 0.3 s)", helps[slowest], 0.3)
+    over = sorted((name for name, (t, _) in helps.items() if t >= 0.3), key=lambda name: -helps[name][0])
+    if over:
+        print("    over 0.3 s: " + ", ".join(f"{name} {helps[name][0]:.2f} s (cpu {helps[name][1]:.2f})" for name in over))
     row("import trustseek", wall(python("import trustseek"), n), 0.5)
     row("trustseek solve (paper preset)", wall([TRUSTSEEK, "solve"], n), 0.7)
     with tempfile.TemporaryDirectory(prefix="trustseek-bench-") as tmp:

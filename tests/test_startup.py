@@ -84,3 +84,21 @@ def test_the_group_has_every_command_for_tools_that_read_it():
     assert "fit" in group.commands and "nonsense" not in group.commands
     assert group.commands["fit"].params  # the real command, built from its module
     assert group.commands.get("nonsense") is None
+
+
+def test_every_submodule_is_an_attribute_of_its_package():
+    """As when each package imported its modules eagerly: ``estimation.selection`` after
+    ``from trustseek import estimation`` (the lazy loader reads the submodules from the stub)."""
+    code = (
+        "import importlib, pkgutil, sys\n"
+        "import trustseek\n"
+        "missing = []\n"
+        "for pkg in ('data', 'design', 'estimation', 'interop', 'model', 'policies', 'pomdp', 'reproduction', 'simulation', 'solvers'):\n"
+        "    mod = importlib.import_module(f'trustseek.{pkg}')\n"
+        "    for info in pkgutil.iter_modules(mod.__path__):\n"
+        "        if getattr(mod, info.name, None) is None:\n"
+        "            missing.append(f'{pkg}.{info.name}')\n"
+        "print(missing, [n for n in ('model', 'solvers', 'policies') if getattr(trustseek, n, None) is None])"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[] []"

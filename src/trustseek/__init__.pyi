@@ -1,5 +1,7 @@
 """The public names of :mod:`trustseek`: read by type checkers, and by ``__init__.py`` to load each on first use."""
 
+# the Python API's packages, as the package attributes of those names
+from . import errors, model, policies, pomdp, solvers, version, vocab
 from .errors import TrustseekError
 from .model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 from .model.jsonfile import ModelError

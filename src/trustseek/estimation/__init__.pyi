@@ -1,5 +1,29 @@
 """The public names of :mod:`trustseek.estimation`: read by type checkers, and by ``__init__.py`` to load each on first use."""
 
+# every submodule, as the package attribute of that name
+from . import (
+    bootstrap,
+    compiled_run,
+    convergence,
+    em,
+    estep,
+    fit,
+    iohmm,
+    kernels,
+    mixture,
+    personal,
+    prediction,
+    quasi_newton,
+    ratings,
+    selection,
+    sequences,
+    spec,
+    structure,
+    trust_iohmm,
+    type_selection,
+    validation,
+    warm,
+)
 from .fit import MIN_EVENTS, FitResult, ModelFitResult, decode, fit_model, fit_trust_model, trust_loglik
 from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
 from .selection import select_levels, selection_warnings

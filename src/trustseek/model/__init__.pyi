@@ -1,5 +1,7 @@
 """The public names of :mod:`trustseek.model`: read by type checkers, and by ``__init__.py`` to load each on first use."""
 
+# every submodule, as the package attribute of that name
+from . import core, iohmm, jsonfile, mixture, presets, task
 from .core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, RatingTable, TrustModel
 from .iohmm import IOHMM_FORMAT, IOHMMModel, load_any_model
 from .jsonfile import ModelError

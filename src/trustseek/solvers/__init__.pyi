@@ -1,5 +1,27 @@
 """The public names of :mod:`trustseek.solvers`: read by type checkers, and by ``__init__.py`` to load each on first use."""
 
+# every submodule, as the package attribute of that name
+from . import (
+    agnostic,
+    alpha,
+    backup,
+    base,
+    certificate,
+    certified_grid,
+    envelopes,
+    eq3,
+    grid,
+    numerics,
+    point,
+    reachable,
+    registry,
+    schedule,
+    sensitivity,
+    specs,
+    summary,
+    type_aware,
+    type_solver,
+)
 from .agnostic import TrustAgnosticSolver, trust_agnostic, trust_agnostic_from_data
 from .alpha import AlphaSolver
 from .base import Solver, SolverError, UnsupportedProblem
