@@ -14,6 +14,12 @@ from trustseek.simulation.designs import simulate_design
 pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 
 
+@pytest.fixture(autouse=True)
+def compiled_at_any_size(monkeypatch):
+    """These tests are about the compiled paths, on data smaller than the fit compiles for."""
+    monkeypatch.setattr(kernels, "COMPILE_MIN", 0)
+
+
 def mixed(n: int, seed: int):
     """n participants cut to random lengths (1 to 71 trials; some equal neighbours), some outputs missing."""
     rng = np.random.default_rng(seed)

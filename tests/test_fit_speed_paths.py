@@ -15,6 +15,12 @@ from trustseek.simulation.designs import simulate_design
 pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 
 
+@pytest.fixture(autouse=True)
+def compiled_at_any_size(monkeypatch):
+    """These tests are about the compiled paths, on data smaller than the fit compiles for."""
+    monkeypatch.setattr(kernels, "COMPILE_MIN", 0)
+
+
 def ragged(n: int, seed: int):
     """``n`` participants with trials cut off at random, so equal and unequal neighbours alternate
     (and one participant keeps a single trial)."""

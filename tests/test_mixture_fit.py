@@ -29,6 +29,13 @@ from trustseek.simulation.populations import Supervisors
 
 pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 
+
+@pytest.fixture(autouse=True)
+def compiled_at_any_size(monkeypatch):
+    """These tests are about the compiled paths, on data smaller than the fit compiles for."""
+    monkeypatch.setattr(kernels, "COMPILE_MIN", 0)
+
+
 SPEC = paper_spec()
 
 

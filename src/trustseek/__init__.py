@@ -6,58 +6,11 @@ The Python API, by package:
 * :mod:`trustseek.pomdp`    -- the assistance POMDP (Section IV) and its belief filter (``bayes``, ``paper``)
 * :mod:`trustseek.policies` -- the ``Policy`` interface, every policy kind, ``PolicyRunner``
 * :mod:`trustseek.solvers`  -- ``solver.solve(problem) -> Policy``; the registry (``make_solver``)
+
+Every name is loaded on first use (``lazy_loader`` reads them from ``__init__.pyi``): ``import
+trustseek`` costs no more than the names a program uses.
 """
 
-from .errors import TrustseekError
-from .model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
-from .model.jsonfile import ModelError
-from .model.presets import load_model, load_task, paper_model, paper_task
-from .model.task import Rewards, Task
-from .policies import (
-    ComplexityPolicy,
-    Policy,
-    PolicyRunner,
-    TrustAwarePolicy,
-    always_ask,
-    load_policy,
-    never_ask,
-    randomized,
-)
-from .pomdp.belief import BayesUpdate, PaperUpdate, make_updater
-from .pomdp.problem import AssistancePOMDP
-from .solvers import GridSolver, Solver, make_solver, solve, solver_names, trust_agnostic
-from .version import __version__ as __version__
+import lazy_loader as _lazy
 
-__all__ = [
-    "ACTIONS",
-    "EXPERIENCES",
-    "HUMAN_ACTIONS",
-    "AssistancePOMDP",
-    "BayesUpdate",
-    "ComplexityPolicy",
-    "GridSolver",
-    "ModelError",
-    "PaperUpdate",
-    "Policy",
-    "PolicyRunner",
-    "Rewards",
-    "Solver",
-    "Task",
-    "TrustAwarePolicy",
-    "TrustModel",
-    "TrustseekError",
-    "__version__",
-    "always_ask",
-    "load_model",
-    "load_policy",
-    "load_task",
-    "make_solver",
-    "make_updater",
-    "never_ask",
-    "paper_model",
-    "paper_task",
-    "randomized",
-    "solve",
-    "solver_names",
-    "trust_agnostic",
-]
+__getattr__, __dir__, __all__ = _lazy.attach_stub(__name__, __file__)

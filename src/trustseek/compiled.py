@@ -1,4 +1,12 @@
-"""numba's ``njit``, or the plain Python function where numba cannot be imported.
+"""numba's ``njit``, applied on a function's first call; or the plain Python function where
+numba cannot be imported.
+
+Decorating imports nothing: numba (half a second to import) and the compiled code (loaded from
+numba's cache, or compiled on a first use after installation) are paid for by the first call
+of a compiled function, so a program that takes only numpy paths (small data) never imports
+numba.  On that first call every function decorated so far is handed to numba at once, and the
+module attributes that named the stand-ins name numba's functions from then on (compiled code
+calls compiled code: numba reads those attributes when it compiles a caller).
 
 numba is a declared dependency; the fallback keeps the compiled modules importable (and their
 numpy or Python paths usable) on a platform without a numba wheel.  ``AVAILABLE`` says which.
@@ -6,21 +14,96 @@ numpy or Python paths usable) on a platform without a numba wheel.  ``AVAILABLE`
 
 from __future__ import annotations
 
+import importlib.util
+import sys
+import threading
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar
 
-try:  # numba is a declared dependency
-    import numba
+__all__ = ["AVAILABLE", "load", "loaded", "njit", "python"]
 
-    AVAILABLE = True
-except ImportError:  # pragma: no cover - exercised only without numba
-    AVAILABLE = False
+AVAILABLE = importlib.util.find_spec("numba") is not None  # numba is a declared dependency
 
-__all__ = ["AVAILABLE", "njit"]
+F = TypeVar("F", bound=Callable[..., Any])
+
+_PENDING: list[_Lazy] = []  # decorated, not yet handed to numba
+_LOCK = threading.RLock()
+_LOADED = False
+
+
+class _Lazy:
+    """A function that numba compiles on the first call of any such function."""
+
+    def __init__(self, func: Callable[..., Any], options: dict[str, Any]) -> None:
+        self.py_func = func
+        self.options = options
+        self.dispatcher: Any = None
+        self.__name__, self.__qualname__, self.__doc__ = func.__name__, func.__qualname__, func.__doc__
+        self.__module__ = func.__module__
+        self.__wrapped__ = func
+
+    def __call__(self, *args: Any) -> Any:
+        if self.dispatcher is None:
+            _load()
+        return self.dispatcher(*args)
+
+    def __repr__(self) -> str:
+        return f"<compiled on first call: {self.__module__}.{self.__qualname__}>"
+
+
+def load() -> None:
+    """Import numba now (a no-op without it): a caller about to do enough compiled work that
+    every path should take the compiled code (see :func:`loaded`)."""
+    if AVAILABLE:
+        _load()
+
+
+def _load() -> None:
+    """Hand every pending function to numba, and point the module attributes that name a
+    stand-in at numba's function."""
+    global _LOADED
+    with _LOCK:
+        import numba
+
+        done = {id(lazy): lazy for lazy in _PENDING}
+        for lazy in _PENDING:
+            lazy.dispatcher = numba.njit(**lazy.options)(lazy.py_func)
+        _PENDING.clear()
+        for name, module in list(sys.modules.items()):
+            if module is None or not name.startswith("trustseek"):
+                continue
+            for attr, value in list(vars(module).items()):
+                if isinstance(value, _Lazy) and id(value) in done:
+                    setattr(module, attr, value.dispatcher)
+        _LOADED = True
+
+
+def loaded() -> bool:
+    """Whether this process has imported numba for its compiled code (a compiled function was
+    called, or :func:`load`): from then on the compiled paths cost no more start-up."""
+    return _LOADED
 
 
 def njit(**options: Any) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """numba's ``njit(**options)`` when numba is installed, else the plain Python function."""
-    if not AVAILABLE:  # pragma: no cover - exercised only without numba
-        return lambda f: f
-    return numba.njit(**options)
+    """numba's ``njit(**options)``, applied on the first call (after that the module attribute
+    is numba's function itself); without numba, the plain Python function."""
+
+    def decorate(func: Callable[..., Any]) -> Callable[..., Any]:
+        if not AVAILABLE:  # pragma: no cover - exercised only without numba
+            return func
+        if _LOADED:
+            import numba
+
+            return numba.njit(**options)(func)
+        lazy = _Lazy(func, options)
+        with _LOCK:
+            _PENDING.append(lazy)
+        return lazy
+
+    return decorate
+
+
+def python(func: F) -> F:
+    """The plain Python function of a compiled one (for small inputs, where numba would cost more
+    to load than it saves)."""
+    return getattr(func, "py_func", func)

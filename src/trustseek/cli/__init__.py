@@ -1,6 +1,7 @@
 """Command-line interface: a thin layer over the Python API.
 
-Each module registers its commands on the shared Typer ``app``.  ``main`` turns
+Each module registers its commands on the shared Typer ``app``; a command's module is imported
+only when that command runs (:mod:`._lazy`), so ``--help`` starts at once.  ``main`` turns
 every :class:`~trustseek.errors.TrustseekError` into one clear line per problem
 on stderr and exit code 2, never a traceback; so is a command that needs an optional
 extra (``server``, ``plots``) which is not installed.
@@ -14,23 +15,6 @@ from rich.markup import escape
 
 from ..errors import TrustseekError
 from ._app import app, err_console
-
-# the modules that register the commands; the import order is the order of the help panels
-# isort: off
-from . import simulate  # simulate, reproduce
-from . import fit  # fit, decode, select
-from . import plan  # solve, agnostic, plot-q; preset, check
-from . import interop  # export-pomdp, solve-pomdp-file
-from . import serve  # serve, export
-from . import sensitivity  # sensitivity
-from . import schedule  # schedule
-from . import design  # design
-from . import types  # fit-types, select-types, personalize
-from . import compare  # compare-types
-from . import validate  # predict, validate
-# isort: on
-
-COMMAND_MODULES = (simulate, fit, plan, interop, serve, sensitivity, schedule, design, types, compare, validate)
 
 #: the optional extras of pyproject.toml, by the top-level module of each of their packages
 EXTRAS = {

@@ -20,16 +20,25 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..model.jsonfile import ModelError, load_json
+from ._lazy import LazyGroup
 
 app = typer.Typer(
     name="trustseek",
+    cls=LazyGroup,
     help="Trust-aware assistance-seeking: fit trust models, solve POMDP policies, simulate, run experiments.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
     context_settings={"help_option_names": ["-h", "--help"]},
 )
+LazyGroup.typer_app = app
+
+
+@app.callback()
+def _group() -> None:
+    # makes ``app`` a group of commands before any command module has registered its commands
+    pass
+
 
 console = Console()
 err_console = Console(stderr=True)
@@ -220,6 +229,8 @@ def keep_columns(out, frame, keep: list[str] | None):
 def check_mapping_file(path: Path | None) -> None:
     """Refuse a ``--mapping`` file that is not readable text (a folder, binary, not UTF-8) or,
     for JSON, not a JSON object, naming the file; the mapping's content is checked by its reader."""
+    from ..model.jsonfile import ModelError, load_json
+
     if path is None:
         return
     if path.suffix.lower() == ".toml":

@@ -1,7 +1,8 @@
-"""Trial logs: column mapping, reading (with located errors) and writing."""
+"""Trial logs: column mapping, reading (with located errors) and writing.
 
-from .cells import DataError
-from .mapping import CANONICAL, ColumnMapping
-from .trials import example_path, read_trials, write_trials
+Each name is loaded on first use (the names are in ``__init__.pyi``).
+"""
 
-__all__ = ["CANONICAL", "ColumnMapping", "DataError", "example_path", "read_trials", "write_trials"]
+import lazy_loader as _lazy
+
+__getattr__, __dir__, __all__ = _lazy.attach_stub(__name__, __file__)

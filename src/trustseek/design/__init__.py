@@ -4,27 +4,10 @@
 * :mod:`.replicate` -- one replicate: experiment 1 → fit → solve → evaluate → experiment 2 → tests;
 * :mod:`.sweep` -- the sweep over designs (in process, local processes or a Dask cluster), its
   summary, the smallest design meeting the targets, the data-collection design search.
+
+Each name is loaded on first use (the names are in ``__init__.pyi``).
 """
 
-from ..reproduction.statistics import paired_tests
-from .evaluation import EVALUATION_GRID, Evaluation, evaluate_policy, high_threshold
-from .replicate import Experiment1, FitSettings, Study, replicate_seed, run_replicate
-from .sweep import TESTS, DesignConfig, DesignResult, ask_search, run_design
+import lazy_loader as _lazy
 
-__all__ = [
-    "EVALUATION_GRID",
-    "TESTS",
-    "DesignConfig",
-    "DesignResult",
-    "Evaluation",
-    "Experiment1",
-    "FitSettings",
-    "Study",
-    "ask_search",
-    "evaluate_policy",
-    "high_threshold",
-    "paired_tests",
-    "replicate_seed",
-    "run_design",
-    "run_replicate",
-]
+__getattr__, __dir__, __all__ = _lazy.attach_stub(__name__, __file__)

@@ -12,48 +12,10 @@
 * :mod:`.fit`, :mod:`.bootstrap`, :mod:`.selection` -- the trust-model fit, its intervals,
   and the choice of the number of levels; :func:`fit_model`, the same fit with any named
   inputs (a general model, :class:`~trustseek.model.IOHMMModel`).
+
+Each name is loaded on first use (the names are in ``__init__.pyi``).
 """
 
-from .fit import MIN_EVENTS, FitResult, ModelFitResult, decode, fit_model, fit_trust_model, trust_loglik
-from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
-from .selection import select_levels, selection_warnings
-from .sequences import Sequences, encode
-from .spec import FitError, Fixed, IOHMMSpec, Params
-from .trust_iohmm import (
-    MODEL_INPUTS,
-    PAPER_EMISSION_INPUTS,
-    PAPER_TRANSITION_INPUTS,
-    from_trust_model,
-    general_spec,
-    paper_spec,
-    to_trust_model,
-)
+import lazy_loader as _lazy
 
-__all__ = [
-    "MIN_EVENTS",
-    "MODEL_INPUTS",
-    "PAPER_EMISSION_INPUTS",
-    "PAPER_TRANSITION_INPUTS",
-    "FitError",
-    "FitResult",
-    "Fixed",
-    "IOHMMFit",
-    "IOHMMSpec",
-    "ModelFitResult",
-    "Params",
-    "Sequences",
-    "decode",
-    "encode",
-    "fit_iohmm",
-    "fit_model",
-    "fit_trust_model",
-    "from_trust_model",
-    "general_spec",
-    "loglik",
-    "paper_spec",
-    "posteriors",
-    "select_levels",
-    "selection_warnings",
-    "to_trust_model",
-    "trust_loglik",
-]
+__getattr__, __dir__, __all__ = _lazy.attach_stub(__name__, __file__)

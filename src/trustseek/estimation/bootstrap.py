@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from ..compiled import load as load_compiled
+from . import kernels
 from .iohmm import fit_iohmm
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec, Params
@@ -185,6 +187,8 @@ def bootstrap(
         log.info(
             "bootstrap: %d resamples are too few for %.0f%% intervals (at least %d)", replicates, 100 * level, MIN_REPLICATES
         )
+    if kernels.worth_compiling(replicates * seqs.n_trials):
+        load_compiled()  # many fits: the compiled E-step in every one (worker processes start from here)
     children = np.random.SeedSequence([seed, 1]).spawn(replicates)
     w = {k: np.asarray(v, dtype=float) for k, v in (weights or {}).items()}
     jobs = [_Replicate(seqs, spec, params, w, ch, restarts, tol, max_iter) for ch in children]

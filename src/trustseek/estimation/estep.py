@@ -76,9 +76,9 @@ class Workspace:
     """Index arrays of one data set and one model size, reused by every E-step.
 
     ``method``: ``numba`` (compiled), ``loop`` or ``scan`` (numpy), or ``auto``: compiled
-    when numba is installed, and for posteriors (or without numba) the scan when the
-    sequences are few and long, else the loop.  ``threads``: how many threads a compiled
-    E-step may use (the result does not depend on it).
+    when numba is installed and it pays (:func:`.kernels.worth_compiling`), and
+    for posteriors (or else) the scan when the sequences are few and long, else the loop.
+    ``threads``: how many threads a compiled E-step may use (the result does not depend on it).
     """
 
     def __init__(self, seqs: Sequences, K: int, M: int, Ue: int, Ut: int, method: str = "auto", threads: int = 1):
@@ -94,7 +94,7 @@ class Workspace:
         self.tidx = np.where(seqs.has_successor(), seqs.ut[:-1], Ut)  # (T-1, N); row Ut = identity, not counted
         # the numpy time loop costs ~T numpy calls per pass and the scan ~log2(T) calls on
         # log2(T)-times more work: the scan wins for few, long sequences
-        self.compiled = method == "numba" or (method == "auto" and kernels.AVAILABLE)
+        self.compiled = method == "numba" or (method == "auto" and kernels.worth_compiling(seqs.n_trials))
         self.scan = method == "scan" or (method in ("auto", "numba") and self.T > 1 and self.T >= SCAN_RATIO * self.N)
         self._eye = np.eye(K)
         self._kernel = kernels.Kernel(self.eidx, self.tidx, seqs.lengths, K, self.PE, Ut + 1, threads) if self.compiled else None

@@ -408,24 +408,29 @@ def never_estimated(frame: pd.DataFrame, spec: IOHMMSpec) -> tuple[tuple[str, tu
     if cx is None or ac is None or ex is None or cx.isna().any() or ac.isna().any():
         return ()  # a log without these columns: nothing to say per row
     observed = frame["human_action"].notna().to_numpy()
-    order = frame.sort_values(["participant", "trial"], kind="stable")
-    has_next = pd.Series(order["participant"].shift(-1).to_numpy() == order["participant"].to_numpy(), index=order.index)
-    has_next = has_next.reindex(frame.index).to_numpy()
+    # a trial has a next one when it is not its participant's last (encode refused repeated indices)
+    person, people = pd.factorize(frame["participant"])
+    trial = frame["trial"].to_numpy(dtype=np.int64)
+    last = np.full(len(people), np.iinfo(np.int64).min)
+    np.maximum.at(last, person, trial)
+    has_next = trial < last[person]
     c, a = cx.to_numpy(dtype=np.int64), ac.to_numpy(dtype=np.int64)
     e = ex.fillna(-1).to_numpy(dtype=np.int64)
-    em_seen = {(int(i), int(j)) for i, j in zip(c[observed], a[observed], strict=True)}
+    em_seen = np.zeros((len(complexities), 2), dtype=bool)
+    em_seen[c[observed], a[observed]] = True
     sel = has_next & (e >= 0)
-    tr_seen = {(int(i), int(j), int(k)) for i, j, k in zip(c[sel], a[sel], e[sel], strict=True)}
+    tr_seen = np.zeros((len(complexities), 2, 2), dtype=bool)
+    tr_seen[c[sel], a[sel], e[sel]] = True
     fixed_ask = "robot_action" in spec.emission_inputs and any(
         dict(f.where) == {"robot_action": "ask"} for f in spec.fixed_emissions
     )
     out: list[tuple[str, tuple[int, ...]]] = []
     for i in range(len(complexities)):
         for j in range(2):
-            if (i, j) not in em_seen and not (fixed_ask and j == 1):
+            if not em_seen[i, j] and not (fixed_ask and j == 1):
                 out.append(("emission", (i, j)))
             for k in range(2):
-                if (i, j, k) not in tr_seen:
+                if not tr_seen[i, j, k]:
                     out.append(("transition", (i, j, k)))
     return tuple(out)
 

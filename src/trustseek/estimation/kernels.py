@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 
 from ..compiled import AVAILABLE as AVAILABLE  # callers read kernels.AVAILABLE
-from ..compiled import njit
+from ..compiled import loaded, njit
 
 CHUNK = 128  # sequences per work item (a fixed grouping of the sums)
 RESCALE = 200  # forward and backward vectors are multiplied by 2**RESCALE when below 2**-RESCALE (exact)
@@ -58,6 +58,7 @@ TINY = 2.0**-RESCALE
 HUGE = 2.0**RESCALE
 LOG_HUGE = RESCALE * math.log(2.0)
 PARALLEL_MIN = 40_000  # trials x parameter sets from which an E-step is split over threads
+COMPILE_MIN = 5_000  # trials from which a fit's E-steps run compiled (worth_compiling)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -774,6 +775,15 @@ def stick_gradient(theta, prior, table, m, tbase, tstride, coff, cptr, cdst, w0,
             v = theta[k]
             out[k] = w[j] / v - tail / (1 - v)
             tail = tail + w[j]
+
+
+def worth_compiling(trials: int) -> bool:
+    """Whether E-steps on ``trials`` trials should run compiled: from :data:`COMPILE_MIN` trials,
+    or once this process has loaded numba anyway (a simulation, a bootstrap, a design study: many
+    fits).  Below, a whole fit in numpy (10 starts) takes less time than importing numba and
+    loading the compiled code from its cache (~1 s), let alone compiling it on a first use after
+    installation (~1 min)."""
+    return AVAILABLE and (trials >= COMPILE_MIN or loaded())
 
 
 _POOL: ThreadPoolExecutor | None = None

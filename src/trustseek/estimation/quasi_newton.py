@@ -21,6 +21,7 @@ import numpy as np
 from scipy.optimize import minimize
 from threadpoolctl import ThreadpoolController
 
+from ..compiled import python
 from . import kernels
 from .em import CAPPED, RunResult
 from .estep import EStep, Workspace
@@ -138,7 +139,7 @@ class Sticks:
         """``base`` with its free cells set from the fractions ``theta``."""
         out = Params(base.initial.copy(), base.emission.copy(), base.transition.copy())
         table, m, mass, tbase, tstride, coff, cptr, cdst = self._layout()
-        kernels.stick_values(
+        python(kernels.stick_values)(  # a few cells: not worth loading numba for
             np.ascontiguousarray(theta, dtype=float),
             table,
             m,
@@ -158,7 +159,7 @@ class Sticks:
         """Gradient of the objective with respect to ``theta`` from the E-step at that point."""
         table, m, _mass, tbase, tstride, coff, cptr, cdst = self._layout()
         out = np.empty(len(theta))
-        kernels.stick_gradient(
+        python(kernels.stick_gradient)(
             np.ascontiguousarray(theta, dtype=float),
             float(self.structure.spec.prior),
             table,

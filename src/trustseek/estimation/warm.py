@@ -14,6 +14,7 @@ import time
 import numpy as np
 import pandas as pd
 
+from ..compiled import load as load_compiled
 from .fit import fit_trust_model
 from .iohmm import fit_iohmm
 from .mixture import fit_types
@@ -45,6 +46,7 @@ def tiny_log(participants: int = 4, trials: int = 12, seed: int = 0) -> pd.DataF
 def warm() -> float:
     """Run every compiled path once on :func:`tiny_log`; the seconds it took."""
     t = time.perf_counter()
+    load_compiled()  # the compiled paths, also on this log of fewer than kernels.COMPILE_MIN trials
     frame = tiny_log()
     spec = preset_spec("paper", frame)
     seqs = encode(frame, spec)

@@ -1,5 +1,8 @@
-"""Standard POMDP files: Cassandra ``.pomdp`` (read and write) and POMDPX (write)."""
+"""Standard POMDP files: Cassandra ``.pomdp`` (read and write) and POMDPX (write).
 
-from .files import PomdpFileError, export_assistance, read_pomdp, write_pomdp, write_pomdpx
+Each name is loaded on first use (the names are in ``__init__.pyi``).
+"""
 
-__all__ = ["PomdpFileError", "export_assistance", "read_pomdp", "write_pomdp", "write_pomdpx"]
+import lazy_loader as _lazy
+
+__getattr__, __dir__, __all__ = _lazy.attach_stub(__name__, __file__)

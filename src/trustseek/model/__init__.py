@@ -1,47 +1,11 @@
 """The supervisor and the task: ``TrustModel`` (trust dynamics and human actions; ``IOHMMModel``
 is the same model with any named inputs), ``Task``
 (complexities, success probabilities, rewards of eq. (1), discount), their JSON formats, and
-the built-in presets."""
+the built-in presets.
 
-from .core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, RatingTable, TrustModel
-from .iohmm import IOHMM_FORMAT, IOHMMModel, load_any_model
-from .jsonfile import ModelError
-from .mixture import TypeMixture
-from .presets import (
-    MIXTURE_PRESETS,
-    MODEL_PRESETS,
-    TASK_PRESETS,
-    conservative_model,
-    load_mixture,
-    load_model,
-    load_task,
-    paper_conservative_mixture,
-    paper_model,
-    paper_task,
-)
-from .task import Rewards, Task
+Each name is loaded on first use (the names are in ``__init__.pyi``).
+"""
 
-__all__ = [
-    "ACTIONS",
-    "EXPERIENCES",
-    "HUMAN_ACTIONS",
-    "IOHMM_FORMAT",
-    "MIXTURE_PRESETS",
-    "MODEL_PRESETS",
-    "TASK_PRESETS",
-    "IOHMMModel",
-    "ModelError",
-    "RatingTable",
-    "Rewards",
-    "Task",
-    "TrustModel",
-    "TypeMixture",
-    "conservative_model",
-    "load_any_model",
-    "load_mixture",
-    "load_model",
-    "load_task",
-    "paper_conservative_mixture",
-    "paper_model",
-    "paper_task",
-]
+import lazy_loader as _lazy
+
+__getattr__, __dir__, __all__ = _lazy.attach_stub(__name__, __file__)

@@ -11,37 +11,10 @@
 * :mod:`.runner`       -- ``PolicyRunner``: a policy with its live belief, trial by trial.
 
 Policies never solve anything: the solvers (``trustseek.solvers``) build them.
+
+Each name is loaded on first use (the names are in ``__init__.pyi``).
 """
 
-from .alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy
-from .base import POLICY_FORMAT, Policy, PolicyError
-from .complexity import COMPLEXITY_KINDS, ComplexityPolicy, always_ask, never_ask, randomized
-from .grid_q import TrustAwarePolicy
-from .kinds import POLICY_KINDS, load_policy, policy_from_dict
-from .regions import ask_bounds, ask_regions
-from .runner import PolicyRunner
-from .thresholds import ask_intervals, threshold
-from .type_aware import TypeAwarePolicy
+import lazy_loader as _lazy
 
-__all__ = [
-    "COMPLEXITY_KINDS",
-    "POLICY_FORMAT",
-    "POLICY_KINDS",
-    "AlphaVectorPolicy",
-    "ComplexityPolicy",
-    "FlatAlphaPolicy",
-    "Policy",
-    "PolicyError",
-    "PolicyRunner",
-    "TrustAwarePolicy",
-    "TypeAwarePolicy",
-    "always_ask",
-    "ask_bounds",
-    "ask_intervals",
-    "ask_regions",
-    "load_policy",
-    "never_ask",
-    "policy_from_dict",
-    "randomized",
-    "threshold",
-]
+__getattr__, __dir__, __all__ = _lazy.attach_stub(__name__, __file__)

@@ -1,19 +1,9 @@
 """The assistance-seeking POMDP of Section IV, its belief filter, and the flat and branch forms
-that solvers and standard files use."""
+that solvers and standard files use.
 
-from .belief import BELIEF_UPDATES, BayesUpdate, Branches, PaperUpdate, ScalarBelief, make_updater
-from .branch_model import BranchModel
-from .flat import FlatPOMDP
-from .problem import AssistancePOMDP
+Each name is loaded on first use (the names are in ``__init__.pyi``).
+"""
 
-__all__ = [
-    "BELIEF_UPDATES",
-    "AssistancePOMDP",
-    "BayesUpdate",
-    "BranchModel",
-    "Branches",
-    "FlatPOMDP",
-    "PaperUpdate",
-    "ScalarBelief",
-    "make_updater",
-]
+import lazy_loader as _lazy
+
+__getattr__, __dir__, __all__ = _lazy.attach_stub(__name__, __file__)

@@ -5,9 +5,10 @@
 * :mod:`.comparison` -- the paper's values next to the reproduction's, with verdicts;
 * :mod:`.pipeline`   -- the run: experiments, fit, plan, replicates, costs, heterogeneity;
 * :mod:`.coverage`   -- how often the fit's bootstrap intervals cover the truth.
+
+Each name is loaded on first use (the names are in ``__init__.pyi``).
 """
 
-from .config import AGNOSTIC, AWARE, PAPER, ReproduceConfig
-from .pipeline import Reproduction, reproduce, write_summary
+import lazy_loader as _lazy
 
-__all__ = ["AGNOSTIC", "AWARE", "PAPER", "ReproduceConfig", "Reproduction", "reproduce", "write_summary"]
+__getattr__, __dir__, __all__ = _lazy.attach_stub(__name__, __file__)

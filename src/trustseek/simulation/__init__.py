@@ -7,27 +7,10 @@
   :mod:`.warm` compiles them into numba's cache once;
 * :mod:`.results`     -- ``Simulation`` and ``CrossoverSimulation``: summaries and trial logs;
 * :mod:`.designs`     -- the paper's data collection and its counterbalanced crossover.
+
+Each name is loaded on first use (the names are in ``__init__.pyi``).
 """
 
-from .designs import add_ratings, crossover, simulate_design
-from .engine import Block, run, simulate
-from .populations import SimulationError, Supervisors
-from .results import CrossoverSimulation, Simulation, participant_ids, summarize
-from .schedules import schedule_counts, schedule_iid
+import lazy_loader as _lazy
 
-__all__ = [
-    "Block",
-    "CrossoverSimulation",
-    "Simulation",
-    "SimulationError",
-    "Supervisors",
-    "add_ratings",
-    "crossover",
-    "participant_ids",
-    "run",
-    "schedule_counts",
-    "schedule_iid",
-    "simulate",
-    "simulate_design",
-    "summarize",
-]
+__getattr__, __dir__, __all__ = _lazy.attach_stub(__name__, __file__)

@@ -15,39 +15,10 @@
 Inside: :mod:`.numerics` (policy evaluation, Howard's improvement, controller values),
 :mod:`.envelopes` and :mod:`.backup` (the exact alpha-vector backup), :mod:`.eq3` (the
 eq.-3 belief MDP), :mod:`.certificate` (certified two-level solutions and their thresholds).
+
+Each name is loaded on first use (the names are in ``__init__.pyi``).
 """
 
-from .agnostic import TrustAgnosticSolver, trust_agnostic, trust_agnostic_from_data
-from .alpha import AlphaSolver
-from .base import Solver, SolverError, UnsupportedProblem
-from .certified_grid import CertifiedGridSolver
-from .grid import GridSolver, solve
-from .point import PointSolver
-from .registry import SOLVERS, make_solver, solve_with, solver_names
-from .specs import PolicySpecError, policy_from_spec
-from .summary import summarize
-from .type_aware import solve_type_aware
-from .type_solver import TypeAwareSolver
+import lazy_loader as _lazy
 
-__all__ = [
-    "SOLVERS",
-    "AlphaSolver",
-    "CertifiedGridSolver",
-    "GridSolver",
-    "PointSolver",
-    "PolicySpecError",
-    "Solver",
-    "SolverError",
-    "TrustAgnosticSolver",
-    "TypeAwareSolver",
-    "UnsupportedProblem",
-    "make_solver",
-    "policy_from_spec",
-    "solve",
-    "solve_type_aware",
-    "solve_with",
-    "solver_names",
-    "summarize",
-    "trust_agnostic",
-    "trust_agnostic_from_data",
-]
+__getattr__, __dir__, __all__ = _lazy.attach_stub(__name__, __file__)

@@ -36,9 +36,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
 from scipy.sparse.csgraph import connected_components
 
+from ..compiled import njit
 from ..model.core import TrustModel
 from ..policies.base import Policy
 from ..policies.envelope import envelope_values

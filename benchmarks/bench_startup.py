@@ -1,0 +1,103 @@
+"""What a person waits for: each command run as a fresh process, end to end (wall time).
+
+    python benchmarks/bench_startup.py            # every row, best of 3 runs each
+    python benchmarks/bench_startup.py --repeat 5
+    python benchmarks/bench_startup.py --no-big   # without the 100,000 x 71 fit (its log takes a minute to make once)
+
+Rows: ``trustseek --help`` and every command's ``--help``, ``import trustseek``, ``trustseek
+solve``, ``trustseek check model.json``, ``trustseek fit`` on the shipped example with numba's
+cache as it is and in a fresh environment (NUMBA_CACHE_DIR pointed at an empty folder: no
+compiled code of any kind), ``trustseek fit`` on 100,000 x 71 trials with one restart, and the
+fit's warm step (``python -m trustseek.estimation.warm``) with an empty cache.  The in-run
+baseline is the bare interpreter (``python -c pass``) and ``import numpy, pandas``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+BIN = Path(sys.executable).parent
+TRUSTSEEK = str(BIN / "trustseek")
+
+
+def wall(argv: list[str], repeat: int, fresh_cache: bool = False) -> tuple[float, float]:
+    """The best wall time of ``argv`` over ``repeat`` runs, each a fresh process (with
+    ``fresh_cache``: each with its own empty numba cache), and that run's CPU time (user +
+    system: what the run costs when the machine is busy with other work)."""
+    best = (float("inf"), float("inf"))
+    for _ in range(repeat):
+        env = dict(os.environ)
+        with tempfile.TemporaryDirectory(prefix="trustseek-numba-") as cache:
+            if fresh_cache:
+                env["NUMBA_CACHE_DIR"] = cache
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
+            t = time.perf_counter()
+            subprocess.run(argv, env=env, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=cache)
+            seconds = time.perf_counter() - t
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpu = after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime
+            best = min(best, (seconds, cpu))
+    return best
+
+
+def row(what: str, seconds: tuple[float, float], target: float | None) -> None:
+    wall_s, cpu = seconds
+    verdict = "" if target is None else f"< {target:g} s  {'met' if wall_s < target else 'NOT MET'}"
+    print(f"  {what:60} {wall_s:7.2f} s  (cpu {cpu:6.2f} s)  {verdict}", flush=True)
+
+
+def python(code: str) -> list[str]:
+    return [sys.executable, "-c", code]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--no-big", action="store_true", help="leave out the 100,000 x 71 fit")
+    args = ap.parse_args(argv)
+    n = args.repeat
+    from trustseek.cli._lazy import COMMANDS
+    from trustseek.data import example_path
+
+    print(f"wall time of fresh processes, best of {n}; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    row("baseline: python -c pass", wall(python("pass"), n), None)
+    row("baseline: python -c 'import numpy, pandas'", wall(python("import numpy, pandas"), n), None)
+    row("trustseek --help", wall([TRUSTSEEK, "--help"], n), 0.3)
+    helps = {name: wall([TRUSTSEEK, name, "--help"], n) for name in COMMANDS}
+    slowest = max(helps, key=helps.__getitem__)
+    met = sum(t < 0.3 for t, _ in helps.values())
+    row(f"trustseek CMD --help, slowest of {len(helps)} ({slowest}; {met} under 0.3 s)", helps[slowest], 0.3)
+    over = sorted((name for name, (t, _) in helps.items() if t >= 0.3), key=lambda name: -helps[name][0])
+    if over:
+        print("    over 0.3 s: " + ", ".join(f"{name} {helps[name][0]:.2f} s (cpu {helps[name][1]:.2f})" for name in over))
+    row("import trustseek", wall(python("import trustseek"), n), 0.5)
+    row("trustseek solve (paper preset)", wall([TRUSTSEEK, "solve"], n), 0.7)
+    with tempfile.TemporaryDirectory(prefix="trustseek-bench-") as tmp:
+        model = Path(tmp) / "model.json"
+        subprocess.run([TRUSTSEEK, "preset", "paper", "--model-out", str(model)], check=True, stdout=subprocess.DEVNULL)
+        row("trustseek check model.json", wall([TRUSTSEEK, "check", str(model)], n), 0.5)
+        fit = [TRUSTSEEK, "fit", str(example_path()), "--preset", "paper", "--out", str(Path(tmp) / "fit.json")]
+        row("trustseek fit (shipped example, 9 x 71), numba cache as is", wall(fit, n), 1.0)
+        row("trustseek fit (shipped example), fresh environment", wall(fit, n, fresh_cache=True), 5.0)
+        if not args.no_big:
+            sys.path.insert(0, str(HERE))
+            from bench_read import cached_logs
+
+            log, _ = cached_logs(100_000)
+            big = [TRUSTSEEK, "fit", str(log), "--preset", "paper", "--restarts", "1", "--out", str(Path(tmp) / "big.json")]
+            row("trustseek fit 100,000 x 71, one restart, numba cache as is", wall(big, 1), 6.0)
+    warm = [sys.executable, "-m", "trustseek.estimation.warm"]
+    row("make test's warm step (estimation.warm), fresh environment", wall(warm, 1, fresh_cache=True), 10.0)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

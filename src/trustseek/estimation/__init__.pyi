@@ -1,0 +1,69 @@
+"""The public names of :mod:`trustseek.estimation`: read by type checkers, and by ``__init__.py`` to load each on first use."""
+
+# every submodule, as the package attribute of that name
+from . import (
+    bootstrap,
+    compiled_run,
+    convergence,
+    em,
+    estep,
+    fit,
+    iohmm,
+    kernels,
+    mixture,
+    personal,
+    prediction,
+    quasi_newton,
+    ratings,
+    selection,
+    sequences,
+    spec,
+    structure,
+    trust_iohmm,
+    type_selection,
+    validation,
+    warm,
+)
+from .fit import MIN_EVENTS, FitResult, ModelFitResult, decode, fit_model, fit_trust_model, trust_loglik
+from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
+from .selection import select_levels, selection_warnings
+from .sequences import Sequences, encode
+from .spec import FitError, Fixed, IOHMMSpec, Params
+from .trust_iohmm import (
+    MODEL_INPUTS,
+    PAPER_EMISSION_INPUTS,
+    PAPER_TRANSITION_INPUTS,
+    from_trust_model,
+    general_spec,
+    paper_spec,
+    to_trust_model,
+)
+
+__all__ = [
+    "MIN_EVENTS",
+    "MODEL_INPUTS",
+    "PAPER_EMISSION_INPUTS",
+    "PAPER_TRANSITION_INPUTS",
+    "FitError",
+    "FitResult",
+    "Fixed",
+    "IOHMMFit",
+    "IOHMMSpec",
+    "ModelFitResult",
+    "Params",
+    "Sequences",
+    "decode",
+    "encode",
+    "fit_iohmm",
+    "fit_model",
+    "fit_trust_model",
+    "from_trust_model",
+    "general_spec",
+    "loglik",
+    "paper_spec",
+    "posteriors",
+    "select_levels",
+    "selection_warnings",
+    "to_trust_model",
+    "trust_loglik",
+]

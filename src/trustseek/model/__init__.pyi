@@ -1,0 +1,46 @@
+"""The public names of :mod:`trustseek.model`: read by type checkers, and by ``__init__.py`` to load each on first use."""
+
+# every submodule, as the package attribute of that name
+from . import core, iohmm, jsonfile, mixture, presets, task
+from .core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, RatingTable, TrustModel
+from .iohmm import IOHMM_FORMAT, IOHMMModel, load_any_model
+from .jsonfile import ModelError
+from .mixture import TypeMixture
+from .presets import (
+    MIXTURE_PRESETS,
+    MODEL_PRESETS,
+    TASK_PRESETS,
+    conservative_model,
+    load_mixture,
+    load_model,
+    load_task,
+    paper_conservative_mixture,
+    paper_model,
+    paper_task,
+)
+from .task import Rewards, Task
+
+__all__ = [
+    "ACTIONS",
+    "EXPERIENCES",
+    "HUMAN_ACTIONS",
+    "IOHMM_FORMAT",
+    "MIXTURE_PRESETS",
+    "MODEL_PRESETS",
+    "TASK_PRESETS",
+    "IOHMMModel",
+    "ModelError",
+    "RatingTable",
+    "Rewards",
+    "Task",
+    "TrustModel",
+    "TypeMixture",
+    "conservative_model",
+    "load_any_model",
+    "load_mixture",
+    "load_model",
+    "load_task",
+    "paper_conservative_mixture",
+    "paper_model",
+    "paper_task",
+]

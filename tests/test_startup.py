@@ -1,0 +1,104 @@
+"""The command line starts at once: ``import trustseek``, ``import trustseek.cli`` and ``trustseek
+--help`` load none of the heavy packages, and the help listing (read from a table, no command
+module imported) is what the command modules register."""
+
+from __future__ import annotations
+
+import inspect
+import json
+import subprocess
+import sys
+
+import pytest
+import typer
+
+from cli_runner import run_cli
+from trustseek.cli import _lazy, app
+
+HEAVY = ("numba", "scipy", "pandas", "matplotlib", "fastapi", "sqlalchemy")
+
+#: what each program leaves in sys.modules, printed as JSON (a fresh interpreter each)
+LOADED = f"import json, sys; print(json.dumps(sorted(m for m in {HEAVY!r} if m in sys.modules)))"
+
+
+def heavy_modules_after(code: str) -> list[str]:
+    out = subprocess.run([sys.executable, "-c", f"{code}\n{LOADED}"], capture_output=True, text=True, timeout=120, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.parametrize(
+    "code",
+    [
+        "import trustseek.cli",
+        "import trustseek",
+        "import trustseek.errors, trustseek.vocab",
+        # the help, as `trustseek --help` prints it
+        "import contextlib, io, sys\nfrom trustseek.cli import main\nsys.argv = ['trustseek', '--help']\n"
+        "with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()):\n    main()",
+    ],
+    ids=["cli", "package", "errors", "help"],
+)
+def test_starting_loads_no_heavy_package(code):
+    assert heavy_modules_after(code) == []
+
+
+def test_the_check_can_fail():
+    assert heavy_modules_after("import pandas") == ["pandas"]
+
+
+def registered() -> dict[str, _lazy.Command]:
+    """Every command as the command modules register it: module, panel, first paragraph of the help."""
+    for module in dict.fromkeys(c.module for c in _lazy.COMMANDS.values()):
+        __import__(f"trustseek.cli.{module}")
+    out = {}
+    for info in app.registered_commands:
+        assert info.callback is not None
+        help_text = inspect.cleandoc(info.help or inspect.getdoc(info.callback) or "")
+        module = info.callback.__module__.rpartition(".")[2]
+        out[_lazy.command_name(info)] = _lazy.Command(module, info.rich_help_panel or "", help_text.split("\n\n")[0].strip())
+    return out
+
+
+def test_the_listing_table_is_what_the_modules_register():
+    """When a command is added, renamed, moved to another panel or its help's first paragraph
+    changes, update COMMANDS in src/trustseek/cli/_lazy.py to match."""
+    real = registered()
+    assert list(_lazy.COMMANDS) == list(real)
+    assert real == _lazy.COMMANDS
+
+
+def test_help_lists_every_command_and_runs_a_command_from_its_module():
+    code, out = run_cli(["--help"])
+    assert code == 0
+    for name, command in _lazy.COMMANDS.items():
+        assert f" {name} " in out
+        assert command.panel in out
+    code, out = run_cli(["preset", "paper"])
+    assert code == 0 and json.loads(out)["model"]["format"] == "trustseek.trust-model/1"
+
+
+def test_the_group_has_every_command_for_tools_that_read_it():
+    group = typer.main.get_command(app)
+    assert isinstance(group, typer.core.TyperGroup)
+    assert list(group.commands) == list(_lazy.COMMANDS)
+    assert "fit" in group.commands and "nonsense" not in group.commands
+    assert group.commands["fit"].params  # the real command, built from its module
+    assert group.commands.get("nonsense") is None
+
+
+def test_every_submodule_is_an_attribute_of_its_package():
+    """As when each package imported its modules eagerly: ``estimation.selection`` after
+    ``from trustseek import estimation`` (the lazy loader reads the submodules from the stub)."""
+    code = (
+        "import importlib, pkgutil, sys\n"
+        "import trustseek\n"
+        "missing = []\n"
+        "for pkg in ('data', 'design', 'estimation', 'interop', 'model', 'policies', 'pomdp', 'reproduction', 'simulation', 'solvers'):\n"
+        "    mod = importlib.import_module(f'trustseek.{pkg}')\n"
+        "    for info in pkgutil.iter_modules(mod.__path__):\n"
+        "        if getattr(mod, info.name, None) is None:\n"
+        "            missing.append(f'{pkg}.{info.name}')\n"
+        "print(missing, [n for n in ('model', 'solvers', 'policies') if getattr(trustseek, n, None) is None])"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[] []"

@@ -1,0 +1,130 @@
+"""A fit starts fast: on small data it takes the numpy path and never imports numba (compiled
+code is loaded on the first call of a compiled function); ``never_estimated`` (whole arrays, no
+longer a walk over every row in Python) says what a row-by-row reading of the log says, on logs
+in any row order, with gaps in the trial numbers, missing human actions and experiences."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from trustseek.estimation import encode, kernels
+from trustseek.estimation.estep import Workspace
+from trustseek.estimation.fit import never_estimated
+from trustseek.estimation.structure import Structure
+from trustseek.estimation.trust_iohmm import paper_spec
+from trustseek.vocab import ACTIONS, EXPERIENCES
+
+COMPLEXITIES = ("low", "high")
+
+
+def row_by_row(frame: pd.DataFrame, fixed_ask: bool) -> tuple[tuple[str, tuple[int, ...]], ...]:
+    """The rows no trial informs, read one trial at a time."""
+    em_seen, tr_seen = set(), set()
+    for _, r in frame.iterrows():
+        key = (COMPLEXITIES.index(r["complexity"]), ACTIONS.index(r["robot_action"]))
+        if pd.notna(r["human_action"]):
+            em_seen.add(key)
+        later = frame[(frame["participant"] == r["participant"]) & (frame["trial"] > r["trial"])]
+        if len(later) and pd.notna(r["experience"]):
+            tr_seen.add((*key, EXPERIENCES.index(r["experience"])))
+    out: list[tuple[str, tuple[int, ...]]] = []
+    for i in range(2):
+        for j in range(2):
+            if (i, j) not in em_seen and not (fixed_ask and j == 1):
+                out.append(("emission", (i, j)))
+            out += [("transition", (i, j, k)) for k in range(2) if (i, j, k) not in tr_seen]
+    return tuple(out)
+
+
+trial_rows = st.lists(
+    st.tuples(
+        st.sampled_from(["P1", "P2", "P3"]),
+        st.sampled_from(COMPLEXITIES),
+        st.sampled_from(ACTIONS),
+        st.sampled_from(["intervene", "rely", None]),
+        st.sampled_from([*EXPERIENCES, None]),
+    ),
+    min_size=0,
+    max_size=12,
+)
+
+
+@settings(max_examples=150, deadline=None)
+@given(rows=trial_rows, shuffle=st.randoms(use_true_random=False))
+def test_never_estimated_is_the_row_by_row_answer(rows, shuffle):
+    trials: dict[str, int] = {}
+    records = []
+    for p, c, a, h, e in rows:
+        trials[p] = trials.get(p, 0) + shuffle.choice([1, 2])  # gaps in the numbering
+        records.append(
+            {"participant": p, "trial": trials[p], "complexity": c, "robot_action": a, "human_action": h, "experience": e}
+        )
+    shuffle.shuffle(records)
+    frame = pd.DataFrame(records, columns=["participant", "trial", "complexity", "robot_action", "human_action", "experience"])
+    frame = frame.astype({"participant": "category", "trial": "int64"})
+    spec = paper_spec()
+    fixed_ask = any(dict(f.where) == {"robot_action": "ask"} for f in spec.fixed_emissions)
+    assert never_estimated(frame, spec) == row_by_row(frame, fixed_ask)
+
+
+def run_python(code: str) -> str:
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, check=True)
+    return out.stdout.strip().splitlines()[-1]
+
+
+def test_a_fit_on_small_data_takes_the_numpy_path_without_importing_numba():
+    code = (
+        "import sys\n"
+        "from trustseek.data import example_path, read_trials\n"
+        "from trustseek.estimation import fit_trust_model\n"
+        "r = fit_trust_model(read_trials(example_path()), restarts=2, n_jobs=1)\n"
+        "print(f'{r.loglik:.4f}', 'numba' in sys.modules)"
+    )
+    loglik, numba_loaded = run_python(code).split()
+    assert numba_loaded == "False"
+    assert loglik == "-69.9113"  # as the compiled path gives it (README, docs/fitting.md)
+
+
+def test_the_fit_compiles_from_compile_min_trials():
+    rows = [
+        {"participant": f"P{p}", "trial": t, "complexity": "low", "robot_action": "autonomous", "human_action": "rely"}
+        for p in range(3)
+        for t in range(1, 5)
+    ]
+    frame = pd.DataFrame(rows).assign(experience="reliable")
+    spec = paper_spec()
+    seqs = encode(frame, spec)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(kernels, "loaded", lambda: False)  # as in a fresh process
+        small = Workspace(seqs, *Structure(spec, seqs).dims)
+        assert not small.compiled and small._kernel is None
+        mp.setattr(kernels, "COMPILE_MIN", seqs.n_trials)
+        assert Workspace(seqs, *Structure(spec, seqs).dims).compiled == kernels.AVAILABLE
+        mp.setattr(kernels, "COMPILE_MIN", seqs.n_trials + 1)
+        mp.setattr(kernels, "loaded", lambda: True)  # numba loaded already (many fits): compiled at any size
+        assert Workspace(seqs, *Structure(spec, seqs).dims).compiled == kernels.AVAILABLE
+
+
+@pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
+def test_compiled_functions_import_numba_on_their_first_call_and_then_are_numbas():
+    code = (
+        "import sys\n"
+        "import numpy as np\n"
+        "from trustseek.estimation import kernels, compiled_run\n"
+        "before = 'numba' in sys.modules\n"
+        "lazy = kernels.stick_values\n"
+        "out = np.zeros(2)\n"
+        "i = np.zeros(1, dtype=np.int64)\n"
+        "lazy(np.array([0.25]), i, i + 2, np.ones(1), i, i + 1, i, np.array([0, 1, 2]), np.array([0, 1]), out, np.zeros(0), np.zeros(0))\n"
+        "import numba\n"
+        "after = isinstance(kernels.stick_values, numba.core.registry.CPUDispatcher)\n"
+        "inner = isinstance(compiled_run.kernels._item, numba.core.registry.CPUDispatcher)\n"
+        "print(before, 'numba' in sys.modules, after, inner, out.tolist())"
+    )
+    assert run_python(code) == "False True True True [0.25, 0.75]"
