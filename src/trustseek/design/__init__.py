@@ -6,7 +6,6 @@
   summary, the smallest design meeting the targets, the data-collection design search.
 """
 
-from ..reproduction.statistics import paired_tests
 from .evaluation import EVALUATION_GRID, Evaluation, evaluate_policy, high_threshold
 from .replicate import Experiment1, FitSettings, Study, replicate_seed, run_replicate
 from .sweep import TESTS, DesignConfig, DesignResult, ask_search, run_design
@@ -23,7 +22,6 @@ __all__ = [
     "ask_search",
     "evaluate_policy",
     "high_threshold",
-    "paired_tests",
     "replicate_seed",
     "run_design",
     "run_replicate",
