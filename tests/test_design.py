@@ -12,12 +12,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import wilcoxon
 
-from trustseek.design import DesignConfig, FitSettings, evaluate_policy, high_threshold, paired_tests, run_design
+from trustseek.design import DesignConfig, FitSettings, evaluate_policy, high_threshold, run_design
 from trustseek.errors import TrustseekError
 from trustseek.model.presets import paper_model, paper_task
 from trustseek.policies import randomized
 from trustseek.pomdp.problem import AssistancePOMDP
-from trustseek.reproduction.statistics import signed_rank_p
+from trustseek.reproduction.statistics import paired_tests, signed_rank_p
 from trustseek.simulation import simulate
 from trustseek.solvers.agnostic import trust_agnostic
 from trustseek.solvers.registry import make_solver

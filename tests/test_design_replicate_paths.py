@@ -7,9 +7,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import ttest_rel
 
-from trustseek.design.replicate import FitSettings, fit_model, paired_tests
+from trustseek.design.replicate import FitSettings, fit_model
 from trustseek.estimation.fit import fit_trust_model
 from trustseek.model.presets import paper_model
+from trustseek.reproduction.statistics import paired_tests
 from trustseek.simulation.designs import simulate_design
 
 
