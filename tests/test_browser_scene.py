@@ -71,7 +71,10 @@ def new_page(browser):
 
 
 def shot(page, out: Path, name: str) -> None:
-    page.screenshot(path=str(out / f"scene-{name}.png"))
+    if SHOTS:  # for the documentation: JPEG, smaller
+        page.screenshot(path=str(out / f"scene-{name}.jpg"), quality=80)
+    else:
+        page.screenshot(path=str(out / f"scene-{name}.png"))
 
 
 def events(c: Client, study_id: str) -> pd.DataFrame:

@@ -15,7 +15,8 @@ import {
   AISLE_H, ARM_MAX, BASE_H, REACH, SHELF_DEPTH, ItemState, Layout, RobotState, View, clampRobot, drawEndEffector, drawLocal, drawWorld,
   gripperPos, makeLayout, pathLength, pickTokens, pointAlong,
 } from "./scene";
-import { Scene3D, webglAvailable } from "./scene3d";
+import { Scene3D } from "./scene3d";
+import { Contacts, chooseScene } from "./scene3d/page";
 
 type Phase = "loading" | "consent" | "instructions" | "quiz" | "approach" | "reach" | "waiting" | "outcome" | "teleop" | "result" | "report" | "questionnaire" | "done" | "error";
 
@@ -82,7 +83,7 @@ function save() {
   const s: Saved = {
     trial: current.trial, submissionId, events: trialEvents, intervened, phase,
     teleopMs: phase === "teleop" || pending?.human === "intervene" ? performance.now() - teleopStart : null,
-    robot, item, pending, driven, armTravel, graspAttempts, contacts, inputs,
+    robot, item, pending, driven, armTravel, graspAttempts, contacts: contacts.count, inputs,
   };
   try {
     localStorage.setItem(savedKey(), JSON.stringify(s));
@@ -187,7 +188,7 @@ async function boot() {
   speed = (st.preview && isFinite(speedParam) && speedParam > 0 ? speedParam : 1) * st.animation_speed;
   $("preview-tag").hidden = !st.preview;
   $("consent-trials").textContent = String(st.trials_total - st.practice_trials);
-  chooseScene((st as { scene?: string }).scene);
+  useScene((st as { scene?: string }).scene);
   shownScore = st.score;
   if (st.consent_text) $("consent-text").textContent = st.consent_text;
   if (st.instructions) $("instructions-text").textContent = st.instructions;
@@ -326,7 +327,7 @@ function resumeTrial(cur: Current, saved: Saved) {
     driven = saved.driven;
     armTravel = saved.armTravel;
     graspAttempts = saved.graspAttempts;
-    contacts = saved.contacts ?? 0;
+    contacts.reset(saved.contacts ?? 0);
     inputs = saved.inputs ?? 0;
     teleopStart = performance.now() - (saved.teleopMs ?? 0);
     setPhase("teleop");
@@ -340,9 +341,8 @@ function resetTeleop() {
   driven = 0;
   armTravel = 0;
   graspAttempts = 0;
-  contacts = 0;
+  contacts.reset();
   inputs = 0;
-  touching = null;
 }
 
 function intervene(via: string) {
@@ -687,11 +687,10 @@ function teleop(cmd: ReturnType<typeof poll>, k: number) {
   const x0 = robot.x, y0 = robot.y, a0 = robot.arm;
   robot.x += cmd.vx * v * k;
   robot.y += cmd.vy * v * k;
-  let hit = clampRobot(robot, layout);
+  const hit = clampRobot(robot, layout);
   robot.arm = Math.max(0, Math.min(ARM_MAX, robot.arm + cmd.arm * 1.0 * k));
-  hit = contactOfArm(a0) ?? hit;
   if (cmd.vx || cmd.vy || cmd.arm) inputs++;
-  touch(hit, cmd.vx, cmd.vy);
+  touch(hit, a0, cmd.vx, cmd.vy);
   driven += Math.hypot(robot.x - x0, robot.y - y0);
   armTravel += Math.abs(robot.arm - a0);
   const gp = gripperPos(robot, layout.side);
@@ -721,7 +720,7 @@ function teleop(cmd: ReturnType<typeof poll>, k: number) {
       robot.holding = false;
       item.inBin = true;
       robot.binCount++;
-      log("deposit", { seconds: (performance.now() - teleopStart) / 1000, driven_m: +driven.toFixed(3), arm_m: +armTravel.toFixed(3), grasp_attempts: graspAttempts, contacts, inputs, gamepad: gamepadName() });
+      log("deposit", { seconds: (performance.now() - teleopStart) / 1000, driven_m: +driven.toFixed(3), arm_m: +armTravel.toFixed(3), grasp_attempts: graspAttempts, contacts: contacts.count, inputs, gamepad: gamepadName() });
       submit("intervene");
     }
   }
@@ -736,27 +735,14 @@ function teleop(cmd: ReturnType<typeof poll>, k: number) {
 let scene3d: Scene3D | null = null;
 let manual = query.get("manual") === "1";
 const APPROACH_V = 1.7; // the rate of pathS (m/s), as the 2-D scene drives
-let contacts = 0; // teleoperation: contacts with shelves, products and obstacles
+const contacts = new Contacts(); // teleoperation: contacts with shelves, products and obstacles
 let inputs = 0; // and frames with a drive or arm input
-let touching: string | null = null;
-let touchAt = 0;
 
-function chooseScene(asked: string | undefined) {
-  const want = query.get("scene") ?? asked ?? "3d";
-  let ran = "2d", reason = want === "2d" ? "asked" : "no webgl";
-  if (want !== "2d" && webglAvailable()) {
-    try {
-      const q = parseInt(query.get("quality") ?? "", 10);
-      const canvases = { world: $<HTMLCanvasElement>("world"), local: $<HTMLCanvasElement>("local"), ee: $<HTMLCanvasElement>("ee") };
-      scene3d = new Scene3D(canvases, q >= 0 && q <= 4 ? q : null);
-      ran = "3d";
-      reason = "webgl";
-    } catch (e) {
-      reason = `webgl failed: ${(e as Error).message}`.slice(0, 200);
-    }
-  }
-  document.body.dataset.scene = ran;
-  api.events([{ t: Date.now(), type: "scene", data: { scene: ran, asked: want, reason } }]).catch(() => undefined);
+function useScene(asked: string | undefined) {
+  const c = chooseScene(query, asked, { world: $<HTMLCanvasElement>("world"), local: $<HTMLCanvasElement>("local"), ee: $<HTMLCanvasElement>("ee") });
+  scene3d = c.scene;
+  document.body.dataset.scene = c.ran;
+  api.events([{ t: Date.now(), type: "scene", data: { scene: c.ran, asked: c.asked, reason: c.reason } }]).catch(() => undefined);
 }
 
 function approachLength(seed: number): number {
@@ -769,29 +755,15 @@ function approachPose(s: number) {
   return scene3d ? scene3d.drivePose(s / APPROACH_V) : pointAlong(layout.path, s);
 }
 
-/** In 3-D, an arm that would strike a shelf or a product stays where it was. */
-function contactOfArm(a0: number): string | null {
-  const hit = scene3d?.teleopArm(robot, item) ?? null;
-  if (hit) robot.arm = a0;
-  return hit;
-}
-
-/** A contact is logged when it begins (a contact that lasts, or repeats within half a second,
- * is one), and pushes the base 5 cm back from where it was driven. */
-function touch(hit: string | null, vx: number, vy: number) {
-  if (hit && hit !== touching) {
-    contacts++;
+/** A contact of the base, or of the arm in 3-D (the arm then stays where it was): logged when it begins. */
+function touch(baseHit: string | null, a0: number, vx: number, vy: number) {
+  const armHit = scene3d?.teleopArm(robot, item) ?? null;
+  if (armHit) robot.arm = a0;
+  const hit = armHit ?? baseHit;
+  if (contacts.touch(hit, clock, robot, layout, vx, vy)) {
     log("contact", { with: hit, x: +robot.x.toFixed(3), y: +robot.y.toFixed(3), arm: +robot.arm.toFixed(3) });
-    const n = Math.hypot(vx, vy);
-    if (!hit.startsWith("arm") && n > 0) {
-      robot.x -= (0.05 * vx) / n;
-      robot.y -= (0.05 * vy) / n;
-      clampRobot(robot, layout);
-    }
     if (scene3d) robot.shake = 0.6;
   }
-  if (hit) touchAt = clock;
-  touching = hit ?? (clock - touchAt > 0.5 ? null : touching);
 }
 
 (window as unknown as { __scene: unknown }).__scene = {
@@ -801,9 +773,10 @@ function touch(hit: string | null, vx: number, vy: number) {
     manual = on;
     last = performance.now();
   },
-  step: (dt: number, frames = 1) => {
+  /** Move the page's clock on by `frames` frames of `dt` seconds; draw the last one unless `render` is false. */
+  step: (dt: number, frames = 1, render = true) => {
     for (let i = 0; i < frames; i++) tick(dt);
-    draw();
+    if (render) draw();
     renderStatus();
     return scene3d?.state() ?? null;
   },

@@ -10,9 +10,7 @@ import { Drive, planPath } from "./drive";
 import { Aabb, Aisle3, makeAisle } from "./geometry";
 import { AisleModel, RobotModel, buildAisle, buildRobot, poseRobot, v3 } from "./models";
 import { OutcomeAnimation } from "./outcome";
-import { VIEW_NAMES, ViewName, Views, webglAvailable } from "./views";
-
-export { webglAvailable };
+import { VIEW_NAMES, ViewName, Views } from "./views";
 
 type V3 = [number, number, number];
 
