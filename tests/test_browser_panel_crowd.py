@@ -39,6 +39,7 @@ STUDY = {
     ],
     "panel": {"completion_code": "CROWD-OK"},
     "animation_speed": 20.0,  # the study sets the pace: fast animations for the test
+    "scene": "2d",  # twenty pages at once: the data path is tested here, the 3-D scene in test_browser_scene.py
 }
 PIDS = [f"crowd-{i:02d}" for i in range(17)] + ["crowd-00", "crowd-01", "crowd-02"]  # 20 arrivals, 17 panel ids
 RELOADERS = {3, 7, 11}
@@ -150,10 +151,13 @@ def test_twenty_participants_through_one_study_link(tmp_path, backend):
     assert not events.duplicated(["session", "trial", "type", "client_time", "data"]).any()
     shown = events[events["type"] == "outcome_shown"].drop_duplicates(["session", "trial"]).groupby("session")["trial"].apply(set)
     reloaders = set(sessions[sessions["panel_id"].isin([PIDS[k] for k in RELOADERS])]["session"])
+    two_tabs = set(sessions[sessions["panel_id"].isin([p for p, n in Counter(PIDS).items() if n > 1])]["session"])
     # every outcome shown is stored, the last trial's too (after the end); a page reloaded while
-    # it was posting the last outcome may lose that one event (it is not kept for a retry)
-    assert all(shown[s] == {1, 2, 3, 4} for s in sessions["session"] if s not in reloaders), shown
-    assert all(4 in shown[s] for s in reloaders), shown
+    # it was posting the last outcome may lose that one event (it is not kept for a retry), and
+    # of two tabs racing on one session the one whose trial was refused shows no outcome for it
+    single = [s for s in sessions["session"] if s not in reloaders | two_tabs]
+    assert len(single) >= 11 and all(shown[s] == {1, 2, 3, 4} for s in single), shown
+    assert all(4 in shown[s] for s in reloaders - two_tabs), shown
 
 
 def test_dashboard_and_the_pages_of_a_paused_closed_or_revoked_link(tmp_path):

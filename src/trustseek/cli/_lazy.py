@@ -52,7 +52,10 @@ COMMANDS: dict[str, Command] = {
         "interop", FILES, "Solve a standard .pomdp file: certified lower and upper bounds at its start belief."
     ),
     "serve": Command("serve", EXP, "Run the experiment server: participant interface, dashboard, experimenter and deploy APIs."),
-    "export": Command("serve", EXP, "Export a study's trials (canonical trial log) and, optionally, its UI events."),
+    "export": Command("serve", EXP, "Export a study's trials (canonical trial log), its UI events, or its whole data bundle."),
+    "study": Command(
+        "serve", EXP, "A study's lifecycle: its status, study link and progress; --status opens, pauses or closes it."
+    ),
     "sensitivity": Command(
         "sensitivity",
         PLAN,
