@@ -66,9 +66,13 @@ def fit_types(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
     types: int = typer.Option(2, "--types", "-m", min=1, max=12, help="Number of supervisor types."),
     differ: str = DifferOpt,
-    restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Starts (half from the perturbed pooled fit, half random)."),
-    bootstrap: int = typer.Option(0, "--bootstrap", "-b", min=0, help="Participant bootstrap resamples for 95% intervals."),
-    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    restarts: int = typer.Option(
+        10, "--restarts", "-r", min=1, max=1000, help="Starts (half from the perturbed pooled fit, half random)."
+    ),
+    bootstrap: int = typer.Option(
+        0, "--bootstrap", "-b", min=0, max=10_000, help="Participant bootstrap resamples for 95% intervals."
+    ),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative log-likelihood tolerance (> 0)."),
     max_iter: int = typer.Option(1000, "--max-iter", min=1, help="E-step cap per start."),
     jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads (fit) and processes (bootstrap)."),
@@ -86,8 +90,12 @@ def fit_types(
     quiet: bool = QuietOpt,
 ) -> None:
     """Fit supervisor types: M trust models of the paper's structure, each participant one type."""
+    from ._app import check_not_inputs
+
     check_outputs((out, "--out"), (type_posteriors, "--type-posteriors"))
     check_output(type_posteriors, "--type-posteriors", POSTERIOR_SUFFIXES)
+    outputs = ((out, "--out"), (type_posteriors, "--type-posteriors"))
+    check_not_inputs(outputs, ((log, "trial log"), (mapping, "--mapping file")))
     if plots is not None and plots.exists() and not plots.is_dir():
         raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
     mx = _mixture()
@@ -189,8 +197,10 @@ def select_types(
     types: str = typer.Option("1..4", "--types", help="Numbers of types to compare, e.g. 1..4 or 1,2,3."),
     differ: str = DifferOpt,
     folds: int = typer.Option(5, "--folds", min=2, help="Folds over participants for the held-out log-likelihood."),
-    restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Starts per fit (and the fit with one type fewer, split)."),
-    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    restarts: int = typer.Option(
+        10, "--restarts", "-r", min=1, max=1000, help="Starts per fit (and the fit with one type fewer, split)."
+    ),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
     jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads per fit."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from ..vocab import ACTIONS, CATEGORICAL_COLUMNS, EXPERIENCES, HUMAN_ACTIONS, TRIAL_COLUMNS
-from .cells import DataError
+from .cells import DataError, shorten
 
 CANONICAL = TRIAL_COLUMNS
 
@@ -124,9 +124,27 @@ class ColumnMapping:
                 p.append(f"drop rule {i}: expected {{'column': name, 'values': [value, ...]}}, got {rule!r}")
         if self.missing is not None and not all(isinstance(m, str) for m in self.missing):
             p.append(f'missing: expected a list of texts (e.g. ["NA", "null"]), got {list(self.missing)!r}')
+        elif self.missing is not None:
+            p += self._marker_problems()
         if self.delimiter is not None and (not isinstance(self.delimiter, str) or len(self.delimiter) != 1):
             p.append(f"delimiter: expected one character, got {self.delimiter!r}")
         return p
+
+    def _marker_problems(self) -> list[str]:
+        """A missing-value marker that is also a label of a categorical column would turn that label's
+        cells into unrecorded ones."""
+        labels: dict[str, str] = {}
+        for col in CATEGORICAL:
+            table = self.labels.get(col)
+            theirs = list(table) if isinstance(table, Mapping) else []
+            for text in (*self.categories(col), *theirs):
+                labels.setdefault(str(text).strip().lower(), col)
+        return [
+            f"missing: {m!r} is also a label of {labels[m.strip().lower()]}; a marker of unrecorded cells cannot be a "
+            "value (drop it from --missing / 'missing', or map the label to another text)"
+            for m in self.missing or ()
+            if m.strip().lower() in labels
+        ]
 
     def categories(self, column: str) -> tuple[str, ...]:
         if column == "complexity":
@@ -233,7 +251,7 @@ class ColumnMapping:
             missing = None
         m = cls(
             {str(k): v for k, v in cols.items()},
-            {str(k): (_label_table(v) if isinstance(v, Mapping) else v) for k, v in labels.items()},
+            {str(k): (_label_table(v, problems, f"labels[{k}]") if isinstance(v, Mapping) else v) for k, v in labels.items()},
             tuple(cx) if cx else None,
             tuple(order) if order is not None else None,
             {str(k): v for k, v in derived.items()},
@@ -292,7 +310,13 @@ class ColumnMapping:
             if not sep or not sep2 or not canon or not ours:
                 problems.append(f"--label {item!r}: expected column:theirs=canonical, e.g. human_action:1=rely")
                 continue
-            labs.setdefault(canon.strip(), {})[theirs.strip()] = ours.strip()
+            table = labs.setdefault(canon.strip(), {})
+            if table.get(theirs.strip(), ours.strip()) != ours.strip():
+                problems.append(
+                    f"--label {canon.strip()}:{theirs.strip()}: the label is mapped to two categories, "
+                    f"{table[theirs.strip()]!r} and {ours.strip()!r}"
+                )
+            table[theirs.strip()] = ours.strip()
         if delimiter is not None:
             delimiter = {"\\t": "\t", "tab": "\t", "TAB": "\t"}.get(delimiter, delimiter)
         if problems:
@@ -404,15 +428,24 @@ def _input_problems(name: str, entry: Any) -> list[str]:
     return p
 
 
-def _label_table(table: Mapping) -> dict[str, Any]:
-    """A label table with its set entries (canonical -> [their labels]) turned into their -> canonical."""
+def _label_table(table: Mapping, conflicts: list[str] | None = None, head: str = "labels") -> dict[str, Any]:
+    """A label table with its set entries (canonical -> [their labels]) turned into their -> canonical;
+    a label of theirs given two canonical labels is added to ``conflicts``."""
     out: dict[str, Any] = {}
+
+    def put(theirs: str, ours: Any) -> None:
+        if theirs in out and out[theirs] != ours and conflicts is not None:
+            conflicts.append(
+                f"{head}: the label {shorten(theirs, 80)!r} is mapped to two categories, {out[theirs]!r} and {ours!r}"
+            )
+        out[theirs] = ours
+
     for k, v in table.items():
         if isinstance(v, list):
             for theirs in v:
-                out[label_key(theirs)] = str(k)
+                put(label_key(theirs), str(k))
         else:
-            out[label_key(k)] = v
+            put(label_key(k), v)
     return out
 
 
