@@ -220,6 +220,9 @@ def read_log(
     frame = read_trials(log, m, required=("participant", "trial", *outputs, *needed))
     for rule, count in frame.attrs.get("dropped", []):
         err_console.print(f"dropped {count} rows of {log} ({escape(rule)})", highlight=False)
+    if m.experience_rule is False:
+        note = "the paper's experience rule is not checked (the mapping's experience_rule: false)"
+        err_console.print(f"{log}: {note}", highlight=False)
     return frame
 
 

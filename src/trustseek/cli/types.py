@@ -46,6 +46,14 @@ def _log(log, mapping, column, label, missing, delimiter):
     return read_log(log, mapping, column, label, ("complexity", "robot_action", "experience"), missing, delimiter)
 
 
+def _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on):
+    """The inputs of the types' trust models (--transitions-on/--emissions-on as for fit) and the
+    log with the columns they need."""
+    from .fit import _read_with_inputs
+
+    return _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter)
+
+
 def parse_types(text: str) -> tuple[int, ...]:
     """``1..4`` or ``1,2,3``: the numbers of types to compare."""
     try:
@@ -66,6 +74,12 @@ def fit_types(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
     types: int = typer.Option(2, "--types", "-m", min=1, max=12, help="Number of supervisor types."),
     differ: str = DifferOpt,
+    transitions_on: str | None = typer.Option(
+        None, "--transitions-on", help="Inputs of the trust transitions (as for fit: complexity, robot_action, experience)."
+    ),
+    emissions_on: str | None = typer.Option(
+        None, "--emissions-on", help="Inputs of the human-action probabilities (as for fit: complexity, robot_action)."
+    ),
     restarts: int = typer.Option(
         10, "--restarts", "-r", min=1, max=1000, help="Starts (half from the perturbed pooled fit, half random)."
     ),
@@ -100,7 +114,7 @@ def fit_types(
         raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
     mx = _mixture()
     mx.parse_differ(differ)
-    frame = _log(log, mapping, column, label, missing, delimiter)
+    tr, em, frame = _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on)
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("starts", total=restarts)
@@ -114,6 +128,8 @@ def fit_types(
             max_iter=max_iter,
             n_jobs=jobs,
             progress=lambda d, t: bar.update(task, completed=d, total=t),
+            transition_inputs=tr,
+            emission_inputs=em,
         )
         intervals = None
         if bootstrap > 0:
@@ -196,6 +212,12 @@ def select_types(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
     types: str = typer.Option("1..4", "--types", help="Numbers of types to compare, e.g. 1..4 or 1,2,3."),
     differ: str = DifferOpt,
+    transitions_on: str | None = typer.Option(
+        None, "--transitions-on", help="Inputs of the trust transitions (as for fit: complexity, robot_action, experience)."
+    ),
+    emissions_on: str | None = typer.Option(
+        None, "--emissions-on", help="Inputs of the human-action probabilities (as for fit: complexity, robot_action)."
+    ),
     folds: int = typer.Option(5, "--folds", min=2, help="Folds over participants for the held-out log-likelihood."),
     restarts: int = typer.Option(
         10, "--restarts", "-r", min=1, max=1000, help="Starts per fit (and the fit with one type fewer, split)."
@@ -217,7 +239,7 @@ def select_types(
     mx.parse_differ(differ)
     from ..estimation import type_selection
 
-    frame = _log(log, mapping, column, label, missing, delimiter)
+    tr, em, frame = _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on)
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("model selection", total=None)
@@ -231,6 +253,8 @@ def select_types(
             tol=tol,
             n_jobs=jobs,
             progress=lambda what, d, t: bar.update(task, completed=d, total=t, description=what),
+            transition_inputs=tr,
+            emission_inputs=em,
         )
     warnings = type_selection.type_selection_warnings(rows)
     if as_json:
@@ -273,9 +297,11 @@ def personalize(
     check_output(out, "--out", directory=True)
     from ..estimation.personal import personalize as run
     from ..model.presets import load_mixture
+    from .fit import _fill_unused, model_inputs
 
     centre = load_mixture(model)
-    frame = _log(log, mapping, column, label, missing, delimiter)
+    used = tuple(dict.fromkeys(c for t in centre.models for c in model_inputs(t)))  # the columns the centre uses
+    frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), centre.models[0], used)
     res = run(frame, centre if centre.n_types > 1 else centre.models[0], strength=strength, tol=tol, estimate=estimate)
     with atomic_output(out, directory=True) as tmp:
         res.save(tmp)

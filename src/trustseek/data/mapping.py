@@ -57,6 +57,9 @@ class ColumnMapping:
                      input's name and may be a derived column).  Each becomes a column named by
                      the input, a categorical of its levels in the declared order; an empty cell
                      or a value outside the levels is an error.
+    ``experience_rule`` ``false`` where the paper's experience rule (an intervention ends
+                     ``faulty``, an ask ends as the task says) is not the study's, e.g. advice
+                     taking, where the aid can be right when the person overrides it.
     """
 
     columns: dict[str, str] = field(default_factory=dict)
@@ -69,6 +72,7 @@ class ColumnMapping:
     delimiter: str | None = None
     rating: dict[str, Any] | None = None
     inputs: dict[str, dict[str, Any]] = field(default_factory=dict)
+    experience_rule: bool | None = None  # False: the paper's experience rule does not hold in this study
 
     def problems(self) -> list[str]:
         p = []
@@ -126,6 +130,8 @@ class ColumnMapping:
             p.append(f'missing: expected a list of texts (e.g. ["NA", "null"]), got {list(self.missing)!r}')
         elif self.missing is not None:
             p += self._marker_problems()
+        if self.experience_rule is not None and not isinstance(self.experience_rule, bool):
+            p.append(f"experience_rule: expected true or false, got {self.experience_rule!r}")
         if self.delimiter is not None and (not isinstance(self.delimiter, str) or len(self.delimiter) != 1):
             p.append(f"delimiter: expected one character, got {self.delimiter!r}")
         return p
@@ -167,6 +173,7 @@ class ColumnMapping:
             other.delimiter or self.delimiter,
             other.rating or self.rating,
             {**self.inputs, **other.inputs},
+            other.experience_rule if other.experience_rule is not None else self.experience_rule,
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -187,6 +194,8 @@ class ColumnMapping:
             d["rating"] = dict(self.rating)
         if self.inputs:
             d["inputs"] = {k: dict(v) for k, v in self.inputs.items()}
+        if self.experience_rule is not None:
+            d["experience_rule"] = self.experience_rule
         return d
 
     def input_levels(self) -> dict[str, tuple[str, ...]]:
@@ -260,6 +269,7 @@ class ColumnMapping:
             d.get("delimiter"),
             dict(d["rating"]) if isinstance(d.get("rating"), Mapping) else d.get("rating"),
             {str(k): (_input_entry(v) if isinstance(v, Mapping) else v) for k, v in inputs.items()},
+            d.get("experience_rule"),
         )
         problems += m.problems()
         if problems:
@@ -334,7 +344,19 @@ class ColumnMapping:
         return base.merged(flags)
 
 
-MAPPING_KEYS = ("columns", "labels", "complexities", "order", "derived", "drop", "missing", "delimiter", "rating", "inputs")
+MAPPING_KEYS = (
+    "columns",
+    "labels",
+    "complexities",
+    "order",
+    "derived",
+    "drop",
+    "missing",
+    "delimiter",
+    "rating",
+    "inputs",
+    "experience_rule",
+)
 
 
 RATING = "rating"  # the canonical name of the rating column a mapping declares

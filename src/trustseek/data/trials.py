@@ -244,7 +244,7 @@ def read_trials(
         for inp in mapping.inputs
         for src in (mapping.input_column(inp),)
     }
-    if check_experience:
+    if check_experience and mapping.experience_rule is not False:
         _check_experience(problems, codes, mapping, present, column)
     if problems.lines:
         raise DataError(problems.lines, name)
