@@ -572,7 +572,11 @@ def select(
     if as_json:
         print_json({"levels": rows, "warnings": warnings})
         return
-    console.print(selection_table("Number of trust levels", "levels", rows, folds))
+    # whole when piped too (a pipe's console is 80 columns wide)
+    from rich.console import Console
+
+    table = selection_table("Number of trust levels", "levels", rows, folds)
+    (console if console.is_terminal else Console(width=400)).print(table)
     console.print(
         "* best by that criterion; reached best: starts (random, and the fit with one level fewer split) "
         "within 0.01 of the best log-likelihood",

@@ -261,7 +261,10 @@ def select_types(
         print_json({"types": rows, "warnings": warnings})
         return
     weights = {"weights": lambda r: ", ".join(f"{w:.2f}" for w in r["weights"])}
-    console.print(selection_table("Number of supervisor types", "types", rows, folds, weights))
+    table = selection_table("Number of supervisor types", "types", rows, folds, weights)
+    from rich.console import Console
+
+    (console if console.is_terminal else Console(width=400)).print(table)  # whole when piped too
     console.print("* best by that criterion; reached best: starts within 0.01 of the best log-likelihood", highlight=False)
     for w in warnings:
         console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
