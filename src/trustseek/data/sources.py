@@ -92,7 +92,7 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str]) -> RawLog
     if suffix in CSV_SUFFIXES:
         return _load_csv(path, name, sep, missing)
     if suffix in JSONL_SUFFIXES + JSON_SUFFIXES:
-        return _load_json(path, name, suffix in JSONL_SUFFIXES, missing)
+        return _load_json(path, name, _json_lines(path, suffix in JSONL_SUFFIXES), missing)
     raise DataError([f"unknown file type {suffix!r}: use .csv, .tsv, .parquet, .jsonl or .json"], name)
 
 
@@ -135,6 +135,25 @@ def _load_parquet(path: Path, name: str, missing: frozenset[str]) -> RawLog:
     except (pa.ArrowException, OSError, ValueError) as exc:
         raise DataError([f"cannot read the file as Parquet: {exc}"], name) from None
     return _arrow_raw(table, name, missing)
+
+
+def _json_lines(path: Path, by_suffix: bool) -> bool:
+    """Whether a JSON log is JSON lines, by its content: an array starts with ``[``; records one
+    per line start with ``{`` and their first line is a whole JSON value (whatever the suffix)."""
+    try:
+        with path.open("rb") as fh:
+            first = fh.readline(HEADER_BYTES).decode("utf-8", "replace").lstrip("\ufeff").strip()
+    except OSError:
+        return by_suffix  # the reader says what is wrong
+    if first.startswith("["):
+        return False
+    if first.startswith("{"):
+        try:
+            json.loads(first)
+        except json.JSONDecodeError:
+            return False  # one object over several lines: the array reader names what is wrong
+        return True
+    return by_suffix
 
 
 def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str]) -> RawLog:
