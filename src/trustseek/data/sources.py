@@ -9,6 +9,7 @@ from __future__ import annotations
 import collections
 import csv
 import io
+import itertools
 import json
 import re
 import sys
@@ -139,10 +140,12 @@ def _load_parquet(path: Path, name: str, missing: frozenset[str]) -> RawLog:
 
 def _json_lines(path: Path, by_suffix: bool) -> bool:
     """Whether a JSON log is JSON lines, by its content: an array starts with ``[``; records one
-    per line start with ``{`` and their first line is a whole JSON value (whatever the suffix)."""
+    per line start with ``{`` and their first line is a whole JSON value (whatever the suffix;
+    a ``.json`` file of a single object is no log of lines: the array reader says so)."""
     try:
         with path.open("rb") as fh:
             first = fh.readline(HEADER_BYTES).decode("utf-8", "replace").lstrip("\ufeff").strip()
+            more = any(line.strip() for line in itertools.islice(fh, 100))
     except OSError:
         return by_suffix  # the reader says what is wrong
     if first.startswith("["):
@@ -152,7 +155,7 @@ def _json_lines(path: Path, by_suffix: bool) -> bool:
             json.loads(first)
         except json.JSONDecodeError:
             return False  # one object over several lines: the array reader names what is wrong
-        return True
+        return by_suffix or more
     return by_suffix
 
 
