@@ -306,3 +306,183 @@ def test_decode_needs_only_the_columns_the_model_uses(tmp_path):
     code, output = run_cli(["decode", str(log), "-m", str(model), "-o", str(tmp_path / "p.csv")])
     assert code == 0, output
     assert len(pd.read_csv(tmp_path / "p.csv")) == len(pd.read_csv(log))
+
+
+# --------------------------------------------------------------------------- hostile inputs
+
+
+def _log_rows() -> list[str]:
+    return Path(LOG).read_text().splitlines()
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["fit", "{log}", "-r", "1", "--max-iter", "2", "--posteriors", "{log}"],
+        ["fit", "{log}", "-r", "1", "--max-iter", "2", "--posteriors", "{dir}/./log.csv"],
+        ["decode", "{log}", "--model", "{model}", "-o", "{log}"],
+        ["predict", "{log}", "--model", "{model}", "-b", "0", "-o", "{log}"],
+        ["fit-types", "{log}", "-r", "1", "--type-posteriors", "{log}"],
+        ["solve", "-m", "{model}", "--grid", "11", "-o", "{model}"],
+        ["agnostic", "-m", "{model}", "-o", "{model}"],
+        ["decode", "{log}", "--model", "{model}", "-o", "{link}"],
+    ],
+    ids=["fit-posteriors", "fit-posteriors-dot", "decode", "predict", "fit-types", "solve", "agnostic", "decode-symlink"],
+)
+def test_an_output_naming_an_input_is_refused_and_the_input_kept(tmp_path, args):
+    log, model = tmp_path / "log.csv", tmp_path / "model.json"
+    log.write_text(Path(LOG).read_text())
+    model.write_text(json.dumps(VALID["model"]))
+    (tmp_path / "link.csv").symlink_to(log)
+    before = (log.read_bytes(), model.read_bytes())
+    line = [a.format(log=log, model=model, dir=tmp_path, link=tmp_path / "link.csv") for a in args]
+    code, output = run_cli(line)
+    assert code == 2 and "would overwrite the input" in output and "Traceback" not in output, output
+    assert (log.read_bytes(), model.read_bytes()) == before
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["fit", LOG, "--restarts", "1000000000"],
+        ["fit", LOG, "--bootstrap", "1000000000"],
+        ["fit", LOG, "--seed=-1"],
+        ["solve", "--grid", "1000000000"],
+        ["simulate", "-n", "1000000000"],
+        ["simulate", "--seed=-1"],
+        ["simulate", "-n", "1000000", "--trials", "1000"],
+        ["fit-types", LOG, "--bootstrap", "1000000000"],
+        ["predict", LOG, "--restarts", "1000000000"],
+    ],
+    ids=["restarts", "bootstrap", "fit-seed", "grid", "simulate-n", "simulate-seed", "simulate-trials", "types", "predict"],
+)
+def test_a_size_beyond_the_machine_or_a_negative_seed_is_refused(args):
+    code, output = run_cli(args)
+    assert code == 2 and "Traceback" not in output, output
+    flag = next(a for a in args[1:] if a.startswith("-")).split("=")[0]
+    assert flag in output or "--participants" in output, output
+
+
+def test_a_log_or_model_that_is_a_fifo_is_refused_without_waiting(tmp_path):
+    import os
+
+    for name, line in (("log.csv", ["fit", "{f}", "-r", "1"]), ("model.json", ["check", "{f}"])):
+        fifo = tmp_path / name
+        os.mkfifo(fifo)
+        code, output = run_cli([a.format(f=fifo) for a in line])
+        assert code == 2 and "named pipe (FIFO)" in output and name in output, output
+
+
+def test_rewards_that_overflow_the_values_are_refused(tmp_path):
+    task = json.loads(json.dumps(VALID["task"]))
+    first, second = list(task["rewards"])[:2]
+    task["rewards"][first], task["rewards"][second] = 1e308, -1e308
+    f = tmp_path / "task.json"
+    f.write_text(json.dumps(task))
+    code, output = run_cli(["solve", "-t", str(f), "--grid", "11"])
+    assert code == 2 and f"rewards[{first}] = 1e+308 is outside" in output and "never asks" not in output, output
+
+
+def test_a_model_file_with_a_duplicated_key_is_refused(tmp_path):
+    text = json.dumps(VALID["model"], indent=1)
+    row = '"high": {'
+    at = text.index(row)
+    f = tmp_path / "model.json"
+    f.write_text(text[:at] + '"high": {"rely": 0.5, "intervene": 0.5}, ' + text[at:])
+    code, output = run_cli(["check", str(f)])
+    assert code == 2 and "the key 'high' appears twice" in output, output
+
+
+def test_nested_participant_ids_in_json_are_refused_by_record(tmp_path):
+    import pandas as pd
+
+    records = pd.read_csv(LOG).to_dict(orient="records")
+    records[2]["participant"] = {"id": 1}
+    records[4]["participant"] = [1, 2]
+    for suffix, text in ((".json", json.dumps(records)), (".jsonl", "\n".join(json.dumps(r) for r in records))):
+        f = tmp_path / f"log{suffix}"
+        f.write_text(text)
+        code, output = run_cli(["fit", str(f), "-r", "1"])
+        assert code == 2 and "column 'participant': an object or a list" in output and "in 2 records" in output, output
+
+
+def test_a_missing_marker_that_is_a_label_is_refused():
+    code, output = run_cli(["fit", LOG, "-r", "1", "--missing", "rely"])
+    assert code == 2 and "'rely' is also a label of human_action" in output, output
+
+
+def test_a_label_mapped_to_two_categories_is_reported_as_such(tmp_path):
+    code, output = run_cli(["fit", LOG, "-r", "1", "--label", "human_action:1=rely", "--label", "human_action:1=intervene"])
+    assert code == 2 and "mapped to two categories, 'rely' and 'intervene'" in output, output
+    m = tmp_path / "map.json"
+    m.write_text(json.dumps({"labels": {"human_action": {"rely": ["1", "yes"], "intervene": ["1", "no"]}}}))
+    code, output = run_cli(["fit", LOG, "-r", "1", "--mapping", str(m)])
+    assert code == 2 and "the label '1' is mapped to two categories" in output and "experience rule" not in output, output
+
+
+@pytest.mark.parametrize("width", [3_000, 20_000])
+def test_a_wide_csv_header_is_counted_whole(tmp_path, width):
+    rows = _log_rows()[:4]
+    f = tmp_path / "wide.csv"
+    extra = "," + ",".join(f"x{i}" for i in range(width))
+    f.write_text(rows[0] + extra + "\n" + "\n".join(r + ",0" * width for r in rows[1:3]) + "\n" + rows[3] + "\n")
+    code, output = run_cli(["fit", str(f), "-r", "1"])
+    assert code == 2 and "Traceback" not in output
+    if width > 10_000:
+        assert f"the header names {width + 7:,} columns" in output, output
+    else:
+        assert f"differs from the header's {width + 7}" in output and "row 3 (7 fields)" in output, output
+
+
+def test_a_quoted_header_name_with_semicolons_does_not_change_the_delimiter(tmp_path):
+    rows = _log_rows()
+    f = tmp_path / "semi.csv"
+    f.write_text(rows[0] + ',"notes; a; b; c; d; e; f; g; h"\n' + "\n".join(r + ",x" for r in rows[1:]) + "\n")
+    code, output = run_cli(["fit", str(f), "-r", "1", "--max-iter", "2"])
+    assert code == 0, output
+
+
+@pytest.mark.parametrize(
+    ("edit", "expected"), [("quote", "row 10 (1 fields, an unterminated quote)"), ("extra", "row 20 (8 fields)")]
+)
+def test_a_malformed_csv_row_is_reported_with_its_row(tmp_path, edit, expected):
+    rows = _log_rows()
+    if edit == "quote":
+        rows[10] = '"' + rows[10]
+    else:
+        rows[20] += ",extra"
+    f = tmp_path / "bad.csv"
+    f.write_text("\n".join(rows) + "\n")
+    code, output = run_cli(["fit", str(f), "-r", "1"])
+    assert code == 2 and expected in output, output
+
+
+def test_a_huge_unknown_value_is_cut_in_the_error(tmp_path):
+    rows = _log_rows()
+    cells = rows[30].split(",")
+    cells[2] = "z" * 1_000_000
+    rows[30] = ",".join(cells)
+    f = tmp_path / "huge.csv"
+    f.write_text("\n".join(rows) + "\n")
+    code, output = run_cli(["fit", str(f), "-r", "1"])
+    assert code == 2 and "unknown category" in output and "more characters" in output and len(output) < 2000, output[:300]
+
+
+def test_decode_and_predict_take_a_preset_name(tmp_path):
+    for line in (["decode", LOG, "--model", "paper", "-o", str(tmp_path / "p.csv")], ["predict", LOG, "-m", "paper", "-b", "0"]):
+        code, output = run_cli(line)
+        assert code == 0, output
+
+
+def test_a_log_where_everyone_always_relies_warns_that_trust_is_not_identified(tmp_path):
+    import pandas as pd
+
+    frame = pd.read_csv(LOG)
+    frame = frame[frame.robot_action == "autonomous"].assign(human_action="rely")
+    f = tmp_path / "rely.csv"
+    frame.to_csv(f, index=False)
+    code, output = run_cli(["fit", str(f), "-r", "1"])
+    text = " ".join(output.split())
+    assert code == 0 and "the initial distribution and the transitions are not identified" in text, output
+    code, output = run_cli(["fit", LOG, "-r", "1"])
+    assert "are not identified (any values" not in " ".join(output.split())

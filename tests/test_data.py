@@ -169,3 +169,16 @@ def test_missing_file_and_dataframe_source(tmp_path):
         read_trials(tmp_path / "nope.csv")
     df = pd.read_csv(pd.io.common.StringIO(GOOD), dtype=str, keep_default_na=False)
     assert len(read_trials(df)) == 5
+
+
+@pytest.mark.parametrize(
+    ("suffix", "layout"), [(".json", "lines"), (".jsonl", "array"), (".ndjson", "array"), (".json", "array")]
+)
+def test_json_lines_and_arrays_are_told_apart_by_content(tmp_path, suffix, layout):
+    canonical = read_trials(example_path("paper_trials.csv"))
+    records = pd.read_csv(example_path("paper_trials.csv")).to_dict(orient="records")
+    f = tmp_path / f"log{suffix}"
+    f.write_text("\n".join(json.dumps(r) for r in records) if layout == "lines" else json.dumps(records, indent=1))
+    frame = read_trials(f)
+    cols = ["participant", "trial", "complexity", "robot_action", "human_action", "experience"]
+    assert frame[cols].astype(str).equals(canonical[cols].astype(str))

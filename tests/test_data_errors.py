@@ -356,3 +356,15 @@ def test_csv_is_parsed_on_the_calling_thread(tmp_path, monkeypatch):
     monkeypatch.setattr(pcsv, "read_csv", spy)
     read_trials(write(tmp_path, GOOD))
     assert len(seen) == 1 and seen[0] is not None and seen[0].use_threads is False
+
+
+def test_duplicate_trials_are_counted_by_participant_naming_the_order(tmp_path):
+    frame = pd.read_csv(example_path("paper_trials.csv"))
+    again = pd.concat([frame, frame[frame.participant.isin(["P001", "P002"])]])
+    f = tmp_path / "retaken.csv"
+    again.to_csv(f, index=False)
+    with pytest.raises(DataError) as exc:
+        read_trials(f)
+    line = exc.value.problems[-1]
+    n1, n2 = (frame.participant == "P001").sum(), (frame.participant == "P002").sum()
+    assert f"by participant, 2 ('P001' {n1}, 'P002' {n2})" in line and '"order"' in line, line

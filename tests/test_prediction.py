@@ -217,3 +217,18 @@ def test_without_resamples_there_is_no_judgement(study):
     assert r.statements() == [
         "no bootstrap resamples (--bootstrap 0): no intervals, so no judgement whether the model beats a baseline"
     ]
+
+
+def test_an_undefined_score_is_no_claim_and_no_nan(tmp_path):
+    """Every scored action the same: AUC is undefined, and predict says so instead of 'does not beat ... +nan'."""
+    from trustseek.model.presets import paper_model
+
+    model = tmp_path / "paper.json"
+    paper_model().save(model)
+    frame = pd.read_csv(example_path("paper_trials.csv"))
+    frame = frame[frame.robot_action == "autonomous"].assign(human_action="rely")
+    f = tmp_path / "rely.csv"
+    frame.to_csv(f, index=False)
+    code, output = run_cli(["predict", str(f), "-m", str(model), "-b", "20"])
+    text = " ".join(output.split())
+    assert code == 0 and "nan" not in text and "are not compared in AUC: the score is undefined" in text, output

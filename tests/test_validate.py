@@ -126,3 +126,13 @@ def test_cli_validate_bad_inputs_are_one_line_errors(tmp_path, args, message):
     assert code == 2
     lines = [x for x in text.splitlines() if x.strip()]
     assert len(lines) == 1 and message in lines[0] and "Traceback" not in text
+
+
+def test_a_constant_baseline_is_no_claim_and_no_nan(rated):
+    """A baseline with one value (every experience reliable) has no correlation: the statements
+    say it is not compared instead of 'does not beat ... +nan'."""
+    constant = rated[rated["robot_action"] == "autonomous"].assign(human_action="rely", experience="reliable")
+    rep = validate_ratings(constant, paper_model(), parse_ratings(constant, "rating"), bootstrap=50, seed=1)
+    lines = rep.statements()
+    assert not any("nan" in line for line in lines), lines
+    assert any("reliable_fraction baseline are not compared" in line for line in lines), lines

@@ -107,6 +107,26 @@ def check_outputs(*outputs: tuple[Path | None, str]) -> None:
         seen[key] = option
 
 
+def _same_path(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet): compare where they point
+        return a.resolve() == b.resolve()
+
+
+def check_not_inputs(outputs: tuple[tuple[Path | None, str], ...], inputs: tuple[tuple[Any, str], ...]) -> None:
+    """Refuse, before any work, an output (path, option) that names an input (path or preset
+    name, what it is): writing it would overwrite what the command reads."""
+    for out, option in outputs:
+        if out is None:
+            continue
+        for given, what in inputs:
+            if given is not None and _same_path(out, Path(given)):
+                raise TrustseekError(
+                    [f"{option} {out}: is the {what}; writing it would overwrite the input: choose another file"]
+                )
+
+
 @contextmanager
 def atomic_output(path: Path, directory: bool = False) -> Iterator[Path]:
     """A temporary path next to ``path`` (same suffix) to write to; it replaces ``path`` only
@@ -209,6 +229,9 @@ def read_log(
     frame = read_trials(log, m, required=("participant", "trial", *outputs, *needed))
     for rule, count in frame.attrs.get("dropped", []):
         err_console.print(f"dropped {count} rows of {log} ({escape(rule)})", highlight=False)
+    if m.experience_rule is False:
+        note = "the paper's experience rule is not checked (the mapping's experience_rule: false)"
+        err_console.print(f"{log}: {note}", highlight=False)
     return frame
 
 

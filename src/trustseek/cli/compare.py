@@ -39,21 +39,27 @@ def compare_types(
         None, "--share", min=0.0, max=1.0, help="Share of the last type of two, e.g. 0.3 (default: the mixture's weights)."
     ),
     task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
-    participants: int = typer.Option(2000, "--participants", "-n", min=1, help="Simulated people per population and block."),
+    participants: int = typer.Option(
+        2000, "--participants", "-n", min=1, max=1_000_000, help="Simulated people per population and block."
+    ),
     fit_participants: int = typer.Option(
-        200, "--fit-participants", min=2, help="People of experiment 1 that the pooled model is fitted to (paper design)."
+        200,
+        "--fit-participants",
+        min=2,
+        max=1_000_000,
+        help="People of experiment 1 that the pooled model is fitted to (paper design).",
     ),
     block: list[str] = typer.Option(
         ["17/17", "68/68"], "--block", "-b", help="Trials per complexity in a block (repeat for several lengths)."
     ),
-    restarts: int = typer.Option(4, "--restarts", min=1, help="EM restarts of the pooled fit."),
+    restarts: int = typer.Option(4, "--restarts", min=1, max=1000, help="EM restarts of the pooled fit."),
     gap: float = typer.Option(
         0.03, "--gap", min=0.0, help="Certified bound gap of each trust-aware solve at its initial belief."
     ),
     max_seconds: float = typer.Option(
         600.0, "--max-seconds", min=0.0, help="Safety time limit of each solve (the gap reached is kept)."
     ),
-    seed: int = typer.Option(0, "--seed", help="Seed of every simulation and fit."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of every simulation and fit."),
     plot: Path | None = typer.Option(None, "--plot", help="Write the figure to this PNG file."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
     quiet: bool = QuietOpt,

@@ -55,7 +55,9 @@ def design(
     ),
     task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
     replicates: int = typer.Option(100, "--replicates", "-r", help="Replicates per design point."),
-    seed: int = typer.Option(0, "--seed", help="Sweep seed (replicate seeds derive from it, the design point and the index)."),
+    seed: int = typer.Option(
+        0, "--seed", min=0, help="Sweep seed (replicate seeds derive from it, the design point and the index)."
+    ),
     participants_1: str = typer.Option("9", "--participants-1", help="Experiment 1: participants (comma-separated grid)."),
     trials_1: str = typer.Option("71", "--trials-1", help="Experiment 1: trials per participant (grid)."),
     share_high_1: str = typer.Option(

@@ -156,18 +156,19 @@ def fit(
         help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for "
         "none); the mapping's 'inputs' may be named too.",
     ),
-    restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Random restarts; the best is kept."),
+    restarts: int = typer.Option(10, "--restarts", "-r", min=1, max=1000, help="Random restarts; the best is kept."),
     bootstrap: int = typer.Option(
         0,
         "--bootstrap",
         "-b",
         min=0,
+        max=10_000,
         help="Participant-level bootstrap resamples for 95% intervals (0 = none; at least 200 advised, fewer warn).",
     ),
     prior: float = typer.Option(
         0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."
     ),
-    seed: int = typer.Option(0, "--seed", help="Random seed (restarts and bootstrap)."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed (restarts and bootstrap)."),
     tol: float = typer.Option(
         1e-8, "--tol", callback=check_tol, help="Stop when the relative change of the log-likelihood is below this (> 0)."
     ),
@@ -227,8 +228,12 @@ def fit(
     simulate refuse those a task can reach until they are supplied (--fill-from).  With a
     rating column (--rating or the mapping's 'rating') the fit is joint on the human actions
     and the ratings, and the model file carries P(rating | trust)."""
+    from ._app import check_not_inputs
+
     check_outputs((out, "--out"), (posteriors, "--posteriors"))
     check_output(posteriors, "--posteriors", POSTERIOR_SUFFIXES)
+    inputs = ((log, "trial log"), (mapping, "--mapping file"), (fill_from, "--fill-from model"))
+    check_not_inputs(((out, "--out"), (posteriors, "--posteriors")), inputs)
     if plots is not None and plots.exists() and not plots.is_dir():
         raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
     if keep and posteriors is None:
@@ -434,10 +439,15 @@ def _fit_general(
 
 
 def load_for_decoding(path: Path):
-    """A trust model, supervisor types (a mixture) or a general model, by the file's format."""
+    """A trust model, supervisor types (a mixture) or a general model, by the file's format; or a
+    preset name (paper, paper+conservative)."""
     from ..model.iohmm import IOHMMModel, is_iohmm_file
     from ..model.jsonfile import load_json
     from ..model.mixture import TypeMixture
+    from ..model.presets import MIXTURE_PRESETS, load_mixture
+
+    if str(path) in MIXTURE_PRESETS and not path.exists():
+        return load_mixture(str(path))
 
     d, source = load_json(path)
     if is_iohmm_file(d):
@@ -486,7 +496,10 @@ def decode_cmd(
 
     The log needs the columns the model depends on: a model fitted with fewer inputs
     (--transitions-on/--emissions-on) decodes a log without the others."""
+    from ._app import check_not_inputs
+
     check_output(out, "--out", POSTERIOR_SUFFIXES)
+    check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (mapping, "--mapping file")))
     from ..model.iohmm import IOHMMModel
 
     types = load_for_decoding(model)  # a plain model is one type
@@ -521,11 +534,12 @@ def select(
         "--restarts",
         "-r",
         min=1,
+        max=1000,
         help="Random starts per fit (default: max(10, free parameters / 4)); each fit also starts from the "
         "fit with one level fewer, each level split in two.",
     ),
     prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count (MAP)."),
-    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
     transitions_on: str | None = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit)."),
     emissions_on: str | None = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit)."),
@@ -558,7 +572,11 @@ def select(
     if as_json:
         print_json({"levels": rows, "warnings": warnings})
         return
-    console.print(selection_table("Number of trust levels", "levels", rows, folds))
+    # whole when piped too (a pipe's console is 80 columns wide)
+    from rich.console import Console
+
+    table = selection_table("Number of trust levels", "levels", rows, folds)
+    (console if console.is_terminal else Console(width=400)).print(table)
     console.print(
         "* best by that criterion; reached best: starts (random, and the fit with one level fewer split) "
         "within 0.01 of the best log-likelihood",

@@ -36,7 +36,10 @@ def export_pomdp(
     """Export the assistance POMDP to a standard file (state augmented with the last human action)."""
     if fmt is not None and fmt not in ("pomdp", "pomdpx"):
         raise TrustseekError([f"--format must be 'pomdp' or 'pomdpx', got {fmt!r}"])
+    from ._app import check_not_inputs
+
     check_output(out, "OUT", None if fmt else (".pomdp", ".pomdpx"))
+    check_not_inputs(((out, "OUT"),), ((model, "--model file"), (task, "--task file")))
     m, t = load_model(model), load_task(task)
     pomdp = AssistancePOMDP(m, t)
     c0 = None

@@ -81,7 +81,7 @@ def solve(
     model: str = ModelOpt,
     task: str = TaskOpt,
     belief_update: str = UpdateOpt,
-    grid: int = typer.Option(DEFAULT_GRID, "--grid", "-g", min=3, help="Number of belief grid points on [0, 1]."),
+    grid: int = typer.Option(DEFAULT_GRID, "--grid", "-g", min=3, max=1_000_001, help="Number of belief grid points on [0, 1]."),
     method: str = typer.Option("policy-iteration", "--method", help=f"Grid solver method: {', '.join(METHODS)}."),
     tol: float = typer.Option(
         1e-9, "--tol", callback=check_tol, help="Value iteration: stop when the certified error bound is below this (> 0)."
@@ -129,7 +129,11 @@ def solve(
         raise TrustseekError([f"--gap must be a finite number > 0, got {gap}"])
     if max_seconds is not None and not (max_seconds > 0 and math.isfinite(max_seconds)):
         raise TrustseekError([f"--max-seconds must be a finite number > 0, got {max_seconds}"])
+    from ._app import check_not_inputs
+
     check_output(out, "--out", (".json",))
+    inputs = ((model, "--model file"), (task, "--task file"), (types, "--types file"), (history, "--history log"))
+    check_not_inputs(((out, "--out"),), inputs)
     mixture = load_mixture(types) if types is not None else mixture_of(model)
     if mixture is None and (history is not None or participant is not None or session is not None):
         raise TrustseekError(["--history, --participant and --session need supervisor types (--types or a mixture with --model)"])
@@ -249,7 +253,11 @@ def agnostic(
     label: list[str] | None = LabelOpt,
 ) -> None:
     """The optimal trust-agnostic policy (Section VI-A)."""
+    from ._app import check_not_inputs
+
     check_output(out, "--out", (".json",))
+    inputs = ((model, "--model file"), (task, "--task file"), (data, "--data log"), (mapping, "--mapping file"))
+    check_not_inputs(((out, "--out"),), inputs)
     if data is None and (mapping is not None or column or label):
         raise TrustseekError(["--mapping, --column and --label apply to a log: give it with --data"])
     t = load_task(task)
@@ -281,14 +289,16 @@ def plot_q_cmd(
     model: str = ModelOpt,
     task: str = TaskOpt,
     belief_update: str = UpdateOpt,
-    grid: int = typer.Option(DEFAULT_GRID, "--grid", "-g", min=3, help="Number of belief grid points."),
+    grid: int = typer.Option(DEFAULT_GRID, "--grid", "-g", min=3, max=1_000_001, help="Number of belief grid points."),
     policy_file: Path | None = typer.Option(None, "--policy", help="Plot a solved policy file instead of solving."),
     out: Path = typer.Option(Path("q.png"), "--out", "-o", help="PNG file to write."),
 ) -> None:
     """Plot Q(b, C, a) for both actions and complexities, with the threshold (Fig. 7)."""
     from ..plots.q import plot_q
+    from ._app import check_not_inputs
 
     check_output(out, "--out", (".png", ".pdf", ".svg"))
+    check_not_inputs(((out, "--out"),), ((model, "--model file"), (task, "--task file"), (policy_file, "--policy file")))
     if policy_file is not None:
         try:
             policy = TrustAwarePolicy.tabulate(load_policy(policy_file))

@@ -44,15 +44,17 @@ def schedule(
     representation: str = typer.Option(
         "grid", "--representation", help=f"Value functions: {' or '.join(REPRESENTATIONS)} (alpha: exact, bayes only)."
     ),
-    grid: int = typer.Option(DEFAULT_SCHEDULE_GRID, "--grid", "-g", min=2, help="Belief grid points (grid representation)."),
+    grid: int = typer.Option(
+        DEFAULT_SCHEDULE_GRID, "--grid", "-g", min=2, max=1_000_001, help="Belief grid points (grid representation)."
+    ),
     order: str = typer.Option("optimal", "--order", help=f"Item order: {', '.join(ORDERS)}."),
     ask_first_hard: bool = typer.Option(False, "--ask-first-hard", help="Always ask on the first high-complexity item."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
     compare: bool = typer.Option(
         False, "--compare", help="Also compare the schedules (random order + trust-aware, optimal, heuristics)."
     ),
-    participants: int = typer.Option(20000, "--participants", min=2, help="--compare: simulated participants."),
-    seed: int = typer.Option(0, "--seed", help="--compare: random seed."),
+    participants: int = typer.Option(20000, "--participants", min=2, max=1_000_000, help="--compare: simulated participants."),
+    seed: int = typer.Option(0, "--seed", min=0, help="--compare: random seed."),
     figure: Path | None = typer.Option(None, "--figure", help="--compare: write the schedule figure (PNG) here."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
 ) -> None:

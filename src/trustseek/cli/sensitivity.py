@@ -29,10 +29,14 @@ def sensitivity(
         max=12,
         help="Printed decimals of each probability (each moves by ± half a unit of the last).",
     ),
-    grid: int = typer.Option(401, "--grid", "-g", min=3, help="Belief grid points of each solve."),
-    samples: int = typer.Option(256, "--samples", min=0, help="Latin-hypercube points that check the optimised joint range."),
-    starts: int = typer.Option(2, "--starts", min=1, help="L-BFGS-B starts per extreme (the one-at-a-time corner first)."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the sample and of random starts."),
+    grid: int = typer.Option(401, "--grid", "-g", min=3, max=1_000_001, help="Belief grid points of each solve."),
+    samples: int = typer.Option(
+        256, "--samples", min=0, max=1_000_000, help="Latin-hypercube points that check the optimised joint range."
+    ),
+    starts: int = typer.Option(
+        2, "--starts", min=1, max=1000, help="L-BFGS-B starts per extreme (the one-at-a-time corner first)."
+    ),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the sample and of random starts."),
     model_only: bool = typer.Option(False, "--model-only", help="Leave the task's success probabilities and discount fixed."),
     top: int = typer.Option(10, "--top", min=1, help="Parameters shown in the one-at-a-time table."),
     plot: Path | None = typer.Option(None, "--plot", help="Write a tornado plot of the threshold to this PNG file."),

@@ -100,7 +100,7 @@ def simulate(
         help=f"Robot policy: {', '.join(SPEC_KINDS)}, {TYPE_AWARE} (for a mixture of supervisor types), "
         "or a policy JSON file (e.g. from 'trustseek solve --out').",
     ),
-    participants: int = typer.Option(9, "--participants", "-n", min=1, help="Number of simulated participants."),
+    participants: int = typer.Option(9, "--participants", "-n", min=1, max=1_000_000, help="Number of simulated participants."),
     counts: str | None = typer.Option(
         None,
         "--counts",
@@ -110,6 +110,7 @@ def simulate(
         None,
         "--trials",
         min=1,
+        max=100_000,
         help="Number of trials with i.i.d. complexities from the task's probabilities (instead of --counts).",
     ),
     belief_update: str = typer.Option(
@@ -121,7 +122,7 @@ def simulate(
     policy_model: str | None = typer.Option(
         None, "--policy-model", help="Model the trust-aware policy is solved for (default: the supervisors' model)."
     ),
-    grid: int = typer.Option(1001, "--grid", min=3, help="Belief grid points for solving the trust-aware policy."),
+    grid: int = typer.Option(1001, "--grid", min=3, max=1_000_001, help="Belief grid points for solving the trust-aware policy."),
     ask_low: float = typer.Option(
         PAPER_ASK_PROBABILITIES["low"], "--ask-low", min=0.0, max=1.0, help="Randomized policy: P(ask) in the first complexity."
     ),
@@ -140,7 +141,7 @@ def simulate(
     pseudo: float = typer.Option(
         0.0, "--pseudo", min=0.0, help="Dirichlet pseudo-count added to every cell (with --concentration)."
     ),
-    seed: int = typer.Option(0, "--seed", help="Random seed (same seed, same supervisors and luck for any policy)."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed (same seed, same supervisors and luck for any policy)."),
     out: Path | None = typer.Option(
         None,
         "--out",
@@ -165,9 +166,13 @@ def simulate(
         source = ctx.get_parameter_source(name)
         if source is not None and source.name != "DEFAULT":
             given.append(option)
+    from ._app import check_not_inputs
+
     check_outputs((out, "--out"), (summary_out, "--summary-out"))
     for f, option in ((out, "--out"), (summary_out, "--summary-out")):
         check_output(f, option, (".csv", ".parquet"))
+    inputs = ((model, "--model file"), (task, "--task file"), (policy, "--policy file"), (policy_model, "--policy-model file"))
+    check_not_inputs(((out, "--out"), (summary_out, "--summary-out")), inputs)
     from .plan import mixture_of, need_two_levels
 
     if types is not None:
@@ -198,10 +203,15 @@ def simulate(
         if policy == "trust-aware" and pm.n_trust != 2:
             need_two_levels(pm, "simulate")
         pol = _policy(policy, pm, t, belief_update, grid, ask_low, ask_high, given)
+    cnt = None if trials is not None else _counts(counts or "41,30", t)
+    n_trials = sum(cnt) if cnt is not None else (trials or 0)
+    if participants * n_trials > 100_000_000:  # about 1.3 GB of simulated trials
+        raise TrustseekError(
+            [f"--participants {participants} x {n_trials} trials each is more than 100,000,000 simulated trials: simulate fewer"]
+        )
     sup = Supervisors.pooled(m, participants) if mixture is None else Supervisors.from_mixture(mixture, participants, rng=seed)
     if concentration is not None:
         sup = Supervisors.dirichlet(m, participants, concentration, np.random.default_rng([seed, 7]), pseudo=pseudo)
-    cnt = None if trials is not None else _counts(counts or "41,30", t)
     record = out is not None
     t0 = time.perf_counter()
     sim = run_simulation(sup, t, pol, participants, counts=cnt, trials=trials, seed=seed, record=record, belief_model=pm)
@@ -272,16 +282,20 @@ def _write(frame, path: Path) -> None:
 @app.command(rich_help_panel="Simulate and reproduce")
 def reproduce(
     out: Path = typer.Option(Path("report"), "--out", "-o", help="Report folder (report.html, PNGs, summary.json, data)."),
-    seed: int = typer.Option(0, "--seed", help="Random seed: the same seed gives the same numbers."),
-    replicates: int = typer.Option(20, "--replicates", "-r", min=0, help="Replicate experiments of the whole pipeline."),
-    large_n: int = typer.Option(
-        10_000, "--large-n", min=1, help="Participants of the large experiment 2 and of the cost studies."
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed: the same seed gives the same numbers."),
+    replicates: int = typer.Option(
+        20, "--replicates", "-r", min=0, max=10_000, help="Replicate experiments of the whole pipeline."
     ),
-    bootstrap: int = typer.Option(200, "--bootstrap", "-b", min=0, help="Bootstrap resamples for the fitted model's intervals."),
-    restarts: int = typer.Option(10, "--restarts", min=1, help="EM restarts of the main fit."),
-    replicate_restarts: int = typer.Option(4, "--replicate-restarts", min=1, help="EM restarts per replicate fit."),
+    large_n: int = typer.Option(
+        10_000, "--large-n", min=1, max=1_000_000, help="Participants of the large experiment 2 and of the cost studies."
+    ),
+    bootstrap: int = typer.Option(
+        200, "--bootstrap", "-b", min=0, max=10_000, help="Bootstrap resamples for the fitted model's intervals."
+    ),
+    restarts: int = typer.Option(10, "--restarts", min=1, max=1000, help="EM restarts of the main fit."),
+    replicate_restarts: int = typer.Option(4, "--replicate-restarts", min=1, max=1000, help="EM restarts per replicate fit."),
     replicate_large_n: int = typer.Option(
-        2_000, "--replicate-large-n", min=1, help="Participants of each replicate's large experiment 2."
+        2_000, "--replicate-large-n", min=1, max=1_000_000, help="Participants of each replicate's large experiment 2."
     ),
     belief_update: str = typer.Option(
         "paper",
@@ -294,12 +308,14 @@ def reproduce(
         10_000,
         "--schedule-participants",
         min=0,
+        max=1_000_000,
         help="Simulated participants of the trial-scheduling section (0: leave the section out).",
     ),
     types_participants: int = typer.Option(
         2_000,
         "--types-participants",
         min=0,
+        max=1_000_000,
         help="Simulated participants of the supervisor-types section (Remark 1; 0: leave the section out).",
     ),
     as_json: bool = typer.Option(False, "--json", help="Print summary.json to stdout instead of tables."),

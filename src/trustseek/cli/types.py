@@ -46,6 +46,14 @@ def _log(log, mapping, column, label, missing, delimiter):
     return read_log(log, mapping, column, label, ("complexity", "robot_action", "experience"), missing, delimiter)
 
 
+def _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on):
+    """The inputs of the types' trust models (--transitions-on/--emissions-on as for fit) and the
+    log with the columns they need."""
+    from .fit import _read_with_inputs
+
+    return _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter)
+
+
 def parse_types(text: str) -> tuple[int, ...]:
     """``1..4`` or ``1,2,3``: the numbers of types to compare."""
     try:
@@ -66,9 +74,19 @@ def fit_types(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
     types: int = typer.Option(2, "--types", "-m", min=1, max=12, help="Number of supervisor types."),
     differ: str = DifferOpt,
-    restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Starts (half from the perturbed pooled fit, half random)."),
-    bootstrap: int = typer.Option(0, "--bootstrap", "-b", min=0, help="Participant bootstrap resamples for 95% intervals."),
-    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    transitions_on: str | None = typer.Option(
+        None, "--transitions-on", help="Inputs of the trust transitions (as for fit: complexity, robot_action, experience)."
+    ),
+    emissions_on: str | None = typer.Option(
+        None, "--emissions-on", help="Inputs of the human-action probabilities (as for fit: complexity, robot_action)."
+    ),
+    restarts: int = typer.Option(
+        10, "--restarts", "-r", min=1, max=1000, help="Starts (half from the perturbed pooled fit, half random)."
+    ),
+    bootstrap: int = typer.Option(
+        0, "--bootstrap", "-b", min=0, max=10_000, help="Participant bootstrap resamples for 95% intervals."
+    ),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative log-likelihood tolerance (> 0)."),
     max_iter: int = typer.Option(1000, "--max-iter", min=1, help="E-step cap per start."),
     jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads (fit) and processes (bootstrap)."),
@@ -86,13 +104,17 @@ def fit_types(
     quiet: bool = QuietOpt,
 ) -> None:
     """Fit supervisor types: M trust models of the paper's structure, each participant one type."""
+    from ._app import check_not_inputs
+
     check_outputs((out, "--out"), (type_posteriors, "--type-posteriors"))
     check_output(type_posteriors, "--type-posteriors", POSTERIOR_SUFFIXES)
+    outputs = ((out, "--out"), (type_posteriors, "--type-posteriors"))
+    check_not_inputs(outputs, ((log, "trial log"), (mapping, "--mapping file")))
     if plots is not None and plots.exists() and not plots.is_dir():
         raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
     mx = _mixture()
     mx.parse_differ(differ)
-    frame = _log(log, mapping, column, label, missing, delimiter)
+    tr, em, frame = _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on)
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("starts", total=restarts)
@@ -106,6 +128,8 @@ def fit_types(
             max_iter=max_iter,
             n_jobs=jobs,
             progress=lambda d, t: bar.update(task, completed=d, total=t),
+            transition_inputs=tr,
+            emission_inputs=em,
         )
         intervals = None
         if bootstrap > 0:
@@ -188,9 +212,17 @@ def select_types(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
     types: str = typer.Option("1..4", "--types", help="Numbers of types to compare, e.g. 1..4 or 1,2,3."),
     differ: str = DifferOpt,
+    transitions_on: str | None = typer.Option(
+        None, "--transitions-on", help="Inputs of the trust transitions (as for fit: complexity, robot_action, experience)."
+    ),
+    emissions_on: str | None = typer.Option(
+        None, "--emissions-on", help="Inputs of the human-action probabilities (as for fit: complexity, robot_action)."
+    ),
     folds: int = typer.Option(5, "--folds", min=2, help="Folds over participants for the held-out log-likelihood."),
-    restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Starts per fit (and the fit with one type fewer, split)."),
-    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    restarts: int = typer.Option(
+        10, "--restarts", "-r", min=1, max=1000, help="Starts per fit (and the fit with one type fewer, split)."
+    ),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
     jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads per fit."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
@@ -207,7 +239,7 @@ def select_types(
     mx.parse_differ(differ)
     from ..estimation import type_selection
 
-    frame = _log(log, mapping, column, label, missing, delimiter)
+    tr, em, frame = _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on)
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("model selection", total=None)
@@ -221,13 +253,18 @@ def select_types(
             tol=tol,
             n_jobs=jobs,
             progress=lambda what, d, t: bar.update(task, completed=d, total=t, description=what),
+            transition_inputs=tr,
+            emission_inputs=em,
         )
     warnings = type_selection.type_selection_warnings(rows)
     if as_json:
         print_json({"types": rows, "warnings": warnings})
         return
     weights = {"weights": lambda r: ", ".join(f"{w:.2f}" for w in r["weights"])}
-    console.print(selection_table("Number of supervisor types", "types", rows, folds, weights))
+    table = selection_table("Number of supervisor types", "types", rows, folds, weights)
+    from rich.console import Console
+
+    (console if console.is_terminal else Console(width=400)).print(table)  # whole when piped too
     console.print("* best by that criterion; reached best: starts within 0.01 of the best log-likelihood", highlight=False)
     for w in warnings:
         console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
@@ -263,9 +300,11 @@ def personalize(
     check_output(out, "--out", directory=True)
     from ..estimation.personal import personalize as run
     from ..model.presets import load_mixture
+    from .fit import _fill_unused, model_inputs
 
     centre = load_mixture(model)
-    frame = _log(log, mapping, column, label, missing, delimiter)
+    used = tuple(dict.fromkeys(c for t in centre.models for c in model_inputs(t)))  # the columns the centre uses
+    frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), centre.models[0], used)
     res = run(frame, centre if centre.n_types > 1 else centre.models[0], strength=strength, tol=tol, estimate=estimate)
     with atomic_output(out, directory=True) as tmp:
         res.save(tmp)

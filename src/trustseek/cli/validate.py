@@ -33,7 +33,7 @@ from ._app import (
 from .fit import POSTERIOR_SUFFIXES, _fill_unused, _general, _read_with_inputs, model_inputs, read_for_model
 
 BootstrapOpt = typer.Option(
-    1000, "--bootstrap", "-b", min=0, help="Participant-bootstrap resamples for the 95% intervals (0 = none)."
+    1000, "--bootstrap", "-b", min=0, max=10_000, help="Participant-bootstrap resamples for the 95% intervals (0 = none)."
 )
 
 
@@ -73,8 +73,12 @@ def _ci(d: dict[str, Any], digits: int = 3) -> str:
 
 
 def _load(path: Path) -> Any:
-    """A trust model or a general model (trustseek.iohmm/1), by the file's format."""
+    """A trust model or a general model (trustseek.iohmm/1), by the file's format; or a preset name (paper)."""
     from ..model.iohmm import load_any_model
+    from ..model.presets import MODEL_PRESETS, load_model
+
+    if str(path) in MODEL_PRESETS and not path.exists():
+        return load_model(str(path))
 
     return load_any_model(path)
 
@@ -100,9 +104,9 @@ def predict(
     levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Trust levels of the held-out fits."),
     transitions_on: str | None = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit)."),
     emissions_on: str | None = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit)."),
-    restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Random restarts of each held-out fit."),
+    restarts: int = typer.Option(10, "--restarts", "-r", min=1, max=1000, help="Random restarts of each held-out fit."),
     prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count of the held-out fits (as for fit)."),
-    seed: int = typer.Option(0, "--seed", help="Random seed (folds, restarts, bootstrap)."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed (folds, restarts, bootstrap)."),
     tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative log-likelihood tolerance of each fit (> 0)."),
     max_iter: int = typer.Option(1000, "--max-iter", min=1, help="Iteration cap per restart (E-steps)."),
     jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads for each fit (default: all cores)."),
@@ -122,7 +126,10 @@ def predict(
 
     Trials whose action the model fixes (the robot asked: P(intervene) = 1) are no prediction
     and are left out of the scores."""
+    from ._app import check_not_inputs
+
     check_output(out, "--out", POSTERIOR_SUFFIXES)
+    check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (mapping, "--mapping file")))
     if keep and out is None:
         raise TrustseekError(["--keep carries log columns into --out: give --out"])
     pr = _prediction()
@@ -213,7 +220,7 @@ def validate(
         help="Ordinal rating labels, lowest first, comma-separated (e.g. low,medium,high); default: numeric ratings.",
     ),
     bootstrap: int = BootstrapOpt,
-    seed: int = typer.Option(0, "--seed", help="Random seed of the bootstrap."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed of the bootstrap."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write per trial the rating, decoded trust and baselines."),
     as_json: bool = typer.Option(False, "--json", help="Print the correlations as one JSON object."),
     mapping: Path | None = MappingOpt,
@@ -225,7 +232,10 @@ def validate(
 ) -> None:
     """Does the decoded trust track self-reported trust?  Spearman and Pearson correlations with
     the ratings (pooled, within and between participants) next to simple baselines."""
+    from ._app import check_not_inputs
+
     check_output(out, "--out", POSTERIOR_SUFFIXES)
+    check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (mapping, "--mapping file")))
     if keep and out is None:
         raise TrustseekError(["--keep carries log columns into --out: give --out"])
     labels = None

@@ -34,6 +34,16 @@ class DataError(TrustseekError, ValueError):
     """A trial log is malformed.  ``problems`` holds one line per kind of problem (file, column, rows, values)."""
 
 
+SHOWN_CHARS = 200  # characters shown of one location (a cell's value may be a megabyte)
+
+
+def shorten(text: str, limit: int = SHOWN_CHARS) -> str:
+    """``text``, cut to ``limit`` characters with the length of what was left out."""
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}... ({len(text) - limit:,} more characters)"
+
+
 class Problems:
     """Problems grouped by kind: one line per kind with the count and the first locations.
 
@@ -52,6 +62,7 @@ class Problems:
         count = len(items) if count is None else count
         if count == 0:
             return
+        items = [shorten(item) for item in items[:SHOWN]]
         if count == 1:
             self.lines.append(f"{head}: {items[0]}")
             return

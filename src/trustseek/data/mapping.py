@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from ..vocab import ACTIONS, CATEGORICAL_COLUMNS, EXPERIENCES, HUMAN_ACTIONS, TRIAL_COLUMNS
-from .cells import DataError
+from .cells import DataError, shorten
 
 CANONICAL = TRIAL_COLUMNS
 
@@ -57,6 +57,9 @@ class ColumnMapping:
                      input's name and may be a derived column).  Each becomes a column named by
                      the input, a categorical of its levels in the declared order; an empty cell
                      or a value outside the levels is an error.
+    ``experience_rule`` ``false`` where the paper's experience rule (an intervention ends
+                     ``faulty``, an ask ends as the task says) is not the study's, e.g. advice
+                     taking, where the aid can be right when the person overrides it.
     """
 
     columns: dict[str, str] = field(default_factory=dict)
@@ -69,6 +72,7 @@ class ColumnMapping:
     delimiter: str | None = None
     rating: dict[str, Any] | None = None
     inputs: dict[str, dict[str, Any]] = field(default_factory=dict)
+    experience_rule: bool | None = None  # False: the paper's experience rule does not hold in this study
 
     def problems(self) -> list[str]:
         p = []
@@ -124,9 +128,29 @@ class ColumnMapping:
                 p.append(f"drop rule {i}: expected {{'column': name, 'values': [value, ...]}}, got {rule!r}")
         if self.missing is not None and not all(isinstance(m, str) for m in self.missing):
             p.append(f'missing: expected a list of texts (e.g. ["NA", "null"]), got {list(self.missing)!r}')
+        elif self.missing is not None:
+            p += self._marker_problems()
+        if self.experience_rule is not None and not isinstance(self.experience_rule, bool):
+            p.append(f"experience_rule: expected true or false, got {self.experience_rule!r}")
         if self.delimiter is not None and (not isinstance(self.delimiter, str) or len(self.delimiter) != 1):
             p.append(f"delimiter: expected one character, got {self.delimiter!r}")
         return p
+
+    def _marker_problems(self) -> list[str]:
+        """A missing-value marker that is also a label of a categorical column would turn that label's
+        cells into unrecorded ones."""
+        labels: dict[str, str] = {}
+        for col in CATEGORICAL:
+            table = self.labels.get(col)
+            theirs = list(table) if isinstance(table, Mapping) else []
+            for text in (*self.categories(col), *theirs):
+                labels.setdefault(str(text).strip().lower(), col)
+        return [
+            f"missing: {m!r} is also a label of {labels[m.strip().lower()]}; a marker of unrecorded cells cannot be a "
+            "value (drop it from --missing / 'missing', or map the label to another text)"
+            for m in self.missing or ()
+            if m.strip().lower() in labels
+        ]
 
     def categories(self, column: str) -> tuple[str, ...]:
         if column == "complexity":
@@ -149,6 +173,7 @@ class ColumnMapping:
             other.delimiter or self.delimiter,
             other.rating or self.rating,
             {**self.inputs, **other.inputs},
+            other.experience_rule if other.experience_rule is not None else self.experience_rule,
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -169,6 +194,8 @@ class ColumnMapping:
             d["rating"] = dict(self.rating)
         if self.inputs:
             d["inputs"] = {k: dict(v) for k, v in self.inputs.items()}
+        if self.experience_rule is not None:
+            d["experience_rule"] = self.experience_rule
         return d
 
     def input_levels(self) -> dict[str, tuple[str, ...]]:
@@ -233,7 +260,7 @@ class ColumnMapping:
             missing = None
         m = cls(
             {str(k): v for k, v in cols.items()},
-            {str(k): (_label_table(v) if isinstance(v, Mapping) else v) for k, v in labels.items()},
+            {str(k): (_label_table(v, problems, f"labels[{k}]") if isinstance(v, Mapping) else v) for k, v in labels.items()},
             tuple(cx) if cx else None,
             tuple(order) if order is not None else None,
             {str(k): v for k, v in derived.items()},
@@ -242,6 +269,7 @@ class ColumnMapping:
             d.get("delimiter"),
             dict(d["rating"]) if isinstance(d.get("rating"), Mapping) else d.get("rating"),
             {str(k): (_input_entry(v) if isinstance(v, Mapping) else v) for k, v in inputs.items()},
+            d.get("experience_rule"),
         )
         problems += m.problems()
         if problems:
@@ -292,7 +320,13 @@ class ColumnMapping:
             if not sep or not sep2 or not canon or not ours:
                 problems.append(f"--label {item!r}: expected column:theirs=canonical, e.g. human_action:1=rely")
                 continue
-            labs.setdefault(canon.strip(), {})[theirs.strip()] = ours.strip()
+            table = labs.setdefault(canon.strip(), {})
+            if table.get(theirs.strip(), ours.strip()) != ours.strip():
+                problems.append(
+                    f"--label {canon.strip()}:{theirs.strip()}: the label is mapped to two categories, "
+                    f"{table[theirs.strip()]!r} and {ours.strip()!r}"
+                )
+            table[theirs.strip()] = ours.strip()
         if delimiter is not None:
             delimiter = {"\\t": "\t", "tab": "\t", "TAB": "\t"}.get(delimiter, delimiter)
         if problems:
@@ -310,7 +344,19 @@ class ColumnMapping:
         return base.merged(flags)
 
 
-MAPPING_KEYS = ("columns", "labels", "complexities", "order", "derived", "drop", "missing", "delimiter", "rating", "inputs")
+MAPPING_KEYS = (
+    "columns",
+    "labels",
+    "complexities",
+    "order",
+    "derived",
+    "drop",
+    "missing",
+    "delimiter",
+    "rating",
+    "inputs",
+    "experience_rule",
+)
 
 
 RATING = "rating"  # the canonical name of the rating column a mapping declares
@@ -404,15 +450,24 @@ def _input_problems(name: str, entry: Any) -> list[str]:
     return p
 
 
-def _label_table(table: Mapping) -> dict[str, Any]:
-    """A label table with its set entries (canonical -> [their labels]) turned into their -> canonical."""
+def _label_table(table: Mapping, conflicts: list[str] | None = None, head: str = "labels") -> dict[str, Any]:
+    """A label table with its set entries (canonical -> [their labels]) turned into their -> canonical;
+    a label of theirs given two canonical labels is added to ``conflicts``."""
     out: dict[str, Any] = {}
+
+    def put(theirs: str, ours: Any) -> None:
+        if theirs in out and out[theirs] != ours and conflicts is not None:
+            conflicts.append(
+                f"{head}: the label {shorten(theirs, 80)!r} is mapped to two categories, {out[theirs]!r} and {ours!r}"
+            )
+        out[theirs] = ours
+
     for k, v in table.items():
         if isinstance(v, list):
             for theirs in v:
-                out[label_key(theirs)] = str(k)
+                put(label_key(theirs), str(k))
         else:
-            out[label_key(k)] = v
+            put(label_key(k), v)
     return out
 
 

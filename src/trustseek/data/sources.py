@@ -6,9 +6,12 @@ column by column (pyarrow where it can), with the rows numbered as in the file.
 
 from __future__ import annotations
 
+import collections
 import csv
 import io
+import itertools
 import json
+import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,7 +19,8 @@ from typing import Any
 
 import pandas as pd
 
-from .cells import Column, DataError, Problems, as_text, column_from_arrow, column_from_pandas
+from ..model.jsonfile import special_file
+from .cells import SHOWN, Column, DataError, Problems, as_text, column_from_arrow, column_from_pandas, shorten
 
 DELIMITERS = (",", ";", "\t", "|")
 
@@ -31,17 +35,23 @@ class RawLog:
     release: Any = None  # list of names -> None: those columns are no longer needed (their memory goes)
 
 
+MAX_COLUMNS = 10_000  # a CSV's columns: parsing takes ~6 s at this width and grows with its square
+HEADER_BYTES = 1 << 26  # the longest header line read (64 MB: millions of columns)
+
+
 def _sniff(path: Path, sep: str | None) -> tuple[str, list[str]]:
-    """The delimiter (given, by suffix, or the most frequent candidate in the header) and the header names."""
+    """The delimiter (given, by suffix, or the most frequent candidate in the header outside
+    quoted names) and the header names; the whole header line is read, however long."""
     with path.open("rb") as fh:
-        head = fh.read(1 << 16)
+        head = fh.readline(HEADER_BYTES)
     text = head.decode("utf-8", "replace").lstrip("\ufeff")
     first = text.splitlines()[0] if text.strip() else ""
     if sep is None:
         if path.suffix.lower() == ".tsv":
             sep = "\t"
         else:
-            counts = {d: first.count(d) for d in DELIMITERS}
+            unquoted = re.sub(r'"[^"]*"', "", first)
+            counts = {d: unquoted.count(d) for d in DELIMITERS}
             best = max(counts, key=lambda d: counts[d])
             sep = best if counts[best] > 0 else ","
     names = next(csv.reader(io.StringIO(first), delimiter=sep), []) if first else []
@@ -74,13 +84,16 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str]) -> RawLog
         raise DataError(["file not found"], name)
     if path.is_dir():
         raise DataError(["is a directory, not a trial log"], name)
+    special = special_file(path)
+    if special:
+        raise DataError([f"is {special}; expected a trial log file"], name)
     suffix = path.suffix.lower()
     if suffix in PARQUET_SUFFIXES:
         return _load_parquet(path, name, missing)
     if suffix in CSV_SUFFIXES:
         return _load_csv(path, name, sep, missing)
     if suffix in JSONL_SUFFIXES + JSON_SUFFIXES:
-        return _load_json(path, name, suffix in JSONL_SUFFIXES, missing)
+        return _load_json(path, name, _json_lines(path, suffix in JSONL_SUFFIXES), missing)
     raise DataError([f"unknown file type {suffix!r}: use .csv, .tsv, .parquet, .jsonl or .json"], name)
 
 
@@ -125,6 +138,27 @@ def _load_parquet(path: Path, name: str, missing: frozenset[str]) -> RawLog:
     return _arrow_raw(table, name, missing)
 
 
+def _json_lines(path: Path, by_suffix: bool) -> bool:
+    """Whether a JSON log is JSON lines, by its content: an array starts with ``[``; records one
+    per line start with ``{`` and their first line is a whole JSON value (whatever the suffix;
+    a ``.json`` file of a single object is no log of lines: the array reader says so)."""
+    try:
+        with path.open("rb") as fh:
+            first = fh.readline(HEADER_BYTES).decode("utf-8", "replace").lstrip("\ufeff").strip()
+            more = any(line.strip() for line in itertools.islice(fh, 100))
+    except OSError:
+        return by_suffix  # the reader says what is wrong
+    if first.startswith("["):
+        return False
+    if first.startswith("{"):
+        try:
+            json.loads(first)
+        except json.JSONDecodeError:
+            return False  # one object over several lines: the array reader names what is wrong
+        return by_suffix or more
+    return by_suffix
+
+
 def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str]) -> RawLog:
     """JSON lines (one object per line) or a JSON array of objects; row N is the N-th record."""
     import pyarrow as pa
@@ -133,9 +167,11 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str]) -> R
         import pyarrow.json as pjson
 
         try:
-            return _arrow_raw(pjson.read_json(path), name, missing)
+            table = pjson.read_json(path)
+            if not any(pa.types.is_nested(f.type) for f in table.schema):
+                return _arrow_raw(table, name, missing)
         except (pa.ArrowException, OSError):
-            pass  # mixed types in a column, or a bad line: read record by record to say where
+            pass  # mixed types in a column, a bad line or nested values: read record by record to say where
     try:
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError:
@@ -168,6 +204,7 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str]) -> R
     p.add("records that are not objects", [w for w, r in zip(where, records, strict=True) if not isinstance(r, dict)])
     if p.lines:
         raise DataError(p.lines, name)
+    _nested_values(records, where, name)
     columns: dict[str, list[Any]] = {}
     for i, r in enumerate(records):
         for k in r:
@@ -185,6 +222,20 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str]) -> R
     return _arrow_raw(table, name, missing)
 
 
+def _nested_values(records: list[dict[str, Any]], where: list[str], name: str) -> None:
+    """Refuse cells that are objects or lists (a cell is a text, number or boolean), by column."""
+    bad: dict[str, list[str]] = {}
+    for w, r in zip(where, records, strict=True):
+        for k, v in r.items():
+            if isinstance(v, (dict, list)):
+                bad.setdefault(k, []).append(f"{w} {json.dumps(v)[:40]}")
+    if bad:
+        p = Problems()
+        for k, items in bad.items():
+            p.add(f"column {shorten(k, 80)!r}: an object or a list where a text or number was expected", items, unit="records")
+        raise DataError(p.lines, name)
+
+
 def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -> RawLog:
     import pyarrow as pa
     import pyarrow.csv as pcsv
@@ -192,17 +243,24 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
     sep, header = _sniff(path, sep)
     if not header:
         raise DataError(["the file is empty (expected a header line naming the columns)"], name)
-    dupes = sorted({c for c in header if header.count(c) > 1})
+    if len(header) > MAX_COLUMNS:
+        raise DataError(
+            [f"the header names {len(header):,} columns (delimiter {sep!r}); at most {MAX_COLUMNS:,} are read: keep the columns "
+             "the analysis uses"],
+            name,
+        )  # fmt: skip
+    counts = collections.Counter(header)
+    dupes = sorted(c for c, k in counts.items() if k > 1)
     if dupes:
-        raise DataError([f"column {c!r} appears {header.count(c)} times in the header" for c in dupes], name)
-    bad_rows: list[tuple[int, int, str]] = []
+        raise DataError([f"column {shorten(c, 80)!r} appears {counts[c]} times in the header" for c in dupes[:SHOWN]], name)
+    bad_rows: list[tuple[int | None, int, str]] = []
 
     def invalid(row: Any) -> str:
         try:
             text = str(row.text)
         except UnicodeDecodeError:
             text = "(not UTF-8 text)"
-        bad_rows.append((row.expected_columns, row.actual_columns, text))
+        bad_rows.append((row.number, row.actual_columns, text))
         return "skip"
 
     # every column as codes into its distinct texts: no Python string per cell
@@ -238,10 +296,18 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
         p = Problems()
         p.add(
             f"rows whose number of fields differs from the header's {len(header)} (delimiter {sep!r})",
-            [f"{got} fields: {text[:60]!r}" for _, got, text in bad_rows],
+            [_bad_row(number, got, text) for number, got, text in bad_rows],
         )
         raise DataError(p.lines, name)
     return _arrow_source(table, name, header, missing)
+
+
+def _bad_row(number: int | None, got: int, text: str) -> str:
+    """A row whose field count is wrong: its data row (the file's line less the header), the
+    fields found, the start of its text, and an unterminated quote when it has one."""
+    where = f"row {number - 1}" if number is not None else "a row"
+    quote = ", an unterminated quote" if text.count('"') % 2 else ""
+    return f"{where} ({got} fields{quote}): {text[:60]!r}"
 
 
 def missing_column_hint(missing: list[str], present: list[str], sep: str | None) -> list[str]:

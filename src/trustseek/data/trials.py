@@ -244,7 +244,7 @@ def read_trials(
         for inp in mapping.inputs
         for src in (mapping.input_column(inp),)
     }
-    if check_experience:
+    if check_experience and mapping.experience_rule is not False:
         _check_experience(problems, codes, mapping, present, column)
     if problems.lines:
         raise DataError(problems.lines, name)
@@ -575,6 +575,14 @@ def _check_trials(
             for d, f in zip(dup[:SHOWN], first[:SHOWN], strict=True)
         ]
         problems.add(f"{column}: duplicate trial indices", items, len(dup))
+        who, count = np.unique(p[order[dup]], return_counts=True)
+        per = ", ".join(f"{ids[w]!r} {c}" for w, c in zip(who[:SHOWN], count[:SHOWN], strict=True))
+        more = f", ... ({len(who) - SHOWN} more participants)" if len(who) > SHOWN else ""
+        problems.lines[-1] += (
+            f"; by participant, {len(who)} ({per}{more}): a trial number that restarts "
+            'in every block or session needs the mapping\'s "order" (e.g. "order": ["block", "trial"]); a participant '
+            "who took the study twice needs an id per session"
+        )
         return None
     return order if rows is None else rows[order]
 

@@ -242,7 +242,27 @@ def _warnings(fit: IOHMMFit, events: dict[str, np.ndarray]) -> list[str]:
             n = float(events["rating"][k].sum())
             if n < MIN_EVENTS:
                 out.append(f"rating[T={spec.levels[k]}]: {n:.1f} expected events, not identified by this data")
+    else:
+        out += _constant_output(fit)
     return out
+
+
+def _constant_output(fit: IOHMMFit) -> list[str]:
+    """A warning when every output the model does not fix is the same category (e.g. every
+    participant always relies): no level then explains the data better than another, so the
+    initial distribution and the transitions are not identified, whatever their events."""
+    seqs, s = fit.seqs, fit.structure
+    free = ~np.all(s.em.fixed, axis=(1, 2))  # (Ue,): some level's row is estimated
+    ue = np.where(seqs.ue >= 0, seqs.ue, 0)
+    seen = (seqs.y >= 0) & (seqs.ue >= 0) & free[ue]
+    values = np.unique(seqs.y[seen])
+    if fit.spec.n_levels < 2 or len(values) != 1:
+        return []
+    only = fit.spec.output_categories[int(values[0])]
+    return [
+        f"every {fit.spec.output} the model does not fix is {only!r}: the data cannot tell the {fit.spec.n_levels} "
+        "levels apart, so the initial distribution and the transitions are not identified (any values fit as well)"
+    ]
 
 
 def fit_sequences(

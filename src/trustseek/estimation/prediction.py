@@ -368,6 +368,12 @@ class PredictionReport:
             for m, d in per.items():
                 if d["better"] == "model":
                     continue
+                if not np.isfinite(d["estimate"]):
+                    out.append(
+                        f"the model and the {base} baseline are not compared in {names[m]}: the score is undefined "
+                        "(e.g. AUC when every scored action is the same)"
+                    )
+                    continue
                 if not np.isfinite(d["lower"]):
                     how, ci = "no bootstrap interval", ""
                 else:

@@ -299,6 +299,9 @@ def mark_choices(rows: Sequence[dict[str, Any]], key: str) -> None:
         r["best_heldout"] = r[key] == best_cv
 
 
+MAX_LEVELS = 8  # the most trust levels select compares (the command's --max-levels bound)
+
+
 def selection_warnings(rows: Sequence[dict[str, Any]]) -> list[str]:
     """Warnings on a :func:`select_levels` table: a best number of levels at the largest compared,
     and fits whose best log-likelihood only one start reached."""
@@ -307,10 +310,12 @@ def selection_warnings(rows: Sequence[dict[str, Any]]) -> list[str]:
         top = max(int(r["levels"]) for r in rows)
         for key, what in (("best_heldout", "held-out log-likelihood"), ("best_bic", "BIC")):
             if any(r[key] and r["levels"] == top for r in rows):
-                out.append(
-                    f"the best {what} is at {top} levels, the largest compared: more levels may fit better "
-                    f"(compare more with --max-levels {top + 1})"
+                more = (
+                    f"compare more with --max-levels {top + 1}"
+                    if top < MAX_LEVELS
+                    else f"{MAX_LEVELS} is the most compared: read the choice as 'at least {top}'"
                 )
+                out.append(f"the best {what} is at {top} levels, the largest compared: more levels may fit better ({more})")
     for r in rows:
         if r["levels"] > 1 and r.get("reached_best", 2) < 2:
             out.append(

@@ -161,6 +161,9 @@ def select_types(
     return rows
 
 
+MAX_TYPES = 12  # the most supervisor types select-types compares (the command's --types bound)
+
+
 def type_selection_warnings(rows: Sequence[dict[str, Any]]) -> list[str]:
     """A best number of types at the largest compared, fits whose best only one start reached,
     and fits with empty types."""
@@ -170,10 +173,12 @@ def type_selection_warnings(rows: Sequence[dict[str, Any]]) -> list[str]:
         low = min(int(r["types"]) for r in rows)
         for key, what in (("best_heldout", "held-out log-likelihood"), ("best_bic", "BIC")):
             if any(r[key] and r["types"] == top for r in rows):
-                out.append(
-                    f"the best {what} is at {top} types, the largest compared: more types may fit better "
-                    f"(compare more with --types {low}..{top + 1})"
+                more = (
+                    f"compare more with --types {low}..{top + 1}"
+                    if top < MAX_TYPES
+                    else f"{MAX_TYPES} is the most compared: read the choice as 'at least {top}'"
                 )
+                out.append(f"the best {what} is at {top} types, the largest compared: more types may fit better ({more})")
     for r in rows:
         if r["types"] > 1 and r.get("reached_best", 2) < 2:
             out.append(

@@ -189,9 +189,15 @@ class ValidationReport:
         for m, per in self.differences.items():
             for base, scopes in per.items():
                 lost = []
+                undefined = [scope for scope, d in scopes.items() if not np.isfinite(d["spearman"]["estimate"])]
+                if undefined:
+                    out.append(
+                        f"the {m} trust and the {base} baseline are not compared ({', '.join(undefined)}): a correlation "
+                        "is undefined there (a constant value or too few rated trials)"
+                    )
                 for scope, d in scopes.items():
                     s = d["spearman"]
-                    if s["better"] != "trust":
+                    if s["better"] != "trust" and scope not in undefined:
                         lo, hi = s["lower"], s["upper"]
                         ci = f"[{lo:+.3f}, {hi:+.3f}]" if np.isfinite(lo) else "(no interval)"
                         lost.append(f"{scope} {s['estimate']:+.3f} {ci}")

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import stat
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Self
@@ -29,6 +30,7 @@ __all__ = [
     "read_row",
     "read_table",
     "read_text",
+    "special_file",
     "unknown_keys",
 ]
 
@@ -195,8 +197,41 @@ def check_row_array(arr: np.ndarray, label_of, problems: list[str]) -> None:
             problems.append(f"{label_of(idx)} sums to {fmt_number(float(row.sum()))}")
 
 
+def _pairs_hook(duplicates: list[str]):
+    """A ``json.loads`` object hook that builds each object and records every key it holds twice
+    (JSON readers differ on which value wins, so a file with one is ambiguous)."""
+
+    def hook(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+        obj: dict[str, Any] = {}
+        for k, v in pairs:
+            if k in obj:
+                keys = list(dict.fromkeys(key for key, _ in pairs))
+                shown = keys if len(keys) <= 8 else [*keys[:8], "..."]
+                duplicates.append(f"the key {k[:80]!r} appears twice in one object (with keys {shown}); keep one")
+            obj[k] = v
+        return obj
+
+    return hook
+
+
 def _reject_constant(name: str) -> Any:
     raise ValueError(f"{name} is not a valid JSON number (use a finite number or null where allowed)")
+
+
+def special_file(path: Path) -> str:
+    """What ``path`` is when it exists and is neither a regular file nor a folder (a FIFO, a
+    socket, a device: reading it could wait forever); empty otherwise."""
+    try:
+        mode = path.stat().st_mode
+    except OSError:
+        return ""  # missing or unreadable: the read says which
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return ""
+    if stat.S_ISFIFO(mode):
+        return "a named pipe (FIFO), not a regular file"
+    if stat.S_ISSOCK(mode):
+        return "a socket, not a regular file"
+    return "a device, not a regular file"
 
 
 def read_text(path: str | Path, kind: str, error: type[TrustseekError], encoding: str = "utf-8", hint: str = "") -> str:
@@ -204,6 +239,9 @@ def read_text(path: str | Path, kind: str, error: type[TrustseekError], encoding
     missing, a directory, unreadable, binary (a NUL byte), or not text in ``encoding`` (with the
     byte, then ``hint``).  ``kind`` names what was expected ("JSON", ".pomdp")."""
     source = str(path)
+    special = special_file(Path(path))
+    if special:
+        raise error([f"is {special}, expected a {kind} file"], source)
     try:
         raw = Path(path).read_bytes()
     except FileNotFoundError:
@@ -232,14 +270,17 @@ def load_json(path: str | Path, expect: type | None = dict) -> tuple[Any, str]:
     text = read_text(path, "JSON", ModelError, encoding="utf-8-sig", hint=": save it as UTF-8 JSON")
     if not text.strip():
         raise ModelError(["is empty, expected JSON"], source)
+    duplicates: list[str] = []
     try:
-        data = json.loads(text, parse_constant=_reject_constant)
+        data = json.loads(text, parse_constant=_reject_constant, object_pairs_hook=_pairs_hook(duplicates))
     except json.JSONDecodeError as exc:
         raise ModelError([f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"], source) from None
     except ValueError as exc:  # NaN / Infinity
         raise ModelError([f"invalid JSON: {exc}"], source) from None
     except RecursionError:
         raise ModelError(["invalid JSON: nested too deeply"], source) from None
+    if duplicates:
+        raise ModelError(duplicates, source)
     if expect is not None and not isinstance(data, expect):
         kind = "an object" if expect is dict else expect.__name__
         raise ModelError([f"the top level must be {kind} ({{...}}), got {type(data).__name__}"], source)

@@ -71,6 +71,10 @@ class Rewards:
         return self.autonomous_success if experience == RELIABLE else self.autonomous_failure
 
 
+#: the largest reward magnitude: values (rewards / (1 - discount), summed over outcomes) stay far from overflow
+MAX_REWARD = 1e12
+
+
 @dataclass(frozen=True, eq=False)
 class Task(JsonFile):
     """The object-collection task: complexity distribution, robot skill, rewards, discount."""
@@ -119,6 +123,10 @@ class Task(JsonFile):
         for k, v in self.rewards.to_dict().items():
             if not math.isfinite(v):
                 problems.append(f"rewards[{k}] = {v!r} must be a finite number")
+            elif abs(v) > MAX_REWARD:
+                problems.append(
+                    f"rewards[{k}] = {fmt_number(v)} is outside [-1e12, 1e12] (larger rewards overflow the values; rescale them)"
+                )
         return problems
 
     def complexity_index(self, name: str) -> int:
