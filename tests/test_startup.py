@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import inspect
 import json
+import os
 import subprocess
 import sys
 
@@ -102,3 +103,44 @@ def test_every_submodule_is_an_attribute_of_its_package():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
     assert out.stdout.strip().splitlines()[-1] == "[] []"
+
+
+def run_main(*argv: str) -> str:
+    """A program that runs ``trustseek argv`` as the command line does (output swallowed)."""
+    return (
+        "import contextlib, io, sys\nfrom trustseek.cli import main\n"
+        f"sys.argv = ['trustseek', *{list(argv)!r}]\n"
+        "with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()):\n    main()"
+    )
+
+
+@pytest.mark.parametrize("command", ["solve", "agnostic", "plot-q", "preset", "check", "schedule", "export-pomdp"])
+def test_the_planning_commands_help_loads_no_heavy_package(command):
+    assert heavy_modules_after(run_main(command, "--help")) == []
+
+
+def test_checking_a_model_loads_no_heavy_package(tmp_path):
+    model = tmp_path / "model.json"
+    code, _ = run_cli(["preset", "paper", "--model-out", str(model)])
+    assert code == 0 and model.is_file()
+    assert heavy_modules_after(run_main("check", str(model)) + "\nassert sys.modules['trustseek.model.core']") == []
+
+
+def test_naming_the_solvers_loads_no_scipy():
+    code = "from trustseek.solvers import make_solver, solver_names\nsolver_names()\nmake_solver('trust-agnostic')"
+    assert heavy_modules_after(code) == []
+
+
+def test_one_blas_thread_also_limits_a_blas_loaded_after_its_first_use():
+    """scipy brings its own OpenBLAS; a solver that runs before scipy is loaded (the paper's
+    small problems need none) must not leave scipy's BLAS threaded for the solvers after it."""
+    code = (
+        "import threadpoolctl\nfrom trustseek.solvers.base import one_blas_thread\n"
+        "threads = one_blas_thread(lambda: sorted(i['num_threads'] for i in threadpoolctl.threadpool_info()))\n"
+        "threads()\nimport scipy.linalg\n"
+        "n = len(threadpoolctl.threadpool_info())\nprint(n, threads())"
+    )
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "2", "OMP_NUM_THREADS": "2"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True, env=env)
+    n, threads = out.stdout.strip().split(" ", 1)
+    assert int(n) >= 2 and json.loads(threads) == [1] * int(n)

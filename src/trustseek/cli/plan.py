@@ -19,8 +19,8 @@ from ..policies import PolicyError, TrustAwarePolicy, load_policy
 from ..policies.base import Policy
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.types import type_aware_problem, type_belief_from_log, type_marginal
-from ..solvers import GridSolver, make_solver, solver_names, summarize, trust_agnostic_from_data
-from ..solvers.grid import DEFAULT_GRID, METHODS
+from ..solvers import make_solver, solver_names, summarize, trust_agnostic_from_data
+from ..solvers.base import DEFAULT_GRID, METHODS
 from ..solvers.type_aware import DEFAULT_TYPE_AWARE_SOLVER, solve_type_aware
 from ..vocab import check_belief_update
 from ._app import ColumnOpt, LabelOpt, MappingOpt, app, atomic_output, check_output, check_tol, console, print_json, read_log
@@ -308,7 +308,7 @@ def plot_q_cmd(
         _check_update(belief_update)
         pomdp = AssistancePOMDP(load_model(model), load_task(task))
         need_two_levels(pomdp.model, "plot-q")
-        policy = GridSolver(grid=grid, belief_update=belief_update).solve(pomdp)
+        policy = make_solver("grid", grid=grid, belief_update=belief_update).solve(pomdp)
     with atomic_output(out) as tmp:
         plot_q(policy, tmp)
     console.print(f"wrote {out}")

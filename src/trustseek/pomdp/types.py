@@ -25,9 +25,9 @@ Product beliefs are rows of length M·K; :func:`type_marginal`, :func:`trust_mar
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from ..errors import TrustseekError
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
@@ -36,6 +36,9 @@ from ..model.task import Task
 from ..vocab import UNOBSERVED
 from .belief import BayesUpdate
 from .problem import AssistancePOMDP
+
+if TYPE_CHECKING:  # the trial log is a data frame; planning without one loads no pandas
+    import pandas as pd
 
 __all__ = [
     "LEVEL_SEPARATOR",
@@ -145,10 +148,11 @@ def warm_start_belief(mixture: TypeMixture, type_belief: np.ndarray | Sequence[f
 
 def _codes(values: pd.Series, names: Sequence[str], column: str, missing_ok: bool = False) -> np.ndarray:
     text = values.astype("object")
+    missing = values.isna().to_numpy()
     out = np.full(len(values), UNOBSERVED, dtype=np.int64)
     bad: list[str] = []
     for i, v in enumerate(text):
-        if v is None or (isinstance(v, float) and np.isnan(v)) or v is pd.NA:
+        if missing[i]:
             if not missing_ok:
                 bad.append("missing")
             continue

@@ -19,8 +19,7 @@ from ..model.task import Task
 from ..policies.complexity import ComplexityPolicy, randomized
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import PAPER_ASK_PROBABILITIES, PAPER_DATA_COUNTS
-from .base import SolverBase, SolverError
-from .numerics import one_blas_thread
+from .base import SolverBase, SolverError, one_blas_thread
 
 #: trials per participant of the paper's data collection (41 low + 30 high)
 PAPER_HORIZON = sum(PAPER_DATA_COUNTS)

@@ -39,12 +39,12 @@ from ..pomdp.branch_model import BranchModel
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
 from .backup import branch_lines, exact_backup
-from .base import SolverBase, SolverError
+from .base import SolverBase, SolverError, one_blas_thread
 from .certificate import CertifiedSolution, policy_from_solution
 from .certified_grid import CertifiedGridSolver
 from .envelopes import difference_extrema, refit, thin, thin_mask
 from .grid import GridSolver
-from .numerics import evaluate_controller, memoryless_controllers, one_blas_thread
+from .numerics import evaluate_controller, memoryless_controllers
 
 __all__ = ["AlphaSolver"]
 

@@ -24,10 +24,9 @@ import numpy as np
 from ..policies.base import Policy
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
-from .base import SolverBase, SolverError
+from .base import SolverBase, SolverError, one_blas_thread
 from .certificate import CertifiedSolution, policy_from_solution
 from .eq3 import paper_grid_values, residual_pieces
-from .numerics import one_blas_thread
 
 __all__ = ["CertifiedGridSolver"]
 

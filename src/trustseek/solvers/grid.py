@@ -34,11 +34,9 @@ from ..model.task import Task
 from ..policies.grid_q import TrustAwarePolicy
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
-from .base import SolverBase, SolverError
-from .numerics import improve, one_blas_thread, policy_values
+from .base import DEFAULT_GRID, METHODS, SolverBase, SolverError, one_blas_thread
+from .numerics import improve, policy_values
 
-DEFAULT_GRID = 2001
-METHODS = ("policy-iteration", "value-iteration")
 #: policy iteration on grids of up to this many points uses dense linear algebra: the transition
 #: matrices built dense for every (C, a) at once and dense linear solves (a few hundred points:
 #: much faster than the sparse path, the same policy; the tests compare both)

@@ -17,46 +17,16 @@ controller evaluation.
 
 from __future__ import annotations
 
-import functools
 import itertools
-from collections.abc import Callable
-from typing import Any, TypeVar
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from threadpoolctl import ThreadpoolController
 
 from ..pomdp.branch_model import BranchModel
+from .base import one_blas_thread
 
 __all__ = ["best_vectors", "evaluate_controller", "improve", "memoryless_controllers", "one_blas_thread", "policy_values"]
-
-F = TypeVar("F", bound=Callable[..., Any])
-
-
-def one_blas_thread(method: F) -> F:
-    """Run ``method`` with the BLAS library (OpenBLAS, MKL) on one thread.  A threaded BLAS
-    splits products and sums differently with the number of cores, so their last bits differ;
-    a solver then picks another vector at a near tie and the policy changes (the type-aware
-    policy of the reproduction's fitted types moved its lower bound by 1.4e-4 between one and
-    two threads).  The solvers' products are thin (K <= a few dozen columns), so one thread
-    costs them little."""
-
-    @functools.wraps(method)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        with _blas_controller().limit(limits=1, user_api="blas"):
-            return method(*args, **kwargs)
-
-    return wrapper  # type: ignore[return-value]
-
-
-@functools.cache
-def _blas_controller() -> ThreadpoolController:
-    """The thread pools of the BLAS libraries loaded (numpy's and scipy's, both loaded with this
-    module), found once: looking them up again on every call (``threadpool_limits``) cost 0.8 ms
-    a solve, against 0.01 ms through the one controller."""
-    return ThreadpoolController()
-
 
 BLOCK_ROWS = 1 << 15  # beliefs per block of best_vectors (with 500 vectors: 130 MB of products)
 

@@ -42,8 +42,8 @@ from ..pomdp.branch_model import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
-from .base import SolverBase, SolverError
-from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, one_blas_thread, policy_values
+from .base import SolverBase, SolverError, one_blas_thread
+from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, policy_values
 
 __all__ = ["PointSolution", "PointSolver", "freudenthal_vertices", "freudenthal_weights"]
 

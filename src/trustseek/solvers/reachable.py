@@ -47,8 +47,8 @@ from ..pomdp.branch_model import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
-from .base import SolverBase, SolverError
-from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, one_blas_thread, policy_values
+from .base import SolverBase, SolverError, one_blas_thread
+from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, policy_values
 from .point import PointSolver
 
 __all__ = ["ReachableSolution", "ReachableSolver", "fast_informed_bound"]

@@ -8,7 +8,8 @@ choose an algorithm themselves::
 
 Options are keyword arguments with defaults; ``None`` means the default.  Options that only
 other solvers take are ignored (so that one set of command-line options serves every
-solver); an option no solver takes is an error.
+solver); an option no solver takes is an error.  A solver's module is loaded when the solver is
+first built (through the package's names), so that naming the solvers loads none of scipy.
 """
 
 from __future__ import annotations
@@ -18,16 +19,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from .. import solvers
 from ..policies.base import Policy
 from .agnostic import PAPER_HORIZON, TrustAgnosticSolver
-from .alpha import AlphaSolver
-from .base import Solver, SolverError
-from .certified_grid import CertifiedGridSolver
-from .grid import DEFAULT_GRID, GridSolver
-from .point import PointSolver
-from .reachable import ReachableSolver
+from .base import DEFAULT_GRID, Solver, SolverError
 from .schedule import DEFAULT_SCHEDULE_GRID, ScheduleSolver
-from .type_solver import TypeAwareSolver
 
 __all__ = ["SOLVERS", "SolverEntry", "make_solver", "solve_with", "solver_names"]
 
@@ -47,31 +43,33 @@ class SolverEntry:
 
 
 def _grid(belief_update: str = "bayes", grid: int = DEFAULT_GRID, method: str = "policy-iteration", tol: float = 1e-9) -> Solver:
-    return GridSolver(grid=grid, belief_update=belief_update, method=method, tol=tol)
+    return solvers.grid.GridSolver(grid=grid, belief_update=belief_update, method=method, tol=tol)
 
 
 def _alpha(belief_update: str = "bayes", gap: float = 1e-6) -> Solver:
-    return AlphaSolver(belief_update=belief_update, tol=gap)
+    return solvers.alpha.AlphaSolver(belief_update=belief_update, tol=gap)
 
 
 def _certified_grid(belief_update: str = "paper", gap: float = 1e-6) -> Solver:
-    return CertifiedGridSolver(belief_update=belief_update, tol=gap)
+    return solvers.certified_grid.CertifiedGridSolver(belief_update=belief_update, tol=gap)
 
 
 def _point(
     belief_update: str = "bayes", gap: float = 1e-3, max_seconds: float = 60.0, max_resolution: int | None = None
 ) -> Solver:
-    return PointSolver(tol=gap, max_seconds=max_seconds, belief_update=belief_update, max_resolution=max_resolution)
+    return solvers.point.PointSolver(tol=gap, max_seconds=max_seconds, belief_update=belief_update, max_resolution=max_resolution)
 
 
 def _reachable(belief_update: str = "bayes", gap: float = 1e-3, max_seconds: float = 60.0) -> Solver:
-    return ReachableSolver(tol=gap, max_seconds=max_seconds, belief_update=belief_update)
+    return solvers.reachable.ReachableSolver(tol=gap, max_seconds=max_seconds, belief_update=belief_update)
 
 
 def _types(
     belief_update: str = "bayes", gap: float = 1e-3, max_seconds: float = 60.0, max_resolution: int | None = None
 ) -> Solver:
-    return TypeAwareSolver(tol=gap, max_seconds=max_seconds, belief_update=belief_update, max_resolution=max_resolution)
+    return solvers.type_solver.TypeAwareSolver(
+        tol=gap, max_seconds=max_seconds, belief_update=belief_update, max_resolution=max_resolution
+    )
 
 
 def _trust_agnostic(horizon: int = PAPER_HORIZON) -> Solver:

@@ -31,9 +31,8 @@ from ..policies.schedule import PieceQ, SchedulePolicy
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem, State, state_key
 from .backup import exact_backup
-from .base import SolverBase, SolverError
+from .base import SolverBase, SolverError, one_blas_thread
 from .envelopes import cross_sum, max_of
-from .numerics import one_blas_thread
 
 ORDERS = ("optimal", "easy-first", "hard-first", "alternating")
 REPRESENTATIONS = ("alpha", "grid")

@@ -30,7 +30,7 @@ from ..policies.schedule import SCHEDULE
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingError, SchedulingProblem
 from ..vocab import BELIEF_UPDATES, PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS
-from .grid import DEFAULT_GRID
+from .base import DEFAULT_GRID
 from .registry import make_solver
 from .schedule import DEFAULT_SCHEDULE_GRID, ORDERS
 

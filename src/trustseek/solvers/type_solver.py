@@ -46,7 +46,8 @@ from ..pomdp.branch_model import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from .alpha import AlphaSolver
-from .numerics import evaluate_controller, improve, memoryless_controllers, one_blas_thread, policy_values
+from .base import one_blas_thread
+from .numerics import evaluate_controller, improve, memoryless_controllers, policy_values
 from .point import (
     PointSolution,
     PointSolver,
