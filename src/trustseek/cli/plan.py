@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import cast
 from pathlib import Path
 
 import typer
@@ -308,7 +309,7 @@ def plot_q_cmd(
         _check_update(belief_update)
         pomdp = AssistancePOMDP(load_model(model), load_task(task))
         need_two_levels(pomdp.model, "plot-q")
-        policy = make_solver("grid", grid=grid, belief_update=belief_update).solve(pomdp)
+        policy = cast(TrustAwarePolicy, make_solver("grid", grid=grid, belief_update=belief_update).solve(pomdp))
     with atomic_output(out) as tmp:
         plot_q(policy, tmp)
     console.print(f"wrote {out}")
