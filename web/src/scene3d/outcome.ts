@@ -111,15 +111,16 @@ export class OutcomeAnimation {
     const it = this.aisle.item;
     const out = Math.sign(this.plan.preTarget[1] - it.y);
     const r = rng(Math.floor(it.x * 1000));
-    this.aisle.products.forEach((p, i) => {
-      const cx = (p.min[0] + p.max[0]) / 2, cy = (p.min[1] + p.max[1]) / 2;
-      const onShelf = Math.sign(it.y - this.aisle.front) === Math.sign(cy - this.aisle.front);
-      const lv = LEVELS.indexOf(p.min[2]);
-      if (onShelf && Math.abs(cx - it.x) < 0.5 && (lv === it.level || lv === it.level + 1)) {
-        const h = p.max[2] - p.min[2];
-        this.products.set(i, new Faller([cx, cy, (p.min[2] + p.max[2]) / 2], [(r() - 0.5) * 0.8, out * (0.9 + r()), 0.5 * r()], h / 2, (r() - 0.5) * 8));
-      }
-    });
+    // the products beside the item on its board and on the board above, or at least the nearest
+    const near = this.aisle.products
+      .map((p, i) => ({ p, i, dx: Math.abs((p.min[0] + p.max[0]) / 2 - it.x), lv: LEVELS.indexOf(p.min[2]) }))
+      .filter(({ p, lv }) => Math.sign(it.y - this.aisle.front) === Math.sign((p.min[1] + p.max[1]) / 2 - this.aisle.front) && (lv === it.level || lv === it.level + 1))
+      .sort((a, b) => a.dx - b.dx);
+    for (const { p, i } of near.filter((n, k) => k === 0 || n.dx < 0.5)) {
+      const h = p.max[2] - p.min[2];
+      const c: V3 = [(p.min[0] + p.max[0]) / 2, (p.min[1] + p.max[1]) / 2, (p.min[2] + p.max[2]) / 2];
+      this.products.set(i, new Faller(c, [(r() - 0.5) * 0.8, out * (0.9 + r()), 0.5 * r()], h / 2, (r() - 0.5) * 8));
+    }
   }
 
   private stepFallers(dt: number) {
