@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import math
-from typing import cast
 from pathlib import Path
+from typing import cast
 
 import typer
 from rich.table import Table
