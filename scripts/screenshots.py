@@ -1,5 +1,5 @@
 """Regenerate the screenshots of the participant's supervision scene in docs/experiments.md:
-run tests/test_browser_scene.py at 1280 x 720 with the detail of a desktop (quality tier 3),
+run tests/web/test_browser_scene.py at 1280 x 720 with the detail of a desktop (quality tier 3),
 save its screenshots under docs/img/scene/, and rewrite the section between the markers
 ``<!-- scene screenshots -->`` and ``<!-- /scene screenshots -->``.
 
@@ -37,7 +37,7 @@ def main() -> int:
     for f in IMG.glob("scene-*.jpg"):
         f.unlink()
     env = {**os.environ, "TRUSTSEEK_ARTIFACTS": str(IMG), "TRUSTSEEK_SCENE_SHOTS": "1"}
-    cmd = [sys.executable, "-m", "pytest", "-q", "-n", "0", "-p", "no:cacheprovider", "tests/test_browser_scene.py"]
+    cmd = [sys.executable, "-m", "pytest", "-q", "-n", "0", "-p", "no:cacheprovider", "tests/web/test_browser_scene.py"]
     if subprocess.run(cmd, cwd=ROOT, env=env).returncode != 0:
         print("the scene tests failed: docs/experiments.md is left as it was", file=sys.stderr)
         return 1

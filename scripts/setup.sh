@@ -15,7 +15,7 @@ if ! command -v chromium >/dev/null 2>&1; then
     apt-get update -qq
     DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver fonts-dejavu-core >/dev/null
   else
-    echo "setup: chromium not found and cannot apt-get install it (need root); the browser tests (tests/test_browser.py, tests/test_report_browser.py) will fail until it is installed" >&2
+    echo "setup: chromium not found and cannot apt-get install it (need root); the browser tests (tests/web/test_browser.py, tests/report/test_report_browser.py) will fail until it is installed" >&2
   fi
 fi
 

@@ -2,7 +2,7 @@
 
 ``trustseek --help`` lists every command from :data:`COMMANDS` (its module, help panel and the
 first paragraph of its help) without importing any command module; ``trustseek fit ...`` imports
-:mod:`.fit` alone, and with it only what ``fit`` needs.  ``tests/test_startup.py`` checks that the
+:mod:`.fit` alone, and with it only what ``fit`` needs.  ``tests/cli/test_startup.py`` checks that the
 table is what the modules register (names, panels, help texts), so it cannot drift from them.
 """
 

@@ -11,7 +11,7 @@ value V(T, x) = Σ_C P(C) [R(T, C, a) + γ Σ P(o, E', T' | T, C, a) V(T', x')] 
 one sparse linear system (:func:`~trustseek.solvers.numerics.policy_values`: BiCGSTAB checked
 against its residual, a direct solve as the fallback; no sampling).  With the default grid of 1001 points the
 interpolation changes the value by far less (about 1e-6 on the paper's model) than the Monte-Carlo error of 10^5 simulated
-supervisors; ``tests/test_design.py`` checks the value against the simulator.
+supervisors; ``tests/design/test_design.py`` checks the value against the simulator.
 
 The regret of a policy is V*(b0) - V^π(b0), both under the true model and from the true initial
 trust, where the optimal policy is the one planned with the true model and its belief.

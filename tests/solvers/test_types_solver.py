@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from test_point import TIGER
+from pomdp_oracles import TIGER
 from trustseek.interop.files import read_pomdp
 from trustseek.model import TypeMixture, paper_conservative_mixture, paper_model, paper_task
 from trustseek.model.core import TrustModel

@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import trustseek
+from pomdp_oracles import TIGER
 from trustseek import AssistancePOMDP, GridSolver
 from trustseek.interop.files import read_pomdp
 from trustseek.model.core import TrustModel
@@ -18,32 +19,6 @@ from trustseek.solvers.numerics import best_vectors
 from trustseek.solvers.point import PointSolver, _simplex_lattice, freudenthal_weights, next_round_seconds
 
 EXAMPLES = Path(trustseek.__file__).parent / "examples"
-
-TIGER = """discount: 0.95
-values: reward
-states: tiger-left tiger-right
-actions: listen open-left open-right
-observations: tiger-left tiger-right
-start: uniform
-T: listen
-identity
-T: open-left
-uniform
-T: open-right
-uniform
-O: listen
-0.85 0.15
-0.15 0.85
-O: open-left
-uniform
-O: open-right
-uniform
-R: listen : * : * : * -1
-R: open-left : tiger-left : * : * -100
-R: open-left : tiger-right : * : * 10
-R: open-right : tiger-left : * : * 10
-R: open-right : tiger-right : * : * -100
-"""
 
 
 @pytest.mark.parametrize("K,r", [(2, 7), (3, 5), (4, 3)])

@@ -20,7 +20,7 @@ from trustseek.testing.servers import ThreadServer
 pytestmark = pytest.mark.browser
 
 TOKEN = "access-test-token"
-AXE = Path(__file__).resolve().parents[1] / "web" / "node_modules" / "axe-core" / "axe.min.js"
+AXE = Path(__file__).resolve().parents[2] / "web" / "node_modules" / "axe-core" / "axe.min.js"
 STUDY = {
     "name": "keyboard",
     "blocks": [{"name": "watch", "policy": {"kind": "never-ask"}, "schedule": {"trials": ["high", "low"]}}],

@@ -7,9 +7,8 @@ from importlib import resources
 import numpy as np
 import pytest
 
+from pomdp_oracles import ENTRY_FORMS, TIGER
 from strict_pomdp_readers import StrictFormatError, pomdpx_transition, read_cassandra, read_pomdpx
-from test_interop import ENTRY_FORMS
-from test_point import TIGER
 from trustseek.interop.files import flat_from_assistance, pomdpx_factors, read_pomdp, write_pomdp, write_pomdpx
 from trustseek.model.presets import load_model, load_task
 from trustseek.pomdp.problem import AssistancePOMDP

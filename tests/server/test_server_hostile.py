@@ -199,7 +199,7 @@ def test_no_request_body_gets_a_5xx(http, data, which):
 
 
 # --------------------------------------------------------------------------- schemathesis on PostgreSQL
-# (tests/test_server_schema.py runs every check on SQLite; here, no 5xx on PostgreSQL, whose
+# (tests/server/test_server_schema.py runs every check on SQLite; here, no 5xx on PostgreSQL, whose
 # text cannot hold NUL and whose driver is another)
 
 

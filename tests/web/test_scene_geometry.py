@@ -13,7 +13,7 @@ import pytest
 from hypothesis import Phase, given, settings
 from hypothesis import strategies as hs
 
-WEB = Path(__file__).resolve().parents[1] / "web"
+WEB = Path(__file__).resolve().parents[2] / "web"
 ESBUILD = WEB / "node_modules" / ".bin" / "esbuild"
 
 # reads {"seeds": [...], "products_out": bool (a product put in front of the item)} on stdin, prints one result per seed and complexity

@@ -85,7 +85,7 @@ def _random_flat(rng, n_s=2, n_a=2, n_o=2, discount=0.3):
 @pytest.mark.parametrize("seed", [1, 2])
 def test_flat_bounds_bracket_pomdp_py_exact_recursion(seed):
     """pomdp-py's own belief-tree recursion (independent code) at horizon 6, within the tail."""
-    from test_interop import pomdp_py_value
+    from pomdp_oracles import pomdp_py_value
 
     flat = _random_flat(np.random.default_rng(seed))
     horizon = 6

@@ -3,7 +3,7 @@
 being killed (SIGKILL) at any moment.  Robots post through a real ``trustseek serve`` process;
 the process is killed while their requests are in flight; after a restart on the same database
 every acknowledged trial is there, once and unchanged, and every acknowledged pending decision
-is answered again as it was (on PostgreSQL: ``tests/test_server_postgres.py``)."""
+is answered again as it was (on PostgreSQL: ``tests/server/test_server_postgres.py``)."""
 
 from __future__ import annotations
 

@@ -347,6 +347,7 @@ def test_study_log_with_a_condition_input_fits_like_the_canonical_log(tmp_path):
     rows to drop, per-trial ratings and a between-subject condition declared as an input: read by a
     mapping file alone, it encodes and fits as the canonical log with the condition column does."""
     from test_data_studies import BASE_MAPPING, study_columns
+
     from trustseek.estimation import PAPER_EMISSION_INPUTS, PAPER_TRANSITION_INPUTS
     from trustseek.estimation.fit import fit_model
 

@@ -244,7 +244,6 @@ def test_each_decision_and_observation_is_one_statement_on_postgresql(pg_app, mo
     one statement sent to PostgreSQL (a write conditional on the session's row, committed by
     itself), and with the full application's bytes; repeats are answered from the database."""
     import psycopg
-
     from test_server_fastpath import Counting, open_session, post
 
     sent = []
@@ -313,6 +312,7 @@ def test_requests_wait_for_a_connection_of_the_conditional_writes(pg_app, monkey
     for one (no more are opened) and are all answered by a conditional write."""
     from test_server_concurrency import post as post_async
     from test_server_fastpath import open_session
+
     from trustseek.server.deploy import store as store_module
 
     monkeypatch.setattr(store_module, "ASYNC_CONNECTIONS", 2)
@@ -344,7 +344,7 @@ def test_requests_wait_for_a_connection_of_the_conditional_writes(pg_app, monkey
 
 
 def test_acknowledged_trials_survive_a_killed_server_on_postgresql(pg_url):
-    """``tests/test_server_durability.py`` on PostgreSQL: acknowledged decisions and trials are
+    """``tests/server/test_server_durability.py`` on PostgreSQL: acknowledged decisions and trials are
     committed (one statement each, committed by itself) before the answer."""
     engine = create_engine(pg_url.replace("postgresql://", "postgresql+psycopg://"))
 
