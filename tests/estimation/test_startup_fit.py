@@ -8,11 +8,13 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import numpy as np
 import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from trustseek.compiled import load as load_compiled
 from trustseek.estimation import encode, kernels
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.fit import never_estimated
@@ -101,14 +103,32 @@ def test_the_fit_compiles_from_compile_min_trials():
     spec = paper_spec()
     seqs = encode(frame, spec)
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(kernels, "loaded", lambda: False)  # as in a fresh process
         small = Workspace(seqs, *Structure(spec, seqs).dims)
         assert not small.compiled and small._kernel is None
         mp.setattr(kernels, "COMPILE_MIN", seqs.n_trials)
         assert Workspace(seqs, *Structure(spec, seqs).dims).compiled == kernels.AVAILABLE
         mp.setattr(kernels, "COMPILE_MIN", seqs.n_trials + 1)
-        mp.setattr(kernels, "loaded", lambda: True)  # numba loaded already (many fits): compiled at any size
-        assert Workspace(seqs, *Structure(spec, seqs).dims).compiled == kernels.AVAILABLE
+        with kernels.many_fits():  # many fits (a bootstrap, a design study): compiled at any size
+            assert Workspace(seqs, *Structure(spec, seqs).dims).compiled == kernels.AVAILABLE
+        # whatever the process ran before: numba loaded by a simulation changes nothing
+        load_compiled()
+        assert not Workspace(seqs, *Structure(spec, seqs).dims).compiled
+
+
+def test_a_fit_gives_the_same_numbers_after_numba_was_loaded():
+    """The fit's numbers depend on the call alone: the same fit, before and after a simulation has
+    loaded the compiled code in this process (the bootstrap intervals of a second run of the same
+    command differed in the 7th digit)."""
+    from trustseek.estimation.fit import fit_trust_model
+    from trustseek.model.presets import paper_model
+    from trustseek.simulation import simulate_design
+
+    frame = simulate_design(paper_model(), 4, seed=1)
+    first = fit_trust_model(frame, restarts=2, seed=3, n_jobs=1).model
+    load_compiled()
+    again = fit_trust_model(frame, restarts=2, seed=3, n_jobs=1).model
+    for name in ("initial", "emission", "transition"):
+        assert np.array_equal(getattr(first, name), getattr(again, name))
 
 
 @pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")

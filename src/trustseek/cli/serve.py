@@ -6,6 +6,7 @@ import ipaddress
 import logging
 import os
 import secrets
+import sys
 from pathlib import Path
 
 import typer
@@ -166,12 +167,28 @@ def _experimenter_token(token: str | None, token_file: Path | None) -> tuple[str
     return token, f"generated, in {path} (readable by you only; reuse it with --token-file {path})"
 
 
+class CurrentStderr(logging.StreamHandler):
+    """A log handler on the process's stderr as it is when a record is written, not as it was
+    when the handler was made (a command run in-process, as tests run it, would otherwise leave
+    the handler on a stream closed since)."""
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value) -> None:
+        pass
+
+
 def log_to_stderr(level: str) -> None:
-    """Show the ``trustseek`` loggers on stderr: INFO and above, or ``level`` if it is lower."""
-    handler = logging.StreamHandler()
-    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    """Show the ``trustseek`` loggers on stderr: INFO and above, or ``level`` if it is lower
+    (one handler, however often it is called)."""
     logger = logging.getLogger("trustseek")
-    logger.addHandler(handler)
+    if not any(isinstance(h, CurrentStderr) for h in logger.handlers):
+        handler = CurrentStderr()
+        handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+        logger.addHandler(handler)
     logger.setLevel(min(logging.INFO, logging.getLevelNamesMapping().get(level.upper(), logging.INFO)))
 
 

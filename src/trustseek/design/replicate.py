@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import TrustseekError
 from ..estimation.fit import fit_sequences
+from ..estimation.kernels import many_fits
 from ..estimation.sequences import Sequences, encode
 from ..estimation.spec import IOHMMSpec
 from ..estimation.trust_iohmm import preset_spec
@@ -112,8 +113,11 @@ def fit_model(frame: Any, settings: FitSettings, seed: int) -> TrustModel:
 
 
 def fit_encoded(seqs: Sequences, spec: IOHMMSpec, settings: FitSettings, seed: int) -> TrustModel:
-    """:func:`fit_model` on trials already encoded for ``spec``."""
-    fit = fit_sequences(seqs, spec, restarts=settings.restarts, seed=seed, tol=settings.tol, max_iter=settings.max_iter, n_jobs=1)
+    """:func:`fit_model` on trials already encoded for ``spec`` (compiled: a study is many fits)."""
+    with many_fits():
+        fit = fit_sequences(
+            seqs, spec, restarts=settings.restarts, seed=seed, tol=settings.tol, max_iter=settings.max_iter, n_jobs=1
+        )
     return fit.model
 
 

@@ -94,10 +94,17 @@ class _Replicate:
     restarts: int
     tol: float
     max_iter: int
+    compiled: bool = False  # every replicate compiled (the bootstrap as a whole pays for it)
 
     def run(self) -> tuple[np.ndarray, bool]:
         """The refitted model's cells (:func:`cell_tables`), flattened table after table, levels aligned to the estimate;
         and whether a random start found a higher maximum than the refit continued from the estimate."""
+        if self.compiled:
+            with kernels.many_fits():
+                return self._run()
+        return self._run()
+
+    def _run(self) -> tuple[np.ndarray, bool]:
         rng = np.random.default_rng(self.seed)
         n = self.seqs.n_participants
         sample = self.seqs.subset(rng.integers(0, n, n))
@@ -187,11 +194,12 @@ def bootstrap(
         log.info(
             "bootstrap: %d resamples are too few for %.0f%% intervals (at least %d)", replicates, 100 * level, MIN_REPLICATES
         )
-    if kernels.worth_compiling(replicates * seqs.n_trials):
+    compiled = kernels.worth_compiling(replicates * seqs.n_trials)
+    if compiled:
         load_compiled()  # many fits: the compiled E-step in every one (worker processes start from here)
     children = np.random.SeedSequence([seed, 1]).spawn(replicates)
     w = {k: np.asarray(v, dtype=float) for k, v in (weights or {}).items()}
-    jobs = [_Replicate(seqs, spec, params, w, ch, restarts, tol, max_iter) for ch in children]
+    jobs = [_Replicate(seqs, spec, params, w, ch, restarts, tol, max_iter, compiled) for ch in children]
     n_jobs = n_jobs or os.cpu_count() or 1
     results: dict[int, tuple[np.ndarray, bool]] = {}
 

@@ -43,14 +43,16 @@ from __future__ import annotations
 import copy
 import itertools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
+from contextvars import ContextVar
 from typing import Any
 
 import numpy as np
 
 from ..compiled import AVAILABLE as AVAILABLE  # callers read kernels.AVAILABLE
-from ..compiled import loaded, njit
+from ..compiled import njit
 
 CHUNK = 128  # sequences per work item (a fixed grouping of the sums)
 RESCALE = 200  # forward and backward vectors are multiplied by 2**RESCALE when below 2**-RESCALE (exact)
@@ -777,13 +779,30 @@ def stick_gradient(theta, prior, table, m, tbase, tstride, coff, cptr, cdst, w0,
             tail = tail + w[j]
 
 
+#: set inside :func:`many_fits`: every fit compiled whatever its size
+_MANY_FITS: ContextVar[bool] = ContextVar("many_fits", default=False)
+
+
+@contextmanager
+def many_fits() -> Iterator[None]:
+    """Within: every fit's E-steps run compiled whatever its size.  For work made of many fits of
+    small data (a bootstrap, a design study, the reproduction's replicates), where loading the
+    compiled code once pays; what runs compiled depends on the call, never on what the process
+    ran before."""
+    token = _MANY_FITS.set(True)
+    try:
+        yield
+    finally:
+        _MANY_FITS.reset(token)
+
+
 def worth_compiling(trials: int) -> bool:
-    """Whether E-steps on ``trials`` trials should run compiled: from :data:`COMPILE_MIN` trials,
-    or once this process has loaded numba anyway (a simulation, a bootstrap, a design study: many
-    fits).  Below, a whole fit in numpy (10 starts) takes less time than importing numba and
-    loading the compiled code from its cache (~1 s), let alone compiling it on a first use after
-    installation (~1 min)."""
-    return AVAILABLE and (trials >= COMPILE_MIN or loaded())
+    """Whether E-steps on ``trials`` trials run compiled: from :data:`COMPILE_MIN` trials, or
+    inside :func:`many_fits`.  Below, a whole fit in numpy (10 starts) takes less time than
+    importing numba and loading the compiled code from its cache (~1 s), let alone compiling it on
+    a first use after installation (~1 min).  The choice depends on the call alone, so that a fit
+    gives the same numbers wherever and whenever it runs."""
+    return AVAILABLE and (trials >= COMPILE_MIN or _MANY_FITS.get())
 
 
 _POOL: ThreadPoolExecutor | None = None

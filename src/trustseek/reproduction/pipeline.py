@@ -39,6 +39,7 @@ import pandas as pd
 
 from ..errors import TrustseekError
 from ..estimation.fit import FitResult, fit_trust_model
+from ..estimation.kernels import many_fits
 from ..model.core import AUTONOMOUS, FAULTY, INTERVENE, TrustModel
 from ..model.jsonfile import json_safe
 from ..model.presets import paper_model, paper_task
@@ -136,10 +137,12 @@ def _fit(
     n_jobs: int,
     progress: Callable[[int, int], None] | None = None,
 ) -> FitResult:
-    """The paper-structured IOHMM fitted to the canonical columns of ``frame``."""
-    return fit_trust_model(
-        frame[CANONICAL], preset="paper", restarts=restarts, seed=seed, bootstrap=bootstrap, n_jobs=n_jobs, progress=progress
-    )
+    """The paper-structured IOHMM fitted to the canonical columns of ``frame`` (compiled: the
+    reproduction is many fits)."""
+    with many_fits():
+        return fit_trust_model(
+            frame[CANONICAL], preset="paper", restarts=restarts, seed=seed, bootstrap=bootstrap, n_jobs=n_jobs, progress=progress
+        )
 
 
 def _solve(model: TrustModel, task: Task, update: str, grid: int) -> Policy:
