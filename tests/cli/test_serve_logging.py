@@ -1,28 +1,26 @@
-"""The server's log handler writes to the stderr of the moment: a command run in-process (as the
-tests run ``trustseek serve``) must not leave later commands' logs on a closed stream."""
+"""The server's log goes to the stderr of the moment while the server runs, and leaves no handler
+behind: a command run in-process (as the tests run ``trustseek serve``) must not put later
+commands' logs on a closed stream, nor into their output."""
 
 import io
 import logging
 import sys
 
-from trustseek.cli.serve import CurrentStderr, log_to_stderr
+from trustseek.cli.serve import log_to_stderr
 
 
-def test_the_log_follows_the_current_stderr_and_is_added_once(monkeypatch):
+def test_the_log_follows_the_current_stderr_while_serving_and_is_removed_after(monkeypatch):
     logger = logging.getLogger("trustseek")
     before = list(logger.handlers)
-    try:
-        first = io.StringIO()
-        monkeypatch.setattr(sys, "stderr", first)
-        log_to_stderr("info")
-        log_to_stderr("info")
+    first = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", first)
+    with log_to_stderr("info"):
         first.close()  # as a test runner closes the stream it captured a command's output in
         second = io.StringIO()
         monkeypatch.setattr(sys, "stderr", second)
-        logging.getLogger("trustseek.server").warning("after the first command")
-        out = second.getvalue()
-        assert "Logging error" not in out
-        assert out.count("after the first command") == 1
-        assert sum(isinstance(h, CurrentStderr) for h in logger.handlers) == 1
-    finally:
-        logger.handlers[:] = before
+        logging.getLogger("trustseek.server").info("while serving")
+    logging.getLogger("trustseek.estimation").info("a later command")
+    out = second.getvalue()
+    assert "Logging error" not in out
+    assert out.count("while serving") == 1 and "a later command" not in out
+    assert logger.handlers == before

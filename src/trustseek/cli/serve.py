@@ -7,6 +7,8 @@ import logging
 import os
 import secrets
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import typer
@@ -92,38 +94,38 @@ def serve(
 
     _check_db(db)
     token, token_source = _experimenter_token(token, token_file)
-    log_to_stderr(log_level)
-    application = create_app(db, token=token, public_url=public_url)  # migrates the schema, once
-    try:
-        loopback = ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        loopback = host == "localhost"
-    shown = "localhost" if host in ("0.0.0.0", "::") else host
-    console.print(f"[bold]trustseek server[/] on http://{shown}:{port}  (database {db})")
-    console.print(f"  dashboard:   http://{shown}:{port}/dashboard")
-    console.print(f"  API docs:    http://{shown}:{port}/docs")
-    # the token itself is never printed: only where it comes from
-    console.print(f"  experimenter token: {token_source}", soft_wrap=True)
-    if not loopback:
-        console.print("[yellow]  listening beyond loopback: put the server behind HTTPS[/]")
-    settle_memory()  # garbage-collector pauses out of request latencies
-    if workers == 1:
-        uvicorn.run(application, host=host, port=port, log_level=log_level, access_log=False)
-        return
-    # each worker builds its own app from the environment (the token never appears in argv)
-    from ..server.app import ENV_DB, ENV_PUBLIC_URL, ENV_TOKEN
+    with log_to_stderr(log_level):  # the server's log, while it runs
+        application = create_app(db, token=token, public_url=public_url)  # migrates the schema, once
+        try:
+            loopback = ipaddress.ip_address(host).is_loopback
+        except ValueError:
+            loopback = host == "localhost"
+        shown = "localhost" if host in ("0.0.0.0", "::") else host
+        console.print(f"[bold]trustseek server[/] on http://{shown}:{port}  (database {db})")
+        console.print(f"  dashboard:   http://{shown}:{port}/dashboard")
+        console.print(f"  API docs:    http://{shown}:{port}/docs")
+        # the token itself is never printed: only where it comes from
+        console.print(f"  experimenter token: {token_source}", soft_wrap=True)
+        if not loopback:
+            console.print("[yellow]  listening beyond loopback: put the server behind HTTPS[/]")
+        settle_memory()  # garbage-collector pauses out of request latencies
+        if workers == 1:
+            uvicorn.run(application, host=host, port=port, log_level=log_level, access_log=False)
+            return
+        # each worker builds its own app from the environment (the token never appears in argv)
+        from ..server.app import ENV_DB, ENV_PUBLIC_URL, ENV_TOKEN
 
-    os.environ.update({ENV_DB: db, ENV_TOKEN: token, ENV_PUBLIC_URL: public_url or ""})
-    console.print(f"  workers:     {workers} processes")
-    uvicorn.run(
-        "trustseek.server.app:from_environment",
-        factory=True,
-        workers=workers,
-        host=host,
-        port=port,
-        log_level=log_level,
-        access_log=False,
-    )
+        os.environ.update({ENV_DB: db, ENV_TOKEN: token, ENV_PUBLIC_URL: public_url or ""})
+        console.print(f"  workers:     {workers} processes")
+        uvicorn.run(
+            "trustseek.server.app:from_environment",
+            factory=True,
+            workers=workers,
+            host=host,
+            port=port,
+            log_level=log_level,
+            access_log=False,
+        )
 
 
 GENERATED_TOKEN_FILE = Path("trustseek-token")
@@ -181,15 +183,21 @@ class CurrentStderr(logging.StreamHandler):
         pass
 
 
-def log_to_stderr(level: str) -> None:
-    """Show the ``trustseek`` loggers on stderr: INFO and above, or ``level`` if it is lower
-    (one handler, however often it is called)."""
+@contextmanager
+def log_to_stderr(level: str) -> Iterator[None]:
+    """Within: the ``trustseek`` loggers on stderr, INFO and above or ``level`` if it is lower
+    (a command run in-process, as the tests run it, leaves no handler behind)."""
     logger = logging.getLogger("trustseek")
-    if not any(isinstance(h, CurrentStderr) for h in logger.handlers):
-        handler = CurrentStderr()
-        handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
-        logger.addHandler(handler)
+    handler = CurrentStderr()
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    before = logger.level
+    logger.addHandler(handler)
     logger.setLevel(min(logging.INFO, logging.getLevelNamesMapping().get(level.upper(), logging.INFO)))
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(before)
 
 
 @app.command("export", rich_help_panel="Experiments")
