@@ -8,7 +8,6 @@ from __future__ import annotations
 import subprocess
 import sys
 
-import numpy as np
 import pandas as pd
 import pytest
 from hypothesis import given, settings
@@ -116,19 +115,28 @@ def test_the_fit_compiles_from_compile_min_trials():
 
 
 def test_a_fit_gives_the_same_numbers_after_numba_was_loaded():
-    """The fit's numbers depend on the call alone: the same fit, before and after a simulation has
-    loaded the compiled code in this process (the bootstrap intervals of a second run of the same
-    command differed in the 7th digit)."""
-    from trustseek.estimation.fit import fit_trust_model
-    from trustseek.model.presets import paper_model
-    from trustseek.simulation import simulate_design
-
-    frame = simulate_design(paper_model(), 4, seed=1)
-    first = fit_trust_model(frame, restarts=2, seed=3, n_jobs=1).model
-    load_compiled()
-    again = fit_trust_model(frame, restarts=2, seed=3, n_jobs=1).model
-    for name in ("initial", "emission", "transition"):
-        assert np.array_equal(getattr(first, name), getattr(again, name))
+    """The fit's numbers depend on the call alone: the same fit in a fresh process, before and
+    after the compiled code is loaded (the bootstrap intervals of a second run of the same command
+    in one process differed in the 7th digit).  A fresh process, so that nothing else has loaded
+    numba before the first fit."""
+    code = (
+        "import sys\n"
+        "from trustseek.compiled import load\n"
+        "from trustseek.data import read_trials, example_path\n"
+        "from trustseek.estimation.fit import fit_trust_model\n"
+        "frame = read_trials(example_path())\n"
+        "def cells():\n"
+        "    m = fit_trust_model(frame, restarts=2, seed=3, n_jobs=1).model\n"
+        "    return b''.join(getattr(m, k).tobytes() for k in ('initial', 'emission', 'transition'))\n"
+        "first = cells()\n"
+        "assert 'numba' not in sys.modules\n"
+        "load()\n"
+        "assert 'numba' in sys.modules\n"
+        "print(first == cells())\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "True"
 
 
 @pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
