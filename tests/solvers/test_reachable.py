@@ -13,8 +13,9 @@ from trustseek.pomdp import AssistancePOMDP
 from trustseek.pomdp.flat import FlatPOMDP
 from trustseek.pomdp.types import type_aware_problem
 from trustseek.solvers import make_solver
-from trustseek.solvers.reachable import ReachableSolver, fast_informed_bound
+from trustseek.solvers.reachable import ReachableSolver
 from trustseek.solvers.type_aware import solve_type_aware
+from trustseek.solvers.upper_bounds import fast_informed_bound
 
 
 def _overlap(a, b, slack=1e-9):

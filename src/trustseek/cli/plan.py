@@ -9,6 +9,7 @@ from typing import cast
 import typer
 from rich.table import Table
 
+from .. import solvers
 from ..errors import TrustseekError
 from ..model.core import ACTIONS, TrustModel
 from ..model.iohmm import IOHMM_FORMAT, IOHMMModel
@@ -21,8 +22,7 @@ from ..policies.base import Policy
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.types import type_aware_problem, type_belief_from_log, type_marginal
 from ..solvers import make_solver, solver_names, summarize, trust_agnostic_from_data
-from ..solvers.base import DEFAULT_GRID, METHODS
-from ..solvers.type_aware import DEFAULT_TYPE_AWARE_SOLVER, solve_type_aware
+from ..solvers.base import DEFAULT_GRID, DEFAULT_TYPE_AWARE_SOLVER, METHODS
 from ..vocab import check_belief_update
 from ._app import ColumnOpt, LabelOpt, MappingOpt, app, atomic_output, check_output, check_tol, console, print_json, read_log
 
@@ -142,7 +142,7 @@ def solve(
         solver = solver or DEFAULT_TYPE_AWARE_SOLVER
         prior = None if history is None else type_posterior(mixture, history, participant, session)
         options = {"belief_update": belief_update, "grid": grid, "method": method, "tol": tol, "max_seconds": max_seconds}
-        policy = solve_type_aware(mixture, load_task(task), solver, gap or 1e-3, type_belief=prior, **options)
+        policy = solvers.solve_type_aware(mixture, load_task(task), solver, gap or 1e-3, type_belief=prior, **options)
         pomdp = type_aware_problem(mixture if prior is None else mixture.with_weights(list(prior)), load_task(task))
     else:
         solver = solver or "grid"

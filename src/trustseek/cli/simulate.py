@@ -13,6 +13,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from .. import solvers
 from ..errors import TrustseekError
 from ..model.core import TrustModel
 from ..model.jsonfile import load_json
@@ -21,8 +22,7 @@ from ..model.task import Task
 from ..policies.base import Policy
 from ..pomdp.types import product_model
 from ..solvers import policy_from_spec
-from ..solvers.specs import SPEC_KINDS
-from ..solvers.type_aware import solve_type_aware
+from ..solvers.policy_specs import SPEC_KINDS
 from ..vocab import PAPER_ASK_PROBABILITIES
 from ._app import QuietOpt, app, atomic_output, check_output, check_outputs, console, err_console, print_json
 
@@ -194,7 +194,7 @@ def simulate(
             raise TrustseekError(
                 [f"--policy {TYPE_AWARE} needs supervisor types: a mixture with --types, --model or --policy-model"]
             )
-        pol = solve_type_aware(policy_types, t, belief_update=belief_update)
+        pol = solvers.solve_type_aware(policy_types, t, belief_update=belief_update)
     else:
         if policy == "trust-aware" and policy_types is not None:
             raise TrustseekError(

@@ -7,14 +7,15 @@
 * :mod:`.certified_grid` -- the certified adaptive grid for the eq.-3 update;
 * :mod:`.point`          -- point-based bounds (any number of trust levels, flat POMDPs too);
 * :mod:`.agnostic`       -- the trust-agnostic optimum (Section VI-A);
-* :mod:`.type_solver`    -- point-based bounds that use the supervisor types of a product problem;
-* :mod:`.type_aware`     -- ``solve_type_aware``: the policy for a person of unknown supervisor type;
-* :mod:`.specs`          -- one policy from a short spec (``policy_from_spec``);
+* :mod:`.type_aware`     -- ``solve_type_aware``: the policy for a person of unknown supervisor type,
+                            and the ``types`` solver (bounds that use the supervisor types);
+* :mod:`.policy_specs`   -- one policy from a short spec (``policy_from_spec``);
 * :mod:`.summary`        -- the machine-readable summary of a solved policy.
 
 Inside: :mod:`.numerics` (policy evaluation, Howard's improvement, controller values),
-:mod:`.envelopes` and :mod:`.backup` (the exact alpha-vector backup), :mod:`.eq3` (the
-eq.-3 belief MDP), :mod:`.certificate` (certified two-level solutions and their thresholds).
+:mod:`.envelopes` and :mod:`.backup` (the exact alpha-vector backup), :mod:`.upper_bounds` (the
+reachable solver's upper bounds), :mod:`.eq3` (the eq.-3 belief MDP), :mod:`.certificate` (certified
+two-level solutions and their thresholds).
 
 Each name is loaded on first use (the names are in ``__init__.pyi``).
 """

@@ -13,14 +13,14 @@ from . import (
     grid,
     numerics,
     point,
+    policy_specs,
     reachable,
     registry,
     schedule,
     sensitivity,
-    specs,
     summary,
     type_aware,
-    type_solver,
+    upper_bounds,
 )
 from .agnostic import TrustAgnosticSolver, trust_agnostic, trust_agnostic_from_data
 from .alpha import AlphaSolver
@@ -28,11 +28,10 @@ from .base import Solver, SolverError, UnsupportedProblem
 from .certified_grid import CertifiedGridSolver
 from .grid import GridSolver, solve
 from .point import PointSolver
+from .policy_specs import PolicySpecError, policy_from_spec
 from .registry import SOLVERS, make_solver, solve_with, solver_names
-from .specs import PolicySpecError, policy_from_spec
 from .summary import summarize
-from .type_aware import solve_type_aware
-from .type_solver import TypeAwareSolver
+from .type_aware import TypeAwareSolver, solve_type_aware
 
 __all__ = [
     "SOLVERS",

@@ -38,20 +38,18 @@ from typing import Any, ClassVar
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from ..policies.alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy
 from ..policies.base import Policy
-from ..pomdp.belief import Branches
 from ..pomdp.branch_model import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
 from .base import SolverBase, SolverError, one_blas_thread
 from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, policy_values
-from .point import PointSolver
+from .upper_bounds import BlockGrid, fast_informed_bound, grid_blocks, inverse_points, phi_of, phi_pairs, unique_rows
 
-__all__ = ["ReachableSolution", "ReachableSolver", "fast_informed_bound"]
+__all__ = ["ReachableSolution", "ReachableSolver"]
 
 
 @dataclass
@@ -73,51 +71,6 @@ class ReachableSolution:
     @property
     def gap(self) -> float:
         return self.upper - self.lower
-
-
-def fast_informed_bound(model: BranchModel, max_rounds: int = 200) -> np.ndarray:
-    """The fast informed bound (Hauskrecht 2000) of a problem in branch form, as Q-vectors
-    beta[c, a, t]: U(b) = Σ_c P(c) max_a beta[c, a]·b bounds the optimal value from above.
-
-    beta[c, a, t] = R[c, a, t] + γ Σ_branch Σ_c' P(c') max_a' Σ_u M[c, a, branch, t, u] beta[c', a', u]
-    (the next context is independent of the branch, so the choice of a' is per c').  Solved by
-    policy iteration on the choices; the result is raised by its Bellman residual / (1 - γ),
-    so that rounding cannot bring it below the fixed point."""
-    M, R, pc, g = model.kernels, model.rewards, model.context_probs, model.discount
-    N, A, Br, K, _ = M.shape
-    n = N * A * K
-    if not g < 1.0:
-        raise SolverError([f"the reachable solver needs a discount below 1, got {g}"])
-
-    def choices_of(beta: np.ndarray) -> np.ndarray:
-        # proj[c, a, br, t, c', a'] = Σ_u M[c, a, br, t, u] beta[c', a', u]
-        proj = np.einsum("cabtu,dfu->cabtdf", M, beta)
-        return proj.argmax(axis=-1)  # [c, a, br, t, c']
-
-    def apply(beta: np.ndarray) -> np.ndarray:
-        proj = np.einsum("cabtu,dfu->cabtdf", M, beta)
-        return R + g * np.einsum("cabtd,d->cat", proj.max(axis=-1), pc)
-
-    ch = np.zeros((N, A, Br, K, N), dtype=np.int64)
-    beta = np.zeros((N, A, K))
-    for _ in range(max_rounds):
-        # the linear system of fixed choices: beta = R + P beta
-        P = np.zeros((N, A, K, N, A, K))
-        w = g * np.einsum("cabtu,d->cabtdu", M, pc)  # [c, a, br, t, c', u]
-        onehot = ch[..., None] == np.arange(A)  # [c, a, br, t, c', a']
-        P += np.einsum("cabtdu,cabtdf->catdfu", w, onehot)
-        beta_new = np.linalg.solve(np.eye(n) - P.reshape(n, n), R.reshape(-1)).reshape(N, A, K)
-        new_ch = choices_of(beta_new)
-        # keep a choice unless another is better by more than rounding
-        proj = np.einsum("cabtu,dfu->cabtdf", M, beta_new)
-        cur = np.take_along_axis(proj, ch[..., None], axis=-1)[..., 0]
-        better = proj.max(axis=-1) > cur + 1e-12 * (1 + np.abs(cur))
-        beta = beta_new
-        if not np.any(better):
-            break
-        ch = np.where(better, new_ch, ch)
-    residual = float(np.max(apply(beta) - beta))
-    return beta + max(0.0, residual) / (1.0 - g)
 
 
 class ReachableSolver(SolverBase):
@@ -171,56 +124,60 @@ class ReachableSolver(SolverBase):
         self.shape = (N, A, Br, K)
         # b @ flat -> unnormalized next beliefs of every (c, a, branch)
         self.flat = np.ascontiguousarray(np.moveaxis(M, 3, 0).reshape(K, -1))
-        self.R, self.pc, self.g = model.rewards, model.context_probs, model.discount
-        self.G = memoryless_controllers(model)
+        self.rewards, self.context_probs, self.discount = model.rewards, model.context_probs, model.discount
+        self.vectors = memoryless_controllers(model)
         self.beta = fast_informed_bound(model)
-        self.corners = self.pc @ self.beta.max(axis=1)  # U at the corners
-        self.blocks = _grid_blocks(model, self.grid_vertices)
+        self.corners = self.context_probs @ self.beta.max(axis=1)  # U at the corners
+        self.blocks = grid_blocks(model, self.grid_vertices)
         # several blocks: the grid over the whole simplex too (it sees what the blocks cannot: the
         # value of not knowing the block), when a resolution of at least 4 fits the vertex budget
         self.whole = None
         if len(self.blocks) > 1 and comb(4 + K - 1, K - 1) <= self.grid_vertices:
-            self.whole = _BlockGrid(model, self.grid_vertices)
+            self.whole = BlockGrid(model, self.grid_vertices)
         if self.blocks:
             self.corners = np.minimum(self.corners, self._base(np.eye(K)))
-        self.P = np.zeros((0, K))
-        self.v = np.zeros(0)
+        self.points = np.zeros((0, K))
+        self.point_values = np.zeros(0)
         self._refresh_points()
 
     def _refresh_points(self) -> None:
         """Cached forms of the upper bound's points for the sawtooth.  A point at a corner of the
         simplex lowers that corner's value instead (every interpolation then uses it)."""
-        corner = np.isclose(self.P.max(axis=1), 1.0, rtol=0.0, atol=1e-15) if len(self.P) else np.zeros(0, dtype=bool)
+        corner = np.isclose(self.points.max(axis=1), 1.0, rtol=0.0, atol=1e-15) if len(self.points) else np.zeros(0, dtype=bool)
         if np.any(corner):
-            t = self.P[corner].argmax(axis=1)
-            np.minimum.at(self.corners, t, self.v[corner])
-            self.P, self.v = self.P[~corner], self.v[~corner]
-        P = self.P
-        self.inv = _inverse(P)
-        self.excess_v = self.v - P @ self.corners  # <= 0: how far below the corners' plane
+            t = self.points[corner].argmax(axis=1)
+            np.minimum.at(self.corners, t, self.point_values[corner])
+            self.points, self.point_values = self.points[~corner], self.point_values[~corner]
+        P = self.points
+        self.inv = inverse_points(P)
+        self.excess_v = self.point_values - P @ self.corners  # <= 0: how far below the corners' plane
 
     # -- bounds at beliefs -------------------------------------------------------------
     def lower_at(self, B: np.ndarray) -> np.ndarray:
-        return (np.atleast_2d(B) @ self.G.T).max(axis=1)
+        return (np.atleast_2d(B) @ self.vectors.T).max(axis=1)
 
     def upper_at(self, B: np.ndarray) -> np.ndarray:
         B = np.atleast_2d(B)
         out = self._basefun(B)
-        if len(self.P):
+        if len(self.points):
             lin = B @ self.corners
             saw = lin[:, None] + self._phi(B) * self.excess_v[None]  # through each point, corners beyond
             out = np.minimum(out, saw.min(axis=1))
             if self.blocks:
                 # the few best points again, with the block bound beyond them instead of the corners
-                k = min(self.refine, len(self.P))
-                idx = np.argpartition(saw, k - 1, axis=1)[:, :k] if k < len(self.P) else np.broadcast_to(np.arange(k), saw.shape)
-                phi = _phi_pairs(B, self.P, idx)
-                out = np.minimum(out, self._through(B, idx, phi, self.v[idx]).min(axis=1))
+                k = min(self.refine, len(self.points))
+                idx = (
+                    np.argpartition(saw, k - 1, axis=1)[:, :k]
+                    if k < len(self.points)
+                    else np.broadcast_to(np.arange(k), saw.shape)
+                )
+                phi = phi_pairs(B, self.points, idx)
+                out = np.minimum(out, self._through(B, idx, phi, self.point_values[idx]).min(axis=1))
         return out
 
     def _basefun(self, B: np.ndarray) -> np.ndarray:
         """The bound without points: the corners' plane, the fast informed bound and the block bound."""
-        fib = np.einsum("c,nc->n", self.pc, np.einsum("nt,cat->nca", B, self.beta).max(axis=2))
+        fib = np.einsum("c,nc->n", self.context_probs, np.einsum("nt,cat->nca", B, self.beta).max(axis=2))
         out = np.minimum(B @ self.corners, fib)
         if self.whole is not None:
             out = np.minimum(out, self.whole.upper_at(B))
@@ -234,7 +191,9 @@ class ReachableSolver(SolverBase):
         rest = np.clip(1.0 - phi, 0.0, 1.0)
         far = rest > 1e-9
         Bp = np.where(
-            far[..., None], (B[:, None, :] - phi[..., None] * self.P[idx]) / np.where(far, rest, 1.0)[..., None], B[:, None, :]
+            far[..., None],
+            (B[:, None, :] - phi[..., None] * self.points[idx]) / np.where(far, rest, 1.0)[..., None],
+            B[:, None, :],
         )
         Bp = np.clip(Bp, 0.0, None)
         Bp /= Bp.sum(axis=2, keepdims=True)
@@ -254,7 +213,7 @@ class ReachableSolver(SolverBase):
 
     def _phi(self, B: np.ndarray) -> np.ndarray:
         """φ_i(b) for beliefs B (n, K) and the upper bound's points: (n, points)."""
-        return _phi(B, self.inv)
+        return phi_of(B, self.inv)
 
     def _successors(self, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(p[c, a, br], next[c, a, br, t]) of one belief."""
@@ -270,21 +229,21 @@ class ReachableSolver(SolverBase):
         """(new lower-bound vector, new upper value) at b, from the successors (p, nxt)."""
         N, A, Br, K = self.shape
         S = nxt.reshape(-1, K)
-        best = (S @ self.G.T).argmax(axis=1).reshape(N, A, Br)
-        g = self.R + self.g * np.einsum("cabtu,cabu->cat", self.model.kernels, self.G[best])
+        best = (S @ self.vectors.T).argmax(axis=1).reshape(N, A, Br)
+        g = self.rewards + self.discount * np.einsum("cabtu,cabu->cat", self.model.kernels, self.vectors[best])
         acts = (g @ b).argmax(axis=1)
-        alpha = np.einsum("c,ct->t", self.pc, g[np.arange(N), acts])
-        q_up = self.R @ b + self.g * (p * self.upper_at(S).reshape(N, A, Br)).sum(axis=2)
-        return alpha, float(self.pc @ q_up.max(axis=1))
+        alpha = np.einsum("c,ct->t", self.context_probs, g[np.arange(N), acts])
+        q_up = self.rewards @ b + self.discount * (p * self.upper_at(S).reshape(N, A, Br)).sum(axis=2)
+        return alpha, float(self.context_probs @ q_up.max(axis=1))
 
     def _update(self, b: np.ndarray) -> None:
         p, nxt = self._successors(b)
         alpha, up = self._backup(b, p, nxt)
         if alpha @ b > self.lower_at(b)[0] + 1e-12 * (1 + abs(alpha @ b)):
-            self.G = np.vstack([self.G, alpha])
+            self.vectors = np.vstack([self.vectors, alpha])
         if up < self.upper_at(b)[0] - 1e-12 * (1 + abs(up)):
-            self.P = np.vstack([self.P, b])
-            self.v = np.append(self.v, up)
+            self.points = np.vstack([self.points, b])
+            self.point_values = np.append(self.point_values, up)
             self._refresh_points()
 
     # -- consolidation over the visited beliefs ----------------------------------------------
@@ -301,17 +260,19 @@ class ReachableSolver(SolverBase):
         Sf = S.reshape(-1, K)
         ii, cc = np.arange(n)[:, None], np.arange(N)[None, :]
         # the actions greedy in the upper bound: near-optimal once the upper bound is close
-        q_up = np.einsum("cat,nt->nca", self.R, B) + self.g * (p * self.upper_at(Sf).reshape(n, N, A, Br)).sum(axis=3)
+        q_up = np.einsum("cat,nt->nca", self.rewards, B) + self.discount * (p * self.upper_at(Sf).reshape(n, N, A, Br)).sum(
+            axis=3
+        )
         up_acts = q_up.argmax(axis=2)
         prev = None
         for _ in range(rounds):
-            best = (Sf @ self.G.T).argmax(axis=1).reshape(n, N, A, Br)
-            g = self.R[None] + self.g * np.einsum("cabtu,ncabu->ncat", self.model.kernels, self.G[best])
+            best = (Sf @ self.vectors.T).argmax(axis=1).reshape(n, N, A, Br)
+            g = self.rewards[None] + self.discount * np.einsum("cabtu,ncabu->ncat", self.model.kernels, self.vectors[best])
             lo_acts = np.einsum("ncat,nt->nca", g, B).argmax(axis=2)
             before = self.lower_at(B)
             new = []
             for acts in (lo_acts, up_acts):
-                alpha = np.einsum("c,nct->nt", self.pc, g[ii, cc, acts])
+                alpha = np.einsum("c,nct->nt", self.context_probs, g[ii, cc, acts])
                 Sa = S[ii, cc, acts]  # (n, N, Br, K)
                 succ = (Sa.reshape(-1, K) @ alpha.T).argmax(axis=1).reshape(n, N, Br)
                 succ = np.where(p[ii, cc, acts] > 0, succ, -1)
@@ -320,8 +281,8 @@ class ReachableSolver(SolverBase):
                 if np.all(np.isfinite(ev)):
                     new.append(ev)
             key = lo_acts.tobytes()
-            G = np.vstack([self.G, *new])
-            self.G = G[np.unique((np.vstack([B, np.eye(K)]) @ G.T).argmax(axis=1))]
+            G = np.vstack([self.vectors, *new])
+            self.vectors = G[np.unique((np.vstack([B, np.eye(K)]) @ G.T).argmax(axis=1))]
             gain = float(np.max(self.lower_at(B) - before))
             if key == prev or gain <= self.tol * 1e-3 or time.perf_counter() > t_end:
                 break
@@ -344,7 +305,7 @@ class ReachableSolver(SolverBase):
         const = self.upper_at(Sf)  # the current bound: valid, and the fallback of every successor
         base_s = Sf @ self.corners
         base_b = B @ self.corners
-        inv = _inverse(B)
+        inv = inverse_points(B)
         v = np.minimum(self.upper_at(B), np.inf)
         # candidate points of every successor: those giving the smallest sawtooth at the start
         cand = np.empty((m, candidates), dtype=np.int64)
@@ -352,7 +313,7 @@ class ReachableSolver(SolverBase):
         step = max(1, 2_000_000 // max(1, n * K))
         for lo in range(0, m, step):
             sl = slice(lo, min(m, lo + step))
-            phi = _phi(Sf[sl], inv)  # (chunk, n)
+            phi = phi_of(Sf[sl], inv)  # (chunk, n)
             saw = base_s[sl, None] + phi * (v - base_b)[None]
             k = min(candidates, n)
             idx = np.argpartition(saw, k - 1, axis=1)[:, :k] if k < n else np.broadcast_to(np.arange(n), (len(phi), n))
@@ -361,21 +322,21 @@ class ReachableSolver(SolverBase):
             if k < candidates:
                 cand[sl, k:] = idx[:, :1]
                 phis[sl, k:] = phis[sl, :1]
-        rew = np.einsum("cat,nt->nca", self.R, B)
+        rew = np.einsum("cat,nt->nca", self.rewards, B)
         # the affine bound of successor s through candidate point j: a0[s, j] + phis[s, j] v_j
         if self.blocks:
-            save = self.P
-            self.P = B
+            save = self.points
+            self.points = B
             u0 = np.empty((m, candidates))
             for lo in range(0, m, 4096):
                 sl = slice(lo, min(m, lo + 4096))
                 u0[sl] = self._through(Sf[sl], cand[sl], phis[sl], np.zeros(cand[sl].shape))
-            self.P = save
+            self.points = save
             a0c = u0
         else:
             a0c = base_s[:, None] - phis * base_b[cand]
         # weight of successor s in the value of its belief: P(c) γ P(branch)
-        wt = (self.g * p * self.pc[None, :, None, None]).reshape(m)
+        wt = (self.discount * p * self.context_probs[None, :, None, None]).reshape(m)
         rows_of = np.repeat(np.arange(n), N * A * Br)
         ar = np.arange(m)
 
@@ -391,7 +352,7 @@ class ReachableSolver(SolverBase):
         def q_of(v: np.ndarray, aff: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> np.ndarray:
             a0, slope, col = choose(v) if aff is None else aff
             val = a0 + slope * v[col]
-            return rew + self.g * (p * val.reshape(n, N, A, Br)).sum(axis=3)
+            return rew + self.discount * (p * val.reshape(n, N, A, Br)).sum(axis=3)
 
         acts = q_of(v).argmax(axis=2)
         for _ in range(rounds):
@@ -401,7 +362,7 @@ class ReachableSolver(SolverBase):
                 sel = np.zeros((n, N, A, Br), dtype=bool)
                 sel[np.arange(n)[:, None], np.arange(N)[None, :], acts] = True
                 sel = sel.reshape(m)
-                rhs = np.einsum("c,nc->n", self.pc, rew[np.arange(n)[:, None], np.arange(N)[None, :], acts])
+                rhs = np.einsum("c,nc->n", self.context_probs, rew[np.arange(n)[:, None], np.arange(N)[None, :], acts])
                 rhs = rhs + np.bincount(rows_of[sel], weights=(wt * a0)[sel], minlength=n)
                 lin = sel & (slope > 0)
                 W = sp.csr_matrix(((wt * slope)[lin], (rows_of[lin], col[lin])), shape=(n, n))
@@ -414,12 +375,12 @@ class ReachableSolver(SolverBase):
             if (np.array_equal(again[2], col) and np.array_equal(again[1] > 0, slope > 0)) or time.perf_counter() > t_end:
                 break
         q = q_of(v)
-        eta = max(0.0, float(np.max(np.einsum("c,nc->n", self.pc, q.max(axis=2)) - v)))
-        v = v + eta / (1 - self.g)
+        eta = max(0.0, float(np.max(np.einsum("c,nc->n", self.context_probs, q.max(axis=2)) - v)))
+        v = v + eta / (1 - self.discount)
         better = v < self.upper_at(B) - 1e-12 * (1 + np.abs(v))
         if np.any(better):
-            self.P = np.vstack([self.P, B[better]])
-            self.v = np.concatenate([self.v, v[better]])
+            self.points = np.vstack([self.points, B[better]])
+            self.point_values = np.concatenate([self.point_values, v[better]])
             self._refresh_points()
 
     def _sampled(self, b0: np.ndarray, rng: np.random.Generator, trajectories: int = 8, length: int = 60) -> np.ndarray:
@@ -432,8 +393,8 @@ class ReachableSolver(SolverBase):
         for _ in range(length):
             p, S = self._successors_many(B)
             ub = self.upper_at(S.reshape(-1, K)).reshape(p.shape)
-            q = np.einsum("cat,nt->nca", self.R, B) + self.g * (p * ub).sum(axis=3)
-            c = rng.choice(N, size=trajectories, p=self.pc)
+            q = np.einsum("cat,nt->nca", self.rewards, B) + self.discount * (p * ub).sum(axis=3)
+            c = rng.choice(N, size=trajectories, p=self.context_probs)
             a = q[idx, c].argmax(axis=1)
             pb = p[idx, c, a]
             u = rng.random(trajectories)[:, None] * pb.sum(axis=1, keepdims=True)
@@ -449,9 +410,9 @@ class ReachableSolver(SolverBase):
         out, front = [b0[None]], b0[None]
         for _ in range(depth):
             p, S = self._successors_many(front)
-            front = _unique_rows(S[p > 0].reshape(-1, K), self.decimals)
+            front = unique_rows(S[p > 0].reshape(-1, K), self.decimals)
             out.append(front)
-        return _unique_rows(np.vstack(out), self.decimals)
+        return unique_rows(np.vstack(out), self.decimals)
 
     def _successors_many(self, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(p[n, c, a, br], next[n, c, a, br, t]) of beliefs B."""
@@ -468,11 +429,11 @@ class ReachableSolver(SolverBase):
         improve on the others at their own belief."""
         K = self.shape[3]
         at = np.vstack([B, np.eye(K)])
-        self.G = self.G[np.unique((at @ self.G.T).argmax(axis=1))]
-        n = len(self.P)
+        self.vectors = self.vectors[np.unique((at @ self.vectors.T).argmax(axis=1))]
+        n = len(self.points)
         if 1 < n <= 4000:
             order = np.argsort(self.excess_v, kind="stable")  # deepest below the corners first
-            P, v, ex = self.P[order], self.v[order], self.excess_v[order]
+            P, v, ex = self.points[order], self.point_values[order], self.excess_v[order]
             base = P @ self.corners
             saw = base[:, None] + self._phi(P)[:, order] * ex[None]  # [i, j]: the sawtooth of point j at point i
             keep = np.zeros(n, dtype=bool)
@@ -480,7 +441,7 @@ class ReachableSolver(SolverBase):
                 others = saw[i, keep]
                 bound = others.min() if len(others) else np.inf
                 keep[i] = v[i] < bound - 1e-12 * (1 + abs(v[i]))
-            self.P, self.v = P[keep], v[keep]
+            self.points, self.point_values = P[keep], v[keep]
             self._refresh_points()
 
     # -- search ------------------------------------------------------------------------
@@ -495,12 +456,12 @@ class ReachableSolver(SolverBase):
             p, nxt = self._successors(b)
             S = nxt.reshape(-1, K)
             ub = self.upper_at(S).reshape(N, A, Br)
-            q_up = self.R @ b + self.g * (p * ub).sum(axis=2)
+            q_up = self.rewards @ b + self.discount * (p * ub).sum(axis=2)
             acts = q_up.argmax(axis=1)
             ci = np.arange(N)
-            threshold /= self.g
+            threshold /= self.discount
             lb = self.lower_at(S).reshape(N, A, Br)
-            excess = self.pc[:, None] * p[ci, acts] * (ub[ci, acts] - lb[ci, acts] - threshold)
+            excess = self.context_probs[:, None] * p[ci, acts] * (ub[ci, acts] - lb[ci, acts] - threshold)
             if time.perf_counter() > t_end:
                 break
             # the branch of largest weighted excess that does not close a loop of the trial
@@ -532,9 +493,9 @@ class ReachableSolver(SolverBase):
         t_end = t0 + self.max_seconds
         self._setup(model)
         b0 = np.asarray(model.initial, dtype=float)
-        width = float(np.max(self.corners) - np.min(self.G.max(axis=0).min()))
+        width = float(np.max(self.corners) - np.min(self.vectors.max(axis=0).min()))
         span = max(width, self.tol)
-        depth_cap = self.max_depth or math.ceil(math.log(self.tol / (2 * span)) / math.log(self.g)) + 1
+        depth_cap = self.max_depth or math.ceil(math.log(self.tol / (2 * span)) / math.log(self.discount)) + 1
         depth_cap = max(1, depth_cap)
         visited: list[np.ndarray] = list(self._reachable(b0, self.seed_depth))
         history = []
@@ -551,7 +512,7 @@ class ReachableSolver(SolverBase):
                 backups += 1
             backup_seconds += time.perf_counter() - b_start
             visited.extend(path[1:])
-            B = _unique_rows(np.array(visited), self.decimals)
+            B = unique_rows(np.array(visited), self.decimals)
             visited = list(B)
             # a consolidation is not started past the limit: the next one costs about (size
             # ratio)^2 x the last one; the first, about two backups per visited belief (each
@@ -561,7 +522,7 @@ class ReachableSolver(SolverBase):
                 # values over the visited beliefs at once (loops of beliefs included), with the
                 # beliefs met on a few trajectories of the greedy policy (what the lower bound needs)
                 c0 = time.perf_counter()
-                B = _unique_rows(np.vstack([B, self._sampled(b0, rng)]), self.decimals)
+                B = unique_rows(np.vstack([B, self._sampled(b0, rng)]), self.decimals)
                 visited = list(B)
                 self._improve_upper(B, t_end=t_end)
                 self._improve_lower(B, t_end=t_end)
@@ -569,14 +530,14 @@ class ReachableSolver(SolverBase):
                 consolidated, cost = len(B), time.perf_counter() - c0
             lo, up = float(self.lower_at(b0)[0]), float(self.upper_at(b0)[0])
             history.append((trials, time.perf_counter() - t0, lo, up))
-        B = _unique_rows(np.array(visited), self.decimals)
+        B = unique_rows(np.array(visited), self.decimals)
         self._prune(B)
         lo, up = float(self.lower_at(b0)[0]), float(self.upper_at(b0)[0])
         self.visited = B
         return ReachableSolution(
-            self.G.copy(),
-            self.P.copy(),
-            self.v.copy(),
+            self.vectors.copy(),
+            self.points.copy(),
+            self.point_values.copy(),
             self.corners.copy(),
             lo,
             up,
@@ -592,13 +553,13 @@ class ReachableSolver(SolverBase):
         set reduced to the vectors best at one of the beliefs."""
         N, A, Br, K = self.shape
         _, S = self._successors_many(beliefs)
-        best = best_vectors(S.reshape(-1, K), self.G).reshape(len(beliefs), N, A, Br)
-        g = self.R[None] + self.g * np.einsum("cabtu,ncabu->ncat", self.model.kernels, self.G[best])
+        best = best_vectors(S.reshape(-1, K), self.vectors).reshape(len(beliefs), N, A, Br)
+        g = self.rewards[None] + self.discount * np.einsum("cabtu,ncabu->ncat", self.model.kernels, self.vectors[best])
         res = []
         for c in range(N):
             row = []
             for a in range(A):
-                V = _unique_rows(g[:, c, a], decimals=12)
+                V = unique_rows(g[:, c, a], decimals=12)
                 row.append(V[np.unique((beliefs @ V.T).argmax(axis=1))])
             res.append(row)
         return res
@@ -610,7 +571,7 @@ class ReachableSolver(SolverBase):
         flat POMDP."""
         sol = self.solve_bounds(problem)
         K = sol.vectors.shape[1]
-        at = _unique_rows(np.vstack([sol.beliefs, np.eye(K), np.full((1, K), 1.0 / K)]))
+        at = unique_rows(np.vstack([sol.beliefs, np.eye(K), np.full((1, K), 1.0 / K)]))
         qv = self.q_vectors(at)
         info: dict[str, Any] = {
             "solver": self.name,
@@ -633,83 +594,3 @@ class ReachableSolver(SolverBase):
         if isinstance(problem, FlatPOMDP):
             return FlatAlphaPolicy(qv[0], sol.vectors, problem.states, problem.actions, info)
         return AlphaVectorPolicy(qv, sol.vectors, problem.model, problem.complexities, "bayes", info)
-
-
-class _BlockGrid:
-    """The grid upper bound of one closed block of hidden states (Lovejoy's bound on Freudenthal's
-    triangulation, certified, as the point solver computes it); one hidden state: its exact value."""
-
-    def __init__(self, model: BranchModel, vertices: int):
-        K = model.n_hidden
-        if K == 1:
-            # one hidden state: the belief never moves, the value is the best reward per context, discounted
-            self.value = float(model.context_probs @ model.rewards[:, :, 0].max(axis=1)) / (1.0 - model.discount)
-            self.solver = None
-            return
-        r = 2
-        while comb(2 * r + K - 1, K - 1) <= vertices:
-            r *= 2
-        self.solver = PointSolver()
-        self.solver.model = model
-        V, u, lookup = self.solver._upper(r)
-        self.solver.r, self.solver.u, self.solver.lookup, self.solver.V = r, u, lookup, V
-        # two hidden states: the triangulation is the grid on [0, 1], interpolation is np.interp
-        order = np.argsort(V[:, -1])
-        self.xs, self.us = V[order, -1], u[order]
-
-    def upper_at(self, B: np.ndarray) -> np.ndarray:
-        if self.solver is None:
-            return np.full(len(B), self.value)
-        if B.shape[1] == 2:
-            return np.interp(B[:, 1], self.xs, self.us)
-        return self.solver.upper_at(B)
-
-
-def _grid_blocks(model: BranchModel, vertices: int) -> list[tuple[np.ndarray, _BlockGrid]]:
-    """The closed blocks of hidden states (no transition between blocks: e.g. the supervisor types
-    of a type mixture), each with its grid upper bound; empty when a block is too large for a grid
-    of ``vertices`` vertices at resolution 2 (the bound is then the sawtooth alone)."""
-    M = model.kernels
-    K = model.n_hidden
-    link = (M.sum(axis=(0, 1, 2)) > 0) | np.eye(K, dtype=bool)
-    n, labels = connected_components(sp.csr_matrix(link | link.T), directed=False)
-    out = []
-    for k in range(n):
-        idx = np.flatnonzero(labels == k)
-        if comb(2 + len(idx) - 1, len(idx) - 1) > vertices:
-            return []
-        sub = Branches.from_kernels(M[..., idx, :][..., idx])
-        bm = BranchModel(model.context_probs, model.rewards[..., idx], sub, model.discount, np.full(len(idx), 1.0 / len(idx)))
-        out.append((idx, _BlockGrid(bm, vertices)))
-    return out
-
-
-def _inverse(P: np.ndarray) -> np.ndarray:
-    """1 / P[i, t] as (K, points), infinite outside each point's support."""
-    with np.errstate(divide="ignore"):
-        return np.ascontiguousarray(np.where(P > 0, 1.0 / np.where(P > 0, P, 1.0), np.inf).T)
-
-
-def _phi(B: np.ndarray, inv: np.ndarray) -> np.ndarray:
-    """φ_i(b) = min over the support of point i of b(t) / b_i(t) (at most 1), for beliefs B (n, K)
-    and points given by :func:`_inverse`: (n, points).  The sawtooth bound through point i is
-    U_corners(b) + φ_i(b) (v_i - U_corners(b_i))."""
-    phi = np.full((len(B), inv.shape[1]), np.inf)
-    with np.errstate(invalid="ignore"):
-        for t in range(B.shape[1]):
-            np.fmin(phi, B[:, t, None] * inv[t][None], out=phi)  # fmin: 0 * inf (outside the support) is skipped
-    return np.minimum(phi, 1.0)
-
-
-def _phi_pairs(B: np.ndarray, P: np.ndarray, idx: np.ndarray) -> np.ndarray:
-    """φ of belief B[n] and point P[idx[n, j]]: (n, k)."""
-    Pi = P[idx]  # (n, k, K)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r = np.where(Pi > 0, B[:, None, :] / np.where(Pi > 0, Pi, 1.0), np.inf)
-    return np.minimum(r.min(axis=2), 1.0)
-
-
-def _unique_rows(B: np.ndarray, decimals: int = 13) -> np.ndarray:
-    """Rows of B without near-duplicates, keeping the first occurrence and the order."""
-    _, idx = np.unique(np.round(B, decimals), axis=0, return_index=True)
-    return B[np.sort(idx)]

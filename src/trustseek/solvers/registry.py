@@ -67,7 +67,7 @@ def _reachable(belief_update: str = "bayes", gap: float = 1e-3, max_seconds: flo
 def _types(
     belief_update: str = "bayes", gap: float = 1e-3, max_seconds: float = 60.0, max_resolution: int | None = None
 ) -> Solver:
-    return solvers.type_solver.TypeAwareSolver(
+    return solvers.type_aware.TypeAwareSolver(
         tol=gap, max_seconds=max_seconds, belief_update=belief_update, max_resolution=max_resolution
     )
 

@@ -1,4 +1,4 @@
-"""The type-aware solve: a policy for a person whose supervisor type is unknown.
+"""The policy for a supervisor of unknown type, and the ``types`` solver that uses the types.
 
 ``solve_type_aware(mixture, task)`` builds the POMDP over (type, trust)
 (:func:`trustseek.pomdp.types.type_aware_problem`) and solves it with a registered solver
@@ -8,28 +8,393 @@
 A person's own policy is the same solve from their type belief: ``type_belief`` (e.g. the
 posterior of :func:`trustseek.pomdp.types.type_belief_from_log` over their earlier sessions)
 replaces the mixture's weights as the initial belief.
+
+The ``types`` solver (:class:`TypeAwareSolver`): point-based bounds that use the supervisor
+types of a product problem.
+
+The (type, trust) product of a type mixture (:mod:`trustseek.pomdp.types`) is an ordinary
+POMDP whose hidden states fall into closed blocks: the types, between which there is no
+transition.  This solver finds the blocks in the kernel (so any problem with that structure
+benefits, whatever its level names) and uses them on both sides:
+
+* **upper bound.**  Revealing the type can only help: V(b) <= Σ_m w_m V_m(p_m), w_m the mass of
+  block m, p_m the belief within it, V_m the block's own optimal value.  For blocks of two
+  states V_m is a function of one number, solved by the certified ``alpha`` solver (gap 1e-6,
+  uniform) and tabulated on a fine grid with its certified gap added (linear interpolation of a
+  convex function's upper values stays above it).  Revealing the type after one trial instead
+  gives Σ_c P(c) max_a Σ_m w_m Q̄_m(c, a, p_m), tighter; the fast informed bound is the third.
+  Their minimum, the *base bound*, caps the Freudenthal grid's Bellman fixed point (Lovejoy's
+  bound, as the point solver computes it): each successor is valued at min(interpolation,
+  base), and the operator with that cap is still monotone, a γ-contraction and above the
+  optimal value, so its fixed point is an upper bound (raised by its residual against rounding).
+* **lower bound.**  Each type's optimal policy, as a controller (one node per belief of a
+  fine lattice: a point backup of the type's alpha vectors, the node best at each next belief),
+  evaluated exactly on the whole product: where the type is nearly known the lower bound is
+  then nearly that type's value.  Point-based policy iteration (the point solver's) builds on
+  these and on the memoryless controllers.
+
+The upper bound reported at b0 looks a few trials ahead (:meth:`TypeAwareSolver.lookahead_upper`).
+The grid resolution is doubled until U(b0) - L(b0) <= ``tol`` or the time limit, as in the
+point solver.  A problem without two-state blocks (one type with K > 2 levels, a flat POMDP)
+is solved with the fast informed bound as the only cap: the point solver plus that cap.
+The bounds rest on the convexity of the Bayes-filter value.
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import numpy as np
+import scipy.sparse as sp
 
+from ..compiled import njit
 from ..model.core import TrustModel
 from ..model.mixture import TypeMixture
 from ..model.task import Task
 from ..policies.alpha_vector import AlphaVectorPolicy
 from ..policies.base import Policy
+from ..policies.envelope import envelope_values
 from ..policies.type_aware import TypeAwarePolicy
+from ..pomdp.branch_model import BranchModel
+from ..pomdp.flat import FlatPOMDP
+from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.types import type_aware_problem
+from .alpha import AlphaSolver
+from .base import DEFAULT_TYPE_AWARE_SOLVER, one_blas_thread
+from .numerics import evaluate_controller, improve, memoryless_controllers, policy_values
+from .point import (
+    PointSolution,
+    PointSolver,
+    _find,
+    _vertex_code,
+    freudenthal_vertices,
+    freudenthal_weights,
+)
 from .registry import make_solver
+from .upper_bounds import closed_blocks, fast_informed_bound
 
-__all__ = ["DEFAULT_TYPE_AWARE_SOLVER", "solve_type_aware"]
+__all__ = ["DEFAULT_TYPE_AWARE_SOLVER", "TypeAwareSolver", "TypeBound", "solve_type_aware", "type_bound"]
 
-#: the solver ``solve_type_aware`` uses unless told otherwise
-DEFAULT_TYPE_AWARE_SOLVER = "point"
+#: intervals of the uniform grid on which each type's value bound is tabulated
+TABLE_INTERVALS = 4096
+
+
+@dataclass
+class TypeBound:
+    """The base upper bound of a problem in branch form (see the module).
+
+    ``lo[m]``/``hi[m]``: the two hidden states of block m (equal for a one-state block; both
+    empty when the bound does not use blocks); ``vt[m, j]``: V̄_m at p = j / TABLE_INTERVALS;
+    ``qt[m, c, a, j]``: Q̄_m; ``beta``: the fast informed bound's Q-vectors;
+    ``controllers``: per block, the values of its controller's nodes on the whole problem."""
+
+    pc: np.ndarray
+    beta: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    vt: np.ndarray
+    qt: np.ndarray
+    controllers: list[np.ndarray]
+    block_gaps: list[float]
+
+    @property
+    def uses_types(self) -> bool:
+        return len(self.lo) > 0
+
+    def __call__(self, B: np.ndarray) -> np.ndarray:
+        """The base bound at beliefs B (n, states)."""
+        B = np.ascontiguousarray(np.atleast_2d(np.asarray(B, dtype=float)))
+        return _base_many(B, self.pc, self.beta, self.lo, self.hi, self.vt, self.qt)
+
+
+def type_bound(problem: AssistancePOMDP | FlatPOMDP, model: BranchModel, block_tol: float = 1e-6) -> TypeBound:
+    """The base bound of ``problem`` (its branch form ``model``): with the types' bounds when
+    every closed block has at most two hidden states and the problem is an assistance POMDP,
+    otherwise the fast informed bound alone."""
+    beta = fast_informed_bound(model)
+    pc = np.ascontiguousarray(model.context_probs, dtype=float)
+    blocks = closed_blocks(model)
+    empty = TypeBound(pc, beta, np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros((0, 1, 1, 2)), [], [])
+    if not isinstance(problem, AssistancePOMDP) or len(blocks) < 2 or max(len(b) for b in blocks) > 2:
+        return empty
+    xs = np.linspace(0.0, 1.0, TABLE_INTERVALS + 1)
+    N, A = model.n_contexts, model.n_actions
+    lo, hi, vts, qts, ctrl, gaps = [], [], [], [], [], []
+    g = model.discount
+    for idx in blocks:
+        if len(idx) == 1:
+            s = int(idx[0])
+            val = float(pc @ model.rewards[:, :, s].max(axis=1)) / (1.0 - g)
+            lo.append(s)
+            hi.append(s)
+            vts.append(np.full(len(xs), val))
+            qts.append(np.broadcast_to((model.rewards[:, :, s] + g * val)[..., None], (N, A, len(xs))).copy())
+            ctrl.append(memoryless_controllers(model))
+            gaps.append(0.0)
+            continue
+        sub = _block_problem(problem, idx)
+        sol = AlphaSolver(tol=block_tol, upper_grid=0).solve_bounds(sub)
+        assert sol.lower is not None
+        vecs, bx = sol.lower
+        vbar = envelope_values(vecs, bx, xs) + sol.gap
+        bm = sub.branch_model()
+        X = np.stack([1.0 - xs, xs], axis=1)
+        p, S = bm.branches.successors(X)  # (n, N, A, Br), (n, N, A, Br, 2)
+        vn = np.interp(S[..., 1], xs, vbar)
+        q = np.einsum("cat,nt->can", bm.rewards, X) + g * np.einsum("ncab,ncab->can", p, vn)
+        lo.append(int(idx[0]))
+        hi.append(int(idx[1]))
+        vts.append(vbar)
+        qts.append(q)
+        ctrl.append(_block_controller(model, bm, vecs))
+        gaps.append(float(sol.gap))
+    return TypeBound(
+        pc,
+        beta,
+        np.array(lo, dtype=np.int64),
+        np.array(hi, dtype=np.int64),
+        np.ascontiguousarray(np.array(vts)),
+        np.ascontiguousarray(np.array(qts)),
+        ctrl,
+        gaps,
+    )
+
+
+def _block_problem(problem: AssistancePOMDP, idx: np.ndarray) -> AssistancePOMDP:
+    """The assistance POMDP of one closed block of trust levels (one supervisor type)."""
+    m = problem.model
+    init = m.initial[idx]
+    init = init / init.sum() if init.sum() > 0 else np.full(len(idx), 1.0 / len(idx))
+    sub = TrustModel(
+        trust_levels=tuple(m.trust_levels[i] for i in idx),
+        complexities=m.complexities,
+        initial=init,
+        emission=m.emission[:, :, idx],
+        transition=m.transition[..., idx, :][..., idx],
+    )
+    return AssistancePOMDP(sub, problem.task)
+
+
+def _block_controller(model: BranchModel, block: BranchModel, vecs: np.ndarray, points: int = 513) -> np.ndarray:
+    """A controller for one block from its alpha vectors ``vecs`` (one node per belief of a lattice
+    of ``points``: the point backup of the vectors there, and after each branch the node best at
+    the next belief), evaluated exactly on the whole problem ``model``: (nodes, states)."""
+    x = np.linspace(0.0, 1.0, points)
+    B = np.stack([1.0 - x, x], axis=1)
+    p, S = block.branches.successors(B)  # (n, N, A, Br), (n, N, A, Br, 2)
+    n, N, A, Br, _ = S.shape
+    best = (S.reshape(-1, 2) @ vecs.T).argmax(axis=1).reshape(n, N, A, Br)
+    g = block.rewards[None] + block.discount * np.einsum("cabtu,ncabu->ncat", block.kernels, vecs[best])
+    acts = np.einsum("ncat,nt->nca", g, B).argmax(axis=2)
+    ii, cc = np.arange(n)[:, None], np.arange(N)[None, :]
+    alpha = np.einsum("c,nct->nt", block.context_probs, g[ii, cc, acts])
+    succ = (S[ii, cc, acts].reshape(-1, 2) @ alpha.T).argmax(axis=1).reshape(n, N, Br)
+    succ = np.where(p[ii, cc, acts] > 0, succ, -1)
+    ev = evaluate_controller(model, acts, succ)
+    return ev if np.all(np.isfinite(ev)) else np.zeros((0, model.n_hidden))
+
+
+class TypeAwareSolver(PointSolver):
+    """Point-based bounds for a product of supervisor types: the grid upper bound capped by the
+    types' bound, the lower bound seeded with each type's controller (see the module)."""
+
+    name = "types"
+
+    instead: ClassVar[dict[str, str]] = {
+        "belief_update": "the types solver bounds the value of the Bayes filter (belief update 'bayes'); "
+        "for the eq.-3 update use the alpha solver (two trust levels) or the grid solver",
+    }
+
+    def unsupported(self, problem: Any) -> list[str]:
+        reasons = super().unsupported(problem)
+        if not reasons and not problem.discount < 1.0:
+            reasons.append(f"the types solver needs a discount below 1, got {problem.discount}: use the grid solver")
+        return reasons
+
+    @one_blas_thread
+    def solve_bounds(self, problem: AssistancePOMDP | FlatPOMDP) -> PointSolution:
+        self.check(problem)
+        t0 = time.perf_counter()
+        model = problem.branch_model()
+        self.bound = type_bound(problem, model)
+        self.setup_seconds = time.perf_counter() - t0
+        return self._bounds(model, t0)
+
+    @one_blas_thread
+    def solve(self, problem: AssistancePOMDP | FlatPOMDP) -> Policy:
+        """The point solver's policy of the lower bound's vectors; ``info`` also says how many
+        closed blocks (types) the upper bound used and the seconds spent on them."""
+        policy = super().solve(problem)
+        policy.info["method"] = "point-based policy iteration + Freudenthal upper bound capped by the types' bound"
+        policy.info["type_blocks"] = len(self.bound.lo)
+        policy.info["type_bound_seconds"] = self.setup_seconds
+        return policy
+
+    def upper_at(self, B: np.ndarray) -> np.ndarray:
+        B = np.atleast_2d(np.asarray(B, dtype=float))
+        out = self.bound(B)
+        if getattr(self, "u", None) is not None and len(self.u):
+            out = np.minimum(out, super().upper_at(B))
+        return out
+
+    def lookahead_upper(self, b0: np.ndarray, max_nodes: int = 5000, max_depth: int = 6) -> float:
+        """The upper bound at b0 improved by looking ahead: the beliefs reachable from b0 are
+        expanded level by level (equal beliefs merged) while a level has at most ``max_nodes``
+        beliefs, to at most ``max_depth`` trials; each belief's bound is then min(U(b), H U(b)) from the deepest level up, where
+        H is the Bellman backup over its successors.  H is monotone and U is above the optimal
+        value, so every such value is too."""
+        m = self.model
+        fan = int(np.prod(m.kernels.shape[:3]))  # successors of one belief: contexts x actions x branches
+        levels = [np.atleast_2d(np.asarray(b0, dtype=float))]
+        links = []
+        while len(levels) <= max_depth and len(levels[-1]) * fan <= 40 * max_nodes:
+            p, S = m.branches.successors(levels[-1])  # (n, N, A, Br), (n, N, A, Br, K)
+            live = p > 1e-300
+            nxt, inverse = np.unique(np.round(S[live], 12), axis=0, return_inverse=True)
+            if len(nxt) > max_nodes:
+                break
+            links.append((p, live, inverse.reshape(-1)))
+            levels.append(S[live][np.unique(inverse.reshape(-1), return_index=True)[1]])
+        values = self.upper_at(levels[-1])
+        for depth in range(len(links) - 1, -1, -1):
+            B = levels[depth]
+            p, live, inverse = links[depth]
+            succ = np.zeros(p.shape)
+            succ[live] = values[inverse]
+            q = np.einsum("cat,nt->nca", m.rewards, B) + m.discount * (p * succ).sum(axis=3)
+            values = np.minimum(self.upper_at(B), q.max(axis=2) @ m.context_probs)
+        return float(values[0])
+
+    def _upper(self, r: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Vertex beliefs, certified upper values and the code lookup at resolution r: the fixed
+        point of the Bellman operator whose successor values are min(interpolation, base bound),
+        by policy iteration over the actions and the choice of the smaller bound."""
+        m = self.model
+        K, N, gamma, pc = m.n_hidden, m.n_contexts, m.discount, m.context_probs
+        V = freudenthal_vertices(K, r)
+        nV = len(V)
+        own = np.round(np.cumsum(V[:, ::-1], axis=1)[:, ::-1] * r).astype(np.int64)
+        lookup = np.sort(_vertex_code(own, r))
+        V = V[np.argsort(_vertex_code(own, r), kind="stable")]
+        p, S = m.branches.successors(V)  # (nV, N, A, Br), (nV, N, A, Br, K)
+        Br = S.shape[3]
+        verts, w = freudenthal_weights(S.reshape(-1, K), r)
+        col = _find(lookup, _vertex_code(verts, r)).reshape(S.shape)
+        if np.any(col < 0):
+            raise RuntimeError("Freudenthal interpolation left the vertex set")
+        w = w.reshape(S.shape)
+        cap = self.bound(S.reshape(-1, K)).reshape(p.shape)
+        rew = np.einsum("cat,nt->nca", m.rewards, V)
+        ii = np.arange(nV)
+
+        def successor_values(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            interp = np.einsum("ncabk,ncabk->ncab", w, u[col])
+            return np.minimum(interp, cap), interp < cap
+
+        def q_of(u: np.ndarray) -> np.ndarray:
+            return rew + gamma * np.einsum("ncab,ncab->nca", p, successor_values(u)[0])
+
+        u = self.bound(V)
+        acts = q_of(u).argmax(axis=2)
+        rows = np.broadcast_to(ii[:, None, None], (nV, Br, K))
+        for _ in range(500):
+            use = successor_values(u)[1]
+            rr = np.zeros(nV)
+            data, cols, rws = [], [], []
+            for c in range(N):
+                a = acts[:, c]
+                pa = p[ii, c, a]
+                ua = use[ii, c, a]
+                rr += pc[c] * (rew[ii, c, a] + gamma * np.where(ua, 0.0, pa * cap[ii, c, a]).sum(axis=1))
+                wt = gamma * pc[c] * (pa * ua)[..., None] * w[ii, c, a]
+                data.append(wt.ravel())
+                cols.append(col[ii, c, a].ravel())
+                rws.append(rows.ravel())
+            W = sp.csr_matrix((np.concatenate(data), (np.concatenate(rws), np.concatenate(cols))), shape=(nV, nV))
+            new_u = policy_values(W, rr, u)
+            new_acts = improve(q_of(new_u), acts, axis=2)
+            same_choice = np.array_equal(successor_values(new_u)[1], use)
+            u = new_u
+            if new_acts is None and same_choice:
+                break
+            if new_acts is not None:
+                acts = new_acts
+        # the capped operator is monotone with modulus γ: u + max(H u - u)+ / (1 - γ) bounds its fixed point
+        eta = max(0.0, float(np.max(q_of(u).max(axis=2) @ pc - u)))
+        return V, u + eta / (1 - gamma), lookup
+
+    def _start(self, model: BranchModel, b0: np.ndarray, reach: np.ndarray) -> np.ndarray:
+        """The memoryless controllers and each type's own controller, keeping the vectors best at
+        some belief reachable from b0 or at a corner."""
+        self.u = np.zeros(0)  # no grid bound yet: upper_at is the types' bound alone
+        G = np.vstack([memoryless_controllers(model), *self.bound.controllers])
+        K = model.n_hidden
+        return G[np.unique((np.vstack([reach, np.eye(K)]) @ G.T).argmax(axis=1))] if len(G) > 1 else G
+
+    def _upper_at_start(self, b0: np.ndarray) -> float:
+        return self.lookahead_upper(b0)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _interp(tab: np.ndarray, x: float) -> float:
+    """Linear interpolation of ``tab`` (values on a uniform grid of [0, 1]) at x."""
+    r = tab.shape[0] - 1
+    y = x * r
+    j = min(max(int(y), 0), r - 1)
+    return tab[j] + (y - j) * (tab[j + 1] - tab[j])
+
+
+@njit(cache=True, nogil=True)
+def _base_many(
+    B: np.ndarray, pc: np.ndarray, beta: np.ndarray, lo: np.ndarray, hi: np.ndarray, vt: np.ndarray, qt: np.ndarray
+) -> np.ndarray:
+    """The base bound (see :class:`TypeBound`) at each row of B: the smallest of the fast
+    informed bound Σ_c P(c) max_a β[c, a]·b, the type revealed now Σ_m w_m V̄_m(p_m) and the
+    type revealed after one trial Σ_c P(c) max_a Σ_m w_m Q̄_m(c, a, p_m)."""
+    n, S = B.shape
+    N, A, _ = beta.shape
+    nb = lo.shape[0]
+    out = np.empty(n)
+    ws = np.empty(max(nb, 1))
+    ps = np.empty(max(nb, 1))
+    for k in range(n):
+        b = B[k]
+        fib = 0.0
+        for c in range(N):
+            best = -np.inf
+            for a in range(A):
+                s = 0.0
+                for t in range(S):
+                    s += beta[c, a, t] * b[t]
+                best = max(best, s)
+            fib += pc[c] * best
+        out[k] = fib
+        if nb == 0:
+            continue
+        f = 0.0
+        for m in range(nb):
+            i, j = lo[m], hi[m]
+            w = b[i] if i == j else b[i] + b[j]
+            p = min(b[j] / w, 1.0) if (i != j and w > 0) else 0.0
+            ws[m] = w
+            ps[m] = p
+            if w > 0:
+                f += w * _interp(vt[m], p)
+        hf = 0.0
+        for c in range(N):
+            best = -np.inf
+            for a in range(A):
+                s = 0.0
+                for m in range(nb):
+                    if ws[m] > 0:
+                        s += ws[m] * _interp(qt[m, c, a], ps[m])
+                best = max(best, s)
+            hf += pc[c] * best
+        out[k] = min(fib, f, hf)
+    return out
 
 
 def solve_type_aware(

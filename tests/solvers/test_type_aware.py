@@ -18,8 +18,8 @@ from trustseek.pomdp import AssistancePOMDP
 from trustseek.pomdp.types import type_aware_problem
 from trustseek.solvers import make_solver
 from trustseek.solvers.point import PointSolver
-from trustseek.solvers.type_aware import solve_type_aware
-from trustseek.solvers.type_solver import TypeAwareSolver, closed_blocks, type_bound
+from trustseek.solvers.type_aware import TypeAwareSolver, solve_type_aware, type_bound
+from trustseek.solvers.upper_bounds import closed_blocks
 
 
 def _overlap(a, b, slack=1e-9):
