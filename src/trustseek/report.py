@@ -155,7 +155,7 @@ def make_figures(rep: Reproduction, out: Path) -> list[Path]:
         )
         paths.append(p)
     if rep.scheduling is not None:
-        from .plots.schedule import plot_scheduling_section
+        from .plots.scheduling import plot_scheduling_section
 
         p = out / "scheduling.png"
         plot_scheduling_section(rep.scheduling, p)

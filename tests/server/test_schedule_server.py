@@ -7,10 +7,10 @@ from fastapi.testclient import TestClient
 
 from trustseek import AssistancePOMDP, paper_model, paper_task
 from trustseek.client import Client, ServerError
-from trustseek.policies.schedule import ScheduleRunner
+from trustseek.policies.scheduling import ScheduleRunner
 from trustseek.pomdp.scheduling import SchedulingProblem
 from trustseek.server import create_app
-from trustseek.solvers.schedule import ScheduleSolver
+from trustseek.solvers.scheduling import ScheduleSolver
 
 TOKEN = "experimenter-secret"
 

@@ -42,7 +42,7 @@ def test_schedules_follow_their_rules_and_share_the_random_numbers(small):
 def test_window_policy_in_the_simulator_picks_only_visible_items():
     pols = schedule_policies(PAPER, (3, 3), names=("optimal",))
     from trustseek.pomdp.scheduling import SchedulingProblem
-    from trustseek.solvers.schedule import ScheduleSolver
+    from trustseek.solvers.scheduling import ScheduleSolver
 
     pols["w2"] = ScheduleSolver(grid=501).solve(SchedulingProblem(PAPER, (3, 3), 2))
     runs = simulate_schedules(PAPER.model, PAPER.task, pols, (3, 3), 20000, seed=2)
@@ -51,7 +51,7 @@ def test_window_policy_in_the_simulator_picks_only_visible_items():
 
 
 def test_report_section_numbers_and_figure(tmp_path):
-    from trustseek.plots.schedule import plot_scheduling_section
+    from trustseek.plots.scheduling import plot_scheduling_section
     from trustseek.reproduction.scheduling import scheduling_section
 
     section = scheduling_section(counts=(4, 4), participants=2000, windows=(1, 2))

@@ -10,11 +10,11 @@ from trustseek import AssistancePOMDP, paper_model, paper_task
 from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 from trustseek.model.jsonfile import json_safe
 from trustseek.policies import policy_from_dict
-from trustseek.policies.schedule import SchedulePolicy, ScheduleRunner
+from trustseek.policies.scheduling import SchedulePolicy, ScheduleRunner
 from trustseek.pomdp.scheduling import SchedulingError, SchedulingProblem
 from trustseek.solvers import UnsupportedProblem, make_solver
 from trustseek.solvers.backup import finite_horizon_value
-from trustseek.solvers.schedule import ScheduleSolver
+from trustseek.solvers.scheduling import ScheduleSolver
 
 
 def oracle(model, task, counts, window):
@@ -199,7 +199,7 @@ def test_a_schedule_policy_file_with_a_nan_is_refused(tmp_path):
     from trustseek.policies.kinds import load_policy
     from trustseek.pomdp.problem import AssistancePOMDP
     from trustseek.pomdp.scheduling import SchedulingProblem
-    from trustseek.solvers.schedule import ScheduleSolver
+    from trustseek.solvers.scheduling import ScheduleSolver
 
     pol = ScheduleSolver("bayes").solve(SchedulingProblem(AssistancePOMDP(paper_model(), paper_task()), (2, 2), None))
     path = tmp_path / "sched.json"

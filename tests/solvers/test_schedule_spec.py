@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from trustseek import AssistancePOMDP, paper_model, paper_task
-from trustseek.policies.schedule import SchedulePolicy
+from trustseek.policies.scheduling import SchedulePolicy
 from trustseek.pomdp.scheduling import SchedulingProblem
 from trustseek.solvers.policy_specs import PolicySpecError, policy_from_spec, schedule_size
-from trustseek.solvers.schedule import ScheduleSolver
+from trustseek.solvers.scheduling import ScheduleSolver
 
 
 def test_schedule_spec_is_the_solvers_policy():

@@ -21,7 +21,7 @@ from trustseek import paper_model, paper_task
 from trustseek.cli import app
 from trustseek.client import Client
 from trustseek.data.trials import read_trials
-from trustseek.policies.schedule import ScheduleRunner
+from trustseek.policies.scheduling import ScheduleRunner
 from trustseek.server import create_app
 from trustseek.server.app import STATIC
 from trustseek.server.studies import block_items

@@ -12,7 +12,7 @@ from ..errors import TrustseekError
 from ..model.presets import load_model, load_task
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem
-from ..solvers.schedule import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS, ScheduleSolver
+from ..solvers.scheduling import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS, ScheduleSolver
 from ..vocab import PAPER_BLOCK_COUNTS, check_belief_update
 from ._app import app, console, print_json
 
@@ -87,7 +87,7 @@ def schedule(
         section = scheduling_section(m, t, problem.counts, participants, seed, belief_update=belief_update)
         summary["comparison"] = section.numbers
         if figure is not None:
-            from ..plots.schedule import plot_scheduling_section
+            from ..plots.scheduling import plot_scheduling_section
 
             plot_scheduling_section(section, figure)
             section.numbers["figure"] = str(figure)

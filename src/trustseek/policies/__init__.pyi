@@ -1,7 +1,7 @@
 """The public names of :mod:`trustseek.policies`: read by type checkers, and by ``__init__.py`` to load each on first use."""
 
 # every submodule, as the package attribute of that name
-from . import alpha_vector, base, complexity, envelope, grid_q, kinds, regions, runner, schedule, thresholds, type_aware
+from . import alpha_vector, base, complexity, envelope, grid_q, kinds, regions, runner, scheduling, thresholds, type_aware
 from .alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy
 from .base import POLICY_FORMAT, Policy, PolicyError
 from .complexity import COMPLEXITY_KINDS, ComplexityPolicy, always_ask, never_ask, randomized

@@ -17,7 +17,7 @@ from .alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy
 from .base import POLICY_FORMAT, Policy
 from .complexity import COMPLEXITY_KINDS, ComplexityPolicy
 from .grid_q import TrustAwarePolicy
-from .schedule import SchedulePolicy
+from .scheduling import SchedulePolicy
 from .type_aware import TypeAwarePolicy
 
 Loader = Callable[[Mapping[str, Any], "str | None"], Policy]

@@ -3,7 +3,7 @@ of the low- and high-complexity items is worth, and what the optimal schedule do
 
 :func:`scheduling_section` computes every number of the section for a model (the paper's by
 default, or a fitted one) and keeps the optimal policy and the simulated runs that its figure
-is drawn from (``trustseek.plots.schedule.plot_scheduling_section``; figures sit above this
+is drawn from (``trustseek.plots.scheduling.plot_scheduling_section``; figures sit above this
 layer). The report renders ``numbers`` and the figure.
 """
 
@@ -17,11 +17,11 @@ import numpy as np
 from ..model.core import TrustModel
 from ..model.presets import paper_model, paper_task
 from ..model.task import Task
-from ..policies.schedule import SchedulePolicy
+from ..policies.scheduling import SchedulePolicy
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem
 from ..simulation.scheduling import ScheduleRuns, exact_values, iid_value, schedule_policies, simulate_schedules
-from ..solvers.schedule import ScheduleSolver
+from ..solvers.scheduling import ScheduleSolver
 from ..vocab import PAPER_BLOCK_COUNTS
 from .statistics import mean_interval
 

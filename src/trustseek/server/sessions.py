@@ -35,7 +35,7 @@ from ..errors import TrustseekError
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 from ..model.task import Task
 from ..policies import PolicyRunner
-from ..policies.schedule import SchedulePolicy
+from ..policies.scheduling import SchedulePolicy
 from .cache import Bounded, caches_of
 from .checks import SCREENED, quiz_due
 from .orm import Answer, Event, EventBatch, Report, Session, Study, Trial, utcnow

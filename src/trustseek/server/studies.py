@@ -35,7 +35,7 @@ from ..model.jsonfile import ModelError
 from ..model.presets import MODEL_PRESETS, TASK_PRESETS
 from ..model.task import Task
 from ..policies import policy_from_dict
-from ..policies.schedule import SCHEDULE
+from ..policies.scheduling import SCHEDULE
 from ..solvers import policy_from_spec
 from .cache import Bounded, StudyCaches
 from .schemas import STRICT, check_preset

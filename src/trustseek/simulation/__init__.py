@@ -1,7 +1,7 @@
 """Simulated supervisors: populations, schedules, the vectorized engine, results and designs.
 
 * :mod:`.populations` -- ``Supervisors``: who the participants are (pooled, Dirichlet, a list);
-* :mod:`.schedules`   -- which complexity each participant meets on each trial;
+* :mod:`.trial_orders` -- which complexity each participant meets on each trial;
 * :mod:`.engine`      -- the vectorized kernel: ``Block``, ``run`` and ``simulate``;
 * :mod:`.kernels`     -- the engine's common cases and the urn schedule compiled (numba);
   :mod:`.warm` compiles them into numba's cache once;

@@ -1,12 +1,12 @@
 """The public names of :mod:`trustseek.simulation`: read by type checkers, and by ``__init__.py`` to load each on first use."""
 
 # every submodule, as the package attribute of that name
-from . import designs, engine, kernels, populations, results, schedules, scheduling, warm
+from . import designs, engine, kernels, populations, results, scheduling, trial_orders, warm
 from .designs import add_ratings, crossover, simulate_design
 from .engine import Block, run, simulate
 from .populations import SimulationError, Supervisors
 from .results import CrossoverSimulation, Simulation, participant_ids, summarize
-from .schedules import schedule_counts, schedule_iid
+from .trial_orders import schedule_counts, schedule_iid
 
 __all__ = [
     "Block",

@@ -20,7 +20,7 @@ from ..vocab import PAPER_ASK_PROBABILITIES, PAPER_BLOCK_COUNTS, PAPER_DATA_COUN
 from .engine import Block, run, seed_sequence, simulate
 from .populations import SimulationError, Supervisors
 from .results import SUMMARY_QUANTITIES, CrossoverSimulation, Simulation, participant_ids
-from .schedules import schedule_counts
+from .trial_orders import schedule_counts
 
 
 def simulate_design(

@@ -46,7 +46,7 @@ from ..vocab import check_belief_update
 from . import kernels
 from .populations import SimulationError, Supervisors
 from .results import SUMMARY_QUANTITIES, Simulation
-from .schedules import schedule_counts, schedule_iid
+from .trial_orders import schedule_counts, schedule_iid
 
 CHUNK = 1 << 14  # participants simulated together (fits the working set in cache)
 WINDOW = 1 << 15  # trials x participants whose uniforms the compiled kernel draws at once

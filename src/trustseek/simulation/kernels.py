@@ -12,7 +12,7 @@ have two trust levels and the robot's action is one of
 It does per participant exactly the arithmetic of the engine's numpy loop (the same
 comparisons, the same products and sums in the same order) on uniforms drawn beforehand in the
 order the numpy loop draws them, so both give the same simulation to the last bit (the tests
-compare them).  :func:`urn_schedule` is :func:`~trustseek.simulation.schedules.schedule_counts`'s
+compare them).  :func:`urn_schedule` is :func:`~trustseek.simulation.trial_orders.schedule_counts`'s
 urn for two complexities.  Without numba the functions run as plain Python (slowly); the engine
 then keeps its numpy loop.
 """

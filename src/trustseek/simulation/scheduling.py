@@ -29,15 +29,15 @@ import numpy as np
 from ..model.core import INTERVENE, RELIABLE, TrustModel
 from ..model.task import Task
 from ..policies.base import Policy
-from ..policies.schedule import SchedulePolicy
+from ..policies.scheduling import SchedulePolicy
 from ..pomdp.belief import ScalarBelief
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem
 from ..solvers.backup import finite_horizon_value
 from ..solvers.registry import make_solver
-from ..solvers.schedule import DEFAULT_SCHEDULE_GRID, ScheduleSolver
+from ..solvers.scheduling import DEFAULT_SCHEDULE_GRID, ScheduleSolver
 from .populations import SimulationError, check_participants
-from .schedules import schedule_counts
+from .trial_orders import schedule_counts
 
 #: name -> (window (0: full control), order, ask on the first hard item); None: the paper's policy
 SCHEDULES: dict[str, tuple[int, str, bool] | None] = {

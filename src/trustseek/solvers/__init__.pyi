@@ -16,7 +16,7 @@ from . import (
     policy_specs,
     reachable,
     registry,
-    schedule,
+    scheduling,
     sensitivity,
     summary,
     type_aware,

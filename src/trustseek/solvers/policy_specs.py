@@ -26,13 +26,13 @@ from ..model.task import Task
 from ..policies.base import Policy
 from ..policies.complexity import ComplexityPolicy, always_ask, never_ask, randomized
 from ..policies.kinds import policy_from_dict
-from ..policies.schedule import SCHEDULE
+from ..policies.scheduling import SCHEDULE
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingError, SchedulingProblem
 from ..vocab import BELIEF_UPDATES, PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS
 from .base import DEFAULT_GRID
 from .registry import make_solver
-from .schedule import DEFAULT_SCHEDULE_GRID, ORDERS
+from .scheduling import DEFAULT_SCHEDULE_GRID, ORDERS
 
 __all__ = ["SCHEDULE", "SPEC_KINDS", "PolicySpecError", "policy_from_spec", "schedule_size"]
 

@@ -23,7 +23,7 @@ from .. import solvers
 from ..policies.base import Policy
 from .agnostic import PAPER_HORIZON, TrustAgnosticSolver
 from .base import DEFAULT_GRID, Solver, SolverError
-from .schedule import DEFAULT_SCHEDULE_GRID, ScheduleSolver
+from .scheduling import DEFAULT_SCHEDULE_GRID, ScheduleSolver
 
 __all__ = ["SOLVERS", "SolverEntry", "make_solver", "solve_with", "solver_names"]
 

@@ -21,7 +21,7 @@ from sqlalchemy.orm import Session as DBSession
 from ...model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 from ...model.task import Task
 from ...policies import PolicyError
-from ...policies.schedule import SchedulePolicy
+from ...policies.scheduling import SchedulePolicy
 from ..orm import PolicyBlob, Session, utcnow
 from ..schemas import MAX_TRIAL
 from ..sessions import new_id, new_token, p_high, trial_dict, trial_experience

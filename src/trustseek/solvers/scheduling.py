@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from ..policies.envelope import envelope_values
-from ..policies.schedule import PieceQ, SchedulePolicy
+from ..policies.scheduling import PieceQ, SchedulePolicy
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem, State, state_key
 from .backup import exact_backup
