@@ -44,7 +44,7 @@ from trustseek.model import TypeMixture, conservative_model, paper_conservative_
 from trustseek.model.core import TrustModel
 from trustseek.model.task import Task
 from trustseek.pomdp import AssistancePOMDP
-from trustseek.pomdp.types import type_aware_problem
+from trustseek.pomdp.supervisor_types import type_aware_problem
 from trustseek.solvers import make_solver
 
 

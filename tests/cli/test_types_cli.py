@@ -12,7 +12,7 @@ import pytest
 from cli_runner import run_cli
 from trustseek.model import paper_conservative_mixture
 from trustseek.policies import TypeAwarePolicy, load_policy
-from trustseek.pomdp.types import type_belief_from_log, warm_start_belief
+from trustseek.pomdp.supervisor_types import type_belief_from_log, warm_start_belief
 
 
 @pytest.fixture(scope="module")

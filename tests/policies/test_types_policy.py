@@ -12,7 +12,7 @@ from trustseek.model import paper_conservative_mixture, paper_task
 from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from trustseek.model.jsonfile import json_safe
 from trustseek.policies import PolicyRunner, TypeAwarePolicy, load_policy, policy_from_dict
-from trustseek.pomdp.types import product_model, type_belief_from_log, warm_start_belief
+from trustseek.pomdp.supervisor_types import product_model, type_belief_from_log, warm_start_belief
 from trustseek.simulation import Supervisors, simulate
 from trustseek.solvers.type_aware import solve_type_aware
 

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from trustseek.model import TypeMixture, conservative_model, paper_conservative_mixture, paper_model, paper_task
 from trustseek.policies import never_ask
 from trustseek.pomdp.belief import BayesUpdate
-from trustseek.pomdp.types import (
+from trustseek.pomdp.supervisor_types import (
     TypeBeliefError,
     product_model,
     split_levels,

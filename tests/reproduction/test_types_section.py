@@ -9,7 +9,7 @@ import pytest
 
 from cli_runner import run_cli
 from trustseek.model import TypeMixture, paper_conservative_mixture, paper_task
-from trustseek.reproduction.types import (
+from trustseek.reproduction.supervisor_types import (
     AGNOSTIC,
     FITTED,
     ORACLE,

@@ -161,7 +161,7 @@ def test_a_time_limit_is_used_when_the_rounds_are_cheaper_than_the_vertex_growth
     about 2.5 s.  Predicting the next round as (vertex growth) x the whole last round stopped
     at resolution 16 after 0.9 s."""
     from trustseek.model import paper_conservative_mixture, paper_task
-    from trustseek.pomdp.types import type_aware_problem
+    from trustseek.pomdp.supervisor_types import type_aware_problem
     from trustseek.solvers import point as point_module
 
     clock = [0.0]

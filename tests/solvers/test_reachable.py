@@ -11,7 +11,7 @@ import pytest
 from trustseek.model import paper_conservative_mixture, paper_task
 from trustseek.pomdp import AssistancePOMDP
 from trustseek.pomdp.flat import FlatPOMDP
-from trustseek.pomdp.types import type_aware_problem
+from trustseek.pomdp.supervisor_types import type_aware_problem
 from trustseek.solvers import make_solver
 from trustseek.solvers.reachable import ReachableSolver
 from trustseek.solvers.type_aware import solve_type_aware

@@ -15,7 +15,7 @@ from trustseek.interop.files import read_pomdp
 from trustseek.model import TypeMixture, paper_conservative_mixture, paper_model, paper_task
 from trustseek.model.core import TrustModel
 from trustseek.pomdp import AssistancePOMDP
-from trustseek.pomdp.types import type_aware_problem
+from trustseek.pomdp.supervisor_types import type_aware_problem
 from trustseek.solvers import make_solver
 from trustseek.solvers.point import PointSolver
 from trustseek.solvers.type_aware import TypeAwareSolver, solve_type_aware, type_bound

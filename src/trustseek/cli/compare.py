@@ -11,7 +11,7 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ..model.presets import load_mixture, load_task
-from ..reproduction.types import types_section
+from ..reproduction.supervisor_types import types_section
 from ._app import QuietOpt, app, check_output, console, print_json, progress_bar
 
 

@@ -20,7 +20,7 @@ from ..model.task import Task
 from ..policies import PolicyError, TrustAwarePolicy, load_policy
 from ..policies.base import Policy
 from ..pomdp.problem import AssistancePOMDP
-from ..pomdp.types import type_aware_problem, type_belief_from_log, type_marginal
+from ..pomdp.supervisor_types import type_aware_problem, type_belief_from_log, type_marginal
 from ..solvers import make_solver, solver_names, summarize, trust_agnostic_from_data
 from ..solvers.base import DEFAULT_GRID, DEFAULT_TYPE_AWARE_SOLVER, METHODS
 from ..vocab import check_belief_update

@@ -20,7 +20,7 @@ from ..model.jsonfile import load_json
 from ..model.presets import load_mixture, load_model, load_task
 from ..model.task import Task
 from ..policies.base import Policy
-from ..pomdp.types import product_model
+from ..pomdp.supervisor_types import product_model
 from ..solvers import policy_from_spec
 from ..solvers.policy_specs import SPEC_KINDS
 from ..vocab import PAPER_ASK_PROBABILITIES

@@ -150,7 +150,7 @@ def fit_types(
         with atomic_output(type_posteriors) as tmp:
             write_trials(post, tmp)
     if plots is not None:
-        from ..plots.types import plot_types
+        from ..plots.supervisor_types import plot_types
 
         written = plot_types(mixture, plots, None if intervals is None else intervals.cells)
     if as_json:

@@ -2,7 +2,7 @@
 
 :class:`TypeAwarePolicy` is an :class:`~trustseek.policies.alpha_vector.AlphaVectorPolicy`
 whose model is the product of a :class:`~trustseek.model.mixture.TypeMixture`
-(:func:`trustseek.pomdp.types.product_model`): its belief is over the M·K pairs (type, trust),
+(:func:`trustseek.pomdp.supervisor_types.product_model`): its belief is over the M·K pairs (type, trust),
 so ``PolicyRunner``, the simulator and the server run it like any alpha-vector policy.  It
 keeps the mixture, so the type belief and the trust belief can be read off its belief.
 
@@ -22,7 +22,7 @@ import numpy as np
 
 from ..model.jsonfile import ModelError
 from ..model.mixture import TypeMixture
-from ..pomdp.types import product_model, trust_marginal, type_marginal, warm_start_belief
+from ..pomdp.supervisor_types import product_model, trust_marginal, type_marginal, warm_start_belief
 from .alpha_vector import AlphaVectorPolicy
 
 

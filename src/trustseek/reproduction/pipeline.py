@@ -63,7 +63,7 @@ from .comparison import (
 from .config import AGNOSTIC, AWARE, LOW, PAPER, ReproduceConfig, seed_int
 from .scheduling import SchedulingSection, scheduling_section
 from .statistics import distribution, mean_ci, share_ci, wilcoxon
-from .types import TypesSection, types_section
+from .supervisor_types import TypesSection, types_section
 
 CANONICAL = list(TRIAL_COLUMNS)
 

@@ -88,7 +88,7 @@ def outcome_draws(s: Session, n: int) -> np.ndarray:
 
 def p_high(belief, n_trust: int | None = None) -> float | None:
     """P(trust = the highest level) of a stored belief.  A type-aware policy's belief is over
-    (supervisor type, trust), type-major (``trustseek.pomdp.types``): given the model's
+    (supervisor type, trust), type-major (``trustseek.pomdp.supervisor_types``): given the model's
     ``n_trust`` levels, its trust marginal sums over the types."""
     if belief is None:
         return None

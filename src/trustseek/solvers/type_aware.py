@@ -1,18 +1,18 @@
 """The policy for a supervisor of unknown type, and the ``types`` solver that uses the types.
 
 ``solve_type_aware(mixture, task)`` builds the POMDP over (type, trust)
-(:func:`trustseek.pomdp.types.type_aware_problem`) and solves it with a registered solver
+(:func:`trustseek.pomdp.supervisor_types.type_aware_problem`) and solves it with a registered solver
 (:mod:`.registry`), like any other problem; an alpha-vector result comes back as a
 :class:`~trustseek.policies.type_aware.TypeAwarePolicy`, which keeps the mixture.
 
 A person's own policy is the same solve from their type belief: ``type_belief`` (e.g. the
-posterior of :func:`trustseek.pomdp.types.type_belief_from_log` over their earlier sessions)
+posterior of :func:`trustseek.pomdp.supervisor_types.type_belief_from_log` over their earlier sessions)
 replaces the mixture's weights as the initial belief.
 
 The ``types`` solver (:class:`TypeAwareSolver`): point-based bounds that use the supervisor
 types of a product problem.
 
-The (type, trust) product of a type mixture (:mod:`trustseek.pomdp.types`) is an ordinary
+The (type, trust) product of a type mixture (:mod:`trustseek.pomdp.supervisor_types`) is an ordinary
 POMDP whose hidden states fall into closed blocks: the types, between which there is no
 transition.  This solver finds the blocks in the kernel (so any problem with that structure
 benefits, whatever its level names) and uses them on both sides:
@@ -61,7 +61,7 @@ from ..policies.type_aware import TypeAwarePolicy
 from ..pomdp.branch_model import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
-from ..pomdp.types import type_aware_problem
+from ..pomdp.supervisor_types import type_aware_problem
 from .alpha import AlphaSolver
 from .base import DEFAULT_TYPE_AWARE_SOLVER, one_blas_thread
 from .numerics import evaluate_controller, improve, memoryless_controllers, policy_values
