@@ -35,8 +35,10 @@ from .jsonfile import (
     UnknownComplexityError,
     check_names,
     check_row_array,
+    freeze_arrays,
     get_key,
     nested,
+    raise_problems,
     read_row,
     read_table,
     unknown_keys,
@@ -93,9 +95,7 @@ class RatingTable:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "levels", tuple(self.levels))
-        arr = np.array(self.probs, dtype=np.float64)
-        arr.setflags(write=False)
-        object.__setattr__(self, "probs", arr)
+        freeze_arrays(self, "probs")
 
     @property
     def n_levels(self) -> int:
@@ -172,13 +172,8 @@ class TrustModel(JsonFile):
         object.__setattr__(
             self, "not_estimated", tuple(sorted({(str(t), tuple(int(i) for i in idx)) for t, idx in self.not_estimated}))
         )
-        for name in ("initial", "emission", "transition"):
-            arr = np.array(getattr(self, name), dtype=np.float64)
-            arr.setflags(write=False)
-            object.__setattr__(self, name, arr)
-        problems = self.problems()
-        if problems:
-            raise ModelError(problems)
+        freeze_arrays(self, "initial", "emission", "transition")
+        raise_problems(self)
 
     # -- shape -------------------------------------------------------------
     @property

@@ -36,9 +36,11 @@ from .jsonfile import (
     ModelError,
     check_names,
     check_row_array,
+    freeze_arrays,
     get_key,
     load_json,
     nested,
+    raise_problems,
     read_row,
     read_table,
     unknown_keys,
@@ -86,13 +88,8 @@ class IOHMMModel(JsonFile):
             object.__setattr__(self, name, tuple(getattr(self, name)))
         object.__setattr__(self, "inputs", {str(k): tuple(v) for k, v in self.inputs.items()})
         object.__setattr__(self, "structure", dict(self.structure))
-        for name in ("initial", "emission", "transition"):
-            arr = np.array(getattr(self, name), dtype=np.float64)
-            arr.setflags(write=False)
-            object.__setattr__(self, name, arr)
-        problems = self.problems()
-        if problems:
-            raise ModelError(problems)
+        freeze_arrays(self, "initial", "emission", "transition")
+        raise_problems(self)
 
     @property
     def n_levels(self) -> int:

@@ -23,10 +23,12 @@ __all__ = [
     "check_names",
     "check_row_array",
     "fmt_number",
+    "freeze_arrays",
     "get_key",
     "json_safe",
     "load_json",
     "nested",
+    "raise_problems",
     "read_row",
     "read_table",
     "read_text",
@@ -39,6 +41,21 @@ ATOL = 1e-9  # tolerance for a probability row to sum to one
 
 class ModelError(TrustseekError, ValueError):
     """A model, task or policy file is malformed.  ``problems`` lists every violation."""
+
+
+def freeze_arrays(obj: Any, *names: str) -> None:
+    """Each named field of the frozen dataclass ``obj`` as a read-only float64 array."""
+    for name in names:
+        arr = np.array(getattr(obj, name), dtype=np.float64)
+        arr.setflags(write=False)
+        object.__setattr__(obj, name, arr)
+
+
+def raise_problems(obj: Any) -> None:
+    """Every problem ``obj.problems()`` finds, raised at once as one :class:`ModelError`."""
+    problems = obj.problems()
+    if problems:
+        raise ModelError(problems)
 
 
 class UnknownComplexityError(ModelError, KeyError):

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from .core import TrustModel
-from .jsonfile import JsonFile, ModelError
+from .jsonfile import JsonFile, ModelError, freeze_arrays, raise_problems
 
 MIXTURE_FORMAT = "trustseek.mixture/1"
 
@@ -37,12 +37,9 @@ class TypeMixture(JsonFile):
     def __post_init__(self) -> None:
         object.__setattr__(self, "names", tuple(str(n) for n in self.names))
         object.__setattr__(self, "models", tuple(self.models))
-        w = np.array(self.weights, dtype=np.float64).reshape(-1)
-        w.setflags(write=False)
-        object.__setattr__(self, "weights", w)
-        problems = self.problems()
-        if problems:
-            raise ModelError(problems)
+        object.__setattr__(self, "weights", np.reshape(np.asarray(self.weights, dtype=np.float64), -1))
+        freeze_arrays(self, "weights")
+        raise_problems(self)
 
     @property
     def n_types(self) -> int:

@@ -26,7 +26,9 @@ from .jsonfile import (
     UnknownComplexityError,
     check_row_array,
     fmt_number,
+    freeze_arrays,
     get_key,
+    raise_problems,
     unknown_keys,
 )
 
@@ -89,13 +91,8 @@ class Task(JsonFile):
     def __post_init__(self) -> None:
         object.__setattr__(self, "complexities", tuple(self.complexities))
         object.__setattr__(self, "ask_experience", tuple(int(x) for x in self.ask_experience))
-        for name in ("complexity_probs", "success"):
-            arr = np.array(getattr(self, name), dtype=np.float64)
-            arr.setflags(write=False)
-            object.__setattr__(self, name, arr)
-        problems = self.problems()
-        if problems:
-            raise ModelError(problems)
+        freeze_arrays(self, "complexity_probs", "success")
+        raise_problems(self)
 
     @property
     def n_complexity(self) -> int:

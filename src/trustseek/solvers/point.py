@@ -366,25 +366,33 @@ class PointSolver(SolverBase):
         sol = self.solve_bounds(problem)
         K = sol.vectors.shape[1]
         qv = self.q_vectors(_unique_rows(np.vstack([sol.points, _simplex_lattice(K, _q_lattice(K))]), K))
-        info: dict[str, Any] = {
-            "solver": self.name,
-            "method": "point-based policy iteration + Freudenthal upper bound",
-            "resolution": self.r,
-            "iterations": sol.iterations,
-            "bellman_residual": float("nan"),
-            "error_bound": sol.gap,
-            "certified_gap": sol.gap,
-            "gap_at": "initial belief",
-            "target_gap": self.tol,
-            "value_bounds_at_initial_belief": [sol.lower, sol.upper],
-            "vectors": len(sol.vectors),
-            "upper_points": len(sol.points),
-            "seconds": sol.seconds,
-            "discount": problem.discount,
-        }
-        if isinstance(problem, FlatPOMDP):
-            return FlatAlphaPolicy(qv[0], sol.vectors, problem.states, problem.actions, info)
-        return AlphaVectorPolicy(qv, sol.vectors, problem.model, problem.complexities, "bayes", info)
+        method = "point-based policy iteration + Freudenthal upper bound"
+        return bounds_policy(self, problem, qv, sol, method, resolution=self.r, iterations=sol.iterations)
+
+
+def bounds_policy(solver: Any, problem: AssistancePOMDP | FlatPOMDP, qv: list, sol: Any, method: str, **counts: Any) -> Policy:
+    """The policy of a bounding solver's lower-bound Q-vectors ``qv`` with the bounds at the
+    initial belief (``sol``: its vectors, points, lower, upper, gap, seconds) and the solver's
+    own ``counts`` in its ``info``: an AlphaVectorPolicy for the assistance POMDP (Bayes update),
+    a FlatAlphaPolicy for a flat POMDP (the point and reachable solvers)."""
+    info: dict[str, Any] = {
+        "solver": solver.name,
+        "method": method,
+        **counts,
+        "bellman_residual": float("nan"),
+        "error_bound": sol.gap,
+        "certified_gap": sol.gap,
+        "gap_at": "initial belief",
+        "target_gap": solver.tol,
+        "value_bounds_at_initial_belief": [sol.lower, sol.upper],
+        "vectors": len(sol.vectors),
+        "upper_points": len(sol.points),
+        "seconds": sol.seconds,
+        "discount": problem.discount,
+    }
+    if isinstance(problem, FlatPOMDP):
+        return FlatAlphaPolicy(qv[0], sol.vectors, problem.states, problem.actions, info)
+    return AlphaVectorPolicy(qv, sol.vectors, problem.model, problem.complexities, "bayes", info)
 
 
 def next_round_seconds(K: int, r: int, lattice: int, t_upper: float, t_lower: float) -> float:

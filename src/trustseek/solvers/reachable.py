@@ -39,7 +39,6 @@ from typing import Any, ClassVar
 import numpy as np
 import scipy.sparse as sp
 
-from ..policies.alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy
 from ..policies.base import Policy
 from ..pomdp.branch_model import BranchModel
 from ..pomdp.flat import FlatPOMDP
@@ -47,6 +46,7 @@ from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
 from .base import SolverBase, SolverError, one_blas_thread
 from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, policy_values
+from .point import bounds_policy
 from .upper_bounds import BlockGrid, fast_informed_bound, grid_blocks, inverse_points, phi_of, phi_pairs, unique_rows
 
 __all__ = ["ReachableSolution", "ReachableSolver"]
@@ -573,24 +573,6 @@ class ReachableSolver(SolverBase):
         K = sol.vectors.shape[1]
         at = unique_rows(np.vstack([sol.beliefs, np.eye(K), np.full((1, K), 1.0 / K)]))
         qv = self.q_vectors(at)
-        info: dict[str, Any] = {
-            "solver": self.name,
-            "method": "heuristic search over reachable beliefs: alpha-vector lower bound, sawtooth upper bound",
-            "trials": sol.trials,
-            "backups": sol.backups,
-            "iterations": sol.trials,
-            "bellman_residual": float("nan"),
-            "error_bound": sol.gap,
-            "certified_gap": sol.gap,
-            "gap_at": "initial belief",
-            "target_gap": self.tol,
-            "value_bounds_at_initial_belief": [sol.lower, sol.upper],
-            "vectors": len(sol.vectors),
-            "upper_points": len(sol.points),
-            "beliefs_visited": len(sol.beliefs),
-            "seconds": sol.seconds,
-            "discount": problem.discount,
-        }
-        if isinstance(problem, FlatPOMDP):
-            return FlatAlphaPolicy(qv[0], sol.vectors, problem.states, problem.actions, info)
-        return AlphaVectorPolicy(qv, sol.vectors, problem.model, problem.complexities, "bayes", info)
+        method = "heuristic search over reachable beliefs: alpha-vector lower bound, sawtooth upper bound"
+        counts = {"trials": sol.trials, "backups": sol.backups, "iterations": sol.trials, "beliefs_visited": len(sol.beliefs)}
+        return bounds_policy(self, problem, qv, sol, method, **counts)
