@@ -19,6 +19,7 @@ from ._app import (
     LabelOpt,
     MappingOpt,
     MissingOpt,
+    OrderOpt,
     QuietOpt,
     app,
     atomic_output,
@@ -83,12 +84,12 @@ def _load(path: Path) -> Any:
     return load_any_model(path)
 
 
-def _read_for(log, m, mapping, column, label, missing, delimiter):
+def _read_for(log, m, mapping, column, label, missing, delimiter, order=None):
     """The log with the columns ``m`` needs (a trust model: the inputs it uses, the others filled)."""
     if isinstance(m, TrustModel):
         used = model_inputs(m)
-        return _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), m, used)
-    return read_for_model(log, m, mapping, column, label, missing, delimiter)
+        return _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter, order=order), m, used)
+    return read_for_model(log, m, mapping, column, label, missing, delimiter, order)
 
 
 @app.command(rich_help_panel="Estimate")
@@ -118,6 +119,7 @@ def predict(
     label: list[str] | None = LabelOpt,
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
+    order: list[str] | None = OrderOpt,
     keep: list[str] | None = KeepOpt,
     quiet: bool = QuietOpt,
 ) -> None:
@@ -137,11 +139,13 @@ def predict(
         if folds is not None:
             raise TrustseekError(["--folds scores held-out fits; --model scores that model in-sample: give one of them"])
         m = _load(model)
-        frame = _read_for(log, m, mapping, column, label, missing, delimiter)
+        frame = _read_for(log, m, mapping, column, label, missing, delimiter, order)
         report = pr.predict_in_sample(frame, m, bootstrap=bootstrap, seed=seed)
     else:
         k = 5 if folds is None else folds
-        tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter)
+        tr, em, frame = _read_with_inputs(
+            log, mapping, column, label, transitions_on, emissions_on, missing, delimiter, order=order
+        )
         bar = progress_bar(quiet or as_json)
         preset: Any = "paper"
         if _general(tr, em):  # inputs a trust model does not have: the general model's structure
@@ -228,6 +232,7 @@ def validate(
     label: list[str] | None = LabelOpt,
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
+    order: list[str] | None = OrderOpt,
     keep: list[str] | None = KeepOpt,
 ) -> None:
     """Does the decoded trust track self-reported trust?  Spearman and Pearson correlations with
@@ -242,7 +247,7 @@ def validate(
     if rating_labels is not None:
         labels = [x.strip() for x in rating_labels.split(",")]
     m = _load(model)
-    frame = _read_for(log, m, mapping, column, label, missing, delimiter)
+    frame = _read_for(log, m, mapping, column, label, missing, delimiter, order)
     va = _validation()
     if rating is None:
         if "rating" not in frame.columns:
