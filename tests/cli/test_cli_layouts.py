@@ -96,3 +96,25 @@ def test_a_record_per_participant_fits_from_the_command_line(study, tmp_path):
     assert code == 0 and re.search(r"log-likelihood", output), output
     code, output = run_cli(fit)
     assert code == 2 and '"explode"' in output and "Traceback" not in output, output
+
+
+def test_a_rating_copied_onto_a_blocks_trials_is_noticed_and_counted_once_with_rating_per(study, tmp_path):
+    log = pd.read_csv(study / "blocks.csv", dtype=str)
+    log["trust"] = log.groupby(["participant", "block"]).ngroup().map(lambda g: str(1 + g % 5))
+    log.to_csv(tmp_path / "rated.csv", index=False)
+    argv = ["validate", str(tmp_path / "rated.csv"), "-m", str(study / "paper.json"), "-b", "0", "--order", "block,trial"]
+    code, output = run_cli([*argv, "--rating", "trust", "--json"])
+    assert code == 0 and json.loads(output[: output.rindex("}") + 1])["n_rated"] == 60, output
+    text = " ".join(output[output.rindex("}") + 1 :].split())
+    assert "'trust' holds one value per 'block', on 60 trials of 12 blocks" in text and "--rating-per block" in text, text
+    code, output = run_cli([*argv, "--rating", "trust", "--rating-per", "block", "--json"])
+    assert code == 0 and json.loads(output[: output.rindex("}") + 1])["n_rated"] == 12, output
+    assert "holds one value" not in output
+    fit = ["fit", str(tmp_path / "rated.csv"), "-r", "1", "--order", "block,trial", "--rating", "trust"]
+    code, output = run_cli([*fit, "--rating-levels", "1,2,3,4,5", "--rating-per", "block"])
+    assert code == 0, output
+    log.loc[0, "trust"] = "5"  # block 1 of P001 rated 1 on its other trials
+    log.to_csv(tmp_path / "rated.csv", index=False)
+    code, output = run_cli([*argv, "--rating", "trust", "--rating-per", "block"])
+    assert code == 2 and "rated.csv: column 'trust': different ratings within one block" in output, output
+    assert "row 1" in output and "Traceback" not in output, output

@@ -209,6 +209,12 @@ OrderOpt = typer.Option(
     help="Columns that order each participant's trials, e.g. block,trial for a trial number that restarts every block "
     "(the mapping's 'order'); the trials are numbered 1, 2, ... in that order.",
 )
+RatingPerOpt = typer.Option(
+    None,
+    "--rating-per",
+    help="The rating is given once per block of this column and copied onto its trials: count it once, on the "
+    "block's last trial (the mapping's rating 'per').",
+)
 KeepOpt = typer.Option(None, "--keep", help="Carry this column of the log into the output (e.g. a condition). Repeatable.")
 
 

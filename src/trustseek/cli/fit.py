@@ -20,6 +20,7 @@ from ._app import (
     MissingOpt,
     OrderOpt,
     QuietOpt,
+    RatingPerOpt,
     app,
     atomic_output,
     check_mapping_file,
@@ -85,13 +86,18 @@ def _general(tr: tuple[str, ...], em: tuple[str, ...]) -> bool:
     return not _fit().trust_iohmm.is_trust_structure(tr, em)
 
 
-def _rating_flags(rating: str | None, levels: str | None, bins: str | None) -> dict | None:
-    """The mapping's rating entry from --rating, --rating-levels and --rating-bins (None without --rating)."""
+def _rating_flags(rating: str | None, levels: str | None, bins: str | None, per: str | None = None) -> dict | None:
+    """The mapping's rating entry from --rating, --rating-levels, --rating-bins and --rating-per
+    (None without --rating)."""
     if rating is None:
-        if levels is not None or bins is not None:
-            raise TrustseekError(["--rating-levels and --rating-bins describe the column named by --rating: give --rating"])
+        if levels is not None or bins is not None or per is not None:
+            raise TrustseekError(
+                ["--rating-levels, --rating-bins and --rating-per describe the column named by --rating: give --rating"]
+            )
         return None
     entry: dict = {"column": rating}
+    if per is not None:
+        entry["per"] = per
     if levels is not None:
         entry["levels"] = [x.strip() for x in levels.split(",")]
     if bins is not None:
@@ -225,6 +231,7 @@ def fit(
     ratings_only: bool = typer.Option(
         False, "--ratings-only", help="Leave the human actions out: fit the trust on the ratings alone."
     ),
+    rating_per: str | None = RatingPerOpt,
     mapping: Path | None = MappingOpt,
     column: list[str] | None = ColumnOpt,
     label: list[str] | None = LabelOpt,
@@ -259,7 +266,7 @@ def fit(
         emissions_on,
         missing,
         delimiter,
-        _rating_flags(rating, rating_levels, rating_bins),
+        _rating_flags(rating, rating_levels, rating_bins, rating_per),
         not ratings_only,
         order,
     )

@@ -21,11 +21,13 @@ from ._app import (
     MissingOpt,
     OrderOpt,
     QuietOpt,
+    RatingPerOpt,
     app,
     atomic_output,
     check_output,
     check_tol,
     console,
+    err_console,
     keep_columns,
     print_json,
     progress_bar,
@@ -209,6 +211,20 @@ def predict(
         console.print(f"per-trial predictions written to {out}")
 
 
+def _one_rating_per_block(frame, log: Path, rating: str, per: str | None, missing: list[str] | None) -> None:
+    """--rating-per: the rating kept on each block's last trial; without it (and without the
+    mapping's rating "per"), a note on stderr when the rating looks copied onto a block's trials."""
+    from ..data import levels
+
+    markers = frozenset(m.strip().lower() for m in missing or ())
+    if per is not None:
+        frame[rating] = levels.one_per_block(frame, rating, per, markers, str(log))
+    elif not frame.attrs.get("rating_per"):
+        note = levels.copied_per_block(frame, rating, markers)
+        if note:
+            err_console.print(f"{log}: note: {escape(note)}", highlight=False)
+
+
 @app.command(rich_help_panel="Estimate")
 def validate(
     log: Path = typer.Argument(..., help="Trial log with a self-reported trust rating column (every trial, or some)."),
@@ -223,6 +239,7 @@ def validate(
         "--rating-labels",
         help="Ordinal rating labels, lowest first, comma-separated (e.g. low,medium,high); default: numeric ratings.",
     ),
+    rating_per: str | None = RatingPerOpt,
     bootstrap: int = BootstrapOpt,
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed of the bootstrap."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write per trial the rating, decoded trust and baselines."),
@@ -255,6 +272,7 @@ def validate(
         rating = "rating"
     if rating == "rating" and labels is None and frame.attrs.get("rating_levels"):
         labels = list(frame.attrs["rating_levels"])  # the mapping's rating: its declared levels
+    _one_rating_per_block(frame, log, rating, rating_per, missing)
     ratings = va.parse_ratings(frame, rating, labels, missing or ())
     report = va.validate_ratings(frame, m, ratings, rating, labels, bootstrap=bootstrap, seed=seed)
     if out is not None:

@@ -8,10 +8,12 @@ levels); values outside the levels are reported with their rows (:class:`~.cells
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
+import pandas as pd
 
-from .cells import NAN_MARK, Column, Problems, spellings, value_ids
+from .cells import NAN_MARK, Column, DataError, Problems, column_from_pandas, spellings, value_ids
 from .mapping import ColumnMapping, format_number, label_key
 
 
@@ -128,3 +130,59 @@ def one_rating_per_block(
     out = np.full(n, -1, dtype=rated.dtype)
     out[order[last]] = hi.astype(rated.dtype)
     return out
+
+
+def _rated_rows(frame: pd.DataFrame, column: str, block: str, missing: frozenset[str]) -> tuple[Any, ...]:
+    """What a rating per block of a read log needs: the rating's cells, per row its code (-1 none),
+    the participant codes, the block column and the trial order."""
+    for c in (column, block):
+        if c not in frame.columns:
+            raise DataError([f"no column {c!r} in the log; its columns: {[str(x) for x in frame.columns]}"])
+    cells = column_from_pandas(frame[column], missing)
+    known = np.array([t is not None and t != NAN_MARK for t in cells.texts], dtype=bool)
+    rated = np.where(known[cells.codes], cells.codes, -1).astype(np.int64)
+    pcode = np.asarray(frame["participant"].cat.codes, dtype=np.int64)
+    order = np.lexsort((frame["trial"].to_numpy(), pcode))
+    return cells, rated, pcode, column_from_pandas(frame[block], missing), order
+
+
+def one_per_block(
+    frame: pd.DataFrame, column: str, block: str, missing: frozenset[str] = frozenset(), source: str | None = None
+) -> pd.Series:
+    """A read log's ``column`` (a rating given once per ``block`` and copied onto its trials)
+    with its value on the block's last trial only (``--rating-per``, like a mapping's rating
+    ``"per"``); different values within one block of a participant are an error."""
+    cells, rated, pcode, blocks, order = _rated_rows(frame, column, block, missing)
+    problems = Problems()
+    kept = one_rating_per_block(problems, rated, pcode, blocks, order, block, column)
+    if problems.lines:
+        raise DataError(problems.lines, source)
+    texts = np.array([*cells.texts, None], dtype=object)
+    return pd.Series(texts[np.where(kept >= 0, kept, len(cells.texts))], index=frame.index, name=column)
+
+
+def copied_per_block(frame: pd.DataFrame, column: str, missing: frozenset[str] = frozenset()) -> str | None:
+    """A note when ``column`` looks like a rating per block copied onto every trial of it: a
+    column named like a block (``block``, ``session``, ``round``) within each of whose groups the
+    rating is one value on two or more trials; None otherwise."""
+    if column not in frame.columns:
+        return None
+    for block in [str(c) for c in frame.columns if any(w in str(c).lower() for w in ("block", "session", "round"))]:
+        if block == column:
+            continue
+        _, rated, pcode, blocks, _ = _rated_rows(frame, column, block, missing)
+        group = pcode * (len(blocks.texts) + 1) + blocks.codes
+        has = rated >= 0
+        if not has.any():
+            return None
+        g, inverse, count = np.unique(group[has], return_inverse=True, return_counts=True)
+        lo = np.full(len(g), np.iinfo(np.int64).max)
+        hi = np.full(len(g), -1, dtype=np.int64)
+        np.minimum.at(lo, inverse, rated[has])
+        np.maximum.at(hi, inverse, rated[has])
+        if (lo == hi).all() and (count > 1).any():
+            return (
+                f"{column!r} holds one value per {block!r}, on {int(has.sum()):,} trials of {len(g):,} blocks: "
+                f'a rating given once per block counts once with --rating-per {block} (the mapping\'s rating "per")'
+            )
+    return None
