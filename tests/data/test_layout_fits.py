@@ -1,7 +1,7 @@
 """Acceptance: a canonical log written in every layout a study may keep it in, read by a mapping
 alone, fits to the canonical log's log-likelihood (the joint fit of actions and block ratings).
 
-Layouts: a long CSV with the study's names, labels and a trial number restarting in every block;
+Layouts: a wide CSV (a row per participant, a column per trial of each field); a long CSV with the study's names, labels and a trial number restarting in every block;
 the same as a JSON array, JSON lines and Parquet; a record per participant with per-trial lists;
 a record per block with per-trial lists; the ratings in a second file, one row per block.  In
 every layout the block's rating is copied onto each of its trials (``"per": "block"``)."""
@@ -85,7 +85,10 @@ def write_layouts(log: pd.DataFrame, folder: Path) -> dict[str, tuple[Path, dict
         for (p, b), g in log.groupby(["pid", "block"], sort=False)
     ]
     ratings = log[["pid", "block", "trust"]].drop_duplicates()
+    wide = log.assign(t=log.groupby("pid").cumcount() + 1).pivot(index="pid", columns="t", values=trials)
+    wide.columns = [f"{field}_{t}" for field, t in wide.columns]
     out = {
+        "wide CSV": (folder / "wide.csv", {**MAPPING, "wide": trials}),
         "long CSV": (folder / "log.csv", MAPPING),
         "JSON array": (folder / "log.json", MAPPING),
         "JSON lines": (folder / "log.jsonl", MAPPING),
@@ -94,6 +97,7 @@ def write_layouts(log: pd.DataFrame, folder: Path) -> dict[str, tuple[Path, dict
         "record per block": (folder / "blocks.jsonl", {**MAPPING, "explode": in_block}),
         "joined ratings": (folder / "actions.csv", {**MAPPING, "join": {"file": str(folder / "ratings.csv")}}),
     }
+    wide.reset_index().to_csv(out["wide CSV"][0], index=False)
     log.to_csv(out["long CSV"][0], index=False)
     log.to_json(out["JSON array"][0], orient="records")
     log.to_json(out["JSON lines"][0], orient="records", lines=True)

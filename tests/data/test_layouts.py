@@ -219,3 +219,29 @@ def test_the_order_flag_replaces_the_files_trial_column(small, tmp_path):
     same_trials(read_trials(log, mapping), read_trials(small))
     with pytest.raises(DataError, match="--order"):
         ColumnMapping.from_flags([], [], order=["block,,trial"])
+
+
+# --------------------------------------------------------------------------- wide
+
+
+def test_a_wide_log_has_a_row_per_trial_and_fewer_trials_where_cells_are_empty(small, tmp_path):
+    fields = FIELDS[1:]
+    wide = small.pivot(index="participant", columns="trial", values=fields)
+    wide.columns = [f"{f}.{t}" for f, t in wide.columns]
+    wide = wide.reset_index()
+    wide.loc[wide.participant == "P002", [f"{f}.20" for f in fields]] = None  # P002 has 19 trials
+    wide.to_csv(tmp_path / "wide.csv", index=False)
+    frame = read_trials(tmp_path / "wide.csv", {"wide": {"columns": fields, "separator": ".", "position": "trial"}})
+    want = read_trials(small[~((small.participant == "P002") & (small.trial == "20"))])
+    same_trials(frame, want)
+    assert frame.groupby("participant", observed=True).size().tolist() == [20, 19, 20]
+
+
+def test_wide_errors_name_the_fields_and_the_mapping_entries(small, tmp_path):
+    small.to_csv(tmp_path / "log.csv", index=False)
+    with pytest.raises(DataError, match=r"wide: no columns named choice_1, choice_2"):
+        read_trials(tmp_path / "log.csv", {"wide": ["choice"]})
+    with pytest.raises(DataError, match="either 'wide'"):
+        ColumnMapping.from_dict({"wide": ["a"], "explode": ["b"]})
+    with pytest.raises(DataError, match="wide: 'separator'"):
+        ColumnMapping.from_dict({"wide": {"columns": ["a"], "separator": 1}})

@@ -19,6 +19,7 @@ from typing import Any
 from ..vocab import ACTIONS, CATEGORICAL_COLUMNS, EXPERIENCES, HUMAN_ACTIONS, TRIAL_COLUMNS
 from .cells import DataError, shorten
 from .layouts import explode_entry, explode_problems, join_entry, join_problems
+from .wide import wide_entry, wide_problems
 
 CANONICAL = TRIAL_COLUMNS
 
@@ -65,6 +66,10 @@ class ColumnMapping:
                      item 1, 2, ... in a new column; every listed column of a record holds a list of
                      the same length, and each item becomes one trial (the record's other fields
                      are copied onto each)
+    ``wide``         a row per participant (or block) with a column per trial of each field:
+                     ``["choice", "difficulty"]`` for ``choice_1``, ``choice_2``, ..., or
+                     ``{"columns": [...], "separator": "_", "position": "trial"}`` to keep each
+                     trial's number in a new column
     ``join``         a second file joined onto the log: ``{"file": "ratings.csv", "on": ["pid",
                      "block"]}`` (``on`` defaults to the participant column, and ``block`` when both
                      files have it); a relative path is taken from the mapping file's folder
@@ -86,6 +91,7 @@ class ColumnMapping:
     experience_rule: bool | None = None  # False: the paper's experience rule does not hold in this study
     explode: dict[str, Any] | None = None  # {"columns": [...], "position": name or None}
     join: dict[str, Any] | None = None  # {"file": path, "on": [columns] or None}
+    wide: dict[str, Any] | None = None  # {"columns": [...], "separator": "_", "position": name or None}
 
     def problems(self) -> list[str]:
         p = []
@@ -147,6 +153,10 @@ class ColumnMapping:
             p += explode_problems(self.explode)
         if self.join is not None:
             p += join_problems(self.join)
+        if self.wide is not None:
+            p += wide_problems(self.wide)
+            if self.explode is not None:
+                p.append("give either 'wide' (a column per trial) or 'explode' (a list per record), not both")
         if self.experience_rule is not None and not isinstance(self.experience_rule, bool):
             p.append(f"experience_rule: expected true or false, got {self.experience_rule!r}")
         if self.delimiter is not None and (not isinstance(self.delimiter, str) or len(self.delimiter) != 1):
@@ -193,6 +203,7 @@ class ColumnMapping:
             other.experience_rule if other.experience_rule is not None else self.experience_rule,
             other.explode or self.explode,
             other.join or self.join,
+            other.wide or self.wide,
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -219,6 +230,8 @@ class ColumnMapping:
             d["explode"] = {k: (list(v) if isinstance(v, (list, tuple)) else v) for k, v in self.explode.items()}
         if self.join is not None:
             d["join"] = dict(self.join)
+        if self.wide is not None:
+            d["wide"] = dict(self.wide)
         return d
 
     def input_levels(self) -> dict[str, tuple[str, ...]]:
@@ -295,6 +308,7 @@ class ColumnMapping:
             d.get("experience_rule"),
             explode_entry(d["explode"]) if "explode" in d else None,
             join_entry(d["join"]) if "join" in d else None,
+            wide_entry(d["wide"]) if "wide" in d else None,
         )
         problems += m.problems()
         if problems:
@@ -394,6 +408,7 @@ MAPPING_KEYS = (
     "experience_rule",
     "explode",
     "join",
+    "wide",
 )
 
 

@@ -34,6 +34,7 @@ from .joins import join_file
 from .levels import input_codes, one_rating_per_block, rating_codes
 from .mapping import CANONICAL, CATEGORICAL, RATING, ColumnMapping, as_mapping, label_key
 from .sources import load_source, missing_column_hint
+from .wide import unpivot
 
 MAX_TRIAL = 2**31 - 1
 ALL = slice(None)  # the order of rows that are in trial order already
@@ -78,6 +79,8 @@ def read_trials(
     markers = frozenset(m.strip().lower() for m in (mapping.missing or ()))
     raw = load_source(source, delimiter or mapping.delimiter, markers, mapping.explode)
     name = raw.name
+    if mapping.wide is not None:
+        raw = unpivot(raw, mapping.wide)
     joined: list[str] = []
     if mapping.join is not None:
         raw, joined = join_file(raw, mapping.join, theirs["participant"], markers)
