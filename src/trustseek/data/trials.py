@@ -54,7 +54,10 @@ def read_trials(
     columns as pandas categoricals with the canonical labels, ``trial`` as int64,
     an unrecorded ``human_action`` as missing), followed by every extra column.
     Rows keep the file's order, less the rows a drop rule of the mapping leaves out
-    (their counts are in ``frame.attrs["dropped"]``: one ``(rule, rows)`` pair per rule).
+    (their counts are in ``frame.attrs["dropped"]``: one ``(rule, rows)`` pair per rule);
+    the mapping's ``wide`` and ``explode`` make one row per trial of a row or record first
+    (a record's trials in order), its ``join`` adds a second file's columns (trials without a
+    row there are counted in ``frame.attrs["joined"]``).
     ``required`` names the canonical columns that must be present (default: all
     six; participant, trial and human_action for a mapping that declares ``inputs``); an
     absent optional column comes back empty.  Each of the mapping's ``inputs`` becomes a
