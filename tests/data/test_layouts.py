@@ -245,3 +245,17 @@ def test_wide_errors_name_the_fields_and_the_mapping_entries(small, tmp_path):
         ColumnMapping.from_dict({"wide": ["a"], "explode": ["b"]})
     with pytest.raises(DataError, match="wide: 'separator'"):
         ColumnMapping.from_dict({"wide": {"columns": ["a"], "separator": 1}})
+
+
+def test_a_second_files_own_problems_name_it(small, tmp_path):
+    (tmp_path / "r.csv").write_text("participant,block,trust\nP001,1,3\nP001,2\n")
+    with pytest.raises(DataError) as exc:
+        read_trials(small, {"join": {"file": str(tmp_path / "r.csv")}})
+    assert exc.value.source == str(tmp_path / "r.csv") and "row 2 (2 fields)" in exc.value.problems[0], exc.value
+
+
+def test_a_position_that_names_a_column_of_the_log_is_an_error(small, tmp_path):
+    recs = records(small, ["participant"], FIELDS)
+    (tmp_path / "people.json").write_text(json.dumps(recs))
+    with pytest.raises(DataError, match="has a column 'participant' already"):
+        read_trials(tmp_path / "people.json", {"explode": {"columns": FIELDS, "position": "participant"}})
