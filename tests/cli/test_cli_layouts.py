@@ -118,3 +118,14 @@ def test_a_rating_copied_onto_a_blocks_trials_is_noticed_and_counted_once_with_r
     code, output = run_cli([*argv, "--rating", "trust", "--rating-per", "block"])
     assert code == 2 and "rated.csv: column 'trust': different ratings within one block" in output, output
     assert "row 1" in output and "Traceback" not in output, output
+
+
+def test_an_output_may_not_overwrite_the_file_a_mapping_joins(study, tmp_path):
+    ratings = tmp_path / "ratings.csv"
+    pd.DataFrame({"participant": ["P001"], "block": ["1"], "trust": ["3"]}).to_csv(ratings, index=False)
+    (tmp_path / "m.json").write_text(json.dumps({"order": ["block", "trial"], "join": {"file": "ratings.csv"}}))
+    before = ratings.read_bytes()
+    argv = ["decode", str(study / "blocks.csv"), "-m", str(study / "paper.json"), "--mapping", str(tmp_path / "m.json")]
+    code, output = run_cli([*argv, "--out", str(ratings)])
+    assert code == 2 and "the file the --mapping file joins" in " ".join(output.split()), output
+    assert ratings.read_bytes() == before

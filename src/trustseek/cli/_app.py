@@ -116,7 +116,9 @@ def _same_path(a: Path, b: Path) -> bool:
 
 def check_not_inputs(outputs: tuple[tuple[Path | None, str], ...], inputs: tuple[tuple[Any, str], ...]) -> None:
     """Refuse, before any work, an output (path, option) that names an input (path or preset
-    name, what it is): writing it would overwrite what the command reads."""
+    name, what it is): writing it would overwrite what the command reads (a --mapping file's
+    joined file included)."""
+    inputs = (*inputs, *_joined_files(inputs))
     for out, option in outputs:
         if out is None:
             continue
@@ -125,6 +127,23 @@ def check_not_inputs(outputs: tuple[tuple[Path | None, str], ...], inputs: tuple
                 raise TrustseekError(
                     [f"{option} {out}: is the {what}; writing it would overwrite the input: choose another file"]
                 )
+
+
+def _joined_files(inputs: tuple[tuple[Any, str], ...]) -> list[tuple[str, str]]:
+    """The second file a --mapping file joins onto the log (a mapping that cannot be read has none
+    here: its reader says what is wrong)."""
+    from ..data.mapping import ColumnMapping
+
+    out = []
+    for given, what in inputs:
+        if given is not None and what == "--mapping file":
+            try:
+                join = ColumnMapping.load(given).join
+            except TrustseekError:
+                continue
+            if join is not None:
+                out.append((join["file"], "file the --mapping file joins"))
+    return out
 
 
 @contextmanager
