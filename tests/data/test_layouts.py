@@ -259,3 +259,12 @@ def test_a_position_that_names_a_column_of_the_log_is_an_error(small, tmp_path):
     (tmp_path / "people.json").write_text(json.dumps(recs))
     with pytest.raises(DataError, match="has a column 'participant' already"):
         read_trials(tmp_path / "people.json", {"explode": {"columns": FIELDS, "position": "participant"}})
+
+
+def test_a_second_file_with_its_own_names_is_joined_by_a_map_of_the_keys(small, tmp_path):
+    people = pd.DataFrame({"pid": ["P001", "P002", "P003"], "group": ["a", "b", "a"]})
+    people.to_json(tmp_path / "people.jsonl", orient="records", lines=True)
+    frame = read_trials(small, {"join": {"file": str(tmp_path / "people.jsonl"), "on": {"participant": "pid"}}})
+    assert frame.groupby("participant", observed=True).group.first().tolist() == ["a", "b", "a"]
+    with pytest.raises(DataError, match="no column 'id' in"):
+        read_trials(small, {"join": {"file": str(tmp_path / "people.jsonl"), "on": {"participant": "id"}}})

@@ -23,20 +23,23 @@ def _keys(raw: Any, on: list[str], tables: list[dict[str, int]]) -> np.ndarray:
 
 def join_file(raw: Any, spec: dict[str, Any], participant: str, missing: frozenset[str]) -> tuple[Any, list[str]]:
     """``raw`` with the columns of the second file ``spec["file"]`` joined on ``spec["on"]``
-    (default: the participant column, and ``block`` when both files have it).  Duplicate keys in
+    (default: the participant column, and ``block`` when both files have it; a dict maps the
+    log's key columns to the second file's).  Duplicate keys in
     the second file and its keys that match no row of the log are errors, by count and
     participant; rows of the log without a match get empty cells (counted in the notes returned)."""
     second = load_source(spec["file"], None, missing)
     sname = second.name
-    on = list(spec.get("on") or [participant, *(["block"] if "block" in raw.columns and "block" in second.columns else [])])
+    given = spec.get("on") or [participant, *(["block"] if "block" in raw.columns and "block" in second.columns else [])]
+    pairs = dict(given) if isinstance(given, dict) else {c: c for c in given}  # the log's column -> the second file's
+    on, other = list(pairs), list(pairs.values())
     lines = [f"join: no column {c!r} in the log; its columns: {raw.columns}" for c in on if c not in raw.columns]
-    lines += [f"join: no column {c!r} in {sname}; its columns: {second.columns}" for c in on if c not in second.columns]
-    clash = [c for c in second.columns if c not in on and c in raw.columns]
+    lines += [f"join: no column {c!r} in {sname}; its columns: {second.columns}" for c in other if c not in second.columns]
+    clash = [c for c in second.columns if c not in other and c in raw.columns]
     lines += [f"join: column {c!r} of {sname} is in the log too; rename one of them" for c in clash]
     if lines:
         raise DataError(lines, raw.name)
     tables: list[dict[str, int]] = [{} for _ in on]
-    theirs = _keys(second, on, tables)
+    theirs = _keys(second, other, tables)
     ours = _keys(raw, on, tables)
     texts = [{v: k for k, v in t.items()} for t in tables]
     pi = on.index(participant) if participant in on else 0
@@ -46,12 +49,12 @@ def join_file(raw: Any, spec: dict[str, Any], participant: str, missing: frozens
 
     p = Problems()
     empty = np.flatnonzero((theirs < 0).any(axis=1))
-    p.rows(f"join: empty {' / '.join(on)} in {sname}", empty)
+    p.rows(f"join: empty {' / '.join(other)} in {sname}", empty)
     uniq, inverse, counts = np.unique(theirs, axis=0, return_inverse=True, return_counts=True)
     inverse = inverse.reshape(-1)
     dup = np.flatnonzero(counts > 1)
     p.add(
-        f"join: {sname} has more than one row for a {' / '.join(on)}",
+        f"join: {sname} has more than one row for a {' / '.join(other)}",
         [f"{who(uniq[d])} ({counts[d]} rows)" for d in dup],
         len(dup),
         unit="keys",
@@ -76,7 +79,7 @@ def join_file(raw: Any, spec: dict[str, Any], participant: str, missing: frozens
     if len(lost):
         per = _by_participant(ours[lost, pi], texts[pi])
         notes.append(f"{len(lost)} trials have no row in {sname} (their joined cells are empty): {per}")
-    added = [c for c in second.columns if c not in on]
+    added = [c for c in second.columns if c not in other]
 
     def col(c: str) -> Column:
         if c not in added:

@@ -79,8 +79,13 @@ def join_problems(j: Any) -> list[str]:
     on = j.get("on")
     if isinstance(on, str):
         on = [on]
+    if isinstance(on, Mapping):
+        on = [*on.keys(), *on.values()]
     if on is not None and (not isinstance(on, list) or not on or not all(isinstance(c, str) and c for c in on)):
-        p.append(f"join: 'on' lists the columns both files share (participant, and block), got {j.get('on')!r}")
+        p.append(
+            "join: 'on' lists the columns both files share (participant, and block), or maps the log's to the second "
+            f'file\'s ({{"subject": "pid"}}), got {j.get("on")!r}'
+        )
     return p
 
 
