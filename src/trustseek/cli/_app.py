@@ -225,12 +225,14 @@ MissingOpt = typer.Option(None, "--missing", help="A cell text meaning not recor
 OrderOpt = typer.Option(
     None,
     "--order",
+    metavar="COLUMN[,COLUMN]",
     help="Columns that order each participant's trials, e.g. block,trial for a trial number that restarts every block "
     "(the mapping's 'order'); the trials are numbered 1, 2, ... in that order.",
 )
 RatingPerOpt = typer.Option(
     None,
     "--rating-per",
+    metavar="COLUMN",
     help="The rating is given once per block of this column and copied onto its trials: count it once, on the "
     "block's last trial (the mapping's rating 'per').",
 )
