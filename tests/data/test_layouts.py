@@ -75,7 +75,8 @@ def test_lists_in_a_column_the_mapping_does_not_explode_are_refused_naming_explo
         with pytest.raises(DataError) as exc:
             read_trials(path)
         text = "\n".join(exc.value.problems)
-        assert "'complexity'" in text and '"explode"' in text, text
+        entry = '"explode": ["trial", "complexity", "robot_action", "human_action", "experience"]'
+        assert "'complexity'" in text and entry in text, text
         with pytest.raises(DataError) as exc:  # only some columns listed: the others are named
             read_trials(path, {"explode": ["trial", "complexity"]})
         assert any("'human_action'" in p for p in exc.value.problems), exc.value.problems

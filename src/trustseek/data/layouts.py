@@ -7,6 +7,7 @@ so every later check and message applies unchanged; the join is :mod:`.joins`.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from typing import Any
 
@@ -14,7 +15,11 @@ import numpy as np
 
 from .cells import SHOWN, DataError, Problems, shorten
 
-EXPLODE_HINT = 'a mapping\'s "explode": ["column", ...] reads per-trial lists of a record per participant or block'
+
+def explode_hint(columns: list[str]) -> str:
+    """The hint of a log with lists in ``columns``: the mapping entry that reads them."""
+    listed = json.dumps([shorten(c, 80) for c in columns[:20]])
+    return f'hint: per-trial lists of a record per participant or block are read by the mapping\'s "explode": {listed}'
 
 
 # --------------------------------------------------------------------------- the mapping's entries
@@ -105,7 +110,10 @@ def refuse_nested(table: Any, name: str) -> None:
     if bad:
         p = Problems()
         p.add("lists or objects where a text or number was expected", [repr(shorten(c, 80)) for c in bad], unit="columns")
-        raise DataError([*p.lines, f"hint: {EXPLODE_HINT}"], name)
+        import pyarrow as pa
+
+        lists = [f.name for f in table.schema if f.name in bad and (pa.types.is_list(f.type) or pa.types.is_large_list(f.type))]
+        raise DataError([*p.lines, *([explode_hint(lists)] if lists else [])], name)
 
 
 def explode_table(table: Any, spec: dict[str, Any], name: str, unit: str = "record") -> Any:

@@ -249,14 +249,17 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str], expl
 def _nested_values(records: list[dict[str, Any]], where: list[str], name: str, lists: set[str]) -> None:
     """Refuse cells that are objects or lists (a cell is a text, number or boolean; a list in a
     column the mapping explodes), by column."""
-    from .layouts import EXPLODE_HINT
+    from .layouts import explode_hint
 
     bad: dict[str, list[str]] = {}
     scalar: dict[str, list[str]] = {}
+    found: set[str] = set()  # columns holding lists
     for w, r in zip(where, records, strict=True):
         for k, v in r.items():
             if isinstance(v, dict) or (isinstance(v, list) and k not in lists):
                 bad.setdefault(k, []).append(f"{w} {json.dumps(v)[:40]}")
+                if isinstance(v, list):
+                    found.add(k)
             elif k in lists and (
                 (v is not None and not isinstance(v, list))
                 or (isinstance(v, list) and any(isinstance(x, (dict, list)) for x in v))
@@ -265,8 +268,8 @@ def _nested_values(records: list[dict[str, Any]], where: list[str], name: str, l
     p = Problems()
     for k, items in bad.items():
         p.add(f"column {shorten(k, 80)!r}: an object or a list where a text or number was expected", items, unit="records")
-    if p.lines:
-        p.lines.append(f"hint: {EXPLODE_HINT}")
+    if found:
+        p.lines.append(explode_hint([k for k in bad if k in found]))
     for k, items in scalar.items():
         p.add(f"explode: column {shorten(k, 80)!r}: not a list of per-trial texts or numbers", items, unit="records")
     if p.lines:
