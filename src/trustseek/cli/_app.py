@@ -116,7 +116,9 @@ def _same_path(a: Path, b: Path) -> bool:
 
 def check_not_inputs(outputs: tuple[tuple[Path | None, str], ...], inputs: tuple[tuple[Any, str], ...]) -> None:
     """Refuse, before any work, an output (path, option) that names an input (path or preset
-    name, what it is): writing it would overwrite what the command reads."""
+    name, what it is): writing it would overwrite what the command reads (a --mapping file's
+    joined file included)."""
+    inputs = (*inputs, *_joined_files(inputs))
     for out, option in outputs:
         if out is None:
             continue
@@ -125,6 +127,23 @@ def check_not_inputs(outputs: tuple[tuple[Path | None, str], ...], inputs: tuple
                 raise TrustseekError(
                     [f"{option} {out}: is the {what}; writing it would overwrite the input: choose another file"]
                 )
+
+
+def _joined_files(inputs: tuple[tuple[Any, str], ...]) -> list[tuple[str, str]]:
+    """The second file a --mapping file joins onto the log (a mapping that cannot be read has none
+    here: its reader says what is wrong)."""
+    from ..data.mapping import ColumnMapping
+
+    out = []
+    for given, what in inputs:
+        if given is not None and what == "--mapping file":
+            try:
+                join = ColumnMapping.load(given).join
+            except TrustseekError:
+                continue
+            if join is not None:
+                out.append((join["file"], "file the --mapping file joins"))
+    return out
 
 
 @contextmanager
@@ -203,6 +222,20 @@ LabelOpt = typer.Option(None, "--label", help="Map a label: column:theirs=canoni
 
 DelimiterOpt = typer.Option(None, "--delimiter", help="A CSV's delimiter (default: sniffed from the header; 'tab' for TAB).")
 MissingOpt = typer.Option(None, "--missing", help="A cell text meaning not recorded, e.g. NA (besides empty). Repeatable.")
+OrderOpt = typer.Option(
+    None,
+    "--order",
+    metavar="COLUMN[,COLUMN]",
+    help="Columns that order each participant's trials, e.g. block,trial for a trial number that restarts every block "
+    "(the mapping's 'order'); the trials are numbered 1, 2, ... in that order.",
+)
+RatingPerOpt = typer.Option(
+    None,
+    "--rating-per",
+    metavar="COLUMN",
+    help="The rating is given once per block of this column and copied onto its trials: count it once, on the "
+    "block's last trial (the mapping's rating 'per').",
+)
 KeepOpt = typer.Option(None, "--keep", help="Carry this column of the log into the output (e.g. a condition). Repeatable.")
 
 
@@ -216,19 +249,22 @@ def read_log(
     delimiter: str | None = None,
     rating: dict | None = None,
     actions: bool = True,
+    order: list[str] | None = None,
 ):
-    """The trial log with the --mapping/--column/--label/--missing/--delimiter options applied;
+    """The trial log with the --mapping/--column/--label/--missing/--delimiter/--order options applied;
     ``needed`` are the canonical columns the command uses beyond participant, trial and
     human_action (not required without ``actions``); ``rating`` a rating entry of a mapping
     (from --rating flags).  Rows left out by the mapping's drop rules are counted on stderr."""
     from ..data import ColumnMapping, read_trials
 
     check_mapping_file(mapping)
-    m = ColumnMapping.from_flags(column or [], label or [], mapping, missing, delimiter, rating)
+    m = ColumnMapping.from_flags(column or [], label or [], mapping, missing, delimiter, rating, order)
     outputs = ("human_action",) if actions else ()
     frame = read_trials(log, m, required=("participant", "trial", *outputs, *needed))
     for rule, count in frame.attrs.get("dropped", []):
         err_console.print(f"dropped {count} rows of {log} ({escape(rule)})", highlight=False)
+    for note in frame.attrs.get("joined", []):
+        err_console.print(f"{log}: {escape(note)}", highlight=False)
     if m.experience_rule is False:
         note = "the paper's experience rule is not checked (the mapping's experience_rule: false)"
         err_console.print(f"{log}: {note}", highlight=False)

@@ -18,7 +18,9 @@ from ._app import (
     LabelOpt,
     MappingOpt,
     MissingOpt,
+    OrderOpt,
     QuietOpt,
+    RatingPerOpt,
     app,
     atomic_output,
     check_mapping_file,
@@ -58,7 +60,17 @@ def _mapping_inputs(mapping: Path | None) -> tuple[str, ...]:
 
 
 def _read_with_inputs(
-    log, mapping, column, label, transitions_on, emissions_on, missing=None, delimiter=None, rating=None, actions=True
+    log,
+    mapping,
+    column,
+    label,
+    transitions_on,
+    emissions_on,
+    missing=None,
+    delimiter=None,
+    rating=None,
+    actions=True,
+    order=None,
 ):
     """The transition and emission inputs named by the flags (canonical ones or the mapping's
     ``inputs``), and the log with those columns (and the human actions unless not ``actions``)."""
@@ -66,7 +78,7 @@ def _read_with_inputs(
     tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on", declared)
     em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on", declared)
     needed = tuple(c for c in dict.fromkeys((*tr, *em)) if c in _fit().MODEL_INPUTS)
-    return tr, em, read_log(log, mapping, column, label, needed, missing, delimiter, rating, actions)
+    return tr, em, read_log(log, mapping, column, label, needed, missing, delimiter, rating, actions, order)
 
 
 def _general(tr: tuple[str, ...], em: tuple[str, ...]) -> bool:
@@ -74,13 +86,18 @@ def _general(tr: tuple[str, ...], em: tuple[str, ...]) -> bool:
     return not _fit().trust_iohmm.is_trust_structure(tr, em)
 
 
-def _rating_flags(rating: str | None, levels: str | None, bins: str | None) -> dict | None:
-    """The mapping's rating entry from --rating, --rating-levels and --rating-bins (None without --rating)."""
+def _rating_flags(rating: str | None, levels: str | None, bins: str | None, per: str | None = None) -> dict | None:
+    """The mapping's rating entry from --rating, --rating-levels, --rating-bins and --rating-per
+    (None without --rating)."""
     if rating is None:
-        if levels is not None or bins is not None:
-            raise TrustseekError(["--rating-levels and --rating-bins describe the column named by --rating: give --rating"])
+        if levels is not None or bins is not None or per is not None:
+            raise TrustseekError(
+                ["--rating-levels, --rating-bins and --rating-per describe the column named by --rating: give --rating"]
+            )
         return None
     entry: dict = {"column": rating}
+    if per is not None:
+        entry["per"] = per
     if levels is not None:
         entry["levels"] = [x.strip() for x in levels.split(",")]
     if bins is not None:
@@ -214,11 +231,13 @@ def fit(
     ratings_only: bool = typer.Option(
         False, "--ratings-only", help="Leave the human actions out: fit the trust on the ratings alone."
     ),
+    rating_per: str | None = RatingPerOpt,
     mapping: Path | None = MappingOpt,
     column: list[str] | None = ColumnOpt,
     label: list[str] | None = LabelOpt,
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
+    order: list[str] | None = OrderOpt,
     keep: list[str] | None = KeepOpt,
     quiet: bool = QuietOpt,
 ) -> None:
@@ -247,8 +266,9 @@ def fit(
         emissions_on,
         missing,
         delimiter,
-        _rating_flags(rating, rating_levels, rating_bins),
+        _rating_flags(rating, rating_levels, rating_bins, rating_per),
         not ratings_only,
+        order,
     )
     rated = "rating" if frame.attrs.get("rating_levels") else None
     if ratings_only and rated is None:
@@ -455,11 +475,11 @@ def load_for_decoding(path: Path):
     return TypeMixture.from_dict(d, source)
 
 
-def read_for_model(log, model, mapping, column, label, missing, delimiter):
+def read_for_model(log, model, mapping, column, label, missing, delimiter, order=None):
     """The log read with the columns a general model's inputs need: the canonical ones it uses,
     and the others declared as the mapping's ``inputs``."""
     canonical = tuple(c for c in model.used_inputs if c in _fit().MODEL_INPUTS)
-    frame = read_log(log, mapping, column, label, canonical, missing, delimiter)
+    frame = read_log(log, mapping, column, label, canonical, missing, delimiter, order=order)
     absent = [c for c in model.used_inputs if c not in frame.columns]
     if absent:
         raise TrustseekError(
@@ -487,6 +507,7 @@ def decode_cmd(
     label: list[str] | None = LabelOpt,
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
+    order: list[str] | None = OrderOpt,
     keep: list[str] | None = KeepOpt,
 ) -> None:
     """Per-trial smoothed P(trust | data) and the Viterbi trust path under a model.
@@ -504,7 +525,7 @@ def decode_cmd(
 
     types = load_for_decoding(model)  # a plain model is one type
     if isinstance(types, IOHMMModel):
-        frame = read_for_model(log, types, mapping, column, label, missing, delimiter)
+        frame = read_for_model(log, types, mapping, column, label, missing, delimiter, order)
         post = keep_columns(_fit().decode(frame, types), frame, keep)
         with atomic_output(out) as tmp:
             _data().write_trials(post, tmp)
@@ -512,7 +533,7 @@ def decode_cmd(
         return
     m = types.models[0]
     used = tuple(dict.fromkeys(c for t in types.models for c in model_inputs(t)))
-    frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), m, used)
+    frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter, order=order), m, used)
     if types.n_types == 1:
         post = keep_columns(_fit().decode(frame, m), frame, keep)
     else:  # supervisor types: P(type | trials) per participant and the type-averaged trust posteriors
@@ -549,10 +570,11 @@ def select(
     label: list[str] | None = LabelOpt,
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
+    order: list[str] | None = OrderOpt,
     quiet: bool = QuietOpt,
 ) -> None:
     """Choose the number of trust levels: BIC and participant-held-out log-likelihood."""
-    tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter)
+    tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter, order=order)
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("model selection", total=None)

@@ -24,7 +24,19 @@ from ..pomdp.supervisor_types import type_aware_problem, type_belief_from_log, t
 from ..solvers import make_solver, solver_names, summarize, trust_agnostic_from_data
 from ..solvers.base import DEFAULT_GRID, DEFAULT_TYPE_AWARE_SOLVER, METHODS
 from ..vocab import check_belief_update
-from ._app import ColumnOpt, LabelOpt, MappingOpt, app, atomic_output, check_output, check_tol, console, print_json, read_log
+from ._app import (
+    ColumnOpt,
+    LabelOpt,
+    MappingOpt,
+    OrderOpt,
+    app,
+    atomic_output,
+    check_output,
+    check_tol,
+    console,
+    print_json,
+    read_log,
+)
 
 ModelOpt = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file.")
 TaskOpt = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file.")
@@ -60,9 +72,10 @@ def type_posterior(
     mapping: Path | None = None,
     column: list[str] | None = None,
     label: list[str] | None = None,
+    order: list[str] | None = None,
 ):
     """The type posterior of one person from their earlier trials (--history, --participant, --session)."""
-    frame = read_log(history, mapping, column, label, ("complexity", "robot_action", "experience"))
+    frame = read_log(history, mapping, column, label, ("complexity", "robot_action", "experience"), order=order)
     return type_belief_from_log(mixture, frame, participant=participant, session=session)
 
 
@@ -252,6 +265,7 @@ def agnostic(
     mapping: Path | None = MappingOpt,
     column: list[str] | None = ColumnOpt,
     label: list[str] | None = LabelOpt,
+    order: list[str] | None = OrderOpt,
 ) -> None:
     """The optimal trust-agnostic policy (Section VI-A)."""
     from ._app import check_not_inputs
@@ -259,12 +273,12 @@ def agnostic(
     check_output(out, "--out", (".json",))
     inputs = ((model, "--model file"), (task, "--task file"), (data, "--data log"), (mapping, "--mapping file"))
     check_not_inputs(((out, "--out"),), inputs)
-    if data is None and (mapping is not None or column or label):
-        raise TrustseekError(["--mapping, --column and --label apply to a log: give it with --data"])
+    if data is None and (mapping is not None or column or label or order):
+        raise TrustseekError(["--mapping, --column, --label and --order apply to a log: give it with --data"])
     t = load_task(task)
     pol: Policy
     if data is not None:
-        frame = read_log(data, mapping, column, label, ("complexity", "robot_action"))
+        frame = read_log(data, mapping, column, label, ("complexity", "robot_action"), order=order)
         pol = trust_agnostic_from_data(frame, t)
     else:
         pol = make_solver("trust-agnostic").solve(AssistancePOMDP(load_model(model), t))

@@ -15,6 +15,7 @@ from ._app import (
     LabelOpt,
     MappingOpt,
     MissingOpt,
+    OrderOpt,
     QuietOpt,
     app,
     atomic_output,
@@ -42,16 +43,17 @@ def _mixture():
     return mixture
 
 
-def _log(log, mapping, column, label, missing, delimiter):
-    return read_log(log, mapping, column, label, ("complexity", "robot_action", "experience"), missing, delimiter)
+def _log(log, mapping, column, label, missing, delimiter, order=None):
+    needed = ("complexity", "robot_action", "experience")
+    return read_log(log, mapping, column, label, needed, missing, delimiter, order=order)
 
 
-def _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on):
+def _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on, order=None):
     """The inputs of the types' trust models (--transitions-on/--emissions-on as for fit) and the
     log with the columns they need."""
     from .fit import _read_with_inputs
 
-    return _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter)
+    return _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter, order=order)
 
 
 def parse_types(text: str) -> tuple[int, ...]:
@@ -101,6 +103,7 @@ def fit_types(
     label: list[str] | None = LabelOpt,
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
+    order: list[str] | None = OrderOpt,
     quiet: bool = QuietOpt,
 ) -> None:
     """Fit supervisor types: M trust models of the paper's structure, each participant one type."""
@@ -114,7 +117,7 @@ def fit_types(
         raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
     mx = _mixture()
     mx.parse_differ(differ)
-    tr, em, frame = _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on)
+    tr, em, frame = _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on, order)
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("starts", total=restarts)
@@ -231,6 +234,7 @@ def select_types(
     label: list[str] | None = LabelOpt,
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
+    order: list[str] | None = OrderOpt,
     quiet: bool = QuietOpt,
 ) -> None:
     """Choose the number of supervisor types: BIC and participant-held-out log-likelihood."""
@@ -239,7 +243,7 @@ def select_types(
     mx.parse_differ(differ)
     from ..estimation import type_selection
 
-    tr, em, frame = _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on)
+    tr, em, frame = _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on, order)
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("model selection", total=None)
@@ -293,6 +297,7 @@ def personalize(
     label: list[str] | None = LabelOpt,
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
+    order: list[str] | None = OrderOpt,
 ) -> None:
     """Per-person trust models: each participant's MAP estimate, shrunk toward the pooled model or their type."""
     if estimate not in ("held-out", "variational"):
@@ -304,7 +309,7 @@ def personalize(
 
     centre = load_mixture(model)
     used = tuple(dict.fromkeys(c for t in centre.models for c in model_inputs(t)))  # the columns the centre uses
-    frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), centre.models[0], used)
+    frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter, order=order), centre.models[0], used)
     res = run(frame, centre if centre.n_types > 1 else centre.models[0], strength=strength, tol=tol, estimate=estimate)
     with atomic_output(out, directory=True) as tmp:
         res.save(tmp)

@@ -19,12 +19,15 @@ from ._app import (
     LabelOpt,
     MappingOpt,
     MissingOpt,
+    OrderOpt,
     QuietOpt,
+    RatingPerOpt,
     app,
     atomic_output,
     check_output,
     check_tol,
     console,
+    err_console,
     keep_columns,
     print_json,
     progress_bar,
@@ -83,12 +86,12 @@ def _load(path: Path) -> Any:
     return load_any_model(path)
 
 
-def _read_for(log, m, mapping, column, label, missing, delimiter):
+def _read_for(log, m, mapping, column, label, missing, delimiter, order=None):
     """The log with the columns ``m`` needs (a trust model: the inputs it uses, the others filled)."""
     if isinstance(m, TrustModel):
         used = model_inputs(m)
-        return _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), m, used)
-    return read_for_model(log, m, mapping, column, label, missing, delimiter)
+        return _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter, order=order), m, used)
+    return read_for_model(log, m, mapping, column, label, missing, delimiter, order)
 
 
 @app.command(rich_help_panel="Estimate")
@@ -118,6 +121,7 @@ def predict(
     label: list[str] | None = LabelOpt,
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
+    order: list[str] | None = OrderOpt,
     keep: list[str] | None = KeepOpt,
     quiet: bool = QuietOpt,
 ) -> None:
@@ -137,11 +141,13 @@ def predict(
         if folds is not None:
             raise TrustseekError(["--folds scores held-out fits; --model scores that model in-sample: give one of them"])
         m = _load(model)
-        frame = _read_for(log, m, mapping, column, label, missing, delimiter)
+        frame = _read_for(log, m, mapping, column, label, missing, delimiter, order)
         report = pr.predict_in_sample(frame, m, bootstrap=bootstrap, seed=seed)
     else:
         k = 5 if folds is None else folds
-        tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter)
+        tr, em, frame = _read_with_inputs(
+            log, mapping, column, label, transitions_on, emissions_on, missing, delimiter, order=order
+        )
         bar = progress_bar(quiet or as_json)
         preset: Any = "paper"
         if _general(tr, em):  # inputs a trust model does not have: the general model's structure
@@ -205,6 +211,20 @@ def predict(
         console.print(f"per-trial predictions written to {out}")
 
 
+def _one_rating_per_block(frame, log: Path, rating: str, per: str | None, missing: list[str] | None) -> None:
+    """--rating-per: the rating kept on each block's last trial; without it (and without the
+    mapping's rating "per"), a note on stderr when the rating looks copied onto a block's trials."""
+    from ..data import levels
+
+    markers = frozenset(m.strip().lower() for m in missing or ())
+    if per is not None:
+        frame[rating] = levels.one_per_block(frame, rating, per, markers, str(log))
+    elif not frame.attrs.get("rating_per"):
+        note = levels.copied_per_block(frame, rating, markers)
+        if note:
+            err_console.print(f"{log}: note: {escape(note)}", highlight=False)
+
+
 @app.command(rich_help_panel="Estimate")
 def validate(
     log: Path = typer.Argument(..., help="Trial log with a self-reported trust rating column (every trial, or some)."),
@@ -219,6 +239,7 @@ def validate(
         "--rating-labels",
         help="Ordinal rating labels, lowest first, comma-separated (e.g. low,medium,high); default: numeric ratings.",
     ),
+    rating_per: str | None = RatingPerOpt,
     bootstrap: int = BootstrapOpt,
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed of the bootstrap."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write per trial the rating, decoded trust and baselines."),
@@ -228,6 +249,7 @@ def validate(
     label: list[str] | None = LabelOpt,
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
+    order: list[str] | None = OrderOpt,
     keep: list[str] | None = KeepOpt,
 ) -> None:
     """Does the decoded trust track self-reported trust?  Spearman and Pearson correlations with
@@ -242,7 +264,7 @@ def validate(
     if rating_labels is not None:
         labels = [x.strip() for x in rating_labels.split(",")]
     m = _load(model)
-    frame = _read_for(log, m, mapping, column, label, missing, delimiter)
+    frame = _read_for(log, m, mapping, column, label, missing, delimiter, order)
     va = _validation()
     if rating is None:
         if "rating" not in frame.columns:
@@ -250,6 +272,7 @@ def validate(
         rating = "rating"
     if rating == "rating" and labels is None and frame.attrs.get("rating_levels"):
         labels = list(frame.attrs["rating_levels"])  # the mapping's rating: its declared levels
+    _one_rating_per_block(frame, log, rating, rating_per, missing)
     ratings = va.parse_ratings(frame, rating, labels, missing or ())
     report = va.validate_ratings(frame, m, ratings, rating, labels, bootstrap=bootstrap, seed=seed)
     if out is not None:

@@ -209,3 +209,12 @@ def column_from_arrow(chunked: Any, missing: frozenset[str]) -> Column:
         parts.append(idx.to_numpy(zero_copy_only=False).astype(np.int32, copy=False))
     codes = parts[0] if len(parts) == 1 else np.concatenate(parts)
     return Column(codes, [*texts, null])
+
+
+def value_ids(col: Column, table: dict[str, int]) -> np.ndarray:
+    """Per row an id of its value, shared across files through ``table`` (numbers by value); -1 empty."""
+    ids = np.full(len(col.texts), -1, dtype=np.int64)
+    for j, t in enumerate(col.texts):
+        if t is not None and t != NAN_MARK:
+            ids[j] = table.setdefault(same_value_key(t), len(table))
+    return ids[col.codes]

@@ -12,12 +12,14 @@ import json
 import math
 import tomllib
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from ..vocab import ACTIONS, CATEGORICAL_COLUMNS, EXPERIENCES, HUMAN_ACTIONS, TRIAL_COLUMNS
 from .cells import DataError, shorten
+from .layouts import explode_entry, explode_problems, join_entry, join_problems
+from .wide import wide_entry, wide_problems
 
 CANONICAL = TRIAL_COLUMNS
 
@@ -51,12 +53,26 @@ class ColumnMapping:
                      for a numeric rating binned into ``[e0, e1), [e1, e2), ... [e_{n-1}, e_n]``
                      (``"levels"`` then names the bins); an empty cell is no rating.  It
                      becomes the ``rating`` column, an ordered categorical of the levels.
+                     ``"per": "block"`` says a rating belongs to a block (a column), copied
+                     onto its trials: it is kept on the block's last trial only.
     ``inputs``       named discrete inputs of a model (optional): ``{"condition": {"column": theirs,
                      "levels": ["control", "aid"]}}`` with the levels in their order (``"labels"``
                      maps the log's texts to levels, as for ``labels``; ``"column"`` defaults to the
                      input's name and may be a derived column).  Each becomes a column named by
                      the input, a categorical of its levels in the declared order; an empty cell
                      or a value outside the levels is an error.
+    ``explode``      per-trial lists in a record per participant (or per block): ``["choice",
+                     "difficulty"]``, or ``{"columns": [...], "position": "item"}`` to number each
+                     item 1, 2, ... in a new column; every listed column of a record holds a list of
+                     the same length, and each item becomes one trial (the record's other fields
+                     are copied onto each)
+    ``wide``         a row per participant (or block) with a column per trial of each field:
+                     ``["choice", "difficulty"]`` for ``choice_1``, ``choice_2``, ..., or
+                     ``{"columns": [...], "separator": "_", "position": "trial"}`` to keep each
+                     trial's number in a new column
+    ``join``         a second file joined onto the log: ``{"file": "ratings.csv", "on": ["pid",
+                     "block"]}`` (``on`` defaults to the participant column, and ``block`` when both
+                     files have it); a relative path is taken from the mapping file's folder
     ``experience_rule`` ``false`` where the paper's experience rule (an intervention ends
                      ``faulty``, an ask ends as the task says) is not the study's, e.g. advice
                      taking, where the aid can be right when the person overrides it.
@@ -73,6 +89,9 @@ class ColumnMapping:
     rating: dict[str, Any] | None = None
     inputs: dict[str, dict[str, Any]] = field(default_factory=dict)
     experience_rule: bool | None = None  # False: the paper's experience rule does not hold in this study
+    explode: dict[str, Any] | None = None  # {"columns": [...], "position": name or None}
+    join: dict[str, Any] | None = None  # {"file": path, "on": [columns] or None}
+    wide: dict[str, Any] | None = None  # {"columns": [...], "separator": "_", "position": name or None}
 
     def problems(self) -> list[str]:
         p = []
@@ -130,6 +149,14 @@ class ColumnMapping:
             p.append(f'missing: expected a list of texts (e.g. ["NA", "null"]), got {list(self.missing)!r}')
         elif self.missing is not None:
             p += self._marker_problems()
+        if self.explode is not None:
+            p += explode_problems(self.explode)
+        if self.join is not None:
+            p += join_problems(self.join)
+        if self.wide is not None:
+            p += wide_problems(self.wide)
+            if self.explode is not None:
+                p.append("give either 'wide' (a column per trial) or 'explode' (a list per record), not both")
         if self.experience_rule is not None and not isinstance(self.experience_rule, bool):
             p.append(f"experience_rule: expected true or false, got {self.experience_rule!r}")
         if self.delimiter is not None and (not isinstance(self.delimiter, str) or len(self.delimiter) != 1):
@@ -174,6 +201,9 @@ class ColumnMapping:
             other.rating or self.rating,
             {**self.inputs, **other.inputs},
             other.experience_rule if other.experience_rule is not None else self.experience_rule,
+            other.explode or self.explode,
+            other.join or self.join,
+            other.wide or self.wide,
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -196,6 +226,12 @@ class ColumnMapping:
             d["inputs"] = {k: dict(v) for k, v in self.inputs.items()}
         if self.experience_rule is not None:
             d["experience_rule"] = self.experience_rule
+        if self.explode is not None:
+            d["explode"] = {k: (list(v) if isinstance(v, (list, tuple)) else v) for k, v in self.explode.items()}
+        if self.join is not None:
+            d["join"] = dict(self.join)
+        if self.wide is not None:
+            d["wide"] = dict(self.wide)
         return d
 
     def input_levels(self) -> dict[str, tuple[str, ...]]:
@@ -270,6 +306,9 @@ class ColumnMapping:
             dict(d["rating"]) if isinstance(d.get("rating"), Mapping) else d.get("rating"),
             {str(k): (_input_entry(v) if isinstance(v, Mapping) else v) for k, v in inputs.items()},
             d.get("experience_rule"),
+            explode_entry(d["explode"]) if "explode" in d else None,
+            join_entry(d["join"]) if "join" in d else None,
+            wide_entry(d["wide"]) if "wide" in d else None,
         )
         problems += m.problems()
         if problems:
@@ -289,7 +328,10 @@ class ColumnMapping:
             d = tomllib.loads(text) if path.suffix.lower() == ".toml" else json.loads(text)
         except (json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
             raise DataError([f"invalid {'TOML' if path.suffix.lower() == '.toml' else 'JSON'}: {exc}"], str(path)) from None
-        return cls.from_dict(d, str(path))
+        m = cls.from_dict(d, str(path))
+        if m.join is not None and not Path(m.join["file"]).is_absolute():  # beside the mapping file
+            m.join = {**m.join, "file": str(path.parent / m.join["file"])}
+        return m
 
     @classmethod
     def from_flags(
@@ -300,9 +342,11 @@ class ColumnMapping:
         missing: Iterable[str] | None = None,
         delimiter: str | None = None,
         rating: Mapping[str, Any] | None = None,
+        order: Iterable[str] | None = None,
     ) -> ColumnMapping:
         """Command-line flags: ``--column canonical=theirs``, ``--label column:theirs=canonical``,
-        ``--missing TEXT`` and ``--delimiter CHAR``; ``rating`` as in a mapping file (``--rating``
+        ``--missing TEXT``, ``--delimiter CHAR`` and ``--order COLUMN[,COLUMN]`` (the columns, each
+        flag one or more separated by commas); ``rating`` as in a mapping file (``--rating``
         with ``--rating-levels`` or ``--rating-bins``)."""
         base = cls.load(file) if file else cls()
         problems = []
@@ -329,6 +373,9 @@ class ColumnMapping:
             table[theirs.strip()] = ours.strip()
         if delimiter is not None:
             delimiter = {"\\t": "\t", "tab": "\t", "TAB": "\t"}.get(delimiter, delimiter)
+        by = [c.strip() for item in order or () for c in item.split(",")]
+        if order and not all(by):
+            problems.append(f"--order {','.join(order)!r}: expected column names separated by commas, e.g. block,trial")
         if problems:
             raise DataError(problems)
         flags = cls(
@@ -337,7 +384,10 @@ class ColumnMapping:
             missing=tuple(missing) if missing else None,
             delimiter=delimiter,
             rating=dict(rating) if rating is not None else None,
+            order=tuple(by) if by else None,
         )
+        if by and "trial" in base.columns:  # --order replaces the file's trial column
+            base = replace(base, columns={k: v for k, v in base.columns.items() if k != "trial"})
         problems = flags.problems()
         if problems:
             raise DataError(problems)
@@ -356,6 +406,9 @@ MAPPING_KEYS = (
     "rating",
     "inputs",
     "experience_rule",
+    "explode",
+    "join",
+    "wide",
 )
 
 
@@ -372,9 +425,12 @@ def _rating_problems(r: Any) -> list[str]:
     if not isinstance(r, Mapping):
         return [f'{head}: expected {{"column": name, "levels": [...]}} or {{"column": name, "bins": [edges]}}, got {r!r}']
     p = []
-    extra = set(r) - {"column", "levels", "labels", "bins"}
+    extra = set(r) - {"column", "levels", "labels", "bins", "per"}
     if extra:
-        p.append(f"{head}: unknown entries {sorted(extra)} (expected column, levels, labels, bins)")
+        p.append(f"{head}: unknown entries {sorted(extra)} (expected column, levels, labels, bins, per)")
+    per = r.get("per")
+    if per is not None and (not isinstance(per, str) or not per):
+        p.append(f"{head}: 'per' names the column of the block a rating belongs to (e.g. \"block\"), got {per!r}")
     col = r.get("column")
     if not isinstance(col, str) or not col:
         p.append(f"{head}: 'column' must name the log's rating column, got {col!r}")

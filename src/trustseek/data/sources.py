@@ -20,7 +20,7 @@ from typing import Any
 import pandas as pd
 
 from ..model.jsonfile import special_file
-from .cells import SHOWN, Column, DataError, Problems, as_text, column_from_arrow, column_from_pandas, shorten
+from .cells import SHOWN, Column, DataError, Problems, column_from_arrow, column_from_pandas, shorten
 
 DELIMITERS = (",", ";", "\t", "|")
 
@@ -70,8 +70,12 @@ JSONL_SUFFIXES = (".jsonl", ".ndjson")
 JSON_SUFFIXES = (".json",)
 
 
-def load_source(source: Any, sep: str | None, missing: frozenset[str]) -> RawLog:
+def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: dict[str, Any] | None = None) -> RawLog:
+    """A log as read, one row per trial: ``explode`` (a mapping's entry) turns the per-trial
+    lists of a record per participant or block into rows (JSON, JSON lines, Parquet, a data frame)."""
     if isinstance(source, pd.DataFrame):
+        if explode is not None:
+            return _exploded_frame(source, missing, explode)
         frame = source
 
         def col(c: str) -> Column:
@@ -89,15 +93,37 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str]) -> RawLog
         raise DataError([f"is {special}; expected a trial log file"], name)
     suffix = path.suffix.lower()
     if suffix in PARQUET_SUFFIXES:
+        if explode is not None:
+            from .layouts import explode_table
+
+            return _arrow_raw(explode_table(_parquet_table(path, name), explode, name, "row"), name, missing)
         return _load_parquet(path, name, missing)
     if suffix in CSV_SUFFIXES:
+        if explode is not None:
+            raise DataError(["explode: a CSV cell is text, not a list; per-trial lists are read from JSON or Parquet"], name)
         return _load_csv(path, name, sep, missing)
     if suffix in JSONL_SUFFIXES + JSON_SUFFIXES:
-        return _load_json(path, name, _json_lines(path, suffix in JSONL_SUFFIXES), missing)
+        return _load_json(path, name, _json_lines(path, suffix in JSONL_SUFFIXES), missing, explode)
     raise DataError([f"unknown file type {suffix!r}: use .csv, .tsv, .parquet, .jsonl or .json"], name)
 
 
+def _exploded_frame(source: pd.DataFrame, missing: frozenset[str], explode: dict[str, Any]) -> RawLog:
+    """A data frame of records with per-trial lists, exploded into one row per item."""
+    import pyarrow as pa
+
+    from .layouts import explode_table
+
+    try:
+        table = pa.Table.from_pandas(source, preserve_index=False)
+    except (pa.ArrowInvalid, pa.ArrowTypeError) as exc:
+        raise DataError([f"explode: the table's columns cannot be read as lists: {exc}"], "<table>") from None
+    return _arrow_raw(explode_table(table, explode, "<table>", "row"), "<table>", missing)
+
+
 def _arrow_raw(table: Any, name: str, missing: frozenset[str]) -> RawLog:
+    from .layouts import refuse_nested
+
+    refuse_nested(table, name)
     names = [str(c) for c in table.column_names]
     dupes = sorted({c for c in names if names.count(c) > 1})
     if dupes:
@@ -125,6 +151,10 @@ def _arrow_source(table: Any, name: str, names: list[str], missing: frozenset[st
 
 
 def _load_parquet(path: Path, name: str, missing: frozenset[str]) -> RawLog:
+    return _arrow_raw(_parquet_table(path, name), name, missing)
+
+
+def _parquet_table(path: Path, name: str) -> Any:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -132,10 +162,9 @@ def _load_parquet(path: Path, name: str, missing: frozenset[str]) -> RawLog:
         schema = pq.read_schema(path)
         texts = [f.name for f in schema if pa.types.is_string(f.type) or pa.types.is_large_string(f.type)]
         # text columns come as codes into their distinct values (no string per row)
-        table = pq.read_table(path, read_dictionary=texts)
+        return pq.read_table(path, read_dictionary=texts)
     except (pa.ArrowException, OSError, ValueError) as exc:
         raise DataError([f"cannot read the file as Parquet: {exc}"], name) from None
-    return _arrow_raw(table, name, missing)
 
 
 def _json_lines(path: Path, by_suffix: bool) -> bool:
@@ -159,10 +188,14 @@ def _json_lines(path: Path, by_suffix: bool) -> bool:
     return by_suffix
 
 
-def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str]) -> RawLog:
-    """JSON lines (one object per line) or a JSON array of objects; row N is the N-th record."""
+def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str], explode: dict[str, Any] | None = None) -> RawLog:
+    """JSON lines (one object per line) or a JSON array of objects; row N is the N-th record
+    (the N-th trial, when ``explode`` turns each record's lists into trials)."""
     import pyarrow as pa
 
+    from .layouts import explode_table, table_from_records
+
+    lists = set(explode["columns"]) if explode is not None else set()
     if lines:
         import pyarrow.json as pjson
 
@@ -170,6 +203,8 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str]) -> R
             table = pjson.read_json(path)
             if not any(pa.types.is_nested(f.type) for f in table.schema):
                 return _arrow_raw(table, name, missing)
+            if lists and not any(pa.types.is_nested(f.type) for f in table.schema if f.name not in lists):
+                return _arrow_raw(explode_table(table, explode or {}, name), name, missing)
         except (pa.ArrowException, OSError):
             pass  # mixed types in a column, a bad line or nested values: read record by record to say where
     try:
@@ -204,35 +239,40 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str]) -> R
     p.add("records that are not objects", [w for w, r in zip(where, records, strict=True) if not isinstance(r, dict)])
     if p.lines:
         raise DataError(p.lines, name)
-    _nested_values(records, where, name)
-    columns: dict[str, list[Any]] = {}
-    for i, r in enumerate(records):
-        for k in r:
-            if k not in columns:
-                columns[k] = [None] * i
-        for k, vals in columns.items():
-            vals.append(r.get(k))
-    arrays = {}
-    for k, vals in columns.items():
-        try:
-            arrays[k] = pa.array(vals)
-        except (pa.ArrowInvalid, pa.ArrowTypeError):  # mixed types: every value as the reader's text
-            arrays[k] = pa.array([None if v is None else as_text(v) for v in vals], type=pa.string())
-    table = pa.table(arrays) if arrays else pa.table({})
+    _nested_values(records, where, name, lists)
+    table = table_from_records(records, lists)
+    if explode is not None:
+        table = explode_table(table, explode, name)
     return _arrow_raw(table, name, missing)
 
 
-def _nested_values(records: list[dict[str, Any]], where: list[str], name: str) -> None:
-    """Refuse cells that are objects or lists (a cell is a text, number or boolean), by column."""
+def _nested_values(records: list[dict[str, Any]], where: list[str], name: str, lists: set[str]) -> None:
+    """Refuse cells that are objects or lists (a cell is a text, number or boolean; a list in a
+    column the mapping explodes), by column."""
+    from .layouts import explode_hint
+
     bad: dict[str, list[str]] = {}
+    scalar: dict[str, list[str]] = {}
+    found: set[str] = set()  # columns holding lists
     for w, r in zip(where, records, strict=True):
         for k, v in r.items():
-            if isinstance(v, (dict, list)):
+            if isinstance(v, dict) or (isinstance(v, list) and k not in lists):
                 bad.setdefault(k, []).append(f"{w} {json.dumps(v)[:40]}")
-    if bad:
-        p = Problems()
-        for k, items in bad.items():
-            p.add(f"column {shorten(k, 80)!r}: an object or a list where a text or number was expected", items, unit="records")
+                if isinstance(v, list):
+                    found.add(k)
+            elif k in lists and (
+                (v is not None and not isinstance(v, list))
+                or (isinstance(v, list) and any(isinstance(x, (dict, list)) for x in v))
+            ):
+                scalar.setdefault(k, []).append(f"{w} {json.dumps(v)[:40]}")
+    p = Problems()
+    for k, items in bad.items():
+        p.add(f"column {shorten(k, 80)!r}: an object or a list where a text or number was expected", items, unit="records")
+    if found:
+        p.lines.append(explode_hint([k for k in bad if k in found]))
+    for k, items in scalar.items():
+        p.add(f"explode: column {shorten(k, 80)!r}: not a list of per-trial texts or numbers", items, unit="records")
+    if p.lines:
         raise DataError(p.lines, name)
 
 

@@ -30,8 +30,11 @@ import pandas as pd
 
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from .cells import NAN_MARK, SHOWN, Column, DataError, Problems, same_value_key, spellings
-from .mapping import CANONICAL, CATEGORICAL, RATING, ColumnMapping, as_mapping, format_number, label_key
+from .joins import join_file
+from .levels import input_codes, one_rating_per_block, rating_codes
+from .mapping import CANONICAL, CATEGORICAL, RATING, ColumnMapping, as_mapping, label_key
 from .sources import load_source, missing_column_hint
+from .wide import unpivot
 
 MAX_TRIAL = 2**31 - 1
 ALL = slice(None)  # the order of rows that are in trial order already
@@ -51,7 +54,10 @@ def read_trials(
     columns as pandas categoricals with the canonical labels, ``trial`` as int64,
     an unrecorded ``human_action`` as missing), followed by every extra column.
     Rows keep the file's order, less the rows a drop rule of the mapping leaves out
-    (their counts are in ``frame.attrs["dropped"]``: one ``(rule, rows)`` pair per rule).
+    (their counts are in ``frame.attrs["dropped"]``: one ``(rule, rows)`` pair per rule);
+    the mapping's ``wide`` and ``explode`` make one row per trial of a row or record first
+    (a record's trials in order), its ``join`` adds a second file's columns (trials without a
+    row there are counted in ``frame.attrs["joined"]``).
     ``required`` names the canonical columns that must be present (default: all
     six; participant, trial and human_action for a mapping that declares ``inputs``); an
     absent optional column comes back empty.  Each of the mapping's ``inputs`` becomes a
@@ -74,8 +80,13 @@ def read_trials(
         required = tuple(c for c in required if c != "trial")
     theirs = {c: mapping.columns.get(c, c) for c in CANONICAL}
     markers = frozenset(m.strip().lower() for m in (mapping.missing or ()))
-    raw = load_source(source, delimiter or mapping.delimiter, markers)
+    raw = load_source(source, delimiter or mapping.delimiter, markers, mapping.explode)
     name = raw.name
+    if mapping.wide is not None:
+        raw = unpivot(raw, mapping.wide)
+    joined: list[str] = []
+    if mapping.join is not None:
+        raw, joined = join_file(raw, mapping.join, theirs["participant"], markers)
     derived = mapping.derived
 
     # every column the mapping names must exist: in the log, or derived from earlier columns
@@ -96,6 +107,9 @@ def read_trials(
     rating_col = mapping.rating["column"] if mapping.rating is not None else None
     if rating_col is not None and rating_col not in known:
         lines.append(f"missing column {rating_col!r} (the mapping's rating column); columns present: {raw.columns}")
+    per = mapping.rating.get("per") if mapping.rating is not None else None
+    if per is not None and per not in known:
+        lines.append(f"missing column {per!r} (the block of the mapping's rating, 'per'); columns present: {raw.columns}")
     for inp in mapping.inputs:
         src = mapping.input_column(inp)
         if src not in known:
@@ -235,12 +249,15 @@ def read_trials(
             f"{column('human_action')}: no trial has a recorded human action (every cell is empty): nothing to fit"
         )
 
-    rating_codes = None
+    rated = None
     if rating_col is not None:
         rc = cols[rating_col] if rating_col in cols else get(rating_col)
-        rating_codes = _rating_codes(problems, rc, mapping, rating_col)
-    input_codes = {
-        inp: _input_codes(problems, cols[src] if src in cols else get(src), mapping, inp, src)
+        rated = rating_codes(problems, rc, mapping, rating_col)
+        if per is not None and perm is not None:
+            order = np.arange(n) if isinstance(perm, slice) else perm
+            rated = one_rating_per_block(problems, rated, pcode, cols[per] if per in cols else get(per), order, per, rating_col)
+    by_input = {
+        inp: input_codes(problems, cols[src] if src in cols else get(src), mapping, inp, src)
         for inp in mapping.inputs
         for src in (mapping.input_column(inp),)
     }
@@ -261,14 +278,15 @@ def read_trials(
     used = {theirs[c] for c in present}
     if not ordered:
         used.add(theirs["trial"])
-    if rating_codes is not None and rating_col is not None:
+    if rated is not None and rating_col is not None:
         levels = pd.Index(list(mapping.rating_levels()), dtype=object)
-        frame[RATING] = pd.Categorical.from_codes(rating_codes, categories=levels, ordered=True)
+        frame[RATING] = pd.Categorical.from_codes(rated, categories=levels, ordered=True)
         frame.attrs["rating_levels"] = tuple(levels)
         frame.attrs["rating_column"] = rating_col
+        frame.attrs["rating_per"] = per
         used.add(rating_col)
     for inp, levels in mapping.input_levels().items():
-        frame[inp] = pd.Categorical.from_codes(input_codes[inp], categories=pd.Index(list(levels), dtype=object))
+        frame[inp] = pd.Categorical.from_codes(by_input[inp], categories=pd.Index(list(levels), dtype=object))
         used.add(mapping.input_column(inp))
     if mapping.inputs:
         frame.attrs["inputs"] = mapping.input_levels()
@@ -279,88 +297,8 @@ def read_trials(
             values = more[c] if rowid is None else more[c].iloc[rowid]
             frame[c] = values.to_numpy() if isinstance(source, pd.DataFrame) else values.values
     frame.attrs["dropped"] = dropped
+    frame.attrs["joined"] = joined
     return frame
-
-
-def _input_codes(problems: Problems, cc: Column, mapping: ColumnMapping, name: str, src: str) -> np.ndarray:
-    """Per row the code of an input's level; an empty cell, a NaN or a value outside the declared
-    levels is reported with its rows (every row of a model's input needs a level)."""
-    entry = mapping.inputs[name]
-    levels = mapping.input_levels()[name]
-    table = {label_key(k): label_key(v) for k, v in (entry.get("labels") or {}).items()}
-    by_spelling = {s: i for i, lv in enumerate(levels) for s in spellings(lv)}
-    lookup = np.full(len(cc.texts), -1, dtype=np.int16 if len(levels) < 2**15 else np.int32)
-    kind = np.zeros(len(cc.texts), dtype=np.int8)  # 0 ok, 1 empty, 2 NaN, 3 outside the levels
-    for j, t in enumerate(cc.texts):
-        if t is None:
-            kind[j] = 1
-            continue
-        if t == NAN_MARK:
-            kind[j] = 2
-            continue
-        label = next((table[s] for s in spellings(t) if s in table), t)
-        hit = next((by_spelling[s] for s in spellings(label) if s in by_spelling), None)
-        if hit is None:
-            kind[j] = 3
-        else:
-            lookup[j] = hit
-    k = kind[cc.codes]
-    known = f"{sorted(table)} (mapped) or " if table else ""
-    expected = f"expected one of {known}the levels {list(levels)}"
-    head = f"column {src!r} (input {name!r})"
-    problems.rows(f"{head}: empty value ({expected})", np.flatnonzero(k == 1))
-    problems.rows(f"{head}: value is NaN ({expected})", np.flatnonzero(k == 2))
-    problems.rows(
-        f"{head}: value outside the declared levels ({expected})",
-        np.flatnonzero(k == 3),
-        lambda r: repr(cc.texts[cc.codes[r]]),
-    )
-    return lookup[cc.codes]
-
-
-def _rating_codes(problems: Problems, rc: Column, mapping: ColumnMapping, name: str) -> np.ndarray:
-    """Per row the code of the rating's level (-1 = no rating); values outside the declared
-    levels or bins are reported with their rows."""
-    r = mapping.rating or {}
-    levels = mapping.rating_levels()
-    lookup = np.full(len(rc.texts) + 1, -1, dtype=np.int16)
-    bad = np.zeros(len(rc.texts) + 1, dtype=bool)
-    if "bins" in r:
-        edges = np.array([float(e) for e in r["bins"]])
-        for j, t in enumerate(rc.texts):
-            if t is None or t == NAN_MARK:
-                continue
-            try:
-                x = float(t)
-            except ValueError:
-                x = math.nan
-            if not math.isfinite(x) or x < edges[0] or x > edges[-1]:
-                bad[j] = True
-            else:
-                lookup[j] = min(int(np.searchsorted(edges, x, side="right")) - 1, len(edges) - 2)
-        lo, hi = format_number(edges[0]), format_number(edges[-1])
-        expected = f"a number in [{lo}, {hi}] (the bins {[format_number(e) for e in edges]})"
-    else:
-        table = {label_key(k): label_key(v) for k, v in (r.get("labels") or {}).items()}
-        by_spelling = {s: i for i, lv in enumerate(levels) for s in spellings(lv)}
-        for j, t in enumerate(rc.texts):
-            if t is None or t == NAN_MARK:
-                continue
-            label = next((table[s] for s in spellings(t) if s in table), t)
-            hit = next((by_spelling[s] for s in spellings(label) if s in by_spelling), None)
-            if hit is None:
-                bad[j] = True
-            else:
-                lookup[j] = hit
-        known = f"{sorted(table)} (mapped) or " if table else ""
-        expected = f"one of {known}the declared levels {list(levels)}"
-    codes = lookup[rc.codes]
-    problems.rows(
-        f"column {name!r}: rating outside the declared levels (expected {expected}; leave the cell empty for no rating)",
-        np.flatnonzero(bad[rc.codes]),
-        lambda row: repr(rc.texts[rc.codes[row]]),
-    )
-    return codes
 
 
 def _participant_codes(pc_: Column) -> tuple[np.ndarray, list[str]]:
@@ -472,6 +410,7 @@ def _order_trials(
             for d in dup[:SHOWN]
         ]
         problems.add(f"column {order[0]!r}: trials with the same order values", items, len(dup))
+        problems.lines[-1] += f'; {offenders(ps[dup], ids)}: add a column to --order or the mapping\'s "order"'
         return trial, valid, None
     lengths = np.bincount(pcode, minlength=len(ids))
     offsets = np.cumsum(lengths) - lengths
@@ -575,16 +514,24 @@ def _check_trials(
             for d, f in zip(dup[:SHOWN], first[:SHOWN], strict=True)
         ]
         problems.add(f"{column}: duplicate trial indices", items, len(dup))
-        who, count = np.unique(p[order[dup]], return_counts=True)
-        per = ", ".join(f"{ids[w]!r} {c}" for w, c in zip(who[:SHOWN], count[:SHOWN], strict=True))
-        more = f", ... ({len(who) - SHOWN} more participants)" if len(who) > SHOWN else ""
         problems.lines[-1] += (
-            f"; by participant, {len(who)} ({per}{more}): a trial number that restarts "
-            'in every block or session needs the mapping\'s "order" (e.g. "order": ["block", "trial"]); a participant '
+            f"; {offenders(p[order[dup]], ids)}: a trial number that restarts in every block or session needs "
+            '--order block,trial or the mapping\'s "order" (e.g. "order": ["block", "trial"]); a participant '
             "who took the study twice needs an id per session"
         )
         return None
     return order if rows is None else rows[order]
+
+
+LISTED = 100  # participants listed by name in a duplicate-trial error
+
+
+def offenders(codes: np.ndarray, ids: list[str]) -> str:
+    """Every participant among ``codes`` (one per offending row) with its count of rows."""
+    who, count = np.unique(codes, return_counts=True)
+    per = ", ".join(f"{ids[w]!r} {c}" for w, c in zip(who[:LISTED], count[:LISTED], strict=True))
+    more = f", ... ({len(who) - LISTED} more participants)" if len(who) > LISTED else ""
+    return f"by participant, {len(who)} ({per}{more})"
 
 
 def write_trials(frame: pd.DataFrame, path: str | Path) -> None:

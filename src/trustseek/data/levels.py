@@ -1,0 +1,188 @@
+"""The levels of a log's named inputs and of its self-reported rating, as codes per row
+(a rating given once per block kept on one trial of the block).
+
+Each distinct cell value is looked up once (in the mapping's label table, then the declared
+levels); values outside the levels are reported with their rows (:class:`~.cells.Problems`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .cells import NAN_MARK, Column, DataError, Problems, column_from_pandas, spellings, value_ids
+from .mapping import ColumnMapping, format_number, label_key
+
+
+def input_codes(problems: Problems, cc: Column, mapping: ColumnMapping, name: str, src: str) -> np.ndarray:
+    """Per row the code of an input's level; an empty cell, a NaN or a value outside the declared
+    levels is reported with its rows (every row of a model's input needs a level)."""
+    entry = mapping.inputs[name]
+    levels = mapping.input_levels()[name]
+    table = {label_key(k): label_key(v) for k, v in (entry.get("labels") or {}).items()}
+    by_spelling = {s: i for i, lv in enumerate(levels) for s in spellings(lv)}
+    lookup = np.full(len(cc.texts), -1, dtype=np.int16 if len(levels) < 2**15 else np.int32)
+    kind = np.zeros(len(cc.texts), dtype=np.int8)  # 0 ok, 1 empty, 2 NaN, 3 outside the levels
+    for j, t in enumerate(cc.texts):
+        if t is None:
+            kind[j] = 1
+            continue
+        if t == NAN_MARK:
+            kind[j] = 2
+            continue
+        label = next((table[s] for s in spellings(t) if s in table), t)
+        hit = next((by_spelling[s] for s in spellings(label) if s in by_spelling), None)
+        if hit is None:
+            kind[j] = 3
+        else:
+            lookup[j] = hit
+    k = kind[cc.codes]
+    known = f"{sorted(table)} (mapped) or " if table else ""
+    expected = f"expected one of {known}the levels {list(levels)}"
+    head = f"column {src!r} (input {name!r})"
+    problems.rows(f"{head}: empty value ({expected})", np.flatnonzero(k == 1))
+    problems.rows(f"{head}: value is NaN ({expected})", np.flatnonzero(k == 2))
+    problems.rows(
+        f"{head}: value outside the declared levels ({expected})",
+        np.flatnonzero(k == 3),
+        lambda r: repr(cc.texts[cc.codes[r]]),
+    )
+    return lookup[cc.codes]
+
+
+def rating_codes(problems: Problems, rc: Column, mapping: ColumnMapping, name: str) -> np.ndarray:
+    """Per row the code of the rating's level (-1 = no rating); values outside the declared
+    levels or bins are reported with their rows."""
+    r = mapping.rating or {}
+    levels = mapping.rating_levels()
+    lookup = np.full(len(rc.texts) + 1, -1, dtype=np.int16)
+    bad = np.zeros(len(rc.texts) + 1, dtype=bool)
+    if "bins" in r:
+        edges = np.array([float(e) for e in r["bins"]])
+        for j, t in enumerate(rc.texts):
+            if t is None or t == NAN_MARK:
+                continue
+            try:
+                x = float(t)
+            except ValueError:
+                x = math.nan
+            if not math.isfinite(x) or x < edges[0] or x > edges[-1]:
+                bad[j] = True
+            else:
+                lookup[j] = min(int(np.searchsorted(edges, x, side="right")) - 1, len(edges) - 2)
+        lo, hi = format_number(edges[0]), format_number(edges[-1])
+        expected = f"a number in [{lo}, {hi}] (the bins {[format_number(e) for e in edges]})"
+    else:
+        table = {label_key(k): label_key(v) for k, v in (r.get("labels") or {}).items()}
+        by_spelling = {s: i for i, lv in enumerate(levels) for s in spellings(lv)}
+        for j, t in enumerate(rc.texts):
+            if t is None or t == NAN_MARK:
+                continue
+            label = next((table[s] for s in spellings(t) if s in table), t)
+            hit = next((by_spelling[s] for s in spellings(label) if s in by_spelling), None)
+            if hit is None:
+                bad[j] = True
+            else:
+                lookup[j] = hit
+        known = f"{sorted(table)} (mapped) or " if table else ""
+        expected = f"one of {known}the declared levels {list(levels)}"
+    codes = lookup[rc.codes]
+    problems.rows(
+        f"column {name!r}: rating outside the declared levels (expected {expected}; leave the cell empty for no rating)",
+        np.flatnonzero(bad[rc.codes]),
+        lambda row: repr(rc.texts[rc.codes[row]]),
+    )
+    return codes
+
+
+def one_rating_per_block(
+    problems: Problems, rated: np.ndarray, pcode: np.ndarray, block: Column, order: np.ndarray, per: str, rating: str
+) -> np.ndarray:
+    """The ratings ``rated`` (a level code per row, -1 = none) of a rating given once per block
+    (column ``per``) and copied onto its trials: kept on the block's last trial (in trial order
+    ``order``) only.  Different ratings within one block of a participant are an error."""
+    n = len(rated)
+    bids = value_ids(block, {})
+    problems.rows(f"column {per!r} (the block of the rating {rating!r}): empty block", np.flatnonzero(bids < 0))
+    nb = int(bids.max()) + 2 if n else 1
+    group = pcode.astype(np.int64) * nb + (bids + 1)
+    _, g = np.unique(group, return_inverse=True)
+    g = g.reshape(-1)
+    ng = int(g.max()) + 1 if n else 0
+    pos = np.empty(n, dtype=np.int64)
+    pos[order] = np.arange(n)
+    last = np.full(ng, -1, dtype=np.int64)
+    np.maximum.at(last, g, pos)
+    has = rated >= 0
+    lo = np.full(ng, np.iinfo(np.int64).max)
+    hi = np.full(ng, -1, dtype=np.int64)
+    np.minimum.at(lo, g[has], rated[has])
+    np.maximum.at(hi, g[has], rated[has])
+    conflict = np.flatnonzero(has & (lo[g] != hi[g]))
+    problems.rows(
+        f"column {rating!r}: different ratings within one block (column {per!r}) of a participant; a rating per block "
+        "has one value per block",
+        conflict,
+    )
+    out = np.full(n, -1, dtype=rated.dtype)
+    out[order[last]] = hi.astype(rated.dtype)
+    return out
+
+
+def _rated_rows(frame: pd.DataFrame, column: str, block: str, missing: frozenset[str]) -> tuple[Any, ...]:
+    """What a rating per block of a read log needs: the rating's cells, per row its code (-1 none),
+    the participant codes, the block column and the trial order."""
+    for c in (column, block):
+        if c not in frame.columns:
+            raise DataError([f"no column {c!r} in the log; its columns: {[str(x) for x in frame.columns]}"])
+    cells = column_from_pandas(frame[column], missing)
+    known = np.array([t is not None and t != NAN_MARK for t in cells.texts], dtype=bool)
+    rated = np.where(known[cells.codes], cells.codes, -1).astype(np.int64)
+    pcode = np.asarray(frame["participant"].cat.codes, dtype=np.int64)
+    order = np.lexsort((frame["trial"].to_numpy(), pcode))
+    return cells, rated, pcode, column_from_pandas(frame[block], missing), order
+
+
+def one_per_block(
+    frame: pd.DataFrame, column: str, block: str, missing: frozenset[str] = frozenset(), source: str | None = None
+) -> pd.Series:
+    """A read log's ``column`` (a rating given once per ``block`` and copied onto its trials)
+    with its value on the block's last trial only (``--rating-per``, like a mapping's rating
+    ``"per"``); different values within one block of a participant are an error."""
+    cells, rated, pcode, blocks, order = _rated_rows(frame, column, block, missing)
+    problems = Problems()
+    kept = one_rating_per_block(problems, rated, pcode, blocks, order, block, column)
+    if problems.lines:
+        raise DataError(problems.lines, source)
+    texts = np.array([*cells.texts, None], dtype=object)
+    return pd.Series(texts[np.where(kept >= 0, kept, len(cells.texts))], index=frame.index, name=column)
+
+
+def copied_per_block(frame: pd.DataFrame, column: str, missing: frozenset[str] = frozenset()) -> str | None:
+    """A note when ``column`` looks like a rating per block copied onto every trial of it: a
+    column named like a block (``block``, ``session``, ``round``) within each of whose groups the
+    rating is one value on two or more trials; None otherwise."""
+    if column not in frame.columns:
+        return None
+    for block in [str(c) for c in frame.columns if any(w in str(c).lower() for w in ("block", "session", "round"))]:
+        if block == column:
+            continue
+        _, rated, pcode, blocks, _ = _rated_rows(frame, column, block, missing)
+        group = pcode * (len(blocks.texts) + 1) + blocks.codes
+        has = rated >= 0
+        if not has.any():
+            return None
+        g, inverse, count = np.unique(group[has], return_inverse=True, return_counts=True)
+        lo = np.full(len(g), np.iinfo(np.int64).max)
+        hi = np.full(len(g), -1, dtype=np.int64)
+        np.minimum.at(lo, inverse, rated[has])
+        np.maximum.at(hi, inverse, rated[has])
+        if (lo == hi).all() and (count > 1).any():
+            return (
+                f"{column!r} holds one value per {block!r}, on {int(has.sum()):,} trials of {len(g):,} blocks: "
+                f'a rating given once per block counts once with --rating-per {block} (the mapping\'s rating "per")'
+            )
+    return None
