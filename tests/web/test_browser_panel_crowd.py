@@ -17,6 +17,7 @@ from urllib.parse import urlsplit
 import pandas as pd
 import pytest
 
+from server_checks import database_rows
 from test_browser import artifacts_dir
 from trustseek.client import Client
 from trustseek.server.app import STATIC
@@ -217,3 +218,28 @@ def test_dashboard_and_the_pages_of_a_paused_closed_or_revoked_link(tmp_path):
             page.screenshot(path=str(out / "page_closed.png"))
             browser.close()
         assert not errors, errors
+
+
+async def preview_run(link: str) -> dict:
+    from playwright.async_api import async_playwright
+
+    async with async_playwright() as p:
+        browser = await p.chromium.launch(executable_path=CHROMIUM, args=list(CHROMIUM_ARGS), headless=True)
+        result = await run_participant(browser, link, 0, "previewer")
+        await browser.close()
+    return result
+
+
+def test_a_preview_run_in_chromium_leaves_the_database_and_the_export_unchanged(tmp_path):
+    path = tmp_path / "preview.sqlite"
+    with ThreadServer(f"sqlite:///{path}", TOKEN) as url:
+        c = Client(url, TOKEN)
+        study = c.create_study(STUDY)
+        c.create_sessions(study["id"], count=1, pilot=True)
+        tables = ("trials", "sessions", "events")
+        export = {t: c.export(study["id"], table=t) for t in tables}
+        rows = database_rows(path)
+        result = asyncio.run(preview_run(c.preview(study["id"])))
+        assert database_rows(path) == rows
+        assert {t: c.export(study["id"], table=t) for t in tables} == export
+    assert result["code"] == "CROWD-OK" and not result["errors"], result  # the whole study was shown, to its end page

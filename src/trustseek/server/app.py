@@ -26,6 +26,7 @@ from .deploy.store import DeployStore
 from .link_routes import STATIC, lifecycle, pages, static_page
 from .middleware import BodyGuard, RequestLog, ServerTiming
 from .participant_routes import own, participant
+from .preview import Previews
 from .routes import experimenter
 from .schemas import ErrorOut
 from .studies import more_problems
@@ -98,24 +99,35 @@ def settle_memory() -> None:
 
 #: the environment variables :func:`from_environment` reads (``trustseek serve --workers N`` sets them)
 ENV_DB, ENV_TOKEN, ENV_PUBLIC_URL = "TRUSTSEEK_DB", "TRUSTSEEK_TOKEN", "TRUSTSEEK_PUBLIC_URL"
+#: the previews' database that the worker processes share (``preview.Previews``)
+ENV_PREVIEW_DB = "TRUSTSEEK_PREVIEW_DB"
 
 
 def from_environment() -> FastAPI:
     """The server configured by the environment: ``$TRUSTSEEK_DB`` (the database URL),
-    ``$TRUSTSEEK_TOKEN`` (the experimenter token) and ``$TRUSTSEEK_PUBLIC_URL``.  This is the
+    ``$TRUSTSEEK_TOKEN`` (the experimenter token), ``$TRUSTSEEK_PUBLIC_URL`` and
+    ``$TRUSTSEEK_PREVIEW_DB`` (the previews' database the workers share).  This is the
     application factory each worker process of ``trustseek serve --workers N`` builds."""
     token = os.environ.get(ENV_TOKEN)
     if not token:
         raise RuntimeError(f"${ENV_TOKEN} is not set")
-    app = create_app(os.environ.get(ENV_DB, DEFAULT_URL), token=token, public_url=os.environ.get(ENV_PUBLIC_URL) or None)
+    app = create_app(
+        os.environ.get(ENV_DB, DEFAULT_URL),
+        token=token,
+        public_url=os.environ.get(ENV_PUBLIC_URL) or None,
+        preview_url=os.environ.get(ENV_PREVIEW_DB) or None,
+    )
     settle_memory()
     return app
 
 
-def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: str | None = None) -> FastAPI:
+def create_app(
+    db_url: str = DEFAULT_URL, token: str | None = None, public_url: str | None = None, preview_url: str | None = None
+) -> FastAPI:
     """The experiment server.  ``token`` guards the experimenter endpoints (a random one is
     made when not given: read it from ``app.state.token``).  Migrations run here, before
-    the first request."""
+    the first request.  Previews run in a database of their own (``preview_url``, by default a
+    temporary file: ``preview.Previews``)."""
     app = ServerApp(
         title="trustseek experiment server",
         version=__version__,
@@ -131,7 +143,9 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     app.state.deploy_plans = Plans()  # the deploy sessions' plans, one parsed copy per content
     app.state.study_caches = StudyCaches()  # the studies' configurations and policies ...
     app.state.db.configure(info={"caches": app.state.study_caches})  # ... reached from the database sessions
+    app.state.previews = Previews(app.state.study_caches, preview_url)  # previews' rows: never in the study's database
     app.router.add_event_handler("shutdown", app.state.deploy_store.close)  # its connections end with the server
+    app.router.add_event_handler("shutdown", app.state.previews.close)
     app.add_exception_handler(RequestValidationError, validation_error)
     app.add_middleware(BodyGuard)
     app.add_middleware(RequestLog)
