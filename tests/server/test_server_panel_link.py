@@ -266,3 +266,38 @@ def test_the_default_practice_has_one_asked_trial_labelled_practice(client):
         "/api/studies", json={"name": "x", "blocks": BLOCKS, "practice": {"trials": ["low"], "asks": [2]}}, headers=H
     )
     assert bad.status_code == 422 and "practice.asks" in bad.text
+
+
+def test_two_tabs_of_one_panel_id_store_every_outcome_shown(client):
+    """Two tabs of one session take the trials in turns (each trial is committed by one tab, the
+    other's submission refused); the tab that committed trial 3 posts its outcome_shown late,
+    after the other tab committed trial 4 and answered the end questionnaire: it is stored."""
+    study = make_study(client, questionnaires=[{"name": "end", "items": [{"id": "a", "text": "A?"}], "when": "end"}])
+    token = token_of(join(client, study, "two-tabs"))
+    assert token_of(join(client, study, "two-tabs")) == token  # the second tab resumes the same session
+    h = {"Authorization": f"Bearer {token}"}
+    sid = client.get("/api/session", headers=h).json()["session_id"]
+    client.post(f"/api/sessions/{sid}/consent", json={"agree": True, "panel": {"PROLIFIC_PID": "two-tabs"}}, headers=h)
+
+    def submit(tab: str, n: int) -> int:
+        body = {"trial": n, "submission_id": f"{tab}-{n}", "human_action": "rely"}
+        return client.post(f"/api/sessions/{sid}/trials", json=body, headers=h).status_code
+
+    def shown(n: int) -> int:
+        ev = {"events": [{"type": "outcome_shown", "trial": n, "data": {"tab": n}}], "batch": f"shown-{n}"}
+        return client.post(f"/api/sessions/{sid}/events", json=ev, headers=h).status_code
+
+    assert client.get(f"/api/sessions/{sid}/state", headers=h).json()["trials_total"] == 2
+    assert (submit("a", 1), submit("b", 1)) == (200, 409)  # tab a commits trial 1; b follows the server
+    assert (submit("b", 2), submit("a", 2)) == (200, 409)  # b commits the last trial ...
+    body = {"questionnaire": "end", "after_trial": 2, "answers": {"a": 3}}
+    assert client.post(f"/api/sessions/{sid}/questionnaires", json=body, headers=h).json()["state"]["ended"]
+    assert shown(2) == 200
+    assert shown(1) == 200  # tab a's outcome of trial 1, delayed: stored after the end
+    assert shown(1) == 200  # a retry of that batch: stored once
+    other = {"events": [{"type": "click", "trial": 2}], "batch": "other"}
+    assert client.post(f"/api/sessions/{sid}/events", json=other, headers=h).status_code == 409  # nothing else
+    future = {"events": [{"type": "outcome_shown", "trial": 3}], "batch": "future"}
+    assert client.post(f"/api/sessions/{sid}/events", json=future, headers=h).status_code == 409  # no such trial
+    events = export(client, study["id"], "events")
+    assert sorted(events[events["type"] == "outcome_shown"]["trial"]) == [1, 2]

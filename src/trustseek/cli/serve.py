@@ -287,8 +287,8 @@ def study_cmd(
 ) -> None:
     """A study's lifecycle: its status, study link and progress; --status opens, pauses or closes it."""
     from ..server.db import open_database
+    from ..server.errors import Refused
     from ..server.lifecycle import STATUSES, progress, set_status
-    from ..server.sessions import SessionError
 
     _check_db(db)
     _check_existing_sqlite(db)
@@ -299,7 +299,7 @@ def study_cmd(
         if status is not None:
             try:
                 set_status(s, st, status)
-            except SessionError as exc:
+            except Refused as exc:
                 raise TrustseekError([f"--status {status}: {exc.message}"]) from None
         counts = progress(s, st.id)
         summary = {"study": st.id, "name": st.name, "status": st.status, "link_path": f"/join/{st.link_token}"}

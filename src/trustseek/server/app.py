@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import gc
 import logging
-import math
 import os
 import secrets
 from typing import Any
@@ -16,6 +15,7 @@ from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 from starlette.concurrency import run_in_threadpool
 
+from ..model.jsonfile import json_safe
 from ..version import __version__
 from .cache import StudyCaches
 from .db import DEFAULT_URL, open_database, safe_url
@@ -23,8 +23,9 @@ from .deploy.http import DeployFront
 from .deploy.plan import Plans
 from .deploy.routes import deploy
 from .deploy.store import DeployStore
+from .errors import Refused
 from .link_routes import STATIC, lifecycle, pages, static_page
-from .middleware import BodyGuard, RequestLog, ServerTiming
+from .middleware import BodyGuard, RequestLog, ServerTiming, status_of
 from .participant_routes import own, participant
 from .preview import Previews
 from .routes import experimenter
@@ -34,21 +35,17 @@ from .studies import more_problems
 log = logging.getLogger(__name__)
 
 
-def json_safe(value: Any) -> Any:
-    """``value`` with every non-finite number replaced by its name (``"NaN"``, ``"Infinity"``),
-    so that it can be written as standard JSON."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
-    if isinstance(value, dict):
-        return {k: json_safe(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [json_safe(v) for v in value]
-    return value
+async def refused(request: Request, exc: Exception) -> JSONResponse:
+    """A refusal of the session layers (``errors.Refused``) with its HTTP status, answered as an
+    ``HTTPException`` is (``{"detail": message}``)."""
+    assert isinstance(exc, Refused)
+    return JSONResponse(status_code=status_of(exc), content={"detail": exc.message})
 
 
 async def validation_error(request: Request, exc: Exception) -> JSONResponse:
-    """422 with every problem, as FastAPI answers, but always serialisable: a refused ``NaN``
-    is echoed as the string ``"NaN"`` (FastAPI's own answer would fail to serialise, a 500)."""
+    """422 with every problem, as FastAPI answers, but always serialisable: a refused ``NaN`` or
+    infinity is echoed as ``null``, the project's one rule (``model.jsonfile.json_safe``; FastAPI's
+    own answer would fail to serialise, a 500)."""
     errors = list(exc.errors()) if isinstance(exc, RequestValidationError) else []
     if isinstance(exc, RequestValidationError) and request.method == "POST" and request.url.path == "/api/studies":
         # a study's other problems too, not only its fields' (solving a policy may take a moment)
@@ -147,6 +144,7 @@ def create_app(
     app.router.add_event_handler("shutdown", app.state.deploy_store.close)  # its connections end with the server
     app.router.add_event_handler("shutdown", app.state.previews.close)
     app.add_exception_handler(RequestValidationError, validation_error)
+    app.add_exception_handler(Refused, refused)
     app.add_middleware(BodyGuard)
     app.add_middleware(RequestLog)
     app.add_middleware(ServerTiming)

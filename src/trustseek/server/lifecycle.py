@@ -26,8 +26,9 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
 from ..model.core import TrustModel
+from .errors import Conflict, NotAllowed
 from .orm import Session, Study, utcnow
-from .sessions import SessionError, ended, new_id, new_token, study_config
+from .sessions import ended, new_id, new_token, study_config
 from .studies import participant_plan
 
 STATUSES = ("draft", "open", "paused", "closed")
@@ -42,10 +43,10 @@ PANEL_ID_PARAMS = ("PROLIFIC_PID", "workerId", "id")
 def set_status(db: DBSession, study: Study, status: str) -> Study:
     """Move ``study`` to ``status`` (a move its lifecycle allows); commits."""
     if status not in STATUSES:
-        raise SessionError(400, f"status must be one of {list(STATUSES)}, got {status!r}")
+        raise NotAllowed(f"status must be one of {list(STATUSES)}, got {status!r}")
     if status != study.status and status not in MOVES[study.status]:
         allowed = list(MOVES[study.status]) or "none (a closed study stays closed)"
-        raise SessionError(409, f"a {study.status} study cannot become {status}; allowed: {allowed}")
+        raise Conflict(f"a {study.status} study cannot become {status}; allowed: {allowed}")
     study.status = status
     db.commit()
     return study
@@ -89,7 +90,7 @@ def create_participant(
     index = db.scalar(select(func.count()).select_from(Session).where(Session.study_id == study.id)) or 0
     label = participant or f"P{index + 1:03d}"
     if db.scalar(select(Session.id).where(Session.study_id == study.id, Session.participant == label)):
-        raise SessionError(409, f"participant {label!r} already exists in study {study.id}")
+        raise Conflict(f"participant {label!r} already exists in study {study.id}")
     cfg = study_config(db, study.id)
     seed = int(np.random.default_rng().integers(0, 2**31 - 1))
     plan = participant_plan(cfg, balanced_index(db, study), seed)

@@ -18,7 +18,7 @@ from .auth import require_experimenter
 from .lifecycle import Arrival, arrive, panel_ids, refusal, revoke, set_status
 from .orm import Session, Study
 from .schemas import ErrorOut, StatusIn
-from .sessions import SessionError, study_config
+from .sessions import study_config
 
 log = logging.getLogger(__name__)
 
@@ -122,10 +122,7 @@ def study_link(request: Request, st: Study) -> str:
 def post_status(study_id: str, body: StatusIn, request: Request):
     with request.app.state.db() as db:
         st = _study(db, study_id)
-        try:
-            set_status(db, st, body.status)
-        except SessionError as exc:
-            raise HTTPException(exc.status, exc.message) from None
+        set_status(db, st, body.status)
         log.info("study %s is now %s", st.id, st.status)
         return {"id": st.id, "status": st.status, "link": study_link(request, st)}
 

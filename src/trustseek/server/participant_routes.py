@@ -11,13 +11,13 @@ from sqlalchemy.exc import IntegrityError
 
 from .auth import Caller, bearer, require_session, session_for_token, token_of
 from .checks import SCREENED, grade_quiz, quiz_due, quiz_problems
+from .errors import Conflict
 from .lifecycle import panel_ids, refusal
 from .orm import Session, utcnow
 from .preview import session_db
-from .routes import _fail, errors
+from .routes import errors
 from .schemas import AnswersIn, ConsentIn, EventsIn, QuizIn, ReportIn, TrialIn
 from .sessions import (
-    SessionError,
     add_answers,
     add_events,
     add_report,
@@ -161,11 +161,7 @@ def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depe
         if started:
             log.info("session %s of study %s started (consent given)", row.id, row.study_id)
         if body.events:
-            try:
-                add_events(db, row, [e.model_dump() for e in body.events])
-            except SessionError as exc:
-                db.rollback()
-                _fail(exc)
+            add_events(db, row, [e.model_dump() for e in body.events])
     return session_state(request, s)
 
 
@@ -174,13 +170,9 @@ def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Dep
     _study_session(s)
     with _db(request, s) as db:
         _not_revoked(_row(db, s))
-        try:
-            t, dup = submit_trial(
-                db, s.id, body.trial, body.submission_id, body.human_action, body.effort_ms, [e.model_dump() for e in body.events]
-            )
-        except SessionError as exc:
-            db.rollback()
-            _fail(exc)
+        t, dup = submit_trial(
+            db, s.id, body.trial, body.submission_id, body.human_action, body.effort_ms, [e.model_dump() for e in body.events]
+        )
         result = participant_trial(t)
     return {"trial": result, "duplicate": dup, "state": session_state(request, s)}
 
@@ -219,14 +211,10 @@ def post_report(session_id: str, body: ReportIn, request: Request, s: Caller = D
         row = _row(db, s)
         _not_revoked(row)
         cfg = study_config(db, row.study_id) if row.study_id else {}
-        try:
-            over = ended(db, row, cfg)
-            rep, dup = add_report(db, row, cfg, body.after_trial, body.value)
-            if over and not dup:  # after the end only a repeat of a stored answer (a retry) is taken
-                raise SessionError(409, "this session has ended")
-        except SessionError as exc:
-            db.rollback()
-            _fail(exc)
+        over = ended(db, row, cfg)
+        rep, dup = add_report(db, row, cfg, body.after_trial, body.value)
+        if over and not dup:  # after the end only a repeat of a stored answer (a retry) is taken
+            raise Conflict("this session has ended")
         out = {"after_trial": rep.after_trial, "value": rep.value, "scope": rep.scope, "duplicate": dup}
     return {"report": out, "state": session_state(request, s)}
 
@@ -240,14 +228,10 @@ def post_answers(session_id: str, body: AnswersIn, request: Request, s: Caller =
         row = _row(db, s)
         _not_revoked(row)
         cfg = study_config(db, str(row.study_id))
-        try:
-            over = ended(db, row, cfg)
-            rows, dup = add_answers(db, row, cfg, body.questionnaire, body.after_trial, body.answers)
-            if over and not dup:  # after the end only a repeat of stored answers (a retry) is taken
-                raise SessionError(409, "this session has ended")
-        except SessionError as exc:
-            db.rollback()
-            _fail(exc)
+        over = ended(db, row, cfg)
+        rows, dup = add_answers(db, row, cfg, body.questionnaire, body.after_trial, body.answers)
+        if over and not dup:  # after the end only a repeat of stored answers (a retry) is taken
+            raise Conflict("this session has ended")
         out = {"questionnaire": body.questionnaire, "after_trial": body.after_trial, "items": len(rows), "duplicate": dup}
     return {"answers": out, "state": session_state(request, s)}
 
@@ -257,14 +241,12 @@ def post_events(session_id: str, body: EventsIn, request: Request, s: Caller = D
     with _db(request, s) as db:
         row = _row(db, s)
         _not_revoked(row)
-        try:
-            events = [e.model_dump() for e in body.events]
-            # after the end, the last trial's outcome shown on the page is still taken
-            late = all(e["trial"] == row.trials_done and e["type"] == "outcome_shown" for e in events)
-            if row.kind == "study" and not late and ended(db, row, study_config(db, str(row.study_id))):
-                raise SessionError(409, "this session has ended")
-            n, dup = add_events(db, row, events, body.batch)
-        except SessionError as exc:
-            db.rollback()
-            _fail(exc)
+        events = [e.model_dump() for e in body.events]
+        # after the end, the outcome shown of a committed trial is still taken: the page posts
+        # it as the outcome appears, and a second tab's or a slow connection's post may come
+        # after another tab has ended the session
+        late = all(e["type"] == "outcome_shown" and 1 <= (e["trial"] or 0) <= row.trials_done for e in events)
+        if row.kind == "study" and not late and ended(db, row, study_config(db, str(row.study_id))):
+            raise Conflict("this session has ended")
+        n, dup = add_events(db, row, events, body.batch)
     return {"stored": n, "duplicate": dup}

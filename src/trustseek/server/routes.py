@@ -21,7 +21,6 @@ from .schemas import (
     SessionsIn,
 )
 from .sessions import (
-    SessionError,
     new_id,
     p_high,
     study_config,
@@ -56,10 +55,6 @@ experimenter = APIRouter(
 
 def _db(request: Request):
     return request.app.state.db()
-
-
-def _fail(exc: SessionError):
-    raise HTTPException(exc.status, exc.message)
 
 
 def _link(request: Request, s: Session) -> str:
@@ -171,9 +166,6 @@ def create_sessions(study_id: str, body: SessionsIn, request: Request):
                         "trials": total_trials(s),
                     }
                 )
-        except SessionError as exc:
-            db.rollback()
-            _fail(exc)
         except IntegrityError:
             db.rollback()
             raise HTTPException(409, "a participant id was taken concurrently; retry") from None
