@@ -233,6 +233,8 @@ def test_a_revoked_link_gets_a_page_and_its_session_takes_nothing(client):
     h = {"Authorization": f"Bearer {link['token']}"}
     assert client.post(f"/api/sessions/{link['session_id']}/consent", json={"agree": True}, headers=h).status_code == 410
     assert client.get("/api/session", headers=h).status_code == 410
+    progress = client.get(f"/api/studies/{study['id']}", headers=H).json()["progress"]
+    assert (progress["revoked"], progress["new"]) == (1, 0)  # counted apart, not as a participant still to start
 
 
 def test_the_last_outcome_shown_is_stored_after_the_end(client):

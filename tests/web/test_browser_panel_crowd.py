@@ -14,6 +14,7 @@ from collections import Counter
 from pathlib import Path
 from urllib.parse import urlsplit
 
+import httpx
 import pandas as pd
 import pytest
 
@@ -171,9 +172,16 @@ def test_dashboard_and_the_pages_of_a_paused_closed_or_revoked_link(tmp_path):
     out = artifacts_dir(tmp_path)
     with ThreadServer(f"sqlite:///{tmp_path / 'pages.sqlite'}", TOKEN) as url:
         c = Client(url, TOKEN)
-        study = c.create_study({**STUDY, "quota": 40})
+        study = c.create_study({**STUDY, "quota": 40, "practice": {"trials": ["low"]}})  # the practice trial asks
         (link,) = c.create_sessions(study["id"], participants=["to-revoke"])
-        c.create_sessions(study["id"], count=1, pilot=True)
+        (pilot,) = c.create_sessions(study["id"], count=1, pilot=True)
+        ph = {"Authorization": f"Bearer {pilot['token']}"}
+        base = f"{url}/api/sessions/{pilot['session_id']}"
+        httpx.post(f"{base}/consent", json={"agree": True}, headers=ph).raise_for_status()
+        httpx.post(f"{base}/quiz", json={"attempt": 1, "answers": {"q": 0}}, headers=ph).raise_for_status()
+        assert httpx.get(f"{base}/state", headers=ph).json()["current"]["robot_action"] == "ask"
+        body = {"trial": 1, "submission_id": "asked", "human_action": "intervene", "effort_ms": 5000}
+        httpx.post(f"{base}/trials", json=body, headers=ph).raise_for_status()
         with sync_playwright() as p:
             browser = launch_chromium(p)
             page = browser.new_page(viewport={"width": 1320, "height": 700})
@@ -182,9 +190,13 @@ def test_dashboard_and_the_pages_of_a_paused_closed_or_revoked_link(tmp_path):
             for pid in ("dash-1", "dash-2"):
                 page.goto(f"{study['link']}?PROLIFIC_PID={pid}")
                 page.wait_for_selector("#screen-consent:not([hidden])")
+            page.screenshot(path=str(out / "page_join.png"))  # the consent page a study link opens
             page.check("#agree")
             page.click("#consent-btn")
             page.wait_for_selector("#screen-instructions:not([hidden])")
+            page.click("#start-btn")
+            page.wait_for_selector("#screen-quiz:not([hidden])")
+            page.screenshot(path=str(out / "page_quiz.png"))
             c.revoke(study["id"], link["session_id"])
             page.goto(link["link"])
             assert page.get_attribute("body", "data-page") == "revoked"
@@ -203,7 +215,11 @@ def test_dashboard_and_the_pages_of_a_paused_closed_or_revoked_link(tmp_path):
             assert dash.inner_text("#study-status") == "paused" and dash.is_disabled("#pause-study")
             assert urlsplit(dash.get_attribute("#study-link", "href")).path == urlsplit(study["link"]).path
             assert "revoked" in dash.inner_text("#rows") and "pilot" in dash.inner_text("#rows")
-            assert "of a quota of 40" in dash.inner_text("#progress")
+            assert "1 revoked" in dash.inner_text("#progress") and "of a quota of 40" in dash.inner_text("#progress") and "preview" not in dash.inner_text("#progress")
+            assert "Enter the experimenter token" not in dash.inner_text("body")  # a valid token says no more
+            pilot_row = dash.inner_text(f"#rows tr:has-text('{pilot['participant']}')")
+            assert "teleoperated (asked)" in pilot_row and "intervene" not in pilot_row, pilot_row
+            assert "0 / 4" in pilot_row and "(practice)" in pilot_row  # the practice trial counted apart
             dash.screenshot(path=str(out / "dashboard_study.png"))
             # a preview: the participant's view, where ?speed= works (and only there)
             page.goto(c.preview(study["id"]) + "?speed=3")

@@ -5,8 +5,7 @@
   arrivals, started sessions may finish).  ``open`` and ``paused`` alternate; any state may
   close.
 * Sessions are ``participant`` sessions, ``pilot`` sessions (flagged, left out of the analysis
-  export unless asked for) or ``preview`` sessions (the experimenter's look at the participant's
-  view: never exported, counted or balanced).
+  export unless asked for); previews run in a database of their own (``preview``).
 * The study link (``/join/<link token>``) gives every panel participant one session, keyed by
   the panel's participant id: a database unique constraint on (study, panel id) keeps it one
   under concurrent arrivals; the study row is locked while an arrival is placed, so that block
@@ -58,11 +57,15 @@ def counted(study_id: str):
 
 
 def progress(db: DBSession, study_id: str) -> dict[str, int]:
-    """Sessions of a study: participants by status (new, running, done, screened), then pilots
-    and previews."""
-    counts = dict.fromkeys(("new", "running", "done", "screened", "pilot", "preview"), 0)
-    for role, status in db.execute(select(Session.role, Session.status).where(Session.study_id == study_id)).all():
-        key = status if role == "participant" else role
+    """Sessions of a study: participants by status (new, running, done, screened; revoked
+    links apart), then pilots (previews are not in the study's database: ``preview``; those stored by earlier versions are
+    left out)."""
+    counts = dict.fromkeys(("new", "running", "done", "screened", "revoked", "pilot"), 0)
+    rows = db.execute(
+        select(Session.role, Session.status, Session.revoked_at).where(Session.study_id == study_id, Session.role != "preview")
+    )
+    for role, status, revoked_at in rows.all():
+        key = role if role != "participant" else "revoked" if revoked_at is not None else status
         counts[key] = counts.get(key, 0) + 1
     return counts
 

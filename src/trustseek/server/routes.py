@@ -96,7 +96,7 @@ def study_summary(db, st: Study, request: Request) -> dict:
         "status": st.status,
         "link": f"{base}/join/{st.link_token}" if st.link_token else None,
         "quota": cfg.get("quota"),
-        "participants": sum(v for k, v in counts.items() if k not in ("pilot", "preview")),
+        "participants": sum(v for k, v in counts.items() if k != "pilot"),
         "progress": counts,
         "blocks": [
             {
@@ -201,7 +201,7 @@ def dashboard(study_id: str, request: Request):
             .join(Session, Trial.session_id == Session.id)
             .where(Session.study_id == st.id, Trial.trial == Session.trials_done)
         ):
-            last[t.session_id] = trial_dict(t)
+            last[t.session_id] = {**trial_dict(t), "practice": bool(t.practice)}
         reports = {}
         for r in db.scalars(
             select(Report)
@@ -221,6 +221,7 @@ def dashboard(study_id: str, request: Request):
                     "link": _link(request, s),
                     "trials_done": s.trials_done,
                     "trials_total": total_trials(s),
+                    "practice_trials": sum(1 for t in s.plan["trials"] if t.get("practice")),
                     "score": s.score,
                     "belief": p_high(s.belief, n_trust),
                     "current": None
