@@ -74,7 +74,17 @@ def test_refusals_are_domain_errors_given_their_status_in_one_place():
 
 
 #: the server's layers below HTTP: they raise domain errors and name no status code
-SESSION_LAYERS = ("sessions", "lifecycle", "checks", "preview", "studies", "deploy/service", "deploy/plan", "deploy/store")
+SESSION_LAYERS = (
+    "sessions",
+    "answers",
+    "lifecycle",
+    "checks",
+    "preview",
+    "studies",
+    "deploy/service",
+    "deploy/plan",
+    "deploy/store",
+)
 
 
 @pytest.mark.parametrize("name", SESSION_LAYERS)

@@ -25,9 +25,10 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
 from ..model.core import TrustModel
+from .answers import ended
 from .errors import Conflict, NotAllowed
 from .orm import Session, Study, utcnow
-from .sessions import ended, new_id, new_token, study_config
+from .sessions import new_id, new_token, study_config
 from .studies import participant_plan
 
 STATUSES = ("draft", "open", "paused", "closed")

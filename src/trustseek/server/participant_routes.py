@@ -9,6 +9,7 @@ from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials
 from sqlalchemy.exc import IntegrityError
 
+from .answers import add_answers, add_report, ended, questionnaire_due, report_due
 from .auth import Caller, bearer, require_session, session_for_token, token_of
 from .checks import SCREENED, grade_quiz, quiz_due, quiz_problems
 from .errors import Conflict
@@ -17,20 +18,7 @@ from .orm import Session, utcnow
 from .preview import session_db
 from .routes import errors
 from .schemas import AnswersIn, ConsentIn, EventsIn, QuizIn, ReportIn, TrialIn
-from .sessions import (
-    add_answers,
-    add_events,
-    add_report,
-    ended,
-    lock,
-    participant_trial,
-    questionnaire_due,
-    report_due,
-    serve,
-    study_config,
-    submit_trial,
-    total_trials,
-)
+from .sessions import add_events, lock, participant_trial, serve, study_config, submit_trial, total_trials
 
 log = logging.getLogger(__name__)
 
