@@ -2,9 +2,10 @@
 study link at once (three of them a second tab of a panel id already running, some reloading
 during a trial, one returning after completing).  No duplicate sessions, one session per panel
 id, block orders balanced to within one, every trial and event stored once, completion codes
-shown only at the end.  Pages are driven by their state, never by wall-clock sleeps; on SQLite
-and on a throwaway PostgreSQL cluster.  The dashboard, the paused and closed pages and a
-revoked link are photographed."""
+shown only at the end.  Pages are driven by their state, never by wall-clock sleeps (on
+SQLite; concurrent arrivals on PostgreSQL are tested through the API).  The dashboard, the
+consent, quiz, paused, closed and completed pages and a revoked link are photographed; a
+preview run to its end page leaves the study's database and export unchanged."""
 
 from __future__ import annotations
 
@@ -105,6 +106,16 @@ async def run_participant(browser, link: str, k: int, pid: str) -> dict:
     return {"k": k, "pid": pid, "code": code, "codes_early": codes_early, "errors": errors}
 
 
+async def preview_run(link: str) -> dict:
+    from playwright.async_api import async_playwright
+
+    async with async_playwright() as p:
+        browser = await p.chromium.launch(executable_path=CHROMIUM, args=list(CHROMIUM_ARGS), headless=True)
+        result = await run_participant(browser, link, 0, "previewer")
+        await browser.close()
+    return result
+
+
 async def crowd(url: str, link: str, out: Path) -> tuple[list[dict], str]:
     from playwright.async_api import async_playwright
 
@@ -164,13 +175,14 @@ def test_twenty_participants_through_one_study_link(tmp_path, backend):
     assert all(shown[s] == [1, 2, 3, 4] for s in sessions["session"]), shown
 
 
-def test_dashboard_and_the_pages_of_a_paused_closed_or_revoked_link(tmp_path):
+def test_dashboard_the_pages_of_a_paused_closed_or_revoked_link_and_a_preview(tmp_path):
     from playwright.sync_api import sync_playwright
 
     from trustseek.testing.browser import launch_chromium
 
     out = artifacts_dir(tmp_path)
-    with ThreadServer(f"sqlite:///{tmp_path / 'pages.sqlite'}", TOKEN) as url:
+    path = tmp_path / "pages.sqlite"
+    with ThreadServer(f"sqlite:///{path}", TOKEN) as url:
         c = Client(url, TOKEN)
         study = c.create_study({**STUDY, "quota": 40, "practice": {"trials": ["low"]}})  # the practice trial asks
         (link,) = c.create_sessions(study["id"], participants=["to-revoke"])
@@ -233,29 +245,15 @@ def test_dashboard_and_the_pages_of_a_paused_closed_or_revoked_link(tmp_path):
             assert page.get_attribute("body", "data-page") == "closed"
             page.screenshot(path=str(out / "page_closed.png"))
             browser.close()
-        assert not errors, errors
-
-
-async def preview_run(link: str) -> dict:
-    from playwright.async_api import async_playwright
-
-    async with async_playwright() as p:
-        browser = await p.chromium.launch(executable_path=CHROMIUM, args=list(CHROMIUM_ARGS), headless=True)
-        result = await run_participant(browser, link, 0, "previewer")
-        await browser.close()
-    return result
-
-
-def test_a_preview_run_in_chromium_leaves_the_database_and_the_export_unchanged(tmp_path):
-    path = tmp_path / "preview.sqlite"
-    with ThreadServer(f"sqlite:///{path}", TOKEN) as url:
-        c = Client(url, TOKEN)
-        study = c.create_study(STUDY)
-        c.create_sessions(study["id"], count=1, pilot=True)
+        # a preview run to its end page (of a study without the practice's teleoperation) leaves
+        # the database and the export unchanged
+        other = c.create_study(STUDY)
+        c.create_sessions(other["id"], count=1, pilot=True)
         tables = ("trials", "sessions", "events")
-        export = {t: c.export(study["id"], table=t) for t in tables}
+        export = {t: c.export(other["id"], table=t) for t in tables}
         rows = database_rows(path)
-        result = asyncio.run(preview_run(c.preview(study["id"])))
+        result = asyncio.run(preview_run(c.preview(other["id"])))
+        assert result["code"] == "CROWD-OK" and not result["errors"], result  # the whole study was shown
         assert database_rows(path) == rows
-        assert {t: c.export(study["id"], table=t) for t in tables} == export
-    assert result["code"] == "CROWD-OK" and not result["errors"], result  # the whole study was shown, to its end page
+        assert {t: c.export(other["id"], table=t) for t in tables} == export
+    assert not errors, errors
