@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import io
 import signal
+import sqlite3
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import closing
 
 import httpx
 import pandas as pd
@@ -14,6 +16,13 @@ import pandas as pd
 from trustseek.client import Client
 from trustseek.data.trials import read_trials
 from trustseek.testing.servers import ThreadServer, free_port, serve_process
+
+
+def database_rows(path) -> dict[str, list[str]]:
+    """Every row of every table of a SQLite database file (each as its repr, sorted)."""
+    with closing(sqlite3.connect(path)) as con:
+        names = [r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")]
+        return {n: sorted(map(repr, con.execute(f'SELECT * FROM "{n}"'))) for n in names}
 
 
 def check_concurrent_duplicate_submissions(db_url: str, token: str) -> None:

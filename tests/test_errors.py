@@ -6,6 +6,8 @@ from __future__ import annotations
 import importlib
 import inspect
 import pkgutil
+import re
+from pathlib import Path
 
 import pytest
 
@@ -13,7 +15,8 @@ import trustseek
 from trustseek import paper_model, paper_task
 from trustseek.errors import TrustseekError
 from trustseek.model.jsonfile import ModelError, UnknownComplexityError
-from trustseek.server.sessions import SessionError
+from trustseek.server.errors import Conflict, Gone, NotAllowed, NotFound, TooLarge
+from trustseek.server.middleware import status_of
 
 # modules that only make sense as a program or inside Alembic
 NOT_IMPORTED = ("trustseek.__main__", "trustseek.server.migrations")
@@ -62,11 +65,30 @@ def test_an_unknown_complexity_is_a_model_error_and_a_key_error(lookup):
     assert str(info.value) == "unknown complexity 'medium'; expected one of ['low', 'high']"
 
 
-def test_a_session_error_carries_its_http_status():
-    err = SessionError(409, "trial 3 is not the current trial")
-    assert isinstance(err, TrustseekError)
-    assert (err.status, err.message, err.lines()) == (
-        409,
-        "trial 3 is not the current trial",
-        ["trial 3 is not the current trial"],
-    )
+def test_refusals_are_domain_errors_given_their_status_in_one_place():
+    err = Conflict("trial 3 is not the current trial")
+    assert isinstance(err, TrustseekError) and not hasattr(err, "status")
+    assert (err.message, err.lines()) == ("trial 3 is not the current trial", ["trial 3 is not the current trial"])
+    statuses = {kind: status_of(kind("x")) for kind in (NotAllowed, NotFound, Conflict, Gone, TooLarge)}
+    assert statuses == {NotAllowed: 400, NotFound: 404, Conflict: 409, Gone: 410, TooLarge: 413}
+
+
+#: the server's layers below HTTP: they raise domain errors and name no status code
+SESSION_LAYERS = (
+    "sessions",
+    "answers",
+    "lifecycle",
+    "checks",
+    "preview",
+    "studies",
+    "deploy/service",
+    "deploy/plan",
+    "deploy/store",
+)
+
+
+@pytest.mark.parametrize("name", SESSION_LAYERS)
+def test_the_session_layers_name_no_http_status(name):
+    source = (Path(trustseek.__file__).parent / "server" / f"{name}.py").read_text()
+    assert "fastapi" not in source and "HTTPException" not in source
+    assert not re.findall(r"\(\s*[45]\d\d\s*,", source), f"server/{name}.py passes a status code"

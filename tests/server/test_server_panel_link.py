@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 from fastapi.testclient import TestClient
 
+from server_checks import database_rows
 from trustseek.server import create_app
 from trustseek.testing.servers import TemporaryPostgres, postgres_binaries
 
@@ -180,16 +181,26 @@ def test_lifecycle_draft_open_paused_closed(client):
     assert export(client, sid, pilot="true")["participant"].nunique() == 2
 
 
-def test_a_pilot_and_a_preview_leave_the_analysis_export_unchanged(client):
-    study = make_study(client)
+def test_a_pilot_and_a_preview_leave_the_analysis_export_unchanged(client, tmp_path):
+    study = make_study(client, questionnaires=[{"name": "end", "items": [{"id": "a", "text": "A?"}], "when": "end"}])
     sid = study["id"]
     run_through(client, token_of(join(client, study, "real")), "real")
     before = export(client, sid).drop(columns=["committed_at"])
     before_reports = export(client, sid, "reports")
     (pilot,) = client.post(f"/api/studies/{sid}/sessions", json={"count": 1, "pilot": True}, headers=H).json()
     run_through(client, pilot["token"], "p")
+    rows = database_rows(tmp_path / "link.sqlite")
     preview = client.post(f"/api/studies/{sid}/preview", headers=H).json()
-    run_through(client, urlsplit(preview["link"]).path.rsplit("/", 1)[-1], "v")
+    token = urlsplit(preview["link"]).path.rsplit("/", 1)[-1]
+    assert client.get(urlsplit(preview["link"]).path).status_code == 200  # the participant's page
+    st = run_through(client, token, "v")
+    h = {"Authorization": f"Bearer {token}"}
+    assert st["preview"] and st["trials_done"] == 2 and st["questionnaire"]["name"] == "end"
+    body = {"questionnaire": "end", "after_trial": 2, "answers": {"a": 4}}
+    assert client.post(f"/api/sessions/{st['session_id']}/questionnaires", json=body, headers=h).json()["state"]["ended"]
+    ev = {"events": [{"type": "outcome_shown", "trial": 2}], "batch": "b1"}
+    assert client.post(f"/api/sessions/{st['session_id']}/events", json=ev, headers=h).status_code == 200
+    assert database_rows(tmp_path / "link.sqlite") == rows  # no row of the preview in the study's database
     pd.testing.assert_frame_equal(export(client, sid).drop(columns=["committed_at"]), before)
     pd.testing.assert_frame_equal(export(client, sid, "reports"), before_reports)
     assert len(export(client, sid, "sessions")) == 1
@@ -197,6 +208,18 @@ def test_a_pilot_and_a_preview_leave_the_analysis_export_unchanged(client):
     dash = client.get(f"/api/studies/{sid}/dashboard", headers=H).json()
     assert [r["role"] for r in dash["participants"]] == ["participant", "pilot"]  # the preview is not listed
     assert dash["study"]["participants"] == 1
+
+
+def test_previews_beyond_the_kept_number_are_forgotten(client, monkeypatch):
+    from trustseek.server import preview as previews
+
+    monkeypatch.setattr(previews, "MAX_PREVIEWS", 2)
+    study = make_study(client)
+    links = [client.post(f"/api/studies/{study['id']}/preview", headers=H).json() for _ in range(3)]
+    tokens = [urlsplit(x["link"]).path.rsplit("/", 1)[-1] for x in links]
+    gone = client.get("/api/session", headers={"Authorization": f"Bearer {tokens[0]}"})
+    assert gone.status_code == 401, gone.text  # the oldest is forgotten
+    assert client.get("/api/session", headers={"Authorization": f"Bearer {tokens[2]}"}).json()["preview"]
 
 
 def test_a_revoked_link_gets_a_page_and_its_session_takes_nothing(client):
@@ -210,6 +233,8 @@ def test_a_revoked_link_gets_a_page_and_its_session_takes_nothing(client):
     h = {"Authorization": f"Bearer {link['token']}"}
     assert client.post(f"/api/sessions/{link['session_id']}/consent", json={"agree": True}, headers=h).status_code == 410
     assert client.get("/api/session", headers=h).status_code == 410
+    progress = client.get(f"/api/studies/{study['id']}", headers=H).json()["progress"]
+    assert (progress["revoked"], progress["new"]) == (1, 0)  # counted apart, not as a participant still to start
 
 
 def test_the_last_outcome_shown_is_stored_after_the_end(client):
@@ -243,3 +268,38 @@ def test_the_default_practice_has_one_asked_trial_labelled_practice(client):
         "/api/studies", json={"name": "x", "blocks": BLOCKS, "practice": {"trials": ["low"], "asks": [2]}}, headers=H
     )
     assert bad.status_code == 422 and "practice.asks" in bad.text
+
+
+def test_two_tabs_of_one_panel_id_store_every_outcome_shown(client):
+    """Two tabs of one session take the trials in turns (each trial is committed by one tab, the
+    other's submission refused); the tab that committed trial 3 posts its outcome_shown late,
+    after the other tab committed trial 4 and answered the end questionnaire: it is stored."""
+    study = make_study(client, questionnaires=[{"name": "end", "items": [{"id": "a", "text": "A?"}], "when": "end"}])
+    token = token_of(join(client, study, "two-tabs"))
+    assert token_of(join(client, study, "two-tabs")) == token  # the second tab resumes the same session
+    h = {"Authorization": f"Bearer {token}"}
+    sid = client.get("/api/session", headers=h).json()["session_id"]
+    client.post(f"/api/sessions/{sid}/consent", json={"agree": True, "panel": {"PROLIFIC_PID": "two-tabs"}}, headers=h)
+
+    def submit(tab: str, n: int) -> int:
+        body = {"trial": n, "submission_id": f"{tab}-{n}", "human_action": "rely"}
+        return client.post(f"/api/sessions/{sid}/trials", json=body, headers=h).status_code
+
+    def shown(n: int) -> int:
+        ev = {"events": [{"type": "outcome_shown", "trial": n, "data": {"tab": n}}], "batch": f"shown-{n}"}
+        return client.post(f"/api/sessions/{sid}/events", json=ev, headers=h).status_code
+
+    assert client.get(f"/api/sessions/{sid}/state", headers=h).json()["trials_total"] == 2
+    assert (submit("a", 1), submit("b", 1)) == (200, 409)  # tab a commits trial 1; b follows the server
+    assert (submit("b", 2), submit("a", 2)) == (200, 409)  # b commits the last trial ...
+    body = {"questionnaire": "end", "after_trial": 2, "answers": {"a": 3}}
+    assert client.post(f"/api/sessions/{sid}/questionnaires", json=body, headers=h).json()["state"]["ended"]
+    assert shown(2) == 200
+    assert shown(1) == 200  # tab a's outcome of trial 1, delayed: stored after the end
+    assert shown(1) == 200  # a retry of that batch: stored once
+    other = {"events": [{"type": "click", "trial": 2}], "batch": "other"}
+    assert client.post(f"/api/sessions/{sid}/events", json=other, headers=h).status_code == 409  # nothing else
+    future = {"events": [{"type": "outcome_shown", "trial": 3}], "batch": "future"}
+    assert client.post(f"/api/sessions/{sid}/events", json=future, headers=h).status_code == 409  # no such trial
+    events = export(client, study["id"], "events")
+    assert sorted(events[events["type"] == "outcome_shown"]["trial"]) == [1, 2]

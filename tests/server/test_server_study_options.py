@@ -381,7 +381,7 @@ def test_migration_0002_gives_sessions_made_before_it_a_secret(tmp_path):
     ),
 )
 def test_an_answer_is_accepted_iff_it_gives_every_item_a_point_of_the_scale(lo, width, n_items, answers):
-    from trustseek.server.sessions import answer_problems
+    from trustseek.server.answers import answer_problems
 
     q = {"name": "q", "items": [{"id": f"i{k}", "text": "t"} for k in range(n_items)], "scale": {"min": lo, "max": lo + width}}
     complete = set(answers) == {f"i{k}" for k in range(n_items)}

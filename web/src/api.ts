@@ -112,6 +112,7 @@ export class Api {
     // the link holds only the token; the server answers with the session it belongs to
     const st = await this.call<State>("GET", `/api/session`);
     this.sessionId = st.session_id;
+    this.resend();
     return st;
   }
 
@@ -131,8 +132,41 @@ export class Api {
   answer(questionnaire: string, after_trial: number, answers: Record<string, number>) {
     return this.call<{ state: State }>("POST", `/api/sessions/${this.sessionId}/questionnaires`, { questionnaire, after_trial, answers });
   }
-  /** A batch of UI events; its id is made once, so the retries of one batch are stored once. */
+  /** A batch of UI events; its id is made once, so the retries of one batch are stored once.  Until
+   * the server answers, the batch is kept in the page's storage (`outbox`): a page reloaded or
+   * closed meanwhile sends it again when the session's page opens next (`resend`). */
   events(events: UIEvent[]) {
-    return this.call("POST", `/api/sessions/${this.sessionId}/events`, { events, batch: batchId() });
+    const batch = batchId();
+    this.outbox((kept) => { kept[batch] = events; });
+    return this.send(batch, events);
+  }
+
+  private async send(batch: string, events: UIEvent[]) {
+    try {
+      return await this.call("POST", `/api/sessions/${this.sessionId}/events`, { events, batch });
+    } finally {
+      this.outbox((kept) => { delete kept[batch]; }); // answered: stored, a repeat, or refused
+    }
+  }
+
+  private resend() {
+    for (const [batch, events] of Object.entries(this.outbox())) this.send(batch, events).catch(() => undefined);
+  }
+
+  /** The kept batches of this session (by batch id), changed by `change` when given. */
+  private outbox(change?: (kept: Record<string, UIEvent[]>) => void): Record<string, UIEvent[]> {
+    const key = `trustseek-outbox-${this.sessionId}`;
+    let kept: Record<string, UIEvent[]> = {};
+    try {
+      kept = JSON.parse(localStorage.getItem(key) ?? "{}") as Record<string, UIEvent[]>;
+      if (change) {
+        change(kept);
+        if (Object.keys(kept).length) localStorage.setItem(key, JSON.stringify(kept));
+        else localStorage.removeItem(key);
+      }
+    } catch {
+      // storage unavailable or full: the batch is only retried while this page is open
+    }
+    return kept;
   }
 }

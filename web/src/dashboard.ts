@@ -1,5 +1,5 @@
 // The experimenter's live dashboard: the study's status, link and overall progress with its
-// lifecycle (open, pause, close), preview, pilot links and the data bundle; per participant the
+// lifecycle (open, pause, close), preview (not recorded), pilot links and the data bundle; per participant the
 // status, panel id, start, end, last activity, trial, robot and human action, outcome, score and
 // current trust belief; refreshed every second.
 
@@ -77,9 +77,9 @@ const COLS = 13;
 interface Row {
   participant: string; session_id: string; status: string; role: string; panel_id: string | null; revoked: boolean;
   started_at: string | null; ended_at: string | null; last_activity: string;
-  trials_done: number; trials_total: number; score: number; belief: number | null; link: string;
+  trials_done: number; trials_total: number; practice_trials: number; score: number; belief: number | null; link: string;
   current: { trial: number; complexity: string; robot_action: string } | null;
-  last: { trial: number; complexity: string; robot_action: string; human_action: string | null; outcome: string; reward: number } | null;
+  last: { trial: number; complexity: string; robot_action: string; human_action: string | null; outcome: string; reward: number; practice: boolean } | null;
   last_self_report: number | null;
 }
 
@@ -113,12 +113,24 @@ function renderSummary(s: Summary) {
   $<HTMLAnchorElement>("study-link").textContent = s.link ?? "";
   $<HTMLAnchorElement>("study-link").href = s.link ?? "#";
   $("progress").innerHTML = `<span class="bar wide"><i style="width:${pct}%"></i></span>
-    <b>${p.done}</b> done, <b>${p.running}</b> running, <b>${p.new}</b> not yet started${s.quota ? ` of a quota of <b>${s.quota}</b>` : ""}${p.screened ? `, ${p.screened} screened out` : ""}; ${p.pilot} pilot, ${p.preview} preview`;
+    <b>${p.done}</b> done, <b>${p.running}</b> running, <b>${p.new}</b> not yet started${s.quota ? ` of a quota of <b>${s.quota}</b>` : ""}${p.screened ? `, ${p.screened} screened out` : ""}${p.revoked ? `, ${p.revoked} revoked` : ""}${p.pilot ? `; ${p.pilot} pilot` : ""}`;
   $("summary").textContent = `${s.name}: ${s.blocks.map((b) => `${b.name} (${b.policy})`).join(", ")}; counterbalance ${s.counterbalance}; self-report ${s.self_report}`;
   for (const [id, to] of [["open-study", "open"], ["pause-study", "paused"], ["close-study", "closed"]] as const) {
     const allowed: Record<string, string[]> = { draft: ["open", "closed"], open: ["paused", "closed"], paused: ["open", "closed"], closed: [] };
     $<HTMLButtonElement>(id).disabled = !(allowed[s.status] ?? []).includes(to);
   }
+}
+
+/** A trial's number as the participant's page shows it: practice trials apart from the study's. */
+function trialLabel(r: Row, n: number): string {
+  return n <= r.practice_trials ? `practice ${n}` : String(n - r.practice_trials);
+}
+
+/** Study trials done of the study's (practice trials are not counted, as on the participant's end page). */
+function progressOf(r: Row): string {
+  const np = r.practice_trials;
+  if (r.trials_done < np) return `practice ${r.trials_done} / ${np}`;
+  return `${r.trials_done - np} / ${r.trials_total - np}`;
 }
 
 function renderRow(r: Row, now: number): string {
@@ -127,10 +139,10 @@ function renderRow(r: Row, now: number): string {
   const status = r.revoked ? "revoked" : r.status;
   return `<tr><td>${esc(r.participant)}${r.role === "pilot" ? ' <span class="pill pilot">pilot</span>' : ""}</td>
     <td>${esc(r.panel_id ?? "")}</td><td><span class="pill ${esc(status)}">${esc(status)}</span></td>
-    <td>${r.trials_done} / ${r.trials_total}${r.current ? ` <span class="muted">(now ${r.current.trial}: ${esc(r.current.robot_action)})</span>` : ""}</td>
+    <td>${progressOf(r)}${r.current ? ` <span class="muted">(now ${trialLabel(r, r.current.trial)}: ${esc(r.current.robot_action)})</span>` : ""}</td>
     <td>${esc(when(r.started_at, now))}</td><td>${esc(when(r.ended_at, now))}</td><td>${esc(when(r.last_activity, now))}</td>
     <td>${esc(t?.complexity ?? "")} ${esc(t?.robot_action ?? "")}</td><td>${esc(humanAction(t))}</td>
-    <td>${esc(t?.outcome ?? "")}${t ? ` <span class="muted">(${t.reward > 0 ? "+" : ""}${t.reward})</span>` : ""}</td>
+    <td>${esc(t?.outcome ?? "")}${t ? ` <span class="muted">(${t.practice ? "practice" : `${t.reward > 0 ? "+" : ""}${t.reward}`})</span>` : ""}</td>
     <td>${r.score}</td>
     <td>${b === null ? "" : `<span class="bar"><i style="width:${(b * 100).toFixed(0)}%"></i></span>${b.toFixed(2)}`}${r.last_self_report !== null ? ` <span class="muted">(said ${r.last_self_report})</span>` : ""}</td>
     <td><a href="${esc(r.link)}" target="_blank" rel="noreferrer">link</a>${r.revoked ? "" : ` <button class="small-btn" data-revoke="${esc(r.session_id)}">revoke</button>`}</td></tr>`;

@@ -7,6 +7,7 @@ import logging
 import os
 import secrets
 import sys
+import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -113,19 +114,21 @@ def serve(
             uvicorn.run(application, host=host, port=port, log_level=log_level, access_log=False)
             return
         # each worker builds its own app from the environment (the token never appears in argv)
-        from ..server.app import ENV_DB, ENV_PUBLIC_URL, ENV_TOKEN
+        from ..server.app import ENV_DB, ENV_PREVIEW_DB, ENV_PUBLIC_URL, ENV_TOKEN
 
-        os.environ.update({ENV_DB: db, ENV_TOKEN: token, ENV_PUBLIC_URL: public_url or ""})
         console.print(f"  workers:     {workers} processes")
-        uvicorn.run(
-            "trustseek.server.app:from_environment",
-            factory=True,
-            workers=workers,
-            host=host,
-            port=port,
-            log_level=log_level,
-            access_log=False,
-        )
+        with tempfile.TemporaryDirectory(prefix="trustseek-previews-") as previews:  # the workers' previews, shared
+            preview_db = f"sqlite:///{Path(previews) / 'previews.sqlite'}"
+            os.environ.update({ENV_DB: db, ENV_TOKEN: token, ENV_PUBLIC_URL: public_url or "", ENV_PREVIEW_DB: preview_db})
+            uvicorn.run(
+                "trustseek.server.app:from_environment",
+                factory=True,
+                workers=workers,
+                host=host,
+                port=port,
+                log_level=log_level,
+                access_log=False,
+            )
 
 
 GENERATED_TOKEN_FILE = Path("trustseek-token")
@@ -284,8 +287,8 @@ def study_cmd(
 ) -> None:
     """A study's lifecycle: its status, study link and progress; --status opens, pauses or closes it."""
     from ..server.db import open_database
+    from ..server.errors import Refused
     from ..server.lifecycle import STATUSES, progress, set_status
-    from ..server.sessions import SessionError
 
     _check_db(db)
     _check_existing_sqlite(db)
@@ -296,7 +299,7 @@ def study_cmd(
         if status is not None:
             try:
                 set_status(s, st, status)
-            except SessionError as exc:
+            except Refused as exc:
                 raise TrustseekError([f"--status {status}: {exc.message}"]) from None
         counts = progress(s, st.id)
         summary = {"study": st.id, "name": st.name, "status": st.status, "link_path": f"/join/{st.link_token}"}

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import gc
 import logging
-import math
 import os
 import secrets
 from typing import Any
@@ -16,6 +15,7 @@ from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 from starlette.concurrency import run_in_threadpool
 
+from ..model.jsonfile import json_safe
 from ..version import __version__
 from .cache import StudyCaches
 from .db import DEFAULT_URL, open_database, safe_url
@@ -23,9 +23,11 @@ from .deploy.http import DeployFront
 from .deploy.plan import Plans
 from .deploy.routes import deploy
 from .deploy.store import DeployStore
+from .errors import Refused
 from .link_routes import STATIC, lifecycle, pages, static_page
-from .middleware import BodyGuard, RequestLog, ServerTiming
+from .middleware import BodyGuard, RequestLog, ServerTiming, status_of
 from .participant_routes import own, participant
+from .preview import Previews
 from .routes import experimenter
 from .schemas import ErrorOut
 from .studies import more_problems
@@ -33,21 +35,17 @@ from .studies import more_problems
 log = logging.getLogger(__name__)
 
 
-def json_safe(value: Any) -> Any:
-    """``value`` with every non-finite number replaced by its name (``"NaN"``, ``"Infinity"``),
-    so that it can be written as standard JSON."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
-    if isinstance(value, dict):
-        return {k: json_safe(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [json_safe(v) for v in value]
-    return value
+async def refused(request: Request, exc: Exception) -> JSONResponse:
+    """A refusal of the session layers (``errors.Refused``) with its HTTP status, answered as an
+    ``HTTPException`` is (``{"detail": message}``)."""
+    assert isinstance(exc, Refused)
+    return JSONResponse(status_code=status_of(exc), content={"detail": exc.message})
 
 
 async def validation_error(request: Request, exc: Exception) -> JSONResponse:
-    """422 with every problem, as FastAPI answers, but always serialisable: a refused ``NaN``
-    is echoed as the string ``"NaN"`` (FastAPI's own answer would fail to serialise, a 500)."""
+    """422 with every problem, as FastAPI answers, but always serialisable: a refused ``NaN`` or
+    infinity is echoed as ``null``, the project's one rule (``model.jsonfile.json_safe``; FastAPI's
+    own answer would fail to serialise, a 500)."""
     errors = list(exc.errors()) if isinstance(exc, RequestValidationError) else []
     if isinstance(exc, RequestValidationError) and request.method == "POST" and request.url.path == "/api/studies":
         # a study's other problems too, not only its fields' (solving a policy may take a moment)
@@ -98,24 +96,35 @@ def settle_memory() -> None:
 
 #: the environment variables :func:`from_environment` reads (``trustseek serve --workers N`` sets them)
 ENV_DB, ENV_TOKEN, ENV_PUBLIC_URL = "TRUSTSEEK_DB", "TRUSTSEEK_TOKEN", "TRUSTSEEK_PUBLIC_URL"
+#: the previews' database that the worker processes share (``preview.Previews``)
+ENV_PREVIEW_DB = "TRUSTSEEK_PREVIEW_DB"
 
 
 def from_environment() -> FastAPI:
     """The server configured by the environment: ``$TRUSTSEEK_DB`` (the database URL),
-    ``$TRUSTSEEK_TOKEN`` (the experimenter token) and ``$TRUSTSEEK_PUBLIC_URL``.  This is the
+    ``$TRUSTSEEK_TOKEN`` (the experimenter token), ``$TRUSTSEEK_PUBLIC_URL`` and
+    ``$TRUSTSEEK_PREVIEW_DB`` (the previews' database the workers share).  This is the
     application factory each worker process of ``trustseek serve --workers N`` builds."""
     token = os.environ.get(ENV_TOKEN)
     if not token:
         raise RuntimeError(f"${ENV_TOKEN} is not set")
-    app = create_app(os.environ.get(ENV_DB, DEFAULT_URL), token=token, public_url=os.environ.get(ENV_PUBLIC_URL) or None)
+    app = create_app(
+        os.environ.get(ENV_DB, DEFAULT_URL),
+        token=token,
+        public_url=os.environ.get(ENV_PUBLIC_URL) or None,
+        preview_url=os.environ.get(ENV_PREVIEW_DB) or None,
+    )
     settle_memory()
     return app
 
 
-def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: str | None = None) -> FastAPI:
+def create_app(
+    db_url: str = DEFAULT_URL, token: str | None = None, public_url: str | None = None, preview_url: str | None = None
+) -> FastAPI:
     """The experiment server.  ``token`` guards the experimenter endpoints (a random one is
     made when not given: read it from ``app.state.token``).  Migrations run here, before
-    the first request."""
+    the first request.  Previews run in a database of their own (``preview_url``, by default a
+    temporary file: ``preview.Previews``)."""
     app = ServerApp(
         title="trustseek experiment server",
         version=__version__,
@@ -131,8 +140,11 @@ def create_app(db_url: str = DEFAULT_URL, token: str | None = None, public_url: 
     app.state.deploy_plans = Plans()  # the deploy sessions' plans, one parsed copy per content
     app.state.study_caches = StudyCaches()  # the studies' configurations and policies ...
     app.state.db.configure(info={"caches": app.state.study_caches})  # ... reached from the database sessions
+    app.state.previews = Previews(app.state.study_caches, preview_url)  # previews' rows: never in the study's database
     app.router.add_event_handler("shutdown", app.state.deploy_store.close)  # its connections end with the server
+    app.router.add_event_handler("shutdown", app.state.previews.close)
     app.add_exception_handler(RequestValidationError, validation_error)
+    app.add_exception_handler(Refused, refused)
     app.add_middleware(BodyGuard)
     app.add_middleware(RequestLog)
     app.add_middleware(ServerTiming)

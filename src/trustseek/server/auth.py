@@ -30,10 +30,12 @@ async def require_experimenter(request: Request, creds: HTTPAuthorizationCredent
 
 @dataclass(frozen=True)
 class Caller:
-    """The session a token belongs to (tokens never change, so this is cached per process)."""
+    """The session a token belongs to (tokens never change, so this is cached per process); a
+    preview's session is in the previews' database (``preview.Previews``)."""
 
     id: str
     kind: str
+    preview: bool = False
 
 
 def caller_for_token(state: Any, token: str) -> Caller | None:
@@ -43,9 +45,14 @@ def caller_for_token(state: Any, token: str) -> Caller | None:
     if caller is None:
         with state.db() as db:
             row = db.execute(select(Session.id, Session.kind).where(Session.token == token)).first()
-        if row is None:
-            return None
-        caller = remember_token(state, token, Caller(row.id, row.kind))
+        if row is not None:
+            caller = Caller(row.id, row.kind)
+        else:
+            found = state.previews.find(token)
+            if found is None:
+                return None
+            caller = Caller(found[0], found[1], preview=True)
+        caller = remember_token(state, token, caller)
     return caller
 
 

@@ -5,8 +5,7 @@
   arrivals, started sessions may finish).  ``open`` and ``paused`` alternate; any state may
   close.
 * Sessions are ``participant`` sessions, ``pilot`` sessions (flagged, left out of the analysis
-  export unless asked for) or ``preview`` sessions (the experimenter's look at the participant's
-  view: never exported, counted or balanced).
+  export unless asked for); previews run in a database of their own (``preview``).
 * The study link (``/join/<link token>``) gives every panel participant one session, keyed by
   the panel's participant id: a database unique constraint on (study, panel id) keeps it one
   under concurrent arrivals; the study row is locked while an arrival is placed, so that block
@@ -26,8 +25,10 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
 from ..model.core import TrustModel
+from .answers import ended
+from .errors import Conflict, NotAllowed
 from .orm import Session, Study, utcnow
-from .sessions import SessionError, ended, new_id, new_token, study_config
+from .sessions import new_id, new_token, study_config
 from .studies import participant_plan
 
 STATUSES = ("draft", "open", "paused", "closed")
@@ -42,10 +43,10 @@ PANEL_ID_PARAMS = ("PROLIFIC_PID", "workerId", "id")
 def set_status(db: DBSession, study: Study, status: str) -> Study:
     """Move ``study`` to ``status`` (a move its lifecycle allows); commits."""
     if status not in STATUSES:
-        raise SessionError(400, f"status must be one of {list(STATUSES)}, got {status!r}")
+        raise NotAllowed(f"status must be one of {list(STATUSES)}, got {status!r}")
     if status != study.status and status not in MOVES[study.status]:
         allowed = list(MOVES[study.status]) or "none (a closed study stays closed)"
-        raise SessionError(409, f"a {study.status} study cannot become {status}; allowed: {allowed}")
+        raise Conflict(f"a {study.status} study cannot become {status}; allowed: {allowed}")
     study.status = status
     db.commit()
     return study
@@ -57,11 +58,15 @@ def counted(study_id: str):
 
 
 def progress(db: DBSession, study_id: str) -> dict[str, int]:
-    """Sessions of a study: participants by status (new, running, done, screened), then pilots
-    and previews."""
-    counts = dict.fromkeys(("new", "running", "done", "screened", "pilot", "preview"), 0)
-    for role, status in db.execute(select(Session.role, Session.status).where(Session.study_id == study_id)).all():
-        key = status if role == "participant" else role
+    """Sessions of a study: participants by status (new, running, done, screened; revoked
+    links apart), then pilots (previews are not in the study's database: ``preview``; those stored by earlier versions are
+    left out)."""
+    counts = dict.fromkeys(("new", "running", "done", "screened", "revoked", "pilot"), 0)
+    rows = db.execute(
+        select(Session.role, Session.status, Session.revoked_at).where(Session.study_id == study_id, Session.role != "preview")
+    )
+    for role, status, revoked_at in rows.all():
+        key = role if role != "participant" else "revoked" if revoked_at is not None else status
         counts[key] = counts.get(key, 0) + 1
     return counts
 
@@ -89,7 +94,7 @@ def create_participant(
     index = db.scalar(select(func.count()).select_from(Session).where(Session.study_id == study.id)) or 0
     label = participant or f"P{index + 1:03d}"
     if db.scalar(select(Session.id).where(Session.study_id == study.id, Session.participant == label)):
-        raise SessionError(409, f"participant {label!r} already exists in study {study.id}")
+        raise Conflict(f"participant {label!r} already exists in study {study.id}")
     cfg = study_config(db, study.id)
     seed = int(np.random.default_rng().integers(0, 2**31 - 1))
     plan = participant_plan(cfg, balanced_index(db, study), seed)

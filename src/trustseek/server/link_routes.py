@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import html
 import logging
-import secrets
 import urllib.parse
 from pathlib import Path
 from typing import Any
@@ -16,10 +15,10 @@ from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Resp
 from sqlalchemy import select
 
 from .auth import require_experimenter
-from .lifecycle import Arrival, arrive, create_participant, panel_ids, refusal, revoke, set_status
+from .lifecycle import Arrival, arrive, panel_ids, refusal, revoke, set_status
 from .orm import Session, Study
 from .schemas import ErrorOut, StatusIn
-from .sessions import SessionError, study_config
+from .sessions import study_config
 
 log = logging.getLogger(__name__)
 
@@ -123,10 +122,7 @@ def study_link(request: Request, st: Study) -> str:
 def post_status(study_id: str, body: StatusIn, request: Request):
     with request.app.state.db() as db:
         st = _study(db, study_id)
-        try:
-            set_status(db, st, body.status)
-        except SessionError as exc:
-            raise HTTPException(exc.status, exc.message) from None
+        set_status(db, st, body.status)
         log.info("study %s is now %s", st.id, st.status)
         return {"id": st.id, "status": st.status, "link": study_link(request, st)}
 
@@ -134,13 +130,13 @@ def post_status(study_id: str, body: StatusIn, request: Request):
 @lifecycle.post("/studies/{study_id}/preview", status_code=201, summary="A preview of the participant's view, not recorded")
 def post_preview(study_id: str, request: Request):
     """A preview session: the participant's view as a participant sees it (``?speed=`` works here
-    only), kept apart from the data: never exported, counted or balanced."""
+    only), run in the previews' own database (``preview.Previews``): nothing of it is stored with
+    the study, so it is never exported, counted or balanced."""
     with request.app.state.db() as db:
         st = _study(db, study_id)
-        s = create_participant(db, st, f"preview-{secrets.token_hex(4)}", role="preview")
-        db.commit()
-        base = request.app.state.public_url or str(request.base_url).rstrip("/")
-        return {"session_id": s.id, "link": f"{base}/s/{s.token}", "role": s.role}
+        s = request.app.state.previews.start(st)
+    base = request.app.state.public_url or str(request.base_url).rstrip("/")
+    return {"session_id": s.id, "link": f"{base}/s/{s.token}", "role": s.role}
 
 
 @lifecycle.post("/studies/{study_id}/sessions/{session_id}/revoke", summary="Revoke a participant's link")

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from .auth import caller_for_token
+from .errors import Conflict, Gone, NotAllowed, NotFound, Refused, TooLarge
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]
@@ -26,6 +27,16 @@ Send = Callable[[Message], Awaitable[None]]
 ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
 
 log = logging.getLogger(__name__)
+
+#: the HTTP status of each refusal of the session layers (``errors``): the one mapping, used by
+#: the application's handler of ``Refused`` (``app``) and by the decision API's front (``deploy.http``)
+STATUS: dict[type[Refused], int] = {NotAllowed: 400, NotFound: 404, Conflict: 409, Gone: 410, TooLarge: 413}
+
+
+def status_of(exc: Refused) -> int:
+    """The HTTP status of a refusal (of its class, or the nearest class above it in ``STATUS``)."""
+    return next(STATUS[c] for c in type(exc).__mro__ if c in STATUS)
+
 
 #: path parameters that are credentials: never logged
 SECRET_PARAMS = frozenset({"token"})

@@ -9,27 +9,16 @@ from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials
 from sqlalchemy.exc import IntegrityError
 
+from .answers import add_answers, add_report, ended, questionnaire_due, report_due
 from .auth import Caller, bearer, require_session, session_for_token, token_of
 from .checks import SCREENED, grade_quiz, quiz_due, quiz_problems
+from .errors import Conflict
 from .lifecycle import panel_ids, refusal
 from .orm import Session, utcnow
-from .routes import _db, _fail, errors
+from .preview import session_db
+from .routes import errors
 from .schemas import AnswersIn, ConsentIn, EventsIn, QuizIn, ReportIn, TrialIn
-from .sessions import (
-    SessionError,
-    add_answers,
-    add_events,
-    add_report,
-    ended,
-    lock,
-    participant_trial,
-    questionnaire_due,
-    report_due,
-    serve,
-    study_config,
-    submit_trial,
-    total_trials,
-)
+from .sessions import add_events, lock, participant_trial, serve, study_config, submit_trial, total_trials
 
 log = logging.getLogger(__name__)
 
@@ -50,13 +39,25 @@ def _not_revoked(row: Session) -> None:
         raise HTTPException(410, "this link has been revoked by the experimenter")
 
 
-def session_state(request: Request, s_id: str) -> dict:
-    with _db(request) as db:
-        s = db.get(Session, s_id)
+def _db(request: Request, caller: Caller):
+    """The caller's database: the previews' for a preview (``preview.Previews``), else the study's."""
+    return session_db(request.app.state, caller.preview)
+
+
+def _row(db, caller: Caller) -> Session:
+    row = db.get(Session, caller.id)
+    if row is None:  # a preview forgotten after newer ones (preview.MAX_PREVIEWS)
+        raise HTTPException(404, "this preview has expired: open a new one from the dashboard")
+    return row
+
+
+def session_state(request: Request, caller: Caller) -> dict:
+    with _db(request, caller) as db:
+        s = _row(db, caller)
         if s.kind != "study":
             raise HTTPException(409, "this is a deploy session; use /api/deploy")
         _not_revoked(s)
-        cfg = study_config(db, s.study_id)
+        cfg = study_config(db, str(s.study_id))
         quiz = quiz_due(s, cfg)
         due = report_due(db, s, cfg)
         asked = questionnaire_due(db, s, cfg) if due is None else None
@@ -110,21 +111,20 @@ def _completion(cfg: dict, s: Session) -> dict | None:
 @own.get("/session", summary="The state of the session that the bearer token belongs to")
 def own_state(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)):
     s = session_for_token(request, token_of(creds))
-    if s.kind != "study":
-        raise HTTPException(409, "this is a deploy session; use /api/deploy")
-    return session_state(request, s.id)
+    _study_session(s)
+    return session_state(request, s)
 
 
 @participant.get("/{session_id}/state", summary="The participant's session: status, current trial, score")
 def get_state(session_id: str, request: Request, s: Caller = Depends(require_session)):
     _study_session(s)
-    return session_state(request, s.id)
+    return session_state(request, s)
 
 
 @participant.post("/{session_id}/consent", summary="Record consent and start the session")
 def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depends(require_session)):
     _study_session(s)
-    with _db(request) as db:
+    with _db(request, s) as db:
         row = lock(db, s.id)
         _not_revoked(row)
         cfg = study_config(db, str(row.study_id))
@@ -149,34 +149,26 @@ def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depe
         if started:
             log.info("session %s of study %s started (consent given)", row.id, row.study_id)
         if body.events:
-            try:
-                add_events(db, row, [e.model_dump() for e in body.events])
-            except SessionError as exc:
-                db.rollback()
-                _fail(exc)
-    return session_state(request, s.id)
+            add_events(db, row, [e.model_dump() for e in body.events])
+    return session_state(request, s)
 
 
 @participant.post("/{session_id}/trials", summary="Submit the current trial (idempotent by submission_id)", responses=errors(400))
 def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Depends(require_session)):
     _study_session(s)
-    with _db(request) as db:
-        _not_revoked(db.get(Session, s.id))
-        try:
-            t, dup = submit_trial(
-                db, s.id, body.trial, body.submission_id, body.human_action, body.effort_ms, [e.model_dump() for e in body.events]
-            )
-        except SessionError as exc:
-            db.rollback()
-            _fail(exc)
+    with _db(request, s) as db:
+        _not_revoked(_row(db, s))
+        t, dup = submit_trial(
+            db, s.id, body.trial, body.submission_id, body.human_action, body.effort_ms, [e.model_dump() for e in body.events]
+        )
         result = participant_trial(t)
-    return {"trial": result, "duplicate": dup, "state": session_state(request, s.id)}
+    return {"trial": result, "duplicate": dup, "state": session_state(request, s)}
 
 
 @participant.post("/{session_id}/quiz", summary="Answer the comprehension quiz (one attempt)", responses=errors(400))
 def post_quiz(session_id: str, body: QuizIn, request: Request, s: Caller = Depends(require_session)):
     _study_session(s)
-    with _db(request) as db:
+    with _db(request, s) as db:
         row = lock(db, s.id)
         _not_revoked(row)
         cfg = study_config(db, str(row.study_id))
@@ -197,26 +189,22 @@ def post_quiz(session_id: str, body: QuizIn, request: Request, s: Caller = Depen
                 raise HTTPException(400, "; ".join(problems))
             wrong, dup = grade_quiz(row, cfg, body.answers), False
             db.commit()
-    return {"wrong": wrong, "duplicate": dup, "state": session_state(request, s.id)}
+    return {"wrong": wrong, "duplicate": dup, "state": session_state(request, s)}
 
 
 @participant.post("/{session_id}/reports", summary="Submit a trust self-report (0-100)")
 def post_report(session_id: str, body: ReportIn, request: Request, s: Caller = Depends(require_session)):
     _study_session(s)
-    with _db(request) as db:
-        row = db.get(Session, s.id)
+    with _db(request, s) as db:
+        row = _row(db, s)
         _not_revoked(row)
         cfg = study_config(db, row.study_id) if row.study_id else {}
-        try:
-            over = ended(db, row, cfg)
-            rep, dup = add_report(db, row, cfg, body.after_trial, body.value)
-            if over and not dup:  # after the end only a repeat of a stored answer (a retry) is taken
-                raise SessionError(409, "this session has ended")
-        except SessionError as exc:
-            db.rollback()
-            _fail(exc)
+        over = ended(db, row, cfg)
+        rep, dup = add_report(db, row, cfg, body.after_trial, body.value)
+        if over and not dup:  # after the end only a repeat of a stored answer (a retry) is taken
+            raise Conflict("this session has ended")
         out = {"after_trial": rep.after_trial, "value": rep.value, "scope": rep.scope, "duplicate": dup}
-    return {"report": out, "state": session_state(request, s.id)}
+    return {"report": out, "state": session_state(request, s)}
 
 
 @participant.post(
@@ -224,35 +212,29 @@ def post_report(session_id: str, body: ReportIn, request: Request, s: Caller = D
 )
 def post_answers(session_id: str, body: AnswersIn, request: Request, s: Caller = Depends(require_session)):
     _study_session(s)
-    with _db(request) as db:
-        row = db.get(Session, s.id)
+    with _db(request, s) as db:
+        row = _row(db, s)
         _not_revoked(row)
-        cfg = study_config(db, row.study_id)
-        try:
-            over = ended(db, row, cfg)
-            rows, dup = add_answers(db, row, cfg, body.questionnaire, body.after_trial, body.answers)
-            if over and not dup:  # after the end only a repeat of stored answers (a retry) is taken
-                raise SessionError(409, "this session has ended")
-        except SessionError as exc:
-            db.rollback()
-            _fail(exc)
+        cfg = study_config(db, str(row.study_id))
+        over = ended(db, row, cfg)
+        rows, dup = add_answers(db, row, cfg, body.questionnaire, body.after_trial, body.answers)
+        if over and not dup:  # after the end only a repeat of stored answers (a retry) is taken
+            raise Conflict("this session has ended")
         out = {"questionnaire": body.questionnaire, "after_trial": body.after_trial, "items": len(rows), "duplicate": dup}
-    return {"answers": out, "state": session_state(request, s.id)}
+    return {"answers": out, "state": session_state(request, s)}
 
 
 @participant.post("/{session_id}/events", summary="Log UI events")
 def post_events(session_id: str, body: EventsIn, request: Request, s: Caller = Depends(require_session)):
-    with _db(request) as db:
-        row = db.get(Session, s.id)
+    with _db(request, s) as db:
+        row = _row(db, s)
         _not_revoked(row)
-        try:
-            events = [e.model_dump() for e in body.events]
-            # after the end, the last trial's outcome shown on the page is still taken
-            late = all(e["trial"] == row.trials_done and e["type"] == "outcome_shown" for e in events)
-            if row.kind == "study" and not late and ended(db, row, study_config(db, row.study_id)):
-                raise SessionError(409, "this session has ended")
-            n, dup = add_events(db, row, events, body.batch)
-        except SessionError as exc:
-            db.rollback()
-            _fail(exc)
+        events = [e.model_dump() for e in body.events]
+        # after the end, the outcome shown of a committed trial is still taken: the page posts
+        # it as the outcome appears, and a second tab's or a slow connection's post may come
+        # after another tab has ended the session
+        late = all(e["type"] == "outcome_shown" and 1 <= (e["trial"] or 0) <= row.trials_done for e in events)
+        if row.kind == "study" and not late and ended(db, row, study_config(db, str(row.study_id))):
+            raise Conflict("this session has ended")
+        n, dup = add_events(db, row, events, body.batch)
     return {"stored": n, "duplicate": dup}

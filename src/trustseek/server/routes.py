@@ -21,7 +21,6 @@ from .schemas import (
     SessionsIn,
 )
 from .sessions import (
-    SessionError,
     new_id,
     p_high,
     study_config,
@@ -56,10 +55,6 @@ experimenter = APIRouter(
 
 def _db(request: Request):
     return request.app.state.db()
-
-
-def _fail(exc: SessionError):
-    raise HTTPException(exc.status, exc.message)
 
 
 def _link(request: Request, s: Session) -> str:
@@ -101,7 +96,7 @@ def study_summary(db, st: Study, request: Request) -> dict:
         "status": st.status,
         "link": f"{base}/join/{st.link_token}" if st.link_token else None,
         "quota": cfg.get("quota"),
-        "participants": sum(v for k, v in counts.items() if k not in ("pilot", "preview")),
+        "participants": sum(v for k, v in counts.items() if k != "pilot"),
         "progress": counts,
         "blocks": [
             {
@@ -171,9 +166,6 @@ def create_sessions(study_id: str, body: SessionsIn, request: Request):
                         "trials": total_trials(s),
                     }
                 )
-        except SessionError as exc:
-            db.rollback()
-            _fail(exc)
         except IntegrityError:
             db.rollback()
             raise HTTPException(409, "a participant id was taken concurrently; retry") from None
@@ -209,7 +201,7 @@ def dashboard(study_id: str, request: Request):
             .join(Session, Trial.session_id == Session.id)
             .where(Session.study_id == st.id, Trial.trial == Session.trials_done)
         ):
-            last[t.session_id] = trial_dict(t)
+            last[t.session_id] = {**trial_dict(t), "practice": bool(t.practice)}
         reports = {}
         for r in db.scalars(
             select(Report)
@@ -229,6 +221,7 @@ def dashboard(study_id: str, request: Request):
                     "link": _link(request, s),
                     "trials_done": s.trials_done,
                     "trials_total": total_trials(s),
+                    "practice_trials": sum(1 for t in s.plan["trials"] if t.get("practice")),
                     "score": s.score,
                     "belief": p_high(s.belief, n_trust),
                     "current": None

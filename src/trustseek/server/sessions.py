@@ -1,7 +1,7 @@
 """What happens in a session, independent of HTTP: serving a trial (complexity from the plan,
 action from the block's policy; in a block whose schedule policy picks the items, both from
 the policy, given the items that remain), committing a trial (outcome, experience, reward, belief
-update), self-reports and events.
+update) and events; self-reports and questionnaires are in ``answers``.
 
 Integrity rules:
 
@@ -36,9 +36,11 @@ from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 from ..model.task import Task
 from ..policies import PolicyRunner
 from ..policies.scheduling import SchedulePolicy
+from .answers import questionnaire_due, report_due
 from .cache import Bounded, caches_of
-from .checks import SCREENED, quiz_due
-from .orm import Answer, Event, EventBatch, Report, Session, Study, Trial, utcnow
+from .checks import quiz_due
+from .errors import Conflict, NotAllowed, NotFound, TooLarge
+from .orm import Event, EventBatch, Session, Study, Trial, utcnow
 from .studies import block_items, policy_object
 
 log = logging.getLogger(__name__)
@@ -48,15 +50,6 @@ MAX_EVENTS_PER_POST = 5000
 #: stored UI events per trial (events outside any trial count together) and per session
 MAX_EVENTS_PER_TRIAL = 2000
 MAX_EVENTS_PER_SESSION = 50_000
-
-
-class SessionError(TrustseekError):
-    """A request that the session's state does not allow; ``status`` is the HTTP code."""
-
-    def __init__(self, status: int, message: str):
-        self.status = status
-        self.message = message
-        super().__init__([message])
 
 
 def new_token() -> str:
@@ -117,7 +110,7 @@ class Context:
     def step(self, n: int) -> dict[str, Any]:
         """The plan of trial ``n`` (block, complexity); only study sessions have one."""
         if self.trials is None:
-            raise SessionError(409, "a deploy session has no trial plan")
+            raise Conflict("a deploy session has no trial plan")
         return self.trials[n - 1]
 
     def pick(self, block: int, belief, remaining: dict[str, int], visible: dict[str, int] | None) -> tuple[str, str]:
@@ -125,7 +118,7 @@ class Context:
         remaining (and visible) items."""
         pol = policy_object(self.policies, self.keys[block], lambda: self.load_policy(block))
         if not isinstance(pol, SchedulePolicy):
-            raise SessionError(500, f"block {block} picks its items by policy but runs a {pol.kind} policy")
+            raise TrustseekError([f"block {block} picks its items by policy but runs a {pol.kind} policy"])
         cx = self.task.complexities
         vis = None if visible is None else [visible.get(c, 0) for c in cx]
         k, a = pol.choose(np.asarray(belief, dtype=float), [remaining.get(c, 0) for c in cx], vis)
@@ -144,7 +137,7 @@ def study_config(db: DBSession, study_id: str) -> dict[str, Any]:
     if cfg is None:
         study = db.get(Study, study_id)
         if study is None:
-            raise SessionError(404, "no such study")
+            raise NotFound("no such study")
         cfg = configs.put(study_id, study.config)
     return cfg
 
@@ -176,7 +169,7 @@ def context(db: DBSession, s: Session) -> Context:
             s.plan["trials"],
             caches.policies,
         )
-    raise SessionError(409, "this is a deploy session; use /api/deploy")
+    raise Conflict("this is a deploy session; use /api/deploy")
 
 
 def _block_policy(cfg: dict[str, Any], b: int) -> dict[str, Any]:
@@ -195,7 +188,7 @@ def lock(db: DBSession, session_id: str) -> Session:
     """The session row, locked for update where the database supports it."""
     s = db.execute(select(Session).where(Session.id == session_id).with_for_update()).scalar_one_or_none()
     if s is None:
-        raise SessionError(404, "no such session")
+        raise NotFound("no such session")
     return s
 
 
@@ -345,30 +338,29 @@ def submit_trial(
     """Commit trial ``n`` of a study session; returns (trial, duplicate)."""
     s = lock(db, session_id)
     if s.kind != "study":
-        raise SessionError(409, "this is a deploy session: post its trials to /api/deploy/sessions/{id}/decide and /observe")
+        raise Conflict("this is a deploy session: post its trials to /api/deploy/sessions/{id}/decide and /observe")
     # trials are committed in order together with trials_done, so trial n exists iff n <= trials_done
     old = _existing(db, s, n) if n <= s.trials_done else None
     if old is not None:
         db.rollback()
         return _replayed(old, n, submission_id, human_action), True
     if s.status != "running":
-        raise SessionError(409, f"the session is {s.status!r}, not running" + (" (consent first)" if s.status == "new" else ""))
+        raise Conflict(f"the session is {s.status!r}, not running" + (" (consent first)" if s.status == "new" else ""))
     if n != s.trials_done + 1:
-        raise SessionError(409, f"trial {n} is not the current trial; the current trial is {s.trials_done + 1}")
+        raise Conflict(f"trial {n} is not the current trial; the current trial is {s.trials_done + 1}")
     cfg = study_config(db, s.study_id) if s.study_id else {}
     if quiz_due(s, cfg) is not None:
-        raise SessionError(409, "answer the comprehension quiz before the first trial")
+        raise Conflict("answer the comprehension quiz before the first trial")
     if report_due(db, s, cfg) is not None or questionnaire_due(db, s, cfg) is not None:
-        raise SessionError(409, f"answer the questions after trial {s.trials_done} before trial {n}")
+        raise Conflict(f"answer the questions after trial {s.trials_done} before trial {n}")
     action, complexity = s.pending_action, s.pending_complexity
     if s.pending_trial != n or action is None or complexity is None:
-        raise SessionError(409, f"trial {n} has not been served yet; fetch the session state first")
+        raise Conflict(f"trial {n} has not been served yet; fetch the session state first")
     if action == "ask" and human_action != "intervene":
-        raise SessionError(
-            400, f"the robot asked for help in trial {n}: human_action must be 'intervene' (teleoperation), got {human_action!r}"
-        )
+        why = f"the robot asked for help in trial {n}: human_action must be 'intervene' (teleoperation)"
+        raise NotAllowed(f"{why}, got {human_action!r}")
     if human_action not in HUMAN_ACTIONS:
-        raise SessionError(400, f"human_action must be one of {list(HUMAN_ACTIONS)}, got {human_action!r}")
+        raise NotAllowed(f"human_action must be one of {list(HUMAN_ACTIONS)}, got {human_action!r}")
     ctx = context(db, s)
     step = ctx.step(n)
     c = ctx.task.complexity_index(complexity)
@@ -398,7 +390,7 @@ def submit_trial(
         return committed, False
     old = _existing(db, s, n)
     if old is None:
-        raise SessionError(409, f"trial {n} could not be committed; fetch the session state and retry")
+        raise Conflict(f"trial {n} could not be committed; fetch the session state and retry")
     return _replayed(old, n, submission_id, human_action), True
 
 
@@ -406,142 +398,13 @@ def _replayed(old: Trial, n: int, submission_id: str, human_action: str | None) 
     """The committed trial ``n``, if a submission repeats the one that committed it (same
     submission id and same human action); a conflicting submission is refused (409)."""
     if old.submission_id != submission_id:
-        raise SessionError(409, f"trial {n} is already committed (by submission {old.submission_id!r})")
+        raise Conflict(f"trial {n} is already committed (by submission {old.submission_id!r})")
     if old.human_action != human_action:
-        raise SessionError(
-            409,
+        raise Conflict(
             f"submission {submission_id!r} committed trial {n} with human_action={old.human_action!r}, "
             f"not {human_action!r}: a retry must repeat the submission",
         )
     return old
-
-
-def _asked_after(s: Session, when: str, n: int) -> bool:
-    """Whether a self-report or questionnaire asked ``when`` ("trial", "block", "end") is asked
-    after trial ``n`` (never after a practice trial)."""
-    trials = s.plan["trials"]
-    if when == "none" or not 1 <= n <= len(trials) or trials[n - 1].get("practice"):
-        return False
-    if when == "block":
-        return n == len(trials) or trials[n]["block"] != trials[n - 1]["block"]
-    if when == "end":
-        return n == len(trials)
-    return True
-
-
-def report_due(db: DBSession, s: Session, cfg: dict[str, Any]) -> int | None:
-    """The trial after which a self-report is still expected, or None."""
-    mode = cfg.get("self_report", "none")
-    n = s.trials_done
-    if not _asked_after(s, mode, n):
-        return None
-    if db.scalar(select(Report.id).where(Report.session_id == s.id, Report.after_trial == n)):
-        return None
-    return n
-
-
-def add_report(db: DBSession, s: Session, cfg: dict[str, Any], after_trial: int, value: float) -> tuple[Report, bool]:
-    mode = cfg.get("self_report", "none")
-    if mode == "none":
-        raise SessionError(409, "this study takes no trust self-reports")
-    old = db.scalar(select(Report).where(Report.session_id == s.id, Report.after_trial == after_trial))
-    if old is not None:
-        if abs(old.value - value) < 1e-12:
-            return old, True
-        raise SessionError(409, f"a self-report after trial {after_trial} is already stored (value {old.value:g})")
-    if not 1 <= after_trial <= s.trials_done:
-        raise SessionError(409, f"after_trial must be a committed trial (1..{s.trials_done}), got {after_trial}")
-    if not _asked_after(s, mode, after_trial):
-        raise SessionError(409, f"no self-report is asked after trial {after_trial} (self_report: {mode!r})")
-    block = s.plan["trials"][after_trial - 1]["block"]
-    rep = Report(session_id=s.id, after_trial=after_trial, block=block, scope=mode, value=value)
-    db.add(rep)
-    try:
-        db.commit()
-    except IntegrityError:
-        db.rollback()
-        old = db.scalar(select(Report).where(Report.session_id == s.id, Report.after_trial == after_trial))
-        if old is None:
-            raise SessionError(409, f"the self-report after trial {after_trial} could not be stored; try again") from None
-        return old, True
-    return rep, False
-
-
-def questionnaire_due(db: DBSession, s: Session, cfg: dict[str, Any]) -> dict[str, Any] | None:
-    """The first of the study's questionnaires still to be answered after the last committed
-    trial (with ``after_trial``), or None."""
-    n = s.trials_done
-    for q in cfg.get("questionnaires") or ():
-        if _asked_after(s, q["when"], n) and not db.scalar(
-            select(Answer.id).where(Answer.session_id == s.id, Answer.questionnaire == q["name"], Answer.after_trial == n)
-        ):
-            return {**q, "after_trial": n}
-    return None
-
-
-def ended(db: DBSession, s: Session, cfg: dict[str, Any]) -> bool:
-    """Whether the session is over: every trial committed and nothing left to answer."""
-    if s.status == SCREENED:
-        return True
-    return s.status == "done" and report_due(db, s, cfg) is None and questionnaire_due(db, s, cfg) is None
-
-
-def answer_problems(q: dict[str, Any], answers: dict[str, float]) -> list[str]:
-    """Why ``answers`` is not a complete answer to questionnaire ``q`` (empty when it is): every
-    item answered, no other, each with a whole point of the scale."""
-    ids = [i["id"] for i in q["items"]]
-    problems = []
-    missing, unknown = [i for i in ids if i not in answers], sorted(set(answers) - set(ids))
-    if missing or unknown:
-        problems.append(f"answer every item of {q['name']!r}: missing {missing}, unknown {unknown}")
-    lo, hi = q["scale"]["min"], q["scale"]["max"]
-    bad = {k: v for k, v in answers.items() if k in ids and not (lo <= v <= hi and float(v).is_integer())}
-    if bad:
-        problems.append(f"answers must be whole points of the scale {lo}..{hi}, got {bad}")
-    return problems
-
-
-def add_answers(
-    db: DBSession, s: Session, cfg: dict[str, Any], name: str, after_trial: int, answers: dict[str, float]
-) -> tuple[list[Answer], bool]:
-    """Store a questionnaire's answers (every item, each a point of its scale); returns
-    (answers, duplicate).  A repeat of stored answers is a duplicate; different ones are refused."""
-    q = next((q for q in cfg.get("questionnaires") or () if q["name"] == name), None)
-    if q is None:
-        raise SessionError(404, f"this study has no questionnaire {name!r}")
-    problems = answer_problems(q, answers)
-    if problems:
-        raise SessionError(400, "; ".join(problems))
-    ids = [i["id"] for i in q["items"]]
-    old = db.scalars(
-        select(Answer).where(Answer.session_id == s.id, Answer.questionnaire == name, Answer.after_trial == after_trial)
-    ).all()
-    if old:
-        if {a.item: a.value for a in old} == {k: float(v) for k, v in answers.items()}:
-            return list(old), True
-        raise SessionError(409, f"{name!r} after trial {after_trial} is already answered, with other answers")
-    if not 1 <= after_trial <= s.trials_done or not _asked_after(s, q["when"], after_trial):
-        raise SessionError(409, f"{name!r} is not asked after trial {after_trial}")
-    block = s.plan["trials"][after_trial - 1]["block"]
-    rows = [
-        Answer(
-            session_id=s.id,
-            questionnaire=name,
-            when=q["when"],
-            after_trial=after_trial,
-            block=block,
-            item=i,
-            value=float(answers[i]),
-        )
-        for i in ids
-    ]
-    db.add_all(rows)
-    try:
-        db.commit()
-    except IntegrityError:
-        db.rollback()
-        raise SessionError(409, f"{name!r} after trial {after_trial} was answered concurrently; fetch the state") from None
-    return rows, False
 
 
 def check_event_room(db: DBSession, s: Session, events: list[dict], trial: int | None = None) -> None:
@@ -550,7 +413,7 @@ def check_event_room(db: DBSession, s: Session, events: list[dict], trial: int |
         return
     total = db.scalar(select(func.count()).select_from(Event).where(Event.session_id == s.id)) or 0
     if total + len(events) > MAX_EVENTS_PER_SESSION:
-        raise SessionError(413, f"this session already holds {total} events; at most {MAX_EVENTS_PER_SESSION} are stored")
+        raise TooLarge(f"this session already holds {total} events; at most {MAX_EVENTS_PER_SESSION} are stored")
     per: dict[int | None, int] = {}
     for ev in events:
         k = trial if trial is not None else ev.get("trial")
@@ -565,7 +428,7 @@ def check_event_room(db: DBSession, s: Session, events: list[dict], trial: int |
             or 0
         )
         if have + m > MAX_EVENTS_PER_TRIAL:
-            raise SessionError(413, f"trial {k} already has {have} events; at most {MAX_EVENTS_PER_TRIAL} are stored per trial")
+            raise TooLarge(f"trial {k} already has {have} events; at most {MAX_EVENTS_PER_TRIAL} are stored per trial")
 
 
 def add_events(db: DBSession, s: Session, events: list[dict], batch: str | None = None) -> tuple[int, bool]:

@@ -4,7 +4,7 @@
   that serves it (``DeployFront``); ``routes``: the FastAPI routes (opening a session, its
   state, and the bodies the front hands on);
 * ``service``: the sessions, independent of HTTP (``create_deploy``, ``deploy_decide``,
-  ``deploy_observe``), refusing with the domain errors of ``errors``;
+  ``deploy_observe``), refusing with the server's domain errors (``server.errors``);
 * ``plan``: a session's task, model and policy with ``PolicyRunner``'s step (``DeployPlan``),
   shared per content (``Plans``, owned by the application as ``app.state.deploy_plans``);
 * ``store``: the statements on the database driver's own connections (``DeployStore``,

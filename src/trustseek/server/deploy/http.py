@@ -15,8 +15,8 @@ application (``app.ServerApp``), whenever:
 * the body is JSON (``Content-Type: application/json``) holding only the fields of ``DecideIn``
   or ``ObserveIn``, with exactly the types and bounds those models accept.
 
-It answers successes and the session's refusals (400, 404, 409: the domain errors of
-``errors``, given their status here, in ``STATUS``) alike.  Anything else -- a malformed body,
+It answers successes and the session's refusals (400, 404, 409: the server's domain errors,
+``..errors``, given their status by the one mapping, ``middleware.STATUS``) alike.  Anything else -- a malformed body,
 another token, a body above the limit -- is handed, body and all, to FastAPI, which refuses it
 (401, 403, 413, 422: ``middleware.BodyGuard`` and pydantic) or, for a body its validation takes,
 calls the same ``answer`` (``routes``).  Both return the same bytes, with the ``Server-Timing``
@@ -37,17 +37,14 @@ from collections.abc import Callable
 from typing import Any
 
 from ..auth import Caller, caller_for_token
-from ..middleware import SESSION_BODY_LIMIT, ASGIApp, Message, Receive, Scope, Send
+from ..errors import Refused
+from ..middleware import SESSION_BODY_LIMIT, ASGIApp, Message, Receive, Scope, Send, status_of
 from ..schemas import MAX_TRIAL
 from ..sessions import trial_dict
-from .errors import Conflict, DeployError, NoSession, NotAllowed
 from .service import deploy_decide, deploy_observe
 from .store import Known, Stale, Statements
 
 log = logging.getLogger(__name__)
-
-#: the HTTP status of each refusal of a deploy session
-STATUS: dict[type[DeployError], int] = {NotAllowed: 400, NoSession: 404, Conflict: 409}
 
 PREFIX = "/api/deploy/sessions/"
 _DECIDE = frozenset({"trial", "complexity", "remaining", "visible"})
@@ -97,10 +94,10 @@ def _dump(out: dict[str, Any]) -> bytes:
     return json.dumps(out, allow_nan=False, separators=(",", ":")).encode()
 
 
-def refusal(exc: DeployError) -> tuple[int, bytes]:
+def refusal(exc: Refused) -> tuple[int, bytes]:
     """(status, body) of a refusal, the bytes of FastAPI's ``HTTPException`` answer."""
     body = json.dumps({"detail": exc.message}, ensure_ascii=False, allow_nan=False, indent=None, separators=(",", ":"))
-    return STATUS[type(exc)], body.encode("utf-8")
+    return status_of(exc), body.encode("utf-8")
 
 
 def _request(plans: Any, sid: str, what: str, args: Args) -> Callable[[Statements], dict[str, Any]]:
@@ -129,7 +126,7 @@ async def answer(state: Any, sid: str, what: str, args: Args) -> tuple[int, byte
         out = run(known)
         if known.write is not None and await store.apply_async(known.write):
             return 200, _dump(out)
-    except (Stale, DeployError):
+    except (Stale, Refused):
         pass  # the transaction below reads the session
     except Exception as exc:
         log.debug("deploy %s of session %s: conditional write failed: %s: %s", what, sid, type(exc).__name__, exc)
@@ -137,7 +134,7 @@ async def answer(state: Any, sid: str, what: str, args: Args) -> tuple[int, byte
         try:
             with store.transaction() as tx:
                 return 200, _dump(run(tx))
-        except DeployError as exc:
+        except Refused as exc:
             return refusal(exc)
         except store.IntegrityError:
             if what != "observe":

@@ -16,7 +16,7 @@ from ...model.core import TrustModel
 from ...model.task import Task
 from ...policies import PolicyRunner, policy_from_dict
 from ..cache import Bounded
-from .errors import NoSession
+from ..errors import NotFound
 
 
 def policy_sha256(policy: dict[str, Any]) -> str:
@@ -123,7 +123,7 @@ class Plans:
             return found
         d = store.plan(session_id)
         if d is None:
-            raise NoSession("no such session")
+            raise NotFound("no such session")
         plan = self.shared(
             d,
             lambda: DeployPlan(Task.from_dict(d["task"]), TrustModel.from_dict(d["model"]), d["policy_kind"], d["policy_sha256"]),

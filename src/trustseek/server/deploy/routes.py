@@ -1,6 +1,6 @@
 """The decision API's FastAPI routes: opening a deploy session, its state, and ``decide`` and
 ``observe`` for the bodies that reach FastAPI (``http.DeployFront`` answers the others with the
-same ``http.answer``).  HTTP status codes are given here and in ``http.STATUS``, nowhere else."""
+same ``http.answer``).  HTTP status codes are given here and in ``middleware.STATUS``, nowhere else."""
 
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ the action (``deploy_decide``), and posts what the human did and the outcome
 
 Each runs with the statements of ``store`` (a transaction of ``store.DeployStore``, or
 ``store.Known``: a conditional write from the state this process knows) and the application's
-``plan.Plans``; refusals are the domain errors of ``errors``.
+``plan.Plans``; refusals are the server's domain errors (``server.errors``).
 """
 
 from __future__ import annotations
@@ -22,10 +22,10 @@ from ...model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 from ...model.task import Task
 from ...policies import PolicyError
 from ...policies.scheduling import SchedulePolicy
+from ..errors import Conflict, NotAllowed, NotFound
 from ..orm import PolicyBlob, Session, utcnow
 from ..schemas import MAX_TRIAL
 from ..sessions import new_id, new_token, p_high, trial_dict, trial_experience
-from .errors import Conflict, NoSession, NotAllowed
 from .plan import DeployPlan, Plans, policy_sha256
 from .store import LiveRow, Statements
 
@@ -83,7 +83,7 @@ def create_deploy(
 def _live(store: Statements, session_id: str) -> LiveRow:
     row = store.live(session_id)
     if row is None:
-        raise NoSession("no such session")
+        raise NotFound("no such session")
     return row
 
 

@@ -1,0 +1,143 @@
+"""A study session's answers: trust self-reports and questionnaires, when each is due after a
+trial, and when the session is over (every trial committed, nothing left to answer).  A repeat
+of stored answers is a duplicate; different ones are refused."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import select
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session as DBSession
+
+from .checks import SCREENED
+from .errors import Conflict, NotAllowed, NotFound
+from .orm import Answer, Report, Session
+
+
+def _asked_after(s: Session, when: str, n: int) -> bool:
+    """Whether a self-report or questionnaire asked ``when`` ("trial", "block", "end") is asked
+    after trial ``n`` (never after a practice trial)."""
+    trials = s.plan["trials"]
+    if when == "none" or not 1 <= n <= len(trials) or trials[n - 1].get("practice"):
+        return False
+    if when == "block":
+        return n == len(trials) or trials[n]["block"] != trials[n - 1]["block"]
+    if when == "end":
+        return n == len(trials)
+    return True
+
+
+def report_due(db: DBSession, s: Session, cfg: dict[str, Any]) -> int | None:
+    """The trial after which a self-report is still expected, or None."""
+    mode = cfg.get("self_report", "none")
+    n = s.trials_done
+    if not _asked_after(s, mode, n):
+        return None
+    if db.scalar(select(Report.id).where(Report.session_id == s.id, Report.after_trial == n)):
+        return None
+    return n
+
+
+def add_report(db: DBSession, s: Session, cfg: dict[str, Any], after_trial: int, value: float) -> tuple[Report, bool]:
+    mode = cfg.get("self_report", "none")
+    if mode == "none":
+        raise Conflict("this study takes no trust self-reports")
+    old = db.scalar(select(Report).where(Report.session_id == s.id, Report.after_trial == after_trial))
+    if old is not None:
+        if abs(old.value - value) < 1e-12:
+            return old, True
+        raise Conflict(f"a self-report after trial {after_trial} is already stored (value {old.value:g})")
+    if not 1 <= after_trial <= s.trials_done:
+        raise Conflict(f"after_trial must be a committed trial (1..{s.trials_done}), got {after_trial}")
+    if not _asked_after(s, mode, after_trial):
+        raise Conflict(f"no self-report is asked after trial {after_trial} (self_report: {mode!r})")
+    block = s.plan["trials"][after_trial - 1]["block"]
+    rep = Report(session_id=s.id, after_trial=after_trial, block=block, scope=mode, value=value)
+    db.add(rep)
+    try:
+        db.commit()
+    except IntegrityError:
+        db.rollback()
+        old = db.scalar(select(Report).where(Report.session_id == s.id, Report.after_trial == after_trial))
+        if old is None:
+            raise Conflict(f"the self-report after trial {after_trial} could not be stored; try again") from None
+        return old, True
+    return rep, False
+
+
+def questionnaire_due(db: DBSession, s: Session, cfg: dict[str, Any]) -> dict[str, Any] | None:
+    """The first of the study's questionnaires still to be answered after the last committed
+    trial (with ``after_trial``), or None."""
+    n = s.trials_done
+    for q in cfg.get("questionnaires") or ():
+        if _asked_after(s, q["when"], n) and not db.scalar(
+            select(Answer.id).where(Answer.session_id == s.id, Answer.questionnaire == q["name"], Answer.after_trial == n)
+        ):
+            return {**q, "after_trial": n}
+    return None
+
+
+def ended(db: DBSession, s: Session, cfg: dict[str, Any]) -> bool:
+    """Whether the session is over: every trial committed and nothing left to answer."""
+    if s.status == SCREENED:
+        return True
+    return s.status == "done" and report_due(db, s, cfg) is None and questionnaire_due(db, s, cfg) is None
+
+
+def answer_problems(q: dict[str, Any], answers: dict[str, float]) -> list[str]:
+    """Why ``answers`` is not a complete answer to questionnaire ``q`` (empty when it is): every
+    item answered, no other, each with a whole point of the scale."""
+    ids = [i["id"] for i in q["items"]]
+    problems = []
+    missing, unknown = [i for i in ids if i not in answers], sorted(set(answers) - set(ids))
+    if missing or unknown:
+        problems.append(f"answer every item of {q['name']!r}: missing {missing}, unknown {unknown}")
+    lo, hi = q["scale"]["min"], q["scale"]["max"]
+    bad = {k: v for k, v in answers.items() if k in ids and not (lo <= v <= hi and float(v).is_integer())}
+    if bad:
+        problems.append(f"answers must be whole points of the scale {lo}..{hi}, got {bad}")
+    return problems
+
+
+def add_answers(
+    db: DBSession, s: Session, cfg: dict[str, Any], name: str, after_trial: int, answers: dict[str, float]
+) -> tuple[list[Answer], bool]:
+    """Store a questionnaire's answers (every item, each a point of its scale); returns
+    (answers, duplicate).  A repeat of stored answers is a duplicate; different ones are refused."""
+    q = next((q for q in cfg.get("questionnaires") or () if q["name"] == name), None)
+    if q is None:
+        raise NotFound(f"this study has no questionnaire {name!r}")
+    problems = answer_problems(q, answers)
+    if problems:
+        raise NotAllowed("; ".join(problems))
+    ids = [i["id"] for i in q["items"]]
+    old = db.scalars(
+        select(Answer).where(Answer.session_id == s.id, Answer.questionnaire == name, Answer.after_trial == after_trial)
+    ).all()
+    if old:
+        if {a.item: a.value for a in old} == {k: float(v) for k, v in answers.items()}:
+            return list(old), True
+        raise Conflict(f"{name!r} after trial {after_trial} is already answered, with other answers")
+    if not 1 <= after_trial <= s.trials_done or not _asked_after(s, q["when"], after_trial):
+        raise Conflict(f"{name!r} is not asked after trial {after_trial}")
+    block = s.plan["trials"][after_trial - 1]["block"]
+    rows = [
+        Answer(
+            session_id=s.id,
+            questionnaire=name,
+            when=q["when"],
+            after_trial=after_trial,
+            block=block,
+            item=i,
+            value=float(answers[i]),
+        )
+        for i in ids
+    ]
+    db.add_all(rows)
+    try:
+        db.commit()
+    except IntegrityError:
+        db.rollback()
+        raise Conflict(f"{name!r} after trial {after_trial} was answered concurrently; fetch the state") from None
+    return rows, False
