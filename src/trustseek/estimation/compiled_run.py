@@ -34,8 +34,8 @@ import numpy as np
 from . import kernels
 from .em import CAPPED, SHRINK, STATIONARY, RunResult
 from .estep import Workspace
-from .quasi_newton import Sticks
 from .spec import FitError, Params
+from .sticks import Sticks, stick_gradient, stick_values
 from .structure import FLOOR, PROJECT_FLOOR, Structure, Table
 
 njit = kernels.njit
@@ -264,12 +264,10 @@ def _fg(theta, base, flat, counts, K, Ue, M, Ut, prior, emt, trt, sticks, data, 
     table, m, mass, tbase, tstride, coff, cptr, cdst = sticks
     a, b = K, K + Ue * K * M
     flat[:] = base
-    kernels.stick_values(theta, table, m, mass, tbase, tstride, coff, cptr, cdst, flat[:a], flat[a:b], flat[b:])
+    stick_values(theta, table, m, mass, tbase, tstride, coff, cptr, cdst, flat[:a], flat[a:b], flat[b:])
     ll, f = _evaluate(flat, K, Ue, M, Ut, prior, emt, trt, data, bufs, counts)
     if math.isfinite(f):
-        kernels.stick_gradient(
-            theta, prior, table, m, tbase, tstride, coff, cptr, cdst, counts[:a], counts[a:b], counts[b:], grad
-        )
+        stick_gradient(theta, prior, table, m, tbase, tstride, coff, cptr, cdst, counts[:a], counts[a:b], counts[b:], grad)
     return ll, f
 
 
