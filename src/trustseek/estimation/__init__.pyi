@@ -16,6 +16,7 @@ from . import (
     prediction,
     quasi_newton,
     ratings,
+    result,
     selection,
     sequences,
     spec,
@@ -26,8 +27,9 @@ from . import (
     validation,
     warm,
 )
-from .fit import MIN_EVENTS, FitResult, ModelFitResult, decode, fit_model, fit_trust_model, trust_loglik
+from .fit import MIN_EVENTS, decode, fit_model, fit_trust_model, trust_loglik
 from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
+from .result import FitResult
 from .selection import select_levels, selection_warnings
 from .sequences import Sequences, encode
 from .spec import FitError, Fixed, IOHMMSpec, Params
@@ -51,7 +53,6 @@ __all__ = [
     "Fixed",
     "IOHMMFit",
     "IOHMMSpec",
-    "ModelFitResult",
     "Params",
     "Sequences",
     "decode",
