@@ -4,6 +4,7 @@
 from . import (
     bootstrap,
     compiled_run,
+    compiled_steps,
     convergence,
     em,
     estep,
