@@ -73,13 +73,12 @@ def _fg(theta, base, flat, counts, model, sticks, ev, grad):
     """The cells of ``theta`` (on ``base``) into ``flat``, their E-step counts into ``counts`` and
     the gradient of the objective into ``grad``; (log-likelihood, objective)."""
     K, Ue, M, _Ut, prior, _emt, _trt = model
-    table, m, mass, tbase, tstride, coff, cptr, cdst = sticks
     a, b = K, K + Ue * K * M
     flat[:] = base
-    stick_values(theta, table, m, mass, tbase, tstride, coff, cptr, cdst, flat[:a], flat[a:b], flat[b:])
+    stick_values(theta, sticks, (flat[:a], flat[a:b], flat[b:]))
     ll, f = steps.evaluate(flat, model, ev, counts)
     if math.isfinite(f):
-        stick_gradient(theta, prior, table, m, tbase, tstride, coff, cptr, cdst, counts[:a], counts[a:b], counts[b:], grad)
+        stick_gradient(theta, prior, sticks, (counts[:a], counts[a:b], counts[b:]), grad)
     return ll, f
 
 

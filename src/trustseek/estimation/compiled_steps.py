@@ -28,7 +28,7 @@ def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
     """E-step of one parameter set: counts into ``ci`` (K,), ``cem`` (Ue, K, M), ``ctr`` (Ut, K, K);
     the log-likelihood (-inf: probability zero, counts zero).  Items of :data:`CHUNK` sequences
     summed in item order, as :meth:`.kernels.Kernel.run` does."""
-    eidx, tidx, code, lengths = data
+    eidx = data[0]
     ini, emit, trans, ll, pin, pe, pt = bufs
     Ue, K, M = em.shape
     Ut = tr.shape[0]
@@ -48,7 +48,7 @@ def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
         pin[c] = 0.0
         pe[c] = 0.0
         pt[c] = 0.0
-        ll[c] = kernels._item(0, lo, min(N, lo + CHUNK), ini, emit, trans, eidx, tidx, code, lengths, pin[c], pe[c], pt[c])
+        ll[c] = kernels._item(0, lo, min(N, lo + CHUNK), (ini, emit, trans), data, (pin[c], pe[c], pt[c]))
     ci[:] = 0.0
     cem[:] = 0.0
     ctr[:] = 0.0

@@ -75,8 +75,13 @@ COMPILE_MIN = 5_000  # trials from which a fit's E-steps run compiled (worth_com
 
 
 @njit(cache=True, nogil=True)
-def _item(r, lo, hi, initial, emit, trans, eidx, tidx, code, lengths, c_init, c_emit, c_trans):
-    """Sequences ``lo:hi`` under parameter set ``r`` into this item's counts; their log-probability."""
+def _item(r, lo, hi, tables, data, counts):
+    """Sequences ``lo:hi`` under parameter set ``r`` of ``tables`` (initial, emit, trans) into this
+    item's ``counts`` (initial, emission, transition); their log-probability.  ``data``: (eidx,
+    tidx, code, lengths)."""
+    initial, emit, trans = tables
+    eidx, tidx, code, lengths = data
+    c_init, c_emit, c_trans = counts
     K = initial.shape[1]
     T = eidx.shape[1]
     total = 0.0
@@ -159,9 +164,11 @@ def _reduce(active, ll, pi, pe, pt, loglik, c_init, c_emit, c_trans):
 
 
 @njit(cache=True, nogil=True)
-def estep_items(first, last, C, chunk, initial, emit, trans, eidx, tidx, code, lengths, active, ll, pi, pe, pt):
-    """Items ``first:last`` (item = r * C + c: parameter set r, sequences c*chunk onwards) into their own sums."""
-    N = eidx.shape[0]
+def estep_items(first, last, C, chunk, tables, data, active, sums):
+    """Items ``first:last`` (item = r * C + c: parameter set r, sequences c*chunk onwards) into their
+    own ``sums`` (log-likelihood (R, C), initial, emission and transition counts per item)."""
+    ll, pi, pe, pt = sums
+    N = data[0].shape[0]
     for item in range(first, last):
         r = item // C
         c = item % C
@@ -170,19 +177,21 @@ def estep_items(first, last, C, chunk, initial, emit, trans, eidx, tidx, code, l
             pi[r, c] = 0.0
             pe[r, c] = 0.0
             pt[r, c] = 0.0
-            ll[r, c] = _item(
-                r, lo, min(N, lo + chunk), initial, emit, trans, eidx, tidx, code, lengths, pi[r, c], pe[r, c], pt[r, c]
-            )
+            ll[r, c] = _item(r, lo, min(N, lo + chunk), tables, data, (pi[r, c], pe[r, c], pt[r, c]))
 
 
 @njit(cache=True, nogil=True)
-def _mixture_item(r, lo, hi, M, initial, emit, trans, eidx, tidx, lengths, c_init, c_emit, c_trans, seq_ll):
+def _mixture_item(r, lo, hi, M, tables, data, counts, seq_ll):
     """Sequences ``lo:hi`` under the M types of parameter set ``r`` (sets ``r * M + m``): per sequence
     the forward pass of every type, the type responsibilities, then each type's backward pass
     with its responsibility as the weight.  A type's ``initial`` row is the joint P(type, S_1)
     (it sums to the type's weight; all zero: an empty type, skipped), so the forward pass gives
     log P(sequence, type).  Counts go to ``c_*[m]``; log P(sequence n, type m) to
-    ``seq_ll[m, n]``; returns the mixture log-probability of the sequences (-inf: zero)."""
+    ``seq_ll[m, n]``; returns the mixture log-probability of the sequences (-inf: zero).
+    ``tables``: (initial, emit, trans); ``data``: (eidx, tidx, lengths); ``counts``: (c_init, c_emit, c_trans)."""
+    initial, emit, trans = tables
+    eidx, tidx, lengths = data
+    c_init, c_emit, c_trans = counts
     K = initial.shape[1]
     T = eidx.shape[1]
     alpha = np.empty((M, max(T, 1), K))
@@ -228,10 +237,11 @@ def _mixture_item(r, lo, hi, M, initial, emit, trans, eidx, tidx, lengths, c_ini
 
 
 @njit(cache=True, nogil=True)
-def mixture_items(first, last, C, chunk, M, initial, emit, trans, eidx, tidx, lengths, active, ll, pi, pe, pt, seq_ll):
-    """Items ``first:last`` of a mixture E-step (item = r * C + c) into their own sums: ``ll`` (R, C),
+def mixture_items(first, last, C, chunk, M, tables, data, active, sums, seq_ll):
+    """Items ``first:last`` of a mixture E-step (item = r * C + c) into their own ``sums``: ``ll`` (R, C),
     ``pi`` (R, C, M, K), ``pe`` (R, C, M, PE, K), ``pt`` (R, C, M, P, K, K); ``seq_ll`` (R, M, N)."""
-    N = eidx.shape[0]
+    ll, pi, pe, pt = sums
+    N = data[0].shape[0]
     for item in range(first, last):
         r = item // C
         c = item % C
@@ -240,15 +250,17 @@ def mixture_items(first, last, C, chunk, M, initial, emit, trans, eidx, tidx, le
             pi[r, c] = 0.0
             pe[r, c] = 0.0
             pt[r, c] = 0.0
-            ll[r, c] = _mixture_item(
-                r, lo, min(N, lo + chunk), M, initial, emit, trans, eidx, tidx, lengths, pi[r, c], pe[r, c], pt[r, c], seq_ll[r]
-            )
+            ll[r, c] = _mixture_item(r, lo, min(N, lo + chunk), M, tables, data, (pi[r, c], pe[r, c], pt[r, c]), seq_ll[r])
 
 
 @njit(cache=True, nogil=True)
-def each_items(lo, hi, pidx, initial, emit, trans, eidx, tidx, lengths, active, ll, ci, ce, ct):
-    """Sequences ``lo:hi``, sequence n under parameter set ``pidx[n]``, each into its own counts
-    ``ci[n]``, ``ce[n]``, ``ct[n]`` and log-probability ``ll[n]`` (skipped where ``active[n]`` is false)."""
+def each_items(lo, hi, pidx, tables, data, active, out):
+    """Sequences ``lo:hi``, sequence n under parameter set ``pidx[n]`` of ``tables`` (initial, emit,
+    trans), each into its own counts ``ci[n]``, ``ce[n]``, ``ct[n]`` and log-probability ``ll[n]``
+    (``out``: (ll, ci, ce, ct); skipped where ``active[n]`` is false).  ``data``: (eidx, tidx, lengths)."""
+    initial, emit, trans = tables
+    eidx, tidx, lengths = data
+    ll, ci, ce, ct = out
     K = initial.shape[1]
     T = eidx.shape[1]
     alpha = np.empty((max(T, 1), K))
@@ -366,17 +378,12 @@ class Kernel:
                 np.empty((R, C, self.PE, K)),
                 np.empty((R, C, self.P, K, K)),
             )
-        args = (
+        tables = (
             np.ascontiguousarray(initial, dtype=np.float64),
             np.ascontiguousarray(emit, dtype=np.float64),
             np.ascontiguousarray(trans, dtype=np.float64),
-            self.eidx,
-            self.tidx,
-            self.code,
-            self.lengths,
-            act,
-            *parts,
         )
+        args = (tables, (self.eidx, self.tidx, self.code, self.lengths), act, parts)
         n_active = int(act.sum())
         if self.threads > 1 and n_active * C > 1 and self.trials * n_active >= PARALLEL_MIN:
             # contiguous runs of the active items, one per thread; each item writes only its own sums
@@ -392,7 +399,7 @@ class Kernel:
         ci = np.empty((R, K))
         ce = np.empty((R, self.PE, K))
         ct = np.empty((R, self.P, K, K))
-        _reduce(act, *args[-4:], ll, ci, ce, ct)
+        _reduce(act, *parts, ll, ci, ce, ct)
         return ll, ci, ce, ct
 
     def _active(self, R: int, active: np.ndarray | None) -> np.ndarray:
@@ -424,18 +431,12 @@ class Kernel:
                 np.empty((R, C, M, self.P, K, K)),
             )
         seq_ll = np.zeros((R, M, N))
-        args = (
-            M,
+        tables = (
             np.ascontiguousarray(initial, dtype=np.float64),
             np.ascontiguousarray(emit, dtype=np.float64),
             np.ascontiguousarray(trans, dtype=np.float64),
-            self.eidx,
-            self.tidx,
-            self.lengths,
-            act,
-            *parts,
-            seq_ll,
         )
+        args = (M, tables, (self.eidx, self.tidx, self.lengths), act, parts, seq_ll)
         n_active = int(act.sum())
         if self.threads > 1 and n_active * C > 1 and self.trials * n_active * M >= PARALLEL_MIN:
             items = [r * C + c for r in np.flatnonzero(act) for c in range(C)]
@@ -466,20 +467,12 @@ class Kernel:
         ci = np.empty((N, K))
         ce = np.empty((N, self.PE, K))
         ct = np.empty((N, self.P, K, K))
-        args = (
-            np.ascontiguousarray(pidx, dtype=np.int64),
+        tables = (
             np.ascontiguousarray(initial, dtype=np.float64),
             np.ascontiguousarray(emit, dtype=np.float64),
             np.ascontiguousarray(trans, dtype=np.float64),
-            self.eidx,
-            self.tidx,
-            self.lengths,
-            act,
-            ll,
-            ci,
-            ce,
-            ct,
         )
+        args = (np.ascontiguousarray(pidx, dtype=np.int64), tables, (self.eidx, self.tidx, self.lengths), act, (ll, ci, ce, ct))
         work = int(self.lengths[act].sum()) if active is not None else self.trials
         if self.threads > 1 and N > CHUNK and work >= PARALLEL_MIN:
             bounds = np.linspace(0, N, min(self.threads, N) + 1).astype(int)

@@ -125,51 +125,37 @@ class Sticks:
     def params(self, theta: np.ndarray, base: Params) -> Params:
         """``base`` with its free cells set from the fractions ``theta``."""
         out = Params(base.initial.copy(), base.emission.copy(), base.transition.copy())
-        table, m, mass, tbase, tstride, coff, cptr, cdst = self._layout()
         python(stick_values)(  # a few cells: not worth loading numba for
             np.ascontiguousarray(theta, dtype=float),
-            table,
-            m,
-            mass,
-            tbase,
-            tstride,
-            coff,
-            cptr,
-            cdst,
-            out.initial.reshape(-1),
-            out.emission.reshape(-1),
-            out.transition.reshape(-1),
+            self._layout(),
+            (out.initial.reshape(-1), out.emission.reshape(-1), out.transition.reshape(-1)),
         )
         return out
 
     def gradient(self, theta: np.ndarray, st: EStep) -> np.ndarray:
         """Gradient of the objective with respect to ``theta`` from the E-step at that point."""
-        table, m, _mass, tbase, tstride, coff, cptr, cdst = self._layout()
         out = np.empty(len(theta))
+        counts = (st.initial, st.emission, st.transition)
         python(stick_gradient)(
             np.ascontiguousarray(theta, dtype=float),
             float(self.structure.spec.prior),
-            table,
-            m,
-            tbase,
-            tstride,
-            coff,
-            cptr,
-            cdst,
-            np.ascontiguousarray(st.initial, dtype=float).reshape(-1),
-            np.ascontiguousarray(st.emission, dtype=float).reshape(-1),
-            np.ascontiguousarray(st.transition, dtype=float).reshape(-1),
+            self._layout(),
+            tuple(np.ascontiguousarray(c, dtype=float).reshape(-1) for c in counts),
             out,
         )
         return out
 
 
 @njit(cache=True, nogil=True)
-def stick_values(theta, table, m, mass, tbase, tstride, coff, cptr, cdst, out0, out1, out2):
-    """The cells of stick-breaking rows from their fractions ``theta``: row i (``m[i]`` cells of
+def stick_values(theta, layout, out):
+    """The cells of stick-breaking rows from their fractions ``theta``, in the ``layout`` (table, m,
+    mass, tbase, tstride, coff, cptr, cdst) of :meth:`Sticks._layout`: row i (``m[i]`` cells of
     total ``mass[i]`` in table ``table[i]``: 0 initial, 1 emission, 2 transition) has fraction j
     at ``theta[tbase[i] + j * tstride[i]]``; its cell j goes to the flat positions
-    ``cdst[cptr[c]:cptr[c + 1]]`` of that table's ``out*``, c = ``coff[i] + j``."""
+    ``cdst[cptr[c]:cptr[c + 1]]`` of that table's ``out`` (initial, emission, transition; flat),
+    c = ``coff[i] + j``."""
+    table, m, mass, tbase, tstride, coff, cptr, cdst = layout
+    out0, out1, out2 = out
     for i in range(len(m)):
         rem = mass[i]
         for j in range(m[i]):
@@ -190,10 +176,12 @@ def stick_values(theta, table, m, mass, tbase, tstride, coff, cptr, cdst, out0, 
 
 
 @njit(cache=True, nogil=True)
-def stick_gradient(theta, prior, table, m, tbase, tstride, coff, cptr, cdst, w0, w1, w2, out):
-    """The gradient of the objective in the fractions of :func:`stick_values`' layout, from the
-    expected counts ``w*`` of the three tables (flat): w_j / v_j - (sum_{i>j} w_i) / (1 - v_j)
-    with w the row's counts plus ``prior``."""
+def stick_gradient(theta, prior, layout, counts, out):
+    """The gradient of the objective in the fractions of :func:`stick_values`' ``layout`` into ``out``,
+    from the expected ``counts`` of the three tables (initial, emission, transition; flat):
+    w_j / v_j - (sum_{i>j} w_i) / (1 - v_j) with w the row's counts plus ``prior``."""
+    table, m, _mass, tbase, tstride, coff, cptr, cdst = layout
+    w0, w1, w2 = counts
     w = np.empty(int(m.max()) if len(m) else 0)
     for i in range(len(m)):
         for j in range(m[i]):
