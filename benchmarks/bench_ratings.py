@@ -22,7 +22,8 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np
 
-from trustseek.estimation.fit import FitResult, fit_trust_model
+from trustseek.estimation.fit import fit_trust_model
+from trustseek.estimation.result import FitResult
 from trustseek.model import RatingTable, TrustModel, paper_model
 from trustseek.simulation import simulate_design
 

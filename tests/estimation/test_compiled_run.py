@@ -5,6 +5,7 @@ import pytest
 
 from trustseek.estimation import FitError, Params, encode, fit_iohmm, kernels, paper_spec
 from trustseek.estimation import compiled_run as cr
+from trustseek.estimation import compiled_steps as steps
 from trustseek.estimation.convergence import em_step
 from trustseek.estimation.em import run_em
 from trustseek.estimation.estep import Workspace
@@ -51,13 +52,14 @@ def test_estep_and_mstep_are_those_of_the_workspace_and_structure(levels, prior)
     p = s.random(np.random.default_rng(levels))
     flat = p.vector().copy()
     counts = np.empty_like(flat)
-    ll, f = cr._evaluate(flat, K, Ue, M, Ut, prior, emt, trt, data, bufs, counts)
+    model = (K, Ue, M, Ut, prior, emt, trt)
+    ll, f = steps.evaluate(flat, model, (data, bufs), counts)
     st = w.estep(p)
     assert ll == st.loglik  # the same items summed in the same order
     assert f == pytest.approx(float(st.loglik + s.log_prior(p)), rel=1e-14)
     assert np.array_equal(counts, np.concatenate([st.initial, st.emission.ravel(), st.transition.ravel()]))
     q = np.empty_like(flat)
-    cr._em_step(flat, counts, K, Ue, M, Ut, prior, emt, trt, q)
+    steps.em_step(flat, counts, model, q)
     np.testing.assert_allclose(q, s.mstep(st, p).vector(), rtol=1e-13, atol=1e-15)
 
 

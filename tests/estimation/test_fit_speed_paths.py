@@ -7,10 +7,10 @@ from threadpoolctl import threadpool_info, threadpool_limits
 
 from trustseek.estimation import Params, encode, fit_iohmm, iohmm, kernels, paper_spec
 from trustseek.estimation.estep import Workspace
-from trustseek.estimation.quasi_newton import one_blas_thread
 from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
+from trustseek.solvers.base import one_blas_thread
 
 pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 
@@ -127,7 +127,7 @@ def sticks_reference(sticks, theta, base, st):
 @pytest.mark.parametrize("types", [0, 2])
 def test_compiled_sticks_equal_the_numpy_formulas(types):
     from trustseek.estimation.mixture import MixtureStructure, MixtureWorkspace
-    from trustseek.estimation.quasi_newton import Sticks
+    from trustseek.estimation.sticks import Sticks
 
     spec = paper_spec()
     seqs = encode(simulate_design(paper_model(), 12, seed=5), spec)

@@ -324,7 +324,8 @@ def test_compiled_estep_equals_the_numpy_reference(K):
 def test_stick_breaking_finish_gradient_and_monotone_history(K):
     """The quasi-Newton finish: its parametrization round-trips, its Fisher-identity gradient
     equals central differences of the objective, and it never lowers the objective."""
-    from trustseek.estimation.quasi_newton import Sticks, finish
+    from trustseek.estimation.quasi_newton import finish
+    from trustseek.estimation.sticks import Sticks
 
     df = small_paper_data(30, (41, 30), seed=13)
     spec = paper_spec(levels=K, prior=0.3)

@@ -17,8 +17,9 @@ from hypothesis import strategies as st
 from cli_runner import run_cli
 from trustseek.data.trials import ColumnMapping, DataError, read_trials
 from trustseek.estimation import FitError, encode, fit_trust_model
-from trustseek.estimation.fit import FitResult, decode, trust_loglik
+from trustseek.estimation.fit import decode, trust_loglik
 from trustseek.estimation.ratings import compose_joint, split_counts, split_joint
+from trustseek.estimation.result import FitResult
 from trustseek.estimation.trust_iohmm import preset_spec
 from trustseek.model import ModelError, RatingTable, TrustModel, paper_model, paper_task
 from trustseek.pomdp import AssistancePOMDP

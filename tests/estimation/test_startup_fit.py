@@ -144,14 +144,14 @@ def test_compiled_functions_import_numba_on_their_first_call_and_then_are_numbas
     code = (
         "import sys\n"
         "import numpy as np\n"
-        "from trustseek.estimation import kernels, compiled_run\n"
+        "from trustseek.estimation import sticks, compiled_run\n"
         "before = 'numba' in sys.modules\n"
-        "lazy = kernels.stick_values\n"
+        "lazy = sticks.stick_values\n"
         "out = np.zeros(2)\n"
         "i = np.zeros(1, dtype=np.int64)\n"
-        "lazy(np.array([0.25]), i, i + 2, np.ones(1), i, i + 1, i, np.array([0, 1, 2]), np.array([0, 1]), out, np.zeros(0), np.zeros(0))\n"
+        "lazy(np.array([0.25]), (i, i + 2, np.ones(1), i, i + 1, i, np.array([0, 1, 2]), np.array([0, 1])), (out, np.zeros(0), np.zeros(0)))\n"
         "import numba\n"
-        "after = isinstance(kernels.stick_values, numba.core.registry.CPUDispatcher)\n"
+        "after = isinstance(sticks.stick_values, numba.core.registry.CPUDispatcher)\n"
         "inner = isinstance(compiled_run.kernels._item, numba.core.registry.CPUDispatcher)\n"
         "print(before, 'numba' in sys.modules, after, inner, out.tolist())"
     )

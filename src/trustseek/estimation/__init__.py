@@ -4,8 +4,9 @@
 * :mod:`.sequences` -- trial tables encoded as integer arrays (:func:`encode`);
 * :mod:`.structure` -- a spec compiled against data: free, tied and fixed cells, M-step;
 * :mod:`.ratings` -- a self-reported rating as a second emission of the level (joint output);
-* :mod:`.estep` / :mod:`.kernels` -- the E-step (compiled, with the numpy reference);
-* :mod:`.em` / :mod:`.quasi_newton` -- EM for R starts with SQUAREM, and the L-BFGS-B finish;
+* :mod:`.estep` / :mod:`.kernels` / :mod:`.forward_backward` -- the E-step (compiled, with the numpy reference);
+* :mod:`.em` / :mod:`.quasi_newton` / :mod:`.sticks` -- EM for R starts with SQUAREM, and the L-BFGS-B finish
+  on the free cells' stick-breaking fractions;
 * :mod:`.convergence` -- a run has converged at a stationary point, checked by one more EM step;
 * :mod:`.iohmm` -- :func:`fit_iohmm`, log-likelihood, posteriors, Viterbi;
 * :mod:`.trust_iohmm` -- the paper's structure, tables to and from a TrustModel;

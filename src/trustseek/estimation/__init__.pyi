@@ -4,10 +4,12 @@
 from . import (
     bootstrap,
     compiled_run,
+    compiled_steps,
     convergence,
     em,
     estep,
     fit,
+    forward_backward,
     iohmm,
     kernels,
     mixture,
@@ -15,17 +17,20 @@ from . import (
     prediction,
     quasi_newton,
     ratings,
+    result,
     selection,
     sequences,
     spec,
+    sticks,
     structure,
     trust_iohmm,
     type_selection,
     validation,
     warm,
 )
-from .fit import MIN_EVENTS, FitResult, ModelFitResult, decode, fit_model, fit_trust_model, trust_loglik
+from .fit import MIN_EVENTS, decode, fit_model, fit_trust_model, trust_loglik
 from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
+from .result import FitResult
 from .selection import select_levels, selection_warnings
 from .sequences import Sequences, encode
 from .spec import FitError, Fixed, IOHMMSpec, Params
@@ -49,7 +54,6 @@ __all__ = [
     "Fixed",
     "IOHMMFit",
     "IOHMMSpec",
-    "ModelFitResult",
     "Params",
     "Sequences",
     "decode",

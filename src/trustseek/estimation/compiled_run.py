@@ -31,12 +31,13 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from . import compiled_steps as steps
 from . import kernels
-from .em import CAPPED, SHRINK, STATIONARY, RunResult
+from .em import CAPPED, STATIONARY, RunResult
 from .estep import Workspace
-from .quasi_newton import Sticks
 from .spec import FitError, Params
-from .structure import FLOOR, PROJECT_FLOOR, Structure, Table
+from .sticks import Sticks, stick_gradient, stick_values
+from .structure import FLOOR, Structure, Table
 
 njit = kernels.njit
 CHUNK = kernels.CHUNK
@@ -50,199 +51,9 @@ ENDED_STATIONARY, ENDED_CAPPED, ENDED_ZERO = 0, 1, 2  # how a compiled run ended
 
 
 @njit(cache=True, nogil=True)
-def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
-    """E-step of one parameter set: counts into ``ci`` (K,), ``cem`` (Ue, K, M), ``ctr`` (Ut, K, K);
-    the log-likelihood (-inf: probability zero, counts zero).  Items of :data:`CHUNK` sequences
-    summed in item order, as :meth:`.kernels.Kernel.run` does."""
-    eidx, tidx, code, lengths = data
-    ini, emit, trans, ll, pin, pe, pt = bufs
-    Ue, K, M = em.shape
-    Ut = tr.shape[0]
-    for u in range(Ue):
-        for k in range(K):
-            for m in range(M):
-                emit[0, u * M + m, k] = em[u, k, m]
-    for k in range(K):
-        ini[0, k] = pi[k]
-        emit[0, Ue * M, k] = 1.0
-    for u in range(Ut):
-        trans[0, u] = tr[u]
-    N = eidx.shape[0]
-    C = ll.shape[0]
-    for c in range(C):
-        lo = c * CHUNK
-        pin[c] = 0.0
-        pe[c] = 0.0
-        pt[c] = 0.0
-        ll[c] = kernels._item(0, lo, min(N, lo + CHUNK), ini, emit, trans, eidx, tidx, code, lengths, pin[c], pe[c], pt[c])
-    ci[:] = 0.0
-    cem[:] = 0.0
-    ctr[:] = 0.0
-    for c in range(C):
-        if not ll[c] > -math.inf:
-            return -math.inf
-    total = 0.0
-    tot_i = np.zeros(K)
-    tot_e = np.zeros((Ue * M + 1, K))
-    tot_t = np.zeros((Ut + 1, K, K))
-    for c in range(C):
-        total += ll[c]
-        tot_i += pin[c]
-        tot_e += pe[c]
-        tot_t += pt[c]
-    ci[:] = tot_i
-    for u in range(Ue):
-        for k in range(K):
-            for m in range(M):
-                cem[u, k, m] = tot_e[u * M + m, k]
-    ctr[:] = tot_t[:Ut]
-    return total
-
-
-@njit(cache=True, nogil=True)
-def _table_mstep(counts, prior, prev, tab, out):
-    """:meth:`.structure.Table.mstep` of one table into ``out``."""
-    group, rep, gfixed, gvalues, mass = tab
-    U, K, M = counts.shape
-    G = rep.shape[0]
-    cg = np.zeros((G, K, M))
-    for u in range(U):
-        cg[group[u]] += counts[u]
-    rows = np.empty((G, K, M))
-    for g in range(G):
-        for k in range(K):
-            tot = 0.0
-            for m in range(M):
-                if not gfixed[g, k, m]:
-                    tot += cg[g, k, m] + prior
-            for m in range(M):
-                if gfixed[g, k, m]:
-                    rows[g, k, m] = gvalues[g, k, m]
-                elif tot > 0:
-                    rows[g, k, m] = (cg[g, k, m] + prior) / tot * mass[g, k]
-                else:
-                    rows[g, k, m] = prev[rep[g], k, m]
-    for u in range(U):
-        out[u] = rows[group[u]]
-
-
-@njit(cache=True, nogil=True)
-def _mstep(ci, cem, ctr, prior, pi, em, tr, emt, trt, qpi, qem, qtr):
-    """The M-step (:meth:`.structure.Structure.mstep`) from the counts at (``pi``, ``em``, ``tr``) into ``q*``."""
-    tot = 0.0
-    for k in range(len(ci)):
-        tot += ci[k] + prior
-    for k in range(len(ci)):
-        qpi[k] = (ci[k] + prior) / tot if tot > 0 else pi[k]
-    _table_mstep(cem, prior, em, emt, qem)
-    _table_mstep(ctr, prior, tr, trt, qtr)
-
-
-@njit(cache=True, nogil=True)
-def _table_project(p, tab, out):
-    """:meth:`.structure.Table.project` of one table into ``out``."""
-    group, rep, gfixed, gvalues, mass = tab
-    U, K, M = p.shape
-    G = rep.shape[0]
-    rows = np.empty((G, K, M))
-    for g in range(G):
-        for k in range(K):
-            s = 0.0
-            for m in range(M):
-                if not gfixed[g, k, m]:
-                    s += max(p[rep[g], k, m], PROJECT_FLOOR)
-            d = s if s > 0 else 1.0
-            for m in range(M):
-                if gfixed[g, k, m]:
-                    rows[g, k, m] = gvalues[g, k, m]
-                else:
-                    rows[g, k, m] = max(p[rep[g], k, m], PROJECT_FLOOR) / d * mass[g, k]
-    for u in range(U):
-        out[u] = rows[group[u]]
-
-
-@njit(cache=True, nogil=True)
-def _table_log_prior(p, prior, tab):
-    _group, rep, gfixed, _gvalues, _mass = tab
-    G, K, M = gfixed.shape
-    s = 0.0
-    for g in range(G):
-        for k in range(K):
-            for m in range(M):
-                if not gfixed[g, k, m]:
-                    s += math.log(max(p[rep[g], k, m], FLOOR))
-    return prior * s
-
-
-@njit(cache=True, nogil=True)
-def _log_prior(pi, em, tr, prior, emt, trt):
-    """:meth:`.structure.Structure.log_prior`."""
-    if prior == 0:
-        return 0.0
-    s = 0.0
-    for k in range(len(pi)):
-        s += math.log(max(pi[k], FLOOR))
-    return prior * s + _table_log_prior(em, prior, emt) + _table_log_prior(tr, prior, trt)
-
-
-@njit(cache=True, nogil=True)
-def _extrapolate(p0, p1, p2, K, emt, trt, Ue, M, Ut, out):
-    """The SQUAREM point of :func:`.em._extrapolate` from the flat cells ``p0 -> p1 -> p2`` into the
-    flat ``out`` (projected); whether it is worth trying (step length below -1)."""
-    rr = 0.0
-    vv = 0.0
-    for i in range(len(p0)):
-        r = p1[i] - p0[i]
-        v = p2[i] - 2 * p1[i] + p0[i]
-        rr += r * r
-        vv += v * v
-    nv = math.sqrt(vv)
-    step = -math.sqrt(rr) / nv if nv > 0 else -1.0
-    if not step < -1.0:
-        return False
-    x = np.empty(len(p0))
-    for i in range(len(p0)):
-        r = p1[i] - p0[i]
-        v = p2[i] - 2 * p1[i] + p0[i]
-        x[i] = max(p0[i] - 2 * step * r + step * step * v, SHRINK * p2[i])
-    s = 0.0
-    for k in range(K):
-        s += max(x[k], PROJECT_FLOOR)
-    for k in range(K):
-        out[k] = max(x[k], PROJECT_FLOOR) / s
-    a, b = K, K + Ue * K * M
-    _table_project(x[a:b].reshape((Ue, K, M)), emt, out[a:b].reshape((Ue, K, M)))
-    _table_project(x[b:].reshape((Ut, K, K)), trt, out[b:].reshape((Ut, K, K)))
-    return True
-
-
-@njit(cache=True, nogil=True)
-def _views(flat, K, Ue, M, Ut):
-    a, b = K, K + Ue * K * M
-    return flat[:a], flat[a:b].reshape((Ue, K, M)), flat[b:].reshape((Ut, K, K))
-
-
-@njit(cache=True, nogil=True)
-def _evaluate(flat, K, Ue, M, Ut, prior, emt, trt, data, bufs, counts):
-    """E-step at the flat cells ``flat`` into ``counts`` (flat, the layout of the cells); (log-likelihood, objective)."""
-    pi, em, tr = _views(flat, K, Ue, M, Ut)
-    ci, cem, ctr = _views(counts, K, Ue, M, Ut)
-    ll = _estep(pi, em, tr, data, bufs, ci, cem, ctr)
-    return ll, ll + _log_prior(pi, em, tr, prior, emt, trt)
-
-
-@njit(cache=True, nogil=True)
-def _em_step(flat, counts, K, Ue, M, Ut, prior, emt, trt, out):
-    """The point one EM step on from ``flat`` with E-step counts ``counts``, into ``out``."""
-    pi, em, tr = _views(flat, K, Ue, M, Ut)
-    ci, cem, ctr = _views(counts, K, Ue, M, Ut)
-    qpi, qem, qtr = _views(out, K, Ue, M, Ut)
-    _mstep(ci, cem, ctr, prior, pi, em, tr, emt, trt, qpi, qem, qtr)
-
-
-@njit(cache=True, nogil=True)
-def _theta(flat, K, Ue, M, Ut, sticks, n):
-    """:meth:`.quasi_newton.Sticks.theta` of the flat cells."""
+def _theta(flat, model, sticks, n):
+    """:meth:`.sticks.Sticks.theta` of the flat cells."""
+    K, Ue, M, _Ut, _prior, _emt, _trt = model
     table, m, mass, tbase, tstride, coff, cptr, cdst = sticks
     a, b = K, K + Ue * K * M
     f0, f1, f2 = flat[:a], flat[a:b], flat[b:]
@@ -258,18 +69,16 @@ def _theta(flat, K, Ue, M, Ut, sticks, n):
 
 
 @njit(cache=True, nogil=True)
-def _fg(theta, base, flat, counts, K, Ue, M, Ut, prior, emt, trt, sticks, data, bufs, grad):
+def _fg(theta, base, flat, counts, model, sticks, ev, grad):
     """The cells of ``theta`` (on ``base``) into ``flat``, their E-step counts into ``counts`` and
     the gradient of the objective into ``grad``; (log-likelihood, objective)."""
-    table, m, mass, tbase, tstride, coff, cptr, cdst = sticks
+    K, Ue, M, _Ut, prior, _emt, _trt = model
     a, b = K, K + Ue * K * M
     flat[:] = base
-    kernels.stick_values(theta, table, m, mass, tbase, tstride, coff, cptr, cdst, flat[:a], flat[a:b], flat[b:])
-    ll, f = _evaluate(flat, K, Ue, M, Ut, prior, emt, trt, data, bufs, counts)
+    stick_values(theta, sticks, (flat[:a], flat[a:b], flat[b:]))
+    ll, f = steps.evaluate(flat, model, ev, counts)
     if math.isfinite(f):
-        kernels.stick_gradient(
-            theta, prior, table, m, tbase, tstride, coff, cptr, cdst, counts[:a], counts[a:b], counts[b:], grad
-        )
+        stick_gradient(theta, prior, sticks, (counts[:a], counts[a:b], counts[b:]), grad)
     return ll, f
 
 
@@ -342,7 +151,7 @@ def _box_qp(g, B, lo, hi, d):
 
 
 @njit(cache=True, nogil=True)
-def _finish(state, budget, ftol, n, K, Ue, M, Ut, prior, emt, trt, sticks, data, bufs, history, nh, B, warm):
+def _finish(state, budget, ftol, model, ev, qn, history, nh):
     """The quasi-Newton finish from the run's point ``state`` (flat cells, counts, log-likelihood,
     objective; updated in place to the best accepted point).  Maximises the objective over the
     stick-breaking fractions in the box [EPS, 1 - EPS]: a BFGS model of the objective (dense,
@@ -350,17 +159,18 @@ def _finish(state, budget, ftol, n, K, Ue, M, Ut, prior, emt, trt, sticks, data,
     inside the box (a small bound-constrained quadratic programme, no E-steps), a backtracking
     line search along it; stops when an iteration changes the objective by at most ``ftol``
     (relative, as L-BFGS-B's ``ftol``), when no step decreases it, or at ``budget`` E-steps.
-    The model's matrix is ``B`` (n, n), left there at the end; with ``warm`` the finish starts
-    from the matrix it holds, else from a multiple of the identity.
-    (E-steps, stopped by the budget, entries in ``history``)."""
+    ``qn`` is (the sticks' layout, their number n, ``B``, ``warm``): the model's matrix is ``B``
+    (n, n), left there at the end; with ``warm`` the finish starts from the matrix it holds, else
+    from a multiple of the identity.  (E-steps, stopped by the budget, entries in ``history``)."""
     flat, counts, stat = state
+    sticks, n, B, warm = qn
     lo, hi = STICK_EPS, 1 - STICK_EPS
     base = flat.copy()
-    x = _theta(base, K, Ue, M, Ut, sticks, n)
+    x = _theta(base, model, sticks, n)
     g = np.empty(n)
     fl = np.empty(len(flat))
     cn = np.empty(len(flat))
-    _ll, f = _fg(x, base, fl, cn, K, Ue, M, Ut, prior, emt, trt, sticks, data, bufs, g)
+    _ll, f = _fg(x, base, fl, cn, model, sticks, ev, g)
     calls = 1
     if not math.isfinite(f):
         return calls, False, nh
@@ -398,7 +208,7 @@ def _finish(state, budget, ftol, n, K, Ue, M, Ut, prior, emt, trt, sticks, data,
                 return calls, True, nh
             for i in range(n):
                 xn[i] = min(max(x[i] + step * d[i], lo), hi)
-            lln, fn = _fg(xn, base, fln, cnn, K, Ue, M, Ut, prior, emt, trt, sticks, data, bufs, gn)
+            lln, fn = _fg(xn, base, fln, cnn, model, sticks, ev, gn)
             calls += 1
             Fn = -fn
             if math.isfinite(Fn) and Fn <= F + ARMIJO * step * slope:
@@ -441,7 +251,7 @@ def _finish(state, budget, ftol, n, K, Ue, M, Ut, prior, emt, trt, sticks, data,
 
 
 @njit(cache=True, nogil=True)
-def _em(state, tol, max_iter, its, K, Ue, M, Ut, prior, emt, trt, data, bufs, accelerate, history, nh):
+def _em(state, tol, max_iter, its, model, ev, accelerate, history, nh):
     """EM with SQUAREM from the point ``state`` (its counts known) until a step gains less than
     ``tol`` (relative), rounding makes a step lose, or ``max_iter`` E-steps; updated in place.
     (E-steps so far, converged, entries in ``history``), as :func:`.em.run_em` decides."""
@@ -458,8 +268,8 @@ def _em(state, tol, max_iter, its, K, Ue, M, Ut, prior, emt, trt, data, bufs, ac
         if its >= max_iter:
             return its, False, nh
         f0 = stat[1]
-        _em_step(flat, counts, K, Ue, M, Ut, prior, emt, trt, p1)
-        ll1, f1 = _evaluate(p1, K, Ue, M, Ut, prior, emt, trt, data, bufs, c1)
+        steps.em_step(flat, counts, model, p1)
+        ll1, f1 = steps.evaluate(p1, model, ev, c1)
         its += 1
         if not f1 >= f0:  # only rounding does this at a fixed point: keep the better point
             return its, True, nh
@@ -481,8 +291,8 @@ def _em(state, tol, max_iter, its, K, Ue, M, Ut, prior, emt, trt, data, bufs, ac
             stat[0], stat[1] = ll1, f1
             return its, False, nh
         p0[:] = flat
-        _em_step(p1, c1, K, Ue, M, Ut, prior, emt, trt, p2)
-        ll2, f2 = _evaluate(p2, K, Ue, M, Ut, prior, emt, trt, data, bufs, c2)
+        steps.em_step(p1, c1, model, p2)
+        ll2, f2 = steps.evaluate(p2, model, ev, c2)
         its += 1
         if not f2 >= f1:
             flat[:] = p1
@@ -496,8 +306,8 @@ def _em(state, tol, max_iter, its, K, Ue, M, Ut, prior, emt, trt, data, bufs, ac
         stat[0], stat[1] = ll2, f2
         if f2 - f1 <= tol * abs(f1):
             return its, True, nh
-        if its < max_iter and _extrapolate(p0, p1, p2, K, emt, trt, Ue, M, Ut, pe):
-            lle, fe = _evaluate(pe, K, Ue, M, Ut, prior, emt, trt, data, bufs, ce)
+        if its < max_iter and steps.extrapolate(p0, p1, p2, model, pe):
+            lle, fe = steps.evaluate(pe, model, ev, ce)
             its += 1
             if fe >= f2 and math.isfinite(fe):
                 history[nh] = fe
@@ -508,13 +318,17 @@ def _em(state, tol, max_iter, its, K, Ue, M, Ut, prior, emt, trt, data, bufs, ac
 
 
 @njit(cache=True, nogil=True)
-def run_one(
-    start, K, Ue, M, Ut, prior, emt, trt, sticks, n, data, C, PE, tol, max_iter, em_tol, finish_tol, qn, accelerate, B, warm
-):
+def run_one(start, model, data, C, PE, settings, qn):
     """One start from its first E-step to its end (see the module).  Returns the end point's
     flat cells, (log-likelihood, objective), E-steps, how it ended, finishes, and the history.
-    ``B`` (n, n) holds the finish's quasi-Newton matrix at the end; with ``warm`` the finishes
-    start from the matrix ``B`` holds, else each from a multiple of the identity."""
+    ``model``: (K, Ue, M, Ut, prior, emission table, transition table); ``data``: the kernel's
+    index arrays, in ``C`` items with ``PE`` emission rows; ``settings``: (tol, max_iter, em_tol,
+    finish_tol, quasi-Newton, accelerate); ``qn``: (the sticks' layout, their number n, ``B``,
+    ``warm``): ``B`` (n, n) holds the finish's quasi-Newton matrix at the end; with ``warm`` the
+    finishes start from the matrix ``B`` holds, else each from a multiple of the identity."""
+    K, _Ue, _M, Ut, _prior, _emt, _trt = model
+    tol, max_iter, em_tol, finish_tol, use_qn, accelerate = settings
+    n = qn[1]
     L = len(start)
     bufs = (
         np.empty((1, K)),
@@ -532,23 +346,22 @@ def run_one(
     counts = np.empty(L)
     stat = np.empty(2)
     history = np.empty(max_iter + 2)
-    stat[0], stat[1] = _evaluate(flat, K, Ue, M, Ut, prior, emt, trt, data, bufs, counts)
+    ev = (data, bufs)
+    stat[0], stat[1] = steps.evaluate(flat, model, ev, counts)
     if not math.isfinite(stat[1]):
         return flat, stat, 1, ENDED_ZERO, 0, history[:0]
     history[0] = stat[1]
     nh = 1
     state = (flat, counts, stat)
-    its, converged, nh = _em(state, em_tol, max_iter, 1, K, Ue, M, Ut, prior, emt, trt, data, bufs, accelerate, history, nh)
+    its, converged, nh = _em(state, em_tol, max_iter, 1, model, ev, accelerate, history, nh)
     finishes = 0
     q = np.empty(L)
     cq = np.empty(L)
     while True:
         if not converged:
             return flat, stat, its, ENDED_CAPPED, finishes, history[:nh]
-        if qn and n > 0 and max_iter - its >= 2 and math.isfinite(stat[1]):
-            calls, capped, nh = _finish(
-                state, max_iter - its, finish_tol, n, K, Ue, M, Ut, prior, emt, trt, sticks, data, bufs, history, nh, B, warm
-            )
+        if use_qn and n > 0 and max_iter - its >= 2 and math.isfinite(stat[1]):
+            calls, capped, nh = _finish(state, max_iter - its, finish_tol, model, ev, qn, history, nh)
             its += calls
             finishes += 1
             if capped:
@@ -556,8 +369,8 @@ def run_one(
         if its + 1 > max_iter or not math.isfinite(stat[1]):
             return flat, stat, its, ENDED_CAPPED, finishes, history[:nh]
         # the check: one EM step from the end point (its counts are known)
-        _em_step(flat, counts, K, Ue, M, Ut, prior, emt, trt, q)
-        llq, fq = _evaluate(q, K, Ue, M, Ut, prior, emt, trt, data, bufs, cq)
+        steps.em_step(flat, counts, model, q)
+        llq, fq = steps.evaluate(q, model, ev, cq)
         its += 1
         f = stat[1]
         if not fq - f > tol * abs(f):
@@ -567,7 +380,7 @@ def run_one(
         stat[0], stat[1] = llq, fq
         history[nh] = fq
         nh += 1
-        its, converged, nh = _em(state, em_tol, max_iter, its, K, Ue, M, Ut, prior, emt, trt, data, bufs, accelerate, history, nh)
+        its, converged, nh = _em(state, em_tol, max_iter, its, model, ev, accelerate, history, nh)
 
 
 def _table(t: Table) -> tuple[np.ndarray, ...]:
@@ -640,13 +453,14 @@ def run_starts(
     data = (kern.eidx, kern.tidx, kern.code, kern.lengths)
     emt, trt = _table(structure.em), _table(structure.tr)
     prior = float(structure.spec.prior)
-    args = (K, Ue, M, Ut, prior, emt, trt, layout, sticks.size, data, kern.C, work.PE)
+    n = sticks.size
+    model = (K, Ue, M, Ut, prior, emt, trt)
     settings = (float(tol), int(max_iter), float(em_tol), float(finish_tol), bool(quasi_newton), bool(accelerate))
     template = starts[0]
     idx = subsample(kern) if quasi_newton and sticks.size > 0 else None
     if idx is not None:
         sub = tuple(np.ascontiguousarray(a[idx]) for a in data)
-        sub_args = (*args[:9], sub, max((len(idx) + CHUNK - 1) // CHUNK, 1), work.PE)
+        sub_C = max((len(idx) + CHUNK - 1) // CHUNK, 1)
         ratio = kern.trials / float(sub[3].sum())
 
     def one(p: Params) -> RunResult:
@@ -655,15 +469,15 @@ def run_starts(
         B = np.zeros((sticks.size, sticks.size))
         sub_its = 0
         if idx is not None:
-            y, _stat, sub_its, sub_ended, _f, _h = run_one(x, *sub_args, *settings, B, False)
+            y, _stat, sub_its, sub_ended, _f, _h = run_one(x, model, sub, sub_C, work.PE, settings, (layout, n, B, False))
             if sub_ended == ENDED_ZERO:
                 raise FitError(["the initial values give the data probability zero"])
             B *= ratio
-            flat, stat, its, ended, finishes, history = run_one(y, *args, *settings, B, True)
+            flat, stat, its, ended, finishes, history = run_one(y, model, data, kern.C, work.PE, settings, (layout, n, B, True))
             if ended != ENDED_ZERO:
                 return result(flat, stat, its, ended, finishes, history, sub_its, t0)
             sub_its = 0  # the subsample's end is impossible for the whole data: from the start again
-        flat, stat, its, ended, finishes, history = run_one(x, *args, *settings, B, False)
+        flat, stat, its, ended, finishes, history = run_one(x, model, data, kern.C, work.PE, settings, (layout, n, B, False))
         if ended == ENDED_ZERO:
             raise FitError(["the initial values give the data probability zero"])
         return result(flat, stat, its, ended, finishes, history, sub_its, t0)

@@ -19,8 +19,9 @@ from dataclasses import replace
 
 from .em import CAPPED, STATIONARY, RunResult, run_em
 from .estep import Workspace
-from .quasi_newton import Sticks, finish
+from .quasi_newton import finish
 from .spec import Params
+from .sticks import Sticks
 from .structure import Structure
 
 CHECK_STEPS = 2  # E-steps of the check: counts at the end point, then the objective one EM step on

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -22,10 +22,10 @@ import pandas as pd
 from ..model.core import TrustModel
 from ..model.iohmm import IOHMMModel
 from ..vocab import ACTIONS, EXPERIENCES
-from .bootstrap import Intervals
 from .bootstrap import bootstrap as _bootstrap
-from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
+from .iohmm import IOHMMFit, fit_iohmm, loglik
 from .ratings import RatingStructure
+from .result import FitResult, posterior_frame
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
 from .structure import Structure, describe_combination
@@ -34,7 +34,6 @@ from .trust_iohmm import (
     check_convertible,
     from_trust_model,
     general_spec,
-    index_grid,
     model_complexities,
     preset_spec,
     to_iohmm_model,
@@ -44,173 +43,6 @@ from .trust_iohmm import (
 log = logging.getLogger(__name__)
 
 MIN_EVENTS = 5  # fewer expected events than this behind a row: "not identified by this data"
-
-
-class Fitted:
-    """What a fitted model's result derives from its fit: the criteria, the posteriors and the
-    fit's record for JSON (shared by :class:`FitResult` and :class:`ModelFitResult`)."""
-
-    fit: IOHMMFit
-    seed: int
-    warnings: list[str]
-    intervals: Intervals | None
-
-    @property
-    def loglik(self) -> float:
-        return self.fit.loglik
-
-    @property
-    def restart_logliks(self) -> list[float]:
-        return self.fit.restart_logliks
-
-    @property
-    def n_params(self) -> int:
-        return self.fit.n_params
-
-    @property
-    def aic(self) -> float:
-        return self.fit.aic
-
-    @property
-    def bic(self) -> float:
-        return self.fit.bic
-
-    def posteriors(self) -> pd.DataFrame:
-        """Smoothed P(level | all trials of the participant) and the Viterbi level, one row per trial."""
-        return posterior_frame(self.fit.seqs, self.fit.spec, self.fit.params)
-
-    def fit_record(self, bootstrap: int) -> dict[str, Any]:
-        """The fit's figures, each start's run, the seed, the bootstrap and the spec, for ``to_dict``."""
-        runs, iv = self.fit.runs, self.intervals
-        return {
-            "loglik": self.loglik,
-            "n_params": self.n_params,
-            "aic": self.aic,
-            "bic": self.bic,
-            "n_participants": self.fit.seqs.n_participants,
-            "n_trials": self.fit.seqs.n_trials,
-            "n_observations": self.fit.n_observations,
-            "restart_logliks": self.restart_logliks,
-            "best_restart": self.fit.best,
-            "iterations": [r.iterations for r in runs],
-            "subsample_iterations": [r.subsample_iterations for r in runs],
-            "converged": [r.converged for r in runs],
-            "ended": [r.ended for r in runs],
-            "seconds": [r.seconds for r in runs],
-            "seed": self.seed,
-            "bootstrap": bootstrap,
-            "ci_level": None if iv is None else iv.level,
-            "ci_method": None if iv is None else iv.method,
-            "ci_other_maximum": None if iv is None else iv.other_maximum,
-            "spec": self.fit.spec.to_dict(),
-        }
-
-
-@dataclass
-class FitResult(Fitted):
-    """A fitted trust model with its diagnostics (see :func:`fit_trust_model`)."""
-
-    model: TrustModel
-    fit: IOHMMFit
-    counts: dict[str, np.ndarray]
-    estimated: dict[str, np.ndarray]
-    ci: dict[str, tuple[np.ndarray, np.ndarray]] | None = None
-    bootstrap: int = 0
-    seed: int = 0
-    warnings: list[str] = field(default_factory=list)
-    intervals: Intervals | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "model": self.model.to_dict(),
-            **self.fit_record(self.bootstrap),
-            "counts": {k: v.tolist() for k, v in self.counts.items()},
-            "estimated": {k: v.tolist() for k, v in self.estimated.items()},
-            "ci": None
-            if self.ci is None
-            else {k: {"lower": lo.tolist(), "upper": hi.tolist()} for k, (lo, hi) in self.ci.items()},
-            "warnings": list(self.warnings),
-        }
-
-    def cells(self) -> list[dict[str, Any]]:
-        """One record per estimated cell: label, TrustModel index, estimate, CI, events.
-
-        A model whose tables ignore some inputs lists each distinct row once, labelled
-        by the inputs it depends on.
-        """
-        m, spec = self.model, self.fit.spec
-        T = m.trust_levels
-        short = {"complexity": "C", "robot_action": "a", "experience": "E'"}
-        names = {"complexity": m.complexities, "robot_action": ACTIONS, "experience": EXPERIENCES}
-        out: list[dict[str, Any]] = []
-        seen: set[tuple[Any, ...]] = set()
-
-        def add(table: str, idx: tuple[int, ...], label: str, key: tuple[Any, ...]) -> None:
-            if not self.estimated[table][idx] or key in seen:
-                return
-            seen.add(key)
-            rec: dict[str, Any] = {
-                "table": table,
-                "index": list(idx),
-                "cell": label,
-                "estimate": float((m.rating.probs if table == "rating" and m.rating is not None else getattr(m, table))[idx]),
-                "events": float(self.counts[table][idx]),
-            }
-            if self.ci is not None:
-                rec["lower"], rec["upper"] = float(self.ci[table][0][idx]), float(self.ci[table][1][idx])
-            if self.intervals is not None:
-                rec["widened"] = bool(self.intervals.widened[table][idx])
-            out.append(rec)
-
-        def cond(inputs: Sequence[str], values: dict[str, int]) -> str:
-            return "".join(f", {short[c]}={names[c][values[c]]}" for c in inputs)
-
-        for t in range(1, m.n_trust) if m.n_trust == 2 else range(m.n_trust):
-            add("initial", (t,), f"P(T1={T[t]})", ("i", t))
-        eg = index_grid(spec, spec.emission_inputs, False)
-        for c in range(m.n_complexity):
-            for a in range(2):
-                for t in range(m.n_trust):
-                    v = {"complexity": c, "robot_action": a}
-                    add("emission", (c, a, t, 1), f"P(rely | T={T[t]}{cond(spec.emission_inputs, v)})", ("e", int(eg[c, a]), t))
-        tg = index_grid(spec, spec.transition_inputs, True)
-        for c in range(m.n_complexity):
-            for a in range(2):
-                for e in range(2):
-                    for t in range(m.n_trust):
-                        for u in range(m.n_trust):
-                            if m.n_trust == 2 and u == 0:
-                                continue
-                            v = {"complexity": c, "robot_action": a, "experience": e}
-                            add(
-                                "transition",
-                                (c, a, e, t, u),
-                                f"P(T'={T[u]} | T={T[t]}{cond(spec.transition_inputs, v)})",
-                                ("t", int(tg[c, a, e]), t, u),
-                            )
-        if m.rating is not None and "rating" in self.estimated:
-            levels = m.rating.levels
-            for t in range(m.n_trust):
-                for r in range(len(levels)):
-                    add("rating", (t, r), f"P(rating={levels[r]} | T={T[t]})", ("r", t, r))
-        return out
-
-
-def posterior_frame(seqs: Sequences, spec: IOHMMSpec, params: Params) -> pd.DataFrame:
-    """Per trial, in the frame's row order: P(level | all trials of the participant) and the Viterbi level."""
-    gamma, path, _ = posteriors(seqs, spec, params)
-    valid = seqs.rows >= 0
-    tt, nn = np.nonzero(valid)
-    order = np.argsort(seqs.rows[valid], kind="stable")
-    tt, nn = tt[order], nn[order]
-    out: dict[str, Any] = {
-        "participant": [seqs.participants[i] for i in nn],
-        "trial": seqs.trial_numbers(tt, nn),
-    }
-    for k, name in enumerate(spec.levels):
-        out[f"p_trust_{name}"] = gamma[tt, nn, k]
-    out["viterbi_trust"] = np.array(spec.levels, dtype=object)[path[tt, nn]]
-    return pd.DataFrame(out)
 
 
 def _estimated_mask(structure: Structure) -> dict[str, np.ndarray]:
@@ -276,7 +108,7 @@ def fit_sequences(
     max_iter: int = 1000,
     progress: Callable[[int, int], None] | None = None,
     init: Sequence[Params] = (),
-) -> FitResult:
+) -> FitResult[TrustModel]:
     """:func:`fit_trust_model` on already encoded sequences."""
     check_convertible(spec)
     total = restarts + len(init) + bootstrap
@@ -313,7 +145,7 @@ def fit_sequences(
         events["rating"] = rc
         counts["rating"] = np.repeat(rc.sum(-1, keepdims=True), spec.n_ratings, axis=-1)
         estimated["rating"] = np.ones_like(rc, dtype=bool)
-    result = FitResult(model, fit, counts, estimated, seed=seed, warnings=_warnings(fit, events))
+    result = FitResult(model, fit, events, counts, estimated, seed=seed, warnings=_warnings(fit, events))
     for w in result.warnings:
         log.info("%s", w)
     if bootstrap > 0 and spec.rating is not None:
@@ -353,7 +185,7 @@ def fit_trust_model(
     rating_levels: Sequence[str] | None = None,
     actions: bool = True,
     **spec_options: Any,
-) -> FitResult:
+) -> FitResult[TrustModel]:
     """Fit a trust model to a trial table (the canonical columns, e.g. from :func:`read_trials`).
 
     ``preset`` is ``"paper"`` (optionally adjusted by ``levels``, ``transition_inputs``,
@@ -476,87 +308,6 @@ def decode(frame: pd.DataFrame, model: TrustModel | IOHMMModel, rating: str | No
 # --------------------------------------------------------------------------- a model with any named inputs
 
 
-@dataclass
-class ModelFitResult(Fitted):
-    """A fitted general model (:class:`~trustseek.model.iohmm.IOHMMModel`, any named inputs) with
-    its diagnostics: expected events behind every row, warnings for rows the data do not identify."""
-
-    model: IOHMMModel
-    fit: IOHMMFit
-    events: dict[str, np.ndarray]
-    warnings: list[str] = field(default_factory=list)
-    seed: int = 0
-    intervals: Intervals | None = None  # bootstrap intervals of every table cell (fit_model's ``bootstrap``)
-
-    def cells(self) -> list[dict[str, Any]]:
-        """One record per estimated row cell: label, table, input levels, estimate, expected events
-        (tied rows once, fixed and never-reached rows left out; of two categories the second only)."""
-        m, s = self.model, self.fit.structure
-        L = m.levels
-        out: list[dict[str, Any]] = []
-        iv = self.intervals
-
-        def with_interval(rec: dict[str, Any], table: str, idx: tuple[int, ...]) -> dict[str, Any]:
-            if iv is not None:
-                rec["lower"], rec["upper"] = float(iv.intervals[table][0][idx]), float(iv.intervals[table][1][idx])
-                rec["widened"] = bool(iv.widened[table][idx])
-            return rec
-
-        for k in range(1, m.n_levels) if m.n_levels == 2 else range(m.n_levels):
-            rec = {
-                "table": "initial",
-                "where": {},
-                "cell": f"P(S1={L[k]})",
-                "estimate": float(m.initial[k]),
-                "events": float(self.events["initial"][k]),
-            }
-            out.append(with_interval(rec, "initial", (k,)))
-        for name, table, arr, cats in (
-            ("emission", s.em, m.emission, m.output_categories),
-            ("transition", s.tr, m.transition, L),
-        ):
-            for g in range(table.G):
-                u = int(table.rep[g])
-                if table.empty[u]:
-                    continue
-                where = m.combination(name, u)
-                cond = "".join(f", {c}={v}" for c, v in where.items())
-                for k in range(m.n_levels):
-                    if np.all(table.fixed[u, k]):
-                        continue
-                    for j in range(1, len(cats)) if len(cats) == 2 else range(len(cats)):
-                        head = f"{m.output}={cats[j]}" if name == "emission" else f"S'={cats[j]}"
-                        rec = {
-                            "table": name,
-                            "where": where,
-                            "level": L[k],
-                            "category": cats[j],
-                            "cell": f"P({head} | S={L[k]}{cond})",
-                            "estimate": float(arr[u, k, j]),
-                            "events": float(self.events[name][u, k]),
-                        }
-                        out.append(with_interval(rec, name, (u, k, j)))
-        if m.rating is not None and "rating" in self.events:
-            for k in range(m.n_levels):
-                for r, lv in enumerate(m.rating.levels):
-                    out.append(
-                        {
-                            "table": "rating",
-                            "where": {},
-                            "level": L[k],
-                            "category": lv,
-                            "cell": f"P(rating={lv} | S={L[k]})",
-                            "estimate": float(m.rating.probs[k, r]),
-                            "events": float(self.events["rating"][k].sum()),
-                        }
-                    )
-        return out
-
-    def to_dict(self) -> dict[str, Any]:
-        bootstrap = 0 if self.intervals is None else self.intervals.replicates
-        return {"model": self.model.to_dict(), **self.fit_record(bootstrap), "warnings": list(self.warnings)}
-
-
 def fit_model(
     frame: pd.DataFrame,
     emission_inputs: Sequence[str],
@@ -574,7 +325,7 @@ def fit_model(
     actions: bool = True,
     spec: IOHMMSpec | None = None,
     bootstrap: int = 0,
-) -> ModelFitResult:
+) -> FitResult[IOHMMModel]:
     """Fit the human action's IOHMM with any named inputs (columns of ``frame``, e.g. a mapping's
     ``inputs`` and the canonical complexity, robot_action, experience) to a general model.
 
@@ -636,7 +387,7 @@ def fit_model(
         warnings.append(f"never estimated (no such trials in the data; the model file holds defaults): {', '.join(never)}")
     for w in warnings:
         log.info("%s", w)
-    result = ModelFitResult(model, fit, events, warnings, seed)
+    result = FitResult(model, fit, events, warnings=warnings, seed=seed)
     if bootstrap > 0:
         result.intervals = _bootstrap(
             seqs,

@@ -20,11 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..solvers.base import one_blas_thread
 from . import compiled_run
 from .convergence import converge
 from .em import STATIONARY, RunResult, run_em
 from .estep import Workspace
-from .quasi_newton import one_blas_thread
 from .ratings import make_structure
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec, Params

@@ -53,484 +53,35 @@ import numpy as np
 
 from ..compiled import AVAILABLE as AVAILABLE  # callers read kernels.AVAILABLE
 from ..compiled import njit
+from .forward_backward import (
+    _backward,
+    _backward2,
+    _backward_codes,
+    _backward_pair,
+    _fold,
+    _forward,
+    _forward2,
+    _forward_codes,
+    _forward_pair,
+    _sequence,
+    _sequence2,
+    _step_table,
+    step_codes,
+)
 
 CHUNK = 128  # sequences per work item (a fixed grouping of the sums)
-RESCALE = 200  # forward and backward vectors are multiplied by 2**RESCALE when below 2**-RESCALE (exact)
-TINY = 2.0**-RESCALE
-HUGE = 2.0**RESCALE
-LOG_HUGE = RESCALE * math.log(2.0)
 PARALLEL_MIN = 40_000  # trials x parameter sets from which an E-step is split over threads
 COMPILE_MIN = 5_000  # trials from which a fit's E-steps run compiled (worth_compiling)
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _forward(r, n, initial, emit, trans, eidx, tidx, L, alpha, scale):
-    """Scaled forward pass of sequence ``n`` under parameter set ``r`` into ``alpha`` and ``scale``;
-    its log-probability (-inf: zero)."""
-    K = initial.shape[1]
-    # forward, scaled: alpha[t] = P(S_t | y_1..t), 1 / scale[t] = P(y_t | y_<t) <= 1;
-    # the scales are multiplied up and their log taken only before underflow
-    e = eidx[n, 0]
-    s = 0.0
-    for k in range(K):
-        a = initial[r, k] * emit[r, e, k]
-        alpha[0, k] = a
-        s += a
-    if not s > 0.0:
-        return -math.inf
-    total = 0.0
-    prod = s
-    inv = 1.0 / s
-    scale[0] = inv
-    for k in range(K):
-        alpha[0, k] *= inv
-    for t in range(1, L):
-        e = eidx[n, t]
-        u = tidx[n, t - 1]
-        s = 0.0
-        for j in range(K):
-            acc = 0.0
-            for i in range(K):
-                acc += alpha[t - 1, i] * trans[r, u, i, j]
-            a = acc * emit[r, e, j]
-            alpha[t, j] = a
-            s += a
-        if not s > 0.0:
-            return -math.inf
-        inv = 1.0 / s
-        scale[t] = inv
-        prod *= s
-        if prod < 1e-250:
-            total += math.log(prod)
-            prod = 1.0
-        for j in range(K):
-            alpha[t, j] *= inv
-    total += math.log(prod)
-    return total
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _backward(r, n, emit, trans, eidx, tidx, L, weight, c_init, c_emit, c_trans, alpha, beta, scale, tmp):
-    """Backward pass of sequence ``n`` after :func:`_forward`: its posterior counts times ``weight`` added."""
-    K = alpha.shape[1]
-    # backward, scaled like alpha: gamma_t = alpha_t * beta_t sums to ``weight``
-    for k in range(K):
-        beta[L - 1, k] = weight
-    for t in range(L - 1, 0, -1):
-        e = eidx[n, t]
-        u = tidx[n, t - 1]
-        inv = scale[t]
-        for j in range(K):
-            tmp[j] = emit[r, e, j] * beta[t, j] * inv
-        for i in range(K):
-            acc = 0.0
-            ai = alpha[t - 1, i]
-            for j in range(K):
-                w = trans[r, u, i, j] * tmp[j]
-                acc += w
-                c_trans[u, i, j] += ai * w
-            beta[t - 1, i] = acc
-    for t in range(L):
-        e = eidx[n, t]
-        for k in range(K):
-            c_emit[e, k] += alpha[t, k] * beta[t, k]
-    for k in range(K):
-        c_init[k] += alpha[0, k] * beta[0, k]
-
-
 @njit(cache=True, nogil=True)
-def _sequence(r, n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans, alpha, beta, scale, tmp):
-    """Add the posterior counts of sequence ``n`` under parameter set ``r``; its log-probability (-inf: zero)."""
-    total = _forward(r, n, initial, emit, trans, eidx, tidx, L, alpha, scale)
-    if not total > -math.inf:
-        return total
-    _backward(r, n, emit, trans, eidx, tidx, L, 1.0, c_init, c_emit, c_trans, alpha, beta, scale, tmp)
-    return total
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _forward2(n, initial, emit, trans, eidx, tidx, L, alpha):
-    """The forward pass of :func:`_sequence2` into ``alpha`` (unnormalised, rescaled by 2**RESCALE
-    where needed); the log-probability of sequence ``n`` (-inf: zero)."""
-    e = eidx[n, 0]
-    a0 = initial[0] * emit[e, 0]
-    a1 = initial[1] * emit[e, 1]
-    shifts = 0
-    if a0 + a1 < TINY:
-        if not a0 + a1 > 0.0:
-            return -math.inf
-        a0 *= HUGE
-        a1 *= HUGE
-        shifts += 1
-    alpha[0, 0] = a0
-    alpha[0, 1] = a1
-    for t in range(1, L):
-        e = eidx[n, t]
-        u = tidx[n, t - 1]
-        b0 = (a0 * trans[u, 0, 0] + a1 * trans[u, 1, 0]) * emit[e, 0]
-        b1 = (a0 * trans[u, 0, 1] + a1 * trans[u, 1, 1]) * emit[e, 1]
-        a0 = b0
-        a1 = b1
-        if a0 + a1 < TINY:
-            if not a0 + a1 > 0.0:
-                return -math.inf
-            a0 *= HUGE
-            a1 *= HUGE
-            shifts += 1
-        alpha[t, 0] = a0
-        alpha[t, 1] = a1
-    return math.log(a0 + a1) - shifts * LOG_HUGE
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _backward2(n, emit, trans, eidx, tidx, L, weight, c_init, c_emit, c_trans, alpha):
-    """The backward pass of :func:`_sequence2` after :func:`_forward2`: the posterior counts of
-    sequence ``n`` times ``weight`` added (the weight enters each trial's normaliser, so a
-    weight of 1 adds exactly the unweighted counts)."""
-    # backward: beta in (g0, g1), rescaled like alpha; gamma and xi normalised per trial
-    g0 = 1.0
-    g1 = 1.0
-    z = weight / (alpha[L - 1, 0] + alpha[L - 1, 1])  # weight / sum(alpha_t * beta_t) at t = L - 1
-    for t in range(L - 1, 0, -1):
-        e = eidx[n, t]
-        u = tidx[n, t - 1]
-        c_emit[e, 0] += alpha[t, 0] * g0 * z
-        c_emit[e, 1] += alpha[t, 1] * g1 * z
-        m0 = emit[e, 0] * g0
-        m1 = emit[e, 1] * g1
-        w00 = trans[u, 0, 0] * m0
-        w01 = trans[u, 0, 1] * m1
-        w10 = trans[u, 1, 0] * m0
-        w11 = trans[u, 1, 1] * m1
-        g0 = w00 + w01
-        g1 = w10 + w11
-        p0 = alpha[t - 1, 0]
-        p1 = alpha[t - 1, 1]
-        # sum(alpha_{t-1} * beta_{t-1}), also the sum of the four xi terms: P(data) up to the scale
-        # factors, so it only changes where alpha was rescaled; beta is rescaled to keep it normal
-        z = p0 * g0 + p1 * g1
-        if z < TINY:
-            g0 *= HUGE
-            g1 *= HUGE
-            w00 *= HUGE
-            w01 *= HUGE
-            w10 *= HUGE
-            w11 *= HUGE
-            z *= HUGE
-        z = weight / z
-        p0 *= z
-        p1 *= z
-        c_trans[u, 0, 0] += p0 * w00
-        c_trans[u, 0, 1] += p0 * w01
-        c_trans[u, 1, 0] += p1 * w10
-        c_trans[u, 1, 1] += p1 * w11
-    e = eidx[n, 0]
-    q0 = alpha[0, 0] * g0 * z
-    q1 = alpha[0, 1] * g1 * z
-    c_emit[e, 0] += q0
-    c_emit[e, 1] += q1
-    c_init[0] += q0
-    c_init[1] += q1
-
-
-@njit(cache=True, nogil=True)
-def _sequence2(n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans, alpha):
-    """:func:`_sequence` for K = 2 levels, with the 2-vectors and 2x2 matrices in registers.
-
-    The forward and backward vectors are not normalised at every trial (a division on
-    the path from one trial to the next) but multiplied by 2**RESCALE (exact) when the
-    forward sum, or the sum of forward times backward, falls below 2**-RESCALE; the
-    posteriors are normalised trial by trial off that path.
-    """
-    total = _forward2(n, initial, emit, trans, eidx, tidx, L, alpha)
-    if not total > -math.inf:
-        return total
-    _backward2(n, emit, trans, eidx, tidx, L, 1.0, c_init, c_emit, c_trans, alpha)
-    return total
-
-
-@njit(cache=True, nogil=True)
-def step_codes(eidx, tidx, PE):
-    """The step code of every trial, (N, T): ``tidx[n, t - 1] * PE + eidx[n, t]`` (the transition
-    into trial t and trial t's emission row) for t >= 1 and ``eidx[n, 0]`` for the first trial."""
-    N, T = eidx.shape
-    code = np.empty((N, T), dtype=np.int32)
-    for n in range(N):
-        if T > 0:
-            code[n, 0] = eidx[n, 0]
-        for t in range(1, T):
-            code[n, t] = tidx[n, t - 1] * PE + eidx[n, t]
-    return code
-
-
-@njit(cache=True, nogil=True)
-def _step_table(emit, trans, PE, A):
-    """``A[u * PE + e] = (trans[u, 0, 0] emit[e, 0], trans[u, 0, 1] emit[e, 1], trans[u, 1, 0] emit[e, 0],
-    trans[u, 1, 1] emit[e, 1])``: the 2 x 2 step matrix of every step code (K = 2)."""
-    for u in range(trans.shape[0]):
-        for e in range(PE):
-            c = u * PE + e
-            A[c, 0] = trans[u, 0, 0] * emit[e, 0]
-            A[c, 1] = trans[u, 0, 1] * emit[e, 1]
-            A[c, 2] = trans[u, 1, 0] * emit[e, 0]
-            A[c, 3] = trans[u, 1, 1] * emit[e, 1]
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _forward_codes(n, initial, emit, A, code, L, alpha, marks):
-    """:func:`_forward2` on the step codes: ``alpha`` unnormalised, multiplied by 2**RESCALE
-    where its sum falls below 2**-RESCALE (the trials where it was go to ``marks``); the
-    log-probability of sequence ``n`` (-inf: zero) and the number of marks."""
-    e = code[n, 0]
-    a0 = initial[0] * emit[e, 0]
-    a1 = initial[1] * emit[e, 1]
-    s = 0
-    if a0 + a1 < TINY:
-        if not a0 + a1 > 0.0:
-            return -math.inf, 0
-        a0 *= HUGE
-        a1 *= HUGE
-        marks[s] = 0
-        s += 1
-    alpha[0, 0] = a0
-    alpha[0, 1] = a1
-    for t in range(1, L):
-        c = code[n, t]
-        x0 = a0 * A[c, 0] + a1 * A[c, 2]
-        x1 = a0 * A[c, 1] + a1 * A[c, 3]
-        a0 = x0
-        a1 = x1
-        if a0 + a1 < TINY:
-            if not a0 + a1 > 0.0:
-                return -math.inf, 0
-            a0 *= HUGE
-            a1 *= HUGE
-            marks[s] = t
-            s += 1
-        alpha[t, 0] = a0
-        alpha[t, 1] = a1
-    return math.log(a0 + a1) - s * LOG_HUGE, s
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _backward_codes(n, A, code, L, c_first, c_step, alpha, marks, s):
-    """The backward pass after :func:`_forward_codes`: the posterior of every step (t - 1, t),
-    xi, added to ``c_step[code[n, t]]`` (4 cells, row-major 2 x 2) and the first trial's
-    posterior to ``c_first[2 + 2 e + k]`` and ``c_first[k]`` (the initial counts).
-
-    sum_k alpha_t(k) beta_t(k) is the probability of the sequence times the scale factors, so
-    its inverse ``z`` is known from the last trial and changes only by powers of 2: by
-    2**RESCALE where ``alpha`` was rescaled (``marks``) and by 2**-RESCALE where ``beta`` is
-    (when ``z`` exceeds 2**RESCALE: the forward-backward sum below 2**-RESCALE).  Trial t's
-    posterior is the sum of the step's over its first level: the emission counts come from
-    ``c_step`` (see :func:`_fold`)."""
-    g0 = 1.0
-    g1 = 1.0
-    z = 1.0 / (alpha[L - 1, 0] + alpha[L - 1, 1])
-    j = s - 1
-    mark = marks[j] if j >= 0 else -1
-    for t in range(L - 1, 0, -1):
-        c = code[n, t]
-        w00 = A[c, 0] * g0
-        w01 = A[c, 1] * g1
-        w10 = A[c, 2] * g0
-        w11 = A[c, 3] * g1
-        g0 = w00 + w01
-        g1 = w10 + w11
-        if t == mark:  # alpha[t] was multiplied by 2**RESCALE, alpha[t - 1] not
-            z *= HUGE
-            j -= 1
-            mark = marks[j] if j >= 0 else -1
-        if z > HUGE:
-            g0 *= HUGE
-            g1 *= HUGE
-            w00 *= HUGE
-            w01 *= HUGE
-            w10 *= HUGE
-            w11 *= HUGE
-            z *= TINY
-        p0 = alpha[t - 1, 0] * z
-        p1 = alpha[t - 1, 1] * z
-        c_step[c, 0] += p0 * w00
-        c_step[c, 1] += p0 * w01
-        c_step[c, 2] += p1 * w10
-        c_step[c, 3] += p1 * w11
-    e = code[n, 0]
-    q0 = alpha[0, 0] * g0 * z
-    q1 = alpha[0, 1] * g1 * z
-    c_first[2 + 2 * e] += q0
-    c_first[3 + 2 * e] += q1
-    c_first[0] += q0
-    c_first[1] += q1
-
-
-@njit(cache=True, nogil=True)
-def _forward_pair(n, m, initial, emit, A, code, L, alpha, alpha2, marks, marks2):
-    """:func:`_forward_codes` of sequences ``n`` and ``m`` of the same length side by side (two
-    independent recursions in one loop keep the processor busy); the same numbers as two calls.
-    Their log-probabilities (both -inf when either is zero) and numbers of marks."""
-    e = code[n, 0]
-    f = code[m, 0]
-    a0 = initial[0] * emit[e, 0]
-    a1 = initial[1] * emit[e, 1]
-    b0 = initial[0] * emit[f, 0]
-    b1 = initial[1] * emit[f, 1]
-    sa = 0
-    sb = 0
-    if a0 + a1 < TINY:
-        if not a0 + a1 > 0.0:
-            return -math.inf, -math.inf, 0, 0
-        a0 *= HUGE
-        a1 *= HUGE
-        marks[sa] = 0
-        sa += 1
-    if b0 + b1 < TINY:
-        if not b0 + b1 > 0.0:
-            return -math.inf, -math.inf, 0, 0
-        b0 *= HUGE
-        b1 *= HUGE
-        marks2[sb] = 0
-        sb += 1
-    alpha[0, 0] = a0
-    alpha[0, 1] = a1
-    alpha2[0, 0] = b0
-    alpha2[0, 1] = b1
-    for t in range(1, L):
-        c = code[n, t]
-        d = code[m, t]
-        x0 = a0 * A[c, 0] + a1 * A[c, 2]
-        x1 = a0 * A[c, 1] + a1 * A[c, 3]
-        y0 = b0 * A[d, 0] + b1 * A[d, 2]
-        y1 = b0 * A[d, 1] + b1 * A[d, 3]
-        a0 = x0
-        a1 = x1
-        b0 = y0
-        b1 = y1
-        if a0 + a1 < TINY:
-            if not a0 + a1 > 0.0:
-                return -math.inf, -math.inf, 0, 0
-            a0 *= HUGE
-            a1 *= HUGE
-            marks[sa] = t
-            sa += 1
-        if b0 + b1 < TINY:
-            if not b0 + b1 > 0.0:
-                return -math.inf, -math.inf, 0, 0
-            b0 *= HUGE
-            b1 *= HUGE
-            marks2[sb] = t
-            sb += 1
-        alpha[t, 0] = a0
-        alpha[t, 1] = a1
-        alpha2[t, 0] = b0
-        alpha2[t, 1] = b1
-    return math.log(a0 + a1) - sa * LOG_HUGE, math.log(b0 + b1) - sb * LOG_HUGE, sa, sb
-
-
-@njit(cache=True, nogil=True)
-def _backward_pair(n, m, A, code, L, ci, cs, alpha, marks, sa, di, ds, alpha2, marks2, sb):
-    """:func:`_backward_codes` of sequences ``n`` (counts into ``ci``, ``cs``) and ``m`` (into
-    ``di``, ``ds``) side by side, after :func:`_forward_pair`; the same numbers as two calls."""
-    g0 = 1.0
-    g1 = 1.0
-    h0 = 1.0
-    h1 = 1.0
-    z = 1.0 / (alpha[L - 1, 0] + alpha[L - 1, 1])
-    y = 1.0 / (alpha2[L - 1, 0] + alpha2[L - 1, 1])
-    ja = sa - 1
-    jb = sb - 1
-    ma = marks[ja] if ja >= 0 else -1
-    mb = marks2[jb] if jb >= 0 else -1
-    for t in range(L - 1, 0, -1):
-        c = code[n, t]
-        d = code[m, t]
-        w00 = A[c, 0] * g0
-        w01 = A[c, 1] * g1
-        w10 = A[c, 2] * g0
-        w11 = A[c, 3] * g1
-        q00 = A[d, 0] * h0
-        q01 = A[d, 1] * h1
-        q10 = A[d, 2] * h0
-        q11 = A[d, 3] * h1
-        g0 = w00 + w01
-        g1 = w10 + w11
-        h0 = q00 + q01
-        h1 = q10 + q11
-        if t == ma:
-            z *= HUGE
-            ja -= 1
-            ma = marks[ja] if ja >= 0 else -1
-        if t == mb:
-            y *= HUGE
-            jb -= 1
-            mb = marks2[jb] if jb >= 0 else -1
-        if z > HUGE:
-            g0 *= HUGE
-            g1 *= HUGE
-            w00 *= HUGE
-            w01 *= HUGE
-            w10 *= HUGE
-            w11 *= HUGE
-            z *= TINY
-        if y > HUGE:
-            h0 *= HUGE
-            h1 *= HUGE
-            q00 *= HUGE
-            q01 *= HUGE
-            q10 *= HUGE
-            q11 *= HUGE
-            y *= TINY
-        p0 = alpha[t - 1, 0] * z
-        p1 = alpha[t - 1, 1] * z
-        r0 = alpha2[t - 1, 0] * y
-        r1 = alpha2[t - 1, 1] * y
-        cs[c, 0] += p0 * w00
-        cs[c, 1] += p0 * w01
-        cs[c, 2] += p1 * w10
-        cs[c, 3] += p1 * w11
-        ds[d, 0] += r0 * q00
-        ds[d, 1] += r0 * q01
-        ds[d, 2] += r1 * q10
-        ds[d, 3] += r1 * q11
-    e = code[n, 0]
-    q0 = alpha[0, 0] * g0 * z
-    q1 = alpha[0, 1] * g1 * z
-    ci[2 + 2 * e] += q0
-    ci[3 + 2 * e] += q1
-    ci[0] += q0
-    ci[1] += q1
-    f = code[m, 0]
-    r0 = alpha2[0, 0] * h0 * y
-    r1 = alpha2[0, 1] * h1 * y
-    di[2 + 2 * f] += r0
-    di[3 + 2 * f] += r1
-    di[0] += r0
-    di[1] += r1
-
-
-@njit(cache=True, nogil=True)
-def _fold(ci, cs, PE, c_init, c_emit, c_trans):
-    """The per-code sums of :func:`_backward_codes` added to the tables: the step (u, e)'s
-    posterior to transition u, its sum over the first level to emission row e."""
-    c_init[0] += ci[0]
-    c_init[1] += ci[1]
-    for e in range(PE):
-        c_emit[e, 0] += ci[2 + 2 * e]
-        c_emit[e, 1] += ci[3 + 2 * e]
-    for u in range(c_trans.shape[0]):
-        for e in range(PE):
-            c = u * PE + e
-            c_emit[e, 0] += cs[c, 0] + cs[c, 2]
-            c_emit[e, 1] += cs[c, 1] + cs[c, 3]
-            c_trans[u, 0, 0] += cs[c, 0]
-            c_trans[u, 0, 1] += cs[c, 1]
-            c_trans[u, 1, 0] += cs[c, 2]
-            c_trans[u, 1, 1] += cs[c, 3]
-
-
-@njit(cache=True, nogil=True)
-def _item(r, lo, hi, initial, emit, trans, eidx, tidx, code, lengths, c_init, c_emit, c_trans):
-    """Sequences ``lo:hi`` under parameter set ``r`` into this item's counts; their log-probability."""
+def _item(r, lo, hi, tables, data, counts):
+    """Sequences ``lo:hi`` under parameter set ``r`` of ``tables`` (initial, emit, trans) into this
+    item's ``counts`` (initial, emission, transition); their log-probability.  ``data``: (eidx,
+    tidx, code, lengths)."""
+    initial, emit, trans = tables
+    eidx, tidx, code, lengths = data
+    c_init, c_emit, c_trans = counts
     K = initial.shape[1]
     T = eidx.shape[1]
     total = 0.0
@@ -613,9 +164,11 @@ def _reduce(active, ll, pi, pe, pt, loglik, c_init, c_emit, c_trans):
 
 
 @njit(cache=True, nogil=True)
-def estep_items(first, last, C, chunk, initial, emit, trans, eidx, tidx, code, lengths, active, ll, pi, pe, pt):
-    """Items ``first:last`` (item = r * C + c: parameter set r, sequences c*chunk onwards) into their own sums."""
-    N = eidx.shape[0]
+def estep_items(first, last, C, chunk, tables, data, active, sums):
+    """Items ``first:last`` (item = r * C + c: parameter set r, sequences c*chunk onwards) into their
+    own ``sums`` (log-likelihood (R, C), initial, emission and transition counts per item)."""
+    ll, pi, pe, pt = sums
+    N = data[0].shape[0]
     for item in range(first, last):
         r = item // C
         c = item % C
@@ -624,19 +177,21 @@ def estep_items(first, last, C, chunk, initial, emit, trans, eidx, tidx, code, l
             pi[r, c] = 0.0
             pe[r, c] = 0.0
             pt[r, c] = 0.0
-            ll[r, c] = _item(
-                r, lo, min(N, lo + chunk), initial, emit, trans, eidx, tidx, code, lengths, pi[r, c], pe[r, c], pt[r, c]
-            )
+            ll[r, c] = _item(r, lo, min(N, lo + chunk), tables, data, (pi[r, c], pe[r, c], pt[r, c]))
 
 
 @njit(cache=True, nogil=True)
-def _mixture_item(r, lo, hi, M, initial, emit, trans, eidx, tidx, lengths, c_init, c_emit, c_trans, seq_ll):
+def _mixture_item(r, lo, hi, M, tables, data, counts, seq_ll):
     """Sequences ``lo:hi`` under the M types of parameter set ``r`` (sets ``r * M + m``): per sequence
     the forward pass of every type, the type responsibilities, then each type's backward pass
     with its responsibility as the weight.  A type's ``initial`` row is the joint P(type, S_1)
     (it sums to the type's weight; all zero: an empty type, skipped), so the forward pass gives
     log P(sequence, type).  Counts go to ``c_*[m]``; log P(sequence n, type m) to
-    ``seq_ll[m, n]``; returns the mixture log-probability of the sequences (-inf: zero)."""
+    ``seq_ll[m, n]``; returns the mixture log-probability of the sequences (-inf: zero).
+    ``tables``: (initial, emit, trans); ``data``: (eidx, tidx, lengths); ``counts``: (c_init, c_emit, c_trans)."""
+    initial, emit, trans = tables
+    eidx, tidx, lengths = data
+    c_init, c_emit, c_trans = counts
     K = initial.shape[1]
     T = eidx.shape[1]
     alpha = np.empty((M, max(T, 1), K))
@@ -682,10 +237,11 @@ def _mixture_item(r, lo, hi, M, initial, emit, trans, eidx, tidx, lengths, c_ini
 
 
 @njit(cache=True, nogil=True)
-def mixture_items(first, last, C, chunk, M, initial, emit, trans, eidx, tidx, lengths, active, ll, pi, pe, pt, seq_ll):
-    """Items ``first:last`` of a mixture E-step (item = r * C + c) into their own sums: ``ll`` (R, C),
+def mixture_items(first, last, C, chunk, M, tables, data, active, sums, seq_ll):
+    """Items ``first:last`` of a mixture E-step (item = r * C + c) into their own ``sums``: ``ll`` (R, C),
     ``pi`` (R, C, M, K), ``pe`` (R, C, M, PE, K), ``pt`` (R, C, M, P, K, K); ``seq_ll`` (R, M, N)."""
-    N = eidx.shape[0]
+    ll, pi, pe, pt = sums
+    N = data[0].shape[0]
     for item in range(first, last):
         r = item // C
         c = item % C
@@ -694,15 +250,17 @@ def mixture_items(first, last, C, chunk, M, initial, emit, trans, eidx, tidx, le
             pi[r, c] = 0.0
             pe[r, c] = 0.0
             pt[r, c] = 0.0
-            ll[r, c] = _mixture_item(
-                r, lo, min(N, lo + chunk), M, initial, emit, trans, eidx, tidx, lengths, pi[r, c], pe[r, c], pt[r, c], seq_ll[r]
-            )
+            ll[r, c] = _mixture_item(r, lo, min(N, lo + chunk), M, tables, data, (pi[r, c], pe[r, c], pt[r, c]), seq_ll[r])
 
 
 @njit(cache=True, nogil=True)
-def each_items(lo, hi, pidx, initial, emit, trans, eidx, tidx, lengths, active, ll, ci, ce, ct):
-    """Sequences ``lo:hi``, sequence n under parameter set ``pidx[n]``, each into its own counts
-    ``ci[n]``, ``ce[n]``, ``ct[n]`` and log-probability ``ll[n]`` (skipped where ``active[n]`` is false)."""
+def each_items(lo, hi, pidx, tables, data, active, out):
+    """Sequences ``lo:hi``, sequence n under parameter set ``pidx[n]`` of ``tables`` (initial, emit,
+    trans), each into its own counts ``ci[n]``, ``ce[n]``, ``ct[n]`` and log-probability ``ll[n]``
+    (``out``: (ll, ci, ce, ct); skipped where ``active[n]`` is false).  ``data``: (eidx, tidx, lengths)."""
+    initial, emit, trans = tables
+    eidx, tidx, lengths = data
+    ll, ci, ce, ct = out
     K = initial.shape[1]
     T = eidx.shape[1]
     alpha = np.empty((max(T, 1), K))
@@ -726,57 +284,6 @@ def each_items(lo, hi, pidx, initial, emit, trans, eidx, tidx, lengths, active, 
             ci[n] = 0.0
             ce[n] = 0.0
             ct[n] = 0.0
-
-
-@njit(cache=True, nogil=True)
-def stick_values(theta, table, m, mass, tbase, tstride, coff, cptr, cdst, out0, out1, out2):
-    """The cells of stick-breaking rows from their fractions ``theta``: row i (``m[i]`` cells of
-    total ``mass[i]`` in table ``table[i]``: 0 initial, 1 emission, 2 transition) has fraction j
-    at ``theta[tbase[i] + j * tstride[i]]``; its cell j goes to the flat positions
-    ``cdst[cptr[c]:cptr[c + 1]]`` of that table's ``out*``, c = ``coff[i] + j``."""
-    for i in range(len(m)):
-        rem = mass[i]
-        for j in range(m[i]):
-            if j < m[i] - 1:
-                v = theta[tbase[i] + j * tstride[i]]
-                val = rem * v
-                rem = rem * (1 - v)
-            else:
-                val = rem
-            c = coff[i] + j
-            for q in range(cptr[c], cptr[c + 1]):
-                if table[i] == 0:
-                    out0[cdst[q]] = val
-                elif table[i] == 1:
-                    out1[cdst[q]] = val
-                else:
-                    out2[cdst[q]] = val
-
-
-@njit(cache=True, nogil=True)
-def stick_gradient(theta, prior, table, m, tbase, tstride, coff, cptr, cdst, w0, w1, w2, out):
-    """The gradient of the objective in the fractions of :func:`stick_values`' layout, from the
-    expected counts ``w*`` of the three tables (flat): w_j / v_j - (sum_{i>j} w_i) / (1 - v_j)
-    with w the row's counts plus ``prior``."""
-    w = np.empty(int(m.max()) if len(m) else 0)
-    for i in range(len(m)):
-        for j in range(m[i]):
-            c = coff[i] + j
-            acc = 0.0
-            for q in range(cptr[c], cptr[c + 1]):
-                if table[i] == 0:
-                    acc += w0[cdst[q]]
-                elif table[i] == 1:
-                    acc += w1[cdst[q]]
-                else:
-                    acc += w2[cdst[q]]
-            w[j] = acc + prior
-        tail = w[m[i] - 1]
-        for j in range(m[i] - 2, -1, -1):
-            k = tbase[i] + j * tstride[i]
-            v = theta[k]
-            out[k] = w[j] / v - tail / (1 - v)
-            tail = tail + w[j]
 
 
 #: set inside :func:`many_fits`: every fit compiled whatever its size
@@ -871,17 +378,12 @@ class Kernel:
                 np.empty((R, C, self.PE, K)),
                 np.empty((R, C, self.P, K, K)),
             )
-        args = (
+        tables = (
             np.ascontiguousarray(initial, dtype=np.float64),
             np.ascontiguousarray(emit, dtype=np.float64),
             np.ascontiguousarray(trans, dtype=np.float64),
-            self.eidx,
-            self.tidx,
-            self.code,
-            self.lengths,
-            act,
-            *parts,
         )
+        args = (tables, (self.eidx, self.tidx, self.code, self.lengths), act, parts)
         n_active = int(act.sum())
         if self.threads > 1 and n_active * C > 1 and self.trials * n_active >= PARALLEL_MIN:
             # contiguous runs of the active items, one per thread; each item writes only its own sums
@@ -897,7 +399,7 @@ class Kernel:
         ci = np.empty((R, K))
         ce = np.empty((R, self.PE, K))
         ct = np.empty((R, self.P, K, K))
-        _reduce(act, *args[-4:], ll, ci, ce, ct)
+        _reduce(act, *parts, ll, ci, ce, ct)
         return ll, ci, ce, ct
 
     def _active(self, R: int, active: np.ndarray | None) -> np.ndarray:
@@ -929,18 +431,12 @@ class Kernel:
                 np.empty((R, C, M, self.P, K, K)),
             )
         seq_ll = np.zeros((R, M, N))
-        args = (
-            M,
+        tables = (
             np.ascontiguousarray(initial, dtype=np.float64),
             np.ascontiguousarray(emit, dtype=np.float64),
             np.ascontiguousarray(trans, dtype=np.float64),
-            self.eidx,
-            self.tidx,
-            self.lengths,
-            act,
-            *parts,
-            seq_ll,
         )
+        args = (M, tables, (self.eidx, self.tidx, self.lengths), act, parts, seq_ll)
         n_active = int(act.sum())
         if self.threads > 1 and n_active * C > 1 and self.trials * n_active * M >= PARALLEL_MIN:
             items = [r * C + c for r in np.flatnonzero(act) for c in range(C)]
@@ -971,20 +467,12 @@ class Kernel:
         ci = np.empty((N, K))
         ce = np.empty((N, self.PE, K))
         ct = np.empty((N, self.P, K, K))
-        args = (
-            np.ascontiguousarray(pidx, dtype=np.int64),
+        tables = (
             np.ascontiguousarray(initial, dtype=np.float64),
             np.ascontiguousarray(emit, dtype=np.float64),
             np.ascontiguousarray(trans, dtype=np.float64),
-            self.eidx,
-            self.tidx,
-            self.lengths,
-            act,
-            ll,
-            ci,
-            ce,
-            ct,
         )
+        args = (np.ascontiguousarray(pidx, dtype=np.int64), tables, (self.eidx, self.tidx, self.lengths), act, (ll, ci, ce, ct))
         work = int(self.lengths[act].sum()) if active is not None else self.trials
         if self.threads > 1 and N > CHUNK and work >= PARALLEL_MIN:
             bounds = np.linspace(0, N, min(self.threads, N) + 1).astype(int)

@@ -49,9 +49,9 @@ from .em import STATIONARY, RunResult, run_em
 from .estep import EStep, Workspace
 from .fit import never_estimated
 from .iohmm import FINISH_FTOL, FINISH_SWITCH, FitCriteria, fit_iohmm
-from .quasi_newton import Sticks, _Part
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
+from .sticks import Sticks, _Part
 from .structure import FLOOR, PROJECT_FLOOR, START_MIX, Structure
 from .trust_iohmm import check_convertible, from_trust_model, preset_spec, to_trust_model
 

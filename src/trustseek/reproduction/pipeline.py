@@ -38,8 +38,9 @@ import numpy as np
 import pandas as pd
 
 from ..errors import TrustseekError
-from ..estimation.fit import FitResult, fit_trust_model
+from ..estimation.fit import fit_trust_model
 from ..estimation.kernels import many_fits
+from ..estimation.result import FitResult
 from ..model.core import AUTONOMOUS, FAULTY, INTERVENE, TrustModel
 from ..model.jsonfile import json_safe
 from ..model.presets import paper_model, paper_task

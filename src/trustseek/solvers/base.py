@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import functools
 import sys
-from collections.abc import Callable
-from typing import Any, ClassVar, Protocol, TypeVar
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager, contextmanager
+from typing import Any, ClassVar, Protocol, TypeVar, overload
 
 from threadpoolctl import ThreadpoolController
 
@@ -93,20 +95,58 @@ def _count(n: int) -> str:
     return {1: "one", 2: "two", 3: "three"}.get(n, str(n))
 
 
-def one_blas_thread(method: F) -> F:
-    """Run ``method`` with the BLAS library (OpenBLAS, MKL) on one thread.  A threaded BLAS
-    splits products and sums differently with the number of cores, so their last bits differ;
-    a solver then picks another vector at a near tie and the policy changes (the type-aware
-    policy of the reproduction's fitted types moved its lower bound by 1.4e-4 between one and
-    two threads).  The solvers' products are thin (K <= a few dozen columns), so one thread
-    costs them little."""
+@overload
+def one_blas_thread() -> AbstractContextManager[None]: ...
 
-    @functools.wraps(method)
+
+@overload
+def one_blas_thread(method: F) -> F: ...
+
+
+def one_blas_thread(method: F | None = None) -> F | AbstractContextManager[None]:
+    """BLAS (OpenBLAS, MKL) on one thread: ``@one_blas_thread`` runs a function so, and
+    ``with one_blas_thread():`` a block.  A threaded BLAS splits products and sums differently
+    with the number of cores, so their last bits differ; a solver then picks another vector at a
+    near tie and the policy changes (the type-aware policy of the reproduction's fitted types
+    moved its lower bound by 1.4e-4 between one and two threads).  The solvers' products are
+    thin (K <= a few dozen columns), so one thread costs them little; L-BFGS-B's tiny BLAS calls
+    a multithreaded BLAS slows by two orders of magnitude on a busy machine.
+
+    Reentrant and shared by threads: the limit is set by the first to enter and lifted by the
+    last to leave (a thread leaving does not lift it under another still inside)."""
+    if method is None:
+        return _one_thread()
+    fn = method
+
+    @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        with _blas_controller("scipy.linalg" in sys.modules).limit(limits=1, user_api="blas"):
-            return method(*args, **kwargs)
+        with _one_thread():
+            return fn(*args, **kwargs)
 
     return wrapper  # type: ignore[return-value]
+
+
+_blas_lock = threading.Lock()
+_blas_limiters: list[tuple[ThreadpoolController, Any]] = []  # the limits in force while inside: one per controller entered with
+_blas_depth = [0]
+
+
+@contextmanager
+def _one_thread() -> Iterator[None]:
+    controller = _blas_controller("scipy.linalg" in sys.modules)
+    with _blas_lock:
+        if not any(c is controller for c, _ in _blas_limiters):  # first entry, or a BLAS loaded since
+            _blas_limiters.append((controller, controller.limit(limits=1, user_api="blas")))
+        _blas_depth[0] += 1
+    try:
+        yield
+    finally:
+        with _blas_lock:
+            _blas_depth[0] -= 1
+            if _blas_depth[0] == 0:
+                for _, limiter in reversed(_blas_limiters):
+                    limiter.restore_original_limits()
+                _blas_limiters.clear()
 
 
 @functools.cache
