@@ -1,9 +1,10 @@
 // The participant page's screens and status panel: which screen shows, the views drawn (3-D or
 // 2-D), the status panel (trial, score, mode, hint), and the state the browser tests read.
 
-import { REACH, View, drawEndEffector, drawLocal, drawWorld, gripperPos, pickTokens } from "../scene";
+import { REACH, View, drawEndEffector, drawLocal, drawWorld, pickTokens } from "../scene";
 import { gamepadName } from "../input";
-import { $, Phase, page } from "./state";
+import { $, Phase, contacts, page } from "./state";
+import { gripper } from "./teleop";
 
 export function setPhase(p: Phase) {
   page.phase = p;
@@ -75,12 +76,8 @@ export function renderStatus() {
     mode = "Your rating, please";
     cls = "idle";
   }
-  const gp = gripperPos(page.robot, page.layout.side);
-  const near = Math.hypot(gp.x - page.item.x, gp.y - page.item.y) <= REACH;
   let h = page.clock < page.hintUntil ? page.hint : "";
-  if (!h && page.phase === "teleop") {
-    h = page.robot.holding ? (page.robot.arm > 0.3 ? "Retract the arm (X), then deposit (B)." : "Press B to deposit the item in the bin.") : near ? "Item within reach: press G to grasp." : "Drive (arrows/WASD) and extend the arm (Z) to reach the item.";
-  }
+  if (!h && page.phase === "teleop") h = teleopHint();
   if (!h && (page.phase === "approach" || page.phase === "reach")) h = "Watch the robot. Intervene (Space) if you think it will fail.";
   const pad = gamepadName();
   const key = [trial, page.st.trials_total, page.shownScore, mode, cls, h, pad, page.phase, page.current?.complexity].join("|");
@@ -103,8 +100,21 @@ export function renderStatus() {
 (window as unknown as { trustseek: unknown }).trustseek = {
   state: () => ({
     phase: page.phase, trial: page.current?.trial ?? null, robot_action: page.current?.robot_action ?? null, complexity: page.current?.complexity ?? null,
-    robot: { x: page.robot.x, y: page.robot.y, arm: page.robot.arm, holding: page.robot.holding }, item: { x: page.item.x, y: page.item.y, inBin: page.item.inBin },
-    gripper: gripperPos(page.robot, page.layout.side), reach: REACH, side: page.layout.side, score: page.st?.score ?? null, shown_score: page.shownScore,
+    robot: { x: page.robot.x, y: page.robot.y, heading: page.robot.heading, arm: page.robot.arm, holding: page.robot.holding, jaw: page.robot.jaw, closed: !!page.robot.closed, tool: page.robot.tool ?? null },
+    item: { x: page.item.x, y: page.item.y, z: page.item.z, inBin: page.item.inBin },
+    gripper: gripper(), reach: REACH, contacts: contacts.count,
+    path: page.scene3d?.drive ? page.scene3d.drive.path : page.layout.path, side: page.layout.side, score: page.st?.score ?? null, shown_score: page.shownScore,
     practice: page.current?.practice ?? null, picks: picks() ?? null, speed: page.speed, trial_label: $("trial-no").textContent, retries: page.retries, connection: $("connection").hidden ? "ok" : "retrying",
   }),
 };
+
+/** What to do next in a teleoperation. */
+function teleopHint(): string {
+  const r = page.robot;
+  if (r.holding) return r.arm > 0.3 ? "Bring the gripper back over the robot (K), then press B to deposit." : "Press B to deposit the item in the bin.";
+  const g = gripper();
+  const near = Math.hypot(g.x - page.item.x, g.y - page.item.y) <= REACH;
+  if (near && r.closed) return "Open the gripper (G) and put it around the item.";
+  if (near) return "Gripper at the item: when it is around the item, press G to close it.";
+  return "Drive (\u2191\u2193, turn \u2190\u2192), move the gripper (I/K, J/L, R/F) to the item.";
+}

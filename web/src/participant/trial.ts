@@ -4,13 +4,14 @@
 // (window.__scene.step).
 
 import { ApiError, Current } from "../api";
-import { gamepadName, poll } from "../input";
+import { poll } from "../input";
 import {
-  AISLE_H, ARM_MAX, BASE_H, REACH, SHELF_DEPTH, clampRobot, gripperPos, makeLayout, pathLength, pointAlong,
+  AISLE_H, BASE_H, SHELF_DEPTH, gripperPos, makeLayout, pathLength, pointAlong,
 } from "../scene";
 import { chooseScene } from "../scene3d/page";
 import { $, Saved, api, contacts, fmtReward, forget, freshItem, freshRobot, log, page, query, save, savedFor, setHint } from "./state";
 import { draw, renderStatus, setPhase, showFatal } from "./status";
+import { resetTeleop, teleop } from "./teleop";
 
 export function startTrial(cur: Current) {
   page.current = cur;
@@ -70,14 +71,6 @@ function resumeTrial(cur: Current, saved: Saved) {
     return;
   }
   setPhase("approach"); // the robot had not finished its approach: it starts it again
-}
-
-function resetTeleop() {
-  page.driven = 0;
-  page.armTravel = 0;
-  page.graspAttempts = 0;
-  contacts.reset();
-  page.inputs = 0;
 }
 
 export function intervene(via: string) {
@@ -192,7 +185,7 @@ function tick(dt: number) {
     if (!page.scene3d) animateOutcome(k);
     else if (page.scene3d.outcome(page.outcome!.outcome, page.phaseT, k, page.robot, page.item)) toResult();
   } else if (page.phase === "teleop") {
-    teleop(cmd, k);
+    if (teleop(cmd, k)) submit("intervene");
     if (page.clock - page.lastSave > 0.5) save();
   } else if (page.phase === "result") {
     if (page.outcome && page.phaseT > 1.6) afterResult();
@@ -259,52 +252,6 @@ function toResult() {
   showBanner();
 }
 
-function teleop(cmd: ReturnType<typeof poll>, k: number) {
-  const v = 1.8;
-  // the 2-D robot faces where it drives; the 3-D one drives sideways too (its wheels are omnidirectional)
-  if (cmd.vx || cmd.vy) page.robot.heading = page.scene3d ? 0 : Math.atan2(cmd.vy, cmd.vx);
-  const x0 = page.robot.x, y0 = page.robot.y, a0 = page.robot.arm;
-  page.robot.x += cmd.vx * v * k;
-  page.robot.y += cmd.vy * v * k;
-  const hit = clampRobot(page.robot, page.layout);
-  page.robot.arm = Math.max(0, Math.min(ARM_MAX, page.robot.arm + cmd.arm * 1.0 * k));
-  if (cmd.vx || cmd.vy || cmd.arm) page.inputs++;
-  touch(hit, a0, cmd.vx, cmd.vy);
-  page.driven += Math.hypot(page.robot.x - x0, page.robot.y - y0);
-  page.armTravel += Math.abs(page.robot.arm - a0);
-  const gp = gripperPos(page.robot, page.layout.side);
-  if (page.robot.holding) {
-    page.item.x = gp.x;
-    page.item.y = gp.y;
-  } else if (!page.robot.holding) page.robot.jaw = Math.min(1, page.robot.jaw + 2 * k);
-  if (cmd.grasp) {
-    page.graspAttempts++;
-    if (page.robot.holding) setHint("Already holding the item: retract the arm (X) and deposit it (B).");
-    else if (Math.hypot(gp.x - page.item.x, gp.y - page.item.y) <= REACH && (page.scene3d?.around(page.item) ?? true)) {
-      page.robot.holding = true;
-      page.robot.jaw = 0;
-      log("grasp", { by: "human" });
-    } else {
-      log("grasp_missed", { distance: Math.hypot(gp.x - page.item.x, gp.y - page.item.y) });
-      setHint("Too far: bring the gripper (orange) onto the item first.");
-    }
-  }
-  if (cmd.deposit) {
-    if (!page.robot.holding) setHint("Grasp the item first (G).");
-    else if (page.robot.arm > 0.3) {
-      log("deposit_refused", { arm: page.robot.arm });
-      setHint("Retract the arm (X) before depositing.");
-    }
-    else {
-      page.robot.holding = false;
-      page.item.inBin = true;
-      page.robot.binCount++;
-      log("deposit", { seconds: (performance.now() - page.teleopStart) / 1000, driven_m: +page.driven.toFixed(3), arm_m: +page.armTravel.toFixed(3), grasp_attempts: page.graspAttempts, contacts: contacts.count, inputs: page.inputs, gamepad: gamepadName() });
-      submit("intervene");
-    }
-  }
-}
-
 // --------------------------------------------------------------------------- the 3-D scene (scene3d/)
 // The views are drawn in 3-D where WebGL works and the study does not ask for the 2-D scene
 // (`"scene": "2d"`, or `?scene=2d`); the session records which scene ran (a "scene" event).
@@ -328,17 +275,6 @@ function approachLength(seed: number): number {
 
 function approachPose(s: number) {
   return page.scene3d ? page.scene3d.drivePose(s / APPROACH_V) : pointAlong(page.layout.path, s);
-}
-
-/** A contact of the base, or of the arm in 3-D (the arm then stays where it was): logged when it begins. */
-function touch(baseHit: string | null, a0: number, vx: number, vy: number) {
-  const armHit = page.scene3d?.teleopArm(page.robot, page.item) ?? null;
-  if (armHit) page.robot.arm = a0;
-  const hit = armHit ?? baseHit;
-  if (contacts.touch(hit, page.clock, page.robot, page.layout, vx, vy)) {
-    log("contact", { with: hit, x: +page.robot.x.toFixed(3), y: +page.robot.y.toFixed(3), arm: +page.robot.arm.toFixed(3) });
-    if (page.scene3d) page.robot.shake = 0.6;
-  }
 }
 
 (window as unknown as { __scene: unknown }).__scene = {
