@@ -4,6 +4,8 @@ is held for as many simulated frames as the goal needs, however busy the machine
 
 from __future__ import annotations
 
+import math
+
 STEP_UNTIL = """
 async ({ cond, dt, frames, limit }) => {
   const f = new Function("s", "g", "return " + cond);
@@ -54,8 +56,17 @@ Object.defineProperty(Navigator.prototype, "getGamepads", {
 });
 """
 # the keys of the keyboard's teleoperation as the gamepad's stick deflections and buttons
-PAD_STICK = {"ArrowUp": (1, -1), "ArrowDown": (1, 1), "ArrowLeft": (0, -1), "ArrowRight": (0, 1), "z": (3, -1), "x": (3, 1)}
-PAD_BUTTON = {"g": 0, "b": 1, " ": 2}
+PAD_STICK = {
+    "ArrowUp": (1, -1),
+    "ArrowDown": (1, 1),
+    "ArrowLeft": (0, -1),
+    "ArrowRight": (0, 1),  # drive, turn
+    "i": (3, -1),
+    "k": (3, 1),
+    "j": (2, -1),
+    "l": (2, 1),  # the gripper forward/back, left/right
+}
+PAD_BUTTON = {"g": 0, "b": 1, " ": 2, "r": 12, "f": 13}
 
 
 class Keyboard:
@@ -68,12 +79,16 @@ class Keyboard:
 
 class Gamepad:
     def hold(self, page, key: str, cond: str, dt: float = 0.02) -> dict:
-        axis, v = PAD_STICK[key]
-        page.evaluate(f"window.__pad.axes[{axis}] = {v}")
+        if key in PAD_BUTTON:  # the D-pad moves the gripper up and down
+            set_, unset = f"window.__pad.buttons[{PAD_BUTTON[key]}] = true", f"window.__pad.buttons[{PAD_BUTTON[key]}] = false"
+        else:
+            axis, v = PAD_STICK[key]
+            set_, unset = f"window.__pad.axes[{axis}] = {v}", f"window.__pad.axes[{axis}] = 0"
+        page.evaluate(set_)
         try:
             return step_until(page, cond, dt=dt, frames=1, limit=2000)
         finally:
-            page.evaluate(f"window.__pad.axes[{axis}] = 0")
+            page.evaluate(unset)
 
     def press(self, page, key: str) -> None:
         page.evaluate(f"window.__pad.buttons[{PAD_BUTTON[key]}] = true")
@@ -93,8 +108,10 @@ def start(page, link: str, query: str = "?manual=1&quality=0") -> None:
 
 
 def teleoperate(page, device: Keyboard | Gamepad | None = None) -> dict:
-    """Drive to the item's shelf side (up to it: a contact), line the gripper
-    up with the item, extend the arm, grasp, retract, deposit. The states at the deposit."""
+    """Drive along the robot's planned path to its place in front of the item (turning on the
+    spot, then forward), push the gripper into the shelf beside the item (a contact), bring it to
+    the item's height and in front of it, into the shelf around the item, close the gripper,
+    pull back over the base, deposit. The states at the deposit."""
     page.evaluate("window.__scene.manual(true)")  # the page's clock stops while the test drives
     try:
         return _teleoperate(page, device or Keyboard())
@@ -103,28 +120,78 @@ def teleoperate(page, device: Keyboard | Gamepad | None = None) -> dict:
             page.evaluate("window.__scene.manual(false)")
 
 
+def settle(page) -> dict:
+    """A few frames without input: the base's speeds ramp down."""
+    return step_until(page, "false || true", dt=0.02, frames=30, limit=1)["s"]
+
+
+WRAP = "(a => Math.atan2(Math.sin(a), Math.cos(a)))"
+
+
+def turn_to(page, dev, heading: float) -> dict:
+    for _ in range(12):
+        s = settle(page)
+        err = math.atan2(math.sin(heading - s["robot"]["heading"]), math.cos(heading - s["robot"]["heading"]))
+        if abs(err) < 0.015:
+            return s
+        key = "ArrowLeft" if err > 0 else "ArrowRight"
+        sign = 1 if err > 0 else -1
+        dev.hold(page, key, f"{WRAP}({heading} - s.robot.heading) * {sign} < 0.01", dt=0.005)
+    raise AssertionError(f"could not turn to {heading}: {settle(page)['robot']}")
+
+
+def drive_to(page, dev, x: float, y: float) -> dict:
+    for _ in range(6):
+        s = settle(page)
+        r = s["robot"]
+        d = math.hypot(x - r["x"], y - r["y"])
+        if d < 0.12:
+            return s
+        turn_to(page, dev, math.atan2(y - r["y"], x - r["x"]))
+        # forward until the goal is no longer ahead
+        dev.hold(
+            page,
+            "ArrowUp",
+            f"(({x} - s.robot.x) * Math.cos(s.robot.heading) + ({y} - s.robot.y) * Math.sin(s.robot.heading)) < 0.03",
+            dt=0.01,
+        )
+    return settle(page)
+
+
+def tool_to(page, dev, axis: str, goal: str, tol: float = 0.015) -> dict:
+    """Move the gripper along one axis of the base ("x" forward, "y" left, "z" up) until the JS
+    expression ``goal`` (the signed error along it) is within ``tol``."""
+    keys = {"x": ("i", "k"), "y": ("j", "l"), "z": ("r", "f")}[axis]
+    for _ in range(8):
+        s = settle(page)
+        err = page.evaluate(f"(s => {goal})(window.trustseek.state())")
+        if abs(err) < tol:
+            return s
+        key = keys[0] if err > 0 else keys[1]
+        sign = 1 if err > 0 else -1
+        dev.hold(page, key, f"({goal}) * {sign} < {tol / 2}", dt=0.004)
+    raise AssertionError(f"gripper never reached {goal} along {axis}: {settle(page)}")
+
+
 def _teleoperate(page, dev: Keyboard | Gamepad) -> dict:
-    s = page.evaluate("window.trustseek.state()")
+    s = settle(page)
     side = s["side"]
-    toward = "ArrowUp" if side < 0 else "ArrowDown"
-    edge = 1.6 if side < 0 else 4.4  # the base stops 5 cm from the shelf (scene.ts clampRobot)
-    dev.hold(page, toward, f"Math.abs(s.robot.y - {edge}) < 0.02")  # the shelf stops the base: a contact
-    for _ in range(8):  # line the gripper up with the item; correct any overshoot
-        s = page.evaluate("window.trustseek.state()")
-        dx = s["item"]["x"] - s["gripper"]["x"]
-        dy = (s["item"]["y"] - s["gripper"]["y"]) * side  # > 0: the arm must extend further
-        if abs(dx) < 0.04 and abs(dy) < 0.04:
-            break
-        if dx > 0.04:
-            dev.hold(page, "ArrowRight", "s.gripper.x >= s.item.x - 0.03", dt=0.004)
-        elif dx < -0.04:
-            dev.hold(page, "ArrowLeft", "s.gripper.x <= s.item.x + 0.03", dt=0.004)
-        elif dy > 0.04:
-            dev.hold(page, "z", f"(s.item.y - s.gripper.y) * {side} <= 0.02", dt=0.004)
-        else:
-            dev.hold(page, "x", f"(s.item.y - s.gripper.y) * {side} >= -0.02", dt=0.004)
+    # along the planned path, from the first point ahead of the base, to its place before the item
+    for p in [q for q in s["path"] if q["x"] > s["robot"]["x"] + 0.3]:
+        drive_to(page, dev, p["x"], p["y"])
+    s = turn_to(page, dev, 0.0)
+    contacts = s["contacts"]
+    # the gripper towards the shelf at its own height: it stops at what it strikes (a contact)
+    out = "l" if side < 0 else "j"
+    dev.hold(page, out, f"s.contacts > {contacts}", dt=0.01)
+    back = "j" if side < 0 else "l"
+    dev.hold(page, back, f"Math.abs(s.gripper.y - {s['robot']['y']}) < 0.5", dt=0.01)
+    # base frame: x forward (the aisle at heading 0), y left, z up
+    tool_to(page, dev, "z", "s.item.z - s.gripper.z")
+    tool_to(page, dev, "x", "s.item.x - s.gripper.x")
+    tool_to(page, dev, "y", "s.item.y - s.gripper.y", tol=0.03)
     dev.press(page, "g")
     step_until(page, "s.robot.holding", limit=20)
-    dev.hold(page, "x", "s.robot.arm < 0.1")
+    dev.hold(page, back, "s.robot.arm < 0.12", dt=0.01)
     dev.press(page, "b")
     return step_until(page, "s.phase !== 'teleop'", limit=50)

@@ -60,9 +60,9 @@ def test_reload_and_outage_lose_nothing(tmp_path):
 
             # drive part of the way, then reload: the robot is where it was, the trial goes on
             s0 = st(page)
-            key = "ArrowUp" if s0["side"] < 0 else "ArrowDown"
             page.evaluate("window.__scene.manual(true)")  # driven by the page's state, its clock stopped
-            moved = scene_drive.hold(page, key, f"Math.abs(s.robot.y - {s0['robot']['y']}) > 0.5")["s"]
+            r0 = s0["robot"]
+            moved = scene_drive.hold(page, "ArrowUp", f"Math.hypot(s.robot.x - {r0['x']}, s.robot.y - {r0['y']}) > 0.5")["s"]
             before = st(page)
             assert abs(before["robot"]["y"] - moved["robot"]["y"]) < 1e-9
             page.reload()

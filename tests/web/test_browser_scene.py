@@ -15,7 +15,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from scene_drive import start, step_until, teleoperate
+from scene_drive import hold, start, step_until, teleoperate
 from trustseek.client import Client
 from trustseek.server.app import STATIC
 from trustseek.testing.browser import CHROMIUM, launch_chromium
@@ -146,18 +146,33 @@ def test_success_intervention_and_keyboard_teleoperation_with_contacts(env):
     step_until(page, "s.phase === 'teleop'", limit=5)
     shot(page, out, "intervention")
     teleoperate(page)
-    # trial 3: the robot asks; teleoperated by keyboard as well
+    # trial 3: the robot asks; a reload part of the way resumes the teleoperation where it was
     step_until(page, "s.trial === 3 && s.phase === 'teleop'")
     shot(page, out, "ask")
+    x0 = page.evaluate("window.trustseek.state().robot.x")
+    hold(page, "ArrowUp", f"s.robot.x > {x0 + 0.5}")
+    hold(page, "r", "s.robot.tool[2] > 0.8", dt=0.01)
+    hold(page, "g", "s.robot.jaw < 0.5", dt=0.01)
+    before = step_until(page, "true", frames=1, limit=1)["s"]["robot"]
+    page.reload()
+    page.wait_for_function("window.trustseek && window.trustseek.state().phase === 'teleop'")
+    after = page.evaluate("window.trustseek.state().robot")
+    for k in ("x", "y", "heading", "closed"):
+        assert after[k] == pytest.approx(before[k], abs=1e-9), (k, before, after)
+    assert after["tool"] == pytest.approx(before["tool"], abs=1e-9)
+    page.keyboard.press("g")  # opened again
     teleoperate(page)
     step_until(page, "s.phase === 'done'")
     page.close()
     assert errors == []
     ev = events(c, study_id)
+    # every teleoperation struck the shelf with the arm once; each contact says what was struck
     contacts = ev[ev["type"] == "contact"]
-    assert len(contacts) >= 2 and {d["with"] for d in contacts["data"]} >= {"shelf"}
+    assert len(contacts) >= 2 and {d["with"] for d in contacts["data"]} <= {"arm-shelf", "arm-product", "shelf"}, contacts
+    assert all(len(d["gripper"]) == 3 for d in contacts["data"])
     deposits = list(ev[ev["type"] == "deposit"]["data"])
-    assert len(deposits) == 2 and all(d["contacts"] >= 1 and d["inputs"] > 10 for d in deposits), deposits
+    assert len(deposits) == 2 and all(d["contacts"] >= 1 and d["inputs"] > 10 and d["driven_m"] > 5 for d in deposits), deposits
+    assert [d["phase"] for d in ev[ev["type"] == "resumed"]["data"]] == ["teleop"]
     assert [d["via"] for d in ev[ev["type"] == "intervene"]["data"]] == ["key"]
 
 

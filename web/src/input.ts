@@ -1,12 +1,19 @@
 // Keyboard and gamepad (standard mapping) input for teleoperation and intervention.
-//   drive base:   arrow keys / WASD          | left stick
-//   arm:          Z extend, X retract         | right stick up/down
-//   grasp:        G                          | A (button 0)
-//   deposit:      B                          | B (button 1)
-//   intervene:    Space                      | X (button 2) or RB (button 5)
+//   drive the base:       ↑/W forward, ↓/S back, ←/A ⟲ turn left, →/D turn right | left stick
+//   move the gripper:     I/K forward/back, J/L left/right (the base's frame)    | right stick
+//                         R/F up/down                                            | D-pad up/down, LB/LT
+//   close/open gripper:   G                                                      | A (button 0)
+//   deposit in the bin:   B                                                      | B (button 1)
+//   intervene:            Space                                                  | X (button 2) or RB (button 5)
 
 export interface Command {
-  vx: number; vy: number; arm: number; grasp: boolean; deposit: boolean; intervene: boolean;
+  /** the base: forward speed and turn rate (counter-clockwise), each -1..1 */
+  drive: number; turn: number;
+  /** the gripper's velocity in the base's frame (forward, left, up), each -1..1 */
+  tool: [number, number, number];
+  /** close an open gripper, open a closed one (once per press) */
+  grip: boolean;
+  deposit: boolean; intervene: boolean;
   /** the device that asked to intervene this frame (logged as the intervention's `via`) */
   interveneVia: "key" | "gamepad" | null;
 }
@@ -44,15 +51,17 @@ export function gamepadName(): string | null {
   return null;
 }
 
+const clamp1 = (v: number) => Math.max(-1, Math.min(1, v));
+
 /** The command of this frame; edge-triggered actions fire once per press. */
 export function poll(): Command {
-  const h = (k: string) => held.has(k);
+  const h = (...ks: string[]) => (ks.some((k) => held.has(k)) ? 1 : 0);
   const once = (...ks: string[]) => ks.some((k) => pressed.has(k));
   const cmd: Command = {
-    vx: (h("ArrowRight") || h("d") ? 1 : 0) - (h("ArrowLeft") || h("a") ? 1 : 0),
-    vy: (h("ArrowDown") || h("s") ? 1 : 0) - (h("ArrowUp") || h("w") ? 1 : 0),
-    arm: (h("z") ? 1 : 0) - (h("x") ? 1 : 0),
-    grasp: once("g"),
+    drive: h("ArrowUp", "w") - h("ArrowDown", "s"),
+    turn: h("ArrowLeft", "a") - h("ArrowRight", "d"),
+    tool: [h("i") - h("k"), h("j") - h("l"), h("r") - h("f")],
+    grip: once("g"),
     deposit: once("b"),
     intervene: once(" "),
     interveneVia: null,
@@ -63,12 +72,14 @@ export function poll(): Command {
   for (const p of pads) {
     if (!p || !p.connected) continue;
     const dz = (v: number) => (Math.abs(v) < 0.15 ? 0 : v);
-    cmd.vx += dz(p.axes[0] ?? 0);
-    cmd.vy += dz(p.axes[1] ?? 0);
-    cmd.arm += -dz(p.axes[3] ?? 0);
     const b = p.buttons.map((x) => x.pressed);
+    cmd.drive += -dz(p.axes[1] ?? 0);
+    cmd.turn += -dz(p.axes[0] ?? 0);
+    cmd.tool[0] += -dz(p.axes[3] ?? 0);
+    cmd.tool[1] += -dz(p.axes[2] ?? 0);
+    cmd.tool[2] += (b[12] || b[4] ? 1 : 0) - (b[13] || b[6] ? 1 : 0);
     const edge = (i: number) => !!b[i] && !prevButtons[i];
-    cmd.grasp ||= edge(0);
+    cmd.grip ||= edge(0);
     cmd.deposit ||= edge(1);
     if (edge(2) || edge(5)) {
       cmd.intervene = true;
@@ -77,8 +88,13 @@ export function poll(): Command {
     prevButtons = b;
     break;
   }
-  cmd.vx = Math.max(-1, Math.min(1, cmd.vx));
-  cmd.vy = Math.max(-1, Math.min(1, cmd.vy));
-  cmd.arm = Math.max(-1, Math.min(1, cmd.arm));
+  cmd.drive = clamp1(cmd.drive);
+  cmd.turn = clamp1(cmd.turn);
+  cmd.tool = cmd.tool.map(clamp1) as [number, number, number];
   return cmd;
+}
+
+/** Whether the command moves anything (an input frame of the teleoperation's effort). */
+export function moves(cmd: Command): boolean {
+  return !!(cmd.drive || cmd.turn || cmd.tool[0] || cmd.tool[1] || cmd.tool[2]);
 }

@@ -31,6 +31,10 @@ export interface RobotState {
   holding: boolean;
   binCount: number;
   shake: number;     // collision shake, decays
+  /** teleoperation in 3-D: the gripper's target in the base's frame (forward, left, up; m) */
+  tool?: [number, number, number];
+  /** teleoperation: the gripper commanded closed */
+  closed?: boolean;
 }
 
 export interface ItemState { x: number; y: number; z: number; inBin: boolean; visible: boolean; }
@@ -114,7 +118,9 @@ export function pointAlong(p: { x: number; y: number }[], s: number): { x: numbe
 /** Keep the robot base in the aisle and out of obstacles (teleoperation never fails, it is
  * blocked); what it ran into ("aisle end", "shelf" or the obstacle's kind), or null. */
 export function clampRobot(rb: RobotState, layout: Layout): string | null {
-  const hx = BASE_W / 2, hy = BASE_H / 2;
+  // the footprint's extent along x and y at the base's heading
+  const c = Math.abs(Math.cos(rb.heading)), s = Math.abs(Math.sin(rb.heading));
+  const hx = (c * BASE_W + s * BASE_H) / 2, hy = (s * BASE_W + c * BASE_H) / 2;
   let hit: string | null = null;
   const x = Math.min(AISLE_W - hx - 0.05, Math.max(hx + 0.05, rb.x));
   const y = Math.min(AISLE_H - SHELF_DEPTH - hy - 0.05, Math.max(SHELF_DEPTH + hy + 0.05, rb.y));

@@ -83,6 +83,8 @@ export function distToBox2(p: readonly number[], b: Aabb): number {
 
 /** Whether the capsule from a to b of radius rad touches the box (sampled every 1 cm). */
 export function capsuleHitsBox(a: readonly number[], b: readonly number[], rad: number, bx: Aabb): boolean {
+  // apart when the capsule's bounding box misses the box grown by the radius
+  for (let i = 0; i < 3; i++) if (Math.min(a[i], b[i]) - rad > bx.max[i] || Math.max(a[i], b[i]) + rad < bx.min[i]) return false;
   const n = Math.max(2, Math.ceil(Math.hypot(b[0] - a[0], b[1] - a[1], b[2] - a[2]) / 0.01));
   const r2 = rad * rad;
   for (let i = 0; i <= n; i++) {

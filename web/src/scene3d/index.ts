@@ -4,12 +4,13 @@
 // the three views of one scene graph.
 
 import * as THREE from "three";
-import { ItemState, Layout, RobotState, View, drawPickTray, gripperPos } from "../scene";
-import { Joints, Pose, Reach, STOW, armHits, forward, inverse, planReach, reachAt } from "./arm";
+import { ItemState, Layout, RobotState, View, drawPickTray } from "../scene";
+import { Joints, Pose, Reach, STOW, armHits, forward, planReach, reachAt } from "./arm";
 import { Drive, planPath } from "./drive";
 import { Aabb, Aisle3, makeAisle } from "./geometry";
 import { AisleModel, RobotModel, buildAisle, buildRobot, poseRobot, v3 } from "./models";
 import { OutcomeAnimation } from "./outcome";
+import { READY, moveTool, nearBoxes, restingZ, solve, toBase } from "./teleop";
 import { VIEW_NAMES, ViewName, Views } from "./views";
 
 type V3 = [number, number, number];
@@ -103,30 +104,45 @@ export class Scene3D {
     item.z = p[2];
   }
 
-  /** Teleoperation: the arm's joints that put the gripper where the page's arm extension says, at
-   * the item's height; the name of what the arm would strike there (the page then keeps it
-   * where it was), or null. */
-  teleopArm(robot: RobotState, item: ItemState): string | null {
+  /** Teleoperation: the arm where the robot's gripper target (`robot.tool`, set on the first
+   * call) puts it, the target moved by `delta` (base frame, m) as far as the arm stays clear.
+   * What a link would strike ("arm-shelf", "arm-product"): with `delta` zero, after the base
+   * moved, the page then puts the base back; otherwise the gripper stopped short of it. */
+  teleopArm(robot: RobotState, item: ItemState, delta: readonly number[] = [0, 0, 0]): string | null {
     const pose = { x: robot.x, y: robot.y, heading: robot.heading };
+    const boxes = nearBoxes(this.aisle, pose);
+    robot.tool ??= this.startTool(pose, boxes);
+    const name = (b: Aabb) => (this.aisle.boards.includes(b) ? "arm-shelf" : "arm-product");
+    const here = solve(pose, robot.tool, robot.jaw);
+    const blocked = here ? armHits(pose, here, boxes) : null;
+    if (!here || blocked) return blocked ? name(blocked) : "arm-limit";
     this.pose = pose;
-    const gp = gripperPos(robot, this.layout.side);
-    const h = robot.holding ? this.aisle.item.z + 0.04 : this.aisle.item.z;
-    const lift = Math.max(0.7, Math.min(1.2, h + 0.3));
-    const jaw = Math.max(0.3, robot.jaw);
-    // the elbow up, or down where up would strike the shelf
-    const tries = robot.arm < 0.05 ? [{ ...STOW, jaw: robot.jaw }] : [1, -1].map((e) => inverse(pose, [gp.x, gp.y, h], 0, lift, jaw, e));
-    const boxes = [...this.aisle.boards, ...this.aisle.products].filter((b) => b.max[0] > robot.x - 1.6 && b.min[0] < robot.x + 1.6);
-    let hit: Aabb | null = null;
-    for (const j of tries) {
-      hit = j && armHits(pose, j, boxes);
-      if (j && !hit) {
-        this.joints = j;
-        break;
-      }
-    }
-    if (hit) return this.aisle.boards.includes(hit) ? "arm-shelf" : "arm-product";
-    if (robot.holding) this.setItem(item, forward(pose, this.joints).grasp);
-    return null;
+    const m = moveTool(pose, robot.tool, delta, here, boxes);
+    robot.tool = m.tool;
+    this.joints = { ...m.joints, jaw: robot.jaw };
+    const g = forward(pose, this.joints).grasp;
+    robot.arm = Math.max(0, Math.hypot(robot.tool[0], robot.tool[1]) - 0.62);
+    if (robot.holding) this.setItem(item, g);
+    return m.hit ? name(m.hit) : null;
+  }
+
+  /** The gripper's target as teleoperation begins: where the arm's grasp point is, if the arm
+   * can hold it level there, or ahead of the torso. */
+  private startTool(pose: Pose, boxes: Aabb[]): V3 {
+    const now = toBase(pose, forward(pose, this.joints).grasp);
+    const j = solve(pose, now, this.joints.jaw);
+    return j && !armHits(pose, j, boxes) ? now : [...READY];
+  }
+
+  /** The item let go where the gripper is: it comes to rest on the board below, or the floor. */
+  release(item: ItemState) {
+    const g = forward(this.pose, this.joints).grasp;
+    this.setItem(item, [g[0], g[1], restingZ(this.aisle, g)]);
+  }
+
+  /** The gripper's grasp point in the world. */
+  grasp(): V3 {
+    return forward(this.pose, this.joints).grasp;
   }
 
   /** Whether the item is between the open fingers (what a grasp in teleoperation needs). */
