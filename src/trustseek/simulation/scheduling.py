@@ -34,8 +34,9 @@ from ..pomdp.belief import ScalarBelief
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem
 from ..solvers.backup import finite_horizon_value
+from ..solvers.defaults import DEFAULT_SCHEDULE_GRID
 from ..solvers.registry import make_solver
-from ..solvers.schedule import DEFAULT_SCHEDULE_GRID, ScheduleSolver
+from ..solvers.schedule import ScheduleSolver
 from .populations import SimulationError, check_participants
 from .schedules import schedule_counts
 

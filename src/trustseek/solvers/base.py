@@ -18,11 +18,6 @@ from ..errors import TrustseekError
 from ..policies.base import Policy
 from ..pomdp.problem import AssistancePOMDP
 
-#: the belief grid's default number of points and its methods (:mod:`.grid`; here so that the
-#: command line's options name them without loading the solvers)
-DEFAULT_GRID = 2001
-METHODS = ("policy-iteration", "value-iteration")
-
 F = TypeVar("F", bound=Callable[..., Any])
 
 

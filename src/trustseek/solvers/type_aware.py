@@ -24,12 +24,10 @@ from ..policies.alpha_vector import AlphaVectorPolicy
 from ..policies.base import Policy
 from ..policies.type_aware import TypeAwarePolicy
 from ..pomdp.types import type_aware_problem
+from .defaults import DEFAULT_TYPE_AWARE_SOLVER
 from .registry import make_solver
 
 __all__ = ["DEFAULT_TYPE_AWARE_SOLVER", "solve_type_aware"]
-
-#: the solver ``solve_type_aware`` uses unless told otherwise
-DEFAULT_TYPE_AWARE_SOLVER = "point"
 
 
 def solve_type_aware(
