@@ -16,7 +16,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from trustseek import AssistancePOMDP, paper_model, paper_task
 from trustseek.pomdp.scheduling import SchedulingProblem
-from trustseek.solvers.scheduling import DEFAULT_SCHEDULE_GRID, ScheduleSolver
+from trustseek.solvers.defaults import DEFAULT_SCHEDULE_GRID
+from trustseek.solvers.scheduling import ScheduleSolver
 
 
 def best_of(fn, repeat):

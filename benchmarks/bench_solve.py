@@ -13,7 +13,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")  # one core
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from trustseek import AssistancePOMDP, GridSolver, paper_model, paper_task
-from trustseek.solvers.grid import DEFAULT_GRID
+from trustseek.solvers.defaults import DEFAULT_GRID
 
 
 def best_of(fn, repeat):

@@ -156,3 +156,25 @@ def test_compiled_functions_import_numba_on_their_first_call_and_then_are_numbas
         "print(before, 'numba' in sys.modules, after, inner, out.tolist())"
     )
     assert run_python(code) == "False True True True [0.25, 0.75]"
+
+
+def test_the_warm_step_runs_every_fit_compiled(monkeypatch):
+    """``python -m trustseek.estimation.warm`` fills numba's cache for the compiled fit: its fits,
+    on a log far below kernels.COMPILE_MIN trials, must take the compiled E-steps (a warm step
+    whose fits took the numpy path compiled almost nothing, and the first big fit then compiled)."""
+    from trustseek.estimation import warm
+
+    compiled: dict[str, bool] = {}
+
+    def record(name):
+        def fit(*args, **kwargs):
+            compiled[name] = kernels.worth_compiling(1)
+
+        return fit
+
+    for name in ("fit_iohmm", "fit_trust_model", "fit_types"):
+        monkeypatch.setattr(warm, name, record(name))
+    monkeypatch.setattr(warm, "load_compiled", lambda: None)
+    monkeypatch.setattr(kernels, "AVAILABLE", True)
+    warm.warm()
+    assert compiled == {"fit_iohmm": True, "fit_trust_model": True, "fit_types": True}

@@ -10,8 +10,6 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..model.presets import load_mixture, load_task
-from ..reproduction.supervisor_types import types_section
 from ._app import QuietOpt, app, check_output, console, print_json, progress_bar
 
 
@@ -65,6 +63,9 @@ def compare_types(
     quiet: bool = QuietOpt,
 ) -> None:
     """Does planning for supervisor types pay? Pooled, type-aware, oracle and trust-agnostic policies on the same people."""
+    from ..model.presets import load_mixture, load_task
+    from ..reproduction.supervisor_types import types_section
+
     counts = [_counts(b) for b in block]
     mix = load_mixture(mixture)
     if share is not None:

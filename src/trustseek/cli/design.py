@@ -10,9 +10,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
-from ..design import DesignConfig, FitSettings, ask_search, run_design
 from ..errors import TrustseekError
-from ..model.presets import load_model, load_task
 from ._app import QuietOpt, app, check_output, console, print_json, progress_bar
 
 
@@ -95,6 +93,9 @@ def design(
     quiet: bool = QuietOpt,
 ) -> None:
     """Power and regret by study design: replicated simulate → fit → solve → evaluate → test pipelines."""
+    from ..design import DesignConfig, FitSettings, ask_search, run_design
+    from ..model.presets import load_model, load_task
+
     check_output(out, "--out", directory=True)
     cfg = DesignConfig(
         truth=load_model(model),

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
 import typer
 from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..model.core import TrustModel
 from ._app import (
     ColumnOpt,
     DelimiterOpt,
@@ -34,6 +33,9 @@ from ._app import (
     read_log,
     selection_table,
 )
+
+if TYPE_CHECKING:
+    from ..model.core import TrustModel
 
 # The fit and data modules (pandas, numba) load only when a command of this group runs,
 # so that the rest of the CLI starts fast.
@@ -130,6 +132,8 @@ def _inputs(text: str | None, default: tuple[str, ...], flag: str, declared: tup
 def model_inputs(model: TrustModel) -> tuple[str, ...]:
     """The inputs whose value changes some probability of ``model`` (a model fitted with
     fewer inputs has identical tables along the others): the log columns decoding needs."""
+    import numpy as np
+
     em = np.asarray(model.emission)  # [C, a, T, o]
     tr = np.asarray(model.transition)  # [C, a, E, T, T']
 

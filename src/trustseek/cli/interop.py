@@ -10,10 +10,6 @@ import typer
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..interop.files import export_assistance, flat_values_check, read_pomdp
-from ..model.presets import load_model, load_task
-from ..pomdp.problem import AssistancePOMDP
-from ..solvers import UnsupportedProblem, make_solver
 from ._app import app, atomic_output, check_output, console, err_console, print_json
 
 #: exit code of solve-pomdp-file when the point solver stops before its target gap
@@ -34,6 +30,10 @@ def export_pomdp(
     ),
 ) -> None:
     """Export the assistance POMDP to a standard file (state augmented with the last human action)."""
+    from ..interop.files import export_assistance, flat_values_check
+    from ..model.presets import load_model, load_task
+    from ..pomdp.problem import AssistancePOMDP
+
     if fmt is not None and fmt not in ("pomdp", "pomdpx"):
         raise TrustseekError([f"--format must be 'pomdp' or 'pomdpx', got {fmt!r}"])
     from ._app import check_not_inputs
@@ -79,6 +79,9 @@ def solve_pomdp_file(
 
     Exit code 3 when the solver stops (time or size limit) before the gap between the bounds
     reaches --gap: the bounds printed are still valid, only looser than asked; 2 for bad input."""
+    from ..interop.files import read_pomdp
+    from ..solvers import UnsupportedProblem, make_solver
+
     if not (gap > 0 and math.isfinite(gap)):
         raise TrustseekError([f"--gap must be a finite number > 0, got {gap}"])
     if not (max_seconds > 0 and math.isfinite(max_seconds)):

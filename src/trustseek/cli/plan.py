@@ -4,25 +4,14 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import cast
+from typing import TYPE_CHECKING, cast
 
 import typer
 from rich.table import Table
 
 from .. import solvers
 from ..errors import TrustseekError
-from ..model.core import ACTIONS, TrustModel
-from ..model.iohmm import IOHMM_FORMAT, IOHMMModel
-from ..model.jsonfile import ModelError, load_json
-from ..model.mixture import MIXTURE_FORMAT, TypeMixture
-from ..model.presets import MIXTURE_PRESETS, MODEL_PRESETS, TASK_PRESETS, load_mixture, load_model, load_task
-from ..model.task import Task
-from ..policies import PolicyError, TrustAwarePolicy, load_policy
-from ..policies.base import Policy
-from ..pomdp.problem import AssistancePOMDP
-from ..pomdp.supervisor_types import type_aware_problem, type_belief_from_log, type_marginal
-from ..solvers import make_solver, solver_names, summarize, trust_agnostic_from_data
-from ..solvers.base import DEFAULT_GRID, DEFAULT_TYPE_AWARE_SOLVER, METHODS
+from ..solvers.defaults import DEFAULT_GRID, DEFAULT_TYPE_AWARE_SOLVER, METHODS
 from ..vocab import check_belief_update
 from ._app import (
     ColumnOpt,
@@ -38,6 +27,11 @@ from ._app import (
     read_log,
 )
 
+if TYPE_CHECKING:
+    from ..model.core import TrustModel
+    from ..model.mixture import TypeMixture
+    from ..policies.base import Policy
+
 ModelOpt = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file.")
 TaskOpt = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file.")
 UpdateOpt = typer.Option(
@@ -52,6 +46,10 @@ def _check_update(name: str) -> str:
 def mixture_of(spec: str) -> TypeMixture | None:
     """The supervisor types ``spec`` names when it is a mixture (a mixture preset such as
     paper+conservative, or a trustseek.mixture/1 file), else None (a plain trust model)."""
+    from ..model.jsonfile import load_json
+    from ..model.mixture import MIXTURE_FORMAT
+    from ..model.presets import MIXTURE_PRESETS, MODEL_PRESETS, load_mixture
+
     if spec in MODEL_PRESETS:
         return None
     if spec in MIXTURE_PRESETS:
@@ -75,6 +73,8 @@ def type_posterior(
     order: list[str] | None = None,
 ):
     """The type posterior of one person from their earlier trials (--history, --participant, --session)."""
+    from ..pomdp.supervisor_types import type_belief_from_log
+
     frame = read_log(history, mapping, column, label, ("complexity", "robot_action", "experience"), order=order)
     return type_belief_from_log(mixture, frame, participant=participant, session=session)
 
@@ -134,6 +134,11 @@ def solve(
 ) -> None:
     """Solve the assistance-seeking POMDP for the optimal trust-aware policy (Section IV), or for a person of
     unknown supervisor type (--types)."""
+    from ..model.presets import load_mixture, load_model, load_task
+    from ..pomdp.problem import AssistancePOMDP
+    from ..pomdp.supervisor_types import type_aware_problem, type_marginal
+    from ..solvers import make_solver, solver_names, summarize
+
     _check_update(belief_update)
     if method not in METHODS:
         raise TrustseekError([f"--method must be one of {list(METHODS)}, got {method!r}"])
@@ -268,6 +273,10 @@ def agnostic(
     order: list[str] | None = OrderOpt,
 ) -> None:
     """The optimal trust-agnostic policy (Section VI-A)."""
+    from ..model.core import ACTIONS
+    from ..model.presets import load_model, load_task
+    from ..pomdp.problem import AssistancePOMDP
+    from ..solvers import make_solver, trust_agnostic_from_data
     from ._app import check_not_inputs
 
     check_output(out, "--out", (".json",))
@@ -309,7 +318,11 @@ def plot_q_cmd(
     out: Path = typer.Option(Path("q.png"), "--out", "-o", help="PNG file to write."),
 ) -> None:
     """Plot Q(b, C, a) for both actions and complexities, with the threshold (Fig. 7)."""
+    from ..model.presets import load_model, load_task
     from ..plots.q import plot_q
+    from ..policies import PolicyError, TrustAwarePolicy, load_policy
+    from ..pomdp.problem import AssistancePOMDP
+    from ..solvers import make_solver
     from ._app import check_not_inputs
 
     check_output(out, "--out", (".png", ".pdf", ".svg"))
@@ -336,6 +349,8 @@ def preset(
     task_out: Path | None = typer.Option(None, "--task-out", help="Write the preset's task here."),
 ) -> None:
     """Print or export a built-in preset (model and task JSON), a starting point for your own files."""
+    from ..model.presets import MODEL_PRESETS, TASK_PRESETS
+
     if name not in MODEL_PRESETS:
         raise TrustseekError([f"unknown preset {name!r}; presets: {sorted(MODEL_PRESETS)}"])
     check_output(model_out, "--model-out", (".json",))
@@ -358,6 +373,12 @@ def check(
     files: list[Path] = typer.Argument(..., help="Trust model, task or policy JSON files."),
 ) -> None:
     """Validate model (trust or general), task and policy files; print every problem found."""
+    from ..model.core import TrustModel
+    from ..model.iohmm import IOHMM_FORMAT, IOHMMModel
+    from ..model.jsonfile import ModelError, load_json
+    from ..model.task import Task
+    from ..policies import load_policy
+
     problems: list[str] = []
     for f in files:
         try:

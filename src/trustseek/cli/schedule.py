@@ -9,10 +9,7 @@ import typer
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..model.presets import load_model, load_task
-from ..pomdp.problem import AssistancePOMDP
-from ..pomdp.scheduling import SchedulingProblem
-from ..solvers.scheduling import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS, ScheduleSolver
+from ..solvers.defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
 from ..vocab import PAPER_BLOCK_COUNTS, check_belief_update
 from ._app import app, console, print_json
 
@@ -59,6 +56,11 @@ def schedule(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
 ) -> None:
     """Choose the next item's complexity jointly with asking (finite horizon, known item counts)."""
+    from ..model.presets import load_model, load_task
+    from ..pomdp.problem import AssistancePOMDP
+    from ..pomdp.scheduling import SchedulingProblem
+    from ..solvers.scheduling import ScheduleSolver
+
     check_belief_update(belief_update, "--belief-update")
     m, t = load_model(model), load_task(task)
     pomdp = AssistancePOMDP(m, t)

@@ -8,8 +8,6 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from ..model.presets import load_model, load_task
-from ..solvers.sensitivity import sensitivity as run_sensitivity
 from ..vocab import check_belief_update
 from ._app import app, console, print_json
 
@@ -43,6 +41,9 @@ def sensitivity(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
 ) -> None:
     """Range of the policy's threshold and of V when every reported parameter moves within its printed precision."""
+    from ..model.presets import load_model, load_task
+    from ..solvers.sensitivity import sensitivity as run_sensitivity
+
     check_belief_update(belief_update, "--belief-update")
     m, t = load_model(model), load_task(task)
     res = run_sensitivity(

@@ -5,8 +5,8 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
 import typer
 from rich.console import Console
 from rich.markup import escape
@@ -15,16 +15,13 @@ from rich.table import Table
 
 from .. import solvers
 from ..errors import TrustseekError
-from ..model.core import TrustModel
-from ..model.jsonfile import load_json
-from ..model.presets import load_mixture, load_model, load_task
-from ..model.task import Task
-from ..policies.base import Policy
-from ..pomdp.supervisor_types import product_model
-from ..solvers import policy_from_spec
-from ..solvers.policy_specs import SPEC_KINDS
-from ..vocab import PAPER_ASK_PROBABILITIES
+from ..vocab import PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS
 from ._app import QuietOpt, app, atomic_output, check_output, check_outputs, console, err_console, print_json
+
+if TYPE_CHECKING:
+    from ..model.core import TrustModel
+    from ..model.task import Task
+    from ..policies.base import Policy
 
 #: --policy for a person of unknown supervisor type (solved for the mixture of --model or --policy-model)
 TYPE_AWARE = "type-aware"
@@ -44,7 +41,10 @@ def _policy(
 
     A solved policy file fixes its belief update and model: the ``given`` options among
     --belief-update and --policy-model are refused with it rather than ignored."""
-    if spec in SPEC_KINDS:
+    from ..model.jsonfile import load_json
+    from ..solvers import policy_from_spec
+
+    if spec in POLICY_SPEC_KINDS:
         p_ask = dict(zip(task.complexities, [ask_low, ask_high], strict=False))  # --ask-low, --ask-high: the first two
         options = {"belief_update": belief_update, "grid": grid, "p_ask": p_ask}
         return policy_from_spec({"kind": spec, **options}, model, task, where="--policy")
@@ -60,7 +60,7 @@ def _policy(
                 source,
             )
         return policy_from_spec(d, model, task, where=source)
-    raise TrustseekError([f"--policy must be one of {list(SPEC_KINDS)} or a policy JSON file, got {spec!r}"])
+    raise TrustseekError([f"--policy must be one of {list(POLICY_SPEC_KINDS)} or a policy JSON file, got {spec!r}"])
 
 
 def _counts(text: str, task) -> list[int]:
@@ -97,7 +97,7 @@ def simulate(
         "trust-aware",
         "--policy",
         "-p",
-        help=f"Robot policy: {', '.join(SPEC_KINDS)}, {TYPE_AWARE} (for a mixture of supervisor types), "
+        help=f"Robot policy: {', '.join(POLICY_SPEC_KINDS)}, {TYPE_AWARE} (for a mixture of supervisor types), "
         "or a policy JSON file (e.g. from 'trustseek solve --out').",
     ),
     participants: int = typer.Option(9, "--participants", "-n", min=1, max=1_000_000, help="Number of simulated participants."),
@@ -154,6 +154,10 @@ def simulate(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
 ) -> None:
     """Simulate supervisors from a trust model working with the robot under a policy."""
+    import numpy as np
+
+    from ..model.presets import load_mixture, load_model, load_task
+    from ..pomdp.supervisor_types import product_model
     from ..simulation.engine import Supervisors
     from ..simulation.engine import simulate as run_simulation
 

@@ -11,7 +11,6 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..model.core import TrustModel
 from ._app import (
     ColumnOpt,
     DelimiterOpt,
@@ -33,7 +32,6 @@ from ._app import (
     progress_bar,
     read_log,
 )
-from .fit import POSTERIOR_SUFFIXES, _fill_unused, _general, _read_with_inputs, model_inputs, read_for_model
 
 BootstrapOpt = typer.Option(
     1000, "--bootstrap", "-b", min=0, max=10_000, help="Participant-bootstrap resamples for the 95% intervals (0 = none)."
@@ -88,6 +86,9 @@ def _load(path: Path) -> Any:
 
 def _read_for(log, m, mapping, column, label, missing, delimiter, order=None):
     """The log with the columns ``m`` needs (a trust model: the inputs it uses, the others filled)."""
+    from ..model.core import TrustModel
+    from .fit import _fill_unused, model_inputs, read_for_model
+
     if isinstance(m, TrustModel):
         used = model_inputs(m)
         return _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter, order=order), m, used)
@@ -131,6 +132,7 @@ def predict(
     Trials whose action the model fixes (the robot asked: P(intervene) = 1) are no prediction
     and are left out of the scores."""
     from ._app import check_not_inputs
+    from .fit import POSTERIOR_SUFFIXES, _general, _read_with_inputs
 
     check_output(out, "--out", POSTERIOR_SUFFIXES)
     check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (mapping, "--mapping file")))
@@ -255,6 +257,7 @@ def validate(
     """Does the decoded trust track self-reported trust?  Spearman and Pearson correlations with
     the ratings (pooled, within and between participants) next to simple baselines."""
     from ._app import check_not_inputs
+    from .fit import POSTERIOR_SUFFIXES
 
     check_output(out, "--out", POSTERIOR_SUFFIXES)
     check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (mapping, "--mapping file")))

@@ -34,8 +34,9 @@ from ..pomdp.belief import ScalarBelief
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem
 from ..solvers.backup import finite_horizon_value
+from ..solvers.defaults import DEFAULT_SCHEDULE_GRID
 from ..solvers.registry import make_solver
-from ..solvers.scheduling import DEFAULT_SCHEDULE_GRID, ScheduleSolver
+from ..solvers.scheduling import ScheduleSolver
 from .populations import SimulationError, check_participants
 from .trial_orders import schedule_counts
 

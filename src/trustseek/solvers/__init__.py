@@ -1,6 +1,7 @@
 """Solvers: turn a problem into a policy, ``solver.solve(problem) -> Policy``.
 
 * :mod:`.base`           -- the ``Solver`` interface and its errors;
+* :mod:`.defaults`       -- the solvers' option names and defaults (loads nothing: the command line's help reads them);
 * :mod:`.registry`       -- every solver by name with its options (``make_solver``);
 * :mod:`.grid`           -- the belief grid (two trust levels, both updates);
 * :mod:`.alpha`          -- certified alpha vectors (two trust levels);

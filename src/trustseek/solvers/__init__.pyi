@@ -8,6 +8,7 @@ from . import (
     base,
     certificate,
     certified_grid,
+    defaults,
     envelopes,
     eq3,
     grid,

@@ -42,13 +42,12 @@ from .backup import branch_lines, exact_backup
 from .base import SolverBase, SolverError, one_blas_thread
 from .certificate import CertifiedSolution, policy_from_solution
 from .certified_grid import CertifiedGridSolver
+from .defaults import METHODS
 from .envelopes import difference_extrema, refit, thin, thin_mask
 from .grid import GridSolver
 from .numerics import evaluate_controller, memoryless_controllers
 
 __all__ = ["AlphaSolver"]
-
-METHODS = ("policy-iteration", "value-iteration")
 
 
 class AlphaSolver(SolverBase):

@@ -20,13 +20,6 @@ from ..errors import TrustseekError
 from ..policies.base import Policy
 from ..pomdp.problem import AssistancePOMDP
 
-#: the belief grid's default number of points and its methods (:mod:`.grid`; here so that the
-#: command line's options name them without loading the solvers)
-DEFAULT_GRID = 2001
-#: the solver ``solve_type_aware`` uses unless told otherwise
-DEFAULT_TYPE_AWARE_SOLVER = "point"
-METHODS = ("policy-iteration", "value-iteration")
-
 F = TypeVar("F", bound=Callable[..., Any])
 
 

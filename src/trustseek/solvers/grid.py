@@ -34,7 +34,8 @@ from ..model.task import Task
 from ..policies.grid_q import TrustAwarePolicy
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
-from .base import DEFAULT_GRID, METHODS, SolverBase, SolverError, one_blas_thread
+from .base import SolverBase, SolverError, one_blas_thread
+from .defaults import DEFAULT_GRID, METHODS
 from .numerics import improve, policy_values
 
 #: policy iteration on grids of up to this many points uses dense linear algebra: the transition

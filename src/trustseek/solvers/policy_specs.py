@@ -30,9 +30,8 @@ from ..policies.scheduling import SCHEDULE
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingError, SchedulingProblem
 from ..vocab import BELIEF_UPDATES, PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS
-from .base import DEFAULT_GRID
+from .defaults import DEFAULT_GRID, DEFAULT_SCHEDULE_GRID, ORDERS
 from .registry import make_solver
-from .scheduling import DEFAULT_SCHEDULE_GRID, ORDERS
 
 __all__ = ["SCHEDULE", "SPEC_KINDS", "PolicySpecError", "policy_from_spec", "schedule_size"]
 

@@ -22,8 +22,9 @@ from typing import Any
 from .. import solvers
 from ..policies.base import Policy
 from .agnostic import PAPER_HORIZON, TrustAgnosticSolver
-from .base import DEFAULT_GRID, Solver, SolverError
-from .scheduling import DEFAULT_SCHEDULE_GRID, ScheduleSolver
+from .base import Solver, SolverError
+from .defaults import DEFAULT_GRID, DEFAULT_SCHEDULE_GRID
+from .schedule import ScheduleSolver
 
 __all__ = ["SOLVERS", "SolverEntry", "make_solver", "solve_with", "solver_names"]
 

@@ -32,11 +32,9 @@ from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem, State, state_key
 from .backup import exact_backup
 from .base import SolverBase, SolverError, one_blas_thread
+from .defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
 from .envelopes import cross_sum, max_of
 
-ORDERS = ("optimal", "easy-first", "hard-first", "alternating")
-REPRESENTATIONS = ("alpha", "grid")
-DEFAULT_SCHEDULE_GRID = 201
 #: Q of an action the rule forbids (stored finite so that policy files stay valid JSON)
 FORBIDDEN = -1e9
 

@@ -63,7 +63,8 @@ from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.supervisor_types import type_aware_problem
 from .alpha import AlphaSolver
-from .base import DEFAULT_TYPE_AWARE_SOLVER, one_blas_thread
+from .base import one_blas_thread
+from .defaults import DEFAULT_TYPE_AWARE_SOLVER
 from .numerics import evaluate_controller, improve, memoryless_controllers, policy_values
 from .point import (
     PointSolution,
