@@ -24,7 +24,7 @@ from ..policies.base import Policy
 from .agnostic import PAPER_HORIZON, TrustAgnosticSolver
 from .base import Solver, SolverError
 from .defaults import DEFAULT_GRID, DEFAULT_SCHEDULE_GRID
-from .schedule import ScheduleSolver
+from .scheduling import ScheduleSolver
 
 __all__ = ["SOLVERS", "SolverEntry", "make_solver", "solve_with", "solver_names"]
 
