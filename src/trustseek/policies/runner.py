@@ -1,7 +1,10 @@
 """``PolicyRunner``: a policy with its live belief, one trial at a time.
 
 This is how the experiment server and a robot run a policy: ``decide`` before a trial,
-``observe`` its events after it.
+``observe`` its events after it.  The step itself is written once: ``action_at`` and
+``belief_after`` at any one belief (the server's decision API keeps many sessions' beliefs and
+applies them to each), ``actions_many`` and ``beliefs_after_many`` at many beliefs at once, in
+codes (the simulation's numpy path: one row per simulated participant).
 """
 
 from __future__ import annotations
@@ -74,3 +77,23 @@ class PolicyRunner:
             return None
         o = UNOBSERVED if human_action is None else HUMAN_ACTIONS.index(human_action)
         return self._updater.update(belief, c, ACTIONS.index(action), o, EXPERIENCES.index(experience))
+
+    def initial_beliefs(self, n: int) -> np.ndarray | None:
+        """``n`` rows of the initial belief (None without a model)."""
+        if self._updater is None:
+            return None
+        b0 = self._updater.initial()
+        return np.broadcast_to(b0, (n, len(b0))).copy()
+
+    def actions_many(self, beliefs: np.ndarray, complexities: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The robot actions (codes) the policy takes at each row of ``beliefs``, each in its own
+        complexity (index)."""
+        return np.asarray(self.policy.actions(beliefs, complexities, rng), dtype=np.int64)
+
+    def beliefs_after_many(
+        self, beliefs: np.ndarray, complexities: np.ndarray, action: np.ndarray, human: np.ndarray, experience: np.ndarray
+    ) -> np.ndarray:
+        """Each row of ``beliefs`` after its trial's events (codes; the rows unchanged without a model)."""
+        if self._updater is None:
+            return beliefs
+        return self._updater.update(beliefs, complexities, action, human, experience)

@@ -38,10 +38,11 @@ import numpy as np
 
 from ..model.core import ASK, AUTONOMOUS, INTERVENE, RELIABLE, RELY, TrustModel
 from ..model.task import Task
-from ..policies.base import Policy
+from ..policies.base import Policy, PolicyError
 from ..policies.complexity import ComplexityPolicy
 from ..policies.regions import ask_bounds
-from ..pomdp.belief import ScalarBelief, make_updater
+from ..policies.runner import PolicyRunner
+from ..pomdp.belief import ScalarBelief
 from ..vocab import check_belief_update
 from . import kernels
 from .populations import SimulationError, Supervisors
@@ -100,15 +101,17 @@ class _Tables:
             self.trust_low = self.trust_cum[:, 0].copy()  # P(T' = low | ...)
 
 
-def _policy_belief(block: Block) -> tuple[TrustModel, str] | None:
-    """(model, update name) of the robot's belief in a block, or None when nothing tracks it."""
+def _runner(block: Block) -> PolicyRunner:
+    """The block's policy with the robot's belief: tracked with the policy's own model, else the
+    block's belief model (then only logged), updated by the block's update, else the policy's,
+    else ``bayes``."""
     pol = block.policy
-    model = pol.model or block.belief_model
-    update = block.belief_update or pol.belief_update or "bayes"
-    if pol.belief_update is not None and model is None:
-        raise SimulationError([f"the {pol.kind} policy needs a trust model for its belief"])
-    check_belief_update(update)
-    return (model, update) if model is not None else None
+    try:
+        runner = PolicyRunner(pol, model=pol.model or block.belief_model, belief_update=block.belief_update)
+    except PolicyError:
+        raise SimulationError([f"the {pol.kind} policy needs a trust model for its belief"]) from None
+    check_belief_update(runner.belief_update)
+    return runner
 
 
 RECORDED = ("complexity", "action", "human", "experience", "trust")  # int8 arrays of a recorded run
@@ -169,21 +172,20 @@ def _run_chunk(
     for block in blocks:
         sched = np.ascontiguousarray(block.schedule[sl].T).astype(np.int64)  # (T, m)
         T = sched.shape[0]
-        belief = _policy_belief(block)
+        runner = _runner(block)
         policy = block.policy
         scalar = None
-        updater = None
-        if belief is not None and belief[0].n_trust == 2:
-            scalar = ScalarBelief(*belief)
+        tracked = runner.model is not None and runner.model.n_trust > 2  # the runner's own filter, row by row
+        if runner.model is not None and runner.model.n_trust == 2:
+            scalar = ScalarBelief(runner.model, runner.belief_update or "bayes")  # the same filter on P(trust = high)
             x = np.full(m, scalar.x0)
             B = np.empty((m, 2))
-        elif belief is not None:
-            updater = make_updater(belief[1], belief[0])
-            B = np.broadcast_to(updater.initial(), (m, belief[0].n_trust)).copy()
+        elif (b0 := runner.initial_beliefs(m)) is not None:
+            B = b0
         else:
             B = np.full((m, 2), np.nan)
         bounds = ask_bounds(policy) if scalar is not None else None
-        fast = _compiled_action(policy, bounds, updater is None) if compiled and two else None
+        fast = _compiled_action(policy, bounds, not tracked) if compiled and two else None
         if fast is not None:
             mode, act = fast
             if mode == kernels.FIXED:
@@ -220,7 +222,7 @@ def _run_chunk(
                 if scalar is not None:
                     B[:, 1] = x
                     np.subtract(1.0, x, out=B[:, 0])
-                a = np.asarray(policy.actions(B, c, rng_pol), dtype=np.int64)
+                a = runner.actions_many(B, c, rng_pol)
             u = rng_sup.random((3, m))
             ca = c * 2 + a
             cap = ca if poff is None else ca + poff
@@ -239,8 +241,8 @@ def _run_chunk(
             trust = (u[2] >= tab.trust_low[kt]).astype(np.int64) if two else (u[2][:, None] >= tab.trust_cum[kt]).sum(axis=1)
             if scalar is not None:
                 x = scalar.step(x, ca, o, e)
-            elif updater is not None:
-                B = updater.update(B, c, a, o, e)
+            elif tracked:
+                B = runner.beliefs_after_many(B, c, a, o, e)
             t_global += 1
         if progress is not None:
             progress(m * T)
@@ -353,7 +355,7 @@ def _check_block(j: int, b: Block, n: int, task: Task) -> None:
     if bm is not None and tuple(bm.complexities) != tuple(task.complexities):
         raise SimulationError([f"block {j + 1}: the belief model's complexities differ from the task's"])
     b.schedule = sch
-    _policy_belief(b)
+    _runner(b)
 
 
 def simulate(
