@@ -96,6 +96,9 @@ def test_a_record_per_participant_fits_from_the_command_line(study, tmp_path):
     assert code == 0 and re.search(r"log-likelihood", output), output
     code, output = run_cli(fit)
     assert code == 2 and '"explode"' in output and "Traceback" not in output, output
+    pd.DataFrame(recs).to_parquet(tmp_path / "people.parquet")  # a pyarrow traceback and exit 1 before
+    code, output = run_cli(["fit", str(tmp_path / "people.parquet"), "-r", "1", "--column", "participant=pid"])
+    assert code == 2 and '"explode": ["block", "trial",' in " ".join(output.split()), output
 
 
 def test_a_rating_copied_onto_a_blocks_trials_is_noticed_and_counted_once_with_rating_per(study, tmp_path):
