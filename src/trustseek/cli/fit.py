@@ -28,6 +28,7 @@ from ._app import (
     check_outputs,
     check_tol,
     console,
+    err_console,
     keep_columns,
     print_json,
     progress_bar,
@@ -250,6 +251,12 @@ def fit(
         order,
     )
     rated = "rating" if frame.attrs.get("rating_levels") else None
+    if rated and not frame.attrs.get("rating_per"):
+        from ..data.levels import copied_per_block
+
+        note = copied_per_block(frame, rated, shown=frame.attrs.get("rating_column"))
+        if note:
+            err_console.print(f"{log}: note: {escape(note)}", highlight=False)
     if ratings_only and rated is None:
         raise TrustseekError(
             ["--ratings-only needs a rating column: --rating COLUMN --rating-levels ..., or the mapping's 'rating'"]
