@@ -96,6 +96,9 @@ def test_a_record_per_participant_fits_from_the_command_line(study, tmp_path):
     assert code == 0 and re.search(r"log-likelihood", output), output
     code, output = run_cli(fit)
     assert code == 2 and '"explode"' in output and "Traceback" not in output, output
+    pd.DataFrame(recs).to_parquet(tmp_path / "people.parquet")  # a pyarrow traceback and exit 1 before
+    code, output = run_cli(["fit", str(tmp_path / "people.parquet"), "-r", "1", "--column", "participant=pid"])
+    assert code == 2 and '"explode": ["block", "trial",' in " ".join(output.split()), output
 
 
 def test_a_rating_copied_onto_a_blocks_trials_is_noticed_and_counted_once_with_rating_per(study, tmp_path):
@@ -112,7 +115,9 @@ def test_a_rating_copied_onto_a_blocks_trials_is_noticed_and_counted_once_with_r
     assert "holds one value" not in output
     fit = ["fit", str(tmp_path / "rated.csv"), "-r", "1", "--order", "block,trial", "--rating", "trust"]
     code, output = run_cli([*fit, "--rating-levels", "1,2,3,4,5", "--rating-per", "block"])
-    assert code == 0, output
+    assert code == 0 and "holds one value" not in output, output
+    code, output = run_cli([*fit, "--rating-levels", "1,2,3,4,5"])
+    assert code == 0 and "'trust' holds one value per 'block'" in " ".join(output.split()), output
     log.loc[0, "trust"] = "5"  # block 1 of P001 rated 1 on its other trials
     log.to_csv(tmp_path / "rated.csv", index=False)
     code, output = run_cli([*argv, "--rating", "trust", "--rating-per", "block"])

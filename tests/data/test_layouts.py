@@ -269,3 +269,22 @@ def test_a_second_file_with_its_own_names_is_joined_by_a_map_of_the_keys(small, 
     assert frame.groupby("participant", observed=True).group.first().tolist() == ["a", "b", "a"]
     with pytest.raises(DataError, match="no column 'id' in"):
         read_trials(small, {"join": {"file": str(tmp_path / "people.jsonl"), "on": {"participant": "id"}}})
+
+
+def test_the_new_entries_survive_a_round_trip_and_a_toml_file(tmp_path):
+    d = {
+        "explode": {"columns": ["choice"], "position": "item"},
+        "join": {"file": "/data/ratings.csv", "on": {"subject": "pid"}},
+        "rating": {"column": "trust", "levels": [1, 2, 3], "per": "block"},
+        "order": ["block", "item"],
+    }
+    m = ColumnMapping.from_dict(d)
+    assert ColumnMapping.from_dict(m.to_dict()) == m
+    (tmp_path / "m.toml").write_text(
+        'order = ["block", "item"]\nexplode = ["choice"]\n[join]\nfile = "ratings.csv"\n[wide]\ncolumns = ["x"]\n'
+    )
+    with pytest.raises(DataError, match="either 'wide'"):
+        ColumnMapping.load(tmp_path / "m.toml")
+    (tmp_path / "m.toml").write_text('explode = ["choice"]\n[join]\nfile = "ratings.csv"\n')
+    m = ColumnMapping.load(tmp_path / "m.toml")
+    assert m.explode == {"columns": ["choice"], "position": None} and m.join == {"file": str(tmp_path / "ratings.csv")}

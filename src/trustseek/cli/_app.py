@@ -271,6 +271,28 @@ def read_log(
     return frame
 
 
+def rating_entry(rating: str | None, levels: str | None, bins: str | None, per: str | None = None) -> dict | None:
+    """The mapping's rating entry from --rating, --rating-levels, --rating-bins and --rating-per
+    (None without --rating)."""
+    if rating is None:
+        if levels is not None or bins is not None or per is not None:
+            raise TrustseekError(
+                ["--rating-levels, --rating-bins and --rating-per describe the column named by --rating: give --rating"]
+            )
+        return None
+    entry: dict = {"column": rating}
+    if per is not None:
+        entry["per"] = per
+    if levels is not None:
+        entry["levels"] = [x.strip() for x in levels.split(",")]
+    if bins is not None:
+        try:
+            entry["bins"] = [float(x) for x in bins.split(",")]
+        except ValueError:
+            raise TrustseekError([f"--rating-bins {bins!r}: expected comma-separated numbers, e.g. 0,25,50,75,100"]) from None
+    return entry
+
+
 def keep_columns(out, frame, keep: list[str] | None):
     """``out`` (one row per row of ``frame``, in its order) with the ``--keep`` columns of ``frame`` added."""
     if not keep:

@@ -27,9 +27,11 @@ from ._app import (
     check_outputs,
     check_tol,
     console,
+    err_console,
     keep_columns,
     print_json,
     progress_bar,
+    rating_entry,
     read_log,
     selection_table,
 )
@@ -86,28 +88,6 @@ def _read_with_inputs(
 def _general(tr: tuple[str, ...], em: tuple[str, ...]) -> bool:
     """True when the inputs are not a trust model's: the fit is a general model (trustseek.iohmm/1)."""
     return not _fit().trust_iohmm.is_trust_structure(tr, em)
-
-
-def _rating_flags(rating: str | None, levels: str | None, bins: str | None, per: str | None = None) -> dict | None:
-    """The mapping's rating entry from --rating, --rating-levels, --rating-bins and --rating-per
-    (None without --rating)."""
-    if rating is None:
-        if levels is not None or bins is not None or per is not None:
-            raise TrustseekError(
-                ["--rating-levels, --rating-bins and --rating-per describe the column named by --rating: give --rating"]
-            )
-        return None
-    entry: dict = {"column": rating}
-    if per is not None:
-        entry["per"] = per
-    if levels is not None:
-        entry["levels"] = [x.strip() for x in levels.split(",")]
-    if bins is not None:
-        try:
-            entry["bins"] = [float(x) for x in bins.split(",")]
-        except ValueError:
-            raise TrustseekError([f"--rating-bins {bins!r}: expected comma-separated numbers, e.g. 0,25,50,75,100"]) from None
-    return entry
 
 
 POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
@@ -270,11 +250,17 @@ def fit(
         emissions_on,
         missing,
         delimiter,
-        _rating_flags(rating, rating_levels, rating_bins, rating_per),
+        rating_entry(rating, rating_levels, rating_bins, rating_per),
         not ratings_only,
         order,
     )
     rated = "rating" if frame.attrs.get("rating_levels") else None
+    if rated and not frame.attrs.get("rating_per"):
+        from ..data.levels import copied_per_block
+
+        note = copied_per_block(frame, rated, shown=frame.attrs.get("rating_column"))
+        if note:
+            err_console.print(f"{log}: note: {escape(note)}", highlight=False)
     if ratings_only and rated is None:
         raise TrustseekError(
             ["--ratings-only needs a rating column: --rating COLUMN --rating-levels ..., or the mapping's 'rating'"]

@@ -161,10 +161,13 @@ def one_per_block(
     return pd.Series(texts[np.where(kept >= 0, kept, len(cells.texts))], index=frame.index, name=column)
 
 
-def copied_per_block(frame: pd.DataFrame, column: str, missing: frozenset[str] = frozenset()) -> str | None:
+def copied_per_block(
+    frame: pd.DataFrame, column: str, missing: frozenset[str] = frozenset(), shown: str | None = None
+) -> str | None:
     """A note when ``column`` looks like a rating per block copied onto every trial of it: a
     column named like a block (``block``, ``session``, ``round``) within each of whose groups the
-    rating is one value on two or more trials; None otherwise."""
+    rating is one value on two or more trials; None otherwise.  ``shown`` is the column's name
+    in the note (the log's name of a mapped rating)."""
     if column not in frame.columns:
         return None
     for block in [str(c) for c in frame.columns if any(w in str(c).lower() for w in ("block", "session", "round"))]:
@@ -182,7 +185,7 @@ def copied_per_block(frame: pd.DataFrame, column: str, missing: frozenset[str] =
         np.maximum.at(hi, inverse, rated[has])
         if (lo == hi).all() and (count > 1).any():
             return (
-                f"{column!r} holds one value per {block!r}, on {int(has.sum()):,} trials of {len(g):,} blocks: "
+                f"{shown or column!r} holds one value per {block!r}, on {int(has.sum()):,} trials of {len(g):,} blocks: "
                 f'a rating given once per block counts once with --rating-per {block} (the mapping\'s rating "per")'
             )
     return None
