@@ -11,9 +11,10 @@ reproduce: setup
 # the static checks first (while the numba kernels of the fit, the simulation and the design study
 # compile into their cache, once, on the other core: trustseek.estimation.warm, trustseek.design.warm),
 # then every test; one BLAS thread per test worker, so that the two workers do not oversubscribe the cores.
-# The warm step loads the cache in about 2.5 s of CPU once it is filled; on a clean clone it compiles
-# (about 58 s of CPU) on the core the static checks leave idle, where without it both test workers
-# would compile the same kernels on their first fit, on the tests' critical path.
+# The warm step loads the cache in about 3 s of CPU once it is filled; on a clean clone it compiles
+# (about 75 s of CPU, the compiled fit included) on the core the static checks leave idle, where
+# without it both test workers would compile the same kernels on their first compiled fit, on the
+# tests' critical path.
 test: setup
 	@(.venv/bin/python -m trustseek.estimation.warm && .venv/bin/python -m trustseek.design.warm) & warm=$$!; status=0; \
 	  $(MAKE) --no-print-directory lint || status=$$?; \

@@ -27,12 +27,13 @@ COMPLEXITIES = ("low", "high")
 def row_by_row(frame: pd.DataFrame, fixed_ask: bool) -> tuple[tuple[str, tuple[int, ...]], ...]:
     """The rows no trial informs, read one trial at a time."""
     em_seen, tr_seen = set(), set()
-    for _, r in frame.iterrows():
+    rows = frame.to_dict("records")
+    for r in rows:
         key = (COMPLEXITIES.index(r["complexity"]), ACTIONS.index(r["robot_action"]))
         if pd.notna(r["human_action"]):
             em_seen.add(key)
-        later = frame[(frame["participant"] == r["participant"]) & (frame["trial"] > r["trial"])]
-        if len(later) and pd.notna(r["experience"]):
+        later = [s for s in rows if s["participant"] == r["participant"] and s["trial"] > r["trial"]]
+        if later and pd.notna(r["experience"]):
             tr_seen.add((*key, EXPERIENCES.index(r["experience"])))
     out: list[tuple[str, tuple[int, ...]]] = []
     for i in range(2):

@@ -254,25 +254,29 @@ def never_estimated(frame: pd.DataFrame, spec: IOHMMSpec) -> tuple[tuple[str, tu
     Rows that inputs a table ignores repeat (e.g. the ask rows when transitions do not depend
     on the robot action) are copies of other rows, not estimates: they are listed too."""
     complexities = model_complexities(spec)
-    cx = frame["complexity"].map({c: i for i, c in enumerate(complexities)}) if "complexity" in frame else None
-    ac = frame["robot_action"].map({a: i for i, a in enumerate(ACTIONS)}) if "robot_action" in frame else None
-    ex = frame["experience"].map({e: i for i, e in enumerate(EXPERIENCES)}) if "experience" in frame else None
-    if cx is None or ac is None or ex is None or cx.isna().any() or ac.isna().any():
+    columns = (("complexity", complexities), ("robot_action", ACTIONS), ("experience", EXPERIENCES))
+    if any(name not in frame for name, _ in columns):
         return ()  # a log without these columns: nothing to say per row
+    c, a, e = (_index_codes(frame[name], names) for name, names in columns)
+    if (c < 0).any() or (a < 0).any():
+        return ()
     observed = frame["human_action"].notna().to_numpy()
     # a trial has a next one when it is not its participant's last (encode refused repeated indices)
-    person, people = pd.factorize(frame["participant"])
+    participant = frame["participant"]
+    if isinstance(participant.dtype, pd.CategoricalDtype):
+        person, n_people = participant.cat.codes.to_numpy(dtype=np.int64), len(participant.cat.categories)
+    else:
+        person, people = pd.factorize(participant)
+        n_people = len(people)
     trial = frame["trial"].to_numpy(dtype=np.int64)
-    last = np.full(len(people), np.iinfo(np.int64).min)
+    last = np.full(n_people, np.iinfo(np.int64).min)
     np.maximum.at(last, person, trial)
     has_next = trial < last[person]
-    c, a = cx.to_numpy(dtype=np.int64), ac.to_numpy(dtype=np.int64)
-    e = ex.fillna(-1).to_numpy(dtype=np.int64)
-    em_seen = np.zeros((len(complexities), 2), dtype=bool)
-    em_seen[c[observed], a[observed]] = True
+    n = len(complexities)
+    row = c * 2 + a  # the emission row (c, a) of each trial; 2 * row + e its transition row (c, a, e)
+    em_seen = (np.bincount(row[observed], minlength=n * 2) > 0).reshape(n, 2)
     sel = has_next & (e >= 0)
-    tr_seen = np.zeros((len(complexities), 2, 2), dtype=bool)
-    tr_seen[c[sel], a[sel], e[sel]] = True
+    tr_seen = (np.bincount(2 * row[sel] + e[sel], minlength=n * 4) > 0).reshape(n, 2, 2)
     fixed_ask = "robot_action" in spec.emission_inputs and any(
         dict(f.where) == {"robot_action": "ask"} for f in spec.fixed_emissions
     )
@@ -285,6 +289,15 @@ def never_estimated(frame: pd.DataFrame, spec: IOHMMSpec) -> tuple[tuple[str, tu
                 if not tr_seen[i, j, k]:
                     out.append(("transition", (i, j, k)))
     return tuple(out)
+
+
+def _index_codes(values: pd.Series, names: Sequence[str]) -> np.ndarray:
+    """Each value's index in ``names``, -1 where it is missing or not among them (a categorical
+    column through its categories: no value looked up per row)."""
+    if isinstance(values.dtype, pd.CategoricalDtype):
+        lookup = [names.index(v) if v in names else -1 for v in values.cat.categories]
+        return np.array([*lookup, -1], dtype=np.int32)[values.cat.codes.to_numpy()]  # code -1 (missing): the last
+    return values.map({v: i for i, v in enumerate(names)}).fillna(-1).to_numpy(dtype=np.int32)
 
 
 def decode(frame: pd.DataFrame, model: TrustModel | IOHMMModel, rating: str | None = None) -> pd.DataFrame:
