@@ -148,7 +148,7 @@ def test_success_intervention_and_keyboard_teleoperation_with_contacts(env):
     page.keyboard.press(" ")
     step_until(page, "s.phase === 'teleop'", limit=5)
     shot(page, out, "intervention")
-    teleoperate(page)
+    teleoperate(page, at_grasp=lambda pg: shot(pg, out, "teleop-grasp"))
     # trial 3: the robot asks; a reload part of the way resumes the teleoperation where it was
     step_until(page, "s.trial === 3 && s.phase === 'teleop'")
     shot(page, out, "ask")

@@ -142,7 +142,10 @@ export class OutcomeAnimation {
       this.cause = "strike";
       const c = Math.cos(prev.heading), sn = Math.sin(prev.heading);
       const bin: V3 = [prev.x - c * 0.25, prev.y - sn * 0.25, 0.62];
-      this.release(bin, [d[0] * 1.4, d[1] * 1.4 + 0.4, 1.2]);
+      // thrown forward and out to the side away from the obstacle, where every camera sees it
+      const o = this.obstacle!;
+      const away = Math.sign(prev.y - (o.y + o.h / 2)) || 1;
+      this.release(bin, [d[0] * 0.8, d[1] * 0.8 + away * 1.6, 1.5]);
       return prev;
     }
     return p;
