@@ -107,14 +107,15 @@ def start(page, link: str, query: str = "?manual=1&quality=0") -> None:
     page.wait_for_function("['approach', 'teleop'].includes(window.trustseek.state().phase)")
 
 
-def teleoperate(page, device: Keyboard | Gamepad | None = None) -> dict:
+def teleoperate(page, device: Keyboard | Gamepad | None = None, at_grasp=None) -> dict:
     """Drive along the robot's planned path to its place in front of the item (turning on the
     spot, then forward), push the gripper into the shelf beside the item (a contact), bring it to
     the item's height and in front of it, into the shelf around the item, close the gripper,
-    pull back over the base, deposit. The states at the deposit."""
+    pull back over the base, deposit (``at_grasp(page)`` is called before the gripper closes).
+    The states at the deposit."""
     page.evaluate("window.__scene.manual(true)")  # the page's clock stops while the test drives
     try:
-        return _teleoperate(page, device or Keyboard())
+        return _teleoperate(page, device or Keyboard(), at_grasp)
     finally:
         if "manual=1" not in page.url:
             page.evaluate("window.__scene.manual(false)")
@@ -173,7 +174,7 @@ def tool_to(page, dev, axis: str, goal: str, tol: float = 0.015) -> dict:
     raise AssertionError(f"gripper never reached {goal} along {axis}: {settle(page)}")
 
 
-def _teleoperate(page, dev: Keyboard | Gamepad) -> dict:
+def _teleoperate(page, dev: Keyboard | Gamepad, at_grasp=None) -> dict:
     s = settle(page)
     side = s["side"]
     # along the planned path, from the first point ahead of the base, to its place before the item
@@ -190,6 +191,9 @@ def _teleoperate(page, dev: Keyboard | Gamepad) -> dict:
     tool_to(page, dev, "z", "s.item.z - s.gripper.z")
     tool_to(page, dev, "x", "s.item.x - s.gripper.x")
     tool_to(page, dev, "y", "s.item.y - s.gripper.y", tol=0.03)
+    if at_grasp:
+        step_until(page, "true", frames=1, limit=1)  # drawn
+        at_grasp(page)
     dev.press(page, "g")
     step_until(page, "s.robot.holding", limit=20)
     dev.hold(page, back, "s.robot.arm < 0.12", dt=0.01)

@@ -176,3 +176,59 @@ def test_teleoperated_gripper_moves_never_take_the_arm_through_a_shelf_or_a_prod
     assert all(r["solvable"] and r["crossings"] == 0 for r in rows), rows
     assert sum(r["refused"] for r in rows) > 0  # the random moves do strike shelves and products
     assert sum(r["reached"] > 0 for r in rows) >= len(rows) // 2  # and the item is reached between them
+
+
+# the outcome's animation for each outcome of the same trial: its cause, its end, and its start
+OUTCOME = """
+import { makeLayout } from "%(web)s/src/scene";
+import { makeAisle } from "%(web)s/src/scene3d/geometry";
+import { planReach } from "%(web)s/src/scene3d/arm";
+import { planPath, Drive } from "%(web)s/src/scene3d/drive";
+import { OutcomeAnimation } from "%(web)s/src/scene3d/outcome";
+import { readFileSync } from "node:fs";
+
+const req = JSON.parse(readFileSync(0, "utf8"));
+const out = [];
+for (const seed of req.seeds) for (const high of [false, true]) {
+  const layout = makeLayout(seed, high);
+  const aisle = makeAisle(layout, seed);
+  const drive = new Drive(planPath(layout));
+  const plan = planReach(drive.at(drive.duration + 1), aisle);
+  const runs = {};
+  for (const kind of ["success", "collision", "dropped"]) {
+    const a = new OutcomeAnimation(kind, plan, aisle, seed, layout);
+    const start = [];
+    let t = 0, f = a.at(0, 0), inBin = false;
+    for (; t < 40 && !f.done; t += 0.02) {
+      f = a.at(t, 0.02);
+      inBin ||= f.inBin;
+      if (t < req.start) start.push(f.joints, f.pose);
+    }
+    runs[kind] = { cause: a.cause, done: f.done, t, inBin: f.inBin, item: a.item ? a.item.p : null, shove: Math.hypot(...a.shove), start: JSON.stringify(start) };
+  }
+  out.push({ seed, high, runs });
+}
+console.log(JSON.stringify(out));
+"""
+
+
+def test_a_failures_animation_shows_its_complexitys_cause_and_every_start_is_the_same(tmp_path):
+    if shutil.which("node") is None or not ESBUILD.exists():
+        pytest.fail("node and web/node_modules are needed: run scripts/setup.sh")
+    (tmp_path / "outcome.ts").write_text(OUTCOME % {"web": WEB.as_posix()})
+    cmd = [str(ESBUILD), str(tmp_path / "outcome.ts"), "--bundle", "--platform=node", "--format=esm"]
+    subprocess.run([*cmd, f"--outfile={tmp_path / 'outcome.mjs'}", "--log-level=warning"], check=True)
+    req = json.dumps({"seeds": list(range(12)), "start": 1.0})
+    res = subprocess.run(["node", str(tmp_path / "outcome.mjs")], input=req, capture_output=True, text=True, check=True)
+    for row in json.loads(res.stdout):
+        runs = row["runs"]
+        assert all(r["done"] for r in runs.values()), row
+        # the first second is the same whatever the outcome: it reveals nothing
+        assert runs["success"]["start"] == runs["collision"]["start"] == runs["dropped"]["start"], row["seed"]
+        assert runs["success"]["cause"] is None and runs["success"]["inBin"], row
+        for kind in ("collision", "dropped"):
+            r = runs[kind]
+            assert r["cause"] == ("strike" if row["high"] else "slip"), (row["seed"], row["high"], kind, r)
+            assert r["item"][2] < 0.1 and not r["inBin"], r  # the item on the floor
+            if row["high"]:
+                assert r["shove"] > 0.05, r  # the obstacle shoved aside

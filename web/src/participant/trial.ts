@@ -127,11 +127,15 @@ function showBanner() {
     dropped: "Failure: the robot dropped the item",
     teleoperated: o.robot_action === "ask" ? "Collected with your help" : "You took over and collected the item",
   };
+  // in 3-D a failure's text names the cause the animation showed (it fits the trial's complexity)
+  const g = page.scene3d?.state();
+  if (g?.cause === "strike") text[o.outcome] = `Failure: the robot struck the ${g.struck} and the item fell`;
+  else if (g?.cause === "slip") text[o.outcome] = "Failure: the item slipped out of the gripper and fell";
   const b = $("banner");
   b.innerHTML = `<span class="pts ${o.reward > 0 ? "pos" : o.reward < 0 ? "neg" : ""}">${r}</span> ${text[o.outcome] ?? o.outcome}${o.practice ? " (practice: not scored)" : ""}`;
   b.className = "show";
   page.shownScore = page.st.score;
-  api.events([{ t: Date.now(), type: "outcome_shown", trial: o.trial, data: { outcome: o.outcome, reward: o.reward } }]).catch(() => undefined);
+  api.events([{ t: Date.now(), type: "outcome_shown", trial: o.trial, data: { outcome: o.outcome, reward: o.reward, cause: g?.cause ?? null } }]).catch(() => undefined);
 }
 
 function afterResult() {

@@ -75,10 +75,15 @@ export class Scene3D {
   /** The outcome's animation at time t; true when it is over. Sets the page's robot and item. */
   outcome(kind: string, t: number, dt: number, robot: RobotState, item: ItemState): boolean {
     if (!this.plan) return true;
-    this.anim ??= new OutcomeAnimation(kind, this.plan, this.aisle, this.seed);
+    this.anim ??= new OutcomeAnimation(kind, this.plan, this.aisle, this.seed, this.layout);
     const a = this.anim;
     const s = a.at(t, dt);
     this.joints = s.joints;
+    if (s.pose) {
+      this.pose = s.pose;
+      Object.assign(robot, { x: s.pose.x, y: s.pose.y, heading: s.pose.heading });
+      if (a.cause === "strike" && robot.shake === 0 && !a.item?.resting) robot.shake = 1;
+    }
     const l = forward(this.pose, s.joints);
     robot.jaw = s.joints.jaw;
     if (s.holding) {
@@ -86,15 +91,18 @@ export class Scene3D {
       this.setItem(item, l.grasp);
     } else if (robot.holding) {
       robot.holding = false;
-      if (kind === "success") {
+      if (s.inBin) {
         item.inBin = true;
         robot.binCount++;
-      } else {
-        const out = Math.sign(this.plan.preTarget[1] - this.aisle.item.y);
-        a.release(l.grasp, kind === "dropped" ? [0.2, out * 0.3, 0] : [0.3, out * 1.2, 0.4]);
       }
     }
-    if (a.item) this.setItem(item, a.item.p);
+    if (a.item) {
+      if (item.inBin) {
+        item.inBin = false; // thrown out of the bin
+        robot.binCount--;
+      }
+      this.setItem(item, a.item.p);
+    }
     return s.done;
   }
 
@@ -178,6 +186,10 @@ export class Scene3D {
   }
 
   private placeFallen(am: AisleModel) {
+    for (const [i, o] of am.obstacles.entries()) {
+      const shoved = this.anim && this.anim.obstacle === this.layout.obstacles[i] ? this.anim.shove : [0, 0, 0];
+      o.mesh.position.set(o.at.x + shoved[0], o.at.y, o.at.z + shoved[1]);
+    }
     if (!this.anim) return;
     const m = new THREE.Matrix4(), q = new THREE.Quaternion(), e = new THREE.Euler();
     for (const [i, f] of this.anim.products) {
@@ -240,6 +252,8 @@ export class Scene3D {
       cause: this.anim?.cause ?? null,
       variant: this.anim?.variant ?? null,
       fallen: this.anim ? this.anim.products.size : 0,
+      shoved: this.anim ? Math.hypot(this.anim.shove[0], this.anim.shove[1]) : 0,
+      struck: this.anim?.cause === "strike" ? this.anim.obstacle!.kind : null,
       fallenOnFloor: this.anim ? [...this.anim.products.values()].filter((f) => f.p[2] < 0.3).length : 0,
       joints: this.joints,
       level: this.aisle?.item.level ?? null,

@@ -22,7 +22,11 @@ function boxMatrix(b: Aabb, m = new THREE.Matrix4()): THREE.Matrix4 {
   );
 }
 
-export interface AisleModel { group: THREE.Group; products: THREE.InstancedMesh; item: THREE.Mesh; path: THREE.Line; }
+export interface AisleModel {
+  group: THREE.Group; products: THREE.InstancedMesh; item: THREE.Mesh; path: THREE.Line;
+  /** the obstacles' meshes (in the layout's order) and where they stand */
+  obstacles: { mesh: THREE.Object3D; at: THREE.Vector3 }[];
+}
 
 export function buildAisle(layout: Layout, aisle: Aisle3): AisleModel {
   const group = new THREE.Group();
@@ -44,14 +48,18 @@ export function buildAisle(layout: Layout, aisle: Aisle3): AisleModel {
   });
   products.castShadow = true;
   group.add(products);
-  for (const o of layout.obstacles) group.add(obstacle(o.kind, o.x + o.w / 2, o.y + o.h / 2, o.w, o.h));
+  const obstacles = layout.obstacles.map((o) => {
+    const mesh = obstacle(o.kind, o.x + o.w / 2, o.y + o.h / 2, o.w, o.h);
+    group.add(mesh);
+    return { mesh, at: mesh.position.clone() };
+  });
   const it = aisle.item;
   const item = new THREE.Mesh(new THREE.CylinderGeometry(it.radius, it.radius, it.height, 16), new THREE.MeshLambertMaterial({ color: layout.item.color, emissive: layout.item.color, emissiveIntensity: 0.25 }));
   item.castShadow = true;
   group.add(item);
   const path = new THREE.Line(new THREE.BufferGeometry(), new THREE.LineDashedMaterial({ color: "#2f6fde", dashSize: 0.15, gapSize: 0.1 }));
   group.add(path);
-  return { group, products, item, path };
+  return { group, products, item, path, obstacles };
 }
 
 function obstacle(kind: "crate" | "cart" | "spill", cx: number, cy: number, w: number, h: number): THREE.Object3D {

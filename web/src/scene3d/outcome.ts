@@ -1,13 +1,16 @@
 // The animation of an autonomous trial's outcome after the reach (the outcome is the server's,
 // sealed until now). Every animation starts with one of three grasps chosen from the scene seed
-// (clean, regrip, slow), whatever the outcome, so its start tells nothing. A success lifts the
-// item out and puts it in the bin; a collision lifts too steeply: the gripper strikes the board
-// above, the item and the products beside it fall; a dropped item slips out of the jaws on the
-// way to the bin and falls to the floor.
+// (clean, regrip, slow), whatever the outcome, so its start tells nothing. A failure shows a
+// cause that fits the trial's complexity. Low complexity: a success lifts the item out and puts
+// it in the bin; a failure lets it slip out of the jaws on the way to the bin, to the floor.
+// High complexity: the item goes in the bin, then the base drives back around the obstacle in
+// the aisle; a success clears it, a failure cuts the corner: the base strikes the crate or the
+// cart, which is shoved aside, and the item is thrown out of the bin to the floor.
 
-import { AISLE_H, AISLE_W, rng } from "../scene";
-import { Joints, Pose, Reach, STOW, inverse, mix, reachAt } from "./arm";
-import { Aisle3, BOARD, LEVELS } from "./geometry";
+import { AISLE_H, AISLE_W, BASE_H, BASE_W, Box, Layout, rng } from "../scene";
+import { Joints, Pose, Reach, STOW, forward, inverse, mix, reachAt } from "./arm";
+import { Drive, planPath } from "./drive";
+import { Aisle3 } from "./geometry";
 
 type V3 = [number, number, number];
 
@@ -34,6 +37,8 @@ export class Faller {
 
 export type Cause = "strike" | "slip";
 export interface Held { joints: Joints; holding: boolean; item: V3; }
+/** The base's pose while it drives back (high complexity), and whether the item is in the bin. */
+export interface Frame extends Held { done: boolean; pose: Pose | null; inBin: boolean; }
 
 const ease = (t: number) => (t <= 0 ? 0 : t >= 1 ? 1 : t * t * (3 - 2 * t));
 
@@ -43,16 +48,32 @@ export class OutcomeAnimation {
   cause: Cause | null = null;
   item: Faller | null = null;
   products = new Map<number, Faller>();
-  private strikeAt = -1;
+  /** high complexity: the drive back, the obstacle in its way, and how far it was shoved */
+  readonly back: Drive | null = null;
+  readonly obstacle: Box | null = null;
+  shove: V3 = [0, 0, 0];
+  private struck: { t: number; pose: Pose; v: V3 } | null = null;
   private bin: Joints;
 
-  constructor(readonly kind: string, readonly plan: Reach, readonly aisle: Aisle3, seed: number) {
+  constructor(readonly kind: string, readonly plan: Reach, readonly aisle: Aisle3, seed: number, layout?: Layout) {
     this.variant = Math.floor(rng((seed ^ 0x2545f491) >>> 0)() * 3) as 0 | 1 | 2;
     this.lag = [0, 0.45, 0.3][this.variant];
     const p = plan.pose;
     const c = Math.cos(p.heading), s = Math.sin(p.heading);
     // over the bin, behind the torso, pointing down
     this.bin = inverse(p, [p.x - c * 0.25, p.y - s * 0.25, 0.75], -Math.PI / 2, 0.9, 0) ?? { ...STOW, jaw: 0 };
+    const o = layout?.obstacles.find((b) => b.kind !== "spill");
+    if (layout && o) {
+      this.obstacle = o;
+      const path = planPath({ ...layout, start: { x: p.x, y: p.y }, pregrasp: layout.start });
+      if (kind !== "success") {
+        // a failure cuts the corner at the obstacle: the waypoints beside it move onto its edge
+        for (const q of path.slice(1, -1)) {
+          if (q.x > o.x - 1.5 && q.x < o.x + o.w + 1.5) q.y = q.y < o.y ? o.y - BASE_H * 0.3 : o.y + o.h + BASE_H * 0.3;
+        }
+      }
+      this.back = new Drive(path, p.heading);
+    }
   }
 
   private grasp(t: number): Joints {
@@ -62,65 +83,94 @@ export class OutcomeAnimation {
     return { ...j, jaw };
   }
 
-  /** The arm at time t (s) of the outcome; the held item's place; whether the animation is over. */
-  at(t: number, dt: number): Held & { done: boolean } {
+  /** The arm at time t (s) of the outcome; the held item's place; the base's pose while it drives
+   * back; whether the animation is over. */
+  at(t: number, dt: number): Frame {
     const g = 0.35 + this.lag; // the grasp is over
     const slow = this.variant === 2 ? 1.4 : 1;
     const it = this.plan.target;
     const out = this.plan.preTarget;
     const lift = (u: number, up: number) => inverse(this.plan.pose, [it[0] + (out[0] - it[0]) * u, it[1] + (out[1] - it[1]) * u, it[2] + up], 0, this.plan.lift, 0);
-    let joints: Joints;
-    let holding = true;
-    if (t < g) return { joints: this.grasp(t), holding: t > 0.3, item: [...it] as V3, done: false };
+    if (t < g) return { joints: this.grasp(t), holding: t > 0.3, item: [...it] as V3, done: false, pose: null, inBin: false };
     const u = ease((t - g) / (0.7 * slow));
-    if (this.kind === "collision") {
-      // the gripper rises too steeply on the way out and strikes the board above
-      const above = (LEVELS[this.aisle.item.level + 1] ?? 1.75) - BOARD - it[2] - 0.04;
-      const up = Math.min(above, 0.04 + u * 0.6);
-      joints = lift(Math.min(u, 0.35), up) ?? reachAt(this.plan, 1);
-      if (up >= above && this.strikeAt < 0) this.strike(t, joints);
-      if (this.strikeAt >= 0) {
-        holding = false;
-        joints = mix(joints, { ...STOW, jaw: 1 }, ease((t - this.strikeAt - 0.3) / 0.8));
+    let joints = (u < 1 ? lift(u, 0.03 * Math.min(1, u * 4)) : null) ?? this.plan.pre;
+    let holding = true;
+    const tb = g + 0.7 * slow; // the arm sets off for the bin
+    const v = ease((t - tb) / 0.8);
+    if (v > 0) joints = mix({ ...this.plan.pre, jaw: 0 }, this.bin, v);
+    const slips = this.kind !== "success" && !this.back;
+    if (slips && v > 0.3) {
+      holding = false;
+      if (!this.cause) {
+        // the item slips out of the jaws and falls, a little away from the shelf
+        this.cause = "slip";
+        this.release(forward(this.plan.pose, joints).grasp, [0.2, Math.sign(out[1] - it[1]) * 0.3, 0]);
       }
-    } else {
-      joints = (u < 1 ? lift(u, 0.03 * Math.min(1, u * 4)) : null) ?? this.plan.pre;
-      const v = ease((t - g - 0.7 * slow) / 0.8);
-      if (v > 0) joints = mix({ ...this.plan.pre, jaw: 0 }, this.bin, v);
-      if (this.kind === "dropped" && v > 0.3) {
-        holding = false;
-        if (!this.cause) this.cause = "slip";
-        joints = { ...joints, jaw: Math.min(1, (v - 0.3) * 3) };
-      }
-      if (this.kind === "success" && v >= 1) holding = false;
+      joints = { ...joints, jaw: Math.min(1, (v - 0.3) * 3) };
+    }
+    const inBin = !slips && v >= 1;
+    if (inBin) holding = false;
+    let pose: Pose | null = null;
+    if (this.back && inBin) {
+      joints = mix(this.bin, { ...STOW, jaw: 0.3 }, ease((t - tb - 0.8) / 0.6));
+      pose = this.driveBack(t - tb - 1.0);
     }
     this.stepFallers(dt);
     const settled = (this.item?.resting ?? false) && [...this.products.values()].every((f) => f.resting);
-    const done = this.kind === "success" ? t > g + 0.7 * slow + 1.0 : this.cause !== null && settled && t > g + 1.6;
-    return { joints, holding, item: [...it] as V3, done };
+    let done: boolean;
+    if (this.kind === "success") done = this.back ? this.passed(pose) : t > tb + 1.8;
+    else done = this.cause !== null && settled && t > (this.struck ? this.struck.t + 1.2 : g + 1.6);
+    return { joints, holding, item: [...it] as V3, done, pose, inBin: inBin && !this.struck };
+  }
+
+  /** The base `s` seconds into its drive back; a failure's drive stops where it strikes the obstacle. */
+  private driveBack(s: number): Pose {
+    const back = this.back!;
+    if (this.struck) {
+      const k = Math.max(0, s - this.struck.t);
+      const o = this.struck.v;
+      this.shove = [o[0] * (1 - Math.exp(-4 * k)), o[1] * (1 - Math.exp(-4 * k)), 0];
+      return this.struck.pose;
+    }
+    const p = back.at(Math.max(0, s));
+    if (this.kind !== "success" && this.overlaps(p)) {
+      // the strike: the base stops short, the obstacle is shoved on, the item flies out of the bin
+      const prev = back.at(Math.max(0, s - 0.05));
+      const d = [Math.cos(prev.heading), Math.sin(prev.heading)];
+      const cart = this.obstacle!.kind === "cart";
+      this.struck = { t: s, pose: prev, v: [d[0] * (cart ? 0.6 : 0.15), d[1] * (cart ? 0.6 : 0.15) + (cart ? 0.2 : 0.05) * Math.sign(d[1] || 1), 0] };
+      this.cause = "strike";
+      const c = Math.cos(prev.heading), sn = Math.sin(prev.heading);
+      const bin: V3 = [prev.x - c * 0.25, prev.y - sn * 0.25, 0.62];
+      // thrown forward and out to the side away from the obstacle, where every camera sees it
+      const o = this.obstacle!;
+      const away = Math.sign(prev.y - (o.y + o.h / 2)) || 1;
+      this.release(bin, [d[0] * 0.8, d[1] * 0.8 + away * 1.6, 1.5]);
+      return prev;
+    }
+    return p;
+  }
+
+  /** Whether the base's footprint at p overlaps the obstacle (separating axes). */
+  private overlaps(p: Pose): boolean {
+    const o = this.obstacle!;
+    const c = Math.cos(p.heading), s = Math.sin(p.heading);
+    const corners = [[1, 1], [1, -1], [-1, -1], [-1, 1]].map(([a, b]) => [p.x + (c * a * BASE_W) / 2 - (s * b * BASE_H) / 2, p.y + (s * a * BASE_W) / 2 + (c * b * BASE_H) / 2]);
+    const oc = [[o.x, o.y], [o.x + o.w, o.y], [o.x + o.w, o.y + o.h], [o.x, o.y + o.h]];
+    return ![[1, 0], [0, 1], [c, s], [-s, c]].some(([ax, ay]) => {
+      const pa = corners.map(([x, y]) => x * ax + y * ay), pb = oc.map(([x, y]) => x * ax + y * ay);
+      return Math.max(...pa) <= Math.min(...pb) || Math.max(...pb) <= Math.min(...pa);
+    });
+  }
+
+  /** A success's drive back is over once the base is past the obstacle. */
+  private passed(p: Pose | null): boolean {
+    return !!p && p.x < this.obstacle!.x - 1.0;
   }
 
   /** Drop the held item from `from` (called once, when the jaws let go). */
   release(from: V3, push: V3) {
     if (!this.item) this.item = new Faller([...from] as V3, push, this.aisle.item.height / 2, 3);
-  }
-
-  private strike(t: number, _j: Joints) {
-    this.strikeAt = t;
-    this.cause = "strike";
-    const it = this.aisle.item;
-    const out = Math.sign(this.plan.preTarget[1] - it.y);
-    const r = rng(Math.floor(it.x * 1000));
-    // the products beside the item on its board and on the board above, or at least the nearest
-    const near = this.aisle.products
-      .map((p, i) => ({ p, i, dx: Math.abs((p.min[0] + p.max[0]) / 2 - it.x), lv: LEVELS.indexOf(p.min[2]) }))
-      .filter(({ p, lv }) => Math.sign(it.y - this.aisle.front) === Math.sign((p.min[1] + p.max[1]) / 2 - this.aisle.front) && (lv === it.level || lv === it.level + 1))
-      .sort((a, b) => a.dx - b.dx);
-    for (const { p, i } of near.filter((n, k) => k === 0 || n.dx < 0.5)) {
-      const h = p.max[2] - p.min[2];
-      const c: V3 = [(p.min[0] + p.max[0]) / 2, (p.min[1] + p.max[1]) / 2, (p.min[2] + p.max[2]) / 2];
-      this.products.set(i, new Faller(c, [(r() - 0.5) * 0.8, out * (0.9 + r()), 0.5 * r()], h / 2, (r() - 0.5) * 8));
-    }
   }
 
   private stepFallers(dt: number) {
