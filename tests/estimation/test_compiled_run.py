@@ -1,4 +1,4 @@
-"""The compiled whole run (estimation/compiled_run.py) against the numpy pieces and the lockstep path."""
+"""The compiled whole run (estimation/compiled_run.py) and its steps (estimation/compiled_steps.py) against the numpy pieces and the lockstep path."""
 
 import numpy as np
 import pytest

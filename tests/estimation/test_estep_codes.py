@@ -5,7 +5,7 @@ mixed lengths (pairs and single sequences), unobserved outputs, and rescaled rec
 import numpy as np
 import pytest
 
-from trustseek.estimation import Params, encode, kernels, paper_spec
+from trustseek.estimation import Params, encode, forward_backward, kernels, paper_spec
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
@@ -72,4 +72,4 @@ def test_rescaled_recursions_in_pairs_and_single_sequences(seed):
 def test_step_codes():
     eidx = np.array([[3, 1, 4], [0, 2, 2]], dtype=np.int32)
     tidx = np.array([[1, 0, 0], [2, 3, 0]], dtype=np.int32)
-    assert kernels.step_codes(eidx, tidx, 5).tolist() == [[3, 1 * 5 + 1, 0 * 5 + 4], [0, 2 * 5 + 2, 3 * 5 + 2]]
+    assert forward_backward.step_codes(eidx, tidx, 5).tolist() == [[3, 1 * 5 + 1, 0 * 5 + 4], [0, 2 * 5 + 2, 3 * 5 + 2]]

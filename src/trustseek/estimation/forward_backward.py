@@ -75,8 +75,11 @@ def _forward(r, n, initial, emit, trans, eidx, tidx, L, alpha, scale):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _backward(r, n, emit, trans, eidx, tidx, L, weight, c_init, c_emit, c_trans, alpha, beta, scale, tmp):
-    """Backward pass of sequence ``n`` after :func:`_forward`: its posterior counts times ``weight`` added."""
+def _backward(r, n, emit, trans, eidx, tidx, L, weight, counts, work):
+    """Backward pass of sequence ``n`` after :func:`_forward`: its posterior counts times ``weight``
+    added to ``counts`` (initial, emission, transition); ``work``: (alpha, beta, scale, tmp)."""
+    c_init, c_emit, c_trans = counts
+    alpha, beta, scale, tmp = work
     K = alpha.shape[1]
     # backward, scaled like alpha: gamma_t = alpha_t * beta_t sums to ``weight``
     for k in range(K):
@@ -104,12 +107,13 @@ def _backward(r, n, emit, trans, eidx, tidx, L, weight, c_init, c_emit, c_trans,
 
 
 @njit(cache=True, nogil=True)
-def _sequence(r, n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans, alpha, beta, scale, tmp):
-    """Add the posterior counts of sequence ``n`` under parameter set ``r``; its log-probability (-inf: zero)."""
-    total = _forward(r, n, initial, emit, trans, eidx, tidx, L, alpha, scale)
+def _sequence(r, n, initial, emit, trans, eidx, tidx, L, counts, work):
+    """Add the posterior counts of sequence ``n`` under parameter set ``r`` to ``counts`` (initial,
+    emission, transition; ``work``: (alpha, beta, scale, tmp)); its log-probability (-inf: zero)."""
+    total = _forward(r, n, initial, emit, trans, eidx, tidx, L, work[0], work[2])
     if not total > -math.inf:
         return total
-    _backward(r, n, emit, trans, eidx, tidx, L, 1.0, c_init, c_emit, c_trans, alpha, beta, scale, tmp)
+    _backward(r, n, emit, trans, eidx, tidx, L, 1.0, counts, work)
     return total
 
 
@@ -148,10 +152,11 @@ def _forward2(n, initial, emit, trans, eidx, tidx, L, alpha):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _backward2(n, emit, trans, eidx, tidx, L, weight, c_init, c_emit, c_trans, alpha):
+def _backward2(n, emit, trans, eidx, tidx, L, weight, counts, alpha):
     """The backward pass of :func:`_sequence2` after :func:`_forward2`: the posterior counts of
-    sequence ``n`` times ``weight`` added (the weight enters each trial's normaliser, so a
-    weight of 1 adds exactly the unweighted counts)."""
+    sequence ``n`` times ``weight`` added to ``counts`` (initial, emission, transition; the weight
+    enters each trial's normaliser, so a weight of 1 adds exactly the unweighted counts)."""
+    c_init, c_emit, c_trans = counts
     # backward: beta in (g0, g1), rescaled like alpha; gamma and xi normalised per trial
     g0 = 1.0
     g1 = 1.0
@@ -199,7 +204,7 @@ def _backward2(n, emit, trans, eidx, tidx, L, weight, c_init, c_emit, c_trans, a
 
 
 @njit(cache=True, nogil=True)
-def _sequence2(n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans, alpha):
+def _sequence2(n, initial, emit, trans, eidx, tidx, L, counts, alpha):
     """:func:`_sequence` for K = 2 levels, with the 2-vectors and 2x2 matrices in registers.
 
     The forward and backward vectors are not normalised at every trial (a division on
@@ -210,7 +215,7 @@ def _sequence2(n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans, 
     total = _forward2(n, initial, emit, trans, eidx, tidx, L, alpha)
     if not total > -math.inf:
         return total
-    _backward2(n, emit, trans, eidx, tidx, L, 1.0, c_init, c_emit, c_trans, alpha)
+    _backward2(n, emit, trans, eidx, tidx, L, 1.0, counts, alpha)
     return total
 
 
@@ -330,10 +335,13 @@ def _backward_codes(n, A, code, L, c_first, c_step, alpha, marks, s):
 
 
 @njit(cache=True, nogil=True)
-def _forward_pair(n, m, initial, emit, A, code, L, alpha, alpha2, marks, marks2):
+def _forward_pair(n, m, initial, emit, A, code, L, first, second):
     """:func:`_forward_codes` of sequences ``n`` and ``m`` of the same length side by side (two
     independent recursions in one loop keep the processor busy); the same numbers as two calls.
-    Their log-probabilities (both -inf when either is zero) and numbers of marks."""
+    ``first`` and ``second``: each sequence's (alpha, marks).  Their log-probabilities (both -inf
+    when either is zero) and numbers of marks."""
+    alpha, marks = first
+    alpha2, marks2 = second
     e = code[n, 0]
     f = code[m, 0]
     a0 = initial[0] * emit[e, 0]
@@ -393,9 +401,12 @@ def _forward_pair(n, m, initial, emit, A, code, L, alpha, alpha2, marks, marks2)
 
 
 @njit(cache=True, nogil=True)
-def _backward_pair(n, m, A, code, L, ci, cs, alpha, marks, sa, di, ds, alpha2, marks2, sb):
-    """:func:`_backward_codes` of sequences ``n`` (counts into ``ci``, ``cs``) and ``m`` (into
-    ``di``, ``ds``) side by side, after :func:`_forward_pair`; the same numbers as two calls."""
+def _backward_pair(n, m, A, code, L, first, second):
+    """:func:`_backward_codes` of sequences ``n`` and ``m`` side by side, after :func:`_forward_pair`;
+    the same numbers as two calls.  ``first`` and ``second``: each sequence's (counts per first
+    trial, counts per step code, alpha, marks, number of marks)."""
+    ci, cs, alpha, marks, sa = first
+    di, ds, alpha2, marks2, sb = second
     g0 = 1.0
     g1 = 1.0
     h0 = 1.0

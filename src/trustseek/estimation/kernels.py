@@ -106,12 +106,12 @@ def _item(r, lo, hi, tables, data, counts):
         while n < hi:
             L = lengths[n]
             if L > 0 and n + 1 < hi and lengths[n + 1] == L:
-                la, lb, sa, sb = _forward_pair(n, n + 1, ini, em, A, code, L, buf, buf2, marks, marks2)
+                la, lb, sa, sb = _forward_pair(n, n + 1, ini, em, A, code, L, (buf, marks), (buf2, marks2))
                 total += la
                 total += lb
                 if not total > -math.inf:
                     return -math.inf
-                _backward_pair(n, n + 1, A, code, L, ci, cs, buf, marks, sa, di, ds, buf2, marks2, sb)
+                _backward_pair(n, n + 1, A, code, L, (ci, cs, buf, marks, sa), (di, ds, buf2, marks2, sb))
                 n += 2
                 continue
             if L > 0:
@@ -128,11 +128,11 @@ def _item(r, lo, hi, tables, data, counts):
         alpha = np.empty((max(T, 1), K))
         beta = np.empty((max(T, 1), K))
         scale = np.empty(max(T, 1))
-        tmp = np.empty(K)
+        work = (alpha, beta, scale, np.empty(K))
         for n in range(lo, hi):
             L = lengths[n]
             if L > 0:
-                total += _sequence(r, n, initial, emit, trans, eidx, tidx, L, c_init, c_emit, c_trans, alpha, beta, scale, tmp)
+                total += _sequence(r, n, initial, emit, trans, eidx, tidx, L, counts, work)
                 if not total > -math.inf:
                     return -math.inf
     return total
@@ -229,10 +229,10 @@ def _mixture_item(r, lo, hi, M, tables, data, counts, seq_ll):
             if w > 0.0:
                 q = r * M + m
                 if K == 2:
-                    _backward2(n, emit[q], trans[q], eidx, tidx, L, w, c_init[m], c_emit[m], c_trans[m], alpha[m])
+                    _backward2(n, emit[q], trans[q], eidx, tidx, L, w, (c_init[m], c_emit[m], c_trans[m]), alpha[m])
                 else:
                     cm = (c_init[m], c_emit[m], c_trans[m])
-                    _backward(q, n, emit, trans, eidx, tidx, L, w, cm[0], cm[1], cm[2], alpha[m], beta, scale[m], tmp)
+                    _backward(q, n, emit, trans, eidx, tidx, L, w, cm, (alpha[m], beta, scale[m], tmp))
     return total
 
 
@@ -266,7 +266,7 @@ def each_items(lo, hi, pidx, tables, data, active, out):
     alpha = np.empty((max(T, 1), K))
     beta = np.empty((max(T, 1), K))
     scale = np.empty(max(T, 1))
-    tmp = np.empty(K)
+    work = (alpha, beta, scale, np.empty(K))
     for n in range(lo, hi):
         ci[n] = 0.0
         ce[n] = 0.0
@@ -277,9 +277,9 @@ def each_items(lo, hi, pidx, tables, data, active, out):
             continue
         q = pidx[n]
         if K == 2:
-            ll[n] = _sequence2(n, initial[q], emit[q], trans[q], eidx, tidx, L, ci[n], ce[n], ct[n], alpha)
+            ll[n] = _sequence2(n, initial[q], emit[q], trans[q], eidx, tidx, L, (ci[n], ce[n], ct[n]), alpha)
         else:
-            ll[n] = _sequence(q, n, initial, emit, trans, eidx, tidx, L, ci[n], ce[n], ct[n], alpha, beta, scale, tmp)
+            ll[n] = _sequence(q, n, initial, emit, trans, eidx, tidx, L, (ci[n], ce[n], ct[n]), work)
         if not ll[n] > -math.inf:
             ci[n] = 0.0
             ce[n] = 0.0
