@@ -452,7 +452,16 @@ def load_for_decoding(path: Path):
     d, source = load_json(path)
     if is_iohmm_file(d):
         return IOHMMModel.from_dict(d, source)
-    return TypeMixture.from_dict(d, source)
+    return TypeMixture.from_dict(d, source, general=True)
+
+
+def read_for_types(log, types, mapping, column, label, missing, delimiter):
+    """The log read for supervisor types (or one model as a mixture of one type): the columns the
+    types use, those a trust model ignores filled."""
+    if types.general:
+        return read_for_model(log, types.models[0], mapping, column, label, missing, delimiter)
+    used = tuple(dict.fromkeys(c for t in types.models for c in model_inputs(t)))
+    return _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), types.models[0], used)
 
 
 def read_for_model(log, model, mapping, column, label, missing, delimiter):
@@ -510,11 +519,9 @@ def decode_cmd(
             _data().write_trials(post, tmp)
         console.print(f"wrote {len(post)} trials to {out}")
         return
-    m = types.models[0]
-    used = tuple(dict.fromkeys(c for t in types.models for c in model_inputs(t)))
-    frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), m, used)
+    frame = read_for_types(log, types, mapping, column, label, missing, delimiter)
     if types.n_types == 1:
-        post = keep_columns(_fit().decode(frame, m), frame, keep)
+        post = keep_columns(_fit().decode(frame, types.models[0]), frame, keep)
     else:  # supervisor types: P(type | trials) per participant and the type-averaged trust posteriors
         from ..estimation.mixture import decode_types
 

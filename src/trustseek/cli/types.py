@@ -170,22 +170,27 @@ def fit_types(
         f"{', '.join(fit.differ)} differ)",
         title_justify="left",
     )
-    m0 = mixture.models[0]
-    cells = [(i, k) for i in range(len(m0.complexities)) for k in range(len(m0.trust_levels))]
+    heads, rely_of = _rely_cells(mixture)
     table.add_column("type")
-    for col in ("weight", "people", "P(T1=high)"):
+    for col in ("weight", "people", f"P(T1={mixture.trust_levels[-1]})"):
         table.add_column(col, justify="right")
-    for i, k in cells:
-        table.add_column(f"rely C={m0.complexities[i]} T={m0.trust_levels[k]}", justify="right")
+    for head in heads:
+        table.add_column(escape(head), justify="right")
     counts = post["type"].value_counts()
     for name, w, m in zip(fit.names, fit.weights, mixture.models, strict=True):
         weight = f"{w:.3f}"
         if intervals is not None:
             lo, hi = intervals.weights[name]
             weight += escape(f" [{lo:.2f}, {hi:.2f}]")
-        rely = [f"{m.emission[i, 0, k, 1]:.2f}" for i, k in cells]
+        rely = [f"{x:.2f}" for x in rely_of(m)]
         table.add_row(name, weight, str(int(counts.get(name, 0))), f"{m.initial[-1]:.2f}", *rely)
     console.print(table)
+    if mixture.general:
+        console.print(
+            f"general types (inputs: {', '.join(mixture.models[0].used_inputs) or 'none'}): decode, predict and "
+            "personalize read them; planning needs trust models",
+            highlight=False,
+        )
     lls = ", ".join(f"{x:.3f}" for x in sorted(fit.restart_logliks, reverse=True))
     console.print(
         f"log-likelihood {fit.loglik:.4f}; {fit.n_params} free parameters; AIC {fit.aic:.2f}; BIC {fit.bic:.2f}\n"
@@ -193,7 +198,9 @@ def fit_types(
         highlight=False,
     )
     console.print(
-        "people: participants whose most probable type it is; rely: P(rely | T, C, autonomous); types are ordered "
+        "people: participants whose most probable type it is; rely: "
+        + ("P(rely | T, inputs)" if mixture.general else "P(rely | T, C, autonomous)")
+        + "; types are ordered "
         "by their mean P(rely) over the estimated emission rows, lowest first",
         highlight=False,
     )
@@ -205,6 +212,25 @@ def fit_types(
         console.print(f"type posteriors written to {type_posteriors}")
     if plots is not None:
         console.print(f"figures written to {', '.join(str(p) for p in written)}")
+
+
+def _rely_cells(mixture):
+    """The table's P(rely) columns: per complexity and trust level without asking (trust models), or
+    per combination of the emission inputs and level (general models); and each type's values."""
+    m0 = mixture.models[0]
+    levels = mixture.trust_levels
+    if mixture.general:
+        rely = m0.output_categories.index("rely") if "rely" in m0.output_categories else -1
+        combos = range(m0.emission.shape[0])
+        heads = [
+            f"rely {' '.join(f'{c}={v}' for c, v in m0.combination('emission', u).items())} T={t}".replace("  ", " ")
+            for u in combos
+            for t in levels
+        ]
+        return heads, lambda m: [m.emission[u, k, rely] for u in combos for k in range(len(levels))]
+    cells = [(i, k) for i in range(len(m0.complexities)) for k in range(len(levels))]
+    heads = [f"rely C={m0.complexities[i]} T={levels[k]}" for i, k in cells]
+    return heads, lambda m: [m.emission[i, 0, k, 1] for i, k in cells]
 
 
 @app.command("select-types", rich_help_panel="Estimate")
@@ -299,12 +325,14 @@ def personalize(
         raise TrustseekError([f"--estimate must be held-out or variational, got {estimate!r}"])
     check_output(out, "--out", directory=True)
     from ..estimation.personal import personalize as run
-    from ..model.presets import load_mixture
-    from .fit import _fill_unused, model_inputs
+    from ..model.iohmm import IOHMMModel
+    from ..model.mixture import TypeMixture
+    from .fit import load_for_decoding, read_for_types
 
-    centre = load_mixture(model)
-    used = tuple(dict.fromkeys(c for t in centre.models for c in model_inputs(t)))  # the columns the centre uses
-    frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), centre.models[0], used)
+    centre = load_for_decoding(Path(model))  # a trust model, a general model or types
+    if isinstance(centre, IOHMMModel):
+        centre = TypeMixture.single(centre)
+    frame = read_for_types(log, centre, mapping, column, label, missing, delimiter)  # the columns the centre uses
     res = run(frame, centre if centre.n_types > 1 else centre.models[0], strength=strength, tol=tol, estimate=estimate)
     with atomic_output(out, directory=True) as tmp:
         res.save(tmp)

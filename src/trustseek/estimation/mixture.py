@@ -1,7 +1,9 @@
 """Supervisor types: a mixture of M trust IOHMMs, each participant one latent type (Remark 1).
 
 Every type has the structure of the pooled model (the same inputs, fixed cells, ties and
-rows no event reaches); a participant's whole sequence comes from one type.  The mixture
+rows no event reaches): trust models for the paper's inputs, general models
+(``trustseek.iohmm/1``) for a study's named inputs, as the pooled fit (:func:`types_spec`);
+a participant's whole sequence comes from one type.  The mixture
 is written as M IOHMMs whose initial rows hold the joint P(type, S_1): type m's row sums to
 its weight w_m.  The EM of the pooled fit then applies unchanged (:func:`~.em.run_em` with
 SQUAREM, the L-BFGS-B finish and the stationarity check of :mod:`.convergence`): per
@@ -42,6 +44,7 @@ import pandas as pd
 from scipy.optimize import linear_sum_assignment
 
 from ..model.core import TrustModel
+from ..model.iohmm import IOHMMModel
 from ..model.mixture import TypeMixture
 from . import kernels
 from .convergence import converge
@@ -53,7 +56,16 @@ from .quasi_newton import Sticks, _Part
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
 from .structure import FLOOR, PROJECT_FLOOR, START_MIX, Structure
-from .trust_iohmm import check_convertible, from_trust_model, preset_spec, to_trust_model
+from .trust_iohmm import (
+    PAPER_EMISSION_INPUTS,
+    PAPER_TRANSITION_INPUTS,
+    from_trust_model,
+    general_spec,
+    is_trust_structure,
+    preset_spec,
+    to_iohmm_model,
+    to_trust_model,
+)
 
 log = logging.getLogger(__name__)
 
@@ -406,8 +418,10 @@ class MixtureFit(FitCriteria):
         probable) and ``p_type_<name>`` per type."""
         return posterior_table(self.seqs, self.names, self.type_posteriors())
 
-    def models(self) -> list[TrustModel]:
-        check_convertible(self.spec)
+    def models(self) -> list[TrustModel] | list[IOHMMModel]:
+        """The types as trust models, or as general models for a study's named inputs."""
+        if general_types(self.spec):
+            return [to_iohmm_model(self.spec, self.params.type_params(m)) for m in range(self.n_types)]
         models = [to_trust_model(self.spec, self.params.type_params(m)) for m in range(self.n_types)]
         return [m.replace(not_estimated=self.not_estimated) for m in models] if self.not_estimated else models
 
@@ -572,6 +586,28 @@ def mixture_warnings(fit: MixtureFit) -> list[str]:
     return out
 
 
+def general_types(spec: IOHMMSpec) -> bool:
+    """True when ``spec``'s types are general models (an input a trust model does not have)."""
+    return not is_trust_structure(spec.transition_inputs, spec.emission_inputs)
+
+
+def types_spec(
+    frame: pd.DataFrame,
+    preset: str | IOHMMSpec = "paper",
+    prior: float = 0.0,
+    transition_inputs: Sequence[str] = PAPER_TRANSITION_INPUTS,
+    emission_inputs: Sequence[str] = PAPER_EMISSION_INPUTS,
+    **spec_options: Any,
+) -> IOHMMSpec:
+    """The structure of every type, as the pooled fit's: the ``preset`` (a trust model) for the
+    canonical inputs, :func:`~.trust_iohmm.general_spec` when an input is a study's own."""
+    if isinstance(preset, IOHMMSpec) or is_trust_structure(transition_inputs, emission_inputs):
+        return preset_spec(
+            preset, frame, prior=prior, transition_inputs=transition_inputs, emission_inputs=emission_inputs, **spec_options
+        )
+    return general_spec(frame, emission_inputs, transition_inputs, spec_options.get("levels", ("low", "high")), prior)
+
+
 def fit_types(
     frame: pd.DataFrame,
     types: int,
@@ -586,9 +622,8 @@ def fit_types(
     progress: Callable[[int, int], None] | None = None,
     **spec_options: Any,
 ) -> MixtureFit:
-    """Fit ``types`` supervisor types to a trial table (the structure as :func:`~.fit.fit_trust_model`)."""
-    spec = preset_spec(preset, frame, prior=prior, **spec_options)
-    check_convertible(spec)
+    """Fit ``types`` supervisor types to a trial table (the structure as the pooled fit's, :func:`types_spec`)."""
+    spec = types_spec(frame, preset, prior, **spec_options)
     seqs = encode(frame, spec)
     pooled = None
     if types > 1:
@@ -623,12 +658,13 @@ def fit_types(
         n_jobs=n_jobs,
         on_restart=tick,
     )
-    fit.not_estimated = never_estimated(frame, spec)
+    fit.not_estimated = () if general_types(spec) else never_estimated(frame, spec)
     return fit
 
 
 def mixture_params(mixture: TypeMixture) -> tuple[IOHMMSpec, MixtureParams]:
-    """The paper-structured spec and the mixture's tables (for decoding and scoring)."""
+    """The types' spec (the paper's structure, or the general models' own) and the mixture's tables
+    (for decoding and scoring)."""
     specs = [from_trust_model(m) for m in mixture.models]
     spec = specs[0][0]
     return spec, MixtureParams.from_types(mixture.weights, [p for _, p in specs])
@@ -718,10 +754,11 @@ class _TypeReplicate:
 
 
 def _type_vectors(spec: IOHMMSpec, params: MixtureParams) -> np.ndarray:
-    """(M, cells): every type's TrustModel cells, table after table."""
+    """(M, cells): every type's model cells (a TrustModel's, or a general model's), table after table."""
+    to_model = to_iohmm_model if general_types(spec) else to_trust_model
     out = []
     for m in range(params.initial.shape[0]):
-        tm = to_trust_model(spec, params.type_params(m))
+        tm = to_model(spec, params.type_params(m))
         out.append(np.concatenate([np.asarray(getattr(tm, t), dtype=float).ravel() for t in PARTS]))
     return np.array(out)
 

@@ -63,17 +63,18 @@ import pandas as pd
 from scipy.optimize import minimize
 from scipy.special import digamma, gammaln
 
-from ..model.core import TrustModel
+from ..model.core import TrustModel, planning_refusal
+from ..model.iohmm import IOHMMModel
 from ..model.jsonfile import json_safe
 from ..model.mixture import TypeMixture
 from . import kernels
 from .em import RunResult, run_em
 from .estep import EStep, Workspace
-from .mixture import MixtureStructure, MixtureWorkspace, mixture_params, type_posteriors
+from .mixture import MixtureStructure, MixtureWorkspace, general_types, mixture_params, type_posteriors
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
 from .structure import FLOOR, Structure, Table
-from .trust_iohmm import to_trust_model
+from .trust_iohmm import to_iohmm_model, to_trust_model
 
 log = logging.getLogger(__name__)
 
@@ -322,7 +323,7 @@ class PersonalModels:
     """One trust model per participant (in the order of ``participants``, the study's values)."""
 
     participants: list[Any]
-    models: list[TrustModel]
+    models: list[TrustModel] | list[IOHMMModel]  # general models for a centre with a study's named inputs
     centre: list[str]
     strength: dict[str, float]
     at_bound: dict[str, bool]
@@ -339,8 +340,10 @@ class PersonalModels:
 
     def arrays(self) -> dict[str, Any]:
         """The models stacked as the arrays of a population of simulated supervisors
-        (``Supervisors(**arrays)``: participant i is row i)."""
+        (``Supervisors(**arrays)``: participant i is row i); trust models only."""
         first = self.models[0]
+        if isinstance(first, IOHMMModel):
+            raise FitError([planning_refusal(first.used_inputs)])
         return {
             "trust_levels": first.trust_levels,
             "complexities": first.complexities,
@@ -423,7 +426,7 @@ class _Prepared:
     rows: dict[str, _Rows]
 
     @classmethod
-    def of(cls, frame: pd.DataFrame, model: TrustModel | TypeMixture, n_jobs: int | None = 1) -> _Prepared:
+    def of(cls, frame: pd.DataFrame, model: TrustModel | IOHMMModel | TypeMixture, n_jobs: int | None = 1) -> _Prepared:
         if not kernels.AVAILABLE:
             raise FitError(["per-person models need the numba package"])
         mixture = model if isinstance(model, TypeMixture) else TypeMixture.single(model)
@@ -555,7 +558,7 @@ def _cv_strengths(
 
 def personalize(
     frame: pd.DataFrame,
-    model: TrustModel | TypeMixture,
+    model: TrustModel | IOHMMModel | TypeMixture,
     strength: float | Mapping[str, float] | None = None,
     tol: float = 1e-8,
     max_iter: int = 1000,
@@ -613,7 +616,10 @@ def personalize(
     # rows no trial of the log reaches are the structure's defaults during the fit: the centre's instead
     params.emission[:, base.em.empty] = centre.emission[:, base.em.empty]
     params.transition[:, base.tr.empty] = centre.transition[:, base.tr.empty]
-    models = [to_trust_model(spec, params.take(n)) for n in range(N)]
+    if general_types(spec):
+        models: list[TrustModel] | list[IOHMMModel] = [to_iohmm_model(spec, params.take(n)) for n in range(N)]
+    else:
+        models = [to_trust_model(spec, params.take(n)) for n in range(N)]
     unconverged = sum(not r.converged for r in runs)
     if unconverged:
         warnings.append(f"{unconverged} of {N} participants' fits stopped at the E-step cap")

@@ -18,11 +18,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .mixture import MixtureFit, MixtureParams, MixtureWorkspace, fit_mixture, split_type_starts
+from .mixture import MixtureFit, MixtureParams, MixtureWorkspace, fit_mixture, split_type_starts, types_spec
 from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, mark_choices, reached_best, smooth_zero_rows
 from .sequences import Sequences, encode
 from .spec import FitError
-from .trust_iohmm import preset_spec
 
 log = logging.getLogger(__name__)
 
@@ -72,7 +71,7 @@ def select_types(
     types = sorted({int(m) for m in types})
     if not types or types[0] < 1:
         raise FitError([f"the numbers of types must be positive integers, got {list(types)}"])
-    spec = preset_spec("paper", frame, prior=prior, **spec_options)
+    spec = types_spec(frame, "paper", prior, **spec_options)
     seqs = encode(frame, spec)
     N = seqs.n_participants
     folds = max(2, min(folds, N))
