@@ -438,6 +438,14 @@ def _fit_general(
         console.print(f"posteriors written to {posteriors}")
 
 
+def widened_note(rows, key: str, asked: int) -> list[str]:
+    """The line saying that the comparison went past the largest number asked, and why."""
+    more = [int(r[key]) for r in rows if r.get("widened")]
+    if not more:
+        return []
+    return [f"the best was at {asked} {key}, the largest asked: compared up to {max(more)} (--no-widen: only the range asked)"]
+
+
 def load_for_decoding(path: Path):
     """A trust model, supervisor types (a mixture) or a general model, by the file's format; or a
     preset name (paper, paper+conservative)."""
@@ -550,6 +558,12 @@ def select(
     tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
     transitions_on: str | None = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit)."),
     emissions_on: str | None = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit)."),
+    widen: bool = typer.Option(
+        True,
+        "--widen/--no-widen",
+        help="While the best by BIC or held-out log-likelihood is the largest number compared, compare one more "
+        "(up to 8); --no-widen compares 1..--max-levels only.",
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
     mapping: Path | None = MappingOpt,
     column: list[str] | None = ColumnOpt,
@@ -574,8 +588,10 @@ def select(
             progress=lambda what, d, t: bar.update(task, completed=d, total=t, description=what),
             transition_inputs=tr,
             emission_inputs=em,
+            widen=widen,
         )
     warnings = _fit().selection_warnings(rows)
+    warnings[:0] = widened_note(rows, "levels", max_levels)
     if as_json:
         print_json({"levels": rows, "warnings": warnings})
         return

@@ -251,6 +251,12 @@ def select_types(
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
     jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads per fit."),
+    widen: bool = typer.Option(
+        True,
+        "--widen/--no-widen",
+        help="While the best by BIC or held-out log-likelihood is the largest number compared, compare one more "
+        "(up to 12); --no-widen compares the numbers given only.",
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
     mapping: Path | None = MappingOpt,
     column: list[str] | None = ColumnOpt,
@@ -281,8 +287,11 @@ def select_types(
             progress=lambda what, d, t: bar.update(task, completed=d, total=t, description=what),
             transition_inputs=tr,
             emission_inputs=em,
+            widen=widen,
         )
-    warnings = type_selection.type_selection_warnings(rows)
+    from .fit import widened_note
+
+    warnings = widened_note(rows, "types", max(values)) + type_selection.type_selection_warnings(rows)
     if as_json:
         print_json({"types": rows, "warnings": warnings})
         return
