@@ -55,12 +55,26 @@ def test_the_experience_rule_is_the_mappings_to_turn_off(advice):
     assert code == 0 and "experience rule is not checked" in " ".join(output.split()), output
 
 
+def test_the_experience_rule_is_a_switch_too(advice):
+    mapping = json.loads((advice / "advice.json").read_text())
+    mapping["columns"]["robot_action"] = "mode"
+    del mapping["experience_rule"]
+    (advice / "rule.json").write_text(json.dumps(mapping))
+    inputs = ["--transitions-on", "robot_action,experience", "--emissions-on", "none"]
+    line = ["predict", str(advice / "advice.csv"), "--mapping", str(advice / "rule.json"), *inputs, "--folds", "2", "-r", "1"]
+    code, output = run_cli([*line, "-b", "0"])
+    assert code == 2 and "the experience rule" in output
+    code, output = run_cli([*line, "-b", "0", "--no-experience-rule"])
+    assert code == 0 and "--no-experience-rule: the paper's experience rule is not checked" in output, output
+    assert json.loads((advice / "rule.json").read_text()) == mapping  # the user's mapping is left as it was
+
+
 def test_types_personal_models_decoding_and_prediction_run_on_the_log(advice):
     log, mapping = str(advice / "advice.csv"), ["--mapping", str(advice / "advice.json")]
     mix, model = advice / "mix.json", advice / "m.json"
     lines = [
         ["fit-types", log, *mapping, *INPUTS, "--types", "2", "-r", "2", "-o", str(mix), "-q"],
-        ["select-types", log, *mapping, *INPUTS, "--types", "1..2", "-r", "1", "--folds", "2", "-q"],
+        ["select-types", log, *mapping, *INPUTS, "--types", "1..2", "-r", "1", "--folds", "2", "-q", "--no-widen"],
         ["decode", log, *mapping, "-m", str(mix), "-o", str(advice / "post.csv")],
         ["fit", log, *mapping, *INPUTS, "-r", "2", "-o", str(model), "-q"],
         ["personalize", log, *mapping, "-m", str(model), "-o", str(advice / "people")],
@@ -101,7 +115,7 @@ def test_every_analysis_runs_on_a_log_with_only_reliance_and_a_named_input(named
     mix, model = named / "mix.json", named / "m.json"
     lines = [
         ["fit-types", log, *mapping, *inputs, "--types", "2", "-r", "2", "-o", str(mix), "--max-iter", "200"],
-        ["select-types", log, *mapping, *inputs, "--types", "1..2", "-r", "1", "--folds", "2", "-q"],
+        ["select-types", log, *mapping, *inputs, "--types", "1..2", "-r", "1", "--folds", "2", "-q", "--no-widen"],
         ["decode", log, *mapping, "-m", str(mix), "-o", str(named / "post.csv")],
         ["fit", log, *mapping, *inputs, "-r", "1", "-o", str(model), "-q"],
         ["personalize", log, *mapping, "-m", str(mix), "-o", str(named / "people"), "--strength", "5"],

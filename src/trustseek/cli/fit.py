@@ -4,13 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import typer
 from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..model.core import TrustModel
 from ._app import (
     ColumnOpt,
     DelimiterOpt,
@@ -32,6 +30,7 @@ from ._app import (
     read_log,
     selection_table,
 )
+from ._reading import NoExperienceRuleOpt, load_for_decoding, read_for_types, rule_off, widened_note
 
 # The fit and data modules (pandas, numba) load only when a command of this group runs,
 # so that the rest of the CLI starts fast.
@@ -108,35 +107,6 @@ def _inputs(text: str | None, default: tuple[str, ...], flag: str, declared: tup
     if len(set(cols)) != len(cols):
         raise TrustseekError([f"{flag}: an input is named twice: {list(cols)}"])
     return cols
-
-
-def model_inputs(model: TrustModel) -> tuple[str, ...]:
-    """The inputs whose value changes some probability of ``model`` (a model fitted with
-    fewer inputs has identical tables along the others): the log columns decoding needs."""
-    em = np.asarray(model.emission)  # [C, a, T, o]
-    tr = np.asarray(model.transition)  # [C, a, E, T, T']
-
-    def varies(arr: np.ndarray, axis: int) -> bool:
-        return bool(np.ptp(arr, axis=axis).max(initial=0.0) > 0.0) if arr.shape[axis] > 1 else False
-
-    used = []
-    if varies(em, 0) or varies(tr, 0):
-        used.append("complexity")
-    if varies(em, 1) or varies(tr, 1):
-        used.append("robot_action")
-    if varies(tr, 2):
-        used.append("experience")
-    return tuple(used)
-
-
-def _fill_unused(frame, model: TrustModel, used: tuple[str, ...]):
-    """The log with the inputs ``model`` ignores filled with one valid value where absent."""
-    fill = {"complexity": model.complexities[0], "robot_action": "autonomous", "experience": "reliable"}
-    frame = frame.copy()
-    for col, value in fill.items():
-        if col not in used and frame[col].isna().all():
-            frame[col] = value
-    return frame
 
 
 @app.command(rich_help_panel="Estimate")
@@ -438,57 +408,6 @@ def _fit_general(
         console.print(f"posteriors written to {posteriors}")
 
 
-def widened_note(rows, key: str, asked: int) -> list[str]:
-    """The line saying that the comparison went past the largest number asked, and why."""
-    more = [int(r[key]) for r in rows if r.get("widened")]
-    if not more:
-        return []
-    return [f"the best was at {asked} {key}, the largest asked: compared up to {max(more)} (--no-widen: only the range asked)"]
-
-
-def load_for_decoding(path: Path):
-    """A trust model, supervisor types (a mixture) or a general model, by the file's format; or a
-    preset name (paper, paper+conservative)."""
-    from ..model.iohmm import IOHMMModel, is_iohmm_file
-    from ..model.jsonfile import load_json
-    from ..model.mixture import TypeMixture
-    from ..model.presets import MIXTURE_PRESETS, load_mixture
-
-    if str(path) in MIXTURE_PRESETS and not path.exists():
-        return load_mixture(str(path))
-
-    d, source = load_json(path)
-    if is_iohmm_file(d):
-        return IOHMMModel.from_dict(d, source)
-    return TypeMixture.from_dict(d, source, general=True)
-
-
-def read_for_types(log, types, mapping, column, label, missing, delimiter):
-    """The log read for supervisor types (or one model as a mixture of one type): the columns the
-    types use, those a trust model ignores filled."""
-    if types.general:
-        return read_for_model(log, types.models[0], mapping, column, label, missing, delimiter)
-    used = tuple(dict.fromkeys(c for t in types.models for c in model_inputs(t)))
-    return _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), types.models[0], used)
-
-
-def read_for_model(log, model, mapping, column, label, missing, delimiter):
-    """The log read with the columns a general model's inputs need: the canonical ones it uses,
-    and the others declared as the mapping's ``inputs``."""
-    canonical = tuple(c for c in model.used_inputs if c in _fit().MODEL_INPUTS)
-    frame = read_log(log, mapping, column, label, canonical, missing, delimiter)
-    absent = [c for c in model.used_inputs if c not in frame.columns]
-    if absent:
-        raise TrustseekError(
-            [
-                f"the model's input {c!r} is not a column of the log: declare it in the mapping's 'inputs' "
-                f'(e.g. "inputs": {{"{c}": {{"column": "...", "levels": {list(model.inputs[c])}}}}})'
-                for c in absent
-            ]
-        )
-    return frame
-
-
 @app.command("decode", rich_help_panel="Estimate")
 def decode_cmd(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
@@ -505,6 +424,7 @@ def decode_cmd(
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
     keep: list[str] | None = KeepOpt,
+    no_rule: bool = NoExperienceRuleOpt,
 ) -> None:
     """Per-trial smoothed P(trust | data) and the Viterbi trust path under a model.
 
@@ -517,19 +437,13 @@ def decode_cmd(
 
     check_output(out, "--out", POSTERIOR_SUFFIXES)
     check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (mapping, "--mapping file")))
-    from ..model.iohmm import IOHMMModel
+    from ..model.mixture import TypeMixture
 
-    types = load_for_decoding(model)  # a plain model is one type
-    if isinstance(types, IOHMMModel):
-        frame = read_for_model(log, types, mapping, column, label, missing, delimiter)
-        post = keep_columns(_fit().decode(frame, types), frame, keep)
-        with atomic_output(out) as tmp:
-            _data().write_trials(post, tmp)
-        console.print(f"wrote {len(post)} trials to {out}")
-        return
-    frame = read_for_types(log, types, mapping, column, label, missing, delimiter)
-    if types.n_types == 1:
-        post = keep_columns(_fit().decode(frame, types.models[0]), frame, keep)
+    types = load_for_decoding(model)  # a trust model, a general model or types
+    frame = read_for_types(log, types, rule_off(mapping, no_rule), column, label, missing, delimiter)
+    if not isinstance(types, TypeMixture) or types.n_types == 1:
+        one = types.models[0] if isinstance(types, TypeMixture) else types
+        post = keep_columns(_fit().decode(frame, one), frame, keep)
     else:  # supervisor types: P(type | trials) per participant and the type-averaged trust posteriors
         from ..estimation.mixture import decode_types
 
@@ -571,9 +485,12 @@ def select(
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
     quiet: bool = QuietOpt,
+    no_rule: bool = NoExperienceRuleOpt,
 ) -> None:
     """Choose the number of trust levels: BIC and participant-held-out log-likelihood."""
-    tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter)
+    tr, em, frame = _read_with_inputs(
+        log, rule_off(mapping, no_rule), column, label, transitions_on, emissions_on, missing, delimiter
+    )
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("model selection", total=None)

@@ -24,9 +24,9 @@ from ._app import (
     console,
     print_json,
     progress_bar,
-    read_log,
     selection_table,
 )
+from ._reading import NoExperienceRuleOpt, rule_off
 
 POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
 DifferOpt = typer.Option(
@@ -40,10 +40,6 @@ def _mixture():
     from ..estimation import mixture
 
     return mixture
-
-
-def _log(log, mapping, column, label, missing, delimiter):
-    return read_log(log, mapping, column, label, ("complexity", "robot_action", "experience"), missing, delimiter)
 
 
 def _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on):
@@ -102,6 +98,7 @@ def fit_types(
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
     quiet: bool = QuietOpt,
+    no_rule: bool = NoExperienceRuleOpt,
 ) -> None:
     """Fit supervisor types: M trust models of the paper's structure, each participant one type."""
     from ._app import check_not_inputs
@@ -114,7 +111,9 @@ def fit_types(
         raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
     mx = _mixture()
     mx.parse_differ(differ)
-    tr, em, frame = _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on)
+    tr, em, frame = _log_with_inputs(
+        log, rule_off(mapping, no_rule), column, label, missing, delimiter, transitions_on, emissions_on
+    )
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("starts", total=restarts)
@@ -264,6 +263,7 @@ def select_types(
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
     quiet: bool = QuietOpt,
+    no_rule: bool = NoExperienceRuleOpt,
 ) -> None:
     """Choose the number of supervisor types: BIC and participant-held-out log-likelihood."""
     values = parse_types(types)
@@ -271,7 +271,9 @@ def select_types(
     mx.parse_differ(differ)
     from ..estimation import type_selection
 
-    tr, em, frame = _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on)
+    tr, em, frame = _log_with_inputs(
+        log, rule_off(mapping, no_rule), column, label, missing, delimiter, transitions_on, emissions_on
+    )
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("model selection", total=None)
@@ -289,7 +291,7 @@ def select_types(
             emission_inputs=em,
             widen=widen,
         )
-    from .fit import widened_note
+    from ._reading import widened_note
 
     warnings = widened_note(rows, "types", max(values)) + type_selection.type_selection_warnings(rows)
     if as_json:
@@ -328,6 +330,7 @@ def personalize(
     label: list[str] | None = LabelOpt,
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
+    no_rule: bool = NoExperienceRuleOpt,
 ) -> None:
     """Per-person trust models: each participant's MAP estimate, shrunk toward the pooled model or their type."""
     if estimate not in ("held-out", "variational"):
@@ -336,12 +339,12 @@ def personalize(
     from ..estimation.personal import personalize as run
     from ..model.iohmm import IOHMMModel
     from ..model.mixture import TypeMixture
-    from .fit import load_for_decoding, read_for_types
+    from ._reading import load_for_decoding, read_for_types
 
     centre = load_for_decoding(Path(model))  # a trust model, a general model or types
     if isinstance(centre, IOHMMModel):
         centre = TypeMixture.single(centre)
-    frame = read_for_types(log, centre, mapping, column, label, missing, delimiter)  # the columns the centre uses
+    frame = read_for_types(log, centre, rule_off(mapping, no_rule), column, label, missing, delimiter)  # the columns it uses
     res = run(frame, centre if centre.n_types > 1 else centre.models[0], strength=strength, tol=tol, estimate=estimate)
     with atomic_output(out, directory=True) as tmp:
         res.save(tmp)

@@ -11,7 +11,6 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..model.core import TrustModel
 from ._app import (
     ColumnOpt,
     DelimiterOpt,
@@ -28,9 +27,9 @@ from ._app import (
     keep_columns,
     print_json,
     progress_bar,
-    read_log,
 )
-from .fit import POSTERIOR_SUFFIXES, _fill_unused, _general, _read_with_inputs, model_inputs, read_for_model
+from ._reading import NoExperienceRuleOpt, read_for_types, rule_off
+from .fit import POSTERIOR_SUFFIXES, _general, _read_with_inputs
 
 BootstrapOpt = typer.Option(
     1000, "--bootstrap", "-b", min=0, max=10_000, help="Participant-bootstrap resamples for the 95% intervals (0 = none)."
@@ -83,14 +82,6 @@ def _load(path: Path) -> Any:
     return load_any_model(path)
 
 
-def _read_for(log, m, mapping, column, label, missing, delimiter):
-    """The log with the columns ``m`` needs (a trust model: the inputs it uses, the others filled)."""
-    if isinstance(m, TrustModel):
-        used = model_inputs(m)
-        return _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter), m, used)
-    return read_for_model(log, m, mapping, column, label, missing, delimiter)
-
-
 @app.command(rich_help_panel="Estimate")
 def predict(
     log: Path = typer.Argument(..., help="Trial log (CSV, Parquet, JSON), one row per trial."),
@@ -120,6 +111,7 @@ def predict(
     delimiter: str | None = DelimiterOpt,
     keep: list[str] | None = KeepOpt,
     quiet: bool = QuietOpt,
+    no_rule: bool = NoExperienceRuleOpt,
 ) -> None:
     """How well a trust model predicts each trial's human action from the trials before it
     (filtering), against baselines: log-loss, Brier score, AUC with bootstrap intervals.
@@ -137,11 +129,13 @@ def predict(
         if folds is not None:
             raise TrustseekError(["--folds scores held-out fits; --model scores that model in-sample: give one of them"])
         m = _load(model)
-        frame = _read_for(log, m, mapping, column, label, missing, delimiter)
+        frame = read_for_types(log, m, rule_off(mapping, no_rule), column, label, missing, delimiter)
         report = pr.predict_in_sample(frame, m, bootstrap=bootstrap, seed=seed)
     else:
         k = 5 if folds is None else folds
-        tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter)
+        tr, em, frame = _read_with_inputs(
+            log, rule_off(mapping, no_rule), column, label, transitions_on, emissions_on, missing, delimiter
+        )
         bar = progress_bar(quiet or as_json)
         preset: Any = "paper"
         if _general(tr, em):  # inputs a trust model does not have: the general model's structure
@@ -229,6 +223,7 @@ def validate(
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
     keep: list[str] | None = KeepOpt,
+    no_rule: bool = NoExperienceRuleOpt,
 ) -> None:
     """Does the decoded trust track self-reported trust?  Spearman and Pearson correlations with
     the ratings (pooled, within and between participants) next to simple baselines."""
@@ -242,7 +237,7 @@ def validate(
     if rating_labels is not None:
         labels = [x.strip() for x in rating_labels.split(",")]
     m = _load(model)
-    frame = _read_for(log, m, mapping, column, label, missing, delimiter)
+    frame = read_for_types(log, m, rule_off(mapping, no_rule), column, label, missing, delimiter)
     va = _validation()
     if rating is None:
         if "rating" not in frame.columns:
