@@ -2,6 +2,7 @@
 
 # every submodule, as the package attribute of that name
 from . import (
+    baselines,
     bootstrap,
     compiled_run,
     convergence,
