@@ -135,7 +135,7 @@ def test_every_analysis_runs_on_a_log_with_only_reliance_and_a_named_input(named
     assert person["format"] == "trustseek.iohmm/1" and list(person["inputs"]) == ["advice"]
 
 
-def test_general_types_are_refused_for_planning_with_the_reason(tmp_path):
+def test_general_types_are_refused_for_planning_with_the_reason(named, tmp_path):
     from trustseek.model.iohmm import IOHMMModel
     from trustseek.model.mixture import TypeMixture
 
@@ -145,6 +145,9 @@ def test_general_types_are_refused_for_planning_with_the_reason(tmp_path):
                           ("advice",), (), np.array([0.5, 0.5]), emission, np.array([[[0.9, 0.1], [0.1, 0.9]]]))  # fmt: skip
 
     TypeMixture(("type1", "type2"), np.array([0.5, 0.5]), (general(0.3), general(0.8))).save(tmp_path / "mix.json")
+    code, output = run_cli(["fit-types", str(named / "log.csv"), "--mapping", str(named / "map.json"), "--emissions-on",
+                            "advice", "--transitions-on", "none", "--plots", str(tmp_path / "figs")])  # fmt: skip
+    assert code == 2 and "have no figures" in output and not (tmp_path / "figs").exists(), output
     code, output = run_cli(["solve", "--types", str(tmp_path / "mix.json")])
     assert code == 2 and "is not a trust model: planning" in " ".join(output.split()), output
     back = TypeMixture.from_dict(json.loads((tmp_path / "mix.json").read_text()), general=True)

@@ -114,6 +114,9 @@ def fit_types(
     tr, em, frame = _log_with_inputs(
         log, rule_off(mapping, no_rule), column, label, missing, delimiter, transitions_on, emissions_on
     )
+    named = [c for c in (*em, *tr) if c not in ("complexity", "robot_action", "experience")]
+    if plots is not None and named:
+        raise TrustseekError([f"--plots draws trust-model types; types of the named inputs {named} have no figures here"])
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("starts", total=restarts)
