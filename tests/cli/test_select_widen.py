@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import json
 
+import pandas as pd
+
 from cli_runner import run_cli
 from trustseek.data.trials import example_path
 
-LOG = str(example_path("paper_trials.csv"))
 
-
-def test_select_compares_more_levels_while_the_best_is_the_largest_compared():
-    line = ["select", LOG, "--max-levels", "1", "-r", "1", "--folds", "2", "-q", "--json"]
+def test_select_compares_more_levels_while_the_best_is_the_largest_compared(tmp_path):
+    log = pd.read_csv(example_path("paper_trials.csv"))
+    log[log["participant"].isin(log["participant"].unique()[:4])].to_csv(tmp_path / "four.csv", index=False)
+    line = ["select", str(tmp_path / "four.csv"), "--max-levels", "1", "-r", "1", "--folds", "2", "-q", "--json"]
     code, output = run_cli(line, stdout=True)
     assert code == 0, output
     out = json.loads(output)
