@@ -136,7 +136,9 @@ def fit_types(
         intervals = None
         if bootstrap > 0:
             task = bar.add_task("bootstrap", total=bootstrap)
-            intervals = mx.bootstrap_types(
+            from ..estimation.type_bootstrap import bootstrap_types
+
+            intervals = bootstrap_types(
                 fit, bootstrap, seed=seed, n_jobs=jobs, progress=lambda d, t: bar.update(task, completed=d, total=t)
             )
     from ..estimation.selection import reached_best

@@ -21,6 +21,7 @@ from . import (
     spec,
     structure,
     trust_iohmm,
+    type_bootstrap,
     type_selection,
     validation,
     warm,
