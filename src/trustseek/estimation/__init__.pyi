@@ -13,6 +13,7 @@ from . import (
     kernels,
     mixture,
     personal,
+    personal_models,
     prediction,
     quasi_newton,
     ratings,
