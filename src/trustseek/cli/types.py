@@ -169,30 +169,11 @@ def fit_types(
             }
         print_json(d)
         return
-    table = Table(
-        title=f"{fit.n_types} supervisor types ({fit.seqs.n_participants} participants, {fit.seqs.n_trials} trials; "
-        f"{', '.join(fit.differ)} differ)",
-        title_justify="left",
-    )
-    heads, rely_of = _rely_cells(mixture)
-    table.add_column("type")
-    for col in ("weight", "people", f"P(T1={mixture.trust_levels[-1]})"):
-        table.add_column(col, justify="right")
-    for head in heads:
-        table.add_column(escape(head), justify="right")
-    counts = post["type"].value_counts()
-    for name, w, m in zip(fit.names, fit.weights, mixture.models, strict=True):
-        weight = f"{w:.3f}"
-        if intervals is not None:
-            lo, hi = intervals.weights[name]
-            weight += escape(f" [{lo:.2f}, {hi:.2f}]")
-        rely = [f"{x:.2f}" for x in rely_of(m)]
-        table.add_row(name, weight, str(int(counts.get(name, 0))), f"{m.initial[-1]:.2f}", *rely)
-    console.print(table)
+    console.print(_types_table(fit, mixture, post, intervals))
     if mixture.general:
         console.print(
-            f"general types (inputs: {', '.join(mixture.models[0].used_inputs) or 'none'}): decode, predict and "
-            "personalize read them; planning needs trust models",
+            f"general types (inputs: {', '.join(mixture.models[0].used_inputs) or 'none'}): decode and personalize "
+            "read them; planning needs trust models",
             highlight=False,
         )
     lls = ", ".join(f"{x:.3f}" for x in sorted(fit.restart_logliks, reverse=True))
@@ -216,6 +197,30 @@ def fit_types(
         console.print(f"type posteriors written to {type_posteriors}")
     if plots is not None:
         console.print(f"figures written to {', '.join(str(p) for p in written)}")
+
+
+def _types_table(fit, mixture, post, intervals) -> Table:
+    """The fitted types, one row each: weight (and interval), people, P(T1 = highest level), P(rely) cells."""
+    table = Table(
+        title=f"{fit.n_types} supervisor types ({fit.seqs.n_participants} participants, {fit.seqs.n_trials} trials; "
+        f"{', '.join(fit.differ)} differ)",
+        title_justify="left",
+    )
+    heads, rely_of = _rely_cells(mixture)
+    table.add_column("type")
+    for col in ("weight", "people", f"P(T1={mixture.trust_levels[-1]})"):
+        table.add_column(col, justify="right")
+    for head in heads:
+        table.add_column(escape(head), justify="right")
+    counts = post["type"].value_counts()
+    for name, w, m in zip(fit.names, fit.weights, mixture.models, strict=True):
+        weight = f"{w:.3f}"
+        if intervals is not None:
+            lo, hi = intervals.weights[name]
+            weight += escape(f" [{lo:.2f}, {hi:.2f}]")
+        rely = [f"{x:.2f}" for x in rely_of(m)]
+        table.add_row(name, weight, str(int(counts.get(name, 0))), f"{m.initial[-1]:.2f}", *rely)
+    return table
 
 
 def _rely_cells(mixture):
