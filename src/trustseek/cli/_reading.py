@@ -78,7 +78,8 @@ def widened_note(rows, key: str, asked: int) -> list[str]:
     more = [int(r[key]) for r in rows if r.get("widened")]
     if not more:
         return []
-    return [f"the best was at {asked} {key}, the largest asked: compared up to {max(more)} (--no-widen: only the range asked)"]
+    unit = key[:-1] if asked == 1 else key
+    return [f"the best was at {asked} {unit}, the largest asked: compared up to {max(more)} (--no-widen: only the range asked)"]
 
 
 def load_for_decoding(path: Path):
