@@ -236,9 +236,17 @@ def coverage(datasets: int, bootstrap: int) -> None:
     t0 = time.perf_counter()
     rows = coverage_study(paper_model(), n_participants=9, datasets=datasets, bootstrap=bootstrap, seed=0)
     print(f"  {time.perf_counter() - t0:.1f} s")
-    print(f"  {'cell':66s} {'truth':>6s} {'coverage':>8s} {'width':>6s} {'mean est':>8s}")
+    print(
+        f"  {'cell':66s} {'truth':>6s} {'coverage':>8s} {'width':>6s} {'mean est':>8s} {'at 0/1':>6s} {'coverage':>8s} {'LR':>3s}"
+    )
     for r in rows:
-        print(f"  {r['cell']:66s} {r['truth']:6.2f} {r['coverage']:8.2f} {r['mean_width']:6.2f} {r['mean_estimate']:8.2f}")
+        print(
+            f"  {r['cell']:66s} {r['truth']:6.2f} {r['coverage']:8.2f} {r['mean_width']:6.2f} {r['mean_estimate']:8.2f} "
+            f"{r['at_boundary']:6d} {r['boundary_coverage']:8.2f} {r['likelihood']:3d}"
+        )
+    print(
+        "  at 0/1: data sets whose estimate of the cell is at the boundary; their coverage; LR: of them, likelihood-ratio intervals"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:

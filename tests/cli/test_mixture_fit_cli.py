@@ -57,7 +57,7 @@ def test_fit_types_json(log):
 
 
 def test_select_types_and_personalize(log, tmp_path):
-    code, text = run_cli(["select-types", str(log), "--types", "1..2", "--folds", "2", "-r", "2", "--json"])
+    code, text = run_cli(["select-types", str(log), "--types", "1..2", "--folds", "2", "-r", "2", "--json", "--no-widen"])
     assert code == 0, text
     d = json.loads(text)
     assert [r["types"] for r in d["types"]] == [1, 2]

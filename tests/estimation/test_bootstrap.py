@@ -91,3 +91,32 @@ def test_enough_resamples_give_no_warning_about_their_number():
     assert enough.notes() == []
     few = Intervals({}, MIN_REPLICATES - 1, 0.95, z, 0, {})
     assert "too few" in few.notes()[0]
+
+
+def test_an_interval_at_the_boundary_can_move():
+    """The reproduction's experiment 1 (9 x 71): Fig. 5b's P(T'=low | T=high, E'=faulty, C=low, autonomous)
+    is estimated at 0, and every resample's own maximum is 0 too (the percentile interval was
+    [1e-12, 1e-12]); there the interval is the likelihood-ratio one, and the row's other cell mirrors it."""
+    from trustseek.estimation.bootstrap import TABLES, boundary_bounds, cell_tables
+    from trustseek.reproduction import pipeline
+    from trustseek.reproduction.config import ReproduceConfig, seed_int
+    from trustseek.simulation import simulate
+
+    cfg = ReproduceConfig()
+    s1, sfit, *_ = np.random.SeedSequence(cfg.seed).spawn(9)
+    model, task = paper_model(), pipeline.paper_task()
+    frame = simulate(model, task, pipeline._ask_policy(cfg), cfg.participants_1, counts=cfg.counts_1, seed=s1).trials()
+    fit = fit_trust_model(frame[pipeline.CANONICAL], restarts=3, seed=seed_int(sfit), n_jobs=1).fit
+    ref = cell_tables(fit.spec, fit.params)
+    shape = ref["transition"].shape
+    cell, other = (0, 0, 0, 1, 0), (0, 0, 0, 1, 1)  # C=low, autonomous, E'=faulty, T=high -> T'=low, high
+    assert ref["transition"][cell] < 1e-6
+    est = np.concatenate([ref[t].ravel() for t in TABLES])
+    lo, hi = np.zeros_like(est), np.ones_like(est)
+    at = ref["initial"].size + ref["emission"].size + np.ravel_multi_index(cell, shape)
+    mirror = ref["initial"].size + ref["emission"].size + np.ravel_multi_index(other, shape)
+    hi[at], lo[mirror] = est[at], est[mirror]  # the percentile interval collapsed at the estimate
+    new_lo, new_hi, moved = boundary_bounds(fit.seqs, fit.spec, fit.params, lo, hi)
+    assert 0.05 < new_hi[at] < 1.0 and new_lo[at] == lo[at], new_hi[at]
+    assert new_lo[mirror] == pytest.approx(1 - new_hi[at]) and moved[[at, mirror]].all()
+    assert moved.sum() == 2  # the rest kept their (not collapsed) intervals

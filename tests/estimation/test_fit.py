@@ -273,6 +273,9 @@ def test_small_coverage_study():
     assert rows["P(T1=high)"]["truth"] == truth.initial[1]
     assert rows[cell]["truth"] == pytest.approx(0.95)
     assert rows[cell]["coverage"] == 1.0 and rows[cell]["mean_width"] < 0.15
+    # cells estimated at 0 or 1 are counted apart: how often, their coverage, how many likelihood-ratio intervals
+    edge = [r for r in rows.values() if r["at_boundary"]]
+    assert edge and all(0 <= r["likelihood"] <= r["at_boundary"] <= 2 and 0 <= r["boundary_coverage"] <= 1 for r in edge)
     emission = truth.emission.copy()
     emission[1, 0, 1] = [0.25, 0.75]  # P(rely | T=high, C=high, autonomous) = 0.75 instead of 0.95
     wrong = truth.replace(emission=emission)

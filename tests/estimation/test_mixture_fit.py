@@ -13,7 +13,6 @@ from trustseek.estimation.mixture import (
     MixtureParams,
     MixtureStructure,
     MixtureWorkspace,
-    bootstrap_types,
     decode_types,
     fit_mixture,
     fit_types,
@@ -21,6 +20,7 @@ from trustseek.estimation.mixture import (
     parse_differ,
 )
 from trustseek.estimation.spec import FitError, Params
+from trustseek.estimation.type_bootstrap import bootstrap_types
 from trustseek.estimation.type_selection import select_types, type_selection_warnings
 from trustseek.model.mixture import TypeMixture
 from trustseek.model.presets import conservative_model, paper_conservative_mixture, paper_model

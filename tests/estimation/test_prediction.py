@@ -13,8 +13,8 @@ from hypothesis import strategies as st
 from cli_runner import run_cli
 from trustseek.data.trials import example_path, read_trials
 from trustseek.estimation import encode, from_trust_model, loglik, posteriors
+from trustseek.estimation.baselines import features
 from trustseek.estimation.prediction import (
-    _features,
     auc,
     filter_beliefs,
     fold_assignment,
@@ -112,8 +112,9 @@ def test_changing_later_trials_does_not_change_earlier_predictions(seed, length,
     np.testing.assert_array_equal(fa.p_rely[: t + 1], fb.p_rely[: t + 1])
     np.testing.assert_array_equal(fa.prior[: t + 1], fb.prior[: t + 1])
     np.testing.assert_array_equal(fa.posterior[: t + 1], fb.posterior[: t + 1])
-    ga, gb = _features(frame, a, fa.determined), _features(changed, b, fb.determined)
-    for name in ("rate_n", "rate_k", "last", "reliable_logit"):
+    sizes = params.emission.shape[0], params.transition.shape[0]
+    ga, gb = features(frame, a, fa.determined, *sizes), features(changed, b, fb.determined, *sizes)
+    for name in ("rate_n", "rate_k", "last", "reliable_logit", "ue", "ut_prev"):
         np.testing.assert_array_equal(getattr(ga, name)[: t + 1], getattr(gb, name)[: t + 1])
 
 
@@ -185,7 +186,9 @@ def test_cli_predict_in_sample_json_and_per_trial_file(tmp_path):
     assert code == 0, text
     d = json.loads(text)
     assert d["mode"] == "in-sample" and d["n_participants"] == 9
-    assert set(d["metrics"]) == {"model", "constant", "participant_rate", "last_action", "reliable_fraction"}
+    assert set(d["metrics"]) == {
+        "model", "constant", "participant_rate", "last_action", "reliable_fraction", "one_level", "inputs_logistic"
+    }  # fmt: skip
     got = pd.read_csv(out)
     log = read_trials(LOG)
     assert got["true_trust"].tolist() == log["true_trust"].tolist()

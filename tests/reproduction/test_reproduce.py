@@ -84,9 +84,9 @@ def test_comparison_lists_every_paper_number(small_run):
     # every numeric row's verdict is the rule's
     for r in rows:
         if isinstance(r["paper"], float) and r["quantity"].startswith("Fig."):
-            assert (r["verdict"], r["reason"]) == judge(
-                r["paper"], r["ours"], r["interval"], fixed=r["reason"].startswith("fixed"), max_width=MAX_WIDTH
-            )
+            fixed = r["reason"].startswith("fixed")
+            rule = judge(r["paper"], r["ours"], r["interval"], fixed=fixed, max_width=MAX_WIDTH, replicates=r["replicate_range"])
+            assert (r["verdict"], r["reason"]) == rule
     # the Fig. 4a cells are fixed by the model's structure, not estimated
     fig4a = [r for r in rows if r["quantity"].startswith("Fig. 4a")]
     assert [r["verdict"] for r in fig4a] == [NOT_TESTABLE] * 4 and all(r["interval"] is None for r in fig4a)
@@ -107,6 +107,9 @@ def test_comparison_lists_every_paper_number(small_run):
         ((1.0, 1.0, (1.0, 1.0), {"fixed": True}), NOT_TESTABLE),
         ((0.7, 0.47, (1e-12, 1.0), {"max_width": MAX_WIDTH}), NOT_TESTABLE),
         ((0.7, 0.47, None), NOT_TESTABLE),
+        # a collapsed bootstrap interval at the boundary, while the replicate experiments range over [0, 1]
+        ((0.39, 1e-12, (1e-12, 1e-12), {"max_width": MAX_WIDTH, "replicates": (0.0, 1.0)}), NOT_TESTABLE),
+        ((0.39, 0.35, (0.30, 0.45), {"max_width": MAX_WIDTH, "replicates": (0.2, 0.6)}), AGREES),
         # a difference: the sign reversed disagrees even inside the interval; the same sign outside it is direction only
         ((6.0, -4.0, (-7.0, 9.0), {"reference": 0.0}), DISAGREES),
         ((6.0, 2.0, (-7.0, 9.0), {"reference": 0.0}), AGREES),

@@ -35,9 +35,10 @@ from ._app import (
     read_log,
     selection_table,
 )
+from ._reading import NoExperienceRuleOpt, load_for_decoding, read_for_types, rule_off, widened_note
 
 if TYPE_CHECKING:
-    from ..model.core import TrustModel
+    pass
 
 # The fit and data modules (pandas, numba) load only when a command of this group runs,
 # so that the rest of the CLI starts fast.
@@ -107,37 +108,6 @@ def _inputs(text: str | None, default: tuple[str, ...], flag: str, declared: tup
     if len(set(cols)) != len(cols):
         raise TrustseekError([f"{flag}: an input is named twice: {list(cols)}"])
     return cols
-
-
-def model_inputs(model: TrustModel) -> tuple[str, ...]:
-    """The inputs whose value changes some probability of ``model`` (a model fitted with
-    fewer inputs has identical tables along the others): the log columns decoding needs."""
-    import numpy as np
-
-    em = np.asarray(model.emission)  # [C, a, T, o]
-    tr = np.asarray(model.transition)  # [C, a, E, T, T']
-
-    def varies(arr: np.ndarray, axis: int) -> bool:
-        return bool(np.ptp(arr, axis=axis).max(initial=0.0) > 0.0) if arr.shape[axis] > 1 else False
-
-    used = []
-    if varies(em, 0) or varies(tr, 0):
-        used.append("complexity")
-    if varies(em, 1) or varies(tr, 1):
-        used.append("robot_action")
-    if varies(tr, 2):
-        used.append("experience")
-    return tuple(used)
-
-
-def _fill_unused(frame, model: TrustModel, used: tuple[str, ...]):
-    """The log with the inputs ``model`` ignores filled with one valid value where absent."""
-    fill = {"complexity": model.complexities[0], "robot_action": "autonomous", "experience": "reliable"}
-    frame = frame.copy()
-    for col, value in fill.items():
-        if col not in used and frame[col].isna().all():
-            frame[col] = value
-    return frame
 
 
 @app.command(rich_help_panel="Estimate")
@@ -448,40 +418,6 @@ def _fit_general(
         console.print(f"posteriors written to {posteriors}")
 
 
-def load_for_decoding(path: Path):
-    """A trust model, supervisor types (a mixture) or a general model, by the file's format; or a
-    preset name (paper, paper+conservative)."""
-    from ..model.iohmm import IOHMMModel, is_iohmm_file
-    from ..model.jsonfile import load_json
-    from ..model.mixture import TypeMixture
-    from ..model.presets import MIXTURE_PRESETS, load_mixture
-
-    if str(path) in MIXTURE_PRESETS and not path.exists():
-        return load_mixture(str(path))
-
-    d, source = load_json(path)
-    if is_iohmm_file(d):
-        return IOHMMModel.from_dict(d, source)
-    return TypeMixture.from_dict(d, source)
-
-
-def read_for_model(log, model, mapping, column, label, missing, delimiter, order=None):
-    """The log read with the columns a general model's inputs need: the canonical ones it uses,
-    and the others declared as the mapping's ``inputs``."""
-    canonical = tuple(c for c in model.used_inputs if c in _fit().MODEL_INPUTS)
-    frame = read_log(log, mapping, column, label, canonical, missing, delimiter, order=order)
-    absent = [c for c in model.used_inputs if c not in frame.columns]
-    if absent:
-        raise TrustseekError(
-            [
-                f"the model's input {c!r} is not a column of the log: declare it in the mapping's 'inputs' "
-                f'(e.g. "inputs": {{"{c}": {{"column": "...", "levels": {list(model.inputs[c])}}}}})'
-                for c in absent
-            ]
-        )
-    return frame
-
-
 @app.command("decode", rich_help_panel="Estimate")
 def decode_cmd(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
@@ -499,6 +435,7 @@ def decode_cmd(
     delimiter: str | None = DelimiterOpt,
     order: list[str] | None = OrderOpt,
     keep: list[str] | None = KeepOpt,
+    no_rule: bool = NoExperienceRuleOpt,
 ) -> None:
     """Per-trial smoothed P(trust | data) and the Viterbi trust path under a model.
 
@@ -511,21 +448,13 @@ def decode_cmd(
 
     check_output(out, "--out", POSTERIOR_SUFFIXES)
     check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (mapping, "--mapping file")))
-    from ..model.iohmm import IOHMMModel
+    from ..model.mixture import TypeMixture
 
-    types = load_for_decoding(model)  # a plain model is one type
-    if isinstance(types, IOHMMModel):
-        frame = read_for_model(log, types, mapping, column, label, missing, delimiter, order)
-        post = keep_columns(_fit().decode(frame, types), frame, keep)
-        with atomic_output(out) as tmp:
-            _data().write_trials(post, tmp)
-        console.print(f"wrote {len(post)} trials to {out}")
-        return
-    m = types.models[0]
-    used = tuple(dict.fromkeys(c for t in types.models for c in model_inputs(t)))
-    frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter, order=order), m, used)
-    if types.n_types == 1:
-        post = keep_columns(_fit().decode(frame, m), frame, keep)
+    types = load_for_decoding(model)  # a trust model, a general model or types
+    frame = read_for_types(log, types, rule_off(mapping, no_rule), column, label, missing, delimiter, order)
+    if not isinstance(types, TypeMixture) or types.n_types == 1:
+        one = types.models[0] if isinstance(types, TypeMixture) else types
+        post = keep_columns(_fit().decode(frame, one), frame, keep)
     else:  # supervisor types: P(type | trials) per participant and the type-averaged trust posteriors
         from ..estimation.mixture import decode_types
 
@@ -554,6 +483,12 @@ def select(
     tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
     transitions_on: str | None = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit)."),
     emissions_on: str | None = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit)."),
+    widen: bool = typer.Option(
+        True,
+        "--widen/--no-widen",
+        help="While the best by BIC or held-out log-likelihood is the largest number compared, compare one more "
+        "(up to 8); --no-widen compares 1..--max-levels only.",
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
     mapping: Path | None = MappingOpt,
     column: list[str] | None = ColumnOpt,
@@ -562,9 +497,12 @@ def select(
     delimiter: str | None = DelimiterOpt,
     order: list[str] | None = OrderOpt,
     quiet: bool = QuietOpt,
+    no_rule: bool = NoExperienceRuleOpt,
 ) -> None:
     """Choose the number of trust levels: BIC and participant-held-out log-likelihood."""
-    tr, em, frame = _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter, order=order)
+    tr, em, frame = _read_with_inputs(
+        log, rule_off(mapping, no_rule), column, label, transitions_on, emissions_on, missing, delimiter, order=order
+    )
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("model selection", total=None)
@@ -579,8 +517,10 @@ def select(
             progress=lambda what, d, t: bar.update(task, completed=d, total=t, description=what),
             transition_inputs=tr,
             emission_inputs=em,
+            widen=widen,
         )
     warnings = _fit().selection_warnings(rows)
+    warnings[:0] = widened_note(rows, "levels", max_levels)
     if as_json:
         print_json({"levels": rows, "warnings": warnings})
         return

@@ -25,9 +25,9 @@ from ._app import (
     console,
     print_json,
     progress_bar,
-    read_log,
     selection_table,
 )
+from ._reading import NoExperienceRuleOpt, rule_off
 
 POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
 DifferOpt = typer.Option(
@@ -41,11 +41,6 @@ def _mixture():
     from ..estimation import mixture
 
     return mixture
-
-
-def _log(log, mapping, column, label, missing, delimiter, order=None):
-    needed = ("complexity", "robot_action", "experience")
-    return read_log(log, mapping, column, label, needed, missing, delimiter, order=order)
 
 
 def _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on, order=None):
@@ -105,6 +100,7 @@ def fit_types(
     delimiter: str | None = DelimiterOpt,
     order: list[str] | None = OrderOpt,
     quiet: bool = QuietOpt,
+    no_rule: bool = NoExperienceRuleOpt,
 ) -> None:
     """Fit supervisor types: M trust models of the paper's structure, each participant one type."""
     from ._app import check_not_inputs
@@ -117,7 +113,12 @@ def fit_types(
         raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
     mx = _mixture()
     mx.parse_differ(differ)
-    tr, em, frame = _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on, order)
+    tr, em, frame = _log_with_inputs(
+        log, rule_off(mapping, no_rule), column, label, missing, delimiter, transitions_on, emissions_on, order
+    )
+    named = [c for c in (*em, *tr) if c not in ("complexity", "robot_action", "experience")]
+    if plots is not None and named:
+        raise TrustseekError([f"--plots draws trust-model types; types of the named inputs {named} have no figures here"])
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("starts", total=restarts)
@@ -137,7 +138,9 @@ def fit_types(
         intervals = None
         if bootstrap > 0:
             task = bar.add_task("bootstrap", total=bootstrap)
-            intervals = mx.bootstrap_types(
+            from ..estimation.type_bootstrap import bootstrap_types
+
+            intervals = bootstrap_types(
                 fit, bootstrap, seed=seed, n_jobs=jobs, progress=lambda d, t: bar.update(task, completed=d, total=t)
             )
     from ..estimation.selection import reached_best
@@ -168,27 +171,13 @@ def fit_types(
             }
         print_json(d)
         return
-    table = Table(
-        title=f"{fit.n_types} supervisor types ({fit.seqs.n_participants} participants, {fit.seqs.n_trials} trials; "
-        f"{', '.join(fit.differ)} differ)",
-        title_justify="left",
-    )
-    m0 = mixture.models[0]
-    cells = [(i, k) for i in range(len(m0.complexities)) for k in range(len(m0.trust_levels))]
-    table.add_column("type")
-    for col in ("weight", "people", "P(T1=high)"):
-        table.add_column(col, justify="right")
-    for i, k in cells:
-        table.add_column(f"rely C={m0.complexities[i]} T={m0.trust_levels[k]}", justify="right")
-    counts = post["type"].value_counts()
-    for name, w, m in zip(fit.names, fit.weights, mixture.models, strict=True):
-        weight = f"{w:.3f}"
-        if intervals is not None:
-            lo, hi = intervals.weights[name]
-            weight += escape(f" [{lo:.2f}, {hi:.2f}]")
-        rely = [f"{m.emission[i, 0, k, 1]:.2f}" for i, k in cells]
-        table.add_row(name, weight, str(int(counts.get(name, 0))), f"{m.initial[-1]:.2f}", *rely)
-    console.print(table)
+    console.print(_types_table(fit, mixture, post, intervals))
+    if mixture.general:
+        console.print(
+            f"general types (inputs: {', '.join(mixture.models[0].used_inputs) or 'none'}): decode and personalize "
+            "read them; planning needs trust models",
+            highlight=False,
+        )
     lls = ", ".join(f"{x:.3f}" for x in sorted(fit.restart_logliks, reverse=True))
     console.print(
         f"log-likelihood {fit.loglik:.4f}; {fit.n_params} free parameters; AIC {fit.aic:.2f}; BIC {fit.bic:.2f}\n"
@@ -196,7 +185,9 @@ def fit_types(
         highlight=False,
     )
     console.print(
-        "people: participants whose most probable type it is; rely: P(rely | T, C, autonomous); types are ordered "
+        "people: participants whose most probable type it is; rely: "
+        + ("P(rely | T, inputs)" if mixture.general else "P(rely | T, C, autonomous)")
+        + "; types are ordered "
         "by their mean P(rely) over the estimated emission rows, lowest first",
         highlight=False,
     )
@@ -208,6 +199,49 @@ def fit_types(
         console.print(f"type posteriors written to {type_posteriors}")
     if plots is not None:
         console.print(f"figures written to {', '.join(str(p) for p in written)}")
+
+
+def _types_table(fit, mixture, post, intervals) -> Table:
+    """The fitted types, one row each: weight (and interval), people, P(T1 = highest level), P(rely) cells."""
+    table = Table(
+        title=f"{fit.n_types} supervisor types ({fit.seqs.n_participants} participants, {fit.seqs.n_trials} trials; "
+        f"{', '.join(fit.differ)} differ)",
+        title_justify="left",
+    )
+    heads, rely_of = _rely_cells(mixture)
+    table.add_column("type")
+    for col in ("weight", "people", f"P(T1={mixture.trust_levels[-1]})"):
+        table.add_column(col, justify="right")
+    for head in heads:
+        table.add_column(escape(head), justify="right")
+    counts = post["type"].value_counts()
+    for name, w, m in zip(fit.names, fit.weights, mixture.models, strict=True):
+        weight = f"{w:.3f}"
+        if intervals is not None:
+            lo, hi = intervals.weights[name]
+            weight += escape(f" [{lo:.2f}, {hi:.2f}]")
+        rely = [f"{x:.2f}" for x in rely_of(m)]
+        table.add_row(name, weight, str(int(counts.get(name, 0))), f"{m.initial[-1]:.2f}", *rely)
+    return table
+
+
+def _rely_cells(mixture):
+    """The table's P(rely) columns: per complexity and trust level without asking (trust models), or
+    per combination of the emission inputs and level (general models); and each type's values."""
+    m0 = mixture.models[0]
+    levels = mixture.trust_levels
+    if mixture.general:
+        rely = m0.output_categories.index("rely") if "rely" in m0.output_categories else -1
+        combos = range(m0.emission.shape[0])
+        heads = [
+            f"rely {' '.join(f'{c}={v}' for c, v in m0.combination('emission', u).items())} T={t}".replace("  ", " ")
+            for u in combos
+            for t in levels
+        ]
+        return heads, lambda m: [m.emission[u, k, rely] for u in combos for k in range(len(levels))]
+    cells = [(i, k) for i in range(len(m0.complexities)) for k in range(len(levels))]
+    heads = [f"rely C={m0.complexities[i]} T={levels[k]}" for i, k in cells]
+    return heads, lambda m: [m.emission[i, 0, k, 1] for i, k in cells]
 
 
 @app.command("select-types", rich_help_panel="Estimate")
@@ -228,6 +262,12 @@ def select_types(
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
     jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads per fit."),
+    widen: bool = typer.Option(
+        True,
+        "--widen/--no-widen",
+        help="While the best by BIC or held-out log-likelihood is the largest number compared, compare one more "
+        "(up to 12); --no-widen compares the numbers given only.",
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print JSON."),
     mapping: Path | None = MappingOpt,
     column: list[str] | None = ColumnOpt,
@@ -236,6 +276,7 @@ def select_types(
     delimiter: str | None = DelimiterOpt,
     order: list[str] | None = OrderOpt,
     quiet: bool = QuietOpt,
+    no_rule: bool = NoExperienceRuleOpt,
 ) -> None:
     """Choose the number of supervisor types: BIC and participant-held-out log-likelihood."""
     values = parse_types(types)
@@ -243,7 +284,9 @@ def select_types(
     mx.parse_differ(differ)
     from ..estimation import type_selection
 
-    tr, em, frame = _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on, order)
+    tr, em, frame = _log_with_inputs(
+        log, rule_off(mapping, no_rule), column, label, missing, delimiter, transitions_on, emissions_on, order
+    )
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("model selection", total=None)
@@ -259,8 +302,11 @@ def select_types(
             progress=lambda what, d, t: bar.update(task, completed=d, total=t, description=what),
             transition_inputs=tr,
             emission_inputs=em,
+            widen=widen,
         )
-    warnings = type_selection.type_selection_warnings(rows)
+    from ._reading import widened_note
+
+    warnings = widened_note(rows, "types", max(values)) + type_selection.type_selection_warnings(rows)
     if as_json:
         print_json({"types": rows, "warnings": warnings})
         return
@@ -298,18 +344,23 @@ def personalize(
     missing: list[str] | None = MissingOpt,
     delimiter: str | None = DelimiterOpt,
     order: list[str] | None = OrderOpt,
+    no_rule: bool = NoExperienceRuleOpt,
 ) -> None:
     """Per-person trust models: each participant's MAP estimate, shrunk toward the pooled model or their type."""
     if estimate not in ("held-out", "variational"):
         raise TrustseekError([f"--estimate must be held-out or variational, got {estimate!r}"])
     check_output(out, "--out", directory=True)
     from ..estimation.personal import personalize as run
-    from ..model.presets import load_mixture
-    from .fit import _fill_unused, model_inputs
+    from ..model.iohmm import IOHMMModel
+    from ..model.mixture import TypeMixture
+    from ._reading import load_for_decoding, read_for_types
 
-    centre = load_mixture(model)
-    used = tuple(dict.fromkeys(c for t in centre.models for c in model_inputs(t)))  # the columns the centre uses
-    frame = _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter, order=order), centre.models[0], used)
+    centre = load_for_decoding(Path(model))  # a trust model, a general model or types
+    if isinstance(centre, IOHMMModel):
+        centre = TypeMixture.single(centre)
+    frame = read_for_types(
+        log, centre, rule_off(mapping, no_rule), column, label, missing, delimiter, order
+    )  # the columns it uses
     res = run(frame, centre if centre.n_types > 1 else centre.models[0], strength=strength, tol=tol, estimate=estimate)
     with atomic_output(out, directory=True) as tmp:
         res.save(tmp)

@@ -30,8 +30,9 @@ from ._app import (
     keep_columns,
     print_json,
     progress_bar,
-    read_log,
 )
+from ._reading import NoExperienceRuleOpt, read_for_types, rule_off
+from .fit import POSTERIOR_SUFFIXES, _general, _read_with_inputs
 
 BootstrapOpt = typer.Option(
     1000, "--bootstrap", "-b", min=0, max=10_000, help="Participant-bootstrap resamples for the 95% intervals (0 = none)."
@@ -84,17 +85,6 @@ def _load(path: Path) -> Any:
     return load_any_model(path)
 
 
-def _read_for(log, m, mapping, column, label, missing, delimiter, order=None):
-    """The log with the columns ``m`` needs (a trust model: the inputs it uses, the others filled)."""
-    from ..model.core import TrustModel
-    from .fit import _fill_unused, model_inputs, read_for_model
-
-    if isinstance(m, TrustModel):
-        used = model_inputs(m)
-        return _fill_unused(read_log(log, mapping, column, label, used, missing, delimiter, order=order), m, used)
-    return read_for_model(log, m, mapping, column, label, missing, delimiter, order)
-
-
 @app.command(rich_help_panel="Estimate")
 def predict(
     log: Path = typer.Argument(..., help="Trial log (CSV, Parquet, JSON), one row per trial."),
@@ -125,6 +115,7 @@ def predict(
     order: list[str] | None = OrderOpt,
     keep: list[str] | None = KeepOpt,
     quiet: bool = QuietOpt,
+    no_rule: bool = NoExperienceRuleOpt,
 ) -> None:
     """How well a trust model predicts each trial's human action from the trials before it
     (filtering), against baselines: log-loss, Brier score, AUC with bootstrap intervals.
@@ -132,7 +123,6 @@ def predict(
     Trials whose action the model fixes (the robot asked: P(intervene) = 1) are no prediction
     and are left out of the scores."""
     from ._app import check_not_inputs
-    from .fit import POSTERIOR_SUFFIXES, _general, _read_with_inputs
 
     check_output(out, "--out", POSTERIOR_SUFFIXES)
     check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (mapping, "--mapping file")))
@@ -143,12 +133,12 @@ def predict(
         if folds is not None:
             raise TrustseekError(["--folds scores held-out fits; --model scores that model in-sample: give one of them"])
         m = _load(model)
-        frame = _read_for(log, m, mapping, column, label, missing, delimiter, order)
+        frame = read_for_types(log, m, rule_off(mapping, no_rule), column, label, missing, delimiter, order)
         report = pr.predict_in_sample(frame, m, bootstrap=bootstrap, seed=seed)
     else:
         k = 5 if folds is None else folds
         tr, em, frame = _read_with_inputs(
-            log, mapping, column, label, transitions_on, emissions_on, missing, delimiter, order=order
+            log, rule_off(mapping, no_rule), column, label, transitions_on, emissions_on, missing, delimiter, order=order
         )
         bar = progress_bar(quiet or as_json)
         preset: Any = "paper"
@@ -253,11 +243,11 @@ def validate(
     delimiter: str | None = DelimiterOpt,
     order: list[str] | None = OrderOpt,
     keep: list[str] | None = KeepOpt,
+    no_rule: bool = NoExperienceRuleOpt,
 ) -> None:
     """Does the decoded trust track self-reported trust?  Spearman and Pearson correlations with
     the ratings (pooled, within and between participants) next to simple baselines."""
     from ._app import check_not_inputs
-    from .fit import POSTERIOR_SUFFIXES
 
     check_output(out, "--out", POSTERIOR_SUFFIXES)
     check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (mapping, "--mapping file")))
@@ -267,7 +257,7 @@ def validate(
     if rating_labels is not None:
         labels = [x.strip() for x in rating_labels.split(",")]
     m = _load(model)
-    frame = _read_for(log, m, mapping, column, label, missing, delimiter, order)
+    frame = read_for_types(log, m, rule_off(mapping, no_rule), column, label, missing, delimiter, order)
     va = _validation()
     if rating is None:
         if "rating" not in frame.columns:

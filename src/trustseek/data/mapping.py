@@ -330,7 +330,7 @@ class ColumnMapping:
             raise DataError([f"invalid {'TOML' if path.suffix.lower() == '.toml' else 'JSON'}: {exc}"], str(path)) from None
         m = cls.from_dict(d, str(path))
         if m.join is not None and not Path(m.join["file"]).is_absolute():  # beside the mapping file
-            m.join = {**m.join, "file": str(path.parent / m.join["file"])}
+            m.join = {**m.join, "file": str((path.parent / m.join["file"]).absolute())}
         return m
 
     @classmethod

@@ -2,6 +2,7 @@
 
 # every submodule, as the package attribute of that name
 from . import (
+    baselines,
     bootstrap,
     compiled_run,
     compiled_steps,
@@ -14,6 +15,7 @@ from . import (
     kernels,
     mixture,
     personal,
+    personal_models,
     prediction,
     quasi_newton,
     ratings,
@@ -24,6 +26,7 @@ from . import (
     sticks,
     structure,
     trust_iohmm,
+    type_bootstrap,
     type_selection,
     validation,
     warm,

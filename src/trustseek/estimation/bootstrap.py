@@ -11,13 +11,18 @@ alone: a replicate whose levels are close on the ordering cell would otherwise s
 them and mix two levels' values in one interval.
 
 The interval of a cell is the percentile interval of the replicates, widened where
-needed to contain the point estimate (see :class:`Intervals`).  Replicate b always
+needed to contain the point estimate (see :class:`Intervals`).  At a boundary the percentile
+interval cannot move: where the estimate of a free cell is 0 and every resample's own maximum
+is 0 too (the percentile interval is [0, 0]), the interval is the likelihood-ratio one instead
+(:func:`boundary_bounds`): every value whose profile log-likelihood (the rest refitted) is within
+:data:`BOUNDARY_DROP` of the maximum, the 95 % point of the chi-bar-square at a boundary.  Replicate b always
 uses the b-th child of the seed, so the intervals do not depend on how many processes
 compute them.
 """
 
 from __future__ import annotations
 
+import copy
 import logging
 import os
 from collections.abc import Callable, Mapping
@@ -28,10 +33,14 @@ import numpy as np
 
 from ..compiled import load as load_compiled
 from . import kernels
+from .em import run_em
+from .estep import Workspace
 from .iohmm import fit_iohmm
+from .ratings import make_structure
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec, Params
-from .trust_iohmm import check_convertible, to_trust_model
+from .structure import Structure, Table
+from .trust_iohmm import check_convertible, index_grid, to_trust_model
 
 log = logging.getLogger(__name__)
 
@@ -40,6 +49,9 @@ LEVEL = 0.95
 OUTSIDE = 1e-9  # an estimate this close to its percentile interval is not outside it
 MIN_REPLICATES = 200  # fewest resamples for a 95 % interval: each 2.5 % tail then rests on 5 replicates
 OTHER_MAXIMUM = 1e-4  # a random start beats the refit continued from the estimate by more than this (log-likelihood)
+BOUNDARY = 1e-6  # a free cell estimated below this is at the boundary
+BOUNDARY_DROP = 2.706 / 2  # log-likelihood drop of a 95 % bound at a boundary: chi-bar-square(0.5, 0.5), 2.706 / 2
+PROFILE_STEPS = 6  # bisection steps of a likelihood-ratio bound: to 1/64, the wider end kept
 
 
 def align(reference: Params, params: Params, weights: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
@@ -81,6 +93,93 @@ def cell_tables(spec: IOHMMSpec, params: Params) -> dict[str, np.ndarray]:
         return {"initial": params.initial, "emission": params.emission, "transition": params.transition}
     m = to_trust_model(spec, params)
     return {name: getattr(m, name) for name in TABLES}
+
+
+def _held(structure: Structure, table: str, u: int, k: int, row: np.ndarray) -> Structure:
+    """``structure`` with row (u, k) of ``table`` (``em`` or ``tr``; its tie group with it) fixed to ``row``."""
+    held = copy.deepcopy(structure)
+    t: Table = getattr(held, table)
+    rows = np.flatnonzero(t.group == t.group[u])
+    t.fixed[rows, k, :] = True
+    t.values[rows, k, :] = row
+    t.gfixed, t.gvalues = t.fixed[t.rep], t.values[t.rep]
+    t.mass = 1.0 - np.where(t.gfixed, t.gvalues, 0.0).sum(-1)
+    t.free_cells = (~t.gfixed).sum(-1)
+    return held
+
+
+def _cell_positions(spec: IOHMMSpec, ref: Mapping[str, np.ndarray], table: str, u: int, k: int, m: int) -> np.ndarray:
+    """Where Params cell (u, k, m) of ``table`` lies in the flattened :func:`cell_tables` (all its copies)."""
+    offset = {"initial": 0, "emission": ref["initial"].size, "transition": ref["initial"].size + ref["emission"].size}[table]
+    shape = ref[table].shape
+    try:
+        check_convertible(spec)
+    except FitError:
+        return np.array([offset + np.ravel_multi_index((u, k, m), shape)])
+    inputs = spec.emission_inputs if table == "emission" else spec.transition_inputs
+    grid = index_grid(spec, inputs, table == "transition")  # TrustModel cell -> combination
+    cells = np.argwhere(grid == u)
+    return np.array([offset + np.ravel_multi_index((*c, k, m), shape) for c in cells], dtype=np.int64)
+
+
+def _profile_bound(work: Workspace, structure: Structure, params: Params, table: str, u: int, k: int, m: int) -> float:
+    """The largest value of free cell (u, k, m), estimated at 0, whose profile log-likelihood (the other
+    cells refitted by EM) is within :data:`BOUNDARY_DROP` of the estimate's."""
+    name = {"em": "emission", "tr": "transition"}[table]
+    est = getattr(params, name)[u, k]
+    top = float(np.sum(work.estep(params).loglik))
+    others = np.arange(est.size) != m
+    share = est[others] / est[others].sum() if est[others].sum() > 0 else np.full(others.sum(), 1.0 / others.sum())
+
+    def drop(v: float) -> float:
+        row = np.zeros(est.size)
+        row[m], row[others] = v, (1 - v) * share
+        held = _held(structure, table, u, k, row)
+        start = Params(params.initial.copy(), params.emission.copy(), params.transition.copy())
+        getattr(start, name)[getattr(held, table).group == getattr(held, table).group[u], k] = row
+        try:
+            (r,) = run_em(held, work, [held.project(start)], tol=1e-5, max_iter=200)
+        except FitError:  # the data impossible at this value
+            return np.inf
+        return top - float(r.loglik)
+
+    if drop(1.0) <= BOUNDARY_DROP:
+        return 1.0
+    a, b = 0.0, 1.0
+    for _ in range(PROFILE_STEPS):
+        mid = (a + b) / 2
+        a, b = (mid, b) if drop(mid) <= BOUNDARY_DROP else (a, mid)
+    return b
+
+
+def boundary_bounds(
+    seqs: Sequences, spec: IOHMMSpec, params: Params, lo: np.ndarray, hi: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Likelihood-ratio intervals for the free emission and transition cells estimated at 0 whose
+    bootstrap interval is [0, 0] (flattened :func:`cell_tables`); a row's other free cell, if it has
+    just one, gets the mirror bound.  The new lower and upper bounds, and the cells they changed."""
+    structure = make_structure(spec, seqs)
+    work = Workspace(seqs, *structure.dims, threads=1)
+    ref = cell_tables(spec, params)
+    lo, hi, moved = lo.copy(), hi.copy(), np.zeros(lo.shape, dtype=bool)
+    for table, name in (("em", "emission"), ("tr", "transition")):
+        t: Table = getattr(structure, table)
+        values = getattr(params, name)
+        for u in t.rep:
+            for k in range(t.K):
+                free = np.flatnonzero(~t.fixed[u, k])
+                if len(free) < t.M:
+                    continue  # a row with fixed cells (or no events) is not estimated
+                for m in free[values[u, k, free] < BOUNDARY]:
+                    pos = _cell_positions(spec, ref, name, int(u), k, int(m))
+                    if len(pos) == 0 or np.any(hi[pos] >= BOUNDARY):
+                        continue
+                    bound = _profile_bound(work, structure, params, table, int(u), k, int(m))
+                    hi[pos], moved[pos] = bound, True
+                    if t.M == 2:
+                        mirror = _cell_positions(spec, ref, name, int(u), k, int(1 - m))
+                        lo[mirror], moved[mirror] = np.minimum(lo[mirror], 1.0 - bound), True
+    return lo, hi, moved
 
 
 @dataclass(frozen=True)
@@ -145,6 +244,12 @@ class Intervals:
     widened: dict[str, np.ndarray]
     other_maximum: int
     draws: dict[str, np.ndarray] = field(repr=False)
+    likelihood: dict[str, np.ndarray] = field(default_factory=dict)  # cells with the likelihood-ratio interval at a boundary
+
+    @property
+    def boundary(self) -> int:
+        """How many cells have the likelihood-ratio interval at a boundary (:func:`boundary_bounds`)."""
+        return int(sum(m.sum() for m in self.likelihood.values()))
 
     @property
     def method(self) -> str:
@@ -157,6 +262,11 @@ class Intervals:
             out.append(
                 f"bootstrap: {self.replicates} resamples are too few for {self.level:.0%} intervals "
                 f"(at least {MIN_REPLICATES}: --bootstrap {MIN_REPLICATES}); the bounds are rough"
+            )
+        if self.boundary:
+            out.append(
+                f"bootstrap: {self.boundary} cells estimated at 0 (or 1) stayed there in every resample; their intervals "
+                "are likelihood-ratio ones (the values whose profile log-likelihood is within 1.35 of the maximum)"
             )
         if any(w.any() for w in self.widened.values()):
             out.append(
@@ -231,7 +341,8 @@ def bootstrap(
     # row's free mass, which differs between the estimate and a replicate in the 17th decimal
     widened = (est < lo - OUTSIDE) | (est > hi + OUTSIDE)
     lo, hi = np.minimum(lo, est), np.maximum(hi, est)
-    intervals, wide, draws = {}, {}, {}
+    lo, hi, at_boundary = boundary_bounds(seqs, spec, params, lo, hi)
+    intervals, wide, draws, likelihood = {}, {}, {}, {}
     pos = 0
     for name in TABLES:
         shape = ref[name].shape
@@ -239,8 +350,9 @@ def bootstrap(
         cut = slice(pos, pos + size)
         intervals[name] = (lo[cut].reshape(shape), hi[cut].reshape(shape))
         wide[name] = widened[cut].reshape(shape)
+        likelihood[name] = at_boundary[cut].reshape(shape)
         draws[name] = flat[:, cut].reshape((replicates, *shape))
         pos += size
     if widened.any():
         log.info("bootstrap: %d cell interval(s) widened to contain the estimate", int(widened.sum()))
-    return Intervals(intervals, replicates, level, wide, int(other), draws)
+    return Intervals(intervals, replicates, level, wide, int(other), draws, likelihood)

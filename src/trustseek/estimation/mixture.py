@@ -1,7 +1,9 @@
 """Supervisor types: a mixture of M trust IOHMMs, each participant one latent type (Remark 1).
 
 Every type has the structure of the pooled model (the same inputs, fixed cells, ties and
-rows no event reaches); a participant's whole sequence comes from one type.  The mixture
+rows no event reaches): trust models for the paper's inputs, general models
+(``trustseek.iohmm/1``) for a study's named inputs, as the pooled fit (:func:`types_spec`);
+a participant's whole sequence comes from one type.  The mixture
 is written as M IOHMMs whose initial rows hold the joint P(type, S_1): type m's row sums to
 its weight w_m.  The EM of the pooled fit then applies unchanged (:func:`~.em.run_em` with
 SQUAREM, the L-BFGS-B finish and the stationarity check of :mod:`.convergence`): per
@@ -33,15 +35,14 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import linear_sum_assignment
 
 from ..model.core import TrustModel
+from ..model.iohmm import IOHMMModel
 from ..model.mixture import TypeMixture
 from . import kernels
 from .convergence import converge
@@ -53,7 +54,16 @@ from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
 from .sticks import Sticks, _Part
 from .structure import FLOOR, PROJECT_FLOOR, START_MIX, Structure
-from .trust_iohmm import check_convertible, from_trust_model, preset_spec, to_trust_model
+from .trust_iohmm import (
+    PAPER_EMISSION_INPUTS,
+    PAPER_TRANSITION_INPUTS,
+    from_trust_model,
+    general_spec,
+    is_trust_structure,
+    preset_spec,
+    to_iohmm_model,
+    to_trust_model,
+)
 
 log = logging.getLogger(__name__)
 
@@ -406,8 +416,10 @@ class MixtureFit(FitCriteria):
         probable) and ``p_type_<name>`` per type."""
         return posterior_table(self.seqs, self.names, self.type_posteriors())
 
-    def models(self) -> list[TrustModel]:
-        check_convertible(self.spec)
+    def models(self) -> list[TrustModel] | list[IOHMMModel]:
+        """The types as trust models, or as general models for a study's named inputs."""
+        if general_types(self.spec):
+            return [to_iohmm_model(self.spec, self.params.type_params(m)) for m in range(self.n_types)]
         models = [to_trust_model(self.spec, self.params.type_params(m)) for m in range(self.n_types)]
         return [m.replace(not_estimated=self.not_estimated) for m in models] if self.not_estimated else models
 
@@ -572,6 +584,28 @@ def mixture_warnings(fit: MixtureFit) -> list[str]:
     return out
 
 
+def general_types(spec: IOHMMSpec) -> bool:
+    """True when ``spec``'s types are general models (an input a trust model does not have)."""
+    return not is_trust_structure(spec.transition_inputs, spec.emission_inputs)
+
+
+def types_spec(
+    frame: pd.DataFrame,
+    preset: str | IOHMMSpec = "paper",
+    prior: float = 0.0,
+    transition_inputs: Sequence[str] = PAPER_TRANSITION_INPUTS,
+    emission_inputs: Sequence[str] = PAPER_EMISSION_INPUTS,
+    **spec_options: Any,
+) -> IOHMMSpec:
+    """The structure of every type, as the pooled fit's: the ``preset`` (a trust model) for the
+    canonical inputs, :func:`~.trust_iohmm.general_spec` when an input is a study's own."""
+    if isinstance(preset, IOHMMSpec) or is_trust_structure(transition_inputs, emission_inputs):
+        return preset_spec(
+            preset, frame, prior=prior, transition_inputs=transition_inputs, emission_inputs=emission_inputs, **spec_options
+        )
+    return general_spec(frame, emission_inputs, transition_inputs, spec_options.get("levels", ("low", "high")), prior)
+
+
 def fit_types(
     frame: pd.DataFrame,
     types: int,
@@ -586,9 +620,8 @@ def fit_types(
     progress: Callable[[int, int], None] | None = None,
     **spec_options: Any,
 ) -> MixtureFit:
-    """Fit ``types`` supervisor types to a trial table (the structure as :func:`~.fit.fit_trust_model`)."""
-    spec = preset_spec(preset, frame, prior=prior, **spec_options)
-    check_convertible(spec)
+    """Fit ``types`` supervisor types to a trial table (the structure as the pooled fit's, :func:`types_spec`)."""
+    spec = types_spec(frame, preset, prior, **spec_options)
     seqs = encode(frame, spec)
     pooled = None
     if types > 1:
@@ -623,12 +656,13 @@ def fit_types(
         n_jobs=n_jobs,
         on_restart=tick,
     )
-    fit.not_estimated = never_estimated(frame, spec)
+    fit.not_estimated = () if general_types(spec) else never_estimated(frame, spec)
     return fit
 
 
 def mixture_params(mixture: TypeMixture) -> tuple[IOHMMSpec, MixtureParams]:
-    """The paper-structured spec and the mixture's tables (for decoding and scoring)."""
+    """The types' spec (the paper's structure, or the general models' own) and the mixture's tables
+    (for decoding and scoring)."""
     specs = [from_trust_model(m) for m in mixture.models]
     spec = specs[0][0]
     return spec, MixtureParams.from_types(mixture.weights, [p for _, p in specs])
@@ -677,117 +711,3 @@ def decode_types(frame: pd.DataFrame, mixture: TypeMixture) -> pd.DataFrame:
     for m, name in enumerate(mixture.names):
         out[f"p_type_{name}"] = post[nn, m]
     return pd.DataFrame(out)
-
-
-@dataclass(frozen=True)
-class _TypeReplicate:
-    """One bootstrap replicate of a mixture fit, sent whole to a worker process."""
-
-    seqs: Sequences
-    spec: IOHMMSpec
-    types: int
-    differ: tuple[str, ...]
-    params: MixtureParams
-    seed: np.random.SeedSequence
-    restarts: int
-    tol: float
-    max_iter: int
-
-    def run(self) -> np.ndarray:
-        """The refitted types' TrustModel cells and weights, types matched to the estimate's."""
-        rng = np.random.default_rng(self.seed)
-        n = self.seqs.n_participants
-        sample = self.seqs.subset(rng.integers(0, n, n))
-        fit = fit_mixture(
-            sample,
-            self.spec,
-            self.types,
-            restarts=self.restarts,
-            seed=self.seed.spawn(1)[0],
-            differ=self.differ,
-            tol=self.tol,
-            max_iter=self.max_iter,
-            init=[self.params],
-            pooled=self.params.type_params(0),
-        )
-        ref = _type_vectors(self.spec, self.params)
-        rep = _type_vectors(self.spec, fit.params)
-        cost = ((ref[:, None, :] - rep[None, :, :]) ** 2).sum(-1)
-        _, cols = linear_sum_assignment(cost)
-        return np.concatenate([rep[cols].ravel(), fit.weights[cols]])
-
-
-def _type_vectors(spec: IOHMMSpec, params: MixtureParams) -> np.ndarray:
-    """(M, cells): every type's TrustModel cells, table after table."""
-    out = []
-    for m in range(params.initial.shape[0]):
-        tm = to_trust_model(spec, params.type_params(m))
-        out.append(np.concatenate([np.asarray(getattr(tm, t), dtype=float).ravel() for t in PARTS]))
-    return np.array(out)
-
-
-@dataclass
-class TypeIntervals:
-    """Participant-bootstrap intervals of every type's TrustModel cells and weight: ``cells[name][table]
-    = (lower, upper)`` and ``weights[name] = (lower, upper)``; percentile intervals of replicates whose
-    types are matched to the estimate's (Hungarian assignment on the squared distance of their
-    cells), widened to contain the estimate (as :mod:`.bootstrap`)."""
-
-    cells: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]]
-    weights: dict[str, tuple[float, float]]
-    replicates: int
-    level: float
-
-
-def bootstrap_types(
-    fit: MixtureFit,
-    replicates: int,
-    seed: int = 0,
-    restarts: int = 2,
-    n_jobs: int | None = None,
-    level: float = 0.95,
-    progress: Callable[[int, int], None] | None = None,
-) -> TypeIntervals:
-    """Intervals at ``level`` for the types of ``fit`` over ``replicates`` resamples of the participants;
-    each replicate refits from the estimate and ``restarts`` seeded starts.  Replicate b uses the b-th
-    child of the seed, whatever the number of processes (``n_jobs``, default all cores)."""
-    if replicates < 1:
-        raise FitError([f"the bootstrap needs at least one replicate, got {replicates}"])
-    children = np.random.SeedSequence([seed, 1]).spawn(replicates)
-    jobs = [_TypeReplicate(fit.seqs, fit.spec, fit.n_types, fit.differ, fit.params, ch, restarts, 1e-6, 1000) for ch in children]
-    n_jobs = n_jobs or os.cpu_count() or 1
-    results: dict[int, np.ndarray] = {}
-
-    def done(i: int, res: np.ndarray) -> None:
-        results[i] = res
-        if progress is not None:
-            progress(len(results), replicates)
-
-    if n_jobs <= 1 or replicates == 1:
-        for i, job in enumerate(jobs):
-            done(i, job.run())
-    else:
-        with ProcessPoolExecutor(max_workers=min(n_jobs, replicates)) as ex:
-            futures = {ex.submit(job.run): i for i, job in enumerate(jobs)}
-            for f in as_completed(futures):
-                done(futures[f], f.result())
-    flat = np.vstack([results[i] for i in range(replicates)])
-    est = np.concatenate([_type_vectors(fit.spec, fit.params).ravel(), fit.weights])
-    a = (1 - level) / 2
-    lo, hi = np.quantile(flat, [a, 1 - a], axis=0)
-    lo, hi = np.minimum(lo, est), np.maximum(hi, est)
-    M = fit.n_types
-    per = (len(est) - M) // M
-    ref = fit.models()[0]
-    cells: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]] = {}
-    weights: dict[str, tuple[float, float]] = {}
-    for m, name in enumerate(fit.names):
-        pos = m * per
-        cells[name] = {}
-        for t in PARTS:
-            shape = np.asarray(getattr(ref, t)).shape
-            size = int(np.prod(shape))
-            cells[name][t] = (lo[pos : pos + size].reshape(shape), hi[pos : pos + size].reshape(shape))
-            pos += size
-        weights[name] = (float(lo[M * per + m]), float(hi[M * per + m]))
-    return TypeIntervals(cells, weights, replicates, level)

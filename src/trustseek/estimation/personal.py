@@ -49,14 +49,10 @@ same pass.
 
 from __future__ import annotations
 
-import json
 import logging
 import math
-import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
-from pathlib import Path
-from typing import Any
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -64,16 +60,17 @@ from scipy.optimize import minimize
 from scipy.special import digamma, gammaln
 
 from ..model.core import TrustModel
-from ..model.jsonfile import json_safe
+from ..model.iohmm import IOHMMModel
 from ..model.mixture import TypeMixture
 from . import kernels
 from .em import RunResult, run_em
 from .estep import EStep, Workspace
-from .mixture import MixtureStructure, MixtureWorkspace, mixture_params, type_posteriors
+from .mixture import MixtureStructure, MixtureWorkspace, general_types, mixture_params, type_posteriors
+from .personal_models import PersonalModels
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
 from .structure import FLOOR, Structure, Table
-from .trust_iohmm import to_trust_model
+from .trust_iohmm import to_iohmm_model, to_trust_model
 
 log = logging.getLogger(__name__)
 
@@ -318,95 +315,6 @@ def _strengths(
 
 
 @dataclass
-class PersonalModels:
-    """One trust model per participant (in the order of ``participants``, the study's values)."""
-
-    participants: list[Any]
-    models: list[TrustModel]
-    centre: list[str]
-    strength: dict[str, float]
-    at_bound: dict[str, bool]
-    method: dict[str, str]  # how each table's s was chosen
-    estimate: str  # "held-out", "variational" or "given"
-    score: float  # the criterion at the chosen strengths (held-out log-likelihood, or variational bound)
-    score_centre: float  # the same at s = S_MAX in every table (the centre)
-    loglik: np.ndarray
-    centre_loglik: np.ndarray
-    iterations: np.ndarray
-    converged: np.ndarray
-    trials: np.ndarray
-    warnings: list[str] = field(default_factory=list)
-
-    def arrays(self) -> dict[str, Any]:
-        """The models stacked as the arrays of a population of simulated supervisors
-        (``Supervisors(**arrays)``: participant i is row i)."""
-        first = self.models[0]
-        return {
-            "trust_levels": first.trust_levels,
-            "complexities": first.complexities,
-            "initial": np.stack([m.initial for m in self.models]),
-            "emission": np.stack([m.emission for m in self.models]),
-            "transition": np.stack([m.transition for m in self.models]),
-            "index": np.arange(len(self.models), dtype=np.int64),
-        }
-
-    def frame(self) -> pd.DataFrame:
-        """One row per participant: the centre, trials, log-likelihood under the centre and own model."""
-        return pd.DataFrame(
-            {
-                "participant": self.participants,
-                "centre": self.centre,
-                "trials": self.trials,
-                "loglik_centre": self.centre_loglik,
-                "loglik_personal": self.loglik,
-                "iterations": self.iterations,
-                "converged": self.converged,
-            }
-        )
-
-    def file_names(self) -> list[str]:
-        """A file name per participant: the participant value made safe, made unique if needed."""
-        out: list[str] = []
-        seen: set[str] = set()
-        for i, p in enumerate(self.participants):
-            base = re.sub(r"[^A-Za-z0-9._-]+", "_", str(p)).strip("._") or f"participant{i + 1}"
-            name = base
-            while name.lower() in seen:
-                name = f"{base}-{i + 1}"
-            seen.add(name.lower())
-            out.append(f"{name}.json")
-        return out
-
-    def summary(self) -> dict[str, Any]:
-        """The strengths, how they were chosen and the criterion (as ``strength.json`` holds them)."""
-        return {
-            "strength": self.strength,
-            "at_bound": self.at_bound,
-            "method": self.method,
-            "estimate": self.estimate,
-            "score": self.score,
-            "score_centre": self.score_centre,
-            "warnings": self.warnings,
-        }
-
-    def save(self, folder: str | Path) -> None:
-        """``<participant>.json`` per participant, ``participants.csv`` (with the file of each) and
-        ``strength.json``, into ``folder`` (created)."""
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        names = self.file_names()
-        for name, m in zip(names, self.models, strict=True):
-            m.save(folder / name)
-        table = self.frame()
-        table.insert(1, "file", names)
-        table.to_csv(folder / "participants.csv", index=False)
-        (folder / "strength.json").write_text(
-            json.dumps(json_safe(self.summary()), indent=2) + "\n",
-            encoding="utf-8",
-        )
-
-
-@dataclass
 class _Prepared:
     """The log encoded against the centre: each participant's centre (the pooled model, or their most
     probable type), the E-step of every participant under it, and the rows of the priors."""
@@ -423,7 +331,7 @@ class _Prepared:
     rows: dict[str, _Rows]
 
     @classmethod
-    def of(cls, frame: pd.DataFrame, model: TrustModel | TypeMixture, n_jobs: int | None = 1) -> _Prepared:
+    def of(cls, frame: pd.DataFrame, model: TrustModel | IOHMMModel | TypeMixture, n_jobs: int | None = 1) -> _Prepared:
         if not kernels.AVAILABLE:
             raise FitError(["per-person models need the numba package"])
         mixture = model if isinstance(model, TypeMixture) else TypeMixture.single(model)
@@ -555,7 +463,7 @@ def _cv_strengths(
 
 def personalize(
     frame: pd.DataFrame,
-    model: TrustModel | TypeMixture,
+    model: TrustModel | IOHMMModel | TypeMixture,
     strength: float | Mapping[str, float] | None = None,
     tol: float = 1e-8,
     max_iter: int = 1000,
@@ -613,7 +521,10 @@ def personalize(
     # rows no trial of the log reaches are the structure's defaults during the fit: the centre's instead
     params.emission[:, base.em.empty] = centre.emission[:, base.em.empty]
     params.transition[:, base.tr.empty] = centre.transition[:, base.tr.empty]
-    models = [to_trust_model(spec, params.take(n)) for n in range(N)]
+    if general_types(spec):
+        models: list[TrustModel] | list[IOHMMModel] = [to_iohmm_model(spec, params.take(n)) for n in range(N)]
+    else:
+        models = [to_trust_model(spec, params.take(n)) for n in range(N)]
     unconverged = sum(not r.converged for r in runs)
     if unconverged:
         warnings.append(f"{unconverged} of {N} participants' fits stopped at the E-step cap")

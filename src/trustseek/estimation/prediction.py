@@ -6,16 +6,10 @@ For every trial t of a participant the model's prediction is
 
 with the belief from the participant's earlier trials only (the forward filter, never the
 smoothed posterior, which would look at the trial itself and later ones).  Baselines
-(:data:`BASELINES`) see the same past:
-
-* ``constant`` -- the rate of reliance in the training trials;
-* ``participant_rate`` -- the participant's reliance so far, a Beta prior of
-  :data:`PRIOR_WEIGHT` trials at the training rate (so the first trial gets the training rate);
-* ``last_action`` -- P(rely | the participant's previous action), estimated on the training
-  trials (the first trial gets the training rate);
-* ``reliable_fraction`` -- the fraction of the participant's earlier trials whose automation was
-  reliable (experience ``reliable``, Laplace-smoothed), turned into P(rely) by a logistic
-  regression on the training trials.
+(:data:`~.baselines.BASELINES`, :mod:`.baselines`) see the same past: the rate of reliance,
+the participant's rate so far, the previous action, the fraction of reliable automation so
+far, and -- a fair comparison for a model with named inputs -- the one-level model and a
+logistic regression on the model's own inputs (with participant intercepts in-sample).
 
 Trials whose emission row gives every trust level the same certain P(rely), 0 or 1 (the paper
 preset fixes P(intervene | ask) = 1), are no prediction of behaviour: they are counted
@@ -43,7 +37,9 @@ import numpy as np
 import pandas as pd
 
 from ..model.core import TrustModel
-from ..vocab import EXPERIENCES, HUMAN_ACTIONS
+from ..model.iohmm import IOHMMModel
+from ..vocab import HUMAN_ACTIONS
+from .baselines import BASELINES, BaselineFit, Features, baseline_predictions, features, fit_baselines
 from .iohmm import fit_iohmm
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
@@ -53,8 +49,6 @@ log = logging.getLogger(__name__)
 
 EPS = 1e-9  # predictions are clipped to [EPS, 1 - EPS] for the log-loss
 CONFIDENT = 1e-6  # a scored trial whose action the model gave less than this probability: a confident miss
-PRIOR_WEIGHT = 2.0  # pseudo-trials at the training rate behind a participant's running rate
-BASELINES = ("constant", "participant_rate", "last_action", "reliable_fraction")
 PREDICTORS = ("model", *BASELINES)
 METRICS = ("log_loss", "brier", "auc")
 LOWER_IS_BETTER = {"log_loss": True, "brier": True, "auc": False}
@@ -219,123 +213,6 @@ def score(
     return metrics, diffs
 
 
-# --------------------------------------------------------------------------- baselines
-
-
-def _spread(values: np.ndarray, seqs: Sequences, fill: float = np.nan) -> np.ndarray:
-    """A per-row array of the frame laid out (T, N) like ``seqs``."""
-    out = np.full(seqs.rows.shape, fill, dtype=float)
-    valid = seqs.rows >= 0
-    out[valid] = values[seqs.rows[valid]]
-    return out
-
-
-def _exclusive_cumsum(a: np.ndarray) -> np.ndarray:
-    """Along trials: the sum over earlier trials (0 at the first)."""
-    c = np.cumsum(a, axis=0)
-    return c - a
-
-
-def _logistic(x: np.ndarray, y: np.ndarray, ridge: float = 1e-3, iterations: int = 50) -> np.ndarray:
-    """Intercept and slope of a logistic regression of ``y`` on ``x`` (Newton's method, a small ridge)."""
-    X = np.column_stack([np.ones_like(x), x])
-    beta = np.zeros(2)
-    for _ in range(iterations):
-        p = 1.0 / (1.0 + np.exp(-(X @ beta)))
-        g = X.T @ (y - p) - ridge * beta
-        H = (X * (p * (1 - p))[:, None]).T @ X + ridge * np.eye(2)
-        step = np.linalg.solve(H, g)
-        beta += step
-        if np.max(np.abs(step)) < 1e-10:
-            break
-    return beta
-
-
-@dataclass
-class _Features:
-    """Per trial, (T, N): what the baselines use, from the participant's earlier trials."""
-
-    rely: np.ndarray  # 1 rely, 0 intervene, NaN unrecorded or padding
-    scored: np.ndarray  # recorded and not determined
-    rate_n: np.ndarray  # scored trials before t
-    rate_k: np.ndarray  # of which relied
-    last: np.ndarray  # previous scored action (1 rely, 0 intervene, NaN none)
-    reliable_logit: np.ndarray  # logit of the Laplace-smoothed fraction of reliable automation before t
-
-
-def _features(frame: pd.DataFrame, seqs: Sequences, determined: np.ndarray) -> _Features:
-    ha = frame["human_action"]
-    rely_row = np.where(ha.isna().to_numpy(), np.nan, (ha.astype(object) == "rely").to_numpy(dtype=float))
-    rely = _spread(rely_row, seqs)
-    scored = np.isfinite(rely) & ~determined
-    r = np.where(scored, rely, 0.0)
-    rate_n = _exclusive_cumsum(scored.astype(float))
-    rate_k = _exclusive_cumsum(r)
-    # previous scored action: forward fill along trials
-    T, N = rely.shape
-    last = np.full((T, N), np.nan)
-    cur = np.full(N, np.nan)
-    for t in range(T):
-        last[t] = cur
-        cur = np.where(scored[t], rely[t], cur)
-    if "experience" in frame and frame["experience"].notna().any():
-        ex = frame["experience"]
-        rel_row = np.where(ex.isna().to_numpy(), np.nan, (ex.astype(object) == EXPERIENCES[1]).to_numpy(dtype=float))
-    else:
-        rel_row = np.full(len(frame), np.nan)
-    rel = _spread(rel_row, seqs)
-    known = np.isfinite(rel)
-    k = _exclusive_cumsum(np.where(known, rel, 0.0))
-    n = _exclusive_cumsum(known.astype(float))
-    f = (k + 1.0) / (n + 2.0)
-    return _Features(rely, scored, rate_n, rate_k, last, np.log(f) - np.log1p(-f))
-
-
-@dataclass
-class BaselineFit:
-    """The baselines' parameters, estimated on training trials."""
-
-    rate: float
-    after_rely: float
-    after_intervene: float
-    reliable_coef: tuple[float, float]
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "rate": self.rate,
-            "after_rely": self.after_rely,
-            "after_intervene": self.after_intervene,
-            "reliable_fraction_logistic": list(self.reliable_coef),
-        }
-
-
-def fit_baselines(f: _Features, columns: np.ndarray) -> BaselineFit:
-    """The baselines' parameters from the scored trials of participants ``columns``."""
-    s = f.scored[:, columns]
-    y = f.rely[:, columns][s]
-    rate = (y.sum() + 1.0) / (y.size + 2.0)
-    last = f.last[:, columns][s]
-    q1 = (y[last == 1].sum() + 1.0) / ((last == 1).sum() + 2.0)
-    q0 = (y[last == 0].sum() + 1.0) / ((last == 0).sum() + 2.0)
-    beta = _logistic(f.reliable_logit[:, columns][s], y) if y.size else np.zeros(2)
-    return BaselineFit(float(rate), float(q1), float(q0), (float(beta[0]), float(beta[1])))
-
-
-def baseline_predictions(f: _Features, fit: BaselineFit) -> dict[str, np.ndarray]:
-    """Every baseline's P(rely), (T, N)."""
-    c = fit.rate
-    part = (f.rate_k + PRIOR_WEIGHT * c) / (f.rate_n + PRIOR_WEIGHT)
-    last = np.where(f.last == 1, fit.after_rely, np.where(f.last == 0, fit.after_intervene, c))
-    a, b = fit.reliable_coef
-    rel = 1.0 / (1.0 + np.exp(-(a + b * f.reliable_logit)))
-    return {
-        "constant": np.full(f.rely.shape, c),
-        "participant_rate": part,
-        "last_action": last,
-        "reliable_fraction": rel,
-    }
-
-
 # --------------------------------------------------------------------------- reports
 
 
@@ -430,7 +307,7 @@ def _report(
     p_model: np.ndarray,
     determined: np.ndarray,
     base: dict[str, np.ndarray],
-    feats: _Features,
+    feats: Features,
     bootstrap: int,
     seed: int,
     fold_of: np.ndarray | None,
@@ -488,20 +365,23 @@ def _report(
     )
 
 
-def _check_scored(feats: _Features) -> None:
+def _check_scored(feats: Features) -> None:
     if not feats.scored.any():
         raise FitError(["no trial to score: every recorded human action is fixed by the model (or none is recorded)"])
 
 
-def predict_in_sample(frame: pd.DataFrame, model: TrustModel, bootstrap: int = 1000, seed: int = 0) -> PredictionReport:
+def predict_in_sample(
+    frame: pd.DataFrame, model: TrustModel | IOHMMModel, bootstrap: int = 1000, seed: int = 0
+) -> PredictionReport:
     """One-step-ahead predictions of every trial under ``model`` (in-sample when ``model`` was
-    fitted to ``frame``), scored against the baselines estimated on the same trials."""
+    fitted to ``frame``), scored against the baselines estimated on the same trials (the inputs'
+    logistic regression with participant intercepts)."""
     spec, params = from_trust_model(model)
     seqs = encode(frame, spec)
     filt = filter_beliefs(seqs, params)
-    feats = _features(frame, seqs, filt.determined)
+    feats = features(frame, seqs, filt.determined, params.emission.shape[0], params.transition.shape[0])
     _check_scored(feats)
-    bfit = fit_baselines(feats, np.arange(seqs.n_participants))
+    bfit = fit_baselines(feats, np.arange(seqs.n_participants), intercepts=True)
     return _report(
         "in-sample",
         frame,
@@ -575,7 +455,9 @@ def predict_heldout(
         log.info("fold %d of %d: %d training participants, log-likelihood %.4f", f + 1, folds, len(train), fit.loglik)
         if progress is not None:
             progress(f + 1, folds)
-    feats = _features(frame, seqs, determined)
+    feats = features(
+        frame, seqs, determined, spec.n_combinations(spec.emission_inputs), spec.n_combinations(spec.transition_inputs)
+    )
     _check_scored(feats)
     base = {k: np.full((T, N), np.nan) for k in BASELINES}
     bfits = []

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -189,9 +189,13 @@ def select_levels(
     max_iter: int = 1000,
     progress: Callable[[str, int, int], None] | None = None,
     splits: int = SPLITS_PER_LEVEL,
+    widen: bool = False,
     **spec_options: Any,
 ) -> list[dict[str, Any]]:
     """Compare numbers of trust levels: BIC on all data and k-fold participant-held-out log-likelihood.
+
+    With ``widen``, while either criterion's best is the largest number compared (and below
+    :data:`MAX_LEVELS`), one more level is compared; such rows carry ``widened``.
 
     ``spec_options`` adjust the ``paper`` preset (as for :func:`~.fit.fit_trust_model`); with
     ``transition_inputs`` / ``emission_inputs`` other than a trust model's, the general model of
@@ -221,6 +225,7 @@ def select_levels(
     perm = np.random.default_rng(np.random.SeedSequence([seed, 2])).permutation(N)
     fold_of = np.empty(N, dtype=np.int64)
     fold_of[perm] = np.arange(N) % folds
+    levels = list(levels)
     total = len(levels) * (folds + 1)
     done = 0
 
@@ -246,7 +251,9 @@ def select_levels(
     rows: list[dict[str, Any]] = []
     prev_full: IOHMMFit | None = None
     prev_fold: list[IOHMMFit | None] = [None] * folds
-    for K in levels:
+    for K in widening(levels, rows, "levels", MAX_LEVELS if widen else 0):
+        if K not in levels:
+            total += folds + 1
         spec = base.with_levels(level_names(K))
         full = one_fit(seqs, spec, prev_full, [seed, 3, K], MOVE_SOURCES)
         prev_full = full
@@ -281,12 +288,27 @@ def select_levels(
                 "restart_logliks": full.restart_logliks,
                 "starts": len(full.runs),
                 "reached_best": hits,
+                "widened": K not in levels,
             }
         )
     mark_choices(rows, "levels")
     for w in selection_warnings(rows):
         log.warning("%s", w)
     return rows
+
+
+def widening(values: Sequence[int], rows: list[dict[str, Any]], key: str, cap: int) -> Iterator[int]:
+    """The numbers to compare: ``values``, then (``cap`` > 0) one more at a time while the best of
+    either criterion over ``rows`` (filled by the caller as each number is compared) is the largest
+    compared, up to ``cap``."""
+    yield from values
+    top = max(values)
+    while cap and top < cap and rows:
+        mark_choices(rows, key)
+        if not any((r["best_bic"] or r["best_heldout"]) and r[key] == top for r in rows):
+            return
+        top += 1
+        yield top
 
 
 def mark_choices(rows: Sequence[dict[str, Any]], key: str) -> None:

@@ -18,11 +18,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .mixture import MixtureFit, MixtureParams, MixtureWorkspace, fit_mixture, split_type_starts
-from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, mark_choices, reached_best, smooth_zero_rows
+from .mixture import MixtureFit, MixtureParams, MixtureWorkspace, fit_mixture, split_type_starts, types_spec
+from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, mark_choices, reached_best, smooth_zero_rows, widening
 from .sequences import Sequences, encode
 from .spec import FitError
-from .trust_iohmm import preset_spec
 
 log = logging.getLogger(__name__)
 
@@ -62,17 +61,19 @@ def select_types(
     max_iter: int = 1000,
     n_jobs: int | None = 1,
     progress: Callable[[str, int, int], None] | None = None,
+    widen: bool = False,
     **spec_options: Any,
 ) -> list[dict[str, Any]]:
     """Compare numbers of supervisor types (``types``, e.g. 1..4): per M the log-likelihood, how
     many starts reached it (within :data:`~.selection.BEST_TOLERANCE`), free parameters, AIC, BIC,
     the k-fold participant-held-out log-likelihood and the empty types; ``best_bic`` and
     ``best_heldout`` mark the choices.  :func:`type_selection_warnings` says when a choice is the
-    largest M compared."""
+    largest M compared; with ``widen`` one more M is compared while it is (up to :data:`MAX_TYPES`;
+    such rows carry ``widened``)."""
     types = sorted({int(m) for m in types})
     if not types or types[0] < 1:
         raise FitError([f"the numbers of types must be positive integers, got {list(types)}"])
-    spec = preset_spec("paper", frame, prior=prior, **spec_options)
+    spec = types_spec(frame, "paper", prior, **spec_options)
     seqs = encode(frame, spec)
     N = seqs.n_participants
     folds = max(2, min(folds, N))
@@ -81,6 +82,7 @@ def select_types(
     fold_of[perm] = np.arange(N) % folds
     total = len(types) * (folds + 1)
     done = 0
+    asked = list(types)
 
     def tick(label: str) -> None:
         nonlocal done
@@ -113,7 +115,8 @@ def select_types(
     prev_fold: list[MixtureFit | None] = [None] * folds
     pooled_full: MixtureFit | None = None
     pooled_fold: list[MixtureFit | None] = [None] * folds
-    for M in types:
+    for M in widening(asked, rows, "types", MAX_TYPES if widen else 0):
+        total += 0 if M in asked else folds + 1
         full = one_fit(seqs, M, prev_full, pooled_full, [seed, 3, M])
         prev_full = full
         if M == 1:
@@ -153,6 +156,7 @@ def select_types(
                 "restart_logliks": full.restart_logliks,
                 "starts": len(full.runs),
                 "reached_best": hits,
+                "widened": M not in asked,
             }
         )
     mark_choices(rows, "types")

@@ -3,11 +3,14 @@ participant belonging to one of them (the paper's Remark 1: "low trust is easily
 for some participants compared to others").
 
 A :class:`TypeMixture` holds the types' names, their weights (the share of the population)
-and one :class:`~trustseek.model.core.TrustModel` per type.  A plain model is the mixture of
-one type.  JSON::
+and one model per type: every type a :class:`~trustseek.model.core.TrustModel`, or (a study
+with other inputs) every type a general model (:class:`~trustseek.model.iohmm.IOHMMModel`)
+with the same levels, output and inputs.  A plain model is the mixture of one type.  Planning
+needs trust models: :meth:`TypeMixture.from_dict` refuses general types unless asked
+(``general=True``: decoding, prediction, per-person models).  JSON::
 
     {"format": "trustseek.mixture/1", "notes": "...",
-     "types": [{"name": "paper", "weight": 0.7, "model": {<trust model>}}, ...]}
+     "types": [{"name": "paper", "weight": 0.7, "model": {<trust model or general model>}}, ...]}
 """
 
 from __future__ import annotations
@@ -15,23 +18,26 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
-from .core import TrustModel
+from .core import TrustModel, planning_refusal
+from .iohmm import IOHMMModel, is_iohmm_file
 from .jsonfile import JsonFile, ModelError, freeze_arrays, raise_problems
 
 MIXTURE_FORMAT = "trustseek.mixture/1"
+M = TypeVar("M", bound="TrustModel | IOHMMModel")  # every type a trust model, or every type a general model
+N = TypeVar("N", bound="TrustModel | IOHMMModel")
 
 
 @dataclass(frozen=True, eq=False)
-class TypeMixture(JsonFile):
+class TypeMixture(JsonFile, Generic[M]):
     """M supervisor types: ``names[m]`` with population share ``weights[m]`` behaves like ``models[m]``."""
 
     names: tuple[str, ...]
     weights: np.ndarray
-    models: tuple[TrustModel, ...]
+    models: tuple[M, ...]
     notes: str = ""
 
     def __post_init__(self) -> None:
@@ -46,12 +52,21 @@ class TypeMixture(JsonFile):
         return len(self.models)
 
     @property
+    def general(self) -> bool:
+        """True when the types are general models (inputs a trust model does not have)."""
+        return isinstance(self.models[0], IOHMMModel)
+
+    @property
     def trust_levels(self) -> tuple[str, ...]:
-        return self.models[0].trust_levels
+        m = self.models[0]
+        return m.levels if isinstance(m, IOHMMModel) else m.trust_levels
 
     @property
     def complexities(self) -> tuple[str, ...]:
-        return self.models[0].complexities
+        m = self.models[0]
+        if isinstance(m, IOHMMModel):
+            raise ModelError([planning_refusal(m.used_inputs)])
+        return m.complexities
 
     def problems(self) -> list[str]:
         """Every violation of the mixture's constraints, as human-readable lines."""
@@ -68,6 +83,8 @@ class TypeMixture(JsonFile):
         elif not np.all(np.isfinite(self.weights)) or np.any(self.weights < 0) or abs(self.weights.sum() - 1) > 1e-6:
             problems.append(f"type weights must be non-negative and sum to 1, got {self.weights.tolist()}")
         first = self.models[0]
+        if isinstance(first, IOHMMModel):
+            return problems + self._general_problems()
         for name, m in zip(self.names, self.models, strict=False):
             if not isinstance(m, TrustModel):
                 problems.append(f"type {name!r}: expected a TrustModel, got {type(m).__name__}")
@@ -79,11 +96,32 @@ class TypeMixture(JsonFile):
                 )
         return problems
 
+    def _general_problems(self) -> list[str]:
+        """General types must share levels, output and inputs (their tables differ)."""
+        first = self.models[0]
+        assert isinstance(first, IOHMMModel)
+
+        def shape(m: IOHMMModel) -> tuple:
+            return (m.levels, m.output, m.output_categories, dict(m.inputs), m.emission_inputs, m.transition_inputs)
+
+        problems = []
+        for name, m in zip(self.names, self.models, strict=False):
+            if not isinstance(m, IOHMMModel):
+                problems.append(f"type {name!r}: expected a general model like type {self.names[0]!r}, got a trust model")
+            elif shape(m) != shape(first):
+                problems.append(
+                    f"type {name!r} has levels {list(m.levels)}, output {m.output!r} and inputs {dict(m.inputs)} "
+                    f"(emissions on {list(m.emission_inputs)}, transitions on {list(m.transition_inputs)}); type "
+                    f"{self.names[0]!r} has {list(first.levels)}, {first.output!r} and {dict(first.inputs)} (emissions on "
+                    f"{list(first.emission_inputs)}, transitions on {list(first.transition_inputs)}): every type must share them"
+                )
+        return problems
+
     # -- constructors -------------------------------------------------------
     @classmethod
-    def single(cls, model: TrustModel, name: str = "pooled") -> TypeMixture:
+    def single(cls, model: N, name: str = "pooled") -> TypeMixture[N]:
         """The mixture of one type."""
-        return cls((name,), np.ones(1), (model,))
+        return TypeMixture((name,), np.ones(1), (model,))
 
     def type_index(self, name: str) -> int:
         try:
@@ -91,7 +129,7 @@ class TypeMixture(JsonFile):
         except ValueError:
             raise ModelError([f"unknown supervisor type {name!r}; types: {list(self.names)}"]) from None
 
-    def with_weights(self, weights: Sequence[float]) -> TypeMixture:
+    def with_weights(self, weights: Sequence[float]) -> TypeMixture[M]:
         """The same types in other proportions (normalised; refused if negative or all zero)."""
         w = np.asarray(weights, dtype=np.float64).reshape(-1)
         if w.shape != (self.n_types,) or not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
@@ -123,9 +161,12 @@ class TypeMixture(JsonFile):
         }
 
     @classmethod
-    def from_dict(cls, d: Any, source: str | None = None) -> TypeMixture:
-        """A mixture from its JSON form; a plain trust model is read as one type named ``pooled``."""
+    def from_dict(cls, d: Any, source: str | None = None, general: bool = False) -> TypeMixture:
+        """A mixture from its JSON form; a plain model is read as one type named ``pooled``.  General
+        types (``trustseek.iohmm/1``) are read only with ``general`` (not for planning)."""
         if isinstance(d, Mapping) and d.get("format", "") != MIXTURE_FORMAT and "types" not in d:
+            if general and is_iohmm_file(d):
+                return cls.single(IOHMMModel.from_dict(d, source))
             return cls.single(TrustModel.from_dict(d, source))
         problems: list[str] = []
         if not isinstance(d, Mapping):
@@ -141,7 +182,7 @@ class TypeMixture(JsonFile):
             raise ModelError(problems, source)
         names: list[str] = []
         weights: list[float] = []
-        models: list[TrustModel] = []
+        models: list[Any] = []
         for i, t in enumerate(types):
             where = f"types[{i}]"
             if not isinstance(t, Mapping):
@@ -158,7 +199,11 @@ class TypeMixture(JsonFile):
                 problems.append(f"{where}.weight must be a non-negative number, got {weight!r}")
                 weight = 0.0
             try:
-                models.append(TrustModel.from_dict(t.get("model"), None))
+                raw = t.get("model")
+                if is_iohmm_file(raw) and not general:
+                    inputs = raw.get("inputs") if isinstance(raw, Mapping) and isinstance(raw.get("inputs"), Mapping) else {}
+                    raise ModelError([planning_refusal(tuple(inputs or ()))])
+                models.append(IOHMMModel.from_dict(raw, None) if is_iohmm_file(raw) else TrustModel.from_dict(raw, None))
             except ModelError as exc:
                 problems.extend(f"{where}.model: {p}" for p in exc.problems)
                 continue

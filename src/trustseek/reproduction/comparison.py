@@ -93,7 +93,8 @@ TOLERANCE = 0.005
 #: the rules of :func:`judge`, in words, as the report states them
 RULES = (
     f"not testable here: the cell is fixed by design (not estimated), there is no interval, or a probability's "
-    f"interval is wider than {MAX_WIDTH} (the design does not identify it);",
+    f"interval is wider than {MAX_WIDTH}, or its replicate experiments range more widely than that (the design does "
+    "not identify it: a bootstrap interval of an estimate at 0 or 1 can collapse there however little the data say);",
     "disagrees: the paper's effect has one sign and ours the opposite one (whatever the interval), or the paper's "
     f"value lies outside the interval (by more than {TOLERANCE}, the paper's rounding) and ours is not on the same "
     "side of the reference;",
@@ -118,16 +119,22 @@ def judge(
     max_width: float | None = None,
     reference: float | None = None,
     tol: float = TOLERANCE,
+    replicates: tuple[float, float] | list[float] | None = None,
 ) -> tuple[str, str]:
     """The verdict of one row and the reason, by :data:`RULES`.
 
     ``paper`` is the paper's number, or None for a qualitative claim that the quantity lies
     above ``reference`` (such as "better for most participants": a share above one half);
     ``reference`` (e.g. 0 for a difference) gives the row a direction; ``max_width`` is the
-    widest interval that still tests something (probabilities: :data:`MAX_WIDTH`).
+    widest interval that still tests something (probabilities: :data:`MAX_WIDTH`); ``replicates``
+    (min, max) of independent replicate experiments: wider than ``max_width``, the design does not
+    identify the quantity whatever the interval (a bootstrap at a boundary estimate can collapse).
     """
     if fixed:
         return NOT_TESTABLE, "fixed by design, not estimated"
+    if max_width is not None and replicates is not None and replicates[1] - replicates[0] > max_width:
+        lo_r, hi_r = replicates
+        return NOT_TESTABLE, f"not identified: the replicate experiments range over [{lo_r:.2f}, {hi_r:.2f}]"
     if interval is None or interval[0] is None or interval[1] is None:
         return NOT_TESTABLE, "no interval"
     lo, hi = float(interval[0]), float(interval[1])
@@ -212,9 +219,12 @@ def comparison_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
             interval, kind = rep_range, rep_kind
         if key in fixed:
             interval, kind, notes = None, "", []
-        rows.append(
-            _row(label, paper_val, fitted[key], interval, kind, "; ".join(notes), fixed=key in fixed, max_width=MAX_WIDTH)
-        )
+        row = _row(
+            label, paper_val, fitted[key], interval, kind, "; ".join(notes), fixed=key in fixed, max_width=MAX_WIDTH,
+            replicates=rep_range,
+        )  # fmt: skip
+        row["replicate_range"] = list(rep_range) if rep_range is not None else None
+        rows.append(row)
     plan = summary["plan"]
     th = summary["replicates"]["threshold"]
     rows.append(

@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from ..estimation.bootstrap import BOUNDARY
 from ..estimation.fit import fit_trust_model
 from ..model.core import TrustModel
 from ..simulation.designs import simulate_design
@@ -27,7 +28,10 @@ def coverage_study(
     Simulates ``datasets`` logs from ``model`` with the paper design, fits each with
     a ``bootstrap``-replicate participant bootstrap, and counts per estimated cell
     how often [lower, upper] contains the true value.  Returns one record per cell
-    (label, truth, coverage, mean interval width, mean estimate).  ``truth`` is the model the
+    (label, truth, coverage, mean interval width, mean estimate; and of the data sets whose
+    estimate of the cell lies at 0 or 1, how many (``at_boundary``), their coverage
+    (``boundary_coverage``, NaN without any) and how many of their intervals are the
+    likelihood-ratio ones (``likelihood``)).  ``truth`` is the model the
     intervals are scored against (default ``model``, the one the data come from; another one
     is a negative control).
     """
@@ -36,6 +40,8 @@ def coverage_study(
     widths: dict[str, list[float]] = {}
     ests: dict[str, list[float]] = {}
     truths: dict[str, float] = {}
+    edge: dict[str, list[float]] = {}
+    lr: dict[str, int] = {}
     for d in range(datasets):
         df = simulate_design(model, n_participants, seed=int(np.random.SeedSequence([seed, 5, d]).generate_state(1)[0]))
         res = fit_trust_model(df, restarts=restarts, seed=seed + d, bootstrap=bootstrap, n_jobs=n_jobs, tol=tol)
@@ -46,6 +52,10 @@ def coverage_study(
             hits.setdefault(key, []).append(float(c["lower"] - 1e-9 <= t <= c["upper"] + 1e-9))
             widths.setdefault(key, []).append(c["upper"] - c["lower"])
             ests.setdefault(key, []).append(c["estimate"])
+            if min(c["estimate"], 1 - c["estimate"]) < BOUNDARY:
+                edge.setdefault(key, []).append(hits[key][-1])
+                mark = res.intervals.likelihood.get(c["table"]) if res.intervals is not None else None
+                lr[key] = lr.get(key, 0) + int(mark is not None and bool(mark[tuple(c["index"])]))
     return [
         {
             "cell": k,
@@ -54,6 +64,9 @@ def coverage_study(
             "datasets": len(v),
             "mean_width": float(np.mean(widths[k])),
             "mean_estimate": float(np.mean(ests[k])),
+            "at_boundary": len(edge.get(k, [])),
+            "boundary_coverage": float(np.mean(edge[k])) if edge.get(k) else float("nan"),
+            "likelihood": lr.get(k, 0),
         }
         for k, v in hits.items()
     ]

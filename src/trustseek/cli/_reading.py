@@ -1,0 +1,135 @@
+"""Reading a model or supervisor types and the log they need, for the analysis commands (decode,
+predict, validate, personalize); the experience rule switch; the widened-range note of the
+selection commands."""
+
+from __future__ import annotations
+
+import atexit
+import json
+import shutil
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import typer
+
+from ..errors import TrustseekError
+from ._app import check_mapping_file, err_console, read_log
+
+if TYPE_CHECKING:
+    from ..model.core import TrustModel
+
+NoExperienceRuleOpt = typer.Option(
+    False,
+    "--no-experience-rule",
+    help="Do not check the paper's experience rule (an intervention ends faulty, an ask as the task says): for a "
+    'study where it does not hold, e.g. advice taking; as the mapping\'s "experience_rule": false.',
+)
+
+
+def rule_off(mapping: Path | None, off: bool) -> Path | None:
+    """The --mapping to read with: with ``off`` (--no-experience-rule), the mapping (or none) with
+    ``experience_rule`` false, written to a temporary file for this process (said on stderr)."""
+    if not off:
+        return mapping
+    from ..data import ColumnMapping
+
+    check_mapping_file(mapping)
+    merged = (ColumnMapping.load(mapping) if mapping is not None else ColumnMapping()).merged(
+        ColumnMapping(experience_rule=False)
+    )
+    folder = Path(tempfile.mkdtemp(prefix="trustseek-mapping-"))
+    atexit.register(shutil.rmtree, folder, True)
+    path = folder / "mapping.json"
+    path.write_text(json.dumps(merged.to_dict()), encoding="utf-8")
+    err_console.print("--no-experience-rule: the paper's experience rule is not checked", highlight=False)
+    return path
+
+
+def model_inputs(model: TrustModel) -> tuple[str, ...]:
+    """The inputs whose value changes some probability of ``model`` (a model fitted with
+    fewer inputs has identical tables along the others): the log columns decoding needs."""
+    import numpy as np
+
+    em = np.asarray(model.emission)  # [C, a, T, o]
+    tr = np.asarray(model.transition)  # [C, a, E, T, T']
+
+    def varies(arr: np.ndarray, axis: int) -> bool:
+        return bool(np.ptp(arr, axis=axis).max(initial=0.0) > 0.0) if arr.shape[axis] > 1 else False
+
+    used = []
+    if varies(em, 0) or varies(tr, 0):
+        used.append("complexity")
+    if varies(em, 1) or varies(tr, 1):
+        used.append("robot_action")
+    if varies(tr, 2):
+        used.append("experience")
+    return tuple(used)
+
+
+def fill_unused(frame, model: TrustModel, used: tuple[str, ...]):
+    """The log with the inputs ``model`` ignores filled with one valid value where absent."""
+    fill = {"complexity": model.complexities[0], "robot_action": "autonomous", "experience": "reliable"}
+    frame = frame.copy()
+    for col, value in fill.items():
+        if col not in used and frame[col].isna().all():
+            frame[col] = value
+    return frame
+
+
+def widened_note(rows, key: str, asked: int) -> list[str]:
+    """The line saying that the comparison went past the largest number asked, and why."""
+    more = [int(r[key]) for r in rows if r.get("widened")]
+    if not more:
+        return []
+    unit = key[:-1] if asked == 1 else key
+    return [f"the best was at {asked} {unit}, the largest asked: compared up to {max(more)} (--no-widen: only the range asked)"]
+
+
+def load_for_decoding(path: Path):
+    """A trust model, supervisor types (a mixture) or a general model, by the file's format; or a
+    preset name (paper, paper+conservative)."""
+    from ..model.iohmm import IOHMMModel, is_iohmm_file
+    from ..model.jsonfile import load_json
+    from ..model.mixture import TypeMixture
+    from ..model.presets import MIXTURE_PRESETS, load_mixture
+
+    if str(path) in MIXTURE_PRESETS and not path.exists():
+        return load_mixture(str(path))
+
+    d, source = load_json(path)
+    if is_iohmm_file(d):
+        return IOHMMModel.from_dict(d, source)
+    return TypeMixture.from_dict(d, source, general=True)
+
+
+def read_for_types(log, types, mapping, column, label, missing, delimiter, order=None):
+    """The log read for supervisor types or one model (a trust or general model): the columns they
+    use, those a trust model ignores filled."""
+    from ..model.mixture import TypeMixture
+
+    if not isinstance(types, TypeMixture):
+        types = TypeMixture.single(types)
+    if types.general:
+        return read_for_model(log, types.models[0], mapping, column, label, missing, delimiter, order)
+    used = tuple(dict.fromkeys(c for t in types.models for c in model_inputs(t)))
+    return fill_unused(read_log(log, mapping, column, label, used, missing, delimiter, order=order), types.models[0], used)
+
+
+def read_for_model(log, model, mapping, column, label, missing, delimiter, order=None):
+    """The log read with the columns a general model's inputs need: the canonical ones it uses,
+    and the others declared as the mapping's ``inputs``."""
+    from ..model.core import PLANNING_INPUTS
+
+    canonical = tuple(c for c in model.used_inputs if c in PLANNING_INPUTS)
+    frame = read_log(log, mapping, column, label, canonical, missing, delimiter, order=order)
+    absent = [c for c in model.used_inputs if c not in frame.columns]
+    if absent:
+        raise TrustseekError(
+            [
+                f"the model's input {c!r} is not a column of the log: declare it in the mapping's 'inputs' "
+                f'(e.g. "inputs": {{"{c}": {{"column": "...", "levels": {list(model.inputs[c])}}}}})'
+                for c in absent
+            ]
+        )
+    return frame

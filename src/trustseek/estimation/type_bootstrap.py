@@ -1,0 +1,132 @@
+"""Participant-bootstrap intervals of supervisor types (:func:`bootstrap_types`): each replicate
+refits the mixture to resampled participants, its types matched to the estimate's."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from .mixture import PARTS, MixtureFit, MixtureParams, fit_mixture, general_types
+from .sequences import Sequences
+from .spec import FitError, IOHMMSpec
+from .trust_iohmm import to_iohmm_model, to_trust_model
+
+
+@dataclass(frozen=True)
+class _TypeReplicate:
+    """One bootstrap replicate of a mixture fit, sent whole to a worker process."""
+
+    seqs: Sequences
+    spec: IOHMMSpec
+    types: int
+    differ: tuple[str, ...]
+    params: MixtureParams
+    seed: np.random.SeedSequence
+    restarts: int
+    tol: float
+    max_iter: int
+
+    def run(self) -> np.ndarray:
+        """The refitted types' TrustModel cells and weights, types matched to the estimate's."""
+        rng = np.random.default_rng(self.seed)
+        n = self.seqs.n_participants
+        sample = self.seqs.subset(rng.integers(0, n, n))
+        fit = fit_mixture(
+            sample,
+            self.spec,
+            self.types,
+            restarts=self.restarts,
+            seed=self.seed.spawn(1)[0],
+            differ=self.differ,
+            tol=self.tol,
+            max_iter=self.max_iter,
+            init=[self.params],
+            pooled=self.params.type_params(0),
+        )
+        ref = _type_vectors(self.spec, self.params)
+        rep = _type_vectors(self.spec, fit.params)
+        cost = ((ref[:, None, :] - rep[None, :, :]) ** 2).sum(-1)
+        _, cols = linear_sum_assignment(cost)
+        return np.concatenate([rep[cols].ravel(), fit.weights[cols]])
+
+
+def _type_vectors(spec: IOHMMSpec, params: MixtureParams) -> np.ndarray:
+    """(M, cells): every type's model cells (a TrustModel's, or a general model's), table after table."""
+    to_model = to_iohmm_model if general_types(spec) else to_trust_model
+    out = []
+    for m in range(params.initial.shape[0]):
+        tm = to_model(spec, params.type_params(m))
+        out.append(np.concatenate([np.asarray(getattr(tm, t), dtype=float).ravel() for t in PARTS]))
+    return np.array(out)
+
+
+@dataclass
+class TypeIntervals:
+    """Participant-bootstrap intervals of every type's TrustModel cells and weight: ``cells[name][table]
+    = (lower, upper)`` and ``weights[name] = (lower, upper)``; percentile intervals of replicates whose
+    types are matched to the estimate's (Hungarian assignment on the squared distance of their
+    cells), widened to contain the estimate (as :mod:`.bootstrap`)."""
+
+    cells: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]]
+    weights: dict[str, tuple[float, float]]
+    replicates: int
+    level: float
+
+
+def bootstrap_types(
+    fit: MixtureFit,
+    replicates: int,
+    seed: int = 0,
+    restarts: int = 2,
+    n_jobs: int | None = None,
+    level: float = 0.95,
+    progress: Callable[[int, int], None] | None = None,
+) -> TypeIntervals:
+    """Intervals at ``level`` for the types of ``fit`` over ``replicates`` resamples of the participants;
+    each replicate refits from the estimate and ``restarts`` seeded starts.  Replicate b uses the b-th
+    child of the seed, whatever the number of processes (``n_jobs``, default all cores)."""
+    if replicates < 1:
+        raise FitError([f"the bootstrap needs at least one replicate, got {replicates}"])
+    children = np.random.SeedSequence([seed, 1]).spawn(replicates)
+    jobs = [_TypeReplicate(fit.seqs, fit.spec, fit.n_types, fit.differ, fit.params, ch, restarts, 1e-6, 1000) for ch in children]
+    n_jobs = n_jobs or os.cpu_count() or 1
+    results: dict[int, np.ndarray] = {}
+
+    def done(i: int, res: np.ndarray) -> None:
+        results[i] = res
+        if progress is not None:
+            progress(len(results), replicates)
+
+    if n_jobs <= 1 or replicates == 1:
+        for i, job in enumerate(jobs):
+            done(i, job.run())
+    else:
+        with ProcessPoolExecutor(max_workers=min(n_jobs, replicates)) as ex:
+            futures = {ex.submit(job.run): i for i, job in enumerate(jobs)}
+            for f in as_completed(futures):
+                done(futures[f], f.result())
+    flat = np.vstack([results[i] for i in range(replicates)])
+    est = np.concatenate([_type_vectors(fit.spec, fit.params).ravel(), fit.weights])
+    a = (1 - level) / 2
+    lo, hi = np.quantile(flat, [a, 1 - a], axis=0)
+    lo, hi = np.minimum(lo, est), np.maximum(hi, est)
+    M = fit.n_types
+    per = (len(est) - M) // M
+    ref = fit.models()[0]
+    cells: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]] = {}
+    weights: dict[str, tuple[float, float]] = {}
+    for m, name in enumerate(fit.names):
+        pos = m * per
+        cells[name] = {}
+        for t in PARTS:
+            shape = np.asarray(getattr(ref, t)).shape
+            size = int(np.prod(shape))
+            cells[name][t] = (lo[pos : pos + size].reshape(shape), hi[pos : pos + size].reshape(shape))
+            pos += size
+        weights[name] = (float(lo[M * per + m]), float(hi[M * per + m]))
+    return TypeIntervals(cells, weights, replicates, level)
