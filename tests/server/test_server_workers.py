@@ -30,7 +30,7 @@ def two_workers(tmp_path):
     proc.wait(timeout=20)
 
 
-def test_robots_on_two_worker_processes(two_workers):
+def test_robots_and_a_preview_on_two_worker_processes(two_workers):
     url = two_workers
     admin = {"Authorization": f"Bearer {TOKEN}"}
     sessions = []
@@ -77,6 +77,7 @@ def test_robots_on_two_worker_processes(two_workers):
         beliefs = [(t["belief"], t["belief_after"]) for t in state["trials"]]
         # the belief carries over from each trial to the next, whichever process served it
         assert all(b[1] == nxt[0] for b, nxt in itertools.pairwise(beliefs))
+    check_a_preview(url, admin)
 
 
 def test_workers_option_is_validated():
@@ -86,3 +87,23 @@ def test_workers_option_is_validated():
 
     r = CliRunner().invoke(app, ["serve", "--workers", "0"])
     assert r.exit_code == 2 and "--workers" in r.output
+
+
+def check_a_preview(url: str, admin: dict[str, str]) -> None:
+    """The workers share the previews' database: a preview made by one process is served by
+    either, and nothing of it reaches the study's database."""
+    blocks = [{"policy": {"kind": "never-ask"}, "schedule": {"trials": ["low", "high"]}}]
+    study = httpx.post(f"{url}/api/studies", json={"name": "w", "blocks": blocks}, headers=admin).json()
+    link = httpx.post(f"{url}/api/studies/{study['id']}/preview", headers=admin).json()["link"]
+    h = {"Authorization": f"Bearer {link.rsplit('/', 1)[-1]}"}
+    # a new connection per request: requests spread over both processes
+    states = [httpx.get(f"{url}/api/session", headers=h) for _ in range(6)]
+    assert [r.status_code for r in states] == [200] * 6 and all(r.json()["preview"] for r in states)
+    sid = states[0].json()["session_id"]
+    assert httpx.post(f"{url}/api/sessions/{sid}/consent", json={"agree": True}, headers=h).status_code == 200
+    for n in (1, 2):
+        body = {"trial": n, "submission_id": f"p{n}", "human_action": "rely"}
+        assert httpx.post(f"{url}/api/sessions/{sid}/trials", json=body, headers=h).status_code == 200
+    assert httpx.get(f"{url}/api/session", headers=h).json()["ended"]
+    sessions = httpx.get(f"{url}/api/studies/{study['id']}/export", params={"table": "sessions"}, headers=admin)
+    assert sessions.status_code == 200 and len(sessions.text.strip().splitlines()) == 1  # the header alone

@@ -1,6 +1,7 @@
 // The participant API (see docs/experiments.md): the session token from the link authorizes
 // every call.  Trial submissions carry a client-made submission id, so a retry after a network
-// error cannot create a second trial.
+// error cannot create a second trial; event batches carry an id too, and are kept in the page's
+// storage until the server answers, so that a reloaded page sends what the last one left.
 
 export interface Current { trial: number; block: number; block_position: number; practice: boolean; complexity: string; robot_action: "autonomous" | "ask"; scene_seed: number;
   items?: { remaining: Record<string, number>; visible: Record<string, number> | null }; // a block whose policy picks the items
