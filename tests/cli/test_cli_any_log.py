@@ -67,6 +67,9 @@ def test_the_experience_rule_is_a_switch_too(advice):
     code, output = run_cli([*line, "-b", "0", "--no-experience-rule"])
     assert code == 0 and "--no-experience-rule: the paper's experience rule is not checked" in output, output
     assert json.loads((advice / "rule.json").read_text()) == mapping  # the user's mapping is left as it was
+    fit = ["fit", str(advice / "advice.csv"), "--mapping", str(advice / "rule.json"), *inputs, "-r", "1"]
+    code, output = run_cli([*fit, "--out", str(advice / "fitted.json"), "--no-experience-rule"])
+    assert code == 0 and "--no-experience-rule: the paper's experience rule is not checked" in output, output
 
 
 def test_types_personal_models_decoding_and_prediction_run_on_the_log(advice):

@@ -194,6 +194,7 @@ def fit(
     order: list[str] | None = OrderOpt,
     keep: list[str] | None = KeepOpt,
     quiet: bool = QuietOpt,
+    no_rule: bool = NoExperienceRuleOpt,
 ) -> None:
     """Estimate the supervisor's trust model from logged trials (extended Baum-Welch).
 
@@ -213,7 +214,7 @@ def fit(
         raise TrustseekError(["--keep carries log columns into --posteriors: give --posteriors"])
     tr, em, frame = _read_with_inputs(
         log,
-        mapping,
+        rule_off(mapping, no_rule),
         column,
         label,
         transitions_on,
