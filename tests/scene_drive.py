@@ -182,7 +182,9 @@ def _teleoperate(page, dev: Keyboard | Gamepad, at_grasp=None) -> dict:
         drive_to(page, dev, p["x"], p["y"])
     s = turn_to(page, dev, 0.0)
     contacts = s["contacts"]
-    # the gripper towards the shelf at its own height: it stops at what it strikes (a contact)
+    # the gripper towards the shelf at the height of the board under the item: it stops at
+    # what it strikes (a contact)
+    tool_to(page, dev, "z", "s.item.z - 0.095 - s.gripper.z")
     out = "l" if side < 0 else "j"
     dev.hold(page, out, f"s.contacts > {contacts}", dt=0.01)
     back = "j" if side < 0 else "l"

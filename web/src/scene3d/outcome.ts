@@ -3,9 +3,9 @@
 // (clean, regrip, slow), whatever the outcome, so its start tells nothing. A failure shows a
 // cause that fits the trial's complexity. Low complexity: a success lifts the item out and puts
 // it in the bin; a failure lets it slip out of the jaws on the way to the bin, to the floor.
-// High complexity: the item goes in the bin, then the base drives back around the obstacle in
-// the aisle; a success clears it, a failure cuts the corner: the base strikes the crate or the
-// cart, which is shoved aside, and the item is thrown out of the bin to the floor.
+// High complexity: the item goes in the bin, then the base sets off back around the obstacle in
+// the aisle; a success ends as it sets off, a failure cuts the corner: the base strikes the
+// crate or the cart, which is shoved aside, and the item is thrown out of the bin to the floor.
 
 import { AISLE_H, AISLE_W, BASE_H, BASE_W, Box, Layout, rng } from "../scene";
 import { Joints, Pose, Reach, STOW, forward, inverse, mix, reachAt } from "./arm";
@@ -40,6 +40,7 @@ export interface Held { joints: Joints; holding: boolean; item: V3; }
 /** The base's pose while it drives back (high complexity), and whether the item is in the bin. */
 export interface Frame extends Held { done: boolean; pose: Pose | null; inBin: boolean; }
 
+const BACK_PACE = 1.4; // the drive back runs this much faster than the approach (the robot hurries)
 const ease = (t: number) => (t <= 0 ? 0 : t >= 1 ? 1 : t * t * (3 - 2 * t));
 
 export class OutcomeAnimation {
@@ -118,7 +119,8 @@ export class OutcomeAnimation {
     this.stepFallers(dt);
     const settled = (this.item?.resting ?? false) && [...this.products.values()].every((f) => f.resting);
     let done: boolean;
-    if (this.kind === "success") done = this.back ? this.passed(pose) : t > tb + 1.8;
+    // a success ends once the base has set off (it goes on out of the picture); a failure drives on to its strike
+    if (this.kind === "success") done = this.back ? t > tb + 2.2 : t > tb + 1.8;
     else done = this.cause !== null && settled && t > (this.struck ? this.struck.t + 1.2 : g + 1.6);
     return { joints, holding, item: [...it] as V3, done, pose, inBin: inBin && !this.struck };
   }
@@ -132,10 +134,10 @@ export class OutcomeAnimation {
       this.shove = [o[0] * (1 - Math.exp(-4 * k)), o[1] * (1 - Math.exp(-4 * k)), 0];
       return this.struck.pose;
     }
-    const p = back.at(Math.max(0, s));
+    const p = back.at(Math.max(0, s) * BACK_PACE);
     if (this.kind !== "success" && this.overlaps(p)) {
       // the strike: the base stops short, the obstacle is shoved on, the item flies out of the bin
-      const prev = back.at(Math.max(0, s - 0.05));
+      const prev = back.at(Math.max(0, s - 0.05) * BACK_PACE);
       const d = [Math.cos(prev.heading), Math.sin(prev.heading)];
       const cart = this.obstacle!.kind === "cart";
       this.struck = { t: s, pose: prev, v: [d[0] * (cart ? 0.6 : 0.15), d[1] * (cart ? 0.6 : 0.15) + (cart ? 0.2 : 0.05) * Math.sign(d[1] || 1), 0] };
@@ -161,11 +163,6 @@ export class OutcomeAnimation {
       const pa = corners.map(([x, y]) => x * ax + y * ay), pb = oc.map(([x, y]) => x * ax + y * ay);
       return Math.max(...pa) <= Math.min(...pb) || Math.max(...pb) <= Math.min(...pa);
     });
-  }
-
-  /** A success's drive back is over once the base is past the obstacle. */
-  private passed(p: Pose | null): boolean {
-    return !!p && p.x < this.obstacle!.x - 1.0;
   }
 
   /** Drop the held item from `from` (called once, when the jaws let go). */
