@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.iohmm import IOHMMModel
-from . import save, style
+from . import finish, style
 from .model import _bars
 
 
@@ -57,7 +57,4 @@ def _plot_table(model: IOHMMModel, table: str, vals: np.ndarray, ylabel: str, ti
         ax.set_title(title)
         ax.set_ylim(0, 1.25)  # room for the legend above the bars
         ax.legend(loc="upper left", frameon=False, ncol=model.n_levels)
-        fig.tight_layout()
-        if path is not None:
-            save(fig, path)
-        return fig
+        return finish(fig, path)
