@@ -218,3 +218,14 @@ def value_ids(col: Column, table: dict[str, int]) -> np.ndarray:
         if t is not None and t != NAN_MARK:
             ids[j] = table.setdefault(same_value_key(t), len(table))
     return ids[col.codes]
+
+
+EMPTY, NAN, UNKNOWN = 1, 2, 3  # the kinds of a bad cell (0: a level, or an empty cell that may be empty)
+
+
+def report_kinds(problems: Problems, cc: Column, k: np.ndarray, heads: tuple[str, str, str]) -> None:
+    """The rows of each kind of bad cell (``k`` per row: ``EMPTY``, ``NAN``, ``UNKNOWN``), under
+    its head; an unknown value is shown."""
+    problems.rows(heads[0], np.flatnonzero(k == EMPTY))
+    problems.rows(heads[1], np.flatnonzero(k == NAN))
+    problems.rows(heads[2], np.flatnonzero(k == UNKNOWN), lambda r: repr(cc.texts[cc.codes[r]]))

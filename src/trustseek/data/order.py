@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .cells import NAN_MARK, SHOWN, Column, Problems
+from .cells import EMPTY, NAN, NAN_MARK, SHOWN, UNKNOWN, Column, Problems, report_kinds
 
 MAX_TRIAL = 2**31 - 1
 ALL = slice(None)  # the order of rows that are in trial order already
@@ -21,12 +21,12 @@ ALL = slice(None)  # the order of rows that are in trial order already
 def trial_numbers(problems: Problems, tc: Column, column: str) -> tuple[np.ndarray, np.ndarray]:
     """Trial numbers (integers >= 0; the distinct values are parsed once) and where they are valid."""
     t_lookup = np.zeros(len(tc.texts), dtype=np.int64)
-    t_kind = np.zeros(len(tc.texts), dtype=np.int8)  # 0 ok, 1 empty, 2 NaN, 3 not an integer >= 0
+    t_kind = np.zeros(len(tc.texts), dtype=np.int8)  # 0 ok, EMPTY, NAN, UNKNOWN: not an integer >= 0
     for j, t in enumerate(tc.texts):
         if t is None:
-            t_kind[j] = 1
+            t_kind[j] = EMPTY
         elif t == NAN_MARK:
-            t_kind[j] = 2
+            t_kind[j] = NAN
         else:
             try:
                 f = float(t)
@@ -35,16 +35,15 @@ def trial_numbers(problems: Problems, tc: Column, column: str) -> tuple[np.ndarr
             if f.is_integer() and 0 <= f <= MAX_TRIAL:
                 t_lookup[j] = int(f)
             else:
-                t_kind[j] = 3
+                t_kind[j] = UNKNOWN
     tkind = t_kind[tc.codes]
     expect = "expected an integer: trials numbered in increasing order, e.g. 1, 2, ... or 0, 1, ..."
-    problems.rows(f"{column}: empty trial index ({expect})", np.flatnonzero(tkind == 1))
-    problems.rows(f"{column}: value is NaN ({expect})", np.flatnonzero(tkind == 2))
-    problems.rows(
+    heads = (
+        f"{column}: empty trial index ({expect})",
+        f"{column}: value is NaN ({expect})",
         f"{column}: value is not an integer between 0 and {MAX_TRIAL}",
-        np.flatnonzero(tkind == 3),
-        lambda r: repr(tc.texts[tc.codes[r]]),
     )
+    report_kinds(problems, tc, tkind, heads)
     return t_lookup[tc.codes], tkind == 0
 
 

@@ -29,9 +29,9 @@ import numpy as np
 import pandas as pd
 
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
-from .cells import NAN_MARK, SHOWN, Column, DataError, Problems, same_value_key, spellings
+from .cells import EMPTY, NAN_MARK, SHOWN, UNKNOWN, Column, DataError, Problems, report_kinds, same_value_key, spellings
 from .joins import join_file
-from .levels import input_codes, one_rating_per_block, rating_codes
+from .levels import input_codes, level_lookup, one_rating_per_block, rating_codes
 from .mapping import CANONICAL, CATEGORICAL, RATING, ColumnMapping, as_mapping, label_key
 from .order import check_trials, order_trials, trial_numbers
 from .sources import RawLog, load_source, missing_column_hint
@@ -277,34 +277,25 @@ def _category_codes(problems: Problems, cc: Column, mapping: ColumnMapping, c: s
     empty cells, NaNs and unknown labels reported, with a hint for labels in another case."""
     allowed = mapping.categories(c)
     table = mapping.labels.get(c, {})
-    lookup = np.full(len(cc.texts), -1, dtype=np.int8)
-    kind = np.zeros(len(cc.texts), dtype=np.int8)  # 0 ok or empty human action, 1 empty, 2 NaN, 3 unknown
-    for j, t in enumerate(cc.texts):
-        if t is None:
-            kind[j] = 0 if c == "human_action" else 1
-            continue
-        if t == NAN_MARK:
-            kind[j] = 2
-            continue
-        label = next((table[s] for s in spellings(t) if s in table), t)
-        if label in allowed:
-            lookup[j] = allowed.index(label)
-        else:
-            kind[j] = 3
+    empty = 0 if c == "human_action" else EMPTY  # an empty human action: not recorded
+    lookup, kind = level_lookup(cc, table, lambda label: allowed.index(label) if label in allowed else None, np.int8, empty)
     k = kind[cc.codes]
     hint = "; leave the cell empty for not recorded" if c == "human_action" else ""
     known_labels = f"{sorted(table)} (mapped) or " if table else ""
-    problems.rows(f"{head}: empty value (expected one of {list(allowed)})", np.flatnonzero(k == 1))
-    problems.rows(f"{head}: value is NaN (expected one of {list(allowed)}{hint})", np.flatnonzero(k == 2))
-    problems.rows(
+    heads = (
+        f"{head}: empty value (expected one of {list(allowed)})",
+        f"{head}: value is NaN (expected one of {list(allowed)}{hint})",
         f"{head}: unknown category (expected one of {known_labels}{list(allowed)})",
-        np.flatnonzero(k == 3),
-        lambda r: repr(cc.texts[cc.codes[r]]),
     )
+    report_kinds(problems, cc, k, heads)
     near = {
-        t: a for j, t in enumerate(cc.texts) if kind[j] == 3 and t is not None for a in allowed if t.strip().lower() == a.lower()
+        t: a
+        for j, t in enumerate(cc.texts)
+        if kind[j] == UNKNOWN and t is not None
+        for a in allowed
+        if t.strip().lower() == a.lower()
     }
-    if near and (k == 3).any():
+    if near and (k == UNKNOWN).any():
         flags = " ".join(f"--label {c}:{t.strip()}={a}" for t, a in list(near.items())[:SHOWN])
         one = len(near) == 1
         problems.lines.append(
