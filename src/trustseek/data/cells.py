@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -229,3 +229,9 @@ def report_kinds(problems: Problems, cc: Column, k: np.ndarray, heads: tuple[str
     problems.rows(heads[0], np.flatnonzero(k == EMPTY))
     problems.rows(heads[1], np.flatnonzero(k == NAN))
     problems.rows(heads[2], np.flatnonzero(k == UNKNOWN), lambda r: repr(cc.texts[cc.codes[r]]))
+
+
+def unknown_entries(head: str, entry: Mapping[str, Any], allowed: Sequence[str]) -> list[str]:
+    """The problem of a mapping's entry with names it does not know (none: an empty list)."""
+    extra = set(entry) - set(allowed)
+    return [f"{head}: unknown entries {sorted(extra)} (expected {', '.join(allowed)})"] if extra else []
