@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -218,3 +218,20 @@ def value_ids(col: Column, table: dict[str, int]) -> np.ndarray:
         if t is not None and t != NAN_MARK:
             ids[j] = table.setdefault(same_value_key(t), len(table))
     return ids[col.codes]
+
+
+EMPTY, NAN, UNKNOWN = 1, 2, 3  # the kinds of a bad cell (0: a level, or an empty cell that may be empty)
+
+
+def report_kinds(problems: Problems, cc: Column, k: np.ndarray, heads: tuple[str, str, str]) -> None:
+    """The rows of each kind of bad cell (``k`` per row: ``EMPTY``, ``NAN``, ``UNKNOWN``), under
+    its head; an unknown value is shown."""
+    problems.rows(heads[0], np.flatnonzero(k == EMPTY))
+    problems.rows(heads[1], np.flatnonzero(k == NAN))
+    problems.rows(heads[2], np.flatnonzero(k == UNKNOWN), lambda r: repr(cc.texts[cc.codes[r]]))
+
+
+def unknown_entries(head: str, entry: Mapping[str, Any], allowed: Sequence[str]) -> list[str]:
+    """The problem of a mapping's entry with names it does not know (none: an empty list)."""
+    extra = set(entry) - set(allowed)
+    return [f"{head}: unknown entries {sorted(extra)} (expected {', '.join(allowed)})"] if extra else []

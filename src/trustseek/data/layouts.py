@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .cells import SHOWN, DataError, Problems, shorten
+from .cells import SHOWN, DataError, Problems, shorten, unknown_entries
 
 
 def explode_hint(columns: list[str]) -> str:
@@ -56,10 +56,7 @@ def explode_problems(e: Any) -> list[str]:
     expected = 'expected the columns holding per-trial lists (["choice", "difficulty"]) or {"columns": [...], "position": name}'
     if not isinstance(e, Mapping):
         return [f"explode: {expected}, got {e!r}"]
-    p = []
-    extra = set(e) - {"columns", "position"}
-    if extra:
-        p.append(f"explode: unknown entries {sorted(extra)} (expected columns, position)")
+    p = unknown_entries("explode", e, ("columns", "position"))
     cols = e.get("columns")
     if not isinstance(cols, list) or not cols or not all(isinstance(c, str) and c for c in cols):
         p.append(f"explode: {expected}, got {cols!r}")
@@ -75,10 +72,7 @@ def join_problems(j: Any) -> list[str]:
     """Everything wrong with a mapping's ``join`` entry."""
     if not isinstance(j, Mapping):
         return [f'join: expected {{"file": "ratings.csv", "on": ["participant"]}}, got {j!r}']
-    p = []
-    extra = set(j) - {"file", "on"}
-    if extra:
-        p.append(f"join: unknown entries {sorted(extra)} (expected file, on)")
+    p = unknown_entries("join", j, ("file", "on"))
     if not isinstance(j.get("file"), str) or not j.get("file"):
         p.append(f"join: 'file' names the second file (CSV, JSON or Parquet), got {j.get('file')!r}")
     on = j.get("on")

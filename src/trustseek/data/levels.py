@@ -8,12 +8,25 @@ levels); values outside the levels are reported with their rows (:class:`~.cells
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from .cells import NAN_MARK, Column, DataError, Problems, column_from_pandas, spellings, value_ids
+from .cells import (
+    EMPTY,
+    NAN,
+    NAN_MARK,
+    UNKNOWN,
+    Column,
+    DataError,
+    Problems,
+    column_from_pandas,
+    report_kinds,
+    spellings,
+    value_ids,
+)
 from .mapping import ColumnMapping, format_number, label_key
 
 
@@ -24,33 +37,45 @@ def input_codes(problems: Problems, cc: Column, mapping: ColumnMapping, name: st
     levels = mapping.input_levels()[name]
     table = {label_key(k): label_key(v) for k, v in (entry.get("labels") or {}).items()}
     by_spelling = {s: i for i, lv in enumerate(levels) for s in spellings(lv)}
-    lookup = np.full(len(cc.texts), -1, dtype=np.int16 if len(levels) < 2**15 else np.int32)
-    kind = np.zeros(len(cc.texts), dtype=np.int8)  # 0 ok, 1 empty, 2 NaN, 3 outside the levels
-    for j, t in enumerate(cc.texts):
-        if t is None:
-            kind[j] = 1
-            continue
-        if t == NAN_MARK:
-            kind[j] = 2
-            continue
-        label = next((table[s] for s in spellings(t) if s in table), t)
-        hit = next((by_spelling[s] for s in spellings(label) if s in by_spelling), None)
-        if hit is None:
-            kind[j] = 3
-        else:
-            lookup[j] = hit
+    dtype = np.int16 if len(levels) < 2**15 else np.int32
+    lookup, kind = level_lookup(
+        cc, table, lambda label: next((by_spelling[s] for s in spellings(label) if s in by_spelling), None), dtype
+    )
     k = kind[cc.codes]
     known = f"{sorted(table)} (mapped) or " if table else ""
     expected = f"expected one of {known}the levels {list(levels)}"
     head = f"column {src!r} (input {name!r})"
-    problems.rows(f"{head}: empty value ({expected})", np.flatnonzero(k == 1))
-    problems.rows(f"{head}: value is NaN ({expected})", np.flatnonzero(k == 2))
-    problems.rows(
+    heads = (
+        f"{head}: empty value ({expected})",
+        f"{head}: value is NaN ({expected})",
         f"{head}: value outside the declared levels ({expected})",
-        np.flatnonzero(k == 3),
-        lambda r: repr(cc.texts[cc.codes[r]]),
     )
+    report_kinds(problems, cc, k, heads)
     return lookup[cc.codes]
+
+
+def level_lookup(
+    cc: Column, table: dict[str, str], find: Callable[[str], int | None], dtype: Any, empty: int = EMPTY
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per distinct value of ``cc`` its level's code (-1: none) and its kind (0 ok, ``empty`` for an
+    empty cell, ``NAN``, ``UNKNOWN``): a value is looked up once, in the label ``table`` (any
+    spelling), then by ``find``."""
+    lookup = np.full(len(cc.texts), -1, dtype=dtype)
+    kind = np.zeros(len(cc.texts), dtype=np.int8)
+    for j, t in enumerate(cc.texts):
+        if t is None:
+            kind[j] = empty
+            continue
+        if t == NAN_MARK:
+            kind[j] = NAN
+            continue
+        label = next((table[s] for s in spellings(t) if s in table), t)
+        hit = find(label)
+        if hit is None:
+            kind[j] = UNKNOWN
+        else:
+            lookup[j] = hit
+    return lookup, kind
 
 
 def rating_codes(problems: Problems, rc: Column, mapping: ColumnMapping, name: str) -> np.ndarray:

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from ..vocab import ACTIONS, CATEGORICAL_COLUMNS, EXPERIENCES, HUMAN_ACTIONS, TRIAL_COLUMNS
-from .cells import DataError, shorten
+from .cells import DataError, shorten, unknown_entries
 from .layouts import explode_entry, explode_problems, join_entry, join_problems
 from .wide import wide_entry, wide_problems
 
@@ -424,10 +424,7 @@ def _rating_problems(r: Any) -> list[str]:
     head = "rating"
     if not isinstance(r, Mapping):
         return [f'{head}: expected {{"column": name, "levels": [...]}} or {{"column": name, "bins": [edges]}}, got {r!r}']
-    p = []
-    extra = set(r) - {"column", "levels", "labels", "bins", "per"}
-    if extra:
-        p.append(f"{head}: unknown entries {sorted(extra)} (expected column, levels, labels, bins, per)")
+    p = unknown_entries(head, r, ("column", "levels", "labels", "bins", "per"))
     per = r.get("per")
     if per is not None and (not isinstance(per, str) or not per):
         p.append(f"{head}: 'per' names the column of the block a rating belongs to (e.g. \"block\"), got {per!r}")
@@ -489,9 +486,7 @@ def _input_problems(name: str, entry: Any) -> list[str]:
     p = []
     if name in CANONICAL or name == RATING or not name:
         p.append(f"{head}: the name is taken (canonical columns and 'rating'); name the input otherwise")
-    extra = set(entry) - {"column", "levels", "labels"}
-    if extra:
-        p.append(f"{head}: unknown entries {sorted(extra)} (expected column, levels, labels)")
+    p += unknown_entries(head, entry, ("column", "levels", "labels"))
     col = entry.get("column", name)
     if not isinstance(col, str) or not col:
         p.append(f"{head}: 'column' must name the log's column, got {col!r}")

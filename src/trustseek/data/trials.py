@@ -14,13 +14,13 @@ values (:mod:`.cells`), each distinct value is checked once, and the problems ar
 with array operations.  Problems are reported through :class:`~.cells.DataError`, one
 line per kind of problem with the file, the column, how many rows and the first few of
 them (``row N`` is the N-th data row, the header not counted, in every format).  The
-mapping lives in :mod:`.mapping`, the file formats in :mod:`.sources`; this module reads
-(:func:`read_trials`: columns, labels, order, trial numbers, experience) and writes.
+mapping lives in :mod:`.mapping`, the file formats in :mod:`.sources`, trial numbers and
+order in :mod:`.order`; this module reads (:func:`read_trials`, one step per function: columns,
+drop rules, participants, trials, derived columns, labels, rating, experience) and writes.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -29,15 +29,13 @@ import numpy as np
 import pandas as pd
 
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
-from .cells import NAN_MARK, SHOWN, Column, DataError, Problems, same_value_key, spellings
+from .cells import EMPTY, NAN_MARK, SHOWN, UNKNOWN, Column, DataError, Problems, report_kinds, same_value_key, spellings
 from .joins import join_file
-from .levels import input_codes, one_rating_per_block, rating_codes
+from .levels import input_codes, level_lookup, one_rating_per_block, rating_codes
 from .mapping import CANONICAL, CATEGORICAL, RATING, ColumnMapping, as_mapping, label_key
-from .sources import load_source, missing_column_hint
+from .order import check_trials, order_trials, trial_numbers
+from .sources import RawLog, load_source, missing_column_hint
 from .wide import unpivot
-
-MAX_TRIAL = 2**31 - 1
-ALL = slice(None)  # the order of rows that are in trial order already
 
 
 def read_trials(
@@ -69,15 +67,7 @@ def read_trials(
     Raises :class:`DataError` listing every kind of problem at once.
     """
     mapping = as_mapping(mapping)
-    ordered = mapping.order is not None
-    if required is None:  # a mapping that declares inputs is for a model of those: the canonical inputs are optional
-        required = ("participant", "trial", "human_action") if mapping.inputs else CANONICAL
-    required = tuple(required)
-    for col in ("trial", "participant"):
-        if col not in required:
-            required = (col, *required)
-    if ordered:
-        required = tuple(c for c in required if c != "trial")
+    required = _required(mapping, required)
     theirs = {c: mapping.columns.get(c, c) for c in CANONICAL}
     markers = frozenset(m.strip().lower() for m in (mapping.missing or ()))
     raw = load_source(source, delimiter or mapping.delimiter, markers, mapping.explode)
@@ -87,12 +77,77 @@ def read_trials(
     joined: list[str] = []
     if mapping.join is not None:
         raw, joined = join_file(raw, mapping.join, theirs["participant"], markers)
-    derived = mapping.derived
+    known = _check_columns(raw, mapping, theirs, required, delimiter)
+    rowid, dropped = _drop_rows(raw, mapping, markers)
+    get = _Columns(raw, rowid)
+    present = [c for c in CANONICAL if theirs[c] in known]
+    canonical = [theirs[c] for c in present if theirs[c] in raw.columns]
+    if raw.release is not None:  # the canonical columns as codes; the file's copy of them goes
+        for c in canonical:
+            get(c)
+        raw.release(canonical)
+    problems = Problems(rowid)
 
-    # every column the mapping names must exist: in the log, or derived from earlier columns
+    def column(c: str) -> str:
+        return f"column {theirs[c]!r}"
+
+    pcode, ids = _participants(problems, get(theirs["participant"]), column("participant"))
+    trial, perm = _trials(problems, get, mapping, pcode, ids, column("trial"))
+    _derive(get, mapping, pcode, perm)
+    codes = _categories(problems, get, mapping, present, column)
+    nothing_recorded = "human_action" in present and not (codes["human_action"] >= 0).any()
+    if "human_action" in required and nothing_recorded and not any(column("human_action") in x for x in problems.lines):
+        problems.lines.append(
+            f"{column('human_action')}: no trial has a recorded human action (every cell is empty): nothing to fit"
+        )
+    rated = _ratings(problems, get, mapping, pcode, perm)
+    by_input = {
+        inp: input_codes(problems, get(src), mapping, inp, src) for inp in mapping.inputs for src in (mapping.input_column(inp),)
+    }
+    if check_experience and mapping.experience_rule is not False:
+        _check_experience(problems, codes, mapping, present, column)
+    if problems.lines:
+        raise DataError(problems.lines, name)
+    frame = _frame(pcode, ids, trial, codes, rated, by_input, mapping)
+    del codes
+    used = {theirs[c] for c in present} | {mapping.input_column(inp) for inp in mapping.inputs}
+    if mapping.order is None:
+        used.add(theirs["trial"])
+    if rated is not None:
+        used.add(mapping.rating["column"])  # type: ignore[index]
+    extras = [c for c in raw.columns if c not in used and c not in frame.columns]
+    if extras:
+        more = raw.extras(extras)
+        for c in extras:
+            values = more[c] if rowid is None else more[c].iloc[rowid]
+            frame[c] = values.to_numpy() if isinstance(source, pd.DataFrame) else values.values
+    frame.attrs["dropped"] = dropped
+    frame.attrs["joined"] = joined
+    return frame
+
+
+def _required(mapping: ColumnMapping, required: Sequence[str] | None) -> tuple[str, ...]:
+    """The canonical columns the log must have: participant and trial always (trial unless the
+    mapping orders the trials by its own columns)."""
+    if required is None:  # a mapping that declares inputs is for a model of those: the canonical inputs are optional
+        required = ("participant", "trial", "human_action") if mapping.inputs else CANONICAL
+    required = tuple(required)
+    for col in ("trial", "participant"):
+        if col not in required:
+            required = (col, *required)
+    if mapping.order is not None:
+        required = tuple(c for c in required if c != "trial")
+    return required
+
+
+def _check_columns(
+    raw: RawLog, mapping: ColumnMapping, theirs: dict[str, str], required: tuple[str, ...], delimiter: str | None
+) -> set[str]:
+    """Every column the mapping names must exist, in the log or derived from earlier columns;
+    returns the columns known (the log's and the derived ones)."""
     lines = []
     known = set(raw.columns)
-    for new, d in derived.items():
+    for new, d in mapping.derived.items():
         sources = list(d["equal"]) if "equal" in d else [d["shift"]]
         for s in sources:
             if s not in known:
@@ -122,12 +177,15 @@ def read_trials(
         lines.append(f"missing column {theirs[c]!r}{via}; columns present: {raw.columns}")
     if lines:
         hints = missing_column_hint(absent, raw.columns, delimiter or mapping.delimiter) if absent else []
-        raise DataError(lines + hints, name)
+        raise DataError(lines + hints, raw.name)
     if raw.n == 0:
-        raise DataError(["the log has no trials (only a header)"], name)
+        raise DataError(["the log has no trials (only a header)"], raw.name)
+    return known
 
-    # rows to drop, each rule counted on the rows the rules before it left
-    rowid: np.ndarray | None = None
+
+def _drop_rows(raw: RawLog, mapping: ColumnMapping, markers: frozenset[str]) -> tuple[np.ndarray | None, list[tuple[str, int]]]:
+    """The rows kept (None: every row) and per drop rule the rows it drops, each rule counted on
+    the rows the rules before it left."""
     keep = np.ones(raw.n, dtype=bool)
     dropped: list[tuple[str, int]] = []
     for rule in mapping.drop:
@@ -138,134 +196,140 @@ def read_trials(
         count = int(hit.sum())
         keep &= ~hit
         dropped.append((f"{rule['column']} in {rule['values']}", count))
-    if not keep.all():
-        rowid = np.flatnonzero(keep)
-    n = raw.n if rowid is None else len(rowid)
-    if n == 0:
-        raise DataError([f"every row is dropped by the drop rules ({'; '.join(f'{r}: {k}' for r, k in dropped)})"], name)
-    del keep
-    cols: dict[str, Column] = {}
+    if keep.all():
+        return None, dropped
+    if not keep.any():
+        raise DataError([f"every row is dropped by the drop rules ({'; '.join(f'{r}: {k}' for r, k in dropped)})"], raw.name)
+    return np.flatnonzero(keep), dropped
 
-    def get(c: str) -> Column:
-        if c not in cols:
-            col = raw.col(c)
-            cols[c] = col if rowid is None else col.take(rowid)
-        return cols[c]
 
-    present = [c for c in CANONICAL if theirs[c] in known]
-    canonical = [theirs[c] for c in present if theirs[c] in raw.columns]
-    if raw.release is not None:  # the canonical columns as codes; the file's copy of them goes
-        for c in canonical:
-            get(c)
-        raw.release(canonical)
-    problems = Problems(rowid)
+class _Columns:
+    """The log's columns as codes, each read on first use (the kept rows only), and the derived columns."""
 
-    def column(c: str) -> str:
-        return f"column {theirs[c]!r}"
+    def __init__(self, raw: RawLog, rowid: np.ndarray | None) -> None:
+        self.raw, self.rowid = raw, rowid
+        self.n = raw.n if rowid is None else len(rowid)
+        self.cols: dict[str, Column] = {}
 
-    # participant: codes into the distinct ids, in order of first appearance
-    pc_ = get(theirs["participant"])
+    def __call__(self, c: str) -> Column:
+        if c not in self.cols:
+            col = self.raw.col(c)
+            self.cols[c] = col if self.rowid is None else col.take(self.rowid)
+        return self.cols[c]
+
+
+def _participants(problems: Problems, pc_: Column, head: str) -> tuple[np.ndarray, list[str]]:
+    """Codes into the distinct participant ids, in order of first appearance; empty ids and NaNs reported."""
     pcode, ids = _participant_codes(pc_)
     empty = pc_.mask([t is None for t in pc_.texts])
-    problems.rows(f"{column('participant')}: empty participant id", np.flatnonzero(empty))
-    problems.rows(f"{column('participant')}: value is NaN", np.flatnonzero((pcode < 0) & ~empty))
-    del empty
+    problems.rows(f"{head}: empty participant id", np.flatnonzero(empty))
+    problems.rows(f"{head}: value is NaN", np.flatnonzero((pcode < 0) & ~empty))
+    return pcode, ids
 
-    perm: np.ndarray | slice | None = None
-    if ordered:
-        trial, valid, perm = _order_trials(problems, get, list(mapping.order or ()), pcode, ids)
-    else:
-        trial, valid = _trial_numbers(problems, get(theirs["trial"]), column("trial"))
-        valid &= pcode >= 0
-        if valid.all():  # the usual case: no copies of the columns
-            perm = _check_trials(problems, pcode, trial, None, ids, column("trial"))
-        elif valid.any():
-            ok = np.flatnonzero(valid)
-            _check_trials(problems, pcode[ok], trial[ok], ok, ids, column("trial"))
 
-    # derived columns, in the order they are defined
-    for new, d in derived.items():
+def _trials(
+    problems: Problems, get: _Columns, mapping: ColumnMapping, pcode: np.ndarray, ids: list[str], head: str
+) -> tuple[np.ndarray, np.ndarray | slice | None]:
+    """Trial numbers (from the trial column, or counted along the mapping's order columns) and the
+    order of the rows by participant and trial (None where the order is broken)."""
+    if mapping.order is not None:
+        trial, _, perm = order_trials(problems, get, list(mapping.order), pcode, ids)
+        return trial, perm
+    trial, valid = trial_numbers(problems, get(mapping.columns.get("trial", "trial")), head)
+    valid &= pcode >= 0
+    if valid.all():  # the usual case: no copies of the columns
+        return trial, check_trials(problems, pcode, trial, None, ids, head)
+    if valid.any():
+        ok = np.flatnonzero(valid)
+        check_trials(problems, pcode[ok], trial[ok], ok, ids, head)
+    return trial, None
+
+
+def _derive(get: _Columns, mapping: ColumnMapping, pcode: np.ndarray, perm: np.ndarray | slice | None) -> None:
+    """The mapping's derived columns, in the order they are defined."""
+    for new, d in mapping.derived.items():
         if "equal" in d:
             a, b = (get(s) for s in d["equal"])
-            cols[new] = _equal(a, b)
+            get.cols[new] = _equal(a, b)
         elif perm is not None:
             fill = d.get("fill")
-            cols[new] = _shift(get(d["shift"]), pcode, perm, int(d.get("by", 1)), None if fill is None else label_key(fill))
-        else:  # the trial order is broken (reported above): nothing to shift by
-            cols[new] = Column(np.zeros(n, np.int32), [None])
+            shifted = _shift(get(d["shift"]), pcode, perm, int(d.get("by", 1)), None if fill is None else label_key(fill))
+            get.cols[new] = shifted
+        else:  # the trial order is broken (reported already): nothing to shift by
+            get.cols[new] = Column(np.zeros(get.n, np.int32), [None])
 
-    # categories: each distinct value is looked up once (in the mapping's labels, then the canonical labels)
+
+def _categories(
+    problems: Problems, get: _Columns, mapping: ColumnMapping, present: list[str], column: Any
+) -> dict[str, np.ndarray]:
+    """Per categorical column the codes into its canonical labels (-1 = none)."""
     codes: dict[str, np.ndarray] = {}
     for c in CATEGORICAL:
-        if c not in present:
-            codes[c] = np.full(n, -1, dtype=np.int8)
-            continue
-        cc = get(theirs[c])
-        allowed = mapping.categories(c)
-        table = mapping.labels.get(c, {})
-        lookup = np.full(len(cc.texts), -1, dtype=np.int8)
-        kind = np.zeros(len(cc.texts), dtype=np.int8)  # 0 ok or empty human action, 1 empty, 2 NaN, 3 unknown
-        for j, t in enumerate(cc.texts):
-            if t is None:
-                kind[j] = 0 if c == "human_action" else 1
-                continue
-            if t == NAN_MARK:
-                kind[j] = 2
-                continue
-            label = next((table[s] for s in spellings(t) if s in table), t)
-            if label in allowed:
-                lookup[j] = allowed.index(label)
-            else:
-                kind[j] = 3
-        codes[c] = lookup[cc.codes]
-        k = kind[cc.codes]
-        hint = "; leave the cell empty for not recorded" if c == "human_action" else ""
-        known_labels = f"{sorted(table)} (mapped) or " if table else ""
-        problems.rows(f"{column(c)}: empty value (expected one of {list(allowed)})", np.flatnonzero(k == 1))
-        problems.rows(f"{column(c)}: value is NaN (expected one of {list(allowed)}{hint})", np.flatnonzero(k == 2))
-        problems.rows(
-            f"{column(c)}: unknown category (expected one of {known_labels}{list(allowed)})",
-            np.flatnonzero(k == 3),
-            lambda r, cc=cc: repr(cc.texts[cc.codes[r]]),
-        )
-        near = {
-            t: a
-            for j, t in enumerate(cc.texts)
-            if kind[j] == 3 and t is not None
-            for a in allowed
-            if t.strip().lower() == a.lower()
-        }
-        if near and (k == 3).any():
-            flags = " ".join(f"--label {c}:{t.strip()}={a}" for t, a in list(near.items())[:SHOWN])
-            one = len(near) == 1
-            problems.lines.append(
-                f"hint: {', '.join(repr(t) for t in list(near)[:SHOWN])} {'is a label' if one else 'are labels'} written "
-                f"in another case or with spaces: map {'it' if one else 'them'} with {flags} (or a mapping file's labels)"
-            )
-        del k
-    nothing_recorded = "human_action" in present and not (codes["human_action"] >= 0).any()
-    if "human_action" in required and nothing_recorded and not any(column("human_action") in x for x in problems.lines):
-        problems.lines.append(
-            f"{column('human_action')}: no trial has a recorded human action (every cell is empty): nothing to fit"
-        )
+        if c in present:
+            codes[c] = _category_codes(problems, get(mapping.columns.get(c, c)), mapping, c, column(c))
+        else:
+            codes[c] = np.full(get.n, -1, dtype=np.int8)
+    return codes
 
-    rated = None
-    if rating_col is not None:
-        rc = cols[rating_col] if rating_col in cols else get(rating_col)
-        rated = rating_codes(problems, rc, mapping, rating_col)
-        if per is not None and perm is not None:
-            order = np.arange(n) if isinstance(perm, slice) else perm
-            rated = one_rating_per_block(problems, rated, pcode, cols[per] if per in cols else get(per), order, per, rating_col)
-    by_input = {
-        inp: input_codes(problems, cols[src] if src in cols else get(src), mapping, inp, src)
-        for inp in mapping.inputs
-        for src in (mapping.input_column(inp),)
+
+def _category_codes(problems: Problems, cc: Column, mapping: ColumnMapping, c: str, head: str) -> np.ndarray:
+    """Each distinct value looked up once (in the mapping's labels, then the canonical labels);
+    empty cells, NaNs and unknown labels reported, with a hint for labels in another case."""
+    allowed = mapping.categories(c)
+    table = mapping.labels.get(c, {})
+    empty = 0 if c == "human_action" else EMPTY  # an empty human action: not recorded
+    lookup, kind = level_lookup(cc, table, lambda label: allowed.index(label) if label in allowed else None, np.int8, empty)
+    k = kind[cc.codes]
+    hint = "; leave the cell empty for not recorded" if c == "human_action" else ""
+    known_labels = f"{sorted(table)} (mapped) or " if table else ""
+    heads = (
+        f"{head}: empty value (expected one of {list(allowed)})",
+        f"{head}: value is NaN (expected one of {list(allowed)}{hint})",
+        f"{head}: unknown category (expected one of {known_labels}{list(allowed)})",
+    )
+    report_kinds(problems, cc, k, heads)
+    near = {
+        t: a
+        for j, t in enumerate(cc.texts)
+        if kind[j] == UNKNOWN and t is not None
+        for a in allowed
+        if t.strip().lower() == a.lower()
     }
-    if check_experience and mapping.experience_rule is not False:
-        _check_experience(problems, codes, mapping, present, column)
-    if problems.lines:
-        raise DataError(problems.lines, name)
+    if near and (k == UNKNOWN).any():
+        flags = " ".join(f"--label {c}:{t.strip()}={a}" for t, a in list(near.items())[:SHOWN])
+        one = len(near) == 1
+        problems.lines.append(
+            f"hint: {', '.join(repr(t) for t in list(near)[:SHOWN])} {'is a label' if one else 'are labels'} written "
+            f"in another case or with spaces: map {'it' if one else 'them'} with {flags} (or a mapping file's labels)"
+        )
+    return lookup[cc.codes]
 
+
+def _ratings(
+    problems: Problems, get: _Columns, mapping: ColumnMapping, pcode: np.ndarray, perm: np.ndarray | slice | None
+) -> np.ndarray | None:
+    """Per row the code of the rating's level (None: the mapping has no rating), kept once per block
+    when the rating is given ``per`` block."""
+    if mapping.rating is None:
+        return None
+    rating_col, per = mapping.rating["column"], mapping.rating.get("per")
+    rated = rating_codes(problems, get(rating_col), mapping, rating_col)
+    if per is not None and perm is not None:
+        order = np.arange(get.n) if isinstance(perm, slice) else perm
+        rated = one_rating_per_block(problems, rated, pcode, get(per), order, per, rating_col)
+    return rated
+
+
+def _frame(
+    pcode: np.ndarray,
+    ids: list[str],
+    trial: np.ndarray,
+    codes: dict[str, np.ndarray],
+    rated: np.ndarray | None,
+    by_input: dict[str, np.ndarray],
+    mapping: ColumnMapping,
+) -> pd.DataFrame:
+    """The canonical columns as a frame (categoricals with the canonical labels), then the rating and the inputs."""
     frame = pd.DataFrame(
         {
             "participant": pd.Categorical.from_codes(pcode, categories=pd.Index(ids, dtype=object)),
@@ -274,30 +338,16 @@ def read_trials(
     )
     for c in CATEGORICAL:
         frame[c] = pd.Categorical.from_codes(codes[c], categories=pd.Index(list(mapping.categories(c)), dtype=object))
-    del codes
-    used = {theirs[c] for c in present}
-    if not ordered:
-        used.add(theirs["trial"])
-    if rated is not None and rating_col is not None:
+    if rated is not None and mapping.rating is not None:
         levels = pd.Index(list(mapping.rating_levels()), dtype=object)
         frame[RATING] = pd.Categorical.from_codes(rated, categories=levels, ordered=True)
         frame.attrs["rating_levels"] = tuple(levels)
-        frame.attrs["rating_column"] = rating_col
-        frame.attrs["rating_per"] = per
-        used.add(rating_col)
+        frame.attrs["rating_column"] = mapping.rating["column"]
+        frame.attrs["rating_per"] = mapping.rating.get("per")
     for inp, levels in mapping.input_levels().items():
         frame[inp] = pd.Categorical.from_codes(by_input[inp], categories=pd.Index(list(levels), dtype=object))
-        used.add(mapping.input_column(inp))
     if mapping.inputs:
         frame.attrs["inputs"] = mapping.input_levels()
-    extras = [c for c in raw.columns if c not in used and c not in frame.columns]
-    if extras:
-        more = raw.extras(extras)
-        for c in extras:
-            values = more[c] if rowid is None else more[c].iloc[rowid]
-            frame[c] = values.to_numpy() if isinstance(source, pd.DataFrame) else values.values
-    frame.attrs["dropped"] = dropped
-    frame.attrs["joined"] = joined
     return frame
 
 
@@ -319,103 +369,6 @@ def _participant_codes(pc_: Column) -> tuple[np.ndarray, list[str]]:
     if c.dtype == np.int32 and np.array_equal(lookup[:used], np.arange(used)):
         return c, list(ids)  # the codes are the ids' indices already (a file's distinct values in order)
     return lookup[c], list(ids)
-
-
-def _trial_numbers(problems: Problems, tc: Column, column: str) -> tuple[np.ndarray, np.ndarray]:
-    """Trial numbers (integers >= 0; the distinct values are parsed once) and where they are valid."""
-    t_lookup = np.zeros(len(tc.texts), dtype=np.int64)
-    t_kind = np.zeros(len(tc.texts), dtype=np.int8)  # 0 ok, 1 empty, 2 NaN, 3 not an integer >= 0
-    for j, t in enumerate(tc.texts):
-        if t is None:
-            t_kind[j] = 1
-        elif t == NAN_MARK:
-            t_kind[j] = 2
-        else:
-            try:
-                f = float(t)
-            except ValueError:
-                f = math.nan
-            if f.is_integer() and 0 <= f <= MAX_TRIAL:
-                t_lookup[j] = int(f)
-            else:
-                t_kind[j] = 3
-    tkind = t_kind[tc.codes]
-    expect = "expected an integer: trials numbered in increasing order, e.g. 1, 2, ... or 0, 1, ..."
-    problems.rows(f"{column}: empty trial index ({expect})", np.flatnonzero(tkind == 1))
-    problems.rows(f"{column}: value is NaN ({expect})", np.flatnonzero(tkind == 2))
-    problems.rows(
-        f"{column}: value is not an integer between 0 and {MAX_TRIAL}",
-        np.flatnonzero(tkind == 3),
-        lambda r: repr(tc.texts[tc.codes[r]]),
-    )
-    return t_lookup[tc.codes], tkind == 0
-
-
-def _order_values(problems: Problems, cc: Column, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """An order column's sort key per row (numbers, else timestamps) and where it is valid."""
-    texts = [t for t in cc.texts if t is not None and t != NAN_MARK]
-    values = np.zeros(len(cc.texts), dtype=np.float64)
-    ok = np.zeros(len(cc.texts), dtype=bool)
-    try:
-        nums = {t: float(t) for t in texts}
-        what = "a number"
-        for j, t in enumerate(cc.texts):
-            if t in nums and math.isfinite(nums[t]):
-                values[j], ok[j] = nums[t], True
-        key: np.ndarray = values[cc.codes]
-    except ValueError:
-        what = "a number or a timestamp"
-        stamps = pd.to_datetime(pd.Series(texts, dtype=object), errors="coerce", utc=True, format="mixed")
-        ns = np.zeros(len(cc.texts), dtype=np.int64)
-        parsed = dict(zip(texts, stamps, strict=True))
-        for j, t in enumerate(cc.texts):
-            s = parsed.get(t) if t is not None else None
-            if s is not None and not pd.isna(s):
-                ns[j], ok[j] = s.value, True
-        key = ns[cc.codes]
-    valid = ok[cc.codes]
-    problems.rows(
-        f"column {name!r}: not {what} (the column orders the trials)",
-        np.flatnonzero(~valid),
-        lambda r: repr(cc.texts[cc.codes[r]]),
-    )
-    return key, valid
-
-
-def _order_trials(
-    problems: Problems, get: Any, order: list[str], pcode: np.ndarray, ids: list[str]
-) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Trials ordered by the ``order`` columns within each participant: numbered 1, 2, ...;
-    rows with the same participant and order values are an error."""
-    n = len(pcode)
-    keys, valid = [], pcode >= 0
-    for c in order:
-        k, ok = _order_values(problems, get(c), c)
-        keys.append(k)
-        valid &= ok
-    trial = np.zeros(n, dtype=np.int64)
-    if not valid.all():
-        return trial, valid, None
-    perm = np.lexsort((*reversed(keys), pcode))
-    ps = pcode[perm]
-    same = ps[1:] == ps[:-1]
-    for k in keys:
-        ks = k[perm]
-        same &= ks[1:] == ks[:-1]
-    dup = np.flatnonzero(same) + 1
-    if len(dup):
-        items = [
-            f"row {problems.row(int(perm[d]))}: same {' / '.join(order)} as row {problems.row(int(perm[d - 1]))} "
-            f"for participant {ids[ps[d]]!r}"
-            for d in dup[:SHOWN]
-        ]
-        problems.add(f"column {order[0]!r}: trials with the same order values", items, len(dup))
-        problems.lines[-1] += f'; {offenders(ps[dup], ids)}: add a column to --order or the mapping\'s "order"'
-        return trial, valid, None
-    lengths = np.bincount(pcode, minlength=len(ids))
-    offsets = np.cumsum(lengths) - lengths
-    trial[perm] = np.arange(n) - offsets[ps] + 1
-    return trial, valid, perm
 
 
 def _equal(a: Column, b: Column) -> Column:
@@ -484,54 +437,6 @@ def _check_experience(
                 f"(the experience rule: an ask in {level} complexity ends {expected})",
                 np.flatnonzero(bad),
             )
-
-
-def _check_trials(
-    problems: Problems, p: np.ndarray, t: np.ndarray, rows: np.ndarray | None, ids: list[str], column: str
-) -> np.ndarray | slice | None:
-    """Duplicate trial indices, with array operations on the (participant, trial) keys of ``rows``
-    (None: every row).  Returns the order of the rows by participant and trial: None when
-    there are duplicates, the rows themselves when they are in that order already.  Gaps are
-    allowed: consecutive trial numbers of a participant are consecutive trials."""
-    span = int(t.max()) + 1
-    key = p.astype(np.int64)
-    key *= span
-    key += t
-    if len(key) < 2 or bool(np.all(key[1:] > key[:-1])):  # sorted, no duplicates: nothing to copy
-        return ALL if rows is None else rows
-    order = np.argsort(key, kind="stable")
-    ks = key[order]
-    del key
-    dup = np.flatnonzero(ks[1:] == ks[:-1]) + 1
-    if len(dup):
-        first = np.searchsorted(ks, ks[dup], side="left")
-
-        def at(i: int) -> int:
-            return problems.row(int(order[i] if rows is None else rows[order[i]]))
-
-        items = [
-            f"row {at(d)}: duplicate trial index {t[order[d]]} for participant {ids[p[order[d]]]!r} (first at row {at(f)})"
-            for d, f in zip(dup[:SHOWN], first[:SHOWN], strict=True)
-        ]
-        problems.add(f"{column}: duplicate trial indices", items, len(dup))
-        problems.lines[-1] += (
-            f"; {offenders(p[order[dup]], ids)}: a trial number that restarts in every block or session needs "
-            '--order block,trial or the mapping\'s "order" (e.g. "order": ["block", "trial"]); a participant '
-            "who took the study twice needs an id per session"
-        )
-        return None
-    return order if rows is None else rows[order]
-
-
-LISTED = 100  # participants listed by name in a duplicate-trial error
-
-
-def offenders(codes: np.ndarray, ids: list[str]) -> str:
-    """Every participant among ``codes`` (one per offending row) with its count of rows."""
-    who, count = np.unique(codes, return_counts=True)
-    per = ", ".join(f"{ids[w]!r} {c}" for w, c in zip(who[:LISTED], count[:LISTED], strict=True))
-    more = f", ... ({len(who) - LISTED} more participants)" if len(who) > LISTED else ""
-    return f"by participant, {len(who)} ({per}{more})"
 
 
 def write_trials(frame: pd.DataFrame, path: str | Path) -> None:

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .cells import Column, DataError, shorten
+from .cells import Column, DataError, shorten, unknown_entries
 from .sources import RawLog
 
 
@@ -33,10 +33,7 @@ def wide_problems(w: Any) -> list[str]:
     expected = 'expected the trial fields of a wide log (["choice", "difficulty"] for choice_1, choice_2, ...)'
     if not isinstance(w, Mapping):
         return [f"wide: {expected}, got {w!r}"]
-    p = []
-    extra = set(w) - {"columns", "separator", "position"}
-    if extra:
-        p.append(f"wide: unknown entries {sorted(extra)} (expected columns, separator, position)")
+    p = unknown_entries("wide", w, ("columns", "separator", "position"))
     cols = w.get("columns")
     if not isinstance(cols, list) or not cols or not all(isinstance(c, str) and c for c in cols) or len(set(cols)) < len(cols):
         p.append(f"wide: {expected}, got {cols!r}")

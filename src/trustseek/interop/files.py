@@ -248,14 +248,34 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
     label = str(source)
     if text is None:
         text = read_text(source, ".pomdp", PomdpFileError)
-    # group the lines into entries: an entry starts with a keyword followed by ':'
-    groups: list[tuple[int, str, str]] = []  # (line, keyword, rest)
-    key_re = re.compile(r"^\s*(discount|values|states|actions|observations|start\s+include|start\s+exclude|start|T|O|R)\s*:(.*)$")
+    r = _PomdpReader(label, _entries(text, label))
+    states, actions, observations = r.states, r.actions, r.observations
+    discount, start = r.discount, r.start()
+    T = np.zeros((len(actions), len(states), len(states)))
+    Om = np.zeros((len(actions), len(states), len(observations)))
+    R = np.zeros((len(actions), len(states), len(states), len(observations)))
+    for no, k, rest in r.groups:
+        if k in ("T", "O"):
+            r.probabilities(T if k == "T" else Om, k, no, rest)
+        elif k == "R":
+            r.rewards(R, no, rest)
+    try:
+        return FlatPOMDP(states, actions, observations, T, Om, R, discount, start)
+    except FlatPOMDPError as exc:
+        raise PomdpFileError(exc.problems, label) from None
+
+
+_KEY = re.compile(r"^\s*(discount|values|states|actions|observations|start\s+include|start\s+exclude|start|T|O|R)\s*:(.*)$")
+
+
+def _entries(text: str, label: str) -> list[tuple[int, str, str]]:
+    """The lines grouped into entries ``(line, keyword, rest)``: an entry starts with a keyword followed by ':'."""
+    groups: list[tuple[int, str, str]] = []
     for no, raw in enumerate(text.splitlines(), start=1):
         line = raw.split("#", 1)[0].rstrip()
         if not line.strip():
             continue
-        m = key_re.match(line)
+        m = _KEY.match(line)
         if m:
             groups.append((no, re.sub(r"\s+", " ", m.group(1)), m.group(2)))
         elif groups:
@@ -263,137 +283,147 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
             groups[-1] = (n0, k, rest + " " + line)
         else:
             raise PomdpFileError([f"line {no}: expected a header such as 'states:', got {line.strip()!r}"], label)
+    return groups
 
-    header: dict[str, tuple[int, str]] = {}
-    for no, k, rest in groups:
-        if k in _HEADER or k.startswith("start"):
-            header[k] = (no, rest.strip())
 
-    def need(k):
-        if k not in header:
-            raise PomdpFileError([f"missing '{k}:' header"], label)
-        return header[k]
+class _PomdpReader:
+    """The sections of a ``.pomdp`` file: the preamble (names, discount, values), ``start`` and
+    the ``T:``, ``O:`` and ``R:`` entries, each problem reported with its line."""
 
-    def names(k):
-        no, rest = need(k)
+    def __init__(self, label: str, groups: list[tuple[int, str, str]]) -> None:
+        self.label, self.groups = label, groups
+        self.header: dict[str, tuple[int, str]] = {}
+        for no, k, rest in groups:
+            if k in _HEADER or k.startswith("start"):
+                self.header[k] = (no, rest.strip())
+        self.states, self.actions, self.observations = self.names("states"), self.names("actions"), self.names("observations")
+        self.discount, self.sign = self._discount(), self._sign()
+
+    def error(self, line: str) -> PomdpFileError:
+        return PomdpFileError([line], self.label)
+
+    def need(self, k: str) -> tuple[int, str]:
+        if k not in self.header:
+            raise self.error(f"missing '{k}:' header")
+        return self.header[k]
+
+    def names(self, k: str) -> tuple[str, ...]:
+        no, rest = self.need(k)
         toks = rest.split()
         if len(toks) == 1 and toks[0].isdigit():
             return tuple(str(i) for i in range(int(toks[0])))
         if not toks:
-            raise PomdpFileError([f"line {no}: '{k}:' needs a count or a list of names"], label)
+            raise self.error(f"line {no}: '{k}:' needs a count or a list of names")
         return tuple(toks)
 
-    states, actions, observations = names("states"), names("actions"), names("observations")
-    n_s, n_a, n_o = len(states), len(actions), len(observations)
-    no, disc = need("discount")
-    try:
-        discount = float(disc)
-    except ValueError:
-        raise PomdpFileError([f"line {no}: discount must be a number, got {disc!r}"], label) from None
-    sign = 1.0
-    if "values" in header:
-        no, val = header["values"]
-        if val not in ("reward", "cost"):
-            raise PomdpFileError([f"line {no}: values must be 'reward' or 'cost', got {val!r}"], label)
-        sign = -1.0 if val == "cost" else 1.0
+    def _discount(self) -> float:
+        no, disc = self.need("discount")
+        try:
+            return float(disc)
+        except ValueError:
+            raise self.error(f"line {no}: discount must be a number, got {disc!r}") from None
 
-    def index(kind, names_, tok, no):
+    def _sign(self) -> float:
+        if "values" not in self.header:
+            return 1.0
+        no, val = self.header["values"]
+        if val not in ("reward", "cost"):
+            raise self.error(f"line {no}: values must be 'reward' or 'cost', got {val!r}")
+        return -1.0 if val == "cost" else 1.0
+
+    def index(self, kind: str, names_: tuple[str, ...], tok: str, no: int) -> list[int]:
         if tok == "*":
             return list(range(len(names_)))
         if tok in names_:
             return [names_.index(tok)]
         if tok.isdigit() and int(tok) < len(names_):
             return [int(tok)]
-        raise PomdpFileError([f"line {no}: unknown {kind} {tok!r}; expected one of {list(names_)} or an index"], label)
+        raise self.error(f"line {no}: unknown {kind} {tok!r}; expected one of {list(names_)} or an index")
 
-    def numbers(toks, count, no, what):
+    def numbers(self, toks: list[str], count: int, no: int, what: str) -> np.ndarray:
         try:
             vals = [float(t) for t in toks]
         except ValueError:
-            raise PomdpFileError([f"line {no}: {what} must be numbers, got {' '.join(toks)!r}"], label) from None
+            raise self.error(f"line {no}: {what} must be numbers, got {' '.join(toks)!r}") from None
         if len(vals) != count:
-            raise PomdpFileError([f"line {no}: {what} needs {count} numbers, got {len(vals)}"], label)
+            raise self.error(f"line {no}: {what} needs {count} numbers, got {len(vals)}")
         return np.array(vals)
 
-    start = np.full(n_s, 1.0 / n_s)
-    if "start" in header:
-        no, rest = header["start"]
-        toks = rest.split()
-        if toks == ["uniform"]:
-            pass
-        elif len(toks) == 1 and not _is_float(toks[0]):
-            start = np.zeros(n_s)
-            start[index("state", states, toks[0], no)[0]] = 1.0
-        else:
-            start = numbers(toks, n_s, no, "start")
-    for k in ("start include", "start exclude"):
-        if k in header:
-            no, rest = header[k]
-            sel = [i for t in rest.split() for i in index("state", states, t, no)]
-            mask = np.zeros(n_s, dtype=bool)
-            mask[sel] = True
-            if k == "start exclude":
-                mask = ~mask
-            start = np.where(mask, 1.0, 0.0) / mask.sum()
+    def start(self) -> np.ndarray:
+        """``start:`` (a distribution, ``uniform`` or one state), ``start include:`` / ``start exclude:``."""
+        n_s, states = len(self.states), self.states
+        start = np.full(n_s, 1.0 / n_s)
+        if "start" in self.header:
+            no, rest = self.header["start"]
+            toks = rest.split()
+            if toks == ["uniform"]:
+                pass
+            elif len(toks) == 1 and not _is_float(toks[0]):
+                start = np.zeros(n_s)
+                start[self.index("state", states, toks[0], no)[0]] = 1.0
+            else:
+                start = self.numbers(toks, n_s, no, "start")
+        for k in ("start include", "start exclude"):
+            if k in self.header:
+                no, rest = self.header[k]
+                sel = [i for t in rest.split() for i in self.index("state", states, t, no)]
+                mask = np.zeros(n_s, dtype=bool)
+                mask[sel] = True
+                if k == "start exclude":
+                    mask = ~mask
+                start = np.where(mask, 1.0, 0.0) / mask.sum()
+        return start
 
-    T = np.zeros((n_a, n_s, n_s))
-    Om = np.zeros((n_a, n_s, n_o))
-    R = np.zeros((n_a, n_s, n_s, n_o))
-    for no, k, rest in groups:
-        if k not in ("T", "O", "R"):
-            continue
+    @staticmethod
+    def _fields(rest: str) -> tuple[list[str], list[str]]:
+        """An entry's ``:``-separated names and its numbers."""
         fields = [f.strip() for f in rest.split(":")]
         last = fields[-1].split()
-        specs = fields[:-1] + ([last[0]] if last else [])
-        vals = last[1:]
-        if k in ("T", "O"):
-            second = ("state", states)
-            third = ("state", states) if k == "T" else ("observation", observations)
-            width = n_s if k == "T" else n_o
-            arr = T if k == "T" else Om
-            if len(specs) == 3:
-                a_, s_, x_ = (index("action", actions, specs[0], no), index(*second, specs[1], no), index(*third, specs[2], no))
-                v = numbers(vals, 1, no, f"{k} entry")[0]
-                arr[np.ix_(a_, s_, x_)] = v
-            elif len(specs) == 2:
-                a_, s_ = index("action", actions, specs[0], no), index(*second, specs[1], no)
-                row = np.full(width, 1.0 / width) if vals == ["uniform"] else numbers(vals, width, no, f"{k} row")
-                for a in a_:
-                    arr[a, s_] = row
-            elif len(specs) == 1:
-                a_ = index("action", actions, specs[0], no)
-                if vals == ["uniform"]:
-                    mat = np.full((n_s, width), 1.0 / width)
-                elif vals == ["identity"] and k == "T":
-                    mat = np.eye(n_s)
-                else:
-                    mat = numbers(vals, n_s * width, no, f"{k} matrix").reshape(n_s, width)
-                for a in a_:
-                    arr[a] = mat
+        return fields[:-1] + ([last[0]] if last else []), last[1:]
+
+    def probabilities(self, arr: np.ndarray, k: str, no: int, rest: str) -> None:
+        """A ``T:`` or ``O:`` entry: one number, a row (or ``uniform``) or a matrix (or ``uniform``, ``identity``)."""
+        specs, vals = self._fields(rest)
+        n_s = len(self.states)
+        second = ("state", self.states)
+        third = ("state", self.states) if k == "T" else ("observation", self.observations)
+        width = n_s if k == "T" else len(self.observations)
+        if len(specs) == 3:
+            a_ = self.index("action", self.actions, specs[0], no)
+            s_, x_ = self.index(*second, specs[1], no), self.index(*third, specs[2], no)
+            arr[np.ix_(a_, s_, x_)] = self.numbers(vals, 1, no, f"{k} entry")[0]
+        elif len(specs) == 2:
+            a_, s_ = self.index("action", self.actions, specs[0], no), self.index(*second, specs[1], no)
+            row = np.full(width, 1.0 / width) if vals == ["uniform"] else self.numbers(vals, width, no, f"{k} row")
+            for a in a_:
+                arr[a, s_] = row
+        elif len(specs) == 1:
+            a_ = self.index("action", self.actions, specs[0], no)
+            if vals == ["uniform"]:
+                mat = np.full((n_s, width), 1.0 / width)
+            elif vals == ["identity"] and k == "T":
+                mat = np.eye(n_s)
             else:
-                raise PomdpFileError([f"line {no}: malformed {k} entry"], label)
+                mat = self.numbers(vals, n_s * width, no, f"{k} matrix").reshape(n_s, width)
+            for a in a_:
+                arr[a] = mat
         else:
-            if len(specs) == 4:
-                a_, s_, s2_, o_ = (
-                    index("action", actions, specs[0], no),
-                    index("state", states, specs[1], no),
-                    index("state", states, specs[2], no),
-                    index("observation", observations, specs[3], no),
-                )
-                R[np.ix_(a_, s_, s2_, o_)] = sign * numbers(vals, 1, no, "R entry")[0]
-            elif len(specs) == 3:
-                a_ = index("action", actions, specs[0], no)
-                s_, s2_ = index("state", states, specs[1], no), index("state", states, specs[2], no)
-                R[np.ix_(a_, s_, s2_)] = sign * numbers(vals, n_o, no, "R row")
-            elif len(specs) == 2:
-                a_, s_ = index("action", actions, specs[0], no), index("state", states, specs[1], no)
-                R[np.ix_(a_, s_)] = sign * numbers(vals, n_s * n_o, no, "R matrix").reshape(n_s, n_o)
-            else:
-                raise PomdpFileError([f"line {no}: malformed R entry"], label)
-    try:
-        return FlatPOMDP(states, actions, observations, T, Om, R, discount, start)
-    except FlatPOMDPError as exc:
-        raise PomdpFileError(exc.problems, label) from None
+            raise self.error(f"line {no}: malformed {k} entry")
+
+    def rewards(self, R: np.ndarray, no: int, rest: str) -> None:
+        """An ``R:`` entry: one number, a row over observations or a matrix (next state by observation)."""
+        specs, vals = self._fields(rest)
+        n_s, n_o = len(self.states), len(self.observations)
+        if not 2 <= len(specs) <= 4:
+            raise self.error(f"line {no}: malformed R entry")
+        kinds = (("action", self.actions), ("state", self.states), ("state", self.states), ("observation", self.observations))
+        where = [self.index(*kind, spec, no) for kind, spec in zip(kinds, specs, strict=False)]
+        if len(specs) == 4:
+            R[np.ix_(*where)] = self.sign * self.numbers(vals, 1, no, "R entry")[0]
+        elif len(specs) == 3:
+            R[np.ix_(*where)] = self.sign * self.numbers(vals, n_o, no, "R row")
+        else:
+            R[np.ix_(*where)] = self.sign * self.numbers(vals, n_s * n_o, no, "R matrix").reshape(n_s, n_o)
 
 
 def _is_float(tok: str) -> bool:

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from . import COLORS, save, style
+from . import COLORS, finish, style
 
 TEST_LABELS = {"wilcoxon": "paired Wilcoxon", "t": "paired t-test"}
 
@@ -48,9 +48,7 @@ def plot_power(summary: dict[str, Any], path=None, title: str | None = None):
         ax.set_ylim(0, 1)
         ax.set_title(title or "Experiment 2: power to detect the trust-aware advantage")
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
-        if path is not None:
-            save(fig, path)
-        return fig
+        return finish(fig, path, layout=False)
 
 
 def plot_regret(summary: dict[str, Any], path=None, title: str | None = None):
@@ -79,9 +77,7 @@ def plot_regret(summary: dict[str, Any], path=None, title: str | None = None):
         ax.set_xlabel("regret of the estimated policy (% of V*, exact evaluation under the true model)")
         ax.set_title(title or "Experiment 1: how close the estimated policy is to the optimal one")
         ax.legend(loc="lower right", frameon=False)
-        if path is not None:
-            save(fig, path)
-        return fig
+        return finish(fig, path, layout=False)
 
 
 def plot_ask_search(search: dict[str, Any], path=None, title: str | None = None):
@@ -118,6 +114,4 @@ def plot_ask_search(search: dict[str, Any], path=None, title: str | None = None)
         ax.legend(loc="upper left", bbox_to_anchor=(1.35, 1.0), frameon=False)
         b = search["budget"]
         ax.set_title(title or f"Data collection: {b['participants']} × {b['trials']} trials")
-        if path is not None:
-            save(fig, path)
-        return fig
+        return finish(fig, path, layout=False)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.iohmm import IOHMMModel
-from . import save, style
+from . import finish, style
 from .model import _bars
 
 
@@ -22,34 +22,25 @@ def _labels(model: IOHMMModel, table: str, n: int) -> list[str]:
 
 def plot_iohmm_emissions(model: IOHMMModel, path=None):
     """P(output = last category | level, emission inputs), by combination of the inputs."""
-    cat = model.output_categories[-1]
-    inputs = ", ".join(model.emission_inputs) or "level only"
-    return _plot_table(
-        model,
-        "emission",
-        model.emission[:, :, -1],
-        f"P({model.output} = {cat} | S, inputs)",
-        f"Estimated P({cat}) by {inputs}",
-        path,
-    )
+    return _plot_table(model, "emission", path)
 
 
 def plot_iohmm_transitions(model: IOHMMModel, path=None):
     """P(next level = the highest | level, transition inputs), by combination of the inputs."""
-    top = model.levels[-1]
-    inputs = ", ".join(model.transition_inputs) or "level only"
-    return _plot_table(
-        model,
-        "transition",
-        np.asarray(model.transition[:, :, -1]),
-        f"P(S' = {top} | S, inputs)",
-        f"Estimated P(S' = {top}) by {inputs}",
-        path,
-    )
+    return _plot_table(model, "transition", path)
 
 
-def _plot_table(model: IOHMMModel, table: str, vals: np.ndarray, ylabel: str, title: str, path):
+def _plot_table(model: IOHMMModel, table: str, path):
     """Bars of one probability per (combination of the table's inputs, level)."""
+    if table == "emission":
+        cat, inputs = model.output_categories[-1], model.emission_inputs
+        vals = model.emission[:, :, -1]
+        ylabel, title = f"P({model.output} = {cat} | S, inputs)", f"Estimated P({cat})"
+    else:
+        top, inputs = model.levels[-1], model.transition_inputs
+        vals = np.asarray(model.transition[:, :, -1])
+        ylabel, title = f"P(S' = {top} | S, inputs)", f"Estimated P(S' = {top})"
+    title += f" by {', '.join(inputs) or 'level only'}"
     with style() as plt:
         fig, ax = plt.subplots(figsize=(max(4.6, 1.3 * len(vals) + 1.5), 2.8))
         _bars(ax, vals, None, None, None, _labels(model, table, len(vals)), [f"S={k}" for k in model.levels])
@@ -57,7 +48,4 @@ def _plot_table(model: IOHMMModel, table: str, vals: np.ndarray, ylabel: str, ti
         ax.set_title(title)
         ax.set_ylim(0, 1.25)  # room for the legend above the bars
         ax.legend(loc="upper left", frameon=False, ncol=model.n_levels)
-        fig.tight_layout()
-        if path is not None:
-            save(fig, path)
-        return fig
+        return finish(fig, path)

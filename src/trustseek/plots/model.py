@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.core import ACTIONS, EXPERIENCES, RELY
-from . import save, style
+from . import finish, style
 
 _LEVEL_COLORS = ("#c8102e", "#1f5fa8", "#2a9d3f", "#7b3294", "#e08214", "#666666", "#000000", "#8c510a")
 
@@ -52,10 +52,7 @@ def plot_emissions(model, path=None, ci=None, reference=None, reference_label="p
         ax.set_ylabel(r"$P(o = \mathrm{rely} \mid T, C, a)$")
         ax.set_title("Estimated probability of relying on the robot" + (" (95% CI)" if ci is not None else ""))
         ax.legend(loc="upper right", frameon=False, ncol=1)
-        fig.tight_layout()
-        if path is not None:
-            save(fig, path)
-        return fig
+        return finish(fig, path)
 
 
 def plot_transitions(model, path=None, ci=None, reference=None, reference_label="paper", ask_experience=None):
@@ -94,7 +91,4 @@ def plot_transitions(model, path=None, ci=None, reference=None, reference_label=
         handles, labels = axes[0, 0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="lower center", ncol=len(labels), frameon=False, fontsize=7, bbox_to_anchor=(0.5, -0.01))
         fig.suptitle("Estimated trust transitions" + (" (95% CI)" if ci is not None else ""), fontsize=9)
-        fig.tight_layout(rect=(0, 0.07, 1, 1))
-        if path is not None:
-            save(fig, path)
-        return fig
+        return finish(fig, path, rect=(0, 0.07, 1, 1))

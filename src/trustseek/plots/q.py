@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import COLORS, save, style
+from . import COLORS, finish, style
 
 
 def plot_q(policy, path=None, title: str | None = None):
@@ -42,7 +42,4 @@ def plot_q(policy, path=None, title: str | None = None):
         handles, labels = axes[0, 0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="lower center", ncol=2, frameon=False, bbox_to_anchor=(0.5, -0.02))
         fig.suptitle(title or f"Action-value functions (belief update: {policy.belief_update})", fontsize=9)
-        fig.tight_layout(rect=(0, 0.07, 1, 1))
-        if path is not None:
-            save(fig, path)
-        return fig
+        return finish(fig, path, rect=(0, 0.07, 1, 1))

@@ -6,7 +6,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from . import COLORS, save, style
+from . import COLORS, finish, style
 
 POLICY_COLORS = {"trust-agnostic": "#7f7f7f", "trust-aware": COLORS["autonomous"]}
 
@@ -96,12 +96,7 @@ def plot_rewards(
                 fontsize=7,
                 bbox_to_anchor=(0.5, 0.0),
             )
-            fig.tight_layout(rect=(0, 0.06, 1, 1))
-        else:
-            fig.tight_layout()
-        if path is not None:
-            save(fig, path)
-        return fig
+        return finish(fig, path, rect=(0, 0.06, 1, 1) if paper_medians else None)
 
 
 def plot_replicates(
@@ -171,10 +166,7 @@ def plot_replicates(
         ax.grid(axis="y", visible=False)
         ax.legend(frameon=False, loc="lower left", fontsize=7)
         fig.suptitle(f"{len(thresholds)} replicate experiments ({design} data collection, fit, plan, evaluation)", fontsize=9)
-        fig.tight_layout()
-        if path is not None:
-            save(fig, path)
-        return fig
+        return finish(fig, path)
 
 
 def _no_data(ax, text: str) -> None:
@@ -205,10 +197,7 @@ def plot_policy_values(rows: Sequence[Mapping], path=None, title: str | None = N
         ax.set_xlabel("mean cumulative reward per block (t 95% interval)")
         ax.grid(axis="y", visible=False)
         ax.set_title(title or "Policies evaluated on the same simulated participants")
-        fig.tight_layout()
-        if path is not None:
-            save(fig, path)
-        return fig
+        return finish(fig, path)
 
 
 def plot_heterogeneity(quartiles: Sequence[Mapping], path=None, score: str = ""):
@@ -246,7 +235,4 @@ def plot_heterogeneity(quartiles: Sequence[Mapping], path=None, score: str = "")
                 ax.set_ylim(lo - pad, hi + pad)
         axes[0].legend(frameon=False, loc="upper right", fontsize=7)
         fig.suptitle("Heterogeneous supervisors under the pooled policies (Remark 1)", fontsize=9)
-        fig.tight_layout()
-        if path is not None:
-            save(fig, path)
-        return fig
+        return finish(fig, path)

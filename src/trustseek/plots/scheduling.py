@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import COLORS, save, style
+from . import COLORS, finish, style
 
 DECISION_COLORS = ("#9ecae1", "#c8102e", "#1f5fa8", "#fd8d3c")  # low/auto, low/ask, high/auto, high/ask
 
@@ -60,12 +60,7 @@ def plot_schedule(
         ax.set_ylabel("share of participants")
         ax.legend(fontsize=6, loc="center left")
         ax.set_title("item order and asks (simulated)")
-        if title:
-            fig.suptitle(title)
-        fig.tight_layout()
-        if path is not None:
-            save(fig, path)
-    return fig
+        return finish(fig, path, title)
 
 
 def plot_scheduling_section(section, path=None, title: str | None = None):

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 from matplotlib.patches import Patch
 
-from . import COLORS, save, style
+from . import COLORS, finish, style
 
 
 def plot_tornado(res: Any, quantity: str, path=None, top: int = 12, paper_value: float | None = None, title: str | None = None):
@@ -39,6 +39,4 @@ def plot_tornado(res: Any, quantity: str, path=None, top: int = 12, paper_value:
         ax.grid(axis="y", visible=False)
         ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
         ax.set_title(title or f"{quantity}: each parameter within its printed precision, alone")
-        if path is not None:
-            save(fig, path)
-        return fig
+        return finish(fig, path, layout=False)

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..model.core import AUTONOMOUS, RELY
-from . import save, style
+from . import finish, style
 from .model import _bars, plot_emissions, plot_transitions
 
 
@@ -34,10 +34,7 @@ def plot_type_emissions(mixture, path=None, ci=None):
         ax.set_title("Supervisor types: probability of relying" + (" (95% CI)" if ci is not None else ""))
         handles, labels = ax.get_legend_handles_labels()
         fig.legend(handles, labels, loc="lower center", ncol=len(labels), frameon=False, fontsize=7, bbox_to_anchor=(0.5, -0.01))
-        fig.tight_layout(rect=(0, 0.07, 1, 1))
-        if path is not None:
-            save(fig, path)
-        return fig
+        return finish(fig, path, rect=(0, 0.07, 1, 1))
 
 
 def plot_types(mixture, folder, ci=None) -> list[Path]:

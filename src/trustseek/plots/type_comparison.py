@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from . import save, style
+from . import finish, style
 
 POLICY_COLORS = {
     "pooled trust-aware": "#1f5fa8",
@@ -64,9 +64,4 @@ def plot_types_section(numbers: dict[str, Any], path=None, title: str | None = N
         ax.set_yticks(y, labels, fontsize=6)
         ax.set_xlabel("difference from pooled trust-aware\n(reward per block, paired 95 % CI)")
         ax.set_title("gain of planning for types")
-        if title:
-            fig.suptitle(title)
-        fig.tight_layout()
-        if path is not None:
-            save(fig, path)
-    return fig
+        return finish(fig, path, title)

@@ -151,104 +151,141 @@ def _run_chunk(
     case is a common one (two trust levels; a threshold policy on a scalar belief, or a
     complexity policy), else in the numpy loop below; both draw the same uniforms in the same
     order and give the same trials."""
-    m = sl.stop - sl.start
-    K = tab.K
-    rng_sup = np.random.default_rng(seeds[0])
-    rng_pol = np.random.default_rng(seeds[1])
-    two = K == 2
-    # parameter-row offsets for heterogeneous populations
-    poff = None if tab.pooled else rows * (2 * tab.N)
-    # initial hidden trust
-    u0 = rng_sup.random(m)
-    icum = tab.init_cum[rows]  # (m, K-1)
-    trust = (u0[:, None] >= icum).sum(axis=1).astype(np.int64)
-    T_total = sum(b.schedule.shape[1] for b in blocks)
-    rec: dict[str, np.ndarray] = {}
-    if record:
-        rec = {k: np.empty((T_total, m), dtype=np.int8) for k in RECORDED}
-        rec["belief"] = np.empty((T_total, m))
-    codes = np.empty((T_total, m), dtype=np.int8)
-    t_global = 0
+    st = _Chunk(tab, rows, sl, seeds, record, sum(b.schedule.shape[1] for b in blocks))
     for block in blocks:
         sched = np.ascontiguousarray(block.schedule[sl].T).astype(np.int64)  # (T, m)
-        T = sched.shape[0]
         runner = _runner(block)
-        policy = block.policy
-        scalar = None
-        tracked = runner.model is not None and runner.model.n_trust > 2  # the runner's own filter, row by row
-        if runner.model is not None and runner.model.n_trust == 2:
-            scalar = ScalarBelief(runner.model, runner.belief_update or "bayes")  # the same filter on P(trust = high)
-            x = np.full(m, scalar.x0)
-            B = np.empty((m, 2))
-        elif (b0 := runner.initial_beliefs(m)) is not None:
-            B = b0
-        else:
-            B = np.full((m, 2), np.nan)
-        bounds = ask_bounds(policy) if scalar is not None else None
-        fast = _compiled_action(policy, bounds, not tracked) if compiled and two else None
+        scalar, x, B, tracked = _belief_start(runner, st.m)
+        bounds = ask_bounds(block.policy) if scalar is not None else None
+        fast = _compiled_action(block.policy, bounds, not tracked) if compiled and tab.K == 2 else None
         if fast is not None:
-            mode, act = fast
-            if mode == kernels.FIXED:
-                pv = act[sched]
-                draws = ~np.all((pv == 0) | (pv == 1), axis=1)  # the trials where actions() draws
-            else:
-                draws = np.zeros(T, dtype=bool)
-            if scalar is not None:
-                bel = kernels.BAYES if scalar.update_name == "bayes" else kernels.PAPER
-                sb = (scalar.a0, scalar.slope, scalar.lik_high, scalar.lik_low)
-            else:
-                bel, sb, x = kernels.NO_BELIEF, (_EMPTY,) * 4, np.zeros(m)
-            into = rec if record else {k: np.zeros((0, 0), dtype=np.int8) for k in RECORDED} | {"belief": np.zeros((0, 0))}
-            offsets = np.zeros(m, dtype=np.int64) if poff is None else poff.astype(np.int64)
-            span = max(1, WINDOW // m)
-            for t0 in range(0, T, span):  # the uniforms of ``span`` trials at a time
-                t1 = min(T, t0 + span)
-                upol = rng_pol.random((int(draws[t0:t1].sum()), m))  # = one random(m) per trial that draws
-                u = rng_sup.random((t1 - t0, 3, m))  # = successive random((3, m))
-                kernels.run_block(
-                    sched[t0:t1], u, upol, draws[t0:t1], mode, act, bel, *sb, x, tab.p_int, tab.p_reliable, tab.trust_low,
-                    offsets, trust, codes, t_global + t0, record,
-                    into["complexity"], into["action"], into["human"], into["experience"], into["trust"], into["belief"],
-                )  # fmt: skip
-            t_global += T
-            if progress is not None:
-                progress(m * T)
-            continue
-        for t in range(T):
-            c = sched[t]
-            if bounds is not None:
-                a = (x < bounds[c]).astype(np.int64)
-            else:
-                if scalar is not None:
-                    B[:, 1] = x
-                    np.subtract(1.0, x, out=B[:, 0])
-                a = runner.actions_many(B, c, rng_pol)
-            u = rng_sup.random((3, m))
-            ca = c * 2 + a
-            cap = ca if poff is None else ca + poff
-            o = (u[0] >= tab.p_int[cap * K + trust]).astype(np.int64)
-            e = (u[1] < tab.p_reliable[ca * 2 + o]).astype(np.int64)
-            kt = (cap * 2 + e) * K + trust
-            if record:
-                rec["complexity"][t_global] = c
-                rec["action"][t_global] = a
-                rec["human"][t_global] = o
-                rec["experience"][t_global] = e
-                rec["trust"][t_global] = trust
-                rec["belief"][t_global] = x if scalar is not None else B[:, -1]
-            codes[t_global] = (a * 2 + o) * 2 + e
-            # the next hidden trust: below P(T' = low) for two levels, #(u >= cumulative row) otherwise
-            trust = (u[2] >= tab.trust_low[kt]).astype(np.int64) if two else (u[2][:, None] >= tab.trust_cum[kt]).sum(axis=1)
-            if scalar is not None:
-                x = scalar.step(x, ca, o, e)
-            elif tracked:
-                B = runner.beliefs_after_many(B, c, a, o, e)
-            t_global += 1
+            _compiled_block(st, sched, fast, scalar, x)
+        else:
+            _numpy_block(st, sched, runner, scalar, x, B, bounds, tracked)
         if progress is not None:
-            progress(m * T)
-    # summaries per block
-    nb = len(blocks)
-    summ = {k: np.zeros((m, nb)) for k in SUMMARY_QUANTITIES}
+            progress(st.m * sched.shape[0])
+    summ = _summaries(tab, blocks, st.codes, gamma, st.m)
+    out: dict[str, np.ndarray] = {}
+    if record:
+        out = {k: v.T for k, v in st.rec.items()}
+        out["reward"] = tab.reward[st.codes].T
+    return summ, out
+
+
+class _Chunk:
+    """The state of a chunk of participants across its blocks: the random streams, the hidden
+    trust (it carries over from block to block), the trials' codes and, when ``record``, every trial."""
+
+    def __init__(
+        self, tab: _Tables, rows: np.ndarray, sl: slice, seeds: Sequence[np.random.SeedSequence], record: bool, total: int
+    ) -> None:
+        self.tab, self.record = tab, record
+        self.m = m = sl.stop - sl.start
+        self.rng_sup = np.random.default_rng(seeds[0])
+        self.rng_pol = np.random.default_rng(seeds[1])
+        self.poff = None if tab.pooled else rows * (2 * tab.N)  # parameter-row offsets for heterogeneous populations
+        u0 = self.rng_sup.random(m)  # the initial hidden trust
+        self.trust = (u0[:, None] >= tab.init_cum[rows]).sum(axis=1).astype(np.int64)
+        self.rec: dict[str, np.ndarray] = {}
+        if record:
+            self.rec = {k: np.empty((total, m), dtype=np.int8) for k in RECORDED}
+            self.rec["belief"] = np.empty((total, m))
+        self.codes = np.empty((total, m), dtype=np.int8)
+        self.t = 0  # the next trial of the chunk
+
+
+def _belief_start(runner: PolicyRunner, m: int) -> tuple[ScalarBelief | None, np.ndarray, np.ndarray, bool]:
+    """The robot's belief at the start of a block: the scalar filter on P(trust = high) with its
+    start ``x`` for two trust levels, else the runner's beliefs ``B`` (tracked row by row for
+    more levels; NaN when the policy has no belief)."""
+    x = _EMPTY
+    tracked = runner.model is not None and runner.model.n_trust > 2  # the runner's own filter, row by row
+    if runner.model is not None and runner.model.n_trust == 2:
+        scalar = ScalarBelief(runner.model, runner.belief_update or "bayes")  # the same filter on P(trust = high)
+        return scalar, np.full(m, scalar.x0), np.empty((m, 2)), tracked
+    b0 = runner.initial_beliefs(m)
+    return None, x, b0 if b0 is not None else np.full((m, 2), np.nan), tracked
+
+
+def _compiled_block(
+    st: _Chunk, sched: np.ndarray, fast: tuple[int, np.ndarray], scalar: ScalarBelief | None, x: np.ndarray
+) -> None:
+    """A block in the compiled kernel, ``span`` trials of uniforms at a time (the same draws as the numpy loop)."""
+    tab, m, T = st.tab, st.m, sched.shape[0]
+    mode, act = fast
+    if mode == kernels.FIXED:
+        pv = act[sched]
+        draws = ~np.all((pv == 0) | (pv == 1), axis=1)  # the trials where actions() draws
+    else:
+        draws = np.zeros(T, dtype=bool)
+    if scalar is not None:
+        bel = kernels.BAYES if scalar.update_name == "bayes" else kernels.PAPER
+        sb = (scalar.a0, scalar.slope, scalar.lik_high, scalar.lik_low)
+    else:
+        bel, sb, x = kernels.NO_BELIEF, (_EMPTY,) * 4, np.zeros(m)
+    into = st.rec if st.record else {k: np.zeros((0, 0), dtype=np.int8) for k in RECORDED} | {"belief": np.zeros((0, 0))}
+    offsets = np.zeros(m, dtype=np.int64) if st.poff is None else st.poff.astype(np.int64)
+    span = max(1, WINDOW // m)
+    for t0 in range(0, T, span):  # the uniforms of ``span`` trials at a time
+        t1 = min(T, t0 + span)
+        upol = st.rng_pol.random((int(draws[t0:t1].sum()), m))  # = one random(m) per trial that draws
+        u = st.rng_sup.random((t1 - t0, 3, m))  # = successive random((3, m))
+        kernels.run_block(
+            sched[t0:t1], u, upol, draws[t0:t1], mode, act, bel, *sb, x, tab.p_int, tab.p_reliable, tab.trust_low,
+            offsets, st.trust, st.codes, st.t + t0, st.record,
+            into["complexity"], into["action"], into["human"], into["experience"], into["trust"], into["belief"],
+        )  # fmt: skip
+    st.t += T
+
+
+def _numpy_block(
+    st: _Chunk,
+    sched: np.ndarray,
+    runner: PolicyRunner,
+    scalar: ScalarBelief | None,
+    x: np.ndarray,
+    B: np.ndarray,
+    bounds: np.ndarray | None,
+    tracked: bool,
+) -> None:
+    """A block in the numpy loop, one trial of every participant at a time."""
+    tab, K, two = st.tab, st.tab.K, st.tab.K == 2
+    for c in sched:
+        if bounds is not None:
+            a = (x < bounds[c]).astype(np.int64)
+        else:
+            if scalar is not None:
+                B[:, 1] = x
+                np.subtract(1.0, x, out=B[:, 0])
+            a = runner.actions_many(B, c, st.rng_pol)
+        u = st.rng_sup.random((3, st.m))
+        ca = c * 2 + a
+        cap = ca if st.poff is None else ca + st.poff
+        trust = st.trust
+        o = (u[0] >= tab.p_int[cap * K + trust]).astype(np.int64)
+        e = (u[1] < tab.p_reliable[ca * 2 + o]).astype(np.int64)
+        kt = (cap * 2 + e) * K + trust
+        if st.record:
+            rec, t = st.rec, st.t
+            rec["complexity"][t] = c
+            rec["action"][t] = a
+            rec["human"][t] = o
+            rec["experience"][t] = e
+            rec["trust"][t] = trust
+            rec["belief"][t] = x if scalar is not None else B[:, -1]
+        st.codes[st.t] = (a * 2 + o) * 2 + e
+        # the next hidden trust: below P(T' = low) for two levels, #(u >= cumulative row) otherwise
+        st.trust = (u[2] >= tab.trust_low[kt]).astype(np.int64) if two else (u[2][:, None] >= tab.trust_cum[kt]).sum(axis=1)
+        if scalar is not None:
+            x = scalar.step(x, ca, o, e)
+        elif tracked:
+            B = runner.beliefs_after_many(B, c, a, o, e)
+        st.t += 1
+
+
+def _summaries(tab: _Tables, blocks: list[Block], codes: np.ndarray, gamma: float, m: int) -> dict[str, np.ndarray]:
+    """The per-block summaries of every participant, from the trials' codes."""
+    summ = {k: np.zeros((m, len(blocks))) for k in SUMMARY_QUANTITIES}
     start = 0
     for j, block in enumerate(blocks):
         T = block.schedule.shape[1]
@@ -261,11 +298,7 @@ def _run_chunk(
         summ["interventions"][:, j] = (cb == CODE_INTERVENE).sum(axis=0)
         summ["asks"][:, j] = (cb >= ASK * 4).sum(axis=0)
         start += T
-    out: dict[str, np.ndarray] = {}
-    if record:
-        out = {k: v.T for k, v in rec.items()}
-        out["reward"] = tab.reward[codes].T
-    return summ, out
+    return summ
 
 
 def seed_sequence(seed: int | np.random.SeedSequence | None) -> np.random.SeedSequence:

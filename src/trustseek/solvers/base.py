@@ -84,6 +84,14 @@ class SolverBase:
             raise UnsupportedProblem(reasons)
 
 
+def bayes_only(name: str) -> dict[str, str]:
+    """The ``instead`` of a solver that bounds the value of the Bayes filter only."""
+    return {
+        "belief_update": f"the {name} solver bounds the value of the Bayes filter (belief update 'bayes'); "
+        "for the eq.-3 update use the alpha solver (two trust levels) or the grid solver",
+    }
+
+
 def _count(n: int) -> str:
     return {1: "one", 2: "two", 3: "three"}.get(n, str(n))
 

@@ -42,7 +42,7 @@ from ..pomdp.branch_model import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
-from .base import SolverBase, SolverError, one_blas_thread
+from .base import SolverBase, SolverError, bayes_only, one_blas_thread
 from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, policy_values
 
 __all__ = ["PointSolution", "PointSolver", "freudenthal_vertices", "freudenthal_weights"]
@@ -142,10 +142,7 @@ class PointSolver(SolverBase):
     u: np.ndarray
     lookup: np.ndarray
     V: np.ndarray
-    instead: ClassVar[dict[str, str]] = {
-        "belief_update": "the point solver bounds the value of the Bayes filter (belief update 'bayes'); "
-        "for the eq.-3 update use the alpha solver (two trust levels) or the grid solver",
-    }
+    instead: ClassVar[dict[str, str]] = bayes_only("point")
 
     def __init__(
         self,

@@ -44,7 +44,7 @@ from ..pomdp.branch_model import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
-from .base import SolverBase, SolverError, one_blas_thread
+from .base import SolverBase, SolverError, bayes_only, one_blas_thread
 from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, policy_values
 from .point import bounds_policy
 from .upper_bounds import BlockGrid, fast_informed_bound, grid_blocks, inverse_points, phi_of, phi_pairs, unique_rows
@@ -79,10 +79,7 @@ class ReachableSolver(SolverBase):
 
     name = "reachable"
     belief_updates = ("bayes",)
-    instead: ClassVar[dict[str, str]] = {
-        "belief_update": "the reachable solver bounds the value of the Bayes filter (belief update 'bayes'); "
-        "for the eq.-3 update use the alpha solver (two trust levels) or the grid solver",
-    }
+    instead: ClassVar[dict[str, str]] = bayes_only("reachable")
 
     def __init__(
         self,

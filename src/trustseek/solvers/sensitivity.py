@@ -230,20 +230,8 @@ def sensitivity(
         raise SensitivityError([f"need grid >= 3, samples >= 0 and starts >= 1; got {grid}, {samples}, {starts}"])
     params = list(parameters) if parameters is not None else free_parameters(model, task, decimals, include_task=include_task)
     _check(model, task)
-    x0 = np.array([p.value for p in params])
-    lo = np.array([p.lower for p in params])
-    hi = np.array([p.upper for p in params])
-    cache: dict[bytes, dict[str, float]] = {}
-
-    def at(x: np.ndarray) -> dict[str, float]:
-        x = np.clip(x, lo, hi)
-        key = x.tobytes()
-        if key not in cache:
-            m, t = apply(model, task, params, x)
-            cache[key] = evaluate(m, t, belief_update, grid)
-        return cache[key]
-
-    nominal = at(x0)
+    box = _Box(model, task, params, belief_update, grid)
+    nominal = box.at(box.x0)
     quantities = [q for q, v in nominal.items() if q == VALUE or 0.0 < v < 1.0]
     if len(quantities) == 1:
         raise SensitivityError(
@@ -252,70 +240,10 @@ def sensitivity(
                 f"or asks outside an interval [0, θ)): {_fmt_thresholds(nominal)}; nothing to analyse"
             ]
         )
-
-    # one at a time
-    oat: list[dict[str, Any]] = []
-    for i, p in enumerate(params):
-        rec: dict[str, Any] = {"name": p.name, "value": p.value, "lower": p.lower, "upper": p.upper}
-        for end, v in (("at_lower", p.lower), ("at_upper", p.upper)):
-            x = x0.copy()
-            x[i] = v
-            r = at(x)
-            rec[end] = {q: r[q] for q in quantities}
-        oat.append(rec)
-
-    # joint: L-BFGS-B on the unit cube u -> lo + u (hi - lo)
-    width = hi - lo
-    free = width > 0
+    oat = _one_at_a_time(box, quantities)
     rng = np.random.default_rng(seed)
-
-    def to_x(u: np.ndarray) -> np.ndarray:
-        return lo + np.clip(u, 0.0, 1.0) * width
-
-    u_nominal = np.where(free, (x0 - lo) / np.where(free, width, 1.0), 0.0)
-    joint: dict[str, dict[str, Any]] = {}
-    for q in quantities:
-        effect = np.array([rec["at_upper"][q] - rec["at_lower"][q] for rec in oat])
-        effect = np.nan_to_num(effect)
-        res: dict[str, Any] = {}
-        for sense, sign in (("min", 1.0), ("max", -1.0)):
-            corner = (sign * effect < 0).astype(float)
-            inits = [corner, u_nominal] + [rng.random(len(params)) for _ in range(max(0, starts - 2))]
-            best_u, best = u_nominal, sign * nominal[q]
-            for u_init in inits[:starts]:
-
-                def f(u: np.ndarray, q: str = q, sign: float = sign) -> float:
-                    v = at(to_x(u))[q]
-                    return sign * v if np.isfinite(v) else np.inf
-
-                if np.isfinite(f(u_init)) and f(u_init) < best:
-                    best_u, best = u_init, f(u_init)
-                opt = minimize(
-                    f, u_init, method="L-BFGS-B", bounds=[(0.0, 1.0)] * len(params), options={"eps": 1e-3, "maxiter": 30}
-                )
-                if np.isfinite(opt.fun) and opt.fun < best:
-                    best_u, best = np.clip(opt.x, 0.0, 1.0), float(opt.fun)
-            x_best = to_x(best_u)
-            res[sense] = sign * best
-            res[f"{sense}_at"] = {p.name: float(v) for p, v in zip(params, x_best, strict=True)}
-        res["method"] = f"L-BFGS-B from {starts} start(s) per extreme (the one-at-a-time corner first)"
-        joint[q] = res
-
-    # Latin-hypercube check
-    sampled: dict[str, dict[str, float]] = {}
-    if samples:
-        from scipy.stats import qmc  # scipy.stats is slow to import: only where it is used
-
-        pts = qmc.LatinHypercube(d=len(params), seed=rng).random(samples)
-        vals: dict[str, list[float]] = {q: [] for q in quantities}
-        for u in pts:
-            r = at(to_x(u))
-            for q in quantities:
-                vals[q].append(r[q])
-        for q in quantities:
-            arr = np.asarray(vals[q], dtype=float)
-            arr = arr[np.isfinite(arr)]
-            sampled[q] = {"n": len(arr), "min": float(arr.min()), "max": float(arr.max())} if len(arr) else {"n": 0}
+    joint = {q: _joint(box, q, oat, nominal[q], starts, rng) for q in quantities}
+    sampled = _sampled(box, quantities, samples, rng) if samples else {}
     return Sensitivity(
         parameters=params,
         quantities=quantities,
@@ -330,9 +258,94 @@ def sensitivity(
             "starts": starts,
             "seed": seed,
             "decimals": dict(decimals) if isinstance(decimals, Mapping) else decimals,
-            "evaluations": len(cache),
+            "evaluations": len(box.cache),
         },
     )
+
+
+class _Box:
+    """The parameters' box: the thresholds and V at a point (each point evaluated once), and the
+    unit cube u -> lo + u (hi - lo) the optimiser works on."""
+
+    def __init__(self, model: TrustModel, task: Task, params: list[Parameter], belief_update: str, grid: int) -> None:
+        self.model, self.task, self.params = model, task, params
+        self.belief_update, self.grid = belief_update, grid
+        self.x0 = np.array([p.value for p in params])
+        self.lo = np.array([p.lower for p in params])
+        self.hi = np.array([p.upper for p in params])
+        self.width = self.hi - self.lo
+        free = self.width > 0
+        self.u_nominal = np.where(free, (self.x0 - self.lo) / np.where(free, self.width, 1.0), 0.0)
+        self.cache: dict[bytes, dict[str, float]] = {}
+
+    def at(self, x: np.ndarray) -> dict[str, float]:
+        x = np.clip(x, self.lo, self.hi)
+        key = x.tobytes()
+        if key not in self.cache:
+            m, t = apply(self.model, self.task, self.params, x)
+            self.cache[key] = evaluate(m, t, self.belief_update, self.grid)
+        return self.cache[key]
+
+    def to_x(self, u: np.ndarray) -> np.ndarray:
+        return self.lo + np.clip(u, 0.0, 1.0) * self.width
+
+
+def _one_at_a_time(box: _Box, quantities: list[str]) -> list[dict[str, Any]]:
+    """Each parameter at its lower and its upper end, the others at their printed values."""
+    oat: list[dict[str, Any]] = []
+    for i, p in enumerate(box.params):
+        rec: dict[str, Any] = {"name": p.name, "value": p.value, "lower": p.lower, "upper": p.upper}
+        for end, v in (("at_lower", p.lower), ("at_upper", p.upper)):
+            x = box.x0.copy()
+            x[i] = v
+            r = box.at(x)
+            rec[end] = {q: r[q] for q in quantities}
+        oat.append(rec)
+    return oat
+
+
+def _joint(box: _Box, q: str, oat: list[dict[str, Any]], nominal: float, starts: int, rng: np.random.Generator) -> dict[str, Any]:
+    """The least and the greatest ``q`` over the box: L-BFGS-B on the unit cube from ``starts`` points per extreme."""
+    n = len(box.params)
+    effect = np.nan_to_num(np.array([rec["at_upper"][q] - rec["at_lower"][q] for rec in oat]))
+    res: dict[str, Any] = {}
+    for sense, sign in (("min", 1.0), ("max", -1.0)):
+        corner = (sign * effect < 0).astype(float)
+        inits = [corner, box.u_nominal] + [rng.random(n) for _ in range(max(0, starts - 2))]
+        best_u, best = box.u_nominal, sign * nominal
+        for u_init in inits[:starts]:
+
+            def f(u: np.ndarray, sign: float = sign) -> float:
+                v = box.at(box.to_x(u))[q]
+                return sign * v if np.isfinite(v) else np.inf
+
+            if np.isfinite(f(u_init)) and f(u_init) < best:
+                best_u, best = u_init, f(u_init)
+            opt = minimize(f, u_init, method="L-BFGS-B", bounds=[(0.0, 1.0)] * n, options={"eps": 1e-3, "maxiter": 30})
+            if np.isfinite(opt.fun) and opt.fun < best:
+                best_u, best = np.clip(opt.x, 0.0, 1.0), float(opt.fun)
+        res[sense] = sign * best
+        res[f"{sense}_at"] = {p.name: float(v) for p, v in zip(box.params, box.to_x(best_u), strict=True)}
+    res["method"] = f"L-BFGS-B from {starts} start(s) per extreme (the one-at-a-time corner first)"
+    return res
+
+
+def _sampled(box: _Box, quantities: list[str], samples: int, rng: np.random.Generator) -> dict[str, dict[str, float]]:
+    """The Latin-hypercube check of the optimiser: each quantity's range over ``samples`` points of the box."""
+    from scipy.stats import qmc  # scipy.stats is slow to import: only where it is used
+
+    pts = qmc.LatinHypercube(d=len(box.params), seed=rng).random(samples)
+    vals: dict[str, list[float]] = {q: [] for q in quantities}
+    for u in pts:
+        r = box.at(box.to_x(u))
+        for q in quantities:
+            vals[q].append(r[q])
+    sampled: dict[str, dict[str, float]] = {}
+    for q in quantities:
+        arr = np.asarray(vals[q], dtype=float)
+        arr = arr[np.isfinite(arr)]
+        sampled[q] = {"n": len(arr), "min": float(arr.min()), "max": float(arr.max())} if len(arr) else {"n": 0}
+    return sampled
 
 
 def _fmt_thresholds(values: Mapping[str, float]) -> str:

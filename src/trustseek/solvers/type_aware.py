@@ -63,7 +63,7 @@ from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.supervisor_types import type_aware_problem
 from .alpha import AlphaSolver
-from .base import one_blas_thread
+from .base import bayes_only, one_blas_thread
 from .defaults import DEFAULT_TYPE_AWARE_SOLVER
 from .numerics import evaluate_controller, improve, memoryless_controllers, policy_values
 from .point import (
@@ -204,10 +204,7 @@ class TypeAwareSolver(PointSolver):
 
     name = "types"
 
-    instead: ClassVar[dict[str, str]] = {
-        "belief_update": "the types solver bounds the value of the Bayes filter (belief update 'bayes'); "
-        "for the eq.-3 update use the alpha solver (two trust levels) or the grid solver",
-    }
+    instead: ClassVar[dict[str, str]] = bayes_only("types")
 
     def unsupported(self, problem: Any) -> list[str]:
         reasons = super().unsupported(problem)
