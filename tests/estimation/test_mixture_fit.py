@@ -8,17 +8,8 @@ from scipy.special import logsumexp
 from trustseek.estimation import encode, fit_iohmm, fit_trust_model, kernels, paper_spec
 from trustseek.estimation.em import run_em
 from trustseek.estimation.estep import Workspace
-from trustseek.estimation.mixture import (
-    EMPTY,
-    MixtureParams,
-    MixtureStructure,
-    MixtureWorkspace,
-    decode_types,
-    fit_mixture,
-    fit_types,
-    mixture_loglik,
-    parse_differ,
-)
+from trustseek.estimation.mixture import decode_types, fit_mixture, fit_types, mixture_loglik
+from trustseek.estimation.mixture_em import EMPTY, MixtureParams, MixtureStructure, MixtureWorkspace, parse_differ
 from trustseek.estimation.spec import FitError, Params
 from trustseek.estimation.type_bootstrap import bootstrap_types
 from trustseek.estimation.type_selection import select_types, type_selection_warnings

@@ -6,7 +6,7 @@ import pytest
 
 from trustseek.estimation import encode, kernels, paper_spec
 from trustseek.estimation.estep import Workspace
-from trustseek.estimation.mixture import MixtureStructure, MixtureWorkspace
+from trustseek.estimation.mixture_em import MixtureStructure, MixtureWorkspace
 from trustseek.estimation.sticks import Sticks
 from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from trustseek.estimation import encode, kernels, paper_spec
-from trustseek.estimation.mixture import MixtureParams, MixtureWorkspace, fit_mixture
+from trustseek.estimation.mixture import fit_mixture
+from trustseek.estimation.mixture_em import MixtureParams, MixtureWorkspace
 from trustseek.estimation.type_selection import heldout_mixture_loglik, heldout_mixture_params
 from trustseek.model.presets import paper_conservative_mixture
 from trustseek.simulation.designs import simulate_design

@@ -43,6 +43,13 @@ def _mixture():
     return mixture
 
 
+def _check_differ(differ: str) -> None:
+    """--differ refused before the log is read when it names no part of the model."""
+    from ..estimation.mixture_em import parse_differ
+
+    parse_differ(differ)
+
+
 def _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on, order=None):
     """The inputs of the types' trust models (--transitions-on/--emissions-on as for fit) and the
     log with the columns they need."""
@@ -112,7 +119,7 @@ def fit_types(
     if plots is not None and plots.exists() and not plots.is_dir():
         raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
     mx = _mixture()
-    mx.parse_differ(differ)
+    _check_differ(differ)
     tr, em, frame = _log_with_inputs(
         log, rule_off(mapping, no_rule), column, label, missing, delimiter, transitions_on, emissions_on, order
     )
@@ -280,8 +287,7 @@ def select_types(
 ) -> None:
     """Choose the number of supervisor types: BIC and participant-held-out log-likelihood."""
     values = parse_types(types)
-    mx = _mixture()
-    mx.parse_differ(differ)
+    _check_differ(differ)
     from ..estimation import type_selection
 
     tr, em, frame = _log_with_inputs(

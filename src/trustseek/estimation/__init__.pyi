@@ -14,6 +14,7 @@ from . import (
     iohmm,
     kernels,
     mixture,
+    mixture_em,
     personal,
     personal_models,
     prediction,

@@ -65,7 +65,8 @@ from ..model.mixture import TypeMixture
 from . import kernels
 from .em import RunResult, run_em
 from .estep import EStep, Workspace
-from .mixture import MixtureStructure, MixtureWorkspace, general_types, mixture_params, type_posteriors
+from .mixture import general_types, mixture_params, type_posteriors
+from .mixture_em import MixtureStructure, MixtureWorkspace
 from .personal_models import PersonalModels
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .mixture import PARTS, MixtureFit, MixtureParams, fit_mixture, general_types
+from .mixture import MixtureFit, fit_mixture, general_types
+from .mixture_em import PARTS, MixtureParams
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec
 from .trust_iohmm import to_iohmm_model, to_trust_model

@@ -18,7 +18,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .mixture import MixtureFit, MixtureParams, MixtureWorkspace, fit_mixture, split_type_starts, types_spec
+from .mixture import MixtureFit, fit_mixture, split_type_starts, types_spec
+from .mixture_em import MixtureParams, MixtureWorkspace
 from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, mark_choices, reached_best, smooth_zero_rows, widening
 from .sequences import Sequences, encode
 from .spec import FitError
