@@ -268,6 +268,42 @@ def test_export_refuses_a_missing_sqlite_file(tmp_path):
     assert not db.exists()
 
 
+def test_a_database_that_accepts_and_never_answers_is_refused_after_the_connect_timeout(tmp_path, monkeypatch):
+    import socket
+    import threading
+
+    import trustseek.server.db as db
+
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(4)
+    held = []
+    stop = threading.Event()
+
+    def accept() -> None:  # accepts every connection and never answers
+        listener.settimeout(0.2)
+        while not stop.is_set():
+            try:
+                held.append(listener.accept()[0])
+            except TimeoutError:
+                continue
+
+    thread = threading.Thread(target=accept, daemon=True)
+    thread.start()
+    monkeypatch.setattr(db, "CONNECT_TIMEOUT", 2)
+    try:
+        port = listener.getsockname()[1]
+        url = f"postgresql://someone@127.0.0.1:{port}/trustseek"
+        code, output = run_cli(["export", "s1", "--db", url, "-o", str(tmp_path / "t.csv")])
+    finally:
+        stop.set()
+        thread.join()
+        for c in held:
+            c.close()
+        listener.close()
+    assert code == 2 and "127.0.0.1" in output and "Traceback" not in output, output
+
+
 def test_solve_pomdp_file_exits_3_above_its_target_gap(tmp_path):
     f = tmp_path / "assist.pomdp"
     assert run_cli(["export-pomdp", str(f)])[0] == 0

@@ -23,6 +23,9 @@ from ..errors import TrustseekError
 
 MIGRATIONS = Path(__file__).resolve().parent / "migrations"
 DEFAULT_URL = "sqlite:///trustseek.sqlite"
+#: seconds a PostgreSQL server may take to answer a new connection (one that accepts and never
+#: answers is refused after this, with one line, instead of a wait without end)
+CONNECT_TIMEOUT = 10
 
 
 class DatabaseError(TrustseekError):
@@ -101,7 +104,8 @@ def make_engine(url: str) -> Engine:
             event.listen(engine, "begin", _sqlite_begin)
             _checkpoint_in_background(engine)
         else:
-            engine = create_engine(url, pool_pre_ping=True, pool_size=20, max_overflow=20)
+            connect = {"connect_timeout": CONNECT_TIMEOUT} if url.startswith("postgresql+psycopg") else {}
+            engine = create_engine(url, pool_pre_ping=True, pool_size=20, max_overflow=20, connect_args=connect)
     except Exception as exc:  # any driver or URL problem becomes one clear line
         raise DatabaseError([f"cannot use database URL {safe_url(url)!r}: {_first_line(exc)}"]) from None
     return engine
