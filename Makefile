@@ -19,7 +19,7 @@ test: setup
 	@(.venv/bin/python -m trustseek.estimation.warm && .venv/bin/python -m trustseek.design.warm) & warm=$$!; status=0; \
 	  $(MAKE) --no-print-directory lint || status=$$?; \
 	  wait $$warm || status=$$?; exit $$status
-	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 .venv/bin/python -m pytest -n 2 -q
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 .venv/bin/python -m pytest -n 2 --dist worksteal -q
 
 # static checks: lint and formatting, types, the layer contracts of docs/architecture.md,
 # and the front end's types
