@@ -36,7 +36,6 @@ fi
 stamp=.venv/.trustseek-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   echo "setup: installing Python packages"
-  .venv/bin/python -m pip install -q --upgrade pip
   .venv/bin/python -m pip install -q -e '.[all,test]'
   touch "$stamp"
 fi

@@ -112,7 +112,7 @@ def test_participant_study_in_chromium(tmp_path):
             page.wait_for_function("['outcome', 'result', 'report'].includes(window.trustseek.state().phase)", timeout=15000)
 
             # end of block 1: self-report
-            page.wait_for_selector("#screen-report:not([hidden])", timeout=15000)
+            page.wait_for_selector("#screen-report:not([hidden])", timeout=45000)
             page.fill("#report-slider", "73")
             page.click("#report-btn")
 
@@ -122,7 +122,7 @@ def test_participant_study_in_chromium(tmp_path):
             )
             assert page.inner_text("#mode") == "Asking for your help"
             teleoperate(page)
-            page.wait_for_selector("#screen-report:not([hidden])", timeout=15000)
+            page.wait_for_selector("#screen-report:not([hidden])", timeout=45000)
             page.fill("#report-slider", "81")
             page.screenshot(path=str(out / "browser_report.png"))
             page.click("#report-btn")
