@@ -25,9 +25,10 @@ from __future__ import annotations
 import copy
 import logging
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -323,14 +324,7 @@ def bootstrap(
     log.info(
         "bootstrap: %d replicates of %d participants over %d processes", replicates, seqs.n_participants, min(n_jobs, replicates)
     )
-    if n_jobs <= 1 or replicates == 1:
-        for i, job in enumerate(jobs):
-            done(i, job.run())
-    else:
-        with ProcessPoolExecutor(max_workers=min(n_jobs, replicates)) as ex:
-            futures = {ex.submit(job.run): i for i, job in enumerate(jobs)}
-            for f in as_completed(futures):
-                done(futures[f], f.result())
+    run_replicates(jobs, n_jobs, done)
     flat = np.vstack([results[i][0] for i in range(replicates)])
     other = sum(results[i][1] for i in range(replicates))
     alpha = (1 - level) / 2
@@ -356,3 +350,16 @@ def bootstrap(
     if widened.any():
         log.info("bootstrap: %d cell interval(s) widened to contain the estimate", int(widened.sum()))
     return Intervals(intervals, replicates, level, wide, int(other), draws, likelihood)
+
+
+def run_replicates(jobs: Sequence[Any], n_jobs: int, done: Callable[[int, Any], None]) -> None:
+    """Each job's ``run()``, in this process or over ``n_jobs`` processes (never more than there
+    are jobs); ``done(i, result)`` is called as job ``i`` finishes (in order in this process)."""
+    if n_jobs <= 1 or len(jobs) == 1:
+        for i, job in enumerate(jobs):
+            done(i, job.run())
+        return
+    with ProcessPoolExecutor(max_workers=min(n_jobs, len(jobs))) as ex:
+        futures = {ex.submit(job.run): i for i, job in enumerate(jobs)}
+        for f in as_completed(futures):
+            done(futures[f], f.result())

@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from .bootstrap import run_replicates
 from .mixture import MixtureFit, fit_mixture, general_types
 from .mixture_em import PARTS, MixtureParams
 from .sequences import Sequences
@@ -103,14 +103,7 @@ def bootstrap_types(
         if progress is not None:
             progress(len(results), replicates)
 
-    if n_jobs <= 1 or replicates == 1:
-        for i, job in enumerate(jobs):
-            done(i, job.run())
-    else:
-        with ProcessPoolExecutor(max_workers=min(n_jobs, replicates)) as ex:
-            futures = {ex.submit(job.run): i for i, job in enumerate(jobs)}
-            for f in as_completed(futures):
-                done(futures[f], f.result())
+    run_replicates(jobs, n_jobs, done)
     flat = np.vstack([results[i] for i in range(replicates)])
     est = np.concatenate([_type_vectors(fit.spec, fit.params).ravel(), fit.weights])
     a = (1 - level) / 2
