@@ -126,7 +126,7 @@ def test_keyboard_only_run_with_axe_on_every_screen_at_1280x720(tmp_path):
             teleoperate(page)  # arrows, Z/X, G, B
 
             # trial 2: rely; then the self-report slider with the arrow keys
-            page.wait_for_selector("#screen-report:not([hidden])", timeout=20000)
+            page.wait_for_selector("#screen-report:not([hidden])", timeout=45000)
             axe(page, "self-report")
             tab_to(page, "report-slider")
             for _ in range(3):
@@ -221,7 +221,7 @@ def test_saving_failures_are_shown_and_retried(tmp_path):
             page.wait_for_selector("#screen-instructions:not([hidden])", timeout=10000)
             assert page.is_hidden("#connection") and failures["consent"] == 0
             page.click("#start-btn")
-            page.wait_for_selector("#screen-report:not([hidden])", timeout=20000)
+            page.wait_for_selector("#screen-report:not([hidden])", timeout=45000)
             page.fill("#report-slider", "40")
             page.click("#report-btn")
             page.wait_for_selector("#connection:not([hidden])", timeout=5000)
