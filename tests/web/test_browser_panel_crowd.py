@@ -54,8 +54,9 @@ RELOADERS = {3, 7, 11}
 #: its outcome, unseen) and reload it
 RELOAD_IN_APPROACH = """() => new Promise((resolve) => {
   const tick = () => {
-    const s = window.trustseek.state();
-    if (s.phase === "approach" && s.trial === 2) {
+    const s = window.trustseek?.state();  // undefined until the page's script has run
+    if (s === undefined) setTimeout(tick, 2);
+    else if (s.phase === "approach" && s.trial === 2) {
       window.requestAnimationFrame = () => 0;
       setTimeout(() => location.reload(), 50);
       resolve(true);
