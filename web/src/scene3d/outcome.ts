@@ -7,7 +7,7 @@
 // the aisle; a success ends as it sets off, a failure cuts the corner: the base strikes the
 // crate or the cart, which is shoved aside, and the item is thrown out of the bin to the floor.
 
-import { AISLE_H, AISLE_W, BASE_H, BASE_W, Box, Layout, rng } from "../scene";
+import { AISLE_H, AISLE_W, BASE_H, BASE_W, Box, Cause, Layout, rng } from "../scene";
 import { Joints, Pose, Reach, STOW, forward, inverse, mix, reachAt } from "./arm";
 import { Drive, planPath } from "./drive";
 import { Aisle3 } from "./geometry";
@@ -35,7 +35,6 @@ export class Faller {
   }
 }
 
-export type Cause = "strike" | "slip";
 export interface Held { joints: Joints; holding: boolean; item: V3; }
 /** The base's pose while it drives back (high complexity), and whether the item is in the bin. */
 export interface Frame extends Held { done: boolean; pose: Pose | null; inBin: boolean; }
