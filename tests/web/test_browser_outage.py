@@ -48,10 +48,10 @@ def test_reload_and_outage_lose_nothing(tmp_path):
         link = c.create_sessions(study["id"], participants=["outage-1"])[0]["link"]
         with sync_playwright() as p:
             browser = launch_chromium(p)
-            page = browser.new_page(viewport={"width": 1280, "height": 720})
+            page = browser.new_page(viewport={"width": 1000, "height": 600})
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(link + "?retry_cap=400")
+            page.goto(link + "?retry_cap=100&quality=0")
             page.wait_for_selector("#screen-consent:not([hidden])")
             page.check("#agree")
             page.click("#consent-btn")
