@@ -200,9 +200,10 @@ for (const seed of req.seeds) for (const high of [false, true]) {
   for (const kind of ["success", "collision", "dropped"]) {
     const a = new OutcomeAnimation(kind, plan, aisle, seed, layout);
     const start = [];
+    const dt = req.dt ?? 0.02;
     let t = 0, f = a.at(0, 0), inBin = false;
-    for (; t < 40 && !f.done; t += 0.02) {
-      f = a.at(t, 0.02);
+    for (; t < 40 && !f.done; t += dt) {
+      f = a.at(t, dt);
       inBin ||= f.inBin;
       if (t < req.start) start.push(f.joints, f.pose);
     }
@@ -259,9 +260,10 @@ for (const seed of req.seeds) for (const high of [false, true]) {
     const item = { x: layout.item.x, y: layout.item.y, z: 0, inBin: false, visible: true };
     const a = new Outcome2D(kind, layout, robot);
     const start = [];
+    const dt = req.dt ?? 0.02;
     let t = 0, done = false;
-    for (; t < 40 && !done; t += 0.02) {
-      done = a.step(t, 0.02, robot, item);
+    for (; t < 40 && !done; t += dt) {
+      done = a.step(t, dt, robot, item);
       if (t < req.start) start.push([robot.x, robot.y, robot.arm, robot.jaw, item.x, item.y, item.inBin]);
     }
     const floor = item.y > SHELF_DEPTH && item.y < AISLE_H - SHELF_DEPTH;
@@ -288,3 +290,16 @@ def test_the_2d_scenes_failure_shows_its_complexitys_cause_and_every_start_is_th
             assert r["fallen"] and r["floor"] and not r["inBin"] and r["binCount"] == 0, r  # the item on the floor
             if row["high"]:
                 assert r["struck"] in ("crate", "cart") and r["shove"] > 0.05, r  # the obstacle shoved aside
+
+
+@pytest.mark.parametrize("scene", ["3d", "2d"])
+def test_a_failure_strikes_the_obstacle_however_long_the_frames(tmp_path, scene):
+    """A fast study or a slow frame moves the base far in one frame (at animation_speed 20 and
+    a 100 ms frame, two seconds of the animation): the drive back still strikes the obstacle and the
+    animation ends, where the base would pass through it and the trial never end."""
+    rows = run_in_node(tmp_path, OUTCOME if scene == "3d" else OUTCOME_2D, {"seeds": list(range(12)), "start": 0, "dt": 2.0})
+    for row in rows:
+        runs = row["runs"]
+        assert all(r["done"] for r in runs.values()), (row["seed"], row["high"], {k: r["cause"] for k, r in runs.items()})
+        if row["high"]:
+            assert runs["collision"]["cause"] == runs["dropped"]["cause"] == "strike", row

@@ -29,6 +29,7 @@ export class Outcome2D {
   private struckAt: number | null = null;
   private shove: P2 = { x: 0, y: 0 };
   private struckBox: P2 | null = null; // where the obstacle stood
+  private checked = 0; // the drive back's time checked for a strike so far
 
   /** `kind`: the server's outcome (success, collision, dropped); the robot at the end of its reach. */
   constructor(readonly kind: string, readonly layout: Layout, robot: RobotState) {
@@ -90,11 +91,19 @@ export class Outcome2D {
       return;
     }
     const L = pathLength(this.back!);
-    const p = pointAlong(this.back!, Math.min(L, Math.max(0, s) * BACK_V));
-    if (this.kind !== "success" && this.overlaps(p)) {
-      this.strike(robot, item, t);
-      return;
+    const at = (u: number) => pointAlong(this.back!, Math.min(L, Math.max(0, u) * BACK_V));
+    // a failure's drive is checked every 10 ms since the last frame: a long frame (a fast study,
+    // a slow machine) does not carry the base through the obstacle
+    for (let u = this.checked; this.kind !== "success" && u < s; ) {
+      u = Math.min(s, u + 0.01);
+      if (this.overlaps(at(u))) {
+        const q = at(u - 0.05); // the base stops short
+        Object.assign(robot, { x: q.x, y: q.y, heading: q.heading });
+        return this.strike(robot, item, t);
+      }
+      this.checked = u;
     }
+    const p = at(s);
     robot.x = p.x;
     robot.y = p.y;
     robot.heading = p.heading;
