@@ -93,7 +93,7 @@ def design(
     quiet: bool = QuietOpt,
 ) -> None:
     """Power and regret by study design: replicated simulate → fit → solve → evaluate → test pipelines."""
-    from ..design import DesignConfig, FitSettings, ask_search, run_design
+    from ..design import DesignConfig, FitSettings
     from ..model.presets import load_model, load_task
 
     check_output(out, "--out", directory=True)
@@ -119,6 +119,28 @@ def design(
     problems = cfg.problems()
     if problems:
         raise TrustseekError(problems)
+    result, search = _run(cfg, jobs, scheduler, quiet, search_low, search_high)
+    paths = None
+    if out is not None:
+        from ..design_report import write_design_report
+
+        paths = write_design_report(result.summary, out, search)
+    if as_json:
+        doc: dict[str, Any] = {"design": result.summary, "ask_search": search}
+        if paths is not None:
+            doc["html"] = str(paths["html"])
+        print_json(doc)
+        return
+    _print(result.summary, search)
+    if paths is not None:
+        console.print(f"report written to {paths['html']}")
+
+
+def _run(cfg, jobs: int, scheduler: str | None, quiet: bool, search_low: str | None, search_high: str | None):
+    """The design's sweep (and the ask-probability search with --search-ask-low/-high), on local
+    processes or a Dask scheduler, with a progress bar unless ``quiet``."""
+    from ..design import ask_search, run_design
+
     client = _connect(scheduler)
     columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
     try:
@@ -143,20 +165,7 @@ def design(
     finally:
         if client is not None:
             client.close()
-    paths = None
-    if out is not None:
-        from ..design_report import write_design_report
-
-        paths = write_design_report(result.summary, out, search)
-    if as_json:
-        doc: dict[str, Any] = {"design": result.summary, "ask_search": search}
-        if paths is not None:
-            doc["html"] = str(paths["html"])
-        print_json(doc)
-        return
-    _print(result.summary, search)
-    if paths is not None:
-        console.print(f"report written to {paths['html']}")
+    return result, search
 
 
 def _iv(d: dict[str, Any], scale: float = 1.0, unit: str = "") -> str:

@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import typer
 from rich.markup import escape
-from rich.table import Table
 
 from ..errors import TrustseekError
 from ._app import (
@@ -35,10 +34,8 @@ from ._app import (
     read_log,
     selection_table,
 )
+from ._output import cells_table, check_plots_folder, fit_summary, print_intervals_note, print_selection, print_warnings
 from ._reading import NoExperienceRuleOpt, load_for_decoding, read_for_types, rule_off, widened_note
-
-if TYPE_CHECKING:
-    pass
 
 # The fit and data modules (pandas, numba) load only when a command of this group runs,
 # so that the rest of the CLI starts fast.
@@ -110,81 +107,93 @@ def _inputs(text: str | None, default: tuple[str, ...], flag: str, declared: tup
     return cols
 
 
+TransitionsOnOpt = typer.Option(
+    None,
+    "--transitions-on",
+    help="Comma-separated inputs of the trust transitions (default: complexity,robot_action,experience; 'none' for "
+    "none); the mapping's 'inputs' may be named too: the fit is then a general model (trustseek.iohmm/1).",
+)
+EmissionsOnOpt = typer.Option(
+    None,
+    "--emissions-on",
+    help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for "
+    "none); the mapping's 'inputs' may be named too.",
+)
+BootstrapOpt = typer.Option(
+    0,
+    "--bootstrap",
+    "-b",
+    min=0,
+    max=10_000,
+    help="Participant-level bootstrap resamples for 95% intervals (0 = none; at least 200 advised, fewer warn).",
+)
+PriorOpt = typer.Option(
+    0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."
+)
+TolOpt = typer.Option(
+    1e-8, "--tol", callback=check_tol, help="Stop when the relative change of the log-likelihood is below this (> 0)."
+)
+JobsOpt = typer.Option(
+    None,
+    "--jobs",
+    "-j",
+    min=1,
+    help="Threads for the fit and processes for the bootstrap (default: all cores); numbers do not depend on it.",
+)
+OutOpt = typer.Option(
+    None,
+    "--out",
+    "-o",
+    help="Write the fitted trust model (JSON, same format as the presets; a general model for other inputs).",
+)
+PosteriorsOpt = typer.Option(
+    None, "--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet)."
+)
+PlotsOpt = typer.Option(None, "--plots", help="Write emission/transition figures (Fig. 4-6 style) into this directory.")
+FillFromOpt = typer.Option(
+    None,
+    "--fill-from",
+    help="Take the rows the data never estimated (e.g. every ask row of a study without asking) from this model "
+    "(a preset name, e.g. paper, or a JSON file with the same levels and complexities).",
+)
+RatingOpt = typer.Option(
+    None,
+    "--rating",
+    help="The log's self-reported trust rating column, fitted jointly as a second emission of the trust "
+    "(empty cells: no rating); or give 'rating' in the mapping file.",
+)
+RatingLevelsOpt = typer.Option(
+    None, "--rating-levels", help="The rating's levels, lowest first, comma-separated (e.g. 1,2,3,4,5,6,7 or low,mid,high)."
+)
+RatingBinsOpt = typer.Option(
+    None, "--rating-bins", help="Bin a numeric rating at these edges, comma-separated (e.g. 0,25,50,75,100)."
+)
+RatingsOnlyOpt = typer.Option(False, "--ratings-only", help="Leave the human actions out: fit the trust on the ratings alone.")
+
+
 @app.command(rich_help_panel="Estimate")
 def fit(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
     preset: str = typer.Option("paper", "--preset", help="Model structure preset (paper)."),
     levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Number of trust levels."),
-    transitions_on: str | None = typer.Option(
-        None,
-        "--transitions-on",
-        help="Comma-separated inputs of the trust transitions (default: complexity,robot_action,experience; 'none' for "
-        "none); the mapping's 'inputs' may be named too: the fit is then a general model (trustseek.iohmm/1).",
-    ),
-    emissions_on: str | None = typer.Option(
-        None,
-        "--emissions-on",
-        help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for "
-        "none); the mapping's 'inputs' may be named too.",
-    ),
+    transitions_on: str | None = TransitionsOnOpt,
+    emissions_on: str | None = EmissionsOnOpt,
     restarts: int = typer.Option(10, "--restarts", "-r", min=1, max=1000, help="Random restarts; the best is kept."),
-    bootstrap: int = typer.Option(
-        0,
-        "--bootstrap",
-        "-b",
-        min=0,
-        max=10_000,
-        help="Participant-level bootstrap resamples for 95% intervals (0 = none; at least 200 advised, fewer warn).",
-    ),
-    prior: float = typer.Option(
-        0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."
-    ),
+    bootstrap: int = BootstrapOpt,
+    prior: float = PriorOpt,
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed (restarts and bootstrap)."),
-    tol: float = typer.Option(
-        1e-8, "--tol", callback=check_tol, help="Stop when the relative change of the log-likelihood is below this (> 0)."
-    ),
+    tol: float = TolOpt,
     max_iter: int = typer.Option(1000, "--max-iter", min=1, help="Iteration cap per restart (E-steps)."),
-    jobs: int | None = typer.Option(
-        None,
-        "--jobs",
-        "-j",
-        min=1,
-        help="Threads for the fit and processes for the bootstrap (default: all cores); numbers do not depend on it.",
-    ),
-    out: Path | None = typer.Option(
-        None,
-        "--out",
-        "-o",
-        help="Write the fitted trust model (JSON, same format as the presets; a general model for other inputs).",
-    ),
-    posteriors: Path | None = typer.Option(
-        None, "--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet)."
-    ),
-    plots: Path | None = typer.Option(
-        None, "--plots", help="Write emission/transition figures (Fig. 4-6 style) into this directory."
-    ),
-    fill_from: str | None = typer.Option(
-        None,
-        "--fill-from",
-        help="Take the rows the data never estimated (e.g. every ask row of a study without asking) from this model "
-        "(a preset name, e.g. paper, or a JSON file with the same levels and complexities).",
-    ),
+    jobs: int | None = JobsOpt,
+    out: Path | None = OutOpt,
+    posteriors: Path | None = PosteriorsOpt,
+    plots: Path | None = PlotsOpt,
+    fill_from: str | None = FillFromOpt,
     as_json: bool = typer.Option(False, "--json", help="Print the fitted model and diagnostics as one JSON object."),
-    rating: str | None = typer.Option(
-        None,
-        "--rating",
-        help="The log's self-reported trust rating column, fitted jointly as a second emission of the trust "
-        "(empty cells: no rating); or give 'rating' in the mapping file.",
-    ),
-    rating_levels: str | None = typer.Option(
-        None, "--rating-levels", help="The rating's levels, lowest first, comma-separated (e.g. 1,2,3,4,5,6,7 or low,mid,high)."
-    ),
-    rating_bins: str | None = typer.Option(
-        None, "--rating-bins", help="Bin a numeric rating at these edges, comma-separated (e.g. 0,25,50,75,100)."
-    ),
-    ratings_only: bool = typer.Option(
-        False, "--ratings-only", help="Leave the human actions out: fit the trust on the ratings alone."
-    ),
+    rating: str | None = RatingOpt,
+    rating_levels: str | None = RatingLevelsOpt,
+    rating_bins: str | None = RatingBinsOpt,
+    ratings_only: bool = RatingsOnlyOpt,
     rating_per: str | None = RatingPerOpt,
     mapping: Path | None = MappingOpt,
     column: list[str] | None = ColumnOpt,
@@ -202,16 +211,7 @@ def fit(
     simulate refuse those a task can reach until they are supplied (--fill-from).  With a
     rating column (--rating or the mapping's 'rating') the fit is joint on the human actions
     and the ratings, and the model file carries P(rating | trust)."""
-    from ._app import check_not_inputs
-
-    check_outputs((out, "--out"), (posteriors, "--posteriors"))
-    check_output(posteriors, "--posteriors", POSTERIOR_SUFFIXES)
-    inputs = ((log, "trial log"), (mapping, "--mapping file"), (fill_from, "--fill-from model"))
-    check_not_inputs(((out, "--out"), (posteriors, "--posteriors")), inputs)
-    if plots is not None and plots.exists() and not plots.is_dir():
-        raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
-    if keep and posteriors is None:
-        raise TrustseekError(["--keep carries log columns into --posteriors: give --posteriors"])
+    _check_fit_paths(log, mapping, fill_from, out, posteriors, plots, keep)
     tr, em, frame = _read_with_inputs(
         log,
         rule_off(mapping, no_rule),
@@ -225,6 +225,82 @@ def fit(
         not ratings_only,
         order,
     )
+    run = _FitRun(levels, restarts, seed, bootstrap, prior, jobs, tol, max_iter, _rated(frame, log, ratings_only), ratings_only)
+    outputs = _FitOutputs(out, posteriors, plots, keep, as_json, quiet)
+    if _general(tr, em):
+        _fit_general(frame, tr, em, run, outputs, fill_from)
+        return
+    result = _fit_trust(frame, preset, tr, em, run, quiet or as_json)
+    drawn = result.model  # the figures show only what the data estimated
+    if fill_from is not None and result.model.not_estimated:
+        from ..model.presets import load_model
+
+        filled = result.model.not_estimated_rows()
+        result.model = result.model.filled_from(load_model(fill_from))
+        result.warnings.append(f"taken from {fill_from}: {', '.join(filled)}")
+    _write_fit(result, frame, outputs)
+    if plots is not None:
+        _plot_trust(result, drawn, plots, preset == "paper" and (tr, em) == _paper_inputs())
+    if as_json:
+        _print_fit_json(result)
+        return
+    n = f"{result.fit.seqs.n_participants} participants, {result.fit.seqs.n_trials} trials"
+    console.print(cells_table(f"Fitted trust model ({n})", result, _fit().MIN_EVENTS))
+    console.print(fit_summary(result, "restarts", len(result.restart_logliks)))
+    print_intervals_note(result.intervals)
+    print_warnings(result.warnings)
+    if out is not None:
+        console.print(f"model written to {out}")
+    if posteriors is not None:
+        console.print(f"posteriors written to {posteriors}")
+    if plots is not None:
+        console.print(f"figures written to {plots}/emissions.png, {plots}/transitions.png")
+
+
+@dataclass(frozen=True)
+class _FitRun:
+    """How ``fit`` fits: the options of the estimate, and the rating column it reads (if any)."""
+
+    levels: int
+    restarts: int
+    seed: int
+    bootstrap: int
+    prior: float
+    jobs: int | None
+    tol: float
+    max_iter: int
+    rated: str | None
+    ratings_only: bool
+
+
+@dataclass(frozen=True)
+class _FitOutputs:
+    """What ``fit`` writes and prints."""
+
+    out: Path | None
+    posteriors: Path | None
+    plots: Path | None
+    keep: list[str] | None
+    as_json: bool
+    quiet: bool
+
+
+def _check_fit_paths(log, mapping, fill_from, out, posteriors, plots, keep) -> None:
+    """fit's output options refused before the log is read."""
+    from ._app import check_not_inputs
+
+    check_outputs((out, "--out"), (posteriors, "--posteriors"))
+    check_output(posteriors, "--posteriors", POSTERIOR_SUFFIXES)
+    inputs = ((log, "trial log"), (mapping, "--mapping file"), (fill_from, "--fill-from model"))
+    check_not_inputs(((out, "--out"), (posteriors, "--posteriors")), inputs)
+    check_plots_folder(plots)
+    if keep and posteriors is None:
+        raise TrustseekError(["--keep carries log columns into --posteriors: give --posteriors"])
+
+
+def _rated(frame, log: Path, ratings_only: bool) -> str | None:
+    """The rating column fitted jointly ("rating") when the log has one; a note when the ratings
+    look copied over a block's trials."""
     rated = "rating" if frame.attrs.get("rating_levels") else None
     if rated and not frame.attrs.get("rating_per"):
         from ..data.levels import copied_per_block
@@ -236,187 +312,125 @@ def fit(
         raise TrustseekError(
             ["--ratings-only needs a rating column: --rating COLUMN --rating-levels ..., or the mapping's 'rating'"]
         )
-    if _general(tr, em):
-        _fit_general(
-            frame, tr, em, levels, restarts, seed, bootstrap, prior, jobs, tol, max_iter, out, posteriors, plots, fill_from,
-            as_json, rated, ratings_only, keep, quiet,
-        )  # fmt: skip
-        return
-    bar = progress_bar(quiet or as_json)
+    return rated
+
+
+def _paper_inputs() -> tuple[tuple[str, ...], tuple[str, ...]]:
+    return _fit().PAPER_TRANSITION_INPUTS, _fit().PAPER_EMISSION_INPUTS
+
+
+def _progress(bar, run: _FitRun):
+    """A progress callback counting the restarts, then the bootstrap's replicates."""
+    task = bar.add_task("restarts", total=run.restarts + run.bootstrap)
+
+    def progress(done: int, total: int) -> None:
+        bar.update(task, completed=done, total=total, description="bootstrap" if done > run.restarts else "restarts")
+
+    return progress
+
+
+def _fit_trust(frame, preset: str, tr, em, run: _FitRun, quiet: bool):
+    """The trust model's fit, with a progress bar unless ``quiet``."""
+    bar = progress_bar(quiet)
     with bar:
-        task = bar.add_task("restarts", total=restarts + bootstrap)
-
-        def progress(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total, description="bootstrap" if done > restarts else "restarts")
-
-        result = _fit().fit_trust_model(
+        return _fit().fit_trust_model(
             frame,
             preset=preset,
-            restarts=restarts,
-            seed=seed,
-            bootstrap=bootstrap,
-            prior=prior,
-            n_jobs=jobs,
-            tol=tol,
-            max_iter=max_iter,
-            progress=progress,
-            levels=levels,
+            restarts=run.restarts,
+            seed=run.seed,
+            bootstrap=run.bootstrap,
+            prior=run.prior,
+            n_jobs=run.jobs,
+            tol=run.tol,
+            max_iter=run.max_iter,
+            progress=_progress(bar, run),
+            levels=run.levels,
             transition_inputs=tr,
             emission_inputs=em,
-            rating=rated,
-            actions=not ratings_only,
+            rating=run.rated,
+            actions=not run.ratings_only,
         )
-    drawn = result.model  # the figures show only what the data estimated
-    if fill_from is not None and result.model.not_estimated:
-        from ..model.presets import load_model
 
-        filled = result.model.not_estimated_rows()
-        result.model = result.model.filled_from(load_model(fill_from))
-        result.warnings.append(f"taken from {fill_from}: {', '.join(filled)}")
-    if out is not None:
-        with atomic_output(out) as tmp:
+
+def _write_fit(result, frame, outputs: _FitOutputs) -> None:
+    """The model file and the posteriors, each written whole or not at all."""
+    if outputs.out is not None:
+        with atomic_output(outputs.out) as tmp:
             result.model.save(tmp)
-    if posteriors is not None:
-        with atomic_output(posteriors) as tmp:
-            _data().write_trials(keep_columns(result.posteriors(), frame, keep), tmp)
-    if plots is not None:
-        from ..model.presets import paper_model
-        from ..plots.model import plot_emissions, plot_transitions
-
-        plots.mkdir(parents=True, exist_ok=True)
-        # the paper's values are a reference only for a model of the paper's structure
-        paper_like = preset == "paper" and tr == _fit().PAPER_TRANSITION_INPUTS and em == _fit().PAPER_EMISSION_INPUTS
-        same = result.model.complexities == paper_model().complexities and result.model.n_trust == 2
-        ref = paper_model() if paper_like and same else None
-        plot_emissions(drawn, plots / "emissions.png", ci=result.ci, reference=ref)
-        plot_transitions(drawn, plots / "transitions.png", ci=result.ci, reference=ref)
-    if as_json:
-        d = result.to_dict()
-        d["cells"] = result.cells()
-        print_json(d)
-        return
-    table = Table(
-        title=f"Fitted trust model ({result.fit.seqs.n_participants} participants, {result.fit.seqs.n_trials} trials)",
-        title_justify="left",
-    )
-    table.add_column("cell")
-    table.add_column("estimate", justify="right")
-    iv = result.intervals
-    if iv is not None:
-        table.add_column(f"{iv.level:.0%} CI ({iv.replicates} resamples)", justify="right")
-    table.add_column("events", justify="right")
-    for c in result.cells():
-        row = [c["cell"], f"{c['estimate']:.3f}"]
-        if iv is not None:
-            ci = escape(f"[{c['lower']:.3f}, {c['upper']:.3f}]")
-            row.append(f"{ci} [yellow]widened[/]" if c.get("widened") else ci)
-        ev = f"{c['events']:.1f}"
-        row.append(ev if c["events"] >= _fit().MIN_EVENTS else f"[yellow]{ev} (not identified)[/]")
-        table.add_row(*row)
-    console.print(table)
-    lls = ", ".join(f"{x:.3f}" for x in sorted(result.restart_logliks, reverse=True))
-    console.print(
-        f"log-likelihood {result.loglik:.4f}; {result.n_params} free parameters; AIC {result.aic:.2f}; BIC {result.bic:.2f}\n"
-        f"restarts (best first): {lls}; {_fit().selection.reached_best(result.restart_logliks)} of "
-        f"{len(result.restart_logliks)} within 0.01 of the best"
-    )
-    if iv is not None:
-        console.print(f"intervals: bootstrap over {iv.replicates} resamples of the participants ({iv.method})", highlight=False)
-    for w in result.warnings:
-        console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
-    if out is not None:
-        console.print(f"model written to {out}")
-    if posteriors is not None:
-        console.print(f"posteriors written to {posteriors}")
-    if plots is not None:
-        console.print(f"figures written to {plots}/emissions.png, {plots}/transitions.png")
+    if outputs.posteriors is not None:
+        with atomic_output(outputs.posteriors) as tmp:
+            _data().write_trials(keep_columns(result.posteriors(), frame, outputs.keep), tmp)
 
 
-def _fit_general(
-    frame, tr, em, levels, restarts, seed, bootstrap, prior, jobs, tol, max_iter, out, posteriors, plots, fill_from,
-    as_json, rated, ratings_only, keep, quiet,
-) -> None:  # fmt: skip
+def _plot_trust(result, drawn, plots: Path, paper_like: bool) -> None:
+    """The emission and transition figures of a trust model, the paper's values as reference for a
+    model of the paper's structure."""
+    from ..model.presets import paper_model
+    from ..plots.model import plot_emissions, plot_transitions
+
+    plots.mkdir(parents=True, exist_ok=True)
+    same = result.model.complexities == paper_model().complexities and result.model.n_trust == 2
+    ref = paper_model() if paper_like and same else None
+    plot_emissions(drawn, plots / "emissions.png", ci=result.ci, reference=ref)
+    plot_transitions(drawn, plots / "transitions.png", ci=result.ci, reference=ref)
+
+
+def _print_fit_json(result) -> None:
+    d = result.to_dict()
+    d["cells"] = result.cells()
+    print_json(d)
+
+
+def _fit_general(frame, tr, em, run: _FitRun, outputs: _FitOutputs, fill_from: str | None) -> None:
     """``fit`` with inputs a trust model does not have: a general model (trustseek.iohmm/1)."""
     named = ", ".join(dict.fromkeys((*em, *tr)))
     if fill_from is not None:
         raise TrustseekError([f"--fill-from is for a trust model; a general model (inputs: {named}) has none"])
-    bar = progress_bar(quiet or as_json)
+    bar = progress_bar(outputs.quiet or outputs.as_json)
     with bar:
-        task = bar.add_task("restarts", total=restarts + bootstrap)
         result = _fit().fit.fit_model(
             frame,
             em,
             tr,
-            levels=levels,
-            restarts=restarts,
-            seed=seed,
-            prior=prior,
-            n_jobs=jobs,
-            tol=tol,
-            max_iter=max_iter,
-            progress=lambda done, total: bar.update(
-                task, completed=done, total=total, description="bootstrap" if done > restarts else "restarts"
-            ),
-            rating=rated,
-            actions=not ratings_only,
-            bootstrap=bootstrap,
+            levels=run.levels,
+            restarts=run.restarts,
+            seed=run.seed,
+            prior=run.prior,
+            n_jobs=run.jobs,
+            tol=run.tol,
+            max_iter=run.max_iter,
+            progress=_progress(bar, run),
+            rating=run.rated,
+            actions=not run.ratings_only,
+            bootstrap=run.bootstrap,
         )
-    if out is not None:
-        with atomic_output(out) as tmp:
-            result.model.save(tmp)
-    if posteriors is not None:
-        with atomic_output(posteriors) as tmp:
-            _data().write_trials(keep_columns(result.posteriors(), frame, keep), tmp)
+    _write_fit(result, frame, outputs)
+    plots = outputs.plots
     if plots is not None:
         from ..plots.iohmm import plot_iohmm_emissions, plot_iohmm_transitions
 
         plots.mkdir(parents=True, exist_ok=True)
         plot_iohmm_emissions(result.model, plots / "emissions.png")
         plot_iohmm_transitions(result.model, plots / "transitions.png")
-    if as_json:
-        d = result.to_dict()
-        d["cells"] = result.cells()
-        print_json(d)
+    if outputs.as_json:
+        _print_fit_json(result)
         return
-    table = Table(
-        title=f"Fitted model (inputs: emissions on {', '.join(em) or 'none'}; transitions on {', '.join(tr) or 'none'}; "
-        f"{result.fit.seqs.n_participants} participants, {result.fit.seqs.n_trials} trials)",
-        title_justify="left",
+    title = (
+        f"Fitted model (inputs: emissions on {', '.join(em) or 'none'}; transitions on {', '.join(tr) or 'none'}; "
+        f"{result.fit.seqs.n_participants} participants, {result.fit.seqs.n_trials} trials)"
     )
-    iv = result.intervals
-    table.add_column("cell")
-    table.add_column("estimate", justify="right")
-    if iv is not None:
-        table.add_column(f"{iv.level:.0%} CI ({iv.replicates} resamples)", justify="right")
-    table.add_column("events", justify="right")
-    for c in result.cells():
-        row = [escape(c["cell"]), f"{c['estimate']:.3f}"]
-        if iv is not None:
-            ci = escape(f"[{c['lower']:.3f}, {c['upper']:.3f}]")
-            row.append(f"{ci} [yellow]widened[/]" if c.get("widened") else ci)
-        ev = f"{c['events']:.1f}"
-        row.append(ev if c["events"] >= _fit().MIN_EVENTS else f"[yellow]{ev} (not identified)[/]")
-        table.add_row(*row)
-    console.print(table)
-    if iv is not None:
-        console.print(f"intervals: bootstrap over {iv.replicates} resamples of the participants ({iv.method})", highlight=False)
-    lls = ", ".join(f"{x:.3f}" for x in sorted(result.restart_logliks, reverse=True))
-    console.print(
-        f"log-likelihood {result.loglik:.4f}; {result.n_params} free parameters; AIC {result.aic:.2f}; BIC {result.bic:.2f}\n"
-        f"restarts (best first): {lls}; {_fit().selection.reached_best(result.restart_logliks)} of "
-        f"{len(result.restart_logliks)} within 0.01 of the best",
-        highlight=False,
-    )
-    for w in result.warnings:
-        console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
+    console.print(cells_table(title, result, _fit().MIN_EVENTS, escape_cells=True))
+    print_intervals_note(result.intervals)
+    console.print(fit_summary(result, "restarts", len(result.restart_logliks)), highlight=False)
+    print_warnings(result.warnings)
     if plots is not None:
         console.print(
             f"figures written to {plots}/emissions.png, {plots}/transitions.png (the tables by combination of the inputs)"
         )
-    if out is not None:
-        console.print(f"general model (trustseek.iohmm/1) written to {out}; decode, predict and validate read it")
-    if posteriors is not None:
-        console.print(f"posteriors written to {posteriors}")
+    if outputs.out is not None:
+        console.print(f"general model (trustseek.iohmm/1) written to {outputs.out}; decode, predict and validate read it")
+    if outputs.posteriors is not None:
+        console.print(f"posteriors written to {outputs.posteriors}")
 
 
 @app.command("decode", rich_help_panel="Estimate")
@@ -525,15 +539,9 @@ def select(
     if as_json:
         print_json({"levels": rows, "warnings": warnings})
         return
-    # whole when piped too (a pipe's console is 80 columns wide)
-    from rich.console import Console
-
-    table = selection_table("Number of trust levels", "levels", rows, folds)
-    (console if console.is_terminal else Console(width=400)).print(table)
-    console.print(
+    print_selection(
+        selection_table("Number of trust levels", "levels", rows, folds),
         "* best by that criterion; reached best: starts (random, and the fit with one level fewer split) "
         "within 0.01 of the best log-likelihood",
-        highlight=False,
+        warnings,
     )
-    for w in warnings:
-        console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)

@@ -137,17 +137,9 @@ def solve(
     from ..model.presets import load_mixture, load_model, load_task
     from ..pomdp.problem import AssistancePOMDP
     from ..pomdp.supervisor_types import type_aware_problem, type_marginal
-    from ..solvers import make_solver, solver_names, summarize
+    from ..solvers import make_solver, summarize
 
-    _check_update(belief_update)
-    if method not in METHODS:
-        raise TrustseekError([f"--method must be one of {list(METHODS)}, got {method!r}"])
-    if solver is not None and solver not in solver_names():
-        raise TrustseekError([f"--solver must be one of {list(solver_names())}, got {solver!r}"])
-    if gap is not None and not (gap > 0 and math.isfinite(gap)):
-        raise TrustseekError([f"--gap must be a finite number > 0, got {gap}"])
-    if max_seconds is not None and not (max_seconds > 0 and math.isfinite(max_seconds)):
-        raise TrustseekError([f"--max-seconds must be a finite number > 0, got {max_seconds}"])
+    _check_solve(belief_update, method, solver, gap, max_seconds)
     from ._app import check_not_inputs
 
     check_output(out, "--out", (".json",))
@@ -192,6 +184,21 @@ def solve(
         console.print(f"supervisor types at the start: {start}; the belief is over (type, trust)")
     if out is not None:
         console.print(f"policy written to {out}")
+
+
+def _check_solve(belief_update: str, method: str, solver: str | None, gap: float | None, max_seconds: float | None) -> None:
+    """solve's options refused before anything is loaded."""
+    from ..solvers import solver_names
+
+    _check_update(belief_update)
+    if method not in METHODS:
+        raise TrustseekError([f"--method must be one of {list(METHODS)}, got {method!r}"])
+    if solver is not None and solver not in solver_names():
+        raise TrustseekError([f"--solver must be one of {list(solver_names())}, got {solver!r}"])
+    if gap is not None and not (gap > 0 and math.isfinite(gap)):
+        raise TrustseekError([f"--gap must be a finite number > 0, got {gap}"])
+    if max_seconds is not None and not (max_seconds > 0 and math.isfinite(max_seconds)):
+        raise TrustseekError([f"--max-seconds must be a finite number > 0, got {max_seconds}"])
 
 
 def _print_solution(policy: Policy, summary: dict) -> None:

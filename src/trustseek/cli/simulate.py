@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import typer
 from rich.console import Console
@@ -76,149 +77,118 @@ def _counts(text: str, task) -> list[int]:
     return vals
 
 
+ModelOpt = typer.Option(
+    "paper",
+    "--model",
+    "-m",
+    help="Supervisors' trust model: a preset name (paper) or a JSON file; a mixture of supervisor types "
+    "(paper+conservative or a mixture file) gives each participant a type in the mixture's shares.",
+)
+TypesOpt = typer.Option(
+    None,
+    "--types",
+    help="Supervisors of several types, as 'solve --types' takes them: a mixture preset (paper+conservative) "
+    "or a mixture JSON file (the same as giving the mixture with --model).",
+)
+PolicyOpt = typer.Option(
+    "trust-aware",
+    "--policy",
+    "-p",
+    help=f"Robot policy: {', '.join(POLICY_SPEC_KINDS)}, {TYPE_AWARE} (for a mixture of supervisor types), "
+    "or a policy JSON file (e.g. from 'trustseek solve --out').",
+)
+CountsOpt = typer.Option(
+    None,
+    "--counts",
+    help="Trials per complexity in random order, e.g. 41,30 (the paper's design). Default: 41,30 unless --trials is given.",
+)
+TrialsOpt = typer.Option(
+    None,
+    "--trials",
+    min=1,
+    max=100_000,
+    help="Number of trials with i.i.d. complexities from the task's probabilities (instead of --counts).",
+)
+BeliefUpdateOpt = typer.Option(
+    "bayes",
+    "--belief-update",
+    "-u",
+    help="Belief update of the trust-aware policy: 'bayes' (exact filter, default) or 'paper' (eq. 3).",
+)
+PolicyModelOpt = typer.Option(
+    None, "--policy-model", help="Model the trust-aware policy is solved for (default: the supervisors' model)."
+)
+AskLowOpt = typer.Option(
+    PAPER_ASK_PROBABILITIES["low"], "--ask-low", min=0.0, max=1.0, help="Randomized policy: P(ask) in the first complexity."
+)
+AskHighOpt = typer.Option(
+    PAPER_ASK_PROBABILITIES["high"],
+    "--ask-high",
+    min=0.0,
+    max=1.0,
+    help="Randomized policy: P(ask) in the second complexity.",
+)
+ConcentrationOpt = typer.Option(
+    None,
+    "--concentration",
+    help="Heterogeneous population: each participant's probability rows ~ Dirichlet(concentration x pooled row + pseudo).",
+)
+PseudoOpt = typer.Option(0.0, "--pseudo", min=0.0, help="Dirichlet pseudo-count added to every cell (with --concentration).")
+OutOpt = typer.Option(
+    None,
+    "--out",
+    "-o",
+    help="Write every trial (canonical trial log + true_trust, belief, reward, block, policy) to this CSV/Parquet file.",
+)
+SummaryOutOpt = typer.Option(None, "--summary-out", help="Write the per-participant summary to this CSV/Parquet file.")
+
+
 @app.command(rich_help_panel="Simulate and reproduce")
 def simulate(
     ctx: typer.Context,
-    model: str = typer.Option(
-        "paper",
-        "--model",
-        "-m",
-        help="Supervisors' trust model: a preset name (paper) or a JSON file; a mixture of supervisor types "
-        "(paper+conservative or a mixture file) gives each participant a type in the mixture's shares.",
-    ),
-    types: str | None = typer.Option(
-        None,
-        "--types",
-        help="Supervisors of several types, as 'solve --types' takes them: a mixture preset (paper+conservative) "
-        "or a mixture JSON file (the same as giving the mixture with --model).",
-    ),
+    model: str = ModelOpt,
+    types: str | None = TypesOpt,
     task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
-    policy: str = typer.Option(
-        "trust-aware",
-        "--policy",
-        "-p",
-        help=f"Robot policy: {', '.join(POLICY_SPEC_KINDS)}, {TYPE_AWARE} (for a mixture of supervisor types), "
-        "or a policy JSON file (e.g. from 'trustseek solve --out').",
-    ),
+    policy: str = PolicyOpt,
     participants: int = typer.Option(9, "--participants", "-n", min=1, max=1_000_000, help="Number of simulated participants."),
-    counts: str | None = typer.Option(
-        None,
-        "--counts",
-        help="Trials per complexity in random order, e.g. 41,30 (the paper's design). Default: 41,30 unless --trials is given.",
-    ),
-    trials: int | None = typer.Option(
-        None,
-        "--trials",
-        min=1,
-        max=100_000,
-        help="Number of trials with i.i.d. complexities from the task's probabilities (instead of --counts).",
-    ),
-    belief_update: str = typer.Option(
-        "bayes",
-        "--belief-update",
-        "-u",
-        help="Belief update of the trust-aware policy: 'bayes' (exact filter, default) or 'paper' (eq. 3).",
-    ),
-    policy_model: str | None = typer.Option(
-        None, "--policy-model", help="Model the trust-aware policy is solved for (default: the supervisors' model)."
-    ),
+    counts: str | None = CountsOpt,
+    trials: int | None = TrialsOpt,
+    belief_update: str = BeliefUpdateOpt,
+    policy_model: str | None = PolicyModelOpt,
     grid: int = typer.Option(1001, "--grid", min=3, max=1_000_001, help="Belief grid points for solving the trust-aware policy."),
-    ask_low: float = typer.Option(
-        PAPER_ASK_PROBABILITIES["low"], "--ask-low", min=0.0, max=1.0, help="Randomized policy: P(ask) in the first complexity."
-    ),
-    ask_high: float = typer.Option(
-        PAPER_ASK_PROBABILITIES["high"],
-        "--ask-high",
-        min=0.0,
-        max=1.0,
-        help="Randomized policy: P(ask) in the second complexity.",
-    ),
-    concentration: float | None = typer.Option(
-        None,
-        "--concentration",
-        help="Heterogeneous population: each participant's probability rows ~ Dirichlet(concentration x pooled row + pseudo).",
-    ),
-    pseudo: float = typer.Option(
-        0.0, "--pseudo", min=0.0, help="Dirichlet pseudo-count added to every cell (with --concentration)."
-    ),
+    ask_low: float = AskLowOpt,
+    ask_high: float = AskHighOpt,
+    concentration: float | None = ConcentrationOpt,
+    pseudo: float = PseudoOpt,
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed (same seed, same supervisors and luck for any policy)."),
-    out: Path | None = typer.Option(
-        None,
-        "--out",
-        "-o",
-        help="Write every trial (canonical trial log + true_trust, belief, reward, block, policy) to this CSV/Parquet file.",
-    ),
-    summary_out: Path | None = typer.Option(
-        None, "--summary-out", help="Write the per-participant summary to this CSV/Parquet file."
-    ),
+    out: Path | None = OutOpt,
+    summary_out: Path | None = SummaryOutOpt,
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
 ) -> None:
     """Simulate supervisors from a trust model working with the robot under a policy."""
-    import numpy as np
-
-    from ..model.presets import load_mixture, load_model, load_task
-    from ..pomdp.supervisor_types import product_model
-    from ..simulation.engine import Supervisors
     from ..simulation.engine import simulate as run_simulation
 
-    if belief_update not in ("paper", "bayes"):
-        raise TrustseekError([f"--belief-update must be 'paper' or 'bayes', got {belief_update!r}"])
-    if counts is not None and trials is not None:
-        raise TrustseekError(["give either --counts or --trials, not both"])
-    given = []  # options that a solved policy file would silently override
-    for name, option in (("belief_update", "--belief-update"), ("policy_model", "--policy-model")):
-        source = ctx.get_parameter_source(name)
-        if source is not None and source.name != "DEFAULT":
-            given.append(option)
+    given = _check_simulate(ctx, belief_update, counts, trials, out, summary_out)
     from ._app import check_not_inputs
 
-    check_outputs((out, "--out"), (summary_out, "--summary-out"))
-    for f, option in ((out, "--out"), (summary_out, "--summary-out")):
-        check_output(f, option, (".csv", ".parquet"))
     inputs = ((model, "--model file"), (task, "--task file"), (policy, "--policy file"), (policy_model, "--policy-model file"))
     check_not_inputs(((out, "--out"), (summary_out, "--summary-out")), inputs)
-    from .plan import mixture_of, need_two_levels
-
-    if types is not None:
-        source = ctx.get_parameter_source("model")
-        if source is not None and source.name != "DEFAULT":
-            raise TrustseekError(["give the supervisors with --model or with --types, not both"])
-    mixture = load_mixture(types) if types is not None else mixture_of(model)
-    m = mixture.models[0] if mixture is not None else load_model(model)
-    if mixture is not None and mixture.n_types == 1:  # one supervisor type is a trust model
-        mixture = None
-    policy_types = mixture_of(policy_model) if policy_model else mixture
-    if mixture is not None and concentration is not None:
-        raise TrustseekError(["--concentration draws around one model; the supervisor types of a mixture are fixed"])
-    t = load_task(task)
-    t.check_compatible(m)
-    pm = product_model(policy_types) if policy_types is not None else (load_model(policy_model) if policy_model else m)
+    pop = _population(ctx, model, types, policy_model, concentration, task)
+    t = pop.task
     if policy == TYPE_AWARE:
-        if policy_types is None:
+        if pop.policy_types is None:
             raise TrustseekError(
                 [f"--policy {TYPE_AWARE} needs supervisor types: a mixture with --types, --model or --policy-model"]
             )
-        pol = solvers.solve_type_aware(policy_types, t, belief_update=belief_update)
+        pol = solvers.solve_type_aware(pop.policy_types, t, belief_update=belief_update)
     else:
-        if policy == "trust-aware" and policy_types is not None:
-            raise TrustseekError(
-                [f"the supervisors are a mixture of types: use --policy {TYPE_AWARE}, or --policy-model MODEL for one model"]
-            )
-        if policy == "trust-aware" and pm.n_trust != 2:
-            need_two_levels(pm, "simulate")
-        pol = _policy(policy, pm, t, belief_update, grid, ask_low, ask_high, given)
-    cnt = None if trials is not None else _counts(counts or "41,30", t)
-    n_trials = sum(cnt) if cnt is not None else (trials or 0)
-    if participants * n_trials > 100_000_000:  # about 1.3 GB of simulated trials
-        raise TrustseekError(
-            [f"--participants {participants} x {n_trials} trials each is more than 100,000,000 simulated trials: simulate fewer"]
-        )
-    sup = Supervisors.pooled(m, participants) if mixture is None else Supervisors.from_mixture(mixture, participants, rng=seed)
-    if concentration is not None:
-        sup = Supervisors.dirichlet(m, participants, concentration, np.random.default_rng([seed, 7]), pseudo=pseudo)
-    record = out is not None
+        pol = _policy(policy, pop.checked_policy_model(policy), t, belief_update, grid, ask_low, ask_high, given)
+    cnt = _trial_counts(counts, trials, participants, t)
+    sup = pop.supervisors(participants, seed, concentration, pseudo)
     t0 = time.perf_counter()
-    sim = run_simulation(sup, t, pol, participants, counts=cnt, trials=trials, seed=seed, record=record, belief_model=pm)
+    sim = run_simulation(
+        sup, t, pol, participants, counts=cnt, trials=trials, seed=seed, record=out is not None, belief_model=pop.pm
+    )
     dt = time.perf_counter() - t0
     if out is not None:
         with atomic_output(out) as tmp:
@@ -227,14 +197,13 @@ def simulate(
     if summary_out is not None:
         with atomic_output(summary_out) as tmp:
             _write(summ, tmp)
-    cols = ["cumulative_reward", "discounted_reward", "autonomous_collections", "failures", "interventions", "asks"]
     stats = {
         c: {
             "mean": float(summ[c].mean()),
             "median": float(summ[c].median()),
             "sd": float(summ[c].std(ddof=1)) if len(summ) > 1 else 0.0,
         }
-        for c in cols
+        for c in SUMMARY_COLUMNS
     }
     n_trials = int(summ["trials"].sum())
     if as_json:
@@ -250,7 +219,110 @@ def simulate(
             }
         )
         return
-    desc = pol.describe()
+    _print_simulation(pol.describe(), participants, n_trials, stats, dt, seed)
+    if out is not None:
+        console.print(f"trials written to {out}")
+    if summary_out is not None:
+        console.print(f"summary written to {summary_out}")
+
+
+#: the per-participant figures simulate reports
+SUMMARY_COLUMNS = ("cumulative_reward", "discounted_reward", "autonomous_collections", "failures", "interventions", "asks")
+
+
+def _given(ctx: typer.Context, *names: str) -> list[str]:
+    """Of ``names`` (a parameter and its option each), the options given on the command line."""
+    out = []
+    for name, option in zip(names[::2], names[1::2], strict=True):
+        source = ctx.get_parameter_source(name)
+        if source is not None and source.name != "DEFAULT":
+            out.append(option)
+    return out
+
+
+def _check_simulate(ctx: typer.Context, belief_update: str, counts, trials, out, summary_out) -> list[str]:
+    """simulate's options refused before anything is loaded; the options a solved policy file would
+    silently override (refused with one)."""
+    if belief_update not in ("paper", "bayes"):
+        raise TrustseekError([f"--belief-update must be 'paper' or 'bayes', got {belief_update!r}"])
+    if counts is not None and trials is not None:
+        raise TrustseekError(["give either --counts or --trials, not both"])
+    given = _given(ctx, "belief_update", "--belief-update", "policy_model", "--policy-model")
+    check_outputs((out, "--out"), (summary_out, "--summary-out"))
+    for f, option in ((out, "--out"), (summary_out, "--summary-out")):
+        check_output(f, option, (".csv", ".parquet"))
+    return given
+
+
+@dataclass
+class _Population:
+    """The simulated supervisors' model (and types), and the model the robot's policy is solved for."""
+
+    model: TrustModel
+    mixture: Any  # TypeMixture of more than one type, or None
+    policy_types: Any  # the types the policy is solved for, or None
+    pm: TrustModel  # the model the policy's belief runs on
+    task: Task
+
+    def checked_policy_model(self, policy: str) -> TrustModel:
+        """The model a policy other than type-aware is solved for."""
+        from .plan import need_two_levels
+
+        if policy == "trust-aware" and self.policy_types is not None:
+            raise TrustseekError(
+                [f"the supervisors are a mixture of types: use --policy {TYPE_AWARE}, or --policy-model MODEL for one model"]
+            )
+        if policy == "trust-aware" and self.pm.n_trust != 2:
+            need_two_levels(self.pm, "simulate")
+        return self.pm
+
+    def supervisors(self, participants: int, seed: int, concentration: float | None, pseudo: float):
+        import numpy as np
+
+        from ..simulation.engine import Supervisors
+
+        if concentration is not None:
+            return Supervisors.dirichlet(self.model, participants, concentration, np.random.default_rng([seed, 7]), pseudo=pseudo)
+        if self.mixture is None:
+            return Supervisors.pooled(self.model, participants)
+        return Supervisors.from_mixture(self.mixture, participants, rng=seed)
+
+
+def _population(
+    ctx: typer.Context, model: str, types: str | None, policy_model: str | None, concentration, task: str
+) -> _Population:
+    """--model or --types (one of them), --policy-model, --concentration and --task read and checked."""
+    from ..model.presets import load_mixture, load_model, load_task
+    from ..pomdp.supervisor_types import product_model
+    from .plan import mixture_of
+
+    if types is not None and _given(ctx, "model", "--model"):
+        raise TrustseekError(["give the supervisors with --model or with --types, not both"])
+    mixture = load_mixture(types) if types is not None else mixture_of(model)
+    m = mixture.models[0] if mixture is not None else load_model(model)
+    if mixture is not None and mixture.n_types == 1:  # one supervisor type is a trust model
+        mixture = None
+    policy_types = mixture_of(policy_model) if policy_model else mixture
+    if mixture is not None and concentration is not None:
+        raise TrustseekError(["--concentration draws around one model; the supervisor types of a mixture are fixed"])
+    t = load_task(task)
+    t.check_compatible(m)
+    pm = product_model(policy_types) if policy_types is not None else (load_model(policy_model) if policy_model else m)
+    return _Population(m, mixture, policy_types, pm, t)
+
+
+def _trial_counts(counts: str | None, trials: int | None, participants: int, task: Task) -> list[int] | None:
+    """The trials per complexity (None: --trials i.i.d. trials), refused when the run is too large."""
+    cnt = None if trials is not None else _counts(counts or "41,30", task)
+    n_trials = sum(cnt) if cnt is not None else (trials or 0)
+    if participants * n_trials > 100_000_000:  # about 1.3 GB of simulated trials
+        raise TrustseekError(
+            [f"--participants {participants} x {n_trials} trials each is more than 100,000,000 simulated trials: simulate fewer"]
+        )
+    return cnt
+
+
+def _print_simulation(desc: str, participants: int, n_trials: int, stats: dict, dt: float, seed: int) -> None:
     table = Table(
         title=f"{participants:,} simulated participants, {n_trials // participants} trials each, policy {escape(desc)}",
         title_justify="left",
@@ -258,14 +330,10 @@ def simulate(
     table.add_column("per participant")
     for h in ("mean", "median", "sd"):
         table.add_column(h, justify="right")
-    for c in cols:
+    for c in SUMMARY_COLUMNS:
         table.add_row(c.replace("_", " "), *(f"{stats[c][k]:.2f}" for k in ("mean", "median", "sd")))
     console.print(table)
     console.print(f"{n_trials:,} trials in {dt:.2f} s ({n_trials / max(dt, 1e-9) / 1e6:.1f} M trials/s), seed {seed}")
-    if out is not None:
-        console.print(f"trials written to {out}")
-    if summary_out is not None:
-        console.print(f"summary written to {summary_out}")
 
 
 def _write(frame, path: Path) -> None:
@@ -283,45 +351,52 @@ def _write(frame, path: Path) -> None:
         frame.to_csv(path, index=False)
 
 
+ReplicatesOpt = typer.Option(20, "--replicates", "-r", min=0, max=10_000, help="Replicate experiments of the whole pipeline.")
+LargeNOpt = typer.Option(
+    10_000, "--large-n", min=1, max=1_000_000, help="Participants of the large experiment 2 and of the cost studies."
+)
+BootstrapOpt = typer.Option(
+    200, "--bootstrap", "-b", min=0, max=10_000, help="Bootstrap resamples for the fitted model's intervals."
+)
+ReplicateLargeNOpt = typer.Option(
+    2_000, "--replicate-large-n", min=1, max=1_000_000, help="Participants of each replicate's large experiment 2."
+)
+ReproduceBeliefUpdateOpt = typer.Option(
+    "paper",
+    "--belief-update",
+    "-u",
+    help="Belief update of the trust-aware policy: 'paper' (eq. 3, as in the paper) or 'bayes'.",
+)
+ScheduleParticipantsOpt = typer.Option(
+    10_000,
+    "--schedule-participants",
+    min=0,
+    max=1_000_000,
+    help="Simulated participants of the trial-scheduling section (0: leave the section out).",
+)
+TypesParticipantsOpt = typer.Option(
+    2_000,
+    "--types-participants",
+    min=0,
+    max=1_000_000,
+    help="Simulated participants of the supervisor-types section (Remark 1; 0: leave the section out).",
+)
+
+
 @app.command(rich_help_panel="Simulate and reproduce")
 def reproduce(
     out: Path = typer.Option(Path("report"), "--out", "-o", help="Report folder (report.html, PNGs, summary.json, data)."),
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed: the same seed gives the same numbers."),
-    replicates: int = typer.Option(
-        20, "--replicates", "-r", min=0, max=10_000, help="Replicate experiments of the whole pipeline."
-    ),
-    large_n: int = typer.Option(
-        10_000, "--large-n", min=1, max=1_000_000, help="Participants of the large experiment 2 and of the cost studies."
-    ),
-    bootstrap: int = typer.Option(
-        200, "--bootstrap", "-b", min=0, max=10_000, help="Bootstrap resamples for the fitted model's intervals."
-    ),
+    replicates: int = ReplicatesOpt,
+    large_n: int = LargeNOpt,
+    bootstrap: int = BootstrapOpt,
     restarts: int = typer.Option(10, "--restarts", min=1, max=1000, help="EM restarts of the main fit."),
     replicate_restarts: int = typer.Option(4, "--replicate-restarts", min=1, max=1000, help="EM restarts per replicate fit."),
-    replicate_large_n: int = typer.Option(
-        2_000, "--replicate-large-n", min=1, max=1_000_000, help="Participants of each replicate's large experiment 2."
-    ),
-    belief_update: str = typer.Option(
-        "paper",
-        "--belief-update",
-        "-u",
-        help="Belief update of the trust-aware policy: 'paper' (eq. 3, as in the paper) or 'bayes'.",
-    ),
+    replicate_large_n: int = ReplicateLargeNOpt,
+    belief_update: str = ReproduceBeliefUpdateOpt,
     jobs: int = typer.Option(2, "--jobs", "-j", min=1, help="Processes (bootstrap and replicates); numbers do not depend on it."),
-    schedule_participants: int = typer.Option(
-        10_000,
-        "--schedule-participants",
-        min=0,
-        max=1_000_000,
-        help="Simulated participants of the trial-scheduling section (0: leave the section out).",
-    ),
-    types_participants: int = typer.Option(
-        2_000,
-        "--types-participants",
-        min=0,
-        max=1_000_000,
-        help="Simulated participants of the supervisor-types section (Remark 1; 0: leave the section out).",
-    ),
+    schedule_participants: int = ScheduleParticipantsOpt,
+    types_participants: int = TypesParticipantsOpt,
     as_json: bool = typer.Option(False, "--json", help="Print summary.json to stdout instead of tables."),
     quiet: bool = QuietOpt,
 ) -> None:
@@ -348,15 +423,7 @@ def reproduce(
         raise TrustseekError(problems)
     check_output(out, "--out", directory=True)
     t0 = time.perf_counter()
-    with Progress(
-        TextColumn("[bold]{task.description:<44}"),
-        BarColumn(),
-        TextColumn("{task.percentage:>3.0f}%"),
-        TimeElapsedColumn(),
-        console=err_console,
-        transient=True,
-        disable=quiet or as_json or not err_console.is_terminal,
-    ) as bar:
+    with _reproduce_progress(quiet or as_json) as bar:
         task = bar.add_task("experiment 1", total=1000)
 
         def progress(label: str, done: int, total: int) -> None:
@@ -370,8 +437,25 @@ def reproduce(
     if as_json:
         print_json(rep.summary)
         return
-    print_comparison(rep.summary)
-    s = rep.summary
+    _print_reproduction(rep.summary)
+    console.print(f"report: {paths['html']}  ({time.perf_counter() - t0:.1f} s)")
+
+
+def _reproduce_progress(quiet: bool) -> Progress:
+    return Progress(
+        TextColumn("[bold]{task.description:<44}"),
+        BarColumn(),
+        TextColumn("{task.percentage:>3.0f}%"),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=True,
+        disable=quiet or not err_console.is_terminal,
+    )
+
+
+def _print_reproduction(s: dict) -> None:
+    """Paper vs reproduction, experiment 2's difference, the disagreements and the verdicts."""
+    print_comparison(s)
     large, small = s["experiment2"]["large"], s["experiment2"]["small"]
     lo, hi = large["mean_difference_ci"]
     console.print(
@@ -384,7 +468,6 @@ def reproduce(
         for d in s["disagreements"]:
             console.print(f"  • {escape(d)}", highlight=False)
     console.print("Rows: " + "; ".join(f"{n} {v}" for v, n in s["verdict_counts"].items()))
-    console.print(f"report: {paths['html']}  ({time.perf_counter() - t0:.1f} s)")
 
 
 def _p(v) -> str:

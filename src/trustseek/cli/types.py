@@ -27,6 +27,7 @@ from ._app import (
     progress_bar,
     selection_table,
 )
+from ._output import check_plots_folder, fit_summary, print_selection, print_warnings
 from ._reading import NoExperienceRuleOpt, rule_off
 
 POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
@@ -116,9 +117,7 @@ def fit_types(
     check_output(type_posteriors, "--type-posteriors", POSTERIOR_SUFFIXES)
     outputs = ((out, "--out"), (type_posteriors, "--type-posteriors"))
     check_not_inputs(outputs, ((log, "trial log"), (mapping, "--mapping file")))
-    if plots is not None and plots.exists() and not plots.is_dir():
-        raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
-    mx = _mixture()
+    check_plots_folder(plots)
     _check_differ(differ)
     tr, em, frame = _log_with_inputs(
         log, rule_off(mapping, no_rule), column, label, missing, delimiter, transitions_on, emissions_on, order
@@ -129,7 +128,7 @@ def fit_types(
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("starts", total=restarts)
-        fit = mx.fit_types(
+        fit = _mixture().fit_types(
             frame,
             types,
             restarts=restarts,
@@ -142,16 +141,7 @@ def fit_types(
             transition_inputs=tr,
             emission_inputs=em,
         )
-        intervals = None
-        if bootstrap > 0:
-            task = bar.add_task("bootstrap", total=bootstrap)
-            from ..estimation.type_bootstrap import bootstrap_types
-
-            intervals = bootstrap_types(
-                fit, bootstrap, seed=seed, n_jobs=jobs, progress=lambda d, t: bar.update(task, completed=d, total=t)
-            )
-    from ..estimation.selection import reached_best
-
+        intervals = _bootstrap_types(fit, bootstrap, seed, jobs, bar)
     mixture = fit.mixture()
     if out is not None:
         with atomic_output(out) as tmp:
@@ -167,17 +157,41 @@ def fit_types(
 
         written = plot_types(mixture, plots, None if intervals is None else intervals.cells)
     if as_json:
-        d = fit.to_dict()
-        d["mixture"] = mixture.to_dict()
-        d["type_counts"] = post["type"].value_counts().reindex(list(fit.names), fill_value=0).to_dict()
-        if intervals is not None:
-            d["weight_intervals"] = intervals.weights
-            d["intervals"] = {
-                n: {t: {"lower": lo.tolist(), "upper": hi.tolist()} for t, (lo, hi) in c.items()}
-                for n, c in intervals.cells.items()
-            }
-        print_json(d)
+        print_json(_types_json(fit, mixture, post, intervals))
         return
+    _print_types(fit, mixture, post, intervals)
+    if out is not None:
+        console.print(f"types written to {out}")
+    if type_posteriors is not None:
+        console.print(f"type posteriors written to {type_posteriors}")
+    if plots is not None:
+        console.print(f"figures written to {', '.join(str(p) for p in written)}")
+
+
+def _bootstrap_types(fit, bootstrap: int, seed: int, jobs: int | None, bar):
+    """The types' bootstrap intervals (None without --bootstrap), with a progress bar of their own."""
+    if bootstrap <= 0:
+        return None
+    task = bar.add_task("bootstrap", total=bootstrap)
+    from ..estimation.type_bootstrap import bootstrap_types
+
+    return bootstrap_types(fit, bootstrap, seed=seed, n_jobs=jobs, progress=lambda d, t: bar.update(task, completed=d, total=t))
+
+
+def _types_json(fit, mixture, post, intervals) -> dict:
+    d = fit.to_dict()
+    d["mixture"] = mixture.to_dict()
+    d["type_counts"] = post["type"].value_counts().reindex(list(fit.names), fill_value=0).to_dict()
+    if intervals is not None:
+        d["weight_intervals"] = intervals.weights
+        d["intervals"] = {
+            n: {t: {"lower": lo.tolist(), "upper": hi.tolist()} for t, (lo, hi) in c.items()} for n, c in intervals.cells.items()
+        }
+    return d
+
+
+def _print_types(fit, mixture, post, intervals) -> None:
+    """The types' table, the fit's summary, the legend and the warnings."""
     console.print(_types_table(fit, mixture, post, intervals))
     if mixture.general:
         console.print(
@@ -185,12 +199,7 @@ def fit_types(
             "read them; planning needs trust models",
             highlight=False,
         )
-    lls = ", ".join(f"{x:.3f}" for x in sorted(fit.restart_logliks, reverse=True))
-    console.print(
-        f"log-likelihood {fit.loglik:.4f}; {fit.n_params} free parameters; AIC {fit.aic:.2f}; BIC {fit.bic:.2f}\n"
-        f"starts (best first): {lls}; {reached_best(fit.restart_logliks)} of {len(fit.runs)} within 0.01 of the best",
-        highlight=False,
-    )
+    console.print(fit_summary(fit, "starts", len(fit.runs)), highlight=False)
     console.print(
         "people: participants whose most probable type it is; rely: "
         + ("P(rely | T, inputs)" if mixture.general else "P(rely | T, C, autonomous)")
@@ -198,14 +207,7 @@ def fit_types(
         "by their mean P(rely) over the estimated emission rows, lowest first",
         highlight=False,
     )
-    for w in fit.warnings:
-        console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
-    if out is not None:
-        console.print(f"types written to {out}")
-    if type_posteriors is not None:
-        console.print(f"type posteriors written to {type_posteriors}")
-    if plots is not None:
-        console.print(f"figures written to {', '.join(str(p) for p in written)}")
+    print_warnings(fit.warnings)
 
 
 def _types_table(fit, mixture, post, intervals) -> Table:
@@ -317,13 +319,11 @@ def select_types(
         print_json({"types": rows, "warnings": warnings})
         return
     weights = {"weights": lambda r: ", ".join(f"{w:.2f}" for w in r["weights"])}
-    table = selection_table("Number of supervisor types", "types", rows, folds, weights)
-    from rich.console import Console
-
-    (console if console.is_terminal else Console(width=400)).print(table)  # whole when piped too
-    console.print("* best by that criterion; reached best: starts within 0.01 of the best log-likelihood", highlight=False)
-    for w in warnings:
-        console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
+    print_selection(
+        selection_table("Number of supervisor types", "types", rows, folds, weights),
+        "* best by that criterion; reached best: starts within 0.01 of the best log-likelihood",
+        warnings,
+    )
 
 
 @app.command("personalize", rich_help_panel="Estimate")
@@ -390,6 +390,5 @@ def personalize(
         f"(under the centre {res.centre_loglik.sum():.3f}, +{gain:.3f})",
         highlight=False,
     )
-    for w in res.warnings:
-        console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
+    print_warnings(res.warnings)
     console.print(f"models written to {out}/ (participants.csv lists each participant's file)")

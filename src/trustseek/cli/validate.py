@@ -122,12 +122,7 @@ def predict(
 
     Trials whose action the model fixes (the robot asked: P(intervene) = 1) are no prediction
     and are left out of the scores."""
-    from ._app import check_not_inputs
-
-    check_output(out, "--out", POSTERIOR_SUFFIXES)
-    check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (mapping, "--mapping file")))
-    if keep and out is None:
-        raise TrustseekError(["--keep carries log columns into --out: give --out"])
+    _check_trial_output(out, keep, log, model, mapping)
     pr = _prediction()
     if model is not None:
         if folds is not None:
@@ -136,16 +131,16 @@ def predict(
         frame = read_for_types(log, m, rule_off(mapping, no_rule), column, label, missing, delimiter, order)
         report = pr.predict_in_sample(frame, m, bootstrap=bootstrap, seed=seed)
     else:
-        k = 5 if folds is None else folds
         tr, em, frame = _read_with_inputs(
             log, rule_off(mapping, no_rule), column, label, transitions_on, emissions_on, missing, delimiter, order=order
         )
-        bar = progress_bar(quiet or as_json)
         preset: Any = "paper"
         if _general(tr, em):  # inputs a trust model does not have: the general model's structure
             from ..estimation.trust_iohmm import general_spec
 
             preset = general_spec(frame, em, tr, levels, prior)
+        k = 5 if folds is None else folds
+        bar = progress_bar(quiet or as_json)
         with bar:
             task = bar.add_task("held-out folds", total=k)
             report = pr.predict_heldout(
@@ -164,14 +159,43 @@ def predict(
                 transition_inputs=tr,
                 emission_inputs=em,
             )
+    _write_trials(report, frame, out, keep)
+    if as_json:
+        print_json(report.to_dict())
+        return
+    _print_prediction(report, model, pr.METRICS)
+    if out is not None:
+        console.print(f"per-trial predictions written to {out}")
+
+
+def _check_trial_output(out: Path | None, keep: list[str] | None, log: Path, model: Path | None, mapping: Path | None) -> None:
+    """--out (per-trial values) and --keep refused before anything is read."""
+    from ._app import check_not_inputs
+
+    check_output(out, "--out", POSTERIOR_SUFFIXES)
+    check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (mapping, "--mapping file")))
+    if keep and out is None:
+        raise TrustseekError(["--keep carries log columns into --out: give --out"])
+
+
+def _write_trials(report, frame, out: Path | None, keep: list[str] | None) -> None:
     if out is not None:
         from ..data.trials import write_trials
 
         with atomic_output(out) as tmp:
             write_trials(keep_columns(report.trials, frame, keep), tmp)
-    if as_json:
-        print_json(report.to_dict())
-        return
+
+
+def _print_statements(lines: list[str], otherwise: str) -> None:
+    """The report's statements, or ``otherwise`` when it has none."""
+    for line in lines:
+        console.print(escape(line), highlight=False)
+    if not lines:
+        console.print(otherwise)
+
+
+def _print_prediction(report, model: Path | None, metrics: tuple[str, ...]) -> None:
+    """The prediction's scores, one table per metric, its notes and statements."""
     how = (
         f"in-sample under {model}"
         if report.mode == "in-sample"
@@ -182,7 +206,7 @@ def predict(
     )
     titles = {"log_loss": "log-loss (nats per trial; lower is better)", "brier": "Brier score (lower is better)"}
     titles["auc"] = "AUC (higher is better)"
-    for m in pr.METRICS:
+    for m in metrics:
         table = _table(titles[m], "predictor", "estimate", "95% CI", "model - this", "95% CI")
         for name, per in report.metrics.items():
             d = report.differences.get(name, {}).get(m)
@@ -194,13 +218,9 @@ def predict(
     note = report.misses_note()
     if note:
         console.print(f"[yellow]note:[/] {escape(note)}", highlight=False)
-    lines = report.statements()
-    for line in lines:
-        console.print(escape(line), highlight=False)
-    if not lines:
-        console.print("the model beats every baseline in every score (95% intervals of the differences exclude 0)")
-    if out is not None:
-        console.print(f"per-trial predictions written to {out}")
+    _print_statements(
+        report.statements(), "the model beats every baseline in every score (95% intervals of the differences exclude 0)"
+    )
 
 
 def _one_rating_per_block(frame, log: Path, rating: str, per: str | None, missing: list[str] | None) -> None:
@@ -247,12 +267,7 @@ def validate(
 ) -> None:
     """Does the decoded trust track self-reported trust?  Spearman and Pearson correlations with
     the ratings (pooled, within and between participants) next to simple baselines."""
-    from ._app import check_not_inputs
-
-    check_output(out, "--out", POSTERIOR_SUFFIXES)
-    check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (mapping, "--mapping file")))
-    if keep and out is None:
-        raise TrustseekError(["--keep carries log columns into --out: give --out"])
+    _check_trial_output(out, keep, log, model, mapping)
     labels = None
     if rating_labels is not None:
         labels = [x.strip() for x in rating_labels.split(",")]
@@ -268,11 +283,7 @@ def validate(
     _one_rating_per_block(frame, log, rating, rating_per, missing)
     ratings = va.parse_ratings(frame, rating, labels, missing or ())
     report = va.validate_ratings(frame, m, ratings, rating, labels, bootstrap=bootstrap, seed=seed)
-    if out is not None:
-        from ..data.trials import write_trials
-
-        with atomic_output(out) as tmp:
-            write_trials(keep_columns(report.trials, frame, keep), tmp)
+    _write_trials(report, frame, out, keep)
     if as_json:
         print_json(report.to_dict())
         return
@@ -294,12 +305,9 @@ def validate(
         + (f"; intervals: 95% participant bootstrap, {report.bootstrap} resamples" if report.bootstrap else ""),
         highlight=False,
     )
-    lines = report.statements()
-    for line in lines:
-        console.print(escape(line), highlight=False)
-    if not lines:
-        console.print(
-            "the decoded trust beats every baseline in every scope (Spearman; 95% intervals of the differences exclude 0)"
-        )
+    _print_statements(
+        report.statements(),
+        "the decoded trust beats every baseline in every scope (Spearman; 95% intervals of the differences exclude 0)",
+    )
     if out is not None:
         console.print(f"per-trial values written to {out}")

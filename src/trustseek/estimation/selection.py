@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -220,81 +220,105 @@ def select_levels(
             raise ValueError(f"options {extra} apply to the paper preset only, not to a model of named inputs")
         base = general_spec(frame, em, tr, prior=prior)
     seqs = encode(frame, base)
-    N = seqs.n_participants
-    folds = max(2, min(folds, N))
-    perm = np.random.default_rng(np.random.SeedSequence([seed, 2])).permutation(N)
-    fold_of = np.empty(N, dtype=np.int64)
-    fold_of[perm] = np.arange(N) % folds
-    levels = list(levels)
-    total = len(levels) * (folds + 1)
-    done = 0
+    previous: dict[int, IOHMMFit] = {}  # per slot (-1: all participants, f: fold f's training participants)
 
-    def tick(label: str) -> None:
-        nonlocal done
-        done += 1
-        if progress:
-            progress(label, done, total)
-
-    def one_fit(data: Sequences, spec: IOHMMSpec, previous: IOHMMFit | None, key: list[int], sources: int) -> IOHMMFit:
-        return fit_with_moves(
+    def one_fit(data: Sequences, K: int, slot: int, key: list[int]) -> IOHMMFit:
+        fit = fit_with_moves(
             data,
-            spec,
-            None if previous is None else previous.params,
+            base.with_levels(level_names(K)),
+            previous[slot].params if slot in previous else None,
             restarts=restarts,
             seed=np.random.SeedSequence(key),
             splits=splits,
-            sources_per_round=sources,
+            sources_per_round=MOVE_SOURCES if slot < 0 else FOLD_MOVE_SOURCES,
             tol=tol,
             max_iter=max_iter,
         )
+        previous[slot] = fit
+        return fit
 
-    rows: list[dict[str, Any]] = []
-    prev_full: IOHMMFit | None = None
-    prev_fold: list[IOHMMFit | None] = [None] * folds
-    for K in widening(levels, rows, "levels", MAX_LEVELS if widen else 0):
-        if K not in levels:
-            total += folds + 1
-        spec = base.with_levels(level_names(K))
-        full = one_fit(seqs, spec, prev_full, [seed, 3, K], MOVE_SOURCES)
-        prev_full = full
-        tick(f"{K} levels")
-        per_fold = []
-        for f in range(folds):
-            train, test = np.flatnonzero(fold_of != f), np.flatnonzero(fold_of == f)
-            fit = one_fit(seqs.subset(train), spec, prev_fold[f], [seed, 4, K, f], FOLD_MOVE_SOURCES)
-            prev_fold[f] = fit
-            per_fold.append(heldout_loglik(seqs.subset(test), fit))
-            tick(f"{K} levels")
+    comparison = HeldOutComparison("levels", folds, seed, MAX_LEVELS if widen else 0, progress)
+    rows = comparison.run(seqs, levels, one_fit, heldout_loglik)
+    for w in selection_warnings(rows):
+        log.warning("%s", w)
+    return rows
+
+
+@dataclass(frozen=True)
+class HeldOutComparison:
+    """Numbers of levels or types (``key``) compared by BIC on all participants and by the
+    log-likelihood of ``folds`` held-out folds of participants (seeded by ``seed``); with
+    ``cap`` > 0 widened while a best is the largest compared (:func:`widening`).
+    ``progress(label, done, total)`` is called after every fit."""
+
+    key: str
+    folds: int
+    seed: int
+    cap: int = 0
+    progress: Callable[[str, int, int], None] | None = None
+
+    def run(
+        self,
+        seqs: Sequences,
+        values: Sequence[int],
+        fit: Callable[[Sequences, int, int, list[int]], Any],
+        heldout: Callable[[Sequences, Any], float],
+        extra: Callable[[Any], dict[str, Any]] | None = None,
+    ) -> list[dict[str, Any]]:
+        """One row per number compared: ``fit(data, n, slot, seed key)`` on all participants (slot
+        -1) and on each fold's training participants (slot f), scored by ``heldout(test, fit)``;
+        ``extra(full fit)`` adds entries to the row.  The rows' choices are marked."""
+        N = seqs.n_participants
+        folds = max(2, min(self.folds, N))
+        perm = np.random.default_rng(np.random.SeedSequence([self.seed, 2])).permutation(N)
+        fold_of = np.empty(N, dtype=np.int64)
+        fold_of[perm] = np.arange(N) % folds
+        asked = list(values)
+        total, done = len(asked) * (folds + 1), 0
+        rows: list[dict[str, Any]] = []
+        for n in widening(asked, rows, self.key, self.cap):
+            total += 0 if n in asked else folds + 1
+            label = f"{n} {self.key}"
+            full = fit(seqs, n, -1, [self.seed, 3, n])
+            done += 1
+            if self.progress:
+                self.progress(label, done, total)
+            per_fold = []
+            for f in range(folds):
+                train, test = np.flatnonzero(fold_of != f), np.flatnonzero(fold_of == f)
+                per_fold.append(heldout(seqs.subset(test), fit(seqs.subset(train), n, f, [self.seed, 4, n, f])))
+                done += 1
+                if self.progress:
+                    self.progress(label, done, total)
+            rows.append(self._row(n, full, per_fold, extra, n not in asked))
+        mark_choices(rows, self.key)
+        return rows
+
+    def _row(self, n: int, full: Any, per_fold: list[float], extra: Any, widened: bool) -> dict[str, Any]:
         held = float(sum(per_fold))
         hits = reached_best(full.restart_logliks)
         log.info(
-            "%d levels: log-likelihood %.4f (reached by %d of %d starts), BIC %.2f, held-out log-likelihood %.4f",
-            K,
+            "%d %s: log-likelihood %.4f (reached by %d of %d starts), BIC %.2f, held-out log-likelihood %.4f",
+            n,
+            self.key,
             full.loglik,
             hits,
             len(full.runs),
             full.bic,
             held,
         )
-        rows.append(
-            {
-                "levels": K,
-                "loglik": full.loglik,
-                "n_params": full.n_params,
-                "aic": full.aic,
-                "bic": full.bic,
-                "heldout_loglik": held,
-                "heldout_per_fold": per_fold,
-                "restart_logliks": full.restart_logliks,
-                "starts": len(full.runs),
-                "reached_best": hits,
-                "widened": K not in levels,
-            }
-        )
-    mark_choices(rows, "levels")
-    for w in selection_warnings(rows):
-        log.warning("%s", w)
-    return rows
+        scores = {"loglik": full.loglik, "n_params": full.n_params, "aic": full.aic, "bic": full.bic}
+        return {
+            self.key: n,
+            **scores,
+            "heldout_loglik": held,
+            "heldout_per_fold": per_fold,
+            **(extra(full) if extra else {}),
+            "restart_logliks": full.restart_logliks,
+            "starts": len(full.runs),
+            "reached_best": hits,
+            "widened": widened,
+        }
 
 
 def widening(values: Sequence[int], rows: list[dict[str, Any]], key: str, cap: int) -> Iterator[int]:

@@ -20,7 +20,7 @@ import pandas as pd
 
 from .mixture import MixtureFit, fit_mixture, split_type_starts, types_spec
 from .mixture_em import MixtureParams, MixtureWorkspace
-from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, mark_choices, reached_best, smooth_zero_rows, widening
+from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, HeldOutComparison, smooth_zero_rows
 from .sequences import Sequences, encode
 from .spec import FitError
 
@@ -76,28 +76,17 @@ def select_types(
         raise FitError([f"the numbers of types must be positive integers, got {list(types)}"])
     spec = types_spec(frame, "paper", prior, **spec_options)
     seqs = encode(frame, spec)
-    N = seqs.n_participants
-    folds = max(2, min(folds, N))
-    perm = np.random.default_rng(np.random.SeedSequence([seed, 2])).permutation(N)
-    fold_of = np.empty(N, dtype=np.int64)
-    fold_of[perm] = np.arange(N) % folds
-    total = len(types) * (folds + 1)
-    done = 0
-    asked = list(types)
+    previous: dict[int, MixtureFit] = {}  # per slot (-1: all participants, f: fold f's training participants)
+    pooled: dict[int, MixtureFit] = {}  # the one-type fit of each slot
 
-    def tick(label: str) -> None:
-        nonlocal done
-        done += 1
-        if progress:
-            progress(label, done, total)
-
-    def one_fit(data: Sequences, M: int, previous: MixtureFit | None, pooled: MixtureFit | None, key: list[int]) -> MixtureFit:
+    def one_fit(data: Sequences, M: int, slot: int, key: list[int]) -> MixtureFit:
         ss = np.random.SeedSequence(key)
+        before = previous.get(slot)
         init = []
-        if previous is not None and previous.n_types == M - 1:
-            init = split_type_starts(previous.params, np.random.default_rng(ss.generate_state(4)), previous.structure)
+        if before is not None and before.n_types == M - 1:
+            init = split_type_starts(before.params, np.random.default_rng(ss.generate_state(4)), before.structure)
             # the split starts live in the previous fit's structure: re-projected by the new one in fit_mixture
-        return fit_mixture(
+        fit = fit_mixture(
             data,
             spec,
             M,
@@ -106,61 +95,20 @@ def select_types(
             differ=differ,
             tol=tol,
             max_iter=max_iter,
-            pooled=None if pooled is None else pooled.params.type_params(0),
+            pooled=pooled[slot].params.type_params(0) if slot in pooled else None,
             init=init,
             n_jobs=n_jobs,
         )
-
-    rows: list[dict[str, Any]] = []
-    prev_full: MixtureFit | None = None
-    prev_fold: list[MixtureFit | None] = [None] * folds
-    pooled_full: MixtureFit | None = None
-    pooled_fold: list[MixtureFit | None] = [None] * folds
-    for M in widening(asked, rows, "types", MAX_TYPES if widen else 0):
-        total += 0 if M in asked else folds + 1
-        full = one_fit(seqs, M, prev_full, pooled_full, [seed, 3, M])
-        prev_full = full
+        previous[slot] = fit
         if M == 1:
-            pooled_full = full
-        tick(f"{M} types")
-        per_fold = []
-        for f in range(folds):
-            train, test = np.flatnonzero(fold_of != f), np.flatnonzero(fold_of == f)
-            fit = one_fit(seqs.subset(train), M, prev_fold[f], pooled_fold[f], [seed, 4, M, f])
-            prev_fold[f] = fit
-            if M == 1:
-                pooled_fold[f] = fit
-            per_fold.append(heldout_mixture_loglik(seqs.subset(test), fit))
-            tick(f"{M} types")
-        held = float(sum(per_fold))
-        hits = reached_best(full.restart_logliks)
-        log.info(
-            "%d types: log-likelihood %.4f (reached by %d of %d starts), BIC %.2f, held-out log-likelihood %.4f",
-            M,
-            full.loglik,
-            hits,
-            len(full.runs),
-            full.bic,
-            held,
-        )
-        rows.append(
-            {
-                "types": M,
-                "loglik": full.loglik,
-                "n_params": full.n_params,
-                "aic": full.aic,
-                "bic": full.bic,
-                "heldout_loglik": held,
-                "heldout_per_fold": per_fold,
-                "weights": full.weights.tolist(),
-                "empty_types": full.empty_types,
-                "restart_logliks": full.restart_logliks,
-                "starts": len(full.runs),
-                "reached_best": hits,
-                "widened": M not in asked,
-            }
-        )
-    mark_choices(rows, "types")
+            pooled[slot] = fit
+        return fit
+
+    def extra(full: MixtureFit) -> dict[str, Any]:
+        return {"weights": full.weights.tolist(), "empty_types": full.empty_types}
+
+    comparison = HeldOutComparison("types", folds, seed, MAX_TYPES if widen else 0, progress)
+    rows = comparison.run(seqs, types, one_fit, heldout_mixture_loglik, extra)
     for w in type_selection_warnings(rows):
         log.warning("%s", w)
     return rows

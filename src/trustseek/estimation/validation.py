@@ -253,6 +253,35 @@ def validate_ratings(
     """Correlations of the decoded trust under ``model`` with ``ratings`` (one number per row of
     ``frame``, NaN = no rating), and of the baselines, with participant-bootstrap intervals."""
     ratings = np.asarray(ratings, dtype=float)
+    values, pcode, N = _decoded_values(frame, model)
+    rated = np.isfinite(ratings)
+    corr, reps = _correlations(values, ratings, pcode, N, bootstrap_counts(N, bootstrap, seed).astype(float))
+    diffs = _differences(corr, reps)
+    trials = pd.DataFrame(
+        {
+            "participant": frame["participant"].to_numpy(),
+            "trial": frame["trial"].to_numpy(),
+            "rating": ratings,
+            **{f"trust_{k}" if k in TRUST_MEASURES else k: v for k, v in values.items()},
+        }
+    )
+    return ValidationReport(
+        column=column,
+        labels=None if labels is None else [str(x) for x in labels],
+        n_rated=int(rated.sum()),
+        n_participants=N,
+        n_participants_rated=len(np.unique(pcode[rated])),
+        correlations=corr,
+        differences=diffs,
+        trials=trials,
+        bootstrap=bootstrap,
+        seed=seed,
+    )
+
+
+def _decoded_values(frame: pd.DataFrame, model: TrustModel) -> tuple[dict[str, np.ndarray], np.ndarray, int]:
+    """Per row of ``frame``: the smoothed and filtered trust (the levels' mean on [0, 1]) and the
+    baselines; each row's participant code; the number of participants."""
     spec, params = from_trust_model(model)
     seqs = encode(frame, spec)
     K = spec.n_levels
@@ -288,10 +317,13 @@ def validate_ratings(
         values["reliable_fraction"] = np.full(n, np.nan)
     values["reliance"] = rely
     values["reliance_rate"] = _running_rate(np.nan_to_num(rely), recorded, pcode, order)
+    return values, pcode, seqs.n_participants
 
+
+def _correlations(values: dict[str, np.ndarray], ratings: np.ndarray, pcode: np.ndarray, N: int, counts: np.ndarray):
+    """Each value's correlations with the ratings per scope and method (estimate and interval), and
+    their bootstrap replicates (``counts``: the participants' multiplicities per replicate)."""
     rated = np.isfinite(ratings)
-    N = seqs.n_participants
-    counts = bootstrap_counts(N, bootstrap, seed).astype(float)
     ones = np.ones((1, N))
     corr: dict[str, dict[str, dict[str, dict[str, float]]]] = {}
     reps: dict[str, dict[str, dict[str, np.ndarray]]] = {}
@@ -321,6 +353,11 @@ def validate_ratings(
             for method in METHODS:
                 lo, hi = _interval(boot[method])
                 corr[name][scope][method] = {"estimate": float(point[method][0]), "lower": lo, "upper": hi, "n": len(a)}
+    return corr, reps
+
+
+def _differences(corr, reps) -> dict[str, dict[str, dict[str, dict[str, dict[str, Any]]]]]:
+    """Trust measure minus baseline, per scope and method, with the bootstrap's interval and which is better."""
     diffs: dict[str, dict[str, dict[str, dict[str, dict[str, Any]]]]] = {}
     for m in TRUST_MEASURES:
         diffs[m] = {}
@@ -335,23 +372,4 @@ def validate_ratings(
                     if np.isfinite(lo) and np.isfinite(hi):
                         better = "trust" if lo > 0 else "baseline" if hi < 0 else "neither"
                     diffs[m][base][scope][method] = {"estimate": est, "lower": lo, "upper": hi, "better": better}
-    trials = pd.DataFrame(
-        {
-            "participant": frame["participant"].to_numpy(),
-            "trial": frame["trial"].to_numpy(),
-            "rating": ratings,
-            **{f"trust_{k}" if k in TRUST_MEASURES else k: v for k, v in values.items()},
-        }
-    )
-    return ValidationReport(
-        column=column,
-        labels=None if labels is None else [str(x) for x in labels],
-        n_rated=int(rated.sum()),
-        n_participants=N,
-        n_participants_rated=len(np.unique(pcode[rated])),
-        correlations=corr,
-        differences=diffs,
-        trials=trials,
-        bootstrap=bootstrap,
-        seed=seed,
-    )
+    return diffs

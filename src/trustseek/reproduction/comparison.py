@@ -199,6 +199,11 @@ def comparison_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
 
     The parameter rows test whether the estimator is consistent: the simulated supervisors
     *are* the paper's model, so the paper's values are the truth the fit should recover."""
+    return [*_parameter_rows(summary), *_policy_rows(summary), *_experiment2_rows(summary)]
+
+
+def _parameter_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
+    """The fitted model's cells against the paper's, with the bootstrap or the replicates' range."""
     rows = []
     fitted = summary["fit"]["values"]
     boot = summary["fit"].get("bootstrap_ci") or {}
@@ -225,6 +230,13 @@ def comparison_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
         )  # fmt: skip
         row["replicate_range"] = list(rep_range) if rep_range is not None else None
         rows.append(row)
+    return rows
+
+
+def _policy_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
+    """The planned policies: the threshold, its sensitivity, where each policy asks."""
+    rows = []
+    rep_kind = f"range of {summary['replicates']['n']} replicates (min–max)"
     plan = summary["plan"]
     th = summary["replicates"]["threshold"]
     rows.append(
@@ -266,6 +278,14 @@ def comparison_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
         rows.append(
             _categorical(f"Trust-agnostic policy, {cn} complexity", pv, agn[cn], f"{rep_agn[cn]:.0%} of replicates choose {pv}")
         )
+    return rows
+
+
+def _experiment2_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
+    """Experiment 2: the medians, their difference, the share better off, the autonomous collections."""
+    rows = []
+    n_rep = summary["replicates"]["n"]
+    rep_kind = f"range of {n_rep} replicates (min–max)"
     small, large = summary["experiment2"]["small"], summary["experiment2"]["large"]
     rr = summary["replicates"]
     rr_large = summary["config"]["replicate_large_n"]

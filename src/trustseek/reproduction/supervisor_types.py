@@ -216,6 +216,37 @@ def _verdicts(numbers: list[dict[str, Any]], conservative: str) -> list[str]:
     return out
 
 
+@dataclass(frozen=True)
+class _PopulationPolicies:
+    """A population's policies planned from its experiment-1 log: the pooled model's, the
+    trust-agnostic one and the fitted types' (with the fits BIC chose among)."""
+
+    model: TrustModel
+    pooled: Policy
+    agnostic: Policy
+    fitted_types: TypeMixture
+    fitted_rows: list[dict[str, Any]]
+    fitted: Policy
+
+    @classmethod
+    def planned(
+        cls, population: TypeMixture, task: Task, plan: Callable[[Any], Policy], participants: int, seed: int, restarts: int
+    ) -> _PopulationPolicies:
+        model, frame = _pooled_fit(population, task, participants, seed, restarts)
+        pooled = plan(model)
+        agnostic = trust_agnostic_from_data(frame, task)
+        fitted_types, rows = _fitted_types(frame, restarts, seed)
+        return cls(model, pooled, agnostic, fitted_types, rows, plan(fitted_types))
+
+    def with_aware(self, type_aware: Policy) -> dict[str, Policy]:
+        """The policies a run of this population compares, with the type-aware one."""
+        return {POOLED: self.pooled, FITTED: self.fitted, TYPE_AWARE: type_aware, AGNOSTIC: self.agnostic}
+
+    def chosen(self) -> dict[str, Any]:
+        """The number of types BIC chose and the fits compared."""
+        return {"chosen": self.fitted_types.n_types, "fits": self.fitted_rows}
+
+
 def types_section(
     mixture: TypeMixture | None = None,
     task: Task | None = None,
@@ -224,7 +255,6 @@ def types_section(
     fit_participants: int = 200,
     restarts: int = 4,
     seed: int = 0,
-    solver: str | None = None,
     gap: float = 0.03,
     max_seconds: float = 600.0,
     progress: Callable[[str], None] | None = None,
@@ -242,62 +272,32 @@ def types_section(
     task = task or paper_task()
     tick = progress or (lambda _s: None)
     seeds = np.random.SeedSequence(seed).generate_state(4)
-    pooled_model, frame = _pooled_fit(mixture, task, fit_participants, int(seeds[0]), restarts)
-    tick("pooled fit")
+    task_levels = mixture.models[0].n_trust
 
     # every trust-aware policy comes from the same solver, so that the paired differences are
     # those of the models planned for, not of the solvers
     def plan(m: TypeMixture | TrustModel) -> Policy:
-        if solver is not None:
-            return solve_type_aware(m, task, solver=solver, gap=gap, max_seconds=max_seconds)
         # the point solver refines its grid until the gap, or a fixed resolution (not a clock:
         # the same seed gives the same policies on a loaded machine); the time limit is a safety net
         levels = (m.n_types if isinstance(m, TypeMixture) else 1) * task_levels
         return solve_type_aware(m, task, gap=gap, max_seconds=max_seconds, max_resolution=POINT_RESOLUTION.get(levels, 16))
 
-    task_levels = mixture.models[0].n_trust
-    pooled = plan(pooled_model)
-    agnostic = trust_agnostic_from_data(frame, task)
+    main = _PopulationPolicies.planned(mixture, task, plan, fit_participants, int(seeds[0]), restarts)
+    tick("pooled fit")
     type_aware = plan(mixture)
     oracle = [plan(m) for m in mixture.models]
-    fitted_mixture, fitted_rows = _fitted_types(frame, restarts, int(seeds[0]))
-    fitted = plan(fitted_mixture)
     tick("policies")
     # the one-type population: the first type alone; its pooled policy is fitted from its own data
     alone = TypeMixture.single(mixture.models[0], mixture.names[0])
-    alone_model, alone_frame = _pooled_fit(alone, task, fit_participants, int(seeds[1]), restarts)
-    alone_pooled = plan(alone_model)
-    alone_agnostic = trust_agnostic_from_data(alone_frame, task)
-    alone_mixture, alone_rows = _fitted_types(alone_frame, restarts, int(seeds[1]))
-    alone_fitted = plan(alone_mixture)
+    one = _PopulationPolicies.planned(alone, task, plan, fit_participants, int(seeds[1]), restarts)
     tick("one-type policies")
     runs: list[PopulationRuns] = []
     for j, counts in enumerate(block_counts):
         counts = tuple(int(c) for c in counts)
-        runs.append(
-            _run(
-                " + ".join(mixture.names),
-                mixture,
-                task,
-                {POOLED: pooled, FITTED: fitted, TYPE_AWARE: type_aware, AGNOSTIC: agnostic},
-                oracle,
-                counts,
-                participants,
-                int(seeds[2]) + j,
-            )
-        )
-        runs.append(
-            _run(
-                f"{mixture.names[0]} alone",
-                alone,
-                task,
-                {POOLED: alone_pooled, FITTED: alone_fitted, TYPE_AWARE: type_aware, AGNOSTIC: alone_agnostic},
-                oracle[:1],
-                counts,
-                participants,
-                int(seeds[3]) + j,
-            )
-        )
+        both = " + ".join(mixture.names)
+        runs.append(_run(both, mixture, task, main.with_aware(type_aware), oracle, counts, participants, int(seeds[2]) + j))
+        name = f"{mixture.names[0]} alone"
+        runs.append(_run(name, alone, task, one.with_aware(type_aware), oracle[:1], counts, participants, int(seeds[3]) + j))
         tick(f"blocks of {sum(counts)} trials")
     numbers = [_numbers(r) for r in runs]
     conservative = mixture.names[-1]
@@ -313,19 +313,19 @@ def types_section(
         },
         # the numbers of types fitted to each population's experiment-1 log, and the one BIC chose
         "fitted_types": {
-            " + ".join(mixture.names): {"chosen": fitted_mixture.n_types, "fits": fitted_rows},
-            f"{mixture.names[0]} alone": {"chosen": alone_mixture.n_types, "fits": alone_rows},
+            " + ".join(mixture.names): main.chosen(),
+            f"{mixture.names[0]} alone": one.chosen(),
         },
         "populations": numbers,
         "verdicts": _verdicts(numbers, conservative),
     }
     policies = {
-        POOLED: pooled,
-        FITTED: fitted,
+        POOLED: main.pooled,
+        FITTED: main.fitted,
         TYPE_AWARE: type_aware,
-        AGNOSTIC: agnostic,
+        AGNOSTIC: main.agnostic,
         "oracle": oracle,
-        "pooled model": pooled_model,
-        "fitted types": fitted_mixture,
+        "pooled model": main.model,
+        "fitted types": main.fitted_types,
     }
     return TypesSection(out, policies, runs)

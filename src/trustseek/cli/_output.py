@@ -1,0 +1,76 @@
+"""What the estimation commands print and check alike: warnings, a fit's cells and summary, a
+selection table, the --plots folder (light at import: rich only)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from rich.markup import escape
+from rich.table import Table
+
+from ..errors import TrustseekError
+from ._app import console
+
+
+def check_plots_folder(plots: Path | None) -> None:
+    """--plots refused before anything is read when it names a file."""
+    if plots is not None and plots.exists() and not plots.is_dir():
+        raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
+
+
+def print_warnings(warnings: list[str]) -> None:
+    for w in warnings:
+        console.print(f"[yellow]warning:[/] {escape(w)}", highlight=False)
+
+
+def print_wide(table: Table) -> None:
+    """A table printed whole, when piped too (a pipe's console is 80 columns wide)."""
+    from rich.console import Console
+
+    (console if console.is_terminal else Console(width=400)).print(table)
+
+
+def print_selection(table: Table, legend: str, warnings: list[str]) -> None:
+    """A model selection's table, its legend and warnings."""
+    print_wide(table)
+    console.print(legend, highlight=False)
+    print_warnings(warnings)
+
+
+def cells_table(title: str, result: Any, min_events: float, escape_cells: bool = False) -> Table:
+    """A fit's cells, one row each: estimate, interval (with a bootstrap) and expected events, those
+    below ``min_events`` marked not identified."""
+    table = Table(title=title, title_justify="left")
+    iv = result.intervals
+    table.add_column("cell")
+    table.add_column("estimate", justify="right")
+    if iv is not None:
+        table.add_column(f"{iv.level:.0%} CI ({iv.replicates} resamples)", justify="right")
+    table.add_column("events", justify="right")
+    for c in result.cells():
+        row = [escape(c["cell"]) if escape_cells else c["cell"], f"{c['estimate']:.3f}"]
+        if iv is not None:
+            ci = escape(f"[{c['lower']:.3f}, {c['upper']:.3f}]")
+            row.append(f"{ci} [yellow]widened[/]" if c.get("widened") else ci)
+        ev = f"{c['events']:.1f}"
+        row.append(ev if c["events"] >= min_events else f"[yellow]{ev} (not identified)[/]")
+        table.add_row(*row)
+    return table
+
+
+def fit_summary(result: Any, starts: str, count: int) -> str:
+    """The log-likelihood, free parameters, AIC and BIC of a fit, and its starts (best first) with
+    how many of ``count`` came within 0.01 of the best."""
+    from ..estimation.selection import reached_best
+
+    lls = ", ".join(f"{x:.3f}" for x in sorted(result.restart_logliks, reverse=True))
+    return (
+        f"log-likelihood {result.loglik:.4f}; {result.n_params} free parameters; AIC {result.aic:.2f}; BIC {result.bic:.2f}\n"
+        f"{starts} (best first): {lls}; {reached_best(result.restart_logliks)} of {count} within 0.01 of the best"
+    )
+
+
+def print_intervals_note(iv: Any) -> None:
+    if iv is not None:
+        console.print(f"intervals: bootstrap over {iv.replicates} resamples of the participants ({iv.method})", highlight=False)
