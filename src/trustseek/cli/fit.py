@@ -9,6 +9,7 @@ import typer
 from rich.markup import escape
 
 from ..errors import TrustseekError
+from ..estimation.options import FitOptions
 from ._app import (
     ColumnOpt,
     DelimiterOpt,
@@ -225,7 +226,8 @@ def fit(
         not ratings_only,
         order,
     )
-    run = _FitRun(levels, restarts, seed, bootstrap, prior, jobs, tol, max_iter, _rated(frame, log, ratings_only), ratings_only)
+    options = FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs)
+    run = _FitRun(levels, options, bootstrap, prior, _rated(frame, log, ratings_only), ratings_only)
     outputs = _FitOutputs(out, posteriors, plots, keep, as_json, quiet)
     if _general(tr, em):
         _fit_general(frame, tr, em, run, outputs, fill_from)
@@ -262,13 +264,9 @@ class _FitRun:
     """How ``fit`` fits: the options of the estimate, and the rating column it reads (if any)."""
 
     levels: int
-    restarts: int
-    seed: int
+    options: FitOptions
     bootstrap: int
     prior: float
-    jobs: int | None
-    tol: float
-    max_iter: int
     rated: str | None
     ratings_only: bool
 
@@ -321,10 +319,11 @@ def _paper_inputs() -> tuple[tuple[str, ...], tuple[str, ...]]:
 
 def _progress(bar, run: _FitRun):
     """A progress callback counting the restarts, then the bootstrap's replicates."""
-    task = bar.add_task("restarts", total=run.restarts + run.bootstrap)
+    restarts = run.options.starts
+    task = bar.add_task("restarts", total=restarts + run.bootstrap)
 
     def progress(done: int, total: int) -> None:
-        bar.update(task, completed=done, total=total, description="bootstrap" if done > run.restarts else "restarts")
+        bar.update(task, completed=done, total=total, description="bootstrap" if done > restarts else "restarts")
 
     return progress
 
@@ -336,13 +335,9 @@ def _fit_trust(frame, preset: str, tr, em, run: _FitRun, quiet: bool):
         return _fit().fit_trust_model(
             frame,
             preset=preset,
-            restarts=run.restarts,
-            seed=run.seed,
+            options=run.options,
             bootstrap=run.bootstrap,
             prior=run.prior,
-            n_jobs=run.jobs,
-            tol=run.tol,
-            max_iter=run.max_iter,
             progress=_progress(bar, run),
             levels=run.levels,
             transition_inputs=tr,
@@ -393,12 +388,8 @@ def _fit_general(frame, tr, em, run: _FitRun, outputs: _FitOutputs, fill_from: s
             em,
             tr,
             levels=run.levels,
-            restarts=run.restarts,
-            seed=run.seed,
+            options=run.options,
             prior=run.prior,
-            n_jobs=run.jobs,
-            tol=run.tol,
-            max_iter=run.max_iter,
             progress=_progress(bar, run),
             rating=run.rated,
             actions=not run.ratings_only,
@@ -525,10 +516,8 @@ def select(
             frame,
             levels=tuple(range(1, max_levels + 1)),
             folds=folds,
-            restarts=restarts,
-            seed=seed,
+            options=FitOptions(restarts=restarts, seed=seed, tol=tol, n_jobs=1),
             prior=prior,
-            tol=tol,
             progress=lambda what, d, t: bar.update(task, completed=d, total=t, description=what),
             transition_inputs=tr,
             emission_inputs=em,

@@ -9,6 +9,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
+from ..estimation.options import FitOptions
 from ._app import (
     ColumnOpt,
     DelimiterOpt,
@@ -131,12 +132,8 @@ def fit_types(
         fit = _mixture().fit_types(
             frame,
             types,
-            restarts=restarts,
-            seed=seed,
+            options=FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs),
             differ=differ,
-            tol=tol,
-            max_iter=max_iter,
-            n_jobs=jobs,
             progress=lambda d, t: bar.update(task, completed=d, total=t),
             transition_inputs=tr,
             emission_inputs=em,
@@ -302,11 +299,8 @@ def select_types(
             frame,
             types=values,
             folds=folds,
-            restarts=restarts,
-            seed=seed,
+            options=FitOptions(restarts=restarts, seed=seed, tol=tol, n_jobs=jobs),
             differ=differ,
-            tol=tol,
-            n_jobs=jobs,
             progress=lambda what, d, t: bar.update(task, completed=d, total=t, description=what),
             transition_inputs=tr,
             emission_inputs=em,

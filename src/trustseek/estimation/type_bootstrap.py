@@ -10,9 +10,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .bootstrap import run_replicates
+from .bootstrap import resample, run_replicates
 from .mixture import MixtureFit, fit_mixture, general_types
 from .mixture_em import PARTS, MixtureParams
+from .options import FitOptions
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec
 from .trust_iohmm import to_iohmm_model, to_trust_model
@@ -28,24 +29,17 @@ class _TypeReplicate:
     differ: tuple[str, ...]
     params: MixtureParams
     seed: np.random.SeedSequence
-    restarts: int
-    tol: float
-    max_iter: int
+    options: FitOptions  # the refit's search (its seed: the replicate's)
 
     def run(self) -> np.ndarray:
         """The refitted types' TrustModel cells and weights, types matched to the estimate's."""
-        rng = np.random.default_rng(self.seed)
-        n = self.seqs.n_participants
-        sample = self.seqs.subset(rng.integers(0, n, n))
+        sample, options = resample(self.seqs, self.seed, self.options)
         fit = fit_mixture(
             sample,
             self.spec,
             self.types,
-            restarts=self.restarts,
-            seed=self.seed.spawn(1)[0],
+            options,
             differ=self.differ,
-            tol=self.tol,
-            max_iter=self.max_iter,
             init=[self.params],
             pooled=self.params.type_params(0),
         )
@@ -94,7 +88,8 @@ def bootstrap_types(
     if replicates < 1:
         raise FitError([f"the bootstrap needs at least one replicate, got {replicates}"])
     children = np.random.SeedSequence([seed, 1]).spawn(replicates)
-    jobs = [_TypeReplicate(fit.seqs, fit.spec, fit.n_types, fit.differ, fit.params, ch, restarts, 1e-6, 1000) for ch in children]
+    refit = FitOptions(restarts=restarts, tol=1e-6)
+    jobs = [_TypeReplicate(fit.seqs, fit.spec, fit.n_types, fit.differ, fit.params, ch, refit) for ch in children]
     n_jobs = n_jobs or os.cpu_count() or 1
     results: dict[int, np.ndarray] = {}
 
