@@ -400,9 +400,7 @@ def simulate(
     trials: int | None = None,
     seed: int | np.random.SeedSequence = 0,
     record: bool = True,
-    belief_update: str | None = None,
     belief_model: TrustModel | None = None,
-    progress: Callable[[int], None] | None = None,
     compiled: bool = True,
 ) -> Simulation:
     """One block per participant under ``policy``.
@@ -421,5 +419,5 @@ def simulate(
         sched = schedule_iid(sup.n, trials, task.complexity_probs, np.random.default_rng(s_sched))
     else:
         raise SimulationError(["give either counts (trials per complexity, in random order) or trials (i.i.d. complexities)"])
-    block = Block(policy, sched, belief_update=belief_update, belief_model=belief_model)
-    return run(task, sup, [block], seed=s_run, record=record, progress=progress, compiled=compiled)
+    block = Block(policy, sched, belief_model=belief_model)
+    return run(task, sup, [block], seed=s_run, record=record, compiled=compiled)
