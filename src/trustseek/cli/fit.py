@@ -62,26 +62,19 @@ def _mapping_inputs(mapping: Path | None) -> tuple[str, ...]:
     return tuple(_data().ColumnMapping.load(mapping).inputs)
 
 
-def _read_with_inputs(
-    log,
-    mapping,
-    column,
-    label,
-    transitions_on,
-    emissions_on,
-    missing=None,
-    delimiter=None,
-    rating=None,
-    actions=True,
-    order=None,
-):
+def _named_inputs(mapping, transitions_on, emissions_on) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
     """The transition and emission inputs named by the flags (canonical ones or the mapping's
-    ``inputs``), and the log with those columns (and the human actions unless not ``actions``)."""
+    ``inputs``), and the canonical columns they need."""
     declared = _mapping_inputs(mapping)
     tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on", declared)
     em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on", declared)
-    needed = tuple(c for c in dict.fromkeys((*tr, *em)) if c in _fit().MODEL_INPUTS)
-    return tr, em, read_log(log, mapping, column, label, needed, missing, delimiter, rating, actions, order)
+    return tr, em, tuple(c for c in dict.fromkeys((*tr, *em)) if c in _fit().MODEL_INPUTS)
+
+
+def _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing=None, delimiter=None, order=None):
+    """The inputs named by the flags (:func:`_named_inputs`) and the log with the columns they need."""
+    tr, em, needed = _named_inputs(mapping, transitions_on, emissions_on)
+    return tr, em, read_log(log, mapping, column, label, needed, missing, delimiter, order=order)
 
 
 def _general(tr: tuple[str, ...], em: tuple[str, ...]) -> bool:
@@ -213,19 +206,10 @@ def fit(
     rating column (--rating or the mapping's 'rating') the fit is joint on the human actions
     and the ratings, and the model file carries P(rating | trust)."""
     _check_fit_paths(log, mapping, fill_from, out, posteriors, plots, keep)
-    tr, em, frame = _read_with_inputs(
-        log,
-        rule_off(mapping, no_rule),
-        column,
-        label,
-        transitions_on,
-        emissions_on,
-        missing,
-        delimiter,
-        rating_entry(rating, rating_levels, rating_bins, rating_per),
-        not ratings_only,
-        order,
-    )
+    mapping = rule_off(mapping, no_rule)
+    tr, em, needed = _named_inputs(mapping, transitions_on, emissions_on)
+    rated = rating_entry(rating, rating_levels, rating_bins, rating_per)
+    frame = read_log(log, mapping, column, label, needed, missing, delimiter, rated, not ratings_only, order)
     options = FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs)
     run = _FitRun(levels, options, bootstrap, prior, _rated(frame, log, ratings_only), ratings_only)
     outputs = _FitOutputs(out, posteriors, plots, keep, as_json, quiet)

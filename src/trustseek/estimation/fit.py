@@ -25,7 +25,7 @@ from ..vocab import ACTIONS, EXPERIENCES
 from .bootstrap import Intervals
 from .bootstrap import bootstrap as _bootstrap
 from .iohmm import IOHMMFit, fit_iohmm, loglik
-from .options import DEFAULTS, FitOptions
+from .options import DEFAULTS, FitOptions, counting
 from .ratings import RatingStructure
 from .result import FitResult, posterior_frame
 from .sequences import Sequences, encode
@@ -110,21 +110,14 @@ def fit_sequences(
     """:func:`fit_trust_model` on already encoded sequences."""
     check_convertible(spec)
     restarts, seed = options.starts, options.seed_number
-    total = restarts + len(init) + bootstrap
-    done = 0
-
-    def tick() -> None:
-        nonlocal done
-        done += 1
-        if progress is not None:
-            progress(done, total)
+    tick = counting(progress, restarts + len(init) + bootstrap)
 
     fit = fit_iohmm(
         seqs,
         spec,
         replace(options, seed=np.random.SeedSequence([seed, 0])),
         init=init,
-        on_restart=lambda i, r: tick(),
+        on_restart=tick,
     )
     model = to_trust_model(
         spec,
@@ -354,13 +347,7 @@ def fit_model(
     seqs = encode(frame, spec)
     if bootstrap > 0 and spec.rating is not None:
         raise FitError(["bootstrap intervals are not available for a fit with ratings (fit without --bootstrap)"])
-    done = 0
-
-    def tick(i: int = 0, r: Any = None) -> None:
-        nonlocal done
-        done += 1
-        if progress is not None:
-            progress(done, restarts + bootstrap)
+    tick = counting(progress, restarts + bootstrap)
 
     fit = fit_iohmm(
         seqs,

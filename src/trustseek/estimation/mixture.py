@@ -49,7 +49,7 @@ from .em import STATIONARY, RunResult, run_em
 from .fit import never_estimated
 from .iohmm import FINISH_FTOL, FINISH_SWITCH, FitCriteria, fit_iohmm
 from .mixture_em import EMPTY, FINISH_MARGIN, PERTURB, MixtureParams, MixtureStructure, MixtureWorkspace
-from .options import DEFAULTS, SERIAL, FitOptions
+from .options import DEFAULTS, SERIAL, FitOptions, counting
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
 from .trust_iohmm import (
@@ -324,13 +324,7 @@ def fit_types(
             replace(options, restarts=min(restarts, 3), seed=np.random.SeedSequence([seed, 5])),
         )
         pooled = first.params
-    done = 0
-
-    def tick(i: int, r: RunResult) -> None:
-        nonlocal done
-        done += 1
-        if progress is not None:
-            progress(done, restarts)
+    tick = counting(progress, restarts)
 
     fit = fit_mixture(
         seqs,

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import operator
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, Any, cast
 
 if TYPE_CHECKING:
     import numpy as np
 
-__all__ = ["DEFAULTS", "SERIAL", "FitOptions"]
+__all__ = ["DEFAULTS", "SERIAL", "FitOptions", "counting"]
 
 
 @dataclass(frozen=True)
@@ -45,3 +46,17 @@ class FitOptions:
 DEFAULTS = FitOptions()
 #: the options' defaults on one thread (the default of the fits that run inside others)
 SERIAL = FitOptions(n_jobs=1)
+
+
+def counting(progress: Callable[[int, int], None] | None, total: int) -> Callable[..., None]:
+    """A callback (of any arguments: a restart's, a replicate's) that counts its calls and reports
+    ``progress(done, total)`` after each."""
+    done = 0
+
+    def tick(*_: Any) -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total)
+
+    return tick
