@@ -50,7 +50,6 @@ log = logging.getLogger(__name__)
 
 EPS = 1e-9  # predictions are clipped to [EPS, 1 - EPS] for the log-loss
 CONFIDENT = 1e-6  # a scored trial whose action the model gave less than this probability: a confident miss
-PREDICTORS = ("model", *BASELINES)
 METRICS = ("log_loss", "brier", "auc")
 LOWER_IS_BETTER = {"log_loss": True, "brier": True, "auc": False}
 LEVEL = 0.95
