@@ -226,8 +226,8 @@ def test_conservative_preset_differs_from_the_paper_in_low_complexity():
 def test_bootstrap_intervals_contain_the_estimate_and_do_not_depend_on_processes():
     df = mixed(30, seed=9)[2]
     fit = fit_types(df, 2, options=FitOptions(restarts=2, seed=0, tol=1e-6))
-    one = bootstrap_types(fit, 3, seed=1, restarts=1, n_jobs=1)
-    two = bootstrap_types(fit, 3, seed=1, restarts=1, n_jobs=2)
+    one = bootstrap_types(fit, 3, options=FitOptions(restarts=1, seed=1, tol=1e-6, n_jobs=1))
+    two = bootstrap_types(fit, 3, options=FitOptions(restarts=1, seed=1, tol=1e-6, n_jobs=2))
     for m, (name, model) in enumerate(zip(fit.names, fit.models(), strict=True)):
         for table in ("initial", "emission", "transition"):
             lo, hi = one.cells[name][table]

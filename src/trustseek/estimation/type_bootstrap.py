@@ -18,6 +18,9 @@ from .sequences import Sequences
 from .spec import FitError, IOHMMSpec
 from .trust_iohmm import to_iohmm_model, to_trust_model
 
+#: a types' bootstrap replicate's refit: from the estimate and 2 random starts, to a relative tolerance of 1e-6
+TYPE_REFITS = FitOptions(restarts=2, tol=1e-6)
+
 
 @dataclass(frozen=True)
 class _TypeReplicate:
@@ -76,21 +79,19 @@ class TypeIntervals:
 def bootstrap_types(
     fit: MixtureFit,
     replicates: int,
-    seed: int = 0,
-    restarts: int = 2,
-    n_jobs: int | None = None,
+    options: FitOptions = TYPE_REFITS,
     level: float = 0.95,
     progress: Callable[[int, int], None] | None = None,
 ) -> TypeIntervals:
     """Intervals at ``level`` for the types of ``fit`` over ``replicates`` resamples of the participants;
-    each replicate refits from the estimate and ``restarts`` seeded starts.  Replicate b uses the b-th
-    child of the seed, whatever the number of processes (``n_jobs``, default all cores)."""
+    each replicate refits from the estimate and ``options.restarts`` seeded starts (:class:`~.options.FitOptions`).
+    Replicate b uses the b-th child of ``options.seed``, whatever the number of processes
+    (``options.n_jobs``, default all cores)."""
     if replicates < 1:
         raise FitError([f"the bootstrap needs at least one replicate, got {replicates}"])
-    children = np.random.SeedSequence([seed, 1]).spawn(replicates)
-    refit = FitOptions(restarts=restarts, tol=1e-6)
-    jobs = [_TypeReplicate(fit.seqs, fit.spec, fit.n_types, fit.differ, fit.params, ch, refit) for ch in children]
-    n_jobs = n_jobs or os.cpu_count() or 1
+    children = np.random.SeedSequence([options.seed_number, 1]).spawn(replicates)
+    jobs = [_TypeReplicate(fit.seqs, fit.spec, fit.n_types, fit.differ, fit.params, ch, options) for ch in children]
+    n_jobs = options.n_jobs or os.cpu_count() or 1
     results: dict[int, np.ndarray] = {}
 
     def done(i: int, res: np.ndarray) -> None:
