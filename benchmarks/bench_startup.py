@@ -3,6 +3,7 @@
     python benchmarks/bench_startup.py            # every row, best of 3 runs each
     python benchmarks/bench_startup.py --repeat 5
     python benchmarks/bench_startup.py --no-big   # without the 100,000 x 71 fit (its log takes a minute to make once)
+    python benchmarks/bench_startup.py --reproduce   # also ``trustseek reproduce`` with an empty numba cache (minutes)
 
 Rows: ``trustseek --help`` and every command's ``--help``, ``import trustseek``, ``trustseek
 solve``, ``trustseek check model.json``, ``trustseek fit`` on the shipped example with numba's
@@ -11,8 +12,11 @@ compiled code of any kind), ``trustseek fit`` on 100,000 x 71 trials with one re
 two runs: the first fills numba's cache with whatever it lacks), and
 ``make test``'s warm step (``python -m trustseek.estimation.warm``, then ``trustseek.design.warm``)
 with numba's cache as it is and with an empty cache (a clean clone: it runs beside the static
-checks, on the core they leave idle).  The in-run
-baseline is the bare interpreter (``python -c pass``) and ``import numpy, pandas``.
+checks, on the core they leave idle), and those static checks (``make lint``): the warm step
+lengthens ``make test`` only by what it takes beyond them.  With ``--reproduce``, ``make
+reproduce``'s command (``trustseek reproduce``) with an empty numba cache, as after setup on a
+fresh clone.  The in-run baseline is the bare interpreter (``python -c pass``) and ``import
+numpy, pandas``.
 """
 
 from __future__ import annotations
@@ -65,6 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-big", action="store_true", help="leave out the 100,000 x 71 fit")
+    ap.add_argument("--reproduce", action="store_true", help="add trustseek reproduce with an empty numba cache")
     args = ap.parse_args(argv)
     n = args.repeat
     from trustseek.cli._lazy import COMMANDS
@@ -103,6 +108,11 @@ def main(argv: list[str] | None = None) -> int:
     warm = ["bash", "-c", f"{py} -m trustseek.estimation.warm && {py} -m trustseek.design.warm"]
     row("make test's warm step (estimation + design), numba cache as is", wall(warm, 1), 10.0)
     row("make test's warm step, fresh environment (a clean clone; beside the lint)", wall(warm, 1, fresh_cache=True), None)
+    row("make lint (the static checks the warm step runs beside)", wall(["make", "-s", "-C", str(HERE.parent), "lint"], 1), None)
+    if args.reproduce:
+        with tempfile.TemporaryDirectory(prefix="trustseek-bench-") as tmp:
+            reproduce = [TRUSTSEEK, "reproduce", "--out", str(Path(tmp) / "report")]
+            row("trustseek reproduce (make reproduce), fresh environment", wall(reproduce, 1, fresh_cache=True), 90.0)
     return 0
 
 

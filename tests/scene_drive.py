@@ -9,15 +9,24 @@ import math
 STEP_UNTIL = """
 async ({ cond, dt, frames, limit }) => {
   const f = new Function("s", "g", "return " + cond);
+  // a task of its own (a message, not a timer: no clamping to 4 ms), so that the page's answers
+  // from the server are handled between two steps
+  const yieldTask = () => new Promise((r) => { const c = new MessageChannel(); c.port1.onmessage = () => r(); c.port2.postMessage(0); });
+  const t0 = performance.now();
   for (let i = 0; i < limit; i++) {
-    // drawn every 10th step and at the goal: the state is the test's, the pictures cost time
-    let g = window.__scene.step(dt, frames, i % 10 === 9);
+    // drawn every 40th step and at the goal: the state is the test's, the pictures cost time
+    let g = window.__scene.step(dt, frames, i % 40 === 39);
     const s = window.trustseek.state();
     if (f(s, g)) {
       g = window.__scene.step(0, 0);
       return { s, g };
     }
-    await new Promise((r) => setTimeout(r, 5)); // lets the page's requests answer
+    if (s.saving || s.phase === "loading") {
+      // the page waits for the server: its clock is not what it waits for (up to 60 s)
+      if (performance.now() - t0 > 60000) break;
+      i--;
+      await new Promise((r) => setTimeout(r, 20));
+    } else await yieldTask();
   }
   return { s: window.trustseek.state(), g: window.__scene.step(0, 0), failed: true };
 }
@@ -96,6 +105,19 @@ class Gamepad:
         page.evaluate(f"window.__pad.buttons[{PAD_BUTTON[key]}] = false")
 
 
+class Paced:
+    """A device whose holds step frames of ``scale`` times the asked length."""
+
+    def __init__(self, device: Keyboard | Gamepad, scale: float):
+        self.device, self.scale = device, scale
+
+    def hold(self, page, key: str, cond: str, dt: float = 0.02) -> dict:
+        return self.device.hold(page, key, cond, dt * self.scale)
+
+    def press(self, page, key: str) -> None:
+        self.device.press(page, key)
+
+
 def start(page, link: str, query: str = "?manual=1&quality=0") -> None:
     """Open the link, consent, read the instructions: the first trial starts."""
     page.goto(link + query)
@@ -115,7 +137,10 @@ def teleoperate(page, device: Keyboard | Gamepad | None = None, at_grasp=None) -
     The states at the deposit."""
     page.evaluate("window.__scene.manual(true)")  # the page's clock stops while the test drives
     try:
-        return _teleoperate(page, device or Keyboard(), at_grasp)
+        # above 3 times the participant's pace, frames as short as at 3 times: a faster study
+        # moves the robot as far in a frame, and its goals are reached as precisely
+        speed = page.evaluate("window.trustseek.state().speed")
+        return _teleoperate(page, Paced(device or Keyboard(), min(1.0, 3.0 / speed)), at_grasp)
     finally:
         if "manual=1" not in page.url:
             page.evaluate("window.__scene.manual(false)")
@@ -129,7 +154,7 @@ def settle(page) -> dict:
 WRAP = "(a => Math.atan2(Math.sin(a), Math.cos(a)))"
 
 
-def turn_to(page, dev, heading: float) -> dict:
+def turn_to(page, dev: Paced, heading: float) -> dict:
     for _ in range(12):
         s = settle(page)
         err = math.atan2(math.sin(heading - s["robot"]["heading"]), math.cos(heading - s["robot"]["heading"]))
@@ -141,7 +166,7 @@ def turn_to(page, dev, heading: float) -> dict:
     raise AssertionError(f"could not turn to {heading}: {settle(page)['robot']}")
 
 
-def drive_to(page, dev, x: float, y: float) -> dict:
+def drive_to(page, dev: Paced, x: float, y: float) -> dict:
     for _ in range(6):
         s = settle(page)
         r = s["robot"]
@@ -159,7 +184,7 @@ def drive_to(page, dev, x: float, y: float) -> dict:
     return settle(page)
 
 
-def tool_to(page, dev, axis: str, goal: str, tol: float = 0.015) -> dict:
+def tool_to(page, dev: Paced, axis: str, goal: str, tol: float = 0.015) -> dict:
     """Move the gripper along one axis of the base ("x" forward, "y" left, "z" up) until the JS
     expression ``goal`` (the signed error along it) is within ``tol``."""
     keys = {"x": ("i", "k"), "y": ("j", "l"), "z": ("r", "f")}[axis]
@@ -174,7 +199,7 @@ def tool_to(page, dev, axis: str, goal: str, tol: float = 0.015) -> dict:
     raise AssertionError(f"gripper never reached {goal} along {axis}: {settle(page)}")
 
 
-def _teleoperate(page, dev: Keyboard | Gamepad, at_grasp=None) -> dict:
+def _teleoperate(page, dev: Paced, at_grasp=None) -> dict:
     s = settle(page)
     side = s["side"]
     # along the planned path, from the first point ahead of the base, to its place before the item

@@ -1,6 +1,7 @@
 """End-to-end: a participant does a short study in headless Chromium (consent, instructions,
 an intervention, an autonomous trial, an assisted teleoperation, self-reports); the export
-holds exactly those trials in the canonical trial-log format."""
+holds exactly those trials in the canonical trial-log format.  The page's clock is the test's
+(``?manual=1``, scene_drive.step_until): it moves by the page's state, not by the wall clock."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import pandas as pd
 import pytest
 
 import scene_drive
+from scene_drive import step_until
 from trustseek.client import Client
 from trustseek.server.app import STATIC
 from trustseek.testing.browser import CHROMIUM, launch_chromium
@@ -79,12 +81,12 @@ def test_participant_study_in_chromium(tmp_path):
         link = c.create_sessions(study["id"], participants=["chromium-1"])[0]["link"]
         with sync_playwright() as p:
             browser = launch_chromium(p)
-            page = browser.new_page(viewport={"width": 1320, "height": 900})
+            page = browser.new_page(viewport={"width": 1000, "height": 600})
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
             requests: list[str] = []
             page.on("request", lambda r: requests.append(r.url))
-            page.goto(link + "?speed=1")
+            page.goto(link + "?speed=1&manual=1&quality=0")
 
             # consent and instructions
             page.wait_for_selector("#screen-consent:not([hidden])")
@@ -98,40 +100,37 @@ def test_participant_study_in_chromium(tmp_path):
             page.wait_for_function("window.trustseek.state().phase === 'approach'")
             assert st(page)["trial"] == 1 and st(page)["complexity"] == "high"
             assert page.inner_text("#mode") == "Collecting autonomously"
-            page.wait_for_timeout(300)
+            step_until(page, "true")  # the robot sets off
             page.screenshot(path=str(out / "browser_autonomous.png"))
             page.keyboard.press(" ")
-            page.wait_for_function("window.trustseek.state().phase === 'teleop'")
+            step_until(page, "s.phase === 'teleop'", frames=1, limit=3)
             assert "intervention" in page.inner_text("#mode")
             teleoperate(page)
 
             # trial 2: autonomous in low complexity; the participant relies and sees the outcome
-            page.wait_for_function(
-                "window.trustseek.state().trial === 2 && window.trustseek.state().phase === 'approach'", timeout=15000
-            )
-            page.wait_for_function("['outcome', 'result', 'report'].includes(window.trustseek.state().phase)", timeout=15000)
+            step_until(page, "s.trial === 2 && s.phase === 'approach'")
+            step_until(page, "['outcome', 'result', 'report'].includes(s.phase)")
 
             # end of block 1: self-report
-            page.wait_for_selector("#screen-report:not([hidden])", timeout=45000)
+            step_until(page, "s.phase === 'report'")
+            assert page.is_visible("#screen-report")
             page.fill("#report-slider", "73")
             page.click("#report-btn")
 
             # trial 3: the robot asks; the participant teleoperates
-            page.wait_for_function(
-                "window.trustseek.state().trial === 3 && window.trustseek.state().phase === 'teleop'", timeout=15000
-            )
+            step_until(page, "s.trial === 3 && s.phase === 'teleop'")
             assert page.inner_text("#mode") == "Asking for your help"
             teleoperate(page)
-            page.wait_for_selector("#screen-report:not([hidden])", timeout=45000)
+            step_until(page, "s.phase === 'report'")
             page.fill("#report-slider", "81")
             page.screenshot(path=str(out / "browser_report.png"))
             page.click("#report-btn")
-            page.wait_for_selector("#screen-done:not([hidden])", timeout=15000)
+            step_until(page, "s.phase === 'done'")
             final_score = float(page.inner_text("#final-score"))
             page.screenshot(path=str(out / "browser_done.png"))
 
             # the experimenter's dashboard shows the finished participant and creates a study
-            dash = browser.new_page(viewport={"width": 1320, "height": 700})
+            dash = browser.new_page(viewport={"width": 1000, "height": 600})
             dash.on("pageerror", lambda e: errors.append(str(e)))
             dash.goto(f"{url}/dashboard")
             dash.fill("#token", TOKEN)

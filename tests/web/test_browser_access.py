@@ -11,6 +11,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from scene_drive import step_until
 from test_browser import artifacts_dir, teleoperate
 from trustseek.client import Client
 from trustseek.server.app import STATIC
@@ -98,7 +99,7 @@ def test_keyboard_only_run_with_axe_on_every_screen_at_1280x720(tmp_path):
             page = browser.new_page(viewport={"width": 1280, "height": 720})
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(link)
+            page.goto(link + "?manual=1")  # the page's clock is the test's (scene_drive.step_until)
 
             # consent: Tab to the box, Space ticks it; Tab to the button, Space presses it
             page.wait_for_selector("#screen-consent:not([hidden])")
@@ -116,17 +117,18 @@ def test_keyboard_only_run_with_axe_on_every_screen_at_1280x720(tmp_path):
 
             # the task at 1280 x 720: everything, the Intervene button too, without scrolling
             page.wait_for_function("window.trustseek.state().phase === 'approach'")
+            step_until(page, "true")  # drawn
             page.screenshot(path=str(out / "access_task_1280x720.png"))
             assert in_view(page, "#intervene-btn"), page.locator("#intervene-btn").bounding_box()
             assert in_view(page, "#world") and in_view(page, "#status")
             assert page.evaluate("document.documentElement.scrollHeight <= innerHeight + 1")
             axe(page, "task")
             page.keyboard.press(" ")  # intervene
-            page.wait_for_function("window.trustseek.state().phase === 'teleop'")
-            teleoperate(page)  # arrows, Z/X, G, B
+            step_until(page, "s.phase === 'teleop'", frames=1, limit=3)
+            teleoperate(page)  # arrows, I/K, J/L, R/F, G, B
 
             # trial 2: rely; then the self-report slider with the arrow keys
-            page.wait_for_selector("#screen-report:not([hidden])", timeout=45000)
+            step_until(page, "s.phase === 'report'")
             axe(page, "self-report")
             tab_to(page, "report-slider")
             for _ in range(3):
@@ -145,7 +147,7 @@ def test_keyboard_only_run_with_axe_on_every_screen_at_1280x720(tmp_path):
             page.keyboard.press("ArrowRight")
             tab_to(page, "questionnaire-btn")
             page.keyboard.press("Enter")
-            page.wait_for_selector("#screen-done:not([hidden])", timeout=15000)
+            page.wait_for_selector("#screen-done:not([hidden])", timeout=30000)
             axe(page, "done")
 
             # an invalid link: a screen that says so, not a blank page
@@ -196,13 +198,14 @@ def test_saving_failures_are_shown_and_retried(tmp_path):
                 "name": "f",
                 "blocks": [{"name": "w", "policy": {"kind": "never-ask"}, "schedule": {"trials": ["low"]}}],
                 "self_report": "block",
-                "animation_speed": 3.0,
+                "animation_speed": 6.0,
+                "scene": "2d",  # what is saved and retried is tested here, not the scene
             }
         )
         link = c.create_sessions(study["id"], participants=["fail-1"])[0]["link"]
         with sync_playwright() as p:
             browser = launch_chromium(p)
-            page = browser.new_page(viewport={"width": 1280, "height": 720})
+            page = browser.new_page(viewport={"width": 800, "height": 600})
             failures = {"consent": 3, "reports": 3}
 
             def flaky(route):

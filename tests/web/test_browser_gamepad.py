@@ -42,7 +42,7 @@ def test_gamepad_intervention_is_logged_as_gamepad(tmp_path):
         link = c.create_sessions(study["id"], participants=["pad-1"])[0]["link"]
         with sync_playwright() as p:
             browser = launch_chromium(p)
-            page = browser.new_page(viewport={"width": 1320, "height": 900})
+            page = browser.new_page(viewport={"width": 1000, "height": 600})
             page.add_init_script(FAKE_GAMEPAD)
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))

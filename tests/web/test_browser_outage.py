@@ -17,7 +17,7 @@ from test_browser import st, teleoperate
 from trustseek.client import Client
 from trustseek.server.app import STATIC
 from trustseek.testing.browser import CHROMIUM, launch_chromium
-from trustseek.testing.servers import free_port, serve_process
+from trustseek.testing.servers import ThreadServer, free_port
 
 pytestmark = pytest.mark.browser
 
@@ -34,8 +34,10 @@ def test_reload_and_outage_lose_nothing(tmp_path):
 
     db = f"sqlite:///{tmp_path / 'outage.sqlite'}"
     port = free_port()
-    url = f"http://127.0.0.1:{port}"
-    proc = serve_process(db, TOKEN, port, log=tmp_path / "server.log")
+    # the server in this process (a second process would take seconds to start, twice); it
+    # goes away and comes back on the same port
+    server = ThreadServer(db, TOKEN, port)
+    url = server.__enter__()
     try:
         c = Client(url, TOKEN)
         study = c.create_study(
@@ -48,10 +50,10 @@ def test_reload_and_outage_lose_nothing(tmp_path):
         link = c.create_sessions(study["id"], participants=["outage-1"])[0]["link"]
         with sync_playwright() as p:
             browser = launch_chromium(p)
-            page = browser.new_page(viewport={"width": 1280, "height": 720})
+            page = browser.new_page(viewport={"width": 1000, "height": 600})
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(link + "?retry_cap=400")
+            page.goto(link + "?retry_cap=100&quality=0")
             page.wait_for_selector("#screen-consent:not([hidden])")
             page.check("#agree")
             page.click("#consent-btn")
@@ -73,8 +75,7 @@ def test_reload_and_outage_lose_nothing(tmp_path):
             assert abs(after["robot"]["x"] - before["robot"]["x"]) < 1e-6
 
             # the server goes away; the participant finishes the trial; the page keeps it
-            proc.kill()
-            proc.wait(timeout=10)
+            server.__exit__(None, None, None)
             teleoperate(page)
             page.wait_for_selector("#connection:not([hidden])", timeout=5000)
             page.wait_for_function(f"window.trustseek.state().retries > {2 * OLD_ATTEMPTS}", timeout=60000)
@@ -83,7 +84,8 @@ def test_reload_and_outage_lose_nothing(tmp_path):
             assert page.is_hidden("#screen-error")
 
             # the server comes back: the page resumes by itself
-            proc = serve_process(db, TOKEN, port, log=tmp_path / "server.log")
+            server = ThreadServer(db, TOKEN, port)
+            server.__enter__()
             page.wait_for_function(
                 "window.trustseek.state().trial === 2 && window.trustseek.state().phase === 'teleop'", timeout=30000
             )
@@ -94,8 +96,7 @@ def test_reload_and_outage_lose_nothing(tmp_path):
         trials = pd.read_csv(io.BytesIO(c.export(study["id"])))
         events = pd.read_csv(io.BytesIO(c.export(study["id"], table="events")))
     finally:
-        proc.kill()
-        proc.wait(timeout=10)
+        server.__exit__(None, None, None)
 
     assert trials["trial"].tolist() == [1]
     assert trials["human_action"].tolist() == ["intervene"] and trials["effort_ms"].iloc[0] > 0

@@ -4,7 +4,8 @@ with one asked trial, two blocks, a per-block questionnaire with an attention ch
 12-item trust-in-automation questionnaire at the end, the completion code and the redirect to the
 panel; the same panel id back at the link gets a page saying it completed.  ``&speed=`` on the
 link changes nothing.  The score changes only when the outcome is shown, and no banner is left
-over the next trial.  The export fits with ``trustseek fit``."""
+over the next trial.  The export fits with ``trustseek fit``.  The page's clock is the test's
+(``&manual=1``, scene_drive.step_until): it moves by the page's state, not by the wall clock."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from scene_drive import step_until
 from test_browser import artifacts_dir, st, teleoperate
 from trustseek.client import Client
 from trustseek.server.app import STATIC
@@ -29,7 +31,7 @@ PANEL = "https://panel.example/complete"
 
 def answer_questionnaire(page, value_of) -> list[str]:
     """Tick one point per item; the submit button is enabled only when every item is answered."""
-    page.wait_for_selector("#screen-questionnaire:not([hidden])", timeout=15000)
+    step_until(page, "s.phase === 'questionnaire'")
     items = page.eval_on_selector_all(".q-item input[type=radio][value='1']", "xs => xs.map(x => x.dataset.item)")
     for k, item in enumerate(items):
         assert page.is_disabled("#questionnaire-btn")
@@ -86,18 +88,18 @@ def test_panel_study_in_chromium(tmp_path):
                     {"template": "jian2000", "when": "end"},
                 ],
                 "panel": {"completion_code": "E2E-CODE", "redirect_url": PANEL + "?cc={completion_code}"},
-                "animation_speed": 2.0,
+                "animation_speed": 6.0,
             }
         )
         link = study["link"]  # one link for every participant of the panel
         with sync_playwright() as p:
             browser = launch_chromium(p)
-            page = browser.new_page(viewport={"width": 1320, "height": 900})
+            page = browser.new_page(viewport={"width": 1000, "height": 600})
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
             page.route(PANEL + "**", lambda route: route.fulfill(status=200, content_type="text/html", body="<p>panel</p>"))
             # &speed= on a participant's link changes nothing: the study's speed is the page's
-            page.goto(link + "?speed=50&PROLIFIC_PID=pp-42&STUDY_ID=st-7&SESSION_ID=se-9")
+            page.goto(link + "?speed=50&manual=1&quality=0&PROLIFIC_PID=pp-42&STUDY_ID=st-7&SESSION_ID=se-9")
 
             page.wait_for_selector("#screen-consent:not([hidden])")
             assert "3 trials" in page.inner_text("#consent-text")  # not a fixed duration
@@ -124,46 +126,39 @@ def test_panel_study_in_chromium(tmp_path):
             page.wait_for_function("window.trustseek.state().phase === 'approach'")
             s = st(page)
             assert s["practice"] is True and page.inner_text("#block-name") == "Practice trial (not scored)"
-            assert s["speed"] == 2.0 and s["trial_label"] == "1 / 2"
-            page.wait_for_function(
-                "window.trustseek.state().trial === 2 && window.trustseek.state().phase === 'teleop'", timeout=20000
-            )
+            assert s["speed"] == 6.0 and s["trial_label"] == "1 / 2"
+            step_until(page, "s.trial === 2 && s.phase === 'teleop'")
             assert st(page)["robot_action"] == "ask" and "Practice" in page.inner_text("#hint")
             page.screenshot(path=str(out / "browser_panel_practice_ask.png"))
             teleoperate(page)
-            page.wait_for_function(
-                "window.trustseek.state().trial === 3 && window.trustseek.state().phase === 'approach'", timeout=20000
-            )
+            step_until(page, "s.trial === 3 && s.phase === 'approach'")
             assert st(page)["practice"] is False and page.inner_text("#score") == "0"
             assert page.inner_text("#trial-no") == "1 / 3"
             # no banner of the practice trial over this one
             assert page.eval_on_selector("#banner", "b => getComputedStyle(b).opacity") == "0"
 
             # while the outcome is animated, the score on screen is still the one before the trial
-            page.wait_for_function("window.trustseek.state().phase === 'outcome'", timeout=20000)
-            during = st(page)
+            during = step_until(page, "s.phase === 'outcome'", frames=1)["s"]
             shown = page.inner_text("#score")
             assert during["score"] != 0 and during["shown_score"] == 0 and shown == "0", (during, shown)
-            page.wait_for_function("window.trustseek.state().phase === 'result'", timeout=20000)
+            step_until(page, "s.phase === 'result'")
             assert page.inner_text("#score") == str(int(during["score"])) or float(page.inner_text("#score")) == during["score"]
 
             # trial 2 of the study in the same block, then the block's questionnaire
-            page.wait_for_function("window.trustseek.state().trial === 4", timeout=20000)
+            step_until(page, "s.trial === 4")
             answer_questionnaire(page, lambda k: 4 - k)
 
             # block 2: the participant takes over
-            page.wait_for_function(
-                "window.trustseek.state().trial === 5 && window.trustseek.state().phase === 'approach'", timeout=20000
-            )
+            step_until(page, "s.trial === 5 && s.phase === 'approach'")
             page.keyboard.press(" ")
-            page.wait_for_function("window.trustseek.state().phase === 'teleop'")
+            step_until(page, "s.phase === 'teleop'", frames=1, limit=3)
             teleoperate(page)
             answer_questionnaire(page, lambda k: 3)
             items = answer_questionnaire(page, lambda k: 1 + k % 7)
             assert len(items) == 12
 
             # the end: the completion code, then the panel
-            page.wait_for_selector("#screen-done:not([hidden])", timeout=15000)
+            step_until(page, "s.phase === 'done'")
             assert page.inner_text("#completion-code") == "E2E-CODE"
             assert page.inner_text("#final-trials") == "3"
             page.screenshot(path=str(out / "browser_panel_done.png"))
@@ -180,7 +175,7 @@ def test_panel_study_in_chromium(tmp_path):
         sessions = pd.read_csv(io.BytesIO(c.export(study["id"], table="sessions")))
 
     assert trials["trial"].tolist() == [1, 2, 3] and trials["session_trial"].tolist() == [3, 4, 5]
-    assert len(sessions) == 1 and sessions["panel_id"].tolist() == ["pp-42"] and sessions["speed"].tolist() == [2.0]
+    assert len(sessions) == 1 and sessions["panel_id"].tolist() == ["pp-42"] and sessions["speed"].tolist() == [6.0]
     assert sessions[["quiz_attempts", "quiz_outcome"]].values.tolist() == [[2, "passed"]]
     assert trials["human_action"].tolist() == ["rely", "rely", "intervene"]
     assert json.loads(sessions["panel"].iloc[0]) == {"PROLIFIC_PID": "pp-42", "STUDY_ID": "st-7", "SESSION_ID": "se-9"}

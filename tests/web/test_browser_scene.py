@@ -25,6 +25,7 @@ from trustseek.testing.servers import ThreadServer
 pytestmark = pytest.mark.browser
 
 TOKEN = "scene-test-token"
+BASE_W = 0.9  # the base's length along its heading (web/src/scene.ts)
 # small pictures unless the screenshots are for the documentation
 SHOTS = os.environ.get("TRUSTSEEK_SCENE_SHOTS") == "1"
 VIEWPORT = {"width": 1280, "height": 720} if SHOTS else {"width": 1000, "height": 600}
@@ -131,7 +132,7 @@ def test_success_intervention_and_keyboard_teleoperation_with_contacts(env):
             "task": task(1.0),
             "blocks": [
                 {"policy": {"kind": "never-ask"}, "schedule": {"trials": ["low", "high"]}},
-                {"policy": {"kind": "always-ask"}, "schedule": {"trials": ["low"]}},
+                {"policy": {"kind": "always-ask"}, "schedule": {"trials": ["high"]}},
             ],
         },
     )
@@ -164,15 +165,26 @@ def test_success_intervention_and_keyboard_teleoperation_with_contacts(env):
         assert after[k] == pytest.approx(before[k], abs=1e-9), (k, before, after)
     assert after["tool"] == pytest.approx(before["tool"], abs=1e-9)
     page.keyboard.press("g")  # opened again
+    # the base driven into the crate or the cart ahead: a contact, and the base pushed back from it
+    s = step_until(page, "true", frames=1, limit=1)["s"]
+    (o,) = [o for o in s["obstacles"] if o["kind"] != "spill"]
+    s = hold(page, "ArrowUp", f"s.contacts > {s['contacts']}")["s"]
+    assert s["robot"]["x"] + BASE_W / 2 <= o["x"] - 0.04, (s["robot"], o)
+    hold(page, "ArrowDown", f"s.robot.x < s.path[0].x + 0.4")  # back to the start, to drive around it
+    hold(page, "f", "s.robot.tool[2] < 0.5", dt=0.01)  # the gripper down again: it clears the shelves as the base turns
     teleoperate(page)
     step_until(page, "s.phase === 'done'")
     page.close()
     assert errors == []
     ev = events(c, study_id)
-    # every teleoperation struck the shelf with the arm once; each contact says what was struck
+    # every teleoperation struck the shelf with the arm once, the second the obstacle with the
+    # base too; each contact says what was struck, and where the base was pushed back to
     contacts = ev[ev["type"] == "contact"]
-    assert len(contacts) >= 2 and {d["with"] for d in contacts["data"]} <= {"arm-shelf", "arm-product", "shelf"}, contacts
+    hits = [d["with"] for d in contacts["data"]]
+    assert len(hits) >= 3 and set(hits) <= {"arm-shelf", "arm-product", "shelf", o["kind"]}, contacts
     assert all(len(d["gripper"]) == 3 for d in contacts["data"])
+    base = contacts[[d["with"] == o["kind"] for d in contacts["data"]]]
+    assert base["trial"].tolist() == [3] and base["data"].iloc[0]["x"] + BASE_W / 2 <= o["x"] - 0.04, base
     deposits = list(ev[ev["type"] == "deposit"]["data"])
     assert len(deposits) == 2 and all(d["contacts"] >= 1 and d["inputs"] > 10 and d["driven_m"] > 5 for d in deposits), deposits
     assert [d["phase"] for d in ev[ev["type"] == "resumed"]["data"]] == ["teleop"]
@@ -183,15 +195,24 @@ def test_success_intervention_and_keyboard_teleoperation_with_contacts(env):
 def test_the_2d_scene_runs_where_webgl_is_missing_or_asked_for(env, how):
     c, browser, p, out = env
     extra = {"scene": "2d"} if how == "study asks" else {}
+    # where the study asks, both trials fail: the 2-D scene shows the cause of its complexity
+    trials, success = (["low"], 1.0) if how == "webgl disabled" else (["low", "high"], 0.0)
     study_id, link = session(
-        c, {"task": task(1.0), "blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"trials": ["low"]}}], **extra}
+        c, {"task": task(success), "blocks": [{"policy": {"kind": "never-ask"}, "schedule": {"trials": trials}}], **extra}
     )
     b = launch_chromium(p, extra_args=("--disable-webgl", "--disable-3d-apis")) if how == "webgl disabled" else browser
     page, errors = new_page(b)
     start(page, link, "?manual=1")
     assert page.evaluate("window.__scene.scene()") == "2d"
     assert page.evaluate("document.body.dataset.scene") == "2d"
-    step_until(page, "s.phase === 'result'")
+    banners = {}
+    for n, complexity in enumerate(trials, 1):
+        s = step_until(page, f"s.trial === {n} && s.phase === 'result'")["s"]
+        banners[complexity] = page.text_content("#banner")
+        if success == 0.0:
+            # the item lies on the floor of the aisle, off the shelves (1.2 m deep on either side)
+            assert s["item"]["fallen"] and not s["item"]["inBin"] and 1.2 < s["item"]["y"] < 4.8, s["item"]
+            shot(page, out, f"fallback-2d-failure-{complexity}")
     if how == "webgl disabled":
         shot(page, out, "fallback-2d")
         b.close()
@@ -201,3 +222,8 @@ def test_the_2d_scene_runs_where_webgl_is_missing_or_asked_for(env, how):
     ev = events(c, study_id)
     scenes = list(ev[ev["type"] == "scene"]["data"])
     assert [(d["scene"], d["reason"]) for d in scenes] == [("2d", "no webgl" if how == "webgl disabled" else "asked")]
+    if success == 0.0:  # the same causes as in 3-D, named by the banner
+        causes = [d["cause"] for d in ev[ev["type"] == "outcome_shown"]["data"]]
+        assert causes == ["slip", "strike"], causes
+        assert "slipped" in banners["low"], banners
+        assert any(f"struck the {k} and the item fell" in banners["high"] for k in ("crate", "cart")), banners

@@ -1,7 +1,9 @@
 """The 3-D scene's geometry (web/src/scene3d/), run in node: for any scene seed and complexity,
 the planned reach never brings a link of the arm into a shelf board or a product box, nor do
 random teleoperated gripper moves (between two accepted configurations either), the base's
-drive keeps its footprint out of the obstacles, accelerates from rest and turns without jumps."""
+drive keeps its footprint out of the obstacles, accelerates from rest and turns without jumps.
+The outcome's animations (3-D, and the 2-D scene's, web/src/outcome2d.ts) show the cause of the
+trial's complexity and start alike whatever the outcome."""
 
 from __future__ import annotations
 
@@ -198,9 +200,10 @@ for (const seed of req.seeds) for (const high of [false, true]) {
   for (const kind of ["success", "collision", "dropped"]) {
     const a = new OutcomeAnimation(kind, plan, aisle, seed, layout);
     const start = [];
+    const dt = req.dt ?? 0.02;
     let t = 0, f = a.at(0, 0), inBin = false;
-    for (; t < 40 && !f.done; t += 0.02) {
-      f = a.at(t, 0.02);
+    for (; t < 40 && !f.done; t += dt) {
+      f = a.at(t, dt);
       inBin ||= f.inBin;
       if (t < req.start) start.push(f.joints, f.pose);
     }
@@ -213,14 +216,7 @@ console.log(JSON.stringify(out));
 
 
 def test_a_failures_animation_shows_its_complexitys_cause_and_every_start_is_the_same(tmp_path):
-    if shutil.which("node") is None or not ESBUILD.exists():
-        pytest.fail("node and web/node_modules are needed: run scripts/setup.sh")
-    (tmp_path / "outcome.ts").write_text(OUTCOME % {"web": WEB.as_posix()})
-    cmd = [str(ESBUILD), str(tmp_path / "outcome.ts"), "--bundle", "--platform=node", "--format=esm"]
-    subprocess.run([*cmd, f"--outfile={tmp_path / 'outcome.mjs'}", "--log-level=warning"], check=True)
-    req = json.dumps({"seeds": list(range(12)), "start": 1.0})
-    res = subprocess.run(["node", str(tmp_path / "outcome.mjs")], input=req, capture_output=True, text=True, check=True)
-    for row in json.loads(res.stdout):
+    for row in run_in_node(tmp_path, OUTCOME, {"seeds": list(range(12)), "start": 1.0}):
         runs = row["runs"]
         assert all(r["done"] for r in runs.values()), row
         # the first second is the same whatever the outcome: it reveals nothing
@@ -232,3 +228,78 @@ def test_a_failures_animation_shows_its_complexitys_cause_and_every_start_is_the
             assert r["item"][2] < 0.1 and not r["inBin"], r  # the item on the floor
             if row["high"]:
                 assert r["shove"] > 0.05, r  # the obstacle shoved aside
+
+
+def run_in_node(tmp_path: Path, source: str, req: dict) -> list[dict]:
+    """Bundle ``source`` (TypeScript importing web/src) for node, feed it ``req`` on stdin, read its JSON."""
+    if shutil.which("node") is None or not ESBUILD.exists():
+        pytest.fail("node and web/node_modules are needed: run scripts/setup.sh")
+    (tmp_path / "run.ts").write_text(source % {"web": WEB.as_posix()})
+    cmd = [str(ESBUILD), str(tmp_path / "run.ts"), "--bundle", "--platform=node", "--format=esm"]
+    subprocess.run([*cmd, f"--outfile={tmp_path / 'run.mjs'}", "--log-level=warning"], check=True)
+    res = subprocess.run(["node", str(tmp_path / "run.mjs")], input=json.dumps(req), capture_output=True, text=True, check=True)
+    return json.loads(res.stdout)
+
+
+# the 2-D scene's outcome animation for each outcome of the same trial, from the robot at the end
+# of its reach: its cause, its end, its start, where the item and the obstacle are
+OUTCOME_2D = """
+import { makeLayout, AISLE_H, SHELF_DEPTH } from "%(web)s/src/scene";
+import { Outcome2D } from "%(web)s/src/outcome2d";
+import { readFileSync } from "node:fs";
+
+const req = JSON.parse(readFileSync(0, "utf8"));
+const out = [];
+for (const seed of req.seeds) for (const high of [false, true]) {
+  const runs = {};
+  for (const kind of ["success", "collision", "dropped"]) {
+    const layout = makeLayout(seed, high);
+    const o = layout.obstacles.find((b) => b.kind !== "spill");
+    const at = o ? [o.x, o.y] : null;
+    const robot = { ...layout.pregrasp, heading: 0, arm: layout.reachExtension, jaw: 1, holding: false, binCount: 0, shake: 0 };
+    const item = { x: layout.item.x, y: layout.item.y, z: 0, inBin: false, visible: true };
+    const a = new Outcome2D(kind, layout, robot);
+    const start = [];
+    const dt = req.dt ?? 0.02;
+    let t = 0, done = false;
+    for (; t < 40 && !done; t += dt) {
+      done = a.step(t, dt, robot, item);
+      if (t < req.start) start.push([robot.x, robot.y, robot.arm, robot.jaw, item.x, item.y, item.inBin]);
+    }
+    const floor = item.y > SHELF_DEPTH && item.y < AISLE_H - SHELF_DEPTH;
+    runs[kind] = { cause: a.cause, struck: a.struck, done, inBin: item.inBin, fallen: !!item.fallen, floor, binCount: robot.binCount,
+                   shove: o ? Math.hypot(o.x - at[0], o.y - at[1]) : 0, start: JSON.stringify(start) };
+  }
+  out.push({ seed, high, runs });
+}
+console.log(JSON.stringify(out));
+"""
+
+
+def test_the_2d_scenes_failure_shows_its_complexitys_cause_and_every_start_is_the_same(tmp_path):
+    for row in run_in_node(tmp_path, OUTCOME_2D, {"seeds": list(range(40)), "start": 1.0}):
+        runs = row["runs"]
+        assert all(r["done"] for r in runs.values()), row
+        # the first second is the same whatever the outcome: it reveals nothing
+        assert runs["success"]["start"] == runs["collision"]["start"] == runs["dropped"]["start"], row["seed"]
+        ok = runs["success"]
+        assert ok["cause"] is None and ok["inBin"] and ok["binCount"] == 1 and not ok["fallen"] and ok["shove"] == 0, row
+        for kind in ("collision", "dropped"):
+            r = runs[kind]
+            assert r["cause"] == ("strike" if row["high"] else "slip"), (row["seed"], row["high"], kind, r)
+            assert r["fallen"] and r["floor"] and not r["inBin"] and r["binCount"] == 0, r  # the item on the floor
+            if row["high"]:
+                assert r["struck"] in ("crate", "cart") and r["shove"] > 0.05, r  # the obstacle shoved aside
+
+
+@pytest.mark.parametrize("scene", ["3d", "2d"])
+def test_a_failure_strikes_the_obstacle_however_long_the_frames(tmp_path, scene):
+    """A fast study or a slow frame moves the base far in one frame (at animation_speed 20 and
+    a 100 ms frame, two seconds of the animation): the drive back still strikes the obstacle and the
+    animation ends, where the base would pass through it and the trial never end."""
+    rows = run_in_node(tmp_path, OUTCOME if scene == "3d" else OUTCOME_2D, {"seeds": list(range(12)), "start": 0, "dt": 2.0})
+    for row in rows:
+        runs = row["runs"]
+        assert all(r["done"] for r in runs.values()), (row["seed"], row["high"], {k: r["cause"] for k, r in runs.items()})
+        if row["high"]:
+            assert runs["collision"]["cause"] == runs["dropped"]["cause"] == "strike", row

@@ -16,7 +16,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as hst
 from typer.testing import CliRunner
 
-from test_browser import artifacts_dir, st, teleoperate
+from scene_drive import step_until
+from test_browser import artifacts_dir, teleoperate
 from trustseek import paper_model, paper_task
 from trustseek.cli import app
 from trustseek.client import Client
@@ -241,33 +242,28 @@ def test_scheduled_block_in_chromium(tmp_path):
         link = c.create_sessions(study["id"], participants=["chromium-s"])[0]["link"]
         with sync_playwright() as p:
             browser = launch_chromium(p)
-            page = browser.new_page(viewport={"width": 1320, "height": 900})
+            page = browser.new_page(viewport={"width": 1000, "height": 600})
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
-            page.goto(link + "?speed=1")
+            page.goto(link + "?manual=1&quality=0")  # the page's clock is the test's (scene_drive.step_until)
             page.wait_for_selector("#screen-consent:not([hidden])")
             page.check("#agree")
             page.click("#consent-btn")
             page.wait_for_selector("#screen-instructions:not([hidden])")
             page.click("#start-btn")
             for n in (1, 2, 3):
-                page.wait_for_function(
-                    f"window.trustseek.state().trial === {n} && ['approach', 'teleop'].includes(window.trustseek.state().phase)",
-                    timeout=15000,
-                )
-                s = st(page)
+                s = step_until(page, f"s.trial === {n} && ['approach', 'teleop'].includes(s.phase)", frames=1)["s"]
                 picks = s["picks"]
                 assert len(picks) == 4 - n and all(t["visible"] for t in picks)
                 assert [t["complexity"] for t in picks if t["next"]] == [s["complexity"]]
                 shown.append((s["complexity"], s["robot_action"]))
                 if n == 1:
-                    page.wait_for_timeout(300)
                     page.screenshot(path=str(out / "browser_schedule_block.png"))
                 if s["phase"] == "teleop":
                     teleoperate(page)
                 else:  # the participant relies on the robot
-                    page.wait_for_function("window.trustseek.state().item.inBin || window.trustseek.state().phase !== 'approach'")
-            page.wait_for_selector("#screen-done:not([hidden])", timeout=20000)
+                    step_until(page, "s.item.inBin || s.phase !== 'approach'")
+            step_until(page, "s.phase === 'done'")
             browser.close()
         assert not errors, errors
         log = pd.read_csv(io.BytesIO(c.export(study["id"])))

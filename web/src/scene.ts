@@ -37,7 +37,12 @@ export interface RobotState {
   closed?: boolean;
 }
 
-export interface ItemState { x: number; y: number; z: number; inBin: boolean; visible: boolean; }
+/** `fallen`: the 2-D scene's item on the floor after a failure (the 3-D scene has its height). */
+export interface ItemState { x: number; y: number; z: number; inBin: boolean; visible: boolean; fallen?: boolean; }
+
+/** What a failure's animation shows: the base strikes the obstacle (high complexity), or the
+ * grasp slips (low); the same in both scenes. */
+export type Cause = "strike" | "slip";
 
 // mulberry32: a small seeded generator so a trial looks the same after a reload
 export function rng(seed: number): () => number {
@@ -523,9 +528,10 @@ export function drawEndEffector(c: HTMLCanvasElement, v: View) {
     g.fillRect(x0 + 3, H * 0.62 - h + 3, (x1 - x0) * 0.3, 4);
   }
   if (item.visible && !item.inBin) {
+    // held: in the jaws; fallen: on the floor at the bottom of the picture; else on its shelf
     const ix = robot.holding ? W / 2 : toX(item.x);
     const r = robot.holding ? 46 : 0.17 * scale;
-    const iy = robot.holding ? H * 0.55 : H * 0.62 - r;
+    const iy = robot.holding ? H * 0.55 : item.fallen ? H - r * 0.8 : H * 0.62 - r;
     g.fillStyle = layout.item.color;
     g.beginPath();
     g.ellipse(ix, iy, r * 0.8, r, 0, 0, Math.PI * 2);

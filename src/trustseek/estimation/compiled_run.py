@@ -351,9 +351,10 @@ def run_one(start, model, data, C, PE, settings, qn):
     if not math.isfinite(stat[1]):
         return flat, stat, 1, ENDED_ZERO, 0, history[:0]
     history[0] = stat[1]
-    nh = 1
+    nh = np.int64(1)
     state = (flat, counts, stat)
-    its, converged, nh = _em(state, em_tol, max_iter, 1, model, ev, accelerate, history, nh)
+    # np.int64(1), not the literal 1 (nor nh = 1): numba would compile a second _em for Literal[int](1)
+    its, converged, nh = _em(state, em_tol, max_iter, np.int64(1), model, ev, accelerate, history, nh)
     finishes = 0
     q = np.empty(L)
     cq = np.empty(L)

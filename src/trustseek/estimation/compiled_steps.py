@@ -48,7 +48,8 @@ def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
         pin[c] = 0.0
         pe[c] = 0.0
         pt[c] = 0.0
-        ll[c] = kernels._item(0, lo, min(N, lo + CHUNK), (ini, emit, trans), data, (pin[c], pe[c], pt[c]))
+        # np.int64(0), not the literal 0: numba would compile a second _item (and _sequence) for Literal[int](0)
+        ll[c] = kernels._item(np.int64(0), lo, min(N, lo + CHUNK), (ini, emit, trans), data, (pin[c], pe[c], pt[c]))
     ci[:] = 0.0
     cem[:] = 0.0
     ctr[:] = 0.0

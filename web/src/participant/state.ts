@@ -2,6 +2,7 @@
 // trial in progress (kept in localStorage across reloads), the page's clock and its messages.
 
 import { Api, Connection, Current, State, TrialResult, UIEvent } from "../api";
+import { Outcome2D } from "../outcome2d";
 import { ItemState, Layout, RobotState, makeLayout } from "../scene";
 import { Scene3D } from "../scene3d";
 import { Contacts } from "../scene3d/page";
@@ -55,6 +56,7 @@ export const page = {
   lastSave: 0,
   retries: 0, // requests repeated since the page was opened (the test of outages reads it)
   scene3d: null as Scene3D | null,
+  anim2d: null as Outcome2D | null, // the 2-D scene's outcome animation
   manual: query.get("manual") === "1",
   inputs: 0, // teleoperation: frames with a drive or arm input
   /** the study's next screen (set by the page's flow) */

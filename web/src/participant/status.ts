@@ -35,7 +35,7 @@ export function showFatal(title: string, msg: string) {
 function view(): View {
   const asking = page.phase === "teleop" && !page.intervened && !page.robot.holding && !page.item.inBin;
   return {
-    layout: page.layout, robot: page.robot, item: page.item, showPath: page.phase === "approach", flash: page.flash, highlight: !page.robot.holding && !page.item.inBin, time: page.clock, bubble: asking ? "Please help me!" : undefined, impact: page.impact, picks: picks(),
+    layout: page.layout, robot: page.robot, item: page.item, showPath: page.phase === "approach", flash: page.flash, highlight: !page.robot.holding && !page.item.inBin && !page.item.fallen, time: page.clock, bubble: asking ? "Please help me!" : undefined, impact: page.impact, picks: picks(),
   };
 }
 
@@ -101,10 +101,10 @@ export function renderStatus() {
   state: () => ({
     phase: page.phase, trial: page.current?.trial ?? null, robot_action: page.current?.robot_action ?? null, complexity: page.current?.complexity ?? null,
     robot: { x: page.robot.x, y: page.robot.y, heading: page.robot.heading, arm: page.robot.arm, holding: page.robot.holding, jaw: page.robot.jaw, closed: !!page.robot.closed, tool: page.robot.tool ?? null },
-    item: { x: page.item.x, y: page.item.y, z: page.item.z, inBin: page.item.inBin },
+    item: { x: page.item.x, y: page.item.y, z: page.item.z, inBin: page.item.inBin, fallen: !!page.item.fallen },
     gripper: gripper(), reach: REACH, contacts: contacts.count,
-    path: page.scene3d?.drive ? page.scene3d.drive.path : page.layout.path, side: page.layout.side, score: page.st?.score ?? null, shown_score: page.shownScore,
-    practice: page.current?.practice ?? null, picks: picks() ?? null, speed: page.speed, trial_label: $("trial-no").textContent, retries: page.retries, connection: $("connection").hidden ? "ok" : "retrying",
+    path: page.scene3d?.drive ? page.scene3d.drive.path : page.layout.path, obstacles: page.layout.obstacles, side: page.layout.side, score: page.st?.score ?? null, shown_score: page.shownScore,
+    practice: page.current?.practice ?? null, picks: picks() ?? null, speed: page.speed, trial_label: $("trial-no").textContent, retries: page.retries, saving: page.pending !== null, connection: $("connection").hidden ? "ok" : "retrying",
   }),
 };
 

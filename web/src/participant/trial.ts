@@ -5,9 +5,8 @@
 
 import { ApiError, Current } from "../api";
 import { poll } from "../input";
-import {
-  AISLE_H, BASE_H, SHELF_DEPTH, gripperPos, makeLayout, pathLength, pointAlong,
-} from "../scene";
+import { Outcome2D } from "../outcome2d";
+import { Cause, makeLayout, pathLength, pointAlong } from "../scene";
 import { chooseScene } from "../scene3d/page";
 import { $, Saved, api, contacts, fmtReward, forget, freshItem, freshRobot, log, page, query, save, savedFor, setHint } from "./state";
 import { draw, renderStatus, setPhase, showFatal } from "./status";
@@ -28,6 +27,7 @@ export function startTrial(cur: Current) {
   page.robot.binCount = bin;
   page.item = freshItem(page.layout);
   page.impact = undefined;
+  page.anim2d = null;
   page.pathS = 0;
   page.pathL = approachLength(cur.scene_seed);
   if (saved) return resumeTrial(cur, saved);
@@ -127,15 +127,21 @@ function showBanner() {
     dropped: "Failure: the robot dropped the item",
     teleoperated: o.robot_action === "ask" ? "Collected with your help" : "You took over and collected the item",
   };
-  // in 3-D a failure's text names the cause the animation showed (it fits the trial's complexity)
-  const g = page.scene3d?.state();
-  if (g?.cause === "strike") text[o.outcome] = `Failure: the robot struck the ${g.struck} and the item fell`;
-  else if (g?.cause === "slip") text[o.outcome] = "Failure: the item slipped out of the gripper and fell";
+  // a failure's text names the cause the animation showed (it fits the trial's complexity)
+  const g = shownCause();
+  if (g.cause === "strike") text[o.outcome] = `Failure: the robot struck the ${g.struck} and the item fell`;
+  else if (g.cause === "slip") text[o.outcome] = "Failure: the item slipped out of the gripper and fell";
   const b = $("banner");
   b.innerHTML = `<span class="pts ${o.reward > 0 ? "pos" : o.reward < 0 ? "neg" : ""}">${r}</span> ${text[o.outcome] ?? o.outcome}${o.practice ? " (practice: not scored)" : ""}`;
   b.className = "show";
   page.shownScore = page.st.score;
-  api.events([{ t: Date.now(), type: "outcome_shown", trial: o.trial, data: { outcome: o.outcome, reward: o.reward, cause: g?.cause ?? null } }]).catch(() => undefined);
+  api.events([{ t: Date.now(), type: "outcome_shown", trial: o.trial, data: { outcome: o.outcome, reward: o.reward, cause: g.cause } }]).catch(() => undefined);
+}
+
+/** The cause of a failure the outcome's animation showed (3-D or 2-D), and what was struck. */
+export function shownCause(): { cause: Cause | null; struck: string | null } {
+  const g = page.scene3d ? page.scene3d.state() : page.anim2d;
+  return { cause: g?.cause ?? null, struck: g?.struck ?? null };
 }
 
 function afterResult() {
@@ -186,68 +192,16 @@ function tick(dt: number) {
       submit("rely");
     }
   } else if (page.phase === "outcome") {
-    if (!page.scene3d) animateOutcome(k);
-    else if (page.scene3d.outcome(page.outcome!.outcome, page.phaseT, k, page.robot, page.item)) toResult();
+    if (!page.scene3d) {
+      page.anim2d ??= new Outcome2D(page.outcome!.outcome, page.layout, page.robot);
+      if (page.anim2d.step(page.phaseT, k, page.robot, page.item)) toResult();
+      page.impact = page.anim2d.impact;
+    } else if (page.scene3d.outcome(page.outcome!.outcome, page.phaseT, k, page.robot, page.item)) toResult();
   } else if (page.phase === "teleop") {
     if (teleop(cmd, k)) submit("intervene");
     if (page.clock - page.lastSave > 0.5) save();
   } else if (page.phase === "result") {
     if (page.outcome && page.phaseT > 1.6) afterResult();
-  }
-}
-
-function animateOutcome(k: number) {
-  const o = page.outcome!;
-  const t = page.phaseT;
-  const gp = gripperPos(page.robot, page.layout.side);
-  if (o.outcome === "success") {
-    if (t < 0.3) page.robot.jaw = Math.max(0, 1 - t / 0.3);
-    else {
-      page.robot.holding = true;
-      page.robot.arm = Math.max(0, page.robot.arm - 1.4 * k);
-      page.item.x = gp.x;
-      page.item.y = gp.y;
-      if (page.robot.arm <= 0) {
-        page.item.inBin = true;
-        page.robot.holding = false;
-        page.robot.binCount++;
-        toResult();
-      }
-    }
-  } else if (o.outcome === "collision") {
-    // the base swerves into the shelf: a jolt, a flash, the arm pulls back
-    const edge = page.layout.side < 0 ? SHELF_DEPTH + BASE_H / 2 : AISLE_H - SHELF_DEPTH - BASE_H / 2;
-    if (!page.impact) {
-      page.robot.y += (edge - page.robot.y) * Math.min(1, 6 * k);
-      if (Math.abs(edge - page.robot.y) < 0.02 || t > 0.4) {
-        page.robot.y = edge;
-        page.impact = { x: page.robot.x + 0.3, y: page.layout.side < 0 ? SHELF_DEPTH : AISLE_H - SHELF_DEPTH, t: 0 };
-        page.flash = 1;
-        page.robot.shake = 1;
-      }
-    } else page.impact.t += k;
-    page.robot.arm = Math.max(0, page.robot.arm - 0.8 * k);
-    if (t > 1.4) toResult();
-  } else {
-    // dropped: grasp, lift, lose it on the way to the bin
-    if (t < 0.3) page.robot.jaw = Math.max(0, 1 - t / 0.3);
-    else if (t < 0.8) {
-      page.robot.holding = true;
-      page.robot.arm = Math.max(0, page.robot.arm - 1.2 * k);
-      page.item.x = gp.x;
-      page.item.y = gp.y;
-    } else {
-      if (page.robot.holding) {
-        page.robot.holding = false;
-        page.robot.jaw = 1;
-        page.flash = 0.8;
-      }
-      // it falls to the floor beside the robot, out of reach
-      const fx = page.robot.x + 0.8, fy = page.robot.y;
-      page.item.x += (fx - page.item.x) * Math.min(1, 4 * k);
-      page.item.y += (fy - page.item.y) * Math.min(1, 4 * k);
-      if (t > 1.6) toResult();
-    }
   }
 }
 

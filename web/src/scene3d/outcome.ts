@@ -7,7 +7,7 @@
 // the aisle; a success ends as it sets off, a failure cuts the corner: the base strikes the
 // crate or the cart, which is shoved aside, and the item is thrown out of the bin to the floor.
 
-import { AISLE_H, AISLE_W, BASE_H, BASE_W, Box, Layout, rng } from "../scene";
+import { AISLE_H, AISLE_W, BASE_H, BASE_W, Box, Cause, Layout, rng } from "../scene";
 import { Joints, Pose, Reach, STOW, forward, inverse, mix, reachAt } from "./arm";
 import { Drive, planPath } from "./drive";
 import { Aisle3 } from "./geometry";
@@ -35,7 +35,6 @@ export class Faller {
   }
 }
 
-export type Cause = "strike" | "slip";
 export interface Held { joints: Joints; holding: boolean; item: V3; }
 /** The base's pose while it drives back (high complexity), and whether the item is in the bin. */
 export interface Frame extends Held { done: boolean; pose: Pose | null; inBin: boolean; }
@@ -54,6 +53,7 @@ export class OutcomeAnimation {
   readonly obstacle: Box | null = null;
   shove: V3 = [0, 0, 0];
   private struck: { t: number; pose: Pose; v: V3 } | null = null;
+  private checked = 0; // the drive back's time checked for a strike so far
   private bin: Joints;
 
   constructor(readonly kind: string, readonly plan: Reach, readonly aisle: Aisle3, seed: number, layout?: Layout) {
@@ -134,23 +134,32 @@ export class OutcomeAnimation {
       this.shove = [o[0] * (1 - Math.exp(-4 * k)), o[1] * (1 - Math.exp(-4 * k)), 0];
       return this.struck.pose;
     }
-    const p = back.at(Math.max(0, s) * BACK_PACE);
-    if (this.kind !== "success" && this.overlaps(p)) {
-      // the strike: the base stops short, the obstacle is shoved on, the item flies out of the bin
-      const prev = back.at(Math.max(0, s - 0.05) * BACK_PACE);
-      const d = [Math.cos(prev.heading), Math.sin(prev.heading)];
-      const cart = this.obstacle!.kind === "cart";
-      this.struck = { t: s, pose: prev, v: [d[0] * (cart ? 0.6 : 0.15), d[1] * (cart ? 0.6 : 0.15) + (cart ? 0.2 : 0.05) * Math.sign(d[1] || 1), 0] };
-      this.cause = "strike";
-      const c = Math.cos(prev.heading), sn = Math.sin(prev.heading);
-      const bin: V3 = [prev.x - c * 0.25, prev.y - sn * 0.25, 0.62];
-      // thrown forward and out to the side away from the obstacle, where every camera sees it
-      const o = this.obstacle!;
-      const away = Math.sign(prev.y - (o.y + o.h / 2)) || 1;
-      this.release(bin, [d[0] * 0.8, d[1] * 0.8 + away * 1.6, 1.5]);
-      return prev;
+    // a failure's drive is checked every 10 ms since the last frame: a long frame (a fast study,
+    // a slow machine) does not carry the base through the obstacle
+    for (let u = this.checked; this.kind !== "success" && u < s; ) {
+      u = Math.min(s, u + 0.01);
+      if (this.overlaps(back.at(Math.max(0, u) * BACK_PACE))) return this.strike(u);
+      this.checked = u;
     }
-    return p;
+    return back.at(Math.max(0, s) * BACK_PACE);
+  }
+
+  /** The strike `s` seconds into the drive back: the base stops short, the obstacle is shoved
+   * on, the item flies out of the bin. */
+  private strike(s: number): Pose {
+    const back = this.back!;
+    const prev = back.at(Math.max(0, s - 0.05) * BACK_PACE);
+    const d = [Math.cos(prev.heading), Math.sin(prev.heading)];
+    const cart = this.obstacle!.kind === "cart";
+    this.struck = { t: s, pose: prev, v: [d[0] * (cart ? 0.6 : 0.15), d[1] * (cart ? 0.6 : 0.15) + (cart ? 0.2 : 0.05) * Math.sign(d[1] || 1), 0] };
+    this.cause = "strike";
+    const c = Math.cos(prev.heading), sn = Math.sin(prev.heading);
+    const bin: V3 = [prev.x - c * 0.25, prev.y - sn * 0.25, 0.62];
+    // thrown forward and out to the side away from the obstacle, where every camera sees it
+    const o = this.obstacle!;
+    const away = Math.sign(prev.y - (o.y + o.h / 2)) || 1;
+    this.release(bin, [d[0] * 0.8, d[1] * 0.8 + away * 1.6, 1.5]);
+    return prev;
   }
 
   /** Whether the base's footprint at p overlaps the obstacle (separating axes). */
