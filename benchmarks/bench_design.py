@@ -39,6 +39,7 @@ from trustseek.design.replicate import (
 from trustseek.design.sweep import study_of
 from trustseek.estimation import fit as fit_module
 from trustseek.estimation.fit import fit_trust_model
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.sequences import encode
 from trustseek.estimation.trust_iohmm import preset_spec
 from trustseek.policies import randomized
@@ -62,7 +63,7 @@ def stages(cfg: DesignConfig, n: int) -> None:
     def old_fit(frame, r):
         fit_module.fit_iohmm = lambda *a, **k: lockstep(*a, **k, compiled=False)
         try:
-            return fit_trust_model(frame, restarts=fs.restarts, seed=r, tol=fs.tol, n_jobs=1)
+            return fit_trust_model(frame, options=FitOptions(restarts=fs.restarts, seed=r, tol=fs.tol, n_jobs=1))
         finally:
             fit_module.fit_iohmm = lockstep
 

@@ -34,6 +34,7 @@ import numpy as np
 from trustseek.estimation import compiled_run, encode, fit_iohmm, fit_trust_model, from_trust_model, kernels, loglik, paper_spec
 from trustseek.estimation.em import run_em
 from trustseek.estimation.estep import Workspace
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.reproduction.coverage import coverage_study
@@ -56,7 +57,7 @@ def first_call() -> None:
     Workspace(seqs, 2, 2, s.Ue, s.Ut).estep(s.random(np.random.default_rng(0)))
     w, c = since(t)
     t = clocks()
-    fit_iohmm(seqs, paper_spec(), restarts=2, seed=0)
+    fit_iohmm(seqs, paper_spec(), options=FitOptions(restarts=2, seed=0, n_jobs=1))
     w2, c2 = since(t)
     print(
         f"compiled E-step available: {kernels.AVAILABLE}; first E-step {w:.2f} s wall, {c:.2f} s CPU "
@@ -93,7 +94,9 @@ def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None =
     fits, times = {}, {}
     for compiled in (True, False, True, False, True, False):  # interleaved, best of 3: a shared machine's noise
         t = clocks()
-        fits[compiled] = fit_iohmm(seqs, spec, restarts=restarts, seed=0, tol=tol, n_jobs=1, compiled=compiled)
+        fits[compiled] = fit_iohmm(
+            seqs, spec, options=FitOptions(restarts=restarts, seed=0, tol=tol, n_jobs=1), compiled=compiled
+        )
         times.setdefault(compiled, []).append(since(t))
     fit, old = fits[True], fits[False]
     wall, cpu, median_cpu = best_of(times[True])
@@ -125,7 +128,7 @@ def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None =
         kernels.AVAILABLE = False
         try:
             t = clocks()
-            ref = fit_iohmm(seqs, spec, restarts=restarts, seed=0, tol=tol)
+            ref = fit_iohmm(seqs, spec, options=FitOptions(restarts=restarts, seed=0, tol=tol, n_jobs=1))
             w2, c2 = since(t)
         finally:
             kernels.AVAILABLE = True
@@ -137,7 +140,7 @@ def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None =
         walls, cpus = {}, {}
         for jobs, compiled in ((1, True), (2, True), (2, False)) * 3:
             t = clocks()
-            two = fit_iohmm(seqs, spec, restarts=restarts, seed=0, tol=tol, n_jobs=jobs, compiled=compiled)
+            two = fit_iohmm(seqs, spec, options=FitOptions(restarts=restarts, seed=0, tol=tol, n_jobs=jobs), compiled=compiled)
             w_, c_ = since(t)
             walls[jobs, compiled] = min(walls.get((jobs, compiled), w_), w_)
             cpus[jobs, compiled] = min(cpus.get((jobs, compiled), c_), c_)
@@ -175,7 +178,7 @@ def big(n: int = 100_000) -> None:
             compiled_run.SUBSAMPLE_MIN = default_min if phase else 10**15
             try:
                 t = clocks()
-                fit = fit_iohmm(seqs, spec, restarts=restarts, seed=0, n_jobs=jobs)
+                fit = fit_iohmm(seqs, spec, options=FitOptions(restarts=restarts, seed=0, n_jobs=jobs))
                 w, c = since(t)
             finally:
                 compiled_run.SUBSAMPLE_MIN = default_min
@@ -205,7 +208,7 @@ def recovery(datasets: int, n: int = 1000, restarts: int = 10) -> None:
     maes, errs, events, lr = [], {}, {}, []
     t = clocks()
     for d in range(datasets):
-        res = fit_trust_model(simulate_design(truth, n, seed=d), restarts=restarts, seed=0)
+        res = fit_trust_model(simulate_design(truth, n, seed=d), options=FitOptions(restarts=restarts, seed=0))
         e = []
         for c in res.cells():
             x = c["estimate"] - float(getattr(truth, c["table"])[tuple(c["index"])])

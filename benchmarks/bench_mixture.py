@@ -25,6 +25,7 @@ import numpy as np
 
 from trustseek.estimation import encode, fit_iohmm, paper_spec
 from trustseek.estimation.mixture import fit_mixture, mixture_loglik
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.type_selection import select_types
 from trustseek.model.presets import paper_conservative_mixture, paper_model
 from trustseek.simulation.designs import simulate_design
@@ -49,14 +50,16 @@ def timing(n: int = 1000, types: int = 3, restarts: int = 10, tol: float = 1e-8,
     spec = paper_spec()
     _mix, _sup, df = population(n, 1)
     seqs = encode(df, spec)
-    fit_mixture(encode(df.head(71 * 3), spec), spec, 2, restarts=1, max_iter=5)  # load the compiled passes
+    fit_mixture(
+        encode(df.head(71 * 3), spec), spec, 2, options=FitOptions(restarts=1, max_iter=5, n_jobs=1)
+    )  # load the compiled passes
     t = clocks()
-    pooled = fit_iohmm(seqs, spec, restarts=restarts, seed=0, tol=tol, n_jobs=1)
+    pooled = fit_iohmm(seqs, spec, options=FitOptions(restarts=restarts, seed=0, tol=tol, n_jobs=1))
     pw, pc = since(t)
     print(f"{n} participants x 71 trials (paper + conservative, 50 %), tol {tol:g}, one thread")
     print(f"  pooled fit, {restarts} restarts: {pw:.3f} s wall, {pc:.3f} s CPU; log-likelihood {pooled.loglik:.4f}")
     t = clocks()
-    fit = fit_mixture(seqs, spec, types, restarts=restarts, seed=0, tol=tol, pooled=pooled.params, n_jobs=1)
+    fit = fit_mixture(seqs, spec, types, options=FitOptions(restarts=restarts, seed=0, tol=tol, n_jobs=1), pooled=pooled.params)
     w, c = since(t)
     its = sum(r.iterations for r in fit.runs)
     for i, r in enumerate(fit.runs):
@@ -75,7 +78,7 @@ def acceptance(n: int = 200) -> None:
     mix, sup, df = population(n, 11)
     seqs = encode(df, spec)
     t = clocks()
-    fit = fit_mixture(seqs, spec, 2, restarts=10, seed=0)
+    fit = fit_mixture(seqs, spec, 2, options=FitOptions(restarts=10, seed=0, n_jobs=1))
     _w, c = since(t)
     truth = np.where(sup.index == mix.type_index("conservative"), 0, 1)  # type1 relies least
     right = float((fit.type_posteriors().argmax(1) == truth).mean())
@@ -88,7 +91,7 @@ def acceptance(n: int = 200) -> None:
     )
     for label, data in (("paper + conservative", df), ("paper model alone", simulate_design(paper_model(), n, seed=12))):
         t = clocks()
-        rows = select_types(data, types=(1, 2, 3), folds=5, restarts=10, seed=0)
+        rows = select_types(data, types=(1, 2, 3), folds=5, options=FitOptions(restarts=10, seed=0, tol=1e-6, n_jobs=1))
         _w, c = since(t)
         bic = next(r["types"] for r in rows if r["best_bic"])
         held = next(r["types"] for r in rows if r["best_heldout"])

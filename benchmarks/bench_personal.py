@@ -33,6 +33,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 
 from trustseek.estimation import encode, fit_trust_model
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.personal import TABLES, _PersonalWorkspace, personalize
 from trustseek.estimation.spec import Params
 from trustseek.estimation.structure import Structure
@@ -87,7 +88,7 @@ def main() -> None:
             new = simulate_design(sup, n, seed=100 * rep + 3, n_trials=trials)
             truth = [sup.model_of(i) for i in range(n)]
             t = time.process_time()
-            pooled = fit_trust_model(df, restarts=3).model
+            pooled = fit_trust_model(df, options=FitOptions(restarts=3)).model
             fit_cpu = time.process_time() - t
             centre_new = new_loglik(new, [pooled] * n)
             print(

@@ -23,6 +23,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np
 
 from trustseek.estimation.fit import fit_trust_model
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.result import FitResult
 from trustseek.model import RatingTable, TrustModel, paper_model
 from trustseek.simulation import simulate_design
@@ -60,21 +61,25 @@ def main() -> None:
     n = args.participants or (300 if args.quick else 1000)
     truth = paper_model().replace(rating=RATING)
     print(f"uptime: {os.getloadavg()[0]:.2f} (1-minute load average)")
-    fit_trust_model(simulate_design(truth, 20, seed=9, n_trials=(10, 10), rating_every=1), restarts=1, rating="rating")  # compile
+    fit_trust_model(
+        simulate_design(truth, 20, seed=9, n_trials=(10, 10), rating_every=1), options=FitOptions(restarts=1), rating="rating"
+    )  # compile
     for every in (1, 5):
         frame = simulate_design(truth, n, seed=1, n_trials=(10, 10), rating_every=every)
         rated = int(frame["rating"].notna().sum())
         when = "every trial" if every == 1 else f"every {every}th trial"
         print(f"{n} participants x 20 trials, a rating on {when} ({rated} ratings), {args.restarts} starts:")
         t = time.perf_counter()
-        joint = fit_trust_model(frame, restarts=args.restarts, seed=0, rating="rating", n_jobs=1)
+        joint = fit_trust_model(frame, options=FitOptions(restarts=args.restarts, seed=0, n_jobs=1), rating="rating")
         report("joint (actions + ratings)", joint, truth, time.perf_counter() - t)
         if every == 1:
             t = time.perf_counter()
-            alone = fit_trust_model(frame, restarts=args.restarts, seed=0, n_jobs=1)
+            alone = fit_trust_model(frame, options=FitOptions(restarts=args.restarts, seed=0, n_jobs=1))
             report("baseline: actions alone", alone, truth, time.perf_counter() - t)
             t = time.perf_counter()
-            ratings = fit_trust_model(frame, restarts=args.restarts, seed=0, rating="rating", actions=False, n_jobs=1)
+            ratings = fit_trust_model(
+                frame, options=FitOptions(restarts=args.restarts, seed=0, n_jobs=1), rating="rating", actions=False
+            )
             report("ratings alone", ratings, truth, time.perf_counter() - t)
 
 

@@ -27,6 +27,7 @@ from trustseek import TrustModel
 from trustseek.data.trials import example_path
 from trustseek.estimation import select_levels
 from trustseek.estimation.iohmm import fit_iohmm, loglik
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.selection import BEST_TOLERANCE
 from trustseek.estimation.sequences import encode
 from trustseek.estimation.trust_iohmm import from_trust_model, level_names, preset_spec
@@ -101,7 +102,7 @@ def table(model: TrustModel, n: int, trials: int, levels: tuple[int, ...], folds
     K = model.n_trust
     df = simulate_design(model, n, seed=seed, n_trials=(trials // 2, trials - trials // 2))
     t = time.perf_counter()
-    rows = select_levels(df, levels=levels, folds=folds, seed=0)
+    rows = select_levels(df, levels=levels, folds=folds, options=FitOptions(restarts=None, seed=0, tol=1e-6, n_jobs=1))
     wall = time.perf_counter() - t
     print(
         f"{K}-level model, {n} participants x {trials} trials (seed {seed}); select K = {levels[0]}..{levels[-1]}, {folds} folds"
@@ -131,7 +132,9 @@ def table(model: TrustModel, n: int, trials: int, levels: tuple[int, ...], folds
     if reference and K in by:
         base = preset_spec("paper", df)
         t = time.perf_counter()
-        ref = fit_iohmm(encode(df, base), base.with_levels(level_names(K)), restarts=reference, seed=0, tol=1e-6, n_jobs=1)
+        ref = fit_iohmm(
+            encode(df, base), base.with_levels(level_names(K)), options=FitOptions(restarts=reference, seed=0, tol=1e-6, n_jobs=1)
+        )
         ll = np.asarray(ref.restart_logliks)
         hits = int((ll >= ll.max() - BEST_TOLERANCE).sum())
         print(

@@ -7,7 +7,6 @@ and can be mailed as a single file.
 from __future__ import annotations
 
 import base64
-import json
 from pathlib import Path
 from typing import Any
 
@@ -206,7 +205,3 @@ def write_report(rep: Reproduction, out: str | Path) -> dict[str, Path]:
     html = out / "report.html"
     html.write_text(render_html(rep.summary, out), encoding="utf-8")
     return {"html": html, "summary": out / "summary.json", "dir": out}
-
-
-def load_summary(path: str | Path) -> dict:
-    return json.loads(Path(path).read_text(encoding="utf-8"))

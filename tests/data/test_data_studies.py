@@ -22,6 +22,7 @@ from hypothesis import strategies as st
 from cli_runner import run_cli
 from trustseek.data import DataError, example_path, read_trials
 from trustseek.estimation import encode, fit_trust_model, paper_spec
+from trustseek.estimation.options import FitOptions
 
 FLIP = {"left": "right", "right": "left"}
 
@@ -42,7 +43,7 @@ def canonical() -> pd.DataFrame:
 @pytest.fixture(scope="module")
 def reference(canonical):
     seqs = encode(canonical, paper_spec())
-    fit = fit_trust_model(canonical, restarts=1, seed=3, max_iter=60)
+    fit = fit_trust_model(canonical, options=FitOptions(restarts=1, seed=3, max_iter=60))
     return seqs, fit.loglik
 
 
@@ -117,7 +118,7 @@ def fit_mapped(path: Path, mapping: dict, tmp_path: Path):
     mfile = tmp_path / "mapping.json"
     mfile.write_text(json.dumps(mapping))
     frame = read_trials(path, mfile)
-    return frame, encode(frame, paper_spec()), fit_trust_model(frame, restarts=1, seed=3, max_iter=60).loglik
+    return frame, encode(frame, paper_spec()), fit_trust_model(frame, options=FitOptions(restarts=1, seed=3, max_iter=60)).loglik
 
 
 def assert_same(reference, seqs, loglik):
@@ -380,7 +381,9 @@ def test_the_shipped_study_mapping_fits_a_study_log(canonical, reference, tmp_pa
     path = tmp_path / "study.csv"
     log.to_csv(path, index=False)
     frame = read_trials(path, example_path("study_mapping.json"))
-    assert_same(reference, encode(frame, paper_spec()), fit_trust_model(frame, restarts=1, seed=3, max_iter=60).loglik)
+    assert_same(
+        reference, encode(frame, paper_spec()), fit_trust_model(frame, options=FitOptions(restarts=1, seed=3, max_iter=60)).loglik
+    )
     practice_only = (log["phase"] == "practice") & (log["attention_check"] == 0)  # each rule counts what is left
     assert [k for _, k in frame.attrs["dropped"]] == [int(log["attention_check"].sum()), int(practice_only.sum())]
 

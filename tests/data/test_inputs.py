@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from cli_runner import run_cli
 from trustseek.data import ColumnMapping, DataError, example_path, read_trials
+from trustseek.estimation.options import FitOptions
 
 RENAME = {"low": "simple", "high": "complex"}  # "complex" sorts before "simple": the declared order must win
 
@@ -188,7 +189,7 @@ def test_general_model_file_round_trip_and_problems(study, tmp_path):
 
     path, mapping, _ = study
     frame = read_trials(path, mapping)
-    result = fit_model(frame, ("advice", "difficulty"), ("condition",), restarts=1, max_iter=40)
+    result = fit_model(frame, ("advice", "difficulty"), ("condition",), options=FitOptions(restarts=1, max_iter=40))
     model = result.model
     f = tmp_path / "g.json"
     model.save(f)
@@ -240,7 +241,7 @@ def test_planning_commands_refuse_a_general_model_in_one_line(study, tmp_path):
     from trustseek.estimation.fit import fit_model
 
     path, mapping, _ = study
-    result = fit_model(read_trials(path, mapping), ("advice",), ("condition",), restarts=1, max_iter=20)
+    result = fit_model(read_trials(path, mapping), ("advice",), ("condition",), options=FitOptions(restarts=1, max_iter=20))
     f = tmp_path / "g.json"
     result.model.save(f)
     for argv in (["solve", "--model", str(f)], ["simulate", "--model", str(f), "--participants", "2"]):
@@ -384,7 +385,7 @@ def test_study_log_with_a_condition_input_fits_like_the_canonical_log(tmp_path):
     fits = []
     for f, group in ((frame, "group"), (canonical, "condition")):
         f = f.rename(columns={group: "group"}) if group != "group" else f
-        fits.append(fit_model(f, PAPER_EMISSION_INPUTS, tr, restarts=1, seed=3, max_iter=40, rating="rating"))
+        fits.append(fit_model(f, PAPER_EMISSION_INPUTS, tr, options=FitOptions(restarts=1, seed=3, max_iter=40), rating="rating"))
     mapped, reference = fits
     assert mapped.model.inputs["group"] == ("transparent", "opaque")
     assert mapped.fit.seqs.n_trials == reference.fit.seqs.n_trials == len(canonical)

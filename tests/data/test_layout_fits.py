@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 
 from trustseek.data import read_trials
 from trustseek.estimation import fit_trust_model
+from trustseek.estimation.options import FitOptions
 
 LEVELS = ("1", "2", "3", "4")
 NAMES = {"participant": "pid", "complexity": "hard", "robot_action": "asked", "human_action": "took_over", "experience": "ok"}
@@ -110,7 +111,9 @@ def write_layouts(log: pd.DataFrame, folder: Path) -> dict[str, tuple[Path, dict
 
 
 def fitted(frame: pd.DataFrame) -> float:
-    return fit_trust_model(frame, restarts=1, seed=1, max_iter=25, n_jobs=1, rating="rating", rating_levels=LEVELS).loglik
+    return fit_trust_model(
+        frame, options=FitOptions(restarts=1, seed=1, max_iter=25, n_jobs=1), rating="rating", rating_levels=LEVELS
+    ).loglik
 
 
 @settings(max_examples=3, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

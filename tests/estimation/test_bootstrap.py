@@ -7,6 +7,7 @@ from trustseek import paper_model
 from trustseek.data.trials import example_path, read_trials
 from trustseek.estimation import fit_trust_model
 from trustseek.estimation.bootstrap import MIN_REPLICATES, align
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.spec import Params
 from trustseek.estimation.trust_iohmm import from_trust_model
 from trustseek.simulation.designs import simulate_design
@@ -60,7 +61,9 @@ def test_shipped_example_every_interval_contains_its_estimate():
     # the README's round trip: P(rely | T=low, C=high, a=autonomous) = 0.378 had the interval [0.000, 0.364].
     # The likelihood has a second maximum 0.11 below the best (that cell at 0.115), which most
     # resamples prefer: the percentile interval lies below the estimate and is widened to it.
-    res = fit_trust_model(read_trials(example_path()), restarts=10, seed=0, bootstrap=REPLICATES, n_jobs=1, tol=1e-6)
+    res = fit_trust_model(
+        read_trials(example_path()), options=FitOptions(restarts=10, seed=0, tol=1e-6, n_jobs=1), bootstrap=REPLICATES
+    )
     assert contained(res) == []
     cell = next(c for c in res.cells() if c["cell"] == "P(rely | T=low, C=high, a=autonomous)")
     assert cell["estimate"] == pytest.approx(0.378, abs=0.002)
@@ -75,7 +78,7 @@ def test_simulated_percentile_intervals_contain_their_estimates(participants, se
     # on data from the paper's model the aligned replicates straddle every estimate:
     # nothing needs widening, each percentile interval contains its estimate on its own
     df = simulate_design(paper_model(), participants, seed=seed)
-    res = fit_trust_model(df, restarts=4, seed=seed, bootstrap=REPLICATES, n_jobs=1, tol=1e-6)
+    res = fit_trust_model(df, options=FitOptions(restarts=4, seed=seed, tol=1e-6, n_jobs=1), bootstrap=REPLICATES)
     assert contained(res) == []
     assert res.intervals is not None
     widened = [c["cell"] for c in res.cells() if c["widened"]]
@@ -106,7 +109,7 @@ def test_an_interval_at_the_boundary_can_move():
     s1, sfit, *_ = np.random.SeedSequence(cfg.seed).spawn(9)
     model, task = paper_model(), pipeline.paper_task()
     frame = simulate(model, task, pipeline._ask_policy(cfg), cfg.participants_1, counts=cfg.counts_1, seed=s1).trials()
-    fit = fit_trust_model(frame[pipeline.CANONICAL], restarts=3, seed=seed_int(sfit), n_jobs=1).fit
+    fit = fit_trust_model(frame[pipeline.CANONICAL], options=FitOptions(restarts=3, seed=seed_int(sfit), n_jobs=1)).fit
     ref = cell_tables(fit.spec, fit.params)
     shape = ref["transition"].shape
     cell, other = (0, 0, 0, 1, 0), (0, 0, 0, 1, 1)  # C=low, autonomous, E'=faulty, T=high -> T'=low, high

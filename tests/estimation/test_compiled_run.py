@@ -9,6 +9,7 @@ from trustseek.estimation import compiled_steps as steps
 from trustseek.estimation.convergence import em_step
 from trustseek.estimation.em import run_em
 from trustseek.estimation.estep import Workspace
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
@@ -79,8 +80,8 @@ def test_em_decides_as_run_em():
 @pytest.mark.parametrize("n, seed", [(9, 1), (9, 2), (60, 4)])
 def test_every_start_ends_stationary_at_least_as_high_as_the_lockstep_path(n, seed):
     spec, seqs, s, w = problem(n, seed)
-    fast = fit_iohmm(seqs, spec, restarts=6, seed=seed)
-    slow = fit_iohmm(seqs, spec, restarts=6, seed=seed, compiled=False)
+    fast = fit_iohmm(seqs, spec, options=FitOptions(restarts=6, seed=seed, n_jobs=1))
+    slow = fit_iohmm(seqs, spec, options=FitOptions(restarts=6, seed=seed, n_jobs=1), compiled=False)
     for a, b in zip(fast.runs, slow.runs, strict=True):
         assert a.converged and a.ended == "stationary" and a.finishes >= 1
         f, _, fq = em_step(s, w, a.params)
@@ -94,7 +95,7 @@ def test_every_start_ends_stationary_at_least_as_high_as_the_lockstep_path(n, se
 def test_the_cap_on_esteps_is_kept():
     spec, seqs, _s, _w = problem(9, 1)
     for cap in (1, 5, 30, 60):
-        fit = fit_iohmm(seqs, spec, restarts=3, seed=0, max_iter=cap)
+        fit = fit_iohmm(seqs, spec, options=FitOptions(restarts=3, seed=0, max_iter=cap, n_jobs=1))
         for r in fit.runs:
             assert r.iterations <= cap
             assert r.ended == "E-step cap" and not r.converged
@@ -103,7 +104,7 @@ def test_the_cap_on_esteps_is_kept():
 
 def test_threads_do_not_change_the_runs():
     spec, seqs, _s, _w = problem(30, 4)
-    fits = [fit_iohmm(seqs, spec, restarts=5, seed=2, n_jobs=j) for j in (1, 2)]
+    fits = [fit_iohmm(seqs, spec, options=FitOptions(restarts=5, seed=2, n_jobs=j)) for j in (1, 2)]
     for a, b in zip(fits[0].runs, fits[1].runs, strict=True):
         assert np.array_equal(a.params.vector(), b.params.vector())
         assert (a.iterations, a.finishes, a.ended, a.history) == (b.iterations, b.finishes, b.ended, b.history)

@@ -8,6 +8,7 @@ from trustseek.estimation import compiled_run as cr
 from trustseek.estimation import encode, fit_iohmm, kernels, paper_spec
 from trustseek.estimation.convergence import em_step
 from trustseek.estimation.estep import Workspace
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
@@ -30,7 +31,7 @@ def problem(n: int, seed: int):
 def test_small_data_has_no_subsample():
     _spec, seqs, s = problem(9, 1)
     assert cr.subsample(Workspace(seqs, *s.dims)._kernel) is None  # 639 trials: the whole data from the start
-    fit = fit_iohmm(seqs, paper_spec(), restarts=2, seed=0)
+    fit = fit_iohmm(seqs, paper_spec(), options=FitOptions(restarts=2, seed=0, n_jobs=1))
     assert [r.subsample_iterations for r in fit.runs] == [0, 0]
 
 
@@ -55,10 +56,10 @@ def test_a_subsample_lacking_a_row_of_the_data_is_not_used(monkeypatch, table):
 @pytest.mark.parametrize("seed", [1, 2])
 def test_every_start_ends_stationary_on_the_whole_data_at_the_whole_data_maximum(monkeypatch, seed):
     spec, seqs, s = problem(240, seed)
-    whole = fit_iohmm(seqs, spec, restarts=4, seed=seed)
+    whole = fit_iohmm(seqs, spec, options=FitOptions(restarts=4, seed=seed, n_jobs=1))
     monkeypatch.setattr(cr, "SUBSAMPLE_MIN", 0)
     monkeypatch.setattr(cr, "SUBSAMPLE_EVERY", 4)
-    fast = fit_iohmm(seqs, spec, restarts=4, seed=seed)
+    fast = fit_iohmm(seqs, spec, options=FitOptions(restarts=4, seed=seed, n_jobs=1))
     w = Workspace(seqs, *s.dims)
     for r in fast.runs:
         assert r.subsample_iterations > 0 and r.converged and r.ended == "stationary"
@@ -68,7 +69,7 @@ def test_every_start_ends_stationary_on_the_whole_data_at_the_whole_data_maximum
         assert np.all(np.diff(r.history) >= 0) and r.history[-1] == r.objective
     assert sum(r.iterations for r in fast.runs) < sum(r.iterations for r in whole.runs)
     assert fast.loglik == pytest.approx(whole.loglik, rel=1e-9)
-    two = fit_iohmm(seqs, spec, restarts=4, seed=seed, n_jobs=2)  # the same numbers on two threads
+    two = fit_iohmm(seqs, spec, options=FitOptions(restarts=4, seed=seed, n_jobs=2))  # the same numbers on two threads
     for a, b in zip(fast.runs, two.runs, strict=True):
         assert np.array_equal(a.params.vector(), b.params.vector())
         assert (a.iterations, a.subsample_iterations, a.history) == (b.iterations, b.subsample_iterations, b.history)
@@ -85,7 +86,7 @@ def test_the_fit_record_and_the_log_say_how_many_e_steps_ran_on_the_subsample(mo
     monkeypatch.setattr(cr, "SUBSAMPLE_EVERY", 4)
     frame = simulate_design(paper_model(), 40, seed=3)
     with caplog.at_level(logging.INFO, logger="trustseek"):
-        res = fit_trust_model(frame, restarts=2, seed=0, n_jobs=1)
+        res = fit_trust_model(frame, options=FitOptions(restarts=2, seed=0, n_jobs=1))
     record = res.fit_record(0)
     assert record["subsample_iterations"] == [r.subsample_iterations for r in res.fit.runs]
     assert all(n > 0 for n in record["subsample_iterations"])

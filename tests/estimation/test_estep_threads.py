@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 
 from trustseek.estimation import Params, encode, fit_iohmm, kernels, paper_spec
 from trustseek.estimation.estep import Workspace
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
@@ -93,8 +94,8 @@ def test_threads_do_not_change_the_estep(monkeypatch, K):
 def test_fit_is_the_same_with_one_and_two_threads(monkeypatch):
     monkeypatch.setattr(kernels, "PARALLEL_MIN", 0)
     spec, seqs, _s = data(260, 7)
-    one = fit_iohmm(seqs, spec, restarts=3, seed=1, n_jobs=1)
-    two = fit_iohmm(seqs, spec, restarts=3, seed=1, n_jobs=2)
+    one = fit_iohmm(seqs, spec, options=FitOptions(restarts=3, seed=1, n_jobs=1))
+    two = fit_iohmm(seqs, spec, options=FitOptions(restarts=3, seed=1, n_jobs=2))
     assert one.loglik == two.loglik
     assert np.array_equal(one.params.vector(), two.params.vector())
     assert [r.iterations for r in one.runs] == [r.iterations for r in two.runs]

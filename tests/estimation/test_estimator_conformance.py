@@ -18,6 +18,7 @@ import pytest
 from trustseek.estimation import encode, fit_iohmm, from_trust_model, kernels, loglik, paper_spec
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.kernels import many_fits
+from trustseek.estimation.options import FitOptions
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
 
@@ -34,7 +35,7 @@ def data():
     fits = {}
     for way, (compiled, many) in WAYS.items():
         with many_fits() if many else contextlib.nullcontext():
-            fits[way] = fit_iohmm(seqs, spec, restarts=2, seed=0, compiled=compiled)
+            fits[way] = fit_iohmm(seqs, spec, options=FitOptions(restarts=2, seed=0, n_jobs=1), compiled=compiled)
     return spec, seqs, fits
 
 

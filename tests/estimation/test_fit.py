@@ -12,6 +12,7 @@ import pytest
 from trustseek import TrustModel, paper_model
 from trustseek.data.trials import ColumnMapping, example_path, read_trials
 from trustseek.estimation import decode, fit_trust_model, select_levels
+from trustseek.estimation.options import FitOptions
 from trustseek.simulation.designs import simulate_design
 
 
@@ -30,7 +31,7 @@ def big_fit():
     # (seeds 0-19, benchmarks/bench_fit.py --recovery 20) the MAE is 0.004-0.062, median 0.015,
     # above 0.03 on 2 of 20 (docs/fitting.md)
     df = simulate_design(paper_model(), 1000, seed=0)
-    return df, fit_trust_model(df, restarts=4, seed=1)
+    return df, fit_trust_model(df, options=FitOptions(restarts=4, seed=1))
 
 
 def test_parameter_recovery_at_1000_participants(big_fit):
@@ -70,7 +71,7 @@ def test_recovery_of_well_identified_cells_on_other_data_sets(seed):
 
     truth = paper_model()
     df = simulate_design(truth, 1000, seed=seed)
-    res = fit_trust_model(df, restarts=4, seed=0)
+    res = fit_trust_model(df, options=FitOptions(restarts=4, seed=0))
     spec, ptrue = from_trust_model(truth)
     assert res.loglik >= loglik(res.fit.seqs, spec, ptrue) - 1e-6
     checked = 0
@@ -112,8 +113,8 @@ def sum_autonomous(df):
 
 def test_nine_participants_bootstrap_is_deterministic_across_processes():
     df = read_trials(example_path())
-    one = fit_trust_model(df, restarts=1, seed=3, bootstrap=3, n_jobs=1, tol=1e-6)
-    two = fit_trust_model(df, restarts=1, seed=3, bootstrap=3, n_jobs=2, tol=1e-6)
+    one = fit_trust_model(df, options=FitOptions(restarts=1, seed=3, tol=1e-6, n_jobs=1), bootstrap=3)
+    two = fit_trust_model(df, options=FitOptions(restarts=1, seed=3, tol=1e-6, n_jobs=2), bootstrap=3)
     assert one.ci is not None
     for name in ("initial", "emission", "transition"):
         lo, hi = one.ci[name]
@@ -132,7 +133,7 @@ def test_nine_participants_bootstrap_is_deterministic_across_processes():
 def test_fit_logs_each_start_and_bootstrap_replicate_and_prints_nothing(caplog, capsys):
     df = read_trials(example_path())
     with caplog.at_level(logging.DEBUG, logger="trustseek.estimation"):
-        fit_trust_model(df, restarts=2, seed=0, bootstrap=2, n_jobs=1, tol=1e-5)
+        fit_trust_model(df, options=FitOptions(restarts=2, seed=0, tol=1e-5, n_jobs=1), bootstrap=2)
     messages = [r.getMessage() for r in caplog.records if r.name.startswith("trustseek.estimation")]
     for start in (0, 1):  # every start reports how it ended
         assert any(m.startswith(f"start {start}: log-likelihood") and ("converged" in m or "cap" in m) for m in messages), (
@@ -166,7 +167,7 @@ def test_another_studys_log_fits_by_column_mapping_alone(tmp_path):
     log.to_csv(path, index=False)
     mapping = ColumnMapping.load(example_path("other_study_mapping.json"))
     frame = read_trials(path, mapping, required=("experience", "human_action"))
-    res = fit_trust_model(frame, restarts=4, seed=0, transition_inputs=("experience",), emission_inputs=())
+    res = fit_trust_model(frame, options=FitOptions(restarts=4, seed=0), transition_inputs=("experience",), emission_inputs=())
     m = res.model
     # emissions depend on nothing: identical across complexity and robot action
     assert np.allclose(m.emission, m.emission[0, 0])
@@ -179,7 +180,7 @@ def test_another_studys_log_fits_by_column_mapping_alone(tmp_path):
 def test_select_levels_prefers_two_levels_on_paper_data(caplog):
     df = simulate_design(paper_model(), 100, seed=9)
     with caplog.at_level(logging.INFO, logger="trustseek.estimation"):
-        rows = select_levels(df, levels=(1, 2, 3), folds=2, restarts=2, seed=0, tol=1e-5)
+        rows = select_levels(df, levels=(1, 2, 3), folds=2, options=FitOptions(restarts=2, seed=0, tol=1e-5, n_jobs=1))
     progress = [r for r in caplog.records if r.name == "trustseek.estimation.selection" and r.levelno == logging.INFO]
     assert [r.getMessage().split(":")[0] for r in progress] == [
         "1 levels",
@@ -317,7 +318,7 @@ def test_select_heldout_stays_finite_when_a_training_fold_never_saw_an_event():
             )
         )
     df = pd.concat(frames, ignore_index=True)
-    rows = select_levels(df, levels=(1, 2), folds=3, restarts=2, seed=0, tol=1e-6)
+    rows = select_levels(df, levels=(1, 2), folds=3, options=FitOptions(restarts=2, seed=0, tol=1e-6, n_jobs=1))
     for r in rows:
         assert np.isfinite(r["heldout_loglik"]) and all(np.isfinite(r["heldout_per_fold"]))
     json.dumps(rows, allow_nan=False)

@@ -7,6 +7,7 @@ from threadpoolctl import threadpool_info, threadpool_limits
 
 from trustseek.estimation import Params, encode, fit_iohmm, iohmm, kernels, paper_spec
 from trustseek.estimation.estep import Workspace
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
@@ -61,7 +62,10 @@ def test_finishes_side_by_side_give_the_numbers_of_one_thread(monkeypatch):
     spec = paper_spec()
     seqs = encode(simulate_design(paper_model(), 30, seed=4), spec)
     seen: list[int] = []
-    fits = [fit_iohmm(seqs, spec, restarts=5, seed=2, n_jobs=j, on_restart=lambda i, r: seen.append(i)) for j in (1, 2, 3)]
+    fits = [
+        fit_iohmm(seqs, spec, options=FitOptions(restarts=5, seed=2, n_jobs=j), on_restart=lambda i, r: seen.append(i))
+        for j in (1, 2, 3)
+    ]
     assert seen == list(range(5)) * 3  # reported in order, whatever finished first
     for other in fits[1:]:
         assert other.best == fits[0].best and other.loglik == fits[0].loglik

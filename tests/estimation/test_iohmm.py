@@ -9,6 +9,7 @@ import pytest
 from trustseek.estimation import FitError, Fixed, IOHMMSpec, Params, encode, fit_iohmm, loglik, paper_spec, posteriors
 from trustseek.estimation.em import run_em
 from trustseek.estimation.estep import Workspace
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.structure import Structure
 from trustseek.simulation.designs import simulate_design
 
@@ -179,7 +180,7 @@ def test_degenerate_participant_who_always_relies():
         }
     )
     spec = paper_spec()
-    fit = fit_iohmm(encode(df, spec), spec, restarts=3, seed=0)
+    fit = fit_iohmm(encode(df, spec), spec, options=FitOptions(restarts=3, seed=0, n_jobs=1))
     for r in fit.runs:
         assert np.all(np.isfinite(r.history)) and np.all(np.diff(r.history) >= 0)
     assert fit.loglik == pytest.approx(0.0, abs=1e-6)  # a level that always relies explains the data
@@ -215,12 +216,12 @@ def test_tied_rows_and_prior():
         }
     )
     seqs = encode(df, tied)
-    fit = fit_iohmm(seqs, tied, restarts=2, seed=1)
+    fit = fit_iohmm(seqs, tied, options=FitOptions(restarts=2, seed=1, n_jobs=1))
     np.testing.assert_allclose(fit.params.emission[0], fit.params.emission[2])  # (low, auto) == (high, auto)
     assert fit.n_params == Structure(base, seqs).n_free - 2
     # a Dirichlet pseudo-count keeps every free cell strictly inside (0, 1)
     map_spec = paper_spec(prior=1.0)
-    fit = fit_iohmm(seqs, map_spec, restarts=2, seed=1)
+    fit = fit_iohmm(seqs, map_spec, options=FitOptions(restarts=2, seed=1, n_jobs=1))
     s = fit.structure
     assert np.all(fit.params.transition[~s.tr.fixed] > 1e-4)
 
@@ -382,9 +383,9 @@ def test_a_start_the_finish_leaves_short_goes_on_to_the_maximum():
     (em,) = run_em(s, w, [start], tol=1e-5)
     short = finish(s, w, em, tol=1e-10)
     assert one_em_step_gain(s, seqs, short.params) > 1e-3  # the case: the finish alone stops short
-    best = fit_iohmm(seqs, spec, restarts=3, seed=1)  # every start reaches the same maximum here
+    best = fit_iohmm(seqs, spec, options=FitOptions(restarts=3, seed=1, n_jobs=1))  # every start reaches the same maximum here
     for compiled in (False, True):
-        (run,) = fit_iohmm(seqs, spec, restarts=0, init=[start], tol=1e-8, compiled=compiled).runs
+        (run,) = fit_iohmm(seqs, spec, options=FitOptions(restarts=0, tol=1e-8, n_jobs=1), init=[start], compiled=compiled).runs
         assert run.converged and run.ended == "stationary" and (compiled or run.finishes >= 2)
         assert one_em_step_gain(s, seqs, run.params) <= 1e-8
         assert np.all(np.diff(run.history) >= 0) and run.history[-1] == pytest.approx(run.objective)
@@ -401,7 +402,7 @@ def test_no_start_ends_where_one_more_em_step_gains_more_than_the_tolerance():
     spec = paper_spec()
     for n, restarts in [(9, 50), (200, 20)]:
         seqs = encode(simulate_design(paper_model(), n, seed=1), spec)
-        fit = fit_iohmm(seqs, spec, restarts=restarts, seed=1, tol=1e-8)
+        fit = fit_iohmm(seqs, spec, options=FitOptions(restarts=restarts, seed=1, tol=1e-8, n_jobs=1))
         for r in fit.runs:
             assert r.converged and r.ended == "stationary", (n, r.ended)
             assert one_em_step_gain(fit.structure, seqs, r.params) <= 1e-8, (n, r.loglik)

@@ -10,6 +10,7 @@ from trustseek.estimation.em import run_em
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.mixture import decode_types, fit_mixture, fit_types, mixture_loglik
 from trustseek.estimation.mixture_em import EMPTY, MixtureParams, MixtureStructure, MixtureWorkspace, parse_differ
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.spec import FitError, Params
 from trustseek.estimation.type_bootstrap import bootstrap_types
 from trustseek.estimation.type_selection import select_types, type_selection_warnings
@@ -44,13 +45,15 @@ def mixture_data():
 @pytest.fixture(scope="module")
 def mixture_fit(mixture_data):
     _mix, _sup, df = mixture_data
-    return fit_mixture(encode(df, SPEC), SPEC, 2, restarts=4, seed=0)
+    return fit_mixture(encode(df, SPEC), SPEC, 2, options=FitOptions(restarts=4, seed=0, n_jobs=1))
 
 
 def test_one_type_is_the_pooled_fit():
     seqs = encode(simulate_design(paper_model(), 40, seed=3), SPEC)
-    pooled = fit_iohmm(seqs, SPEC, restarts=3, seed=0, compiled=False)  # the same lockstep runs and finish
-    one = fit_mixture(seqs, SPEC, 1, restarts=3, seed=0)
+    pooled = fit_iohmm(
+        seqs, SPEC, options=FitOptions(restarts=3, seed=0, n_jobs=1), compiled=False
+    )  # the same lockstep runs and finish
+    one = fit_mixture(seqs, SPEC, 1, options=FitOptions(restarts=3, seed=0, n_jobs=1))
     assert one.loglik == pytest.approx(pooled.loglik, abs=1e-8)
     assert one.restart_logliks == pytest.approx(pooled.restart_logliks, abs=1e-8)
     np.testing.assert_allclose(one.params.type_params(0).emission, pooled.params.emission, atol=1e-10)
@@ -61,7 +64,9 @@ def test_one_type_is_the_pooled_fit():
 def test_fit_types_with_one_type_is_fit_trust_model():
     df = simulate_design(paper_model(), 30, seed=5)
     # the pooled fit runs compiled with its own finish: the two maxima agree to the fit's tolerance (1e-8 relative)
-    assert fit_types(df, 1, restarts=2).loglik == pytest.approx(fit_trust_model(df, restarts=2).loglik, rel=1e-8)
+    assert fit_types(df, 1, options=FitOptions(restarts=2)).loglik == pytest.approx(
+        fit_trust_model(df, options=FitOptions(restarts=2)).loglik, rel=1e-8
+    )
 
 
 @pytest.mark.parametrize("K", [2, 3])
@@ -119,7 +124,7 @@ def test_the_unweighted_estep_is_unchanged_by_two_equal_types():
 @pytest.mark.parametrize("differ", ["all", "emission", "transition", "initial,emission"])
 def test_every_run_climbs_and_ends_finite(mixture_data, differ):
     seqs = encode(mixture_data[2], SPEC).subset(np.arange(40))
-    fit = fit_mixture(seqs, SPEC, 2, restarts=3, seed=1, differ=differ, max_iter=300)
+    fit = fit_mixture(seqs, SPEC, 2, options=FitOptions(restarts=3, seed=1, max_iter=300, n_jobs=1), differ=differ)
     for run in fit.runs:
         h = np.array(run.history)
         assert np.all(np.isfinite(h))
@@ -178,7 +183,7 @@ def test_an_empty_type_is_carried_and_reported():
     """A type with weight exactly 0: the E-step skips it, the M-step keeps it at 0, the fit names it."""
     seqs = encode(simulate_design(paper_model(), 30, seed=8), SPEC)
     s = MixtureStructure(SPEC, seqs, 2)
-    pooled = fit_iohmm(seqs, SPEC, restarts=1, seed=0).params
+    pooled = fit_iohmm(seqs, SPEC, options=FitOptions(restarts=1, seed=0, n_jobs=1)).params
     p = MixtureParams.from_types([1.0, 0.0], [pooled, s.random(np.random.default_rng(0)).type_params(0)])
     work = MixtureWorkspace(seqs, s)
     st = work.estep(p)
@@ -194,12 +199,12 @@ def test_an_empty_type_is_carried_and_reported():
 
 
 def test_selection_picks_two_types_on_the_mixture_and_one_on_the_paper_model(mixture_data):
-    rows = select_types(mixture_data[2], types=(1, 2, 3), folds=3, restarts=3, seed=0)
+    rows = select_types(mixture_data[2], types=(1, 2, 3), folds=3, options=FitOptions(restarts=3, seed=0, tol=1e-6, n_jobs=1))
     assert [r["types"] for r in rows if r["best_bic"]] == [2]
     assert [r["types"] for r in rows if r["best_heldout"]] == [2]
     assert all(r["reached_best"] >= 1 for r in rows)
     paper = simulate_design(paper_model(), 120, seed=2)
-    rows = select_types(paper, types=(1, 2), folds=3, restarts=3, seed=0)
+    rows = select_types(paper, types=(1, 2), folds=3, options=FitOptions(restarts=3, seed=0, tol=1e-6, n_jobs=1))
     assert [r["types"] for r in rows if r["best_bic"]] == [1]
     assert [r["types"] for r in rows if r["best_heldout"]] == [1]
 
@@ -220,9 +225,9 @@ def test_conservative_preset_differs_from_the_paper_in_low_complexity():
 
 def test_bootstrap_intervals_contain_the_estimate_and_do_not_depend_on_processes():
     df = mixed(30, seed=9)[2]
-    fit = fit_types(df, 2, restarts=2, seed=0, tol=1e-6)
-    one = bootstrap_types(fit, 3, seed=1, restarts=1, n_jobs=1)
-    two = bootstrap_types(fit, 3, seed=1, restarts=1, n_jobs=2)
+    fit = fit_types(df, 2, options=FitOptions(restarts=2, seed=0, tol=1e-6))
+    one = bootstrap_types(fit, 3, options=FitOptions(restarts=1, seed=1, tol=1e-6, n_jobs=1))
+    two = bootstrap_types(fit, 3, options=FitOptions(restarts=1, seed=1, tol=1e-6, n_jobs=2))
     for m, (name, model) in enumerate(zip(fit.names, fit.models(), strict=True)):
         for table in ("initial", "emission", "transition"):
             lo, hi = one.cells[name][table]

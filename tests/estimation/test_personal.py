@@ -11,6 +11,7 @@ from scipy.optimize import minimize_scalar
 from scipy.special import gammaln
 
 from trustseek.estimation import encode, fit_trust_model, kernels, loglik, personal
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.personal import EB, NOTHING, ONE_DRAW, blocks, personalize
 from trustseek.estimation.trust_iohmm import from_trust_model
 from trustseek.model.core import TrustModel
@@ -25,7 +26,7 @@ pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not inst
 def pooled_data():
     sup = Supervisors.dirichlet(paper_model(), 40, 20.0, rng=0)
     df = simulate_design(sup, 40, seed=1)
-    return df, fit_trust_model(df, restarts=2).model
+    return df, fit_trust_model(df, options=FitOptions(restarts=2)).model
 
 
 def known_levels_model() -> TrustModel:
@@ -157,7 +158,7 @@ def test_two_types_around_the_pooled_model_are_seen_by_the_held_out_estimate():
     mix = paper_conservative_mixture(0.5)
     sup = Supervisors.from_mixture(mix, 40, rng=0)
     df = simulate_design(sup, 40, seed=1)
-    pooled = fit_trust_model(df, restarts=2).model
+    pooled = fit_trust_model(df, options=FitOptions(restarts=2)).model
     res = personalize(df, pooled)
     assert not all(res.at_bound.values()) and res.score > res.score_centre + 5.0
     # new trials of the same people: their own models predict them better than the pooled one

@@ -14,6 +14,7 @@ from cli_runner import run_cli
 from trustseek.data.trials import example_path, read_trials
 from trustseek.estimation import encode, from_trust_model, loglik, posteriors
 from trustseek.estimation.baselines import features
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.prediction import (
     auc,
     filter_beliefs,
@@ -156,7 +157,7 @@ def test_folds_are_by_participant_seeded_and_balanced():
 
 def test_held_out_folds_use_each_participant_once_and_never_train_on_it():
     frame = simulate_design(paper_model(), 6, seed=4, n_trials=(12, 10))
-    opts = {"folds": 3, "restarts": 1, "seed": 0, "bootstrap": 20, "tol": 1e-4, "max_iter": 60, "prior": 0.5}
+    opts = {"folds": 3, "options": FitOptions(restarts=1, seed=0, tol=1e-4, max_iter=60), "bootstrap": 20, "prior": 0.5}
     r = predict_heldout(frame, **opts)
     per = r.trials.groupby("participant", observed=True)["fold"].agg(["nunique", "first"])
     assert (per["nunique"] == 1).all() and len(per) == 6

@@ -18,6 +18,7 @@ from cli_runner import run_cli
 from trustseek.data.trials import ColumnMapping, DataError, read_trials
 from trustseek.estimation import FitError, encode, fit_trust_model
 from trustseek.estimation.fit import decode, trust_loglik
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.ratings import compose_joint, split_counts, split_joint
 from trustseek.estimation.result import FitResult
 from trustseek.estimation.trust_iohmm import preset_spec
@@ -145,7 +146,7 @@ def forward_loglik(frame: pd.DataFrame, model: TrustModel, rating: str | None) -
 def test_fit_loglik_equals_an_independent_forward_algorithm():
     frame = simulate_design(TRUTH, 25, seed=3, n_trials=(4, 4), rating_every=3, p_unobserved=0.3)
     assert frame["human_action"].isna().any() and (frame["human_action"].isna() & frame["rating"].notna()).any()
-    res = fit_trust_model(frame, restarts=2, seed=1, rating="rating", tol=1e-6)
+    res = fit_trust_model(frame, options=FitOptions(restarts=2, seed=1, tol=1e-6), rating="rating")
     ref = forward_loglik(frame, res.model, "rating")
     assert res.loglik == pytest.approx(ref, abs=1e-8)
     assert trust_loglik(frame, res.model, "rating") == pytest.approx(ref, abs=1e-8)
@@ -182,7 +183,7 @@ def test_ratings_move_the_decoded_trust():
 @pytest.mark.parametrize("every", [1, 5])
 def test_joint_fit_recovers_the_generating_model(every):
     frame = simulate_design(TRUTH, 1000, seed=1, n_trials=(10, 10), rating_every=every)
-    res = fit_trust_model(frame, restarts=4, seed=0, rating="rating", n_jobs=1)
+    res = fit_trust_model(frame, options=FitOptions(restarts=4, seed=0, n_jobs=1), rating="rating")
     err = errors(res, TRUTH)
     assert len(err) == 27  # 17 action-model cells the design reaches + 2 x 5 rating cells
     assert err.mean() <= 0.03
@@ -192,7 +193,7 @@ def test_joint_fit_recovers_the_generating_model(every):
 
 def test_ratings_only_fit():
     frame = simulate_design(TRUTH, 600, seed=2, n_trials=(10, 10), rating_every=1)
-    res = fit_trust_model(frame, restarts=4, seed=0, rating="rating", actions=False, n_jobs=1)
+    res = fit_trust_model(frame, options=FitOptions(restarts=4, seed=0, n_jobs=1), rating="rating", actions=False)
     assert res.model.rating is not None
     assert np.abs(res.model.rating.probs - RATING.probs).max() < 0.05  # levels named by the mean rating
     # no human action counted: every emission row is marked never estimated, and left uniform
@@ -211,7 +212,7 @@ def test_rating_levels_must_be_declared_and_values_inside_them():
         fit_trust_model(frame, rating="score")
     frame.loc[4, "score"] = "9"
     with pytest.raises(FitError, match=r"row 5, column 'score': value '9' is not one of"):
-        fit_trust_model(frame, rating="score", rating_levels=LEVELS, restarts=1)
+        fit_trust_model(frame, rating="score", rating_levels=LEVELS, options=FitOptions(restarts=1))
     frame["score"] = frame["rating"].astype(object).map(lambda v: None if v is None or v != v else int(v))
     seqs = encode(frame, replace(preset_spec("paper", frame), rating="score", rating_levels=LEVELS))
     assert (seqs.y >= 0).sum() == len(frame)  # numeric ratings match their levels by text

@@ -11,6 +11,7 @@ from trustseek import TrustModel, paper_model
 from trustseek.data.trials import example_path
 from trustseek.estimation import selection
 from trustseek.estimation.iohmm import fit_iohmm, loglik
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.selection import (
     fit_with_moves,
     merge_levels,
@@ -43,10 +44,16 @@ def test_select_fits_reach_the_maximum_that_200_restarts_find_where_the_old_defa
     base = preset_spec("paper", df)
     seqs = encode(df, base)
     spec = base.with_levels(level_names(3))
-    old = fit_iohmm(seqs, spec, restarts=10, seed=np.random.SeedSequence([0, 3, 3]), tol=1e-6)
+    old = fit_iohmm(seqs, spec, options=FitOptions(restarts=10, seed=np.random.SeedSequence([0, 3, 3]), tol=1e-6, n_jobs=1))
     assert old.loglik < THREE_LEVEL_REFERENCE - 1.0
-    two = fit_with_moves(seqs, base.with_levels(level_names(2)), seed=np.random.SeedSequence([0, 3, 2]), tol=1e-6)
-    new = fit_with_moves(seqs, spec, two.params, seed=np.random.SeedSequence([0, 3, 3]), tol=1e-6)
+    two = fit_with_moves(
+        seqs,
+        base.with_levels(level_names(2)),
+        options=FitOptions(restarts=None, seed=np.random.SeedSequence([0, 3, 2]), tol=1e-6, n_jobs=1),
+    )
+    new = fit_with_moves(
+        seqs, spec, two.params, options=FitOptions(restarts=None, seed=np.random.SeedSequence([0, 3, 3]), tol=1e-6, n_jobs=1)
+    )
     assert new.loglik >= THREE_LEVEL_REFERENCE - selection.BEST_TOLERANCE
     assert new.loglik >= two.loglik  # nested: a split start starts as likely as the 2-level fit
     # the old default's random starts are among the new ones (more restarts only add starts)
@@ -104,7 +111,7 @@ def test_warnings_at_the_largest_number_of_levels_and_for_a_lone_best_start():
 def test_select_levels_reports_starts_reaching_the_best_and_warns_at_the_limit(caplog):
     df = simulate_design(paper_model(), 40, seed=3)
     with caplog.at_level("WARNING", logger="trustseek.estimation"):
-        rows = select_levels(df, levels=(1, 2), folds=2, restarts=2, seed=0, tol=1e-5)
+        rows = select_levels(df, levels=(1, 2), folds=2, options=FitOptions(restarts=2, seed=0, tol=1e-5, n_jobs=1))
     by = {r["levels"]: r for r in rows}
     assert by[2]["starts"] >= 2 + 2  # 2 random + 2 splits of the single level
     assert 1 <= by[2]["reached_best"] <= by[2]["starts"]
@@ -139,7 +146,7 @@ def test_moves_start_from_the_best_distinct_maxima_not_moved_from_before():
     each once: runs within the tolerance of one another are one maximum."""
     df = simulate_design(paper_model(), 10, seed=0, n_trials=(6, 6))
     spec = preset_spec("paper", df).with_levels(level_names(2))
-    fit = fit_iohmm(encode(df, spec), spec, restarts=1, seed=0, tol=1e-4)
+    fit = fit_iohmm(encode(df, spec), spec, options=FitOptions(restarts=1, seed=0, tol=1e-4, n_jobs=1))
     run = fit.runs[0]
     objectives = [-10.0, -12.0, -10.005, -11.0, float("-inf"), -12.0 + 0.02]
     fit = replace(fit, runs=[replace(run, objective=o) for o in objectives])

@@ -9,6 +9,7 @@ from trustseek import paper_model
 from trustseek.estimation import selection
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.iohmm import fit_iohmm
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.selection import heldout_loglik, heldout_params
 from trustseek.estimation.sequences import encode
 from trustseek.estimation.spec import Params
@@ -21,7 +22,7 @@ def train_test():
     df = simulate_design(paper_model(), 30, seed=5, n_trials=(10, 10))
     spec = preset_spec("paper", df).with_levels(level_names(2))
     seqs = encode(df, spec)
-    fit = fit_iohmm(seqs, spec, restarts=2, seed=0, tol=1e-5)
+    fit = fit_iohmm(seqs, spec, options=FitOptions(restarts=2, seed=0, tol=1e-5, n_jobs=1))
     return fit, seqs.subset(np.arange(20, 30))
 
 

@@ -84,8 +84,8 @@ def test_a_fit_on_small_data_takes_the_numpy_path_without_importing_numba():
     code = (
         "import sys\n"
         "from trustseek.data import example_path, read_trials\n"
-        "from trustseek.estimation import fit_trust_model\n"
-        "r = fit_trust_model(read_trials(example_path()), restarts=2, n_jobs=1)\n"
+        "from trustseek.estimation import FitOptions, fit_trust_model\n"
+        "r = fit_trust_model(read_trials(example_path()), options=FitOptions(restarts=2, n_jobs=1))\n"
         "print(f'{r.loglik:.4f}', 'numba' in sys.modules)"
     )
     loglik, numba_loaded = run_python(code).split()
@@ -124,10 +124,11 @@ def test_a_fit_gives_the_same_numbers_after_numba_was_loaded():
         "import sys\n"
         "from trustseek.compiled import load\n"
         "from trustseek.data import read_trials, example_path\n"
+        "from trustseek.estimation import FitOptions\n"
         "from trustseek.estimation.fit import fit_trust_model\n"
         "frame = read_trials(example_path())\n"
         "def cells():\n"
-        "    m = fit_trust_model(frame, restarts=2, seed=3, n_jobs=1).model\n"
+        "    m = fit_trust_model(frame, options=FitOptions(restarts=2, seed=3, n_jobs=1)).model\n"
         "    return b''.join(getattr(m, k).tobytes() for k in ('initial', 'emission', 'transition'))\n"
         "first = cells()\n"
         "assert 'numba' not in sys.modules\n"

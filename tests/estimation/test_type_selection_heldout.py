@@ -8,6 +8,7 @@ import pytest
 from trustseek.estimation import encode, kernels, paper_spec
 from trustseek.estimation.mixture import fit_mixture
 from trustseek.estimation.mixture_em import MixtureParams, MixtureWorkspace
+from trustseek.estimation.options import FitOptions
 from trustseek.estimation.type_selection import heldout_mixture_loglik, heldout_mixture_params
 from trustseek.model.presets import paper_conservative_mixture
 from trustseek.simulation.designs import simulate_design
@@ -21,7 +22,7 @@ def train_test():
     mix = paper_conservative_mixture(0.5)
     sup = Supervisors.from_mixture(mix, 30, rng=3)
     seqs = encode(simulate_design(sup, 30, seed=4, n_trials=(10, 10)), paper_spec())
-    fit = fit_mixture(seqs.subset(np.arange(20)), paper_spec(), 2, restarts=2, seed=0, tol=1e-5)
+    fit = fit_mixture(seqs.subset(np.arange(20)), paper_spec(), 2, options=FitOptions(restarts=2, seed=0, tol=1e-5, n_jobs=1))
     return fit, seqs.subset(np.arange(20, 30))
 
 

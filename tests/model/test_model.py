@@ -9,6 +9,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from trustseek import ModelError, Task, TrustModel
+from trustseek.estimation.options import FitOptions
 from trustseek.model.presets import PAPER_UNOBSERVED_CELLS, load_model, load_task
 
 
@@ -218,7 +219,7 @@ def _no_ask_fit():
     from trustseek.simulation.designs import simulate_design
 
     df = simulate_design(paper_model(), 40, seed=0, p_ask=(0.0, 0.0))  # a study in which the robot never asks
-    return fit_trust_model(df, restarts=1, seed=0, tol=1e-5)
+    return fit_trust_model(df, options=FitOptions(restarts=1, seed=0, tol=1e-5))
 
 
 def test_not_estimated_round_trips_and_absent_means_all_estimated(tmp_path, model):
@@ -282,7 +283,7 @@ def test_a_fit_of_the_paper_design_plans_without_filling(task):
     from trustseek.pomdp.problem import AssistancePOMDP
     from trustseek.simulation.designs import simulate_design
 
-    res = fit_trust_model(simulate_design(paper_model(), 30, seed=1), restarts=1, seed=0, tol=1e-5)
+    res = fit_trust_model(simulate_design(paper_model(), 30, seed=1), options=FitOptions(restarts=1, seed=0, tol=1e-5))
     # the design never produces these (the experience after asking is fixed by the complexity)
     assert res.model.not_estimated_rows() == ["transition[C=low, a=ask, E=reliable]", "transition[C=high, a=ask, E=faulty]"]
     AssistancePOMDP(res.model, task)

@@ -14,6 +14,7 @@ from trustseek.cli import app
 from trustseek.data.trials import read_trials
 from trustseek.estimation.fit import fit_trust_model, from_trust_model
 from trustseek.estimation.iohmm import loglik
+from trustseek.estimation.options import FitOptions
 from trustseek.server import create_app
 
 TOKEN = "fit-token"
@@ -60,7 +61,7 @@ def test_exported_study_is_fitted(tmp_path):
     res = CliRunner().invoke(app, ["fit", str(out), "--restarts", "2", "--json"])
     assert res.exit_code == 0, res.output
     assert "80 trials" in json.loads(res.output)["model"]["notes"]
-    fit = fit_trust_model(frame, restarts=2, seed=0)
+    fit = fit_trust_model(frame, options=FitOptions(restarts=2, seed=0))
     # the maximum-likelihood fit explains the exported trials at least as well as the model
     # that generated them (the sessions' schedules are random, so no fixed value is asserted)
     spec, p_true = from_trust_model(model)

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from trustseek import paper_model, paper_task
+from trustseek.estimation.options import FitOptions
 from trustseek.model.presets import conservative_model
 from trustseek.pomdp.problem import AssistancePOMDP
 from trustseek.solvers.grid import GridSolver, _dense_howard, dense_policy_iteration, dense_transitions
@@ -47,7 +48,7 @@ def test_the_coarse_start_ends_where_the_greedy_start_does(update):
     models = [paper_model()]
     for seed in range(3):  # fitted models, as a design replicate plans with
         frame = simulate(paper_model(), task, randomized({"low": 0.2, "high": 0.5}), 6, counts=(20, 15), seed=seed).trials()
-        models.append(fit_trust_model(frame, restarts=1, seed=seed, n_jobs=1).model)
+        models.append(fit_trust_model(frame, options=FitOptions(restarts=1, seed=seed, n_jobs=1)).model)
     for model in models:
         pomdp = AssistancePOMDP(model, task)
         _, q_coarse, _, _ = dense_policy_iteration(pomdp, update, 101)

@@ -9,6 +9,7 @@ import typer
 from rich.markup import escape
 
 from ..errors import TrustseekError
+from ..estimation.options import FitOptions
 from ._app import (
     ColumnOpt,
     DelimiterOpt,
@@ -61,26 +62,19 @@ def _mapping_inputs(mapping: Path | None) -> tuple[str, ...]:
     return tuple(_data().ColumnMapping.load(mapping).inputs)
 
 
-def _read_with_inputs(
-    log,
-    mapping,
-    column,
-    label,
-    transitions_on,
-    emissions_on,
-    missing=None,
-    delimiter=None,
-    rating=None,
-    actions=True,
-    order=None,
-):
+def _named_inputs(mapping, transitions_on, emissions_on) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
     """The transition and emission inputs named by the flags (canonical ones or the mapping's
-    ``inputs``), and the log with those columns (and the human actions unless not ``actions``)."""
+    ``inputs``), and the canonical columns they need."""
     declared = _mapping_inputs(mapping)
     tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on", declared)
     em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on", declared)
-    needed = tuple(c for c in dict.fromkeys((*tr, *em)) if c in _fit().MODEL_INPUTS)
-    return tr, em, read_log(log, mapping, column, label, needed, missing, delimiter, rating, actions, order)
+    return tr, em, tuple(c for c in dict.fromkeys((*tr, *em)) if c in _fit().MODEL_INPUTS)
+
+
+def _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing=None, delimiter=None, order=None):
+    """The inputs named by the flags (:func:`_named_inputs`) and the log with the columns they need."""
+    tr, em, needed = _named_inputs(mapping, transitions_on, emissions_on)
+    return tr, em, read_log(log, mapping, column, label, needed, missing, delimiter, order=order)
 
 
 def _general(tr: tuple[str, ...], em: tuple[str, ...]) -> bool:
@@ -212,20 +206,12 @@ def fit(
     rating column (--rating or the mapping's 'rating') the fit is joint on the human actions
     and the ratings, and the model file carries P(rating | trust)."""
     _check_fit_paths(log, mapping, fill_from, out, posteriors, plots, keep)
-    tr, em, frame = _read_with_inputs(
-        log,
-        rule_off(mapping, no_rule),
-        column,
-        label,
-        transitions_on,
-        emissions_on,
-        missing,
-        delimiter,
-        rating_entry(rating, rating_levels, rating_bins, rating_per),
-        not ratings_only,
-        order,
-    )
-    run = _FitRun(levels, restarts, seed, bootstrap, prior, jobs, tol, max_iter, _rated(frame, log, ratings_only), ratings_only)
+    mapping = rule_off(mapping, no_rule)
+    tr, em, needed = _named_inputs(mapping, transitions_on, emissions_on)
+    rated = rating_entry(rating, rating_levels, rating_bins, rating_per)
+    frame = read_log(log, mapping, column, label, needed, missing, delimiter, rated, not ratings_only, order)
+    options = FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs)
+    run = _FitRun(levels, options, bootstrap, prior, _rated(frame, log, ratings_only), ratings_only)
     outputs = _FitOutputs(out, posteriors, plots, keep, as_json, quiet)
     if _general(tr, em):
         _fit_general(frame, tr, em, run, outputs, fill_from)
@@ -262,13 +248,9 @@ class _FitRun:
     """How ``fit`` fits: the options of the estimate, and the rating column it reads (if any)."""
 
     levels: int
-    restarts: int
-    seed: int
+    options: FitOptions
     bootstrap: int
     prior: float
-    jobs: int | None
-    tol: float
-    max_iter: int
     rated: str | None
     ratings_only: bool
 
@@ -321,10 +303,11 @@ def _paper_inputs() -> tuple[tuple[str, ...], tuple[str, ...]]:
 
 def _progress(bar, run: _FitRun):
     """A progress callback counting the restarts, then the bootstrap's replicates."""
-    task = bar.add_task("restarts", total=run.restarts + run.bootstrap)
+    restarts = run.options.starts
+    task = bar.add_task("restarts", total=restarts + run.bootstrap)
 
     def progress(done: int, total: int) -> None:
-        bar.update(task, completed=done, total=total, description="bootstrap" if done > run.restarts else "restarts")
+        bar.update(task, completed=done, total=total, description="bootstrap" if done > restarts else "restarts")
 
     return progress
 
@@ -336,13 +319,9 @@ def _fit_trust(frame, preset: str, tr, em, run: _FitRun, quiet: bool):
         return _fit().fit_trust_model(
             frame,
             preset=preset,
-            restarts=run.restarts,
-            seed=run.seed,
+            options=run.options,
             bootstrap=run.bootstrap,
             prior=run.prior,
-            n_jobs=run.jobs,
-            tol=run.tol,
-            max_iter=run.max_iter,
             progress=_progress(bar, run),
             levels=run.levels,
             transition_inputs=tr,
@@ -393,12 +372,8 @@ def _fit_general(frame, tr, em, run: _FitRun, outputs: _FitOutputs, fill_from: s
             em,
             tr,
             levels=run.levels,
-            restarts=run.restarts,
-            seed=run.seed,
+            options=run.options,
             prior=run.prior,
-            n_jobs=run.jobs,
-            tol=run.tol,
-            max_iter=run.max_iter,
             progress=_progress(bar, run),
             rating=run.rated,
             actions=not run.ratings_only,
@@ -525,10 +500,8 @@ def select(
             frame,
             levels=tuple(range(1, max_levels + 1)),
             folds=folds,
-            restarts=restarts,
-            seed=seed,
+            options=FitOptions(restarts=restarts, seed=seed, tol=tol, n_jobs=1),
             prior=prior,
-            tol=tol,
             progress=lambda what, d, t: bar.update(task, completed=d, total=t, description=what),
             transition_inputs=tr,
             emission_inputs=em,

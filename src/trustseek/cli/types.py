@@ -9,6 +9,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
+from ..estimation.options import FitOptions
 from ._app import (
     ColumnOpt,
     DelimiterOpt,
@@ -29,6 +30,7 @@ from ._app import (
 )
 from ._output import check_plots_folder, fit_summary, print_selection, print_warnings
 from ._reading import NoExperienceRuleOpt, rule_off
+from .fit import _read_with_inputs
 
 POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
 DifferOpt = typer.Option(
@@ -49,14 +51,6 @@ def _check_differ(differ: str) -> None:
     from ..estimation.mixture_em import parse_differ
 
     parse_differ(differ)
-
-
-def _log_with_inputs(log, mapping, column, label, missing, delimiter, transitions_on, emissions_on, order=None):
-    """The inputs of the types' trust models (--transitions-on/--emissions-on as for fit) and the
-    log with the columns they need."""
-    from .fit import _read_with_inputs
-
-    return _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing, delimiter, order=order)
 
 
 def parse_types(text: str) -> tuple[int, ...]:
@@ -119,8 +113,8 @@ def fit_types(
     check_not_inputs(outputs, ((log, "trial log"), (mapping, "--mapping file")))
     check_plots_folder(plots)
     _check_differ(differ)
-    tr, em, frame = _log_with_inputs(
-        log, rule_off(mapping, no_rule), column, label, missing, delimiter, transitions_on, emissions_on, order
+    tr, em, frame = _read_with_inputs(
+        log, rule_off(mapping, no_rule), column, label, transitions_on, emissions_on, missing, delimiter, order
     )
     named = [c for c in (*em, *tr) if c not in ("complexity", "robot_action", "experience")]
     if plots is not None and named:
@@ -131,12 +125,8 @@ def fit_types(
         fit = _mixture().fit_types(
             frame,
             types,
-            restarts=restarts,
-            seed=seed,
+            options=FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs),
             differ=differ,
-            tol=tol,
-            max_iter=max_iter,
-            n_jobs=jobs,
             progress=lambda d, t: bar.update(task, completed=d, total=t),
             transition_inputs=tr,
             emission_inputs=em,
@@ -175,7 +165,12 @@ def _bootstrap_types(fit, bootstrap: int, seed: int, jobs: int | None, bar):
     task = bar.add_task("bootstrap", total=bootstrap)
     from ..estimation.type_bootstrap import bootstrap_types
 
-    return bootstrap_types(fit, bootstrap, seed=seed, n_jobs=jobs, progress=lambda d, t: bar.update(task, completed=d, total=t))
+    return bootstrap_types(
+        fit,
+        bootstrap,
+        options=FitOptions(restarts=2, seed=seed, tol=1e-6, n_jobs=jobs),
+        progress=lambda d, t: bar.update(task, completed=d, total=t),
+    )
 
 
 def _types_json(fit, mixture, post, intervals) -> dict:
@@ -292,8 +287,8 @@ def select_types(
     _check_differ(differ)
     from ..estimation import type_selection
 
-    tr, em, frame = _log_with_inputs(
-        log, rule_off(mapping, no_rule), column, label, missing, delimiter, transitions_on, emissions_on, order
+    tr, em, frame = _read_with_inputs(
+        log, rule_off(mapping, no_rule), column, label, transitions_on, emissions_on, missing, delimiter, order
     )
     bar = progress_bar(quiet or as_json)
     with bar:
@@ -302,11 +297,8 @@ def select_types(
             frame,
             types=values,
             folds=folds,
-            restarts=restarts,
-            seed=seed,
+            options=FitOptions(restarts=restarts, seed=seed, tol=tol, n_jobs=jobs),
             differ=differ,
-            tol=tol,
-            n_jobs=jobs,
             progress=lambda what, d, t: bar.update(task, completed=d, total=t, description=what),
             transition_inputs=tr,
             emission_inputs=em,

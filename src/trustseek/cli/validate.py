@@ -11,6 +11,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
+from ..estimation.options import FitOptions
 from ._app import (
     ColumnOpt,
     DelimiterOpt,
@@ -147,13 +148,9 @@ def predict(
                 frame,
                 preset=preset,
                 folds=k,
-                restarts=restarts,
-                seed=seed,
+                options=FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs),
                 bootstrap=bootstrap,
                 prior=prior,
-                n_jobs=jobs,
-                tol=tol,
-                max_iter=max_iter,
                 progress=lambda d, t: bar.update(task, completed=d, total=t),
                 levels=levels,
                 transition_inputs=tr,

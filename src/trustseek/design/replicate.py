@@ -16,6 +16,7 @@ import numpy as np
 from ..errors import TrustseekError
 from ..estimation.fit import fit_sequences
 from ..estimation.kernels import many_fits
+from ..estimation.options import FitOptions
 from ..estimation.sequences import Sequences, encode
 from ..estimation.spec import IOHMMSpec
 from ..estimation.trust_iohmm import preset_spec
@@ -116,7 +117,9 @@ def fit_encoded(seqs: Sequences, spec: IOHMMSpec, settings: FitSettings, seed: i
     """:func:`fit_model` on trials already encoded for ``spec`` (compiled: a study is many fits)."""
     with many_fits():
         fit = fit_sequences(
-            seqs, spec, restarts=settings.restarts, seed=seed, tol=settings.tol, max_iter=settings.max_iter, n_jobs=1
+            seqs,
+            spec,
+            options=FitOptions(restarts=settings.restarts, seed=seed, tol=settings.tol, max_iter=settings.max_iter, n_jobs=1),
         )
     return fit.model
 

@@ -8,6 +8,8 @@
 * :mod:`.em` / :mod:`.quasi_newton` / :mod:`.sticks` -- EM for R starts with SQUAREM, and the L-BFGS-B finish
   on the free cells' stick-breaking fractions;
 * :mod:`.convergence` -- a run has converged at a stationary point, checked by one more EM step;
+* :mod:`.options` -- how a fit searches (:class:`FitOptions`: restarts, seed, tolerance, iteration
+  cap, workers), one set taken by every fit, selection and bootstrap;
 * :mod:`.iohmm` -- :func:`fit_iohmm`, log-likelihood, posteriors, Viterbi;
 * :mod:`.trust_iohmm` -- the paper's structure, tables to and from a TrustModel;
 * :mod:`.fit`, :mod:`.bootstrap`, :mod:`.selection` -- the trust-model fit, its intervals,

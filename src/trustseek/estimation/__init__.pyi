@@ -15,6 +15,7 @@ from . import (
     kernels,
     mixture,
     mixture_em,
+    options,
     personal,
     personal_models,
     prediction,
@@ -34,6 +35,7 @@ from . import (
 )
 from .fit import MIN_EVENTS, decode, fit_model, fit_trust_model, trust_loglik
 from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
+from .options import FitOptions
 from .result import FitResult
 from .selection import select_levels, selection_warnings
 from .sequences import Sequences, encode
@@ -54,6 +56,7 @@ __all__ = [
     "PAPER_EMISSION_INPUTS",
     "PAPER_TRANSITION_INPUTS",
     "FitError",
+    "FitOptions",
     "FitResult",
     "Fixed",
     "IOHMMFit",

@@ -27,7 +27,7 @@ import logging
 import os
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -37,11 +37,15 @@ from . import kernels
 from .em import run_em
 from .estep import Workspace
 from .iohmm import fit_iohmm
+from .options import FitOptions
 from .ratings import make_structure
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec, Params
 from .structure import Structure, Table
 from .trust_iohmm import check_convertible, index_grid, to_trust_model
+
+#: a bootstrap replicate's refit: from the estimate and 3 random starts, over all cores
+REFITS = FitOptions(restarts=3)
 
 log = logging.getLogger(__name__)
 
@@ -183,6 +187,14 @@ def boundary_bounds(
     return lo, hi, moved
 
 
+def resample(seqs: Sequences, seed: np.random.SeedSequence, options: FitOptions) -> tuple[Sequences, FitOptions]:
+    """A bootstrap replicate's participants (drawn with replacement, seeded by ``seed``) and the
+    options of its refit (seeded by the seed's first child, on one thread)."""
+    rng = np.random.default_rng(seed)
+    n = seqs.n_participants
+    return seqs.subset(rng.integers(0, n, n)), replace(options, seed=seed.spawn(1)[0], n_jobs=1)
+
+
 @dataclass(frozen=True)
 class _Replicate:
     """One bootstrap replicate, sent whole to a worker process."""
@@ -192,9 +204,7 @@ class _Replicate:
     params: Params
     weights: Mapping[str, np.ndarray]
     seed: np.random.SeedSequence
-    restarts: int
-    tol: float
-    max_iter: int
+    options: FitOptions  # the refit's search (its seed: the replicate's)
     compiled: bool = False  # every replicate compiled (the bootstrap as a whole pays for it)
 
     def run(self) -> tuple[np.ndarray, bool]:
@@ -206,16 +216,11 @@ class _Replicate:
         return self._run()
 
     def _run(self) -> tuple[np.ndarray, bool]:
-        rng = np.random.default_rng(self.seed)
-        n = self.seqs.n_participants
-        sample = self.seqs.subset(rng.integers(0, n, n))
+        sample, options = resample(self.seqs, self.seed, self.options)
         fit = fit_iohmm(
             sample,
             self.spec,
-            restarts=self.restarts,
-            seed=self.seed.spawn(1)[0],
-            tol=self.tol,
-            max_iter=self.max_iter,
+            options,
             init=[self.params],
         )
         p = fit.params.permuted(align(self.params, fit.params, self.weights))
@@ -283,11 +288,7 @@ def bootstrap(
     spec: IOHMMSpec,
     params: Params,
     replicates: int,
-    seed: int = 0,
-    restarts: int = 3,
-    n_jobs: int | None = None,
-    tol: float = 1e-8,
-    max_iter: int = 1000,
+    options: FitOptions = REFITS,
     level: float = LEVEL,
     progress: Callable[[str, int, int], None] | None = None,
     weights: Mapping[str, np.ndarray] | None = None,
@@ -295,7 +296,9 @@ def bootstrap(
     """Intervals at ``level`` for every cell (:func:`cell_tables`) of the fit ``params``, over ``replicates`` resamples.
 
     ``weights`` are passed to :func:`align` (the fit's expected events behind each row
-    are a good choice).  Replicates run over ``n_jobs`` processes (default: all cores);
+    are a good choice).  Each replicate refits from the estimate and ``options.restarts`` random
+    starts (:class:`~.options.FitOptions`, seeded from ``options.seed``) over ``options.n_jobs``
+    processes (default: all cores);
     ``progress("bootstrap", done, replicates)`` is called as each one finishes.  Fewer than :data:`MIN_REPLICATES`
     resamples for a 95 % interval are allowed (tests, quick looks) but logged
     and named in :meth:`Intervals.notes`.
@@ -309,10 +312,10 @@ def bootstrap(
     compiled = kernels.worth_compiling(replicates * seqs.n_trials)
     if compiled:
         load_compiled()  # many fits: the compiled E-step in every one (worker processes start from here)
-    children = np.random.SeedSequence([seed, 1]).spawn(replicates)
+    children = np.random.SeedSequence([options.seed_number, 1]).spawn(replicates)
     w = {k: np.asarray(v, dtype=float) for k, v in (weights or {}).items()}
-    jobs = [_Replicate(seqs, spec, params, w, ch, restarts, tol, max_iter, compiled) for ch in children]
-    n_jobs = n_jobs or os.cpu_count() or 1
+    jobs = [_Replicate(seqs, spec, params, w, ch, options, compiled) for ch in children]
+    n_jobs = options.n_jobs or os.cpu_count() or 1
     results: dict[int, tuple[np.ndarray, bool]] = {}
 
     def done(i: int, res: tuple[np.ndarray, bool]) -> None:

@@ -22,8 +22,10 @@ import pandas as pd
 from ..model.core import TrustModel
 from ..model.iohmm import IOHMMModel
 from ..vocab import ACTIONS, EXPERIENCES
+from .bootstrap import Intervals
 from .bootstrap import bootstrap as _bootstrap
 from .iohmm import IOHMMFit, fit_iohmm, loglik
+from .options import DEFAULTS, FitOptions, counting
 from .ratings import RatingStructure
 from .result import FitResult, posterior_frame
 from .sequences import Sequences, encode
@@ -100,36 +102,22 @@ def _constant_output(fit: IOHMMFit) -> list[str]:
 def fit_sequences(
     seqs: Sequences,
     spec: IOHMMSpec,
-    restarts: int = 10,
-    seed: int = 0,
+    options: FitOptions = DEFAULTS,
     bootstrap: int = 0,
-    n_jobs: int | None = None,
-    tol: float = 1e-8,
-    max_iter: int = 1000,
     progress: Callable[[int, int], None] | None = None,
     init: Sequence[Params] = (),
 ) -> FitResult[TrustModel]:
     """:func:`fit_trust_model` on already encoded sequences."""
     check_convertible(spec)
-    total = restarts + len(init) + bootstrap
-    done = 0
-
-    def tick() -> None:
-        nonlocal done
-        done += 1
-        if progress is not None:
-            progress(done, total)
+    restarts, seed = options.starts, options.seed_number
+    tick = counting(progress, restarts + len(init) + bootstrap)
 
     fit = fit_iohmm(
         seqs,
         spec,
-        restarts=restarts,
-        seed=np.random.SeedSequence([seed, 0]),
-        tol=tol,
-        max_iter=max_iter,
+        replace(options, seed=np.random.SeedSequence([seed, 0])),
         init=init,
-        on_restart=lambda i, r: tick(),
-        n_jobs=n_jobs,
+        on_restart=tick,
     )
     model = to_trust_model(
         spec,
@@ -151,35 +139,36 @@ def fit_sequences(
     if bootstrap > 0 and spec.rating is not None:
         raise FitError(["bootstrap intervals are not available for a fit with ratings (fit without --bootstrap)"])
     if bootstrap > 0:
-        result.intervals = bootstrap_intervals = _bootstrap(
-            seqs,
-            spec,
-            fit.params,
-            bootstrap,
-            seed=seed,
-            restarts=min(restarts, 3),
-            n_jobs=n_jobs,
-            tol=tol,
-            max_iter=max_iter,
-            progress=lambda label, d, t: tick(),
-            weights=events,  # levels of a replicate are matched on the rows the data determine
-        )
-        result.ci = bootstrap_intervals.intervals
+        # levels of a replicate are matched on the rows the data determine
+        result.intervals = _intervals(result, bootstrap, options, tick, events)
+        result.ci = result.intervals.intervals
         result.bootstrap = bootstrap
-        result.warnings += bootstrap_intervals.notes()
     return result
+
+
+def _intervals(result: FitResult, bootstrap: int, options: FitOptions, tick: Callable[[], None], weights) -> Intervals:
+    """The bootstrap intervals of ``result``'s fit over ``bootstrap`` resamples (each refit from
+    at most 3 random starts; ``tick`` after each), their notes added to its warnings."""
+    fit = result.fit
+    intervals = _bootstrap(
+        fit.seqs,
+        fit.spec,
+        fit.params,
+        bootstrap,
+        replace(options, restarts=min(options.starts, 3)),
+        progress=lambda label, d, t: tick(),
+        weights=weights,
+    )
+    result.warnings += intervals.notes()
+    return intervals
 
 
 def fit_trust_model(
     frame: pd.DataFrame,
     preset: str | IOHMMSpec = "paper",
-    restarts: int = 10,
-    seed: int = 0,
+    options: FitOptions = DEFAULTS,
     bootstrap: int = 0,
     prior: float = 0.0,
-    n_jobs: int | None = None,
-    tol: float = 1e-8,
-    max_iter: int = 1000,
     progress: Callable[[int, int], None] | None = None,
     rating: str | None = None,
     rating_levels: Sequence[str] | None = None,
@@ -194,9 +183,10 @@ def fit_trust_model(
     ``bootstrap`` > 0, participants are resampled that many times and a 95 % interval is
     reported for every cell (:mod:`.bootstrap`: percentile, replicate levels aligned to
     the estimate, widened to contain it; at least 200 resamples are advised, fewer add
-    a warning), computed over ``n_jobs`` processes (default: all cores); the fit itself
-    shares its E-steps over ``n_jobs`` threads.  Results do not depend on ``n_jobs``.  ``progress(done, total)``
-    is called after every restart and bootstrap replicate.
+    a warning), computed over ``options.n_jobs`` processes (default: all cores); the fit itself
+    shares its E-steps over as many threads.  ``options`` (:class:`~.options.FitOptions`) are
+    the search's: restarts, seed, tolerance, iteration cap, workers; results do not depend on
+    the workers.  ``progress(done, total)`` is called after every restart and bootstrap replicate.
 
     ``rating`` names a column of self-reported trust ratings, a second emission of the hidden
     trust (P(rating | trust), one free row per level; an empty cell contributes probability
@@ -213,7 +203,7 @@ def fit_trust_model(
         if rating is None:
             raise FitError(["a fit without the human actions needs a rating column"])
         frame = frame.assign(human_action=pd.Series(pd.NA, index=frame.index, dtype=object))
-    result = fit_sequences(encode(frame, spec), spec, restarts, seed, bootstrap, n_jobs, tol, max_iter, progress)
+    result = fit_sequences(encode(frame, spec), spec, options, bootstrap, progress)
     marked = never_estimated(frame, spec)
     if marked:
         result.model = result.model.replace(not_estimated=marked)
@@ -326,32 +316,27 @@ def fit_model(
     emission_inputs: Sequence[str],
     transition_inputs: Sequence[str],
     levels: Sequence[str] | int = ("low", "high"),
-    restarts: int = 10,
-    seed: int = 0,
+    options: FitOptions = DEFAULTS,
     prior: float = 0.0,
-    n_jobs: int | None = None,
-    tol: float = 1e-8,
-    max_iter: int = 1000,
     progress: Callable[[int, int], None] | None = None,
     rating: str | None = None,
-    rating_levels: Sequence[str] | None = None,
     actions: bool = True,
-    spec: IOHMMSpec | None = None,
     bootstrap: int = 0,
 ) -> FitResult[IOHMMModel]:
     """Fit the human action's IOHMM with any named inputs (columns of ``frame``, e.g. a mapping's
     ``inputs`` and the canonical complexity, robot_action, experience) to a general model.
 
     Each input's levels keep their declared order (a categorical column's categories: the
-    mapping's).  The structure is :func:`~.trust_iohmm.general_spec` (or ``spec``); restarts,
-    seeding, tolerance, ratings and ``actions`` are as for :func:`fit_trust_model`, which fits
-    the same model with the paper's inputs as a :class:`~trustseek.model.TrustModel`.
+    mapping's).  The structure is :func:`~.trust_iohmm.general_spec`; ``options``
+    (:class:`~.options.FitOptions`), ratings and ``actions`` are as for :func:`fit_trust_model`, which fits
+    the same model with the paper's inputs as a :class:`~trustseek.model.TrustModel` (a rating
+    column's levels are its categories, as :func:`~trustseek.data.read_trials` reads a mapped rating).
     ``bootstrap`` > 0 resamples participants that many times for an interval of every table
     cell (:mod:`.bootstrap`, as for the trust model); ``progress`` then counts its replicates too."""
-    if spec is None:
-        spec = general_spec(frame, emission_inputs, transition_inputs, levels, prior)
+    restarts, seed = options.starts, options.seed_number
+    spec = general_spec(frame, emission_inputs, transition_inputs, levels, prior)
     if rating is not None:
-        spec = replace(spec, rating=rating, rating_levels=rating_levels_of(frame, rating, rating_levels))
+        spec = replace(spec, rating=rating, rating_levels=rating_levels_of(frame, rating))
     if not actions:
         if rating is None:
             raise FitError(["a fit without the human actions needs a rating column"])
@@ -362,23 +347,13 @@ def fit_model(
     seqs = encode(frame, spec)
     if bootstrap > 0 and spec.rating is not None:
         raise FitError(["bootstrap intervals are not available for a fit with ratings (fit without --bootstrap)"])
-    done = 0
-
-    def tick(i: int = 0, r: Any = None) -> None:
-        nonlocal done
-        done += 1
-        if progress is not None:
-            progress(done, restarts + bootstrap)
+    tick = counting(progress, restarts + bootstrap)
 
     fit = fit_iohmm(
         seqs,
         spec,
-        restarts=restarts,
-        seed=np.random.SeedSequence([seed, 0]),
-        tol=tol,
-        max_iter=max_iter,
+        replace(options, seed=np.random.SeedSequence([seed, 0])),
         on_restart=tick,
-        n_jobs=n_jobs,
     )
     notes = f"fitted by trustseek: {seqs.n_participants} participants, {seqs.n_trials} trials, log-likelihood {fit.loglik:.4f}"
     model = to_iohmm_model(spec, fit.params, notes)
@@ -402,18 +377,6 @@ def fit_model(
         log.info("%s", w)
     result = FitResult(model, fit, events, warnings=warnings, seed=seed)
     if bootstrap > 0:
-        result.intervals = _bootstrap(
-            seqs,
-            spec,
-            fit.params,
-            bootstrap,
-            seed=seed,
-            restarts=min(restarts, 3),
-            n_jobs=n_jobs,
-            tol=tol,
-            max_iter=max_iter,
-            progress=lambda label, d, t: tick(),
-            weights={k: v for k, v in events.items() if k in ("initial", "emission", "transition")},
-        )
-        result.warnings += result.intervals.notes()
+        weights = {k: v for k, v in events.items() if k in ("initial", "emission", "transition")}
+        result.intervals = _intervals(result, bootstrap, options, tick, weights)
     return result

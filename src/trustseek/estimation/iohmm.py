@@ -25,6 +25,7 @@ from . import compiled_run
 from .convergence import converge
 from .em import STATIONARY, RunResult, run_em
 from .estep import Workspace
+from .options import SERIAL, FitOptions
 from .ratings import make_structure
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec, Params
@@ -105,18 +106,15 @@ def _describe(i: int, r: RunResult) -> str:
 def fit_iohmm(
     seqs: Sequences,
     spec: IOHMMSpec,
-    restarts: int = 10,
-    seed: int | np.random.SeedSequence = 0,
-    tol: float = 1e-8,
-    max_iter: int = 1000,
-    accelerate: bool = True,
+    options: FitOptions = SERIAL,
     init: Sequence[Params] = (),
     on_restart: Callable[[int, RunResult], None] | None = None,
+    accelerate: bool = True,
     quasi_newton: bool = True,
-    n_jobs: int | None = 1,
     compiled: bool = True,
 ) -> IOHMMFit:
-    """Fit ``spec`` to ``seqs``: the runs from ``init`` and ``restarts`` random starts; the best is kept.
+    """Fit ``spec`` to ``seqs``: the runs from ``init`` and ``options.restarts`` random starts (from
+    ``options.seed``); the best is kept (:class:`~.options.FitOptions`: by default on one thread).
 
     Each run is EM with SQUAREM (the runs in lockstep) and, with ``quasi_newton``, EM
     only to the relative tolerance ``max(tol, 1e-5)`` followed by the L-BFGS-B finish
@@ -135,12 +133,13 @@ def fit_iohmm(
     quasi-Newton finish, the same check), the starts side by side on the ``n_jobs`` threads;
     else EM runs the starts in lockstep and scipy's L-BFGS-B finishes them.
     """
+    tol, max_iter, seed = options.tol, options.max_iter, options.seed
     structure = make_structure(spec, seqs)
     quasi_newton = quasi_newton and not structure.joint
-    work = Workspace(seqs, *structure.dims, threads=n_jobs or os.cpu_count() or 1)
+    work = Workspace(seqs, *structure.dims, threads=options.n_jobs or os.cpu_count() or 1)
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     starts = [structure.project(p) for p in init]
-    starts += [structure.random(np.random.default_rng(s)) for s in ss.spawn(restarts)]
+    starts += [structure.random(np.random.default_rng(s)) for s in ss.spawn(options.starts)]
     if not starts:
         raise FitError(["at least one restart is needed"])
     log.debug(

@@ -35,7 +35,7 @@ from __future__ import annotations
 import logging
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -49,6 +49,7 @@ from .em import STATIONARY, RunResult, run_em
 from .fit import never_estimated
 from .iohmm import FINISH_FTOL, FINISH_SWITCH, FitCriteria, fit_iohmm
 from .mixture_em import EMPTY, FINISH_MARGIN, PERTURB, MixtureParams, MixtureStructure, MixtureWorkspace
+from .options import DEFAULTS, SERIAL, FitOptions, counting
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
 from .trust_iohmm import (
@@ -195,21 +196,18 @@ def fit_mixture(
     seqs: Sequences,
     spec: IOHMMSpec,
     types: int,
-    restarts: int = 10,
-    seed: int | np.random.SeedSequence = 0,
+    options: FitOptions = SERIAL,
     differ: str | Sequence[str] = "all",
-    tol: float = 1e-8,
-    max_iter: int = 1000,
     pooled: Params | None = None,
     init: Sequence[MixtureParams] = (),
+    on_restart: Callable[[int, RunResult], None] | None = None,
     accelerate: bool = True,
     quasi_newton: bool = True,
-    n_jobs: int | None = 1,
-    on_restart: Callable[[int, RunResult], None] | None = None,
 ) -> MixtureFit:
     """Fit M = ``types`` supervisor types to ``seqs``; the best of the runs is kept.
 
-    Starts: ``init``, then ``restarts`` seeded ones: with M >= 2 the first half are the
+    Starts: ``init``, then ``options.restarts`` seeded ones (:class:`~.options.FitOptions`, by
+    default on one thread): with M >= 2 the first half are the
     pooled fit (``pooled``, or a pooled fit of 3 restarts made here) with every row
     perturbed (:meth:`MixtureStructure.perturbed`), the rest random (with M = 1 all random,
     the pooled fit's own draws).  With M = 1 each run is exactly the pooled fit's
@@ -221,14 +219,17 @@ def fit_mixture(
     docs/types.md).  The objective never decreases along a run.
     """
     structure = MixtureStructure(spec, seqs, types, differ)
-    work = MixtureWorkspace(seqs, structure, threads=n_jobs or os.cpu_count() or 1)
+    restarts, seed, tol, max_iter = options.starts, options.seed, options.tol, options.max_iter
+    work = MixtureWorkspace(seqs, structure, threads=options.n_jobs or os.cpu_count() or 1)
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     M = structure.n_types
     starts: list[MixtureParams] = [structure.project(p) for p in init]
     children = ss.spawn(restarts)
     n_perturbed = (restarts + 1) // 2 if M > 1 else 0
     if n_perturbed and pooled is None:
-        pooled = fit_iohmm(seqs, spec, restarts=3, seed=ss.spawn(1)[0], tol=max(tol, 1e-6), max_iter=max_iter).params
+        pooled = fit_iohmm(
+            seqs, spec, FitOptions(restarts=3, seed=ss.spawn(1)[0], tol=max(tol, 1e-6), max_iter=max_iter, n_jobs=1)
+        ).params
     for i, s in enumerate(children):
         rng = np.random.default_rng(s)
         starts.append(structure.perturbed(pooled, rng) if i < n_perturbed and pooled is not None else structure.random(rng))
@@ -304,17 +305,15 @@ def fit_types(
     frame: pd.DataFrame,
     types: int,
     preset: str | IOHMMSpec = "paper",
-    restarts: int = 10,
-    seed: int = 0,
+    options: FitOptions = DEFAULTS,
     differ: str | Sequence[str] = "all",
     prior: float = 0.0,
-    tol: float = 1e-8,
-    max_iter: int = 1000,
-    n_jobs: int | None = None,
     progress: Callable[[int, int], None] | None = None,
     **spec_options: Any,
 ) -> MixtureFit:
-    """Fit ``types`` supervisor types to a trial table (the structure as the pooled fit's, :func:`types_spec`)."""
+    """Fit ``types`` supervisor types to a trial table (the structure as the pooled fit's, :func:`types_spec`),
+    searched as ``options`` say (:class:`~.options.FitOptions`)."""
+    restarts, seed = options.starts, options.seed_number
     spec = types_spec(frame, preset, prior, **spec_options)
     seqs = encode(frame, spec)
     pooled = None
@@ -322,32 +321,18 @@ def fit_types(
         first = fit_iohmm(
             seqs,
             spec,
-            restarts=min(restarts, 3),
-            seed=np.random.SeedSequence([seed, 5]),
-            tol=tol,
-            max_iter=max_iter,
-            n_jobs=n_jobs,
+            replace(options, restarts=min(restarts, 3), seed=np.random.SeedSequence([seed, 5])),
         )
         pooled = first.params
-    done = 0
-
-    def tick(i: int, r: RunResult) -> None:
-        nonlocal done
-        done += 1
-        if progress is not None:
-            progress(done, restarts)
+    tick = counting(progress, restarts)
 
     fit = fit_mixture(
         seqs,
         spec,
         types,
-        restarts=restarts,
-        seed=np.random.SeedSequence([seed, 0]),
+        replace(options, seed=np.random.SeedSequence([seed, 0])),
         differ=differ,
-        tol=tol,
-        max_iter=max_iter,
         pooled=pooled,
-        n_jobs=n_jobs,
         on_restart=tick,
     )
     fit.not_estimated = () if general_types(spec) else never_estimated(frame, spec)

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -41,6 +41,7 @@ from ..model.iohmm import IOHMMModel
 from ..vocab import HUMAN_ACTIONS
 from .baselines import BASELINES, BaselineFit, Features, baseline_predictions, features, fit_baselines
 from .iohmm import fit_iohmm
+from .options import DEFAULTS, FitOptions
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
 from .trust_iohmm import from_trust_model, preset_spec
@@ -49,7 +50,6 @@ log = logging.getLogger(__name__)
 
 EPS = 1e-9  # predictions are clipped to [EPS, 1 - EPS] for the log-loss
 CONFIDENT = 1e-6  # a scored trial whose action the model gave less than this probability: a confident miss
-PREDICTORS = ("model", *BASELINES)
 METRICS = ("log_loss", "brier", "auc")
 LOWER_IS_BETTER = {"log_loss": True, "brier": True, "auc": False}
 LEVEL = 0.95
@@ -143,7 +143,8 @@ def _losses(p: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return -(y * np.log(q) + (1 - y) * np.log1p(-q)), (p - y) ** 2
 
 
-def _interval(values: np.ndarray) -> tuple[float, float]:
+def percentile_interval(values: np.ndarray) -> tuple[float, float]:
+    """The central :data:`LEVEL` percentile interval of the finite ``values`` (NaN, NaN: none)."""
     v = values[np.isfinite(values)]
     if v.size == 0:
         return float("nan"), float("nan")
@@ -195,13 +196,13 @@ def score(
     for name in predictions:
         metrics[name] = {}
         for m in METRICS:
-            lo, hi = _interval(reps[name][m])
+            lo, hi = percentile_interval(reps[name][m])
             metrics[name][m] = {"estimate": point[name][m], "lower": lo, "upper": hi}
     diffs: dict[str, dict[str, dict[str, Any]]] = {}
     for base in (b for b in predictions if b != "model"):
         diffs[base] = {}
         for m in METRICS:
-            lo, hi = _interval(reps["model"][m] - reps[base][m])
+            lo, hi = percentile_interval(reps["model"][m] - reps[base][m])
             est = point["model"][m] - point[base][m]
             better = "neither"
             if np.isfinite(lo) and np.isfinite(hi):
@@ -304,17 +305,18 @@ def _report(
     mode: str,
     frame: pd.DataFrame,
     seqs: Sequences,
-    p_model: np.ndarray,
+    preds: dict[str, np.ndarray],
     determined: np.ndarray,
-    base: dict[str, np.ndarray],
     feats: Features,
     bootstrap: int,
     seed: int,
     fold_of: np.ndarray | None,
     baseline_fits: list[BaselineFit],
 ) -> PredictionReport:
+    """The report of the predictions ``preds`` (the model's P(rely) as "model", then the
+    baselines'), per trial in the frame's row order and scored."""
     valid = seqs.rows >= 0
-    preds = {"model": p_model, **base}
+    p_model = preds["model"]
     s = feats.scored
     nn = np.nonzero(s)[1]
     y = feats.rely[s]
@@ -386,9 +388,8 @@ def predict_in_sample(
         "in-sample",
         frame,
         seqs,
-        filt.p_rely,
+        {"model": filt.p_rely, **baseline_predictions(feats, bfit)},
         filt.determined,
-        baseline_predictions(feats, bfit),
         feats,
         bootstrap,
         seed,
@@ -414,21 +415,18 @@ def predict_heldout(
     frame: pd.DataFrame,
     folds: int = 5,
     preset: str | IOHMMSpec = "paper",
-    restarts: int = 10,
-    seed: int = 0,
+    options: FitOptions = DEFAULTS,
     bootstrap: int = 1000,
     prior: float = 0.0,
-    n_jobs: int | None = None,
-    tol: float = 1e-8,
-    max_iter: int = 1000,
     progress: Callable[[int, int], None] | None = None,
     **spec_options: Any,
 ) -> PredictionReport:
     """One-step-ahead predictions of held-out participants: ``folds`` folds of participants
-    (seeded by ``seed``); each is predicted by a model fitted to the others (the fit settings as
-    for :func:`~.fit.fit_trust_model`, the restarts seeded as a fit with ``seed`` would be) and
+    (seeded by ``options.seed``); each is predicted by a model fitted to the others (``options``
+    as for :func:`~.fit.fit_trust_model`, the restarts seeded as a fit with that seed would be) and
     scored against baselines estimated on the same training folds.  ``progress(done, folds)``
     is called after each fold."""
+    seed = options.seed_number
     spec = preset_spec(preset, frame, prior=prior, **spec_options)
     seqs = encode(frame, spec)
     fold_of = fold_assignment(seqs.n_participants, folds, seed)
@@ -441,11 +439,7 @@ def predict_heldout(
         fit = fit_iohmm(
             seqs.subset(train),
             spec,
-            restarts=restarts,
-            seed=np.random.SeedSequence([seed, 0]),
-            tol=tol,
-            max_iter=max_iter,
-            n_jobs=n_jobs,
+            replace(options, seed=np.random.SeedSequence([seed, 0])),
         )
         held = filter_beliefs(seqs.subset(test), fit.params)
         Tt = held.p_rely.shape[0]
@@ -467,4 +461,5 @@ def predict_heldout(
         bfits.append(bfit)
         for k, v in baseline_predictions(feats, bfit).items():
             base[k][:, test] = v[:, test]
-    return _report("held-out", frame, seqs, p_model, determined, base, feats, bootstrap, seed, fold_of, bfits)
+    preds = {"model": p_model, **base}
+    return _report("held-out", frame, seqs, preds, determined, feats, bootstrap, seed, fold_of, bfits)

@@ -23,6 +23,7 @@ import pandas as pd
 
 from .estep import Workspace
 from .iohmm import IOHMMFit, fit_iohmm
+from .options import FitOptions
 from .sequences import Sequences, encode
 from .spec import IOHMMSpec, Params
 from .structure import Structure
@@ -36,6 +37,11 @@ from .trust_iohmm import (
 )
 
 log = logging.getLogger(__name__)
+
+#: a fit's random starts by its free parameters (:func:`default_restarts`), on one thread
+BY_PARAMETERS = FitOptions(restarts=None, n_jobs=1)
+#: the fits of a selection: starts by free parameters, each to a relative tolerance of 1e-6
+SELECTION = FitOptions(restarts=None, tol=1e-6, n_jobs=1)
 
 HELDOUT_PSEUDOCOUNT = 0.5  # per free cell of a row smoothed for held-out scoring (training counts + this)
 ZERO_CELL = 1e-9  # a fitted probability at most this is a zero (the fit clips such cells to 1e-12)
@@ -115,38 +121,38 @@ def fit_with_moves(
     seqs: Sequences,
     spec: IOHMMSpec,
     previous: Params | None = None,
-    restarts: int | None = None,
-    seed: int | np.random.SeedSequence = 0,
+    options: FitOptions = BY_PARAMETERS,
     splits: int = SPLITS_PER_LEVEL,
     rounds: int = MOVE_ROUNDS,
     sources_per_round: int = MOVE_SOURCES,
-    **options: Any,
 ) -> IOHMMFit:
-    """:func:`~.iohmm.fit_iohmm` from random starts (default :func:`default_restarts`) and from
+    """:func:`~.iohmm.fit_iohmm` from ``options.restarts`` random starts (default
+    :func:`default_restarts`) and from
     ``previous`` (a fit with one level fewer) split (:func:`split_starts`); then up to ``rounds``
     times from the ``sources_per_round`` best distinct local maxima not moved from before
     (:func:`move_sources`; a lower maximum's moves can lead past the best) with two levels
     merged and one split (:func:`split_merge_starts`), while that gains more than
     :data:`BEST_TOLERANCE`.  Every run is kept in the result's ``runs``."""
+    seed = options.seed
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     # the random starts are those fit_iohmm draws from ``seed`` (the first n of n + m are the
     # same): more restarts only add starts; the split and merge moves draw from the seed's own state
     rng = np.random.default_rng(ss.generate_state(4))
+    restarts = options.restarts
     n_random = restarts if restarts is not None else default_restarts(Structure(spec, seqs).n_free)
     init: list[Params] = []
     K = spec.n_levels
     if previous is not None and previous.initial.shape[-1] == K - 1 and splits > 0:
         init = split_starts(previous, rng, splits)
-    fit = fit_iohmm(seqs, spec, restarts=n_random, seed=ss, init=init, **options)
+    fit = fit_iohmm(seqs, spec, replace(options, restarts=n_random, seed=ss), init=init)
     used: list[float] = []  # objectives of the fits already moved from
     for _ in range(rounds if K > 2 else 0):
         sources = move_sources(fit, used, sources_per_round)
         if not sources:
             break
         used += [fit.runs[i].objective for i in sources]
-        more = fit_iohmm(
-            seqs, spec, restarts=0, init=[p for i in sources for p in split_merge_starts(fit.runs[i].params, rng)], **options
-        )
+        starts = [p for i in sources for p in split_merge_starts(fit.runs[i].params, rng)]
+        more = fit_iohmm(seqs, spec, replace(options, restarts=0, seed=0), init=starts)
         gain = more.objective - fit.objective
         runs = fit.runs + more.runs
         fit = replace(more, runs=runs, best=len(fit.runs) + more.best) if gain > 0 else replace(fit, runs=runs)
@@ -182,11 +188,8 @@ def select_levels(
     frame: pd.DataFrame,
     levels: Sequence[int] = (1, 2, 3, 4),
     folds: int = 5,
-    restarts: int | None = None,
-    seed: int = 0,
+    options: FitOptions = SELECTION,
     prior: float = 0.0,
-    tol: float = 1e-6,
-    max_iter: int = 1000,
     progress: Callable[[str, int, int], None] | None = None,
     splits: int = SPLITS_PER_LEVEL,
     widen: bool = False,
@@ -201,7 +204,7 @@ def select_levels(
     ``transition_inputs`` / ``emission_inputs`` other than a trust model's, the general model of
     those named inputs (:func:`~.trust_iohmm.general_spec`) is compared;
     ``progress(label, done, total)`` is called after every fit (``label`` names the number
-    of levels being compared).  Each fit is :func:`fit_with_moves`: ``restarts`` random
+    of levels being compared).  Each fit is :func:`fit_with_moves`: ``options.restarts`` random
     starts (default: :func:`default_restarts` of its free parameters), ``splits`` split
     starts per level of the fit with one level fewer (when it was compared just before),
     then merge-and-split starts from the :data:`MOVE_SOURCES` best distinct maxima (the
@@ -227,17 +230,14 @@ def select_levels(
             data,
             base.with_levels(level_names(K)),
             previous[slot].params if slot in previous else None,
-            restarts=restarts,
-            seed=np.random.SeedSequence(key),
+            replace(options, seed=np.random.SeedSequence(key)),
             splits=splits,
             sources_per_round=MOVE_SOURCES if slot < 0 else FOLD_MOVE_SOURCES,
-            tol=tol,
-            max_iter=max_iter,
         )
         previous[slot] = fit
         return fit
 
-    comparison = HeldOutComparison("levels", folds, seed, MAX_LEVELS if widen else 0, progress)
+    comparison = HeldOutComparison("levels", folds, options.seed_number, MAX_LEVELS if widen else 0, progress)
     rows = comparison.run(seqs, levels, one_fit, heldout_loglik)
     for w in selection_warnings(rows):
         log.warning("%s", w)
@@ -351,23 +351,40 @@ MAX_LEVELS = 8  # the most trust levels select compares (the command's --max-lev
 def selection_warnings(rows: Sequence[dict[str, Any]]) -> list[str]:
     """Warnings on a :func:`select_levels` table: a best number of levels at the largest compared,
     and fits whose best log-likelihood only one start reached."""
+    return comparison_warnings(rows, "levels", MAX_LEVELS, "--max-levels {next}")
+
+
+def comparison_warnings(
+    rows: Sequence[dict[str, Any]],
+    key: str,
+    cap: int,
+    more: str,
+    within: str = "",
+    of_row: Callable[[dict[str, Any]], list[str]] | None = None,
+) -> list[str]:
+    """Warnings on a comparison of numbers of ``key`` (levels or types): a best number at the
+    largest compared (``more``, the option to compare more, formatted with ``low`` and ``next``;
+    ``cap`` the most comparable), fits whose best log-likelihood only one start reached, and
+    ``of_row(row)`` after each row's."""
     out = []
     if len(rows) > 1:
-        top = max(int(r["levels"]) for r in rows)
-        for key, what in (("best_heldout", "held-out log-likelihood"), ("best_bic", "BIC")):
-            if any(r[key] and r["levels"] == top for r in rows):
-                more = (
-                    f"compare more with --max-levels {top + 1}"
-                    if top < MAX_LEVELS
-                    else f"{MAX_LEVELS} is the most compared: read the choice as 'at least {top}'"
+        top = max(int(r[key]) for r in rows)
+        low = min(int(r[key]) for r in rows)
+        for best, what in (("best_heldout", "held-out log-likelihood"), ("best_bic", "BIC")):
+            if any(r[best] and r[key] == top for r in rows):
+                hint = (
+                    f"compare more with {more.format(low=low, next=top + 1)}"
+                    if top < cap
+                    else f"{cap} is the most compared: read the choice as 'at least {top}'"
                 )
-                out.append(f"the best {what} is at {top} levels, the largest compared: more levels may fit better ({more})")
+                out.append(f"the best {what} is at {top} {key}, the largest compared: more {key} may fit better ({hint})")
     for r in rows:
-        if r["levels"] > 1 and r.get("reached_best", 2) < 2:
+        if r[key] > 1 and r.get("reached_best", 2) < 2:
             out.append(
-                f"{r['levels']} levels: only 1 of {r['starts']} starts reached the best log-likelihood; "
+                f"{r[key]} {key}: only 1 of {r['starts']} starts reached the best log-likelihood{within}; "
                 "the maximum may not have been found (more --restarts)"
             )
+        out += of_row(r) if of_row else []
     return out
 
 

@@ -58,23 +58,7 @@ def paper_spec(
     bad = [c for c in (*transition_inputs, *emission_inputs) if c not in cats]
     if bad:
         raise FitError([f"input {c!r} is not one of {list(MODEL_INPUTS)}" for c in bad])
-    fixed = (Fixed({"robot_action": "ask"}, {"intervene": 1.0, "rely": 0.0}),) if "robot_action" in emission_inputs else ()
-    where = {}
-    if "complexity" in emission_inputs:
-        where["complexity"] = complexities[-1]
-    if "robot_action" in emission_inputs:
-        where["robot_action"] = "autonomous"
-    return IOHMMSpec(
-        levels=tuple(levels),
-        output="human_action",
-        output_categories=HUMAN_ACTIONS,
-        emission_inputs=tuple(emission_inputs),
-        transition_inputs=tuple(transition_inputs),
-        categories={c: cats[c] for c in (*transition_inputs, *emission_inputs)},
-        fixed_emissions=fixed,
-        order_by=(where, "rely"),
-        prior=float(prior),
-    )
+    return _human_action_spec(levels, emission_inputs, transition_inputs, cats, prior)
 
 
 def preset_spec(
@@ -248,7 +232,18 @@ def general_spec(
     if isinstance(levels, int):
         levels = level_names(levels)
     cats = dict(categories) if categories is not None else input_levels(frame, (*emission_inputs, *transition_inputs))
-    cats = {c: tuple(v) for c, v in cats.items()}
+    return _human_action_spec(levels, emission_inputs, transition_inputs, {c: tuple(v) for c, v in cats.items()}, prior)
+
+
+def _human_action_spec(
+    levels: Sequence[str],
+    emission_inputs: Sequence[str],
+    transition_inputs: Sequence[str],
+    cats: Mapping[str, tuple[str, ...]],
+    prior: float,
+) -> IOHMMSpec:
+    """The IOHMM of the human action on these inputs (levels ``cats``): P(intervene | ask) = 1 when
+    emissions depend on the robot action; levels named by P(rely) without asking in the last complexity."""
     fixed: tuple[Fixed, ...] = ()
     if "robot_action" in emission_inputs and "ask" in cats["robot_action"]:
         fixed = (Fixed({"robot_action": "ask"}, {"intervene": 1.0, "rely": 0.0}),)

@@ -10,12 +10,16 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .bootstrap import run_replicates
+from .bootstrap import resample, run_replicates
 from .mixture import MixtureFit, fit_mixture, general_types
 from .mixture_em import PARTS, MixtureParams
+from .options import FitOptions
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec
 from .trust_iohmm import to_iohmm_model, to_trust_model
+
+#: a types' bootstrap replicate's refit: from the estimate and 2 random starts, to a relative tolerance of 1e-6
+TYPE_REFITS = FitOptions(restarts=2, tol=1e-6)
 
 
 @dataclass(frozen=True)
@@ -28,24 +32,17 @@ class _TypeReplicate:
     differ: tuple[str, ...]
     params: MixtureParams
     seed: np.random.SeedSequence
-    restarts: int
-    tol: float
-    max_iter: int
+    options: FitOptions  # the refit's search (its seed: the replicate's)
 
     def run(self) -> np.ndarray:
         """The refitted types' TrustModel cells and weights, types matched to the estimate's."""
-        rng = np.random.default_rng(self.seed)
-        n = self.seqs.n_participants
-        sample = self.seqs.subset(rng.integers(0, n, n))
+        sample, options = resample(self.seqs, self.seed, self.options)
         fit = fit_mixture(
             sample,
             self.spec,
             self.types,
-            restarts=self.restarts,
-            seed=self.seed.spawn(1)[0],
+            options,
             differ=self.differ,
-            tol=self.tol,
-            max_iter=self.max_iter,
             init=[self.params],
             pooled=self.params.type_params(0),
         )
@@ -82,20 +79,19 @@ class TypeIntervals:
 def bootstrap_types(
     fit: MixtureFit,
     replicates: int,
-    seed: int = 0,
-    restarts: int = 2,
-    n_jobs: int | None = None,
+    options: FitOptions = TYPE_REFITS,
     level: float = 0.95,
     progress: Callable[[int, int], None] | None = None,
 ) -> TypeIntervals:
     """Intervals at ``level`` for the types of ``fit`` over ``replicates`` resamples of the participants;
-    each replicate refits from the estimate and ``restarts`` seeded starts.  Replicate b uses the b-th
-    child of the seed, whatever the number of processes (``n_jobs``, default all cores)."""
+    each replicate refits from the estimate and ``options.restarts`` seeded starts (:class:`~.options.FitOptions`).
+    Replicate b uses the b-th child of ``options.seed``, whatever the number of processes
+    (``options.n_jobs``, default all cores)."""
     if replicates < 1:
         raise FitError([f"the bootstrap needs at least one replicate, got {replicates}"])
-    children = np.random.SeedSequence([seed, 1]).spawn(replicates)
-    jobs = [_TypeReplicate(fit.seqs, fit.spec, fit.n_types, fit.differ, fit.params, ch, restarts, 1e-6, 1000) for ch in children]
-    n_jobs = n_jobs or os.cpu_count() or 1
+    children = np.random.SeedSequence([options.seed_number, 1]).spawn(replicates)
+    jobs = [_TypeReplicate(fit.seqs, fit.spec, fit.n_types, fit.differ, fit.params, ch, options) for ch in children]
+    n_jobs = options.n_jobs or os.cpu_count() or 1
     results: dict[int, np.ndarray] = {}
 
     def done(i: int, res: np.ndarray) -> None:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -20,11 +21,15 @@ import pandas as pd
 
 from .mixture import MixtureFit, fit_mixture, split_type_starts, types_spec
 from .mixture_em import MixtureParams, MixtureWorkspace
-from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, HeldOutComparison, smooth_zero_rows
+from .options import FitOptions
+from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, HeldOutComparison, comparison_warnings, smooth_zero_rows
 from .sequences import Sequences, encode
 from .spec import FitError
 
 log = logging.getLogger(__name__)
+
+#: the fits of a selection of types: 10 starts each, to a relative tolerance of 1e-6, on one thread
+TYPE_SELECTION = FitOptions(tol=1e-6, n_jobs=1)
 
 
 def heldout_mixture_loglik(test: Sequences, fit: MixtureFit) -> float:
@@ -54,13 +59,9 @@ def select_types(
     frame: pd.DataFrame,
     types: Sequence[int] = (1, 2, 3, 4),
     folds: int = 5,
-    restarts: int = 10,
-    seed: int = 0,
+    options: FitOptions = TYPE_SELECTION,
     differ: str | Sequence[str] = "all",
     prior: float = 0.0,
-    tol: float = 1e-6,
-    max_iter: int = 1000,
-    n_jobs: int | None = 1,
     progress: Callable[[str, int, int], None] | None = None,
     widen: bool = False,
     **spec_options: Any,
@@ -90,14 +91,10 @@ def select_types(
             data,
             spec,
             M,
-            restarts=restarts,
-            seed=ss,
+            replace(options, seed=ss),
             differ=differ,
-            tol=tol,
-            max_iter=max_iter,
             pooled=pooled[slot].params.type_params(0) if slot in pooled else None,
             init=init,
-            n_jobs=n_jobs,
         )
         previous[slot] = fit
         if M == 1:
@@ -107,7 +104,7 @@ def select_types(
     def extra(full: MixtureFit) -> dict[str, Any]:
         return {"weights": full.weights.tolist(), "empty_types": full.empty_types}
 
-    comparison = HeldOutComparison("types", folds, seed, MAX_TYPES if widen else 0, progress)
+    comparison = HeldOutComparison("types", folds, options.seed_number, MAX_TYPES if widen else 0, progress)
     rows = comparison.run(seqs, types, one_fit, heldout_mixture_loglik, extra)
     for w in type_selection_warnings(rows):
         log.warning("%s", w)
@@ -120,24 +117,10 @@ MAX_TYPES = 12  # the most supervisor types select-types compares (the command's
 def type_selection_warnings(rows: Sequence[dict[str, Any]]) -> list[str]:
     """A best number of types at the largest compared, fits whose best only one start reached,
     and fits with empty types."""
-    out = []
-    if len(rows) > 1:
-        top = max(int(r["types"]) for r in rows)
-        low = min(int(r["types"]) for r in rows)
-        for key, what in (("best_heldout", "held-out log-likelihood"), ("best_bic", "BIC")):
-            if any(r[key] and r["types"] == top for r in rows):
-                more = (
-                    f"compare more with --types {low}..{top + 1}"
-                    if top < MAX_TYPES
-                    else f"{MAX_TYPES} is the most compared: read the choice as 'at least {top}'"
-                )
-                out.append(f"the best {what} is at {top} types, the largest compared: more types may fit better ({more})")
-    for r in rows:
-        if r["types"] > 1 and r.get("reached_best", 2) < 2:
-            out.append(
-                f"{r['types']} types: only 1 of {r['starts']} starts reached the best log-likelihood (within "
-                f"{BEST_TOLERANCE}); the maximum may not have been found (more --restarts)"
-            )
-        if r.get("empty_types"):
-            out.append(f"{r['types']} types: empty type(s) {', '.join(r['empty_types'])}: fewer types fit as well")
-    return out
+
+    def empty(r: dict[str, Any]) -> list[str]:
+        if not r.get("empty_types"):
+            return []
+        return [f"{r['types']} types: empty type(s) {', '.join(r['empty_types'])}: fewer types fit as well"]
+
+    return comparison_warnings(rows, "types", MAX_TYPES, "--types {low}..{next}", f" (within {BEST_TOLERANCE})", empty)

@@ -37,7 +37,7 @@ from ..data.cells import NAN_WORDS, DataError
 from ..model.core import TrustModel
 from ..vocab import EXPERIENCES
 from .iohmm import posteriors
-from .prediction import LEVEL, bootstrap_counts, chunks, filter_beliefs
+from .prediction import LEVEL, bootstrap_counts, chunks, filter_beliefs, percentile_interval
 from .sequences import encode
 from .spec import FitError
 from .trust_iohmm import from_trust_model
@@ -153,14 +153,6 @@ def correlations(x: np.ndarray, y: np.ndarray, w: np.ndarray) -> dict[str, np.nd
         "spearman": _weighted_pearson(_weighted_ranks(x, w), _weighted_ranks(y, w), w),
         "pearson": _weighted_pearson(x, y, w),
     }
-
-
-def _interval(values: np.ndarray) -> tuple[float, float]:
-    v = values[np.isfinite(values)]
-    if v.size == 0:
-        return float("nan"), float("nan")
-    lo, hi = np.percentile(v, [100 * (1 - LEVEL) / 2, 100 * (1 + LEVEL) / 2])
-    return float(lo), float(hi)
 
 
 # --------------------------------------------------------------------------- the report
@@ -351,7 +343,7 @@ def _correlations(values: dict[str, np.ndarray], ratings: np.ndarray, pcode: np.
             reps[name][scope] = boot
             corr[name][scope] = {}
             for method in METHODS:
-                lo, hi = _interval(boot[method])
+                lo, hi = percentile_interval(boot[method])
                 corr[name][scope][method] = {"estimate": float(point[method][0]), "lower": lo, "upper": hi, "n": len(a)}
     return corr, reps
 
@@ -366,7 +358,7 @@ def _differences(corr, reps) -> dict[str, dict[str, dict[str, dict[str, dict[str
             for scope in SCOPES:
                 diffs[m][base][scope] = {}
                 for method in METHODS:
-                    lo, hi = _interval(reps[m][scope][method] - reps[base][scope][method])
+                    lo, hi = percentile_interval(reps[m][scope][method] - reps[base][scope][method])
                     est = corr[m][scope][method]["estimate"] - corr[base][scope][method]["estimate"]
                     better = "neither"
                     if np.isfinite(lo) and np.isfinite(hi):

@@ -19,6 +19,7 @@ from .fit import fit_trust_model
 from .iohmm import fit_iohmm
 from .kernels import many_fits
 from .mixture import fit_types
+from .options import FitOptions
 from .sequences import encode
 from .trust_iohmm import preset_spec
 
@@ -54,9 +55,11 @@ def warm() -> float:
     # inside many_fits the E-steps run compiled on this log of fewer than kernels.COMPILE_MIN trials
     with many_fits():
         for compiled in (True, False):
-            fit_iohmm(seqs, spec, restarts=1, max_iter=5, compiled=compiled, n_jobs=1)
-        fit_trust_model(frame, restarts=1, max_iter=5, n_jobs=1, rating="rating", rating_levels=("1", "2", "3"))
-        fit_types(frame, 2, restarts=1, max_iter=5, n_jobs=1)
+            fit_iohmm(seqs, spec, options=FitOptions(restarts=1, max_iter=5, n_jobs=1), compiled=compiled)
+        fit_trust_model(
+            frame, options=FitOptions(restarts=1, max_iter=5, n_jobs=1), rating="rating", rating_levels=("1", "2", "3")
+        )
+        fit_types(frame, 2, options=FitOptions(restarts=1, max_iter=5, n_jobs=1))
     return time.perf_counter() - t
 
 

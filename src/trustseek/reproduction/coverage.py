@@ -8,6 +8,7 @@ import numpy as np
 
 from ..estimation.bootstrap import BOUNDARY
 from ..estimation.fit import fit_trust_model
+from ..estimation.options import FitOptions
 from ..model.core import TrustModel
 from ..simulation.designs import simulate_design
 
@@ -44,7 +45,9 @@ def coverage_study(
     lr: dict[str, int] = {}
     for d in range(datasets):
         df = simulate_design(model, n_participants, seed=int(np.random.SeedSequence([seed, 5, d]).generate_state(1)[0]))
-        res = fit_trust_model(df, restarts=restarts, seed=seed + d, bootstrap=bootstrap, n_jobs=n_jobs, tol=tol)
+        res = fit_trust_model(
+            df, options=FitOptions(restarts=restarts, seed=seed + d, tol=tol, n_jobs=n_jobs), bootstrap=bootstrap
+        )
         for c in res.cells():
             key = c["cell"]
             t = float(getattr(target, c["table"])[tuple(c["index"])])

@@ -40,6 +40,7 @@ import pandas as pd
 from ..errors import TrustseekError
 from ..estimation.fit import fit_trust_model
 from ..estimation.kernels import many_fits
+from ..estimation.options import FitOptions
 from ..estimation.result import FitResult
 from ..model.core import TrustModel
 from ..model.jsonfile import json_safe
@@ -134,7 +135,11 @@ def _fit(
     reproduction is many fits)."""
     with many_fits():
         return fit_trust_model(
-            frame[CANONICAL], preset="paper", restarts=restarts, seed=seed, bootstrap=bootstrap, n_jobs=n_jobs, progress=progress
+            frame[CANONICAL],
+            preset="paper",
+            options=FitOptions(restarts=restarts, seed=seed, n_jobs=n_jobs),
+            bootstrap=bootstrap,
+            progress=progress,
         )
 
 
@@ -167,27 +172,23 @@ def run_replicate(args: tuple[ReproduceConfig, int, np.random.SeedSequence]) -> 
     out["asks_low"] = bool((aware.ask_intervals() or {}).get("low"))
     out["agnostic"] = _agnostic_summary(agn)["action"]
     out["params"] = param_values(model)
-    small = crossover(
-        truth, task, [aware, agn], cfg.participants_2, counts=cfg.counts_2, seed=s2, record=False, belief_model=model
+    e2, e2l = (  # paper-sized, then large
+        _experiment2(crossover(truth, task, [aware, agn], n, counts=cfg.counts_2, seed=s, record=False, belief_model=model))
+        for n, s in ((cfg.participants_2, s2), (cfg.replicate_large_n, s3))
     )
-    e2 = _experiment2(small)
     out["median_aware"] = e2["median_aware"]
     out["median_agnostic"] = e2["median_agnostic"]
     out["median_diff_small"] = e2["median_difference"]
     out["wilcoxon_p_small"] = e2["wilcoxon"]["p_value"]
-    large = crossover(
-        truth, task, [aware, agn], cfg.replicate_large_n, counts=cfg.counts_2, seed=s3, record=False, belief_model=model
-    )
-    e2l = _experiment2(large)
     out["mean_diff_large"] = e2l["mean_difference"]
     out["share_better_large"] = e2l["share_aware_better"]
     out["median_diff_large"] = e2l["median_difference"]
     # cost of estimation: the same participants under the true model's policy
     true_pol = solve_policy(truth, task, cfg.belief_update, cfg.grid)
-    r_fit = simulate(truth, task, aware, cfg.replicate_large_n, counts=cfg.counts_2, seed=scost, record=False).by_policy()[AWARE]
-    r_true = simulate(truth, task, true_pol, cfg.replicate_large_n, counts=cfg.counts_2, seed=scost, record=False).by_policy()[
-        AWARE
-    ]
+    r_fit, r_true = (
+        simulate(truth, task, pol, cfg.replicate_large_n, counts=cfg.counts_2, seed=scost, record=False).by_policy()[AWARE]
+        for pol in (aware, true_pol)
+    )
     out["estimation_loss"] = float(np.mean(r_true - r_fit))
     return out
 

@@ -37,6 +37,7 @@ import pandas as pd
 
 from ..estimation.fit import fit_trust_model
 from ..estimation.mixture import fit_types
+from ..estimation.options import FitOptions
 from ..model.core import TrustModel
 from ..model.mixture import TypeMixture
 from ..model.presets import paper_conservative_mixture, paper_task
@@ -99,7 +100,7 @@ def _pooled_fit(mixture: TypeMixture, task: Task, participants: int, seed: int, 
     people of the mixture, one pooled model fitted to all of it."""
     sup = Supervisors.from_mixture(mixture, participants, rng=seed)
     frame = simulate_design(sup, participants, seed=seed, task=task)
-    fit = fit_trust_model(frame[list(TRIAL_COLUMNS)], preset="paper", restarts=restarts, seed=seed)
+    fit = fit_trust_model(frame[list(TRIAL_COLUMNS)], preset="paper", options=FitOptions(restarts=restarts, seed=seed))
     return fit.model, frame
 
 
@@ -108,7 +109,7 @@ def _fitted_types(frame: pd.DataFrame, restarts: int, seed: int) -> tuple[TypeMi
     the number with the lowest BIC (a one-type choice is the pooled structure's own fit)."""
     rows, fits = [], []
     for m in range(1, MAX_TYPES + 1):
-        fit = fit_types(frame[list(TRIAL_COLUMNS)], m, restarts=restarts, seed=seed)
+        fit = fit_types(frame[list(TRIAL_COLUMNS)], m, options=FitOptions(restarts=restarts, seed=seed))
         rows.append({"types": m, "loglik": float(fit.loglik), "bic": float(fit.bic)})
         fits.append(fit)
     best = min(range(len(rows)), key=lambda i: rows[i]["bic"])

@@ -7,7 +7,7 @@ meets every policy, one block each, in a counterbalanced order.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -107,7 +107,6 @@ def crossover(
     seed: int | np.random.SeedSequence = 0,
     record: bool = True,
     belief_model: TrustModel | None = None,
-    progress: Callable[[int], None] | None = None,
     compiled: bool = True,
 ) -> CrossoverSimulation:
     """The within-participant design of Section VI-B: every participant does one block per
@@ -152,7 +151,6 @@ def crossover(
             seed=group_seeds[g],
             record=record,
             participants=ids[idx],
-            progress=progress,
             compiled=compiled,
         )
         parts.append((idx, order, sim))

@@ -225,16 +225,16 @@ def _compiled_block(
         bel, sb, x = kernels.NO_BELIEF, (_EMPTY,) * 4, np.zeros(m)
     into = st.rec if st.record else {k: np.zeros((0, 0), dtype=np.int8) for k in RECORDED} | {"belief": np.zeros((0, 0))}
     offsets = np.zeros(m, dtype=np.int64) if st.poff is None else st.poff.astype(np.int64)
+    tables = (tab.p_int, tab.p_reliable, tab.trust_low, offsets)
+    records = (st.record, *(into[k] for k in ("complexity", "action", "human", "experience", "trust", "belief")))
     span = max(1, WINDOW // m)
     for t0 in range(0, T, span):  # the uniforms of ``span`` trials at a time
         t1 = min(T, t0 + span)
         upol = st.rng_pol.random((int(draws[t0:t1].sum()), m))  # = one random(m) per trial that draws
         u = st.rng_sup.random((t1 - t0, 3, m))  # = successive random((3, m))
         kernels.run_block(
-            sched[t0:t1], u, upol, draws[t0:t1], mode, act, bel, *sb, x, tab.p_int, tab.p_reliable, tab.trust_low,
-            offsets, st.trust, st.codes, st.t + t0, st.record,
-            into["complexity"], into["action"], into["human"], into["experience"], into["trust"], into["belief"],
-        )  # fmt: skip
+            sched[t0:t1], (u, upol, draws[t0:t1]), fast, (bel, *sb), x, tables, st.trust, st.codes, st.t + t0, records
+        )
     st.t += T
 
 
@@ -400,9 +400,7 @@ def simulate(
     trials: int | None = None,
     seed: int | np.random.SeedSequence = 0,
     record: bool = True,
-    belief_update: str | None = None,
     belief_model: TrustModel | None = None,
-    progress: Callable[[int], None] | None = None,
     compiled: bool = True,
 ) -> Simulation:
     """One block per participant under ``policy``.
@@ -421,5 +419,5 @@ def simulate(
         sched = schedule_iid(sup.n, trials, task.complexity_probs, np.random.default_rng(s_sched))
     else:
         raise SimulationError(["give either counts (trials per complexity, in random order) or trials (i.i.d. complexities)"])
-    block = Block(policy, sched, belief_update=belief_update, belief_model=belief_model)
-    return run(task, sup, [block], seed=s_run, record=record, progress=progress, compiled=compiled)
+    block = Block(policy, sched, belief_model=belief_model)
+    return run(task, sup, [block], seed=s_run, record=record, compiled=compiled)

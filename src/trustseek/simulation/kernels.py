@@ -35,32 +35,25 @@ BAYES = 2
 @njit(cache=True, nogil=True)
 def run_block(
     sched,  # (T, m) int64 complexity indices
-    u,  # (T, 3, m) the supervisors' uniforms: human action, experience, next trust
-    upol,  # (D, m) the policy's uniforms, one row per trial that draws (FIXED mode)
-    draws,  # (T,) bool: whether trial t draws a row of upol
-    mode,  # THRESHOLD or FIXED
-    act,  # (N,) bounds (THRESHOLD) or ask probabilities (FIXED)
-    belief,  # NO_BELIEF, PAPER or BAYES
-    a0,  # ScalarBelief tables (unused without a belief)
-    slope,
-    lik_high,
-    lik_low,
+    uniforms,  # (u, upol, draws), see below
+    policy,  # (mode, act): THRESHOLD or FIXED; (N,) bounds (THRESHOLD) or ask probabilities (FIXED)
+    beliefs,  # (belief, a0, slope, lik_high, lik_low): NO_BELIEF, PAPER or BAYES, the ScalarBelief tables
     x,  # (m,) the robot's belief, updated in place
-    p_int,  # the engine's flat tables (two trust levels)
-    p_reliable,
-    trust_low,
-    poff,  # (m,) parameter-row offsets (zeros for a pooled population)
+    tables,  # (p_int, p_reliable, trust_low, poff): the engine's flat tables, (m,) parameter-row offsets
     trust,  # (m,) int64 hidden trust, updated in place
     codes,  # (T_total, m) int8 outcome codes, rows t0.. written
     t0,
-    record,
-    rc,  # (T_total, m) records (written when ``record``)
-    ra,
-    rh,
-    re,
-    rt,
-    rb,
+    records,  # (record, rc, ra, rh, re, rt, rb): the (T_total, m) records, written when ``record``
 ):
+    """One block of ``sched``'s trials.  ``uniforms``: u (T, 3, m), the supervisors' uniforms
+    (human action, experience, next trust); upol (D, m), the policy's, one row per trial that
+    draws (FIXED mode); draws (T,) bool, whether trial t draws a row of upol.  The tables of the
+    belief are unused without one; ``poff`` is zeros for a pooled population."""
+    u, upol, draws = uniforms
+    mode, act = policy
+    belief, a0, slope, lik_high, lik_low = beliefs
+    p_int, p_reliable, trust_low, poff = tables
+    record, rc, ra, rh, re, rt, rb = records
     T, m = sched.shape
     k = 0
     for t in range(T):

@@ -19,7 +19,6 @@ from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from ..model.task import Task
 from .populations import SimulationError
 
-EXTRA_COLUMNS = ("block", "policy", "true_trust", "belief", "reward")
 SUMMARY_COLUMNS = (
     "participant",
     "block",
@@ -83,12 +82,6 @@ class Simulation:
             v = self.summary_arrays[k].reshape(-1)
             out[k] = v if k in ("cumulative_reward", "discounted_reward") else v.astype(np.int64)
         return pd.DataFrame(out, columns=list(SUMMARY_COLUMNS))
-
-    def totals(self) -> pd.DataFrame:
-        """One row per participant, summed over blocks."""
-        s = self.summary()
-        cols = list(SUMMARY_COLUMNS[3:])
-        return s.groupby("participant", sort=False)[cols].sum().reset_index()
 
     def reward_matrix(self, key: str = "cumulative_reward") -> np.ndarray:
         """(n, n_blocks) array of a summary quantity."""

@@ -1,0 +1,62 @@
+"""How a fit searches: one set of options shared by every fit, selection and bootstrap."""
+
+from __future__ import annotations
+
+import operator
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, cast
+
+if TYPE_CHECKING:
+    import numpy as np
+
+__all__ = ["DEFAULTS", "SERIAL", "FitOptions", "counting"]
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """The search of an EM fit, apart from the model it fits.
+
+    ``restarts`` random starts (the best run is kept; ``None`` where a function chooses by the
+    model's free parameters, as :func:`~.selection.select_levels`), drawn from ``seed`` (an
+    integer or a :class:`numpy.random.SeedSequence`); each run stops when the relative change of
+    its objective is below ``tol``, or after ``max_iter`` E-steps; ``n_jobs`` threads share the
+    E-steps (processes for a bootstrap; ``None``: all cores).  Results do not depend on ``n_jobs``."""
+
+    restarts: int | None = 10
+    seed: int | np.random.SeedSequence = 0
+    tol: float = 1e-8
+    max_iter: int = 1000
+    n_jobs: int | None = None
+
+    @property
+    def starts(self) -> int:
+        """The number of random starts (``restarts``, which must be set)."""
+        if self.restarts is None:
+            raise ValueError("restarts is None: this fit needs a number of random starts")
+        return self.restarts
+
+    @property
+    def seed_number(self) -> int:
+        """``seed`` as an integer (the fits that derive several seeds from it take no SeedSequence)."""
+        return operator.index(cast("int", self.seed))
+
+
+#: the options' defaults: 10 restarts from seed 0, to a relative tolerance of 1e-8, on all cores
+DEFAULTS = FitOptions()
+#: the options' defaults on one thread (the default of the fits that run inside others)
+SERIAL = FitOptions(n_jobs=1)
+
+
+def counting(progress: Callable[[int, int], None] | None, total: int) -> Callable[..., None]:
+    """A callback (of any arguments: a restart's, a replicate's) that counts its calls and reports
+    ``progress(done, total)`` after each."""
+    done = 0
+
+    def tick(*_: Any) -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total)
+
+    return tick
