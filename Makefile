@@ -12,9 +12,9 @@ reproduce: setup
 # compile into their cache, once, on the other core: trustseek.estimation.warm, trustseek.design.warm),
 # then every test; one BLAS thread per test worker, so that the two workers do not oversubscribe the cores.
 # The warm step loads the cache in about 3 s of CPU once it is filled; on a clean clone it compiles
-# (about 75 s of CPU, the compiled fit included) on the core the static checks leave idle, where
-# without it both test workers would compile the same kernels on their first compiled fit, on the
-# tests' critical path.
+# (45-47 s of CPU, nearly all of it the compiled fit; the static checks take about 30 s) on the core
+# the static checks leave idle, where without it both test workers would compile the same kernels
+# on their first compiled fit, on the tests' critical path.
 test: setup
 	@(.venv/bin/python -m trustseek.estimation.warm && .venv/bin/python -m trustseek.design.warm) & warm=$$!; status=0; \
 	  $(MAKE) --no-print-directory lint || status=$$?; \
