@@ -8,12 +8,6 @@ numba.  On that first call every function decorated so far is handed to numba at
 module attributes that named the stand-ins name numba's functions from then on (compiled code
 calls compiled code: numba reads those attributes when it compiles a caller).
 
-The compiled code is optimised at LLVM's level 1 (:data:`OPT_LEVEL`; numba's default is 3), unless
-``NUMBA_OPT`` is set in the environment: level 1 compiles in two thirds of the time (the fit's
-kernels in a fresh environment: 39 s of CPU against 58 s) and runs as fast (the fit within 5 %, the
-simulation 10-15 % faster), with the same numbers bit for bit (without fast-math no level may
-reorder floating-point operations).
-
 numba is a declared dependency; the fallback keeps the compiled modules importable (and their
 numpy or Python paths usable) on a platform without a numba wheel.  ``AVAILABLE`` says which.
 """
@@ -21,17 +15,14 @@ numpy or Python paths usable) on a platform without a numba wheel.  ``AVAILABLE`
 from __future__ import annotations
 
 import importlib.util
-import os
 import sys
 import threading
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-__all__ = ["AVAILABLE", "OPT_LEVEL", "load", "loaded", "njit", "python"]
+__all__ = ["AVAILABLE", "load", "loaded", "njit", "python"]
 
 AVAILABLE = importlib.util.find_spec("numba") is not None  # numba is a declared dependency
-
-OPT_LEVEL = "1"  # numba's NUMBA_OPT for this package's compiled code, unless the environment sets it
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -72,8 +63,6 @@ def _load() -> None:
     stand-in at numba's function."""
     global _LOADED
     with _LOCK:
-        if "numba" not in sys.modules:  # numba reads its optimisation level once, on import
-            os.environ.setdefault("NUMBA_OPT", OPT_LEVEL)
         import numba
 
         done = {id(lazy): lazy for lazy in _PENDING}
