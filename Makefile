@@ -5,6 +5,15 @@
 setup:
 	@bash scripts/setup.sh
 
+# make reproduce and make test compile their numba kernels at LLVM's level 1 (NUMBA_OPT), in a numba
+# cache of their own: the same numbers bit for bit, compiled in about three quarters of the CPU time
+# of numba's default level 3 (the fit's kernels 45-47 s against 57-59 s; a reproduction in a fresh
+# environment 84 s against 115-121 s), but the compiled fit runs 7-14 % slower, so the package's own
+# cache (every fit outside these two commands) keeps level 3.
+MAKE_NUMBA_CACHE := $(CURDIR)/.numba-make-cache
+reproduce test: export NUMBA_OPT := 1
+reproduce test: export NUMBA_CACHE_DIR := $(MAKE_NUMBA_CACHE)
+
 reproduce: setup
 	.venv/bin/trustseek reproduce --out report
 
@@ -14,12 +23,7 @@ reproduce: setup
 # The warm step loads the cache in about 3 s of CPU once it is filled; on a clean clone it compiles
 # on the core the static checks leave idle (about 33 s of CPU with empty caches), where without it
 # both test workers would compile the same kernels on their first compiled fit, on the tests'
-# critical path.  The tests' compiled code is optimised at LLVM's level 1 (NUMBA_OPT), in a numba
-# cache of their own: it compiles in 45-47 s of CPU against 57-59 s at numba's default level 3, with
-# the same numbers bit for bit, but runs the compiled fit 7-14 % slower, so the package's own cache
-# (and every fit outside the tests) keeps level 3.
-test: export NUMBA_OPT := 1
-test: export NUMBA_CACHE_DIR := $(CURDIR)/.numba-test-cache
+# critical path (at level 1, in the cache above).
 test: setup
 	@(.venv/bin/python -m trustseek.estimation.warm && .venv/bin/python -m trustseek.design.warm) & warm=$$!; status=0; \
 	  $(MAKE) --no-print-directory lint || status=$$?; \
