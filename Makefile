@@ -7,8 +7,8 @@ setup:
 
 # make reproduce and make test compile their numba kernels at LLVM's level 1 (NUMBA_OPT), in a numba
 # cache of their own: the same numbers bit for bit, compiled in about three quarters of the CPU time
-# of numba's default level 3 (the warm step 41-47 s against 57-64 s; a reproduction in a fresh
-# environment 84 s against 115-121 s), but the compiled fit runs 7-14 % slower, so the package's own
+# of numba's default level 3 (the warm step 41-48 s against 57-64 s; a reproduction in a fresh
+# environment 65-84 s against 115-121 s), but the compiled fit runs 7-14 % slower, so the package's own
 # cache (every fit outside these two commands) keeps level 3.
 MAKE_NUMBA_CACHE := $(CURDIR)/.numba-make-cache
 reproduce test: export NUMBA_OPT := 1
