@@ -57,7 +57,7 @@ trial_rows = st.lists(
 )
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=50, deadline=None)
 @given(rows=trial_rows, shuffle=st.randoms(use_true_random=False))
 def test_never_estimated_is_the_row_by_row_answer(rows, shuffle):
     trials: dict[str, int] = {}
