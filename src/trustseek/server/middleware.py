@@ -105,7 +105,43 @@ EXPERIMENTER_BODY_LIMIT = 16 * 1024 * 1024
 _WRITES = frozenset({"POST", "PUT", "PATCH", "DELETE"})
 
 
-async def _refuse(send: Send, status: int, detail: str | list[dict[str, Any]], headers: tuple = ()) -> None:
+class BodyTooLarge(Exception):
+    """A request's body went past the limit it was read with."""
+
+
+async def read_body(receive: Receive, limit: int) -> bytes | None:
+    """A request's whole body, read from ``receive`` (None when the client went away first);
+    ``BodyTooLarge`` past ``limit`` bytes, before more is read."""
+    chunks, size = [], 0
+    while True:
+        message = await receive()
+        if message["type"] != "http.request":
+            return None
+        chunk = message.get("body", b"")
+        size += len(chunk)
+        if size > limit:
+            raise BodyTooLarge
+        chunks.append(chunk)
+        if not message.get("more_body"):
+            return b"".join(chunks)
+
+
+def replaying(body: bytes, receive: Receive) -> Receive:
+    """A ``receive`` for the next layer that gives the body read already, then the connection's
+    own messages (a disconnect)."""
+    given = False
+
+    async def replay() -> Message:
+        nonlocal given
+        if not given:
+            given = True
+            return {"type": "http.request", "body": body, "more_body": False}
+        return await receive()
+
+    return replay
+
+
+async def refuse(send: Send, status: int, detail: str | list[dict[str, Any]], headers: tuple = ()) -> None:
     body = json.dumps({"detail": detail}).encode()
     head = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode()), *headers]
     await send({"type": "http.response.start", "status": status, "headers": head})
@@ -176,7 +212,7 @@ class BodyGuard:
         if scope["type"] != "http" or not scope.get("path", "").startswith("/api/"):
             return await self.app(scope, receive, send)
         if "\x00" in scope["path"] or b"%00" in scope.get("query_string", b""):
-            return await _refuse(send, 400, "the path or the query holds a NUL character (%00): text may not contain NUL")
+            return await refuse(send, 400, "the path or the query holds a NUL character (%00): text may not contain NUL")
         if scope.get("method") not in _WRITES:
             return await self.app(scope, receive, send)
         state = scope["app"].state
@@ -184,7 +220,7 @@ class BodyGuard:
         scheme, _, token = headers.get(b"authorization", b"").decode("latin-1").partition(" ")
         token = token.strip()
         if scheme.lower() != "bearer" or not token:
-            return await _refuse(
+            return await refuse(
                 send, 401, "missing token: send 'Authorization: Bearer <token>'", ((b"www-authenticate", b"Bearer"),)
             )
         if secrets.compare_digest(token.encode(), state.token.encode()):
@@ -194,35 +230,21 @@ class BodyGuard:
         else:
             path = scope["path"]
             on_session = path.startswith(("/api/sessions/", "/api/deploy/sessions/"))
-            return await _refuse(
+            return await refuse(
                 send, 401 if on_session else 403, "unknown session token" if on_session else "wrong experimenter token"
             )
         declared = headers.get(b"content-length")
         if declared is not None and (not declared.isdigit() or int(declared) > limit):
-            return await _refuse(send, 413, f"the request body must be at most {limit} bytes")
-        chunks, size = [], 0
-        while True:
-            message = await receive()
-            if message["type"] != "http.request":  # the client went away
-                return
-            size += len(message.get("body", b""))
-            if size > limit:
-                return await _refuse(send, 413, f"the request body must be at most {limit} bytes")
-            chunks.append(message.get("body", b""))
-            if not message.get("more_body"):
-                break
-        body, replayed = b"".join(chunks), False
+            return await refuse(send, 413, f"the request body must be at most {limit} bytes")
+        try:
+            body = await read_body(receive, limit)
+        except BodyTooLarge:
+            return await refuse(send, 413, f"the request body must be at most {limit} bytes")
+        if body is None:  # the client went away
+            return
         problem = json_body_problem(headers, body)
         if problem is not None:
             # FastAPI would answer a body it cannot decode with a 400 outside the documented
             # refusals; it is a malformed body like any other invalid JSON: 422
-            return await _refuse(send, *problem)
-
-        async def replay() -> Message:
-            nonlocal replayed
-            if not replayed:
-                replayed = True
-                return {"type": "http.request", "body": body, "more_body": False}
-            return await receive()
-
-        await self.app(scope, replay, send)
+            return await refuse(send, *problem)
+        await self.app(scope, replaying(body, receive), send)

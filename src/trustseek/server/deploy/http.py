@@ -38,7 +38,18 @@ from typing import Any
 
 from ..auth import Caller, caller_for_token
 from ..errors import Refused
-from ..middleware import SESSION_BODY_LIMIT, ASGIApp, Message, Receive, Scope, Send, status_of
+from ..middleware import (
+    SESSION_BODY_LIMIT,
+    ASGIApp,
+    BodyTooLarge,
+    Receive,
+    Scope,
+    Send,
+    read_body,
+    refuse,
+    replaying,
+    status_of,
+)
 from ..schemas import MAX_TRIAL
 from ..sessions import trial_dict
 from .service import deploy_decide, deploy_observe
@@ -169,15 +180,12 @@ class DeployFront:
         caller = _caller(scope, sid)
         if caller is None:
             return await self.app(scope, receive, send)  # nothing read: the guard and the routes answer
-        chunks = []
-        while True:
-            message = await receive()
-            if message["type"] != "http.request":  # the client went away
-                return
-            chunks.append(message.get("body", b""))
-            if not message.get("more_body"):
-                break
-        body = b"".join(chunks)
+        try:
+            body = await read_body(receive, SESSION_BODY_LIMIT)  # its declared length is within the limit
+        except BodyTooLarge:  # more than declared: the HTTP server refuses such a body before this
+            return await refuse(send, 413, f"the request body must be at most {SESSION_BODY_LIMIT} bytes")
+        if body is None:  # the client went away
+            return
         args = _args(what, body)
         if args is not None:
             status, out = await answer(scope["app"].state, caller.id, what, args)
@@ -188,16 +196,7 @@ class DeployFront:
             await send({"type": "http.response.start", "status": status, "headers": head})
             await send({"type": "http.response.body", "body": out})
             return
-        replayed = False
-
-        async def replay() -> Message:
-            nonlocal replayed
-            if not replayed:
-                replayed = True
-                return {"type": "http.request", "body": body, "more_body": False}
-            return await receive()
-
-        await self.app(scope, replay, send)
+        await self.app(scope, replaying(body, receive), send)
 
 
 def _args(what: str, raw: bytes) -> Args | None:
