@@ -105,13 +105,9 @@ EXPERIMENTER_BODY_LIMIT = 16 * 1024 * 1024
 _WRITES = frozenset({"POST", "PUT", "PATCH", "DELETE"})
 
 
-class BodyTooLarge(Exception):
-    """A request's body went past the limit it was read with."""
-
-
 async def read_body(receive: Receive, limit: int) -> bytes | None:
     """A request's whole body, read from ``receive`` (None when the client went away first);
-    ``BodyTooLarge`` past ``limit`` bytes, before more is read."""
+    ``TooLarge`` past ``limit`` bytes, before more is read."""
     chunks, size = [], 0
     while True:
         message = await receive()
@@ -120,7 +116,7 @@ async def read_body(receive: Receive, limit: int) -> bytes | None:
         chunk = message.get("body", b"")
         size += len(chunk)
         if size > limit:
-            raise BodyTooLarge
+            raise TooLarge(f"the request body must be at most {limit} bytes")
         chunks.append(chunk)
         if not message.get("more_body"):
             return b"".join(chunks)
@@ -238,8 +234,8 @@ class BodyGuard:
             return await refuse(send, 413, f"the request body must be at most {limit} bytes")
         try:
             body = await read_body(receive, limit)
-        except BodyTooLarge:
-            return await refuse(send, 413, f"the request body must be at most {limit} bytes")
+        except TooLarge as exc:
+            return await refuse(send, status_of(exc), exc.message)
         if body is None:  # the client went away
             return
         problem = json_body_problem(headers, body)

@@ -37,11 +37,10 @@ from collections.abc import Callable
 from typing import Any
 
 from ..auth import Caller, caller_for_token
-from ..errors import Refused
+from ..errors import Refused, TooLarge
 from ..middleware import (
     SESSION_BODY_LIMIT,
     ASGIApp,
-    BodyTooLarge,
     Receive,
     Scope,
     Send,
@@ -182,8 +181,8 @@ class DeployFront:
             return await self.app(scope, receive, send)  # nothing read: the guard and the routes answer
         try:
             body = await read_body(receive, SESSION_BODY_LIMIT)  # its declared length is within the limit
-        except BodyTooLarge:  # more than declared: the HTTP server refuses such a body before this
-            return await refuse(send, 413, f"the request body must be at most {SESSION_BODY_LIMIT} bytes")
+        except TooLarge as exc:  # more than declared: the HTTP server refuses such a body before this
+            return await refuse(send, status_of(exc), exc.message)
         if body is None:  # the client went away
             return
         args = _args(what, body)
