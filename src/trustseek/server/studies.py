@@ -23,8 +23,9 @@ study, so a study keeps behaving identically whatever the code later computes.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 import numpy as np
 from pydantic import BaseModel, Field, field_validator, model_validator
@@ -39,6 +40,8 @@ from ..policies.scheduling import SCHEDULE
 from ..solvers import policy_from_spec
 from .cache import Bounded, StudyCaches
 from .schemas import STRICT, check_preset
+
+_Spec = TypeVar("_Spec", Task, TrustModel)
 
 MAX_TRIALS_PER_BLOCK = 1000
 MAX_GRID = 20001  # the largest belief grid a study may ask the server to solve
@@ -211,26 +214,23 @@ class StudyIn(BaseModel):
         return check_preset(v, info.field_name)
 
 
-def _unknown_preset(field: str, spec: str, presets) -> ConfigError:
-    return ConfigError([f"unknown {field} preset {spec!r}; presets: {sorted(presets)}, or give the JSON object"])
+def _from_spec(field: str, spec: str | dict, presets: dict[str, Callable[[], _Spec]], cls: type[_Spec]) -> _Spec:
+    """A preset by name or the JSON object of a ``field`` (``task`` or ``model``), or a
+    ``ConfigError`` that says what is wrong."""
+    if isinstance(spec, str) and spec not in presets:
+        raise ConfigError([f"unknown {field} preset {spec!r}; presets: {sorted(presets)}, or give the JSON object"])
+    try:
+        return presets[spec]() if isinstance(spec, str) else cls.from_dict(spec, field)
+    except ModelError as exc:
+        raise ConfigError(exc.lines()) from None
 
 
 def load_task_spec(spec: str | dict) -> Task:
-    if isinstance(spec, str) and spec not in TASK_PRESETS:
-        raise _unknown_preset("task", spec, TASK_PRESETS)
-    try:
-        return TASK_PRESETS[spec]() if isinstance(spec, str) else Task.from_dict(spec, "task")
-    except ModelError as exc:
-        raise ConfigError(exc.lines()) from None
+    return _from_spec("task", spec, TASK_PRESETS, Task)
 
 
 def load_model_spec(spec: str | dict) -> TrustModel:
-    if isinstance(spec, str) and spec not in MODEL_PRESETS:
-        raise _unknown_preset("model", spec, MODEL_PRESETS)
-    try:
-        return MODEL_PRESETS[spec]() if isinstance(spec, str) else TrustModel.from_dict(spec, "model")
-    except ModelError as exc:
-        raise ConfigError(exc.lines()) from None
+    return _from_spec("model", spec, MODEL_PRESETS, TrustModel)
 
 
 def resolve_policy(
