@@ -44,6 +44,14 @@ def _db(request: Request, caller: Caller):
     return session_db(request.app.state, caller.preview)
 
 
+def _locked(db, caller: Caller) -> tuple[Session, dict]:
+    """The caller's session, locked for an update that depends on its state, and its study's
+    configuration; refused when its link is revoked."""
+    row = lock(db, caller.id)
+    _not_revoked(row)
+    return row, study_config(db, str(row.study_id))
+
+
 def _row(db, caller: Caller) -> Session:
     row = db.get(Session, caller.id)
     if row is None:  # a preview forgotten after newer ones (preview.MAX_PREVIEWS)
@@ -125,9 +133,7 @@ def get_state(session_id: str, request: Request, s: Caller = Depends(require_ses
 def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depends(require_session)):
     _study_session(s)
     with _db(request, s) as db:
-        row = lock(db, s.id)
-        _not_revoked(row)
-        cfg = study_config(db, str(row.study_id))
+        row, cfg = _locked(db, s)
         started = row.status == "new"
         if started:
             why = refusal(db, row)
@@ -169,9 +175,7 @@ def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Dep
 def post_quiz(session_id: str, body: QuizIn, request: Request, s: Caller = Depends(require_session)):
     _study_session(s)
     with _db(request, s) as db:
-        row = lock(db, s.id)
-        _not_revoked(row)
-        cfg = study_config(db, str(row.study_id))
+        row, cfg = _locked(db, s)
         due = quiz_due(row, cfg)
         done = (row.quiz or {}).get("attempts", [])
         if body.attempt <= len(done):  # a repeat of a stored attempt (a retry after a lost answer)
