@@ -115,6 +115,12 @@ def _scheduled(pol: Any, task: Task, belief, complexity: str | None, remaining, 
         raise NotAllowed("; ".join(exc.problems) if isinstance(exc, PolicyError) else str(exc)) from None
 
 
+def _decision(n: int, complexity: Any, action: Any, belief: Any, committed: bool = False) -> dict[str, Any]:
+    """``decide``'s answer: trial ``n``'s complexity and robot action, the belief they were
+    decided at, and whether the trial is committed already."""
+    return {"trial": n, "complexity": complexity, "robot_action": action, "belief": belief, "committed": committed}
+
+
 def deploy_decide(
     store: Statements,
     plans: Plans,
@@ -139,25 +145,13 @@ def deploy_decide(
     if old is not None:
         if complexity is not None and old.complexity != complexity:
             raise Conflict(f"trial {n} was committed with complexity {old.complexity!r}, not {complexity!r}")
-        return {
-            "trial": n,
-            "complexity": old.complexity,
-            "robot_action": old.robot_action,
-            "belief": old.belief,
-            "committed": True,
-        }
+        return _decision(n, old.complexity, old.robot_action, old.belief, committed=True)
     if n != s.trials_done + 1:
         raise Conflict(f"trial {n} is not the next trial; the next trial is {s.trials_done + 1}")
     if s.pending_trial == n:
         if complexity is not None and s.pending_complexity != complexity:
             raise Conflict(f"trial {n} was already decided for complexity {s.pending_complexity!r}, not {complexity!r}")
-        return {
-            "trial": n,
-            "complexity": s.pending_complexity,
-            "robot_action": s.pending_action,
-            "belief": p_high(s.belief, plan.n_trust),
-            "committed": False,
-        }
+        return _decision(n, s.pending_complexity, s.pending_action, p_high(s.belief, plan.n_trust))
     load = lambda: store.policy(plan.sha)  # noqa: E731
     if remaining is None and plan.kind == SchedulePolicy.kind:
         raise NotAllowed("a schedule policy needs the remaining items: post remaining (per complexity)")
@@ -168,13 +162,7 @@ def deploy_decide(
         assert complexity is not None
         action = plan.decide(load, s.belief, s.seed, n, complexity)
     store.decided(session_id, n, complexity, action, utcnow())
-    return {
-        "trial": n,
-        "complexity": complexity,
-        "robot_action": action,
-        "belief": p_high(s.belief, plan.n_trust),
-        "committed": False,
-    }
+    return _decision(n, complexity, action, p_high(s.belief, plan.n_trust))
 
 
 def deploy_observe(
