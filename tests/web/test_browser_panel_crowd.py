@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import asyncio
 import io
-import json
 from collections import Counter
 from pathlib import Path
 from urllib.parse import urlsplit
@@ -22,7 +21,6 @@ import pytest
 
 from server_checks import database_rows
 from test_browser import artifacts_dir
-
 from trustseek.client import Client
 from trustseek.server.app import STATIC
 from trustseek.testing.browser import CHROMIUM, CHROMIUM_ARGS
@@ -77,26 +75,28 @@ async def next_phase(page) -> str:
     return await page.evaluate("document.body.dataset.phase")
 
 
+#: what a participant answers on each form: the choice to tick (if any) and the button that sends it
+FORMS = {
+    "consent": ("#agree", "#consent-btn"),
+    "instructions": (None, "#start-btn"),
+    "quiz": ("input[name='quiz-q'][value='0']", "#quiz-btn"),
+    "questionnaire": ("input[name='q-attn'][value='3']", "#questionnaire-btn"),
+}
+
+
 async def step(page, phase: str) -> None:
     """Answer what the page asks in ``phase`` and wait until it has moved on."""
-    if phase == "consent":
-        await page.check("#agree")
-        await page.click("#consent-btn")
-        await page.wait_for_function("document.body.dataset.phase !== 'consent'", timeout=30000)
-    elif phase == "instructions":
-        await page.click("#start-btn")
-        await page.wait_for_function("document.body.dataset.phase !== 'instructions'", timeout=30000)
-    elif phase == "quiz":
-        await page.check("input[name='quiz-q'][value='0']")
-        await page.click("#quiz-btn")
-        await page.wait_for_function("document.body.dataset.phase !== 'quiz'", timeout=30000)
-    elif phase == "questionnaire":
-        await page.check("input[name='q-attn'][value='3']")
-        await page.click("#questionnaire-btn")
-        await page.wait_for_function("document.body.dataset.phase !== 'questionnaire'", timeout=30000)
+    if phase in FORMS:
+        choice, button = FORMS[phase]
+        if choice is not None:
+            await page.check(choice)
+        await page.click(button)
+        await page.wait_for_function(f"document.body.dataset.phase !== '{phase}'", timeout=30000)
     elif phase == "approach":
         trial = await page.evaluate("window.trustseek.state().trial")  # null in a page just reloaded
-        assert await page.evaluate(RUN_TRIAL, trial), f"trial {trial} never ended: {await page.evaluate('window.trustseek.state()')}"
+        assert await page.evaluate(RUN_TRIAL, trial), (
+            f"trial {trial} never ended: {await page.evaluate('window.trustseek.state()')}"
+        )
 
 
 async def run_participant(browser, link: str, k: int, pid: str) -> dict:

@@ -170,7 +170,7 @@ def test_success_intervention_and_keyboard_teleoperation_with_contacts(env):
     (o,) = [o for o in s["obstacles"] if o["kind"] != "spill"]
     s = hold(page, "ArrowUp", f"s.contacts > {s['contacts']}")["s"]
     assert s["robot"]["x"] + BASE_W / 2 <= o["x"] - 0.04, (s["robot"], o)
-    hold(page, "ArrowDown", f"s.robot.x < s.path[0].x + 0.4")  # back to the start, to drive around it
+    hold(page, "ArrowDown", "s.robot.x < s.path[0].x + 0.4")  # back to the start, to drive around it
     hold(page, "f", "s.robot.tool[2] < 0.5", dt=0.01)  # the gripper down again: it clears the shelves as the base turns
     teleoperate(page)
     step_until(page, "s.phase === 'done'")

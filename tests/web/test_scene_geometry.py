@@ -67,22 +67,29 @@ console.log(JSON.stringify(out));
 """
 
 
+def bundle(d: Path, name: str, source: str) -> Path:
+    """``source`` (TypeScript importing web/src) bundled by esbuild into ``d/name.mjs`` for node."""
+    if shutil.which("node") is None or not ESBUILD.exists():
+        pytest.fail("node and web/node_modules are needed: run scripts/setup.sh")
+    (d / f"{name}.ts").write_text(source % {"web": WEB.as_posix()})
+    cmd = [str(ESBUILD), str(d / f"{name}.ts"), "--bundle", "--platform=node", "--format=esm", f"--outfile={d / f'{name}.mjs'}"]
+    subprocess.run([*cmd, "--log-level=warning"], check=True)
+    return d / f"{name}.mjs"
+
+
+def node_json(script: Path, req: dict) -> list[dict]:
+    """What the bundled ``script`` prints (JSON) for ``req`` on its stdin."""
+    res = subprocess.run(["node", str(script)], input=json.dumps(req), capture_output=True, text=True, check=True, timeout=120)
+    return json.loads(res.stdout)
+
+
 @pytest.fixture(scope="module")
 def probe(tmp_path_factory) -> Path:
-    node = shutil.which("node")
-    if node is None or not ESBUILD.exists():
-        pytest.fail("node and web/node_modules are needed: run scripts/setup.sh")
-    d = tmp_path_factory.mktemp("probe")
-    (d / "probe.ts").write_text(PROBE % {"web": WEB.as_posix()})
-    cmd = [str(ESBUILD), str(d / "probe.ts"), "--bundle", "--platform=node", "--format=esm", f"--outfile={d / 'probe.mjs'}"]
-    subprocess.run([*cmd, "--log-level=warning"], check=True)
-    return d / "probe.mjs"
+    return bundle(tmp_path_factory.mktemp("probe"), "probe", PROBE)
 
 
 def run(probe: Path, seeds: list[int], products_out: bool = False) -> list[dict]:
-    req = json.dumps({"seeds": seeds, "products_out": products_out})
-    res = subprocess.run(["node", str(probe)], input=req, capture_output=True, text=True, check=True, timeout=120)
-    return json.loads(res.stdout)
+    return node_json(probe, {"seeds": seeds, "products_out": products_out})
 
 
 # one node run per example; no shrinking (each example is a batch of seeds, printed when one fails)
@@ -159,22 +166,13 @@ console.log(JSON.stringify(out));
 
 @pytest.fixture(scope="module")
 def teleop_probe(tmp_path_factory) -> Path:
-    node = shutil.which("node")
-    if node is None or not ESBUILD.exists():
-        pytest.fail("node and web/node_modules are needed: run scripts/setup.sh")
-    d = tmp_path_factory.mktemp("teleop")
-    (d / "teleop.ts").write_text(TELEOP % {"web": WEB.as_posix()})
-    cmd = [str(ESBUILD), str(d / "teleop.ts"), "--bundle", "--platform=node", "--format=esm", f"--outfile={d / 'teleop.mjs'}"]
-    subprocess.run([*cmd, "--log-level=warning"], check=True)
-    return d / "teleop.mjs"
+    return bundle(tmp_path_factory.mktemp("teleop"), "teleop", TELEOP)
 
 
 @settings(max_examples=2, deadline=None, derandomize=True, phases=[Phase.explicit, Phase.generate])
 @given(hs.lists(hs.integers(0, 2**31 - 1), min_size=10, max_size=10, unique=True))
 def test_teleoperated_gripper_moves_never_take_the_arm_through_a_shelf_or_a_product(teleop_probe, seeds):
-    req = json.dumps({"seeds": seeds, "moves": 100})
-    res = subprocess.run(["node", str(teleop_probe)], input=req, capture_output=True, text=True, check=True, timeout=120)
-    rows = json.loads(res.stdout)
+    rows = node_json(teleop_probe, {"seeds": seeds, "moves": 100})
     assert all(r["solvable"] and r["crossings"] == 0 for r in rows), rows
     assert sum(r["refused"] for r in rows) > 0  # the random moves do strike shelves and products
     assert sum(r["reached"] > 0 for r in rows) >= len(rows) // 2  # and the item is reached between them
@@ -231,14 +229,8 @@ def test_a_failures_animation_shows_its_complexitys_cause_and_every_start_is_the
 
 
 def run_in_node(tmp_path: Path, source: str, req: dict) -> list[dict]:
-    """Bundle ``source`` (TypeScript importing web/src) for node, feed it ``req`` on stdin, read its JSON."""
-    if shutil.which("node") is None or not ESBUILD.exists():
-        pytest.fail("node and web/node_modules are needed: run scripts/setup.sh")
-    (tmp_path / "run.ts").write_text(source % {"web": WEB.as_posix()})
-    cmd = [str(ESBUILD), str(tmp_path / "run.ts"), "--bundle", "--platform=node", "--format=esm"]
-    subprocess.run([*cmd, f"--outfile={tmp_path / 'run.mjs'}", "--log-level=warning"], check=True)
-    res = subprocess.run(["node", str(tmp_path / "run.mjs")], input=json.dumps(req), capture_output=True, text=True, check=True)
-    return json.loads(res.stdout)
+    """``source`` bundled for node, run with ``req`` on its stdin: what it prints (JSON)."""
+    return node_json(bundle(tmp_path, "run", source), req)
 
 
 # the 2-D scene's outcome animation for each outcome of the same trial, from the robot at the end
