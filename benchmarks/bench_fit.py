@@ -31,7 +31,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 
-from trustseek.estimation import compiled_run, encode, fit_iohmm, fit_trust_model, from_trust_model, kernels, loglik, paper_spec
+from trustseek.estimation import compiled_run, encode, fit_iohmm, fit_trust_model, from_model, kernels, loglik, paper_spec
 from trustseek.estimation.em import run_em
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.options import FitOptions
@@ -203,7 +203,7 @@ def big(n: int = 100_000) -> None:
 def recovery(datasets: int, n: int = 1000, restarts: int = 10) -> None:
     """MAE over the free cells on ``datasets`` synthetic data sets (seeds 0..datasets-1), and per cell."""
     truth = paper_model()
-    spec, ptrue = from_trust_model(truth)
+    spec, ptrue = from_model(truth)
     print(f"parameter recovery at {n} x 71, {restarts} restarts, data set seeds 0..{datasets - 1}")
     maes, errs, events, lr = [], {}, {}, []
     t = clocks()
@@ -216,7 +216,7 @@ def recovery(datasets: int, n: int = 1000, restarts: int = 10) -> None:
             errs.setdefault(c["cell"], []).append(x)
             events.setdefault(c["cell"], []).append(c["events"])
         maes.append(float(np.mean(e)))
-        lr.append(2 * (res.loglik - loglik(res.fit.seqs, spec, ptrue)))
+        lr.append(2 * (res.loglik - loglik(res.seqs, spec, ptrue)))
         print(
             f"  seed {d:3d}: MAE {maes[-1]:.4f}; 2 (LL(fit) - LL(truth)) = {lr[-1]:6.2f}; restarts end in "
             f"[{min(res.restart_logliks):.2f}, {max(res.restart_logliks):.2f}]"

@@ -37,7 +37,7 @@ from trustseek.estimation.options import FitOptions
 from trustseek.estimation.personal import TABLES, _PersonalWorkspace, personalize
 from trustseek.estimation.spec import Params
 from trustseek.estimation.structure import Structure
-from trustseek.estimation.trust_iohmm import from_trust_model
+from trustseek.estimation.trust_iohmm import from_model
 from trustseek.model.core import TrustModel
 from trustseek.model.presets import paper_conservative_mixture, paper_model
 from trustseek.simulation.designs import simulate_design
@@ -64,10 +64,10 @@ def rely_error(models: list[TrustModel], truth: list[TrustModel]) -> float:
 
 def new_loglik(df, models: list[TrustModel]) -> float:
     """Log-likelihood of log ``df`` with participant n under ``models[n]``."""
-    spec, _ = from_trust_model(models[0])
+    spec, _ = from_model(models[0])
     seqs = encode(df, spec)
     work = _PersonalWorkspace(seqs, *Structure(spec, seqs).dims, method="numba")
-    params = Params.stack([from_trust_model(m)[1] for m in models])
+    params = Params.stack([from_model(m)[1] for m in models])
     return float(work.estep(params).loglik.sum())
 
 

@@ -47,7 +47,7 @@ def report(label: str, result: FitResult, truth: TrustModel, seconds: float) -> 
     a = errors(result, truth, actions_only=True)
     print(
         f"  {label:34s} cells {len(e):3d}  MAE {e.mean():.4f}  max {e.max():.4f}  (action-model cells: {len(a)}, MAE {a.mean():.4f})  "
-        f"log-lik {result.loglik:12.3f}  {seconds:6.1f} s  ({result.fit.runs[result.fit.best].ended})",
+        f"log-lik {result.loglik:12.3f}  {seconds:6.1f} s  ({result.runs[result.best].ended})",
         flush=True,
     )
 

@@ -23,14 +23,14 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 
-from trustseek import TrustModel
+from trustseek import TrustModel, trust_model
 from trustseek.data.trials import example_path
 from trustseek.estimation import select_levels
 from trustseek.estimation.iohmm import fit_iohmm, loglik
 from trustseek.estimation.options import FitOptions
 from trustseek.estimation.selection import BEST_TOLERANCE
 from trustseek.estimation.sequences import encode
-from trustseek.estimation.trust_iohmm import from_trust_model, level_names, preset_spec
+from trustseek.estimation.trust_iohmm import from_model, level_names, preset_spec
 from trustseek.simulation.designs import simulate_design
 
 
@@ -55,7 +55,7 @@ def four_level_model() -> TrustModel:
                         p, to = (0.6 if a == 0 else 0.2), max(t - 1, 0)
                     tr[c, a, e, t, to] += p
                     tr[c, a, e, t, t] += 1 - p
-    return TrustModel(("low", "medium-low", "medium-high", "high"), ("low", "high"), np.array([0.1, 0.2, 0.3, 0.4]), em, tr)
+    return trust_model(("low", "medium-low", "medium-high", "high"), ("low", "high"), np.array([0.1, 0.2, 0.3, 0.4]), em, tr)
 
 
 def three_level_model() -> TrustModel:
@@ -77,7 +77,7 @@ def chain(rely_high: list[float], rely_low: list[float], up: tuple[float, float]
         p, to = (up[c], min(t + 1, K - 1)) if e == 1 else (down[a], max(t - 1, 0))
         tr[c, a, e, t, to] += p
         tr[c, a, e, t, t] += 1 - p
-    return TrustModel(level_names(K), ("low", "high"), np.full(K, 1.0 / K), em, tr)
+    return trust_model(level_names(K), ("low", "high"), np.full(K, 1.0 / K), em, tr)
 
 
 def separated_three() -> TrustModel:
@@ -118,7 +118,7 @@ def table(model: TrustModel, n: int, trials: int, levels: tuple[int, ...], folds
     bic = min(rows, key=lambda r: r["bic"])["levels"]
     held = max(rows, key=lambda r: r["heldout_loglik"])["levels"]
     print(f"  chosen: BIC {bic}, held-out {held} (generating: {K}); select took {wall:.0f} s")
-    spec, params = from_trust_model(model)
+    spec, params = from_model(model)
     true_ll = loglik(encode(df, spec), spec, params)
     if K in by and K - 1 in by:
         fit, lower = by[K], by[K - 1]

@@ -41,7 +41,7 @@ import numpy as np
 from trustseek.data import example_path
 from trustseek.interop.files import write_pomdpx
 from trustseek.model import TypeMixture, conservative_model, paper_conservative_mixture, paper_model, paper_task
-from trustseek.model.core import TrustModel
+from trustseek.model.core import TrustModel, trust_model
 from trustseek.model.task import Task
 from trustseek.pomdp import AssistancePOMDP
 from trustseek.pomdp.supervisor_types import type_aware_problem
@@ -51,7 +51,7 @@ from trustseek.solvers import make_solver
 def midway() -> TrustModel:
     """The average of the paper's and the conservative supervisor (a third type for the benchmark)."""
     p, c = paper_model(), conservative_model()
-    return TrustModel(
+    return trust_model(
         p.trust_levels,
         p.complexities,
         (p.initial + c.initial) / 2,
@@ -78,7 +78,7 @@ def chain_model(K: int) -> TrustModel:
     initial = np.zeros(K)
     initial[-1] = 1.0
     names = tuple(f"level{t}" for t in range(K))
-    return TrustModel(names, p.complexities, initial, emission, transition)
+    return trust_model(names, p.complexities, initial, emission, transition)
 
 
 def run(name: str, pomdp: AssistancePOMDP, solver: str, limit: float, **options: Any) -> float:

@@ -3,7 +3,7 @@
 # the Python API's packages, as the package attributes of those names
 from . import errors, model, policies, pomdp, solvers, version, vocab
 from .errors import TrustseekError
-from .model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
+from .model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel, trust_model
 from .model.jsonfile import ModelError
 from .model.presets import load_model, load_task, paper_model, paper_task
 from .model.task import Rewards, Task
@@ -54,4 +54,5 @@ __all__ = [
     "solve",
     "solver_names",
     "trust_agnostic",
+    "trust_model",
 ]

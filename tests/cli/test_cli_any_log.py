@@ -139,12 +139,12 @@ def test_every_analysis_runs_on_a_log_with_only_reliance_and_a_named_input(named
 
 
 def test_general_types_are_refused_for_planning_with_the_reason(named, tmp_path):
-    from trustseek.model.iohmm import IOHMMModel
+    from trustseek.model.core import TrustModel
     from trustseek.model.mixture import TypeMixture
 
-    def general(rely: float) -> IOHMMModel:
+    def general(rely: float) -> TrustModel:
         emission = np.array([[[1 - rely, rely]] * 2] * 2)
-        return IOHMMModel(("low", "high"), "human_action", ("intervene", "rely"), {"advice": ("agree", "disagree")},
+        return TrustModel(("low", "high"), "human_action", ("intervene", "rely"), {"advice": ("agree", "disagree")},
                           ("advice",), (), np.array([0.5, 0.5]), emission, np.array([[[0.9, 0.1], [0.1, 0.9]]]))  # fmt: skip
 
     TypeMixture(("type1", "type2"), np.array([0.5, 0.5]), (general(0.3), general(0.8))).save(tmp_path / "mix.json")

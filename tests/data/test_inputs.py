@@ -184,7 +184,7 @@ def test_named_inputs_fit_equals_an_independent_em(study, tmp_path):
 
 def test_general_model_file_round_trip_and_problems(study, tmp_path):
     from trustseek.estimation.fit import fit_model
-    from trustseek.model.iohmm import IOHMMModel, load_any_model
+    from trustseek.model.core import TrustModel, load_any_model
     from trustseek.model.jsonfile import ModelError
 
     path, mapping, _ = study
@@ -194,7 +194,7 @@ def test_general_model_file_round_trip_and_problems(study, tmp_path):
     f = tmp_path / "g.json"
     model.save(f)
     again = load_any_model(f)
-    assert isinstance(again, IOHMMModel)
+    assert isinstance(again, TrustModel) and again.general
     assert again == model
     assert again.inputs == {"advice": ADVICE, "difficulty": DIFFICULTY, "condition": CONDITIONS}
     d = json.loads(f.read_text())
@@ -203,12 +203,12 @@ def test_general_model_file_round_trip_and_problems(study, tmp_path):
     d["transition"]["aid"].pop("low")
     d["inputs"]["condition"] = ["control", "control"]
     with pytest.raises(ModelError) as err:
-        IOHMMModel.from_dict(d, "bad.json")
+        TrustModel.from_dict(d, "bad.json", general=True)
     lines = err.value.lines()
     assert any("inputs.condition has duplicate names" in x for x in lines), lines
     d["inputs"]["condition"] = list(CONDITIONS)
     with pytest.raises(ModelError) as err:
-        IOHMMModel.from_dict(d, "bad.json")
+        TrustModel.from_dict(d, "bad.json", general=True)
     text = "\n".join(err.value.lines())
     assert "emission[advice=agree, difficulty=hard][level=high] sums to" in text
     assert "transition[condition=aid][level=low] is missing" in text
@@ -218,9 +218,9 @@ def test_existing_trust_model_files_still_load_and_the_paper_model_is_the_preset
     """A trust model file loads as before, through the general loader too; the paper's structure is
     the general model's preset: the same spec, and a trust model decodes like its general form."""
     from trustseek.estimation import PAPER_EMISSION_INPUTS, PAPER_TRANSITION_INPUTS, decode, paper_spec
-    from trustseek.estimation.trust_iohmm import from_trust_model, general_spec, spec_of, to_iohmm_model
+    from trustseek.estimation.trust_iohmm import from_model, general_spec, spec_of, to_model
     from trustseek.model import TrustModel, paper_model
-    from trustseek.model.iohmm import load_any_model
+    from trustseek.model.core import load_any_model
 
     shipped = example_path("three_level_model.json")
     assert load_any_model(shipped) == TrustModel.load(shipped)
@@ -229,7 +229,7 @@ def test_existing_trust_model_files_still_load_and_the_paper_model_is_the_preset
     assert load_any_model(tmp_path / "paper.json") == paper
     frame = read_trials(example_path())
     assert general_spec(frame, PAPER_EMISSION_INPUTS, PAPER_TRANSITION_INPUTS) == paper_spec()
-    general = to_iohmm_model(*from_trust_model(paper))
+    general = to_model(*from_model(paper), general=True)
     general.save(tmp_path / "general.json")
     again = load_any_model(tmp_path / "general.json")
     assert again == general  # the fixed row P(intervene | ask) = 1 and the level-naming rule kept
@@ -388,7 +388,7 @@ def test_study_log_with_a_condition_input_fits_like_the_canonical_log(tmp_path):
         fits.append(fit_model(f, PAPER_EMISSION_INPUTS, tr, options=FitOptions(restarts=1, seed=3, max_iter=40), rating="rating"))
     mapped, reference = fits
     assert mapped.model.inputs["group"] == ("transparent", "opaque")
-    assert mapped.fit.seqs.n_trials == reference.fit.seqs.n_trials == len(canonical)
+    assert mapped.seqs.n_trials == reference.seqs.n_trials == len(canonical)
     assert mapped.loglik == pytest.approx(reference.loglik, rel=1e-9, abs=1e-9)
 
 

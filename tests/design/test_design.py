@@ -31,13 +31,7 @@ def _other_model():
     tr[..., 1, 1] = 1 - tr[..., 1, 0]
     tr[..., 0, 1] = tr[..., 0, 1] * 0.6
     tr[..., 0, 0] = 1 - tr[..., 0, 1]
-    return type(m)(
-        trust_levels=m.trust_levels,
-        complexities=m.complexities,
-        initial=m.initial,
-        emission=m.emission,
-        transition=tr,
-    )
+    return m.replace(transition=tr, notes="")
 
 
 def _monte_carlo(policy, truth, task, belief_model=None, n=20_000, trials=1_000, seed=5):

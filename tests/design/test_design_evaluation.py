@@ -5,7 +5,7 @@ import scipy.sparse as sp
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trustseek import TrustModel, paper_task
+from trustseek import TrustModel, paper_task, trust_model
 from trustseek.design.evaluation import _ask_probabilities, _chain_matrix, evaluate_policy
 from trustseek.policies import TrustAwarePolicy
 from trustseek.pomdp.belief import ScalarBelief
@@ -20,7 +20,7 @@ def random_model(seed: int, ask_informative: bool) -> TrustModel:
     if not ask_informative:
         em[:, 1] = 1.0  # asked supervisors always intervene (zero kernel entries)
     tr = rng.dirichlet([2.0, 2.0], size=(2, 2, 2, 2))
-    return TrustModel(("low", "high"), ("low", "high"), rng.dirichlet([2.0, 2.0]), np.stack([em, 1 - em], -1), tr)
+    return trust_model(("low", "high"), ("low", "high"), rng.dirichlet([2.0, 2.0]), np.stack([em, 1 - em], -1), tr)
 
 
 def reference_matrix(step, kernel, w, gamma, xs):

@@ -9,7 +9,7 @@ import pandas as pd
 
 from trustseek.estimation.baselines import INTERCEPT_RIDGE, RIDGE, logistic
 from trustseek.estimation.prediction import predict_in_sample
-from trustseek.model.iohmm import IOHMMModel
+from trustseek.model.core import TrustModel
 
 
 def test_the_group_intercepts_are_the_dense_ridge_solution():
@@ -46,7 +46,7 @@ def _advice_log(rng, people=12, trials=30, spread=0.0):
 def _model(p_agree, p_disagree):
     """A model of the advice alone: both levels rely alike (no trust to track)."""
     emission = np.array([[[1 - p_agree, p_agree]] * 2, [[1 - p_disagree, p_disagree]] * 2])
-    return IOHMMModel(("low", "high"), "human_action", ("intervene", "rely"), {"advice": ("agree", "disagree")},
+    return TrustModel(("low", "high"), "human_action", ("intervene", "rely"), {"advice": ("agree", "disagree")},
                       ("advice",), (), np.array([0.5, 0.5]), emission, np.array([[[0.9, 0.1], [0.1, 0.9]]]))  # fmt: skip
 
 

@@ -9,7 +9,7 @@ from trustseek.estimation import fit_trust_model
 from trustseek.estimation.bootstrap import MIN_REPLICATES, align
 from trustseek.estimation.options import FitOptions
 from trustseek.estimation.spec import Params
-from trustseek.estimation.trust_iohmm import from_trust_model
+from trustseek.estimation.trust_iohmm import from_model
 from trustseek.simulation.designs import simulate_design
 
 # few resamples keep the suite fast; MIN_REPLICATES is what a report should use
@@ -38,7 +38,7 @@ def test_align_undoes_any_relabelling(K):
 
 def test_align_follows_the_weights():
     # the levels agree on a heavily weighted row and are swapped on a row with no data behind it
-    _, ref = from_trust_model(paper_model())
+    _, ref = from_model(paper_model())
     other = Params(ref.initial.copy(), ref.emission.copy(), ref.transition.copy())
     other.emission[0] = ref.emission[0][::-1]
     w = {"initial": np.zeros(2), "emission": np.ones((4, 2)), "transition": np.zeros((8, 2))}
@@ -109,7 +109,7 @@ def test_an_interval_at_the_boundary_can_move():
     s1, sfit, *_ = np.random.SeedSequence(cfg.seed).spawn(9)
     model, task = paper_model(), pipeline.paper_task()
     frame = simulate(model, task, pipeline._ask_policy(cfg), cfg.participants_1, counts=cfg.counts_1, seed=s1).trials()
-    fit = fit_trust_model(frame[pipeline.CANONICAL], options=FitOptions(restarts=3, seed=seed_int(sfit), n_jobs=1)).fit
+    fit = fit_trust_model(frame[pipeline.CANONICAL], options=FitOptions(restarts=3, seed=seed_int(sfit), n_jobs=1))
     ref = cell_tables(fit.spec, fit.params)
     shape = ref["transition"].shape
     cell, other = (0, 0, 0, 1, 0), (0, 0, 0, 1, 1)  # C=low, autonomous, E'=faulty, T=high -> T'=low, high

@@ -15,7 +15,7 @@ import contextlib
 import numpy as np
 import pytest
 
-from trustseek.estimation import encode, fit_iohmm, from_trust_model, kernels, loglik, paper_spec
+from trustseek.estimation import encode, fit_iohmm, from_model, kernels, loglik, paper_spec
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.kernels import many_fits
 from trustseek.estimation.options import FitOptions
@@ -56,7 +56,7 @@ def test_every_way_a_fit_runs_conforms(data, way):
         assert r.ended == "stationary" and r.converged
         assert r.history[-1] == r.objective
     # it recovers the generating model: at least the truth's log-likelihood, its free cells near the truth's
-    truth_spec, truth = from_trust_model(paper_model())
+    truth_spec, truth = from_model(paper_model())
     assert fit.loglik >= loglik(seqs, truth_spec, truth) - 1e-9
     free = ~fit.structure.em.fixed
     assert np.max(np.abs(fit.params.emission - truth.emission)[free]) < 0.15

@@ -67,13 +67,13 @@ def test_recovery_of_well_identified_cells_on_other_data_sets(seed):
     cells with many expected events are within 0.03 of the truth.  (Event counts are only a
     partial guide: the weakly identified cells -- P(rely | T=low, C=high) and the transitions
     after a failure -- also have thousands of events; see docs/fitting.md.)"""
-    from trustseek.estimation import from_trust_model, loglik
+    from trustseek.estimation import from_model, loglik
 
     truth = paper_model()
     df = simulate_design(truth, 1000, seed=seed)
     res = fit_trust_model(df, options=FitOptions(restarts=4, seed=0))
-    spec, ptrue = from_trust_model(truth)
-    assert res.loglik >= loglik(res.fit.seqs, spec, ptrue) - 1e-6
+    spec, ptrue = from_model(truth)
+    assert res.loglik >= loglik(res.seqs, spec, ptrue) - 1e-6
     checked = 0
     for c in res.cells():
         if c["events"] >= WELL_IDENTIFIED_EVENTS:

@@ -13,8 +13,8 @@ from scipy.special import gammaln
 from trustseek.estimation import encode, fit_trust_model, kernels, loglik, personal
 from trustseek.estimation.options import FitOptions
 from trustseek.estimation.personal import EB, NOTHING, ONE_DRAW, blocks, personalize
-from trustseek.estimation.trust_iohmm import from_trust_model
-from trustseek.model.core import TrustModel
+from trustseek.estimation.trust_iohmm import from_model
+from trustseek.model.core import TrustModel, trust_model
 from trustseek.model.presets import paper_conservative_mixture, paper_model
 from trustseek.simulation.designs import simulate_design
 from trustseek.simulation.populations import Supervisors
@@ -37,7 +37,7 @@ def known_levels_model() -> TrustModel:
     em[0, 0, 1] = [0.3, 0.7]
     em[1, 0, 1] = [0.2, 0.8]
     tr = np.broadcast_to(np.eye(2), p.transition.shape).copy()
-    return TrustModel(p.trust_levels, p.complexities, np.array([0.0, 1.0]), em, tr)
+    return trust_model(p.trust_levels, p.complexities, np.array([0.0, 1.0]), em, tr)
 
 
 def dirichlet_multinomial(s: float, counts: np.ndarray, t: np.ndarray) -> float:
@@ -108,7 +108,7 @@ def test_each_block_is_scored_given_the_others():
     prep = personal._Prepared.of(df, pm)
     cv = personal._CrossValidation(prep, 3, 1e-8, 1000)
     score = cv.score(dict.fromkeys(personal.TABLES, 1e12))  # the models are the centre
-    spec, params = from_trust_model(pm)
+    spec, params = from_model(pm)
     seqs = prep.seqs
     b = blocks(seqs.lengths, seqs.y.shape[0], 3)
     for n in range(6):
@@ -163,9 +163,9 @@ def test_two_types_around_the_pooled_model_are_seen_by_the_held_out_estimate():
     assert not all(res.at_bound.values()) and res.score > res.score_centre + 5.0
     # new trials of the same people: their own models predict them better than the pooled one
     new = simulate_design(sup, 40, seed=2)
-    spec, centre = from_trust_model(pooled)
+    spec, centre = from_model(pooled)
     seqs = encode(new, spec)
-    own = sum(loglik(seqs.subset([n]), spec, from_trust_model(m)[1]) for n, m in enumerate(res.models))
+    own = sum(loglik(seqs.subset([n]), spec, from_model(m)[1]) for n, m in enumerate(res.models))
     assert own > loglik(seqs, spec, centre) + 5.0
 
 
@@ -180,7 +180,7 @@ def test_strong_prior_keeps_the_centre_and_none_moves_each_participant_toward_th
     assert weak.loglik.sum() > strong.loglik.sum() + 1.0
     assert weak.converged.all()
     # the models are each participant's: their log-likelihood is the one reported
-    spec, params = from_trust_model(weak.models[3])
+    spec, params = from_model(weak.models[3])
     seqs = encode(df, spec)
     assert loglik(seqs.subset([3]), spec, params) == pytest.approx(weak.loglik[3], rel=1e-6)
 

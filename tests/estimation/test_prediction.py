@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from cli_runner import run_cli
 from trustseek.data.trials import example_path, read_trials
-from trustseek.estimation import encode, from_trust_model, loglik, posteriors
+from trustseek.estimation import encode, from_model, loglik, posteriors
 from trustseek.estimation.baselines import features
 from trustseek.estimation.options import FitOptions
 from trustseek.estimation.prediction import (
@@ -81,7 +81,7 @@ def test_ask_trials_are_counted_apart_and_not_scored(study):
 def test_the_filter_predicts_with_the_likelihood_chain_rule_and_ends_at_the_smoothed_posterior():
     rng = np.random.default_rng(5)
     frame = _random_log(rng, [9, 14, 5])
-    spec, _ = from_trust_model(paper_model())
+    spec, _ = from_model(paper_model())
     params = _random_params(rng)
     seqs = encode(frame, spec)
     f = filter_beliefs(seqs, params)
@@ -105,7 +105,7 @@ def test_changing_later_trials_does_not_change_earlier_predictions(seed, length,
     later = (changed["participant"] == "P0") & (changed["trial"] > t + 1)
     for c in ("complexity", "robot_action", "human_action", "experience"):
         changed.loc[later, c] = other.loc[later, c]
-    spec, _ = from_trust_model(paper_model())
+    spec, _ = from_model(paper_model())
     params = _random_params(rng, K)
     spec = spec.with_levels([f"l{k}" for k in range(K)])
     a, b = encode(frame, spec), encode(changed, spec)

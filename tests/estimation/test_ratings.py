@@ -188,7 +188,7 @@ def test_joint_fit_recovers_the_generating_model(every):
     assert len(err) == 27  # 17 action-model cells the design reaches + 2 x 5 rating cells
     assert err.mean() <= 0.03
     assert res.model.rating is not None and res.model.rating.levels == LEVELS
-    assert res.fit.runs[res.fit.best].ended == "stationary"
+    assert res.runs[res.best].ended == "stationary"
 
 
 def test_ratings_only_fit():

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from trustseek import ModelError, Task, TrustModel
+from trustseek import ModelError, Task, TrustModel, trust_model
 from trustseek.estimation.options import FitOptions
 from trustseek.model.presets import PAPER_UNOBSERVED_CELLS, load_model, load_task
 
@@ -194,7 +194,7 @@ def _random_rows(draw, shape):
 def random_models(draw):
     K = draw(st.integers(2, 4))
     N = draw(st.integers(2, 3))
-    return TrustModel(
+    return trust_model(
         trust_levels=tuple(f"t{i}" for i in range(K)),
         complexities=tuple(f"c{i}" for i in range(N)),
         initial=_random_rows(draw, (K,)),

@@ -73,10 +73,10 @@ def test_vectorized_equals_scalar_and_stays_a_distribution(n, seed, which):
 
 def _interior_pomdp(K, seed=4):
     """A random model and task with every probability strictly inside (0, 1)."""
-    from trustseek import AssistancePOMDP, TrustModel, paper_task
+    from trustseek import AssistancePOMDP, paper_task, trust_model
 
     rng = np.random.default_rng(seed)
-    m = TrustModel(
+    m = trust_model(
         tuple(f"t{k}" for k in range(K)),
         ("low", "high"),
         rng.dirichlet(np.ones(K)),

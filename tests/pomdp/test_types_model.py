@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trustseek.model import TypeMixture, conservative_model, paper_conservative_mixture, paper_model, paper_task
+from trustseek.model import TypeMixture, conservative_model, paper_conservative_mixture, paper_model, paper_task, trust_model
 from trustseek.policies import never_ask
 from trustseek.pomdp.belief import BayesUpdate
 from trustseek.pomdp.supervisor_types import (
@@ -29,7 +29,7 @@ from trustseek.simulation import Supervisors, simulate
 def _midway() -> TypeMixture:
     """Three types: the paper's, the conservative one and their average."""
     p, c = paper_model(), conservative_model()
-    mid = type(p)(
+    mid = trust_model(
         p.trust_levels,
         p.complexities,
         (p.initial + c.initial) / 2,

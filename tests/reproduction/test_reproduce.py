@@ -350,9 +350,9 @@ def test_simulated_log_round_trips_through_fit(tmp_path):
     # (cells such as P(rely | low trust, high complexity) are weakly identified, so the
     # likelihood, not each cell, is the sharp check)
     from trustseek.estimation import encode, loglik
-    from trustseek.estimation.fit import from_trust_model
+    from trustseek.estimation.fit import from_model
 
-    spec, params = from_trust_model(truth)
+    spec, params = from_model(truth)
     ll_truth = loglik(encode(frame[frame.columns[:6]], spec), spec, params)
     assert out["loglik"] >= ll_truth - 1e-6
     assert out["loglik"] - ll_truth < 0.5 * out["n_params"] + 10  # not absurdly better: no overfitting bug

@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 from trustseek import paper_model
 from trustseek.cli import app
 from trustseek.data.trials import read_trials
-from trustseek.estimation.fit import fit_trust_model, from_trust_model
+from trustseek.estimation.fit import fit_trust_model, from_model
 from trustseek.estimation.iohmm import loglik
 from trustseek.estimation.options import FitOptions
 from trustseek.server import create_app
@@ -64,8 +64,8 @@ def test_exported_study_is_fitted(tmp_path):
     fit = fit_trust_model(frame, options=FitOptions(restarts=2, seed=0))
     # the maximum-likelihood fit explains the exported trials at least as well as the model
     # that generated them (the sessions' schedules are random, so no fixed value is asserted)
-    spec, p_true = from_trust_model(model)
+    spec, p_true = from_model(model)
     # (a log-likelihood of 0 up to rounding when every exported action had probability 1)
     assert np.isfinite(fit.loglik) and fit.loglik <= 1e-9
-    assert fit.loglik >= loglik(fit.fit.seqs, spec, p_true) - 1e-6
+    assert fit.loglik >= loglik(fit.seqs, spec, p_true) - 1e-6
     assert fit.counts["emission"].sum() > 0

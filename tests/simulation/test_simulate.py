@@ -6,7 +6,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from trustseek import AssistancePOMDP, TrustModel, always_ask, make_updater, never_ask, paper_model, randomized, solve
+from trustseek import (
+    AssistancePOMDP,
+    always_ask,
+    make_updater,
+    never_ask,
+    paper_model,
+    randomized,
+    solve,
+    trust_model,
+)
 from trustseek.model.core import ASK, AUTONOMOUS, INTERVENE, RELIABLE
 from trustseek.policies import TrustAwarePolicy, ask_bounds
 from trustseek.pomdp.belief import ScalarBelief
@@ -31,7 +40,7 @@ def interior_model(seed=3, K=2):
     transition = rng.dirichlet(np.full(K, 2.0), size=(N, 2, 2, K)) * 0.9 + 0.1 / K
     initial = rng.dirichlet(np.full(K, 3.0))
     levels = ("low", "high") if K == 2 else tuple(f"t{i}" for i in range(K))
-    return TrustModel(levels, ("low", "high"), initial, emission, transition)
+    return trust_model(levels, ("low", "high"), initial, emission, transition)
 
 
 def within(emp, expected, count, z=5.0):

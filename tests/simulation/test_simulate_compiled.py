@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trustseek import TrustModel, paper_model, paper_task
+from trustseek import TrustModel, paper_model, paper_task, trust_model
 from trustseek.policies import ComplexityPolicy, TrustAwarePolicy, ask_bounds
 from trustseek.simulation import Block, Supervisors, crossover, kernels, run, schedule_counts, simulate
 
@@ -20,7 +20,7 @@ def interior_model(seed: int) -> TrustModel:
     rng = np.random.default_rng(seed)
     em = rng.uniform(0.1, 0.9, size=(2, 2, 2))
     transition = rng.dirichlet([2.0, 2.0], size=(2, 2, 2, 2)) * 0.9 + 0.05
-    return TrustModel(("low", "high"), ("low", "high"), rng.dirichlet([3.0, 3.0]), np.stack([em, 1 - em], -1), transition)
+    return trust_model(("low", "high"), ("low", "high"), rng.dirichlet([3.0, 3.0]), np.stack([em, 1 - em], -1), transition)
 
 
 def threshold_policy(model: TrustModel, bounds: tuple[float, float], update: str) -> TrustAwarePolicy:

@@ -11,7 +11,7 @@ import trustseek
 from pomdp_oracles import TIGER
 from trustseek import AssistancePOMDP, GridSolver
 from trustseek.interop.files import read_pomdp
-from trustseek.model.core import TrustModel
+from trustseek.model.core import TrustModel, trust_model
 from trustseek.model.task import Task
 from trustseek.policies import AlphaVectorPolicy
 from trustseek.solvers.alpha import AlphaSolver
@@ -96,7 +96,7 @@ def test_lumped_three_level_model_has_the_two_level_value(model, task, pomdp):
         tr3[..., src, 0] = tr2[..., s2, 0]
         tr3[..., src, 1] = 0.5 * tr2[..., s2, 1]
         tr3[..., src, 2] = 0.5 * tr2[..., s2, 1]
-    m3 = TrustModel(("low", "high", "high2"), model.complexities, np.array([0.0, 0.5, 0.5]), em, tr3)
+    m3 = trust_model(("low", "high", "high2"), model.complexities, np.array([0.0, 0.5, 0.5]), em, tr3)
     sol = PointSolver(tol=1e-3).solve_bounds(AssistancePOMDP(m3, task))
     ref = AlphaSolver(tol=1e-6).solve_bounds(pomdp)
     v = float(ref.q_values(pomdp, np.array(1.0)).max(axis=-1) @ task.complexity_probs)

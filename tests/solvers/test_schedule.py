@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from trustseek import AssistancePOMDP, paper_model, paper_task
-from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
+from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, trust_model
 from trustseek.model.jsonfile import json_safe
 from trustseek.policies import policy_from_dict
 from trustseek.policies.scheduling import SchedulePolicy, ScheduleRunner
@@ -64,7 +64,7 @@ def random_model(seed):
     rng = np.random.default_rng(seed)
     em = rng.dirichlet([2, 2], size=(2, 2, 2))
     tr = rng.dirichlet([2, 2], size=(2, 2, 2, 2))
-    return TrustModel(("low", "high"), ("low", "high"), rng.dirichlet([2, 2]), em, tr)
+    return trust_model(("low", "high"), ("low", "high"), rng.dirichlet([2, 2]), em, tr)
 
 
 PAPER = AssistancePOMDP(paper_model(), paper_task())

@@ -121,10 +121,10 @@ def test_fine_grid_approaches_exact_tree(pomdp, update):
 
 
 def test_grid_solver_rejects_three_levels(task):
-    from trustseek import TrustModel
+    from trustseek import trust_model
 
     K = 3
-    m = TrustModel(
+    m = trust_model(
         ("low", "mid", "high"),
         ("low", "high"),
         np.ones(K) / K,

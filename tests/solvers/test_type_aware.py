@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from pomdp_oracles import TIGER
 from trustseek.interop.files import read_pomdp
 from trustseek.model import TypeMixture, paper_conservative_mixture, paper_model, paper_task
-from trustseek.model.core import TrustModel
+from trustseek.model.core import TrustModel, trust_model
 from trustseek.pomdp import AssistancePOMDP
 from trustseek.pomdp.supervisor_types import type_aware_problem
 from trustseek.solvers import make_solver
@@ -37,7 +37,7 @@ def _random_type(rng: np.random.Generator) -> TrustModel:
     emission = p.emission.copy()
     emission[:, 0] = rng.dirichlet(np.ones(2), size=(2, 2))
     transition = rng.dirichlet(np.full(2, 0.7), size=p.transition.shape[:-1])
-    return TrustModel(p.trust_levels, p.complexities, rng.dirichlet(np.ones(2)), emission, transition)
+    return trust_model(p.trust_levels, p.complexities, rng.dirichlet(np.ones(2)), emission, transition)
 
 
 def _point(problem, resolution=16):

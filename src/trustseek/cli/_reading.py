@@ -89,7 +89,8 @@ def widened_note(rows, key: str, asked: int) -> list[str]:
 def load_for_decoding(path: Path):
     """A trust model, supervisor types (a mixture) or a general model, by the file's format; or a
     preset name (paper, paper+conservative)."""
-    from ..model.iohmm import IOHMMModel, is_iohmm_file
+    from ..model.core import TrustModel
+    from ..model.files import is_iohmm_file
     from ..model.jsonfile import load_json
     from ..model.mixture import TypeMixture
     from ..model.presets import MIXTURE_PRESETS, load_mixture
@@ -99,7 +100,7 @@ def load_for_decoding(path: Path):
 
     d, source = load_json(path)
     if is_iohmm_file(d):
-        return IOHMMModel.from_dict(d, source)
+        return TrustModel.from_dict(d, source, general=True)
     return TypeMixture.from_dict(d, source, general=True)
 
 

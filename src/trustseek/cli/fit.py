@@ -230,7 +230,7 @@ def fit(
     if as_json:
         _print_fit_json(result)
         return
-    n = f"{result.fit.seqs.n_participants} participants, {result.fit.seqs.n_trials} trials"
+    n = f"{result.seqs.n_participants} participants, {result.seqs.n_trials} trials"
     console.print(cells_table(f"Fitted trust model ({n})", result, _fit().MIN_EVENTS))
     console.print(fit_summary(result, "restarts", len(result.restart_logliks)))
     print_intervals_note(result.intervals)
@@ -392,7 +392,7 @@ def _fit_general(frame, tr, em, run: _FitRun, outputs: _FitOutputs, fill_from: s
         return
     title = (
         f"Fitted model (inputs: emissions on {', '.join(em) or 'none'}; transitions on {', '.join(tr) or 'none'}; "
-        f"{result.fit.seqs.n_participants} participants, {result.fit.seqs.n_trials} trials)"
+        f"{result.seqs.n_participants} participants, {result.seqs.n_trials} trials)"
     )
     console.print(cells_table(title, result, _fit().MIN_EVENTS, escape_cells=True))
     print_intervals_note(result.intervals)

@@ -380,8 +380,7 @@ def check(
     files: list[Path] = typer.Argument(..., help="Trust model, task or policy JSON files."),
 ) -> None:
     """Validate model (trust or general), task and policy files; print every problem found."""
-    from ..model.core import TrustModel
-    from ..model.iohmm import IOHMM_FORMAT, IOHMMModel
+    from ..model.core import IOHMM_FORMAT, TrustModel
     from ..model.jsonfile import ModelError, load_json
     from ..model.task import Task
     from ..policies import load_policy
@@ -403,7 +402,7 @@ def check(
             elif "policy" in fmt:
                 load_policy(f)
             elif fmt == IOHMM_FORMAT:
-                g = IOHMMModel.from_dict(text, str(f))
+                g = TrustModel.from_dict(text, str(f), general=True)
                 console.print(
                     f"{f}: a general model, inputs: {', '.join(g.used_inputs) or 'none'} (decode, predict and validate "
                     "read it; solve and simulate need a trust model)",

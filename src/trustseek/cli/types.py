@@ -349,12 +349,11 @@ def personalize(
         raise TrustseekError([f"--estimate must be held-out or variational, got {estimate!r}"])
     check_output(out, "--out", directory=True)
     from ..estimation.personal import personalize as run
-    from ..model.iohmm import IOHMMModel
     from ..model.mixture import TypeMixture
     from ._reading import load_for_decoding, read_for_types
 
     centre = load_for_decoding(Path(model))  # a trust model, a general model or types
-    if isinstance(centre, IOHMMModel):
+    if not isinstance(centre, TypeMixture):
         centre = TypeMixture.single(centre)
     frame = read_for_types(
         log, centre, rule_off(mapping, no_rule), column, label, missing, delimiter, order

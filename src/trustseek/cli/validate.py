@@ -77,7 +77,7 @@ def _ci(d: dict[str, Any], digits: int = 3) -> str:
 
 def _load(path: Path) -> Any:
     """A trust model or a general model (trustseek.iohmm/1), by the file's format; or a preset name (paper)."""
-    from ..model.iohmm import load_any_model
+    from ..model.core import load_any_model
     from ..model.presets import MODEL_PRESETS, load_model
 
     if str(path) in MODEL_PRESETS and not path.exists():

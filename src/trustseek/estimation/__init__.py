@@ -14,7 +14,7 @@
 * :mod:`.trust_iohmm` -- the paper's structure, tables to and from a TrustModel;
 * :mod:`.fit`, :mod:`.bootstrap`, :mod:`.selection` -- the trust-model fit, its intervals,
   and the choice of the number of levels; :func:`fit_model`, the same fit with any named
-  inputs (a general model, :class:`~trustseek.model.IOHMMModel`).
+  inputs (a general model: a :class:`~trustseek.model.TrustModel` with those inputs).
 
 Each name is loaded on first use (the names are in ``__init__.pyi``).
 """

@@ -34,7 +34,7 @@ from . import (
     warm,
 )
 from .fit import MIN_EVENTS, decode, fit_model, fit_trust_model, trust_loglik
-from .iohmm import IOHMMFit, fit_iohmm, loglik, posteriors
+from .iohmm import EMFit, fit_iohmm, loglik, posteriors
 from .options import FitOptions
 from .result import FitResult
 from .selection import select_levels, selection_warnings
@@ -44,10 +44,10 @@ from .trust_iohmm import (
     MODEL_INPUTS,
     PAPER_EMISSION_INPUTS,
     PAPER_TRANSITION_INPUTS,
-    from_trust_model,
+    from_model,
     general_spec,
     paper_spec,
-    to_trust_model,
+    to_model,
 )
 
 __all__ = [
@@ -55,11 +55,11 @@ __all__ = [
     "MODEL_INPUTS",
     "PAPER_EMISSION_INPUTS",
     "PAPER_TRANSITION_INPUTS",
+    "EMFit",
     "FitError",
     "FitOptions",
     "FitResult",
     "Fixed",
-    "IOHMMFit",
     "IOHMMSpec",
     "Params",
     "Sequences",
@@ -68,13 +68,13 @@ __all__ = [
     "fit_iohmm",
     "fit_model",
     "fit_trust_model",
-    "from_trust_model",
+    "from_model",
     "general_spec",
     "loglik",
     "paper_spec",
     "posteriors",
     "select_levels",
     "selection_warnings",
-    "to_trust_model",
+    "to_model",
     "trust_loglik",
 ]

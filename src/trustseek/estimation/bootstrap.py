@@ -42,7 +42,7 @@ from .ratings import make_structure
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec, Params
 from .structure import Structure, Table
-from .trust_iohmm import check_convertible, index_grid, to_trust_model
+from .trust_iohmm import check_convertible, index_grid, to_model
 
 #: a bootstrap replicate's refit: from the estimate and 3 random starts, over all cores
 REFITS = FitOptions(restarts=3)
@@ -96,7 +96,7 @@ def cell_tables(spec: IOHMMSpec, params: Params) -> dict[str, np.ndarray]:
         check_convertible(spec)
     except FitError:
         return {"initial": params.initial, "emission": params.emission, "transition": params.transition}
-    m = to_trust_model(spec, params)
+    m = to_model(spec, params)
     return {name: getattr(m, name) for name in TABLES}
 
 

@@ -20,26 +20,24 @@ import numpy as np
 import pandas as pd
 
 from ..model.core import TrustModel
-from ..model.iohmm import IOHMMModel
 from ..vocab import ACTIONS, EXPERIENCES
 from .bootstrap import Intervals
 from .bootstrap import bootstrap as _bootstrap
-from .iohmm import IOHMMFit, fit_iohmm, loglik
+from .iohmm import EMFit, fit_iohmm, loglik, posterior_frame
 from .options import DEFAULTS, FitOptions, counting
 from .ratings import RatingStructure
-from .result import FitResult, posterior_frame
+from .result import FitResult
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
 from .structure import Structure, describe_combination
 from .trust_iohmm import (
     broadcast,
     check_convertible,
-    from_trust_model,
+    from_model,
     general_spec,
     model_complexities,
     preset_spec,
-    to_iohmm_model,
-    to_trust_model,
+    to_model,
 )
 
 log = logging.getLogger(__name__)
@@ -54,7 +52,7 @@ def _estimated_mask(structure: Structure) -> dict[str, np.ndarray]:
     return {"initial": np.full(structure.K, structure.K > 1), "emission": em.astype(float), "transition": tr.astype(float)}
 
 
-def _warnings(fit: IOHMMFit, events: dict[str, np.ndarray]) -> list[str]:
+def _warnings(fit: EMFit, events: dict[str, np.ndarray]) -> list[str]:
     """One line per estimated row with fewer than :data:`MIN_EVENTS` expected events behind it."""
     s, spec = fit.structure, fit.spec
     out = []
@@ -81,7 +79,7 @@ def _warnings(fit: IOHMMFit, events: dict[str, np.ndarray]) -> list[str]:
     return out
 
 
-def _constant_output(fit: IOHMMFit) -> list[str]:
+def _constant_output(fit: EMFit) -> list[str]:
     """A warning when every output the model does not fix is the same category (e.g. every
     participant always relies): no level then explains the data better than another, so the
     initial distribution and the transitions are not identified, whatever their events."""
@@ -106,34 +104,18 @@ def fit_sequences(
     bootstrap: int = 0,
     progress: Callable[[int, int], None] | None = None,
     init: Sequence[Params] = (),
-) -> FitResult[TrustModel]:
+) -> FitResult:
     """:func:`fit_trust_model` on already encoded sequences."""
     check_convertible(spec)
-    restarts, seed = options.starts, options.seed_number
-    tick = counting(progress, restarts + len(init) + bootstrap)
-
-    fit = fit_iohmm(
-        seqs,
-        spec,
-        replace(options, seed=np.random.SeedSequence([seed, 0])),
-        init=init,
-        on_restart=tick,
-    )
-    model = to_trust_model(
-        spec,
-        fit.params,
-        notes=f"fitted by trustseek: {seqs.n_participants} participants, {seqs.n_trials} trials, log-likelihood {fit.loglik:.4f}",
-    )
-    events = fit.expected_events()
+    tick = counting(progress, options.starts + len(init) + bootstrap)
+    result = _fitted(seqs, spec, options, tick, init)
+    events = result.events
     counts = broadcast(spec, events)
-    estimated = {k: v.astype(bool) for k, v in broadcast(spec, _estimated_mask(fit.structure)).items()}
-    if isinstance(fit.structure, RatingStructure):
-        st = fit.workspace().estep(fit.params)
-        rc = fit.structure.rating_counts(st.emission)  # (K, R) expected events behind each rating cell
-        events["rating"] = rc
-        counts["rating"] = np.repeat(rc.sum(-1, keepdims=True), spec.n_ratings, axis=-1)
-        estimated["rating"] = np.ones_like(rc, dtype=bool)
-    result = FitResult(model, fit, events, counts, estimated, seed=seed, warnings=_warnings(fit, events))
+    estimated = {k: v.astype(bool) for k, v in broadcast(spec, _estimated_mask(result.structure)).items()}
+    if "rating" in events:
+        counts["rating"] = np.repeat(events["rating"].sum(-1, keepdims=True), spec.n_ratings, axis=-1)
+        estimated["rating"] = np.ones_like(events["rating"], dtype=bool)
+    result.counts, result.estimated, result.warnings = counts, estimated, _warnings(result, events)
     for w in result.warnings:
         log.info("%s", w)
     if bootstrap > 0 and spec.rating is not None:
@@ -146,10 +128,34 @@ def fit_sequences(
     return result
 
 
+def _fitted(
+    seqs: Sequences, spec: IOHMMSpec, options: FitOptions, tick: Callable[..., None], init: Sequence[Params] = (), general=False
+) -> FitResult:
+    """The EM fit of ``spec`` (:func:`~.iohmm.fit_iohmm`, ``tick`` after each start) with its model (with
+    ``general``, a general model) and the expected events behind its rows (a rating's too)."""
+    seed = options.seed_number
+    fit = fit_iohmm(seqs, spec, replace(options, seed=np.random.SeedSequence([seed, 0])), init=init, on_restart=tick)
+    notes = f"fitted by trustseek: {seqs.n_participants} participants, {seqs.n_trials} trials, log-likelihood {fit.loglik:.4f}"
+    return FitResult.of(fit, to_model(spec, fit.params, notes, general=general), _expected_events(fit), seed)
+
+
+def _expected_events(fit: EMFit) -> dict[str, np.ndarray]:
+    """Posterior-expected number of data events behind each row (tied rows: the group's), and with a
+    rating, behind each rating cell (K, R)."""
+    st = fit.workspace().estep(fit.params)
+    s = fit.structure
+    out = {"initial": np.full(s.K, float(fit.seqs.n_participants))}
+    for name, table, counts in (("emission", s.em, s.action_counts(st.emission)), ("transition", s.tr, st.transition)):
+        out[name] = table.grouped(counts.sum(-1))[table.group]  # (U, K)
+    if isinstance(s, RatingStructure):
+        out["rating"] = s.rating_counts(st.emission)
+    return out
+
+
 def _intervals(result: FitResult, bootstrap: int, options: FitOptions, tick: Callable[[], None], weights) -> Intervals:
     """The bootstrap intervals of ``result``'s fit over ``bootstrap`` resamples (each refit from
     at most 3 random starts; ``tick`` after each), their notes added to its warnings."""
-    fit = result.fit
+    fit = result
     intervals = _bootstrap(
         fit.seqs,
         fit.spec,
@@ -174,7 +180,7 @@ def fit_trust_model(
     rating_levels: Sequence[str] | None = None,
     actions: bool = True,
     **spec_options: Any,
-) -> FitResult[TrustModel]:
+) -> FitResult:
     """Fit a trust model to a trial table (the canonical columns, e.g. from :func:`read_trials`).
 
     ``preset`` is ``"paper"`` (optionally adjusted by ``levels``, ``transition_inputs``,
@@ -197,12 +203,7 @@ def fit_trust_model(
     missing): a fit on the ratings alone, whose emission rows are then never estimated.
     """
     spec = preset_spec(preset, frame, prior=prior, **spec_options)
-    if rating is not None:
-        spec = replace(spec, rating=rating, rating_levels=rating_levels_of(frame, rating, rating_levels))
-    if not actions:
-        if rating is None:
-            raise FitError(["a fit without the human actions needs a rating column"])
-        frame = frame.assign(human_action=pd.Series(pd.NA, index=frame.index, dtype=object))
+    frame, spec = _with_rating(frame, spec, rating, rating_levels, actions)
     result = fit_sequences(encode(frame, spec), spec, options, bootstrap, progress)
     marked = never_estimated(frame, spec)
     if marked:
@@ -210,6 +211,20 @@ def fit_trust_model(
         names = ", ".join(result.model.not_estimated_rows())
         result.warnings.append(f"never estimated (no such trials in the data; marked in the model file): {names}")
     return result
+
+
+def _with_rating(
+    frame: pd.DataFrame, spec: IOHMMSpec, rating: str | None, levels: Sequence[str] | None, actions: bool
+) -> tuple[pd.DataFrame, IOHMMSpec]:
+    """The spec with the rating column (its levels: :func:`rating_levels_of`), and without the human
+    actions (every one counted missing) unless ``actions``."""
+    if rating is not None:
+        spec = replace(spec, rating=rating, rating_levels=rating_levels_of(frame, rating, levels))
+    if not actions:
+        if rating is None:
+            raise FitError(["a fit without the human actions needs a rating column"])
+        frame = frame.assign(human_action=pd.Series(pd.NA, index=frame.index, dtype=object))
+    return frame, spec
 
 
 def rating_levels_of(frame: pd.DataFrame, column: str, levels: Sequence[str] | None = None) -> tuple[str, ...]:
@@ -229,10 +244,10 @@ def rating_levels_of(frame: pd.DataFrame, column: str, levels: Sequence[str] | N
     )
 
 
-def trust_loglik(frame: pd.DataFrame, model: TrustModel | IOHMMModel, rating: str | None = None) -> float:
+def trust_loglik(frame: pd.DataFrame, model: TrustModel, rating: str | None = None) -> float:
     """Log-likelihood of the log under ``model``: the human actions, and with ``rating`` (a column)
     the ratings too, through the model's rating table (an empty rating contributes probability 1)."""
-    spec, params = from_trust_model(model, rating)
+    spec, params = from_model(model, rating)
     return loglik(encode(frame, spec), spec, params)
 
 
@@ -290,11 +305,11 @@ def _index_codes(values: pd.Series, names: Sequence[str]) -> np.ndarray:
     return values.map({v: i for i, v in enumerate(names)}).fillna(-1).to_numpy(dtype=np.int32)
 
 
-def decode(frame: pd.DataFrame, model: TrustModel | IOHMMModel, rating: str | None = None) -> pd.DataFrame:
+def decode(frame: pd.DataFrame, model: TrustModel, rating: str | None = None) -> pd.DataFrame:
     """Per-trial smoothed P(trust = level | all trials of the participant) and the Viterbi level
     (with ``rating``, a column, from the ratings too, through the model's rating table); a
     general model decodes from its own inputs."""
-    spec, params = from_trust_model(model, rating)
+    spec, params = from_model(model, rating)
     seqs = encode(frame, spec)
     try:
         return posterior_frame(seqs, spec, params)
@@ -322,7 +337,7 @@ def fit_model(
     rating: str | None = None,
     actions: bool = True,
     bootstrap: int = 0,
-) -> FitResult[IOHMMModel]:
+) -> FitResult:
     """Fit the human action's IOHMM with any named inputs (columns of ``frame``, e.g. a mapping's
     ``inputs`` and the canonical complexity, robot_action, experience) to a general model.
 
@@ -333,40 +348,24 @@ def fit_model(
     column's levels are its categories, as :func:`~trustseek.data.read_trials` reads a mapped rating).
     ``bootstrap`` > 0 resamples participants that many times for an interval of every table
     cell (:mod:`.bootstrap`, as for the trust model); ``progress`` then counts its replicates too."""
-    restarts, seed = options.starts, options.seed_number
     spec = general_spec(frame, emission_inputs, transition_inputs, levels, prior)
-    if rating is not None:
-        spec = replace(spec, rating=rating, rating_levels=rating_levels_of(frame, rating))
-    if not actions:
-        if rating is None:
-            raise FitError(["a fit without the human actions needs a rating column"])
-        frame = frame.assign(human_action=pd.Series(pd.NA, index=frame.index, dtype=object))
+    frame, spec = _with_rating(frame, spec, rating, None, actions)
     problems = spec.problems()
     if problems:
         raise FitError(problems)
     seqs = encode(frame, spec)
     if bootstrap > 0 and spec.rating is not None:
         raise FitError(["bootstrap intervals are not available for a fit with ratings (fit without --bootstrap)"])
-    tick = counting(progress, restarts + bootstrap)
+    tick = counting(progress, options.starts + bootstrap)
 
-    fit = fit_iohmm(
-        seqs,
-        spec,
-        replace(options, seed=np.random.SeedSequence([seed, 0])),
-        on_restart=tick,
-    )
-    notes = f"fitted by trustseek: {seqs.n_participants} participants, {seqs.n_trials} trials, log-likelihood {fit.loglik:.4f}"
-    model = to_iohmm_model(spec, fit.params, notes)
-    events = fit.expected_events()
-    if isinstance(fit.structure, RatingStructure):
-        st = fit.workspace().estep(fit.params)
-        events["rating"] = fit.structure.rating_counts(st.emission)
-    warnings = _warnings(fit, events)
+    result = _fitted(seqs, spec, options, tick, general=True)
+    events, warnings = result.events, result.warnings
+    warnings += _warnings(result, events)
     never = [
         f"{name}[{describe_combination(int(u), inputs, spec.categories)}]"
         for name, table, inputs in (
-            ("emission", fit.structure.em, spec.emission_inputs),
-            ("transition", fit.structure.tr, spec.transition_inputs),
+            ("emission", result.structure.em, spec.emission_inputs),
+            ("transition", result.structure.tr, spec.transition_inputs),
         )
         for u in table.rep[table.empty[table.rep]]
         if not np.all(table.fixed[u])
@@ -375,7 +374,6 @@ def fit_model(
         warnings.append(f"never estimated (no such trials in the data; the model file holds defaults): {', '.join(never)}")
     for w in warnings:
         log.info("%s", w)
-    result = FitResult(model, fit, events, warnings=warnings, seed=seed)
     if bootstrap > 0:
         weights = {k: v for k, v in events.items() if k in ("initial", "emission", "transition")}
         result.intervals = _intervals(result, bootstrap, options, tick, weights)

@@ -2,7 +2,9 @@
 
 :func:`fit_iohmm` runs EM from several starts (in lockstep, :mod:`.em`), each to a
 loose relative tolerance and then on with the quasi-Newton finish
-(:mod:`.quasi_newton`), keeps the best, and names its levels by the spec's rule.
+(:mod:`.quasi_newton`), keeps the best, and names its levels by the spec's rule: an
+:class:`EMFit` (the tables, every start's run and the criteria; the model fits' result,
+:class:`~.result.FitResult`, and a mixture's extend it).
 :func:`loglik`, :func:`posteriors` and :func:`viterbi` are the inference the rest of
 the package needs.  The objective (log-likelihood plus log-prior) never decreases
 along a run.
@@ -17,8 +19,10 @@ import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from ..solvers.base import one_blas_thread
 from . import compiled_run
@@ -38,14 +42,21 @@ FINISH_FTOL = 0.01  # the finish stops at this fraction of the fit's relative to
 CONCURRENT_MIN = 10_000  # trials from which the starts' finishes run on several threads at once
 
 
-class FitCriteria:
-    """What every fit result derives from its structure, data, log-likelihood and runs: free
-    parameters, observations, AIC, BIC and each start's log-likelihood."""
+@dataclass
+class EMFit:
+    """What an EM fit leaves (:func:`~.iohmm.fit_iohmm`, and a mixture's): the spec and structure
+    fitted, the data, the best start's tables (``params``; levels ordered by the spec's
+    ``order_by`` rule), log-likelihood and objective, every start's run and which was best; and
+    the criteria derived from them: free parameters, observations, AIC, BIC."""
 
+    spec: IOHMMSpec
     structure: Structure
     seqs: Sequences
+    params: Params
     loglik: float
+    objective: float
     runs: list[RunResult]
+    best: int
 
     @property
     def n_params(self) -> int:
@@ -67,31 +78,8 @@ class FitCriteria:
     def restart_logliks(self) -> list[float]:
         return [r.loglik for r in self.runs]
 
-
-@dataclass
-class IOHMMFit(FitCriteria):
-    """Result of :func:`fit_iohmm`; levels are ordered by the spec's ``order_by`` rule."""
-
-    spec: IOHMMSpec
-    structure: Structure
-    seqs: Sequences
-    params: Params
-    loglik: float
-    objective: float
-    runs: list[RunResult]
-    best: int
-
     def workspace(self) -> Workspace:
         return Workspace(self.seqs, *self.structure.dims)
-
-    def expected_events(self) -> dict[str, np.ndarray]:
-        """Posterior-expected number of data events behind each row (tied rows: the group's)."""
-        st = self.workspace().estep(self.params)
-        s = self.structure
-        out = {"initial": np.full(s.K, float(self.seqs.n_participants))}
-        for name, table, counts in (("emission", s.em, s.action_counts(st.emission)), ("transition", s.tr, st.transition)):
-            out[name] = table.grouped(counts.sum(-1))[table.group]  # (U, K)
-        return out
 
 
 def _describe(i: int, r: RunResult) -> str:
@@ -112,7 +100,7 @@ def fit_iohmm(
     accelerate: bool = True,
     quasi_newton: bool = True,
     compiled: bool = True,
-) -> IOHMMFit:
+) -> EMFit:
     """Fit ``spec`` to ``seqs``: the runs from ``init`` and ``options.restarts`` random starts (from
     ``options.seed``); the best is kept (:class:`~.options.FitOptions`: by default on one thread).
 
@@ -198,7 +186,7 @@ def fit_iohmm(
     best = int(np.argmax([r.objective for r in runs]))
     p = runs[best].params
     log.info("best of %d starts: %s", len(runs), _describe(best, runs[best]))
-    return IOHMMFit(spec, structure, seqs, p.permuted(structure.order(p)), runs[best].loglik, runs[best].objective, runs, best)
+    return EMFit(spec, structure, seqs, p.permuted(structure.order(p)), runs[best].loglik, runs[best].objective, runs, best)
 
 
 def _workspace(seqs: Sequences, spec: IOHMMSpec, params: Params) -> Workspace:
@@ -238,3 +226,20 @@ def viterbi(work: Workspace, p: Params) -> np.ndarray:
         path[t - 1] = np.take_along_axis(back[t], path[t][:, None], 1)[:, 0]
     path[np.arange(T)[:, None] >= work.seqs.lengths[None, :]] = -1
     return path
+
+
+def posterior_frame(seqs: Sequences, spec: IOHMMSpec, params: Params) -> pd.DataFrame:
+    """Per trial, in the frame's row order: P(level | all trials of the participant) and the Viterbi level."""
+    gamma, path, _ = posteriors(seqs, spec, params)
+    valid = seqs.rows >= 0
+    tt, nn = np.nonzero(valid)
+    order = np.argsort(seqs.rows[valid], kind="stable")
+    tt, nn = tt[order], nn[order]
+    out: dict[str, Any] = {
+        "participant": [seqs.participants[i] for i in nn],
+        "trial": seqs.trial_numbers(tt, nn),
+    }
+    for k, name in enumerate(spec.levels):
+        out[f"p_trust_{name}"] = gamma[tt, nn, k]
+    out["viterbi_trust"] = np.array(spec.levels, dtype=object)[path[tt, nn]]
+    return pd.DataFrame(out)

@@ -42,42 +42,36 @@ import numpy as np
 import pandas as pd
 
 from ..model.core import TrustModel
-from ..model.iohmm import IOHMMModel
 from ..model.mixture import TypeMixture
 from .convergence import converge
 from .em import STATIONARY, RunResult, run_em
 from .fit import never_estimated
-from .iohmm import FINISH_FTOL, FINISH_SWITCH, FitCriteria, fit_iohmm
+from .iohmm import FINISH_FTOL, FINISH_SWITCH, fit_iohmm
 from .mixture_em import EMPTY, FINISH_MARGIN, PERTURB, MixtureParams, MixtureStructure, MixtureWorkspace
 from .options import DEFAULTS, SERIAL, FitOptions, counting
+from .result import EMFit
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
 from .trust_iohmm import (
     PAPER_EMISSION_INPUTS,
     PAPER_TRANSITION_INPUTS,
-    from_trust_model,
+    from_model,
     general_spec,
     is_trust_structure,
     preset_spec,
-    to_iohmm_model,
-    to_trust_model,
+    to_model,
 )
 
 log = logging.getLogger(__name__)
 
 
 @dataclass
-class MixtureFit(FitCriteria):
-    """Result of :func:`fit_mixture`: ``params`` with the types in the stated order (``type1`` first)."""
+class MixtureFit(EMFit):
+    """Result of :func:`fit_mixture`: the EM run, ``params`` with the types in the stated order
+    (``type1`` first), and the types' names."""
 
-    spec: IOHMMSpec
     structure: MixtureStructure
-    seqs: Sequences
     params: MixtureParams
-    loglik: float
-    objective: float
-    runs: list[RunResult]
-    best: int
     names: tuple[str, ...]
     warnings: list[str] = field(default_factory=list)
     not_estimated: tuple[tuple[str, tuple[int, ...]], ...] = ()  # TrustModel rows no trial informs (as the pooled fit)
@@ -111,11 +105,10 @@ class MixtureFit(FitCriteria):
         probable) and ``p_type_<name>`` per type."""
         return posterior_table(self.seqs, self.names, self.type_posteriors())
 
-    def models(self) -> list[TrustModel] | list[IOHMMModel]:
+    def models(self) -> list[TrustModel]:
         """The types as trust models, or as general models for a study's named inputs."""
-        if general_types(self.spec):
-            return [to_iohmm_model(self.spec, self.params.type_params(m)) for m in range(self.n_types)]
-        models = [to_trust_model(self.spec, self.params.type_params(m)) for m in range(self.n_types)]
+        general = general_types(self.spec)
+        models = [to_model(self.spec, self.params.type_params(m), general=general) for m in range(self.n_types)]
         return [m.replace(not_estimated=self.not_estimated) for m in models] if self.not_estimated else models
 
     def mixture(self, notes: str = "") -> TypeMixture:
@@ -342,7 +335,7 @@ def fit_types(
 def mixture_params(mixture: TypeMixture) -> tuple[IOHMMSpec, MixtureParams]:
     """The types' spec (the paper's structure, or the general models' own) and the mixture's tables
     (for decoding and scoring)."""
-    specs = [from_trust_model(m) for m in mixture.models]
+    specs = [from_model(m) for m in mixture.models]
     spec = specs[0][0]
     return spec, MixtureParams.from_types(mixture.weights, [p for _, p in specs])
 

@@ -60,7 +60,6 @@ from scipy.optimize import minimize
 from scipy.special import digamma, gammaln
 
 from ..model.core import TrustModel
-from ..model.iohmm import IOHMMModel
 from ..model.mixture import TypeMixture
 from . import kernels
 from .em import RunResult, run_em
@@ -71,7 +70,7 @@ from .personal_models import PersonalModels
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
 from .structure import FLOOR, Structure, Table
-from .trust_iohmm import to_iohmm_model, to_trust_model
+from .trust_iohmm import to_model
 
 log = logging.getLogger(__name__)
 
@@ -332,7 +331,7 @@ class _Prepared:
     rows: dict[str, _Rows]
 
     @classmethod
-    def of(cls, frame: pd.DataFrame, model: TrustModel | IOHMMModel | TypeMixture, n_jobs: int | None = 1) -> _Prepared:
+    def of(cls, frame: pd.DataFrame, model: TrustModel | TypeMixture, n_jobs: int | None = 1) -> _Prepared:
         if not kernels.AVAILABLE:
             raise FitError(["per-person models need the numba package"])
         mixture = model if isinstance(model, TypeMixture) else TypeMixture.single(model)
@@ -464,7 +463,7 @@ def _cv_strengths(
 
 def personalize(
     frame: pd.DataFrame,
-    model: TrustModel | IOHMMModel | TypeMixture,
+    model: TrustModel | TypeMixture,
     strength: float | Mapping[str, float] | None = None,
     tol: float = 1e-8,
     max_iter: int = 1000,
@@ -522,10 +521,7 @@ def personalize(
     # rows no trial of the log reaches are the structure's defaults during the fit: the centre's instead
     params.emission[:, base.em.empty] = centre.emission[:, base.em.empty]
     params.transition[:, base.tr.empty] = centre.transition[:, base.tr.empty]
-    if general_types(spec):
-        models: list[TrustModel] | list[IOHMMModel] = [to_iohmm_model(spec, params.take(n)) for n in range(N)]
-    else:
-        models = [to_trust_model(spec, params.take(n)) for n in range(N)]
+    models = [to_model(spec, params.take(n), general=general_types(spec)) for n in range(N)]
     unconverged = sum(not r.converged for r in runs)
     if unconverged:
         warnings.append(f"{unconverged} of {N} participants' fits stopped at the E-step cap")

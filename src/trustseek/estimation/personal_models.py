@@ -13,7 +13,6 @@ import numpy as np
 import pandas as pd
 
 from ..model.core import TrustModel, planning_refusal
-from ..model.iohmm import IOHMMModel
 from ..model.jsonfile import json_safe
 from .spec import FitError
 
@@ -23,7 +22,7 @@ class PersonalModels:
     """One trust model per participant (in the order of ``participants``, the study's values)."""
 
     participants: list[Any]
-    models: list[TrustModel] | list[IOHMMModel]  # general models for a centre with a study's named inputs
+    models: list[TrustModel]  # general models for a centre with a study's named inputs
     centre: list[str]
     strength: dict[str, float]
     at_bound: dict[str, bool]
@@ -42,7 +41,7 @@ class PersonalModels:
         """The models stacked as the arrays of a population of simulated supervisors
         (``Supervisors(**arrays)``: participant i is row i); trust models only."""
         first = self.models[0]
-        if isinstance(first, IOHMMModel):
+        if first.general:
             raise FitError([planning_refusal(first.used_inputs)])
         return {
             "trust_levels": first.trust_levels,

@@ -37,14 +37,13 @@ import numpy as np
 import pandas as pd
 
 from ..model.core import TrustModel
-from ..model.iohmm import IOHMMModel
 from ..vocab import HUMAN_ACTIONS
 from .baselines import BASELINES, BaselineFit, Features, baseline_predictions, features, fit_baselines
 from .iohmm import fit_iohmm
 from .options import DEFAULTS, FitOptions
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
-from .trust_iohmm import from_trust_model, preset_spec
+from .trust_iohmm import from_model, preset_spec
 
 log = logging.getLogger(__name__)
 
@@ -372,13 +371,11 @@ def _check_scored(feats: Features) -> None:
         raise FitError(["no trial to score: every recorded human action is fixed by the model (or none is recorded)"])
 
 
-def predict_in_sample(
-    frame: pd.DataFrame, model: TrustModel | IOHMMModel, bootstrap: int = 1000, seed: int = 0
-) -> PredictionReport:
+def predict_in_sample(frame: pd.DataFrame, model: TrustModel, bootstrap: int = 1000, seed: int = 0) -> PredictionReport:
     """One-step-ahead predictions of every trial under ``model`` (in-sample when ``model`` was
     fitted to ``frame``), scored against the baselines estimated on the same trials (the inputs'
     logistic regression with participant intercepts)."""
-    spec, params = from_trust_model(model)
+    spec, params = from_model(model)
     seqs = encode(frame, spec)
     filt = filter_beliefs(seqs, params)
     feats = features(frame, seqs, filt.determined, params.emission.shape[0], params.transition.shape[0])

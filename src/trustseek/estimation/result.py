@@ -1,44 +1,41 @@
-"""The result of a fit: the fitted model (a :class:`~trustseek.model.TrustModel` or a general
-:class:`~trustseek.model.iohmm.IOHMMModel`) with its diagnostics, as :func:`.fit.fit_trust_model`
-and :func:`.fit.fit_model` return it.
-
-The criteria (log-likelihood, free parameters, AIC, BIC, each start's log-likelihood) are those
-of the EM run behind it (``fit``, an :class:`~.iohmm.IOHMMFit`); ``events`` the expected events
-behind every row of the IOHMM's tables; a trust model's result also carries them in the
-TrustModel's own index (``counts``, ``estimated``) and its bootstrap intervals (``ci``).
+"""The result of a fit: the EM fit (:class:`EMFit`: its structure, data, tables, log-likelihood,
+every start's run, and the criteria derived from them: free parameters, AIC, BIC), as
+:func:`.iohmm.fit_iohmm` returns it; and :class:`FitResult`, what the model fits (:func:`.fit.fit_trust_model`,
+:func:`.fit.fit_model`) return: the EM fit with the fitted model (a :class:`~trustseek.model.TrustModel`, a trust
+model or a general one) and its diagnostics: ``events`` the expected events behind every row of
+the IOHMM's tables; a trust model's result also carries them in the trust model's own index
+(``counts``, ``estimated``) and its bootstrap intervals (``ci``).  A mixture's fit
+(:class:`~.mixture.MixtureFit`) shares the run and the criteria (:class:`EMFit`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
-from typing import Any, Generic, TypeVar
+from dataclasses import dataclass, field, fields
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 
 from ..model.core import TrustModel
-from ..model.iohmm import IOHMMModel
 from ..vocab import ACTIONS, EXPERIENCES
-from .bootstrap import Intervals
-from .iohmm import IOHMMFit, posteriors
-from .sequences import Sequences
-from .spec import IOHMMSpec, Params
+from .iohmm import EMFit, posterior_frame
 from .trust_iohmm import index_grid
 
-ModelT = TypeVar("ModelT", TrustModel, IOHMMModel)
+if TYPE_CHECKING:
+    from .bootstrap import Intervals
 
 
 @dataclass
-class FitResult(Generic[ModelT]):
-    """A fitted model with its diagnostics: the EM run behind it (``fit``), the expected events
-    behind every row (``events``), warnings for rows the data do not identify, the seed, and
-    bootstrap intervals (``intervals``) when asked for.  A trust model's result also has the
-    events and the estimated cells in the TrustModel's index (``counts``, ``estimated``), the
-    intervals as (lower, upper) tables (``ci``) and the number of replicates (``bootstrap``)."""
+class FitResult(EMFit):
+    """A fitted model (a trust model or a general one) with its EM fit and diagnostics: the
+    expected events behind every row (``events``), warnings for rows the data do not identify,
+    the seed, and bootstrap intervals (``intervals``) when asked for.  A trust model's result also
+    has the events and the estimated cells in the trust model's index (``counts``,
+    ``estimated``), the intervals as (lower, upper) tables (``ci``) and the number of replicates
+    (``bootstrap``)."""
 
-    model: ModelT
-    fit: IOHMMFit
+    model: TrustModel
     events: dict[str, np.ndarray]
     counts: dict[str, np.ndarray] = field(default_factory=dict)
     estimated: dict[str, np.ndarray] = field(default_factory=dict)
@@ -48,43 +45,28 @@ class FitResult(Generic[ModelT]):
     warnings: list[str] = field(default_factory=list)
     intervals: Intervals | None = None
 
-    @property
-    def loglik(self) -> float:
-        return self.fit.loglik
-
-    @property
-    def restart_logliks(self) -> list[float]:
-        return self.fit.restart_logliks
-
-    @property
-    def n_params(self) -> int:
-        return self.fit.n_params
-
-    @property
-    def aic(self) -> float:
-        return self.fit.aic
-
-    @property
-    def bic(self) -> float:
-        return self.fit.bic
+    @classmethod
+    def of(cls, fit: EMFit, model: TrustModel, events: dict[str, np.ndarray], seed: int) -> FitResult:
+        """``fit`` with its model, the expected events behind its rows and the seed."""
+        return cls(**{f.name: getattr(fit, f.name) for f in fields(EMFit)}, model=model, events=events, seed=seed)
 
     def posteriors(self) -> pd.DataFrame:
         """Smoothed P(level | all trials of the participant) and the Viterbi level, one row per trial."""
-        return posterior_frame(self.fit.seqs, self.fit.spec, self.fit.params)
+        return posterior_frame(self.seqs, self.spec, self.params)
 
     def fit_record(self, bootstrap: int) -> dict[str, Any]:
         """The fit's figures, each start's run, the seed, the bootstrap and the spec, for ``to_dict``."""
-        runs, iv = self.fit.runs, self.intervals
+        runs, iv = self.runs, self.intervals
         return {
             "loglik": self.loglik,
             "n_params": self.n_params,
             "aic": self.aic,
             "bic": self.bic,
-            "n_participants": self.fit.seqs.n_participants,
-            "n_trials": self.fit.seqs.n_trials,
-            "n_observations": self.fit.n_observations,
+            "n_participants": self.seqs.n_participants,
+            "n_trials": self.seqs.n_trials,
+            "n_observations": self.n_observations,
             "restart_logliks": self.restart_logliks,
-            "best_restart": self.fit.best,
+            "best_restart": self.best,
             "iterations": [r.iterations for r in runs],
             "subsample_iterations": [r.subsample_iterations for r in runs],
             "converged": [r.converged for r in runs],
@@ -95,13 +77,13 @@ class FitResult(Generic[ModelT]):
             "ci_level": None if iv is None else iv.level,
             "ci_method": None if iv is None else iv.method,
             "ci_other_maximum": None if iv is None else iv.other_maximum,
-            "spec": self.fit.spec.to_dict(),
+            "spec": self.spec.to_dict(),
         }
 
     def to_dict(self) -> dict[str, Any]:
         """The model, the fit's figures and runs, the seed, the bootstrap, the spec and the warnings
         (a trust model's also its counts, estimated cells and intervals), for JSON."""
-        if not isinstance(self.model, TrustModel):
+        if self.model.general:
             bootstrap = 0 if self.intervals is None else self.intervals.replicates
             return {"model": self.model.to_dict(), **self.fit_record(bootstrap), "warnings": list(self.warnings)}
         return {
@@ -120,9 +102,9 @@ class FitResult(Generic[ModelT]):
         category (a general model's), estimate, interval, expected events.  A model whose tables
         ignore some inputs lists each distinct row once, labelled by the inputs it depends on;
         fixed and never-reached rows are left out."""
-        if isinstance(self.model, TrustModel):
-            return self._trust_cells(self.model)
-        return self._model_cells(self.model)
+        if self.model.general:
+            return self._model_cells(self.model)
+        return self._trust_cells(self.model)
 
     def _trust_cells(self, m: TrustModel) -> list[dict[str, Any]]:
         """A trust model's cells: label, TrustModel index, estimate, CI, events.
@@ -130,7 +112,7 @@ class FitResult(Generic[ModelT]):
         A model whose tables ignore some inputs lists each distinct row once, labelled
         by the inputs it depends on.
         """
-        spec = self.fit.spec
+        spec = self.spec
         T = m.trust_levels
         short = {"complexity": "C", "robot_action": "a", "experience": "E'"}
         names = {"complexity": m.complexities, "robot_action": ACTIONS, "experience": EXPERIENCES}
@@ -187,10 +169,10 @@ class FitResult(Generic[ModelT]):
                     add("rating", (t, r), f"P(rating={levels[r]} | T={T[t]})", ("r", t, r))
         return out
 
-    def _model_cells(self, m: IOHMMModel) -> list[dict[str, Any]]:
+    def _model_cells(self, m: TrustModel) -> list[dict[str, Any]]:
         """A general model's row cells: label, table, input levels, estimate, expected events
         (tied rows once, fixed and never-reached rows left out; of two categories the second only)."""
-        s = self.fit.structure
+        s = self.structure
         L = m.levels
         out: list[dict[str, Any]] = []
         iv = self.intervals
@@ -211,8 +193,8 @@ class FitResult(Generic[ModelT]):
             }
             out.append(with_interval(rec, "initial", (k,)))
         for name, table, arr, cats in (
-            ("emission", s.em, m.emission, m.output_categories),
-            ("transition", s.tr, m.transition, L),
+            ("emission", s.em, m.emission_rows, m.output_categories),
+            ("transition", s.tr, m.transition_rows, L),
         ):
             for g in range(table.G):
                 u = int(table.rep[g])
@@ -250,20 +232,3 @@ class FitResult(Generic[ModelT]):
                         }
                     )
         return out
-
-
-def posterior_frame(seqs: Sequences, spec: IOHMMSpec, params: Params) -> pd.DataFrame:
-    """Per trial, in the frame's row order: P(level | all trials of the participant) and the Viterbi level."""
-    gamma, path, _ = posteriors(seqs, spec, params)
-    valid = seqs.rows >= 0
-    tt, nn = np.nonzero(valid)
-    order = np.argsort(seqs.rows[valid], kind="stable")
-    tt, nn = tt[order], nn[order]
-    out: dict[str, Any] = {
-        "participant": [seqs.participants[i] for i in nn],
-        "trial": seqs.trial_numbers(tt, nn),
-    }
-    for k, name in enumerate(spec.levels):
-        out[f"p_trust_{name}"] = gamma[tt, nn, k]
-    out["viterbi_trust"] = np.array(spec.levels, dtype=object)[path[tt, nn]]
-    return pd.DataFrame(out)

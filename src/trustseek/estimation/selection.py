@@ -22,8 +22,9 @@ import numpy as np
 import pandas as pd
 
 from .estep import Workspace
-from .iohmm import IOHMMFit, fit_iohmm
+from .iohmm import fit_iohmm
 from .options import FitOptions
+from .result import EMFit
 from .sequences import Sequences, encode
 from .spec import IOHMMSpec, Params
 from .structure import Structure
@@ -125,7 +126,7 @@ def fit_with_moves(
     splits: int = SPLITS_PER_LEVEL,
     rounds: int = MOVE_ROUNDS,
     sources_per_round: int = MOVE_SOURCES,
-) -> IOHMMFit:
+) -> EMFit:
     """:func:`~.iohmm.fit_iohmm` from ``options.restarts`` random starts (default
     :func:`default_restarts`) and from
     ``previous`` (a fit with one level fewer) split (:func:`split_starts`); then up to ``rounds``
@@ -161,7 +162,7 @@ def fit_with_moves(
     return fit
 
 
-def move_sources(fit: IOHMMFit, used: Sequence[float], n: int) -> list[int]:
+def move_sources(fit: EMFit, used: Sequence[float], n: int) -> list[int]:
     """Indices of the ``n`` best distinct local maxima among ``fit``'s runs not moved from yet.
 
     Runs within :data:`BEST_TOLERANCE` of each other (or of an objective in ``used``) count
@@ -223,9 +224,9 @@ def select_levels(
             raise ValueError(f"options {extra} apply to the paper preset only, not to a model of named inputs")
         base = general_spec(frame, em, tr, prior=prior)
     seqs = encode(frame, base)
-    previous: dict[int, IOHMMFit] = {}  # per slot (-1: all participants, f: fold f's training participants)
+    previous: dict[int, EMFit] = {}  # per slot (-1: all participants, f: fold f's training participants)
 
-    def one_fit(data: Sequences, K: int, slot: int, key: list[int]) -> IOHMMFit:
+    def one_fit(data: Sequences, K: int, slot: int, key: list[int]) -> EMFit:
         fit = fit_with_moves(
             data,
             base.with_levels(level_names(K)),
@@ -388,7 +389,7 @@ def comparison_warnings(
     return out
 
 
-def heldout_loglik(test: Sequences, fit: IOHMMFit) -> float:
+def heldout_loglik(test: Sequences, fit: EMFit) -> float:
     """Held-out log-likelihood of ``test`` under the training fit, smoothed only where it would be -inf.
 
     The held-out score compares the fitted models themselves: every row of the fit (the
@@ -408,7 +409,7 @@ def heldout_loglik(test: Sequences, fit: IOHMMFit) -> float:
     return float(Workspace(test, *fit.structure.dims).loglik(heldout_params(fit)))
 
 
-def heldout_params(fit: IOHMMFit, pseudocount: float = HELDOUT_PSEUDOCOUNT) -> Params:
+def heldout_params(fit: EMFit, pseudocount: float = HELDOUT_PSEUDOCOUNT) -> Params:
     """The parameters :func:`heldout_loglik` scores with: ``fit``'s, with every row holding a free
     cell at 0 (at most :data:`ZERO_CELL`) replaced by the smoothed row (expected counts + ``pseudocount`` per free cell)."""
     s = fit.structure

@@ -4,11 +4,11 @@
   transitions on (complexity, robot action, experience at the end of the trial),
   emissions on (complexity, robot action), P(intervene | ask) = 1 fixed, levels
   labelled so that ``high`` relies more in high complexity;
-* :func:`to_trust_model` / :func:`from_trust_model` -- IOHMM tables, whatever inputs they
-  depend on, broadcast to the :class:`~trustseek.model.TrustModel` arrays, and back;
-* :func:`general_spec` / :func:`to_iohmm_model` / :func:`from_iohmm_model` -- the same model
-  with any named inputs (a mapping's ``inputs``), kept as a general model file
-  (:class:`~trustseek.model.iohmm.IOHMMModel`); the paper's structure is its preset.
+* :func:`to_model` / :func:`from_model` -- IOHMM tables to a :class:`~trustseek.model.TrustModel`
+  and back: a trust model's tables, whatever inputs they depend on, broadcast to the paper's
+  inputs, or a general model with any named inputs (a mapping's ``inputs``, :func:`general_spec`)
+  and the spec's structure kept with them (:func:`spec_of` reads it back); the paper's
+  structure is its preset.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 
-from ..model.core import RatingTable, TrustModel
-from ..model.iohmm import IOHMMModel
+from ..model.core import RatingTable, TrustModel, trust_model
+from ..model.files import STRUCTURE_KEYS
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, LEVELS
 from .ratings import compose_joint, split_joint
 from .spec import FitError, Fixed, IOHMMSpec, Params
@@ -136,24 +136,35 @@ def index_grid(spec: IOHMMSpec, inputs: Sequence[str], with_experience: bool) ->
     return out
 
 
-def to_trust_model(spec: IOHMMSpec, params: Params, notes: str = "") -> TrustModel:
-    """Broadcast IOHMM tables to the TrustModel arrays (inputs a table ignores repeat); a spec
-    with a rating gives the model its rating table."""
-    check_convertible(spec)
-    eg = index_grid(spec, spec.emission_inputs, False)
-    tg = index_grid(spec, spec.transition_inputs, True)
+def to_model(spec: IOHMMSpec, params: Params, notes: str = "", general: bool = False) -> TrustModel:
+    """The fitted tables as a model: with ``general``, a general model (the spec's structure kept
+    with them), else a trust model (inputs a table ignores repeat); a spec with a rating gives the
+    model its rating table."""
     emission, rating = params.emission, None
     if spec.rating is not None:
         emission, probs = split_joint(emission, spec.n_outputs, spec.n_ratings)
         rating = RatingTable(spec.rating_levels, probs)
+    if not general:
+        check_convertible(spec)
+        eg = index_grid(spec, spec.emission_inputs, False)
+        tg = index_grid(spec, spec.transition_inputs, True)
+        levels, complexities = spec.levels, model_complexities(spec)
+        return trust_model(levels, complexities, params.initial, emission[eg], params.transition[tg], notes, rating=rating)
+    d = spec.to_dict()
     return TrustModel(
-        trust_levels=spec.levels,
-        complexities=model_complexities(spec),
+        levels=spec.levels,
+        output=spec.output,
+        output_categories=spec.output_categories,
+        inputs={c: tuple(spec.categories[c]) for c in dict.fromkeys((*spec.emission_inputs, *spec.transition_inputs))},
+        emission_inputs=spec.emission_inputs,
+        transition_inputs=spec.transition_inputs,
         initial=params.initial,
-        emission=emission[eg],
-        transition=params.transition[tg],
-        notes=notes,
+        emission=emission,
+        transition=params.transition,
+        structure={k: d[k] for k in STRUCTURE_KEYS},
         rating=rating,
+        rating_column=spec.rating,
+        notes=notes,
     )
 
 
@@ -169,27 +180,21 @@ def broadcast(spec: IOHMMSpec, arrays: Mapping[str, np.ndarray]) -> dict[str, np
     }
 
 
-def from_trust_model(model: TrustModel | IOHMMModel, rating: str | None = None) -> tuple[IOHMMSpec, Params]:
-    """The paper-structured spec and tables that reproduce ``model`` exactly (for decoding);
-    a general model (:class:`~trustseek.model.iohmm.IOHMMModel`) gives its own spec and tables.
+def from_model(model: TrustModel, rating: str | None = None) -> tuple[IOHMMSpec, Params]:
+    """The spec and tables that reproduce ``model`` exactly (for decoding): a trust model's the
+    paper-structured spec, a general model's its own (:func:`spec_of`).
 
     With ``rating`` (a column name) and a model with a rating table, the spec has that
     rating and the tables are the joint ones (:mod:`.ratings`)."""
-    if isinstance(model, IOHMMModel):
-        return from_iohmm_model(model, rating)
-    K, C = model.n_trust, model.n_complexity
-    spec = paper_spec(complexities=model.complexities, levels=model.trust_levels)
-    emission = np.array(model.emission, dtype=float).reshape(C * 2, K, 2)
+    spec = spec_of(model) if model.general else paper_spec(complexities=model.complexities, levels=model.trust_levels)
+    emission = np.array(model.emission_rows, dtype=float)
     if rating is not None:
         if model.rating is None:
-            raise FitError(["the model has no rating table (P(rating | trust)): it cannot use ratings"])
+            level = "level" if model.general else "trust"
+            raise FitError([f"the model has no rating table (P(rating | {level})): it cannot use ratings"])
         spec = replace(spec, rating=rating, rating_levels=model.rating.levels)
         emission = compose_joint(emission, np.array(model.rating.probs, dtype=float))
-    return spec, Params(
-        np.array(model.initial, dtype=float),
-        emission,
-        np.array(model.transition, dtype=float).reshape(C * 4, K, K),
-    )
+    return spec, Params(np.array(model.initial, dtype=float), emission, np.array(model.transition_rows, dtype=float))
 
 
 # --------------------------------------------------------------------------- the general model: any named inputs
@@ -265,40 +270,13 @@ def _human_action_spec(
     )
 
 
-def to_iohmm_model(spec: IOHMMSpec, params: Params, notes: str = "") -> IOHMMModel:
-    """The fitted tables as a general model file (the spec's structure kept with them)."""
-    emission, rating = params.emission, None
-    if spec.rating is not None:
-        emission, probs = split_joint(emission, spec.n_outputs, spec.n_ratings)
-        rating = RatingTable(spec.rating_levels, probs)
-    d = spec.to_dict()
-    structure = {
-        k: d[k] for k in ("fixed_emissions", "fixed_transitions", "tied_emissions", "tied_transitions", "order_by", "prior")
-    }
-    return IOHMMModel(
-        levels=spec.levels,
-        output=spec.output,
-        output_categories=spec.output_categories,
-        inputs={c: tuple(spec.categories[c]) for c in dict.fromkeys((*spec.emission_inputs, *spec.transition_inputs))},
-        emission_inputs=spec.emission_inputs,
-        transition_inputs=spec.transition_inputs,
-        initial=params.initial,
-        emission=emission,
-        transition=params.transition,
-        structure=structure,
-        rating=rating,
-        rating_column=spec.rating,
-        notes=notes,
-    )
-
-
 def _where(raw: object) -> dict[str, str]:
     return {str(k): str(v) for k, v in raw.items()} if isinstance(raw, Mapping) else {}
 
 
-def spec_of(model: IOHMMModel) -> IOHMMSpec:
+def spec_of(model: TrustModel) -> IOHMMSpec:
     """The spec a general model file was fitted with (its structure read back)."""
-    st = model.structure
+    st = model.structure or {}
     try:
         fixed = {
             name: tuple(
@@ -333,16 +311,3 @@ def spec_of(model: IOHMMModel) -> IOHMMSpec:
     if problems:
         raise FitError(problems)
     return spec
-
-
-def from_iohmm_model(model: IOHMMModel, rating: str | None = None) -> tuple[IOHMMSpec, Params]:
-    """The spec and tables of a general model (with ``rating``, a column, the joint tables of the
-    human action and the rating through the model's rating table)."""
-    spec = spec_of(model)
-    emission = np.array(model.emission, dtype=float)
-    if rating is not None:
-        if model.rating is None:
-            raise FitError(["the model has no rating table (P(rating | level)): it cannot use ratings"])
-        spec = replace(spec, rating=rating, rating_levels=model.rating.levels)
-        emission = compose_joint(emission, np.array(model.rating.probs, dtype=float))
-    return spec, Params(np.array(model.initial, dtype=float), emission, np.array(model.transition, dtype=float))

@@ -16,7 +16,7 @@ from .mixture_em import PARTS, MixtureParams
 from .options import FitOptions
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec
-from .trust_iohmm import to_iohmm_model, to_trust_model
+from .trust_iohmm import to_model
 
 #: a types' bootstrap replicate's refit: from the estimate and 2 random starts, to a relative tolerance of 1e-6
 TYPE_REFITS = FitOptions(restarts=2, tol=1e-6)
@@ -55,10 +55,9 @@ class _TypeReplicate:
 
 def _type_vectors(spec: IOHMMSpec, params: MixtureParams) -> np.ndarray:
     """(M, cells): every type's model cells (a TrustModel's, or a general model's), table after table."""
-    to_model = to_iohmm_model if general_types(spec) else to_trust_model
     out = []
     for m in range(params.initial.shape[0]):
-        tm = to_model(spec, params.type_params(m))
+        tm = to_model(spec, params.type_params(m), general=general_types(spec))
         out.append(np.concatenate([np.asarray(getattr(tm, t), dtype=float).ravel() for t in PARTS]))
     return np.array(out)
 

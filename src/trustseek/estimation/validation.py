@@ -40,7 +40,7 @@ from .iohmm import posteriors
 from .prediction import LEVEL, bootstrap_counts, chunks, filter_beliefs, percentile_interval
 from .sequences import encode
 from .spec import FitError
-from .trust_iohmm import from_trust_model
+from .trust_iohmm import from_model
 
 TRUST_MEASURES = ("smoothed", "filtered")
 RATING_BASELINES = ("reliable_fraction", "reliance", "reliance_rate")
@@ -274,7 +274,7 @@ def validate_ratings(
 def _decoded_values(frame: pd.DataFrame, model: TrustModel) -> tuple[dict[str, np.ndarray], np.ndarray, int]:
     """Per row of ``frame``: the smoothed and filtered trust (the levels' mean on [0, 1]) and the
     baselines; each row's participant code; the number of participants."""
-    spec, params = from_trust_model(model)
+    spec, params = from_model(model)
     seqs = encode(frame, spec)
     K = spec.n_levels
     scale = np.arange(K) / (K - 1)

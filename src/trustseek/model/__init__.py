@@ -1,5 +1,5 @@
-"""The supervisor and the task: ``TrustModel`` (trust dynamics and human actions; ``IOHMMModel``
-is the same model with any named inputs), ``Task``
+"""The supervisor and the task: ``TrustModel`` (trust dynamics and human actions; the paper's
+inputs, ``trust_model``, or any named inputs: a general model), ``Task``
 (complexities, success probabilities, rewards of eq. (1), discount), their JSON formats, and
 the built-in presets.
 

@@ -1,9 +1,8 @@
 """The public names of :mod:`trustseek.model`: read by type checkers, and by ``__init__.py`` to load each on first use."""
 
 # every submodule, as the package attribute of that name
-from . import core, iohmm, jsonfile, mixture, presets, task
-from .core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, RatingTable, TrustModel
-from .iohmm import IOHMM_FORMAT, IOHMMModel, load_any_model
+from . import core, files, jsonfile, mixture, presets, rating, task
+from .core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, IOHMM_FORMAT, TrustModel, load_any_model, trust_model
 from .jsonfile import ModelError
 from .mixture import TypeMixture
 from .presets import (
@@ -18,6 +17,7 @@ from .presets import (
     paper_model,
     paper_task,
 )
+from .rating import RatingTable
 from .task import Rewards, Task
 
 __all__ = [
@@ -28,7 +28,6 @@ __all__ = [
     "MIXTURE_PRESETS",
     "MODEL_PRESETS",
     "TASK_PRESETS",
-    "IOHMMModel",
     "ModelError",
     "RatingTable",
     "Rewards",
@@ -43,4 +42,5 @@ __all__ = [
     "paper_conservative_mixture",
     "paper_model",
     "paper_task",
+    "trust_model",
 ]

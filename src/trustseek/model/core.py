@@ -1,4 +1,13 @@
-"""The supervisor model (`TrustModel`, with an optional `RatingTable`); the task is in ``task.py``.
+"""The supervisor model: one class, :class:`TrustModel`, an IOHMM of a hidden level (trust), one
+output (the human action) and named discrete inputs, with an optional rating table.
+
+The trust model the planner needs is this model configured with the paper's inputs
+(:func:`trust_model`): emissions on complexity and the robot action, transitions on
+complexity, the robot action and the experience.  A study may condition on anything it logs
+instead (a between-subject condition, the aid's advice, an image's difficulty): the model then
+keeps those inputs by name, each with its levels in their declared order (a general model,
+``general``); planning (solve, simulate, the policies) refuses it, decoding, prediction and
+validation take either.
 
 Vocabulary (fixed everywhere in trustseek):
 
@@ -9,40 +18,46 @@ Vocabulary (fixed everywhere in trustseek):
   uses ``low`` / ``high`` for both.  Trust levels are ordered from lowest to
   highest, so for two levels the belief is P(trust = high) = b[-1].
 
-Array layouts (all ``numpy.float64``):
+Tables (``numpy.float64``), one axis per input in the order the table lists them, then the
+level, then the output category (or the next level)::
 
-* ``TrustModel.initial[t]``                      P(T_1 = t)
-* ``TrustModel.emission[c, a, t, o]``             P(o_t = o | T_t = t, C_t = c, a_t = a)
-* ``TrustModel.transition[c, a, e, t, t2]``       P(T_{t+1} = t2 | T_t = t, E_{t+1} = e, C_t = c, a_t = a)
-* ``TrustModel.rating.probs[t, r]``               P(self-reported rating = r | T_t = t) (optional table)
+    initial[t]                          P(T_1 = t)
+    emission[*emission inputs, t, o]    P(o_t = o | T_t = t, the trial's emission inputs)
+    transition[*transition inputs, t, t2]  P(T_{t+1} = t2 | T_t = t, the trial's transition inputs)
+    rating.probs[t, r]                  P(self-reported rating = r | T_t = t) (optional table)
 
-JSON formats are documented in ``docs/formats.md``.  Loading validates every
-cell and reports every problem at once through :class:`~trustseek.model.jsonfile.ModelError`.
+so that a trust model has ``emission[c, a, t, o]`` and ``transition[c, a, e, t, t2]``;
+``emission_rows`` and ``transition_rows`` are the same tables by input combination ``u`` (C
+order over the inputs, the first varying slowest).  The JSON formats (``trustseek.trust-model/1``
+for a trust model, ``trustseek.iohmm/1`` for a general one) are in ``docs/formats.md`` and
+:mod:`.files`; loading validates every cell and reports every problem at once through
+:class:`~trustseek.model.jsonfile.ModelError`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields
+from dataclasses import replace as _replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..vocab import ACTIONS, ASK, AUTONOMOUS, EXPERIENCES, FAULTY, HUMAN_ACTIONS, INTERVENE, RELIABLE, RELY
-from .jsonfile import (
-    JsonFile,
-    ModelError,
-    UnknownComplexityError,
-    check_names,
-    check_row_array,
-    freeze_arrays,
-    get_key,
-    nested,
-    raise_problems,
-    read_row,
-    read_table,
-    unknown_keys,
+from .files import (
+    EMISSION_INPUTS,
+    IOHMM_FORMAT,
+    MODEL_FORMAT,
+    PLANNING_INPUTS,
+    SYMBOLS,
+    is_iohmm_file,
+    model_fields,
+    model_to_dict,
+    planning_refusal,
 )
+from .jsonfile import JsonFile, ModelError, UnknownComplexityError, check_row_array, freeze_arrays, load_json, raise_problems
+from .rating import RatingTable
 
 __all__ = [  # the vocabulary is re-exported for convenience
     "ACTIONS",
@@ -59,190 +74,219 @@ __all__ = [  # the vocabulary is re-exported for convenience
     "RELY",
     "RatingTable",
     "TrustModel",
+    "is_iohmm_file",
+    "load_any_model",
     "planning_refusal",
+    "trust_model",
 ]
-
-MODEL_FORMAT = "trustseek.trust-model/1"
-IOHMM_FORMAT = "trustseek.iohmm/1"  # a general model with named inputs (model/iohmm.py)
-PLANNING_INPUTS = ("complexity", "robot_action", "experience")  # the inputs of a trust model, which planning needs
-
-
-def planning_refusal(inputs: Sequence[str]) -> str:
-    """The one line said where a trust model is needed and a general model (with ``inputs``) is given."""
-    named = ", ".join(inputs) if inputs else "none"
-    return (
-        f"a general IOHMM model ({IOHMM_FORMAT}, inputs: {named}) is not a trust model: planning "
-        f"(solve, simulate, policies) needs a trust model ({MODEL_FORMAT}) whose inputs are among "
-        f"{', '.join(PLANNING_INPUTS)} (fit with --transitions-on/--emissions-on naming only those)"
-    )
-
-
-# --------------------------------------------------------------------------- TrustModel
 
 
 @dataclass(frozen=True, eq=False)
-class RatingTable:
-    """A self-reported trust rating as a second emission of the hidden trust.
+class TrustModel(JsonFile):
+    """An IOHMM of hidden trust with named inputs (see the module docstring).
 
-    ``levels`` are the rating's ordinal levels, lowest first (e.g. ``"1"`` .. ``"7"``, or
-    labels); ``probs[t, r]`` is P(rating = levels[r] | trust level t), one free row per trust
-    level.  The rating depends on the trust only (not on complexity or the robot action),
-    and a trial without a rating contributes probability 1.
+    ``structure`` is None for a trust model (the paper's inputs, written as
+    ``trustseek.trust-model/1``), and for a general model the fixed and tied rows, ``order_by``
+    and ``prior`` it was fitted with (written as ``trustseek.iohmm/1``).  ``not_estimated``
+    lists a trust model's rows no data ever estimated (e.g. every ask row of a model fitted
+    from a study without asking): ``("emission", (c, a))`` or ``("transition", (c, a, e))``.
     """
 
     levels: tuple[str, ...]
-    probs: np.ndarray
+    output: str
+    output_categories: tuple[str, ...]
+    inputs: Mapping[str, tuple[str, ...]]  # every input's levels, in their declared order
+    emission_inputs: tuple[str, ...]
+    transition_inputs: tuple[str, ...]
+    initial: np.ndarray
+    emission: np.ndarray
+    transition: np.ndarray
+    structure: Mapping[str, Any] | None = field(default_factory=dict)
+    rating: RatingTable | None = None
+    rating_column: str | None = None
+    notes: str = ""
+    not_estimated: tuple[tuple[str, tuple[int, ...]], ...] = ()
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "levels", tuple(self.levels))
-        freeze_arrays(self, "probs")
+        for name in ("levels", "output_categories", "emission_inputs", "transition_inputs"):
+            object.__setattr__(self, name, tuple(getattr(self, name)))
+        object.__setattr__(self, "inputs", {str(k): tuple(v) for k, v in self.inputs.items()})
+        object.__setattr__(self, "structure", None if self.structure is None else dict(self.structure))
+        object.__setattr__(
+            self, "not_estimated", tuple(sorted({(str(t), tuple(int(i) for i in idx)) for t, idx in self.not_estimated}))
+        )
+        freeze_arrays(self, "initial", "emission", "transition")
+        for name, inputs in (("emission", self.emission_inputs), ("transition", self.transition_inputs)):
+            arr = getattr(self, name)
+            if all(c in self.inputs for c in inputs) and arr.ndim == 3 and arr.shape[0] == self.n_combinations(inputs):
+                object.__setattr__(self, name, arr.reshape(self.axes(inputs) + arr.shape[1:]))  # given by combination
+        raise_problems(self)
+
+    # -- configuration -----------------------------------------------------
+    @property
+    def general(self) -> bool:
+        """True for a general model (inputs a trust model does not have, or a fitted structure kept)."""
+        return self.structure is not None
 
     @property
     def n_levels(self) -> int:
         return len(self.levels)
 
-    def problems(self, trust_levels: Sequence[str]) -> list[str]:
-        """Every violation of the table's constraints for a model with ``trust_levels``."""
-        problems: list[str] = []
-        if not all(isinstance(n, str) and n for n in self.levels):
-            problems.append(f"rating levels must be non-empty strings, got {list(self.levels)!r}")
-        if len(set(self.levels)) != len(self.levels):
-            problems.append(f"rating levels have duplicate names: {list(self.levels)}")
-        if len(self.levels) < 2:
-            problems.append(f"rating levels need at least 2 entries, got {len(self.levels)}")
-        shape = (len(trust_levels), len(self.levels))
-        if self.probs.shape != shape:
-            problems.append(
-                f"rating probabilities have shape {self.probs.shape}, expected {shape} (trust levels x rating levels)"
-            )
-            return problems
-        check_row_array(self.probs, lambda i: f"rating[T={trust_levels[i[0]]}]", problems)
-        return problems
+    def axes(self, inputs: Sequence[str]) -> tuple[int, ...]:
+        return tuple(len(self.inputs[c]) for c in inputs)
 
-    def to_dict(self, trust_levels: Sequence[str]) -> dict[str, Any]:
-        return {"levels": list(self.levels), "probs": nested(self.probs, [trust_levels, self.levels])}
+    def n_combinations(self, inputs: Sequence[str]) -> int:
+        return int(np.prod(self.axes(inputs))) if inputs else 1
 
-    @classmethod
-    def read(cls, obj: Any, trust_levels: Sequence[str], problems: list[str]) -> RatingTable | None:
-        """The ``rating`` entry of a model file (``{"levels": [...], "probs": {T: {level: p}}}``);
-        every problem is appended to ``problems``."""
-        if not isinstance(obj, Mapping):
-            problems.append(f"rating must be an object with 'levels' and 'probs', got {obj!r}")
-            return None
-        unknown_keys(obj, ["levels", "probs"], "rating", problems)
-        levels = check_names(get_key(obj, "levels", "rating.levels", problems), "rating.levels", problems)
-        raw = get_key(obj, "probs", "rating.probs", problems)
-        if not levels or raw is None:
-            return None
-        probs = np.full((len(trust_levels), len(levels)), np.nan)
-        unknown_keys(raw, trust_levels, "rating.probs", problems)
-        for t, name in enumerate(trust_levels):
-            cell = get_key(raw, name, f"rating[T={name}]", problems)
-            if cell is not None:
-                row = read_row(cell, levels, f"rating[T={name}]", problems)
-                if row is not None:
-                    probs[t] = row
-        return cls(tuple(levels), probs)
+    @property
+    def used_inputs(self) -> tuple[str, ...]:
+        """The inputs of either table, emission inputs first."""
+        return tuple(dict.fromkeys((*self.emission_inputs, *self.transition_inputs)))
 
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, RatingTable):
-            return NotImplemented
-        return self.levels == other.levels and np.array_equal(self.probs, other.probs)
+    @property
+    def emission_rows(self) -> np.ndarray:
+        """``emission`` by input combination: (U, K, M)."""
+        return self.emission.reshape(self.n_combinations(self.emission_inputs), self.n_levels, -1)
 
+    @property
+    def transition_rows(self) -> np.ndarray:
+        """``transition`` by input combination: (U, K, K)."""
+        return self.transition.reshape(self.n_combinations(self.transition_inputs), self.n_levels, self.n_levels)
 
-@dataclass(frozen=True, eq=False)
-class TrustModel(JsonFile):
-    """The supervisor: hidden trust, its dynamics, and how it drives the human action."""
+    def symbol(self, name: str) -> str:
+        """How row names show an input (``C``, ``a``, ``E`` for a trust model) or the level (``T``)."""
+        if self.general:
+            return "level" if name == "level" else name
+        return "T" if name == "level" else SYMBOLS[name]
 
-    trust_levels: tuple[str, ...]
-    complexities: tuple[str, ...]
-    initial: np.ndarray
-    emission: np.ndarray
-    transition: np.ndarray
-    notes: str = ""
-    # rows no data ever estimated (e.g. every ask row of a model fitted from a study without
-    # asking): ("emission", (c, a)) or ("transition", (c, a, e)); empty = all estimated
-    not_estimated: tuple[tuple[str, tuple[int, ...]], ...] = ()
-    # the optional second emission: a self-reported rating, P(rating | trust) (None: no ratings)
-    rating: RatingTable | None = None
+    def combination(self, table: str, u: int) -> dict[str, str]:
+        """The input levels of combination ``u`` of ``table`` (``emission`` or ``transition``)."""
+        inputs = self.emission_inputs if table == "emission" else self.transition_inputs
+        if not inputs:
+            return {}
+        idx = np.unravel_index(u, self.axes(inputs))
+        return {c: self.inputs[c][int(i)] for c, i in zip(inputs, idx, strict=True)}
 
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "trust_levels", tuple(self.trust_levels))
-        object.__setattr__(self, "complexities", tuple(self.complexities))
-        object.__setattr__(
-            self, "not_estimated", tuple(sorted({(str(t), tuple(int(i) for i in idx)) for t, idx in self.not_estimated}))
+    def row_name(self, table: str, where: int | Sequence[int], k: int | None = None) -> str:
+        """``emission[C=high, a=ask]``, ``transition[C=high, a=ask, E=reliable][T=low]`` or
+        ``emission[advice=agree, difficulty=hard][level=low]``: the row at input combination
+        ``where`` (its index ``u``, or one index per input) and level ``k``."""
+        inputs = self.emission_inputs if table == "emission" else self.transition_inputs
+        if isinstance(where, int | np.integer):
+            u = int(where)
+        else:
+            u = int(np.ravel_multi_index(tuple(where), self.axes(inputs))) if inputs else 0
+        named = ", ".join(f"{self.symbol(c)}={v}" for c, v in self.combination(table, u).items())
+        s = f"{table}[{named}]" if named else table
+        return s if k is None else f"{s}[{self.symbol('level')}={self.levels[k]}]"
+
+    def problems(self) -> list[str]:
+        """Every violation of the model's constraints, as human-readable lines."""
+        if not self.general and not self.paper_inputs:
+            return [f"a trust model has the paper's inputs ({', '.join(PLANNING_INPUTS)}); give a general model a structure"]
+        p = self._name_problems() if self.general else self._trust_problems()
+        if p and self.general:
+            return p
+        K, M = self.n_levels, len(self.output_categories)
+        shapes = {
+            "initial": (K,),
+            "emission": (*self.axes(self.emission_inputs), K, M),
+            "transition": (*self.axes(self.transition_inputs), K, K),
+        }
+        p += [f"{n} has shape {getattr(self, n).shape}, expected {s}" for n, s in shapes.items() if getattr(self, n).shape != s]
+        if p:
+            return p
+        check_row_array(self.initial[None, :], lambda i: "initial", p)
+        for table in ("emission", "transition"):
+            check_row_array(getattr(self, table), lambda i, t=table: self.row_name(t, i[:-1], i[-1]), p)
+        return p + self._extras_problems()
+
+    def _name_problems(self) -> list[str]:
+        """A general model's names: levels, output categories, inputs and their levels."""
+        p: list[str] = []
+        for what, names in (("levels", self.levels), ("output categories", self.output_categories)):
+            if not all(isinstance(n, str) and n for n in names) or len(set(names)) != len(names):
+                p.append(f"{what} must be distinct non-empty names, got {list(names)}")
+        if len(self.output_categories) < 2:
+            p.append(f"the output {self.output!r} needs at least 2 categories")
+        if not self.levels:
+            p.append("a model needs at least one level")
+        for name, cols in (("emission_inputs", self.emission_inputs), ("transition_inputs", self.transition_inputs)):
+            if len(set(cols)) != len(cols):
+                p.append(f"{name} repeat an input: {list(cols)}")
+            p += [f"{name}: {c!r} is not one of the inputs {list(self.inputs)}" for c in cols if c not in self.inputs]
+        for c, lv in self.inputs.items():
+            if not lv or not all(isinstance(x, str) and x for x in lv) or len(set(lv)) != len(lv):
+                p.append(f"input {c!r}: levels must be distinct non-empty names, got {list(lv)}")
+        return p
+
+    @property
+    def paper_inputs(self) -> bool:
+        """True when the inputs are the paper's (as a trust model has them)."""
+        return (
+            self.output == "human_action"
+            and self.output_categories == HUMAN_ACTIONS
+            and set(self.inputs) == set(PLANNING_INPUTS)
+            and self.inputs.get("robot_action") == ACTIONS
+            and self.inputs.get("experience") == EXPERIENCES
+            and self.emission_inputs == EMISSION_INPUTS
+            and self.transition_inputs == PLANNING_INPUTS
         )
-        freeze_arrays(self, "initial", "emission", "transition")
-        raise_problems(self)
 
-    # -- shape -------------------------------------------------------------
+    def _trust_problems(self) -> list[str]:
+        """A trust model's names: two or more distinct trust levels and complexities."""
+        p: list[str] = []
+        for what, names in (("trust_levels", self.levels), ("complexities", self.inputs["complexity"])):
+            if len(set(names)) != len(names):
+                p.append(f"{what} has duplicate names: {list(names)}")
+            if len(names) < 2:
+                p.append(f"{what} needs at least 2 entries, got {len(names)}")
+        return p
+
+    def _extras_problems(self) -> list[str]:
+        p: list[str] = []
+        if self.not_estimated and self.general:
+            p.append("not_estimated marks rows of a trust model; a general model has none")
+        row_shapes: dict[str, tuple[int, ...]] = {"emission": self.emission.shape[:-2], "transition": self.transition.shape[:-2]}
+        for table, idx in self.not_estimated:
+            rshape = row_shapes.get(table)
+            if rshape is None or len(idx) != len(rshape) or any(not 0 <= i < n for i, n in zip(idx, rshape, strict=False)):
+                p.append(f"not_estimated: {table}{list(idx)} is not a row of the model")
+        if self.rating is not None:
+            if not isinstance(self.rating, RatingTable):
+                p.append(f"rating must be a RatingTable, got {type(self.rating).__name__}")
+            else:
+                p += self.rating.problems(self.levels)
+        return p
+
+    # -- what the planner names --------------------------------------------
+    @property
+    def trust_levels(self) -> tuple[str, ...]:
+        return self.levels
+
+    @property
+    def complexities(self) -> tuple[str, ...]:
+        """A trust model's complexities (a general model is refused: planning needs a trust model)."""
+        if self.general:
+            raise ModelError([planning_refusal(self.used_inputs)])
+        return self.inputs["complexity"]
+
     @property
     def n_trust(self) -> int:
-        return len(self.trust_levels)
+        return len(self.levels)
 
     @property
     def n_complexity(self) -> int:
         return len(self.complexities)
 
-    def problems(self) -> list[str]:
-        """Every violation of the model's constraints, as human-readable lines."""
-        K, N = len(self.trust_levels), len(self.complexities)
-        problems: list[str] = []
-        for what, names in (("trust_levels", self.trust_levels), ("complexities", self.complexities)):
-            if len(set(names)) != len(names):
-                problems.append(f"{what} has duplicate names: {list(names)}")
-            if len(names) < 2:
-                problems.append(f"{what} needs at least 2 entries, got {len(names)}")
-        shapes = {
-            "initial": (K,),
-            "emission": (N, 2, K, 2),
-            "transition": (N, 2, 2, K, K),
-        }
-        for name, shape in shapes.items():
-            if getattr(self, name).shape != shape:
-                problems.append(f"{name} has shape {getattr(self, name).shape}, expected {shape}")
-        if problems:
-            return problems
-        T, C = self.trust_levels, self.complexities
-        check_row_array(self.initial[None, :], lambda idx: "initial", problems)
-        check_row_array(
-            self.emission,
-            lambda i: f"emission[C={C[i[0]]}, a={ACTIONS[i[1]]}][T={T[i[2]]}]",
-            problems,
-        )
-        check_row_array(
-            self.transition,
-            lambda i: f"transition[C={C[i[0]]}, a={ACTIONS[i[1]]}, E={EXPERIENCES[i[2]]}][T={T[i[3]]}]",
-            problems,
-        )
-        row_shapes: dict[str, tuple[int, ...]] = {"emission": (N, 2), "transition": (N, 2, 2)}
-        for table, idx in self.not_estimated:
-            rshape = row_shapes.get(table)
-            if rshape is None or len(idx) != len(rshape) or any(not 0 <= i < n for i, n in zip(idx, rshape, strict=False)):
-                problems.append(f"not_estimated: {table}{list(idx)} is not a row of the model")
-        if self.rating is not None:
-            if not isinstance(self.rating, RatingTable):
-                problems.append(f"rating must be a RatingTable, got {type(self.rating).__name__}")
-            else:
-                problems += self.rating.problems(T)
-        return problems
-
-    # -- convenience -------------------------------------------------------
     def trust_index(self, name: str) -> int:
-        return self.trust_levels.index(name)
+        return self.levels.index(name)
 
     def complexity_index(self, name: str) -> int:
         try:
             return self.complexities.index(name)
         except ValueError:
             raise UnknownComplexityError([f"unknown complexity {name!r}; expected one of {list(self.complexities)}"]) from None
-
-    def row_name(self, table: str, idx: Sequence[int]) -> str:
-        """``emission[C=high, a=ask]`` or ``transition[C=high, a=ask, E=reliable]``."""
-        parts = [f"C={self.complexities[idx[0]]}", f"a={ACTIONS[idx[1]]}"]
-        if table == "transition":
-            parts.append(f"E={EXPERIENCES[idx[2]]}")
-        return f"{table}[{', '.join(parts)}]"
 
     def not_estimated_rows(self) -> list[str]:
         """The rows no data estimated, by name (:meth:`row_name`)."""
@@ -267,127 +311,71 @@ class TrustModel(JsonFile):
         """P(o = intervene | belief, C = c, a) for a belief vector over trust levels."""
         return float(np.asarray(belief) @ self.emission[c, a, :, INTERVENE])
 
-    # -- JSON --------------------------------------------------------------
+    # -- JSON (the two formats: .files) -------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        T, C = self.trust_levels, self.complexities
-        return {
-            "format": MODEL_FORMAT,
-            "notes": self.notes,
-            "trust_levels": list(T),
-            "complexities": list(C),
-            "initial": nested(self.initial, [T]),
-            "emission": nested(self.emission, [C, ACTIONS, T, HUMAN_ACTIONS]),
-            "transition": nested(self.transition, [C, ACTIONS, EXPERIENCES, T, T]),
-            **({"not_estimated": [_row_dict(t, idx, C) for t, idx in self.not_estimated]} if self.not_estimated else {}),
-            **({"rating": self.rating.to_dict(T)} if self.rating is not None else {}),
-        }
+        return model_to_dict(self)
 
     @classmethod
-    def from_dict(cls, d: Any, source: str | None = None) -> TrustModel:
-        problems: list[str] = []
-        if not isinstance(d, Mapping):
-            raise ModelError([f"a trust model must be a JSON object, got {type(d).__name__}"], source)
-        fmt = d.get("format", MODEL_FORMAT)
-        if fmt == IOHMM_FORMAT:
-            inputs = [*d.get("emission_inputs", []), *d.get("transition_inputs", [])]
-            raise ModelError([planning_refusal([str(c) for c in dict.fromkeys(inputs)])], source)
-        if fmt != MODEL_FORMAT:
-            problems.append(f"format is {fmt!r}, expected {MODEL_FORMAT!r}")
-        unknown_keys(
-            d,
-            ["format", "notes", "trust_levels", "complexities", "initial", "emission", "transition", "not_estimated", "rating"],
-            "model",
-            problems,
-        )
-        T = check_names(get_key(d, "trust_levels", "trust_levels", problems), "trust_levels", problems)
-        C = check_names(get_key(d, "complexities", "complexities", problems), "complexities", problems)
-        if problems or not T or not C:
-            raise ModelError(problems, source)
-        K, N = len(T), len(C)
-        initial = np.full(K, np.nan)
-        emission = np.full((N, 2, K, 2), np.nan)
-        transition = np.full((N, 2, 2, K, K), np.nan)
-
-        init = get_key(d, "initial", "initial", problems)
-        if init is not None:
-            row = read_row(init, T, "initial", problems)
-            if row is not None:
-                initial[:] = row
-
-        em = get_key(d, "emission", "emission", problems)
-        if em is not None:
-            read_table(em, "emission", [("C", C), ("a", ACTIONS)], ("T", T), HUMAN_ACTIONS, emission, problems)
-        tr = get_key(d, "transition", "transition", problems)
-        if tr is not None:
-            read_table(tr, "transition", [("C", C), ("a", ACTIONS), ("E", EXPERIENCES)], ("T", T), T, transition, problems)
-        notes = d.get("notes", "")
-        if not isinstance(notes, str):
-            problems.append(f"notes must be a string, got {notes!r}")
-        not_estimated = _read_not_estimated(d.get("not_estimated", []), C, problems)
-        rating = RatingTable.read(d["rating"], T, problems) if d.get("rating") is not None else None
-        if problems:
-            raise ModelError(problems, source)
+    def from_dict(cls, d: Any, source: str | None = None, general: bool = False) -> TrustModel:
+        """A trust model from its JSON form; with ``general``, a general model file too (by its
+        ``format``), which is otherwise refused (planning needs a trust model)."""
+        kw = model_fields(d, source, general)
         try:
-            return cls(tuple(T), tuple(C), initial, emission, transition, notes=notes, not_estimated=not_estimated, rating=rating)
+            return cls(**kw)
         except ModelError as exc:
             raise ModelError(exc.problems, source) from None
 
     def replace(self, **changes: Any) -> TrustModel:
-        kw: dict[str, Any] = {
-            "trust_levels": self.trust_levels,
-            "complexities": self.complexities,
-            "initial": self.initial,
-            "emission": self.emission,
-            "transition": self.transition,
-            "notes": self.notes,
-            "not_estimated": self.not_estimated,
-            "rating": self.rating,
-        }
-        kw.update(changes)
-        return TrustModel(**kw)
+        """This model with ``changes`` (fields, or a trust model's ``trust_levels`` and ``complexities``)."""
+        if "trust_levels" in changes:
+            changes["levels"] = changes.pop("trust_levels")
+        if "complexities" in changes:
+            changes["inputs"] = {**self.inputs, "complexity": tuple(changes.pop("complexities"))}
+        return _replace(self, **changes)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, TrustModel):
             return NotImplemented
-        return (
-            self.trust_levels == other.trust_levels
-            and self.complexities == other.complexities
-            and np.array_equal(self.initial, other.initial)
-            and np.array_equal(self.emission, other.emission)
-            and np.array_equal(self.transition, other.transition)
-            and self.not_estimated == other.not_estimated
-            and self.rating == other.rating
-        )
+        for f in fields(self):
+            if f.name == "notes":
+                continue
+            a, b = getattr(self, f.name), getattr(other, f.name)
+            if not (np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b):
+                return False
+        return True
 
 
-def _row_dict(table: str, idx: tuple[int, ...], C: Sequence[str]) -> dict[str, str]:
-    d = {"table": table, "C": C[idx[0]], "a": ACTIONS[idx[1]]}
-    if table == "transition":
-        d["E"] = EXPERIENCES[idx[2]]
-    return d
+def trust_model(
+    trust_levels: Sequence[str],
+    complexities: Sequence[str],
+    initial: Any,
+    emission: Any,
+    transition: Any,
+    notes: str = "",
+    not_estimated: Sequence[tuple[str, tuple[int, ...]]] = (),
+    rating: RatingTable | None = None,
+) -> TrustModel:
+    """The trust model with the paper's inputs: ``emission[c, a, t, o]`` and
+    ``transition[c, a, e, t, t2]`` over ``complexities``, the robot actions and the experiences."""
+    return TrustModel(
+        levels=tuple(trust_levels),
+        output="human_action",
+        output_categories=HUMAN_ACTIONS,
+        inputs={"complexity": tuple(complexities), "robot_action": ACTIONS, "experience": EXPERIENCES},
+        emission_inputs=EMISSION_INPUTS,
+        transition_inputs=PLANNING_INPUTS,
+        initial=initial,
+        emission=emission,
+        transition=transition,
+        structure=None,
+        rating=rating,
+        notes=notes,
+        not_estimated=tuple(not_estimated),
+    )
 
 
-def _read_not_estimated(raw: Any, C: Sequence[str], problems: list[str]) -> tuple[tuple[str, tuple[int, ...]], ...]:
-    """``not_estimated``: a list of rows ``{"table": "emission"|"transition", "C": .., "a": .., ["E": ..]}``."""
-    if not isinstance(raw, list):
-        problems.append(f"not_estimated must be a list of rows, got {raw!r}")
-        return ()
-    out = []
-    for i, row in enumerate(raw):
-        where = f"not_estimated[{i}]"
-        if not isinstance(row, Mapping) or row.get("table") not in ("emission", "transition"):
-            problems.append(f"{where}: expected {{'table': 'emission' or 'transition', 'C': ..., 'a': ...}}, got {row!r}")
-            continue
-        keys = [("C", list(C)), ("a", list(ACTIONS))] + ([("E", list(EXPERIENCES))] if row["table"] == "transition" else [])
-        extra = set(row) - {"table", *(k for k, _ in keys)}
-        if extra:
-            problems.append(f"{where}: unknown keys {sorted(extra)}")
-        idx = []
-        for k, names in keys:
-            if row.get(k) not in names:
-                problems.append(f"{where}: {k} = {row.get(k)!r} is not one of {names}")
-            else:
-                idx.append(names.index(row[k]))
-        if len(idx) == len(keys):
-            out.append((str(row["table"]), tuple(idx)))
-    return tuple(out)
+def load_any_model(path: str | Path) -> TrustModel:
+    """A trust model file (``trustseek.trust-model/1``, or no format) or a general model file
+    (``trustseek.iohmm/1``), by its ``format``."""
+    d, source = load_json(path)
+    return TrustModel.from_dict(d, source, general=True)

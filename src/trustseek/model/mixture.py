@@ -3,9 +3,9 @@ participant belonging to one of them (the paper's Remark 1: "low trust is easily
 for some participants compared to others").
 
 A :class:`TypeMixture` holds the types' names, their weights (the share of the population)
-and one model per type: every type a :class:`~trustseek.model.core.TrustModel`, or (a study
-with other inputs) every type a general model (:class:`~trustseek.model.iohmm.IOHMMModel`)
-with the same levels, output and inputs.  A plain model is the mixture of one type.  Planning
+and one model per type (:class:`~trustseek.model.core.TrustModel`): every type a trust model,
+or (a study with other inputs) every type a general model with the same levels, output and
+inputs.  A plain model is the mixture of one type.  Planning
 needs trust models: :meth:`TypeMixture.from_dict` refuses general types unless asked
 (``general=True``: decoding, prediction, per-person models).  JSON::
 
@@ -18,26 +18,24 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Generic, TypeVar
+from typing import Any
 
 import numpy as np
 
 from .core import TrustModel, planning_refusal
-from .iohmm import IOHMMModel, is_iohmm_file
+from .files import is_iohmm_file
 from .jsonfile import JsonFile, ModelError, freeze_arrays, raise_problems
 
 MIXTURE_FORMAT = "trustseek.mixture/1"
-M = TypeVar("M", bound="TrustModel | IOHMMModel")  # every type a trust model, or every type a general model
-N = TypeVar("N", bound="TrustModel | IOHMMModel")
 
 
 @dataclass(frozen=True, eq=False)
-class TypeMixture(JsonFile, Generic[M]):
+class TypeMixture(JsonFile):
     """M supervisor types: ``names[m]`` with population share ``weights[m]`` behaves like ``models[m]``."""
 
     names: tuple[str, ...]
     weights: np.ndarray
-    models: tuple[M, ...]
+    models: tuple[TrustModel, ...]
     notes: str = ""
 
     def __post_init__(self) -> None:
@@ -54,19 +52,15 @@ class TypeMixture(JsonFile, Generic[M]):
     @property
     def general(self) -> bool:
         """True when the types are general models (inputs a trust model does not have)."""
-        return isinstance(self.models[0], IOHMMModel)
+        return self.models[0].general
 
     @property
     def trust_levels(self) -> tuple[str, ...]:
-        m = self.models[0]
-        return m.levels if isinstance(m, IOHMMModel) else m.trust_levels
+        return self.models[0].levels
 
     @property
     def complexities(self) -> tuple[str, ...]:
-        m = self.models[0]
-        if isinstance(m, IOHMMModel):
-            raise ModelError([planning_refusal(m.used_inputs)])
-        return m.complexities
+        return self.models[0].complexities
 
     def problems(self) -> list[str]:
         """Every violation of the mixture's constraints, as human-readable lines."""
@@ -83,43 +77,22 @@ class TypeMixture(JsonFile, Generic[M]):
         elif not np.all(np.isfinite(self.weights)) or np.any(self.weights < 0) or abs(self.weights.sum() - 1) > 1e-6:
             problems.append(f"type weights must be non-negative and sum to 1, got {self.weights.tolist()}")
         first = self.models[0]
-        if isinstance(first, IOHMMModel):
-            return problems + self._general_problems()
         for name, m in zip(self.names, self.models, strict=False):
             if not isinstance(m, TrustModel):
                 problems.append(f"type {name!r}: expected a TrustModel, got {type(m).__name__}")
-            elif m.trust_levels != first.trust_levels or m.complexities != first.complexities:
+            elif m.general != first.general:
+                kinds = ("a general model", "a trust model") if first.general else ("a trust model", "a general model")
+                problems.append(f"type {name!r}: expected {kinds[0]} like type {self.names[0]!r}, got {kinds[1]}")
+            elif _configuration(m) != _configuration(first):
                 problems.append(
-                    f"type {name!r} has trust levels {list(m.trust_levels)} and complexities {list(m.complexities)}; "
-                    f"type {self.names[0]!r} has {list(first.trust_levels)} and {list(first.complexities)}: "
+                    f"type {name!r} has {_described(m)}; type {self.names[0]!r} has {_described(first)}: "
                     "every type must share them"
-                )
-        return problems
-
-    def _general_problems(self) -> list[str]:
-        """General types must share levels, output and inputs (their tables differ)."""
-        first = self.models[0]
-        assert isinstance(first, IOHMMModel)
-
-        def shape(m: IOHMMModel) -> tuple:
-            return (m.levels, m.output, m.output_categories, dict(m.inputs), m.emission_inputs, m.transition_inputs)
-
-        problems = []
-        for name, m in zip(self.names, self.models, strict=False):
-            if not isinstance(m, IOHMMModel):
-                problems.append(f"type {name!r}: expected a general model like type {self.names[0]!r}, got a trust model")
-            elif shape(m) != shape(first):
-                problems.append(
-                    f"type {name!r} has levels {list(m.levels)}, output {m.output!r} and inputs {dict(m.inputs)} "
-                    f"(emissions on {list(m.emission_inputs)}, transitions on {list(m.transition_inputs)}); type "
-                    f"{self.names[0]!r} has {list(first.levels)}, {first.output!r} and {dict(first.inputs)} (emissions on "
-                    f"{list(first.emission_inputs)}, transitions on {list(first.transition_inputs)}): every type must share them"
                 )
         return problems
 
     # -- constructors -------------------------------------------------------
     @classmethod
-    def single(cls, model: N, name: str = "pooled") -> TypeMixture[N]:
+    def single(cls, model: TrustModel, name: str = "pooled") -> TypeMixture:
         """The mixture of one type."""
         return TypeMixture((name,), np.ones(1), (model,))
 
@@ -129,7 +102,7 @@ class TypeMixture(JsonFile, Generic[M]):
         except ValueError:
             raise ModelError([f"unknown supervisor type {name!r}; types: {list(self.names)}"]) from None
 
-    def with_weights(self, weights: Sequence[float]) -> TypeMixture[M]:
+    def with_weights(self, weights: Sequence[float]) -> TypeMixture:
         """The same types in other proportions (normalised; refused if negative or all zero)."""
         w = np.asarray(weights, dtype=np.float64).reshape(-1)
         if w.shape != (self.n_types,) or not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
@@ -165,9 +138,7 @@ class TypeMixture(JsonFile, Generic[M]):
         """A mixture from its JSON form; a plain model is read as one type named ``pooled``.  General
         types (``trustseek.iohmm/1``) are read only with ``general`` (not for planning)."""
         if isinstance(d, Mapping) and d.get("format", "") != MIXTURE_FORMAT and "types" not in d:
-            if general and is_iohmm_file(d):
-                return cls.single(IOHMMModel.from_dict(d, source))
-            return cls.single(TrustModel.from_dict(d, source))
+            return cls.single(TrustModel.from_dict(d, source, general))
         problems: list[str] = []
         if not isinstance(d, Mapping):
             raise ModelError([f"a mixture must be a JSON object, got {type(d).__name__}"], source)
@@ -203,7 +174,7 @@ class TypeMixture(JsonFile, Generic[M]):
                 if is_iohmm_file(raw) and not general:
                     inputs = raw.get("inputs") if isinstance(raw, Mapping) and isinstance(raw.get("inputs"), Mapping) else {}
                     raise ModelError([planning_refusal(tuple(inputs or ()))])
-                models.append(IOHMMModel.from_dict(raw, None) if is_iohmm_file(raw) else TrustModel.from_dict(raw, None))
+                models.append(TrustModel.from_dict(raw, None, general))
             except ModelError as exc:
                 problems.extend(f"{where}.model: {p}" for p in exc.problems)
                 continue
@@ -229,3 +200,17 @@ class TypeMixture(JsonFile, Generic[M]):
         )
 
     __hash__ = None  # type: ignore[assignment]
+
+
+def _configuration(m: TrustModel) -> tuple:
+    """What every type shares: levels, output and inputs (their tables differ)."""
+    return (m.levels, m.output, m.output_categories, dict(m.inputs), m.emission_inputs, m.transition_inputs)
+
+
+def _described(m: TrustModel) -> str:
+    if not m.general:
+        return f"trust levels {list(m.trust_levels)} and complexities {list(m.complexities)}"
+    return (
+        f"levels {list(m.levels)}, output {m.output!r} and inputs {dict(m.inputs)} (emissions on "
+        f"{list(m.emission_inputs)}, transitions on {list(m.transition_inputs)})"
+    )

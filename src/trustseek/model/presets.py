@@ -29,7 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .core import ASK, AUTONOMOUS, FAULTY, RELIABLE, TrustModel
+from ..vocab import LEVELS
+from .core import ASK, AUTONOMOUS, FAULTY, RELIABLE, TrustModel, trust_model
 from .jsonfile import ModelError
 from .mixture import TypeMixture
 from .task import Rewards, Task
@@ -61,17 +62,11 @@ def paper_model() -> TrustModel:
     transition[HIGH, AUTONOMOUS, FAULTY] = [[0.70, 0.30], [1.00, 0.00]]  # Fig. 6b
     transition[HIGH, ASK, RELIABLE] = [[0.56, 0.44], [0.06, 0.94]]  # Fig. 6c
     transition[HIGH, ASK, FAULTY] = eye  # never observed (identity)
-    return TrustModel(
-        trust_levels=("low", "high"),
-        complexities=("low", "high"),
-        initial=np.array([0.0, 1.0]),
-        emission=emission,
-        transition=transition,
-        notes=(
-            "Section V of Mangalindan, Rovira & Srivastava, 'On trust-aware assistance-seeking in "
-            "human-supervised autonomy'. Never-observed cells (identity): " + "; ".join(PAPER_UNOBSERVED_CELLS)
-        ),
+    notes = (
+        "Section V of Mangalindan, Rovira & Srivastava, 'On trust-aware assistance-seeking in "
+        "human-supervised autonomy'. Never-observed cells (identity): " + "; ".join(PAPER_UNOBSERVED_CELLS)
     )
+    return trust_model(LEVELS, LEVELS, np.array([0.0, 1.0]), emission, transition, notes)
 
 
 def conservative_model() -> TrustModel:
@@ -94,17 +89,11 @@ def conservative_model() -> TrustModel:
     transition[HIGH, AUTONOMOUS, FAULTY] = [[1.0, 0.0], [1.0, 0.0]]
     transition[HIGH, ASK, RELIABLE] = [[0.85, 0.15], [0.15, 0.85]]
     transition[HIGH, ASK, FAULTY] = eye  # never observed (identity)
-    return TrustModel(
-        trust_levels=("low", "high"),
-        complexities=("low", "high"),
-        initial=np.array([0.5, 0.5]),
-        emission=emission,
-        transition=transition,
-        notes=(
-            "A conservative supervisor (Remark 1 of the paper): intervenes in low complexity when trust is low, "
-            "loses trust after failures and repairs it slowly. Illustrative numbers, not estimated."
-        ),
+    notes = (
+        "A conservative supervisor (Remark 1 of the paper): intervenes in low complexity when trust is low, "
+        "loses trust after failures and repairs it slowly. Illustrative numbers, not estimated."
     )
+    return trust_model(LEVELS, LEVELS, np.array([0.5, 0.5]), emission, transition, notes)
 
 
 def paper_conservative_mixture(conservative_share: float = 0.3) -> TypeMixture:

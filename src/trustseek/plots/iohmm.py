@@ -1,4 +1,4 @@
-"""A general model's tables (``IOHMMModel``, named inputs) by input combination.
+"""A general model's tables (a :class:`~trustseek.model.TrustModel` with named inputs) by input combination.
 
 Emissions: P(output = its last category | level, emission inputs), one group of bars per
 combination of the emission inputs' levels, one bar per level.  Transitions: P(next level
@@ -11,34 +11,34 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.iohmm import IOHMMModel
+from ..model.core import TrustModel
 from . import finish, style
 from .model import _bars
 
 
-def _labels(model: IOHMMModel, table: str, n: int) -> list[str]:
+def _labels(model: TrustModel, table: str, n: int) -> list[str]:
     return ["\n".join(f"{c}={v}" for c, v in model.combination(table, u).items()) or "(all trials)" for u in range(n)]
 
 
-def plot_iohmm_emissions(model: IOHMMModel, path=None):
+def plot_iohmm_emissions(model: TrustModel, path=None):
     """P(output = last category | level, emission inputs), by combination of the inputs."""
     return _plot_table(model, "emission", path)
 
 
-def plot_iohmm_transitions(model: IOHMMModel, path=None):
+def plot_iohmm_transitions(model: TrustModel, path=None):
     """P(next level = the highest | level, transition inputs), by combination of the inputs."""
     return _plot_table(model, "transition", path)
 
 
-def _plot_table(model: IOHMMModel, table: str, path):
+def _plot_table(model: TrustModel, table: str, path):
     """Bars of one probability per (combination of the table's inputs, level)."""
     if table == "emission":
         cat, inputs = model.output_categories[-1], model.emission_inputs
-        vals = model.emission[:, :, -1]
+        vals = model.emission_rows[:, :, -1]
         ylabel, title = f"P({model.output} = {cat} | S, inputs)", f"Estimated P({cat})"
     else:
         top, inputs = model.levels[-1], model.transition_inputs
-        vals = np.asarray(model.transition[:, :, -1])
+        vals = np.asarray(model.transition_rows[:, :, -1])
         ylabel, title = f"P(S' = {top} | S, inputs)", f"Estimated P(S' = {top})"
     title += f" by {', '.join(inputs) or 'level only'}"
     with style() as plt:

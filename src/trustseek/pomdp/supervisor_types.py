@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import TrustseekError
-from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
+from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel, trust_model
 from ..model.mixture import TypeMixture
 from ..model.task import Task
 from ..vocab import UNOBSERVED
@@ -81,7 +81,7 @@ def product_model(mixture: TypeMixture | TrustModel) -> TrustModel:
     for i, m in enumerate(mixture.models):
         transition[..., i * K : (i + 1) * K, i * K : (i + 1) * K] = m.transition
     not_estimated = tuple({row for m in mixture.models for row in m.not_estimated})
-    return TrustModel(
+    return trust_model(
         trust_levels=tuple(level_name(n, t) for n in mixture.names for t in mixture.trust_levels),
         complexities=first.complexities,
         initial=initial,

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import TrustseekError
-from ..model.core import TrustModel
+from ..model.core import TrustModel, trust_model
 from ..model.mixture import TypeMixture
 
 
@@ -147,7 +147,7 @@ class Supervisors:
     def model_of(self, participant: int) -> TrustModel:
         """The TrustModel of participant ``participant`` (0-based)."""
         p = int(self.index[participant])
-        return TrustModel(self.trust_levels, self.complexities, self.initial[p], self.emission[p], self.transition[p])
+        return trust_model(self.trust_levels, self.complexities, self.initial[p], self.emission[p], self.transition[p])
 
     def take(self, idx: np.ndarray) -> Supervisors:
         """The sub-population of participants ``idx`` (0-based indices)."""

@@ -51,7 +51,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..compiled import njit
-from ..model.core import TrustModel
+from ..model.core import TrustModel, trust_model
 from ..model.mixture import TypeMixture
 from ..model.task import Task
 from ..policies.alpha_vector import AlphaVectorPolicy
@@ -169,7 +169,7 @@ def _block_problem(problem: AssistancePOMDP, idx: np.ndarray) -> AssistancePOMDP
     m = problem.model
     init = m.initial[idx]
     init = init / init.sum() if init.sum() > 0 else np.full(len(idx), 1.0 / len(idx))
-    sub = TrustModel(
+    sub = trust_model(
         trust_levels=tuple(m.trust_levels[i] for i in idx),
         complexities=m.complexities,
         initial=init,
