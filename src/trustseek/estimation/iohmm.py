@@ -81,6 +81,17 @@ class EMFit:
     def workspace(self) -> Workspace:
         return Workspace(self.seqs, *self.structure.dims)
 
+    def figures(self) -> dict[str, Any]:
+        """The log-likelihood, the criteria and the data's size, for JSON."""
+        return {
+            "loglik": self.loglik,
+            "n_params": self.n_params,
+            "aic": self.aic,
+            "bic": self.bic,
+            "n_participants": self.seqs.n_participants,
+            "n_trials": self.seqs.n_trials,
+        }
+
 
 def _describe(i: int, r: RunResult) -> str:
     state = "converged: stationary" if r.ended == STATIONARY else f"not converged: {r.ended}"

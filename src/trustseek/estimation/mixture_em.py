@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -44,45 +44,12 @@ class MixtureParams(Params):
     """The tables of M types: ``initial`` (M, K) the joint P(type, S_1), ``emission`` (M, Ue, K, X),
     ``transition`` (M, Ut, K, K); a batch of R mixtures carries a leading axis R on each."""
 
-    @property
-    def batched(self) -> bool:
-        return self.initial.ndim == 3
+    OWN: ClassVar[int] = 2
 
     @property
     def weights(self) -> np.ndarray:
         """The types' weights, (M,) or (R, M)."""
         return self.initial.sum(-1)
-
-    @classmethod
-    def stack(cls, sets: Sequence[Params]) -> MixtureParams:
-        return cls(
-            np.stack([p.initial for p in sets]), np.stack([p.emission for p in sets]), np.stack([p.transition for p in sets])
-        )
-
-    def as_batch(self) -> MixtureParams:
-        return MixtureParams(self.initial[None], self.emission[None], self.transition[None])
-
-    def take(self, r: int) -> MixtureParams:
-        return MixtureParams(self.initial[r].copy(), self.emission[r].copy(), self.transition[r].copy())
-
-    def where(self, mask: np.ndarray, other: Params) -> MixtureParams:
-        m2, m4 = mask[:, None, None], mask[:, None, None, None, None]
-        return MixtureParams(
-            np.where(m2, self.initial, other.initial),
-            np.where(m4, self.emission, other.emission),
-            np.where(m4, self.transition, other.transition),
-        )
-
-    def copy(self) -> MixtureParams:
-        return MixtureParams(self.initial.copy(), self.emission.copy(), self.transition.copy())
-
-    def vector(self) -> np.ndarray:
-        lead = self.initial.shape[:-2]
-        return np.concatenate([a.reshape(*lead, -1) for a in (self.initial, self.emission, self.transition)], axis=-1)
-
-    def from_vector(self, x: np.ndarray) -> MixtureParams:
-        p = super().from_vector(x)
-        return MixtureParams(p.initial, p.emission, p.transition)
 
     def type_params(self, m: int) -> Params:
         """Type ``m`` as an ordinary IOHMM (its initial row normalised; uniform for an empty type)."""

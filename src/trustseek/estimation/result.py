@@ -58,12 +58,7 @@ class FitResult(EMFit):
         """The fit's figures, each start's run, the seed, the bootstrap and the spec, for ``to_dict``."""
         runs, iv = self.runs, self.intervals
         return {
-            "loglik": self.loglik,
-            "n_params": self.n_params,
-            "aic": self.aic,
-            "bic": self.bic,
-            "n_participants": self.seqs.n_participants,
-            "n_trials": self.seqs.n_trials,
+            **self.figures(),
             "n_observations": self.n_observations,
             "restart_logliks": self.restart_logliks,
             "best_restart": self.best,

@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, ClassVar, Self
 
 import numpy as np
 
@@ -157,50 +157,47 @@ class Params:
     initial: np.ndarray
     emission: np.ndarray
     transition: np.ndarray
+    OWN: ClassVar[int] = 1  # the trailing axes of ``initial`` that belong to one set (a mixture's: 2)
 
     @property
     def batched(self) -> bool:
         """True when the arrays carry a leading axis of parameter sets."""
-        return self.initial.ndim == 2
+        return self.initial.ndim == self.OWN + 1
 
     @classmethod
-    def stack(cls, sets: Sequence[Params]) -> Params:
+    def stack(cls, sets: Sequence[Params]) -> Self:
         """R single parameter sets as one with a leading axis R."""
         return cls(
             np.stack([p.initial for p in sets]), np.stack([p.emission for p in sets]), np.stack([p.transition for p in sets])
         )
 
-    def as_batch(self) -> Params:
+    def as_batch(self) -> Self:
         """A single parameter set as a batch of one (views, no copies)."""
-        return Params(self.initial[None], self.emission[None], self.transition[None])
+        return type(self)(self.initial[None], self.emission[None], self.transition[None])
 
-    def take(self, r: int) -> Params:
+    def take(self, r: int) -> Self:
         """Parameter set ``r`` of a batch (a copy)."""
-        return Params(self.initial[r].copy(), self.emission[r].copy(), self.transition[r].copy())
+        return type(self)(self.initial[r].copy(), self.emission[r].copy(), self.transition[r].copy())
 
-    def where(self, mask: np.ndarray, other: Params) -> Params:
+    def where(self, mask: np.ndarray, other: Params) -> Self:
         """Per parameter set of a batch: this one where ``mask`` (R,) holds, else ``other``."""
-        m1, m3 = mask[:, None], mask[:, None, None, None]
-        return Params(
-            np.where(m1, self.initial, other.initial),
-            np.where(m3, self.emission, other.emission),
-            np.where(m3, self.transition, other.transition),
-        )
+        pairs = ((self.initial, other.initial), (self.emission, other.emission), (self.transition, other.transition))
+        return type(self)(*(np.where(mask.reshape(-1, *[1] * (a.ndim - 1)), a, b) for a, b in pairs))
 
-    def copy(self) -> Params:
-        return Params(self.initial.copy(), self.emission.copy(), self.transition.copy())
+    def copy(self) -> Self:
+        return type(self)(self.initial.copy(), self.emission.copy(), self.transition.copy())
 
     def vector(self) -> np.ndarray:
         """All cells in one vector (one row per parameter set of a batch)."""
-        lead = self.initial.shape[:-1]
+        lead = self.initial.shape[: -self.OWN]
         return np.concatenate([a.reshape(*lead, -1) for a in (self.initial, self.emission, self.transition)], axis=-1)
 
-    def from_vector(self, x: np.ndarray) -> Params:
+    def from_vector(self, x: np.ndarray) -> Self:
         """Parameters shaped like these, with cells from ``x`` (the inverse of :meth:`vector`)."""
         lead = x.ndim - 1
         a = int(np.prod(self.initial.shape[lead:]))
         b = int(np.prod(self.emission.shape[lead:]))
-        return Params(
+        return type(self)(
             x[..., :a].reshape(self.initial.shape).copy(),
             x[..., a : a + b].reshape(self.emission.shape).copy(),
             x[..., a + b :].reshape(self.transition.shape).copy(),

@@ -37,7 +37,7 @@ for a trust model, ``trustseek.iohmm/1`` for a general one) are in ``docs/format
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from dataclasses import replace as _replace
 from pathlib import Path
 from typing import Any
@@ -56,7 +56,16 @@ from .files import (
     model_to_dict,
     planning_refusal,
 )
-from .jsonfile import JsonFile, ModelError, UnknownComplexityError, check_row_array, freeze_arrays, load_json, raise_problems
+from .jsonfile import (
+    JsonFile,
+    ModelError,
+    UnknownComplexityError,
+    build,
+    check_row_array,
+    freeze_arrays,
+    load_json,
+    raise_problems,
+)
 from .rating import RatingTable
 
 __all__ = [  # the vocabulary is re-exported for convenience
@@ -271,9 +280,7 @@ class TrustModel(JsonFile):
             raise ModelError([planning_refusal(self.used_inputs)])
         return self.inputs["complexity"]
 
-    @property
-    def n_trust(self) -> int:
-        return len(self.levels)
+    n_trust = n_levels  # the planner's name
 
     @property
     def n_complexity(self) -> int:
@@ -319,11 +326,7 @@ class TrustModel(JsonFile):
     def from_dict(cls, d: Any, source: str | None = None, general: bool = False) -> TrustModel:
         """A trust model from its JSON form; with ``general``, a general model file too (by its
         ``format``), which is otherwise refused (planning needs a trust model)."""
-        kw = model_fields(d, source, general)
-        try:
-            return cls(**kw)
-        except ModelError as exc:
-            raise ModelError(exc.problems, source) from None
+        return build(cls, [], source, **model_fields(d, source, general))
 
     def replace(self, **changes: Any) -> TrustModel:
         """This model with ``changes`` (fields, or a trust model's ``trust_levels`` and ``complexities``)."""
@@ -332,17 +335,6 @@ class TrustModel(JsonFile):
         if "complexities" in changes:
             changes["inputs"] = {**self.inputs, "complexity": tuple(changes.pop("complexities"))}
         return _replace(self, **changes)
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, TrustModel):
-            return NotImplemented
-        for f in fields(self):
-            if f.name == "notes":
-                continue
-            a, b = getattr(self, f.name), getattr(other, f.name)
-            if not (np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b):
-                return False
-        return True
 
 
 def trust_model(

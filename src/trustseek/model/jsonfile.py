@@ -7,9 +7,10 @@ from __future__ import annotations
 import json
 import math
 import stat
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import fields
 from pathlib import Path
-from typing import Any, Self
+from typing import Any, Self, TypeVar
 
 import numpy as np
 
@@ -20,6 +21,7 @@ __all__ = [
     "JsonFile",
     "ModelError",
     "UnknownComplexityError",
+    "build",
     "check_names",
     "check_row_array",
     "fmt_number",
@@ -32,11 +34,13 @@ __all__ = [
     "read_row",
     "read_table",
     "read_text",
+    "same_fields",
     "special_file",
     "unknown_keys",
 ]
 
 ATOL = 1e-9  # tolerance for a probability row to sum to one
+T = TypeVar("T")
 
 
 class ModelError(TrustseekError, ValueError):
@@ -49,6 +53,17 @@ def freeze_arrays(obj: Any, *names: str) -> None:
         arr = np.array(getattr(obj, name), dtype=np.float64)
         arr.setflags(write=False)
         object.__setattr__(obj, name, arr)
+
+
+def build(cls: Callable[..., T], problems: list[str], source: str | None, *args: Any, **kw: Any) -> T:
+    """``cls(*args, **kw)`` once a reader found no ``problems``: every problem, the reader's or the
+    constructor's, raised as one :class:`ModelError` naming ``source``."""
+    if problems:
+        raise ModelError(problems, source)
+    try:
+        return cls(*args, **kw)
+    except ModelError as exc:
+        raise ModelError(exc.problems, source) from None
 
 
 def raise_problems(obj: Any) -> None:
@@ -304,10 +319,28 @@ def load_json(path: str | Path, expect: type | None = dict) -> tuple[Any, str]:
     return data, source
 
 
+def same_fields(a: Any, b: Any, skip: Sequence[str] = ()) -> bool:
+    """True when the dataclasses ``a`` and ``b`` hold equal values in every field but ``skip``
+    (arrays equal in shape and values)."""
+    for f in fields(a):
+        if f.name in skip:
+            continue
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        if not (np.array_equal(x, y) if isinstance(x, np.ndarray) else x == y):
+            return False
+    return True
+
+
 class JsonFile:
     """``save`` and ``load`` for a class with ``to_dict()`` and ``from_dict(d, source)``: the JSON
     written with two-space indents (NaN and infinities as null), and read with every problem
-    located in the file (``load_json``, then ``from_dict`` naming the file)."""
+    located in the file (``load_json``, then ``from_dict`` naming the file).  Two are equal when
+    every field but the notes is (:func:`same_fields`)."""
+
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        return same_fields(self, other, skip=("notes",))
 
     def to_dict(self) -> dict[str, Any]:
         raise NotImplementedError

@@ -24,7 +24,7 @@ import numpy as np
 
 from .core import TrustModel, planning_refusal
 from .files import is_iohmm_file
-from .jsonfile import JsonFile, ModelError, freeze_arrays, raise_problems
+from .jsonfile import JsonFile, ModelError, build, freeze_arrays, raise_problems
 
 MIXTURE_FORMAT = "trustseek.mixture/1"
 
@@ -183,23 +183,7 @@ class TypeMixture(JsonFile):
         notes = d.get("notes", "")
         if not isinstance(notes, str):
             problems.append(f"notes must be a string, got {notes!r}")
-        if problems:
-            raise ModelError(problems, source)
-        try:
-            return cls(tuple(names), np.asarray(weights), tuple(models), notes)
-        except ModelError as exc:
-            raise ModelError(exc.problems, source) from None
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, TypeMixture):
-            return NotImplemented
-        return (
-            self.names == other.names
-            and np.array_equal(self.weights, other.weights)
-            and all(a == b for a, b in zip(self.models, other.models, strict=True))
-        )
-
-    __hash__ = None  # type: ignore[assignment]
+        return build(cls, problems, source, tuple(names), np.asarray(weights), tuple(models), notes)
 
 
 def _configuration(m: TrustModel) -> tuple:

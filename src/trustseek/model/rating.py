@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from .jsonfile import check_names, check_row_array, freeze_arrays, get_key, nested, read_row, unknown_keys
+from .jsonfile import check_names, check_row_array, freeze_arrays, get_key, nested, read_row, same_fields, unknown_keys
 
 __all__ = ["RatingTable"]
 
@@ -80,4 +80,4 @@ class RatingTable:
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, RatingTable):
             return NotImplemented
-        return self.levels == other.levels and np.array_equal(self.probs, other.probs)
+        return same_fields(self, other)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -24,6 +24,7 @@ from .jsonfile import (
     JsonFile,
     ModelError,
     UnknownComplexityError,
+    build,
     check_row_array,
     fmt_number,
     freeze_arrays,
@@ -57,12 +58,7 @@ class Rewards:
     autonomous_failure: float = -3.0  # (autonomous, rely, faulty)
 
     def to_dict(self) -> dict[str, float]:
-        return {
-            "autonomous_success": self.autonomous_success,
-            "ask": self.ask,
-            "intervene": self.intervene,
-            "autonomous_failure": self.autonomous_failure,
-        }
+        return asdict(self)
 
     def of(self, action: int, human_action: int, experience: int) -> float:
         """Reward of one trial from its robot action, human action and experience indices."""
@@ -276,21 +272,4 @@ class Task(JsonFile):
         disc = d.get("discount", Task.discount)
         if isinstance(disc, bool) or not isinstance(disc, (int, float)) or not (0.0 <= float(disc) < 1.0):
             problems.append(f"discount = {disc!r} must be a number in [0, 1)")
-        if problems:
-            raise ModelError(problems, source)
-        try:
-            return cls(tuple(names), np.array(probs), np.array(succ), tuple(askx), rewards, float(disc))
-        except ModelError as exc:
-            raise ModelError(exc.problems, source) from None
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, Task):
-            return NotImplemented
-        return (
-            self.complexities == other.complexities
-            and np.array_equal(self.complexity_probs, other.complexity_probs)
-            and np.array_equal(self.success, other.success)
-            and self.ask_experience == other.ask_experience
-            and self.rewards == other.rewards
-            and self.discount == other.discount
-        )
+        return build(cls, problems, source, tuple(names), np.array(probs), np.array(succ), tuple(askx), rewards, float(disc))
