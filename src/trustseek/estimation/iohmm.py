@@ -83,14 +83,8 @@ class EMFit:
 
     def figures(self) -> dict[str, Any]:
         """The log-likelihood, the criteria and the data's size, for JSON."""
-        return {
-            "loglik": self.loglik,
-            "n_params": self.n_params,
-            "aic": self.aic,
-            "bic": self.bic,
-            "n_participants": self.seqs.n_participants,
-            "n_trials": self.seqs.n_trials,
-        }
+        criteria = {name: getattr(self, name) for name in ("loglik", "n_params", "aic", "bic")}
+        return {**criteria, "n_participants": self.seqs.n_participants, "n_trials": self.seqs.n_trials}
 
 
 def _describe(i: int, r: RunResult) -> str:

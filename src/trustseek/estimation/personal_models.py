@@ -81,15 +81,7 @@ class PersonalModels:
 
     def summary(self) -> dict[str, Any]:
         """The strengths, how they were chosen and the criterion (as ``strength.json`` holds them)."""
-        return {
-            "strength": self.strength,
-            "at_bound": self.at_bound,
-            "method": self.method,
-            "estimate": self.estimate,
-            "score": self.score,
-            "score_centre": self.score_centre,
-            "warnings": self.warnings,
-        }
+        return {k: getattr(self, k) for k in ("strength", "at_bound", "method", "estimate", "score", "score_centre", "warnings")}
 
     def save(self, folder: str | Path) -> None:
         """``<participant>.json`` per participant, ``participants.csv`` (with the file of each) and

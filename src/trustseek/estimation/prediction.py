@@ -279,16 +279,9 @@ class PredictionReport:
         )
 
     def to_dict(self) -> dict[str, Any]:
+        counts = ("n_participants", "n_scored", "n_determined", "determined_matched", "n_unrecorded", "n_confident_misses")
         return {
-            "mode": self.mode,
-            "folds": self.folds,
-            "n_participants": self.n_participants,
-            "n_scored": self.n_scored,
-            "n_determined": self.n_determined,
-            "determined_matched": self.determined_matched,
-            "n_unrecorded": self.n_unrecorded,
-            "n_confident_misses": self.n_confident_misses,
-            "bootstrap": self.bootstrap,
+            **{k: getattr(self, k) for k in ("mode", "folds", *counts, "bootstrap")},
             "ci_level": LEVEL,
             "seed": self.seed,
             "metrics": self.metrics,

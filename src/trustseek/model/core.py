@@ -349,21 +349,9 @@ def trust_model(
 ) -> TrustModel:
     """The trust model with the paper's inputs: ``emission[c, a, t, o]`` and
     ``transition[c, a, e, t, t2]`` over ``complexities``, the robot actions and the experiences."""
-    return TrustModel(
-        levels=tuple(trust_levels),
-        output="human_action",
-        output_categories=HUMAN_ACTIONS,
-        inputs={"complexity": tuple(complexities), "robot_action": ACTIONS, "experience": EXPERIENCES},
-        emission_inputs=EMISSION_INPUTS,
-        transition_inputs=PLANNING_INPUTS,
-        initial=initial,
-        emission=emission,
-        transition=transition,
-        structure=None,
-        rating=rating,
-        notes=notes,
-        not_estimated=tuple(not_estimated),
-    )
+    inputs = {"complexity": tuple(complexities), "robot_action": ACTIONS, "experience": EXPERIENCES}
+    return TrustModel(tuple(trust_levels), "human_action", HUMAN_ACTIONS, inputs, EMISSION_INPUTS, PLANNING_INPUTS,
+                      initial, emission, transition, None, rating, None, notes, tuple(not_estimated))  # fmt: skip
 
 
 def load_any_model(path: str | Path) -> TrustModel:

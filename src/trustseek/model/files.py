@@ -46,20 +46,8 @@ def planning_refusal(inputs: Sequence[str]) -> str:
 
 STRUCTURE_KEYS = ("fixed_emissions", "fixed_transitions", "tied_emissions", "tied_transitions", "order_by", "prior")
 TRUST_KEYS = ("format", "notes", "trust_levels", "complexities", "initial", "emission", "transition", "not_estimated", "rating")
-GENERAL_KEYS = (
-    "format",
-    "notes",
-    "levels",
-    "output",
-    "inputs",
-    "emission_inputs",
-    "transition_inputs",
-    "structure",
-    "initial",
-    "emission",
-    "transition",
-    "rating",
-)
+GENERAL_KEYS = ("format", "notes", "levels", "output", "inputs", "emission_inputs", "transition_inputs", "structure",
+                "initial", "emission", "transition", "rating")  # fmt: skip
 
 
 def _tables(m: Any) -> dict[str, Any]:
