@@ -293,3 +293,35 @@ def test_filling_needs_the_same_levels(model):
     three = load_model(str(__import__("trustseek.data.trials", fromlist=["x"]).example_path("three_level_model.json")))
     with pytest.raises(ModelError, match="cannot fill"):
         model.replace(not_estimated=(("emission", (0, 1)),)).filled_from(three)
+
+
+def test_one_model_class_the_trust_model_is_its_configuration_with_the_paper_inputs(tmp_path):
+    """A trust model and a general model are one class: the trust model is the general model with
+    the paper's inputs and no fitted structure; either file is written again byte for byte, and a
+    general model with the paper's inputs stays a general model file."""
+    from importlib.resources import files
+
+    from trustseek.model.core import load_any_model
+
+    shipped = files("trustseek") / "examples" / "three_level_model.json"
+    m = TrustModel.load(shipped)
+    m.save(tmp_path / "again.json")
+    assert (tmp_path / "again.json").read_bytes() == shipped.read_bytes()
+    assert not m.general and m.emission.shape == (2, 2, 3, 2) and m.emission_rows.shape == (4, 3, 2)
+    general = m.replace(structure={"prior": 0.0})
+    assert general.general and type(general) is type(m) and general != m
+    general.save(tmp_path / "general.json")
+    text = (tmp_path / "general.json").read_text()
+    assert '"format": "trustseek.iohmm/1"' in text
+    back = load_any_model(tmp_path / "general.json")
+    assert back == general and back.emission.shape == m.emission.shape
+    back.save(tmp_path / "general2.json")
+    assert (tmp_path / "general2.json").read_text() == text
+    with pytest.raises(ModelError, match="is not a trust model: planning"):
+        TrustModel.load(tmp_path / "general.json")
+    with pytest.raises(ModelError, match="not a trust model: planning"):
+        _ = general.complexities
+    with pytest.raises(ModelError, match="a trust model has the paper's inputs"):
+        m.replace(emission_inputs=("complexity",), emission=m.emission[:, 0])
+    with pytest.raises(ModelError, match="not_estimated marks rows of a trust model"):
+        general.replace(not_estimated=(("emission", (0, 1)),))
