@@ -326,7 +326,8 @@ class TrustModel(JsonFile):
     def from_dict(cls, d: Any, source: str | None = None, general: bool = False) -> TrustModel:
         """A trust model from its JSON form; with ``general``, a general model file too (by its
         ``format``), which is otherwise refused (planning needs a trust model)."""
-        return build(cls, [], source, **model_fields(d, source, general))
+        fields = model_fields(d, source, general)
+        return build([], source, lambda: cls(**fields))
 
     def replace(self, **changes: Any) -> TrustModel:
         """This model with ``changes`` (fields, or a trust model's ``trust_levels`` and ``complexities``)."""

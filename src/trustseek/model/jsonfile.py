@@ -55,13 +55,13 @@ def freeze_arrays(obj: Any, *names: str) -> None:
         object.__setattr__(obj, name, arr)
 
 
-def build(cls: Callable[..., T], problems: list[str], source: str | None, *args: Any, **kw: Any) -> T:
-    """``cls(*args, **kw)`` once a reader found no ``problems``: every problem, the reader's or the
-    constructor's, raised as one :class:`ModelError` naming ``source``."""
+def build(problems: list[str], source: str | None, make: Callable[[], T]) -> T:
+    """``make()`` once a reader found no ``problems`` (its arguments may rely on that): every problem,
+    the reader's or the constructor's, raised as one :class:`ModelError` naming ``source``."""
     if problems:
         raise ModelError(problems, source)
     try:
-        return cls(*args, **kw)
+        return make()
     except ModelError as exc:
         raise ModelError(exc.problems, source) from None
 

@@ -183,7 +183,7 @@ class TypeMixture(JsonFile):
         notes = d.get("notes", "")
         if not isinstance(notes, str):
             problems.append(f"notes must be a string, got {notes!r}")
-        return build(cls, problems, source, tuple(names), np.asarray(weights), tuple(models), notes)
+        return build(problems, source, lambda: cls(tuple(names), np.asarray(weights), tuple(models), notes))
 
 
 def _configuration(m: TrustModel) -> tuple:

@@ -272,4 +272,8 @@ class Task(JsonFile):
         disc = d.get("discount", Task.discount)
         if isinstance(disc, bool) or not isinstance(disc, (int, float)) or not (0.0 <= float(disc) < 1.0):
             problems.append(f"discount = {disc!r} must be a number in [0, 1)")
-        return build(cls, problems, source, tuple(names), np.array(probs), np.array(succ), tuple(askx), rewards, float(disc))
+
+        def make() -> Task:  # only once the reader found no problem: ``disc`` is then a number
+            return cls(tuple(names), np.array(probs), np.array(succ), tuple(askx), rewards, float(disc))
+
+        return build(problems, source, make)
