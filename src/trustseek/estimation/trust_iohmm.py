@@ -20,14 +20,13 @@ import numpy as np
 import pandas as pd
 
 from ..model.core import RatingTable, TrustModel, trust_model
-from ..model.files import STRUCTURE_KEYS
+from ..model.files import EMISSION_INPUTS, PLANNING_INPUTS, STRUCTURE_KEYS
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, LEVELS
 from .ratings import compose_joint, split_joint
 from .spec import FitError, Fixed, IOHMMSpec, Params
 
-PAPER_TRANSITION_INPUTS = ("complexity", "robot_action", "experience")
-PAPER_EMISSION_INPUTS = ("complexity", "robot_action")
-MODEL_INPUTS = ("complexity", "robot_action", "experience")
+PAPER_TRANSITION_INPUTS = MODEL_INPUTS = PLANNING_INPUTS  # a trust model's inputs, the paper's transitions'
+PAPER_EMISSION_INPUTS = EMISSION_INPUTS
 PRESETS = ("paper",)
 
 

@@ -286,9 +286,6 @@ class TrustModel(JsonFile):
     def n_complexity(self) -> int:
         return len(self.complexities)
 
-    def trust_index(self, name: str) -> int:
-        return self.levels.index(name)
-
     def complexity_index(self, name: str) -> int:
         try:
             return self.complexities.index(name)
