@@ -13,27 +13,14 @@ from .. import solvers
 from ..errors import TrustseekError
 from ..solvers.defaults import DEFAULT_GRID, DEFAULT_TYPE_AWARE_SOLVER, METHODS
 from ..vocab import check_belief_update
-from ._app import (
-    ColumnOpt,
-    LabelOpt,
-    MappingOpt,
-    OrderOpt,
-    app,
-    atomic_output,
-    check_output,
-    check_tol,
-    console,
-    print_json,
-    read_log,
-)
+from ._app import app, atomic_output, check_output, check_tol, console, print_json
+from ._options import FROM_OPTIONS, JsonOpt, LogReading, ModelOpt, PrintJsonOpt, TaskOpt, log_options
 
 if TYPE_CHECKING:
     from ..model.core import TrustModel
     from ..model.mixture import TypeMixture
     from ..policies.base import Policy
 
-ModelOpt = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file.")
-TaskOpt = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file.")
 UpdateOpt = typer.Option(
     "bayes", "--belief-update", "-u", help="Belief update: 'bayes' (exact filter, default) or 'paper' (eq. 3)."
 )
@@ -67,15 +54,11 @@ def type_posterior(
     history: Path,
     participant: str | None,
     session: str | None,
-    mapping: Path | None = None,
-    column: list[str] | None = None,
-    label: list[str] | None = None,
-    order: list[str] | None = None,
 ):
     """The type posterior of one person from their earlier trials (--history, --participant, --session)."""
     from ..pomdp.supervisor_types import type_belief_from_log
 
-    frame = read_log(history, mapping, column, label, ("complexity", "robot_action", "experience"), order=order)
+    frame = LogReading().read(history, ("complexity", "robot_action", "experience"))
     return type_belief_from_log(mixture, frame, participant=participant, session=session)
 
 
@@ -101,7 +84,7 @@ def solve(
         1e-9, "--tol", callback=check_tol, help="Value iteration: stop when the certified error bound is below this (> 0)."
     ),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
+    as_json: bool = JsonOpt,
     solver: str | None = typer.Option(
         None,
         "--solver",
@@ -268,16 +251,14 @@ def _print_certified(policy: Policy, summary: dict) -> None:
 
 
 @app.command(rich_help_panel="Plan")
+@log_options(names=("mapping", "column", "label", "order"))
 def agnostic(
     model: str = ModelOpt,
     task: str = TaskOpt,
     data: Path | None = typer.Option(None, "--data", help="Estimate P(intervene | C) from this trial log instead of the model."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
-    mapping: Path | None = MappingOpt,
-    column: list[str] | None = ColumnOpt,
-    label: list[str] | None = LabelOpt,
-    order: list[str] | None = OrderOpt,
+    as_json: bool = PrintJsonOpt,
+    reading: LogReading = FROM_OPTIONS,
 ) -> None:
     """The optimal trust-agnostic policy (Section VI-A)."""
     from ..model.core import ACTIONS
@@ -287,14 +268,14 @@ def agnostic(
     from ._app import check_not_inputs
 
     check_output(out, "--out", (".json",))
-    inputs = ((model, "--model file"), (task, "--task file"), (data, "--data log"), (mapping, "--mapping file"))
+    inputs = ((model, "--model file"), (task, "--task file"), (data, "--data log"), (reading.mapping, "--mapping file"))
     check_not_inputs(((out, "--out"),), inputs)
-    if data is None and (mapping is not None or column or label or order):
+    if data is None and (reading.mapping is not None or reading.column or reading.label or reading.order):
         raise TrustseekError(["--mapping, --column, --label and --order apply to a log: give it with --data"])
     t = load_task(task)
     pol: Policy
     if data is not None:
-        frame = read_log(data, mapping, column, label, ("complexity", "robot_action"), order=order)
+        frame = reading.read(data, ("complexity", "robot_action"))
         pol = trust_agnostic_from_data(frame, t)
     else:
         pol = make_solver("trust-agnostic").solve(AssistancePOMDP(load_model(model), t))
