@@ -106,6 +106,9 @@ EmissionsOnOpt = typer.Option(
     help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for "
     "none); the mapping's 'inputs' may be named too.",
 )
+#: the inputs of the commands that fit as ``fit`` does
+AsForFitTransitionsOpt = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit).")
+AsForFitEmissionsOpt = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit).")
 BootstrapOpt = typer.Option(
     0,
     "--bootstrap",
@@ -446,8 +449,8 @@ def select(
     prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count (MAP)."),
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
-    transitions_on: str | None = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit)."),
-    emissions_on: str | None = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit)."),
+    transitions_on: str | None = AsForFitTransitionsOpt,
+    emissions_on: str | None = AsForFitEmissionsOpt,
     widen: bool = widen_option(8, "1..--max-levels"),
     as_json: bool = PrintJsonOpt,
     reading: LogReading = FROM_OPTIONS,

@@ -28,6 +28,12 @@ from ._output import check_plots_folder, fit_summary, print_selection, print_war
 from .fit import _read_with_inputs
 
 POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
+TransitionsOnOpt = typer.Option(
+    None, "--transitions-on", help="Inputs of the trust transitions (as for fit: complexity, robot_action, experience)."
+)
+EmissionsOnOpt = typer.Option(
+    None, "--emissions-on", help="Inputs of the human-action probabilities (as for fit: complexity, robot_action)."
+)
 DifferOpt = typer.Option(
     "all",
     "--differ",
@@ -69,12 +75,8 @@ def fit_types(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
     types: int = typer.Option(2, "--types", "-m", min=1, max=12, help="Number of supervisor types."),
     differ: str = DifferOpt,
-    transitions_on: str | None = typer.Option(
-        None, "--transitions-on", help="Inputs of the trust transitions (as for fit: complexity, robot_action, experience)."
-    ),
-    emissions_on: str | None = typer.Option(
-        None, "--emissions-on", help="Inputs of the human-action probabilities (as for fit: complexity, robot_action)."
-    ),
+    transitions_on: str | None = TransitionsOnOpt,
+    emissions_on: str | None = EmissionsOnOpt,
     restarts: int = typer.Option(
         10, "--restarts", "-r", min=1, max=1000, help="Starts (half from the perturbed pooled fit, half random)."
     ),
@@ -238,12 +240,8 @@ def select_types(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
     types: str = typer.Option("1..4", "--types", help="Numbers of types to compare, e.g. 1..4 or 1,2,3."),
     differ: str = DifferOpt,
-    transitions_on: str | None = typer.Option(
-        None, "--transitions-on", help="Inputs of the trust transitions (as for fit: complexity, robot_action, experience)."
-    ),
-    emissions_on: str | None = typer.Option(
-        None, "--emissions-on", help="Inputs of the human-action probabilities (as for fit: complexity, robot_action)."
-    ),
+    transitions_on: str | None = TransitionsOnOpt,
+    emissions_on: str | None = EmissionsOnOpt,
     folds: int = typer.Option(5, "--folds", min=2, help="Folds over participants for the held-out log-likelihood."),
     restarts: int = typer.Option(
         10, "--restarts", "-r", min=1, max=1000, help="Starts per fit (and the fit with one type fewer, split)."

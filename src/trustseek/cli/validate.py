@@ -25,7 +25,7 @@ from ._app import (
 )
 from ._options import FROM_OPTIONS, LogReading, RatingPerOpt, log_options
 from ._reading import read_for_types
-from .fit import POSTERIOR_SUFFIXES, _general, _read_with_inputs
+from .fit import POSTERIOR_SUFFIXES, AsForFitEmissionsOpt, AsForFitTransitionsOpt, _general, _read_with_inputs
 
 BootstrapOpt = typer.Option(
     1000, "--bootstrap", "-b", min=0, max=10_000, help="Participant-bootstrap resamples for the 95% intervals (0 = none)."
@@ -90,8 +90,8 @@ def predict(
     ),
     folds: int | None = typer.Option(None, "--folds", min=2, help="Folds of participants for the held-out fits (default 5)."),
     levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Trust levels of the held-out fits."),
-    transitions_on: str | None = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit)."),
-    emissions_on: str | None = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit)."),
+    transitions_on: str | None = AsForFitTransitionsOpt,
+    emissions_on: str | None = AsForFitEmissionsOpt,
     restarts: int = typer.Option(10, "--restarts", "-r", min=1, max=1000, help="Random restarts of each held-out fit."),
     prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count of the held-out fits (as for fit)."),
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed (folds, restarts, bootstrap)."),
