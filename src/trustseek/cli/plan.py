@@ -14,7 +14,7 @@ from ..errors import TrustseekError
 from ..solvers.defaults import DEFAULT_GRID, DEFAULT_TYPE_AWARE_SOLVER, METHODS
 from ..vocab import check_belief_update
 from ._app import app, atomic_output, check_output, check_tol, console, print_json
-from ._options import FROM_OPTIONS, JsonOpt, LogReading, ModelOpt, PrintJsonOpt, TaskOpt, log_options
+from ._options import FROM_OPTIONS, JsonOpt, LogReading, ModelOpt, PrintJsonOpt, TaskOpt, log_options, model_and_task
 
 if TYPE_CHECKING:
     from ..model.core import TrustModel
@@ -24,10 +24,6 @@ if TYPE_CHECKING:
 UpdateOpt = typer.Option(
     "bayes", "--belief-update", "-u", help="Belief update: 'bayes' (exact filter, default) or 'paper' (eq. 3)."
 )
-
-
-def _check_update(name: str) -> str:
-    return check_belief_update(name, "--belief-update")
 
 
 def mixture_of(spec: str) -> TypeMixture | None:
@@ -117,7 +113,7 @@ def solve(
 ) -> None:
     """Solve the assistance-seeking POMDP for the optimal trust-aware policy (Section IV), or for a person of
     unknown supervisor type (--types)."""
-    from ..model.presets import load_mixture, load_model, load_task
+    from ..model.presets import load_mixture, load_task
     from ..pomdp.problem import AssistancePOMDP
     from ..pomdp.supervisor_types import type_aware_problem, type_marginal
     from ..solvers import make_solver, summarize
@@ -139,7 +135,7 @@ def solve(
         pomdp = type_aware_problem(mixture if prior is None else mixture.with_weights(list(prior)), load_task(task))
     else:
         solver = solver or "grid"
-        pomdp = AssistancePOMDP(load_model(model), load_task(task))
+        pomdp = AssistancePOMDP(*model_and_task(model, task))
         if solver == "grid":
             need_two_levels(pomdp.model, "solve")
         built = make_solver(
@@ -173,7 +169,7 @@ def _check_solve(belief_update: str, method: str, solver: str | None, gap: float
     """solve's options refused before anything is loaded."""
     from ..solvers import solver_names
 
-    _check_update(belief_update)
+    check_belief_update(belief_update, "--belief-update")
     if method not in METHODS:
         raise TrustseekError([f"--method must be one of {list(METHODS)}, got {method!r}"])
     if solver is not None and solver not in solver_names():
@@ -306,7 +302,6 @@ def plot_q_cmd(
     out: Path = typer.Option(Path("q.png"), "--out", "-o", help="PNG file to write."),
 ) -> None:
     """Plot Q(b, C, a) for both actions and complexities, with the threshold (Fig. 7)."""
-    from ..model.presets import load_model, load_task
     from ..plots.q import plot_q
     from ..policies import PolicyError, TrustAwarePolicy, load_policy
     from ..pomdp.problem import AssistancePOMDP
@@ -321,8 +316,7 @@ def plot_q_cmd(
         except PolicyError as exc:
             raise TrustseekError([f"{p} to plot" for p in exc.problems], str(policy_file)) from None
     else:
-        _check_update(belief_update)
-        pomdp = AssistancePOMDP(load_model(model), load_task(task))
+        pomdp = AssistancePOMDP(*model_and_task(model, task, belief_update))
         need_two_levels(pomdp.model, "plot-q")
         policy = cast(TrustAwarePolicy, make_solver("grid", grid=grid, belief_update=belief_update).solve(pomdp))
     with atomic_output(out) as tmp:
