@@ -14,6 +14,7 @@ from ._app import (
     app,
     atomic_output,
     check_mapping_file,
+    check_not_inputs,
     check_output,
     check_outputs,
     check_tol,
@@ -254,8 +255,6 @@ class _FitOutputs:
 
 def _check_fit_paths(log, mapping, fill_from, out, posteriors, plots, keep) -> None:
     """fit's output options refused before the log is read."""
-    from ._app import check_not_inputs
-
     check_outputs((out, "--out"), (posteriors, "--posteriors"))
     check_output(posteriors, "--posteriors", POSTERIOR_SUFFIXES)
     inputs = ((log, "trial log"), (mapping, "--mapping file"), (fill_from, "--fill-from model"))
@@ -411,8 +410,6 @@ def decode_cmd(
 
     The log needs the columns the model depends on: a model fitted with fewer inputs
     (--transitions-on/--emissions-on) decodes a log without the others."""
-    from ._app import check_not_inputs
-
     check_output(out, "--out", POSTERIOR_SUFFIXES)
     check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (reading.mapping, "--mapping file")))
     from ..model.mixture import TypeMixture

@@ -10,7 +10,7 @@ import typer
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import app, atomic_output, check_output, console, err_console, print_json
+from ._app import app, atomic_output, check_not_inputs, check_output, console, err_console, print_json
 from ._options import ModelOpt, PrintJsonOpt, TaskOpt, model_and_task
 
 #: exit code of solve-pomdp-file when the point solver stops before its target gap
@@ -36,8 +36,6 @@ def export_pomdp(
 
     if fmt is not None and fmt not in ("pomdp", "pomdpx"):
         raise TrustseekError([f"--format must be 'pomdp' or 'pomdpx', got {fmt!r}"])
-    from ._app import check_not_inputs
-
     check_output(out, "OUT", None if fmt else (".pomdp", ".pomdpx"))
     check_not_inputs(((out, "OUT"),), ((model, "--model file"), (task, "--task file")))
     m, t = model_and_task(model, task)

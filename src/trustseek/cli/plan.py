@@ -13,7 +13,7 @@ from .. import solvers
 from ..errors import TrustseekError
 from ..solvers.defaults import DEFAULT_GRID, DEFAULT_TYPE_AWARE_SOLVER, METHODS
 from ..vocab import check_belief_update
-from ._app import app, atomic_output, check_output, check_tol, console, print_json
+from ._app import app, atomic_output, check_not_inputs, check_output, check_tol, console, print_json
 from ._options import FROM_OPTIONS, JsonOpt, LogReading, ModelOpt, PrintJsonOpt, TaskOpt, log_options, model_and_task
 
 if TYPE_CHECKING:
@@ -119,8 +119,6 @@ def solve(
     from ..solvers import make_solver, summarize
 
     _check_solve(belief_update, method, solver, gap, max_seconds)
-    from ._app import check_not_inputs
-
     check_output(out, "--out", (".json",))
     inputs = ((model, "--model file"), (task, "--task file"), (types, "--types file"), (history, "--history log"))
     check_not_inputs(((out, "--out"),), inputs)
@@ -261,7 +259,6 @@ def agnostic(
     from ..model.presets import load_model, load_task
     from ..pomdp.problem import AssistancePOMDP
     from ..solvers import make_solver, trust_agnostic_from_data
-    from ._app import check_not_inputs
 
     check_output(out, "--out", (".json",))
     inputs = ((model, "--model file"), (task, "--task file"), (data, "--data log"), (reading.mapping, "--mapping file"))
@@ -306,7 +303,6 @@ def plot_q_cmd(
     from ..policies import PolicyError, TrustAwarePolicy, load_policy
     from ..pomdp.problem import AssistancePOMDP
     from ..solvers import make_solver
-    from ._app import check_not_inputs
 
     check_output(out, "--out", (".png", ".pdf", ".svg"))
     check_not_inputs(((out, "--out"),), ((model, "--model file"), (task, "--task file"), (policy_file, "--policy file")))

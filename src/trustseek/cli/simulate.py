@@ -17,7 +17,17 @@ from rich.table import Table
 from .. import solvers
 from ..errors import TrustseekError
 from ..vocab import PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS
-from ._app import app, atomic_output, check_output, check_outputs, console, err_console, print_json, print_written
+from ._app import (
+    app,
+    atomic_output,
+    check_not_inputs,
+    check_output,
+    check_outputs,
+    console,
+    err_console,
+    print_json,
+    print_written,
+)
 from ._options import JsonOpt, QuietOpt, TaskOpt
 
 if TYPE_CHECKING:
@@ -170,8 +180,6 @@ def simulate(
     from ..simulation.engine import simulate as run_simulation
 
     given = _check_simulate(ctx, belief_update, counts, trials, out, summary_out)
-    from ._app import check_not_inputs
-
     inputs = ((model, "--model file"), (task, "--task file"), (policy, "--policy file"), (policy_model, "--policy-model file"))
     check_not_inputs(((out, "--out"), (summary_out, "--summary-out")), inputs)
     pop = _population(ctx, model, types, policy_model, concentration, task)

@@ -13,6 +13,7 @@ from ..estimation.options import FitOptions
 from ._app import (
     app,
     atomic_output,
+    check_not_inputs,
     check_output,
     check_outputs,
     check_tol,
@@ -25,6 +26,7 @@ from ._app import (
 )
 from ._options import FROM_OPTIONS, LogReading, PrintJsonOpt, log_options, widen_option
 from ._output import check_plots_folder, fit_summary, print_selection, print_warnings
+from ._reading import load_for_decoding, read_for_types, widened_note
 from .fit import _read_with_inputs
 
 POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
@@ -97,8 +99,6 @@ def fit_types(
     quiet: bool = False,
 ) -> None:
     """Fit supervisor types: M trust models of the paper's structure, each participant one type."""
-    from ._app import check_not_inputs
-
     check_outputs((out, "--out"), (type_posteriors, "--type-posteriors"))
     check_output(type_posteriors, "--type-posteriors", POSTERIOR_SUFFIXES)
     outputs = ((out, "--out"), (type_posteriors, "--type-posteriors"))
@@ -272,8 +272,6 @@ def select_types(
             emission_inputs=em,
             widen=widen,
         )
-    from ._reading import widened_note
-
     warnings = widened_note(rows, "types", max(values)) + type_selection.type_selection_warnings(rows)
     if as_json:
         print_json({"types": rows, "warnings": warnings})
@@ -314,7 +312,6 @@ def personalize(
     from ..estimation.personal import personalize as run
     from ..model.iohmm import IOHMMModel
     from ..model.mixture import TypeMixture
-    from ._reading import load_for_decoding, read_for_types
 
     centre = load_for_decoding(Path(model))  # a trust model, a general model or types
     if isinstance(centre, IOHMMModel):

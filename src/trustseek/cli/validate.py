@@ -15,6 +15,7 @@ from ..estimation.options import FitOptions
 from ._app import (
     app,
     atomic_output,
+    check_not_inputs,
     check_output,
     check_tol,
     console,
@@ -149,8 +150,6 @@ def predict(
 
 def _check_trial_output(out: Path | None, log: Path, model: Path | None, reading: LogReading) -> None:
     """--out (per-trial values) and --keep refused before anything is read."""
-    from ._app import check_not_inputs
-
     check_output(out, "--out", POSTERIOR_SUFFIXES)
     check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (reading.mapping, "--mapping file")))
     if reading.keep and out is None:
