@@ -6,14 +6,13 @@ which a command takes with :func:`log_options`, as one :class:`LogReading`."""
 from __future__ import annotations
 
 import atexit
-import functools
 import inspect
 import json
 import shutil
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, wraps
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -150,9 +149,7 @@ def log_options(
     options --mapping, --column, --label, --missing, --delimiter, --order, (--keep, --quiet,)
     --no-experience-rule, or those ``names`` (keys of :data:`_OPTIONS`), listed in that order
     after its own; ``quiet`` is passed on to the command as itself."""
-    if names is None:
-        names = (*list(_OPTIONS)[:6], *(["keep"] if keep else []), *(["quiet"] if quiet else []), "no_rule")
-    chosen = names
+    chosen = names or (*list(_OPTIONS)[:6], *(["keep"] if keep else []), *(["quiet"] if quiet else []), "no_rule")
     unknown = [n for n in chosen if n not in _OPTIONS]
     if unknown:
         raise ValueError(f"no log option {unknown}")
@@ -160,10 +157,11 @@ def log_options(
     def decorate(command: Callable[..., None]) -> Callable[..., None]:
         own = [p for p in inspect.signature(command, eval_str=True).parameters.values() if p.name not in ("reading", *chosen)]
         added = [
-            inspect.Parameter(n, inspect.Parameter.KEYWORD_ONLY, default=_OPTIONS[n][1], annotation=_OPTIONS[n][0]) for n in names
+            inspect.Parameter(n, inspect.Parameter.KEYWORD_ONLY, default=_OPTIONS[n][1], annotation=_OPTIONS[n][0])
+            for n in chosen
         ]
 
-        @functools.wraps(command)
+        @wraps(command)
         def run(**values: Any) -> None:
             fields = {n: values.pop(n) for n in chosen if n not in _PASSED_ON}
             command(reading=LogReading(**fields), **values)
