@@ -31,7 +31,10 @@ SHOTS = [
     ("ask", "The robot asks for help"),
     ("fallback-2d", "The 2-D scene, where the browser has no WebGL"),
     ("fallback-2d-failure-low", "A low-complexity failure in the 2-D scene: the item slipped out of the gripper, on the floor"),
-    ("fallback-2d-failure-high", "A high-complexity failure in the 2-D scene: the base struck the obstacle, the item on the floor"),
+    (
+        "fallback-2d-failure-high",
+        "A high-complexity failure in the 2-D scene: the base struck the obstacle, the item on the floor",
+    ),
 ]
 BEGIN, END = "<!-- scene screenshots -->", "<!-- /scene screenshots -->"
 

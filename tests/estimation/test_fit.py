@@ -379,14 +379,3 @@ def test_cli_model_of_a_study_without_asking_is_marked_checked_refused_and_fille
     np.testing.assert_array_equal(m.transition[:, 1], paper_model().transition[:, 1])
     invoke("solve", "--model", filled, "--json")
     assert (tmp_path / "f" / "transitions.png").stat().st_size > 0
-
-
-def test_transition_figure_leaves_out_never_estimated_rows():
-    from trustseek.plots.model import plot_transitions
-
-    m = paper_model()
-    full = plot_transitions(m)
-    marked = plot_transitions(m.replace(not_estimated=(("transition", (0, 1, 0)), ("transition", (0, 1, 1)))))
-    ticks = [t.get_text() for t in marked.axes[0].get_xticklabels()]
-    assert len(ticks) == 2 and not any("ask" in t for t in ticks)
-    assert len(full.axes[0].get_xticklabels()) == 4

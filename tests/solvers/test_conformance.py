@@ -124,3 +124,11 @@ def test_every_solver_builds_with_its_defaults_and_rejects_unknown_options():
         make_solver("magic")
     with pytest.raises(TrustseekError, match="unknown solver option 'colour'"):
         make_solver("grid", colour="blue")
+
+
+@pytest.mark.parametrize("name", [n for n, e in SOLVERS.items() if "gap" in e.options or "tol" in e.options])
+@pytest.mark.parametrize("tol", [0.0, -1.0, float("inf"), float("nan")])
+def test_every_target_gap_is_a_finite_number_above_zero(name, tol):
+    key = "gap" if "gap" in SOLVERS[name].options else "tol"
+    with pytest.raises(TrustseekError, match="the target gap must be a finite number > 0"):
+        make_solver(name, **{key: tol})

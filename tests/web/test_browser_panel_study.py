@@ -102,7 +102,9 @@ def test_panel_study_in_chromium(tmp_path):
             page.goto(link + "?speed=50&manual=1&quality=0&PROLIFIC_PID=pp-42&STUDY_ID=st-7&SESSION_ID=se-9")
 
             page.wait_for_selector("#screen-consent:not([hidden])")
-            assert "3 trials" in page.inner_text("#consent-text")  # not a fixed duration
+            # the trials counted, not a fixed duration, and the practice trials said apart
+            assert "has 3 trials (after 2 practice trials, not scored). " in page.inner_text("#consent-text")
+            page.screenshot(path=str(out / "browser_panel_consent.png"))
             page.check("#agree")
             page.click("#consent-btn")
             page.wait_for_selector("#screen-instructions:not([hidden])")

@@ -44,7 +44,9 @@ async function boot() {
   }
   page.speed = (page.st.preview && isFinite(speedParam) && speedParam > 0 ? speedParam : 1) * page.st.animation_speed;
   $("preview-tag").hidden = !page.st.preview;
-  $("consent-trials").textContent = String(page.st.trials_total - page.st.practice_trials);
+  const practice = page.st.practice_trials;
+  const after = practice ? ` (after ${practice} practice trial${practice === 1 ? "" : "s"}, not scored)` : "";
+  $("consent-trials").textContent = `${page.st.trials_total - practice} trials${after}`;
   useScene((page.st as { scene?: string }).scene);
   page.shownScore = page.st.score;
   if (page.st.consent_text) $("consent-text").textContent = page.st.consent_text;

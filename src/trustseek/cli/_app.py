@@ -8,14 +8,13 @@ import os
 import secrets
 import shutil
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import typer
 from rich.console import Console
-from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
@@ -42,6 +41,13 @@ def _group() -> None:
 
 console = Console()
 err_console = Console(stderr=True)
+
+
+def print_written(*outputs: tuple[str, Any]) -> None:
+    """``<what> written to <where>`` for each output given (``where`` not None)."""
+    for what, where in outputs:
+        if where is not None:
+            console.print(f"{what} written to {where}")
 
 
 def print_json(obj: Any) -> None:
@@ -179,9 +185,6 @@ def check_tol(value: float) -> float:
     return value
 
 
-QuietOpt = typer.Option(False, "--quiet", "-q", help="No progress bar on stderr (there is none when stderr is not a terminal).")
-
-
 def selection_table(title: str, key: str, rows: list[dict[str, Any]], folds: int, extra: dict[str, Any] | None = None) -> Table:
     """The table of a model selection (``select``, ``select-types``): per compared size ``key``
     its log-likelihood, starts that reached the best, parameters, AIC, BIC and held-out score,
@@ -215,62 +218,21 @@ def progress_bar(quiet: bool, *columns: Any) -> Progress:
     return Progress(*cols, console=err_console, transient=True, disable=quiet or not err_console.is_terminal)
 
 
+@contextmanager
+def progress_task(quiet: bool, description: str, total: int | None = None) -> Iterator[Callable[..., None]]:
+    """A :func:`progress_bar` with one task, open for the block: yields ``update(done, total,
+    description=None)``, a progress callback."""
+    bar = progress_bar(quiet)
+    with bar:
+        task = bar.add_task(description, total=total)
+
+        def update(done: float, of: float | None, description: str | None = None) -> None:
+            bar.update(task, completed=done, total=of, description=description)
+
+        yield update
+
+
 # --------------------------------------------------------------------------- trial logs
-
-MappingOpt = typer.Option(None, "--mapping", help="Column/label mapping file (JSON or TOML) for a log with other names.")
-ColumnOpt = typer.Option(None, "--column", help="Map a column: canonical=theirs (e.g. human_action=rely). Repeatable.")
-LabelOpt = typer.Option(None, "--label", help="Map a label: column:theirs=canonical (e.g. human_action:1=rely). Repeatable.")
-
-
-DelimiterOpt = typer.Option(None, "--delimiter", help="A CSV's delimiter (default: sniffed from the header; 'tab' for TAB).")
-MissingOpt = typer.Option(None, "--missing", help="A cell text meaning not recorded, e.g. NA (besides empty). Repeatable.")
-OrderOpt = typer.Option(
-    None,
-    "--order",
-    metavar="COLUMN[,COLUMN]",
-    help="Columns that order each participant's trials, e.g. block,trial for a trial number that restarts every block "
-    "(the mapping's 'order'); the trials are numbered 1, 2, ... in that order.",
-)
-RatingPerOpt = typer.Option(
-    None,
-    "--rating-per",
-    metavar="COLUMN",
-    help="The rating is given once per block of this column and copied onto its trials: count it once, on the "
-    "block's last trial (the mapping's rating 'per').",
-)
-KeepOpt = typer.Option(None, "--keep", help="Carry this column of the log into the output (e.g. a condition). Repeatable.")
-
-
-def read_log(
-    log: Path,
-    mapping: Path | None,
-    column: list[str] | None,
-    label: list[str] | None,
-    needed: tuple[str, ...],
-    missing: list[str] | None = None,
-    delimiter: str | None = None,
-    rating: dict | None = None,
-    actions: bool = True,
-    order: list[str] | None = None,
-):
-    """The trial log with the --mapping/--column/--label/--missing/--delimiter/--order options applied;
-    ``needed`` are the canonical columns the command uses beyond participant, trial and
-    human_action (not required without ``actions``); ``rating`` a rating entry of a mapping
-    (from --rating flags).  Rows left out by the mapping's drop rules are counted on stderr."""
-    from ..data import ColumnMapping, read_trials
-
-    check_mapping_file(mapping)
-    m = ColumnMapping.from_flags(column or [], label or [], mapping, missing, delimiter, rating, order)
-    outputs = ("human_action",) if actions else ()
-    frame = read_trials(log, m, required=("participant", "trial", *outputs, *needed))
-    for rule, count in frame.attrs.get("dropped", []):
-        err_console.print(f"dropped {count} rows of {log} ({escape(rule)})", highlight=False)
-    for note in frame.attrs.get("joined", []):
-        err_console.print(f"{log}: {escape(note)}", highlight=False)
-    if m.experience_rule is False:
-        note = "the paper's experience rule is not checked (the mapping's experience_rule: false)"
-        err_console.print(f"{log}: {note}", highlight=False)
-    return frame
 
 
 def rating_entry(rating: str | None, levels: str | None, bins: str | None, per: str | None = None) -> dict | None:

@@ -1,49 +1,16 @@
 """Reading a model or supervisor types and the log they need, for the analysis commands (decode,
-predict, validate, personalize); the experience rule switch; the widened-range note of the
-selection commands."""
+predict, validate, personalize); the widened-range note of the selection commands."""
 
 from __future__ import annotations
 
-import atexit
-import json
-import shutil
-import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import typer
-
 from ..errors import TrustseekError
-from ._app import check_mapping_file, err_console, read_log
 
 if TYPE_CHECKING:
     from ..model.core import TrustModel
-
-NoExperienceRuleOpt = typer.Option(
-    False,
-    "--no-experience-rule",
-    help="Do not check the paper's experience rule (an intervention ends faulty, an ask as the task says): for a "
-    'study where it does not hold, e.g. advice taking; as the mapping\'s "experience_rule": false.',
-)
-
-
-def rule_off(mapping: Path | None, off: bool) -> Path | None:
-    """The --mapping to read with: with ``off`` (--no-experience-rule), the mapping (or none) with
-    ``experience_rule`` false, written to a temporary file for this process (said on stderr)."""
-    if not off:
-        return mapping
-    from ..data import ColumnMapping
-
-    check_mapping_file(mapping)
-    merged = (ColumnMapping.load(mapping) if mapping is not None else ColumnMapping()).merged(
-        ColumnMapping(experience_rule=False)
-    )
-    folder = Path(tempfile.mkdtemp(prefix="trustseek-mapping-"))
-    atexit.register(shutil.rmtree, folder, True)
-    path = folder / "mapping.json"
-    path.write_text(json.dumps(merged.to_dict()), encoding="utf-8")
-    err_console.print("--no-experience-rule: the paper's experience rule is not checked", highlight=False)
-    return path
+    from ._options import LogReading
 
 
 def model_inputs(model: TrustModel) -> tuple[str, ...]:
@@ -104,7 +71,7 @@ def load_for_decoding(path: Path):
     return TypeMixture.from_dict(d, source, general=True)
 
 
-def read_for_types(log, types, mapping, column, label, missing, delimiter, order=None):
+def read_for_types(log: Path, types, reading: LogReading):
     """The log read for supervisor types or one model (a trust or general model): the columns they
     use, those a trust model ignores filled."""
     from ..model.mixture import TypeMixture
@@ -112,18 +79,18 @@ def read_for_types(log, types, mapping, column, label, missing, delimiter, order
     if not isinstance(types, TypeMixture):
         types = TypeMixture.single(types)
     if types.general:
-        return read_for_model(log, types.models[0], mapping, column, label, missing, delimiter, order)
+        return read_for_model(log, types.models[0], reading)
     used = tuple(dict.fromkeys(c for t in types.models for c in model_inputs(t)))
-    return fill_unused(read_log(log, mapping, column, label, used, missing, delimiter, order=order), types.models[0], used)
+    return fill_unused(reading.read(log, used), types.models[0], used)
 
 
-def read_for_model(log, model, mapping, column, label, missing, delimiter, order=None):
+def read_for_model(log: Path, model, reading: LogReading):
     """The log read with the columns a general model's inputs need: the canonical ones it uses,
     and the others declared as the mapping's ``inputs``."""
     from ..model.core import PLANNING_INPUTS
 
     canonical = tuple(c for c in model.used_inputs if c in PLANNING_INPUTS)
-    frame = read_log(log, mapping, column, label, canonical, missing, delimiter, order=order)
+    frame = reading.read(log, canonical)
     absent = [c for c in model.used_inputs if c not in frame.columns]
     if absent:
         raise TrustseekError(

@@ -10,7 +10,8 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import QuietOpt, app, check_output, console, print_json, progress_bar
+from ._app import app, check_output, console, print_json, progress_bar
+from ._options import JsonOpt, QuietOpt, TaskOpt
 
 
 def _counts(text: str) -> tuple[int, ...]:
@@ -36,7 +37,7 @@ def compare_types(
     share: float | None = typer.Option(
         None, "--share", min=0.0, max=1.0, help="Share of the last type of two, e.g. 0.3 (default: the mixture's weights)."
     ),
-    task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
+    task: str = TaskOpt,
     participants: int = typer.Option(
         2000, "--participants", "-n", min=1, max=1_000_000, help="Simulated people per population and block."
     ),
@@ -59,7 +60,7 @@ def compare_types(
     ),
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of every simulation and fit."),
     plot: Path | None = typer.Option(None, "--plot", help="Write the figure to this PNG file."),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
+    as_json: bool = JsonOpt,
     quiet: bool = QuietOpt,
 ) -> None:
     """Does planning for supervisor types pay? Pooled, type-aware, oracle and trust-agnostic policies on the same people."""

@@ -11,7 +11,8 @@ from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsed
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import QuietOpt, app, check_output, console, print_json, progress_bar
+from ._app import app, check_output, console, print_json, progress_bar
+from ._options import JsonOpt, QuietOpt, TaskOpt
 
 
 def _floats(text: str, option: str) -> tuple[float, ...]:
@@ -51,7 +52,7 @@ def design(
     model: str = typer.Option(
         "paper", "--model", "-m", help="True population: a preset name (paper) or a trust-model JSON file."
     ),
-    task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
+    task: str = TaskOpt,
     replicates: int = typer.Option(100, "--replicates", "-r", help="Replicates per design point."),
     seed: int = typer.Option(
         0, "--seed", min=0, help="Sweep seed (replicate seeds derive from it, the design point and the index)."
@@ -89,7 +90,7 @@ def design(
         None, "--scheduler", help="Run on this Dask distributed scheduler (e.g. tcp://host:8786)."
     ),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write design.html, design.json and the figures to this folder."),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
+    as_json: bool = JsonOpt,
     quiet: bool = QuietOpt,
 ) -> None:
     """Power and regret by study design: replicated simulate → fit → solve → evaluate → test pipelines."""

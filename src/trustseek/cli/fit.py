@@ -11,18 +11,10 @@ from rich.markup import escape
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
 from ._app import (
-    ColumnOpt,
-    DelimiterOpt,
-    KeepOpt,
-    LabelOpt,
-    MappingOpt,
-    MissingOpt,
-    OrderOpt,
-    QuietOpt,
-    RatingPerOpt,
     app,
     atomic_output,
     check_mapping_file,
+    check_not_inputs,
     check_output,
     check_outputs,
     check_tol,
@@ -30,13 +22,15 @@ from ._app import (
     err_console,
     keep_columns,
     print_json,
+    print_written,
     progress_bar,
+    progress_task,
     rating_entry,
-    read_log,
     selection_table,
 )
+from ._options import FROM_OPTIONS, LogReading, PrintJsonOpt, RatingPerOpt, log_options, widen_option
 from ._output import cells_table, check_plots_folder, fit_summary, print_intervals_note, print_selection, print_warnings
-from ._reading import NoExperienceRuleOpt, load_for_decoding, read_for_types, rule_off, widened_note
+from ._reading import load_for_decoding, read_for_types, widened_note
 
 # The fit and data modules (pandas, numba) load only when a command of this group runs,
 # so that the rest of the CLI starts fast.
@@ -71,10 +65,10 @@ def _named_inputs(mapping, transitions_on, emissions_on) -> tuple[tuple[str, ...
     return tr, em, tuple(c for c in dict.fromkeys((*tr, *em)) if c in _fit().MODEL_INPUTS)
 
 
-def _read_with_inputs(log, mapping, column, label, transitions_on, emissions_on, missing=None, delimiter=None, order=None):
+def _read_with_inputs(log: Path, reading: LogReading, transitions_on: str | None, emissions_on: str | None):
     """The inputs named by the flags (:func:`_named_inputs`) and the log with the columns they need."""
-    tr, em, needed = _named_inputs(mapping, transitions_on, emissions_on)
-    return tr, em, read_log(log, mapping, column, label, needed, missing, delimiter, order=order)
+    tr, em, needed = _named_inputs(reading.mapping_to_read, transitions_on, emissions_on)
+    return tr, em, reading.read(log, needed)
 
 
 def _general(tr: tuple[str, ...], em: tuple[str, ...]) -> bool:
@@ -113,6 +107,9 @@ EmissionsOnOpt = typer.Option(
     help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for "
     "none); the mapping's 'inputs' may be named too.",
 )
+#: the inputs of the commands that fit as ``fit`` does
+AsForFitTransitionsOpt = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit).")
+AsForFitEmissionsOpt = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit).")
 BootstrapOpt = typer.Option(
     0,
     "--bootstrap",
@@ -166,6 +163,7 @@ RatingsOnlyOpt = typer.Option(False, "--ratings-only", help="Leave the human act
 
 
 @app.command(rich_help_panel="Estimate")
+@log_options(keep=True, quiet=True)
 def fit(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
     preset: str = typer.Option("paper", "--preset", help="Model structure preset (paper)."),
@@ -189,15 +187,8 @@ def fit(
     rating_bins: str | None = RatingBinsOpt,
     ratings_only: bool = RatingsOnlyOpt,
     rating_per: str | None = RatingPerOpt,
-    mapping: Path | None = MappingOpt,
-    column: list[str] | None = ColumnOpt,
-    label: list[str] | None = LabelOpt,
-    missing: list[str] | None = MissingOpt,
-    delimiter: str | None = DelimiterOpt,
-    order: list[str] | None = OrderOpt,
-    keep: list[str] | None = KeepOpt,
-    quiet: bool = QuietOpt,
-    no_rule: bool = NoExperienceRuleOpt,
+    reading: LogReading = FROM_OPTIONS,
+    quiet: bool = False,
 ) -> None:
     """Estimate the supervisor's trust model from logged trials (extended Baum-Welch).
 
@@ -205,14 +196,13 @@ def fit(
     simulate refuse those a task can reach until they are supplied (--fill-from).  With a
     rating column (--rating or the mapping's 'rating') the fit is joint on the human actions
     and the ratings, and the model file carries P(rating | trust)."""
-    _check_fit_paths(log, mapping, fill_from, out, posteriors, plots, keep)
-    mapping = rule_off(mapping, no_rule)
-    tr, em, needed = _named_inputs(mapping, transitions_on, emissions_on)
+    _check_fit_paths(log, reading.mapping, fill_from, out, posteriors, plots, reading.keep)
+    tr, em, needed = _named_inputs(reading.mapping_to_read, transitions_on, emissions_on)
     rated = rating_entry(rating, rating_levels, rating_bins, rating_per)
-    frame = read_log(log, mapping, column, label, needed, missing, delimiter, rated, not ratings_only, order)
+    frame = reading.read(log, needed, rated, not ratings_only)
     options = FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs)
     run = _FitRun(levels, options, bootstrap, prior, _rated(frame, log, ratings_only), ratings_only)
-    outputs = _FitOutputs(out, posteriors, plots, keep, as_json, quiet)
+    outputs = _FitOutputs(out, posteriors, plots, reading.keep, as_json, quiet)
     if _general(tr, em):
         _fit_general(frame, tr, em, run, outputs, fill_from)
         return
@@ -235,12 +225,8 @@ def fit(
     console.print(fit_summary(result, "restarts", len(result.restart_logliks)))
     print_intervals_note(result.intervals)
     print_warnings(result.warnings)
-    if out is not None:
-        console.print(f"model written to {out}")
-    if posteriors is not None:
-        console.print(f"posteriors written to {posteriors}")
-    if plots is not None:
-        console.print(f"figures written to {plots}/emissions.png, {plots}/transitions.png")
+    figures = None if plots is None else f"{plots}/emissions.png, {plots}/transitions.png"
+    print_written(("model", out), ("posteriors", posteriors), ("figures", figures))
 
 
 @dataclass(frozen=True)
@@ -269,8 +255,6 @@ class _FitOutputs:
 
 def _check_fit_paths(log, mapping, fill_from, out, posteriors, plots, keep) -> None:
     """fit's output options refused before the log is read."""
-    from ._app import check_not_inputs
-
     check_outputs((out, "--out"), (posteriors, "--posteriors"))
     check_output(posteriors, "--posteriors", POSTERIOR_SUFFIXES)
     inputs = ((log, "trial log"), (mapping, "--mapping file"), (fill_from, "--fill-from model"))
@@ -398,17 +382,16 @@ def _fit_general(frame, tr, em, run: _FitRun, outputs: _FitOutputs, fill_from: s
     print_intervals_note(result.intervals)
     console.print(fit_summary(result, "restarts", len(result.restart_logliks)), highlight=False)
     print_warnings(result.warnings)
-    if plots is not None:
-        console.print(
-            f"figures written to {plots}/emissions.png, {plots}/transitions.png (the tables by combination of the inputs)"
-        )
-    if outputs.out is not None:
-        console.print(f"general model (trustseek.iohmm/1) written to {outputs.out}; decode, predict and validate read it")
-    if outputs.posteriors is not None:
-        console.print(f"posteriors written to {outputs.posteriors}")
+    figures = None if plots is None else f"{plots}/emissions.png, {plots}/transitions.png"
+    print_written(
+        ("figures", figures and f"{figures} (the tables by combination of the inputs)"),
+        ("general model (trustseek.iohmm/1)", outputs.out and f"{outputs.out}; decode, predict and validate read it"),
+        ("posteriors", outputs.posteriors),
+    )
 
 
 @app.command("decode", rich_help_panel="Estimate")
+@log_options(keep=True)
 def decode_cmd(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
     model: Path = typer.Option(
@@ -418,14 +401,7 @@ def decode_cmd(
         help="Trust model or general model JSON (from 'trustseek fit') or supervisor types (from 'trustseek fit-types').",
     ),
     out: Path = typer.Option(Path("posteriors.csv"), "--out", "-o", help="Output file (.csv or .parquet)."),
-    mapping: Path | None = MappingOpt,
-    column: list[str] | None = ColumnOpt,
-    label: list[str] | None = LabelOpt,
-    missing: list[str] | None = MissingOpt,
-    delimiter: str | None = DelimiterOpt,
-    order: list[str] | None = OrderOpt,
-    keep: list[str] | None = KeepOpt,
-    no_rule: bool = NoExperienceRuleOpt,
+    reading: LogReading = FROM_OPTIONS,
 ) -> None:
     """Per-trial smoothed P(trust | data) and the Viterbi trust path under a model.
 
@@ -434,27 +410,26 @@ def decode_cmd(
 
     The log needs the columns the model depends on: a model fitted with fewer inputs
     (--transitions-on/--emissions-on) decodes a log without the others."""
-    from ._app import check_not_inputs
-
     check_output(out, "--out", POSTERIOR_SUFFIXES)
-    check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (mapping, "--mapping file")))
+    check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (reading.mapping, "--mapping file")))
     from ..model.mixture import TypeMixture
 
     types = load_for_decoding(model)  # a trust model, a general model or types
-    frame = read_for_types(log, types, rule_off(mapping, no_rule), column, label, missing, delimiter, order)
+    frame = read_for_types(log, types, reading)
     if not isinstance(types, TypeMixture) or types.n_types == 1:
         one = types.models[0] if isinstance(types, TypeMixture) else types
-        post = keep_columns(_fit().decode(frame, one), frame, keep)
+        post = keep_columns(_fit().decode(frame, one), frame, reading.keep)
     else:  # supervisor types: P(type | trials) per participant and the type-averaged trust posteriors
         from ..estimation.mixture import decode_types
 
-        post = keep_columns(decode_types(frame, types), frame, keep)
+        post = keep_columns(decode_types(frame, types), frame, reading.keep)
     with atomic_output(out) as tmp:
         _data().write_trials(post, tmp)
     console.print(f"wrote {len(post)} trials to {out}")
 
 
 @app.command(rich_help_panel="Estimate")
+@log_options(quiet=True)
 def select(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
     max_levels: int = typer.Option(4, "--max-levels", min=1, max=8, help="Compare 1..this many trust levels."),
@@ -471,38 +446,23 @@ def select(
     prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count (MAP)."),
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
-    transitions_on: str | None = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit)."),
-    emissions_on: str | None = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit)."),
-    widen: bool = typer.Option(
-        True,
-        "--widen/--no-widen",
-        help="While the best by BIC or held-out log-likelihood is the largest number compared, compare one more "
-        "(up to 8); --no-widen compares 1..--max-levels only.",
-    ),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
-    mapping: Path | None = MappingOpt,
-    column: list[str] | None = ColumnOpt,
-    label: list[str] | None = LabelOpt,
-    missing: list[str] | None = MissingOpt,
-    delimiter: str | None = DelimiterOpt,
-    order: list[str] | None = OrderOpt,
-    quiet: bool = QuietOpt,
-    no_rule: bool = NoExperienceRuleOpt,
+    transitions_on: str | None = AsForFitTransitionsOpt,
+    emissions_on: str | None = AsForFitEmissionsOpt,
+    widen: bool = widen_option(8, "1..--max-levels"),
+    as_json: bool = PrintJsonOpt,
+    reading: LogReading = FROM_OPTIONS,
+    quiet: bool = False,
 ) -> None:
     """Choose the number of trust levels: BIC and participant-held-out log-likelihood."""
-    tr, em, frame = _read_with_inputs(
-        log, rule_off(mapping, no_rule), column, label, transitions_on, emissions_on, missing, delimiter, order=order
-    )
-    bar = progress_bar(quiet or as_json)
-    with bar:
-        task = bar.add_task("model selection", total=None)
+    tr, em, frame = _read_with_inputs(log, reading, transitions_on, emissions_on)
+    with progress_task(quiet or as_json, "model selection") as update:
         rows = _fit().select_levels(
             frame,
             levels=tuple(range(1, max_levels + 1)),
             folds=folds,
             options=FitOptions(restarts=restarts, seed=seed, tol=tol, n_jobs=1),
             prior=prior,
-            progress=lambda what, d, t: bar.update(task, completed=d, total=t, description=what),
+            progress=lambda what, d, t: update(d, t, what),
             transition_inputs=tr,
             emission_inputs=em,
             widen=widen,

@@ -10,7 +10,8 @@ import typer
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import app, atomic_output, check_output, console, err_console, print_json
+from ._app import app, atomic_output, check_not_inputs, check_output, console, err_console, print_json
+from ._options import ModelOpt, PrintJsonOpt, TaskOpt, model_and_task
 
 #: exit code of solve-pomdp-file when the point solver stops before its target gap
 GAP_NOT_REACHED = 3
@@ -19,8 +20,8 @@ GAP_NOT_REACHED = 3
 @app.command("export-pomdp", rich_help_panel="Files")
 def export_pomdp(
     out: Path = typer.Argument(..., help="File to write: .pomdp (Cassandra) or .pomdpx (POMDPX)."),
-    model: str = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file."),
-    task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
+    model: str = ModelOpt,
+    task: str = TaskOpt,
     fmt: str | None = typer.Option(None, "--format", help="pomdp or pomdpx (default: from the file suffix)."),
     initial_complexity: str | None = typer.Option(
         None, "--initial-complexity", help="Start from this complexity instead of P(C) (.pomdp only)."
@@ -31,16 +32,13 @@ def export_pomdp(
 ) -> None:
     """Export the assistance POMDP to a standard file (state augmented with the last human action)."""
     from ..interop.files import export_assistance, flat_values_check
-    from ..model.presets import load_model, load_task
     from ..pomdp.problem import AssistancePOMDP
 
     if fmt is not None and fmt not in ("pomdp", "pomdpx"):
         raise TrustseekError([f"--format must be 'pomdp' or 'pomdpx', got {fmt!r}"])
-    from ._app import check_not_inputs
-
     check_output(out, "OUT", None if fmt else (".pomdp", ".pomdpx"))
     check_not_inputs(((out, "OUT"),), ((model, "--model file"), (task, "--task file")))
-    m, t = load_model(model), load_task(task)
+    m, t = model_and_task(model, task)
     pomdp = AssistancePOMDP(m, t)
     c0 = None
     if initial_complexity is not None:
@@ -73,7 +71,7 @@ def solve_pomdp_file(
         None, "--horizon", min=1, max=8, help="Exact finite-horizon value instead (small files only)."
     ),
     max_seconds: float = typer.Option(60.0, "--max-seconds", help="Time limit for the point solver."),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
+    as_json: bool = PrintJsonOpt,
 ) -> None:
     """Solve a standard .pomdp file: certified lower and upper bounds at its start belief.
 

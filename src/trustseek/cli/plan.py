@@ -13,34 +13,17 @@ from .. import solvers
 from ..errors import TrustseekError
 from ..solvers.defaults import DEFAULT_GRID, DEFAULT_TYPE_AWARE_SOLVER, METHODS
 from ..vocab import check_belief_update
-from ._app import (
-    ColumnOpt,
-    LabelOpt,
-    MappingOpt,
-    OrderOpt,
-    app,
-    atomic_output,
-    check_output,
-    check_tol,
-    console,
-    print_json,
-    read_log,
-)
+from ._app import app, atomic_output, check_not_inputs, check_output, check_tol, console, print_json
+from ._options import FROM_OPTIONS, JsonOpt, LogReading, ModelOpt, PrintJsonOpt, TaskOpt, log_options, model_and_task
 
 if TYPE_CHECKING:
     from ..model.core import TrustModel
     from ..model.mixture import TypeMixture
     from ..policies.base import Policy
 
-ModelOpt = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file.")
-TaskOpt = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file.")
 UpdateOpt = typer.Option(
     "bayes", "--belief-update", "-u", help="Belief update: 'bayes' (exact filter, default) or 'paper' (eq. 3)."
 )
-
-
-def _check_update(name: str) -> str:
-    return check_belief_update(name, "--belief-update")
 
 
 def mixture_of(spec: str) -> TypeMixture | None:
@@ -67,15 +50,11 @@ def type_posterior(
     history: Path,
     participant: str | None,
     session: str | None,
-    mapping: Path | None = None,
-    column: list[str] | None = None,
-    label: list[str] | None = None,
-    order: list[str] | None = None,
 ):
     """The type posterior of one person from their earlier trials (--history, --participant, --session)."""
     from ..pomdp.supervisor_types import type_belief_from_log
 
-    frame = read_log(history, mapping, column, label, ("complexity", "robot_action", "experience"), order=order)
+    frame = LogReading().read(history, ("complexity", "robot_action", "experience"))
     return type_belief_from_log(mixture, frame, participant=participant, session=session)
 
 
@@ -101,7 +80,7 @@ def solve(
         1e-9, "--tol", callback=check_tol, help="Value iteration: stop when the certified error bound is below this (> 0)."
     ),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
+    as_json: bool = JsonOpt,
     solver: str | None = typer.Option(
         None,
         "--solver",
@@ -134,14 +113,12 @@ def solve(
 ) -> None:
     """Solve the assistance-seeking POMDP for the optimal trust-aware policy (Section IV), or for a person of
     unknown supervisor type (--types)."""
-    from ..model.presets import load_mixture, load_model, load_task
+    from ..model.presets import load_mixture, load_task
     from ..pomdp.problem import AssistancePOMDP
     from ..pomdp.supervisor_types import type_aware_problem, type_marginal
     from ..solvers import make_solver, summarize
 
     _check_solve(belief_update, method, solver, gap, max_seconds)
-    from ._app import check_not_inputs
-
     check_output(out, "--out", (".json",))
     inputs = ((model, "--model file"), (task, "--task file"), (types, "--types file"), (history, "--history log"))
     check_not_inputs(((out, "--out"),), inputs)
@@ -156,7 +133,7 @@ def solve(
         pomdp = type_aware_problem(mixture if prior is None else mixture.with_weights(list(prior)), load_task(task))
     else:
         solver = solver or "grid"
-        pomdp = AssistancePOMDP(load_model(model), load_task(task))
+        pomdp = AssistancePOMDP(*model_and_task(model, task))
         if solver == "grid":
             need_two_levels(pomdp.model, "solve")
         built = make_solver(
@@ -190,7 +167,7 @@ def _check_solve(belief_update: str, method: str, solver: str | None, gap: float
     """solve's options refused before anything is loaded."""
     from ..solvers import solver_names
 
-    _check_update(belief_update)
+    check_belief_update(belief_update, "--belief-update")
     if method not in METHODS:
         raise TrustseekError([f"--method must be one of {list(METHODS)}, got {method!r}"])
     if solver is not None and solver not in solver_names():
@@ -268,33 +245,30 @@ def _print_certified(policy: Policy, summary: dict) -> None:
 
 
 @app.command(rich_help_panel="Plan")
+@log_options(names=("mapping", "column", "label", "order"))
 def agnostic(
     model: str = ModelOpt,
     task: str = TaskOpt,
     data: Path | None = typer.Option(None, "--data", help="Estimate P(intervene | C) from this trial log instead of the model."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
-    mapping: Path | None = MappingOpt,
-    column: list[str] | None = ColumnOpt,
-    label: list[str] | None = LabelOpt,
-    order: list[str] | None = OrderOpt,
+    as_json: bool = PrintJsonOpt,
+    reading: LogReading = FROM_OPTIONS,
 ) -> None:
     """The optimal trust-agnostic policy (Section VI-A)."""
     from ..model.core import ACTIONS
     from ..model.presets import load_model, load_task
     from ..pomdp.problem import AssistancePOMDP
     from ..solvers import make_solver, trust_agnostic_from_data
-    from ._app import check_not_inputs
 
     check_output(out, "--out", (".json",))
-    inputs = ((model, "--model file"), (task, "--task file"), (data, "--data log"), (mapping, "--mapping file"))
+    inputs = ((model, "--model file"), (task, "--task file"), (data, "--data log"), (reading.mapping, "--mapping file"))
     check_not_inputs(((out, "--out"),), inputs)
-    if data is None and (mapping is not None or column or label or order):
+    if data is None and (reading.mapping is not None or reading.column or reading.label or reading.order):
         raise TrustseekError(["--mapping, --column, --label and --order apply to a log: give it with --data"])
     t = load_task(task)
     pol: Policy
     if data is not None:
-        frame = read_log(data, mapping, column, label, ("complexity", "robot_action"), order=order)
+        frame = reading.read(data, ("complexity", "robot_action"))
         pol = trust_agnostic_from_data(frame, t)
     else:
         pol = make_solver("trust-agnostic").solve(AssistancePOMDP(load_model(model), t))
@@ -325,12 +299,10 @@ def plot_q_cmd(
     out: Path = typer.Option(Path("q.png"), "--out", "-o", help="PNG file to write."),
 ) -> None:
     """Plot Q(b, C, a) for both actions and complexities, with the threshold (Fig. 7)."""
-    from ..model.presets import load_model, load_task
     from ..plots.q import plot_q
     from ..policies import PolicyError, TrustAwarePolicy, load_policy
     from ..pomdp.problem import AssistancePOMDP
     from ..solvers import make_solver
-    from ._app import check_not_inputs
 
     check_output(out, "--out", (".png", ".pdf", ".svg"))
     check_not_inputs(((out, "--out"),), ((model, "--model file"), (task, "--task file"), (policy_file, "--policy file")))
@@ -340,8 +312,7 @@ def plot_q_cmd(
         except PolicyError as exc:
             raise TrustseekError([f"{p} to plot" for p in exc.problems], str(policy_file)) from None
     else:
-        _check_update(belief_update)
-        pomdp = AssistancePOMDP(load_model(model), load_task(task))
+        pomdp = AssistancePOMDP(*model_and_task(model, task, belief_update))
         need_two_levels(pomdp.model, "plot-q")
         policy = cast(TrustAwarePolicy, make_solver("grid", grid=grid, belief_update=belief_update).solve(pomdp))
     with atomic_output(out) as tmp:

@@ -10,8 +10,9 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ..solvers.defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
-from ..vocab import PAPER_BLOCK_COUNTS, check_belief_update
+from ..vocab import PAPER_BLOCK_COUNTS
 from ._app import app, console, print_json
+from ._options import JsonOpt, ModelOpt, TaskOpt, model_and_task
 
 
 def parse_counts(text: str, complexities: tuple[str, ...]) -> tuple[int, ...]:
@@ -31,8 +32,8 @@ def parse_counts(text: str, complexities: tuple[str, ...]) -> tuple[int, ...]:
 
 @app.command(rich_help_panel="Plan")
 def schedule(
-    model: str = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file."),
-    task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
+    model: str = ModelOpt,
+    task: str = TaskOpt,
     counts: str = typer.Option(
         ",".join(map(str, PAPER_BLOCK_COUNTS)), "--counts", "-n", help="Items per complexity: 17,17 or low=17,high=17."
     ),
@@ -53,16 +54,14 @@ def schedule(
     participants: int = typer.Option(20000, "--participants", min=2, max=1_000_000, help="--compare: simulated participants."),
     seed: int = typer.Option(0, "--seed", min=0, help="--compare: random seed."),
     figure: Path | None = typer.Option(None, "--figure", help="--compare: write the schedule figure (PNG) here."),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
+    as_json: bool = JsonOpt,
 ) -> None:
     """Choose the next item's complexity jointly with asking (finite horizon, known item counts)."""
-    from ..model.presets import load_model, load_task
     from ..pomdp.problem import AssistancePOMDP
     from ..pomdp.scheduling import SchedulingProblem
     from ..solvers.scheduling import ScheduleSolver
 
-    check_belief_update(belief_update, "--belief-update")
-    m, t = load_model(model), load_task(task)
+    m, t = model_and_task(model, task, belief_update)
     pomdp = AssistancePOMDP(m, t)
     n = parse_counts(counts, pomdp.complexities)
     problem = SchedulingProblem.build(pomdp, n, window or None)

@@ -8,14 +8,14 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from ..vocab import check_belief_update
 from ._app import app, console, print_json
+from ._options import JsonOpt, ModelOpt, TaskOpt, model_and_task
 
 
 @app.command(rich_help_panel="Plan")
 def sensitivity(
-    model: str = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file."),
-    task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
+    model: str = ModelOpt,
+    task: str = TaskOpt,
     belief_update: str = typer.Option(
         "paper", "--belief-update", "-u", help="Belief update of the policy: 'paper' (eq. 3, default) or 'bayes'."
     ),
@@ -38,14 +38,12 @@ def sensitivity(
     model_only: bool = typer.Option(False, "--model-only", help="Leave the task's success probabilities and discount fixed."),
     top: int = typer.Option(10, "--top", min=1, help="Parameters shown in the one-at-a-time table."),
     plot: Path | None = typer.Option(None, "--plot", help="Write a tornado plot of the threshold to this PNG file."),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
+    as_json: bool = JsonOpt,
 ) -> None:
     """Range of the policy's threshold and of V when every reported parameter moves within its printed precision."""
-    from ..model.presets import load_model, load_task
     from ..solvers.sensitivity import sensitivity as run_sensitivity
 
-    check_belief_update(belief_update, "--belief-update")
-    m, t = load_model(model), load_task(task)
+    m, t = model_and_task(model, task, belief_update)
     res = run_sensitivity(
         m,
         t,

@@ -17,7 +17,18 @@ from rich.table import Table
 from .. import solvers
 from ..errors import TrustseekError
 from ..vocab import PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS
-from ._app import QuietOpt, app, atomic_output, check_output, check_outputs, console, err_console, print_json
+from ._app import (
+    app,
+    atomic_output,
+    check_not_inputs,
+    check_output,
+    check_outputs,
+    console,
+    err_console,
+    print_json,
+    print_written,
+)
+from ._options import JsonOpt, QuietOpt, TaskOpt
 
 if TYPE_CHECKING:
     from ..model.core import TrustModel
@@ -148,7 +159,7 @@ def simulate(
     ctx: typer.Context,
     model: str = ModelOpt,
     types: str | None = TypesOpt,
-    task: str = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file."),
+    task: str = TaskOpt,
     policy: str = PolicyOpt,
     participants: int = typer.Option(9, "--participants", "-n", min=1, max=1_000_000, help="Number of simulated participants."),
     counts: str | None = CountsOpt,
@@ -163,14 +174,12 @@ def simulate(
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed (same seed, same supervisors and luck for any policy)."),
     out: Path | None = OutOpt,
     summary_out: Path | None = SummaryOutOpt,
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of tables."),
+    as_json: bool = JsonOpt,
 ) -> None:
     """Simulate supervisors from a trust model working with the robot under a policy."""
     from ..simulation.engine import simulate as run_simulation
 
     given = _check_simulate(ctx, belief_update, counts, trials, out, summary_out)
-    from ._app import check_not_inputs
-
     inputs = ((model, "--model file"), (task, "--task file"), (policy, "--policy file"), (policy_model, "--policy-model file"))
     check_not_inputs(((out, "--out"), (summary_out, "--summary-out")), inputs)
     pop = _population(ctx, model, types, policy_model, concentration, task)
@@ -220,10 +229,7 @@ def simulate(
         )
         return
     _print_simulation(pol.describe(), participants, n_trials, stats, dt, seed)
-    if out is not None:
-        console.print(f"trials written to {out}")
-    if summary_out is not None:
-        console.print(f"summary written to {summary_out}")
+    print_written(("trials", out), ("summary", summary_out))
 
 
 #: the per-participant figures simulate reports

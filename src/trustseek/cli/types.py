@@ -11,28 +11,31 @@ from rich.table import Table
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
 from ._app import (
-    ColumnOpt,
-    DelimiterOpt,
-    LabelOpt,
-    MappingOpt,
-    MissingOpt,
-    OrderOpt,
-    QuietOpt,
     app,
     atomic_output,
+    check_not_inputs,
     check_output,
     check_outputs,
     check_tol,
     console,
     print_json,
+    print_written,
     progress_bar,
+    progress_task,
     selection_table,
 )
+from ._options import FROM_OPTIONS, LogReading, PrintJsonOpt, log_options, widen_option
 from ._output import check_plots_folder, fit_summary, print_selection, print_warnings
-from ._reading import NoExperienceRuleOpt, rule_off
+from ._reading import load_for_decoding, read_for_types, widened_note
 from .fit import _read_with_inputs
 
 POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
+TransitionsOnOpt = typer.Option(
+    None, "--transitions-on", help="Inputs of the trust transitions (as for fit: complexity, robot_action, experience)."
+)
+EmissionsOnOpt = typer.Option(
+    None, "--emissions-on", help="Inputs of the human-action probabilities (as for fit: complexity, robot_action)."
+)
 DifferOpt = typer.Option(
     "all",
     "--differ",
@@ -69,16 +72,13 @@ def parse_types(text: str) -> tuple[int, ...]:
 
 
 @app.command("fit-types", rich_help_panel="Estimate")
+@log_options(quiet=True)
 def fit_types(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
     types: int = typer.Option(2, "--types", "-m", min=1, max=12, help="Number of supervisor types."),
     differ: str = DifferOpt,
-    transitions_on: str | None = typer.Option(
-        None, "--transitions-on", help="Inputs of the trust transitions (as for fit: complexity, robot_action, experience)."
-    ),
-    emissions_on: str | None = typer.Option(
-        None, "--emissions-on", help="Inputs of the human-action probabilities (as for fit: complexity, robot_action)."
-    ),
+    transitions_on: str | None = TransitionsOnOpt,
+    emissions_on: str | None = EmissionsOnOpt,
     restarts: int = typer.Option(
         10, "--restarts", "-r", min=1, max=1000, help="Starts (half from the perturbed pooled fit, half random)."
     ),
@@ -95,27 +95,17 @@ def fit_types(
     ),
     plots: Path | None = typer.Option(None, "--plots", help="Write per-type figures into this directory."),
     as_json: bool = typer.Option(False, "--json", help="Print the fit as one JSON object."),
-    mapping: Path | None = MappingOpt,
-    column: list[str] | None = ColumnOpt,
-    label: list[str] | None = LabelOpt,
-    missing: list[str] | None = MissingOpt,
-    delimiter: str | None = DelimiterOpt,
-    order: list[str] | None = OrderOpt,
-    quiet: bool = QuietOpt,
-    no_rule: bool = NoExperienceRuleOpt,
+    reading: LogReading = FROM_OPTIONS,
+    quiet: bool = False,
 ) -> None:
     """Fit supervisor types: M trust models of the paper's structure, each participant one type."""
-    from ._app import check_not_inputs
-
     check_outputs((out, "--out"), (type_posteriors, "--type-posteriors"))
     check_output(type_posteriors, "--type-posteriors", POSTERIOR_SUFFIXES)
     outputs = ((out, "--out"), (type_posteriors, "--type-posteriors"))
-    check_not_inputs(outputs, ((log, "trial log"), (mapping, "--mapping file")))
+    check_not_inputs(outputs, ((log, "trial log"), (reading.mapping, "--mapping file")))
     check_plots_folder(plots)
     _check_differ(differ)
-    tr, em, frame = _read_with_inputs(
-        log, rule_off(mapping, no_rule), column, label, transitions_on, emissions_on, missing, delimiter, order
-    )
+    tr, em, frame = _read_with_inputs(log, reading, transitions_on, emissions_on)
     named = [c for c in (*em, *tr) if c not in ("complexity", "robot_action", "experience")]
     if plots is not None and named:
         raise TrustseekError([f"--plots draws trust-model types; types of the named inputs {named} have no figures here"])
@@ -150,12 +140,8 @@ def fit_types(
         print_json(_types_json(fit, mixture, post, intervals))
         return
     _print_types(fit, mixture, post, intervals)
-    if out is not None:
-        console.print(f"types written to {out}")
-    if type_posteriors is not None:
-        console.print(f"type posteriors written to {type_posteriors}")
-    if plots is not None:
-        console.print(f"figures written to {', '.join(str(p) for p in written)}")
+    figures = None if plots is None else ", ".join(str(p) for p in written)
+    print_written(("types", out), ("type posteriors", type_posteriors), ("figures", figures))
 
 
 def _bootstrap_types(fit, bootstrap: int, seed: int, jobs: int | None, bar):
@@ -249,16 +235,13 @@ def _rely_cells(mixture):
 
 
 @app.command("select-types", rich_help_panel="Estimate")
+@log_options(quiet=True)
 def select_types(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
     types: str = typer.Option("1..4", "--types", help="Numbers of types to compare, e.g. 1..4 or 1,2,3."),
     differ: str = DifferOpt,
-    transitions_on: str | None = typer.Option(
-        None, "--transitions-on", help="Inputs of the trust transitions (as for fit: complexity, robot_action, experience)."
-    ),
-    emissions_on: str | None = typer.Option(
-        None, "--emissions-on", help="Inputs of the human-action probabilities (as for fit: complexity, robot_action)."
-    ),
+    transitions_on: str | None = TransitionsOnOpt,
+    emissions_on: str | None = EmissionsOnOpt,
     folds: int = typer.Option(5, "--folds", min=2, help="Folds over participants for the held-out log-likelihood."),
     restarts: int = typer.Option(
         10, "--restarts", "-r", min=1, max=1000, help="Starts per fit (and the fit with one type fewer, split)."
@@ -266,46 +249,29 @@ def select_types(
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
     jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads per fit."),
-    widen: bool = typer.Option(
-        True,
-        "--widen/--no-widen",
-        help="While the best by BIC or held-out log-likelihood is the largest number compared, compare one more "
-        "(up to 12); --no-widen compares the numbers given only.",
-    ),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON."),
-    mapping: Path | None = MappingOpt,
-    column: list[str] | None = ColumnOpt,
-    label: list[str] | None = LabelOpt,
-    missing: list[str] | None = MissingOpt,
-    delimiter: str | None = DelimiterOpt,
-    order: list[str] | None = OrderOpt,
-    quiet: bool = QuietOpt,
-    no_rule: bool = NoExperienceRuleOpt,
+    widen: bool = widen_option(12, "the numbers given"),
+    as_json: bool = PrintJsonOpt,
+    reading: LogReading = FROM_OPTIONS,
+    quiet: bool = False,
 ) -> None:
     """Choose the number of supervisor types: BIC and participant-held-out log-likelihood."""
     values = parse_types(types)
     _check_differ(differ)
     from ..estimation import type_selection
 
-    tr, em, frame = _read_with_inputs(
-        log, rule_off(mapping, no_rule), column, label, transitions_on, emissions_on, missing, delimiter, order
-    )
-    bar = progress_bar(quiet or as_json)
-    with bar:
-        task = bar.add_task("model selection", total=None)
+    tr, em, frame = _read_with_inputs(log, reading, transitions_on, emissions_on)
+    with progress_task(quiet or as_json, "model selection") as update:
         rows = type_selection.select_types(
             frame,
             types=values,
             folds=folds,
             options=FitOptions(restarts=restarts, seed=seed, tol=tol, n_jobs=jobs),
             differ=differ,
-            progress=lambda what, d, t: bar.update(task, completed=d, total=t, description=what),
+            progress=lambda what, d, t: update(d, t, what),
             transition_inputs=tr,
             emission_inputs=em,
             widen=widen,
         )
-    from ._reading import widened_note
-
     warnings = widened_note(rows, "types", max(values)) + type_selection.type_selection_warnings(rows)
     if as_json:
         print_json({"types": rows, "warnings": warnings})
@@ -319,6 +285,7 @@ def select_types(
 
 
 @app.command("personalize", rich_help_panel="Estimate")
+@log_options()
 def personalize(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
     model: str = typer.Option(
@@ -336,13 +303,7 @@ def personalize(
     ),
     tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative tolerance of each participant's EM (> 0)."),
     as_json: bool = typer.Option(False, "--json", help="Print the strengths and the per-participant summary as JSON."),
-    mapping: Path | None = MappingOpt,
-    column: list[str] | None = ColumnOpt,
-    label: list[str] | None = LabelOpt,
-    missing: list[str] | None = MissingOpt,
-    delimiter: str | None = DelimiterOpt,
-    order: list[str] | None = OrderOpt,
-    no_rule: bool = NoExperienceRuleOpt,
+    reading: LogReading = FROM_OPTIONS,
 ) -> None:
     """Per-person trust models: each participant's MAP estimate, shrunk toward the pooled model or their type."""
     if estimate not in ("held-out", "variational"):
@@ -350,14 +311,11 @@ def personalize(
     check_output(out, "--out", directory=True)
     from ..estimation.personal import personalize as run
     from ..model.mixture import TypeMixture
-    from ._reading import load_for_decoding, read_for_types
 
     centre = load_for_decoding(Path(model))  # a trust model, a general model or types
     if not isinstance(centre, TypeMixture):
         centre = TypeMixture.single(centre)
-    frame = read_for_types(
-        log, centre, rule_off(mapping, no_rule), column, label, missing, delimiter, order
-    )  # the columns it uses
+    frame = read_for_types(log, centre, reading)  # the columns it uses
     res = run(frame, centre if centre.n_types > 1 else centre.models[0], strength=strength, tol=tol, estimate=estimate)
     with atomic_output(out, directory=True) as tmp:
         res.save(tmp)

@@ -13,27 +13,20 @@ from rich.table import Table
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
 from ._app import (
-    ColumnOpt,
-    DelimiterOpt,
-    KeepOpt,
-    LabelOpt,
-    MappingOpt,
-    MissingOpt,
-    OrderOpt,
-    QuietOpt,
-    RatingPerOpt,
     app,
     atomic_output,
+    check_not_inputs,
     check_output,
     check_tol,
     console,
     err_console,
     keep_columns,
     print_json,
-    progress_bar,
+    progress_task,
 )
-from ._reading import NoExperienceRuleOpt, read_for_types, rule_off
-from .fit import POSTERIOR_SUFFIXES, _general, _read_with_inputs
+from ._options import FROM_OPTIONS, LogReading, RatingPerOpt, log_options
+from ._reading import read_for_types
+from .fit import POSTERIOR_SUFFIXES, AsForFitEmissionsOpt, AsForFitTransitionsOpt, _general, _read_with_inputs
 
 BootstrapOpt = typer.Option(
     1000, "--bootstrap", "-b", min=0, max=10_000, help="Participant-bootstrap resamples for the 95% intervals (0 = none)."
@@ -87,6 +80,7 @@ def _load(path: Path) -> Any:
 
 
 @app.command(rich_help_panel="Estimate")
+@log_options(keep=True, quiet=True)
 def predict(
     log: Path = typer.Argument(..., help="Trial log (CSV, Parquet, JSON), one row per trial."),
     model: Path | None = typer.Option(
@@ -97,8 +91,8 @@ def predict(
     ),
     folds: int | None = typer.Option(None, "--folds", min=2, help="Folds of participants for the held-out fits (default 5)."),
     levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Trust levels of the held-out fits."),
-    transitions_on: str | None = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit)."),
-    emissions_on: str | None = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit)."),
+    transitions_on: str | None = AsForFitTransitionsOpt,
+    emissions_on: str | None = AsForFitEmissionsOpt,
     restarts: int = typer.Option(10, "--restarts", "-r", min=1, max=1000, help="Random restarts of each held-out fit."),
     prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count of the held-out fits (as for fit)."),
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed (folds, restarts, bootstrap)."),
@@ -108,42 +102,31 @@ def predict(
     bootstrap: int = BootstrapOpt,
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the per-trial predictions (CSV or Parquet)."),
     as_json: bool = typer.Option(False, "--json", help="Print the scores as one JSON object."),
-    mapping: Path | None = MappingOpt,
-    column: list[str] | None = ColumnOpt,
-    label: list[str] | None = LabelOpt,
-    missing: list[str] | None = MissingOpt,
-    delimiter: str | None = DelimiterOpt,
-    order: list[str] | None = OrderOpt,
-    keep: list[str] | None = KeepOpt,
-    quiet: bool = QuietOpt,
-    no_rule: bool = NoExperienceRuleOpt,
+    reading: LogReading = FROM_OPTIONS,
+    quiet: bool = False,
 ) -> None:
     """How well a trust model predicts each trial's human action from the trials before it
     (filtering), against baselines: log-loss, Brier score, AUC with bootstrap intervals.
 
     Trials whose action the model fixes (the robot asked: P(intervene) = 1) are no prediction
     and are left out of the scores."""
-    _check_trial_output(out, keep, log, model, mapping)
+    _check_trial_output(out, log, model, reading)
     pr = _prediction()
     if model is not None:
         if folds is not None:
             raise TrustseekError(["--folds scores held-out fits; --model scores that model in-sample: give one of them"])
         m = _load(model)
-        frame = read_for_types(log, m, rule_off(mapping, no_rule), column, label, missing, delimiter, order)
+        frame = read_for_types(log, m, reading)
         report = pr.predict_in_sample(frame, m, bootstrap=bootstrap, seed=seed)
     else:
-        tr, em, frame = _read_with_inputs(
-            log, rule_off(mapping, no_rule), column, label, transitions_on, emissions_on, missing, delimiter, order=order
-        )
+        tr, em, frame = _read_with_inputs(log, reading, transitions_on, emissions_on)
         preset: Any = "paper"
         if _general(tr, em):  # inputs a trust model does not have: the general model's structure
             from ..estimation.trust_iohmm import general_spec
 
             preset = general_spec(frame, em, tr, levels, prior)
         k = 5 if folds is None else folds
-        bar = progress_bar(quiet or as_json)
-        with bar:
-            task = bar.add_task("held-out folds", total=k)
+        with progress_task(quiet or as_json, "held-out folds", k) as update:
             report = pr.predict_heldout(
                 frame,
                 preset=preset,
@@ -151,12 +134,12 @@ def predict(
                 options=FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs),
                 bootstrap=bootstrap,
                 prior=prior,
-                progress=lambda d, t: bar.update(task, completed=d, total=t),
+                progress=update,
                 levels=levels,
                 transition_inputs=tr,
                 emission_inputs=em,
             )
-    _write_trials(report, frame, out, keep)
+    _write_trials(report, frame, out, reading.keep)
     if as_json:
         print_json(report.to_dict())
         return
@@ -165,13 +148,11 @@ def predict(
         console.print(f"per-trial predictions written to {out}")
 
 
-def _check_trial_output(out: Path | None, keep: list[str] | None, log: Path, model: Path | None, mapping: Path | None) -> None:
+def _check_trial_output(out: Path | None, log: Path, model: Path | None, reading: LogReading) -> None:
     """--out (per-trial values) and --keep refused before anything is read."""
-    from ._app import check_not_inputs
-
     check_output(out, "--out", POSTERIOR_SUFFIXES)
-    check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (mapping, "--mapping file")))
-    if keep and out is None:
+    check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (reading.mapping, "--mapping file")))
+    if reading.keep and out is None:
         raise TrustseekError(["--keep carries log columns into --out: give --out"])
 
 
@@ -235,6 +216,7 @@ def _one_rating_per_block(frame, log: Path, rating: str, per: str | None, missin
 
 
 @app.command(rich_help_panel="Estimate")
+@log_options(keep=True)
 def validate(
     log: Path = typer.Argument(..., help="Trial log with a self-reported trust rating column (every trial, or some)."),
     model: Path = typer.Option(..., "--model", "-m", help="Trust model or general model JSON (e.g. from 'trustseek fit')."),
@@ -253,23 +235,16 @@ def validate(
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed of the bootstrap."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write per trial the rating, decoded trust and baselines."),
     as_json: bool = typer.Option(False, "--json", help="Print the correlations as one JSON object."),
-    mapping: Path | None = MappingOpt,
-    column: list[str] | None = ColumnOpt,
-    label: list[str] | None = LabelOpt,
-    missing: list[str] | None = MissingOpt,
-    delimiter: str | None = DelimiterOpt,
-    order: list[str] | None = OrderOpt,
-    keep: list[str] | None = KeepOpt,
-    no_rule: bool = NoExperienceRuleOpt,
+    reading: LogReading = FROM_OPTIONS,
 ) -> None:
     """Does the decoded trust track self-reported trust?  Spearman and Pearson correlations with
     the ratings (pooled, within and between participants) next to simple baselines."""
-    _check_trial_output(out, keep, log, model, mapping)
+    _check_trial_output(out, log, model, reading)
     labels = None
     if rating_labels is not None:
         labels = [x.strip() for x in rating_labels.split(",")]
     m = _load(model)
-    frame = read_for_types(log, m, rule_off(mapping, no_rule), column, label, missing, delimiter, order)
+    frame = read_for_types(log, m, reading)
     va = _validation()
     if rating is None:
         if "rating" not in frame.columns:
@@ -277,10 +252,10 @@ def validate(
         rating = "rating"
     if rating == "rating" and labels is None and frame.attrs.get("rating_levels"):
         labels = list(frame.attrs["rating_levels"])  # the mapping's rating: its declared levels
-    _one_rating_per_block(frame, log, rating, rating_per, missing)
-    ratings = va.parse_ratings(frame, rating, labels, missing or ())
+    _one_rating_per_block(frame, log, rating, rating_per, reading.missing)
+    ratings = va.parse_ratings(frame, rating, labels, reading.missing or ())
     report = va.validate_ratings(frame, m, ratings, rating, labels, bootstrap=bootstrap, seed=seed)
-    _write_trials(report, frame, out, keep)
+    _write_trials(report, frame, out, reading.keep)
     if as_json:
         print_json(report.to_dict())
         return

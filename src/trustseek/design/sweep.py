@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import vocab
 from ..errors import TrustseekError
 from ..model.core import TrustModel
 from ..model.jsonfile import json_safe
@@ -31,14 +32,6 @@ from ..model.presets import paper_model, paper_task
 from ..model.task import Task
 from ..reproduction.statistics import mean_ci, share_ci
 from ..solvers.numerics import one_blas_thread
-from ..vocab import (
-    BELIEF_UPDATES,
-    PAPER_ASK_PROBABILITIES,
-    PAPER_BLOCK_COUNTS,
-    PAPER_DATA_COUNTS,
-    PAPER_DATA_PARTICIPANTS,
-    PAPER_EVALUATION_PARTICIPANTS,
-)
 from .evaluation import evaluate_policy, high_threshold
 from .replicate import Experiment1, FitSettings, Study, plan, run_chunk
 
@@ -59,14 +52,14 @@ class DesignConfig:
     seed: int = 0
     replicates: int = 100
     # experiment 1 (every combination is a design point)
-    participants_1: tuple[int, ...] = (PAPER_DATA_PARTICIPANTS,)
-    trials_1: tuple[int, ...] = (sum(PAPER_DATA_COUNTS),)
-    share_high_1: tuple[float, ...] = (PAPER_DATA_COUNTS[1] / sum(PAPER_DATA_COUNTS),)
-    ask_low: tuple[float, ...] = (PAPER_ASK_PROBABILITIES["low"],)
-    ask_high: tuple[float, ...] = (PAPER_ASK_PROBABILITIES["high"],)
+    participants_1: tuple[int, ...] = (vocab.PAPER_DATA_PARTICIPANTS,)
+    trials_1: tuple[int, ...] = (sum(vocab.PAPER_DATA_COUNTS),)
+    share_high_1: tuple[float, ...] = (vocab.PAPER_DATA_COUNTS[1] / sum(vocab.PAPER_DATA_COUNTS),)
+    ask_low: tuple[float, ...] = (vocab.PAPER_ASK_PROBABILITIES["low"],)
+    ask_high: tuple[float, ...] = (vocab.PAPER_ASK_PROBABILITIES["high"],)
     # experiment 2 (evaluated inside every replicate)
-    participants_2: tuple[int, ...] = (PAPER_EVALUATION_PARTICIPANTS, 10, 15, 20, 30, 40, 60)
-    trials_2: tuple[int, ...] = (sum(PAPER_BLOCK_COUNTS),)
+    participants_2: tuple[int, ...] = (vocab.PAPER_EVALUATION_PARTICIPANTS, 10, 15, 20, 30, 40, 60)
+    trials_2: tuple[int, ...] = (sum(vocab.PAPER_BLOCK_COUNTS),)
     counterbalance: bool = True
     alpha: float = 0.05
     test: str = "wilcoxon"  # the test the targets use
@@ -101,8 +94,8 @@ class DesignConfig:
             p.append(f"--regret-target must be >= 0, got {self.regret_target}")
         if self.fit.restarts < 1:
             p.append(f"--restarts must be >= 1, got {self.fit.restarts}")
-        if self.fit.belief_update not in BELIEF_UPDATES:
-            p.append(f"--belief-update must be one of {list(BELIEF_UPDATES)}, got {self.fit.belief_update!r}")
+        if self.fit.belief_update not in vocab.BELIEF_UPDATES:
+            p.append(f"--belief-update must be one of {list(vocab.BELIEF_UPDATES)}, got {self.fit.belief_update!r}")
         if self.truth.n_trust != 2:
             p.append(f"a design study needs a true model with two trust levels, got {self.truth.n_trust}")
         if self.task.n_complexity != 2:
@@ -376,7 +369,7 @@ def ask_search(
     policy; the best with its interval next to the paper's 0.10 / 0.40, and the Welch interval of
     the paper's regret minus the best's (independent replicates: seeds differ by design point)."""
     grid = [(float(lo), float(hi)) for lo in ask_low for hi in ask_high]
-    paper = (PAPER_ASK_PROBABILITIES["low"], PAPER_ASK_PROBABILITIES["high"])
+    paper = (vocab.PAPER_ASK_PROBABILITIES["low"], vocab.PAPER_ASK_PROBABILITIES["high"])
     if paper not in grid:
         grid.append(paper)
     sub = DesignConfig(**{**cfg.__dict__, "participants_1": cfg.participants_1[:1], "trials_1": cfg.trials_1[:1]})

@@ -16,8 +16,7 @@ import numpy as np
 from ..model.core import ACTIONS, ASK, AUTONOMOUS, TrustModel
 from ..model.jsonfile import ModelError
 from ..pomdp.belief import to_vector
-from ..vocab import BELIEF_UPDATES
-from .base import POLICY_FORMAT, PolicyBase, PolicyError
+from .base import PolicyBase, PolicyError, planned_for
 from .envelope import envelope
 from .thresholds import Interval, ask_intervals
 
@@ -114,29 +113,22 @@ class AlphaVectorPolicy(PolicyBase):
     # -- JSON ----------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         assert self.model is not None
-        d: dict[str, Any] = {
-            "format": POLICY_FORMAT,
-            "kind": self.kind,
-            "complexities": list(self.complexities),
-            "belief_update": self.belief_update,
-            "info": self.info,
-            "model": self.model.to_dict(),
-            "q_vectors": {
+        d = self._file(
+            belief_update=self.belief_update,
+            info=self.info,
+            model=self.model.to_dict(),
+            q_vectors={
                 cn: {an: self.q_vectors[c][a].tolist() for a, an in enumerate(ACTIONS)} for c, cn in enumerate(self.complexities)
             },
-            "value_vectors": self.value_vectors.tolist(),
-        }
+            value_vectors=self.value_vectors.tolist(),
+        )
         if self.model.n_trust == 2:
             d["thresholds"] = self.thresholds()
         return d
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], source: str | None = None) -> AlphaVectorPolicy:
-        model = TrustModel.from_dict(d.get("model"), source)
-        cx = list(d.get("complexities") or [])
-        bu = d.get("belief_update")
-        if bu not in BELIEF_UPDATES:
-            raise ModelError([f"belief_update is {bu!r}, expected one of {list(BELIEF_UPDATES)}"], source)
+        cx, model, bu = planned_for(d, source)
         qv: Any = d.get("q_vectors")
         try:
             q = [[np.array(qv[c][a], dtype=float) for a in ACTIONS] for c in cx]
@@ -146,7 +138,7 @@ class AlphaVectorPolicy(PolicyBase):
                 [f"q_vectors must map each complexity {cx} and action {list(ACTIONS)} to a list of vectors"], source
             ) from None
         try:
-            return cls(q, vv, model, cx, str(bu), d.get("info"))
+            return cls(q, vv, model, cx, bu, d.get("info"))
         except ModelError as exc:
             raise ModelError(exc.problems, source) from None
 
@@ -206,16 +198,13 @@ class FlatAlphaPolicy(PolicyBase):
         return f"{self.kind} ({sum(len(v) for v in self.q_vectors)} Q-vectors over {len(self.states)} states)"
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "format": POLICY_FORMAT,
-            "kind": self.kind,
-            "complexities": list(self.complexities),
-            "states": list(self.states),
-            "actions": list(self.action_names),
-            "info": self.info,
-            "q_vectors": {an: v.tolist() for an, v in zip(self.action_names, self.q_vectors, strict=True)},
-            "value_vectors": self.value_vectors.tolist(),
-        }
+        return self._file(
+            states=list(self.states),
+            actions=list(self.action_names),
+            info=self.info,
+            q_vectors={an: v.tolist() for an, v in zip(self.action_names, self.q_vectors, strict=True)},
+            value_vectors=self.value_vectors.tolist(),
+        )
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], source: str | None = None) -> FlatAlphaPolicy:

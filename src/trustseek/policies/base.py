@@ -10,6 +10,7 @@ JSON (``to_dict``; the ``kind`` field names the loader, see :mod:`.kinds`).
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -17,8 +18,9 @@ import numpy as np
 
 from ..errors import TrustseekError
 from ..model.core import TrustModel
-from ..model.jsonfile import json_safe
+from ..model.jsonfile import ModelError, json_safe
 from ..pomdp.belief import to_vector
+from ..vocab import BELIEF_UPDATES
 from .thresholds import Interval, threshold
 
 POLICY_FORMAT = "trustseek.policy/1"
@@ -139,6 +141,10 @@ class PolicyBase:
     def to_dict(self) -> dict[str, Any]:
         raise NotImplementedError
 
+    def _file(self, **fields: Any) -> dict[str, Any]:
+        """A policy file: its format, kind and complexities, then ``fields`` in their order."""
+        return {"format": POLICY_FORMAT, "kind": self.kind, "complexities": list(self.complexities), **fields}
+
     def save(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(json_safe(self.to_dict()), indent=1, allow_nan=False) + "\n", encoding="utf-8")
 
@@ -153,3 +159,13 @@ class PolicyBase:
             raise PolicyError(
                 [f"ask intervals, thresholds and Q(b_high) need two trust levels; this model has {self.model.n_trust}"]
             )
+
+
+def planned_for(d: Mapping[str, Any], source: str | None) -> tuple[list[str], TrustModel, str]:
+    """What a trust-aware policy file was planned for: its complexities, its trust model and its
+    belief update (one of :data:`BELIEF_UPDATES`)."""
+    model = TrustModel.from_dict(d.get("model"), source)
+    update = d.get("belief_update")
+    if update not in BELIEF_UPDATES:
+        raise ModelError([f"belief_update is {update!r}, expected one of {list(BELIEF_UPDATES)}"], source)
+    return list(d.get("complexities") or []), model, str(update)

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..model.jsonfile import ModelError
 from ..vocab import COMPLEXITY_POLICY_KINDS, PAPER_ASK_PROBABILITIES
-from .base import POLICY_FORMAT, PolicyBase, PolicyError
+from .base import PolicyBase, PolicyError
 from .thresholds import Interval
 
 COMPLEXITY_KINDS = COMPLEXITY_POLICY_KINDS
@@ -72,13 +72,7 @@ class ComplexityPolicy(PolicyBase):
         return f"{self.kind} ({parts})"
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "format": POLICY_FORMAT,
-            "kind": self.kind,
-            "complexities": list(self.complexities),
-            "p_ask": {cn: float(p) for cn, p in zip(self.complexities, self.p_ask, strict=True)},
-            "info": self.info,
-        }
+        return self._file(p_ask={cn: float(p) for cn, p in zip(self.complexities, self.p_ask, strict=True)}, info=self.info)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], source: str | None = None) -> ComplexityPolicy:

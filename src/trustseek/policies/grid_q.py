@@ -14,8 +14,7 @@ import numpy as np
 
 from ..model.core import ACTIONS, ASK, AUTONOMOUS, TrustModel
 from ..model.jsonfile import ModelError
-from ..vocab import BELIEF_UPDATES
-from .base import POLICY_FORMAT, Policy, PolicyBase, PolicyError
+from .base import Policy, PolicyBase, PolicyError, planned_for
 from .thresholds import Interval, ask_intervals
 
 TABLE_POINTS = 4001  # points of a Q table made from another policy's Q-function
@@ -95,28 +94,21 @@ class TrustAwarePolicy(PolicyBase):
 
     def to_dict(self) -> dict[str, Any]:
         assert self.model is not None
-        return {
-            "format": POLICY_FORMAT,
-            "kind": self.kind,
-            "complexities": list(self.complexities),
-            "belief_update": self.belief_update,
-            "thresholds": self.thresholds(),
-            "info": self.info,
-            "model": self.model.to_dict(),
-            "grid": {"points": len(self.grid)},
-            "q": {
+        return self._file(
+            belief_update=self.belief_update,
+            thresholds=self.thresholds(),
+            info=self.info,
+            model=self.model.to_dict(),
+            grid={"points": len(self.grid)},
+            q={
                 cn: {an: [round(float(v), 12) for v in self.q[:, c, a]] for a, an in enumerate(ACTIONS)}
                 for c, cn in enumerate(self.complexities)
             },
-        }
+        )
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], source: str | None = None) -> TrustAwarePolicy:
-        cx = list(d.get("complexities") or [])
-        model = TrustModel.from_dict(d.get("model"), source)
-        bu = d.get("belief_update")
-        if bu not in BELIEF_UPDATES:
-            raise ModelError([f"belief_update is {bu!r}, expected one of {list(BELIEF_UPDATES)}"], source)
+        cx, model, bu = planned_for(d, source)
         q: Any = d.get("q")
         try:
             arr = np.array([[q[c][a] for a in ACTIONS] for c in cx], dtype=float).transpose(2, 0, 1)
@@ -125,4 +117,4 @@ class TrustAwarePolicy(PolicyBase):
                 [f"q must map each complexity {cx} and action {list(ACTIONS)} to a list of numbers"], source
             ) from None
         grid = np.linspace(0.0, 1.0, arr.shape[0])
-        return cls(grid, arr, model, cx, str(bu), d.get("info"))
+        return cls(grid, arr, model, cx, bu, d.get("info"))

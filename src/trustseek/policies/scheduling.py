@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -25,30 +25,12 @@ from ..model.core import ACTIONS, ASK, AUTONOMOUS, TrustModel
 from ..model.jsonfile import ModelError
 from ..pomdp.belief import to_vector
 from ..pomdp.scheduling import Counts, State, parse_state_key, state_key
-from ..vocab import BELIEF_UPDATES
-from .base import POLICY_FORMAT, Policy, PolicyBase, PolicyError
+from .base import PolicyBase, PolicyError, planned_for
 from .runner import PolicyRunner
 from .thresholds import Interval, ask_intervals
 
 SCHEDULE = "schedule"
 TIE = 1e-12  # a later (complexity, action) must beat an earlier one by more than this
-
-
-class ChoosingPolicy(Policy, Protocol):
-    """A policy that also chooses the next item: the interface of scheduling policies."""
-
-    counts: Counts
-    window: int | None
-
-    def choose(self, belief: Any, remaining: Sequence[int], visible: Sequence[int] | None = None) -> tuple[int, int]:
-        """(complexity index, action) of the next trial."""
-        ...
-
-    def choices(
-        self, beliefs: np.ndarray, remaining: np.ndarray, visible: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Vectorized: beliefs (n, K) or P(trust = high) (n,), remaining and visible (n, N)."""
-        ...
 
 
 @dataclass(frozen=True)
@@ -246,26 +228,19 @@ class SchedulePolicy(PolicyBase):
                     t[an] = np.round(v, 10).tolist() if grid is not None else v.tolist()
                 entry[self.complexities[k]] = t
             states[state_key(s)] = entry
-        return {
-            "format": POLICY_FORMAT,
-            "kind": self.kind,
-            "complexities": list(self.complexities),
-            "belief_update": self.belief_update,
-            "counts": list(self.counts),
-            "window": self.window,
-            "grid": grid,
-            "info": self.info,
-            "model": self.model.to_dict(),
-            "states": states,
-        }
+        return self._file(
+            belief_update=self.belief_update,
+            counts=list(self.counts),
+            window=self.window,
+            grid=grid,
+            info=self.info,
+            model=self.model.to_dict(),
+            states=states,
+        )
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], source: str | None = None) -> SchedulePolicy:
-        cx = list(d.get("complexities") or [])
-        model = TrustModel.from_dict(d.get("model"), source)
-        bu = d.get("belief_update")
-        if bu not in BELIEF_UPDATES:
-            raise ModelError([f"belief_update is {bu!r}, expected one of {list(BELIEF_UPDATES)}"], source)
+        cx, model, bu = planned_for(d, source)
         counts, window = d.get("counts"), d.get("window")
         if not isinstance(counts, list) or len(counts) != len(cx) or not all(isinstance(k, int) and k >= 0 for k in counts):
             raise ModelError([f"counts must be one non-negative integer per complexity, got {counts!r}"], source)
@@ -290,7 +265,7 @@ class SchedulePolicy(PolicyBase):
             raise ModelError(
                 ["states must map 'remaining/visible' to, per visible complexity, breakpoints x and Q per action"], source
             ) from None
-        return cls(q, model, cx, str(bu), counts, window, d.get("info"))
+        return cls(q, model, cx, bu, counts, window, d.get("info"))
 
 
 def _high(belief: Any, model: TrustModel | None) -> float:

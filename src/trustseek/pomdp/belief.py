@@ -193,10 +193,6 @@ class Branches:
         return cls("bayes", kernels.sum(axis=-1), kernels)
 
     @property
-    def n_branches(self) -> int:
-        return self.prob.shape[2]
-
-    @property
     def n_hidden(self) -> int:
         return self.prob.shape[3]
 

@@ -164,13 +164,8 @@ def trials_frame(db: DBSession, study: Study, practice: bool = False, pilot: boo
         for t, p in rows
     ]
     frame = pd.DataFrame(data, columns=CANONICAL + EXTRA)
-    frame["trial"] = frame["trial"].astype("int64")
-    frame["block"] = frame["block"].astype("int64")
-    for col in ("participant", "complexity", "robot_action", "human_action", "experience"):
-        frame[col] = frame[col].astype("object")
-    frame["self_report"] = frame["self_report"].astype("float64")
-    frame["effort_ms"] = frame["effort_ms"].astype("float64")
-    return frame
+    text = dict.fromkeys(("participant", "complexity", "robot_action", "human_action", "experience"), "object")
+    return frame.astype({"trial": "int64", "block": "int64", **text, "self_report": "float64", "effort_ms": "float64"})
 
 
 def answers_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame:
@@ -210,11 +205,7 @@ def answers_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFr
     ]
     frame = pd.DataFrame(rows, columns=REPORT_COLUMNS)
     frame = frame.sort_values(["participant", "session_trial", "questionnaire"], kind="stable").reset_index(drop=True)
-    frame["trial"] = frame["trial"].astype("int64")
-    frame["value"] = frame["value"].astype("float64")
-    frame["check"] = frame["check"].astype("Int64")
-    frame["check_passed"] = frame["check_passed"].astype("boolean")
-    return frame
+    return frame.astype({"trial": "int64", "value": "float64", "check": "Int64", "check_passed": "boolean"})
 
 
 def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame:

@@ -34,7 +34,6 @@ from .studies import participant_plan
 STATUSES = ("draft", "open", "paused", "closed")
 #: the states each state may move to
 MOVES = {"draft": ("open", "closed"), "open": ("paused", "closed"), "paused": ("open", "closed"), "closed": ()}
-ROLES = ("participant", "pilot", "preview")
 #: the panels' names of a participant's id in a study link's query, first found wins when the
 #: study names none (Prolific, MTurk, SONA)
 PANEL_ID_PARAMS = ("PROLIFIC_PID", "workerId", "id")

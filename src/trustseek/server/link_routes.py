@@ -17,6 +17,7 @@ from sqlalchemy import select
 from .auth import require_experimenter
 from .lifecycle import Arrival, arrive, panel_ids, refusal, revoke, set_status
 from .orm import Session, Study
+from .routes import study_or_404
 from .schemas import ErrorOut, StatusIn
 from .sessions import study_config
 
@@ -107,13 +108,6 @@ _ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorOut} for code i
 lifecycle = APIRouter(prefix="/api", tags=["experimenter"], dependencies=[Depends(require_experimenter)], responses=_ERRORS)
 
 
-def _study(db, study_id: str) -> Study:
-    st = db.get(Study, study_id)
-    if st is None:
-        raise HTTPException(404, f"no study {study_id!r}")
-    return st
-
-
 def study_link(request: Request, st: Study) -> str:
     return f"{request.app.state.public_url or str(request.base_url).rstrip('/')}/join/{st.link_token}"
 
@@ -121,7 +115,7 @@ def study_link(request: Request, st: Study) -> str:
 @lifecycle.post("/studies/{study_id}/status", summary="Open, pause or close a study")
 def post_status(study_id: str, body: StatusIn, request: Request):
     with request.app.state.db() as db:
-        st = _study(db, study_id)
+        st = study_or_404(db, study_id)
         set_status(db, st, body.status)
         log.info("study %s is now %s", st.id, st.status)
         return {"id": st.id, "status": st.status, "link": study_link(request, st)}
@@ -133,7 +127,7 @@ def post_preview(study_id: str, request: Request):
     only), run in the previews' own database (``preview.Previews``): nothing of it is stored with
     the study, so it is never exported, counted or balanced."""
     with request.app.state.db() as db:
-        st = _study(db, study_id)
+        st = study_or_404(db, study_id)
         s = request.app.state.previews.start(st)
     base = request.app.state.public_url or str(request.base_url).rstrip("/")
     return {"session_id": s.id, "link": f"{base}/s/{s.token}", "role": s.role}

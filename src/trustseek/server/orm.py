@@ -95,12 +95,19 @@ class Session(Base):
     quiz: Mapped[dict | None] = mapped_column(JSON, nullable=True)
 
 
-class Trial(Base):
+class _SessionRow:
+    """The columns of a row that belongs to a session: an id, the session (indexed) and the time
+    it was made (listed last)."""
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True, sort_order=-2)
+    session_id: Mapped[str] = mapped_column(ForeignKey("sessions.id"), index=True, sort_order=-1)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow, sort_order=1)
+
+
+class Trial(_SessionRow, Base):
     __tablename__ = "trials"
     __table_args__ = (UniqueConstraint("session_id", "trial", name="uq_trial_session_number"),)
 
-    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
-    session_id: Mapped[str] = mapped_column(ForeignKey("sessions.id"), index=True)
     trial: Mapped[int] = mapped_column(Integer)
     block: Mapped[int] = mapped_column(Integer)
     policy: Mapped[str] = mapped_column(String(32))
@@ -115,49 +122,39 @@ class Trial(Base):
     effort_ms: Mapped[float | None] = mapped_column(Float, nullable=True)
     practice: Mapped[bool] = mapped_column(Boolean, default=False)  # practice trials: logged, not analysed
     submission_id: Mapped[str] = mapped_column(String(64))
-    created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
-class Report(Base):
+class Report(_SessionRow, Base):
     __tablename__ = "reports"
     __table_args__ = (UniqueConstraint("session_id", "after_trial", name="uq_report_session_trial"),)
 
-    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
-    session_id: Mapped[str] = mapped_column(ForeignKey("sessions.id"), index=True)
     after_trial: Mapped[int] = mapped_column(Integer)
     block: Mapped[int] = mapped_column(Integer)
     scope: Mapped[str] = mapped_column(String(8))  # "trial" or "block"
     value: Mapped[float] = mapped_column(Float)
-    created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
-class Answer(Base):
+class Answer(_SessionRow, Base):
     """One item of a questionnaire (``docs/experiments.md``), answered after trial ``after_trial``."""
 
     __tablename__ = "answers"
     __table_args__ = (UniqueConstraint("session_id", "questionnaire", "after_trial", "item", name="uq_answer"),)
 
-    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
-    session_id: Mapped[str] = mapped_column(ForeignKey("sessions.id"), index=True)
     questionnaire: Mapped[str] = mapped_column(String(100))
     when: Mapped[str] = mapped_column(String(8))  # "trial", "block" or "end"
     after_trial: Mapped[int] = mapped_column(Integer)
     block: Mapped[int] = mapped_column(Integer)
     item: Mapped[str] = mapped_column(String(100))
     value: Mapped[float] = mapped_column(Float)
-    created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
-class Event(Base):
+class Event(_SessionRow, Base):
     __tablename__ = "events"
 
-    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
-    session_id: Mapped[str] = mapped_column(ForeignKey("sessions.id"), index=True)
     trial: Mapped[int | None] = mapped_column(Integer, nullable=True)
     client_time: Mapped[float | None] = mapped_column(Float, nullable=True)  # ms since the Unix epoch
     type: Mapped[str] = mapped_column(String(40))
     data: Mapped[str] = mapped_column(Text, default="{}")
-    created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
 class EventBatch(Base):

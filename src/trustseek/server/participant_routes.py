@@ -4,6 +4,8 @@ self-reports, questionnaires, events)."""
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
+from typing import Any
 
 from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials
@@ -198,34 +200,38 @@ def post_quiz(session_id: str, body: QuizIn, request: Request, s: Caller = Depen
 
 @participant.post("/{session_id}/reports", summary="Submit a trust self-report (0-100)")
 def post_report(session_id: str, body: ReportIn, request: Request, s: Caller = Depends(require_session)):
-    _study_session(s)
-    with _db(request, s) as db:
-        row = _row(db, s)
-        _not_revoked(row)
-        cfg = study_config(db, row.study_id) if row.study_id else {}
-        over = ended(db, row, cfg)
+    def add(db, row, cfg) -> tuple[dict[str, Any], bool]:
         rep, dup = add_report(db, row, cfg, body.after_trial, body.value)
-        if over and not dup:  # after the end only a repeat of a stored answer (a retry) is taken
-            raise Conflict("this session has ended")
-        out = {"after_trial": rep.after_trial, "value": rep.value, "scope": rep.scope, "duplicate": dup}
-    return {"report": out, "state": session_state(request, s)}
+        return {"after_trial": rep.after_trial, "value": rep.value, "scope": rep.scope, "duplicate": dup}, dup
+
+    return {"report": _submitted(request, s, add), "state": session_state(request, s)}
 
 
 @participant.post(
     "/{session_id}/questionnaires", summary="Answer a questionnaire (every item, on its scale)", responses=errors(400, 404)
 )
 def post_answers(session_id: str, body: AnswersIn, request: Request, s: Caller = Depends(require_session)):
+    def add(db, row, cfg) -> tuple[dict[str, Any], bool]:
+        rows, dup = add_answers(db, row, cfg, body.questionnaire, body.after_trial, body.answers)
+        return {"questionnaire": body.questionnaire, "after_trial": body.after_trial, "items": len(rows), "duplicate": dup}, dup
+
+    return {"answers": _submitted(request, s, add), "state": session_state(request, s)}
+
+
+def _submitted(request: Request, s: Caller, add: Callable[..., tuple[dict[str, Any], bool]]) -> dict[str, Any]:
+    """A study session's self-report or questionnaire, stored by ``add(db, row, config)`` ->
+    (its answer, whether it repeats a stored one); after the session's end only a repeat (a
+    retry) is taken."""
     _study_session(s)
     with _db(request, s) as db:
         row = _row(db, s)
         _not_revoked(row)
         cfg = study_config(db, str(row.study_id))
         over = ended(db, row, cfg)
-        rows, dup = add_answers(db, row, cfg, body.questionnaire, body.after_trial, body.answers)
-        if over and not dup:  # after the end only a repeat of stored answers (a retry) is taken
+        out, dup = add(db, row, cfg)
+        if over and not dup:
             raise Conflict("this session has ended")
-        out = {"questionnaire": body.questionnaire, "after_trial": body.after_trial, "items": len(rows), "duplicate": dup}
-    return {"answers": out, "state": session_state(request, s)}
+        return out
 
 
 @participant.post("/{session_id}/events", summary="Log UI events")

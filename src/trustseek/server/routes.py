@@ -119,7 +119,8 @@ def list_studies(request: Request):
         return [study_summary(db, st, request) for st in db.scalars(select(Study).order_by(Study.created_at))]
 
 
-def _study(db, study_id: str) -> Study:
+def study_or_404(db, study_id: str) -> Study:
+    """The study ``study_id``, or a 404 answer."""
     st = db.get(Study, study_id)
     if st is None:
         raise HTTPException(404, f"no study {study_id!r}")
@@ -129,7 +130,7 @@ def _study(db, study_id: str) -> Study:
 @experimenter.get("/studies/{study_id}", summary="A study's configuration", responses=errors(404))
 def get_study(study_id: str, request: Request):
     with _db(request) as db:
-        st = _study(db, study_id)
+        st = study_or_404(db, study_id)
         return {**study_summary(db, st, request), "config": st.config}
 
 
@@ -147,7 +148,7 @@ def create_sessions(study_id: str, body: SessionsIn, request: Request):
             raise HTTPException(400, "participant ids must be unique, non-empty strings of at most 200 characters")
     out = []
     with _db(request) as db:
-        st = _study(db, study_id)
+        st = study_or_404(db, study_id)
         if st.status == "closed":
             raise HTTPException(409, f"study {study_id} is closed: it takes no new participants")
         role = "pilot" if body.pilot or st.status == "draft" else "participant"
@@ -166,10 +167,6 @@ def create_sessions(study_id: str, body: SessionsIn, request: Request):
                         "trials": total_trials(s),
                     }
                 )
-        except IntegrityError:
-            db.rollback()
-            raise HTTPException(409, "a participant id was taken concurrently; retry") from None
-        try:
             db.commit()
         except IntegrityError:
             db.rollback()
@@ -181,7 +178,7 @@ def create_sessions(study_id: str, body: SessionsIn, request: Request):
 @experimenter.get("/studies/{study_id}/dashboard", summary="Live state of every participant", responses=errors(404))
 def dashboard(study_id: str, request: Request):
     with _db(request) as db:
-        st = _study(db, study_id)
+        st = study_or_404(db, study_id)
         sessions = db.scalars(
             select(Session)
             .where(Session.study_id == st.id, Session.role != "preview")
@@ -280,7 +277,7 @@ def export(
     pilot: bool = Query(False, description="Include the pilot sessions (left out of the analysis export by default)."),
 ):
     with _db(request) as db:
-        st = _study(db, study_id)
+        st = study_or_404(db, study_id)
         if table == "trials":
             frame = trials_frame(db, st, practice=practice, pilot=pilot)
         else:
@@ -306,7 +303,7 @@ def export(
 )
 def bundle(study_id: str, request: Request, pilot: bool = Query(False, description="Include the pilot sessions.")):
     with _db(request) as db:
-        st = _study(db, study_id)
+        st = study_or_404(db, study_id)
         content = bundle_zip(bundle_files(db, st, pilot), f"{st.id}-bundle")
     name = f"{st.id}-bundle.zip"
     return Response(content, media_type="application/zip", headers={"Content-Disposition": f'attachment; filename="{name}"'})

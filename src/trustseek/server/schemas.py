@@ -19,6 +19,8 @@ from ..model.presets import MODEL_PRESETS, TASK_PRESETS
 MAX_TRIAL = 10**7
 #: the largest ``data`` of one UI event, as compact JSON
 MAX_EVENT_DATA = 4096
+#: UI events in one post
+MAX_EVENTS_PER_POST = 5000
 
 STRICT = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
 
@@ -74,7 +76,7 @@ class StatusIn(BaseModel):
 class ConsentIn(BaseModel):
     model_config = STRICT
     agree: Literal[True]
-    events: list[EventIn] = Field(default_factory=list, max_length=5000)
+    events: list[EventIn] = Field(default_factory=list, max_length=MAX_EVENTS_PER_POST)
     panel: dict[str, str] = Field(
         default_factory=dict, max_length=10, description="An online panel's ids from the link's query (PROLIFIC_PID, ...)."
     )
@@ -100,7 +102,7 @@ class TrialIn(BaseModel):
     submission_id: str = Field(..., min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:-]+$")
     human_action: Literal["intervene", "rely"]
     effort_ms: float | None = Field(None, ge=0, le=1e8)
-    events: list[EventIn] = Field(default_factory=list, max_length=5000)
+    events: list[EventIn] = Field(default_factory=list, max_length=MAX_EVENTS_PER_POST)
 
 
 class ReportIn(BaseModel):
@@ -124,7 +126,7 @@ class QuizIn(BaseModel):
 
 class EventsIn(BaseModel):
     model_config = STRICT
-    events: list[EventIn] = Field(..., min_length=1, max_length=5000)
+    events: list[EventIn] = Field(..., min_length=1, max_length=MAX_EVENTS_PER_POST)
     batch: str | None = Field(
         None,
         min_length=1,

@@ -45,8 +45,6 @@ from .studies import block_items, policy_object
 
 log = logging.getLogger(__name__)
 
-OUTCOMES = ("success", "collision", "dropped", "teleoperated")
-MAX_EVENTS_PER_POST = 5000
 #: stored UI events per trial (events outside any trial count together) and per session
 MAX_EVENTS_PER_TRIAL = 2000
 MAX_EVENTS_PER_SESSION = 50_000

@@ -37,7 +37,6 @@ from ..policies.base import Policy
 from ..policies.envelope import active_piece, envelope, envelope_values
 from ..pomdp.branch_model import BranchModel
 from ..pomdp.problem import AssistancePOMDP
-from ..vocab import check_belief_update
 from .backup import branch_lines, exact_backup
 from .base import SolverBase, SolverError, one_blas_thread
 from .certificate import CertifiedSolution, policy_from_solution
@@ -69,12 +68,9 @@ class AlphaSolver(SolverBase):
         seed_points: int = 257,
         seed_rounds: int = 1,
     ):
-        self.belief_update = check_belief_update(belief_update)
+        self._targets(belief_update, tol)
         if method not in METHODS:
             raise SolverError([f"unknown method {method!r}; expected one of {list(METHODS)}"])
-        if not tol > 0:
-            raise SolverError([f"the target gap must be positive, got {tol}"])
-        self.tol = float(tol)
         self.method = method
         self.max_iter = int(max_iter)
         self.upper_grid = int(upper_grid)

@@ -8,6 +8,7 @@ and refuses the rest with :class:`UnsupportedProblem` before doing any work.
 from __future__ import annotations
 
 import functools
+import math
 import sys
 import threading
 from collections.abc import Callable, Iterator
@@ -19,6 +20,7 @@ from threadpoolctl import ThreadpoolController
 from ..errors import TrustseekError
 from ..policies.base import Policy
 from ..pomdp.problem import AssistancePOMDP
+from ..vocab import check_belief_update
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -54,6 +56,8 @@ class SolverBase:
     trust_levels: int | None = None  # the number of trust levels handled (None: any)
     belief_updates: tuple[str, ...] = ("bayes", "paper")
     belief_update: str | None = None
+    tol: float
+    max_seconds: float
     #: what to use for a model with another number of trust levels / another belief update /
     #: a problem that is not an assistance POMDP (default: the point solver, which takes any
     #: number of trust levels and flat POMDPs)
@@ -76,6 +80,18 @@ class SolverBase:
             default = f"the {self.name} solver does not handle the {self.belief_update!r} update"
             reasons.append(self.instead.get("belief_update", default))
         return reasons
+
+    def _targets(self, belief_update: str, tol: float, max_seconds: float | None = None) -> None:
+        """Set the belief update (checked), the target gap ``tol`` (a finite number > 0) and, for
+        an anytime solver, its time limit ``max_seconds`` (> 0)."""
+        if not (tol > 0 and math.isfinite(tol)):
+            raise SolverError([f"the target gap must be a finite number > 0, got {tol}"])
+        if max_seconds is not None and not max_seconds > 0:
+            raise SolverError([f"the time limit must be positive, got {max_seconds}"])
+        self.belief_update = check_belief_update(belief_update)
+        self.tol = float(tol)
+        if max_seconds is not None:
+            self.max_seconds = float(max_seconds)
 
     def check(self, problem: Any) -> None:
         """Raise :class:`UnsupportedProblem` with every reason the problem is not handled."""

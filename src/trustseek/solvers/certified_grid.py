@@ -23,8 +23,7 @@ import numpy as np
 
 from ..policies.base import Policy
 from ..pomdp.problem import AssistancePOMDP
-from ..vocab import check_belief_update
-from .base import SolverBase, SolverError, one_blas_thread
+from .base import SolverBase, one_blas_thread
 from .certificate import CertifiedSolution, policy_from_solution
 from .eq3 import paper_grid_values, residual_pieces
 
@@ -44,10 +43,7 @@ class CertifiedGridSolver(SolverBase):
     }
 
     def __init__(self, belief_update: str = "paper", tol: float = 1e-6, grid: int = 1025, max_grid: int = 200_001):
-        if not tol > 0:
-            raise SolverError([f"the target gap must be positive, got {tol}"])
-        self.belief_update = check_belief_update(belief_update)
-        self.tol = float(tol)
+        self._targets(belief_update, tol)
         self.grid = int(grid)  # the starting grid (refined adaptively)
         self.max_grid = int(max_grid)
 

@@ -33,7 +33,6 @@ from ..model.core import TrustModel
 from ..model.task import Task
 from ..policies.grid_q import TrustAwarePolicy
 from ..pomdp.problem import AssistancePOMDP
-from ..vocab import check_belief_update
 from .base import SolverBase, SolverError, one_blas_thread
 from .defaults import DEFAULT_GRID, METHODS
 from .numerics import improve, policy_values
@@ -106,13 +105,11 @@ class GridSolver(SolverBase):
     ):
         if grid < 3:
             raise SolverError([f"grid must have at least 3 points, got {grid}"])
-        check_belief_update(belief_update)
+        self._targets(belief_update, tol)
         if method not in METHODS:
             raise SolverError([f"unknown method {method!r}; expected one of {list(METHODS)}"])
         self.grid = int(grid)
-        self.belief_update = belief_update
         self.method = method
-        self.tol = float(tol)
         self.max_iter = int(max_iter)
         self.dense_max = int(dense_max)
 

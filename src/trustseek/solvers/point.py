@@ -41,7 +41,6 @@ from ..policies.base import Policy
 from ..pomdp.branch_model import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
-from ..vocab import check_belief_update
 from .base import SolverBase, SolverError, bayes_only, one_blas_thread
 from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, policy_values
 
@@ -155,11 +154,7 @@ class PointSolver(SolverBase):
         seed: int = 0,
         belief_update: str = "bayes",
     ):
-        if not tol > 0:
-            raise SolverError([f"the target gap must be positive, got {tol}"])
-        self.belief_update = check_belief_update(belief_update)
-        self.tol = float(tol)
-        self.max_seconds = float(max_seconds)
+        self._targets(belief_update, tol, max_seconds)
         self.resolution = resolution
         self.max_resolution = max_resolution
         self.depth = int(depth)
@@ -207,22 +202,29 @@ class PointSolver(SolverBase):
             prev = key
 
     # -- upper bound: Freudenthal grid, policy iteration ---------------------------------
-    def _upper(self, r: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Vertex beliefs, certified upper values and the code lookup at resolution r."""
-        m = self.model
-        K, N, gamma, pc = m.n_hidden, len(m.context_probs), m.discount, m.context_probs
+    def _vertex_grid(self, r: int) -> tuple[np.ndarray, ...]:
+        """The vertices V of the Freudenthal grid at resolution r sorted by code (vertex i has
+        code lookup[i]), their successors' probabilities p (nV, N, A, Br) and beliefs S
+        (nV, N, A, Br, K), and the vertices col and weights w that interpolate each successor."""
+        K = self.model.n_hidden
         V = freudenthal_vertices(K, r)
-        nV = len(V)
         own = np.round(np.cumsum(V[:, ::-1], axis=1)[:, ::-1] * r).astype(np.int64)
         lookup = np.sort(_vertex_code(own, r))
-        V = V[np.argsort(_vertex_code(own, r), kind="stable")]  # vertex i has code lookup[i]
-        S, p = self._successors(V)  # (nV, N, A, Br, K)
-        Br = S.shape[3]
+        V = V[np.argsort(_vertex_code(own, r), kind="stable")]
+        p, S = self.model.branches.successors(V)
         verts, w = freudenthal_weights(S.reshape(-1, K), r)
         col = _find(lookup, _vertex_code(verts, r)).reshape(S.shape)
         if np.any(col < 0):
             raise RuntimeError("Freudenthal interpolation left the vertex set")
-        wt = w.reshape(S.shape) * p[..., None]
+        return V, lookup, p, S, col, w.reshape(S.shape)
+
+    def _upper(self, r: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Vertex beliefs, certified upper values and the code lookup at resolution r."""
+        m = self.model
+        K, N, gamma, pc = m.n_hidden, len(m.context_probs), m.discount, m.context_probs
+        V, lookup, p, S, col, w = self._vertex_grid(r)
+        nV, Br = len(V), S.shape[3]
+        wt = w * p[..., None]
         rew = np.einsum("cat,nt->nca", m.rewards, V)
         rows = np.broadcast_to(np.arange(nV)[:, None, None], (nV, Br, K))
         ii = np.arange(nV)

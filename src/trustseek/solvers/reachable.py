@@ -43,8 +43,7 @@ from ..policies.base import Policy
 from ..pomdp.branch_model import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
-from ..vocab import check_belief_update
-from .base import SolverBase, SolverError, bayes_only, one_blas_thread
+from .base import SolverBase, bayes_only, one_blas_thread
 from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, policy_values
 from .point import bounds_policy
 from .upper_bounds import BlockGrid, fast_informed_bound, grid_blocks, inverse_points, phi_of, phi_pairs, unique_rows
@@ -92,13 +91,7 @@ class ReachableSolver(SolverBase):
         refine: int = 4,
         seed_depth: int = 3,
     ):
-        if not (tol > 0 and math.isfinite(tol)):
-            raise SolverError([f"the target gap must be a finite number > 0, got {tol}"])
-        if not max_seconds > 0:
-            raise SolverError([f"the time limit must be positive, got {max_seconds}"])
-        self.belief_update = check_belief_update(belief_update)
-        self.tol = float(tol)
-        self.max_seconds = float(max_seconds)
+        self._targets(belief_update, tol, max_seconds)
         self.max_depth = max_depth
         self.grid_vertices = int(grid_vertices)
         self.refine = int(refine)  # points re-evaluated with the block bound beyond them

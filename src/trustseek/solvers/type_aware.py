@@ -69,10 +69,6 @@ from .numerics import evaluate_controller, improve, memoryless_controllers, poli
 from .point import (
     PointSolution,
     PointSolver,
-    _find,
-    _vertex_code,
-    freudenthal_vertices,
-    freudenthal_weights,
 )
 from .registry import make_solver
 from .upper_bounds import closed_blocks, fast_informed_bound
@@ -99,7 +95,6 @@ class TypeBound:
     vt: np.ndarray
     qt: np.ndarray
     controllers: list[np.ndarray]
-    block_gaps: list[float]
 
     @property
     def uses_types(self) -> bool:
@@ -118,12 +113,12 @@ def type_bound(problem: AssistancePOMDP | FlatPOMDP, model: BranchModel, block_t
     beta = fast_informed_bound(model)
     pc = np.ascontiguousarray(model.context_probs, dtype=float)
     blocks = closed_blocks(model)
-    empty = TypeBound(pc, beta, np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros((0, 1, 1, 2)), [], [])
+    empty = TypeBound(pc, beta, np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros((0, 1, 1, 2)), [])
     if not isinstance(problem, AssistancePOMDP) or len(blocks) < 2 or max(len(b) for b in blocks) > 2:
         return empty
     xs = np.linspace(0.0, 1.0, TABLE_INTERVALS + 1)
     N, A = model.n_contexts, model.n_actions
-    lo, hi, vts, qts, ctrl, gaps = [], [], [], [], [], []
+    lo, hi, vts, qts, ctrl = [], [], [], [], []
     g = model.discount
     for idx in blocks:
         if len(idx) == 1:
@@ -134,7 +129,6 @@ def type_bound(problem: AssistancePOMDP | FlatPOMDP, model: BranchModel, block_t
             vts.append(np.full(len(xs), val))
             qts.append(np.broadcast_to((model.rewards[:, :, s] + g * val)[..., None], (N, A, len(xs))).copy())
             ctrl.append(memoryless_controllers(model))
-            gaps.append(0.0)
             continue
         sub = _block_problem(problem, idx)
         sol = AlphaSolver(tol=block_tol, upper_grid=0).solve_bounds(sub)
@@ -151,7 +145,6 @@ def type_bound(problem: AssistancePOMDP | FlatPOMDP, model: BranchModel, block_t
         vts.append(vbar)
         qts.append(q)
         ctrl.append(_block_controller(model, bm, vecs))
-        gaps.append(float(sol.gap))
     return TypeBound(
         pc,
         beta,
@@ -160,7 +153,6 @@ def type_bound(problem: AssistancePOMDP | FlatPOMDP, model: BranchModel, block_t
         np.ascontiguousarray(np.array(vts)),
         np.ascontiguousarray(np.array(qts)),
         ctrl,
-        gaps,
     )
 
 
@@ -272,18 +264,8 @@ class TypeAwareSolver(PointSolver):
         by policy iteration over the actions and the choice of the smaller bound."""
         m = self.model
         K, N, gamma, pc = m.n_hidden, m.n_contexts, m.discount, m.context_probs
-        V = freudenthal_vertices(K, r)
-        nV = len(V)
-        own = np.round(np.cumsum(V[:, ::-1], axis=1)[:, ::-1] * r).astype(np.int64)
-        lookup = np.sort(_vertex_code(own, r))
-        V = V[np.argsort(_vertex_code(own, r), kind="stable")]
-        p, S = m.branches.successors(V)  # (nV, N, A, Br), (nV, N, A, Br, K)
-        Br = S.shape[3]
-        verts, w = freudenthal_weights(S.reshape(-1, K), r)
-        col = _find(lookup, _vertex_code(verts, r)).reshape(S.shape)
-        if np.any(col < 0):
-            raise RuntimeError("Freudenthal interpolation left the vertex set")
-        w = w.reshape(S.shape)
+        V, lookup, p, S, col, w = self._vertex_grid(r)
+        nV, Br = len(V), S.shape[3]
         cap = self.bound(S.reshape(-1, K)).reshape(p.shape)
         rew = np.einsum("cat,nt->nca", m.rewards, V)
         ii = np.arange(nV)

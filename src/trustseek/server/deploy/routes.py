@@ -107,26 +107,29 @@ def _robot(request: Request, session_id: str) -> Caller:
     return s
 
 
+#: what decide and observe share in the API description
+_ROBOT_ROUTE: dict[str, Any] = {"openapi_extra": _BEARER, "responses": errors(400, 404, 409)}
+
+
+async def _answer(request: Request, session_id: str, what: str, args: tuple) -> Response:
+    """The deploy session's answer to ``decide`` or ``observe`` (:func:`http.answer`)."""
+    s = _robot(request, session_id)
+    status, out = await answer(request.app.state, s.id, what, args)
+    return Response(out, status_code=status, media_type="application/json")
+
+
 @deploy.post(
     "/sessions/{session_id}/decide",
     summary="Post a trial's complexity (or, for a schedule policy, the remaining items), get the robot action",
-    openapi_extra=_BEARER,
-    responses=errors(400, 404, 409),
+    **_ROBOT_ROUTE,
 )
 async def decide(session_id: str, body: DecideIn, request: Request):
     # async on purpose: a short transaction run on the event loop, without a hop to a worker thread
-    s = _robot(request, session_id)
-    status, out = await answer(request.app.state, s.id, "decide", (body.trial, body.complexity, body.remaining, body.visible))
-    return Response(out, status_code=status, media_type="application/json")
+    return await _answer(request, session_id, "decide", (body.trial, body.complexity, body.remaining, body.visible))
 
 
 @deploy.post(
-    "/sessions/{session_id}/observe",
-    summary="Post the observed human action and outcome; updates the belief",
-    openapi_extra=_BEARER,
-    responses=errors(400, 404, 409),
+    "/sessions/{session_id}/observe", summary="Post the observed human action and outcome; updates the belief", **_ROBOT_ROUTE
 )
 async def observe(session_id: str, body: ObserveIn, request: Request):
-    s = _robot(request, session_id)
-    status, out = await answer(request.app.state, s.id, "observe", (body.trial, body.human_action, body.outcome))
-    return Response(out, status_code=status, media_type="application/json")
+    return await _answer(request, session_id, "observe", (body.trial, body.human_action, body.outcome))
