@@ -58,15 +58,17 @@ def policy_from_dict(d: Any, source: str | None = None) -> Policy:
     return policy
 
 
-#: the numeric tables of the policy classes (attribute name -> name in the file)
-_TABLES = {"q": "q", "q_vectors": "q_vectors", "value_vectors": "value_vectors"}
+#: the numeric tables of the policy classes (attribute names, as the keys in the file; a schedule
+#: policy's ``q`` is under ``states``)
+_TABLES = ("q", "q_vectors", "value_vectors")
 
 
 def _non_finite(policy: Policy) -> list[tuple[str, int]]:
     """The numeric tables of ``policy`` that hold non-finite numbers (a null in the file reads
     as NaN), with how many."""
     out = []
-    for attr, name in _TABLES.items():
+    for attr in _TABLES:
+        name = "states" if policy.kind == SchedulePolicy.kind and attr == "q" else attr
         value = getattr(policy, attr, None)
         if value is None:
             continue
