@@ -75,7 +75,10 @@ FLAT = "a flat POMDP's policy chooses among the file's own actions, with no trus
 CASES: dict[str, Case] = {
     "trust-aware": Case(
         lambda: make_solver("grid", grid=201).solve(_paper()),
-        lacks={"exact-json": "its Q is written to 12 decimals, so the thresholds of the loaded policy move in the 12th"},
+        lacks={
+            "exact-json": "its Q is written to 12 decimals, so the thresholds of the loaded policy move in the 12th",
+            "checked-grid": "its grid only tells people the number of points: the loader reads the length of q",
+        },
     ),
     "alpha-vector": Case(lambda: make_solver("alpha", gap=1e-2).solve(_paper())),
     "trust-agnostic": Case(lambda: make_solver("trust-agnostic").solve(_paper())),
@@ -284,9 +287,9 @@ def test_reported_ask_regions_agree_with_the_decisions(kind, built) -> None:
 
 # -- corrupted files -----------------------------------------------------------------------
 
-#: keys a file of the kind may leave out (key -> what it means then)
 #: keys that are not tables of numbers
 HEADER = ("format", "kind", "complexities", "belief_update", "info", "thresholds", "counts", "window", "grid")
+#: keys a file may leave out (key -> what it means then); when given, they must still be right
 OPTIONAL = {
     "info": "no notes",
     "thresholds": "written for people: recomputed from the tables",
@@ -295,8 +298,10 @@ OPTIONAL = {
 }
 
 
-def _wrong(value: Any) -> Any:
-    return "seven" if isinstance(value, (int, float, dict, list)) and not isinstance(value, bool) else 7
+def _wrong(value: Any) -> tuple[Any, ...]:
+    """Values of the wrong type where the file has ``value`` (a bool is not a number)."""
+    ints = isinstance(value, list) and value and all(type(v) is int for v in value)
+    return (7 if isinstance(value, str) else "seven", True, *([[True] * len(value)] if ints else []))
 
 
 def _poisoned(d: dict[str, Any]) -> tuple[dict[str, Any], str] | None:
@@ -347,10 +352,12 @@ def _refused(d: Any, tmp_path: Any, name: str, key: str, *what: str) -> None:
 def test_a_corrupted_file_is_refused_naming_the_problem(kind, built, tmp_path) -> None:
     d = _plain(_policy(kind, built))
     for key, value in d.items():
-        if key in OPTIONAL:
+        if key not in OPTIONAL:
+            _refused({k: v for k, v in d.items() if k != key}, tmp_path, f"missing-{key}", key)
+        if _lacks(kind, f"checked-{key}"):
             continue
-        _refused({k: v for k, v in d.items() if k != key}, tmp_path, f"missing-{key}", key)
-        _refused({**d, key: _wrong(value)}, tmp_path, f"wrong-{key}", key)
+        for i, wrong in enumerate(_wrong(value)):
+            _refused({**d, key: wrong}, tmp_path, f"wrong-{key}-{i}", key)
     poisoned = _poisoned(d)
     assert poisoned is not None
     bad, key = poisoned

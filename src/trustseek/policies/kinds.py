@@ -43,6 +43,11 @@ def policy_from_dict(d: Any, source: str | None = None) -> Policy:
     cx = d.get("complexities")
     if not isinstance(cx, list) or not all(isinstance(x, str) for x in cx):
         problems.append(f"complexities must be a list of names, got {cx!r}")
+    info, th = d.get("info"), d.get("thresholds")
+    if info is not None and not isinstance(info, Mapping):
+        problems.append(f"info must be an object of notes, got {type(info).__name__}")
+    if th is not None and not (isinstance(th, Mapping) and all(v is None or _number(v) for v in th.values())):
+        problems.append(f"thresholds must map each complexity to a number or null, got {th!r}")
     if problems:
         raise ModelError(problems, source)
     kind = d.get("kind")
@@ -77,6 +82,10 @@ def _non_finite(policy: Policy) -> list[tuple[str, int]]:
         if n:
             out.append((name, n))
     return out
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def _leaves(value: Any) -> list[Any]:
