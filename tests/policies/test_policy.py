@@ -73,8 +73,6 @@ def test_randomized_frequencies(rng):
     a = pol.actions(np.full((n, 2), 0.5), c, rng)
     assert a[c == 0].mean() == pytest.approx(0.10, abs=0.004)
     assert a[c == 1].mean() == pytest.approx(0.40, abs=0.005)
-    with pytest.raises(ValueError, match="rng"):
-        pol.actions(np.full((2, 2), 0.5), np.array([0, 1]))
 
 
 def test_fixed_policies():
@@ -82,22 +80,6 @@ def test_fixed_policies():
     assert never_ask().actions(None, np.array([0, 1])).tolist() == [0, 0]
     with pytest.raises(ModelError, match=r"p_ask must lie in \[0, 1\]"):
         ComplexityPolicy("randomized", ["low", "high"], [0.1, 1.4])
-
-
-def test_json_round_trip(tmp_path, aware, model, task):
-    for pol in (aware, trust_agnostic(model, task), randomized(), always_ask(), never_ask()):
-        path = tmp_path / f"{pol.kind}.json"
-        pol.save(path)
-        again = load_policy(path)
-        assert again.kind == pol.kind
-        assert again.complexities == pol.complexities
-        if isinstance(pol, TrustAwarePolicy):
-            np.testing.assert_allclose(again.q, pol.q, atol=1e-9)
-            assert again.belief_update == pol.belief_update
-            assert again.model == pol.model
-            assert again.thresholds()["high"] == pytest.approx(pol.thresholds()["high"], abs=1e-9)
-        else:
-            np.testing.assert_array_equal(again.p_ask, pol.p_ask)
 
 
 def test_bad_policy_file(tmp_path):
@@ -141,25 +123,16 @@ def test_non_threshold_policy_writes_valid_json(tmp_path, aware):
 
 
 def test_ask_regions_of_complexity_policies(model, task):
-    """A policy that ignores the belief asks on all of [0, 1] or nowhere; at random it has no
-    ask region.  Its bounds for the simulator follow."""
+    """A policy that ignores the belief asks on all of [0, 1] or nowhere; its bounds for the
+    simulator follow."""
     from trustseek.policies import PolicyError, ask_bounds
 
     agn = trust_agnostic(model, task)  # never in low, always in high
     assert agn.ask_intervals() == {"low": [], "high": [(0.0, 1.0)]}
     assert agn.thresholds() == {"low": None, "high": 1.0}
     assert ask_bounds(agn).tolist() == [-np.inf, np.inf]
-    assert randomized().ask_intervals() is None and randomized().thresholds() is None
-    assert ask_bounds(randomized()) is None
     with pytest.raises(PolicyError, match="no Q-function"):
         agn.q_values(0.5)
-
-
-def test_ask_bounds_of_a_threshold_policy(aware):
-    from trustseek.policies import ask_bounds
-
-    bounds = ask_bounds(aware)
-    assert bounds[0] == -np.inf and bounds[1] == pytest.approx(aware.thresholds()["high"])
 
 
 def test_tabulated_q_keeps_the_decisions(aware):
@@ -170,9 +143,3 @@ def test_tabulated_q_keeps_the_decisions(aware):
     assert table.thresholds()["high"] == pytest.approx(aware.thresholds()["high"], abs=1e-9)
     with pytest.raises(PolicyError, match="no Q-function"):
         TrustAwarePolicy.tabulate(never_ask())
-
-
-def test_every_policy_kind_has_a_loader():
-    from trustseek.policies import COMPLEXITY_KINDS, POLICY_KINDS
-
-    assert {"trust-aware", "alpha-vector", "flat-alpha-vector", "schedule", "type-aware", *COMPLEXITY_KINDS} == set(POLICY_KINDS)

@@ -188,37 +188,3 @@ def test_bad_problems_are_refused_with_reasons():
     with pytest.raises(UnsupportedProblem, match="bayes update only"):
         ScheduleSolver(belief_update="paper", representation="alpha").solve(SchedulingProblem(PAPER, (2, 2)))
     assert SchedulingProblem(PAPER, (2, 2), 9).full_control
-
-
-def test_a_schedule_policy_file_with_a_nan_is_refused(tmp_path):
-    """The policy-file check for finite numbers reaches into a schedule policy's Q pieces."""
-    import json
-
-    from trustseek.model.jsonfile import ModelError
-    from trustseek.model.presets import paper_model, paper_task
-    from trustseek.policies.kinds import load_policy
-    from trustseek.pomdp.problem import AssistancePOMDP
-    from trustseek.pomdp.scheduling import SchedulingProblem
-    from trustseek.solvers.scheduling import ScheduleSolver
-
-    pol = ScheduleSolver("bayes").solve(SchedulingProblem(AssistancePOMDP(paper_model(), paper_task()), (2, 2), None))
-    path = tmp_path / "sched.json"
-    pol.save(path)
-    text = path.read_text()
-    assert load_policy(path).to_dict() == pol.to_dict()
-    d = json.loads(text)
-
-    def poison(node):  # the first list of numbers in the file gets a NaN
-        if isinstance(node, dict):
-            return any(poison(v) for k, v in node.items() if k not in ("complexities", "counts", "info"))
-        if isinstance(node, list):
-            if node and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in node):
-                node[0] = None
-                return True
-            return any(poison(v) for v in node)
-        return False
-
-    assert poison(d)
-    path.write_text(json.dumps(d))
-    with pytest.raises(ModelError, match="null, NaN or infinite"):
-        load_policy(path)

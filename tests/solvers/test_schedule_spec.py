@@ -65,17 +65,3 @@ def test_schedule_spec_bounded_before_solving():
         policy_from_spec({"kind": "schedule", "counts": [17, 17]}, model, task, max_values=1000)
     n_states = SchedulingProblem(AssistancePOMDP(model, task), (5, 4), 2).n_states
     assert n_states * 2 * 2 * 7 <= schedule_size((5, 4), 2, 7)
-
-
-def test_schedule_policy_json_is_checked_for_finite_numbers():
-    """A schedule policy JSON loads through the policy kinds registry, which checks its Q values
-    (before, the finiteness check failed with a TypeError on the schedule policy's table)."""
-    from trustseek.model.jsonfile import ModelError
-    from trustseek.policies.kinds import policy_from_dict
-
-    d = policy_from_spec({"kind": "schedule", "counts": [2, 1], "grid": 5}, paper_model(), paper_task()).to_dict()
-    assert isinstance(policy_from_dict(d), SchedulePolicy)
-    key = next(iter(d["states"]))
-    d["states"][key]["low"]["ask"][2] = None
-    with pytest.raises(ModelError, match="q has 1 null, NaN or infinite"):
-        policy_from_dict(d)

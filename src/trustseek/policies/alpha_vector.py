@@ -21,14 +21,20 @@ from .envelope import envelope
 from .thresholds import Interval, ask_intervals
 
 
-def _vector_sets(sets: Sequence[Any], K: int, what: str, problems: list[str]) -> list[np.ndarray]:
-    """Each set as a non-empty (n, K) array of finite numbers (problems noted, not raised)."""
-    out = [np.atleast_2d(np.asarray(v, dtype=float)) for v in sets]
-    for v in out:
-        if v.ndim != 2 or v.shape[1] != K or len(v) == 0 or not np.all(np.isfinite(v)):
-            problems.append(f"every {what} set must be a non-empty (n, {K}) array of finite numbers")
-            break
-    return out
+def _vectors(value: Any, K: int, what: str, problems: list[str]) -> np.ndarray:
+    """``value`` as a non-empty (n, K) array of finite numbers (a problem naming ``what`` noted, not raised)."""
+    try:
+        v = np.atleast_2d(np.asarray(value, dtype=float))
+    except (TypeError, ValueError):
+        v = np.empty((0, K))
+    if v.ndim != 2 or v.shape[1] != K or len(v) == 0 or not np.all(np.isfinite(v)):
+        problems.append(f"{what} must be a non-empty (n, {K}) array of finite numbers")
+    return v
+
+
+def _vector_sets(sets: Sequence[Any], K: int, problems: list[str]) -> list[np.ndarray]:
+    """Each set of Q-vectors as a non-empty (n, K) array of finite numbers (problems noted, not raised)."""
+    return [_vectors(v, K, "every set of q_vectors", problems) for v in sets]
 
 
 class AlphaVectorPolicy(PolicyBase):
@@ -58,10 +64,8 @@ class AlphaVectorPolicy(PolicyBase):
         problems: list[str] = []
         if len(q_vectors) != len(self.complexities) or any(len(p) != 2 for p in q_vectors):
             problems.append(f"q_vectors needs one entry per complexity {list(self.complexities)} and action {list(ACTIONS)}")
-        self.q_vectors = [_vector_sets(per_a, K, "Q-vector", problems) for per_a in q_vectors]
-        self.value_vectors = np.atleast_2d(np.asarray(value_vectors, dtype=float))
-        if self.value_vectors.shape[1] != K or not np.all(np.isfinite(self.value_vectors)):
-            problems.append(f"value vectors must be a (n, {K}) array of finite numbers")
+        self.q_vectors = [_vector_sets(per_a, K, problems) for per_a in q_vectors]
+        self.value_vectors = _vectors(value_vectors, K, "value_vectors", problems)
         if problems:
             raise ModelError(list(dict.fromkeys(problems)))
 
@@ -132,13 +136,12 @@ class AlphaVectorPolicy(PolicyBase):
         qv: Any = d.get("q_vectors")
         try:
             q = [[np.array(qv[c][a], dtype=float) for a in ACTIONS] for c in cx]
-            vv = np.array(d.get("value_vectors"), dtype=float)
         except (KeyError, TypeError, ValueError):
             raise ModelError(
                 [f"q_vectors must map each complexity {cx} and action {list(ACTIONS)} to a list of vectors"], source
             ) from None
         try:
-            return cls(q, vv, model, cx, bu, d.get("info"))
+            return cls(q, d.get("value_vectors", []), model, cx, bu, d.get("info"))
         except ModelError as exc:
             raise ModelError(exc.problems, source) from None
 
@@ -170,10 +173,8 @@ class FlatAlphaPolicy(PolicyBase):
         problems: list[str] = []
         if len(q_vectors) != len(self.action_names):
             problems.append(f"q_vectors needs one set per action {list(self.action_names)}")
-        self.q_vectors = _vector_sets(q_vectors, len(self.states), "Q-vector", problems)
-        self.value_vectors = np.atleast_2d(np.asarray(value_vectors, dtype=float))
-        if self.value_vectors.shape[1] != len(self.states) or not np.all(np.isfinite(self.value_vectors)):
-            problems.append(f"value vectors must be a (n, {len(self.states)}) array of finite numbers")
+        self.q_vectors = _vector_sets(q_vectors, len(self.states), problems)
+        self.value_vectors = _vectors(value_vectors, len(self.states), "value_vectors", problems)
         if problems:
             raise ModelError(list(dict.fromkeys(problems)))
 
@@ -213,10 +214,9 @@ class FlatAlphaPolicy(PolicyBase):
             raise ModelError(["a flat-alpha-vector policy needs 'states', 'actions' and 'q_vectors'"], source)
         try:
             q = [np.array(qv[a], dtype=float) for a in names]
-            vv = np.array(d.get("value_vectors"), dtype=float)
         except (KeyError, TypeError, ValueError):
             raise ModelError([f"q_vectors must map each action {names} to a list of vectors"], source) from None
         try:
-            return cls(q, vv, states, names, d.get("info"))
+            return cls(q, d.get("value_vectors", []), states, names, d.get("info"))
         except ModelError as exc:
             raise ModelError(exc.problems, source) from None

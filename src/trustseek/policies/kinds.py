@@ -43,6 +43,11 @@ def policy_from_dict(d: Any, source: str | None = None) -> Policy:
     cx = d.get("complexities")
     if not isinstance(cx, list) or not all(isinstance(x, str) for x in cx):
         problems.append(f"complexities must be a list of names, got {cx!r}")
+    info, th = d.get("info"), d.get("thresholds")
+    if info is not None and not isinstance(info, Mapping):
+        problems.append(f"info must be an object of notes, got {type(info).__name__}")
+    if th is not None and not (isinstance(th, Mapping) and all(v is None or _number(v) for v in th.values())):
+        problems.append(f"thresholds must map each complexity to a number or null, got {th!r}")
     if problems:
         raise ModelError(problems, source)
     kind = d.get("kind")
@@ -58,15 +63,17 @@ def policy_from_dict(d: Any, source: str | None = None) -> Policy:
     return policy
 
 
-#: the numeric tables of the policy classes (attribute name -> name in the file)
-_TABLES = {"q": "q", "q_vectors": "q_vectors", "value_vectors": "value_vectors"}
+#: the numeric tables of the policy classes (attribute names, as the keys in the file; a schedule
+#: policy's ``q`` is under ``states``)
+_TABLES = ("q", "q_vectors", "value_vectors")
 
 
 def _non_finite(policy: Policy) -> list[tuple[str, int]]:
     """The numeric tables of ``policy`` that hold non-finite numbers (a null in the file reads
     as NaN), with how many."""
     out = []
-    for attr, name in _TABLES.items():
+    for attr in _TABLES:
+        name = "states" if policy.kind == SchedulePolicy.kind and attr == "q" else attr
         value = getattr(policy, attr, None)
         if value is None:
             continue
@@ -75,6 +82,10 @@ def _non_finite(policy: Policy) -> list[tuple[str, int]]:
         if n:
             out.append((name, n))
     return out
+
+
+def _number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def _leaves(value: Any) -> list[Any]:
