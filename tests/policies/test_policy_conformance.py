@@ -319,20 +319,20 @@ def _wrong(value: Any) -> tuple[Any, ...]:
     return (7 if isinstance(value, str) else "seven", True, *([[True] * len(value)] if ints else []))
 
 
-def _poisoned(d: dict[str, Any]) -> tuple[dict[str, Any], str] | None:
-    """``d`` with the first number of the policy's own tables set to NaN, and the key it is under
-    (a NaN in the trust model or the mixture is theirs to refuse: tests/model)."""
+def _poisoned(d: dict[str, Any], bad: Any = math.nan) -> tuple[dict[str, Any], str] | None:
+    """``d`` with the first number of the policy's own tables set to ``bad``, and the key it is
+    under (a bad number in the trust model or the mixture is theirs to refuse: tests/model)."""
     for key, value in d.items():
         if key in (*HEADER, "model", "mixture"):
             continue
         out = json.loads(json.dumps(value))
-        if _poison(out):
+        if _poison(out, bad):
             return {**d, key: out}, key
     return None
 
 
-def _poison(node: Any) -> bool:
-    """Set the first number in ``node`` (outside names and formats) to NaN; whether there was one."""
+def _poison(node: Any, bad: Any) -> bool:
+    """Set the first number in ``node`` (outside names and formats) to ``bad``; whether there was one."""
     if isinstance(node, dict):
         slots = [(node, k) for k in node if k not in ("trust_levels", "complexities", "names", "format")]
     elif isinstance(node, list):
@@ -342,9 +342,9 @@ def _poison(node: Any) -> bool:
     for parent, k in slots:
         v = parent[k]
         if isinstance(v, (int, float)) and not isinstance(v, bool):
-            parent[k] = math.nan
+            parent[k] = bad
             return True
-        if _poison(v):
+        if _poison(v, bad):
             return True
     return False
 
@@ -377,3 +377,8 @@ def test_a_corrupted_file_is_refused_naming_the_problem(kind, built, tmp_path) -
     assert poisoned is not None
     bad, key = poisoned
     _refused(bad, tmp_path, "nan", key, "NaN", "nan", "finite")
+    # a true where a number belongs (numpy would read it as 1.0)
+    poisoned = _poisoned(d, True)
+    assert poisoned is not None
+    bad, key = poisoned
+    _refused(bad, tmp_path, "true", key, "true or false")

@@ -48,6 +48,11 @@ def policy_from_dict(d: Any, source: str | None = None) -> Policy:
         problems.append(f"info must be an object of notes, got {type(info).__name__}")
     if th is not None and not (isinstance(th, Mapping) and all(v is None or _number(v) for v in th.values())):
         problems.append(f"thresholds must map each complexity to a number or null, got {th!r}")
+    problems += [
+        f"{key} holds true or false where a policy's table holds numbers"
+        for key, value in d.items()
+        if key not in _NOT_TABLES and _holds_bool(value)
+    ]
     if problems:
         raise ModelError(problems, source)
     kind = d.get("kind")
@@ -82,6 +87,28 @@ def _non_finite(policy: Policy) -> list[tuple[str, int]]:
         if n:
             out.append((name, n))
     return out
+
+
+#: the keys of a policy file that are not its own tables of numbers (the model and the mixture
+#: are checked by their own readers)
+_NOT_TABLES = (
+    "format",
+    "kind",
+    "complexities",
+    "belief_update",
+    "info",
+    "thresholds",
+    "counts",
+    "window",
+    "grid",
+    "model",
+    "mixture",
+)
+
+
+def _holds_bool(value: Any) -> bool:
+    """Whether a JSON ``true``/``false`` stands anywhere in ``value`` (numpy would read it as 1 or 0)."""
+    return any(isinstance(leaf, bool) for leaf in _leaves(value))
 
 
 def _number(value: Any) -> bool:
