@@ -31,6 +31,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from ..compiled import PARALLEL_LOCK, set_threads
 from . import compiled_steps as steps
 from . import kernels
 from .em import CAPPED, STATIONARY, RunResult
@@ -330,18 +331,7 @@ def run_one(start, model, data, C, PE, settings, qn):
     tol, max_iter, em_tol, finish_tol, use_qn, accelerate = settings
     n = qn[1]
     L = len(start)
-    bufs = (
-        np.empty((1, K)),
-        np.empty((1, PE, K)),
-        np.empty((1, Ut + 1, K, K)),
-        np.empty(C),
-        np.empty((C, K)),
-        np.empty((C, PE, K)),
-        np.empty((C, Ut + 1, K, K)),
-    )
-    for k in range(K):
-        for j in range(K):
-            bufs[2][0, Ut, k, j] = 1.0 if k == j else 0.0
+    bufs = steps.estep_buffers(K, PE, Ut + 1, C)
     flat = start.copy()
     counts = np.empty(L)
     stat = np.empty(2)
@@ -499,6 +489,10 @@ def run_starts(
             int(sub_its),
         )
 
+    if kern.C >= steps.PARALLEL_ITEMS:  # each E-step on the threads, one start after the other
+        with PARALLEL_LOCK:
+            set_threads(threads)
+            return [one(p) for p in starts]
     if threads > 1 and len(starts) > 1:
         with ThreadPoolExecutor(min(threads, len(starts)), thread_name_prefix="trustseek-fit") as pool:
             return list(pool.map(one, starts))
