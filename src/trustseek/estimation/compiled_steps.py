@@ -42,8 +42,8 @@ def estep_buffers(K, PE, U1, C):
 def _items_parallel(C, tables, data, active, sums):
     """The items on numba's threads, each into its own sums (the same numbers on any number of threads)."""
     for c in prange(C):
-        i = np.int64(c)  # prange counts in uint64: estep_items' own variant, not a second one
-        kernels.estep_items(i, i + 1, C, CHUNK, tables, data, active, sums)
+        i = np.int64(c)  # prange counts in uint64, and CHUNK would be a literal: Kernel.run's variant, not a second
+        kernels.estep_items(i, i + 1, C, np.int64(CHUNK), tables, data, active, sums)
 
 
 @njit(cache=True, nogil=True)
@@ -69,7 +69,7 @@ def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
     if C >= PARALLEL_ITEMS:
         _items_parallel(C, tables, data, active, sums)
     else:
-        kernels.estep_items(np.int64(0), C, C, CHUNK, tables, data, active, sums)
+        kernels.estep_items(np.int64(0), C, C, np.int64(CHUNK), tables, data, active, sums)
     ll, tot_i, tot_e, tot_t = totals
     kernels._reduce(active, sums[0], sums[1], sums[2], sums[3], ll, tot_i, tot_e, tot_t)
     ci[:] = tot_i[0]
