@@ -82,30 +82,37 @@ def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
 
 
 @njit(cache=True, nogil=True)
-def _table_mstep(counts, prior, prev, tab, out):
-    """:meth:`.structure.Table.mstep` of one table into ``out``."""
+def _rows(num, prev, tab, out):
+    """The free cells ``num`` (G, K, M) of each group's rows scaled to the row's free mass (fixed
+    cells: their values; a row whose free cells sum to 0: ``prev``'s), into ``out`` by group."""
     group, rep, gfixed, gvalues, mass = tab
-    U, K, M = counts.shape
-    G = rep.shape[0]
-    cg = np.zeros((G, K, M))
-    for u in range(U):
-        cg[group[u]] += counts[u]
-    rows = np.empty((G, K, M))
+    G, K, M = num.shape
     for g in range(G):
         for k in range(K):
             tot = 0.0
             for m in range(M):
                 if not gfixed[g, k, m]:
-                    tot += cg[g, k, m] + prior
+                    tot += num[g, k, m]
             for m in range(M):
                 if gfixed[g, k, m]:
-                    rows[g, k, m] = gvalues[g, k, m]
+                    num[g, k, m] = gvalues[g, k, m]
                 elif tot > 0:
-                    rows[g, k, m] = (cg[g, k, m] + prior) / tot * mass[g, k]
+                    num[g, k, m] = num[g, k, m] / tot * mass[g, k]
                 else:
-                    rows[g, k, m] = prev[rep[g], k, m]
+                    num[g, k, m] = prev[rep[g], k, m]
+    for u in range(out.shape[0]):
+        out[u] = num[group[u]]
+
+
+@njit(cache=True, nogil=True)
+def _table_mstep(counts, prior, prev, tab, out):
+    """:meth:`.structure.Table.mstep` of one table into ``out``."""
+    group = tab[0]
+    U, K, M = counts.shape
+    cg = np.zeros((tab[1].shape[0], K, M))
     for u in range(U):
-        out[u] = rows[group[u]]
+        cg[group[u]] += counts[u]
+    _rows(cg + prior, prev, tab, out)
 
 
 @njit(cache=True, nogil=True)
@@ -126,25 +133,12 @@ def _mstep(counts, prior, params, emt, trt, out):
 
 @njit(cache=True, nogil=True)
 def _table_project(p, tab, out):
-    """:meth:`.structure.Table.project` of one table into ``out``."""
-    group, rep, gfixed, gvalues, mass = tab
-    U, K, M = p.shape
-    G = rep.shape[0]
-    rows = np.empty((G, K, M))
-    for g in range(G):
-        for k in range(K):
-            s = 0.0
-            for m in range(M):
-                if not gfixed[g, k, m]:
-                    s += max(p[rep[g], k, m], PROJECT_FLOOR)
-            d = s if s > 0 else 1.0
-            for m in range(M):
-                if gfixed[g, k, m]:
-                    rows[g, k, m] = gvalues[g, k, m]
-                else:
-                    rows[g, k, m] = max(p[rep[g], k, m], PROJECT_FLOOR) / d * mass[g, k]
-    for u in range(U):
-        out[u] = rows[group[u]]
+    """:meth:`.structure.Table.project` of one table into ``out`` (a free cell counts at least PROJECT_FLOOR)."""
+    rep = tab[1]
+    num = np.empty((rep.shape[0], p.shape[1], p.shape[2]))
+    for g in range(rep.shape[0]):
+        num[g] = np.maximum(p[rep[g]], PROJECT_FLOOR)
+    _rows(num, p, tab, out)
 
 
 @njit(cache=True, nogil=True)
