@@ -33,7 +33,7 @@ def problem(n: int, seed: int, **spec_options):
 def pieces(s: Structure, w: Workspace):
     K, M, Ue, Ut = s.dims
     kern = w._kernel
-    bufs = steps.estep_buffers(K, w.PE, Ut + 1, kern.C)
+    bufs = steps.estep_buffers(K, w.PE, Ut + 1, kern.C, True)
     return (K, Ue, M, Ut), (kern.eidx, kern.tidx, kern.code, kern.lengths), bufs, cr._table(s.em), cr._table(s.tr)
 
 
@@ -111,8 +111,9 @@ def test_a_start_giving_the_data_probability_zero_is_refused():
 
 
 def test_the_estep_on_numbas_threads_is_the_kernels_to_the_last_bit():
-    """From steps.PARALLEL_ITEMS items the compiled run's E-step runs on numba's threads: the
-    numbers of the kernel's E-step, on one thread or two."""
+    """With fewer starts than threads, from steps.PARALLEL_ITEMS items, the compiled run's E-steps
+    run on numba's threads: the numbers of the kernel's E-step, and the run of one thread, on
+    one thread or two."""
     from trustseek.compiled import set_threads
 
     _spec, _seqs, s, w = problem(steps.PARALLEL_ITEMS * cr.CHUNK + 5, 4)
@@ -126,3 +127,6 @@ def test_the_estep_on_numbas_threads_is_the_kernels_to_the_last_bit():
         ll, _f = steps.evaluate(flat, (K, Ue, M, Ut, 0.0, emt, trt), (data, bufs), counts)
         assert ll == st.loglik
         assert np.array_equal(counts, np.concatenate([st.initial, st.emission.ravel(), st.transition.ravel()]))
+    one, two = (cr.run_starts(s, w, [p], 1e-8, 1000, 1e-5, 1e-12, threads=t)[0] for t in (1, 2))
+    assert (one.loglik, one.iterations, one.history) == (two.loglik, two.iterations, two.history)
+    assert np.array_equal(one.params.vector(), two.params.vector())

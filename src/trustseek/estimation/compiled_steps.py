@@ -26,16 +26,16 @@ PARALLEL_ITEMS = 8  # items (of CHUNK sequences) from which the E-step runs on n
 
 
 @njit(cache=True, nogil=True)
-def estep_buffers(K, PE, U1, C):
+def estep_buffers(K, PE, U1, C, threaded):
     """The E-step's buffers for data of ``C`` items: the tables of one parameter set (initial, emission
     rows, transitions with the identity in the last), the active flag, the items' sums and their totals
-    (:meth:`.kernels.Kernel.run`'s layout, R = 1)."""
+    (:meth:`.kernels.Kernel.run`'s layout, R = 1), and whether the items go on numba's threads."""
     trans = np.zeros((1, U1, K, K))
     for k in range(K):
         trans[0, U1 - 1, k, k] = 1.0
     sums = (np.empty((1, C)), np.empty((1, C, K)), np.empty((1, C, PE, K)), np.empty((1, C, U1, K, K)))
     totals = (np.empty(1), np.empty((1, K)), np.empty((1, PE, K)), np.empty((1, U1, K, K)))
-    return (np.empty((1, K)), np.empty((1, PE, K)), trans), np.ones(1, dtype=np.bool_), sums, totals
+    return (np.empty((1, K)), np.empty((1, PE, K)), trans), np.ones(1, dtype=np.bool_), sums, totals, threaded
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -50,9 +50,9 @@ def _items_parallel(C, tables, data, active, sums):
 def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
     """E-step of one parameter set: counts into ``ci`` (K,), ``cem`` (Ue, K, M), ``ctr`` (Ut, K, K);
     the log-likelihood (-inf: probability zero, counts zero).  The items and their sums of
-    :meth:`.kernels.Kernel.run` (``bufs``: :func:`estep_buffers`), on numba's threads from
-    :data:`PARALLEL_ITEMS` items."""
-    tables, active, sums, totals = bufs
+    :meth:`.kernels.Kernel.run` (``bufs``: :func:`estep_buffers`), on numba's threads when the
+    buffers say so and there are :data:`PARALLEL_ITEMS` items."""
+    tables, active, sums, totals, threaded = bufs
     ini, emit, trans = tables
     Ue, K, M = em.shape
     Ut = tr.shape[0]
@@ -66,7 +66,7 @@ def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
     for u in range(Ut):
         trans[0, u] = tr[u]
     C = sums[0].shape[1]
-    if C >= PARALLEL_ITEMS:
+    if threaded and C >= PARALLEL_ITEMS:
         _items_parallel(C, tables, data, active, sums)
     else:
         kernels.estep_items(np.int64(0), C, C, np.int64(CHUNK), tables, data, active, sums)
