@@ -25,7 +25,7 @@ CHUNK = kernels.CHUNK
 PARALLEL_ITEMS = 8  # items (of CHUNK sequences) from which the E-step runs on numba's threads
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")  # no kernel of its own in the cache
 def estep_buffers(K, PE, U1, C, threaded):
     """The E-step's buffers for data of ``C`` items: the tables of one parameter set (initial, emission
     rows, transitions with the identity in the last), the active flag, the items' sums and their totals
@@ -81,7 +81,7 @@ def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
     return ll[0]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")  # no kernel of its own in the cache
 def _rows(num, prev, tab, out):
     """The free cells ``num`` (G, K, M) of each group's rows scaled to the row's free mass (fixed
     cells: their values; a row whose free cells sum to 0: ``prev``'s), into ``out`` by group."""
