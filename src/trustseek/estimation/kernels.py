@@ -158,21 +158,29 @@ def _reduce(active, ll, pi, pe, pt, loglik, c_init, c_emit, c_trans):
             c_trans[r] += pt[r, c]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _slot(item, C, chunk, N, sums):
+    """Item ``item`` (= r * C + c): its parameter set r, c, its sequences lo:hi and its own sums
+    (initial, emission, transition), zeroed."""
+    _ll, pi, pe, pt = sums
+    r = item // C
+    c = item % C
+    lo = c * chunk
+    pi[r, c] = 0.0
+    pe[r, c] = 0.0
+    pt[r, c] = 0.0
+    return r, c, lo, min(N, lo + chunk), (pi[r, c], pe[r, c], pt[r, c])
+
+
 @njit(cache=True, nogil=True)
 def estep_items(first, last, C, chunk, tables, data, active, sums):
     """Items ``first:last`` (item = r * C + c: parameter set r, sequences c*chunk onwards) into their
     own ``sums`` (log-likelihood (R, C), initial, emission and transition counts per item)."""
-    ll, pi, pe, pt = sums
     N = data[0].shape[0]
     for item in range(first, last):
-        r = item // C
-        c = item % C
-        if active[r]:
-            lo = c * chunk
-            pi[r, c] = 0.0
-            pe[r, c] = 0.0
-            pt[r, c] = 0.0
-            ll[r, c] = _item(r, lo, min(N, lo + chunk), tables, data, (pi[r, c], pe[r, c], pt[r, c]))
+        if active[item // C]:
+            r, c, lo, hi, counts = _slot(item, C, chunk, N, sums)
+            sums[0][r, c] = _item(r, lo, hi, tables, data, counts)
 
 
 @njit(cache=True, nogil=True)
@@ -235,17 +243,11 @@ def _mixture_item(r, lo, hi, M, tables, data, counts, seq_ll):
 def mixture_items(first, last, C, chunk, M, tables, data, active, sums, seq_ll):
     """Items ``first:last`` of a mixture E-step (item = r * C + c) into their own ``sums``: ``ll`` (R, C),
     ``pi`` (R, C, M, K), ``pe`` (R, C, M, PE, K), ``pt`` (R, C, M, P, K, K); ``seq_ll`` (R, M, N)."""
-    ll, pi, pe, pt = sums
     N = data[0].shape[0]
     for item in range(first, last):
-        r = item // C
-        c = item % C
-        if active[r]:
-            lo = c * chunk
-            pi[r, c] = 0.0
-            pe[r, c] = 0.0
-            pt[r, c] = 0.0
-            ll[r, c] = _mixture_item(r, lo, min(N, lo + chunk), M, tables, data, (pi[r, c], pe[r, c], pt[r, c]), seq_ll[r])
+        if active[item // C]:
+            r, c, lo, hi, counts = _slot(item, C, chunk, N, sums)
+            sums[0][r, c] = _mixture_item(r, lo, hi, M, tables, data, counts, seq_ll[r])
 
 
 @njit(cache=True, nogil=True)
