@@ -10,17 +10,25 @@ calls compiled code: numba reads those attributes when it compiles a caller).
 
 numba is a declared dependency; the fallback keeps the compiled modules importable (and their
 numpy or Python paths usable) on a platform without a numba wheel.  ``AVAILABLE`` says which.
+
+:data:`prange` is ``range`` until numba is loaded and numba's ``prange`` from then on (a module
+that imports it sees the switch as it sees the compiled functions').  A function with a
+``prange`` loop is compiled with ``parallel=True``: its loop runs on numba's threads, in numba's
+``workqueue`` layer unless ``NUMBA_THREADING_LAYER`` names another (not GNU OpenMP, which hangs
+a process forked after using it); that layer must not be entered by two threads at once, so
+such a call is made under :data:`PARALLEL_LOCK`.
 """
 
 from __future__ import annotations
 
 import importlib.util
+import os
 import sys
 import threading
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-__all__ = ["AVAILABLE", "load", "loaded", "njit", "python"]
+__all__ = ["AVAILABLE", "PARALLEL_LOCK", "load", "loaded", "njit", "prange", "python", "set_threads"]
 
 AVAILABLE = importlib.util.find_spec("numba") is not None  # numba is a declared dependency
 
@@ -29,6 +37,17 @@ F = TypeVar("F", bound=Callable[..., Any])
 _PENDING: list[_Lazy] = []  # decorated, not yet handed to numba
 _LOCK = threading.RLock()
 _LOADED = False
+PARALLEL_LOCK = threading.Lock()  # held around every call that runs a prange loop on several threads
+
+
+class _PRange:
+    """``range`` until numba is loaded (then the module attribute is numba's ``prange``)."""
+
+    def __call__(self, *args: int) -> range:
+        return range(*args)
+
+
+prange: Any = _PRange()
 
 
 class _Lazy:
@@ -61,10 +80,13 @@ def load() -> None:
 def _load() -> None:
     """Hand every pending function to numba, and point the module attributes that name a
     stand-in at numba's function."""
-    global _LOADED
+    global _LOADED, prange
     with _LOCK:
         import numba
 
+        if "NUMBA_THREADING_LAYER" not in os.environ:
+            numba.config.THREADING_LAYER = "workqueue"  # type: ignore[attr-defined]
+        marker, prange = prange, numba.prange
         done = {id(lazy): lazy for lazy in _PENDING}
         for lazy in _PENDING:
             lazy.dispatcher = numba.njit(**lazy.options)(lazy.py_func)
@@ -75,6 +97,8 @@ def _load() -> None:
             for attr, value in list(vars(module).items()):
                 if isinstance(value, _Lazy) and id(value) in done:
                     setattr(module, attr, value.dispatcher)
+                elif value is marker:
+                    setattr(module, attr, numba.prange)
         _LOADED = True
 
 
@@ -101,6 +125,18 @@ def njit(**options: Any) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
         return lazy
 
     return decorate
+
+
+def set_threads(n: int) -> int:
+    """Let the calling thread's ``prange`` loops use ``n`` of numba's threads (at most as many as
+    numba started); how many they will use.  1 without numba loaded."""
+    if not _LOADED:
+        return 1
+    import numba
+
+    n = max(1, min(int(n), numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
+    numba.set_num_threads(n)
+    return n
 
 
 def python(func: F) -> F:

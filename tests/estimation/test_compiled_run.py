@@ -33,16 +33,7 @@ def problem(n: int, seed: int, **spec_options):
 def pieces(s: Structure, w: Workspace):
     K, M, Ue, Ut = s.dims
     kern = w._kernel
-    bufs = (
-        np.empty((1, K)),
-        np.empty((1, w.PE, K)),
-        np.empty((1, Ut + 1, K, K)),
-        np.empty(kern.C),
-        np.empty((kern.C, K)),
-        np.empty((kern.C, w.PE, K)),
-        np.empty((kern.C, Ut + 1, K, K)),
-    )
-    bufs[2][0, Ut] = np.eye(K)
+    bufs = steps.estep_buffers(K, w.PE, Ut + 1, kern.C, True)
     return (K, Ue, M, Ut), (kern.eidx, kern.tidx, kern.code, kern.lengths), bufs, cr._table(s.em), cr._table(s.tr)
 
 
@@ -117,3 +108,25 @@ def test_a_start_giving_the_data_probability_zero_is_refused():
     em[:, :, 0], em[:, :, 1] = 0.0, 1.0  # every first-category output impossible
     with pytest.raises(FitError, match="probability zero"):
         cr.run_starts(s, w, [p, Params(p.initial, em, p.transition)], 1e-8, 1000, 1e-5, 1e-12)
+
+
+def test_the_estep_on_numbas_threads_is_the_kernels_to_the_last_bit():
+    """With fewer starts than threads, from steps.PARALLEL_ITEMS items, the compiled run's E-steps
+    run on numba's threads: the numbers of the kernel's E-step, and the run of one thread, on
+    one thread or two."""
+    from trustseek.compiled import set_threads
+
+    _spec, _seqs, s, w = problem(steps.PARALLEL_ITEMS * cr.CHUNK + 5, 4)
+    (K, Ue, M, Ut), data, bufs, emt, trt = pieces(s, w)
+    assert w._kernel.C > steps.PARALLEL_ITEMS
+    p = s.random(np.random.default_rng(1))
+    st = w.estep(p)
+    for threads in (1, 2):
+        set_threads(threads)
+        flat, counts = p.vector().copy(), np.empty(len(p.vector()))
+        ll, _f = steps.evaluate(flat, (K, Ue, M, Ut, 0.0, emt, trt), (data, bufs), counts)
+        assert ll == st.loglik
+        assert np.array_equal(counts, np.concatenate([st.initial, st.emission.ravel(), st.transition.ravel()]))
+    one, two = (cr.run_starts(s, w, [p], 1e-8, 40, 1e-5, 1e-12, threads=t)[0] for t in (1, 2))  # 40 E-steps: cheap
+    assert (one.loglik, one.iterations, one.history) == (two.loglik, two.iterations, two.history)
+    assert np.array_equal(one.params.vector(), two.params.vector())

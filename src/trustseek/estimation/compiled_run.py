@@ -31,6 +31,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from ..compiled import PARALLEL_LOCK, set_threads
 from . import compiled_steps as steps
 from . import kernels
 from .em import CAPPED, STATIONARY, RunResult
@@ -323,25 +324,15 @@ def run_one(start, model, data, C, PE, settings, qn):
     flat cells, (log-likelihood, objective), E-steps, how it ended, finishes, and the history.
     ``model``: (K, Ue, M, Ut, prior, emission table, transition table); ``data``: the kernel's
     index arrays, in ``C`` items with ``PE`` emission rows; ``settings``: (tol, max_iter, em_tol,
-    finish_tol, quasi-Newton, accelerate); ``qn``: (the sticks' layout, their number n, ``B``,
-    ``warm``): ``B`` (n, n) holds the finish's quasi-Newton matrix at the end; with ``warm`` the
-    finishes start from the matrix ``B`` holds, else each from a multiple of the identity."""
+    finish_tol, quasi-Newton, accelerate, the E-step's items on numba's threads); ``qn``: (the
+    sticks' layout, their number n, ``B``, ``warm``): ``B`` (n, n) holds the finish's quasi-Newton
+    matrix at the end; with ``warm`` the finishes start from the matrix ``B`` holds, else each
+    from a multiple of the identity."""
     K, _Ue, _M, Ut, _prior, _emt, _trt = model
-    tol, max_iter, em_tol, finish_tol, use_qn, accelerate = settings
+    tol, max_iter, em_tol, finish_tol, use_qn, accelerate, threaded = settings
     n = qn[1]
     L = len(start)
-    bufs = (
-        np.empty((1, K)),
-        np.empty((1, PE, K)),
-        np.empty((1, Ut + 1, K, K)),
-        np.empty(C),
-        np.empty((C, K)),
-        np.empty((C, PE, K)),
-        np.empty((C, Ut + 1, K, K)),
-    )
-    for k in range(K):
-        for j in range(K):
-            bufs[2][0, Ut, k, j] = 1.0 if k == j else 0.0
+    bufs = steps.estep_buffers(K, PE, Ut + 1, C, threaded)
     flat = start.copy()
     counts = np.empty(L)
     stat = np.empty(2)
@@ -436,7 +427,8 @@ def run_starts(
     threads: int = 1,
 ) -> list[RunResult]:
     """Each start carried to a stationary point or to ``max_iter`` E-steps, compiled (see the
-    module); ``threads`` run starts side by side (the numbers do not depend on it).
+    module); ``threads`` run starts side by side, or with fewer starts than threads on data of
+    ``compiled_steps.PARALLEL_ITEMS`` items or more share each E-step (the numbers do not depend on it).
 
     From :data:`SUBSAMPLE_MIN` trials on (:func:`subsample`) each start runs first on every
     :data:`SUBSAMPLE_EVERY`-th sequence to its own stationary point (or ``max_iter`` E-steps),
@@ -456,7 +448,9 @@ def run_starts(
     prior = float(structure.spec.prior)
     n = sticks.size
     model = (K, Ue, M, Ut, prior, emt, trt)
-    settings = (float(tol), int(max_iter), float(em_tol), float(finish_tol), bool(quasi_newton), bool(accelerate))
+    # fewer starts than threads on data of PARALLEL_ITEMS items or more: each E-step on the threads
+    threaded = threads > 1 and len(starts) < threads and kern.C >= steps.PARALLEL_ITEMS
+    settings = (float(tol), int(max_iter), float(em_tol), float(finish_tol), bool(quasi_newton), bool(accelerate), threaded)
     template = starts[0]
     idx = subsample(kern) if quasi_newton and sticks.size > 0 else None
     if idx is not None:
@@ -499,6 +493,10 @@ def run_starts(
             int(sub_its),
         )
 
+    if threaded:
+        with PARALLEL_LOCK:
+            set_threads(threads)
+            return [one(p) for p in starts]
     if threads > 1 and len(starts) > 1:
         with ThreadPoolExecutor(min(threads, len(starts)), thread_name_prefix="trustseek-fit") as pool:
             return list(pool.map(one, starts))

@@ -15,21 +15,45 @@ import math
 
 import numpy as np
 
+from ..compiled import prange
 from . import kernels
 from .em import SHRINK
 from .structure import FLOOR, PROJECT_FLOOR
 
 njit = kernels.njit
 CHUNK = kernels.CHUNK
+PARALLEL_ITEMS = 8  # items (of CHUNK sequences) from which the E-step runs on numba's threads
+
+
+@njit(cache=True, nogil=True, inline="always")  # no kernel of its own in the cache
+def estep_buffers(K, PE, U1, C, threaded):
+    """The E-step's buffers for data of ``C`` items: the tables of one parameter set (initial, emission
+    rows, transitions with the identity in the last), the active flag, the items' sums and their totals
+    (:meth:`.kernels.Kernel.run`'s layout, R = 1), and whether the items go on numba's threads."""
+    trans = np.zeros((1, U1, K, K))
+    for k in range(K):
+        trans[0, U1 - 1, k, k] = 1.0
+    sums = (np.empty((1, C)), np.empty((1, C, K)), np.empty((1, C, PE, K)), np.empty((1, C, U1, K, K)))
+    totals = (np.empty(1), np.empty((1, K)), np.empty((1, PE, K)), np.empty((1, U1, K, K)))
+    return (np.empty((1, K)), np.empty((1, PE, K)), trans), np.ones(1, dtype=np.bool_), sums, totals, threaded
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _items_parallel(C, tables, data, active, sums):
+    """The items on numba's threads, each into its own sums (the same numbers on any number of threads)."""
+    for c in prange(C):
+        i = np.int64(c)  # prange counts in uint64, and CHUNK would be a literal: Kernel.run's variant, not a second
+        kernels.estep_items(i, i + 1, C, np.int64(CHUNK), tables, data, active, sums)
 
 
 @njit(cache=True, nogil=True)
 def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
     """E-step of one parameter set: counts into ``ci`` (K,), ``cem`` (Ue, K, M), ``ctr`` (Ut, K, K);
-    the log-likelihood (-inf: probability zero, counts zero).  Items of :data:`CHUNK` sequences
-    summed in item order, as :meth:`.kernels.Kernel.run` does."""
-    eidx = data[0]
-    ini, emit, trans, ll, pin, pe, pt = bufs
+    the log-likelihood (-inf: probability zero, counts zero).  The items and their sums of
+    :meth:`.kernels.Kernel.run` (``bufs``: :func:`estep_buffers`), on numba's threads when the
+    buffers say so and there are :data:`PARALLEL_ITEMS` items."""
+    tables, active, sums, totals, threaded = bufs
+    ini, emit, trans = tables
     Ue, K, M = em.shape
     Ut = tr.shape[0]
     for u in range(Ue):
@@ -41,64 +65,54 @@ def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
         emit[0, Ue * M, k] = 1.0
     for u in range(Ut):
         trans[0, u] = tr[u]
-    N = eidx.shape[0]
-    C = ll.shape[0]
-    for c in range(C):
-        lo = c * CHUNK
-        pin[c] = 0.0
-        pe[c] = 0.0
-        pt[c] = 0.0
-        # np.int64(0), not the literal 0: numba would compile a second _item (and _sequence) for Literal[int](0)
-        ll[c] = kernels._item(np.int64(0), lo, min(N, lo + CHUNK), (ini, emit, trans), data, (pin[c], pe[c], pt[c]))
-    ci[:] = 0.0
-    cem[:] = 0.0
-    ctr[:] = 0.0
-    for c in range(C):
-        if not ll[c] > -math.inf:
-            return -math.inf
-    total = 0.0
-    tot_i = np.zeros(K)
-    tot_e = np.zeros((Ue * M + 1, K))
-    tot_t = np.zeros((Ut + 1, K, K))
-    for c in range(C):
-        total += ll[c]
-        tot_i += pin[c]
-        tot_e += pe[c]
-        tot_t += pt[c]
-    ci[:] = tot_i
+    C = sums[0].shape[1]
+    if threaded and C >= PARALLEL_ITEMS:
+        _items_parallel(C, tables, data, active, sums)
+    else:
+        kernels.estep_items(np.int64(0), C, C, np.int64(CHUNK), tables, data, active, sums)
+    ll, tot_i, tot_e, tot_t = totals
+    kernels._reduce(active, sums[0], sums[1], sums[2], sums[3], ll, tot_i, tot_e, tot_t)
+    ci[:] = tot_i[0]
     for u in range(Ue):
         for k in range(K):
             for m in range(M):
-                cem[u, k, m] = tot_e[u * M + m, k]
-    ctr[:] = tot_t[:Ut]
-    return total
+                cem[u, k, m] = tot_e[0, u * M + m, k]
+    ctr[:] = tot_t[0, :Ut]
+    return ll[0]
 
 
-@njit(cache=True, nogil=True)
-def _table_mstep(counts, prior, prev, tab, out):
-    """:meth:`.structure.Table.mstep` of one table into ``out``."""
+@njit(cache=True, nogil=True, inline="always")  # no kernel of its own in the cache
+def _rows(num, prev, tab, out):
+    """The free cells ``num`` (G, K, M) of each group's rows scaled to the row's free mass (fixed
+    cells: their values; a row whose free cells sum to 0: ``prev``'s), into ``out`` by group."""
     group, rep, gfixed, gvalues, mass = tab
-    U, K, M = counts.shape
-    G = rep.shape[0]
-    cg = np.zeros((G, K, M))
-    for u in range(U):
-        cg[group[u]] += counts[u]
-    rows = np.empty((G, K, M))
+    G, K, M = num.shape
     for g in range(G):
         for k in range(K):
             tot = 0.0
             for m in range(M):
                 if not gfixed[g, k, m]:
-                    tot += cg[g, k, m] + prior
+                    tot += num[g, k, m]
             for m in range(M):
                 if gfixed[g, k, m]:
-                    rows[g, k, m] = gvalues[g, k, m]
+                    num[g, k, m] = gvalues[g, k, m]
                 elif tot > 0:
-                    rows[g, k, m] = (cg[g, k, m] + prior) / tot * mass[g, k]
+                    num[g, k, m] = num[g, k, m] / tot * mass[g, k]
                 else:
-                    rows[g, k, m] = prev[rep[g], k, m]
+                    num[g, k, m] = prev[rep[g], k, m]
+    for u in range(out.shape[0]):
+        out[u] = num[group[u]]
+
+
+@njit(cache=True, nogil=True)
+def _table_mstep(counts, prior, prev, tab, out):
+    """:meth:`.structure.Table.mstep` of one table into ``out``."""
+    group = tab[0]
+    U, K, M = counts.shape
+    cg = np.zeros((tab[1].shape[0], K, M))
     for u in range(U):
-        out[u] = rows[group[u]]
+        cg[group[u]] += counts[u]
+    _rows(cg + prior, prev, tab, out)
 
 
 @njit(cache=True, nogil=True)
@@ -119,25 +133,12 @@ def _mstep(counts, prior, params, emt, trt, out):
 
 @njit(cache=True, nogil=True)
 def _table_project(p, tab, out):
-    """:meth:`.structure.Table.project` of one table into ``out``."""
-    group, rep, gfixed, gvalues, mass = tab
-    U, K, M = p.shape
-    G = rep.shape[0]
-    rows = np.empty((G, K, M))
-    for g in range(G):
-        for k in range(K):
-            s = 0.0
-            for m in range(M):
-                if not gfixed[g, k, m]:
-                    s += max(p[rep[g], k, m], PROJECT_FLOOR)
-            d = s if s > 0 else 1.0
-            for m in range(M):
-                if gfixed[g, k, m]:
-                    rows[g, k, m] = gvalues[g, k, m]
-                else:
-                    rows[g, k, m] = max(p[rep[g], k, m], PROJECT_FLOOR) / d * mass[g, k]
-    for u in range(U):
-        out[u] = rows[group[u]]
+    """:meth:`.structure.Table.project` of one table into ``out`` (a free cell counts at least PROJECT_FLOOR)."""
+    rep = tab[1]
+    num = np.empty((rep.shape[0], p.shape[1], p.shape[2]))
+    for g in range(rep.shape[0]):
+        num[g] = np.maximum(p[rep[g]], PROJECT_FLOOR)
+    _rows(num, p, tab, out)
 
 
 @njit(cache=True, nogil=True)

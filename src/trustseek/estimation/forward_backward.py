@@ -283,6 +283,18 @@ def _forward_codes(n, initial, emit, A, code, L, alpha, marks):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _first(e, g0, g1, z, alpha, c_first):
+    """The first trial's posterior (emission row ``e``; backward pair (g0, g1), inverse normaliser
+    ``z``) added to ``c_first[2 + 2 e + k]`` and ``c_first[k]`` (the initial counts)."""
+    q0 = alpha[0, 0] * g0 * z
+    q1 = alpha[0, 1] * g1 * z
+    c_first[2 + 2 * e] += q0
+    c_first[3 + 2 * e] += q1
+    c_first[0] += q0
+    c_first[1] += q1
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _backward_codes(n, A, code, L, c_first, c_step, alpha, marks, s):
     """The backward pass after :func:`_forward_codes`: the posterior of every step (t - 1, t),
     xi, added to ``c_step[code[n, t]]`` (4 cells, row-major 2 x 2) and the first trial's
@@ -325,13 +337,7 @@ def _backward_codes(n, A, code, L, c_first, c_step, alpha, marks, s):
         c_step[c, 1] += p0 * w01
         c_step[c, 2] += p1 * w10
         c_step[c, 3] += p1 * w11
-    e = code[n, 0]
-    q0 = alpha[0, 0] * g0 * z
-    q1 = alpha[0, 1] * g1 * z
-    c_first[2 + 2 * e] += q0
-    c_first[3 + 2 * e] += q1
-    c_first[0] += q0
-    c_first[1] += q1
+    _first(code[n, 0], g0, g1, z, alpha, c_first)
 
 
 @njit(cache=True, nogil=True)
@@ -468,20 +474,8 @@ def _backward_pair(n, m, A, code, L, first, second):
         ds[d, 1] += r0 * q01
         ds[d, 2] += r1 * q10
         ds[d, 3] += r1 * q11
-    e = code[n, 0]
-    q0 = alpha[0, 0] * g0 * z
-    q1 = alpha[0, 1] * g1 * z
-    ci[2 + 2 * e] += q0
-    ci[3 + 2 * e] += q1
-    ci[0] += q0
-    ci[1] += q1
-    f = code[m, 0]
-    r0 = alpha2[0, 0] * h0 * y
-    r1 = alpha2[0, 1] * h1 * y
-    di[2 + 2 * f] += r0
-    di[3 + 2 * f] += r1
-    di[0] += r0
-    di[1] += r1
+    _first(code[n, 0], g0, g1, z, alpha, ci)
+    _first(code[m, 0], h0, h1, y, alpha2, di)
 
 
 @njit(cache=True, nogil=True)

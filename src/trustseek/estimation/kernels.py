@@ -26,13 +26,8 @@ fixed order.  The items run on one thread or are split over several (Python thre
 the compiled code releases the GIL), with the same grouping, so the result is the same
 to the last bit whatever the number of threads.
 
-With K = 2 the pass works on step codes: per code one 2 x 2 matrix ``trans[u, i, j] *
-emit[e, j]`` (one load per cell instead of a transition and an emission cell), the posterior
-of each step (t - 1, t) added to its code's four sums, and trial t's emission counts taken
-from those sums at the end of the item (the posterior of trial t is that of the step summed
-over its first level); the forward-backward normaliser is carried from the last trial instead
-of divided out at every trial (it changes only by the exact rescalings).  The numbers equal
-the numpy reference's to rounding (about 1e-15 relative).
+With K = 2 the pass works on step codes, its counts per code folded into the tables at the end
+of an item (:mod:`.forward_backward`).
 
 A sequence whose probability is zero makes the log-likelihood of its parameter
 set -inf, with zero counts.
@@ -163,21 +158,29 @@ def _reduce(active, ll, pi, pe, pt, loglik, c_init, c_emit, c_trans):
             c_trans[r] += pt[r, c]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _slot(item, C, chunk, N, sums):
+    """Item ``item`` (= r * C + c): its parameter set r, c, its sequences lo:hi and its own sums
+    (initial, emission, transition), zeroed."""
+    _ll, pi, pe, pt = sums
+    r = item // C
+    c = item % C
+    lo = c * chunk
+    pi[r, c] = 0.0
+    pe[r, c] = 0.0
+    pt[r, c] = 0.0
+    return r, c, lo, min(N, lo + chunk), (pi[r, c], pe[r, c], pt[r, c])
+
+
 @njit(cache=True, nogil=True)
 def estep_items(first, last, C, chunk, tables, data, active, sums):
     """Items ``first:last`` (item = r * C + c: parameter set r, sequences c*chunk onwards) into their
     own ``sums`` (log-likelihood (R, C), initial, emission and transition counts per item)."""
-    ll, pi, pe, pt = sums
     N = data[0].shape[0]
     for item in range(first, last):
-        r = item // C
-        c = item % C
-        if active[r]:
-            lo = c * chunk
-            pi[r, c] = 0.0
-            pe[r, c] = 0.0
-            pt[r, c] = 0.0
-            ll[r, c] = _item(r, lo, min(N, lo + chunk), tables, data, (pi[r, c], pe[r, c], pt[r, c]))
+        if active[item // C]:
+            r, c, lo, hi, counts = _slot(item, C, chunk, N, sums)
+            sums[0][r, c] = _item(r, lo, hi, tables, data, counts)
 
 
 @njit(cache=True, nogil=True)
@@ -240,17 +243,11 @@ def _mixture_item(r, lo, hi, M, tables, data, counts, seq_ll):
 def mixture_items(first, last, C, chunk, M, tables, data, active, sums, seq_ll):
     """Items ``first:last`` of a mixture E-step (item = r * C + c) into their own ``sums``: ``ll`` (R, C),
     ``pi`` (R, C, M, K), ``pe`` (R, C, M, PE, K), ``pt`` (R, C, M, P, K, K); ``seq_ll`` (R, M, N)."""
-    ll, pi, pe, pt = sums
     N = data[0].shape[0]
     for item in range(first, last):
-        r = item // C
-        c = item % C
-        if active[r]:
-            lo = c * chunk
-            pi[r, c] = 0.0
-            pe[r, c] = 0.0
-            pt[r, c] = 0.0
-            ll[r, c] = _mixture_item(r, lo, min(N, lo + chunk), M, tables, data, (pi[r, c], pe[r, c], pt[r, c]), seq_ll[r])
+        if active[item // C]:
+            r, c, lo, hi, counts = _slot(item, C, chunk, N, sums)
+            sums[0][r, c] = _mixture_item(r, lo, hi, M, tables, data, counts, seq_ll[r])
 
 
 @njit(cache=True, nogil=True)
@@ -347,7 +344,7 @@ class Kernel:
         self.trials = int(self.lengths.sum())
         self.C = max((N + CHUNK - 1) // CHUNK, 1)  # items per parameter set
         self.every = np.ones(1, dtype=np.bool_)  # the default "all parameter sets active", grown as needed
-        self._partials: dict[int, tuple[np.ndarray, ...]] = {}
+        self._partials: dict[tuple[int, tuple[int, ...]], tuple[np.ndarray, ...]] = {}
 
     def serial(self) -> Kernel:
         """A kernel on the same (shared, read-only) index arrays with its own buffers, running each
@@ -362,45 +359,9 @@ class Kernel:
         self, initial: np.ndarray, emit: np.ndarray, trans: np.ndarray, active: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(loglik (R,), initial counts (R, K), emission counts (R, PE, K), transition counts (R, P, K, K))."""
-        R, K = initial.shape
-        C = self.C
-        if active is None:
-            if len(self.every) < R:
-                self.every = np.ones(R, dtype=np.bool_)
-            act = self.every[:R]
-        else:
-            act = np.ascontiguousarray(active, dtype=np.bool_)
-        parts = self._partials.get(R)
-        if parts is None:  # each item's own sums, zeroed by the item itself: made once per number of parameter sets
-            parts = self._partials[R] = (
-                np.empty((R, C)),
-                np.empty((R, C, K)),
-                np.empty((R, C, self.PE, K)),
-                np.empty((R, C, self.P, K, K)),
-            )
-        tables = (
-            np.ascontiguousarray(initial, dtype=np.float64),
-            np.ascontiguousarray(emit, dtype=np.float64),
-            np.ascontiguousarray(trans, dtype=np.float64),
-        )
-        args = (tables, (self.eidx, self.tidx, self.code, self.lengths), act, parts)
-        n_active = int(act.sum())
-        if self.threads > 1 and n_active * C > 1 and self.trials * n_active >= PARALLEL_MIN:
-            # contiguous runs of the active items, one per thread; each item writes only its own sums
-            items = [r * C + c for r in np.flatnonzero(act) for c in range(C)]
-            bounds = np.linspace(0, len(items), min(self.threads, len(items)) + 1).astype(int)
-            pool = _pool(len(bounds) - 1)
-            futures = [pool.submit(_run_items, items[a:b], C, args) for a, b in itertools.pairwise(bounds)]
-            for f in futures:
-                f.result()
-        else:
-            estep_items(0, R * C, C, CHUNK, *args)
-        ll = np.empty(R)
-        ci = np.empty((R, K))
-        ce = np.empty((R, self.PE, K))
-        ct = np.empty((R, self.P, K, K))
-        _reduce(act, *parts, ll, ci, ce, ct)
-        return ll, ci, ce, ct
+        R = initial.shape[0]
+        data = (self.eidx, self.tidx, self.code, self.lengths)
+        return self._items(estep_items, R, (), self._active(R, active), (_tables(initial, emit, trans), data), ())
 
     def _active(self, R: int, active: np.ndarray | None) -> np.ndarray:
         if active is None:
@@ -409,6 +370,36 @@ class Kernel:
             return self.every[:R]
         return np.ascontiguousarray(active, dtype=np.bool_)
 
+    def _items(
+        self, kernel: Callable[..., Any], R: int, lead: tuple[int, ...], act: np.ndarray, before: tuple, after: tuple
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``kernel``'s items of the active parameter sets, each into its own sums (made once per
+        R and ``lead``, the axes of the types), on one thread or split over several; the sums added
+        per set in item order: (loglik (R,), initial (R, *lead, K), emission (R, *lead, PE, K),
+        transition (R, *lead, P, K, K)).  ``kernel``'s arguments: ``before``, the active sets, the
+        sums, ``after``."""
+        C, K = self.C, self.K
+        shapes = ((K,), (self.PE, K), (self.P, K, K))
+        parts = self._partials.get((R, lead))
+        if parts is None:  # each item's own sums, zeroed by the item itself
+            parts = self._partials[(R, lead)] = (np.empty((R, C)), *(np.empty((R, C, *lead, *sh)) for sh in shapes))
+        args = (*before, act, parts, *after)
+        n_active = int(act.sum())
+        if self.threads > 1 and n_active * C > 1 and self.trials * n_active * math.prod(lead) >= PARALLEL_MIN:
+            # contiguous runs of the active items, one per thread; each item writes only its own sums
+            items = [r * C + c for r in np.flatnonzero(act) for c in range(C)]
+            bounds = np.linspace(0, len(items), min(self.threads, len(items)) + 1).astype(int)
+            pool = _pool(len(bounds) - 1)
+            futures = [pool.submit(_run_items, items[a:b], C, args, kernel) for a, b in itertools.pairwise(bounds)]
+            for f in futures:
+                f.result()
+        else:
+            kernel(0, R * C, C, CHUNK, *args)
+        ll = np.empty(R)
+        ci, ce, ct = (np.empty((R, *lead, *sh)) for sh in shapes)
+        _reduce(act, *parts, ll, ci, ce, ct)
+        return ll, ci, ce, ct
+
     def run_mixture(
         self, initial: np.ndarray, emit: np.ndarray, trans: np.ndarray, M: int, active: np.ndarray | None = None
     ) -> tuple[np.ndarray, ...]:
@@ -416,43 +407,10 @@ class Kernel:
         at r * M + m; ``initial`` the joint P(type, S_1)).  Returns the mixture log-likelihood (R,),
         the per-type counts weighted by the type responsibilities, initial (R, M, K), emission
         (R, M, PE, K), transition (R, M, P, K, K), and log P(sequence n, type m), (R, M, N)."""
-        RM, K = initial.shape
-        R = RM // M
-        C = self.C
-        N = self.eidx.shape[0]
-        act = self._active(R, active)
-        key = -(R * 1000 + M)
-        parts = self._partials.get(key)
-        if parts is None:
-            parts = self._partials[key] = (
-                np.empty((R, C)),
-                np.empty((R, C, M, K)),
-                np.empty((R, C, M, self.PE, K)),
-                np.empty((R, C, M, self.P, K, K)),
-            )
-        seq_ll = np.zeros((R, M, N))
-        tables = (
-            np.ascontiguousarray(initial, dtype=np.float64),
-            np.ascontiguousarray(emit, dtype=np.float64),
-            np.ascontiguousarray(trans, dtype=np.float64),
-        )
-        args = (M, tables, (self.eidx, self.tidx, self.lengths), act, parts, seq_ll)
-        n_active = int(act.sum())
-        if self.threads > 1 and n_active * C > 1 and self.trials * n_active * M >= PARALLEL_MIN:
-            items = [r * C + c for r in np.flatnonzero(act) for c in range(C)]
-            bounds = np.linspace(0, len(items), min(self.threads, len(items)) + 1).astype(int)
-            pool = _pool(len(bounds) - 1)
-            futures = [pool.submit(_run_items, items[a:b], C, args, mixture_items) for a, b in itertools.pairwise(bounds)]
-            for f in futures:
-                f.result()
-        else:
-            mixture_items(0, R * C, C, CHUNK, *args)
-        ll = np.empty(R)
-        ci = np.empty((R, M, K))
-        ce = np.empty((R, M, self.PE, K))
-        ct = np.empty((R, M, self.P, K, K))
-        _reduce(act, *parts, ll, ci, ce, ct)
-        return ll, ci, ce, ct, seq_ll
+        R = initial.shape[0] // M
+        seq_ll = np.zeros((R, M, self.eidx.shape[0]))
+        before = (M, _tables(initial, emit, trans), (self.eidx, self.tidx, self.lengths))
+        return (*self._items(mixture_items, R, (M,), self._active(R, active), before, (seq_ll,)), seq_ll)
 
     def run_each(
         self, pidx: np.ndarray, initial: np.ndarray, emit: np.ndarray, trans: np.ndarray, active: np.ndarray | None = None
@@ -467,11 +425,7 @@ class Kernel:
         ci = np.empty((N, K))
         ce = np.empty((N, self.PE, K))
         ct = np.empty((N, self.P, K, K))
-        tables = (
-            np.ascontiguousarray(initial, dtype=np.float64),
-            np.ascontiguousarray(emit, dtype=np.float64),
-            np.ascontiguousarray(trans, dtype=np.float64),
-        )
+        tables = _tables(initial, emit, trans)
         args = (np.ascontiguousarray(pidx, dtype=np.int64), tables, (self.eidx, self.tidx, self.lengths), act, (ll, ci, ce, ct))
         work = int(self.lengths[act].sum()) if active is not None else self.trials
         if self.threads > 1 and N > CHUNK and work >= PARALLEL_MIN:
@@ -483,6 +437,10 @@ class Kernel:
         else:
             each_items(0, N, *args)
         return ll, ci, ce, ct
+
+
+def _tables(initial: np.ndarray, emit: np.ndarray, trans: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return tuple(np.ascontiguousarray(x, dtype=np.float64) for x in (initial, emit, trans))  # type: ignore[return-value]
 
 
 def _run_items(items: list[int], C: int, args: tuple, kernel: Callable[..., Any] = estep_items) -> None:
