@@ -20,7 +20,7 @@ from ..errors import TrustseekError
 from ..model.core import TrustModel
 from ..model.jsonfile import ModelError, json_safe
 from ..pomdp.belief import to_vector
-from ..vocab import BELIEF_UPDATES
+from ..vocab import VocabularyError, check_belief_update
 from .thresholds import Interval, threshold
 
 POLICY_FORMAT = "trustseek.policy/1"
@@ -163,9 +163,10 @@ class PolicyBase:
 
 def planned_for(d: Mapping[str, Any], source: str | None) -> tuple[list[str], TrustModel, str]:
     """What a trust-aware policy file was planned for: its complexities, its trust model and its
-    belief update (one of :data:`BELIEF_UPDATES`)."""
+    belief update (one of :data:`~trustseek.vocab.BELIEF_UPDATES`)."""
     model = TrustModel.from_dict(d.get("model"), source)
-    update = d.get("belief_update")
-    if update not in BELIEF_UPDATES:
-        raise ModelError([f"belief_update is {update!r}, expected one of {list(BELIEF_UPDATES)}"], source)
-    return list(d.get("complexities") or []), model, str(update)
+    try:
+        update = check_belief_update(d.get("belief_update"), "belief_update")
+    except VocabularyError as exc:
+        raise ModelError(exc.problems, source) from None
+    return list(d.get("complexities") or []), model, update

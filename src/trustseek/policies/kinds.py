@@ -49,9 +49,9 @@ def policy_from_dict(d: Any, source: str | None = None) -> Policy:
     if th is not None and not (isinstance(th, Mapping) and all(v is None or _number(v) for v in th.values())):
         problems.append(f"thresholds must map each complexity to a number or null, got {th!r}")
     problems += [
-        f"{key} holds true or false where a policy's table holds numbers"
+        f"{key} holds true or false where a policy holds numbers"
         for key, value in d.items()
-        if key not in _NOT_TABLES and _holds_bool(value)
+        if key not in NOT_NUMBERS and _holds_bool(value)
     ]
     if problems:
         raise ModelError(problems, source)
@@ -89,25 +89,14 @@ def _non_finite(policy: Policy) -> list[tuple[str, int]]:
     return out
 
 
-#: the keys of a policy file that are not its own tables of numbers (the model and the mixture
-#: are checked by their own readers)
-_NOT_TABLES = (
-    "format",
-    "kind",
-    "complexities",
-    "belief_update",
-    "info",
-    "thresholds",
-    "counts",
-    "window",
-    "grid",
-    "model",
-    "mixture",
-)
+#: the keys of a policy file where a ``true``/``false`` is not refused here: texts and notes,
+#: and the model and the mixture, which their own readers check
+NOT_NUMBERS = ("format", "kind", "complexities", "belief_update", "info", "thresholds", "model", "mixture")
 
 
 def _holds_bool(value: Any) -> bool:
-    """Whether a JSON ``true``/``false`` stands anywhere in ``value`` (numpy would read it as 1 or 0)."""
+    """Whether a JSON ``true``/``false`` stands anywhere in ``value`` (numpy and ``int`` checks
+    would read it as 1 or 0)."""
     return any(isinstance(leaf, bool) for leaf in _leaves(value))
 
 

@@ -242,13 +242,13 @@ class SchedulePolicy(PolicyBase):
     def from_dict(cls, d: Mapping[str, Any], source: str | None = None) -> SchedulePolicy:
         cx, model, bu = planned_for(d, source)
         counts, window = d.get("counts"), d.get("window")
-        if not isinstance(counts, list) or len(counts) != len(cx) or not all(_count(k) and k >= 0 for k in counts):
+        if not isinstance(counts, list) or len(counts) != len(cx) or not all(isinstance(k, int) and k >= 0 for k in counts):
             raise ModelError([f"counts must be one non-negative integer per complexity, got {counts!r}"], source)
-        if window is not None and (not _count(window) or window < 1):
+        if window is not None and (not isinstance(window, int) or window < 1):
             raise ModelError([f"window must be a positive integer or null, got {window!r}"], source)
         q: dict[State, dict[int, PieceQ]] = {}
         grid = d.get("grid")
-        if grid is not None and (not _count(grid) or grid < 2):
+        if grid is not None and (not isinstance(grid, int) or grid < 2):
             raise ModelError([f"grid must be a number of points (at least 2) or null, got {grid!r}"], source)
         uniform = None if grid is None else np.linspace(0.0, 1.0, grid)
         try:
@@ -266,11 +266,6 @@ class SchedulePolicy(PolicyBase):
                 ["states must map 'remaining/visible' to, per visible complexity, breakpoints x and Q per action"], source
             ) from None
         return cls(q, model, cx, bu, counts, window, d.get("info"))
-
-
-def _count(value: Any) -> bool:
-    """Whether a file's value is an integer (a JSON true is not)."""
-    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def _high(belief: Any, model: TrustModel | None) -> float:
