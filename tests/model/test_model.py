@@ -325,3 +325,11 @@ def test_one_model_class_the_trust_model_is_its_configuration_with_the_paper_inp
         m.replace(emission_inputs=("complexity",), emission=m.emission[:, 0])
     with pytest.raises(ModelError, match="not_estimated marks rows of a trust model"):
         general.replace(not_estimated=(("emission", (0, 1)),))
+
+
+@pytest.mark.parametrize("inputs", [None, 5, [["a"]], "abc"])
+def test_a_general_model_file_with_broken_input_names_is_refused_for_planning(tmp_path, inputs):
+    path = tmp_path / "general.json"
+    path.write_text(json.dumps({"format": "trustseek.iohmm/1", "emission_inputs": inputs}), encoding="utf-8")
+    with pytest.raises(ModelError, match=r"general\.json.*inputs: none\) is not a trust model"):
+        TrustModel.load(path)

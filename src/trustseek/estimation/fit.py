@@ -155,11 +155,10 @@ def _expected_events(fit: EMFit) -> dict[str, np.ndarray]:
 def _intervals(result: FitResult, bootstrap: int, options: FitOptions, tick: Callable[[], None], weights) -> Intervals:
     """The bootstrap intervals of ``result``'s fit over ``bootstrap`` resamples (each refit from
     at most 3 random starts; ``tick`` after each), their notes added to its warnings."""
-    fit = result
     intervals = _bootstrap(
-        fit.seqs,
-        fit.spec,
-        fit.params,
+        result.seqs,
+        result.spec,
+        result.params,
         bootstrap,
         replace(options, restarts=min(options.starts, 3)),
         progress=lambda label, d, t: tick(),

@@ -46,10 +46,9 @@ from ..model.mixture import TypeMixture
 from .convergence import converge
 from .em import STATIONARY, RunResult, run_em
 from .fit import never_estimated
-from .iohmm import FINISH_FTOL, FINISH_SWITCH, fit_iohmm
+from .iohmm import FINISH_FTOL, FINISH_SWITCH, EMFit, fit_iohmm
 from .mixture_em import EMPTY, FINISH_MARGIN, PERTURB, MixtureParams, MixtureStructure, MixtureWorkspace
 from .options import DEFAULTS, SERIAL, FitOptions, counting
-from .result import EMFit
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
 from .trust_iohmm import (

@@ -22,9 +22,8 @@ import numpy as np
 import pandas as pd
 
 from .estep import Workspace
-from .iohmm import fit_iohmm
+from .iohmm import EMFit, fit_iohmm
 from .options import FitOptions
-from .result import EMFit
 from .sequences import Sequences, encode
 from .spec import IOHMMSpec, Params
 from .structure import Structure

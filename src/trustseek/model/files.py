@@ -104,8 +104,9 @@ def model_fields(d: Any, source: str | None = None, general: bool = False) -> di
     if not isinstance(d, Mapping):
         raise ModelError([f"a trust model must be a JSON object, got {type(d).__name__}"], source)
     if d.get("format", MODEL_FORMAT) == IOHMM_FORMAT:
-        inputs = [*d.get("emission_inputs", []), *d.get("transition_inputs", [])]
-        raise ModelError([planning_refusal([str(c) for c in dict.fromkeys(inputs)])], source)
+        named = [d.get("emission_inputs"), d.get("transition_inputs")]
+        inputs = [c for names in named if isinstance(names, list) for c in names if isinstance(c, str)]
+        raise ModelError([planning_refusal(list(dict.fromkeys(inputs)))], source)
     return _read(d, source, _trust_header)
 
 

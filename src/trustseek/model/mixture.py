@@ -22,8 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from .core import TrustModel, planning_refusal
-from .files import is_iohmm_file
+from .core import TrustModel
 from .jsonfile import JsonFile, ModelError, build, freeze_arrays, raise_problems
 
 MIXTURE_FORMAT = "trustseek.mixture/1"
@@ -170,11 +169,7 @@ class TypeMixture(JsonFile):
                 problems.append(f"{where}.weight must be a non-negative number, got {weight!r}")
                 weight = 0.0
             try:
-                raw = t.get("model")
-                if is_iohmm_file(raw) and not general:
-                    inputs = raw.get("inputs") if isinstance(raw, Mapping) and isinstance(raw.get("inputs"), Mapping) else {}
-                    raise ModelError([planning_refusal(tuple(inputs or ()))])
-                models.append(TrustModel.from_dict(raw, None, general))
+                models.append(TrustModel.from_dict(t.get("model"), None, general))
             except ModelError as exc:
                 problems.extend(f"{where}.model: {p}" for p in exc.problems)
                 continue
