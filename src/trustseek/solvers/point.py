@@ -209,9 +209,10 @@ class PointSolver(SolverBase):
         K = self.model.n_hidden
         V = freudenthal_vertices(K, r)
         own = np.round(np.cumsum(V[:, ::-1], axis=1)[:, ::-1] * r).astype(np.int64)
-        lookup = np.sort(_vertex_code(own, r))
-        V = V[np.argsort(_vertex_code(own, r), kind="stable")]
-        p, S = self.model.branches.successors(V)
+        codes = _vertex_code(own, r)
+        order = np.argsort(codes, kind="stable")
+        lookup, V = codes[order], V[order]
+        S, p = self._successors(V)
         verts, w = freudenthal_weights(S.reshape(-1, K), r)
         col = _find(lookup, _vertex_code(verts, r)).reshape(S.shape)
         if np.any(col < 0):
