@@ -51,9 +51,10 @@ def test_bad_model_file_gives_one_line_per_problem(tmp_path, model):
 
 
 def test_bad_option_values(tmp_path):
-    proc = run("solve", "--belief-update", "magic", check=False)
-    assert proc.returncode == 2 and "Traceback" not in proc.stderr
-    assert "--belief-update must be 'bayes' or 'paper'" in proc.stderr
+    for command in ("solve", "simulate", "schedule"):  # one check, one message
+        proc = run(command, "--belief-update", "magic", check=False)
+        assert proc.returncode == 2 and "Traceback" not in proc.stderr
+        assert "--belief-update must be 'bayes' or 'paper', got 'magic'" in proc.stderr, command
     proc = run("solve", "--model", str(tmp_path / "missing.json"), check=False)
     assert proc.returncode == 2 and "file not found" in proc.stderr
 

@@ -16,7 +16,7 @@ from rich.table import Table
 
 from .. import solvers
 from ..errors import TrustseekError
-from ..vocab import PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS
+from ..vocab import PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS, check_belief_update
 from ._app import (
     app,
     atomic_output,
@@ -202,6 +202,8 @@ def simulate(
     if out is not None:
         with atomic_output(out) as tmp:
             _write(sim.trials(), tmp)
+    from ..simulation.results import SUMMARY_QUANTITIES
+
     summ = sim.summary()
     if summary_out is not None:
         with atomic_output(summary_out) as tmp:
@@ -212,7 +214,7 @@ def simulate(
             "median": float(summ[c].median()),
             "sd": float(summ[c].std(ddof=1)) if len(summ) > 1 else 0.0,
         }
-        for c in SUMMARY_COLUMNS
+        for c in SUMMARY_QUANTITIES
     }
     n_trials = int(summ["trials"].sum())
     if as_json:
@@ -232,10 +234,6 @@ def simulate(
     print_written(("trials", out), ("summary", summary_out))
 
 
-#: the per-participant figures simulate reports
-SUMMARY_COLUMNS = ("cumulative_reward", "discounted_reward", "autonomous_collections", "failures", "interventions", "asks")
-
-
 def _given(ctx: typer.Context, *names: str) -> list[str]:
     """Of ``names`` (a parameter and its option each), the options given on the command line."""
     out = []
@@ -249,8 +247,7 @@ def _given(ctx: typer.Context, *names: str) -> list[str]:
 def _check_simulate(ctx: typer.Context, belief_update: str, counts, trials, out, summary_out) -> list[str]:
     """simulate's options refused before anything is loaded; the options a solved policy file would
     silently override (refused with one)."""
-    if belief_update not in ("paper", "bayes"):
-        raise TrustseekError([f"--belief-update must be 'paper' or 'bayes', got {belief_update!r}"])
+    check_belief_update(belief_update, "--belief-update")
     if counts is not None and trials is not None:
         raise TrustseekError(["give either --counts or --trials, not both"])
     given = _given(ctx, "belief_update", "--belief-update", "policy_model", "--policy-model")
@@ -336,8 +333,8 @@ def _print_simulation(desc: str, participants: int, n_trials: int, stats: dict, 
     table.add_column("per participant")
     for h in ("mean", "median", "sd"):
         table.add_column(h, justify="right")
-    for c in SUMMARY_COLUMNS:
-        table.add_row(c.replace("_", " "), *(f"{stats[c][k]:.2f}" for k in ("mean", "median", "sd")))
+    for c, figures in stats.items():
+        table.add_row(c.replace("_", " "), *(f"{figures[k]:.2f}" for k in ("mean", "median", "sd")))
     console.print(table)
     console.print(f"{n_trials:,} trials in {dt:.2f} s ({n_trials / max(dt, 1e-9) / 1e6:.1f} M trials/s), seed {seed}")
 

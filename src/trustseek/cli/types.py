@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import typer
@@ -27,9 +28,8 @@ from ._app import (
 from ._options import FROM_OPTIONS, LogReading, PrintJsonOpt, log_options, widen_option
 from ._output import check_plots_folder, fit_summary, print_selection, print_warnings
 from ._reading import load_for_decoding, read_for_types, widened_note
-from .fit import _read_with_inputs
+from .fit import POSTERIOR_SUFFIXES, _read_with_inputs
 
-POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
 TransitionsOnOpt = typer.Option(
     None, "--transitions-on", help="Inputs of the trust transitions (as for fit: complexity, robot_action, experience)."
 )
@@ -149,12 +149,12 @@ def _bootstrap_types(fit, bootstrap: int, seed: int, jobs: int | None, bar):
     if bootstrap <= 0:
         return None
     task = bar.add_task("bootstrap", total=bootstrap)
-    from ..estimation.type_bootstrap import bootstrap_types
+    from ..estimation.type_bootstrap import TYPE_REFITS, bootstrap_types
 
     return bootstrap_types(
         fit,
         bootstrap,
-        options=FitOptions(restarts=2, seed=seed, tol=1e-6, n_jobs=jobs),
+        options=replace(TYPE_REFITS, seed=seed, n_jobs=jobs),
         progress=lambda d, t: bar.update(task, completed=d, total=t),
     )
 
