@@ -19,9 +19,11 @@ class FitOptions:
 
     ``restarts`` random starts (the best run is kept; ``None`` where a function chooses by the
     model's free parameters, as :func:`~.selection.select_levels`), drawn from ``seed`` (an
-    integer or a :class:`numpy.random.SeedSequence`); each run stops when the relative change of
-    its objective is below ``tol``, or after ``max_iter`` E-steps; ``n_jobs`` threads share the
-    E-steps (processes for a bootstrap; ``None``: all cores).  Results do not depend on ``n_jobs``."""
+    integer; :func:`~.iohmm.fit_iohmm` and :func:`~.mixture.fit_mixture` also take a
+    :class:`numpy.random.SeedSequence`, the fits that derive several seeds from it do not); each
+    run stops when the relative change of its objective is below ``tol``, or after ``max_iter``
+    E-steps; ``n_jobs`` threads share the E-steps (processes for a bootstrap; ``None``: all
+    cores).  Results do not depend on ``n_jobs``."""
 
     restarts: int | None = 10
     seed: int | np.random.SeedSequence = 0

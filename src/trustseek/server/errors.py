@@ -34,4 +34,4 @@ class Gone(Refused):
 
 
 class TooLarge(Refused):
-    """More than a session may hold (events)."""
+    """More than the server takes: a request body over the size limit, or more events than a session may hold."""

@@ -49,8 +49,10 @@ def upgrade() -> None:
     )
     op.create_index("ix_sessions_token", "sessions", ["token"], unique=True)
     op.create_index("ix_sessions_study_id", "sessions", ["study_id"])
-    _session_rows(
+    op.create_table(
         "trials",
+        sa.Column("id", sa.Integer(), primary_key=True, autoincrement=True),
+        sa.Column("session_id", sa.String(32), sa.ForeignKey("sessions.id"), nullable=False),
         sa.Column("trial", sa.Integer(), nullable=False),
         sa.Column("block", sa.Integer(), nullable=False),
         sa.Column("policy", sa.String(32), nullable=False),
@@ -64,37 +66,33 @@ def upgrade() -> None:
         sa.Column("belief_after", sa.Float(), nullable=True),
         sa.Column("effort_ms", sa.Float(), nullable=True),
         sa.Column("submission_id", sa.String(64), nullable=False),
-        unique=("uq_trial_session_number", "trial"),
+        sa.Column("created_at", sa.DateTime(), nullable=False),
+        sa.UniqueConstraint("session_id", "trial", name="uq_trial_session_number"),
     )
-    _session_rows(
+    op.create_index("ix_trials_session_id", "trials", ["session_id"])
+    op.create_table(
         "reports",
+        sa.Column("id", sa.Integer(), primary_key=True, autoincrement=True),
+        sa.Column("session_id", sa.String(32), sa.ForeignKey("sessions.id"), nullable=False),
         sa.Column("after_trial", sa.Integer(), nullable=False),
         sa.Column("block", sa.Integer(), nullable=False),
         sa.Column("scope", sa.String(8), nullable=False),
         sa.Column("value", sa.Float(), nullable=False),
-        unique=("uq_report_session_trial", "after_trial"),
+        sa.Column("created_at", sa.DateTime(), nullable=False),
+        sa.UniqueConstraint("session_id", "after_trial", name="uq_report_session_trial"),
     )
-    _session_rows(
+    op.create_index("ix_reports_session_id", "reports", ["session_id"])
+    op.create_table(
         "events",
+        sa.Column("id", sa.Integer(), primary_key=True, autoincrement=True),
+        sa.Column("session_id", sa.String(32), sa.ForeignKey("sessions.id"), nullable=False),
         sa.Column("trial", sa.Integer(), nullable=True),
         sa.Column("client_time", sa.Float(), nullable=True),
         sa.Column("type", sa.String(40), nullable=False),
         sa.Column("data", sa.Text(), nullable=False),
-    )
-
-
-def _session_rows(name: str, *columns: sa.Column, unique: tuple[str, str] | None = None) -> None:
-    """A table of a session's rows: an id, the session, ``columns``, the time of creation, unique
-    (constraint name, column) per session when given; indexed by session."""
-    op.create_table(
-        name,
-        sa.Column("id", sa.Integer(), primary_key=True, autoincrement=True),
-        sa.Column("session_id", sa.String(32), sa.ForeignKey("sessions.id"), nullable=False),
-        *columns,
         sa.Column("created_at", sa.DateTime(), nullable=False),
-        *([] if unique is None else [sa.UniqueConstraint("session_id", unique[1], name=unique[0])]),
     )
-    op.create_index(f"ix_{name}_session_id", name, ["session_id"])
+    op.create_index("ix_events_session_id", "events", ["session_id"])
 
 
 def downgrade() -> None:
