@@ -358,6 +358,48 @@ def test_csv_is_parsed_on_the_calling_thread(tmp_path, monkeypatch):
     assert len(seen) == 1 and seen[0] is not None and seen[0].use_threads is False
 
 
+def _read_split_and_whole(path: Path, monkeypatch) -> list:
+    """``read_trials(path)`` parsed whole and in two halves (the frame, or the error's text)."""
+    from trustseek.data import sources
+
+    out = []
+    for split in (1 << 62, 0):
+        monkeypatch.setattr(sources, "SPLIT_BYTES", split)
+        try:
+            out.append(read_trials(path))
+        except DataError as exc:
+            out.append(str(exc))
+    return out
+
+
+def test_a_large_csv_parsed_in_two_halves_reads_as_whole(tmp_path, monkeypatch):
+    """A large CSV is parsed in two halves at once (two cores); the frame is the one-pass frame."""
+    import pyarrow.csv as pcsv
+
+    seen = []
+    real = pcsv.read_csv
+
+    def spy(source, read_options=None, **kw):
+        seen.append(read_options.use_threads)
+        return real(source, read_options=read_options, **kw)
+
+    monkeypatch.setattr(pcsv, "read_csv", spy)
+    whole, halves = _read_split_and_whole(example_path(), monkeypatch)
+    pd.testing.assert_frame_equal(whole, halves)
+    assert seen == [False, False, False]  # one pass, then two halves: never pyarrow's pool
+
+
+def test_bad_rows_in_either_half_are_numbered_as_in_the_file(tmp_path, monkeypatch):
+    lines = example_path().read_text().splitlines()
+    lines[3] += ",x"  # first half
+    lines[-5] += ",y"  # second half, after an empty line below
+    lines.insert(len(lines) // 2 + 10, "")
+    lines[-2] = lines[-2].rsplit(",", 1)[0]
+    whole, halves = _read_split_and_whole(write(tmp_path, "\n".join(lines) + "\n"), monkeypatch)
+    assert whole == halves
+    assert "row 3 (8 fields)" in whole and "row 635 (8 fields)" in whole and "row 638 (6 fields)" in whole
+
+
 def test_duplicate_trials_are_counted_by_participant_naming_the_order(tmp_path):
     frame = pd.read_csv(example_path("paper_trials.csv"))
     again = pd.concat([frame, frame[frame.participant.isin(["P001", "P002"])]])

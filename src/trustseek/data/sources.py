@@ -11,8 +11,10 @@ import csv
 import io
 import itertools
 import json
+import os
 import re
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -293,36 +295,46 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
     dupes = sorted(c for c, k in counts.items() if k > 1)
     if dupes:
         raise DataError([f"column {shorten(c, 80)!r} appears {counts[c]} times in the header" for c in dupes[:SHOWN]], name)
-    bad_rows: list[tuple[int | None, int, str]] = []
-
-    def invalid(row: Any) -> str:
-        try:
-            text = str(row.text)
-        except UnicodeDecodeError:
-            text = "(not UTF-8 text)"
-        bad_rows.append((row.number, row.actual_columns, text))
-        return "skip"
-
     # every column as codes into its distinct texts: no Python string per cell
     dictionary = pa.dictionary(pa.int32(), pa.string())
     types = dict.fromkeys(header, dictionary)
+    parts = _csv_parts(path)
+    bad_rows: list[list[tuple[int | None, int, str]]] = [[] for _ in parts]
+
+    def parse(i: int) -> Any:
+        def invalid(row: Any) -> str:
+            try:
+                text = str(row.text)
+            except UnicodeDecodeError:
+                text = "(not UTF-8 text)"
+            bad_rows[i].append((row.number, row.actual_columns, text))
+            return "skip"
+
+        # on the calling thread (pyarrow's own pool is not used): a process that has read a CSV on
+        # pyarrow's thread pool can abort at exit ("terminate called without an active exception")
+        # under load, instead of exiting with its status
+        return pcsv.read_csv(
+            pa.BufferReader(parts[i]) if len(parts) > 1 else path,
+            read_options=pcsv.ReadOptions(column_names=header, skip_rows=int(i == 0), block_size=1 << 24, use_threads=False),
+            parse_options=pcsv.ParseOptions(delimiter=sep, invalid_row_handler=invalid, newlines_in_values=False),
+            convert_options=pcsv.ConvertOptions(
+                column_types=types, null_values=[], strings_can_be_null=False, quoted_strings_can_be_null=False
+            ),
+        )
+
     # pyarrow decodes a malformed row's text for the handler; a row that is not UTF-8 fails there,
     # outside any caller, so such failures are collected here instead of being printed
     undecodable: list[Any] = []
     hook = sys.unraisablehook
     sys.unraisablehook = undecodable.append
     try:
-        # one thread: a process that has read a CSV on pyarrow's thread pool can abort at exit
-        # ("terminate called without an active exception") under load, instead of exiting with
-        # its status; the single-threaded parse costs ~0.5 s on 7.1 M rows (benchmarks/bench_read.py)
-        table = pcsv.read_csv(
-            path,
-            read_options=pcsv.ReadOptions(column_names=header, skip_rows=1, block_size=1 << 24, use_threads=False),
-            parse_options=pcsv.ParseOptions(delimiter=sep, invalid_row_handler=invalid, newlines_in_values=False),
-            convert_options=pcsv.ConvertOptions(
-                column_types=types, null_values=[], strings_can_be_null=False, quoted_strings_can_be_null=False
-            ),
-        )
+        if len(parts) == 1:
+            table = parse(0)
+        else:  # the second half on a thread of ours while this one parses the first
+            with ThreadPoolExecutor(1, thread_name_prefix="trustseek-csv") as pool:
+                second = pool.submit(parse, 1)
+                first = parse(0)
+                table = pa.concat_tables([first, second.result()])
     except (pa.ArrowException, OSError) as exc:
         msg = str(exc)
         if "UTF8" in msg or "UTF-8" in msg:
@@ -332,14 +344,48 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
         sys.unraisablehook = hook
     if undecodable:
         raise DataError(["the file is not UTF-8 text (save it as UTF-8 CSV)"], name)
-    if bad_rows:
+    if any(bad_rows):
+        if len(parts) > 1 and bad_rows[1]:  # the second half's line numbers count from its start
+            before = _line_ends(parts[0])
+            bad_rows[1] = [(None if n is None else n + before, got, text) for n, got, text in bad_rows[1]]
         p = Problems()
         p.add(
             f"rows whose number of fields differs from the header's {len(header)} (delimiter {sep!r})",
-            [_bad_row(number, got, text) for number, got, text in bad_rows],
+            [_bad_row(number, got, text) for part in bad_rows for number, got, text in part],
         )
         raise DataError(p.lines, name)
     return _arrow_source(table, name, header, missing)
+
+
+SPLIT_BYTES = 1 << 26  # a CSV from this size (64 MB) is parsed in two halves side by side
+SPLIT_SEARCH = 1 << 20  # how far past the middle a line end is looked for
+
+
+def _csv_parts(path: Path) -> list[Any]:
+    """The file whole (one part), or from :data:`SPLIT_BYTES` on a machine with two cores or more
+    its two halves (pyarrow buffers of the memory-mapped file), split after the first line end
+    past the middle: a row never spans lines here (no newlines in values), so the halves hold
+    the rows of the whole, in order.  The two are parsed at once, one per core: 7.1 M rows in
+    about half the time of one pass (``benchmarks/bench_startup.py``, the 100,000 x 71 fit)."""
+    import pyarrow as pa
+
+    size = path.stat().st_size
+    if size < SPLIT_BYTES or len(os.sched_getaffinity(0)) < 2:
+        return [path]
+    whole = pa.memory_map(str(path)).read_buffer()
+    middle = size // 2
+    end = whole.slice(middle, min(SPLIT_SEARCH, size - middle)).to_pybytes().find(b"\n")
+    if end < 0 or middle + end + 1 >= size:
+        return [path]
+    cut = middle + end + 1
+    return [whole.slice(0, cut), whole.slice(cut)]
+
+
+def _line_ends(part: Any) -> int:
+    """The line ends in a part of the file (the lines before the next part)."""
+    import numpy as np
+
+    return int(np.count_nonzero(np.frombuffer(part, dtype=np.uint8) == ord("\n")))
 
 
 def _bad_row(number: int | None, got: int, text: str) -> str:
