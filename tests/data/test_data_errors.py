@@ -400,6 +400,17 @@ def test_bad_rows_in_either_half_are_numbered_as_in_the_file(tmp_path, monkeypat
     assert "row 3 (8 fields)" in whole and "row 635 (8 fields)" in whole and "row 638 (6 fields)" in whole
 
 
+def test_a_csv_with_quotes_is_never_cut_inside_a_quoted_line_end(tmp_path, monkeypatch):
+    """A quoted value may hold a line end (pyarrow reads it as one value): a file with a quote is
+    parsed in one pass, so a cut never falls inside one (here the line end past the middle)."""
+    lines = example_path().read_text().splitlines()
+    middle = len(lines) // 2 - 1
+    lines[middle] = lines[middle].replace(",low,", ',"lo\nw",', 1).replace(",high,", ',"hi\ngh",', 1)
+    whole, halves = _read_split_and_whole(write(tmp_path, "\r\n".join(lines) + "\r\n"), monkeypatch)
+    assert whole == halves
+    assert "unknown category" in whole and f"row {middle}" in whole
+
+
 def test_duplicate_trials_are_counted_by_participant_naming_the_order(tmp_path):
     frame = pd.read_csv(example_path("paper_trials.csv"))
     again = pd.concat([frame, frame[frame.participant.isin(["P001", "P002"])]])

@@ -11,6 +11,7 @@ import csv
 import io
 import itertools
 import json
+import mmap
 import os
 import re
 import sys
@@ -363,22 +364,24 @@ SPLIT_SEARCH = 1 << 20  # how far past the middle a line end is looked for
 
 def _csv_parts(path: Path) -> list[Any]:
     """The file whole (one part), or from :data:`SPLIT_BYTES` on a machine with two cores or more
-    its two halves (pyarrow buffers of the memory-mapped file), split after the first line end
-    past the middle: a row never spans lines here (no newlines in values), so the halves hold
-    the rows of the whole, in order.  The two are parsed at once, one per core: 7.1 M rows in
-    about half the time of one pass (``benchmarks/bench_startup.py``, the 100,000 x 71 fit)."""
+    its two halves (buffers of the memory-mapped file), split after the first line end past the
+    middle.  Only a file without a quote is split: a quoted value may hold a line end, and a
+    row never spans lines outside one, so the halves hold the rows of the whole, in order.  The
+    two are parsed at once, one per core: 7.1 M rows in about half the time of one pass
+    (``benchmarks/bench_read.py``)."""
     import pyarrow as pa
 
     size = path.stat().st_size
     if size < SPLIT_BYTES or len(os.sched_getaffinity(0)) < 2:
         return [path]
-    whole = pa.memory_map(str(path)).read_buffer()
+    with path.open("rb") as fh:
+        whole = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
     middle = size // 2
-    end = whole.slice(middle, min(SPLIT_SEARCH, size - middle)).to_pybytes().find(b"\n")
-    if end < 0 or middle + end + 1 >= size:
+    end = whole.find(b"\n", middle, middle + SPLIT_SEARCH)
+    if end < 0 or end + 1 >= size or whole.find(b'"') >= 0:
         return [path]
-    cut = middle + end + 1
-    return [whole.slice(0, cut), whole.slice(cut)]
+    buffer = pa.py_buffer(whole)
+    return [buffer.slice(0, end + 1), buffer.slice(end + 1)]
 
 
 def _line_ends(part: Any) -> int:
