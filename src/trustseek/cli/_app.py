@@ -122,9 +122,7 @@ def _same_path(a: Path, b: Path) -> bool:
 
 def check_not_inputs(outputs: tuple[tuple[Path | None, str], ...], inputs: tuple[tuple[Any, str], ...]) -> None:
     """Refuse, before any work, an output (path, option) that names an input (path or preset
-    name, what it is): writing it would overwrite what the command reads (a --mapping file's
-    joined file included)."""
-    inputs = (*inputs, *_joined_files(inputs))
+    name, what it is): writing it would overwrite what the command reads."""
     for out, option in outputs:
         if out is None:
             continue
@@ -133,25 +131,6 @@ def check_not_inputs(outputs: tuple[tuple[Path | None, str], ...], inputs: tuple
                 raise TrustseekError(
                     [f"{option} {out}: is the {what}; writing it would overwrite the input: choose another file"]
                 )
-
-
-def _joined_files(inputs: tuple[tuple[Any, str], ...]) -> list[tuple[str, str]]:
-    """The second file a --mapping file joins onto the log (a mapping that cannot be read has none
-    here: its reader says what is wrong)."""
-    mappings = [given for given, what in inputs if given is not None and what == "--mapping file"]
-    if not mappings:
-        return []  # without a mapping nothing to read (and no pandas to load: 0.45 s of a start)
-    from ..data.mapping import ColumnMapping
-
-    out = []
-    for given in mappings:
-        try:
-            join = ColumnMapping.load(given).join
-        except TrustseekError:
-            continue
-        if join is not None:
-            out.append((join["file"], "file the --mapping file joins"))
-    return out
 
 
 @contextmanager
@@ -269,28 +248,3 @@ def keep_columns(out, frame, keep: list[str] | None):
     for c in keep:
         out[c] = frame[c].to_numpy()
     return out
-
-
-def check_mapping_file(path: Path | None) -> None:
-    """Refuse a ``--mapping`` file that is not readable text (a folder, binary, not UTF-8) or,
-    for JSON, not a JSON object, naming the file; the mapping's content is checked by its reader."""
-    from ..model.jsonfile import ModelError, load_json
-
-    if path is None:
-        return
-    if path.suffix.lower() == ".toml":
-        try:
-            path.read_bytes().decode("utf-8")
-        except IsADirectoryError:
-            raise TrustseekError(["--mapping: is a directory, expected a JSON or TOML file"], str(path)) from None
-        except FileNotFoundError:
-            raise TrustseekError(["--mapping: file not found"], str(path)) from None
-        except OSError as exc:
-            raise TrustseekError([f"--mapping: cannot read file: {exc.strerror or exc}"], str(path)) from None
-        except UnicodeDecodeError:
-            raise TrustseekError(["--mapping: is not UTF-8 text: save it as UTF-8 TOML"], str(path)) from None
-        return
-    try:
-        load_json(path)
-    except ModelError as exc:
-        raise TrustseekError([f"--mapping: {p}" for p in exc.problems], str(path)) from None

@@ -261,10 +261,10 @@ def agnostic(
     from ..solvers import make_solver, trust_agnostic_from_data
 
     check_output(out, "--out", (".json",))
-    inputs = ((model, "--model file"), (task, "--task file"), (data, "--data log"), (reading.mapping, "--mapping file"))
-    check_not_inputs(((out, "--out"),), inputs)
     if data is None and (reading.mapping is not None or reading.column or reading.label or reading.order):
         raise TrustseekError(["--mapping, --column, --label and --order apply to a log: give it with --data"])
+    inputs = ((model, "--model file"), (task, "--task file"), (data, "--data log"), *reading.inputs())
+    check_not_inputs(((out, "--out"),), inputs)
     t = load_task(task)
     pol: Policy
     if data is not None:
