@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated
 
 import typer
 from rich.markup import escape
@@ -99,79 +100,101 @@ def _inputs(text: str | None, default: tuple[str, ...], flag: str, declared: tup
 @app.command(rich_help_panel="Estimate")
 @log_options(keep=True)
 def fit(
-    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
-    preset: str = typer.Option("paper", "--preset", help="Model structure preset (paper)."),
-    levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Number of trust levels."),
-    transitions_on: str | None = typer.Option(
-        None,
-        "--transitions-on",
-        help="Comma-separated inputs of the trust transitions (default: complexity,robot_action,experience; 'none' for "
-        "none); the mapping's 'inputs' may be named too: the fit is then a general model (trustseek.iohmm/1).",
-    ),
-    emissions_on: str | None = typer.Option(
-        None,
-        "--emissions-on",
-        help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for "
-        "none); the mapping's 'inputs' may be named too.",
-    ),
-    restarts: int = typer.Option(10, "--restarts", "-r", min=1, max=1000, help="Random restarts; the best is kept."),
-    bootstrap: int = typer.Option(
-        0,
-        "--bootstrap",
-        "-b",
-        min=0,
-        max=10_000,
-        help="Participant-level bootstrap resamples for 95% intervals (0 = none; at least 200 advised, fewer warn).",
-    ),
-    prior: float = typer.Option(
-        0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."
-    ),
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed (restarts and bootstrap)."),
-    tol: float = typer.Option(
-        1e-8, "--tol", callback=check_tol, help="Stop when the relative change of the log-likelihood is below this (> 0)."
-    ),
-    max_iter: int = typer.Option(1000, "--max-iter", min=1, help="Iteration cap per restart (E-steps)."),
-    jobs: int | None = typer.Option(
-        None,
-        "--jobs",
-        "-j",
-        min=1,
-        help="Threads for the fit and processes for the bootstrap (default: all cores); numbers do not depend on it.",
-    ),
-    out: Path | None = typer.Option(
-        None,
-        "--out",
-        "-o",
-        help="Write the fitted trust model (JSON, same format as the presets; a general model for other inputs).",
-    ),
-    posteriors: Path | None = typer.Option(
-        None, "--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet)."
-    ),
-    plots: Path | None = typer.Option(
-        None, "--plots", help="Write emission/transition figures (Fig. 4-6 style) into this directory."
-    ),
-    fill_from: str | None = typer.Option(
-        None,
-        "--fill-from",
-        help="Take the rows the data never estimated (e.g. every ask row of a study without asking) from this model "
-        "(a preset name, e.g. paper, or a JSON file with the same levels and complexities).",
-    ),
-    as_json: bool = typer.Option(False, "--json", help="Print the fitted model and diagnostics as one JSON object."),
-    rating: str | None = typer.Option(
-        None,
-        "--rating",
-        help="The log's self-reported trust rating column, fitted jointly as a second emission of the trust "
-        "(empty cells: no rating); or give 'rating' in the mapping file.",
-    ),
-    rating_levels: str | None = typer.Option(
-        None, "--rating-levels", help="The rating's levels, lowest first, comma-separated (e.g. 1,2,3,4,5,6,7 or low,mid,high)."
-    ),
-    rating_bins: str | None = typer.Option(
-        None, "--rating-bins", help="Bin a numeric rating at these edges, comma-separated (e.g. 0,25,50,75,100)."
-    ),
-    ratings_only: bool = typer.Option(
-        False, "--ratings-only", help="Leave the human actions out: fit the trust on the ratings alone."
-    ),
+    log: Annotated[Path, typer.Argument(help="Trial log (CSV or Parquet), one row per trial.")],
+    preset: Annotated[str, typer.Option("--preset", help="Model structure preset (paper).")] = "paper",
+    levels: Annotated[int, typer.Option("--levels", "-k", min=2, max=8, help="Number of trust levels.")] = 2,
+    transitions_on: Annotated[
+        str | None,
+        typer.Option(
+            "--transitions-on",
+            help="Comma-separated inputs of the trust transitions (default: complexity,robot_action,experience; 'none' for "
+            "none); the mapping's 'inputs' may be named too: the fit is then a general model (trustseek.iohmm/1).",
+        ),
+    ] = None,
+    emissions_on: Annotated[
+        str | None,
+        typer.Option(
+            "--emissions-on",
+            help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for "
+            "none); the mapping's 'inputs' may be named too.",
+        ),
+    ] = None,
+    restarts: Annotated[int, typer.Option("--restarts", "-r", min=1, max=1000, help="Random restarts; the best is kept.")] = 10,
+    bootstrap: Annotated[
+        int,
+        typer.Option(
+            "--bootstrap",
+            "-b",
+            min=0,
+            max=10_000,
+            help="Participant-level bootstrap resamples for 95% intervals (0 = none; at least 200 advised, fewer warn).",
+        ),
+    ] = 0,
+    prior: Annotated[
+        float,
+        typer.Option("--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."),
+    ] = 0.0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed (restarts and bootstrap).")] = 0,
+    tol: Annotated[
+        float,
+        typer.Option(
+            "--tol", callback=check_tol, help="Stop when the relative change of the log-likelihood is below this (> 0)."
+        ),
+    ] = 1e-8,
+    max_iter: Annotated[int, typer.Option("--max-iter", min=1, help="Iteration cap per restart (E-steps).")] = 1000,
+    jobs: Annotated[
+        int | None,
+        typer.Option(
+            "--jobs",
+            "-j",
+            min=1,
+            help="Threads for the fit and processes for the bootstrap (default: all cores); numbers do not depend on it.",
+        ),
+    ] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            "-o",
+            help="Write the fitted trust model (JSON, same format as the presets; a general model for other inputs).",
+        ),
+    ] = None,
+    posteriors: Annotated[
+        Path | None, typer.Option("--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet).")
+    ] = None,
+    plots: Annotated[
+        Path | None, typer.Option("--plots", help="Write emission/transition figures (Fig. 4-6 style) into this directory.")
+    ] = None,
+    fill_from: Annotated[
+        str | None,
+        typer.Option(
+            "--fill-from",
+            help="Take the rows the data never estimated (e.g. every ask row of a study without asking) from this model "
+            "(a preset name, e.g. paper, or a JSON file with the same levels and complexities).",
+        ),
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the fitted model and diagnostics as one JSON object.")] = False,
+    rating: Annotated[
+        str | None,
+        typer.Option(
+            "--rating",
+            help="The log's self-reported trust rating column, fitted jointly as a second emission of the trust "
+            "(empty cells: no rating); or give 'rating' in the mapping file.",
+        ),
+    ] = None,
+    rating_levels: Annotated[
+        str | None,
+        typer.Option(
+            "--rating-levels", help="The rating's levels, lowest first, comma-separated (e.g. 1,2,3,4,5,6,7 or low,mid,high)."
+        ),
+    ] = None,
+    rating_bins: Annotated[
+        str | None,
+        typer.Option("--rating-bins", help="Bin a numeric rating at these edges, comma-separated (e.g. 0,25,50,75,100)."),
+    ] = None,
+    ratings_only: Annotated[
+        bool, typer.Option("--ratings-only", help="Leave the human actions out: fit the trust on the ratings alone.")
+    ] = False,
     rating_per: str | None = RatingPerOpt,
     reading: LogReading = FROM_OPTIONS,
     quiet: bool = QuietOpt,
@@ -379,14 +402,16 @@ def _fit_general(frame, tr, em, run: _FitRun, outputs: _FitOutputs, fill_from: s
 @app.command("decode", rich_help_panel="Estimate")
 @log_options(keep=True)
 def decode_cmd(
-    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
-    model: Path = typer.Option(
-        ...,
-        "--model",
-        "-m",
-        help="Trust model or general model JSON (from 'trustseek fit') or supervisor types (from 'trustseek fit-types').",
-    ),
-    out: Path = typer.Option(Path("posteriors.csv"), "--out", "-o", help="Output file (.csv or .parquet)."),
+    log: Annotated[Path, typer.Argument(help="Trial log (CSV or Parquet).")],
+    model: Annotated[
+        Path,
+        typer.Option(
+            "--model",
+            "-m",
+            help="Trust model or general model JSON (from 'trustseek fit') or supervisor types (from 'trustseek fit-types').",
+        ),
+    ],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output file (.csv or .parquet).")] = Path("posteriors.csv"),
     reading: LogReading = FROM_OPTIONS,
 ) -> None:
     """Per-trial smoothed P(trust | data) and the Viterbi trust path under a model.
@@ -417,21 +442,25 @@ def decode_cmd(
 @app.command(rich_help_panel="Estimate")
 @log_options()
 def select(
-    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
-    max_levels: int = typer.Option(4, "--max-levels", min=1, max=8, help="Compare 1..this many trust levels."),
-    folds: int = typer.Option(5, "--folds", min=2, help="Folds over participants for the held-out log-likelihood."),
-    restarts: int | None = typer.Option(
-        None,
-        "--restarts",
-        "-r",
-        min=1,
-        max=1000,
-        help="Random starts per fit (default: max(10, free parameters / 4)); each fit also starts from the "
-        "fit with one level fewer, each level split in two.",
-    ),
-    prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count (MAP)."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
-    tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
+    log: Annotated[Path, typer.Argument(help="Trial log (CSV or Parquet).")],
+    max_levels: Annotated[int, typer.Option("--max-levels", min=1, max=8, help="Compare 1..this many trust levels.")] = 4,
+    folds: Annotated[int, typer.Option("--folds", min=2, help="Folds over participants for the held-out log-likelihood.")] = 5,
+    restarts: Annotated[
+        int | None,
+        typer.Option(
+            "--restarts",
+            "-r",
+            min=1,
+            max=1000,
+            help="Random starts per fit (default: max(10, free parameters / 4)); each fit also starts from the "
+            "fit with one level fewer, each level split in two.",
+        ),
+    ] = None,
+    prior: Annotated[float, typer.Option("--prior", min=0.0, help="Dirichlet pseudo-count (MAP).")] = 0.0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed.")] = 0,
+    tol: Annotated[
+        float, typer.Option("--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0).")
+    ] = 1e-6,
     transitions_on: str | None = AsForFitTransitionsOpt,
     emissions_on: str | None = AsForFitEmissionsOpt,
     widen: bool = widen_option(8, "1..--max-levels"),

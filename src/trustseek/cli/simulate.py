@@ -6,7 +6,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from rich.console import Console
@@ -78,79 +78,99 @@ def _policy(
 @app.command(rich_help_panel="Simulate and reproduce")
 def simulate(
     ctx: typer.Context,
-    model: str = typer.Option(
-        "paper",
-        "--model",
-        "-m",
-        help="Supervisors' trust model: a preset name (paper) or a JSON file; a mixture of supervisor types "
-        "(paper+conservative or a mixture file) gives each participant a type in the mixture's shares.",
-    ),
-    types: str | None = typer.Option(
-        None,
-        "--types",
-        help="Supervisors of several types, as 'solve --types' takes them: a mixture preset (paper+conservative) "
-        "or a mixture JSON file (the same as giving the mixture with --model).",
-    ),
+    model: Annotated[
+        str,
+        typer.Option(
+            "--model",
+            "-m",
+            help="Supervisors' trust model: a preset name (paper) or a JSON file; a mixture of supervisor types "
+            "(paper+conservative or a mixture file) gives each participant a type in the mixture's shares.",
+        ),
+    ] = "paper",
+    types: Annotated[
+        str | None,
+        typer.Option(
+            "--types",
+            help="Supervisors of several types, as 'solve --types' takes them: a mixture preset (paper+conservative) "
+            "or a mixture JSON file (the same as giving the mixture with --model).",
+        ),
+    ] = None,
     task: str = TaskOpt,
-    policy: str = typer.Option(
-        "trust-aware",
-        "--policy",
-        "-p",
-        help=f"Robot policy: {', '.join(POLICY_SPEC_KINDS)}, {TYPE_AWARE} (for a mixture of supervisor types), "
-        "or a policy JSON file (e.g. from 'trustseek solve --out').",
-    ),
-    participants: int = typer.Option(9, "--participants", "-n", min=1, max=1_000_000, help="Number of simulated participants."),
-    counts: str | None = typer.Option(
-        None,
-        "--counts",
-        help="Trials per complexity in random order, e.g. 41,30 or low=41,high=30 (the paper's design). "
-        "Default: 41,30 unless --trials is given.",
-    ),
-    trials: int | None = typer.Option(
-        None,
-        "--trials",
-        min=1,
-        max=100_000,
-        help="Number of trials with i.i.d. complexities from the task's probabilities (instead of --counts).",
-    ),
-    belief_update: str = typer.Option(
-        "bayes",
-        "--belief-update",
-        "-u",
-        help="Belief update of the trust-aware policy: 'bayes' (exact filter, default) or 'paper' (eq. 3).",
-    ),
-    policy_model: str | None = typer.Option(
-        None, "--policy-model", help="Model the trust-aware policy is solved for (default: the supervisors' model)."
-    ),
-    grid: int = typer.Option(1001, "--grid", min=3, max=1_000_001, help="Belief grid points for solving the trust-aware policy."),
-    ask_low: float = typer.Option(
-        PAPER_ASK_PROBABILITIES["low"], "--ask-low", min=0.0, max=1.0, help="Randomized policy: P(ask) in the first complexity."
-    ),
-    ask_high: float = typer.Option(
-        PAPER_ASK_PROBABILITIES["high"],
-        "--ask-high",
-        min=0.0,
-        max=1.0,
-        help="Randomized policy: P(ask) in the second complexity.",
-    ),
-    concentration: float | None = typer.Option(
-        None,
-        "--concentration",
-        help="Heterogeneous population: each participant's probability rows ~ Dirichlet(concentration x pooled row + pseudo).",
-    ),
-    pseudo: float = typer.Option(
-        0.0, "--pseudo", min=0.0, help="Dirichlet pseudo-count added to every cell (with --concentration)."
-    ),
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed (same seed, same supervisors and luck for any policy)."),
-    out: Path | None = typer.Option(
-        None,
-        "--out",
-        "-o",
-        help="Write every trial (canonical trial log + true_trust, belief, reward, block, policy) to this CSV/Parquet file.",
-    ),
-    summary_out: Path | None = typer.Option(
-        None, "--summary-out", help="Write the per-participant summary to this CSV/Parquet file."
-    ),
+    policy: Annotated[
+        str,
+        typer.Option(
+            "--policy",
+            "-p",
+            help=f"Robot policy: {', '.join(POLICY_SPEC_KINDS)}, {TYPE_AWARE} (for a mixture of supervisor types), "
+            "or a policy JSON file (e.g. from 'trustseek solve --out').",
+        ),
+    ] = "trust-aware",
+    participants: Annotated[
+        int, typer.Option("--participants", "-n", min=1, max=1_000_000, help="Number of simulated participants.")
+    ] = 9,
+    counts: Annotated[
+        str | None,
+        typer.Option(
+            "--counts",
+            help="Trials per complexity in random order, e.g. 41,30 or low=41,high=30 (the paper's design). "
+            "Default: 41,30 unless --trials is given.",
+        ),
+    ] = None,
+    trials: Annotated[
+        int | None,
+        typer.Option(
+            "--trials",
+            min=1,
+            max=100_000,
+            help="Number of trials with i.i.d. complexities from the task's probabilities (instead of --counts).",
+        ),
+    ] = None,
+    belief_update: Annotated[
+        str,
+        typer.Option(
+            "--belief-update",
+            "-u",
+            help="Belief update of the trust-aware policy: 'bayes' (exact filter, default) or 'paper' (eq. 3).",
+        ),
+    ] = "bayes",
+    policy_model: Annotated[
+        str | None,
+        typer.Option("--policy-model", help="Model the trust-aware policy is solved for (default: the supervisors' model)."),
+    ] = None,
+    grid: Annotated[
+        int, typer.Option("--grid", min=3, max=1_000_001, help="Belief grid points for solving the trust-aware policy.")
+    ] = 1001,
+    ask_low: Annotated[
+        float, typer.Option("--ask-low", min=0.0, max=1.0, help="Randomized policy: P(ask) in the first complexity.")
+    ] = PAPER_ASK_PROBABILITIES["low"],
+    ask_high: Annotated[
+        float, typer.Option("--ask-high", min=0.0, max=1.0, help="Randomized policy: P(ask) in the second complexity.")
+    ] = PAPER_ASK_PROBABILITIES["high"],
+    concentration: Annotated[
+        float | None,
+        typer.Option(
+            "--concentration",
+            help="Heterogeneous population: each participant's probability rows ~ "
+            "Dirichlet(concentration x pooled row + pseudo).",
+        ),
+    ] = None,
+    pseudo: Annotated[
+        float, typer.Option("--pseudo", min=0.0, help="Dirichlet pseudo-count added to every cell (with --concentration).")
+    ] = 0.0,
+    seed: Annotated[
+        int, typer.Option("--seed", min=0, help="Random seed (same seed, same supervisors and luck for any policy).")
+    ] = 0,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            "-o",
+            help="Write every trial (canonical trial log + true_trust, belief, reward, block, policy) to this CSV/Parquet file.",
+        ),
+    ] = None,
+    summary_out: Annotated[
+        Path | None, typer.Option("--summary-out", help="Write the per-participant summary to this CSV/Parquet file.")
+    ] = None,
     as_json: bool = JsonOpt,
 ) -> None:
     """Simulate supervisors from a trust model working with the robot under a policy."""
@@ -333,44 +353,56 @@ def _write(frame, path: Path) -> None:
 
 @app.command(rich_help_panel="Simulate and reproduce")
 def reproduce(
-    out: Path = typer.Option(Path("report"), "--out", "-o", help="Report folder (report.html, PNGs, summary.json, data)."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed: the same seed gives the same numbers."),
-    replicates: int = typer.Option(
-        20, "--replicates", "-r", min=0, max=10_000, help="Replicate experiments of the whole pipeline."
+    out: Annotated[Path, typer.Option("--out", "-o", help="Report folder (report.html, PNGs, summary.json, data).")] = Path(
+        "report"
     ),
-    large_n: int = typer.Option(
-        10_000, "--large-n", min=1, max=1_000_000, help="Participants of the large experiment 2 and of the cost studies."
-    ),
-    bootstrap: int = typer.Option(
-        200, "--bootstrap", "-b", min=0, max=10_000, help="Bootstrap resamples for the fitted model's intervals."
-    ),
-    restarts: int = typer.Option(10, "--restarts", min=1, max=1000, help="EM restarts of the main fit."),
-    replicate_restarts: int = typer.Option(4, "--replicate-restarts", min=1, max=1000, help="EM restarts per replicate fit."),
-    replicate_large_n: int = typer.Option(
-        2_000, "--replicate-large-n", min=1, max=1_000_000, help="Participants of each replicate's large experiment 2."
-    ),
-    belief_update: str = typer.Option(
-        "paper",
-        "--belief-update",
-        "-u",
-        help="Belief update of the trust-aware policy: 'paper' (eq. 3, as in the paper) or 'bayes'.",
-    ),
-    jobs: int = typer.Option(2, "--jobs", "-j", min=1, help="Processes (bootstrap and replicates); numbers do not depend on it."),
-    schedule_participants: int = typer.Option(
-        10_000,
-        "--schedule-participants",
-        min=0,
-        max=1_000_000,
-        help="Simulated participants of the trial-scheduling section (0: leave the section out).",
-    ),
-    types_participants: int = typer.Option(
-        2_000,
-        "--types-participants",
-        min=0,
-        max=1_000_000,
-        help="Simulated participants of the supervisor-types section (Remark 1; 0: leave the section out).",
-    ),
-    as_json: bool = typer.Option(False, "--json", help="Print summary.json to stdout instead of tables."),
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed: the same seed gives the same numbers.")] = 0,
+    replicates: Annotated[
+        int, typer.Option("--replicates", "-r", min=0, max=10_000, help="Replicate experiments of the whole pipeline.")
+    ] = 20,
+    large_n: Annotated[
+        int,
+        typer.Option("--large-n", min=1, max=1_000_000, help="Participants of the large experiment 2 and of the cost studies."),
+    ] = 10_000,
+    bootstrap: Annotated[
+        int, typer.Option("--bootstrap", "-b", min=0, max=10_000, help="Bootstrap resamples for the fitted model's intervals.")
+    ] = 200,
+    restarts: Annotated[int, typer.Option("--restarts", min=1, max=1000, help="EM restarts of the main fit.")] = 10,
+    replicate_restarts: Annotated[
+        int, typer.Option("--replicate-restarts", min=1, max=1000, help="EM restarts per replicate fit.")
+    ] = 4,
+    replicate_large_n: Annotated[
+        int,
+        typer.Option("--replicate-large-n", help="Participants of each replicate's large experiment 2.", min=1, max=1_000_000),
+    ] = 2_000,
+    belief_update: Annotated[
+        str,
+        typer.Option(
+            "--belief-update", "-u", help="Belief update of the trust-aware policy: 'paper' (eq. 3, as in the paper) or 'bayes'."
+        ),
+    ] = "paper",
+    jobs: Annotated[
+        int, typer.Option("--jobs", "-j", min=1, help="Processes (bootstrap and replicates); numbers do not depend on it.")
+    ] = 2,
+    schedule_participants: Annotated[
+        int,
+        typer.Option(
+            "--schedule-participants",
+            min=0,
+            max=1_000_000,
+            help="Simulated participants of the trial-scheduling section (0: leave the section out).",
+        ),
+    ] = 10_000,
+    types_participants: Annotated[
+        int,
+        typer.Option(
+            "--types-participants",
+            min=0,
+            max=1_000_000,
+            help="Simulated participants of the supervisor-types section (Remark 1; 0: leave the section out).",
+        ),
+    ] = 2_000,
+    as_json: Annotated[bool, typer.Option("--json", help="Print summary.json to stdout instead of tables.")] = False,
     quiet: bool = QuietOpt,
 ) -> None:
     """Reproduce Sections V-VI of the paper on simulated supervisors and write a report."""
