@@ -51,20 +51,11 @@ def print_written(*outputs: tuple[str, Any]) -> None:
 
 
 def print_json(obj: Any) -> None:
-    """Machine-readable output: one JSON object on stdout, nothing else."""
+    """Machine-readable output: one JSON object on stdout, nothing else (numpy values as numbers
+    and lists, NaN and infinities as null: :func:`~trustseek.model.jsonfile.json_safe`)."""
     from ..model.jsonfile import json_safe
 
-    sys.stdout.write(json.dumps(json_safe(obj), indent=2, default=_json_default, allow_nan=False) + "\n")
-
-
-def _json_default(o: Any):
-    import numpy as np
-
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(f"not JSON serializable: {type(o).__name__}")
+    sys.stdout.write(json.dumps(json_safe(obj), indent=2, allow_nan=False) + "\n")
 
 
 # --------------------------------------------------------------------------- outputs
@@ -98,19 +89,25 @@ def check_output(path: Path | None, option: str, suffixes: tuple[str, ...] | Non
         fail("exists and is not writable")
 
 
-def check_outputs(*outputs: tuple[Path | None, str]) -> None:
-    """:func:`check_output` for every (path, option), and no two options naming the same file."""
-    for path, option in outputs:
-        check_output(path, option)
+def check_outputs(*outputs: tuple[Any, ...], inputs: tuple[tuple[Any, str], ...] = ()) -> None:
+    """Refuse, before any work, the outputs (path, option[, suffixes]) that :func:`check_output`
+    refuses, two options naming the same file, and an output naming one of the ``inputs`` (path
+    or preset name, what it is): writing it would overwrite what the command reads."""
+    for path, option, *suffixes in outputs:
+        check_output(path, option, *suffixes)
     seen: dict[Path, str] = {}
-
-    for path, option in outputs:
+    for path, option, *_ in outputs:
         if path is None:
             continue
         key = path.resolve()
         if key in seen:
             raise TrustseekError([f"{seen[key]} and {option} name the same file {path}"])
         seen[key] = option
+        for given, what in inputs:
+            if given is not None and _same_path(path, Path(given)):
+                raise TrustseekError(
+                    [f"{option} {path}: is the {what}; writing it would overwrite the input: choose another file"]
+                )
 
 
 def _same_path(a: Path, b: Path) -> bool:
@@ -118,19 +115,6 @@ def _same_path(a: Path, b: Path) -> bool:
         return os.path.samefile(a, b)
     except OSError:  # one of them does not exist (yet): compare where they point
         return a.resolve() == b.resolve()
-
-
-def check_not_inputs(outputs: tuple[tuple[Path | None, str], ...], inputs: tuple[tuple[Any, str], ...]) -> None:
-    """Refuse, before any work, an output (path, option) that names an input (path or preset
-    name, what it is): writing it would overwrite what the command reads."""
-    for out, option in outputs:
-        if out is None:
-            continue
-        for given, what in inputs:
-            if given is not None and _same_path(out, Path(given)):
-                raise TrustseekError(
-                    [f"{option} {out}: is the {what}; writing it would overwrite the input: choose another file"]
-                )
 
 
 @contextmanager
@@ -162,6 +146,12 @@ def check_tol(value: float) -> float:
     if not (math.isfinite(value) and value > 0):
         raise typer.BadParameter(f"must be a finite number > 0, got {value}")
     return value
+
+
+def check_positive(value: float | None, option: str) -> None:
+    """A number option, when given, refused unless it is finite and > 0."""
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise TrustseekError([f"{option} must be a finite number > 0, got {value}"])
 
 
 def selection_table(title: str, key: str, rows: list[dict[str, Any]], folds: int, extra: dict[str, Any] | None = None) -> Table:

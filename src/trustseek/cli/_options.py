@@ -176,7 +176,7 @@ class LogReading:
 
     def inputs(self) -> tuple[tuple[Any, str], ...]:
         """The files the options name that a command reads (the --mapping file and the file it
-        joins), as (path, what) for :func:`~._app.check_not_inputs`."""
+        joins), as (path, what) for :func:`~._app.check_outputs`."""
         mapping = self.column_mapping
         joined = None if mapping is None or mapping.join is None else mapping.join["file"]
         return ((self.mapping, "--mapping file"), (joined, "file the --mapping file joins"))

@@ -14,8 +14,6 @@ from ..estimation.options import FitOptions
 from ._app import (
     app,
     atomic_output,
-    check_not_inputs,
-    check_output,
     check_outputs,
     check_tol,
     console,
@@ -264,10 +262,8 @@ class _FitOutputs:
 
 def _check_fit_paths(log, reading: LogReading, fill_from, out, posteriors, plots) -> None:
     """fit's output options refused before the log is read."""
-    check_outputs((out, "--out"), (posteriors, "--posteriors"))
-    check_output(posteriors, "--posteriors", POSTERIOR_SUFFIXES)
     inputs = ((log, "trial log"), *reading.inputs(), (fill_from, "--fill-from model"))
-    check_not_inputs(((out, "--out"), (posteriors, "--posteriors")), inputs)
+    check_outputs((out, "--out"), (posteriors, "--posteriors", POSTERIOR_SUFFIXES), inputs=inputs)
     check_plots_folder(plots)
     if reading.keep and posteriors is None:
         raise TrustseekError(["--keep carries log columns into --posteriors: give --posteriors"])
@@ -421,8 +417,7 @@ def decode_cmd(
 
     The log needs the columns the model depends on: a model fitted with fewer inputs
     (--transitions-on/--emissions-on) decodes a log without the others."""
-    check_output(out, "--out", POSTERIOR_SUFFIXES)
-    check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), *reading.inputs()))
+    check_outputs((out, "--out", POSTERIOR_SUFFIXES), inputs=((log, "trial log"), (model, "--model file"), *reading.inputs()))
     from ..model.mixture import TypeMixture
 
     types = load_for_decoding(model)  # a trust model, a general model or types

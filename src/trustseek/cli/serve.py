@@ -229,9 +229,7 @@ def export_cmd(
     _check_existing_sqlite(db)
     if out is None and bundle is None:
         raise TrustseekError(["give --out FILE (the trial log) or --bundle DIR (every table)"])
-    check_outputs((out, "--out"), (events, "--events"))
-    for p, option in ((out, "--out"), (events, "--events")):
-        check_output(p, option, (".csv", ".parquet"))
+    check_outputs((out, "--out", (".csv", ".parquet")), (events, "--events", (".csv", ".parquet")))
     check_output(bundle, "--bundle", directory=True)
     with open_database(db)() as s:
         st = _stored_study(s, study, db)

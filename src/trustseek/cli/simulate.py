@@ -20,7 +20,6 @@ from ..vocab import PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS, check_belief_upd
 from ._app import (
     app,
     atomic_output,
-    check_not_inputs,
     check_output,
     check_outputs,
     console,
@@ -176,9 +175,10 @@ def simulate(
     """Simulate supervisors from a trust model working with the robot under a policy."""
     from ..simulation.engine import simulate as run_simulation
 
-    given = _check_simulate(ctx, belief_update, counts, trials, out, summary_out)
+    given = _check_simulate(ctx, belief_update, counts, trials)
     inputs = ((model, "--model file"), (task, "--task file"), (policy, "--policy file"), (policy_model, "--policy-model file"))
-    check_not_inputs(((out, "--out"), (summary_out, "--summary-out")), inputs)
+    tables = (".csv", ".parquet")
+    check_outputs((out, "--out", tables), (summary_out, "--summary-out", tables), inputs=inputs)
     pop = _population(ctx, model, types, policy_model, concentration, task)
     t = pop.task
     cnt = _trial_counts(counts, trials, participants, t)
@@ -241,17 +241,13 @@ def _given(ctx: typer.Context, *names: str) -> list[str]:
     return out
 
 
-def _check_simulate(ctx: typer.Context, belief_update: str, counts, trials, out, summary_out) -> list[str]:
+def _check_simulate(ctx: typer.Context, belief_update: str, counts, trials) -> list[str]:
     """simulate's options refused before anything is loaded; the options a solved policy file would
     silently override (refused with one)."""
     check_belief_update(belief_update, "--belief-update")
     if counts is not None and trials is not None:
         raise TrustseekError(["give either --counts or --trials, not both"])
-    given = _given(ctx, "belief_update", "--belief-update", "policy_model", "--policy-model")
-    check_outputs((out, "--out"), (summary_out, "--summary-out"))
-    for f, option in ((out, "--out"), (summary_out, "--summary-out")):
-        check_output(f, option, (".csv", ".parquet"))
-    return given
+    return _given(ctx, "belief_update", "--belief-update", "policy_model", "--policy-model")
 
 
 @dataclass
@@ -337,15 +333,12 @@ def _print_simulation(desc: str, participants: int, n_trials: int, stats: dict, 
 
 
 def _write(frame, path: Path) -> None:
-    try:
-        from ..data.trials import write_trials
+    """A table of trials as a trial log, another (the summary) as it is."""
+    from ..data.trials import write_trials
 
-        if list(frame.columns[:2]) == ["participant", "trial"]:
-            write_trials(frame, path)
-            return
-    except ImportError:
-        pass
-    if path.suffix.lower() == ".parquet":
+    if list(frame.columns[:2]) == ["participant", "trial"]:
+        write_trials(frame, path)
+    elif path.suffix.lower() == ".parquet":
         frame.to_parquet(path, index=False)
     else:
         frame.to_csv(path, index=False)

@@ -14,7 +14,6 @@ from ..estimation.options import FitOptions
 from ._app import (
     app,
     atomic_output,
-    check_not_inputs,
     check_output,
     check_outputs,
     check_tol,
@@ -99,10 +98,8 @@ def fit_types(
     quiet: bool = QuietOpt,
 ) -> None:
     """Fit supervisor types: M trust models of the paper's structure, each participant one type."""
-    check_outputs((out, "--out"), (type_posteriors, "--type-posteriors"))
-    check_output(type_posteriors, "--type-posteriors", POSTERIOR_SUFFIXES)
-    outputs = ((out, "--out"), (type_posteriors, "--type-posteriors"))
-    check_not_inputs(outputs, ((log, "trial log"), *reading.inputs()))
+    outputs = ((out, "--out"), (type_posteriors, "--type-posteriors", POSTERIOR_SUFFIXES))
+    check_outputs(*outputs, inputs=((log, "trial log"), *reading.inputs()))
     check_plots_folder(plots)
     _check_differ(differ)
     tr, em, frame = read_with_inputs(log, reading, transitions_on, emissions_on)

@@ -15,8 +15,7 @@ from ..estimation.options import FitOptions
 from ._app import (
     app,
     atomic_output,
-    check_not_inputs,
-    check_output,
+    check_outputs,
     check_tol,
     console,
     err_console,
@@ -158,8 +157,7 @@ def predict(
 
 def _check_trial_output(out: Path | None, log: Path, model: Path | None, reading: LogReading) -> None:
     """--out (per-trial values) and --keep refused before anything is read."""
-    check_output(out, "--out", POSTERIOR_SUFFIXES)
-    check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), *reading.inputs()))
+    check_outputs((out, "--out", POSTERIOR_SUFFIXES), inputs=((log, "trial log"), (model, "--model file"), *reading.inputs()))
     if reading.keep and out is None:
         raise TrustseekError(["--keep carries log columns into --out: give --out"])
 
