@@ -50,12 +50,6 @@ def _fit():
     return estimation
 
 
-def _data():
-    from ..data import trials as data
-
-    return data
-
-
 def _named_inputs(reading: LogReading, transitions_on, emissions_on) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
     """The transition and emission inputs named by the flags (canonical ones or the --mapping
     file's ``inputs``), and the canonical columns they need."""
@@ -326,8 +320,10 @@ def _write_fit(result, frame, outputs: _FitOutputs) -> None:
         with atomic_output(outputs.out) as tmp:
             result.model.save(tmp)
     if outputs.posteriors is not None:
+        from ..data.trials import write_trials
+
         with atomic_output(outputs.posteriors) as tmp:
-            _data().write_trials(keep_columns(result.posteriors(), frame, outputs.keep), tmp)
+            write_trials(keep_columns(result.posteriors(), frame, outputs.keep), tmp)
 
 
 def _plot_trust(result, drawn, plots: Path, paper_like: bool) -> None:
@@ -429,8 +425,10 @@ def decode_cmd(
         from ..estimation.mixture import decode_types
 
         post = keep_columns(decode_types(frame, types), frame, reading.keep)
+    from ..data.trials import write_trials
+
     with atomic_output(out) as tmp:
-        _data().write_trials(post, tmp)
+        write_trials(post, tmp)
     console.print(f"wrote {len(post)} trials to {out}")
 
 

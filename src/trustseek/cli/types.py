@@ -42,12 +42,6 @@ DifferOpt = typer.Option(
 )
 
 
-def _mixture():
-    from ..estimation import mixture
-
-    return mixture
-
-
 def _check_differ(differ: str) -> None:
     """--differ refused before the log is read when it names no part of the model."""
     from ..estimation.mixture_em import parse_differ
@@ -106,10 +100,12 @@ def fit_types(
     named = [c for c in (*em, *tr) if c not in ("complexity", "robot_action", "experience")]
     if plots is not None and named:
         raise TrustseekError([f"--plots draws trust-model types; types of the named inputs {named} have no figures here"])
+    from ..estimation.mixture import fit_types as fit_mixture
+
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("starts", total=restarts)
-        fit = _mixture().fit_types(
+        fit = fit_mixture(
             frame,
             types,
             options=FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs),

@@ -40,18 +40,6 @@ BootstrapOpt = typer.Option(
 )
 
 
-def _prediction():
-    from ..estimation import prediction
-
-    return prediction
-
-
-def _validation():
-    from ..estimation import validation
-
-    return validation
-
-
 def _table(title: str, *columns: str) -> Table:
     table = Table(title=title, title_justify="left", box=None, padding=(0, 2, 0, 0), header_style="bold underline")
     for i, c in enumerate(columns):
@@ -118,7 +106,8 @@ def predict(
     Trials whose action the model fixes (the robot asked: P(intervene) = 1) are no prediction
     and are left out of the scores."""
     _check_trial_output(out, log, model, reading)
-    pr = _prediction()
+    from ..estimation import prediction as pr
+
     if model is not None:
         if folds is not None:
             raise TrustseekError(["--folds scores held-out fits; --model scores that model in-sample: give one of them"])
@@ -251,7 +240,8 @@ def validate(
         labels = [x.strip() for x in rating_labels.split(",")]
     m = _load(model)
     frame = read_for_types(log, m, reading)
-    va = _validation()
+    from ..estimation import validation as va
+
     if rating is None:
         if "rating" not in frame.columns:
             raise TrustseekError(["no rating column: name the log's self-reported trust column with --rating COLUMN"])
