@@ -12,26 +12,8 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
-from ._app import (
-    app,
-    atomic_output,
-    check_outputs,
-    check_tol,
-    console,
-    err_console,
-    keep_columns,
-    print_json,
-    progress_task,
-)
-from ._options import (
-    FROM_OPTIONS,
-    AsForFitEmissionsOpt,
-    AsForFitTransitionsOpt,
-    LogReading,
-    QuietOpt,
-    RatingPerOpt,
-    log_options,
-)
+from ._app import app, atomic_output, check_outputs, check_tol, console, err_console, keep_columns, print_json, progress_task
+from ._options import FROM_OPTIONS, AsForFitEmissionsOpt, AsForFitTransitionsOpt, LogReading, QuietOpt, RatingPerOpt, log_options
 from ._reading import read_for_types
 from .fit import POSTERIOR_SUFFIXES, general_inputs, read_with_inputs
 
