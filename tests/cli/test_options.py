@@ -97,3 +97,12 @@ def test_a_toml_mapping_is_refused_naming_the_option_and_the_file(tmp_path):
     mapping.write_text("columns = [")
     code, output = run_cli(["fit", LOG, "--mapping", str(mapping), "-r", "1"])
     assert code == 2 and f"{mapping}: --mapping: invalid TOML" in output and "Traceback" not in output, output
+
+
+def test_a_toml_mapping_is_read_as_a_json_one(tmp_path):
+    log = tmp_path / "log.csv"
+    log.write_text(Path(LOG).read_text().replace("participant,", "person,", 1))
+    mapping = tmp_path / "mapping.toml"
+    mapping.write_text('[columns]\nparticipant = "person"\n')
+    code, output = run_cli(["agnostic", "--data", str(log), "--mapping", str(mapping), "--json"])
+    assert code == 0 and json.loads(output)["kind"] == "trust-agnostic", output
