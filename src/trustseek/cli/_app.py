@@ -16,7 +16,6 @@ from typing import Any
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
 
 from ..errors import TrustseekError
 from ._lazy import LazyGroup
@@ -154,26 +153,7 @@ def check_positive(value: float | None, option: str) -> None:
         raise TrustseekError([f"{option} must be a finite number > 0, got {value}"])
 
 
-def selection_table(title: str, key: str, rows: list[dict[str, Any]], folds: int, extra: dict[str, Any] | None = None) -> Table:
-    """The table of a model selection (``select``, ``select-types``): per compared size ``key``
-    its log-likelihood, starts that reached the best, parameters, AIC, BIC and held-out score,
-    the best by each criterion starred; ``extra`` maps further column names to a cell function."""
-    extra = extra or {}
-    table = Table(title=title, title_justify="left")
-    for col in (key, "log-likelihood", "reached best", "parameters", "AIC", "BIC", f"held-out LL ({folds}-fold)", *extra):
-        table.add_column(col, justify="right")
-    for r in rows:
-        table.add_row(
-            str(r[key]),
-            f"{r['loglik']:.3f}",
-            f"{r['reached_best']} of {r['starts']}",
-            str(r["n_params"]),
-            f"{r['aic']:.2f}",
-            f"{r['bic']:.2f}" + (" *" if r["best_bic"] else ""),
-            f"{r['heldout_loglik']:.3f}" + (" *" if r["best_heldout"] else ""),
-            *(cell(r) for cell in extra.values()),
-        )
-    return table
+# --------------------------------------------------------------------------- progress
 
 
 def progress_bar(quiet: bool, *columns: Any) -> Progress:
@@ -199,42 +179,3 @@ def progress_task(quiet: bool, description: str, total: int | None = None) -> It
             bar.update(task, completed=done, total=of, description=description)
 
         yield update
-
-
-# --------------------------------------------------------------------------- trial logs
-
-
-def rating_entry(rating: str | None, levels: str | None, bins: str | None, per: str | None = None) -> dict | None:
-    """The mapping's rating entry from --rating, --rating-levels, --rating-bins and --rating-per
-    (None without --rating)."""
-    if rating is None:
-        if levels is not None or bins is not None or per is not None:
-            raise TrustseekError(
-                ["--rating-levels, --rating-bins and --rating-per describe the column named by --rating: give --rating"]
-            )
-        return None
-    entry: dict = {"column": rating}
-    if per is not None:
-        entry["per"] = per
-    if levels is not None:
-        entry["levels"] = [x.strip() for x in levels.split(",")]
-    if bins is not None:
-        try:
-            entry["bins"] = [float(x) for x in bins.split(",")]
-        except ValueError:
-            raise TrustseekError([f"--rating-bins {bins!r}: expected comma-separated numbers, e.g. 0,25,50,75,100"]) from None
-    return entry
-
-
-def keep_columns(out, frame, keep: list[str] | None):
-    """``out`` (one row per row of ``frame``, in its order) with the ``--keep`` columns of ``frame`` added."""
-    if not keep:
-        return out
-    absent = [c for c in keep if c not in frame.columns or c in out.columns]
-    if absent:
-        cols = list(frame.columns)
-        raise TrustseekError([f"--keep {c!r}: not an extra column of the log; its columns: {cols}" for c in absent])
-    out = out.copy()
-    for c in keep:
-        out[c] = frame[c].to_numpy()
-    return out

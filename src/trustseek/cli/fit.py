@@ -18,13 +18,10 @@ from ._app import (
     check_tol,
     console,
     err_console,
-    keep_columns,
     print_json,
     print_written,
     progress_bar,
     progress_task,
-    rating_entry,
-    selection_table,
 )
 from ._options import (
     FROM_OPTIONS,
@@ -38,7 +35,7 @@ from ._options import (
     widen_option,
 )
 from ._output import cells_table, check_plots_folder, fit_summary, print_intervals_note, print_selection, print_warnings
-from ._reading import load_for_decoding, read_for_types, widened_note
+from ._reading import keep_columns, load_for_decoding, read_for_types, widened_note
 
 # The fit and data modules (pandas, numba) load only when a command of this group runs,
 # so that the rest of the CLI starts fast.
@@ -252,6 +249,28 @@ class _FitOutputs:
     keep: list[str] | None
     as_json: bool
     quiet: bool
+
+
+def rating_entry(rating: str | None, levels: str | None, bins: str | None, per: str | None = None) -> dict | None:
+    """The mapping's rating entry from --rating, --rating-levels, --rating-bins and --rating-per
+    (None without --rating)."""
+    if rating is None:
+        if levels is not None or bins is not None or per is not None:
+            raise TrustseekError(
+                ["--rating-levels, --rating-bins and --rating-per describe the column named by --rating: give --rating"]
+            )
+        return None
+    entry: dict = {"column": rating}
+    if per is not None:
+        entry["per"] = per
+    if levels is not None:
+        entry["levels"] = [x.strip() for x in levels.split(",")]
+    if bins is not None:
+        try:
+            entry["bins"] = [float(x) for x in bins.split(",")]
+        except ValueError:
+            raise TrustseekError([f"--rating-bins {bins!r}: expected comma-separated numbers, e.g. 0,25,50,75,100"]) from None
+    return entry
 
 
 def _check_fit_paths(log, reading: LogReading, fill_from, out, posteriors, plots) -> None:
@@ -481,7 +500,10 @@ def select(
         print_json({"levels": rows, "warnings": warnings})
         return
     print_selection(
-        selection_table("Number of trust levels", "levels", rows, folds),
+        "Number of trust levels",
+        "levels",
+        rows,
+        folds,
         "* best by that criterion; reached best: starts (random, and the fit with one level fewer split) "
         "within 0.01 of the best log-likelihood",
         warnings,

@@ -22,7 +22,6 @@ from ._app import (
     print_written,
     progress_bar,
     progress_task,
-    selection_table,
 )
 from ._options import FROM_OPTIONS, LogReading, PrintJsonOpt, QuietOpt, log_options, widen_option
 from ._output import check_plots_folder, fit_summary, print_selection, print_warnings
@@ -271,9 +270,13 @@ def select_types(
         return
     weights = {"weights": lambda r: ", ".join(f"{w:.2f}" for w in r["weights"])}
     print_selection(
-        selection_table("Number of supervisor types", "types", rows, folds, weights),
+        "Number of supervisor types",
+        "types",
+        rows,
+        folds,
         "* best by that criterion; reached best: starts within 0.01 of the best log-likelihood",
         warnings,
+        weights,
     )
 
 

@@ -12,9 +12,9 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
-from ._app import app, atomic_output, check_outputs, check_tol, console, err_console, keep_columns, print_json, progress_task
+from ._app import app, atomic_output, check_outputs, check_tol, console, err_console, print_json, progress_task
 from ._options import FROM_OPTIONS, AsForFitEmissionsOpt, AsForFitTransitionsOpt, LogReading, QuietOpt, RatingPerOpt, log_options
-from ._reading import read_for_types
+from ._reading import keep_columns, read_for_types
 from .fit import POSTERIOR_SUFFIXES, general_inputs, read_with_inputs
 
 BootstrapOpt = typer.Option(
