@@ -1,15 +1,20 @@
 """cli/_options.log_options: a command's ``reading`` parameter becomes the log options, listed
-after the command's own, and their values reach the command as one LogReading."""
+where it stands among the command's own, and their values reach the command as one LogReading."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
+import pytest
 import typer
 from typer.testing import CliRunner
 
-from trustseek.cli._options import FROM_OPTIONS, LogReading, log_options
+from cli_runner import run_cli
+from trustseek.cli._options import FROM_OPTIONS, LogReading, QuietOpt, log_options
+from trustseek.data.trials import example_path
 
+LOG = str(example_path("paper_trials.csv"))
 READING = ["--mapping", "--column", "--label", "--missing", "--delimiter", "--order"]
 
 
@@ -27,11 +32,11 @@ def test_the_log_options_follow_the_commands_own_and_reach_it_as_one_reading(tmp
     app, seen = _group(), {}
 
     @app.command()
-    @log_options(keep=True, quiet=True)
-    def run(n: int = typer.Option(1, "--n"), reading: LogReading = FROM_OPTIONS, quiet: bool = False) -> None:
+    @log_options(keep=True)
+    def run(n: int = typer.Option(1, "--n"), reading: LogReading = FROM_OPTIONS, quiet: bool = QuietOpt) -> None:
         seen.update(n=n, reading=reading, quiet=quiet)
 
-    assert _options(app) == ["--n", *READING, "--keep", "--quiet", "--no-experience-rule"]
+    assert _options(app) == ["--n", *READING, "--keep", "--no-experience-rule", "--quiet"]
     args = ["run", "--n", "3", "--mapping", str(tmp_path / "m.json"), "--column", "a=b", "--column", "c=d"]
     result = CliRunner().invoke(app, [*args, "--order", "block,trial", "--keep", "x", "-q", "--no-experience-rule"])
     assert result.exit_code == 0, result.output
@@ -56,3 +61,48 @@ def test_a_command_takes_only_the_log_options_it_names():
 
     assert _options(plain) == [*READING, "--no-experience-rule"]
     assert _options(some) == ["--mapping", "--order"]
+
+
+def _count_reads(monkeypatch, name: str) -> list[str]:
+    """Every read of a file called ``name`` from now on (through Path.read_bytes or read_text)."""
+    reads: list[str] = []
+    for method in ("read_bytes", "read_text"):
+        original = getattr(Path, method)
+
+        def counted(self, *args, _original=original, **kwargs):
+            if self.name == name:
+                reads.append(str(self))
+            return _original(self, *args, **kwargs)
+
+        monkeypatch.setattr(Path, method, counted)
+    return reads
+
+
+@pytest.mark.parametrize("rule", [[], ["--no-experience-rule"]])
+def test_a_mapping_file_is_read_once_per_command(tmp_path, monkeypatch, rule):
+    """fit reads its --mapping once (the joined file, the inputs it declares and the log's reading
+    all come from that one read), and --no-experience-rule switches the rule off without writing
+    a second mapping file."""
+    mapping = tmp_path / "mapping.json"
+    mapping.write_text(json.dumps({"columns": {"participant": "participant"}}))
+    reads = _count_reads(monkeypatch, "mapping.json")
+    code, output = run_cli(["fit", LOG, "--mapping", str(mapping), "-r", "1", "--max-iter", "2", "-q", *rule])
+    assert code == 0, output
+    assert reads == [str(mapping)]
+    assert ("--no-experience-rule: the paper's experience rule is not checked" in output) == bool(rule), output
+
+
+def test_a_toml_mapping_is_refused_naming_the_option_and_the_file(tmp_path):
+    mapping = tmp_path / "mapping.toml"
+    mapping.write_text("columns = [")
+    code, output = run_cli(["fit", LOG, "--mapping", str(mapping), "-r", "1"])
+    assert code == 2 and f"{mapping}: --mapping: invalid TOML" in output and "Traceback" not in output, output
+
+
+def test_a_toml_mapping_is_read_as_a_json_one(tmp_path):
+    log = tmp_path / "log.csv"
+    log.write_text(Path(LOG).read_text().replace("participant,", "person,", 1))
+    mapping = tmp_path / "mapping.toml"
+    mapping.write_text('[columns]\nparticipant = "person"\n')
+    code, output = run_cli(["agnostic", "--data", str(log), "--mapping", str(mapping), "--json"])
+    assert code == 0 and json.loads(output)["kind"] == "trust-agnostic", output

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 
@@ -93,20 +91,9 @@ def test_a_one_type_mixture_makes_the_type_aware_policy_the_single_type_one():
         assert np.allclose(runs.rewards[TYPE_AWARE], runs.rewards[ORACLE])
 
 
-def test_compare_types_command():
-    code, out = run_cli(
-        ["compare-types", "-n", "100", "--fit-participants", "20", "--restarts", "1", "-b", "5/5", "--gap", "0.1", "--json"]
-    )
-    assert code == 0, out
-    numbers, _ = json.JSONDecoder().raw_decode(out)  # stdout's one JSON object (stderr may follow)
-    assert numbers["participants"] == 100
-
-
 @pytest.mark.parametrize(
     ("args", "needle"),
     [
-        (["-b", "17"], "--block must be trials per complexity like 17/17"),
-        (["-b", "x/y"], "--block must be trials per complexity"),
         (["-m", "paper", "--share", "0.3"], "--share needs a mixture of two types"),
         (["-m", "nobody"], "unknown mixture preset"),
         (["--types", "nobody"], "unknown mixture preset"),  # --types names the mixture, as in solve and simulate

@@ -16,7 +16,6 @@ from typing import Any
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
 
 from ..errors import TrustseekError
 from ._lazy import LazyGroup
@@ -51,20 +50,11 @@ def print_written(*outputs: tuple[str, Any]) -> None:
 
 
 def print_json(obj: Any) -> None:
-    """Machine-readable output: one JSON object on stdout, nothing else."""
+    """Machine-readable output: one JSON object on stdout, nothing else (numpy values as numbers
+    and lists, NaN and infinities as null: :func:`~trustseek.model.jsonfile.json_safe`)."""
     from ..model.jsonfile import json_safe
 
-    sys.stdout.write(json.dumps(json_safe(obj), indent=2, default=_json_default, allow_nan=False) + "\n")
-
-
-def _json_default(o: Any):
-    import numpy as np
-
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(f"not JSON serializable: {type(o).__name__}")
+    sys.stdout.write(json.dumps(json_safe(obj), indent=2, allow_nan=False) + "\n")
 
 
 # --------------------------------------------------------------------------- outputs
@@ -98,19 +88,25 @@ def check_output(path: Path | None, option: str, suffixes: tuple[str, ...] | Non
         fail("exists and is not writable")
 
 
-def check_outputs(*outputs: tuple[Path | None, str]) -> None:
-    """:func:`check_output` for every (path, option), and no two options naming the same file."""
-    for path, option in outputs:
-        check_output(path, option)
+def check_outputs(*outputs: tuple[Any, ...], inputs: tuple[tuple[Any, str], ...] = ()) -> None:
+    """Refuse, before any work, the outputs (path, option[, suffixes]) that :func:`check_output`
+    refuses, two options naming the same file, and an output naming one of the ``inputs`` (path
+    or preset name, what it is): writing it would overwrite what the command reads."""
+    for path, option, *suffixes in outputs:
+        check_output(path, option, *suffixes)
     seen: dict[Path, str] = {}
-
-    for path, option in outputs:
+    for path, option, *_ in outputs:
         if path is None:
             continue
         key = path.resolve()
         if key in seen:
             raise TrustseekError([f"{seen[key]} and {option} name the same file {path}"])
         seen[key] = option
+        for given, what in inputs:
+            if given is not None and _same_path(path, Path(given)):
+                raise TrustseekError(
+                    [f"{option} {path}: is the {what}; writing it would overwrite the input: choose another file"]
+                )
 
 
 def _same_path(a: Path, b: Path) -> bool:
@@ -118,40 +114,6 @@ def _same_path(a: Path, b: Path) -> bool:
         return os.path.samefile(a, b)
     except OSError:  # one of them does not exist (yet): compare where they point
         return a.resolve() == b.resolve()
-
-
-def check_not_inputs(outputs: tuple[tuple[Path | None, str], ...], inputs: tuple[tuple[Any, str], ...]) -> None:
-    """Refuse, before any work, an output (path, option) that names an input (path or preset
-    name, what it is): writing it would overwrite what the command reads (a --mapping file's
-    joined file included)."""
-    inputs = (*inputs, *_joined_files(inputs))
-    for out, option in outputs:
-        if out is None:
-            continue
-        for given, what in inputs:
-            if given is not None and _same_path(out, Path(given)):
-                raise TrustseekError(
-                    [f"{option} {out}: is the {what}; writing it would overwrite the input: choose another file"]
-                )
-
-
-def _joined_files(inputs: tuple[tuple[Any, str], ...]) -> list[tuple[str, str]]:
-    """The second file a --mapping file joins onto the log (a mapping that cannot be read has none
-    here: its reader says what is wrong)."""
-    mappings = [given for given, what in inputs if given is not None and what == "--mapping file"]
-    if not mappings:
-        return []  # without a mapping nothing to read (and no pandas to load: 0.45 s of a start)
-    from ..data.mapping import ColumnMapping
-
-    out = []
-    for given in mappings:
-        try:
-            join = ColumnMapping.load(given).join
-        except TrustseekError:
-            continue
-        if join is not None:
-            out.append((join["file"], "file the --mapping file joins"))
-    return out
 
 
 @contextmanager
@@ -185,26 +147,13 @@ def check_tol(value: float) -> float:
     return value
 
 
-def selection_table(title: str, key: str, rows: list[dict[str, Any]], folds: int, extra: dict[str, Any] | None = None) -> Table:
-    """The table of a model selection (``select``, ``select-types``): per compared size ``key``
-    its log-likelihood, starts that reached the best, parameters, AIC, BIC and held-out score,
-    the best by each criterion starred; ``extra`` maps further column names to a cell function."""
-    extra = extra or {}
-    table = Table(title=title, title_justify="left")
-    for col in (key, "log-likelihood", "reached best", "parameters", "AIC", "BIC", f"held-out LL ({folds}-fold)", *extra):
-        table.add_column(col, justify="right")
-    for r in rows:
-        table.add_row(
-            str(r[key]),
-            f"{r['loglik']:.3f}",
-            f"{r['reached_best']} of {r['starts']}",
-            str(r["n_params"]),
-            f"{r['aic']:.2f}",
-            f"{r['bic']:.2f}" + (" *" if r["best_bic"] else ""),
-            f"{r['heldout_loglik']:.3f}" + (" *" if r["best_heldout"] else ""),
-            *(cell(r) for cell in extra.values()),
-        )
-    return table
+def check_positive(value: float | None, option: str) -> None:
+    """A number option, when given, refused unless it is finite and > 0."""
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise TrustseekError([f"{option} must be a finite number > 0, got {value}"])
+
+
+# --------------------------------------------------------------------------- progress
 
 
 def progress_bar(quiet: bool, *columns: Any) -> Progress:
@@ -230,67 +179,3 @@ def progress_task(quiet: bool, description: str, total: int | None = None) -> It
             bar.update(task, completed=done, total=of, description=description)
 
         yield update
-
-
-# --------------------------------------------------------------------------- trial logs
-
-
-def rating_entry(rating: str | None, levels: str | None, bins: str | None, per: str | None = None) -> dict | None:
-    """The mapping's rating entry from --rating, --rating-levels, --rating-bins and --rating-per
-    (None without --rating)."""
-    if rating is None:
-        if levels is not None or bins is not None or per is not None:
-            raise TrustseekError(
-                ["--rating-levels, --rating-bins and --rating-per describe the column named by --rating: give --rating"]
-            )
-        return None
-    entry: dict = {"column": rating}
-    if per is not None:
-        entry["per"] = per
-    if levels is not None:
-        entry["levels"] = [x.strip() for x in levels.split(",")]
-    if bins is not None:
-        try:
-            entry["bins"] = [float(x) for x in bins.split(",")]
-        except ValueError:
-            raise TrustseekError([f"--rating-bins {bins!r}: expected comma-separated numbers, e.g. 0,25,50,75,100"]) from None
-    return entry
-
-
-def keep_columns(out, frame, keep: list[str] | None):
-    """``out`` (one row per row of ``frame``, in its order) with the ``--keep`` columns of ``frame`` added."""
-    if not keep:
-        return out
-    absent = [c for c in keep if c not in frame.columns or c in out.columns]
-    if absent:
-        cols = list(frame.columns)
-        raise TrustseekError([f"--keep {c!r}: not an extra column of the log; its columns: {cols}" for c in absent])
-    out = out.copy()
-    for c in keep:
-        out[c] = frame[c].to_numpy()
-    return out
-
-
-def check_mapping_file(path: Path | None) -> None:
-    """Refuse a ``--mapping`` file that is not readable text (a folder, binary, not UTF-8) or,
-    for JSON, not a JSON object, naming the file; the mapping's content is checked by its reader."""
-    from ..model.jsonfile import ModelError, load_json
-
-    if path is None:
-        return
-    if path.suffix.lower() == ".toml":
-        try:
-            path.read_bytes().decode("utf-8")
-        except IsADirectoryError:
-            raise TrustseekError(["--mapping: is a directory, expected a JSON or TOML file"], str(path)) from None
-        except FileNotFoundError:
-            raise TrustseekError(["--mapping: file not found"], str(path)) from None
-        except OSError as exc:
-            raise TrustseekError([f"--mapping: cannot read file: {exc.strerror or exc}"], str(path)) from None
-        except UnicodeDecodeError:
-            raise TrustseekError(["--mapping: is not UTF-8 text: save it as UTF-8 TOML"], str(path)) from None
-        return
-    try:
-        load_json(path)
-    except ModelError as exc:
-        raise TrustseekError([f"--mapping: {p}" for p in exc.problems], str(path)) from None

@@ -1,16 +1,14 @@
 """Options several commands take, declared once: --model and --task (and reading what they
-name), --json, --quiet, --widen, and those that say how a command reads its trial log
-(--mapping, --column, --label, --missing, --delimiter, --order, --keep, --no-experience-rule),
-which a command takes with :func:`log_options`, as one :class:`LogReading`."""
+name), --json, --quiet, --widen, --counts, the inputs of the commands that fit as fit does, and
+those that say how a command reads its trial log (--mapping, --column, --label, --missing,
+--delimiter, --order, --keep, --no-experience-rule), which a command takes with
+:func:`log_options`, as one :class:`LogReading`."""
 
 from __future__ import annotations
 
-import atexit
 import inspect
-import json
-import shutil
-import tempfile
-from collections.abc import Callable
+import re
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cached_property, wraps
 from pathlib import Path
@@ -19,10 +17,12 @@ from typing import TYPE_CHECKING, Any
 import typer
 from rich.markup import escape
 
+from ..errors import TrustseekError
 from ..vocab import check_belief_update
-from ._app import check_mapping_file, err_console
+from ._app import err_console
 
 if TYPE_CHECKING:
+    from ..data.mapping import ColumnMapping
     from ..model.core import TrustModel
     from ..model.task import Task
 
@@ -30,6 +30,17 @@ ModelOpt = typer.Option("paper", "--model", "-m", help="Trust model: a preset na
 TaskOpt = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file.")
 JsonOpt = typer.Option(False, "--json", help="Print one JSON object instead of tables.")
 PrintJsonOpt = typer.Option(False, "--json", help="Print JSON.")
+QuietOpt = typer.Option(False, "--quiet", "-q", help="No progress bar on stderr (there is none when stderr is not a terminal).")
+#: the inputs of the commands that fit as ``fit`` does
+AsForFitTransitionsOpt = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit).")
+AsForFitEmissionsOpt = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit).")
+RatingPerOpt = typer.Option(
+    None,
+    "--rating-per",
+    metavar="COLUMN",
+    help="The rating is given once per block of this column and copied onto its trials: count it once, on the "
+    "block's last trial (the mapping's rating 'per').",
+)
 
 
 def widen_option(most: int, otherwise: str) -> Any:
@@ -52,47 +63,91 @@ def model_and_task(model: str, task: str, belief_update: str | None = None) -> t
     return load_model(model), load_task(task)
 
 
-MappingOpt = typer.Option(None, "--mapping", help="Column/label mapping file (JSON or TOML) for a log with other names.")
-ColumnOpt = typer.Option(None, "--column", help="Map a column: canonical=theirs (e.g. human_action=rely). Repeatable.")
-LabelOpt = typer.Option(None, "--label", help="Map a label: column:theirs=canonical (e.g. human_action:1=rely). Repeatable.")
-DelimiterOpt = typer.Option(None, "--delimiter", help="A CSV's delimiter (default: sniffed from the header; 'tab' for TAB).")
-MissingOpt = typer.Option(None, "--missing", help="A cell text meaning not recorded, e.g. NA (besides empty). Repeatable.")
-OrderOpt = typer.Option(
-    None,
-    "--order",
-    metavar="COLUMN[,COLUMN]",
-    help="Columns that order each participant's trials, e.g. block,trial for a trial number that restarts every block "
-    "(the mapping's 'order'); the trials are numbered 1, 2, ... in that order.",
-)
-RatingPerOpt = typer.Option(
-    None,
-    "--rating-per",
-    metavar="COLUMN",
-    help="The rating is given once per block of this column and copied onto its trials: count it once, on the "
-    "block's last trial (the mapping's rating 'per').",
-)
-KeepOpt = typer.Option(None, "--keep", help="Carry this column of the log into the output (e.g. a condition). Repeatable.")
-QuietOpt = typer.Option(False, "--quiet", "-q", help="No progress bar on stderr (there is none when stderr is not a terminal).")
-NoExperienceRuleOpt = typer.Option(
-    False,
-    "--no-experience-rule",
-    help="Do not check the paper's experience rule (an intervention ends faulty, an ask as the task says): for a "
-    'study where it does not hold, e.g. advice taking; as the mapping\'s "experience_rule": false.',
-)
+def parse_counts(text: str, complexities: Sequence[str], option: str = "--counts") -> tuple[int, ...]:
+    """Trials per complexity, ``17,17`` (in the task's order) or ``low=17,high=17`` (a complexity
+    left out has none): whole numbers 0 or more, at least one trial in all; else one error naming
+    ``option``, the value and what is expected."""
+    parts = [p.strip() for p in text.split(",")]
+    named = [p.partition("=") for p in parts]
+    problem = None
+    if any(sep for _, sep, _ in named):
+        keys = [k.strip() for k, _, _ in named]
+        values = {k.strip(): v.strip() for k, _, v in named}
+        unknown = [k for k in keys if k not in complexities]
+        if not all(sep for _, sep, _ in named):
+            problem = "mixes numbers and names"
+        elif unknown:
+            problem = f"{unknown[0]!r} is not a complexity of the task"
+        elif len(set(keys)) != len(keys):
+            problem = "a complexity is named twice"
+        numbers = [values.get(c, "0") for c in complexities]
+    else:
+        numbers = parts
+        if len(parts) != len(complexities):
+            problem = f"{len(parts)} number{'s' * (len(parts) != 1)} for {len(complexities)} complexities"
+    bad = [n for n in numbers if not re.fullmatch(r"[0-9]+", n)]
+    if problem is None and bad:
+        problem = f"{bad[0]!r} is negative" if re.fullmatch(r"-[0-9]+", bad[0]) else f"{bad[0]!r} is not a whole number"
+    if problem is None and not any(int(n) for n in numbers):
+        problem = "no trials"
+    if problem is not None:
+        examples = f"{','.join('17' for _ in complexities)} or {','.join(f'{c}=17' for c in complexities)}"
+        raise TrustseekError(
+            [
+                f"{option} {text!r}: {problem}; expected a whole number 0 or more per complexity "
+                f"({', '.join(complexities)}), at least one trial in all, e.g. {examples}"
+            ]
+        )
+    return tuple(int(n) for n in numbers)
+
 
 #: the options :func:`log_options` adds, in the order the help lists them: (annotation, option)
 _OPTIONS: dict[str, tuple[Any, Any]] = {
-    "mapping": (Path | None, MappingOpt),
-    "column": (list[str] | None, ColumnOpt),
-    "label": (list[str] | None, LabelOpt),
-    "missing": (list[str] | None, MissingOpt),
-    "delimiter": (str | None, DelimiterOpt),
-    "order": (list[str] | None, OrderOpt),
-    "keep": (list[str] | None, KeepOpt),
-    "quiet": (bool, QuietOpt),
-    "no_rule": (bool, NoExperienceRuleOpt),
+    "mapping": (
+        Path | None,
+        typer.Option(None, "--mapping", help="Column/label mapping file (JSON or TOML) for a log with other names."),
+    ),
+    "column": (
+        list[str] | None,
+        typer.Option(None, "--column", help="Map a column: canonical=theirs (e.g. human_action=rely). Repeatable."),
+    ),
+    "label": (
+        list[str] | None,
+        typer.Option(None, "--label", help="Map a label: column:theirs=canonical (e.g. human_action:1=rely). Repeatable."),
+    ),
+    "missing": (
+        list[str] | None,
+        typer.Option(None, "--missing", help="A cell text meaning not recorded, e.g. NA (besides empty). Repeatable."),
+    ),
+    "delimiter": (
+        str | None,
+        typer.Option(None, "--delimiter", help="A CSV's delimiter (default: sniffed from the header; 'tab' for TAB)."),
+    ),
+    "order": (
+        list[str] | None,
+        typer.Option(
+            None,
+            "--order",
+            metavar="COLUMN[,COLUMN]",
+            help="Columns that order each participant's trials, e.g. block,trial for a trial number that restarts every "
+            "block (the mapping's 'order'); the trials are numbered 1, 2, ... in that order.",
+        ),
+    ),
+    "keep": (
+        list[str] | None,
+        typer.Option(None, "--keep", help="Carry this column of the log into the output (e.g. a condition). Repeatable."),
+    ),
+    "no_rule": (
+        bool,
+        typer.Option(
+            False,
+            "--no-experience-rule",
+            help="Do not check the paper's experience rule (an intervention ends faulty, an ask as the task says): "
+            'for a study where it does not hold, e.g. advice taking; as the mapping\'s "experience_rule": false.',
+        ),
+    ),
 }
-_PASSED_ON = ("quiet",)  # options the command takes itself, not as part of its LogReading
+_DEFAULT = ("mapping", "column", "label", "missing", "delimiter", "order")
 
 
 @dataclass(frozen=True)
@@ -109,9 +164,22 @@ class LogReading:
     no_rule: bool = False
 
     @cached_property
-    def mapping_to_read(self) -> Path | None:
-        """The --mapping to read with (:func:`rule_off`; once per command)."""
-        return rule_off(self.mapping, self.no_rule)
+    def column_mapping(self) -> ColumnMapping | None:
+        """The --mapping file, read once per command, with --no-experience-rule its rule switched
+        off (None without either)."""
+        from ..data.mapping import ColumnMapping
+
+        read = None if self.mapping is None else read_mapping(self.mapping)
+        if not self.no_rule:
+            return read
+        return (read or ColumnMapping()).merged(ColumnMapping(experience_rule=False))
+
+    def inputs(self) -> tuple[tuple[Any, str], ...]:
+        """The files the options name that a command reads (the --mapping file and the file it
+        joins), as (path, what) for :func:`~._app.check_outputs`."""
+        mapping = self.column_mapping
+        joined = None if mapping is None or mapping.join is None else mapping.join["file"]
+        return ((self.mapping, "--mapping file"), (joined, "file the --mapping file joins"))
 
     def read(self, log: Path, needed: tuple[str, ...], rating: dict | None = None, actions: bool = True):
         """The trial log with these options applied; ``needed`` are the canonical columns the
@@ -120,10 +188,8 @@ class LogReading:
         out by the mapping's drop rules are counted on stderr."""
         from ..data import ColumnMapping, read_trials
 
-        mapping = self.mapping_to_read
-        check_mapping_file(mapping)
         m = ColumnMapping.from_flags(
-            self.column or [], self.label or [], mapping, self.missing, self.delimiter, rating, self.order
+            self.column or [], self.label or [], self.column_mapping, self.missing, self.delimiter, rating, self.order
         )
         outputs = ("human_action",) if actions else ()
         frame = read_trials(log, m, required=("participant", "trial", *outputs, *needed))
@@ -131,7 +197,9 @@ class LogReading:
             err_console.print(f"dropped {count} rows of {log} ({escape(rule)})", highlight=False)
         for note in frame.attrs.get("joined", []):
             err_console.print(f"{log}: {escape(note)}", highlight=False)
-        if m.experience_rule is False:
+        if self.no_rule:
+            err_console.print("--no-experience-rule: the paper's experience rule is not checked", highlight=False)
+        elif m.experience_rule is False:
             note = "the paper's experience rule is not checked (the mapping's experience_rule: false)"
             err_console.print(f"{log}: {note}", highlight=False)
         return frame
@@ -142,20 +210,21 @@ class LogReading:
 FROM_OPTIONS = LogReading()
 
 
-def log_options(
-    keep: bool = False, quiet: bool = False, names: tuple[str, ...] | None = None
-) -> Callable[[Callable[..., None]], Callable[..., None]]:
+def log_options(keep: bool = False, names: tuple[str, ...] | None = None) -> Callable[[Callable[..., None]], Callable[..., None]]:
     """A command's log options: its parameter ``reading`` (a :class:`LogReading`) becomes the
-    options --mapping, --column, --label, --missing, --delimiter, --order, (--keep, --quiet,)
-    --no-experience-rule, or those ``names`` (keys of :data:`_OPTIONS`), listed in that order
-    after its own; ``quiet`` is passed on to the command as itself."""
-    chosen = names or (*list(_OPTIONS)[:6], *(["keep"] if keep else []), *(["quiet"] if quiet else []), "no_rule")
+    options --mapping, --column, --label, --missing, --delimiter, --order, (--keep,)
+    --no-experience-rule, or those ``names`` (keys of :data:`_OPTIONS`), in that order where
+    ``reading`` stands."""
+    chosen = names or (*_DEFAULT, *(["keep"] if keep else []), "no_rule")
     unknown = [n for n in chosen if n not in _OPTIONS]
     if unknown:
         raise ValueError(f"no log option {unknown}")
 
     def decorate(command: Callable[..., None]) -> Callable[..., None]:
-        own = [p for p in inspect.signature(command, eval_str=True).parameters.values() if p.name not in ("reading", *chosen)]
+        own = [
+            p.replace(kind=inspect.Parameter.KEYWORD_ONLY) for p in inspect.signature(command, eval_str=True).parameters.values()
+        ]
+        at = [p.name for p in own].index("reading")
         added = [
             inspect.Parameter(n, inspect.Parameter.KEYWORD_ONLY, default=_OPTIONS[n][1], annotation=_OPTIONS[n][0])
             for n in chosen
@@ -163,30 +232,32 @@ def log_options(
 
         @wraps(command)
         def run(**values: Any) -> None:
-            fields = {n: values.pop(n) for n in chosen if n not in _PASSED_ON}
-            command(reading=LogReading(**fields), **values)
+            command(reading=LogReading(**{n: values.pop(n) for n in chosen}), **values)
 
-        run.__signature__ = inspect.Signature([*own, *added], return_annotation=None)  # type: ignore[attr-defined]
+        run.__signature__ = inspect.Signature([*own[:at], *added, *own[at + 1 :]], return_annotation=None)  # type: ignore[attr-defined]
         run.__annotations__ = {p.name: p.annotation for p in run.__signature__.parameters.values()}  # type: ignore[attr-defined]
         return run
 
     return decorate
 
 
-def rule_off(mapping: Path | None, off: bool) -> Path | None:
-    """The --mapping to read with: with ``off`` (--no-experience-rule), the mapping (or none) with
-    ``experience_rule`` false, written to a temporary file for this process (said on stderr)."""
-    if not off:
-        return mapping
-    from ..data import ColumnMapping
+def read_mapping(path: Path) -> ColumnMapping:
+    """A --mapping file (JSON or TOML), read once; a file that is not readable text (a folder,
+    binary, not UTF-8) or not a JSON object or TOML table is refused naming the file."""
+    import tomllib
 
-    check_mapping_file(mapping)
-    merged = (ColumnMapping.load(mapping) if mapping is not None else ColumnMapping()).merged(
-        ColumnMapping(experience_rule=False)
-    )
-    folder = Path(tempfile.mkdtemp(prefix="trustseek-mapping-"))
-    atexit.register(shutil.rmtree, folder, True)
-    path = folder / "mapping.json"
-    path.write_text(json.dumps(merged.to_dict()), encoding="utf-8")
-    err_console.print("--no-experience-rule: the paper's experience rule is not checked", highlight=False)
-    return path
+    from ..data.mapping import ColumnMapping
+    from ..model.jsonfile import ModelError, load_json, read_text
+
+    try:
+        if path.suffix.lower() == ".toml":
+            text = read_text(path, "JSON or TOML", ModelError, hint=": save it as UTF-8 TOML")
+            try:
+                content: Any = tomllib.loads(text)
+            except tomllib.TOMLDecodeError as exc:
+                raise ModelError([f"invalid TOML: {exc}"], str(path)) from None
+        else:
+            content, _ = load_json(path)
+    except ModelError as exc:
+        raise TrustseekError([f"--mapping: {p}" for p in exc.problems], str(path)) from None
+    return ColumnMapping.from_file(content, path)

@@ -31,8 +31,28 @@ def print_wide(table: Table) -> None:
     (console if console.is_terminal else Console(width=400)).print(table)
 
 
-def print_selection(table: Table, legend: str, warnings: list[str]) -> None:
-    """A model selection's table, its legend and warnings."""
+def print_selection(
+    title: str, key: str, rows: list[dict[str, Any]], folds: int, legend: str, warnings: list[str], extra: dict | None = None
+) -> None:
+    """A model selection's table (``select``, ``select-types``), its legend and warnings: per
+    compared size ``key`` its log-likelihood, starts that reached the best, parameters, AIC, BIC
+    and held-out score, the best by each criterion starred; ``extra`` maps further column names
+    to a cell function."""
+    extra = extra or {}
+    table = Table(title=title, title_justify="left")
+    for col in (key, "log-likelihood", "reached best", "parameters", "AIC", "BIC", f"held-out LL ({folds}-fold)", *extra):
+        table.add_column(col, justify="right")
+    for r in rows:
+        table.add_row(
+            str(r[key]),
+            f"{r['loglik']:.3f}",
+            f"{r['reached_best']} of {r['starts']}",
+            str(r["n_params"]),
+            f"{r['aic']:.2f}",
+            f"{r['bic']:.2f}" + (" *" if r["best_bic"] else ""),
+            f"{r['heldout_loglik']:.3f}" + (" *" if r["best_heldout"] else ""),
+            *(cell(r) for cell in extra.values()),
+        )
     print_wide(table)
     console.print(legend, highlight=False)
     print_warnings(warnings)

@@ -1,5 +1,6 @@
 """Reading a model or supervisor types and the log they need, for the analysis commands (decode,
-predict, validate, personalize); the widened-range note of the selection commands."""
+predict, validate, personalize), and carrying the log's --keep columns into their output; the
+widened-range note of the selection commands."""
 
 from __future__ import annotations
 
@@ -101,3 +102,17 @@ def read_for_model(log: Path, model, reading: LogReading):
             ]
         )
     return frame
+
+
+def keep_columns(out, frame, keep: list[str] | None):
+    """``out`` (one row per row of ``frame``, in its order) with the ``--keep`` columns of ``frame`` added."""
+    if not keep:
+        return out
+    absent = [c for c in keep if c not in frame.columns or c in out.columns]
+    if absent:
+        cols = list(frame.columns)
+        raise TrustseekError([f"--keep {c!r}: not an extra column of the log; its columns: {cols}" for c in absent])
+    out = out.copy()
+    for c in keep:
+        out[c] = frame[c].to_numpy()
+    return out

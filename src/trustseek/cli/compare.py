@@ -11,17 +11,7 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ._app import app, check_output, console, print_json, progress_bar
-from ._options import JsonOpt, QuietOpt, TaskOpt
-
-
-def _counts(text: str) -> tuple[int, ...]:
-    try:
-        parts = tuple(int(x) for x in text.split("/"))
-    except ValueError:
-        parts = ()
-    if len(parts) < 2 or any(p < 0 for p in parts) or sum(parts) < 1:
-        raise TrustseekError([f"--block must be trials per complexity like 17/17, got {text!r}"])
-    return parts
+from ._options import JsonOpt, QuietOpt, TaskOpt, parse_counts
 
 
 @app.command("compare-types", rich_help_panel="Simulate and reproduce")
@@ -49,7 +39,10 @@ def compare_types(
         help="People of experiment 1 that the pooled model is fitted to (paper design).",
     ),
     block: list[str] = typer.Option(
-        ["17/17", "68/68"], "--block", "-b", help="Trials per complexity in a block (repeat for several lengths)."
+        ["17,17", "68,68"],
+        "--block",
+        "-b",
+        help="Trials per complexity in a block, e.g. 17,17 or low=17,high=17 (repeat for several lengths).",
     ),
     restarts: int = typer.Option(4, "--restarts", min=1, max=1000, help="EM restarts of the pooled fit."),
     gap: float = typer.Option(
@@ -67,13 +60,13 @@ def compare_types(
     from ..model.presets import load_mixture, load_task
     from ..reproduction.supervisor_types import types_section
 
-    counts = [_counts(b) for b in block]
     mix = load_mixture(mixture)
     if share is not None:
         if mix.n_types != 2:
             raise TrustseekError([f"--share needs a mixture of two types; {mixture} has {mix.n_types}"])
         mix = mix.with_weights([1 - share, share])
     t = load_task(task)
+    counts = [parse_counts(b, t.complexities, "--block") for b in block]
     if plot is not None:
         check_output(plot, "--plot")
     steps = ["pooled fit", "policies", "one-type policies", *[f"blocks of {sum(c)} trials" for c in counts]]

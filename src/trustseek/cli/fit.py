@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Annotated
 
 import typer
 from rich.markup import escape
@@ -13,24 +14,28 @@ from ..estimation.options import FitOptions
 from ._app import (
     app,
     atomic_output,
-    check_mapping_file,
-    check_not_inputs,
-    check_output,
     check_outputs,
     check_tol,
     console,
     err_console,
-    keep_columns,
     print_json,
     print_written,
     progress_bar,
     progress_task,
-    rating_entry,
-    selection_table,
 )
-from ._options import FROM_OPTIONS, LogReading, PrintJsonOpt, RatingPerOpt, log_options, widen_option
+from ._options import (
+    FROM_OPTIONS,
+    AsForFitEmissionsOpt,
+    AsForFitTransitionsOpt,
+    LogReading,
+    PrintJsonOpt,
+    QuietOpt,
+    RatingPerOpt,
+    log_options,
+    widen_option,
+)
 from ._output import cells_table, check_plots_folder, fit_summary, print_intervals_note, print_selection, print_warnings
-from ._reading import load_for_decoding, read_for_types, widened_note
+from ._reading import keep_columns, load_for_decoding, read_for_types, widened_note
 
 # The fit and data modules (pandas, numba) load only when a command of this group runs,
 # so that the rest of the CLI starts fast.
@@ -42,36 +47,22 @@ def _fit():
     return estimation
 
 
-def _data():
-    from ..data import trials as data
-
-    return data
-
-
-def _mapping_inputs(mapping: Path | None) -> tuple[str, ...]:
-    """The names of the inputs a --mapping file declares (its ``inputs`` entry)."""
-    if mapping is None:
-        return ()
-    check_mapping_file(mapping)
-    return tuple(_data().ColumnMapping.load(mapping).inputs)
-
-
-def _named_inputs(mapping, transitions_on, emissions_on) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
-    """The transition and emission inputs named by the flags (canonical ones or the mapping's
-    ``inputs``), and the canonical columns they need."""
-    declared = _mapping_inputs(mapping)
+def _named_inputs(reading: LogReading, transitions_on, emissions_on) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
+    """The transition and emission inputs named by the flags (canonical ones or the --mapping
+    file's ``inputs``), and the canonical columns they need."""
+    declared = () if reading.column_mapping is None else tuple(reading.column_mapping.inputs)
     tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on", declared)
     em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on", declared)
     return tr, em, tuple(c for c in dict.fromkeys((*tr, *em)) if c in _fit().MODEL_INPUTS)
 
 
-def _read_with_inputs(log: Path, reading: LogReading, transitions_on: str | None, emissions_on: str | None):
+def read_with_inputs(log: Path, reading: LogReading, transitions_on: str | None, emissions_on: str | None):
     """The inputs named by the flags (:func:`_named_inputs`) and the log with the columns they need."""
-    tr, em, needed = _named_inputs(reading.mapping_to_read, transitions_on, emissions_on)
+    tr, em, needed = _named_inputs(reading, transitions_on, emissions_on)
     return tr, em, reading.read(log, needed)
 
 
-def _general(tr: tuple[str, ...], em: tuple[str, ...]) -> bool:
+def general_inputs(tr: tuple[str, ...], em: tuple[str, ...]) -> bool:
     """True when the inputs are not a trust model's: the fit is a general model (trustseek.iohmm/1)."""
     return not _fit().trust_iohmm.is_trust_structure(tr, em)
 
@@ -95,100 +86,107 @@ def _inputs(text: str | None, default: tuple[str, ...], flag: str, declared: tup
     return cols
 
 
-TransitionsOnOpt = typer.Option(
-    None,
-    "--transitions-on",
-    help="Comma-separated inputs of the trust transitions (default: complexity,robot_action,experience; 'none' for "
-    "none); the mapping's 'inputs' may be named too: the fit is then a general model (trustseek.iohmm/1).",
-)
-EmissionsOnOpt = typer.Option(
-    None,
-    "--emissions-on",
-    help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for "
-    "none); the mapping's 'inputs' may be named too.",
-)
-#: the inputs of the commands that fit as ``fit`` does
-AsForFitTransitionsOpt = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit).")
-AsForFitEmissionsOpt = typer.Option(None, "--emissions-on", help="Inputs of the emissions (as for fit).")
-BootstrapOpt = typer.Option(
-    0,
-    "--bootstrap",
-    "-b",
-    min=0,
-    max=10_000,
-    help="Participant-level bootstrap resamples for 95% intervals (0 = none; at least 200 advised, fewer warn).",
-)
-PriorOpt = typer.Option(
-    0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."
-)
-TolOpt = typer.Option(
-    1e-8, "--tol", callback=check_tol, help="Stop when the relative change of the log-likelihood is below this (> 0)."
-)
-JobsOpt = typer.Option(
-    None,
-    "--jobs",
-    "-j",
-    min=1,
-    help="Threads for the fit and processes for the bootstrap (default: all cores); numbers do not depend on it.",
-)
-OutOpt = typer.Option(
-    None,
-    "--out",
-    "-o",
-    help="Write the fitted trust model (JSON, same format as the presets; a general model for other inputs).",
-)
-PosteriorsOpt = typer.Option(
-    None, "--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet)."
-)
-PlotsOpt = typer.Option(None, "--plots", help="Write emission/transition figures (Fig. 4-6 style) into this directory.")
-FillFromOpt = typer.Option(
-    None,
-    "--fill-from",
-    help="Take the rows the data never estimated (e.g. every ask row of a study without asking) from this model "
-    "(a preset name, e.g. paper, or a JSON file with the same levels and complexities).",
-)
-RatingOpt = typer.Option(
-    None,
-    "--rating",
-    help="The log's self-reported trust rating column, fitted jointly as a second emission of the trust "
-    "(empty cells: no rating); or give 'rating' in the mapping file.",
-)
-RatingLevelsOpt = typer.Option(
-    None, "--rating-levels", help="The rating's levels, lowest first, comma-separated (e.g. 1,2,3,4,5,6,7 or low,mid,high)."
-)
-RatingBinsOpt = typer.Option(
-    None, "--rating-bins", help="Bin a numeric rating at these edges, comma-separated (e.g. 0,25,50,75,100)."
-)
-RatingsOnlyOpt = typer.Option(False, "--ratings-only", help="Leave the human actions out: fit the trust on the ratings alone.")
-
-
 @app.command(rich_help_panel="Estimate")
-@log_options(keep=True, quiet=True)
+@log_options(keep=True)
 def fit(
-    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
-    preset: str = typer.Option("paper", "--preset", help="Model structure preset (paper)."),
-    levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Number of trust levels."),
-    transitions_on: str | None = TransitionsOnOpt,
-    emissions_on: str | None = EmissionsOnOpt,
-    restarts: int = typer.Option(10, "--restarts", "-r", min=1, max=1000, help="Random restarts; the best is kept."),
-    bootstrap: int = BootstrapOpt,
-    prior: float = PriorOpt,
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed (restarts and bootstrap)."),
-    tol: float = TolOpt,
-    max_iter: int = typer.Option(1000, "--max-iter", min=1, help="Iteration cap per restart (E-steps)."),
-    jobs: int | None = JobsOpt,
-    out: Path | None = OutOpt,
-    posteriors: Path | None = PosteriorsOpt,
-    plots: Path | None = PlotsOpt,
-    fill_from: str | None = FillFromOpt,
-    as_json: bool = typer.Option(False, "--json", help="Print the fitted model and diagnostics as one JSON object."),
-    rating: str | None = RatingOpt,
-    rating_levels: str | None = RatingLevelsOpt,
-    rating_bins: str | None = RatingBinsOpt,
-    ratings_only: bool = RatingsOnlyOpt,
+    log: Annotated[Path, typer.Argument(help="Trial log (CSV or Parquet), one row per trial.")],
+    preset: Annotated[str, typer.Option("--preset", help="Model structure preset (paper).")] = "paper",
+    levels: Annotated[int, typer.Option("--levels", "-k", min=2, max=8, help="Number of trust levels.")] = 2,
+    transitions_on: Annotated[
+        str | None,
+        typer.Option(
+            "--transitions-on",
+            help="Comma-separated inputs of the trust transitions (default: complexity,robot_action,experience; 'none' for "
+            "none); the mapping's 'inputs' may be named too: the fit is then a general model (trustseek.iohmm/1).",
+        ),
+    ] = None,
+    emissions_on: Annotated[
+        str | None,
+        typer.Option(
+            "--emissions-on",
+            help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for "
+            "none); the mapping's 'inputs' may be named too.",
+        ),
+    ] = None,
+    restarts: Annotated[int, typer.Option("--restarts", "-r", min=1, max=1000, help="Random restarts; the best is kept.")] = 10,
+    bootstrap: Annotated[
+        int,
+        typer.Option(
+            "--bootstrap",
+            "-b",
+            min=0,
+            max=10_000,
+            help="Participant-level bootstrap resamples for 95% intervals (0 = none; at least 200 advised, fewer warn).",
+        ),
+    ] = 0,
+    prior: Annotated[
+        float,
+        typer.Option("--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."),
+    ] = 0.0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed (restarts and bootstrap).")] = 0,
+    tol: Annotated[
+        float,
+        typer.Option(
+            "--tol", callback=check_tol, help="Stop when the relative change of the log-likelihood is below this (> 0)."
+        ),
+    ] = 1e-8,
+    max_iter: Annotated[int, typer.Option("--max-iter", min=1, help="Iteration cap per restart (E-steps).")] = 1000,
+    jobs: Annotated[
+        int | None,
+        typer.Option(
+            "--jobs",
+            "-j",
+            min=1,
+            help="Threads for the fit and processes for the bootstrap (default: all cores); numbers do not depend on it.",
+        ),
+    ] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            "-o",
+            help="Write the fitted trust model (JSON, same format as the presets; a general model for other inputs).",
+        ),
+    ] = None,
+    posteriors: Annotated[
+        Path | None, typer.Option("--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet).")
+    ] = None,
+    plots: Annotated[
+        Path | None, typer.Option("--plots", help="Write emission/transition figures (Fig. 4-6 style) into this directory.")
+    ] = None,
+    fill_from: Annotated[
+        str | None,
+        typer.Option(
+            "--fill-from",
+            help="Take the rows the data never estimated (e.g. every ask row of a study without asking) from this model "
+            "(a preset name, e.g. paper, or a JSON file with the same levels and complexities).",
+        ),
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the fitted model and diagnostics as one JSON object.")] = False,
+    rating: Annotated[
+        str | None,
+        typer.Option(
+            "--rating",
+            help="The log's self-reported trust rating column, fitted jointly as a second emission of the trust "
+            "(empty cells: no rating); or give 'rating' in the mapping file.",
+        ),
+    ] = None,
+    rating_levels: Annotated[
+        str | None,
+        typer.Option(
+            "--rating-levels", help="The rating's levels, lowest first, comma-separated (e.g. 1,2,3,4,5,6,7 or low,mid,high)."
+        ),
+    ] = None,
+    rating_bins: Annotated[
+        str | None,
+        typer.Option("--rating-bins", help="Bin a numeric rating at these edges, comma-separated (e.g. 0,25,50,75,100)."),
+    ] = None,
+    ratings_only: Annotated[
+        bool, typer.Option("--ratings-only", help="Leave the human actions out: fit the trust on the ratings alone.")
+    ] = False,
     rating_per: str | None = RatingPerOpt,
     reading: LogReading = FROM_OPTIONS,
-    quiet: bool = False,
+    quiet: bool = QuietOpt,
 ) -> None:
     """Estimate the supervisor's trust model from logged trials (extended Baum-Welch).
 
@@ -196,14 +194,14 @@ def fit(
     simulate refuse those a task can reach until they are supplied (--fill-from).  With a
     rating column (--rating or the mapping's 'rating') the fit is joint on the human actions
     and the ratings, and the model file carries P(rating | trust)."""
-    _check_fit_paths(log, reading.mapping, fill_from, out, posteriors, plots, reading.keep)
-    tr, em, needed = _named_inputs(reading.mapping_to_read, transitions_on, emissions_on)
+    _check_fit_paths(log, reading, fill_from, out, posteriors, plots)
+    tr, em, needed = _named_inputs(reading, transitions_on, emissions_on)
     rated = rating_entry(rating, rating_levels, rating_bins, rating_per)
     frame = reading.read(log, needed, rated, not ratings_only)
     options = FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs)
     run = _FitRun(levels, options, bootstrap, prior, _rated(frame, log, ratings_only), ratings_only)
     outputs = _FitOutputs(out, posteriors, plots, reading.keep, as_json, quiet)
-    if _general(tr, em):
+    if general_inputs(tr, em):
         _fit_general(frame, tr, em, run, outputs, fill_from)
         return
     result = _fit_trust(frame, preset, tr, em, run, quiet or as_json)
@@ -253,14 +251,34 @@ class _FitOutputs:
     quiet: bool
 
 
-def _check_fit_paths(log, mapping, fill_from, out, posteriors, plots, keep) -> None:
+def rating_entry(rating: str | None, levels: str | None, bins: str | None, per: str | None = None) -> dict | None:
+    """The mapping's rating entry from --rating, --rating-levels, --rating-bins and --rating-per
+    (None without --rating)."""
+    if rating is None:
+        if levels is not None or bins is not None or per is not None:
+            raise TrustseekError(
+                ["--rating-levels, --rating-bins and --rating-per describe the column named by --rating: give --rating"]
+            )
+        return None
+    entry: dict = {"column": rating}
+    if per is not None:
+        entry["per"] = per
+    if levels is not None:
+        entry["levels"] = [x.strip() for x in levels.split(",")]
+    if bins is not None:
+        try:
+            entry["bins"] = [float(x) for x in bins.split(",")]
+        except ValueError:
+            raise TrustseekError([f"--rating-bins {bins!r}: expected comma-separated numbers, e.g. 0,25,50,75,100"]) from None
+    return entry
+
+
+def _check_fit_paths(log, reading: LogReading, fill_from, out, posteriors, plots) -> None:
     """fit's output options refused before the log is read."""
-    check_outputs((out, "--out"), (posteriors, "--posteriors"))
-    check_output(posteriors, "--posteriors", POSTERIOR_SUFFIXES)
-    inputs = ((log, "trial log"), (mapping, "--mapping file"), (fill_from, "--fill-from model"))
-    check_not_inputs(((out, "--out"), (posteriors, "--posteriors")), inputs)
+    inputs = ((log, "trial log"), *reading.inputs(), (fill_from, "--fill-from model"))
+    check_outputs((out, "--out"), (posteriors, "--posteriors", POSTERIOR_SUFFIXES), inputs=inputs)
     check_plots_folder(plots)
-    if keep and posteriors is None:
+    if reading.keep and posteriors is None:
         raise TrustseekError(["--keep carries log columns into --posteriors: give --posteriors"])
 
 
@@ -321,8 +339,10 @@ def _write_fit(result, frame, outputs: _FitOutputs) -> None:
         with atomic_output(outputs.out) as tmp:
             result.model.save(tmp)
     if outputs.posteriors is not None:
+        from ..data.trials import write_trials
+
         with atomic_output(outputs.posteriors) as tmp:
-            _data().write_trials(keep_columns(result.posteriors(), frame, outputs.keep), tmp)
+            write_trials(keep_columns(result.posteriors(), frame, outputs.keep), tmp)
 
 
 def _plot_trust(result, drawn, plots: Path, paper_like: bool) -> None:
@@ -393,14 +413,16 @@ def _fit_general(frame, tr, em, run: _FitRun, outputs: _FitOutputs, fill_from: s
 @app.command("decode", rich_help_panel="Estimate")
 @log_options(keep=True)
 def decode_cmd(
-    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
-    model: Path = typer.Option(
-        ...,
-        "--model",
-        "-m",
-        help="Trust model or general model JSON (from 'trustseek fit') or supervisor types (from 'trustseek fit-types').",
-    ),
-    out: Path = typer.Option(Path("posteriors.csv"), "--out", "-o", help="Output file (.csv or .parquet)."),
+    log: Annotated[Path, typer.Argument(help="Trial log (CSV or Parquet).")],
+    model: Annotated[
+        Path,
+        typer.Option(
+            "--model",
+            "-m",
+            help="Trust model or general model JSON (from 'trustseek fit') or supervisor types (from 'trustseek fit-types').",
+        ),
+    ],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output file (.csv or .parquet).")] = Path("posteriors.csv"),
     reading: LogReading = FROM_OPTIONS,
 ) -> None:
     """Per-trial smoothed P(trust | data) and the Viterbi trust path under a model.
@@ -410,8 +432,7 @@ def decode_cmd(
 
     The log needs the columns the model depends on: a model fitted with fewer inputs
     (--transitions-on/--emissions-on) decodes a log without the others."""
-    check_output(out, "--out", POSTERIOR_SUFFIXES)
-    check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (reading.mapping, "--mapping file")))
+    check_outputs((out, "--out", POSTERIOR_SUFFIXES), inputs=((log, "trial log"), (model, "--model file"), *reading.inputs()))
     from ..model.mixture import TypeMixture
 
     types = load_for_decoding(model)  # a trust model, a general model or types
@@ -423,38 +444,44 @@ def decode_cmd(
         from ..estimation.mixture import decode_types
 
         post = keep_columns(decode_types(frame, types), frame, reading.keep)
+    from ..data.trials import write_trials
+
     with atomic_output(out) as tmp:
-        _data().write_trials(post, tmp)
+        write_trials(post, tmp)
     console.print(f"wrote {len(post)} trials to {out}")
 
 
 @app.command(rich_help_panel="Estimate")
-@log_options(quiet=True)
+@log_options()
 def select(
-    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
-    max_levels: int = typer.Option(4, "--max-levels", min=1, max=8, help="Compare 1..this many trust levels."),
-    folds: int = typer.Option(5, "--folds", min=2, help="Folds over participants for the held-out log-likelihood."),
-    restarts: int | None = typer.Option(
-        None,
-        "--restarts",
-        "-r",
-        min=1,
-        max=1000,
-        help="Random starts per fit (default: max(10, free parameters / 4)); each fit also starts from the "
-        "fit with one level fewer, each level split in two.",
-    ),
-    prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count (MAP)."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
-    tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
+    log: Annotated[Path, typer.Argument(help="Trial log (CSV or Parquet).")],
+    max_levels: Annotated[int, typer.Option("--max-levels", min=1, max=8, help="Compare 1..this many trust levels.")] = 4,
+    folds: Annotated[int, typer.Option("--folds", min=2, help="Folds over participants for the held-out log-likelihood.")] = 5,
+    restarts: Annotated[
+        int | None,
+        typer.Option(
+            "--restarts",
+            "-r",
+            min=1,
+            max=1000,
+            help="Random starts per fit (default: max(10, free parameters / 4)); each fit also starts from the "
+            "fit with one level fewer, each level split in two.",
+        ),
+    ] = None,
+    prior: Annotated[float, typer.Option("--prior", min=0.0, help="Dirichlet pseudo-count (MAP).")] = 0.0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed.")] = 0,
+    tol: Annotated[
+        float, typer.Option("--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0).")
+    ] = 1e-6,
     transitions_on: str | None = AsForFitTransitionsOpt,
     emissions_on: str | None = AsForFitEmissionsOpt,
     widen: bool = widen_option(8, "1..--max-levels"),
     as_json: bool = PrintJsonOpt,
     reading: LogReading = FROM_OPTIONS,
-    quiet: bool = False,
+    quiet: bool = QuietOpt,
 ) -> None:
     """Choose the number of trust levels: BIC and participant-held-out log-likelihood."""
-    tr, em, frame = _read_with_inputs(log, reading, transitions_on, emissions_on)
+    tr, em, frame = read_with_inputs(log, reading, transitions_on, emissions_on)
     with progress_task(quiet or as_json, "model selection") as update:
         rows = _fit().select_levels(
             frame,
@@ -473,7 +500,10 @@ def select(
         print_json({"levels": rows, "warnings": warnings})
         return
     print_selection(
-        selection_table("Number of trust levels", "levels", rows, folds),
+        "Number of trust levels",
+        "levels",
+        rows,
+        folds,
         "* best by that criterion; reached best: starts (random, and the fit with one level fewer split) "
         "within 0.01 of the best log-likelihood",
         warnings,

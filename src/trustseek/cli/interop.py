@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any
 
@@ -10,7 +9,7 @@ import typer
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import app, atomic_output, check_not_inputs, check_output, console, err_console, print_json
+from ._app import app, atomic_output, check_outputs, check_positive, console, err_console, print_json
 from ._options import ModelOpt, PrintJsonOpt, TaskOpt, model_and_task
 
 #: exit code of solve-pomdp-file when the point solver stops before its target gap
@@ -36,8 +35,8 @@ def export_pomdp(
 
     if fmt is not None and fmt not in ("pomdp", "pomdpx"):
         raise TrustseekError([f"--format must be 'pomdp' or 'pomdpx', got {fmt!r}"])
-    check_output(out, "OUT", None if fmt else (".pomdp", ".pomdpx"))
-    check_not_inputs(((out, "OUT"),), ((model, "--model file"), (task, "--task file")))
+    inputs = ((model, "--model file"), (task, "--task file"))
+    check_outputs((out, "OUT", None if fmt else (".pomdp", ".pomdpx")), inputs=inputs)
     m, t = model_and_task(model, task)
     pomdp = AssistancePOMDP(m, t)
     c0 = None
@@ -80,10 +79,8 @@ def solve_pomdp_file(
     from ..interop.files import read_pomdp
     from ..solvers import UnsupportedProblem, make_solver
 
-    if not (gap > 0 and math.isfinite(gap)):
-        raise TrustseekError([f"--gap must be a finite number > 0, got {gap}"])
-    if not (max_seconds > 0 and math.isfinite(max_seconds)):
-        raise TrustseekError([f"--max-seconds must be a finite number > 0, got {max_seconds}"])
+    check_positive(gap, "--gap")
+    check_positive(max_seconds, "--max-seconds")
     flat = read_pomdp(path)
     res: dict[str, Any]
     if horizon is not None:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
 
@@ -13,7 +12,7 @@ from .. import solvers
 from ..errors import TrustseekError
 from ..solvers.defaults import DEFAULT_GRID, DEFAULT_TYPE_AWARE_SOLVER, METHODS
 from ..vocab import check_belief_update
-from ._app import app, atomic_output, check_not_inputs, check_output, check_tol, console, print_json
+from ._app import app, atomic_output, check_outputs, check_positive, check_tol, console, print_json
 from ._options import FROM_OPTIONS, JsonOpt, LogReading, ModelOpt, PrintJsonOpt, TaskOpt, log_options, model_and_task
 
 if TYPE_CHECKING:
@@ -119,9 +118,8 @@ def solve(
     from ..solvers import make_solver, summarize
 
     _check_solve(belief_update, method, solver, gap, max_seconds)
-    check_output(out, "--out", (".json",))
     inputs = ((model, "--model file"), (task, "--task file"), (types, "--types file"), (history, "--history log"))
-    check_not_inputs(((out, "--out"),), inputs)
+    check_outputs((out, "--out", (".json",)), inputs=inputs)
     mixture = load_mixture(types) if types is not None else mixture_of(model)
     if mixture is None and (history is not None or participant is not None or session is not None):
         raise TrustseekError(["--history, --participant and --session need supervisor types (--types or a mixture with --model)"])
@@ -172,10 +170,8 @@ def _check_solve(belief_update: str, method: str, solver: str | None, gap: float
         raise TrustseekError([f"--method must be one of {list(METHODS)}, got {method!r}"])
     if solver is not None and solver not in solver_names():
         raise TrustseekError([f"--solver must be one of {list(solver_names())}, got {solver!r}"])
-    if gap is not None and not (gap > 0 and math.isfinite(gap)):
-        raise TrustseekError([f"--gap must be a finite number > 0, got {gap}"])
-    if max_seconds is not None and not (max_seconds > 0 and math.isfinite(max_seconds)):
-        raise TrustseekError([f"--max-seconds must be a finite number > 0, got {max_seconds}"])
+    check_positive(gap, "--gap")
+    check_positive(max_seconds, "--max-seconds")
 
 
 def _print_solution(policy: Policy, summary: dict) -> None:
@@ -260,11 +256,10 @@ def agnostic(
     from ..pomdp.problem import AssistancePOMDP
     from ..solvers import make_solver, trust_agnostic_from_data
 
-    check_output(out, "--out", (".json",))
-    inputs = ((model, "--model file"), (task, "--task file"), (data, "--data log"), (reading.mapping, "--mapping file"))
-    check_not_inputs(((out, "--out"),), inputs)
     if data is None and (reading.mapping is not None or reading.column or reading.label or reading.order):
         raise TrustseekError(["--mapping, --column, --label and --order apply to a log: give it with --data"])
+    inputs = ((model, "--model file"), (task, "--task file"), (data, "--data log"), *reading.inputs())
+    check_outputs((out, "--out", (".json",)), inputs=inputs)
     t = load_task(task)
     pol: Policy
     if data is not None:
@@ -304,8 +299,8 @@ def plot_q_cmd(
     from ..pomdp.problem import AssistancePOMDP
     from ..solvers import make_solver
 
-    check_output(out, "--out", (".png", ".pdf", ".svg"))
-    check_not_inputs(((out, "--out"),), ((model, "--model file"), (task, "--task file"), (policy_file, "--policy file")))
+    inputs = ((model, "--model file"), (task, "--task file"), (policy_file, "--policy file"))
+    check_outputs((out, "--out", (".png", ".pdf", ".svg")), inputs=inputs)
     if policy_file is not None:
         try:
             policy = TrustAwarePolicy.tabulate(load_policy(policy_file))
@@ -331,8 +326,7 @@ def preset(
 
     if name not in MODEL_PRESETS:
         raise TrustseekError([f"unknown preset {name!r}; presets: {sorted(MODEL_PRESETS)}"])
-    check_output(model_out, "--model-out", (".json",))
-    check_output(task_out, "--task-out", (".json",))
+    check_outputs((model_out, "--model-out", (".json",)), (task_out, "--task-out", (".json",)))
     m, t = MODEL_PRESETS[name](), TASK_PRESETS[name]()
     if model_out:
         with atomic_output(model_out) as tmp:

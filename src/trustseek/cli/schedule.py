@@ -8,26 +8,10 @@ from typing import Any
 import typer
 from rich.table import Table
 
-from ..errors import TrustseekError
 from ..solvers.defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
 from ..vocab import PAPER_BLOCK_COUNTS
 from ._app import app, console, print_json
-from ._options import JsonOpt, ModelOpt, TaskOpt, model_and_task
-
-
-def parse_counts(text: str, complexities: tuple[str, ...]) -> tuple[int, ...]:
-    """``17,17`` (in the task's order) or ``low=17,high=17``."""
-    parts = [p.strip() for p in text.split(",") if p.strip()]
-    try:
-        if parts and all("=" in p for p in parts):
-            named = {k.strip(): int(v) for k, v in (p.split("=", 1) for p in parts)}
-            unknown = sorted(set(named) - set(complexities))
-            if unknown:
-                raise TrustseekError([f"--counts names unknown complexity {unknown[0]!r}; expected {list(complexities)}"])
-            return tuple(named.get(c, 0) for c in complexities)
-        return tuple(int(p) for p in parts)
-    except ValueError:
-        raise TrustseekError([f"--counts must be numbers like 17,17 or low=17,high=17, got {text!r}"]) from None
+from ._options import JsonOpt, ModelOpt, TaskOpt, model_and_task, parse_counts
 
 
 @app.command(rich_help_panel="Plan")

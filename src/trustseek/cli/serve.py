@@ -27,9 +27,11 @@ def _check_db(db: str) -> str:
 
 
 def _check_existing_sqlite(db: str) -> None:
-    """Reading from a SQLite file that does not exist would create an empty database: refuse it."""
+    """A database URL to read from; a SQLite file that does not exist would be created empty:
+    refused."""
     from sqlalchemy.engine import make_url
 
+    _check_db(db)
     try:
         url = make_url(db)
     except Exception:
@@ -225,13 +227,10 @@ def export_cmd(
     from ..server.db import open_database
     from ..server.export import events_frame, trials_frame, write_frame
 
-    _check_db(db)
     _check_existing_sqlite(db)
     if out is None and bundle is None:
         raise TrustseekError(["give --out FILE (the trial log) or --bundle DIR (every table)"])
-    check_outputs((out, "--out"), (events, "--events"))
-    for p, option in ((out, "--out"), (events, "--events")):
-        check_output(p, option, (".csv", ".parquet"))
+    check_outputs((out, "--out", (".csv", ".parquet")), (events, "--events", (".csv", ".parquet")))
     check_output(bundle, "--bundle", directory=True)
     with open_database(db)() as s:
         st = _stored_study(s, study, db)
@@ -290,7 +289,6 @@ def study_cmd(
     from ..server.errors import Refused
     from ..server.lifecycle import STATUSES, progress, set_status
 
-    _check_db(db)
     _check_existing_sqlite(db)
     if status is not None and status not in STATUSES:
         raise TrustseekError([f"--status {status!r}: expected one of {', '.join(STATUSES)}"])

@@ -6,12 +6,12 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import BarColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from .. import solvers
@@ -20,15 +20,14 @@ from ..vocab import PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS, check_belief_upd
 from ._app import (
     app,
     atomic_output,
-    check_not_inputs,
     check_output,
     check_outputs,
     console,
-    err_console,
     print_json,
     print_written,
+    progress_bar,
 )
-from ._options import JsonOpt, QuietOpt, TaskOpt
+from ._options import JsonOpt, QuietOpt, TaskOpt, parse_counts
 
 if TYPE_CHECKING:
     from ..model.core import TrustModel
@@ -75,115 +74,114 @@ def _policy(
     raise TrustseekError([f"--policy must be one of {list(POLICY_SPEC_KINDS)} or a policy JSON file, got {spec!r}"])
 
 
-def _counts(text: str, task) -> list[int]:
-    parts = [x.strip() for x in text.split(",")]
-    if len(parts) != task.n_complexity:
-        raise TrustseekError([f"--counts needs one number per complexity {list(task.complexities)} (e.g. 41,30), got {text!r}"])
-    try:
-        vals = [int(x) for x in parts]
-    except ValueError:
-        raise TrustseekError([f"--counts must be comma-separated integers (e.g. 41,30), got {text!r}"]) from None
-    if any(v < 0 for v in vals) or sum(vals) < 1:
-        raise TrustseekError([f"--counts must be non-negative with at least one trial, got {text!r}"])
-    return vals
-
-
-ModelOpt = typer.Option(
-    "paper",
-    "--model",
-    "-m",
-    help="Supervisors' trust model: a preset name (paper) or a JSON file; a mixture of supervisor types "
-    "(paper+conservative or a mixture file) gives each participant a type in the mixture's shares.",
-)
-TypesOpt = typer.Option(
-    None,
-    "--types",
-    help="Supervisors of several types, as 'solve --types' takes them: a mixture preset (paper+conservative) "
-    "or a mixture JSON file (the same as giving the mixture with --model).",
-)
-PolicyOpt = typer.Option(
-    "trust-aware",
-    "--policy",
-    "-p",
-    help=f"Robot policy: {', '.join(POLICY_SPEC_KINDS)}, {TYPE_AWARE} (for a mixture of supervisor types), "
-    "or a policy JSON file (e.g. from 'trustseek solve --out').",
-)
-CountsOpt = typer.Option(
-    None,
-    "--counts",
-    help="Trials per complexity in random order, e.g. 41,30 (the paper's design). Default: 41,30 unless --trials is given.",
-)
-TrialsOpt = typer.Option(
-    None,
-    "--trials",
-    min=1,
-    max=100_000,
-    help="Number of trials with i.i.d. complexities from the task's probabilities (instead of --counts).",
-)
-BeliefUpdateOpt = typer.Option(
-    "bayes",
-    "--belief-update",
-    "-u",
-    help="Belief update of the trust-aware policy: 'bayes' (exact filter, default) or 'paper' (eq. 3).",
-)
-PolicyModelOpt = typer.Option(
-    None, "--policy-model", help="Model the trust-aware policy is solved for (default: the supervisors' model)."
-)
-AskLowOpt = typer.Option(
-    PAPER_ASK_PROBABILITIES["low"], "--ask-low", min=0.0, max=1.0, help="Randomized policy: P(ask) in the first complexity."
-)
-AskHighOpt = typer.Option(
-    PAPER_ASK_PROBABILITIES["high"],
-    "--ask-high",
-    min=0.0,
-    max=1.0,
-    help="Randomized policy: P(ask) in the second complexity.",
-)
-ConcentrationOpt = typer.Option(
-    None,
-    "--concentration",
-    help="Heterogeneous population: each participant's probability rows ~ Dirichlet(concentration x pooled row + pseudo).",
-)
-PseudoOpt = typer.Option(0.0, "--pseudo", min=0.0, help="Dirichlet pseudo-count added to every cell (with --concentration).")
-OutOpt = typer.Option(
-    None,
-    "--out",
-    "-o",
-    help="Write every trial (canonical trial log + true_trust, belief, reward, block, policy) to this CSV/Parquet file.",
-)
-SummaryOutOpt = typer.Option(None, "--summary-out", help="Write the per-participant summary to this CSV/Parquet file.")
-
-
 @app.command(rich_help_panel="Simulate and reproduce")
 def simulate(
     ctx: typer.Context,
-    model: str = ModelOpt,
-    types: str | None = TypesOpt,
+    model: Annotated[
+        str,
+        typer.Option(
+            "--model",
+            "-m",
+            help="Supervisors' trust model: a preset name (paper) or a JSON file; a mixture of supervisor types "
+            "(paper+conservative or a mixture file) gives each participant a type in the mixture's shares.",
+        ),
+    ] = "paper",
+    types: Annotated[
+        str | None,
+        typer.Option(
+            "--types",
+            help="Supervisors of several types, as 'solve --types' takes them: a mixture preset (paper+conservative) "
+            "or a mixture JSON file (the same as giving the mixture with --model).",
+        ),
+    ] = None,
     task: str = TaskOpt,
-    policy: str = PolicyOpt,
-    participants: int = typer.Option(9, "--participants", "-n", min=1, max=1_000_000, help="Number of simulated participants."),
-    counts: str | None = CountsOpt,
-    trials: int | None = TrialsOpt,
-    belief_update: str = BeliefUpdateOpt,
-    policy_model: str | None = PolicyModelOpt,
-    grid: int = typer.Option(1001, "--grid", min=3, max=1_000_001, help="Belief grid points for solving the trust-aware policy."),
-    ask_low: float = AskLowOpt,
-    ask_high: float = AskHighOpt,
-    concentration: float | None = ConcentrationOpt,
-    pseudo: float = PseudoOpt,
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed (same seed, same supervisors and luck for any policy)."),
-    out: Path | None = OutOpt,
-    summary_out: Path | None = SummaryOutOpt,
+    policy: Annotated[
+        str,
+        typer.Option(
+            "--policy",
+            "-p",
+            help=f"Robot policy: {', '.join(POLICY_SPEC_KINDS)}, {TYPE_AWARE} (for a mixture of supervisor types), "
+            "or a policy JSON file (e.g. from 'trustseek solve --out').",
+        ),
+    ] = "trust-aware",
+    participants: Annotated[
+        int, typer.Option("--participants", "-n", min=1, max=1_000_000, help="Number of simulated participants.")
+    ] = 9,
+    counts: Annotated[
+        str | None,
+        typer.Option(
+            "--counts",
+            help="Trials per complexity in random order, e.g. 41,30 or low=41,high=30 (the paper's design). "
+            "Default: 41,30 unless --trials is given.",
+        ),
+    ] = None,
+    trials: Annotated[
+        int | None,
+        typer.Option(
+            "--trials",
+            min=1,
+            max=100_000,
+            help="Number of trials with i.i.d. complexities from the task's probabilities (instead of --counts).",
+        ),
+    ] = None,
+    belief_update: Annotated[
+        str,
+        typer.Option(
+            "--belief-update",
+            "-u",
+            help="Belief update of the trust-aware policy: 'bayes' (exact filter, default) or 'paper' (eq. 3).",
+        ),
+    ] = "bayes",
+    policy_model: Annotated[
+        str | None,
+        typer.Option("--policy-model", help="Model the trust-aware policy is solved for (default: the supervisors' model)."),
+    ] = None,
+    grid: Annotated[
+        int, typer.Option("--grid", min=3, max=1_000_001, help="Belief grid points for solving the trust-aware policy.")
+    ] = 1001,
+    ask_low: Annotated[
+        float, typer.Option("--ask-low", min=0.0, max=1.0, help="Randomized policy: P(ask) in the first complexity.")
+    ] = PAPER_ASK_PROBABILITIES["low"],
+    ask_high: Annotated[
+        float, typer.Option("--ask-high", min=0.0, max=1.0, help="Randomized policy: P(ask) in the second complexity.")
+    ] = PAPER_ASK_PROBABILITIES["high"],
+    concentration: Annotated[
+        float | None,
+        typer.Option(
+            "--concentration",
+            help="Heterogeneous population: each participant's probability rows ~ "
+            "Dirichlet(concentration x pooled row + pseudo).",
+        ),
+    ] = None,
+    pseudo: Annotated[
+        float, typer.Option("--pseudo", min=0.0, help="Dirichlet pseudo-count added to every cell (with --concentration).")
+    ] = 0.0,
+    seed: Annotated[
+        int, typer.Option("--seed", min=0, help="Random seed (same seed, same supervisors and luck for any policy).")
+    ] = 0,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            "-o",
+            help="Write every trial (canonical trial log + true_trust, belief, reward, block, policy) to this CSV/Parquet file.",
+        ),
+    ] = None,
+    summary_out: Annotated[
+        Path | None, typer.Option("--summary-out", help="Write the per-participant summary to this CSV/Parquet file.")
+    ] = None,
     as_json: bool = JsonOpt,
 ) -> None:
     """Simulate supervisors from a trust model working with the robot under a policy."""
     from ..simulation.engine import simulate as run_simulation
 
-    given = _check_simulate(ctx, belief_update, counts, trials, out, summary_out)
+    given = _check_simulate(ctx, belief_update, counts, trials)
     inputs = ((model, "--model file"), (task, "--task file"), (policy, "--policy file"), (policy_model, "--policy-model file"))
-    check_not_inputs(((out, "--out"), (summary_out, "--summary-out")), inputs)
+    tables = (".csv", ".parquet")
+    check_outputs((out, "--out", tables), (summary_out, "--summary-out", tables), inputs=inputs)
     pop = _population(ctx, model, types, policy_model, concentration, task)
     t = pop.task
+    cnt = _trial_counts(counts, trials, participants, t)
     if policy == TYPE_AWARE:
         if pop.policy_types is None:
             raise TrustseekError(
@@ -192,7 +190,6 @@ def simulate(
         pol = solvers.solve_type_aware(pop.policy_types, t, belief_update=belief_update)
     else:
         pol = _policy(policy, pop.checked_policy_model(policy), t, belief_update, grid, ask_low, ask_high, given)
-    cnt = _trial_counts(counts, trials, participants, t)
     sup = pop.supervisors(participants, seed, concentration, pseudo)
     t0 = time.perf_counter()
     sim = run_simulation(
@@ -244,17 +241,13 @@ def _given(ctx: typer.Context, *names: str) -> list[str]:
     return out
 
 
-def _check_simulate(ctx: typer.Context, belief_update: str, counts, trials, out, summary_out) -> list[str]:
+def _check_simulate(ctx: typer.Context, belief_update: str, counts, trials) -> list[str]:
     """simulate's options refused before anything is loaded; the options a solved policy file would
     silently override (refused with one)."""
     check_belief_update(belief_update, "--belief-update")
     if counts is not None and trials is not None:
         raise TrustseekError(["give either --counts or --trials, not both"])
-    given = _given(ctx, "belief_update", "--belief-update", "policy_model", "--policy-model")
-    check_outputs((out, "--out"), (summary_out, "--summary-out"))
-    for f, option in ((out, "--out"), (summary_out, "--summary-out")):
-        check_output(f, option, (".csv", ".parquet"))
-    return given
+    return _given(ctx, "belief_update", "--belief-update", "policy_model", "--policy-model")
 
 
 @dataclass
@@ -316,7 +309,7 @@ def _population(
 
 def _trial_counts(counts: str | None, trials: int | None, participants: int, task: Task) -> list[int] | None:
     """The trials per complexity (None: --trials i.i.d. trials), refused when the run is too large."""
-    cnt = None if trials is not None else _counts(counts or "41,30", task)
+    cnt = None if trials is not None else list(parse_counts(counts or "41,30", task.complexities))
     n_trials = sum(cnt) if cnt is not None else (trials or 0)
     if participants * n_trials > 100_000_000:  # about 1.3 GB of simulated trials
         raise TrustseekError(
@@ -340,67 +333,69 @@ def _print_simulation(desc: str, participants: int, n_trials: int, stats: dict, 
 
 
 def _write(frame, path: Path) -> None:
-    try:
-        from ..data.trials import write_trials
+    """A table of trials as a trial log, another (the summary) as it is."""
+    from ..data.trials import write_trials
 
-        if list(frame.columns[:2]) == ["participant", "trial"]:
-            write_trials(frame, path)
-            return
-    except ImportError:
-        pass
-    if path.suffix.lower() == ".parquet":
+    if list(frame.columns[:2]) == ["participant", "trial"]:
+        write_trials(frame, path)
+    elif path.suffix.lower() == ".parquet":
         frame.to_parquet(path, index=False)
     else:
         frame.to_csv(path, index=False)
 
 
-ReplicatesOpt = typer.Option(20, "--replicates", "-r", min=0, max=10_000, help="Replicate experiments of the whole pipeline.")
-LargeNOpt = typer.Option(
-    10_000, "--large-n", min=1, max=1_000_000, help="Participants of the large experiment 2 and of the cost studies."
-)
-BootstrapOpt = typer.Option(
-    200, "--bootstrap", "-b", min=0, max=10_000, help="Bootstrap resamples for the fitted model's intervals."
-)
-ReplicateLargeNOpt = typer.Option(
-    2_000, "--replicate-large-n", min=1, max=1_000_000, help="Participants of each replicate's large experiment 2."
-)
-ReproduceBeliefUpdateOpt = typer.Option(
-    "paper",
-    "--belief-update",
-    "-u",
-    help="Belief update of the trust-aware policy: 'paper' (eq. 3, as in the paper) or 'bayes'.",
-)
-ScheduleParticipantsOpt = typer.Option(
-    10_000,
-    "--schedule-participants",
-    min=0,
-    max=1_000_000,
-    help="Simulated participants of the trial-scheduling section (0: leave the section out).",
-)
-TypesParticipantsOpt = typer.Option(
-    2_000,
-    "--types-participants",
-    min=0,
-    max=1_000_000,
-    help="Simulated participants of the supervisor-types section (Remark 1; 0: leave the section out).",
-)
-
-
 @app.command(rich_help_panel="Simulate and reproduce")
 def reproduce(
-    out: Path = typer.Option(Path("report"), "--out", "-o", help="Report folder (report.html, PNGs, summary.json, data)."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed: the same seed gives the same numbers."),
-    replicates: int = ReplicatesOpt,
-    large_n: int = LargeNOpt,
-    bootstrap: int = BootstrapOpt,
-    restarts: int = typer.Option(10, "--restarts", min=1, max=1000, help="EM restarts of the main fit."),
-    replicate_restarts: int = typer.Option(4, "--replicate-restarts", min=1, max=1000, help="EM restarts per replicate fit."),
-    replicate_large_n: int = ReplicateLargeNOpt,
-    belief_update: str = ReproduceBeliefUpdateOpt,
-    jobs: int = typer.Option(2, "--jobs", "-j", min=1, help="Processes (bootstrap and replicates); numbers do not depend on it."),
-    schedule_participants: int = ScheduleParticipantsOpt,
-    types_participants: int = TypesParticipantsOpt,
-    as_json: bool = typer.Option(False, "--json", help="Print summary.json to stdout instead of tables."),
+    out: Annotated[Path, typer.Option("--out", "-o", help="Report folder (report.html, PNGs, summary.json, data).")] = Path(
+        "report"
+    ),
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed: the same seed gives the same numbers.")] = 0,
+    replicates: Annotated[
+        int, typer.Option("--replicates", "-r", min=0, max=10_000, help="Replicate experiments of the whole pipeline.")
+    ] = 20,
+    large_n: Annotated[
+        int,
+        typer.Option("--large-n", min=1, max=1_000_000, help="Participants of the large experiment 2 and of the cost studies."),
+    ] = 10_000,
+    bootstrap: Annotated[
+        int, typer.Option("--bootstrap", "-b", min=0, max=10_000, help="Bootstrap resamples for the fitted model's intervals.")
+    ] = 200,
+    restarts: Annotated[int, typer.Option("--restarts", min=1, max=1000, help="EM restarts of the main fit.")] = 10,
+    replicate_restarts: Annotated[
+        int, typer.Option("--replicate-restarts", min=1, max=1000, help="EM restarts per replicate fit.")
+    ] = 4,
+    replicate_large_n: Annotated[
+        int,
+        typer.Option("--replicate-large-n", help="Participants of each replicate's large experiment 2.", min=1, max=1_000_000),
+    ] = 2_000,
+    belief_update: Annotated[
+        str,
+        typer.Option(
+            "--belief-update", "-u", help="Belief update of the trust-aware policy: 'paper' (eq. 3, as in the paper) or 'bayes'."
+        ),
+    ] = "paper",
+    jobs: Annotated[
+        int, typer.Option("--jobs", "-j", min=1, help="Processes (bootstrap and replicates); numbers do not depend on it.")
+    ] = 2,
+    schedule_participants: Annotated[
+        int,
+        typer.Option(
+            "--schedule-participants",
+            min=0,
+            max=1_000_000,
+            help="Simulated participants of the trial-scheduling section (0: leave the section out).",
+        ),
+    ] = 10_000,
+    types_participants: Annotated[
+        int,
+        typer.Option(
+            "--types-participants",
+            min=0,
+            max=1_000_000,
+            help="Simulated participants of the supervisor-types section (Remark 1; 0: leave the section out).",
+        ),
+    ] = 2_000,
+    as_json: Annotated[bool, typer.Option("--json", help="Print summary.json to stdout instead of tables.")] = False,
     quiet: bool = QuietOpt,
 ) -> None:
     """Reproduce Sections V-VI of the paper on simulated supervisors and write a report."""
@@ -426,7 +421,13 @@ def reproduce(
         raise TrustseekError(problems)
     check_output(out, "--out", directory=True)
     t0 = time.perf_counter()
-    with _reproduce_progress(quiet or as_json) as bar:
+    columns = (
+        TextColumn("[bold]{task.description:<44}"),
+        BarColumn(),
+        TextColumn("{task.percentage:>3.0f}%"),
+        TimeElapsedColumn(),
+    )
+    with progress_bar(quiet or as_json, *columns) as bar:
         task = bar.add_task("experiment 1", total=1000)
 
         def progress(label: str, done: int, total: int) -> None:
@@ -442,18 +443,6 @@ def reproduce(
         return
     _print_reproduction(rep.summary)
     console.print(f"report: {paths['html']}  ({time.perf_counter() - t0:.1f} s)")
-
-
-def _reproduce_progress(quiet: bool) -> Progress:
-    return Progress(
-        TextColumn("[bold]{task.description:<44}"),
-        BarColumn(),
-        TextColumn("{task.percentage:>3.0f}%"),
-        TimeElapsedColumn(),
-        console=err_console,
-        transient=True,
-        disable=quiet or not err_console.is_terminal,
-    )
 
 
 def _print_reproduction(s: dict) -> None:

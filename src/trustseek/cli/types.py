@@ -14,7 +14,6 @@ from ..estimation.options import FitOptions
 from ._app import (
     app,
     atomic_output,
-    check_not_inputs,
     check_output,
     check_outputs,
     check_tol,
@@ -23,12 +22,11 @@ from ._app import (
     print_written,
     progress_bar,
     progress_task,
-    selection_table,
 )
-from ._options import FROM_OPTIONS, LogReading, PrintJsonOpt, log_options, widen_option
+from ._options import FROM_OPTIONS, LogReading, PrintJsonOpt, QuietOpt, log_options, widen_option
 from ._output import check_plots_folder, fit_summary, print_selection, print_warnings
 from ._reading import load_for_decoding, read_for_types, widened_note
-from .fit import POSTERIOR_SUFFIXES, _read_with_inputs
+from .fit import POSTERIOR_SUFFIXES, read_with_inputs
 
 TransitionsOnOpt = typer.Option(
     None, "--transitions-on", help="Inputs of the trust transitions (as for fit: complexity, robot_action, experience)."
@@ -41,12 +39,6 @@ DifferOpt = typer.Option(
     "--differ",
     help="What differs between types: 'all', or some of initial,emission,transition (the rest is shared by every type).",
 )
-
-
-def _mixture():
-    from ..estimation import mixture
-
-    return mixture
 
 
 def _check_differ(differ: str) -> None:
@@ -72,7 +64,7 @@ def parse_types(text: str) -> tuple[int, ...]:
 
 
 @app.command("fit-types", rich_help_panel="Estimate")
-@log_options(quiet=True)
+@log_options()
 def fit_types(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
     types: int = typer.Option(2, "--types", "-m", min=1, max=12, help="Number of supervisor types."),
@@ -96,23 +88,23 @@ def fit_types(
     plots: Path | None = typer.Option(None, "--plots", help="Write per-type figures into this directory."),
     as_json: bool = typer.Option(False, "--json", help="Print the fit as one JSON object."),
     reading: LogReading = FROM_OPTIONS,
-    quiet: bool = False,
+    quiet: bool = QuietOpt,
 ) -> None:
     """Fit supervisor types: M trust models of the paper's structure, each participant one type."""
-    check_outputs((out, "--out"), (type_posteriors, "--type-posteriors"))
-    check_output(type_posteriors, "--type-posteriors", POSTERIOR_SUFFIXES)
-    outputs = ((out, "--out"), (type_posteriors, "--type-posteriors"))
-    check_not_inputs(outputs, ((log, "trial log"), (reading.mapping, "--mapping file")))
+    outputs = ((out, "--out"), (type_posteriors, "--type-posteriors", POSTERIOR_SUFFIXES))
+    check_outputs(*outputs, inputs=((log, "trial log"), *reading.inputs()))
     check_plots_folder(plots)
     _check_differ(differ)
-    tr, em, frame = _read_with_inputs(log, reading, transitions_on, emissions_on)
+    tr, em, frame = read_with_inputs(log, reading, transitions_on, emissions_on)
     named = [c for c in (*em, *tr) if c not in ("complexity", "robot_action", "experience")]
     if plots is not None and named:
         raise TrustseekError([f"--plots draws trust-model types; types of the named inputs {named} have no figures here"])
+    from ..estimation.mixture import fit_types as fit_mixture
+
     bar = progress_bar(quiet or as_json)
     with bar:
         task = bar.add_task("starts", total=restarts)
-        fit = _mixture().fit_types(
+        fit = fit_mixture(
             frame,
             types,
             options=FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs),
@@ -235,7 +227,7 @@ def _rely_cells(mixture):
 
 
 @app.command("select-types", rich_help_panel="Estimate")
-@log_options(quiet=True)
+@log_options()
 def select_types(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
     types: str = typer.Option("1..4", "--types", help="Numbers of types to compare, e.g. 1..4 or 1,2,3."),
@@ -252,14 +244,14 @@ def select_types(
     widen: bool = widen_option(12, "the numbers given"),
     as_json: bool = PrintJsonOpt,
     reading: LogReading = FROM_OPTIONS,
-    quiet: bool = False,
+    quiet: bool = QuietOpt,
 ) -> None:
     """Choose the number of supervisor types: BIC and participant-held-out log-likelihood."""
     values = parse_types(types)
     _check_differ(differ)
     from ..estimation import type_selection
 
-    tr, em, frame = _read_with_inputs(log, reading, transitions_on, emissions_on)
+    tr, em, frame = read_with_inputs(log, reading, transitions_on, emissions_on)
     with progress_task(quiet or as_json, "model selection") as update:
         rows = type_selection.select_types(
             frame,
@@ -278,9 +270,13 @@ def select_types(
         return
     weights = {"weights": lambda r: ", ".join(f"{w:.2f}" for w in r["weights"])}
     print_selection(
-        selection_table("Number of supervisor types", "types", rows, folds, weights),
+        "Number of supervisor types",
+        "types",
+        rows,
+        folds,
         "* best by that criterion; reached best: starts within 0.01 of the best log-likelihood",
         warnings,
+        weights,
     )
 
 

@@ -12,37 +12,14 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
-from ._app import (
-    app,
-    atomic_output,
-    check_not_inputs,
-    check_output,
-    check_tol,
-    console,
-    err_console,
-    keep_columns,
-    print_json,
-    progress_task,
-)
-from ._options import FROM_OPTIONS, LogReading, RatingPerOpt, log_options
-from ._reading import read_for_types
-from .fit import POSTERIOR_SUFFIXES, AsForFitEmissionsOpt, AsForFitTransitionsOpt, _general, _read_with_inputs
+from ._app import app, atomic_output, check_outputs, check_tol, console, err_console, print_json, progress_task
+from ._options import FROM_OPTIONS, AsForFitEmissionsOpt, AsForFitTransitionsOpt, LogReading, QuietOpt, RatingPerOpt, log_options
+from ._reading import keep_columns, read_for_types
+from .fit import POSTERIOR_SUFFIXES, general_inputs, read_with_inputs
 
 BootstrapOpt = typer.Option(
     1000, "--bootstrap", "-b", min=0, max=10_000, help="Participant-bootstrap resamples for the 95% intervals (0 = none)."
 )
-
-
-def _prediction():
-    from ..estimation import prediction
-
-    return prediction
-
-
-def _validation():
-    from ..estimation import validation
-
-    return validation
 
 
 def _table(title: str, *columns: str) -> Table:
@@ -80,7 +57,7 @@ def _load(path: Path) -> Any:
 
 
 @app.command(rich_help_panel="Estimate")
-@log_options(keep=True, quiet=True)
+@log_options(keep=True)
 def predict(
     log: Path = typer.Argument(..., help="Trial log (CSV, Parquet, JSON), one row per trial."),
     model: Path | None = typer.Option(
@@ -103,7 +80,7 @@ def predict(
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the per-trial predictions (CSV or Parquet)."),
     as_json: bool = typer.Option(False, "--json", help="Print the scores as one JSON object."),
     reading: LogReading = FROM_OPTIONS,
-    quiet: bool = False,
+    quiet: bool = QuietOpt,
 ) -> None:
     """How well a trust model predicts each trial's human action from the trials before it
     (filtering), against baselines: log-loss, Brier score, AUC with bootstrap intervals.
@@ -111,7 +88,8 @@ def predict(
     Trials whose action the model fixes (the robot asked: P(intervene) = 1) are no prediction
     and are left out of the scores."""
     _check_trial_output(out, log, model, reading)
-    pr = _prediction()
+    from ..estimation import prediction as pr
+
     if model is not None:
         if folds is not None:
             raise TrustseekError(["--folds scores held-out fits; --model scores that model in-sample: give one of them"])
@@ -119,9 +97,9 @@ def predict(
         frame = read_for_types(log, m, reading)
         report = pr.predict_in_sample(frame, m, bootstrap=bootstrap, seed=seed)
     else:
-        tr, em, frame = _read_with_inputs(log, reading, transitions_on, emissions_on)
+        tr, em, frame = read_with_inputs(log, reading, transitions_on, emissions_on)
         preset: Any = "paper"
-        if _general(tr, em):  # inputs a trust model does not have: the general model's structure
+        if general_inputs(tr, em):  # inputs a trust model does not have: the general model's structure
             from ..estimation.trust_iohmm import general_spec
 
             preset = general_spec(frame, em, tr, levels, prior)
@@ -150,8 +128,7 @@ def predict(
 
 def _check_trial_output(out: Path | None, log: Path, model: Path | None, reading: LogReading) -> None:
     """--out (per-trial values) and --keep refused before anything is read."""
-    check_output(out, "--out", POSTERIOR_SUFFIXES)
-    check_not_inputs(((out, "--out"),), ((log, "trial log"), (model, "--model file"), (reading.mapping, "--mapping file")))
+    check_outputs((out, "--out", POSTERIOR_SUFFIXES), inputs=((log, "trial log"), (model, "--model file"), *reading.inputs()))
     if reading.keep and out is None:
         raise TrustseekError(["--keep carries log columns into --out: give --out"])
 
@@ -245,7 +222,8 @@ def validate(
         labels = [x.strip() for x in rating_labels.split(",")]
     m = _load(model)
     frame = read_for_types(log, m, reading)
-    va = _validation()
+    from ..estimation import validation as va
+
     if rating is None:
         if "rating" not in frame.columns:
             raise TrustseekError(["no rating column: name the log's self-reported trust column with --rating COLUMN"])

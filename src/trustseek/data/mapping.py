@@ -328,9 +328,15 @@ class ColumnMapping:
             d = tomllib.loads(text) if path.suffix.lower() == ".toml" else json.loads(text)
         except (json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
             raise DataError([f"invalid {'TOML' if path.suffix.lower() == '.toml' else 'JSON'}: {exc}"], str(path)) from None
+        return cls.from_file(d, path)
+
+    @classmethod
+    def from_file(cls, d: Any, path: str | Path) -> ColumnMapping:
+        """The mapping a file at ``path`` holds, its content ``d`` already read: a joined file
+        named relative to it is beside it."""
         m = cls.from_dict(d, str(path))
-        if m.join is not None and not Path(m.join["file"]).is_absolute():  # beside the mapping file
-            m.join = {**m.join, "file": str((path.parent / m.join["file"]).absolute())}
+        if m.join is not None and not Path(m.join["file"]).is_absolute():
+            m.join = {**m.join, "file": str((Path(path).parent / m.join["file"]).absolute())}
         return m
 
     @classmethod
@@ -338,7 +344,7 @@ class ColumnMapping:
         cls,
         columns: Iterable[str] = (),
         labels: Iterable[str] = (),
-        file: str | Path | None = None,
+        file: str | Path | ColumnMapping | None = None,
         missing: Iterable[str] | None = None,
         delimiter: str | None = None,
         rating: Mapping[str, Any] | None = None,
@@ -347,8 +353,8 @@ class ColumnMapping:
         """Command-line flags: ``--column canonical=theirs``, ``--label column:theirs=canonical``,
         ``--missing TEXT``, ``--delimiter CHAR`` and ``--order COLUMN[,COLUMN]`` (the columns, each
         flag one or more separated by commas); ``rating`` as in a mapping file (``--rating``
-        with ``--rating-levels`` or ``--rating-bins``)."""
-        base = cls.load(file) if file else cls()
+        with ``--rating-levels`` or ``--rating-bins``); ``file`` a mapping file or one already read."""
+        base = file if isinstance(file, ColumnMapping) else (cls.load(file) if file else cls())
         problems = []
         cols: dict[str, str] = {}
         labs: dict[str, dict[str, str]] = {}
