@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from .orm import Session, utcnow
+from .orm import Session, iso, utcnow
 
 #: a session's status once a failed quiz has ended it
 SCREENED = "screened"
@@ -51,7 +51,7 @@ def grade_quiz(s: Session, cfg: dict[str, Any], answers: dict[str, int]) -> list
     quiz = cfg["quiz"]
     wrong = [q["id"] for q in quiz["questions"] if answers[q["id"]] != q["answer"]]
     record = dict(s.quiz or {"attempts": [], "outcome": None})
-    record["attempts"] = [*record.get("attempts", []), {"answers": answers, "wrong": wrong, "at": utcnow().isoformat() + "Z"}]
+    record["attempts"] = [*record.get("attempts", []), {"answers": answers, "wrong": wrong, "at": iso(utcnow())}]
     if not wrong:
         record["outcome"] = "passed"
     elif len(record["attempts"]) >= quiz["attempts"]:

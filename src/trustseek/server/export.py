@@ -25,10 +25,9 @@ import pandas as pd
 from sqlalchemy import select
 from sqlalchemy.orm import Session as DBSession
 
-from ..data.trials import write_trials
 from ..vocab import TRIAL_COLUMNS
 from .checks import check_passed
-from .orm import Answer, Event, Report, Session, Study, Trial
+from .orm import Answer, Event, Report, Session, Study, Trial, iso
 
 CANONICAL = list(TRIAL_COLUMNS)
 EXTRA = [
@@ -109,10 +108,6 @@ def exported(study: Study, pilot: bool = False) -> tuple:
     return (Session.study_id == study.id, Session.role.in_(("participant", "pilot") if pilot else ("participant",)))
 
 
-def _iso(t) -> str | None:
-    return None if t is None else t.isoformat() + "Z"
-
-
 def _block_names(study: Study) -> list[str]:
     return [b["name"] for b in study.config["blocks"]] + ["practice"]
 
@@ -157,7 +152,7 @@ def trials_frame(db: DBSession, study: Study, practice: bool = False, pilot: boo
             "self_report": reports.get((t.session_id, t.trial)),
             "study": study.id,
             "session": t.session_id,
-            "committed_at": t.created_at.isoformat() + "Z",
+            "committed_at": iso(t.created_at),
             "practice": bool(t.practice),
             "session_trial": t.trial,
         }
@@ -199,7 +194,7 @@ def answers_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFr
             "check_passed": check_passed(item_, value),
             "study": study.id,
             "session": r.session_id,
-            "answered_at": r.created_at.isoformat() + "Z",
+            "answered_at": iso(r.created_at),
         }
         for q, when, item, value, item_, r, p in data
     ]
@@ -232,10 +227,10 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
             "panel_id": s.panel_id,
             "panel": json.dumps(s.panel or {}),
             "speed": s.speed,
-            "created_at": _iso(s.created_at),
-            "started_at": _iso(s.consented_at),
-            "ended_at": _iso(s.ended_at),
-            "revoked_at": _iso(s.revoked_at),
+            "created_at": iso(s.created_at),
+            "started_at": iso(s.consented_at),
+            "ended_at": iso(s.ended_at),
+            "revoked_at": iso(s.revoked_at),
             "quiz_attempts": len((s.quiz or {}).get("attempts", [])),
             "quiz_outcome": (s.quiz or {}).get("outcome"),
             "checks_failed": failed.get(s.id, 0),
@@ -258,7 +253,7 @@ def events_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFra
             "session": e.session_id,
             "trial": e.trial,
             "client_time": e.client_time,
-            "server_time": e.created_at.isoformat() + "Z",
+            "server_time": iso(e.created_at),
             "type": e.type,
             "data": e.data,
         }
@@ -269,30 +264,21 @@ def events_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFra
     return frame
 
 
-def events_csv(frame: pd.DataFrame) -> bytes:
-    """The CSV of an events table: formulas escaped (:func:`escape_formulas`) and lines ended
-    with CRLF (RFC 4180), so that a carriage return inside a participant's text is quoted
-    instead of splitting the row."""
-    return escape_formulas(frame).to_csv(index=False, lineterminator="\r\n").encode()
-
-
-def to_bytes(frame: pd.DataFrame, fmt: str) -> bytes:
-    buf = io.BytesIO()
+def table_bytes(frame: pd.DataFrame, fmt: str, escaped: bool = False) -> bytes:
+    """A table as a file's bytes, CSV or Parquet: the one writer of the export, the bundle and
+    ``trustseek export``.  ``escaped``: a table holding participants' text, whose CSV has its
+    formulas escaped (:func:`escape_formulas`) and lines ended with CRLF (RFC 4180), so that a
+    carriage return inside a participant's text is quoted instead of splitting the row."""
     if fmt == "parquet":
+        buf = io.BytesIO()
         frame.to_parquet(buf, index=False)
-    else:
-        frame.to_csv(buf, index=False)
-    return buf.getvalue()
+        return buf.getvalue()
+    if escaped:
+        return escape_formulas(frame).to_csv(index=False, lineterminator="\r\n").encode()
+    return frame.to_csv(index=False).encode()
 
 
-def write_frame(frame: pd.DataFrame, path: str | Path, trials: bool = True) -> None:
-    """Write by suffix (.csv or .parquet); trial logs go through :func:`trustseek.data.trials.write_trials`
-    (the canonical format), other tables are written as they are."""
+def write_frame(frame: pd.DataFrame, path: str | Path) -> None:
+    """Write a table by the suffix of ``path``: Parquet (``.parquet``, ``.pq``) or CSV."""
     path = Path(path)
-    if trials:
-        write_trials(frame, path)
-        return
-    if path.suffix == ".parquet":
-        frame.to_parquet(path, index=False)
-    else:
-        frame.to_csv(path, index=False)
+    path.write_bytes(table_bytes(frame, "parquet" if path.suffix.lower() in (".parquet", ".pq") else "csv"))

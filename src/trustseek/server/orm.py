@@ -26,6 +26,11 @@ def utcnow() -> datetime:
     return datetime.now(UTC).replace(tzinfo=None)
 
 
+def iso(t: datetime | None) -> str | None:
+    """A stored (UTC) time as the API and the exports write it: ISO 8601 ending in ``Z``."""
+    return None if t is None else t.isoformat() + "Z"
+
+
 class Base(DeclarativeBase):
     pass
 

@@ -271,6 +271,12 @@ def participant_trial(t: Trial) -> dict[str, Any]:
     return {**{k: getattr(t, k) for k in PARTICIPANT_TRIAL}, "practice": bool(t.practice)}
 
 
+def trial_reward(task: Task, action: str, human: str | None, experience: str) -> float:
+    """The trial's points, eq. (1) (no human action is counted as relying)."""
+    o = HUMAN_ACTIONS.index(human) if human is not None else HUMAN_ACTIONS.index("rely")
+    return float(task.rewards.of(ACTIONS.index(action), o, EXPERIENCES.index(experience)))
+
+
 def trial_experience(task: Task, c: int, action: str, human: str | None, success: bool | None) -> str:
     if action == "ask":
         return EXPERIENCES[task.ask_experience[c]]
@@ -286,22 +292,11 @@ def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: in
     before = runner.belief
     after = runner.observe(row.complexity, row.robot_action, row.human_action, row.experience)
     row.belief, row.belief_after = p_high(before, ctx.model.n_trust), p_high(after, ctx.model.n_trust)
-    a = ACTIONS.index(row.robot_action)
-    o = HUMAN_ACTIONS.index(row.human_action) if row.human_action is not None else 1
-    row.reward = float(ctx.task.rewards.of(a, o, EXPERIENCES.index(row.experience)))
+    row.reward = trial_reward(ctx.task, row.robot_action, row.human_action, row.experience)
     if row.practice:  # practice leaves the belief and the score as they were
         after, row.belief_after = None, row.belief
     db.add(row)
-    for ev in events or []:
-        db.add(
-            Event(
-                session_id=s.id,
-                trial=row.trial,
-                client_time=ev.get("t"),
-                type=str(ev.get("type", ""))[:40],
-                data=json.dumps(ev.get("data", {})),
-            )
-        )
+    db.add_all(_event(s, row.trial, ev) for ev in events or ())
     s.belief = [float(x) for x in after] if after is not None else s.belief
     s.trials_done = row.trial
     s.score = float(s.score + (0.0 if row.practice else row.reward))
@@ -429,6 +424,12 @@ def check_event_room(db: DBSession, s: Session, events: list[dict], trial: int |
             raise TooLarge(f"trial {k} already has {have} events; at most {MAX_EVENTS_PER_TRIAL} are stored per trial")
 
 
+def _event(s: Session, trial: int | None, ev: dict) -> Event:
+    """The row of a UI event (``schemas.EventIn``'s fields) of session ``s``."""
+    data = json.dumps(ev.get("data", {}))
+    return Event(session_id=s.id, trial=trial, client_time=ev.get("t"), type=str(ev.get("type", ""))[:40], data=data)
+
+
 def add_events(db: DBSession, s: Session, events: list[dict], batch: str | None = None) -> tuple[int, bool]:
     """Store ``events``; with a ``batch`` id, a batch already stored is not stored again.
     Returns (events stored, whether the batch was a repeat)."""
@@ -437,16 +438,7 @@ def add_events(db: DBSession, s: Session, events: list[dict], batch: str | None 
             return 0, True
         db.add(EventBatch(session_id=s.id, batch=batch, events=len(events)))
     check_event_room(db, s, events)
-    for ev in events:
-        db.add(
-            Event(
-                session_id=s.id,
-                trial=ev.get("trial"),
-                client_time=ev.get("t"),
-                type=str(ev.get("type", ""))[:40],
-                data=json.dumps(ev.get("data", {})),
-            )
-        )
+    db.add_all(_event(s, ev.get("trial"), ev) for ev in events)
     try:
         db.commit()
     except IntegrityError:  # the same batch committed by a concurrent request in the meantime
