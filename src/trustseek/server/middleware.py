@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .auth import caller_for_token
+from .auth import MISSING_TOKEN, bearer_token, caller_for_token
 from .errors import Conflict, Gone, NotAllowed, NotFound, Refused, TooLarge
 
 Scope = MutableMapping[str, Any]
@@ -213,12 +213,9 @@ class BodyGuard:
             return await self.app(scope, receive, send)
         state = scope["app"].state
         headers = dict(scope.get("headers") or ())
-        scheme, _, token = headers.get(b"authorization", b"").decode("latin-1").partition(" ")
-        token = token.strip()
-        if scheme.lower() != "bearer" or not token:
-            return await refuse(
-                send, 401, "missing token: send 'Authorization: Bearer <token>'", ((b"www-authenticate", b"Bearer"),)
-            )
+        token = bearer_token(headers.get(b"authorization", b"").decode("latin-1"))
+        if token is None:
+            return await refuse(send, 401, MISSING_TOKEN, ((b"www-authenticate", b"Bearer"),))
         if secrets.compare_digest(token.encode(), state.token.encode()):
             limit = EXPERIMENTER_BODY_LIMIT
         elif caller_for_token(state, token) is not None:

@@ -5,14 +5,13 @@ same ``http.answer``).  HTTP status codes are given here and in ``middleware.STA
 from __future__ import annotations
 
 import logging
-import secrets
 from typing import Any
 
 from fastapi import APIRouter, Depends, HTTPException, Request, Response
 from sqlalchemy import select
 
 from ...errors import TrustseekError
-from ..auth import Caller, remember_token, require_experimenter, require_session, session_for_token
+from ..auth import Caller, bearer_token, missing_token, remember_token, require_experimenter, require_session, session_caller
 from ..orm import Session, Trial
 from ..routes import errors
 from ..schemas import DecideIn, DeployIn, ObserveIn
@@ -96,13 +95,10 @@ def deploy_state(session_id: str, request: Request, s: Caller = Depends(require_
 def _robot(request: Request, session_id: str) -> Caller:
     """The deploy session named in the path, if the bearer token is its token (the check of
     ``require_session``, made inline)."""
-    header = request.headers.get("authorization", "")
-    scheme, _, token = header.partition(" ")
-    if scheme.lower() != "bearer" or not token:
-        raise HTTPException(401, "missing token: send 'Authorization: Bearer <token>'", headers={"WWW-Authenticate": "Bearer"})
-    s = session_for_token(request, token.strip())
-    if not secrets.compare_digest(s.id.encode(), session_id.encode()):
-        raise HTTPException(403, "this token belongs to another session")
+    token = bearer_token(request.headers.get("authorization", ""))
+    if token is None:
+        raise missing_token()
+    s = session_caller(request, token, session_id)
     _deploy_session(s)
     return s
 
