@@ -26,7 +26,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session as DBSession
 
 from ..vocab import TRIAL_COLUMNS
-from .checks import check_passed
+from .answers import check_passed
 from .orm import Answer, Event, Report, Session, Study, Trial, iso
 
 CANONICAL = list(TRIAL_COLUMNS)

@@ -9,13 +9,11 @@ from typing import Any
 
 from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials
-from sqlalchemy.exc import IntegrityError
 
-from .answers import add_answers, add_report, ended, questionnaire_due, report_due
+from .answers import SCREENED, add_answers, add_report, answer_quiz, ended, questionnaire_due, quiz_due, report_due
 from .auth import Caller, bearer, require_session, session_for_token, token_of
-from .checks import SCREENED, grade_quiz, quiz_due, quiz_problems
 from .errors import Conflict
-from .lifecycle import panel_ids, refusal
+from .lifecycle import give_consent
 from .orm import Session, utcnow
 from .preview import session_db
 from .routes import errors
@@ -134,25 +132,7 @@ def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depe
     _study_session(s)
     with _db(request, s) as db:
         row, cfg = _locked(db, s)
-        started = row.status == "new"
-        if started:
-            why = refusal(db, row)
-            if why is not None:
-                db.rollback()
-                raise HTTPException(409, f"the study is {why}: it takes no new participants")
-            key, ids = panel_ids(cfg, body.panel) if cfg.get("panel") else (None, {})
-            row.status, row.consented_at, row.updated_at = "running", utcnow(), utcnow()
-            row.panel = {**ids, **(row.panel or {})} or None
-            row.panel_id = row.panel_id or key
-        elif ended(db, row, cfg):
-            db.rollback()
-            raise HTTPException(409, "this session has ended")
-        try:
-            db.commit()
-        except IntegrityError:  # the same panel id already has a session of this study
-            db.rollback()
-            raise HTTPException(409, "this panel id already has a session in this study: use that session's link") from None
-        if started:
+        if give_consent(db, row, cfg, body.panel):
             log.info("session %s of study %s started (consent given)", row.id, row.study_id)
         if body.events:
             add_events(db, row, [e.model_dump() for e in body.events])
@@ -175,24 +155,7 @@ def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Dep
 def post_quiz(session_id: str, body: QuizIn, request: Request, s: Caller = Depends(require_session)):
     _study_session(s)
     with _db(request, s) as db:
-        row, cfg = _locked(db, s)
-        due = quiz_due(row, cfg)
-        done = (row.quiz or {}).get("attempts", [])
-        if body.attempt <= len(done):  # a repeat of a stored attempt (a retry after a lost answer)
-            db.rollback()
-            if done[body.attempt - 1]["answers"] != body.answers:
-                raise HTTPException(409, f"attempt {body.attempt} is already answered, with other answers")
-            wrong, dup = done[body.attempt - 1]["wrong"], True
-        elif due is None or body.attempt != due["attempt"]:
-            db.rollback()
-            raise HTTPException(409, "no quiz attempt is due" if due is None else f"the attempt due is {due['attempt']}")
-        else:
-            problems = quiz_problems(cfg, body.answers)
-            if problems:
-                db.rollback()
-                raise HTTPException(400, "; ".join(problems))
-            wrong, dup = grade_quiz(row, cfg, body.answers), False
-            db.commit()
+        wrong, dup = answer_quiz(db, *_locked(db, s), body.attempt, body.answers)
     return {"wrong": wrong, "duplicate": dup, "state": session_state(request, s)}
 
 

@@ -36,9 +36,8 @@ from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 from ..model.task import Task
 from ..policies import PolicyRunner
 from ..policies.scheduling import SchedulePolicy
-from .answers import questionnaire_due, report_due
+from .answers import questionnaire_due, quiz_due, report_due
 from .cache import Bounded, caches_of
-from .checks import quiz_due
 from .errors import Conflict, NotAllowed, NotFound, TooLarge
 from .orm import Event, EventBatch, Session, Study, Trial, utcnow
 from .studies import block_items, policy_object
