@@ -217,12 +217,29 @@ class StudyIn(BaseModel):
 def _from_spec(field: str, spec: str | dict, presets: dict[str, Callable[[], _Spec]], cls: type[_Spec]) -> _Spec:
     """A preset by name or the JSON object of a ``field`` (``task`` or ``model``), or a
     ``ConfigError`` that says what is wrong."""
-    if isinstance(spec, str) and spec not in presets:
-        raise ConfigError([f"unknown {field} preset {spec!r}; presets: {sorted(presets)}, or give the JSON object"])
     try:
-        return presets[spec]() if isinstance(spec, str) else cls.from_dict(spec, field)
+        return presets[check_preset(spec, field)]() if isinstance(spec, str) else cls.from_dict(spec, field)
     except ModelError as exc:
         raise ConfigError(exc.lines()) from None
+    except ValueError as exc:  # not a preset
+        raise ConfigError([str(exc)]) from None
+
+
+def complexity_problems(model: TrustModel, task: Task) -> list[str]:
+    """Why ``model`` cannot run with ``task`` (empty when it can): their complexities differ."""
+    if tuple(model.complexities) == tuple(task.complexities):
+        return []
+    return [f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}"]
+
+
+def _unknown(names: list[str], complexities: tuple[str, ...], where: str) -> list[str]:
+    """The problem of complexities ``names`` (of ``where``) that are not among ``complexities``."""
+    bad = sorted({c for c in names if c not in complexities})
+    return [f"{where} names unknown complexities {bad}; expected {list(complexities)}"] if bad else []
+
+
+def _names(s: Schedule) -> list[str]:
+    return list(s.counts) if s.counts is not None else list(s.trials or [])
 
 
 def load_task_spec(spec: str | dict) -> Task:
@@ -267,8 +284,8 @@ def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dic
         model = load_model_spec(study.model)
     except ConfigError as exc:
         problems += exc.problems
-    if task is not None and model is not None and tuple(model.complexities) != tuple(task.complexities):
-        problems.append(f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}")
+    if task is not None and model is not None:
+        problems += complexity_problems(model, task)
     if problems or task is None or model is None:
         # the other parts are still checked against what is known, so that every problem is named at once
         known = task or model
@@ -285,10 +302,7 @@ def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dic
             except ConfigError as exc:
                 problems += exc.problems
             continue
-        names = list(s.counts) if s.counts is not None else list(s.trials or [])
-        bad = sorted({c for c in names if c not in task.complexities})
-        if bad:
-            problems.append(f"{where}.schedule names unknown complexities {bad}; expected {list(task.complexities)}")
+        problems += _unknown(_names(s), tuple(task.complexities), f"{where}.schedule")
         try:
             pol = resolve_policy(b.policy, model, task, f"{where}.policy", caches)
         except ConfigError as exc:
@@ -306,9 +320,7 @@ def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dic
         )
     practice = None
     if study.practice is not None:
-        bad = sorted({c for c in study.practice.trials if c not in task.complexities})
-        if bad:
-            problems.append(f"practice.trials names unknown complexities {bad}; expected {list(task.complexities)}")
+        problems += _unknown(study.practice.trials, tuple(task.complexities), "practice.trials")
         try:
             practice_policy = resolve_policy(study.practice.policy, model, task, "practice.policy", caches)
             asks = study.practice.asks if study.practice.asks is not None else [len(study.practice.trials)]
@@ -335,18 +347,13 @@ def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dic
 
 def unknown_complexities(study: StudyIn, complexities: tuple[str, ...]) -> list[str]:
     """The blocks' and the practice's complexities that are not among ``complexities``."""
-    problems = []
-    for i, b in enumerate(study.blocks):
-        if isinstance(b.schedule, Schedule):
-            names = list(b.schedule.counts) if b.schedule.counts is not None else list(b.schedule.trials or [])
-            bad = sorted({c for c in names if c not in complexities})
-            if bad:
-                problems.append(f"blocks[{i}].schedule names unknown complexities {bad}; expected {list(complexities)}")
-    if study.practice is not None:
-        bad = sorted({c for c in study.practice.trials if c not in complexities})
-        if bad:
-            problems.append(f"practice.trials names unknown complexities {bad}; expected {list(complexities)}")
-    return problems
+    problems = [
+        p
+        for i, b in enumerate(study.blocks)
+        if isinstance(b.schedule, Schedule)
+        for p in _unknown(_names(b.schedule), complexities, f"blocks[{i}].schedule")
+    ]
+    return problems + ([] if study.practice is None else _unknown(study.practice.trials, complexities, "practice.trials"))
 
 
 def more_problems(body: Any, errors: list[dict[str, Any]]) -> list[str]:

@@ -16,7 +16,7 @@ from ..orm import Session, Trial
 from ..routes import errors
 from ..schemas import DecideIn, DeployIn, ObserveIn
 from ..sessions import p_high, trial_dict
-from ..studies import ConfigError, load_model_spec, load_task_spec, resolve_policy
+from ..studies import ConfigError, complexity_problems, load_model_spec, load_task_spec, resolve_policy
 from .http import answer
 from .service import create_deploy, score_problem
 from .store import LiveRow
@@ -37,13 +37,9 @@ _BEARER: dict[str, Any] = {"security": [{"HTTPBearer": []}]}
 def open_deploy(body: DeployIn, request: Request):
     try:
         task, model = load_task_spec(body.task), load_model_spec(body.model)
-        if tuple(model.complexities) != tuple(task.complexities):
-            raise ConfigError(
-                [f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}"]
-            )
-        overflow = score_problem(task)
-        if overflow is not None:
-            raise ConfigError([overflow])
+        problems = complexity_problems(model, task) or [p for p in [score_problem(task)] if p is not None]
+        if problems:
+            raise ConfigError(problems)
         policy = resolve_policy(body.policy, model, task, caches=request.app.state.study_caches)
     except ConfigError as exc:
         raise HTTPException(400, {"problems": exc.problems}) from None
