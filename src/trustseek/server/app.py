@@ -20,13 +20,13 @@ from ..version import __version__
 from .cache import StudyCaches
 from .db import DEFAULT_URL, open_database, safe_url
 from .deploy.http import DeployFront
-from .deploy.plan import Plans
 from .deploy.routes import deploy
 from .deploy.store import DeployStore
 from .errors import Refused
 from .link_routes import STATIC, lifecycle, pages, static_page
 from .middleware import BodyGuard, RequestLog, ServerTiming, status_of
 from .participant_routes import own, participant
+from .plan import Plans
 from .preview import Previews
 from .routes import experimenter
 from .schemas import ErrorOut

@@ -23,6 +23,7 @@ import hmac
 import json
 import logging
 import secrets
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,13 +35,13 @@ from sqlalchemy.orm import Session as DBSession
 from ..errors import TrustseekError
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 from ..model.task import Task
-from ..policies import PolicyRunner
 from ..policies.scheduling import SchedulePolicy
 from .answers import questionnaire_due, quiz_due, report_due
-from .cache import Bounded, caches_of
+from .cache import caches_of
 from .errors import Conflict, NotAllowed, NotFound, TooLarge
 from .orm import Event, EventBatch, Session, Study, Trial, utcnow
-from .studies import block_items, policy_object
+from .plan import PolicyPlan
+from .studies import block_items
 
 log = logging.getLogger(__name__)
 
@@ -93,38 +94,34 @@ def p_high(belief, n_trust: int | None = None) -> float | None:
 
 @dataclass
 class Context:
-    """Everything needed to run one session's policy: task, model, per-block policies (kinds
-    and cache keys) and, for study sessions, the per-trial plan."""
+    """A study's task and model, its blocks' policy kinds, and each block's ``plan.PolicyPlan``
+    (the block's policy with ``PolicyRunner``'s step, parsed once and remembered by the
+    application); the index after the study's blocks is the practice block's."""
 
     task: Task
     model: TrustModel
     kinds: list[str]
-    keys: list[str]
-    load_policy: Any  # callable(block) -> policy JSON, used when the policy is not cached
-    trials: list[dict[str, Any]] | None
-    policies: Bounded[str, Any] | None = None  # the application's parsed policies (StudyCaches.policies)
+    plans: list[PolicyPlan]
+    load_policy: Callable[[int], dict[str, Any]]  # block -> its policy JSON, read when its plan has not parsed it
 
-    def step(self, n: int) -> dict[str, Any]:
-        """The plan of trial ``n`` (block, complexity); only study sessions have one."""
-        if self.trials is None:
-            raise Conflict("a deploy session has no trial plan")
-        return self.trials[n - 1]
+    def decide(self, block: int, belief: list, seed: int, n: int, complexity: str) -> str:
+        """Block ``block``'s action at ``belief`` in trial ``n`` (drawing from ``default_rng([seed, n, 0])``)."""
+        return self.plans[block].decide(lambda: self.load_policy(block), belief, seed, n, complexity)
+
+    def update(self, block: int, belief: list, complexity: str, action: str, human: str | None, experience: str) -> list | None:
+        """The belief after a trial of block ``block``."""
+        return self.plans[block].update(lambda: self.load_policy(block), belief, complexity, action, human, experience)
 
     def pick(self, block: int, belief, remaining: dict[str, int], visible: dict[str, int] | None) -> tuple[str, str]:
         """(complexity, robot action) that block ``block``'s schedule policy picks for the
         remaining (and visible) items."""
-        pol = policy_object(self.policies, self.keys[block], lambda: self.load_policy(block))
+        pol = self.plans[block].policy(lambda: self.load_policy(block))
         if not isinstance(pol, SchedulePolicy):
             raise TrustseekError([f"block {block} picks its items by policy but runs a {pol.kind} policy"])
         cx = self.task.complexities
         vis = None if visible is None else [visible.get(c, 0) for c in cx]
         k, a = pol.choose(np.asarray(belief, dtype=float), [remaining.get(c, 0) for c in cx], vis)
         return cx[k], ACTIONS[a]
-
-    def runner(self, block: int, belief, seed: int, trial: int) -> PolicyRunner:
-        pol = policy_object(self.policies, self.keys[block], lambda: self.load_policy(block))
-        model = getattr(pol, "model", None) or self.model
-        return PolicyRunner(pol, model=model, rng=np.random.default_rng([seed, trial, 0]), belief=np.asarray(belief, dtype=float))
 
 
 def study_config(db: DBSession, study_id: str) -> dict[str, Any]:
@@ -140,33 +137,19 @@ def study_config(db: DBSession, study_id: str) -> dict[str, Any]:
 
 
 def context(db: DBSession, s: Session) -> Context:
-    """The context of a study session (deploy sessions: ``deploy.plan.DeployPlan``)."""
-    if s.kind == "study" and s.study_id is not None:
-        study_id = s.study_id
-        key = f"study:{study_id}"
-        caches = caches_of(db)
-        cached = caches.contexts.get(key)
-        if cached is None:
-            cfg = study_config(db, study_id)
-            cached = caches.contexts.put(
-                key,
-                (
-                    Task.from_dict(cfg["task"]),
-                    TrustModel.from_dict(cfg["model"]),
-                    [_block_policy(cfg, b)["kind"] for b in range(len(cfg["blocks"]) + bool(cfg.get("practice")))],
-                ),
-            )
-        task, model, kinds = cached
-        return Context(
-            task,
-            model,
-            kinds,
-            [f"{key}:{i}" for i in range(len(kinds))],
-            lambda b: _block_policy(study_config(db, study_id), b),
-            s.plan["trials"],
-            caches.policies,
-        )
-    raise Conflict("this is a deploy session; use /api/deploy")
+    """The context of a study session (deploy sessions have their own: ``plan.Plans``)."""
+    if s.kind != "study" or s.study_id is None:
+        raise Conflict("this is a deploy session; use /api/deploy")
+    study_id = s.study_id
+    contexts = caches_of(db).contexts
+    ctx = contexts.get(study_id)
+    if ctx is None:
+        cfg = study_config(db, study_id)
+        task, model = Task.from_dict(cfg["task"]), TrustModel.from_dict(cfg["model"])
+        kinds = [_block_policy(cfg, b)["kind"] for b in range(len(cfg["blocks"]) + bool(cfg.get("practice")))]
+        plans = [PolicyPlan(task, model, kind, f"study:{study_id}:{b}") for b, kind in enumerate(kinds)]
+        ctx = contexts.put(study_id, Context(task, model, kinds, plans, lambda b: _block_policy(cfg, b)))
+    return ctx
 
 
 def _block_policy(cfg: dict[str, Any], b: int) -> dict[str, Any]:
@@ -205,8 +188,8 @@ def serve(db: DBSession, s: Session) -> dict[str, Any] | None:
         if step.get("action"):  # a practice trial in which the robot asks, whatever the policy
             s.pending_complexity, s.pending_action = step["complexity"], step["action"]
         elif items is None:
-            runner = ctx.runner(step["block"], s.belief, s.seed, n)
-            s.pending_complexity, s.pending_action = step["complexity"], runner.decide(step["complexity"])
+            s.pending_complexity = step["complexity"]
+            s.pending_action = ctx.decide(step["block"], s.belief, s.seed, n, step["complexity"])
         else:
             s.pending_complexity, s.pending_action = ctx.pick(step["block"], s.belief, *items)
         s.pending_trial = n
@@ -287,10 +270,8 @@ def trial_experience(task: Task, c: int, action: str, human: str | None, success
 def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: int, events: list[dict] | None) -> Trial | None:
     """Commit ``row`` with the belief update and the session's progress; None when another
     submission committed this trial first."""
-    runner = ctx.runner(block, s.belief, s.seed, row.trial)
-    before = runner.belief
-    after = runner.observe(row.complexity, row.robot_action, row.human_action, row.experience)
-    row.belief, row.belief_after = p_high(before, ctx.model.n_trust), p_high(after, ctx.model.n_trust)
+    after = ctx.update(block, s.belief, row.complexity, row.robot_action, row.human_action, row.experience)
+    row.belief, row.belief_after = p_high(s.belief, ctx.model.n_trust), p_high(after, ctx.model.n_trust)
     row.reward = trial_reward(ctx.task, row.robot_action, row.human_action, row.experience)
     if row.practice:  # practice leaves the belief and the score as they were
         after, row.belief_after = None, row.belief
@@ -354,7 +335,7 @@ def submit_trial(
     if human_action not in HUMAN_ACTIONS:
         raise NotAllowed(f"human_action must be one of {list(HUMAN_ACTIONS)}, got {human_action!r}")
     ctx = context(db, s)
-    step = ctx.step(n)
+    step = s.plan["trials"][n - 1]
     c = ctx.task.complexity_index(complexity)
     if action == "autonomous" and human_action == "rely":
         r = outcome_draws(s, n)

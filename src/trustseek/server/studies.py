@@ -35,10 +35,9 @@ from ..model.core import TrustModel
 from ..model.jsonfile import ModelError
 from ..model.presets import MODEL_PRESETS, TASK_PRESETS
 from ..model.task import Task
-from ..policies import policy_from_dict
 from ..policies.scheduling import SCHEDULE
 from ..solvers import policy_from_spec
-from .cache import Bounded, StudyCaches
+from .cache import StudyCaches
 from .schemas import STRICT, check_preset
 
 _Spec = TypeVar("_Spec", Task, TrustModel)
@@ -492,17 +491,3 @@ def block_items(
     for c in queue[:window]:
         visible[c] += 1
     return remaining, visible
-
-
-def policy_object(policies: Bounded[str, Any] | None, key: str, policy_json):
-    """The policy object of a stored (immutable) policy JSON, remembered by ``key`` in the
-    application's ``policies``: parsing a solved policy is not free, and stored policies never
-    change.  ``policy_json`` may be a callable returning the JSON, called only when the policy
-    is not remembered."""
-    pol = None if policies is None else policies.get(key)
-    if pol is None:
-        d = policy_json() if callable(policy_json) else policy_json
-        pol = policy_from_dict(d, key)
-        if policies is not None:
-            policies.put(key, pol)
-    return pol

@@ -24,9 +24,9 @@ from ...policies import PolicyError
 from ...policies.scheduling import SchedulePolicy
 from ..errors import Conflict, NotAllowed, NotFound
 from ..orm import PolicyBlob, Session, utcnow
+from ..plan import Plans, PolicyPlan, policy_sha256
 from ..schemas import MAX_TRIAL
 from ..sessions import new_id, new_token, p_high, trial_dict, trial_experience, trial_reward
-from .plan import DeployPlan, Plans, policy_sha256
 from .store import LiveRow, Statements
 
 
@@ -51,7 +51,7 @@ def create_deploy(
     A policy that does not load raises its ``ModelError``."""
     sha = policy_sha256(policy)
     content = {"task": task.to_dict(), "model": model.to_dict(), "policy_sha256": sha, "policy_kind": policy["kind"]}
-    plan = plans.shared(content, lambda: DeployPlan(task, model, policy["kind"], sha))
+    plan = plans.shared(content, lambda: PolicyPlan(task, model, policy["kind"], sha))
     pol = plan.policy(lambda: policy)  # sessions with the same plan share one parsed copy
     pm = getattr(pol, "model", None) or model
     if db.get(PolicyBlob, sha) is None:
