@@ -38,6 +38,13 @@ def status_of(exc: Refused) -> int:
     return next(STATUS[c] for c in type(exc).__mro__ if c in STATUS)
 
 
+def refusal(exc: Refused) -> tuple[int, bytes]:
+    """(status, body) of a refusal: ``{"detail": message}``, the bytes of FastAPI's ``JSONResponse``
+    (the application's handler, ``app.refused``, and the decision API's front answer with them)."""
+    body = json.dumps({"detail": exc.message}, ensure_ascii=False, allow_nan=False, indent=None, separators=(",", ":"))
+    return status_of(exc), body.encode("utf-8")
+
+
 #: path parameters that are credentials: never logged
 SECRET_PARAMS = frozenset({"token"})
 

@@ -15,7 +15,6 @@ from .auth import Caller, bearer, require_session, session_for_token, token_of
 from .errors import Conflict
 from .lifecycle import give_consent
 from .orm import Session, utcnow
-from .preview import session_db
 from .routes import errors
 from .schemas import AnswersIn, ConsentIn, EventsIn, QuizIn, ReportIn, TrialIn
 from .sessions import add_events, lock, participant_trial, serve, study_config, submit_trial, total_trials
@@ -41,7 +40,7 @@ def _not_revoked(row: Session) -> None:
 
 def _db(request: Request, caller: Caller):
     """The caller's database: the previews' for a preview (``preview.Previews``), else the study's."""
-    return session_db(request.app.state, caller.preview)
+    return request.app.state.previews.db() if caller.preview else request.app.state.db()
 
 
 def _locked(db, caller: Caller) -> tuple[Session, dict]:

@@ -94,13 +94,12 @@ def p_high(belief, n_trust: int | None = None) -> float | None:
 
 @dataclass
 class Context:
-    """A study's task and model, its blocks' policy kinds, and each block's ``plan.PolicyPlan``
+    """A study's task and model, and each block's ``plan.PolicyPlan`` (its kind and
     (the block's policy with ``PolicyRunner``'s step, parsed once and remembered by the
     application); the index after the study's blocks is the practice block's."""
 
     task: Task
     model: TrustModel
-    kinds: list[str]
     plans: list[PolicyPlan]
     load_policy: Callable[[int], dict[str, Any]]  # block -> its policy JSON, read when its plan has not parsed it
 
@@ -148,7 +147,7 @@ def context(db: DBSession, s: Session) -> Context:
         task, model = Task.from_dict(cfg["task"]), TrustModel.from_dict(cfg["model"])
         kinds = [_block_policy(cfg, b)["kind"] for b in range(len(cfg["blocks"]) + bool(cfg.get("practice")))]
         plans = [PolicyPlan(task, model, kind, f"study:{study_id}:{b}") for b, kind in enumerate(kinds)]
-        ctx = contexts.put(study_id, Context(task, model, kinds, plans, lambda b: _block_policy(cfg, b)))
+        ctx = contexts.put(study_id, Context(task, model, plans, lambda b: _block_policy(cfg, b)))
     return ctx
 
 
@@ -347,7 +346,7 @@ def submit_trial(
         session_id=s.id,
         trial=n,
         block=step["block"],
-        policy=ctx.kinds[step["block"]],
+        policy=ctx.plans[step["block"]].kind,
         complexity=complexity,
         robot_action=action,
         human_action=human_action,

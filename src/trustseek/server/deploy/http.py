@@ -47,6 +47,7 @@ from ..middleware import (
     Scope,
     Send,
     read_body,
+    refusal,
     refuse,
     replaying,
     status_of,
@@ -67,12 +68,6 @@ Args = tuple[Any, ...]
 
 def _dump(out: dict[str, Any]) -> bytes:
     return json.dumps(out, allow_nan=False, separators=(",", ":")).encode()
-
-
-def refusal(exc: Refused) -> tuple[int, bytes]:
-    """(status, body) of a refusal, the bytes of FastAPI's ``HTTPException`` answer."""
-    body = json.dumps({"detail": exc.message}, ensure_ascii=False, allow_nan=False, indent=None, separators=(",", ":"))
-    return status_of(exc), body.encode("utf-8")
 
 
 def _request(plans: Any, sid: str, what: str, args: Args) -> Callable[[Statements], dict[str, Any]]:
