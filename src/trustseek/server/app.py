@@ -24,7 +24,7 @@ from .deploy.routes import deploy
 from .deploy.store import DeployStore
 from .errors import Refused
 from .link_routes import STATIC, lifecycle, pages, static_page
-from .middleware import BodyGuard, RequestLog, ServerTiming, refusal
+from .middleware import BodyGuard, RequestLog, refusal
 from .participant_routes import own, participant
 from .plan import Plans
 from .preview import Previews
@@ -148,7 +148,6 @@ def create_app(
     app.add_exception_handler(Refused, refused)
     app.add_middleware(BodyGuard)
     app.add_middleware(RequestLog)
-    app.add_middleware(ServerTiming)
     # deploy first: the decision API is matched without trying the others
     for router in (deploy, experimenter, own, participant, lifecycle, pages):
         app.include_router(router, responses=NUL_REFUSAL)

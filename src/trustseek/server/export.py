@@ -22,7 +22,7 @@ import json
 from pathlib import Path
 
 import pandas as pd
-from sqlalchemy import select
+from sqlalchemy import Select, select
 from sqlalchemy.orm import Session as DBSession
 
 from ..vocab import TRIAL_COLUMNS
@@ -108,6 +108,11 @@ def exported(study: Study, pilot: bool = False) -> tuple:
     return (Session.study_id == study.id, Session.role.in_(("participant", "pilot") if pilot else ("participant",)))
 
 
+def _exported_rows(table, study: Study, pilot: bool, *columns) -> Select:
+    """The rows of ``table`` (with ``columns`` of their session) of the sessions a table holds."""
+    return select(table, *columns).join(Session, table.session_id == Session.id).where(*exported(study, pilot))
+
+
 def _block_names(study: Study) -> list[str]:
     return [b["name"] for b in study.config["blocks"]] + ["practice"]
 
@@ -123,16 +128,11 @@ def trials_frame(db: DBSession, study: Study, practice: bool = False, pilot: boo
     sessions with ``pilot=True``."""
     names = _block_names(study)
     skip = _practice_counts(db, study)
-    rows = db.execute(
-        select(Trial, Session.participant)
-        .join(Session, Trial.session_id == Session.id)
-        .where(*exported(study, pilot), *(() if practice else (Trial.practice.is_(False),)))
-        .order_by(Session.participant, Trial.trial)
-    ).all()
-    reports = {
-        (r.session_id, r.after_trial): r.value
-        for r in db.scalars(select(Report).join(Session, Report.session_id == Session.id).where(*exported(study, pilot)))
-    }
+    trials = _exported_rows(Trial, study, pilot, Session.participant)
+    if not practice:
+        trials = trials.where(Trial.practice.is_(False))
+    rows = db.execute(trials.order_by(Session.participant, Trial.trial)).all()
+    reports = {(r.session_id, r.after_trial): r.value for r in db.scalars(_exported_rows(Report, study, pilot))}
     data = [
         {
             "participant": p,
@@ -170,13 +170,9 @@ def answers_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFr
     skip = _practice_counts(db, study)
     items = {(q["name"], i["id"]): i for q in study.config.get("questionnaires") or () for i in q["items"]}
     data: list[tuple[str, str, str, float, dict, Report | Answer, str]] = []
-    for r, p in db.execute(
-        select(Report, Session.participant).join(Session, Report.session_id == Session.id).where(*exported(study, pilot))
-    ).all():
+    for r, p in db.execute(_exported_rows(Report, study, pilot, Session.participant)).all():
         data.append(("self_report", r.scope, "trust", r.value, {}, r, p))
-    for a, p in db.execute(
-        select(Answer, Session.participant).join(Session, Answer.session_id == Session.id).where(*exported(study, pilot))
-    ).all():
+    for a, p in db.execute(_exported_rows(Answer, study, pilot, Session.participant)).all():
         data.append((a.questionnaire, a.when, a.item, a.value, items.get((a.questionnaire, a.item), {}), a, p))
     rows = [
         {
@@ -210,7 +206,7 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
     checks = study.config.get("questionnaires") or ()
     items = {(q["name"], i["id"]): i for q in checks for i in q["items"] if i.get("check") is not None}
     failed: dict[str, int] = {}
-    for a in db.scalars(select(Answer).join(Session, Answer.session_id == Session.id).where(*exported(study, pilot))):
+    for a in db.scalars(_exported_rows(Answer, study, pilot)):
         if (a.questionnaire, a.item) in items and not check_passed(items[(a.questionnaire, a.item)], a.value):
             failed[a.session_id] = failed.get(a.session_id, 0) + 1
     rows = [
@@ -241,12 +237,7 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
 
 
 def events_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame:
-    rows = db.execute(
-        select(Event, Session.participant)
-        .join(Session, Event.session_id == Session.id)
-        .where(*exported(study, pilot))
-        .order_by(Session.participant, Event.id)
-    ).all()
+    rows = db.execute(_exported_rows(Event, study, pilot, Session.participant).order_by(Session.participant, Event.id)).all()
     data = [
         {
             "participant": p,

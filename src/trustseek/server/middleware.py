@@ -1,4 +1,4 @@
-"""ASGI middleware of the experiment server: response timing, the request log, and the guard
+"""ASGI middleware of the experiment server: response timing with the request log, and the guard
 that authenticates writes and caps their size before any body is read.
 
 Both are plain ASGI wrappers (no per-request objects beyond a closure), so the latency-critical
@@ -49,28 +49,6 @@ def refusal(exc: Refused) -> tuple[int, bytes]:
 SECRET_PARAMS = frozenset({"token"})
 
 
-class ServerTiming:
-    """Every response carries ``Server-Timing: app;dur=<ms>``, the time from the request reaching
-    the application to its response headers (routing, authentication, validation, the handler
-    with its database transaction, serialization)."""
-
-    def __init__(self, app: ASGIApp):
-        self.app = app
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http":
-            return await self.app(scope, receive, send)
-        t0 = time.perf_counter()
-
-        async def timed(message: Message) -> None:
-            if message["type"] == "http.response.start":
-                dur = f"app;dur={(time.perf_counter() - t0) * 1000:.3f}".encode()
-                message["headers"] = [*message.get("headers", ()), (b"server-timing", dur)]
-            await send(message)
-
-        await self.app(scope, receive, timed)
-
-
 def request_context(scope: Scope) -> str:
     """``METHOD /route/{template}`` and the path parameters that identify what was asked for
     (study, session, trial), never a token: the template, not the path, is logged because a
@@ -82,8 +60,11 @@ def request_context(scope: Scope) -> str:
 
 
 class RequestLog:
-    """Logs refused requests (4xx, at INFO), failed ones (5xx, at ERROR) and unhandled errors
-    with the request's context; successful requests are not logged."""
+    """Every response carries ``Server-Timing: app;dur=<ms>``, the time from the request reaching
+    the application to its response headers (routing, authentication, validation, the handler
+    with its database transaction, serialization).  Refused requests (4xx) are logged at INFO,
+    failed ones (5xx) at ERROR, and unhandled errors with the request's context; successful
+    requests are not logged."""
 
     def __init__(self, app: ASGIApp):
         self.app = app
@@ -91,11 +72,15 @@ class RequestLog:
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             return await self.app(scope, receive, send)
+        t0 = time.perf_counter()
 
         async def logged(message: Message) -> None:
-            if message["type"] == "http.response.start" and message["status"] >= 400:
+            if message["type"] == "http.response.start":
+                dur = f"app;dur={(time.perf_counter() - t0) * 1000:.3f}".encode()
+                message["headers"] = [*message.get("headers", ()), (b"server-timing", dur)]
                 status = message["status"]
-                log.log(logging.ERROR if status >= 500 else logging.INFO, "%s -> %d", request_context(scope), status)
+                if status >= 400:
+                    log.log(logging.ERROR if status >= 500 else logging.INFO, "%s -> %d", request_context(scope), status)
             await send(message)
 
         try:

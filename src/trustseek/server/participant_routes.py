@@ -33,9 +33,10 @@ def _study_session(s: Caller) -> None:
         raise HTTPException(409, "this is a deploy session; use /api/deploy")
 
 
-def _not_revoked(row: Session) -> None:
+def _not_revoked(row: Session) -> Session:
     if row.revoked_at is not None:
         raise HTTPException(410, "this link has been revoked by the experimenter")
+    return row
 
 
 def _db(request: Request, caller: Caller):
@@ -46,22 +47,21 @@ def _db(request: Request, caller: Caller):
 def _locked(db, caller: Caller) -> tuple[Session, dict]:
     """The caller's session, locked for an update that depends on its state, and its study's
     configuration; refused when its link is revoked."""
-    row = lock(db, caller.id)
-    _not_revoked(row)
+    row = _not_revoked(lock(db, caller.id))
     return row, study_config(db, str(row.study_id))
 
 
 def _row(db, caller: Caller) -> Session:
+    """The caller's session; refused when its link is revoked."""
     row = db.get(Session, caller.id)
     if row is None:  # a preview forgotten after newer ones (preview.MAX_PREVIEWS)
         raise HTTPException(404, "this preview has expired: open a new one from the dashboard")
-    return row
+    return _not_revoked(row)
 
 
 def session_state(request: Request, caller: Caller) -> dict:
     with _db(request, caller) as db:
         s = _row(db, caller)
-        _not_revoked(s)
         cfg = study_config(db, str(s.study_id))
         quiz = quiz_due(s, cfg)
         due = report_due(db, s, cfg)
@@ -142,7 +142,7 @@ def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depe
 def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Depends(require_session)):
     _study_session(s)
     with _db(request, s) as db:
-        _not_revoked(_row(db, s))
+        _row(db, s)
         t, dup = submit_trial(
             db, s.id, body.trial, body.submission_id, body.human_action, body.effort_ms, [e.model_dump() for e in body.events]
         )
@@ -185,7 +185,6 @@ def _submitted(request: Request, s: Caller, add: Callable[..., tuple[dict[str, A
     _study_session(s)
     with _db(request, s) as db:
         row = _row(db, s)
-        _not_revoked(row)
         cfg = study_config(db, str(row.study_id))
         over = ended(db, row, cfg)
         out, dup = add(db, row, cfg)
@@ -198,7 +197,6 @@ def _submitted(request: Request, s: Caller, add: Callable[..., tuple[dict[str, A
 def post_events(session_id: str, body: EventsIn, request: Request, s: Caller = Depends(require_session)):
     with _db(request, s) as db:
         row = _row(db, s)
-        _not_revoked(row)
         events = [e.model_dump() for e in body.events]
         # after the end, the outcome shown of a committed trial is still taken: the page posts
         # it as the outcome appears, and a second tab's or a slow connection's post may come

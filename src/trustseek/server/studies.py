@@ -255,8 +255,6 @@ def resolve_policy(
     """A policy spec (``trustseek.solvers.policy_specs``) to the core's policy JSON, solving the POMDP
     for ``trust-aware`` (remembered in the application's ``caches``: many sessions open with
     the same model, task and spec)."""
-    if not isinstance(spec, dict):
-        raise ConfigError([f"{where} must be an object"])
     key = None if "format" in spec or caches is None else json.dumps([model.to_dict(), task.to_dict(), spec], sort_keys=True)
     if key is not None and caches is not None:
         found = caches.resolved.get(key) or caches.schedules.get(key)

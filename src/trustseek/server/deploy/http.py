@@ -20,7 +20,7 @@ It answers successes and the session's refusals (400, 404, 409: the server's dom
 another token, a body above the limit -- is handed, body and all, to FastAPI, which refuses it
 (401, 403, 413, 422: ``middleware.BodyGuard`` and pydantic) or, for a body its validation takes,
 calls the same ``answer`` (``routes``).  Both return the same bytes, with the ``Server-Timing``
-header of ``middleware.ServerTiming``.
+header of ``middleware.RequestLog``.
 
 ``answer`` runs the request first from the session's state this process knows, with one
 conditional write (``store.Known``; on PostgreSQL one statement, awaited), else in one
