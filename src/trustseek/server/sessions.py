@@ -39,7 +39,7 @@ from ..policies.scheduling import SchedulePolicy
 from .answers import questionnaire_due, quiz_due, report_due
 from .cache import caches_of
 from .errors import Conflict, NotAllowed, NotFound, TooLarge
-from .orm import Event, EventBatch, Session, Study, Trial, utcnow
+from .orm import Event, EventBatch, Session, Study, Trial, TrialRow, utcnow
 from .plan import PolicyPlan
 from .studies import block_items
 
@@ -225,23 +225,9 @@ def served(s: Session, n: int, items: tuple[dict[str, int], dict[str, int] | Non
     return out
 
 
-def trial_dict(t: Trial | Any) -> dict[str, Any]:
-    # a trial row, or the decision API's TrialRow (deploy.store) with the same columns
-    return {
-        "trial": t.trial,
-        "block": t.block,
-        "policy": t.policy,
-        "complexity": t.complexity,
-        "robot_action": t.robot_action,
-        "human_action": t.human_action,
-        "outcome": t.outcome,
-        "experience": t.experience,
-        "reward": t.reward,
-        "belief": t.belief,
-        "belief_after": t.belief_after,
-        "effort_ms": t.effort_ms,
-        "submission_id": t.submission_id,
-    }
+def trial_dict(t: Trial | TrialRow) -> dict[str, Any]:
+    """A committed trial (a row, or the decision API's ``TrialRow``) as the API answers it."""
+    return {k: getattr(t, k) for k in TrialRow._fields}
 
 
 #: what a participant's page learns of a committed trial: never the belief or the experience
