@@ -8,7 +8,6 @@ import html
 import logging
 import urllib.parse
 from pathlib import Path
-from typing import Any
 
 from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
@@ -17,8 +16,8 @@ from sqlalchemy import select
 from .auth import require_experimenter
 from .lifecycle import Arrival, arrive, panel_ids, refusal, revoke, set_status
 from .orm import Session, Study, iso
-from .routes import public_url, study_or_404
-from .schemas import ErrorOut, StatusIn
+from .routes import errors, public_url, study_or_404
+from .schemas import StatusIn
 from .sessions import study_config
 
 log = logging.getLogger(__name__)
@@ -104,8 +103,9 @@ def join_page(link_token: str, request: Request) -> Response:
     return RedirectResponse(f"/s/{token}?{urllib.parse.urlencode(query)}", status_code=303)
 
 
-_ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorOut} for code in (400, 401, 403, 404, 409)}
-lifecycle = APIRouter(prefix="/api", tags=["experimenter"], dependencies=[Depends(require_experimenter)], responses=_ERRORS)
+lifecycle = APIRouter(
+    prefix="/api", tags=["experimenter"], dependencies=[Depends(require_experimenter)], responses=errors(400, 401, 403, 404, 409)
+)
 
 
 @lifecycle.post("/studies/{study_id}/status", summary="Open, pause or close a study")

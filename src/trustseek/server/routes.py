@@ -16,17 +16,8 @@ from .bundle import bundle_files, bundle_zip
 from .export import answers_frame, events_frame, sessions_frame, table_bytes, trials_frame
 from .lifecycle import create_participant, progress
 from .orm import Event, Report, Session, Study, Trial, iso, utcnow
-from .schemas import (
-    ErrorOut,
-    SessionsIn,
-)
-from .sessions import (
-    new_id,
-    p_high,
-    study_config,
-    total_trials,
-    trial_dict,
-)
+from .schemas import ErrorOut, SessionsIn
+from .sessions import new_id, p_high, pending, study_config, total_trials, trial_dict
 from .studies import ConfigError, StudyIn, build_study_config
 
 log = logging.getLogger(__name__)
@@ -225,9 +216,7 @@ def dashboard(study_id: str, request: Request):
                     "practice_trials": sum(1 for t in s.plan["trials"] if t.get("practice")),
                     "score": s.score,
                     "belief": p_high(s.belief, n_trust),
-                    "current": None
-                    if s.pending_trial is None
-                    else {"trial": s.pending_trial, "complexity": s.pending_complexity, "robot_action": s.pending_action},
+                    "current": pending(s),
                     "last": last.get(s.id),
                     "last_self_report": reports.get(s.id),
                     "updated_at": iso(s.updated_at),

@@ -205,6 +205,13 @@ def scheduled_items(db: DBSession, s: Session, block: int) -> tuple[dict[str, in
     return block_items(study_config(db, s.study_id), s.plan, block, [str(c) for c in picks])
 
 
+def pending(s: Session) -> dict[str, Any] | None:
+    """The session's trial decided and not yet committed, or None."""
+    if s.pending_trial is None:
+        return None
+    return {"trial": s.pending_trial, "complexity": s.pending_complexity, "robot_action": s.pending_action}
+
+
 def served(s: Session, n: int, items: tuple[dict[str, int], dict[str, int] | None] | None = None) -> dict[str, Any]:
     """Trial ``n`` as served to the participant (``n`` is the session's pending trial); in a block
     whose policy picks the items, ``items`` (remaining, visible) before this trial's pick."""

@@ -15,7 +15,7 @@ from ..auth import Caller, bearer_token, missing_token, remember_token, require_
 from ..orm import Session, Trial
 from ..routes import errors
 from ..schemas import DecideIn, DeployIn, ObserveIn
-from ..sessions import p_high, trial_dict
+from ..sessions import p_high, pending, trial_dict
 from ..studies import ConfigError, complexity_problems, load_model_spec, load_task_spec, resolve_policy
 from .http import answer
 from .service import create_deploy, score_problem
@@ -81,9 +81,7 @@ def deploy_state(session_id: str, request: Request, s: Caller = Depends(require_
             "trials_done": row.trials_done,
             "score": row.score,
             "belief": p_high(row.belief, len(row.plan["model"]["trust_levels"])),
-            "pending": None
-            if row.pending_trial is None
-            else {"trial": row.pending_trial, "complexity": row.pending_complexity, "robot_action": row.pending_action},
+            "pending": pending(row),
             "trials": [trial_dict(t) for t in trials],
         }
 
