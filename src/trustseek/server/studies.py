@@ -116,18 +116,19 @@ class ScaleIn(BaseModel):
         return self
 
 
-class ItemIn(BaseModel):
+class _Asked(BaseModel):
+    # what a questionnaire's item and a quiz's question share
     model_config = STRICT
     id: str = Field(..., min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
     text: str = Field(..., min_length=1, max_length=1000)
+
+
+class ItemIn(_Asked):
     reverse: bool = False
     check: int | None = Field(None, description="An attention check: the point of the scale the item instructs.")
 
 
-class QuizQuestionIn(BaseModel):
-    model_config = STRICT
-    id: str = Field(..., min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
-    text: str = Field(..., min_length=1, max_length=1000)
+class QuizQuestionIn(_Asked):
     options: list[str] = Field(..., min_length=2, max_length=10)
     answer: int = Field(..., ge=0, description="The index of the right option (from 0).")
 
