@@ -78,11 +78,10 @@ SESSION_LAYERS = (
     "sessions",
     "answers",
     "lifecycle",
-    "checks",
+    "plan",
     "preview",
     "studies",
     "deploy/service",
-    "deploy/plan",
     "deploy/store",
 )
 

@@ -49,6 +49,13 @@ def _read_json(path: str | Path) -> Any:
     return load_json(path)[0]
 
 
+def _written(data: bytes, path: str | Path | None) -> bytes:
+    """``data``, written to ``path`` when given."""
+    if path is not None:
+        Path(path).write_bytes(data)
+    return data
+
+
 def _check(r: httpx.Response) -> Any:
     if r.status_code >= 400:
         try:
@@ -145,10 +152,7 @@ class Client:
     def bundle(self, study_id: str, path: str | Path | None = None, pilot: bool = False) -> bytes:
         """The study's data bundle as a zip file (every table in CSV and Parquet, the study's
         configuration, a data dictionary); written to ``path`` when given."""
-        data = self._get(f"/api/studies/{study_id}/bundle", pilot=pilot)
-        if path is not None:
-            Path(path).write_bytes(data)
-        return data
+        return _written(self._get(f"/api/studies/{study_id}/bundle", pilot=pilot), path)
 
     def dashboard(self, study_id: str) -> dict[str, Any]:
         return self._get(f"/api/studies/{study_id}/dashboard")
@@ -157,10 +161,7 @@ class Client:
         """The study's trials (canonical trial log) or ``table="events"``; CSV or Parquet by the
         suffix of ``path`` (CSV without a path).  Returns the bytes, and writes them to ``path``."""
         fmt = "parquet" if path is not None and Path(path).suffix == ".parquet" else "csv"
-        data = self._get(f"/api/studies/{study_id}/export", table=table, format=fmt)  # trials, events, reports, sessions
-        if path is not None:
-            Path(path).write_bytes(data)
-        return data
+        return _written(self._get(f"/api/studies/{study_id}/export", table=table, format=fmt), path)  # any table
 
     # -- deploy ------------------------------------------------------------
     def open_deploy(
@@ -204,39 +205,32 @@ class DeploySession:
     def _auth(self) -> dict[str, str]:
         return {"Authorization": f"Bearer {self.token}"}
 
+    def _post(self, what: str, trial: int | None, **fields: Any) -> dict[str, Any]:
+        """``decide`` or ``observe`` of trial ``trial`` (by default the next one) with ``fields``."""
+        body = {"trial": self.trial + 1 if trial is None else trial, **fields}
+        return _check(self.http.post(f"/api/deploy/sessions/{self.session_id}/{what}", json=body, headers=self._auth()))
+
+    def _decided(self, out: dict[str, Any]) -> tuple[str, str]:
+        self.action = out["robot_action"]
+        return out["complexity"], out["robot_action"]
+
     def decide(self, complexity: str, trial: int | None = None) -> str:
         """The robot action (``autonomous`` or ``ask``) for the next trial of this complexity."""
-        n = self.trial + 1 if trial is None else trial
-        out = _check(
-            self.http.post(
-                f"/api/deploy/sessions/{self.session_id}/decide",
-                json={"trial": n, "complexity": complexity},
-                headers=self._auth(),
-            )
-        )
-        self.action = out["robot_action"]
-        return self.action
+        return self._decided(self._post("decide", trial, complexity=complexity))[1]
 
     def choose(
         self, remaining: dict[str, int], visible: dict[str, int] | None = None, trial: int | None = None
     ) -> tuple[str, str]:
         """For a ``schedule`` policy: tell the service which items remain (and which are visible,
         when the policy sees a window); returns the (complexity, robot action) of the next trial."""
-        n = self.trial + 1 if trial is None else trial
-        body: dict[str, Any] = {"trial": n, "remaining": remaining}
-        if visible is not None:
-            body["visible"] = visible
-        out = _check(self.http.post(f"/api/deploy/sessions/{self.session_id}/decide", json=body, headers=self._auth()))
-        self.action = out["robot_action"]
-        return out["complexity"], out["robot_action"]
+        seen = {} if visible is None else {"visible": visible}
+        return self._decided(self._post("decide", trial, remaining=remaining, **seen))
 
     def observe(self, human_action: str | None = None, outcome: str | None = None, trial: int | None = None) -> float | None:
         """Report the trial: ``human_action`` ``intervene``/``rely`` (omit when the robot asked)
         and, when the human relied, ``outcome`` ``success``/``failure``.  Returns the new belief."""
-        n = self.trial + 1 if trial is None else trial
-        body = {"trial": n, "human_action": human_action, "outcome": outcome}
-        out = _check(self.http.post(f"/api/deploy/sessions/{self.session_id}/observe", json=body, headers=self._auth()))
-        self.trial = max(self.trial, n)
+        out = self._post("observe", trial, human_action=human_action, outcome=outcome)
+        self.trial = max(self.trial, out["trial"]["trial"])
         self.belief = out["belief"]
         return self.belief
 

@@ -134,3 +134,19 @@ def test_the_study_command_shows_and_moves_the_lifecycle(finished):
     assert code == 2 and "--status 'shut'" in text
     assert run_cli(["study", study, "--db", db, "--status", "closed"])[0] == 0
     assert "closed" in run_cli(["study", study, "--db", db])[1]
+
+
+def test_export_writes_parquet_by_its_suffix_in_any_case(tmp_path):
+    """``--out`` and ``--events`` ending in ``.PARQUET`` (the suffix check takes any case) are both
+    Parquet files: the events table was written as CSV there."""
+    db = f"sqlite:///{tmp_path / 'case.sqlite'}"
+    with TestClient(create_app(db, token=TOKEN)) as client:
+        blocks = [{"policy": {"kind": "never-ask"}, "schedule": {"trials": ["low"]}}]
+        study = client.post("/api/studies", json={"name": "case", "blocks": blocks}, headers=H).json()["id"]
+        (info,) = client.post(f"/api/studies/{study}/sessions", json={"count": 1}, headers=H).json()
+        h = {"Authorization": f"Bearer {info['token']}"}
+        assert client.post(f"/api/sessions/{info['session_id']}/events", json={"events": [{"type": "x"}]}, headers=h).is_success
+    out, events = tmp_path / "trials.PARQUET", tmp_path / "events.PARQUET"
+    code, text = run_cli(["export", study, "--db", db, "--out", str(out), "--events", str(events)])
+    assert code == 0, text
+    assert len(pd.read_parquet(out)) == 0 and pd.read_parquet(events)["type"].tolist() == ["x"]

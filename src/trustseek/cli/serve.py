@@ -242,7 +242,7 @@ def export_cmd(
             write_frame(trials, tmp)
     if events is not None and ev is not None:
         with atomic_output(events) as tmp:
-            write_frame(ev, tmp, trials=False)
+            write_frame(ev, tmp)
     if bundle is not None and files is not None:
         with atomic_output(bundle, directory=True) as tmp:
             write_bundle(files, tmp)

@@ -1,6 +1,14 @@
-"""A study session's answers: trust self-reports and questionnaires, when each is due after a
-trial, and when the session is over (every trial committed, nothing left to answer).  A repeat
-of stored answers is a duplicate; different ones are refused."""
+"""A study session's answers: the comprehension quiz, trust self-reports and questionnaires,
+when each is due, and when the session is over (every trial committed, nothing left to answer).
+A repeat of stored answers is a duplicate; different ones are refused.
+
+The quiz is every question right within the allowed attempts; each attempt is kept with the
+session (its answers and the questions it got wrong).  After the last failed attempt the
+study's ``on_fail`` decides: ``end`` screens the session out (it ends; the panel's
+``fail_code``, if any, is shown instead of the completion code) or ``continue`` (the session
+goes on, the failure recorded).  An attention-check item of a questionnaire names the point of
+its scale that it instructs; the export says whether each answer matched it.
+"""
 
 from __future__ import annotations
 
@@ -10,9 +18,77 @@ from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
-from .checks import SCREENED
 from .errors import Conflict, NotAllowed, NotFound
-from .orm import Answer, Report, Session
+from .orm import Answer, Report, Session, iso, utcnow
+
+#: a session's status once a failed quiz has ended it
+SCREENED = "screened"
+
+
+def quiz_due(s: Session, cfg: dict[str, Any]) -> dict[str, Any] | None:
+    """The quiz as the participant's page shows it (no answers), while it is still to be
+    passed by a running session; None otherwise."""
+    quiz = cfg.get("quiz")
+    if not quiz or s.status != "running" or (s.quiz or {}).get("outcome"):
+        return None
+    done = len((s.quiz or {}).get("attempts", []))
+    return {
+        "attempt": done + 1,
+        "attempts": quiz["attempts"],
+        "questions": [{"id": q["id"], "text": q["text"], "options": q["options"]} for q in quiz["questions"]],
+        "wrong": (s.quiz or {}).get("attempts", [{}])[-1].get("wrong", []) if done else [],
+    }
+
+
+def quiz_problems(cfg: dict[str, Any], answers: dict[str, int]) -> list[str]:
+    """Why ``answers`` is not an answer to every question of the quiz (empty when it is)."""
+    qs = {q["id"]: q for q in cfg["quiz"]["questions"]}
+    missing, unknown = [k for k in qs if k not in answers], sorted(set(answers) - set(qs))
+    problems = [f"answer every question: missing {missing}, unknown {unknown}"] if missing or unknown else []
+    bad = {k: v for k, v in answers.items() if k in qs and not 0 <= v < len(qs[k]["options"])}
+    if bad:
+        problems.append(f"answers must be option indices of their question, got {bad}")
+    return problems
+
+
+def answer_quiz(db: DBSession, s: Session, cfg: dict[str, Any], attempt: int, answers: dict[str, int]) -> tuple[list[str], bool]:
+    """Take attempt ``attempt`` at the quiz of session ``s`` (locked): (the ids of the questions
+    it got wrong, whether it repeats a stored attempt).  The last failed attempt settles the
+    outcome (and, with ``on_fail: end``, screens the session out).  Commits."""
+    done = (s.quiz or {}).get("attempts", [])
+    if attempt <= len(done):  # a repeat of a stored attempt (a retry after a lost answer)
+        db.rollback()
+        if done[attempt - 1]["answers"] != answers:
+            raise Conflict(f"attempt {attempt} is already answered, with other answers")
+        return done[attempt - 1]["wrong"], True
+    due = quiz_due(s, cfg)
+    if due is None or attempt != due["attempt"]:
+        db.rollback()
+        raise Conflict("no quiz attempt is due" if due is None else f"the attempt due is {due['attempt']}")
+    problems = quiz_problems(cfg, answers)
+    if problems:
+        db.rollback()
+        raise NotAllowed("; ".join(problems))
+    quiz = cfg["quiz"]
+    wrong = [q["id"] for q in quiz["questions"] if answers[q["id"]] != q["answer"]]
+    record = dict(s.quiz or {"attempts": [], "outcome": None})
+    record["attempts"] = [*record.get("attempts", []), {"answers": answers, "wrong": wrong, "at": iso(utcnow())}]
+    if not wrong:
+        record["outcome"] = "passed"
+    elif len(record["attempts"]) >= quiz["attempts"]:
+        record["outcome"] = "failed"
+        if quiz["on_fail"] == "end":
+            s.status = SCREENED
+            s.ended_at = utcnow()
+    s.quiz = record
+    s.updated_at = utcnow()
+    db.commit()
+    return wrong, False
+
+
+def check_passed(item: dict[str, Any], value: float) -> bool | None:
+    """Whether an answer to an attention-check item is the point it instructs (None: not a check)."""
+    return None if item.get("check") is None else float(value) == float(item["check"])
 
 
 def _asked_after(s: Session, when: str, n: int) -> bool:

@@ -11,7 +11,7 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse
+from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
 from starlette.concurrency import run_in_threadpool
 
@@ -20,13 +20,13 @@ from ..version import __version__
 from .cache import StudyCaches
 from .db import DEFAULT_URL, open_database, safe_url
 from .deploy.http import DeployFront
-from .deploy.plan import Plans
 from .deploy.routes import deploy
 from .deploy.store import DeployStore
 from .errors import Refused
 from .link_routes import STATIC, lifecycle, pages, static_page
-from .middleware import BodyGuard, RequestLog, ServerTiming, status_of
+from .middleware import BodyGuard, RequestLog, refusal
 from .participant_routes import own, participant
+from .plan import Plans
 from .preview import Previews
 from .routes import experimenter
 from .schemas import ErrorOut
@@ -35,11 +35,12 @@ from .studies import more_problems
 log = logging.getLogger(__name__)
 
 
-async def refused(request: Request, exc: Exception) -> JSONResponse:
+async def refused(request: Request, exc: Exception) -> Response:
     """A refusal of the session layers (``errors.Refused``) with its HTTP status, answered as an
     ``HTTPException`` is (``{"detail": message}``)."""
     assert isinstance(exc, Refused)
-    return JSONResponse(status_code=status_of(exc), content={"detail": exc.message})
+    status, body = refusal(exc)
+    return Response(body, status_code=status, media_type="application/json")
 
 
 async def validation_error(request: Request, exc: Exception) -> JSONResponse:
@@ -147,7 +148,6 @@ def create_app(
     app.add_exception_handler(Refused, refused)
     app.add_middleware(BodyGuard)
     app.add_middleware(RequestLog)
-    app.add_middleware(ServerTiming)
     # deploy first: the decision API is matched without trying the others
     for router in (deploy, experimenter, own, participant, lifecycle, pages):
         app.include_router(router, responses=NUL_REFUSAL)

@@ -16,10 +16,25 @@ from .orm import Session
 bearer = HTTPBearer(auto_error=False, description="Experimenter token, or a session token for session endpoints.")
 
 
+#: the refusal of a request without a bearer token (401)
+MISSING_TOKEN = "missing token: send 'Authorization: Bearer <token>'"
+
+
+def bearer_token(header: str) -> str | None:
+    """The token of an ``Authorization: Bearer <token>`` header, or None."""
+    scheme, _, token = header.partition(" ")
+    token = token.strip()
+    return token if scheme.lower() == "bearer" and token else None
+
+
 def token_of(creds: HTTPAuthorizationCredentials | None) -> str:
     if creds is None or not creds.credentials:
-        raise HTTPException(401, "missing token: send 'Authorization: Bearer <token>'", headers={"WWW-Authenticate": "Bearer"})
+        raise missing_token()
     return creds.credentials
+
+
+def missing_token() -> HTTPException:
+    return HTTPException(401, MISSING_TOKEN, headers={"WWW-Authenticate": "Bearer"})
 
 
 async def require_experimenter(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)) -> None:
@@ -76,7 +91,12 @@ async def require_session(
     session_id: str, request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)
 ) -> Caller:
     """The session named in the path, if the bearer token is that session's token."""
-    s = session_for_token(request, token_of(creds))
+    return session_caller(request, token_of(creds), session_id)
+
+
+def session_caller(request: Request, token: str, session_id: str) -> Caller:
+    """The session of ``token``, if it is session ``session_id``."""
+    s = session_for_token(request, token)
     if not secrets.compare_digest(s.id.encode(), session_id.encode()):
         raise HTTPException(403, "this token belongs to another session")
     return s

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import io
 import json
-import tempfile
 import zipfile
 from pathlib import Path
 
@@ -26,7 +25,7 @@ import pandas as pd
 from sqlalchemy import select
 from sqlalchemy.orm import Session as DBSession
 
-from .export import answers_frame, events_csv, events_frame, exported, sessions_frame, trials_frame, write_frame
+from .export import answers_frame, events_frame, exported, sessions_frame, table_bytes, trials_frame
 from .orm import Session, Study
 
 TABLES = ("trials", "reports", "questionnaires", "quiz", "sessions", "events")
@@ -211,21 +210,13 @@ def bundle_files(db: DBSession, study: Study, pilot: bool = False) -> dict[str, 
     frames = bundle_frames(db, study, pilot)
     files: dict[str, bytes] = {}
     for name, frame in frames.items():
-        if name == "trials":  # the canonical trial log, as trustseek fit reads it
-            files["trials.csv"] = _written(frame, ".csv")
-        else:  # text from participants' browsers: formulas escaped, CR/LF quoted
-            files[f"{name}.csv"] = events_csv(frame)
-        files[f"{name}.parquet"] = _written(frame, ".parquet", trials=name == "trials")
+        # the trial log as trustseek fit reads it; the other tables hold text from participants'
+        # browsers: formulas escaped, CR/LF quoted
+        files[f"{name}.csv"] = table_bytes(frame, "csv", escaped=name != "trials")
+        files[f"{name}.parquet"] = table_bytes(frame, "parquet")
     files["study.json"] = json.dumps({"id": study.id, "name": study.name, "config": study.config}, indent=2).encode()
-    files["dictionary.csv"] = dictionary_frame(frames).to_csv(index=False).encode()
+    files["dictionary.csv"] = table_bytes(dictionary_frame(frames), "csv")
     return files
-
-
-def _written(frame: pd.DataFrame, suffix: str, trials: bool = True) -> bytes:
-    with tempfile.TemporaryDirectory() as d:
-        path = Path(d) / f"table{suffix}"
-        write_frame(frame, path, trials=trials)
-        return path.read_bytes()
 
 
 def write_bundle(files: dict[str, bytes], folder: Path) -> None:

@@ -22,13 +22,12 @@ import json
 from pathlib import Path
 
 import pandas as pd
-from sqlalchemy import select
+from sqlalchemy import Select, select
 from sqlalchemy.orm import Session as DBSession
 
-from ..data.trials import write_trials
 from ..vocab import TRIAL_COLUMNS
-from .checks import check_passed
-from .orm import Answer, Event, Report, Session, Study, Trial
+from .answers import check_passed
+from .orm import Answer, Event, Report, Session, Study, Trial, iso
 
 CANONICAL = list(TRIAL_COLUMNS)
 EXTRA = [
@@ -109,8 +108,9 @@ def exported(study: Study, pilot: bool = False) -> tuple:
     return (Session.study_id == study.id, Session.role.in_(("participant", "pilot") if pilot else ("participant",)))
 
 
-def _iso(t) -> str | None:
-    return None if t is None else t.isoformat() + "Z"
+def _exported_rows(table, study: Study, pilot: bool, *columns) -> Select:
+    """The rows of ``table`` (with ``columns`` of their session) of the sessions a table holds."""
+    return select(table, *columns).join(Session, table.session_id == Session.id).where(*exported(study, pilot))
 
 
 def _block_names(study: Study) -> list[str]:
@@ -128,16 +128,11 @@ def trials_frame(db: DBSession, study: Study, practice: bool = False, pilot: boo
     sessions with ``pilot=True``."""
     names = _block_names(study)
     skip = _practice_counts(db, study)
-    rows = db.execute(
-        select(Trial, Session.participant)
-        .join(Session, Trial.session_id == Session.id)
-        .where(*exported(study, pilot), *(() if practice else (Trial.practice.is_(False),)))
-        .order_by(Session.participant, Trial.trial)
-    ).all()
-    reports = {
-        (r.session_id, r.after_trial): r.value
-        for r in db.scalars(select(Report).join(Session, Report.session_id == Session.id).where(*exported(study, pilot)))
-    }
+    trials = _exported_rows(Trial, study, pilot, Session.participant)
+    if not practice:
+        trials = trials.where(Trial.practice.is_(False))
+    rows = db.execute(trials.order_by(Session.participant, Trial.trial)).all()
+    reports = {(r.session_id, r.after_trial): r.value for r in db.scalars(_exported_rows(Report, study, pilot))}
     data = [
         {
             "participant": p,
@@ -157,7 +152,7 @@ def trials_frame(db: DBSession, study: Study, practice: bool = False, pilot: boo
             "self_report": reports.get((t.session_id, t.trial)),
             "study": study.id,
             "session": t.session_id,
-            "committed_at": t.created_at.isoformat() + "Z",
+            "committed_at": iso(t.created_at),
             "practice": bool(t.practice),
             "session_trial": t.trial,
         }
@@ -175,13 +170,9 @@ def answers_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFr
     skip = _practice_counts(db, study)
     items = {(q["name"], i["id"]): i for q in study.config.get("questionnaires") or () for i in q["items"]}
     data: list[tuple[str, str, str, float, dict, Report | Answer, str]] = []
-    for r, p in db.execute(
-        select(Report, Session.participant).join(Session, Report.session_id == Session.id).where(*exported(study, pilot))
-    ).all():
+    for r, p in db.execute(_exported_rows(Report, study, pilot, Session.participant)).all():
         data.append(("self_report", r.scope, "trust", r.value, {}, r, p))
-    for a, p in db.execute(
-        select(Answer, Session.participant).join(Session, Answer.session_id == Session.id).where(*exported(study, pilot))
-    ).all():
+    for a, p in db.execute(_exported_rows(Answer, study, pilot, Session.participant)).all():
         data.append((a.questionnaire, a.when, a.item, a.value, items.get((a.questionnaire, a.item), {}), a, p))
     rows = [
         {
@@ -199,7 +190,7 @@ def answers_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFr
             "check_passed": check_passed(item_, value),
             "study": study.id,
             "session": r.session_id,
-            "answered_at": r.created_at.isoformat() + "Z",
+            "answered_at": iso(r.created_at),
         }
         for q, when, item, value, item_, r, p in data
     ]
@@ -215,7 +206,7 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
     checks = study.config.get("questionnaires") or ()
     items = {(q["name"], i["id"]): i for q in checks for i in q["items"] if i.get("check") is not None}
     failed: dict[str, int] = {}
-    for a in db.scalars(select(Answer).join(Session, Answer.session_id == Session.id).where(*exported(study, pilot))):
+    for a in db.scalars(_exported_rows(Answer, study, pilot)):
         if (a.questionnaire, a.item) in items and not check_passed(items[(a.questionnaire, a.item)], a.value):
             failed[a.session_id] = failed.get(a.session_id, 0) + 1
     rows = [
@@ -232,10 +223,10 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
             "panel_id": s.panel_id,
             "panel": json.dumps(s.panel or {}),
             "speed": s.speed,
-            "created_at": _iso(s.created_at),
-            "started_at": _iso(s.consented_at),
-            "ended_at": _iso(s.ended_at),
-            "revoked_at": _iso(s.revoked_at),
+            "created_at": iso(s.created_at),
+            "started_at": iso(s.consented_at),
+            "ended_at": iso(s.ended_at),
+            "revoked_at": iso(s.revoked_at),
             "quiz_attempts": len((s.quiz or {}).get("attempts", [])),
             "quiz_outcome": (s.quiz or {}).get("outcome"),
             "checks_failed": failed.get(s.id, 0),
@@ -246,19 +237,14 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
 
 
 def events_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame:
-    rows = db.execute(
-        select(Event, Session.participant)
-        .join(Session, Event.session_id == Session.id)
-        .where(*exported(study, pilot))
-        .order_by(Session.participant, Event.id)
-    ).all()
+    rows = db.execute(_exported_rows(Event, study, pilot, Session.participant).order_by(Session.participant, Event.id)).all()
     data = [
         {
             "participant": p,
             "session": e.session_id,
             "trial": e.trial,
             "client_time": e.client_time,
-            "server_time": e.created_at.isoformat() + "Z",
+            "server_time": iso(e.created_at),
             "type": e.type,
             "data": e.data,
         }
@@ -269,30 +255,21 @@ def events_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFra
     return frame
 
 
-def events_csv(frame: pd.DataFrame) -> bytes:
-    """The CSV of an events table: formulas escaped (:func:`escape_formulas`) and lines ended
-    with CRLF (RFC 4180), so that a carriage return inside a participant's text is quoted
-    instead of splitting the row."""
-    return escape_formulas(frame).to_csv(index=False, lineterminator="\r\n").encode()
-
-
-def to_bytes(frame: pd.DataFrame, fmt: str) -> bytes:
-    buf = io.BytesIO()
+def table_bytes(frame: pd.DataFrame, fmt: str, escaped: bool = False) -> bytes:
+    """A table as a file's bytes, CSV or Parquet: the one writer of the export, the bundle and
+    ``trustseek export``.  ``escaped``: a table holding participants' text, whose CSV has its
+    formulas escaped (:func:`escape_formulas`) and lines ended with CRLF (RFC 4180), so that a
+    carriage return inside a participant's text is quoted instead of splitting the row."""
     if fmt == "parquet":
+        buf = io.BytesIO()
         frame.to_parquet(buf, index=False)
-    else:
-        frame.to_csv(buf, index=False)
-    return buf.getvalue()
+        return buf.getvalue()
+    if escaped:
+        return escape_formulas(frame).to_csv(index=False, lineterminator="\r\n").encode()
+    return frame.to_csv(index=False).encode()
 
 
-def write_frame(frame: pd.DataFrame, path: str | Path, trials: bool = True) -> None:
-    """Write by suffix (.csv or .parquet); trial logs go through :func:`trustseek.data.trials.write_trials`
-    (the canonical format), other tables are written as they are."""
+def write_frame(frame: pd.DataFrame, path: str | Path) -> None:
+    """Write a table by the suffix of ``path``: Parquet (``.parquet``, ``.pq``) or CSV."""
     path = Path(path)
-    if trials:
-        write_trials(frame, path)
-        return
-    if path.suffix == ".parquet":
-        frame.to_parquet(path, index=False)
-    else:
-        frame.to_csv(path, index=False)
+    path.write_bytes(table_bytes(frame, "parquet" if path.suffix.lower() in (".parquet", ".pq") else "csv"))

@@ -196,6 +196,31 @@ def refusal(db: DBSession, s: Session) -> str | None:
     return status if status in ("paused", "closed") else None
 
 
+def give_consent(db: DBSession, s: Session, cfg: dict[str, Any], query: dict[str, str]) -> bool:
+    """Start session ``s`` (locked) on its participant's consent, keeping the panel's ids of the
+    link's ``query``; whether it started now (the consent of a running session changes nothing).
+    Commits."""
+    started = s.status == "new"
+    if started:
+        why = refusal(db, s)
+        if why is not None:
+            db.rollback()
+            raise Conflict(f"the study is {why}: it takes no new participants")
+        key, ids = panel_ids(cfg, query) if cfg.get("panel") else (None, {})
+        s.status, s.consented_at, s.updated_at = "running", utcnow(), utcnow()
+        s.panel = {**ids, **(s.panel or {})} or None
+        s.panel_id = s.panel_id or key
+    elif ended(db, s, cfg):
+        db.rollback()
+        raise Conflict("this session has ended")
+    try:
+        db.commit()
+    except IntegrityError:  # the same panel id already has a session of this study
+        db.rollback()
+        raise Conflict("this panel id already has a session in this study: use that session's link") from None
+    return started
+
+
 def revoke(db: DBSession, s: Session) -> Session:
     if s.revoked_at is None:
         s.revoked_at = s.updated_at = utcnow()

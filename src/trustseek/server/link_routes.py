@@ -8,7 +8,6 @@ import html
 import logging
 import urllib.parse
 from pathlib import Path
-from typing import Any
 
 from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
@@ -16,9 +15,9 @@ from sqlalchemy import select
 
 from .auth import require_experimenter
 from .lifecycle import Arrival, arrive, panel_ids, refusal, revoke, set_status
-from .orm import Session, Study
-from .routes import study_or_404
-from .schemas import ErrorOut, StatusIn
+from .orm import Session, Study, iso
+from .routes import errors, public_url, study_or_404
+from .schemas import StatusIn
 from .sessions import study_config
 
 log = logging.getLogger(__name__)
@@ -104,12 +103,9 @@ def join_page(link_token: str, request: Request) -> Response:
     return RedirectResponse(f"/s/{token}?{urllib.parse.urlencode(query)}", status_code=303)
 
 
-_ERRORS: dict[int | str, dict[str, Any]] = {code: {"model": ErrorOut} for code in (400, 401, 403, 404, 409)}
-lifecycle = APIRouter(prefix="/api", tags=["experimenter"], dependencies=[Depends(require_experimenter)], responses=_ERRORS)
-
-
-def study_link(request: Request, st: Study) -> str:
-    return f"{request.app.state.public_url or str(request.base_url).rstrip('/')}/join/{st.link_token}"
+lifecycle = APIRouter(
+    prefix="/api", tags=["experimenter"], dependencies=[Depends(require_experimenter)], responses=errors(400, 401, 403, 404, 409)
+)
 
 
 @lifecycle.post("/studies/{study_id}/status", summary="Open, pause or close a study")
@@ -118,7 +114,7 @@ def post_status(study_id: str, body: StatusIn, request: Request):
         st = study_or_404(db, study_id)
         set_status(db, st, body.status)
         log.info("study %s is now %s", st.id, st.status)
-        return {"id": st.id, "status": st.status, "link": study_link(request, st)}
+        return {"id": st.id, "status": st.status, "link": public_url(request, f"/join/{st.link_token}")}
 
 
 @lifecycle.post("/studies/{study_id}/preview", status_code=201, summary="A preview of the participant's view, not recorded")
@@ -129,8 +125,7 @@ def post_preview(study_id: str, request: Request):
     with request.app.state.db() as db:
         st = study_or_404(db, study_id)
         s = request.app.state.previews.start(st)
-    base = request.app.state.public_url or str(request.base_url).rstrip("/")
-    return {"session_id": s.id, "link": f"{base}/s/{s.token}", "role": s.role}
+    return {"session_id": s.id, "link": public_url(request, f"/s/{s.token}"), "role": s.role}
 
 
 @lifecycle.post("/studies/{study_id}/sessions/{session_id}/revoke", summary="Revoke a participant's link")
@@ -142,4 +137,4 @@ def post_revoke(study_id: str, session_id: str, request: Request):
         revoke(db, s)
         request.app.state.tokens.pop(s.token, None)
         log.info("study %s: session %s revoked", study_id, s.id)
-        return {"session_id": s.id, "revoked_at": s.revoked_at.isoformat() + "Z" if s.revoked_at else None}
+        return {"session_id": s.id, "revoked_at": iso(s.revoked_at)}

@@ -1,4 +1,4 @@
-"""ASGI middleware of the experiment server: response timing, the request log, and the guard
+"""ASGI middleware of the experiment server: response timing with the request log, and the guard
 that authenticates writes and caps their size before any body is read.
 
 Both are plain ASGI wrappers (no per-request objects beyond a closure), so the latency-critical
@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .auth import caller_for_token
+from .auth import MISSING_TOKEN, bearer_token, caller_for_token
 from .errors import Conflict, Gone, NotAllowed, NotFound, Refused, TooLarge
 
 Scope = MutableMapping[str, Any]
@@ -38,30 +38,15 @@ def status_of(exc: Refused) -> int:
     return next(STATUS[c] for c in type(exc).__mro__ if c in STATUS)
 
 
+def refusal(exc: Refused) -> tuple[int, bytes]:
+    """(status, body) of a refusal: ``{"detail": message}``, the bytes of FastAPI's ``JSONResponse``
+    (the application's handler, ``app.refused``, and the decision API's front answer with them)."""
+    body = json.dumps({"detail": exc.message}, ensure_ascii=False, allow_nan=False, indent=None, separators=(",", ":"))
+    return status_of(exc), body.encode("utf-8")
+
+
 #: path parameters that are credentials: never logged
 SECRET_PARAMS = frozenset({"token"})
-
-
-class ServerTiming:
-    """Every response carries ``Server-Timing: app;dur=<ms>``, the time from the request reaching
-    the application to its response headers (routing, authentication, validation, the handler
-    with its database transaction, serialization)."""
-
-    def __init__(self, app: ASGIApp):
-        self.app = app
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] != "http":
-            return await self.app(scope, receive, send)
-        t0 = time.perf_counter()
-
-        async def timed(message: Message) -> None:
-            if message["type"] == "http.response.start":
-                dur = f"app;dur={(time.perf_counter() - t0) * 1000:.3f}".encode()
-                message["headers"] = [*message.get("headers", ()), (b"server-timing", dur)]
-            await send(message)
-
-        await self.app(scope, receive, timed)
 
 
 def request_context(scope: Scope) -> str:
@@ -75,8 +60,11 @@ def request_context(scope: Scope) -> str:
 
 
 class RequestLog:
-    """Logs refused requests (4xx, at INFO), failed ones (5xx, at ERROR) and unhandled errors
-    with the request's context; successful requests are not logged."""
+    """Every response carries ``Server-Timing: app;dur=<ms>``, the time from the request reaching
+    the application to its response headers (routing, authentication, validation, the handler
+    with its database transaction, serialization).  Refused requests (4xx) are logged at INFO,
+    failed ones (5xx) at ERROR, and unhandled errors with the request's context; successful
+    requests are not logged."""
 
     def __init__(self, app: ASGIApp):
         self.app = app
@@ -84,11 +72,15 @@ class RequestLog:
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             return await self.app(scope, receive, send)
+        t0 = time.perf_counter()
 
         async def logged(message: Message) -> None:
-            if message["type"] == "http.response.start" and message["status"] >= 400:
+            if message["type"] == "http.response.start":
+                dur = f"app;dur={(time.perf_counter() - t0) * 1000:.3f}".encode()
+                message["headers"] = [*message.get("headers", ()), (b"server-timing", dur)]
                 status = message["status"]
-                log.log(logging.ERROR if status >= 500 else logging.INFO, "%s -> %d", request_context(scope), status)
+                if status >= 400:
+                    log.log(logging.ERROR if status >= 500 else logging.INFO, "%s -> %d", request_context(scope), status)
             await send(message)
 
         try:
@@ -213,12 +205,9 @@ class BodyGuard:
             return await self.app(scope, receive, send)
         state = scope["app"].state
         headers = dict(scope.get("headers") or ())
-        scheme, _, token = headers.get(b"authorization", b"").decode("latin-1").partition(" ")
-        token = token.strip()
-        if scheme.lower() != "bearer" or not token:
-            return await refuse(
-                send, 401, "missing token: send 'Authorization: Bearer <token>'", ((b"www-authenticate", b"Bearer"),)
-            )
+        token = bearer_token(headers.get(b"authorization", b"").decode("latin-1"))
+        if token is None:
+            return await refuse(send, 401, MISSING_TOKEN, ((b"www-authenticate", b"Bearer"),))
         if secrets.compare_digest(token.encode(), state.token.encode()):
             limit = EXPERIMENTER_BODY_LIMIT
         elif caller_for_token(state, token) is not None:

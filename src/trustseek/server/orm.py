@@ -17,6 +17,7 @@ migrations in ``migrations/``; these classes mirror it.
 from __future__ import annotations
 
 from datetime import UTC, datetime
+from typing import NamedTuple
 
 from sqlalchemy import JSON, Boolean, Float, ForeignKey, Index, Integer, String, Text, UniqueConstraint
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
@@ -24,6 +25,11 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 def utcnow() -> datetime:
     return datetime.now(UTC).replace(tzinfo=None)
+
+
+def iso(t: datetime | None) -> str | None:
+    """A stored (UTC) time as the API and the exports write it: ISO 8601 ending in ``Z``."""
+    return None if t is None else t.isoformat() + "Z"
 
 
 class Base(DeclarativeBase):
@@ -122,6 +128,25 @@ class Trial(_SessionRow, Base):
     effort_ms: Mapped[float | None] = mapped_column(Float, nullable=True)
     practice: Mapped[bool] = mapped_column(Boolean, default=False)  # practice trials: logged, not analysed
     submission_id: Mapped[str] = mapped_column(String(64))
+
+
+class TrialRow(NamedTuple):
+    """A committed trial's columns as the API answers them (``sessions.trial_dict``), and as the
+    decision API's store reads them (``deploy.store``)."""
+
+    trial: int
+    block: int
+    policy: str
+    complexity: str
+    robot_action: str
+    human_action: str | None
+    outcome: str
+    experience: str
+    reward: float
+    belief: float | None
+    belief_after: float | None
+    effort_ms: float | None
+    submission_id: str
 
 
 class Report(_SessionRow, Base):

@@ -9,15 +9,12 @@ from typing import Any
 
 from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials
-from sqlalchemy.exc import IntegrityError
 
-from .answers import add_answers, add_report, ended, questionnaire_due, report_due
+from .answers import SCREENED, add_answers, add_report, answer_quiz, ended, questionnaire_due, quiz_due, report_due
 from .auth import Caller, bearer, require_session, session_for_token, token_of
-from .checks import SCREENED, grade_quiz, quiz_due, quiz_problems
 from .errors import Conflict
-from .lifecycle import panel_ids, refusal
+from .lifecycle import give_consent
 from .orm import Session, utcnow
-from .preview import session_db
 from .routes import errors
 from .schemas import AnswersIn, ConsentIn, EventsIn, QuizIn, ReportIn, TrialIn
 from .sessions import add_events, lock, participant_trial, serve, study_config, submit_trial, total_trials
@@ -36,37 +33,35 @@ def _study_session(s: Caller) -> None:
         raise HTTPException(409, "this is a deploy session; use /api/deploy")
 
 
-def _not_revoked(row: Session) -> None:
+def _not_revoked(row: Session) -> Session:
     if row.revoked_at is not None:
         raise HTTPException(410, "this link has been revoked by the experimenter")
+    return row
 
 
 def _db(request: Request, caller: Caller):
     """The caller's database: the previews' for a preview (``preview.Previews``), else the study's."""
-    return session_db(request.app.state, caller.preview)
+    return request.app.state.previews.db() if caller.preview else request.app.state.db()
 
 
 def _locked(db, caller: Caller) -> tuple[Session, dict]:
     """The caller's session, locked for an update that depends on its state, and its study's
     configuration; refused when its link is revoked."""
-    row = lock(db, caller.id)
-    _not_revoked(row)
+    row = _not_revoked(lock(db, caller.id))
     return row, study_config(db, str(row.study_id))
 
 
 def _row(db, caller: Caller) -> Session:
+    """The caller's session; refused when its link is revoked."""
     row = db.get(Session, caller.id)
     if row is None:  # a preview forgotten after newer ones (preview.MAX_PREVIEWS)
         raise HTTPException(404, "this preview has expired: open a new one from the dashboard")
-    return row
+    return _not_revoked(row)
 
 
 def session_state(request: Request, caller: Caller) -> dict:
     with _db(request, caller) as db:
         s = _row(db, caller)
-        if s.kind != "study":
-            raise HTTPException(409, "this is a deploy session; use /api/deploy")
-        _not_revoked(s)
         cfg = study_config(db, str(s.study_id))
         quiz = quiz_due(s, cfg)
         due = report_due(db, s, cfg)
@@ -136,25 +131,7 @@ def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depe
     _study_session(s)
     with _db(request, s) as db:
         row, cfg = _locked(db, s)
-        started = row.status == "new"
-        if started:
-            why = refusal(db, row)
-            if why is not None:
-                db.rollback()
-                raise HTTPException(409, f"the study is {why}: it takes no new participants")
-            key, ids = panel_ids(cfg, body.panel) if cfg.get("panel") else (None, {})
-            row.status, row.consented_at, row.updated_at = "running", utcnow(), utcnow()
-            row.panel = {**ids, **(row.panel or {})} or None
-            row.panel_id = row.panel_id or key
-        elif ended(db, row, cfg):
-            db.rollback()
-            raise HTTPException(409, "this session has ended")
-        try:
-            db.commit()
-        except IntegrityError:  # the same panel id already has a session of this study
-            db.rollback()
-            raise HTTPException(409, "this panel id already has a session in this study: use that session's link") from None
-        if started:
+        if give_consent(db, row, cfg, body.panel):
             log.info("session %s of study %s started (consent given)", row.id, row.study_id)
         if body.events:
             add_events(db, row, [e.model_dump() for e in body.events])
@@ -165,7 +142,7 @@ def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depe
 def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Depends(require_session)):
     _study_session(s)
     with _db(request, s) as db:
-        _not_revoked(_row(db, s))
+        _row(db, s)
         t, dup = submit_trial(
             db, s.id, body.trial, body.submission_id, body.human_action, body.effort_ms, [e.model_dump() for e in body.events]
         )
@@ -177,24 +154,7 @@ def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Dep
 def post_quiz(session_id: str, body: QuizIn, request: Request, s: Caller = Depends(require_session)):
     _study_session(s)
     with _db(request, s) as db:
-        row, cfg = _locked(db, s)
-        due = quiz_due(row, cfg)
-        done = (row.quiz or {}).get("attempts", [])
-        if body.attempt <= len(done):  # a repeat of a stored attempt (a retry after a lost answer)
-            db.rollback()
-            if done[body.attempt - 1]["answers"] != body.answers:
-                raise HTTPException(409, f"attempt {body.attempt} is already answered, with other answers")
-            wrong, dup = done[body.attempt - 1]["wrong"], True
-        elif due is None or body.attempt != due["attempt"]:
-            db.rollback()
-            raise HTTPException(409, "no quiz attempt is due" if due is None else f"the attempt due is {due['attempt']}")
-        else:
-            problems = quiz_problems(cfg, body.answers)
-            if problems:
-                db.rollback()
-                raise HTTPException(400, "; ".join(problems))
-            wrong, dup = grade_quiz(row, cfg, body.answers), False
-            db.commit()
+        wrong, dup = answer_quiz(db, *_locked(db, s), body.attempt, body.answers)
     return {"wrong": wrong, "duplicate": dup, "state": session_state(request, s)}
 
 
@@ -225,7 +185,6 @@ def _submitted(request: Request, s: Caller, add: Callable[..., tuple[dict[str, A
     _study_session(s)
     with _db(request, s) as db:
         row = _row(db, s)
-        _not_revoked(row)
         cfg = study_config(db, str(row.study_id))
         over = ended(db, row, cfg)
         out, dup = add(db, row, cfg)
@@ -238,7 +197,6 @@ def _submitted(request: Request, s: Caller, add: Callable[..., tuple[dict[str, A
 def post_events(session_id: str, body: EventsIn, request: Request, s: Caller = Depends(require_session)):
     with _db(request, s) as db:
         row = _row(db, s)
-        _not_revoked(row)
         events = [e.model_dump() for e in body.events]
         # after the end, the outcome shown of a committed trial is still taken: the page posts
         # it as the outcome appears, and a second tab's or a slow connection's post may come

@@ -18,7 +18,6 @@ import tempfile
 import threading
 import weakref
 from pathlib import Path
-from typing import Any
 
 from sqlalchemy import delete, select
 from sqlalchemy.orm import Session as DBSession
@@ -102,9 +101,3 @@ class Previews:
             if self._dir is not None:
                 shutil.rmtree(self._dir, ignore_errors=True)
                 self._dir, self._url = None, None
-
-
-def session_db(state: Any, preview: bool) -> DBSession:
-    """A database session for a study session's requests: the previews' database for a preview,
-    else the study's (``state`` is the application's state)."""
-    return state.previews.db() if preview else state.db()

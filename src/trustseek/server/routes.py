@@ -13,20 +13,11 @@ from sqlalchemy.exc import IntegrityError
 
 from .auth import require_experimenter
 from .bundle import bundle_files, bundle_zip
-from .export import answers_frame, events_csv, events_frame, sessions_frame, to_bytes, trials_frame
+from .export import answers_frame, events_frame, sessions_frame, table_bytes, trials_frame
 from .lifecycle import create_participant, progress
-from .orm import Event, Report, Session, Study, Trial, utcnow
-from .schemas import (
-    ErrorOut,
-    SessionsIn,
-)
-from .sessions import (
-    new_id,
-    p_high,
-    study_config,
-    total_trials,
-    trial_dict,
-)
+from .orm import Event, Report, Session, Study, Trial, iso, utcnow
+from .schemas import ErrorOut, SessionsIn
+from .sessions import new_id, p_high, pending, study_config, total_trials, trial_dict
 from .studies import ConfigError, StudyIn, build_study_config
 
 log = logging.getLogger(__name__)
@@ -57,8 +48,13 @@ def _db(request: Request):
     return request.app.state.db()
 
 
+def public_url(request: Request, path: str) -> str:
+    """``path`` on the server as participants reach it: under ``public_url``, else the request's base."""
+    return f"{request.app.state.public_url or str(request.base_url).rstrip('/')}{path}"
+
+
 def _link(request: Request, s: Session) -> str:
-    return f"{request.app.state.public_url or str(request.base_url).rstrip('/')}/s/{s.token}"
+    return public_url(request, f"/s/{s.token}")
 
 
 # --------------------------------------------------------------------------- experimenter
@@ -88,13 +84,12 @@ def create_study(body: StudyIn, request: Request, status: str = Query("open", pa
 def study_summary(db, st: Study, request: Request) -> dict:
     counts = progress(db, st.id)
     cfg = st.config
-    base = request.app.state.public_url or str(request.base_url).rstrip("/")
     return {
         "id": st.id,
         "name": st.name,
-        "created_at": st.created_at.isoformat() + "Z",
+        "created_at": iso(st.created_at),
         "status": st.status,
-        "link": f"{base}/join/{st.link_token}" if st.link_token else None,
+        "link": public_url(request, f"/join/{st.link_token}") if st.link_token else None,
         "quota": cfg.get("quota"),
         "participants": sum(v for k, v in counts.items() if k != "pilot"),
         "progress": counts,
@@ -221,26 +216,20 @@ def dashboard(study_id: str, request: Request):
                     "practice_trials": sum(1 for t in s.plan["trials"] if t.get("practice")),
                     "score": s.score,
                     "belief": p_high(s.belief, n_trust),
-                    "current": None
-                    if s.pending_trial is None
-                    else {"trial": s.pending_trial, "complexity": s.pending_complexity, "robot_action": s.pending_action},
+                    "current": pending(s),
                     "last": last.get(s.id),
                     "last_self_report": reports.get(s.id),
-                    "updated_at": s.updated_at.isoformat() + "Z",
+                    "updated_at": iso(s.updated_at),
                     "role": s.role,
                     "panel_id": s.panel_id or _first_panel_id(s.panel),
-                    "created_at": _iso(s.created_at),
-                    "started_at": _iso(s.consented_at),
-                    "ended_at": _iso(s.ended_at),
-                    "last_activity": _iso(max(t for t in (s.updated_at, seen.get(s.id)) if t is not None)),
+                    "created_at": iso(s.created_at),
+                    "started_at": iso(s.consented_at),
+                    "ended_at": iso(s.ended_at),
+                    "last_activity": iso(max(t for t in (s.updated_at, seen.get(s.id)) if t is not None)),
                     "revoked": s.revoked_at is not None,
                 }
             )
-        return {"study": study_summary(db, st, request), "participants": rows, "time": utcnow().isoformat() + "Z"}
-
-
-def _iso(t) -> str | None:
-    return None if t is None else t.isoformat() + "Z"
+        return {"study": study_summary(db, st, request), "participants": rows, "time": iso(utcnow())}
 
 
 def _first_panel_id(panel: dict | None) -> str | None:
@@ -283,7 +272,7 @@ def export(
         else:
             frame = {"events": events_frame, "reports": answers_frame, "sessions": sessions_frame}[table](db, st, pilot)
     # text from participants' browsers: formulas escaped, CR/LF quoted
-    content = events_csv(frame) if table != "trials" and format == "csv" else to_bytes(frame, format)
+    content = table_bytes(frame, format, escaped=table != "trials")
     media = "text/csv" if format == "csv" else "application/vnd.apache.parquet"
     name = f"{st.id}-{table}.{format}"
     return Response(content, media_type=media, headers={"Content-Disposition": f'attachment; filename="{name}"'})

@@ -23,6 +23,7 @@ import hmac
 import json
 import logging
 import secrets
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,14 +35,13 @@ from sqlalchemy.orm import Session as DBSession
 from ..errors import TrustseekError
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 from ..model.task import Task
-from ..policies import PolicyRunner
 from ..policies.scheduling import SchedulePolicy
-from .answers import questionnaire_due, report_due
-from .cache import Bounded, caches_of
-from .checks import quiz_due
+from .answers import questionnaire_due, quiz_due, report_due
+from .cache import caches_of
 from .errors import Conflict, NotAllowed, NotFound, TooLarge
-from .orm import Event, EventBatch, Session, Study, Trial, utcnow
-from .studies import block_items, policy_object
+from .orm import Event, EventBatch, Session, Study, Trial, TrialRow, utcnow
+from .plan import PolicyPlan
+from .studies import block_items
 
 log = logging.getLogger(__name__)
 
@@ -94,38 +94,33 @@ def p_high(belief, n_trust: int | None = None) -> float | None:
 
 @dataclass
 class Context:
-    """Everything needed to run one session's policy: task, model, per-block policies (kinds
-    and cache keys) and, for study sessions, the per-trial plan."""
+    """A study's task and model, and each block's ``plan.PolicyPlan`` (its kind and
+    (the block's policy with ``PolicyRunner``'s step, parsed once and remembered by the
+    application); the index after the study's blocks is the practice block's."""
 
     task: Task
     model: TrustModel
-    kinds: list[str]
-    keys: list[str]
-    load_policy: Any  # callable(block) -> policy JSON, used when the policy is not cached
-    trials: list[dict[str, Any]] | None
-    policies: Bounded[str, Any] | None = None  # the application's parsed policies (StudyCaches.policies)
+    plans: list[PolicyPlan]
+    load_policy: Callable[[int], dict[str, Any]]  # block -> its policy JSON, read when its plan has not parsed it
 
-    def step(self, n: int) -> dict[str, Any]:
-        """The plan of trial ``n`` (block, complexity); only study sessions have one."""
-        if self.trials is None:
-            raise Conflict("a deploy session has no trial plan")
-        return self.trials[n - 1]
+    def decide(self, block: int, belief: list, seed: int, n: int, complexity: str) -> str:
+        """Block ``block``'s action at ``belief`` in trial ``n`` (drawing from ``default_rng([seed, n, 0])``)."""
+        return self.plans[block].decide(lambda: self.load_policy(block), belief, seed, n, complexity)
+
+    def update(self, block: int, belief: list, complexity: str, action: str, human: str | None, experience: str) -> list | None:
+        """The belief after a trial of block ``block``."""
+        return self.plans[block].update(lambda: self.load_policy(block), belief, complexity, action, human, experience)
 
     def pick(self, block: int, belief, remaining: dict[str, int], visible: dict[str, int] | None) -> tuple[str, str]:
         """(complexity, robot action) that block ``block``'s schedule policy picks for the
         remaining (and visible) items."""
-        pol = policy_object(self.policies, self.keys[block], lambda: self.load_policy(block))
+        pol = self.plans[block].policy(lambda: self.load_policy(block))
         if not isinstance(pol, SchedulePolicy):
             raise TrustseekError([f"block {block} picks its items by policy but runs a {pol.kind} policy"])
         cx = self.task.complexities
         vis = None if visible is None else [visible.get(c, 0) for c in cx]
         k, a = pol.choose(np.asarray(belief, dtype=float), [remaining.get(c, 0) for c in cx], vis)
         return cx[k], ACTIONS[a]
-
-    def runner(self, block: int, belief, seed: int, trial: int) -> PolicyRunner:
-        pol = policy_object(self.policies, self.keys[block], lambda: self.load_policy(block))
-        model = getattr(pol, "model", None) or self.model
-        return PolicyRunner(pol, model=model, rng=np.random.default_rng([seed, trial, 0]), belief=np.asarray(belief, dtype=float))
 
 
 def study_config(db: DBSession, study_id: str) -> dict[str, Any]:
@@ -141,33 +136,19 @@ def study_config(db: DBSession, study_id: str) -> dict[str, Any]:
 
 
 def context(db: DBSession, s: Session) -> Context:
-    """The context of a study session (deploy sessions: ``deploy.plan.DeployPlan``)."""
-    if s.kind == "study" and s.study_id is not None:
-        study_id = s.study_id
-        key = f"study:{study_id}"
-        caches = caches_of(db)
-        cached = caches.contexts.get(key)
-        if cached is None:
-            cfg = study_config(db, study_id)
-            cached = caches.contexts.put(
-                key,
-                (
-                    Task.from_dict(cfg["task"]),
-                    TrustModel.from_dict(cfg["model"]),
-                    [_block_policy(cfg, b)["kind"] for b in range(len(cfg["blocks"]) + bool(cfg.get("practice")))],
-                ),
-            )
-        task, model, kinds = cached
-        return Context(
-            task,
-            model,
-            kinds,
-            [f"{key}:{i}" for i in range(len(kinds))],
-            lambda b: _block_policy(study_config(db, study_id), b),
-            s.plan["trials"],
-            caches.policies,
-        )
-    raise Conflict("this is a deploy session; use /api/deploy")
+    """The context of a study session (deploy sessions have their own: ``plan.Plans``)."""
+    if s.kind != "study" or s.study_id is None:
+        raise Conflict("this is a deploy session; use /api/deploy")
+    study_id = s.study_id
+    contexts = caches_of(db).contexts
+    ctx = contexts.get(study_id)
+    if ctx is None:
+        cfg = study_config(db, study_id)
+        task, model = Task.from_dict(cfg["task"]), TrustModel.from_dict(cfg["model"])
+        kinds = [_block_policy(cfg, b)["kind"] for b in range(len(cfg["blocks"]) + bool(cfg.get("practice")))]
+        plans = [PolicyPlan(task, model, kind, f"study:{study_id}:{b}") for b, kind in enumerate(kinds)]
+        ctx = contexts.put(study_id, Context(task, model, plans, lambda b: _block_policy(cfg, b)))
+    return ctx
 
 
 def _block_policy(cfg: dict[str, Any], b: int) -> dict[str, Any]:
@@ -206,8 +187,8 @@ def serve(db: DBSession, s: Session) -> dict[str, Any] | None:
         if step.get("action"):  # a practice trial in which the robot asks, whatever the policy
             s.pending_complexity, s.pending_action = step["complexity"], step["action"]
         elif items is None:
-            runner = ctx.runner(step["block"], s.belief, s.seed, n)
-            s.pending_complexity, s.pending_action = step["complexity"], runner.decide(step["complexity"])
+            s.pending_complexity = step["complexity"]
+            s.pending_action = ctx.decide(step["block"], s.belief, s.seed, n, step["complexity"])
         else:
             s.pending_complexity, s.pending_action = ctx.pick(step["block"], s.belief, *items)
         s.pending_trial = n
@@ -222,6 +203,13 @@ def scheduled_items(db: DBSession, s: Session, block: int) -> tuple[dict[str, in
     picks = db.scalars(select(Trial.complexity).where(Trial.session_id == s.id, Trial.block == block).order_by(Trial.trial)).all()
     assert s.study_id is not None
     return block_items(study_config(db, s.study_id), s.plan, block, [str(c) for c in picks])
+
+
+def pending(s: Session) -> dict[str, Any] | None:
+    """The session's trial decided and not yet committed, or None."""
+    if s.pending_trial is None:
+        return None
+    return {"trial": s.pending_trial, "complexity": s.pending_complexity, "robot_action": s.pending_action}
 
 
 def served(s: Session, n: int, items: tuple[dict[str, int], dict[str, int] | None] | None = None) -> dict[str, Any]:
@@ -244,23 +232,9 @@ def served(s: Session, n: int, items: tuple[dict[str, int], dict[str, int] | Non
     return out
 
 
-def trial_dict(t: Trial | Any) -> dict[str, Any]:
-    # a trial row, or the decision API's TrialRow (deploy.store) with the same columns
-    return {
-        "trial": t.trial,
-        "block": t.block,
-        "policy": t.policy,
-        "complexity": t.complexity,
-        "robot_action": t.robot_action,
-        "human_action": t.human_action,
-        "outcome": t.outcome,
-        "experience": t.experience,
-        "reward": t.reward,
-        "belief": t.belief,
-        "belief_after": t.belief_after,
-        "effort_ms": t.effort_ms,
-        "submission_id": t.submission_id,
-    }
+def trial_dict(t: Trial | TrialRow) -> dict[str, Any]:
+    """A committed trial (a row, or the decision API's ``TrialRow``) as the API answers it."""
+    return {k: getattr(t, k) for k in TrialRow._fields}
 
 
 #: what a participant's page learns of a committed trial: never the belief or the experience
@@ -269,6 +243,12 @@ PARTICIPANT_TRIAL = ("trial", "block", "complexity", "robot_action", "human_acti
 
 def participant_trial(t: Trial) -> dict[str, Any]:
     return {**{k: getattr(t, k) for k in PARTICIPANT_TRIAL}, "practice": bool(t.practice)}
+
+
+def trial_reward(task: Task, action: str, human: str | None, experience: str) -> float:
+    """The trial's points, eq. (1) (no human action is counted as relying)."""
+    o = HUMAN_ACTIONS.index(human) if human is not None else HUMAN_ACTIONS.index("rely")
+    return float(task.rewards.of(ACTIONS.index(action), o, EXPERIENCES.index(experience)))
 
 
 def trial_experience(task: Task, c: int, action: str, human: str | None, success: bool | None) -> str:
@@ -282,26 +262,13 @@ def trial_experience(task: Task, c: int, action: str, human: str | None, success
 def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: int, events: list[dict] | None) -> Trial | None:
     """Commit ``row`` with the belief update and the session's progress; None when another
     submission committed this trial first."""
-    runner = ctx.runner(block, s.belief, s.seed, row.trial)
-    before = runner.belief
-    after = runner.observe(row.complexity, row.robot_action, row.human_action, row.experience)
-    row.belief, row.belief_after = p_high(before, ctx.model.n_trust), p_high(after, ctx.model.n_trust)
-    a = ACTIONS.index(row.robot_action)
-    o = HUMAN_ACTIONS.index(row.human_action) if row.human_action is not None else 1
-    row.reward = float(ctx.task.rewards.of(a, o, EXPERIENCES.index(row.experience)))
+    after = ctx.update(block, s.belief, row.complexity, row.robot_action, row.human_action, row.experience)
+    row.belief, row.belief_after = p_high(s.belief, ctx.model.n_trust), p_high(after, ctx.model.n_trust)
+    row.reward = trial_reward(ctx.task, row.robot_action, row.human_action, row.experience)
     if row.practice:  # practice leaves the belief and the score as they were
         after, row.belief_after = None, row.belief
     db.add(row)
-    for ev in events or []:
-        db.add(
-            Event(
-                session_id=s.id,
-                trial=row.trial,
-                client_time=ev.get("t"),
-                type=str(ev.get("type", ""))[:40],
-                data=json.dumps(ev.get("data", {})),
-            )
-        )
+    db.add_all(_event(s, row.trial, ev) for ev in events or ())
     s.belief = [float(x) for x in after] if after is not None else s.belief
     s.trials_done = row.trial
     s.score = float(s.score + (0.0 if row.practice else row.reward))
@@ -329,11 +296,12 @@ def submit_trial(
     session_id: str,
     n: int,
     submission_id: str,
-    human_action: str | None,
+    human_action: str,
     effort_ms: float | None,
     events: list[dict] | None,
 ) -> tuple[Trial, bool]:
-    """Commit trial ``n`` of a study session; returns (trial, duplicate)."""
+    """Commit trial ``n`` of a study session with the human action (``intervene`` or ``rely``, as
+    ``schemas.TrialIn`` takes it); returns (trial, duplicate)."""
     s = lock(db, session_id)
     if s.kind != "study":
         raise Conflict("this is a deploy session: post its trials to /api/deploy/sessions/{id}/decide and /observe")
@@ -357,10 +325,8 @@ def submit_trial(
     if action == "ask" and human_action != "intervene":
         why = f"the robot asked for help in trial {n}: human_action must be 'intervene' (teleoperation)"
         raise NotAllowed(f"{why}, got {human_action!r}")
-    if human_action not in HUMAN_ACTIONS:
-        raise NotAllowed(f"human_action must be one of {list(HUMAN_ACTIONS)}, got {human_action!r}")
     ctx = context(db, s)
-    step = ctx.step(n)
+    step = s.plan["trials"][n - 1]
     c = ctx.task.complexity_index(complexity)
     if action == "autonomous" and human_action == "rely":
         r = outcome_draws(s, n)
@@ -372,7 +338,7 @@ def submit_trial(
         session_id=s.id,
         trial=n,
         block=step["block"],
-        policy=ctx.kinds[step["block"]],
+        policy=ctx.plans[step["block"]].kind,
         complexity=complexity,
         robot_action=action,
         human_action=human_action,
@@ -429,6 +395,12 @@ def check_event_room(db: DBSession, s: Session, events: list[dict], trial: int |
             raise TooLarge(f"trial {k} already has {have} events; at most {MAX_EVENTS_PER_TRIAL} are stored per trial")
 
 
+def _event(s: Session, trial: int | None, ev: dict) -> Event:
+    """The row of a UI event (``schemas.EventIn``'s fields) of session ``s``."""
+    data = json.dumps(ev.get("data", {}))
+    return Event(session_id=s.id, trial=trial, client_time=ev.get("t"), type=str(ev.get("type", ""))[:40], data=data)
+
+
 def add_events(db: DBSession, s: Session, events: list[dict], batch: str | None = None) -> tuple[int, bool]:
     """Store ``events``; with a ``batch`` id, a batch already stored is not stored again.
     Returns (events stored, whether the batch was a repeat)."""
@@ -437,16 +409,7 @@ def add_events(db: DBSession, s: Session, events: list[dict], batch: str | None 
             return 0, True
         db.add(EventBatch(session_id=s.id, batch=batch, events=len(events)))
     check_event_room(db, s, events)
-    for ev in events:
-        db.add(
-            Event(
-                session_id=s.id,
-                trial=ev.get("trial"),
-                client_time=ev.get("t"),
-                type=str(ev.get("type", ""))[:40],
-                data=json.dumps(ev.get("data", {})),
-            )
-        )
+    db.add_all(_event(s, ev.get("trial"), ev) for ev in events)
     try:
         db.commit()
     except IntegrityError:  # the same batch committed by a concurrent request in the meantime

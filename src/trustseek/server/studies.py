@@ -35,10 +35,9 @@ from ..model.core import TrustModel
 from ..model.jsonfile import ModelError
 from ..model.presets import MODEL_PRESETS, TASK_PRESETS
 from ..model.task import Task
-from ..policies import policy_from_dict
 from ..policies.scheduling import SCHEDULE
 from ..solvers import policy_from_spec
-from .cache import Bounded, StudyCaches
+from .cache import StudyCaches
 from .schemas import STRICT, check_preset
 
 _Spec = TypeVar("_Spec", Task, TrustModel)
@@ -117,18 +116,19 @@ class ScaleIn(BaseModel):
         return self
 
 
-class ItemIn(BaseModel):
+class _Asked(BaseModel):
+    # what a questionnaire's item and a quiz's question share
     model_config = STRICT
     id: str = Field(..., min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
     text: str = Field(..., min_length=1, max_length=1000)
+
+
+class ItemIn(_Asked):
     reverse: bool = False
     check: int | None = Field(None, description="An attention check: the point of the scale the item instructs.")
 
 
-class QuizQuestionIn(BaseModel):
-    model_config = STRICT
-    id: str = Field(..., min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
-    text: str = Field(..., min_length=1, max_length=1000)
+class QuizQuestionIn(_Asked):
     options: list[str] = Field(..., min_length=2, max_length=10)
     answer: int = Field(..., ge=0, description="The index of the right option (from 0).")
 
@@ -217,12 +217,29 @@ class StudyIn(BaseModel):
 def _from_spec(field: str, spec: str | dict, presets: dict[str, Callable[[], _Spec]], cls: type[_Spec]) -> _Spec:
     """A preset by name or the JSON object of a ``field`` (``task`` or ``model``), or a
     ``ConfigError`` that says what is wrong."""
-    if isinstance(spec, str) and spec not in presets:
-        raise ConfigError([f"unknown {field} preset {spec!r}; presets: {sorted(presets)}, or give the JSON object"])
     try:
-        return presets[spec]() if isinstance(spec, str) else cls.from_dict(spec, field)
+        return presets[check_preset(spec, field)]() if isinstance(spec, str) else cls.from_dict(spec, field)
     except ModelError as exc:
         raise ConfigError(exc.lines()) from None
+    except ValueError as exc:  # not a preset
+        raise ConfigError([str(exc)]) from None
+
+
+def complexity_problems(model: TrustModel, task: Task) -> list[str]:
+    """Why ``model`` cannot run with ``task`` (empty when it can): their complexities differ."""
+    if tuple(model.complexities) == tuple(task.complexities):
+        return []
+    return [f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}"]
+
+
+def _unknown(names: list[str], complexities: tuple[str, ...], where: str) -> list[str]:
+    """The problem of complexities ``names`` (of ``where``) that are not among ``complexities``."""
+    bad = sorted({c for c in names if c not in complexities})
+    return [f"{where} names unknown complexities {bad}; expected {list(complexities)}"] if bad else []
+
+
+def _names(s: Schedule) -> list[str]:
+    return list(s.counts) if s.counts is not None else list(s.trials or [])
 
 
 def load_task_spec(spec: str | dict) -> Task:
@@ -239,8 +256,6 @@ def resolve_policy(
     """A policy spec (``trustseek.solvers.policy_specs``) to the core's policy JSON, solving the POMDP
     for ``trust-aware`` (remembered in the application's ``caches``: many sessions open with
     the same model, task and spec)."""
-    if not isinstance(spec, dict):
-        raise ConfigError([f"{where} must be an object"])
     key = None if "format" in spec or caches is None else json.dumps([model.to_dict(), task.to_dict(), spec], sort_keys=True)
     if key is not None and caches is not None:
         found = caches.resolved.get(key) or caches.schedules.get(key)
@@ -267,8 +282,8 @@ def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dic
         model = load_model_spec(study.model)
     except ConfigError as exc:
         problems += exc.problems
-    if task is not None and model is not None and tuple(model.complexities) != tuple(task.complexities):
-        problems.append(f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}")
+    if task is not None and model is not None:
+        problems += complexity_problems(model, task)
     if problems or task is None or model is None:
         # the other parts are still checked against what is known, so that every problem is named at once
         known = task or model
@@ -285,10 +300,7 @@ def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dic
             except ConfigError as exc:
                 problems += exc.problems
             continue
-        names = list(s.counts) if s.counts is not None else list(s.trials or [])
-        bad = sorted({c for c in names if c not in task.complexities})
-        if bad:
-            problems.append(f"{where}.schedule names unknown complexities {bad}; expected {list(task.complexities)}")
+        problems += _unknown(_names(s), tuple(task.complexities), f"{where}.schedule")
         try:
             pol = resolve_policy(b.policy, model, task, f"{where}.policy", caches)
         except ConfigError as exc:
@@ -306,9 +318,7 @@ def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dic
         )
     practice = None
     if study.practice is not None:
-        bad = sorted({c for c in study.practice.trials if c not in task.complexities})
-        if bad:
-            problems.append(f"practice.trials names unknown complexities {bad}; expected {list(task.complexities)}")
+        problems += _unknown(study.practice.trials, tuple(task.complexities), "practice.trials")
         try:
             practice_policy = resolve_policy(study.practice.policy, model, task, "practice.policy", caches)
             asks = study.practice.asks if study.practice.asks is not None else [len(study.practice.trials)]
@@ -335,18 +345,13 @@ def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dic
 
 def unknown_complexities(study: StudyIn, complexities: tuple[str, ...]) -> list[str]:
     """The blocks' and the practice's complexities that are not among ``complexities``."""
-    problems = []
-    for i, b in enumerate(study.blocks):
-        if isinstance(b.schedule, Schedule):
-            names = list(b.schedule.counts) if b.schedule.counts is not None else list(b.schedule.trials or [])
-            bad = sorted({c for c in names if c not in complexities})
-            if bad:
-                problems.append(f"blocks[{i}].schedule names unknown complexities {bad}; expected {list(complexities)}")
-    if study.practice is not None:
-        bad = sorted({c for c in study.practice.trials if c not in complexities})
-        if bad:
-            problems.append(f"practice.trials names unknown complexities {bad}; expected {list(complexities)}")
-    return problems
+    problems = [
+        p
+        for i, b in enumerate(study.blocks)
+        if isinstance(b.schedule, Schedule)
+        for p in _unknown(_names(b.schedule), complexities, f"blocks[{i}].schedule")
+    ]
+    return problems + ([] if study.practice is None else _unknown(study.practice.trials, complexities, "practice.trials"))
 
 
 def more_problems(body: Any, errors: list[dict[str, Any]]) -> list[str]:
@@ -485,17 +490,3 @@ def block_items(
     for c in queue[:window]:
         visible[c] += 1
     return remaining, visible
-
-
-def policy_object(policies: Bounded[str, Any] | None, key: str, policy_json):
-    """The policy object of a stored (immutable) policy JSON, remembered by ``key`` in the
-    application's ``policies``: parsing a solved policy is not free, and stored policies never
-    change.  ``policy_json`` may be a callable returning the JSON, called only when the policy
-    is not remembered."""
-    pol = None if policies is None else policies.get(key)
-    if pol is None:
-        d = policy_json() if callable(policy_json) else policy_json
-        pol = policy_from_dict(d, key)
-        if policies is not None:
-            policies.put(key, pol)
-    return pol

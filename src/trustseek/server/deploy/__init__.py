@@ -5,8 +5,8 @@
   state, and the bodies the front hands on);
 * ``service``: the sessions, independent of HTTP (``create_deploy``, ``deploy_decide``,
   ``deploy_observe``), refusing with the server's domain errors (``server.errors``);
-* ``plan``: a session's task, model and policy with ``PolicyRunner``'s step (``DeployPlan``),
-  shared per content (``Plans``, owned by the application as ``app.state.deploy_plans``);
+* ``server.plan``: a session's task, model and policy with ``PolicyRunner``'s step (``PolicyPlan``,
+  as a study block's), shared per content (``Plans``, owned by the application as ``app.state.deploy_plans``);
 * ``store``: the statements on the database driver's own connections (``DeployStore``,
   ``app.state.deploy_store``); what they remember is bounded by ``server.cache.Bounded``.
 

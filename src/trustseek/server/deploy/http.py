@@ -12,15 +12,15 @@ application (``app.ServerApp``), whenever:
 * the bearer token is the token of that deploy session (the check of ``middleware.BodyGuard``
   and the routes), and the declared body length is within ``SESSION_BODY_LIMIT`` (the body is
   read only then);
-* the body is JSON (``Content-Type: application/json``) holding only the fields of ``DecideIn``
-  or ``ObserveIn``, with exactly the types and bounds those models accept.
+* the body is JSON (``Content-Type: application/json``) that the route's model, ``DecideIn`` or
+  ``ObserveIn``, accepts (validated by that model, as FastAPI would).
 
 It answers successes and the session's refusals (400, 404, 409: the server's domain errors,
 ``..errors``, given their status by the one mapping, ``middleware.STATUS``) alike.  Anything else -- a malformed body,
 another token, a body above the limit -- is handed, body and all, to FastAPI, which refuses it
 (401, 403, 413, 422: ``middleware.BodyGuard`` and pydantic) or, for a body its validation takes,
 calls the same ``answer`` (``routes``).  Both return the same bytes, with the ``Server-Timing``
-header of ``middleware.ServerTiming``.
+header of ``middleware.RequestLog``.
 
 ``answer`` runs the request first from the session's state this process knows, with one
 conditional write (``store.Known``; on PostgreSQL one statement, awaited), else in one
@@ -36,7 +36,9 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from ..auth import Caller, caller_for_token
+from pydantic import ValidationError
+
+from ..auth import Caller, bearer_token, caller_for_token
 from ..errors import Refused, TooLarge
 from ..middleware import (
     SESSION_BODY_LIMIT,
@@ -45,11 +47,12 @@ from ..middleware import (
     Scope,
     Send,
     read_body,
+    refusal,
     refuse,
     replaying,
     status_of,
 )
-from ..schemas import MAX_TRIAL
+from ..schemas import DecideIn, ObserveIn
 from ..sessions import trial_dict
 from .service import deploy_decide, deploy_observe
 from .store import Known, Stale, Statements
@@ -57,57 +60,14 @@ from .store import Known, Stale, Statements
 log = logging.getLogger(__name__)
 
 PREFIX = "/api/deploy/sessions/"
-_DECIDE = frozenset({"trial", "complexity", "remaining", "visible"})
-_OBSERVE = frozenset({"trial", "human_action", "outcome"})
-_HUMAN = frozenset({"intervene", "rely"})
-_OUTCOME = frozenset({"success", "failure", "collision", "dropped", "teleoperated"})
 _JSON = (b"content-type", b"application/json")
 
 #: (trial, complexity, remaining, visible) of ``decide``; (trial, human action, outcome) of ``observe``
 Args = tuple[Any, ...]
 
 
-def _trial(body: dict[str, Any]) -> int | None:
-    n = body.get("trial")
-    return n if type(n) is int and 1 <= n <= MAX_TRIAL else None
-
-
-def _text(v: Any) -> bool:
-    return type(v) is str and "\x00" not in v  # a NUL character is the body guard's 400
-
-
-def _counts(v: Any) -> bool:
-    return v is None or (type(v) is dict and all(_text(k) and type(n) is int for k, n in v.items()))
-
-
-def decide_args(body: dict[str, Any]) -> Args | None:
-    """(trial, complexity, remaining, visible) of a body ``DecideIn`` accepts, else None."""
-    if not body.keys() <= _DECIDE:
-        return None
-    n, c, remaining, visible = _trial(body), body.get("complexity"), body.get("remaining"), body.get("visible")
-    if n is None or not (c is None or (_text(c) and 1 <= len(c) <= 32)) or not (_counts(remaining) and _counts(visible)):
-        return None
-    return n, c, remaining, visible
-
-
-def observe_args(body: dict[str, Any]) -> Args | None:
-    """(trial, human action, outcome) of a body ``ObserveIn`` accepts, else None."""
-    if not body.keys() <= _OBSERVE:
-        return None
-    n, h, o = _trial(body), body.get("human_action"), body.get("outcome")
-    if n is None or not (h is None or (type(h) is str and h in _HUMAN)) or not (o is None or (type(o) is str and o in _OUTCOME)):
-        return None
-    return n, h, o
-
-
 def _dump(out: dict[str, Any]) -> bytes:
     return json.dumps(out, allow_nan=False, separators=(",", ":")).encode()
-
-
-def refusal(exc: Refused) -> tuple[int, bytes]:
-    """(status, body) of a refusal, the bytes of FastAPI's ``HTTPException`` answer."""
-    body = json.dumps({"detail": exc.message}, ensure_ascii=False, allow_nan=False, indent=None, separators=(",", ":"))
-    return status_of(exc), body.encode("utf-8")
 
 
 def _request(plans: Any, sid: str, what: str, args: Args) -> Callable[[Statements], dict[str, Any]]:
@@ -199,14 +159,19 @@ class DeployFront:
 
 
 def _args(what: str, raw: bytes) -> Args | None:
-    """The request's arguments, or None when the body is not one the request schema takes."""
+    """The request's arguments, validated by the route's own model (``DecideIn``, ``ObserveIn``),
+    or None when that model refuses the body, or it holds a NUL character (the body guard's 400):
+    FastAPI then answers it."""
+    if b"\\u0000" in raw:
+        return None
     try:
-        body = json.loads(raw)
-    except (ValueError, RecursionError):  # FastAPI refuses it (middleware.json_body_problem)
+        if what == "decide":
+            d = DecideIn.model_validate_json(raw)
+            return d.trial, d.complexity, d.remaining, d.visible
+        o = ObserveIn.model_validate_json(raw)
+        return o.trial, o.human_action, o.outcome
+    except ValidationError:
         return None
-    if type(body) is not dict:
-        return None
-    return decide_args(body) if what == "decide" else observe_args(body)
 
 
 def _caller(scope: Scope, sid: str) -> Caller | None:
@@ -230,9 +195,8 @@ def _caller(scope: Scope, sid: str) -> Caller | None:
         return None
     if not length.isdigit() or int(length) > SESSION_BODY_LIMIT:
         return None
-    scheme, _, token = auth.decode("latin-1").partition(" ")
-    token = token.strip()
-    if scheme.lower() != "bearer" or not token:
+    token = bearer_token(auth.decode("latin-1"))
+    if token is None:
         return None
     caller = caller_for_token(scope["app"].state, token)
     if caller is None or caller.kind != "deploy" or not secrets.compare_digest(caller.id.encode(), sid.encode()):

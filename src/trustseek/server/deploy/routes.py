@@ -5,19 +5,18 @@ same ``http.answer``).  HTTP status codes are given here and in ``middleware.STA
 from __future__ import annotations
 
 import logging
-import secrets
 from typing import Any
 
 from fastapi import APIRouter, Depends, HTTPException, Request, Response
 from sqlalchemy import select
 
 from ...errors import TrustseekError
-from ..auth import Caller, remember_token, require_experimenter, require_session, session_for_token
+from ..auth import Caller, bearer_token, missing_token, remember_token, require_experimenter, require_session, session_caller
 from ..orm import Session, Trial
 from ..routes import errors
 from ..schemas import DecideIn, DeployIn, ObserveIn
-from ..sessions import p_high, trial_dict
-from ..studies import ConfigError, load_model_spec, load_task_spec, resolve_policy
+from ..sessions import p_high, pending, trial_dict
+from ..studies import ConfigError, complexity_problems, load_model_spec, load_task_spec, resolve_policy
 from .http import answer
 from .service import create_deploy, score_problem
 from .store import LiveRow
@@ -38,13 +37,9 @@ _BEARER: dict[str, Any] = {"security": [{"HTTPBearer": []}]}
 def open_deploy(body: DeployIn, request: Request):
     try:
         task, model = load_task_spec(body.task), load_model_spec(body.model)
-        if tuple(model.complexities) != tuple(task.complexities):
-            raise ConfigError(
-                [f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}"]
-            )
-        overflow = score_problem(task)
-        if overflow is not None:
-            raise ConfigError([overflow])
+        problems = complexity_problems(model, task) or [p for p in [score_problem(task)] if p is not None]
+        if problems:
+            raise ConfigError(problems)
         policy = resolve_policy(body.policy, model, task, caches=request.app.state.study_caches)
     except ConfigError as exc:
         raise HTTPException(400, {"problems": exc.problems}) from None
@@ -86,9 +81,7 @@ def deploy_state(session_id: str, request: Request, s: Caller = Depends(require_
             "trials_done": row.trials_done,
             "score": row.score,
             "belief": p_high(row.belief, len(row.plan["model"]["trust_levels"])),
-            "pending": None
-            if row.pending_trial is None
-            else {"trial": row.pending_trial, "complexity": row.pending_complexity, "robot_action": row.pending_action},
+            "pending": pending(row),
             "trials": [trial_dict(t) for t in trials],
         }
 
@@ -96,13 +89,10 @@ def deploy_state(session_id: str, request: Request, s: Caller = Depends(require_
 def _robot(request: Request, session_id: str) -> Caller:
     """The deploy session named in the path, if the bearer token is its token (the check of
     ``require_session``, made inline)."""
-    header = request.headers.get("authorization", "")
-    scheme, _, token = header.partition(" ")
-    if scheme.lower() != "bearer" or not token:
-        raise HTTPException(401, "missing token: send 'Authorization: Bearer <token>'", headers={"WWW-Authenticate": "Bearer"})
-    s = session_for_token(request, token.strip())
-    if not secrets.compare_digest(s.id.encode(), session_id.encode()):
-        raise HTTPException(403, "this token belongs to another session")
+    token = bearer_token(request.headers.get("authorization", ""))
+    if token is None:
+        raise missing_token()
+    s = session_caller(request, token, session_id)
     _deploy_session(s)
     return s
 

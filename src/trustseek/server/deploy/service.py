@@ -18,15 +18,15 @@ import numpy as np
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
-from ...model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
+from ...model.core import ACTIONS, HUMAN_ACTIONS, TrustModel
 from ...model.task import Task
 from ...policies import PolicyError
 from ...policies.scheduling import SchedulePolicy
 from ..errors import Conflict, NotAllowed, NotFound
 from ..orm import PolicyBlob, Session, utcnow
+from ..plan import Plans, PolicyPlan, policy_sha256
 from ..schemas import MAX_TRIAL
-from ..sessions import new_id, new_token, p_high, trial_dict, trial_experience
-from .plan import DeployPlan, Plans, policy_sha256
+from ..sessions import new_id, new_token, p_high, trial_dict, trial_experience, trial_reward
 from .store import LiveRow, Statements
 
 
@@ -51,7 +51,7 @@ def create_deploy(
     A policy that does not load raises its ``ModelError``."""
     sha = policy_sha256(policy)
     content = {"task": task.to_dict(), "model": model.to_dict(), "policy_sha256": sha, "policy_kind": policy["kind"]}
-    plan = plans.shared(content, lambda: DeployPlan(task, model, policy["kind"], sha))
+    plan = plans.shared(content, lambda: PolicyPlan(task, model, policy["kind"], sha))
     pol = plan.policy(lambda: policy)  # sessions with the same plan share one parsed copy
     pm = getattr(pol, "model", None) or model
     if db.get(PolicyBlob, sha) is None:
@@ -216,7 +216,6 @@ def deploy_observe(
             success = outcome == "success"
     experience = trial_experience(task, c, action, human_action, success)
     after = plan.update(lambda: store.policy(plan.sha), s.belief, complexity, action, human_action, experience)
-    a, o = ACTIONS.index(action), HUMAN_ACTIONS.index(human_action)
     t: dict[str, Any] = {
         "trial": n,
         "block": 0,
@@ -226,7 +225,7 @@ def deploy_observe(
         "human_action": human_action,
         "outcome": outcome,
         "experience": experience,
-        "reward": float(task.rewards.of(a, o, EXPERIENCES.index(experience))),
+        "reward": trial_reward(task, action, human_action, experience),
         "belief": p_high(s.belief, plan.n_trust),
         "belief_after": p_high(after, plan.n_trust),
         "effort_ms": None,

@@ -48,6 +48,7 @@ from sqlalchemy.engine import Engine
 
 from ...errors import TrustseekError
 from ..cache import Bounded
+from ..orm import Trial, TrialRow
 
 
 class LiveRow(NamedTuple):
@@ -62,24 +63,6 @@ class LiveRow(NamedTuple):
     pending_trial: int | None
     pending_complexity: str | None
     pending_action: str | None
-
-
-class TrialRow(NamedTuple):
-    """A committed trial's columns, as ``trial_dict`` reads them."""
-
-    trial: int
-    block: int
-    policy: str
-    complexity: str
-    robot_action: str
-    human_action: str | None
-    outcome: str
-    experience: str
-    reward: float
-    belief: float | None
-    belief_after: float | None
-    effort_ms: float | None
-    submission_id: str
 
 
 _TRIAL_COLUMNS = ", ".join(TrialRow._fields)
@@ -113,8 +96,6 @@ def _statements(dialect: str) -> dict[str, str]:
     import re
 
     from sqlalchemy.dialects import postgresql
-
-    from ..orm import Trial
 
     out = {
         k: v.format(lock=" FOR UPDATE", belief="CAST(:belief AS JSON)", belief_json="CAST(:belief_json AS JSON)")

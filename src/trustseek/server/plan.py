@@ -1,7 +1,7 @@
-"""What never changes in a deploy session: its task, model and policy (``DeployPlan``), shared
-by every session opened with the same ones (``Plans``, owned by the application), and the
-policy's step of ``PolicyRunner`` applied to the session's belief, remembered when it drew
-nothing from the session's generator."""
+"""A policy with ``PolicyRunner``'s step applied to any belief (``PolicyPlan``: a study block's
+policy, or a deploy session's task, model and policy), remembered when it drew nothing from the
+session's generator; the deploy sessions' plans, one per content, shared by every session
+opened with the same ones (``Plans``, owned by the application)."""
 
 from __future__ import annotations
 
@@ -12,11 +12,11 @@ from typing import Any
 
 import numpy as np
 
-from ...model.core import TrustModel
-from ...model.task import Task
-from ...policies import PolicyRunner, policy_from_dict
-from ..cache import Bounded
-from ..errors import NotFound
+from ..model.core import TrustModel
+from ..model.task import Task
+from ..policies import PolicyRunner, policy_from_dict
+from .cache import Bounded
+from .errors import NotFound
 
 
 def policy_sha256(policy: dict[str, Any]) -> str:
@@ -46,7 +46,7 @@ class _LazyRng:
         return getattr(self._rng, name)
 
 
-class DeployPlan:
+class PolicyPlan:
     """A deploy session's task, model and policy (``plan`` of the session row), with the policy
     object and its ``PolicyRunner`` built once.  Decisions and belief updates are deterministic
     functions of (belief, complexity[, action, human action, experience]), except a decision
@@ -90,7 +90,7 @@ class DeployPlan:
         return action
 
     def update(
-        self, load: Callable[[], dict[str, Any]], belief: list, complexity: str, action: str, human: str, experience: str
+        self, load: Callable[[], dict[str, Any]], belief: list, complexity: str, action: str, human: str | None, experience: str
     ) -> list | None:
         """The belief after a trial, as ``PolicyRunner.observe`` updates it (None: no belief)."""
         key = (tuple(belief), complexity, action, human, experience)
@@ -108,15 +108,15 @@ class Plans:
     copy per content: 1000 robots opened with the paper's model share one."""
 
     def __init__(self, sessions: int = 200_000, contents: int = 256):
-        self.by_session: Bounded[str, DeployPlan] = Bounded(sessions)
-        self.by_content: Bounded[str, DeployPlan] = Bounded(contents)
+        self.by_session: Bounded[str, PolicyPlan] = Bounded(sessions)
+        self.by_content: Bounded[str, PolicyPlan] = Bounded(contents)
 
-    def shared(self, plan: dict[str, Any], make: Callable[[], DeployPlan]) -> DeployPlan:
+    def shared(self, plan: dict[str, Any], make: Callable[[], PolicyPlan]) -> PolicyPlan:
         """The one plan of this content (``plan`` as stored in the session row)."""
         key = json.dumps([plan["task"], plan["model"], plan["policy_sha256"], plan["policy_kind"]], sort_keys=True)
         return self.by_content.get(key) or self.by_content.put(key, make())
 
-    def of(self, store: Any, session_id: str) -> DeployPlan:
+    def of(self, store: Any, session_id: str) -> PolicyPlan:
         """The plan of deploy session ``session_id`` (``store`` reads it when not known here)."""
         found = self.by_session.get(session_id)
         if found is not None:
@@ -126,14 +126,14 @@ class Plans:
             raise NotFound("no such session")
         plan = self.shared(
             d,
-            lambda: DeployPlan(Task.from_dict(d["task"]), TrustModel.from_dict(d["model"]), d["policy_kind"], d["policy_sha256"]),
+            lambda: PolicyPlan(Task.from_dict(d["task"]), TrustModel.from_dict(d["model"]), d["policy_kind"], d["policy_sha256"]),
         )
         return self.by_session.put(session_id, plan)
 
     def remember(self, session_id: str, plan: dict[str, Any], task: Task, model: TrustModel) -> None:
         """Register a session just opened by this process, so that its first decision needs no
         database read nor parsing (``task`` and ``model`` are the ones ``plan`` describes)."""
-        shared = self.shared(plan, lambda: DeployPlan(task, model, plan["policy_kind"], plan["policy_sha256"]))
+        shared = self.shared(plan, lambda: PolicyPlan(task, model, plan["policy_kind"], plan["policy_sha256"]))
         self.by_session.put(session_id, shared)
 
     def clear(self) -> None:
