@@ -33,7 +33,6 @@ initial row (undefined at weight zero) is written uniform.
 from __future__ import annotations
 
 import logging
-import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -46,7 +45,7 @@ from ..model.mixture import TypeMixture
 from .convergence import converge
 from .em import STATIONARY, RunResult, run_em
 from .fit import never_estimated
-from .iohmm import FINISH_FTOL, FINISH_SWITCH, EMFit, fit_iohmm
+from .iohmm import EMFit, fit_iohmm
 from .mixture_em import EMPTY, FINISH_MARGIN, PERTURB, MixtureParams, MixtureStructure, MixtureWorkspace
 from .options import DEFAULTS, SERIAL, FitOptions, counting
 from .sequences import Sequences, encode
@@ -207,7 +206,10 @@ def fit_mixture(
     """
     structure = MixtureStructure(spec, seqs, types, differ)
     restarts, seed, tol, max_iter = options.starts, options.seed, options.tol, options.max_iter
-    work = MixtureWorkspace(seqs, structure, threads=options.n_jobs or os.cpu_count() or 1)
+    sticks = structure.sticks() if quasi_newton else None
+    qn = quasi_newton and sticks is not None
+    settings = options.run(qn and structure.n_types == 1, accelerate)  # with M >= 2 EM runs to tol, the finish later
+    work = MixtureWorkspace(seqs, structure, threads=settings.threads)
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     M = structure.n_types
     starts: list[MixtureParams] = [structure.project(p) for p in init]
@@ -223,23 +225,20 @@ def fit_mixture(
     if not starts:
         raise FitError(["at least one start is needed"])
     log.debug("fitting %d types to %d sequences from %d starts", M, seqs.n_participants, len(starts))
-    sticks = structure.sticks() if quasi_newton else None
-    qn = quasi_newton and sticks is not None
     runs: list[RunResult] = []
     if M == 1:  # the pooled fit's procedure, step for step
-        em_tol = max(tol, FINISH_SWITCH) if qn else tol
-        for r in run_em(structure, work, starts, tol=em_tol, max_iter=max_iter, accelerate=accelerate):
-            runs.append(converge(structure, work, r, tol, max_iter, em_tol, tol * FINISH_FTOL, qn, accelerate, sticks))
+        for r in run_em(structure, work, starts, settings.em_tol, max_iter, accelerate):
+            runs.append(converge(structure, work, r, settings, sticks))
     else:
         # every start: EM with SQUAREM to tol and the stationarity check; then the L-BFGS-B finish
         # (and the check again) only for the starts ending within FINISH_MARGIN of the best
-        for r in run_em(structure, work, starts, tol=tol, max_iter=max_iter, accelerate=accelerate):
-            runs.append(converge(structure, work, r, tol, max_iter, tol, tol * FINISH_FTOL, False, accelerate))
+        for r in run_em(structure, work, starts, tol, max_iter, accelerate):
+            runs.append(converge(structure, work, r, settings))
         if qn:
             top = max(r.objective for r in runs)
             for i, r in enumerate(runs):
                 if r.objective >= top - FINISH_MARGIN and r.iterations < max_iter:
-                    runs[i] = converge(structure, work, r, tol, max_iter, tol, tol * FINISH_FTOL, True, accelerate, sticks)
+                    runs[i] = converge(structure, work, r, replace(settings, quasi_newton=True), sticks)
     for i, r in enumerate(runs):
         log.debug("%s", _describe(i, r))
         if on_restart is not None:

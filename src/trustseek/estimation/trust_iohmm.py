@@ -150,16 +150,22 @@ def to_model(spec: IOHMMSpec, params: Params, notes: str = "", general: bool = F
         levels, complexities = spec.levels, model_complexities(spec)
         return trust_model(levels, complexities, params.initial, emission[eg], params.transition[tg], notes, rating=rating)
     d = spec.to_dict()
+    inputs = {c: tuple(spec.categories[c]) for c in dict.fromkeys((*spec.emission_inputs, *spec.transition_inputs))}
+
+    def named(rows: np.ndarray, on: Sequence[str]) -> np.ndarray:
+        """A table by input combination (U, K, ·) with one axis per input of ``on``."""
+        return rows.reshape(*(len(inputs[c]) for c in on), *rows.shape[1:])
+
     return TrustModel(
         levels=spec.levels,
         output=spec.output,
         output_categories=spec.output_categories,
-        inputs={c: tuple(spec.categories[c]) for c in dict.fromkeys((*spec.emission_inputs, *spec.transition_inputs))},
+        inputs=inputs,
         emission_inputs=spec.emission_inputs,
         transition_inputs=spec.transition_inputs,
         initial=params.initial,
-        emission=emission,
-        transition=params.transition,
+        emission=named(emission, spec.emission_inputs),
+        transition=named(params.transition, spec.transition_inputs),
         structure={k: d[k] for k in STRUCTURE_KEYS},
         rating=rating,
         rating_column=spec.rating,
