@@ -24,7 +24,7 @@ import pandas as pd
 from .estep import Workspace
 from .iohmm import EMFit, fit_iohmm
 from .options import FitOptions
-from .sequences import Sequences, encode
+from .sequences import Sequences, deal_folds, encode
 from .spec import IOHMMSpec, Params
 from .structure import Structure
 from .trust_iohmm import (
@@ -270,9 +270,7 @@ class HeldOutComparison:
         ``extra(full fit)`` adds entries to the row.  The rows' choices are marked."""
         N = seqs.n_participants
         folds = max(2, min(self.folds, N))
-        perm = np.random.default_rng(np.random.SeedSequence([self.seed, 2])).permutation(N)
-        fold_of = np.empty(N, dtype=np.int64)
-        fold_of[perm] = np.arange(N) % folds
+        fold_of = deal_folds(N, folds, [self.seed, 2])
         asked = list(values)
         total, done = len(asked) * (folds + 1), 0
         rows: list[dict[str, Any]] = []
