@@ -61,6 +61,7 @@ from .jsonfile import (
     ModelError,
     UnknownComplexityError,
     build,
+    check_names,
     check_row_array,
     freeze_arrays,
     load_json,
@@ -234,11 +235,8 @@ class TrustModel(JsonFile):
     def _trust_problems(self) -> list[str]:
         """A trust model's names: two or more distinct trust levels and complexities."""
         p: list[str] = []
-        for what, names in (("trust_levels", self.levels), ("complexities", self.inputs["complexity"])):
-            if len(set(names)) != len(names):
-                p.append(f"{what} has duplicate names: {list(names)}")
-            if len(names) < 2:
-                p.append(f"{what} needs at least 2 entries, got {len(names)}")
+        check_names(list(self.levels), "trust_levels", p)
+        check_names(list(self.inputs["complexity"]), "complexities", p)
         return p
 
     def _extras_problems(self) -> list[str]:
