@@ -2,7 +2,7 @@
 
 Every type has the structure of the pooled model (the same inputs, fixed cells, ties and
 rows no event reaches): trust models for the paper's inputs, general models
-(``trustseek.iohmm/1``) for a study's named inputs, as the pooled fit (:func:`types_spec`);
+(``trustseek.iohmm/1``) for a study's named inputs, as the pooled fit (:func:`~.trust_iohmm.inputs_spec`);
 a participant's whole sequence comes from one type.  The mixture
 is written as M IOHMMs whose initial rows hold the joint P(type, S_1): type m's row sums to
 its weight w_m.  The EM of the pooled fit then applies unchanged (:func:`~.em.run_em` with
@@ -51,12 +51,9 @@ from .options import DEFAULTS, SERIAL, FitOptions, counting
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
 from .trust_iohmm import (
-    PAPER_EMISSION_INPUTS,
-    PAPER_TRANSITION_INPUTS,
     from_model,
-    general_spec,
+    inputs_spec,
     is_trust_structure,
-    preset_spec,
     to_model,
 )
 
@@ -270,23 +267,6 @@ def general_types(spec: IOHMMSpec) -> bool:
     return not is_trust_structure(spec.transition_inputs, spec.emission_inputs)
 
 
-def types_spec(
-    frame: pd.DataFrame,
-    preset: str | IOHMMSpec = "paper",
-    prior: float = 0.0,
-    transition_inputs: Sequence[str] = PAPER_TRANSITION_INPUTS,
-    emission_inputs: Sequence[str] = PAPER_EMISSION_INPUTS,
-    **spec_options: Any,
-) -> IOHMMSpec:
-    """The structure of every type, as the pooled fit's: the ``preset`` (a trust model) for the
-    canonical inputs, :func:`~.trust_iohmm.general_spec` when an input is a study's own."""
-    if isinstance(preset, IOHMMSpec) or is_trust_structure(transition_inputs, emission_inputs):
-        return preset_spec(
-            preset, frame, prior=prior, transition_inputs=transition_inputs, emission_inputs=emission_inputs, **spec_options
-        )
-    return general_spec(frame, emission_inputs, transition_inputs, spec_options.get("levels", ("low", "high")), prior)
-
-
 def fit_types(
     frame: pd.DataFrame,
     types: int,
@@ -297,10 +277,10 @@ def fit_types(
     progress: Callable[[int, int], None] | None = None,
     **spec_options: Any,
 ) -> MixtureFit:
-    """Fit ``types`` supervisor types to a trial table (the structure as the pooled fit's, :func:`types_spec`),
+    """Fit ``types`` supervisor types to a trial table (the structure as the pooled fit's, :func:`~.trust_iohmm.inputs_spec`),
     searched as ``options`` say (:class:`~.options.FitOptions`)."""
     restarts, seed = options.starts, options.seed_number
-    spec = types_spec(frame, preset, prior, **spec_options)
+    spec = inputs_spec(frame, preset, prior, **spec_options)
     seqs = encode(frame, spec)
     pooled = None
     if types > 1:

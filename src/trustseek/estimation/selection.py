@@ -28,12 +28,8 @@ from .sequences import Sequences, deal_folds, encode
 from .spec import IOHMMSpec, Params
 from .structure import Structure
 from .trust_iohmm import (
-    PAPER_EMISSION_INPUTS,
-    PAPER_TRANSITION_INPUTS,
-    general_spec,
-    is_trust_structure,
+    inputs_spec,
     level_names,
-    preset_spec,
 )
 
 log = logging.getLogger(__name__)
@@ -213,15 +209,7 @@ def select_levels(
     and ``reached_best`` (starts within :data:`BEST_TOLERANCE` of the best);
     :func:`selection_warnings` says when the best number of levels is the largest compared.
     """
-    tr = tuple(spec_options.get("transition_inputs", PAPER_TRANSITION_INPUTS))
-    em = tuple(spec_options.get("emission_inputs", PAPER_EMISSION_INPUTS))
-    if is_trust_structure(tr, em):
-        base = preset_spec("paper", frame, prior=prior, **spec_options)
-    else:
-        extra = sorted(set(spec_options) - {"transition_inputs", "emission_inputs"})
-        if extra:
-            raise ValueError(f"options {extra} apply to the paper preset only, not to a model of named inputs")
-        base = general_spec(frame, em, tr, prior=prior)
+    base = inputs_spec(frame, "paper", prior, **spec_options)
     seqs = encode(frame, base)
     previous: dict[int, EMFit] = {}  # per slot (-1: all participants, f: fold f's training participants)
 
