@@ -123,11 +123,10 @@ def fit_iohmm(
     quasi-Newton finish, the same check), the starts side by side on the ``n_jobs`` threads;
     else EM runs the starts in lockstep and scipy's L-BFGS-B finishes them.
     """
-    seed = options.seed
     structure = make_structure(spec, seqs)
     settings = options.run(quasi_newton and not structure.joint, accelerate)
     work = Workspace(seqs, *structure.dims, threads=settings.threads)
-    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    ss = options.seed_sequence
     starts = [structure.project(p) for p in init]
     starts += [structure.random(np.random.default_rng(s)) for s in ss.spawn(options.starts)]
     if not starts:

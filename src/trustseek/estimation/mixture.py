@@ -202,12 +202,12 @@ def fit_mixture(
     docs/types.md).  The objective never decreases along a run.
     """
     structure = MixtureStructure(spec, seqs, types, differ)
-    restarts, seed, tol, max_iter = options.starts, options.seed, options.tol, options.max_iter
+    restarts, tol, max_iter = options.starts, options.tol, options.max_iter
     sticks = structure.sticks() if quasi_newton else None
     qn = quasi_newton and sticks is not None
     settings = options.run(qn and structure.n_types == 1, accelerate)  # with M >= 2 EM runs to tol, the finish later
     work = MixtureWorkspace(seqs, structure, threads=settings.threads)
-    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    ss = options.seed_sequence
     M = structure.n_types
     starts: list[MixtureParams] = [structure.project(p) for p in init]
     children = ss.spawn(restarts)

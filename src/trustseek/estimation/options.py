@@ -46,6 +46,13 @@ class FitOptions:
         """``seed`` as an integer (the fits that derive several seeds from it take no SeedSequence)."""
         return operator.index(cast("int", self.seed))
 
+    @property
+    def seed_sequence(self) -> np.random.SeedSequence:
+        """``seed`` as a :class:`numpy.random.SeedSequence` (the one given, whose children count on)."""
+        import numpy as np  # here: importing these options loads no numpy (the command line's help)
+
+        return self.seed if isinstance(self.seed, np.random.SeedSequence) else np.random.SeedSequence(self.seed)
+
     def run(self, quasi_newton: bool = True, accelerate: bool = True) -> RunSettings:
         """How each start of a fit with these options runs (:class:`RunSettings`)."""
         return RunSettings(

@@ -129,8 +129,7 @@ def fit_with_moves(
     (:func:`move_sources`; a lower maximum's moves can lead past the best) with two levels
     merged and one split (:func:`split_merge_starts`), while that gains more than
     :data:`BEST_TOLERANCE`.  Every run is kept in the result's ``runs``."""
-    seed = options.seed
-    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    ss = options.seed_sequence
     # the random starts are those fit_iohmm draws from ``seed`` (the first n of n + m are the
     # same): more restarts only add starts; the split and merge moves draw from the seed's own state
     rng = np.random.default_rng(ss.generate_state(4))
