@@ -145,7 +145,7 @@ def test_general_types_are_refused_for_planning_with_the_reason(named, tmp_path)
     def general(rely: float) -> TrustModel:
         emission = np.array([[[1 - rely, rely]] * 2] * 2)
         return TrustModel(("low", "high"), "human_action", ("intervene", "rely"), {"advice": ("agree", "disagree")},
-                          ("advice",), (), np.array([0.5, 0.5]), emission, np.array([[[0.9, 0.1], [0.1, 0.9]]]))  # fmt: skip
+                          ("advice",), (), np.array([0.5, 0.5]), emission, np.array([[0.9, 0.1], [0.1, 0.9]]))  # fmt: skip
 
     TypeMixture(("type1", "type2"), np.array([0.5, 0.5]), (general(0.3), general(0.8))).save(tmp_path / "mix.json")
     code, output = run_cli(["fit-types", str(named / "log.csv"), "--mapping", str(named / "map.json"), "--emissions-on",

@@ -47,7 +47,7 @@ def _model(p_agree, p_disagree):
     """A model of the advice alone: both levels rely alike (no trust to track)."""
     emission = np.array([[[1 - p_agree, p_agree]] * 2, [[1 - p_disagree, p_disagree]] * 2])
     return TrustModel(("low", "high"), "human_action", ("intervene", "rely"), {"advice": ("agree", "disagree")},
-                      ("advice",), (), np.array([0.5, 0.5]), emission, np.array([[[0.9, 0.1], [0.1, 0.9]]]))  # fmt: skip
+                      ("advice",), (), np.array([0.5, 0.5]), emission, np.array([[0.9, 0.1], [0.1, 0.9]]))  # fmt: skip
 
 
 def test_a_model_of_an_input_does_not_beat_baselines_that_see_the_input():

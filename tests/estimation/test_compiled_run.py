@@ -9,7 +9,7 @@ from trustseek.estimation import compiled_steps as steps
 from trustseek.estimation.convergence import em_step
 from trustseek.estimation.em import run_em
 from trustseek.estimation.estep import Workspace
-from trustseek.estimation.options import FitOptions
+from trustseek.estimation.options import FitOptions, RunSettings
 from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
@@ -63,7 +63,7 @@ def test_em_decides_as_run_em():
     for r in range(3):
         start = s.random(np.random.default_rng(r))
         (ref,) = run_em(s, w, [start], tol=1e-6)
-        (got,) = cr.run_starts(s, w, [start], 1e-6, 1000, 1e-6, 1e-10, quasi_newton=False)
+        (got,) = cr.run_starts(s, w, [start], RunSettings(1e-6, 1000, 1e-6, quasi_newton=False))
         np.testing.assert_allclose(got.history[: len(ref.history)], ref.history, rtol=1e-8)
         assert got.iterations >= ref.iterations
 
@@ -107,7 +107,7 @@ def test_a_start_giving_the_data_probability_zero_is_refused():
     em = p.emission.copy()
     em[:, :, 0], em[:, :, 1] = 0.0, 1.0  # every first-category output impossible
     with pytest.raises(FitError, match="probability zero"):
-        cr.run_starts(s, w, [p, Params(p.initial, em, p.transition)], 1e-8, 1000, 1e-5, 1e-12)
+        cr.run_starts(s, w, [p, Params(p.initial, em, p.transition)], RunSettings(1e-8, 1000, 1e-5))
 
 
 def test_the_estep_on_numbas_threads_is_the_kernels_to_the_last_bit():
@@ -135,6 +135,6 @@ def test_the_estep_on_numbas_threads_is_the_kernels_to_the_last_bit():
             assert np.array_equal(counts, np.concatenate([st.initial, st.emission.ravel(), st.transition.ravel()]))
     finally:
         set_threads(before)
-    one, two = (cr.run_starts(s, w, [p], 1e-8, 40, 1e-5, 1e-12, threads=t)[0] for t in (1, 2))  # 40 E-steps: cheap
+    one, two = (cr.run_starts(s, w, [p], RunSettings(1e-8, 40, 1e-5, threads=t))[0] for t in (1, 2))  # 40 E-steps: cheap
     assert (one.loglik, one.iterations, one.history) == (two.loglik, two.iterations, two.history)
     assert np.array_equal(one.params.vector(), two.params.vector())

@@ -87,7 +87,7 @@ def test_the_fit_record_and_the_log_say_how_many_e_steps_ran_on_the_subsample(mo
     frame = simulate_design(paper_model(), 40, seed=3)
     with caplog.at_level(logging.INFO, logger="trustseek"):
         res = fit_trust_model(frame, options=FitOptions(restarts=2, seed=0, n_jobs=1))
-    record = res.fit_record(0)
+    record = res.fit_record()
     assert record["subsample_iterations"] == [r.subsample_iterations for r in res.runs]
     assert all(n > 0 for n in record["subsample_iterations"])
     assert "on a subsample" in caplog.text

@@ -235,3 +235,17 @@ def test_bootstrap_intervals_contain_the_estimate_and_do_not_depend_on_processes
             assert np.all(lo <= est + 1e-12) and np.all(est <= hi + 1e-12)
             np.testing.assert_array_equal(lo, two.cells[name][table][0])
         assert one.weights[name][0] <= fit.weights[m] <= one.weights[name][1]
+
+
+def test_types_of_named_inputs_refuse_the_presets_options_as_the_selection_of_levels_does():
+    """With a study's own input the types are general models: an option of the paper preset (here
+    its complexities) is refused, where the types' fit left it unread and fitted on."""
+    frame = simulate_design(paper_model(), 4, seed=0)
+    frame["advice"] = np.where(np.arange(len(frame)) % 2 == 0, "agree", "disagree")
+    named = {"transition_inputs": ("advice",), "emission_inputs": ()}
+    for run in (
+        lambda: fit_types(frame, 2, options=FitOptions(restarts=1, max_iter=3, n_jobs=1), complexities=("a", "b"), **named),
+        lambda: select_types(frame, (1,), folds=2, options=FitOptions(restarts=1, max_iter=3), complexities=("a", "b"), **named),
+    ):
+        with pytest.raises(ValueError, match=r"options \['complexities'\] apply to the paper preset only"):
+            run()

@@ -1,6 +1,7 @@
 """Trust model and task files: round trips, the paper preset, and validation."""
 
 import copy
+import dataclasses
 import json
 
 import numpy as np
@@ -90,6 +91,26 @@ def test_task_validation(task):
     assert "complexities[high].success = 1.3 must be a probability in [0, 1]" in p
     assert any("ask_experience = 'great'" in x for x in p)
     assert any(x.startswith("discount = 1.0") for x in p)
+
+
+def test_names_of_a_model_and_a_task_are_checked_alike(model, task):
+    """Trust levels and complexities, of a model and of a task, are distinct non-empty texts, at
+    least two: one check says it everywhere (a number among the names was taken before)."""
+    with pytest.raises(ModelError) as exc:
+        model.replace(trust_levels=("low", 3))
+    assert exc.value.problems == ["trust_levels must be a list of non-empty strings, got ['low', 3]"]
+    with pytest.raises(ModelError) as exc:
+        model.replace(complexities=("low", "low"))
+    assert exc.value.problems == ["complexities has duplicate names: ['low', 'low']"]
+    with pytest.raises(ModelError, match=r"complexities must be a list of non-empty strings, got \['low', 2\]"):
+        dataclasses.replace(task, complexities=("low", 2))
+
+
+def test_a_model_takes_its_tables_with_one_axis_per_input_only(model):
+    """A table given by input combination, (U, K, ·), is refused with its expected shape (the
+    constructor reshaped it before; only the fit's own conversion needs that form)."""
+    with pytest.raises(ModelError, match=r"emission has shape \(4, 2, 2\), expected \(2, 2, 2, 2\)"):
+        model.replace(emission=model.emission_rows)
 
 
 def test_names_must_match(model, task):

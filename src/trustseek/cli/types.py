@@ -312,7 +312,8 @@ def personalize(
     if not isinstance(centre, TypeMixture):
         centre = TypeMixture.single(centre)
     frame = read_for_types(log, centre, reading)  # the columns it uses
-    res = run(frame, centre if centre.n_types > 1 else centre.models[0], strength=strength, tol=tol, estimate=estimate)
+    centre_model = centre if centre.n_types > 1 else centre.models[0]
+    res = run(frame, centre_model, strength=strength, options=FitOptions(tol=tol, n_jobs=1), estimate=estimate)
     with atomic_output(out, directory=True) as tmp:
         res.save(tmp)
     if as_json:

@@ -312,24 +312,22 @@ def bootstrap(
     compiled = kernels.worth_compiling(replicates * seqs.n_trials)
     if compiled:
         load_compiled()  # many fits: the compiled E-step in every one (worker processes start from here)
-    children = np.random.SeedSequence([options.seed_number, 1]).spawn(replicates)
     w = {k: np.asarray(v, dtype=float) for k, v in (weights or {}).items()}
-    jobs = [_Replicate(seqs, spec, params, w, ch, options, compiled) for ch in children]
-    n_jobs = options.n_jobs or os.cpu_count() or 1
-    results: dict[int, tuple[np.ndarray, bool]] = {}
 
-    def done(i: int, res: tuple[np.ndarray, bool]) -> None:
-        results[i] = res
-        log.debug("bootstrap replicate %d done (%d of %d)", i, len(results), replicates)
+    def done(i: int, finished: int) -> None:
+        log.debug("bootstrap replicate %d done (%d of %d)", i, finished, replicates)
         if progress is not None:
-            progress("bootstrap", len(results), replicates)
+            progress("bootstrap", finished, replicates)
 
     log.info(
-        "bootstrap: %d replicates of %d participants over %d processes", replicates, seqs.n_participants, min(n_jobs, replicates)
+        "bootstrap: %d replicates of %d participants over %d processes",
+        replicates,
+        seqs.n_participants,
+        min(processes(options), replicates),
     )
-    run_replicates(jobs, n_jobs, done)
-    flat = np.vstack([results[i][0] for i in range(replicates)])
-    other = sum(results[i][1] for i in range(replicates))
+    results = replicate(lambda ch: _Replicate(seqs, spec, params, w, ch, options, compiled), replicates, options, done)
+    flat = np.vstack([r[0] for r in results])
+    other = sum(r[1] for r in results)
     alpha = (1 - level) / 2
     lo, hi = np.quantile(flat, [alpha, 1 - alpha], axis=0)
     ref = cell_tables(spec, params)
@@ -353,6 +351,28 @@ def bootstrap(
     if widened.any():
         log.info("bootstrap: %d cell interval(s) widened to contain the estimate", int(widened.sum()))
     return Intervals(intervals, replicates, level, wide, int(other), draws, likelihood)
+
+
+def processes(options: FitOptions) -> int:
+    """The processes a bootstrap runs on: ``options.n_jobs``, or all cores."""
+    return options.n_jobs or os.cpu_count() or 1
+
+
+def replicate(
+    job: Callable[[np.random.SeedSequence], Any], replicates: int, options: FitOptions, done: Callable[[int, int], None]
+) -> list[Any]:
+    """Every replicate's result, in order: replicate b runs ``job(seed)`` with the b-th child of
+    ``options.seed`` (whatever the number of processes), over :func:`processes`; ``done(b, finished)``
+    is called as each finishes."""
+    children = np.random.SeedSequence([options.seed_number, 1]).spawn(replicates)
+    results: dict[int, Any] = {}
+
+    def finished(i: int, res: Any) -> None:
+        results[i] = res
+        done(i, len(results))
+
+    run_replicates([job(ch) for ch in children], processes(options), finished)
+    return [results[i] for i in range(replicates)]
 
 
 def run_replicates(jobs: Sequence[Any], n_jobs: int, done: Callable[[int, Any], None]) -> None:

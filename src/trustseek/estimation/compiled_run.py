@@ -36,6 +36,7 @@ from . import compiled_steps as steps
 from . import kernels
 from .em import CAPPED, STATIONARY, RunResult
 from .estep import Workspace
+from .options import RunSettings
 from .spec import FitError, Params
 from .sticks import Sticks, stick_gradient, stick_values
 from .structure import FLOOR, Structure, Table
@@ -414,20 +415,10 @@ def applies(structure: Structure, work: Workspace) -> bool:
     return kernels.AVAILABLE and work.compiled and type(structure) is Structure and work.seqs.n_trials > 0
 
 
-def run_starts(
-    structure: Structure,
-    work: Workspace,
-    starts: Sequence[Params],
-    tol: float,
-    max_iter: int,
-    em_tol: float,
-    finish_tol: float,
-    quasi_newton: bool = True,
-    accelerate: bool = True,
-    threads: int = 1,
-) -> list[RunResult]:
-    """Each start carried to a stationary point or to ``max_iter`` E-steps, compiled (see the
-    module); ``threads`` run starts side by side, or with fewer starts than threads on data of
+def run_starts(structure: Structure, work: Workspace, starts: Sequence[Params], settings: RunSettings) -> list[RunResult]:
+    """Each start carried to a stationary point or to ``settings.max_iter`` E-steps, compiled (see
+    the module; the finish to :data:`FINISH_FTOL` of ``settings.tol``); ``settings.threads`` run
+    starts side by side, or with fewer starts than threads on data of
     ``compiled_steps.PARALLEL_ITEMS`` items or more share each E-step (the numbers do not depend on it).
 
     From :data:`SUBSAMPLE_MIN` trials on (:func:`subsample`) each start runs first on every
@@ -449,8 +440,10 @@ def run_starts(
     n = sticks.size
     model = (K, Ue, M, Ut, prior, emt, trt)
     # fewer starts than threads on data of PARALLEL_ITEMS items or more: each E-step on the threads
+    threads, tol, quasi_newton = settings.threads, settings.tol, settings.quasi_newton
     threaded = threads > 1 and len(starts) < threads and kern.C >= steps.PARALLEL_ITEMS
-    settings = (float(tol), int(max_iter), float(em_tol), float(finish_tol), bool(quasi_newton), bool(accelerate), threaded)
+    numbers = (float(tol), int(settings.max_iter), float(settings.em_tol), float(tol * FINISH_FTOL), bool(quasi_newton),
+                bool(settings.accelerate), threaded)  # fmt: skip
     template = starts[0]
     idx = subsample(kern) if quasi_newton and sticks.size > 0 else None
     if idx is not None:
@@ -464,15 +457,15 @@ def run_starts(
         B = np.zeros((sticks.size, sticks.size))
         sub_its = 0
         if idx is not None:
-            y, _stat, sub_its, sub_ended, _f, _h = run_one(x, model, sub, sub_C, work.PE, settings, (layout, n, B, False))
+            y, _stat, sub_its, sub_ended, _f, _h = run_one(x, model, sub, sub_C, work.PE, numbers, (layout, n, B, False))
             if sub_ended == ENDED_ZERO:
                 raise FitError(["the initial values give the data probability zero"])
             B *= ratio
-            flat, stat, its, ended, finishes, history = run_one(y, model, data, kern.C, work.PE, settings, (layout, n, B, True))
+            flat, stat, its, ended, finishes, history = run_one(y, model, data, kern.C, work.PE, numbers, (layout, n, B, True))
             if ended != ENDED_ZERO:
                 return result(flat, stat, its, ended, finishes, history, sub_its, t0)
             sub_its = 0  # the subsample's end is impossible for the whole data: from the start again
-        flat, stat, its, ended, finishes, history = run_one(x, model, data, kern.C, work.PE, settings, (layout, n, B, False))
+        flat, stat, its, ended, finishes, history = run_one(x, model, data, kern.C, work.PE, numbers, (layout, n, B, False))
         if ended == ENDED_ZERO:
             raise FitError(["the initial values give the data probability zero"])
         return result(flat, stat, its, ended, finishes, history, sub_its, t0)

@@ -19,11 +19,13 @@ from dataclasses import replace
 
 from .em import CAPPED, STATIONARY, RunResult, run_em
 from .estep import Workspace
+from .options import RunSettings
 from .quasi_newton import finish
 from .spec import Params
 from .sticks import Sticks
 from .structure import Structure
 
+FINISH_FTOL = 0.01  # the finish stops at this fraction of the fit's relative tolerance
 CHECK_STEPS = 2  # E-steps of the check: counts at the end point, then the objective one EM step on
 
 
@@ -41,29 +43,22 @@ def stationary(f: float, fq: float, tol: float) -> bool:
 
 
 def converge(
-    structure: Structure,
-    work: Workspace,
-    run: RunResult,
-    tol: float,
-    max_iter: int,
-    em_tol: float,
-    finish_tol: float,
-    quasi_newton: bool = True,
-    accelerate: bool = True,
-    sticks: Sticks | None = None,
+    structure: Structure, work: Workspace, run: RunResult, settings: RunSettings, sticks: Sticks | None = None
 ) -> RunResult:
-    """Carry ``run`` (an EM run to ``em_tol``) to a stationary point or to ``max_iter`` E-steps.
+    """Carry ``run`` (an EM run to ``settings.em_tol``) to a stationary point or to ``settings.max_iter`` E-steps.
 
-    Each round is the quasi-Newton finish (to ``finish_tol``; skipped without
+    Each round is the quasi-Newton finish (to :data:`FINISH_FTOL` of ``tol``; skipped without
     ``quasi_newton``), then the check: when one EM step from the end point gains more
     than ``tol`` (relative), EM goes on from that step's point to ``em_tol`` and the
     next round begins.  ``ended`` is :data:`~.em.STATIONARY` (``converged``) or
     :data:`~.em.CAPPED`; the objective history never decreases.  ``sticks`` is passed to the finish.
     """
+    tol, max_iter, em_tol = settings.tol, settings.max_iter, settings.em_tol
+    finish_tol = tol * FINISH_FTOL
     t0 = time.perf_counter()
     seconds = run.seconds
     while True:
-        if quasi_newton:
+        if settings.quasi_newton:
             run = finish(structure, work, run, tol=finish_tol, max_iter=max_iter, sticks=sticks)
         if run.iterations + CHECK_STEPS > max_iter or not math.isfinite(run.objective):
             return _ended(run, CAPPED, seconds, t0)
@@ -71,7 +66,7 @@ def converge(
         if stationary(f, fq, tol):
             return _ended(replace(run, iterations=run.iterations + CHECK_STEPS), STATIONARY, seconds, t0)
         (more,) = run_em(
-            structure, work, [q], tol=em_tol, max_iter=max_iter - run.iterations - CHECK_STEPS, accelerate=accelerate
+            structure, work, [q], tol=em_tol, max_iter=max_iter - run.iterations - CHECK_STEPS, accelerate=settings.accelerate
         )
         run = replace(
             more,

@@ -21,7 +21,6 @@ import pandas as pd
 
 from ..model.core import TrustModel
 from ..vocab import ACTIONS, EXPERIENCES
-from .bootstrap import Intervals
 from .bootstrap import bootstrap as _bootstrap
 from .iohmm import EMFit, fit_iohmm, loglik, posterior_frame
 from .options import DEFAULTS, FitOptions, counting
@@ -107,6 +106,7 @@ def fit_sequences(
 ) -> FitResult:
     """:func:`fit_trust_model` on already encoded sequences."""
     check_convertible(spec)
+    _check_bootstrap(spec, bootstrap)
     tick = counting(progress, options.starts + len(init) + bootstrap)
     result = _fitted(seqs, spec, options, tick, init)
     events = result.events
@@ -116,16 +116,7 @@ def fit_sequences(
         counts["rating"] = np.repeat(events["rating"].sum(-1, keepdims=True), spec.n_ratings, axis=-1)
         estimated["rating"] = np.ones_like(events["rating"], dtype=bool)
     result.counts, result.estimated, result.warnings = counts, estimated, _warnings(result, events)
-    for w in result.warnings:
-        log.info("%s", w)
-    if bootstrap > 0 and spec.rating is not None:
-        raise FitError(["bootstrap intervals are not available for a fit with ratings (fit without --bootstrap)"])
-    if bootstrap > 0:
-        # levels of a replicate are matched on the rows the data determine
-        result.intervals = _intervals(result, bootstrap, options, tick, events)
-        result.ci = result.intervals.intervals
-        result.bootstrap = bootstrap
-    return result
+    return _with_intervals(result, bootstrap, options, tick)
 
 
 def _fitted(
@@ -152,20 +143,30 @@ def _expected_events(fit: EMFit) -> dict[str, np.ndarray]:
     return out
 
 
-def _intervals(result: FitResult, bootstrap: int, options: FitOptions, tick: Callable[[], None], weights) -> Intervals:
-    """The bootstrap intervals of ``result``'s fit over ``bootstrap`` resamples (each refit from
-    at most 3 random starts; ``tick`` after each), their notes added to its warnings."""
-    intervals = _bootstrap(
-        result.seqs,
-        result.spec,
-        result.params,
-        bootstrap,
-        replace(options, restarts=min(options.starts, 3)),
-        progress=lambda label, d, t: tick(),
-        weights=weights,
-    )
-    result.warnings += intervals.notes()
-    return intervals
+def _check_bootstrap(spec: IOHMMSpec, bootstrap: int) -> None:
+    if bootstrap > 0 and spec.rating is not None:
+        raise FitError(["bootstrap intervals are not available for a fit with ratings (fit without --bootstrap)"])
+
+
+def _with_intervals(result: FitResult, bootstrap: int, options: FitOptions, tick: Callable[[], None]) -> FitResult:
+    """``result`` with its warnings logged and, with ``bootstrap`` > 0, its intervals over that many
+    resamples (each refit from at most 3 random starts; ``tick`` after each; a replicate's levels
+    matched on the rows the data determine, weighted by the expected events), their notes added to
+    its warnings."""
+    for w in result.warnings:
+        log.info("%s", w)
+    if bootstrap > 0:
+        result.intervals = _bootstrap(
+            result.seqs,
+            result.spec,
+            result.params,
+            bootstrap,
+            replace(options, restarts=min(options.starts, 3)),
+            progress=lambda label, d, t: tick(),
+            weights={k: v for k, v in result.events.items() if k in ("initial", "emission", "transition")},
+        )
+        result.warnings += result.intervals.notes()
+    return result
 
 
 def fit_trust_model(
@@ -353,13 +354,11 @@ def fit_model(
     if problems:
         raise FitError(problems)
     seqs = encode(frame, spec)
-    if bootstrap > 0 and spec.rating is not None:
-        raise FitError(["bootstrap intervals are not available for a fit with ratings (fit without --bootstrap)"])
+    _check_bootstrap(spec, bootstrap)
     tick = counting(progress, options.starts + bootstrap)
-
     result = _fitted(seqs, spec, options, tick, general=True)
-    events, warnings = result.events, result.warnings
-    warnings += _warnings(result, events)
+    warnings = result.warnings
+    warnings += _warnings(result, result.events)
     never = [
         f"{name}[{describe_combination(int(u), inputs, spec.categories)}]"
         for name, table, inputs in (
@@ -371,9 +370,4 @@ def fit_model(
     ]
     if never:
         warnings.append(f"never estimated (no such trials in the data; the model file holds defaults): {', '.join(never)}")
-    for w in warnings:
-        log.info("%s", w)
-    if bootstrap > 0:
-        weights = {k: v for k, v in events.items() if k in ("initial", "emission", "transition")}
-        result.intervals = _intervals(result, bootstrap, options, tick, weights)
-    return result
+    return _with_intervals(result, bootstrap, options, tick)

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import logging
 import math
-import os
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -37,8 +36,6 @@ from .structure import Structure
 
 log = logging.getLogger(__name__)
 
-FINISH_SWITCH = 1e-5  # EM hands over to the L-BFGS-B finish at this relative change (or the fit's tol if looser)
-FINISH_FTOL = 0.01  # the finish stops at this fraction of the fit's relative tolerance
 CONCURRENT_MIN = 10_000  # trials from which the starts' finishes run on several threads at once
 
 
@@ -126,11 +123,10 @@ def fit_iohmm(
     quasi-Newton finish, the same check), the starts side by side on the ``n_jobs`` threads;
     else EM runs the starts in lockstep and scipy's L-BFGS-B finishes them.
     """
-    tol, max_iter, seed = options.tol, options.max_iter, options.seed
     structure = make_structure(spec, seqs)
-    quasi_newton = quasi_newton and not structure.joint
-    work = Workspace(seqs, *structure.dims, threads=options.n_jobs or os.cpu_count() or 1)
-    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    settings = options.run(quasi_newton and not structure.joint, accelerate)
+    work = Workspace(seqs, *structure.dims, threads=settings.threads)
+    ss = options.seed_sequence
     starts = [structure.project(p) for p in init]
     starts += [structure.random(np.random.default_rng(s)) for s in ss.spawn(options.starts)]
     if not starts:
@@ -142,12 +138,8 @@ def fit_iohmm(
         seqs.n_trials,
         len(starts),
     )
-    em_tol = max(tol, FINISH_SWITCH) if quasi_newton else tol
     group = work.lockstep(len(starts))
     runs: list[RunResult] = []
-
-    def carry(r: RunResult, w: Workspace) -> RunResult:
-        return converge(structure, w, r, tol, max_iter, em_tol, tol * FINISH_FTOL, quasi_newton, accelerate)
 
     def record(r: RunResult) -> None:
         log.debug("%s", _describe(len(runs), r))
@@ -160,25 +152,14 @@ def fit_iohmm(
     def alone(r: RunResult) -> RunResult:
         if not hasattr(local, "work"):
             local.work = work.serial()
-        return carry(r, local.work)
+        return converge(structure, local.work, r, settings)
 
     if compiled and compiled_run.applies(structure, work):  # (a spec with a rating goes the lockstep way below)
-        for r in compiled_run.run_starts(
-            structure,
-            work,
-            starts,
-            tol,
-            max_iter,
-            em_tol,
-            tol * compiled_run.FINISH_FTOL,
-            quasi_newton,
-            accelerate,
-            work.threads,
-        ):
+        for r in compiled_run.run_starts(structure, work, starts, settings):
             record(r)
     with one_blas_thread():
         for g in range(len(runs), len(starts), group):
-            ems = run_em(structure, work, starts[g : g + group], tol=em_tol, max_iter=max_iter, accelerate=accelerate)
+            ems = run_em(structure, work, starts[g : g + group], settings.em_tol, settings.max_iter, settings.accelerate)
             if work.threads > 1 and len(ems) > 1 and seqs.n_trials >= CONCURRENT_MIN:
                 # each start's finish is a sequence of single E-steps with Python in between: the starts
                 # go on side by side, one per thread, each with its own buffers (the same numbers)
@@ -187,7 +168,7 @@ def fit_iohmm(
                         record(r)
             else:
                 for r in ems:
-                    record(carry(r, work))
+                    record(converge(structure, work, r, settings))
     best = int(np.argmax([r.objective for r in runs]))
     p = runs[best].params
     log.info("best of %d starts: %s", len(runs), _describe(best, runs[best]))

@@ -2,7 +2,7 @@
 
 Every type has the structure of the pooled model (the same inputs, fixed cells, ties and
 rows no event reaches): trust models for the paper's inputs, general models
-(``trustseek.iohmm/1``) for a study's named inputs, as the pooled fit (:func:`types_spec`);
+(``trustseek.iohmm/1``) for a study's named inputs, as the pooled fit (:func:`~.trust_iohmm.inputs_spec`);
 a participant's whole sequence comes from one type.  The mixture
 is written as M IOHMMs whose initial rows hold the joint P(type, S_1): type m's row sums to
 its weight w_m.  The EM of the pooled fit then applies unchanged (:func:`~.em.run_em` with
@@ -33,7 +33,6 @@ initial row (undefined at weight zero) is written uniform.
 from __future__ import annotations
 
 import logging
-import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -46,18 +45,15 @@ from ..model.mixture import TypeMixture
 from .convergence import converge
 from .em import STATIONARY, RunResult, run_em
 from .fit import never_estimated
-from .iohmm import FINISH_FTOL, FINISH_SWITCH, EMFit, fit_iohmm
+from .iohmm import EMFit, fit_iohmm
 from .mixture_em import EMPTY, FINISH_MARGIN, PERTURB, MixtureParams, MixtureStructure, MixtureWorkspace
 from .options import DEFAULTS, SERIAL, FitOptions, counting
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
 from .trust_iohmm import (
-    PAPER_EMISSION_INPUTS,
-    PAPER_TRANSITION_INPUTS,
     from_model,
-    general_spec,
+    inputs_spec,
     is_trust_structure,
-    preset_spec,
     to_model,
 )
 
@@ -206,9 +202,12 @@ def fit_mixture(
     docs/types.md).  The objective never decreases along a run.
     """
     structure = MixtureStructure(spec, seqs, types, differ)
-    restarts, seed, tol, max_iter = options.starts, options.seed, options.tol, options.max_iter
-    work = MixtureWorkspace(seqs, structure, threads=options.n_jobs or os.cpu_count() or 1)
-    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    restarts, tol, max_iter = options.starts, options.tol, options.max_iter
+    sticks = structure.sticks() if quasi_newton else None
+    qn = quasi_newton and sticks is not None
+    settings = options.run(qn and structure.n_types == 1, accelerate)  # with M >= 2 EM runs to tol, the finish later
+    work = MixtureWorkspace(seqs, structure, threads=settings.threads)
+    ss = options.seed_sequence
     M = structure.n_types
     starts: list[MixtureParams] = [structure.project(p) for p in init]
     children = ss.spawn(restarts)
@@ -223,23 +222,20 @@ def fit_mixture(
     if not starts:
         raise FitError(["at least one start is needed"])
     log.debug("fitting %d types to %d sequences from %d starts", M, seqs.n_participants, len(starts))
-    sticks = structure.sticks() if quasi_newton else None
-    qn = quasi_newton and sticks is not None
     runs: list[RunResult] = []
     if M == 1:  # the pooled fit's procedure, step for step
-        em_tol = max(tol, FINISH_SWITCH) if qn else tol
-        for r in run_em(structure, work, starts, tol=em_tol, max_iter=max_iter, accelerate=accelerate):
-            runs.append(converge(structure, work, r, tol, max_iter, em_tol, tol * FINISH_FTOL, qn, accelerate, sticks))
+        for r in run_em(structure, work, starts, settings.em_tol, max_iter, accelerate):
+            runs.append(converge(structure, work, r, settings, sticks))
     else:
         # every start: EM with SQUAREM to tol and the stationarity check; then the L-BFGS-B finish
         # (and the check again) only for the starts ending within FINISH_MARGIN of the best
-        for r in run_em(structure, work, starts, tol=tol, max_iter=max_iter, accelerate=accelerate):
-            runs.append(converge(structure, work, r, tol, max_iter, tol, tol * FINISH_FTOL, False, accelerate))
+        for r in run_em(structure, work, starts, tol, max_iter, accelerate):
+            runs.append(converge(structure, work, r, settings))
         if qn:
             top = max(r.objective for r in runs)
             for i, r in enumerate(runs):
                 if r.objective >= top - FINISH_MARGIN and r.iterations < max_iter:
-                    runs[i] = converge(structure, work, r, tol, max_iter, tol, tol * FINISH_FTOL, True, accelerate, sticks)
+                    runs[i] = converge(structure, work, r, replace(settings, quasi_newton=True), sticks)
     for i, r in enumerate(runs):
         log.debug("%s", _describe(i, r))
         if on_restart is not None:
@@ -271,23 +267,6 @@ def general_types(spec: IOHMMSpec) -> bool:
     return not is_trust_structure(spec.transition_inputs, spec.emission_inputs)
 
 
-def types_spec(
-    frame: pd.DataFrame,
-    preset: str | IOHMMSpec = "paper",
-    prior: float = 0.0,
-    transition_inputs: Sequence[str] = PAPER_TRANSITION_INPUTS,
-    emission_inputs: Sequence[str] = PAPER_EMISSION_INPUTS,
-    **spec_options: Any,
-) -> IOHMMSpec:
-    """The structure of every type, as the pooled fit's: the ``preset`` (a trust model) for the
-    canonical inputs, :func:`~.trust_iohmm.general_spec` when an input is a study's own."""
-    if isinstance(preset, IOHMMSpec) or is_trust_structure(transition_inputs, emission_inputs):
-        return preset_spec(
-            preset, frame, prior=prior, transition_inputs=transition_inputs, emission_inputs=emission_inputs, **spec_options
-        )
-    return general_spec(frame, emission_inputs, transition_inputs, spec_options.get("levels", ("low", "high")), prior)
-
-
 def fit_types(
     frame: pd.DataFrame,
     types: int,
@@ -298,10 +277,10 @@ def fit_types(
     progress: Callable[[int, int], None] | None = None,
     **spec_options: Any,
 ) -> MixtureFit:
-    """Fit ``types`` supervisor types to a trial table (the structure as the pooled fit's, :func:`types_spec`),
+    """Fit ``types`` supervisor types to a trial table (the structure as the pooled fit's, :func:`~.trust_iohmm.inputs_spec`),
     searched as ``options`` say (:class:`~.options.FitOptions`)."""
     restarts, seed = options.starts, options.seed_number
-    spec = types_spec(frame, preset, prior, **spec_options)
+    spec = inputs_spec(frame, preset, prior, **spec_options)
     seqs = encode(frame, spec)
     pooled = None
     if types > 1:

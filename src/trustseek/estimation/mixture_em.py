@@ -24,7 +24,6 @@ PARTS = ("initial", "emission", "transition")
 EMPTY = 1e-3  # a type with fewer expected participants than this is empty
 FINISH_MARGIN = 1.0  # with M >= 2, the starts ending this close to the best (nats) get the L-BFGS-B finish
 PERTURB = 1.0  # perturbed pooled starts: every row's log-odds moved by a normal draw of this scale
-TIE = 1e-9
 
 
 def parse_differ(differ: str | Sequence[str]) -> tuple[str, ...]:
@@ -119,7 +118,6 @@ class MixtureStructure(Structure):
         if self.n_types > 1 and not self.differ:
             raise FitError(["the types must differ in some part"])
         K = self.K
-        self.base_free = self.n_free
         init = (self.n_types * K - 1) if "initial" in self.differ else (self.n_types - 1) + (K - 1)
         em = self.em.n_free() * (self.n_types if "emission" in self.differ else 1)
         tr = self.tr.n_free() * (self.n_types if "transition" in self.differ else 1)

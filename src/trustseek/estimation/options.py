@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import operator
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, cast
@@ -10,7 +11,9 @@ from typing import TYPE_CHECKING, Any, cast
 if TYPE_CHECKING:
     import numpy as np
 
-__all__ = ["DEFAULTS", "SERIAL", "FitOptions", "counting"]
+__all__ = ["DEFAULTS", "FINISH_SWITCH", "SERIAL", "FitOptions", "RunSettings", "counting"]
+
+FINISH_SWITCH = 1e-5  # EM hands over to the quasi-Newton finish at this relative change (or the fit's tol if looser)
 
 
 @dataclass(frozen=True)
@@ -42,6 +45,43 @@ class FitOptions:
     def seed_number(self) -> int:
         """``seed`` as an integer (the fits that derive several seeds from it take no SeedSequence)."""
         return operator.index(cast("int", self.seed))
+
+    @property
+    def seed_sequence(self) -> np.random.SeedSequence:
+        """``seed`` as a :class:`numpy.random.SeedSequence` (the one given, whose children count on)."""
+        import numpy as np  # here: importing these options loads no numpy (the command line's help)
+
+        return self.seed if isinstance(self.seed, np.random.SeedSequence) else np.random.SeedSequence(self.seed)
+
+    def run(self, quasi_newton: bool = True, accelerate: bool = True) -> RunSettings:
+        """How each start of a fit with these options runs (:class:`RunSettings`)."""
+        return RunSettings(
+            tol=self.tol,
+            max_iter=self.max_iter,
+            em_tol=max(self.tol, FINISH_SWITCH) if quasi_newton else self.tol,
+            quasi_newton=quasi_newton,
+            accelerate=accelerate,
+            threads=max(1, int(self.n_jobs or os.cpu_count() or 1)),
+        )
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """How each start of one fit runs, made once per fit (:meth:`FitOptions.run`) and passed whole
+    to the EM loop's end (:func:`~.convergence.converge`) and the compiled run
+    (:func:`~.compiled_run.run_starts`).
+
+    A run ends at a stationary point, where one more EM step gains at most ``tol`` (relative), or
+    at ``max_iter`` E-steps; EM runs to ``em_tol`` before the quasi-Newton finish (with
+    ``quasi_newton``; each finish derives its own tolerance from ``tol``); ``accelerate``: SQUAREM;
+    ``threads``: the threads the starts and E-steps may share (the numbers do not depend on them)."""
+
+    tol: float = 1e-8
+    max_iter: int = 1000
+    em_tol: float = 1e-8
+    quasi_newton: bool = True
+    accelerate: bool = True
+    threads: int = 1
 
 
 #: the options' defaults: 10 restarts from seed 0, to a relative tolerance of 1e-8, on all cores

@@ -66,6 +66,7 @@ from .em import RunResult, run_em
 from .estep import EStep, Workspace
 from .mixture import general_types, mixture_params, type_posteriors
 from .mixture_em import MixtureStructure, MixtureWorkspace
+from .options import SERIAL, FitOptions
 from .personal_models import PersonalModels
 from .sequences import Sequences, encode
 from .spec import FitError, IOHMMSpec, Params
@@ -465,9 +466,7 @@ def personalize(
     frame: pd.DataFrame,
     model: TrustModel | TypeMixture,
     strength: float | Mapping[str, float] | None = None,
-    tol: float = 1e-8,
-    max_iter: int = 1000,
-    n_jobs: int | None = 1,
+    options: FitOptions = SERIAL,
     estimate: str = "held-out",
     folds: int = FOLDS,
 ) -> PersonalModels:
@@ -475,8 +474,11 @@ def personalize(
     participant's most probable type).  ``strength``: one s for every table, or per table
     (``initial``, ``emission``, ``transition``); None estimates each table's s, by ``estimate``:
     ``held-out`` (the held-out log-likelihood over ``folds`` blocks of each participant's trials)
-    or ``variational`` (variational empirical Bayes)."""
-    prep = _Prepared.of(frame, model, n_jobs)
+    or ``variational`` (variational empirical Bayes).  Each participant's EM runs to ``options.tol``
+    (relative) or ``options.max_iter`` E-steps, the participants' E-steps on ``options.n_jobs``
+    threads (:class:`~.options.FitOptions`; by default one)."""
+    tol, max_iter = options.tol, options.max_iter
+    prep = _Prepared.of(frame, model, options.n_jobs)
     spec, seqs, base, centre, work, start = prep.spec, prep.seqs, prep.base, prep.centre, prep.work, prep.start
     N = seqs.n_participants
     warnings: list[str] = []

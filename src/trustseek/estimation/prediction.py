@@ -41,7 +41,7 @@ from ..vocab import HUMAN_ACTIONS
 from .baselines import BASELINES, BaselineFit, Features, baseline_predictions, features, fit_baselines
 from .iohmm import fit_iohmm
 from .options import DEFAULTS, FitOptions
-from .sequences import Sequences, encode
+from .sequences import Sequences, deal_folds, encode
 from .spec import FitError, IOHMMSpec, Params
 from .trust_iohmm import from_model, preset_spec
 
@@ -395,10 +395,7 @@ def fold_assignment(n_participants: int, folds: int, seed: int = 0) -> np.ndarra
         raise FitError([f"--folds must be at least 2, got {folds}"])
     if folds > n_participants:
         raise FitError([f"--folds {folds} is more than the {n_participants} participants of the log (folds are by participant)"])
-    perm = np.random.default_rng(np.random.SeedSequence([seed, 6])).permutation(n_participants)
-    fold_of = np.empty(n_participants, dtype=np.int64)
-    fold_of[perm] = np.arange(n_participants) % folds
-    return fold_of
+    return deal_folds(n_participants, folds, [seed, 6])
 
 
 def predict_heldout(

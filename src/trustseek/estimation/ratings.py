@@ -70,10 +70,8 @@ class RatingStructure(Structure):
         y = seqs.y.astype(np.int32)
         action = np.where(y >= 0, y // (R + 1), -1)
         action = np.where(action == M, -1, action).astype(seqs.y.dtype)
-        rated = (y >= 0) & (y % (R + 1) != R)
         super().__init__(replace(spec, rating=None, rating_levels=()), replace(seqs, y=action))
         self.spec = spec
-        self.rating_events = float(rated.sum())
         self.n_free += spec.n_levels * (R - 1)
 
     @property

@@ -39,11 +39,19 @@ class FitResult(EMFit):
     events: dict[str, np.ndarray]
     counts: dict[str, np.ndarray] = field(default_factory=dict)
     estimated: dict[str, np.ndarray] = field(default_factory=dict)
-    ci: dict[str, tuple[np.ndarray, np.ndarray]] | None = None
-    bootstrap: int = 0
     seed: int = 0
     warnings: list[str] = field(default_factory=list)
     intervals: Intervals | None = None
+
+    @property
+    def ci(self) -> dict[str, tuple[np.ndarray, np.ndarray]] | None:
+        """The bootstrap intervals as (lower, upper) tables, by table (None without a bootstrap)."""
+        return None if self.intervals is None else self.intervals.intervals
+
+    @property
+    def bootstrap(self) -> int:
+        """The number of bootstrap replicates (0: none)."""
+        return 0 if self.intervals is None else self.intervals.replicates
 
     @classmethod
     def of(cls, fit: EMFit, model: TrustModel, events: dict[str, np.ndarray], seed: int) -> FitResult:
@@ -54,7 +62,7 @@ class FitResult(EMFit):
         """Smoothed P(level | all trials of the participant) and the Viterbi level, one row per trial."""
         return posterior_frame(self.seqs, self.spec, self.params)
 
-    def fit_record(self, bootstrap: int) -> dict[str, Any]:
+    def fit_record(self) -> dict[str, Any]:
         """The fit's figures, each start's run, the seed, the bootstrap and the spec, for ``to_dict``."""
         runs, iv = self.runs, self.intervals
         return {
@@ -68,7 +76,7 @@ class FitResult(EMFit):
             "ended": [r.ended for r in runs],
             "seconds": [r.seconds for r in runs],
             "seed": self.seed,
-            "bootstrap": bootstrap,
+            "bootstrap": self.bootstrap,
             "ci_level": None if iv is None else iv.level,
             "ci_method": None if iv is None else iv.method,
             "ci_other_maximum": None if iv is None else iv.other_maximum,
@@ -79,11 +87,10 @@ class FitResult(EMFit):
         """The model, the fit's figures and runs, the seed, the bootstrap, the spec and the warnings
         (a trust model's also its counts, estimated cells and intervals), for JSON."""
         if self.model.general:
-            bootstrap = 0 if self.intervals is None else self.intervals.replicates
-            return {"model": self.model.to_dict(), **self.fit_record(bootstrap), "warnings": list(self.warnings)}
+            return {"model": self.model.to_dict(), **self.fit_record(), "warnings": list(self.warnings)}
         return {
             "model": self.model.to_dict(),
-            **self.fit_record(self.bootstrap),
+            **self.fit_record(),
             "counts": {k: v.tolist() for k, v in self.counts.items()},
             "estimated": {k: v.tolist() for k, v in self.estimated.items()},
             "ci": None

@@ -24,16 +24,12 @@ import pandas as pd
 from .estep import Workspace
 from .iohmm import EMFit, fit_iohmm
 from .options import FitOptions
-from .sequences import Sequences, encode
+from .sequences import Sequences, deal_folds, encode
 from .spec import IOHMMSpec, Params
 from .structure import Structure
 from .trust_iohmm import (
-    PAPER_EMISSION_INPUTS,
-    PAPER_TRANSITION_INPUTS,
-    general_spec,
-    is_trust_structure,
+    inputs_spec,
     level_names,
-    preset_spec,
 )
 
 log = logging.getLogger(__name__)
@@ -133,8 +129,7 @@ def fit_with_moves(
     (:func:`move_sources`; a lower maximum's moves can lead past the best) with two levels
     merged and one split (:func:`split_merge_starts`), while that gains more than
     :data:`BEST_TOLERANCE`.  Every run is kept in the result's ``runs``."""
-    seed = options.seed
-    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    ss = options.seed_sequence
     # the random starts are those fit_iohmm draws from ``seed`` (the first n of n + m are the
     # same): more restarts only add starts; the split and merge moves draw from the seed's own state
     rng = np.random.default_rng(ss.generate_state(4))
@@ -213,15 +208,7 @@ def select_levels(
     and ``reached_best`` (starts within :data:`BEST_TOLERANCE` of the best);
     :func:`selection_warnings` says when the best number of levels is the largest compared.
     """
-    tr = tuple(spec_options.get("transition_inputs", PAPER_TRANSITION_INPUTS))
-    em = tuple(spec_options.get("emission_inputs", PAPER_EMISSION_INPUTS))
-    if is_trust_structure(tr, em):
-        base = preset_spec("paper", frame, prior=prior, **spec_options)
-    else:
-        extra = sorted(set(spec_options) - {"transition_inputs", "emission_inputs"})
-        if extra:
-            raise ValueError(f"options {extra} apply to the paper preset only, not to a model of named inputs")
-        base = general_spec(frame, em, tr, prior=prior)
+    base = inputs_spec(frame, "paper", prior, **spec_options)
     seqs = encode(frame, base)
     previous: dict[int, EMFit] = {}  # per slot (-1: all participants, f: fold f's training participants)
 
@@ -270,9 +257,7 @@ class HeldOutComparison:
         ``extra(full fit)`` adds entries to the row.  The rows' choices are marked."""
         N = seqs.n_participants
         folds = max(2, min(self.folds, N))
-        perm = np.random.default_rng(np.random.SeedSequence([self.seed, 2])).permutation(N)
-        fold_of = np.empty(N, dtype=np.int64)
-        fold_of[perm] = np.arange(N) % folds
+        fold_of = deal_folds(N, folds, [self.seed, 2])
         asked = list(values)
         total, done = len(asked) * (folds + 1), 0
         rows: list[dict[str, Any]] = []

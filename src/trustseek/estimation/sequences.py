@@ -239,3 +239,12 @@ def encode(frame: pd.DataFrame, spec: IOHMMSpec, participant: str = "participant
     row_type = np.int32 if n < 2**31 else np.int64
     rows = spread(np.arange(n, dtype=row_type), row_type)
     return Sequences(participants, lengths, y, ue, ut, rows, n, base, np.asarray(trials, dtype=np.int64))
+
+
+def deal_folds(n_participants: int, folds: int, key: Sequence[int]) -> np.ndarray:
+    """The fold (0..folds-1) of every participant: a permutation seeded by ``key`` (a
+    :class:`numpy.random.SeedSequence`'s entropy) dealt round-robin, so fold sizes differ by at most one."""
+    perm = np.random.default_rng(np.random.SeedSequence(list(key))).permutation(n_participants)
+    fold_of = np.empty(n_participants, dtype=np.int64)
+    fold_of[perm] = np.arange(n_participants) % folds
+    return fold_of

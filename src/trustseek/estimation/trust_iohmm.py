@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -150,16 +151,22 @@ def to_model(spec: IOHMMSpec, params: Params, notes: str = "", general: bool = F
         levels, complexities = spec.levels, model_complexities(spec)
         return trust_model(levels, complexities, params.initial, emission[eg], params.transition[tg], notes, rating=rating)
     d = spec.to_dict()
+    inputs = {c: tuple(spec.categories[c]) for c in dict.fromkeys((*spec.emission_inputs, *spec.transition_inputs))}
+
+    def named(rows: np.ndarray, on: Sequence[str]) -> np.ndarray:
+        """A table by input combination (U, K, ·) with one axis per input of ``on``."""
+        return rows.reshape(*(len(inputs[c]) for c in on), *rows.shape[1:])
+
     return TrustModel(
         levels=spec.levels,
         output=spec.output,
         output_categories=spec.output_categories,
-        inputs={c: tuple(spec.categories[c]) for c in dict.fromkeys((*spec.emission_inputs, *spec.transition_inputs))},
+        inputs=inputs,
         emission_inputs=spec.emission_inputs,
         transition_inputs=spec.transition_inputs,
         initial=params.initial,
-        emission=emission,
-        transition=params.transition,
+        emission=named(emission, spec.emission_inputs),
+        transition=named(params.transition, spec.transition_inputs),
         structure={k: d[k] for k in STRUCTURE_KEYS},
         rating=rating,
         rating_column=spec.rating,
@@ -237,6 +244,27 @@ def general_spec(
         levels = level_names(levels)
     cats = dict(categories) if categories is not None else input_levels(frame, (*emission_inputs, *transition_inputs))
     return _human_action_spec(levels, emission_inputs, transition_inputs, {c: tuple(v) for c, v in cats.items()}, prior)
+
+
+def inputs_spec(
+    frame: pd.DataFrame,
+    preset: str | IOHMMSpec = "paper",
+    prior: float = 0.0,
+    transition_inputs: Sequence[str] = PAPER_TRANSITION_INPUTS,
+    emission_inputs: Sequence[str] = PAPER_EMISSION_INPUTS,
+    **spec_options: Any,
+) -> IOHMMSpec:
+    """The structure for these inputs: the ``preset`` (a trust model, ``spec_options`` as for
+    :func:`preset_spec`) for the canonical inputs, :func:`general_spec` when an input is a study's
+    own (of ``spec_options`` only ``levels`` applies there; any other is refused)."""
+    if isinstance(preset, IOHMMSpec) or is_trust_structure(transition_inputs, emission_inputs):
+        return preset_spec(
+            preset, frame, prior=prior, transition_inputs=transition_inputs, emission_inputs=emission_inputs, **spec_options
+        )
+    extra = sorted(set(spec_options) - {"levels"})
+    if extra:
+        raise ValueError(f"options {extra} apply to the paper preset only, not to a model of named inputs")
+    return general_spec(frame, emission_inputs, transition_inputs, spec_options.get("levels", ("low", "high")), prior)
 
 
 def _human_action_spec(

@@ -3,14 +3,13 @@ refits the mixture to resampled participants, its types matched to the estimate'
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .bootstrap import resample, run_replicates
+from .bootstrap import replicate, resample
 from .mixture import MixtureFit, fit_mixture, general_types
 from .mixture_em import PARTS, MixtureParams
 from .options import FitOptions
@@ -88,18 +87,15 @@ def bootstrap_types(
     (``options.n_jobs``, default all cores)."""
     if replicates < 1:
         raise FitError([f"the bootstrap needs at least one replicate, got {replicates}"])
-    children = np.random.SeedSequence([options.seed_number, 1]).spawn(replicates)
-    jobs = [_TypeReplicate(fit.seqs, fit.spec, fit.n_types, fit.differ, fit.params, ch, options) for ch in children]
-    n_jobs = options.n_jobs or os.cpu_count() or 1
-    results: dict[int, np.ndarray] = {}
 
-    def done(i: int, res: np.ndarray) -> None:
-        results[i] = res
+    def done(_i: int, finished: int) -> None:
         if progress is not None:
-            progress(len(results), replicates)
+            progress(finished, replicates)
 
-    run_replicates(jobs, n_jobs, done)
-    flat = np.vstack([results[i] for i in range(replicates)])
+    def job(seed: np.random.SeedSequence) -> _TypeReplicate:
+        return _TypeReplicate(fit.seqs, fit.spec, fit.n_types, fit.differ, fit.params, seed, options)
+
+    flat = np.vstack(replicate(job, replicates, options, done))
     est = np.concatenate([_type_vectors(fit.spec, fit.params).ravel(), fit.weights])
     a = (1 - level) / 2
     lo, hi = np.quantile(flat, [a, 1 - a], axis=0)

@@ -19,12 +19,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .mixture import MixtureFit, fit_mixture, split_type_starts, types_spec
+from .mixture import MixtureFit, fit_mixture, split_type_starts
 from .mixture_em import MixtureParams, MixtureWorkspace
 from .options import FitOptions
 from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, HeldOutComparison, comparison_warnings, smooth_zero_rows
 from .sequences import Sequences, encode
 from .spec import FitError
+from .trust_iohmm import inputs_spec
 
 log = logging.getLogger(__name__)
 
@@ -75,7 +76,7 @@ def select_types(
     types = sorted({int(m) for m in types})
     if not types or types[0] < 1:
         raise FitError([f"the numbers of types must be positive integers, got {list(types)}"])
-    spec = types_spec(frame, "paper", prior, **spec_options)
+    spec = inputs_spec(frame, "paper", prior, **spec_options)
     seqs = encode(frame, spec)
     previous: dict[int, MixtureFit] = {}  # per slot (-1: all participants, f: fold f's training participants)
     pooled: dict[int, MixtureFit] = {}  # the one-type fit of each slot

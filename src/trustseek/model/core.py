@@ -46,7 +46,6 @@ import numpy as np
 
 from ..vocab import ACTIONS, ASK, AUTONOMOUS, EXPERIENCES, FAULTY, HUMAN_ACTIONS, INTERVENE, RELIABLE, RELY
 from .files import (
-    EMISSION_INPUTS,
     IOHMM_FORMAT,
     MODEL_FORMAT,
     PLANNING_INPUTS,
@@ -55,12 +54,14 @@ from .files import (
     model_fields,
     model_to_dict,
     planning_refusal,
+    trust_fields,
 )
 from .jsonfile import (
     JsonFile,
     ModelError,
     UnknownComplexityError,
     build,
+    check_names,
     check_row_array,
     freeze_arrays,
     load_json,
@@ -125,10 +126,6 @@ class TrustModel(JsonFile):
             self, "not_estimated", tuple(sorted({(str(t), tuple(int(i) for i in idx)) for t, idx in self.not_estimated}))
         )
         freeze_arrays(self, "initial", "emission", "transition")
-        for name, inputs in (("emission", self.emission_inputs), ("transition", self.transition_inputs)):
-            arr = getattr(self, name)
-            if all(c in self.inputs for c in inputs) and arr.ndim == 3 and arr.shape[0] == self.n_combinations(inputs):
-                object.__setattr__(self, name, arr.reshape(self.axes(inputs) + arr.shape[1:]))  # given by combination
         raise_problems(self)
 
     # -- configuration -----------------------------------------------------
@@ -231,25 +228,15 @@ class TrustModel(JsonFile):
 
     @property
     def paper_inputs(self) -> bool:
-        """True when the inputs are the paper's (as a trust model has them)."""
-        return (
-            self.output == "human_action"
-            and self.output_categories == HUMAN_ACTIONS
-            and set(self.inputs) == set(PLANNING_INPUTS)
-            and self.inputs.get("robot_action") == ACTIONS
-            and self.inputs.get("experience") == EXPERIENCES
-            and self.emission_inputs == EMISSION_INPUTS
-            and self.transition_inputs == PLANNING_INPUTS
-        )
+        """True when the inputs are the paper's (as a trust model has them: :func:`~.files.trust_fields`)."""
+        paper = trust_fields(self.levels, self.inputs.get("complexity", ()))
+        return all(getattr(self, k) == v for k, v in paper.items() if k != "structure")
 
     def _trust_problems(self) -> list[str]:
         """A trust model's names: two or more distinct trust levels and complexities."""
         p: list[str] = []
-        for what, names in (("trust_levels", self.levels), ("complexities", self.inputs["complexity"])):
-            if len(set(names)) != len(names):
-                p.append(f"{what} has duplicate names: {list(names)}")
-            if len(names) < 2:
-                p.append(f"{what} needs at least 2 entries, got {len(names)}")
+        check_names(list(self.levels), "trust_levels", p)
+        check_names(list(self.inputs["complexity"]), "complexities", p)
         return p
 
     def _extras_problems(self) -> list[str]:
@@ -347,9 +334,8 @@ def trust_model(
 ) -> TrustModel:
     """The trust model with the paper's inputs: ``emission[c, a, t, o]`` and
     ``transition[c, a, e, t, t2]`` over ``complexities``, the robot actions and the experiences."""
-    inputs = {"complexity": tuple(complexities), "robot_action": ACTIONS, "experience": EXPERIENCES}
-    return TrustModel(tuple(trust_levels), "human_action", HUMAN_ACTIONS, inputs, EMISSION_INPUTS, PLANNING_INPUTS,
-                      initial, emission, transition, None, rating, None, notes, tuple(not_estimated))  # fmt: skip
+    return TrustModel(**trust_fields(trust_levels, complexities), initial=initial, emission=emission, transition=transition,
+                      rating=rating, notes=notes, not_estimated=tuple(not_estimated))  # fmt: skip
 
 
 def load_any_model(path: str | Path) -> TrustModel:

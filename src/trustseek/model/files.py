@@ -25,6 +25,7 @@ __all__ = [
     "model_fields",
     "model_to_dict",
     "planning_refusal",
+    "trust_fields",
 ]
 
 MODEL_FORMAT = "trustseek.trust-model/1"
@@ -32,6 +33,21 @@ IOHMM_FORMAT = "trustseek.iohmm/1"  # a general model with named inputs
 PLANNING_INPUTS = ("complexity", "robot_action", "experience")  # the inputs of a trust model, which planning needs
 EMISSION_INPUTS = ("complexity", "robot_action")  # a trust model's emissions depend on these
 SYMBOLS = {"complexity": "C", "robot_action": "a", "experience": "E"}  # how a trust model's row names show its inputs
+
+
+def trust_fields(trust_levels: Sequence[str], complexities: Sequence[str]) -> dict[str, Any]:
+    """A trust model's configuration (the paper's): its levels, the human action as output, the
+    inputs complexity (``complexities``), robot action and experience, emissions on the first two,
+    transitions on all three, no fitted structure."""
+    return {
+        "levels": tuple(trust_levels),
+        "output": "human_action",
+        "output_categories": HUMAN_ACTIONS,
+        "inputs": {"complexity": tuple(complexities), "robot_action": ACTIONS, "experience": EXPERIENCES},
+        "emission_inputs": EMISSION_INPUTS,
+        "transition_inputs": PLANNING_INPUTS,
+        "structure": None,
+    }
 
 
 def planning_refusal(inputs: Sequence[str]) -> str:
@@ -150,15 +166,7 @@ def _trust_header(d: Mapping[str, Any], problems: list[str]):
     C = check_names(get_key(d, "complexities", "complexities", problems), "complexities", problems)
     if not T or not C:
         return None, {}, None
-    kw = {
-        "levels": tuple(T),
-        "output": "human_action",
-        "output_categories": HUMAN_ACTIONS,
-        "inputs": {"complexity": tuple(C), "robot_action": ACTIONS, "experience": EXPERIENCES},
-        "emission_inputs": EMISSION_INPUTS,
-        "transition_inputs": PLANNING_INPUTS,
-        "structure": None,
-    }
+    kw = trust_fields(T, C)
 
     def rest(problems: list[str]) -> dict[str, Any]:
         notes = d.get("notes", "")

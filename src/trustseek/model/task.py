@@ -25,6 +25,7 @@ from .jsonfile import (
     ModelError,
     UnknownComplexityError,
     build,
+    check_names,
     check_row_array,
     fmt_number,
     freeze_arrays,
@@ -97,10 +98,7 @@ class Task(JsonFile):
     def problems(self) -> list[str]:
         N = len(self.complexities)
         problems: list[str] = []
-        if len(set(self.complexities)) != N:
-            problems.append(f"complexities has duplicate names: {list(self.complexities)}")
-        if N < 2:
-            problems.append(f"complexities needs at least 2 entries, got {N}")
+        check_names(list(self.complexities), "complexities", problems)
         if self.complexity_probs.shape != (N,) or self.success.shape != (N,) or len(self.ask_experience) != N:
             problems.append("complexity_probs, success and ask_experience need one entry per complexity")
             return problems
