@@ -4,13 +4,9 @@
 from . import (
     agnostic,
     alpha,
-    backup,
     base,
-    certificate,
-    certified_grid,
+    certified,
     defaults,
-    envelopes,
-    eq3,
     grid,
     numerics,
     point,
@@ -26,7 +22,7 @@ from . import (
 from .agnostic import TrustAgnosticSolver, trust_agnostic, trust_agnostic_from_data
 from .alpha import AlphaSolver
 from .base import Solver, SolverError, UnsupportedProblem
-from .certified_grid import CertifiedGridSolver
+from .certified import CertifiedGridSolver
 from .grid import GridSolver, solve
 from .point import PointSolver
 from .policy_specs import PolicySpecError, policy_from_spec

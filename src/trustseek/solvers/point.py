@@ -38,11 +38,21 @@ import scipy.sparse as sp
 
 from ..policies.alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy
 from ..policies.base import Policy
-from ..pomdp.branch_model import BranchModel
+from ..pomdp.belief import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from .base import SolverBase, SolverError, bayes_only, one_blas_thread
-from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, policy_values
+from .numerics import (
+    best_at,
+    best_vectors,
+    evaluate_controller,
+    greedy_controller,
+    improve,
+    memoryless_controllers,
+    point_backup,
+    policy_values,
+    unique_rows,
+)
 
 __all__ = ["PointSolution", "PointSolver", "freudenthal_vertices", "freudenthal_weights"]
 
@@ -180,22 +190,16 @@ class PointSolver(SolverBase):
         prev = None
         for _ in range(rounds):
             best = (Sf @ self.G.T).argmax(axis=1).reshape(n, N, A, Br)
-            # backup at every belief: g[i, c, a] = R + γ Σ_br M (p-weighted) G[best]
-            proj = np.einsum("cabtu,ncabu->ncat", m.kernels, self.G[best])
-            g = m.rewards[None] + m.discount * proj
+            g = point_backup(m, self.G, best)
             acts = np.einsum("ncat,nt->nca", g, B).argmax(axis=2)  # (n, N)
-            alpha = np.einsum("c,nct->nt", m.context_probs, g[np.arange(n)[:, None], np.arange(N)[None, :], acts])
             # controller: node i, successors = node best at the next belief among the new vectors
-            Sa = S[np.arange(n)[:, None], np.arange(N)[None, :], acts]  # (n, N, Br, K)
-            succ = (Sa.reshape(-1, K) @ alpha.T).argmax(axis=1).reshape(n, N, Br)
-            pa = p[np.arange(n)[:, None], np.arange(N)[None, :], acts]
-            succ = np.where(pa > 0, succ, -1)
+            alpha, succ = greedy_controller(m, S, p, g, acts)
             key = (acts.tobytes(), succ.tobytes())
             before = (B @ self.G.T).max(axis=1)
             ev = evaluate_controller(m, acts, succ, guess=alpha)
             if not np.all(np.isfinite(ev)):
                 ev = alpha
-            self.G = _prune(np.vstack([self.G, alpha, ev]), B)
+            self.G = best_at(np.vstack([self.G, alpha, ev]), B)
             gain = float(np.max((B @ self.G.T).max(axis=1) - before))
             if key == prev or gain <= self.tol * 1e-2:
                 break
@@ -266,9 +270,9 @@ class PointSolver(SolverBase):
         out, front = [b0[None]], b0[None]
         for _ in range(depth):
             S, p = self._successors(front)
-            front = _unique_rows(S[p > 0].reshape(-1, K), K)
+            front = unique_rows(S[p > 0].reshape(-1, K))
             out.append(front)
-        return _unique_rows(np.vstack(out), K)
+        return unique_rows(np.vstack(out))
 
     def _sampled(self, b0: np.ndarray, rng: np.random.Generator, trajectories: int = 8, length: int = 50) -> np.ndarray:
         """Beliefs met along simulated trajectories from b0 (complexity and branch drawn with their
@@ -290,7 +294,7 @@ class PointSolver(SolverBase):
             br = np.minimum((np.cumsum(pb, axis=1) / pb.sum(axis=1, keepdims=True) < u).sum(axis=1), pb.shape[1] - 1)
             B = S[idx, c, a, br]
             out.append(B)
-        return _unique_rows(np.vstack(out), K, decimals=9)
+        return unique_rows(np.vstack(out), decimals=9)
 
     # -- solve -------------------------------------------------------------------------
     @one_blas_thread
@@ -333,7 +337,7 @@ class PointSolver(SolverBase):
             V, u, lookup = self._upper(r)
             t_upper = time.perf_counter() - t_round
             self.r, self.u, self.lookup, self.V = r, u, lookup, V
-            B = _unique_rows(np.vstack([_simplex_lattice(K, min(r, lat)), reach, self._sampled(b0, rng)]), K)
+            B = unique_rows(np.vstack([_simplex_lattice(K, min(r, lat)), reach, self._sampled(b0, rng)]))
             S, p = self._successors(B)
             self._improve_lower(B, S, p)
             lo = float(self.lower_at(b0)[0])
@@ -354,9 +358,8 @@ class PointSolver(SolverBase):
         m = self.model
         S = self._successors(beliefs)[0]
         n, N, A, Br, K = S.shape
-        best = best_vectors(S.reshape(-1, K), self.G).reshape(n, N, A, Br)
-        g = m.rewards[None] + m.discount * np.einsum("cabtu,ncabu->ncat", m.kernels, self.G[best])
-        return [[_unique_rows(g[:, c, a], K, decimals=12) for a in range(A)] for c in range(N)]
+        g = point_backup(m, self.G, best_vectors(S.reshape(-1, K), self.G).reshape(n, N, A, Br))
+        return [[unique_rows(g[:, c, a], decimals=12) for a in range(A)] for c in range(N)]
 
     @one_blas_thread
     def solve(self, problem: AssistancePOMDP | FlatPOMDP) -> Policy:
@@ -365,7 +368,7 @@ class PointSolver(SolverBase):
         for a flat POMDP."""
         sol = self.solve_bounds(problem)
         K = sol.vectors.shape[1]
-        qv = self.q_vectors(_unique_rows(np.vstack([sol.points, _simplex_lattice(K, _q_lattice(K))]), K))
+        qv = self.q_vectors(unique_rows(np.vstack([sol.points, _simplex_lattice(K, _q_lattice(K))])))
         method = "point-based policy iteration + Freudenthal upper bound"
         return bounds_policy(self, problem, qv, sol, method, resolution=self.r, iterations=sol.iterations)
 
@@ -414,18 +417,6 @@ def _q_lattice(K: int, max_points: int = 5_000) -> int:
     while r > 1 and _lattice_size(K, r) > max_points:
         r -= 1
     return r
-
-
-def _unique_rows(B: np.ndarray, K: int, decimals: int = 13) -> np.ndarray:
-    """Rows of B without near-duplicates, keeping the first occurrence and the order."""
-    _, idx = np.unique(np.round(B, decimals), axis=0, return_index=True)
-    return B[np.sort(idx)]
-
-
-def _prune(G: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Keep the vectors that are best at some belief of B."""
-    keep = np.unique((B @ G.T).argmax(axis=1))
-    return G[keep]
 
 
 def _simplex_lattice(K: int, n: int) -> np.ndarray:

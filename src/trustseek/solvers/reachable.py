@@ -40,13 +40,23 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..policies.base import Policy
-from ..pomdp.branch_model import BranchModel
+from ..pomdp.belief import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from .base import SolverBase, bayes_only, one_blas_thread
-from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, policy_values
+from .numerics import (
+    best_at,
+    best_vectors,
+    evaluate_controller,
+    greedy_controller,
+    improve,
+    memoryless_controllers,
+    point_backup,
+    policy_values,
+    unique_rows,
+)
 from .point import bounds_policy
-from .upper_bounds import BlockGrid, fast_informed_bound, grid_blocks, inverse_points, phi_of, phi_pairs, unique_rows
+from .upper_bounds import BlockGrid, fast_informed_bound, grid_blocks, inverse_points, phi_of, phi_pairs
 
 __all__ = ["ReachableSolution", "ReachableSolver"]
 
@@ -248,7 +258,6 @@ class ReachableSolver(SolverBase):
         n = len(B)
         p, S = self._successors_many(B)  # (n, N, A, Br), (n, N, A, Br, K)
         Sf = S.reshape(-1, K)
-        ii, cc = np.arange(n)[:, None], np.arange(N)[None, :]
         # the actions greedy in the upper bound: near-optimal once the upper bound is close
         q_up = np.einsum("cat,nt->nca", self.rewards, B) + self.discount * (p * self.upper_at(Sf).reshape(n, N, A, Br)).sum(
             axis=3
@@ -257,22 +266,19 @@ class ReachableSolver(SolverBase):
         prev = None
         for _ in range(rounds):
             best = (Sf @ self.vectors.T).argmax(axis=1).reshape(n, N, A, Br)
-            g = self.rewards[None] + self.discount * np.einsum("cabtu,ncabu->ncat", self.model.kernels, self.vectors[best])
+            g = point_backup(self.model, self.vectors, best)
             lo_acts = np.einsum("ncat,nt->nca", g, B).argmax(axis=2)
             before = self.lower_at(B)
             new = []
             for acts in (lo_acts, up_acts):
-                alpha = np.einsum("c,nct->nt", self.context_probs, g[ii, cc, acts])
-                Sa = S[ii, cc, acts]  # (n, N, Br, K)
-                succ = (Sa.reshape(-1, K) @ alpha.T).argmax(axis=1).reshape(n, N, Br)
-                succ = np.where(p[ii, cc, acts] > 0, succ, -1)
+                alpha, succ = greedy_controller(self.model, S, p, g, acts)
                 ev = evaluate_controller(self.model, acts, succ, guess=alpha)
                 new.append(alpha)
                 if np.all(np.isfinite(ev)):
                     new.append(ev)
             key = lo_acts.tobytes()
             G = np.vstack([self.vectors, *new])
-            self.vectors = G[np.unique((np.vstack([B, np.eye(K)]) @ G.T).argmax(axis=1))]
+            self.vectors = best_at(G, np.vstack([B, np.eye(K)]))
             gain = float(np.max(self.lower_at(B) - before))
             if key == prev or gain <= self.tol * 1e-3 or time.perf_counter() > t_end:
                 break
@@ -419,7 +425,7 @@ class ReachableSolver(SolverBase):
         improve on the others at their own belief."""
         K = self.shape[3]
         at = np.vstack([B, np.eye(K)])
-        self.vectors = self.vectors[np.unique((at @ self.vectors.T).argmax(axis=1))]
+        self.vectors = best_at(self.vectors, at)
         n = len(self.points)
         if 1 < n <= 4000:
             order = np.argsort(self.excess_v, kind="stable")  # deepest below the corners first
@@ -543,14 +549,12 @@ class ReachableSolver(SolverBase):
         set reduced to the vectors best at one of the beliefs."""
         N, A, Br, K = self.shape
         _, S = self._successors_many(beliefs)
-        best = best_vectors(S.reshape(-1, K), self.vectors).reshape(len(beliefs), N, A, Br)
-        g = self.rewards[None] + self.discount * np.einsum("cabtu,ncabu->ncat", self.model.kernels, self.vectors[best])
+        g = point_backup(self.model, self.vectors, best_vectors(S.reshape(-1, K), self.vectors).reshape(len(beliefs), N, A, Br))
         res = []
         for c in range(N):
             row = []
             for a in range(A):
-                V = unique_rows(g[:, c, a], decimals=12)
-                row.append(V[np.unique((beliefs @ V.T).argmax(axis=1))])
+                row.append(best_at(unique_rows(g[:, c, a], decimals=12), beliefs))
             res.append(row)
         return res
 

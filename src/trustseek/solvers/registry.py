@@ -52,7 +52,7 @@ def _alpha(belief_update: str = "bayes", gap: float = 1e-6) -> Solver:
 
 
 def _certified_grid(belief_update: str = "paper", gap: float = 1e-6) -> Solver:
-    return solvers.certified_grid.CertifiedGridSolver(belief_update=belief_update, tol=gap)
+    return solvers.certified.CertifiedGridSolver(belief_update=belief_update, tol=gap)
 
 
 def _point(

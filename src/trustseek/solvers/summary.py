@@ -11,8 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..policies.base import Policy
-from ..policies.regions import ask_regions
+from ..policies.base import Policy, ask_regions
 from ..pomdp.problem import AssistancePOMDP
 from .agnostic import TrustAgnosticSolver
 

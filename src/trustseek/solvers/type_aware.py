@@ -54,18 +54,25 @@ from ..compiled import njit
 from ..model.core import TrustModel, trust_model
 from ..model.mixture import TypeMixture
 from ..model.task import Task
-from ..policies.alpha_vector import AlphaVectorPolicy
+from ..policies.alpha_vector import AlphaVectorPolicy, TypeAwarePolicy
 from ..policies.base import Policy
 from ..policies.envelope import envelope_values
-from ..policies.type_aware import TypeAwarePolicy
-from ..pomdp.branch_model import BranchModel
+from ..pomdp.belief import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.supervisor_types import type_aware_problem
 from .alpha import AlphaSolver
 from .base import bayes_only, one_blas_thread
 from .defaults import DEFAULT_TYPE_AWARE_SOLVER
-from .numerics import evaluate_controller, improve, memoryless_controllers, policy_values
+from .numerics import (
+    best_at,
+    evaluate_controller,
+    greedy_controller,
+    improve,
+    memoryless_controllers,
+    point_backup,
+    policy_values,
+)
 from .point import (
     PointSolution,
     PointSolver,
@@ -179,13 +186,9 @@ def _block_controller(model: BranchModel, block: BranchModel, vecs: np.ndarray, 
     B = np.stack([1.0 - x, x], axis=1)
     p, S = block.branches.successors(B)  # (n, N, A, Br), (n, N, A, Br, 2)
     n, N, A, Br, _ = S.shape
-    best = (S.reshape(-1, 2) @ vecs.T).argmax(axis=1).reshape(n, N, A, Br)
-    g = block.rewards[None] + block.discount * np.einsum("cabtu,ncabu->ncat", block.kernels, vecs[best])
+    g = point_backup(block, vecs, (S.reshape(-1, 2) @ vecs.T).argmax(axis=1).reshape(n, N, A, Br))
     acts = np.einsum("ncat,nt->nca", g, B).argmax(axis=2)
-    ii, cc = np.arange(n)[:, None], np.arange(N)[None, :]
-    alpha = np.einsum("c,nct->nt", block.context_probs, g[ii, cc, acts])
-    succ = (S[ii, cc, acts].reshape(-1, 2) @ alpha.T).argmax(axis=1).reshape(n, N, Br)
-    succ = np.where(p[ii, cc, acts] > 0, succ, -1)
+    succ = greedy_controller(block, S, p, g, acts)[1]
     ev = evaluate_controller(model, acts, succ)
     return ev if np.all(np.isfinite(ev)) else np.zeros((0, model.n_hidden))
 
@@ -312,7 +315,7 @@ class TypeAwareSolver(PointSolver):
         self.u = np.zeros(0)  # no grid bound yet: upper_at is the types' bound alone
         G = np.vstack([memoryless_controllers(model), *self.bound.controllers])
         K = model.n_hidden
-        return G[np.unique((np.vstack([reach, np.eye(K)]) @ G.T).argmax(axis=1))] if len(G) > 1 else G
+        return best_at(G, np.vstack([reach, np.eye(K)])) if len(G) > 1 else G
 
     def _upper_at_start(self, b0: np.ndarray) -> float:
         return self.lookahead_upper(b0)

@@ -10,8 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from ..pomdp.belief import Branches
-from ..pomdp.branch_model import BranchModel
+from ..pomdp.belief import Branches, BranchModel
 from .base import SolverError
 from .point import PointSolver
 
@@ -23,7 +22,6 @@ __all__ = [
     "inverse_points",
     "phi_of",
     "phi_pairs",
-    "unique_rows",
 ]
 
 
@@ -148,9 +146,3 @@ def phi_pairs(B: np.ndarray, P: np.ndarray, idx: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         r = np.where(Pi > 0, B[:, None, :] / np.where(Pi > 0, Pi, 1.0), np.inf)
     return np.minimum(r.min(axis=2), 1.0)
-
-
-def unique_rows(B: np.ndarray, decimals: int = 13) -> np.ndarray:
-    """Rows of B without near-duplicates, keeping the first occurrence and the order."""
-    _, idx = np.unique(np.round(B, decimals), axis=0, return_index=True)
-    return B[np.sort(idx)]
