@@ -27,7 +27,7 @@ Three views of the same filter, for three kinds of callers:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -250,23 +250,19 @@ class BranchModel:
     branches: Branches
     discount: float
     initial: np.ndarray
+    #: the sizes: contexts (complexities; one for a flat POMDP), actions, hidden states (trust levels)
+    n_contexts: int = field(init=False)
+    n_actions: int = field(init=False)
+    n_hidden: int = field(init=False)
+
+    def __post_init__(self) -> None:
+        for name, size in zip(("n_contexts", "n_actions", "n_hidden"), self.rewards.shape, strict=True):
+            object.__setattr__(self, name, int(size))
 
     @property
     def kernels(self) -> np.ndarray:
         """M[c, a, branch, t, t2] = P(branch, T' = t2 | T = t, c, a): the unnormalized belief update."""
         return self.branches.move
-
-    @property
-    def n_hidden(self) -> int:
-        return self.rewards.shape[2]
-
-    @property
-    def n_actions(self) -> int:
-        return self.rewards.shape[1]
-
-    @property
-    def n_contexts(self) -> int:
-        return len(self.context_probs)
 
     def finite_horizon_value(self, belief: np.ndarray, horizon: int, context: int | None = None) -> float:
         """The exact optimal value of ``horizon`` trials from a belief, by expanding the belief

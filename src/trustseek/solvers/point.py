@@ -54,7 +54,7 @@ from .numerics import (
     unique_rows,
 )
 
-__all__ = ["PointSolution", "PointSolver", "freudenthal_vertices", "freudenthal_weights"]
+__all__ = ["PointSolution", "PointSolver", "bounds_policy", "freudenthal_weights", "next_round_seconds"]
 
 
 @dataclass
@@ -73,12 +73,6 @@ class PointSolution:
     @property
     def gap(self) -> float:
         return self.upper - self.lower
-
-
-def freudenthal_vertices(K: int, r: int) -> np.ndarray:
-    """The beliefs at the vertices of Freudenthal's triangulation of the simplex at resolution r
-    (all beliefs with coordinates in multiples of 1/r)."""
-    return _simplex_lattice(K, r)
 
 
 def freudenthal_weights(B: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
@@ -211,7 +205,7 @@ class PointSolver(SolverBase):
         code lookup[i]), their successors' probabilities p (nV, N, A, Br) and beliefs S
         (nV, N, A, Br, K), and the vertices col and weights w that interpolate each successor."""
         K = self.model.n_hidden
-        V = freudenthal_vertices(K, r)
+        V = _simplex_lattice(K, r)  # the vertices: every belief with coordinates in multiples of 1/r
         own = np.round(np.cumsum(V[:, ::-1], axis=1)[:, ::-1] * r).astype(np.int64)
         codes = _vertex_code(own, r)
         order = np.argsort(codes, kind="stable")
@@ -430,6 +424,3 @@ def _simplex_lattice(K: int, n: int) -> np.ndarray:
         edges = (-1, *bars, n + K - 1)
         rows.append([edges[i + 1] - edges[i] - 1 for i in range(K)])
     return np.array(rows, dtype=float) / n
-
-
-__all__ = ["PointSolution", "PointSolver", "evaluate_controller", "freudenthal_weights", "next_round_seconds"]

@@ -43,18 +43,8 @@ from ..policies.base import Policy
 from ..pomdp.belief import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
+from . import numerics
 from .base import SolverBase, bayes_only, one_blas_thread
-from .numerics import (
-    best_at,
-    best_vectors,
-    evaluate_controller,
-    greedy_controller,
-    improve,
-    memoryless_controllers,
-    point_backup,
-    policy_values,
-    unique_rows,
-)
 from .point import bounds_policy
 from .upper_bounds import BlockGrid, fast_informed_bound, grid_blocks, inverse_points, phi_of, phi_pairs
 
@@ -125,7 +115,7 @@ class ReachableSolver(SolverBase):
         # b @ flat -> unnormalized next beliefs of every (c, a, branch)
         self.flat = np.ascontiguousarray(np.moveaxis(M, 3, 0).reshape(K, -1))
         self.rewards, self.context_probs, self.discount = model.rewards, model.context_probs, model.discount
-        self.vectors = memoryless_controllers(model)
+        self.vectors = numerics.memoryless_controllers(model)
         self.beta = fast_informed_bound(model)
         self.corners = self.context_probs @ self.beta.max(axis=1)  # U at the corners
         self.blocks = grid_blocks(model, self.grid_vertices)
@@ -266,19 +256,19 @@ class ReachableSolver(SolverBase):
         prev = None
         for _ in range(rounds):
             best = (Sf @ self.vectors.T).argmax(axis=1).reshape(n, N, A, Br)
-            g = point_backup(self.model, self.vectors, best)
+            g = numerics.point_backup(self.model, self.vectors, best)
             lo_acts = np.einsum("ncat,nt->nca", g, B).argmax(axis=2)
             before = self.lower_at(B)
             new = []
             for acts in (lo_acts, up_acts):
-                alpha, succ = greedy_controller(self.model, S, p, g, acts)
-                ev = evaluate_controller(self.model, acts, succ, guess=alpha)
+                alpha, succ = numerics.greedy_controller(self.model, S, p, g, acts)
+                ev = numerics.evaluate_controller(self.model, acts, succ, guess=alpha)
                 new.append(alpha)
                 if np.all(np.isfinite(ev)):
                     new.append(ev)
             key = lo_acts.tobytes()
             G = np.vstack([self.vectors, *new])
-            self.vectors = best_at(G, np.vstack([B, np.eye(K)]))
+            self.vectors = numerics.best_at(G, np.vstack([B, np.eye(K)]))
             gain = float(np.max(self.lower_at(B) - before))
             if key == prev or gain <= self.tol * 1e-3 or time.perf_counter() > t_end:
                 break
@@ -362,8 +352,8 @@ class ReachableSolver(SolverBase):
                 rhs = rhs + np.bincount(rows_of[sel], weights=(wt * a0)[sel], minlength=n)
                 lin = sel & (slope > 0)
                 W = sp.csr_matrix(((wt * slope)[lin], (rows_of[lin], col[lin])), shape=(n, n))
-                v = policy_values(W, rhs, v)
-                new_acts = improve(q_of(v, aff), acts, axis=2)
+                v = numerics.policy_values(W, rhs, v)
+                new_acts = numerics.improve(q_of(v, aff), acts, axis=2)
                 if new_acts is None or time.perf_counter() > t_end:
                     break
                 acts = new_acts
@@ -406,9 +396,9 @@ class ReachableSolver(SolverBase):
         out, front = [b0[None]], b0[None]
         for _ in range(depth):
             p, S = self._successors_many(front)
-            front = unique_rows(S[p > 0].reshape(-1, K), self.decimals)
+            front = numerics.unique_rows(S[p > 0].reshape(-1, K), self.decimals)
             out.append(front)
-        return unique_rows(np.vstack(out), self.decimals)
+        return numerics.unique_rows(np.vstack(out), self.decimals)
 
     def _successors_many(self, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(p[n, c, a, br], next[n, c, a, br, t]) of beliefs B."""
@@ -425,7 +415,7 @@ class ReachableSolver(SolverBase):
         improve on the others at their own belief."""
         K = self.shape[3]
         at = np.vstack([B, np.eye(K)])
-        self.vectors = best_at(self.vectors, at)
+        self.vectors = numerics.best_at(self.vectors, at)
         n = len(self.points)
         if 1 < n <= 4000:
             order = np.argsort(self.excess_v, kind="stable")  # deepest below the corners first
@@ -508,7 +498,7 @@ class ReachableSolver(SolverBase):
                 backups += 1
             backup_seconds += time.perf_counter() - b_start
             visited.extend(path[1:])
-            B = unique_rows(np.array(visited), self.decimals)
+            B = numerics.unique_rows(np.array(visited), self.decimals)
             visited = list(B)
             # a consolidation is not started past the limit: the next one costs about (size
             # ratio)^2 x the last one; the first, about two backups per visited belief (each
@@ -518,7 +508,7 @@ class ReachableSolver(SolverBase):
                 # values over the visited beliefs at once (loops of beliefs included), with the
                 # beliefs met on a few trajectories of the greedy policy (what the lower bound needs)
                 c0 = time.perf_counter()
-                B = unique_rows(np.vstack([B, self._sampled(b0, rng)]), self.decimals)
+                B = numerics.unique_rows(np.vstack([B, self._sampled(b0, rng)]), self.decimals)
                 visited = list(B)
                 self._improve_upper(B, t_end=t_end)
                 self._improve_lower(B, t_end=t_end)
@@ -526,7 +516,7 @@ class ReachableSolver(SolverBase):
                 consolidated, cost = len(B), time.perf_counter() - c0
             lo, up = float(self.lower_at(b0)[0]), float(self.upper_at(b0)[0])
             history.append((trials, time.perf_counter() - t0, lo, up))
-        B = unique_rows(np.array(visited), self.decimals)
+        B = numerics.unique_rows(np.array(visited), self.decimals)
         self._prune(B)
         lo, up = float(self.lower_at(b0)[0]), float(self.upper_at(b0)[0])
         self.visited = B
@@ -549,12 +539,13 @@ class ReachableSolver(SolverBase):
         set reduced to the vectors best at one of the beliefs."""
         N, A, Br, K = self.shape
         _, S = self._successors_many(beliefs)
-        g = point_backup(self.model, self.vectors, best_vectors(S.reshape(-1, K), self.vectors).reshape(len(beliefs), N, A, Br))
+        best = numerics.best_vectors(S.reshape(-1, K), self.vectors).reshape(len(beliefs), N, A, Br)
+        g = numerics.point_backup(self.model, self.vectors, best)
         res = []
         for c in range(N):
             row = []
             for a in range(A):
-                row.append(best_at(unique_rows(g[:, c, a], decimals=12), beliefs))
+                row.append(numerics.best_at(numerics.unique_rows(g[:, c, a], decimals=12), beliefs))
             res.append(row)
         return res
 
@@ -565,7 +556,7 @@ class ReachableSolver(SolverBase):
         flat POMDP."""
         sol = self.solve_bounds(problem)
         K = sol.vectors.shape[1]
-        at = unique_rows(np.vstack([sol.beliefs, np.eye(K), np.full((1, K), 1.0 / K)]))
+        at = numerics.unique_rows(np.vstack([sol.beliefs, np.eye(K), np.full((1, K), 1.0 / K)]))
         qv = self.q_vectors(at)
         method = "heuristic search over reachable beliefs: alpha-vector lower bound, sawtooth upper bound"
         counts = {"trials": sol.trials, "backups": sol.backups, "iterations": sol.trials, "beliefs_visited": len(sol.beliefs)}
