@@ -15,12 +15,13 @@ controller evaluation.
   types solvers' lower bounds);
 * :func:`evaluate_controller` -- the exact value vectors of a finite-state controller on a
   POMDP in branch form (any number of hidden states), and :func:`memoryless_controllers`;
-* :func:`unique_rows` -- beliefs without near-duplicates.
+* :func:`unique_rows` -- beliefs without near-duplicates, and :func:`reachable_beliefs`.
 """
 
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -37,6 +38,7 @@ __all__ = [
     "memoryless_controllers",
     "point_backup",
     "policy_values",
+    "reachable_beliefs",
     "unique_rows",
 ]
 
@@ -175,3 +177,20 @@ def unique_rows(B: np.ndarray, decimals: int = 13) -> np.ndarray:
     """Rows of B without near-duplicates, keeping the first occurrence and the order."""
     _, idx = np.unique(np.round(B, decimals), axis=0, return_index=True)
     return B[np.sort(idx)]
+
+
+def reachable_beliefs(
+    b0: np.ndarray,
+    depth: int,
+    successors: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+    decimals: int = 13,
+) -> np.ndarray:
+    """b0 and the beliefs reachable from it in up to ``depth`` trials (any context, action and
+    branch of positive probability), equal to ``decimals`` decimals merged; ``successors(B)``
+    gives (p[n, c, a, branch], next[n, c, a, branch, K]) of beliefs B."""
+    out, front = [b0[None]], b0[None]
+    for _ in range(depth):
+        p, S = successors(front)
+        front = unique_rows(S[p > 0].reshape(-1, len(b0)), decimals)
+        out.append(front)
+    return unique_rows(np.vstack(out), decimals)

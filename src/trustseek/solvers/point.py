@@ -51,6 +51,7 @@ from .numerics import (
     memoryless_controllers,
     point_backup,
     policy_values,
+    reachable_beliefs,
     unique_rows,
 )
 
@@ -171,11 +172,6 @@ class PointSolver(SolverBase):
             return [] if problem.discount < 1.0 else [f"the point solver needs a discount below 1, got {problem.discount}"]
         return super().unsupported(problem)
 
-    # -- successors of a set of beliefs ------------------------------------------
-    def _successors(self, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        p, S = self.model.branches.successors(B)  # (n, N, A, Br), (n, N, A, Br, K)
-        return S, p
-
     # -- lower bound: point-based controller evaluation -----------------------------
     def _improve_lower(self, B: np.ndarray, S: np.ndarray, p: np.ndarray, rounds: int = 30) -> None:
         m = self.model
@@ -210,7 +206,7 @@ class PointSolver(SolverBase):
         codes = _vertex_code(own, r)
         order = np.argsort(codes, kind="stable")
         lookup, V = codes[order], V[order]
-        S, p = self._successors(V)
+        p, S = self.model.branches.successors(V)
         verts, w = freudenthal_weights(S.reshape(-1, K), r)
         col = _find(lookup, _vertex_code(verts, r)).reshape(S.shape)
         if np.any(col < 0):
@@ -258,16 +254,6 @@ class PointSolver(SolverBase):
     def lower_at(self, B: np.ndarray) -> np.ndarray:
         return (np.atleast_2d(np.asarray(B, dtype=float)) @ self.G.T).max(axis=1)
 
-    def _reachable(self, b0: np.ndarray, depth: int) -> np.ndarray:
-        """Beliefs reachable from b0 in up to ``depth`` trials (any context, action and branch)."""
-        K = self.model.n_hidden
-        out, front = [b0[None]], b0[None]
-        for _ in range(depth):
-            S, p = self._successors(front)
-            front = unique_rows(S[p > 0].reshape(-1, K))
-            out.append(front)
-        return unique_rows(np.vstack(out))
-
     def _sampled(self, b0: np.ndarray, rng: np.random.Generator, trajectories: int = 8, length: int = 50) -> np.ndarray:
         """Beliefs met along simulated trajectories from b0 (complexity and branch drawn with their
         probabilities, actions greedy in the current lower bound): PBVI-style belief expansion."""
@@ -277,7 +263,7 @@ class PointSolver(SolverBase):
         out = []
         idx = np.arange(trajectories)
         for _ in range(length):
-            S, p = self._successors(B)  # (n, N, A, Br, K)
+            p, S = self.model.branches.successors(B)  # (n, N, A, Br), (n, N, A, Br, K)
             c = rng.choice(N, size=trajectories, p=m.context_probs)
             # greedy action of the one-step lookahead on the lower bound
             lb = (S.reshape(-1, K) @ self.G.T).max(axis=1).reshape(p.shape)
@@ -312,7 +298,7 @@ class PointSolver(SolverBase):
         self.model = model
         K = model.n_hidden
         b0 = np.asarray(model.initial, dtype=float)
-        reach = self._reachable(b0, self.depth)
+        reach = reachable_beliefs(b0, self.depth, model.branches.successors)
         self.G = self._start(model, b0, reach)
         r = self.resolution or {2: 64, 3: 16, 4: 8}.get(K, 4 if K <= 8 else 2)
         r_max = self.max_resolution or {2: 4096, 3: 512, 4: 64}.get(K, 16)
@@ -332,7 +318,7 @@ class PointSolver(SolverBase):
             t_upper = time.perf_counter() - t_round
             self.r, self.u, self.lookup, self.V = r, u, lookup, V
             B = unique_rows(np.vstack([_simplex_lattice(K, min(r, lat)), reach, self._sampled(b0, rng)]))
-            S, p = self._successors(B)
+            p, S = self.model.branches.successors(B)
             self._improve_lower(B, S, p)
             lo = float(self.lower_at(b0)[0])
             up = self._upper_at_start(b0)
@@ -350,7 +336,7 @@ class PointSolver(SolverBase):
     def q_vectors(self, beliefs: np.ndarray) -> list[list[np.ndarray]]:
         """Q lower-bound vectors per (context, action): point backups of L at ``beliefs``."""
         m = self.model
-        S = self._successors(beliefs)[0]
+        S = self.model.branches.successors(beliefs)[1]
         n, N, A, Br, K = S.shape
         g = point_backup(m, self.G, best_vectors(S.reshape(-1, K), self.G).reshape(n, N, A, Br))
         return [[unique_rows(g[:, c, a], decimals=12) for a in range(A)] for c in range(N)]

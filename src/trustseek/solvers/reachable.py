@@ -207,12 +207,8 @@ class ReachableSolver(SolverBase):
 
     def _successors(self, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(p[c, a, br], next[c, a, br, t]) of one belief."""
-        N, A, Br, K = self.shape
-        nb = (b @ self.flat).reshape(N, A, Br, K)
-        p = nb.sum(axis=-1)
-        ok = p > 1e-300
-        nxt = np.where(ok[..., None], nb / np.where(ok, p, 1.0)[..., None], 1.0 / K)
-        return np.where(ok, p, 0.0), nxt
+        p, nxt = self._successors_many(b[None])
+        return p[0], nxt[0]
 
     # -- backups -----------------------------------------------------------------------
     def _backup(self, b: np.ndarray, p: np.ndarray, nxt: np.ndarray) -> tuple[np.ndarray, float]:
@@ -389,17 +385,6 @@ class ReachableSolver(SolverBase):
             out.append(B)
         return np.vstack(out)
 
-    def _reachable(self, b0: np.ndarray, depth: int) -> np.ndarray:
-        """b0 and the beliefs reachable from it in up to ``depth`` trials (any context, action and
-        branch of positive probability), near-duplicates merged."""
-        K = self.shape[3]
-        out, front = [b0[None]], b0[None]
-        for _ in range(depth):
-            p, S = self._successors_many(front)
-            front = numerics.unique_rows(S[p > 0].reshape(-1, K), self.decimals)
-            out.append(front)
-        return numerics.unique_rows(np.vstack(out), self.decimals)
-
     def _successors_many(self, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(p[n, c, a, br], next[n, c, a, br, t]) of beliefs B."""
         N, A, Br, K = self.shape
@@ -483,7 +468,7 @@ class ReachableSolver(SolverBase):
         span = max(width, self.tol)
         depth_cap = self.max_depth or math.ceil(math.log(self.tol / (2 * span)) / math.log(self.discount)) + 1
         depth_cap = max(1, depth_cap)
-        visited: list[np.ndarray] = list(self._reachable(b0, self.seed_depth))
+        visited: list[np.ndarray] = list(numerics.reachable_beliefs(b0, self.seed_depth, self._successors_many, self.decimals))
         history = []
         trials = backups = consolidated = 0
         cost = backup_seconds = 0.0
