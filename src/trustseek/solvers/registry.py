@@ -48,7 +48,6 @@ from ..vocab import BELIEF_UPDATES, PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS
 from .agnostic import PAPER_HORIZON, TrustAgnosticSolver
 from .base import Solver, SolverError
 from .defaults import DEFAULT_GRID, DEFAULT_SCHEDULE_GRID, ORDERS
-from .scheduling import ScheduleSolver
 
 __all__ = [
     "SCHEDULE",
@@ -120,7 +119,7 @@ def _schedule(
     order: str = "optimal",
     ask_first_hard: bool = False,
 ) -> Solver:
-    return ScheduleSolver(belief_update, representation, schedule_grid, order, ask_first_hard)
+    return solvers.scheduling.ScheduleSolver(belief_update, representation, schedule_grid, order, ask_first_hard)
 
 
 SOLVERS: dict[str, SolverEntry] = {
