@@ -246,6 +246,14 @@ class PointSolver(SolverBase):
         eta = max(0.0, float(np.max(q_of(u).max(axis=2) @ pc - u)))
         return V, u + eta / (1 - gamma), lookup
 
+    def grid_bound(self, model: BranchModel, r: int) -> tuple[np.ndarray, np.ndarray]:
+        """Solve the grid upper bound of ``model`` at resolution r and keep it (``upper_at`` reads
+        it): the vertex beliefs and their certified upper values."""
+        self.model = model
+        V, u, lookup = self._upper(r)
+        self.r, self.u, self.lookup, self.V = r, u, lookup, V
+        return V, u
+
     def upper_at(self, B: np.ndarray) -> np.ndarray:
         """The certified upper bound at beliefs B (linear interpolation of the vertex values)."""
         verts, w = freudenthal_weights(np.atleast_2d(np.asarray(B, dtype=float)), self.r)
@@ -314,9 +322,8 @@ class PointSolver(SolverBase):
         while True:
             rounds += 1
             t_round = time.perf_counter()
-            V, u, lookup = self._upper(r)
+            V, u = self.grid_bound(model, r)
             t_upper = time.perf_counter() - t_round
-            self.r, self.u, self.lookup, self.V = r, u, lookup, V
             B = unique_rows(np.vstack([_simplex_lattice(K, min(r, lat)), reach, self._sampled(b0, rng)]))
             p, S = self.model.branches.successors(B)
             self._improve_lower(B, S, p)

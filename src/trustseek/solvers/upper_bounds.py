@@ -85,9 +85,7 @@ class BlockGrid:
         while comb(2 * r + K - 1, K - 1) <= vertices:
             r *= 2
         self.solver = PointSolver()
-        self.solver.model = model
-        V, u, lookup = self.solver._upper(r)
-        self.solver.r, self.solver.u, self.solver.lookup, self.solver.V = r, u, lookup, V
+        V, u = self.solver.grid_bound(model, r)
         # two hidden states: the triangulation is the grid on [0, 1], interpolation is np.interp
         order = np.argsort(V[:, -1])
         self.xs, self.us = V[order, -1], u[order]
