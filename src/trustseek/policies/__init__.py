@@ -11,7 +11,8 @@
                           supervisor type);
 * :mod:`.complexity`   -- ``ComplexityPolicy``: trust-agnostic, randomized, always/never ask;
 * :mod:`.kinds`        -- the policy JSON: one loader per kind, ``policy_from_dict``, ``load_policy``;
-* :mod:`.runner`       -- ``PolicyRunner``: a policy with its live belief, trial by trial.
+* :mod:`.runner`       -- ``PolicyRunner``: a policy with its live belief, trial by trial;
+* :mod:`.scheduling`   -- ``SchedulePolicy`` and ``ScheduleRunner``: which item next, and whether to ask.
 
 Policies never solve anything: the solvers (``trustseek.solvers``) build them.
 
