@@ -70,7 +70,7 @@ from .point import (
     PointSolver,
 )
 from .registry import make_solver
-from .upper_bounds import closed_blocks, fast_informed_bound
+from .upper_bounds import closed_blocks, fast_informed_bound, one_state_value
 
 __all__ = ["DEFAULT_TYPE_AWARE_SOLVER", "TypeAwareSolver", "TypeBound", "solve_type_aware", "type_bound"]
 
@@ -122,7 +122,7 @@ def type_bound(problem: AssistancePOMDP | FlatPOMDP, model: BranchModel, block_t
     for idx in blocks:
         if len(idx) == 1:
             s = int(idx[0])
-            val = float(pc @ model.rewards[:, :, s].max(axis=1)) / (1.0 - g)
+            val = one_state_value(model, s)
             lo.append(s)
             hi.append(s)
             vts.append(np.full(len(xs), val))

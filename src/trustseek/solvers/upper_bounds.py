@@ -20,6 +20,7 @@ __all__ = [
     "fast_informed_bound",
     "grid_blocks",
     "inverse_points",
+    "one_state_value",
     "phi_of",
     "phi_pairs",
 ]
@@ -70,6 +71,12 @@ def fast_informed_bound(model: BranchModel, max_rounds: int = 200) -> np.ndarray
     return beta + max(0.0, residual) / (1.0 - g)
 
 
+def one_state_value(model: BranchModel, s: int) -> float:
+    """The exact value of hidden state ``s`` when it is a closed block of its own: the belief never
+    moves, so the value is the best reward per context, averaged over the contexts, discounted."""
+    return float(model.context_probs @ model.rewards[:, :, s].max(axis=1)) / (1.0 - model.discount)
+
+
 class BlockGrid:
     """The grid upper bound of one closed block of hidden states (Lovejoy's bound on Freudenthal's
     triangulation, certified, as the point solver computes it); one hidden state: its exact value."""
@@ -77,8 +84,7 @@ class BlockGrid:
     def __init__(self, model: BranchModel, vertices: int):
         K = model.n_hidden
         if K == 1:
-            # one hidden state: the belief never moves, the value is the best reward per context, discounted
-            self.value = float(model.context_probs @ model.rewards[:, :, 0].max(axis=1)) / (1.0 - model.discount)
+            self.value = one_state_value(model, 0)
             self.solver = None
             return
         r = 2
