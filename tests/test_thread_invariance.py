@@ -14,7 +14,7 @@ import pytest
 from threadpoolctl import threadpool_info, threadpool_limits
 
 from trustseek.solvers import make_solver
-from trustseek.solvers.numerics import one_blas_thread
+from trustseek.solvers.base import one_blas_thread
 from trustseek.solvers.registry import SOLVERS
 
 

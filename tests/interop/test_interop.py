@@ -18,7 +18,7 @@ from trustseek.interop.files import (
     write_pomdp,
     write_pomdpx,
 )
-from trustseek.solvers.backup import finite_horizon_value
+from trustseek.solvers.alpha import finite_horizon_value
 
 pomdp_py = pytest.importorskip("pomdp_py")
 from pomdp_py.algorithms import value_function  # noqa: E402

@@ -38,7 +38,7 @@ from trustseek.policies import (
     policy_from_dict,
     randomized,
 )
-from trustseek.policies.regions import ask_bounds
+from trustseek.policies.base import ask_bounds
 from trustseek.policies.scheduling import ScheduleRunner
 from trustseek.pomdp.belief import UNOBSERVED, make_updater
 from trustseek.pomdp.problem import AssistancePOMDP

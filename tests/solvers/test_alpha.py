@@ -8,9 +8,8 @@ import pytest
 from trustseek import AssistancePOMDP, BayesUpdate, GridSolver, PolicyRunner, load_policy
 from trustseek.policies import AlphaVectorPolicy
 from trustseek.policies.envelope import envelope, envelope_values
-from trustseek.solvers.alpha import AlphaSolver
-from trustseek.solvers.backup import exact_backup, finite_horizon_value, finite_horizon_vectors
-from trustseek.solvers.eq3 import paper_residual
+from trustseek.solvers.alpha import AlphaSolver, exact_backup, finite_horizon_value, finite_horizon_vectors
+from trustseek.solvers.certified import paper_residual
 
 # Reference values of the issue (three independent solvers), Bayes update, paper preset
 REF_V0, REF_V1_LOW, REF_V1_HIGH, REF_THRESHOLD, REF_MYOPIC = 110.655, 111.061, 110.249, 0.7815, 0.836
@@ -206,7 +205,7 @@ def test_paper_update_certified(paper_pomdp, paper_update):
 
 def test_paper_residual_is_exact_on_a_coarse_grid(paper_pomdp):
     """The piecewise-quadratic supremum equals a brute-force maximum on a very fine sample."""
-    from trustseek.solvers.eq3 import paper_q
+    from trustseek.solvers.certified import paper_q
 
     sol = GridSolver(grid=41, belief_update="paper").solve_grid(paper_pomdp)
     values = sol.value @ paper_pomdp.complexity_probs
@@ -258,7 +257,7 @@ def test_paper_grid_values_match_the_core_policy_iteration(paper_pomdp, rng):
     non-uniform grid (transition matrices assembled independently, as scipy matrices)."""
     import scipy.sparse as sp
 
-    from trustseek.solvers.eq3 import paper_grid_values, paper_maps
+    from trustseek.solvers.certified import paper_grid_values, paper_maps
     from trustseek.solvers.grid import policy_iteration
 
     grid = np.unique(np.concatenate([[0.0, 1.0], rng.random(300)]))

@@ -13,6 +13,7 @@ from trustseek.pomdp import AssistancePOMDP
 from trustseek.pomdp.flat import FlatPOMDP
 from trustseek.pomdp.supervisor_types import type_aware_problem
 from trustseek.solvers import make_solver
+from trustseek.solvers.numerics import reachable_beliefs
 from trustseek.solvers.reachable import ReachableSolver
 from trustseek.solvers.type_aware import solve_type_aware
 from trustseek.solvers.upper_bounds import fast_informed_bound
@@ -111,7 +112,7 @@ def test_a_consolidation_cut_by_the_clock_keeps_both_bounds(pomdp):
     exact = make_solver("alpha", gap=1e-6).solve(pomdp)
     solver = ReachableSolver(tol=1e-3)
     solver._setup(pomdp.branch_model())
-    B = solver._reachable(np.asarray(pomdp.model.initial, dtype=float), 3)
+    B = reachable_beliefs(np.asarray(pomdp.model.initial, dtype=float), 3, solver._successors_many, solver.decimals)
     value = np.array([exact.value_bound(b) for b in B])
     up_before, lo_before = solver.upper_at(B), solver.lower_at(B)
     solver._improve_upper(B, t_end=0.0)
@@ -126,7 +127,7 @@ def test_a_consolidation_cut_by_the_clock_keeps_both_bounds(pomdp):
     point.solve_bounds(problem)
     solver = ReachableSolver(tol=1e-3)
     solver._setup(problem.branch_model())
-    B = solver._reachable(np.asarray(problem.model.initial, dtype=float), 2)
+    B = reachable_beliefs(np.asarray(problem.model.initial, dtype=float), 2, solver._successors_many, solver.decimals)
     up_before, lo_before = solver.upper_at(B), solver.lower_at(B)
     solver._improve_upper(B, t_end=0.0)
     solver._improve_lower(B, t_end=0.0)

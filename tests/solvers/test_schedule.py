@@ -13,7 +13,7 @@ from trustseek.policies import policy_from_dict
 from trustseek.policies.scheduling import SchedulePolicy, ScheduleRunner
 from trustseek.pomdp.scheduling import SchedulingError, SchedulingProblem
 from trustseek.solvers import UnsupportedProblem, make_solver
-from trustseek.solvers.backup import finite_horizon_value
+from trustseek.solvers.alpha import finite_horizon_value
 from trustseek.solvers.scheduling import ScheduleSolver
 
 

@@ -26,7 +26,7 @@ from trustseek.policies.scheduling import ScheduleRunner
 from trustseek.server import create_app
 from trustseek.server.app import STATIC
 from trustseek.server.studies import block_items
-from trustseek.solvers.policy_specs import policy_from_spec
+from trustseek.solvers.registry import policy_from_spec
 from trustseek.testing.browser import CHROMIUM, launch_chromium
 from trustseek.testing.servers import ThreadServer
 

@@ -28,7 +28,7 @@ from ..reproduction.config import seed_int
 from ..reproduction.statistics import paired_tests
 from ..simulation import Simulation, crossover, simulate
 from ..solvers.agnostic import agnostic_from_intervention_rates, trust_agnostic_from_data
-from ..solvers.numerics import one_blas_thread
+from ..solvers.base import one_blas_thread
 from ..solvers.registry import make_solver
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, LEVELS
 from .evaluation import EVALUATION_GRID, evaluate_policy, high_threshold

@@ -31,7 +31,7 @@ from ..model.jsonfile import json_safe
 from ..model.presets import paper_model, paper_task
 from ..model.task import Task
 from ..reproduction.statistics import mean_ci, share_ci
-from ..solvers.numerics import one_blas_thread
+from ..solvers.base import one_blas_thread
 from .evaluation import evaluate_policy, high_threshold
 from .replicate import Experiment1, FitSettings, Study, plan, run_chunk
 

@@ -1,16 +1,14 @@
 """The public names of :mod:`trustseek.policies`: read by type checkers, and by ``__init__.py`` to load each on first use."""
 
 # every submodule, as the package attribute of that name
-from . import alpha_vector, base, complexity, envelope, grid_q, kinds, regions, runner, scheduling, thresholds, type_aware
-from .alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy
-from .base import POLICY_FORMAT, Policy, PolicyError
+from . import alpha_vector, base, complexity, envelope, grid_q, kinds, regions, runner, scheduling
+from .alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy, TypeAwarePolicy
+from .base import POLICY_FORMAT, Policy, PolicyError, ask_bounds, ask_regions
 from .complexity import COMPLEXITY_KINDS, ComplexityPolicy, always_ask, never_ask, randomized
 from .grid_q import TrustAwarePolicy
 from .kinds import POLICY_KINDS, load_policy, policy_from_dict
-from .regions import ask_bounds, ask_regions
+from .regions import ask_intervals, threshold
 from .runner import PolicyRunner
-from .thresholds import ask_intervals, threshold
-from .type_aware import TypeAwarePolicy
 
 __all__ = [
     "COMPLEXITY_KINDS",

@@ -4,7 +4,9 @@ A policy answers one question -- given the robot's belief over trust and the tri
 complexity, ``autonomous`` or ``ask``? -- vectorized (``actions``) or for one trial
 (``action``).  Around it every policy also says where it asks (``ask_intervals`` /
 ``thresholds``), gives its Q-function and value when it has one, and writes itself as
-JSON (``to_dict``; the ``kind`` field names the loader, see :mod:`.kinds`).
+JSON (``to_dict``; the ``kind`` field names the loader, see :mod:`.kinds`).  Where a policy asks,
+through this interface: :func:`ask_bounds` (the simulator's threshold bounds) and
+:func:`ask_regions` (the JSON view).
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from ..model.core import TrustModel
 from ..model.jsonfile import ModelError, json_safe
 from ..pomdp.belief import to_vector
 from ..vocab import VocabularyError, check_belief_update
-from .thresholds import Interval, threshold
+from .regions import Interval, threshold
 
 POLICY_FORMAT = "trustseek.policy/1"
 
@@ -170,3 +172,34 @@ def planned_for(d: Mapping[str, Any], source: str | None) -> tuple[list[str], Tr
     except VocabularyError as exc:
         raise ModelError(exc.problems, source) from None
     return list(d.get("complexities") or []), model, update
+
+
+def ask_bounds(policy: Policy) -> np.ndarray | None:
+    """Per complexity index, the bound θ_C such that the policy asks exactly when
+    P(trust = high) < θ_C (``-inf``: never asks, ``+inf``: always asks), or ``None`` when its
+    ask region is not an interval starting at 0 or when it asks at random.
+
+    This is the policy's ``actions`` in one comparison per trial (what the simulator uses);
+    the bounds are the ends of ``ask_intervals()``, so both agree except for beliefs within
+    rounding error of a crossing itself."""
+    intervals = policy.ask_intervals()
+    if intervals is None:
+        return None
+    out = []
+    for cn in policy.complexities:
+        iv = intervals[cn]
+        th = threshold(iv)
+        if th is None:
+            out.append(-np.inf)
+        elif np.isnan(th):
+            return None
+        else:
+            out.append(np.inf if th >= 1.0 else th)
+    return np.array(out)
+
+
+def ask_regions(policy: Policy) -> dict[str, Any]:
+    """Where a policy asks, ready for JSON: its ``thresholds`` and ``ask_intervals`` (as lists) per
+    complexity (for a policy that asks at random: thresholds ``None``, no intervals)."""
+    intervals = policy.ask_intervals() or {}
+    return {"thresholds": policy.thresholds(), "ask_intervals": {k: [list(iv) for iv in v] for k, v in intervals.items()}}

@@ -18,7 +18,7 @@ import numpy as np
 from ..model.jsonfile import ModelError
 from ..vocab import COMPLEXITY_POLICY_KINDS, PAPER_ASK_PROBABILITIES
 from .base import PolicyBase, PolicyError
-from .thresholds import Interval
+from .regions import Interval
 
 COMPLEXITY_KINDS = COMPLEXITY_POLICY_KINDS
 

@@ -15,7 +15,7 @@ import numpy as np
 from ..model.core import ACTIONS, ASK, AUTONOMOUS, TrustModel
 from ..model.jsonfile import ModelError
 from .base import Policy, PolicyBase, PolicyError, planned_for
-from .thresholds import Interval, ask_intervals
+from .regions import Interval, ask_intervals
 
 TABLE_POINTS = 4001  # points of a Q table made from another policy's Q-function
 

@@ -13,12 +13,11 @@ from typing import Any
 import numpy as np
 
 from ..model.jsonfile import ModelError, load_json
-from .alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy
+from .alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy, TypeAwarePolicy
 from .base import POLICY_FORMAT, Policy
 from .complexity import COMPLEXITY_KINDS, ComplexityPolicy
 from .grid_q import TrustAwarePolicy
 from .scheduling import SchedulePolicy
-from .type_aware import TypeAwarePolicy
 
 Loader = Callable[[Mapping[str, Any], "str | None"], Policy]
 

@@ -1,42 +1,61 @@
-"""Where a policy asks, through the ``Policy`` interface: the simulator's threshold bounds and the
-JSON view of a policy's ask regions."""
+"""Where a policy asks, as regions of belief: ask intervals and thresholds, extracted once.
+
+For two trust levels a trust-aware policy asks where the advantage
+D(x) = Q(x, C, ask) - Q(x, C, autonomous) is positive, x = P(trust = high).  The paper's
+policies are *threshold* policies: they ask exactly when x < θ_C.  Every policy reports
+its ask region through ``ask_intervals()``; :func:`ask_intervals` turns sampled advantages
+into intervals and :func:`threshold` intervals into a threshold (:func:`.base.ask_bounds` and
+:func:`.base.ask_regions` apply them to a policy).
+"""
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from .base import Policy
-from .thresholds import threshold
+Interval = tuple[float, float]
 
 
-def ask_bounds(policy: Policy) -> np.ndarray | None:
-    """Per complexity index, the bound θ_C such that the policy asks exactly when
-    P(trust = high) < θ_C (``-inf``: never asks, ``+inf``: always asks), or ``None`` when its
-    ask region is not an interval starting at 0 or when it asks at random.
+def linear_crossing(x: np.ndarray, d: np.ndarray, i: int) -> float:
+    """Where the line through (x[i], d[i]) and (x[i+1], d[i+1]) crosses zero."""
+    d0, d1 = d[i], d[i + 1]
+    if d0 == d1:
+        return float(x[i])
+    return float(x[i] + d0 / (d0 - d1) * (x[i + 1] - x[i]))
 
-    This is the policy's ``actions`` in one comparison per trial (what the simulator uses);
-    the bounds are the ends of ``ask_intervals()``, so both agree except for beliefs within
-    rounding error of a crossing itself."""
-    intervals = policy.ask_intervals()
-    if intervals is None:
+
+def ask_intervals(x: np.ndarray, advantage: np.ndarray, crossing: Callable[[int], float] | None = None) -> list[Interval]:
+    """The maximal intervals of [x[0], x[-1]] where the advantage of asking is positive, from
+    its values at the increasing points ``x``.  An interval ends at a sample end point or,
+    between samples i and i + 1 where the sign changes, at ``crossing(i)`` (by default the
+    zero of the line through the two samples: exact for piecewise-linear advantages)."""
+    x = np.asarray(x, dtype=float)
+    d = np.asarray(advantage, dtype=float)
+    cross = crossing or (lambda i: linear_crossing(x, d, i))
+    ask = d > 0
+    out: list[Interval] = []
+    n = len(x)
+    i = 0
+    while i < n:
+        if not ask[i]:
+            i += 1
+            continue
+        start = i
+        while i < n and ask[i]:
+            i += 1
+        lo = x[0] if start == 0 else cross(start - 1)
+        hi = x[-1] if i == n else cross(i - 1)
+        out.append((float(lo), float(hi)))
+    return out
+
+
+def threshold(intervals: Sequence[Interval], start: float = 0.0) -> float | None:
+    """The belief in high trust below which a policy with these ask intervals asks: ``None``
+    when it never asks, the upper end when it asks on one interval [start, θ) (1.0 when it
+    always asks), NaN when its ask region is not of that form (see the intervals)."""
+    if not intervals:
         return None
-    out = []
-    for cn in policy.complexities:
-        iv = intervals[cn]
-        th = threshold(iv)
-        if th is None:
-            out.append(-np.inf)
-        elif np.isnan(th):
-            return None
-        else:
-            out.append(np.inf if th >= 1.0 else th)
-    return np.array(out)
-
-
-def ask_regions(policy: Policy) -> dict[str, Any]:
-    """Where a policy asks, ready for JSON: its ``thresholds`` and ``ask_intervals`` (as lists) per
-    complexity (for a policy that asks at random: thresholds ``None``, no intervals)."""
-    intervals = policy.ask_intervals() or {}
-    return {"thresholds": policy.thresholds(), "ask_intervals": {k: [list(iv) for iv in v] for k, v in intervals.items()}}
+    if len(intervals) == 1 and intervals[0][0] == start:
+        return float(intervals[0][1])
+    return float("nan")

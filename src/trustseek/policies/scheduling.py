@@ -26,8 +26,8 @@ from ..model.jsonfile import ModelError
 from ..pomdp.belief import to_vector
 from ..pomdp.scheduling import Counts, State, parse_state_key, state_key
 from .base import PolicyBase, PolicyError, planned_for
+from .regions import Interval, ask_intervals
 from .runner import PolicyRunner
-from .thresholds import Interval, ask_intervals
 
 SCHEDULE = "schedule"
 TIE = 1e-12  # a later (complexity, action) must beat an earlier one by more than this

@@ -21,12 +21,13 @@ Three views of the same filter, for three kinds of callers:
 * :class:`ScalarBelief` is the same update for two trust levels on the number
   x = P(trust = high), with the tables flattened for gathers (the simulator's fast path);
 * :class:`Branches` enumerates *every* successor of a belief after (C, a) with its
-  probability (what the belief-MDP solvers expand).
+  probability (what the belief-MDP solvers expand), and :class:`BranchModel` is a POMDP in
+  that branch form (contexts, rewards, Bayes branches, discount, initial belief).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -41,6 +42,7 @@ __all__ = [
     "BayesUpdate",
     "BeliefError",
     "BeliefUpdater",
+    "BranchModel",
     "Branches",
     "PaperUpdate",
     "ScalarBelief",
@@ -228,3 +230,63 @@ class Branches:
         if self.n_hidden != 2:
             raise BeliefError([f"two_level() needs two trust levels; these branches have {self.n_hidden}"])
         return self.prob[..., 0], self.prob[..., 1], self.move[..., 0, 1], self.move[..., 1, 1]
+
+
+# --------------------------------------------------------------------------- the branch form
+# The assistance POMDP has a *mixed* observability: the complexity (a context, drawn i.i.d. from
+# P(C) and seen before acting) is observed, trust (the hidden part) is not, and after each trial
+# a branch (o, E') moves the belief.  A flat POMDP (e.g. a ``.pomdp`` file) is the special case of
+# one context whose branches are the observations.  Both are written as context_probs[c],
+# rewards[c, a, t], Bayes branches (kernels[c, a, branch, t, t2]), discount and initial[t]: what
+# the point-based solvers and controller evaluation work on.
+
+
+@dataclass(frozen=True, eq=False)
+class BranchModel:
+    """context_probs[c], rewards[c, a, t], Bayes ``branches``, discount, initial belief[t]."""
+
+    context_probs: np.ndarray
+    rewards: np.ndarray
+    branches: Branches
+    discount: float
+    initial: np.ndarray
+    #: the sizes: contexts (complexities; one for a flat POMDP), actions, hidden states (trust levels)
+    n_contexts: int = field(init=False)
+    n_actions: int = field(init=False)
+    n_hidden: int = field(init=False)
+
+    def __post_init__(self) -> None:
+        for name, size in zip(("n_contexts", "n_actions", "n_hidden"), self.rewards.shape, strict=True):
+            object.__setattr__(self, name, int(size))
+
+    @property
+    def kernels(self) -> np.ndarray:
+        """M[c, a, branch, t, t2] = P(branch, T' = t2 | T = t, c, a): the unnormalized belief update."""
+        return self.branches.move
+
+    def finite_horizon_value(self, belief: np.ndarray, horizon: int, context: int | None = None) -> float:
+        """The exact optimal value of ``horizon`` trials from a belief, by expanding the belief
+        tree (every context, action and branch; for small problems and short horizons): for a
+        known context of the first trial, or averaged over the context probabilities."""
+        b0 = np.asarray(belief, dtype=float)
+        M = self.kernels
+
+        def v(b: np.ndarray, c: int, h: int) -> float:
+            best = -np.inf
+            for a in range(self.n_actions):
+                q = float(self.rewards[c, a] @ b)
+                if h > 1:
+                    for br in range(M.shape[2]):
+                        nb = b @ M[c, a, br]
+                        p = nb.sum()
+                        if p > 1e-300:
+                            q += self.discount * p * w(nb / p, h - 1)
+                best = max(best, q)
+            return best
+
+        def w(b: np.ndarray, h: int) -> float:
+            return float(sum(pc * v(b, c, h) for c, pc in enumerate(self.context_probs) if pc > 0))
+
+        if horizon == 0:
+            return 0.0
+        return w(b0, horizon) if context is None else v(b0, context, horizon)

@@ -15,8 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import TrustseekError
-from .belief import Branches
-from .branch_model import BranchModel
+from .belief import Branches, BranchModel
 
 
 class FlatPOMDPError(TrustseekError, ValueError):

@@ -34,8 +34,7 @@ import numpy as np
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 from ..model.task import Task
 from ..vocab import check_belief_update
-from .belief import Branches
-from .branch_model import BranchModel
+from .belief import Branches, BranchModel
 
 AXES = {
     "emission": ("complexity", "robot_action", "trust", "human_action"),

@@ -253,7 +253,7 @@ def load_model_spec(spec: str | dict) -> TrustModel:
 def resolve_policy(
     spec: dict[str, Any], model: TrustModel, task: Task, where: str = "policy", caches: StudyCaches | None = None
 ) -> dict[str, Any]:
-    """A policy spec (``trustseek.solvers.policy_specs``) to the core's policy JSON, solving the POMDP
+    """A policy spec (``trustseek.solvers.registry``) to the core's policy JSON, solving the POMDP
     for ``trust-aware`` (remembered in the application's ``caches``: many sessions open with
     the same model, task and spec)."""
     key = None if "format" in spec or caches is None else json.dumps([model.to_dict(), task.to_dict(), spec], sort_keys=True)

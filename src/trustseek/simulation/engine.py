@@ -38,9 +38,8 @@ import numpy as np
 
 from ..model.core import ASK, AUTONOMOUS, INTERVENE, RELIABLE, RELY, TrustModel
 from ..model.task import Task
-from ..policies.base import Policy, PolicyError
+from ..policies.base import Policy, PolicyError, ask_bounds
 from ..policies.complexity import ComplexityPolicy
-from ..policies.regions import ask_bounds
 from ..policies.runner import PolicyRunner
 from ..pomdp.belief import ScalarBelief
 from ..vocab import check_belief_update

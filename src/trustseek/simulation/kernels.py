@@ -4,7 +4,7 @@
 have two trust levels and the robot's action is one of
 
 * a threshold on its scalar belief x = P(trust = high) (``mode`` :data:`THRESHOLD`, the bounds of
-  :func:`~trustseek.policies.regions.ask_bounds`), the belief following the ``paper`` or ``bayes``
+  :func:`~trustseek.policies.base.ask_bounds`), the belief following the ``paper`` or ``bayes``
   update of :class:`~trustseek.pomdp.belief.ScalarBelief`;
 * a fixed probability of asking per complexity (``mode`` :data:`FIXED`, a
   :class:`~trustseek.policies.ComplexityPolicy`), with or without a tracked belief.

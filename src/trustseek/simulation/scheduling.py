@@ -33,7 +33,7 @@ from ..policies.scheduling import SchedulePolicy
 from ..pomdp.belief import ScalarBelief
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem
-from ..solvers.backup import finite_horizon_value
+from ..solvers.alpha import finite_horizon_value
 from ..solvers.defaults import DEFAULT_SCHEDULE_GRID
 from ..solvers.registry import make_solver
 from ..solvers.scheduling import ScheduleSolver

@@ -4,17 +4,12 @@
 from . import (
     agnostic,
     alpha,
-    backup,
     base,
-    certificate,
-    certified_grid,
+    certified,
     defaults,
-    envelopes,
-    eq3,
     grid,
     numerics,
     point,
-    policy_specs,
     reachable,
     registry,
     scheduling,
@@ -26,11 +21,10 @@ from . import (
 from .agnostic import TrustAgnosticSolver, trust_agnostic, trust_agnostic_from_data
 from .alpha import AlphaSolver
 from .base import Solver, SolverError, UnsupportedProblem
-from .certified_grid import CertifiedGridSolver
-from .grid import GridSolver, solve
+from .certified import CertifiedGridSolver
+from .grid import GridSolver
 from .point import PointSolver
-from .policy_specs import PolicySpecError, policy_from_spec
-from .registry import SOLVERS, make_solver, solve_with, solver_names
+from .registry import SOLVERS, PolicySpecError, make_solver, policy_from_spec, solve, solve_with, solver_names
 from .summary import summarize
 from .type_aware import TypeAwareSolver, solve_type_aware
 

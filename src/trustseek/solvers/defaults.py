@@ -7,7 +7,7 @@ from __future__ import annotations
 DEFAULT_GRID = 2001
 METHODS = ("policy-iteration", "value-iteration")
 
-#: the scheduling solver's item orders, value-function representations and default grid (:mod:`.schedule`)
+#: the scheduling solver's item orders, value-function representations and default grid (:mod:`.scheduling`)
 ORDERS = ("optimal", "easy-first", "hard-first", "alternating")
 REPRESENTATIONS = ("alpha", "grid")
 DEFAULT_SCHEDULE_GRID = 201

@@ -29,8 +29,6 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from ..model.core import TrustModel
-from ..model.task import Task
 from ..policies.grid_q import TrustAwarePolicy
 from ..pomdp.problem import AssistancePOMDP
 from .base import SolverBase, SolverError, one_blas_thread
@@ -294,15 +292,3 @@ def policy_iteration(
             break
         policy = new_policy
     return W, policy, it
-
-
-def solve(
-    model: TrustModel,
-    task: Task,
-    belief_update: str = "bayes",
-    grid: int = DEFAULT_GRID,
-    method: str = "policy-iteration",
-    tol: float = 1e-9,
-) -> TrustAwarePolicy:
-    """Solve the assistance POMDP of ``model`` and ``task`` for the trust-aware policy."""
-    return GridSolver(grid=grid, belief_update=belief_update, method=method, tol=tol).solve(AssistancePOMDP(model, task))

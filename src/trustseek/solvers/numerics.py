@@ -7,26 +7,40 @@ controller evaluation.
   the residual, with a direct sparse solve as the fallback;
 * :func:`improve` -- Howard's improvement step, keeping the current action unless another is
   better by more than rounding, so that policy iteration terminates;
-* :func:`one_blas_thread` -- runs a solver's work with BLAS on one thread, so that its
-  numbers do not depend on the machine's cores;
 * :func:`best_vectors` -- which of a set of vectors is best at each of many beliefs, in
-  blocks, so that a fine grid's successors never need the whole product in memory;
+  blocks, so that a fine grid's successors never need the whole product in memory, and
+  :func:`best_at` -- the vectors best at some belief of a set (pruning);
+* :func:`point_backup` and :func:`greedy_controller` -- the point-based backup of alpha vectors
+  at beliefs, and the controller whose nodes act greedily there (the point, reachable and
+  types solvers' lower bounds);
 * :func:`evaluate_controller` -- the exact value vectors of a finite-state controller on a
-  POMDP in branch form (any number of hidden states), and :func:`memoryless_controllers`.
+  POMDP in branch form (any number of hidden states), and :func:`memoryless_controllers`;
+* :func:`unique_rows` -- beliefs without near-duplicates, and :func:`reachable_beliefs`.
 """
 
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..pomdp.branch_model import BranchModel
-from .base import one_blas_thread
+from ..pomdp.belief import BranchModel
 
-__all__ = ["best_vectors", "evaluate_controller", "improve", "memoryless_controllers", "one_blas_thread", "policy_values"]
+__all__ = [
+    "best_at",
+    "best_vectors",
+    "evaluate_controller",
+    "greedy_controller",
+    "improve",
+    "memoryless_controllers",
+    "point_backup",
+    "policy_values",
+    "reachable_beliefs",
+    "unique_rows",
+]
 
 BLOCK_ROWS = 1 << 15  # beliefs per block of best_vectors (with 500 vectors: 130 MB of products)
 
@@ -130,3 +144,53 @@ def memoryless_controllers(model: BranchModel, limit: int = 64) -> np.ndarray:
     acts = np.array(combos, dtype=np.int64).reshape(n, N)
     succ = np.broadcast_to(np.arange(n)[:, None, None], (n, N, model.kernels.shape[2])).copy()
     return evaluate_controller(model, acts, succ)
+
+
+def best_at(vectors: np.ndarray, beliefs: np.ndarray) -> np.ndarray:
+    """The vectors best at some belief of ``beliefs`` (n, K), in their order: a pruned lower bound."""
+    return vectors[np.unique((beliefs @ vectors.T).argmax(axis=1))]
+
+
+def point_backup(model: BranchModel, vectors: np.ndarray, best: np.ndarray) -> np.ndarray:
+    """g[n, c, a, t] = R[c, a, t] + γ Σ_branch M[c, a, branch] α_best: the point-based backup of
+    the alpha vectors ``vectors`` at n beliefs, ``best[n, c, a, branch]`` the vector used after
+    each branch (the one best at the next belief)."""
+    return model.rewards[None] + model.discount * np.einsum("cabtu,ncabu->ncat", model.kernels, vectors[best])
+
+
+def greedy_controller(
+    model: BranchModel, S: np.ndarray, p: np.ndarray, g: np.ndarray, actions: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The controller of n nodes, one per belief, whose node takes ``actions[n, c]`` and after
+    each branch goes to the node best at the next belief: (its one-step values alpha (n, K) from
+    the backup ``g`` (:func:`point_backup`), its successors (n, c, branch), -1 where the branch
+    cannot happen).  ``S`` (n, c, a, branch, K) and ``p`` (n, c, a, branch) are the beliefs'
+    successors and their probabilities."""
+    n, N, _, Br, K = S.shape
+    ii, cc = np.arange(n)[:, None], np.arange(N)[None, :]
+    alpha = np.einsum("c,nct->nt", model.context_probs, g[ii, cc, actions])
+    succ = (S[ii, cc, actions].reshape(-1, K) @ alpha.T).argmax(axis=1).reshape(n, N, Br)
+    return alpha, np.where(p[ii, cc, actions] > 0, succ, -1)
+
+
+def unique_rows(B: np.ndarray, decimals: int = 13) -> np.ndarray:
+    """Rows of B without near-duplicates, keeping the first occurrence and the order."""
+    _, idx = np.unique(np.round(B, decimals), axis=0, return_index=True)
+    return B[np.sort(idx)]
+
+
+def reachable_beliefs(
+    b0: np.ndarray,
+    depth: int,
+    successors: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+    decimals: int = 13,
+) -> np.ndarray:
+    """b0 and the beliefs reachable from it in up to ``depth`` trials (any context, action and
+    branch of positive probability), equal to ``decimals`` decimals merged; ``successors(B)``
+    gives (p[n, c, a, branch], next[n, c, a, branch, K]) of beliefs B."""
+    out, front = [b0[None]], b0[None]
+    for _ in range(depth):
+        p, S = successors(front)
+        front = unique_rows(S[p > 0].reshape(-1, len(b0)), decimals)
+        out.append(front)
+    return unique_rows(np.vstack(out), decimals)

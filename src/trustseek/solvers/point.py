@@ -38,13 +38,24 @@ import scipy.sparse as sp
 
 from ..policies.alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy
 from ..policies.base import Policy
-from ..pomdp.branch_model import BranchModel
+from ..pomdp.belief import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from .base import SolverBase, SolverError, bayes_only, one_blas_thread
-from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, policy_values
+from .numerics import (
+    best_at,
+    best_vectors,
+    evaluate_controller,
+    greedy_controller,
+    improve,
+    memoryless_controllers,
+    point_backup,
+    policy_values,
+    reachable_beliefs,
+    unique_rows,
+)
 
-__all__ = ["PointSolution", "PointSolver", "freudenthal_vertices", "freudenthal_weights"]
+__all__ = ["PointSolution", "PointSolver", "bounds_policy", "freudenthal_weights", "next_round_seconds"]
 
 
 @dataclass
@@ -63,12 +74,6 @@ class PointSolution:
     @property
     def gap(self) -> float:
         return self.upper - self.lower
-
-
-def freudenthal_vertices(K: int, r: int) -> np.ndarray:
-    """The beliefs at the vertices of Freudenthal's triangulation of the simplex at resolution r
-    (all beliefs with coordinates in multiples of 1/r)."""
-    return _simplex_lattice(K, r)
 
 
 def freudenthal_weights(B: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
@@ -167,11 +172,6 @@ class PointSolver(SolverBase):
             return [] if problem.discount < 1.0 else [f"the point solver needs a discount below 1, got {problem.discount}"]
         return super().unsupported(problem)
 
-    # -- successors of a set of beliefs ------------------------------------------
-    def _successors(self, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        p, S = self.model.branches.successors(B)  # (n, N, A, Br), (n, N, A, Br, K)
-        return S, p
-
     # -- lower bound: point-based controller evaluation -----------------------------
     def _improve_lower(self, B: np.ndarray, S: np.ndarray, p: np.ndarray, rounds: int = 30) -> None:
         m = self.model
@@ -180,22 +180,16 @@ class PointSolver(SolverBase):
         prev = None
         for _ in range(rounds):
             best = (Sf @ self.G.T).argmax(axis=1).reshape(n, N, A, Br)
-            # backup at every belief: g[i, c, a] = R + γ Σ_br M (p-weighted) G[best]
-            proj = np.einsum("cabtu,ncabu->ncat", m.kernels, self.G[best])
-            g = m.rewards[None] + m.discount * proj
+            g = point_backup(m, self.G, best)
             acts = np.einsum("ncat,nt->nca", g, B).argmax(axis=2)  # (n, N)
-            alpha = np.einsum("c,nct->nt", m.context_probs, g[np.arange(n)[:, None], np.arange(N)[None, :], acts])
             # controller: node i, successors = node best at the next belief among the new vectors
-            Sa = S[np.arange(n)[:, None], np.arange(N)[None, :], acts]  # (n, N, Br, K)
-            succ = (Sa.reshape(-1, K) @ alpha.T).argmax(axis=1).reshape(n, N, Br)
-            pa = p[np.arange(n)[:, None], np.arange(N)[None, :], acts]
-            succ = np.where(pa > 0, succ, -1)
+            alpha, succ = greedy_controller(m, S, p, g, acts)
             key = (acts.tobytes(), succ.tobytes())
             before = (B @ self.G.T).max(axis=1)
             ev = evaluate_controller(m, acts, succ, guess=alpha)
             if not np.all(np.isfinite(ev)):
                 ev = alpha
-            self.G = _prune(np.vstack([self.G, alpha, ev]), B)
+            self.G = best_at(np.vstack([self.G, alpha, ev]), B)
             gain = float(np.max((B @ self.G.T).max(axis=1) - before))
             if key == prev or gain <= self.tol * 1e-2:
                 break
@@ -207,12 +201,12 @@ class PointSolver(SolverBase):
         code lookup[i]), their successors' probabilities p (nV, N, A, Br) and beliefs S
         (nV, N, A, Br, K), and the vertices col and weights w that interpolate each successor."""
         K = self.model.n_hidden
-        V = freudenthal_vertices(K, r)
+        V = _simplex_lattice(K, r)  # the vertices: every belief with coordinates in multiples of 1/r
         own = np.round(np.cumsum(V[:, ::-1], axis=1)[:, ::-1] * r).astype(np.int64)
         codes = _vertex_code(own, r)
         order = np.argsort(codes, kind="stable")
         lookup, V = codes[order], V[order]
-        S, p = self._successors(V)
+        p, S = self.model.branches.successors(V)
         verts, w = freudenthal_weights(S.reshape(-1, K), r)
         col = _find(lookup, _vertex_code(verts, r)).reshape(S.shape)
         if np.any(col < 0):
@@ -252,6 +246,14 @@ class PointSolver(SolverBase):
         eta = max(0.0, float(np.max(q_of(u).max(axis=2) @ pc - u)))
         return V, u + eta / (1 - gamma), lookup
 
+    def grid_bound(self, model: BranchModel, r: int) -> tuple[np.ndarray, np.ndarray]:
+        """Solve the grid upper bound of ``model`` at resolution r and keep it (``upper_at`` reads
+        it): the vertex beliefs and their certified upper values."""
+        self.model = model
+        V, u, lookup = self._upper(r)
+        self.r, self.u, self.lookup, self.V = r, u, lookup, V
+        return V, u
+
     def upper_at(self, B: np.ndarray) -> np.ndarray:
         """The certified upper bound at beliefs B (linear interpolation of the vertex values)."""
         verts, w = freudenthal_weights(np.atleast_2d(np.asarray(B, dtype=float)), self.r)
@@ -259,16 +261,6 @@ class PointSolver(SolverBase):
 
     def lower_at(self, B: np.ndarray) -> np.ndarray:
         return (np.atleast_2d(np.asarray(B, dtype=float)) @ self.G.T).max(axis=1)
-
-    def _reachable(self, b0: np.ndarray, depth: int) -> np.ndarray:
-        """Beliefs reachable from b0 in up to ``depth`` trials (any context, action and branch)."""
-        K = self.model.n_hidden
-        out, front = [b0[None]], b0[None]
-        for _ in range(depth):
-            S, p = self._successors(front)
-            front = _unique_rows(S[p > 0].reshape(-1, K), K)
-            out.append(front)
-        return _unique_rows(np.vstack(out), K)
 
     def _sampled(self, b0: np.ndarray, rng: np.random.Generator, trajectories: int = 8, length: int = 50) -> np.ndarray:
         """Beliefs met along simulated trajectories from b0 (complexity and branch drawn with their
@@ -279,7 +271,7 @@ class PointSolver(SolverBase):
         out = []
         idx = np.arange(trajectories)
         for _ in range(length):
-            S, p = self._successors(B)  # (n, N, A, Br, K)
+            p, S = self.model.branches.successors(B)  # (n, N, A, Br), (n, N, A, Br, K)
             c = rng.choice(N, size=trajectories, p=m.context_probs)
             # greedy action of the one-step lookahead on the lower bound
             lb = (S.reshape(-1, K) @ self.G.T).max(axis=1).reshape(p.shape)
@@ -290,7 +282,7 @@ class PointSolver(SolverBase):
             br = np.minimum((np.cumsum(pb, axis=1) / pb.sum(axis=1, keepdims=True) < u).sum(axis=1), pb.shape[1] - 1)
             B = S[idx, c, a, br]
             out.append(B)
-        return _unique_rows(np.vstack(out), K, decimals=9)
+        return unique_rows(np.vstack(out), decimals=9)
 
     # -- solve -------------------------------------------------------------------------
     @one_blas_thread
@@ -314,7 +306,7 @@ class PointSolver(SolverBase):
         self.model = model
         K = model.n_hidden
         b0 = np.asarray(model.initial, dtype=float)
-        reach = self._reachable(b0, self.depth)
+        reach = reachable_beliefs(b0, self.depth, model.branches.successors)
         self.G = self._start(model, b0, reach)
         r = self.resolution or {2: 64, 3: 16, 4: 8}.get(K, 4 if K <= 8 else 2)
         r_max = self.max_resolution or {2: 4096, 3: 512, 4: 64}.get(K, 16)
@@ -330,11 +322,10 @@ class PointSolver(SolverBase):
         while True:
             rounds += 1
             t_round = time.perf_counter()
-            V, u, lookup = self._upper(r)
+            V, u = self.grid_bound(model, r)
             t_upper = time.perf_counter() - t_round
-            self.r, self.u, self.lookup, self.V = r, u, lookup, V
-            B = _unique_rows(np.vstack([_simplex_lattice(K, min(r, lat)), reach, self._sampled(b0, rng)]), K)
-            S, p = self._successors(B)
+            B = unique_rows(np.vstack([_simplex_lattice(K, min(r, lat)), reach, self._sampled(b0, rng)]))
+            p, S = self.model.branches.successors(B)
             self._improve_lower(B, S, p)
             lo = float(self.lower_at(b0)[0])
             up = self._upper_at_start(b0)
@@ -352,11 +343,10 @@ class PointSolver(SolverBase):
     def q_vectors(self, beliefs: np.ndarray) -> list[list[np.ndarray]]:
         """Q lower-bound vectors per (context, action): point backups of L at ``beliefs``."""
         m = self.model
-        S = self._successors(beliefs)[0]
+        S = self.model.branches.successors(beliefs)[1]
         n, N, A, Br, K = S.shape
-        best = best_vectors(S.reshape(-1, K), self.G).reshape(n, N, A, Br)
-        g = m.rewards[None] + m.discount * np.einsum("cabtu,ncabu->ncat", m.kernels, self.G[best])
-        return [[_unique_rows(g[:, c, a], K, decimals=12) for a in range(A)] for c in range(N)]
+        g = point_backup(m, self.G, best_vectors(S.reshape(-1, K), self.G).reshape(n, N, A, Br))
+        return [[unique_rows(g[:, c, a], decimals=12) for a in range(A)] for c in range(N)]
 
     @one_blas_thread
     def solve(self, problem: AssistancePOMDP | FlatPOMDP) -> Policy:
@@ -365,7 +355,7 @@ class PointSolver(SolverBase):
         for a flat POMDP."""
         sol = self.solve_bounds(problem)
         K = sol.vectors.shape[1]
-        qv = self.q_vectors(_unique_rows(np.vstack([sol.points, _simplex_lattice(K, _q_lattice(K))]), K))
+        qv = self.q_vectors(unique_rows(np.vstack([sol.points, _simplex_lattice(K, _q_lattice(K))])))
         method = "point-based policy iteration + Freudenthal upper bound"
         return bounds_policy(self, problem, qv, sol, method, resolution=self.r, iterations=sol.iterations)
 
@@ -416,18 +406,6 @@ def _q_lattice(K: int, max_points: int = 5_000) -> int:
     return r
 
 
-def _unique_rows(B: np.ndarray, K: int, decimals: int = 13) -> np.ndarray:
-    """Rows of B without near-duplicates, keeping the first occurrence and the order."""
-    _, idx = np.unique(np.round(B, decimals), axis=0, return_index=True)
-    return B[np.sort(idx)]
-
-
-def _prune(G: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Keep the vectors that are best at some belief of B."""
-    keep = np.unique((B @ G.T).argmax(axis=1))
-    return G[keep]
-
-
 def _simplex_lattice(K: int, n: int) -> np.ndarray:
     """All beliefs with coordinates in {0, 1/n, ..., 1} (the simplex lattice)."""
     if K == 2:
@@ -439,6 +417,3 @@ def _simplex_lattice(K: int, n: int) -> np.ndarray:
         edges = (-1, *bars, n + K - 1)
         rows.append([edges[i + 1] - edges[i] - 1 for i in range(K)])
     return np.array(rows, dtype=float) / n
-
-
-__all__ = ["PointSolution", "PointSolver", "evaluate_controller", "freudenthal_weights", "next_round_seconds"]

@@ -40,13 +40,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..policies.base import Policy
-from ..pomdp.branch_model import BranchModel
+from ..pomdp.belief import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
+from . import numerics
 from .base import SolverBase, bayes_only, one_blas_thread
-from .numerics import best_vectors, evaluate_controller, improve, memoryless_controllers, policy_values
 from .point import bounds_policy
-from .upper_bounds import BlockGrid, fast_informed_bound, grid_blocks, inverse_points, phi_of, phi_pairs, unique_rows
+from .upper_bounds import BlockGrid, fast_informed_bound, grid_blocks, inverse_points, phi_of, phi_pairs
 
 __all__ = ["ReachableSolution", "ReachableSolver"]
 
@@ -115,7 +115,7 @@ class ReachableSolver(SolverBase):
         # b @ flat -> unnormalized next beliefs of every (c, a, branch)
         self.flat = np.ascontiguousarray(np.moveaxis(M, 3, 0).reshape(K, -1))
         self.rewards, self.context_probs, self.discount = model.rewards, model.context_probs, model.discount
-        self.vectors = memoryless_controllers(model)
+        self.vectors = numerics.memoryless_controllers(model)
         self.beta = fast_informed_bound(model)
         self.corners = self.context_probs @ self.beta.max(axis=1)  # U at the corners
         self.blocks = grid_blocks(model, self.grid_vertices)
@@ -207,12 +207,8 @@ class ReachableSolver(SolverBase):
 
     def _successors(self, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(p[c, a, br], next[c, a, br, t]) of one belief."""
-        N, A, Br, K = self.shape
-        nb = (b @ self.flat).reshape(N, A, Br, K)
-        p = nb.sum(axis=-1)
-        ok = p > 1e-300
-        nxt = np.where(ok[..., None], nb / np.where(ok, p, 1.0)[..., None], 1.0 / K)
-        return np.where(ok, p, 0.0), nxt
+        p, nxt = self._successors_many(b[None])
+        return p[0], nxt[0]
 
     # -- backups -----------------------------------------------------------------------
     def _backup(self, b: np.ndarray, p: np.ndarray, nxt: np.ndarray) -> tuple[np.ndarray, float]:
@@ -248,7 +244,6 @@ class ReachableSolver(SolverBase):
         n = len(B)
         p, S = self._successors_many(B)  # (n, N, A, Br), (n, N, A, Br, K)
         Sf = S.reshape(-1, K)
-        ii, cc = np.arange(n)[:, None], np.arange(N)[None, :]
         # the actions greedy in the upper bound: near-optimal once the upper bound is close
         q_up = np.einsum("cat,nt->nca", self.rewards, B) + self.discount * (p * self.upper_at(Sf).reshape(n, N, A, Br)).sum(
             axis=3
@@ -257,22 +252,19 @@ class ReachableSolver(SolverBase):
         prev = None
         for _ in range(rounds):
             best = (Sf @ self.vectors.T).argmax(axis=1).reshape(n, N, A, Br)
-            g = self.rewards[None] + self.discount * np.einsum("cabtu,ncabu->ncat", self.model.kernels, self.vectors[best])
+            g = numerics.point_backup(self.model, self.vectors, best)
             lo_acts = np.einsum("ncat,nt->nca", g, B).argmax(axis=2)
             before = self.lower_at(B)
             new = []
             for acts in (lo_acts, up_acts):
-                alpha = np.einsum("c,nct->nt", self.context_probs, g[ii, cc, acts])
-                Sa = S[ii, cc, acts]  # (n, N, Br, K)
-                succ = (Sa.reshape(-1, K) @ alpha.T).argmax(axis=1).reshape(n, N, Br)
-                succ = np.where(p[ii, cc, acts] > 0, succ, -1)
-                ev = evaluate_controller(self.model, acts, succ, guess=alpha)
+                alpha, succ = numerics.greedy_controller(self.model, S, p, g, acts)
+                ev = numerics.evaluate_controller(self.model, acts, succ, guess=alpha)
                 new.append(alpha)
                 if np.all(np.isfinite(ev)):
                     new.append(ev)
             key = lo_acts.tobytes()
             G = np.vstack([self.vectors, *new])
-            self.vectors = G[np.unique((np.vstack([B, np.eye(K)]) @ G.T).argmax(axis=1))]
+            self.vectors = numerics.best_at(G, np.vstack([B, np.eye(K)]))
             gain = float(np.max(self.lower_at(B) - before))
             if key == prev or gain <= self.tol * 1e-3 or time.perf_counter() > t_end:
                 break
@@ -356,8 +348,8 @@ class ReachableSolver(SolverBase):
                 rhs = rhs + np.bincount(rows_of[sel], weights=(wt * a0)[sel], minlength=n)
                 lin = sel & (slope > 0)
                 W = sp.csr_matrix(((wt * slope)[lin], (rows_of[lin], col[lin])), shape=(n, n))
-                v = policy_values(W, rhs, v)
-                new_acts = improve(q_of(v, aff), acts, axis=2)
+                v = numerics.policy_values(W, rhs, v)
+                new_acts = numerics.improve(q_of(v, aff), acts, axis=2)
                 if new_acts is None or time.perf_counter() > t_end:
                     break
                 acts = new_acts
@@ -393,17 +385,6 @@ class ReachableSolver(SolverBase):
             out.append(B)
         return np.vstack(out)
 
-    def _reachable(self, b0: np.ndarray, depth: int) -> np.ndarray:
-        """b0 and the beliefs reachable from it in up to ``depth`` trials (any context, action and
-        branch of positive probability), near-duplicates merged."""
-        K = self.shape[3]
-        out, front = [b0[None]], b0[None]
-        for _ in range(depth):
-            p, S = self._successors_many(front)
-            front = unique_rows(S[p > 0].reshape(-1, K), self.decimals)
-            out.append(front)
-        return unique_rows(np.vstack(out), self.decimals)
-
     def _successors_many(self, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(p[n, c, a, br], next[n, c, a, br, t]) of beliefs B."""
         N, A, Br, K = self.shape
@@ -419,7 +400,7 @@ class ReachableSolver(SolverBase):
         improve on the others at their own belief."""
         K = self.shape[3]
         at = np.vstack([B, np.eye(K)])
-        self.vectors = self.vectors[np.unique((at @ self.vectors.T).argmax(axis=1))]
+        self.vectors = numerics.best_at(self.vectors, at)
         n = len(self.points)
         if 1 < n <= 4000:
             order = np.argsort(self.excess_v, kind="stable")  # deepest below the corners first
@@ -487,7 +468,7 @@ class ReachableSolver(SolverBase):
         span = max(width, self.tol)
         depth_cap = self.max_depth or math.ceil(math.log(self.tol / (2 * span)) / math.log(self.discount)) + 1
         depth_cap = max(1, depth_cap)
-        visited: list[np.ndarray] = list(self._reachable(b0, self.seed_depth))
+        visited: list[np.ndarray] = list(numerics.reachable_beliefs(b0, self.seed_depth, self._successors_many, self.decimals))
         history = []
         trials = backups = consolidated = 0
         cost = backup_seconds = 0.0
@@ -502,7 +483,7 @@ class ReachableSolver(SolverBase):
                 backups += 1
             backup_seconds += time.perf_counter() - b_start
             visited.extend(path[1:])
-            B = unique_rows(np.array(visited), self.decimals)
+            B = numerics.unique_rows(np.array(visited), self.decimals)
             visited = list(B)
             # a consolidation is not started past the limit: the next one costs about (size
             # ratio)^2 x the last one; the first, about two backups per visited belief (each
@@ -512,7 +493,7 @@ class ReachableSolver(SolverBase):
                 # values over the visited beliefs at once (loops of beliefs included), with the
                 # beliefs met on a few trajectories of the greedy policy (what the lower bound needs)
                 c0 = time.perf_counter()
-                B = unique_rows(np.vstack([B, self._sampled(b0, rng)]), self.decimals)
+                B = numerics.unique_rows(np.vstack([B, self._sampled(b0, rng)]), self.decimals)
                 visited = list(B)
                 self._improve_upper(B, t_end=t_end)
                 self._improve_lower(B, t_end=t_end)
@@ -520,7 +501,7 @@ class ReachableSolver(SolverBase):
                 consolidated, cost = len(B), time.perf_counter() - c0
             lo, up = float(self.lower_at(b0)[0]), float(self.upper_at(b0)[0])
             history.append((trials, time.perf_counter() - t0, lo, up))
-        B = unique_rows(np.array(visited), self.decimals)
+        B = numerics.unique_rows(np.array(visited), self.decimals)
         self._prune(B)
         lo, up = float(self.lower_at(b0)[0]), float(self.upper_at(b0)[0])
         self.visited = B
@@ -543,14 +524,13 @@ class ReachableSolver(SolverBase):
         set reduced to the vectors best at one of the beliefs."""
         N, A, Br, K = self.shape
         _, S = self._successors_many(beliefs)
-        best = best_vectors(S.reshape(-1, K), self.vectors).reshape(len(beliefs), N, A, Br)
-        g = self.rewards[None] + self.discount * np.einsum("cabtu,ncabu->ncat", self.model.kernels, self.vectors[best])
+        best = numerics.best_vectors(S.reshape(-1, K), self.vectors).reshape(len(beliefs), N, A, Br)
+        g = numerics.point_backup(self.model, self.vectors, best)
         res = []
         for c in range(N):
             row = []
             for a in range(A):
-                V = unique_rows(g[:, c, a], decimals=12)
-                row.append(V[np.unique((beliefs @ V.T).argmax(axis=1))])
+                row.append(numerics.best_at(numerics.unique_rows(g[:, c, a], decimals=12), beliefs))
             res.append(row)
         return res
 
@@ -561,7 +541,7 @@ class ReachableSolver(SolverBase):
         flat POMDP."""
         sol = self.solve_bounds(problem)
         K = sol.vectors.shape[1]
-        at = unique_rows(np.vstack([sol.beliefs, np.eye(K), np.full((1, K), 1.0 / K)]))
+        at = numerics.unique_rows(np.vstack([sol.beliefs, np.eye(K), np.full((1, K), 1.0 / K)]))
         qv = self.q_vectors(at)
         method = "heuristic search over reachable beliefs: alpha-vector lower bound, sawtooth upper bound"
         counts = {"trials": sol.trials, "backups": sol.backups, "iterations": sol.trials, "beliefs_visited": len(sol.beliefs)}

@@ -1,4 +1,5 @@
-"""The solver registry: every solver by name, with its options and their defaults.
+"""The solver registry: every solver by name, with its options and their defaults, and every
+policy by a short spec (:func:`policy_from_spec`), solved through it.
 
 The command line, the experiment server and the reproduction build solvers here and never
 choose an algorithm themselves::
@@ -10,23 +11,57 @@ Options are keyword arguments with defaults; ``None`` means the default.  Option
 other solvers take are ignored (so that one set of command-line options serves every
 solver); an option no solver takes is an error.  A solver's module is loaded when the solver is
 first built (through the package's names), so that naming the solvers loads none of scipy.
+
+A policy spec is what ``trustseek simulate --policy`` and a study's blocks name, a JSON object::
+
+    {"kind": "trust-aware", "belief_update": "bayes", "grid": 2001}   solved by the grid solver
+    {"kind": "trust-agnostic"}                                         Section VI-A, from the model
+    {"kind": "randomized", "p_ask": {"low": 0.1, "high": 0.4}}         (default: the paper's design)
+    {"kind": "always-ask"} / {"kind": "never-ask"}
+    {"kind": "schedule", "counts": {"low": 17, "high": 17}, "window": null}
+                                    trial scheduling, solved by the schedule solver (options:
+                                    belief_update, grid, order, ask_first_hard)
+
+or a full policy JSON (with ``format``), taken as it is.  Every problem is reported at once,
+each line naming where in the spec it is (``where``).
 """
 
 from __future__ import annotations
 
 import inspect
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from .. import solvers
+from ..errors import TrustseekError
+from ..model.core import TrustModel
+from ..model.jsonfile import ModelError
+from ..model.task import Task
 from ..policies.base import Policy
+from ..policies.complexity import ComplexityPolicy, always_ask, never_ask, randomized
+from ..policies.kinds import policy_from_dict
+from ..policies.scheduling import SCHEDULE
+from ..pomdp.problem import AssistancePOMDP
+from ..pomdp.scheduling import SchedulingError, SchedulingProblem
+from ..vocab import BELIEF_UPDATES, PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS
 from .agnostic import PAPER_HORIZON, TrustAgnosticSolver
 from .base import Solver, SolverError
-from .defaults import DEFAULT_GRID, DEFAULT_SCHEDULE_GRID
-from .scheduling import ScheduleSolver
+from .defaults import DEFAULT_GRID, DEFAULT_SCHEDULE_GRID, ORDERS
 
-__all__ = ["SOLVERS", "SolverEntry", "make_solver", "solve_with", "solver_names"]
+__all__ = [
+    "SCHEDULE",
+    "SOLVERS",
+    "SPEC_KINDS",
+    "PolicySpecError",
+    "SolverEntry",
+    "make_solver",
+    "policy_from_spec",
+    "schedule_size",
+    "solve",
+    "solve_with",
+    "solver_names",
+]
 
 
 @dataclass(frozen=True)
@@ -52,7 +87,7 @@ def _alpha(belief_update: str = "bayes", gap: float = 1e-6) -> Solver:
 
 
 def _certified_grid(belief_update: str = "paper", gap: float = 1e-6) -> Solver:
-    return solvers.certified_grid.CertifiedGridSolver(belief_update=belief_update, tol=gap)
+    return solvers.certified.CertifiedGridSolver(belief_update=belief_update, tol=gap)
 
 
 def _point(
@@ -84,7 +119,7 @@ def _schedule(
     order: str = "optimal",
     ask_first_hard: bool = False,
 ) -> Solver:
-    return ScheduleSolver(belief_update, representation, schedule_grid, order, ask_first_hard)
+    return solvers.scheduling.ScheduleSolver(belief_update, representation, schedule_grid, order, ask_first_hard)
 
 
 SOLVERS: dict[str, SolverEntry] = {
@@ -128,3 +163,170 @@ def make_solver(name: str, **options: Any) -> Solver:
 def solve_with(name: str, problem: Any, **options: Any) -> Policy:
     """Build the solver called ``name`` and solve ``problem`` with it."""
     return make_solver(name, **options).solve(problem)
+
+
+def solve(
+    model: TrustModel,
+    task: Task,
+    belief_update: str = "bayes",
+    grid: int = DEFAULT_GRID,
+    method: str = "policy-iteration",
+    tol: float = 1e-9,
+) -> Policy:
+    """Solve the assistance POMDP of ``model`` and ``task`` for the trust-aware policy (the grid solver)."""
+    return make_solver("grid", belief_update=belief_update, grid=grid, method=method, tol=tol).solve(AssistancePOMDP(model, task))
+
+
+# --------------------------------------------------------------------------- policies by spec
+
+
+#: the kinds of a plain policy (``trustseek simulate --policy`` names these)
+SPEC_KINDS = POLICY_SPEC_KINDS
+SPEC_ENTRIES = ("kind", "belief_update", "grid", "p_ask")
+SCHEDULE_ENTRIES = ("kind", "counts", "window", "belief_update", "grid", "order", "ask_first_hard")
+
+
+class PolicySpecError(TrustseekError, ValueError):
+    """A policy spec that does not name a policy; one line per problem."""
+
+
+def policy_from_spec(
+    spec: Any,
+    model: TrustModel,
+    task: Task,
+    where: str = "policy",
+    max_grid: int | None = None,
+    max_values: int | None = None,
+) -> Policy:
+    """The policy a spec names, for ``model`` and ``task`` (solving the POMDP for ``trust-aware``
+    and the scheduling problem for ``schedule``).
+
+    ``max_grid`` caps the grid of a trust-aware spec and ``max_values`` the size of a schedule
+    spec's policy (states x complexities x actions x grid points, bounded before solving): a
+    server limits the work a request can ask for."""
+    if not isinstance(spec, Mapping):
+        raise PolicySpecError([f"{where} must be an object"])
+    if "format" in spec:
+        pol = policy_from_dict(spec, where)
+        if tuple(pol.complexities) != tuple(task.complexities):
+            ours, theirs = list(pol.complexities), list(task.complexities)
+            raise PolicySpecError([f"{where}: complexities {ours} differ from the task's {theirs}"])
+        return pol
+    kind = spec.get("kind")
+    if kind == SCHEDULE:
+        return _schedule_spec(spec, model, task, where, max_values)
+    extra = sorted(set(spec) - set(SPEC_ENTRIES))
+    if extra:
+        raise PolicySpecError([f"{where} has unknown entries {extra} (expected some of {sorted(SPEC_ENTRIES)})"])
+    if kind not in SPEC_KINDS:
+        kinds = [*SPEC_KINDS, SCHEDULE]
+        raise PolicySpecError([f"{where}.kind is {kind!r}, expected one of {kinds} (or give a full policy JSON)"])
+    cx = task.complexities
+    if kind == "trust-aware":
+        return _trust_aware_spec(spec, model, task, where, max_grid)
+    if kind == "trust-agnostic":
+        return make_solver("trust-agnostic").solve(AssistancePOMDP(model, task))
+    if kind == "randomized":
+        return _randomized_spec(spec.get("p_ask"), cx, where)
+    return always_ask(cx) if kind == "always-ask" else never_ask(cx)
+
+
+def _trust_aware_spec(spec: Mapping[str, Any], model: TrustModel, task: Task, where: str, max_grid: int | None) -> Policy:
+    bu = spec.get("belief_update", "bayes")
+    grid = spec.get("grid", DEFAULT_GRID)
+    problems = []
+    if bu not in BELIEF_UPDATES:
+        problems.append(f"{where}.belief_update is {bu!r}, expected {' or '.join(repr(b) for b in BELIEF_UPDATES)}")
+    top = max_grid if max_grid is not None else float("inf")
+    if not isinstance(grid, int) or isinstance(grid, bool) or not 3 <= grid <= top:
+        expected = f"an integer in [3, {max_grid}]" if max_grid is not None else "an integer of at least 3"
+        problems.append(f"{where}.grid is {grid!r}, expected {expected}")
+    if problems:
+        raise PolicySpecError(problems)
+    pomdp = AssistancePOMDP(model, task)
+    solver = make_solver("grid", belief_update=bu, grid=grid)
+    reasons = solver.unsupported(pomdp)
+    if reasons:
+        raise PolicySpecError([f"{where}: {r}" for r in reasons])
+    return solver.solve(pomdp)
+
+
+def _randomized_spec(p: Any, cx: tuple[str, ...], where: str) -> ComplexityPolicy:
+    if p is None:  # the paper's design when the task has its complexities
+        return randomized(PAPER_ASK_PROBABILITIES if cx == tuple(PAPER_ASK_PROBABILITIES) else dict.fromkeys(cx, 0.25))
+    if not isinstance(p, Mapping) or set(p) != set(cx):
+        raise PolicySpecError([f"{where}.p_ask must map each complexity {list(cx)} to a probability, got {p!r}"])
+    try:
+        return ComplexityPolicy("randomized", cx, [p[c] for c in cx])
+    except ModelError as exc:
+        raise PolicySpecError([f"{where}: {x}" for x in exc.problems]) from None
+
+
+def schedule_size(counts: tuple[int, ...], window: int | None, grid: int) -> int:
+    """An upper bound on the number of Q values of a schedule policy (without enumerating its
+    states): prod(counts + 1) remaining states, times the visible compositions of a window,
+    times complexities, actions and grid points."""
+    n = sum(counts)
+    states = 1
+    for k in counts:
+        states *= k + 1
+    if window is not None and window < n:
+        states *= (window + 1) ** (len(counts) - 1)
+    return states * len(counts) * 2 * grid
+
+
+def _schedule_spec(spec: Mapping[str, Any], model: TrustModel, task: Task, where: str, max_values: int | None) -> Policy:
+    problems = []
+    extra = sorted(set(spec) - set(SCHEDULE_ENTRIES))
+    if extra:
+        problems.append(f"{where} has unknown entries {extra} (expected some of {sorted(SCHEDULE_ENTRIES)})")
+    cx = task.complexities
+    counts = spec.get("counts")
+    if isinstance(counts, Mapping) and set(counts) <= set(cx):
+        counts = [counts.get(c, 0) for c in cx]
+    if not (
+        isinstance(counts, list | tuple)
+        and len(counts) == len(cx)
+        and all(isinstance(k, int) and not isinstance(k, bool) and k >= 0 for k in counts)
+        and sum(counts) >= 1
+    ):
+        problems.append(
+            f"{where}.counts must give a non-negative number of items for each complexity {list(cx)} "
+            f"(an object by name or a list), at least one item in all, got {spec.get('counts')!r}"
+        )
+        counts = None
+    window = spec.get("window")
+    if window is not None and (not isinstance(window, int) or isinstance(window, bool) or window < 1):
+        problems.append(f"{where}.window is {window!r}, expected a positive number of items or null (every item)")
+    bu = spec.get("belief_update", "bayes")
+    if bu not in BELIEF_UPDATES:
+        problems.append(f"{where}.belief_update is {bu!r}, expected {' or '.join(repr(b) for b in BELIEF_UPDATES)}")
+    grid = spec.get("grid", DEFAULT_SCHEDULE_GRID)
+    if not isinstance(grid, int) or isinstance(grid, bool) or grid < 3:
+        problems.append(f"{where}.grid is {grid!r}, expected an integer of at least 3")
+    order = spec.get("order", "optimal")
+    if order not in ORDERS:
+        problems.append(f"{where}.order is {order!r}, expected one of {list(ORDERS)}")
+    first = spec.get("ask_first_hard", False)
+    if not isinstance(first, bool):
+        problems.append(f"{where}.ask_first_hard is {first!r}, expected true or false")
+    if problems:
+        raise PolicySpecError(problems)
+    assert counts is not None
+    size = schedule_size(tuple(counts), window, grid)
+    if max_values is not None and size > max_values:
+        raise PolicySpecError(
+            [
+                f"{where}: a schedule policy for counts {list(counts)}, window {window} and grid {grid} could hold "
+                f"{size} values, more than the {max_values} allowed here: use fewer items, a smaller window or grid"
+            ]
+        )
+    try:
+        problem = SchedulingProblem(AssistancePOMDP(model, task), tuple(counts), window)
+    except SchedulingError as exc:
+        raise PolicySpecError([f"{where}: {x}" for x in exc.problems]) from None
+    solver = make_solver(SCHEDULE, belief_update=bu, schedule_grid=grid, order=order, ask_first_hard=first)
+    reasons = solver.unsupported(problem)
+    if reasons:
+        raise PolicySpecError([f"{where}: {r}" for r in reasons])
+    return solver.solve(problem)

@@ -10,7 +10,7 @@ With V_s(x) the optimal value of state s = (remaining, visible) at x = P(trust =
 Two representations of the value functions:
 
 * ``alpha`` (``bayes`` update): sets of alpha vectors, backed up exactly with the envelope
-  backup of :mod:`.backup` (no approximation: the values equal an exhaustive search);
+  backup of :func:`~.alpha.exact_backup` (no approximation: the values equal an exhaustive search);
 * ``grid`` (either update): values on a uniform grid of x, linear interpolation in between.
 
 ``order`` restricts the picks to a rule (``easy-first``, ``hard-first``, ``alternating``; the
@@ -26,14 +26,13 @@ from typing import Any
 
 import numpy as np
 
-from ..policies.envelope import envelope_values
+from ..policies.envelope import cross_sum, envelope_values, max_of
 from ..policies.scheduling import PieceQ, SchedulePolicy
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem, State, state_key
-from .backup import exact_backup
+from .alpha import exact_backup
 from .base import SolverBase, SolverError, one_blas_thread
 from .defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
-from .envelopes import cross_sum, max_of
 
 #: Q of an action the rule forbids (stored finite so that policy files stay valid JSON)
 FORBIDDEN = -1e9

@@ -11,10 +11,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..policies.base import Policy
-from ..policies.regions import ask_regions
+from ..policies.base import Policy, ask_regions
 from ..pomdp.problem import AssistancePOMDP
-from .agnostic import TrustAgnosticSolver
+from .registry import make_solver
 
 __all__ = ["summarize"]
 
@@ -22,7 +21,7 @@ __all__ = ["summarize"]
 def summarize(policy: Policy, pomdp: AssistancePOMDP) -> dict[str, Any]:
     """The summary of ``policy`` solved for ``pomdp`` (any number of trust levels)."""
     info = policy.info
-    agnostic = TrustAgnosticSolver().solve(pomdp).to_dict()["p_ask"]
+    agnostic = make_solver("trust-agnostic").solve(pomdp).to_dict()["p_ask"]
     name = "trust-aware" if policy.belief_update is not None else policy.kind
     two_levels = pomdp.n_trust == 2
     if "certified_gap" not in info:

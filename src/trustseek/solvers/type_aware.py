@@ -54,24 +54,23 @@ from ..compiled import njit
 from ..model.core import TrustModel, trust_model
 from ..model.mixture import TypeMixture
 from ..model.task import Task
-from ..policies.alpha_vector import AlphaVectorPolicy
+from ..policies.alpha_vector import AlphaVectorPolicy, TypeAwarePolicy
 from ..policies.base import Policy
 from ..policies.envelope import envelope_values
-from ..policies.type_aware import TypeAwarePolicy
-from ..pomdp.branch_model import BranchModel
+from ..pomdp.belief import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.supervisor_types import type_aware_problem
+from . import numerics
 from .alpha import AlphaSolver
 from .base import bayes_only, one_blas_thread
 from .defaults import DEFAULT_TYPE_AWARE_SOLVER
-from .numerics import evaluate_controller, improve, memoryless_controllers, policy_values
 from .point import (
     PointSolution,
     PointSolver,
 )
 from .registry import make_solver
-from .upper_bounds import closed_blocks, fast_informed_bound
+from .upper_bounds import closed_blocks, fast_informed_bound, one_state_value
 
 __all__ = ["DEFAULT_TYPE_AWARE_SOLVER", "TypeAwareSolver", "TypeBound", "solve_type_aware", "type_bound"]
 
@@ -123,12 +122,12 @@ def type_bound(problem: AssistancePOMDP | FlatPOMDP, model: BranchModel, block_t
     for idx in blocks:
         if len(idx) == 1:
             s = int(idx[0])
-            val = float(pc @ model.rewards[:, :, s].max(axis=1)) / (1.0 - g)
+            val = one_state_value(model, s)
             lo.append(s)
             hi.append(s)
             vts.append(np.full(len(xs), val))
             qts.append(np.broadcast_to((model.rewards[:, :, s] + g * val)[..., None], (N, A, len(xs))).copy())
-            ctrl.append(memoryless_controllers(model))
+            ctrl.append(numerics.memoryless_controllers(model))
             continue
         sub = _block_problem(problem, idx)
         sol = AlphaSolver(tol=block_tol, upper_grid=0).solve_bounds(sub)
@@ -179,14 +178,10 @@ def _block_controller(model: BranchModel, block: BranchModel, vecs: np.ndarray, 
     B = np.stack([1.0 - x, x], axis=1)
     p, S = block.branches.successors(B)  # (n, N, A, Br), (n, N, A, Br, 2)
     n, N, A, Br, _ = S.shape
-    best = (S.reshape(-1, 2) @ vecs.T).argmax(axis=1).reshape(n, N, A, Br)
-    g = block.rewards[None] + block.discount * np.einsum("cabtu,ncabu->ncat", block.kernels, vecs[best])
+    g = numerics.point_backup(block, vecs, (S.reshape(-1, 2) @ vecs.T).argmax(axis=1).reshape(n, N, A, Br))
     acts = np.einsum("ncat,nt->nca", g, B).argmax(axis=2)
-    ii, cc = np.arange(n)[:, None], np.arange(N)[None, :]
-    alpha = np.einsum("c,nct->nt", block.context_probs, g[ii, cc, acts])
-    succ = (S[ii, cc, acts].reshape(-1, 2) @ alpha.T).argmax(axis=1).reshape(n, N, Br)
-    succ = np.where(p[ii, cc, acts] > 0, succ, -1)
-    ev = evaluate_controller(model, acts, succ)
+    succ = numerics.greedy_controller(block, S, p, g, acts)[1]
+    ev = numerics.evaluate_controller(model, acts, succ)
     return ev if np.all(np.isfinite(ev)) else np.zeros((0, model.n_hidden))
 
 
@@ -294,8 +289,8 @@ class TypeAwareSolver(PointSolver):
                 cols.append(col[ii, c, a].ravel())
                 rws.append(rows.ravel())
             W = sp.csr_matrix((np.concatenate(data), (np.concatenate(rws), np.concatenate(cols))), shape=(nV, nV))
-            new_u = policy_values(W, rr, u)
-            new_acts = improve(q_of(new_u), acts, axis=2)
+            new_u = numerics.policy_values(W, rr, u)
+            new_acts = numerics.improve(q_of(new_u), acts, axis=2)
             same_choice = np.array_equal(successor_values(new_u)[1], use)
             u = new_u
             if new_acts is None and same_choice:
@@ -310,9 +305,9 @@ class TypeAwareSolver(PointSolver):
         """The memoryless controllers and each type's own controller, keeping the vectors best at
         some belief reachable from b0 or at a corner."""
         self.u = np.zeros(0)  # no grid bound yet: upper_at is the types' bound alone
-        G = np.vstack([memoryless_controllers(model), *self.bound.controllers])
+        G = np.vstack([numerics.memoryless_controllers(model), *self.bound.controllers])
         K = model.n_hidden
-        return G[np.unique((np.vstack([reach, np.eye(K)]) @ G.T).argmax(axis=1))] if len(G) > 1 else G
+        return numerics.best_at(G, np.vstack([reach, np.eye(K)])) if len(G) > 1 else G
 
     def _upper_at_start(self, b0: np.ndarray) -> float:
         return self.lookahead_upper(b0)

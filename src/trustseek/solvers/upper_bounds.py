@@ -10,8 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from ..pomdp.belief import Branches
-from ..pomdp.branch_model import BranchModel
+from ..pomdp.belief import Branches, BranchModel
 from .base import SolverError
 from .point import PointSolver
 
@@ -21,9 +20,9 @@ __all__ = [
     "fast_informed_bound",
     "grid_blocks",
     "inverse_points",
+    "one_state_value",
     "phi_of",
     "phi_pairs",
-    "unique_rows",
 ]
 
 
@@ -72,6 +71,12 @@ def fast_informed_bound(model: BranchModel, max_rounds: int = 200) -> np.ndarray
     return beta + max(0.0, residual) / (1.0 - g)
 
 
+def one_state_value(model: BranchModel, s: int) -> float:
+    """The exact value of hidden state ``s`` when it is a closed block of its own: the belief never
+    moves, so the value is the best reward per context, averaged over the contexts, discounted."""
+    return float(model.context_probs @ model.rewards[:, :, s].max(axis=1)) / (1.0 - model.discount)
+
+
 class BlockGrid:
     """The grid upper bound of one closed block of hidden states (Lovejoy's bound on Freudenthal's
     triangulation, certified, as the point solver computes it); one hidden state: its exact value."""
@@ -79,17 +84,14 @@ class BlockGrid:
     def __init__(self, model: BranchModel, vertices: int):
         K = model.n_hidden
         if K == 1:
-            # one hidden state: the belief never moves, the value is the best reward per context, discounted
-            self.value = float(model.context_probs @ model.rewards[:, :, 0].max(axis=1)) / (1.0 - model.discount)
+            self.value = one_state_value(model, 0)
             self.solver = None
             return
         r = 2
         while comb(2 * r + K - 1, K - 1) <= vertices:
             r *= 2
         self.solver = PointSolver()
-        self.solver.model = model
-        V, u, lookup = self.solver._upper(r)
-        self.solver.r, self.solver.u, self.solver.lookup, self.solver.V = r, u, lookup, V
+        V, u = self.solver.grid_bound(model, r)
         # two hidden states: the triangulation is the grid on [0, 1], interpolation is np.interp
         order = np.argsort(V[:, -1])
         self.xs, self.us = V[order, -1], u[order]
@@ -148,9 +150,3 @@ def phi_pairs(B: np.ndarray, P: np.ndarray, idx: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         r = np.where(Pi > 0, B[:, None, :] / np.where(Pi > 0, Pi, 1.0), np.inf)
     return np.minimum(r.min(axis=2), 1.0)
-
-
-def unique_rows(B: np.ndarray, decimals: int = 13) -> np.ndarray:
-    """Rows of B without near-duplicates, keeping the first occurrence and the order."""
-    _, idx = np.unique(np.round(B, decimals), axis=0, return_index=True)
-    return B[np.sort(idx)]
