@@ -21,15 +21,18 @@ such a call is made under :data:`PARALLEL_LOCK`.
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import os
 import sys
 import threading
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, TypeVar
 
 __all__ = ["AVAILABLE", "PARALLEL_LOCK", "load", "loaded", "njit", "prange", "python", "set_threads"]
 
+_PACKAGE = Path(__file__).resolve().parent
 AVAILABLE = importlib.util.find_spec("numba") is not None  # numba is a declared dependency
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -86,6 +89,8 @@ def _load() -> None:
 
         if "NUMBA_THREADING_LAYER" not in os.environ:
             numba.config.THREADING_LAYER = "workqueue"  # type: ignore[attr-defined]
+        if not _LOADED:
+            _stamp_our_caches()
         marker, prange = prange, numba.prange
         done = {id(lazy): lazy for lazy in _PENDING}
         for lazy in _PENDING:
@@ -100,6 +105,64 @@ def _load() -> None:
                 elif value is marker:
                     setattr(module, attr, numba.prange)
         _LOADED = True
+
+
+#: the package's modules compiled code is made of: those with compiled functions and those whose
+#: values compiled functions read (tests/test_compiled.py checks the list against the code)
+COMPILED_SOURCES = (
+    "estimation/compiled_run.py",
+    "estimation/compiled_steps.py",
+    "estimation/em.py",
+    "estimation/forward_backward.py",
+    "estimation/kernels.py",
+    "estimation/sticks.py",
+    "estimation/structure.py",
+    "simulation/kernels.py",
+    "solvers/type_aware.py",
+)
+
+
+def sources_stamp() -> bytes:
+    """One digest of :data:`COMPILED_SOURCES`' contents."""
+    digest = hashlib.sha256()
+    for name in COMPILED_SOURCES:
+        digest.update((_PACKAGE / name).read_bytes())
+    return digest.digest()
+
+
+def _stamp_our_caches() -> None:
+    """Key every cached compiled function of the package on :func:`sources_stamp`.
+
+    numba keys a cached function on its own file's content alone, and a compiled function holds
+    the compiled code it calls: after a change to another module (an update, a ``git pull``, an
+    edit), its cached code stays the old one, and can give other numbers or crash (numba's
+    documented limit).  Here a change to any of the modules compiled code is made of compiles
+    them all anew.  numba's own locators find the cache (``NUMBA_CACHE_DIR``, beside the source,
+    or the user's cache); only the stamp they compare is this one.
+    """
+    from numba.core import caching
+
+    stamp = sources_stamp()
+
+    def stamped(locator: Any) -> Any:
+        class Stamped(locator):
+            @classmethod
+            def from_function(cls, py_func: Any, py_file: str) -> Any:
+                if not os.path.realpath(py_file).startswith(str(_PACKAGE) + os.sep):
+                    return None
+                return super().from_function(py_func, py_file)
+
+            def get_source_stamp(self) -> bytes:
+                return stamp
+
+        return Stamped
+
+    # the names of numba 0.68 (earlier releases prefix them with an underscore)
+    names = ("CacheImpl", "UserProvidedCacheLocator", "InTreeCacheLocator", "UserWideCacheLocator")
+    impl, *locators = (getattr(caching, n, None) or getattr(caching, "_" + n, None) for n in names)
+    if impl is None or None in locators:  # pragma: no cover - a numba without them keeps its own keys
+        return
+    impl._locator_classes = [*(stamped(c) for c in locators), *impl._locator_classes]
 
 
 def loaded() -> bool:

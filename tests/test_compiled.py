@@ -1,0 +1,97 @@
+"""The compiled code's cache: keyed on every module compiled code is made of."""
+
+from __future__ import annotations
+
+import ast
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import trustseek
+from trustseek import compiled
+
+PACKAGE = Path(trustseek.__file__).resolve().parent
+
+
+def _compiled_functions(tree: ast.Module) -> list[ast.FunctionDef]:
+    return [
+        node
+        for node in tree.body
+        if isinstance(node, ast.FunctionDef) and any("njit" in ast.unparse(d) for d in node.decorator_list)
+    ]
+
+
+def _imported(tree: ast.Module, here: Path) -> dict[str, Path]:
+    """Each name a module imports from the package: the file it comes from."""
+    out = {}
+    for node in tree.body:
+        if isinstance(node, ast.ImportFrom) and node.level > 0:
+            base = here.parent
+            for _ in range(node.level - 1):
+                base = base.parent
+            for alias in node.names:
+                target = base / (node.module or "").replace(".", "/")
+                as_module = target / f"{alias.name}.py"
+                out[alias.asname or alias.name] = as_module if as_module.exists() else target.with_suffix(".py")
+    return out
+
+
+def test_the_compiled_sources_are_every_module_compiled_code_is_made_of():
+    """A module with compiled functions, and a module whose values (constants, compiled functions)
+    a compiled function reads, are in COMPILED_SOURCES: a change to one of them recompiles all."""
+    needed = set()
+    for path in PACKAGE.rglob("*.py"):
+        tree = ast.parse(path.read_text())
+        functions = _compiled_functions(tree)
+        if not functions:
+            continue
+        needed.add(path.relative_to(PACKAGE).as_posix())
+        imported = _imported(tree, path)
+        for fn in functions:
+            for node in ast.walk(fn):
+                if isinstance(node, ast.Name) and node.id in imported:
+                    needed.add(imported[node.id].resolve().relative_to(PACKAGE).as_posix())
+    needed.discard("compiled.py")  # the decorator itself
+    assert needed <= set(compiled.COMPILED_SOURCES), sorted(needed - set(compiled.COMPILED_SOURCES))
+    assert set(compiled.COMPILED_SOURCES) <= {p.relative_to(PACKAGE).as_posix() for p in PACKAGE.rglob("*.py")}
+    assert "estimation/kernels.py" in needed and "estimation/structure.py" in needed  # the scan finds them
+
+
+def test_the_stamp_changes_with_any_compiled_source(tmp_path, monkeypatch):
+    for name in compiled.COMPILED_SOURCES:
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(PACKAGE / name, tmp_path / name)
+    monkeypatch.setattr(compiled, "_PACKAGE", tmp_path)
+    before = compiled.sources_stamp()
+    assert before == compiled.sources_stamp()
+    for name in compiled.COMPILED_SOURCES:
+        with (tmp_path / name).open("a") as fh:
+            fh.write("\n")
+        after = compiled.sources_stamp()
+        assert after != before, name
+        before = after
+
+
+def test_a_cached_package_function_is_stamped_with_every_compiled_source(tmp_path):
+    """In a fresh process with its own cache: the package's compiled functions are cached under the
+    stamp of all compiled sources (not their own file's), anything else as numba does."""
+    code = """
+import numba
+from numba.core import caching
+from trustseek import compiled
+from trustseek.estimation import forward_backward
+compiled.load()
+def mine(x):
+    return x + 1
+ours = caching.FunctionCache(forward_backward.step_codes.py_func)
+theirs = caching.FunctionCache(mine)
+print(ours._impl.locator.get_source_stamp() == compiled.sources_stamp(),
+      theirs._impl.locator.get_source_stamp() == compiled.sources_stamp(),
+      type(theirs._impl.locator).__name__)
+"""
+    script = tmp_path / "probe.py"
+    script.write_text(code)
+    env = {"NUMBA_CACHE_DIR": str(tmp_path / "cache"), "PATH": "/usr/bin:/bin"}
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, check=True).stdout.split()
+    assert out == ["True", "False", "UserProvidedCacheLocator"]
