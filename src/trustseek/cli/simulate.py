@@ -74,102 +74,116 @@ def _policy(
     raise TrustseekError([f"--policy must be one of {list(POLICY_SPEC_KINDS)} or a policy JSON file, got {spec!r}"])
 
 
+# simulate's options (Typer reads each from its parameter's annotation)
+_Model = Annotated[
+    str,
+    typer.Option(
+        "--model",
+        "-m",
+        help="Supervisors' trust model: a preset name (paper) or a JSON file; a mixture of supervisor types "
+        "(paper+conservative or a mixture file) gives each participant a type in the mixture's shares.",
+    ),
+]
+_Types = Annotated[
+    str | None,
+    typer.Option(
+        "--types",
+        help="Supervisors of several types, as 'solve --types' takes them: a mixture preset (paper+conservative) "
+        "or a mixture JSON file (the same as giving the mixture with --model).",
+    ),
+]
+_Policy = Annotated[
+    str,
+    typer.Option(
+        "--policy",
+        "-p",
+        help=f"Robot policy: {', '.join(POLICY_SPEC_KINDS)}, {TYPE_AWARE} (for a mixture of supervisor types), "
+        "or a policy JSON file (e.g. from 'trustseek solve --out').",
+    ),
+]
+_Participants = Annotated[
+    int, typer.Option("--participants", "-n", min=1, max=1_000_000, help="Number of simulated participants.")
+]
+_Counts = Annotated[
+    str | None,
+    typer.Option(
+        "--counts",
+        help="Trials per complexity in random order, e.g. 41,30 or low=41,high=30 (the paper's design). "
+        "Default: 41,30 unless --trials is given.",
+    ),
+]
+_Trials = Annotated[
+    int | None,
+    typer.Option(
+        "--trials",
+        min=1,
+        max=100_000,
+        help="Number of trials with i.i.d. complexities from the task's probabilities (instead of --counts).",
+    ),
+]
+_BeliefUpdate = Annotated[
+    str,
+    typer.Option(
+        "--belief-update",
+        "-u",
+        help="Belief update of the trust-aware policy: 'bayes' (exact filter, default) or 'paper' (eq. 3).",
+    ),
+]
+_PolicyModel = Annotated[
+    str | None,
+    typer.Option("--policy-model", help="Model the trust-aware policy is solved for (default: the supervisors' model)."),
+]
+_Grid = Annotated[
+    int, typer.Option("--grid", min=3, max=1_000_001, help="Belief grid points for solving the trust-aware policy.")
+]
+_AskLow = Annotated[float, typer.Option("--ask-low", min=0.0, max=1.0, help="Randomized policy: P(ask) in the first complexity.")]
+_AskHigh = Annotated[
+    float, typer.Option("--ask-high", min=0.0, max=1.0, help="Randomized policy: P(ask) in the second complexity.")
+]
+_Concentration = Annotated[
+    float | None,
+    typer.Option(
+        "--concentration",
+        help="Heterogeneous population: each participant's probability rows ~ Dirichlet(concentration x pooled row + pseudo).",
+    ),
+]
+_Pseudo = Annotated[
+    float, typer.Option("--pseudo", min=0.0, help="Dirichlet pseudo-count added to every cell (with --concentration).")
+]
+_Seed = Annotated[int, typer.Option("--seed", min=0, help="Random seed (same seed, same supervisors and luck for any policy).")]
+_Out = Annotated[
+    Path | None,
+    typer.Option(
+        "--out",
+        "-o",
+        help="Write every trial (canonical trial log + true_trust, belief, reward, block, policy) to this CSV/Parquet file.",
+    ),
+]
+_SummaryOut = Annotated[
+    Path | None, typer.Option("--summary-out", help="Write the per-participant summary to this CSV/Parquet file.")
+]
+
+
 @app.command(rich_help_panel="Simulate and reproduce")
 def simulate(
     ctx: typer.Context,
-    model: Annotated[
-        str,
-        typer.Option(
-            "--model",
-            "-m",
-            help="Supervisors' trust model: a preset name (paper) or a JSON file; a mixture of supervisor types "
-            "(paper+conservative or a mixture file) gives each participant a type in the mixture's shares.",
-        ),
-    ] = "paper",
-    types: Annotated[
-        str | None,
-        typer.Option(
-            "--types",
-            help="Supervisors of several types, as 'solve --types' takes them: a mixture preset (paper+conservative) "
-            "or a mixture JSON file (the same as giving the mixture with --model).",
-        ),
-    ] = None,
+    model: _Model = "paper",
+    types: _Types = None,
     task: str = TaskOpt,
-    policy: Annotated[
-        str,
-        typer.Option(
-            "--policy",
-            "-p",
-            help=f"Robot policy: {', '.join(POLICY_SPEC_KINDS)}, {TYPE_AWARE} (for a mixture of supervisor types), "
-            "or a policy JSON file (e.g. from 'trustseek solve --out').",
-        ),
-    ] = "trust-aware",
-    participants: Annotated[
-        int, typer.Option("--participants", "-n", min=1, max=1_000_000, help="Number of simulated participants.")
-    ] = 9,
-    counts: Annotated[
-        str | None,
-        typer.Option(
-            "--counts",
-            help="Trials per complexity in random order, e.g. 41,30 or low=41,high=30 (the paper's design). "
-            "Default: 41,30 unless --trials is given.",
-        ),
-    ] = None,
-    trials: Annotated[
-        int | None,
-        typer.Option(
-            "--trials",
-            min=1,
-            max=100_000,
-            help="Number of trials with i.i.d. complexities from the task's probabilities (instead of --counts).",
-        ),
-    ] = None,
-    belief_update: Annotated[
-        str,
-        typer.Option(
-            "--belief-update",
-            "-u",
-            help="Belief update of the trust-aware policy: 'bayes' (exact filter, default) or 'paper' (eq. 3).",
-        ),
-    ] = "bayes",
-    policy_model: Annotated[
-        str | None,
-        typer.Option("--policy-model", help="Model the trust-aware policy is solved for (default: the supervisors' model)."),
-    ] = None,
-    grid: Annotated[
-        int, typer.Option("--grid", min=3, max=1_000_001, help="Belief grid points for solving the trust-aware policy.")
-    ] = 1001,
-    ask_low: Annotated[
-        float, typer.Option("--ask-low", min=0.0, max=1.0, help="Randomized policy: P(ask) in the first complexity.")
-    ] = PAPER_ASK_PROBABILITIES["low"],
-    ask_high: Annotated[
-        float, typer.Option("--ask-high", min=0.0, max=1.0, help="Randomized policy: P(ask) in the second complexity.")
-    ] = PAPER_ASK_PROBABILITIES["high"],
-    concentration: Annotated[
-        float | None,
-        typer.Option(
-            "--concentration",
-            help="Heterogeneous population: each participant's probability rows ~ "
-            "Dirichlet(concentration x pooled row + pseudo).",
-        ),
-    ] = None,
-    pseudo: Annotated[
-        float, typer.Option("--pseudo", min=0.0, help="Dirichlet pseudo-count added to every cell (with --concentration).")
-    ] = 0.0,
-    seed: Annotated[
-        int, typer.Option("--seed", min=0, help="Random seed (same seed, same supervisors and luck for any policy).")
-    ] = 0,
-    out: Annotated[
-        Path | None,
-        typer.Option(
-            "--out",
-            "-o",
-            help="Write every trial (canonical trial log + true_trust, belief, reward, block, policy) to this CSV/Parquet file.",
-        ),
-    ] = None,
-    summary_out: Annotated[
-        Path | None, typer.Option("--summary-out", help="Write the per-participant summary to this CSV/Parquet file.")
-    ] = None,
+    policy: _Policy = "trust-aware",
+    participants: _Participants = 9,
+    counts: _Counts = None,
+    trials: _Trials = None,
+    belief_update: _BeliefUpdate = "bayes",
+    policy_model: _PolicyModel = None,
+    grid: _Grid = 1001,
+    ask_low: _AskLow = PAPER_ASK_PROBABILITIES["low"],
+    ask_high: _AskHigh = PAPER_ASK_PROBABILITIES["high"],
+    concentration: _Concentration = None,
+    pseudo: _Pseudo = 0.0,
+    seed: _Seed = 0,
+    out: _Out = None,
+    summary_out: _SummaryOut = None,
     as_json: bool = JsonOpt,
 ) -> None:
     """Simulate supervisors from a trust model working with the robot under a policy."""
