@@ -44,3 +44,20 @@ def test_the_import_graph_sees_imports_inside_functions(tmp_path, monkeypatch):
     graph = grimp.build_graph("layered", cache_dir=None)
     assert graph.direct_import_exists(importer="layered.low", imported="layered.high")
     assert graph.find_shortest_chain(importer="layered.low", imported="layered.high") is not None
+
+
+def test_solvers_are_built_through_the_registry_outside_the_solvers():
+    """Outside ``solvers/`` a solver is made by ``make_solver`` (its options checked once), never by
+    its class."""
+    import ast
+
+    built = []
+    for path in sorted((ROOT / "src" / "trustseek").rglob("*.py")):
+        if "solvers" in path.relative_to(ROOT / "src" / "trustseek").parts:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call):
+                name = node.func.id if isinstance(node.func, ast.Name) else getattr(node.func, "attr", "")
+                if name.endswith("Solver"):
+                    built.append(f"{path.relative_to(ROOT)}:{node.lineno} {name}")
+    assert not built, built

@@ -41,15 +41,24 @@ def schedule(
     as_json: bool = JsonOpt,
 ) -> None:
     """Choose the next item's complexity jointly with asking (finite horizon, known item counts)."""
+    from ..policies.scheduling import SchedulePolicy
     from ..pomdp.problem import AssistancePOMDP
     from ..pomdp.scheduling import SchedulingProblem
-    from ..solvers.scheduling import ScheduleSolver
+    from ..solvers.registry import make_solver
 
     m, t = model_and_task(model, task, belief_update)
     pomdp = AssistancePOMDP(m, t)
     n = parse_counts(counts, pomdp.complexities)
     problem = SchedulingProblem.build(pomdp, n, window or None)
-    policy = ScheduleSolver(belief_update, representation, grid, order, ask_first_hard).solve(problem)
+    policy = make_solver(
+        "schedule",
+        belief_update=belief_update,
+        representation=representation,
+        schedule_grid=grid,
+        order=order,
+        ask_first_hard=ask_first_hard,
+    ).solve(problem)
+    assert isinstance(policy, SchedulePolicy)
     x0 = float(m.initial[-1])
     first = None
     if problem.full_control:

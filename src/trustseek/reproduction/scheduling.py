@@ -21,7 +21,7 @@ from ..policies.scheduling import SchedulePolicy
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem
 from ..simulation.scheduling import ScheduleRuns, exact_values, iid_value, schedule_policies, simulate_schedules
-from ..solvers.scheduling import ScheduleSolver
+from ..solvers.registry import make_solver
 from ..vocab import PAPER_BLOCK_COUNTS
 from .statistics import mean_interval
 
@@ -74,7 +74,7 @@ def scheduling_section(
     window_values = {}
     for w in windows:
         if w < sum(counts):
-            pol = ScheduleSolver(belief_update).solve(SchedulingProblem(pomdp, counts, w))
+            pol = make_solver("schedule", belief_update=belief_update).solve(SchedulingProblem(pomdp, counts, w))
             window_values[str(w)] = pol.info["value"]
     optimal = policies["optimal"]
     assert isinstance(optimal, SchedulePolicy)

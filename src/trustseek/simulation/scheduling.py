@@ -36,7 +36,6 @@ from ..pomdp.scheduling import SchedulingProblem
 from ..solvers.alpha import finite_horizon_value
 from ..solvers.defaults import DEFAULT_SCHEDULE_GRID
 from ..solvers.registry import make_solver
-from ..solvers.scheduling import ScheduleSolver
 from .populations import SimulationError, check_participants
 from .trial_orders import schedule_counts
 
@@ -71,7 +70,14 @@ def schedule_policies(
             continue
         window, order, ask_first = spec
         problem = SchedulingProblem(pomdp, counts, window or None)
-        solver = ScheduleSolver(belief_update, representation, grid, order, ask_first)
+        solver = make_solver(
+            "schedule",
+            belief_update=belief_update,
+            representation=representation,
+            schedule_grid=grid,
+            order=order,
+            ask_first_hard=ask_first,
+        )
         out[name] = solver.solve(problem)
     return out
 
