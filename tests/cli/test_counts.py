@@ -83,3 +83,19 @@ def test_compare_types_takes_blocks_by_name():
     assert code == 0, out
     numbers, _ = json.JSONDecoder().raw_decode(out)  # stdout's one JSON object (stderr may follow)
     assert numbers["participants"] == 40 and {p["trials"] for p in numbers["populations"]} == {4}
+
+
+@pytest.mark.parametrize(
+    ("line", "needle"),
+    [
+        (["schedule", "--counts", "1000000000,1"], "more than 50,000,000"),
+        (["schedule", "--counts", "2000,2000", "--representation", "alpha"], "more than 50,000,000"),
+        (["compare-types", "--block", "1000000000,1", "-n", "2"], "more than 100,000,000 simulated trials"),
+        (["simulate", "--counts", "1000000000,1", "-n", "1"], "more than 100,000,000 simulated trials"),
+    ],
+)
+def test_counts_too_large_to_compute_are_refused_before_the_work(line, needle):
+    """A schedule of 10^9 items, and blocks of 10^9 trials in compare-types, ran until killed; the
+    schedule solver and the simulation's schedules refuse them (exit 2), whoever calls them."""
+    code, err = run_cli(line, stdout=False)
+    assert code == 2 and needle in err, err

@@ -323,12 +323,10 @@ def _population(
 
 def _trial_counts(counts: str | None, trials: int | None, participants: int, task: Task) -> list[int] | None:
     """The trials per complexity (None: --trials i.i.d. trials), refused when the run is too large."""
+    from ..simulation.populations import check_size
+
     cnt = None if trials is not None else list(parse_counts(counts or "41,30", task.complexities))
-    n_trials = sum(cnt) if cnt is not None else (trials or 0)
-    if participants * n_trials > 100_000_000:  # about 1.3 GB of simulated trials
-        raise TrustseekError(
-            [f"--participants {participants} x {n_trials} trials each is more than 100,000,000 simulated trials: simulate fewer"]
-        )
+    check_size(participants, sum(cnt) if cnt is not None else (trials or 0))
     return cnt
 
 

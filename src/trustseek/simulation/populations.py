@@ -29,6 +29,17 @@ def check_participants(n: int) -> None:
         raise SimulationError([f"the number of participants must be a positive integer, got {n!r}"])
 
 
+MAX_TRIALS = 100_000_000  # simulated trials in one schedule (about 1.3 GB of trials)
+
+
+def check_size(n: int, trials: int) -> None:
+    """Refuse ``n`` participants x ``trials`` trials above :data:`MAX_TRIALS`."""
+    if n * trials > MAX_TRIALS:
+        raise SimulationError(
+            [f"{n} participants x {trials} trials each is more than {MAX_TRIALS:,} simulated trials: simulate fewer"]
+        )
+
+
 @dataclass(frozen=True, eq=False)
 class Supervisors:
     """Per-participant supervisor parameters.

@@ -11,7 +11,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from . import kernels
-from .populations import SimulationError, check_participants
+from .populations import SimulationError, check_participants, check_size
 
 SeedLike = np.random.Generator | np.random.SeedSequence | int | None
 
@@ -42,6 +42,7 @@ def schedule_counts(
                 f"with at least one trial in total, got {numbers}"
             ]
         )
+    check_size(n, sum(numbers))
     # Drawing trial by trial from an urn holding the remaining trials of each complexity
     # gives every arrangement of the counts the same probability (vectorized over participants).
     gen = np.random.default_rng(rng)
@@ -77,6 +78,7 @@ def schedule_iid(n: int, trials: int, probs: Sequence[float] | np.ndarray, rng: 
     check_participants(n)
     if int(trials) != trials or trials < 1:
         raise SimulationError([f"the number of trials must be a positive integer, got {trials!r}"])
+    check_size(n, trials)
     p = np.asarray(probs, dtype=float)
     u = np.random.default_rng(rng).random((int(trials), n))
     return np.searchsorted(np.cumsum(p)[:-1], u, side="right").astype(np.int8).T

@@ -34,6 +34,8 @@ from .alpha import exact_backup
 from .base import SolverBase, SolverError, one_blas_thread
 from .defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
 
+MAX_VALUES = 50_000_000  # the largest schedule policy solved (Q values; the paper's 41/30 items: 1 M, about 1 s)
+
 #: Q of an action the rule forbids (stored finite so that policy files stay valid JSON)
 FORBIDDEN = -1e9
 
@@ -110,6 +112,14 @@ class ScheduleSolver(SolverBase):
         if self.representation == "alpha" and self.belief_update != "bayes":
             reasons.append(
                 f"alpha vectors are exact for the bayes update only; for {self.belief_update!r} use the grid representation"
+            )
+        from .registry import schedule_size  # (the registry loads this module when it builds the solver)
+
+        size = schedule_size(problem.counts, problem.window, self.grid if self.representation == "grid" else 1)
+        if size > MAX_VALUES:
+            reasons.append(
+                f"{sum(problem.counts):,} items {list(problem.counts)} make up to {size:,} values to compute, more than "
+                f"{MAX_VALUES:,} (about a minute): fewer items, a window, or a coarser grid"
             )
         reasons += [r for r in super().unsupported(problem.pomdp) if "trust levels" not in r]
         return reasons
