@@ -89,7 +89,7 @@ def test_compare_types_takes_blocks_by_name():
     ("line", "needle"),
     [
         (["schedule", "--counts", "1000000000,1"], "more than 50,000,000"),
-        (["schedule", "--counts", "2000,2000", "--representation", "alpha"], "more than 50,000,000"),
+        (["schedule", "--counts", "2000,2000", "--representation", "alpha"], "more than 20,000,000"),
         (["compare-types", "--block", "1000000000,1", "-n", "2"], "more than 100,000,000 simulated trials"),
         (["simulate", "--counts", "1000000000,1", "-n", "1"], "more than 100,000,000 simulated trials"),
     ],

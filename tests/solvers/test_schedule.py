@@ -188,3 +188,20 @@ def test_bad_problems_are_refused_with_reasons():
     with pytest.raises(UnsupportedProblem, match="bayes update only"):
         ScheduleSolver(belief_update="paper", representation="alpha").solve(SchedulingProblem(PAPER, (2, 2)))
     assert SchedulingProblem(PAPER, (2, 2), 9).full_control
+
+
+def test_problems_too_large_to_solve_are_refused_and_growing_alpha_vectors_stop(monkeypatch):
+    """A schedule of 10^9 items, and alpha vectors on the paper's 41 + 30 items (past two minutes
+    and 7 GB), ran until killed: the size is refused before the solve, and the alpha vectors'
+    growth stops the solve at a budget of pieces, each with the way out."""
+    with pytest.raises(UnsupportedProblem, match="a window, or a coarser grid"):
+        ScheduleSolver().solve(SchedulingProblem(PAPER, (10**9, 1)))
+    with pytest.raises(UnsupportedProblem, match="use the grid representation"):
+        ScheduleSolver(representation="alpha").solve(SchedulingProblem(PAPER, (2000, 2000)))
+    import trustseek.solvers.scheduling as scheduling
+
+    problem = SchedulingProblem(PAPER, (6, 6))
+    ScheduleSolver(representation="alpha").solve(problem)  # within the budget
+    monkeypatch.setattr(scheduling, "MAX_PIECES", 1000)
+    with pytest.raises(scheduling.SolverError, match=r"grew past 1,000 pieces.*use the grid representation"):
+        ScheduleSolver(representation="alpha").solve(problem)

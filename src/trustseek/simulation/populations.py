@@ -32,11 +32,13 @@ def check_participants(n: int) -> None:
 MAX_TRIALS = 100_000_000  # simulated trials in one schedule (about 1.3 GB of trials)
 
 
-def check_size(n: int, trials: int) -> None:
-    """Refuse ``n`` participants x ``trials`` trials above :data:`MAX_TRIALS`."""
+def check_size(n: int, trials: int, options: str = "") -> None:
+    """Refuse ``n`` participants x ``trials`` trials above :data:`MAX_TRIALS` (``options``: what the
+    caller's user sets them with, named in the message)."""
     if n * trials > MAX_TRIALS:
+        fewer = f"simulate fewer ({options})" if options else "simulate fewer"
         raise SimulationError(
-            [f"{n} participants x {trials} trials each is more than {MAX_TRIALS:,} simulated trials: simulate fewer"]
+            [f"{n:,} participants x {trials:,} trials each is more than {MAX_TRIALS:,} simulated trials: {fewer}"]
         )
 
 

@@ -35,6 +35,10 @@ from .base import SolverBase, SolverError, one_blas_thread
 from .defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
 
 MAX_VALUES = 50_000_000  # the largest schedule policy solved (Q values; the paper's 41/30 items: 1 M, about 1 s)
+#: the alpha representation's budget of stored pieces (breakpoints and alpha vectors): its envelopes
+#: grow with the items left (17 + 17 on the paper's model: 2 M pieces in about 1 s; 25 + 25: 36 M, 16 s
+#: and 1.1 GB; 41 + 30 ran past two minutes and 7 GB), so a solve past it stops with the reason
+MAX_PIECES = 20_000_000
 
 #: Q of an action the rule forbids (stored finite so that policy files stay valid JSON)
 FORBIDDEN = -1e9
@@ -115,11 +119,18 @@ class ScheduleSolver(SolverBase):
             )
         from .registry import schedule_size  # (the registry loads this module when it builds the solver)
 
-        size = schedule_size(problem.counts, problem.window, self.grid if self.representation == "grid" else 1)
-        if size > MAX_VALUES:
+        items = f"{sum(problem.counts):,} items {list(problem.counts)}"
+        if self.representation == "grid":
+            size = schedule_size(problem.counts, problem.window, self.grid)
+            if size > MAX_VALUES:
+                reasons.append(
+                    f"{items} make up to {size:,} values to compute, more than {MAX_VALUES:,} (about a minute): "
+                    "fewer items, a window, or a coarser grid"
+                )
+        elif (size := schedule_size(problem.counts, problem.window, 2)) > MAX_PIECES:  # >= 2 breakpoints, 2 vectors
             reasons.append(
-                f"{sum(problem.counts):,} items {list(problem.counts)} make up to {size:,} values to compute, more than "
-                f"{MAX_VALUES:,} (about a minute): fewer items, a window, or a coarser grid"
+                f"the alpha vectors of {items} make at least {size:,} pieces, more than {MAX_PIECES:,}: "
+                "use the grid representation, or fewer items"
             )
         reasons += [r for r in super().unsupported(problem.pomdp) if "trust levels" not in r]
         return reasons
@@ -131,7 +142,7 @@ class ScheduleSolver(SolverBase):
         pomdp = problem.pomdp
         backup: Callable[[Any], list[tuple[PieceQ, Any]]]
         if self.representation == "alpha":
-            mix, value, backup = _alpha_ops(pomdp)
+            mix, value, backup = _alpha_ops(pomdp, problem.counts)
         else:
             mix, value, backup = _grid_ops(pomdp, self.belief_update, self.grid)
         V: dict[State, Any] = {}
@@ -180,9 +191,11 @@ def _max_q(per_k: dict[int, PieceQ], x: float) -> float:
 # --------------------------------------------------------------------------- alpha vectors
 
 
-def _alpha_ops(pomdp: AssistancePOMDP):
-    """(mix, value, backup) on envelopes of alpha vectors (exact, bayes update)."""
+def _alpha_ops(pomdp: AssistancePOMDP, counts: tuple[int, ...]):
+    """(mix, value, backup) on envelopes of alpha vectors (exact, bayes update); the backups stop
+    when their pieces pass :data:`MAX_PIECES`."""
     zero: Envelope = (np.zeros((1, 2)), np.array([0.0, 1.0]))
+    pieces = [0]
 
     def mix(parts: list[tuple[Envelope, float]]) -> Envelope:
         if not parts:
@@ -208,6 +221,15 @@ def _alpha_ops(pomdp: AssistancePOMDP):
             xs_c = np.unique(np.concatenate([bk.q[c][a][1] for a in range(2)]))
             vals = np.stack([envelope_values(*bk.q[c][a], xs_c) for a in range(2)], axis=1)
             out.append((PieceQ(xs_c, vals), ([bk.q[c][a][0] for a in range(2)], [bk.q[c][a][1] for a in range(2)])))
+            pieces[0] += xs_c.size + sum(len(bk.q[c][a][0]) for a in range(2))
+        if pieces[0] > MAX_PIECES:
+            raise SolverError(
+                [
+                    f"the alpha vectors of {sum(counts):,} items {list(counts)} grew past {MAX_PIECES:,} pieces "
+                    "before the solve ended (they grow with the items left): use the grid representation, "
+                    "or fewer items"
+                ]
+            )
         return out
 
     return mix, value, backup
