@@ -59,6 +59,7 @@ def compare_types(
     """Does planning for supervisor types pay? Pooled, type-aware, oracle and trust-agnostic policies on the same people."""
     from ..model.presets import load_mixture, load_task
     from ..reproduction.supervisor_types import types_section
+    from ..simulation.populations import check_size
 
     mix = load_mixture(mixture)
     if share is not None:
@@ -67,6 +68,8 @@ def compare_types(
         mix = mix.with_weights([1 - share, share])
     t = load_task(task)
     counts = [parse_counts(b, t.complexities, "--block") for b in block]
+    for c in counts:  # before the pooled fit and the solves, not after them
+        check_size(participants, sum(c), "--participants, --block")
     if plot is not None:
         check_output(plot, "--plot")
     steps = ["pooled fit", "policies", "one-type policies", *[f"blocks of {sum(c)} trials" for c in counts]]
