@@ -95,3 +95,31 @@ print(ours._impl.locator.get_source_stamp() == compiled.sources_stamp(),
     env = {"NUMBA_CACHE_DIR": str(tmp_path / "cache"), "PATH": "/usr/bin:/bin"}
     out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, check=True).stdout.split()
     assert out == ["True", "False", "UserProvidedCacheLocator"]
+
+
+def test_numba_loads_on_a_second_thread_joined_on_leaving(tmp_path):
+    """load_meanwhile (a large log's read): in a fresh process, nothing without ``when``; else numba
+    and the first kernel load on a thread of their own, joined on leaving; a failure there is left
+    for the caller's own first compiled call (no exception, no thread left behind)."""
+    code = """
+import threading
+from trustseek import compiled
+from trustseek.estimation import forward_backward
+from trustseek.estimation.warm import first_kernel
+with compiled.load_meanwhile(first_kernel, when=False):
+    pass
+print(compiled.loaded())
+def broken():
+    raise RuntimeError("left for the caller")
+with compiled.load_meanwhile(broken):
+    during = sorted(t.name for t in threading.enumerate())
+print(during == ["MainThread", "trustseek-load"], compiled.loaded(), threading.active_count())
+with compiled.load_meanwhile(first_kernel):
+    pass
+first_kernel()
+print(type(forward_backward.step_codes).__name__)
+"""
+    script = tmp_path / "probe.py"
+    script.write_text(code)
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, check=True, timeout=300).stdout.split()
+    assert out == ["False", "True", "True", "1", "CPUDispatcher"], out

@@ -26,11 +26,12 @@ import importlib.util
 import os
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
 
-__all__ = ["AVAILABLE", "PARALLEL_LOCK", "load", "loaded", "njit", "prange", "python", "set_threads"]
+__all__ = ["AVAILABLE", "PARALLEL_LOCK", "load", "load_meanwhile", "loaded", "njit", "prange", "python", "set_threads"]
 
 _PACKAGE = Path(__file__).resolve().parent
 AVAILABLE = importlib.util.find_spec("numba") is not None  # numba is a declared dependency
@@ -165,6 +166,33 @@ def _stamp_our_caches() -> None:
     impl._locator_classes = [*(stamped(c) for c in locators), *impl._locator_classes]
 
 
+@contextmanager
+def load_meanwhile(first: Callable[[], object], when: bool = True) -> Iterator[None]:
+    """Within: numba is imported and ``first`` (a call of a small compiled function, which sets up
+    numba's code generator and its cache: about half a second) runs on a second thread, while
+    the caller does work of its own that leaves a core free (reading a large log); joined on
+    leaving, before anything can fork.  The modules with compiled functions that the work
+    imports meanwhile must not be needed by compiled code (the data layer has none).  A failure
+    there is left for the caller's own first compiled call to meet and report."""
+    if not (when and AVAILABLE) or _LOADED:
+        yield
+        return
+
+    def run() -> None:
+        try:
+            _load()
+            first()
+        except Exception:  # the same call on the caller's thread meets it and reports it
+            pass
+
+    thread = threading.Thread(target=run, name="trustseek-load")
+    thread.start()
+    try:
+        yield
+    finally:
+        thread.join()
+
+
 def loaded() -> bool:
     """Whether this process has imported numba for its compiled code (a compiled function was
     called, or :func:`load`): from then on the compiled paths cost no more start-up."""
@@ -178,12 +206,12 @@ def njit(**options: Any) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     def decorate(func: Callable[..., Any]) -> Callable[..., Any]:
         if not AVAILABLE:  # pragma: no cover - exercised only without numba
             return func
-        if _LOADED:
-            import numba
+        with _LOCK:  # (numba may be loading on another thread: see load_meanwhile)
+            if _LOADED:
+                import numba
 
-            return numba.njit(**options)(func)
-        lazy = _Lazy(func, options)
-        with _LOCK:
+                return numba.njit(**options)(func)
+            lazy = _Lazy(func, options)
             _PENDING.append(lazy)
         return lazy
 

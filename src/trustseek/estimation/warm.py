@@ -16,6 +16,7 @@ import pandas as pd
 
 from ..compiled import load as load_compiled
 from .fit import fit_trust_model
+from .forward_backward import step_codes
 from .iohmm import fit_iohmm
 from .kernels import many_fits
 from .mixture import fit_types
@@ -43,6 +44,13 @@ def tiny_log(participants: int = 4, trials: int = 12, seed: int = 0) -> pd.DataF
                 }
             )
     return pd.DataFrame(rows)
+
+
+def first_kernel() -> None:
+    """The first compiled call of a fit, on made-up arrays: it sets up numba's code generator and
+    cache (what :func:`~trustseek.compiled.load_meanwhile` runs while a large log is read)."""
+    codes = np.zeros((1, 2), dtype=np.int32)
+    step_codes(codes, codes.copy(), 2)
 
 
 def warm() -> float:
