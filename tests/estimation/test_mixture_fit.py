@@ -249,3 +249,27 @@ def test_types_of_named_inputs_refuse_the_presets_options_as_the_selection_of_le
     ):
         with pytest.raises(ValueError, match=r"options \['complexities'\] apply to the paper preset only"):
             run()
+
+
+def test_cells_that_no_resample_moved_from_zero_are_counted_and_said():
+    """A types' bootstrap gives [0, 0] for a free cell estimated at 0 that every resample left there;
+    the intervals count those cells (not the fixed ask rows, nor rows no trial informs) and say
+    what such an interval means, where they used to stand as if the value were known."""
+    from trustseek.data.trials import example_path, read_trials
+
+    fit = fit_types(read_trials(example_path()), 2, options=FitOptions(restarts=2, seed=0, tol=1e-6, n_jobs=1))
+    iv = bootstrap_types(fit, 4, options=FitOptions(restarts=1, seed=1, tol=1e-6, n_jobs=1))
+    expected = 0
+    for name, model in zip(fit.names, fit.models(), strict=True):
+        for table in ("emission", "transition"):
+            est, hi = np.asarray(getattr(model, table)), iv.cells[name][table][1]
+            stuck = (est < 1e-6) & (hi < 1e-6)
+            if table == "emission":
+                stuck[:, 1] = False  # P(intervene | ask) = 1 is fixed by the preset
+            for kind, where in model.not_estimated:
+                if kind == table:
+                    stuck[where] = False
+            expected += int(stuck.sum())
+    assert iv.at_zero == expected > 0
+    (note,) = [n for n in iv.notes() if "stayed there" in n]
+    assert f"{expected} cells of the types estimated at 0" in note and "not that the value is known" in note

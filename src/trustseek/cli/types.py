@@ -132,6 +132,8 @@ def fit_types(
         print_json(_types_json(fit, mixture, post, intervals))
         return
     _print_types(fit, mixture, post, intervals)
+    if intervals is not None:
+        print_warnings(intervals.notes())
     figures = None if plots is None else ", ".join(str(p) for p in written)
     print_written(("types", out), ("type posteriors", type_posteriors), ("figures", figures))
 
@@ -157,6 +159,7 @@ def _types_json(fit, mixture, post, intervals) -> dict:
     d["type_counts"] = post["type"].value_counts().reindex(list(fit.names), fill_value=0).to_dict()
     if intervals is not None:
         d["weight_intervals"] = intervals.weights
+        d["interval_notes"] = intervals.notes()
         d["intervals"] = {
             n: {t: {"lower": lo.tolist(), "upper": hi.tolist()} for t, (lo, hi) in c.items()} for n, c in intervals.cells.items()
         }

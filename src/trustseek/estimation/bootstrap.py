@@ -25,7 +25,7 @@ from __future__ import annotations
 import copy
 import logging
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -157,16 +157,13 @@ def _profile_bound(work: Workspace, structure: Structure, params: Params, table:
     return b
 
 
-def boundary_bounds(
-    seqs: Sequences, spec: IOHMMSpec, params: Params, lo: np.ndarray, hi: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Likelihood-ratio intervals for the free emission and transition cells estimated at 0 whose
-    bootstrap interval is [0, 0] (flattened :func:`cell_tables`); a row's other free cell, if it has
-    just one, gets the mirror bound.  The new lower and upper bounds, and the cells they changed."""
-    structure = make_structure(spec, seqs)
-    work = Workspace(seqs, *structure.dims, threads=1)
+def cells_at_zero(
+    structure: Structure, spec: IOHMMSpec, params: Params
+) -> Iterator[tuple[str, Table, int, int, int, np.ndarray]]:
+    """The free emission and transition cells of ``params`` estimated at 0, in rows whose cells are
+    all free: (``em`` or ``tr``, its table, u, k, m, where the cell lies in the flattened
+    :func:`cell_tables`)."""
     ref = cell_tables(spec, params)
-    lo, hi, moved = lo.copy(), hi.copy(), np.zeros(lo.shape, dtype=bool)
     for table, name in (("em", "emission"), ("tr", "transition")):
         t: Table = getattr(structure, table)
         values = getattr(params, name)
@@ -177,13 +174,29 @@ def boundary_bounds(
                     continue  # a row with fixed cells (or no events) is not estimated
                 for m in free[values[u, k, free] < BOUNDARY]:
                     pos = _cell_positions(spec, ref, name, int(u), k, int(m))
-                    if len(pos) == 0 or np.any(hi[pos] >= BOUNDARY):
-                        continue
-                    bound = _profile_bound(work, structure, params, table, int(u), k, int(m))
-                    hi[pos], moved[pos] = bound, True
-                    if t.M == 2:
-                        mirror = _cell_positions(spec, ref, name, int(u), k, int(1 - m))
-                        lo[mirror], moved[mirror] = np.minimum(lo[mirror], 1.0 - bound), True
+                    if len(pos):
+                        yield table, t, int(u), k, int(m), pos
+
+
+def boundary_bounds(
+    seqs: Sequences, spec: IOHMMSpec, params: Params, lo: np.ndarray, hi: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Likelihood-ratio intervals for the free emission and transition cells estimated at 0 whose
+    bootstrap interval is [0, 0] (flattened :func:`cell_tables`); a row's other free cell, if it has
+    just one, gets the mirror bound.  The new lower and upper bounds, and the cells they changed."""
+    structure = make_structure(spec, seqs)
+    work = Workspace(seqs, *structure.dims, threads=1)
+    ref = cell_tables(spec, params)
+    lo, hi, moved = lo.copy(), hi.copy(), np.zeros(lo.shape, dtype=bool)
+    for table, t, u, k, m, pos in cells_at_zero(structure, spec, params):
+        if np.any(hi[pos] >= BOUNDARY):
+            continue
+        bound = _profile_bound(work, structure, params, table, u, k, m)
+        hi[pos], moved[pos] = bound, True
+        if t.M == 2:
+            name = {"em": "emission", "tr": "transition"}[table]
+            mirror = _cell_positions(spec, ref, name, u, k, 1 - m)
+            lo[mirror], moved[mirror] = np.minimum(lo[mirror], 1.0 - bound), True
     return lo, hi, moved
 
 

@@ -9,10 +9,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .bootstrap import replicate, resample
+from .bootstrap import BOUNDARY, LEVEL, MIN_REPLICATES, cells_at_zero, replicate, resample
 from .mixture import MixtureFit, fit_mixture, general_types
 from .mixture_em import PARTS, MixtureParams
 from .options import FitOptions
+from .ratings import make_structure
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec
 from .trust_iohmm import to_model
@@ -72,6 +73,23 @@ class TypeIntervals:
     weights: dict[str, tuple[float, float]]
     replicates: int
     level: float
+    at_zero: int = 0  # free cells estimated at 0 that stayed there in every resample
+
+    def notes(self) -> list[str]:
+        """Plain-language warnings about these intervals (empty when there is nothing to say)."""
+        out = []
+        if self.replicates < MIN_REPLICATES and self.level >= LEVEL:
+            out.append(
+                f"bootstrap: {self.replicates} resamples are too few for {self.level:.0%} intervals "
+                f"(at least {MIN_REPLICATES}: --bootstrap {MIN_REPLICATES}); the bounds are rough"
+            )
+        if self.at_zero:
+            out.append(
+                f"bootstrap: {self.at_zero} cells of the types estimated at 0 stayed there in every resample: their "
+                "interval [0, 0] says only that no resample moved them, not that the value is known (a single "
+                "model's fit, 'trustseek fit --bootstrap', bounds such cells by likelihood ratio)"
+            )
+        return out
 
 
 def bootstrap_types(
@@ -114,4 +132,15 @@ def bootstrap_types(
             cells[name][t] = (lo[pos : pos + size].reshape(shape), hi[pos : pos + size].reshape(shape))
             pos += size
         weights[name] = (float(lo[M * per + m]), float(hi[M * per + m]))
-    return TypeIntervals(cells, weights, replicates, level)
+    return TypeIntervals(cells, weights, replicates, level, _at_zero(fit, hi, per))
+
+
+def _at_zero(fit: MixtureFit, hi: np.ndarray, per: int) -> int:
+    """How many free cells of the types, estimated at 0, have the upper bound 0 (``hi``: every type's
+    cells, ``per`` each, as :func:`_type_vectors` lays them out)."""
+    structure = make_structure(fit.spec, fit.seqs)
+    return sum(
+        bool(np.all(hi[m * per + pos] < BOUNDARY))
+        for m in range(fit.n_types)
+        for *_, pos in cells_at_zero(structure, fit.spec, fit.params.type_params(m))
+    )
