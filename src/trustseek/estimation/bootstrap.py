@@ -157,6 +157,16 @@ def _profile_bound(work: Workspace, structure: Structure, params: Params, table:
     return b
 
 
+def few_resamples(replicates: int, level: float) -> list[str]:
+    """The note of intervals at ``level`` on fewer than :data:`MIN_REPLICATES` resamples (or none)."""
+    if replicates >= MIN_REPLICATES or level < LEVEL:
+        return []
+    return [
+        f"bootstrap: {replicates} resamples are too few for {level:.0%} intervals "
+        f"(at least {MIN_REPLICATES}: --bootstrap {MIN_REPLICATES}); the bounds are rough"
+    ]
+
+
 def cells_at_zero(
     structure: Structure, spec: IOHMMSpec, params: Params
 ) -> Iterator[tuple[str, Table, int, int, int, np.ndarray]]:
@@ -276,12 +286,7 @@ class Intervals:
 
     def notes(self) -> list[str]:
         """Plain-language warnings about these intervals (empty when there is nothing to say)."""
-        out = []
-        if self.replicates < MIN_REPLICATES and self.level >= LEVEL:
-            out.append(
-                f"bootstrap: {self.replicates} resamples are too few for {self.level:.0%} intervals "
-                f"(at least {MIN_REPLICATES}: --bootstrap {MIN_REPLICATES}); the bounds are rough"
-            )
+        out = few_resamples(self.replicates, self.level)
         if self.boundary:
             out.append(
                 f"bootstrap: {self.boundary} cells estimated at 0 (or 1) stayed there in every resample; their intervals "

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .bootstrap import BOUNDARY, LEVEL, MIN_REPLICATES, cells_at_zero, replicate, resample
+from .bootstrap import BOUNDARY, cells_at_zero, few_resamples, replicate, resample
 from .mixture import MixtureFit, fit_mixture, general_types
 from .mixture_em import PARTS, MixtureParams
 from .options import FitOptions
@@ -77,12 +77,7 @@ class TypeIntervals:
 
     def notes(self) -> list[str]:
         """Plain-language warnings about these intervals (empty when there is nothing to say)."""
-        out = []
-        if self.replicates < MIN_REPLICATES and self.level >= LEVEL:
-            out.append(
-                f"bootstrap: {self.replicates} resamples are too few for {self.level:.0%} intervals "
-                f"(at least {MIN_REPLICATES}: --bootstrap {MIN_REPLICATES}); the bounds are rough"
-            )
+        out = few_resamples(self.replicates, self.level)
         if self.at_zero:
             out.append(
                 f"bootstrap: {self.at_zero} cells of the types estimated at 0 stayed there in every resample: their "
