@@ -251,25 +251,35 @@ def test_types_of_named_inputs_refuse_the_presets_options_as_the_selection_of_le
             run()
 
 
-def test_cells_that_no_resample_moved_from_zero_are_counted_and_said():
-    """A types' bootstrap gives [0, 0] for a free cell estimated at 0 that every resample left there;
-    the intervals count those cells (not the fixed ask rows, nor rows no trial informs) and say
-    what such an interval means, where they used to stand as if the value were known."""
+def test_cells_that_no_resample_moved_from_zero_get_likelihood_ratio_bounds(monkeypatch):
+    """A types' bootstrap gave [0, 0] for a free cell estimated at 0 that every resample left there,
+    as if the value were known: such cells (not the fixed ask rows, nor rows no trial informs) get
+    the likelihood-ratio bound of a single fit's (bisection to 1/64), the mixture refitted; the
+    other intervals are the percentile ones, and the intervals say how many."""
     from trustseek.data.trials import example_path, read_trials
+    from trustseek.estimation import type_bootstrap
 
     fit = fit_types(read_trials(example_path()), 2, options=FitOptions(restarts=2, seed=0, tol=1e-6, n_jobs=1))
-    iv = bootstrap_types(fit, 4, options=FitOptions(restarts=1, seed=1, tol=1e-6, n_jobs=1))
+    options = FitOptions(restarts=1, seed=1, tol=1e-6, n_jobs=1)
+    iv = bootstrap_types(fit, 4, options=options)
+    with monkeypatch.context() as patch:  # the same replicates' percentile intervals alone
+        patch.setattr(type_bootstrap, "_boundary_bounds", lambda fit, lo, hi, per: (lo, hi, 0))
+        raw = bootstrap_types(fit, 4, options=options)
     expected = 0
     for name, model in zip(fit.names, fit.models(), strict=True):
         for table in ("emission", "transition"):
-            est, hi = np.asarray(getattr(model, table)), iv.cells[name][table][1]
-            stuck = (est < 1e-6) & (hi < 1e-6)
+            est = np.asarray(getattr(model, table))
+            lo, hi = iv.cells[name][table]
+            assert np.all(lo <= est + 1e-12) and np.all(est <= hi + 1e-12)
+            stuck = (est < 1e-6) & (raw.cells[name][table][1] < 1e-6)
             if table == "emission":
                 stuck[:, 1] = False  # P(intervene | ask) = 1 is fixed by the preset
             for kind, where in model.not_estimated:
                 if kind == table:
                     stuck[where] = False
+            assert np.all(hi[stuck] > 0) and np.all(hi[stuck] * 64 == np.round(hi[stuck] * 64))  # a bisection's end
+            np.testing.assert_array_equal(hi[~stuck], raw.cells[name][table][1][~stuck])
             expected += int(stuck.sum())
-    assert iv.at_zero == expected > 0
+    assert iv.boundary == expected > 0 and raw.boundary == 0
     (note,) = [n for n in iv.notes() if "stayed there" in n]
-    assert f"{expected} cells of the types estimated at 0" in note and "not that the value is known" in note
+    assert f"{expected} cells of the types" in note and "likelihood-ratio" in note

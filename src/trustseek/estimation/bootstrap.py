@@ -113,7 +113,7 @@ def _held(structure: Structure, table: str, u: int, k: int, row: np.ndarray) -> 
     return held
 
 
-def _cell_positions(spec: IOHMMSpec, ref: Mapping[str, np.ndarray], table: str, u: int, k: int, m: int) -> np.ndarray:
+def cell_positions(spec: IOHMMSpec, ref: Mapping[str, np.ndarray], table: str, u: int, k: int, m: int) -> np.ndarray:
     """Where Params cell (u, k, m) of ``table`` lies in the flattened :func:`cell_tables` (all its copies)."""
     offset = {"initial": 0, "emission": ref["initial"].size, "transition": ref["initial"].size + ref["emission"].size}[table]
     shape = ref[table].shape
@@ -127,26 +127,18 @@ def _cell_positions(spec: IOHMMSpec, ref: Mapping[str, np.ndarray], table: str, 
     return np.array([offset + np.ravel_multi_index((*c, k, m), shape) for c in cells], dtype=np.int64)
 
 
-def _profile_bound(work: Workspace, structure: Structure, params: Params, table: str, u: int, k: int, m: int) -> float:
-    """The largest value of free cell (u, k, m), estimated at 0, whose profile log-likelihood (the other
-    cells refitted by EM) is within :data:`BOUNDARY_DROP` of the estimate's."""
-    name = {"em": "emission", "tr": "transition"}[table]
-    est = getattr(params, name)[u, k]
-    top = float(np.sum(work.estep(params).loglik))
+def profile_bound(est: np.ndarray, m: int, top: float, refit: Callable[[np.ndarray], float]) -> float:
+    """The largest value of cell ``m`` of a row estimated at ``est`` (cell ``m`` at 0) whose profile
+    log-likelihood is within :data:`BOUNDARY_DROP` of ``top``, the maximum: ``refit(row)`` is the
+    largest log-likelihood with the row held at ``row`` (the other cells keep their shares of the
+    rest), ``-inf`` where the data are impossible.  Bisection to 1/64, the wider end kept."""
     others = np.arange(est.size) != m
     share = est[others] / est[others].sum() if est[others].sum() > 0 else np.full(others.sum(), 1.0 / others.sum())
 
     def drop(v: float) -> float:
         row = np.zeros(est.size)
         row[m], row[others] = v, (1 - v) * share
-        held = _held(structure, table, u, k, row)
-        start = Params(params.initial.copy(), params.emission.copy(), params.transition.copy())
-        getattr(start, name)[getattr(held, table).group == getattr(held, table).group[u], k] = row
-        try:
-            (r,) = run_em(held, work, [held.project(start)], tol=1e-5, max_iter=200)
-        except FitError:  # the data impossible at this value
-            return np.inf
-        return top - float(r.loglik)
+        return top - refit(row)
 
     if drop(1.0) <= BOUNDARY_DROP:
         return 1.0
@@ -155,6 +147,23 @@ def _profile_bound(work: Workspace, structure: Structure, params: Params, table:
         mid = (a + b) / 2
         a, b = (mid, b) if drop(mid) <= BOUNDARY_DROP else (a, mid)
     return b
+
+
+def _profile_bound(work: Workspace, structure: Structure, params: Params, table: str, u: int, k: int, m: int) -> float:
+    """:func:`profile_bound` of free cell (u, k, m) of a single model, the other cells refitted by EM."""
+    name = {"em": "emission", "tr": "transition"}[table]
+
+    def refit(row: np.ndarray) -> float:
+        held = _held(structure, table, u, k, row)
+        start = Params(params.initial.copy(), params.emission.copy(), params.transition.copy())
+        getattr(start, name)[getattr(held, table).group == getattr(held, table).group[u], k] = row
+        try:
+            (r,) = run_em(held, work, [held.project(start)], tol=1e-5, max_iter=200)
+        except FitError:  # the data impossible at this value
+            return -np.inf
+        return float(r.loglik)
+
+    return profile_bound(getattr(params, name)[u, k], m, float(np.sum(work.estep(params).loglik)), refit)
 
 
 def few_resamples(replicates: int, level: float) -> list[str]:
@@ -183,7 +192,7 @@ def cells_at_zero(
                 if len(free) < t.M:
                     continue  # a row with fixed cells (or no events) is not estimated
                 for m in free[values[u, k, free] < BOUNDARY]:
-                    pos = _cell_positions(spec, ref, name, int(u), k, int(m))
+                    pos = cell_positions(spec, ref, name, int(u), k, int(m))
                     if len(pos):
                         yield table, t, int(u), k, int(m), pos
 
@@ -205,7 +214,7 @@ def boundary_bounds(
         hi[pos], moved[pos] = bound, True
         if t.M == 2:
             name = {"em": "emission", "tr": "transition"}[table]
-            mirror = _cell_positions(spec, ref, name, u, k, 1 - m)
+            mirror = cell_positions(spec, ref, name, u, k, 1 - m)
             lo[mirror], moved[mirror] = np.minimum(lo[mirror], 1.0 - bound), True
     return lo, hi, moved
 

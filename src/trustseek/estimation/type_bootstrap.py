@@ -9,13 +9,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .bootstrap import BOUNDARY, cells_at_zero, few_resamples, replicate, resample
+from .bootstrap import BOUNDARY, cell_positions, cell_tables, cells_at_zero, few_resamples, profile_bound, replicate, resample
+from .em import run_em
+from .estep import EStep, Workspace
 from .mixture import MixtureFit, fit_mixture, general_types
-from .mixture_em import PARTS, MixtureParams
+from .mixture_em import PARTS, MixtureParams, MixtureStructure
 from .options import FitOptions
-from .ratings import make_structure
 from .sequences import Sequences
-from .spec import FitError, IOHMMSpec
+from .spec import FitError, IOHMMSpec, Params
 from .trust_iohmm import to_model
 
 #: a types' bootstrap replicate's refit: from the estimate and 2 random starts, to a relative tolerance of 1e-6
@@ -73,16 +74,16 @@ class TypeIntervals:
     weights: dict[str, tuple[float, float]]
     replicates: int
     level: float
-    at_zero: int = 0  # free cells estimated at 0 that stayed there in every resample
+    boundary: int = 0  # cells with the likelihood-ratio interval at a boundary
 
     def notes(self) -> list[str]:
         """Plain-language warnings about these intervals (empty when there is nothing to say)."""
         out = few_resamples(self.replicates, self.level)
-        if self.at_zero:
+        if self.boundary:
             out.append(
-                f"bootstrap: {self.at_zero} cells of the types estimated at 0 stayed there in every resample: their "
-                "interval [0, 0] says only that no resample moved them, not that the value is known (a single "
-                "model's fit, 'trustseek fit --bootstrap', bounds such cells by likelihood ratio)"
+                f"bootstrap: {self.boundary} cells of the types estimated at 0 (or 1) stayed there in every resample; "
+                "their intervals are likelihood-ratio ones (the values whose profile log-likelihood, the mixture "
+                "refitted, is within 1.35 of the maximum)"
             )
         return out
 
@@ -115,6 +116,7 @@ def bootstrap_types(
     lo, hi = np.minimum(lo, est), np.maximum(hi, est)
     M = fit.n_types
     per = (len(est) - M) // M
+    lo, hi, at_boundary = _boundary_bounds(fit, lo, hi, per)
     ref = fit.models()[0]
     cells: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]] = {}
     weights: dict[str, tuple[float, float]] = {}
@@ -127,15 +129,72 @@ def bootstrap_types(
             cells[name][t] = (lo[pos : pos + size].reshape(shape), hi[pos : pos + size].reshape(shape))
             pos += size
         weights[name] = (float(lo[M * per + m]), float(hi[M * per + m]))
-    return TypeIntervals(cells, weights, replicates, level, _at_zero(fit, hi, per))
+    return TypeIntervals(cells, weights, replicates, level, at_boundary)
 
 
-def _at_zero(fit: MixtureFit, hi: np.ndarray, per: int) -> int:
-    """How many free cells of the types, estimated at 0, have the upper bound 0 (``hi``: every type's
-    cells, ``per`` each, as :func:`_type_vectors` lays them out)."""
-    structure = make_structure(fit.spec, fit.seqs)
-    return sum(
-        bool(np.all(hi[m * per + pos] < BOUNDARY))
-        for m in range(fit.n_types)
-        for *_, pos in cells_at_zero(structure, fit.spec, fit.params.type_params(m))
-    )
+class _HeldType(MixtureStructure):
+    """A mixture's structure whose EM keeps rows ``rows``, level ``k`` of table ``name`` of type ``m``
+    (every type for a part they share: ``m`` a slice) at ``row``."""
+
+    def __init__(self, base: MixtureStructure, name: str, m: int | slice, rows: np.ndarray, k: int, row: np.ndarray):
+        self.__dict__.update(base.__dict__)
+        self.held = (name, m, rows, k, row)
+
+    def _hold(self, p: MixtureParams) -> MixtureParams:
+        name, m, rows, k, row = self.held
+        getattr(p, name)[..., m, rows, k, :] = row
+        return p
+
+    def mstep(self, stats: EStep, previous: Params, prior: float | None = None) -> MixtureParams:
+        return self._hold(super().mstep(stats, previous, prior))
+
+    def project(self, p: Params) -> MixtureParams:
+        return self._hold(super().project(p))
+
+
+def _refit(
+    fit: MixtureFit, work: Workspace, name: str, which: int | slice, rows: np.ndarray, k: int
+) -> Callable[[np.ndarray], float]:
+    """The mixture's largest log-likelihood with rows ``rows``, level ``k`` of table ``name`` of type(s)
+    ``which`` held at a row (EM from the estimate; ``-inf`` where the data are impossible)."""
+
+    def refit(row: np.ndarray) -> float:
+        held = _HeldType(fit.structure, name, which, rows, k, row)
+        start = MixtureParams(fit.params.initial.copy(), fit.params.emission.copy(), fit.params.transition.copy())
+        getattr(start, name)[which, rows, k] = row
+        try:
+            (r,) = run_em(held, work, [held.project(start)], tol=1e-5, max_iter=200)
+        except FitError:  # the data impossible at this value
+            return -np.inf
+        return float(r.loglik)
+
+    return refit
+
+
+def _boundary_bounds(fit: MixtureFit, lo: np.ndarray, hi: np.ndarray, per: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Likelihood-ratio intervals (:func:`~.bootstrap.profile_bound`, the mixture refitted by EM) for
+    the free cells of the types estimated at 0 whose bootstrap interval is [0, 0] (``lo``, ``hi``:
+    every type's cells, ``per`` each, as :func:`_type_vectors` lays them out); a row's other cell, if it
+    has just one, gets the mirror bound.  The new bounds, and how many cells got one."""
+    structure, work = fit.structure, fit.workspace()
+    top = float(np.sum(work.estep(fit.params).loglik))
+    lo, hi, moved = lo.copy(), hi.copy(), 0
+    for m in range(fit.n_types):
+        for table, t, u, k, c, pos in cells_at_zero(structure, fit.spec, fit.params.type_params(m)):
+            name = {"em": "emission", "tr": "transition"}[table]
+            shared = structure.shared(name)
+            if (shared and m > 0) or np.any(hi[m * per + pos] >= BOUNDARY):
+                continue  # a shared cell is bounded once, with type 0's
+            which: int | slice = slice(None) if shared else m
+            rows = np.flatnonzero(t.group == t.group[u])
+
+            refit = _refit(fit, work, name, which, rows, k)
+            bound = profile_bound(getattr(fit.params, name)[m, u, k], c, top, refit)
+            types = range(fit.n_types) if shared else (m,)
+            mirror = cell_positions(fit.spec, cell_tables(fit.spec, fit.params.type_params(m)), name, u, k, 1 - c)
+            for mm in types:
+                hi[mm * per + pos] = bound
+                if t.M == 2:
+                    lo[mm * per + mirror] = np.minimum(lo[mm * per + mirror], 1.0 - bound)
+                moved += len(pos)
+    return lo, hi, moved
