@@ -421,3 +421,15 @@ def test_duplicate_trials_are_counted_by_participant_naming_the_order(tmp_path):
     line = exc.value.problems[-1]
     n1, n2 = (frame.participant == "P001").sum(), (frame.participant == "P002").sum()
     assert f"by participant, 2 ('P001' {n1}, 'P002' {n2})" in line and '"order"' in line, line
+
+
+@pytest.mark.parametrize(("encoding", "bom", "expected"), [("utf-16", True, "UTF-16 text"), ("utf-16-le", False, "NUL bytes")])
+def test_a_utf16_csv_is_named_with_its_fix(tmp_path, encoding, bom, expected):
+    """Excel's 'Unicode Text' (UTF-16) passed as UTF-8 with a NUL between characters, and was refused
+    for a row of '\\x00' at its end: the header's encoding is named, with the way to UTF-8."""
+    path = tmp_path / "log.csv"
+    path.write_bytes(GOOD.encode(encoding))
+    assert path.read_bytes()[:2] in (b"\xff\xfe", b"\xfe\xff") or not bom
+    with pytest.raises(DataError, match=expected) as exc:
+        read_trials(path)
+    assert str(path) in str(exc.value) and "UTF-8" in str(exc.value)

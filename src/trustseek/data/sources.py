@@ -42,11 +42,18 @@ MAX_COLUMNS = 10_000  # a CSV's columns: parsing takes ~6 s at this width and gr
 HEADER_BYTES = 1 << 26  # the longest header line read (64 MB: millions of columns)
 
 
-def _sniff(path: Path, sep: str | None) -> tuple[str, list[str]]:
+def _sniff(path: Path, sep: str | None, name: str) -> tuple[str, list[str]]:
     """The delimiter (given, by suffix, or the most frequent candidate in the header outside
-    quoted names) and the header names; the whole header line is read, however long."""
+    quoted names) and the header names; the whole header line is read, however long.  UTF-16
+    text (Excel's "Unicode Text") is refused here: its ASCII would pass as UTF-8 with a NUL
+    byte between every two characters."""
     with path.open("rb") as fh:
         head = fh.readline(HEADER_BYTES)
+    if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        fix = f"save it as 'CSV UTF-8' or iconv -f UTF-16 -t UTF-8 {shorten(path.name, 80)} > log.csv"
+        raise DataError([f"the file is UTF-16 text (as Excel's 'Unicode Text'), not UTF-8: {fix}"], name)
+    if b"\x00" in head:
+        raise DataError(["the header holds NUL bytes: the file is not UTF-8 text (UTF-16 without its mark, or no text)"], name)
     text = head.decode("utf-8", "replace").lstrip("\ufeff")
     first = text.splitlines()[0] if text.strip() else ""
     if sep is None:
@@ -283,7 +290,7 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
     import pyarrow as pa
     import pyarrow.csv as pcsv
 
-    sep, header = _sniff(path, sep)
+    sep, header = _sniff(path, sep, name)
     if not header:
         raise DataError(["the file is empty (expected a header line naming the columns)"], name)
     if len(header) > MAX_COLUMNS:
