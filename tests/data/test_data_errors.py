@@ -433,3 +433,18 @@ def test_a_utf16_csv_is_named_with_its_fix(tmp_path, encoding, bom, expected):
     with pytest.raises(DataError, match=expected) as exc:
         read_trials(path)
     assert str(path) in str(exc.value) and "UTF-8" in str(exc.value)
+
+
+def test_excels_sep_line_names_the_delimiter_and_rows_count_from_the_header(tmp_path, monkeypatch):
+    """Excel writes (and reads) a first line 'sep=;' naming the delimiter; it was taken for a header
+    of two columns and every row refused. It names the delimiter, the header follows it, and a bad
+    row is numbered as a data row, in one pass and in two halves alike."""
+    lines = example_path().read_text().replace(",", ";").splitlines()
+    plain = read_trials(write(tmp_path, "\n".join(lines) + "\n", "plain.csv"))
+    declared = write(tmp_path, "\ufeffsep=;\r\n" + "\r\n".join(lines) + "\r\n", "declared.csv")
+    pd.testing.assert_frame_equal(read_trials(declared), plain, check_like=True)
+    lines[3] += ";x"
+    lines[-5] += ";y"
+    whole, halves = _read_split_and_whole(write(tmp_path, "sep=;\n" + "\n".join(lines) + "\n"), monkeypatch)
+    assert whole == halves
+    assert "row 3 (8 fields)" in whole and f"row {len(lines) - 5} (8 fields)" in whole and "delimiter ';'" in whole

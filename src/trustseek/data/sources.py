@@ -42,13 +42,18 @@ MAX_COLUMNS = 10_000  # a CSV's columns: parsing takes ~6 s at this width and gr
 HEADER_BYTES = 1 << 26  # the longest header line read (64 MB: millions of columns)
 
 
-def _sniff(path: Path, sep: str | None, name: str) -> tuple[str, list[str]]:
-    """The delimiter (given, by suffix, or the most frequent candidate in the header outside
-    quoted names) and the header names; the whole header line is read, however long.  UTF-16
-    text (Excel's "Unicode Text") is refused here: its ASCII would pass as UTF-8 with a NUL
-    byte between every two characters."""
+def _sniff(path: Path, sep: str | None, name: str) -> tuple[str, list[str], int]:
+    """The delimiter (given, by the file's first line ``sep=;`` as Excel writes and reads it, by
+    suffix, or the most frequent candidate in the header outside quoted names), the header names,
+    and the lines before the data (the header, after a ``sep=`` line); the whole header line is
+    read, however long.  UTF-16 text (Excel's "Unicode Text") is refused here: its ASCII would
+    pass as UTF-8 with a NUL byte between every two characters."""
     with path.open("rb") as fh:
         head = fh.readline(HEADER_BYTES)
+        declared = re.fullmatch(rb"(?:\xef\xbb\xbf)?sep=(.)\r?\n?", head)
+        if declared:
+            sep = sep or declared.group(1).decode("utf-8", "replace")
+            head = fh.readline(HEADER_BYTES)
     if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
         fix = f"save it as 'CSV UTF-8' or iconv -f UTF-16 -t UTF-8 {shorten(path.name, 80)} > log.csv"
         raise DataError([f"the file is UTF-16 text (as Excel's 'Unicode Text'), not UTF-8: {fix}"], name)
@@ -65,7 +70,7 @@ def _sniff(path: Path, sep: str | None, name: str) -> tuple[str, list[str]]:
             best = max(counts, key=lambda d: counts[d])
             sep = best if counts[best] > 0 else ","
     names = next(csv.reader(io.StringIO(first), delimiter=sep), []) if first else []
-    return sep, [n.strip() for n in names]
+    return sep, [n.strip() for n in names], 2 if declared else 1
 
 
 CSV_SUFFIXES = (".csv", ".txt", ".tsv")
@@ -290,7 +295,7 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
     import pyarrow as pa
     import pyarrow.csv as pcsv
 
-    sep, header = _sniff(path, sep, name)
+    sep, header, skip = _sniff(path, sep, name)
     if not header:
         raise DataError(["the file is empty (expected a header line naming the columns)"], name)
     if len(header) > MAX_COLUMNS:
@@ -323,7 +328,9 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
         # under load, instead of exiting with its status
         return pcsv.read_csv(
             pa.BufferReader(parts[i]) if len(parts) > 1 else path,
-            read_options=pcsv.ReadOptions(column_names=header, skip_rows=int(i == 0), block_size=1 << 24, use_threads=False),
+            read_options=pcsv.ReadOptions(
+                column_names=header, skip_rows=skip if i == 0 else 0, block_size=1 << 24, use_threads=False
+            ),
             parse_options=pcsv.ParseOptions(delimiter=sep, invalid_row_handler=invalid, newlines_in_values=False),
             convert_options=pcsv.ConvertOptions(
                 column_types=types, null_values=[], strings_can_be_null=False, quoted_strings_can_be_null=False
@@ -359,7 +366,7 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
         p = Problems()
         p.add(
             f"rows whose number of fields differs from the header's {len(header)} (delimiter {sep!r})",
-            [_bad_row(number, got, text) for part in bad_rows for number, got, text in part],
+            [_bad_row(number, got, text, skip) for part in bad_rows for number, got, text in part],
         )
         raise DataError(p.lines, name)
     return _arrow_source(table, name, header, missing)
@@ -398,10 +405,11 @@ def _line_ends(part: Any) -> int:
     return int(np.count_nonzero(np.frombuffer(part, dtype=np.uint8) == ord("\n")))
 
 
-def _bad_row(number: int | None, got: int, text: str) -> str:
-    """A row whose field count is wrong: its data row (the file's line less the header), the
-    fields found, the start of its text, and an unterminated quote when it has one."""
-    where = f"row {number - 1}" if number is not None else "a row"
+def _bad_row(number: int | None, got: int, text: str, skip: int = 1) -> str:
+    """A row whose field count is wrong: its data row (the file's line less the ``skip`` lines
+    before the data), the fields found, the start of its text, and an unterminated quote when it
+    has one."""
+    where = f"row {number - skip}" if number is not None else "a row"
     quote = ", an unterminated quote" if text.count('"') % 2 else ""
     return f"{where} ({got} fields{quote}): {text[:60]!r}"
 
