@@ -448,3 +448,24 @@ def test_excels_sep_line_names_the_delimiter_and_rows_count_from_the_header(tmp_
     whole, halves = _read_split_and_whole(write(tmp_path, "sep=;\n" + "\n".join(lines) + "\n"), monkeypatch)
     assert whole == halves
     assert "row 3 (8 fields)" in whole and f"row {len(lines) - 5} (8 fields)" in whole and "delimiter ';'" in whole
+
+
+def test_rows_with_every_cell_empty_are_dropped_and_counted(tmp_path):
+    """A spreadsheet's formatted but unused rows (',,,,,') were refused as trials with an empty id,
+    index and labels in every column: they are dropped as blank lines are, and counted; a row with
+    some cells empty is a trial (its empty human action a missing one), and the other rows keep
+    their numbers."""
+    blank = ",,,,,"
+    rows = [*ROWS[:3], blank, *ROWS[3:], blank, " , ,,\t,,"]
+    frame = read_trials(write(tmp_path, "\n".join([HEADER, *rows]) + "\n"))
+    assert frame.attrs["dropped"] == [("every cell empty", 3)]
+    clean = read_trials(write(tmp_path, GOOD, "clean.csv"))
+    pd.testing.assert_frame_equal(frame.reset_index(drop=True), clean.reset_index(drop=True), check_like=True)
+    assert frame["human_action"].isna().sum() == 1  # B,2's empty human action: a trial, kept
+    with pytest.raises(DataError, match=r"row 11: duplicate trial index 3 for participant .B. \(first at row 8\)"):
+        read_trials(write(tmp_path, "\n".join([HEADER, *rows, "B,3,high,autonomous,rely,reliable"]) + "\n", "dup.csv"))
+    with pytest.raises(DataError, match="every cell of its 2 rows is empty"):
+        read_trials(write(tmp_path, "\n".join([HEADER, blank, blank]) + "\n", "none.csv"))
+    code, out = run_cli(["decode", str(tmp_path / "log.csv"), "-m", "paper"], stdout=False)
+    said = " ".join(out.split())
+    assert code == 0 and "dropped 3 rows of" in said and "(every cell empty)" in said, out
