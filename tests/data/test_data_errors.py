@@ -464,6 +464,10 @@ def test_rows_with_every_cell_empty_are_dropped_and_counted(tmp_path):
     assert frame["human_action"].isna().sum() == 1  # B,2's empty human action: a trial, kept
     with pytest.raises(DataError, match=r"row 11: duplicate trial index 3 for participant .B. \(first at row 8\)"):
         read_trials(write(tmp_path, "\n".join([HEADER, *rows, "B,3,high,autonomous,rely,reliable"]) + "\n", "dup.csv"))
+    records = pd.read_csv(write(tmp_path, GOOD, "records.csv"))
+    records.loc[len(records)] = [None] * len(records.columns)  # pandas writes NaN in the trial column
+    records.to_parquet(tmp_path / "nulls.parquet")
+    assert read_trials(tmp_path / "nulls.parquet").attrs["dropped"] == [("every cell empty", 1)]
     with pytest.raises(DataError, match="every cell of its 2 rows is empty"):
         read_trials(write(tmp_path, "\n".join([HEADER, blank, blank]) + "\n", "none.csv"))
     code, out = run_cli(["decode", str(tmp_path / "log.csv"), "-m", "paper"], stdout=False)

@@ -186,11 +186,12 @@ def _check_columns(
 def _drop_rows(raw: RawLog, mapping: ColumnMapping, markers: frozenset[str]) -> tuple[np.ndarray | None, list[tuple[str, int]]]:
     """The rows kept (None: every row) and per drop rule the rows it drops, each rule counted on
     the rows the rules before it left.  Rows with every cell empty (a spreadsheet's formatted but
-    unused rows: ``,,,,``) go first, as blank lines do, counted as a rule of their own."""
+    unused rows: ``,,,,``; null or NaN in Parquet and JSON) go first, as blank lines do, counted
+    as a rule of their own."""
     empty = np.ones(raw.n, dtype=bool)
     for c in raw.columns:  # usually one column tells: no row is empty in the participant's
         cc = raw.col(c)
-        empty &= cc.mask([t is None or not t.strip() for t in cc.texts])
+        empty &= cc.mask([t is None or t == NAN_MARK or not t.strip() for t in cc.texts])
         if not empty.any():
             break
     keep = ~empty
