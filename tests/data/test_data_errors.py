@@ -473,3 +473,12 @@ def test_rows_with_every_cell_empty_are_dropped_and_counted(tmp_path):
     code, out = run_cli(["decode", str(tmp_path / "log.csv"), "-m", "paper"], stdout=False)
     said = " ".join(out.split())
     assert code == 0 and "dropped 3 rows of" in said and "(every cell empty)" in said, out
+
+
+@pytest.mark.parametrize(("name", "expected"), [("log.xlsx", "save its sheet as 'CSV UTF-8'"), ("log.csv.gz", "decompress it first")])
+def test_a_workbook_or_a_compressed_log_gets_the_way_to_a_readable_one(tmp_path, name, expected):
+    path = tmp_path / name
+    path.write_bytes(b"PK\x03\x04")
+    with pytest.raises(DataError, match=expected) as exc:
+        read_trials(path)
+    assert str(path) in str(exc.value) and ".csv, .tsv, .parquet" in str(exc.value)

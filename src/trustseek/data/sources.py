@@ -119,7 +119,14 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: 
         return _load_csv(path, name, sep, missing)
     if suffix in JSONL_SUFFIXES + JSON_SUFFIXES:
         return _load_json(path, name, _json_lines(path, suffix in JSONL_SUFFIXES), missing, explode)
-    raise DataError([f"unknown file type {suffix!r}: use .csv, .tsv, .parquet, .jsonl or .json"], name)
+    how = {**dict.fromkeys(SHEET_SUFFIXES, "a spreadsheet: save its sheet as 'CSV UTF-8'"),
+           **dict.fromkeys(PACKED_SUFFIXES, "a compressed file: decompress it first, e.g. with gunzip or unzip")}  # fmt: skip
+    hint = f" ({how[suffix]})" if suffix in how else ""
+    raise DataError([f"unknown file type {suffix!r}{hint}: use .csv, .tsv, .parquet, .jsonl or .json"], name)
+
+
+SHEET_SUFFIXES = (".xlsx", ".xls", ".xlsm", ".ods", ".numbers")
+PACKED_SUFFIXES = (".gz", ".zip", ".bz2", ".xz", ".zst", ".7z")
 
 
 def _exploded_frame(source: pd.DataFrame, missing: frozenset[str], explode: dict[str, Any]) -> RawLog:
