@@ -475,7 +475,9 @@ def test_rows_with_every_cell_empty_are_dropped_and_counted(tmp_path):
     assert code == 0 and "dropped 3 rows of" in said and "(every cell empty)" in said, out
 
 
-@pytest.mark.parametrize(("name", "expected"), [("log.xlsx", "save its sheet as 'CSV UTF-8'"), ("log.csv.gz", "decompress it first")])
+@pytest.mark.parametrize(
+    ("name", "expected"), [("log.xlsx", "save its sheet as 'CSV UTF-8'"), ("log.csv.gz", "decompress it first")]
+)
 def test_a_workbook_or_a_compressed_log_gets_the_way_to_a_readable_one(tmp_path, name, expected):
     path = tmp_path / name
     path.write_bytes(b"PK\x03\x04")
