@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import os
 import shutil
 import subprocess
 import sys
@@ -123,3 +124,30 @@ print(type(forward_backward.step_codes).__name__)
     script.write_text(code)
     out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, check=True, timeout=300).stdout.split()
     assert out == ["False", "True", "True", "1", "CPUDispatcher"], out
+
+
+def test_cached_code_calling_a_prange_loop_runs_first_in_a_fresh_process(tmp_path):
+    """A cached function that calls a prange loop of another cached function links against numba's
+    threading layer, which numba launches only when it loads a function with such a loop itself:
+    run first in a fresh process it crashed (the compiled fit: 'LLVM ERROR: Symbol not found:
+    allocate_sched', exit 134).  Once compiled code is loaded, the layer runs, whatever the cache."""
+    (tmp_path / "kernels_probe.py").write_text(
+        "import numba\n\n\n"
+        "@numba.njit(cache=True, parallel=True)\n"
+        "def loop(x):\n    s = 0.0\n    for i in numba.prange(x.size):\n        s += x[i]\n    return s\n\n\n"
+        "@numba.njit(cache=True)\n"
+        "def caller(x):\n    return loop(x) + 1.0\n"
+    )
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "PYTHONPATH": f"{tmp_path}{os.pathsep}{PACKAGE.parent}"}
+    steps = [
+        "import kernels_probe as k; print(k.loop(np.ones(3)))",  # the loop alone, cached
+        "import kernels_probe as k; print(k.caller(np.ones(3)))",  # the caller compiled on the cached loop
+        "from trustseek import compiled; compiled.load(); import kernels_probe as k; print(k.caller(np.ones(3)))",
+    ]
+    outs = [
+        subprocess.run([sys.executable, "-c", "import numpy as np; " + s], capture_output=True, text=True, env=env, timeout=300)
+        for s in steps
+    ]
+    assert [(o.returncode, o.stdout.strip()) for o in outs] == [(0, "3.0"), (0, "4.0"), (0, "4.0")], [
+        o.stderr[-300:] for o in outs
+    ]
