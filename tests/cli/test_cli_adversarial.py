@@ -362,8 +362,19 @@ def _log_rows() -> list[str]:
         ["solve", "-m", "{model}", "--grid", "11", "-o", "{model}"],
         ["agnostic", "-m", "{model}", "-o", "{model}"],
         ["decode", "{log}", "--model", "{model}", "-o", "{link}"],
+        ["schedule", "-m", "{model}", "-n", "2,2", "-o", "{model}"],
     ],
-    ids=["fit-posteriors", "fit-posteriors-dot", "decode", "predict", "fit-types", "solve", "agnostic", "decode-symlink"],
+    ids=[
+        "fit-posteriors",
+        "fit-posteriors-dot",
+        "decode",
+        "predict",
+        "fit-types",
+        "solve",
+        "agnostic",
+        "decode-symlink",
+        "schedule",
+    ],
 )
 def test_an_output_naming_an_input_is_refused_and_the_input_kept(tmp_path, args):
     log, model = tmp_path / "log.csv", tmp_path / "model.json"
@@ -522,3 +533,29 @@ def test_a_log_where_everyone_always_relies_warns_that_trust_is_not_identified(t
     assert code == 0 and "the initial distribution and the transitions are not identified" in text, output
     code, output = run_cli(["fit", LOG, "-r", "1"])
     assert "are not identified (any values" not in " ".join(output.split())
+
+
+#: (command line, what the refusal says) of options out of bounds that a command refuses before
+#: any work (each ran for seconds or without end, or failed with a traceback after its work)
+REFUSED_UP_FRONT = [
+    (["select-types", LOG, "--types", "1..1000000000"], "--types: numbers of types between 1 and 12"),
+    (["select-types", LOG, "--types", "1,1"], "--types: a number of types is given twice"),
+    (["schedule", "--compare", "--figure", "{dir}/log.csv"], "--figure {dir}/log.csv: expected a file ending in .png"),
+    (["schedule", "--figure", "{dir}/missing/f.png"], "the folder {dir}/missing does not exist"),
+    (["sensitivity", "--plot", "{dir}/log.csv"], "--plot {dir}/log.csv: expected a file ending in .png"),
+    (["compare-types", "--plot", "{dir}/figure.csv"], "--plot {dir}/figure.csv: expected a file ending in .png"),
+]
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    REFUSED_UP_FRONT,
+    ids=[f"{a[0]} {next(x for x in a[1:] if x.startswith('-'))}" for a, _ in REFUSED_UP_FRONT],
+)
+def test_an_option_beyond_its_bounds_is_refused_before_any_work(tmp_path, args, expected):
+    (tmp_path / "log.csv").write_text(Path(LOG).read_text())
+    before = _listing(tmp_path)
+    code, output = run_cli([a.format(dir=tmp_path) for a in args])
+    text = " ".join(output.split())
+    assert code == 2 and "Traceback" not in output and expected.format(dir=tmp_path) in text, output
+    assert _listing(tmp_path) == before
