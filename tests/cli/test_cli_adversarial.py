@@ -544,6 +544,15 @@ REFUSED_UP_FRONT = [
     (["schedule", "--figure", "{dir}/missing/f.png"], "the folder {dir}/missing does not exist"),
     (["sensitivity", "--plot", "{dir}/log.csv"], "--plot {dir}/log.csv: expected a file ending in .png"),
     (["compare-types", "--plot", "{dir}/figure.csv"], "--plot {dir}/figure.csv: expected a file ending in .png"),
+    (["design", "-r", "1000000000"], "--replicates must be between 2 and 10,000, got 1000000000"),
+    (["design", "--participants-2", "1000000000"], "experiment 2 of 1,000,000,000 participants x 2 blocks x 34 trials"),
+    (["design", "--grid", "1000000000"], "--grid must be between 3 and 1,000,001 belief points"),
+    (["design", "--tol", "nan"], "--tol must be a finite number > 0, got nan"),
+    (["design", "--search-ask-low", ""], "--search-ask-low: expected at least one value"),
+    (["design", "--scheduler", ""], "--scheduler"),  # without dask: that it needs it
+    (["design", "--jobs", "1000000000"], "less than or equal to 256"),
+    (["reproduce", "--jobs", "1000000000", "-o", "{dir}/report"], "less than or equal to 256"),
+    (["fit", LOG, "--jobs", "1000000000"], "less than or equal to 256"),
 ]
 
 

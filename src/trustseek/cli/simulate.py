@@ -16,6 +16,7 @@ from rich.table import Table
 
 from .. import solvers
 from ..errors import TrustseekError
+from ..estimation.options import MAX_JOBS
 from ..vocab import PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS, check_belief_update
 from ._app import (
     app,
@@ -387,7 +388,10 @@ def reproduce(
         ),
     ] = "paper",
     jobs: Annotated[
-        int, typer.Option("--jobs", "-j", min=1, help="Processes (bootstrap and replicates); numbers do not depend on it.")
+        int,
+        typer.Option(
+            "--jobs", "-j", min=1, max=MAX_JOBS, help="Processes (bootstrap and replicates); numbers do not depend on it."
+        ),
     ] = 2,
     schedule_participants: Annotated[
         int,

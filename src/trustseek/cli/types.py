@@ -10,7 +10,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..estimation.options import FitOptions
+from ..estimation.options import MAX_JOBS, FitOptions
 from ._app import (
     app,
     atomic_output,
@@ -88,7 +88,7 @@ def fit_types(
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative log-likelihood tolerance (> 0)."),
     max_iter: int = typer.Option(1000, "--max-iter", min=1, help="E-step cap per start."),
-    jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads (fit) and processes (bootstrap)."),
+    jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, max=MAX_JOBS, help="Threads (fit) and processes (bootstrap)."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the types (JSON trustseek.mixture/1)."),
     type_posteriors: Path | None = typer.Option(
         None, "--type-posteriors", help="Write P(type | trials) per participant (CSV/Parquet)."
@@ -248,7 +248,7 @@ def select_types(
     ),
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
-    jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads per fit."),
+    jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, max=MAX_JOBS, help="Threads per fit."),
     widen: bool = widen_option(12, "the numbers given"),
     as_json: bool = PrintJsonOpt,
     reading: LogReading = FROM_OPTIONS,
