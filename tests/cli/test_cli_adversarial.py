@@ -553,6 +553,9 @@ REFUSED_UP_FRONT = [
     (["design", "--jobs", "1000000000"], "less than or equal to 256"),
     (["reproduce", "--jobs", "1000000000", "-o", "{dir}/report"], "less than or equal to 256"),
     (["fit", LOG, "--jobs", "1000000000"], "less than or equal to 256"),
+    (["compare-types", "--gap", "0"], "--gap must be a finite number > 0, got 0.0"),
+    (["compare-types", "--max-seconds", "inf"], "--max-seconds must be a finite number > 0, got inf"),
+    (["solve-pomdp-file", "{dir}/paper.pomdp", "--horizon", "8"], "--horizon 8: the exact value expands 2,532,289 belief nodes"),
 ]
 
 
@@ -563,6 +566,8 @@ REFUSED_UP_FRONT = [
 )
 def test_an_option_beyond_its_bounds_is_refused_before_any_work(tmp_path, args, expected):
     (tmp_path / "log.csv").write_text(Path(LOG).read_text())
+    if "solve-pomdp-file" in args:
+        assert run_cli(["export-pomdp", str(tmp_path / "paper.pomdp")])[0] == 0
     before = _listing(tmp_path)
     code, output = run_cli([a.format(dir=tmp_path) for a in args])
     text = " ".join(output.split())

@@ -10,7 +10,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import FIGURE_SUFFIXES, app, check_output, console, print_json, progress_bar
+from ._app import FIGURE_SUFFIXES, app, check_output, check_positive, console, print_json, progress_bar
 from ._options import JsonOpt, QuietOpt, TaskOpt, parse_counts
 
 
@@ -61,6 +61,8 @@ def compare_types(
     from ..reproduction.supervisor_types import types_section
     from ..simulation.populations import check_size
 
+    check_positive(gap, "--gap")  # the solver refuses them too, but only after the pooled fit
+    check_positive(max_seconds, "--max-seconds")
     mix = load_mixture(mixture)
     if share is not None:
         if mix.n_types != 2:
