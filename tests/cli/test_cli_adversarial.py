@@ -553,6 +553,8 @@ REFUSED_UP_FRONT = [
     (["design", "--jobs", "1000000000"], "less than or equal to 256"),
     (["reproduce", "--jobs", "1000000000", "-o", "{dir}/report"], "less than or equal to 256"),
     (["fit", LOG, "--jobs", "1000000000"], "less than or equal to 256"),
+    (["select", LOG, "--folds", "10"], "--folds 10 is more than the 9 participants of the log"),
+    (["select-types", LOG, "--folds", "1000000000"], "--folds 1000000000 is more than the 9 participants"),
     (["compare-types", "--gap", "0"], "--gap must be a finite number > 0, got 0.0"),
     (["compare-types", "--max-seconds", "inf"], "--max-seconds must be a finite number > 0, got inf"),
     (["solve-pomdp-file", "{dir}/paper.pomdp", "--horizon", "8"], "--horizon 8: the exact value expands 2,532,289 belief nodes"),
