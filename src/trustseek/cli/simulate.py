@@ -326,7 +326,7 @@ def _trial_counts(counts: str | None, trials: int | None, participants: int, tas
     """The trials per complexity (None: --trials i.i.d. trials), refused when the run is too large."""
     from ..simulation.populations import check_size
 
-    cnt = None if trials is not None else list(parse_counts(counts or "41,30", task.complexities))
+    cnt = None if trials is not None else list(parse_counts("41,30" if counts is None else counts, task.complexities))
     check_size(participants, sum(cnt) if cnt is not None else (trials or 0), "--participants, --trials or --counts")
     return cnt
 
