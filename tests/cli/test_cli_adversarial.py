@@ -363,6 +363,7 @@ def _log_rows() -> list[str]:
         ["agnostic", "-m", "{model}", "-o", "{model}"],
         ["decode", "{log}", "--model", "{model}", "-o", "{link}"],
         ["schedule", "-m", "{model}", "-n", "2,2", "-o", "{model}"],
+        ["export", "s1", "--db", "sqlite:///{log}", "-o", "{log}"],
     ],
     ids=[
         "fit-posteriors",
@@ -374,6 +375,7 @@ def _log_rows() -> list[str]:
         "agnostic",
         "decode-symlink",
         "schedule",
+        "export",
     ],
 )
 def test_an_output_naming_an_input_is_refused_and_the_input_kept(tmp_path, args):
@@ -558,6 +560,7 @@ REFUSED_UP_FRONT = [
     (["fit", LOG, "--prior", "1e308"], "--prior must be a pseudo-count between 0 and 1e+12, got 1e+308"),
     (["personalize", LOG, "-m", "paper", "-o", "{dir}/people", "--strength", "1e308"], "--strength must be a pseudo-count"),
     (["simulate", "--counts", ""], "--counts '': 1 number for 2 complexities"),
+    (["export", "s1", "--db", "sqlite:///", "-o", "{dir}/t.csv"], "--db sqlite:///: names no SQLite file"),
     (["compare-types", "--gap", "0"], "--gap must be a finite number > 0, got 0.0"),
     (["compare-types", "--max-seconds", "inf"], "--max-seconds must be a finite number > 0, got inf"),
     (["solve-pomdp-file", "{dir}/paper.pomdp", "--horizon", "8"], "--horizon 8: the exact value expands 2,532,289 belief nodes"),
