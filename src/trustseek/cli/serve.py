@@ -226,16 +226,16 @@ def export_cmd(
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ) -> None:
     """Export a study's trials (canonical trial log), its UI events, or its whole data bundle."""
-    from ..server.bundle import bundle_files, write_bundle
-    from ..server.db import open_database
-    from ..server.export import events_frame, trials_frame, write_frame
-
     sqlite = _check_existing_sqlite(db)
     if out is None and bundle is None:
         raise TrustseekError(["give --out FILE (the trial log) or --bundle DIR (every table)"])
     outputs = ((out, "--out", (".csv", ".parquet")), (events, "--events", (".csv", ".parquet")))
     check_outputs(*outputs, inputs=((sqlite, "--db SQLite file"),))
     check_output(bundle, "--bundle", directory=True)
+    from ..server.bundle import bundle_files, write_bundle  # after the checks: they load the server
+    from ..server.db import open_database
+    from ..server.export import events_frame, trials_frame, write_frame
+
     with open_database(db)() as s:
         st = _stored_study(s, study, db)
         trials = trials_frame(s, st, pilot=pilot)
