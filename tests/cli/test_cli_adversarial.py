@@ -564,6 +564,7 @@ REFUSED_UP_FRONT = [
     (["sensitivity", "--samples", "1000000"], "--samples 1,000,000 x --grid 401 is 401,000,000 belief points"),
     (["sensitivity", "--starts", "1000"], "the ranges of 20 parameters from --starts 1,000 at --grid 401 take"),
     (["sensitivity", "--grid", "1000001", "--samples", "0"], "at --grid 1,000,001 take at least"),
+    (["simulate", "-n", "1", "--concentration", "nan"], "--concentration must be a finite number > 0, got nan"),
     (["compare-types", "--gap", "0"], "--gap must be a finite number > 0, got 0.0"),
     (["compare-types", "--max-seconds", "inf"], "--max-seconds must be a finite number > 0, got inf"),
     (["solve-pomdp-file", "{dir}/paper.pomdp", "--horizon", "8"], "--horizon 8: the exact value expands 2,532,289 belief nodes"),
