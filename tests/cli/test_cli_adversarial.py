@@ -362,8 +362,21 @@ def _log_rows() -> list[str]:
         ["solve", "-m", "{model}", "--grid", "11", "-o", "{model}"],
         ["agnostic", "-m", "{model}", "-o", "{model}"],
         ["decode", "{log}", "--model", "{model}", "-o", "{link}"],
+        ["schedule", "-m", "{model}", "-n", "2,2", "-o", "{model}"],
+        ["export", "s1", "--db", "sqlite:///{log}", "-o", "{log}"],
     ],
-    ids=["fit-posteriors", "fit-posteriors-dot", "decode", "predict", "fit-types", "solve", "agnostic", "decode-symlink"],
+    ids=[
+        "fit-posteriors",
+        "fit-posteriors-dot",
+        "decode",
+        "predict",
+        "fit-types",
+        "solve",
+        "agnostic",
+        "decode-symlink",
+        "schedule",
+        "export",
+    ],
 )
 def test_an_output_naming_an_input_is_refused_and_the_input_kept(tmp_path, args):
     log, model = tmp_path / "log.csv", tmp_path / "model.json"
@@ -522,3 +535,53 @@ def test_a_log_where_everyone_always_relies_warns_that_trust_is_not_identified(t
     assert code == 0 and "the initial distribution and the transitions are not identified" in text, output
     code, output = run_cli(["fit", LOG, "-r", "1"])
     assert "are not identified (any values" not in " ".join(output.split())
+
+
+#: (command line, what the refusal says) of options out of bounds that a command refuses before
+#: any work (each ran for seconds or without end, or failed with a traceback after its work)
+REFUSED_UP_FRONT = [
+    (["select-types", LOG, "--types", "1..1000000000"], "--types: numbers of types between 1 and 12"),
+    (["select-types", LOG, "--types", "1,1"], "--types: a number of types is given twice"),
+    (["schedule", "--compare", "--figure", "{dir}/log.csv"], "--figure {dir}/log.csv: expected a file ending in .png"),
+    (["schedule", "--figure", "{dir}/missing/f.png"], "the folder {dir}/missing does not exist"),
+    (["sensitivity", "--plot", "{dir}/log.csv"], "--plot {dir}/log.csv: expected a file ending in .png"),
+    (["compare-types", "--plot", "{dir}/figure.csv"], "--plot {dir}/figure.csv: expected a file ending in .png"),
+    (["design", "-r", "1000000000"], "--replicates must be between 2 and 10,000, got 1000000000"),
+    (["design", "--participants-2", "1000000000"], "experiment 2 of 1,000,000,000 participants x 2 blocks x 34 trials"),
+    (["design", "--grid", "1000000000"], "--grid must be between 3 and 1,000,001 belief points"),
+    (["design", "--tol", "nan"], "--tol must be a finite number > 0, got nan"),
+    (["design", "--search-ask-low", ""], "--search-ask-low: expected at least one value"),
+    (["design", "--scheduler", ""], "--scheduler"),  # without dask: that it needs it
+    (["design", "--jobs", "1000000000"], "less than or equal to 256"),
+    (["reproduce", "--jobs", "1000000000", "-o", "{dir}/report"], "less than or equal to 256"),
+    (["fit", LOG, "--jobs", "1000000000"], "less than or equal to 256"),
+    (["select", LOG, "--folds", "10"], "--folds 10 is more than the 9 participants of the log"),
+    (["select-types", LOG, "--folds", "1000000000"], "--folds 1000000000 is more than the 9 participants"),
+    (["fit", LOG, "--prior", "1e308"], "--prior must be a pseudo-count between 0 and 1e+12, got 1e+308"),
+    (["personalize", LOG, "-m", "paper", "-o", "{dir}/people", "--strength", "1e308"], "--strength must be a pseudo-count"),
+    (["simulate", "--counts", ""], "--counts '': 1 number for 2 complexities"),
+    (["export", "s1", "--db", "sqlite:///", "-o", "{dir}/t.csv"], "--db sqlite:///: names no SQLite file"),
+    (["sensitivity", "--samples", "1000000"], "--samples 1,000,000 x --grid 401 is 401,000,000 belief points"),
+    (["sensitivity", "--starts", "1000"], "the ranges of 20 parameters from --starts 1,000 at --grid 401 take"),
+    (["sensitivity", "--grid", "1000001", "--samples", "0"], "at --grid 1,000,001 take at least"),
+    (["simulate", "-n", "1", "--concentration", "nan"], "--concentration must be a finite number > 0, got nan"),
+    (["compare-types", "--gap", "0"], "--gap must be a finite number > 0, got 0.0"),
+    (["compare-types", "--max-seconds", "inf"], "--max-seconds must be a finite number > 0, got inf"),
+    (["solve-pomdp-file", "{dir}/paper.pomdp", "--horizon", "8"], "--horizon 8: the exact value expands 2,532,289 belief nodes"),
+]
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    REFUSED_UP_FRONT,
+    ids=[f"{a[0]} {next(x for x in a[1:] if x.startswith('-'))}" for a, _ in REFUSED_UP_FRONT],
+)
+def test_an_option_beyond_its_bounds_is_refused_before_any_work(tmp_path, args, expected):
+    (tmp_path / "log.csv").write_text(Path(LOG).read_text())
+    if "solve-pomdp-file" in args:
+        assert run_cli(["export-pomdp", str(tmp_path / "paper.pomdp")])[0] == 0
+    before = _listing(tmp_path)
+    code, output = run_cli([a.format(dir=tmp_path) for a in args])
+    text = " ".join(output.split())
+    assert code == 2 and "Traceback" not in output and expected.format(dir=tmp_path) in text, output
+    assert _listing(tmp_path) == before

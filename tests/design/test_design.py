@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import wilcoxon
 
-from trustseek.design import DesignConfig, FitSettings, evaluate_policy, high_threshold, run_design
+from trustseek.design import DesignConfig, FitSettings, ask_search, evaluate_policy, high_threshold, run_design
 from trustseek.errors import TrustseekError
 from trustseek.model.presets import paper_model, paper_task
 from trustseek.policies import randomized
@@ -175,3 +175,26 @@ def test_agnostic_from_arrays_is_the_solvers():
         frame = simulate(truth, task, randomized({"low": 0.1, "high": 0.4}), 3, counts=(10, 8), seed=seed).trials()
         ours, ref = _agnostic(frame, task), trust_agnostic_from_data(frame, task)
         assert ours.p_ask.tolist() == ref.p_ask.tolist() and ours.info == ref.info
+
+
+def test_sizes_beyond_the_machine_are_refused_before_any_replicate():
+    """A billion replicates, participants or workers ran until killed (or forked a pool of that
+    many processes); each is refused at once, naming its option."""
+    from trustseek.design.sweep import execute
+
+    cases = [
+        (DesignConfig(replicates=10**9), "--replicates must be between 2 and 10,000"),
+        (DesignConfig(participants_2=(10**9,)), "experiment 2 of 1,000,000,000 participants"),
+        (DesignConfig(participants_1=tuple(range(1, 102)), replicates=10_000), "more than 1,000,000 replicate pipelines"),
+        (DesignConfig(fit=FitSettings(restarts=10**9)), "--restarts must be between 1 and 1000"),
+        (DesignConfig(fit=FitSettings(tol=float("nan"))), "--tol must be a finite number > 0"),
+        (DesignConfig(fit=FitSettings(grid=10**9)), "--grid must be between 3 and 1,000,001"),
+        (DesignConfig(regret_target=float("nan")), "--regret-target must be a finite number"),
+    ]
+    for cfg, expected in cases:
+        with pytest.raises(TrustseekError, match=expected):
+            run_design(cfg)
+    with pytest.raises(TrustseekError, match="--jobs must be between 1 and 256"):
+        execute(None, [], jobs=10**9)  # type: ignore[arg-type]
+    with pytest.raises(TrustseekError, match="--search-ask-low needs values in"):
+        ask_search(DesignConfig(), [float("nan")], [0.4])

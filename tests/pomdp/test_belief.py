@@ -143,3 +143,19 @@ def test_impossible_branches_lead_to_a_distribution(model):
     p, nxt = AssistancePOMDP(model, paper_task()).branches("bayes").successors(np.array([[0.4, 0.6]]), HIGH, ASK)
     assert p[0, RELY * 2 + RELIABLE] == 0.0 and p[0, RELY * 2 + FAULTY] == 0.0
     np.testing.assert_allclose(nxt.sum(axis=-1), 1.0)
+
+
+def test_an_exact_finite_horizon_value_beyond_its_tree_budget_is_refused_up_front(monkeypatch):
+    """solve-pomdp-file --horizon 8 on the exported paper problem expanded 2.5 M belief nodes
+    (30 s); the tree is counted on the beliefs' supports first, and refused above the budget."""
+    import trustseek.pomdp.belief as belief
+    from pomdp_oracles import TIGER
+    from trustseek.interop.files import read_pomdp
+
+    flat = read_pomdp("tiger.pomdp", TIGER)
+    tiger = flat.branch_model()  # 3 actions x 2 observations, every branch reachable
+    assert [tiger.tree_size(flat.start, h) for h in (0, 1, 2, 3)] == [0, 1, 7, 43]
+    assert tiger.finite_horizon_value(flat.start, 2) == pytest.approx(-1.95, abs=1e-12)
+    monkeypatch.setattr(belief, "MAX_TREE_NODES", 42)
+    with pytest.raises(belief.BeliefError, match="horizon 3: the exact value expands 43 belief nodes, more than 42"):
+        tiger.finite_horizon_value(flat.start, 3)

@@ -60,6 +60,10 @@ def print_json(obj: Any) -> None:
 # --------------------------------------------------------------------------- outputs
 
 
+#: the file suffixes a figure option takes (the formats every figure is written in)
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
+
+
 def check_output(path: Path | None, option: str, suffixes: tuple[str, ...] | None = None, directory: bool = False) -> None:
     """Refuse, before any work, an output path that cannot be written: its folder must exist and
     be writable, and the path must not be a folder (for ``directory`` outputs: not a file, and

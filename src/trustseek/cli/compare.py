@@ -10,7 +10,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import app, check_output, console, print_json, progress_bar
+from ._app import FIGURE_SUFFIXES, app, check_output, check_positive, console, print_json, progress_bar
 from ._options import JsonOpt, QuietOpt, TaskOpt, parse_counts
 
 
@@ -52,7 +52,7 @@ def compare_types(
         600.0, "--max-seconds", min=0.0, help="Safety time limit of each solve (the gap reached is kept)."
     ),
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of every simulation and fit."),
-    plot: Path | None = typer.Option(None, "--plot", help="Write the figure to this PNG file."),
+    plot: Path | None = typer.Option(None, "--plot", help="Write the figure to this PNG, PDF or SVG file."),
     as_json: bool = JsonOpt,
     quiet: bool = QuietOpt,
 ) -> None:
@@ -61,6 +61,8 @@ def compare_types(
     from ..reproduction.supervisor_types import types_section
     from ..simulation.populations import check_size
 
+    check_positive(gap, "--gap")  # the solver refuses them too, but only after the pooled fit
+    check_positive(max_seconds, "--max-seconds")
     mix = load_mixture(mixture)
     if share is not None:
         if mix.n_types != 2:
@@ -71,7 +73,7 @@ def compare_types(
     for c in counts:  # before the pooled fit and the solves, not after them
         check_size(participants, sum(c), "--participants, --block")
     if plot is not None:
-        check_output(plot, "--plot")
+        check_output(plot, "--plot", FIGURE_SUFFIXES)
     steps = ["pooled fit", "policies", "one-type policies", *[f"blocks of {sum(c)} trials" for c in counts]]
     with progress_bar(quiet or as_json) as bar:
         tid = bar.add_task("compare-types", total=len(steps))

@@ -11,6 +11,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsed
 from rich.table import Table
 
 from ..errors import TrustseekError
+from ..estimation.options import MAX_JOBS
 from ._app import app, check_output, console, print_json, progress_bar
 from ._options import JsonOpt, QuietOpt, TaskOpt
 
@@ -45,6 +46,10 @@ def _connect(scheduler: str | None) -> Any:
         return Client(scheduler, timeout=30)
     except OSError as exc:
         raise TrustseekError([f"--scheduler {scheduler}: cannot connect ({exc})"]) from None
+    except (ValueError, TypeError) as exc:  # not an address: distributed's parser says why
+        raise TrustseekError(
+            [f"--scheduler {scheduler!r}: {exc}; expected a scheduler address such as tcp://host:8786"]
+        ) from None
 
 
 @app.command(rich_help_panel="Simulate and reproduce")
@@ -85,7 +90,7 @@ def design(
     search_high: str | None = typer.Option(
         None, "--search-ask-high", help="... and the P(ask | high) grid (default 0.1,0.25,0.4,0.55,0.7)."
     ),
-    jobs: int = typer.Option(1, "--jobs", "-j", min=1, help="Local processes (ignored with --scheduler)."),
+    jobs: int = typer.Option(1, "--jobs", "-j", min=1, max=MAX_JOBS, help="Local processes (ignored with --scheduler)."),
     scheduler: str | None = typer.Option(
         None, "--scheduler", help="Run on this Dask distributed scheduler (e.g. tcp://host:8786)."
     ),
@@ -94,7 +99,7 @@ def design(
     quiet: bool = QuietOpt,
 ) -> None:
     """Power and regret by study design: replicated simulate → fit → solve → evaluate → test pipelines."""
-    from ..design import DesignConfig, FitSettings
+    from ..design import DesignConfig, FitSettings, ask_search_problems
     from ..model.presets import load_model, load_task
 
     check_output(out, "--out", directory=True)
@@ -117,10 +122,16 @@ def design(
         regret_target=regret_target,
         fit=FitSettings(restarts=restarts, tol=tol, belief_update=belief_update, grid=grid),
     )
-    problems = cfg.problems()
+    search_grid = None
+    if search_low is not None or search_high is not None:
+        search_grid = (
+            _floats("0.05,0.1,0.2,0.3" if search_low is None else search_low, "--search-ask-low"),
+            _floats("0.1,0.25,0.4,0.55,0.7" if search_high is None else search_high, "--search-ask-high"),
+        )
+    problems = cfg.problems() or (ask_search_problems(cfg, *search_grid) if search_grid else [])
     if problems:
         raise TrustseekError(problems)
-    result, search = _run(cfg, jobs, scheduler, quiet, search_low, search_high)
+    result, search = _run(cfg, jobs, scheduler, quiet, search_grid)
     paths = None
     if out is not None:
         from ..design_report import write_design_report
@@ -137,9 +148,10 @@ def design(
         console.print(f"report written to {paths['html']}")
 
 
-def _run(cfg, jobs: int, scheduler: str | None, quiet: bool, search_low: str | None, search_high: str | None):
-    """The design's sweep (and the ask-probability search with --search-ask-low/-high), on local
-    processes or a Dask scheduler, with a progress bar unless ``quiet``."""
+def _run(cfg, jobs: int, scheduler: str | None, quiet: bool, search_grid: tuple[tuple[float, ...], tuple[float, ...]] | None):
+    """The design's sweep (and the ask-probability search on ``search_grid``, the values of
+    --search-ask-low and -high), on local processes or a Dask scheduler, with a progress bar
+    unless ``quiet``."""
     from ..design import ask_search, run_design
 
     client = _connect(scheduler)
@@ -153,12 +165,11 @@ def _run(cfg, jobs: int, scheduler: str | None, quiet: bool, search_low: str | N
 
             result = run_design(cfg, jobs=jobs, client=client, progress=progress)
             search = None
-            if search_low is not None or search_high is not None:
+            if search_grid is not None:
                 tid = bar.add_task("ask-probability search", total=None)
                 search = ask_search(
                     cfg,
-                    _floats(search_low or "0.05,0.1,0.2,0.3", "--search-ask-low"),
-                    _floats(search_high or "0.1,0.25,0.4,0.55,0.7", "--search-ask-high"),
+                    *search_grid,
                     jobs=jobs,
                     client=client,
                     progress=progress,

@@ -11,7 +11,7 @@ import typer
 from rich.markup import escape
 
 from ..errors import TrustseekError
-from ..estimation.options import FitOptions
+from ..estimation.options import MAX_JOBS, FitOptions
 from ._app import (
     app,
     atomic_output,
@@ -147,6 +147,7 @@ _Jobs = Annotated[
         "--jobs",
         "-j",
         min=1,
+        max=MAX_JOBS,
         help="Threads for the fit and processes for the bootstrap (default: all cores); numbers do not depend on it.",
     ),
 ]

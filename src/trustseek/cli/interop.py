@@ -84,7 +84,10 @@ def solve_pomdp_file(
     flat = read_pomdp(path)
     res: dict[str, Any]
     if horizon is not None:
-        v = flat.finite_horizon_value(flat.start, horizon)
+        try:
+            v = flat.finite_horizon_value(flat.start, horizon)
+        except TrustseekError as exc:  # the tree's size: name the option and the file
+            raise TrustseekError([f"{path}: --{line}" for line in exc.lines()]) from None
         res = {"file": str(path), "horizon": horizon, "value": v}
     else:
         try:

@@ -12,7 +12,7 @@ from .. import solvers
 from ..errors import TrustseekError
 from ..solvers.defaults import DEFAULT_GRID, DEFAULT_TYPE_AWARE_SOLVER, METHODS
 from ..vocab import check_belief_update
-from ._app import app, atomic_output, check_outputs, check_positive, check_tol, console, print_json
+from ._app import FIGURE_SUFFIXES, app, atomic_output, check_outputs, check_positive, check_tol, console, print_json
 from ._options import FROM_OPTIONS, JsonOpt, LogReading, ModelOpt, PrintJsonOpt, TaskOpt, log_options, model_and_task
 
 if TYPE_CHECKING:
@@ -300,7 +300,7 @@ def plot_q_cmd(
     from ..solvers import make_solver
 
     inputs = ((model, "--model file"), (task, "--task file"), (policy_file, "--policy file"))
-    check_outputs((out, "--out", (".png", ".pdf", ".svg")), inputs=inputs)
+    check_outputs((out, "--out", FIGURE_SUFFIXES), inputs=inputs)
     if policy_file is not None:
         try:
             policy = TrustAwarePolicy.tabulate(load_policy(policy_file))

@@ -10,7 +10,7 @@ from rich.table import Table
 
 from ..solvers.defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
 from ..vocab import PAPER_BLOCK_COUNTS
-from ._app import app, console, print_json
+from ._app import FIGURE_SUFFIXES, app, check_outputs, console, print_json
 from ._options import JsonOpt, ModelOpt, TaskOpt, model_and_task, parse_counts
 
 
@@ -37,7 +37,7 @@ def schedule(
     ),
     participants: int = typer.Option(20000, "--participants", min=2, max=1_000_000, help="--compare: simulated participants."),
     seed: int = typer.Option(0, "--seed", min=0, help="--compare: random seed."),
-    figure: Path | None = typer.Option(None, "--figure", help="--compare: write the schedule figure (PNG) here."),
+    figure: Path | None = typer.Option(None, "--figure", help="--compare: write the schedule figure (PNG, PDF or SVG) here."),
     as_json: bool = JsonOpt,
 ) -> None:
     """Choose the next item's complexity jointly with asking (finite horizon, known item counts)."""
@@ -46,6 +46,8 @@ def schedule(
     from ..pomdp.scheduling import SchedulingProblem
     from ..solvers.registry import make_solver
 
+    inputs = ((model, "--model file"), (task, "--task file"))
+    check_outputs((out, "--out", (".json",)), (figure, "--figure", FIGURE_SUFFIXES), inputs=inputs)
     m, t = model_and_task(model, task, belief_update)
     pomdp = AssistancePOMDP(m, t)
     n = parse_counts(counts, pomdp.complexities)

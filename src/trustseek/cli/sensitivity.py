@@ -8,7 +8,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from ._app import app, console, print_json
+from ._app import FIGURE_SUFFIXES, app, check_outputs, console, print_json
 from ._options import JsonOpt, ModelOpt, TaskOpt, model_and_task
 
 
@@ -37,12 +37,13 @@ def sensitivity(
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of the sample and of random starts."),
     model_only: bool = typer.Option(False, "--model-only", help="Leave the task's success probabilities and discount fixed."),
     top: int = typer.Option(10, "--top", min=1, help="Parameters shown in the one-at-a-time table."),
-    plot: Path | None = typer.Option(None, "--plot", help="Write a tornado plot of the threshold to this PNG file."),
+    plot: Path | None = typer.Option(None, "--plot", help="Write a tornado plot of the threshold to this PNG, PDF or SVG file."),
     as_json: bool = JsonOpt,
 ) -> None:
     """Range of the policy's threshold and of V when every reported parameter moves within its printed precision."""
     from ..solvers.sensitivity import sensitivity as run_sensitivity
 
+    check_outputs((plot, "--plot", FIGURE_SUFFIXES), inputs=((model, "--model file"), (task, "--task file")))
     m, t = model_and_task(model, task, belief_update)
     res = run_sensitivity(
         m,

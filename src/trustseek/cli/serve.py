@@ -26,9 +26,9 @@ def _check_db(db: str) -> str:
     return db
 
 
-def _check_existing_sqlite(db: str) -> None:
+def _check_existing_sqlite(db: str) -> Path | None:
     """A database URL to read from; a SQLite file that does not exist would be created empty:
-    refused."""
+    refused.  The SQLite file it names (None for another database)."""
     from sqlalchemy.engine import make_url
 
     _check_db(db)
@@ -37,15 +37,18 @@ def _check_existing_sqlite(db: str) -> None:
     except Exception:
         raise TrustseekError([f"--db: cannot parse the database URL {db!r}"]) from None
     if url.get_backend_name() != "sqlite":
-        return
+        return None
     name = url.database or ""
-    if name in ("", ":memory:") or name.startswith("file:"):
-        return
+    if not name:
+        raise TrustseekError([f"--db {db}: names no SQLite file; expected e.g. sqlite:///study.sqlite"])
+    if name == ":memory:" or name.startswith("file:"):
+        return None
     path = Path(name)
     if not path.is_file():
         raise TrustseekError(
             [f"--db {db}: the SQLite file {path} does not exist (run 'trustseek serve --db {db}' to create a study database)"]
         )
+    return path
 
 
 @app.command(rich_help_panel="Experiments")
@@ -223,15 +226,16 @@ def export_cmd(
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ) -> None:
     """Export a study's trials (canonical trial log), its UI events, or its whole data bundle."""
-    from ..server.bundle import bundle_files, write_bundle
+    sqlite = _check_existing_sqlite(db)
+    if out is None and bundle is None:
+        raise TrustseekError(["give --out FILE (the trial log) or --bundle DIR (every table)"])
+    outputs = ((out, "--out", (".csv", ".parquet")), (events, "--events", (".csv", ".parquet")))
+    check_outputs(*outputs, inputs=((sqlite, "--db SQLite file"),))
+    check_output(bundle, "--bundle", directory=True)
+    from ..server.bundle import bundle_files, write_bundle  # after the checks: they load the server
     from ..server.db import open_database
     from ..server.export import events_frame, trials_frame, write_frame
 
-    _check_existing_sqlite(db)
-    if out is None and bundle is None:
-        raise TrustseekError(["give --out FILE (the trial log) or --bundle DIR (every table)"])
-    check_outputs((out, "--out", (".csv", ".parquet")), (events, "--events", (".csv", ".parquet")))
-    check_output(bundle, "--bundle", directory=True)
     with open_database(db)() as s:
         st = _stored_study(s, study, db)
         trials = trials_frame(s, st, pilot=pilot)

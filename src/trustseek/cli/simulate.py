@@ -16,6 +16,7 @@ from rich.table import Table
 
 from .. import solvers
 from ..errors import TrustseekError
+from ..estimation.options import MAX_JOBS
 from ..vocab import PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS, check_belief_update
 from ._app import (
     app,
@@ -325,7 +326,7 @@ def _trial_counts(counts: str | None, trials: int | None, participants: int, tas
     """The trials per complexity (None: --trials i.i.d. trials), refused when the run is too large."""
     from ..simulation.populations import check_size
 
-    cnt = None if trials is not None else list(parse_counts(counts or "41,30", task.complexities))
+    cnt = None if trials is not None else list(parse_counts("41,30" if counts is None else counts, task.complexities))
     check_size(participants, sum(cnt) if cnt is not None else (trials or 0), "--participants, --trials or --counts")
     return cnt
 
@@ -387,7 +388,10 @@ def reproduce(
         ),
     ] = "paper",
     jobs: Annotated[
-        int, typer.Option("--jobs", "-j", min=1, help="Processes (bootstrap and replicates); numbers do not depend on it.")
+        int,
+        typer.Option(
+            "--jobs", "-j", min=1, max=MAX_JOBS, help="Processes (bootstrap and replicates); numbers do not depend on it."
+        ),
     ] = 2,
     schedule_participants: Annotated[
         int,

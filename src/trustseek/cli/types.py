@@ -10,7 +10,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..estimation.options import FitOptions
+from ..estimation.options import MAX_JOBS, FitOptions
 from ._app import (
     app,
     atomic_output,
@@ -50,17 +50,25 @@ def _check_differ(differ: str) -> None:
 
 def parse_types(text: str) -> tuple[int, ...]:
     """``1..4`` or ``1,2,3``: the numbers of types to compare."""
+    from ..estimation.type_selection import MAX_TYPES
+
+    ends: tuple[int, ...]
     try:
         if ".." in text:
-            a, b = text.split("..", 1)
-            values = tuple(range(int(a), int(b) + 1))
+            a, b = (int(x) for x in text.split("..", 1))
+            ends = (a, b) if a <= b else ()
         else:
-            values = tuple(int(x) for x in text.split(",") if x.strip())
+            ends = tuple(int(x) for x in text.split(",") if x.strip())
     except ValueError:
         raise TrustseekError([f"--types: expected e.g. 1..4 or 1,2,3, got {text!r}"]) from None
-    if not values or min(values) < 1 or max(values) > 12:
-        raise TrustseekError([f"--types: numbers of types between 1 and 12, e.g. 1..4; got {text!r}"])
-    return values
+    # the ends are checked before a range is made of them: 1..1000000000 is refused at once
+    if not ends or min(ends) < 1 or max(ends) > MAX_TYPES:
+        raise TrustseekError([f"--types: numbers of types between 1 and {MAX_TYPES}, e.g. 1..4; got {text!r}"])
+    if ".." in text:
+        return tuple(range(ends[0], ends[1] + 1))
+    if len(set(ends)) != len(ends):
+        raise TrustseekError([f"--types: a number of types is given twice, e.g. 1,2,3; got {text!r}"])
+    return ends
 
 
 @app.command("fit-types", rich_help_panel="Estimate")
@@ -80,7 +88,7 @@ def fit_types(
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative log-likelihood tolerance (> 0)."),
     max_iter: int = typer.Option(1000, "--max-iter", min=1, help="E-step cap per start."),
-    jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads (fit) and processes (bootstrap)."),
+    jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, max=MAX_JOBS, help="Threads (fit) and processes (bootstrap)."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the types (JSON trustseek.mixture/1)."),
     type_posteriors: Path | None = typer.Option(
         None, "--type-posteriors", help="Write P(type | trials) per participant (CSV/Parquet)."
@@ -243,7 +251,7 @@ def select_types(
     ),
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
-    jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads per fit."),
+    jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, max=MAX_JOBS, help="Threads per fit."),
     widen: bool = widen_option(12, "the numbers given"),
     as_json: bool = PrintJsonOpt,
     reading: LogReading = FROM_OPTIONS,

@@ -11,7 +11,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..estimation.options import FitOptions
+from ..estimation.options import MAX_JOBS, FitOptions
 from ._app import app, atomic_output, check_outputs, check_tol, console, err_console, print_json, progress_task
 from ._options import FROM_OPTIONS, AsForFitEmissionsOpt, AsForFitTransitionsOpt, LogReading, QuietOpt, RatingPerOpt, log_options
 from ._reading import keep_columns, read_for_types
@@ -75,7 +75,7 @@ def predict(
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed (folds, restarts, bootstrap)."),
     tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative log-likelihood tolerance of each fit (> 0)."),
     max_iter: int = typer.Option(1000, "--max-iter", min=1, help="Iteration cap per restart (E-steps)."),
-    jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, help="Threads for each fit (default: all cores)."),
+    jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, max=MAX_JOBS, help="Threads for each fit (default: all cores)."),
     bootstrap: int = BootstrapOpt,
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the per-trial predictions (CSV or Parquet)."),
     as_json: bool = typer.Option(False, "--json", help="Print the scores as one JSON object."),

@@ -26,6 +26,7 @@ import numpy as np
 
 from .. import vocab
 from ..errors import TrustseekError
+from ..estimation.options import check_jobs
 from ..model.core import TrustModel
 from ..model.jsonfile import json_safe
 from ..model.presets import paper_model, paper_task
@@ -35,9 +36,14 @@ from ..solvers.base import one_blas_thread
 from .evaluation import evaluate_policy, high_threshold
 from .replicate import Experiment1, FitSettings, Study, plan, run_chunk
 
-__all__ = ["TESTS", "DesignConfig", "DesignResult", "ask_search", "run_design"]
+__all__ = ["TESTS", "DesignConfig", "DesignResult", "ask_search", "ask_search_problems", "run_design"]
 
 TESTS = ("wilcoxon", "t")
+PAPER_ASK = (vocab.PAPER_ASK_PROBABILITIES["low"], vocab.PAPER_ASK_PROBABILITIES["high"])  # (ask_low, ask_high)
+MAX_REPLICATES = 10_000  # replicates per design point (as reproduce's --replicates)
+MAX_PIPELINES = 1_000_000  # replicate pipelines of a sweep: design points x replicates
+MAX_RESTARTS = 1000  # random starts of each replicate's fit (as fit's --restarts)
+MAX_GRID = 1_000_001  # belief grid points of each replicate's solve (as solve's --grid)
 
 Progress = Callable[[int, int], None]
 
@@ -72,8 +78,8 @@ class DesignConfig:
     def problems(self) -> list[str]:
         """Every setting out of range, as a message naming its option."""
         p: list[str] = []
-        if self.replicates < 2:
-            p.append(f"--replicates must be >= 2, got {self.replicates}")
+        if not 2 <= self.replicates <= MAX_REPLICATES:
+            p.append(f"--replicates must be between 2 and {MAX_REPLICATES:,}, got {self.replicates}")
         for name in ("participants_1", "trials_1", "participants_2", "trials_2"):
             vals = getattr(self, name)
             if not vals or min(vals) < 1:
@@ -90,16 +96,52 @@ class DesignConfig:
             p.append(f"--test must be one of {list(TESTS)}, got {self.test!r}")
         if not 0 < self.power_target < 1:
             p.append(f"--power-target must lie in (0, 1), got {self.power_target}")
-        if self.regret_target < 0:
-            p.append(f"--regret-target must be >= 0, got {self.regret_target}")
-        if self.fit.restarts < 1:
-            p.append(f"--restarts must be >= 1, got {self.fit.restarts}")
+        if not 0 <= self.regret_target < math.inf:
+            p.append(f"--regret-target must be a finite number >= 0, got {self.regret_target}")
+        if not 1 <= self.fit.restarts <= MAX_RESTARTS:
+            p.append(f"--restarts must be between 1 and {MAX_RESTARTS}, got {self.fit.restarts}")
+        if not 0 < self.fit.tol < math.inf:
+            p.append(f"--tol must be a finite number > 0, got {self.fit.tol}")
+        if not 3 <= self.fit.grid <= MAX_GRID:
+            p.append(f"--grid must be between 3 and {MAX_GRID:,} belief points, got {self.fit.grid}")
         if self.fit.belief_update not in vocab.BELIEF_UPDATES:
             p.append(f"--belief-update must be one of {list(vocab.BELIEF_UPDATES)}, got {self.fit.belief_update!r}")
         if self.truth.n_trust != 2:
             p.append(f"a design study needs a true model with two trust levels, got {self.truth.n_trust}")
         if self.task.n_complexity != 2:
             p.append(f"a design study needs a task with two complexities, got {self.task.n_complexity}")
+        return p or self.size_problems()
+
+    def size_problems(self, points: int | None = None) -> list[str]:
+        """The sweep's sizes beyond the machine, refused before any replicate runs: a simulated
+        experiment of more than :data:`~trustseek.simulation.populations.MAX_TRIALS` trials, or
+        more than :data:`MAX_PIPELINES` replicate pipelines (``points`` design points; default:
+        every combination of experiment 1's grids)."""
+        from ..simulation.populations import MAX_TRIALS
+
+        p: list[str] = []
+        if points is None:
+            points = math.prod(
+                len(g) for g in (self.participants_1, self.trials_1, self.share_high_1, self.ask_low, self.ask_high)
+            )
+        if points * self.replicates > MAX_PIPELINES:
+            p.append(
+                f"{points:,} design points x {self.replicates:,} replicates is more than {MAX_PIPELINES:,} replicate "
+                "pipelines: fewer values in the grids or fewer --replicates"
+            )
+        one = max(self.participants_1) * max(self.trials_1)
+        if one > MAX_TRIALS:
+            p.append(
+                f"experiment 1 of {max(self.participants_1):,} participants x {max(self.trials_1):,} trials is more than "
+                f"{MAX_TRIALS:,} simulated trials: fewer --participants-1 or --trials-1"
+            )
+        two = max(self.participants_2) * 2 * max(self.trials_2)
+        if two > MAX_TRIALS:
+            p.append(
+                f"experiment 2 of {max(self.participants_2):,} participants x 2 blocks x {max(self.trials_2):,} trials is "
+                f"more than {MAX_TRIALS:,} simulated trials: fewer --participants-2 or --trials-2"
+            )
+        return p
         return p
 
     def designs(self) -> list[Experiment1]:
@@ -191,6 +233,7 @@ def execute(
 ) -> list[dict[str, Any]]:
     """Every replicate of ``items`` (point, design, replicate), sorted by (point, replicate):
     in this process (``jobs`` = 1), in ``jobs`` local processes, or on the Dask ``client``."""
+    check_jobs(jobs, "--jobs")
     total = len(items)
     report = progress or (lambda done, tot: None)
     out: list[dict[str, Any]] = []
@@ -210,7 +253,7 @@ def execute(
                 out.extend(fut.result())
                 report(len(out), total)
         else:
-            with ProcessPoolExecutor(max_workers=jobs) as ex:
+            with ProcessPoolExecutor(max_workers=min(jobs, len(parts))) as ex:
                 futs = [ex.submit(run_chunk, study, part) for part in parts]
                 for f in as_completed(futs):
                     out.extend(f.result())
@@ -355,6 +398,33 @@ def summarize(cfg: DesignConfig, study: Study, designs: list[Experiment1], reps:
     }
 
 
+def _search_of(
+    cfg: DesignConfig, ask_low: Iterable[float], ask_high: Iterable[float]
+) -> tuple[DesignConfig, list[tuple[float, float]], list[str]]:
+    """The ask-probability search's sweep: its settings (experiment 1's budget, the first value
+    of each other grid of ``cfg``), its (ask_low, ask_high) grid with the paper's, and every
+    setting out of range."""
+    lows, highs = [float(v) for v in ask_low], [float(v) for v in ask_high]
+    problems = [
+        f"{name} needs values in [0, 1], got {vals}"
+        for name, vals in (("--search-ask-low", lows), ("--search-ask-high", highs))
+        if not vals or any(not 0 <= v <= 1 for v in vals)
+    ]
+    grid = [(lo, hi) for lo in lows for hi in highs]
+    if PAPER_ASK not in grid:
+        grid.append(PAPER_ASK)
+    sub = DesignConfig(**{**cfg.__dict__, "participants_1": cfg.participants_1[:1], "trials_1": cfg.trials_1[:1]})
+    sub.share_high_1 = cfg.share_high_1[:1]
+    sub.participants_2 = cfg.participants_2[:1]
+    sub.trials_2 = cfg.trials_2[:1]
+    return sub, grid, problems or sub.problems() or sub.size_problems(len(grid))
+
+
+def ask_search_problems(cfg: DesignConfig, ask_low: Iterable[float], ask_high: Iterable[float]) -> list[str]:
+    """Every setting of :func:`ask_search` out of range (a caller's check before any work)."""
+    return _search_of(cfg, ask_low, ask_high)[2]
+
+
 @one_blas_thread
 def ask_search(
     cfg: DesignConfig,
@@ -368,15 +438,7 @@ def ask_search(
     (the first of ``cfg``'s participants and trials), ranked by the mean regret of the estimated
     policy; the best with its interval next to the paper's 0.10 / 0.40, and the Welch interval of
     the paper's regret minus the best's (independent replicates: seeds differ by design point)."""
-    grid = [(float(lo), float(hi)) for lo in ask_low for hi in ask_high]
-    paper = (vocab.PAPER_ASK_PROBABILITIES["low"], vocab.PAPER_ASK_PROBABILITIES["high"])
-    if paper not in grid:
-        grid.append(paper)
-    sub = DesignConfig(**{**cfg.__dict__, "participants_1": cfg.participants_1[:1], "trials_1": cfg.trials_1[:1]})
-    sub.share_high_1 = cfg.share_high_1[:1]
-    sub.participants_2 = cfg.participants_2[:1]
-    sub.trials_2 = cfg.trials_2[:1]
-    problems = sub.problems()
+    sub, grid, problems = _search_of(cfg, ask_low, ask_high)
     if problems:
         raise TrustseekError(problems)
     study = study_of(sub)
@@ -402,7 +464,7 @@ def ask_search(
         )
     ranked = sorted(rows, key=lambda r: math.inf if r["regret"]["mean"] is None else r["regret"]["mean"])
     best = ranked[0]
-    at_paper = next(r for r in rows if (r["ask_low"], r["ask_high"]) == paper)
+    at_paper = next(r for r in rows if (r["ask_low"], r["ask_high"]) == PAPER_ASK)
     regrets = {i: np.array([r["regret"] for r in reps if r["point"] == i and "error" not in r]) for i in range(len(designs))}
     i_best, i_paper = rows.index(best), rows.index(at_paper)
     difference: dict[str, Any] = {"mean": None, "lo": None, "hi": None}

@@ -37,7 +37,7 @@ from . import kernels
 from .em import run_em
 from .estep import Workspace
 from .iohmm import fit_iohmm
-from .options import FitOptions
+from .options import FitOptions, check_jobs
 from .ratings import make_structure
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec, Params
@@ -409,6 +409,7 @@ def run_replicates(jobs: Sequence[Any], n_jobs: int, done: Callable[[int, Any], 
         for i, job in enumerate(jobs):
             done(i, job.run())
         return
+    check_jobs(n_jobs)
     with ProcessPoolExecutor(max_workers=min(n_jobs, len(jobs))) as ex:
         futures = {ex.submit(job.run): i for i, job in enumerate(jobs)}
         for f in as_completed(futures):

@@ -13,6 +13,9 @@ if TYPE_CHECKING:
 
 __all__ = ["DEFAULTS", "FINISH_SWITCH", "SERIAL", "FitOptions", "RunSettings", "counting"]
 
+#: the most worker processes (or threads) a computation starts: with the fork start method a pool
+#: starts all of its workers at once, so --jobs 1000000000 would fork until the machine gives out
+MAX_JOBS = 256
 FINISH_SWITCH = 1e-5  # EM hands over to the quasi-Newton finish at this relative change (or the fit's tol if looser)
 
 
@@ -82,6 +85,15 @@ class RunSettings:
     quasi_newton: bool = True
     accelerate: bool = True
     threads: int = 1
+
+
+def check_jobs(jobs: int | None, option: str = "jobs") -> None:
+    """Refuse a number of workers below 1 or above :data:`MAX_JOBS` (``option``: what the caller's
+    user sets it with, named in the message); None (all cores) passes."""
+    from ..errors import TrustseekError
+
+    if jobs is not None and not 1 <= jobs <= MAX_JOBS:
+        raise TrustseekError([f"{option} must be between 1 and {MAX_JOBS} worker processes, got {jobs}"])
 
 
 #: the options' defaults: 10 restarts from seed 0, to a relative tolerance of 1e-8, on all cores

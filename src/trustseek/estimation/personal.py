@@ -69,7 +69,7 @@ from .mixture_em import MixtureStructure, MixtureWorkspace
 from .options import SERIAL, FitOptions
 from .personal_models import PersonalModels
 from .sequences import Sequences, encode
-from .spec import FitError, IOHMMSpec, Params
+from .spec import MAX_PSEUDOCOUNT, FitError, IOHMMSpec, Params
 from .structure import FLOOR, Structure, Table
 from .trust_iohmm import to_model
 
@@ -478,6 +478,10 @@ def personalize(
     (relative) or ``options.max_iter`` E-steps, the participants' E-steps on ``options.n_jobs``
     threads (:class:`~.options.FitOptions`; by default one)."""
     tol, max_iter = options.tol, options.max_iter
+    given = [] if strength is None else list(strength.values()) if isinstance(strength, Mapping) else [strength]
+    for value in given:  # before the participants' data are prepared
+        if not 0 <= value <= MAX_PSEUDOCOUNT:
+            raise FitError([f"--strength must be a pseudo-count between 0 and {MAX_PSEUDOCOUNT:g}, got {value!r}"])
     prep = _Prepared.of(frame, model, options.n_jobs)
     spec, seqs, base, centre, work, start = prep.spec, prep.seqs, prep.base, prep.centre, prep.work, prep.start
     N = seqs.n_participants
@@ -515,8 +519,6 @@ def personalize(
         s_tab, bound, method = {}, {}, {}
         for name in TABLES:
             value = strength[name] if isinstance(strength, Mapping) else strength
-            if not (math.isfinite(value) and value >= 0):
-                raise FitError([f"strength must be a finite number >= 0, got {value!r}"])
             s_tab[name], bound[name], method[name] = float(value), False, GIVEN
     runs = prep.fit(s_tab, work, start, tol, max_iter)
     params = Params.stack([r.params for r in runs])

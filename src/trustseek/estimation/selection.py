@@ -256,8 +256,8 @@ class HeldOutComparison:
         -1) and on each fold's training participants (slot f), scored by ``heldout(test, fit)``;
         ``extra(full fit)`` adds entries to the row.  The rows' choices are marked."""
         N = seqs.n_participants
-        folds = max(2, min(self.folds, N))
-        fold_of = deal_folds(N, folds, [self.seed, 2])
+        folds = self.folds
+        fold_of = deal_folds(N, folds, [self.seed, 2])  # refuses more folds than participants
         asked = list(values)
         total, done = len(asked) * (folds + 1), 0
         rows: list[dict[str, Any]] = []

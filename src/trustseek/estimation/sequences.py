@@ -243,7 +243,12 @@ def encode(frame: pd.DataFrame, spec: IOHMMSpec, participant: str = "participant
 
 def deal_folds(n_participants: int, folds: int, key: Sequence[int]) -> np.ndarray:
     """The fold (0..folds-1) of every participant: a permutation seeded by ``key`` (a
-    :class:`numpy.random.SeedSequence`'s entropy) dealt round-robin, so fold sizes differ by at most one."""
+    :class:`numpy.random.SeedSequence`'s entropy) dealt round-robin, so fold sizes differ by at
+    most one.  At least 2 folds, and no more than participants (each fold holds one)."""
+    if folds < 2:
+        raise FitError([f"--folds must be at least 2, got {folds}"])
+    if folds > n_participants:
+        raise FitError([f"--folds {folds} is more than the {n_participants} participants of the log (folds are by participant)"])
     perm = np.random.default_rng(np.random.SeedSequence(list(key))).permutation(n_participants)
     fold_of = np.empty(n_participants, dtype=np.int64)
     fold_of[perm] = np.arange(n_participants) % folds

@@ -24,7 +24,6 @@ that names the levels.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, ClassVar, Self
@@ -32,6 +31,11 @@ from typing import Any, ClassVar, Self
 import numpy as np
 
 from ..errors import TrustseekError
+
+#: the largest Dirichlet pseudo-count a fit takes (--prior, personalize's --strength): one this
+#: large already fixes every row at the prior's; near 1e308 the log-prior overflowed and the fit
+#: failed with "the initial values give the data probability zero"
+MAX_PSEUDOCOUNT = 1e12
 
 
 class FitError(TrustseekError, ValueError):
@@ -121,8 +125,8 @@ class IOHMMSpec:
                 p.append(f"the rating {self.rating!r} needs at least 2 distinct levels, got {list(self.rating_levels)}")
             if self.rating == self.output or self.rating in (*self.emission_inputs, *self.transition_inputs):
                 p.append(f"the rating {self.rating!r} cannot also be the output or an input")
-        if not (math.isfinite(self.prior) and self.prior >= 0):
-            p.append(f"prior must be a finite pseudo-count >= 0, got {self.prior!r}")
+        if not 0 <= self.prior <= MAX_PSEUDOCOUNT:
+            p.append(f"--prior must be a pseudo-count between 0 and {MAX_PSEUDOCOUNT:g}, got {self.prior!r}")
         return p
 
     def with_levels(self, levels: Sequence[str]) -> IOHMMSpec:

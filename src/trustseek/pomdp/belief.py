@@ -54,6 +54,10 @@ __all__ = [
 # --------------------------------------------------------------------------- observed trials
 
 
+#: the most belief nodes an exact finite-horizon value expands (about 12 s at 12 µs a node)
+MAX_TREE_NODES = 1_000_000
+
+
 class BeliefError(TrustseekError, ValueError):
     """A belief that does not fit the model (e.g. one number for more than two trust levels)."""
 
@@ -264,11 +268,43 @@ class BranchModel:
         """M[c, a, branch, t, t2] = P(branch, T' = t2 | T = t, c, a): the unnormalized belief update."""
         return self.branches.move
 
+    def tree_size(self, belief: np.ndarray, horizon: int, context: int | None = None) -> int:
+        """The belief nodes :meth:`finite_horizon_value` expands, counted before any of them on
+        the beliefs' supports alone (a branch is expanded when it can happen from the support)."""
+        reach = self.kernels > 0
+        memo: dict[tuple[int, bytes, int], int] = {}
+
+        def nodes(support: np.ndarray, c: int, h: int) -> int:
+            key = (c, support.tobytes(), h)
+            if key not in memo:
+                n = 1
+                if h > 1:
+                    for a in range(self.n_actions):
+                        for br in range(reach.shape[2]):
+                            nxt = support @ reach[c, a, br]
+                            if nxt.any():
+                                n += sum(nodes(nxt, c2, h - 1) for c2, pc in enumerate(self.context_probs) if pc > 0)
+                memo[key] = n
+            return memo[key]
+
+        start = np.asarray(belief, dtype=float) > 0
+        contexts = [context] if context is not None else [c for c, pc in enumerate(self.context_probs) if pc > 0]
+        return 0 if horizon == 0 else sum(nodes(start, c, horizon) for c in contexts)
+
     def finite_horizon_value(self, belief: np.ndarray, horizon: int, context: int | None = None) -> float:
         """The exact optimal value of ``horizon`` trials from a belief, by expanding the belief
         tree (every context, action and branch; for small problems and short horizons): for a
-        known context of the first trial, or averaged over the context probabilities."""
+        known context of the first trial, or averaged over the context probabilities.  A tree of
+        more than :data:`MAX_TREE_NODES` nodes (:meth:`tree_size`) is refused before any work."""
         b0 = np.asarray(belief, dtype=float)
+        size = self.tree_size(b0, horizon, context)
+        if size > MAX_TREE_NODES:
+            raise BeliefError(
+                [
+                    f"horizon {horizon}: the exact value expands {size:,} belief nodes, more than {MAX_TREE_NODES:,} "
+                    "(about 12 s): a shorter horizon"
+                ]
+            )
         M = self.kernels
 
         def v(b: np.ndarray, c: int, h: int) -> float:

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from ..estimation.options import MAX_JOBS
 from ..vocab import (
     BELIEF_UPDATES,
     PAPER_ASK_PROBABILITIES,
@@ -94,6 +95,8 @@ class ReproduceConfig:
             p.append("ask probabilities must lie in [0, 1]")
         if self.grid < 3:
             p.append(f"--grid must be >= 3, got {self.grid}")
+        if self.jobs > MAX_JOBS:
+            p.append(f"--jobs must be between 1 and {MAX_JOBS} worker processes, got {self.jobs}")
         return p
 
     def to_summary(self) -> dict[str, Any]:

@@ -423,7 +423,7 @@ def _replicates(
     if cfg.replicates:
         args = [(cfg, i, child) for i, child in enumerate(seed.spawn(cfg.replicates))]
         if cfg.jobs > 1 and cfg.replicates > 1:
-            with ProcessPoolExecutor(max_workers=cfg.jobs) as ex:
+            with ProcessPoolExecutor(max_workers=min(cfg.jobs, cfg.replicates)) as ex:
                 for r in ex.map(run_replicate, args):
                     reps.append(r)
                     report("replicates", len(reps), cfg.replicates)

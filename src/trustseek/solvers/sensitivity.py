@@ -51,6 +51,11 @@ __all__ = [
 
 #: the value quantity's name (the thresholds are ``threshold[<complexity>]``)
 VALUE = "V"
+#: the most belief-grid points x solves of the Latin-hypercube check (samples x grid; on the paper's
+#: model a sampled solve costs ~5e-5 s a grid point, so 1e7 is about 8 minutes) and of the
+#: one-at-a-time and optimised ranges, counted at their fewest evaluations (~1.3e-6 s a point)
+MAX_SAMPLED_POINTS = 10_000_000
+MAX_RANGE_POINTS = 100_000_000
 
 
 class SensitivityError(TrustseekError, ValueError):
@@ -229,6 +234,7 @@ def sensitivity(
     if grid < 3 or samples < 0 or starts < 1:
         raise SensitivityError([f"need grid >= 3, samples >= 0 and starts >= 1; got {grid}, {samples}, {starts}"])
     params = list(parameters) if parameters is not None else free_parameters(model, task, decimals, include_task=include_task)
+    _check_size(len(params), grid, samples, starts)
     _check(model, task)
     box = _Box(model, task, params, belief_update, grid)
     nominal = box.at(box.x0)
@@ -261,6 +267,27 @@ def sensitivity(
             "evaluations": len(box.cache),
         },
     )
+
+
+def _check_size(n: int, grid: int, samples: int, starts: int) -> None:
+    """Refuse, before any solve, a run beyond :data:`MAX_SAMPLED_POINTS` or
+    :data:`MAX_RANGE_POINTS`: the ranges take 2 n + 1 solves one at a time and, per start of each
+    extreme of the value and a threshold, five gradients of n + 1 solves (the paper's model: 2,803
+    solves in all with the default two starts, against the 881 counted)."""
+    problems = []
+    if samples * grid > MAX_SAMPLED_POINTS:
+        problems.append(
+            f"--samples {samples:,} x --grid {grid:,} is {samples * grid:,} belief points to solve, more than "
+            f"{MAX_SAMPLED_POINTS:,} (about 8 minutes): fewer samples or a coarser grid"
+        )
+    fewest = 2 * n + 1 + starts * 2 * 2 * 5 * (n + 1)
+    if fewest * grid > MAX_RANGE_POINTS:
+        problems.append(
+            f"the ranges of {n} parameters from --starts {starts:,} at --grid {grid:,} take at least {fewest * grid:,} "
+            f"belief points to solve, more than {MAX_RANGE_POINTS:,} (a few minutes): fewer starts or a coarser grid"
+        )
+    if problems:
+        raise SensitivityError(problems)
 
 
 class _Box:
