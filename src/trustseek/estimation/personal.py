@@ -481,7 +481,7 @@ def personalize(
     given = [] if strength is None else list(strength.values()) if isinstance(strength, Mapping) else [strength]
     for value in given:  # before the participants' data are prepared
         if not 0 <= value <= MAX_PSEUDOCOUNT:
-            raise FitError([f"--strength must be a pseudo-count between 0 and {MAX_PSEUDOCOUNT:g}, got {value!r}"])
+            raise FitError([f"strength (--strength) must be a pseudo-count between 0 and {MAX_PSEUDOCOUNT:g}, got {value!r}"])
     prep = _Prepared.of(frame, model, options.n_jobs)
     spec, seqs, base, centre, work, start = prep.spec, prep.seqs, prep.base, prep.centre, prep.work, prep.start
     N = seqs.n_participants

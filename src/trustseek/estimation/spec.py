@@ -126,7 +126,7 @@ class IOHMMSpec:
             if self.rating == self.output or self.rating in (*self.emission_inputs, *self.transition_inputs):
                 p.append(f"the rating {self.rating!r} cannot also be the output or an input")
         if not 0 <= self.prior <= MAX_PSEUDOCOUNT:
-            p.append(f"--prior must be a pseudo-count between 0 and {MAX_PSEUDOCOUNT:g}, got {self.prior!r}")
+            p.append(f"prior (--prior) must be a pseudo-count between 0 and {MAX_PSEUDOCOUNT:g}, got {self.prior!r}")
         return p
 
     def with_levels(self, levels: Sequence[str]) -> IOHMMSpec:

@@ -136,9 +136,9 @@ class Supervisors:
         population; cells with zero weight (``r = 0`` and ``pseudo = 0``) stay zero."""
         check_participants(n)
         if not (np.isfinite(concentration) and concentration > 0):
-            raise SimulationError([f"--concentration must be a finite number > 0, got {concentration!r}"])
+            raise SimulationError([f"concentration (--concentration) must be a finite positive number, got {concentration!r}"])
         if not (np.isfinite(pseudo) and pseudo >= 0):
-            raise SimulationError([f"--pseudo must be a finite number >= 0, got {pseudo!r}"])
+            raise SimulationError([f"pseudo (--pseudo) must be a finite number 0 or more, got {pseudo!r}"])
         rng = np.random.default_rng(rng)
 
         def draw(rows: np.ndarray) -> np.ndarray:
