@@ -142,7 +142,6 @@ class DesignConfig:
                 f"more than {MAX_TRIALS:,} simulated trials: fewer --participants-2 or --trials-2"
             )
         return p
-        return p
 
     def designs(self) -> list[Experiment1]:
         """Experiment 1's design points, in order (the index is the point's seed component)."""
