@@ -470,7 +470,9 @@ def test_rows_with_every_cell_empty_are_dropped_and_counted(tmp_path):
     assert read_trials(tmp_path / "nulls.parquet").attrs["dropped"] == [("every cell empty", 1)]
     with pytest.raises(DataError, match="every cell of its 2 rows is empty"):
         read_trials(write(tmp_path, "\n".join([HEADER, blank, blank]) + "\n", "none.csv"))
-    code, out = run_cli(["decode", str(tmp_path / "log.csv"), "-m", "paper"], stdout=False)
+    code, out = run_cli(
+        ["decode", str(tmp_path / "log.csv"), "-m", "paper", "-o", str(tmp_path / "posteriors.csv")], stdout=False
+    )
     said = " ".join(out.split())
     assert code == 0 and "dropped 3 rows of" in said and "(every cell empty)" in said, out
 
