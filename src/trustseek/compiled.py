@@ -90,12 +90,12 @@ def _load() -> None:
 
         if "NUMBA_THREADING_LAYER" not in os.environ:
             numba.config.THREADING_LAYER = "workqueue"  # type: ignore[attr-defined]
-        # the threading layer launched now: compiled code loaded from the cache that calls a prange
-        # loop (the compiled run's E-step) links against the layer's symbols, and numba launches it
-        # only for a cached function that has the loop itself, so such a caller run first crashed
-        # the process ("LLVM ERROR: Symbol not found: allocate_sched", or a segfault)
-        numba.get_num_threads()
         if not _LOADED:
+            # the threading layer launched now: compiled code loaded from the cache that calls a
+            # prange loop (the compiled run's E-step) links against the layer's symbols, and numba
+            # launches it only for a cached function that has the loop itself, so such a caller run
+            # first crashed the process ("LLVM ERROR: Symbol not found: allocate_sched", or a segfault)
+            numba.get_num_threads()
             _stamp_our_caches()
         marker, prange = prange, numba.prange
         done = {id(lazy): lazy for lazy in _PENDING}

@@ -180,6 +180,7 @@ def _boundary_bounds(fit: MixtureFit, lo: np.ndarray, hi: np.ndarray, per: int) 
     top = float(np.sum(work.estep(fit.params).loglik))
     lo, hi, moved = lo.copy(), hi.copy(), 0
     for m in range(fit.n_types):
+        ref = cell_tables(fit.spec, fit.params.type_params(m))
         for table, t, u, k, c, pos in cells_at_zero(structure, fit.spec, fit.params.type_params(m)):
             name = {"em": "emission", "tr": "transition"}[table]
             shared = structure.shared(name)
@@ -191,7 +192,7 @@ def _boundary_bounds(fit: MixtureFit, lo: np.ndarray, hi: np.ndarray, per: int) 
             refit = _refit(fit, work, name, which, rows, k)
             bound = profile_bound(getattr(fit.params, name)[m, u, k], c, top, refit)
             types = range(fit.n_types) if shared else (m,)
-            mirror = cell_positions(fit.spec, cell_tables(fit.spec, fit.params.type_params(m)), name, u, k, 1 - c)
+            mirror = cell_positions(fit.spec, ref, name, u, k, 1 - c)
             for mm in types:
                 hi[mm * per + pos] = bound
                 if t.M == 2:
