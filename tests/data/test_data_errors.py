@@ -478,11 +478,57 @@ def test_rows_with_every_cell_empty_are_dropped_and_counted(tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("name", "expected"), [("log.xlsx", "save its sheet as 'CSV UTF-8'"), ("log.csv.gz", "decompress it first")]
+    ("name", "expected"),
+    [("log.xlsx", "save its sheet as 'CSV UTF-8'"), ("log.json.gz", "decompress it first"), ("log.zip", "decompress it first")],
 )
-def test_a_workbook_or_a_compressed_log_gets_the_way_to_a_readable_one(tmp_path, name, expected):
+def test_a_workbook_or_a_packed_log_gets_the_way_to_a_readable_one(tmp_path, name, expected):
     path = tmp_path / name
     path.write_bytes(b"PK\x03\x04")
     with pytest.raises(DataError, match=expected) as exc:
         read_trials(path)
-    assert str(path) in str(exc.value) and ".csv, .tsv, .parquet" in str(exc.value)
+    assert str(path) in str(exc.value) and ".csv, .tsv, .parquet" in str(exc.value) and ".csv.gz" in str(exc.value)
+
+
+def _compress(data: bytes, codec: str) -> bytes:
+    import bz2
+    import gzip
+
+    import pyarrow as pa
+
+    if codec == "gzip":
+        return gzip.compress(data)
+    if codec == "bz2":
+        return bz2.compress(data)
+    return pa.compress(data, codec, asbytes=True)  # zstd: a raw frame, as the zstd tool writes it
+
+
+@pytest.mark.parametrize(
+    ("suffix", "codec"), [(".csv.gz", "gzip"), (".csv.bz2", "bz2"), (".csv.zst", "zstd"), (".tsv.gz", "gzip")]
+)
+def test_a_compressed_csv_reads_as_the_plain_file(tmp_path, suffix, codec):
+    """A log compressed as a lab's tools keep it (log.csv.gz) was refused with 'decompress it first'."""
+    plain = example_path()
+    text = plain.read_bytes()
+    if suffix.startswith(".tsv"):
+        text = text.replace(b",", b"\t")
+    path = tmp_path / f"log{suffix}"
+    path.write_bytes(_compress(text, codec))
+    pd.testing.assert_frame_equal(read_trials(path), read_trials(plain))
+
+
+def test_a_compressed_csv_keeps_its_delimiter_line_and_row_numbers(tmp_path):
+    body = "sep=;\n" + "\n".join([HEADER, *ROWS[:3], "A;4;high", *ROWS[4:]]).replace(",", ";") + "\n"
+    path = tmp_path / "log.csv.gz"
+    path.write_bytes(_compress(body.encode(), "gzip"))
+    with pytest.raises(DataError, match=r"row 4 \(3 fields\)"):
+        read_trials(path)
+
+
+@pytest.mark.parametrize("damage", ["not gzip", "truncated"])
+def test_a_damaged_compressed_csv_is_refused_by_name(tmp_path, damage):
+    whole = _compress(example_path().read_bytes(), "gzip")
+    path = tmp_path / "log.csv.gz"
+    path.write_bytes(b"participant,trial\n" if damage == "not gzip" else whole[: len(whole) // 2])
+    with pytest.raises(DataError, match=r"cannot decompress the file \(gzip, by its suffix\)") as exc:
+        read_trials(path)
+    assert str(path) in str(exc.value)

@@ -1,4 +1,5 @@
-"""The sources a log is read from: CSV (delimiter sniffed), Parquet, JSON lines, JSON and data frames.
+"""The sources a log is read from: CSV (delimiter sniffed; gzip, bzip2 or zstd compressed too),
+Parquet, JSON lines, JSON and data frames.
 
 Each source becomes a :class:`RawLog`: its columns as :class:`~.cells.Column` codes, read
 column by column (pyarrow where it can), with the rows numbered as in the file.
@@ -42,18 +43,41 @@ MAX_COLUMNS = 10_000  # a CSV's columns: parsing takes ~6 s at this width and gr
 HEADER_BYTES = 1 << 26  # the longest header line read (64 MB: millions of columns)
 
 
+def _open_bytes(path: Path) -> Any:
+    """The file's bytes as read: decompressed when its suffix names a compression (:data:`COMPRESSED`)."""
+    codec = COMPRESSED.get(path.suffix.lower())
+    if codec is None:
+        return path.open("rb")
+    import pyarrow as pa
+
+    return io.BufferedReader(pa.input_stream(str(path), compression=codec))
+
+
+def _not_decompressed(path: Path, name: str, why: Exception) -> DataError:
+    return DataError([f"cannot decompress the file ({COMPRESSED[path.suffix.lower()]}, by its suffix): {why}"], name)
+
+
+def _csv_suffix(path: Path) -> str:
+    """The suffix that says what the file holds: ``.csv`` of ``log.csv`` and of ``log.csv.gz``."""
+    suffixes = [s.lower() for s in path.suffixes]
+    return suffixes[-2] if len(suffixes) > 1 and suffixes[-1] in COMPRESSED else path.suffix.lower()
+
+
 def _sniff(path: Path, sep: str | None, name: str) -> tuple[str, list[str], int]:
     """The delimiter (given, by the file's first line ``sep=;`` as Excel writes and reads it, by
     suffix, or the most frequent candidate in the header outside quoted names), the header names,
     and the lines before the data (the header, after a ``sep=`` line); the whole header line is
     read, however long.  UTF-16 text (Excel's "Unicode Text") is refused here: its ASCII would
     pass as UTF-8 with a NUL byte between every two characters."""
-    with path.open("rb") as fh:
-        head = fh.readline(HEADER_BYTES)
-        declared = re.fullmatch(rb"(?:\xef\xbb\xbf)?sep=(.)\r?\n?", head)
-        if declared:
-            sep = sep or declared.group(1).decode("utf-8", "replace")
+    try:
+        with _open_bytes(path) as fh:
             head = fh.readline(HEADER_BYTES)
+            declared = re.fullmatch(rb"(?:\xef\xbb\xbf)?sep=(.)\r?\n?", head)
+            if declared:
+                sep = sep or declared.group(1).decode("utf-8", "replace")
+                head = fh.readline(HEADER_BYTES)
+    except OSError as exc:  # a compressed file that is not what its suffix says
+        raise _not_decompressed(path, name, exc) from None
     if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
         fix = f"save it as 'CSV UTF-8' or iconv -f UTF-16 -t UTF-8 {shorten(path.name, 80)} > log.csv"
         raise DataError([f"the file is UTF-16 text (as Excel's 'Unicode Text'), not UTF-8: {fix}"], name)
@@ -62,7 +86,7 @@ def _sniff(path: Path, sep: str | None, name: str) -> tuple[str, list[str], int]
     text = head.decode("utf-8", "replace").lstrip("\ufeff")
     first = text.splitlines()[0] if text.strip() else ""
     if sep is None:
-        if path.suffix.lower() == ".tsv":
+        if _csv_suffix(path) == ".tsv":
             sep = "\t"
         else:
             unquoted = re.sub(r'"[^"]*"', "", first)
@@ -74,6 +98,7 @@ def _sniff(path: Path, sep: str | None, name: str) -> tuple[str, list[str], int]
 
 
 CSV_SUFFIXES = (".csv", ".txt", ".tsv")
+COMPRESSED = {".gz": "gzip", ".bz2": "bz2", ".zst": "zstd"}  # a CSV's compressions, by suffix (log.csv.gz)
 
 
 PARQUET_SUFFIXES = (".parquet", ".pq")
@@ -113,7 +138,7 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: 
 
             return _arrow_raw(explode_table(_parquet_table(path, name), explode, name, "row"), name, missing)
         return _load_parquet(path, name, missing)
-    if suffix in CSV_SUFFIXES:
+    if _csv_suffix(path) in CSV_SUFFIXES:
         if explode is not None:
             raise DataError(["explode: a CSV cell is text, not a list; per-trial lists are read from JSON or Parquet"], name)
         return _load_csv(path, name, sep, missing)
@@ -122,7 +147,11 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: 
     how = {**dict.fromkeys(SHEET_SUFFIXES, "a spreadsheet: save its sheet as 'CSV UTF-8'"),
            **dict.fromkeys(PACKED_SUFFIXES, "a compressed file: decompress it first, e.g. with gunzip or unzip")}  # fmt: skip
     hint = f" ({how[suffix]})" if suffix in how else ""
-    raise DataError([f"unknown file type {suffix!r}{hint}: use .csv, .tsv, .parquet, .jsonl or .json"], name)
+    raise DataError(
+        [f"unknown file type {suffix!r}{hint}: use .csv, .tsv, .parquet, .jsonl or .json (a CSV may be compressed: .csv.gz, "
+         ".csv.bz2, .csv.zst)"],
+        name,
+    )  # fmt: skip
 
 
 SHEET_SUFFIXES = (".xlsx", ".xls", ".xlsm", ".ods", ".numbers")
@@ -334,7 +363,7 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
         # pyarrow's thread pool can abort at exit ("terminate called without an active exception")
         # under load, instead of exiting with its status
         return pcsv.read_csv(
-            pa.BufferReader(parts[i]) if len(parts) > 1 else path,
+            pa.BufferReader(parts[i]) if len(parts) > 1 else str(path),  # a path: decompressed by its suffix
             read_options=pcsv.ReadOptions(
                 column_names=header, skip_rows=skip if i == 0 else 0, block_size=1 << 24, use_threads=False
             ),
@@ -361,6 +390,8 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
         msg = str(exc)
         if "UTF8" in msg or "UTF-8" in msg:
             raise DataError(["the file is not UTF-8 text (save it as UTF-8 CSV)"], name) from None
+        if path.suffix.lower() in COMPRESSED:
+            raise _not_decompressed(path, name, exc) from None
         raise DataError([f"cannot read the file as CSV (delimiter {sep!r}): {msg}"], name) from None
     finally:
         sys.unraisablehook = hook
@@ -386,14 +417,14 @@ SPLIT_SEARCH = 1 << 20  # how far past the middle a line end is looked for
 def _csv_parts(path: Path) -> list[Any]:
     """The file whole (one part), or from :data:`SPLIT_BYTES` on a machine with two cores or more
     its two halves (buffers of the memory-mapped file), split after the first line end past the
-    middle.  Only a file without a quote is split: a quoted value may hold a line end, and a
+    middle.  Only an uncompressed file without a quote is split: a quoted value may hold a line end, and a
     row never spans lines outside one, so the halves hold the rows of the whole, in order.  The
     two are parsed at once, one per core: 7.1 M rows in about half the time of one pass
     (``benchmarks/bench_read.py``)."""
     import pyarrow as pa
 
     size = path.stat().st_size
-    if size < SPLIT_BYTES or len(os.sched_getaffinity(0)) < 2:
+    if size < SPLIT_BYTES or len(os.sched_getaffinity(0)) < 2 or path.suffix.lower() in COMPRESSED:
         return [path]
     with path.open("rb") as fh:
         whole = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
