@@ -282,6 +282,11 @@ def fit_types(
     restarts, seed = options.starts, options.seed_number
     spec = inputs_spec(frame, preset, prior, **spec_options)
     seqs = encode(frame, spec)
+    if types > seqs.n_participants:  # each participant is one type: the rest would be empty
+        raise FitError(
+            [f"types (--types) must be at most the log's {seqs.n_participants} participants (each participant is one type), "
+             f"got {types}"]
+        )  # fmt: skip
     pooled = None
     if types > 1:
         first = fit_iohmm(
