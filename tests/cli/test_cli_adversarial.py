@@ -557,6 +557,8 @@ REFUSED_UP_FRONT = [
     (["fit", LOG, "--jobs", "1000000000"], "less than or equal to 256"),
     (["select", LOG, "--folds", "10"], "--folds 10 is more than the 9 participants of the log"),
     (["select-types", LOG, "--folds", "1000000000"], "--folds 1000000000 is more than the 9 participants"),
+    (["fit", LOG, "--plots", "{dir}/missing/figures"], "--plots {dir}/missing/figures: the folder {dir}/missing does not exist"),
+    (["fit-types", LOG, "--plots", "{dir}/log.csv"], "--plots {dir}/log.csv: exists and is not a folder"),
     (["fit-types", LOG, "--types", "10"], "types (--types) must be at most the log's 9 participants (each participant is"),
     (["fit", LOG, "--prior", "1e308"], "prior (--prior) must be a pseudo-count between 0 and 1e+12, got 1e+308"),
     (

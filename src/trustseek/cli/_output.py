@@ -3,6 +3,7 @@ selection table, the --plots folder (light at import: rich only)."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -10,13 +11,21 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import console
+from ._app import check_output, console
 
 
 def check_plots_folder(plots: Path | None) -> None:
-    """--plots refused before anything is read when it names a file."""
-    if plots is not None and plots.exists() and not plots.is_dir():
+    """--plots refused before anything is read when it names a file, or a new folder whose own
+    folder does not exist or is not writable (as every other output: a typo is not a tree of new
+    folders); an existing folder is written into (figures of the same name are replaced)."""
+    if plots is None:
+        return
+    if not plots.exists():
+        check_output(plots, "--plots", directory=True)
+    elif not plots.is_dir():
         raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
+    elif not os.access(plots, os.W_OK | os.X_OK):
+        raise TrustseekError([f"--plots {plots}: the folder is not writable"])
 
 
 def print_warnings(warnings: list[str]) -> None:
