@@ -16,7 +16,7 @@ from .errors import Conflict
 from .lifecycle import give_consent
 from .orm import Session, utcnow
 from .routes import errors
-from .schemas import AnswersIn, ConsentIn, EventsIn, QuizIn, ReportIn, TrialIn
+from .schemas import AnswersIn, ConsentIn, EventsIn, QuizAttemptIn, ReportIn, TrialIn
 from .sessions import add_events, lock, participant_trial, serve, study_config, submit_trial, total_trials
 
 log = logging.getLogger(__name__)
@@ -151,7 +151,7 @@ def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Dep
 
 
 @participant.post("/{session_id}/quiz", summary="Answer the comprehension quiz (one attempt)", responses=errors(400))
-def post_quiz(session_id: str, body: QuizIn, request: Request, s: Caller = Depends(require_session)):
+def post_quiz(session_id: str, body: QuizAttemptIn, request: Request, s: Caller = Depends(require_session)):
     _study_session(s)
     with _db(request, s) as db:
         wrong, dup = answer_quiz(db, *_locked(db, s), body.attempt, body.answers)

@@ -118,7 +118,7 @@ class AnswersIn(BaseModel):
     answers: dict[str, float] = Field(..., min_length=1, max_length=100, description="Item id -> a point of the scale.")
 
 
-class QuizIn(BaseModel):
+class QuizAttemptIn(BaseModel):
     model_config = STRICT
     attempt: int = Field(..., ge=1, le=10, description="The attempt's number, from 1 (a retry repeats it).")
     answers: dict[str, int] = Field(..., min_length=1, max_length=20, description="Question id -> option index.")
