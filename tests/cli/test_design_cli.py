@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import socket
+import threading
 
+import pytest
 from typer.testing import CliRunner
 
+from cli_runner import run_cli
 from trustseek.cli import app
+from trustseek.cli import design as design_cli
 
 SMALL = ["-r", "2", "--participants-1", "6", "--trials-1", "40", "--participants-2", "4,8", "--trials-2", "20", "--restarts", "1"]
 
@@ -44,3 +50,61 @@ def test_design_refuses_bad_grids():
     assert isinstance(res.exception, TrustseekError)
     text = " ".join(res.exception.lines())
     assert "--alpha" in text and "--replicates" in text
+
+
+@contextlib.contextmanager
+def _listener(reply: bytes | None):
+    """A TCP port where something that is not a Dask scheduler listens: it sends ``reply`` to each
+    connection (None: nothing, the connection held open)."""
+    server = socket.create_server(("127.0.0.1", 0))
+    held: list[socket.socket] = []
+
+    def serve() -> None:
+        with contextlib.suppress(OSError):
+            while True:
+                conn, _ = server.accept()
+                held.append(conn)
+                if reply is not None:
+                    conn.sendall(reply)
+
+    threading.Thread(target=serve, daemon=True).start()
+    try:
+        yield f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    finally:
+        server.close()
+        for conn in held:
+            conn.close()
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.parametrize(
+    ("where", "expected"),
+    [
+        ("refused", "cannot connect ("),  # waited dask's 30 s timeout
+        ("another protocol", "what answers there is not a Dask scheduler ("),  # a traceback
+        ("silent", "something listens there but no Dask scheduler answered in 1 s"),  # waited until the server hung up
+    ],
+)
+def test_a_scheduler_address_where_no_scheduler_answers_is_refused_in_seconds(monkeypatch, where, expected):
+    monkeypatch.setattr(design_cli, "ANSWER_SECONDS", 1)
+    reply = {"another protocol": b"\xff" * 64, "silent": None}.get(where)
+    with contextlib.ExitStack() as stack:
+        address = f"tcp://127.0.0.1:{_free_port()}" if where == "refused" else stack.enter_context(_listener(reply))
+        code, output = run_cli(["design", "--scheduler", address])
+    text = " ".join(output.split())
+    assert code == 2 and "Traceback" not in output and f"--scheduler {address}: {expected}" in text, output
+
+
+@pytest.mark.parametrize(
+    ("address", "expected"),
+    [("nonsense://", "unknown address scheme 'nonsense'"), ("tcp://[::1", "invalid address"), ("tcp://host", "missing port")],
+)
+def test_a_scheduler_address_dask_cannot_parse_is_refused_with_its_reason(address, expected):
+    code, output = run_cli(["design", "--scheduler", address])
+    text = " ".join(output.split())
+    assert code == 2 and f"--scheduler {address!r}: {expected}" in text and "such as tcp://host:8786" in text, output

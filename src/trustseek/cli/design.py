@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import socket
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +36,10 @@ def _ints(text: str, option: str) -> tuple[int, ...]:
 
 
 def _connect(scheduler: str | None) -> Any:
+    """A client of the Dask scheduler at ``scheduler``; every way it cannot be one is a
+    TrustseekError within :data:`CONNECT_SECONDS` (a port nothing listens on) or
+    :data:`ANSWER_SECONDS` (a port where something else listens: dask's handshake would wait on
+    a web server until it hangs up, and a reply in another protocol ended in a traceback)."""
     if scheduler is None:
         return None
     try:
@@ -42,14 +48,53 @@ def _connect(scheduler: str | None) -> Any:
         raise TrustseekError(
             ["--scheduler needs the optional 'design' dependencies (dask.distributed): pip install 'trustseek[design]'"]
         ) from None
+    where = _address(scheduler)
+    made: dict[str, Any] = {}
+
+    def make() -> None:
+        try:
+            if where is not None:  # dask's Client retries a refused connection until its timeout
+                socket.create_connection(where, timeout=CONNECT_SECONDS).close()
+            made["client"] = Client(scheduler, timeout=ANSWER_SECONDS)
+        except BaseException as exc:  # each kind is told apart below
+            made["error"] = exc
+
+    worker = threading.Thread(target=make, name="trustseek-dask-connect", daemon=True)  # daemon: a hung handshake ends with us
+    worker.start()
+    worker.join(ANSWER_SECONDS)
+    exc = made.get("error")
+    if "client" in made:
+        return made["client"]
+    if exc is None:
+        raise TrustseekError(
+            [f"--scheduler {scheduler}: something listens there but no Dask scheduler answered in {ANSWER_SECONDS} s "
+             "(a scheduler listens on port 8786 unless told otherwise)"]
+        )  # fmt: skip
+    if isinstance(exc, OSError):
+        raise TrustseekError([f"--scheduler {scheduler}: cannot connect ({exc})"])
+    raise TrustseekError(
+        [f"--scheduler {scheduler}: what answers there is not a Dask scheduler ({type(exc).__name__}: {str(exc)[:120]})"]
+    )
+
+
+def _address(scheduler: str) -> tuple[str, int] | None:
+    """The host and port of a TCP or TLS scheduler address (None for dask's other schemes); an
+    address dask cannot parse is refused, with its parser's reason."""
+    from distributed.comm import parse_address, parse_host_port
+    from distributed.comm.registry import get_backend
+
     try:
-        return Client(scheduler, timeout=30)
-    except OSError as exc:
-        raise TrustseekError([f"--scheduler {scheduler}: cannot connect ({exc})"]) from None
-    except (ValueError, TypeError) as exc:  # not an address: distributed's parser says why
+        scheme, where = parse_address(scheduler)
+        get_backend(scheme).get_address_host(where)
+        return parse_host_port(where) if scheme in ("tcp", "tls") else None
+    except (ValueError, TypeError) as exc:
         raise TrustseekError(
             [f"--scheduler {scheduler!r}: {exc}; expected a scheduler address such as tcp://host:8786"]
         ) from None
+
+
+CONNECT_SECONDS = 5  # a scheduler's port that does not take a connection in this time is not listening
+ANSWER_SECONDS = 10  # a scheduler that has not taken the connection and answered dask's handshake in this time is none
 
 
 @app.command(rich_help_panel="Simulate and reproduce")
