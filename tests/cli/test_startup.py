@@ -86,6 +86,20 @@ def test_the_group_has_every_command_for_tools_that_read_it():
     assert group.commands.get("nonsense") is None
 
 
+def test_help_paragraphs_are_wrapped_by_the_terminal_not_by_the_source():
+    """Typer printed a docstring's line breaks as they are: `trustseek --help` showed 'predict' as
+    '... from the trials before it' and '(filtering), against ...' on a line of its own."""
+    group = typer.main.get_command(app)
+    assert isinstance(group, _lazy.LazyGroup)
+    for name in _lazy.COMMANDS:
+        for text in (_lazy.LazyGroup._summary(name).help, group.commands[name].help):
+            assert text is not None
+            broken = [p for p in text.split("\n\n") if "\n" in p and not p.startswith(("\b", "- "))]
+            assert not broken, (name, broken)
+    listed = "- one\n- two"
+    assert _lazy.reflow(f"A line\nand its rest.\n\n{listed}") == f"A line and its rest.\n\n{listed}"
+
+
 def test_every_submodule_is_an_attribute_of_its_package():
     """As when each package imported its modules eagerly: ``estimation.selection`` after
     ``from trustseek import estimation`` (the lazy loader reads the submodules from the stub)."""

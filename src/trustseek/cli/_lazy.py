@@ -9,6 +9,8 @@ table is what the modules register (names, panels, help texts), so it cannot dri
 from __future__ import annotations
 
 import importlib
+import inspect
+import re
 from collections.abc import Iterator, MutableMapping
 from typing import Any, ClassVar, NamedTuple
 
@@ -96,24 +98,43 @@ COMMANDS: dict[str, Command] = {
 }
 
 
+def reflow(text: str) -> str:
+    """A help text with each paragraph on one line, for the terminal to wrap: Typer prints a
+    docstring's line breaks as they are, so a paragraph broke at the source's line ends and again
+    at the terminal's width.  A paragraph that is a list or holds an indented block keeps its
+    lines, as does one marked with ``\\b`` (Click's mark for text not to be rewrapped)."""
+    paragraphs = inspect.cleandoc(text).split("\n\n")
+    kept = re.compile(r"\s|[-*•]\s|\d+[.)]\s")
+    return "\n\n".join(
+        p if p.startswith("\b") or any(kept.match(line) for line in p.split("\n")[1:]) else " ".join(p.split())
+        for p in paragraphs
+    )
+
+
 def command_name(info: typer.models.CommandInfo) -> str:
     """The name Typer gives a registered command."""
     assert info.callback is not None
     return info.name or typer.main.get_command_name(info.callback.__name__)
 
 
+def _reflowed(command: click.Command) -> click.Command:
+    if command.help:
+        command.help = reflow(command.help)
+    return command
+
+
 class LazyCommands(MutableMapping[str, click.Command]):
     """A group's commands by name: every name of :data:`COMMANDS`, each built on first access."""
 
     def __init__(self, built: MutableMapping[str, click.Command], build: Any) -> None:
-        self.built = dict(built)
+        self.built = {name: _reflowed(command) for name, command in built.items()}
         self.build = build
 
     def __getitem__(self, name: str) -> click.Command:
         if name not in self.built:
             if name not in COMMANDS:
                 raise KeyError(name)
-            self.built[name] = self.build(name)
+            self.built[name] = _reflowed(self.build(name))
         return self.built[name]
 
     def __contains__(self, name: object) -> bool:
@@ -127,7 +148,7 @@ class LazyCommands(MutableMapping[str, click.Command]):
         return len(COMMANDS.keys() | self.built.keys())
 
     def __setitem__(self, name: str, command: click.Command) -> None:
-        self.built[name] = command
+        self.built[name] = _reflowed(command)
 
     def __delitem__(self, name: str) -> None:
         del self.built[name]
@@ -165,7 +186,7 @@ class LazyGroup(typer.core.TyperGroup):
     @staticmethod
     def _summary(name: str) -> click.Command:
         """A stand-in for the listing: the command's name, help panel and summary."""
-        return typer.core.TyperCommand(name, help=COMMANDS[name].summary, rich_help_panel=COMMANDS[name].panel)
+        return typer.core.TyperCommand(name, help=reflow(COMMANDS[name].summary), rich_help_panel=COMMANDS[name].panel)
 
     def _build(self, name: str) -> click.Command:
         """The command ``name``, its module imported (which registers it on the application)."""
