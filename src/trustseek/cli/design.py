@@ -133,7 +133,7 @@ def design(
         None, "--search-ask-low", help="Also search experiment 1's ask probabilities: P(ask | low) grid."
     ),
     search_high: str | None = typer.Option(
-        None, "--search-ask-high", help="... and the P(ask | high) grid (default 0.1,0.25,0.4,0.55,0.7)."
+        None, "--search-ask-high", help="... and the P(ask | high) grid (default 0.1, 0.25, 0.4, 0.55, 0.7)."
     ),
     jobs: int = typer.Option(1, "--jobs", "-j", min=1, max=MAX_JOBS, help="Local processes (ignored with --scheduler)."),
     scheduler: str | None = typer.Option(

@@ -111,7 +111,7 @@ _TransitionsOn = Annotated[
     str | None,
     typer.Option(
         "--transitions-on",
-        help="Comma-separated inputs of the trust transitions (default: complexity,robot_action,experience; 'none' for "
+        help="Comma-separated inputs of the trust transitions (default: complexity, robot_action, experience; 'none' for "
         "none); the mapping's 'inputs' may be named too: the fit is then a general model (trustseek.iohmm/1).",
     ),
 ]
@@ -119,7 +119,7 @@ _EmissionsOn = Annotated[
     str | None,
     typer.Option(
         "--emissions-on",
-        help="Comma-separated inputs of the human-action probabilities (default: complexity,robot_action; 'none' for "
+        help="Comma-separated inputs of the human-action probabilities (default: complexity, robot_action; 'none' for "
         "none); the mapping's 'inputs' may be named too.",
     ),
 ]
@@ -163,7 +163,7 @@ _Posteriors = Annotated[
     Path | None, typer.Option("--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet).")
 ]
 _Plots = Annotated[
-    Path | None, typer.Option("--plots", help="Write emission/transition figures (Fig. 4-6 style) into this directory.")
+    Path | None, typer.Option("--plots", help="Write the emission and transition figures (Fig. 4-6 style) into this directory.")
 ]
 _FillFrom = Annotated[
     str | None,

@@ -89,10 +89,10 @@ def solve(
         "certified-grid (eq. 3, certified) or trust-agnostic.",
     ),
     gap: float | None = typer.Option(
-        None, "--gap", help="alpha/point/types/reachable: target certified gap between the value bounds (default 1e-6 / 1e-3)."
+        None, "--gap", help="alpha, point, types, reachable: target certified gap between the value bounds (default 1e-6 / 1e-3)."
     ),
     max_seconds: float | None = typer.Option(
-        None, "--max-seconds", help="point/types/reachable: stop after this many seconds (default 60) with the bounds reached."
+        None, "--max-seconds", help="point, types, reachable: stop after this many seconds (default 60) with the bounds reached."
     ),
     types: str | None = typer.Option(
         None,
