@@ -19,7 +19,7 @@ IMG = ROOT / "docs" / "img" / "scene"
 DOC = ROOT / "docs" / "experiments.md"
 # (file stem, caption), in the order of a trial
 SHOTS = [
-    ("approach", "The robot drives around the obstacles on its planned path (dashed)"),
+    ("approach", "The robot on its way to the item along its planned path (dashed)"),
     ("reach", "The arm reaches into the shelf at the item's height (local view over the robot's shoulder)"),
     ("success", "A success: the item is in the bin"),
     ("failure-low-start", "A low-complexity failure: the item slips out of the gripper on its way to the bin"),

@@ -79,6 +79,18 @@ def shot(page, out: Path, name: str) -> None:
         page.screenshot(path=str(out / f"scene-{name}.png"))
 
 
+def _drawn(page) -> bool:
+    """Whether each view (world, local, end-effector) shows a picture on the screen: the pixels of
+    its canvas are not all of one colour."""
+    from PIL import Image, ImageStat
+
+    for view in ("#world", "#local", "#ee"):
+        picture = Image.open(io.BytesIO(page.locator(view).screenshot())).convert("L")
+        if ImageStat.Stat(picture).stddev[0] < 5.0:
+            return False
+    return True
+
+
 def events(c: Client, study_id: str) -> pd.DataFrame:
     ev = pd.read_csv(io.BytesIO(c.export(study_id, table="events")))
     ev["data"] = [json.loads(d) if isinstance(d, str) else {} for d in ev["data"]]
@@ -138,6 +150,11 @@ def test_success_intervention_and_keyboard_teleoperation_with_contacts(env):
     )
     page, errors = new_page(browser)
     start(page, link, QUERY)
+    # on its way: the page's clock stands until the test steps it, and nothing was drawn yet (the
+    # documentation's picture of the approach was three empty views)
+    at = step_until(page, "true", limit=1)["s"]["robot"]
+    moving = step_until(page, f"Math.hypot(s.robot.x - {at['x']}, s.robot.y - {at['y']}) > 1.0 || s.phase !== 'approach'")
+    assert moving["s"]["phase"] == "approach" and _drawn(page), moving["s"]
     shot(page, out, "approach")
     step_until(page, "s.phase === 'outcome'")
     r = step_until(page, "s.phase === 'result'")
