@@ -11,6 +11,7 @@ from typing import Any
 
 from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
+from .design.sweep import participants_needed
 from .plots.design import plot_ask_search, plot_power, plot_regret
 from .version import __version__
 
@@ -58,7 +59,7 @@ def write_design_report(summary: dict[str, Any], out: str | Path, search: dict[s
     (out / "design.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
     env = Environment(loader=FileSystemLoader(str(TEMPLATES)), autoescape=True, undefined=StrictUndefined)
     html = env.get_template("design.html.j2").render(
-        s=summary, search=search, figures=embedded, fmt=_fmt, pct=_pct, iv=_iv, version=__version__
+        s=summary, search=search, figures=embedded, fmt=_fmt, pct=_pct, iv=_iv, needed=participants_needed, version=__version__
     )
     (out / "design.html").write_text(html, encoding="utf-8")
     return {"html": out / "design.html", "json": out / "design.json", "dir": out}

@@ -198,3 +198,23 @@ def test_sizes_beyond_the_machine_are_refused_before_any_replicate():
         execute(None, [], jobs=10**9)  # type: ignore[arg-type]
     with pytest.raises(TrustseekError, match="--search-ask-low needs values in"):
         ask_search(DesignConfig(), [float("nan")], [0.4])
+
+
+def _curve(powers: list[tuple[int, float, float, float]]) -> list[dict]:
+    return [{"participants": n, "wilcoxon": {"power": p, "lo": lo, "hi": hi}} for n, p, lo, hi in powers]
+
+
+def test_participants_needed_says_how_many_or_how_far_the_grid_falls_short():
+    """'beyond the grid (interval ends: - to beyond the grid)' named neither the power reached nor
+    what to try next."""
+    from trustseek.design import participants_needed
+
+    curve = _curve([(30, 0.07, 0.03, 0.14), (60, 0.10, 0.05, 0.18)])
+    short = {"curve": curve, "participants_for_power": {"estimate": None, "lo": None, "hi": None}}
+    assert participants_needed(short, 0.8, "wilcoxon") == (
+        "more than 60, the largest of the grid (power 0.10 [0.05, 0.18] there): widen it, e.g. --participants-2 60,120,240,480"
+    )
+    met = {"curve": curve, "participants_for_power": {"estimate": 20, "lo": 5, "hi": None}}
+    assert participants_needed(met, 0.1, "wilcoxon") == "20 (5 by the interval's upper end; beyond the grid by its lower end)"
+    both = {"curve": curve, "participants_for_power": {"estimate": 20, "lo": 5, "hi": 40}}
+    assert participants_needed(both, 0.1, "wilcoxon") == "20 (5 by the interval's upper end; 40 by its lower end)"

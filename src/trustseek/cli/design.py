@@ -234,6 +234,8 @@ def _iv(d: dict[str, Any], scale: float = 1.0, unit: str = "") -> str:
 
 
 def _print(s: dict[str, Any], search: dict[str, Any] | None) -> None:
+    from ..design import participants_needed
+
     console.print(
         f"V* = {s['optimal']['value']:.4f} (optimal threshold {s['optimal']['threshold']:.4f}); "
         f"{s['config']['replicates']} replicates per design; α = {s['targets']['alpha']:g}"
@@ -268,14 +270,8 @@ def _print(s: dict[str, Any], search: dict[str, Any] | None) -> None:
                     escape(f"{c['t']['power']:.2f} [{c['t']['lo']:.2f}, {c['t']['hi']:.2f}]"),
                 )
             console.print(t)
-            need = e["participants_for_power"]
-            lo = need["lo"] if need["lo"] is not None else "-"
-            hi = need["hi"] if need["hi"] is not None else "beyond the grid"
-            console.print(
-                f"participants for power {s['targets']['power']:g} ({s['targets']['test']}): "
-                f"{need['estimate'] if need['estimate'] is not None else 'beyond the grid'} "
-                f"(interval ends: {lo} to {hi})"
-            )
+            needed = participants_needed(e, s["targets"]["power"], s["targets"]["test"])
+            console.print(escape(f"participants for power {s['targets']['power']:g} ({s['targets']['test']}): {needed}"))
     sd = s["smallest_design"]
     if sd is None:
         console.print("no design of the grid meets the targets")

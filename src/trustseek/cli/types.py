@@ -37,7 +37,8 @@ EmissionsOnOpt = typer.Option(
 DifferOpt = typer.Option(
     "all",
     "--differ",
-    help="What differs between types: 'all', or some of initial, emission, transition, comma-separated (the rest is shared by every type).",
+    help="What differs between types: 'all', or some of initial, emission, transition, comma-separated (the rest is "
+    "shared by every type).",
 )
 
 

@@ -4,7 +4,7 @@
 from . import evaluation, replicate, sweep, warm
 from .evaluation import EVALUATION_GRID, Evaluation, evaluate_policy, high_threshold
 from .replicate import Experiment1, FitSettings, Study, replicate_seed, run_replicate
-from .sweep import TESTS, DesignConfig, DesignResult, ask_search, ask_search_problems, run_design
+from .sweep import TESTS, DesignConfig, DesignResult, ask_search, ask_search_problems, participants_needed, run_design
 
 __all__ = [
     "EVALUATION_GRID",
@@ -19,6 +19,7 @@ __all__ = [
     "ask_search_problems",
     "evaluate_policy",
     "high_threshold",
+    "participants_needed",
     "replicate_seed",
     "run_design",
     "run_replicate",

@@ -36,7 +36,7 @@ from ..solvers.base import one_blas_thread
 from .evaluation import evaluate_policy, high_threshold
 from .replicate import Experiment1, FitSettings, Study, plan, run_chunk
 
-__all__ = ["TESTS", "DesignConfig", "DesignResult", "ask_search", "ask_search_problems", "run_design"]
+__all__ = ["TESTS", "DesignConfig", "DesignResult", "ask_search", "ask_search_problems", "participants_needed", "run_design"]
 
 TESTS = ("wilcoxon", "t")
 PAPER_ASK = (vocab.PAPER_ASK_PROBABILITIES["low"], vocab.PAPER_ASK_PROBABILITIES["high"])  # (ask_low, ask_high)
@@ -417,6 +417,24 @@ def _search_of(
     sub.participants_2 = cfg.participants_2[:1]
     sub.trials_2 = cfg.trials_2[:1]
     return sub, grid, problems or sub.problems() or sub.size_problems(len(grid))
+
+
+def participants_needed(experiment2: dict[str, Any], power: float, test: str) -> str:
+    """The participants experiment 2 needs for ``power``, in words: the smallest grid value whose
+    power reaches it, with the grid values where its interval's upper and lower ends do; when no
+    value reaches it, the largest value, its power, and a wider grid to try."""
+    need, curve = experiment2["participants_for_power"], experiment2["curve"]
+    if need["estimate"] is None:
+        last = curve[-1]
+        at = last[test]
+        wider = ",".join(str(last["participants"] * k) for k in (1, 2, 4, 8))
+        return (
+            f"more than {last['participants']}, the largest of the grid (power {at['power']:.2f} [{at['lo']:.2f}, "
+            f"{at['hi']:.2f}] there): widen it, e.g. --participants-2 {wider}"
+        )
+    ends = [f"{need['lo']} by the interval's upper end"]
+    ends.append(f"{need['hi']} by its lower end" if need["hi"] is not None else "beyond the grid by its lower end")
+    return f"{need['estimate']} ({'; '.join(ends)})"
 
 
 def ask_search_problems(cfg: DesignConfig, ask_low: Iterable[float], ask_high: Iterable[float]) -> list[str]:
