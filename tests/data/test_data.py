@@ -182,3 +182,23 @@ def test_json_lines_and_arrays_are_told_apart_by_content(tmp_path, suffix, layou
     frame = read_trials(f)
     cols = ["participant", "trial", "complexity", "robot_action", "human_action", "experience"]
     assert frame[cols].astype(str).equals(canonical[cols].astype(str))
+
+
+def test_each_column_of_a_file_is_turned_into_codes_once(monkeypatch):
+    """The participant column was converted twice (the check for empty rows, then the reading):
+    on 7.1 M rows with 100,000 participants, 0.12 s each time."""
+    from collections import Counter
+
+    from trustseek.data import sources
+
+    seen: Counter[str] = Counter()
+    convert = sources.column_from_arrow
+
+    def counted(chunked, missing):
+        seen[str(chunked.type)] += 1
+        return convert(chunked, missing)
+
+    monkeypatch.setattr(sources, "column_from_arrow", counted)
+    frame = read_trials(example_path())
+    # the six canonical columns as codes (true_trust, an extra column, is carried as it is)
+    assert len(frame) == 639 and sum(seen.values()) == 6, seen

@@ -78,8 +78,9 @@ def read_trials(
     if mapping.join is not None:
         raw, joined = join_file(raw, mapping.join, theirs["participant"], markers)
     known = _check_columns(raw, mapping, theirs, required, delimiter)
-    rowid, dropped = _drop_rows(raw, mapping, markers)
-    get = _Columns(raw, rowid)
+    read: dict[str, Column] = {}  # the file's columns as codes, each converted once
+    rowid, dropped = _drop_rows(raw, mapping, markers, read)
+    get = _Columns(raw, rowid, read)
     present = [c for c in CANONICAL if theirs[c] in known]
     canonical = [theirs[c] for c in present if theirs[c] in raw.columns]
     if raw.release is not None:  # the canonical columns as codes; the file's copy of them goes
@@ -183,14 +184,22 @@ def _check_columns(
     return known
 
 
-def _drop_rows(raw: RawLog, mapping: ColumnMapping, markers: frozenset[str]) -> tuple[np.ndarray | None, list[tuple[str, int]]]:
+def _drop_rows(
+    raw: RawLog, mapping: ColumnMapping, markers: frozenset[str], read: dict[str, Column]
+) -> tuple[np.ndarray | None, list[tuple[str, int]]]:
     """The rows kept (None: every row) and per drop rule the rows it drops, each rule counted on
     the rows the rules before it left.  Rows with every cell empty (a spreadsheet's formatted but
     unused rows: ``,,,,``; null or NaN in Parquet and JSON) go first, as blank lines do, counted
-    as a rule of their own."""
+    as a rule of their own.  The columns it reads go into ``read``."""
+
+    def column(c: str) -> Column:
+        if c not in read:
+            read[c] = raw.col(c)
+        return read[c]
+
     empty = np.ones(raw.n, dtype=bool)
     for c in raw.columns:  # usually one column tells: no row is empty in the participant's
-        cc = raw.col(c)
+        cc = column(c)
         empty &= cc.mask([t is None or t == NAN_MARK or not t.strip() for t in cc.texts])
         if not empty.any():
             break
@@ -199,7 +208,7 @@ def _drop_rows(raw: RawLog, mapping: ColumnMapping, markers: frozenset[str]) -> 
         raise DataError([f"the log has no trials: every cell of its {raw.n:,} rows is empty"], raw.name)
     dropped: list[tuple[str, int]] = [] if keep.all() else [("every cell empty", int((~keep).sum()))]
     for rule in mapping.drop:
-        cc = raw.col(rule["column"])
+        cc = column(rule["column"])
         wanted = {s for v in rule["values"] for s in spellings(label_key(v))}
         blank = "" in wanted or any(str(v).strip().lower() in markers for v in rule["values"])
         hit = cc.mask([t in wanted if t is not None else blank for t in cc.texts]) & keep
@@ -216,14 +225,15 @@ def _drop_rows(raw: RawLog, mapping: ColumnMapping, markers: frozenset[str]) -> 
 class _Columns:
     """The log's columns as codes, each read on first use (the kept rows only), and the derived columns."""
 
-    def __init__(self, raw: RawLog, rowid: np.ndarray | None) -> None:
-        self.raw, self.rowid = raw, rowid
+    def __init__(self, raw: RawLog, rowid: np.ndarray | None, read: dict[str, Column]) -> None:
+        self.raw, self.rowid, self.read = raw, rowid, read
         self.n = raw.n if rowid is None else len(rowid)
         self.cols: dict[str, Column] = {}
 
     def __call__(self, c: str) -> Column:
         if c not in self.cols:
-            col = self.raw.col(c)
+            col = self.read.pop(c, None)
+            col = self.raw.col(c) if col is None else col
             self.cols[c] = col if self.rowid is None else col.take(self.rowid)
         return self.cols[c]
 
