@@ -135,13 +135,17 @@ def _item(r, lo, hi, tables, data, counts):
 
 @njit(cache=True, nogil=True)
 def _reduce(active, ll, pi, pe, pt, loglik, c_init, c_emit, c_trans):
-    """Add the items' sums per parameter set, in item order."""
+    """Add the items' sums per parameter set, in item order: ``ll`` (R, C) and the counts ``pi``,
+    ``pe``, ``pt`` (R, C, X) into ``loglik`` (R,) and ``c_init``, ``c_emit``, ``c_trans`` (R, X), each
+    count's trailing axes flattened (:func:`reduce_items`), so one compiled function serves
+    every layout, the cells added one by one (no array assignment, whose shape check would
+    compile a formatted error message into every caller)."""
     R, C = ll.shape
     for r in range(R):
         loglik[r] = 0.0
-        c_init[r] = 0.0
-        c_emit[r] = 0.0
-        c_trans[r] = 0.0
+        c_init[r, :] = 0.0
+        c_emit[r, :] = 0.0
+        c_trans[r, :] = 0.0
         if not active[r]:
             continue
         dead = False
@@ -153,9 +157,22 @@ def _reduce(active, ll, pi, pe, pt, loglik, c_init, c_emit, c_trans):
             continue
         for c in range(C):
             loglik[r] += ll[r, c]
-            c_init[r] += pi[r, c]
-            c_emit[r] += pe[r, c]
-            c_trans[r] += pt[r, c]
+            for x in range(pi.shape[2]):
+                c_init[r, x] += pi[r, c, x]
+            for x in range(pe.shape[2]):
+                c_emit[r, x] += pe[r, c, x]
+            for x in range(pt.shape[2]):
+                c_trans[r, x] += pt[r, c, x]
+
+
+def reduce_items(active: np.ndarray, sums: tuple[np.ndarray, ...], totals: tuple[np.ndarray, ...]) -> None:
+    """:func:`_reduce` of the items' ``sums`` (log-likelihood (R, C), counts (R, C, ...)) into ``totals``
+    (log-likelihood (R,), counts (R, ...)), all C-contiguous."""
+    ll, *counts = sums
+    R, C = ll.shape
+    flat = [c.reshape(R, C, -1) for c in counts]
+    out = [t.reshape(R, -1) for t in totals[1:]]
+    _reduce(active, ll, *flat, totals[0], *out)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -397,7 +414,7 @@ class Kernel:
             kernel(0, R * C, C, CHUNK, *args)
         ll = np.empty(R)
         ci, ce, ct = (np.empty((R, *lead, *sh)) for sh in shapes)
-        _reduce(act, *parts, ll, ci, ce, ct)
+        reduce_items(act, parts, (ll, ci, ce, ct))
         return ll, ci, ce, ct
 
     def run_mixture(
