@@ -6,9 +6,9 @@ setup:
 	@bash scripts/setup.sh
 
 # make reproduce and make test compile their numba kernels at LLVM's level 1 (NUMBA_OPT), in a numba
-# cache of their own: the same numbers bit for bit, compiled in about three quarters of the CPU time
-# of numba's default level 3 (the warm step 41-48 s against 57-64 s; a reproduction in a fresh
-# environment 65-84 s against 115-121 s), but the compiled fit runs 7-14 % slower, so the package's own
+# cache of their own: the same numbers bit for bit, compiled in less CPU time than at numba's default
+# level 3 (the warm step 39-43 s against 42-43 s; a reproduction in a fresh environment 65-84 s against
+# 115-121 s, measured before the warm step's 47-51 s), but the compiled fit runs 7-14 % slower, so the package's own
 # cache (every fit outside these two commands) keeps level 3.
 MAKE_NUMBA_CACHE := $(CURDIR)/.numba-make-cache
 reproduce test: export NUMBA_OPT := 1
@@ -21,7 +21,7 @@ reproduce: setup
 # compile into their cache, once, on the other core: trustseek.estimation.warm, trustseek.design.warm),
 # then every test; one BLAS thread per test worker, so that the two workers do not oversubscribe the cores.
 # The warm step loads the cache in about 3 s of CPU once it is filled; on a clean clone it compiles
-# on the core the static checks leave idle (about 33 s of CPU with empty caches), where without it
+# on the core the static checks leave idle (39-43 s of CPU with empty caches), where without it
 # both test workers would compile the same kernels on their first compiled fit, on the tests'
 # critical path (at level 1, in the cache above).
 test: setup

@@ -138,3 +138,28 @@ def test_the_estep_on_numbas_threads_is_the_kernels_to_the_last_bit():
     one, two = (cr.run_starts(s, w, [p], RunSettings(1e-8, 40, 1e-5, threads=t))[0] for t in (1, 2))  # 40 E-steps: cheap
     assert (one.loglik, one.iterations, one.history) == (two.loglik, two.iterations, two.history)
     assert np.array_equal(one.params.vector(), two.params.vector())
+
+
+def test_the_estep_compiles_no_formatted_shape_error_and_one_reduction():
+    """Compile time: numba compiles every library with the code of all it calls.  An array
+    assignment's shape check brings a formatted error message (str of integers, join) into the
+    E-step and every library above it, and each layout of the item sums was a compilation of its
+    own: the E-step's libraries have no such check, and the plain and the mixture E-step reduce
+    their items with one compiled function."""
+    _spec, _seqs, s, w = problem(40, 3)
+    (K, Ue, M, Ut), data, bufs, emt, trt = pieces(s, w)
+    p = s.random(np.random.default_rng(0))
+    flat = p.vector().copy()
+    steps.evaluate(flat, (K, Ue, M, Ut, 0.0, emt, trt), (data, bufs), np.empty_like(flat))
+    kern = w._kernel
+    rng = np.random.default_rng(1)
+    initial = rng.dirichlet(np.ones(K), size=2) / 2
+    emit = rng.random((2, kern.PE, K))
+    trans = rng.dirichlet(np.ones(K), size=(2, kern.P, K))
+    kern.run(initial[:1], emit[:1], trans[:1])
+    kern.run_mixture(initial, emit, trans, 2)
+    assert len(kernels._reduce.signatures) == 1
+    for func in (steps.evaluate, kernels.estep_items, kernels._reduce):
+        for compiled in func.overloads.values():
+            code = str(compiled.library._get_module_for_linking())  # also of a library loaded from the cache
+            assert "raise_with_shape_context" not in code, func

@@ -52,7 +52,7 @@ SUBSAMPLE_EVERY = 10  # the subsample: every SUBSAMPLE_EVERY-th sequence
 ENDED_STATIONARY, ENDED_CAPPED, ENDED_ZERO = 0, 1, 2  # how a compiled run ended
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _theta(flat, model, sticks, n):
     """:meth:`.sticks.Sticks.theta` of the flat cells."""
     K, Ue, M, _Ut, _prior, _emt, _trt = model
@@ -70,13 +70,13 @@ def _theta(flat, model, sticks, n):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _fg(theta, base, flat, counts, model, sticks, ev, grad):
     """The cells of ``theta`` (on ``base``) into ``flat``, their E-step counts into ``counts`` and
     the gradient of the objective into ``grad``; (log-likelihood, objective)."""
     K, Ue, M, _Ut, prior, _emt, _trt = model
     a, b = K, K + Ue * K * M
-    flat[:] = base
+    steps.copy(flat, base)
     stick_values(theta, sticks, (flat[:a], flat[a:b], flat[b:]))
     ll, f = steps.evaluate(flat, model, ev, counts)
     if math.isfinite(f):
@@ -237,12 +237,12 @@ def _finish(state, budget, ftol, model, ev, qn, history, nh):
                         B[i, j] += y_[i] * y_[j] / sy - Bs[i] * Bs[j] / sBs
         # a shortened step's small change says little about the distance to the maximum
         small = step == 1.0 and F - Fn <= ftol * max(abs(F), abs(Fn), 1.0)
-        x[:] = xn
-        g[:] = gn
+        steps.copy(x, xn)
+        steps.copy(g, gn)
         F = Fn
         if -Fn > stat[1]:
-            flat[:] = fln
-            counts[:] = cnn
+            steps.copy(flat, fln)
+            steps.copy(counts, cnn)
             stat[0] = lln
             stat[1] = -Fn
             history[nh] = -Fn
@@ -278,33 +278,33 @@ def _em(state, tol, max_iter, its, model, ev, accelerate, history, nh):
         history[nh] = f1
         nh += 1
         if f1 - f0 <= tol * abs(f0):
-            flat[:] = p1
-            counts[:] = c1
+            steps.copy(flat, p1)
+            steps.copy(counts, c1)
             stat[0], stat[1] = ll1, f1
             return its, True, nh
         if not accelerate:
-            flat[:] = p1
-            counts[:] = c1
+            steps.copy(flat, p1)
+            steps.copy(counts, c1)
             stat[0], stat[1] = ll1, f1
             continue
         if its >= max_iter:
-            flat[:] = p1
-            counts[:] = c1
+            steps.copy(flat, p1)
+            steps.copy(counts, c1)
             stat[0], stat[1] = ll1, f1
             return its, False, nh
-        p0[:] = flat
+        steps.copy(p0, flat)
         steps.em_step(p1, c1, model, p2)
         ll2, f2 = steps.evaluate(p2, model, ev, c2)
         its += 1
         if not f2 >= f1:
-            flat[:] = p1
-            counts[:] = c1
+            steps.copy(flat, p1)
+            steps.copy(counts, c1)
             stat[0], stat[1] = ll1, f1
             return its, True, nh
         history[nh] = f2
         nh += 1
-        flat[:] = p2
-        counts[:] = c2
+        steps.copy(flat, p2)
+        steps.copy(counts, c2)
         stat[0], stat[1] = ll2, f2
         if f2 - f1 <= tol * abs(f1):
             return its, True, nh
@@ -314,8 +314,8 @@ def _em(state, tol, max_iter, its, model, ev, accelerate, history, nh):
             if fe >= f2 and math.isfinite(fe):
                 history[nh] = fe
                 nh += 1
-                flat[:] = pe
-                counts[:] = ce
+                steps.copy(flat, pe)
+                steps.copy(counts, ce)
                 stat[0], stat[1] = lle, fe
 
 
@@ -368,8 +368,8 @@ def run_one(start, model, data, C, PE, settings, qn):
         f = stat[1]
         if not fq - f > tol * abs(f):
             return flat, stat, its, ENDED_STATIONARY, finishes, history[:nh]
-        flat[:] = q
-        counts[:] = cq
+        steps.copy(flat, q)
+        steps.copy(counts, cq)
         stat[0], stat[1] = llq, fq
         history[nh] = fq
         nh += 1

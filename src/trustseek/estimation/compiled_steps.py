@@ -7,6 +7,14 @@ A parameter set is flat: the initial distribution (K,), the emission rows (Ue, K
 transition rows (Ut, K, K) one after the other (:meth:`~.spec.Params.vector`); ``model`` is the
 tuple (K, Ue, M, Ut, prior, emission table, transition table) and ``ev`` the E-step's (data,
 buffers).
+
+Compile time: numba compiles every compiled function that another calls into a library of its own,
+with the machine code of everything it calls, so each level of calls between :func:`evaluate` and
+the compiled run compiles the E-step's code again.  The small steps here are therefore inlined
+into their one caller (``inline="always"``: no library of their own), and arrays are copied cell
+by cell, not by an array assignment (whose shape check compiles a formatted error message into
+every library above it).  Large functions stay functions: numba's type inference of an inlined
+body costs more than the library it saves.
 """
 
 from __future__ import annotations
@@ -46,7 +54,7 @@ def _items_parallel(C, tables, data, active, sums):
         kernels.estep_items(i, i + 1, C, np.int64(CHUNK), tables, data, active, sums)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
     """E-step of one parameter set: counts into ``ci`` (K,), ``cem`` (Ue, K, M), ``ctr`` (Ut, K, K);
     the log-likelihood (-inf: probability zero, counts zero).  The items and their sums of
@@ -64,20 +72,38 @@ def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
         ini[0, k] = pi[k]
         emit[0, Ue * M, k] = 1.0
     for u in range(Ut):
-        trans[0, u] = tr[u]
+        for i in range(K):
+            for j in range(K):
+                trans[0, u, i, j] = tr[u, i, j]
     C = sums[0].shape[1]
     if threaded and C >= PARALLEL_ITEMS:
         _items_parallel(C, tables, data, active, sums)
     else:
         kernels.estep_items(np.int64(0), C, C, np.int64(CHUNK), tables, data, active, sums)
     ll, tot_i, tot_e, tot_t = totals
-    kernels._reduce(active, sums[0], sums[1], sums[2], sums[3], ll, tot_i, tot_e, tot_t)
-    ci[:] = tot_i[0]
+    U1 = trans.shape[1]
+    PE = emit.shape[1]
+    kernels._reduce(
+        active,
+        sums[0],
+        sums[1].reshape((1, C, K)),
+        sums[2].reshape((1, C, PE * K)),
+        sums[3].reshape((1, C, U1 * K * K)),
+        ll,
+        tot_i,
+        tot_e.reshape((1, PE * K)),
+        tot_t.reshape((1, U1 * K * K)),
+    )
+    for k in range(K):
+        ci[k] = tot_i[0, k]
     for u in range(Ue):
         for k in range(K):
             for m in range(M):
                 cem[u, k, m] = tot_e[0, u * M + m, k]
-    ctr[:] = tot_t[0, :Ut]
+    for u in range(Ut):
+        for i in range(K):
+            for j in range(K):
+                ctr[u, i, j] = tot_t[0, u, i, j]
     return ll[0]
 
 
@@ -101,21 +127,25 @@ def _rows(num, prev, tab, out):
                 else:
                     num[g, k, m] = prev[rep[g], k, m]
     for u in range(out.shape[0]):
-        out[u] = num[group[u]]
+        for k in range(K):
+            for m in range(M):
+                out[u, k, m] = num[group[u], k, m]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _table_mstep(counts, prior, prev, tab, out):
     """:meth:`.structure.Table.mstep` of one table into ``out``."""
     group = tab[0]
     U, K, M = counts.shape
     cg = np.zeros((tab[1].shape[0], K, M))
     for u in range(U):
-        cg[group[u]] += counts[u]
+        for k in range(K):
+            for m in range(M):
+                cg[group[u], k, m] += counts[u, k, m]
     _rows(cg + prior, prev, tab, out)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _mstep(counts, prior, params, emt, trt, out):
     """The M-step (:meth:`.structure.Structure.mstep`) from the ``counts`` (initial, emission,
     transition) at ``params`` (the same three tables) into the three tables ``out``."""
@@ -131,17 +161,19 @@ def _mstep(counts, prior, params, emt, trt, out):
     _table_mstep(ctr, prior, tr, trt, qtr)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _table_project(p, tab, out):
     """:meth:`.structure.Table.project` of one table into ``out`` (a free cell counts at least PROJECT_FLOOR)."""
     rep = tab[1]
     num = np.empty((rep.shape[0], p.shape[1], p.shape[2]))
     for g in range(rep.shape[0]):
-        num[g] = np.maximum(p[rep[g]], PROJECT_FLOOR)
+        for k in range(p.shape[1]):
+            for m in range(p.shape[2]):
+                num[g, k, m] = np.maximum(p[rep[g], k, m], PROJECT_FLOOR)
     _rows(num, p, tab, out)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _table_log_prior(p, prior, tab):
     _group, rep, gfixed, _gvalues, _mass = tab
     G, K, M = gfixed.shape
@@ -154,7 +186,7 @@ def _table_log_prior(p, prior, tab):
     return prior * s
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _log_prior(pi, em, tr, prior, emt, trt):
     """:meth:`.structure.Structure.log_prior`."""
     if prior == 0:
@@ -197,7 +229,15 @@ def extrapolate(p0, p1, p2, model, out):
     return True
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")  # no kernel of its own in the cache
+def copy(dst, src):
+    """``dst[:] = src`` for 1-D arrays, cell by cell (an array assignment's shape check would compile a
+    formatted error message into every caller)."""
+    for i in range(len(src)):
+        dst[i] = src[i]
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _views(flat, K, Ue, M, Ut):
     a, b = K, K + Ue * K * M
     return flat[:a], flat[a:b].reshape((Ue, K, M)), flat[b:].reshape((Ut, K, K))

@@ -135,13 +135,17 @@ def _item(r, lo, hi, tables, data, counts):
 
 @njit(cache=True, nogil=True)
 def _reduce(active, ll, pi, pe, pt, loglik, c_init, c_emit, c_trans):
-    """Add the items' sums per parameter set, in item order."""
+    """Add the items' sums per parameter set, in item order: ``ll`` (R, C) and the counts ``pi``,
+    ``pe``, ``pt`` (R, C, X) into ``loglik`` (R,) and ``c_init``, ``c_emit``, ``c_trans`` (R, X), each
+    count's trailing axes flattened (:meth:`Kernel._items`), so one compiled function serves
+    every layout, the cells added one by one (no array assignment, whose shape check would
+    compile a formatted error message into every caller)."""
     R, C = ll.shape
     for r in range(R):
         loglik[r] = 0.0
-        c_init[r] = 0.0
-        c_emit[r] = 0.0
-        c_trans[r] = 0.0
+        c_init[r, :] = 0.0
+        c_emit[r, :] = 0.0
+        c_trans[r, :] = 0.0
         if not active[r]:
             continue
         dead = False
@@ -153,9 +157,12 @@ def _reduce(active, ll, pi, pe, pt, loglik, c_init, c_emit, c_trans):
             continue
         for c in range(C):
             loglik[r] += ll[r, c]
-            c_init[r] += pi[r, c]
-            c_emit[r] += pe[r, c]
-            c_trans[r] += pt[r, c]
+            for x in range(pi.shape[2]):
+                c_init[r, x] += pi[r, c, x]
+            for x in range(pe.shape[2]):
+                c_emit[r, x] += pe[r, c, x]
+            for x in range(pt.shape[2]):
+                c_trans[r, x] += pt[r, c, x]
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -344,7 +351,7 @@ class Kernel:
         self.trials = int(self.lengths.sum())
         self.C = max((N + CHUNK - 1) // CHUNK, 1)  # items per parameter set
         self.every = np.ones(1, dtype=np.bool_)  # the default "all parameter sets active", grown as needed
-        self._partials: dict[tuple[int, tuple[int, ...]], tuple[np.ndarray, ...]] = {}
+        self._partials: dict[tuple[int, tuple[int, ...]], tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]] = {}
 
     def serial(self) -> Kernel:
         """A kernel on the same (shared, read-only) index arrays with its own buffers, running each
@@ -380,9 +387,11 @@ class Kernel:
         sums, ``after``."""
         C, K = self.C, self.K
         shapes = ((K,), (self.PE, K), (self.P, K, K))
-        parts = self._partials.get((R, lead))
-        if parts is None:  # each item's own sums, zeroed by the item itself
-            parts = self._partials[(R, lead)] = (np.empty((R, C)), *(np.empty((R, C, *lead, *sh)) for sh in shapes))
+        cached = self._partials.get((R, lead))
+        if cached is None:  # each item's own sums, zeroed by the item itself, and their views for _reduce
+            parts = (np.empty((R, C)), *(np.empty((R, C, *lead, *sh)) for sh in shapes))
+            cached = self._partials[(R, lead)] = (parts, (parts[0], *(p.reshape(R, C, -1) for p in parts[1:])))
+        parts, flat = cached
         args = (*before, act, parts, *after)
         n_active = int(act.sum())
         if self.threads > 1 and n_active * C > 1 and self.trials * n_active * math.prod(lead) >= PARALLEL_MIN:
@@ -396,8 +405,9 @@ class Kernel:
         else:
             kernel(0, R * C, C, CHUNK, *args)
         ll = np.empty(R)
-        ci, ce, ct = (np.empty((R, *lead, *sh)) for sh in shapes)
-        _reduce(act, *parts, ll, ci, ce, ct)
+        totals = [np.empty((R, math.prod(lead) * math.prod(sh))) for sh in shapes]
+        _reduce(act, *flat, ll, *totals)
+        ci, ce, ct = (t.reshape((R, *lead, *sh)) for t, sh in zip(totals, shapes, strict=True))
         return ll, ci, ce, ct
 
     def run_mixture(
