@@ -7,9 +7,9 @@ setup:
 
 # make reproduce and make test compile their numba kernels at LLVM's level 1 (NUMBA_OPT), in a numba
 # cache of their own: the same numbers bit for bit, compiled in less CPU time than at numba's default
-# level 3 (the warm step 39-43 s against 42-43 s; a reproduction in a fresh environment 65-84 s against
-# 115-121 s, measured before the warm step's 47-51 s), but the compiled fit runs 7-14 % slower, so the package's own
-# cache (every fit outside these two commands) keeps level 3.
+# level 3 (the warm step 39-43 s against 42-43 s; a reproduction in a fresh environment 68.6 s wall
+# against 79.9 s), but the compiled fit runs 7-14 % slower, so the package's own cache (every fit
+# outside these two commands) keeps level 3.
 MAKE_NUMBA_CACHE := $(CURDIR)/.numba-make-cache
 reproduce test: export NUMBA_OPT := 1
 reproduce test: export NUMBA_CACHE_DIR := $(MAKE_NUMBA_CACHE)

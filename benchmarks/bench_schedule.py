@@ -1,4 +1,4 @@
-"""Trial scheduling, 17 + 17 items on the paper's model, two trust levels (issue targets: full
+"""Trial scheduling, 17 + 17 items on the paper's model, two trust levels (targets: full
 control < 1 s on one core, a window of 3 items < 5 s).
 
 Reports the grid representation (the default) and the exact alpha vectors (full control),

@@ -1,4 +1,4 @@
-"""Solve time of the paper preset on the belief grid (issue target: < 100 ms for 10,001 points).
+"""Solve time of the paper preset on the belief grid (target: < 100 ms for 10,001 points).
 
 Reports policy iteration (the default) against plain value iteration to the same
 certified tolerance, measured in the same run, for the default grid and 10,001 points.

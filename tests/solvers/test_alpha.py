@@ -11,7 +11,7 @@ from trustseek.policies.envelope import envelope, envelope_values
 from trustseek.solvers.alpha import AlphaSolver, exact_backup, finite_horizon_value, finite_horizon_vectors
 from trustseek.solvers.certified import paper_residual
 
-# Reference values of the issue (three independent solvers), Bayes update, paper preset
+# Reference values from three independent solvers, Bayes update, paper preset
 REF_V0, REF_V1_LOW, REF_V1_HIGH, REF_THRESHOLD, REF_MYOPIC = 110.655, 111.061, 110.249, 0.7815, 0.836
 
 
