@@ -39,3 +39,20 @@ def test_schedule_table_and_errors():
     assert bad.returncode == 2 and "--counts" in bad.stderr
     bad = run("schedule", "--counts", "3,3", "-u", "paper", "--representation", "alpha", check=False)
     assert bad.returncode == 2 and "grid representation" in bad.stderr
+
+
+def test_the_comparison_says_what_it_does_while_it_runs(monkeypatch):
+    """schedule --compare ran 18 s at its defaults (12 min at --participants 1000000) without a
+    word on the terminal."""
+    import io
+
+    from rich.console import Console
+
+    from cli_runner import run_cli
+    from trustseek.cli import _app
+
+    screen = io.StringIO()
+    monkeypatch.setattr(_app, "err_console", Console(file=screen, force_terminal=True, width=100))
+    code, out = run_cli(["schedule", "--counts", "3,3", "--compare", "--participants", "40"])
+    assert code == 0, out
+    assert "comparing the schedules on 40 simulated participants" in screen.getvalue()
