@@ -216,5 +216,10 @@ def test_participants_needed_says_how_many_or_how_far_the_grid_falls_short():
     )
     met = {"curve": curve, "participants_for_power": {"estimate": 20, "lo": 5, "hi": None}}
     assert participants_needed(met, 0.1, "wilcoxon") == "20 (5 by the interval's upper end; beyond the grid by its lower end)"
+    failed = {
+        "curve": _curve([(60, None, float("nan"), float("nan"))]),
+        "participants_for_power": short["participants_for_power"],
+    }
+    assert participants_needed(failed, 0.8, "wilcoxon").startswith("more than 60, the largest of the grid (power - [-, -] there)")
     both = {"curve": curve, "participants_for_power": {"estimate": 20, "lo": 5, "hi": 40}}
     assert participants_needed(both, 0.1, "wilcoxon") == "20 (5 by the interval's upper end; 40 by its lower end)"

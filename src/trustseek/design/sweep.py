@@ -426,15 +426,19 @@ def participants_needed(experiment2: dict[str, Any], power: float, test: str) ->
     need, curve = experiment2["participants_for_power"], experiment2["curve"]
     if need["estimate"] is None:
         last = curve[-1]
-        at = last[test]
+        reached, lo, hi = (_two(last[test][k]) for k in ("power", "lo", "hi"))
         wider = ",".join(str(last["participants"] * k) for k in (1, 2, 4, 8))
         return (
-            f"more than {last['participants']}, the largest of the grid (power {at['power']:.2f} [{at['lo']:.2f}, "
-            f"{at['hi']:.2f}] there): widen it, e.g. --participants-2 {wider}"
+            f"more than {last['participants']}, the largest of the grid (power {reached} [{lo}, {hi}] there): widen it, "
+            f"e.g. --participants-2 {wider}"
         )
     ends = [f"{need['lo']} by the interval's upper end"]
     ends.append(f"{need['hi']} by its lower end" if need["hi"] is not None else "beyond the grid by its lower end")
     return f"{need['estimate']} ({'; '.join(ends)})"
+
+
+def _two(x: float | None) -> str:
+    return "-" if x is None or not math.isfinite(x) else f"{x:.2f}"
 
 
 def ask_search_problems(cfg: DesignConfig, ask_low: Iterable[float], ask_high: Iterable[float]) -> list[str]:
