@@ -503,7 +503,8 @@ def _compress(data: bytes, codec: str) -> bytes:
 
 
 @pytest.mark.parametrize(
-    ("suffix", "codec"), [(".csv.gz", "gzip"), (".csv.bz2", "bz2"), (".csv.zst", "zstd"), (".tsv.gz", "gzip")]
+    ("suffix", "codec"),
+    [(".csv.gz", "gzip"), (".csv.bz2", "bz2"), (".csv.zst", "zstd"), (".tsv.gz", "gzip"), (".CSV.GZ", "gzip")],
 )
 def test_a_compressed_csv_reads_as_the_plain_file(tmp_path, suffix, codec):
     """A log compressed as a lab's tools keep it (log.csv.gz) was refused with 'decompress it first'."""

@@ -48,9 +48,18 @@ def _open_bytes(path: Path) -> Any:
     codec = COMPRESSED.get(path.suffix.lower())
     if codec is None:
         return path.open("rb")
+    return io.BufferedReader(_input(path))
+
+
+def _input(path: Path) -> Any:
+    """What pyarrow reads a whole file from: its path, or a stream that decompresses it by its
+    suffix in any case (pyarrow's own detection knows ``.gz``, not ``.GZ``)."""
+    codec = COMPRESSED.get(path.suffix.lower())
+    if codec is None:
+        return str(path)
     import pyarrow as pa
 
-    return io.BufferedReader(pa.input_stream(str(path), compression=codec))
+    return pa.input_stream(str(path), compression=codec)
 
 
 def _not_decompressed(path: Path, name: str, why: Exception) -> DataError:
@@ -363,7 +372,7 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
         # pyarrow's thread pool can abort at exit ("terminate called without an active exception")
         # under load, instead of exiting with its status
         return pcsv.read_csv(
-            pa.BufferReader(parts[i]) if len(parts) > 1 else str(path),  # a path: decompressed by its suffix
+            pa.BufferReader(parts[i]) if len(parts) > 1 else _input(path),
             read_options=pcsv.ReadOptions(
                 column_names=header, skip_rows=skip if i == 0 else 0, block_size=1 << 24, use_threads=False
             ),
