@@ -399,7 +399,7 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
         msg = str(exc)
         if "UTF8" in msg or "UTF-8" in msg:
             raise DataError(["the file is not UTF-8 text (save it as UTF-8 CSV)"], name) from None
-        if path.suffix.lower() in COMPRESSED:
+        if path.suffix.lower() in COMPRESSED and isinstance(exc, OSError):  # zlib's and the others' failures
             raise _not_decompressed(path, name, exc) from None
         raise DataError([f"cannot read the file as CSV (delimiter {sep!r}): {msg}"], name) from None
     finally:
