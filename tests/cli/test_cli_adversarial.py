@@ -559,6 +559,7 @@ REFUSED_UP_FRONT = [
     (["select-types", LOG, "--folds", "1000000000"], "--folds 1000000000 is more than the 9 participants"),
     (["fit", LOG, "--plots", "{dir}/missing/figures"], "--plots {dir}/missing/figures: the folder {dir}/missing does not exist"),
     (["fit-types", LOG, "--plots", "{dir}/log.csv"], "--plots {dir}/log.csv: exists and is not a folder"),
+    (["select-types", LOG, "--types", "8..10"], "types (--types) must be at most the log's 9 participants (each participant"),
     (["fit-types", LOG, "--types", "10"], "types (--types) must be at most the log's 9 participants (each participant is"),
     (["fit", LOG, "--prior", "1e308"], "prior (--prior) must be a pseudo-count between 0 and 1e+12, got 1e+308"),
     (

@@ -78,6 +78,11 @@ def select_types(
         raise FitError([f"the numbers of types must be positive integers, got {list(types)}"])
     spec = inputs_spec(frame, "paper", prior, **spec_options)
     seqs = encode(frame, spec)
+    if types[-1] > seqs.n_participants:  # each participant is one type: the rest would be empty
+        raise FitError(
+            [f"types (--types) must be at most the log's {seqs.n_participants} participants (each participant is one type), "
+             f"got {types[-1]}"]
+        )  # fmt: skip
     previous: dict[int, MixtureFit] = {}  # per slot (-1: all participants, f: fold f's training participants)
     pooled: dict[int, MixtureFit] = {}  # the one-type fit of each slot
 
@@ -105,7 +110,8 @@ def select_types(
     def extra(full: MixtureFit) -> dict[str, Any]:
         return {"weights": full.weights.tolist(), "empty_types": full.empty_types}
 
-    comparison = HeldOutComparison("types", folds, options.seed_number, MAX_TYPES if widen else 0, progress)
+    cap = min(MAX_TYPES, seqs.n_participants) if widen else 0
+    comparison = HeldOutComparison("types", folds, options.seed_number, cap, progress)
     rows = comparison.run(seqs, types, one_fit, heldout_mixture_loglik, extra)
     for w in type_selection_warnings(rows):
         log.warning("%s", w)
