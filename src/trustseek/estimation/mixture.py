@@ -282,11 +282,7 @@ def fit_types(
     restarts, seed = options.starts, options.seed_number
     spec = inputs_spec(frame, preset, prior, **spec_options)
     seqs = encode(frame, spec)
-    if types > seqs.n_participants:  # each participant is one type: the rest would be empty
-        raise FitError(
-            [f"types (--types) must be at most the log's {seqs.n_participants} participants (each participant is one type), "
-             f"got {types}"]
-        )  # fmt: skip
+    check_types(types, seqs)
     pooled = None
     if types > 1:
         first = fit_iohmm(
@@ -308,6 +304,15 @@ def fit_types(
     )
     fit.not_estimated = () if general_types(spec) else never_estimated(frame, spec)
     return fit
+
+
+def check_types(types: int, seqs: Sequences) -> None:
+    """Refuse more types than participants: each participant is one type, so the rest would be empty."""
+    if types > seqs.n_participants:
+        raise FitError(
+            [f"types (--types) must be at most the log's {seqs.n_participants} participants (each participant is one type), "
+             f"got {types}"]
+        )  # fmt: skip
 
 
 def mixture_params(mixture: TypeMixture) -> tuple[IOHMMSpec, MixtureParams]:

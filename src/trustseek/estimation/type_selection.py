@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .mixture import MixtureFit, fit_mixture, split_type_starts
+from .mixture import MixtureFit, check_types, fit_mixture, split_type_starts
 from .mixture_em import MixtureParams, MixtureWorkspace
 from .options import FitOptions
 from .selection import BEST_TOLERANCE, HELDOUT_PSEUDOCOUNT, HeldOutComparison, comparison_warnings, smooth_zero_rows
@@ -78,11 +78,7 @@ def select_types(
         raise FitError([f"the numbers of types must be positive integers, got {list(types)}"])
     spec = inputs_spec(frame, "paper", prior, **spec_options)
     seqs = encode(frame, spec)
-    if types[-1] > seqs.n_participants:  # each participant is one type: the rest would be empty
-        raise FitError(
-            [f"types (--types) must be at most the log's {seqs.n_participants} participants (each participant is one type), "
-             f"got {types[-1]}"]
-        )  # fmt: skip
+    check_types(types[-1], seqs)
     previous: dict[int, MixtureFit] = {}  # per slot (-1: all participants, f: fold f's training participants)
     pooled: dict[int, MixtureFit] = {}  # the one-type fit of each slot
 
