@@ -55,6 +55,7 @@ OUTSIDE = 1e-9  # an estimate this close to its percentile interval is not outsi
 MIN_REPLICATES = 200  # fewest resamples for a 95 % interval: each 2.5 % tail then rests on 5 replicates
 OTHER_MAXIMUM = 1e-4  # a random start beats the refit continued from the estimate by more than this (log-likelihood)
 BOUNDARY = 1e-6  # a free cell estimated below this is at the boundary
+TABLE_NAMES = {"em": "emission", "tr": "transition"}  # a structure's tables and the Params arrays they fill
 BOUNDARY_DROP = 2.706 / 2  # log-likelihood drop of a 95 % bound at a boundary: chi-bar-square(0.5, 0.5), 2.706 / 2
 PROFILE_STEPS = 6  # bisection steps of a likelihood-ratio bound: to 1/64, the wider end kept
 
@@ -151,7 +152,7 @@ def profile_bound(est: np.ndarray, m: int, top: float, refit: Callable[[np.ndarr
 
 def _profile_bound(work: Workspace, structure: Structure, params: Params, table: str, u: int, k: int, m: int) -> float:
     """:func:`profile_bound` of free cell (u, k, m) of a single model, the other cells refitted by EM."""
-    name = {"em": "emission", "tr": "transition"}[table]
+    name = TABLE_NAMES[table]
 
     def refit(row: np.ndarray) -> float:
         held = _held(structure, table, u, k, row)
@@ -176,6 +177,14 @@ def few_resamples(replicates: int, level: float) -> list[str]:
     ]
 
 
+def boundary_note(count: int, cells: str = "cells", profile: str = "profile log-likelihood") -> str:
+    """The note of ``count`` intervals that are likelihood-ratio ones (:func:`profile_bound`)."""
+    return (
+        f"bootstrap: {count} {cells} estimated at 0 (or 1) stayed there in every resample; their intervals are "
+        f"likelihood-ratio ones (the values whose {profile} is within {BOUNDARY_DROP:.2f} of the maximum)"
+    )
+
+
 def cells_at_zero(
     structure: Structure, spec: IOHMMSpec, params: Params
 ) -> Iterator[tuple[str, Table, int, int, int, np.ndarray]]:
@@ -183,7 +192,7 @@ def cells_at_zero(
     all free: (``em`` or ``tr``, its table, u, k, m, where the cell lies in the flattened
     :func:`cell_tables`)."""
     ref = cell_tables(spec, params)
-    for table, name in (("em", "emission"), ("tr", "transition")):
+    for table, name in TABLE_NAMES.items():
         t: Table = getattr(structure, table)
         values = getattr(params, name)
         for u in t.rep:
@@ -213,7 +222,7 @@ def boundary_bounds(
         bound = _profile_bound(work, structure, params, table, u, k, m)
         hi[pos], moved[pos] = bound, True
         if t.M == 2:
-            name = {"em": "emission", "tr": "transition"}[table]
+            name = TABLE_NAMES[table]
             mirror = cell_positions(spec, ref, name, u, k, 1 - m)
             lo[mirror], moved[mirror] = np.minimum(lo[mirror], 1.0 - bound), True
     return lo, hi, moved
@@ -297,10 +306,7 @@ class Intervals:
         """Plain-language warnings about these intervals (empty when there is nothing to say)."""
         out = few_resamples(self.replicates, self.level)
         if self.boundary:
-            out.append(
-                f"bootstrap: {self.boundary} cells estimated at 0 (or 1) stayed there in every resample; their intervals "
-                "are likelihood-ratio ones (the values whose profile log-likelihood is within 1.35 of the maximum)"
-            )
+            out.append(boundary_note(self.boundary))
         if any(w.any() for w in self.widened.values()):
             out.append(
                 "bootstrap: some intervals were widened to contain their estimate (the replicates lay on one side "

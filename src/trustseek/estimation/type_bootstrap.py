@@ -9,7 +9,18 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .bootstrap import BOUNDARY, cell_positions, cell_tables, cells_at_zero, few_resamples, profile_bound, replicate, resample
+from .bootstrap import (
+    BOUNDARY,
+    TABLE_NAMES,
+    boundary_note,
+    cell_positions,
+    cell_tables,
+    cells_at_zero,
+    few_resamples,
+    profile_bound,
+    replicate,
+    resample,
+)
 from .em import run_em
 from .estep import EStep, Workspace
 from .mixture import MixtureFit, fit_mixture, general_types
@@ -80,11 +91,7 @@ class TypeIntervals:
         """Plain-language warnings about these intervals (empty when there is nothing to say)."""
         out = few_resamples(self.replicates, self.level)
         if self.boundary:
-            out.append(
-                f"bootstrap: {self.boundary} cells of the types estimated at 0 (or 1) stayed there in every resample; "
-                "their intervals are likelihood-ratio ones (the values whose profile log-likelihood, the mixture "
-                "refitted, is within 1.35 of the maximum)"
-            )
+            out.append(boundary_note(self.boundary, "cells of the types", "profile log-likelihood, the mixture refitted,"))
         return out
 
 
@@ -182,7 +189,7 @@ def _boundary_bounds(fit: MixtureFit, lo: np.ndarray, hi: np.ndarray, per: int) 
     for m in range(fit.n_types):
         ref = cell_tables(fit.spec, fit.params.type_params(m))
         for table, t, u, k, c, pos in cells_at_zero(structure, fit.spec, fit.params.type_params(m)):
-            name = {"em": "emission", "tr": "transition"}[table]
+            name = TABLE_NAMES[table]
             shared = structure.shared(name)
             if (shared and m > 0) or np.any(hi[m * per + pos] >= BOUNDARY):
                 continue  # a shared cell is bounded once, with type 0's
