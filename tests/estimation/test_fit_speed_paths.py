@@ -1,13 +1,18 @@
 """The fit's faster paths give the numbers of the plain ones: sequences two at a time in the
 compiled E-step, the starts' finishes side by side on threads, BLAS held to one thread."""
 
+import functools
+import threading
+
 import numpy as np
 import pytest
 from threadpoolctl import threadpool_info, threadpool_limits
 
-from trustseek.estimation import Params, encode, fit_iohmm, iohmm, kernels, paper_spec
+from trustseek.estimation import Params, convergence, encode, fit_iohmm, iohmm, kernels, paper_spec
+from trustseek.estimation.em import run_em
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.options import FitOptions
+from trustseek.estimation.spec import FitError
 from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
@@ -57,22 +62,76 @@ def test_a_pair_with_zero_probability_makes_the_set_impossible():
     assert st.loglik == -np.inf and not st.emission.any() and not st.transition.any()
 
 
-def test_finishes_side_by_side_give_the_numbers_of_one_thread(monkeypatch):
-    monkeypatch.setattr(iohmm, "CONCURRENT_MIN", 0)
+@pytest.mark.parametrize("method", ["loop", "numba"])
+def test_pooled_finishes_give_the_numbers_of_one_at_a_time(monkeypatch, method):
+    """The starts' finishes on threads of their own, their E-steps pooled into batches, give each
+    start's numbers alone, and are reported in order whatever finished first."""
     spec = paper_spec()
-    seqs = encode(simulate_design(paper_model(), 30, seed=4), spec)
+    seqs = encode(simulate_design(paper_model(), 12, seed=4), spec)
+    monkeypatch.setattr(iohmm, "Workspace", functools.partial(Workspace, method=method))
     seen: list[int] = []
-    fits = [
-        fit_iohmm(seqs, spec, options=FitOptions(restarts=5, seed=2, n_jobs=j), on_restart=lambda i, r: seen.append(i))
-        for j in (1, 2, 3)
-    ]
-    assert seen == list(range(5)) * 3  # reported in order, whatever finished first
-    for other in fits[1:]:
-        assert other.best == fits[0].best and other.loglik == fits[0].loglik
-        for a, b in zip(fits[0].runs, other.runs, strict=True):
-            assert np.array_equal(a.params.vector(), b.params.vector())
-            assert (a.iterations, a.finishes, a.ended, a.history) == (b.iterations, b.finishes, b.ended, b.history)
-    assert all(r.ended == "stationary" for r in fits[1].runs)
+    batches: list[int] = []
+    serve = convergence._Pool._serve
+
+    def counted(pool):
+        if pool.asked and len(pool.asked) >= pool.live:
+            batches.append(len(pool.asked))
+        serve(pool)
+
+    monkeypatch.setattr(convergence._Pool, "_serve", counted)
+    fits = []
+    for pooled in (1, convergence.POOLED):
+        monkeypatch.setattr(convergence, "POOLED", pooled)
+        fits.append(fit_iohmm(seqs, spec, FitOptions(restarts=5, seed=2), on_restart=lambda i, r: seen.append(i), compiled=False))
+    assert seen == list(range(5)) * 2
+    assert max(batches) == 5  # the second fit pooled its E-steps
+    a_fit, b_fit = fits
+    assert b_fit.best == a_fit.best and b_fit.loglik == a_fit.loglik
+    for a, b in zip(a_fit.runs, b_fit.runs, strict=True):
+        assert np.array_equal(a.params.vector(), b.params.vector())
+        assert (a.iterations, a.finishes, a.ended, a.history) == (b.iterations, b.finishes, b.ended, b.history)
+    assert all(r.ended == "stationary" for r in b_fit.runs)
+
+
+class _Failing:
+    """A workspace whose ``fail_at``-th E-step raises."""
+
+    def __init__(self, work, fail_at):
+        self.work, self.calls, self.fail_at = work, 0, fail_at
+
+    def __getattr__(self, name):
+        return getattr(self.work, name)
+
+    def estep(self, p, active=None, posteriors=False):
+        self.calls += 1
+        if self.calls == self.fail_at:
+            raise FitError(["the data went away"])
+        return self.work.estep(p, active, posteriors)
+
+
+@pytest.mark.parametrize("fail_at", [1, 5, 40])
+def test_a_failing_pooled_estep_reaches_the_caller_and_stops_every_run(fail_at):
+    spec = paper_spec()
+    seqs = encode(simulate_design(paper_model(), 6, seed=1), spec)
+    s = Structure(spec, seqs)
+    work = Workspace(seqs, *s.dims, method="loop")
+    runs = run_em(s, work, [s.random(np.random.default_rng(r)) for r in range(4)], tol=1e-3)
+    settings = FitOptions(restarts=4).run(True, True)
+    with pytest.raises(FitError, match="went away"):
+        list(convergence.converge_runs(s, _Failing(work, fail_at), runs, settings))
+    assert not [t for t in threading.enumerate() if t.name.startswith("trustseek-fit")]
+
+
+def test_leaving_the_pooled_runs_early_stops_their_threads():
+    spec = paper_spec()
+    seqs = encode(simulate_design(paper_model(), 6, seed=1), spec)
+    s = Structure(spec, seqs)
+    work = Workspace(seqs, *s.dims, method="loop")
+    runs = run_em(s, work, [s.random(np.random.default_rng(r)) for r in range(3)], tol=1e-3)
+    results = convergence.converge_runs(s, work, runs, FitOptions(restarts=3).run(True, True))
+    assert next(results).converged
+    results.close()  # the caller stops listening (an interrupt, an error of its own)
+    assert not [t for t in threading.enumerate() if t.name.startswith("trustseek-fit")]
 
 
 def blas_threads() -> list[int]:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .estep import EStep, Workspace
+from .estep import EStep, EStepper
 from .spec import FitError, Params
 from .structure import Structure
 
@@ -95,7 +95,7 @@ class _Lockstep:
 
 def run_em(
     structure: Structure,
-    work: Workspace,
+    work: EStepper,
     starts: Sequence[Params],
     tol: float = 1e-8,
     max_iter: int = 1000,

@@ -19,7 +19,6 @@ The compiled pass keeps no per-trial posteriors; they come from a numpy method.
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -49,8 +48,8 @@ class EStep:
     transition: np.ndarray  # (Ut, K, K)
     gamma: np.ndarray | None = None
 
-    def take(self, r: int) -> EStep:
-        """The E-step of parameter set ``r`` of a batch."""
+    def take(self, r: int | slice) -> EStep:
+        """The E-step of parameter set ``r`` of a batch (a slice: those sets, a batch)."""
         return EStep(
             self.loglik[r], self.initial[r], self.emission[r], self.transition[r], None if self.gamma is None else self.gamma[r]
         )
@@ -64,6 +63,14 @@ class EStep:
             np.where(m3, self.emission, other.emission),
             np.where(m3, self.transition, other.transition),
         )
+
+
+class EStepper(Protocol):
+    """What EM and its finish ask of a workspace (:class:`Workspace`, or E-steps pooled over runs)."""
+
+    def estep(self, p: Params, active: np.ndarray | None = None, posteriors: bool = False) -> EStep: ...
+
+    def loglik(self, p: Params) -> np.ndarray: ...
 
 
 class _NumpyEStep(Protocol):
@@ -100,14 +107,9 @@ class Workspace:
         self._kernel = kernels.Kernel(self.eidx, self.tidx, seqs.lengths, K, self.PE, Ut + 1, threads) if self.compiled else None
         self._numpy: dict[int, _NumpyEStep] = {}
 
-    def serial(self) -> Workspace:
-        """This workspace with its own buffers, each E-step on the calling thread: for one of
-        several threads that fit at once (the results are the same as this workspace's)."""
-        w = copy.copy(self)
-        w.threads = 1
-        w._kernel = None if self._kernel is None else self._kernel.serial()
-        w._numpy = {}
-        return w
+    def as_own(self, p: Params) -> Params:
+        """``p`` as this workspace's parameter sets (a mixture's workspace makes its own of plain tables)."""
+        return p
 
     def lockstep(self, n: int) -> int:
         """How many of ``n`` parameter sets to run side by side (the rest in further groups)."""

@@ -14,9 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
-import threading
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,7 +23,7 @@ import pandas as pd
 
 from ..solvers.base import one_blas_thread
 from . import compiled_run
-from .convergence import converge
+from .convergence import converge_runs
 from .em import STATIONARY, RunResult, run_em
 from .estep import Workspace
 from .options import SERIAL, FitOptions
@@ -35,8 +33,6 @@ from .spec import FitError, IOHMMSpec, Params
 from .structure import Structure
 
 log = logging.getLogger(__name__)
-
-CONCURRENT_MIN = 10_000  # trials from which the starts' finishes run on several threads at once
 
 
 @dataclass
@@ -121,7 +117,8 @@ def fit_iohmm(
     With ``compiled`` (and numba, and no rating) each start runs from its first E-step to its
     end in compiled code (:mod:`.compiled_run`: the same EM and SQUAREM decisions, its own
     quasi-Newton finish, the same check), the starts side by side on the ``n_jobs`` threads;
-    else EM runs the starts in lockstep and scipy's L-BFGS-B finishes them.
+    else EM runs the starts in lockstep and scipy's L-BFGS-B finishes them, each start on a
+    thread of its own with their E-steps pooled into one (:func:`~.convergence.converge_runs`).
     """
     structure = make_structure(spec, seqs)
     settings = options.run(quasi_newton and not structure.joint, accelerate)
@@ -147,28 +144,14 @@ def fit_iohmm(
             on_restart(len(runs), r)
         runs.append(r)
 
-    local = threading.local()  # a thread's own buffers when the starts go on side by side
-
-    def alone(r: RunResult) -> RunResult:
-        if not hasattr(local, "work"):
-            local.work = work.serial()
-        return converge(structure, local.work, r, settings)
-
     if compiled and compiled_run.applies(structure, work):  # (a spec with a rating goes the lockstep way below)
         for r in compiled_run.run_starts(structure, work, starts, settings):
             record(r)
     with one_blas_thread():
         for g in range(len(runs), len(starts), group):
             ems = run_em(structure, work, starts[g : g + group], settings.em_tol, settings.max_iter, settings.accelerate)
-            if work.threads > 1 and len(ems) > 1 and seqs.n_trials >= CONCURRENT_MIN:
-                # each start's finish is a sequence of single E-steps with Python in between: the starts
-                # go on side by side, one per thread, each with its own buffers (the same numbers)
-                with ThreadPoolExecutor(min(work.threads, len(ems)), thread_name_prefix="trustseek-fit") as pool:
-                    for r in pool.map(alone, ems):
-                        record(r)
-            else:
-                for r in ems:
-                    record(converge(structure, work, r, settings))
+            for r in converge_runs(structure, work, ems, settings):
+                record(r)
     best = int(np.argmax([r.objective for r in runs]))
     p = runs[best].params
     log.info("best of %d starts: %s", len(runs), _describe(best, runs[best]))

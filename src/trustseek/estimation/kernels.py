@@ -35,7 +35,6 @@ set -inf, with zero counts.
 
 from __future__ import annotations
 
-import copy
 import itertools
 import math
 from collections.abc import Callable, Iterator
@@ -352,15 +351,6 @@ class Kernel:
         self.C = max((N + CHUNK - 1) // CHUNK, 1)  # items per parameter set
         self.every = np.ones(1, dtype=np.bool_)  # the default "all parameter sets active", grown as needed
         self._partials: dict[tuple[int, tuple[int, ...]], tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]] = {}
-
-    def serial(self) -> Kernel:
-        """A kernel on the same (shared, read-only) index arrays with its own buffers, running each
-        E-step on the calling thread: one per thread when several callers run at once."""
-        k = copy.copy(self)
-        k.threads = 1
-        k.every = self.every.copy()
-        k._partials = {}
-        return k
 
     def run(
         self, initial: np.ndarray, emit: np.ndarray, trans: np.ndarray, active: np.ndarray | None = None

@@ -42,7 +42,7 @@ import pandas as pd
 
 from ..model.core import TrustModel
 from ..model.mixture import TypeMixture
-from .convergence import converge
+from .convergence import converge_runs
 from .em import STATIONARY, RunResult, run_em
 from .fit import never_estimated
 from .iohmm import EMFit, fit_iohmm
@@ -224,18 +224,19 @@ def fit_mixture(
     log.debug("fitting %d types to %d sequences from %d starts", M, seqs.n_participants, len(starts))
     runs: list[RunResult] = []
     if M == 1:  # the pooled fit's procedure, step for step
-        for r in run_em(structure, work, starts, settings.em_tol, max_iter, accelerate):
-            runs.append(converge(structure, work, r, settings, sticks))
+        runs += converge_runs(
+            structure, work, run_em(structure, work, starts, settings.em_tol, max_iter, accelerate), settings, sticks
+        )
     else:
         # every start: EM with SQUAREM to tol and the stationarity check; then the L-BFGS-B finish
         # (and the check again) only for the starts ending within FINISH_MARGIN of the best
-        for r in run_em(structure, work, starts, tol, max_iter, accelerate):
-            runs.append(converge(structure, work, r, settings))
+        runs += converge_runs(structure, work, run_em(structure, work, starts, tol, max_iter, accelerate), settings)
         if qn:
             top = max(r.objective for r in runs)
-            for i, r in enumerate(runs):
-                if r.objective >= top - FINISH_MARGIN and r.iterations < max_iter:
-                    runs[i] = converge(structure, work, r, replace(settings, quasi_newton=True), sticks)
+            near = [i for i, r in enumerate(runs) if r.objective >= top - FINISH_MARGIN and r.iterations < max_iter]
+            done = converge_runs(structure, work, [runs[i] for i in near], replace(settings, quasi_newton=True), sticks)
+            for i, r in zip(near, done, strict=True):
+                runs[i] = r
     for i, r in enumerate(runs):
         log.debug("%s", _describe(i, r))
         if on_restart is not None:

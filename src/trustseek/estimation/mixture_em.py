@@ -85,10 +85,10 @@ class MixtureEStep(EStep):
 
     sequence: np.ndarray | None = None
 
-    def take(self, r: int) -> MixtureEStep:
+    def take(self, r: int | slice) -> MixtureEStep:
         return MixtureEStep(self.loglik[r], self.initial[r], self.emission[r], self.transition[r], None, self._seq(r))
 
-    def _seq(self, r: int) -> np.ndarray | None:
+    def _seq(self, r: int | slice) -> np.ndarray | None:
         return None if self.sequence is None else self.sequence[r]
 
     def where(self, mask: np.ndarray, other: EStep) -> MixtureEStep:
@@ -265,9 +265,12 @@ class MixtureWorkspace(Workspace):
         super().__init__(seqs, *structure.dims, method="numba", threads=threads)
         self.n_types = structure.n_types
 
+    def as_own(self, p: Params) -> MixtureParams:
+        """The finish's points come as plain tables."""
+        return p if isinstance(p, MixtureParams) else MixtureParams(p.initial, p.emission, p.transition)
+
     def estep(self, p: Params, active: np.ndarray | None = None, posteriors: bool = False) -> MixtureEStep:
-        if not isinstance(p, MixtureParams):  # the finish's points come as plain tables
-            p = MixtureParams(p.initial, p.emission, p.transition)
+        p = self.as_own(p)
         batch = p if p.batched else p.as_batch()
         R, M, K = batch.initial.shape
         flat = Params(

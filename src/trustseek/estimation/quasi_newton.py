@@ -12,12 +12,13 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from ..solvers.base import one_blas_thread
 from .em import CAPPED, RunResult
-from .estep import Workspace
+from .estep import EStepper
 from .spec import Params
 from .sticks import Sticks
 from .structure import Structure
@@ -53,8 +54,17 @@ class _Best:
             self.objective, self.params, self.loglik = hit
 
 
+def optimizer() -> Any:
+    """scipy's ``minimize``, imported on first use (0.5 s of CPU; the compiled run never needs it).
+    Import it on the thread that limits BLAS to one thread (:func:`~trustseek.solvers.base.one_blas_thread`)
+    before others run the finish: a limit set on another thread misses the BLAS scipy loads."""
+    from scipy.optimize import minimize
+
+    return minimize
+
+
 def finish(
-    structure: Structure, work: Workspace, run: RunResult, tol: float = 1e-8, max_iter: int = 1000, sticks: Sticks | None = None
+    structure: Structure, work: EStepper, run: RunResult, tol: float = 1e-8, max_iter: int = 1000, sticks: Sticks | None = None
 ) -> RunResult:
     """Continue a run with L-BFGS-B on the stick-breaking fractions of the free cells.
 
@@ -88,8 +98,7 @@ def finish(
             return math.inf, np.zeros_like(theta)
         return -f, -sticks.gradient(theta, st)
 
-    from scipy.optimize import minimize  # here: 0.5 s of CPU to import, and the compiled run never needs it
-
+    minimize = optimizer()
     try:
         with one_blas_thread():
             res = minimize(
