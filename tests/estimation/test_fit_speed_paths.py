@@ -2,6 +2,9 @@
 compiled E-step, the starts' finishes side by side on threads, BLAS held to one thread."""
 
 import functools
+import os
+import subprocess
+import sys
 import threading
 
 import numpy as np
@@ -162,3 +165,35 @@ def left_as_found() -> None:
     second.__exit__(None, None, None)
     assert all(set(x) == {1} for x in seen), seen
     assert blas_threads() == before
+
+
+POOLED_BLAS = """
+import sys
+from threadpoolctl import threadpool_info
+from trustseek.data import example_path, read_trials
+from trustseek.estimation import convergence, encode, fit_iohmm, paper_spec
+
+log = read_trials(example_path())
+log = log[log["participant"].isin(log["participant"].unique()[:4])]  # 4 x 71: the numpy time loop, starts pooled
+assert "scipy.linalg" not in sys.modules  # scipy's BLAS is loaded by the first finish
+seen = set()
+finish = convergence.finish
+
+def watched(*args, **kwargs):
+    out = finish(*args, **kwargs)
+    seen.update(lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas")
+    return out
+
+convergence.finish = watched
+spec = paper_spec()
+fit_iohmm(encode(log, spec), spec)
+print(sorted(seen))
+"""
+
+
+def test_pooled_finishes_hold_every_blas_to_one_thread():
+    """scipy's BLAS, loaded by the first finish, is held to one thread on the finishes' threads
+    too (a limit set on a worker thread missed it, and OpenBLAS's idle threads spun)."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "2", "OMP_NUM_THREADS": "2"}
+    out = subprocess.run([sys.executable, "-c", POOLED_BLAS], capture_output=True, text=True, env=env, check=True)
+    assert out.stdout.split() == ["[1]"]
