@@ -8,10 +8,13 @@ import sys
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from trustseek import TrustModel, paper_model
 from trustseek.data.trials import ColumnMapping, example_path, read_trials
-from trustseek.estimation import decode, fit_trust_model, select_levels
+from trustseek.estimation import decode, fit_trust_model, paper_spec, select_levels
+from trustseek.estimation.fit import never_estimated
 from trustseek.estimation.options import FitOptions
 from trustseek.simulation.designs import simulate_design
 
@@ -379,3 +382,43 @@ def test_cli_model_of_a_study_without_asking_is_marked_checked_refused_and_fille
     np.testing.assert_array_equal(m.transition[:, 1], paper_model().transition[:, 1])
     invoke("solve", "--model", filled, "--json")
     assert (tmp_path / "f" / "transitions.png").stat().st_size > 0
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    rows=st.lists(
+        st.tuples(
+            st.integers(0, 3),  # participant
+            st.sampled_from(["low", "high", None]),
+            st.sampled_from(["autonomous", "ask"]),
+            st.sampled_from(["rely", "intervene", None]),
+            st.sampled_from(["faulty", "reliable", None]),
+        ),
+        max_size=30,
+    ),
+    categorical=st.booleans(),
+)
+def test_never_estimated_rows_are_those_no_trial_informs(rows, categorical):
+    """Against a trial-by-trial count: an emission row (c, a) needs an observed human action, a
+    transition row (c, a, e) a trial of the same participant after it (and e known)."""
+    frame = pd.DataFrame(rows, columns=["participant", "complexity", "robot_action", "human_action", "experience"])
+    frame["trial"] = frame.groupby("participant").cumcount() * 2 + 1  # gaps: 'next' is any later trial
+    frame = frame.sample(frac=1, random_state=0)  # in any order
+    if categorical:
+        frame = frame.astype(dict.fromkeys(("participant", "complexity", "robot_action", "experience"), "category"))
+    spec = paper_spec()
+    got = set(never_estimated(frame, spec))
+    if frame["complexity"].isna().any():
+        assert got == set()  # a trial without its complexity: nothing to say per row
+        return
+    last = frame.groupby("participant", observed=True)["trial"].transform("max")
+    em, tr = set(), set()
+    for (_, t), lst in zip(frame.iterrows(), last, strict=True):
+        c, a = ["low", "high"].index(t["complexity"]), ["autonomous", "ask"].index(t["robot_action"])
+        if pd.notna(t["human_action"]):
+            em.add((c, a))
+        if t["trial"] < lst and pd.notna(t["experience"]):
+            tr.add((c, a, ["faulty", "reliable"].index(t["experience"])))
+    want = {("emission", (c, a)) for c in range(2) for a in range(2) if (c, a) not in em and a == 0}
+    want |= {("transition", (c, a, e)) for c in range(2) for a in range(2) for e in range(2) if (c, a, e) not in tr}
+    assert got == want

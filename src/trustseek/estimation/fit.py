@@ -265,7 +265,6 @@ def never_estimated(frame: pd.DataFrame, spec: IOHMMSpec) -> tuple[tuple[str, tu
     c, a, e = (_index_codes(frame[name], names) for name, names in columns)
     if (c < 0).any() or (a < 0).any():
         return ()
-    observed = frame["human_action"].notna().to_numpy()
     # a trial has a next one when it is not its participant's last (encode refused repeated indices)
     participant = frame["participant"]
     if isinstance(participant.dtype, pd.CategoricalDtype):
@@ -276,12 +275,14 @@ def never_estimated(frame: pd.DataFrame, spec: IOHMMSpec) -> tuple[tuple[str, tu
     trial = frame["trial"].to_numpy(dtype=np.int64)
     last = np.full(n_people, np.iinfo(np.int64).min)
     np.maximum.at(last, person, trial)
-    has_next = trial < last[person]
+    # one count per (what the trial informs, c, a, e + 1): 1 an observed human action (its
+    # emission row), 2 a next trial (its transition row, when e is known), 3 both
+    informs = frame["human_action"].notna().to_numpy().view(np.int8) + 2 * (trial < last[person]).view(np.int8)
     n = len(complexities)
-    row = c * 2 + a  # the emission row (c, a) of each trial; 2 * row + e its transition row (c, a, e)
-    em_seen = (np.bincount(row[observed], minlength=n * 2) > 0).reshape(n, 2)
-    sel = has_next & (e >= 0)
-    tr_seen = (np.bincount(2 * row[sel] + e[sel], minlength=n * 4) > 0).reshape(n, 2, 2)
+    key = ((informs.astype(np.int16) * n + c) * 2 + a) * 3 + (e + 1)
+    counts = np.bincount(key, minlength=4 * n * 6).reshape(4, n, 2, 3)
+    em_seen = counts[[1, 3]].sum((0, 3)) > 0
+    tr_seen = counts[2:, :, :, 1:].sum(0) > 0
     fixed_ask = "robot_action" in spec.emission_inputs and any(
         dict(f.where) == {"robot_action": "ask"} for f in spec.fixed_emissions
     )
@@ -301,8 +302,8 @@ def _index_codes(values: pd.Series, names: Sequence[str]) -> np.ndarray:
     column through its categories: no value looked up per row)."""
     if isinstance(values.dtype, pd.CategoricalDtype):
         lookup = [names.index(v) if v in names else -1 for v in values.cat.categories]
-        return np.array([*lookup, -1], dtype=np.int32)[values.cat.codes.to_numpy()]  # code -1 (missing): the last
-    return values.map({v: i for i, v in enumerate(names)}).fillna(-1).to_numpy(dtype=np.int32)
+        return np.array([*lookup, -1], dtype=np.int16)[values.cat.codes.to_numpy()]  # code -1 (missing): the last
+    return values.map({v: i for i, v in enumerate(names)}).fillna(-1).to_numpy(dtype=np.int16)
 
 
 def decode(frame: pd.DataFrame, model: TrustModel, rating: str | None = None) -> pd.DataFrame:
