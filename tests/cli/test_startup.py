@@ -191,3 +191,22 @@ def test_one_blas_thread_also_limits_a_blas_loaded_after_its_first_use():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True, env=env)
     n, threads = out.stdout.strip().split(" ", 1)
     assert int(n) >= 2 and json.loads(threads) == [1] * int(n)
+
+
+def test_every_option_name_is_whole_in_the_help_at_80_columns(monkeypatch):
+    """Rich shrank every column of the options table to fit: at 80 columns `reproduce --help`
+    showed `--schedule-participan…` and `select --help` `--no-experience-r…` and
+    `column:theirs=cano…`, names and examples a person cannot type from the help."""
+    from typer import rich_utils
+
+    monkeypatch.setattr(rich_utils, "MAX_WIDTH", 80)
+    group = typer.main.get_command(app)
+    seen = 0
+    for name in _lazy.COMMANDS:
+        code, out = run_cli([name, "--help"])
+        assert code == 0, out
+        assert "…" not in out, (name, [line for line in out.splitlines() if "…" in line])
+        names = [opt for p in group.commands[name].params for opt in (*p.opts, *p.secondary_opts) if opt.startswith("--")]
+        assert all(opt in out for opt in names), (name, [opt for opt in names if opt not in out])
+        seen += len(names)
+    assert seen > 100

@@ -8,6 +8,7 @@ table is what the modules register (names, panels, help texts), so it cannot dri
 
 from __future__ import annotations
 
+import functools
 import importlib
 import inspect
 import re
@@ -118,9 +119,48 @@ def command_name(info: typer.models.CommandInfo) -> str:
 
 
 def _reflowed(command: click.Command) -> click.Command:
+    """The command with its help reflowed (:func:`reflow`) and its options' names kept whole
+    (:class:`WholeNamesCommand`)."""
     if command.help:
         command.help = reflow(command.help)
+    if type(command) is typer.core.TyperCommand:
+        command.__class__ = WholeNamesCommand  # (a subclass that only renders its help otherwise)
     return command
+
+
+class WholeNamesCommand(typer.core.TyperCommand):
+    """A command whose help shows every option's names whole: Rich shrinks each column of Typer's
+    options table to fit the terminal, and at 80 columns cut names such as
+    ``--schedule-participan…``; here the names' columns keep their width and the type and the
+    help wrap instead (a word longer than the help's column folds over lines)."""
+
+    def format_help(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        from typer import rich_utils
+
+        rich_utils.Table = _options_table()  # type: ignore[misc]  # (Typer makes its tables from this name of its module)
+        super().format_help(ctx, formatter)
+
+
+@functools.cache
+def _options_table() -> Any:
+    """Rich's table, whose columns but the last two (type and help) do not wrap, and whose last
+    is one text that folds a word longer than the column (Typer's row of texts cut it with an
+    ellipsis: ``column:theirs=can…``)."""
+    from rich.columns import Columns
+    from rich.table import Table
+    from rich.text import Text
+
+    class OptionsTable(Table):
+        def add_row(self, *renderables: Any, **options: Any) -> None:
+            *rest, last = renderables
+            texts = [r for r in last.renderables if isinstance(r, Text)] if isinstance(last, Columns) else []
+            if texts and len(texts) == len(last.renderables):
+                last = Text(" ", overflow="fold").join(texts)
+            super().add_row(*rest, last, **options)
+            for column in self.columns[:-2]:  # (the required mark and) the names; not the type and the help
+                column.no_wrap = True
+
+    return OptionsTable
 
 
 class LazyCommands(MutableMapping[str, click.Command]):
