@@ -422,3 +422,14 @@ def test_never_estimated_rows_are_those_no_trial_informs(rows, categorical):
     want = {("emission", (c, a)) for c in range(2) for a in range(2) if (c, a) not in em and a == 0}
     want |= {("transition", (c, a, e)) for c in range(2) for a in range(2) for e in range(2) if (c, a, e) not in tr}
     assert got == want
+
+
+def test_a_best_restart_stopped_at_the_cap_is_a_warning():
+    """A fit whose best restart hit --max-iter said nothing: its estimates looked final."""
+    frame = read_trials(example_path())
+    capped = fit_trust_model(frame, options=FitOptions(restarts=2, max_iter=3, seed=0))
+    assert not capped.runs[capped.best].converged
+    assert any(w.startswith("the best restart stopped at the cap on E-steps") for w in capped.warnings)
+    done = fit_trust_model(frame, options=FitOptions(restarts=2, seed=0))
+    assert done.runs[done.best].converged
+    assert not any("cap on E-steps" in w for w in done.warnings)
