@@ -1,0 +1,98 @@
+"""The fast paths of reading a large log give what the general ones give: a CSV read in blocks and
+halves against the same table given as a data frame, ids checked at once against cell by cell."""
+
+import io
+
+import pandas as pd
+import pytest
+
+from trustseek.data.trials import CANONICAL, DataError, read_trials
+
+HEADER = "participant,trial,complexity,robot_action,human_action,experience,block\n"
+
+
+def rows(ids, trials=(1, 2)):
+    """A valid log: a row for each id and trial (ask in low complexity, so the experience is faulty)."""
+    return "".join(f"{p},{t},low,ask,rely,faulty,{t}\n" for p in ids for t in trials)
+
+
+def as_table(text):
+    return pd.read_csv(io.StringIO(text), dtype=str, keep_default_na=False)
+
+
+def same_read(tmp_path, text, **kw):
+    """The log read from a CSV file and from the same cells as a data frame (the general path;
+    an extra column is carried as the source holds it)."""
+    path = tmp_path / "log.csv"
+    path.write_text(text)
+    frame = read_trials(path, **kw)
+    same(frame, read_trials(as_table(text), **kw))
+    return frame
+
+
+def same(frame, other):
+    cols = list(CANONICAL)
+    pd.testing.assert_frame_equal(frame[cols], other[cols])
+    assert frame.attrs == other.attrs
+
+
+def same_error(tmp_path, text, **kw):
+    path = tmp_path / "log.csv"
+    path.write_text(text)
+    with pytest.raises(DataError) as from_file:
+        read_trials(path, **kw)
+    with pytest.raises(DataError) as from_table:
+        read_trials(as_table(text), **kw)
+    assert from_file.value.problems == from_table.value.problems
+    return "\n".join(from_file.value.problems)
+
+
+IDS = [f"P{i:03d}" for i in range(80)]  # more ids than are cleaned one by one
+
+
+@pytest.mark.parametrize(
+    "odd",
+    [
+        [],  # every id as it is: checked at once
+        [" P001", "P002 "],  # spaces around an id: the same participant as without
+        ["Zoë"],  # not ASCII
+        ["P\x1c"],  # a separator str.strip() takes off: the same participant as 'P'
+    ],
+)
+def test_many_ids_read_as_the_same_table_given_as_a_frame(tmp_path, odd):
+    frame = same_read(tmp_path, HEADER + rows(IDS) + rows(odd, trials=(3,)))
+    stripped = [o.strip() for o in odd]
+    assert list(frame["participant"].cat.categories) == list(dict.fromkeys([*IDS, *stripped]))
+    counts = frame.groupby("participant", observed=True).size()
+    assert counts.to_dict() == {p: (2 if p in IDS else 0) + stripped.count(p) for p in dict.fromkeys([*IDS, *stripped])}
+
+
+@pytest.mark.parametrize(("cell", "told"), [("nan", "value is NaN"), ("  ", "empty participant id"), ("N/A", "value is NaN")])
+def test_a_bad_id_among_many_is_told_at_its_row(tmp_path, cell, told):
+    text = HEADER + rows(IDS[:70]) + rows([cell]) + rows(IDS[70:])
+    lines = same_error(tmp_path, text)
+    assert f"column 'participant': {told} in 2 rows: row 141; row 142" in lines
+
+
+def test_a_missing_value_marker_among_many_ids_is_an_empty_id(tmp_path):
+    text = HEADER + rows(IDS[:70]) + rows(["gone"]) + rows(IDS[70:])
+    assert "column 'participant': empty participant id in 2 rows: row 141; row 142" in same_error(
+        tmp_path, text, mapping={"missing": ["GONE"]}
+    )
+    same_read(tmp_path, HEADER + rows(IDS), mapping={"missing": ["GONE"]})
+
+
+def test_parquet_nulls_are_empty_cells_and_a_column_without_them_reads_whole(tmp_path):
+    table = as_table(HEADER + rows(IDS[:3]))
+    good = tmp_path / "good.parquet"
+    table.to_parquet(good)
+    same(read_trials(good), read_trials(table))
+    table.loc[[1, 4], "trial"] = None
+    table.loc[2, "complexity"] = None
+    bad = tmp_path / "bad.parquet"
+    table.to_parquet(bad)
+    with pytest.raises(DataError) as exc:
+        read_trials(bad)
+    lines = "\n".join(exc.value.problems)
+    assert "column 'trial': empty trial index" in lines and "in 2 rows: row 2; row 5" in lines
+    assert "column 'complexity': empty value (expected one of ['low', 'high']): row 3" in lines
