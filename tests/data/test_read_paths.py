@@ -96,3 +96,34 @@ def test_parquet_nulls_are_empty_cells_and_a_column_without_them_reads_whole(tmp
     lines = "\n".join(exc.value.problems)
     assert "column 'trial': empty trial index" in lines and "in 2 rows: row 2; row 5" in lines
     assert "column 'complexity': empty value (expected one of ['low', 'high']): row 3" in lines
+
+
+@pytest.fixture
+def small_blocks(monkeypatch):
+    """CSV parsed in blocks of 256 bytes (each with its own dictionaries) and, from 1 kB, in two halves."""
+    from trustseek.data import sources
+
+    monkeypatch.setattr(sources, "BLOCK_BYTES", 256)
+    monkeypatch.setattr(sources, "SPLIT_BYTES", 1024)
+
+
+def test_blocks_with_their_own_dictionaries_read_as_one_table(tmp_path, small_blocks):
+    import pyarrow.csv as pcsv
+
+    # later blocks meet the labels in another order, and the ids and empty actions anew
+    text = HEADER + rows(IDS[:40]) + rows(IDS[40:]).replace("low,ask,rely,faulty", "high,autonomous,,reliable")
+    frame = same_read(tmp_path, text)
+    chunks = pcsv.read_csv(tmp_path / "log.csv", read_options=pcsv.ReadOptions(block_size=256)).column(0).num_chunks
+    assert chunks > 20 and len(frame) == 160 and frame["human_action"].isna().sum() == 80
+    assert list(frame["complexity"].iloc[[0, 79, 80, 159]]) == ["low", "low", "high", "high"]
+
+
+@pytest.mark.parametrize("at", [5, 150])  # a first block; a late block of the second half
+def test_text_that_is_not_utf8_in_any_block_is_refused(tmp_path, small_blocks, at):
+    lines = (HEADER + rows(IDS)).splitlines(keepends=True)
+    lines[at] = lines[at].replace("rely", "r\xe9ly")
+    path = tmp_path / "log.csv"
+    path.write_bytes("".join(lines).encode("latin-1"))
+    with pytest.raises(DataError) as exc:
+        read_trials(path)
+    assert exc.value.problems == ["the file is not UTF-8 text (save it as UTF-8 CSV)"]
