@@ -127,3 +127,34 @@ def test_text_that_is_not_utf8_in_any_block_is_refused(tmp_path, small_blocks, a
     with pytest.raises(DataError) as exc:
         read_trials(path)
     assert exc.value.problems == ["the file is not UTF-8 text (save it as UTF-8 CSV)"]
+
+
+def test_rows_of_another_width_in_any_block_are_found_by_a_second_pass(tmp_path, small_blocks, monkeypatch):
+    """A log whose rows are all as wide as the header is parsed once, without a handler for bad
+    rows; a bad row anywhere makes its half parsed again with it, to number every bad row."""
+    import pyarrow.csv as pcsv
+
+    handlers = []
+    real = pcsv.read_csv
+
+    def spy(source, parse_options=None, **kw):
+        handlers.append(parse_options.invalid_row_handler is not None)
+        return real(source, parse_options=parse_options, **kw)
+
+    monkeypatch.setattr(pcsv, "read_csv", spy)
+    lines = (HEADER + rows(IDS)).splitlines(keepends=True)
+    path = tmp_path / "log.csv"
+    path.write_text("".join(lines))
+    read_trials(path)
+    assert handlers == [False, False]  # two halves, one pass each
+    lines[7] = lines[7].replace(",1\n", ",1,x\n")
+    lines[150] = lines[150].replace("rely,", "")
+    path.write_text("".join(lines))
+    handlers.clear()
+    with pytest.raises(DataError) as exc:
+        read_trials(path)
+    assert sorted(handlers) == [False, False, True, True]
+    assert exc.value.problems == [
+        "rows whose number of fields differs from the header's 7 (delimiter ',') in 2 rows: "
+        "row 7 (8 fields): 'P003,1,low,ask,rely,faulty,1,x'; row 150 (6 fields): 'P074,2,low,ask,faulty,2'"
+    ]
