@@ -100,19 +100,24 @@ def test_parquet_nulls_are_empty_cells_and_a_column_without_them_reads_whole(tmp
 
 @pytest.fixture
 def small_blocks(monkeypatch):
-    """CSV parsed in blocks of 256 bytes (each with its own dictionaries) and, from 1 kB, in two halves."""
+    """CSV parsed in blocks of 256 bytes (each with its own dictionaries) and, from 1 kB, in parts
+    of 1 kB on two threads."""
     from trustseek.data import sources
 
     monkeypatch.setattr(sources, "BLOCK_BYTES", 256)
     monkeypatch.setattr(sources, "SPLIT_BYTES", 1024)
+    monkeypatch.setattr(sources, "PART_BYTES", 1024)
 
 
 def test_blocks_with_their_own_dictionaries_read_as_one_table(tmp_path, small_blocks):
     import pyarrow.csv as pcsv
 
+    from trustseek.data import sources
+
     # later blocks meet the labels in another order, and the ids and empty actions anew
     text = HEADER + rows(IDS[:40]) + rows(IDS[40:]).replace("low,ask,rely,faulty", "high,autonomous,,reliable")
     frame = same_read(tmp_path, text)
+    assert len(sources._csv_parts(tmp_path / "log.csv")) == 5
     chunks = pcsv.read_csv(tmp_path / "log.csv", read_options=pcsv.ReadOptions(block_size=256)).column(0).num_chunks
     assert chunks > 20 and len(frame) == 160 and frame["human_action"].isna().sum() == 80
     assert list(frame["complexity"].iloc[[0, 79, 80, 159]]) == ["low", "low", "high", "high"]
@@ -146,14 +151,15 @@ def test_rows_of_another_width_in_any_block_are_found_by_a_second_pass(tmp_path,
     path = tmp_path / "log.csv"
     path.write_text("".join(lines))
     read_trials(path)
-    assert handlers == [False, False]  # two halves, one pass each
+    parts = path.stat().st_size // 1024
+    assert handlers == [False] * parts  # one pass each
     lines[7] = lines[7].replace(",1\n", ",1,x\n")
     lines[150] = lines[150].replace("rely,", "")
     path.write_text("".join(lines))
     handlers.clear()
     with pytest.raises(DataError) as exc:
         read_trials(path)
-    assert sorted(handlers) == [False, False, True, True]
+    assert sorted(handlers) == [False] * parts + [True, True]  # the two parts with a bad row again
     assert exc.value.problems == [
         "rows whose number of fields differs from the header's 7 (delimiter ',') in 2 rows: "
         "row 7 (8 fields): 'P003,1,low,ask,rely,faulty,1,x'; row 150 (6 fields): 'P074,2,low,ask,faulty,2'"

@@ -16,6 +16,7 @@ import mmap
 import os
 import re
 import sys
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -400,13 +401,7 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
     hook = sys.unraisablehook
     sys.unraisablehook = undecodable.append
     try:
-        if len(parts) == 1:
-            table = parse(0)
-        else:  # the second half on a thread of ours while this one parses the first
-            with ThreadPoolExecutor(1, thread_name_prefix="trustseek-csv") as pool:
-                second = pool.submit(parse, 1)
-                first = parse(0)
-                table = pa.concat_tables([first, second.result()])
+        table = parse(0) if len(parts) == 1 else pa.concat_tables(_on_two_threads(parse, len(parts)))
     except (pa.ArrowException, OSError) as exc:
         msg = str(exc)
         if "UTF8" in msg or "UTF-8" in msg:
@@ -419,9 +414,10 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
     if undecodable:
         raise DataError(["the file is not UTF-8 text (save it as UTF-8 CSV)"], name)
     if any(bad_rows):
-        if len(parts) > 1 and bad_rows[1]:  # the second half's line numbers count from its start
-            before = _line_ends(parts[0])
-            bad_rows[1] = [(None if n is None else n + before, got, text) for n, got, text in bad_rows[1]]
+        before = 0
+        for i in range(1, len(parts)):  # a later part's line numbers count from its start
+            before += _line_ends(parts[i - 1])
+            bad_rows[i] = [(None if n is None else n + before, got, text) for n, got, text in bad_rows[i]]
         p = Problems()
         p.add(
             f"rows whose number of fields differs from the header's {len(header)} (delimiter {sep!r})",
@@ -439,18 +435,48 @@ def _check_utf8(table: Any) -> None:
             chunk.dictionary.validate(full=True)
 
 
+def _on_two_threads(parse: Any, count: int) -> list[Any]:
+    """``parse(i)`` of every part ``i``, in order, each part taken by whichever of two threads (this
+    one and one of ours) is free: the two end together however the cores are shared.  The error
+    of the first part that fails is raised."""
+    results: list[Any] = [None] * count
+    failed: dict[int, BaseException] = {}
+    parts = iter(range(count))
+    lock = threading.Lock()
+
+    def work() -> None:
+        while not failed:
+            with lock:
+                i = next(parts, None)
+            if i is None:
+                return
+            try:
+                results[i] = parse(i)
+            except BaseException as exc:  # raised below, on the calling thread
+                failed[i] = exc
+
+    with ThreadPoolExecutor(1, thread_name_prefix="trustseek-csv") as pool:
+        other = pool.submit(work)
+        work()
+        other.result()
+    if failed:
+        raise failed[min(failed)]
+    return results
+
+
 BLOCK_BYTES = 1 << 24  # a CSV is parsed in blocks of this size (16 MB), each with its own dictionaries
-SPLIT_BYTES = 1 << 26  # a CSV from this size (64 MB) is parsed in two halves side by side
-SPLIT_SEARCH = 1 << 20  # how far past the middle a line end is looked for
+SPLIT_BYTES = 1 << 26  # a CSV from this size (64 MB) is parsed in parts on two threads
+PART_BYTES = 1 << 25  # the size of those parts (32 MB)
+SPLIT_SEARCH = 1 << 20  # how far past a part's end a line end is looked for
 
 
 def _csv_parts(path: Path) -> list[Any]:
     """The file whole (one part), or from :data:`SPLIT_BYTES` on a machine with two cores or more
-    its two halves (buffers of the memory-mapped file), split after the first line end past the
-    middle.  Only an uncompressed file without a quote is split: a quoted value may hold a line end, and a
-    row never spans lines outside one, so the halves hold the rows of the whole, in order.  The
-    two are parsed at once, one per core: 7.1 M rows in about half the time of one pass
-    (``benchmarks/bench_read.py``)."""
+    its parts of about :data:`PART_BYTES` (buffers of the memory-mapped file), each split after the
+    first line end past its size.  Only an uncompressed file without a quote is split: a quoted
+    value may hold a line end, and a row never spans lines outside one, so the parts hold the rows
+    of the whole, in order.  They are parsed on two threads, one per core: 7.1 M rows in about
+    half the time of one pass (``benchmarks/bench_read.py``)."""
     import pyarrow as pa
 
     size = path.stat().st_size
@@ -458,12 +484,20 @@ def _csv_parts(path: Path) -> list[Any]:
         return [path]
     with path.open("rb") as fh:
         whole = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
-    middle = size // 2
-    end = whole.find(b"\n", middle, middle + SPLIT_SEARCH)
-    if end < 0 or end + 1 >= size or whole.find(b'"') >= 0:
+    count = max(2, size // PART_BYTES)
+    starts = [0]
+    for j in range(1, count):
+        at = max(j * size // count, starts[-1])
+        end = whole.find(b"\n", at, at + SPLIT_SEARCH)
+        if end < 0:
+            return [path]
+        if end + 1 >= size:
+            break
+        starts.append(end + 1)
+    if len(starts) < 2 or whole.find(b'"') >= 0:
         return [path]
     buffer = pa.py_buffer(whole)
-    return [buffer.slice(0, end + 1), buffer.slice(end + 1)]
+    return [buffer.slice(a, b - a) for a, b in zip(starts, [*starts[1:], size], strict=True)]
 
 
 def _line_ends(part: Any) -> int:
