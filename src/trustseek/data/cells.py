@@ -145,6 +145,9 @@ def same_value_key(text: str) -> str:
     return repr(f)
 
 
+GATHER_ROWS = 1 << 18  # rows looked up at a time by :meth:`Column.per_row`
+
+
 @dataclass
 class Column:
     """One column: per row a code into ``texts`` (the distinct values as text: None = an empty
@@ -167,7 +170,16 @@ class Column:
         """Per row, ``flags`` of its distinct value (one flag per entry of ``texts``)."""
         if not self.occurs(flags):
             return np.zeros(len(self.codes), dtype=bool)
-        return np.asarray(flags, dtype=bool)[self.codes]
+        return self.per_row(np.asarray(flags, dtype=bool))
+
+    def per_row(self, values: np.ndarray) -> np.ndarray:
+        """Per row the entry of ``values`` (one per entry of ``texts``) of its value: ``values[codes]``,
+        taken a slice of rows at a time (the codes of a slice, not of the whole column, are widened
+        to 64-bit indices: 2 MB at a time instead of 57 MB for 7.1 M rows)."""
+        out = np.empty(len(self.codes), dtype=values.dtype)
+        for i in range(0, len(self.codes), GATHER_ROWS):
+            np.take(values, self.codes[i : i + GATHER_ROWS], out=out[i : i + GATHER_ROWS])
+        return out
 
 
 def column_from_pandas(values: pd.Series, missing: frozenset[str]) -> Column:
@@ -257,7 +269,7 @@ def report_kinds(problems: Problems, cc: Column, kind: np.ndarray, heads: tuple[
     no row holds a bad cell)."""
     if not cc.occurs(kind != 0):
         return None
-    k = kind[cc.codes]
+    k = cc.per_row(kind)
     problems.rows(heads[0], np.flatnonzero(k == EMPTY))
     problems.rows(heads[1], np.flatnonzero(k == NAN))
     problems.rows(heads[2], np.flatnonzero(k == UNKNOWN), lambda r: repr(cc.texts[cc.codes[r]]))

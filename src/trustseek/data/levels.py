@@ -50,7 +50,7 @@ def input_codes(problems: Problems, cc: Column, mapping: ColumnMapping, name: st
         f"{head}: value outside the declared levels ({expected})",
     )
     report_kinds(problems, cc, kind, heads)
-    return lookup[cc.codes]
+    return cc.per_row(lookup)
 
 
 def level_lookup(

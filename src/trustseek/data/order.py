@@ -43,7 +43,7 @@ def trial_numbers(problems: Problems, tc: Column, column: str) -> tuple[np.ndarr
         f"{column}: value is not an integer between 0 and {MAX_TRIAL}",
     )
     tkind = report_kinds(problems, tc, t_kind, heads)
-    return t_lookup[tc.codes], np.ones(len(tc.codes), dtype=bool) if tkind is None else tkind == 0
+    return tc.per_row(t_lookup), np.ones(len(tc.codes), dtype=bool) if tkind is None else tkind == 0
 
 
 def order_values(problems: Problems, cc: Column, name: str) -> tuple[np.ndarray, np.ndarray]:

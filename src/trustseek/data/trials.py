@@ -321,7 +321,7 @@ def _category_codes(problems: Problems, cc: Column, mapping: ColumnMapping, c: s
             f"hint: {', '.join(repr(t) for t in list(near)[:SHOWN])} {'is a label' if one else 'are labels'} written "
             f"in another case or with spaces: map {'it' if one else 'them'} with {flags} (or a mapping file's labels)"
         )
-    return lookup[cc.codes]
+    return cc.per_row(lookup)
 
 
 def _ratings(
@@ -391,7 +391,7 @@ def _participant_codes(pc_: Column) -> tuple[np.ndarray, list[str]]:
     used = int(c.max()) + 1 if len(c) else 0
     if c.dtype == np.int32 and np.array_equal(lookup[:used], np.arange(used)):
         return c, list(ids)  # the codes are the ids' indices already (a file's distinct values in order)
-    return lookup[c], list(ids)
+    return pc_.per_row(lookup), list(ids)
 
 
 def _equal(a: Column, b: Column) -> Column:
