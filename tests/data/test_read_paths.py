@@ -117,7 +117,7 @@ def test_blocks_with_their_own_dictionaries_read_as_one_table(tmp_path, small_bl
     # later blocks meet the labels in another order, and the ids and empty actions anew
     text = HEADER + rows(IDS[:40]) + rows(IDS[40:]).replace("low,ask,rely,faulty", "high,autonomous,,reliable")
     frame = same_read(tmp_path, text)
-    assert len(sources._csv_parts(tmp_path / "log.csv")) == 5
+    assert len(sources._csv_parts(tmp_path / "log.csv")[0]) == 5
     chunks = pcsv.read_csv(tmp_path / "log.csv", read_options=pcsv.ReadOptions(block_size=256)).column(0).num_chunks
     assert chunks > 20 and len(frame) == 160 and frame["human_action"].isna().sum() == 80
     assert list(frame["complexity"].iloc[[0, 79, 80, 159]]) == ["low", "low", "high", "high"]
@@ -164,3 +164,18 @@ def test_rows_of_another_width_in_any_block_are_found_by_a_second_pass(tmp_path,
         "rows whose number of fields differs from the header's 7 (delimiter ',') in 2 rows: "
         "row 7 (8 fields): 'P003,1,low,ask,rely,faulty,1,x'; row 150 (6 fields): 'P074,2,low,ask,faulty,2'"
     ]
+
+
+@pytest.mark.parametrize("at", [36, 77])  # a cell of 40 lines over the end of the first part; of another
+def test_a_quoted_value_over_line_ends_makes_the_file_read_in_one_pass(tmp_path, small_blocks, monkeypatch, at):
+    from trustseek.data import sources
+
+    monkeypatch.setattr(sources, "BLOCK_BYTES", 1 << 20)  # the cell in one block (blocks split at line ends)
+    cell = '"' + "\n".join(["note"] * 40) + '"'
+    lines = (HEADER + rows(IDS)).splitlines(keepends=True)
+    lines[at] = lines[at].rsplit(",", 1)[0] + "," + cell + "\n"
+    text = "".join(lines)
+    start, count = text.index(cell), len(text) // 1024
+    assert any(start < j * len(text) // count < start + len(cell) for j in range(1, count))  # a split in the cell
+    frame = same_read(tmp_path, text)
+    assert len(frame) == 160 and frame["block"].iloc[at - 1] == cell.strip('"')

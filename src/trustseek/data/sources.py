@@ -357,10 +357,13 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
     # every column as codes into its distinct texts: no Python string per cell
     dictionary = pa.dictionary(pa.int32(), pa.string())
     types = dict.fromkeys(header, dictionary)
-    parts = _csv_parts(path)
+    parts, quoted = _csv_parts(path)
     bad_rows: list[list[tuple[int | None, int, str]]] = [[] for _ in parts]
 
     def parse(i: int) -> Any:
+        if len(parts) > 1 and quoted(i):
+            raise _Quoted
+
         def invalid(row: Any) -> str:
             try:
                 text = str(row.text)
@@ -401,7 +404,11 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
     hook = sys.unraisablehook
     sys.unraisablehook = undecodable.append
     try:
-        table = parse(0) if len(parts) == 1 else pa.concat_tables(_on_two_threads(parse, len(parts)))
+        try:
+            table = parse(0) if len(parts) == 1 else pa.concat_tables(_on_two_threads(parse, len(parts)))
+        except _Quoted:  # a quoted value may hold a line end: the file in one pass
+            parts, bad_rows = [path], [[]]
+            table = parse(0)
     except (pa.ArrowException, OSError) as exc:
         msg = str(exc)
         if "UTF8" in msg or "UTF-8" in msg:
@@ -470,18 +477,24 @@ PART_BYTES = 1 << 25  # the size of those parts (32 MB)
 SPLIT_SEARCH = 1 << 20  # how far past a part's end a line end is looked for
 
 
-def _csv_parts(path: Path) -> list[Any]:
+class _Quoted(Exception):
+    """A part of a CSV holds a quote: the file is parsed in one pass instead."""
+
+
+def _csv_parts(path: Path) -> tuple[list[Any], Any]:
     """The file whole (one part), or from :data:`SPLIT_BYTES` on a machine with two cores or more
     its parts of about :data:`PART_BYTES` (buffers of the memory-mapped file), each split after the
-    first line end past its size.  Only an uncompressed file without a quote is split: a quoted
-    value may hold a line end, and a row never spans lines outside one, so the parts hold the rows
-    of the whole, in order.  They are parsed on two threads, one per core: 7.1 M rows in about
-    half the time of one pass (``benchmarks/bench_read.py``)."""
+    first line end past its size; and whether part ``i`` holds a quote.  Only an uncompressed file
+    without a quote is read in parts (each part is looked at on the thread that parses it): a
+    quoted value may hold a line end, and a row never spans lines outside one, so the parts hold
+    the rows of the whole, in order.  They are parsed on two threads, one per core: 7.1 M rows in
+    about half the time of one pass (``benchmarks/bench_read.py``)."""
     import pyarrow as pa
 
+    whole_file: tuple[list[Any], Any] = ([path], lambda i: False)
     size = path.stat().st_size
     if size < SPLIT_BYTES or len(os.sched_getaffinity(0)) < 2 or path.suffix.lower() in COMPRESSED:
-        return [path]
+        return whole_file
     with path.open("rb") as fh:
         whole = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
     count = max(2, size // PART_BYTES)
@@ -490,14 +503,19 @@ def _csv_parts(path: Path) -> list[Any]:
         at = max(j * size // count, starts[-1])
         end = whole.find(b"\n", at, at + SPLIT_SEARCH)
         if end < 0:
-            return [path]
+            return whole_file
         if end + 1 >= size:
             break
         starts.append(end + 1)
-    if len(starts) < 2 or whole.find(b'"') >= 0:
-        return [path]
+    if len(starts) < 2:
+        return whole_file
     buffer = pa.py_buffer(whole)
-    return [buffer.slice(a, b - a) for a, b in zip(starts, [*starts[1:], size], strict=True)]
+    ends = [*starts[1:], size]
+
+    def quoted(i: int) -> bool:
+        return whole.find(b'"', starts[i], ends[i]) >= 0
+
+    return [buffer.slice(a, b - a) for a, b in zip(starts, ends, strict=True)], quoted
 
 
 def _line_ends(part: Any) -> int:
