@@ -179,3 +179,11 @@ def test_a_quoted_value_over_line_ends_makes_the_file_read_in_one_pass(tmp_path,
     assert any(start < j * len(text) // count < start + len(cell) for j in range(1, count))  # a split in the cell
     frame = same_read(tmp_path, text)
     assert len(frame) == 160 and frame["block"].iloc[at - 1] == cell.strip('"')
+
+
+def test_a_file_that_quotes_its_header_is_read_in_one_pass_from_the_start(tmp_path, small_blocks):
+    from trustseek.data import sources
+
+    text = HEADER.replace("participant", '"participant"') + rows(IDS)
+    same_read(tmp_path, text)
+    assert sources._csv_parts(tmp_path / "log.csv")[0] == [tmp_path / "log.csv"]

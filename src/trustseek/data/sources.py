@@ -485,10 +485,11 @@ def _csv_parts(path: Path) -> tuple[list[Any], Any]:
     """The file whole (one part), or from :data:`SPLIT_BYTES` on a machine with two cores or more
     its parts of about :data:`PART_BYTES` (buffers of the memory-mapped file), each split after the
     first line end past its size; and whether part ``i`` holds a quote.  Only an uncompressed file
-    without a quote is read in parts (each part is looked at on the thread that parses it): a
-    quoted value may hold a line end, and a row never spans lines outside one, so the parts hold
-    the rows of the whole, in order.  They are parsed on two threads, one per core: 7.1 M rows in
-    about half the time of one pass (``benchmarks/bench_read.py``)."""
+    without a quote is read in parts (the first part is looked at here, each other one on the
+    thread that parses it): a quoted value may hold a line end, and a row never spans lines
+    outside one, so the parts hold the rows of the whole, in order.  They are parsed on two
+    threads, one per core: 7.1 M rows in about half the time of one pass
+    (``benchmarks/bench_read.py``)."""
     import pyarrow as pa
 
     whole_file: tuple[list[Any], Any] = ([path], lambda i: False)
@@ -507,14 +508,14 @@ def _csv_parts(path: Path) -> tuple[list[Any], Any]:
         if end + 1 >= size:
             break
         starts.append(end + 1)
-    if len(starts) < 2:
-        return whole_file
-    buffer = pa.py_buffer(whole)
     ends = [*starts[1:], size]
 
     def quoted(i: int) -> bool:
         return whole.find(b'"', starts[i], ends[i]) >= 0
 
+    if len(starts) < 2 or quoted(0):  # a file that quotes its header or first rows: no part parsed in vain
+        return whole_file
+    buffer = pa.py_buffer(whole)
     return [buffer.slice(a, b - a) for a, b in zip(starts, ends, strict=True)], quoted
 
 
