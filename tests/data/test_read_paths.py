@@ -3,7 +3,6 @@ halves against the same table given as a data frame, ids checked at once against
 
 import io
 
-import numpy as np
 import pandas as pd
 import pytest
 
@@ -188,25 +187,3 @@ def test_a_file_that_quotes_its_header_is_read_in_one_pass_from_the_start(tmp_pa
     text = HEADER.replace("participant", '"participant"') + rows(IDS)
     same_read(tmp_path, text)
     assert sources._csv_parts(tmp_path / "log.csv")[0] == [tmp_path / "log.csv"]
-
-
-def test_more_ids_than_a_byte_holds_read_as_the_same_table(tmp_path):
-    ids = [f"Q{i:04d}" for i in range(300)]  # codes of four bytes (the ids of a large log)
-    frame = same_read(tmp_path, HEADER + rows(ids))
-    assert list(frame["participant"].cat.categories) == ids
-
-
-@pytest.mark.parametrize("values", [125, 126])  # the most in one byte per row with a shift's fill; one more
-def test_a_shift_fills_after_the_last_code_of_a_column_of_one_byte_codes(values):
-    import pyarrow as pa
-
-    from trustseek.data.cells import column_from_arrow
-    from trustseek.data.trials import _shift
-
-    texts = [f"v{i}" for i in range(values)]
-    col = column_from_arrow(pa.chunked_array([pa.array(texts * 2).dictionary_encode()]), frozenset())
-    assert col.codes.dtype == (np.int8 if values == 125 else np.int32)
-    pcode = np.repeat([0, 1], values)
-    shifted = _shift(col, pcode, slice(None), 1, "none")
-    got = [shifted.texts[c] for c in shifted.codes]
-    assert got == ["none", *texts[:-1], "none", *texts[:-1]]

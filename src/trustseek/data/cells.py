@@ -151,8 +151,7 @@ GATHER_ROWS = 1 << 18  # rows looked up at a time by :meth:`Column.per_row`
 @dataclass
 class Column:
     """One column: per row a code into ``texts`` (the distinct values as text: None = an empty
-    cell or a missing-value marker, the NaN marker = a NaN); the codes are integers of any width
-    that holds ``len(texts) + 1`` (one more for a value added after them, as a shift's fill)."""
+    cell or a missing-value marker, the NaN marker = a NaN)."""
 
     codes: np.ndarray
     texts: list[str | None]
@@ -244,13 +243,11 @@ def column_from_arrow(chunked: Any, missing: frozenset[str]) -> Column:
     if chunked.num_chunks == 0:
         return Column(np.zeros(0, dtype=np.int32), [null])
     texts = _arrow_texts(chunked.chunk(0).dictionary, missing)
-    # a column of few values in one byte per row: a quarter of the memory to fill (and to fault in)
-    codes = np.empty(len(chunked), dtype=np.int8 if len(texts) + 2 <= 127 else np.int32)
-    at = 0
+    parts = []
     for chunk in chunked.chunks:
         idx = chunk.indices.fill_null(len(texts)) if chunk.null_count else chunk.indices
-        codes[at : at + len(idx)] = idx.to_numpy(zero_copy_only=False)
-        at += len(idx)
+        parts.append(idx.to_numpy(zero_copy_only=False).astype(np.int32, copy=False))
+    codes = parts[0] if len(parts) == 1 else np.concatenate(parts)
     return Column(codes, [*texts, null], last_unused=chunked.null_count == 0)
 
 
