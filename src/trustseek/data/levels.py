@@ -41,7 +41,6 @@ def input_codes(problems: Problems, cc: Column, mapping: ColumnMapping, name: st
     lookup, kind = level_lookup(
         cc, table, lambda label: next((by_spelling[s] for s in spellings(label) if s in by_spelling), None), dtype
     )
-    k = kind[cc.codes]
     known = f"{sorted(table)} (mapped) or " if table else ""
     expected = f"expected one of {known}the levels {list(levels)}"
     head = f"column {src!r} (input {name!r})"
@@ -50,8 +49,8 @@ def input_codes(problems: Problems, cc: Column, mapping: ColumnMapping, name: st
         f"{head}: value is NaN ({expected})",
         f"{head}: value outside the declared levels ({expected})",
     )
-    report_kinds(problems, cc, k, heads)
-    return lookup[cc.codes]
+    report_kinds(problems, cc, kind, heads)
+    return cc.per_row(lookup)
 
 
 def level_lookup(

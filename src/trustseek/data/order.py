@@ -36,15 +36,14 @@ def trial_numbers(problems: Problems, tc: Column, column: str) -> tuple[np.ndarr
                 t_lookup[j] = int(f)
             else:
                 t_kind[j] = UNKNOWN
-    tkind = t_kind[tc.codes]
     expect = "expected an integer: trials numbered in increasing order, e.g. 1, 2, ... or 0, 1, ..."
     heads = (
         f"{column}: empty trial index ({expect})",
         f"{column}: value is NaN ({expect})",
         f"{column}: value is not an integer between 0 and {MAX_TRIAL}",
     )
-    report_kinds(problems, tc, tkind, heads)
-    return t_lookup[tc.codes], tkind == 0
+    tkind = report_kinds(problems, tc, t_kind, heads)
+    return tc.per_row(t_lookup), np.ones(len(tc.codes), dtype=bool) if tkind is None else tkind == 0
 
 
 def order_values(problems: Problems, cc: Column, name: str) -> tuple[np.ndarray, np.ndarray]:

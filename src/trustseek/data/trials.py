@@ -299,7 +299,6 @@ def _category_codes(problems: Problems, cc: Column, mapping: ColumnMapping, c: s
     table = mapping.labels.get(c, {})
     empty = 0 if c == "human_action" else EMPTY  # an empty human action: not recorded
     lookup, kind = level_lookup(cc, table, lambda label: allowed.index(label) if label in allowed else None, np.int8, empty)
-    k = kind[cc.codes]
     hint = "; leave the cell empty for not recorded" if c == "human_action" else ""
     known_labels = f"{sorted(table)} (mapped) or " if table else ""
     heads = (
@@ -307,7 +306,7 @@ def _category_codes(problems: Problems, cc: Column, mapping: ColumnMapping, c: s
         f"{head}: value is NaN (expected one of {list(allowed)}{hint})",
         f"{head}: unknown category (expected one of {known_labels}{list(allowed)})",
     )
-    report_kinds(problems, cc, k, heads)
+    k = report_kinds(problems, cc, kind, heads)
     near = {
         t: a
         for j, t in enumerate(cc.texts)
@@ -315,14 +314,14 @@ def _category_codes(problems: Problems, cc: Column, mapping: ColumnMapping, c: s
         for a in allowed
         if t.strip().lower() == a.lower()
     }
-    if near and (k == UNKNOWN).any():
+    if near and k is not None and (k == UNKNOWN).any():
         flags = " ".join(f"--label {c}:{t.strip()}={a}" for t, a in list(near.items())[:SHOWN])
         one = len(near) == 1
         problems.lines.append(
             f"hint: {', '.join(repr(t) for t in list(near)[:SHOWN])} {'is a label' if one else 'are labels'} written "
             f"in another case or with spaces: map {'it' if one else 'them'} with {flags} (or a mapping file's labels)"
         )
-    return lookup[cc.codes]
+    return cc.per_row(lookup)
 
 
 def _ratings(
@@ -379,16 +378,20 @@ def _participant_codes(pc_: Column) -> tuple[np.ndarray, list[str]]:
     first = np.full(len(pc_.texts), len(c), dtype=np.int64)
     change = np.flatnonzero(np.r_[True, c[1:] != c[:-1]]) if len(c) else np.zeros(0, dtype=np.int64)
     np.minimum.at(first, c[change], change)
-    ids: dict[str, int] = {}
+    seen = np.flatnonzero(valid & (first < len(c)))  # the valid values a row holds, by first row
+    seen = seen[np.argsort(first[seen], kind="stable")]
     lookup = np.full(len(pc_.texts), -1, dtype=np.int32)
-    for j in np.argsort(first, kind="stable"):
-        t = pc_.texts[j]
-        if valid[j] and first[j] < len(c):
-            lookup[j] = ids.setdefault(str(t), len(ids))
+    named = [str(pc_.texts[j]) for j in seen]
+    ids = dict.fromkeys(named)
+    if len(ids) == len(named):  # the usual case: one text per distinct value
+        lookup[seen] = np.arange(len(seen), dtype=np.int32)
+    else:  # values that read as the same id (' P1' and 'P1'): the first one's index
+        index = {t: i for i, t in enumerate(ids)}
+        lookup[seen] = [index[t] for t in named]
     used = int(c.max()) + 1 if len(c) else 0
     if c.dtype == np.int32 and np.array_equal(lookup[:used], np.arange(used)):
         return c, list(ids)  # the codes are the ids' indices already (a file's distinct values in order)
-    return lookup[c], list(ids)
+    return pc_.per_row(lookup), list(ids)
 
 
 def _equal(a: Column, b: Column) -> Column:
