@@ -187,3 +187,18 @@ def test_a_file_that_quotes_its_header_is_read_in_one_pass_from_the_start(tmp_pa
     text = HEADER.replace("participant", '"participant"') + rows(IDS)
     same_read(tmp_path, text)
     assert sources._csv_parts(tmp_path / "log.csv")[0] == [tmp_path / "log.csv"]
+
+
+def test_a_quoted_value_over_line_ends_at_a_block_end_is_one_value(tmp_path, monkeypatch):
+    """pyarrow's reader ends a block at its last line end; without newlines in values allowed, a
+    line end inside a quoted value there cut the row in two, and a valid file was refused with
+    rows of the wrong width (a log over 16 MB with a free-text column of several lines)."""
+    from trustseek.data import sources
+
+    monkeypatch.setattr(sources, "BLOCK_BYTES", 256)
+    lines = (HEADER + rows(IDS)).splitlines(keepends=True)
+    cell = '"' + "\n".join(["note"] * 40) + '"'
+    at = next(i for i in range(1, len(lines)) if len("".join(lines[:i])) > 200)
+    lines[at] = lines[at].rsplit(",", 1)[0] + "," + cell + "\n"
+    frame = same_read(tmp_path, "".join(lines))
+    assert len(frame) == 160 and frame["block"].iloc[at - 1] == cell.strip('"')

@@ -381,7 +381,11 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
                 read_options=pcsv.ReadOptions(
                     column_names=header, skip_rows=skip if i == 0 else 0, block_size=BLOCK_BYTES, use_threads=False
                 ),
-                parse_options=pcsv.ParseOptions(delimiter=sep, invalid_row_handler=handler, newlines_in_values=False),
+                parse_options=pcsv.ParseOptions(
+                    delimiter=sep,
+                    invalid_row_handler=handler,
+                    newlines_in_values=True,  # a quoted value may span lines
+                ),
                 convert_options=pcsv.ConvertOptions(
                     column_types=types,
                     null_values=[],
