@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import BarColumn, TextColumn, TimeElapsedColumn
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from .. import solvers
@@ -437,13 +437,7 @@ def reproduce(
         raise TrustseekError(problems)
     check_output(out, "--out", directory=True)
     t0 = time.perf_counter()
-    columns = (
-        TextColumn("[bold]{task.description:<44}"),
-        BarColumn(),
-        TextColumn("{task.percentage:>3.0f}%"),
-        TimeElapsedColumn(),
-    )
-    with progress_bar(quiet or as_json, *columns) as bar:
+    with _stages_bar(quiet or as_json) as bar:
         task = bar.add_task("experiment 1", total=1000)
 
         def progress(label: str, done: int, total: int) -> None:
@@ -459,6 +453,12 @@ def reproduce(
         return
     _print_reproduction(rep.summary)
     console.print(f"report: {paths['html']}  ({time.perf_counter() - t0:.1f} s)")
+
+
+def _stages_bar(quiet: bool) -> Progress:
+    """The reproduction's progress bar: the stage and its count, the share done, the time."""
+    columns = (TextColumn("[bold]{task.description:<44}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"))
+    return progress_bar(quiet, *columns, TimeElapsedColumn())
 
 
 def _print_reproduction(s: dict) -> None:
