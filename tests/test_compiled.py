@@ -151,3 +151,26 @@ def test_cached_code_calling_a_prange_loop_runs_first_in_a_fresh_process(tmp_pat
     assert [(o.returncode, o.stdout.strip()) for o in outs] == [(0, "3.0"), (0, "4.0"), (0, "4.0")], [
         o.stderr[-300:] for o in outs
     ]
+
+
+def test_a_compile_is_told_while_it_runs_and_a_cache_load_is_not():
+    """A first use after installation compiled for up to a minute behind a progress bar that stood
+    still; the command line now shows a line while numba compiles (``compiling_note``)."""
+    import numba
+
+    from trustseek.cli._app import COMPILING, progress_bar
+
+    compiled.load()
+    seen: list[bool] = []
+    with compiled.compiling_note(seen.append):
+        add = numba.njit(lambda x: x + 1)
+        add(1)  # compiled now: told, start and end
+        add(2)  # the same signature: nothing to compile
+    assert seen == [True, False]
+    lines: list[list[str]] = []
+    with progress_bar(True) as bar:  # (off: not a terminal; its tasks are kept all the same)
+        bar.add_task("restarts", total=3)
+        with compiled.compiling_note(lambda on: lines.append([t.description for t in bar.tasks])):
+            numba.njit(lambda x: x * 2)(1.5)
+        lines.append([t.description for t in bar.tasks])
+    assert lines == [["restarts", COMPILING], ["restarts"], ["restarts"]]

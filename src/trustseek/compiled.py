@@ -31,7 +31,18 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
 
-__all__ = ["AVAILABLE", "PARALLEL_LOCK", "load", "load_meanwhile", "loaded", "njit", "prange", "python", "set_threads"]
+__all__ = [
+    "AVAILABLE",
+    "PARALLEL_LOCK",
+    "compiling_note",
+    "load",
+    "load_meanwhile",
+    "loaded",
+    "njit",
+    "prange",
+    "python",
+    "set_threads",
+]
 
 _PACKAGE = Path(__file__).resolve().parent
 AVAILABLE = importlib.util.find_spec("numba") is not None  # numba is a declared dependency
@@ -42,6 +53,7 @@ _PENDING: list[_Lazy] = []  # decorated, not yet handed to numba
 _LOCK = threading.RLock()
 _LOADED = False
 PARALLEL_LOCK = threading.Lock()  # held around every call that runs a prange loop on several threads
+_NOTES: list[Callable[[bool], None]] = []  # told when numba starts and ends compiling (compiling_note)
 
 
 class _PRange:
@@ -97,6 +109,7 @@ def _load() -> None:
             # first crashed the process ("LLVM ERROR: Symbol not found: allocate_sched", or a segfault)
             numba.get_num_threads()
             _stamp_our_caches()
+            _listen_for_compiles()
         marker, prange = prange, numba.prange
         done = {id(lazy): lazy for lazy in _PENDING}
         for lazy in _PENDING:
@@ -111,6 +124,50 @@ def _load() -> None:
                 elif value is marker:
                     setattr(module, attr, numba.prange)
         _LOADED = True
+
+
+@contextmanager
+def compiling_note(note: Callable[[bool], None]) -> Iterator[None]:
+    """Within: ``note(True)`` when numba starts compiling (code its cache lacks: a first use after
+    installation or an upgrade, up to a minute) and ``note(False)`` when it is done; loading
+    compiled code from the cache says nothing.  Called on the thread that compiles."""
+    with _LOCK:
+        _NOTES.append(note)
+    try:
+        yield
+    finally:
+        with _LOCK:
+            _NOTES.remove(note)
+
+
+def _listen_for_compiles() -> None:
+    """Register with numba a listener that tells :data:`_NOTES` when the outermost compile starts
+    and ends (a compiled function compiles the ones it calls within its own compile)."""
+    from numba.core import event
+
+    depth = [0]
+    lock = threading.Lock()
+
+    def tell(on: bool) -> None:
+        for note in list(_NOTES):
+            note(on)
+
+    class Compiling(event.Listener):
+        def on_start(self, ev: Any) -> None:
+            with lock:
+                depth[0] += 1
+                first = depth[0] == 1
+            if first:
+                tell(True)
+
+        def on_end(self, ev: Any) -> None:
+            with lock:
+                depth[0] -= 1
+                last = depth[0] == 0
+            if last:
+                tell(False)
+
+    event.register("numba:compile", Compiling())
 
 
 #: the package's modules compiled code is made of: those with compiled functions and those whose

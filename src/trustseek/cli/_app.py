@@ -17,6 +17,7 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+from ..compiled import compiling_note
 from ..errors import TrustseekError
 from ._lazy import LazyGroup
 
@@ -160,15 +161,43 @@ def check_positive(value: float | None, option: str) -> None:
 # --------------------------------------------------------------------------- progress
 
 
+COMPILING = "compiling, once after installation (up to a minute)"
+
+
+class _Progress(Progress):
+    """Rich's progress display, with a line of its own while numba compiles (a first use after
+    installation: a bar that stood still for a minute looked hung)."""
+
+    def __enter__(self) -> _Progress:
+        super().__enter__()
+        self._compiling: Any = None
+        self._note = compiling_note(self.compiling)
+        self._note.__enter__()
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self._note.__exit__(*exc)
+        super().__exit__(*exc)
+
+    def compiling(self, on: bool) -> None:
+        """Show (``on``) or take away the line saying that numba compiles."""
+        if on and self._compiling is None:
+            self._compiling = self.add_task(COMPILING, total=None)
+        elif not on and self._compiling is not None:
+            self.remove_task(self._compiling)
+            self._compiling = None
+
+
 def progress_bar(quiet: bool, *columns: Any) -> Progress:
-    """The progress bar of a long run, on stderr: off with ``--quiet`` and when stderr is not a terminal."""
+    """The progress bar of a long run, on stderr: off with ``--quiet`` and when stderr is not a
+    terminal; while numba compiles, a line says so."""
     cols = columns or (
         TextColumn("{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
     )
-    return Progress(*cols, console=err_console, transient=True, disable=quiet or not err_console.is_terminal)
+    return _Progress(*cols, console=err_console, transient=True, disable=quiet or not err_console.is_terminal)
 
 
 @contextmanager
