@@ -125,16 +125,39 @@ def test_a_failing_pooled_estep_reaches_the_caller_and_stops_every_run(fail_at):
     assert not [t for t in threading.enumerate() if t.name.startswith("trustseek-fit")]
 
 
+class _Counting:
+    """A workspace that counts the parameter sets of its E-steps."""
+
+    def __init__(self, work):
+        self.work, self.sets = work, 0
+
+    def __getattr__(self, name):
+        return getattr(self.work, name)
+
+    def estep(self, p, active=None, posteriors=False):
+        self.sets += len(p.initial) if p.batched else 1
+        return self.work.estep(p, active, posteriors)
+
+
 def test_leaving_the_pooled_runs_early_stops_their_threads():
+    """The caller stops listening after the first run (an interrupt, an error of its own): the
+    other runs stop at their next E-step, and their threads are gone."""
     spec = paper_spec()
     seqs = encode(simulate_design(paper_model(), 6, seed=1), spec)
     s = Structure(spec, seqs)
     work = Workspace(seqs, *s.dims, method="loop")
-    runs = run_em(s, work, [s.random(np.random.default_rng(r)) for r in range(3)], tol=1e-3)
-    results = convergence.converge_runs(s, work, runs, FitOptions(restarts=3).run(True, True))
+    settings = FitOptions(restarts=3).run(True, True)
+    starts = run_em(s, work, [s.random(np.random.default_rng(r)) for r in range(3)], tol=1e-3)
+    first = next(convergence.converge_runs(s, work, starts[:1], settings))  # a stationary point
+    runs = [first, *starts[1:]]  # the first ends within a few E-steps, the others go on for many
+    full = _Counting(work)
+    assert all(r.converged for r in convergence.converge_runs(s, full, runs, settings))
+    cut = _Counting(work)
+    results = convergence.converge_runs(s, cut, runs, settings)
     assert next(results).converged
-    results.close()  # the caller stops listening (an interrupt, an error of its own)
+    results.close()
     assert not [t for t in threading.enumerate() if t.name.startswith("trustseek-fit")]
+    assert cut.sets < full.sets / 2, (cut.sets, full.sets)
 
 
 def blas_threads() -> list[int]:
