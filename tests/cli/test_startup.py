@@ -210,3 +210,14 @@ def test_every_option_name_is_whole_in_the_help_at_80_columns(monkeypatch):
         assert all(opt in out for opt in names), (name, [opt for opt in names if opt not in out])
         seen += len(names)
     assert seen > 100
+
+
+def test_on_a_narrow_terminal_the_help_text_keeps_a_readable_width(monkeypatch):
+    """Keeping the names whole at 40 columns left the help's column one letter wide: `reproduce
+    --help` ran to 1,036 lines, a letter each.  Below 60 columns the names may be cut again."""
+    from typer import rich_utils
+
+    monkeypatch.setattr(rich_utils, "MAX_WIDTH", 40)
+    code, out = run_cli(["reproduce", "--help"])
+    assert code == 0 and "Report" in out and "folder" in out
+    assert len(out.splitlines()) < 300, len(out.splitlines())

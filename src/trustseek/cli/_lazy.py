@@ -141,11 +141,14 @@ class WholeNamesCommand(typer.core.TyperCommand):
         super().format_help(ctx, formatter)
 
 
+WHOLE_NAMES_FROM = 60  # a table this wide or wider keeps every option's names whole
+
+
 @functools.cache
 def _options_table() -> Any:
-    """Rich's table, whose columns but the last two (type and help) do not wrap, and whose last
-    is one text that folds a word longer than the column (Typer's row of texts cut it with an
-    ellipsis: ``column:theirs=can…``)."""
+    """Rich's table, whose columns but the last two (type and help) do not wrap when it is
+    :data:`WHOLE_NAMES_FROM` columns wide or wider, and whose last is one text that folds a word
+    longer than the column (Typer's row of texts cut it with an ellipsis: ``column:theirs=can…``)."""
     from rich.columns import Columns
     from rich.table import Table
     from rich.text import Text
@@ -157,8 +160,12 @@ def _options_table() -> Any:
             if texts and len(texts) == len(last.renderables):
                 last = Text(" ", overflow="fold").join(texts)
             super().add_row(*rest, last, **options)
+
+        def __rich_console__(self, console: Any, options: Any) -> Any:
+            keep = options.max_width >= WHOLE_NAMES_FROM  # narrower, the help's column would be a letter wide
             for column in self.columns[:-2]:  # (the required mark and) the names; not the type and the help
-                column.no_wrap = True
+                column.no_wrap = keep
+            yield from super().__rich_console__(console, options)
 
     return OptionsTable
 
