@@ -1,26 +1,11 @@
-"""The baselines a model's one-step-ahead P(rely) is compared with (:mod:`.prediction`).
-
-Each sees what the model sees of the participant's past, and is estimated on the training
-trials only:
-
-* ``constant`` -- the rate of reliance in the training trials;
-* ``participant_rate`` -- the participant's reliance so far, a Beta prior of
-  :data:`PRIOR_WEIGHT` trials at the training rate (so the first trial gets the training rate);
-* ``last_action`` -- P(rely | the participant's previous action) (the first trial gets the
-  training rate);
-* ``reliable_fraction`` -- the fraction of the participant's earlier trials whose automation was
-  reliable (experience ``reliable``, Laplace-smoothed), turned into P(rely) by a logistic
-  regression;
-* ``one_level`` -- the model with one level and the model's own inputs: P(rely | the trial's
-  emission inputs), each combination's reliance rate (Laplace-smoothed);
-* ``inputs_logistic`` -- a logistic regression on the model's inputs: the trial's emission-input
-  combination and the previous trial's transition-input combination (one-hot, the first trial its
-  own category), with participant intercepts (ridge :data:`INTERCEPT_RIDGE`) where the
-  participant's trials are among the training trials (in-sample; held-out folds are by
-  participant, so a held-out participant gets none).
-
-A model whose named inputs inform its emissions is thus compared with models that see the same
-inputs and no hidden trust.
+"""The baselines a model's one-step-ahead P(rely) is compared with (:mod:`.prediction`), each seeing
+what the model sees of the participant's past and estimated on the training trials only:
+``constant`` (the training rate), ``participant_rate`` (the participant's rate so far, a prior of
+:data:`PRIOR_WEIGHT` trials at the training rate), ``last_action`` (P(rely | the previous action)),
+``reliable_fraction`` (a logistic regression on the smoothed fraction of reliable automation so far),
+``one_level`` (the one-level model: each emission-input combination's rate) and ``inputs_logistic``
+(a logistic regression on the model's inputs, with participant intercepts of ridge
+:data:`INTERCEPT_RIDGE` in-sample).  See docs/validation.md.
 """
 
 from __future__ import annotations
@@ -40,7 +25,7 @@ RIDGE = 1e-3  # ridge of the logistic regressions' shared coefficients
 INTERCEPT_RIDGE = 1.0  # ridge of the participant intercepts: shrunk toward the shared intercept
 
 
-def _spread(values: np.ndarray, seqs: Sequences, fill: float = np.nan) -> np.ndarray:
+def spread(values: np.ndarray, seqs: Sequences, fill: float = np.nan) -> np.ndarray:
     """A per-row array of the frame laid out (T, N) like ``seqs``."""
     out = np.full(seqs.rows.shape, fill, dtype=float)
     valid = seqs.rows >= 0
@@ -52,6 +37,26 @@ def _exclusive_cumsum(a: np.ndarray) -> np.ndarray:
     """Along trials: the sum over earlier trials (0 at the first)."""
     c = np.cumsum(a, axis=0)
     return c - a
+
+
+def indicators(frame: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    """Per row of ``frame``: 1 rely, 0 intervene (NaN unrecorded); 1 reliable, 0 faulty automation (NaN
+    unknown, every row without a recorded experience)."""
+    ha = frame["human_action"]
+    rely = np.where(ha.isna().to_numpy(), np.nan, (ha.astype(object) == "rely").to_numpy(dtype=float))
+    if "experience" not in frame or not frame["experience"].notna().any():
+        return rely, np.full(len(frame), np.nan)
+    ex = frame["experience"]
+    return rely, np.where(ex.isna().to_numpy(), np.nan, (ex.astype(object) == EXPERIENCES[1]).to_numpy(dtype=float))
+
+
+def running_rate(x: np.ndarray, inclusive: bool = False) -> np.ndarray:
+    """(T, N): the Laplace-smoothed rate (ones + 1) / (known + 2) of the finite 0/1 values of ``x``
+    over each participant's earlier trials (and the trial itself with ``inclusive``)."""
+    known = np.isfinite(x)
+    k, n = np.where(known, x, 0.0), known.astype(float)
+    k, n = (np.cumsum(k, axis=0), np.cumsum(n, axis=0)) if inclusive else (_exclusive_cumsum(k), _exclusive_cumsum(n))
+    return (k + 1.0) / (n + 2.0)
 
 
 def logistic(
@@ -115,9 +120,8 @@ class Features:
 def features(frame: pd.DataFrame, seqs: Sequences, determined: np.ndarray, n_ue: int, n_ut: int) -> Features:
     """The baselines' inputs of every trial of ``seqs`` (the model's ``n_ue`` emission and ``n_ut``
     transition input combinations; ``determined`` trials are not scored)."""
-    ha = frame["human_action"]
-    rely_row = np.where(ha.isna().to_numpy(), np.nan, (ha.astype(object) == "rely").to_numpy(dtype=float))
-    rely = _spread(rely_row, seqs)
+    rely_row, rel_row = indicators(frame)
+    rely = spread(rely_row, seqs)
     scored = np.isfinite(rely) & ~determined
     r = np.where(scored, rely, 0.0)
     rate_n = _exclusive_cumsum(scored.astype(float))
@@ -129,16 +133,7 @@ def features(frame: pd.DataFrame, seqs: Sequences, determined: np.ndarray, n_ue:
     for t in range(T):
         last[t] = cur
         cur = np.where(scored[t], rely[t], cur)
-    if "experience" in frame and frame["experience"].notna().any():
-        ex = frame["experience"]
-        rel_row = np.where(ex.isna().to_numpy(), np.nan, (ex.astype(object) == EXPERIENCES[1]).to_numpy(dtype=float))
-    else:
-        rel_row = np.full(len(frame), np.nan)
-    rel = _spread(rel_row, seqs)
-    known = np.isfinite(rel)
-    k = _exclusive_cumsum(np.where(known, rel, 0.0))
-    n = _exclusive_cumsum(known.astype(float))
-    f = (k + 1.0) / (n + 2.0)
+    f = running_rate(spread(rel_row, seqs))
     valid = seqs.rows >= 0
     ue = np.where(valid, seqs.ue, 0).astype(np.int64)
     ut_prev = np.full((T, N), n_ut, dtype=np.int64)

@@ -1,23 +1,12 @@
-"""Participant-level bootstrap of a fit: an interval for every cell of the model's tables.
+"""Participant-level bootstrap of a fit: an interval for every cell of the model's tables
+(:func:`cell_tables`: a TrustModel's, or a general model's own tables).
 
-The cells are a TrustModel's (a fit with the paper's inputs) or, for a model of other named
-inputs, the IOHMM's own tables (:func:`cell_tables`).
-
-Each replicate resamples participants with replacement and refits from the point
-estimate and a few random starts (the estimator of the point estimate: the best of
-several maxima).  Its levels are then matched to the point estimate's by the
-permutation that best reproduces it (:func:`align`), not named by the ordering rule
-alone: a replicate whose levels are close on the ordering cell would otherwise swap
-them and mix two levels' values in one interval.
-
-The interval of a cell is the percentile interval of the replicates, widened where
-needed to contain the point estimate (see :class:`Intervals`).  At a boundary the percentile
-interval cannot move: where the estimate of a free cell is 0 and every resample's own maximum
-is 0 too (the percentile interval is [0, 0]), the interval is the likelihood-ratio one instead
-(:func:`boundary_bounds`): every value whose profile log-likelihood (the rest refitted) is within
-:data:`BOUNDARY_DROP` of the maximum, the 95 % point of the chi-bar-square at a boundary.  Replicate b always
-uses the b-th child of the seed, so the intervals do not depend on how many processes
-compute them.
+Each replicate refits resampled participants from the estimate and a few random starts; its levels
+are matched to the estimate's (:func:`align`).  A cell's interval is the replicates' percentile
+interval widened to contain the estimate (:class:`Intervals`); a free cell at 0 that every resample
+leaves at 0 gets the likelihood-ratio interval instead (:func:`bound_zero_cells`, the drop
+:data:`BOUNDARY_DROP`).  Replicate b always uses the b-th child of the seed, whatever the number of
+processes.  See docs/fitting.md.
 """
 
 from __future__ import annotations
@@ -28,6 +17,7 @@ import os
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -37,6 +27,7 @@ from . import kernels
 from .em import run_em
 from .estep import Workspace
 from .iohmm import fit_iohmm
+from .mixture_em import MixtureStructure
 from .options import FitOptions, check_jobs
 from .ratings import make_structure
 from .sequences import Sequences
@@ -61,16 +52,11 @@ PROFILE_STEPS = 6  # bisection steps of a likelihood-ratio bound: to 1/64, the w
 
 
 def align(reference: Params, params: Params, weights: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
-    """The permutation of ``params``' levels that best matches ``reference``'s (for :meth:`Params.permuted`).
-
-    Level j of ``params`` is assigned to level i of ``reference`` so as to minimise the
-    sum over levels of a weighted squared distance between their rows: the initial
-    probability, every emission row, and the probability of staying at the level in
-    every transition row.  ``weights`` (``initial`` (K,), ``emission`` (Ue, K),
-    ``transition`` (Ut, K), e.g. the expected events behind each row) weigh the rows of
-    reference level i; by default every row counts once.  The assignment is exact
-    (Hungarian algorithm), whatever the number of levels.
-    """
+    """The permutation of ``params``' levels that best matches ``reference``'s (for :meth:`Params.permuted`):
+    the exact assignment (Hungarian algorithm) minimising the weighted squared distance of the levels'
+    initial probabilities, emission rows and probabilities of staying in every transition row;
+    ``weights`` (``initial`` (K,), ``emission`` (Ue, K), ``transition`` (Ut, K), e.g. the expected
+    events behind each row) weigh reference level i's rows, by default once each."""
     K = reference.initial.shape[-1]
     w = dict(weights or {})
     wi = np.asarray(w.get("initial", np.ones(K)), dtype=float)
@@ -90,37 +76,27 @@ def align(reference: Params, params: Params, weights: Mapping[str, np.ndarray] |
     return perm
 
 
-def cell_tables(spec: IOHMMSpec, params: Params) -> dict[str, np.ndarray]:
-    """The tables whose cells get intervals: a trust model's TrustModel arrays, or for a model of
-    other named inputs its own ``initial`` (K,), ``emission`` (Ue, K, Y), ``transition`` (Ut, K, K)."""
+def _trust_cells(spec: IOHMMSpec) -> bool:
+    """Whether ``spec``'s cells are a TrustModel's (else the IOHMM's own tables)."""
     try:
         check_convertible(spec)
     except FitError:
-        return {"initial": params.initial, "emission": params.emission, "transition": params.transition}
-    m = to_model(spec, params)
+        return False
+    return True
+
+
+def cell_tables(spec: IOHMMSpec, params: Params) -> dict[str, np.ndarray]:
+    """The tables whose cells get intervals: a trust model's TrustModel arrays, or for a model of
+    other named inputs its own ``initial`` (K,), ``emission`` (Ue, K, Y), ``transition`` (Ut, K, K)."""
+    m = to_model(spec, params) if _trust_cells(spec) else params
     return {name: getattr(m, name) for name in TABLES}
-
-
-def _held(structure: Structure, table: str, u: int, k: int, row: np.ndarray) -> Structure:
-    """``structure`` with row (u, k) of ``table`` (``em`` or ``tr``; its tie group with it) fixed to ``row``."""
-    held = copy.deepcopy(structure)
-    t: Table = getattr(held, table)
-    rows = np.flatnonzero(t.group == t.group[u])
-    t.fixed[rows, k, :] = True
-    t.values[rows, k, :] = row
-    t.gfixed, t.gvalues = t.fixed[t.rep], t.values[t.rep]
-    t.mass = 1.0 - np.where(t.gfixed, t.gvalues, 0.0).sum(-1)
-    t.free_cells = (~t.gfixed).sum(-1)
-    return held
 
 
 def cell_positions(spec: IOHMMSpec, ref: Mapping[str, np.ndarray], table: str, u: int, k: int, m: int) -> np.ndarray:
     """Where Params cell (u, k, m) of ``table`` lies in the flattened :func:`cell_tables` (all its copies)."""
     offset = {"initial": 0, "emission": ref["initial"].size, "transition": ref["initial"].size + ref["emission"].size}[table]
     shape = ref[table].shape
-    try:
-        check_convertible(spec)
-    except FitError:
+    if not _trust_cells(spec):
         return np.array([offset + np.ravel_multi_index((u, k, m), shape)])
     inputs = spec.emission_inputs if table == "emission" else spec.transition_inputs
     grid = index_grid(spec, inputs, table == "transition")  # TrustModel cell -> combination
@@ -148,23 +124,6 @@ def profile_bound(est: np.ndarray, m: int, top: float, refit: Callable[[np.ndarr
         mid = (a + b) / 2
         a, b = (mid, b) if drop(mid) <= BOUNDARY_DROP else (a, mid)
     return b
-
-
-def _profile_bound(work: Workspace, structure: Structure, params: Params, table: str, u: int, k: int, m: int) -> float:
-    """:func:`profile_bound` of free cell (u, k, m) of a single model, the other cells refitted by EM."""
-    name = TABLE_NAMES[table]
-
-    def refit(row: np.ndarray) -> float:
-        held = _held(structure, table, u, k, row)
-        start = Params(params.initial.copy(), params.emission.copy(), params.transition.copy())
-        getattr(start, name)[getattr(held, table).group == getattr(held, table).group[u], k] = row
-        try:
-            (r,) = run_em(held, work, [held.project(start)], tol=1e-5, max_iter=200)
-        except FitError:  # the data impossible at this value
-            return -np.inf
-        return float(r.loglik)
-
-    return profile_bound(getattr(params, name)[u, k], m, float(np.sum(work.estep(params).loglik)), refit)
 
 
 def few_resamples(replicates: int, level: float) -> list[str]:
@@ -206,26 +165,82 @@ def cells_at_zero(
                         yield table, t, int(u), k, int(m), pos
 
 
+def _held_loglik(
+    hold: Callable[[np.ndarray], Structure], work: Workspace, params: Params, name: str, index: tuple, row: np.ndarray
+) -> float:
+    """The largest log-likelihood with a row of table ``name`` held at ``row`` (``hold(row)``: the structure
+    keeping it, ``index``: where it lies in ``params``): EM from ``params``; ``-inf`` where the data are impossible."""
+    held = hold(row)
+    start = type(params)(params.initial.copy(), params.emission.copy(), params.transition.copy())
+    getattr(start, name)[index] = row
+    try:
+        (r,) = run_em(held, work, [held.project(start)], tol=1e-5, max_iter=200)
+    except FitError:  # the data impossible at this value
+        return -np.inf
+    return float(r.loglik)
+
+
+def bound_zero_cells(
+    structure: Structure,
+    work: Workspace,
+    spec: IOHMMSpec,
+    params: Params,
+    types: Sequence[Params],
+    lo: np.ndarray,
+    hi: np.ndarray,
+    hold: Callable[..., Structure],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Likelihood-ratio intervals (:func:`profile_bound`, the rest refitted by EM from ``params``) for the
+    free cells of each of ``types`` (a single model's, or a mixture's types: ``lo``, ``hi`` hold each one's
+    flattened :func:`cell_tables` in turn) estimated at 0 whose bootstrap interval is [0, 0]; a row's other
+    free cell, if it has just one, gets the mirror bound.  A part the types share is bounded once, with
+    type 0's.  ``hold(table, which, rows, k, row)`` is the structure keeping those rows at ``row`` (``which``:
+    the type, a slice for a shared part, None for a single model).  The new bounds, the cells bounded and
+    their mirrors."""
+    top = float(np.sum(work.estep(params).loglik))
+    mixture = isinstance(structure, MixtureStructure)
+    per = len(lo) // len(types)
+    lo, hi = lo.copy(), hi.copy()
+    bounded, mirrored = np.zeros(lo.shape, dtype=bool), np.zeros(lo.shape, dtype=bool)
+    for m, p in enumerate(types):
+        ref = cell_tables(spec, p)
+        for table, t, u, k, c, pos in cells_at_zero(structure, spec, p):
+            name = TABLE_NAMES[table]
+            shared = isinstance(structure, MixtureStructure) and structure.shared(name)
+            if (shared and m > 0) or np.any(hi[m * per + pos] >= BOUNDARY):
+                continue  # a shared cell is bounded once, with type 0's
+            rows = np.flatnonzero(t.group == t.group[u])
+            which = (slice(None) if shared else m) if mixture else None
+            index = (rows, k) if which is None else (which, rows, k)
+            refit = partial(_held_loglik, partial(hold, table, which, rows, k), work, params, name, index)
+            bound = profile_bound(getattr(p, name)[u, k], c, top, refit)
+            mirror = cell_positions(spec, ref, name, u, k, 1 - c) if t.M == 2 else pos[:0]  # a row of two cells
+            for at in (mm * per for mm in (range(len(types)) if shared else (m,))):
+                hi[at + pos], bounded[at + pos] = bound, True
+                lo[at + mirror], mirrored[at + mirror] = np.minimum(lo[at + mirror], 1.0 - bound), True
+    return lo, hi, bounded, mirrored
+
+
+def _hold_row(structure: Structure, table: str, _which: None, rows: np.ndarray, k: int, row: np.ndarray) -> Structure:
+    """``structure`` with rows ``rows`` (a tie group), level ``k`` of ``table`` (``em`` or ``tr``) fixed to ``row``."""
+    held = copy.deepcopy(structure)
+    t: Table = getattr(held, table)
+    t.fixed[rows, k, :] = True
+    t.values[rows, k, :] = row
+    t.gfixed, t.gvalues = t.fixed[t.rep], t.values[t.rep]
+    t.mass = 1.0 - np.where(t.gfixed, t.gvalues, 0.0).sum(-1)
+    t.free_cells = (~t.gfixed).sum(-1)
+    return held
+
+
 def boundary_bounds(
     seqs: Sequences, spec: IOHMMSpec, params: Params, lo: np.ndarray, hi: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Likelihood-ratio intervals for the free emission and transition cells estimated at 0 whose
-    bootstrap interval is [0, 0] (flattened :func:`cell_tables`); a row's other free cell, if it has
-    just one, gets the mirror bound.  The new lower and upper bounds, and the cells they changed."""
+    """:func:`bound_zero_cells` of a single model: the new lower and upper bounds, and the cells they changed."""
     structure = make_structure(spec, seqs)
     work = Workspace(seqs, *structure.dims, threads=1)
-    ref = cell_tables(spec, params)
-    lo, hi, moved = lo.copy(), hi.copy(), np.zeros(lo.shape, dtype=bool)
-    for table, t, u, k, m, pos in cells_at_zero(structure, spec, params):
-        if np.any(hi[pos] >= BOUNDARY):
-            continue
-        bound = _profile_bound(work, structure, params, table, u, k, m)
-        hi[pos], moved[pos] = bound, True
-        if t.M == 2:
-            name = TABLE_NAMES[table]
-            mirror = cell_positions(spec, ref, name, u, k, 1 - m)
-            lo[mirror], moved[mirror] = np.minimum(lo[mirror], 1.0 - bound), True
-    return lo, hi, moved
+    lo, hi, bounded, mirrored = bound_zero_cells(structure, work, spec, params, [params], lo, hi, partial(_hold_row, structure))
+    return lo, hi, bounded | mirrored
 
 
 def resample(seqs: Sequences, seed: np.random.SeedSequence, options: FitOptions) -> tuple[Sequences, FitOptions]:
@@ -238,52 +253,64 @@ def resample(seqs: Sequences, seed: np.random.SeedSequence, options: FitOptions)
 
 @dataclass(frozen=True)
 class _Replicate:
-    """One bootstrap replicate, sent whole to a worker process."""
+    """One bootstrap replicate, sent whole to a worker process: ``refit(sample, options)`` (picklable)
+    on the resample of ``seed`` (:func:`resample`)."""
 
     seqs: Sequences
-    spec: IOHMMSpec
-    params: Params
-    weights: Mapping[str, np.ndarray]
     seed: np.random.SeedSequence
     options: FitOptions  # the refit's search (its seed: the replicate's)
+    refit: Callable[[Sequences, FitOptions], Any]
     compiled: bool = False  # every replicate compiled (the bootstrap as a whole pays for it)
 
-    def run(self) -> tuple[np.ndarray, bool]:
-        """The refitted model's cells (:func:`cell_tables`), flattened table after table, levels aligned to the estimate;
-        and whether a random start found a higher maximum than the refit continued from the estimate."""
+    def run(self) -> Any:
+        sample, options = resample(self.seqs, self.seed, self.options)
         if self.compiled:
             with kernels.many_fits():
-                return self._run()
-        return self._run()
+                return self.refit(sample, options)
+        return self.refit(sample, options)
 
-    def _run(self) -> tuple[np.ndarray, bool]:
-        sample, options = resample(self.seqs, self.seed, self.options)
-        fit = fit_iohmm(
-            sample,
-            self.spec,
-            options,
-            init=[self.params],
-        )
-        p = fit.params.permuted(align(self.params, fit.params, self.weights))
-        tables = cell_tables(self.spec, p)
-        other = fit.runs[fit.best].objective - fit.runs[0].objective > OTHER_MAXIMUM
-        return np.concatenate([tables[name].ravel() for name in TABLES]), bool(other)
+
+def _refit(spec: IOHMMSpec, params: Params, weights: Mapping[str, np.ndarray], sample: Sequences, options: FitOptions):
+    """The refitted model's cells (:func:`flat_cells`), levels aligned to the estimate; and whether a
+    random start found a higher maximum than the refit continued from the estimate."""
+    fit = fit_iohmm(sample, spec, options, init=[params])
+    p = fit.params.permuted(align(params, fit.params, weights))
+    other = fit.runs[fit.best].objective - fit.runs[0].objective > OTHER_MAXIMUM
+    return flat_cells(cell_tables(spec, p)), bool(other)
+
+
+def flat_cells(tables: Mapping[str, Any]) -> np.ndarray:
+    """The cells of ``tables`` (:data:`TABLES`), flattened table after table."""
+    return np.concatenate([np.asarray(tables[name], dtype=float).ravel() for name in TABLES])
+
+
+def split_cells(flat: np.ndarray, shapes: Mapping[str, tuple[int, ...]]) -> dict[str, np.ndarray]:
+    """``flat`` (..., cells) cut back into tables of ``shapes``, table after table."""
+    out, pos = {}, 0
+    for name in TABLES:
+        size = int(np.prod(shapes[name]))
+        out[name] = flat[..., pos : pos + size].reshape(*flat.shape[:-1], *shapes[name])
+        pos += size
+    return out
+
+
+def percentile_bounds(flat: np.ndarray, est: np.ndarray, level: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The percentile interval at ``level`` of the replicates ``flat`` (B, cells), widened to contain the
+    estimate ``est``, and where it had to be."""
+    alpha = (1 - level) / 2
+    lo, hi = np.quantile(flat, [alpha, 1 - alpha], axis=0)
+    # outside by more than rounding: a cell on the stick-breaking boundary sits at 1e-12 times the
+    # row's free mass, which differs between the estimate and a replicate in the 17th decimal
+    widened = (est < lo - OUTSIDE) | (est > hi + OUTSIDE)
+    return np.minimum(lo, est), np.maximum(hi, est), widened
 
 
 @dataclass
 class Intervals:
-    """Bootstrap intervals for every cell of the model's tables, and what they rest on.
-
-    ``intervals[table] = (lower, upper)``: the percentile interval at ``level`` of the
-    ``replicates`` refits, widened to contain the point estimate where it did not
-    (``widened[table]``, True for those cells).  A percentile interval that leaves out
-    the estimate means the replicates' distribution is not centred on it; on these
-    data that happens when the likelihood has another maximum almost as high, which
-    many resamples prefer (``other_maximum`` counts the replicates in which a random
-    start beat the refit continued from the estimate).  The estimate maximises the
-    likelihood, so no likelihood-based test rejects it; the widened interval contains
-    the percentile interval, so its coverage is at least that interval's.
-    """
+    """Bootstrap intervals for every cell of the model's tables, and what they rest on:
+    ``intervals[table] = (lower, upper)``, the percentile interval at ``level`` of the ``replicates``
+    refits, widened to contain the estimate where it did not (``widened[table]``; ``other_maximum``:
+    the replicates in which a random start beat the refit continued from the estimate)."""
 
     intervals: dict[str, tuple[np.ndarray, np.ndarray]]
     replicates: int
@@ -326,16 +353,11 @@ def bootstrap(
     progress: Callable[[str, int, int], None] | None = None,
     weights: Mapping[str, np.ndarray] | None = None,
 ) -> Intervals:
-    """Intervals at ``level`` for every cell (:func:`cell_tables`) of the fit ``params``, over ``replicates`` resamples.
-
-    ``weights`` are passed to :func:`align` (the fit's expected events behind each row
-    are a good choice).  Each replicate refits from the estimate and ``options.restarts`` random
-    starts (:class:`~.options.FitOptions`, seeded from ``options.seed``) over ``options.n_jobs``
-    processes (default: all cores);
-    ``progress("bootstrap", done, replicates)`` is called as each one finishes.  Fewer than :data:`MIN_REPLICATES`
-    resamples for a 95 % interval are allowed (tests, quick looks) but logged
-    and named in :meth:`Intervals.notes`.
-    """
+    """Intervals at ``level`` for every cell (:func:`cell_tables`) of the fit ``params``, over ``replicates``
+    resamples, each refitted from the estimate and ``options.restarts`` random starts over ``options.n_jobs``
+    processes (default: all cores); ``weights`` go to :func:`align`; ``progress("bootstrap", done,
+    replicates)`` is called as each finishes.  Fewer than :data:`MIN_REPLICATES` resamples are named
+    in :meth:`Intervals.notes`."""
     if replicates < 1:
         raise ValueError(f"the bootstrap needs at least one replicate, got {replicates}")
     if replicates < MIN_REPLICATES and level >= LEVEL:
@@ -358,32 +380,24 @@ def bootstrap(
         seqs.n_participants,
         min(processes(options), replicates),
     )
-    results = replicate(lambda ch: _Replicate(seqs, spec, params, w, ch, options, compiled), replicates, options, done)
+    results = replicate(partial(_refit, spec, params, w), seqs, replicates, options, done, compiled)
     flat = np.vstack([r[0] for r in results])
-    other = sum(r[1] for r in results)
-    alpha = (1 - level) / 2
-    lo, hi = np.quantile(flat, [alpha, 1 - alpha], axis=0)
     ref = cell_tables(spec, params)
-    est = np.concatenate([ref[name].ravel() for name in TABLES])
-    # outside by more than rounding: a cell on the stick-breaking boundary sits at 1e-12 times the
-    # row's free mass, which differs between the estimate and a replicate in the 17th decimal
-    widened = (est < lo - OUTSIDE) | (est > hi + OUTSIDE)
-    lo, hi = np.minimum(lo, est), np.maximum(hi, est)
+    shapes = {name: ref[name].shape for name in TABLES}
+    lo, hi, widened = percentile_bounds(flat, flat_cells(ref), level)
     lo, hi, at_boundary = boundary_bounds(seqs, spec, params, lo, hi)
-    intervals, wide, draws, likelihood = {}, {}, {}, {}
-    pos = 0
-    for name in TABLES:
-        shape = ref[name].shape
-        size = int(np.prod(shape))
-        cut = slice(pos, pos + size)
-        intervals[name] = (lo[cut].reshape(shape), hi[cut].reshape(shape))
-        wide[name] = widened[cut].reshape(shape)
-        likelihood[name] = at_boundary[cut].reshape(shape)
-        draws[name] = flat[:, cut].reshape((replicates, *shape))
-        pos += size
+    los, his = split_cells(lo, shapes), split_cells(hi, shapes)
     if widened.any():
         log.info("bootstrap: %d cell interval(s) widened to contain the estimate", int(widened.sum()))
-    return Intervals(intervals, replicates, level, wide, int(other), draws, likelihood)
+    return Intervals(
+        {name: (los[name], his[name]) for name in TABLES},
+        replicates,
+        level,
+        split_cells(widened, shapes),
+        int(sum(r[1] for r in results)),
+        split_cells(flat, shapes),
+        split_cells(at_boundary, shapes),
+    )
 
 
 def processes(options: FitOptions) -> int:
@@ -392,31 +406,31 @@ def processes(options: FitOptions) -> int:
 
 
 def replicate(
-    job: Callable[[np.random.SeedSequence], Any], replicates: int, options: FitOptions, done: Callable[[int, int], None]
+    refit: Callable[[Sequences, FitOptions], Any],
+    seqs: Sequences,
+    replicates: int,
+    options: FitOptions,
+    done: Callable[[int, int], None],
+    compiled: bool = False,
 ) -> list[Any]:
-    """Every replicate's result, in order: replicate b runs ``job(seed)`` with the b-th child of
-    ``options.seed`` (whatever the number of processes), over :func:`processes`; ``done(b, finished)``
-    is called as each finishes."""
-    children = np.random.SeedSequence([options.seed_number, 1]).spawn(replicates)
+    """Every replicate's ``refit`` (:class:`_Replicate`), in order: replicate b resamples with the b-th
+    child of ``options.seed`` (whatever the number of processes), over :func:`processes` (in this
+    process for one); ``done(b, finished)`` is called as each finishes."""
+    jobs = [
+        _Replicate(seqs, ch, options, refit, compiled)
+        for ch in np.random.SeedSequence([options.seed_number, 1]).spawn(replicates)
+    ]
     results: dict[int, Any] = {}
-
-    def finished(i: int, res: Any) -> None:
-        results[i] = res
-        done(i, len(results))
-
-    run_replicates([job(ch) for ch in children], processes(options), finished)
-    return [results[i] for i in range(replicates)]
-
-
-def run_replicates(jobs: Sequence[Any], n_jobs: int, done: Callable[[int, Any], None]) -> None:
-    """Each job's ``run()``, in this process or over ``n_jobs`` processes (never more than there
-    are jobs); ``done(i, result)`` is called as job ``i`` finishes (in order in this process)."""
+    n_jobs = processes(options)
     if n_jobs <= 1 or len(jobs) == 1:
         for i, job in enumerate(jobs):
-            done(i, job.run())
-        return
+            results[i] = job.run()
+            done(i, len(results))
+        return [results[i] for i in range(replicates)]
     check_jobs(n_jobs)
     with ProcessPoolExecutor(max_workers=min(n_jobs, len(jobs))) as ex:
         futures = {ex.submit(job.run): i for i, job in enumerate(jobs)}
         for f in as_completed(futures):
-            done(futures[f], f.result())
+            results[futures[f]] = f.result()
+            done(futures[f], len(results))
+    return [results[i] for i in range(replicates)]

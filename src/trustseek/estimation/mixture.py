@@ -1,33 +1,13 @@
 """Supervisor types: a mixture of M trust IOHMMs, each participant one latent type (Remark 1).
 
-Every type has the structure of the pooled model (the same inputs, fixed cells, ties and
-rows no event reaches): trust models for the paper's inputs, general models
-(``trustseek.iohmm/1``) for a study's named inputs, as the pooled fit (:func:`~.trust_iohmm.inputs_spec`);
-a participant's whole sequence comes from one type.  The mixture
-is written as M IOHMMs whose initial rows hold the joint P(type, S_1): type m's row sums to
-its weight w_m.  The EM of the pooled fit then applies unchanged (:func:`~.em.run_em` with
-SQUAREM, the L-BFGS-B finish and the stationarity check of :mod:`.convergence`): per
-participant the forward pass of every type gives log P(sequence, type) and the type
-responsibilities (log-sum-exp), and each type's backward pass adds its expected counts
-weighted by the responsibility (one compiled pass, :meth:`~.kernels.Kernel.run_mixture`).
-The M-step normalises the joint initial table over (type, level), so a type's weight is its
-mean responsibility, and the other tables per type.  Parts named shared (``differ`` leaves
-them out) pool their counts over the types and are one table for all.
-
-With M = 1 every step is the pooled fit's, operation for operation: the same starts, the
-same E-step sums, the same M-step; the result equals :func:`~.iohmm.fit_iohmm`'s.
-
-**Naming the types.**  Within each type the levels are named by the spec's rule (one
-order for all types when a part is shared, from the weight-averaged tables).  Types are
-then ordered by their mean P(rely) (the spec's ``order_by`` category) over the free
-emission rows the data reach and over the levels, lowest first: ``type1`` relies least
-(the most conservative).  Ties (to 1e-9: e.g. shared emissions) are broken by P(T1 =
-highest level), then by the mean probability of moving to or staying at the highest level
-over the free transition rows the data reach, then by weight (largest first).
-
-A type whose weight falls to zero (fewer than :data:`EMPTY` expected participants) is
-*empty*: it is kept, reported in :attr:`MixtureFit.empty_types` and the warnings, and its
-initial row (undefined at weight zero) is written uniform.
+Every type has the pooled model's structure (trust models for the paper's inputs, general models
+for a study's named inputs, :func:`~.trust_iohmm.inputs_spec`); a participant's whole sequence comes
+from one type.  The M IOHMMs' initial rows hold the joint P(type, S_1), so the pooled fit's EM
+applies unchanged (:mod:`.mixture_em`); with M = 1 it is the pooled fit, operation for operation.
+Within each type the levels are named by the spec's rule; the types are ordered by their mean
+P(rely), lowest first (:meth:`~.mixture_em.MixtureStructure.type_order`).  A type of fewer than
+:data:`~.mixture_em.EMPTY` expected participants is *empty*: kept, reported, its initial row uniform.
+See docs/types.md.
 """
 
 from __future__ import annotations

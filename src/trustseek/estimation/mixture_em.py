@@ -1,9 +1,7 @@
-"""The EM components of supervisor types (:mod:`.mixture`): the M types' tables
-(:class:`MixtureParams`), the E-step over types (:class:`MixtureEStep`: the forward pass of every
-type per participant, the responsibilities, the weighted backward passes), the structure that
-normalises the joint initial table over (type, level) and pools the shared parts
-(:class:`MixtureStructure`), and the workspace that runs them compiled or in numpy
-(:class:`MixtureWorkspace`).  With M = 1 each is the pooled fit's, operation for operation."""
+"""The EM components of supervisor types (:mod:`.mixture`): the types' tables (:class:`MixtureParams`),
+the E-step over types (:class:`MixtureEStep`), the structure that normalises the joint initial table
+over (type, level) and pools the shared parts (:class:`MixtureStructure`), and the compiled
+workspace (:class:`MixtureWorkspace`).  With M = 1 each is the pooled fit's, operation for operation."""
 
 from __future__ import annotations
 

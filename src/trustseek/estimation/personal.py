@@ -1,50 +1,15 @@
 """Per-person trust models: each participant's MAP estimate, shrunk toward a centre model.
 
-The centre is the pooled model, or with supervisor types (a
-:class:`~trustseek.model.mixture.TypeMixture`) the participant's most probable type.  Every
-free row of participant n's model gets a Dirichlet prior Dirichlet(s t) with t the centre's
-row (over the row's usable cells: free, and positive in the centre, renormalised), so the
-M-step is ``(expected counts + s t) / total`` (for a row with observed counts, the posterior
-mean under Dirichlet(s t)): a row the participant's trials never reach
-stays the centre's, and a row they reach often moves toward their own counts.  Tied rows
-share one prior and one estimate; fixed cells stay fixed; a zero of the centre stays zero.
-
-**The strength s** is estimated from the data, **one s per table** (emission, transition),
-in one of two ways.  The initial table keeps the centre's row (s = :data:`S_MAX`) unless s is
-given: each participant's trials are a single draw from their initial row, and a single draw
-has the centre's probabilities whatever s is, so the data carry no information on it.
-
-``held-out`` (the default): each participant's trials are split into :data:`FOLDS` blocks of
-consecutive trials; for each block, every participant's MAP is fitted with that block's
-actions unobserved and scores log p(block | the other blocks) (the forward-backward
-likelihood of all actions minus that of the others).  Summed over blocks and participants,
-this held-out log-likelihood is maximised over a log grid of s per table (decades from
-:data:`S_MAX` down to :data:`S_MIN`, refined by half and quarter decades, one table at a
-time), and the largest s within one standard error of the best is kept (the paired
-differences over participants): a noisy gain does not personalise.  At :data:`S_MAX` the
-table is reported as at the bound (the personal models are the centre there).
-
-``variational``: variational empirical Bayes (MacKay 1997; Beal 2003, ch. 3).  For given
-strengths each participant's posterior is approximated by q(theta_n) q(levels_n), with
-q(theta_n) a Dirichlet per row whose parameters are ``s t + expected counts`` and
-q(levels_n) the forward-backward posterior under the sub-normalised tables
-exp(E_q[log theta_n]); the bound on log p(trials of n | s),
-
-    F_n(s) = log Z_n - KL(q(theta_n) || Dirichlet(s t)),
-
-(Z_n: the forward-backward normaliser under those tables) is maximised over q by alternating
-the two updates (it never decreases) and ``sum_n F_n`` over log s (a grid per table, then
-L-BFGS-B with the exact gradient at the converged q).  With known levels the bound is the
-evidence.  With hidden levels it is below the evidence by a gap that grows as s gets small
-(q ignores how the levels and the rows depend on each other), so it shrinks more than the
-data call for; measured (docs/types.md): on two supervisor types around their pooled fit it
-keeps every s at the bound while the held-out estimate finds finite s and models that
-predict new trials better.
-
-Each participant's MAP is the EM of the pooled fit (:func:`~.em.run_em`, SQUAREM), one
-parameter set per participant, each run on that participant's trials only (the compiled
-pass :meth:`~.kernels.Kernel.run_each`), from the centre; the variational E-steps use the
-same pass.
+The centre is the pooled model, or with supervisor types (a :class:`~trustseek.model.mixture.TypeMixture`)
+the participant's most probable type.  Every free row of participant n's model gets the prior
+Dirichlet(s t), t the centre's row over its usable cells (free, and positive in the centre): the
+M-step is ``(expected counts + s t) / total``; tied rows share one prior, fixed cells and the
+centre's zeros stay.  One strength s per table (emission, transition; the initial table keeps the
+centre's, a single draw per participant carries no information on it), estimated ``held-out``
+(:class:`_CrossValidation`: blocks of each participant's trials, a log grid of s, the one-standard-error
+rule) or ``variational`` (:class:`_Evidence`: variational empirical Bayes, MacKay 1997; Beal 2003,
+ch. 3), as docs/types.md describes and measures.  Each participant's MAP is the pooled fit's EM
+(:func:`~.em.run_em`) on their trials only (the compiled pass :meth:`~.kernels.Kernel.run_each`).
 """
 
 from __future__ import annotations
@@ -346,11 +311,7 @@ class _Prepared:
         else:
             types = np.zeros(N, dtype=np.int64)
         each = [mp.type_params(m) for m in range(mixture.n_types)]
-        centre = Params(
-            np.stack([each[i].initial for i in types]),
-            np.stack([each[i].emission for i in types]),
-            np.stack([each[i].transition for i in types]),
-        )
+        centre = Params.stack([each[i] for i in types])
         work = _PersonalWorkspace(seqs, *base.dims, method="numba", threads=n_jobs or 1)
         start = base.project(centre)
         rows = {

@@ -1,29 +1,12 @@
 """How well a trust model predicts: one-step-ahead P(rely) by filtering, against simple baselines.
 
-For every trial t of a participant the model's prediction is
-
-    P(o_t = rely | trials 1..t-1, C_t, a_t) = sum_k P(T_t = k | trials 1..t-1) P(rely | T_t = k, C_t, a_t)
-
-with the belief from the participant's earlier trials only (the forward filter, never the
-smoothed posterior, which would look at the trial itself and later ones).  Baselines
-(:data:`~.baselines.BASELINES`, :mod:`.baselines`) see the same past: the rate of reliance,
-the participant's rate so far, the previous action, the fraction of reliable automation so
-far, and -- a fair comparison for a model with named inputs -- the one-level model and a
-logistic regression on the model's own inputs (with participant intercepts in-sample).
-
-Trials whose emission row gives every trust level the same certain P(rely), 0 or 1 (the paper
-preset fixes P(intervene | ask) = 1), are no prediction of behaviour: they are counted
-separately and left out of every score, for the model and the baselines alike.  Trials without
-a recorded human action are not scored either (the filter passes over them).
-
-Scores: log-loss (nats per trial, predictions clipped to [:data:`EPS`, 1 - EPS]), Brier score
-and AUC (rank formula, ties counted one half), each with a participant-bootstrap percentile
-interval, and the paired difference model - baseline on the same resamples.
-
-Evaluation is in-sample under a given model (:func:`predict_in_sample`) or by held-out
-participants (:func:`predict_heldout`): k folds of participants, seeded; each fold is predicted
-by a model fitted to the other folds with the given fit settings, and the baselines are
-estimated on the same training folds.
+For trial t the model predicts sum_k P(T_t = k | trials 1..t-1) P(rely | T_t = k, C_t, a_t), the
+belief from the forward filter (never the smoothed posterior); the baselines (:mod:`.baselines`) see
+the same past.  Trials whose emission row fixes P(rely) at 0 or 1 for every level, and trials without
+a recorded human action, are not scored.  Scores: log-loss (clipped to [:data:`EPS`, 1 - EPS]),
+Brier and AUC, with participant-bootstrap percentile intervals and the paired differences model -
+baseline; in-sample (:func:`predict_in_sample`) or on held-out folds of participants
+(:func:`predict_heldout`).  See docs/validation.md.
 """
 
 from __future__ import annotations
@@ -197,20 +180,25 @@ def score(
         for m in METRICS:
             lo, hi = percentile_interval(reps[name][m])
             metrics[name][m] = {"estimate": point[name][m], "lower": lo, "upper": hi}
-    diffs: dict[str, dict[str, dict[str, Any]]] = {}
-    for base in (b for b in predictions if b != "model"):
-        diffs[base] = {}
-        for m in METRICS:
-            lo, hi = percentile_interval(reps["model"][m] - reps[base][m])
-            est = point["model"][m] - point[base][m]
-            better = "neither"
-            if np.isfinite(lo) and np.isfinite(hi):
-                if LOWER_IS_BETTER[m]:
-                    better = "model" if hi < 0 else "baseline" if lo > 0 else "neither"
-                else:
-                    better = "model" if lo > 0 else "baseline" if hi < 0 else "neither"
-            diffs[base][m] = {"estimate": est, "lower": lo, "upper": hi, "better": better}
+    diffs = {
+        base: {
+            m: paired(point["model"][m] - point[base][m], reps["model"][m] - reps[base][m], LOWER_IS_BETTER[m]) for m in METRICS
+        }
+        for base in predictions
+        if base != "model"
+    }
     return metrics, diffs
+
+
+def paired(estimate: float, reps: np.ndarray, lower_is_better: bool = False, ours: str = "model") -> dict[str, Any]:
+    """A difference ``ours`` - baseline: its ``estimate``, the percentile interval of its resamples ``reps``
+    and which of the two is better (``neither`` where the interval includes 0)."""
+    lo, hi = percentile_interval(reps)
+    better = "neither"
+    if np.isfinite(lo) and np.isfinite(hi):
+        good, bad = (hi < 0, lo > 0) if lower_is_better else (lo > 0, hi < 0)
+        better = ours if good else "baseline" if bad else "neither"
+    return {"estimate": estimate, "lower": lo, "upper": hi, "better": better}
 
 
 # --------------------------------------------------------------------------- reports

@@ -1,24 +1,11 @@
 """A self-reported rating as a second emission of the hidden level, through one joint output.
 
-A spec with a ``rating`` (:class:`~.spec.IOHMMSpec`) emits two outputs per trial: the
-output y (the human action), P(y | S = k, u) with its inputs u, and the rating r,
-P(r | S = k), one free categorical row per level.  The E-step sees one joint output with
-(M + 1) x (R + 1) categories, "missing" being a category of each factor:
-
-    joint[u, k, (y, r)]              = P(y | k, u) P(r | k)
-    joint[u, k, (y, missing)]        = P(y | k, u)
-    joint[u, k, (missing, r)]        = P(r | k)
-    joint[u, k, (missing, missing)]  = 1          (never looked up: such a trial is unobserved)
-
-so a missing rating or a missing action contributes probability 1 as a factor, and the
-compiled E-step runs unchanged (its emission lookups need no normalised rows).  The M-step
-marginalises the expected counts per joint category to each factor and maximises each in
-closed form: the output's rows with the structure of the spec (fixed cells, ties, rows no
-event reaches), the rating's rows as free categoricals (plus the prior's pseudo-counts).
-SQUAREM extrapolates the joint table and :meth:`RatingStructure.project` reads the factors
-back from their own cells, so every accepted point factorises.  The L-BFGS-B finish works on
-one table's free cells and is not used for such specs: their runs are EM (with SQUAREM) to
-the fit's tolerance, then the same stationarity check (:mod:`.convergence`).
+With a ``rating`` (:class:`~.spec.IOHMMSpec`) the E-step sees one output of (M + 1) x (R + 1)
+categories, "missing" a category of each factor: joint[u, k, (y, r)] = P(y | k, u) P(r | k), a
+missing factor contributing 1, so the compiled E-step runs unchanged.  The M-step marginalises the
+expected counts to each factor: the output's rows with the spec's structure, the rating's rows free
+(:class:`RatingStructure`); such fits run EM with SQUAREM and the stationarity check, without the
+L-BFGS-B finish.
 """
 
 from __future__ import annotations

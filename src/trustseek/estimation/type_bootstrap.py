@@ -5,81 +5,54 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from .bootstrap import (
-    BOUNDARY,
-    TABLE_NAMES,
+    TABLES,
+    bound_zero_cells,
     boundary_note,
-    cell_positions,
     cell_tables,
-    cells_at_zero,
     few_resamples,
-    profile_bound,
+    flat_cells,
+    percentile_bounds,
     replicate,
-    resample,
+    split_cells,
 )
-from .em import run_em
-from .estep import EStep, Workspace
-from .mixture import MixtureFit, fit_mixture, general_types
-from .mixture_em import PARTS, MixtureParams, MixtureStructure
+from .estep import EStep
+from .mixture import MixtureFit, fit_mixture
+from .mixture_em import MixtureParams, MixtureStructure
 from .options import FitOptions
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec, Params
-from .trust_iohmm import to_model
 
 #: a types' bootstrap replicate's refit: from the estimate and 2 random starts, to a relative tolerance of 1e-6
 TYPE_REFITS = FitOptions(restarts=2, tol=1e-6)
 
 
-@dataclass(frozen=True)
-class _TypeReplicate:
-    """One bootstrap replicate of a mixture fit, sent whole to a worker process."""
-
-    seqs: Sequences
-    spec: IOHMMSpec
-    types: int
-    differ: tuple[str, ...]
-    params: MixtureParams
-    seed: np.random.SeedSequence
-    options: FitOptions  # the refit's search (its seed: the replicate's)
-
-    def run(self) -> np.ndarray:
-        """The refitted types' TrustModel cells and weights, types matched to the estimate's."""
-        sample, options = resample(self.seqs, self.seed, self.options)
-        fit = fit_mixture(
-            sample,
-            self.spec,
-            self.types,
-            options,
-            differ=self.differ,
-            init=[self.params],
-            pooled=self.params.type_params(0),
-        )
-        ref = _type_vectors(self.spec, self.params)
-        rep = _type_vectors(self.spec, fit.params)
-        cost = ((ref[:, None, :] - rep[None, :, :]) ** 2).sum(-1)
-        _, cols = linear_sum_assignment(cost)
-        return np.concatenate([rep[cols].ravel(), fit.weights[cols]])
+def _refit_types(
+    spec: IOHMMSpec, types: int, differ: tuple[str, ...], params: MixtureParams, sample: Sequences, options: FitOptions
+) -> np.ndarray:
+    """The refitted types' cells and weights, types matched to the estimate's (Hungarian assignment
+    on the squared distance of their cells)."""
+    fit = fit_mixture(sample, spec, types, options, differ=differ, init=[params], pooled=params.type_params(0))
+    ref, rep = _type_vectors(spec, params), _type_vectors(spec, fit.params)
+    _, cols = linear_sum_assignment(((ref[:, None, :] - rep[None, :, :]) ** 2).sum(-1))
+    return np.concatenate([rep[cols].ravel(), fit.weights[cols]])
 
 
 def _type_vectors(spec: IOHMMSpec, params: MixtureParams) -> np.ndarray:
-    """(M, cells): every type's model cells (a TrustModel's, or a general model's), table after table."""
-    out = []
-    for m in range(params.initial.shape[0]):
-        tm = to_model(spec, params.type_params(m), general=general_types(spec))
-        out.append(np.concatenate([np.asarray(getattr(tm, t), dtype=float).ravel() for t in PARTS]))
-    return np.array(out)
+    """(M, cells): every type's model cells (:func:`~.bootstrap.cell_tables`), table after table."""
+    return np.array([flat_cells(cell_tables(spec, params.type_params(m))) for m in range(params.initial.shape[0])])
 
 
 @dataclass
 class TypeIntervals:
-    """Participant-bootstrap intervals of every type's TrustModel cells and weight: ``cells[name][table]
+    """Participant-bootstrap intervals of every type's model cells and weight: ``cells[name][table]
     = (lower, upper)`` and ``weights[name] = (lower, upper)``; percentile intervals of replicates whose
-    types are matched to the estimate's (Hungarian assignment on the squared distance of their
-    cells), widened to contain the estimate (as :mod:`.bootstrap`)."""
+    types are matched to the estimate's, widened to contain the estimate (as :mod:`.bootstrap`)."""
 
     cells: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]]
     weights: dict[str, tuple[float, float]]
@@ -113,28 +86,20 @@ def bootstrap_types(
         if progress is not None:
             progress(finished, replicates)
 
-    def job(seed: np.random.SeedSequence) -> _TypeReplicate:
-        return _TypeReplicate(fit.seqs, fit.spec, fit.n_types, fit.differ, fit.params, seed, options)
-
-    flat = np.vstack(replicate(job, replicates, options, done))
+    refit = partial(_refit_types, fit.spec, fit.n_types, fit.differ, fit.params)
+    flat = np.vstack(replicate(refit, fit.seqs, replicates, options, done))
     est = np.concatenate([_type_vectors(fit.spec, fit.params).ravel(), fit.weights])
-    a = (1 - level) / 2
-    lo, hi = np.quantile(flat, [a, 1 - a], axis=0)
-    lo, hi = np.minimum(lo, est), np.maximum(hi, est)
+    lo, hi, _ = percentile_bounds(flat, est, level)
     M = fit.n_types
     per = (len(est) - M) // M
     lo, hi, at_boundary = _boundary_bounds(fit, lo, hi, per)
     ref = fit.models()[0]
+    shapes = {t: np.shape(getattr(ref, t)) for t in TABLES}
     cells: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]] = {}
     weights: dict[str, tuple[float, float]] = {}
     for m, name in enumerate(fit.names):
-        pos = m * per
-        cells[name] = {}
-        for t in PARTS:
-            shape = np.asarray(getattr(ref, t)).shape
-            size = int(np.prod(shape))
-            cells[name][t] = (lo[pos : pos + size].reshape(shape), hi[pos : pos + size].reshape(shape))
-            pos += size
+        los, his = split_cells(lo[m * per : (m + 1) * per], shapes), split_cells(hi[m * per : (m + 1) * per], shapes)
+        cells[name] = {t: (los[t], his[t]) for t in TABLES}
         weights[name] = (float(lo[M * per + m]), float(hi[M * per + m]))
     return TypeIntervals(cells, weights, replicates, level, at_boundary)
 
@@ -159,50 +124,16 @@ class _HeldType(MixtureStructure):
         return self._hold(super().project(p))
 
 
-def _refit(
-    fit: MixtureFit, work: Workspace, name: str, which: int | slice, rows: np.ndarray, k: int
-) -> Callable[[np.ndarray], float]:
-    """The mixture's largest log-likelihood with rows ``rows``, level ``k`` of table ``name`` of type(s)
-    ``which`` held at a row (EM from the estimate; ``-inf`` where the data are impossible)."""
-
-    def refit(row: np.ndarray) -> float:
-        held = _HeldType(fit.structure, name, which, rows, k, row)
-        start = MixtureParams(fit.params.initial.copy(), fit.params.emission.copy(), fit.params.transition.copy())
-        getattr(start, name)[which, rows, k] = row
-        try:
-            (r,) = run_em(held, work, [held.project(start)], tol=1e-5, max_iter=200)
-        except FitError:  # the data impossible at this value
-            return -np.inf
-        return float(r.loglik)
-
-    return refit
+def _hold_type(structure: MixtureStructure, table: str, which: int | slice, rows: np.ndarray, k: int, row: np.ndarray):
+    return _HeldType(structure, "emission" if table == "em" else "transition", which, rows, k, row)
 
 
 def _boundary_bounds(fit: MixtureFit, lo: np.ndarray, hi: np.ndarray, per: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """Likelihood-ratio intervals (:func:`~.bootstrap.profile_bound`, the mixture refitted by EM) for
-    the free cells of the types estimated at 0 whose bootstrap interval is [0, 0] (``lo``, ``hi``:
-    every type's cells, ``per`` each, as :func:`_type_vectors` lays them out); a row's other cell, if it
-    has just one, gets the mirror bound.  The new bounds, and how many cells got one."""
-    structure, work = fit.structure, fit.workspace()
-    top = float(np.sum(work.estep(fit.params).loglik))
-    lo, hi, moved = lo.copy(), hi.copy(), 0
-    for m in range(fit.n_types):
-        ref = cell_tables(fit.spec, fit.params.type_params(m))
-        for table, t, u, k, c, pos in cells_at_zero(structure, fit.spec, fit.params.type_params(m)):
-            name = TABLE_NAMES[table]
-            shared = structure.shared(name)
-            if (shared and m > 0) or np.any(hi[m * per + pos] >= BOUNDARY):
-                continue  # a shared cell is bounded once, with type 0's
-            which: int | slice = slice(None) if shared else m
-            rows = np.flatnonzero(t.group == t.group[u])
-
-            refit = _refit(fit, work, name, which, rows, k)
-            bound = profile_bound(getattr(fit.params, name)[m, u, k], c, top, refit)
-            types = range(fit.n_types) if shared else (m,)
-            mirror = cell_positions(fit.spec, ref, name, u, k, 1 - c)
-            for mm in types:
-                hi[mm * per + pos] = bound
-                if t.M == 2:
-                    lo[mm * per + mirror] = np.minimum(lo[mm * per + mirror], 1.0 - bound)
-                moved += len(pos)
-    return lo, hi, moved
+    """Likelihood-ratio intervals (:func:`~.bootstrap.bound_zero_cells`, the mixture refitted by EM) for
+    the types' cells (``per`` each in ``lo``, ``hi``, as :func:`_type_vectors` lays them out, the
+    weights after them).  The new bounds, and how many cells got one."""
+    types = [fit.params.type_params(m) for m in range(fit.n_types)]
+    n = fit.n_types * per
+    hold = partial(_hold_type, fit.structure)
+    lo_c, hi_c, bounded, _ = bound_zero_cells(fit.structure, fit.workspace(), fit.spec, fit.params, types, lo[:n], hi[:n], hold)
+    return np.concatenate([lo_c, lo[n:]]), np.concatenate([hi_c, hi[n:]]), int(bounded.sum())

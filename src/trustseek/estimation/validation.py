@@ -1,27 +1,11 @@
 """Does the hidden trust track self-reports?  Correlations of decoded trust with trust ratings.
 
-A log may carry a self-reported trust rating on some trials (every trial, or the last trial of
-each block, empty elsewhere): numbers, or ordinal labels declared lowest first
-(:func:`parse_ratings`).  On the rated trials, :func:`validate_ratings` correlates the ratings
-with
-
-* the decoded trust: ``smoothed`` (P(trust = high | all the participant's trials); for K > 2
-  levels the expected level, scaled to 0 = lowest, 1 = highest) and ``filtered`` (the same
-  from the trials up to and including the rated one only);
-* baselines (:data:`RATING_BASELINES`): the fraction of trials so far (the rated one included)
-  whose automation was reliable, the trial's own reliance (1 rely, 0 intervene; trials without
-  a recorded action are skipped), and the participant's reliance rate so far (Laplace-smoothed).
-
-Each correlation (Spearman and Pearson) is given in three scopes:
-
-* ``pooled`` -- every rated trial;
-* ``within`` -- values and ratings centred on the participant's means, then pooled (participants
-  with fewer than two rated trials left out): does trust move with the ratings over time?
-* ``between`` -- one point per participant, the means of values and ratings: do participants
-  who report more trust get more decoded trust?
-
-Intervals are participant-bootstrap percentiles (participants drawn with replacement; a
-participant drawn twice counts twice); differences trust - baseline are on the same resamples.
+On the rated trials (:func:`parse_ratings`: numbers, or ordinal labels lowest first),
+:func:`validate_ratings` correlates the ratings (Spearman and Pearson) with the decoded trust
+(``smoothed`` and ``filtered``: the expected level on [0, 1]) and with baselines
+(:data:`RATING_BASELINES`), ``pooled``, ``within`` participants (centred on their means) and
+``between`` them (their means), with participant-bootstrap intervals and differences trust -
+baseline on the same resamples.  See docs/validation.md.
 """
 
 from __future__ import annotations
@@ -35,9 +19,9 @@ import pandas as pd
 
 from ..data.cells import NAN_WORDS, DataError
 from ..model.core import TrustModel
-from ..vocab import EXPERIENCES
+from .baselines import indicators, running_rate, spread
 from .iohmm import posteriors
-from .prediction import LEVEL, bootstrap_counts, chunks, filter_beliefs, percentile_interval
+from .prediction import LEVEL, bootstrap_counts, chunks, filter_beliefs, paired, percentile_interval
 from .sequences import encode
 from .spec import FitError
 from .trust_iohmm import from_model
@@ -218,21 +202,6 @@ class ValidationReport:
         }
 
 
-def _running_rate(hits: np.ndarray, known: np.ndarray, participant: np.ndarray, order: np.ndarray) -> np.ndarray:
-    """Per row: (hits + 1) / (known + 2) over the participant's trials up to and including this one."""
-    h = np.where(known, hits, 0.0)[order]
-    k = known.astype(float)[order]
-    p = participant[order]
-    ch, ck = np.cumsum(h), np.cumsum(k)
-    first = np.flatnonzero(np.r_[True, p[1:] != p[:-1]])
-    size = np.diff(np.r_[first, len(p)])
-    base_h = np.repeat(ch[first] - h[first], size)
-    base_k = np.repeat(ck[first] - k[first], size)
-    out = np.empty(len(p))
-    out[order] = (ch - base_h + 1.0) / (ck - base_k + 2.0)
-    return out
-
-
 def validate_ratings(
     frame: pd.DataFrame,
     model: TrustModel,
@@ -284,31 +253,22 @@ def _decoded_values(frame: pd.DataFrame, model: TrustModel) -> tuple[dict[str, n
         raise FitError(["the trials have probability zero under this model: nothing to decode"]) from None
     filt = filter_beliefs(seqs, params)
     valid = seqs.rows >= 0
-    rows = seqs.rows[valid]
     n = len(frame)
     pcode = np.empty(n, dtype=np.int64)
-    pcode[rows] = np.nonzero(valid)[1]
-    trial_no = np.empty(n, dtype=np.int64)
-    vt, vn = np.nonzero(valid)
-    trial_no[rows] = seqs.trial_numbers(vt, vn)
-    values: dict[str, np.ndarray] = {}
-    for name, arr in (("smoothed", gamma), ("filtered", filt.posterior)):
+    pcode[seqs.rows[valid]] = np.nonzero(valid)[1]
+
+    def per_row(arr: np.ndarray) -> np.ndarray:
         v = np.full(n, np.nan)
-        v[rows] = (arr[valid] * scale).sum(-1)
-        values[name] = v
-    order = np.lexsort((trial_no, pcode))
-    ha = frame["human_action"]
-    recorded = ha.notna().to_numpy()
-    rely = np.where(recorded, (ha.astype(object) == "rely").to_numpy(dtype=float), np.nan)
-    if "experience" in frame and frame["experience"].notna().any():
-        ex = frame["experience"]
-        exp_known = ex.notna().to_numpy()
-        reliable = (ex.astype(object) == EXPERIENCES[1]).to_numpy(dtype=float)
-        values["reliable_fraction"] = _running_rate(reliable, exp_known, pcode, order)
-    else:
+        v[seqs.rows[valid]] = arr[valid]
+        return v
+
+    rely, reliable = indicators(frame)
+    values = {name: per_row((arr * scale).sum(-1)) for name, arr in (("smoothed", gamma), ("filtered", filt.posterior))}
+    values["reliable_fraction"] = per_row(running_rate(spread(reliable, seqs), inclusive=True))
+    if not np.isfinite(reliable).any():
         values["reliable_fraction"] = np.full(n, np.nan)
     values["reliance"] = rely
-    values["reliance_rate"] = _running_rate(np.nan_to_num(rely), recorded, pcode, order)
+    values["reliance_rate"] = per_row(running_rate(spread(rely, seqs), inclusive=True))
     return values, pcode, seqs.n_participants
 
 
@@ -350,18 +310,9 @@ def _correlations(values: dict[str, np.ndarray], ratings: np.ndarray, pcode: np.
 
 def _differences(corr, reps) -> dict[str, dict[str, dict[str, dict[str, dict[str, Any]]]]]:
     """Trust measure minus baseline, per scope and method, with the bootstrap's interval and which is better."""
-    diffs: dict[str, dict[str, dict[str, dict[str, dict[str, Any]]]]] = {}
-    for m in TRUST_MEASURES:
-        diffs[m] = {}
-        for base in RATING_BASELINES:
-            diffs[m][base] = {}
-            for scope in SCOPES:
-                diffs[m][base][scope] = {}
-                for method in METHODS:
-                    lo, hi = percentile_interval(reps[m][scope][method] - reps[base][scope][method])
-                    est = corr[m][scope][method]["estimate"] - corr[base][scope][method]["estimate"]
-                    better = "neither"
-                    if np.isfinite(lo) and np.isfinite(hi):
-                        better = "trust" if lo > 0 else "baseline" if hi < 0 else "neither"
-                    diffs[m][base][scope][method] = {"estimate": est, "lower": lo, "upper": hi, "better": better}
-    return diffs
+
+    def diff(m: str, base: str, scope: str, method: str) -> dict[str, Any]:
+        est = corr[m][scope][method]["estimate"] - corr[base][scope][method]["estimate"]
+        return paired(est, reps[m][scope][method] - reps[base][scope][method], ours="trust")
+
+    return {m: {b: {s: {k: diff(m, b, s, k) for k in METHODS} for s in SCOPES} for b in RATING_BASELINES} for m in TRUST_MEASURES}
