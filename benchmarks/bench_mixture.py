@@ -26,7 +26,7 @@ import numpy as np
 from trustseek.estimation import encode, fit_iohmm, paper_spec
 from trustseek.estimation.mixture import fit_mixture, mixture_loglik
 from trustseek.estimation.options import FitOptions
-from trustseek.estimation.type_selection import select_types
+from trustseek.estimation.selection import select_types
 from trustseek.model.presets import paper_conservative_mixture, paper_model
 from trustseek.simulation.designs import simulate_design
 from trustseek.simulation.populations import Supervisors

@@ -3,8 +3,7 @@ at the most a command compares, says the choice is a lower bound (no option it w
 
 from __future__ import annotations
 
-from trustseek.estimation.selection import MAX_LEVELS, selection_warnings
-from trustseek.estimation.type_selection import MAX_TYPES, type_selection_warnings
+from trustseek.estimation.selection import MAX_LEVELS, MAX_TYPES, selection_warnings, type_selection_warnings
 
 
 def _rows(key: str, top: int) -> list[dict]:

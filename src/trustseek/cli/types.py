@@ -51,7 +51,7 @@ def _check_differ(differ: str) -> None:
 
 def parse_types(text: str) -> tuple[int, ...]:
     """``1..4`` or ``1,2,3``: the numbers of types to compare."""
-    from ..estimation.type_selection import MAX_TYPES
+    from ..estimation.selection import MAX_TYPES
 
     ends: tuple[int, ...]
     try:
@@ -152,7 +152,7 @@ def _bootstrap_types(fit, bootstrap: int, seed: int, jobs: int | None, bar):
     if bootstrap <= 0:
         return None
     task = bar.add_task("bootstrap", total=bootstrap)
-    from ..estimation.type_bootstrap import TYPE_REFITS, bootstrap_types
+    from ..estimation.bootstrap import TYPE_REFITS, bootstrap_types
 
     return bootstrap_types(
         fit,
@@ -261,11 +261,11 @@ def select_types(
     """Choose the number of supervisor types: BIC and participant-held-out log-likelihood."""
     values = parse_types(types)
     _check_differ(differ)
-    from ..estimation import type_selection
+    from ..estimation import selection
 
     tr, em, frame = read_with_inputs(log, reading, transitions_on, emissions_on)
     with progress_task(quiet or as_json, "model selection") as update:
-        rows = type_selection.select_types(
+        rows = selection.select_types(
             frame,
             types=values,
             folds=folds,
@@ -276,7 +276,7 @@ def select_types(
             emission_inputs=em,
             widen=widen,
         )
-    warnings = widened_note(rows, "types", max(values)) + type_selection.type_selection_warnings(rows)
+    warnings = widened_note(rows, "types", max(values)) + selection.type_selection_warnings(rows)
     if as_json:
         print_json({"types": rows, "warnings": warnings})
         return

@@ -17,7 +17,6 @@ from . import (
     mixture_em,
     options,
     personal,
-    personal_models,
     prediction,
     quasi_newton,
     ratings,
@@ -28,8 +27,6 @@ from . import (
     sticks,
     structure,
     trust_iohmm,
-    type_bootstrap,
-    type_selection,
     validation,
     warm,
 )

@@ -33,6 +33,14 @@ def spread(values: np.ndarray, seqs: Sequences, fill: float = np.nan) -> np.ndar
     return out
 
 
+def per_row(arr: np.ndarray, seqs: Sequences, n: int, fill: Any = np.nan, dtype: Any = float) -> np.ndarray:
+    """The inverse of :func:`spread`: a (T, N) array as the values of the frame's ``n`` rows (``fill`` elsewhere)."""
+    out = np.full(n, fill, dtype=dtype)
+    valid = seqs.rows >= 0
+    out[seqs.rows[valid]] = arr[valid]
+    return out
+
+
 def _exclusive_cumsum(a: np.ndarray) -> np.ndarray:
     """Along trials: the sum over earlier trials (0 at the first)."""
     c = np.cumsum(a, axis=0)

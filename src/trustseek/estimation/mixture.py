@@ -25,7 +25,7 @@ from ..model.mixture import TypeMixture
 from .convergence import converge_runs
 from .em import STATIONARY, RunResult, run_em
 from .fit import never_estimated
-from .iohmm import EMFit, fit_iohmm
+from .iohmm import EMFit, _describe, fit_iohmm, posteriors
 from .mixture_em import EMPTY, FINISH_MARGIN, PERTURB, MixtureParams, MixtureStructure, MixtureWorkspace
 from .options import DEFAULTS, SERIAL, FitOptions, counting
 from .sequences import Sequences, encode
@@ -78,7 +78,10 @@ class MixtureFit(EMFit):
     def posterior_frame(self) -> pd.DataFrame:
         """One row per participant: ``participant`` (the study's value), ``trials``, ``type`` (the most
         probable) and ``p_type_<name>`` per type."""
-        return posterior_table(self.seqs, self.names, self.type_posteriors())
+        post = self.type_posteriors()
+        out: dict[str, Any] = {"participant": list(self.seqs.participants), "trials": self.seqs.lengths.astype(np.int64)}
+        out["type"] = np.array(self.names, dtype=object)[post.argmax(1)]
+        return pd.DataFrame(out | {f"p_type_{name}": post[:, m] for m, name in enumerate(self.names)})
 
     def models(self) -> list[TrustModel]:
         """The types as trust models, or as general models for a study's named inputs."""
@@ -123,19 +126,6 @@ def type_posteriors(work: MixtureWorkspace, params: MixtureParams) -> np.ndarray
     return e / e.sum(1, keepdims=True)
 
 
-def posterior_table(seqs: Sequences, names: Sequence[str], post: np.ndarray) -> pd.DataFrame:
-    out: dict[str, Any] = {"participant": list(seqs.participants), "trials": seqs.lengths.astype(np.int64)}
-    out["type"] = np.array(names, dtype=object)[post.argmax(1)]
-    for m, name in enumerate(names):
-        out[f"p_type_{name}"] = post[:, m]
-    return pd.DataFrame(out)
-
-
-def _describe(i: int, r: RunResult) -> str:
-    state = "converged: stationary" if r.ended == STATIONARY else f"not converged: {r.ended}"
-    return f"start {i}: log-likelihood {r.loglik:.6f} after {r.iterations} E-steps ({state}, {r.seconds:.3f} s)"
-
-
 def split_type_starts(previous: MixtureParams, rng: np.random.Generator, structure: MixtureStructure) -> list[MixtureParams]:
     """Starts with one type more than ``previous``: each type copied, the two copies' rows pushed
     apart (log-odds +/- a normal draw) and its weight shared at random."""
@@ -164,28 +154,17 @@ def fit_mixture(
     pooled: Params | None = None,
     init: Sequence[MixtureParams] = (),
     on_restart: Callable[[int, RunResult], None] | None = None,
-    accelerate: bool = True,
-    quasi_newton: bool = True,
 ) -> MixtureFit:
-    """Fit M = ``types`` supervisor types to ``seqs``; the best of the runs is kept.
-
-    Starts: ``init``, then ``options.restarts`` seeded ones (:class:`~.options.FitOptions`, by
-    default on one thread): with M >= 2 the first half are the
-    pooled fit (``pooled``, or a pooled fit of 3 restarts made here) with every row
-    perturbed (:meth:`MixtureStructure.perturbed`), the rest random (with M = 1 all random,
-    the pooled fit's own draws).  With M = 1 each run is exactly the pooled fit's
-    (:func:`~.iohmm.fit_iohmm`).  With M >= 2 every run is EM with SQUAREM to ``tol`` and the
-    stationarity check (one more EM step gains at most ``tol``, relative); the runs that end
-    within :data:`FINISH_MARGIN` nats of the best then get the L-BFGS-B finish and the check
-    again (not when the initial row is shared): a type the data do not need lies on a flat
-    ridge, where the finish of every run cost more E-steps than EM itself (measured in
-    docs/types.md).  The objective never decreases along a run.
-    """
+    """Fit M = ``types`` supervisor types to ``seqs``; the best of the runs is kept.  Starts: ``init``, then
+    ``options.restarts`` seeded ones: with M >= 2 the first half the pooled fit (``pooled``, or one of 3
+    restarts made here) perturbed (:meth:`MixtureStructure.perturbed`), the rest random.  With M = 1 each
+    run is exactly :func:`~.iohmm.fit_iohmm`'s; with M >= 2 EM with SQUAREM to ``tol`` and the stationarity
+    check, then the L-BFGS-B finish only for the runs ending within :data:`FINISH_MARGIN` nats of the best
+    (a type the data do not need lies on a flat ridge where finishing every run costs more: docs/types.md)."""
     structure = MixtureStructure(spec, seqs, types, differ)
     restarts, tol, max_iter = options.starts, options.tol, options.max_iter
-    sticks = structure.sticks() if quasi_newton else None
-    qn = quasi_newton and sticks is not None
-    settings = options.run(qn and structure.n_types == 1, accelerate)  # with M >= 2 EM runs to tol, the finish later
+    sticks = structure.sticks()
+    settings = options.run(sticks is not None and structure.n_types == 1)  # with M >= 2 EM runs to tol, the finish later
     work = MixtureWorkspace(seqs, structure, threads=settings.threads)
     ss = options.seed_sequence
     M = structure.n_types
@@ -204,14 +183,12 @@ def fit_mixture(
     log.debug("fitting %d types to %d sequences from %d starts", M, seqs.n_participants, len(starts))
     runs: list[RunResult] = []
     if M == 1:  # the pooled fit's procedure, step for step
-        runs += converge_runs(
-            structure, work, run_em(structure, work, starts, settings.em_tol, max_iter, accelerate), settings, sticks
-        )
+        runs += converge_runs(structure, work, run_em(structure, work, starts, settings.em_tol, max_iter), settings, sticks)
     else:
         # every start: EM with SQUAREM to tol and the stationarity check; then the L-BFGS-B finish
         # (and the check again) only for the starts ending within FINISH_MARGIN of the best
-        runs += converge_runs(structure, work, run_em(structure, work, starts, tol, max_iter, accelerate), settings)
-        if qn:
+        runs += converge_runs(structure, work, run_em(structure, work, starts, tol, max_iter), settings)
+        if sticks is not None:
             top = max(r.objective for r in runs)
             near = [i for i, r in enumerate(runs) if r.objective >= top - FINISH_MARGIN and r.iterations < max_iter]
             done = converge_runs(structure, work, [runs[i] for i in near], replace(settings, quasi_newton=True), sticks)
@@ -266,23 +243,9 @@ def fit_types(
     check_types(types, seqs)
     pooled = None
     if types > 1:
-        first = fit_iohmm(
-            seqs,
-            spec,
-            replace(options, restarts=min(restarts, 3), seed=np.random.SeedSequence([seed, 5])),
-        )
-        pooled = first.params
-    tick = counting(progress, restarts)
-
-    fit = fit_mixture(
-        seqs,
-        spec,
-        types,
-        replace(options, seed=np.random.SeedSequence([seed, 0])),
-        differ=differ,
-        pooled=pooled,
-        on_restart=tick,
-    )
+        pooled = fit_iohmm(seqs, spec, replace(options, restarts=min(restarts, 3), seed=np.random.SeedSequence([seed, 5]))).params
+    options = replace(options, seed=np.random.SeedSequence([seed, 0]))
+    fit = fit_mixture(seqs, spec, types, options, differ=differ, pooled=pooled, on_restart=counting(progress, restarts))
     fit.not_estimated = () if general_types(spec) else never_estimated(frame, spec)
     return fit
 
@@ -316,8 +279,6 @@ def decode_types(frame: pd.DataFrame, mixture: TypeMixture) -> pd.DataFrame:
     """Per trial: P(type | the participant's trials) as ``p_type_<name>``, the most probable ``type``, and
     P(trust | trials) = sum_m P(type m | trials) P(trust | trials, type m), with the Viterbi path of the
     most probable type."""
-    from .iohmm import posteriors
-
     spec, params = mixture_params(mixture)
     seqs = encode(frame, spec)
     structure = MixtureStructure(spec, seqs, mixture.n_types)

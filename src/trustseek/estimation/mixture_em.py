@@ -57,13 +57,9 @@ class MixtureParams(Params):
 
     def relabelled(self, types: np.ndarray, levels: Sequence[np.ndarray]) -> MixtureParams:
         """New type i is old type ``types[i]``, its levels permuted by ``levels[types[i]]``."""
-        ini, em, tr = [], [], []
-        for m in types:
-            p = Params(self.initial[m], self.emission[m], self.transition[m]).permuted(levels[m])
-            ini.append(p.initial)
-            em.append(p.emission)
-            tr.append(p.transition)
-        return MixtureParams(np.stack(ini), np.stack(em), np.stack(tr))
+        return MixtureParams.stack(
+            [Params(self.initial[m], self.emission[m], self.transition[m]).permuted(levels[m]) for m in types]
+        )
 
     @classmethod
     def from_types(cls, weights: Sequence[float] | np.ndarray, types: Sequence[Params]) -> MixtureParams:

@@ -14,17 +14,22 @@ ch. 3), as docs/types.md describes and measures.  Each participant's MAP is the 
 
 from __future__ import annotations
 
+import json
 import logging
 import math
+import re
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 from scipy.optimize import minimize
 from scipy.special import digamma, gammaln
 
-from ..model.core import TrustModel
+from ..model.core import TrustModel, planning_refusal
+from ..model.jsonfile import json_safe
 from ..model.mixture import TypeMixture
 from . import kernels
 from .em import RunResult, run_em
@@ -32,7 +37,6 @@ from .estep import EStep, Workspace
 from .mixture import general_types, mixture_params, type_posteriors
 from .mixture_em import MixtureStructure, MixtureWorkspace
 from .options import SERIAL, FitOptions
-from .personal_models import PersonalModels
 from .sequences import Sequences, encode
 from .spec import MAX_PSEUDOCOUNT, FitError, IOHMMSpec, Params
 from .structure import FLOOR, Structure, Table
@@ -96,14 +100,11 @@ class _PersonalStructure(Structure):
 
 
 class _Rows:
-    """The Dirichlet rows of one table for N participants, tie groups as one row (the representative's).
-
-    A row's usable cells are its free cells where the centre is positive (a zero of the centre is a
-    zero of every personal model); a row with two or more usable cells, in a group the log reaches,
-    gets the prior Dirichlet(s t) with t the centre's row renormalised over those cells, scaled to
-    the row's free mass.  A row with one usable cell is that cell at the free mass; fixed cells keep
-    their values.  ``centre``: (N, U, K, X), or (N, K) for the initial table (``table`` None).
-    """
+    """The Dirichlet rows of one table for N participants, tie groups as one row (the representative's):
+    a row with two or more usable cells (free, positive in the centre) in a group the log reaches gets
+    Dirichlet(s t), t the centre's row over them scaled to the free mass; a row with one is that cell at
+    the free mass; fixed cells keep their values.  ``centre``: (N, U, K, X), or (N, K) for the initial
+    table (``table`` None)."""
 
     def __init__(self, centre: np.ndarray, table: Table | None):
         if table is None:
@@ -173,14 +174,10 @@ class _Variational:
 
 
 class _Evidence:
-    """Variational Bayes (MacKay 1997; Beal 2003, ch. 3) for every participant's model at once.
-
-    For strengths s (per table), q(theta_n) is Dirichlet(s t + expected counts) per row and
-    q(levels of n) the forward-backward posterior under the sub-normalised tables
-    exp(E_q[log theta_n]); the bound ``log Z_n - KL(q(theta_n) || prior)`` (Z_n: the
-    forward-backward normaliser under those tables) never decreases along the updates and is
-    at most log p(trials of n | s).
-    """
+    """Variational Bayes (MacKay 1997; Beal 2003, ch. 3) for every participant's model at once: q(theta_n)
+    Dirichlet(s t + expected counts) per row, q(levels of n) the forward-backward posterior under
+    exp(E_q[log theta_n]); the bound ``log Z_n - KL(q(theta_n) || prior)`` never decreases along the
+    updates and is at most log p(trials of n | s)."""
 
     def __init__(self, work: _PersonalWorkspace, rows: dict[str, _Rows]):
         self.work, self.rows = work, rows
@@ -194,11 +191,8 @@ class _Evidence:
         return self.work.estep(Params(tilde["initial"][:, 0, 0], tilde["emission"], tilde["transition"]), self.active)
 
     def counts(self, st: EStep) -> dict[str, np.ndarray]:
-        return {
-            "initial": self.rows["initial"].grouped(st.initial[:, None, None, :]),
-            "emission": self.rows["emission"].grouped(st.emission),
-            "transition": self.rows["transition"].grouped(st.transition),
-        }
+        by = {"initial": st.initial[:, None, None, :], "emission": st.emission, "transition": st.transition}
+        return {k: self.rows[k].grouped(by[k]) for k in TABLES}
 
     def run(self, s: Mapping[str, float], counts: Mapping[str, np.ndarray], tol: float, max_iter: int) -> _Variational:
         """Variational E-steps from q(theta_n) = Dirichlet(s t + ``counts``) until the summed bound
@@ -225,20 +219,13 @@ def _estimable(rows: Mapping[str, _Rows], counts: Mapping[str, np.ndarray]) -> l
     return [k for k in TABLES if k != "initial" and np.where(rows[k].dirichlet[..., None], counts[k], 0.0).sum() > 0]
 
 
-def _not_estimated(table: str) -> str:
-    return ONE_DRAW if table == "initial" else NOTHING
-
-
 def _strengths(
-    evidence: _Evidence, start: dict[str, np.ndarray], tol: float, max_iter: int
-) -> tuple[dict[str, float], dict[str, bool], dict[str, str], float, float]:
-    """The strengths maximising the summed variational bound (log scale, within [S_MIN, S_MAX]); whether
-    each is at a bound, how it was chosen, the bound there and at s = S_MAX (the centre itself)."""
+    evidence: _Evidence, start: dict[str, np.ndarray], free: list[str], tol: float, max_iter: int
+) -> tuple[dict[str, float], float, float]:
+    """The strengths of the tables ``free`` maximising the summed variational bound (log scale, within
+    [S_MIN, S_MAX]; the others at S_MAX), the bound there and at s = S_MAX (the centre itself)."""
     rows = evidence.rows
-    # a table whose Dirichlet rows no participant's trials reach: the data say nothing about its s
-    free = _estimable(rows, start)
     s = dict.fromkeys(TABLES, S_MAX)
-    how = {k: (EB if k in free else _not_estimated(k)) for k in TABLES}
     lo, hi = math.log(S_MIN), math.log(S_MAX)
     state = {"counts": dict(start)}
 
@@ -252,7 +239,7 @@ def _strengths(
 
     at_max, _ = evaluate(np.full(len(free), hi))
     if not free:
-        return s, dict.fromkeys(TABLES, True), how, -at_max, -at_max
+        return s, -at_max, -at_max
     # a coarse grid for each table in turn (the others at their best so far), from the centre down;
     # then all tables' s together by L-BFGS-B from there
     x0 = np.full(len(free), hi)
@@ -274,10 +261,8 @@ def _strengths(
         if top - value <= NEGLIGIBLE * int(np.count_nonzero(evidence.active)):
             x, value = at_top, top
     value, _ = evaluate(x)
-    bound = dict.fromkeys(TABLES, True)
-    bound.update({k: bool(v >= hi - 1e-9) for k, v in zip(free, x, strict=True)})
-    s.update({k: S_MAX for k in free if bound[k]})
-    return s, bound, how, -value, -at_max
+    s.update({k: S_MAX for k, v in zip(free, x, strict=True) if v >= hi - 1e-9})
+    return s, -value, -at_max
 
 
 @dataclass
@@ -382,18 +367,15 @@ class _CrossValidation:
 
 
 def _cv_strengths(
-    prep: _Prepared, folds: int, tol: float, max_iter: int
-) -> tuple[dict[str, float], dict[str, bool], dict[str, str], float, float]:
+    prep: _Prepared, free: list[str], folds: int, tol: float, max_iter: int
+) -> tuple[dict[str, float], float, float]:
     """Each table's s by the held-out log-likelihood (:class:`_CrossValidation`), one table at a time
     (the others at their choice so far): a decade grid from S_MAX down to S_MIN, refined by half and
     quarter decades around the best, then the largest s tried whose score is within one standard
     error of the best's (the paired differences over participants; the one-standard-error rule).
-    Whether each is at S_MAX, how it was chosen, the score there and at s = S_MAX everywhere."""
-    start = prep.evidence().counts(prep.first)
-    free = _estimable(prep.rows, start)
+    The strengths of the tables ``free`` (the others at S_MAX), the score there and at s = S_MAX everywhere."""
     cv = _CrossValidation(prep, folds, tol, max_iter)
     s = dict.fromkeys(TABLES, S_MAX)
-    how = {k: (CV.format(folds=folds) if k in free else _not_estimated(k)) for k in TABLES}
     current = cv.score(s)
     centre = float(current.sum())
     lo, hi = math.log10(S_MIN), math.log10(S_MAX)
@@ -419,8 +401,90 @@ def _cv_strengths(
                 x_pick = x
                 break
         s[k], current = 10.0**x_pick, tried[x_pick]
-    bound = {k: (k not in free) or s[k] >= S_MAX for k in TABLES}
-    return s, bound, how, float(current.sum()), centre
+    return s, float(current.sum()), centre
+
+
+@dataclass
+class PersonalModels:
+    """One trust model per participant (in the order of ``participants``, the study's values)."""
+
+    participants: list[Any]
+    models: list[TrustModel]  # general models for a centre with a study's named inputs
+    centre: list[str]
+    strength: dict[str, float]
+    at_bound: dict[str, bool]
+    method: dict[str, str]  # how each table's s was chosen
+    estimate: str  # "held-out", "variational" or "given"
+    score: float  # the criterion at the chosen strengths (held-out log-likelihood, or variational bound)
+    score_centre: float  # the same at s = S_MAX in every table (the centre)
+    loglik: np.ndarray
+    centre_loglik: np.ndarray
+    iterations: np.ndarray
+    converged: np.ndarray
+    trials: np.ndarray
+    warnings: list[str] = field(default_factory=list)
+
+    def arrays(self) -> dict[str, Any]:
+        """The models stacked as the arrays of a population of simulated supervisors
+        (``Supervisors(**arrays)``: participant i is row i); trust models only."""
+        first = self.models[0]
+        if first.general:
+            raise FitError([planning_refusal(first.used_inputs)])
+        return {
+            "trust_levels": first.trust_levels,
+            "complexities": first.complexities,
+            "initial": np.stack([m.initial for m in self.models]),
+            "emission": np.stack([m.emission for m in self.models]),
+            "transition": np.stack([m.transition for m in self.models]),
+            "index": np.arange(len(self.models), dtype=np.int64),
+        }
+
+    def frame(self) -> pd.DataFrame:
+        """One row per participant: the centre, trials, log-likelihood under the centre and own model."""
+        return pd.DataFrame(
+            {
+                "participant": self.participants,
+                "centre": self.centre,
+                "trials": self.trials,
+                "loglik_centre": self.centre_loglik,
+                "loglik_personal": self.loglik,
+                "iterations": self.iterations,
+                "converged": self.converged,
+            }
+        )
+
+    def file_names(self) -> list[str]:
+        """A file name per participant: the participant value made safe, made unique if needed."""
+        out: list[str] = []
+        seen: set[str] = set()
+        for i, p in enumerate(self.participants):
+            base = re.sub(r"[^A-Za-z0-9._-]+", "_", str(p)).strip("._") or f"participant{i + 1}"
+            name = base
+            while name.lower() in seen:
+                name = f"{base}-{i + 1}"
+            seen.add(name.lower())
+            out.append(f"{name}.json")
+        return out
+
+    def summary(self) -> dict[str, Any]:
+        """The strengths, how they were chosen and the criterion (as ``strength.json`` holds them)."""
+        return {k: getattr(self, k) for k in ("strength", "at_bound", "method", "estimate", "score", "score_centre", "warnings")}
+
+    def save(self, folder: str | Path) -> None:
+        """``<participant>.json`` per participant, ``participants.csv`` (with the file of each) and
+        ``strength.json``, into ``folder`` (created)."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        names = self.file_names()
+        for name, m in zip(names, self.models, strict=True):
+            m.save(folder / name)
+        table = self.frame()
+        table.insert(1, "file", names)
+        table.to_csv(folder / "participants.csv", index=False)
+        (folder / "strength.json").write_text(
+            json.dumps(json_safe(self.summary()), indent=2) + "\n",
+            encoding="utf-8",
+        )
 
 
 def personalize(
@@ -443,44 +507,44 @@ def personalize(
     for value in given:  # before the participants' data are prepared
         if not 0 <= value <= MAX_PSEUDOCOUNT:
             raise FitError([f"strength (--strength) must be a pseudo-count between 0 and {MAX_PSEUDOCOUNT:g}, got {value!r}"])
+    if strength is None and estimate not in ESTIMATES:
+        raise FitError([f"estimate must be one of {list(ESTIMATES)}, got {estimate!r}"])
+    if strength is None and estimate == "held-out" and not (isinstance(folds, int) and folds >= 2):
+        raise FitError([f"folds must be an integer >= 2, got {folds!r}"])
     prep = _Prepared.of(frame, model, options.n_jobs)
     spec, seqs, base, centre, work, start = prep.spec, prep.seqs, prep.base, prep.centre, prep.work, prep.start
     N = seqs.n_participants
     warnings: list[str] = []
-    scores = {"estimate": math.nan, "centre": math.nan}
     if strength is None:
-        if estimate not in ESTIMATES:
-            raise FitError([f"estimate must be one of {list(ESTIMATES)}, got {estimate!r}"])
-        if estimate == "held-out" and not (isinstance(folds, int) and folds >= 2):
-            raise FitError([f"folds must be an integer >= 2, got {folds!r}"])
         evidence = prep.evidence()
         left_out = int(N - np.count_nonzero(evidence.active))
-        if left_out and estimate == "variational":
-            warnings.append(
-                f"{left_out} of {N} participants' trials are impossible where the centre has "
-                "a zero: they are left out of the strength estimate"
-            )
+        counts = evidence.counts(prep.first)
+        free = _estimable(prep.rows, counts)  # the other tables' s: the data say nothing about it
+        how = EB if estimate == "variational" else CV.format(folds=folds)
+        method = {k: how if k in free else ONE_DRAW if k == "initial" else NOTHING for k in TABLES}
         if estimate == "variational":
-            s_tab, bound, method, scores["estimate"], scores["centre"] = _strengths(
-                evidence, evidence.counts(prep.first), tol, max_iter
-            )
+            if left_out:
+                warnings.append(
+                    f"{left_out} of {N} participants' trials are impossible where the centre has "
+                    "a zero: they are left out of the strength estimate"
+                )
+            s_tab, score, centre_score = _strengths(evidence, counts, free, tol, max_iter)
         else:
-            s_tab, bound, method, scores["estimate"], scores["centre"] = _cv_strengths(prep, folds, tol, max_iter)
-        warnings += [
-            f"{name}: the strength is at its bound ({s_tab[name]:.3g}): the data show no individual differences there"
-            for name in TABLES
-            if bound[name] and method[name] not in (NOTHING, ONE_DRAW)
-        ]
+            s_tab, score, centre_score = _cv_strengths(prep, free, folds, tol, max_iter)
+        bound = {k: k not in free or s_tab[k] >= S_MAX for k in TABLES}
+        for name in TABLES:
+            if bound[name] and method[name] not in (NOTHING, ONE_DRAW):
+                warnings.append(
+                    f"{name}: the strength is at its bound ({s_tab[name]:.3g}): the data show no individual differences there"
+                )
         warnings += [
             f"{name}: the strength is at its lower bound ({s_tab[name]:.3g}): each participant's rows are their own counts"
             for name in TABLES
             if s_tab[name] <= S_MIN * (1 + 1e-9)
         ]
     else:
-        s_tab, bound, method = {}, {}, {}
-        for name in TABLES:
-            value = strength[name] if isinstance(strength, Mapping) else strength
-            s_tab[name], bound[name], method[name] = float(value), False, GIVEN
+        s_tab = {name: float(strength[name] if isinstance(strength, Mapping) else strength) for name in TABLES}
+        bound, method, score, centre_score = dict.fromkeys(TABLES, False), dict.fromkeys(TABLES, GIVEN), math.nan, math.nan
     runs = prep.fit(s_tab, work, start, tol, max_iter)
     params = Params.stack([r.params for r in runs])
     # rows no trial of the log reaches are the structure's defaults during the fit: the centre's instead
@@ -498,8 +562,8 @@ def personalize(
         at_bound=bound,
         method=method,
         estimate=estimate if strength is None else GIVEN,
-        score=scores["estimate"],
-        score_centre=scores["centre"],
+        score=score,
+        score_centre=centre_score,
         loglik=work.estep(params).loglik,
         centre_loglik=prep.first.loglik,
         iterations=np.array([r.iterations for r in runs]),

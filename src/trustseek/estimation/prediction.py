@@ -21,7 +21,7 @@ import pandas as pd
 
 from ..model.core import TrustModel
 from ..vocab import HUMAN_ACTIONS
-from .baselines import BASELINES, BaselineFit, Features, baseline_predictions, features, fit_baselines
+from .baselines import BASELINES, BaselineFit, Features, baseline_predictions, features, fit_baselines, per_row
 from .iohmm import fit_iohmm
 from .options import DEFAULTS, FitOptions
 from .sequences import Sequences, deal_folds, encode
@@ -282,7 +282,6 @@ class PredictionReport:
 
 
 def _report(
-    mode: str,
     frame: pd.DataFrame,
     seqs: Sequences,
     preds: dict[str, np.ndarray],
@@ -293,8 +292,8 @@ def _report(
     fold_of: np.ndarray | None,
     baseline_fits: list[BaselineFit],
 ) -> PredictionReport:
-    """The report of the predictions ``preds`` (the model's P(rely) as "model", then the
-    baselines'), per trial in the frame's row order and scored."""
+    """The report of the predictions ``preds`` (the model's P(rely) as "model", then the baselines'),
+    per trial in the frame's row order and scored; held-out when ``fold_of`` gives the folds."""
     valid = seqs.rows >= 0
     p_model = preds["model"]
     s = feats.scored
@@ -312,17 +311,10 @@ def _report(
     out["trial"][rows] = seqs.trial_numbers(vt, vn)
     for c in ("complexity", "robot_action", "human_action"):
         out[c] = frame[c].to_numpy() if c in frame else np.full(n, None)
-    out["scored"] = np.zeros(n, dtype=bool)
-    out["scored"][rows] = s[valid]
-    out["fixed_by_model"] = np.zeros(n, dtype=bool)
-    out["fixed_by_model"][rows] = determined[valid]
+    out["scored"], out["fixed_by_model"] = per_row(s, seqs, n, False, bool), per_row(determined, seqs, n, False, bool)
     if fold_of is not None:
-        out["fold"] = np.zeros(n, dtype=np.int64)
-        out["fold"][rows] = fold_of[vn] + 1
-    for k, v in preds.items():
-        col = np.full(n, np.nan)
-        col[rows] = v[valid]
-        out[f"p_rely_{k}"] = col
+        out["fold"] = per_row(np.broadcast_to(fold_of + 1, valid.shape), seqs, n, 0, np.int64)
+    out |= {f"p_rely_{k}": per_row(v, seqs, n) for k, v in preds.items()}
     trials = pd.DataFrame(out)
     pm, ys = p_model[s], feats.rely[s]
     misses = int((np.where(ys == 1, pm, 1 - pm) < CONFIDENT).sum())
@@ -330,7 +322,7 @@ def _report(
     det_obs = determined & np.isfinite(feats.rely)
     matched = int((det_obs & (feats.rely == np.where(np.isfinite(p_model), np.round(p_model), -1))).sum())
     return PredictionReport(
-        mode=mode,
+        mode="in-sample" if fold_of is None else "held-out",
         trials=trials,
         metrics=metrics,
         differences=diffs,
@@ -362,18 +354,8 @@ def predict_in_sample(frame: pd.DataFrame, model: TrustModel, bootstrap: int = 1
     feats = features(frame, seqs, filt.determined, params.emission.shape[0], params.transition.shape[0])
     _check_scored(feats)
     bfit = fit_baselines(feats, np.arange(seqs.n_participants), intercepts=True)
-    return _report(
-        "in-sample",
-        frame,
-        seqs,
-        {"model": filt.p_rely, **baseline_predictions(feats, bfit)},
-        filt.determined,
-        feats,
-        bootstrap,
-        seed,
-        None,
-        [bfit],
-    )
+    preds = {"model": filt.p_rely, **baseline_predictions(feats, bfit)}
+    return _report(frame, seqs, preds, filt.determined, feats, bootstrap, seed, None, [bfit])
 
 
 def fold_assignment(n_participants: int, folds: int, seed: int = 0) -> np.ndarray:
@@ -404,19 +386,13 @@ def predict_heldout(
     T, N = seqs.y.shape
     p_model = np.full((T, N), np.nan)
     determined = np.zeros((T, N), dtype=bool)
-    fits: list[tuple[np.ndarray, Params]] = []
     for f in range(folds):
         train, test = np.flatnonzero(fold_of != f), np.flatnonzero(fold_of == f)
-        fit = fit_iohmm(
-            seqs.subset(train),
-            spec,
-            replace(options, seed=np.random.SeedSequence([seed, 0])),
-        )
+        fit = fit_iohmm(seqs.subset(train), spec, replace(options, seed=np.random.SeedSequence([seed, 0])))
         held = filter_beliefs(seqs.subset(test), fit.params)
         Tt = held.p_rely.shape[0]
         p_model[:Tt, test] = held.p_rely
         determined[:Tt, test] = held.determined
-        fits.append((test, fit.params))
         log.info("fold %d of %d: %d training participants, log-likelihood %.4f", f + 1, folds, len(train), fit.loglik)
         if progress is not None:
             progress(f + 1, folds)
@@ -433,4 +409,4 @@ def predict_heldout(
         for k, v in baseline_predictions(feats, bfit).items():
             base[k][:, test] = v[:, test]
     preds = {"model": p_model, **base}
-    return _report("held-out", frame, seqs, preds, determined, feats, bootstrap, seed, fold_of, bfits)
+    return _report(frame, seqs, preds, determined, feats, bootstrap, seed, fold_of, bfits)

@@ -1,13 +1,12 @@
-"""Choosing the number of trust levels: BIC on all data and participant-held-out log-likelihood.
+"""Choosing the number of trust levels (:func:`select_levels`) or of supervisor types
+(:func:`select_types`): BIC on all data and participant-held-out log-likelihood.
 
-The likelihood of a K-level model has many local maxima, more with every level, and
-random starts reach the best one ever more rarely.  Each K-level fit therefore starts
-both from random points (their number grows with the free parameters,
-:func:`default_restarts`) and from the (K-1)-level fit with one level split in two
-(:func:`split_starts`): a K-level model at least as likely as the (K-1)-level one, from
-which EM only climbs; then from the best local maxima found with two levels merged and
-one split (:func:`split_merge_starts`).  Every row reports how many starts reached the best
-log-likelihood (within :data:`BEST_TOLERANCE`).
+Each K-level fit starts from random points (by its free parameters, :func:`default_restarts`), from
+the (K-1)-level fit with one level split in two (:func:`split_starts`: as likely, EM only climbs),
+then from the best local maxima with two levels merged and one split (:func:`split_merge_starts`);
+each M-type fit from random points, the perturbed pooled fit and the (M-1)-type fit with each type
+split (:func:`~.mixture.split_type_starts`).  Every row reports how many starts reached the best
+log-likelihood (within :data:`BEST_TOLERANCE`).  See docs/fitting.md and docs/types.md.
 """
 
 from __future__ import annotations
@@ -23,14 +22,13 @@ import pandas as pd
 
 from .estep import Workspace
 from .iohmm import EMFit, fit_iohmm
+from .mixture import MixtureFit, check_types, fit_mixture, split_type_starts
+from .mixture_em import MixtureWorkspace
 from .options import FitOptions
 from .sequences import Sequences, deal_folds, encode
-from .spec import IOHMMSpec, Params
+from .spec import FitError, IOHMMSpec, Params
 from .structure import Structure
-from .trust_iohmm import (
-    inputs_spec,
-    level_names,
-)
+from .trust_iohmm import inputs_spec, level_names
 
 log = logging.getLogger(__name__)
 
@@ -38,6 +36,8 @@ log = logging.getLogger(__name__)
 BY_PARAMETERS = FitOptions(restarts=None, n_jobs=1)
 #: the fits of a selection: starts by free parameters, each to a relative tolerance of 1e-6
 SELECTION = FitOptions(restarts=None, tol=1e-6, n_jobs=1)
+#: the fits of a selection of types: 10 starts each, to a relative tolerance of 1e-6, on one thread
+TYPE_SELECTION = FitOptions(tol=1e-6, n_jobs=1)
 
 HELDOUT_PSEUDOCOUNT = 0.5  # per free cell of a row smoothed for held-out scoring (training counts + this)
 ZERO_CELL = 1e-9  # a fitted probability at most this is a zero (the fit clips such cells to 1e-12)
@@ -64,14 +64,10 @@ def reached_best(logliks: Sequence[float], tol: float = BEST_TOLERANCE) -> int:
 
 
 def split_starts(previous: Params, rng: np.random.Generator, per_level: int = SPLITS_PER_LEVEL) -> list[Params]:
-    """Starts with one more level: each level of ``previous`` split in two, ``per_level`` times.
-
-    The copy of level j takes a random share of j's initial probability and of every
-    transition into j, and j's rows out; the two halves' emission rows are pushed
-    apart (log-odds +/- a normal draw) and every row is mixed with :data:`SPLIT_MIX`
-    of a random row.  Fixed and tied cells are restored by the structure's projection
-    (:meth:`~.structure.Structure.project`) when the fit starts.
-    """
+    """Starts with one more level: each level j of ``previous`` split in two, ``per_level`` times: the
+    copy takes a random share of j's initial probability and incoming transitions and j's rows out, the
+    halves' emission rows pushed apart, every row mixed with :data:`SPLIT_MIX` of a random row (the
+    structure's projection restores fixed and tied cells when the fit starts)."""
     K0 = previous.initial.shape[-1]
     out = []
     for j in range(K0):
@@ -122,13 +118,10 @@ def fit_with_moves(
     rounds: int = MOVE_ROUNDS,
     sources_per_round: int = MOVE_SOURCES,
 ) -> EMFit:
-    """:func:`~.iohmm.fit_iohmm` from ``options.restarts`` random starts (default
-    :func:`default_restarts`) and from
-    ``previous`` (a fit with one level fewer) split (:func:`split_starts`); then up to ``rounds``
-    times from the ``sources_per_round`` best distinct local maxima not moved from before
-    (:func:`move_sources`; a lower maximum's moves can lead past the best) with two levels
-    merged and one split (:func:`split_merge_starts`), while that gains more than
-    :data:`BEST_TOLERANCE`.  Every run is kept in the result's ``runs``."""
+    """:func:`~.iohmm.fit_iohmm` from ``options.restarts`` random starts (default :func:`default_restarts`)
+    and ``previous`` (one level fewer) split; then up to ``rounds`` times, while that gains more than
+    :data:`BEST_TOLERANCE`, from the ``sources_per_round`` best distinct maxima not moved from before
+    (:func:`move_sources`) with two levels merged and one split.  Every run is kept in ``runs``."""
     ss = options.seed_sequence
     # the random starts are those fit_iohmm draws from ``seed`` (the first n of n + m are the
     # same): more restarts only add starts; the split and merge moves draw from the seed's own state
@@ -190,24 +183,12 @@ def select_levels(
     widen: bool = False,
     **spec_options: Any,
 ) -> list[dict[str, Any]]:
-    """Compare numbers of trust levels: BIC on all data and k-fold participant-held-out log-likelihood.
-
-    With ``widen``, while either criterion's best is the largest number compared (and below
-    :data:`MAX_LEVELS`), one more level is compared; such rows carry ``widened``.
-
-    ``spec_options`` adjust the ``paper`` preset (as for :func:`~.fit.fit_trust_model`); with
-    ``transition_inputs`` / ``emission_inputs`` other than a trust model's, the general model of
-    those named inputs (:func:`~.trust_iohmm.general_spec`) is compared;
-    ``progress(label, done, total)`` is called after every fit (``label`` names the number
-    of levels being compared).  Each fit is :func:`fit_with_moves`: ``options.restarts`` random
-    starts (default: :func:`default_restarts` of its free parameters), ``splits`` split
-    starts per level of the fit with one level fewer (when it was compared just before),
-    then merge-and-split starts from the :data:`MOVE_SOURCES` best distinct maxima (the
-    fit on all participants, whose log-likelihood and BIC are reported) or from the best
-    (:data:`FOLD_MOVE_SOURCES`, the training folds: three times fewer starts).  Each row holds ``starts`` (all of them)
-    and ``reached_best`` (starts within :data:`BEST_TOLERANCE` of the best);
-    :func:`selection_warnings` says when the best number of levels is the largest compared.
-    """
+    """Compare numbers of trust levels: BIC on all data and k-fold participant-held-out log-likelihood
+    (:class:`HeldOutComparison`; with ``widen`` one more level while a best is the largest compared, up
+    to :data:`MAX_LEVELS`).  ``spec_options`` adjust the ``paper`` preset, or name inputs of a general
+    model (:func:`~.trust_iohmm.inputs_spec`).  Each fit is :func:`fit_with_moves` with ``splits``
+    split starts per level, merge-and-split moves from the :data:`MOVE_SOURCES` best maxima on all
+    participants, :data:`FOLD_MOVE_SOURCES` in the training folds."""
     base = inputs_spec(frame, "paper", prior, **spec_options)
     seqs = encode(frame, base)
     previous: dict[int, EMFit] = {}  # per slot (-1: all participants, f: fold f's training participants)
@@ -374,37 +355,31 @@ def comparison_warnings(
 
 
 def heldout_loglik(test: Sequences, fit: EMFit) -> float:
-    """Held-out log-likelihood of ``test`` under the training fit, smoothed only where it would be -inf.
-
-    The held-out score compares the fitted models themselves: every row of the fit (the
-    initial distribution, each emission and transition row) is scored as fitted, except a
-    row that puts probability 0 (at most :data:`ZERO_CELL`: the fit keeps such cells at
-    1e-12) on a free cell.  A training fold can do that (no
-    training participant ever did it) while a held-out participant does it, and the
-    held-out log-likelihood would be -inf (about -27.6 per such event at 1e-12) for
-    every number of levels alike.  Such a row
-    is replaced by its smoothed estimate: the training fit's expected counts plus
-    :data:`HELDOUT_PSEUDOCOUNT` per free cell (on top of the spec's prior).  Smoothing
-    every row instead would pull the many sparsely visited transition rows of a larger
-    model towards uniform, a cost that grows with the number of levels
-    (docs/fitting.md, "Choosing the number of levels").  Input rows unseen in training
-    keep their defaults.
-    """
-    return float(Workspace(test, *fit.structure.dims).loglik(heldout_params(fit)))
+    """Held-out log-likelihood of ``test`` under the training fit (of a mixture: sum over participants of
+    log sum_m w_m P(trials | type m)), its tables as fitted but where a free cell at 0 would make it
+    -inf (:func:`heldout_params`): smoothing every row would pull the many sparsely visited rows of a
+    larger model towards uniform (docs/fitting.md, "Choosing the number of levels")."""
+    work = MixtureWorkspace(test, fit.structure) if isinstance(fit, MixtureFit) else Workspace(test, *fit.structure.dims)
+    return float(work.loglik(heldout_params(fit)))
 
 
 def heldout_params(fit: EMFit, pseudocount: float = HELDOUT_PSEUDOCOUNT) -> Params:
-    """The parameters :func:`heldout_loglik` scores with: ``fit``'s, with every row holding a free
-    cell at 0 (at most :data:`ZERO_CELL`) replaced by the smoothed row (expected counts + ``pseudocount`` per free cell)."""
-    s = fit.structure
+    """``fit``'s tables with every row holding a free cell at 0 (at most :data:`ZERO_CELL`) replaced by the
+    smoothed row: one M-step from the fit's expected counts plus ``pseudocount`` per free cell (on top of
+    the spec's prior); a mixture's initial table, one distribution over (type, first level), as a whole."""
     p = fit.params
     st = fit.workspace().estep(p)
     a = fit.spec.prior + pseudocount
-    c0 = st.initial + a
-    smooth = Params(c0 / c0.sum(), s.em.mstep(st.emission, a, p.emission), s.tr.mstep(st.transition, a, p.transition))
-
-    return Params(
-        smooth_zero_rows(p.initial, smooth.initial),
+    smooth: Params
+    axes: tuple[int, ...]
+    if isinstance(fit, MixtureFit):
+        smooth, axes = fit.structure.mstep(st, p, prior=a), (-2, -1)
+    else:
+        s, c0 = fit.structure, st.initial + a
+        smooth = Params(c0 / c0.sum(), s.em.mstep(st.emission, a, p.emission), s.tr.mstep(st.transition, a, p.transition))
+        axes = (-1,)
+    return type(p)(
+        smooth_zero_rows(p.initial, smooth.initial, axes),
         smooth_zero_rows(p.emission, smooth.emission),
         smooth_zero_rows(p.transition, smooth.transition),
     )
@@ -415,3 +390,72 @@ def smooth_zero_rows(fitted: np.ndarray, smoothed: np.ndarray, axes: tuple[int, 
     :data:`ZERO_CELL`, where ``smoothed`` is above it: fixed zeros stay) taken from ``smoothed``."""
     zero = ((fitted <= ZERO_CELL) & (smoothed > fitted)).any(axis=axes, keepdims=True)
     return np.where(zero, smoothed, fitted)
+
+
+def select_types(
+    frame: pd.DataFrame,
+    types: Sequence[int] = (1, 2, 3, 4),
+    folds: int = 5,
+    options: FitOptions = TYPE_SELECTION,
+    differ: str | Sequence[str] = "all",
+    prior: float = 0.0,
+    progress: Callable[[str, int, int], None] | None = None,
+    widen: bool = False,
+    **spec_options: Any,
+) -> list[dict[str, Any]]:
+    """Compare numbers of supervisor types (``types``, e.g. 1..4) as :func:`select_levels` compares levels
+    (up to :data:`MAX_TYPES`); each row also holds the types' weights and the empty types."""
+    types = sorted({int(m) for m in types})
+    if not types or types[0] < 1:
+        raise FitError([f"the numbers of types must be positive integers, got {list(types)}"])
+    spec = inputs_spec(frame, "paper", prior, **spec_options)
+    seqs = encode(frame, spec)
+    check_types(types[-1], seqs)
+    previous: dict[int, MixtureFit] = {}  # per slot (-1: all participants, f: fold f's training participants)
+    pooled: dict[int, MixtureFit] = {}  # the one-type fit of each slot
+
+    def one_fit(data: Sequences, M: int, slot: int, key: list[int]) -> MixtureFit:
+        ss = np.random.SeedSequence(key)
+        before = previous.get(slot)
+        init = []
+        if before is not None and before.n_types == M - 1:
+            init = split_type_starts(before.params, np.random.default_rng(ss.generate_state(4)), before.structure)
+            # the split starts live in the previous fit's structure: re-projected by the new one in fit_mixture
+        fit = fit_mixture(
+            data,
+            spec,
+            M,
+            replace(options, seed=ss),
+            differ=differ,
+            pooled=pooled[slot].params.type_params(0) if slot in pooled else None,
+            init=init,
+        )
+        previous[slot] = fit
+        if M == 1:
+            pooled[slot] = fit
+        return fit
+
+    def extra(full: MixtureFit) -> dict[str, Any]:
+        return {"weights": full.weights.tolist(), "empty_types": full.empty_types}
+
+    cap = min(MAX_TYPES, seqs.n_participants) if widen else 0
+    comparison = HeldOutComparison("types", folds, options.seed_number, cap, progress)
+    rows = comparison.run(seqs, types, one_fit, heldout_loglik, extra)
+    for w in type_selection_warnings(rows):
+        log.warning("%s", w)
+    return rows
+
+
+MAX_TYPES = 12  # the most supervisor types select-types compares (the command's --types bound)
+
+
+def type_selection_warnings(rows: Sequence[dict[str, Any]]) -> list[str]:
+    """A best number of types at the largest compared, fits whose best only one start reached,
+    and fits with empty types."""
+
+    def empty(r: dict[str, Any]) -> list[str]:
+        if not r.get("empty_types"):
+            return []
+        return [f"{r['types']} types: empty type(s) {', '.join(r['empty_types'])}: fewer types fit as well"]
+
+    return comparison_warnings(rows, "types", MAX_TYPES, "--types {low}..{next}", f" (within {BEST_TOLERANCE})", empty)

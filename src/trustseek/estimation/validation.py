@@ -19,7 +19,7 @@ import pandas as pd
 
 from ..data.cells import NAN_WORDS, DataError
 from ..model.core import TrustModel
-from .baselines import indicators, running_rate, spread
+from .baselines import indicators, per_row, running_rate, spread
 from .iohmm import posteriors
 from .prediction import LEVEL, bootstrap_counts, chunks, filter_beliefs, paired, percentile_interval
 from .sequences import encode
@@ -256,19 +256,13 @@ def _decoded_values(frame: pd.DataFrame, model: TrustModel) -> tuple[dict[str, n
     n = len(frame)
     pcode = np.empty(n, dtype=np.int64)
     pcode[seqs.rows[valid]] = np.nonzero(valid)[1]
-
-    def per_row(arr: np.ndarray) -> np.ndarray:
-        v = np.full(n, np.nan)
-        v[seqs.rows[valid]] = arr[valid]
-        return v
-
     rely, reliable = indicators(frame)
-    values = {name: per_row((arr * scale).sum(-1)) for name, arr in (("smoothed", gamma), ("filtered", filt.posterior))}
-    values["reliable_fraction"] = per_row(running_rate(spread(reliable, seqs), inclusive=True))
+    values = {name: per_row((arr * scale).sum(-1), seqs, n) for name, arr in (("smoothed", gamma), ("filtered", filt.posterior))}
+    values["reliable_fraction"] = per_row(running_rate(spread(reliable, seqs), inclusive=True), seqs, n)
     if not np.isfinite(reliable).any():
         values["reliable_fraction"] = np.full(n, np.nan)
     values["reliance"] = rely
-    values["reliance_rate"] = per_row(running_rate(spread(rely, seqs), inclusive=True))
+    values["reliance_rate"] = per_row(running_rate(spread(rely, seqs), inclusive=True), seqs, n)
     return values, pcode, seqs.n_participants
 
 

@@ -9,7 +9,7 @@ from trustseek.estimation import encode, kernels, paper_spec
 from trustseek.estimation.mixture import fit_mixture
 from trustseek.estimation.mixture_em import MixtureParams, MixtureWorkspace
 from trustseek.estimation.options import FitOptions
-from trustseek.estimation.type_selection import heldout_mixture_loglik, heldout_mixture_params
+from trustseek.estimation.selection import heldout_loglik, heldout_params
 from trustseek.model.presets import paper_conservative_mixture
 from trustseek.simulation.designs import simulate_design
 from trustseek.simulation.populations import Supervisors
@@ -42,11 +42,11 @@ def test_a_mixture_without_zero_cells_is_scored_as_fitted(train_test):
     """Before, every free cell of every type got 0.5 more counts: the score was not the fitted mixture's."""
     fit, test = train_test
     inner = _interior(fit)
-    out = heldout_mixture_params(inner)
+    out = heldout_params(inner)
     for name in ("initial", "emission", "transition"):
         np.testing.assert_array_equal(getattr(out, name), getattr(inner.params, name))
     direct = float(MixtureWorkspace(test, fit.structure).loglik(inner.params))
-    assert heldout_mixture_loglik(test, inner) == pytest.approx(direct, abs=1e-9)
+    assert heldout_loglik(test, inner) == pytest.approx(direct, abs=1e-9)
 
 
 def test_only_a_row_with_a_zero_free_cell_is_smoothed(train_test):
@@ -57,14 +57,14 @@ def test_only_a_row_with_a_zero_free_cell_is_smoothed(train_test):
     u = int(np.flatnonzero(~fit.structure.tr.fixed.any((-2, -1)))[0])
     tr[1, u, 0] = [1.0, 0.0]  # type 2 never leaves low trust from input row u
     zeroed = replace(inner, params=MixtureParams(p.initial, p.emission, tr))
-    out = heldout_mixture_params(zeroed)
+    out = heldout_params(zeroed)
     assert np.all(out.transition[1, u, 0] > 0)
     others = np.ones(tr.shape[:3], dtype=bool)
     others[1, u, 0] = False
     np.testing.assert_array_equal(out.transition[others], tr[others])
     np.testing.assert_array_equal(out.emission, p.emission)
     np.testing.assert_array_equal(out.initial, p.initial)
-    assert np.isfinite(heldout_mixture_loglik(test, zeroed))
+    assert np.isfinite(heldout_loglik(test, zeroed))
 
 
 def test_a_zero_in_the_initial_table_smooths_the_whole_joint_table(train_test):
@@ -74,7 +74,7 @@ def test_a_zero_in_the_initial_table_smooths_the_whole_joint_table(train_test):
     ini = p.initial.copy()
     ini[0, 0] = 0.0
     ini /= ini.sum()
-    out = heldout_mixture_params(replace(inner, params=MixtureParams(ini, p.emission, p.transition)))
+    out = heldout_params(replace(inner, params=MixtureParams(ini, p.emission, p.transition)))
     assert out.initial[0, 0] > 0
     assert out.initial.sum() == pytest.approx(1.0)
     np.testing.assert_array_equal(out.transition, p.transition)
