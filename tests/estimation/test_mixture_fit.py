@@ -6,10 +6,9 @@ import pytest
 from scipy.special import logsumexp
 
 from trustseek.estimation import encode, fit_iohmm, fit_trust_model, kernels, paper_spec
-from trustseek.estimation.bootstrap import bootstrap_types
 from trustseek.estimation.em import run_em
 from trustseek.estimation.estep import Workspace
-from trustseek.estimation.mixture import decode_types, fit_mixture, fit_types, mixture_loglik
+from trustseek.estimation.mixture import bootstrap_types, decode_types, fit_mixture, fit_types, mixture_loglik
 from trustseek.estimation.mixture_em import EMPTY, MixtureParams, MixtureStructure, MixtureWorkspace, parse_differ
 from trustseek.estimation.options import FitOptions
 from trustseek.estimation.selection import select_types, type_selection_warnings
@@ -257,13 +256,13 @@ def test_cells_that_no_resample_moved_from_zero_get_likelihood_ratio_bounds(monk
     the likelihood-ratio bound of a single fit's (bisection to 1/64), the mixture refitted; the
     other intervals are the percentile ones, and the intervals say how many."""
     from trustseek.data.trials import example_path, read_trials
-    from trustseek.estimation import bootstrap
+    from trustseek.estimation import mixture
 
     fit = fit_types(read_trials(example_path()), 2, options=FitOptions(restarts=2, seed=0, tol=1e-6, n_jobs=1))
     options = FitOptions(restarts=1, seed=1, tol=1e-6, n_jobs=1)
     iv = bootstrap_types(fit, 4, options=options)
     with monkeypatch.context() as patch:  # the same replicates' percentile intervals alone
-        patch.setattr(bootstrap, "_type_boundary_bounds", lambda fit, lo, hi, per: (lo, hi, 0))
+        patch.setattr(mixture, "_type_boundary_bounds", lambda fit, lo, hi, per: (lo, hi, 0))
         raw = bootstrap_types(fit, 4, options=options)
     expected = 0
     for name, model in zip(fit.names, fit.models(), strict=True):

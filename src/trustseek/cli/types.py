@@ -152,7 +152,7 @@ def _bootstrap_types(fit, bootstrap: int, seed: int, jobs: int | None, bar):
     if bootstrap <= 0:
         return None
     task = bar.add_task("bootstrap", total=bootstrap)
-    from ..estimation.bootstrap import TYPE_REFITS, bootstrap_types
+    from ..estimation.mixture import TYPE_REFITS, bootstrap_types
 
     return bootstrap_types(
         fit,
