@@ -11,7 +11,7 @@ import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 import pandas as pd
@@ -182,6 +182,18 @@ class Column:
         return out
 
 
+@dataclass
+class RawLog:
+    """A log as read: its rows, its column names and each column as codes on demand."""
+
+    name: str
+    n: int
+    columns: list[str]
+    col: Any  # name -> Column
+    extras: Any  # list of names -> DataFrame of those columns
+    release: Any = None  # list of names -> None: those columns are no longer needed (their memory goes)
+
+
 def column_from_pandas(values: pd.Series, missing: frozenset[str]) -> Column:
     numeric = pd.api.types.is_numeric_dtype(values.dtype) and not pd.api.types.is_bool_dtype(values.dtype)
     if isinstance(values.dtype, pd.CategoricalDtype):
@@ -251,11 +263,14 @@ def column_from_arrow(chunked: Any, missing: frozenset[str]) -> Column:
     return Column(codes, [*texts, null], last_unused=chunked.null_count == 0)
 
 
-def value_ids(col: Column, table: dict[str, int]) -> np.ndarray:
-    """Per row an id of its value, shared across files through ``table`` (numbers by value); -1 empty."""
+def value_ids(col: Column, table: dict[str, int], nan: int = -1) -> np.ndarray:
+    """Per row an id of its value, shared across columns and files through ``table`` (numbers by
+    value); -1 empty, ``nan`` for a NaN."""
     ids = np.full(len(col.texts), -1, dtype=np.int64)
     for j, t in enumerate(col.texts):
-        if t is not None and t != NAN_MARK:
+        if t == NAN_MARK:
+            ids[j] = nan
+        elif t is not None:
             ids[j] = table.setdefault(same_value_key(t), len(table))
     return ids[col.codes]
 
@@ -274,6 +289,11 @@ def report_kinds(problems: Problems, cc: Column, kind: np.ndarray, heads: tuple[
     problems.rows(heads[1], np.flatnonzero(k == NAN))
     problems.rows(heads[2], np.flatnonzero(k == UNKNOWN), lambda r: repr(cc.texts[cc.codes[r]]))
     return k
+
+
+def names_list(x: Any) -> TypeGuard[list[str]]:
+    """Whether ``x`` is a non-empty list of non-empty names."""
+    return isinstance(x, list) and bool(x) and all(isinstance(c, str) and c for c in x)
 
 
 def unknown_entries(head: str, entry: Mapping[str, Any], allowed: Sequence[str]) -> list[str]:

@@ -18,38 +18,28 @@ import re
 import sys
 import threading
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
 from ..model.jsonfile import special_file
-from .cells import SHOWN, Column, DataError, Problems, column_from_arrow, column_from_pandas, shorten
+from .cells import SHOWN, Column, DataError, Problems, RawLog, column_from_arrow, column_from_pandas, shorten
 
 DELIMITERS = (",", ";", "\t", "|")
-
-
-@dataclass
-class RawLog:
-    name: str
-    n: int
-    columns: list[str]
-    col: Any  # name -> Column
-    extras: Any  # list of names -> DataFrame of those columns
-    release: Any = None  # list of names -> None: those columns are no longer needed (their memory goes)
-
-
+CSV_SUFFIXES = (".csv", ".txt", ".tsv")
+COMPRESSED = {".gz": "gzip", ".bz2": "bz2", ".zst": "zstd"}  # a CSV's compressions, by suffix (log.csv.gz)
+PARQUET_SUFFIXES = (".parquet", ".pq")
+JSONL_SUFFIXES = (".jsonl", ".ndjson")
+JSON_SUFFIXES = (".json",)
+SHEET_SUFFIXES = (".xlsx", ".xls", ".xlsm", ".ods", ".numbers")
+PACKED_SUFFIXES = (".gz", ".zip", ".bz2", ".xz", ".zst", ".7z")
 MAX_COLUMNS = 10_000  # a CSV's columns: parsing takes ~6 s at this width and grows with its square
 HEADER_BYTES = 1 << 26  # the longest header line read (64 MB: millions of columns)
-
-
-def _open_bytes(path: Path) -> Any:
-    """The file's bytes as read: decompressed when its suffix names a compression (:data:`COMPRESSED`)."""
-    codec = COMPRESSED.get(path.suffix.lower())
-    if codec is None:
-        return path.open("rb")
-    return io.BufferedReader(_input(path))
+BLOCK_BYTES = 1 << 24  # a CSV is parsed in blocks of this size (16 MB), each with its own dictionaries
+SPLIT_BYTES = 1 << 26  # a CSV from this size (64 MB) is parsed in parts on two threads
+PART_BYTES = 1 << 25  # the size of those parts (32 MB)
+SPLIT_SEARCH = 1 << 20  # how far past a part's end a line end is looked for
 
 
 def _input(path: Path) -> Any:
@@ -80,7 +70,7 @@ def _sniff(path: Path, sep: str | None, name: str) -> tuple[str, list[str], int]
     read, however long.  UTF-16 text (Excel's "Unicode Text") is refused here: its ASCII would
     pass as UTF-8 with a NUL byte between every two characters."""
     try:
-        with _open_bytes(path) as fh:
+        with io.BufferedReader(_input(path)) if path.suffix.lower() in COMPRESSED else path.open("rb") as fh:
             head = fh.readline(HEADER_BYTES)
             declared = re.fullmatch(rb"(?:\xef\xbb\xbf)?sep=(.)\r?\n?", head)
             if declared:
@@ -105,19 +95,6 @@ def _sniff(path: Path, sep: str | None, name: str) -> tuple[str, list[str], int]
             sep = best if counts[best] > 0 else ","
     names = next(csv.reader(io.StringIO(first), delimiter=sep), []) if first else []
     return sep, [n.strip() for n in names], 2 if declared else 1
-
-
-CSV_SUFFIXES = (".csv", ".txt", ".tsv")
-COMPRESSED = {".gz": "gzip", ".bz2": "bz2", ".zst": "zstd"}  # a CSV's compressions, by suffix (log.csv.gz)
-
-
-PARQUET_SUFFIXES = (".parquet", ".pq")
-
-
-JSONL_SUFFIXES = (".jsonl", ".ndjson")
-
-
-JSON_SUFFIXES = (".json",)
 
 
 def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: dict[str, Any] | None = None) -> RawLog:
@@ -147,7 +124,7 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: 
             from .layouts import explode_table
 
             return _arrow_raw(explode_table(_parquet_table(path, name), explode, name, "row"), name, missing)
-        return _load_parquet(path, name, missing)
+        return _arrow_raw(_parquet_table(path, name), name, missing)
     if _csv_suffix(path) in CSV_SUFFIXES:
         if explode is not None:
             raise DataError(["explode: a CSV cell is text, not a list; per-trial lists are read from JSON or Parquet"], name)
@@ -162,10 +139,6 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: 
          ".csv.bz2, .csv.zst)"],
         name,
     )  # fmt: skip
-
-
-SHEET_SUFFIXES = (".xlsx", ".xls", ".xlsm", ".ods", ".numbers")
-PACKED_SUFFIXES = (".gz", ".zip", ".bz2", ".xz", ".zst", ".7z")
 
 
 def _exploded_frame(source: pd.DataFrame, missing: frozenset[str], explode: dict[str, Any]) -> RawLog:
@@ -209,10 +182,6 @@ def _arrow_source(table: Any, name: str, names: list[str], missing: frozenset[st
         lambda cs: held["table"].select(cs).to_pandas(),
         release,
     )
-
-
-def _load_parquet(path: Path, name: str, missing: frozenset[str]) -> RawLog:
-    return _arrow_raw(_parquet_table(path, name), name, missing)
 
 
 def _parquet_table(path: Path, name: str) -> Any:
@@ -473,12 +442,6 @@ def _on_two_threads(parse: Any, count: int) -> list[Any]:
     if failed:
         raise failed[min(failed)]
     return results
-
-
-BLOCK_BYTES = 1 << 24  # a CSV is parsed in blocks of this size (16 MB), each with its own dictionaries
-SPLIT_BYTES = 1 << 26  # a CSV from this size (64 MB) is parsed in parts on two threads
-PART_BYTES = 1 << 25  # the size of those parts (32 MB)
-SPLIT_SEARCH = 1 << 20  # how far past a part's end a line end is looked for
 
 
 class _Quoted(Exception):

@@ -49,19 +49,6 @@ from ..pomdp.belief import to_vector
 from ..pomdp.flat import FlatPOMDP, FlatPOMDPError
 from ..pomdp.problem import AssistancePOMDP
 
-__all__ = [
-    "PomdpFileError",
-    "export_assistance",
-    "flat_belief",
-    "flat_from_assistance",
-    "flat_values_check",
-    "pomdpx_factors",
-    "read_pomdp",
-    "read_pomdpx_tables",
-    "write_pomdp",
-    "write_pomdpx",
-]
-
 
 class PomdpFileError(FlatPOMDPError):
     """A ``.pomdp`` or POMDPX file is malformed."""
@@ -73,26 +60,8 @@ class PomdpFileError(FlatPOMDPError):
 # Cassandra's grammar: an identifier is [a-zA-Z][a-zA-Z0-9_-]* and is not one of its keywords.
 # POMDPX value names are XML tokens; the same identifiers are used there, so one name works in both.
 _IDENT = re.compile(r"[A-Za-z][A-Za-z0-9_\-]*")
-_CASSANDRA_KEYWORDS = frozenset(
-    {
-        "discount",
-        "values",
-        "states",
-        "actions",
-        "observations",
-        "T",
-        "O",
-        "R",
-        "uniform",
-        "identity",
-        "reward",
-        "cost",
-        "start",
-        "include",
-        "exclude",
-        "reset",
-    }
-)
+_HEADER = ("discount", "values", "states", "actions", "observations", "start")
+_CASSANDRA_KEYWORDS = frozenset((*_HEADER, "T", "O", "R", "uniform", "identity", "reward", "cost", "include", "exclude", "reset"))
 
 
 def _is_identifier(name: str) -> bool:
@@ -121,15 +90,8 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
     kern = pomdp.kernel  # [c, a, t, o, e, u]
     pc = pomdp.complexity_probs
     T_, C_ = _tokens(pomdp.trust_levels), _tokens(pomdp.complexities)
-    states = _tokens(
-        [
-            f"{T_[t]}_{EXPERIENCES[e]}_{C_[c]}_{HUMAN_ACTIONS[o]}"
-            for t in range(K)
-            for e in range(2)
-            for c in range(N)
-            for o in range(2)
-        ]
-    )
+    cells = product(range(K), range(2), range(N), range(2))
+    states = _tokens([f"{T_[t]}_{EXPERIENCES[e]}_{C_[c]}_{HUMAN_ACTIONS[o]}" for t, e, c, o in cells])
     obs = _tokens([f"{HUMAN_ACTIONS[o]}_{EXPERIENCES[e]}_{C_[c]}" for o in range(2) for e in range(2) for c in range(N)])
 
     def sidx(t, e, c, o):
@@ -198,12 +160,8 @@ def _names_or_count(names: Sequence[str]) -> tuple[str, list[str]]:
 
 
 def write_pomdp(flat: FlatPOMDP, path: str | Path | None = None) -> str:
-    """Write Cassandra's ``.pomdp`` format; returns the text (and writes it when ``path`` is given).
-
-    The file follows the published grammar: names are identifiers (``[a-zA-Z][a-zA-Z0-9_-]*``,
-    not a keyword; other names are made into identifiers), numbers have a digit on each side of
-    the point, the preamble comes first, then ``start:``, then the ``T:``, ``O:`` and ``R:``
-    entries."""
+    """Write Cassandra's ``.pomdp`` format (its published grammar: the preamble, ``start:``, then the
+    ``T:``, ``O:`` and ``R:`` entries); returns the text (and writes it when ``path`` is given)."""
     state_header, states = _names_or_count(flat.states)
     action_header, actions = _names_or_count(flat.actions)
     obs_header, observations = _names_or_count(flat.observations)
@@ -217,14 +175,9 @@ def write_pomdp(flat: FlatPOMDP, path: str | Path | None = None) -> str:
         "start: " + " ".join(_num(x) for x in flat.start),
         "",
     ]
-    for a, an in enumerate(actions):
-        lines.append(f"T: {an}")
-        lines += [" ".join(_num(x) for x in row) for row in flat.transition[a]]
-        lines.append("")
-    for a, an in enumerate(actions):
-        lines.append(f"O: {an}")
-        lines += [" ".join(_num(x) for x in row) for row in flat.observation[a]]
-        lines.append("")
+    for key, table in (("T", flat.transition), ("O", flat.observation)):
+        for a, an in enumerate(actions):
+            lines += [f"{key}: {an}", *(" ".join(_num(x) for x in row) for row in table[a]), ""]
     for a, an in enumerate(actions):
         for s, sn in enumerate(states):
             block = flat.reward[a, s]
@@ -238,9 +191,6 @@ def write_pomdp(flat: FlatPOMDP, path: str | Path | None = None) -> str:
     if path is not None:
         Path(path).write_text(text, encoding="utf-8")
     return text
-
-
-_HEADER = ("discount", "values", "states", "actions", "observations", "start")
 
 
 def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
@@ -499,7 +449,7 @@ def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
     ET.SubElement(av, "ValueEnum").text = " ".join(ACTIONS)
     ET.SubElement(var, "RewardVar", vname="reward")
 
-    def table(parent, tag, var_, parents, values, value_tag):
+    def cond(parent, var_, parents, values, tag="CondProb", value_tag="ProbTable"):
         c = ET.SubElement(parent, tag)
         ET.SubElement(c, "Var").text = var_
         ET.SubElement(c, "Parent").text = " ".join(parents)
@@ -509,9 +459,6 @@ def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
         n_dash = sum(1 for x in parents if x != "null") + (value_tag == "ProbTable")
         ET.SubElement(e, "Instance").text = " ".join(["-"] * max(n_dash, 1))
         ET.SubElement(e, value_tag).text = " ".join(_num(x) for x in np.asarray(values).ravel())
-
-    def cond(parent, var_, parents, values):
-        table(parent, "CondProb", var_, parents, values, "ProbTable")
 
     init = ET.SubElement(root, "InitialStateBelief")
     cond(init, "trust_0", ["null"], pomdp.model.initial)
@@ -527,7 +474,7 @@ def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
     cond(of, "human_action", ["human_1"], np.eye(2))
     rf = ET.SubElement(root, "RewardFunction")
     R = np.transpose(pomdp.expected_reward, (1, 0, 2))  # [a, c, t]
-    table(rf, "Func", "reward", ["robot", "complexity_0", "trust_0"], R, "ValueTable")
+    cond(rf, "reward", ["robot", "complexity_0", "trust_0"], R, "Func", "ValueTable")
     ET.indent(root)
     text = '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
     if path is not None:
@@ -581,16 +528,14 @@ def flat_values_check(pomdp: AssistancePOMDP, horizons: Sequence[int] = (1, 2, 3
     exact expansion of the belief tree; any number of trust levels)."""
     flat = flat_from_assistance(pomdp)
     belief_mdp = pomdp.branch_model()
-    rows = []
     b0 = pomdp.model.initial
-    for h in horizons:
-        for c, cn in enumerate(pomdp.complexities):
-            rows.append(
-                {
-                    "horizon": h,
-                    "complexity": cn,
-                    "flat": flat.finite_horizon_value(flat_belief(pomdp, b0, c), h),
-                    "belief_mdp": belief_mdp.finite_horizon_value(b0, h, c),
-                }
-            )
-    return rows
+    return [
+        {
+            "horizon": h,
+            "complexity": cn,
+            "flat": flat.finite_horizon_value(flat_belief(pomdp, b0, c), h),
+            "belief_mdp": belief_mdp.finite_horizon_value(b0, h, c),
+        }
+        for h in horizons
+        for c, cn in enumerate(pomdp.complexities)
+    ]
