@@ -94,9 +94,6 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
     states = _tokens([f"{T_[t]}_{EXPERIENCES[e]}_{C_[c]}_{HUMAN_ACTIONS[o]}" for t, e, c, o in cells])
     obs = _tokens([f"{HUMAN_ACTIONS[o]}_{EXPERIENCES[e]}_{C_[c]}" for o in range(2) for e in range(2) for c in range(N)])
 
-    def sidx(t, e, c, o):
-        return ((t * 2 + e) * N + c) * 2 + o
-
     def oidx(o, e, c):
         return (o * 2 + e) * N + c
 
@@ -107,15 +104,15 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
     R = pomdp.expected_reward  # [c, a, t]
     for a in range(2):
         for t, e, c, o in product(range(K), range(2), range(N), range(2)):
-            s = sidx(t, e, c, o)
+            s = _state_index(t, e, c, o, N)
             Om[a, s, oidx(o, e, c)] = 1.0
             Rm[a, s] = R[c, a, t]
             for o2, e2, u, c2 in product(range(2), range(2), range(K), range(N)):
-                Tm[a, s, sidx(u, e2, c2, o2)] += pc[c2] * kern[c, a, t, o2, e2, u]
+                Tm[a, s, _state_index(u, e2, c2, o2, N)] += pc[c2] * kern[c, a, t, o2, e2, u]
     start = np.zeros(n_s)
     cw = pc if initial_complexity is None else np.eye(N)[initial_complexity]
     for t, c in product(range(K), range(N)):
-        start[sidx(t, 1, c, 1)] = pomdp.model.initial[t] * cw[c]
+        start[_state_index(t, 1, c, 1, N)] = pomdp.model.initial[t] * cw[c]
     notes = [
         "trustseek assistance POMDP, flat form",
         "state names: <trust>_<experience>_<complexity>_<last human action>; "
@@ -128,12 +125,15 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
 
 def flat_belief(pomdp: AssistancePOMDP, belief, complexity: int) -> np.ndarray:
     """The flat belief for a belief over trust and a known complexity (E = reliable, last = rely)."""
-    b = to_vector(belief, pomdp.n_trust)
     K, N = pomdp.n_trust, pomdp.n_complexity
     out = np.zeros(K * 2 * N * 2)
-    for t in range(K):
-        out[((t * 2 + 1) * N + complexity) * 2 + 1] = b[t]
+    out[[_state_index(t, 1, complexity, 1, N) for t in range(K)]] = to_vector(belief, K)
     return out
+
+
+def _state_index(t: int, e: int, c: int, o: int, n_complexity: int) -> int:
+    """The flat state (T, E, C, last human action) in the export's order."""
+    return ((t * 2 + e) * n_complexity + c) * 2 + o
 
 
 # --------------------------------------------------------------------------- Cassandra .pomdp
@@ -205,10 +205,8 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
     Om = np.zeros((len(actions), len(states), len(observations)))
     R = np.zeros((len(actions), len(states), len(states), len(observations)))
     for no, k, rest in r.groups:
-        if k in ("T", "O"):
-            r.probabilities(T if k == "T" else Om, k, no, rest)
-        elif k == "R":
-            r.rewards(R, no, rest)
+        if k in ("T", "O", "R"):
+            r.entry({"T": T, "O": Om, "R": R}[k], k, no, rest)
     try:
         return FlatPOMDP(states, actions, observations, T, Om, R, discount, start)
     except FlatPOMDPError as exc:
@@ -274,9 +272,7 @@ class _PomdpReader:
             raise self.error(f"line {no}: discount must be a number, got {disc!r}") from None
 
     def _sign(self) -> float:
-        if "values" not in self.header:
-            return 1.0
-        no, val = self.header["values"]
+        no, val = self.header.get("values", (0, "reward"))
         if val not in ("reward", "cost"):
             raise self.error(f"line {no}: values must be 'reward' or 'cost', got {val!r}")
         return -1.0 if val == "cost" else 1.0
@@ -331,49 +327,26 @@ class _PomdpReader:
         last = fields[-1].split()
         return fields[:-1] + ([last[0]] if last else []), last[1:]
 
-    def probabilities(self, arr: np.ndarray, k: str, no: int, rest: str) -> None:
-        """A ``T:`` or ``O:`` entry: one number, a row (or ``uniform``) or a matrix (or ``uniform``, ``identity``)."""
+    def entry(self, arr: np.ndarray, k: str, no: int, rest: str) -> None:
+        """A ``T:``, ``O:`` or ``R:`` entry: one number, a row or a matrix (the last axes of ``arr``
+        its names leave open); a probability row or matrix may be ``uniform``, a ``T:`` matrix
+        ``identity``; rewards are negated where the file gives costs."""
         specs, vals = self._fields(rest)
-        n_s = len(self.states)
-        second = ("state", self.states)
-        third = ("state", self.states) if k == "T" else ("observation", self.observations)
-        width = n_s if k == "T" else len(self.observations)
-        if len(specs) == 3:
-            a_ = self.index("action", self.actions, specs[0], no)
-            s_, x_ = self.index(*second, specs[1], no), self.index(*third, specs[2], no)
-            arr[np.ix_(a_, s_, x_)] = self.numbers(vals, 1, no, f"{k} entry")[0]
-        elif len(specs) == 2:
-            a_, s_ = self.index("action", self.actions, specs[0], no), self.index(*second, specs[1], no)
-            row = np.full(width, 1.0 / width) if vals == ["uniform"] else self.numbers(vals, width, no, f"{k} row")
-            for a in a_:
-                arr[a, s_] = row
-        elif len(specs) == 1:
-            a_ = self.index("action", self.actions, specs[0], no)
-            if vals == ["uniform"]:
-                mat = np.full((n_s, width), 1.0 / width)
-            elif vals == ["identity"] and k == "T":
-                mat = np.eye(n_s)
-            else:
-                mat = self.numbers(vals, n_s * width, no, f"{k} matrix").reshape(n_s, width)
-            for a in a_:
-                arr[a] = mat
-        else:
+        if not (2 if k == "R" else 1) <= len(specs) <= arr.ndim:
             raise self.error(f"line {no}: malformed {k} entry")
-
-    def rewards(self, R: np.ndarray, no: int, rest: str) -> None:
-        """An ``R:`` entry: one number, a row over observations or a matrix (next state by observation)."""
-        specs, vals = self._fields(rest)
-        n_s, n_o = len(self.states), len(self.observations)
-        if not 2 <= len(specs) <= 4:
-            raise self.error(f"line {no}: malformed R entry")
-        kinds = (("action", self.actions), ("state", self.states), ("state", self.states), ("observation", self.observations))
+        third = ("observation", self.observations) if k == "O" else ("state", self.states)
+        kinds = (("action", self.actions), ("state", self.states), third, ("observation", self.observations))
         where = [self.index(*kind, spec, no) for kind, spec in zip(kinds, specs, strict=False)]
-        if len(specs) == 4:
-            R[np.ix_(*where)] = self.sign * self.numbers(vals, 1, no, "R entry")[0]
-        elif len(specs) == 3:
-            R[np.ix_(*where)] = self.sign * self.numbers(vals, n_o, no, "R row")
+        shape = arr.shape[len(specs) :]
+        value: np.ndarray
+        if vals == ["uniform"] and shape and k != "R":
+            value = np.full(shape, 1.0 / shape[-1])
+        elif vals == ["identity"] and len(shape) == 2 and k == "T":
+            value = np.eye(len(self.states))
         else:
-            R[np.ix_(*where)] = self.sign * self.numbers(vals, n_s * n_o, no, "R matrix").reshape(n_s, n_o)
+            what = ("entry", "row", "matrix")[len(shape)]
+            value = (self.sign if k == "R" else 1.0) * self.numbers(vals, int(np.prod(shape)), no, f"{k} {what}").reshape(shape)
+        arr[np.ix_(*where)] = value
 
 
 def _is_float(tok: str) -> bool:
