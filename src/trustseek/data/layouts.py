@@ -160,21 +160,13 @@ def explode_table(table: Any, spec: dict[str, Any], name: str, unit: str = "reco
     if p.lines:
         raise DataError(p.lines, name)
     first = lengths[cols[0]]
-    differs = np.zeros(len(first), dtype=bool)
-    for c in cols[1:]:
-        differs |= lengths[c] != first
-    unequal = np.flatnonzero(differs)
+    unequal = np.flatnonzero(np.logical_or.reduce([lengths[c] != first for c in cols], axis=0))
     items = [f"{unit} {r + 1} ({', '.join(f'{c} {int(lengths[c][r])}' for c in cols)})" for r in unequal[:SHOWN]]
     p.add("explode: lists of different lengths within a record", items, len(unequal), unit=f"{unit}s")
     if p.lines:
         raise DataError(p.lines, name)
     parent = pc.list_parent_indices(table[cols[0]].chunk(0) if table.num_rows else pa.array([], pa.list_(pa.int8())))
-    out = {}
-    for c in table.column_names:
-        if c in cols:
-            out[c] = pc.list_flatten(table[c])
-        else:
-            out[c] = table[c].take(parent)
+    out = {c: pc.list_flatten(table[c]) if c in cols else table[c].take(parent) for c in table.column_names}
     if position is not None:
         idx = parent.to_numpy(zero_copy_only=False)
         offsets = np.cumsum(first.astype(np.int64)) - first

@@ -16,13 +16,14 @@ import pandas as pd
 
 from .cells import (
     EMPTY,
-    NAN,
     NAN_MARK,
+    SHOWN,
     UNKNOWN,
     Column,
     DataError,
     Problems,
     column_from_pandas,
+    level_lookup,
     report_kinds,
     spellings,
     value_ids,
@@ -59,28 +60,37 @@ def input_codes(problems: Problems, cc: Column, mapping: ColumnMapping, name: st
     return cc.per_row(lookup)
 
 
-def level_lookup(
-    cc: Column, table: dict[str, str], find: Callable[[str], int | None], dtype: Any, empty: int = EMPTY
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per distinct value of ``cc`` its level's code (-1: none) and its kind (0 ok, ``empty`` for an
-    empty cell, ``NAN``, ``UNKNOWN``): a value is looked up once, in the label ``table`` (any
-    spelling), then by ``find``."""
-    lookup = np.full(len(cc.texts), -1, dtype=dtype)
-    kind = np.zeros(len(cc.texts), dtype=np.int8)
-    for j, t in enumerate(cc.texts):
-        if t is None:
-            kind[j] = empty
-            continue
-        if t == NAN_MARK:
-            kind[j] = NAN
-            continue
-        label = next((table[s] for s in spellings(t) if s in table), t)
-        hit = find(label)
-        if hit is None:
-            kind[j] = UNKNOWN
-        else:
-            lookup[j] = hit
-    return lookup, kind
+def category_codes(problems: Problems, cc: Column, mapping: ColumnMapping, c: str, head: str) -> np.ndarray:
+    """Per row the code of a categorical column's canonical label, each distinct value looked up
+    once (in the mapping's labels, then the canonical labels); empty cells, NaNs and unknown labels
+    reported, with a hint for labels in another case."""
+    allowed = mapping.categories(c)
+    table = mapping.labels.get(c, {})
+    empty = 0 if c == "human_action" else EMPTY  # an empty human action: not recorded
+    lookup, kind = level_lookup(cc, table, lambda label: allowed.index(label) if label in allowed else None, np.int8, empty)
+    hint = "; leave the cell empty for not recorded" if c == "human_action" else ""
+    known_labels = f"{sorted(table)} (mapped) or " if table else ""
+    heads = (
+        f"{head}: empty value (expected one of {list(allowed)})",
+        f"{head}: value is NaN (expected one of {list(allowed)}{hint})",
+        f"{head}: unknown category (expected one of {known_labels}{list(allowed)})",
+    )
+    k = report_kinds(problems, cc, kind, heads)
+    near = {
+        t: a
+        for j, t in enumerate(cc.texts)
+        if kind[j] == UNKNOWN and t is not None
+        for a in allowed
+        if t.strip().lower() == a.lower()
+    }
+    if near and k is not None and (k == UNKNOWN).any():
+        flags = " ".join(f"--label {c}:{t.strip()}={a}" for t, a in list(near.items())[:SHOWN])
+        one = len(near) == 1
+        problems.lines.append(
+            f"hint: {', '.join(repr(t) for t in list(near)[:SHOWN])} {'is a label' if one else 'are labels'} written "
+            f"in another case or with spaces: map {'it' if one else 'them'} with {flags} (or a mapping file's labels)"
+        )
+    return cc.per_row(lookup)
 
 
 def rating_codes(problems: Problems, rc: Column, mapping: ColumnMapping, name: str) -> np.ndarray:

@@ -223,7 +223,7 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str], expl
     (the N-th trial, when ``explode`` turns each record's lists into trials)."""
     import pyarrow as pa
 
-    from .layouts import explode_table, table_from_records
+    from .layouts import explode_table, nested_columns, table_from_records
 
     lists = set(explode["columns"]) if explode is not None else set()
     if lines:
@@ -231,9 +231,9 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str], expl
 
         try:
             table = pjson.read_json(path)
-            if not any(pa.types.is_nested(f.type) for f in table.schema):
+            if not nested_columns(table):
                 return _arrow_raw(table, name, missing)
-            if lists and not any(pa.types.is_nested(f.type) for f in table.schema if f.name not in lists):
+            if lists and not set(nested_columns(table)) - lists:
                 return _arrow_raw(explode_table(table, explode or {}, name), name, missing)
         except (pa.ArrowException, OSError):
             pass  # mixed types in a column, a bad line or nested values: read record by record to say where

@@ -19,9 +19,9 @@ import numpy as np
 import pandas as pd
 
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
-from .cells import EMPTY, NAN_MARK, SHOWN, UNKNOWN, Column, DataError, Problems, RawLog, report_kinds, spellings, value_ids
+from .cells import NAN_MARK, Column, DataError, Problems, RawLog, spellings, value_ids
 from .layouts import join_file, unpivot
-from .levels import input_codes, level_lookup, one_rating_per_block, rating_codes
+from .levels import category_codes, input_codes, one_rating_per_block, rating_codes
 from .mapping import CANONICAL, CATEGORICAL, RATING, ColumnMapping, as_mapping, label_key
 from .order import check_trials, order_trials, trial_numbers
 from .sources import load_source, missing_column_hint
@@ -259,43 +259,11 @@ def _categories(
 ) -> dict[str, np.ndarray]:
     """Per categorical column the codes into its canonical labels (-1 = none)."""
     return {
-        c: _category_codes(problems, get(mapping.columns.get(c, c)), mapping, c, column(c))
+        c: category_codes(problems, get(mapping.columns.get(c, c)), mapping, c, column(c))
         if c in present
         else np.full(get.n, -1, dtype=np.int8)
         for c in CATEGORICAL
     }
-
-
-def _category_codes(problems: Problems, cc: Column, mapping: ColumnMapping, c: str, head: str) -> np.ndarray:
-    """Each distinct value looked up once (in the mapping's labels, then the canonical labels);
-    empty cells, NaNs and unknown labels reported, with a hint for labels in another case."""
-    allowed = mapping.categories(c)
-    table = mapping.labels.get(c, {})
-    empty = 0 if c == "human_action" else EMPTY  # an empty human action: not recorded
-    lookup, kind = level_lookup(cc, table, lambda label: allowed.index(label) if label in allowed else None, np.int8, empty)
-    hint = "; leave the cell empty for not recorded" if c == "human_action" else ""
-    known_labels = f"{sorted(table)} (mapped) or " if table else ""
-    heads = (
-        f"{head}: empty value (expected one of {list(allowed)})",
-        f"{head}: value is NaN (expected one of {list(allowed)}{hint})",
-        f"{head}: unknown category (expected one of {known_labels}{list(allowed)})",
-    )
-    k = report_kinds(problems, cc, kind, heads)
-    near = {
-        t: a
-        for j, t in enumerate(cc.texts)
-        if kind[j] == UNKNOWN and t is not None
-        for a in allowed
-        if t.strip().lower() == a.lower()
-    }
-    if near and k is not None and (k == UNKNOWN).any():
-        flags = " ".join(f"--label {c}:{t.strip()}={a}" for t, a in list(near.items())[:SHOWN])
-        one = len(near) == 1
-        problems.lines.append(
-            f"hint: {', '.join(repr(t) for t in list(near)[:SHOWN])} {'is a label' if one else 'are labels'} written "
-            f"in another case or with spaces: map {'it' if one else 'them'} with {flags} (or a mapping file's labels)"
-        )
-    return cc.per_row(lookup)
 
 
 def _ratings(
