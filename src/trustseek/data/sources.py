@@ -16,8 +16,7 @@ import mmap
 import os
 import re
 import sys
-import threading
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
@@ -120,11 +119,10 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: 
         raise DataError([f"is {special}; expected a trial log file"], name)
     suffix = path.suffix.lower()
     if suffix in PARQUET_SUFFIXES:
-        if explode is not None:
-            from .layouts import explode_table
+        from .layouts import explode_table
 
-            return _arrow_raw(explode_table(_parquet_table(path, name), explode, name, "row"), name, missing)
-        return _arrow_raw(_parquet_table(path, name), name, missing)
+        table = _parquet_table(path, name)
+        return _arrow_raw(table if explode is None else explode_table(table, explode, name, "row"), name, missing)
     if _csv_suffix(path) in CSV_SUFFIXES:
         if explode is not None:
             raise DataError(["explode: a CSV cell is text, not a list; per-trial lists are read from JSON or Parquet"], name)
@@ -290,10 +288,7 @@ def _nested_values(records: list[dict[str, Any]], where: list[str], name: str, l
                 bad.setdefault(k, []).append(f"{w} {json.dumps(v)[:40]}")
                 if isinstance(v, list):
                     found.add(k)
-            elif k in lists and (
-                (v is not None and not isinstance(v, list))
-                or (isinstance(v, list) and any(isinstance(x, (dict, list)) for x in v))
-            ):
+            elif k in lists and v is not None and (not isinstance(v, list) or any(isinstance(x, (dict, list)) for x in v)):
                 scalar.setdefault(k, []).append(f"{w} {json.dumps(v)[:40]}")
     p = Problems()
     for k, items in bad.items():
@@ -416,32 +411,15 @@ def _check_utf8(table: Any) -> None:
 
 
 def _on_two_threads(parse: Any, count: int) -> list[Any]:
-    """``parse(i)`` of every part ``i``, in order, each part taken by whichever of two threads (this
-    one and one of ours) is free: the two end together however the cores are shared.  The error
-    of the first part that fails is raised."""
-    results: list[Any] = [None] * count
-    failed: dict[int, BaseException] = {}
-    parts = iter(range(count))
-    lock = threading.Lock()
-
-    def work() -> None:
-        while not failed:
-            with lock:
-                i = next(parts, None)
-            if i is None:
-                return
-            try:
-                results[i] = parse(i)
-            except BaseException as exc:  # raised below, on the calling thread
-                failed[i] = exc
-
-    with ThreadPoolExecutor(1, thread_name_prefix="trustseek-csv") as pool:
-        other = pool.submit(work)
-        work()
-        other.result()
-    if failed:
-        raise failed[min(failed)]
-    return results
+    """``parse(i)`` of every part ``i``, in order, on two threads, each part taken by whichever is
+    free: the two end together however the cores are shared.  From the first failure on no part
+    is begun, and the error of the first part that fails is raised."""
+    with ThreadPoolExecutor(2, thread_name_prefix="trustseek-csv") as pool:
+        futures = [pool.submit(parse, i) for i in range(count)]
+        wait(futures, return_when=FIRST_EXCEPTION)
+        for f in futures:
+            f.cancel()  # the parts not begun (they come after every part begun)
+    return [f.result() for f in futures]
 
 
 class _Quoted(Exception):
