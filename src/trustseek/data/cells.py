@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, TypeGuard
 
 import numpy as np
@@ -38,15 +38,15 @@ def shorten(text: str, limit: int = SHOWN_CHARS) -> str:
     return f"{text[:limit]}... ({len(text) - limit:,} more characters)"
 
 
+@dataclass
 class Problems:
     """Problems grouped by kind: one line per kind with the count and the first locations.
 
     ``rowid`` maps the rows being checked to the file's data rows (rows left out by a
     drop rule are not checked, and locations still name the file's rows)."""
 
-    def __init__(self, rowid: np.ndarray | None = None) -> None:
-        self.lines: list[str] = []
-        self.rowid = rowid
+    rowid: np.ndarray | None = None
+    lines: list[str] = field(default_factory=list)
 
     def row(self, r: int) -> int:
         """The file's data row (1-based) of checked row ``r`` (0-based)."""

@@ -64,10 +64,6 @@ _HEADER = ("discount", "values", "states", "actions", "observations", "start")
 _CASSANDRA_KEYWORDS = frozenset((*_HEADER, "T", "O", "R", "uniform", "identity", "reward", "cost", "include", "exclude", "reset"))
 
 
-def _is_identifier(name: str) -> bool:
-    return _IDENT.fullmatch(name) is not None and name not in _CASSANDRA_KEYWORDS
-
-
 def _token(name: str) -> str:
     """``name`` made into an identifier: other characters become ``_``, a leading non-letter gets ``v``."""
     tok = re.sub(r"[^A-Za-z0-9_\-]", "_", name)
@@ -151,7 +147,7 @@ def _names_or_count(names: Sequence[str]) -> tuple[str, list[str]]:
     they are identifiers, the count and indices when they are the default names 0..n-1, otherwise
     identifiers made from the names."""
     names = list(names)
-    if all(_is_identifier(n) for n in names) and len(set(names)) == len(names):
+    if all(_IDENT.fullmatch(n) and n not in _CASSANDRA_KEYWORDS for n in names) and len(set(names)) == len(names):
         return " ".join(names), names
     if names == [str(i) for i in range(len(names))]:
         return str(len(names)), names
@@ -199,16 +195,14 @@ def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
     if text is None:
         text = read_text(source, ".pomdp", PomdpFileError)
     r = _PomdpReader(label, _entries(text, label))
-    states, actions, observations = r.states, r.actions, r.observations
-    discount, start = r.discount, r.start()
-    T = np.zeros((len(actions), len(states), len(states)))
-    Om = np.zeros((len(actions), len(states), len(observations)))
-    R = np.zeros((len(actions), len(states), len(states), len(observations)))
+    start = r.start()
+    n_a, n_s, n_o = len(r.actions), len(r.states), len(r.observations)
+    tables = {"T": np.zeros((n_a, n_s, n_s)), "O": np.zeros((n_a, n_s, n_o)), "R": np.zeros((n_a, n_s, n_s, n_o))}
     for no, k, rest in r.groups:
-        if k in ("T", "O", "R"):
-            r.entry({"T": T, "O": Om, "R": R}[k], k, no, rest)
+        if k in tables:
+            r.entry(tables[k], k, no, rest)
     try:
-        return FlatPOMDP(states, actions, observations, T, Om, R, discount, start)
+        return FlatPOMDP(r.states, r.actions, r.observations, tables["T"], tables["O"], tables["R"], r.discount, start)
     except FlatPOMDPError as exc:
         raise PomdpFileError(exc.problems, label) from None
 
