@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, TypeGuard
 
 import numpy as np
 import pandas as pd
@@ -19,22 +19,16 @@ import pandas as pd
 from ..errors import TrustseekError
 
 SHOWN = 5  # locations shown per kind of problem
-
-
-NAN_WORDS = ("nan", "na", "n/a", "null", "none")
-
-
+SHOWN_CHARS = 200  # characters shown of one location (a cell's value may be a megabyte)
+NAN_WORDS = frozenset(("nan", "na", "n/a", "null", "none"))
 NAN_MARK = "\x00nan"  # marker of a NaN cell among the texts of a column
-
-
-NAN_SET = frozenset(NAN_WORDS)
+GATHER_ROWS = 1 << 18  # rows looked up at a time by :meth:`Column.per_row`
+ASCII_SPACE = "".join(chr(c) for c in range(128) if chr(c).isspace())  # what str.strip() takes off ASCII text
+EMPTY, NAN, UNKNOWN = 1, 2, 3  # the kinds of a bad cell (0: a level, or an empty cell that may be empty)
 
 
 class DataError(TrustseekError, ValueError):
     """A trial log is malformed.  ``problems`` holds one line per kind of problem (file, column, rows, values)."""
-
-
-SHOWN_CHARS = 200  # characters shown of one location (a cell's value may be a megabyte)
 
 
 def shorten(text: str, limit: int = SHOWN_CHARS) -> str:
@@ -44,15 +38,15 @@ def shorten(text: str, limit: int = SHOWN_CHARS) -> str:
     return f"{text[:limit]}... ({len(text) - limit:,} more characters)"
 
 
+@dataclass
 class Problems:
     """Problems grouped by kind: one line per kind with the count and the first locations.
 
     ``rowid`` maps the rows being checked to the file's data rows (rows left out by a
     drop rule are not checked, and locations still name the file's rows)."""
 
-    def __init__(self, rowid: np.ndarray | None = None) -> None:
-        self.lines: list[str] = []
-        self.rowid = rowid
+    rowid: np.ndarray | None = None
+    lines: list[str] = field(default_factory=list)
 
     def row(self, r: int) -> int:
         """The file's data row (1-based) of checked row ``r`` (0-based)."""
@@ -103,7 +97,7 @@ def as_text(v: Any, missing: frozenset[str] = frozenset()) -> str | None:
     if isinstance(v, (float, np.floating)):
         f = float(v)
         if math.isnan(f):
-            return None if missing & NAN_SET else NAN_MARK
+            return None if missing & NAN_WORDS else NAN_MARK
         if f.is_integer() and abs(f) < 2**63:
             return str(int(f))
         return repr(f)
@@ -145,9 +139,6 @@ def same_value_key(text: str) -> str:
     return repr(f)
 
 
-GATHER_ROWS = 1 << 18  # rows looked up at a time by :meth:`Column.per_row`
-
-
 @dataclass
 class Column:
     """One column: per row a code into ``texts`` (the distinct values as text: None = an empty
@@ -182,6 +173,18 @@ class Column:
         return out
 
 
+@dataclass
+class RawLog:
+    """A log as read: its rows, its column names and each column as codes on demand."""
+
+    name: str
+    n: int
+    columns: list[str]
+    col: Any  # name -> Column
+    extras: Any  # list of names -> DataFrame of those columns
+    release: Any = None  # list of names -> None: those columns are no longer needed (their memory goes)
+
+
 def column_from_pandas(values: pd.Series, missing: frozenset[str]) -> Column:
     numeric = pd.api.types.is_numeric_dtype(values.dtype) and not pd.api.types.is_bool_dtype(values.dtype)
     if isinstance(values.dtype, pd.CategoricalDtype):
@@ -189,7 +192,7 @@ def column_from_pandas(values: pd.Series, missing: frozenset[str]) -> Column:
     else:
         codes, uniques = pd.factorize(values, use_na_sentinel=True)
     texts = [as_text(u, missing) for u in np.asarray(uniques, dtype=object)]
-    null = NAN_MARK if numeric and not missing & NAN_SET else None
+    null = NAN_MARK if numeric and not missing & NAN_WORDS else None
     codes = np.asarray(codes, dtype=np.int32)
     codes = np.where(codes < 0, np.int32(len(texts)), codes)
     return Column(codes, [*texts, null])
@@ -209,9 +212,6 @@ def _arrow_texts(dictionary: Any, missing: frozenset[str]) -> list[str | None]:
     if pa.types.is_integer(typ):
         return list(pc.cast(dictionary, pa.string()).to_pylist())
     return [as_text(v, missing) for v in dictionary.to_pylist()]
-
-
-ASCII_SPACE = "".join(chr(c) for c in range(128) if chr(c).isspace())  # what str.strip() takes off ASCII text
 
 
 def _clean_ascii(texts: Any, missing: frozenset[str]) -> bool:
@@ -239,7 +239,7 @@ def column_from_arrow(chunked: Any, missing: frozenset[str]) -> Column:
         value_type = typ
         chunked = pc.dictionary_encode(chunked)
     numeric = pa.types.is_integer(value_type) or pa.types.is_floating(value_type) or pa.types.is_decimal(value_type)
-    null = NAN_MARK if numeric and not missing & NAN_SET else None
+    null = NAN_MARK if numeric and not missing & NAN_WORDS else None
     if chunked.num_chunks == 0:
         return Column(np.zeros(0, dtype=np.int32), [null])
     texts = _arrow_texts(chunked.chunk(0).dictionary, missing)
@@ -251,16 +251,40 @@ def column_from_arrow(chunked: Any, missing: frozenset[str]) -> Column:
     return Column(codes, [*texts, null], last_unused=chunked.null_count == 0)
 
 
-def value_ids(col: Column, table: dict[str, int]) -> np.ndarray:
-    """Per row an id of its value, shared across files through ``table`` (numbers by value); -1 empty."""
+def value_ids(col: Column, table: dict[str, int], nan: int = -1) -> np.ndarray:
+    """Per row an id of its value, shared across columns and files through ``table`` (numbers by
+    value); -1 empty, ``nan`` for a NaN."""
     ids = np.full(len(col.texts), -1, dtype=np.int64)
     for j, t in enumerate(col.texts):
-        if t is not None and t != NAN_MARK:
+        if t == NAN_MARK:
+            ids[j] = nan
+        elif t is not None:
             ids[j] = table.setdefault(same_value_key(t), len(table))
     return ids[col.codes]
 
 
-EMPTY, NAN, UNKNOWN = 1, 2, 3  # the kinds of a bad cell (0: a level, or an empty cell that may be empty)
+def level_lookup(
+    cc: Column, table: dict[str, str], find: Callable[[str], int | None], dtype: Any, empty: int = EMPTY
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per distinct value of ``cc`` its level's code (-1: none) and its kind (0 ok, ``empty`` for an
+    empty cell, ``NAN``, ``UNKNOWN``): a value is looked up once, in the label ``table`` (any
+    spelling), then by ``find``."""
+    lookup = np.full(len(cc.texts), -1, dtype=dtype)
+    kind = np.zeros(len(cc.texts), dtype=np.int8)
+    for j, t in enumerate(cc.texts):
+        if t is None:
+            kind[j] = empty
+            continue
+        if t == NAN_MARK:
+            kind[j] = NAN
+            continue
+        label = next((table[s] for s in spellings(t) if s in table), t) if table else t
+        hit = find(label)
+        if hit is None:
+            kind[j] = UNKNOWN
+        else:
+            lookup[j] = hit
+    return lookup, kind
 
 
 def report_kinds(problems: Problems, cc: Column, kind: np.ndarray, heads: tuple[str, str, str]) -> np.ndarray | None:
@@ -274,6 +298,11 @@ def report_kinds(problems: Problems, cc: Column, kind: np.ndarray, heads: tuple[
     problems.rows(heads[1], np.flatnonzero(k == NAN))
     problems.rows(heads[2], np.flatnonzero(k == UNKNOWN), lambda r: repr(cc.texts[cc.codes[r]]))
     return k
+
+
+def names_list(x: Any) -> TypeGuard[list[str]]:
+    """Whether ``x`` is a non-empty list of non-empty names."""
+    return isinstance(x, list) and bool(x) and all(isinstance(c, str) and c for c in x)
 
 
 def unknown_entries(head: str, entry: Mapping[str, Any], allowed: Sequence[str]) -> list[str]:

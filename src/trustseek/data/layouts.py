@@ -1,19 +1,22 @@
-"""Per-trial lists exploded from a record per participant (or per block) into one row per trial,
-and the mapping's ``explode`` and ``join`` entries checked.
-
-Exploding works on the log as read (a pyarrow table) before the canonical columns are checked,
-so every later check and message applies unchanged; the join is :mod:`.joins`.
+"""A log's layouts made into one row per trial, on the log as read and before the canonical
+columns are checked (so every later check and message applies unchanged): per-trial lists of a
+record per participant or block (the mapping's ``explode``), a row per participant or block
+with a column per trial of each field (``wide``: ``choice_1``, ``choice_2``, ...), and a second
+file joined by participant and block (``join``: CSV, JSON or Parquet, read as a log is, its
+columns mapped, rated or used as inputs like any other); and those entries of a mapping checked.
 """
 
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
-from .cells import SHOWN, DataError, Problems, shorten, unknown_entries
+from .cells import SHOWN, Column, DataError, Problems, RawLog, names_list, shorten, unknown_entries, value_ids
 
 
 def explode_hint(columns: list[str]) -> str:
@@ -28,27 +31,31 @@ def explode_hint(columns: list[str]) -> str:
 def explode_entry(entry: Any) -> Any:
     """An ``explode`` entry as ``{"columns": [...], "position": name or None}`` (a column name or a
     list of them is the columns alone); anything else is kept for :func:`explode_problems`."""
-    if isinstance(entry, str):
-        entry = [entry]
+    entry = [entry] if isinstance(entry, str) else entry
     if isinstance(entry, list):
         return {"columns": entry, "position": None}
-    if isinstance(entry, Mapping):
-        out = dict(entry)
-        if isinstance(out.get("columns"), str):
-            out["columns"] = [out["columns"]]
-        out.setdefault("position", None)
-        return out
-    return entry
+    if isinstance(entry, Mapping) and isinstance(entry.get("columns"), str):
+        entry = {**entry, "columns": [entry["columns"]]}
+    return {"position": None, **entry} if isinstance(entry, Mapping) else entry
+
+
+def wide_entry(entry: Any) -> Any:
+    """A ``wide`` entry as ``{"columns": [...], "separator": "_", "position": name or None}``
+    (a list of names is the columns alone); anything else is kept for :func:`wide_problems`."""
+    entry = {"columns": entry} if isinstance(entry, list) else entry
+    return {"separator": "_", "position": None, **entry} if isinstance(entry, Mapping) else entry
 
 
 def join_entry(entry: Any) -> Any:
     """A ``join`` entry with ``on`` as a list (a single column name is a list of one)."""
-    if not isinstance(entry, Mapping):
-        return entry
-    out = dict(entry)
-    if isinstance(out.get("on"), str):
-        out["on"] = [out["on"]]
-    return out
+    if isinstance(entry, Mapping) and isinstance(entry.get("on"), str):
+        return {**entry, "on": [entry["on"]]}
+    return dict(entry) if isinstance(entry, Mapping) else entry
+
+
+def _position(head: str, e: Mapping, what: str) -> list[str]:
+    pos = e.get("position")
+    return [f"{head}: 'position' names a new column {what}, got {pos!r}"] if pos is not None and not names_list([pos]) else []
 
 
 def explode_problems(e: Any) -> list[str]:
@@ -58,14 +65,25 @@ def explode_problems(e: Any) -> list[str]:
         return [f"explode: {expected}, got {e!r}"]
     p = unknown_entries("explode", e, ("columns", "position"))
     cols = e.get("columns")
-    if not isinstance(cols, list) or not cols or not all(isinstance(c, str) and c for c in cols):
+    if not names_list(cols):
         p.append(f"explode: {expected}, got {cols!r}")
     elif len(set(cols)) != len(cols):
         p.append(f"explode: a column is listed twice in {cols!r}")
-    pos = e.get("position")
-    if pos is not None and (not isinstance(pos, str) or not pos):
-        p.append(f"explode: 'position' names a new column numbering the items 1, 2, ..., got {pos!r}")
-    return p
+    return p + _position("explode", e, "numbering the items 1, 2, ...")
+
+
+def wide_problems(w: Any) -> list[str]:
+    """Everything wrong with a mapping's ``wide`` entry."""
+    expected = 'expected the trial fields of a wide log (["choice", "difficulty"] for choice_1, choice_2, ...)'
+    if not isinstance(w, Mapping):
+        return [f"wide: {expected}, got {w!r}"]
+    p = unknown_entries("wide", w, ("columns", "separator", "position"))
+    cols = w.get("columns")
+    if not names_list(cols) or len(set(cols)) < len(cols):
+        p.append(f"wide: {expected}, got {cols!r}")
+    if not isinstance(w.get("separator"), str):
+        p.append(f"wide: 'separator' is the text between a field and its trial number (default '_'), got {w.get('separator')!r}")
+    return p + _position("wide", w, "holding each trial's number")
 
 
 def join_problems(j: Any) -> list[str]:
@@ -76,11 +94,8 @@ def join_problems(j: Any) -> list[str]:
     if not isinstance(j.get("file"), str) or not j.get("file"):
         p.append(f"join: 'file' names the second file (CSV, JSON or Parquet), got {j.get('file')!r}")
     on = j.get("on")
-    if isinstance(on, str):
-        on = [on]
-    if isinstance(on, Mapping):
-        on = [*on.keys(), *on.values()]
-    if on is not None and (not isinstance(on, list) or not on or not all(isinstance(c, str) and c for c in on)):
+    on = [on] if isinstance(on, str) else [*on.keys(), *on.values()] if isinstance(on, Mapping) else on
+    if on is not None and not names_list(on):
         p.append(
             "join: 'on' lists the columns both files share (participant, and block), or maps the log's to the second "
             f'file\'s ({{"subject": "pid"}}), got {j.get("on")!r}'
@@ -88,7 +103,7 @@ def join_problems(j: Any) -> list[str]:
     return p
 
 
-# --------------------------------------------------------------------------- explode
+# --------------------------------------------------------------------------- explode, wide and join
 
 
 def nested_columns(table: Any) -> list[str]:
@@ -145,21 +160,13 @@ def explode_table(table: Any, spec: dict[str, Any], name: str, unit: str = "reco
     if p.lines:
         raise DataError(p.lines, name)
     first = lengths[cols[0]]
-    differs = np.zeros(len(first), dtype=bool)
-    for c in cols[1:]:
-        differs |= lengths[c] != first
-    unequal = np.flatnonzero(differs)
+    unequal = np.flatnonzero(np.logical_or.reduce([lengths[c] != first for c in cols], axis=0))
     items = [f"{unit} {r + 1} ({', '.join(f'{c} {int(lengths[c][r])}' for c in cols)})" for r in unequal[:SHOWN]]
     p.add("explode: lists of different lengths within a record", items, len(unequal), unit=f"{unit}s")
     if p.lines:
         raise DataError(p.lines, name)
     parent = pc.list_parent_indices(table[cols[0]].chunk(0) if table.num_rows else pa.array([], pa.list_(pa.int8())))
-    out = {}
-    for c in table.column_names:
-        if c in cols:
-            out[c] = pc.list_flatten(table[c])
-        else:
-            out[c] = table[c].take(parent)
+    out = {c: pc.list_flatten(table[c]) if c in cols else table[c].take(parent) for c in table.column_names}
     if position is not None:
         idx = parent.to_numpy(zero_copy_only=False)
         offsets = np.cumsum(first.astype(np.int64)) - first
@@ -194,3 +201,159 @@ def table_from_records(records: list[dict[str, Any]], lists: set[str]) -> Any:
             else:
                 arrays[k] = pa.array([None if v is None else as_text(v) for v in vals], type=pa.string())
     return pa.table(arrays) if arrays else pa.table({})
+
+
+def _stack(raw: RawLog, names: list[str | None], rows: np.ndarray, k: np.ndarray) -> Column:
+    """One column from per-trial columns ``names`` (None: absent): row i of the result is
+    ``names[k[i]]`` at record ``rows[i]``, the texts merged."""
+    texts: list[str | None] = [None]
+    index: dict[str | None, int] = {None: 0}
+    codes = np.zeros(len(rows), dtype=np.int32)
+    for j, name in enumerate(names):
+        if name is None:
+            continue
+        col = raw.col(name)
+        for t in col.texts:
+            if t not in index:
+                index[t] = len(texts)
+                texts.append(t)
+        remap = np.array([index[t] for t in col.texts], dtype=np.int32)
+        at = k == j
+        codes[at] = remap[col.codes[rows[at]]]
+    return Column(codes, texts)
+
+
+def unpivot(raw: RawLog, spec: dict[str, Any]) -> RawLog:
+    """One row per record and trial number found among the ``spec["columns"]`` fields' columns
+    (``<field><separator><n>``); the record's other columns are copied onto each, and a trial
+    number whose fields are all empty in a record is no trial (a participant with fewer trials)."""
+    sep, fields, position = spec["separator"], list(spec["columns"]), spec.get("position")
+    found: dict[str, dict[int, str]] = {}
+    for f in fields:
+        pattern = re.compile(re.escape(f) + re.escape(sep) + r"(\d+)$")
+        found[f] = {int(m.group(1)): c for c in raw.columns if (m := pattern.match(c))}
+    present = shorten(str(raw.columns))
+    lines = [f"wide: no columns named {f}{sep}1, {f}{sep}2, ...; columns present: {present}" for f in fields if not found[f]]
+    taken = {c for per in found.values() for c in per.values()}
+    clash = [c for c in [*fields, *([position] if position else [])] if c in raw.columns and c not in taken]
+    lines += [f"wide: the log has a column {c!r} already; name the field or position otherwise" for c in clash]
+    if lines:
+        raise DataError(lines, raw.name)
+    numbers = sorted({n for per in found.values() for n in per})
+    names = {f: [found[f].get(n) for n in numbers] for f in fields}
+    rows = np.repeat(np.arange(raw.n), len(numbers))
+    k = np.tile(np.arange(len(numbers)), raw.n)
+    stacked = {f: _stack(raw, names[f], rows, k) for f in fields}
+    trial = np.zeros(len(rows), dtype=bool)
+    for cc in stacked.values():
+        trial |= np.array([t is not None for t in cc.texts], dtype=bool)[cc.codes]
+    keep = np.flatnonzero(trial)
+    rows, k = rows[keep], k[keep]
+    stacked = {f: c.take(keep) for f, c in stacked.items()}
+    if position:
+        stacked[position] = Column(k.astype(np.int32), [str(n) for n in numbers])
+    others = [c for c in raw.columns if c not in taken]
+
+    def col(c: str) -> Column:
+        return stacked[c] if c in stacked else raw.col(c).take(rows)
+
+    def extras(cs: list[str]) -> pd.DataFrame:
+        mine = [c for c in cs if c not in stacked]
+        frame = raw.extras(mine).iloc[rows].reset_index(drop=True) if mine else pd.DataFrame(index=pd.RangeIndex(len(rows)))
+        for c in cs:
+            if c in stacked:
+                frame[c] = np.array(stacked[c].texts, dtype=object)[stacked[c].codes]
+        return frame[cs]
+
+    return RawLog(raw.name, len(rows), [*others, *stacked], col, extras)
+
+
+def _keys(raw: Any, on: list[str], tables: list[dict[str, int]]) -> np.ndarray:
+    """Per row of ``raw`` the ids of its values in the ``on`` columns, (rows, len(on))."""
+    return np.stack([value_ids(raw.col(c), t) for c, t in zip(on, tables, strict=True)], axis=1)
+
+
+def join_file(raw: RawLog, second: RawLog, spec: dict[str, Any], participant: str) -> tuple[RawLog, list[str]]:
+    """``raw`` with the columns of the second file ``second`` (``spec["file"]``) joined on ``spec["on"]``
+    (default: the participant column, and ``block`` when both files have it; a dict maps the
+    log's key columns to the second file's).  Duplicate keys in
+    the second file and its keys that match no row of the log are errors, by count and
+    participant; rows of the log without a match get empty cells (counted in the notes returned)."""
+    sname = second.name
+    given = spec.get("on") or [participant, *(["block"] if "block" in raw.columns and "block" in second.columns else [])]
+    pairs = dict(given) if isinstance(given, dict) else {c: c for c in given}  # the log's column -> the second file's
+    on, other = list(pairs), list(pairs.values())
+    lines = [f"join: no column {c!r} in the log; its columns: {raw.columns}" for c in on if c not in raw.columns]
+    lines += [f"join: no column {c!r} in {sname}; its columns: {second.columns}" for c in other if c not in second.columns]
+    clash = [c for c in second.columns if c not in other and c in raw.columns]
+    lines += [f"join: column {c!r} of {sname} is in the log too; rename one of them" for c in clash]
+    if lines:
+        raise DataError(lines, raw.name)
+    tables: list[dict[str, int]] = [{} for _ in on]
+    theirs = _keys(second, other, tables)
+    ours = _keys(raw, on, tables)
+    texts = [{v: k for k, v in t.items()} for t in tables]
+    pi = on.index(participant) if participant in on else 0
+
+    def who(key: np.ndarray) -> str:
+        return " / ".join(repr(texts[i].get(int(k), "")) for i, k in enumerate(key))
+
+    p = Problems()
+    empty = np.flatnonzero((theirs < 0).any(axis=1))
+    p.rows(f"join: empty {' / '.join(other)} in {sname}", empty)
+    uniq, inverse, counts = np.unique(theirs, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.reshape(-1)
+    dup = np.flatnonzero(counts > 1)
+    p.add(
+        f"join: {sname} has more than one row for a {' / '.join(other)}",
+        [f"{who(uniq[d])} ({counts[d]} rows)" for d in dup],
+        len(dup),
+        unit="keys",
+    )
+    # each log row's row of the second file (-1: none), by one integer per key
+    radix = np.cumprod([1, *(len(t) + 1 for t in tables[:-1])]).astype(np.int64)
+    k2, k1 = (theirs + 1) @ radix, (ours + 1) @ radix
+    by = np.argsort(k2, kind="stable")
+    at = np.minimum(np.searchsorted(k2[by], k1), max(len(k2) - 1, 0))
+    found = (k2[by][at] == k1) & (ours >= 0).all(axis=1) if len(k2) else np.zeros(raw.n, dtype=bool)
+    match = np.where(found, by[at] if len(k2) else 0, -1)
+    hit = np.zeros(len(uniq), dtype=bool)  # per distinct key of the second file: some log row has it
+    hit[inverse[match[match >= 0]]] = True
+    unmatched = np.flatnonzero(~hit[inverse] & (theirs >= 0).all(axis=1))
+    if len(unmatched):
+        per = _by_participant(theirs[unmatched, pi], texts[pi])
+        p.lines.append(f"join: rows that match no trial of {raw.name} by {' / '.join(on)}: {len(unmatched)} ({per})")
+    if p.lines:
+        raise DataError(p.lines, sname)
+    notes = []
+    lost = np.flatnonzero(match < 0)
+    if len(lost):
+        per = _by_participant(ours[lost, pi], texts[pi])
+        notes.append(f"{len(lost)} trials have no row in {sname} (their joined cells are empty): {per}")
+    added = [c for c in second.columns if c not in other]
+
+    def col(c: str) -> Column:
+        if c not in added:
+            return raw.col(c)
+        sc = second.col(c)
+        return Column(np.where(match >= 0, sc.codes[np.maximum(match, 0)], len(sc.texts)).astype(np.int32), [*sc.texts, None])
+
+    def extras(cs: list[str]) -> pd.DataFrame:
+        mine = [c for c in cs if c not in added]
+        frame = raw.extras(mine) if mine else pd.DataFrame(index=pd.RangeIndex(raw.n))
+        more = [c for c in cs if c in added]
+        if more:
+            other = second.extras(more).reindex(match).reset_index(drop=True)
+            for c in more:
+                frame[c] = other[c].to_numpy()
+        return frame[cs]
+
+    release = raw.release and (lambda cs: raw.release([c for c in cs if c not in added]))
+    return RawLog(raw.name, raw.n, [*raw.columns, *added], col, extras, release), notes
+
+
+def _by_participant(codes: np.ndarray, texts: dict[int, str]) -> str:
+    who, count = np.unique(codes, return_counts=True)
+    shown = ", ".join(f"{texts.get(int(w), '')!r} {c}" for w, c in zip(who[:20], count[:20], strict=True))
+    more = f", ... ({len(who) - 20} more participants)" if len(who) > 20 else ""
+    return f"by participant, {len(who)}: {shown}{more}"

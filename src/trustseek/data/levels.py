@@ -16,13 +16,14 @@ import pandas as pd
 
 from .cells import (
     EMPTY,
-    NAN,
     NAN_MARK,
+    SHOWN,
     UNKNOWN,
     Column,
     DataError,
     Problems,
     column_from_pandas,
+    level_lookup,
     report_kinds,
     spellings,
     value_ids,
@@ -30,18 +31,24 @@ from .cells import (
 from .mapping import ColumnMapping, format_number, label_key
 
 
+def _mapped(entry: Any) -> tuple[dict[str, str], str]:
+    """An entry's label table (the log's texts -> levels) and how an error names it."""
+    table = {label_key(k): label_key(v) for k, v in (entry.get("labels") or {}).items()}
+    return table, f"{sorted(table)} (mapped) or " if table else ""
+
+
+def _level_of(levels: tuple[str, ...]) -> Callable[[str], int | None]:
+    """The index of a level by any of its spellings (None: not a level)."""
+    by_spelling = {s: i for i, lv in enumerate(levels) for s in spellings(lv)}
+    return lambda label: next((by_spelling[s] for s in spellings(label) if s in by_spelling), None)
+
+
 def input_codes(problems: Problems, cc: Column, mapping: ColumnMapping, name: str, src: str) -> np.ndarray:
     """Per row the code of an input's level; an empty cell, a NaN or a value outside the declared
     levels is reported with its rows (every row of a model's input needs a level)."""
-    entry = mapping.inputs[name]
     levels = mapping.input_levels()[name]
-    table = {label_key(k): label_key(v) for k, v in (entry.get("labels") or {}).items()}
-    by_spelling = {s: i for i, lv in enumerate(levels) for s in spellings(lv)}
-    dtype = np.int16 if len(levels) < 2**15 else np.int32
-    lookup, kind = level_lookup(
-        cc, table, lambda label: next((by_spelling[s] for s in spellings(label) if s in by_spelling), None), dtype
-    )
-    known = f"{sorted(table)} (mapped) or " if table else ""
+    table, known = _mapped(mapping.inputs[name])
+    lookup, kind = level_lookup(cc, table, _level_of(levels), np.int16 if len(levels) < 2**15 else np.int32)
     expected = f"expected one of {known}the levels {list(levels)}"
     head = f"column {src!r} (input {name!r})"
     heads = (
@@ -53,73 +60,72 @@ def input_codes(problems: Problems, cc: Column, mapping: ColumnMapping, name: st
     return cc.per_row(lookup)
 
 
-def level_lookup(
-    cc: Column, table: dict[str, str], find: Callable[[str], int | None], dtype: Any, empty: int = EMPTY
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per distinct value of ``cc`` its level's code (-1: none) and its kind (0 ok, ``empty`` for an
-    empty cell, ``NAN``, ``UNKNOWN``): a value is looked up once, in the label ``table`` (any
-    spelling), then by ``find``."""
-    lookup = np.full(len(cc.texts), -1, dtype=dtype)
-    kind = np.zeros(len(cc.texts), dtype=np.int8)
-    for j, t in enumerate(cc.texts):
-        if t is None:
-            kind[j] = empty
-            continue
-        if t == NAN_MARK:
-            kind[j] = NAN
-            continue
-        label = next((table[s] for s in spellings(t) if s in table), t)
-        hit = find(label)
-        if hit is None:
-            kind[j] = UNKNOWN
-        else:
-            lookup[j] = hit
-    return lookup, kind
+def category_codes(problems: Problems, cc: Column, mapping: ColumnMapping, c: str, head: str) -> np.ndarray:
+    """Per row the code of a categorical column's canonical label, each distinct value looked up
+    once (in the mapping's labels, then the canonical labels); empty cells, NaNs and unknown labels
+    reported, with a hint for labels in another case."""
+    allowed = mapping.categories(c)
+    table = mapping.labels.get(c, {})
+    empty = 0 if c == "human_action" else EMPTY  # an empty human action: not recorded
+    lookup, kind = level_lookup(cc, table, lambda label: allowed.index(label) if label in allowed else None, np.int8, empty)
+    hint = "; leave the cell empty for not recorded" if c == "human_action" else ""
+    known_labels = f"{sorted(table)} (mapped) or " if table else ""
+    heads = (
+        f"{head}: empty value (expected one of {list(allowed)})",
+        f"{head}: value is NaN (expected one of {list(allowed)}{hint})",
+        f"{head}: unknown category (expected one of {known_labels}{list(allowed)})",
+    )
+    k = report_kinds(problems, cc, kind, heads)
+    near = {
+        t: a
+        for j, t in enumerate(cc.texts)
+        if kind[j] == UNKNOWN and t is not None
+        for a in allowed
+        if t.strip().lower() == a.lower()
+    }
+    if near and k is not None and (k == UNKNOWN).any():
+        flags = " ".join(f"--label {c}:{t.strip()}={a}" for t, a in list(near.items())[:SHOWN])
+        one = len(near) == 1
+        problems.lines.append(
+            f"hint: {', '.join(repr(t) for t in list(near)[:SHOWN])} {'is a label' if one else 'are labels'} written "
+            f"in another case or with spaces: map {'it' if one else 'them'} with {flags} (or a mapping file's labels)"
+        )
+    return cc.per_row(lookup)
 
 
 def rating_codes(problems: Problems, rc: Column, mapping: ColumnMapping, name: str) -> np.ndarray:
     """Per row the code of the rating's level (-1 = no rating); values outside the declared
     levels or bins are reported with their rows."""
     r = mapping.rating or {}
-    levels = mapping.rating_levels()
-    lookup = np.full(len(rc.texts) + 1, -1, dtype=np.int16)
-    bad = np.zeros(len(rc.texts) + 1, dtype=bool)
+    find: Callable[[str], int | None]
+    table: dict[str, str] = {}
     if "bins" in r:
         edges = np.array([float(e) for e in r["bins"]])
-        for j, t in enumerate(rc.texts):
-            if t is None or t == NAN_MARK:
-                continue
+
+        def in_bins(t: str) -> int | None:
             try:
                 x = float(t)
             except ValueError:
-                x = math.nan
+                return None
             if not math.isfinite(x) or x < edges[0] or x > edges[-1]:
-                bad[j] = True
-            else:
-                lookup[j] = min(int(np.searchsorted(edges, x, side="right")) - 1, len(edges) - 2)
+                return None
+            return min(int(np.searchsorted(edges, x, side="right")) - 1, len(edges) - 2)
+
+        find = in_bins
         lo, hi = format_number(edges[0]), format_number(edges[-1])
         expected = f"a number in [{lo}, {hi}] (the bins {[format_number(e) for e in edges]})"
     else:
-        table = {label_key(k): label_key(v) for k, v in (r.get("labels") or {}).items()}
-        by_spelling = {s: i for i, lv in enumerate(levels) for s in spellings(lv)}
-        for j, t in enumerate(rc.texts):
-            if t is None or t == NAN_MARK:
-                continue
-            label = next((table[s] for s in spellings(t) if s in table), t)
-            hit = next((by_spelling[s] for s in spellings(label) if s in by_spelling), None)
-            if hit is None:
-                bad[j] = True
-            else:
-                lookup[j] = hit
-        known = f"{sorted(table)} (mapped) or " if table else ""
+        levels = mapping.rating_levels()
+        table, known = _mapped(r)
+        find = _level_of(levels)
         expected = f"one of {known}the declared levels {list(levels)}"
-    codes = lookup[rc.codes]
+    lookup, kind = level_lookup(rc, table, find, np.int16)
     problems.rows(
         f"column {name!r}: rating outside the declared levels (expected {expected}; leave the cell empty for no rating)",
-        np.flatnonzero(bad[rc.codes]),
+        np.flatnonzero(rc.mask(kind == UNKNOWN)),
         lambda row: repr(rc.texts[rc.codes[row]]),
     )
-    return codes
+    return rc.per_row(lookup)
 
 
 def one_rating_per_block(

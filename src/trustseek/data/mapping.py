@@ -12,22 +12,16 @@ import json
 import math
 import tomllib
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
-from ..vocab import ACTIONS, CATEGORICAL_COLUMNS, EXPERIENCES, HUMAN_ACTIONS, TRIAL_COLUMNS
-from .cells import DataError, shorten, unknown_entries
-from .layouts import explode_entry, explode_problems, join_entry, join_problems
-from .wide import wide_entry, wide_problems
+from ..vocab import ACTIONS, CATEGORICAL_COLUMNS, EXPERIENCES, HUMAN_ACTIONS, LEVELS, TRIAL_COLUMNS
+from .cells import DataError, names_list, shorten, unknown_entries
+from .layouts import explode_entry, explode_problems, join_entry, join_problems, wide_entry, wide_problems
 
 CANONICAL = TRIAL_COLUMNS
-
-
 CATEGORICAL = CATEGORICAL_COLUMNS
-
-
-DEFAULT_COMPLEXITIES = ("low", "high")
 
 
 @dataclass
@@ -116,22 +110,16 @@ class ColumnMapping:
                 if ours not in allowed:
                     p.append(f"label mapping: {canon}:{theirs}={ours!r} is not one of {list(allowed)}")
         if self.order is not None:
-            if not self.order or not all(isinstance(c, str) and c for c in self.order):
+            if not names_list(list(self.order)):
                 p.append(f"order: expected a column name or a list of column names, got {list(self.order)!r}")
             if "trial" in self.columns:
                 p.append("order: give either 'order' or a 'trial' column, not both")
-        known: set[str] = set()
         for name, d in self.derived.items():
             if not isinstance(d, Mapping) or len(set(d) & {"equal", "shift"}) != 1:
                 p.append(f"derived column {name!r}: expected {{'equal': [a, b]}} or {{'shift': column, 'by': 1}}, got {d!r}")
             elif "equal" in d:
                 eq = d["equal"]
-                if (
-                    set(d) != {"equal"}
-                    or not isinstance(eq, list)
-                    or len(eq) != 2
-                    or not all(isinstance(c, str) and c for c in eq)
-                ):
+                if set(d) != {"equal"} or not names_list(eq) or len(eq) != 2:
                     p.append(f"derived column {name!r}: 'equal' takes a list of two column names, got {eq!r}")
             else:
                 by = d.get("by", 1)
@@ -139,7 +127,6 @@ class ColumnMapping:
                     p.append(f"derived column {name!r}: 'shift' takes a column name (and 'by', 'fill'), got {dict(d)!r}")
                 elif not isinstance(by, int) or isinstance(by, bool) or by == 0:
                     p.append(f"derived column {name!r}: 'by' must be a non-zero integer (1 = the previous trial), got {by!r}")
-            known.add(name)
         for i, rule in enumerate(self.drop, 1):
             ok = isinstance(rule, Mapping) and set(rule) == {"column", "values"}
             ok = ok and isinstance(rule["column"], str) and isinstance(rule["values"], list) and bool(rule["values"])
@@ -181,57 +168,34 @@ class ColumnMapping:
 
     def categories(self, column: str) -> tuple[str, ...]:
         if column == "complexity":
-            return tuple(self.complexities or DEFAULT_COMPLEXITIES)
+            return tuple(self.complexities or LEVELS)
         return {"robot_action": ACTIONS, "human_action": HUMAN_ACTIONS, "experience": EXPERIENCES}[column]
 
     def merged(self, other: ColumnMapping) -> ColumnMapping:
-        """This mapping overridden by ``other`` (e.g. a file overridden by command-line flags)."""
-        labels = {k: dict(v) for k, v in self.labels.items()}
-        for k, v in other.labels.items():
-            labels.setdefault(k, {}).update(v)
-        return ColumnMapping(
-            {**self.columns, **other.columns},
-            labels,
-            other.complexities or self.complexities,
-            other.order or self.order,
-            {**self.derived, **other.derived},
-            [*self.drop, *other.drop],
-            other.missing if other.missing is not None else self.missing,
-            other.delimiter or self.delimiter,
-            other.rating or self.rating,
-            {**self.inputs, **other.inputs},
-            other.experience_rule if other.experience_rule is not None else self.experience_rule,
-            other.explode or self.explode,
-            other.join or self.join,
-            other.wide or self.wide,
-        )
+        """This mapping overridden by ``other`` (e.g. a file overridden by command-line flags): tables
+        merged, drop rules added, any other entry of ``other`` given replacing this one's."""
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            mine, theirs = getattr(self, f.name), getattr(other, f.name)
+            if f.name == "labels":
+                out[f.name] = {k: {**mine.get(k, {}), **theirs.get(k, {})} for k in {**mine, **theirs}}
+            elif f.default_factory is dict:
+                out[f.name] = {**mine, **theirs}
+            elif f.default_factory is list:
+                out[f.name] = [*mine, *theirs]
+            elif f.name in ("missing", "experience_rule"):  # an empty list, or false, is given too
+                out[f.name] = theirs if theirs is not None else mine
+            else:
+                out[f.name] = theirs or mine
+        return ColumnMapping(**out)
 
     def to_dict(self) -> dict[str, Any]:
-        d: dict[str, Any] = {"columns": dict(self.columns), "labels": {k: dict(v) for k, v in self.labels.items()}}
-        if self.complexities:
-            d["complexities"] = list(self.complexities)
-        if self.order:
-            d["order"] = list(self.order)
-        if self.derived:
-            d["derived"] = {k: dict(v) for k, v in self.derived.items()}
-        if self.drop:
-            d["drop"] = [dict(r) for r in self.drop]
-        if self.missing is not None:
-            d["missing"] = list(self.missing)
-        if self.delimiter:
-            d["delimiter"] = self.delimiter
-        if self.rating is not None:
-            d["rating"] = dict(self.rating)
-        if self.inputs:
-            d["inputs"] = {k: dict(v) for k, v in self.inputs.items()}
-        if self.experience_rule is not None:
-            d["experience_rule"] = self.experience_rule
-        if self.explode is not None:
-            d["explode"] = {k: (list(v) if isinstance(v, (list, tuple)) else v) for k, v in self.explode.items()}
-        if self.join is not None:
-            d["join"] = dict(self.join)
-        if self.wide is not None:
-            d["wide"] = dict(self.wide)
+        """The mapping as a file holds it: every entry given, in lists and objects."""
+        d: dict[str, Any] = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name in ("columns", "labels") or (v is not None if f.name in ("missing", "experience_rule") else v):
+                d[f.name] = _plain(v)
         return d
 
     def input_levels(self) -> dict[str, tuple[str, ...]]:
@@ -258,53 +222,27 @@ class ColumnMapping:
             raise DataError(["a mapping must be an object with 'columns' and/or 'labels'"], source)
         unknown = set(d) - set(MAPPING_KEYS)
         problems = [f"unknown entry {k!r} (expected {', '.join(MAPPING_KEYS)})" for k in sorted(unknown)]
-        cols = d.get("columns", {})
-        labels = d.get("labels", {})
-        cx = d.get("complexities")
-        order = d.get("order")
-        derived = d.get("derived", {})
-        drop = d.get("drop", [])
-        missing = d.get("missing")
-        inputs = d.get("inputs", {})
-        if not isinstance(inputs, Mapping):
-            problems.append(f"'inputs' must map input names to {{'column': ..., 'levels': [...]}}, got {inputs!r}")
-            inputs = {}
-        if not isinstance(cols, Mapping):
-            problems.append(f"'columns' must map canonical names to the log's names, got {cols!r}")
-            cols = {}
-        if not isinstance(labels, Mapping):
-            problems.append(f"'labels' must map canonical columns to label tables, got {labels!r}")
-            labels = {}
-        if cx is not None and (not isinstance(cx, list) or not all(isinstance(c, str) and c for c in cx) or len(cx) < 2):
-            problems.append(f"'complexities' must list at least 2 names, got {cx!r}")
-            cx = None
-        if isinstance(order, str):
-            order = [order]
-        if order is not None and not isinstance(order, list):
-            problems.append(f"'order' must be a column name or a list of them, got {order!r}")
-            order = None
-        if not isinstance(derived, Mapping):
-            problems.append(f"'derived' must map new column names to their definitions, got {derived!r}")
-            derived = {}
-        if not isinstance(drop, list):
-            problems.append(f"'drop' must be a list of rules, got {drop!r}")
-            drop = []
-        if isinstance(missing, str):
-            missing = [missing]
-        if missing is not None and not isinstance(missing, list):
-            problems.append(f"'missing' must list texts, got {missing!r}")
-            missing = None
+        given: dict[str, Any] = {}
+        for key, absent, what in _SHAPES:
+            v = d.get(key, absent)
+            v = [v] if isinstance(v, str) and key in ("order", "missing") else v
+            ok = isinstance(v, Mapping if isinstance(absent, dict) else list)
+            if not (ok and (key != "complexities" or (names_list(v) and len(v) >= 2))) and (v is not None or absent is not None):
+                problems.append(f"'{key}' must {what}, got {v!r}")
+                v = absent
+            given[key] = v
+        cx, order, missing, labels = given["complexities"], given["order"], given["missing"], given["labels"]
         m = cls(
-            {str(k): v for k, v in cols.items()},
+            {str(k): v for k, v in given["columns"].items()},
             {str(k): (_label_table(v, problems, f"labels[{k}]") if isinstance(v, Mapping) else v) for k, v in labels.items()},
             tuple(cx) if cx else None,
             tuple(order) if order is not None else None,
-            {str(k): v for k, v in derived.items()},
-            list(drop),
+            {str(k): v for k, v in given["derived"].items()},
+            list(given["drop"]),
             tuple(missing) if missing is not None else None,
             d.get("delimiter"),
             dict(d["rating"]) if isinstance(d.get("rating"), Mapping) else d.get("rating"),
-            {str(k): (_input_entry(v) if isinstance(v, Mapping) else v) for k, v in inputs.items()},
+            {str(k): (_input_entry(v) if isinstance(v, Mapping) else v) for k, v in given["inputs"].items()},
             d.get("experience_rule"),
             explode_entry(d["explode"]) if "explode" in d else None,
             join_entry(d["join"]) if "join" in d else None,
@@ -370,15 +308,14 @@ class ColumnMapping:
             if not sep or not sep2 or not canon or not ours:
                 problems.append(f"--label {item!r}: expected column:theirs=canonical, e.g. human_action:1=rely")
                 continue
-            table = labs.setdefault(canon.strip(), {})
-            if table.get(theirs.strip(), ours.strip()) != ours.strip():
+            canon, theirs, ours = canon.strip(), theirs.strip(), ours.strip()
+            table = labs.setdefault(canon, {})
+            if table.get(theirs, ours) != ours:
                 problems.append(
-                    f"--label {canon.strip()}:{theirs.strip()}: the label is mapped to two categories, "
-                    f"{table[theirs.strip()]!r} and {ours.strip()!r}"
+                    f"--label {canon}:{theirs}: the label is mapped to two categories, {table[theirs]!r} and {ours!r}"
                 )
-            table[theirs.strip()] = ours.strip()
-        if delimiter is not None:
-            delimiter = {"\\t": "\t", "tab": "\t", "TAB": "\t"}.get(delimiter, delimiter)
+            table[theirs] = ours
+        delimiter = {"\\t": "\t", "tab": "\t", "TAB": "\t"}.get(delimiter or "", delimiter)
         by = [c.strip() for item in order or () for c in item.split(",")]
         if order and not all(by):
             problems.append(f"--order {','.join(order)!r}: expected column names separated by commas, e.g. block,trial")
@@ -400,25 +337,27 @@ class ColumnMapping:
         return base.merged(flags)
 
 
-MAPPING_KEYS = (
-    "columns",
-    "labels",
-    "complexities",
-    "order",
-    "derived",
-    "drop",
-    "missing",
-    "delimiter",
-    "rating",
-    "inputs",
-    "experience_rule",
-    "explode",
-    "join",
-    "wide",
+MAPPING_KEYS = tuple(f.name for f in fields(ColumnMapping))
+_SHAPES: tuple[tuple[str, Any, str], ...] = (  # an entry checked in from_dict, its value when absent, what it must be
+    ("inputs", {}, "map input names to {'column': ..., 'levels': [...]}"),
+    ("columns", {}, "map canonical names to the log's names"),
+    ("labels", {}, "map canonical columns to label tables"),
+    ("complexities", None, "list at least 2 names"),
+    ("order", None, "be a column name or a list of them"),
+    ("derived", {}, "map new column names to their definitions"),
+    ("drop", [], "be a list of rules"),
+    ("missing", None, "list texts"),
 )
 
 
 RATING = "rating"  # the canonical name of the rating column a mapping declares
+
+
+def _plain(v: Any) -> Any:
+    """A value as JSON holds it: objects and lists copied, tuples as lists."""
+    if isinstance(v, Mapping):
+        return {k: _plain(x) for k, x in v.items()}
+    return [_plain(x) for x in v] if isinstance(v, (list, tuple)) else v
 
 
 def format_number(x: float) -> str:
@@ -449,12 +388,7 @@ def _rating_problems(r: Any) -> list[str]:
     if bins is not None:
         ok = isinstance(bins, list) and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in bins)
         edges = [float(v) for v in bins] if ok else []
-        if (
-            not ok
-            or len(edges) < 3
-            or not all(math.isfinite(e) for e in edges)
-            or any(b <= a for a, b in itertools.pairwise(edges))
-        ):
+        if not ok or len(edges) < 3 or not all(map(math.isfinite, edges)) or any(b <= a for a, b in itertools.pairwise(edges)):
             p.append(f"{head}: 'bins' must list at least 3 increasing finite edges (2 bins), got {bins!r}")
         elif levels is not None and names and len(names) != len(edges) - 1:
             p.append(f"{head}: {len(edges) - 1} bins need {len(edges) - 1} level names, got {len(names)}")

@@ -12,30 +12,24 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .cells import EMPTY, NAN, NAN_MARK, SHOWN, UNKNOWN, Column, Problems, report_kinds
+from .cells import NAN_MARK, SHOWN, Column, Problems, level_lookup, report_kinds
 
 MAX_TRIAL = 2**31 - 1
 ALL = slice(None)  # the order of rows that are in trial order already
+LISTED = 100  # participants listed by name in a duplicate-trial error
 
 
 def trial_numbers(problems: Problems, tc: Column, column: str) -> tuple[np.ndarray, np.ndarray]:
     """Trial numbers (integers >= 0; the distinct values are parsed once) and where they are valid."""
-    t_lookup = np.zeros(len(tc.texts), dtype=np.int64)
-    t_kind = np.zeros(len(tc.texts), dtype=np.int8)  # 0 ok, EMPTY, NAN, UNKNOWN: not an integer >= 0
-    for j, t in enumerate(tc.texts):
-        if t is None:
-            t_kind[j] = EMPTY
-        elif t == NAN_MARK:
-            t_kind[j] = NAN
-        else:
-            try:
-                f = float(t)
-            except ValueError:
-                f = math.nan
-            if f.is_integer() and 0 <= f <= MAX_TRIAL:
-                t_lookup[j] = int(f)
-            else:
-                t_kind[j] = UNKNOWN
+
+    def number(t: str) -> int | None:
+        try:
+            f = float(t)
+        except ValueError:
+            return None
+        return int(f) if f.is_integer() and 0 <= f <= MAX_TRIAL else None
+
+    t_lookup, t_kind = level_lookup(tc, {}, number, np.int64)
     expect = "expected an integer: trials numbered in increasing order, e.g. 1, 2, ... or 0, 1, ..."
     heads = (
         f"{column}: empty trial index ({expect})",
@@ -148,9 +142,6 @@ def check_trials(
         )
         return None
     return order if rows is None else rows[order]
-
-
-LISTED = 100  # participants listed by name in a duplicate-trial error
 
 
 def offenders(codes: np.ndarray, ids: list[str]) -> str:

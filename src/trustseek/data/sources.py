@@ -16,40 +16,29 @@ import mmap
 import os
 import re
 import sys
-import threading
-from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
 from ..model.jsonfile import special_file
-from .cells import SHOWN, Column, DataError, Problems, column_from_arrow, column_from_pandas, shorten
+from .cells import SHOWN, Column, DataError, Problems, RawLog, column_from_arrow, column_from_pandas, shorten
 
 DELIMITERS = (",", ";", "\t", "|")
-
-
-@dataclass
-class RawLog:
-    name: str
-    n: int
-    columns: list[str]
-    col: Any  # name -> Column
-    extras: Any  # list of names -> DataFrame of those columns
-    release: Any = None  # list of names -> None: those columns are no longer needed (their memory goes)
-
-
+CSV_SUFFIXES = (".csv", ".txt", ".tsv")
+COMPRESSED = {".gz": "gzip", ".bz2": "bz2", ".zst": "zstd"}  # a CSV's compressions, by suffix (log.csv.gz)
+PARQUET_SUFFIXES = (".parquet", ".pq")
+JSONL_SUFFIXES = (".jsonl", ".ndjson")
+JSON_SUFFIXES = (".json",)
+SHEET_SUFFIXES = (".xlsx", ".xls", ".xlsm", ".ods", ".numbers")
+PACKED_SUFFIXES = (".gz", ".zip", ".bz2", ".xz", ".zst", ".7z")
 MAX_COLUMNS = 10_000  # a CSV's columns: parsing takes ~6 s at this width and grows with its square
 HEADER_BYTES = 1 << 26  # the longest header line read (64 MB: millions of columns)
-
-
-def _open_bytes(path: Path) -> Any:
-    """The file's bytes as read: decompressed when its suffix names a compression (:data:`COMPRESSED`)."""
-    codec = COMPRESSED.get(path.suffix.lower())
-    if codec is None:
-        return path.open("rb")
-    return io.BufferedReader(_input(path))
+BLOCK_BYTES = 1 << 24  # a CSV is parsed in blocks of this size (16 MB), each with its own dictionaries
+SPLIT_BYTES = 1 << 26  # a CSV from this size (64 MB) is parsed in parts on two threads
+PART_BYTES = 1 << 25  # the size of those parts (32 MB)
+SPLIT_SEARCH = 1 << 20  # how far past a part's end a line end is looked for
 
 
 def _input(path: Path) -> Any:
@@ -80,7 +69,7 @@ def _sniff(path: Path, sep: str | None, name: str) -> tuple[str, list[str], int]
     read, however long.  UTF-16 text (Excel's "Unicode Text") is refused here: its ASCII would
     pass as UTF-8 with a NUL byte between every two characters."""
     try:
-        with _open_bytes(path) as fh:
+        with io.BufferedReader(_input(path)) if path.suffix.lower() in COMPRESSED else path.open("rb") as fh:
             head = fh.readline(HEADER_BYTES)
             declared = re.fullmatch(rb"(?:\xef\xbb\xbf)?sep=(.)\r?\n?", head)
             if declared:
@@ -107,19 +96,6 @@ def _sniff(path: Path, sep: str | None, name: str) -> tuple[str, list[str], int]
     return sep, [n.strip() for n in names], 2 if declared else 1
 
 
-CSV_SUFFIXES = (".csv", ".txt", ".tsv")
-COMPRESSED = {".gz": "gzip", ".bz2": "bz2", ".zst": "zstd"}  # a CSV's compressions, by suffix (log.csv.gz)
-
-
-PARQUET_SUFFIXES = (".parquet", ".pq")
-
-
-JSONL_SUFFIXES = (".jsonl", ".ndjson")
-
-
-JSON_SUFFIXES = (".json",)
-
-
 def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: dict[str, Any] | None = None) -> RawLog:
     """A log as read, one row per trial: ``explode`` (a mapping's entry) turns the per-trial
     lists of a record per participant or block into rows (JSON, JSON lines, Parquet, a data frame)."""
@@ -143,11 +119,10 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: 
         raise DataError([f"is {special}; expected a trial log file"], name)
     suffix = path.suffix.lower()
     if suffix in PARQUET_SUFFIXES:
-        if explode is not None:
-            from .layouts import explode_table
+        from .layouts import explode_table
 
-            return _arrow_raw(explode_table(_parquet_table(path, name), explode, name, "row"), name, missing)
-        return _load_parquet(path, name, missing)
+        table = _parquet_table(path, name)
+        return _arrow_raw(table if explode is None else explode_table(table, explode, name, "row"), name, missing)
     if _csv_suffix(path) in CSV_SUFFIXES:
         if explode is not None:
             raise DataError(["explode: a CSV cell is text, not a list; per-trial lists are read from JSON or Parquet"], name)
@@ -162,10 +137,6 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: 
          ".csv.bz2, .csv.zst)"],
         name,
     )  # fmt: skip
-
-
-SHEET_SUFFIXES = (".xlsx", ".xls", ".xlsm", ".ods", ".numbers")
-PACKED_SUFFIXES = (".gz", ".zip", ".bz2", ".xz", ".zst", ".7z")
 
 
 def _exploded_frame(source: pd.DataFrame, missing: frozenset[str], explode: dict[str, Any]) -> RawLog:
@@ -211,10 +182,6 @@ def _arrow_source(table: Any, name: str, names: list[str], missing: frozenset[st
     )
 
 
-def _load_parquet(path: Path, name: str, missing: frozenset[str]) -> RawLog:
-    return _arrow_raw(_parquet_table(path, name), name, missing)
-
-
 def _parquet_table(path: Path, name: str) -> Any:
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -254,7 +221,7 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str], expl
     (the N-th trial, when ``explode`` turns each record's lists into trials)."""
     import pyarrow as pa
 
-    from .layouts import explode_table, table_from_records
+    from .layouts import explode_table, nested_columns, table_from_records
 
     lists = set(explode["columns"]) if explode is not None else set()
     if lines:
@@ -262,9 +229,9 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str], expl
 
         try:
             table = pjson.read_json(path)
-            if not any(pa.types.is_nested(f.type) for f in table.schema):
+            if not nested_columns(table):
                 return _arrow_raw(table, name, missing)
-            if lists and not any(pa.types.is_nested(f.type) for f in table.schema if f.name not in lists):
+            if lists and not set(nested_columns(table)) - lists:
                 return _arrow_raw(explode_table(table, explode or {}, name), name, missing)
         except (pa.ArrowException, OSError):
             pass  # mixed types in a column, a bad line or nested values: read record by record to say where
@@ -321,10 +288,7 @@ def _nested_values(records: list[dict[str, Any]], where: list[str], name: str, l
                 bad.setdefault(k, []).append(f"{w} {json.dumps(v)[:40]}")
                 if isinstance(v, list):
                     found.add(k)
-            elif k in lists and (
-                (v is not None and not isinstance(v, list))
-                or (isinstance(v, list) and any(isinstance(x, (dict, list)) for x in v))
-            ):
+            elif k in lists and v is not None and (not isinstance(v, list) or any(isinstance(x, (dict, list)) for x in v)):
                 scalar.setdefault(k, []).append(f"{w} {json.dumps(v)[:40]}")
     p = Problems()
     for k, items in bad.items():
@@ -447,38 +411,15 @@ def _check_utf8(table: Any) -> None:
 
 
 def _on_two_threads(parse: Any, count: int) -> list[Any]:
-    """``parse(i)`` of every part ``i``, in order, each part taken by whichever of two threads (this
-    one and one of ours) is free: the two end together however the cores are shared.  The error
-    of the first part that fails is raised."""
-    results: list[Any] = [None] * count
-    failed: dict[int, BaseException] = {}
-    parts = iter(range(count))
-    lock = threading.Lock()
-
-    def work() -> None:
-        while not failed:
-            with lock:
-                i = next(parts, None)
-            if i is None:
-                return
-            try:
-                results[i] = parse(i)
-            except BaseException as exc:  # raised below, on the calling thread
-                failed[i] = exc
-
-    with ThreadPoolExecutor(1, thread_name_prefix="trustseek-csv") as pool:
-        other = pool.submit(work)
-        work()
-        other.result()
-    if failed:
-        raise failed[min(failed)]
-    return results
-
-
-BLOCK_BYTES = 1 << 24  # a CSV is parsed in blocks of this size (16 MB), each with its own dictionaries
-SPLIT_BYTES = 1 << 26  # a CSV from this size (64 MB) is parsed in parts on two threads
-PART_BYTES = 1 << 25  # the size of those parts (32 MB)
-SPLIT_SEARCH = 1 << 20  # how far past a part's end a line end is looked for
+    """``parse(i)`` of every part ``i``, in order, on two threads, each part taken by whichever is
+    free: the two end together however the cores are shared.  From the first failure on no part
+    is begun, and the error of the first part that fails is raised."""
+    with ThreadPoolExecutor(2, thread_name_prefix="trustseek-csv") as pool:
+        futures = [pool.submit(parse, i) for i in range(count)]
+        wait(futures, return_when=FIRST_EXCEPTION)
+        for f in futures:
+            f.cancel()  # the parts not begun (they come after every part begun)
+    return [f.result() for f in futures]
 
 
 class _Quoted(Exception):

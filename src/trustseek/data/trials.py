@@ -1,22 +1,12 @@
-"""Trial logs: read, map, validate and write the canonical one-row-per-trial table.
+"""Trial logs: read, map, validate and write the canonical one-row-per-trial table
+(``docs/data-format.md``): ``participant  trial  complexity  robot_action  human_action  experience``,
+``human_action`` empty where not recorded, extra columns kept.
 
-Canonical columns, in order (see ``docs/data-format.md``)::
-
-    participant  trial  complexity  robot_action  human_action  experience
-
-``human_action`` may be empty (not recorded: unobserved).  Extra columns are kept.
-A log from another study is read through a :class:`ColumnMapping`: its column
-names (``columns``: canonical -> theirs) and category labels (``labels``:
-canonical column -> {their label: canonical label}).
-
-Reading is column-wise: every column becomes integer codes into its few distinct
-values (:mod:`.cells`), each distinct value is checked once, and the problems are found
-with array operations.  Problems are reported through :class:`~.cells.DataError`, one
-line per kind of problem with the file, the column, how many rows and the first few of
-them (``row N`` is the N-th data row, the header not counted, in every format).  The
-mapping lives in :mod:`.mapping`, the file formats in :mod:`.sources`, trial numbers and
-order in :mod:`.order`; this module reads (:func:`read_trials`, one step per function: columns,
-drop rules, participants, trials, derived columns, labels, rating, experience) and writes.
+Reading is column-wise: every column becomes integer codes into its few distinct values
+(:mod:`.cells`), each distinct value is checked once, and the problems are found with array
+operations, reported one line per kind (file, column, how many rows and the first few; ``row N``
+is the N-th data row in every format).  :func:`read_trials` is one step per function: columns,
+drop rules, participants, trials, derived columns, labels, rating, experience.
 """
 
 from __future__ import annotations
@@ -29,13 +19,12 @@ import numpy as np
 import pandas as pd
 
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
-from .cells import EMPTY, NAN_MARK, SHOWN, UNKNOWN, Column, DataError, Problems, report_kinds, same_value_key, spellings
-from .joins import join_file
-from .levels import input_codes, level_lookup, one_rating_per_block, rating_codes
+from .cells import NAN_MARK, Column, DataError, Problems, RawLog, spellings, value_ids
+from .layouts import join_file, unpivot
+from .levels import category_codes, input_codes, one_rating_per_block, rating_codes
 from .mapping import CANONICAL, CATEGORICAL, RATING, ColumnMapping, as_mapping, label_key
 from .order import check_trials, order_trials, trial_numbers
-from .sources import RawLog, load_source, missing_column_hint
-from .wide import unpivot
+from .sources import load_source, missing_column_hint
 
 
 def read_trials(
@@ -76,7 +65,7 @@ def read_trials(
         raw = unpivot(raw, mapping.wide)
     joined: list[str] = []
     if mapping.join is not None:
-        raw, joined = join_file(raw, mapping.join, theirs["participant"], markers)
+        raw, joined = join_file(raw, load_source(mapping.join["file"], None, markers), mapping.join, theirs["participant"])
     known = _check_columns(raw, mapping, theirs, required, delimiter)
     read: dict[str, Column] = {}  # the file's columns as codes, each converted once
     rowid, dropped = _drop_rows(raw, mapping, markers, read)
@@ -146,36 +135,31 @@ def _check_columns(
 ) -> set[str]:
     """Every column the mapping names must exist, in the log or derived from earlier columns;
     returns the columns known (the log's and the derived ones)."""
+    present = f"; columns present: {raw.columns}"
     lines = []
     known = set(raw.columns)
     for new, d in mapping.derived.items():
-        sources = list(d["equal"]) if "equal" in d else [d["shift"]]
-        for s in sources:
-            if s not in known:
-                lines.append(f"derived column {new!r}: no column {s!r}; columns present: {raw.columns}")
+        lines += [f"derived column {new!r}: no column {s!r}{present}" for s in d.get("equal", [d.get("shift")]) if s not in known]
         known.add(new)
-    for rule in mapping.drop:
-        if rule["column"] not in raw.columns:
-            lines.append(f"drop rule: no column {rule['column']!r}; columns present: {raw.columns}")
-    for c in mapping.order or ():
-        if c not in raw.columns:
-            lines.append(f"order: no column {c!r}; columns present: {raw.columns}")
-    rating_col = mapping.rating["column"] if mapping.rating is not None else None
-    if rating_col is not None and rating_col not in known:
-        lines.append(f"missing column {rating_col!r} (the mapping's rating column); columns present: {raw.columns}")
-    per = mapping.rating.get("per") if mapping.rating is not None else None
-    if per is not None and per not in known:
-        lines.append(f"missing column {per!r} (the block of the mapping's rating, 'per'); columns present: {raw.columns}")
+    lines += [f"drop rule: no column {r['column']!r}{present}" for r in mapping.drop if r["column"] not in raw.columns]
+    lines += [f"order: no column {c!r}{present}" for c in mapping.order or () if c not in raw.columns]
+    rating = mapping.rating or {}
+    for c, what in (
+        (rating.get("column"), "the mapping's rating column"),
+        (rating.get("per"), "the block of the mapping's rating, 'per'"),
+    ):
+        if c is not None and c not in known:
+            lines.append(f"missing column {c!r} ({what}){present}")
     for inp in mapping.inputs:
         src = mapping.input_column(inp)
         if src not in known:
-            lines.append(f"missing column {src!r} (the mapping's input {inp!r}); columns present: {raw.columns}")
+            lines.append(f"missing column {src!r} (the mapping's input {inp!r}){present}")
         elif inp != src and inp in raw.columns:
             lines.append(f"input {inp!r}: the log has a column {inp!r} too; give the input another name")
     absent = [c for c in required if theirs[c] not in known]
-    for c in absent:
-        via = f" (mapped from canonical {c!r})" if theirs[c] != c else ""
-        lines.append(f"missing column {theirs[c]!r}{via}; columns present: {raw.columns}")
+    lines += [
+        f"missing column {theirs[c]!r}{f' (mapped from canonical {c!r})' if theirs[c] != c else ''}{present}" for c in absent
+    ]
     if lines:
         hints = missing_column_hint(absent, raw.columns, delimiter or mapping.delimiter) if absent else []
         raise DataError(lines + hints, raw.name)
@@ -238,15 +222,6 @@ class _Columns:
         return self.cols[c]
 
 
-def _participants(problems: Problems, pc_: Column, head: str) -> tuple[np.ndarray, list[str]]:
-    """Codes into the distinct participant ids, in order of first appearance; empty ids and NaNs reported."""
-    pcode, ids = _participant_codes(pc_)
-    empty = pc_.mask([t is None for t in pc_.texts])
-    problems.rows(f"{head}: empty participant id", np.flatnonzero(empty))
-    problems.rows(f"{head}: value is NaN", np.flatnonzero((pcode < 0) & ~empty))
-    return pcode, ids
-
-
 def _trials(
     problems: Problems, get: _Columns, mapping: ColumnMapping, pcode: np.ndarray, ids: list[str], head: str
 ) -> tuple[np.ndarray, np.ndarray | slice | None]:
@@ -283,45 +258,12 @@ def _categories(
     problems: Problems, get: _Columns, mapping: ColumnMapping, present: list[str], column: Any
 ) -> dict[str, np.ndarray]:
     """Per categorical column the codes into its canonical labels (-1 = none)."""
-    codes: dict[str, np.ndarray] = {}
-    for c in CATEGORICAL:
-        if c in present:
-            codes[c] = _category_codes(problems, get(mapping.columns.get(c, c)), mapping, c, column(c))
-        else:
-            codes[c] = np.full(get.n, -1, dtype=np.int8)
-    return codes
-
-
-def _category_codes(problems: Problems, cc: Column, mapping: ColumnMapping, c: str, head: str) -> np.ndarray:
-    """Each distinct value looked up once (in the mapping's labels, then the canonical labels);
-    empty cells, NaNs and unknown labels reported, with a hint for labels in another case."""
-    allowed = mapping.categories(c)
-    table = mapping.labels.get(c, {})
-    empty = 0 if c == "human_action" else EMPTY  # an empty human action: not recorded
-    lookup, kind = level_lookup(cc, table, lambda label: allowed.index(label) if label in allowed else None, np.int8, empty)
-    hint = "; leave the cell empty for not recorded" if c == "human_action" else ""
-    known_labels = f"{sorted(table)} (mapped) or " if table else ""
-    heads = (
-        f"{head}: empty value (expected one of {list(allowed)})",
-        f"{head}: value is NaN (expected one of {list(allowed)}{hint})",
-        f"{head}: unknown category (expected one of {known_labels}{list(allowed)})",
-    )
-    k = report_kinds(problems, cc, kind, heads)
-    near = {
-        t: a
-        for j, t in enumerate(cc.texts)
-        if kind[j] == UNKNOWN and t is not None
-        for a in allowed
-        if t.strip().lower() == a.lower()
+    return {
+        c: category_codes(problems, get(mapping.columns.get(c, c)), mapping, c, column(c))
+        if c in present
+        else np.full(get.n, -1, dtype=np.int8)
+        for c in CATEGORICAL
     }
-    if near and k is not None and (k == UNKNOWN).any():
-        flags = " ".join(f"--label {c}:{t.strip()}={a}" for t, a in list(near.items())[:SHOWN])
-        one = len(near) == 1
-        problems.lines.append(
-            f"hint: {', '.join(repr(t) for t in list(near)[:SHOWN])} {'is a label' if one else 'are labels'} written "
-            f"in another case or with spaces: map {'it' if one else 'them'} with {flags} (or a mapping file's labels)"
-        )
-    return cc.per_row(lookup)
 
 
 def _ratings(
@@ -370,8 +312,9 @@ def _frame(
     return frame
 
 
-def _participant_codes(pc_: Column) -> tuple[np.ndarray, list[str]]:
-    """Per row the participant's index (-1 = no id), the ids in order of first appearance."""
+def _participants(problems: Problems, pc_: Column, head: str) -> tuple[np.ndarray, list[str]]:
+    """Per row the participant's index (-1 = no id), the ids in order of first appearance; empty
+    ids and NaNs reported."""
     valid = np.array([t is not None and t != NAN_MARK for t in pc_.texts], dtype=bool)
     # the first row of every distinct value: rows where the code changes are enough
     c = pc_.codes
@@ -389,26 +332,19 @@ def _participant_codes(pc_: Column) -> tuple[np.ndarray, list[str]]:
         index = {t: i for i, t in enumerate(ids)}
         lookup[seen] = [index[t] for t in named]
     used = int(c.max()) + 1 if len(c) else 0
-    if c.dtype == np.int32 and np.array_equal(lookup[:used], np.arange(used)):
-        return c, list(ids)  # the codes are the ids' indices already (a file's distinct values in order)
-    return pc_.per_row(lookup), list(ids)
+    # the codes are the ids' indices already where a file's distinct values are in order
+    pcode = c if c.dtype == np.int32 and np.array_equal(lookup[:used], np.arange(used)) else pc_.per_row(lookup)
+    empty = pc_.mask([t is None for t in pc_.texts])
+    problems.rows(f"{head}: empty participant id", np.flatnonzero(empty))
+    problems.rows(f"{head}: value is NaN", np.flatnonzero((pcode < 0) & ~empty))
+    return pcode, list(ids)
 
 
 def _equal(a: Column, b: Column) -> Column:
     """``true`` where two columns hold the same value (numbers by value); empty where either is
     empty, NaN where either is NaN (an error where the column needs a value)."""
     keys: dict[str, int] = {}
-
-    def ids(col: Column) -> np.ndarray:
-        out = np.full(len(col.texts), -1, dtype=np.int64)  # -1 empty, -2 NaN
-        for j, t in enumerate(col.texts):
-            if t == NAN_MARK:
-                out[j] = -2
-            elif t is not None:
-                out[j] = keys.setdefault(same_value_key(t), len(keys))
-        return out
-
-    va, vb = ids(a)[a.codes], ids(b)[b.codes]
+    va, vb = value_ids(a, keys, nan=-2), value_ids(b, keys, nan=-2)
     codes = (va == vb).astype(np.int32)
     codes[(va == -1) | (vb == -1)] = 2
     codes[(va == -2) | (vb == -2)] = 3

@@ -49,19 +49,6 @@ from ..pomdp.belief import to_vector
 from ..pomdp.flat import FlatPOMDP, FlatPOMDPError
 from ..pomdp.problem import AssistancePOMDP
 
-__all__ = [
-    "PomdpFileError",
-    "export_assistance",
-    "flat_belief",
-    "flat_from_assistance",
-    "flat_values_check",
-    "pomdpx_factors",
-    "read_pomdp",
-    "read_pomdpx_tables",
-    "write_pomdp",
-    "write_pomdpx",
-]
-
 
 class PomdpFileError(FlatPOMDPError):
     """A ``.pomdp`` or POMDPX file is malformed."""
@@ -73,30 +60,8 @@ class PomdpFileError(FlatPOMDPError):
 # Cassandra's grammar: an identifier is [a-zA-Z][a-zA-Z0-9_-]* and is not one of its keywords.
 # POMDPX value names are XML tokens; the same identifiers are used there, so one name works in both.
 _IDENT = re.compile(r"[A-Za-z][A-Za-z0-9_\-]*")
-_CASSANDRA_KEYWORDS = frozenset(
-    {
-        "discount",
-        "values",
-        "states",
-        "actions",
-        "observations",
-        "T",
-        "O",
-        "R",
-        "uniform",
-        "identity",
-        "reward",
-        "cost",
-        "start",
-        "include",
-        "exclude",
-        "reset",
-    }
-)
-
-
-def _is_identifier(name: str) -> bool:
-    return _IDENT.fullmatch(name) is not None and name not in _CASSANDRA_KEYWORDS
+_HEADER = ("discount", "values", "states", "actions", "observations", "start")
+_CASSANDRA_KEYWORDS = frozenset((*_HEADER, "T", "O", "R", "uniform", "identity", "reward", "cost", "include", "exclude", "reset"))
 
 
 def _token(name: str) -> str:
@@ -121,19 +86,9 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
     kern = pomdp.kernel  # [c, a, t, o, e, u]
     pc = pomdp.complexity_probs
     T_, C_ = _tokens(pomdp.trust_levels), _tokens(pomdp.complexities)
-    states = _tokens(
-        [
-            f"{T_[t]}_{EXPERIENCES[e]}_{C_[c]}_{HUMAN_ACTIONS[o]}"
-            for t in range(K)
-            for e in range(2)
-            for c in range(N)
-            for o in range(2)
-        ]
-    )
+    cells = product(range(K), range(2), range(N), range(2))
+    states = _tokens([f"{T_[t]}_{EXPERIENCES[e]}_{C_[c]}_{HUMAN_ACTIONS[o]}" for t, e, c, o in cells])
     obs = _tokens([f"{HUMAN_ACTIONS[o]}_{EXPERIENCES[e]}_{C_[c]}" for o in range(2) for e in range(2) for c in range(N)])
-
-    def sidx(t, e, c, o):
-        return ((t * 2 + e) * N + c) * 2 + o
 
     def oidx(o, e, c):
         return (o * 2 + e) * N + c
@@ -145,15 +100,15 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
     R = pomdp.expected_reward  # [c, a, t]
     for a in range(2):
         for t, e, c, o in product(range(K), range(2), range(N), range(2)):
-            s = sidx(t, e, c, o)
+            s = _state_index(t, e, c, o, N)
             Om[a, s, oidx(o, e, c)] = 1.0
             Rm[a, s] = R[c, a, t]
             for o2, e2, u, c2 in product(range(2), range(2), range(K), range(N)):
-                Tm[a, s, sidx(u, e2, c2, o2)] += pc[c2] * kern[c, a, t, o2, e2, u]
+                Tm[a, s, _state_index(u, e2, c2, o2, N)] += pc[c2] * kern[c, a, t, o2, e2, u]
     start = np.zeros(n_s)
     cw = pc if initial_complexity is None else np.eye(N)[initial_complexity]
     for t, c in product(range(K), range(N)):
-        start[sidx(t, 1, c, 1)] = pomdp.model.initial[t] * cw[c]
+        start[_state_index(t, 1, c, 1, N)] = pomdp.model.initial[t] * cw[c]
     notes = [
         "trustseek assistance POMDP, flat form",
         "state names: <trust>_<experience>_<complexity>_<last human action>; "
@@ -166,12 +121,15 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
 
 def flat_belief(pomdp: AssistancePOMDP, belief, complexity: int) -> np.ndarray:
     """The flat belief for a belief over trust and a known complexity (E = reliable, last = rely)."""
-    b = to_vector(belief, pomdp.n_trust)
     K, N = pomdp.n_trust, pomdp.n_complexity
     out = np.zeros(K * 2 * N * 2)
-    for t in range(K):
-        out[((t * 2 + 1) * N + complexity) * 2 + 1] = b[t]
+    out[[_state_index(t, 1, complexity, 1, N) for t in range(K)]] = to_vector(belief, K)
     return out
+
+
+def _state_index(t: int, e: int, c: int, o: int, n_complexity: int) -> int:
+    """The flat state (T, E, C, last human action) in the export's order."""
+    return ((t * 2 + e) * n_complexity + c) * 2 + o
 
 
 # --------------------------------------------------------------------------- Cassandra .pomdp
@@ -189,7 +147,7 @@ def _names_or_count(names: Sequence[str]) -> tuple[str, list[str]]:
     they are identifiers, the count and indices when they are the default names 0..n-1, otherwise
     identifiers made from the names."""
     names = list(names)
-    if all(_is_identifier(n) for n in names) and len(set(names)) == len(names):
+    if all(_IDENT.fullmatch(n) and n not in _CASSANDRA_KEYWORDS for n in names) and len(set(names)) == len(names):
         return " ".join(names), names
     if names == [str(i) for i in range(len(names))]:
         return str(len(names)), names
@@ -198,12 +156,8 @@ def _names_or_count(names: Sequence[str]) -> tuple[str, list[str]]:
 
 
 def write_pomdp(flat: FlatPOMDP, path: str | Path | None = None) -> str:
-    """Write Cassandra's ``.pomdp`` format; returns the text (and writes it when ``path`` is given).
-
-    The file follows the published grammar: names are identifiers (``[a-zA-Z][a-zA-Z0-9_-]*``,
-    not a keyword; other names are made into identifiers), numbers have a digit on each side of
-    the point, the preamble comes first, then ``start:``, then the ``T:``, ``O:`` and ``R:``
-    entries."""
+    """Write Cassandra's ``.pomdp`` format (its published grammar: the preamble, ``start:``, then the
+    ``T:``, ``O:`` and ``R:`` entries); returns the text (and writes it when ``path`` is given)."""
     state_header, states = _names_or_count(flat.states)
     action_header, actions = _names_or_count(flat.actions)
     obs_header, observations = _names_or_count(flat.observations)
@@ -217,14 +171,9 @@ def write_pomdp(flat: FlatPOMDP, path: str | Path | None = None) -> str:
         "start: " + " ".join(_num(x) for x in flat.start),
         "",
     ]
-    for a, an in enumerate(actions):
-        lines.append(f"T: {an}")
-        lines += [" ".join(_num(x) for x in row) for row in flat.transition[a]]
-        lines.append("")
-    for a, an in enumerate(actions):
-        lines.append(f"O: {an}")
-        lines += [" ".join(_num(x) for x in row) for row in flat.observation[a]]
-        lines.append("")
+    for key, table in (("T", flat.transition), ("O", flat.observation)):
+        for a, an in enumerate(actions):
+            lines += [f"{key}: {an}", *(" ".join(_num(x) for x in row) for row in table[a]), ""]
     for a, an in enumerate(actions):
         for s, sn in enumerate(states):
             block = flat.reward[a, s]
@@ -240,27 +189,20 @@ def write_pomdp(flat: FlatPOMDP, path: str | Path | None = None) -> str:
     return text
 
 
-_HEADER = ("discount", "values", "states", "actions", "observations", "start")
-
-
 def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
     """Parse Cassandra's ``.pomdp`` format from a file (or from ``text``, with ``source`` as its label)."""
     label = str(source)
     if text is None:
         text = read_text(source, ".pomdp", PomdpFileError)
     r = _PomdpReader(label, _entries(text, label))
-    states, actions, observations = r.states, r.actions, r.observations
-    discount, start = r.discount, r.start()
-    T = np.zeros((len(actions), len(states), len(states)))
-    Om = np.zeros((len(actions), len(states), len(observations)))
-    R = np.zeros((len(actions), len(states), len(states), len(observations)))
+    start = r.start()
+    n_a, n_s, n_o = len(r.actions), len(r.states), len(r.observations)
+    tables = {"T": np.zeros((n_a, n_s, n_s)), "O": np.zeros((n_a, n_s, n_o)), "R": np.zeros((n_a, n_s, n_s, n_o))}
     for no, k, rest in r.groups:
-        if k in ("T", "O"):
-            r.probabilities(T if k == "T" else Om, k, no, rest)
-        elif k == "R":
-            r.rewards(R, no, rest)
+        if k in tables:
+            r.entry(tables[k], k, no, rest)
     try:
-        return FlatPOMDP(states, actions, observations, T, Om, R, discount, start)
+        return FlatPOMDP(r.states, r.actions, r.observations, tables["T"], tables["O"], tables["R"], r.discount, start)
     except FlatPOMDPError as exc:
         raise PomdpFileError(exc.problems, label) from None
 
@@ -324,9 +266,7 @@ class _PomdpReader:
             raise self.error(f"line {no}: discount must be a number, got {disc!r}") from None
 
     def _sign(self) -> float:
-        if "values" not in self.header:
-            return 1.0
-        no, val = self.header["values"]
+        no, val = self.header.get("values", (0, "reward"))
         if val not in ("reward", "cost"):
             raise self.error(f"line {no}: values must be 'reward' or 'cost', got {val!r}")
         return -1.0 if val == "cost" else 1.0
@@ -381,49 +321,26 @@ class _PomdpReader:
         last = fields[-1].split()
         return fields[:-1] + ([last[0]] if last else []), last[1:]
 
-    def probabilities(self, arr: np.ndarray, k: str, no: int, rest: str) -> None:
-        """A ``T:`` or ``O:`` entry: one number, a row (or ``uniform``) or a matrix (or ``uniform``, ``identity``)."""
+    def entry(self, arr: np.ndarray, k: str, no: int, rest: str) -> None:
+        """A ``T:``, ``O:`` or ``R:`` entry: one number, a row or a matrix (the last axes of ``arr``
+        its names leave open); a probability row or matrix may be ``uniform``, a ``T:`` matrix
+        ``identity``; rewards are negated where the file gives costs."""
         specs, vals = self._fields(rest)
-        n_s = len(self.states)
-        second = ("state", self.states)
-        third = ("state", self.states) if k == "T" else ("observation", self.observations)
-        width = n_s if k == "T" else len(self.observations)
-        if len(specs) == 3:
-            a_ = self.index("action", self.actions, specs[0], no)
-            s_, x_ = self.index(*second, specs[1], no), self.index(*third, specs[2], no)
-            arr[np.ix_(a_, s_, x_)] = self.numbers(vals, 1, no, f"{k} entry")[0]
-        elif len(specs) == 2:
-            a_, s_ = self.index("action", self.actions, specs[0], no), self.index(*second, specs[1], no)
-            row = np.full(width, 1.0 / width) if vals == ["uniform"] else self.numbers(vals, width, no, f"{k} row")
-            for a in a_:
-                arr[a, s_] = row
-        elif len(specs) == 1:
-            a_ = self.index("action", self.actions, specs[0], no)
-            if vals == ["uniform"]:
-                mat = np.full((n_s, width), 1.0 / width)
-            elif vals == ["identity"] and k == "T":
-                mat = np.eye(n_s)
-            else:
-                mat = self.numbers(vals, n_s * width, no, f"{k} matrix").reshape(n_s, width)
-            for a in a_:
-                arr[a] = mat
-        else:
+        if not (2 if k == "R" else 1) <= len(specs) <= arr.ndim:
             raise self.error(f"line {no}: malformed {k} entry")
-
-    def rewards(self, R: np.ndarray, no: int, rest: str) -> None:
-        """An ``R:`` entry: one number, a row over observations or a matrix (next state by observation)."""
-        specs, vals = self._fields(rest)
-        n_s, n_o = len(self.states), len(self.observations)
-        if not 2 <= len(specs) <= 4:
-            raise self.error(f"line {no}: malformed R entry")
-        kinds = (("action", self.actions), ("state", self.states), ("state", self.states), ("observation", self.observations))
+        third = ("observation", self.observations) if k == "O" else ("state", self.states)
+        kinds = (("action", self.actions), ("state", self.states), third, ("observation", self.observations))
         where = [self.index(*kind, spec, no) for kind, spec in zip(kinds, specs, strict=False)]
-        if len(specs) == 4:
-            R[np.ix_(*where)] = self.sign * self.numbers(vals, 1, no, "R entry")[0]
-        elif len(specs) == 3:
-            R[np.ix_(*where)] = self.sign * self.numbers(vals, n_o, no, "R row")
+        shape = arr.shape[len(specs) :]
+        value: np.ndarray
+        if vals == ["uniform"] and shape and k != "R":
+            value = np.full(shape, 1.0 / shape[-1])
+        elif vals == ["identity"] and len(shape) == 2 and k == "T":
+            value = np.eye(len(self.states))
         else:
-            R[np.ix_(*where)] = self.sign * self.numbers(vals, n_s * n_o, no, "R matrix").reshape(n_s, n_o)
+            what = ("entry", "row", "matrix")[len(shape)]
+            value = (self.sign if k == "R" else 1.0) * self.numbers(vals, int(np.prod(shape)), no, f"{k} {what}").reshape(shape)
+        arr[np.ix_(*where)] = value
 
 
 def _is_float(tok: str) -> bool:
@@ -499,7 +416,7 @@ def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
     ET.SubElement(av, "ValueEnum").text = " ".join(ACTIONS)
     ET.SubElement(var, "RewardVar", vname="reward")
 
-    def table(parent, tag, var_, parents, values, value_tag):
+    def cond(parent, var_, parents, values, tag="CondProb", value_tag="ProbTable"):
         c = ET.SubElement(parent, tag)
         ET.SubElement(c, "Var").text = var_
         ET.SubElement(c, "Parent").text = " ".join(parents)
@@ -509,9 +426,6 @@ def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
         n_dash = sum(1 for x in parents if x != "null") + (value_tag == "ProbTable")
         ET.SubElement(e, "Instance").text = " ".join(["-"] * max(n_dash, 1))
         ET.SubElement(e, value_tag).text = " ".join(_num(x) for x in np.asarray(values).ravel())
-
-    def cond(parent, var_, parents, values):
-        table(parent, "CondProb", var_, parents, values, "ProbTable")
 
     init = ET.SubElement(root, "InitialStateBelief")
     cond(init, "trust_0", ["null"], pomdp.model.initial)
@@ -527,7 +441,7 @@ def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
     cond(of, "human_action", ["human_1"], np.eye(2))
     rf = ET.SubElement(root, "RewardFunction")
     R = np.transpose(pomdp.expected_reward, (1, 0, 2))  # [a, c, t]
-    table(rf, "Func", "reward", ["robot", "complexity_0", "trust_0"], R, "ValueTable")
+    cond(rf, "reward", ["robot", "complexity_0", "trust_0"], R, "Func", "ValueTable")
     ET.indent(root)
     text = '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
     if path is not None:
@@ -581,16 +495,14 @@ def flat_values_check(pomdp: AssistancePOMDP, horizons: Sequence[int] = (1, 2, 3
     exact expansion of the belief tree; any number of trust levels)."""
     flat = flat_from_assistance(pomdp)
     belief_mdp = pomdp.branch_model()
-    rows = []
     b0 = pomdp.model.initial
-    for h in horizons:
-        for c, cn in enumerate(pomdp.complexities):
-            rows.append(
-                {
-                    "horizon": h,
-                    "complexity": cn,
-                    "flat": flat.finite_horizon_value(flat_belief(pomdp, b0, c), h),
-                    "belief_mdp": belief_mdp.finite_horizon_value(b0, h, c),
-                }
-            )
-    return rows
+    return [
+        {
+            "horizon": h,
+            "complexity": cn,
+            "flat": flat.finite_horizon_value(flat_belief(pomdp, b0, c), h),
+            "belief_mdp": belief_mdp.finite_horizon_value(b0, h, c),
+        }
+        for h in horizons
+        for c, cn in enumerate(pomdp.complexities)
+    ]
