@@ -25,7 +25,7 @@ def _blas_threads() -> list[int]:
 def test_one_blas_thread_limits_blas_inside_and_restores_it_after():
     with threadpool_limits(limits=2, user_api="blas"):
         outside = _blas_threads()
-        inside = one_blas_thread(_blas_threads)()
+        inside = one_blas_thread()(_blas_threads)()
         assert all(n == 1 for n in inside) and _blas_threads() == outside
 
 

@@ -183,7 +183,7 @@ def test_one_blas_thread_also_limits_a_blas_loaded_after_its_first_use():
     small problems need none) must not leave scipy's BLAS threaded for the solvers after it."""
     code = (
         "import threadpoolctl\nfrom trustseek.solvers.base import one_blas_thread\n"
-        "threads = one_blas_thread(lambda: sorted(i['num_threads'] for i in threadpoolctl.threadpool_info()))\n"
+        "threads = one_blas_thread()(lambda: sorted(i['num_threads'] for i in threadpoolctl.threadpool_info()))\n"
         "threads()\nimport scipy.linalg\n"
         "n = len(threadpoolctl.threadpool_info())\nprint(n, threads())"
     )

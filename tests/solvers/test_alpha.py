@@ -9,7 +9,7 @@ from trustseek import AssistancePOMDP, BayesUpdate, GridSolver, PolicyRunner, lo
 from trustseek.policies import AlphaVectorPolicy
 from trustseek.policies.envelope import envelope, envelope_values
 from trustseek.solvers.alpha import AlphaSolver, exact_backup, finite_horizon_value, finite_horizon_vectors
-from trustseek.solvers.certified import paper_residual
+from trustseek.solvers.certified import residual_pieces
 
 # Reference values from three independent solvers, Bayes update, paper preset
 REF_V0, REF_V1_LOW, REF_V1_HIGH, REF_THRESHOLD, REF_MYOPIC = 110.655, 111.061, 110.249, 0.7815, 0.836
@@ -190,7 +190,7 @@ def test_paper_update_certified(paper_pomdp, paper_update):
     eps_plus, eps_minus = paper_update.residuals
     grid, values = paper_update.grid_solution
     # recomputing the exact residual on the returned grid gives the same certificate
-    assert paper_residual(paper_pomdp, grid, values) == pytest.approx((eps_plus, eps_minus), abs=1e-12)
+    assert residual_pieces(paper_pomdp, grid, values)[:2] == pytest.approx((eps_plus, eps_minus), abs=1e-12)
     rep = paper_update.threshold_report(paper_pomdp)
     th, (lo, hi) = rep["high"]["threshold"], rep["high"]["interval"]
     assert lo <= th <= hi and hi - lo < 1e-4
@@ -209,7 +209,7 @@ def test_paper_residual_is_exact_on_a_coarse_grid(paper_pomdp):
 
     sol = GridSolver(grid=41, belief_update="paper").solve_grid(paper_pomdp)
     values = sol.value @ paper_pomdp.complexity_probs
-    eps_plus, eps_minus = paper_residual(paper_pomdp, sol.grid, values)
+    eps_plus, eps_minus = residual_pieces(paper_pomdp, sol.grid, values)[:2]
     x = np.linspace(0, 1, 400001)
     tv = paper_q(paper_pomdp, values, x, sol.grid).max(axis=1).T @ paper_pomdp.complexity_probs
     diff = tv - np.interp(x, sol.grid, values)

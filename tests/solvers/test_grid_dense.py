@@ -15,7 +15,7 @@ from trustseek.solvers.grid import GridSolver, _dense_howard, dense_policy_itera
 def test_dense_transitions_are_the_grid_solvers(update, grid):
     pomdp = AssistancePOMDP(paper_model(), paper_task())
     solver = GridSolver(grid=grid, belief_update=update)
-    points, _, P = solver.build(pomdp)
+    points, _, P, _, _ = solver.operators(pomdp)
     dense = dense_transitions(pomdp, update, np.stack([1.0 - points, points], axis=1))
     assert dense.shape == (2, 2, grid, grid)
     for c in range(2):

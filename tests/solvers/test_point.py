@@ -187,5 +187,5 @@ def test_a_time_limit_is_used_when_the_rounds_are_cheaper_than_the_vertex_growth
     monkeypatch.setattr(solver, "_upper", timed_upper)
     monkeypatch.setattr(solver, "_improve_lower", timed_lower)
     sol = solver.solve_bounds(type_aware_problem(paper_conservative_mixture(), paper_task()))
-    assert solver.r == 64
+    assert solver.grid_resolution == 64
     assert [len(h) for h in sol.history] == [4] * 4 and sol.history[-1][1] < 5.0

@@ -44,7 +44,7 @@ def _point(problem, resolution=16):
     """The point solver's bounds at b0 and its lower-bound vectors (each the exact value of a
     controller: an independent certified lower bound everywhere)."""
     solver = PointSolver(tol=1e-9, resolution=resolution, max_resolution=resolution)
-    return solver.solve_bounds(problem), solver.G
+    return solver.solve_bounds(problem), solver.vectors
 
 
 @settings(max_examples=5, deadline=None)

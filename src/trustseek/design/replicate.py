@@ -258,7 +258,7 @@ def run_replicate(study: Study, point: int, design: Experiment1, replicate: int)
     return out
 
 
-@one_blas_thread
+@one_blas_thread()
 def run_chunk(study: Study, items: Sequence[tuple[int, Experiment1, int]]) -> list[dict[str, Any]]:
     """Several replicates in one task (what an executor runs)."""
     return [run_replicate(study, point, design, rep) for point, design, rep in items]

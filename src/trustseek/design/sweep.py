@@ -261,7 +261,7 @@ def execute(
     return out
 
 
-@one_blas_thread
+@one_blas_thread()
 def run_design(
     cfg: DesignConfig | None = None,
     jobs: int = 1,
@@ -446,7 +446,7 @@ def ask_search_problems(cfg: DesignConfig, ask_low: Iterable[float], ask_high: I
     return _search_of(cfg, ask_low, ask_high)[2]
 
 
-@one_blas_thread
+@one_blas_thread()
 def ask_search(
     cfg: DesignConfig,
     ask_low: Iterable[float],

@@ -1,11 +1,6 @@
-"""The trust-agnostic optimum (Section VI-A): the best policy that looks only at the complexity.
-
-Per complexity it compares the expected one-trial reward of acting autonomously,
-P(rely | C)·(p_suc R_success + (1 - p_suc) R_failure) + P(intervene | C) R_intervene, with
-that of asking, and picks the larger (autonomous on ties).  P(intervene | C, autonomous)
-comes from a trust model (averaged over the trust distribution that a data-collection
-design produces) or from logged trials.
-"""
+"""The trust-agnostic optimum (Section VI-A): the best policy that looks only at the complexity,
+with P(intervene | C, autonomous) from a trust model (averaged over the trust distribution that a
+data-collection design produces) or from logged trials."""
 
 from __future__ import annotations
 
@@ -19,7 +14,7 @@ from ..model.task import Task
 from ..policies.complexity import ComplexityPolicy, randomized
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import PAPER_ASK_PROBABILITIES, PAPER_DATA_COUNTS
-from .base import SolverBase, SolverError, one_blas_thread
+from .base import Solver, SolverError, one_blas_thread
 
 #: trials per participant of the paper's data collection (41 low + 30 high)
 PAPER_HORIZON = sum(PAPER_DATA_COUNTS)
@@ -60,12 +55,6 @@ def trust_occupancy(model: TrustModel, task: Task, data_policy: ComplexityPolicy
     return acc / horizon
 
 
-def paper_data_policy(task: Task) -> ComplexityPolicy:
-    """The data-collection policy of Section V for the task's complexities (0.25 for a
-    complexity the paper does not name)."""
-    return randomized({c: PAPER_ASK_PROBABILITIES.get(c, 0.25) for c in task.complexities})
-
-
 def trust_agnostic(
     model: TrustModel,
     task: Task,
@@ -75,7 +64,8 @@ def trust_agnostic(
     """The optimal trust-agnostic policy with P(intervene | C, autonomous) taken from ``model``,
     averaged over the trust distribution that the data-collection design produces (by default
     the paper's: randomized 0.10/0.40 policy, 71 trials)."""
-    data_policy = data_policy or paper_data_policy(task)
+    # by default Section V's design (0.25 for a complexity the paper does not name)
+    data_policy = data_policy or randomized({c: PAPER_ASK_PROBABILITIES.get(c, 0.25) for c in task.complexities})
     occ = trust_occupancy(model, task, data_policy, horizon)
     p_int = np.einsum("t,ct->c", occ, model.emission[:, AUTONOMOUS, :, INTERVENE])
     return agnostic_from_intervention_rates(
@@ -95,7 +85,7 @@ def trust_agnostic_from_data(trials: Any, task: Task) -> ComplexityPolicy:
     return agnostic_from_intervention_rates(task, p_int, source=f"data, {len(trials)} trials")
 
 
-class TrustAgnosticSolver(SolverBase):
+class TrustAgnosticSolver(Solver):
     """The optimal trust-agnostic policy of a model and task (:func:`trust_agnostic`) as a solver:
     any number of trust levels; the policy ignores the belief."""
 
@@ -107,7 +97,7 @@ class TrustAgnosticSolver(SolverBase):
         self.horizon = int(horizon)
         self.data_policy = data_policy
 
-    @one_blas_thread
+    @one_blas_thread()
     def solve(self, pomdp: AssistancePOMDP) -> ComplexityPolicy:
         """The trust-agnostic policy; ``info`` says where P(intervene | C) came from."""
         self.check(pomdp)

@@ -1,32 +1,17 @@
-"""The alpha solver: certified bounds for two trust levels.
+"""The alpha solver: certified bounds for two trust levels (docs/solvers.md, ``alpha``).
 
-The complexity and the last experience are observed, so the belief that matters
-is one number, x = P(trust = high), and the value over P(C) is
+With x = P(trust = high) the value over P(C) is W(x) = Σ_C P(C) max_a Q(x, C, a).  Under the
+``bayes`` update W is convex and piecewise linear, the maximum of alpha vectors (lines in x), and
+:func:`exact_backup` computes the exact Bellman backup of such a function with envelopes (each
+branch (o, E') moves x by a monotone linear-fractional map; no linear programs).
+:class:`AlphaSolver` runs policy iteration on finite-state controllers built from the backup's
+vectors, so L(x) = max_α α·x is the value of executable policies, a certified lower bound, and
 
-    W(x) = Σ_C P(C) max_a Q(x, C, a),
-    Q(x, C, a) = r(x, C, a) + γ Σ_branch P(branch | x, C, a) W(x'_branch).
+    W <= T L + γ δ / (1 - γ),  δ = sup_x (T L - L)(x)  (computed exactly),
 
-``bayes`` update (the exact filter).  W is piecewise linear and convex, the
-maximum of *alpha vectors* (α(low), α(high)), i.e. lines in x, and the exact
-Bellman backup of such a function is computed with envelopes (:func:`exact_backup`: each
-Bayes branch (o, E') moves x by a monotone linear-fractional map, so the backup of such a
-function is again one, computed without linear programs; the exact finite-horizon value is
-built on it).  :class:`AlphaSolver` runs policy iteration on
-finite-state controllers: every vector of the exact backup becomes a controller node
-(an action per complexity and a successor node per (C, o, E')), the successors are
-re-pointed to the best node at the node's witness belief, and the controller is
-evaluated exactly by one linear solve.  Every vector kept is the value of an
-executable policy, so L(x) = max_α α·x is a certified lower bound on W, and T L ≥ L.
-The contraction of the Bellman operator T then gives the upper bound
-
-    W ≤ T L + γ δ / (1 - γ),  δ = sup_x (T L - L)(x)  (computed exactly),
-
-so the certified gap is δ / (1 - γ).  The grid solver's interpolated value is a
-second, independent upper bound (linear interpolation over-estimates a convex
-function); the reported gap uses the smaller of the two.
-
-``paper`` update (eq. 3).  Alpha vectors cannot represent its value; the solver
-runs the certified adaptive grid (:class:`~.certified.CertifiedGridSolver`) instead.
+a certified gap δ / (1 - γ); the grid solver's interpolated value is a second upper bound.
+Under the ``paper`` update (eq. 3) alpha vectors cannot represent W; the solver runs the
+certified adaptive grid (:class:`~.certified.CertifiedGridSolver`).
 """
 
 from __future__ import annotations
@@ -37,7 +22,6 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..policies.base import Policy
 from ..policies.envelope import (
     active_piece,
     cross_sum,
@@ -52,9 +36,8 @@ from ..policies.envelope import (
 )
 from ..pomdp.belief import BranchModel, to_vector
 from ..pomdp.problem import AssistancePOMDP
-from .base import SolverBase, SolverError, one_blas_thread
-from .certified import CertifiedGridSolver, CertifiedSolution, policy_from_solution
-from .defaults import METHODS
+from .base import one_blas_thread
+from .certified import CertifiedGridSolver, CertifiedSolution, CertifiedSolver
 from .grid import GridSolver
 from .numerics import evaluate_controller, memoryless_controllers
 
@@ -207,50 +190,27 @@ def finite_horizon_value(pomdp: AssistancePOMDP, horizon: int, belief: Any, comp
 
 # --------------------------------------------------------------------------- the solver
 
+MAX_ITER = 2000  # backups at most
+THIN = 0.1  # lines worth less than THIN * tol * (1 - γ) are dropped from L
+SEED_POINTS = 257  # beliefs of the starting controller
 
-class AlphaSolver(SolverBase):
-    """Certified solver for two trust levels (``bayes``: alpha vectors; ``paper``: certified grid)."""
+
+class AlphaSolver(CertifiedSolver):
+    """Certified solver for two trust levels (``bayes``: alpha vectors, an AlphaVectorPolicy;
+    ``paper``: the certified grid, a TrustAwarePolicy on a fine grid)."""
 
     name = "alpha"
-    trust_levels = 2
 
-    def __init__(
-        self,
-        belief_update: str = "bayes",
-        tol: float = 1e-6,
-        method: str = "policy-iteration",
-        max_iter: int = 2000,
-        upper_grid: int = 201,
-        grid: int = 1025,  # starting grid of the paper update (refined adaptively)
-        max_grid: int = 200_001,
-        thin: float = 0.1,
-        seed_points: int = 257,
-        seed_rounds: int = 1,
-    ):
+    def __init__(self, belief_update: str = "bayes", tol: float = 1e-6, upper_grid: int = 201):
         self._targets(belief_update, tol)
-        if method not in METHODS:
-            raise SolverError([f"unknown method {method!r}; expected one of {list(METHODS)}"])
-        self.method = method
-        self.max_iter = int(max_iter)
-        self.upper_grid = int(upper_grid)
-        self.grid = int(grid)
-        self.max_grid = int(max_grid)
-        self.seed_points = int(seed_points)  # beliefs of the starting controller
-        self.seed_rounds = int(seed_rounds)  # its rounds of greedy improvement
-        self.thin = float(thin)  # lines worth less than thin * tol * (1 - γ) are dropped from L
+        self.upper_grid = int(upper_grid)  # points of the grid solver's upper bound (0: none)
 
-    @one_blas_thread
-    def solve(self, pomdp: AssistancePOMDP) -> Policy:
-        """The optimal policy: an AlphaVectorPolicy (bayes) or a certified TrustAwarePolicy on a
-        fine grid (paper); ``info`` holds the certificate."""
-        return policy_from_solution(self.solve_bounds(pomdp), pomdp, self.name, self.tol)
-
-    @one_blas_thread
+    @one_blas_thread()
     def solve_bounds(self, pomdp: AssistancePOMDP) -> CertifiedSolution:
         """The certified solution (lower bound, Q envelopes, gap)."""
         self.check(pomdp)
         if self.belief_update == "paper":
-            return CertifiedGridSolver(tol=self.tol, grid=self.grid, max_grid=self.max_grid).solve_bounds(pomdp)
+            return CertifiedGridSolver(tol=self.tol).solve_bounds(pomdp)
         return self._solve_bayes(pomdp)
 
     def _solve_bayes(self, pomdp: AssistancePOMDP) -> CertifiedSolution:
@@ -258,12 +218,12 @@ class AlphaSolver(SolverBase):
         gamma = pomdp.discount
         model = pomdp.branch_model()
         base = memoryless_controllers(model)
-        vecs = np.vstack([base, _grid_controller(pomdp, model, self.seed_points, base, self.seed_rounds)])
+        vecs = np.vstack([base, _grid_controller(pomdp, model, SEED_POINTS, base)])
         idx, xs = envelope(vecs)
         vecs = vecs[idx]
         history: list[float] = []
         it = 0
-        eta = self.thin * self.tol * (1 - gamma)
+        eta = THIN * self.tol * (1 - gamma)
         while True:
             vecs, xs = thin(vecs, xs, eta)
             bk = exact_backup(pomdp, vecs, xs)
@@ -273,18 +233,17 @@ class AlphaSolver(SolverBase):
             below = max(0.0, -inf)
             gap = (delta + below) / (1 - gamma)
             history.append(gap)
-            if gap <= self.tol or it >= self.max_iter:
+            if gap <= self.tol or it >= MAX_ITER:
                 break
             it += 1
-            # every vector of the backup is the value of "act, then follow a node of L"
+            # every vector of the backup is the value of "act, then follow a node of L"; the
+            # controller's nodes: the vectors of T L, less those worth under eta
             new = [vecs, bk.vectors]
-            if self.method == "policy-iteration":
-                # the controller's nodes: the vectors of T L, less those worth under eta
-                nodes, nxs, keep = refit(bk.vectors, bk.xs, np.nonzero(thin_mask(bk.vectors, eta))[0])
-                succ = _repoint(pomdp, nodes, nxs, bk.actions[keep])
-                ev = evaluate_controller(model, bk.actions[keep], succ, guess=nodes, rtol=1e-11)
-                if np.all(np.isfinite(ev)):
-                    new.append(ev)
+            nodes, nxs, keep = refit(bk.vectors, bk.xs, np.nonzero(thin_mask(bk.vectors, eta))[0])
+            succ = _repoint(pomdp, nodes, nxs, bk.actions[keep])
+            ev = evaluate_controller(model, bk.actions[keep], succ, guess=nodes, rtol=1e-11)
+            if np.all(np.isfinite(ev)):
+                new.append(ev)
             # L <- the upper envelope of L, T L and the controller's values (one sort by slope)
             allv = np.vstack(new)
             idx, xs = envelope(allv)
@@ -300,7 +259,7 @@ class AlphaSolver(SolverBase):
             gap = min(gap, float(np.max(up - envelope_values(vecs, xs, pts))) + below / (1 - gamma))
         return CertifiedSolution(
             belief_update="bayes",
-            method=self.method,
+            method="policy-iteration",
             lower=(vecs, xs),
             q=bk.q,
             gap=float(gap),
@@ -311,34 +270,27 @@ class AlphaSolver(SolverBase):
         )
 
 
-def _grid_controller(pomdp: AssistancePOMDP, model: BranchModel, points: int, base: np.ndarray, rounds: int = 1) -> np.ndarray:
-    """Values of a controller on a few beliefs: greedy actions of a one-step lookahead on the
-    values known so far (first the memoryless controllers'), successors = the nearest belief of
-    the set (a cheap start); ``rounds`` times, each round looking ahead on the last values."""
-    if points < 2:
-        return np.zeros((0, 2))
+def _grid_controller(pomdp: AssistancePOMDP, model: BranchModel, points: int, base: np.ndarray) -> np.ndarray:
+    """Values of a controller on ``points`` beliefs: greedy actions of a one-step lookahead on the
+    memoryless controllers' values ``base``, successors = the nearest belief of the set (a cheap start)."""
     x = np.linspace(0.0, 1.0, points)
     b = np.stack([1 - x, x], axis=1)
     M = model.kernels  # [c, a, branch, t, u]
     N, n_branch = pomdp.n_complexity, M.shape[2]
     nbs = [np.einsum("nt,abtu->nabu", b, M[c]) for c in range(N)]  # (n, a, branch, u) per c: unnormalized
-    ev = np.zeros((0, 2))
-    for _ in range(max(1, rounds)):
-        look = np.vstack([base, ev])
-        guess = look[(b @ look.T).argmax(axis=1)]  # the best known vector at each belief
-        acts = np.zeros((points, N), dtype=np.int64)
-        succ = np.full((points, N, n_branch), -1, dtype=np.int64)
-        for c, nb in enumerate(nbs):
-            z = nb.sum(axis=-1)
-            val = np.where(z > 0, (nb @ look.T).max(axis=-1), 0.0)
-            q = b @ pomdp.expected_reward[c].T + pomdp.discount * val.sum(axis=2)
-            acts[:, c] = q.argmax(axis=1)
-            na = nb[np.arange(points), acts[:, c]]  # (n, branch, u)
-            za = na.sum(axis=-1)
-            nx = np.where(za > 0, na[..., 1] / np.where(za > 0, za, 1.0), 0.0)
-            succ[:, c] = np.where(za > 0, np.rint(nx * (points - 1)).astype(np.int64), -1)
-        ev = evaluate_controller(model, acts, succ, guess=guess, rtol=1e-11)
-    return ev
+    guess = base[(b @ base.T).argmax(axis=1)]  # the best known vector at each belief
+    acts = np.zeros((points, N), dtype=np.int64)
+    succ = np.full((points, N, n_branch), -1, dtype=np.int64)
+    for c, nb in enumerate(nbs):
+        z = nb.sum(axis=-1)
+        val = np.where(z > 0, (nb @ base.T).max(axis=-1), 0.0)
+        q = b @ pomdp.expected_reward[c].T + pomdp.discount * val.sum(axis=2)
+        acts[:, c] = q.argmax(axis=1)
+        na = nb[np.arange(points), acts[:, c]]  # (n, branch, u)
+        za = na.sum(axis=-1)
+        nx = np.where(za > 0, na[..., 1] / np.where(za > 0, za, 1.0), 0.0)
+        succ[:, c] = np.where(za > 0, np.rint(nx * (points - 1)).astype(np.int64), -1)
+    return evaluate_controller(model, acts, succ, guess=guess, rtol=1e-11)
 
 
 def _repoint(pomdp: AssistancePOMDP, vecs: np.ndarray, xs: np.ndarray, actions: np.ndarray) -> np.ndarray:

@@ -11,18 +11,17 @@ import functools
 import math
 import sys
 import threading
-from collections.abc import Callable, Iterator
-from contextlib import AbstractContextManager, contextmanager
-from typing import Any, ClassVar, Protocol, TypeVar, overload
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any, ClassVar
 
 from threadpoolctl import ThreadpoolController
 
 from ..errors import TrustseekError
 from ..policies.base import Policy
+from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import check_belief_update
-
-F = TypeVar("F", bound=Callable[..., Any])
 
 
 class SolverError(TrustseekError, ValueError):
@@ -33,24 +32,10 @@ class UnsupportedProblem(SolverError):
     """A solver was given a problem it does not handle; each line names an alternative."""
 
 
-class Solver(Protocol):
-    """Turns a problem into a policy."""
-
-    name: str
-
-    def unsupported(self, problem: Any) -> list[str]:
-        """Why this solver cannot solve ``problem`` (empty when it can); each reason names an
-        alternative."""
-        ...
-
-    def solve(self, problem: Any) -> Policy:
-        """The solver's policy for ``problem`` (raises :class:`UnsupportedProblem` first)."""
-        ...
-
-
-class SolverBase:
-    """Checks shared by the solvers: the problem type, the number of trust levels, the belief
-    update.  Subclasses set what they handle and what to use instead."""
+class Solver:
+    """Turns a problem into a policy: ``solve(problem)``.  Holds the checks shared by the solvers
+    (the problem type, the number of trust levels, the belief update); subclasses set what they
+    handle and what to use instead."""
 
     name = ""
     trust_levels: int | None = None  # the number of trust levels handled (None: any)
@@ -62,8 +47,19 @@ class SolverBase:
     #: a problem that is not an assistance POMDP (default: the point solver, which takes any
     #: number of trust levels and flat POMDPs)
     instead: ClassVar[dict[str, str]] = {}
+    flat: ClassVar[bool] = False  # solves flat POMDPs (files) too, with a discount below 1
+    discounted: ClassVar[bool] = False  # needs a discount below 1 (its bounds rest on the contraction)
+
+    def solve(self, problem: Any) -> Policy:
+        """The solver's policy for ``problem`` (raises :class:`UnsupportedProblem` first)."""
+        raise NotImplementedError
 
     def unsupported(self, problem: Any) -> list[str]:
+        """Why this solver cannot solve ``problem`` (empty when it can); each reason names an
+        alternative."""
+        below = f"the {self.name} solver needs a discount below 1, got {getattr(problem, 'discount', None)}"
+        if self.flat and isinstance(problem, FlatPOMDP):
+            return [] if problem.discount < 1.0 else [below]
         reasons = []
         if not isinstance(problem, AssistancePOMDP):
             reasons.append(
@@ -79,6 +75,8 @@ class SolverBase:
         if self.belief_update is not None and self.belief_update not in self.belief_updates:
             default = f"the {self.name} solver does not handle the {self.belief_update!r} update"
             reasons.append(self.instead.get("belief_update", default))
+        if self.discounted and not reasons and not problem.discount < 1.0:
+            reasons.append(f"{below}: use the grid solver")
         return reasons
 
     def _targets(self, belief_update: str, tol: float, max_seconds: float | None = None) -> None:
@@ -112,44 +110,22 @@ def _count(n: int) -> str:
     return {1: "one", 2: "two", 3: "three"}.get(n, str(n))
 
 
-@overload
-def one_blas_thread() -> AbstractContextManager[None]: ...
-
-
-@overload
-def one_blas_thread(method: F) -> F: ...
-
-
-def one_blas_thread(method: F | None = None) -> F | AbstractContextManager[None]:
-    """BLAS (OpenBLAS, MKL) on one thread: ``@one_blas_thread`` runs a function so, and
-    ``with one_blas_thread():`` a block.  A threaded BLAS splits products and sums differently
-    with the number of cores, so their last bits differ; a solver then picks another vector at a
-    near tie and the policy changes (the type-aware policy of the reproduction's fitted types
-    moved its lower bound by 1.4e-4 between one and two threads).  The solvers' products are
-    thin (K <= a few dozen columns), so one thread costs them little; L-BFGS-B's tiny BLAS calls
-    a multithreaded BLAS slows by two orders of magnitude on a busy machine.
-
-    Reentrant and shared by threads: the limit is set by the first to enter and lifted by the
-    last to leave (a thread leaving does not lift it under another still inside)."""
-    if method is None:
-        return _one_thread()
-    fn = method
-
-    @functools.wraps(fn)
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        with _one_thread():
-            return fn(*args, **kwargs)
-
-    return wrapper  # type: ignore[return-value]
-
-
 _blas_lock = threading.Lock()
 _blas_limiters: list[tuple[ThreadpoolController, Any]] = []  # the limits in force while inside: one per controller entered with
 _blas_depth = [0]
 
 
 @contextmanager
-def _one_thread() -> Iterator[None]:
+def one_blas_thread() -> Iterator[None]:
+    """BLAS (OpenBLAS, MKL) on one thread: ``with one_blas_thread():`` runs a block so, and
+    ``@one_blas_thread()`` a function.  A threaded BLAS splits products and sums differently with
+    the number of cores, so their last bits differ and a solver may pick another vector at a near
+    tie (the type-aware policy of the reproduction's fitted types moved its lower bound by 1.4e-4
+    between one and two threads); the solvers' thin products lose little on one thread, and
+    L-BFGS-B's tiny BLAS calls gain two orders of magnitude on a busy machine.
+
+    Reentrant and shared by threads: the limit is set by the first to enter and lifted by the
+    last to leave (a thread leaving does not lift it under another still inside)."""
     controller = _blas_controller("scipy.linalg" in sys.modules)
     with _blas_lock:
         if not any(c is controller for c, _ in _blas_limiters):  # first entry, or a BLAS loaded since

@@ -1,29 +1,19 @@
 """Certified solutions of the two-level belief MDP: the certificate, the eq.-3 numerics and the
-certified adaptive grid.
+certified adaptive grid (docs/solvers.md, ``alpha`` and ``certified-grid``).
 
-Both certified two-level solvers (``alpha`` for the Bayes filter, ``certified-grid`` for
-eq. 3) end with a computed value function -- an envelope of alpha vectors, or the linear
-interpolation of values on a grid -- and an exact bound on its Bellman residual, which
-bounds the optimal value from both sides.  :class:`CertifiedSolution` holds either, answers
-Q, the value and the advantage of asking at any belief, and reports thresholds with their
-certified uncertainty intervals: the optimal advantage D = Q(ask) - Q(autonomous) lies
-within ±γ·gap of the computed one, so the threshold lies where |D| <= γ·gap.
+Both certified two-level solvers end with a computed value function (an envelope of alpha
+vectors, or the linear interpolation of grid values) and an exact bound on its Bellman residual,
+which bounds the optimal value from both sides.  :class:`CertifiedSolution` holds either and
+reports thresholds with certified intervals: the optimal advantage Q(ask) - Q(autonomous) lies
+within ±γ·gap of the computed one.
 
-**The eq.-3 update (``paper``).**  Eq. 3 is not a Bayes filter: each branch E' has a
-probability linear in x = P(trust = high) and a next belief x' = f0 (1 - x) + f1 x that is not
-rescaled by it, so with W the linear interpolation V of values on a grid, Q(x, C, a) is
-piecewise quadratic in x (linear × piecewise linear) and W is neither linear nor convex; alpha
-vectors cannot represent it.  :func:`paper_grid_values` gives the values of the grid MDP
-(Howard's policy iteration on a possibly non-uniform grid), :func:`paper_q` Q of the
-interpolated values at any beliefs.  On every piece between grid points, their preimages under
-the belief maps and the roots of the advantage, (T V - V)(x) is one quadratic, so its supremum
-ε+ and infimum -ε- over the whole of [0, 1] are computed exactly (:func:`residual_pieces`), and
-
-    V - ε- / (1 - γ)  ≤  W  ≤  V + ε+ / (1 - γ).
-
-:class:`CertifiedGridSolver` refines the grid where the residual is large until the gap
-(ε+ + ε-) / (1 - γ) meets the tolerance; its policy is a grid-Q policy whose Q table is computed
-from the certified value.
+**The eq.-3 update (``paper``)** is not a Bayes filter: each branch E' has a probability linear in
+x = P(trust = high) and a next belief x' = f0 (1 - x) + f1 x not rescaled by it, so Q of the
+interpolated value V is piecewise quadratic and alpha vectors cannot represent it.  On each piece
+between grid points, their preimages and the advantage's roots, T V - V is one quadratic, so its
+supremum ε+ and infimum -ε- are exact (:func:`residual_pieces`), and
+V - ε- / (1 - γ) <= W <= V + ε+ / (1 - γ).  :class:`CertifiedGridSolver` refines the grid where
+the residual is large until (ε+ + ε-) / (1 - γ) meets the tolerance.
 """
 
 from __future__ import annotations
@@ -44,18 +34,16 @@ from ..policies.envelope import envelope_values
 from ..policies.grid_q import TABLE_POINTS, TrustAwarePolicy
 from ..policies.regions import ask_intervals, threshold
 from ..pomdp.problem import AssistancePOMDP
-from .base import SolverBase, one_blas_thread
+from .base import Solver, one_blas_thread
 from .numerics import improve, policy_values
 
 __all__ = [
     "CertifiedGridSolver",
     "CertifiedSolution",
     "Residual",
-    "certificate",
     "paper_grid_values",
     "paper_maps",
     "paper_q",
-    "paper_residual",
     "policy_from_solution",
     "residual_pieces",
 ]
@@ -146,15 +134,9 @@ class Residual(NamedTuple):
     inf: np.ndarray
 
 
-def paper_residual(pomdp: AssistancePOMDP, grid: np.ndarray, values: np.ndarray) -> tuple[float, float]:
-    """(ε+, ε-) = (sup, -inf) over x in [0, 1] of (T V - V)(x) for the eq.-3 belief MDP, where V
-    is the linear interpolation of ``values`` on ``grid`` (see :func:`residual_pieces`)."""
-    res = residual_pieces(pomdp, grid, values)
-    return res.eps_plus, res.eps_minus
-
-
 def residual_pieces(pomdp: AssistancePOMDP, grid: np.ndarray, values: np.ndarray) -> Residual:
-    """The residual of :func:`paper_residual` with its pieces.  Exact up to rounding: the interval
+    """The residual T V - V of V, the linear interpolation of ``values`` on ``grid``, for the eq.-3
+    belief MDP: (ε+, ε-) = (sup, -inf) over [0, 1], with its pieces.  Exact up to rounding: the interval
     is cut at the grid points, their preimages under every belief map and the roots of every
     advantage Q(ask) - Q(autonomous), so that on each piece T V - V is a single quadratic."""
     f = paper_maps(pomdp)[1]
@@ -354,25 +336,13 @@ def _bracket(f: Callable[..., float], x: np.ndarray, d: np.ndarray, th: float, l
     return float(brentq(f, x[i], x[j], args=(level,), xtol=1e-15))
 
 
-def certificate(sol: CertifiedSolution, pomdp: AssistancePOMDP) -> dict[str, Any]:
-    """The machine-readable certificate: gap, bounds at the initial belief, thresholds."""
-    pc = pomdp.complexity_probs
-    b0 = float(pomdp.model.initial[-1])
-    q0 = sol.q_values(pomdp, np.array(b0))
-    low0 = float(q0.max(axis=-1) @ pc)
-    ths = sol.threshold_report(pomdp)
-    return {
-        "certified_gap": sol.gap,
-        "value_bounds_at_initial_belief": [low0, low0 + sol.gap],
-        "thresholds": {k: v["threshold"] for k, v in ths.items()},
-        "threshold_intervals": {k: v["interval"] for k, v in ths.items()},
-    }
-
-
 def policy_from_solution(sol: CertifiedSolution, pomdp: AssistancePOMDP, solver: str, target_gap: float | None = None) -> Policy:
     """Wrap a solution as a Policy with its certificate in ``info``: an AlphaVectorPolicy
     (alpha vectors) or a TrustAwarePolicy whose Q table is computed from the certified grid
     values."""
+    q0 = sol.q_values(pomdp, np.array(float(pomdp.model.initial[-1])))
+    low0 = float(q0.max(axis=-1) @ pomdp.complexity_probs)
+    ths = sol.threshold_report(pomdp)
     info: dict[str, Any] = {
         "solver": solver,
         "method": sol.method,
@@ -381,9 +351,12 @@ def policy_from_solution(sol: CertifiedSolution, pomdp: AssistancePOMDP, solver:
         "error_bound": sol.gap,
         "seconds": sol.seconds,
         "discount": pomdp.discount,
+        "certified_gap": sol.gap,  # the certificate: gap, bounds at the initial belief, thresholds
+        "value_bounds_at_initial_belief": [low0, low0 + sol.gap],
+        "thresholds": {k: v["threshold"] for k, v in ths.items()},
+        "threshold_intervals": {k: v["interval"] for k, v in ths.items()},
+        "target_gap": target_gap,
     }
-    info.update(certificate(sol, pomdp))
-    info["target_gap"] = target_gap
     if sol.q is not None and sol.lower is not None:
         info["vectors"] = len(sol.lower[0])
         return AlphaVectorPolicy(
@@ -400,11 +373,25 @@ def policy_from_solution(sol: CertifiedSolution, pomdp: AssistancePOMDP, solver:
 # --------------------------------------------------------------------------- the certified adaptive grid
 
 
-class CertifiedGridSolver(SolverBase):
-    """Certified solution of the eq.-3 belief MDP on an adaptively refined grid."""
+class CertifiedSolver(Solver):
+    """A solver of certified two-level solutions: ``solve_bounds`` gives the solution, ``solve`` its
+    policy, ``info`` holding the certificate."""
+
+    trust_levels = 2
+
+    @one_blas_thread()
+    def solve(self, pomdp: AssistancePOMDP) -> Policy:
+        return policy_from_solution(self.solve_bounds(pomdp), pomdp, self.name, self.tol)
+
+    def solve_bounds(self, pomdp: AssistancePOMDP) -> CertifiedSolution:
+        raise NotImplementedError
+
+
+class CertifiedGridSolver(CertifiedSolver):
+    """Certified solution of the eq.-3 belief MDP on an adaptively refined grid: its policy is a
+    grid-Q policy from the certified value."""
 
     name = "certified-grid"
-    trust_levels = 2
     belief_updates = ("paper",)
     instead: ClassVar[dict[str, str]] = {
         "trust_levels": "use the point solver (Bayes filter)",
@@ -412,17 +399,13 @@ class CertifiedGridSolver(SolverBase):
         "for the Bayes filter use the alpha solver",
     }
 
-    def __init__(self, belief_update: str = "paper", tol: float = 1e-6, grid: int = 1025, max_grid: int = 200_001):
+    grid = 1025  # the starting grid (refined adaptively) ...
+    max_grid = 200_001  # ... up to this many points
+
+    def __init__(self, belief_update: str = "paper", tol: float = 1e-6):
         self._targets(belief_update, tol)
-        self.grid = int(grid)  # the starting grid (refined adaptively)
-        self.max_grid = int(max_grid)
 
-    @one_blas_thread
-    def solve(self, pomdp: AssistancePOMDP) -> Policy:
-        """A grid-Q policy from the certified value; ``info`` holds the certificate."""
-        return policy_from_solution(self.solve_bounds(pomdp), pomdp, self.name, self.tol)
-
-    @one_blas_thread
+    @one_blas_thread()
     def solve_bounds(self, pomdp: AssistancePOMDP) -> CertifiedSolution:
         """The certified grid values, refined until the gap meets the tolerance."""
         self.check(pomdp)

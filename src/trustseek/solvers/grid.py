@@ -1,22 +1,11 @@
 """The grid solver: the belief MDP of Section IV-C on a uniform grid of beliefs (two trust levels).
 
-The belief MDP has states (b, C): the belief over trust and the complexity of
-the coming trial (the last experience E does not matter, see Fig. 7).  Its
-Q-function is
-
-    Q(b, C, a) = r(b, C, a) + γ Σ_{branches} P(branch | b, C, a) W(b'),
-    W(b)       = Σ_C P(C) max_a Q(b, C, a),
-
-where a branch is (o, E') for the ``bayes`` update and E' alone for the ``paper``
-update (eq. 3 ignores o), and b' is the updated belief (``pomdp.branches``).
-
-:class:`GridSolver` discretizes P(trust = high) on a uniform grid of two-level
-models and interpolates W linearly between grid points.  Interpolation weights
-are non-negative and sum to one, so the discretized problem is itself a finite
-MDP on the grid; it is solved either by value iteration (stopping when the
-certified error bound γ/(1-γ)·‖W_{k+1} - W_k‖∞ drops below ``tol``) or by
-policy iteration (exact for the grid MDP), and the Bellman residual of the
-result is reported either way.
+Q(b, C, a) = r(b, C, a) + γ Σ_branch P(branch | b, C, a) W(b') and W(b) = Σ_C P(C) max_a Q(b, C, a),
+a branch being (o, E') for the ``bayes`` update and E' for ``paper`` (eq. 3).  W is interpolated
+linearly between the points of a uniform grid of P(trust = high), which makes the discretized
+problem a finite MDP on the grid, solved by value iteration (until the certified error bound
+γ/(1-γ)·‖W_{k+1} - W_k‖∞ <= ``tol``) or policy iteration (exact for the grid MDP); the Bellman
+residual of the result is reported either way.
 """
 
 from __future__ import annotations
@@ -31,7 +20,7 @@ import scipy.sparse as sp
 
 from ..policies.grid_q import TrustAwarePolicy
 from ..pomdp.problem import AssistancePOMDP
-from .base import SolverBase, SolverError, one_blas_thread
+from .base import Solver, SolverError, one_blas_thread
 from .defaults import DEFAULT_GRID, METHODS
 from .numerics import improve, policy_values
 
@@ -85,7 +74,7 @@ class GridSolution:
         return self.q.max(axis=2)
 
 
-class GridSolver(SolverBase):
+class GridSolver(Solver):
     """Value/policy iteration on a uniform belief grid, for models with two trust levels."""
 
     name = "grid"
@@ -111,9 +100,12 @@ class GridSolver(SolverBase):
         self.max_iter = int(max_iter)
         self.dense_max = int(dense_max)
 
-    # -- the discretized belief MDP ------------------------------------------
-    def build(self, pomdp: AssistancePOMDP) -> tuple[np.ndarray, np.ndarray, GridMatrices]:
-        """Grid, rewards r[c, a] (G,) and sparse transition matrices P[c][a] (G, G) on the grid."""
+    def operators(
+        self, pomdp: AssistancePOMDP
+    ) -> tuple[np.ndarray, np.ndarray, GridMatrices, Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], np.ndarray]]:
+        """The discretized belief MDP: (grid, rewards r[c, a] (G,), sparse transition matrices
+        P[c][a] (G, G) on the grid, q_of, bellman), q_of(W) -> Q (G, N, 2) and the Bellman
+        operator W -> T W, where W(b) = Σ_C P(C) max_a Q(b, C, a)."""
         self.check(pomdp)
         grid = np.linspace(0.0, 1.0, self.grid)
         beliefs = np.stack([1.0 - grid, grid], axis=1)
@@ -127,14 +119,6 @@ class GridSolver(SolverBase):
                 live = np.any(p > 0, axis=0)  # branches that can happen at all
                 row.append(interpolation_matrix(nxt[:, live, 1], grid, p[:, live]))
             P.append(row)
-        return grid, r, P
-
-    def operators(
-        self, pomdp: AssistancePOMDP
-    ) -> tuple[np.ndarray, np.ndarray, GridMatrices, Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], np.ndarray]]:
-        """(grid, r, P, q_of, bellman): q_of(W) -> Q (G, N, 2) and the Bellman operator W -> T W
-        of the discretized belief MDP, where W(b) = Σ_C P(C) max_a Q(b, C, a)."""
-        grid, r, P = self.build(pomdp)
         N, gamma = pomdp.n_complexity, pomdp.discount
         pc = pomdp.complexity_probs
 
@@ -147,7 +131,7 @@ class GridSolver(SolverBase):
         return grid, r, P, q_of, bellman
 
     # -- solving ---------------------------------------------------------------
-    @one_blas_thread
+    @one_blas_thread()
     def solve(self, pomdp: AssistancePOMDP) -> TrustAwarePolicy:
         """The trust-aware policy: greedy in Q on the grid (``info`` says how it was obtained)."""
         sol = self.solve_grid(pomdp)

@@ -1,26 +1,16 @@
-"""Numerics shared by the solvers: one policy evaluation, one Howard improvement step, one
-controller evaluation.
-
-* :func:`policy_values` -- the values x = r + P x of a fixed policy (P its discounted
-  transition matrix): BiCGSTAB started from a guess (these systems are well conditioned and
-  very sparse, and a warm start from the previous policy's values is close), checked against
-  the residual, with a direct sparse solve as the fallback;
-* :func:`improve` -- Howard's improvement step, keeping the current action unless another is
-  better by more than rounding, so that policy iteration terminates;
-* :func:`best_vectors` -- which of a set of vectors is best at each of many beliefs, in
-  blocks, so that a fine grid's successors never need the whole product in memory, and
-  :func:`best_at` -- the vectors best at some belief of a set (pruning);
-* :func:`point_backup` and :func:`greedy_controller` -- the point-based backup of alpha vectors
-  at beliefs, and the controller whose nodes act greedily there (the point, reachable and
-  types solvers' lower bounds);
-* :func:`evaluate_controller` -- the exact value vectors of a finite-state controller on a
-  POMDP in branch form (any number of hidden states), and :func:`memoryless_controllers`;
-* :func:`unique_rows` -- beliefs without near-duplicates, and :func:`reachable_beliefs`.
-"""
+"""Numerics shared by the solvers: policy evaluation (:func:`policy_values`: BiCGSTAB from a warm
+start, checked by its residual, a direct sparse solve as the fallback), Howard's improvement step
+(:func:`improve`), the best of a set of vectors at many beliefs (:func:`best_vectors`,
+:func:`best_at`), the point-based backup and its greedy controller, point-based policy iteration
+(:func:`controller_iteration`), the exact evaluation of a finite-state controller on a POMDP in
+branch form (:func:`evaluate_controller`), and the beliefs reachable from b0 or met on simulated
+trajectories."""
 
 from __future__ import annotations
 
 import itertools
+import math
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -32,13 +22,16 @@ from ..pomdp.belief import BranchModel
 __all__ = [
     "best_at",
     "best_vectors",
+    "controller_iteration",
     "evaluate_controller",
     "greedy_controller",
     "improve",
     "memoryless_controllers",
     "point_backup",
     "policy_values",
+    "q_vectors",
     "reachable_beliefs",
+    "sample_beliefs",
     "unique_rows",
 ]
 
@@ -171,6 +164,86 @@ def greedy_controller(
     alpha = np.einsum("c,nct->nt", model.context_probs, g[ii, cc, actions])
     succ = (S[ii, cc, actions].reshape(-1, K) @ alpha.T).argmax(axis=1).reshape(n, N, Br)
     return alpha, np.where(p[ii, cc, actions] > 0, succ, -1)
+
+
+def controller_iteration(
+    model: BranchModel,
+    vectors: np.ndarray,
+    B: np.ndarray,
+    successors: tuple[np.ndarray, np.ndarray],
+    keep_at: np.ndarray,
+    min_gain: float,
+    rounds: int,
+    also: np.ndarray | None = None,
+    t_end: float = math.inf,
+) -> np.ndarray:
+    """Point-based policy iteration on beliefs B (n, K), their ``successors`` = (p (n, c, a, branch),
+    S (n, c, a, branch, K)): each round every belief is a node of a controller acting greedily in
+    the point backup of ``vectors`` (with ``also`` (n, c), a second controller taking those
+    actions), going after each branch to the node best at the next belief; the controllers are
+    evaluated exactly and their values join ``vectors``, which keeps those best at a belief of
+    ``keep_at``.  Stops when the greedy controller repeats (its actions, and its successors
+    without ``also``), the gain at B is at most ``min_gain``, or past ``t_end``.  Every vector is
+    a controller's value, so the lower bound holds whenever it stops."""
+    p, S = successors
+    n, N, A, Br, K = S.shape
+    Sf = S.reshape(-1, K)
+    prev = None
+    for _ in range(rounds):
+        g = point_backup(model, vectors, (Sf @ vectors.T).argmax(axis=1).reshape(n, N, A, Br))
+        acts = np.einsum("ncat,nt->nca", g, B).argmax(axis=2)
+        before = (B @ vectors.T).max(axis=1)
+        new, key = [], None
+        for a in (acts,) if also is None else (acts, also):
+            alpha, succ = greedy_controller(model, S, p, g, a)
+            key = key or (acts.tobytes(), succ.tobytes() if also is None else b"")
+            ev = evaluate_controller(model, a, succ, guess=alpha)
+            new += [alpha, ev] if np.all(np.isfinite(ev)) else [alpha]
+        vectors = best_at(np.vstack([vectors, *new]), keep_at)
+        gain = float(np.max((B @ vectors.T).max(axis=1) - before))
+        if key == prev or gain <= min_gain or time.perf_counter() > t_end:
+            break
+        prev = key
+    return vectors
+
+
+def q_vectors(model: BranchModel, vectors: np.ndarray, beliefs: np.ndarray, S: np.ndarray, prune: bool = False) -> list:
+    """Q lower-bound vectors per (context, action): point backups of ``vectors`` at ``beliefs``
+    (``S``: their successors (n, c, a, branch, K)) without near-duplicates, with ``prune`` only
+    those best at one of the beliefs."""
+    n, N, A, Br, K = S.shape
+    g = point_backup(model, vectors, best_vectors(S.reshape(-1, K), vectors).reshape(n, N, A, Br))
+    rows = [[unique_rows(g[:, c, a], decimals=12) for a in range(A)] for c in range(N)]
+    return [[best_at(q, beliefs) for q in row] for row in rows] if prune else rows
+
+
+def sample_beliefs(
+    model: BranchModel,
+    b0: np.ndarray,
+    rng: np.random.Generator,
+    successors: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+    bound: Callable[[np.ndarray], np.ndarray],
+    length: int,
+    trajectories: int = 8,
+) -> np.ndarray:
+    """Beliefs met on simulated trajectories from b0 (PBVI-style belief expansion): the context
+    and the branch drawn with their probabilities, the action greedy in a one-step lookahead on
+    ``bound`` (a function of beliefs (n, K)); ``successors(B)`` as in :func:`reachable_beliefs`."""
+    B = np.repeat(b0[None], trajectories, axis=0)
+    idx = np.arange(trajectories)
+    out = []
+    for _ in range(length):
+        p, S = successors(B)  # (n, N, A, Br), (n, N, A, Br, K)
+        c = rng.choice(model.n_contexts, size=trajectories, p=model.context_probs)
+        value = bound(S.reshape(-1, model.n_hidden)).reshape(p.shape)
+        q = np.einsum("cat,nt->nca", model.rewards, B) + model.discount * (p * value).sum(axis=-1)
+        a = q[idx, c].argmax(axis=1)
+        pb = p[idx, c, a]  # (n, Br)
+        u = rng.random(trajectories)[:, None]
+        br = np.minimum((np.cumsum(pb, axis=1) / pb.sum(axis=1, keepdims=True) < u).sum(axis=1), pb.shape[1] - 1)
+        B = S[idx, c, a, br]
+        out.append(B)
+    return np.vstack(out)
 
 
 def unique_rows(B: np.ndarray, decimals: int = 13) -> np.ndarray:

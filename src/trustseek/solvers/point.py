@@ -1,28 +1,15 @@
-"""Point-based solver with lower and upper bounds, for any number of trust levels.
+"""Point-based solver with lower and upper bounds at the initial belief, for any number of
+trust levels (docs/solvers.md, ``point``).
 
-With K trust levels the belief is a point of the (K-1)-simplex.  The value at the
-initial belief b0 is bracketed from both sides:
+* lower bound: L(b) = max_α α·b over alpha vectors, each the exact value of an executable
+  controller (memoryless ones, then point-based policy iteration on a lattice of the simplex,
+  the beliefs reachable from b0 in two trials and those met on simulated trajectories);
+* upper bound: the Bellman fixed point with linear interpolation on Freudenthal's
+  triangulation of the simplex (Lovejoy's bound), certified against rounding by its residual.
 
-* lower bound: a set Γ of alpha vectors, L(b) = max_α α·b.  Every vector is the
-  value of an executable policy (memoryless controllers to start, then
-  point-based controllers evaluated exactly: one node per sampled belief, its
-  greedy actions, and per branch the node best at the next belief), so L ≤ V.
-  The beliefs are a lattice of the simplex, those reachable from b0 in two trials
-  and those met on simulated trajectories (seeded);
-* upper bound: the fixed point of the Bellman operator with linear interpolation
-  on Freudenthal's triangulation of the simplex (Lovejoy's bound), solved by
-  policy iteration; interpolation over-estimates a convex value, so it is an
-  upper bound, certified against the rounding of the solve by its residual.
-
-The resolution of the triangulation is doubled until U(b0) - L(b0) <= ``tol``.
-
-The structure is the mixed-observability one of the assistance POMDP: a
-context c (the complexity, drawn i.i.d. from P(C) and seen before acting), a
-hidden part t (trust), and branches (o, E') whose unnormalized kernel
-M[c, a, branch, t, t'] moves the belief.  A flat POMDP (e.g. a ``.pomdp`` file)
-is the special case of one context and branches = observations.  The bounds
-rest on the convexity of the Bayes-filter value; for the eq.-3 update use the
-``alpha`` solver (two trust levels).
+The resolution of the triangulation is doubled until U(b0) - L(b0) <= ``tol``.  The problem is
+taken in branch form (a context seen before acting, branches (o, E') moving the belief), so a
+flat POMDP is the case of one context.  The bounds rest on the convexity of the Bayes-filter value.
 """
 
 from __future__ import annotations
@@ -41,17 +28,15 @@ from ..policies.base import Policy
 from ..pomdp.belief import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
-from .base import SolverBase, SolverError, bayes_only, one_blas_thread
+from .base import Solver, SolverError, bayes_only, one_blas_thread
 from .numerics import (
-    best_at,
-    best_vectors,
-    evaluate_controller,
-    greedy_controller,
+    controller_iteration,
     improve,
     memoryless_controllers,
-    point_backup,
     policy_values,
+    q_vectors,
     reachable_beliefs,
+    sample_beliefs,
     unique_rows,
 )
 
@@ -60,16 +45,18 @@ __all__ = ["PointSolution", "PointSolver", "bounds_policy", "freudenthal_weights
 
 @dataclass
 class PointSolution:
-    """Bounds at the initial belief, the vectors of the lower bound and the upper-bound points."""
+    """Bounds at the initial belief, the vectors of the lower bound and the upper bound's points
+    (the point, types and reachable solvers)."""
 
     vectors: np.ndarray  # lower bound: L(b) = max_α α·b
-    points: np.ndarray  # upper bound: the vertices of the triangulation ...
-    point_values: np.ndarray  # ... and their certified values (linear interpolation)
+    points: np.ndarray  # upper bound: belief points (the point solver: the triangulation's vertices) ...
+    point_values: np.ndarray  # ... and their certified values
     lower: float
     upper: float
-    iterations: int
     seconds: float
-    history: list[tuple[int, float, float, float]] = field(default_factory=list)  # (points, seconds, lower, upper)
+    counts: dict[str, int]  # what the solver counts (its ``info``): rounds, trials, backups ...
+    history: list[tuple[int, float, float, float]] = field(default_factory=list)  # (points or trial, seconds, lower, upper)
+    beliefs: np.ndarray | None = None  # the beliefs the search visited (reachable)
 
     @property
     def gap(self) -> float:
@@ -119,34 +106,23 @@ def _vertex_code(verts: np.ndarray, r: int) -> np.ndarray:
     return np.where(ok, (np.clip(verts[..., 1:], 0, r) * mult).sum(axis=-1), 0)
 
 
-class PointSolver(SolverBase):
-    """Point-based lower bound and Freudenthal-grid upper bound, refined until the gap at b0 is small.
-
-    * Lower bound: point-based policy iteration.  On a set of beliefs (the grid vertices, b0 and
-      the beliefs reachable from b0 in a few trials) every belief is a controller node with its
-      greedy actions and, for every branch, the node that is best at the next belief; the
-      controller is evaluated exactly (one sparse linear solve) and its values join Γ.
-    * Upper bound: the fixed point of the Bellman operator with linear interpolation on
-      Freudenthal's triangulation of the simplex at resolution r (policy iteration, exact for the
-      grid problem); linear interpolation over-estimates the convex value, so the fixed point is
-      an upper bound, and it is certified against the rounding of the solve by its Bellman residual.
-    * The resolution is doubled until U(b0) - L(b0) <= tol.  The vertex count grows like
-      r^(K-1), which is what limits the number of trust levels.
-
-    It solves the assistance POMDP (an alpha-vector policy) and flat POMDPs read from standard
-    files (a flat alpha-vector policy).
-    """
+class PointSolver(Solver):
+    """Point-based lower bound and Freudenthal-grid upper bound, refined until the gap at b0 is
+    small (see the module).  The vertex count grows like r^(K-1), which is what limits the number
+    of trust levels.  It solves the assistance POMDP (an alpha-vector policy) and flat POMDPs read
+    from standard files (a flat alpha-vector policy)."""
 
     name = "point"
     belief_updates = ("bayes",)
-    # the state of the last solve: the problem, the lower-bound vectors, the upper bound
-    model: BranchModel
-    G: np.ndarray
-    r: int
-    u: np.ndarray
-    lookup: np.ndarray
-    V: np.ndarray
     instead: ClassVar[dict[str, str]] = bayes_only("point")
+    flat = True
+    # the state of the last solve: the problem, the lower bound's vectors, the grid upper bound
+    model: BranchModel
+    vectors: np.ndarray
+    grid_resolution: int
+    vertices: np.ndarray
+    vertex_values: np.ndarray
+    lookup: np.ndarray
 
     def __init__(
         self,
@@ -154,46 +130,17 @@ class PointSolver(SolverBase):
         max_seconds: float = 60.0,
         resolution: int | None = None,
         max_resolution: int | None = None,
-        depth: int = 2,
-        lower_lattice: int | None = None,
-        seed: int = 0,
         belief_update: str = "bayes",
     ):
         self._targets(belief_update, tol, max_seconds)
-        self.resolution = resolution
+        self.resolution = resolution  # the first grid's (default: by the number of hidden states)
         self.max_resolution = max_resolution
-        self.depth = int(depth)
-        self.seed = seed
         self.max_vertices = 100_000
-        self.lower_lattice = lower_lattice  # beliefs of the lower bound: this lattice and the reachable set
 
-    def unsupported(self, problem: Any) -> list[str]:
-        if isinstance(problem, FlatPOMDP):
-            return [] if problem.discount < 1.0 else [f"the point solver needs a discount below 1, got {problem.discount}"]
-        return super().unsupported(problem)
-
-    # -- lower bound: point-based controller evaluation -----------------------------
-    def _improve_lower(self, B: np.ndarray, S: np.ndarray, p: np.ndarray, rounds: int = 30) -> None:
-        m = self.model
-        n, N, A, Br, K = S.shape
-        Sf = S.reshape(-1, K)
-        prev = None
-        for _ in range(rounds):
-            best = (Sf @ self.G.T).argmax(axis=1).reshape(n, N, A, Br)
-            g = point_backup(m, self.G, best)
-            acts = np.einsum("ncat,nt->nca", g, B).argmax(axis=2)  # (n, N)
-            # controller: node i, successors = node best at the next belief among the new vectors
-            alpha, succ = greedy_controller(m, S, p, g, acts)
-            key = (acts.tobytes(), succ.tobytes())
-            before = (B @ self.G.T).max(axis=1)
-            ev = evaluate_controller(m, acts, succ, guess=alpha)
-            if not np.all(np.isfinite(ev)):
-                ev = alpha
-            self.G = best_at(np.vstack([self.G, alpha, ev]), B)
-            gain = float(np.max((B @ self.G.T).max(axis=1) - before))
-            if key == prev or gain <= self.tol * 1e-2:
-                break
-            prev = key
+    def _improve_lower(self, B: np.ndarray) -> None:
+        """Point-based policy iteration on beliefs B (:func:`~.numerics.controller_iteration`)."""
+        succ = self.model.branches.successors(B)
+        self.vectors = controller_iteration(self.model, self.vectors, B, succ, B, self.tol * 1e-2, 30)
 
     # -- upper bound: Freudenthal grid, policy iteration ---------------------------------
     def _vertex_grid(self, r: int) -> tuple[np.ndarray, ...]:
@@ -216,12 +163,12 @@ class PointSolver(SolverBase):
     def _upper(self, r: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Vertex beliefs, certified upper values and the code lookup at resolution r."""
         m = self.model
-        K, N, gamma, pc = m.n_hidden, len(m.context_probs), m.discount, m.context_probs
+        N, gamma, pc = len(m.context_probs), m.discount, m.context_probs
         V, lookup, p, S, col, w = self._vertex_grid(r)
-        nV, Br = len(V), S.shape[3]
+        nV = len(V)
         wt = w * p[..., None]
         rew = np.einsum("cat,nt->nca", m.rewards, V)
-        rows = np.broadcast_to(np.arange(nV)[:, None, None], (nV, Br, K))
+        rows = np.broadcast_to(np.arange(nV)[:, None, None], (nV, *S.shape[3:]))
         ii = np.arange(nV)
 
         def q_of(u: np.ndarray) -> np.ndarray:
@@ -250,42 +197,20 @@ class PointSolver(SolverBase):
         """Solve the grid upper bound of ``model`` at resolution r and keep it (``upper_at`` reads
         it): the vertex beliefs and their certified upper values."""
         self.model = model
-        V, u, lookup = self._upper(r)
-        self.r, self.u, self.lookup, self.V = r, u, lookup, V
-        return V, u
+        self.vertices, self.vertex_values, self.lookup = self._upper(r)
+        self.grid_resolution = r
+        return self.vertices, self.vertex_values
 
     def upper_at(self, B: np.ndarray) -> np.ndarray:
         """The certified upper bound at beliefs B (linear interpolation of the vertex values)."""
-        verts, w = freudenthal_weights(np.atleast_2d(np.asarray(B, dtype=float)), self.r)
-        return (w * self.u[_find(self.lookup, _vertex_code(verts, self.r))]).sum(axis=1)
+        r = self.grid_resolution
+        verts, w = freudenthal_weights(np.atleast_2d(np.asarray(B, dtype=float)), r)
+        return (w * self.vertex_values[_find(self.lookup, _vertex_code(verts, r))]).sum(axis=1)
 
     def lower_at(self, B: np.ndarray) -> np.ndarray:
-        return (np.atleast_2d(np.asarray(B, dtype=float)) @ self.G.T).max(axis=1)
+        return (np.atleast_2d(np.asarray(B, dtype=float)) @ self.vectors.T).max(axis=1)
 
-    def _sampled(self, b0: np.ndarray, rng: np.random.Generator, trajectories: int = 8, length: int = 50) -> np.ndarray:
-        """Beliefs met along simulated trajectories from b0 (complexity and branch drawn with their
-        probabilities, actions greedy in the current lower bound): PBVI-style belief expansion."""
-        m = self.model
-        K, N = m.n_hidden, len(m.context_probs)
-        B = np.repeat(b0[None], trajectories, axis=0)
-        out = []
-        idx = np.arange(trajectories)
-        for _ in range(length):
-            p, S = self.model.branches.successors(B)  # (n, N, A, Br), (n, N, A, Br, K)
-            c = rng.choice(N, size=trajectories, p=m.context_probs)
-            # greedy action of the one-step lookahead on the lower bound
-            lb = (S.reshape(-1, K) @ self.G.T).max(axis=1).reshape(p.shape)
-            qa = np.einsum("cat,nt->nca", m.rewards, B) + m.discount * (p * lb).sum(axis=-1)
-            a = qa[idx, c].argmax(axis=1)
-            pb = p[idx, c, a]  # (n, Br)
-            u = rng.random(trajectories)[:, None]
-            br = np.minimum((np.cumsum(pb, axis=1) / pb.sum(axis=1, keepdims=True) < u).sum(axis=1), pb.shape[1] - 1)
-            B = S[idx, c, a, br]
-            out.append(B)
-        return unique_rows(np.vstack(out), decimals=9)
-
-    # -- solve -------------------------------------------------------------------------
-    @one_blas_thread
+    @one_blas_thread()
     def solve_bounds(self, problem: AssistancePOMDP | FlatPOMDP) -> PointSolution:
         """Lower and upper bounds at the initial belief (the vectors and points behind them)."""
         self.check(problem)
@@ -306,8 +231,8 @@ class PointSolver(SolverBase):
         self.model = model
         K = model.n_hidden
         b0 = np.asarray(model.initial, dtype=float)
-        reach = reachable_beliefs(b0, self.depth, model.branches.successors)
-        self.G = self._start(model, b0, reach)
+        reach = reachable_beliefs(b0, 2, model.branches.successors)  # two trials ahead
+        self.vectors = self._start(model, b0, reach)
         r = self.resolution or {2: 64, 3: 16, 4: 8}.get(K, 4 if K <= 8 else 2)
         r_max = self.max_resolution or {2: 4096, 3: 512, 4: 64}.get(K, 16)
         if (r + 1) ** (K - 1) >= 2**62 or _lattice_size(K, r) > self.max_vertices:
@@ -315,8 +240,8 @@ class PointSolver(SolverBase):
                 f"{K} hidden states are too many for the grid upper bound of the {self.name} solver "
                 f"({_lattice_size(K, r)} vertices at resolution {r})"
             )
-        lat = self.lower_lattice or {2: 256, 3: 16, 4: 6}.get(K, 3)
-        rng = np.random.default_rng(self.seed)
+        lat = {2: 256, 3: 16, 4: 6}.get(K, 3)  # the lower bound's lattice: at most this resolution
+        rng = np.random.default_rng(0)
         history = []
         rounds = 0
         while True:
@@ -324,9 +249,8 @@ class PointSolver(SolverBase):
             t_round = time.perf_counter()
             V, u = self.grid_bound(model, r)
             t_upper = time.perf_counter() - t_round
-            B = unique_rows(np.vstack([_simplex_lattice(K, min(r, lat)), reach, self._sampled(b0, rng)]))
-            p, S = self.model.branches.successors(B)
-            self._improve_lower(B, S, p)
+            sampled = sample_beliefs(model, b0, rng, model.branches.successors, self.lower_at, 50)
+            self._improve_lower(unique_rows(np.vstack([_simplex_lattice(K, min(r, lat)), reach, unique_rows(sampled, 9)])))
             lo = float(self.lower_at(b0)[0])
             up = self._upper_at_start(b0)
             history.append((len(V), time.perf_counter() - t0, lo, up))
@@ -338,37 +262,29 @@ class PointSolver(SolverBase):
             if up - lo <= self.tol or r * 2 > r_max or too_big or late:
                 break
             r *= 2
-        return PointSolution(self.G.copy(), V.copy(), u.copy(), lo, up, rounds, time.perf_counter() - t0, history)
+        counts = {"resolution": r, "iterations": rounds}
+        return PointSolution(self.vectors.copy(), V.copy(), u.copy(), lo, up, time.perf_counter() - t0, counts, history)
 
-    def q_vectors(self, beliefs: np.ndarray) -> list[list[np.ndarray]]:
-        """Q lower-bound vectors per (context, action): point backups of L at ``beliefs``."""
-        m = self.model
-        S = self.model.branches.successors(beliefs)[1]
-        n, N, A, Br, K = S.shape
-        g = point_backup(m, self.G, best_vectors(S.reshape(-1, K), self.G).reshape(n, N, A, Br))
-        return [[unique_rows(g[:, c, a], decimals=12) for a in range(A)] for c in range(N)]
-
-    @one_blas_thread
+    @one_blas_thread()
     def solve(self, problem: AssistancePOMDP | FlatPOMDP) -> Policy:
         """The policy of the lower bound's vectors, with the bounds at the initial belief in its
         ``info``: an AlphaVectorPolicy for the assistance POMDP (Bayes update), a FlatAlphaPolicy
         for a flat POMDP."""
         sol = self.solve_bounds(problem)
         K = sol.vectors.shape[1]
-        qv = self.q_vectors(unique_rows(np.vstack([sol.points, _simplex_lattice(K, _q_lattice(K))])))
-        method = "point-based policy iteration + Freudenthal upper bound"
-        return bounds_policy(self, problem, qv, sol, method, resolution=self.r, iterations=sol.iterations)
+        beliefs = unique_rows(np.vstack([sol.points, _simplex_lattice(K, _q_lattice(K))]))
+        qv = q_vectors(self.model, self.vectors, beliefs, self.model.branches.successors(beliefs)[1])
+        return bounds_policy(self, problem, qv, sol, "point-based policy iteration + Freudenthal upper bound")
 
 
-def bounds_policy(solver: Any, problem: AssistancePOMDP | FlatPOMDP, qv: list, sol: Any, method: str, **counts: Any) -> Policy:
+def bounds_policy(solver: Any, problem: AssistancePOMDP | FlatPOMDP, qv: list, sol: PointSolution, method: str) -> Policy:
     """The policy of a bounding solver's lower-bound Q-vectors ``qv`` with the bounds at the
-    initial belief (``sol``: its vectors, points, lower, upper, gap, seconds) and the solver's
-    own ``counts`` in its ``info``: an AlphaVectorPolicy for the assistance POMDP (Bayes update),
-    a FlatAlphaPolicy for a flat POMDP (the point and reachable solvers)."""
+    initial belief and the solver's own counts in its ``info``: an AlphaVectorPolicy for the
+    assistance POMDP (Bayes update), a FlatAlphaPolicy for a flat POMDP."""
     info: dict[str, Any] = {
         "solver": solver.name,
         "method": method,
-        **counts,
+        **sol.counts,
         "bellman_residual": float("nan"),
         "error_bound": sol.gap,
         "certified_gap": sol.gap,

@@ -1,40 +1,27 @@
-"""Reachable-belief solver: heuristic search from the initial belief with certified bounds
-(in the manner of HSVI2 and SARSOP), for any number of hidden states.
+"""Reachable-belief solver: heuristic search from the initial belief with certified bounds (in
+the manner of HSVI2 and SARSOP), for any number of hidden states (docs/solvers.md).
 
-The point solver bounds the value on a triangulation of the whole belief simplex, whose
-vertex count grows like r^(K-1).  The beliefs that matter are those reachable from b0, and
-for many problems -- a supervisor of unknown type above all, whose (type, trust) belief
-mostly moves within a few directions -- they are few.  This solver only visits them:
+The point solver bounds the value on a triangulation of the whole simplex (r^(K-1) vertices);
+this solver visits only the beliefs reachable from b0, which for a supervisor of unknown type
+are few:
 
-* **lower bound** L(b) = max_α α·b over a set Γ of alpha vectors.  Γ starts with the values of
-  the memoryless controllers ("take a_c in context c") and grows by point-based backups: at a
-  belief b, for each context c, action a and branch (o, E') the vector of Γ best at the next
-  belief, and per context the action best at b.  Each vector is the exact value of a
-  finite-state controller (take a_c now, then run the controller of the chosen vector), so
-  L(b0) is the value of an executable policy.  Vectors never best at a visited belief are pruned.
-* **upper bound** U(b): the sawtooth interpolation of belief–value points above the corner
-  values of the fast informed bound (FIB, solved by policy iteration and certified by its
-  residual), and never above the FIB function itself.  A point is added by the Bellman
-  backup of U at a visited belief; by convexity of the value every interpolation stays above it.
-* **search**: trials from b0; at each belief the action greedy in U for each context, then
-  the (context, branch) whose weighted excess gap, p · (U - L - ε γ^-d), is largest; the
-  trial ends where the excess is not positive; the beliefs of the trial are backed up in
-  reverse.  It stops when U(b0) - L(b0) <= ``tol`` or after ``max_seconds``.
+* **lower bound** L(b) = max_α α·b: memoryless controllers, point-based backups at the visited
+  beliefs and point-based policy iteration over them; every vector is a controller's value;
+* **upper bound** U(b): the sawtooth interpolation of belief-value points above the corner values
+  of the fast informed bound, never above that bound or the blocks' grid bounds
+  (:mod:`.upper_bounds`); points come from Bellman backups of U;
+* **search**: trials from b0, greedy in U, down the (context, branch) of largest weighted excess
+  gap p · (U - L - ε γ^-d), backed up in reverse, until U(b0) - L(b0) <= ``tol`` or ``max_seconds``.
 
-The problem is taken in branch form (:class:`~trustseek.pomdp.branch_model.BranchModel`):
-the context (complexity) is seen before acting and the branches (o, E') move the belief, so
-it solves the assistance POMDP with any number of trust levels -- the (type, trust) product
-of a supervisor-type mixture included -- and flat POMDPs.  The bounds rest on the convexity
-of the Bayes-filter value; for the eq.-3 update use the ``alpha`` or ``grid`` solver.
+The bounds rest on the convexity of the Bayes-filter value.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
 from math import comb
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import numpy as np
 import scipy.sparse as sp
@@ -44,67 +31,29 @@ from ..pomdp.belief import BranchModel
 from ..pomdp.flat import FlatPOMDP
 from ..pomdp.problem import AssistancePOMDP
 from . import numerics
-from .base import SolverBase, bayes_only, one_blas_thread
-from .point import bounds_policy
+from .base import Solver, bayes_only, one_blas_thread
+from .point import PointSolution, bounds_policy
 from .upper_bounds import BlockGrid, fast_informed_bound, grid_blocks, inverse_points, phi_of, phi_pairs
 
-__all__ = ["ReachableSolution", "ReachableSolver"]
+__all__ = ["ReachableSolver"]
 
 
-@dataclass
-class ReachableSolution:
-    """Bounds at the initial belief, the lower bound's vectors, the upper bound's points."""
-
-    vectors: np.ndarray  # lower bound: L(b) = max_α α·b
-    points: np.ndarray  # upper bound: belief points ...
-    point_values: np.ndarray  # ... with their upper values (sawtooth interpolation)
-    corners: np.ndarray  # upper values at the corners of the simplex
-    lower: float
-    upper: float
-    trials: int
-    backups: int
-    seconds: float
-    beliefs: np.ndarray  # the beliefs the search visited
-    history: list[tuple[int, float, float, float]] = field(default_factory=list)  # (trial, seconds, lower, upper)
-
-    @property
-    def gap(self) -> float:
-        return self.upper - self.lower
-
-
-class ReachableSolver(SolverBase):
+class ReachableSolver(Solver):
     """Heuristic search over the beliefs reachable from b0 with a lower bound of alpha vectors
     and a sawtooth upper bound, until the gap at b0 is at most ``tol`` (see the module)."""
 
     name = "reachable"
     belief_updates = ("bayes",)
     instead: ClassVar[dict[str, str]] = bayes_only("reachable")
+    flat = discounted = True
 
-    def __init__(
-        self,
-        tol: float = 1e-3,
-        max_seconds: float = 60.0,
-        belief_update: str = "bayes",
-        max_depth: int | None = None,
-        grid_vertices: int = 4000,
-        decimals: int = 3,
-        refine: int = 4,
-        seed_depth: int = 3,
-    ):
+    grid_vertices = 4000  # the most vertices of a block's grid bound
+    refine = 4  # points re-evaluated with the block bound beyond them
+    decimals = 3  # visited beliefs equal to this many decimals are one (the first met)
+    seed_depth = 3  # the search starts with every belief this many trials from b0
+
+    def __init__(self, tol: float = 1e-3, max_seconds: float = 60.0, belief_update: str = "bayes"):
         self._targets(belief_update, tol, max_seconds)
-        self.max_depth = max_depth
-        self.grid_vertices = int(grid_vertices)
-        self.refine = int(refine)  # points re-evaluated with the block bound beyond them
-        self.decimals = int(decimals)  # visited beliefs equal to this many decimals are one (the first met)
-        self.seed_depth = int(seed_depth)  # the search starts with every belief this many trials from b0
-
-    def unsupported(self, problem: Any) -> list[str]:
-        if isinstance(problem, FlatPOMDP):
-            return [] if problem.discount < 1.0 else [f"the reachable solver needs a discount below 1, got {problem.discount}"]
-        reasons = super().unsupported(problem)
-        if not reasons and not problem.discount < 1.0:
-            reasons.append(f"the reachable solver needs a discount below 1, got {problem.discount}: use the grid solver")
-        return reasons
 
     # -- set-up ------------------------------------------------------------------------
     def _setup(self, model: BranchModel) -> None:
@@ -113,7 +62,7 @@ class ReachableSolver(SolverBase):
         N, A, Br, K, _ = M.shape
         self.shape = (N, A, Br, K)
         # b @ flat -> unnormalized next beliefs of every (c, a, branch)
-        self.flat = np.ascontiguousarray(np.moveaxis(M, 3, 0).reshape(K, -1))
+        self.moves = np.ascontiguousarray(np.moveaxis(M, 3, 0).reshape(K, -1))
         self.rewards, self.context_probs, self.discount = model.rewards, model.context_probs, model.discount
         self.vectors = numerics.memoryless_controllers(model)
         self.beta = fast_informed_bound(model)
@@ -139,8 +88,8 @@ class ReachableSolver(SolverBase):
             np.minimum.at(self.corners, t, self.point_values[corner])
             self.points, self.point_values = self.points[~corner], self.point_values[~corner]
         P = self.points
-        self.inv = inverse_points(P)
-        self.excess_v = self.point_values - P @ self.corners  # <= 0: how far below the corners' plane
+        self.inverse = inverse_points(P)
+        self.excess = self.point_values - P @ self.corners  # <= 0: how far below the corners' plane
 
     # -- bounds at beliefs -------------------------------------------------------------
     def lower_at(self, B: np.ndarray) -> np.ndarray:
@@ -151,7 +100,7 @@ class ReachableSolver(SolverBase):
         out = self._basefun(B)
         if len(self.points):
             lin = B @ self.corners
-            saw = lin[:, None] + self._phi(B) * self.excess_v[None]  # through each point, corners beyond
+            saw = lin[:, None] + phi_of(B, self.inverse) * self.excess[None]  # through each point, corners beyond
             out = np.minimum(out, saw.min(axis=1))
             if self.blocks:
                 # the few best points again, with the block bound beyond them instead of the corners
@@ -201,10 +150,6 @@ class ReachableSolver(SolverBase):
                 out[ok] += mass[ok] * grid.upper_at(B[ok][:, idx] / mass[ok, None])
         return out
 
-    def _phi(self, B: np.ndarray) -> np.ndarray:
-        """φ_i(b) for beliefs B (n, K) and the upper bound's points: (n, points)."""
-        return phi_of(B, self.inv)
-
     def _successors(self, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(p[c, a, br], next[c, a, br, t]) of one belief."""
         p, nxt = self._successors_many(b[None])
@@ -233,42 +178,16 @@ class ReachableSolver(SolverBase):
             self._refresh_points()
 
     # -- consolidation over the visited beliefs ----------------------------------------------
-    def _improve_lower(self, B: np.ndarray, rounds: int = 20, t_end: float = math.inf) -> None:
-        """Point-based policy iteration on the visited beliefs: every belief is a controller node
-        with its greedy actions and, per (context, branch), the node best at the next belief; the
-        controller is evaluated exactly (one sparse solve), so long loops of beliefs (a supervisor
-        who keeps relying) are valued at once rather than one discount factor per backup.  Stops
-        after the round that ends past ``t_end`` (every vector is a controller's value, so the
-        bound holds whenever it stops)."""
+    def _improve_lower(self, B: np.ndarray, t_end: float = math.inf) -> None:
+        """Point-based policy iteration on the visited beliefs (:func:`~.numerics.controller_iteration`),
+        with a second controller taking the actions greedy in the upper bound (near-optimal once it
+        is close): long loops of beliefs (a supervisor who keeps relying) are valued at once."""
         N, A, Br, K = self.shape
-        n = len(B)
-        p, S = self._successors_many(B)  # (n, N, A, Br), (n, N, A, Br, K)
-        Sf = S.reshape(-1, K)
-        # the actions greedy in the upper bound: near-optimal once the upper bound is close
-        q_up = np.einsum("cat,nt->nca", self.rewards, B) + self.discount * (p * self.upper_at(Sf).reshape(n, N, A, Br)).sum(
-            axis=3
-        )
-        up_acts = q_up.argmax(axis=2)
-        prev = None
-        for _ in range(rounds):
-            best = (Sf @ self.vectors.T).argmax(axis=1).reshape(n, N, A, Br)
-            g = numerics.point_backup(self.model, self.vectors, best)
-            lo_acts = np.einsum("ncat,nt->nca", g, B).argmax(axis=2)
-            before = self.lower_at(B)
-            new = []
-            for acts in (lo_acts, up_acts):
-                alpha, succ = numerics.greedy_controller(self.model, S, p, g, acts)
-                ev = numerics.evaluate_controller(self.model, acts, succ, guess=alpha)
-                new.append(alpha)
-                if np.all(np.isfinite(ev)):
-                    new.append(ev)
-            key = lo_acts.tobytes()
-            G = np.vstack([self.vectors, *new])
-            self.vectors = numerics.best_at(G, np.vstack([B, np.eye(K)]))
-            gain = float(np.max(self.lower_at(B) - before))
-            if key == prev or gain <= self.tol * 1e-3 or time.perf_counter() > t_end:
-                break
-            prev = key
+        p, S = self._successors_many(B)
+        ub = self.upper_at(S.reshape(-1, K)).reshape(len(B), N, A, Br)
+        up_acts = (np.einsum("cat,nt->nca", self.rewards, B) + self.discount * (p * ub).sum(axis=3)).argmax(axis=2)
+        at = np.vstack([B, np.eye(K)])
+        self.vectors = numerics.controller_iteration(self.model, self.vectors, B, (p, S), at, self.tol * 1e-3, 20, up_acts, t_end)
 
     def _improve_upper(self, B: np.ndarray, candidates: int = 8, rounds: int = 30, t_end: float = math.inf) -> None:
         """The upper values of the visited beliefs as the fixed point of the Bellman operator on
@@ -365,30 +284,10 @@ class ReachableSolver(SolverBase):
             self.point_values = np.concatenate([self.point_values, v[better]])
             self._refresh_points()
 
-    def _sampled(self, b0: np.ndarray, rng: np.random.Generator, trajectories: int = 8, length: int = 60) -> np.ndarray:
-        """Beliefs met on trajectories from b0: context and branch drawn with their probabilities,
-        the action greedy in the upper bound."""
-        N, _, Br, K = self.shape
-        B = np.repeat(b0[None], trajectories, axis=0)
-        idx = np.arange(trajectories)
-        out = []
-        for _ in range(length):
-            p, S = self._successors_many(B)
-            ub = self.upper_at(S.reshape(-1, K)).reshape(p.shape)
-            q = np.einsum("cat,nt->nca", self.rewards, B) + self.discount * (p * ub).sum(axis=3)
-            c = rng.choice(N, size=trajectories, p=self.context_probs)
-            a = q[idx, c].argmax(axis=1)
-            pb = p[idx, c, a]
-            u = rng.random(trajectories)[:, None] * pb.sum(axis=1, keepdims=True)
-            br = np.minimum((np.cumsum(pb, axis=1) < u).sum(axis=1), Br - 1)
-            B = S[idx, c, a, br]
-            out.append(B)
-        return np.vstack(out)
-
     def _successors_many(self, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(p[n, c, a, br], next[n, c, a, br, t]) of beliefs B."""
         N, A, Br, K = self.shape
-        nb = (B @ self.flat).reshape(len(B), N, A, Br, K)
+        nb = (B @ self.moves).reshape(len(B), N, A, Br, K)
         p = nb.sum(axis=-1)
         ok = p > 1e-300
         nxt = np.where(ok[..., None], nb / np.where(ok, p, 1.0)[..., None], 1.0 / K)
@@ -403,10 +302,10 @@ class ReachableSolver(SolverBase):
         self.vectors = numerics.best_at(self.vectors, at)
         n = len(self.points)
         if 1 < n <= 4000:
-            order = np.argsort(self.excess_v, kind="stable")  # deepest below the corners first
-            P, v, ex = self.points[order], self.point_values[order], self.excess_v[order]
+            order = np.argsort(self.excess, kind="stable")  # deepest below the corners first
+            P, v, ex = self.points[order], self.point_values[order], self.excess[order]
             base = P @ self.corners
-            saw = base[:, None] + self._phi(P)[:, order] * ex[None]  # [i, j]: the sawtooth of point j at point i
+            saw = base[:, None] + phi_of(P, self.inverse)[:, order] * ex[None]  # [i, j]: the sawtooth of point j at point i
             keep = np.zeros(n, dtype=bool)
             for i in range(n):
                 others = saw[i, keep]
@@ -453,20 +352,20 @@ class ReachableSolver(SolverBase):
             path.append(b)
         return path
 
-    @one_blas_thread
-    def solve_bounds(self, problem: AssistancePOMDP | FlatPOMDP) -> ReachableSolution:
+    @one_blas_thread()
+    def solve_bounds(self, problem: AssistancePOMDP | FlatPOMDP) -> PointSolution:
         """Lower and upper bounds at the initial belief (the vectors and points behind them)."""
         self.check(problem)
         return self._bounds(problem.branch_model())
 
-    def _bounds(self, model: BranchModel) -> ReachableSolution:
+    def _bounds(self, model: BranchModel) -> PointSolution:
         t0 = time.perf_counter()
         t_end = t0 + self.max_seconds
         self._setup(model)
         b0 = np.asarray(model.initial, dtype=float)
         width = float(np.max(self.corners) - np.min(self.vectors.max(axis=0).min()))
         span = max(width, self.tol)
-        depth_cap = self.max_depth or math.ceil(math.log(self.tol / (2 * span)) / math.log(self.discount)) + 1
+        depth_cap = math.ceil(math.log(self.tol / (2 * span)) / math.log(self.discount)) + 1
         depth_cap = max(1, depth_cap)
         visited: list[np.ndarray] = list(numerics.reachable_beliefs(b0, self.seed_depth, self._successors_many, self.decimals))
         history = []
@@ -493,7 +392,8 @@ class ReachableSolver(SolverBase):
                 # values over the visited beliefs at once (loops of beliefs included), with the
                 # beliefs met on a few trajectories of the greedy policy (what the lower bound needs)
                 c0 = time.perf_counter()
-                B = numerics.unique_rows(np.vstack([B, self._sampled(b0, rng)]), self.decimals)
+                sampled = numerics.sample_beliefs(self.model, b0, rng, self._successors_many, self.upper_at, 60)
+                B = numerics.unique_rows(np.vstack([B, sampled]), self.decimals)
                 visited = list(B)
                 self._improve_upper(B, t_end=t_end)
                 self._improve_lower(B, t_end=t_end)
@@ -504,45 +404,19 @@ class ReachableSolver(SolverBase):
         B = numerics.unique_rows(np.array(visited), self.decimals)
         self._prune(B)
         lo, up = float(self.lower_at(b0)[0]), float(self.upper_at(b0)[0])
-        self.visited = B
-        return ReachableSolution(
-            self.vectors.copy(),
-            self.points.copy(),
-            self.point_values.copy(),
-            self.corners.copy(),
-            lo,
-            up,
-            trials,
-            backups,
-            time.perf_counter() - t0,
-            B,
-            history,
-        )
+        counts = {"trials": trials, "backups": backups, "iterations": trials, "beliefs_visited": len(B)}
+        vectors, points, values = self.vectors.copy(), self.points.copy(), self.point_values.copy()
+        return PointSolution(vectors, points, values, lo, up, time.perf_counter() - t0, counts, history, B)
 
-    def q_vectors(self, beliefs: np.ndarray) -> list[list[np.ndarray]]:
-        """Q lower-bound vectors per (context, action): point backups of L at ``beliefs``, each
-        set reduced to the vectors best at one of the beliefs."""
-        N, A, Br, K = self.shape
-        _, S = self._successors_many(beliefs)
-        best = numerics.best_vectors(S.reshape(-1, K), self.vectors).reshape(len(beliefs), N, A, Br)
-        g = numerics.point_backup(self.model, self.vectors, best)
-        res = []
-        for c in range(N):
-            row = []
-            for a in range(A):
-                row.append(numerics.best_at(numerics.unique_rows(g[:, c, a], decimals=12), beliefs))
-            res.append(row)
-        return res
-
-    @one_blas_thread
+    @one_blas_thread()
     def solve(self, problem: AssistancePOMDP | FlatPOMDP) -> Policy:
         """The policy greedy in the lower bound's Q-vectors, with the bounds at the initial belief
         in its ``info``: an AlphaVectorPolicy for the assistance POMDP, a FlatAlphaPolicy for a
         flat POMDP."""
         sol = self.solve_bounds(problem)
         K = sol.vectors.shape[1]
+        assert sol.beliefs is not None
         at = numerics.unique_rows(np.vstack([sol.beliefs, np.eye(K), np.full((1, K), 1.0 / K)]))
-        qv = self.q_vectors(at)
+        qv = numerics.q_vectors(self.model, self.vectors, at, self._successors_many(at)[1], prune=True)
         method = "heuristic search over reachable beliefs: alpha-vector lower bound, sawtooth upper bound"
-        counts = {"trials": sol.trials, "backups": sol.backups, "iterations": sol.trials, "beliefs_visited": len(sol.beliefs)}
-        return bounds_policy(self, problem, qv, sol, method, **counts)
+        return bounds_policy(self, problem, qv, sol, method)

@@ -2,25 +2,19 @@
 policy by a short spec (:func:`policy_from_spec`), solved through it.
 
 The command line, the experiment server and the reproduction build solvers here and never
-choose an algorithm themselves::
+choose an algorithm themselves: ``make_solver("alpha", belief_update="paper", gap=1e-6).solve(pomdp)``.
+Options are keyword arguments with defaults (``None``: the default); options that only other
+solvers take are ignored, an option no solver takes is an error.  A solver's module is loaded
+when the solver is first built, so that naming the solvers loads none of scipy.
 
-    solver = make_solver("alpha", belief_update="paper", gap=1e-6)
-    policy = solver.solve(AssistancePOMDP(model, task))
-
-Options are keyword arguments with defaults; ``None`` means the default.  Options that only
-other solvers take are ignored (so that one set of command-line options serves every
-solver); an option no solver takes is an error.  A solver's module is loaded when the solver is
-first built (through the package's names), so that naming the solvers loads none of scipy.
-
-A policy spec is what ``trustseek simulate --policy`` and a study's blocks name, a JSON object::
+A policy spec (``trustseek simulate --policy``, a study's blocks) is a JSON object::
 
     {"kind": "trust-aware", "belief_update": "bayes", "grid": 2001}   solved by the grid solver
     {"kind": "trust-agnostic"}                                         Section VI-A, from the model
     {"kind": "randomized", "p_ask": {"low": 0.1, "high": 0.4}}         (default: the paper's design)
     {"kind": "always-ask"} / {"kind": "never-ask"}
     {"kind": "schedule", "counts": {"low": 17, "high": 17}, "window": null}
-                                    trial scheduling, solved by the schedule solver (options:
-                                    belief_update, grid, order, ask_first_hard)
+                                    trial scheduling (options: belief_update, grid, order, ask_first_hard)
 
 or a full policy JSON (with ``format``), taken as it is.  Every problem is reported at once,
 each line naming where in the spec it is (``where``).
@@ -232,23 +226,31 @@ def policy_from_spec(
 
 
 def _trust_aware_spec(spec: Mapping[str, Any], model: TrustModel, task: Task, where: str, max_grid: int | None) -> Policy:
-    bu = spec.get("belief_update", "bayes")
-    grid = spec.get("grid", DEFAULT_GRID)
-    problems = []
-    if bu not in BELIEF_UPDATES:
-        problems.append(f"{where}.belief_update is {bu!r}, expected {' or '.join(repr(b) for b in BELIEF_UPDATES)}")
-    top = max_grid if max_grid is not None else float("inf")
-    if not isinstance(grid, int) or isinstance(grid, bool) or not 3 <= grid <= top:
-        expected = f"an integer in [3, {max_grid}]" if max_grid is not None else "an integer of at least 3"
-        problems.append(f"{where}.grid is {grid!r}, expected {expected}")
+    problems: list[str] = []
+    bu, grid = _update_and_grid(spec, where, DEFAULT_GRID, max_grid, problems)
     if problems:
         raise PolicySpecError(problems)
-    pomdp = AssistancePOMDP(model, task)
-    solver = make_solver("grid", belief_update=bu, grid=grid)
-    reasons = solver.unsupported(pomdp)
+    return _solved(make_solver("grid", belief_update=bu, grid=grid), AssistancePOMDP(model, task), where)
+
+
+def _update_and_grid(spec: Mapping[str, Any], where: str, default: int, max_grid: int | None, problems: list[str]) -> tuple:
+    """A spec's ``belief_update`` and ``grid`` (at most ``max_grid``); what is wrong goes to ``problems``."""
+    bu = spec.get("belief_update", "bayes")
+    grid = spec.get("grid", default)
+    if bu not in BELIEF_UPDATES:
+        problems.append(f"{where}.belief_update is {bu!r}, expected {' or '.join(repr(b) for b in BELIEF_UPDATES)}")
+    if not isinstance(grid, int) or isinstance(grid, bool) or not 3 <= grid <= (float("inf") if max_grid is None else max_grid):
+        expected = f"an integer in [3, {max_grid}]" if max_grid is not None else "an integer of at least 3"
+        problems.append(f"{where}.grid is {grid!r}, expected {expected}")
+    return bu, grid
+
+
+def _solved(solver: Solver, problem: Any, where: str) -> Policy:
+    """``solver``'s policy for ``problem``, or what keeps it from solving it, each line at ``where``."""
+    reasons = solver.unsupported(problem)
     if reasons:
         raise PolicySpecError([f"{where}: {r}" for r in reasons])
-    return solver.solve(pomdp)
+    return solver.solve(problem)
 
 
 def _randomized_spec(p: Any, cx: tuple[str, ...], where: str) -> ComplexityPolicy:
@@ -298,12 +300,7 @@ def _schedule_spec(spec: Mapping[str, Any], model: TrustModel, task: Task, where
     window = spec.get("window")
     if window is not None and (not isinstance(window, int) or isinstance(window, bool) or window < 1):
         problems.append(f"{where}.window is {window!r}, expected a positive number of items or null (every item)")
-    bu = spec.get("belief_update", "bayes")
-    if bu not in BELIEF_UPDATES:
-        problems.append(f"{where}.belief_update is {bu!r}, expected {' or '.join(repr(b) for b in BELIEF_UPDATES)}")
-    grid = spec.get("grid", DEFAULT_SCHEDULE_GRID)
-    if not isinstance(grid, int) or isinstance(grid, bool) or grid < 3:
-        problems.append(f"{where}.grid is {grid!r}, expected an integer of at least 3")
+    bu, grid = _update_and_grid(spec, where, DEFAULT_SCHEDULE_GRID, None, problems)
     order = spec.get("order", "optimal")
     if order not in ORDERS:
         problems.append(f"{where}.order is {order!r}, expected one of {list(ORDERS)}")
@@ -325,8 +322,4 @@ def _schedule_spec(spec: Mapping[str, Any], model: TrustModel, task: Task, where
         problem = SchedulingProblem(AssistancePOMDP(model, task), tuple(counts), window)
     except SchedulingError as exc:
         raise PolicySpecError([f"{where}: {x}" for x in exc.problems]) from None
-    solver = make_solver(SCHEDULE, belief_update=bu, schedule_grid=grid, order=order, ask_first_hard=first)
-    reasons = solver.unsupported(problem)
-    if reasons:
-        raise PolicySpecError([f"{where}: {r}" for r in reasons])
-    return solver.solve(problem)
+    return _solved(make_solver(SCHEDULE, belief_update=bu, schedule_grid=grid, order=order, ask_first_hard=first), problem, where)

@@ -1,21 +1,16 @@
 """The scheduling solver: backward induction over the remaining items, a belief value function
-at each (remaining, visible) state (two trust levels).
+at each (remaining, visible) state (two trust levels; docs/scheduling.md).
 
 With V_s(x) the optimal value of state s = (remaining, visible) at x = P(trust = high),
 
     W_u(x)        = Σ_{s'} P(s' | u) V_{s'}(x)                       (afterstate u: the next item arrives)
     Q_s(x, k, a)  = r(x, k, a) + γ Σ_branches P(branch | x, k, a) W_{after(s, k)}(x'),
-    V_s(x)        = max over visible k and actions a of Q_s(x, k, a),   V = 0 with no items left.
+    V_s(x)        = max over visible k and actions a of Q_s(x, k, a),   V = 0 with no items left,
 
-Two representations of the value functions:
-
-* ``alpha`` (``bayes`` update): sets of alpha vectors, backed up exactly with the envelope
-  backup of :func:`~.alpha.exact_backup` (no approximation: the values equal an exhaustive search);
-* ``grid`` (either update): values on a uniform grid of x, linear interpolation in between.
-
-``order`` restricts the picks to a rule (``easy-first``, ``hard-first``, ``alternating``; the
-asks stay optimal for that order) and ``ask_first_hard`` forces an ask on the first
-high-complexity item: the heuristics the evaluation compares the optimal schedule with.
+as exact envelopes of alpha vectors (``alpha``, the ``bayes`` update: :func:`~.alpha.exact_backup`)
+or values on a uniform grid of x (``grid``, either update).  ``order`` restricts the picks to a
+rule and ``ask_first_hard`` forces an ask on the first high-complexity item (the heuristics the
+evaluation compares the optimal schedule with).
 """
 
 from __future__ import annotations
@@ -31,7 +26,7 @@ from ..policies.scheduling import PieceQ, SchedulePolicy
 from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem, State, state_key
 from .alpha import exact_backup
-from .base import SolverBase, SolverError, one_blas_thread
+from .base import Solver, SolverError, one_blas_thread
 from .defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
 
 MAX_VALUES = 50_000_000  # the largest schedule policy solved (Q values; the paper's 41/30 items: 1 M, about 1 s)
@@ -68,7 +63,7 @@ def forced_ask(problem: SchedulingProblem, state: State, k: int) -> bool:
     return k == hard and state[0][hard] == problem.counts[hard]
 
 
-class ScheduleSolver(SolverBase):
+class ScheduleSolver(Solver):
     """Backward induction over the counts for a :class:`SchedulingProblem` (two trust levels)."""
 
     name = "schedule"
@@ -135,7 +130,7 @@ class ScheduleSolver(SolverBase):
         reasons += [r for r in super().unsupported(problem.pomdp) if "trust levels" not in r]
         return reasons
 
-    @one_blas_thread
+    @one_blas_thread()
     def solve(self, problem: SchedulingProblem) -> SchedulePolicy:
         self.check(problem)
         t0 = time.perf_counter()

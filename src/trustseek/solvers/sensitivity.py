@@ -1,27 +1,16 @@
 """How much the threshold policy moves when the reported parameters move within their printed precision.
 
-A paper prints its estimates rounded (two decimals in Section V); the threshold of the optimal
-policy is a function of all of them at once, and rounding each one by up to half a unit of its
-last decimal moves it.  :func:`sensitivity` measures by how much, for any two-level trust model
-and task:
+A paper prints its estimates rounded (two decimals in Section V); rounding each one by up to half
+a unit of its last decimal moves the optimal policy's threshold.  :func:`sensitivity` measures by
+how much, for any two-level trust model and task: each free parameter at either end of its box
+alone (a tornado), and jointly the smallest and largest threshold and value over the box by
+L-BFGS-B, cross-checked by a Latin-hypercube sample.
 
-* **one at a time** (a tornado): each free parameter at the lower and at the upper end of its
-  box, every other parameter at its printed value;
-* **jointly**: the smallest and largest threshold (and value) over the whole box, by L-BFGS-B
-  (:func:`scipy.optimize.minimize`, finite-difference gradients) started from the corner the
-  one-at-a-time signs point to and from the printed values, cross-checked by a Latin-hypercube
-  sample of the box (every sampled point must lie inside the optimised range).
-
-The free parameters (:func:`free_parameters`) are one probability per two-outcome row: P(T_1 =
-high); P(rely | T, C, autonomous); P(T' = high | T, E', C, a) for the experiences the task can
-produce after ``a`` (rows the design never produces, such as a reliable experience after asking
-in low complexity, are left out, and so are the ``ask`` emissions, which the design fixes: an
-asked human teleoperates); the robot's success probabilities and the discount.  Rewards are
-integers and P(C) is an assumption, not an estimate: neither moves.
-
-The quantities are the threshold on P(T = high) below which the policy asks, per complexity
-where the printed model's policy has one, and V = Σ_C P(C) V(b_1, C), the expected discounted
-reward from the initial belief.
+The free parameters (:func:`free_parameters`) are one probability per two-outcome row that the
+design produces: P(T_1 = high), P(rely | T, C, autonomous), P(T' = high | T, E', C, a), the robot's
+success probabilities and the discount (the ``ask`` emissions, the integer rewards and P(C) do not
+move).  The quantities are the threshold on P(T = high) below which the policy asks, per
+complexity where the printed model's policy has one, and V = Σ_C P(C) V(b_1, C).
 """
 
 from __future__ import annotations
@@ -77,12 +66,9 @@ class Parameter:
         return {"name": self.name, "table": self.table, "value": self.value, "lower": self.lower, "upper": self.upper}
 
 
-def _box(value: float, half: float, lo: float = 0.0, hi: float = 1.0) -> tuple[float, float]:
-    return max(lo, value - half), min(hi, value + half)
-
-
-def _half(decimals: int) -> float:
-    return 0.5 * 10.0 ** (-decimals)
+def _box(value: float, decimals: int, hi: float = 1.0) -> tuple[float, float]:
+    """± half a unit of the last of ``decimals`` printed decimals around ``value``, within [0, hi]."""
+    return max(0.0, value - 0.5 * 10.0 ** (-decimals)), min(hi, value + 0.5 * 10.0 ** (-decimals))
 
 
 def free_parameters(
@@ -102,21 +88,15 @@ def free_parameters(
 
     out: list[Parameter] = []
 
-    def add(name: str, table: str, index: tuple[int, ...], value: float, half: float | None = None) -> None:
-        h = _half(dec(name)) if half is None else half
-        lo, hi = _box(value, h)
-        out.append(Parameter(name, table, index, value, lo, hi))
+    def add(name: str, table: str, index: tuple[int, ...], value: float, places: int | None = None, hi: float = 1.0) -> None:
+        out.append(Parameter(name, table, index, value, *_box(value, dec(name) if places is None else places, hi)))
 
     tl, cl = model.trust_levels, model.complexities
     add(f"P(T1={tl[1]})", "initial", (1,), float(model.initial[1]))
     for c, cn in enumerate(cl):
         for t, tn in enumerate(tl):
-            add(
-                f"P(rely | T={tn}, C={cn}, autonomous)",
-                "emission",
-                (c, AUTONOMOUS, t, RELY),
-                float(model.emission[c, AUTONOMOUS, t, RELY]),
-            )
+            at = (c, AUTONOMOUS, t, RELY)
+            add(f"P(rely | T={tn}, C={cn}, autonomous)", "emission", at, float(model.emission[at]))
     experience_names = ("faulty", "reliable")
     for c, cn in enumerate(cl):
         for a, an in ((AUTONOMOUS, "autonomous"), (ASK, "ask")):
@@ -129,9 +109,7 @@ def free_parameters(
     if include_task:
         for c, cn in enumerate(task.complexities):
             add(f"p_suc(C={cn})", "success", (c,), float(task.success[c]))
-        g = float(task.discount)
-        lo, hi = _box(g, _half(discount_decimals), 0.0, 1.0 - 1e-9)
-        out.append(Parameter("discount", "discount", (), g, lo, hi))
+        add("discount", "discount", (), float(task.discount), discount_decimals, 1.0 - 1e-9)
     return out
 
 

@@ -1,43 +1,24 @@
-"""The policy for a supervisor of unknown type, and the ``types`` solver that uses the types.
+"""The policy for a supervisor of unknown type, and the ``types`` solver that uses the types
+(docs/solvers.md, ``types``).
 
 ``solve_type_aware(mixture, task)`` builds the POMDP over (type, trust)
-(:func:`trustseek.pomdp.supervisor_types.type_aware_problem`) and solves it with a registered solver
-(:mod:`.registry`), like any other problem; an alpha-vector result comes back as a
-:class:`~trustseek.policies.type_aware.TypeAwarePolicy`, which keeps the mixture.
+(:func:`trustseek.pomdp.supervisor_types.type_aware_problem`) and solves it with a registered
+solver; an alpha-vector result comes back as a
+:class:`~trustseek.policies.alpha_vector.TypeAwarePolicy`, which keeps the mixture.  A person's
+own policy is the same solve from their type belief (``type_belief``).
 
-A person's own policy is the same solve from their type belief: ``type_belief`` (e.g. the
-posterior of :func:`trustseek.pomdp.supervisor_types.type_belief_from_log` over their earlier sessions)
-replaces the mixture's weights as the initial belief.
+:class:`TypeAwareSolver` is the point solver with two changes, both drawn from the closed blocks
+of hidden states (the types, between which there is no transition) found in the kernel:
 
-The ``types`` solver (:class:`TypeAwareSolver`): point-based bounds that use the supervisor
-types of a product problem.
+* **upper bound**: the Freudenthal grid's Bellman fixed point with each successor valued at
+  min(interpolation, base bound); the base bound (:class:`TypeBound`) is the smallest of the
+  fast informed bound, the type revealed now, Σ_m w_m V̄_m(p_m) (V̄_m each two-state type's
+  certified ``alpha`` value, tabulated), and the type revealed after one trial.  At b0 the bound
+  looks a few trials ahead (:meth:`TypeAwareSolver.lookahead_upper`);
+* **lower bound**: seeded with each type's optimal policy as a controller evaluated on the whole
+  product.
 
-The (type, trust) product of a type mixture (:mod:`trustseek.pomdp.supervisor_types`) is an ordinary
-POMDP whose hidden states fall into closed blocks: the types, between which there is no
-transition.  This solver finds the blocks in the kernel (so any problem with that structure
-benefits, whatever its level names) and uses them on both sides:
-
-* **upper bound.**  Revealing the type can only help: V(b) <= Σ_m w_m V_m(p_m), w_m the mass of
-  block m, p_m the belief within it, V_m the block's own optimal value.  For blocks of two
-  states V_m is a function of one number, solved by the certified ``alpha`` solver (gap 1e-6,
-  uniform) and tabulated on a fine grid with its certified gap added (linear interpolation of a
-  convex function's upper values stays above it).  Revealing the type after one trial instead
-  gives Σ_c P(c) max_a Σ_m w_m Q̄_m(c, a, p_m), tighter; the fast informed bound is the third.
-  Their minimum, the *base bound*, caps the Freudenthal grid's Bellman fixed point (Lovejoy's
-  bound, as the point solver computes it): each successor is valued at min(interpolation,
-  base), and the operator with that cap is still monotone, a γ-contraction and above the
-  optimal value, so its fixed point is an upper bound (raised by its residual against rounding).
-* **lower bound.**  Each type's optimal policy, as a controller (one node per belief of a
-  fine lattice: a point backup of the type's alpha vectors, the node best at each next belief),
-  evaluated exactly on the whole product: where the type is nearly known the lower bound is
-  then nearly that type's value.  Point-based policy iteration (the point solver's) builds on
-  these and on the memoryless controllers.
-
-The upper bound reported at b0 looks a few trials ahead (:meth:`TypeAwareSolver.lookahead_upper`).
-The grid resolution is doubled until U(b0) - L(b0) <= ``tol`` or the time limit, as in the
-point solver.  A problem without two-state blocks (one type with K > 2 levels, a flat POMDP)
-is solved with the fast informed bound as the only cap: the point solver plus that cap.
-The bounds rest on the convexity of the Bayes-filter value.
+A problem without two-state blocks gets the fast informed bound as the only cap.
 """
 
 from __future__ import annotations
@@ -192,14 +173,9 @@ class TypeAwareSolver(PointSolver):
     name = "types"
 
     instead: ClassVar[dict[str, str]] = bayes_only("types")
+    discounted = True
 
-    def unsupported(self, problem: Any) -> list[str]:
-        reasons = super().unsupported(problem)
-        if not reasons and not problem.discount < 1.0:
-            reasons.append(f"the types solver needs a discount below 1, got {problem.discount}: use the grid solver")
-        return reasons
-
-    @one_blas_thread
+    @one_blas_thread()
     def solve_bounds(self, problem: AssistancePOMDP | FlatPOMDP) -> PointSolution:
         self.check(problem)
         t0 = time.perf_counter()
@@ -208,7 +184,7 @@ class TypeAwareSolver(PointSolver):
         self.setup_seconds = time.perf_counter() - t0
         return self._bounds(model, t0)
 
-    @one_blas_thread
+    @one_blas_thread()
     def solve(self, problem: AssistancePOMDP | FlatPOMDP) -> Policy:
         """The point solver's policy of the lower bound's vectors; ``info`` also says how many
         closed blocks (types) the upper bound used and the seconds spent on them."""
@@ -221,7 +197,7 @@ class TypeAwareSolver(PointSolver):
     def upper_at(self, B: np.ndarray) -> np.ndarray:
         B = np.atleast_2d(np.asarray(B, dtype=float))
         out = self.bound(B)
-        if getattr(self, "u", None) is not None and len(self.u):
+        if len(getattr(self, "vertex_values", ())):
             out = np.minimum(out, super().upper_at(B))
         return out
 
@@ -304,7 +280,7 @@ class TypeAwareSolver(PointSolver):
     def _start(self, model: BranchModel, b0: np.ndarray, reach: np.ndarray) -> np.ndarray:
         """The memoryless controllers and each type's own controller, keeping the vectors best at
         some belief reachable from b0 or at a corner."""
-        self.u = np.zeros(0)  # no grid bound yet: upper_at is the types' bound alone
+        self.vertex_values = np.zeros(0)  # no grid bound yet: upper_at is the types' bound alone
         G = np.vstack([numerics.memoryless_controllers(model), *self.bound.controllers])
         K = model.n_hidden
         return numerics.best_at(G, np.vstack([reach, np.eye(K)])) if len(G) > 1 else G

@@ -40,34 +40,25 @@ def fast_informed_bound(model: BranchModel, max_rounds: int = 200) -> np.ndarray
     if not g < 1.0:
         raise SolverError([f"the reachable solver needs a discount below 1, got {g}"])
 
-    def choices_of(beta: np.ndarray) -> np.ndarray:
-        # proj[c, a, br, t, c', a'] = Σ_u M[c, a, br, t, u] beta[c', a', u]
-        proj = np.einsum("cabtu,dfu->cabtdf", M, beta)
-        return proj.argmax(axis=-1)  # [c, a, br, t, c']
+    def project(beta: np.ndarray) -> np.ndarray:  # [c, a, br, t, c', a'] = Σ_u M[c, a, br, t, u] beta[c', a', u]
+        return np.einsum("cabtu,dfu->cabtdf", M, beta)
 
-    def apply(beta: np.ndarray) -> np.ndarray:
-        proj = np.einsum("cabtu,dfu->cabtdf", M, beta)
-        return R + g * np.einsum("cabtd,d->cat", proj.max(axis=-1), pc)
-
-    ch = np.zeros((N, A, Br, K, N), dtype=np.int64)
+    ch = np.zeros((N, A, Br, K, N), dtype=np.int64)  # the choice of a' per (c, a, br, t, c')
     beta = np.zeros((N, A, K))
+    w = g * np.einsum("cabtu,d->cabtdu", M, pc)  # [c, a, br, t, c', u]
     for _ in range(max_rounds):
         # the linear system of fixed choices: beta = R + P beta
-        P = np.zeros((N, A, K, N, A, K))
-        w = g * np.einsum("cabtu,d->cabtdu", M, pc)  # [c, a, br, t, c', u]
-        onehot = ch[..., None] == np.arange(A)  # [c, a, br, t, c', a']
-        P += np.einsum("cabtdu,cabtdf->catdfu", w, onehot)
+        P = np.einsum("cabtdu,cabtdf->catdfu", w, ch[..., None] == np.arange(A))
         beta_new = np.linalg.solve(np.eye(n) - P.reshape(n, n), R.reshape(-1)).reshape(N, A, K)
-        new_ch = choices_of(beta_new)
         # keep a choice unless another is better by more than rounding
-        proj = np.einsum("cabtu,dfu->cabtdf", M, beta_new)
+        proj = project(beta_new)
         cur = np.take_along_axis(proj, ch[..., None], axis=-1)[..., 0]
         better = proj.max(axis=-1) > cur + 1e-12 * (1 + np.abs(cur))
         beta = beta_new
         if not np.any(better):
             break
-        ch = np.where(better, new_ch, ch)
-    residual = float(np.max(apply(beta) - beta))
+        ch = np.where(better, proj.argmax(axis=-1), ch)
+    residual = float(np.max(R + g * np.einsum("cabtd,d->cat", project(beta).max(axis=-1), pc) - beta))
     return beta + max(0.0, residual) / (1.0 - g)
 
 
