@@ -40,12 +40,12 @@ from trustseek.policies import (
 )
 from trustseek.policies.base import ask_bounds
 from trustseek.policies.scheduling import ScheduleRunner
-from trustseek.pomdp.belief import UNOBSERVED, make_updater
+from trustseek.pomdp.belief import make_updater
 from trustseek.pomdp.problem import AssistancePOMDP
 from trustseek.pomdp.scheduling import SchedulingProblem
 from trustseek.solvers.registry import make_solver
 from trustseek.solvers.type_aware import solve_type_aware
-from trustseek.vocab import PAPER_ASK_PROBABILITIES
+from trustseek.vocab import PAPER_ASK_PROBABILITIES, UNOBSERVED
 
 #: (complexity, human action or None when unobserved, experience) of the fixed run of trials;
 #: three of each complexity, as many as the schedule instance has items

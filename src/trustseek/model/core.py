@@ -9,14 +9,7 @@ keeps those inputs by name, each with its levels in their declared order (a gene
 ``general``); planning (solve, simulate, the policies) refuses it, decoding, prediction and
 validation take either.
 
-Vocabulary (fixed everywhere in trustseek):
-
-* robot action ``a``: ``autonomous`` / ``ask``            (index 0 / 1)
-* human action ``o``: ``intervene`` / ``rely``            (index 0 / 1)
-* experience ``E``:   ``faulty`` / ``reliable``           (index 0 / 1)
-* trust ``T`` and complexity ``C`` have user-chosen, ordered names; the paper
-  uses ``low`` / ``high`` for both.  Trust levels are ordered from lowest to
-  highest, so for two levels the belief is P(trust = high) = b[-1].
+The vocabulary and indices are :mod:`trustseek.vocab`'s.
 
 Tables (``numpy.float64``), one axis per input in the order the table lists them, then the
 level, then the output category (or the next level)::

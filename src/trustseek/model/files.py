@@ -16,18 +16,6 @@ from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from .jsonfile import ModelError, check_names, get_key, nested, read_row, read_table, unknown_keys
 from .rating import RatingTable
 
-__all__ = [
-    "EMISSION_INPUTS",
-    "IOHMM_FORMAT",
-    "MODEL_FORMAT",
-    "PLANNING_INPUTS",
-    "is_iohmm_file",
-    "model_fields",
-    "model_to_dict",
-    "planning_refusal",
-    "trust_fields",
-]
-
 MODEL_FORMAT = "trustseek.trust-model/1"
 IOHMM_FORMAT = "trustseek.iohmm/1"  # a general model with named inputs
 PLANNING_INPUTS = ("complexity", "robot_action", "experience")  # the inputs of a trust model, which planning needs

@@ -16,29 +16,6 @@ import numpy as np
 
 from ..errors import TrustseekError
 
-__all__ = [
-    "ATOL",
-    "JsonFile",
-    "ModelError",
-    "UnknownComplexityError",
-    "build",
-    "check_names",
-    "check_row_array",
-    "fmt_number",
-    "freeze_arrays",
-    "get_key",
-    "json_safe",
-    "load_json",
-    "nested",
-    "raise_problems",
-    "read_row",
-    "read_table",
-    "read_text",
-    "same_fields",
-    "special_file",
-    "unknown_keys",
-]
-
 ATOL = 1e-9  # tolerance for a probability row to sum to one
 T = TypeVar("T")
 

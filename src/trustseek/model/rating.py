@@ -10,8 +10,6 @@ import numpy as np
 
 from .jsonfile import check_names, check_row_array, freeze_arrays, get_key, nested, read_row, same_fields, unknown_keys
 
-__all__ = ["RatingTable"]
-
 
 @dataclass(frozen=True, eq=False)
 class RatingTable:

@@ -34,8 +34,6 @@ from .jsonfile import (
     unknown_keys,
 )
 
-__all__ = ["TASK_FORMAT", "Rewards", "Task"]
-
 TASK_FORMAT = "trustseek.task/1"
 
 
@@ -138,21 +136,11 @@ class Task(JsonFile):
 
     def experience_table(self) -> np.ndarray:
         """P(E' | o, C, a) as an array indexed [c, a, o, e]."""
-        out = np.zeros((self.n_complexity, 2, 2, 2))
-        for c in range(self.n_complexity):
-            for a in range(2):
-                for o in range(2):
-                    out[c, a, o] = self.p_experience(c, a, o)
-        return out
+        return np.array([[[self.p_experience(c, a, o) for o in range(2)] for a in range(2)] for c in range(self.n_complexity)])
 
     def reward_table(self) -> np.ndarray:
         """Reward of eq. (1) as an array indexed [a, o, e]."""
-        out = np.zeros((2, 2, 2))
-        for a in range(2):
-            for o in range(2):
-                for e in range(2):
-                    out[a, o, e] = self.rewards.of(a, o, e)
-        return out
+        return np.array([[[self.rewards.of(a, o, e) for e in range(2)] for o in range(2)] for a in range(2)], dtype=float)
 
     def check_compatible(self, model: TrustModel) -> None:
         """Refuse a model whose complexities differ, or with never-estimated rows this task can reach."""

@@ -26,11 +26,11 @@ from typing import Any
 import numpy as np
 
 from ..model.core import ACTIONS, ASK, AUTONOMOUS, TrustModel
-from ..model.jsonfile import ModelError
+from ..model.jsonfile import ModelError, build
 from ..model.mixture import TypeMixture
 from ..pomdp.belief import to_vector
 from ..pomdp.supervisor_types import product_model, trust_marginal, type_marginal, warm_start_belief
-from .base import PolicyBase, PolicyError, planned_for
+from .base import Policy, PolicyError, planned_for
 from .envelope import envelope
 from .regions import Interval, ask_intervals
 
@@ -51,7 +51,7 @@ def _vector_sets(sets: Sequence[Any], K: int, problems: list[str]) -> list[np.nd
     return [_vectors(v, K, "every set of q_vectors", problems) for v in sets]
 
 
-class AlphaVectorPolicy(PolicyBase):
+class AlphaVectorPolicy(Policy):
     """Greedy in Q(b, C, a) = max over the Q-vectors of (C, a) of α·b; any number of trust levels.
 
     ``q_vectors[c][a]`` is an array (n, K) of vectors, each the value of "take a now, then
@@ -154,13 +154,10 @@ class AlphaVectorPolicy(PolicyBase):
             raise ModelError(
                 [f"q_vectors must map each complexity {cx} and action {list(ACTIONS)} to a list of vectors"], source
             ) from None
-        try:
-            return cls(q, d.get("value_vectors", []), model, cx, bu, d.get("info"))
-        except ModelError as exc:
-            raise ModelError(exc.problems, source) from None
+        return build([], source, lambda: cls(q, d.get("value_vectors", []), model, cx, bu, d.get("info")))
 
 
-class FlatAlphaPolicy(PolicyBase):
+class FlatAlphaPolicy(Policy):
     """Greedy in alpha vectors over the states of a flat POMDP (the point solver's policy for a
     standard ``.pomdp`` file): action a(b) = argmax_a max over the Q-vectors of a of α·b.
 
@@ -230,10 +227,7 @@ class FlatAlphaPolicy(PolicyBase):
             q = [np.array(qv[a], dtype=float) for a in names]
         except (KeyError, TypeError, ValueError):
             raise ModelError([f"q_vectors must map each action {names} to a list of vectors"], source) from None
-        try:
-            return cls(q, d.get("value_vectors", []), states, names, d.get("info"))
-        except ModelError as exc:
-            raise ModelError(exc.problems, source) from None
+        return build([], source, lambda: cls(q, d.get("value_vectors", []), states, names, d.get("info")))
 
 
 class TypeAwarePolicy(AlphaVectorPolicy):
@@ -290,7 +284,4 @@ class TypeAwarePolicy(AlphaVectorPolicy):
     def from_dict(cls, d: Mapping[str, Any], source: str | None = None) -> TypeAwarePolicy:
         mixture = TypeMixture.from_dict(d.get("mixture"), source)
         plain = AlphaVectorPolicy.from_dict({**d, "model": product_model(mixture).to_dict()}, source)
-        try:
-            return cls.from_alpha(mixture, plain)
-        except ModelError as exc:
-            raise ModelError(exc.problems, source) from None
+        return build([], source, lambda: cls.from_alpha(mixture, plain))

@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
-from ..pomdp.belief import UNOBSERVED, make_updater
+from ..pomdp.belief import make_updater
+from ..vocab import UNOBSERVED
 from .base import Policy, PolicyError
 
 

@@ -25,7 +25,7 @@ from ..model.core import ACTIONS, ASK, AUTONOMOUS, TrustModel
 from ..model.jsonfile import ModelError
 from ..pomdp.belief import to_vector
 from ..pomdp.scheduling import Counts, State, parse_state_key, state_key
-from .base import PolicyBase, PolicyError, planned_for
+from .base import Policy, PolicyError, planned_for
 from .regions import Interval, ask_intervals
 from .runner import PolicyRunner
 
@@ -50,7 +50,7 @@ class PieceQ:
         return out if dtype is None else out.astype(dtype)
 
 
-class SchedulePolicy(PolicyBase):
+class SchedulePolicy(Policy):
     """Greedy in Q(x, state, k, a) over the visible complexities k and the actions a (ties go to
     the lower complexity index, then to ``autonomous``)."""
 

@@ -28,28 +28,12 @@ Three views of the same filter, for three kinds of callers:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol
-
 import numpy as np
 
 from ..errors import TrustseekError
 from ..model.core import TrustModel
-from ..vocab import BELIEF_UPDATES, UNOBSERVED, check_belief_update
-
-__all__ = [
-    "BELIEF_UPDATES",
-    "UNOBSERVED",
-    "BayesUpdate",
-    "BeliefError",
-    "BeliefUpdater",
-    "BranchModel",
-    "Branches",
-    "PaperUpdate",
-    "ScalarBelief",
-    "make_updater",
-    "to_vector",
-]
-
+from ..vocab import BELIEF_UPDATES as BELIEF_UPDATES  # the package exports it from here
+from ..vocab import check_belief_update
 
 # --------------------------------------------------------------------------- observed trials
 
@@ -62,18 +46,9 @@ class BeliefError(TrustseekError, ValueError):
     """A belief that does not fit the model (e.g. one number for more than two trust levels)."""
 
 
-class BeliefUpdater(Protocol):
-    """Follows the belief through observed trials."""
-
-    name: str
-    model: TrustModel
-
-    def initial(self) -> np.ndarray: ...
-
-    def update(self, b: np.ndarray, c, a, o, e) -> np.ndarray: ...
-
-
 class _Updater:
+    """Follows the belief through observed trials: ``initial()``, ``update(b, c, a, o, e)``."""
+
     name = ""
 
     def __init__(self, model: TrustModel):

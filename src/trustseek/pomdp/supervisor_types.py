@@ -40,19 +40,6 @@ from .problem import AssistancePOMDP
 if TYPE_CHECKING:  # the trial log is a data frame; planning without one loads no pandas
     import pandas as pd
 
-__all__ = [
-    "LEVEL_SEPARATOR",
-    "TypeBeliefError",
-    "level_name",
-    "product_model",
-    "split_levels",
-    "trust_given_type",
-    "trust_marginal",
-    "type_aware_problem",
-    "type_belief_from_log",
-    "type_marginal",
-    "warm_start_belief",
-]
 
 #: joins a type's name and a trust level's name in the product model's level names
 LEVEL_SEPARATOR = "/"
