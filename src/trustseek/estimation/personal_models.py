@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..model.core import TrustModel, planning_refusal
+from ..model.core import TrustModel
+from ..model.files import planning_refusal
 from ..model.jsonfile import json_safe
 from .spec import FitError
 

@@ -37,13 +37,10 @@ from typing import Any
 
 import numpy as np
 
-from ..vocab import ACTIONS, ASK, AUTONOMOUS, EXPERIENCES, FAULTY, HUMAN_ACTIONS, INTERVENE, RELIABLE, RELY
+from ..vocab import INTERVENE
 from .files import (
-    IOHMM_FORMAT,
-    MODEL_FORMAT,
     PLANNING_INPUTS,
     SYMBOLS,
-    is_iohmm_file,
     model_fields,
     model_to_dict,
     planning_refusal,
@@ -61,27 +58,6 @@ from .jsonfile import (
     raise_problems,
 )
 from .rating import RatingTable
-
-__all__ = [  # the vocabulary is re-exported for convenience
-    "ACTIONS",
-    "ASK",
-    "AUTONOMOUS",
-    "EXPERIENCES",
-    "FAULTY",
-    "HUMAN_ACTIONS",
-    "INTERVENE",
-    "IOHMM_FORMAT",
-    "MODEL_FORMAT",
-    "PLANNING_INPUTS",
-    "RELIABLE",
-    "RELY",
-    "RatingTable",
-    "TrustModel",
-    "is_iohmm_file",
-    "load_any_model",
-    "planning_refusal",
-    "trust_model",
-]
 
 
 @dataclass(frozen=True, eq=False)

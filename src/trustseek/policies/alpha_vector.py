@@ -10,12 +10,8 @@ unknown: its model is the product of a :class:`~trustseek.model.mixture.TypeMixt
 (:func:`trustseek.pomdp.supervisor_types.product_model`), its belief is over the M·K pairs
 (type, trust), so ``PolicyRunner``, the simulator and the server run it like any alpha-vector
 policy; it keeps the mixture, so the type belief and the trust belief can be read off its
-belief.  Its JSON (kind ``type-aware``) holds the alpha-vector fields without ``model``, and
-the mixture::
-
-    {"format": "trustseek.policy/1", "kind": "type-aware", "complexities": [...],
-     "belief_update": "bayes", "mixture": {<trustseek.mixture/1>},
-     "q_vectors": {C: {a: [[... M·K numbers ...], ...]}}, "value_vectors": [...], "info": {...}}
+belief.  Its JSON (kind ``type-aware``, docs/types-planning.md) holds the alpha-vector fields
+without ``model``, and the mixture.
 """
 
 from __future__ import annotations
@@ -25,11 +21,12 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import ACTIONS, ASK, AUTONOMOUS, TrustModel
+from ..model.core import TrustModel
 from ..model.jsonfile import ModelError, build
 from ..model.mixture import TypeMixture
 from ..pomdp.belief import to_vector
 from ..pomdp.supervisor_types import product_model, trust_marginal, type_marginal, warm_start_belief
+from ..vocab import ACTIONS, ASK, AUTONOMOUS
 from .base import Policy, PolicyError, planned_for
 from .envelope import envelope
 from .regions import Interval, ask_intervals

@@ -12,8 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import ACTIONS, ASK, AUTONOMOUS, TrustModel
+from ..model.core import TrustModel
 from ..model.jsonfile import ModelError
+from ..vocab import ACTIONS, ASK, AUTONOMOUS
 from .base import Policy, PolicyError, planned_for
 from .regions import Interval, ask_intervals
 

@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
+from ..model.core import TrustModel
 from ..pomdp.belief import make_updater
-from ..vocab import UNOBSERVED
+from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, UNOBSERVED
 from .base import Policy, PolicyError
 
 

@@ -21,10 +21,11 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import ACTIONS, ASK, AUTONOMOUS, TrustModel
+from ..model.core import TrustModel
 from ..model.jsonfile import ModelError
 from ..pomdp.belief import to_vector
 from ..pomdp.scheduling import Counts, State, parse_state_key, state_key
+from ..vocab import ACTIONS, ASK, AUTONOMOUS
 from .base import Policy, PolicyError, planned_for
 from .regions import Interval, ask_intervals
 from .runner import PolicyRunner

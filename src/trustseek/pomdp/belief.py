@@ -28,6 +28,7 @@ Three views of the same filter, for three kinds of callers:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+
 import numpy as np
 
 from ..errors import TrustseekError

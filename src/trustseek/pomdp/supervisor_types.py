@@ -30,10 +30,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import TrustseekError
-from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel, trust_model
+from ..model.core import TrustModel, trust_model
 from ..model.mixture import TypeMixture
 from ..model.task import Task
-from ..vocab import UNOBSERVED
+from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, UNOBSERVED
 from .belief import BayesUpdate
 from .problem import AssistancePOMDP
 
