@@ -31,6 +31,8 @@ from .base import Policy, PolicyError, planned_for
 from .envelope import envelope
 from .regions import Interval, ask_intervals
 
+Q_SETS = "every set of q_vectors"
+
 
 def _vectors(value: Any, K: int, what: str, problems: list[str]) -> np.ndarray:
     """``value`` as a non-empty (n, K) array of finite numbers (a problem naming ``what`` noted, not raised)."""
@@ -41,11 +43,6 @@ def _vectors(value: Any, K: int, what: str, problems: list[str]) -> np.ndarray:
     if v.ndim != 2 or v.shape[1] != K or len(v) == 0 or not np.all(np.isfinite(v)):
         problems.append(f"{what} must be a non-empty (n, {K}) array of finite numbers")
     return v
-
-
-def _vector_sets(sets: Sequence[Any], K: int, problems: list[str]) -> list[np.ndarray]:
-    """Each set of Q-vectors as a non-empty (n, K) array of finite numbers (problems noted, not raised)."""
-    return [_vectors(v, K, "every set of q_vectors", problems) for v in sets]
 
 
 class AlphaVectorPolicy(Policy):
@@ -75,7 +72,7 @@ class AlphaVectorPolicy(Policy):
         problems: list[str] = []
         if len(q_vectors) != len(self.complexities) or any(len(p) != 2 for p in q_vectors):
             problems.append(f"q_vectors needs one entry per complexity {list(self.complexities)} and action {list(ACTIONS)}")
-        self.q_vectors = [_vector_sets(per_a, K, problems) for per_a in q_vectors]
+        self.q_vectors = [[_vectors(v, K, Q_SETS, problems) for v in per_a] for per_a in q_vectors]
         self.value_vectors = _vectors(value_vectors, K, "value_vectors", problems)
         if problems:
             raise ModelError(list(dict.fromkeys(problems)))
@@ -181,7 +178,7 @@ class FlatAlphaPolicy(Policy):
         problems: list[str] = []
         if len(q_vectors) != len(self.action_names):
             problems.append(f"q_vectors needs one set per action {list(self.action_names)}")
-        self.q_vectors = _vector_sets(q_vectors, len(self.states), problems)
+        self.q_vectors = [_vectors(v, len(self.states), Q_SETS, problems) for v in q_vectors]
         self.value_vectors = _vectors(value_vectors, len(self.states), "value_vectors", problems)
         if problems:
             raise ModelError(list(dict.fromkeys(problems)))

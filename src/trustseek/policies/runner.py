@@ -60,8 +60,7 @@ class PolicyRunner:
 
     def action_at(self, belief: np.ndarray | None, complexity: int | str, rng: np.random.Generator | None = None) -> str:
         """The robot action the policy takes at ``belief`` (drawing from ``rng``, else the runner's own)."""
-        c = self.policy.complexity_index(complexity)
-        return ACTIONS[self.policy.action(belief, c, self.rng if rng is None else rng)]
+        return ACTIONS[self.policy.action(belief, complexity, self.rng if rng is None else rng)]
 
     def belief_after(
         self, belief: np.ndarray | None, complexity: int | str, action: str, human_action: str | None, experience: str

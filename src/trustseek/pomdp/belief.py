@@ -13,16 +13,10 @@ levels, ``b[-1]`` is P(trust = high)).  Two updates are offered:
   was not recorded (``o = -1``) or that the model deems impossible is not
   conditioned on.
 
-Three views of the same filter, for three kinds of callers:
-
-* :class:`BayesUpdate` / :class:`PaperUpdate` follow one *observed* trial (c, a, o, e),
-  vectorized over beliefs of shape (..., K), any number of trust levels (``PolicyRunner``,
-  the server, the simulator for K > 2);
-* :class:`ScalarBelief` is the same update for two trust levels on the number
-  x = P(trust = high), with the tables flattened for gathers (the simulator's fast path);
-* :class:`Branches` enumerates *every* successor of a belief after (C, a) with its
-  probability (what the belief-MDP solvers expand), and :class:`BranchModel` is a POMDP in
-  that branch form (contexts, rewards, Bayes branches, discount, initial belief).
+Three views of the same filter: :class:`BayesUpdate` / :class:`PaperUpdate` follow one observed
+trial, any number of trust levels; :class:`ScalarBelief` on x = P(trust = high) (the simulator's
+fast path); :class:`Branches` enumerates every successor of a belief (what the belief-MDP
+solvers expand), and :class:`BranchModel` is a POMDP in that branch form.
 """
 
 from __future__ import annotations
@@ -213,12 +207,8 @@ class Branches:
 
 
 # --------------------------------------------------------------------------- the branch form
-# The assistance POMDP has a *mixed* observability: the complexity (a context, drawn i.i.d. from
-# P(C) and seen before acting) is observed, trust (the hidden part) is not, and after each trial
-# a branch (o, E') moves the belief.  A flat POMDP (e.g. a ``.pomdp`` file) is the special case of
-# one context whose branches are the observations.  Both are written as context_probs[c],
-# rewards[c, a, t], Bayes branches (kernels[c, a, branch, t, t2]), discount and initial[t]: what
-# the point-based solvers and controller evaluation work on.
+# The complexity (a context, i.i.d., seen before acting) is observed, trust is not; a flat POMDP
+# (a ``.pomdp`` file) is the case of one context whose branches are the observations.
 
 
 @dataclass(frozen=True, eq=False)
