@@ -1,7 +1,7 @@
 """The policy JSON: one loader per ``kind``, ``policy_from_dict`` and ``load_policy``.
 
 Every policy file has ``format: trustseek.policy/1``, a ``kind`` and its ``complexities``;
-the rest depends on the kind.  Files written by earlier versions load unchanged.
+the rest depends on the kind.
 """
 
 from __future__ import annotations

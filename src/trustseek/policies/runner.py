@@ -55,9 +55,6 @@ class PolicyRunner:
             self.belief = after
         return after
 
-    # the step itself, at any belief: ``decide`` and ``observe`` apply it to the live belief, and
-    # a service that keeps many beliefs (the server's decision API) applies it to each of them
-
     def action_at(self, belief: np.ndarray | None, complexity: int | str, rng: np.random.Generator | None = None) -> str:
         """The robot action the policy takes at ``belief`` (drawing from ``rng``, else the runner's own)."""
         return ACTIONS[self.policy.action(belief, complexity, self.rng if rng is None else rng)]

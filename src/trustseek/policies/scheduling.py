@@ -314,9 +314,7 @@ class ScheduleRunner(PolicyRunner):
 
     def decide(self, complexity: int | str) -> str:
         assert self.remaining is not None
-        bound = self.schedule_policy.at(self.remaining, self.visible)
-        c = bound.complexity_index(complexity)
-        return ACTIONS[bound.action(self.belief, c, self.rng)]
+        return ACTIONS[self.schedule_policy.at(self.remaining, self.visible).action(self.belief, complexity, self.rng)]
 
     def observe(self, complexity: int | str, action: str, human_action: str | None, experience: str) -> np.ndarray | None:
         c = self.policy.complexity_index(complexity)
