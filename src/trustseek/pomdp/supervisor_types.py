@@ -134,23 +134,15 @@ def warm_start_belief(mixture: TypeMixture, type_belief: np.ndarray | Sequence[f
 
 
 def _codes(values: pd.Series, names: Sequence[str], column: str, missing_ok: bool = False) -> np.ndarray:
-    text = values.astype("object")
+    """The index in ``names`` of each value (:data:`UNOBSERVED` where missing, if allowed)."""
     missing = values.isna().to_numpy()
-    out = np.full(len(values), UNOBSERVED, dtype=np.int64)
-    bad: list[str] = []
-    for i, v in enumerate(text):
-        if missing[i]:
-            if not missing_ok:
-                bad.append("missing")
-            continue
-        s = str(v)
-        if s in names:
-            out[i] = names.index(s)
-        else:
-            bad.append(repr(s))
+    text = [str(v) for v in values.astype("object")]
+    bad = {repr(s) for s, m in zip(text, missing, strict=True) if not m and s not in names}
+    if not missing_ok and missing.any():
+        bad.add("missing")
     if bad:
-        raise TypeBeliefError([f"column {column!r}: {sorted(set(bad))} not among {list(names)}"])
-    return out
+        raise TypeBeliefError([f"column {column!r}: {sorted(bad)} not among {list(names)}"])
+    return np.array([UNOBSERVED if m else names.index(s) for s, m in zip(text, missing, strict=True)], dtype=np.int64)
 
 
 def type_belief_from_log(
