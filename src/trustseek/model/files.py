@@ -228,10 +228,8 @@ def _input_list(raw: Any, what: str, inputs: Mapping[str, Any], problems: list[s
     if not isinstance(raw, list) or not all(isinstance(c, str) for c in raw):
         problems.append(f"{what} must list input names, got {raw!r}")
         return []
-    bad = [c for c in raw if c not in inputs]
-    for c in bad:
-        problems.append(f"{what}: {c!r} is not one of the inputs {list(inputs)}")
-    return [c for c in raw if c not in bad]
+    problems += [f"{what}: {c!r} is not one of the inputs {list(inputs)}" for c in raw if c not in inputs]
+    return [c for c in raw if c in inputs]
 
 
 def _row_dict(table: str, idx: tuple[int, ...], C: Sequence[str]) -> dict[str, str]:
