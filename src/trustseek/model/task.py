@@ -218,18 +218,15 @@ class Task(JsonFile):
                     unknown_keys(spec, ["probability", "success", "ask_experience"], lab, problems)
                     for key, store in (("probability", probs), ("success", succ)):
                         v = get_key(spec, key, f"{lab}.{key}", problems)
-                        if v is None:
-                            continue
-                        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0.0 <= float(v) <= 1.0):
+                        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= v <= 1.0):
                             problems.append(f"{lab}.{key} = {v!r} must be a probability in [0, 1]")
-                            continue
-                        store.append(float(v))
+                        elif v is not None:
+                            store.append(float(v))
                     ae = get_key(spec, "ask_experience", f"{lab}.ask_experience", problems)
-                    if ae is not None:
-                        if ae not in EXPERIENCES:
-                            problems.append(f"{lab}.ask_experience = {ae!r} must be one of {list(EXPERIENCES)}")
-                        else:
-                            askx.append(EXPERIENCES.index(ae))
+                    if ae is not None and ae not in EXPERIENCES:
+                        problems.append(f"{lab}.ask_experience = {ae!r} must be one of {list(EXPERIENCES)}")
+                    elif ae is not None:
+                        askx.append(EXPERIENCES.index(ae))
                 if not problems and abs(sum(probs) - 1.0) > ATOL:
                     problems.append(f"complexity probabilities sum to {fmt_number(sum(probs))}")
         rw = d.get("rewards", {})
