@@ -29,9 +29,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 
 from trustseek import PolicyRunner, paper_model, paper_task, randomized, solve
-from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from trustseek.policies import ask_bounds
 from trustseek.simulation import simulate
+from trustseek.vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 
 COUNTS = (41, 30)  # Section V: 71 trials, 41 low and 30 high
 

@@ -3,7 +3,7 @@
 # the Python API's packages, as the package attributes of those names
 from . import errors, model, policies, pomdp, solvers, version, vocab
 from .errors import TrustseekError
-from .model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel, trust_model
+from .model.core import TrustModel, trust_model
 from .model.jsonfile import ModelError
 from .model.presets import load_model, load_task, paper_model, paper_task
 from .model.task import Rewards, Task
@@ -21,6 +21,7 @@ from .pomdp.belief import BayesUpdate, PaperUpdate, make_updater
 from .pomdp.problem import AssistancePOMDP
 from .solvers import GridSolver, Solver, make_solver, solve, solver_names, trust_agnostic
 from .version import __version__ as __version__
+from .vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 
 __all__ = [
     "ACTIONS",

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from trustseek.model.core import RELY
 from trustseek.model.presets import conservative_model, paper_model, paper_task
 from trustseek.plots.model import plot_emissions, plot_transitions
 from trustseek.plots.q import plot_q
+from trustseek.vocab import RELY
 
 
 def bar_heights(ax) -> list[float]:

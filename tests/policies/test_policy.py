@@ -15,9 +15,9 @@ from trustseek import (
     solve,
     trust_agnostic,
 )
-from trustseek.model.core import ASK, AUTONOMOUS
 from trustseek.model.jsonfile import ModelError
 from trustseek.solvers.agnostic import agnostic_from_intervention_rates, trust_agnostic_from_data
+from trustseek.vocab import ASK, AUTONOMOUS
 
 
 @pytest.fixture(scope="module")

@@ -26,7 +26,6 @@ import pytest
 from pomdp_oracles import TIGER
 from trustseek.interop.files import read_pomdp
 from trustseek.model import paper_conservative_mixture, paper_model, paper_task
-from trustseek.model.core import ACTIONS, ASK, EXPERIENCES, HUMAN_ACTIONS
 from trustseek.model.jsonfile import ModelError, json_safe
 from trustseek.policies import (
     POLICY_KINDS,
@@ -40,12 +39,12 @@ from trustseek.policies import (
 )
 from trustseek.policies.base import ask_bounds
 from trustseek.policies.scheduling import ScheduleRunner
-from trustseek.pomdp.belief import UNOBSERVED, make_updater
+from trustseek.pomdp.belief import make_updater
 from trustseek.pomdp.problem import AssistancePOMDP
 from trustseek.pomdp.scheduling import SchedulingProblem
 from trustseek.solvers.registry import make_solver
 from trustseek.solvers.type_aware import solve_type_aware
-from trustseek.vocab import PAPER_ASK_PROBABILITIES
+from trustseek.vocab import ACTIONS, ASK, EXPERIENCES, HUMAN_ACTIONS, PAPER_ASK_PROBABILITIES, UNOBSERVED
 
 #: (complexity, human action or None when unobserved, experience) of the fixed run of trials;
 #: three of each complexity, as many as the schedule instance has items

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from trustseek.model import paper_conservative_mixture, paper_task
-from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from trustseek.policies import PolicyRunner, TypeAwarePolicy
 from trustseek.pomdp.supervisor_types import product_model, type_belief_from_log, warm_start_belief
 from trustseek.simulation import Supervisors, simulate
 from trustseek.solvers.type_aware import solve_type_aware
+from trustseek.vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 
 
 @pytest.fixture(scope="module")

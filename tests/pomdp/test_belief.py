@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from trustseek import BayesUpdate, PaperUpdate, paper_model
-from trustseek.model.core import ASK, AUTONOMOUS, FAULTY, INTERVENE, RELIABLE, RELY
+from trustseek.vocab import ASK, AUTONOMOUS, FAULTY, INTERVENE, RELIABLE, RELY
 
 LOW, HIGH = 0, 1
 

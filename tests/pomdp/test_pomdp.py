@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from trustseek.model.core import ASK, AUTONOMOUS, FAULTY, INTERVENE, RELIABLE, RELY
+from trustseek.vocab import ASK, AUTONOMOUS, FAULTY, INTERVENE, RELIABLE, RELY
 
 LOW, HIGH = 0, 1
 

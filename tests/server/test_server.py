@@ -14,8 +14,8 @@ from sqlalchemy import create_engine, text
 from server_checks import check_concurrent_duplicate_submissions, experimenter_view
 from trustseek import BayesUpdate, paper_model, paper_task, solve
 from trustseek.client import Client, ServerError
-from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from trustseek.server import create_app
+from trustseek.vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 
 TOKEN = "experimenter-secret"
 H = {"Authorization": f"Bearer {TOKEN}"}

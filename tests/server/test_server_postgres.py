@@ -32,9 +32,9 @@ from server_checks import (
 from trustseek import BayesUpdate, paper_model, paper_task, solve
 from trustseek.client import Client, DeploySession
 from trustseek.data.trials import read_trials
-from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from trustseek.server import create_app
 from trustseek.testing.servers import TemporaryPostgres, postgres_binaries
+from trustseek.vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 
 TOKEN = "postgres-experimenter-secret"
 H = {"Authorization": f"Bearer {TOKEN}"}

@@ -16,7 +16,6 @@ from trustseek import (
     solve,
     trust_model,
 )
-from trustseek.model.core import ASK, AUTONOMOUS, INTERVENE, RELIABLE
 from trustseek.policies import TrustAwarePolicy, ask_bounds
 from trustseek.pomdp.belief import ScalarBelief
 from trustseek.simulation import (
@@ -29,6 +28,7 @@ from trustseek.simulation import (
     schedule_iid,
     simulate,
 )
+from trustseek.vocab import ASK, AUTONOMOUS, INTERVENE, RELIABLE
 
 
 def interior_model(seed=3, K=2):

@@ -17,13 +17,13 @@ import pytest
 from trustseek import AssistancePOMDP, PolicyRunner, paper_model, paper_task
 from trustseek.data import example_path
 from trustseek.errors import TrustseekError
-from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
+from trustseek.model.core import TrustModel
 from trustseek.model.jsonfile import json_safe
 from trustseek.model.task import Task
 from trustseek.policies import policy_from_dict
 from trustseek.simulation import simulate
 from trustseek.solvers import SOLVERS, UnsupportedProblem, make_solver, solver_names
-from trustseek.vocab import BELIEF_UPDATES
+from trustseek.vocab import ACTIONS, BELIEF_UPDATES, EXPERIENCES, HUMAN_ACTIONS
 
 PROBLEMS = ("paper", "three-level")
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from trustseek import AssistancePOMDP, paper_model, paper_task
-from trustseek.model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, trust_model
+from trustseek.model.core import trust_model
 from trustseek.model.jsonfile import json_safe
 from trustseek.policies import policy_from_dict
 from trustseek.policies.scheduling import SchedulePolicy, ScheduleRunner
@@ -15,6 +15,7 @@ from trustseek.pomdp.scheduling import SchedulingError, SchedulingProblem
 from trustseek.solvers import UnsupportedProblem, make_solver
 from trustseek.solvers.alpha import finite_horizon_value
 from trustseek.solvers.scheduling import ScheduleSolver
+from trustseek.vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 
 
 def oracle(model, task, counts, window):

@@ -88,7 +88,7 @@ def read_for_types(log: Path, types, reading: LogReading):
 def read_for_model(log: Path, model, reading: LogReading):
     """The log read with the columns a general model's inputs need: the canonical ones it uses,
     and the others declared as the mapping's ``inputs``."""
-    from ..model.core import PLANNING_INPUTS
+    from ..model.files import PLANNING_INPUTS
 
     canonical = tuple(c for c in model.used_inputs if c in PLANNING_INPUTS)
     frame = reading.read(log, canonical)

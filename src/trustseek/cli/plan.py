@@ -251,10 +251,10 @@ def agnostic(
     reading: LogReading = FROM_OPTIONS,
 ) -> None:
     """The optimal trust-agnostic policy (Section VI-A)."""
-    from ..model.core import ACTIONS
     from ..model.presets import load_model, load_task
     from ..pomdp.problem import AssistancePOMDP
     from ..solvers import make_solver, trust_agnostic_from_data
+    from ..vocab import ACTIONS
 
     if data is None and (reading.mapping is not None or reading.column or reading.label or reading.order):
         raise TrustseekError(["--mapping, --column, --label and --order apply to a log: give it with --data"])
@@ -345,7 +345,8 @@ def check(
     files: list[Path] = typer.Argument(..., help="Trust model, task or policy JSON files."),
 ) -> None:
     """Validate model (trust or general), task and policy files; print every problem found."""
-    from ..model.core import IOHMM_FORMAT, TrustModel
+    from ..model.core import TrustModel
+    from ..model.files import IOHMM_FORMAT
     from ..model.jsonfile import ModelError, load_json
     from ..model.task import Task
     from ..policies import load_policy

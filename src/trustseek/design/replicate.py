@@ -20,7 +20,7 @@ from ..estimation.options import FitOptions
 from ..estimation.sequences import Sequences, encode
 from ..estimation.spec import IOHMMSpec
 from ..estimation.trust_iohmm import preset_spec
-from ..model.core import AUTONOMOUS, INTERVENE, TrustModel
+from ..model.core import TrustModel
 from ..model.task import Task
 from ..policies import ComplexityPolicy, TrustAwarePolicy, randomized
 from ..pomdp.problem import AssistancePOMDP
@@ -30,7 +30,7 @@ from ..simulation import Simulation, crossover, simulate
 from ..solvers.agnostic import agnostic_from_intervention_rates, trust_agnostic_from_data
 from ..solvers.base import one_blas_thread
 from ..solvers.registry import make_solver
-from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, LEVELS
+from ..vocab import ACTIONS, AUTONOMOUS, EXPERIENCES, HUMAN_ACTIONS, INTERVENE, LEVELS
 from .evaluation import EVALUATION_GRID, evaluate_policy, high_threshold
 
 __all__ = ["Experiment1", "FitSettings", "Study", "replicate_seed", "run_replicate"]

@@ -28,7 +28,8 @@ import pandas as pd
 from scipy.optimize import minimize
 from scipy.special import digamma, gammaln
 
-from ..model.core import TrustModel, planning_refusal
+from ..model.core import TrustModel
+from ..model.files import planning_refusal
 from ..model.jsonfile import json_safe
 from ..model.mixture import TypeMixture
 from . import kernels

@@ -43,11 +43,11 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from ..model.jsonfile import read_text
 from ..pomdp.belief import to_vector
 from ..pomdp.flat import FlatPOMDP, FlatPOMDPError
 from ..pomdp.problem import AssistancePOMDP
+from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 
 
 class PomdpFileError(FlatPOMDPError):

@@ -2,7 +2,8 @@
 
 # every submodule, as the package attribute of that name
 from . import core, files, jsonfile, mixture, presets, rating, task
-from .core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, IOHMM_FORMAT, TrustModel, load_any_model, trust_model
+from .core import TrustModel, load_any_model, trust_model
+from .files import IOHMM_FORMAT
 from .jsonfile import ModelError
 from .mixture import TypeMixture
 from .presets import (
@@ -21,9 +22,6 @@ from .rating import RatingTable
 from .task import Rewards, Task
 
 __all__ = [
-    "ACTIONS",
-    "EXPERIENCES",
-    "HUMAN_ACTIONS",
     "IOHMM_FORMAT",
     "MIXTURE_PRESETS",
     "MODEL_PRESETS",

@@ -9,14 +9,7 @@ keeps those inputs by name, each with its levels in their declared order (a gene
 ``general``); planning (solve, simulate, the policies) refuses it, decoding, prediction and
 validation take either.
 
-Vocabulary (fixed everywhere in trustseek):
-
-* robot action ``a``: ``autonomous`` / ``ask``            (index 0 / 1)
-* human action ``o``: ``intervene`` / ``rely``            (index 0 / 1)
-* experience ``E``:   ``faulty`` / ``reliable``           (index 0 / 1)
-* trust ``T`` and complexity ``C`` have user-chosen, ordered names; the paper
-  uses ``low`` / ``high`` for both.  Trust levels are ordered from lowest to
-  highest, so for two levels the belief is P(trust = high) = b[-1].
+The vocabulary and indices are :mod:`trustseek.vocab`'s.
 
 Tables (``numpy.float64``), one axis per input in the order the table lists them, then the
 level, then the output category (or the next level)::
@@ -44,13 +37,10 @@ from typing import Any
 
 import numpy as np
 
-from ..vocab import ACTIONS, ASK, AUTONOMOUS, EXPERIENCES, FAULTY, HUMAN_ACTIONS, INTERVENE, RELIABLE, RELY
+from ..vocab import INTERVENE
 from .files import (
-    IOHMM_FORMAT,
-    MODEL_FORMAT,
     PLANNING_INPUTS,
     SYMBOLS,
-    is_iohmm_file,
     model_fields,
     model_to_dict,
     planning_refusal,
@@ -68,27 +58,6 @@ from .jsonfile import (
     raise_problems,
 )
 from .rating import RatingTable
-
-__all__ = [  # the vocabulary is re-exported for convenience
-    "ACTIONS",
-    "ASK",
-    "AUTONOMOUS",
-    "EXPERIENCES",
-    "FAULTY",
-    "HUMAN_ACTIONS",
-    "INTERVENE",
-    "IOHMM_FORMAT",
-    "MODEL_FORMAT",
-    "PLANNING_INPUTS",
-    "RELIABLE",
-    "RELY",
-    "RatingTable",
-    "TrustModel",
-    "is_iohmm_file",
-    "load_any_model",
-    "planning_refusal",
-    "trust_model",
-]
 
 
 @dataclass(frozen=True, eq=False)
@@ -190,7 +159,7 @@ class TrustModel(JsonFile):
         """Every violation of the model's constraints, as human-readable lines."""
         if not self.general and not self.paper_inputs:
             return [f"a trust model has the paper's inputs ({', '.join(PLANNING_INPUTS)}); give a general model a structure"]
-        p = self._name_problems() if self.general else self._trust_problems()
+        p = self._name_problems()
         if p and self.general:
             return p
         K, M = self.n_levels, len(self.output_categories)
@@ -208,22 +177,21 @@ class TrustModel(JsonFile):
         return p + self._extras_problems()
 
     def _name_problems(self) -> list[str]:
-        """A general model's names: levels, output categories, inputs and their levels."""
+        """The names: a trust model's trust levels and complexities (two or more each), a general
+        model's levels, output categories, inputs and their levels."""
         p: list[str] = []
-        for what, names in (("levels", self.levels), ("output categories", self.output_categories)):
-            if not all(isinstance(n, str) and n for n in names) or len(set(names)) != len(names):
-                p.append(f"{what} must be distinct non-empty names, got {list(names)}")
-        if len(self.output_categories) < 2:
-            p.append(f"the output {self.output!r} needs at least 2 categories")
-        if not self.levels:
-            p.append("a model needs at least one level")
+        if not self.general:
+            check_names(list(self.levels), "trust_levels", p)
+            check_names(list(self.inputs["complexity"]), "complexities", p)
+            return p
+        check_names(list(self.levels), "levels", p, minimum=1)
+        check_names(list(self.output_categories), "output categories", p)
         for name, cols in (("emission_inputs", self.emission_inputs), ("transition_inputs", self.transition_inputs)):
             if len(set(cols)) != len(cols):
                 p.append(f"{name} repeat an input: {list(cols)}")
             p += [f"{name}: {c!r} is not one of the inputs {list(self.inputs)}" for c in cols if c not in self.inputs]
         for c, lv in self.inputs.items():
-            if not lv or not all(isinstance(x, str) and x for x in lv) or len(set(lv)) != len(lv):
-                p.append(f"input {c!r}: levels must be distinct non-empty names, got {list(lv)}")
+            check_names(list(lv), f"input {c!r} levels", p, minimum=1)
         return p
 
     @property
@@ -231,13 +199,6 @@ class TrustModel(JsonFile):
         """True when the inputs are the paper's (as a trust model has them: :func:`~.files.trust_fields`)."""
         paper = trust_fields(self.levels, self.inputs.get("complexity", ()))
         return all(getattr(self, k) == v for k, v in paper.items() if k != "structure")
-
-    def _trust_problems(self) -> list[str]:
-        """A trust model's names: two or more distinct trust levels and complexities."""
-        p: list[str] = []
-        check_names(list(self.levels), "trust_levels", p)
-        check_names(list(self.inputs["complexity"]), "complexities", p)
-        return p
 
     def _extras_problems(self) -> list[str]:
         p: list[str] = []

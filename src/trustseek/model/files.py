@@ -16,18 +16,6 @@ from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from .jsonfile import ModelError, check_names, get_key, nested, read_row, read_table, unknown_keys
 from .rating import RatingTable
 
-__all__ = [
-    "EMISSION_INPUTS",
-    "IOHMM_FORMAT",
-    "MODEL_FORMAT",
-    "PLANNING_INPUTS",
-    "is_iohmm_file",
-    "model_fields",
-    "model_to_dict",
-    "planning_refusal",
-    "trust_fields",
-]
-
 MODEL_FORMAT = "trustseek.trust-model/1"
 IOHMM_FORMAT = "trustseek.iohmm/1"  # a general model with named inputs
 PLANNING_INPUTS = ("complexity", "robot_action", "experience")  # the inputs of a trust model, which planning needs
@@ -240,10 +228,8 @@ def _input_list(raw: Any, what: str, inputs: Mapping[str, Any], problems: list[s
     if not isinstance(raw, list) or not all(isinstance(c, str) for c in raw):
         problems.append(f"{what} must list input names, got {raw!r}")
         return []
-    bad = [c for c in raw if c not in inputs]
-    for c in bad:
-        problems.append(f"{what}: {c!r} is not one of the inputs {list(inputs)}")
-    return [c for c in raw if c not in bad]
+    problems += [f"{what}: {c!r} is not one of the inputs {list(inputs)}" for c in raw if c not in inputs]
+    return [c for c in raw if c in inputs]
 
 
 def _row_dict(table: str, idx: tuple[int, ...], C: Sequence[str]) -> dict[str, str]:

@@ -16,29 +16,6 @@ import numpy as np
 
 from ..errors import TrustseekError
 
-__all__ = [
-    "ATOL",
-    "JsonFile",
-    "ModelError",
-    "UnknownComplexityError",
-    "build",
-    "check_names",
-    "check_row_array",
-    "fmt_number",
-    "freeze_arrays",
-    "get_key",
-    "json_safe",
-    "load_json",
-    "nested",
-    "raise_problems",
-    "read_row",
-    "read_table",
-    "read_text",
-    "same_fields",
-    "special_file",
-    "unknown_keys",
-]
-
 ATOL = 1e-9  # tolerance for a probability row to sum to one
 T = TypeVar("T")
 
@@ -120,29 +97,20 @@ def read_row(obj: Any, keys: Sequence[str], label: str, problems: list[str]) -> 
     if not isinstance(obj, Mapping):
         problems.append(f"{label} must be an object mapping {list(keys)} to probabilities, got {obj!r}")
         return None
+    before = len(problems)
+    unknown_keys(obj, keys, label, problems)
     row = np.full(len(keys), np.nan)
-    ok = True
-    for k in obj:
-        if k not in keys:
-            problems.append(f"{label} has unknown entry {k!r} (expected one of {list(keys)})")
-            ok = False
     for i, k in enumerate(keys):
+        v = obj.get(k)
         if k not in obj:
             problems.append(f"{label}[{k}] is missing")
-            ok = False
-            continue
-        v = obj[k]
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
+        elif isinstance(v, bool) or not isinstance(v, (int, float)):
             problems.append(f"{label}[{k}] must be a number, got {v!r}")
-            ok = False
-            continue
-        v = float(v)
-        if not math.isfinite(v) or v < 0.0 or v > 1.0:
-            problems.append(f"{label}[{k}] = {fmt_number(v)} is outside [0, 1]")
-            ok = False
-            continue
-        row[i] = v
-    if not ok:
+        elif not math.isfinite(v) or v < 0.0 or v > 1.0:
+            problems.append(f"{label}[{k}] = {fmt_number(float(v))} is outside [0, 1]")
+        else:
+            row[i] = v
+    if len(problems) > before:
         return None
     s = float(row.sum())
     if abs(s - 1.0) > ATOL:

@@ -7,10 +7,8 @@ and one model per type (:class:`~trustseek.model.core.TrustModel`): every type a
 or (a study with other inputs) every type a general model with the same levels, output and
 inputs.  A plain model is the mixture of one type.  Planning
 needs trust models: :meth:`TypeMixture.from_dict` refuses general types unless asked
-(``general=True``: decoding, prediction, per-person models).  JSON::
-
-    {"format": "trustseek.mixture/1", "notes": "...",
-     "types": [{"name": "paper", "weight": 0.7, "model": {<trust model or general model>}}, ...]}
+(``general=True``: decoding, prediction, per-person models).  The JSON (``trustseek.mixture/1``)
+is in docs/formats.md.
 """
 
 from __future__ import annotations

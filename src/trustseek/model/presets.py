@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..vocab import LEVELS
-from .core import ASK, AUTONOMOUS, FAULTY, RELIABLE, TrustModel, trust_model
+from ..vocab import ASK, AUTONOMOUS, FAULTY, LEVELS, RELIABLE
+from .core import TrustModel, trust_model
 from .jsonfile import ModelError
 from .mixture import TypeMixture
 from .task import Rewards, Task

@@ -10,8 +10,6 @@ import numpy as np
 
 from .jsonfile import check_names, check_row_array, freeze_arrays, get_key, nested, read_row, same_fields, unknown_keys
 
-__all__ = ["RatingTable"]
-
 
 @dataclass(frozen=True, eq=False)
 class RatingTable:
@@ -37,12 +35,7 @@ class RatingTable:
     def problems(self, trust_levels: Sequence[str]) -> list[str]:
         """Every violation of the table's constraints for a model with ``trust_levels``."""
         problems: list[str] = []
-        if not all(isinstance(n, str) and n for n in self.levels):
-            problems.append(f"rating levels must be non-empty strings, got {list(self.levels)!r}")
-        if len(set(self.levels)) != len(self.levels):
-            problems.append(f"rating levels have duplicate names: {list(self.levels)}")
-        if len(self.levels) < 2:
-            problems.append(f"rating levels need at least 2 entries, got {len(self.levels)}")
+        check_names(list(self.levels), "rating levels", problems)
         shape = (len(trust_levels), len(self.levels))
         if self.probs.shape != shape:
             problems.append(

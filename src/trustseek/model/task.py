@@ -34,8 +34,6 @@ from .jsonfile import (
     unknown_keys,
 )
 
-__all__ = ["TASK_FORMAT", "Rewards", "Task"]
-
 TASK_FORMAT = "trustseek.task/1"
 
 
@@ -138,21 +136,11 @@ class Task(JsonFile):
 
     def experience_table(self) -> np.ndarray:
         """P(E' | o, C, a) as an array indexed [c, a, o, e]."""
-        out = np.zeros((self.n_complexity, 2, 2, 2))
-        for c in range(self.n_complexity):
-            for a in range(2):
-                for o in range(2):
-                    out[c, a, o] = self.p_experience(c, a, o)
-        return out
+        return np.array([[[self.p_experience(c, a, o) for o in range(2)] for a in range(2)] for c in range(self.n_complexity)])
 
     def reward_table(self) -> np.ndarray:
         """Reward of eq. (1) as an array indexed [a, o, e]."""
-        out = np.zeros((2, 2, 2))
-        for a in range(2):
-            for o in range(2):
-                for e in range(2):
-                    out[a, o, e] = self.rewards.of(a, o, e)
-        return out
+        return np.array([[[self.rewards.of(a, o, e) for e in range(2)] for o in range(2)] for a in range(2)], dtype=float)
 
     def check_compatible(self, model: TrustModel) -> None:
         """Refuse a model whose complexities differ, or with never-estimated rows this task can reach."""
@@ -230,18 +218,15 @@ class Task(JsonFile):
                     unknown_keys(spec, ["probability", "success", "ask_experience"], lab, problems)
                     for key, store in (("probability", probs), ("success", succ)):
                         v = get_key(spec, key, f"{lab}.{key}", problems)
-                        if v is None:
-                            continue
-                        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0.0 <= float(v) <= 1.0):
+                        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= v <= 1.0):
                             problems.append(f"{lab}.{key} = {v!r} must be a probability in [0, 1]")
-                            continue
-                        store.append(float(v))
+                        elif v is not None:
+                            store.append(float(v))
                     ae = get_key(spec, "ask_experience", f"{lab}.ask_experience", problems)
-                    if ae is not None:
-                        if ae not in EXPERIENCES:
-                            problems.append(f"{lab}.ask_experience = {ae!r} must be one of {list(EXPERIENCES)}")
-                        else:
-                            askx.append(EXPERIENCES.index(ae))
+                    if ae is not None and ae not in EXPERIENCES:
+                        problems.append(f"{lab}.ask_experience = {ae!r} must be one of {list(EXPERIENCES)}")
+                    elif ae is not None:
+                        askx.append(EXPERIENCES.index(ae))
                 if not problems and abs(sum(probs) - 1.0) > ATOL:
                     problems.append(f"complexity probabilities sum to {fmt_number(sum(probs))}")
         rw = d.get("rewards", {})

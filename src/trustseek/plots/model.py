@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.core import ACTIONS, EXPERIENCES, RELY
+from ..vocab import ACTIONS, EXPERIENCES, RELY
 from . import finish, style
 
 _LEVEL_COLORS = ("#c8102e", "#1f5fa8", "#2a9d3f", "#7b3294", "#e08214", "#666666", "#000000", "#8c510a")

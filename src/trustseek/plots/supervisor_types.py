@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model.core import AUTONOMOUS, RELY
+from ..vocab import AUTONOMOUS, RELY
 from . import finish, style
 from .model import _bars, plot_emissions, plot_transitions
 

@@ -4,14 +4,13 @@
 from . import alpha_vector, base, complexity, envelope, grid_q, kinds, regions, runner, scheduling
 from .alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy, TypeAwarePolicy
 from .base import POLICY_FORMAT, Policy, PolicyError, ask_bounds, ask_regions
-from .complexity import COMPLEXITY_KINDS, ComplexityPolicy, always_ask, never_ask, randomized
+from .complexity import ComplexityPolicy, always_ask, never_ask, randomized
 from .grid_q import TrustAwarePolicy
 from .kinds import POLICY_KINDS, load_policy, policy_from_dict
 from .regions import ask_intervals, threshold
 from .runner import PolicyRunner
 
 __all__ = [
-    "COMPLEXITY_KINDS",
     "POLICY_FORMAT",
     "POLICY_KINDS",
     "AlphaVectorPolicy",

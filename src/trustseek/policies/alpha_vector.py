@@ -10,12 +10,8 @@ unknown: its model is the product of a :class:`~trustseek.model.mixture.TypeMixt
 (:func:`trustseek.pomdp.supervisor_types.product_model`), its belief is over the M·K pairs
 (type, trust), so ``PolicyRunner``, the simulator and the server run it like any alpha-vector
 policy; it keeps the mixture, so the type belief and the trust belief can be read off its
-belief.  Its JSON (kind ``type-aware``) holds the alpha-vector fields without ``model``, and
-the mixture::
-
-    {"format": "trustseek.policy/1", "kind": "type-aware", "complexities": [...],
-     "belief_update": "bayes", "mixture": {<trustseek.mixture/1>},
-     "q_vectors": {C: {a: [[... M·K numbers ...], ...]}}, "value_vectors": [...], "info": {...}}
+belief.  Its JSON (kind ``type-aware``, docs/types-planning.md) holds the alpha-vector fields
+without ``model``, and the mixture.
 """
 
 from __future__ import annotations
@@ -25,14 +21,17 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import ACTIONS, ASK, AUTONOMOUS, TrustModel
-from ..model.jsonfile import ModelError
+from ..model.core import TrustModel
+from ..model.jsonfile import ModelError, build
 from ..model.mixture import TypeMixture
 from ..pomdp.belief import to_vector
 from ..pomdp.supervisor_types import product_model, trust_marginal, type_marginal, warm_start_belief
-from .base import PolicyBase, PolicyError, planned_for
+from ..vocab import ACTIONS, ASK, AUTONOMOUS
+from .base import Policy, PolicyError, planned_for
 from .envelope import envelope
 from .regions import Interval, ask_intervals
+
+Q_SETS = "every set of q_vectors"
 
 
 def _vectors(value: Any, K: int, what: str, problems: list[str]) -> np.ndarray:
@@ -46,12 +45,7 @@ def _vectors(value: Any, K: int, what: str, problems: list[str]) -> np.ndarray:
     return v
 
 
-def _vector_sets(sets: Sequence[Any], K: int, problems: list[str]) -> list[np.ndarray]:
-    """Each set of Q-vectors as a non-empty (n, K) array of finite numbers (problems noted, not raised)."""
-    return [_vectors(v, K, "every set of q_vectors", problems) for v in sets]
-
-
-class AlphaVectorPolicy(PolicyBase):
+class AlphaVectorPolicy(Policy):
     """Greedy in Q(b, C, a) = max over the Q-vectors of (C, a) of α·b; any number of trust levels.
 
     ``q_vectors[c][a]`` is an array (n, K) of vectors, each the value of "take a now, then
@@ -78,7 +72,7 @@ class AlphaVectorPolicy(PolicyBase):
         problems: list[str] = []
         if len(q_vectors) != len(self.complexities) or any(len(p) != 2 for p in q_vectors):
             problems.append(f"q_vectors needs one entry per complexity {list(self.complexities)} and action {list(ACTIONS)}")
-        self.q_vectors = [_vector_sets(per_a, K, problems) for per_a in q_vectors]
+        self.q_vectors = [[_vectors(v, K, Q_SETS, problems) for v in per_a] for per_a in q_vectors]
         self.value_vectors = _vectors(value_vectors, K, "value_vectors", problems)
         if problems:
             raise ModelError(list(dict.fromkeys(problems)))
@@ -154,13 +148,10 @@ class AlphaVectorPolicy(PolicyBase):
             raise ModelError(
                 [f"q_vectors must map each complexity {cx} and action {list(ACTIONS)} to a list of vectors"], source
             ) from None
-        try:
-            return cls(q, d.get("value_vectors", []), model, cx, bu, d.get("info"))
-        except ModelError as exc:
-            raise ModelError(exc.problems, source) from None
+        return build([], source, lambda: cls(q, d.get("value_vectors", []), model, cx, bu, d.get("info")))
 
 
-class FlatAlphaPolicy(PolicyBase):
+class FlatAlphaPolicy(Policy):
     """Greedy in alpha vectors over the states of a flat POMDP (the point solver's policy for a
     standard ``.pomdp`` file): action a(b) = argmax_a max over the Q-vectors of a of α·b.
 
@@ -187,7 +178,7 @@ class FlatAlphaPolicy(PolicyBase):
         problems: list[str] = []
         if len(q_vectors) != len(self.action_names):
             problems.append(f"q_vectors needs one set per action {list(self.action_names)}")
-        self.q_vectors = _vector_sets(q_vectors, len(self.states), problems)
+        self.q_vectors = [_vectors(v, len(self.states), Q_SETS, problems) for v in q_vectors]
         self.value_vectors = _vectors(value_vectors, len(self.states), "value_vectors", problems)
         if problems:
             raise ModelError(list(dict.fromkeys(problems)))
@@ -230,10 +221,7 @@ class FlatAlphaPolicy(PolicyBase):
             q = [np.array(qv[a], dtype=float) for a in names]
         except (KeyError, TypeError, ValueError):
             raise ModelError([f"q_vectors must map each action {names} to a list of vectors"], source) from None
-        try:
-            return cls(q, d.get("value_vectors", []), states, names, d.get("info"))
-        except ModelError as exc:
-            raise ModelError(exc.problems, source) from None
+        return build([], source, lambda: cls(q, d.get("value_vectors", []), states, names, d.get("info")))
 
 
 class TypeAwarePolicy(AlphaVectorPolicy):
@@ -290,7 +278,4 @@ class TypeAwarePolicy(AlphaVectorPolicy):
     def from_dict(cls, d: Mapping[str, Any], source: str | None = None) -> TypeAwarePolicy:
         mixture = TypeMixture.from_dict(d.get("mixture"), source)
         plain = AlphaVectorPolicy.from_dict({**d, "model": product_model(mixture).to_dict()}, source)
-        try:
-            return cls.from_alpha(mixture, plain)
-        except ModelError as exc:
-            raise ModelError(exc.problems, source) from None
+        return build([], source, lambda: cls.from_alpha(mixture, plain))

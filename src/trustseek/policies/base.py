@@ -1,4 +1,4 @@
-"""The ``Policy`` interface, which every policy implements completely, and what policies share.
+"""The ``Policy`` base class, which every policy kind extends, and what policies share.
 
 A policy answers one question -- given the robot's belief over trust and the trial's
 complexity, ``autonomous`` or ``ask``? -- vectorized (``actions``) or for one trial
@@ -14,7 +14,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -33,73 +33,14 @@ class PolicyError(TrustseekError, ValueError):
     that ignores the belief, or thresholds of a model with more than two trust levels)."""
 
 
-class Policy(Protocol):
-    """What the robot does on the next trial.
+class Policy:
+    """What the robot does on the next trial; every policy kind is one of these.
 
     ``belief_update`` names the belief the policy reads (``bayes`` or ``paper``; ``None`` for
     a policy that ignores the belief) and ``model`` the trust model it is tracked with.
     Beliefs are rows over the trust levels (for ``action``, P(trust = high) as one number is
     accepted for two levels); complexities are indices (``action`` also takes names).
     """
-
-    kind: str
-    complexities: tuple[str, ...]
-    belief_update: str | None
-    model: TrustModel | None
-    info: dict[str, Any]
-
-    def complexity_index(self, complexity: int | str) -> int:
-        """The index of a complexity given by name or index (KeyError when unknown)."""
-        ...
-
-    def actions(self, beliefs: np.ndarray | None, complexities: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
-        """Actions (0 = autonomous, 1 = ask) for beliefs (n, K) and complexity indices (n,)."""
-        ...
-
-    def action(self, belief: Any, complexity: int | str, rng: np.random.Generator | None = None) -> int:
-        """The action of one trial."""
-        ...
-
-    def ask_intervals(self) -> dict[str, list[Interval]] | None:
-        """Per complexity, the intervals of P(trust = high) where the policy asks (two trust
-        levels); ``None`` for a policy that asks at random."""
-        ...
-
-    def thresholds(self) -> dict[str, float | None] | None:
-        """Per complexity, the belief in high trust below which the policy asks (``None``:
-        never asks, 1.0: always asks, NaN: the ask region is not [0, θ)); ``None`` for a
-        policy that asks at random."""
-        ...
-
-    def q_values(self, b_high: Any) -> np.ndarray:
-        """Q(b, C, a) at P(trust = high) = b_high (two trust levels), shape (..., N, 2)."""
-        ...
-
-    def value(self, b_high: Any, complexity: int | str | None = None) -> np.ndarray:
-        """V(b, C) = max_a Q(b, C, a) at P(trust = high) = b_high: shape (..., N), or (...)
-        for one complexity."""
-        ...
-
-    def to_dict(self) -> dict[str, Any]:
-        """The policy JSON (format ``trustseek.policy/1``)."""
-        ...
-
-    def save(self, path: str | Path) -> None:
-        """Write the policy JSON to a file."""
-        ...
-
-    def describe(self) -> str:
-        """One line for people."""
-        ...
-
-    def overview(self) -> dict[str, Any]:
-        """A JSON object naming the policy, small enough to print with results."""
-        ...
-
-
-class PolicyBase:
-    """What every policy shares: complexity lookup, one decision from the vectorized ones,
-    thresholds from the ask intervals, JSON output, and the errors of what it lacks."""
 
     kind = ""
     complexities: tuple[str, ...] = ()
@@ -108,6 +49,7 @@ class PolicyBase:
     info: dict[str, Any]
 
     def complexity_index(self, complexity: int | str) -> int:
+        """The index of a complexity given by name or index (KeyError when unknown)."""
         if isinstance(complexity, str):
             try:
                 return self.complexities.index(complexity)
@@ -119,28 +61,39 @@ class PolicyBase:
         return c
 
     def actions(self, beliefs: np.ndarray | None, complexities: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
+        """Actions (0 = autonomous, 1 = ask) for beliefs (n, K) and complexity indices (n,)."""
         raise NotImplementedError
 
     def action(self, belief: Any, complexity: int | str, rng: np.random.Generator | None = None) -> int:
+        """The action of one trial."""
         n_trust = self.model.n_trust if self.model is not None else 2
         b = to_vector(belief, n_trust)[None, :] if belief is not None else np.full((1, n_trust), np.nan)
         return int(self.actions(b, np.array([self.complexity_index(complexity)]), rng)[0])
 
     def ask_intervals(self) -> dict[str, list[Interval]] | None:
+        """Per complexity, the intervals of P(trust = high) where the policy asks (two trust
+        levels); ``None`` for a policy that asks at random."""
         raise NotImplementedError
 
     def thresholds(self) -> dict[str, float | None] | None:
+        """Per complexity, the belief in high trust below which the policy asks (``None``:
+        never asks, 1.0: always asks, NaN: the ask region is not [0, θ)); ``None`` for a
+        policy that asks at random."""
         intervals = self.ask_intervals()
         return None if intervals is None else {cn: threshold(iv) for cn, iv in intervals.items()}
 
     def q_values(self, b_high: Any) -> np.ndarray:
+        """Q(b, C, a) at P(trust = high) = b_high (two trust levels), shape (..., N, 2)."""
         raise PolicyError([f"a {self.kind} policy has no Q-function"])
 
     def value(self, b_high: Any, complexity: int | str | None = None) -> np.ndarray:
+        """V(b, C) = max_a Q(b, C, a) at P(trust = high) = b_high: shape (..., N), or (...)
+        for one complexity."""
         v = self.q_values(b_high).max(axis=-1)
         return v if complexity is None else v[..., self.complexity_index(complexity)]
 
     def to_dict(self) -> dict[str, Any]:
+        """The policy JSON (format ``trustseek.policy/1``)."""
         raise NotImplementedError
 
     def _file(self, **fields: Any) -> dict[str, Any]:
@@ -148,12 +101,15 @@ class PolicyBase:
         return {"format": POLICY_FORMAT, "kind": self.kind, "complexities": list(self.complexities), **fields}
 
     def save(self, path: str | Path) -> None:
+        """Write the policy JSON to a file."""
         Path(path).write_text(json.dumps(json_safe(self.to_dict()), indent=1, allow_nan=False) + "\n", encoding="utf-8")
 
     def describe(self) -> str:
+        """One line for people."""
         return self.kind
 
     def overview(self) -> dict[str, Any]:
+        """A JSON object naming the policy, small enough to print with results."""
         return self.to_dict()
 
     def _need_two_levels(self) -> None:

@@ -15,15 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from ..model.jsonfile import ModelError
+from ..model.jsonfile import ModelError, build
 from ..vocab import COMPLEXITY_POLICY_KINDS, PAPER_ASK_PROBABILITIES
-from .base import PolicyBase, PolicyError
+from .base import Policy, PolicyError
 from .regions import Interval
 
-COMPLEXITY_KINDS = COMPLEXITY_POLICY_KINDS
 
-
-class ComplexityPolicy(PolicyBase):
+class ComplexityPolicy(Policy):
     """A policy that looks only at the complexity: ask with probability p_ask[C].
 
     Covers ``trust-agnostic`` (p_ask in {0, 1}), ``randomized``, ``always-ask`` and
@@ -43,7 +41,7 @@ class ComplexityPolicy(PolicyBase):
             problems.append(f"p_ask needs one entry per complexity {list(self.complexities)}, got {self.p_ask.tolist()}")
         elif np.any(~np.isfinite(self.p_ask)) or np.any(self.p_ask < 0) or np.any(self.p_ask > 1):
             problems.append(f"p_ask must lie in [0, 1], got {self.p_ask.tolist()}")
-        if kind not in COMPLEXITY_KINDS:
+        if kind not in COMPLEXITY_POLICY_KINDS:
             problems.append(f"unknown policy kind {kind!r}")
         if problems:
             raise ModelError(problems)
@@ -82,10 +80,7 @@ class ComplexityPolicy(PolicyBase):
         # but exactly the policy's complexities
         if not isinstance(p, Mapping) or len(p) != len(cx) or set(p) != set(cx):
             raise ModelError([f"p_ask must map each of {cx} to a probability, got {p!r}"], source)
-        try:
-            return cls(str(d.get("kind")), cx, [p[c] for c in cx], d.get("info"))
-        except ModelError as exc:
-            raise ModelError(exc.problems, source) from None
+        return build([], source, lambda: cls(str(d.get("kind")), cx, [p[c] for c in cx], d.get("info")))
 
 
 def _describe_p(p: float) -> str:

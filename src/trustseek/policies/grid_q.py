@@ -12,15 +12,16 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import ACTIONS, ASK, AUTONOMOUS, TrustModel
+from ..model.core import TrustModel
 from ..model.jsonfile import ModelError
-from .base import Policy, PolicyBase, PolicyError, planned_for
+from ..vocab import ACTIONS, ASK, AUTONOMOUS
+from .base import Policy, PolicyError, planned_for
 from .regions import Interval, ask_intervals
 
 TABLE_POINTS = 4001  # points of a Q table made from another policy's Q-function
 
 
-class TrustAwarePolicy(PolicyBase):
+class TrustAwarePolicy(Policy):
     """Greedy in the solved Q(b, C, a) on a belief grid over P(trust = high) (two trust levels);
     ties go to ``autonomous``."""
 

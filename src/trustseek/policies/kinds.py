@@ -1,7 +1,7 @@
 """The policy JSON: one loader per ``kind``, ``policy_from_dict`` and ``load_policy``.
 
 Every policy file has ``format: trustseek.policy/1``, a ``kind`` and its ``complexities``;
-the rest depends on the kind.  Files written by earlier versions load unchanged.
+the rest depends on the kind.
 """
 
 from __future__ import annotations
@@ -13,9 +13,10 @@ from typing import Any
 import numpy as np
 
 from ..model.jsonfile import ModelError, load_json
+from ..vocab import COMPLEXITY_POLICY_KINDS
 from .alpha_vector import AlphaVectorPolicy, FlatAlphaPolicy, TypeAwarePolicy
 from .base import POLICY_FORMAT, Policy
-from .complexity import COMPLEXITY_KINDS, ComplexityPolicy
+from .complexity import ComplexityPolicy
 from .grid_q import TrustAwarePolicy
 from .scheduling import SchedulePolicy
 
@@ -25,7 +26,7 @@ Loader = Callable[[Mapping[str, Any], "str | None"], Policy]
 POLICY_KINDS: dict[str, Loader] = {
     TrustAwarePolicy.kind: TrustAwarePolicy.from_dict,
     AlphaVectorPolicy.kind: AlphaVectorPolicy.from_dict,
-    **dict.fromkeys(COMPLEXITY_KINDS, ComplexityPolicy.from_dict),
+    **dict.fromkeys(COMPLEXITY_POLICY_KINDS, ComplexityPolicy.from_dict),
     FlatAlphaPolicy.kind: FlatAlphaPolicy.from_dict,
     SchedulePolicy.kind: SchedulePolicy.from_dict,
     TypeAwarePolicy.kind: TypeAwarePolicy.from_dict,

@@ -33,21 +33,12 @@ def ask_intervals(x: np.ndarray, advantage: np.ndarray, crossing: Callable[[int]
     x = np.asarray(x, dtype=float)
     d = np.asarray(advantage, dtype=float)
     cross = crossing or (lambda i: linear_crossing(x, d, i))
-    ask = d > 0
-    out: list[Interval] = []
     n = len(x)
-    i = 0
-    while i < n:
-        if not ask[i]:
-            i += 1
-            continue
-        start = i
-        while i < n and ask[i]:
-            i += 1
-        lo = x[0] if start == 0 else cross(start - 1)
-        hi = x[-1] if i == n else cross(i - 1)
-        out.append((float(lo), float(hi)))
-    return out
+    edges = np.flatnonzero(np.diff(np.concatenate([[False], d > 0, [False]]).astype(np.int8)))  # starts, ends of runs
+    return [
+        (float(x[0] if i == 0 else cross(i - 1)), float(x[-1] if j == n else cross(j - 1)))
+        for i, j in zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True)
+    ]
 
 
 def threshold(intervals: Sequence[Interval], start: float = 0.0) -> float | None:

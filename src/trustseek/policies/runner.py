@@ -13,8 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
-from ..pomdp.belief import UNOBSERVED, make_updater
+from ..model.core import TrustModel
+from ..pomdp.belief import make_updater
+from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, UNOBSERVED
 from .base import Policy, PolicyError
 
 
@@ -54,13 +55,9 @@ class PolicyRunner:
             self.belief = after
         return after
 
-    # the step itself, at any belief: ``decide`` and ``observe`` apply it to the live belief, and
-    # a service that keeps many beliefs (the server's decision API) applies it to each of them
-
     def action_at(self, belief: np.ndarray | None, complexity: int | str, rng: np.random.Generator | None = None) -> str:
         """The robot action the policy takes at ``belief`` (drawing from ``rng``, else the runner's own)."""
-        c = self.policy.complexity_index(complexity)
-        return ACTIONS[self.policy.action(belief, c, self.rng if rng is None else rng)]
+        return ACTIONS[self.policy.action(belief, complexity, self.rng if rng is None else rng)]
 
     def belief_after(
         self, belief: np.ndarray | None, complexity: int | str, action: str, human_action: str | None, experience: str

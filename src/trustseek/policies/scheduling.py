@@ -21,11 +21,12 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import ACTIONS, ASK, AUTONOMOUS, TrustModel
+from ..model.core import TrustModel
 from ..model.jsonfile import ModelError
 from ..pomdp.belief import to_vector
 from ..pomdp.scheduling import Counts, State, parse_state_key, state_key
-from .base import PolicyBase, PolicyError, planned_for
+from ..vocab import ACTIONS, ASK, AUTONOMOUS
+from .base import Policy, PolicyError, planned_for
 from .regions import Interval, ask_intervals
 from .runner import PolicyRunner
 
@@ -50,7 +51,7 @@ class PieceQ:
         return out if dtype is None else out.astype(dtype)
 
 
-class SchedulePolicy(PolicyBase):
+class SchedulePolicy(Policy):
     """Greedy in Q(x, state, k, a) over the visible complexities k and the actions a (ties go to
     the lower complexity index, then to ``autonomous``)."""
 
@@ -313,9 +314,7 @@ class ScheduleRunner(PolicyRunner):
 
     def decide(self, complexity: int | str) -> str:
         assert self.remaining is not None
-        bound = self.schedule_policy.at(self.remaining, self.visible)
-        c = bound.complexity_index(complexity)
-        return ACTIONS[bound.action(self.belief, c, self.rng)]
+        return ACTIONS[self.schedule_policy.at(self.remaining, self.visible).action(self.belief, complexity, self.rng)]
 
     def observe(self, complexity: int | str, action: str, human_action: str | None, experience: str) -> np.ndarray | None:
         c = self.policy.complexity_index(complexity)

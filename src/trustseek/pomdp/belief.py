@@ -13,43 +13,22 @@ levels, ``b[-1]`` is P(trust = high)).  Two updates are offered:
   was not recorded (``o = -1``) or that the model deems impossible is not
   conditioned on.
 
-Three views of the same filter, for three kinds of callers:
-
-* :class:`BayesUpdate` / :class:`PaperUpdate` follow one *observed* trial (c, a, o, e),
-  vectorized over beliefs of shape (..., K), any number of trust levels (``PolicyRunner``,
-  the server, the simulator for K > 2);
-* :class:`ScalarBelief` is the same update for two trust levels on the number
-  x = P(trust = high), with the tables flattened for gathers (the simulator's fast path);
-* :class:`Branches` enumerates *every* successor of a belief after (C, a) with its
-  probability (what the belief-MDP solvers expand), and :class:`BranchModel` is a POMDP in
-  that branch form (contexts, rewards, Bayes branches, discount, initial belief).
+Three views of the same filter: :class:`BayesUpdate` / :class:`PaperUpdate` follow one observed
+trial, any number of trust levels; :class:`ScalarBelief` on x = P(trust = high) (the simulator's
+fast path); :class:`Branches` enumerates every successor of a belief (what the belief-MDP
+solvers expand), and :class:`BranchModel` is a POMDP in that branch form.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
 
 from ..errors import TrustseekError
 from ..model.core import TrustModel
-from ..vocab import BELIEF_UPDATES, UNOBSERVED, check_belief_update
-
-__all__ = [
-    "BELIEF_UPDATES",
-    "UNOBSERVED",
-    "BayesUpdate",
-    "BeliefError",
-    "BeliefUpdater",
-    "BranchModel",
-    "Branches",
-    "PaperUpdate",
-    "ScalarBelief",
-    "make_updater",
-    "to_vector",
-]
-
+from ..vocab import BELIEF_UPDATES as BELIEF_UPDATES  # the package exports it from here
+from ..vocab import check_belief_update
 
 # --------------------------------------------------------------------------- observed trials
 
@@ -62,18 +41,9 @@ class BeliefError(TrustseekError, ValueError):
     """A belief that does not fit the model (e.g. one number for more than two trust levels)."""
 
 
-class BeliefUpdater(Protocol):
-    """Follows the belief through observed trials."""
-
-    name: str
-    model: TrustModel
-
-    def initial(self) -> np.ndarray: ...
-
-    def update(self, b: np.ndarray, c, a, o, e) -> np.ndarray: ...
-
-
 class _Updater:
+    """Follows the belief through observed trials: ``initial()``, ``update(b, c, a, o, e)``."""
+
     name = ""
 
     def __init__(self, model: TrustModel):
@@ -237,12 +207,8 @@ class Branches:
 
 
 # --------------------------------------------------------------------------- the branch form
-# The assistance POMDP has a *mixed* observability: the complexity (a context, drawn i.i.d. from
-# P(C) and seen before acting) is observed, trust (the hidden part) is not, and after each trial
-# a branch (o, E') moves the belief.  A flat POMDP (e.g. a ``.pomdp`` file) is the special case of
-# one context whose branches are the observations.  Both are written as context_probs[c],
-# rewards[c, a, t], Bayes branches (kernels[c, a, branch, t, t2]), discount and initial[t]: what
-# the point-based solvers and controller evaluation work on.
+# The complexity (a context, i.i.d., seen before acting) is observed, trust is not; a flat POMDP
+# (a ``.pomdp`` file) is the case of one context whose branches are the observations.
 
 
 @dataclass(frozen=True, eq=False)

@@ -9,19 +9,9 @@ and the next state is drawn as
     P(S_{t+1} | S_t, a_t) = P(T_{t+1} | E_{t+1}, T_t, C_t, a_t) P(C_{t+1}) P(E_{t+1} | T_t, C_t, a_t),
     P(E_{t+1} | T_t, C_t, a_t) = sum_o P(E_{t+1} | o, C_t, a_t) P(o | T_t, C_t, a_t).
 
-The reward R(S, a) is eq. (2), the expectation of eq. (1) over o and E'.
-
-Two views of the same problem are offered:
-
-* factored arrays with named axes (what the belief-MDP solvers use):
-  ``emission[c, a, t, o]``, ``experience[c, a, o, e]``,
-  ``trust_transition[c, a, e, t, t2]``, ``complexity_probs[c]``,
-  ``trial_reward[a, o, e]``, ``expected_reward[c, a, t]`` and the joint one-step
-  kernel ``kernel[c, a, t, o, e, t2]``;
-* flat arrays over the enumerated states (what generic POMDP code uses):
-  ``states`` (tuples of names), ``transition_matrix[a, s, s2]``,
-  ``observation_matrix[a, s, o]`` (observation of the state at the start),
-  ``reward_matrix[s, a]``.
+The reward R(S, a) is eq. (2), the expectation of eq. (1) over o and E'.  The arrays have
+named axes (:data:`AXES`): factored ones (what the belief-MDP solvers use) and flat ones over
+the enumerated states (``transition_matrix``, ``observation_matrix``, ``reward_matrix``).
 """
 
 from __future__ import annotations
@@ -31,9 +21,9 @@ from functools import cached_property
 
 import numpy as np
 
-from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
+from ..model.core import TrustModel
 from ..model.task import Task
-from ..vocab import check_belief_update
+from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, check_belief_update
 from .belief import Branches, BranchModel
 
 AXES = {
@@ -167,37 +157,21 @@ class AssistancePOMDP:
     def transition_matrix(self) -> np.ndarray:
         """P(S' | S, a), axes [a, s, s2]."""
         K, N = self.n_trust, self.n_complexity
-        # P(e', t' | t, c, a) = sum_o kernel
-        pet = self.kernel.sum(axis=3)  # [c, a, t, e, u]
-        out = np.zeros((2, K, 2, N, K, 2, N))  # [a, t, e, c, u, e2, c2]
-        for a in range(2):
-            for c in range(N):
-                block = pet[c, a].transpose(0, 2, 1)  # [t, u, e2]
-                val = block[:, :, :, None] * self.complexity_probs[None, None, None, :]  # [t, u, e2, c2]
-                out[a, :, :, c] = val[:, None, :, :, :].repeat(2, axis=1)  # independent of e
-        S = K * 2 * N
-        return out.reshape(2, S, S)
+        pet = self.kernel.sum(axis=3).transpose(1, 2, 0, 4, 3)  # P(e', t' | t, c, a) as [a, t, c, u, e2]
+        out = pet[..., None] * self.complexity_probs  # [a, t, c, u, e2, c2]
+        return np.broadcast_to(out[:, :, None], (2, K, 2, N, K, 2, N)).reshape(2, K * 2 * N, -1)  # independent of e
 
     @cached_property
     def observation_matrix(self) -> np.ndarray:
         """P(o | S, a) for the state S at the start of the trial, axes [a, s, o]."""
         K, N = self.n_trust, self.n_complexity
-        out = np.zeros((2, K, 2, N, 2))
-        for a in range(2):
-            for t in range(K):
-                for c in range(N):
-                    out[a, t, :, c] = self.emission[c, a, t]
-        return out.reshape(2, K * 2 * N, 2)
+        return np.broadcast_to(self.emission.transpose(1, 2, 0, 3)[:, :, None], (2, K, 2, N, 2)).reshape(2, -1, 2)
 
     @cached_property
     def reward_matrix(self) -> np.ndarray:
         """R(S, a) of eq. (2), axes [s, a]."""
         K, N = self.n_trust, self.n_complexity
-        out = np.zeros((K, 2, N, 2))
-        for t in range(K):
-            for c in range(N):
-                out[t, :, c, :] = self.expected_reward[c, :, t]
-        return out.reshape(K * 2 * N, 2)
+        return np.broadcast_to(self.expected_reward.transpose(2, 0, 1)[:, None], (K, 2, N, 2)).reshape(-1, 2)
 
     @cached_property
     def initial_state_distribution(self) -> np.ndarray:

@@ -139,10 +139,8 @@ class SchedulingProblem:
     def states(self) -> list[State]:
         """Every reachable state, in order of decreasing remaining items (backward induction
         runs through them reversed)."""
-        seen: dict[State, None] = {}
         frontier = [s for s, _ in self.start()]
-        for s in frontier:
-            seen[s] = None
+        seen: dict[State, None] = dict.fromkeys(frontier)
         while frontier:
             nxt = []
             for s in frontier:

@@ -30,29 +30,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import TrustseekError
-from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel, trust_model
+from ..model.core import TrustModel, trust_model
 from ..model.mixture import TypeMixture
 from ..model.task import Task
-from ..vocab import UNOBSERVED
+from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, UNOBSERVED
 from .belief import BayesUpdate
 from .problem import AssistancePOMDP
 
 if TYPE_CHECKING:  # the trial log is a data frame; planning without one loads no pandas
     import pandas as pd
 
-__all__ = [
-    "LEVEL_SEPARATOR",
-    "TypeBeliefError",
-    "level_name",
-    "product_model",
-    "split_levels",
-    "trust_given_type",
-    "trust_marginal",
-    "type_aware_problem",
-    "type_belief_from_log",
-    "type_marginal",
-    "warm_start_belief",
-]
 
 #: joins a type's name and a trust level's name in the product model's level names
 LEVEL_SEPARATOR = "/"
@@ -147,23 +134,15 @@ def warm_start_belief(mixture: TypeMixture, type_belief: np.ndarray | Sequence[f
 
 
 def _codes(values: pd.Series, names: Sequence[str], column: str, missing_ok: bool = False) -> np.ndarray:
-    text = values.astype("object")
+    """The index in ``names`` of each value (:data:`UNOBSERVED` where missing, if allowed)."""
     missing = values.isna().to_numpy()
-    out = np.full(len(values), UNOBSERVED, dtype=np.int64)
-    bad: list[str] = []
-    for i, v in enumerate(text):
-        if missing[i]:
-            if not missing_ok:
-                bad.append("missing")
-            continue
-        s = str(v)
-        if s in names:
-            out[i] = names.index(s)
-        else:
-            bad.append(repr(s))
+    text = [str(v) for v in values.astype("object")]
+    bad = {repr(s) for s, m in zip(text, missing, strict=True) if not m and s not in names}
+    if not missing_ok and missing.any():
+        bad.add("missing")
     if bad:
-        raise TypeBeliefError([f"column {column!r}: {sorted(set(bad))} not among {list(names)}"])
-    return out
+        raise TypeBeliefError([f"column {column!r}: {sorted(bad)} not among {list(names)}"])
+    return np.array([UNOBSERVED if m else names.index(s) for s, m in zip(text, missing, strict=True)], dtype=np.int64)
 
 
 def type_belief_from_log(

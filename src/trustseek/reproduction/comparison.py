@@ -12,7 +12,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..model.core import ASK, AUTONOMOUS, FAULTY, INTERVENE, RELIABLE, RELY, TrustModel
+from ..model.core import TrustModel
+from ..vocab import ASK, AUTONOMOUS, FAULTY, INTERVENE, RELIABLE, RELY
 from .config import AGNOSTIC, AWARE, HIGH, LOW, PAPER
 
 

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import AUTONOMOUS, FAULTY, INTERVENE, TrustModel
+from ..model.core import TrustModel
 from ..model.task import Task
 from ..policies import ComplexityPolicy, Policy, always_ask, never_ask
 from ..pomdp.problem import AssistancePOMDP
@@ -18,6 +18,7 @@ from ..simulation import Supervisors, crossover, simulate
 from ..solvers.agnostic import trust_agnostic
 from ..solvers.registry import make_solver
 from ..solvers.sensitivity import Sensitivity, evaluate, sensitivity
+from ..vocab import AUTONOMOUS, FAULTY, INTERVENE
 from .config import AGNOSTIC, AWARE, LOW, PAPER, ReproduceConfig
 from .statistics import mean_ci
 

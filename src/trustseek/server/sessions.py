@@ -33,9 +33,10 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
 from ..errors import TrustseekError
-from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
+from ..model.core import TrustModel
 from ..model.task import Task
 from ..policies.scheduling import SchedulePolicy
+from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from .answers import questionnaire_due, quiz_due, report_due
 from .cache import caches_of
 from .errors import Conflict, NotAllowed, NotFound, TooLarge

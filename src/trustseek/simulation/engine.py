@@ -36,13 +36,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.core import ASK, AUTONOMOUS, INTERVENE, RELIABLE, RELY, TrustModel
+from ..model.core import TrustModel
 from ..model.task import Task
 from ..policies.base import Policy, PolicyError, ask_bounds
 from ..policies.complexity import ComplexityPolicy
 from ..policies.runner import PolicyRunner
 from ..pomdp.belief import ScalarBelief
-from ..vocab import check_belief_update
+from ..vocab import ASK, AUTONOMOUS, INTERVENE, RELIABLE, RELY, check_belief_update
 from . import kernels
 from .populations import SimulationError, Supervisors
 from .results import SUMMARY_QUANTITIES, Simulation

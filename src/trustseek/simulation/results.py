@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from ..model.task import Task
+from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from .populations import SimulationError
 
 SUMMARY_COLUMNS = (

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.core import INTERVENE, RELIABLE, TrustModel
+from ..model.core import TrustModel
 from ..model.task import Task
 from ..policies.base import Policy
 from ..policies.scheduling import SchedulePolicy
@@ -36,6 +36,7 @@ from ..pomdp.scheduling import SchedulingProblem
 from ..solvers.alpha import finite_horizon_value
 from ..solvers.defaults import DEFAULT_SCHEDULE_GRID
 from ..solvers.registry import make_solver
+from ..vocab import INTERVENE, RELIABLE
 from .populations import SimulationError, check_participants
 from .trial_orders import schedule_counts
 

@@ -9,11 +9,11 @@ from typing import Any
 
 import numpy as np
 
-from ..model.core import AUTONOMOUS, INTERVENE, TrustModel
+from ..model.core import TrustModel
 from ..model.task import Task
 from ..policies.complexity import ComplexityPolicy, randomized
 from ..pomdp.problem import AssistancePOMDP
-from ..vocab import PAPER_ASK_PROBABILITIES, PAPER_DATA_COUNTS
+from ..vocab import AUTONOMOUS, INTERVENE, PAPER_ASK_PROBABILITIES, PAPER_DATA_COUNTS
 from .base import Solver, SolverError, one_blas_thread
 
 #: trials per participant of the paper's data collection (41 low + 30 high)

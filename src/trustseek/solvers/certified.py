@@ -27,13 +27,13 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.optimize import brentq
 
-from ..model.core import ASK, AUTONOMOUS
 from ..policies.alpha_vector import AlphaVectorPolicy
 from ..policies.base import Policy
 from ..policies.envelope import envelope_values
 from ..policies.grid_q import TABLE_POINTS, TrustAwarePolicy
 from ..policies.regions import ask_intervals, threshold
 from ..pomdp.problem import AssistancePOMDP
+from ..vocab import ASK, AUTONOMOUS
 from .base import Solver, one_blas_thread
 from .numerics import improve, policy_values
 

@@ -23,10 +23,10 @@ import numpy as np
 from scipy.optimize import minimize
 
 from ..errors import TrustseekError
-from ..model.core import ASK, AUTONOMOUS, RELY, TrustModel
+from ..model.core import TrustModel
 from ..model.task import Task
 from ..pomdp.problem import AssistancePOMDP
-from ..vocab import check_belief_update
+from ..vocab import ASK, AUTONOMOUS, RELY, check_belief_update
 from .registry import make_solver
 
 __all__ = [

@@ -18,10 +18,11 @@ import numpy as np
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
-from ...model.core import ACTIONS, HUMAN_ACTIONS, TrustModel
+from ...model.core import TrustModel
 from ...model.task import Task
 from ...policies import PolicyError
 from ...policies.scheduling import SchedulePolicy
+from ...vocab import ACTIONS, HUMAN_ACTIONS
 from ..errors import Conflict, NotAllowed, NotFound
 from ..orm import PolicyBlob, Session, utcnow
 from ..plan import Plans, PolicyPlan, policy_sha256
