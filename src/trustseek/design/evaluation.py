@@ -1,20 +1,14 @@
 """Exact evaluation of a policy under a true model.
 
-A policy plans with its own model (usually a fitted one) and tracks the supervisor's trust with
-its own belief updater; the supervisors behave like the *true* model.  The value of the policy
-is then the value of a Markov chain on pairs (true trust T, the policy's belief x = P(trust =
-high) under its own model): at (T, x) the policy takes its action a(x, C) for the coming
-complexity C ~ P(C), the true model draws (o, E', T') and the policy's updater moves x to
-x'(x, C, a, o, E').  The chain's x is kept on a uniform grid with x' spread linearly over the
-two grid points that bracket it (non-negative weights summing to one), and the discounted
-value V(T, x) = Σ_C P(C) [R(T, C, a) + γ Σ P(o, E', T' | T, C, a) V(T', x')] is the solution of
-one sparse linear system (:func:`~trustseek.solvers.numerics.policy_values`: BiCGSTAB checked
-against its residual, a direct solve as the fallback; no sampling).  With the default grid of 1001 points the
-interpolation changes the value by far less (about 1e-6 on the paper's model) than the Monte-Carlo error of 10^5 simulated
-supervisors; ``tests/design/test_design.py`` checks the value against the simulator.
-
-The regret of a policy is V*(b0) - V^π(b0), both under the true model and from the true initial
-trust, where the optimal policy is the one planned with the true model and its belief.
+A policy plans and tracks trust with its own model; the supervisors follow the *true* model.  The
+policy's value is that of a Markov chain on (true trust T, the policy's belief x = P(trust = high)):
+at (T, x) it takes a(x, C) for C ~ P(C), the true model draws (o, E', T') and the policy's updater
+moves x to x'.  x lives on a uniform grid, x' spread linearly over the two grid points around it,
+and V(T, x) = Σ_C P(C) [R(T, C, a) + γ Σ P(o, E', T' | T, C, a) V(T', x')] is one sparse linear
+solve (:func:`~trustseek.solvers.numerics.policy_values`; no sampling).  On 1001 points the
+interpolation moves the value by about 1e-6 on the paper's model, far below the Monte-Carlo error
+of 10^5 simulated supervisors.  The regret of a policy is V*(b0) - V^π(b0), both under the true
+model from its initial trust, V* that of the policy planned with the true model.
 """
 
 from __future__ import annotations
@@ -49,9 +43,6 @@ class Evaluation:
 
 def _ask_probabilities(policy: Policy, x: np.ndarray, n_complexity: int) -> np.ndarray:
     """P(ask | x, C) of ``policy`` at beliefs ``x`` (G,), shape (N, G)."""
-    p_ask = getattr(policy, "p_ask", None)
-    if policy.belief_update is None and p_ask is not None:
-        return np.broadcast_to(np.asarray(p_ask, dtype=float)[:, None], (n_complexity, len(x))).copy()
     beliefs = np.stack([1.0 - x, x], axis=1)
     out = np.empty((n_complexity, len(x)))
     for c in range(n_complexity):

@@ -19,7 +19,7 @@ import math
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -31,10 +31,11 @@ from ..model.core import TrustModel
 from ..model.jsonfile import json_safe
 from ..model.presets import paper_model, paper_task
 from ..model.task import Task
+from ..reproduction.robustness import solve_policy
 from ..reproduction.statistics import mean_ci, share_ci
 from ..solvers.base import one_blas_thread
 from .evaluation import evaluate_policy, high_threshold
-from .replicate import Experiment1, FitSettings, Study, plan, run_chunk
+from .replicate import Experiment1, FitSettings, Study, run_chunk
 
 __all__ = ["TESTS", "DesignConfig", "DesignResult", "ask_search", "ask_search_problems", "participants_needed", "run_design"]
 
@@ -153,27 +154,10 @@ class DesignConfig:
         return out
 
     def to_summary(self) -> dict[str, Any]:
-        """The settings as the JSON records them."""
-        return {
-            "seed": self.seed,
-            "replicates": self.replicates,
-            "participants_1": list(self.participants_1),
-            "trials_1": list(self.trials_1),
-            "share_high_1": list(self.share_high_1),
-            "ask_low": list(self.ask_low),
-            "ask_high": list(self.ask_high),
-            "participants_2": list(self.participants_2),
-            "trials_2": list(self.trials_2),
-            "counterbalance": self.counterbalance,
-            "alpha": self.alpha,
-            "test": self.test,
-            "fit": asdict(self.fit),
-            "power_target": self.power_target,
-            "regret_target": self.regret_target,
-            "level": self.level,
-            "truth": self.truth.to_dict(),
-            "task": self.task.to_dict(),
-        }
+        """The settings as the JSON records them (the models last)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("truth", "task")}
+        out = {k: list(v) if isinstance(v, tuple) else v for k, v in out.items()}
+        return out | {"fit": asdict(self.fit), "truth": self.truth.to_dict(), "task": self.task.to_dict()}
 
 
 @dataclass
@@ -187,7 +171,7 @@ class DesignResult:
 
 def study_of(cfg: DesignConfig) -> Study:
     """What every replicate shares, with the true model's optimal policy's value and threshold."""
-    best = plan(cfg.truth, cfg.task, cfg.fit)
+    best = solve_policy(cfg.truth, cfg.task, cfg.fit.belief_update, cfg.fit.grid)
     v_star = evaluate_policy(best, cfg.truth, cfg.task, grid=cfg.fit.evaluation_grid).value
     return Study(
         truth=cfg.truth,
@@ -201,10 +185,6 @@ def study_of(cfg: DesignConfig) -> Study:
         optimal_threshold=high_threshold(best),
         seed=cfg.seed,
     )
-
-
-def _chunks(items: list[Any], size: int) -> list[list[Any]]:
-    return [items[i : i + size] for i in range(0, len(items), size)]
 
 
 def _even_parts(items: list[Any], workers: int, most: int = 8) -> list[list[Any]]:
@@ -228,7 +208,6 @@ def execute(
     jobs: int = 1,
     client: Any = None,
     progress: Progress | None = None,
-    chunk: int | None = None,
 ) -> list[dict[str, Any]]:
     """Every replicate of ``items`` (point, design, replicate), sorted by (point, replicate):
     in this process (``jobs`` = 1), in ``jobs`` local processes, or on the Dask ``client``."""
@@ -242,7 +221,7 @@ def execute(
             report(len(out), total)
     else:
         workers = jobs if client is None else max(1, len(client.scheduler_info().get("workers", {})))
-        parts = _chunks(items, chunk) if chunk else _even_parts(items, workers)
+        parts = _even_parts(items, workers)
         if client is not None:
             from dask.distributed import as_completed as dask_completed
 

@@ -84,20 +84,8 @@ def serve_process(
     wait until it answers (at most ``timeout`` seconds).  The token goes through the environment,
     not the command line.  A server that does not answer in time is stopped before the error is
     raised, so that it does not live on (holding the port and the database) after the test."""
-    cmd = [
-        sys.executable,
-        "-c",
-        "from trustseek.cli import main; main()",
-        "serve",
-        "--db",
-        db_url,
-        "--host",
-        "127.0.0.1",
-        "--port",
-        str(port),
-        "--workers",
-        str(workers),
-    ]
+    where = f"--host 127.0.0.1 --port {port} --workers {workers}".split()
+    cmd = [sys.executable, "-c", "from trustseek.cli import main; main()", "serve", "--db", db_url, *where]
     env = {**os.environ, "PYTHONUNBUFFERED": "1", "TRUSTSEEK_TOKEN": token}
     # the child keeps its own descriptors: this process closes its copies once the server answers
     with contextlib.ExitStack() as files:
@@ -191,36 +179,14 @@ class TemporaryPostgres:
         if self.owner is not None:
             os.chown(root, *self.owner)
         data, port = root / "data", free_port()
-        self._run(
-            str(self.bindir / "initdb"),
-            "-D",
-            str(data),
-            "-U",
-            "postgres",
-            "-A",
-            "trust",
-            "-E",
-            "UTF8",
-            "--no-sync",
-            "--no-instructions",
-        )
+        initdb = ["-U", "postgres", "-A", "trust", "-E", "UTF8", "--no-sync", "--no-instructions"]
+        self._run(str(self.bindir / "initdb"), "-D", str(data), *initdb)
         opts = f"-k {root} -p {port} -c listen_addresses=127.0.0.1"
         if not self.fsync:
             opts += " -c fsync=off -c full_page_writes=off"
         self.started = True  # from here on stop() runs pg_ctl stop, even if the start fails half-way
-        self._run(
-            str(self.bindir / "pg_ctl"),
-            "-D",
-            str(data),
-            "-l",
-            str(root / "server.log"),
-            "-o",
-            opts,
-            "-w",
-            "-t",
-            "60",
-            "start",
-        )
+        log = str(root / "server.log")
+        self._run(str(self.bindir / "pg_ctl"), "-D", str(data), "-l", log, "-o", opts, "-w", "-t", "60", "start")
         self.url = f"postgresql://postgres@127.0.0.1:{port}/postgres"
         return self.url
 
