@@ -24,6 +24,7 @@ from ..model.task import Task
 from ..policies import Policy
 from ..pomdp.belief import ScalarBelief
 from ..pomdp.problem import AssistancePOMDP
+from ..reproduction.robustness import high_threshold
 from ..solvers.numerics import policy_values
 
 __all__ = ["EVALUATION_GRID", "Evaluation", "evaluate_policy", "high_threshold"]
@@ -133,16 +134,3 @@ def _evaluate_belief_free(p_ask: np.ndarray, truth: TrustModel, task: Task, grid
     r = np.einsum("ca,cat->t", w, R)
     V = np.linalg.solve(np.eye(len(r)) - gamma * P, r)
     return Evaluation(value=float(truth.initial @ V), by_trust=tuple(float(v) for v in V), grid=grid)
-
-
-def high_threshold(policy: Policy) -> float:
-    """The belief in high trust below which ``policy`` asks in the last (highest) complexity: 0
-    when it never asks there, 1 when it always does; NaN when its ask region is not [0, θ) or it
-    ignores the belief."""
-    th = policy.thresholds() if policy.belief_update is not None else None
-    if not th:
-        return float("nan")
-    v = th.get(policy.complexities[-1])
-    if v is None:
-        return 0.0
-    return float(v)

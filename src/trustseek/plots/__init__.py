@@ -50,11 +50,6 @@ def style() -> Iterator[ModuleType]:
         yield plt
 
 
-def save(fig, path) -> None:
-    fig.savefig(path)
-    plt.close(fig)
-
-
 def finish(fig, path=None, title: str | None = None, rect: tuple[float, float, float, float] | None = None, layout: bool = True):
     """A figure's common tail: its ``title`` (``suptitle``), the tight layout (within ``rect``;
     none when not ``layout``), saved to ``path`` when one is given; returns the figure."""
@@ -63,5 +58,6 @@ def finish(fig, path=None, title: str | None = None, rect: tuple[float, float, f
     if layout:
         fig.tight_layout(rect=rect)
     if path is not None:
-        save(fig, path)
+        fig.savefig(path)
+        plt.close(fig)
     return fig

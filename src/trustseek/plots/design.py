@@ -64,14 +64,8 @@ def plot_regret(summary: dict[str, Any], path=None, title: str | None = None):
                 continue
             lo = r["lo"] if r["lo"] is not None else r["mean"]
             hi = r["hi"] if r["hi"] is not None else r["mean"]
-            ax.errorbar(
-                100 * r["mean"],
-                i,
-                xerr=[[100 * (r["mean"] - lo)], [100 * (hi - r["mean"])]],
-                fmt="o",
-                color=COLORS["high"],
-                capsize=3,
-            )
+            err = [[100 * (r["mean"] - lo)], [100 * (hi - r["mean"])]]
+            ax.errorbar(100 * r["mean"], i, xerr=err, fmt="o", color=COLORS["high"], capsize=3)
         ax.axvline(100 * target, color="black", lw=0.8, ls=":", label=f"target {100 * target:g} % of V*")
         ax.set_yticks(range(len(pts)), [_label(p) for p in pts])
         ax.set_xlabel("regret of the estimated policy (% of V*, exact evaluation under the true model)")
@@ -98,17 +92,8 @@ def plot_ask_search(search: dict[str, Any], path=None, title: str | None = None)
         ax.set_xlabel("P(ask | low complexity) in experiment 1")
         ax.set_ylabel("P(ask | high complexity)")
         for key, marker, lab in (("best", "*", "best"), ("paper", "s", "paper (0.10 / 0.40)")):
-            b = search[key]
-            ax.plot(
-                lows.index(b["ask_low"]),
-                highs.index(b["ask_high"]),
-                marker=marker,
-                color="white",
-                mec="black",
-                ms=11,
-                ls="",
-                label=lab,
-            )
+            x, y = lows.index(search[key]["ask_low"]), highs.index(search[key]["ask_high"])
+            ax.plot(x, y, marker=marker, color="white", mec="black", ms=11, ls="", label=lab)
         fig.colorbar(im, ax=ax, label="mean regret (% of V*)")
         ax.grid(False)
         ax.legend(loc="upper left", bbox_to_anchor=(1.35, 1.0), frameon=False)

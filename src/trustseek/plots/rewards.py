@@ -9,6 +9,7 @@ import numpy as np
 from . import COLORS, finish, style
 
 POLICY_COLORS = {"trust-agnostic": "#7f7f7f", "trust-aware": COLORS["autonomous"]}
+PAPER_MARK = {"facecolor": "none", "edgecolor": COLORS["ask"], "linewidth": 1.0}  # a value the paper reports
 
 
 def _box(ax, data: Sequence[np.ndarray], labels: Sequence[str], colors: Sequence[str], fliers: bool = True):
@@ -65,19 +66,9 @@ def plot_rewards(
             for j, d in enumerate(data):
                 med = float(np.median(d))
                 ax.annotate(f"{med:g}", xy=(j + 1.27, med), fontsize=7, va="center", color="black")
-            if paper_medians:
-                for j, k in enumerate(order):
-                    if k in paper_medians:
-                        ax.scatter(
-                            [j + 1],
-                            [paper_medians[k]],
-                            marker="D",
-                            s=22,
-                            facecolor="none",
-                            edgecolor=COLORS["ask"],
-                            linewidth=1.0,
-                            zorder=4,
-                        )
+            for j, k in enumerate(order):
+                if paper_medians and k in paper_medians:
+                    ax.scatter([j + 1], [paper_medians[k]], marker="D", s=22, zorder=4, **PAPER_MARK)
             ax.set_ylabel("cumulative reward per block")
             ax.set_xlim(0.5, len(order) + 0.7)
             ax.set_title(f"{'(a)' if paired else '(b)'} {n:,} simulated participants")
@@ -87,15 +78,9 @@ def plot_rewards(
 
             handle = Line2D([], [], marker="D", ls="none", markersize=5, markerfacecolor="none", markeredgecolor=COLORS["ask"])
             median_line = Line2D([], [], color="black", lw=1.2)
-            fig.legend(
-                [median_line, handle],
-                ["median (simulation)", "median reported in the paper"],
-                loc="lower center",
-                ncols=2,
-                frameon=False,
-                fontsize=7,
-                bbox_to_anchor=(0.5, 0.0),
-            )
+            labels = ["median (simulation)", "median reported in the paper"]
+            where = {"loc": "lower center", "bbox_to_anchor": (0.5, 0.0)}
+            fig.legend([median_line, handle], labels, ncols=2, frameon=False, fontsize=7, **where)
         return finish(fig, path, rect=(0, 0.06, 1, 1) if paper_medians else None)
 
 

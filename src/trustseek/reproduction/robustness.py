@@ -22,11 +22,19 @@ from .config import AGNOSTIC, AWARE, LOW, PAPER, ReproduceConfig
 from .statistics import mean_ci
 
 
+def high_threshold(policy: Policy) -> float:
+    """The belief in high trust below which ``policy`` asks in the last (highest) complexity: 0
+    when it never asks there, 1 when it always does; NaN when its ask region is not [0, θ) or it
+    ignores the belief."""
+    th = policy.thresholds() if policy.belief_update is not None else None
+    v = th.get(policy.complexities[-1]) if th else float("nan")
+    return 0.0 if v is None else float(v)
+
+
 def threshold_of(policy: Policy) -> float | None:
-    """The high-complexity threshold of a policy that reads the belief (None when it never asks,
-    when its ask region is not [0, θ) or when it ignores the belief)."""
-    th = (policy.thresholds() or {}).get("high") if policy.belief_update is not None else None
-    return None if th is None or not np.isfinite(th) else float(th)
+    """:func:`high_threshold`, None when the policy never asks there or has no threshold."""
+    th = high_threshold(policy)
+    return th if th > 0 else None
 
 
 def solve_policy(model: TrustModel, task: Task, update: str, grid: int) -> Policy:
