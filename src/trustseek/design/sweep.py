@@ -1,15 +1,11 @@
 """Study design and power analysis: replicated pipelines over a grid of designs.
 
-:func:`run_design` takes a :class:`DesignConfig` (the true population, the task, grids over
-experiment 1 and experiment 2, the fit settings, R replicates, the targets) and runs every
-replicate (:func:`~.replicate.run_replicate`) in this process, in local processes
-(``jobs``) or on a Dask distributed cluster (``client``).  Replicate seeds depend only on the
-sweep seed, the design point and the replicate index, so the summary is the same whatever
-runs it.  The summary (JSON-ready) holds per design point the regret and the threshold error
-of the estimated policy with intervals, per experiment-2 setting the power of both tests with
-exact intervals, the participants needed for the target power, and the smallest design that
-meets the targets.  :func:`ask_search` is the data-collection design search: experiment 1's
-ask probabilities at a fixed budget of trials, ranked by regret.
+:func:`run_design` runs every replicate of a :class:`DesignConfig` in this process, in local
+processes or on a Dask cluster (seeds depend only on the sweep seed, the design point and the
+replicate, so the summary is the same whatever runs it) and summarizes per design point the
+regret and threshold error with intervals, the power of both tests with exact intervals, the
+participants needed and the smallest design meeting the targets.  :func:`ask_search` ranks
+experiment 1's ask probabilities at a fixed budget of trials by regret.
 """
 
 from __future__ import annotations
@@ -339,16 +335,12 @@ def summarize(cfg: DesignConfig, study: Study, designs: list[Experiment1], reps:
                             "cost_trials": d.participants * d.trials + 2 * n * trials,
                         }
                     )
-            needed = next((c["participants"] for c in curve if (c[cfg.test]["power"] or 0) >= cfg.power_target), None)
-            needed_lo = next((c["participants"] for c in curve if (c[cfg.test]["hi"] or 0) >= cfg.power_target), None)
-            needed_hi = next((c["participants"] for c in curve if (c[cfg.test]["lo"] or 0) >= cfg.power_target), None)
-            point["experiment2"].append(
-                {
-                    "trials_per_block": trials,
-                    "curve": curve,
-                    "participants_for_power": {"estimate": needed, "lo": needed_lo, "hi": needed_hi},
-                }
-            )
+            # the smallest grid value whose power (the estimate, its interval's upper and lower ends) reaches the target
+            need = {
+                key: next((c["participants"] for c in curve if (c[cfg.test][end] or 0) >= cfg.power_target), None)
+                for key, end in (("estimate", "power"), ("lo", "hi"), ("hi", "lo"))
+            }
+            point["experiment2"].append({"trials_per_block": trials, "curve": curve, "participants_for_power": need})
         points.append(point)
     smallest = min(candidates, key=lambda c: (c["cost_trials"], c["point"], c["participants_2"])) if candidates else None
     return {

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.core import ACTIONS, EXPERIENCES, RELY
-from . import finish, style
+from . import figure, finish
 
 _LEVEL_COLORS = ("#c8102e", "#1f5fa8", "#2a9d3f", "#7b3294", "#e08214", "#666666", "#000000", "#8c510a")
 
@@ -51,8 +51,7 @@ def plot_emissions(model, path=None, ci=None, reference=None, reference_label="p
     skip = set(getattr(model, "not_estimated", ()))
     groups = [(c, a) for a in range(2) for c in range(len(C)) if ("emission", (c, a)) not in skip]
     vals, lo, hi, ref = _cells(model, "emission", ci, reference, groups, lambda g, t: (*g, t, RELY))
-    with style() as plt:
-        fig, ax = plt.subplots(figsize=(4.6, 2.6))
+    with figure(figsize=(4.6, 2.6)) as (fig, ax):
         _bars(ax, vals, lo, hi, ref, [f"C={C[c]}\na={ACTIONS[a]}" for c, a in groups], [f"T={t}" for t in T], reference_label)
         ax.set_ylabel(r"$P(o = \mathrm{rely} \mid T, C, a)$")
         ax.set_title("Estimated probability of relying on the robot" + (" (95% CI)" if ci is not None else ""))
@@ -75,8 +74,7 @@ def plot_transitions(model, path=None, ci=None, reference=None, reference_label=
             groups = [(a, e) for a, e in groups if ACTIONS[a] != "ask" or e == ask_experience[c]]
         if groups:
             panels.append((c, groups))
-    with style() as plt:
-        fig, axes = plt.subplots(1, max(len(panels), 1), figsize=(3.4 * max(len(panels), 1), 2.7), squeeze=False)
+    with figure(1, max(len(panels), 1), figsize=(3.4 * max(len(panels), 1), 2.7), squeeze=False) as (fig, axes):
         for ax, (c, groups) in zip(axes[0], panels, strict=False):
             vals, lo, hi, ref = _cells(model, "transition", ci, reference, groups, lambda g, t, c=c: (c, *g, t, top))
             labels = [f"{ACTIONS[a]}\nE'={EXPERIENCES[e]}" for a, e in groups]

@@ -129,13 +129,9 @@ def _run_chunk(
     progress: Callable[[int], None] | None,
     compiled: bool = True,
 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """Participants ``sl`` (parameter rows ``rows``) through every block: the per-block
-    summaries and, when ``record``, every trial (participant-major arrays).
-
-    A block runs in the compiled kernel (:func:`.kernels.run_block`) when ``compiled`` and the
-    case is a common one (two trust levels; a threshold policy on a scalar belief, or a
-    complexity policy), else in the numpy loop below; both draw the same uniforms in the same
-    order and give the same trials."""
+    """Participants ``sl`` (parameter rows ``rows``) through every block, each in the compiled
+    kernel when ``compiled`` and it can, else in the numpy loop: the per-block summaries and,
+    when ``record``, every trial (participant-major arrays)."""
     st = _Chunk(tab, rows, sl, seeds, record, sum(b.schedule.shape[1] for b in blocks))
     for block in blocks:
         sched = np.ascontiguousarray(block.schedule[sl].T).astype(np.int64)  # (T, m)
@@ -303,11 +299,10 @@ def run(
 ) -> Simulation:
     """Simulate every participant of ``supervisors`` through ``blocks`` in order.
 
-    ``seed`` fixes every draw (supervisors' luck in chunks of :data:`CHUNK` participants, and
-    the policies' own draws on a separate stream).  ``record=False`` keeps only the
-    per-participant summaries (what large runs need).  ``progress(k)`` is called with the
-    number of trials just simulated.  ``compiled=False`` runs every block in the numpy loop
-    (the reference the compiled kernel is tested against; the same simulation).
+    ``seed`` fixes every draw (the supervisors' per chunk of :data:`CHUNK` participants, the
+    policies' on a separate stream).  ``record=False`` keeps only the per-participant summaries.
+    ``progress(k)`` is called with the number of trials just simulated.  ``compiled=False`` runs
+    every block in the numpy loop (the reference of the compiled kernel; the same simulation).
     """
     blocks = list(blocks)
     n = supervisors.n
