@@ -15,7 +15,7 @@ import math
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -434,10 +434,7 @@ def ask_search(
     if problems:
         raise TrustseekError(problems)
     study = study_of(sub)
-    designs = [
-        Experiment1(sub.participants_1[0], sub.trials_1[0], round(sub.trials_1[0] * float(sub.share_high_1[0])), lo, hi)
-        for lo, hi in grid
-    ]
+    designs = [replace(sub.designs()[0], ask_low=lo, ask_high=hi) for lo, hi in grid]
     items = [(i, d, r) for i, d in enumerate(designs) for r in range(sub.replicates)]
     reps = execute(study, items, jobs=jobs, client=client, progress=progress)
     rows: list[dict[str, Any]] = []
