@@ -26,7 +26,7 @@ import pandas as pd
 from ..estimation.fit import fit_trust_model
 from ..estimation.mixture import fit_types
 from ..estimation.options import FitOptions
-from ..model.core import TrustModel
+from ..model.core import INTERVENE, TrustModel
 from ..model.mixture import TypeMixture
 from ..model.presets import paper_conservative_mixture, paper_task
 from ..model.task import Task
@@ -121,15 +121,9 @@ def _run(
     low_c = task.complexities.index("low") if "low" in task.complexities else 0
 
     def one(pol: Policy) -> tuple[np.ndarray, np.ndarray]:
-        sim = simulate(sup, task, pol, counts=counts, seed=seed, record=True)
-        t = sim.trials()
-        inter = (
-            t.assign(x=(t["complexity"] == task.complexities[low_c]) & (t["human_action"] == "intervene"))
-            .groupby("participant", sort=False)["x"]
-            .sum()
-            .to_numpy(dtype=float)
-        )
-        return sim.reward_matrix()[:, 0], inter
+        trials = simulate(sup, task, pol, counts=counts, seed=seed, record=True)
+        a = trials.arrays or {}
+        return trials.reward_matrix()[:, 0], ((a["complexity"] == low_c) & (a["human"] == INTERVENE)).sum(axis=1).astype(float)
 
     for label, pol in policies.items():
         rewards[label], low[label] = one(pol)

@@ -134,16 +134,10 @@ def postgres_binaries() -> Path | None:
 
 
 class TemporaryPostgres:
-    """A throwaway PostgreSQL cluster: ``initdb`` in a temporary directory, the server on
-    127.0.0.1:<free port> with its socket in that directory, trust authentication for the
-    ``postgres`` role, no fsync (test data; ``fsync=True``: PostgreSQL's defaults, every commit on
-    disk before it is acknowledged, as a real database runs).  PostgreSQL refuses to run as root, so as root its
-    programs run as the ``postgres`` user (through ``runuser``).
-
-        with TemporaryPostgres() as url:    # postgresql://postgres@127.0.0.1:<port>/postgres
-            app = create_app(url)
-
-    ``start()`` / ``stop()`` for fixtures; ``stop()`` always removes the directory.
+    """A throwaway PostgreSQL cluster in a temporary directory, on 127.0.0.1:<free port>, trust
+    authentication for ``postgres``, no fsync (``fsync=True``: PostgreSQL's defaults).  As root its
+    programs run as the ``postgres`` user (``runuser``).  ``with TemporaryPostgres() as url:`` or
+    ``start()`` / ``stop()`` (which always removes the directory).
     """
 
     def __init__(self, bindir: Path | None = None, fsync: bool = False):
