@@ -4,7 +4,6 @@ the tests, the benchmark and notebooks)."""
 
 from __future__ import annotations
 
-import contextlib
 import glob
 import os
 import pwd
@@ -77,9 +76,7 @@ class ThreadServer:
         self.thread.join(timeout=10)
 
 
-def serve_process(
-    db_url: str, token: str, port: int, log: Path | None = None, workers: int = 1, timeout: float = START_TIMEOUT
-) -> subprocess.Popen:
+def serve_process(db_url: str, token: str, port: int, workers: int = 1, timeout: float = START_TIMEOUT) -> subprocess.Popen:
     """Start ``trustseek serve`` (``workers`` processes) as a child process on 127.0.0.1:port and
     wait until it answers (at most ``timeout`` seconds).  The token goes through the environment,
     not the command line.  A server that does not answer in time is stopped before the error is
@@ -87,12 +84,10 @@ def serve_process(
     where = f"--host 127.0.0.1 --port {port} --workers {workers}".split()
     cmd = [sys.executable, "-c", "from trustseek.cli import main; main()", "serve", "--db", db_url, *where]
     env = {**os.environ, "PYTHONUNBUFFERED": "1", "TRUSTSEEK_TOKEN": token}
-    # the child keeps its own descriptors: this process closes its copies once the server answers
-    with contextlib.ExitStack() as files:
-        out = files.enter_context(open(log, "ab")) if log is not None else subprocess.DEVNULL
-        # stderr goes to a file, not a pipe: an unread pipe would block a chatty server
-        err = files.enter_context(tempfile.TemporaryFile())
-        proc = subprocess.Popen(cmd, stdout=out, stderr=err, env=env)
+    # stderr to a file, not a pipe (an unread pipe would block a chatty server); the child keeps its own
+    # descriptor, this process closes its copy once the server answers
+    with tempfile.TemporaryFile() as err:
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, env=env)
         try:
             wait_ready(f"http://127.0.0.1:{port}", timeout=timeout, proc=proc)
         except ServerStartError as exc:
@@ -140,9 +135,9 @@ class TemporaryPostgres:
     ``start()`` / ``stop()`` (which always removes the directory).
     """
 
-    def __init__(self, bindir: Path | None = None, fsync: bool = False):
+    def __init__(self, fsync: bool = False):
         self.fsync = fsync
-        found = bindir or postgres_binaries()
+        found = postgres_binaries()
         if found is None:
             raise ServerStartError("PostgreSQL server binaries (initdb, pg_ctl) not found: install Debian's postgresql package")
         self.bindir: Path = found
