@@ -32,7 +32,6 @@ from trustseek.design.replicate import (
     experiment1_sequences,
     fit_encoded,
     paired_tests,
-    plan,
     replicate_seed,
     run_replicate,
 )
@@ -43,6 +42,7 @@ from trustseek.estimation.options import FitOptions
 from trustseek.estimation.sequences import encode
 from trustseek.estimation.trust_iohmm import preset_spec
 from trustseek.policies import randomized
+from trustseek.reproduction.robustness import solve_policy
 from trustseek.simulation import crossover, simulate
 from trustseek.vocab import TRIAL_COLUMNS
 
@@ -80,7 +80,7 @@ def stages(cfg: DesignConfig, n: int) -> None:
         model = fit_encoded(seqs, spec, fs, r)
         t["fit"] += time.process_time() - c
         c = time.process_time()
-        aware = plan(model, task, fs)
+        aware = solve_policy(model, task, fs.belief_update, fs.grid)
         t["solve"] += time.process_time() - c
         c = time.process_time()
         agn = agnostic_of(sim1)

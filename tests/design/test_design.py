@@ -167,13 +167,13 @@ def test_config_problems_name_the_options():
 
 
 def test_agnostic_from_arrays_is_the_solvers():
-    from trustseek.design.replicate import _agnostic
+    from trustseek.design.replicate import agnostic_of
     from trustseek.solvers.agnostic import trust_agnostic_from_data
 
     truth, task = paper_model(), paper_task()
     for seed in range(5):
-        frame = simulate(truth, task, randomized({"low": 0.1, "high": 0.4}), 3, counts=(10, 8), seed=seed).trials()
-        ours, ref = _agnostic(frame, task), trust_agnostic_from_data(frame, task)
+        sim = simulate(truth, task, randomized({"low": 0.1, "high": 0.4}), 3, counts=(10, 8), seed=seed)
+        ours, ref = agnostic_of(sim), trust_agnostic_from_data(sim.trials(), task)
         assert ours.p_ask.tolist() == ref.p_ask.tolist() and ours.info == ref.info
 
 

@@ -7,13 +7,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trustseek.design.replicate import _agnostic, agnostic_of, experiment1_sequences
+from trustseek.design.replicate import agnostic_of, experiment1_sequences
 from trustseek.errors import TrustseekError
 from trustseek.estimation.sequences import encode
 from trustseek.estimation.trust_iohmm import preset_spec
 from trustseek.model.presets import paper_model, paper_task
 from trustseek.policies import randomized
 from trustseek.simulation import simulate
+from trustseek.solvers.agnostic import trust_agnostic_from_data
 from trustseek.vocab import TRIAL_COLUMNS
 
 
@@ -43,7 +44,7 @@ def test_sequences_from_arrays_equal_encode_of_the_trials(n, low, high, ask, see
         else:
             assert a == b, f.name
     try:
-        want = _agnostic(frame, task)
+        want = trust_agnostic_from_data(frame, task)
     except TrustseekError as exc:
         with pytest.raises(TrustseekError) as got:
             agnostic_of(sim)

@@ -1,20 +1,14 @@
 """Exact evaluation of a policy under a true model.
 
-A policy plans with its own model (usually a fitted one) and tracks the supervisor's trust with
-its own belief updater; the supervisors behave like the *true* model.  The value of the policy
-is then the value of a Markov chain on pairs (true trust T, the policy's belief x = P(trust =
-high) under its own model): at (T, x) the policy takes its action a(x, C) for the coming
-complexity C ~ P(C), the true model draws (o, E', T') and the policy's updater moves x to
-x'(x, C, a, o, E').  The chain's x is kept on a uniform grid with x' spread linearly over the
-two grid points that bracket it (non-negative weights summing to one), and the discounted
-value V(T, x) = Σ_C P(C) [R(T, C, a) + γ Σ P(o, E', T' | T, C, a) V(T', x')] is the solution of
-one sparse linear system (:func:`~trustseek.solvers.numerics.policy_values`: BiCGSTAB checked
-against its residual, a direct solve as the fallback; no sampling).  With the default grid of 1001 points the
-interpolation changes the value by far less (about 1e-6 on the paper's model) than the Monte-Carlo error of 10^5 simulated
-supervisors; ``tests/design/test_design.py`` checks the value against the simulator.
-
-The regret of a policy is V*(b0) - V^π(b0), both under the true model and from the true initial
-trust, where the optimal policy is the one planned with the true model and its belief.
+A policy plans and tracks trust with its own model; the supervisors follow the *true* model.  The
+policy's value is that of a Markov chain on (true trust T, the policy's belief x = P(trust = high)):
+at (T, x) it takes a(x, C) for C ~ P(C), the true model draws (o, E', T') and the policy's updater
+moves x to x'.  x lives on a uniform grid, x' spread linearly over the two grid points around it,
+and V(T, x) = Σ_C P(C) [R(T, C, a) + γ Σ P(o, E', T' | T, C, a) V(T', x')] is one sparse linear
+solve (:func:`~trustseek.solvers.numerics.policy_values`; no sampling).  On 1001 points the
+interpolation moves the value by about 1e-6 on the paper's model, far below the Monte-Carlo error
+of 10^5 simulated supervisors.  The regret of a policy is V*(b0) - V^π(b0), both under the true
+model from its initial trust, V* that of the policy planned with the true model.
 """
 
 from __future__ import annotations
@@ -30,6 +24,7 @@ from ..model.task import Task
 from ..policies import Policy
 from ..pomdp.belief import ScalarBelief
 from ..pomdp.problem import AssistancePOMDP
+from ..reproduction.robustness import high_threshold
 from ..solvers.numerics import policy_values
 
 __all__ = ["EVALUATION_GRID", "Evaluation", "evaluate_policy", "high_threshold"]
@@ -49,9 +44,6 @@ class Evaluation:
 
 def _ask_probabilities(policy: Policy, x: np.ndarray, n_complexity: int) -> np.ndarray:
     """P(ask | x, C) of ``policy`` at beliefs ``x`` (G,), shape (N, G)."""
-    p_ask = getattr(policy, "p_ask", None)
-    if policy.belief_update is None and p_ask is not None:
-        return np.broadcast_to(np.asarray(p_ask, dtype=float)[:, None], (n_complexity, len(x))).copy()
     beliefs = np.stack([1.0 - x, x], axis=1)
     out = np.empty((n_complexity, len(x)))
     for c in range(n_complexity):
@@ -142,16 +134,3 @@ def _evaluate_belief_free(p_ask: np.ndarray, truth: TrustModel, task: Task, grid
     r = np.einsum("ca,cat->t", w, R)
     V = np.linalg.solve(np.eye(len(r)) - gamma * P, r)
     return Evaluation(value=float(truth.initial @ V), by_trust=tuple(float(v) for v in V), grid=grid)
-
-
-def high_threshold(policy: Policy) -> float:
-    """The belief in high trust below which ``policy`` asks in the last (highest) complexity: 0
-    when it never asks there, 1 when it always does; NaN when its ask region is not [0, θ) or it
-    ignores the belief."""
-    th = policy.thresholds() if policy.belief_update is not None else None
-    if not th:
-        return float("nan")
-    v = th.get(policy.complexities[-1])
-    if v is None:
-        return 0.0
-    return float(v)

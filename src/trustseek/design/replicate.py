@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
@@ -22,14 +22,13 @@ from ..estimation.spec import IOHMMSpec
 from ..estimation.trust_iohmm import preset_spec
 from ..model.core import TrustModel
 from ..model.task import Task
-from ..policies import ComplexityPolicy, TrustAwarePolicy, randomized
-from ..pomdp.problem import AssistancePOMDP
+from ..policies import ComplexityPolicy, randomized
 from ..reproduction.config import seed_int
+from ..reproduction.robustness import solve_policy
 from ..reproduction.statistics import paired_tests
 from ..simulation import Simulation, crossover, simulate
 from ..solvers.agnostic import agnostic_from_intervention_rates, trust_agnostic_from_data
 from ..solvers.base import one_blas_thread
-from ..solvers.registry import make_solver
 from ..vocab import ACTIONS, AUTONOMOUS, EXPERIENCES, HUMAN_ACTIONS, INTERVENE, LEVELS
 from .evaluation import EVALUATION_GRID, evaluate_policy, high_threshold
 
@@ -173,31 +172,10 @@ def experiment1_sequences(sim: Simulation) -> tuple[Sequences, IOHMMSpec]:
     return seqs, spec
 
 
-def plan(model: TrustModel, task: Task, settings: FitSettings) -> TrustAwarePolicy:
-    """The trust-aware policy of ``model``: the registry's grid solver on ``settings.grid``
-    points (a few hundred: its dense policy iteration)."""
-    solver = make_solver("grid", grid=settings.grid, belief_update=settings.belief_update)
-    return cast(TrustAwarePolicy, solver.solve(AssistancePOMDP(model, task)))
-
-
-def _agnostic(frame: Any, task: Task) -> ComplexityPolicy:
-    """The trust-agnostic policy from experiment 1's data (as
-    :func:`~trustseek.solvers.agnostic.trust_agnostic_from_data`: P(intervene | C, autonomous)
-    estimated by its share), on the columns' arrays."""
-    c = frame["complexity"].to_numpy()
-    auto = frame["robot_action"].to_numpy() == "autonomous"
-    human = frame["human_action"].to_numpy()
-    p_int = []
-    for cn in task.complexities:
-        sel = auto & (c == cn)
-        if not sel.any():
-            return trust_agnostic_from_data(frame, task)  # raises, naming the complexity
-        p_int.append(float(np.mean(human[sel] == "intervene")))
-    return agnostic_from_intervention_rates(task, p_int, source=f"data, {len(frame)} trials")
-
-
 def agnostic_of(sim: Simulation) -> ComplexityPolicy:
-    """:func:`_agnostic` of ``sim.trials()``, on the simulation's integer arrays."""
+    """The trust-agnostic policy from experiment 1's trials (as
+    :func:`~trustseek.solvers.agnostic.trust_agnostic_from_data` of ``sim.trials()``: P(intervene |
+    C, autonomous) estimated by its share), on the simulation's integer arrays."""
     if sim.arrays is None:
         raise TrustseekError(["experiment 1 must record its trials"])
     c = sim.arrays["complexity"].reshape(-1)
@@ -207,7 +185,7 @@ def agnostic_of(sim: Simulation) -> ComplexityPolicy:
     for k in range(sim.task.n_complexity):
         sel = auto & (c == k)
         if not sel.any():
-            return _agnostic(sim.trials(), sim.task)  # raises, naming the complexity
+            return trust_agnostic_from_data(sim.trials(), sim.task)  # raises, naming the complexity
         p_int.append(float(np.mean(intervene[sel])))
     return agnostic_from_intervention_rates(sim.task, p_int, source=f"data, {len(c)} trials")
 
@@ -222,7 +200,7 @@ def run_replicate(study: Study, point: int, design: Experiment1, replicate: int)
     sim1 = simulate(truth, task, ask, design.participants, counts=design.counts, seed=s1)
     try:
         model = fit_encoded(*experiment1_sequences(sim1), fs, seed_int(sfit))
-        aware = plan(model, task, fs)
+        aware = solve_policy(model, task, fs.belief_update, fs.grid)
         agnostic = agnostic_of(sim1)
     except TrustseekError as exc:
         out["error"] = "; ".join(exc.lines())

@@ -1,15 +1,11 @@
 """Study design and power analysis: replicated pipelines over a grid of designs.
 
-:func:`run_design` takes a :class:`DesignConfig` (the true population, the task, grids over
-experiment 1 and experiment 2, the fit settings, R replicates, the targets) and runs every
-replicate (:func:`~.replicate.run_replicate`) in this process, in local processes
-(``jobs``) or on a Dask distributed cluster (``client``).  Replicate seeds depend only on the
-sweep seed, the design point and the replicate index, so the summary is the same whatever
-runs it.  The summary (JSON-ready) holds per design point the regret and the threshold error
-of the estimated policy with intervals, per experiment-2 setting the power of both tests with
-exact intervals, the participants needed for the target power, and the smallest design that
-meets the targets.  :func:`ask_search` is the data-collection design search: experiment 1's
-ask probabilities at a fixed budget of trials, ranked by regret.
+:func:`run_design` runs every replicate of a :class:`DesignConfig` in this process, in local
+processes or on a Dask cluster (seeds depend only on the sweep seed, the design point and the
+replicate, so the summary is the same whatever runs it) and summarizes per design point the
+regret and threshold error with intervals, the power of both tests with exact intervals, the
+participants needed and the smallest design meeting the targets.  :func:`ask_search` ranks
+experiment 1's ask probabilities at a fixed budget of trials by regret.
 """
 
 from __future__ import annotations
@@ -19,7 +15,7 @@ import math
 import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -31,10 +27,11 @@ from ..model.core import TrustModel
 from ..model.jsonfile import json_safe
 from ..model.presets import paper_model, paper_task
 from ..model.task import Task
+from ..reproduction.robustness import solve_policy
 from ..reproduction.statistics import mean_ci, share_ci
 from ..solvers.base import one_blas_thread
 from .evaluation import evaluate_policy, high_threshold
-from .replicate import Experiment1, FitSettings, Study, plan, run_chunk
+from .replicate import Experiment1, FitSettings, Study, run_chunk
 
 __all__ = ["TESTS", "DesignConfig", "DesignResult", "ask_search", "ask_search_problems", "participants_needed", "run_design"]
 
@@ -153,27 +150,10 @@ class DesignConfig:
         return out
 
     def to_summary(self) -> dict[str, Any]:
-        """The settings as the JSON records them."""
-        return {
-            "seed": self.seed,
-            "replicates": self.replicates,
-            "participants_1": list(self.participants_1),
-            "trials_1": list(self.trials_1),
-            "share_high_1": list(self.share_high_1),
-            "ask_low": list(self.ask_low),
-            "ask_high": list(self.ask_high),
-            "participants_2": list(self.participants_2),
-            "trials_2": list(self.trials_2),
-            "counterbalance": self.counterbalance,
-            "alpha": self.alpha,
-            "test": self.test,
-            "fit": asdict(self.fit),
-            "power_target": self.power_target,
-            "regret_target": self.regret_target,
-            "level": self.level,
-            "truth": self.truth.to_dict(),
-            "task": self.task.to_dict(),
-        }
+        """The settings as the JSON records them (the models last)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("truth", "task")}
+        out = {k: list(v) if isinstance(v, tuple) else v for k, v in out.items()}
+        return out | {"fit": asdict(self.fit), "truth": self.truth.to_dict(), "task": self.task.to_dict()}
 
 
 @dataclass
@@ -187,7 +167,7 @@ class DesignResult:
 
 def study_of(cfg: DesignConfig) -> Study:
     """What every replicate shares, with the true model's optimal policy's value and threshold."""
-    best = plan(cfg.truth, cfg.task, cfg.fit)
+    best = solve_policy(cfg.truth, cfg.task, cfg.fit.belief_update, cfg.fit.grid)
     v_star = evaluate_policy(best, cfg.truth, cfg.task, grid=cfg.fit.evaluation_grid).value
     return Study(
         truth=cfg.truth,
@@ -201,10 +181,6 @@ def study_of(cfg: DesignConfig) -> Study:
         optimal_threshold=high_threshold(best),
         seed=cfg.seed,
     )
-
-
-def _chunks(items: list[Any], size: int) -> list[list[Any]]:
-    return [items[i : i + size] for i in range(0, len(items), size)]
 
 
 def _even_parts(items: list[Any], workers: int, most: int = 8) -> list[list[Any]]:
@@ -228,7 +204,6 @@ def execute(
     jobs: int = 1,
     client: Any = None,
     progress: Progress | None = None,
-    chunk: int | None = None,
 ) -> list[dict[str, Any]]:
     """Every replicate of ``items`` (point, design, replicate), sorted by (point, replicate):
     in this process (``jobs`` = 1), in ``jobs`` local processes, or on the Dask ``client``."""
@@ -242,7 +217,7 @@ def execute(
             report(len(out), total)
     else:
         workers = jobs if client is None else max(1, len(client.scheduler_info().get("workers", {})))
-        parts = _chunks(items, chunk) if chunk else _even_parts(items, workers)
+        parts = _even_parts(items, workers)
         if client is not None:
             from dask.distributed import as_completed as dask_completed
 
@@ -360,16 +335,12 @@ def summarize(cfg: DesignConfig, study: Study, designs: list[Experiment1], reps:
                             "cost_trials": d.participants * d.trials + 2 * n * trials,
                         }
                     )
-            needed = next((c["participants"] for c in curve if (c[cfg.test]["power"] or 0) >= cfg.power_target), None)
-            needed_lo = next((c["participants"] for c in curve if (c[cfg.test]["hi"] or 0) >= cfg.power_target), None)
-            needed_hi = next((c["participants"] for c in curve if (c[cfg.test]["lo"] or 0) >= cfg.power_target), None)
-            point["experiment2"].append(
-                {
-                    "trials_per_block": trials,
-                    "curve": curve,
-                    "participants_for_power": {"estimate": needed, "lo": needed_lo, "hi": needed_hi},
-                }
-            )
+            # the smallest grid value whose power (the estimate, its interval's upper and lower ends) reaches the target
+            need = {
+                key: next((c["participants"] for c in curve if (c[cfg.test][end] or 0) >= cfg.power_target), None)
+                for key, end in (("estimate", "power"), ("lo", "hi"), ("hi", "lo"))
+            }
+            point["experiment2"].append({"trials_per_block": trials, "curve": curve, "participants_for_power": need})
         points.append(point)
     smallest = min(candidates, key=lambda c: (c["cost_trials"], c["point"], c["participants_2"])) if candidates else None
     return {
@@ -463,10 +434,7 @@ def ask_search(
     if problems:
         raise TrustseekError(problems)
     study = study_of(sub)
-    designs = [
-        Experiment1(sub.participants_1[0], sub.trials_1[0], round(sub.trials_1[0] * float(sub.share_high_1[0])), lo, hi)
-        for lo, hi in grid
-    ]
+    designs = [replace(sub.designs()[0], ask_low=lo, ask_high=hi) for lo, hi in grid]
     items = [(i, d, r) for i, d in enumerate(designs) for r in range(sub.replicates)]
     reps = execute(study, items, jobs=jobs, client=client, progress=progress)
     rows: list[dict[str, Any]] = []

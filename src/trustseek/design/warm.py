@@ -1,26 +1,7 @@
-"""Compile the design study's numba kernels (those of the simulation) into numba's on-disk cache, once.
+"""``python -m trustseek.design.warm``: the design study's compiled kernels are the simulation's, so this
+runs :mod:`trustseek.simulation.warm` (``make test`` runs it after the fit's :mod:`trustseek.estimation.warm`)."""
 
-``python -m trustseek.design.warm`` runs :func:`trustseek.simulation.warm.warm` (every compiled
-path of the simulation engine), so that later
-processes, test workers among them, load them from the cache.  ``make test`` runs it next to the
-static checks, after the fit's :mod:`trustseek.estimation.warm`.
-"""
-
-from __future__ import annotations
-
-import time
-
-from ..simulation.warm import warm as warm_simulation
-
-
-def warm() -> float:
-    """Run every compiled path once; the seconds it took."""
-    t = time.perf_counter()
-    warm_simulation()
-    return time.perf_counter() - t
-
+import runpy
 
 if __name__ == "__main__":
-    import sys
-
-    sys.stdout.write(f"compiled the simulation's kernels in {warm():.1f} s\n")
+    runpy.run_module("trustseek.simulation.warm", run_name="__main__")

@@ -1,6 +1,6 @@
 """Figures in the style of the paper (matplotlib, Agg backend, no display needed).
 
-``style()`` is the shared look: serif fonts, thin axes, the paper's two colours.
+``figure()`` makes a figure in the shared look (serif fonts, thin axes, the paper's two colours).
 Each family of figures lives in its own module: ``model`` (Figs. 4-6, the fitted trust
 model), ``q`` (Fig. 7, the belief MDP's Q-values), ``rewards`` (Fig. 8 and the replicate,
 policy-comparison and heterogeneity figures).
@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Iterator
-from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 import matplotlib
@@ -44,15 +43,10 @@ RC: dict[RcKeyType, Any] = {
 
 
 @contextlib.contextmanager
-def style() -> Iterator[ModuleType]:
-    """``pyplot`` with the paper's look, restored on exit."""
+def figure(*args: Any, **kwargs: Any) -> Iterator[Any]:
+    """``(fig, axes)`` of ``plt.subplots(*args, **kwargs)`` drawn with the paper's look (restored on exit)."""
     with plt.rc_context(RC):
-        yield plt
-
-
-def save(fig, path) -> None:
-    fig.savefig(path)
-    plt.close(fig)
+        yield plt.subplots(*args, **kwargs)
 
 
 def finish(fig, path=None, title: str | None = None, rect: tuple[float, float, float, float] | None = None, layout: bool = True):
@@ -63,5 +57,6 @@ def finish(fig, path=None, title: str | None = None, rect: tuple[float, float, f
     if layout:
         fig.tight_layout(rect=rect)
     if path is not None:
-        save(fig, path)
+        fig.savefig(path)
+        plt.close(fig)
     return fig

@@ -5,9 +5,10 @@ from __future__ import annotations
 
 from typing import Any
 
+import matplotlib
 import numpy as np
 
-from . import COLORS, finish, style
+from . import COLORS, figure, finish
 
 TEST_LABELS = {"wilcoxon": "paired Wilcoxon", "t": "paired t-test"}
 
@@ -21,9 +22,8 @@ def plot_power(summary: dict[str, Any], path=None, title: str | None = None):
     """Power of experiment 2 against its participants, one line per test and experiment-1 design
     and block length, with the exact 95 % intervals as bands and the target power as a line."""
     target = summary["targets"]["power"]
-    with style() as plt:
-        fig, ax = plt.subplots(figsize=(5.6, 3.4))
-        colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    with figure(figsize=(5.6, 3.4)) as (fig, ax):
+        colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
         k = 0
         for point in summary["points"]:
             for e2 in point["experiment2"]:
@@ -56,22 +56,15 @@ def plot_regret(summary: dict[str, Any], path=None, title: str | None = None):
     interval, and the regret target."""
     pts = summary["points"]
     target = summary["targets"]["relative_regret"]
-    with style() as plt:
-        fig, ax = plt.subplots(figsize=(5.6, 0.35 * len(pts) + 1.5))
+    with figure(figsize=(5.6, 0.35 * len(pts) + 1.5)) as (fig, ax):
         for i, p in enumerate(pts):
             r = p["relative_regret"]
             if r["mean"] is None:
                 continue
             lo = r["lo"] if r["lo"] is not None else r["mean"]
             hi = r["hi"] if r["hi"] is not None else r["mean"]
-            ax.errorbar(
-                100 * r["mean"],
-                i,
-                xerr=[[100 * (r["mean"] - lo)], [100 * (hi - r["mean"])]],
-                fmt="o",
-                color=COLORS["high"],
-                capsize=3,
-            )
+            err = [[100 * (r["mean"] - lo)], [100 * (hi - r["mean"])]]
+            ax.errorbar(100 * r["mean"], i, xerr=err, fmt="o", color=COLORS["high"], capsize=3)
         ax.axvline(100 * target, color="black", lw=0.8, ls=":", label=f"target {100 * target:g} % of V*")
         ax.set_yticks(range(len(pts)), [_label(p) for p in pts])
         ax.set_xlabel("regret of the estimated policy (% of V*, exact evaluation under the true model)")
@@ -90,25 +83,15 @@ def plot_ask_search(search: dict[str, Any], path=None, title: str | None = None)
     for r in rows:
         if r["relative_regret"] is not None:
             grid[highs.index(r["ask_high"]), lows.index(r["ask_low"])] = 100 * r["relative_regret"]
-    with style() as plt:
-        fig, ax = plt.subplots(figsize=(4.8, 3.6))
+    with figure(figsize=(4.8, 3.6)) as (fig, ax):
         im = ax.imshow(grid, origin="lower", cmap="viridis_r", aspect="auto")
         ax.set_xticks(range(len(lows)), [f"{v:.2f}" for v in lows])
         ax.set_yticks(range(len(highs)), [f"{v:.2f}" for v in highs])
         ax.set_xlabel("P(ask | low complexity) in experiment 1")
         ax.set_ylabel("P(ask | high complexity)")
         for key, marker, lab in (("best", "*", "best"), ("paper", "s", "paper (0.10 / 0.40)")):
-            b = search[key]
-            ax.plot(
-                lows.index(b["ask_low"]),
-                highs.index(b["ask_high"]),
-                marker=marker,
-                color="white",
-                mec="black",
-                ms=11,
-                ls="",
-                label=lab,
-            )
+            x, y = lows.index(search[key]["ask_low"]), highs.index(search[key]["ask_high"])
+            ax.plot(x, y, marker=marker, color="white", mec="black", ms=11, ls="", label=lab)
         fig.colorbar(im, ax=ax, label="mean regret (% of V*)")
         ax.grid(False)
         ax.legend(loc="upper left", bbox_to_anchor=(1.35, 1.0), frameon=False)

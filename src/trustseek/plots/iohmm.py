@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.core import TrustModel
-from . import finish, style
+from . import figure, finish
 from .model import _bars
 
 
@@ -41,8 +41,7 @@ def _plot_table(model: TrustModel, table: str, path):
         vals = np.asarray(model.transition_rows[:, :, -1])
         ylabel, title = f"P(S' = {top} | S, inputs)", f"Estimated P(S' = {top})"
     title += f" by {', '.join(inputs) or 'level only'}"
-    with style() as plt:
-        fig, ax = plt.subplots(figsize=(max(4.6, 1.3 * len(vals) + 1.5), 2.8))
+    with figure(figsize=(max(4.6, 1.3 * len(vals) + 1.5), 2.8)) as (fig, ax):
         _bars(ax, vals, None, None, None, _labels(model, table, len(vals)), [f"S={k}" for k in model.levels])
         ax.set_ylabel(ylabel)
         ax.set_title(title)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..vocab import ACTIONS, EXPERIENCES, RELY
-from . import finish, style
+from . import figure, finish
 
 _LEVEL_COLORS = ("#c8102e", "#1f5fa8", "#2a9d3f", "#7b3294", "#e08214", "#666666", "#000000", "#8c510a")
 
@@ -34,20 +34,24 @@ def _bars(ax, values, lower, upper, ref, labels, series, ref_label="paper"):
     ax.set_ylim(0, 1.05)
 
 
+def _cells(model, table, ci, reference, groups, index):
+    """``table`` at ``index(group, trust level)`` per group and level, shape (groups, levels): of the
+    model, of the ends of its interval ``ci`` and of a ``reference`` of the same levels and
+    complexities (None where there is none)."""
+    same = reference is not None and (reference.trust_levels, reference.complexities) == (model.trust_levels, model.complexities)
+    ends = ci[table] if ci is not None else (None, None)
+    arrays = (getattr(model, table), *ends, getattr(reference, table) if same else None)
+    levels = range(len(model.trust_levels))
+    return [None if a is None else np.array([[a[index(g, t)] for t in levels] for g in groups]) for a in arrays]
+
+
 def plot_emissions(model, path=None, ci=None, reference=None, reference_label="paper"):
     """P(rely | T, C, a) per complexity and robot action (Fig. 4), one bar per trust level."""
     T, C = model.trust_levels, model.complexities
     skip = set(getattr(model, "not_estimated", ()))
     groups = [(c, a) for a in range(2) for c in range(len(C)) if ("emission", (c, a)) not in skip]
-    vals = np.array([[model.emission[c, a, t, RELY] for t in range(len(T))] for c, a in groups])
-    lo = hi = ref = None
-    if ci is not None:
-        lo = np.array([[ci["emission"][0][c, a, t, RELY] for t in range(len(T))] for c, a in groups])
-        hi = np.array([[ci["emission"][1][c, a, t, RELY] for t in range(len(T))] for c, a in groups])
-    if reference is not None and reference.trust_levels == model.trust_levels and reference.complexities == model.complexities:
-        ref = np.array([[reference.emission[c, a, t, RELY] for t in range(len(T))] for c, a in groups])
-    with style() as plt:
-        fig, ax = plt.subplots(figsize=(4.6, 2.6))
+    vals, lo, hi, ref = _cells(model, "emission", ci, reference, groups, lambda g, t: (*g, t, RELY))
+    with figure(figsize=(4.6, 2.6)) as (fig, ax):
         _bars(ax, vals, lo, hi, ref, [f"C={C[c]}\na={ACTIONS[a]}" for c, a in groups], [f"T={t}" for t in T], reference_label)
         ax.set_ylabel(r"$P(o = \mathrm{rely} \mid T, C, a)$")
         ax.set_title("Estimated probability of relying on the robot" + (" (95% CI)" if ci is not None else ""))
@@ -70,19 +74,9 @@ def plot_transitions(model, path=None, ci=None, reference=None, reference_label=
             groups = [(a, e) for a, e in groups if ACTIONS[a] != "ask" or e == ask_experience[c]]
         if groups:
             panels.append((c, groups))
-    ref_ok = (
-        reference is not None and reference.trust_levels == model.trust_levels and reference.complexities == model.complexities
-    )
-    with style() as plt:
-        fig, axes = plt.subplots(1, max(len(panels), 1), figsize=(3.4 * max(len(panels), 1), 2.7), squeeze=False)
+    with figure(1, max(len(panels), 1), figsize=(3.4 * max(len(panels), 1), 2.7), squeeze=False) as (fig, axes):
         for ax, (c, groups) in zip(axes[0], panels, strict=False):
-            vals = np.array([[model.transition[c, a, e, t, top] for t in range(len(T))] for a, e in groups])
-            lo = hi = ref = None
-            if ci is not None:
-                lo = np.array([[ci["transition"][0][c, a, e, t, top] for t in range(len(T))] for a, e in groups])
-                hi = np.array([[ci["transition"][1][c, a, e, t, top] for t in range(len(T))] for a, e in groups])
-            if ref_ok:
-                ref = np.array([[reference.transition[c, a, e, t, top] for t in range(len(T))] for a, e in groups])
+            vals, lo, hi, ref = _cells(model, "transition", ci, reference, groups, lambda g, t, c=c: (c, *g, t, top))
             labels = [f"{ACTIONS[a]}\nE'={EXPERIENCES[e]}" for a, e in groups]
             _bars(ax, vals, lo, hi, ref, labels, [f"T={t}" for t in T], reference_label)
             ax.set_title(f"complexity {C[c]}")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import COLORS, finish, style
+from . import COLORS, figure, finish
 
 
 def plot_q(policy, path=None, title: str | None = None):
@@ -15,8 +15,7 @@ def plot_q(policy, path=None, title: str | None = None):
     """
     thresholds = policy.thresholds()
     N = len(policy.complexities)
-    with style() as plt:
-        fig, axes = plt.subplots(1, N, figsize=(3.3 * N, 2.6), sharey=False, squeeze=False)
+    with figure(1, N, figsize=(3.3 * N, 2.6), sharey=False, squeeze=False) as (fig, axes):
         for c, cn in enumerate(policy.complexities):
             ax = axes[0, c]
             ax.plot(policy.grid, policy.q[:, c, 0], color=COLORS["autonomous"], label="autonomous ($a^-$)")

@@ -6,9 +6,10 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from . import COLORS, finish, style
+from . import COLORS, figure, finish
 
 POLICY_COLORS = {"trust-agnostic": "#7f7f7f", "trust-aware": COLORS["autonomous"]}
+PAPER_MARK = {"facecolor": "none", "edgecolor": COLORS["ask"], "linewidth": 1.0}  # a value the paper reports
 
 
 def _box(ax, data: Sequence[np.ndarray], labels: Sequence[str], colors: Sequence[str], fliers: bool = True):
@@ -46,8 +47,7 @@ def plot_rewards(
     order = [k for k in order if k in small] + [k for k in small if k not in order]
     cols = [POLICY_COLORS.get(k, COLORS["ask"]) for k in order]
     n_pan = 2 if large is not None else 1
-    with style() as plt:
-        fig, axes = plt.subplots(1, n_pan, figsize=(3.4 * n_pan, 2.8), squeeze=False)
+    with figure(1, n_pan, figsize=(3.4 * n_pan, 2.8), squeeze=False) as (fig, axes):
         panels = [(axes[0, 0], small, True)]
         if large is not None:
             panels.append((axes[0, 1], large, False))
@@ -65,19 +65,9 @@ def plot_rewards(
             for j, d in enumerate(data):
                 med = float(np.median(d))
                 ax.annotate(f"{med:g}", xy=(j + 1.27, med), fontsize=7, va="center", color="black")
-            if paper_medians:
-                for j, k in enumerate(order):
-                    if k in paper_medians:
-                        ax.scatter(
-                            [j + 1],
-                            [paper_medians[k]],
-                            marker="D",
-                            s=22,
-                            facecolor="none",
-                            edgecolor=COLORS["ask"],
-                            linewidth=1.0,
-                            zorder=4,
-                        )
+            for j, k in enumerate(order):
+                if paper_medians and k in paper_medians:
+                    ax.scatter([j + 1], [paper_medians[k]], marker="D", s=22, zorder=4, **PAPER_MARK)
             ax.set_ylabel("cumulative reward per block")
             ax.set_xlim(0.5, len(order) + 0.7)
             ax.set_title(f"{'(a)' if paired else '(b)'} {n:,} simulated participants")
@@ -87,15 +77,9 @@ def plot_rewards(
 
             handle = Line2D([], [], marker="D", ls="none", markersize=5, markerfacecolor="none", markeredgecolor=COLORS["ask"])
             median_line = Line2D([], [], color="black", lw=1.2)
-            fig.legend(
-                [median_line, handle],
-                ["median (simulation)", "median reported in the paper"],
-                loc="lower center",
-                ncols=2,
-                frameon=False,
-                fontsize=7,
-                bbox_to_anchor=(0.5, 0.0),
-            )
+            labels = ["median (simulation)", "median reported in the paper"]
+            where = {"loc": "lower center", "bbox_to_anchor": (0.5, 0.0)}
+            fig.legend([median_line, handle], labels, ncols=2, frameon=False, fontsize=7, **where)
         return finish(fig, path, rect=(0, 0.06, 1, 1) if paper_medians else None)
 
 
@@ -113,8 +97,7 @@ def plot_replicates(
     complexity; (b) the aware - agnostic reward difference (median difference of a
     paper-sized experiment, and mean difference over a large N)."""
     th = np.asarray([t for t in thresholds if t is not None and np.isfinite(t)], dtype=float)
-    with style() as plt:
-        fig, axes = plt.subplots(1, 2, figsize=(6.8, 2.6))
+    with figure(1, 2, figsize=(6.8, 2.6)) as (fig, axes):
         ax = axes[0]
         if len(th):
             lo = max(0.0, min(th.min(), paper_threshold) - 0.02)
@@ -178,8 +161,7 @@ def plot_policy_values(rows: Sequence[Mapping], path=None, title: str | None = N
     """Mean cumulative reward per block with 95% intervals, one bar per policy variant.
 
     ``rows``: dicts with ``label``, ``mean``, ``lo``, ``hi`` and optionally ``group``."""
-    with style() as plt:
-        fig, ax = plt.subplots(figsize=(5.6, 0.32 * len(rows) + 0.9))
+    with figure(figsize=(5.6, 0.32 * len(rows) + 0.9)) as (fig, ax):
         y = np.arange(len(rows))[::-1]
         groups = sorted({r.get("group", "") for r in rows})
         palette = [COLORS["autonomous"], "#7f7f7f", COLORS["ask"], "#2a9d8f"]
@@ -206,8 +188,7 @@ def plot_heterogeneity(quartiles: Sequence[Mapping], path=None, score: str = "")
     q = [r["quartile"] for r in quartiles]
     x = np.arange(len(q))
     w = 0.36
-    with style() as plt:
-        fig, axes = plt.subplots(1, 2, figsize=(6.8, 2.5))
+    with figure(1, 2, figsize=(6.8, 2.5)) as (fig, axes):
         for ax, (ka, kg, ylabel) in zip(
             axes,
             [

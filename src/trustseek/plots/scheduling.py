@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+from matplotlib.colors import ListedColormap
+from matplotlib.patches import Patch
 
-from . import COLORS, finish, style
+from . import COLORS, figure, finish
 
 DECISION_COLORS = ("#9ecae1", "#c8102e", "#1f5fa8", "#fd8d3c")  # low/auto, low/ask, high/auto, high/ask
 
@@ -30,11 +32,7 @@ def plot_schedule(
         # follow the most common pick on this trial
         k = int(np.bincount(cx[:, t], minlength=len(counts)).argmax())
         rem[k] -= 1
-    with style() as plt:
-        from matplotlib.colors import ListedColormap
-        from matplotlib.patches import Patch
-
-        fig, axes = plt.subplots(1, 2, figsize=(7.4, 2.8))
+    with figure(1, 2, figsize=(7.4, 2.8)) as (fig, axes):
         ax = axes[0]
         ax.imshow(
             img, origin="lower", aspect="auto", extent=(0.5, T + 0.5, 0, 1), cmap=ListedColormap(DECISION_COLORS),

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 from matplotlib.patches import Patch
 
-from . import COLORS, finish, style
+from . import COLORS, figure, finish
 
 
 def plot_tornado(res: Any, quantity: str, path=None, top: int = 12, paper_value: float | None = None, title: str | None = None):
@@ -19,8 +19,7 @@ def plot_tornado(res: Any, quantity: str, path=None, top: int = 12, paper_value:
     rows = sorted(rows, key=lambda r: -abs(r["at_upper"][quantity] - r["at_lower"][quantity]))[:top][::-1]
     nominal = res.nominal[quantity]
     lo, hi = res.range_of(quantity)
-    with style() as plt:
-        fig, ax = plt.subplots(figsize=(6.4, 0.32 * len(rows) + 1.4))
+    with figure(figsize=(6.4, 0.32 * len(rows) + 1.4)) as (fig, ax):
         ax.axvspan(lo, hi, color="0.85", alpha=0.6, lw=0, label=f"joint range [{lo:.3f}, {hi:.3f}]")
         for i, r in enumerate(rows):
             a, b = r["at_lower"][quantity], r["at_upper"][quantity]

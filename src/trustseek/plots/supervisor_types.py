@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..vocab import AUTONOMOUS, RELY
-from . import finish, style
+from . import figure, finish
 from .model import _bars, plot_emissions, plot_transitions
 
 
@@ -27,8 +27,7 @@ def plot_type_emissions(mixture, path=None, ci=None):
         lo = np.array([[ci[n]["emission"][0][c, AUTONOMOUS, t, RELY] for n in mixture.names] for c, t in groups])
         hi = np.array([[ci[n]["emission"][1][c, AUTONOMOUS, t, RELY] for n in mixture.names] for c, t in groups])
     series = [f"{n} ({w:.0%})" for n, w in zip(mixture.names, mixture.weights, strict=True)]
-    with style() as plt:
-        fig, ax = plt.subplots(figsize=(4.8, 2.6))
+    with figure(figsize=(4.8, 2.6)) as (fig, ax):
         _bars(ax, vals, lo, hi, None, [f"C={C[c]}\nT={T[t]}" for c, t in groups], series)
         ax.set_ylabel(r"$P(o = \mathrm{rely} \mid T, C, a = \mathrm{autonomous})$")
         ax.set_title("Supervisor types: probability of relying" + (" (95% CI)" if ci is not None else ""))

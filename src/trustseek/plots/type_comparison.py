@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from . import finish, style
+from . import figure, finish
 
 POLICY_COLORS = {
     "pooled trust-aware": "#1f5fa8",
@@ -42,8 +42,7 @@ def plot_types_section(numbers: dict[str, Any], path=None, title: str | None = N
     type, population and block length.  Returns the figure (written to ``path``)."""
     pops = numbers["populations"]
     policies = list(POLICY_COLORS)
-    with style() as plt:
-        fig, axes = plt.subplots(1, 2, figsize=(7.4, 2.9), gridspec_kw={"width_ratios": [1.3, 1]})
+    with figure(1, 2, figsize=(7.4, 2.9), gridspec_kw={"width_ratios": [1.3, 1]}) as (fig, axes):
         _bars(axes[0], pops[0], policies)
         axes[0].legend(fontsize=6, loc="lower left", framealpha=0.9)
         ax = axes[1]

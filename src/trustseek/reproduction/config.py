@@ -38,6 +38,16 @@ PAPER = {
 }
 
 
+#: the lowest value of each counting setting, in the order :meth:`ReproduceConfig.problems` checks them
+LOWEST = {
+    "replicates": 0,
+    **dict.fromkeys(
+        ("large_n", "participants_1", "participants_2", "restarts", "replicate_restarts", "replicate_large_n", "jobs"), 1
+    ),
+    **dict.fromkeys(("sensitivity_samples", "schedule_participants", "types_participants", "bootstrap"), 0),
+}
+
+
 @dataclass
 class ReproduceConfig:
     """Every setting of the reproduction (the defaults are the paper's design)."""
@@ -67,28 +77,9 @@ class ReproduceConfig:
     def problems(self) -> list[str]:
         """Every setting out of range, as a message naming its command-line option."""
         p = []
-        if self.replicates < 0:
-            p.append(f"--replicates must be >= 0, got {self.replicates}")
-        at_least_one = (
-            "large_n",
-            "participants_1",
-            "participants_2",
-            "restarts",
-            "replicate_restarts",
-            "replicate_large_n",
-            "jobs",
-        )
-        for name in at_least_one:
-            if getattr(self, name) < 1:
-                p.append(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
-        if self.sensitivity_samples < 0:
-            p.append(f"--sensitivity-samples must be >= 0, got {self.sensitivity_samples}")
-        if self.schedule_participants < 0:
-            p.append(f"--schedule-participants must be >= 0, got {self.schedule_participants}")
-        if self.types_participants < 0:
-            p.append(f"--types-participants must be >= 0, got {self.types_participants}")
-        if self.bootstrap < 0:
-            p.append(f"--bootstrap must be >= 0, got {self.bootstrap}")
+        for name, low in LOWEST.items():
+            if getattr(self, name) < low:
+                p.append(f"--{name.replace('_', '-')} must be >= {low}, got {getattr(self, name)}")
         if self.belief_update not in BELIEF_UPDATES:
             p.append(f"--belief-update must be 'paper' or 'bayes', got {self.belief_update!r}")
         if not (0 <= self.ask_low <= 1 and 0 <= self.ask_high <= 1):

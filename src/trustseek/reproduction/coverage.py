@@ -24,17 +24,12 @@ def coverage_study(
     tol: float = 1e-6,
     truth: TrustModel | None = None,
 ) -> list[dict[str, Any]]:
-    """How often the 95 % bootstrap intervals cover the truth, cell by cell.
-
-    Simulates ``datasets`` logs from ``model`` with the paper design, fits each with
-    a ``bootstrap``-replicate participant bootstrap, and counts per estimated cell
-    how often [lower, upper] contains the true value.  Returns one record per cell
-    (label, truth, coverage, mean interval width, mean estimate; and of the data sets whose
-    estimate of the cell lies at 0 or 1, how many (``at_boundary``), their coverage
-    (``boundary_coverage``, NaN without any) and how many of their intervals are the
-    likelihood-ratio ones (``likelihood``)).  ``truth`` is the model the
-    intervals are scored against (default ``model``, the one the data come from; another one
-    is a negative control).
+    """How often the 95 % bootstrap intervals cover the truth, cell by cell, over ``datasets``
+    logs simulated from ``model`` (paper design) and fitted with a ``bootstrap``-replicate
+    participant bootstrap.  One record per cell: truth, coverage, mean width and estimate, and of
+    the data sets whose estimate lies at 0 or 1 their number (``at_boundary``), coverage
+    (``boundary_coverage``, NaN without any) and likelihood-ratio intervals (``likelihood``).
+    ``truth`` scores the intervals against another model (a negative control).
     """
     target = model if truth is None else truth
     hits: dict[str, list[float]] = {}

@@ -1,27 +1,12 @@
-"""The paper's Sections V and VI end to end, on simulated supervisors.
+"""The paper's Sections V and VI end to end, on simulated supervisors that are the paper's model.
 
-:func:`reproduce` runs, from one seed:
-
-1. **Experiment 1** (data collection): 9 participants x 71 trials (41 low, 30 high, random
-   order) under the randomized policy (ask w.p. 0.10 in low, 0.40 in high complexity);
-   supervisors behave like the ``paper`` preset.
-2. **Fit** of the IOHMM to those trials (:func:`trustseek.fit.fit_trust_model`, bootstrap
-   intervals), the Fig. 4-6 equivalents next to the paper's values.
-3. **Plan**: the trust-aware policy of the fitted model (Fig. 7) and the trust-agnostic
-   policy estimated from the experiment-1 data (Section VI-A).
-4. **Experiment 2**: every participant does one block of 17 low + 17 high trials per
-   policy, counterbalanced order; with 5 participants as in the paper and with a large N.
-   Medians, Wilcoxon signed-rank test, autonomous collections and interventions.
-5. **Replicates** of the whole pipeline (1-4) with fresh simulated participants: the
-   distributions of the estimated threshold and of the aware - agnostic reward difference.
-6. **Costs** of estimation (policy of the true model vs of the fitted one) and of the belief
-   update (``paper`` eq. (3) vs ``bayes``), on the same simulated participants; and a
-   heterogeneous population around the pooled model (Remark 1).
-
-Nothing is tuned to match the paper: the supervisors are the paper's model, everything
-else is estimated from simulated data exactly as the paper estimated it from people.
-The result is a JSON-serializable summary (``summary.json``); :mod:`trustseek.report`
-writes the HTML report and figures.
+:func:`reproduce` runs, from one seed: experiment 1 (9 participants x 71 trials under the
+randomized policy); the fit of the IOHMM with bootstrap intervals (Figs. 4-6); the plan (Fig. 7,
+and the trust-agnostic policy of Section VI-A); experiment 2 (a counterbalanced crossover with 5
+participants and with a large N: medians, Wilcoxon test); replicates of all of that with fresh
+participants; the costs of estimation and of the belief update; a heterogeneous population
+(Remark 1).  Nothing is tuned to match the paper.  The summary is JSON-ready (``summary.json``);
+:mod:`trustseek.report` writes the HTML report and figures.
 """
 
 from __future__ import annotations

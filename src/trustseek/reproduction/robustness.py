@@ -23,11 +23,19 @@ from .config import AGNOSTIC, AWARE, LOW, PAPER, ReproduceConfig
 from .statistics import mean_ci
 
 
+def high_threshold(policy: Policy) -> float:
+    """The belief in high trust below which ``policy`` asks in the last (highest) complexity: 0
+    when it never asks there, 1 when it always does; NaN when its ask region is not [0, θ) or it
+    ignores the belief."""
+    th = policy.thresholds() if policy.belief_update is not None else None
+    v = th.get(policy.complexities[-1]) if th else float("nan")
+    return 0.0 if v is None else float(v)
+
+
 def threshold_of(policy: Policy) -> float | None:
-    """The high-complexity threshold of a policy that reads the belief (None when it never asks,
-    when its ask region is not [0, θ) or when it ignores the belief)."""
-    th = (policy.thresholds() or {}).get("high") if policy.belief_update is not None else None
-    return None if th is None or not np.isfinite(th) else float(th)
+    """:func:`high_threshold`, None when the policy never asks there or has no threshold."""
+    th = high_threshold(policy)
+    return th if th > 0 else None
 
 
 def solve_policy(model: TrustModel, task: Task, update: str, grid: int) -> Policy:
@@ -45,6 +53,11 @@ class Plan:
     aware: Policy
     true_policy: Policy
     agnostic: ComplexityPolicy
+
+
+def _interval(values: np.ndarray) -> dict[str, float]:
+    """The mean of ``values`` and its t interval as ``{"mean", "lo", "hi"}``."""
+    return dict(zip(("mean", "lo", "hi"), mean_ci(values), strict=True))
 
 
 def costs(cfg: ReproduceConfig, plan: Plan, seed: np.random.SeedSequence) -> dict[str, Any]:
@@ -73,26 +86,20 @@ def costs(cfg: ReproduceConfig, plan: Plan, seed: np.random.SeedSequence) -> dic
         sim = simulate(truth, task, pol, n, counts=cfg.counts_2, seed=seed, record=False, belief_model=fitted)
         r = sim.summary_arrays["cumulative_reward"][:, 0]
         rewards[label] = r
-        m, lo, hi = mean_ci(r)
-        th = threshold_of(pol)
         rows.append(
             {
                 "label": label,
                 "group": group,
-                "mean": m,
-                "lo": lo,
-                "hi": hi,
+                **_interval(r),
                 "median": float(np.median(r)),
-                "threshold_high": th,
+                "threshold_high": threshold_of(pol),
                 "autonomous_collections": float(sim.summary_arrays["autonomous_collections"][:, 0].mean()),
                 "interventions": float(sim.summary_arrays["interventions"][:, 0].mean()),
             }
         )
     ref = rewards[variants[0][0]]
     for row in rows:
-        d = rewards[row["label"]] - ref
-        m, lo, hi = mean_ci(d)
-        row["vs_true_policy"] = {"mean": m, "lo": lo, "hi": hi}
+        row["vs_true_policy"] = _interval(rewards[row["label"]] - ref)
     est = rewards[variants[2][0]] - ref
     upd = rewards[variants[1][0]] - ref
     return {
@@ -100,12 +107,8 @@ def costs(cfg: ReproduceConfig, plan: Plan, seed: np.random.SeedSequence) -> dic
         "participants": n,
         "trials_per_block": int(sum(cfg.counts_2)),
         "rows": rows,
-        "estimation_cost": dict(zip(("mean", "lo", "hi"), mean_ci(-est), strict=True)),
-        "belief_update_gain": {
-            "from": cfg.belief_update,
-            "to": other,
-            **dict(zip(("mean", "lo", "hi"), mean_ci(upd), strict=True)),
-        },
+        "estimation_cost": _interval(-est),
+        "belief_update_gain": {"from": cfg.belief_update, "to": other, **_interval(upd)},
     }
 
 
@@ -119,16 +122,13 @@ def model_gain(cfg: ReproduceConfig, aware: np.ndarray, agnostic: np.ndarray) ->
     simulated participants (common random numbers), per participant and, as in the paper's
     experiment 2, as the difference of medians over groups of ``participants_2`` participants."""
     d = aware - agnostic
-    m, lo, hi = mean_ci(d)
     k = cfg.participants_2
     rng = np.random.default_rng([cfg.seed, 2, 71])
     groups = rng.integers(0, len(d), size=(GROUPS, k))  # with replacement: k is tiny next to len(d)
     stat = np.median(aware[groups], axis=1) - np.median(agnostic[groups], axis=1)
     return {
         "participants": len(d),
-        "mean": m,
-        "lo": lo,
-        "hi": hi,
+        **_interval(d),
         "sd": float(d.std(ddof=1)),
         "p2.5": float(np.percentile(d, 2.5)),
         "p97.5": float(np.percentile(d, 97.5)),

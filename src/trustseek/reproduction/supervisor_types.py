@@ -1,29 +1,17 @@
 """The report section on supervisor types (the paper's Remark 1): does a robot that knows the
-population has types, and learns which one it is working with, rescue the conservative
-supervisors that the pooled model lost?
+population has types, and learns which one it works with, rescue the conservative supervisors
+the pooled model lost?
 
-:func:`types_section` compares, on the same simulated people (common random numbers, so the
-differences are paired per participant), five policies:
-
-* **pooled trust-aware**: the paper's approach: one model fitted to the pooled
-  experiment-1 data of the population (paper design), its optimal policy;
-* **type-aware (fitted types)**: what a researcher would deploy: supervisor types fitted to the
-  same experiment-1 log (1 to 3 types, the number chosen by BIC), the optimal policy of their
-  (type, trust) POMDP; one type chosen makes it the pooled structure's own policy;
-* **type-aware**: the same for the population's true types; a new person's type is unknown and
-  learned from their interventions and outcomes;
-* **oracle**: each person's own type's optimal policy (the type known in advance); run for every
-  type on everyone with the same random numbers, then each person's own type's run is kept;
-* **trust-agnostic**: the optimal policy of the intervention rates in the experiment-1 data.
-
-at the paper's block length (17 + 17 trials) and a longer one, per type and overall, and again
-on a one-type population (the paper's supervisor alone): there the fitted types should come out
-as one, and cost nothing; the type-aware policy of the true two types is run there too, to show
-what planning for types that are absent costs.
-
-Every trust-aware policy (pooled, type-aware, each oracle) is solved by the same solver
-(:func:`~trustseek.solvers.type_aware.solve_type_aware`, a one-type mixture for a single
-model), so that the paired differences are those of the models planned for, not of solvers.
+:func:`types_section` runs, on the same simulated people (common random numbers: paired
+differences), the pooled trust-aware policy (one model fitted to the pooled experiment-1 log);
+the type-aware policy of the types fitted to that log (1 to 3, chosen by BIC); the type-aware
+policy of the true types (a person's type learned from their interventions and outcomes); the
+oracle (each person's own type's policy, the type known in advance); and the trust-agnostic
+policy.  It does so at the paper's block length and a longer one, per type and overall, on the
+mixture and on its first type alone (where the fitted types should come out as one).  Every
+trust-aware policy is solved by :func:`~trustseek.solvers.type_aware.solve_type_aware` (a
+one-type mixture for a single model), so that the differences are those of the models, not
+of solvers.
 """
 
 from __future__ import annotations
@@ -38,7 +26,7 @@ import pandas as pd
 from ..estimation.fit import fit_trust_model
 from ..estimation.mixture import fit_types
 from ..estimation.options import FitOptions
-from ..model.core import TrustModel
+from ..model.core import INTERVENE, TrustModel
 from ..model.mixture import TypeMixture
 from ..model.presets import paper_conservative_mixture, paper_task
 from ..model.task import Task
@@ -133,15 +121,9 @@ def _run(
     low_c = task.complexities.index("low") if "low" in task.complexities else 0
 
     def one(pol: Policy) -> tuple[np.ndarray, np.ndarray]:
-        sim = simulate(sup, task, pol, counts=counts, seed=seed, record=True)
-        t = sim.trials()
-        inter = (
-            t.assign(x=(t["complexity"] == task.complexities[low_c]) & (t["human_action"] == "intervene"))
-            .groupby("participant", sort=False)["x"]
-            .sum()
-            .to_numpy(dtype=float)
-        )
-        return sim.reward_matrix()[:, 0], inter
+        trials = simulate(sup, task, pol, counts=counts, seed=seed, record=True)
+        a = trials.arrays or {}
+        return trials.reward_matrix()[:, 0], ((a["complexity"] == low_c) & (a["human"] == INTERVENE)).sum(axis=1).astype(float)
 
     for label, pol in policies.items():
         rewards[label], low[label] = one(pol)
@@ -177,12 +159,8 @@ def _verdicts(numbers: list[dict[str, Any]], conservative: str) -> list[str]:
     """Plain sentences on the section's questions, from the paired intervals."""
 
     def diff(block: dict[str, Any], group: str, a: str, b: str) -> dict[str, Any] | None:
-        for g in block["groups"]:
-            if g["group"] == group:
-                for d in g["differences"]:
-                    if d["policy"] == a and d["against"] == b:
-                        return d
-        return None
+        pairs = (d for g in block["groups"] if g["group"] == group for d in g["differences"])
+        return next((d for d in pairs if (d["policy"], d["against"]) == (a, b)), None)
 
     def say(d: dict[str, Any]) -> str:
         return f"{d['mean']:+.2f} [{d['low']:+.2f}, {d['high']:+.2f}]"
@@ -195,12 +173,7 @@ def _verdicts(numbers: list[dict[str, Any]], conservative: str) -> list[str]:
             whole = diff(block, group, policy, POOLED)
             if whole is None:
                 continue
-            if whole["low"] > 0:
-                verdict = "gains"
-            elif whole["high"] < 0:
-                verdict = "loses"
-            else:
-                verdict = "neither gains nor loses measurably"
+            verdict = "gains" if whole["low"] > 0 else "loses" if whole["high"] < 0 else "neither gains nor loses measurably"
             out.append(f"{where}: {label} {verdict} against the pooled one per block, {say(whole)} (paired 95 % CI).")
         cons = diff(block, conservative, TYPE_AWARE, POOLED)
         orc = diff(block, conservative, ORACLE, TYPE_AWARE)
@@ -275,11 +248,7 @@ def types_section(
     seeds = np.random.SeedSequence(seed).generate_state(4)
     task_levels = mixture.models[0].n_trust
 
-    # every trust-aware policy comes from the same solver, so that the paired differences are
-    # those of the models planned for, not of the solvers
-    def plan(m: TypeMixture | TrustModel) -> Policy:
-        # the point solver refines its grid until the gap, or a fixed resolution (not a clock:
-        # the same seed gives the same policies on a loaded machine); the time limit is a safety net
+    def plan(m: TypeMixture | TrustModel) -> Policy:  # every trust-aware policy, by the same solver
         levels = (m.n_types if isinstance(m, TypeMixture) else 1) * task_levels
         return solve_type_aware(m, task, gap=gap, max_seconds=max_seconds, max_resolution=POINT_RESOLUTION.get(levels, 16))
 

@@ -35,16 +35,12 @@ def simulate_design(
 ) -> pd.DataFrame:
     """Trial logs from ``model`` with the paper's design (Section V), in the canonical columns.
 
-    Each participant does ``n_trials[c]`` trials of complexity c in random order, under
-    the ``randomized`` policy that asks with probability ``p_ask[c]``; outcomes follow
-    ``task`` (default: the paper task) and the experience rule of Section III.  This is
-    the simulation engine's run of that policy; the hidden trust at the start of each
-    trial is kept in the extra column ``true_trust``.  ``model`` is one supervisor model or a
-    population (:class:`Supervisors`, e.g. :meth:`Supervisors.from_mixture`; participant ``i``
-    of the log is row ``i`` of the population).  ``p_unobserved`` blanks that
-    fraction of human actions (not recorded).  ``rating_every`` > 0 adds a ``rating`` column
-    drawn from the model's rating table (:func:`add_ratings`) on every ``rating_every``-th
-    trial of each participant.
+    Each participant does ``n_trials[c]`` trials of complexity c in random order under the
+    ``randomized`` policy asking with ``p_ask[c]``; outcomes follow ``task`` (default: the paper
+    task); the hidden trust at the start of each trial is the extra column ``true_trust``.
+    ``model`` is one supervisor model or a :class:`Supervisors` population (participant ``i`` is
+    its row ``i``).  ``p_unobserved`` blanks that fraction of human actions; ``rating_every`` > 0
+    adds a ``rating`` column (:func:`add_ratings`) on every ``rating_every``-th trial.
     """
     task = task or paper_task()
     if isinstance(model, TrustModel):
@@ -110,15 +106,12 @@ def crossover(
     compiled: bool = True,
 ) -> CrossoverSimulation:
     """The within-participant design of Section VI-B: every participant does one block per
-    policy (``counts`` trials of each complexity in random order, per block), in an order that
-    is counterbalanced across participants.
+    policy (``counts`` trials of each complexity in random order), in a counterbalanced order.
 
-    ``first[i]`` is the index of the policy participant ``i`` starts with; by default
-    participants take the policies' rotations in turn (with two policies and five
-    participants: 3 start with the first policy, 2 with the second, as in the paper).  Blocks
-    are labelled by policy, so ``by_policy`` gives paired values per participant; the
-    ``block`` column of the trials is the position (1 = first block done).  ``compiled`` as in
-    :func:`~trustseek.simulation.engine.run`.
+    ``first[i]`` is the policy participant ``i`` starts with; by default the rotations in turn
+    (two policies, five participants: 3 start with the first, as in the paper).  Blocks are
+    labelled by policy (``by_policy`` gives paired values); the trials' ``block`` column is the
+    position.  ``compiled`` as in :func:`~trustseek.simulation.engine.run`.
     """
     sup = model if isinstance(model, Supervisors) else Supervisors.pooled(model, n_participants)
     n = sup.n

@@ -1,32 +1,18 @@
 """Simulated supervisors: a vectorized Monte-Carlo model of the object-collection task.
 
-Each simulated *participant* is a supervisor drawn from a :class:`~trustseek.model.TrustModel`
-who works through one or more *blocks* of trials, each block under one robot policy.
-Trial ``t`` of a participant runs in the order of Sections III-IV:
+Each simulated participant is a supervisor drawn from a :class:`~trustseek.model.TrustModel` who
+works through one or more blocks of trials, each under one robot policy.  Trial ``t`` follows
+Sections III-IV: the complexity ``C_t`` comes from the schedule; the robot picks ``a_t`` from its
+belief; ``o_t ~ P(o | T_t, C_t, a_t)``; ``E_{t+1} ~ P(E | o_t, C_t, a_t)``; the reward is eq. (1);
+``T_{t+1} ~ P(T' | T_t, E_{t+1}, C_t, a_t)`` and the robot updates its belief (``paper``/``bayes``).
 
-1. the trial's complexity ``C_t`` comes from the participant's schedule;
-2. the robot picks ``a_t`` from its current belief ``b_t`` (``policy.actions``);
-3. the human action follows the emission table, ``o_t ~ P(o | T_t, C_t, a_t)``;
-4. the experience follows the task, ``E_{t+1} ~ P(E | o_t, C_t, a_t)`` (autonomous success
-   with probability ``Task.success[C]``, ``Task.ask_experience[C]`` when the robot asks);
-5. the reward is eq. (1), ``Task.reward_table()[a, o, E]``;
-6. the hidden trust moves, ``T_{t+1} ~ P(T' | T_t, E_{t+1}, C_t, a_t)``, and the robot
-   updates its belief with the policy's updater (``paper`` or ``bayes``).
-
-All participants advance together, one trial at a time, as numpy arrays of shape
-``(n_participants,)`` (processed in chunks of :data:`CHUNK` participants).  Every trial
-draws the same three uniforms per participant whatever the robot does, from a
-generator separate from the policy's, so two runs with the same seed and different
-policies face the *same* supervisors, schedules and luck (common random numbers):
-differences between policies are paired.
-
-The common cases (two trust levels; a threshold policy on the scalar belief, or a policy that
-asks with fixed probabilities per complexity) run in a compiled loop (:mod:`.kernels`) that
-draws the same uniforms in the same order and gives the same simulation to the last bit;
-``compiled=False`` runs the numpy loop for every block.
-
-Populations live in :mod:`.populations`, schedules in :mod:`.schedules`, what a run
-produces in :mod:`.results` and the paper's designs in :mod:`.designs`.
+All participants advance together, one trial at a time (in chunks of :data:`CHUNK`).  Every trial
+draws the same three uniforms per participant whatever the robot does, from a generator separate
+from the policy's, so runs with the same seed and different policies face the same supervisors,
+schedules and luck (common random numbers).  The common cases (two trust levels; a threshold
+policy on the scalar belief, or fixed ask probabilities per complexity) run in the compiled loop
+of :mod:`.kernels`, which gives the same simulation to the last bit; ``compiled=False`` runs the
+numpy loop for every block.
 """
 
 from __future__ import annotations
@@ -143,13 +129,9 @@ def _run_chunk(
     progress: Callable[[int], None] | None,
     compiled: bool = True,
 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """Participants ``sl`` (parameter rows ``rows``) through every block: the per-block
-    summaries and, when ``record``, every trial (participant-major arrays).
-
-    A block runs in the compiled kernel (:func:`.kernels.run_block`) when ``compiled`` and the
-    case is a common one (two trust levels; a threshold policy on a scalar belief, or a
-    complexity policy), else in the numpy loop below; both draw the same uniforms in the same
-    order and give the same trials."""
+    """Participants ``sl`` (parameter rows ``rows``) through every block, each in the compiled
+    kernel when ``compiled`` and it can, else in the numpy loop: the per-block summaries and,
+    when ``record``, every trial (participant-major arrays)."""
     st = _Chunk(tab, rows, sl, seeds, record, sum(b.schedule.shape[1] for b in blocks))
     for block in blocks:
         sched = np.ascontiguousarray(block.schedule[sl].T).astype(np.int64)  # (T, m)
@@ -317,11 +299,10 @@ def run(
 ) -> Simulation:
     """Simulate every participant of ``supervisors`` through ``blocks`` in order.
 
-    ``seed`` fixes every draw (supervisors' luck in chunks of :data:`CHUNK` participants, and
-    the policies' own draws on a separate stream).  ``record=False`` keeps only the
-    per-participant summaries (what large runs need).  ``progress(k)`` is called with the
-    number of trials just simulated.  ``compiled=False`` runs every block in the numpy loop
-    (the reference the compiled kernel is tested against; the same simulation).
+    ``seed`` fixes every draw (the supervisors' per chunk of :data:`CHUNK` participants, the
+    policies' on a separate stream).  ``record=False`` keeps only the per-participant summaries.
+    ``progress(k)`` is called with the number of trials just simulated.  ``compiled=False`` runs
+    every block in the numpy loop (the reference of the compiled kernel; the same simulation).
     """
     blocks = list(blocks)
     n = supervisors.n

@@ -1,20 +1,12 @@
 """Compiled loops of the simulation engine (numba): the common case of a block, and the urn schedule.
 
-:func:`run_block` runs one block of trials for the participants of a chunk when the supervisors
-have two trust levels and the robot's action is one of
-
-* a threshold on its scalar belief x = P(trust = high) (``mode`` :data:`THRESHOLD`, the bounds of
-  :func:`~trustseek.policies.base.ask_bounds`), the belief following the ``paper`` or ``bayes``
-  update of :class:`~trustseek.pomdp.belief.ScalarBelief`;
-* a fixed probability of asking per complexity (``mode`` :data:`FIXED`, a
-  :class:`~trustseek.policies.ComplexityPolicy`), with or without a tracked belief.
-
-It does per participant exactly the arithmetic of the engine's numpy loop (the same
-comparisons, the same products and sums in the same order) on uniforms drawn beforehand in the
-order the numpy loop draws them, so both give the same simulation to the last bit (the tests
-compare them).  :func:`urn_schedule` is :func:`~trustseek.simulation.trial_orders.schedule_counts`'s
-urn for two complexities.  Without numba the functions run as plain Python (slowly); the engine
-then keeps its numpy loop.
+:func:`run_block` runs one block for a chunk of participants with two trust levels when the robot
+asks below a threshold on its scalar belief (:data:`THRESHOLD`, the bounds of
+:func:`~trustseek.policies.base.ask_bounds`; ``paper`` or ``bayes`` update) or with fixed
+probabilities per complexity (:data:`FIXED`).  It does per participant exactly the arithmetic of
+the engine's numpy loop on uniforms drawn beforehand in the same order, so both give the same
+simulation to the last bit.  :func:`urn_schedule` is
+:func:`~trustseek.simulation.trial_orders.schedule_counts`'s urn for two complexities.
 """
 
 from __future__ import annotations

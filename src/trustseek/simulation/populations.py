@@ -10,7 +10,7 @@ conservative individuals), participants take models from a list
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -118,8 +118,7 @@ class Supervisors:
         check_participants(n)
         g = np.random.default_rng(rng)
         types = mixture.sample_types(n, g) if draw else g.permutation(mixture.counts(n))
-        sup = cls.from_models(mixture.models)
-        return cls(sup.trust_levels, sup.complexities, sup.initial, sup.emission, sup.transition, types.astype(np.int64))
+        return replace(cls.from_models(mixture.models), index=types.astype(np.int64))
 
     @classmethod
     def dirichlet(
@@ -164,6 +163,4 @@ class Supervisors:
 
     def take(self, idx: np.ndarray) -> Supervisors:
         """The sub-population of participants ``idx`` (0-based indices)."""
-        return Supervisors(
-            self.trust_levels, self.complexities, self.initial, self.emission, self.transition, self.index[np.asarray(idx)]
-        )
+        return replace(self, index=self.index[np.asarray(idx)])

@@ -1,10 +1,9 @@
 """What a simulation produced: per-participant summaries per block and, when recorded, every trial.
 
-:class:`Simulation` holds one column of summaries per block (in the order the blocks were
-done); :class:`CrossoverSimulation` holds one per policy, with each participant's order of
-policies, so that ``by_policy`` gives paired values.  The hidden trust ``T_t`` recorded with
-a trial is the trust at the start of that trial (the one that drives ``o_t``); ``belief`` is
-the robot's P(trust = highest level) when it chose ``a_t``.
+:class:`Simulation` holds one summary column per block (in the order done);
+:class:`CrossoverSimulation` one per policy, with each participant's order, so that ``by_policy``
+gives paired values.  A trial's recorded trust is the trust at its start; ``belief`` is the
+robot's P(trust = highest level) when it chose the action.
 """
 
 from __future__ import annotations

@@ -1,22 +1,12 @@
-"""Evaluating trial schedules: exact finite-horizon values, and simulation with common random
-numbers of the compared schedules.
+"""Evaluating trial schedules: exact finite-horizon values, and simulation with common random numbers.
 
-The schedules compared (:data:`SCHEDULES`):
-
-* ``random + trust-aware`` -- the paper: items in random order, the stationary trust-aware
-  policy (thresholds of the infinite-horizon belief MDP) decides the asks;
-* ``random + finite-horizon`` -- random order, the asks optimal for the finite session (the
-  scheduling problem with a window of one item);
-* ``optimal`` -- full control: the optimal schedule and asks;
-* heuristics with finite-horizon-optimal asks for that order: ``easy first``, ``hard first``,
-  ``alternating``, and ``ask on first hard`` (random order, the first high-complexity item is
-  always asked about).
-
-Every schedule but the first is a :class:`SchedulePolicy`; its exact value is the solver's.
-The simulator (:func:`simulate_schedules`) runs any mix of schedule policies and plain
-policies (random order) on the same supervisors: each participant gets one random queue of
-the items, and trial t draws the same three uniforms whatever the schedule does, so
-differences between schedules are paired.
+:data:`SCHEDULES`: the paper's random order with its stationary trust-aware policy; random order
+with the asks optimal for the finite session; full control (the optimal schedule and asks);
+heuristic orders (easy first, hard first, alternating) with finite-horizon-optimal asks; and
+asking on the first hard item.  Every schedule but the first is a :class:`SchedulePolicy` whose
+exact value is the solver's.  :func:`simulate_schedules` runs schedule and plain policies on the
+same supervisors: one random queue of items per participant, the same three uniforms on trial t
+whatever the schedule does, so differences are paired.
 """
 
 from __future__ import annotations

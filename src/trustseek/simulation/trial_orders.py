@@ -56,19 +56,14 @@ def schedule_counts(
     for t in range(T):
         x = gen.random(n)
         x *= left  # uniform over the trials left: below remaining[0] -> complexity 0, ...
-        if N == 2:
-            high = x >= remaining[0]
-            out[t] = high
-            remaining[0] -= ~high
-        else:
-            c = np.zeros(n, dtype=np.int8)
-            edge = remaining[0].copy()
-            for k in range(1, N):
-                c += x >= edge
-                edge += remaining[k]
-            out[t] = c
-            for k in range(N):
-                remaining[k] -= c == k
+        c = np.zeros(n, dtype=np.int8)
+        edge = remaining[0].copy()
+        for k in range(1, N):
+            c += x >= edge
+            edge += remaining[k]
+        out[t] = c
+        for k in range(N):
+            remaining[k] -= c == k
         left -= 1
     return out.T  # (n, T), stored trial-major: the simulator reads one trial of everyone at a time
 

@@ -18,10 +18,10 @@ CHROMIUM_ARGS = (
 )
 
 
-def launch_chromium(playwright: Any, extra_args: tuple[str, ...] = (), **options: Any) -> Any:
+def launch_chromium(playwright: Any, extra_args: tuple[str, ...] = ()) -> Any:
     """A headless Chromium through Playwright, from :data:`CHROMIUM` (never a downloaded build),
     with :data:`CHROMIUM_ARGS` and ``extra_args`` (e.g. ``--disable-webgl``)."""
     if not Path(CHROMIUM).exists():
         raise FileNotFoundError(f"{CHROMIUM} is missing: scripts/setup.sh installs Debian's chromium")
     args = [*CHROMIUM_ARGS, *extra_args]
-    return playwright.chromium.launch(executable_path=CHROMIUM, args=args, headless=True, **options)
+    return playwright.chromium.launch(executable_path=CHROMIUM, args=args, headless=True)

@@ -4,7 +4,6 @@ the tests, the benchmark and notebooks)."""
 
 from __future__ import annotations
 
-import contextlib
 import glob
 import os
 import pwd
@@ -77,34 +76,18 @@ class ThreadServer:
         self.thread.join(timeout=10)
 
 
-def serve_process(
-    db_url: str, token: str, port: int, log: Path | None = None, workers: int = 1, timeout: float = START_TIMEOUT
-) -> subprocess.Popen:
+def serve_process(db_url: str, token: str, port: int, workers: int = 1, timeout: float = START_TIMEOUT) -> subprocess.Popen:
     """Start ``trustseek serve`` (``workers`` processes) as a child process on 127.0.0.1:port and
     wait until it answers (at most ``timeout`` seconds).  The token goes through the environment,
     not the command line.  A server that does not answer in time is stopped before the error is
     raised, so that it does not live on (holding the port and the database) after the test."""
-    cmd = [
-        sys.executable,
-        "-c",
-        "from trustseek.cli import main; main()",
-        "serve",
-        "--db",
-        db_url,
-        "--host",
-        "127.0.0.1",
-        "--port",
-        str(port),
-        "--workers",
-        str(workers),
-    ]
+    where = f"--host 127.0.0.1 --port {port} --workers {workers}".split()
+    cmd = [sys.executable, "-c", "from trustseek.cli import main; main()", "serve", "--db", db_url, *where]
     env = {**os.environ, "PYTHONUNBUFFERED": "1", "TRUSTSEEK_TOKEN": token}
-    # the child keeps its own descriptors: this process closes its copies once the server answers
-    with contextlib.ExitStack() as files:
-        out = files.enter_context(open(log, "ab")) if log is not None else subprocess.DEVNULL
-        # stderr goes to a file, not a pipe: an unread pipe would block a chatty server
-        err = files.enter_context(tempfile.TemporaryFile())
-        proc = subprocess.Popen(cmd, stdout=out, stderr=err, env=env)
+    # stderr to a file, not a pipe (an unread pipe would block a chatty server); the child keeps its own
+    # descriptor, this process closes its copy once the server answers
+    with tempfile.TemporaryFile() as err:
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, env=env)
         try:
             wait_ready(f"http://127.0.0.1:{port}", timeout=timeout, proc=proc)
         except ServerStartError as exc:
@@ -146,21 +129,15 @@ def postgres_binaries() -> Path | None:
 
 
 class TemporaryPostgres:
-    """A throwaway PostgreSQL cluster: ``initdb`` in a temporary directory, the server on
-    127.0.0.1:<free port> with its socket in that directory, trust authentication for the
-    ``postgres`` role, no fsync (test data; ``fsync=True``: PostgreSQL's defaults, every commit on
-    disk before it is acknowledged, as a real database runs).  PostgreSQL refuses to run as root, so as root its
-    programs run as the ``postgres`` user (through ``runuser``).
-
-        with TemporaryPostgres() as url:    # postgresql://postgres@127.0.0.1:<port>/postgres
-            app = create_app(url)
-
-    ``start()`` / ``stop()`` for fixtures; ``stop()`` always removes the directory.
+    """A throwaway PostgreSQL cluster in a temporary directory, on 127.0.0.1:<free port>, trust
+    authentication for ``postgres``, no fsync (``fsync=True``: PostgreSQL's defaults).  As root its
+    programs run as the ``postgres`` user (``runuser``).  ``with TemporaryPostgres() as url:`` or
+    ``start()`` / ``stop()`` (which always removes the directory).
     """
 
-    def __init__(self, bindir: Path | None = None, fsync: bool = False):
+    def __init__(self, fsync: bool = False):
         self.fsync = fsync
-        found = bindir or postgres_binaries()
+        found = postgres_binaries()
         if found is None:
             raise ServerStartError("PostgreSQL server binaries (initdb, pg_ctl) not found: install Debian's postgresql package")
         self.bindir: Path = found
@@ -191,36 +168,14 @@ class TemporaryPostgres:
         if self.owner is not None:
             os.chown(root, *self.owner)
         data, port = root / "data", free_port()
-        self._run(
-            str(self.bindir / "initdb"),
-            "-D",
-            str(data),
-            "-U",
-            "postgres",
-            "-A",
-            "trust",
-            "-E",
-            "UTF8",
-            "--no-sync",
-            "--no-instructions",
-        )
+        initdb = ["-U", "postgres", "-A", "trust", "-E", "UTF8", "--no-sync", "--no-instructions"]
+        self._run(str(self.bindir / "initdb"), "-D", str(data), *initdb)
         opts = f"-k {root} -p {port} -c listen_addresses=127.0.0.1"
         if not self.fsync:
             opts += " -c fsync=off -c full_page_writes=off"
         self.started = True  # from here on stop() runs pg_ctl stop, even if the start fails half-way
-        self._run(
-            str(self.bindir / "pg_ctl"),
-            "-D",
-            str(data),
-            "-l",
-            str(root / "server.log"),
-            "-o",
-            opts,
-            "-w",
-            "-t",
-            "60",
-            "start",
-        )
+        log = str(root / "server.log")
+        self._run(str(self.bindir / "pg_ctl"), "-D", str(data), "-l", log, "-o", opts, "-w", "-t", "60", "start")
         self.url = f"postgresql://postgres@127.0.0.1:{port}/postgres"
         return self.url
 
