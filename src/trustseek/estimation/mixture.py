@@ -6,7 +6,7 @@ rows no event reaches): trust models for the paper's inputs, general models
 a participant's whole sequence comes from one type.  The mixture
 is written as M IOHMMs whose initial rows hold the joint P(type, S_1): type m's row sums to
 its weight w_m.  The EM of the pooled fit then applies unchanged (:func:`~.em.run_em` with
-SQUAREM, the L-BFGS-B finish and the stationarity check of :mod:`.convergence`): per
+SQUAREM, the L-BFGS-B finish and the stationarity check of :mod:`.em`): per
 participant the forward pass of every type gives log P(sequence, type) and the type
 responsibilities (log-sum-exp), and each type's backward pass adds its expected counts
 weighted by the responsibility (one compiled pass, :meth:`~.kernels.Kernel.run_mixture`).
@@ -42,8 +42,7 @@ import pandas as pd
 
 from ..model.core import TrustModel
 from ..model.mixture import TypeMixture
-from .convergence import converge_runs
-from .em import STATIONARY, RunResult, run_em
+from .em import STATIONARY, RunResult, converge_runs, run_em
 from .fit import never_estimated
 from .iohmm import EMFit, fit_iohmm
 from .mixture_em import EMPTY, FINISH_MARGIN, PERTURB, MixtureParams, MixtureStructure, MixtureWorkspace

@@ -18,7 +18,7 @@ event reaches), the rating's rows as free categoricals (plus the prior's pseudo-
 SQUAREM extrapolates the joint table and :meth:`RatingStructure.project` reads the factors
 back from their own cells, so every accepted point factorises.  The L-BFGS-B finish works on
 one table's free cells and is not used for such specs: their runs are EM (with SQUAREM) to
-the fit's tolerance, then the same stationarity check (:mod:`.convergence`).
+the fit's tolerance, then the same stationarity check (:mod:`.em`).
 """
 
 from __future__ import annotations

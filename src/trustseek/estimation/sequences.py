@@ -179,13 +179,10 @@ def _participants(values: pd.Series) -> tuple[np.ndarray, list[str]]:
 def encode(frame: pd.DataFrame, spec: IOHMMSpec, participant: str = "participant", trial: str = "trial") -> Sequences:
     """Encode a validated trial table (one row per trial) for ``spec``.
 
-        Participants keep their order of first appearance.  A participant's trials are
-        ordered by their index, and consecutive indices are consecutive trials: a gap
-        in the numbers (trials removed from the log) is not a trial of its own.  ``base``
-        records whether the table counts from 0 or 1; ``trial_of_row`` keeps every row's
-        index.  A missing output value is unobserved.  With a rating (``spec.rating``) ``y`` holds
-    the joint code of output and rating (:func:`joint_codes`).  The arrays hold compact integers
-        (int16 codes, int32 rows).
+    Participants keep their order of first appearance; a participant's trials are ordered by their
+    index, and a gap in the numbers is not a trial of its own.  ``base`` records whether the table
+    counts from 0 or 1, ``trial_of_row`` every row's index.  A missing output is unobserved; with a
+    rating ``y`` holds the joint code (:func:`joint_codes`).
     """
     n = len(frame)
     codes = _codes(frame, spec)
