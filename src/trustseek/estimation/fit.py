@@ -20,7 +20,7 @@ from .iohmm import EMFit, fit_iohmm, loglik, posterior_frame
 from .options import DEFAULTS, FitOptions, counting
 from .ratings import RatingStructure
 from .result import FitResult
-from .sequences import Sequences, encode
+from .sequences import Sequences, encode, participant_codes
 from .spec import FitError, IOHMMSpec, Params
 from .structure import Structure, describe_combination
 from .trust_iohmm import (
@@ -264,14 +264,9 @@ def never_estimated(frame: pd.DataFrame, spec: IOHMMSpec) -> tuple[tuple[str, tu
     if (c < 0).any() or (a < 0).any():
         return ()
     # a trial has a next one when it is not its participant's last (encode refused repeated indices)
-    participant = frame["participant"]
-    if isinstance(participant.dtype, pd.CategoricalDtype):
-        person, n_people = participant.cat.codes.to_numpy(dtype=np.int64), len(participant.cat.categories)
-    else:
-        person, people = pd.factorize(participant)
-        n_people = len(people)
+    person, people = participant_codes(frame["participant"])
     trial = frame["trial"].to_numpy(dtype=np.int64)
-    last = np.full(n_people, np.iinfo(np.int64).min)
+    last = np.full(len(people), np.iinfo(np.int64).min)
     np.maximum.at(last, person, trial)
     # one count per (what the trial informs, c, a, e + 1): 1 an observed human action (its
     # emission row), 2 a next trial (its transition row, when e is known), 3 both

@@ -157,7 +157,7 @@ def joint_codes(action: np.ndarray, rating: np.ndarray, n_outputs: int, n_rating
     return np.where((action < 0) & (rating < 0), -1, out)
 
 
-def _participants(values: pd.Series) -> tuple[np.ndarray, list[str]]:
+def participant_codes(values: pd.Series) -> tuple[np.ndarray, list[str]]:
     """Per row the participant's index, participants in order of first appearance."""
     if isinstance(values.dtype, pd.CategoricalDtype) and not values.isna().any():
         c = values.cat.codes.to_numpy()
@@ -186,7 +186,7 @@ def encode(frame: pd.DataFrame, spec: IOHMMSpec, participant: str = "participant
     """
     n = len(frame)
     codes = _codes(frame, spec)
-    pcode, participants = _participants(frame[participant])
+    pcode, participants = participant_codes(frame[participant])
     trials = frame[trial].to_numpy()
     if trials.dtype.kind not in "iu":
         trials = trials.astype(np.int64)
