@@ -236,35 +236,36 @@ def _step_table(emit, trans, PE, A):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _rescale(a0, a1, marks, s, t):
-    """(a0, a1) times 2**RESCALE where their sum is below 2**-RESCALE (trial ``t`` then goes to
-    ``marks[s]``), the number of marks, and whether the sum is zero."""
-    if a0 + a1 < TINY:
-        if not a0 + a1 > 0.0:
-            return a0, a1, s, True
-        marks[s] = t
-        return a0 * HUGE, a1 * HUGE, s + 1, False
-    return a0, a1, s, False
-
-
-@njit(cache=True, nogil=True, inline="always")
 def _forward_codes(n, initial, emit, A, code, L, alpha, marks):
     """:func:`_forward2` on the step codes: ``alpha`` unnormalised, multiplied by 2**RESCALE
     where its sum falls below 2**-RESCALE (the trials where it was go to ``marks``); the
     log-probability of sequence ``n`` (-inf: zero) and the number of marks."""
     e = code[n, 0]
-    a0, a1, s, zero = _rescale(initial[0] * emit[e, 0], initial[1] * emit[e, 1], marks, 0, 0)
-    if zero:
-        return -math.inf, 0
+    a0 = initial[0] * emit[e, 0]
+    a1 = initial[1] * emit[e, 1]
+    s = 0
+    if a0 + a1 < TINY:
+        if not a0 + a1 > 0.0:
+            return -math.inf, 0
+        a0 *= HUGE
+        a1 *= HUGE
+        marks[s] = 0
+        s += 1
     alpha[0, 0] = a0
     alpha[0, 1] = a1
     for t in range(1, L):
         c = code[n, t]
         x0 = a0 * A[c, 0] + a1 * A[c, 2]
         x1 = a0 * A[c, 1] + a1 * A[c, 3]
-        a0, a1, s, zero = _rescale(x0, x1, marks, s, t)
-        if zero:
-            return -math.inf, 0
+        a0 = x0
+        a1 = x1
+        if a0 + a1 < TINY:
+            if not a0 + a1 > 0.0:
+                return -math.inf, 0
+            a0 *= HUGE
+            a1 *= HUGE
+            marks[s] = t
+            s += 1
         alpha[t, 0] = a0
         alpha[t, 1] = a1
     return math.log(a0 + a1) - s * LOG_HUGE, s
@@ -332,12 +333,26 @@ def _forward_pair(n, m, initial, emit, A, code, L, first, second):
     alpha2, marks2 = second
     e = code[n, 0]
     f = code[m, 0]
-    a0, a1, sa, zero = _rescale(initial[0] * emit[e, 0], initial[1] * emit[e, 1], marks, 0, 0)
-    if zero:
-        return -math.inf, -math.inf, 0, 0
-    b0, b1, sb, zero = _rescale(initial[0] * emit[f, 0], initial[1] * emit[f, 1], marks2, 0, 0)
-    if zero:
-        return -math.inf, -math.inf, 0, 0
+    a0 = initial[0] * emit[e, 0]
+    a1 = initial[1] * emit[e, 1]
+    b0 = initial[0] * emit[f, 0]
+    b1 = initial[1] * emit[f, 1]
+    sa = 0
+    sb = 0
+    if a0 + a1 < TINY:
+        if not a0 + a1 > 0.0:
+            return -math.inf, -math.inf, 0, 0
+        a0 *= HUGE
+        a1 *= HUGE
+        marks[sa] = 0
+        sa += 1
+    if b0 + b1 < TINY:
+        if not b0 + b1 > 0.0:
+            return -math.inf, -math.inf, 0, 0
+        b0 *= HUGE
+        b1 *= HUGE
+        marks2[sb] = 0
+        sb += 1
     alpha[0, 0] = a0
     alpha[0, 1] = a1
     alpha2[0, 0] = b0
@@ -349,12 +364,24 @@ def _forward_pair(n, m, initial, emit, A, code, L, first, second):
         x1 = a0 * A[c, 1] + a1 * A[c, 3]
         y0 = b0 * A[d, 0] + b1 * A[d, 2]
         y1 = b0 * A[d, 1] + b1 * A[d, 3]
-        a0, a1, sa, zero = _rescale(x0, x1, marks, sa, t)
-        if zero:
-            return -math.inf, -math.inf, 0, 0
-        b0, b1, sb, zero = _rescale(y0, y1, marks2, sb, t)
-        if zero:
-            return -math.inf, -math.inf, 0, 0
+        a0 = x0
+        a1 = x1
+        b0 = y0
+        b1 = y1
+        if a0 + a1 < TINY:
+            if not a0 + a1 > 0.0:
+                return -math.inf, -math.inf, 0, 0
+            a0 *= HUGE
+            a1 *= HUGE
+            marks[sa] = t
+            sa += 1
+        if b0 + b1 < TINY:
+            if not b0 + b1 > 0.0:
+                return -math.inf, -math.inf, 0, 0
+            b0 *= HUGE
+            b1 *= HUGE
+            marks2[sb] = t
+            sb += 1
         alpha[t, 0] = a0
         alpha[t, 1] = a1
         alpha2[t, 0] = b0
