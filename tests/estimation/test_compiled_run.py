@@ -6,8 +6,7 @@ import pytest
 from trustseek.estimation import FitError, Params, encode, fit_iohmm, kernels, paper_spec
 from trustseek.estimation import compiled_run as cr
 from trustseek.estimation import compiled_steps as steps
-from trustseek.estimation.convergence import em_step
-from trustseek.estimation.em import run_em
+from trustseek.estimation.em import em_step, run_em
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.options import FitOptions, RunSettings
 from trustseek.estimation.structure import Structure

@@ -6,7 +6,7 @@ import pytest
 
 from trustseek.estimation import compiled_run as cr
 from trustseek.estimation import encode, fit_iohmm, kernels, paper_spec
-from trustseek.estimation.convergence import em_step
+from trustseek.estimation.em import em_step
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.options import FitOptions
 from trustseek.estimation.structure import Structure

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from threadpoolctl import threadpool_info, threadpool_limits
 
-from trustseek.estimation import Params, convergence, encode, fit_iohmm, iohmm, kernels, paper_spec
+from trustseek.estimation import Params, em, encode, fit_iohmm, iohmm, kernels, paper_spec
 from trustseek.estimation.em import run_em
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.options import FitOptions
@@ -58,10 +58,10 @@ def test_sequences_two_at_a_time_match_the_numpy_estep(seed):
 def test_a_pair_with_zero_probability_makes_the_set_impossible():
     _spec, seqs, s = ragged(20, 3)
     p = s.random(np.random.default_rng(0))
-    em = p.emission.copy()
-    em[:, :, 0] = 0.0  # no output can be the first category
-    em[:, :, 1] = 1.0
-    st = Workspace(seqs, *s.dims, method="numba").estep(Params(p.initial, em, p.transition))
+    emission = p.emission.copy()
+    emission[:, :, 0] = 0.0  # no output can be the first category
+    emission[:, :, 1] = 1.0
+    st = Workspace(seqs, *s.dims, method="numba").estep(Params(p.initial, emission, p.transition))
     assert st.loglik == -np.inf and not st.emission.any() and not st.transition.any()
 
 
@@ -74,17 +74,17 @@ def test_pooled_finishes_give_the_numbers_of_one_at_a_time(monkeypatch, method):
     monkeypatch.setattr(iohmm, "Workspace", functools.partial(Workspace, method=method))
     seen: list[int] = []
     batches: list[int] = []
-    serve = convergence._Pool._serve
+    serve = em._Pool._serve
 
     def counted(pool):
         if pool.asked and len(pool.asked) >= pool.live:
             batches.append(len(pool.asked))
         serve(pool)
 
-    monkeypatch.setattr(convergence._Pool, "_serve", counted)
+    monkeypatch.setattr(em._Pool, "_serve", counted)
     fits = []
-    for pooled in (1, convergence.POOLED):
-        monkeypatch.setattr(convergence, "POOLED", pooled)
+    for pooled in (1, em.POOLED):
+        monkeypatch.setattr(em, "POOLED", pooled)
         fits.append(fit_iohmm(seqs, spec, FitOptions(restarts=5, seed=2), on_restart=lambda i, r: seen.append(i), compiled=False))
     assert seen == list(range(5)) * 2
     assert max(batches) == 5  # the second fit pooled its E-steps
@@ -121,7 +121,7 @@ def test_a_failing_pooled_estep_reaches_the_caller_and_stops_every_run(fail_at):
     runs = run_em(s, work, [s.random(np.random.default_rng(r)) for r in range(4)], tol=1e-3)
     settings = FitOptions(restarts=4).run(True, True)
     with pytest.raises(FitError, match="went away"):
-        list(convergence.converge_runs(s, _Failing(work, fail_at), runs, settings))
+        list(em.converge_runs(s, _Failing(work, fail_at), runs, settings))
     assert not [t for t in threading.enumerate() if t.name.startswith("trustseek-fit")]
 
 
@@ -148,12 +148,12 @@ def test_leaving_the_pooled_runs_early_stops_their_threads():
     work = Workspace(seqs, *s.dims, method="loop")
     settings = FitOptions(restarts=3).run(True, True)
     starts = run_em(s, work, [s.random(np.random.default_rng(r)) for r in range(3)], tol=1e-3)
-    first = next(convergence.converge_runs(s, work, starts[:1], settings))  # a stationary point
+    first = next(em.converge_runs(s, work, starts[:1], settings))  # a stationary point
     runs = [first, *starts[1:]]  # the first ends within a few E-steps, the others go on for many
     full = _Counting(work)
-    assert all(r.converged for r in convergence.converge_runs(s, full, runs, settings))
+    assert all(r.converged for r in em.converge_runs(s, full, runs, settings))
     cut = _Counting(work)
-    results = convergence.converge_runs(s, cut, runs, settings)
+    results = em.converge_runs(s, cut, runs, settings)
     assert next(results).converged
     results.close()
     assert not [t for t in threading.enumerate() if t.name.startswith("trustseek-fit")]
@@ -194,20 +194,20 @@ POOLED_BLAS = """
 import sys
 from threadpoolctl import threadpool_info
 from trustseek.data import example_path, read_trials
-from trustseek.estimation import convergence, encode, fit_iohmm, paper_spec
+from trustseek.estimation import em, encode, fit_iohmm, paper_spec
 
 log = read_trials(example_path())
 log = log[log["participant"].isin(log["participant"].unique()[:4])]  # 4 x 71: the numpy time loop, starts pooled
 assert "scipy.linalg" not in sys.modules  # scipy's BLAS is loaded by the first finish
 seen = set()
-finish = convergence.finish
+finish = em.finish
 
 def watched(*args, **kwargs):
     out = finish(*args, **kwargs)
     seen.update(lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas")
     return out
 
-convergence.finish = watched
+em.finish = watched
 spec = paper_spec()
 fit_iohmm(encode(log, spec), spec)
 print(sorted(seen))

@@ -325,7 +325,7 @@ def test_compiled_estep_equals_the_numpy_reference(K):
 def test_stick_breaking_finish_gradient_and_monotone_history(K):
     """The quasi-Newton finish: its parametrization round-trips, its Fisher-identity gradient
     equals central differences of the objective, and it never lowers the objective."""
-    from trustseek.estimation.quasi_newton import finish
+    from trustseek.estimation.em import finish
     from trustseek.estimation.sticks import Sticks
 
     df = small_paper_data(30, (41, 30), seed=13)
@@ -361,7 +361,7 @@ def test_stick_breaking_finish_gradient_and_monotone_history(K):
 
 def one_em_step_gain(s, seqs, params):
     """Relative gain of the objective by one more EM step from ``params``."""
-    from trustseek.estimation.convergence import em_step
+    from trustseek.estimation.em import em_step
 
     f, _, fq = em_step(s, Workspace(seqs, *s.dims), params)
     return (fq - f) / abs(f)
@@ -372,7 +372,7 @@ def test_a_start_the_finish_leaves_short_goes_on_to_the_maximum():
     finish stop at -1725.02, where the finish's own test is met but one EM step still gains
     6e-3 (relative): the fit must not call that converged, and goes on to the maximum (the
     lockstep path with that finish; the compiled run, with its own finish, from the same start)."""
-    from trustseek.estimation.quasi_newton import finish
+    from trustseek.estimation.em import finish
     from trustseek.model.presets import paper_model
 
     spec = paper_spec()

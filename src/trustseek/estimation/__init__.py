@@ -5,12 +5,11 @@
 * :mod:`.structure` -- a spec compiled against data: free, tied and fixed cells, M-step;
 * :mod:`.ratings` -- a self-reported rating as a second emission of the level (joint output);
 * :mod:`.estep` / :mod:`.kernels` / :mod:`.forward_backward` -- the E-step (compiled, with the numpy reference);
-* :mod:`.em` / :mod:`.quasi_newton` / :mod:`.sticks` -- EM for R starts with SQUAREM, and the L-BFGS-B finish
-  on the free cells' stick-breaking fractions;
-* :mod:`.convergence` -- a run has converged at a stationary point, checked by one more EM step;
+* :mod:`.em` / :mod:`.sticks` -- the EM driver: R starts with SQUAREM, the L-BFGS-B finish on the free
+  cells' stick-breaking fractions, the stationarity check; :mod:`.compiled_run`, the same run compiled;
 * :mod:`.options` -- how a fit searches (:class:`FitOptions`: restarts, seed, tolerance, iteration
   cap, workers), one set taken by every fit, selection and bootstrap;
-* :mod:`.iohmm` -- :func:`fit_iohmm`, log-likelihood, posteriors, Viterbi;
+* :mod:`.iohmm` -- :func:`fit_iohmm`, log-likelihood, posteriors, Viterbi;;
 * :mod:`.trust_iohmm` -- the paper's structure, tables to and from a TrustModel;
 * :mod:`.fit`, :mod:`.bootstrap`, :mod:`.selection` -- the trust-model fit, its intervals,
   and the choice of the number of levels; :func:`fit_model`, the same fit with any named

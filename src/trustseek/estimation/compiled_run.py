@@ -1,25 +1,14 @@
 """A whole run compiled: EM with SQUAREM, the quasi-Newton finish and the stationarity check in one call.
 
-For a small problem (a few thousand trials) the E-step itself takes microseconds and a run
-spends most of its time in Python between E-steps: the M-step, the SQUAREM step, scipy's
-L-BFGS-B driver.  :func:`run_starts` runs each start from its first E-step to its end in
-compiled code (numba), with the decisions of :func:`~.em.run_em` and
-:func:`~.convergence.converge`:
-
-* EM with SQUAREM (two EM steps, the extrapolated point kept only when its objective is at
-  least the second step's) to the hand-over tolerance;
-* the finish: a projected limited-memory BFGS on the stick-breaking fractions of the free
-  cells (:class:`~.quasi_newton.Sticks`, the same box and the same gradient by Fisher's
-  identity), with a backtracking line search along the projection onto the box, to the
-  finish tolerance (relative change of an iteration, as L-BFGS-B's ``ftol``);
-* the check: one EM step from the end point gains at most ``tol`` (relative), else EM goes
-  on from that step's point and the next round begins.  The end point's expected counts
-  are those of its own E-step, so the check costs one E-step (the point one step on).
-
-Every start runs on one thread from start to end (starts go side by side on several
-threads), so the result does not depend on the number of threads.  The E-step is the
-compiled pass of :mod:`.kernels` over the same items in the same order: its numbers are
-those of :meth:`~.estep.Workspace.estep`.
+On a few thousand trials an E-step takes microseconds and a run spends its time in Python between
+E-steps.  :func:`run_starts` runs each start from its first E-step to its end in numba, with the
+decisions of :func:`~.em.run_em` and :func:`~.em.converge`: EM with SQUAREM to the hand-over
+tolerance; the finish, a projected BFGS on the stick-breaking fractions (:mod:`.sticks`: the same
+box and gradient) with a backtracking line search, to the finish tolerance (as L-BFGS-B's
+``ftol``); the check, one EM step from the end point (its counts known: one E-step).  A start runs
+on one thread from start to end, so the result does not depend on the number of threads; the
+E-step is :mod:`.kernels`' pass over the same items in the same order, so its numbers are those of
+:meth:`~.estep.Workspace.estep`.
 """
 
 from __future__ import annotations
@@ -38,12 +27,11 @@ from .em import CAPPED, STATIONARY, RunResult
 from .estep import Workspace
 from .options import RunSettings
 from .spec import FitError, Params
-from .sticks import Sticks, stick_gradient, stick_values
-from .structure import FLOOR, Structure, Table
+from .sticks import EPS, Sticks, stick_gradient, stick_theta, stick_values
+from .structure import Structure, Table
 
 njit = kernels.njit
 CHUNK = kernels.CHUNK
-STICK_EPS = Sticks.EPS
 ARMIJO = 1e-4  # sufficient decrease of the finish's line search
 FINISH_FTOL = 1e-4  # the finish stops at this fraction of the fit's relative tolerance (a full step gaining less)
 BACKTRACKS = 30  # halvings of the step before the line search gives up
@@ -53,21 +41,13 @@ ENDED_STATIONARY, ENDED_CAPPED, ENDED_ZERO = 0, 1, 2  # how a compiled run ended
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _theta(flat, model, sticks, n):
-    """:meth:`.sticks.Sticks.theta` of the flat cells."""
-    K, Ue, M, _Ut, _prior, _emt, _trt = model
-    table, m, mass, tbase, tstride, coff, cptr, cdst = sticks
-    a, b = K, K + Ue * K * M
-    f0, f1, f2 = flat[:a], flat[a:b], flat[b:]
-    out = np.empty(n)
-    for i in range(len(m)):
-        rem = mass[i]
-        for j in range(m[i] - 1):
-            q = cdst[cptr[coff[i] + j]]
-            val = f0[q] if table[i] == 0 else (f1[q] if table[i] == 1 else f2[q])
-            out[tbase[i] + j * tstride[i]] = min(max(val / max(rem, FLOOR), STICK_EPS), 1 - STICK_EPS)
-            rem = rem - val
-    return out
+def _take(state, p, c, ll, f):
+    """The point ``p`` with E-step counts ``c``, log-likelihood ``ll`` and objective ``f`` into ``state``."""
+    flat, counts, stat = state
+    steps.copy(flat, p)
+    steps.copy(counts, c)
+    stat[0] = ll
+    stat[1] = f
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -154,21 +134,20 @@ def _box_qp(g, B, lo, hi, d):
 
 @njit(cache=True, nogil=True)
 def _finish(state, budget, ftol, model, ev, qn, history, nh):
-    """The quasi-Newton finish from the run's point ``state`` (flat cells, counts, log-likelihood,
-    objective; updated in place to the best accepted point).  Maximises the objective over the
-    stick-breaking fractions in the box [EPS, 1 - EPS]: a BFGS model of the objective (dense,
-    its Hessian updated from each step's gradient change), the step that is best for the model
-    inside the box (a small bound-constrained quadratic programme, no E-steps), a backtracking
-    line search along it; stops when an iteration changes the objective by at most ``ftol``
-    (relative, as L-BFGS-B's ``ftol``), when no step decreases it, or at ``budget`` E-steps.
-    ``qn`` is (the sticks' layout, their number n, ``B``, ``warm``): the model's matrix is ``B``
-    (n, n), left there at the end; with ``warm`` the finish starts from the matrix it holds, else
-    from a multiple of the identity.  (E-steps, stopped by the budget, entries in ``history``)."""
-    flat, counts, stat = state
+    """The quasi-Newton finish from ``state`` (flat cells, counts, (log-likelihood, objective); updated
+    in place to the best accepted point): a dense BFGS model of the objective over the fractions in
+    [EPS, 1 - EPS], its best step inside the box (:func:`_box_qp`), a backtracking line search; stops
+    when an iteration changes the objective by at most ``ftol`` (relative), no step decreases it, or
+    at ``budget`` E-steps.  ``qn``: (the sticks' layout, their number n, ``B`` (n, n), ``warm``): the
+    model's matrix is left in ``B``; with ``warm`` it starts from ``B``, else from a multiple of the
+    identity.  Returns (E-steps, stopped by the budget, entries in ``history``)."""
+    flat, _counts, stat = state
     sticks, n, B, warm = qn
-    lo, hi = STICK_EPS, 1 - STICK_EPS
+    lo, hi = EPS, 1 - EPS
     base = flat.copy()
-    x = _theta(base, model, sticks, n)
+    K, Ue, M = model[0], model[1], model[2]
+    x = np.empty(n)
+    stick_theta((base[:K], base[K : K + Ue * K * M], base[K + Ue * K * M :]), sticks, x)
     g = np.empty(n)
     fl = np.empty(len(flat))
     cn = np.empty(len(flat))
@@ -241,10 +220,7 @@ def _finish(state, budget, ftol, model, ev, qn, history, nh):
         steps.copy(g, gn)
         F = Fn
         if -Fn > stat[1]:
-            steps.copy(flat, fln)
-            steps.copy(counts, cnn)
-            stat[0] = lln
-            stat[1] = -Fn
+            _take(state, fln, cnn, lln, -Fn)
             history[nh] = -Fn
             nh += 1
         if small:
@@ -254,9 +230,8 @@ def _finish(state, budget, ftol, model, ev, qn, history, nh):
 
 @njit(cache=True, nogil=True)
 def _em(state, tol, max_iter, its, model, ev, accelerate, history, nh):
-    """EM with SQUAREM from the point ``state`` (its counts known) until a step gains less than
-    ``tol`` (relative), rounding makes a step lose, or ``max_iter`` E-steps; updated in place.
-    (E-steps so far, converged, entries in ``history``), as :func:`.em.run_em` decides."""
+    """EM with SQUAREM from ``state`` (its counts known; updated in place), as :func:`.em.run_em`
+    decides; (E-steps so far, converged, entries in ``history``)."""
     flat, counts, stat = state
     L = len(flat)
     p1 = np.empty(L)
@@ -277,35 +252,22 @@ def _em(state, tol, max_iter, its, model, ev, accelerate, history, nh):
             return its, True, nh
         history[nh] = f1
         nh += 1
-        if f1 - f0 <= tol * abs(f0):
-            steps.copy(flat, p1)
-            steps.copy(counts, c1)
-            stat[0], stat[1] = ll1, f1
-            return its, True, nh
-        if not accelerate:
-            steps.copy(flat, p1)
-            steps.copy(counts, c1)
-            stat[0], stat[1] = ll1, f1
+        small = f1 - f0 <= tol * abs(f0)
+        if small or not accelerate or its >= max_iter:
+            _take(state, p1, c1, ll1, f1)
+            if small or its >= max_iter:
+                return its, small, nh
             continue
-        if its >= max_iter:
-            steps.copy(flat, p1)
-            steps.copy(counts, c1)
-            stat[0], stat[1] = ll1, f1
-            return its, False, nh
         steps.copy(p0, flat)
         steps.em_step(p1, c1, model, p2)
         ll2, f2 = steps.evaluate(p2, model, ev, c2)
         its += 1
         if not f2 >= f1:
-            steps.copy(flat, p1)
-            steps.copy(counts, c1)
-            stat[0], stat[1] = ll1, f1
+            _take(state, p1, c1, ll1, f1)
             return its, True, nh
         history[nh] = f2
         nh += 1
-        steps.copy(flat, p2)
-        steps.copy(counts, c2)
-        stat[0], stat[1] = ll2, f2
+        _take(state, p2, c2, ll2, f2)
         if f2 - f1 <= tol * abs(f1):
             return its, True, nh
         if its < max_iter and steps.extrapolate(p0, p1, p2, model, pe):
@@ -314,21 +276,16 @@ def _em(state, tol, max_iter, its, model, ev, accelerate, history, nh):
             if fe >= f2 and math.isfinite(fe):
                 history[nh] = fe
                 nh += 1
-                steps.copy(flat, pe)
-                steps.copy(counts, ce)
-                stat[0], stat[1] = lle, fe
+                _take(state, pe, ce, lle, fe)
 
 
 @njit(cache=True, nogil=True)
 def run_one(start, model, data, C, PE, settings, qn):
-    """One start from its first E-step to its end (see the module).  Returns the end point's
-    flat cells, (log-likelihood, objective), E-steps, how it ended, finishes, and the history.
-    ``model``: (K, Ue, M, Ut, prior, emission table, transition table); ``data``: the kernel's
-    index arrays, in ``C`` items with ``PE`` emission rows; ``settings``: (tol, max_iter, em_tol,
-    finish_tol, quasi-Newton, accelerate, the E-step's items on numba's threads); ``qn``: (the
-    sticks' layout, their number n, ``B``, ``warm``): ``B`` (n, n) holds the finish's quasi-Newton
-    matrix at the end; with ``warm`` the finishes start from the matrix ``B`` holds, else each
-    from a multiple of the identity."""
+    """One start from its first E-step to its end: the end point's flat cells, (log-likelihood,
+    objective), E-steps, how it ended, finishes, and the history.  ``model``: (K, Ue, M, Ut, prior,
+    emission table, transition table); ``data``: the kernel's index arrays, in ``C`` items with
+    ``PE`` emission rows; ``settings``: (tol, max_iter, em_tol, finish_tol, quasi-Newton, accelerate,
+    the E-step on numba's threads); ``qn``: as for :func:`_finish`."""
     K, _Ue, _M, Ut, _prior, _emt, _trt = model
     tol, max_iter, em_tol, finish_tol, use_qn, accelerate, threaded = settings
     n = qn[1]
@@ -368,9 +325,7 @@ def run_one(start, model, data, C, PE, settings, qn):
         f = stat[1]
         if not fq - f > tol * abs(f):
             return flat, stat, its, ENDED_STATIONARY, finishes, history[:nh]
-        steps.copy(flat, q)
-        steps.copy(counts, cq)
-        stat[0], stat[1] = llq, fq
+        _take(state, q, cq, llq, fq)
         history[nh] = fq
         nh += 1
         its, converged, nh = _em(state, em_tol, max_iter, its, model, ev, accelerate, history, nh)
@@ -416,19 +371,15 @@ def applies(structure: Structure, work: Workspace) -> bool:
 
 
 def run_starts(structure: Structure, work: Workspace, starts: Sequence[Params], settings: RunSettings) -> list[RunResult]:
-    """Each start carried to a stationary point or to ``settings.max_iter`` E-steps, compiled (see
-    the module; the finish to :data:`FINISH_FTOL` of ``settings.tol``); ``settings.threads`` run
-    starts side by side, or with fewer starts than threads on data of
-    ``compiled_steps.PARALLEL_ITEMS`` items or more share each E-step (the numbers do not depend on it).
+    """Each start carried to a stationary point or ``settings.max_iter`` E-steps, compiled (the finish
+    to :data:`FINISH_FTOL` of ``settings.tol``); ``settings.threads`` run starts side by side, or, with
+    fewer starts than threads on ``compiled_steps.PARALLEL_ITEMS`` items or more, share each E-step.
 
-    From :data:`SUBSAMPLE_MIN` trials on (:func:`subsample`) each start runs first on every
-    :data:`SUBSAMPLE_EVERY`-th sequence to its own stationary point (or ``max_iter`` E-steps),
-    then on the whole data from there to a stationary point of the whole data (or ``max_iter``
-    more E-steps), its finish starting from the subsample's quasi-Newton matrix scaled by the
-    ratio of trials: the whole data's curvature is about that.  ``RunResult.iterations``
-    counts the whole data's E-steps, ``subsample_iterations`` the subsample's; the history is
-    the whole data's.  A start whose subsample end gives the whole data probability zero is
-    run again from its start on the whole data."""
+    From :data:`SUBSAMPLE_MIN` trials (:func:`subsample`) a start runs first on every
+    :data:`SUBSAMPLE_EVERY`-th sequence to its own end, then on the whole data from there (at most
+    ``max_iter`` more E-steps), the finish starting from the subsample's matrix scaled by the ratio of
+    trials; ``subsample_iterations`` counts the subsample's E-steps.  A subsample end that gives the
+    whole data probability zero is run again from the start on the whole data."""
     K, M, Ue, Ut = structure.dims
     kern = work._kernel
     assert kern is not None
@@ -454,25 +405,19 @@ def run_starts(structure: Structure, work: Workspace, starts: Sequence[Params], 
     def one(p: Params) -> RunResult:
         t0 = time.perf_counter()
         x = np.ascontiguousarray(p.vector(), dtype=float)
-        B = np.zeros((sticks.size, sticks.size))
-        sub_its = 0
+        B = np.zeros((n, n))
+        sub_its, out = 0, None
         if idx is not None:
-            y, _stat, sub_its, sub_ended, _f, _h = run_one(x, model, sub, sub_C, work.PE, numbers, (layout, n, B, False))
-            if sub_ended == ENDED_ZERO:
-                raise FitError(["the initial values give the data probability zero"])
+            y, _stat, sub_its, _ended, _f, _h = run_one(x, model, sub, sub_C, work.PE, numbers, (layout, n, B, False))
             B *= ratio
-            flat, stat, its, ended, finishes, history = run_one(y, model, data, kern.C, work.PE, numbers, (layout, n, B, True))
-            if ended != ENDED_ZERO:
-                return result(flat, stat, its, ended, finishes, history, sub_its, t0)
-            sub_its = 0  # the subsample's end is impossible for the whole data: from the start again
-        flat, stat, its, ended, finishes, history = run_one(x, model, data, kern.C, work.PE, numbers, (layout, n, B, False))
+            out = run_one(y, model, data, kern.C, work.PE, numbers, (layout, n, B, True))
+            if out[3] == ENDED_ZERO:  # the subsample's end is impossible for the whole data: from the start again
+                sub_its, out = 0, None
+        if out is None:
+            out = run_one(x, model, data, kern.C, work.PE, numbers, (layout, n, B, False))
+        flat, stat, its, ended, finishes, history = out
         if ended == ENDED_ZERO:
             raise FitError(["the initial values give the data probability zero"])
-        return result(flat, stat, its, ended, finishes, history, sub_its, t0)
-
-    def result(
-        flat: np.ndarray, stat: np.ndarray, its: int, ended: int, finishes: int, history: np.ndarray, sub_its: int, t0: float
-    ) -> RunResult:
         return RunResult(
             template.from_vector(flat),
             float(stat[0]),

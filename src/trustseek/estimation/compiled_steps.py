@@ -1,20 +1,13 @@
 """The steps of the compiled run (:mod:`.compiled_run`) on flat cells, in numba: the E-step of one
-parameter set (the compiled pass of :mod:`.kernels` over the same items in the same order, so its
-numbers are those of :meth:`~.estep.Workspace.estep`), the M-step, the projection and the log-prior
-of :class:`~.structure.Structure`, and the SQUAREM point of :func:`.em._extrapolate`.
+parameter set (:mod:`.kernels`' pass over the same items in the same order: the numbers of
+:meth:`~.estep.Workspace.estep`), the M-step, projection and log-prior of
+:class:`~.structure.Structure`, and the SQUAREM point of :func:`.em._extrapolate`.
 
-A parameter set is flat: the initial distribution (K,), the emission rows (Ue, K, M) and the
-transition rows (Ut, K, K) one after the other (:meth:`~.spec.Params.vector`); ``model`` is the
-tuple (K, Ue, M, Ut, prior, emission table, transition table) and ``ev`` the E-step's (data,
-buffers).
-
-Compile time: numba compiles every compiled function that another calls into a library of its own,
-with the machine code of everything it calls, so each level of calls between :func:`evaluate` and
-the compiled run compiles the E-step's code again.  The small steps here are therefore inlined
-into their one caller (``inline="always"``: no library of their own), and arrays are copied cell
-by cell, not by an array assignment (whose shape check compiles a formatted error message into
-every library above it).  Large functions stay functions: numba's type inference of an inlined
-body costs more than the library it saves.
+A parameter set is flat (:meth:`~.spec.Params.vector`); ``model`` is (K, Ue, M, Ut, prior, emission
+table, transition table) and ``ev`` the E-step's (data, buffers).  Compile time: numba compiles each
+function another calls into a library of its own with all it calls, so small steps are inlined
+(``inline="always"``) and arrays copied cell by cell (an array assignment's shape check compiles an
+error message into every library above it); large functions stay functions.
 """
 
 from __future__ import annotations
@@ -35,9 +28,8 @@ PARALLEL_ITEMS = 8  # items (of CHUNK sequences) from which the E-step runs on n
 
 @njit(cache=True, nogil=True, inline="always")  # no kernel of its own in the cache
 def estep_buffers(K, PE, U1, C, threaded):
-    """The E-step's buffers for data of ``C`` items: the tables of one parameter set (initial, emission
-    rows, transitions with the identity in the last), the active flag, the items' sums and their totals
-    (:meth:`.kernels.Kernel.run`'s layout, R = 1), and whether the items go on numba's threads."""
+    """The E-step's buffers for ``C`` items (:meth:`.kernels.Kernel.run`'s layout, R = 1): the tables,
+    the active flag, the items' sums and totals, and whether the items go on numba's threads."""
     trans = np.zeros((1, U1, K, K))
     for k in range(K):
         trans[0, U1 - 1, k, k] = 1.0
@@ -57,9 +49,7 @@ def _items_parallel(C, tables, data, active, sums):
 @njit(cache=True, nogil=True, inline="always")
 def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
     """E-step of one parameter set: counts into ``ci`` (K,), ``cem`` (Ue, K, M), ``ctr`` (Ut, K, K);
-    the log-likelihood (-inf: probability zero, counts zero).  The items and their sums of
-    :meth:`.kernels.Kernel.run` (``bufs``: :func:`estep_buffers`), on numba's threads when the
-    buffers say so and there are :data:`PARALLEL_ITEMS` items."""
+    the log-likelihood (-inf: probability zero).  ``bufs``: :func:`estep_buffers`."""
     tables, active, sums, totals, threaded = bufs
     ini, emit, trans = tables
     Ue, K, M = em.shape
@@ -109,8 +99,8 @@ def _estep(pi, em, tr, data, bufs, ci, cem, ctr):
 
 @njit(cache=True, nogil=True, inline="always")  # no kernel of its own in the cache
 def _rows(num, prev, tab, out):
-    """The free cells ``num`` (G, K, M) of each group's rows scaled to the row's free mass (fixed
-    cells: their values; a row whose free cells sum to 0: ``prev``'s), into ``out`` by group."""
+    """Each group's rows ``num`` (G, K, M) with the fixed cells set and the free ones scaled to the free
+    mass (summing to 0: ``prev``'s row), into ``out`` by group."""
     group, rep, gfixed, gvalues, mass = tab
     G, K, M = num.shape
     for g in range(G):
@@ -231,8 +221,7 @@ def extrapolate(p0, p1, p2, model, out):
 
 @njit(cache=True, nogil=True, inline="always")  # no kernel of its own in the cache
 def copy(dst, src):
-    """``dst[:] = src`` for 1-D arrays, cell by cell (an array assignment's shape check would compile a
-    formatted error message into every caller)."""
+    """``dst[:] = src`` for 1-D arrays, cell by cell (see the module)."""
     for i in range(len(src)):
         dst[i] = src[i]
 
@@ -245,8 +234,7 @@ def _views(flat, K, Ue, M, Ut):
 
 @njit(cache=True, nogil=True)
 def evaluate(flat, model, ev, counts):
-    """E-step at the flat cells ``flat`` into ``counts`` (flat, the layout of the cells); (log-likelihood,
-    objective).  ``model``: (K, Ue, M, Ut, prior, emission table, transition table); ``ev``: (data, buffers)."""
+    """E-step at the flat cells ``flat``, its counts into ``counts`` (flat); (log-likelihood, objective)."""
     K, Ue, M, Ut, prior, emt, trt = model
     data, bufs = ev
     pi, em, tr = _views(flat, K, Ue, M, Ut)

@@ -1,20 +1,15 @@
 """The E-step of the IOHMM: scaled forward-backward and the expected counts, for R parameter sets at once.
 
-One index layout serves every implementation.  Trial t of sequence n reads emission
-row ``eidx[t, n]`` (emission-input combination * M + output, or a last row of ones when
-the output is unobserved or the trial is padding) and, towards trial t+1, transition
-row ``tidx[t, n]`` (a last identity matrix where the sequence has ended).  Parameter
-sets carry a leading axis R (see :class:`~.spec.Params`); a single set is R = 1.
+One index layout serves every implementation: trial t of sequence n reads emission row ``eidx[t, n]``
+(emission-input combination * M + output; a last row of ones for an unobserved output or padding)
+and, towards trial t+1, transition row ``tidx[t, n]`` (a last identity where the sequence ended).
 
-* compiled (:mod:`.kernels`, numba): one pass per sequence and parameter set with the
-  counts accumulated on the way; parameter sets that have stopped are skipped;
-* numpy, time loop: the R copies of the data side by side (column r*N + n), a Python
-  loop over trial index with a handful of numpy calls on length-RN rows.  It is the
-  reference the compiled pass is tested against, and the fallback without numba;
-* numpy, scan: prefix and suffix products of the per-step matrices in log2(T) rounds,
-  for few, long sequences.
+* compiled (:mod:`.kernels`): one pass per sequence and parameter set, stopped sets skipped;
+* numpy time loop: the R copies of the data side by side (column r*N + n), a Python loop over
+  trials; the reference the compiled pass is tested against, and the fallback without numba;
+* numpy scan: prefix and suffix products of the step matrices in log2(T) rounds (few, long sequences).
 
-The compiled pass keeps no per-trial posteriors; they come from a numpy method.
+Per-trial posteriors come from a numpy method.
 """
 
 from __future__ import annotations
@@ -36,11 +31,8 @@ _add = np.add.reduce  # the ufunc method directly: the time loop is call-overhea
 
 @dataclass
 class EStep:
-    """Log-likelihood and expected counts (leading axis R for R parameter sets).
-
-    ``gamma`` holds the smoothed posteriors per trial, (T, N, K), when they were asked for.
-    A parameter set under which the data have probability zero reports ``-inf`` and zero counts.
-    """
+    """Log-likelihood and expected counts (leading axis R for R parameter sets; probability zero: ``-inf``
+    and zero counts); ``gamma``, the smoothed posteriors per trial (T, N, K), when asked for."""
 
     loglik: np.ndarray  # () or (R,)
     initial: np.ndarray  # expected counts (K,)
@@ -73,19 +65,12 @@ class EStepper(Protocol):
     def loglik(self, p: Params) -> np.ndarray: ...
 
 
-class _NumpyEStep(Protocol):
-    def loglik(self, initial: np.ndarray, Bx: np.ndarray, Ax: np.ndarray) -> np.ndarray: ...
-
-    def estep(self, initial: np.ndarray, Bx: np.ndarray, Ax: np.ndarray, posteriors: bool) -> EStep: ...
-
-
 class Workspace:
     """Index arrays of one data set and one model size, reused by every E-step.
 
-    ``method``: ``numba`` (compiled), ``loop`` or ``scan`` (numpy), or ``auto``: compiled
-    when numba is installed and it pays (:func:`.kernels.worth_compiling`), and
-    for posteriors (or else) the scan when the sequences are few and long, else the loop.
-    ``threads``: how many threads a compiled E-step may use (the result does not depend on it).
+    ``method``: ``numba``, ``loop``, ``scan`` or ``auto``: compiled where it pays
+    (:func:`.kernels.worth_compiling`), and for posteriors (or else) the scan for few, long
+    sequences, else the loop.  ``threads``: for a compiled E-step (the result does not depend on it).
     """
 
     def __init__(self, seqs: Sequences, K: int, M: int, Ue: int, Ut: int, method: str = "auto", threads: int = 1):
@@ -99,13 +84,11 @@ class Workspace:
         self.PE = Ue * M + 1  # emission rows + "nothing observed"
         self.eidx = np.where(seqs.y >= 0, seqs.ue * M + seqs.y, Ue * M)  # (T, N)
         self.tidx = np.where(seqs.has_successor(), seqs.ut[:-1], Ut)  # (T-1, N); row Ut = identity, not counted
-        # the numpy time loop costs ~T numpy calls per pass and the scan ~log2(T) calls on
-        # log2(T)-times more work: the scan wins for few, long sequences
         self.compiled = method == "numba" or (method == "auto" and kernels.worth_compiling(seqs.n_trials))
         self.scan = method == "scan" or (method in ("auto", "numba") and self.T > 1 and self.T >= SCAN_RATIO * self.N)
         self._eye = np.eye(K)
         self._kernel = kernels.Kernel(self.eidx, self.tidx, seqs.lengths, K, self.PE, Ut + 1, threads) if self.compiled else None
-        self._numpy: dict[int, _NumpyEStep] = {}
+        self._numpy: dict[int, _TimeLoop | _Scan] = {}
 
     def as_own(self, p: Params) -> Params:
         """``p`` as this workspace's parameter sets (a mixture's workspace makes its own of plain tables)."""
@@ -128,11 +111,8 @@ class Workspace:
         return Bx, Ax
 
     def estep(self, p: Params, active: np.ndarray | None = None, posteriors: bool = False) -> EStep:
-        """Log-likelihood and expected counts of ``p`` (one parameter set, or a batch).
-
-        The compiled pass skips parameter sets of a batch where ``active`` is false (they
-        report 0 and no counts); the numpy methods compute every set.
-        """
+        """Log-likelihood and expected counts of ``p`` (one parameter set, or a batch); the compiled pass
+        skips the sets where ``active`` is false (0 and no counts), the numpy methods compute all."""
         batch = p if p.batched else p.as_batch()
         Bx, Ax = self.tables(batch)
         if self._kernel is not None and not posteriors:
@@ -153,7 +133,7 @@ class Workspace:
         Bx, Ax = self.tables(p)
         return self._reference(len(p.initial)).loglik(p.initial, Bx, Ax)
 
-    def _reference(self, R: int) -> _NumpyEStep:
+    def _reference(self, R: int) -> _TimeLoop | _Scan:
         """The numpy E-step for R parameter sets (built once per R)."""
         if R not in self._numpy:
             self._numpy[R] = _Scan(self, R) if self.scan else _TimeLoop(self, R)
@@ -171,6 +151,12 @@ class _Columns:
         self.eidx = (w.eidx[:, None, :] + off * PE).reshape(T, R * N)  # rows of (R * PE, K)
         self.tidx = (w.tidx[:, None, :] + off * U1).reshape(T - 1, R * N)  # rows of (R * U1, K, K)
         self.midx = (w.tidx[:, None, :] * PE + w.eidx[1:, None, :] + off * (U1 * PE)).reshape(T - 1, R * N)
+
+    def _forward(self, initial: np.ndarray, Bx: np.ndarray, Ax: np.ndarray) -> tuple[np.ndarray, ...]:
+        raise NotImplementedError
+
+    def loglik(self, initial: np.ndarray, Bx: np.ndarray, Ax: np.ndarray) -> np.ndarray:
+        return self._forward(initial, Bx, Ax)[3]
 
     def step_table(self, Bx: np.ndarray, Ax: np.ndarray) -> np.ndarray:
         """(R * U1 * PE, K, K): A[i, j] * B[j] for every (set, transition row, emission row)."""
@@ -227,9 +213,6 @@ class _TimeLoop(_Columns):
             ll = np.log(c).sum(0).reshape(R, N).sum(1)
         return alpha, c, Mt, ll
 
-    def loglik(self, initial: np.ndarray, Bx: np.ndarray, Ax: np.ndarray) -> np.ndarray:
-        return self._forward(initial, Bx, Ax)[3]
-
     def estep(self, initial: np.ndarray, Bx: np.ndarray, Ax: np.ndarray, posteriors: bool) -> EStep:
         K, R, N = self.K, self.R, self.N
         alpha, c, Mt, ll = self._forward(initial, Bx, Ax)
@@ -255,12 +238,9 @@ class _TimeLoop(_Columns):
 
 
 class _Scan(_Columns):
-    """The numpy E-step by inclusive prefix and suffix products of the per-step matrices.
-
-    M_t = A_t diag(B_{t+1}) (RN, T-1, K, K).  F_t = M_0 ... M_t and G_t = M_t ... M_{T-2}
-    are built in log2(T) rounds of batched matrix products, each product rescaled to
-    sum 1 with its log-scale kept.  alpha_t ∝ alpha_0 F_{t-1}, beta_t ∝ G_t 1.
-    """
+    """The numpy E-step by prefix and suffix products of M_t = A_t diag(B_{t+1}) (RN, T-1, K, K):
+    F_t = M_0 ... M_t and G_t = M_t ... M_{T-2} in log2(T) rounds, each product rescaled to sum 1
+    (its log-scale kept); alpha_t ∝ alpha_0 F_{t-1}, beta_t ∝ G_t 1."""
 
     def __init__(self, w: Workspace, R: int):
         super().__init__(w, R)
@@ -284,9 +264,6 @@ class _Scan(_Columns):
             if Mt.shape[1]:
                 ll = ll + np.log(np.einsum("nk,nkj->n", a0, F[:, -1])) + logF[:, -1]
         return a0, Mt, F, ll.reshape(R, N).sum(1)
-
-    def loglik(self, initial: np.ndarray, Bx: np.ndarray, Ax: np.ndarray) -> np.ndarray:
-        return self._forward(initial, Bx, Ax)[3]
 
     def estep(self, initial: np.ndarray, Bx: np.ndarray, Ax: np.ndarray, posteriors: bool) -> EStep:
         K, R, N = self.K, self.R, self.N

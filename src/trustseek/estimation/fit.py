@@ -1,12 +1,6 @@
-"""Estimate the supervisor model (a :class:`~trustseek.model.TrustModel`) from logged trials.
-
-* :func:`fit_trust_model` -- restarts, the best fit, diagnostics (expected events behind
-  every cell, warnings for cells the data do not identify), bootstrap intervals;
-* :func:`decode` -- smoothed P(trust | data) and the Viterbi path per trial.
-
-The structure (the ``paper`` preset and its variants) and the conversion between IOHMM
-tables and a TrustModel are in :mod:`.trust_iohmm`; the number of levels is chosen in
-:mod:`.selection`.
+"""Estimate the supervisor model (a :class:`~trustseek.model.TrustModel`) from logged trials:
+:func:`fit_trust_model` and :func:`fit_model` (the best of the restarts, the expected events behind
+every row, warnings for rows the data do not identify, bootstrap intervals); :func:`decode`.
 """
 
 from __future__ import annotations
@@ -26,7 +20,7 @@ from .iohmm import EMFit, fit_iohmm, loglik, posterior_frame
 from .options import DEFAULTS, FitOptions, counting
 from .ratings import RatingStructure
 from .result import FitResult
-from .sequences import Sequences, encode
+from .sequences import Sequences, encode, participant_codes
 from .spec import FitError, IOHMMSpec, Params
 from .structure import Structure, describe_combination
 from .trust_iohmm import (
@@ -86,9 +80,8 @@ def _warnings(fit: EMFit, events: dict[str, np.ndarray]) -> list[str]:
 
 
 def _constant_output(fit: EMFit) -> list[str]:
-    """A warning when every output the model does not fix is the same category (e.g. every
-    participant always relies): no level then explains the data better than another, so the
-    initial distribution and the transitions are not identified, whatever their events."""
+    """A warning when every output the model does not fix is the same category (e.g. everyone always
+    relies): the initial distribution and the transitions are then not identified."""
     seqs, s = fit.seqs, fit.structure
     free = ~np.all(s.em.fixed, axis=(1, 2))  # (Ue,): some level's row is estimated
     ue = np.where(seqs.ue >= 0, seqs.ue, 0)
@@ -157,9 +150,7 @@ def _check_bootstrap(spec: IOHMMSpec, bootstrap: int) -> None:
 
 def _with_intervals(result: FitResult, bootstrap: int, options: FitOptions, tick: Callable[[], None]) -> FitResult:
     """``result`` with its warnings logged and, with ``bootstrap`` > 0, its intervals over that many
-    resamples (each refit from at most 3 random starts; ``tick`` after each; a replicate's levels
-    matched on the rows the data determine, weighted by the expected events), their notes added to
-    its warnings."""
+    resamples (each refit from at most 3 random starts; ``tick`` after each), their notes added."""
     for w in result.warnings:
         log.info("%s", w)
     if bootstrap > 0:
@@ -273,14 +264,9 @@ def never_estimated(frame: pd.DataFrame, spec: IOHMMSpec) -> tuple[tuple[str, tu
     if (c < 0).any() or (a < 0).any():
         return ()
     # a trial has a next one when it is not its participant's last (encode refused repeated indices)
-    participant = frame["participant"]
-    if isinstance(participant.dtype, pd.CategoricalDtype):
-        person, n_people = participant.cat.codes.to_numpy(dtype=np.int64), len(participant.cat.categories)
-    else:
-        person, people = pd.factorize(participant)
-        n_people = len(people)
+    person, people = participant_codes(frame["participant"])
     trial = frame["trial"].to_numpy(dtype=np.int64)
-    last = np.full(n_people, np.iinfo(np.int64).min)
+    last = np.full(len(people), np.iinfo(np.int64).min)
     np.maximum.at(last, person, trial)
     # one count per (what the trial informs, c, a, e + 1): 1 an observed human action (its
     # emission row), 2 a next trial (its transition row, when e is known), 3 both
@@ -305,8 +291,7 @@ def never_estimated(frame: pd.DataFrame, spec: IOHMMSpec) -> tuple[tuple[str, tu
 
 
 def _index_codes(values: pd.Series, names: Sequence[str]) -> np.ndarray:
-    """Each value's index in ``names``, -1 where it is missing or not among them (a categorical
-    column through its categories: no value looked up per row)."""
+    """Each value's index in ``names``, -1 where it is missing or not among them."""
     if isinstance(values.dtype, pd.CategoricalDtype):
         lookup = [names.index(v) if v in names else -1 for v in values.cat.categories]
         return np.array([*lookup, -1], dtype=np.int16)[values.cat.codes.to_numpy()]  # code -1 (missing): the last

@@ -1,17 +1,11 @@
-"""The scaled forward-backward pass of one sequence with fused expected-count accumulation (numba).
+"""The scaled forward-backward pass of one sequence, the posterior counts added straight into the
+tables (no per-trial arrays; numba).  Tables and data as in :mod:`.kernels`, which runs these passes.
 
-Per sequence a scaled forward pass, a backward pass, and the posterior counts added straight
-into the emission, transition and initial tables, with no per-trial arrays; the layout of the
-tables and data is that of :mod:`.kernels`, which runs these passes over items of sequences.
-
-Forward and backward vectors are multiplied by 2**:data:`RESCALE` when below 2**-RESCALE
-(exact).  With K = 2 the pass works on step codes: per code one 2 x 2 matrix ``trans[u, i, j] *
-emit[e, j]`` (one load per cell instead of a transition and an emission cell), the posterior
-of each step (t - 1, t) added to its code's four sums, and trial t's emission counts taken
-from those sums at the end of the item (the posterior of trial t is that of the step summed
-over its first level); the forward-backward normaliser is carried from the last trial instead
-of divided out at every trial (it changes only by the exact rescalings).  The numbers equal
-the numpy reference's to rounding (about 1e-15 relative).
+Vectors are multiplied by 2**:data:`RESCALE` (exact) when below 2**-RESCALE.  With K = 2 the
+passes work in registers; the single-set pass on step codes: per code one 2 x 2 matrix ``trans[u, i,
+j] * emit[e, j]``, each step's posterior added to its code's four sums, trial t's emission counts
+taken from them at the end of the item (:func:`_fold`), the normaliser carried from the last trial.
+The numbers equal the numpy reference's to rounding (about 1e-15 relative).
 """
 
 from __future__ import annotations
@@ -205,13 +199,8 @@ def _backward2(n, emit, trans, eidx, tidx, L, weight, counts, alpha):
 
 @njit(cache=True, nogil=True)
 def _sequence2(n, initial, emit, trans, eidx, tidx, L, counts, alpha):
-    """:func:`_sequence` for K = 2 levels, with the 2-vectors and 2x2 matrices in registers.
-
-    The forward and backward vectors are not normalised at every trial (a division on
-    the path from one trial to the next) but multiplied by 2**RESCALE (exact) when the
-    forward sum, or the sum of forward times backward, falls below 2**-RESCALE; the
-    posteriors are normalised trial by trial off that path.
-    """
+    """:func:`_sequence` for K = 2 levels in registers: the vectors rescaled, not normalised, on the
+    path from one trial to the next; the posteriors normalised trial by trial off that path."""
     total = _forward2(n, initial, emit, trans, eidx, tidx, L, alpha)
     if not total > -math.inf:
         return total
@@ -296,16 +285,11 @@ def _first(e, g0, g1, z, alpha, c_first):
 
 @njit(cache=True, nogil=True, inline="always")
 def _backward_codes(n, A, code, L, c_first, c_step, alpha, marks, s):
-    """The backward pass after :func:`_forward_codes`: the posterior of every step (t - 1, t),
-    xi, added to ``c_step[code[n, t]]`` (4 cells, row-major 2 x 2) and the first trial's
-    posterior to ``c_first[2 + 2 e + k]`` and ``c_first[k]`` (the initial counts).
-
-    sum_k alpha_t(k) beta_t(k) is the probability of the sequence times the scale factors, so
-    its inverse ``z`` is known from the last trial and changes only by powers of 2: by
-    2**RESCALE where ``alpha`` was rescaled (``marks``) and by 2**-RESCALE where ``beta`` is
-    (when ``z`` exceeds 2**RESCALE: the forward-backward sum below 2**-RESCALE).  Trial t's
-    posterior is the sum of the step's over its first level: the emission counts come from
-    ``c_step`` (see :func:`_fold`)."""
+    """The backward pass after :func:`_forward_codes`: each step's posterior (t - 1, t) added to
+    ``c_step[code[n, t]]`` (row-major 2 x 2), the first trial's to ``c_first`` (:func:`_first`).
+    sum_k alpha_t(k) beta_t(k) is the sequence's probability times the scale factors: its inverse
+    ``z`` is known from the last trial and changes by 2**RESCALE where ``alpha`` was rescaled
+    (``marks``) and by 2**-RESCALE where ``beta`` is (``z`` above 2**RESCALE)."""
     g0 = 1.0
     g1 = 1.0
     z = 1.0 / (alpha[L - 1, 0] + alpha[L - 1, 1])
@@ -342,10 +326,9 @@ def _backward_codes(n, A, code, L, c_first, c_step, alpha, marks, s):
 
 @njit(cache=True, nogil=True)
 def _forward_pair(n, m, initial, emit, A, code, L, first, second):
-    """:func:`_forward_codes` of sequences ``n`` and ``m`` of the same length side by side (two
-    independent recursions in one loop keep the processor busy); the same numbers as two calls.
-    ``first`` and ``second``: each sequence's (alpha, marks).  Their log-probabilities (both -inf
-    when either is zero) and numbers of marks."""
+    """:func:`_forward_codes` of sequences ``n`` and ``m`` of one length side by side (two recursions
+    in one loop keep the processor busy), the numbers of two calls; ``first``, ``second``: each one's
+    (alpha, marks).  Their log-probabilities (both -inf when either is zero) and numbers of marks."""
     alpha, marks = first
     alpha2, marks2 = second
     e = code[n, 0]
@@ -408,9 +391,8 @@ def _forward_pair(n, m, initial, emit, A, code, L, first, second):
 
 @njit(cache=True, nogil=True)
 def _backward_pair(n, m, A, code, L, first, second):
-    """:func:`_backward_codes` of sequences ``n`` and ``m`` side by side, after :func:`_forward_pair`;
-    the same numbers as two calls.  ``first`` and ``second``: each sequence's (counts per first
-    trial, counts per step code, alpha, marks, number of marks)."""
+    """:func:`_backward_codes` of sequences ``n`` and ``m`` side by side after :func:`_forward_pair`, the
+    numbers of two calls; ``first``, ``second``: each one's (c_first, c_step, alpha, marks, marks' number)."""
     ci, cs, alpha, marks, sa = first
     di, ds, alpha2, marks2, sb = second
     g0 = 1.0

@@ -1,13 +1,8 @@
-"""Fitting a discrete IOHMM (extended Baum-Welch) and inference under fitted parameters.
+"""Fitting a discrete IOHMM (extended Baum-Welch, :mod:`.em` or :mod:`.compiled_run`) and inference.
 
-:func:`fit_iohmm` runs EM from several starts (in lockstep, :mod:`.em`), each to a
-loose relative tolerance and then on with the quasi-Newton finish
-(:mod:`.quasi_newton`), keeps the best, and names its levels by the spec's rule: an
-:class:`EMFit` (the tables, every start's run and the criteria; the model fits' result,
-:class:`~.result.FitResult`, and a mixture's extend it).
-:func:`loglik`, :func:`posteriors` and :func:`viterbi` are the inference the rest of
-the package needs.  The objective (log-likelihood plus log-prior) never decreases
-along a run.
+:func:`fit_iohmm` runs every start, keeps the best and names its levels by the spec's rule: an
+:class:`EMFit` (extended by the model fits' :class:`~.result.FitResult` and a mixture's).
+:func:`loglik`, :func:`posteriors` and :func:`viterbi` are the inference the package needs.
 """
 
 from __future__ import annotations
@@ -23,8 +18,7 @@ import pandas as pd
 
 from ..solvers.base import one_blas_thread
 from . import compiled_run
-from .convergence import converge_runs
-from .em import STATIONARY, RunResult, run_em
+from .em import STATIONARY, RunResult, converge_runs, run_em
 from .estep import Workspace
 from .options import SERIAL, FitOptions
 from .ratings import make_structure
@@ -100,25 +94,15 @@ def fit_iohmm(
     compiled: bool = True,
 ) -> EMFit:
     """Fit ``spec`` to ``seqs``: the runs from ``init`` and ``options.restarts`` random starts (from
-    ``options.seed``); the best is kept (:class:`~.options.FitOptions`: by default on one thread).
+    ``options.seed``); the best is kept.
 
-    Each run is EM with SQUAREM (the runs in lockstep) and, with ``quasi_newton``, EM
-    only to the relative tolerance ``max(tol, 1e-5)`` followed by the L-BFGS-B finish
-    to ``tol / 100``: on flat ridges of the likelihood EM's small steps would meet
-    ``tol`` short of the maximum.  A run has converged only at a stationary point, where
-    one more EM step gains at most ``tol`` (relative); until then it goes on
-    (:func:`~.convergence.converge`).  ``max_iter`` caps the E-steps of a run.  Each
-    run's outcome is logged (``trustseek.estimation``, debug) and passed to ``on_restart``.
-    ``n_jobs`` threads (None: all cores) share each E-step's work, over the starts and the
-    participants, when there is enough of it; the result does not depend on ``n_jobs``.
-    A spec with a rating (:mod:`.ratings`) is fitted by EM alone (no quasi-Newton finish),
-    to ``tol`` and the same stationarity check.
-
-    With ``compiled`` (and numba, and no rating) each start runs from its first E-step to its
-    end in compiled code (:mod:`.compiled_run`: the same EM and SQUAREM decisions, its own
-    quasi-Newton finish, the same check), the starts side by side on the ``n_jobs`` threads;
-    else EM runs the starts in lockstep and scipy's L-BFGS-B finishes them, each start on a
-    thread of its own with their E-steps pooled into one (:func:`~.convergence.converge_runs`).
+    Each run is EM with SQUAREM (``accelerate``) and, with ``quasi_newton``, EM only to
+    ``max(tol, 1e-5)`` then the quasi-Newton finish; it has converged only at a stationary point,
+    where one more EM step gains at most ``tol`` (relative) (:func:`~.em.converge`), else at
+    ``max_iter`` E-steps.  Each run's outcome is logged (debug) and passed to ``on_restart``; the
+    ``n_jobs`` threads change no number.  A spec with a rating is fitted by EM alone.  With
+    ``compiled`` (and numba, and no rating) each start runs compiled (:mod:`.compiled_run`), else
+    the starts run in lockstep and scipy's L-BFGS-B finishes them (:func:`~.em.converge_runs`).
     """
     structure = make_structure(spec, seqs)
     settings = options.run(quasi_newton and not structure.joint, accelerate)

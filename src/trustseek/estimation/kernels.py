@@ -1,36 +1,16 @@
-"""Compiled scaled forward-backward with fused expected-count accumulation (numba).
+"""The compiled E-step of R parameter sets on the same sequences (numba), over the passes of
+:mod:`.forward_backward`; the numpy E-step of :mod:`.estep` is the reference it is tested against.
 
-One call runs the E-step of R parameter sets of a discrete IOHMM on the same
-sequences: per sequence a scaled forward pass, a backward pass, and the
-posterior counts added straight into the emission, transition and initial
-tables, with no per-trial arrays.  The numpy implementation in
-:mod:`.estep` (``Workspace(method="loop")``) is the reference it is tested
-against.
+Tables (leading axis R): ``initial`` (R, K); ``emit`` (R, PE, K), row ``emission-input combination
+* M + output`` and a last row of ones (unobserved output); ``trans`` (R, Ut + 1, K, K), the last
+unused padding.  Data: ``eidx`` (N, T) emission row per trial, ``tidx`` (N, T) transition row of
+trial t (t -> t+1), ``lengths`` (N,), and ``code`` (N, T), the step codes (:func:`step_codes`) the
+two-level pass reads.  Inactive parameter sets (``active[r]`` false) report 0 and zero counts; a
+sequence of probability zero makes its set's log-likelihood -inf, with zero counts.
 
-Tables (leading axis R = parameter sets):
-
-* ``initial`` (R, K);
-* ``emit`` (R, PE, K): likelihood of the trial's observation per level, row
-  ``emission-input combination * M + output`` and a last row of ones for an
-  unobserved output;
-* ``trans`` (R, Ut + 1, K, K): transition matrices, the last one unused padding.
-
-Data: ``eidx`` (N, T) emission row per trial, ``tidx`` (N, T) transition row of
-trial t (t -> t+1), ``lengths`` (N,), and for the two-level pass ``code`` (N, T), the
-step code ``tidx[n, t - 1] * PE + eidx[n, t]`` of trial t (:func:`step_codes`).  Inactive
-parameter sets (``active[r]`` false) are skipped and report log-likelihood 0 and zero counts.
-
-The work is cut into items of one parameter set and :data:`CHUNK` consecutive
-sequences; each item sums into its own counts, and the items' sums are added in a
-fixed order.  The items run on one thread or are split over several (Python threads:
-the compiled code releases the GIL), with the same grouping, so the result is the same
-to the last bit whatever the number of threads.
-
-With K = 2 the pass works on step codes, its counts per code folded into the tables at the end
-of an item (:mod:`.forward_backward`).
-
-A sequence whose probability is zero makes the log-likelihood of its parameter
-set -inf, with zero counts.
+The work is cut into items of one parameter set and :data:`CHUNK` consecutive sequences, each
+summing into its own counts, the sums added in a fixed order: on one thread or several (the
+compiled code releases the GIL), the result is the same to the last bit.
 """
 
 from __future__ import annotations
@@ -135,10 +115,8 @@ def _item(r, lo, hi, tables, data, counts):
 @njit(cache=True, nogil=True)
 def _reduce(active, ll, pi, pe, pt, loglik, c_init, c_emit, c_trans):
     """Add the items' sums per parameter set, in item order: ``ll`` (R, C) and the counts ``pi``,
-    ``pe``, ``pt`` (R, C, X) into ``loglik`` (R,) and ``c_init``, ``c_emit``, ``c_trans`` (R, X), each
-    count's trailing axes flattened (:meth:`Kernel._items`), so one compiled function serves
-    every layout, the cells added one by one (no array assignment, whose shape check would
-    compile a formatted error message into every caller)."""
+    ``pe``, ``pt`` (R, C, X; trailing axes flattened: one function for every layout) into ``loglik``
+    (R,) and ``c_init``, ``c_emit``, ``c_trans`` (R, X), cell by cell."""
     R, C = ll.shape
     for r in range(R):
         loglik[r] = 0.0
@@ -191,13 +169,10 @@ def estep_items(first, last, C, chunk, tables, data, active, sums):
 
 @njit(cache=True, nogil=True)
 def _mixture_item(r, lo, hi, M, tables, data, counts, seq_ll):
-    """Sequences ``lo:hi`` under the M types of parameter set ``r`` (sets ``r * M + m``): per sequence
-    the forward pass of every type, the type responsibilities, then each type's backward pass
-    with its responsibility as the weight.  A type's ``initial`` row is the joint P(type, S_1)
-    (it sums to the type's weight; all zero: an empty type, skipped), so the forward pass gives
-    log P(sequence, type).  Counts go to ``c_*[m]``; log P(sequence n, type m) to
-    ``seq_ll[m, n]``; returns the mixture log-probability of the sequences (-inf: zero).
-    ``tables``: (initial, emit, trans); ``data``: (eidx, tidx, lengths); ``counts``: (c_init, c_emit, c_trans)."""
+    """Sequences ``lo:hi`` under the M types of parameter set ``r`` (sets ``r * M + m``; ``initial`` the
+    joint P(type, S_1)): per sequence every type's forward pass, the responsibilities, then each
+    type's backward pass weighted by its responsibility, counts into ``counts[.][m]`` and log
+    P(sequence n, type m) into ``seq_ll[m, n]``; the mixture log-probability (-inf: zero)."""
     initial, emit, trans = tables
     eidx, tidx, lengths = data
     c_init, c_emit, c_trans = counts
@@ -295,10 +270,8 @@ _MANY_FITS: ContextVar[bool] = ContextVar("many_fits", default=False)
 
 @contextmanager
 def many_fits() -> Iterator[None]:
-    """Within: every fit's E-steps run compiled whatever its size.  For work made of many fits of
-    small data (a bootstrap, a design study, the reproduction's replicates), where loading the
-    compiled code once pays; what runs compiled depends on the call, never on what the process
-    ran before."""
+    """Within: every fit's E-steps run compiled whatever its size (many fits of small data: a
+    bootstrap, a design study, the reproduction's replicates)."""
     token = _MANY_FITS.set(True)
     try:
         yield
@@ -307,11 +280,9 @@ def many_fits() -> Iterator[None]:
 
 
 def worth_compiling(trials: int) -> bool:
-    """Whether E-steps on ``trials`` trials run compiled: from :data:`COMPILE_MIN` trials, or
-    inside :func:`many_fits`.  Below, a whole fit in numpy (10 starts) takes less time than
-    importing numba and loading the compiled code from its cache (~1 s), let alone compiling it on
-    a first use after installation (~1 min).  The choice depends on the call alone, so that a fit
-    gives the same numbers wherever and whenever it runs."""
+    """Whether E-steps on ``trials`` trials run compiled: from :data:`COMPILE_MIN` trials (below, a
+    numpy fit takes less than loading numba, ~1 s), or inside :func:`many_fits`.  The choice depends
+    on the call alone, so a fit gives the same numbers wherever it runs."""
     return AVAILABLE and (trials >= COMPILE_MIN or _MANY_FITS.get())
 
 
@@ -329,12 +300,9 @@ def _pool(n: int) -> ThreadPoolExecutor:
 
 
 class Kernel:
-    """The index arrays of one data set for :func:`estep_items` (any number of parameter sets).
-
-    ``threads``: how many threads an E-step may use; the work is split over them when it is
-    at least :data:`PARALLEL_MIN` trials x parameter sets.  The result does not depend on it.
-    The items' sums live in buffers kept between calls: one kernel serves one caller at a time.
-    """
+    """The index arrays of one data set for :func:`estep_items`; the work is split over ``threads``
+    from :data:`PARALLEL_MIN` trials x parameter sets (the result does not depend on it).  The
+    items' sums live in buffers kept between calls: one kernel serves one caller at a time."""
 
     def __init__(self, eidx: np.ndarray, tidx: np.ndarray, lengths: np.ndarray, K: int, PE: int, P: int, threads: int = 1):
         """``eidx`` (T, N) and ``tidx`` (T-1, N) as time-major arrays (padding is never read)."""
@@ -370,11 +338,9 @@ class Kernel:
     def _items(
         self, kernel: Callable[..., Any], R: int, lead: tuple[int, ...], act: np.ndarray, before: tuple, after: tuple
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``kernel``'s items of the active parameter sets, each into its own sums (made once per
-        R and ``lead``, the axes of the types), on one thread or split over several; the sums added
-        per set in item order: (loglik (R,), initial (R, *lead, K), emission (R, *lead, PE, K),
-        transition (R, *lead, P, K, K)).  ``kernel``'s arguments: ``before``, the active sets, the
-        sums, ``after``."""
+        """``kernel``'s items of the active sets (its arguments: ``before``, the active sets, the sums,
+        ``after``), each into its own sums (``lead``: the types' axes), the sums added per set in item
+        order: (loglik (R,), initial (R, *lead, K), emission (R, *lead, PE, K), transition (R, *lead, P, K, K))."""
         C, K = self.C, self.K
         shapes = ((K,), (self.PE, K), (self.P, K, K))
         cached = self._partials.get((R, lead))
@@ -387,11 +353,7 @@ class Kernel:
         if self.threads > 1 and n_active * C > 1 and self.trials * n_active * math.prod(lead) >= PARALLEL_MIN:
             # contiguous runs of the active items, one per thread; each item writes only its own sums
             items = [r * C + c for r in np.flatnonzero(act) for c in range(C)]
-            bounds = np.linspace(0, len(items), min(self.threads, len(items)) + 1).astype(int)
-            pool = _pool(len(bounds) - 1)
-            futures = [pool.submit(_run_items, items[a:b], C, args, kernel) for a, b in itertools.pairwise(bounds)]
-            for f in futures:
-                f.result()
+            self._split(len(items), lambda a, b: _run_items(items[a:b], C, args, kernel))
         else:
             kernel(0, R * C, C, CHUNK, *args)
         ll = np.empty(R)
@@ -403,10 +365,8 @@ class Kernel:
     def run_mixture(
         self, initial: np.ndarray, emit: np.ndarray, trans: np.ndarray, M: int, active: np.ndarray | None = None
     ) -> tuple[np.ndarray, ...]:
-        """The E-step of R mixtures of M types: tables with a leading axis R * M (type m of set r
-        at r * M + m; ``initial`` the joint P(type, S_1)).  Returns the mixture log-likelihood (R,),
-        the per-type counts weighted by the type responsibilities, initial (R, M, K), emission
-        (R, M, PE, K), transition (R, M, P, K, K), and log P(sequence n, type m), (R, M, N)."""
+        """The E-step of R mixtures of M types (tables of R * M sets, :func:`_mixture_item`): the
+        log-likelihood (R,), the per-type counts (R, M, ...) and log P(sequence n, type m), (R, M, N)."""
         R = initial.shape[0] // M
         seq_ll = np.zeros((R, M, self.eidx.shape[0]))
         before = (M, _tables(initial, emit, trans), (self.eidx, self.tidx, self.lengths))
@@ -429,21 +389,24 @@ class Kernel:
         args = (np.ascontiguousarray(pidx, dtype=np.int64), tables, (self.eidx, self.tidx, self.lengths), act, (ll, ci, ce, ct))
         work = int(self.lengths[act].sum()) if active is not None else self.trials
         if self.threads > 1 and N > CHUNK and work >= PARALLEL_MIN:
-            bounds = np.linspace(0, N, min(self.threads, N) + 1).astype(int)
-            pool = _pool(len(bounds) - 1)
-            futures = [pool.submit(each_items, a, b, *args) for a, b in itertools.pairwise(bounds)]
-            for f in futures:
-                f.result()
+            self._split(N, lambda a, b: each_items(a, b, *args))
         else:
             each_items(0, N, *args)
         return ll, ci, ce, ct
+
+    def _split(self, n: int, part: Callable[[int, int], Any]) -> None:
+        """``part(a, b)`` of ``n`` things cut into one contiguous run per thread, on the E-step threads."""
+        bounds = np.linspace(0, n, min(self.threads, n) + 1).astype(int)
+        pool = _pool(len(bounds) - 1)
+        for f in [pool.submit(part, a, b) for a, b in itertools.pairwise(bounds)]:
+            f.result()
 
 
 def _tables(initial: np.ndarray, emit: np.ndarray, trans: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return tuple(np.ascontiguousarray(x, dtype=np.float64) for x in (initial, emit, trans))  # type: ignore[return-value]
 
 
-def _run_items(items: list[int], C: int, args: tuple, kernel: Callable[..., Any] = estep_items) -> None:
+def _run_items(items: list[int], C: int, args: tuple, kernel: Callable[..., Any]) -> None:
     """The items of one thread, as runs of consecutive items."""
     i = 0
     while i < len(items):

@@ -34,8 +34,7 @@ from .bootstrap import (
     replicate,
     split_cells,
 )
-from .convergence import converge_runs
-from .em import STATIONARY, RunResult, run_em
+from .em import STATIONARY, RunResult, converge_runs, run_em
 from .estep import EStep
 from .fit import never_estimated
 from .iohmm import EMFit, _describe, fit_iohmm, posteriors

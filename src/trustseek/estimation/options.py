@@ -70,14 +70,10 @@ class FitOptions:
 
 @dataclass(frozen=True)
 class RunSettings:
-    """How each start of one fit runs, made once per fit (:meth:`FitOptions.run`) and passed whole
-    to the EM loop's end (:func:`~.convergence.converge`) and the compiled run
-    (:func:`~.compiled_run.run_starts`).
-
-    A run ends at a stationary point, where one more EM step gains at most ``tol`` (relative), or
-    at ``max_iter`` E-steps; EM runs to ``em_tol`` before the quasi-Newton finish (with
-    ``quasi_newton``; each finish derives its own tolerance from ``tol``); ``accelerate``: SQUAREM;
-    ``threads``: the threads the starts and E-steps may share (the numbers do not depend on them)."""
+    """How each start of one fit runs (:meth:`FitOptions.run`), passed whole to :func:`~.em.converge` and
+    :func:`~.compiled_run.run_starts`: to a stationary point (one more EM step gains at most ``tol``,
+    relative) or ``max_iter`` E-steps; EM to ``em_tol`` before the finish (with ``quasi_newton``);
+    ``accelerate``: SQUAREM; ``threads``: shared by the starts and E-steps (no number depends on them)."""
 
     tol: float = 1e-8
     max_iter: int = 1000

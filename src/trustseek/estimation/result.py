@@ -1,11 +1,5 @@
-"""The result of a fit: the EM fit (:class:`EMFit`: its structure, data, tables, log-likelihood,
-every start's run, and the criteria derived from them: free parameters, AIC, BIC), as
-:func:`.iohmm.fit_iohmm` returns it; and :class:`FitResult`, what the model fits (:func:`.fit.fit_trust_model`,
-:func:`.fit.fit_model`) return: the EM fit with the fitted model (a :class:`~trustseek.model.TrustModel`, a trust
-model or a general one) and its diagnostics: ``events`` the expected events behind every row of
-the IOHMM's tables; a trust model's result also carries them in the trust model's own index
-(``counts``, ``estimated``) and its bootstrap intervals (``ci``).  A mixture's fit
-(:class:`~.mixture.MixtureFit`) shares the run and the criteria (:class:`EMFit`).
+"""The result of the model fits (:func:`.fit.fit_trust_model`, :func:`.fit.fit_model`): :class:`FitResult`,
+the EM fit (:class:`~.iohmm.EMFit`, which a mixture's fit extends too) with its model and diagnostics.
 """
 
 from __future__ import annotations
@@ -108,12 +102,16 @@ class FitResult(EMFit):
             return self._model_cells(self.model)
         return self._trust_cells(self.model)
 
-    def _trust_cells(self, m: TrustModel) -> list[dict[str, Any]]:
-        """A trust model's cells: label, TrustModel index, estimate, CI, events.
+    def _with_interval(self, rec: dict[str, Any], table: str, idx: tuple[int, ...]) -> dict[str, Any]:
+        """``rec`` with the bootstrap interval of cell ``idx`` of ``table``, when there is one."""
+        if self.intervals is not None:
+            lo, hi = self.intervals.intervals[table]
+            rec["lower"], rec["upper"] = float(lo[idx]), float(hi[idx])
+            rec["widened"] = bool(self.intervals.widened[table][idx])
+        return rec
 
-        A model whose tables ignore some inputs lists each distinct row once, labelled
-        by the inputs it depends on.
-        """
+    def _trust_cells(self, m: TrustModel) -> list[dict[str, Any]]:
+        """A trust model's cells: label, TrustModel index, estimate, CI, events (see :meth:`cells`)."""
         spec = self.spec
         T = m.trust_levels
         short = {"complexity": "C", "robot_action": "a", "experience": "E'"}
@@ -132,11 +130,7 @@ class FitResult(EMFit):
                 "estimate": float((m.rating.probs if table == "rating" and m.rating is not None else getattr(m, table))[idx]),
                 "events": float(self.counts[table][idx]),
             }
-            if self.ci is not None:
-                rec["lower"], rec["upper"] = float(self.ci[table][0][idx]), float(self.ci[table][1][idx])
-            if self.intervals is not None:
-                rec["widened"] = bool(self.intervals.widened[table][idx])
-            out.append(rec)
+            out.append(self._with_interval(rec, table, idx))
 
         def cond(inputs: Sequence[str], values: dict[str, int]) -> str:
             return "".join(f", {short[c]}={names[c][values[c]]}" for c in inputs)
@@ -177,13 +171,6 @@ class FitResult(EMFit):
         s = self.structure
         L = m.levels
         out: list[dict[str, Any]] = []
-        iv = self.intervals
-
-        def with_interval(rec: dict[str, Any], table: str, idx: tuple[int, ...]) -> dict[str, Any]:
-            if iv is not None:
-                rec["lower"], rec["upper"] = float(iv.intervals[table][0][idx]), float(iv.intervals[table][1][idx])
-                rec["widened"] = bool(iv.widened[table][idx])
-            return rec
 
         for k in range(1, m.n_levels) if m.n_levels == 2 else range(m.n_levels):
             rec = {
@@ -193,7 +180,7 @@ class FitResult(EMFit):
                 "estimate": float(m.initial[k]),
                 "events": float(self.events["initial"][k]),
             }
-            out.append(with_interval(rec, "initial", (k,)))
+            out.append(self._with_interval(rec, "initial", (k,)))
         for name, table, arr, cats in (
             ("emission", s.em, m.emission_rows, m.output_categories),
             ("transition", s.tr, m.transition_rows, L),
@@ -218,7 +205,7 @@ class FitResult(EMFit):
                             "estimate": float(arr[u, k, j]),
                             "events": float(self.events[name][u, k]),
                         }
-                        out.append(with_interval(rec, name, (u, k, j)))
+                        out.append(self._with_interval(rec, name, (u, k, j)))
         if m.rating is not None and "rating" in self.events:
             for k in range(m.n_levels):
                 for r, lv in enumerate(m.rating.levels):

@@ -157,7 +157,7 @@ def joint_codes(action: np.ndarray, rating: np.ndarray, n_outputs: int, n_rating
     return np.where((action < 0) & (rating < 0), -1, out)
 
 
-def _participants(values: pd.Series) -> tuple[np.ndarray, list[str]]:
+def participant_codes(values: pd.Series) -> tuple[np.ndarray, list[str]]:
     """Per row the participant's index, participants in order of first appearance."""
     if isinstance(values.dtype, pd.CategoricalDtype) and not values.isna().any():
         c = values.cat.codes.to_numpy()
@@ -179,17 +179,14 @@ def _participants(values: pd.Series) -> tuple[np.ndarray, list[str]]:
 def encode(frame: pd.DataFrame, spec: IOHMMSpec, participant: str = "participant", trial: str = "trial") -> Sequences:
     """Encode a validated trial table (one row per trial) for ``spec``.
 
-        Participants keep their order of first appearance.  A participant's trials are
-        ordered by their index, and consecutive indices are consecutive trials: a gap
-        in the numbers (trials removed from the log) is not a trial of its own.  ``base``
-        records whether the table counts from 0 or 1; ``trial_of_row`` keeps every row's
-        index.  A missing output value is unobserved.  With a rating (``spec.rating``) ``y`` holds
-    the joint code of output and rating (:func:`joint_codes`).  The arrays hold compact integers
-        (int16 codes, int32 rows).
+    Participants keep their order of first appearance; a participant's trials are ordered by their
+    index, and a gap in the numbers is not a trial of its own.  ``base`` records whether the table
+    counts from 0 or 1, ``trial_of_row`` every row's index.  A missing output is unobserved; with a
+    rating ``y`` holds the joint code (:func:`joint_codes`).
     """
     n = len(frame)
     codes = _codes(frame, spec)
-    pcode, participants = _participants(frame[participant])
+    pcode, participants = participant_codes(frame[participant])
     trials = frame[trial].to_numpy()
     if trials.dtype.kind not in "iu":
         trials = trials.astype(np.int64)

@@ -3,8 +3,8 @@
 A row with free cells c_0..c_{m-1} and free mass s holds p_0 = s v_0,
 p_j = s v_j prod_{i<j} (1 - v_i), p_{m-1} = s prod_{i<m-1} (1 - v_i); the gradient of the
 objective comes from the E-step's expected counts by Fisher's identity.  :class:`Sticks` is
-the layout (numpy); :func:`stick_values` and :func:`stick_gradient` are its compiled maps, run
-in plain Python by :class:`Sticks` (a few cells) and compiled inside :mod:`.compiled_run`.
+the layout (numpy); :func:`stick_theta`, :func:`stick_values` and :func:`stick_gradient` are its
+maps, run in plain Python by :class:`Sticks` (a few cells) and compiled inside :mod:`.compiled_run`.
 """
 
 from __future__ import annotations
@@ -17,6 +17,8 @@ from ..compiled import njit, python
 from .estep import EStep
 from .spec import Params
 from .structure import FLOOR, Structure
+
+EPS = 1e-12  # the fractions' box: [EPS, 1 - EPS]
 
 
 @dataclass
@@ -34,15 +36,7 @@ class _Part:
 
 
 class Sticks:
-    """Free cells as stick-breaking fractions in [0, 1]: a box, for L-BFGS-B.
-
-    A row with free cells c_0..c_{m-1} and free mass s holds p_0 = s v_0,
-    p_j = s v_j prod_{i<j} (1 - v_i), p_{m-1} = s prod_{i<m-1} (1 - v_i).  With
-    expected counts (plus pseudo-counts) w, the gradient of the objective is, by
-    Fisher's identity, w_j / v_j - (sum_{i>j} w_i) / (1 - v_j).
-    """
-
-    EPS = 1e-12
+    """The layout of a structure's free cells as stick-breaking fractions (see the module)."""
 
     def __init__(self, structure: Structure):
         self.structure = structure
@@ -74,16 +68,10 @@ class Sticks:
 
     def theta(self, p: Params) -> np.ndarray:
         """The fractions of the free cells of ``p``."""
-        out = []
-        for part in self.parts:
-            flat = np.empty(part.rows * part.m)
-            flat[part.src] = getattr(p, part.table).ravel()[part.dst]
-            vals = flat.reshape(part.rows, part.m)
-            rem = part.mass.copy()
-            for j in range(part.m - 1):
-                out.append(np.clip(vals[:, j] / np.maximum(rem, FLOOR), self.EPS, 1 - self.EPS))
-                rem = rem - vals[:, j]
-        return np.concatenate(out) if out else np.zeros(0)
+        out = np.empty(self.size)
+        cells = tuple(np.ascontiguousarray(a, dtype=float).reshape(-1) for a in (p.initial, p.emission, p.transition))
+        python(stick_theta)(cells, self._layout(), out)  # a few cells: not worth loading numba for
+        return out
 
     def _layout(self) -> tuple[np.ndarray, ...]:
         """The parts as per-row arrays for the compiled :func:`stick_values` and
@@ -144,6 +132,21 @@ class Sticks:
             out,
         )
         return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def stick_theta(cells, layout, out):
+    """The fractions of the flat ``cells`` (initial, emission, transition) in the ``layout`` of
+    :func:`stick_values` into ``out``, each in [EPS, 1 - EPS]."""
+    table, m, mass, tbase, tstride, coff, cptr, cdst = layout
+    f0, f1, f2 = cells
+    for i in range(len(m)):
+        rem = mass[i]
+        for j in range(m[i] - 1):
+            q = cdst[cptr[coff[i] + j]]
+            val = f0[q] if table[i] == 0 else (f1[q] if table[i] == 1 else f2[q])
+            out[tbase[i] + j * tstride[i]] = min(max(val / max(rem, FLOOR), EPS), 1 - EPS)
+            rem = rem - val
 
 
 @njit(cache=True, nogil=True)

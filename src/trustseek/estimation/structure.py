@@ -1,13 +1,9 @@
 """An :class:`IOHMMSpec` compiled against data: which cells are free, tied, fixed or never reached.
 
-:class:`Structure` turns the spec's fixed rows, tie groups and prior into per-table
-masks, finds the input combinations that no data event reaches (transitions default
-to the identity, the level does not change; emissions to uniform; such rows are not
-estimated), reports events that a fixed cell forbids, and provides what EM needs of
-the structure: random starts, the closed-form M-step, the projection back onto the
-constraints, the log-prior, and the permutation that names the levels.
-
-Every operation accepts parameters with leading axes (independent runs side by side).
+:class:`Structure` turns the spec's fixed rows, tie groups and prior into per-table masks, fixes
+the rows no data event reaches (transitions to the identity, emissions to uniform), reports events
+a fixed cell forbids, and gives EM random starts, the M-step, the projection onto the constraints,
+the log-prior and the permutation that names the levels, all over leading axes (runs side by side).
 """
 
 from __future__ import annotations
@@ -26,11 +22,8 @@ START_MIX = 0.2  # random starts mix this much of the uniform row into a Dirichl
 
 
 class Table:
-    """Fixed cells, tie groups and defaults of one parameter table (U input combinations x K levels x M).
-
-    Filled in two steps: the spec sets ``fixed``, ``values`` and ``group``; :meth:`finish`
-    then adds what the data decide (rows no event reaches) and the per-group arrays.
-    """
+    """Fixed cells, tie groups and defaults of one table (U input combinations x K levels x M): the spec
+    sets ``fixed``, ``values`` and ``group``, then :meth:`finish` adds what the data decide."""
 
     def __init__(self, U: int, K: int, M: int):
         self.U, self.K, self.M = U, K, M
@@ -247,13 +240,9 @@ class Structure:
         )
 
     def order(self, p: Params) -> np.ndarray:
-        """Permutation putting levels in ascending order of the spec's ``order_by`` emission.
-
-        The key is P(category) averaged over the ``order_by`` rows the data reach (all
-        ``order_by`` rows if none is reached); levels that tie there (to 1e-9) are ordered by
-        P(category) averaged over every row the data reach that is not fixed, then by the
-        initial probability, then by their index.
-        """
+        """Permutation putting levels in ascending order of P(category) averaged over the ``order_by``
+        rows the data reach (all of them if none); ties (to 1e-9) by the same over every reached row
+        not fixed, then by the initial probability, then by index."""
         spec = self.spec
         if spec.order_by is None or self.K == 1:
             return np.arange(self.K)

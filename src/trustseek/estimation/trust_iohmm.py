@@ -1,14 +1,10 @@
 """The supervisor's trust model as an IOHMM: the paper's structure, and tables to and from a TrustModel.
 
-* :func:`paper_spec` -- the IOHMM structure of Section V: trust levels ``low``/``high``,
-  transitions on (complexity, robot action, experience at the end of the trial),
-  emissions on (complexity, robot action), P(intervene | ask) = 1 fixed, levels
-  labelled so that ``high`` relies more in high complexity;
-* :func:`to_model` / :func:`from_model` -- IOHMM tables to a :class:`~trustseek.model.TrustModel`
-  and back: a trust model's tables, whatever inputs they depend on, broadcast to the paper's
-  inputs, or a general model with any named inputs (a mapping's ``inputs``, :func:`general_spec`)
-  and the spec's structure kept with them (:func:`spec_of` reads it back); the paper's
-  structure is its preset.
+* :func:`paper_spec` -- Section V: trust ``low``/``high``, transitions on (complexity, robot action,
+  experience at the end of the trial), emissions on (complexity, robot action), P(intervene | ask) = 1;
+* :func:`to_model` / :func:`from_model` -- IOHMM tables to a :class:`~trustseek.model.TrustModel` and
+  back: a trust model's (broadcast to the paper's inputs) or a general model's with any named inputs
+  (:func:`general_spec`), its structure kept with them (:func:`spec_of` reads it back).
 """
 
 from __future__ import annotations
@@ -51,8 +47,6 @@ def paper_spec(
     action.  Levels are ordered by P(rely) in high complexity without asking (as far
     as the emission inputs resolve it), lowest first.
     """
-    if isinstance(levels, int):
-        levels = level_names(levels)
     complexities = tuple(complexities)
     cats = {"complexity": complexities, "robot_action": ACTIONS, "experience": EXPERIENCES}
     bad = [c for c in (*transition_inputs, *emission_inputs) if c not in cats]
@@ -240,8 +234,6 @@ def general_spec(
     inputs are present (P(intervene | ask) = 1 when emissions depend on the robot action; levels
     named by P(rely) without asking in the last complexity), every other input free.  The
     inputs' levels are ``categories``, else the frame's (:func:`input_levels`)."""
-    if isinstance(levels, int):
-        levels = level_names(levels)
     cats = dict(categories) if categories is not None else input_levels(frame, (*emission_inputs, *transition_inputs))
     return _human_action_spec(levels, emission_inputs, transition_inputs, {c: tuple(v) for c, v in cats.items()}, prior)
 
@@ -268,7 +260,7 @@ def inputs_spec(
 
 
 def _human_action_spec(
-    levels: Sequence[str],
+    levels: Sequence[str] | int,
     emission_inputs: Sequence[str],
     transition_inputs: Sequence[str],
     cats: Mapping[str, tuple[str, ...]],
@@ -276,6 +268,8 @@ def _human_action_spec(
 ) -> IOHMMSpec:
     """The IOHMM of the human action on these inputs (levels ``cats``): P(intervene | ask) = 1 when
     emissions depend on the robot action; levels named by P(rely) without asking in the last complexity."""
+    if isinstance(levels, int):
+        levels = level_names(levels)
     fixed: tuple[Fixed, ...] = ()
     if "robot_action" in emission_inputs and "ask" in cats["robot_action"]:
         fixed = (Fixed({"robot_action": "ask"}, {"intervene": 1.0, "rely": 0.0}),)

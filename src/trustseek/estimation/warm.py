@@ -1,10 +1,6 @@
-"""Compile the fit's numba kernels into numba's on-disk cache, once.
-
-The compiled E-step (:mod:`.kernels`) and the compiled run of a restart (:mod:`.compiled_run`)
-take about a minute of CPU to compile on their first use after installation; later processes
-load them from the cache in a fraction of a second.  ``python -m trustseek.estimation.warm``
-does that first use on a tiny made-up log (both fit paths, a rating, two supervisor types), so
-that the first real fit does not pay it.  ``make test`` runs it next to the static checks.
+"""Compile the fit's numba kernels into numba's on-disk cache, once (about a minute of CPU; later
+processes load them in a fraction of a second): ``python -m trustseek.estimation.warm`` runs both fit
+paths, a rating and two supervisor types on a tiny made-up log.  ``make test`` runs it.
 """
 
 from __future__ import annotations
