@@ -64,11 +64,11 @@ def print_written(*outputs: tuple[str, Any]) -> None:
             console.print(f"{what} written to {where}")
 
 
-def make_table(title: str, *columns: str, left: int = 1, **options: Any) -> Table:
+def make_table(title: str, *columns: str, left: int = 1, no_wrap: bool = False, **options: Any) -> Table:
     """A table titled on the left; its first ``left`` columns justified left, the others right."""
     out = Table(title=title, title_justify="left", **options)
     for i, column in enumerate(columns):
-        out.add_column(column, justify="left" if i < left else "right")
+        out.add_column(column, justify="left" if i < left else "right", no_wrap=no_wrap)
     return out
 
 

@@ -11,7 +11,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import check_output, console, print_json
+from ._app import check_output, console, make_table, print_json
 
 
 def check_plots_folder(plots: Path | None) -> None:
@@ -51,9 +51,8 @@ def print_selection(
         print_json({key: rows, "warnings": warnings})
         return
     extra = how.get("extra", {})
-    table = Table(title=title, title_justify="left")
-    for col in (key, "log-likelihood", "reached best", "parameters", "AIC", "BIC", f"held-out LL ({folds}-fold)", *extra):
-        table.add_column(col, justify="right")
+    columns = (key, "log-likelihood", "reached best", "parameters", "AIC", "BIC", f"held-out LL ({folds}-fold)", *extra)
+    table = make_table(title, *columns, left=0)
     for r in rows:
         table.add_row(
             str(r[key]),
@@ -74,13 +73,9 @@ def print_selection(
 def cells_table(title: str, result: Any, min_events: float, escape_cells: bool = False) -> Table:
     """A fit's cells, one row each: estimate, interval (with a bootstrap) and expected events, those
     below ``min_events`` marked not identified."""
-    table = Table(title=title, title_justify="left")
     iv = result.intervals
-    table.add_column("cell")
-    table.add_column("estimate", justify="right")
-    if iv is not None:
-        table.add_column(f"{iv.level:.0%} CI ({iv.replicates} resamples)", justify="right")
-    table.add_column("events", justify="right")
+    interval = () if iv is None else (f"{iv.level:.0%} CI ({iv.replicates} resamples)",)
+    table = make_table(title, "cell", "estimate", *interval, "events")
     for c in result.cells():
         row = [escape(c["cell"]) if escape_cells else c["cell"], f"{c['estimate']:.3f}"]
         if iv is not None:

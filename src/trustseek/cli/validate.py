@@ -12,7 +12,7 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ..estimation.options import MAX_JOBS, FitOptions
-from ._app import check_outputs, check_tol, command, console, err_console, print_json, progress_task, write_atomic
+from ._app import check_outputs, check_tol, command, console, err_console, make_table, print_json, progress_task, write_atomic
 from ._options import FROM_OPTIONS, AsForFitEmissionsOpt, AsForFitTransitionsOpt, LogReading, QuietOpt, RatingPerOpt, log_options
 from ._reading import keep_columns, read_for_types, write_log
 from .fit import POSTERIOR_SUFFIXES, general_inputs, read_with_inputs
@@ -23,10 +23,7 @@ BootstrapOpt = typer.Option(
 
 
 def _table(title: str, *columns: str) -> Table:
-    table = Table(title=title, title_justify="left", box=None, padding=(0, 2, 0, 0), header_style="bold underline")
-    for i, c in enumerate(columns):
-        table.add_column(c, justify="left" if i == 0 else "right", no_wrap=True)
-    return table
+    return make_table(title, *columns, no_wrap=True, box=None, padding=(0, 2, 0, 0), header_style="bold underline")
 
 
 def _pair(d: dict[str, Any], signed: bool) -> tuple[str, str]:
