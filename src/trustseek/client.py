@@ -116,14 +116,11 @@ class Client:
             v = config.get(key)
             if isinstance(v, Path) or (isinstance(v, str) and v.endswith(".json")):
                 config[key] = _read_json(v)
-        blocks = []
+        if "blocks" in config:
+            config["blocks"] = [dict(b) for b in config["blocks"]]
         for b in config.get("blocks", []):
-            b = dict(b)
             if isinstance(b.get("policy"), (str, Path)):
                 b["policy"] = _read_json(b["policy"])
-            blocks.append(b)
-        if "blocks" in config:
-            config["blocks"] = blocks
         return self._post("/api/studies", config, status=status)
 
     def studies(self) -> list[dict[str, Any]]:

@@ -31,19 +31,6 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
 
-__all__ = [
-    "AVAILABLE",
-    "PARALLEL_LOCK",
-    "compiling_note",
-    "load",
-    "load_meanwhile",
-    "loaded",
-    "njit",
-    "prange",
-    "python",
-    "set_threads",
-]
-
 _PACKAGE = Path(__file__).resolve().parent
 AVAILABLE = importlib.util.find_spec("numba") is not None  # numba is a declared dependency
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 import json
 import math
 import os
@@ -16,10 +17,11 @@ from typing import Any
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
 
 from ..compiled import compiling_note
 from ..errors import TrustseekError
-from ._lazy import LazyGroup
+from ._lazy import COMMANDS, LazyGroup
 
 app = typer.Typer(
     name="trustseek",
@@ -39,6 +41,18 @@ def _group() -> None:
     pass
 
 
+def command(name: str) -> Callable[[Callable[..., None]], Callable[..., None]]:
+    """Register the command ``name`` in its help panel of :data:`~._lazy.COMMANDS`; its help is
+    the listing's summary, then the function's docstring (the rest of the help, if any)."""
+    entry = COMMANDS[name]
+
+    def register(function: Callable[..., None]) -> Callable[..., None]:
+        function.__doc__ = entry.summary + (f"\n\n{inspect.cleandoc(function.__doc__)}" if function.__doc__ else "")
+        return app.command(name, rich_help_panel=entry.panel)(function)
+
+    return register
+
+
 console = Console()
 err_console = Console(stderr=True)
 
@@ -48,6 +62,14 @@ def print_written(*outputs: tuple[str, Any]) -> None:
     for what, where in outputs:
         if where is not None:
             console.print(f"{what} written to {where}")
+
+
+def make_table(title: str, *columns: str, left: int = 1, no_wrap: bool = False, **options: Any) -> Table:
+    """A table titled on the left; its first ``left`` columns justified left, the others right."""
+    out = Table(title=title, title_justify="left", **options)
+    for i, column in enumerate(columns):
+        out.add_column(column, justify="left" if i < left else "right", no_wrap=no_wrap)
+    return out
 
 
 def print_json(obj: Any) -> None:
@@ -142,6 +164,13 @@ def atomic_output(path: Path, directory: bool = False) -> Iterator[Path]:
         raise
 
 
+def write_atomic(path: Path | None, write: Callable[[Path], Any], directory: bool = False) -> None:
+    """``write(tmp)`` through :func:`atomic_output`, when ``path`` is given."""
+    if path is not None:
+        with atomic_output(path, directory) as tmp:
+            write(tmp)
+
+
 # --------------------------------------------------------------------------- options
 
 
@@ -191,12 +220,7 @@ class _Progress(Progress):
 def progress_bar(quiet: bool, *columns: Any) -> Progress:
     """The progress bar of a long run, on stderr: off with ``--quiet`` and when stderr is not a
     terminal; while numba compiles, a line says so."""
-    cols = columns or (
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-    )
+    cols = columns or (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     return _Progress(*cols, console=err_console, transient=True, disable=quiet or not err_console.is_terminal)
 
 

@@ -75,9 +75,7 @@ COMMANDS: dict[str, Command] = {
     ),
     "select-types": Command("types", EST, "Choose the number of supervisor types: BIC and participant-held-out log-likelihood."),
     "personalize": Command(
-        "types",
-        EST,
-        "Per-person trust models: each participant's MAP estimate, shrunk toward the pooled model or their type.",
+        "types", EST, "Per-person trust models: each participant's MAP estimate, shrunk toward the pooled model or their type."
     ),
     "compare-types": Command(
         "compare",

@@ -11,7 +11,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import check_output, console
+from ._app import check_output, console, make_table, print_json
 
 
 def check_plots_folder(plots: Path | None) -> None:
@@ -41,16 +41,18 @@ def print_wide(table: Table) -> None:
 
 
 def print_selection(
-    title: str, key: str, rows: list[dict[str, Any]], folds: int, legend: str, warnings: list[str], extra: dict | None = None
+    title: str, key: str, rows: list[dict[str, Any]], folds: int, warnings: list[str], as_json: bool, **how: Any
 ) -> None:
-    """A model selection's table (``select``, ``select-types``), its legend and warnings: per
-    compared size ``key`` its log-likelihood, starts that reached the best, parameters, AIC, BIC
-    and held-out score, the best by each criterion starred; ``extra`` maps further column names
-    to a cell function."""
-    extra = extra or {}
-    table = Table(title=title, title_justify="left")
-    for col in (key, "log-likelihood", "reached best", "parameters", "AIC", "BIC", f"held-out LL ({folds}-fold)", *extra):
-        table.add_column(col, justify="right")
+    """A model selection (``select``, ``select-types``) as JSON, or its table, legend and warnings:
+    per compared size ``key`` its log-likelihood, starts that reached the best (``how["starts"]``
+    says which), parameters, AIC, BIC and held-out score, the best by each criterion starred;
+    ``how["extra"]`` maps further column names to a cell function."""
+    if as_json:
+        print_json({key: rows, "warnings": warnings})
+        return
+    extra = how.get("extra", {})
+    columns = (key, "log-likelihood", "reached best", "parameters", "AIC", "BIC", f"held-out LL ({folds}-fold)", *extra)
+    table = make_table(title, *columns, left=0)
     for r in rows:
         table.add_row(
             str(r[key]),
@@ -63,6 +65,7 @@ def print_selection(
             *(cell(r) for cell in extra.values()),
         )
     print_wide(table)
+    legend = f"* best by that criterion; reached best: starts{how.get('starts', '')} within 0.01 of the best log-likelihood"
     console.print(legend, highlight=False)
     print_warnings(warnings)
 
@@ -70,13 +73,9 @@ def print_selection(
 def cells_table(title: str, result: Any, min_events: float, escape_cells: bool = False) -> Table:
     """A fit's cells, one row each: estimate, interval (with a bootstrap) and expected events, those
     below ``min_events`` marked not identified."""
-    table = Table(title=title, title_justify="left")
     iv = result.intervals
-    table.add_column("cell")
-    table.add_column("estimate", justify="right")
-    if iv is not None:
-        table.add_column(f"{iv.level:.0%} CI ({iv.replicates} resamples)", justify="right")
-    table.add_column("events", justify="right")
+    interval = () if iv is None else (f"{iv.level:.0%} CI ({iv.replicates} resamples)",)
+    table = make_table(title, "cell", "estimate", *interval, "events")
     for c in result.cells():
         row = [escape(c["cell"]) if escape_cells else c["cell"], f"{c['estimate']:.3f}"]
         if iv is not None:

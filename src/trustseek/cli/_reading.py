@@ -116,3 +116,10 @@ def keep_columns(out, frame, keep: list[str] | None):
     for c in keep:
         out[c] = frame[c].to_numpy()
     return out
+
+
+def write_log(frame, path: Path) -> None:
+    """A table of trials written as a trial log (CSV or Parquet, by the suffix)."""
+    from ..data.trials import write_trials
+
+    write_trials(frame, path)

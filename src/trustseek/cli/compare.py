@@ -10,11 +10,11 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import FIGURE_SUFFIXES, app, check_output, check_positive, console, print_json, progress_bar
+from ._app import FIGURE_SUFFIXES, check_output, check_positive, command, console, print_json, progress_bar
 from ._options import JsonOpt, QuietOpt, TaskOpt, parse_counts
 
 
-@app.command("compare-types", rich_help_panel="Simulate and reproduce")
+@command("compare-types")
 def compare_types(
     mixture: str = typer.Option(
         "paper+conservative",
@@ -56,7 +56,6 @@ def compare_types(
     as_json: bool = JsonOpt,
     quiet: bool = QuietOpt,
 ) -> None:
-    """Does planning for supervisor types pay? Pooled, type-aware, oracle and trust-agnostic policies on the same people."""
     from ..model.presets import load_mixture, load_task
     from ..reproduction.supervisor_types import types_section
     from ..simulation.populations import check_size
@@ -72,8 +71,7 @@ def compare_types(
     counts = [parse_counts(b, t.complexities, "--block") for b in block]
     for c in counts:  # before the pooled fit and the solves, not after them
         check_size(participants, sum(c), "--participants, --block")
-    if plot is not None:
-        check_output(plot, "--plot", FIGURE_SUFFIXES)
+    check_output(plot, "--plot", FIGURE_SUFFIXES)
     steps = ["pooled fit", "policies", "one-type policies", *[f"blocks of {sum(c)} trials" for c in counts]]
     with progress_bar(quiet or as_json) as bar:
         tid = bar.add_task("compare-types", total=len(steps))

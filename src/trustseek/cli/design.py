@@ -10,11 +10,10 @@ from typing import Any
 import typer
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-from rich.table import Table
 
 from ..errors import TrustseekError
 from ..estimation.options import MAX_JOBS
-from ._app import app, check_output, console, print_json, progress_bar
+from ._app import check_output, command, console, make_table, print_json, progress_bar
 from ._options import JsonOpt, QuietOpt, TaskOpt
 
 
@@ -97,7 +96,7 @@ CONNECT_SECONDS = 5  # a scheduler's port that does not take a connection in thi
 ANSWER_SECONDS = 10  # a scheduler that has not taken the connection and answered dask's handshake in this time is none
 
 
-@app.command(rich_help_panel="Simulate and reproduce")
+@command("design")
 def design(
     model: str = typer.Option(
         "paper", "--model", "-m", help="True population: a preset name (paper) or a trust-model JSON file."
@@ -143,7 +142,6 @@ def design(
     as_json: bool = JsonOpt,
     quiet: bool = QuietOpt,
 ) -> None:
-    """Power and regret by study design: replicated simulate → fit → solve → evaluate → test pipelines."""
     from ..design import DesignConfig, FitSettings, ask_search_problems
     from ..model.presets import load_model, load_task
 
@@ -212,13 +210,7 @@ def _run(cfg, jobs: int, scheduler: str | None, quiet: bool, search_grid: tuple[
             search = None
             if search_grid is not None:
                 tid = bar.add_task("ask-probability search", total=None)
-                search = ask_search(
-                    cfg,
-                    *search_grid,
-                    jobs=jobs,
-                    client=client,
-                    progress=progress,
-                )
+                search = ask_search(cfg, *search_grid, jobs=jobs, client=client, progress=progress)
     finally:
         if client is not None:
             client.close()
@@ -240,9 +232,8 @@ def _print(s: dict[str, Any], search: dict[str, Any] | None) -> None:
         f"V* = {s['optimal']['value']:.4f} (optimal threshold {s['optimal']['threshold']:.4f}); "
         f"{s['config']['replicates']} replicates per design; α = {s['targets']['alpha']:g}"
     )
-    t1 = Table(title="Experiment 1: the estimated policy under the true model", title_justify="left")
-    for col in ("design", "failed", "regret", "regret, % of V*", "threshold error"):
-        t1.add_column(col, justify="left" if col == "design" else "right")
+    columns = ("design", "failed", "regret", "regret, % of V*", "threshold error")
+    t1 = make_table("Experiment 1: the estimated policy under the true model", *columns)
     for p in s["points"]:
         e = p["experiment1"]
         t1.add_row(
@@ -256,12 +247,8 @@ def _print(s: dict[str, Any], search: dict[str, Any] | None) -> None:
     for p in s["points"]:
         e1 = p["experiment1"]
         for e in p["experiment2"]:
-            t = Table(
-                title=f"Experiment 2 after {e1['participants']} × {e1['trials']}: {e['trials_per_block']} trials per block",
-                title_justify="left",
-            )
-            for col in ("participants", "mean difference", "power (Wilcoxon)", "power (t-test)"):
-                t.add_column(col, justify="right")
+            title = f"Experiment 2 after {e1['participants']} × {e1['trials']}: {e['trials_per_block']} trials per block"
+            t = make_table(title, "participants", "mean difference", "power (Wilcoxon)", "power (t-test)", left=0)
             for c in e["curve"]:
                 t.add_row(
                     str(c["participants"]),

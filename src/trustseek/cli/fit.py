@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from contextlib import AbstractContextManager, nullcontext
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated
 
@@ -13,16 +12,16 @@ from rich.markup import escape
 from ..errors import TrustseekError
 from ..estimation.options import MAX_JOBS, FitOptions
 from ._app import (
-    app,
-    atomic_output,
     check_outputs,
     check_tol,
+    command,
     console,
     err_console,
     print_json,
     print_written,
     progress_bar,
     progress_task,
+    write_atomic,
 )
 from ._options import (
     FROM_OPTIONS,
@@ -36,7 +35,7 @@ from ._options import (
     widen_option,
 )
 from ._output import cells_table, check_plots_folder, fit_summary, print_intervals_note, print_selection, print_warnings
-from ._reading import keep_columns, load_for_decoding, read_for_types, widened_note
+from ._reading import keep_columns, load_for_decoding, read_for_types, widened_note, write_log
 
 # The fit and data modules (pandas, numba) load only when a command of this group runs,
 # so that the rest of the CLI starts fast.
@@ -134,8 +133,7 @@ _Bootstrap = Annotated[
     ),
 ]
 _Prior = Annotated[
-    float,
-    typer.Option("--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."),
+    float, typer.Option("--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood.")
 ]
 _Tol = Annotated[
     float,
@@ -154,9 +152,7 @@ _Jobs = Annotated[
 _Out = Annotated[
     Path | None,
     typer.Option(
-        "--out",
-        "-o",
-        help="Write the fitted trust model (JSON, same format as the presets; a general model for other inputs).",
+        "--out", "-o", help="Write the fitted trust model (JSON, same format as the presets; a general model for other inputs)."
     ),
 ]
 _Posteriors = Annotated[
@@ -188,15 +184,14 @@ _RatingLevels = Annotated[
     ),
 ]
 _RatingBins = Annotated[
-    str | None,
-    typer.Option("--rating-bins", help="Bin a numeric rating at these edges, comma-separated (e.g. 0,25,50,75,100)."),
+    str | None, typer.Option("--rating-bins", help="Bin a numeric rating at these edges, comma-separated (e.g. 0,25,50,75,100).")
 ]
 _RatingsOnly = Annotated[
     bool, typer.Option("--ratings-only", help="Leave the human actions out: fit the trust on the ratings alone.")
 ]
 
 
-@app.command(rich_help_panel="Estimate")
+@command("fit")
 @log_options(keep=True)
 def fit(
     log: Annotated[Path, typer.Argument(help="Trial log (CSV or Parquet), one row per trial.")],
@@ -224,9 +219,7 @@ def fit(
     reading: LogReading = FROM_OPTIONS,
     quiet: bool = QuietOpt,
 ) -> None:
-    """Estimate the supervisor's trust model from logged trials (extended Baum-Welch).
-
-    Rows no trial informs are marked "not_estimated" in the model file; solve, plot-q and
+    """Rows no trial informs are marked "not_estimated" in the model file; solve, plot-q and
     simulate refuse those a task can reach until they are supplied (--fill-from).  With a
     rating column (--rating or the mapping's 'rating') the fit is joint on the human actions
     and the ratings, and the model file carries P(rating | trust)."""
@@ -236,12 +229,18 @@ def fit(
     with _load_compiled_meanwhile(log):
         frame = reading.read(log, needed, rated, not ratings_only)
     options = FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs)
-    run = _FitRun(levels, options, bootstrap, prior, _rated(frame, log, ratings_only), ratings_only)
-    outputs = _FitOutputs(out, posteriors, plots, reading.keep, as_json, quiet)
-    if general_inputs(tr, em):
-        _fit_general(frame, tr, em, run, outputs, fill_from)
-        return
-    result = _fit_trust(frame, preset, tr, em, run, quiet or as_json)
+    settings = {"levels": levels, "options": options, "bootstrap": bootstrap, "prior": prior}
+    settings |= {"rating": _rated(frame, log, ratings_only), "actions": not ratings_only}
+    general = general_inputs(tr, em)
+    if general and fill_from is not None:
+        named = ", ".join(dict.fromkeys((*em, *tr)))
+        raise TrustseekError([f"--fill-from is for a trust model; a general model (inputs: {named}) has none"])
+    with progress_bar(quiet or as_json) as bar:
+        settings["progress"] = _progress(bar, options.starts, bootstrap)
+        if general:
+            result = _fit().fit.fit_model(frame, em, tr, **settings)
+        else:
+            result = _fit().fit_trust_model(frame, preset=preset, transition_inputs=tr, emission_inputs=em, **settings)
     drawn = result.model  # the figures show only what the data estimated
     if fill_from is not None and result.model.not_estimated:
         from ..model.presets import load_model
@@ -249,43 +248,23 @@ def fit(
         filled = result.model.not_estimated_rows()
         result.model = result.model.filled_from(load_model(fill_from))
         result.warnings.append(f"taken from {fill_from}: {', '.join(filled)}")
-    _write_fit(result, frame, outputs)
+    write_atomic(out, result.model.save)
+    write_atomic(posteriors, lambda tmp: write_log(keep_columns(result.posteriors(), frame, reading.keep), tmp))
     if plots is not None:
-        _plot_trust(result, drawn, plots, preset == "paper" and (tr, em) == _paper_inputs())
+        _plot(result, drawn, plots, general, preset == "paper" and (tr, em) == _paper_inputs())
     if as_json:
-        _print_fit_json(result)
+        print_json({**result.to_dict(), "cells": result.cells()})
         return
-    n = f"{result.seqs.n_participants} participants, {result.seqs.n_trials} trials"
-    console.print(cells_table(f"Fitted trust model ({n})", result, _fit().MIN_EVENTS))
-    console.print(fit_summary(result, "restarts", len(result.restart_logliks)))
-    print_intervals_note(result.intervals)
-    print_warnings(result.warnings)
+    _print_fit(result, tr, em, general)
     figures = None if plots is None else f"{plots}/emissions.png, {plots}/transitions.png"
-    print_written(("model", out), ("posteriors", posteriors), ("figures", figures))
-
-
-@dataclass(frozen=True)
-class _FitRun:
-    """How ``fit`` fits: the options of the estimate, and the rating column it reads (if any)."""
-
-    levels: int
-    options: FitOptions
-    bootstrap: int
-    prior: float
-    rated: str | None
-    ratings_only: bool
-
-
-@dataclass(frozen=True)
-class _FitOutputs:
-    """What ``fit`` writes and prints."""
-
-    out: Path | None
-    posteriors: Path | None
-    plots: Path | None
-    keep: list[str] | None
-    as_json: bool
-    quiet: bool
+    if not general:
+        print_written(("model", out), ("posteriors", posteriors), ("figures", figures))
+        return
+    print_written(
+        ("figures", figures and f"{figures} (the tables by combination of the inputs)"),
+        ("general model (trustseek.iohmm/1)", out and f"{out}; decode, predict and validate read it"),
+        ("posteriors", posteriors),
+    )
 
 
 def rating_entry(rating: str | None, levels: str | None, bins: str | None, per: str | None = None) -> dict | None:
@@ -340,10 +319,9 @@ def _paper_inputs() -> tuple[tuple[str, ...], tuple[str, ...]]:
     return _fit().PAPER_TRANSITION_INPUTS, _fit().PAPER_EMISSION_INPUTS
 
 
-def _progress(bar, run: _FitRun):
+def _progress(bar, restarts: int, bootstrap: int):
     """A progress callback counting the restarts, then the bootstrap's replicates."""
-    restarts = run.options.starts
-    task = bar.add_task("restarts", total=restarts + run.bootstrap)
+    task = bar.add_task("restarts", total=restarts + bootstrap)
 
     def progress(done: int, total: int) -> None:
         bar.update(task, completed=done, total=total, description="bootstrap" if done > restarts else "restarts")
@@ -351,103 +329,42 @@ def _progress(bar, run: _FitRun):
     return progress
 
 
-def _fit_trust(frame, preset: str, tr, em, run: _FitRun, quiet: bool):
-    """The trust model's fit, with a progress bar unless ``quiet``."""
-    bar = progress_bar(quiet)
-    with bar:
-        return _fit().fit_trust_model(
-            frame,
-            preset=preset,
-            options=run.options,
-            bootstrap=run.bootstrap,
-            prior=run.prior,
-            progress=_progress(bar, run),
-            levels=run.levels,
-            transition_inputs=tr,
-            emission_inputs=em,
-            rating=run.rated,
-            actions=not run.ratings_only,
-        )
+def _plot(result, drawn, plots: Path, general: bool, paper_like: bool) -> None:
+    """The emission and transition figures: a general model's tables by combination of its inputs;
+    a trust model's with the paper's values as reference for a model of the paper's structure."""
+    plots.mkdir(parents=True, exist_ok=True)
+    if general:
+        from ..plots.iohmm import plot_iohmm_emissions, plot_iohmm_transitions
 
-
-def _write_fit(result, frame, outputs: _FitOutputs) -> None:
-    """The model file and the posteriors, each written whole or not at all."""
-    if outputs.out is not None:
-        with atomic_output(outputs.out) as tmp:
-            result.model.save(tmp)
-    if outputs.posteriors is not None:
-        from ..data.trials import write_trials
-
-        with atomic_output(outputs.posteriors) as tmp:
-            write_trials(keep_columns(result.posteriors(), frame, outputs.keep), tmp)
-
-
-def _plot_trust(result, drawn, plots: Path, paper_like: bool) -> None:
-    """The emission and transition figures of a trust model, the paper's values as reference for a
-    model of the paper's structure."""
+        plot_iohmm_emissions(result.model, plots / "emissions.png")
+        plot_iohmm_transitions(result.model, plots / "transitions.png")
+        return
     from ..model.presets import paper_model
     from ..plots.model import plot_emissions, plot_transitions
 
-    plots.mkdir(parents=True, exist_ok=True)
     same = result.model.complexities == paper_model().complexities and result.model.n_trust == 2
     ref = paper_model() if paper_like and same else None
     plot_emissions(drawn, plots / "emissions.png", ci=result.ci, reference=ref)
     plot_transitions(drawn, plots / "transitions.png", ci=result.ci, reference=ref)
 
 
-def _print_fit_json(result) -> None:
-    d = result.to_dict()
-    d["cells"] = result.cells()
-    print_json(d)
-
-
-def _fit_general(frame, tr, em, run: _FitRun, outputs: _FitOutputs, fill_from: str | None) -> None:
-    """``fit`` with inputs a trust model does not have: a general model (trustseek.iohmm/1)."""
-    named = ", ".join(dict.fromkeys((*em, *tr)))
-    if fill_from is not None:
-        raise TrustseekError([f"--fill-from is for a trust model; a general model (inputs: {named}) has none"])
-    bar = progress_bar(outputs.quiet or outputs.as_json)
-    with bar:
-        result = _fit().fit.fit_model(
-            frame,
-            em,
-            tr,
-            levels=run.levels,
-            options=run.options,
-            prior=run.prior,
-            progress=_progress(bar, run),
-            rating=run.rated,
-            actions=not run.ratings_only,
-            bootstrap=run.bootstrap,
-        )
-    _write_fit(result, frame, outputs)
-    plots = outputs.plots
-    if plots is not None:
-        from ..plots.iohmm import plot_iohmm_emissions, plot_iohmm_transitions
-
-        plots.mkdir(parents=True, exist_ok=True)
-        plot_iohmm_emissions(result.model, plots / "emissions.png")
-        plot_iohmm_transitions(result.model, plots / "transitions.png")
-    if outputs.as_json:
-        _print_fit_json(result)
-        return
-    title = (
-        f"Fitted model (inputs: emissions on {', '.join(em) or 'none'}; transitions on {', '.join(tr) or 'none'}; "
-        f"{result.seqs.n_participants} participants, {result.seqs.n_trials} trials)"
-    )
-    console.print(cells_table(title, result, _fit().MIN_EVENTS, escape_cells=True))
-    print_intervals_note(result.intervals)
-    console.print(fit_summary(result, "restarts", len(result.restart_logliks)), highlight=False)
+def _print_fit(result, tr, em, general: bool) -> None:
+    """The fit's cells, summary, intervals and warnings."""
+    n = f"{result.seqs.n_participants} participants, {result.seqs.n_trials} trials"
+    summary = fit_summary(result, "restarts", len(result.restart_logliks))
+    if general:
+        inputs = f"emissions on {', '.join(em) or 'none'}; transitions on {', '.join(tr) or 'none'}"
+        console.print(cells_table(f"Fitted model (inputs: {inputs}; {n})", result, _fit().MIN_EVENTS, escape_cells=True))
+        print_intervals_note(result.intervals)
+        console.print(summary, highlight=False)
+    else:
+        console.print(cells_table(f"Fitted trust model ({n})", result, _fit().MIN_EVENTS))
+        console.print(summary)
+        print_intervals_note(result.intervals)
     print_warnings(result.warnings)
-    figures = None if plots is None else f"{plots}/emissions.png, {plots}/transitions.png"
-    print_written(
-        ("figures", figures and f"{figures} (the tables by combination of the inputs)"),
-        ("general model (trustseek.iohmm/1)", outputs.out and f"{outputs.out}; decode, predict and validate read it"),
-        ("posteriors", outputs.posteriors),
-    )
 
 
-@app.command("decode", rich_help_panel="Estimate")
+@command("decode")
 @log_options(keep=True)
 def decode_cmd(
     log: Annotated[Path, typer.Argument(help="Trial log (CSV or Parquet).")],
@@ -462,9 +379,7 @@ def decode_cmd(
     out: Annotated[Path, typer.Option("--out", "-o", help="Output file (.csv or .parquet).")] = Path("posteriors.csv"),
     reading: LogReading = FROM_OPTIONS,
 ) -> None:
-    """Per-trial smoothed P(trust | data) and the Viterbi trust path under a model.
-
-    Under supervisor types, also each participant's most probable ``type`` and P(type | trials)
+    """Under supervisor types, also each participant's most probable ``type`` and P(type | trials)
     (``p_type_<name>``); the trust posteriors are averaged over the types.
 
     The log needs the columns the model depends on: a model fitted with fewer inputs
@@ -474,21 +389,18 @@ def decode_cmd(
 
     types = load_for_decoding(model)  # a trust model, a general model or types
     frame = read_for_types(log, types, reading)
-    if not isinstance(types, TypeMixture) or types.n_types == 1:
-        one = types.models[0] if isinstance(types, TypeMixture) else types
-        post = keep_columns(_fit().decode(frame, one), frame, reading.keep)
-    else:  # supervisor types: P(type | trials) per participant and the type-averaged trust posteriors
+    if isinstance(types, TypeMixture) and types.n_types > 1:  # P(type | trials) and the type-averaged posteriors
         from ..estimation.mixture import decode_types
 
-        post = keep_columns(decode_types(frame, types), frame, reading.keep)
-    from ..data.trials import write_trials
-
-    with atomic_output(out) as tmp:
-        write_trials(post, tmp)
+        post = decode_types(frame, types)
+    else:
+        post = _fit().decode(frame, types.models[0] if isinstance(types, TypeMixture) else types)
+    post = keep_columns(post, frame, reading.keep)
+    write_atomic(out, lambda tmp: write_log(post, tmp))
     console.print(f"wrote {len(post)} trials to {out}")
 
 
-@app.command(rich_help_panel="Estimate")
+@command("select")
 @log_options()
 def select(
     log: Annotated[Path, typer.Argument(help="Trial log (CSV or Parquet).")],
@@ -517,7 +429,6 @@ def select(
     reading: LogReading = FROM_OPTIONS,
     quiet: bool = QuietOpt,
 ) -> None:
-    """Choose the number of trust levels: BIC and participant-held-out log-likelihood."""
     tr, em, frame = read_with_inputs(log, reading, transitions_on, emissions_on)
     with progress_task(quiet or as_json, "model selection") as update:
         rows = _fit().select_levels(
@@ -533,15 +444,5 @@ def select(
         )
     warnings = _fit().selection_warnings(rows)
     warnings[:0] = widened_note(rows, "levels", max_levels)
-    if as_json:
-        print_json({"levels": rows, "warnings": warnings})
-        return
-    print_selection(
-        "Number of trust levels",
-        "levels",
-        rows,
-        folds,
-        "* best by that criterion; reached best: starts (random, and the fit with one level fewer split) "
-        "within 0.01 of the best log-likelihood",
-        warnings,
-    )
+    starts = " (random, and the fit with one level fewer split)"
+    print_selection("Number of trust levels", "levels", rows, folds, warnings, as_json, starts=starts)

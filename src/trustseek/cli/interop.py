@@ -6,17 +6,16 @@ from pathlib import Path
 from typing import Any
 
 import typer
-from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import app, atomic_output, check_outputs, check_positive, console, err_console, print_json
+from ._app import check_outputs, check_positive, command, console, err_console, make_table, print_json, write_atomic
 from ._options import ModelOpt, PrintJsonOpt, TaskOpt, model_and_task
 
 #: exit code of solve-pomdp-file when the point solver stops before its target gap
 GAP_NOT_REACHED = 3
 
 
-@app.command("export-pomdp", rich_help_panel="Files")
+@command("export-pomdp")
 def export_pomdp(
     out: Path = typer.Argument(..., help="File to write: .pomdp (Cassandra) or .pomdpx (POMDPX)."),
     model: str = ModelOpt,
@@ -29,7 +28,6 @@ def export_pomdp(
         False, "--verify", help="Also print finite-horizon values (1-3) of the file and of the belief MDP."
     ),
 ) -> None:
-    """Export the assistance POMDP to a standard file (state augmented with the last human action)."""
     from ..interop.files import export_assistance, flat_values_check
     from ..pomdp.problem import AssistancePOMDP
 
@@ -44,13 +42,11 @@ def export_pomdp(
         if initial_complexity not in t.complexities:
             raise TrustseekError([f"--initial-complexity must be one of {list(t.complexities)}, got {initial_complexity!r}"])
         c0 = t.complexities.index(initial_complexity)
-    with atomic_output(out) as tmp:
-        export_assistance(pomdp, tmp, fmt or out.suffix.lower().lstrip("."), c0)
+    write_atomic(out, lambda tmp: export_assistance(pomdp, tmp, fmt or out.suffix.lower().lstrip("."), c0))
     console.print(f"wrote {out}")
     if verify:
-        table = Table(title="Finite-horizon values from the initial belief", title_justify="left")
-        for col in ("horizon", "complexity", "flat file", "belief MDP", "difference"):
-            table.add_column(col, justify="right")
+        columns = ("horizon", "complexity", "flat file", "belief MDP", "difference")
+        table = make_table("Finite-horizon values from the initial belief", *columns, left=0)
         for r in flat_values_check(pomdp):
             table.add_row(
                 str(r["horizon"]),
@@ -62,7 +58,7 @@ def export_pomdp(
         console.print(table)
 
 
-@app.command("solve-pomdp-file", rich_help_panel="Files")
+@command("solve-pomdp-file")
 def solve_pomdp_file(
     path: Path = typer.Argument(..., help="A Cassandra .pomdp file (e.g. Tiger)."),
     gap: float = typer.Option(1e-3, "--gap", help="Target gap between the bounds at the start belief."),
@@ -72,9 +68,7 @@ def solve_pomdp_file(
     max_seconds: float = typer.Option(60.0, "--max-seconds", help="Time limit for the point solver."),
     as_json: bool = PrintJsonOpt,
 ) -> None:
-    """Solve a standard .pomdp file: certified lower and upper bounds at its start belief.
-
-    Exit code 3 when the solver stops (time or size limit) before the gap between the bounds
+    """Exit code 3 when the solver stops (time or size limit) before the gap between the bounds
     reaches --gap: the bounds printed are still valid, only looser than asked; 2 for bad input."""
     from ..interop.files import read_pomdp
     from ..solvers import UnsupportedProblem, make_solver

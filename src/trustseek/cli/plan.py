@@ -6,13 +6,22 @@ from pathlib import Path
 from typing import TYPE_CHECKING, cast
 
 import typer
-from rich.table import Table
 
 from .. import solvers
 from ..errors import TrustseekError
 from ..solvers.defaults import DEFAULT_GRID, DEFAULT_TYPE_AWARE_SOLVER, METHODS
 from ..vocab import check_belief_update
-from ._app import FIGURE_SUFFIXES, app, atomic_output, check_outputs, check_positive, check_tol, console, print_json
+from ._app import (
+    FIGURE_SUFFIXES,
+    check_outputs,
+    check_positive,
+    check_tol,
+    command,
+    console,
+    make_table,
+    print_json,
+    write_atomic,
+)
 from ._options import FROM_OPTIONS, JsonOpt, LogReading, ModelOpt, PrintJsonOpt, TaskOpt, log_options, model_and_task
 
 if TYPE_CHECKING:
@@ -44,12 +53,7 @@ def mixture_of(spec: str) -> TypeMixture | None:
     return None
 
 
-def type_posterior(
-    mixture: TypeMixture,
-    history: Path,
-    participant: str | None,
-    session: str | None,
-):
+def type_posterior(mixture: TypeMixture, history: Path, participant: str | None, session: str | None):
     """The type posterior of one person from their earlier trials (--history, --participant, --session)."""
     from ..pomdp.supervisor_types import type_belief_from_log
 
@@ -68,7 +72,7 @@ def need_two_levels(model: TrustModel, command: str) -> None:
         raise TrustseekError([f"the default grid solver needs two trust levels; this model has {model.n_trust}: {alternative}"])
 
 
-@app.command(rich_help_panel="Plan")
+@command("solve")
 def solve(
     model: str = ModelOpt,
     task: str = TaskOpt,
@@ -101,17 +105,13 @@ def solve(
         "JSON file; the belief is over (type, trust). A mixture given with --model does the same.",
     ),
     history: Path | None = typer.Option(
-        None,
-        "--history",
-        help="With types: the person's earlier trials (a trial log); the plan starts from their type belief.",
+        None, "--history", help="With types: the person's earlier trials (a trial log); the plan starts from their type belief."
     ),
     participant: str | None = typer.Option(None, "--participant", help="With --history: the person's participant id."),
     session: str | None = typer.Option(
         None, "--session", help="With --history: the column that separates sessions (trust restarts in each)."
     ),
 ) -> None:
-    """Solve the assistance-seeking POMDP for the optimal trust-aware policy (Section IV), or for a person of
-    unknown supervisor type (--types)."""
     from ..model.presets import load_mixture, load_task
     from ..pomdp.problem import AssistancePOMDP
     from ..pomdp.supervisor_types import type_aware_problem, type_marginal
@@ -143,9 +143,8 @@ def solve(
         summary["type_belief"] = dict(
             zip(mixture.names, map(float, type_marginal(pomdp.model.initial, mixture.n_types)), strict=True)
         )
+    write_atomic(out, policy.save)
     if out is not None:
-        with atomic_output(out) as tmp:
-            policy.save(tmp)
         summary["policy_file"] = str(out)
     if as_json:
         print_json(summary)
@@ -179,12 +178,9 @@ def _print_solution(policy: Policy, summary: dict) -> None:
     info = policy.info
     name = summary["policy"][:1].upper() + summary["policy"][1:]
     grid = f", grid {info['grid_points']}" if "grid_points" in info else ""
-    table = Table(title=f"{name} policy (belief update: {policy.belief_update}{grid})", title_justify="left")
-    table.add_column("complexity")
-    table.add_column("asks when P(trust=high) in")
-    table.add_column("threshold", justify="right")
-    table.add_column("V(b=1, C)", justify="right")
-    table.add_column("trust-agnostic", justify="left")
+    title = f"{name} policy (belief update: {policy.belief_update}{grid})"
+    table = make_table(title, "complexity", "asks when P(trust=high) in", "threshold", "V(b=1, C)", "trust-agnostic", left=2)
+    table.columns[-1].justify = "left"
     for cn in policy.complexities:
         iv = summary["ask_intervals"].get(cn, [])
         ivs = ", ".join(f"[{lo:.4f}, {hi:.4f})" for lo, hi in iv) or "never asks"
@@ -210,9 +206,8 @@ def _print_certified(policy: Policy, summary: dict) -> None:
     info = policy.info
     title = f"Trust-aware policy ({summary['solver']} solver, belief update: {policy.belief_update})"
     if "thresholds" in summary:
-        table = Table(title=title, title_justify="left")
-        for col in ("complexity", "asks when P(trust=high) in", "threshold", "certified interval", "V(b=1, C)"):
-            table.add_column(col)
+        columns = ("complexity", "asks when P(trust=high) in", "threshold", "certified interval", "V(b=1, C)")
+        table = make_table(title, *columns, left=5)
         intervals = summary.get("threshold_intervals") or {}
         for cn in policy.complexities:
             iv = summary["ask_intervals"][cn]
@@ -240,7 +235,7 @@ def _print_certified(policy: Policy, summary: dict) -> None:
         console.print(f"[yellow]the target gap {target:g} was not reached (time or size limit)[/]")
 
 
-@app.command(rich_help_panel="Plan")
+@command("agnostic")
 @log_options(names=("mapping", "column", "label", "order"))
 def agnostic(
     model: str = ModelOpt,
@@ -250,7 +245,6 @@ def agnostic(
     as_json: bool = PrintJsonOpt,
     reading: LogReading = FROM_OPTIONS,
 ) -> None:
-    """The optimal trust-agnostic policy (Section VI-A)."""
     from ..model.presets import load_model, load_task
     from ..pomdp.problem import AssistancePOMDP
     from ..solvers import make_solver, trust_agnostic_from_data
@@ -267,15 +261,12 @@ def agnostic(
         pol = trust_agnostic_from_data(frame, t)
     else:
         pol = make_solver("trust-agnostic").solve(AssistancePOMDP(load_model(model), t))
-    if out is not None:
-        with atomic_output(out) as tmp:
-            pol.save(tmp)
+    write_atomic(out, pol.save)
     if as_json:
         print_json(pol.to_dict())
         return
-    table = Table(title="Trust-agnostic policy", title_justify="left")
-    for col in ("complexity", "P(intervene | C, autonomous)", "E\\[r | autonomous]", "E\\[r | ask]", "action"):
-        table.add_column(col)
+    columns = ("complexity", "P(intervene | C, autonomous)", "E\\[r | autonomous]", "E\\[r | ask]", "action")
+    table = make_table("Trust-agnostic policy", *columns, left=5)
     for cn in t.complexities:
         er = pol.info["expected_reward"][cn]
         action = ACTIONS[pol.action(None, cn)]
@@ -284,7 +275,7 @@ def agnostic(
     console.print(f"P(intervene | C) from the {pol.info['source']}")
 
 
-@app.command("plot-q", rich_help_panel="Plan")
+@command("plot-q")
 def plot_q_cmd(
     model: str = ModelOpt,
     task: str = TaskOpt,
@@ -293,7 +284,6 @@ def plot_q_cmd(
     policy_file: Path | None = typer.Option(None, "--policy", help="Plot a solved policy file instead of solving."),
     out: Path = typer.Option(Path("q.png"), "--out", "-o", help="PNG file to write."),
 ) -> None:
-    """Plot Q(b, C, a) for both actions and complexities, with the threshold (Fig. 7)."""
     from ..plots.q import plot_q
     from ..policies import PolicyError, TrustAwarePolicy, load_policy
     from ..pomdp.problem import AssistancePOMDP
@@ -310,41 +300,32 @@ def plot_q_cmd(
         pomdp = AssistancePOMDP(*model_and_task(model, task, belief_update))
         need_two_levels(pomdp.model, "plot-q")
         policy = cast(TrustAwarePolicy, make_solver("grid", grid=grid, belief_update=belief_update).solve(pomdp))
-    with atomic_output(out) as tmp:
-        plot_q(policy, tmp)
+    write_atomic(out, lambda tmp: plot_q(policy, tmp))
     console.print(f"wrote {out}")
 
 
-@app.command(rich_help_panel="Files")
+@command("preset")
 def preset(
     name: str = typer.Argument("paper", help="Preset name."),
     model_out: Path | None = typer.Option(None, "--model-out", help="Write the preset's trust model here."),
     task_out: Path | None = typer.Option(None, "--task-out", help="Write the preset's task here."),
 ) -> None:
-    """Print or export a built-in preset (model and task JSON), a starting point for your own files."""
     from ..model.presets import MODEL_PRESETS, TASK_PRESETS
 
     if name not in MODEL_PRESETS:
         raise TrustseekError([f"unknown preset {name!r}; presets: {sorted(MODEL_PRESETS)}"])
     check_outputs((model_out, "--model-out", (".json",)), (task_out, "--task-out", (".json",)))
     m, t = MODEL_PRESETS[name](), TASK_PRESETS[name]()
-    if model_out:
-        with atomic_output(model_out) as tmp:
-            m.save(tmp)
-        console.print(f"wrote {model_out}")
-    if task_out:
-        with atomic_output(task_out) as tmp:
-            t.save(tmp)
-        console.print(f"wrote {task_out}")
+    for path, made in ((model_out, m), (task_out, t)):
+        if path:
+            write_atomic(path, made.save)
+            console.print(f"wrote {path}")
     if not model_out and not task_out:
         print_json({"model": m.to_dict(), "task": t.to_dict()})
 
 
-@app.command(rich_help_panel="Files")
-def check(
-    files: list[Path] = typer.Argument(..., help="Trust model, task or policy JSON files."),
-) -> None:
-    """Validate model (trust or general), task and policy files; print every problem found."""
+@command("check")
+def check(files: list[Path] = typer.Argument(..., help="Trust model, task or policy JSON files.")) -> None:
     from ..model.core import TrustModel
     from ..model.files import IOHMM_FORMAT
     from ..model.jsonfile import ModelError, load_json

@@ -6,15 +6,14 @@ from pathlib import Path
 from typing import Any
 
 import typer
-from rich.table import Table
 
 from ..solvers.defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
 from ..vocab import PAPER_BLOCK_COUNTS
-from ._app import FIGURE_SUFFIXES, app, check_outputs, console, print_json, progress_task
+from ._app import FIGURE_SUFFIXES, check_outputs, command, console, make_table, print_json, progress_task
 from ._options import JsonOpt, ModelOpt, TaskOpt, model_and_task, parse_counts
 
 
-@app.command(rich_help_panel="Plan")
+@command("schedule")
 def schedule(
     model: str = ModelOpt,
     task: str = TaskOpt,
@@ -40,7 +39,6 @@ def schedule(
     figure: Path | None = typer.Option(None, "--figure", help="--compare: write the schedule figure (PNG, PDF or SVG) here."),
     as_json: bool = JsonOpt,
 ) -> None:
-    """Choose the next item's complexity jointly with asking (finite horizon, known item counts)."""
     from ..policies.scheduling import SchedulePolicy
     from ..pomdp.problem import AssistancePOMDP
     from ..pomdp.scheduling import SchedulingProblem
@@ -106,11 +104,8 @@ def schedule(
 
 
 def _print_comparison(sec: dict[str, Any]) -> None:
-    table = Table(
-        title=f"Schedules ({sec['participants']} simulated participants, same supervisors and queues)", title_justify="left"
-    )
-    for col in ("schedule", "exact", "discounted [95% CI]", "gain over random + trust-aware", "cumulative", "asks"):
-        table.add_column(col, justify="left" if col == "schedule" else "right")
+    title = f"Schedules ({sec['participants']} simulated participants, same supervisors and queues)"
+    table = make_table(title, "schedule", "exact", "discounted [95% CI]", "gain over random + trust-aware", "cumulative", "asks")
     for r in sec["schedules"]:
         d, g, c = r["discounted"], r["gain_discounted"], r["cumulative"]
         ex = "-" if r["exact_discounted"] is None else f"{r['exact_discounted']:.3f}"

@@ -6,13 +6,12 @@ from pathlib import Path
 
 import typer
 from rich.markup import escape
-from rich.table import Table
 
-from ._app import FIGURE_SUFFIXES, app, check_outputs, console, print_json
+from ._app import FIGURE_SUFFIXES, check_outputs, command, console, make_table, print_json
 from ._options import JsonOpt, ModelOpt, TaskOpt, model_and_task
 
 
-@app.command(rich_help_panel="Plan")
+@command("sensitivity")
 def sensitivity(
     model: str = ModelOpt,
     task: str = TaskOpt,
@@ -40,7 +39,6 @@ def sensitivity(
     plot: Path | None = typer.Option(None, "--plot", help="Write a tornado plot of the threshold to this PNG, PDF or SVG file."),
     as_json: bool = JsonOpt,
 ) -> None:
-    """Range of the policy's threshold and of V when every reported parameter moves within its printed precision."""
     from ..solvers.sensitivity import sensitivity as run_sensitivity
 
     check_outputs((plot, "--plot", FIGURE_SUFFIXES), inputs=((model, "--model file"), (task, "--task file")))
@@ -72,9 +70,9 @@ def sensitivity(
         f"{len(res.parameters)} free parameters, each ± {h:g} around its value (clipped to [0, 1]); "
         f"belief update {belief_update}, {grid}-point grid, {res.settings['evaluations']} solves."
     )
-    summary = Table(title="Joint range over the box", title_justify="left")
-    for col in ("quantity", "printed values", "joint min", "joint max", f"sample of {samples}"):
-        summary.add_column(col, justify="left" if col == "quantity" else "right")
+    summary = make_table(
+        "Joint range over the box", "quantity", "printed values", "joint min", "joint max", f"sample of {samples}"
+    )
     for q in res.quantities:
         lo, hi = res.range_of(q)
         s = res.sampled.get(q, {})
@@ -85,9 +83,8 @@ def sensitivity(
         if not q.startswith("threshold"):
             continue
         rows = sorted(res.one_at_a_time, key=lambda r: -abs(r["at_upper"][q] - r["at_lower"][q]))[:top]
-        table = Table(title=escape(f"One at a time: {q} (largest effects first)"), title_justify="left")
-        for col in ("parameter", "value", "box", escape(f"{q} at lower"), escape(f"{q} at upper")):
-            table.add_column(col, justify="left" if col == "parameter" else "right")
+        columns = ("parameter", "value", "box", escape(f"{q} at lower"), escape(f"{q} at upper"))
+        table = make_table(escape(f"One at a time: {q} (largest effects first)"), *columns)
         for r in rows:
             table.add_row(
                 escape(r["name"]),

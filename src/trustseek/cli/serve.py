@@ -11,11 +11,12 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import typer
 
 from ..errors import TrustseekError
-from ._app import app, atomic_output, check_output, check_outputs, console, print_json
+from ._app import check_output, check_outputs, command, console, print_json, write_atomic
 
 
 def _check_db(db: str) -> str:
@@ -51,7 +52,7 @@ def _check_existing_sqlite(db: str) -> Path | None:
     return path
 
 
-@app.command(rich_help_panel="Experiments")
+@command("serve")
 def serve(
     db: str = typer.Option(
         "sqlite:///trustseek.sqlite", "--db", help="Database URL: a SQLite file (default) or postgresql://..."
@@ -89,10 +90,7 @@ def serve(
         "or debug with --log-level debug.",
     ),
 ) -> None:
-    """Run the experiment server: participant interface, dashboard, experimenter and deploy APIs.
-
-    The schema is migrated at start-up.  The OpenAPI description is at /docs and /openapi.json.
-    """
+    """The schema is migrated at start-up.  The OpenAPI description is at /docs and /openapi.json."""
     import uvicorn
 
     from ..server import create_app
@@ -115,8 +113,9 @@ def serve(
         if not loopback:
             console.print("[yellow]  listening beyond loopback: put the server behind HTTPS[/]")
         settle_memory()  # garbage-collector pauses out of request latencies
+        where: dict[str, Any] = {"host": host, "port": port, "log_level": log_level, "access_log": False}
         if workers == 1:
-            uvicorn.run(application, host=host, port=port, log_level=log_level, access_log=False)
+            uvicorn.run(application, **where)
             return
         # each worker builds its own app from the environment (the token never appears in argv)
         from ..server.app import ENV_DB, ENV_PREVIEW_DB, ENV_PUBLIC_URL, ENV_TOKEN
@@ -125,15 +124,7 @@ def serve(
         with tempfile.TemporaryDirectory(prefix="trustseek-previews-") as previews:  # the workers' previews, shared
             preview_db = f"sqlite:///{Path(previews) / 'previews.sqlite'}"
             os.environ.update({ENV_DB: db, ENV_TOKEN: token, ENV_PUBLIC_URL: public_url or "", ENV_PREVIEW_DB: preview_db})
-            uvicorn.run(
-                "trustseek.server.app:from_environment",
-                factory=True,
-                workers=workers,
-                host=host,
-                port=port,
-                log_level=log_level,
-                access_log=False,
-            )
+            uvicorn.run("trustseek.server.app:from_environment", factory=True, workers=workers, **where)
 
 
 GENERATED_TOKEN_FILE = Path("trustseek-token")
@@ -208,7 +199,7 @@ def log_to_stderr(level: str) -> Iterator[None]:
         logger.setLevel(before)
 
 
-@app.command("export", rich_help_panel="Experiments")
+@command("export")
 def export_cmd(
     study: str = typer.Argument(..., help="Study id."),
     db: str = typer.Option("sqlite:///trustseek.sqlite", "--db", help="Database URL."),
@@ -225,7 +216,6 @@ def export_cmd(
     pilot: bool = typer.Option(False, "--pilot", help="Include the pilot sessions (left out by default)."),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ) -> None:
-    """Export a study's trials (canonical trial log), its UI events, or its whole data bundle."""
     sqlite = _check_existing_sqlite(db)
     if out is None and bundle is None:
         raise TrustseekError(["give --out FILE (the trial log) or --bundle DIR (every table)"])
@@ -240,16 +230,10 @@ def export_cmd(
         st = _stored_study(s, study, db)
         trials = trials_frame(s, st, pilot=pilot)
         ev = events_frame(s, st, pilot) if events is not None else None
-        files = bundle_files(s, st, pilot) if bundle is not None else None
-    if out is not None:
-        with atomic_output(out) as tmp:
-            write_frame(trials, tmp)
-    if events is not None and ev is not None:
-        with atomic_output(events) as tmp:
-            write_frame(ev, tmp)
-    if bundle is not None and files is not None:
-        with atomic_output(bundle, directory=True) as tmp:
-            write_bundle(files, tmp)
+        files = bundle_files(s, st, pilot) if bundle is not None else {}
+    write_atomic(out, lambda tmp: write_frame(trials, tmp))
+    write_atomic(events, lambda tmp: write_frame(ev, tmp))
+    write_atomic(bundle, lambda tmp: write_bundle(files, tmp), directory=True)
     summary = {
         "study": study,
         "trials": len(trials),
@@ -258,7 +242,7 @@ def export_cmd(
         "events": None if ev is None else len(ev),
         "events_out": None if events is None else str(events),
         "bundle": None if bundle is None else str(bundle),
-        "files": None if files is None else sorted(files),
+        "files": None if bundle is None else sorted(files),
     }
     if as_json:
         print_json(summary)
@@ -279,7 +263,7 @@ def _stored_study(s, study: str, db: str):
     return st
 
 
-@app.command("study", rich_help_panel="Experiments")
+@command("study")
 def study_cmd(
     study: str = typer.Argument(..., help="Study id."),
     db: str = typer.Option("sqlite:///trustseek.sqlite", "--db", help="Database URL."),
@@ -288,7 +272,6 @@ def study_cmd(
     ),
     as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
 ) -> None:
-    """A study's lifecycle: its status, study link and progress; --status opens, pauses or closes it."""
     from ..server.db import open_database
     from ..server.errors import Refused
     from ..server.lifecycle import STATUSES, progress, set_status

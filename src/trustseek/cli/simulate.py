@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 from rich.console import Console
@@ -19,14 +18,16 @@ from ..errors import TrustseekError
 from ..estimation.options import MAX_JOBS
 from ..vocab import PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS, check_belief_update
 from ._app import (
-    app,
     atomic_output,
     check_output,
     check_outputs,
+    command,
     console,
+    make_table,
     print_json,
     print_written,
     progress_bar,
+    write_atomic,
 )
 from ._options import JsonOpt, QuietOpt, TaskOpt, parse_counts
 
@@ -39,155 +40,84 @@ if TYPE_CHECKING:
 TYPE_AWARE = "type-aware"
 
 
-def _policy(
-    spec: str,
-    model: TrustModel,
-    task: Task,
-    belief_update: str,
-    grid: int,
-    ask_low: float,
-    ask_high: float,
-    given: Sequence[str] = (),
-) -> Policy:
-    """The policy ``--policy`` names: a kind (with the options of this command) or a policy JSON file.
-
-    A solved policy file fixes its belief update and model: the ``given`` options among
-    --belief-update and --policy-model are refused with it rather than ignored."""
-    from ..model.jsonfile import load_json
-    from ..solvers import policy_from_spec
-
-    if spec in POLICY_SPEC_KINDS:
-        p_ask = dict(zip(task.complexities, [ask_low, ask_high], strict=False))  # --ask-low, --ask-high: the first two
-        options = {"belief_update": belief_update, "grid": grid, "p_ask": p_ask}
-        return policy_from_spec({"kind": spec, **options}, model, task, where="--policy")
-    p = Path(spec)
-    if p.suffix.lower() == ".json" or p.exists():
-        d, source = load_json(p)
-        if "format" in d and given:
-            raise TrustseekError(
-                [
-                    f"{option} does not apply to a solved policy file: it fixes its own belief update and model"
-                    for option in given
-                ],
-                source,
-            )
-        return policy_from_spec(d, model, task, where=source)
-    raise TrustseekError([f"--policy must be one of {list(POLICY_SPEC_KINDS)} or a policy JSON file, got {spec!r}"])
-
-
-# simulate's options (Typer reads each from its parameter's annotation)
-_Model = Annotated[
-    str,
-    typer.Option(
+@command("simulate")
+def simulate(
+    ctx: typer.Context,
+    model: str = typer.Option(
+        "paper",
         "--model",
         "-m",
         help="Supervisors' trust model: a preset name (paper) or a JSON file; a mixture of supervisor types "
         "(paper+conservative or a mixture file) gives each participant a type in the mixture's shares.",
     ),
-]
-_Types = Annotated[
-    str | None,
-    typer.Option(
+    types: str | None = typer.Option(
+        None,
         "--types",
         help="Supervisors of several types, as 'solve --types' takes them: a mixture preset (paper+conservative) "
         "or a mixture JSON file (the same as giving the mixture with --model).",
     ),
-]
-_Policy = Annotated[
-    str,
-    typer.Option(
+    task: str = TaskOpt,
+    policy: str = typer.Option(
+        "trust-aware",
         "--policy",
         "-p",
         help=f"Robot policy: {', '.join(POLICY_SPEC_KINDS)}, {TYPE_AWARE} (for a mixture of supervisor types), "
         "or a policy JSON file (e.g. from 'trustseek solve --out').",
     ),
-]
-_Participants = Annotated[
-    int, typer.Option("--participants", "-n", min=1, max=1_000_000, help="Number of simulated participants.")
-]
-_Counts = Annotated[
-    str | None,
-    typer.Option(
+    participants: int = typer.Option(9, "--participants", "-n", min=1, max=1_000_000, help="Number of simulated participants."),
+    counts: str | None = typer.Option(
+        None,
         "--counts",
         help="Trials per complexity in random order, e.g. 41,30 or low=41,high=30 (the paper's design). "
         "Default: 41,30 unless --trials is given.",
     ),
-]
-_Trials = Annotated[
-    int | None,
-    typer.Option(
+    trials: int | None = typer.Option(
+        None,
         "--trials",
         min=1,
         max=100_000,
         help="Number of trials with i.i.d. complexities from the task's probabilities (instead of --counts).",
     ),
-]
-_BeliefUpdate = Annotated[
-    str,
-    typer.Option(
+    belief_update: str = typer.Option(
+        "bayes",
         "--belief-update",
         "-u",
         help="Belief update of the trust-aware policy: 'bayes' (exact filter, default) or 'paper' (eq. 3).",
     ),
-]
-_PolicyModel = Annotated[
-    str | None,
-    typer.Option("--policy-model", help="Model the trust-aware policy is solved for (default: the supervisors' model)."),
-]
-_Grid = Annotated[
-    int, typer.Option("--grid", min=3, max=1_000_001, help="Belief grid points for solving the trust-aware policy.")
-]
-_AskLow = Annotated[float, typer.Option("--ask-low", min=0.0, max=1.0, help="Randomized policy: P(ask) in the first complexity.")]
-_AskHigh = Annotated[
-    float, typer.Option("--ask-high", min=0.0, max=1.0, help="Randomized policy: P(ask) in the second complexity.")
-]
-_Concentration = Annotated[
-    float | None,
-    typer.Option(
+    policy_model: str | None = typer.Option(
+        None, "--policy-model", help="Model the trust-aware policy is solved for (default: the supervisors' model)."
+    ),
+    grid: int = typer.Option(1001, "--grid", min=3, max=1_000_001, help="Belief grid points for solving the trust-aware policy."),
+    ask_low: float = typer.Option(
+        PAPER_ASK_PROBABILITIES["low"], "--ask-low", min=0.0, max=1.0, help="Randomized policy: P(ask) in the first complexity."
+    ),
+    ask_high: float = typer.Option(
+        PAPER_ASK_PROBABILITIES["high"],
+        "--ask-high",
+        min=0.0,
+        max=1.0,
+        help="Randomized policy: P(ask) in the second complexity.",
+    ),
+    concentration: float | None = typer.Option(
+        None,
         "--concentration",
         help="Heterogeneous population: each participant's probability rows ~ Dirichlet(concentration x pooled row + pseudo).",
     ),
-]
-_Pseudo = Annotated[
-    float, typer.Option("--pseudo", min=0.0, help="Dirichlet pseudo-count added to every cell (with --concentration).")
-]
-_Seed = Annotated[int, typer.Option("--seed", min=0, help="Random seed (same seed, same supervisors and luck for any policy).")]
-_Out = Annotated[
-    Path | None,
-    typer.Option(
+    pseudo: float = typer.Option(
+        0.0, "--pseudo", min=0.0, help="Dirichlet pseudo-count added to every cell (with --concentration)."
+    ),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed (same seed, same supervisors and luck for any policy)."),
+    out: Path | None = typer.Option(
+        None,
         "--out",
         "-o",
         help="Write every trial (canonical trial log + true_trust, belief, reward, block, policy) to this CSV/Parquet file.",
     ),
-]
-_SummaryOut = Annotated[
-    Path | None, typer.Option("--summary-out", help="Write the per-participant summary to this CSV/Parquet file.")
-]
-
-
-@app.command(rich_help_panel="Simulate and reproduce")
-def simulate(
-    ctx: typer.Context,
-    model: _Model = "paper",
-    types: _Types = None,
-    task: str = TaskOpt,
-    policy: _Policy = "trust-aware",
-    participants: _Participants = 9,
-    counts: _Counts = None,
-    trials: _Trials = None,
-    belief_update: _BeliefUpdate = "bayes",
-    policy_model: _PolicyModel = None,
-    grid: _Grid = 1001,
-    ask_low: _AskLow = PAPER_ASK_PROBABILITIES["low"],
-    ask_high: _AskHigh = PAPER_ASK_PROBABILITIES["high"],
-    concentration: _Concentration = None,
-    pseudo: _Pseudo = 0.0,
-    seed: _Seed = 0,
-    out: _Out = None,
-    summary_out: _SummaryOut = None,
+    summary_out: Path | None = typer.Option(
+        None, "--summary-out", help="Write the per-participant summary to this CSV/Parquet file."
+    ),
     as_json: bool = JsonOpt,
 ) -> None:
-    """Simulate supervisors from a trust model working with the robot under a policy."""
     from ..simulation.engine import simulate as run_simulation
 
     given = _check_simulate(ctx, belief_update, counts, trials)
@@ -197,53 +127,17 @@ def simulate(
     pop = _population(ctx, model, types, policy_model, concentration, task)
     t = pop.task
     cnt = _trial_counts(counts, trials, participants, t)
-    if policy == TYPE_AWARE:
-        if pop.policy_types is None:
-            raise TrustseekError(
-                [f"--policy {TYPE_AWARE} needs supervisor types: a mixture with --types, --model or --policy-model"]
-            )
-        pol = solvers.solve_type_aware(pop.policy_types, t, belief_update=belief_update)
-    else:
-        pol = _policy(policy, pop.checked_policy_model(policy), t, belief_update, grid, ask_low, ask_high, given)
+    pol = pop.policy(policy, belief_update, grid, ask_low, ask_high, given)
     sup = pop.supervisors(participants, seed, concentration, pseudo)
     t0 = time.perf_counter()
     sim = run_simulation(
         sup, t, pol, participants, counts=cnt, trials=trials, seed=seed, record=out is not None, belief_model=pop.pm
     )
     dt = time.perf_counter() - t0
-    if out is not None:
-        with atomic_output(out) as tmp:
-            _write(sim.trials(), tmp)
-    from ..simulation.results import SUMMARY_QUANTITIES
-
+    write_atomic(out, lambda tmp: _write(sim.trials(), tmp))
     summ = sim.summary()
-    if summary_out is not None:
-        with atomic_output(summary_out) as tmp:
-            _write(summ, tmp)
-    stats = {
-        c: {
-            "mean": float(summ[c].mean()),
-            "median": float(summ[c].median()),
-            "sd": float(summ[c].std(ddof=1)) if len(summ) > 1 else 0.0,
-        }
-        for c in SUMMARY_QUANTITIES
-    }
-    n_trials = int(summ["trials"].sum())
-    if as_json:
-        print_json(
-            {
-                "policy": pol.overview(),
-                "participants": participants,
-                "trials": n_trials,
-                "seed": seed,
-                "statistics": stats,
-                "trials_file": str(out) if out else None,
-                "summary_file": str(summary_out) if summary_out else None,
-            }
-        )
-        return
-    _print_simulation(pol.describe(), participants, n_trials, stats, dt, seed)
-    print_written(("trials", out), ("summary", summary_out))
+    write_atomic(summary_out, lambda tmp: _write(summ, tmp))
+    _report_simulation(summ, pol, participants, seed, dt, out, summary_out, as_json)
 
 
 def _given(ctx: typer.Context, *names: str) -> list[str]:
@@ -275,17 +169,39 @@ class _Population:
     pm: TrustModel  # the model the policy's belief runs on
     task: Task
 
-    def checked_policy_model(self, policy: str) -> TrustModel:
-        """The model a policy other than type-aware is solved for."""
+    def policy(self, spec: str, belief_update: str, grid: int, ask_low: float, ask_high: float, given: list[str]) -> Policy:
+        """The policy ``--policy`` names: a kind (with the options of this command) or a policy JSON file.
+
+        A solved policy file fixes its belief update and model: the ``given`` options among
+        --belief-update and --policy-model are refused with it rather than ignored."""
+        from ..model.jsonfile import load_json
+        from ..solvers import policy_from_spec
         from .plan import need_two_levels
 
-        if policy == "trust-aware" and self.policy_types is not None:
+        if spec == TYPE_AWARE:
+            if self.policy_types is None:
+                raise TrustseekError(
+                    [f"--policy {TYPE_AWARE} needs supervisor types: a mixture with --types, --model or --policy-model"]
+                )
+            return solvers.solve_type_aware(self.policy_types, self.task, belief_update=belief_update)
+        if spec == "trust-aware" and self.policy_types is not None:
             raise TrustseekError(
                 [f"the supervisors are a mixture of types: use --policy {TYPE_AWARE}, or --policy-model MODEL for one model"]
             )
-        if policy == "trust-aware" and self.pm.n_trust != 2:
+        if spec == "trust-aware" and self.pm.n_trust != 2:
             need_two_levels(self.pm, "simulate")
-        return self.pm
+        if spec in POLICY_SPEC_KINDS:
+            p_ask = dict(zip(self.task.complexities, [ask_low, ask_high], strict=False))  # --ask-low, --ask-high: the first two
+            options = {"belief_update": belief_update, "grid": grid, "p_ask": p_ask}
+            return policy_from_spec({"kind": spec, **options}, self.pm, self.task, where="--policy")
+        p = Path(spec)
+        if p.suffix.lower() == ".json" or p.exists():
+            d, source = load_json(p)
+            if "format" in d and given:
+                message = "does not apply to a solved policy file: it fixes its own belief update and model"
+                raise TrustseekError([f"{option} {message}" for option in given], source)
+            return policy_from_spec(d, self.pm, self.task, where=source)
+        raise TrustseekError([f"--policy must be one of {list(POLICY_SPEC_KINDS)} or a policy JSON file, got {spec!r}"])
 
     def supervisors(self, participants: int, seed: int, concentration: float | None, pseudo: float):
         import numpy as np
@@ -331,18 +247,27 @@ def _trial_counts(counts: str | None, trials: int | None, participants: int, tas
     return cnt
 
 
-def _print_simulation(desc: str, participants: int, n_trials: int, stats: dict, dt: float, seed: int) -> None:
-    table = Table(
-        title=f"{participants:,} simulated participants, {n_trials // participants} trials each, policy {escape(desc)}",
-        title_justify="left",
-    )
-    table.add_column("per participant")
-    for h in ("mean", "median", "sd"):
-        table.add_column(h, justify="right")
+def _report_simulation(summ, pol: Policy, participants: int, seed: int, dt: float, out, summary_out, as_json: bool) -> None:
+    """The per-participant statistics, as JSON or a table, and the files written."""
+    from ..simulation.results import SUMMARY_QUANTITIES
+
+    sd = (lambda c: float(c.std(ddof=1))) if len(summ) > 1 else (lambda c: 0.0)
+    stats = {c: {"mean": float(summ[c].mean()), "median": float(summ[c].median()), "sd": sd(summ[c])} for c in SUMMARY_QUANTITIES}
+    n_trials = int(summ["trials"].sum())
+    if as_json:
+        files = {"trials_file": str(out) if out else None, "summary_file": str(summary_out) if summary_out else None}
+        print_json(
+            {"policy": pol.overview(), "participants": participants, "trials": n_trials, "seed": seed, "statistics": stats}
+            | files
+        )
+        return
+    title = f"{participants:,} simulated participants, {n_trials // participants} trials each, policy {escape(pol.describe())}"
+    out_table = make_table(title, "per participant", "mean", "median", "sd")
     for c, figures in stats.items():
-        table.add_row(c.replace("_", " "), *(f"{figures[k]:.2f}" for k in ("mean", "median", "sd")))
-    console.print(table)
+        out_table.add_row(c.replace("_", " "), *(f"{figures[k]:.2f}" for k in ("mean", "median", "sd")))
+    console.print(out_table)
     console.print(f"{n_trials:,} trials in {dt:.2f} s ({n_trials / max(dt, 1e-9) / 1e6:.1f} M trials/s), seed {seed}")
+    print_written(("trials", out), ("summary", summary_out))
 
 
 def _write(frame, path: Path) -> None:
@@ -357,81 +282,56 @@ def _write(frame, path: Path) -> None:
         frame.to_csv(path, index=False)
 
 
-@app.command(rich_help_panel="Simulate and reproduce")
+@command("reproduce")
 def reproduce(
-    out: Annotated[Path, typer.Option("--out", "-o", help="Report folder (report.html, PNGs, summary.json, data).")] = Path(
-        "report"
+    out: Path = typer.Option(Path("report"), "--out", "-o", help="Report folder (report.html, PNGs, summary.json, data)."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed: the same seed gives the same numbers."),
+    replicates: int = typer.Option(
+        20, "--replicates", "-r", min=0, max=10_000, help="Replicate experiments of the whole pipeline."
     ),
-    seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed: the same seed gives the same numbers.")] = 0,
-    replicates: Annotated[
-        int, typer.Option("--replicates", "-r", min=0, max=10_000, help="Replicate experiments of the whole pipeline.")
-    ] = 20,
-    large_n: Annotated[
-        int,
-        typer.Option("--large-n", min=1, max=1_000_000, help="Participants of the large experiment 2 and of the cost studies."),
-    ] = 10_000,
-    bootstrap: Annotated[
-        int, typer.Option("--bootstrap", "-b", min=0, max=10_000, help="Bootstrap resamples for the fitted model's intervals.")
-    ] = 200,
-    restarts: Annotated[int, typer.Option("--restarts", min=1, max=1000, help="EM restarts of the main fit.")] = 10,
-    replicate_restarts: Annotated[
-        int, typer.Option("--replicate-restarts", min=1, max=1000, help="EM restarts per replicate fit.")
-    ] = 4,
-    replicate_large_n: Annotated[
-        int,
-        typer.Option("--replicate-large-n", help="Participants of each replicate's large experiment 2.", min=1, max=1_000_000),
-    ] = 2_000,
-    belief_update: Annotated[
-        str,
-        typer.Option(
-            "--belief-update", "-u", help="Belief update of the trust-aware policy: 'paper' (eq. 3, as in the paper) or 'bayes'."
-        ),
-    ] = "paper",
-    jobs: Annotated[
-        int,
-        typer.Option(
-            "--jobs", "-j", min=1, max=MAX_JOBS, help="Processes (bootstrap and replicates); numbers do not depend on it."
-        ),
-    ] = 2,
-    schedule_participants: Annotated[
-        int,
-        typer.Option(
-            "--schedule-participants",
-            min=0,
-            max=1_000_000,
-            help="Simulated participants of the trial-scheduling section (0: leave the section out).",
-        ),
-    ] = 10_000,
-    types_participants: Annotated[
-        int,
-        typer.Option(
-            "--types-participants",
-            min=0,
-            max=1_000_000,
-            help="Simulated participants of the supervisor-types section (Remark 1; 0: leave the section out).",
-        ),
-    ] = 2_000,
-    as_json: Annotated[bool, typer.Option("--json", help="Print summary.json to stdout instead of tables.")] = False,
+    large_n: int = typer.Option(
+        10_000, "--large-n", min=1, max=1_000_000, help="Participants of the large experiment 2 and of the cost studies."
+    ),
+    bootstrap: int = typer.Option(
+        200, "--bootstrap", "-b", min=0, max=10_000, help="Bootstrap resamples for the fitted model's intervals."
+    ),
+    restarts: int = typer.Option(10, "--restarts", min=1, max=1000, help="EM restarts of the main fit."),
+    replicate_restarts: int = typer.Option(4, "--replicate-restarts", min=1, max=1000, help="EM restarts per replicate fit."),
+    replicate_large_n: int = typer.Option(
+        2_000, "--replicate-large-n", help="Participants of each replicate's large experiment 2.", min=1, max=1_000_000
+    ),
+    belief_update: str = typer.Option(
+        "paper",
+        "--belief-update",
+        "-u",
+        help="Belief update of the trust-aware policy: 'paper' (eq. 3, as in the paper) or 'bayes'.",
+    ),
+    jobs: int = typer.Option(
+        2, "--jobs", "-j", min=1, max=MAX_JOBS, help="Processes (bootstrap and replicates); numbers do not depend on it."
+    ),
+    schedule_participants: int = typer.Option(
+        10_000,
+        "--schedule-participants",
+        min=0,
+        max=1_000_000,
+        help="Simulated participants of the trial-scheduling section (0: leave the section out).",
+    ),
+    types_participants: int = typer.Option(
+        2_000,
+        "--types-participants",
+        min=0,
+        max=1_000_000,
+        help="Simulated participants of the supervisor-types section (Remark 1; 0: leave the section out).",
+    ),
+    as_json: bool = typer.Option(False, "--json", help="Print summary.json to stdout instead of tables."),
     quiet: bool = QuietOpt,
 ) -> None:
-    """Reproduce Sections V-VI of the paper on simulated supervisors and write a report."""
     from ..report import write_report
     from ..reproduction.pipeline import ReproduceConfig
     from ..reproduction.pipeline import reproduce as run_reproduce
 
-    cfg = ReproduceConfig(
-        seed=seed,
-        replicates=replicates,
-        large_n=large_n,
-        bootstrap=bootstrap,
-        restarts=restarts,
-        replicate_restarts=replicate_restarts,
-        replicate_large_n=replicate_large_n,
-        belief_update=belief_update,
-        jobs=jobs,
-        schedule_participants=schedule_participants,
-        types_participants=types_participants,
-    )
+    given = locals()  # the options named as the configuration's fields
+    cfg = ReproduceConfig(**{f.name: given[f.name] for f in fields(ReproduceConfig) if f.name in given})
     problems = cfg.problems()
     if problems:
         raise TrustseekError(problems)

@@ -12,20 +12,21 @@ from rich.table import Table
 from ..errors import TrustseekError
 from ..estimation.options import MAX_JOBS, FitOptions
 from ._app import (
-    app,
-    atomic_output,
     check_output,
     check_outputs,
     check_tol,
+    command,
     console,
+    make_table,
     print_json,
     print_written,
     progress_bar,
     progress_task,
+    write_atomic,
 )
 from ._options import FROM_OPTIONS, LogReading, PrintJsonOpt, QuietOpt, log_options, widen_option
 from ._output import check_plots_folder, fit_summary, print_selection, print_warnings
-from ._reading import load_for_decoding, read_for_types, widened_note
+from ._reading import load_for_decoding, read_for_types, widened_note, write_log
 from .fit import POSTERIOR_SUFFIXES, read_with_inputs
 
 TransitionsOnOpt = typer.Option(
@@ -72,7 +73,7 @@ def parse_types(text: str) -> tuple[int, ...]:
     return ends
 
 
-@app.command("fit-types", rich_help_panel="Estimate")
+@command("fit-types")
 @log_options()
 def fit_types(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
@@ -99,7 +100,6 @@ def fit_types(
     reading: LogReading = FROM_OPTIONS,
     quiet: bool = QuietOpt,
 ) -> None:
-    """Fit supervisor types: M trust models of the paper's structure, each participant one type."""
     outputs = ((out, "--out"), (type_posteriors, "--type-posteriors", POSTERIOR_SUFFIXES))
     check_outputs(*outputs, inputs=((log, "trial log"), *reading.inputs()))
     check_plots_folder(plots)
@@ -124,15 +124,9 @@ def fit_types(
         )
         intervals = _bootstrap_types(fit, bootstrap, seed, jobs, bar)
     mixture = fit.mixture()
-    if out is not None:
-        with atomic_output(out) as tmp:
-            mixture.save(tmp)
+    write_atomic(out, mixture.save)
     post = fit.posterior_frame()
-    if type_posteriors is not None:
-        from ..data.trials import write_trials
-
-        with atomic_output(type_posteriors) as tmp:
-            write_trials(post, tmp)
+    write_atomic(type_posteriors, lambda tmp: write_log(post, tmp))
     if plots is not None:
         from ..plots.supervisor_types import plot_types
 
@@ -197,17 +191,10 @@ def _print_types(fit, mixture, post, intervals) -> None:
 
 def _types_table(fit, mixture, post, intervals) -> Table:
     """The fitted types, one row each: weight (and interval), people, P(T1 = highest level), P(rely) cells."""
-    table = Table(
-        title=f"{fit.n_types} supervisor types ({fit.seqs.n_participants} participants, {fit.seqs.n_trials} trials; "
-        f"{', '.join(fit.differ)} differ)",
-        title_justify="left",
-    )
     heads, rely_of = _rely_cells(mixture)
-    table.add_column("type")
-    for col in ("weight", "people", f"P(T1={mixture.trust_levels[-1]})"):
-        table.add_column(col, justify="right")
-    for head in heads:
-        table.add_column(escape(head), justify="right")
+    title = f"{fit.n_types} supervisor types ({fit.seqs.n_participants} participants, {fit.seqs.n_trials} trials; "
+    top = f"P(T1={mixture.trust_levels[-1]})"
+    out = make_table(f"{title}{', '.join(fit.differ)} differ)", "type", "weight", "people", top, *map(escape, heads))
     counts = post["type"].value_counts()
     for name, w, m in zip(fit.names, fit.weights, mixture.models, strict=True):
         weight = f"{w:.3f}"
@@ -215,8 +202,8 @@ def _types_table(fit, mixture, post, intervals) -> Table:
             lo, hi = intervals.weights[name]
             weight += escape(f" [{lo:.2f}, {hi:.2f}]")
         rely = [f"{x:.2f}" for x in rely_of(m)]
-        table.add_row(name, weight, str(int(counts.get(name, 0))), f"{m.initial[-1]:.2f}", *rely)
-    return table
+        out.add_row(name, weight, str(int(counts.get(name, 0))), f"{m.initial[-1]:.2f}", *rely)
+    return out
 
 
 def _rely_cells(mixture):
@@ -238,7 +225,7 @@ def _rely_cells(mixture):
     return heads, lambda m: [m.emission[i, 0, k, 1] for i, k in cells]
 
 
-@app.command("select-types", rich_help_panel="Estimate")
+@command("select-types")
 @log_options()
 def select_types(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
@@ -258,7 +245,6 @@ def select_types(
     reading: LogReading = FROM_OPTIONS,
     quiet: bool = QuietOpt,
 ) -> None:
-    """Choose the number of supervisor types: BIC and participant-held-out log-likelihood."""
     values = parse_types(types)
     _check_differ(differ)
     from ..estimation import selection
@@ -277,22 +263,11 @@ def select_types(
             widen=widen,
         )
     warnings = widened_note(rows, "types", max(values)) + selection.type_selection_warnings(rows)
-    if as_json:
-        print_json({"types": rows, "warnings": warnings})
-        return
     weights = {"weights": lambda r: ", ".join(f"{w:.2f}" for w in r["weights"])}
-    print_selection(
-        "Number of supervisor types",
-        "types",
-        rows,
-        folds,
-        "* best by that criterion; reached best: starts within 0.01 of the best log-likelihood",
-        warnings,
-        weights,
-    )
+    print_selection("Number of supervisor types", "types", rows, folds, warnings, as_json, extra=weights)
 
 
-@app.command("personalize", rich_help_panel="Estimate")
+@command("personalize")
 @log_options()
 def personalize(
     log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
@@ -313,7 +288,6 @@ def personalize(
     as_json: bool = typer.Option(False, "--json", help="Print the strengths and the per-participant summary as JSON."),
     reading: LogReading = FROM_OPTIONS,
 ) -> None:
-    """Per-person trust models: each participant's MAP estimate, shrunk toward the pooled model or their type."""
     if estimate not in ("held-out", "variational"):
         raise TrustseekError([f"--estimate must be held-out or variational, got {estimate!r}"])
     check_output(out, "--out", directory=True)
@@ -326,8 +300,7 @@ def personalize(
     frame = read_for_types(log, centre, reading)  # the columns it uses
     centre_model = centre if centre.n_types > 1 else centre.models[0]
     res = run(frame, centre_model, strength=strength, options=FitOptions(tol=tol, n_jobs=1), estimate=estimate)
-    with atomic_output(out, directory=True) as tmp:
-        res.save(tmp)
+    write_atomic(out, res.save, directory=True)
     if as_json:
         print_json({**res.summary(), "participants": res.frame().to_dict(orient="records")})
         return

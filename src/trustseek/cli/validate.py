@@ -12,9 +12,9 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ..estimation.options import MAX_JOBS, FitOptions
-from ._app import app, atomic_output, check_outputs, check_tol, console, err_console, print_json, progress_task
+from ._app import check_outputs, check_tol, command, console, err_console, make_table, print_json, progress_task, write_atomic
 from ._options import FROM_OPTIONS, AsForFitEmissionsOpt, AsForFitTransitionsOpt, LogReading, QuietOpt, RatingPerOpt, log_options
-from ._reading import keep_columns, read_for_types
+from ._reading import keep_columns, read_for_types, write_log
 from .fit import POSTERIOR_SUFFIXES, general_inputs, read_with_inputs
 
 BootstrapOpt = typer.Option(
@@ -23,10 +23,7 @@ BootstrapOpt = typer.Option(
 
 
 def _table(title: str, *columns: str) -> Table:
-    table = Table(title=title, title_justify="left", box=None, padding=(0, 2, 0, 0), header_style="bold underline")
-    for i, c in enumerate(columns):
-        table.add_column(c, justify="left" if i == 0 else "right", no_wrap=True)
-    return table
+    return make_table(title, *columns, no_wrap=True, box=None, padding=(0, 2, 0, 0), header_style="bold underline")
 
 
 def _pair(d: dict[str, Any], signed: bool) -> tuple[str, str]:
@@ -56,7 +53,7 @@ def _load(path: Path) -> Any:
     return load_any_model(path)
 
 
-@app.command(rich_help_panel="Estimate")
+@command("predict")
 @log_options(keep=True)
 def predict(
     log: Path = typer.Argument(..., help="Trial log (CSV, Parquet, JSON), one row per trial."),
@@ -82,10 +79,7 @@ def predict(
     reading: LogReading = FROM_OPTIONS,
     quiet: bool = QuietOpt,
 ) -> None:
-    """How well a trust model predicts each trial's human action from the trials before it
-    (filtering), against baselines: log-loss, Brier score, AUC with bootstrap intervals.
-
-    Trials whose action the model fixes (the robot asked: P(intervene) = 1) are no prediction
+    """Trials whose action the model fixes (the robot asked: P(intervene) = 1) are no prediction
     and are left out of the scores."""
     _check_trial_output(out, log, model, reading)
     from ..estimation import prediction as pr
@@ -117,7 +111,7 @@ def predict(
                 transition_inputs=tr,
                 emission_inputs=em,
             )
-    _write_trials(report, frame, out, reading.keep)
+    write_atomic(out, lambda tmp: write_log(keep_columns(report.trials, frame, reading.keep), tmp))
     if as_json:
         print_json(report.to_dict())
         return
@@ -131,14 +125,6 @@ def _check_trial_output(out: Path | None, log: Path, model: Path | None, reading
     check_outputs((out, "--out", POSTERIOR_SUFFIXES), inputs=((log, "trial log"), (model, "--model file"), *reading.inputs()))
     if reading.keep and out is None:
         raise TrustseekError(["--keep carries log columns into --out: give --out"])
-
-
-def _write_trials(report, frame, out: Path | None, keep: list[str] | None) -> None:
-    if out is not None:
-        from ..data.trials import write_trials
-
-        with atomic_output(out) as tmp:
-            write_trials(keep_columns(report.trials, frame, keep), tmp)
 
 
 def _print_statements(lines: list[str], otherwise: str) -> None:
@@ -192,7 +178,7 @@ def _one_rating_per_block(frame, log: Path, rating: str, per: str | None, missin
             err_console.print(f"{log}: note: {escape(note)}", highlight=False)
 
 
-@app.command(rich_help_panel="Estimate")
+@command("validate")
 @log_options(keep=True)
 def validate(
     log: Path = typer.Argument(..., help="Trial log with a self-reported trust rating column (every trial, or some)."),
@@ -214,12 +200,8 @@ def validate(
     as_json: bool = typer.Option(False, "--json", help="Print the correlations as one JSON object."),
     reading: LogReading = FROM_OPTIONS,
 ) -> None:
-    """Does the decoded trust track self-reported trust?  Spearman and Pearson correlations with
-    the ratings (pooled, within and between participants) next to simple baselines."""
     _check_trial_output(out, log, model, reading)
-    labels = None
-    if rating_labels is not None:
-        labels = [x.strip() for x in rating_labels.split(",")]
+    labels = None if rating_labels is None else [x.strip() for x in rating_labels.split(",")]
     m = _load(model)
     frame = read_for_types(log, m, reading)
     from ..estimation import validation as va
@@ -233,7 +215,7 @@ def validate(
     _one_rating_per_block(frame, log, rating, rating_per, reading.missing)
     ratings = va.parse_ratings(frame, rating, labels, reading.missing or ())
     report = va.validate_ratings(frame, m, ratings, rating, labels, bootstrap=bootstrap, seed=seed)
-    _write_trials(report, frame, out, reading.keep)
+    write_atomic(out, lambda tmp: write_log(keep_columns(report.trials, frame, reading.keep), tmp))
     if as_json:
         print_json(report.to_dict())
         return
