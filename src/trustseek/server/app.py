@@ -19,8 +19,7 @@ from ..model.jsonfile import json_safe
 from ..version import __version__
 from .cache import StudyCaches
 from .db import DEFAULT_URL, open_database, safe_url
-from .deploy.http import DeployFront
-from .deploy.routes import deploy
+from .deploy.http import DeployFront, deploy
 from .deploy.store import DeployStore
 from .errors import Refused
 from .link_routes import STATIC, lifecycle, pages, static_page

@@ -38,11 +38,15 @@ def status_of(exc: Refused) -> int:
     return next(STATUS[c] for c in type(exc).__mro__ if c in STATUS)
 
 
+def json_bytes(value: Any) -> bytes:
+    """A JSON answer's bytes, as FastAPI's ``JSONResponse`` writes them (the routes, the
+    application's handler of refusals and the decision API's front answer alike)."""
+    return json.dumps(value, ensure_ascii=False, allow_nan=False, separators=(",", ":")).encode("utf-8")
+
+
 def refusal(exc: Refused) -> tuple[int, bytes]:
-    """(status, body) of a refusal: ``{"detail": message}``, the bytes of FastAPI's ``JSONResponse``
-    (the application's handler, ``app.refused``, and the decision API's front answer with them)."""
-    body = json.dumps({"detail": exc.message}, ensure_ascii=False, allow_nan=False, indent=None, separators=(",", ":"))
-    return status_of(exc), body.encode("utf-8")
+    """(status, body) of a refusal: ``{"detail": message}``."""
+    return status_of(exc), json_bytes({"detail": exc.message})
 
 
 #: path parameters that are credentials: never logged
@@ -130,8 +134,8 @@ def replaying(body: bytes, receive: Receive) -> Receive:
 
 
 async def refuse(send: Send, status: int, detail: str | list[dict[str, Any]], headers: tuple = ()) -> None:
-    body = json.dumps({"detail": detail}).encode()
-    head = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode()), *headers]
+    body = json_bytes({"detail": detail})
+    head = [(b"content-type", b"application/json"), (b"content-length", b"%d" % len(body)), *headers]
     await send({"type": "http.response.start", "status": status, "headers": head})
     await send({"type": "http.response.body", "body": body})
 

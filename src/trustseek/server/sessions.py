@@ -23,8 +23,8 @@ import hmac
 import json
 import logging
 import secrets
-from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -32,10 +32,8 @@ from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
-from ..errors import TrustseekError
 from ..model.core import ACTIONS, EXPERIENCES, HUMAN_ACTIONS, TrustModel
 from ..model.task import Task
-from ..policies.scheduling import SchedulePolicy
 from .answers import questionnaire_due, quiz_due, report_due
 from .cache import caches_of
 from .errors import Conflict, NotAllowed, NotFound, TooLarge
@@ -94,33 +92,13 @@ def p_high(belief, n_trust: int | None = None) -> float | None:
 
 @dataclass
 class Context:
-    """A study's task and model, and each block's ``plan.PolicyPlan`` (its kind and
-    (the block's policy with ``PolicyRunner``'s step, parsed once and remembered by the
-    application); the index after the study's blocks is the practice block's."""
+    """A study's task and model, and each block's ``plan.PolicyPlan`` (the block's policy with
+    ``PolicyRunner``'s step, parsed once and remembered by the application); the index after
+    the study's blocks is the practice block's."""
 
     task: Task
     model: TrustModel
     plans: list[PolicyPlan]
-    load_policy: Callable[[int], dict[str, Any]]  # block -> its policy JSON, read when its plan has not parsed it
-
-    def decide(self, block: int, belief: list, seed: int, n: int, complexity: str) -> str:
-        """Block ``block``'s action at ``belief`` in trial ``n`` (drawing from ``default_rng([seed, n, 0])``)."""
-        return self.plans[block].decide(lambda: self.load_policy(block), belief, seed, n, complexity)
-
-    def update(self, block: int, belief: list, complexity: str, action: str, human: str | None, experience: str) -> list | None:
-        """The belief after a trial of block ``block``."""
-        return self.plans[block].update(lambda: self.load_policy(block), belief, complexity, action, human, experience)
-
-    def pick(self, block: int, belief, remaining: dict[str, int], visible: dict[str, int] | None) -> tuple[str, str]:
-        """(complexity, robot action) that block ``block``'s schedule policy picks for the
-        remaining (and visible) items."""
-        pol = self.plans[block].policy(lambda: self.load_policy(block))
-        if not isinstance(pol, SchedulePolicy):
-            raise TrustseekError([f"block {block} picks its items by policy but runs a {pol.kind} policy"])
-        cx = self.task.complexities
-        vis = None if visible is None else [visible.get(c, 0) for c in cx]
-        k, a = pol.choose(np.asarray(belief, dtype=float), [remaining.get(c, 0) for c in cx], vis)
-        return cx[k], ACTIONS[a]
 
 
 def study_config(db: DBSession, study_id: str) -> dict[str, Any]:
@@ -145,15 +123,10 @@ def context(db: DBSession, s: Session) -> Context:
     if ctx is None:
         cfg = study_config(db, study_id)
         task, model = Task.from_dict(cfg["task"]), TrustModel.from_dict(cfg["model"])
-        kinds = [_block_policy(cfg, b)["kind"] for b in range(len(cfg["blocks"]) + bool(cfg.get("practice")))]
-        plans = [PolicyPlan(task, model, kind, f"study:{study_id}:{b}") for b, kind in enumerate(kinds)]
-        ctx = contexts.put(study_id, Context(task, model, plans, lambda b: _block_policy(cfg, b)))
+        policies = [*(b["policy"] for b in cfg["blocks"]), *([cfg["practice"]["policy"]] if cfg.get("practice") else [])]
+        plans = [PolicyPlan(task, model, p["kind"], f"study:{study_id}:{b}", partial(dict, p)) for b, p in enumerate(policies)]
+        ctx = contexts.put(study_id, Context(task, model, plans))
     return ctx
-
-
-def _block_policy(cfg: dict[str, Any], b: int) -> dict[str, Any]:
-    """Block ``b``'s policy; the index after the study's blocks is the practice block's."""
-    return cfg["blocks"][b]["policy"] if b < len(cfg["blocks"]) else cfg["practice"]["policy"]
 
 
 def total_trials(s: Session) -> int | None:
@@ -188,9 +161,9 @@ def serve(db: DBSession, s: Session) -> dict[str, Any] | None:
             s.pending_complexity, s.pending_action = step["complexity"], step["action"]
         elif items is None:
             s.pending_complexity = step["complexity"]
-            s.pending_action = ctx.decide(step["block"], s.belief, s.seed, n, step["complexity"])
+            s.pending_action = ctx.plans[step["block"]].decide(s.belief, s.seed, n, step["complexity"])
         else:
-            s.pending_complexity, s.pending_action = ctx.pick(step["block"], s.belief, *items)
+            s.pending_complexity, s.pending_action = ctx.plans[step["block"]].pick(s.belief, *items)
         s.pending_trial = n
         s.updated_at = utcnow()
         db.commit()
@@ -262,7 +235,7 @@ def trial_experience(task: Task, c: int, action: str, human: str | None, success
 def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: int, events: list[dict] | None) -> Trial | None:
     """Commit ``row`` with the belief update and the session's progress; None when another
     submission committed this trial first."""
-    after = ctx.update(block, s.belief, row.complexity, row.robot_action, row.human_action, row.experience)
+    after = ctx.plans[block].update(s.belief, row.complexity, row.robot_action, row.human_action, row.experience)
     row.belief, row.belief_after = p_high(s.belief, ctx.model.n_trust), p_high(after, ctx.model.n_trust)
     row.reward = trial_reward(ctx.task, row.robot_action, row.human_action, row.experience)
     if row.practice:  # practice leaves the belief and the score as they were
