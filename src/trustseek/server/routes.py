@@ -12,8 +12,7 @@ from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 
 from .auth import require_experimenter
-from .bundle import bundle_files, bundle_zip
-from .export import answers_frame, events_frame, sessions_frame, table_bytes, trials_frame
+from .export import answers_frame, bundle_files, bundle_zip, events_frame, sessions_frame, table_bytes, trials_frame
 from .lifecycle import create_participant, progress
 from .orm import Event, Report, Session, Study, Trial, iso, utcnow
 from .schemas import ErrorOut, SessionsIn
