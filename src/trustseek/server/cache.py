@@ -61,7 +61,7 @@ class StudyCaches:
 
     def __init__(self) -> None:
         self.configs: Bounded[str, dict[str, Any]] = Bounded(256)  # study id -> its configuration
-        self.contexts: Bounded[str, Any] = Bounded(256)  # study id -> its sessions.Context (its blocks' parsed policies)
+        self.contexts: Bounded[str, Any] = Bounded(256)  # study id -> its blocks' plans (sessions.block_plan)
         self.resolved: Bounded[str, dict[str, Any]] = Bounded(64)  # (model, task, spec) -> policy JSON
         self.schedules: Bounded[str, dict[str, Any]] = Bounded(MAX_CACHED_SCHEDULES)  # the same, schedule policies
 

@@ -23,7 +23,7 @@ import hmac
 import json
 import logging
 import secrets
-from dataclasses import dataclass
+from collections import Counter
 from functools import partial
 from typing import Any
 
@@ -87,20 +87,6 @@ def p_high(belief, n_trust: int | None = None) -> float | None:
     return float(b[-1])
 
 
-# --------------------------------------------------------------------------- session context
-
-
-@dataclass
-class Context:
-    """A study's task and model, and each block's ``plan.PolicyPlan`` (the block's policy with
-    ``PolicyRunner``'s step, parsed once and remembered by the application); the index after
-    the study's blocks is the practice block's."""
-
-    task: Task
-    model: TrustModel
-    plans: list[PolicyPlan]
-
-
 def study_config(db: DBSession, study_id: str) -> dict[str, Any]:
     """A study's configuration (immutable once created, so remembered by the application)."""
     configs = caches_of(db).configs
@@ -113,20 +99,20 @@ def study_config(db: DBSession, study_id: str) -> dict[str, Any]:
     return cfg
 
 
-def context(db: DBSession, s: Session) -> Context:
-    """The context of a study session (deploy sessions have their own: ``plan.Plans``)."""
+def block_plan(db: DBSession, s: Session, block: int) -> PolicyPlan:
+    """The plan of a study session's block (its policy with ``PolicyRunner``'s step, parsed once
+    and remembered by the application); the index after the study's blocks is the practice's."""
     if s.kind != "study" or s.study_id is None:
         raise Conflict("this is a deploy session; use /api/deploy")
-    study_id = s.study_id
     contexts = caches_of(db).contexts
-    ctx = contexts.get(study_id)
-    if ctx is None:
-        cfg = study_config(db, study_id)
+    plans = contexts.get(s.study_id)
+    if plans is None:
+        cfg = study_config(db, s.study_id)
         task, model = Task.from_dict(cfg["task"]), TrustModel.from_dict(cfg["model"])
         policies = [*(b["policy"] for b in cfg["blocks"]), *([cfg["practice"]["policy"]] if cfg.get("practice") else [])]
-        plans = [PolicyPlan(task, model, p["kind"], f"study:{study_id}:{b}", partial(dict, p)) for b, p in enumerate(policies)]
-        ctx = contexts.put(study_id, Context(task, model, plans))
-    return ctx
+        plans = [PolicyPlan(task, model, p["kind"], f"study:{s.study_id}:{b}", partial(dict, p)) for b, p in enumerate(policies)]
+        contexts.put(s.study_id, plans)
+    return plans[block]
 
 
 def total_trials(s: Session) -> int | None:
@@ -156,14 +142,14 @@ def serve(db: DBSession, s: Session) -> dict[str, Any] | None:
     step = s.plan["trials"][n - 1]
     items = scheduled_items(db, s, step["block"]) if step["complexity"] is None else None
     if s.pending_trial != n:
-        ctx = context(db, s)
+        plan = block_plan(db, s, step["block"])
         if step.get("action"):  # a practice trial in which the robot asks, whatever the policy
             s.pending_complexity, s.pending_action = step["complexity"], step["action"]
         elif items is None:
             s.pending_complexity = step["complexity"]
-            s.pending_action = ctx.plans[step["block"]].decide(s.belief, s.seed, n, step["complexity"])
+            s.pending_action = plan.decide(s.belief, s.seed, n, step["complexity"])
         else:
-            s.pending_complexity, s.pending_action = ctx.plans[step["block"]].pick(s.belief, *items)
+            s.pending_complexity, s.pending_action = plan.pick(s.belief, *items)
         s.pending_trial = n
         s.updated_at = utcnow()
         db.commit()
@@ -232,12 +218,12 @@ def trial_experience(task: Task, c: int, action: str, human: str | None, success
     return "reliable" if success else "faulty"
 
 
-def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: int, events: list[dict] | None) -> Trial | None:
+def _commit_trial(db: DBSession, s: Session, row: Trial, plan: PolicyPlan, events: list[dict] | None) -> Trial | None:
     """Commit ``row`` with the belief update and the session's progress; None when another
     submission committed this trial first."""
-    after = ctx.plans[block].update(s.belief, row.complexity, row.robot_action, row.human_action, row.experience)
-    row.belief, row.belief_after = p_high(s.belief, ctx.model.n_trust), p_high(after, ctx.model.n_trust)
-    row.reward = trial_reward(ctx.task, row.robot_action, row.human_action, row.experience)
+    after = plan.update(s.belief, row.complexity, row.robot_action, row.human_action, row.experience)
+    row.belief, row.belief_after = p_high(s.belief, plan.n_trust), p_high(after, plan.n_trust)
+    row.reward = trial_reward(plan.task, row.robot_action, row.human_action, row.experience)
     if row.practice:  # practice leaves the belief and the score as they were
         after, row.belief_after = None, row.belief
     db.add(row)
@@ -298,12 +284,12 @@ def submit_trial(
     if action == "ask" and human_action != "intervene":
         why = f"the robot asked for help in trial {n}: human_action must be 'intervene' (teleoperation)"
         raise NotAllowed(f"{why}, got {human_action!r}")
-    ctx = context(db, s)
     step = s.plan["trials"][n - 1]
-    c = ctx.task.complexity_index(complexity)
+    plan = block_plan(db, s, step["block"])
+    c = plan.task.complexity_index(complexity)
     if action == "autonomous" and human_action == "rely":
         r = outcome_draws(s, n)
-        success = bool(r[0] < ctx.task.success[c])
+        success = bool(r[0] < plan.task.success[c])
         outcome = "success" if success else ("collision" if r[1] < 0.5 else "dropped")
     else:
         success, outcome = None, "teleoperated"
@@ -311,18 +297,18 @@ def submit_trial(
         session_id=s.id,
         trial=n,
         block=step["block"],
-        policy=ctx.plans[step["block"]].kind,
+        policy=plan.kind,
         complexity=complexity,
         robot_action=action,
         human_action=human_action,
         outcome=outcome,
-        experience=trial_experience(ctx.task, c, action, human_action, success),
+        experience=trial_experience(plan.task, c, action, human_action, success),
         effort_ms=effort_ms,
         practice=bool(step.get("practice")),
         submission_id=submission_id,
     )
     check_event_room(db, s, events or [], n)
-    committed = _commit_trial(db, s, row, ctx, step["block"], events)
+    committed = _commit_trial(db, s, row, plan, events)
     if committed is not None:
         return committed, False
     old = _existing(db, s, n)
@@ -348,23 +334,15 @@ def check_event_room(db: DBSession, s: Session, events: list[dict], trial: int |
     """Refuse (413) events beyond the per-trial and per-session bounds."""
     if not events:
         return
-    total = db.scalar(select(func.count()).select_from(Event).where(Event.session_id == s.id)) or 0
+    query = select(Event.trial, func.count()).where(Event.session_id == s.id).group_by(Event.trial)
+    stored: dict[int | None, int] = dict(db.execute(query).all())
+    total = sum(stored.values())
     if total + len(events) > MAX_EVENTS_PER_SESSION:
         raise TooLarge(f"this session already holds {total} events; at most {MAX_EVENTS_PER_SESSION} are stored")
-    per: dict[int | None, int] = {}
-    for ev in events:
-        k = trial if trial is not None else ev.get("trial")
-        per[k] = per.get(k, 0) + 1
+    per = Counter(trial if trial is not None else ev.get("trial") for ev in events)
     for k, m in per.items():
-        have = (
-            db.scalar(
-                select(func.count())
-                .select_from(Event)
-                .where(Event.session_id == s.id, Event.trial.is_(None) if k is None else Event.trial == k)
-            )
-            or 0
-        )
-        if have + m > MAX_EVENTS_PER_TRIAL:
+        if stored.get(k, 0) + m > MAX_EVENTS_PER_TRIAL:
+            have = stored.get(k, 0)
             raise TooLarge(f"trial {k} already has {have} events; at most {MAX_EVENTS_PER_TRIAL} are stored per trial")
 
 

@@ -232,16 +232,6 @@ def complexity_problems(model: TrustModel, task: Task) -> list[str]:
     return [f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}"]
 
 
-def _unknown(names: list[str], complexities: tuple[str, ...], where: str) -> list[str]:
-    """The problem of complexities ``names`` (of ``where``) that are not among ``complexities``."""
-    bad = sorted({c for c in names if c not in complexities})
-    return [f"{where} names unknown complexities {bad}; expected {list(complexities)}"] if bad else []
-
-
-def _names(s: Schedule) -> list[str]:
-    return list(s.counts) if s.counts is not None else list(s.trials or [])
-
-
 def load_task_spec(spec: str | dict) -> Task:
     return _from_spec("task", spec, TASK_PRESETS, Task)
 
@@ -282,43 +272,30 @@ def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dic
         model = load_model_spec(study.model)
     except ConfigError as exc:
         problems += exc.problems
+    # the other parts are checked against what is known, so that every problem is named at once
+    known = task or model
+    unknown = [] if known is None else unknown_complexities(study, tuple(known.complexities))
     if task is not None and model is not None:
         problems += complexity_problems(model, task)
     if problems or task is None or model is None:
-        # the other parts are still checked against what is known, so that every problem is named at once
-        known = task or model
-        problems += [] if known is None else unknown_complexities(study, tuple(known.complexities))
-        raise ConfigError(problems)
+        raise ConfigError(problems + unknown)
+    problems += unknown
     blocks = []
     for i, b in enumerate(study.blocks):
-        where = f"blocks[{i}]"
-        s = b.schedule
-        if not isinstance(s, Schedule):
-            try:
-                pol = resolve_policy(b.policy, model, task, f"{where}.policy", caches)
-                blocks.append({"name": b.name or f"block {i + 1}", "policy": pol, "schedule": chosen_schedule(pol, where)})
-            except ConfigError as exc:
-                problems += exc.problems
-            continue
-        problems += _unknown(_names(s), tuple(task.complexities), f"{where}.schedule")
+        where, s = f"blocks[{i}]", b.schedule
         try:
             pol = resolve_policy(b.policy, model, task, f"{where}.policy", caches)
+            if not isinstance(s, Schedule):
+                schedule = chosen_schedule(pol, where)
+            elif pol["kind"] == SCHEDULE:
+                raise ConfigError([f'{where}: a schedule policy picks the items: give the block "schedule": "{BY_POLICY}"'])
+            else:
+                schedule = {"counts": s.counts} if s.counts is not None else {"trials": s.trials}
+            blocks.append({"name": b.name or f"block {i + 1}", "policy": pol, "schedule": schedule})
         except ConfigError as exc:
             problems += exc.problems
-            continue
-        if pol["kind"] == SCHEDULE:
-            problems.append(f'{where}: a schedule policy picks the items: give the block "schedule": "{BY_POLICY}"')
-            continue
-        blocks.append(
-            {
-                "name": b.name or f"block {i + 1}",
-                "policy": pol,
-                "schedule": {"counts": s.counts} if s.counts is not None else {"trials": s.trials},
-            }
-        )
     practice = None
     if study.practice is not None:
-        problems += _unknown(study.practice.trials, tuple(task.complexities), "practice.trials")
         try:
             practice_policy = resolve_policy(study.practice.policy, model, task, "practice.policy", caches)
             asks = study.practice.asks if study.practice.asks is not None else [len(study.practice.trials)]
@@ -345,13 +322,15 @@ def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dic
 
 def unknown_complexities(study: StudyIn, complexities: tuple[str, ...]) -> list[str]:
     """The blocks' and the practice's complexities that are not among ``complexities``."""
-    problems = [
-        p
-        for i, b in enumerate(study.blocks)
-        if isinstance(b.schedule, Schedule)
-        for p in _unknown(_names(b.schedule), complexities, f"blocks[{i}].schedule")
-    ]
-    return problems + ([] if study.practice is None else _unknown(study.practice.trials, complexities, "practice.trials"))
+    named = [(f"blocks[{i}].schedule", b.schedule) for i, b in enumerate(study.blocks) if isinstance(b.schedule, Schedule)]
+    lists = [(w, list(s.counts) if s.counts is not None else list(s.trials or [])) for w, s in named]
+    lists += [] if study.practice is None else [("practice.trials", study.practice.trials)]
+    problems = []
+    for where, names in lists:
+        bad = sorted({c for c in names if c not in complexities})
+        if bad:
+            problems.append(f"{where} names unknown complexities {bad}; expected {list(complexities)}")
+    return problems
 
 
 def more_problems(body: Any, errors: list[dict[str, Any]]) -> list[str]:

@@ -68,7 +68,7 @@ _SQL = {
     "insert": f"INSERT INTO trials ({', '.join(_INSERTED)}) VALUES ({', '.join(':' + c for c in _INSERTED)})",
     "decided": "UPDATE sessions SET pending_trial = :p_trial, pending_complexity = :p_complexity, "
     "pending_action = :p_action, updated_at = :now WHERE id = :sid AND trials_done = :was AND pending_trial IS NULL",
-    "observed": "UPDATE sessions SET belief = {belief}, trials_done = :done, score = :score, pending_trial = NULL, "
+    "observed": "UPDATE sessions SET belief = {belief_json}, trials_done = :done, score = :score, pending_trial = NULL, "
     "pending_complexity = NULL, pending_action = NULL, updated_at = :now WHERE id = :sid AND trials_done = :was "
     "AND pending_trial = :done AND pending_complexity = :p_complexity AND pending_action = :p_action",
 }
@@ -76,10 +76,10 @@ _SQL = {
 
 def _statements(dialect: str) -> dict[str, str]:
     if dialect == "sqlite":
-        return {k: v.format(lock="", belief=":belief") for k, v in _SQL.items()}
+        return {k: v.format(lock="", belief_json=":belief_json") for k, v in _SQL.items()}
     from sqlalchemy.dialects import postgresql
 
-    out = {k: v.format(lock=" FOR UPDATE", belief="CAST(:belief AS JSON)") for k, v in _SQL.items()}
+    out = {k: v.format(lock=" FOR UPDATE", belief_json="CAST(:belief_json AS JSON)") for k, v in _SQL.items()}
     # observe in one statement: the trial is inserted only if the session row was advanced (a
     # parameter in a SELECT list has no type of its own: each is cast to its column's)
     pg, column = postgresql.dialect(), Trial.__table__.c
@@ -121,7 +121,7 @@ def _decided(store: DeployStore, row: LiveRow, n: int, complexity: str, action: 
 def _observed(store: DeployStore, row: LiveRow, trial: dict[str, Any], belief: list, score: float, now: datetime) -> Write:
     """Advance the session by the committed ``trial`` (``trial_dict``'s keys) and insert it."""
     t, n = store.now(now), trial["trial"]
-    params = {"sid": row.id, "was": row.trials_done, "done": n, "score": score, "now": t, "belief": json.dumps(belief)}
+    params = {"sid": row.id, "was": row.trials_done, "done": n, "score": score, "now": t, "belief_json": json.dumps(belief)}
     params.update(p_complexity=row.pending_complexity, p_action=row.pending_action)
     inserted = {**trial, "session_id": row.id, "practice": False, "created_at": t}
     after = LiveRow(row.id, row.kind, row.seed, list(belief), n, score)
