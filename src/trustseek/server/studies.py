@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any, Literal, TypeVar
 
 import numpy as np
-from pydantic import BaseModel, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from ..errors import TrustseekError
 from ..model.core import TrustModel
@@ -38,7 +38,7 @@ from ..model.task import Task
 from ..policies.scheduling import SCHEDULE
 from ..solvers import policy_from_spec
 from .cache import StudyCaches
-from .schemas import STRICT, check_preset
+from .schemas import Body, check_preset
 
 _Spec = TypeVar("_Spec", Task, TrustModel)
 
@@ -53,8 +53,7 @@ class ConfigError(TrustseekError, ValueError):
     """A study or deploy configuration is invalid; ``problems`` lists every reason."""
 
 
-class Schedule(BaseModel):
-    model_config = STRICT
+class Schedule(Body):
     counts: dict[str, int] | None = Field(None, description="Trials per complexity, shuffled per participant.")
     trials: list[str] | None = Field(None, description="A fixed list of complexities, in order.")
 
@@ -73,8 +72,7 @@ class Schedule(BaseModel):
         return self
 
 
-class BlockIn(BaseModel):
-    model_config = STRICT
+class BlockIn(Body):
     name: str | None = Field(None, max_length=100)
     policy: dict[str, Any] = Field(..., description="A policy spec ({'kind': ...}) or a full policy JSON.")
     schedule: Schedule | Literal["policy"] = Field(
@@ -82,13 +80,12 @@ class BlockIn(BaseModel):
     )
 
 
-class PracticeIn(BaseModel):
+class PracticeIn(Body):
     """Practice trials before the first block: logged (``practice`` true), left out of the
     analysis export, scored nowhere, and without effect on the trust belief.  The robot asks
     (the participant teleoperates) in the practice trials ``asks`` (numbers from 1; by default
     the last one), and follows ``policy`` in the others."""
 
-    model_config = STRICT
     trials: list[str] = Field(..., min_length=1, max_length=50, description="The practice trials' complexities, in order.")
     policy: dict[str, Any] = Field(default_factory=lambda: {"kind": "never-ask"}, description="The robot's policy in practice.")
     asks: list[int] | None = Field(
@@ -103,8 +100,7 @@ class PracticeIn(BaseModel):
         return self
 
 
-class ScaleIn(BaseModel):
-    model_config = STRICT
+class ScaleIn(Body):
     min: int = Field(1, ge=-1000, le=1000)
     max: int = Field(7, ge=-1000, le=1000)
     anchors: list[str] = Field(default_factory=list, max_length=2, description="Labels of the two ends.")
@@ -116,9 +112,8 @@ class ScaleIn(BaseModel):
         return self
 
 
-class _Asked(BaseModel):
+class _Asked(Body):
     # what a questionnaire's item and a quiz's question share
-    model_config = STRICT
     id: str = Field(..., min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
     text: str = Field(..., min_length=1, max_length=1000)
 
@@ -139,12 +134,11 @@ class QuizQuestionIn(_Asked):
         return self
 
 
-class QuizIn(BaseModel):
+class QuizIn(Body):
     """A comprehension quiz after the instructions: every question right to go on, within
     ``attempts`` attempts; then ``on_fail``: ``end`` (the session ends, with ``fail_code`` as the
     panel's code when given) or ``continue`` (the session goes on, the failure recorded)."""
 
-    model_config = STRICT
     questions: list[QuizQuestionIn] = Field(..., min_length=1, max_length=20)
     attempts: int = Field(2, ge=1, le=10)
     on_fail: Literal["end", "continue"] = "end"
@@ -157,11 +151,10 @@ class QuizIn(BaseModel):
         return self
 
 
-class QuestionnaireIn(BaseModel):
+class QuestionnaireIn(Body):
     """A questionnaire asked after every trial, after every block or at the end; either its
     items and scale, or ``template`` (a shipped questionnaire: ``questionnaire_templates()``)."""
 
-    model_config = STRICT
     name: str | None = Field(None, min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
     when: Literal["trial", "block", "end"] = "end"
     template: str | None = None
@@ -178,18 +171,16 @@ class QuestionnaireIn(BaseModel):
         return self
 
 
-class PanelIn(BaseModel):
+class PanelIn(Body):
     """An online panel (Prolific and the like): the completion code and the redirect shown at the
     end, and the query parameters of the participant link that carry the panel's ids."""
 
-    model_config = STRICT
     completion_code: str = Field(..., min_length=1, max_length=100)
     redirect_url: str | None = Field(None, max_length=2000, pattern=r"^https?://")
     id_params: list[str] = Field(default_factory=lambda: ["PROLIFIC_PID", "STUDY_ID", "SESSION_ID"], max_length=10)
 
 
-class StudyIn(BaseModel):
-    model_config = STRICT
+class StudyIn(Body):
     name: str = Field(..., min_length=1, max_length=200)
     task: str | dict[str, Any] = "paper"
     model: str | dict[str, Any] = "paper"

@@ -24,6 +24,7 @@ from typing import Any
 from fastapi import APIRouter, Depends, HTTPException, Request, Response
 from pydantic import ValidationError
 from sqlalchemy import select
+from starlette.types import ASGIApp, Receive, Scope, Send
 
 from ...errors import TrustseekError
 from ..auth import (
@@ -37,7 +38,7 @@ from ..auth import (
     session_caller,
 )
 from ..errors import Refused, TooLarge
-from ..middleware import SESSION_BODY_LIMIT, ASGIApp, Receive, Scope, Send, json_bytes, read_body, refusal, refuse, replaying
+from ..middleware import SESSION_BODY_LIMIT, json_bytes, read_body, refusal, refuse, replaying
 from ..orm import Session, Trial
 from ..routes import errors
 from ..schemas import DecideIn, DeployIn, ObserveIn
