@@ -1,19 +1,13 @@
-"""What happens in a session, independent of HTTP: serving a trial (complexity from the plan,
-action from the block's policy; in a block whose schedule policy picks the items, both from
-the policy, given the items that remain), committing a trial (outcome, experience, reward, belief
-update) and events; self-reports and questionnaires are in ``answers``.
+"""A study session, independent of HTTP: serving a trial (complexity from the plan, action from
+the block's policy; or both from a schedule policy, given the items that remain), committing it
+(outcome, experience, reward, belief update) and events; the answers are in ``answers``.
 
-Integrity rules:
-
-* a trial is committed (one database transaction with the belief update) before the next
-  trial is served;
-* the served trial is stored in the session row; its action comes from a generator seeded by
-  (session seed, trial number) and its outcome and scene layout from keys derived from the
-  session's secret (HMAC-SHA256 with a different label each), so a restarted server serves and
-  scores exactly what it would have before, and nothing the participant's page receives
-  (the scene seed included) says anything about an outcome before it is shown;
-* trial numbers are unique per session: a repeated submission returns the stored trial,
-  a conflicting one is refused.
+A trial is committed, with the belief update, before the next is served; the served trial is
+stored in the session row.  Its action comes from a generator seeded by (seed, trial), its
+outcome and scene layout from keys derived from the session's secret (HMAC-SHA256, a label
+each): a restarted server serves and scores what it would have before, and nothing the page
+receives says anything about an outcome before it is shown.  A repeated submission returns the
+stored trial; a conflicting one is refused.
 """
 
 from __future__ import annotations
@@ -57,9 +51,8 @@ def new_id() -> str:
 
 
 def sealed(secret: str, label: str, n: int) -> int:
-    """A 128-bit number derived from the session's ``secret`` for ``label`` (``"outcome"``,
-    ``"scene"``) and trial ``n``: HMAC-SHA256, so that one label's numbers say nothing about
-    another's, and none can be computed without the secret."""
+    """A 128-bit number of the session's ``secret`` for ``label`` (``outcome``, ``scene``) and
+    trial ``n`` (HMAC-SHA256: one label's numbers say nothing of another's)."""
     digest = hmac.new(bytes.fromhex(secret), f"{label}:{n}".encode(), hashlib.sha256).digest()
     return int.from_bytes(digest[:16], "big")
 
@@ -76,9 +69,8 @@ def outcome_draws(s: Session, n: int) -> np.ndarray:
 
 
 def p_high(belief, n_trust: int | None = None) -> float | None:
-    """P(trust = the highest level) of a stored belief.  A type-aware policy's belief is over
-    (supervisor type, trust), type-major (``trustseek.pomdp.supervisor_types``): given the model's
-    ``n_trust`` levels, its trust marginal sums over the types."""
+    """P(trust = the highest level) of a stored belief; a belief over (supervisor type, trust),
+    type-major, is summed over the types given the model's ``n_trust`` levels."""
     if belief is None:
         return None
     b = np.asarray(belief, dtype=float)

@@ -1,11 +1,8 @@
 """The decision API's sessions, independent of HTTP: a robot opens a deploy session with a task,
 a model and a policy (``create_deploy``); then, trial by trial, it posts the complexity and gets
-the action (``deploy_decide``), and posts what the human did and the outcome
-(``deploy_observe``), which commits the trial and updates the belief with ``PolicyRunner``'s step.
-
-Each runs with the statements of ``store`` (a transaction of ``store.DeployStore``, or
-``store.Known``: a conditional write from the state this process knows) and the application's
-``plan.Plans``; refusals are the server's domain errors (``server.errors``).
+the action (``deploy_decide``), and posts what the human did and the outcome (``deploy_observe``),
+which commits the trial and updates the belief with ``PolicyRunner``'s step.  Each runs with the
+statements of ``store`` (a transaction, or ``store.Known``) and the application's ``plan.Plans``.
 """
 
 from __future__ import annotations

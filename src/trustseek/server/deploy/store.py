@@ -1,26 +1,14 @@
-"""The deploy sessions' live state on the database driver's own connections, without an ORM.
+"""The deploy sessions' live state on the database driver's own connection (``sqlite3`` or
+``psycopg``), held by the process: SQLAlchemy's pooling, caches and result objects cost several
+times what the database spends on the decision API's one short write by primary key.
 
-The decision API is the latency-critical path: each request is one short write by primary key,
-and SQLAlchemy's pooling, compilation-cache lookups and result objects cost several times what
-the database spends.  So these statements run on the driver's own connection (``sqlite3`` or
-``psycopg``), held by the process and reused, written once per dialect and prepared by the driver.
-
-A request is answered in one of two ways, both committed before the response is sent:
-
-* **From the known state** (``Known``), the usual way: the process keeps each session's live
-  columns as it last committed or read them (``DeployStore.known``) and makes its one write
-  conditional on the row still holding them.  On PostgreSQL that is one statement (an
-  observation's trial inserted by the same statement), committed by itself and awaited on the
-  event loop on connections of its own (``apply_async``).  A row another process has moved on
-  fails the condition: nothing is written, and the request runs in a transaction instead.
-* **In a transaction** that reads the row (``BEGIN IMMEDIATE`` on SQLite, ``SELECT ... FOR
-  UPDATE`` on PostgreSQL), on the held connection, with the same statements: when the process
-  does not know the session or its state is out of date, and for everything that writes
-  nothing (a repeated request, a refusal).
-
-A lock serializes the use of the held connection (it matters only when the application is
-driven from several threads, as test clients do).  A connection that fails is dropped and the
-next use opens a new one.
+A request is answered from the state this process knows (``Known``, the usual way: one write
+conditional on the row still holding that state; on PostgreSQL one statement, awaited on the
+event loop on connections of its own), or else in a transaction that reads the row (``BEGIN
+IMMEDIATE`` on SQLite, ``SELECT ... FOR UPDATE`` on PostgreSQL) with the same statements: when
+the process does not know the session or another process has moved it on, and for anything
+that writes nothing.  Both commit before the response is sent.  A connection that fails is
+dropped and the next use opens a new one.
 """
 
 from __future__ import annotations
@@ -135,11 +123,10 @@ ASYNC_CONNECTIONS = 8  # PostgreSQL: connections for conditional writes awaited 
 
 
 class DeployStore:
-    """The statements of the decision API on one held driver connection (see the module's
-    docstring).  ``with store.transaction() as tx:`` runs ``tx.live(...)`` and the others in one
-    transaction, committed when the block ends without an exception, rolled back otherwise.
-    ``Known(store)`` answers from the state this process knows instead, with one conditional
-    write applied by ``apply_async``."""
+    """The decision API's statements on one held driver connection: ``with store.transaction()
+    as tx:`` runs ``tx.live(...)`` and the others in one transaction (committed when the block
+    ends without an exception); ``apply_async`` applies a ``Known`` request's write.  A lock
+    serializes the held connection's use (for applications driven from several threads)."""
 
     def __init__(self, engine: Engine):
         self.engine = engine
@@ -269,12 +256,10 @@ class DeployStore:
         return done
 
     async def apply_async(self, w: Write) -> bool:
-        """Apply a conditional write: True if the session was still in the state it was computed
-        from (the write is then committed), else False (nothing written).  On SQLite, on the held
-        connection; on PostgreSQL, awaited on the event loop on one of up to
-        ``ASYNC_CONNECTIONS`` connections of its own, so that other requests are served while
-        the database works (and commits made at once share its flushes of the log); when all of
-        them are busy, the request waits for one."""
+        """Apply and commit a conditional write: whether the session was still in the state it was
+        computed from.  On SQLite on the held connection; on PostgreSQL awaited on one of up to
+        ``ASYNC_CONNECTIONS`` connections of its own (waiting for one when all are busy), so that
+        other requests are served meanwhile and commits made at once share the log's flushes."""
         if self.sqlite:
             with self._lock:
                 try:
