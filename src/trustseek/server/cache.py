@@ -1,8 +1,7 @@
-"""``Bounded``: the one bounded mapping of the server (least recently used entries are forgotten
-first), for what it remembers, always in objects the application owns (``app.state``), never
-in a module: the study sessions' configurations and contexts with their blocks' policies
-(``StudyCaches``), the deploy sessions' plans (``plan.Plans``), their decisions and belief updates, the
-sessions' live rows (``deploy.store.DeployStore``)."""
+"""``Bounded``: the server's one bounded mapping (the least recently used entries forgotten
+first), for what it remembers, always in objects the application owns (``app.state``), never in
+a module: ``StudyCaches``, the deploy sessions' plans (``plan.Plans``) with their decisions and
+belief updates, and their live rows (``deploy.store.DeployStore``)."""
 
 from __future__ import annotations
 

@@ -1,18 +1,11 @@
-"""A study's tables: the canonical trial log (what ``trustseek fit`` reads), self-reports and
-questionnaire answers, sessions, UI events, questionnaires and quiz attempts; the one writer of
-their CSV and Parquet; and the data bundle: every table in both formats, the study's
-configuration and a data dictionary, in one folder (``trustseek export STUDY --bundle DIR``) or
-one zip file (the dashboard's download).
+"""A study's tables, the one writer of their CSV and Parquet, and the data bundle: every table
+in both formats, the configuration and a data dictionary (``DICTIONARY``, which also orders
+every table's columns), in a folder (``trustseek export STUDY --bundle DIR``) or a zip file.
 
-The trial log's columns are the canonical ``participant, trial, complexity, robot_action,
-human_action, experience`` then the study's own (``DICTIONARY["trials"]``).  ``belief`` is
-P(trust = high) when the action was decided, ``belief_after`` after the trial's update.  When
-the robot asks, the human teleoperates, recorded as ``intervene``.  Practice trials are left out
-of the analysis log (the default), whose ``trial`` counts the analysed trials from 1;
-``session_trial`` is the trial's number in the session (practice included), the numbering of
-the events, the full log (``practice=True``) and the reports.  The reports table is long: one
-row per self-report or questionnaire item, with the analysed trial it follows.  Pilot sessions
-are left out unless asked for (``pilot``); preview sessions always.
+The trial log (``trials``) is what ``trustseek fit`` reads: the canonical columns, then the
+study's.  Practice trials are left out of it by default; its ``trial`` counts the analysed
+trials from 1, ``session_trial`` the session's (practice included: the numbering of events and
+reports).  Pilot sessions are left out unless asked for (``pilot``); preview sessions always.
 """
 
 from __future__ import annotations

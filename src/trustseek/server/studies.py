@@ -1,23 +1,9 @@
-"""Study configuration: validation, policy resolution and per-participant plans.
-
-A study is created from a JSON object (see ``docs/experiments.md``)::
-
-    {"name": "pilot", "task": "paper", "model": "paper",
-     "blocks": [{"name": "agnostic", "policy": {"kind": "trust-agnostic"},
-                 "schedule": {"counts": {"low": 10, "high": 10}}},
-                {"name": "aware", "policy": {"kind": "trust-aware"},
-                 "schedule": {"trials": ["low", "high", "high"]}},
-                {"name": "scheduled", "schedule": "policy",
-                 "policy": {"kind": "schedule", "counts": {"low": 17, "high": 17}, "window": null}}],
-     "counterbalance": "rotate", "self_report": "block", "animation_speed": 1.0, "seed": 7}
-
-A block with ``"schedule": "policy"`` runs a ``schedule`` policy: its items are the policy's
-counts, and before each trial the policy picks which kind of item comes next (among the next
-``window`` items of a queue shuffled per participant, or among all remaining ones) and whether
-to ask (``docs/scheduling.md``).
-
-Policies are resolved once, at creation, into the core's policy JSON and stored with the
-study, so a study keeps behaving identically whatever the code later computes.
+"""Study configuration (``docs/experiments.md``): its request bodies and validation, policy
+resolution and per-participant plans.  A block with ``"schedule": "policy"`` runs a ``schedule``
+policy, which picks before each trial which kind of item comes next, among the next ``window``
+items of a queue shuffled per participant or among all remaining ones (``docs/scheduling.md``).
+Policies are resolved once, at creation, into the core's policy JSON stored with the study, so
+a study keeps behaving identically whatever the code later computes.
 """
 
 from __future__ import annotations
