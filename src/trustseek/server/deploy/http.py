@@ -29,13 +29,14 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 from ...errors import TrustseekError
 from ..auth import (
     Caller,
+    bearer,
     bearer_token,
     caller_for_token,
-    missing_token,
     remember_token,
     require_experimenter,
     require_session,
     session_caller,
+    token_of,
 )
 from ..errors import Refused, TooLarge
 from ..middleware import SESSION_BODY_LIMIT, json_bytes, read_body, refusal, refuse, replaying
@@ -236,10 +237,7 @@ def deploy_state(session_id: str, request: Request, s: Caller = Depends(robot)):
 async def _answer(request: Request, session_id: str, what: str, args: Args) -> Response:
     """The answer of a body FastAPI validated, the token checked after it (as ``require_session``
     and ``robot`` check it)."""
-    token = bearer_token(request.headers.get("authorization", ""))
-    if token is None:
-        raise missing_token()
-    s = await robot(session_caller(request, token, session_id))
+    s = await robot(session_caller(request, token_of(await bearer(request)), session_id))
     status, out = await answer(request.app.state, s.id, what, args)
     return Response(out, status_code=status, media_type="application/json")
 
