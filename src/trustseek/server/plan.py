@@ -50,12 +50,9 @@ class _LazyRng:
 
 
 class PolicyPlan:
-    """A task, model and policy (``load`` gives the policy's JSON, parsed on first use), with the
-    policy's ``PolicyRunner`` built once.  Decisions and belief updates are deterministic
-    functions of (belief, complexity[, action, human action, experience]), except a decision
-    that draws from the generator of (seed, trial): the others are remembered, so a belief that
-    many robots reach (every robot's first trials start from the same prior) is decided and
-    updated once."""
+    """A task, model and policy (``load`` gives the policy's JSON, parsed on first use) with its
+    ``PolicyRunner``.  Decisions that drew nothing from the generator of (seed, trial), and belief
+    updates, are remembered: many robots reach the same beliefs (every one starts from the prior)."""
 
     MEMO = 50_000  # remembered decisions and updates per plan
 

@@ -335,14 +335,12 @@ class DeployStore:
 
 
 class Known:
-    """A ``decide`` or ``observe`` answered from the session's live columns as this process
-    last read or committed them (``DeployStore.known``), without reading them: its one write
-    is deferred (``write``) for ``DeployStore.apply_async``, conditional on the row still
-    holding what it was computed from.  A session's row only moves forward (``trials_done``
-    grows, the belief and score change only with it, a pending decision is set once and cleared
-    when its trial is committed), so such a write is one that a locked read would have made.
-    Anything else -- a read of a trial, the plan or a policy, a refusal -- raises ``Stale`` or
-    is not applied: only a transaction that reads the row answers those."""
+    """A ``decide`` or ``observe`` answered from the session's live columns as this process last
+    read or committed them, its one write deferred (``write``) for ``DeployStore.apply_async``.
+    A session's row only moves forward (``trials_done`` grows, the belief and score change only
+    with it, a pending decision is set once and cleared with its trial), so a write conditional
+    on those columns is one that a locked read would have made.  A read of a trial, the plan or a
+    policy raises ``Stale``: only a transaction that reads the row answers those."""
 
     def __init__(self, store: DeployStore):
         self.store = store
