@@ -1,5 +1,5 @@
 """HTTP routes: experimenter (studies, sessions, dashboard, export); the participant's are in
-``participant_routes``, the decision API's in ``deploy.routes``."""
+``participant_routes``, the decision API's in ``deploy.http``."""
 
 from __future__ import annotations
 
