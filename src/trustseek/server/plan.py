@@ -64,9 +64,10 @@ class PolicyPlan:
         self._decided: Bounded[tuple, str] = Bounded(self.MEMO)
         self._updated: Bounded[tuple, list[float]] = Bounded(self.MEMO)
 
-    def policy(self) -> Any:
+    def policy(self, load: Callable[[], dict[str, Any]] | None = None) -> Any:
+        """The policy object, parsed on first use from ``load`` (by default the plan's own)."""
         if self._policy is None:
-            self._policy = policy_from_dict(self._load(), f"policy:{self.sha}")
+            self._policy = policy_from_dict((load or self._load)(), f"policy:{self.sha}")
         return self._policy
 
     def runner(self) -> PolicyRunner:
@@ -140,12 +141,15 @@ class Plans:
         ``model`` parsed from it unless given), its policy parsed."""
         key = json.dumps([plan["task"], plan["model"], plan["policy_sha256"], plan["policy_kind"]], sort_keys=True)
         found = self.by_content.get(key)
-        if found is None:
+        if found is None:  # shared at once: sessions opened meanwhile share it too
             task = Task.from_dict(plan["task"]) if task is None else task
             model = TrustModel.from_dict(plan["model"]) if model is None else model
-            found = PolicyPlan(task, model, plan["policy_kind"], plan["policy_sha256"], load)
-            found.policy()  # parsed while ``load`` can read it
-            self.by_content.put(key, found)
+            found = self.by_content.put(key, PolicyPlan(task, model, plan["policy_kind"], plan["policy_sha256"], load))
+        try:
+            found.policy(load)  # parsed by this caller's ``load`` unless parsed already
+        except BaseException:
+            self.by_content.pop(key)
+            raise
         return found
 
     def of(self, store: Any, session_id: str) -> PolicyPlan:
