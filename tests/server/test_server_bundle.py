@@ -15,7 +15,7 @@ from fastapi.testclient import TestClient
 
 from cli_runner import run_cli
 from trustseek.server import create_app
-from trustseek.server.bundle import DICTIONARY, TABLES
+from trustseek.server.export import DICTIONARY, TABLES
 
 TOKEN = "experimenter-secret"
 H = {"Authorization": f"Bearer {TOKEN}"}

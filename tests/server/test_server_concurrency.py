@@ -172,19 +172,13 @@ def test_remembered_decisions_equal_fresh_ones(tmp_path, policy):
     app = create_app(f"sqlite:///{tmp_path / 'memo.sqlite'}", token=TOKEN)
     _, info = asyncio.run(post(app, "/api/deploy/sessions", {"policy": policy, "seed": 5}, TOKEN))
     plan = app.state.deploy_plans.by_session.get(info["session_id"])
-    store = app.state.deploy_store
-
-    def load():
-        with store.transaction() as tx:
-            return tx.policy(plan.sha)
-
-    pol = plan.policy(load)
+    pol = plan.policy()
     pm = getattr(pol, "model", None) or plan.model
     beliefs = [[1 - x, x] for x in np.linspace(0.0, 1.0, 21)]
     for b in beliefs:
         for n in (1, 2, 3):
             for cx in ("low", "high"):
-                a = plan.decide(load, b, 5, n, cx)
+                a = plan.decide(b, 5, n, cx)
                 fresh = PolicyRunner(pol, model=pm, rng=np.random.default_rng([5, n, 0]), belief=np.asarray(b)).decide(cx)
                 assert a == fresh
     if policy["kind"] == "randomized":
@@ -201,13 +195,7 @@ def test_a_plans_step_is_policy_runners_step(tmp_path, policy):
     app = create_app(f"sqlite:///{tmp_path / 'step.sqlite'}", token=TOKEN)
     _, info = asyncio.run(post(app, "/api/deploy/sessions", {"policy": policy, "seed": 11}, TOKEN))
     plan = app.state.deploy_plans.by_session.get(info["session_id"])
-    store = app.state.deploy_store
-
-    def load():
-        with store.transaction() as tx:
-            return tx.policy(plan.sha)
-
-    pol = plan.policy(load)
+    pol = plan.policy()
     pm = getattr(pol, "model", None) or plan.model
     rng = random.Random(3)
     cases = [
@@ -224,7 +212,7 @@ def test_a_plans_step_is_policy_runners_step(tmp_path, policy):
     for _ in range(2):  # the second time from what the plan remembers
         for b, n, cx, a, h, e in cases:
             runner = PolicyRunner(pol, model=pm, rng=np.random.default_rng([11, n, 0]), belief=np.asarray(b))
-            assert plan.decide(load, b, 11, n, cx) == runner.decide(cx)
+            assert plan.decide(b, 11, n, cx) == runner.decide(cx)
             after = runner.observe(cx, a, h, e)
-            assert plan.update(load, b, cx, a, h, e) == [float(v) for v in after]
+            assert plan.update(b, cx, a, h, e) == [float(v) for v in after]
     app.state.deploy_store.close()

@@ -222,9 +222,8 @@ def export_cmd(
     outputs = ((out, "--out", (".csv", ".parquet")), (events, "--events", (".csv", ".parquet")))
     check_outputs(*outputs, inputs=((sqlite, "--db SQLite file"),))
     check_output(bundle, "--bundle", directory=True)
-    from ..server.bundle import bundle_files, write_bundle  # after the checks: they load the server
-    from ..server.db import open_database
-    from ..server.export import events_frame, trials_frame, write_frame
+    from ..server.db import open_database  # after the checks: they load the server
+    from ..server.export import bundle_files, events_frame, trials_frame, write_bundle, write_frame
 
     with open_database(db)() as s:
         st = _stored_study(s, study, db)

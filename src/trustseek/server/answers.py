@@ -1,13 +1,9 @@
 """A study session's answers: the comprehension quiz, trust self-reports and questionnaires,
 when each is due, and when the session is over (every trial committed, nothing left to answer).
-A repeat of stored answers is a duplicate; different ones are refused.
-
-The quiz is every question right within the allowed attempts; each attempt is kept with the
-session (its answers and the questions it got wrong).  After the last failed attempt the
-study's ``on_fail`` decides: ``end`` screens the session out (it ends; the panel's
-``fail_code``, if any, is shown instead of the completion code) or ``continue`` (the session
-goes on, the failure recorded).  An attention-check item of a questionnaire names the point of
-its scale that it instructs; the export says whether each answer matched it.
+A repeat of stored answers is a duplicate; different ones are refused.  Every quiz attempt is
+kept with the session; after the last failed one the study's ``on_fail`` decides: ``end``
+screens the session out, ``continue`` records the failure.  An attention-check item names the
+point of its scale that it instructs.
 """
 
 from __future__ import annotations

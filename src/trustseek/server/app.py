@@ -19,8 +19,7 @@ from ..model.jsonfile import json_safe
 from ..version import __version__
 from .cache import StudyCaches
 from .db import DEFAULT_URL, open_database, safe_url
-from .deploy.http import DeployFront
-from .deploy.routes import deploy
+from .deploy.http import DeployFront, deploy
 from .deploy.store import DeployStore
 from .errors import Refused
 from .link_routes import STATIC, lifecycle, pages, static_page
@@ -36,17 +35,15 @@ log = logging.getLogger(__name__)
 
 
 async def refused(request: Request, exc: Exception) -> Response:
-    """A refusal of the session layers (``errors.Refused``) with its HTTP status, answered as an
-    ``HTTPException`` is (``{"detail": message}``)."""
+    """A refusal of the session layers (``errors.Refused``) with its HTTP status, as ``HTTPException``'s."""
     assert isinstance(exc, Refused)
     status, body = refusal(exc)
     return Response(body, status_code=status, media_type="application/json")
 
 
 async def validation_error(request: Request, exc: Exception) -> JSONResponse:
-    """422 with every problem, as FastAPI answers, but always serialisable: a refused ``NaN`` or
-    infinity is echoed as ``null``, the project's one rule (``model.jsonfile.json_safe``; FastAPI's
-    own answer would fail to serialise, a 500)."""
+    """422 with every problem, as FastAPI answers, a refused ``NaN`` or infinity echoed as
+    ``null`` (``model.jsonfile.json_safe``; FastAPI's own answer would fail to serialise, a 500)."""
     errors = list(exc.errors()) if isinstance(exc, RequestValidationError) else []
     if isinstance(exc, RequestValidationError) and request.method == "POST" and request.url.path == "/api/studies":
         # a study's other problems too, not only its fields' (solving a policy may take a moment)
@@ -56,9 +53,7 @@ async def validation_error(request: Request, exc: Exception) -> JSONResponse:
 
 
 class ServerApp(FastAPI):
-    """The FastAPI application with the decision API's front in front of it: well-formed
-    ``decide`` and ``observe`` requests are answered before the framework's stack
-    (``deploy.http``), everything else goes through it."""
+    """The FastAPI application behind the decision API's front (``deploy.http.DeployFront``)."""
 
     def __init__(self, *args: Any, **kwargs: Any):
         super().__init__(*args, **kwargs)
@@ -83,13 +78,10 @@ GC_THRESHOLDS = (20_000, 20, 50)
 
 
 def settle_memory() -> None:
-    """Keep the garbage collector's pauses out of request latencies, in a server process once
-    its application is built: what start-up made (modules, the application, the schema) lives as
-    long as the process, so it is moved out of the collector's passes (``gc.freeze``), and the
-    young generation is collected after 20,000 net allocations instead of 700.  A request of the
-    decision API frees what it allocates, so under load the collector then runs a few times a
-    minute rather than dozens of times a second, and a full pass (tens of milliseconds with the
-    parsed plans and caches of many sessions) every ~20 million allocations."""
+    """Keep the garbage collector's pauses out of request latencies, in a server process once its
+    application is built: what start-up made is moved out of the collector's passes
+    (``gc.freeze``), and the young generation is collected after 20,000 net allocations instead
+    of 700 (a decision API request frees what it allocates), a full pass every ~20 million."""
     gc.collect()
     gc.freeze()
     gc.set_threshold(*GC_THRESHOLDS)
@@ -102,10 +94,8 @@ ENV_PREVIEW_DB = "TRUSTSEEK_PREVIEW_DB"
 
 
 def from_environment() -> FastAPI:
-    """The server configured by the environment: ``$TRUSTSEEK_DB`` (the database URL),
-    ``$TRUSTSEEK_TOKEN`` (the experimenter token), ``$TRUSTSEEK_PUBLIC_URL`` and
-    ``$TRUSTSEEK_PREVIEW_DB`` (the previews' database the workers share).  This is the
-    application factory each worker process of ``trustseek serve --workers N`` builds."""
+    """The server configured by the environment (``ENV_*``): the application each worker process
+    of ``trustseek serve --workers N`` builds."""
     token = os.environ.get(ENV_TOKEN)
     if not token:
         raise RuntimeError(f"${ENV_TOKEN} is not set")
@@ -122,10 +112,9 @@ def from_environment() -> FastAPI:
 def create_app(
     db_url: str = DEFAULT_URL, token: str | None = None, public_url: str | None = None, preview_url: str | None = None
 ) -> FastAPI:
-    """The experiment server.  ``token`` guards the experimenter endpoints (a random one is
-    made when not given: read it from ``app.state.token``).  Migrations run here, before
-    the first request.  Previews run in a database of their own (``preview_url``, by default a
-    temporary file: ``preview.Previews``)."""
+    """The experiment server.  ``token`` guards the experimenter endpoints (by default a random
+    one, ``app.state.token``).  Migrations run here.  Previews run in a database of their own
+    (``preview_url``, by default a temporary file: ``preview.Previews``)."""
     app = ServerApp(
         title="trustseek experiment server",
         version=__version__,

@@ -15,7 +15,6 @@ from .orm import Session
 
 bearer = HTTPBearer(auto_error=False, description="Experimenter token, or a session token for session endpoints.")
 
-
 #: the refusal of a request without a bearer token (401)
 MISSING_TOKEN = "missing token: send 'Authorization: Bearer <token>'"
 
@@ -29,17 +28,12 @@ def bearer_token(header: str) -> str | None:
 
 def token_of(creds: HTTPAuthorizationCredentials | None) -> str:
     if creds is None or not creds.credentials:
-        raise missing_token()
+        raise HTTPException(401, MISSING_TOKEN, headers={"WWW-Authenticate": "Bearer"})
     return creds.credentials
 
 
-def missing_token() -> HTTPException:
-    return HTTPException(401, MISSING_TOKEN, headers={"WWW-Authenticate": "Bearer"})
-
-
 async def require_experimenter(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)) -> None:
-    token = token_of(creds)
-    if not secrets.compare_digest(token.encode(), request.app.state.token.encode()):
+    if not secrets.compare_digest(token_of(creds).encode(), request.app.state.token.encode()):
         raise HTTPException(403, "wrong experimenter token")
 
 
@@ -55,19 +49,14 @@ class Caller:
 
 def caller_for_token(state: Any, token: str) -> Caller | None:
     """The session of a session token, or None; ``state`` is the application's state."""
-    cache: dict[str, Caller] = state.tokens
-    caller = cache.get(token)
+    caller = state.tokens.get(token)
     if caller is None:
         with state.db() as db:
             row = db.execute(select(Session.id, Session.kind).where(Session.token == token)).first()
-        if row is not None:
-            caller = Caller(row.id, row.kind)
-        else:
-            found = state.previews.find(token)
-            if found is None:
-                return None
-            caller = Caller(found[0], found[1], preview=True)
-        caller = remember_token(state, token, caller)
+        found = (row.id, row.kind) if row is not None else state.previews.find(token)
+        if found is None:
+            return None
+        caller = remember_token(state, token, Caller(found[0], found[1], preview=row is None))
     return caller
 
 

@@ -1,8 +1,7 @@
-"""``Bounded``: the one bounded mapping of the server (least recently used entries are forgotten
-first), for what it remembers, always in objects the application owns (``app.state``), never
-in a module: the study sessions' configurations and contexts with their blocks' policies
-(``StudyCaches``), the deploy sessions' plans (``plan.Plans``), their decisions and belief updates, the
-sessions' live rows (``deploy.store.DeployStore``)."""
+"""``Bounded``: the server's one bounded mapping (the least recently used entries forgotten
+first), for what it remembers, always in objects the application owns (``app.state``), never in
+a module: ``StudyCaches``, the deploy sessions' plans (``plan.Plans``) with their decisions and
+belief updates, and their live rows (``deploy.store.DeployStore``)."""
 
 from __future__ import annotations
 
@@ -61,7 +60,7 @@ class StudyCaches:
 
     def __init__(self) -> None:
         self.configs: Bounded[str, dict[str, Any]] = Bounded(256)  # study id -> its configuration
-        self.contexts: Bounded[str, Any] = Bounded(256)  # study id -> its sessions.Context (its blocks' parsed policies)
+        self.contexts: Bounded[str, Any] = Bounded(256)  # study id -> its blocks' plans (sessions.block_plan)
         self.resolved: Bounded[str, dict[str, Any]] = Bounded(64)  # (model, task, spec) -> policy JSON
         self.schedules: Bounded[str, dict[str, Any]] = Bounded(MAX_CACHED_SCHEDULES)  # the same, schedule policies
 

@@ -33,14 +33,13 @@ class DatabaseError(TrustseekError):
 
 
 def _sqlite_pragmas(dbapi_connection, _record) -> None:
-    # transactions are begun explicitly (see _sqlite_begin), not by the driver
+    # transactions are begun explicitly (see _sqlite_begin), not by the driver; WAL + NORMAL:
+    # committed trials survive a killed process; checkpoints run in a background thread
+    # (_checkpoint_in_background), the automatic ones are only a backstop
     dbapi_connection.isolation_level = None
     cur = dbapi_connection.cursor()
-    cur.execute("PRAGMA journal_mode=WAL")
-    cur.execute("PRAGMA synchronous=NORMAL")  # WAL + NORMAL: committed trials survive a killed process
-    cur.execute("PRAGMA foreign_keys=ON")
-    cur.execute("PRAGMA busy_timeout=10000")
-    # checkpoints run in a background thread (_checkpoint_in_background); this is only a backstop
+    for pragma in ("journal_mode=WAL", "synchronous=NORMAL", "foreign_keys=ON", "busy_timeout=10000"):
+        cur.execute(f"PRAGMA {pragma}")
     cur.execute(f"PRAGMA wal_autocheckpoint={BACKSTOP_CHECKPOINT_PAGES}")
     cur.close()
 

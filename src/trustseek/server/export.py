@@ -1,25 +1,20 @@
-"""Export a study to the canonical trial-log format (what ``trustseek fit`` reads) and its
-UI events to an events table.
+"""A study's tables, the one writer of their CSV and Parquet, and the data bundle: every table
+in both formats, the configuration and a data dictionary (``DICTIONARY``, which also orders
+every table's columns), in a folder (``trustseek export STUDY --bundle DIR``) or a zip file.
 
-Trial columns: ``participant, trial, complexity, robot_action, human_action, experience``
-(canonical, in that order), then ``block, block_name, policy, outcome, reward, belief,
-belief_after, effort_ms, self_report, study, session, committed_at, practice, session_trial``.
-``belief`` is P(trust = high) when the action was decided, ``belief_after`` after the trial's
-update.  When the robot asks, the human teleoperates, recorded as ``intervene``.
-
-Practice trials are left out of the analysis log (the default), whose ``trial`` counts the
-analysed trials from 1; ``session_trial`` is the trial's number in the session (practice
-included), the numbering of the events, the full log (``practice=True``) and the reports.
-
-The reports table is long: one row per self-report or questionnaire item, with the analysed
-trial it follows (``trial``, empty after practice) so that it joins the trial log.
+The trial log (``trials``) is what ``trustseek fit`` reads: the canonical columns, then the
+study's.  Practice trials are left out of it by default; its ``trial`` counts the analysed
+trials from 1, ``session_trial`` the session's (practice included: the numbering of events and
+reports).  Pilot sessions are left out unless asked for (``pilot``); preview sessions always.
 """
 
 from __future__ import annotations
 
 import io
 import json
+import zipfile
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 from sqlalchemy import Select, select
@@ -29,62 +24,103 @@ from ..vocab import TRIAL_COLUMNS
 from .answers import check_passed
 from .orm import Answer, Event, Report, Session, Study, Trial, iso
 
-CANONICAL = list(TRIAL_COLUMNS)
-EXTRA = [
-    "block",
-    "block_name",
-    "policy",
-    "outcome",
-    "reward",
-    "belief",
-    "belief_after",
-    "effort_ms",
-    "self_report",
-    "study",
-    "session",
-    "committed_at",
-    "practice",
-    "session_trial",
-]
-REPORT_COLUMNS = [
-    "participant",
-    "trial",
-    "session_trial",
-    "block",
-    "block_name",
-    "questionnaire",
-    "when",
-    "item",
-    "value",
-    "reverse",
-    "check",
-    "check_passed",
-    "study",
-    "session",
-    "answered_at",
-]
-SESSION_COLUMNS = [
-    "participant",
-    "session",
-    "role",
-    "status",
-    "trials_done",
-    "score",
-    "seed",
-    "secret",
-    "block_order",
-    "panel_id",
-    "panel",
-    "speed",
-    "created_at",
-    "started_at",
-    "ended_at",
-    "revoked_at",
-    "quiz_attempts",
-    "quiz_outcome",
-    "checks_failed",
-]
-EVENT_COLUMNS = ["participant", "session", "trial", "client_time", "server_time", "type", "data"]
+#: the meaning of every column of the bundle, by table
+DICTIONARY: dict[str, dict[str, str]] = {
+    "trials": {
+        "participant": "participant label (P001, ...; the panel id is in sessions)",
+        "trial": "analysed trial, from 1 (practice left out)",
+        "complexity": "item complexity: low or high",
+        "robot_action": "autonomous or ask",
+        "human_action": "rely or intervene; when the robot asked, the human teleoperated, recorded as intervene",
+        "experience": "reliable or faulty (Section III)",
+        "block": "block number in the study's order of blocks, from 1",
+        "block_name": "the block's name",
+        "policy": "the block's policy kind",
+        "outcome": "success, collision, dropped or teleoperated",
+        "reward": "points of the trial, eq. (1)",
+        "belief": "P(trust = high) when the action was decided",
+        "belief_after": "P(trust = high) after the trial's update",
+        "effort_ms": "teleoperation time in ms (empty when the robot worked alone)",
+        "self_report": "the 0-100 trust self-report after this trial (or block), if any",
+        "study": "study id",
+        "session": "session id",
+        "committed_at": "server time the trial was stored (UTC)",
+        "practice": "practice trial (false in the analysis log)",
+        "session_trial": "trial number in the session, practice included (the numbering of events)",
+    },
+    "reports": {
+        "participant": "participant label",
+        "trial": "analysed trial the answer follows (joins trials on participant, trial)",
+        "session_trial": "session trial it follows",
+        "block": "block number, from 1",
+        "block_name": "the block's name",
+        "questionnaire": "questionnaire name; self_report is the 0-100 slider",
+        "when": "trial, block or end",
+        "item": "item id (trust for the slider)",
+        "value": "the answer (a point of the scale)",
+        "reverse": "reverse-scored item",
+        "check": "an attention check: the point the item instructs (empty otherwise)",
+        "check_passed": "the answer is the instructed point (empty when not a check)",
+        "study": "study id",
+        "session": "session id",
+        "answered_at": "server time (UTC)",
+    },
+    "questionnaires": {
+        "questionnaire": "questionnaire name (quiz: the comprehension quiz)",
+        "when": "trial, block, end (quiz: after the instructions)",
+        "title": "title shown",
+        "item": "item or question id",
+        "text": "the text shown",
+        "reverse": "reverse-scored item",
+        "check": "attention check: the instructed point; quiz: the right option's index",
+        "scale_min": "lowest point of the scale",
+        "scale_max": "highest point of the scale",
+        "options": "quiz: the options, as JSON",
+    },
+    "quiz": {
+        "participant": "participant label",
+        "session": "session id",
+        "attempt": "attempt number, from 1",
+        "question": "question id",
+        "answer": "index of the chosen option",
+        "correct": "the chosen option is the right one",
+        "answered_at": "server time (UTC)",
+    },
+    "sessions": {
+        "participant": "participant label",
+        "session": "session id",
+        "role": "participant or pilot",
+        "status": "new, running, done or screened (ended by a failed quiz)",
+        "trials_done": "trials committed, practice included",
+        "score": "team score",
+        "seed": "the session's seed (reproduces its plan and actions)",
+        "secret": "the session's secret (reproduces its outcomes and scenes)",
+        "block_order": "block names in the participant's order, as JSON",
+        "panel_id": "the panel's participant id (PROLIFIC_PID, workerId, ...)",
+        "panel": "every panel id of the link, as JSON",
+        "speed": "animation speed the session ran at",
+        "created_at": "arrival (UTC)",
+        "started_at": "consent (UTC)",
+        "ended_at": "end (UTC)",
+        "revoked_at": "link revoked (UTC)",
+        "quiz_attempts": "attempts at the comprehension quiz",
+        "quiz_outcome": "passed or failed (empty: no quiz, or not finished)",
+        "checks_failed": "attention-check items answered otherwise than instructed",
+    },
+    "events": {
+        "participant": "participant label",
+        "session": "session id",
+        "trial": "session trial (empty outside trials)",
+        "client_time": "browser time, ms since the Unix epoch",
+        "server_time": "server time (UTC)",
+        "type": "event type (consent, trial_start, intervene, grasp, deposit, outcome_shown, ...)",
+        "data": "the event's data, as JSON",
+    },
+}
+
+
+TABLES = tuple(DICTIONARY)
+assert list(DICTIONARY["trials"])[: len(TRIAL_COLUMNS)] == list(TRIAL_COLUMNS)
 
 #: a text cell starting with one of these is a formula to a spreadsheet (CSV injection)
 FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
@@ -123,6 +159,11 @@ def _practice_counts(db: DBSession, study: Study) -> dict[str, int]:
     return dict.fromkeys(db.scalars(select(Session.id).where(Session.study_id == study.id)), n)
 
 
+def _columns(row: Any, names: str) -> dict[str, Any]:
+    """The columns ``names`` (space-separated) of a row, as the table names them."""
+    return {c: getattr(row, c) for c in names.split()}
+
+
 def trials_frame(db: DBSession, study: Study, practice: bool = False, pilot: bool = False) -> pd.DataFrame:
     """The study's trial log: the analysed trials, or every trial with ``practice=True``; pilot
     sessions with ``pilot=True``."""
@@ -135,20 +176,11 @@ def trials_frame(db: DBSession, study: Study, practice: bool = False, pilot: boo
     reports = {(r.session_id, r.after_trial): r.value for r in db.scalars(_exported_rows(Report, study, pilot))}
     data = [
         {
+            **_columns(t, "complexity robot_action human_action experience policy outcome reward belief belief_after effort_ms"),
             "participant": p,
             "trial": t.trial if practice else t.trial - skip.get(t.session_id, 0),
-            "complexity": t.complexity,
-            "robot_action": t.robot_action,
-            "human_action": t.human_action,
-            "experience": t.experience,
             "block": t.block + 1,
             "block_name": names[t.block],
-            "policy": t.policy,
-            "outcome": t.outcome,
-            "reward": t.reward,
-            "belief": t.belief,
-            "belief_after": t.belief_after,
-            "effort_ms": t.effort_ms,
             "self_report": reports.get((t.session_id, t.trial)),
             "study": study.id,
             "session": t.session_id,
@@ -158,7 +190,7 @@ def trials_frame(db: DBSession, study: Study, practice: bool = False, pilot: boo
         }
         for t, p in rows
     ]
-    frame = pd.DataFrame(data, columns=CANONICAL + EXTRA)
+    frame = pd.DataFrame(data, columns=list(DICTIONARY["trials"]))
     text = dict.fromkeys(("participant", "complexity", "robot_action", "human_action", "experience"), "object")
     return frame.astype({"trial": "int64", "block": "int64", **text, "self_report": "float64", "effort_ms": "float64"})
 
@@ -194,7 +226,7 @@ def answers_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFr
         }
         for q, when, item, value, item_, r, p in data
     ]
-    frame = pd.DataFrame(rows, columns=REPORT_COLUMNS)
+    frame = pd.DataFrame(rows, columns=list(DICTIONARY["reports"]))
     frame = frame.sort_values(["participant", "session_trial", "questionnaire"], kind="stable").reset_index(drop=True)
     return frame.astype({"trial": "int64", "value": "float64", "check": "Int64", "check_passed": "boolean"})
 
@@ -211,18 +243,10 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
             failed[a.session_id] = failed.get(a.session_id, 0) + 1
     rows = [
         {
-            "participant": s.participant,
+            **_columns(s, "participant role status trials_done score seed secret panel_id speed"),
             "session": s.id,
-            "role": s.role,
-            "status": s.status,
-            "trials_done": s.trials_done,
-            "score": s.score,
-            "seed": s.seed,
-            "secret": s.secret,
             "block_order": json.dumps([names[b] for b in s.plan["block_order"]]),
-            "panel_id": s.panel_id,
             "panel": json.dumps(s.panel or {}),
-            "speed": s.speed,
             "created_at": iso(s.created_at),
             "started_at": iso(s.consented_at),
             "ended_at": iso(s.ended_at),
@@ -233,24 +257,21 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
         }
         for s in db.scalars(select(Session).where(*exported(study, pilot)).order_by(Session.participant))
     ]
-    return pd.DataFrame(rows, columns=SESSION_COLUMNS)
+    return pd.DataFrame(rows, columns=list(DICTIONARY["sessions"]))
 
 
 def events_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame:
     rows = db.execute(_exported_rows(Event, study, pilot, Session.participant).order_by(Session.participant, Event.id)).all()
     data = [
         {
+            **_columns(e, "trial client_time type data"),
             "participant": p,
             "session": e.session_id,
-            "trial": e.trial,
-            "client_time": e.client_time,
             "server_time": iso(e.created_at),
-            "type": e.type,
-            "data": e.data,
         }
         for e, p in rows
     ]
-    frame = pd.DataFrame(data, columns=EVENT_COLUMNS)
+    frame = pd.DataFrame(data, columns=list(DICTIONARY["events"]))
     frame["trial"] = frame["trial"].astype("Int64")
     return frame
 
@@ -273,3 +294,110 @@ def write_frame(frame: pd.DataFrame, path: str | Path) -> None:
     """Write a table by the suffix of ``path``: Parquet (``.parquet``, ``.pq``) or CSV."""
     path = Path(path)
     path.write_bytes(table_bytes(frame, "parquet" if path.suffix.lower() in (".parquet", ".pq") else "csv"))
+
+
+def questionnaires_frame(study: Study) -> pd.DataFrame:
+    """Every questionnaire item and quiz question as asked."""
+    cfg = study.config
+    rows = [
+        {
+            "questionnaire": q["name"],
+            "when": q["when"],
+            "title": q.get("title"),
+            "item": i["id"],
+            "text": i["text"],
+            "reverse": bool(i.get("reverse")),
+            "check": i.get("check"),
+            "scale_min": q["scale"]["min"],
+            "scale_max": q["scale"]["max"],
+            "options": None,
+        }
+        for q in cfg.get("questionnaires") or ()
+        for i in q["items"]
+    ]
+    for qq in (cfg.get("quiz") or {}).get("questions", []):
+        rows.append(
+            {
+                "questionnaire": "quiz",
+                "when": "instructions",
+                "title": None,
+                "item": qq["id"],
+                "text": qq["text"],
+                "reverse": False,
+                "check": qq["answer"],
+                "scale_min": None,
+                "scale_max": None,
+                "options": json.dumps(qq["options"]),
+            }
+        )
+    frame = pd.DataFrame(rows, columns=list(DICTIONARY["questionnaires"]))
+    for col in ("check", "scale_min", "scale_max"):
+        frame[col] = frame[col].astype("Int64")
+    return frame
+
+
+def quiz_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame:
+    answers = {q["id"]: q["answer"] for q in (study.config.get("quiz") or {}).get("questions", [])}
+    rows = [
+        {
+            "participant": s.participant,
+            "session": s.id,
+            "attempt": k + 1,
+            "question": q,
+            "answer": a,
+            "correct": a == answers.get(q),
+            "answered_at": at["at"],
+        }
+        for s in db.scalars(select(Session).where(*exported(study, pilot)).order_by(Session.participant))
+        for k, at in enumerate((s.quiz or {}).get("attempts", []))
+        for q, a in at["answers"].items()
+    ]
+    return pd.DataFrame(rows, columns=list(DICTIONARY["quiz"]))
+
+
+def bundle_frames(db: DBSession, study: Study, pilot: bool = False) -> dict[str, pd.DataFrame]:
+    return {
+        "trials": trials_frame(db, study, pilot=pilot),
+        "reports": answers_frame(db, study, pilot),
+        "questionnaires": questionnaires_frame(study),
+        "quiz": quiz_frame(db, study, pilot),
+        "sessions": sessions_frame(db, study, pilot),
+        "events": events_frame(db, study, pilot),
+    }
+
+
+def dictionary_frame(frames: dict[str, pd.DataFrame]) -> pd.DataFrame:
+    rows = [
+        {"table": t, "column": c, "type": str(f[c].dtype), "description": DICTIONARY[t].get(c, "")}
+        for t, f in frames.items()
+        for c in f.columns
+    ]
+    return pd.DataFrame(rows, columns=["table", "column", "type", "description"])
+
+
+def bundle_files(db: DBSession, study: Study, pilot: bool = False) -> dict[str, bytes]:
+    """The bundle's files by name: ``<table>.csv`` and ``<table>.parquet`` for every table,
+    ``study.json`` and ``dictionary.csv``."""
+    frames = bundle_frames(db, study, pilot)
+    files: dict[str, bytes] = {}
+    for name, frame in frames.items():
+        # the trial log as trustseek fit reads it; the other tables hold text from participants'
+        # browsers: formulas escaped, CR/LF quoted
+        files[f"{name}.csv"] = table_bytes(frame, "csv", escaped=name != "trials")
+        files[f"{name}.parquet"] = table_bytes(frame, "parquet")
+    files["study.json"] = json.dumps({"id": study.id, "name": study.name, "config": study.config}, indent=2).encode()
+    files["dictionary.csv"] = table_bytes(dictionary_frame(frames), "csv")
+    return files
+
+
+def write_bundle(files: dict[str, bytes], folder: Path) -> None:
+    for name, content in files.items():
+        (folder / name).write_bytes(content)
+
+
+def bundle_zip(files: dict[str, bytes], root: str) -> bytes:
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+        for name, content in files.items():
+            z.writestr(f"{root}/{name}", content)
+    return buf.getvalue()

@@ -1,15 +1,12 @@
 """A study's lifecycle and its participants' arrival.
 
-* A study is ``draft`` (links made now are pilots; the study link refuses arrivals), ``open``,
-  ``paused`` (no new arrivals; started sessions go on) or ``closed`` (for good: no new
-  arrivals, started sessions may finish).  ``open`` and ``paused`` alternate; any state may
-  close.
-* Sessions are ``participant`` sessions, ``pilot`` sessions (flagged, left out of the analysis
-  export unless asked for); previews run in a database of their own (``preview``).
-* The study link (``/join/<link token>``) gives every panel participant one session, keyed by
-  the panel's participant id: a database unique constraint on (study, panel id) keeps it one
-  under concurrent arrivals; the study row is locked while an arrival is placed, so that block
-  orders stay balanced and the quota is exact.
+A study is ``draft`` (links made now are pilots; the study link refuses arrivals), ``open``,
+``paused`` (no new arrivals; started sessions go on) or ``closed`` (for good).  Sessions are
+``participant`` or ``pilot`` sessions (left out of the analysis export unless asked for);
+previews run in a database of their own (``preview``).  The study link gives every panel
+participant one session, keyed by the panel's id (a unique constraint keeps it one under
+concurrent arrivals; the study row is locked while an arrival is placed, so that block orders
+stay balanced and the quota is exact).
 """
 
 from __future__ import annotations
@@ -57,9 +54,8 @@ def counted(study_id: str):
 
 
 def progress(db: DBSession, study_id: str) -> dict[str, int]:
-    """Sessions of a study: participants by status (new, running, done, screened; revoked
-    links apart), then pilots (previews are not in the study's database: ``preview``; those stored by earlier versions are
-    left out)."""
+    """Sessions of a study: participants by status (revoked links apart), then pilots (previews
+    stored by earlier versions left out)."""
     counts = dict.fromkeys(("new", "running", "done", "screened", "revoked", "pilot"), 0)
     rows = db.execute(
         select(Session.role, Session.status, Session.revoked_at).where(Session.study_id == study_id, Session.role != "preview")
@@ -71,8 +67,7 @@ def progress(db: DBSession, study_id: str) -> dict[str, int]:
 
 
 def balanced_index(db: DBSession, study: Study) -> int:
-    """The rotation (0-based) that the fewest counted sessions started with; ties go to the
-    lowest, so links made one by one rotate as before."""
+    """The rotation (0-based) that the fewest counted sessions started with, the lowest of ties."""
     cfg = study_config(db, study.id)
     n = len(cfg["blocks"])
     plans = db.scalars(select(Session.plan).where(*counted(study.id))).all()
@@ -88,8 +83,7 @@ def create_participant(
     panel_id: str | None = None,
     panel: dict[str, str] | None = None,
 ) -> Session:
-    """A new session of ``study`` (not committed): its block order balanced over the counted
-    sessions (participants; a pilot or preview takes the next order without counting)."""
+    """A new session of ``study`` (not committed), its block order balanced over the counted sessions."""
     index = db.scalar(select(func.count()).select_from(Session).where(Session.study_id == study.id)) or 0
     label = participant or f"P{index + 1:03d}"
     if db.scalar(select(Session.id).where(Session.study_id == study.id, Session.participant == label)):
@@ -186,8 +180,7 @@ def _resumed(db: DBSession, s: Session) -> Arrival:
 
 def refusal(db: DBSession, s: Session) -> str | None:
     """Why a session's link shows a page instead of the study (``revoked``, ``paused``,
-    ``closed``), or None: a revoked link, or a study that takes no new arrivals for a session
-    that has not started (started sessions go on)."""
+    ``closed``: a study that takes no new arrivals, for a session not started), or None."""
     if s.revoked_at is not None:
         return "revoked"
     if s.status != "new" or s.role == "preview" or s.study_id is None:
@@ -198,8 +191,7 @@ def refusal(db: DBSession, s: Session) -> str | None:
 
 def give_consent(db: DBSession, s: Session, cfg: dict[str, Any], query: dict[str, str]) -> bool:
     """Start session ``s`` (locked) on its participant's consent, keeping the panel's ids of the
-    link's ``query``; whether it started now (the consent of a running session changes nothing).
-    Commits."""
+    link's ``query``; whether it started now.  Commits."""
     started = s.status == "new"
     if started:
         why = refusal(db, s)

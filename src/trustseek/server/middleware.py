@@ -1,9 +1,6 @@
-"""ASGI middleware of the experiment server: response timing with the request log, and the guard
-that authenticates writes and caps their size before any body is read.
-
-Both are plain ASGI wrappers (no per-request objects beyond a closure), so the latency-critical
-decision API pays next to nothing for them.
-"""
+"""Plain ASGI middleware of the experiment server (nearly free for the decision API): response
+timing with the request log, and the guard that authenticates writes and caps their size before
+any body is read; the refusals' status codes."""
 
 from __future__ import annotations
 
@@ -12,24 +9,17 @@ import logging
 import re
 import secrets
 import time
-from collections.abc import Awaitable, Callable, MutableMapping
 from typing import Any
 
 import numpy as np
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from .auth import MISSING_TOKEN, bearer_token, caller_for_token
 from .errors import Conflict, Gone, NotAllowed, NotFound, Refused, TooLarge
 
-Scope = MutableMapping[str, Any]
-Message = MutableMapping[str, Any]
-Receive = Callable[[], Awaitable[Message]]
-Send = Callable[[Message], Awaitable[None]]
-ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
-
 log = logging.getLogger(__name__)
 
-#: the HTTP status of each refusal of the session layers (``errors``): the one mapping, used by
-#: the application's handler of ``Refused`` (``app``) and by the decision API's front (``deploy.http``)
+#: the HTTP status of each refusal of the session layers (``errors``): the one mapping
 STATUS: dict[type[Refused], int] = {NotAllowed: 400, NotFound: 404, Conflict: 409, Gone: 410, TooLarge: 413}
 
 
@@ -38,33 +28,29 @@ def status_of(exc: Refused) -> int:
     return next(STATUS[c] for c in type(exc).__mro__ if c in STATUS)
 
 
+def json_bytes(value: Any) -> bytes:
+    """A JSON answer's bytes, as FastAPI's ``JSONResponse`` writes them."""
+    return json.dumps(value, ensure_ascii=False, allow_nan=False, separators=(",", ":")).encode("utf-8")
+
+
 def refusal(exc: Refused) -> tuple[int, bytes]:
-    """(status, body) of a refusal: ``{"detail": message}``, the bytes of FastAPI's ``JSONResponse``
-    (the application's handler, ``app.refused``, and the decision API's front answer with them)."""
-    body = json.dumps({"detail": exc.message}, ensure_ascii=False, allow_nan=False, indent=None, separators=(",", ":"))
-    return status_of(exc), body.encode("utf-8")
-
-
-#: path parameters that are credentials: never logged
-SECRET_PARAMS = frozenset({"token"})
+    """(status, body) of a refusal: ``{"detail": message}``."""
+    return status_of(exc), json_bytes({"detail": exc.message})
 
 
 def request_context(scope: Scope) -> str:
-    """``METHOD /route/{template}`` and the path parameters that identify what was asked for
-    (study, session, trial), never a token: the template, not the path, is logged because a
-    participant's link carries its token in the path."""
+    """``METHOD /route/{template}`` and the path parameters but a token (the template, not the
+    path, as a participant's link carries its token in the path)."""
     route = getattr(scope.get("route"), "path", None) or "(no route)"
-    params = {k: v for k, v in (scope.get("path_params") or {}).items() if k not in SECRET_PARAMS}
+    params = {k: v for k, v in (scope.get("path_params") or {}).items() if k != "token"}
     where = "".join(f" {k}={v}" for k, v in params.items())
     return f"{scope.get('method', '?')} {route}{where}"
 
 
 class RequestLog:
     """Every response carries ``Server-Timing: app;dur=<ms>``, the time from the request reaching
-    the application to its response headers (routing, authentication, validation, the handler
-    with its database transaction, serialization).  Refused requests (4xx) are logged at INFO,
-    failed ones (5xx) at ERROR, and unhandled errors with the request's context; successful
-    requests are not logged."""
+    the application to its response headers.  Refused requests (4xx) are logged at INFO, failed
+    ones (5xx) and unhandled errors at ERROR, with the request's context."""
 
     def __init__(self, app: ASGIApp):
         self.app = app
@@ -115,8 +101,7 @@ async def read_body(receive: Receive, limit: int) -> bytes | None:
 
 
 def replaying(body: bytes, receive: Receive) -> Receive:
-    """A ``receive`` for the next layer that gives the body read already, then the connection's
-    own messages (a disconnect)."""
+    """A ``receive`` that gives the body read already, then the connection's own messages."""
     given = False
 
     async def replay() -> Message:
@@ -130,23 +115,21 @@ def replaying(body: bytes, receive: Receive) -> Receive:
 
 
 async def refuse(send: Send, status: int, detail: str | list[dict[str, Any]], headers: tuple = ()) -> None:
-    body = json.dumps({"detail": detail}).encode()
-    head = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode()), *headers]
+    body = json_bytes({"detail": detail})
+    head = [(b"content-type", b"application/json"), (b"content-length", b"%d" % len(body)), *headers]
     await send({"type": "http.response.start", "status": status, "headers": head})
     await send({"type": "http.response.body", "body": body})
 
 
-#: the deepest nesting of arrays and objects a JSON body may have (the API's own bodies nest a
-#: few levels; a deeper one is refused before it is parsed, so that no parser, validator or
-#: error message recurses through it)
+#: the deepest nesting of arrays and objects a JSON body may have (refused before it is parsed,
+#: so that no parser, validator or error message recurses through it)
 MAX_JSON_DEPTH = 64
 _STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.DOTALL)
 _NUL = re.compile(r"(?<!\\)(?:\\\\)*\\u0000")
 
 
 def json_depth(text: str) -> int:
-    """The deepest nesting of arrays and objects in JSON ``text`` (brackets inside strings do
-    not count), without recursion."""
+    """The deepest nesting of arrays and objects in JSON ``text`` (not counting strings)."""
     code = np.frombuffer(_STRING.sub("", text).encode("utf-8", "replace"), dtype=np.uint8)
     step = np.isin(code, _OPEN).astype(np.int64) - np.isin(code, _CLOSE)
     return int(np.cumsum(step).max(initial=0))
@@ -157,11 +140,9 @@ _CLOSE = np.frombuffer(b"]}", dtype=np.uint8)
 
 
 def json_body_problem(headers: dict[bytes, bytes], body: bytes) -> tuple[int, Any] | None:
-    """(status, detail) of a body sent as JSON that no route may be given: one that is not text
-    in the encoding JSON detection finds (422), one nested deeper than ``MAX_JSON_DEPTH`` (422),
-    or one holding a NUL character in a string (400: PostgreSQL's text cannot hold it, so it is
-    refused on every database and for every field alike).  None for any other body, and for
-    bodies not sent as JSON (the routes' to judge)."""
+    """(status, detail) of a body sent as JSON that no route may be given: not text (422), nested
+    deeper than ``MAX_JSON_DEPTH`` (422), or holding a NUL character in a string (400:
+    PostgreSQL's text cannot hold it, so it is refused on every database); else None."""
     kind = headers.get(b"content-type", b"").split(b";")[0].strip().lower()
     if not body or (kind != b"application/json" and not kind.endswith(b"+json")):
         return None
@@ -173,10 +154,8 @@ def json_body_problem(headers: dict[bytes, bytes], body: bytes) -> tuple[int, An
         return 422, [_invalid(f"the body is nested deeper than {MAX_JSON_DEPTH} levels of arrays and objects")]
     found = _NUL.search(text) if "\\u0000" in text else None
     if found is not None:
-        return (
-            400,
-            f"the body holds a NUL character (\\u0000) in a string at character {found.end() - 6}: text may not contain NUL",
-        )
+        where = f"in a string at character {found.end() - 6}"
+        return 400, f"the body holds a NUL character (\\u0000) {where}: text may not contain NUL"
     return None
 
 
@@ -185,13 +164,11 @@ def _invalid(msg: str) -> dict[str, Any]:
 
 
 class BodyGuard:
-    """Every write to ``/api/`` is authenticated before its body is read: no bearer token is a
-    401, a token that is neither the experimenter's nor a session's is refused (401 on session
-    paths, 403 elsewhere) without reading the body.  Bodies are then read up to a bound (a
-    session's ``SESSION_BODY_LIMIT``, the experimenter's ``EXPERIMENTER_BODY_LIMIT``); a larger
-    one, declared or streamed, is a 413.  A JSON body is then checked once for every route
-    (``json_body_problem``: text, nesting, no NUL character), as are the path and query of every
-    request to ``/api/`` (no NUL character).  Which session a token may write to is the routes' check."""
+    """Every write to ``/api/`` is authenticated before its body is read (no bearer token: 401;
+    neither the experimenter's nor a session's: 401 on session paths, 403 elsewhere), then read
+    up to the session's or the experimenter's bound (413 beyond, declared or streamed) and
+    checked once for every route (``json_body_problem``); the path and query of every request to
+    ``/api/`` hold no NUL character.  Which session a token may write to is the routes' check."""
 
     def __init__(self, app: ASGIApp):
         self.app = app
@@ -213,23 +190,19 @@ class BodyGuard:
         elif caller_for_token(state, token) is not None:
             limit = SESSION_BODY_LIMIT
         else:
-            path = scope["path"]
-            on_session = path.startswith(("/api/sessions/", "/api/deploy/sessions/"))
-            return await refuse(
-                send, 401 if on_session else 403, "unknown session token" if on_session else "wrong experimenter token"
-            )
+            if scope["path"].startswith(("/api/sessions/", "/api/deploy/sessions/")):
+                return await refuse(send, 401, "unknown session token")
+            return await refuse(send, 403, "wrong experimenter token")
         declared = headers.get(b"content-length")
         if declared is not None and (not declared.isdigit() or int(declared) > limit):
             return await refuse(send, 413, f"the request body must be at most {limit} bytes")
         try:
             body = await read_body(receive, limit)
         except TooLarge as exc:
-            return await refuse(send, status_of(exc), exc.message)
+            return await refuse(send, 413, exc.message)
         if body is None:  # the client went away
             return
         problem = json_body_problem(headers, body)
-        if problem is not None:
-            # FastAPI would answer a body it cannot decode with a 400 outside the documented
-            # refusals; it is a malformed body like any other invalid JSON: 422
+        if problem is not None:  # (FastAPI would answer an undecodable body with an undocumented 400)
             return await refuse(send, *problem)
         await self.app(scope, replaying(body, receive), send)

@@ -1,18 +1,9 @@
-"""Database schema (SQLAlchemy 2 ORM).  The schema itself is created by the Alembic
-migrations in ``migrations/``; these classes mirror it.
-
-* ``Study``    -- an experiment: task, trust model, blocks (policy + schedule), options; its
-  lifecycle (``status``: draft, open, paused, closed) and the token of
-  its panel link (``/join/<link_token>``).
-* ``Session``  -- one participant of a study (``kind = "study"``; ``role``: participant, pilot
-  or preview) or one robot run of the deploy API (``kind = "deploy"``); reached through its
-  unguessable ``token``.  Holds the live belief and the trial that is currently served.
-* ``Trial``    -- one committed trial; unique per (session, trial number).
-* ``Report``   -- a trust self-report (after a trial or a block).
-* ``Answer``   -- one item of a questionnaire answered after a trial, a block or the session.
-* ``Event``    -- a timestamped user-interface event.
-* ``PolicyBlob`` -- a policy JSON used by deploy sessions, stored once by its hash.
-"""
+"""Database schema (SQLAlchemy 2 ORM), mirroring what the Alembic migrations in ``migrations/``
+create: ``Study`` (configuration, lifecycle, panel link token), ``Session`` (a participant of a
+study, ``kind = "study"``, or a robot of the deploy API, ``kind = "deploy"``: its live belief
+and served trial, reached through its token), ``Trial`` (unique per session and number),
+``Report`` (trust self-reports), ``Answer`` (questionnaire items), ``Event`` (UI events),
+``EventBatch`` and ``PolicyBlob`` (a deploy policy, stored once by its hash)."""
 
 from __future__ import annotations
 

@@ -1,13 +1,10 @@
 """Previews: the experimenter's look at a study's participant view, run without recording.
 
-A preview session runs the same routes and session logic as a participant's, but its rows
-(session, trials, events, answers) live in a database of their own that the application owns
-(``app.state.previews``): a temporary SQLite file, made at the first preview and removed when
-the server stops.  The study's database never holds a preview's rows, so a preview cannot reach
-an export, a count or the balancing of block orders.  The worker processes of
-``trustseek serve --workers N`` share one such file (``$TRUSTSEEK_PREVIEW_DB``, made by the
-parent process), so a preview's requests may reach any of them.  At most ``MAX_PREVIEWS``
-previews are kept; older ones are forgotten (their links then answer 404).
+A preview session runs the participant's routes and logic, but its rows live in a database of
+their own (``app.state.previews``; by default a temporary SQLite file removed when the server
+stops, shared by the worker processes through ``$TRUSTSEEK_PREVIEW_DB``), so a preview never
+reaches an export, a count or the balancing of block orders.  At most ``MAX_PREVIEWS`` are
+kept; older ones are forgotten (their links then answer 404).
 """
 
 from __future__ import annotations

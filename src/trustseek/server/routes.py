@@ -1,5 +1,5 @@
 """HTTP routes: experimenter (studies, sessions, dashboard, export); the participant's are in
-``participant_routes``, the decision API's in ``deploy.routes``."""
+``participant_routes``, the decision API's in ``deploy.http``."""
 
 from __future__ import annotations
 
@@ -12,8 +12,7 @@ from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 
 from .auth import require_experimenter
-from .bundle import bundle_files, bundle_zip
-from .export import answers_frame, events_frame, sessions_frame, table_bytes, trials_frame
+from .export import answers_frame, bundle_files, bundle_zip, events_frame, sessions_frame, table_bytes, trials_frame
 from .lifecycle import create_participant, progress
 from .orm import Event, Report, Session, Study, Trial, iso, utcnow
 from .schemas import ErrorOut, SessionsIn
@@ -179,57 +178,43 @@ def dashboard(study_id: str, request: Request):
             .where(Session.study_id == st.id, Session.role != "preview")
             .order_by(Session.created_at, Session.participant)
         ).all()
-        seen = dict(
-            db.execute(
-                select(Event.session_id, func.max(Event.created_at))
-                .join(Session, Event.session_id == Session.id)
-                .where(Session.study_id == st.id)
-                .group_by(Event.session_id)
-            ).all()
-        )
-        last = {}
-        for t in db.scalars(
-            select(Trial)
-            .join(Session, Trial.session_id == Session.id)
-            .where(Session.study_id == st.id, Trial.trial == Session.trials_done)
-        ):
-            last[t.session_id] = {**trial_dict(t), "practice": bool(t.practice)}
-        reports = {}
-        for r in db.scalars(
-            select(Report)
-            .join(Session, Report.session_id == Session.id)
-            .where(Session.study_id == st.id)
-            .order_by(Report.after_trial)
-        ):
-            reports[r.session_id] = r.value
-        rows = []
+        latest = _in_study(Event, st, Event.session_id, func.max(Event.created_at)).group_by(Event.session_id)
+        seen = dict(db.execute(latest).all())
+        last_trials = db.scalars(_in_study(Trial, st).where(Trial.trial == Session.trials_done))
+        last = {t.session_id: {**trial_dict(t), "practice": bool(t.practice)} for t in last_trials}
+        reports = {r.session_id: r.value for r in db.scalars(_in_study(Report, st).order_by(Report.after_trial))}
         n_trust = len(study_config(db, st.id)["model"]["trust_levels"])
-        for s in sessions:
-            rows.append(
-                {
-                    "participant": s.participant,
-                    "session_id": s.id,
-                    "status": s.status,
-                    "link": _link(request, s),
-                    "trials_done": s.trials_done,
-                    "trials_total": total_trials(s),
-                    "practice_trials": sum(1 for t in s.plan["trials"] if t.get("practice")),
-                    "score": s.score,
-                    "belief": p_high(s.belief, n_trust),
-                    "current": pending(s),
-                    "last": last.get(s.id),
-                    "last_self_report": reports.get(s.id),
-                    "updated_at": iso(s.updated_at),
-                    "role": s.role,
-                    "panel_id": s.panel_id or _first_panel_id(s.panel),
-                    "created_at": iso(s.created_at),
-                    "started_at": iso(s.consented_at),
-                    "ended_at": iso(s.ended_at),
-                    "last_activity": iso(max(t for t in (s.updated_at, seen.get(s.id)) if t is not None)),
-                    "revoked": s.revoked_at is not None,
-                }
-            )
+        rows = [
+            {
+                "participant": s.participant,
+                "session_id": s.id,
+                "status": s.status,
+                "link": _link(request, s),
+                "trials_done": s.trials_done,
+                "trials_total": total_trials(s),
+                "practice_trials": sum(1 for t in s.plan["trials"] if t.get("practice")),
+                "score": s.score,
+                "belief": p_high(s.belief, n_trust),
+                "current": pending(s),
+                "last": last.get(s.id),
+                "last_self_report": reports.get(s.id),
+                "updated_at": iso(s.updated_at),
+                "role": s.role,
+                "panel_id": s.panel_id or _first_panel_id(s.panel),
+                "created_at": iso(s.created_at),
+                "started_at": iso(s.consented_at),
+                "ended_at": iso(s.ended_at),
+                "last_activity": iso(max(t for t in (s.updated_at, seen.get(s.id)) if t is not None)),
+                "revoked": s.revoked_at is not None,
+            }
+            for s in sessions
+        ]
         return {"study": study_summary(db, st, request), "participants": rows, "time": iso(utcnow())}
+
+
+def _in_study(table: Any, st: Study, *columns: Any) -> Any:
+    """The rows of ``table`` (or its ``columns``) that belong to the sessions of study ``st``."""
+    return select(*(columns or (table,))).join(Session, table.session_id == Session.id).where(Session.study_id == st.id)
 
 
 def _first_panel_id(panel: dict | None) -> str | None:

@@ -25,6 +25,12 @@ MAX_EVENTS_PER_POST = 5000
 STRICT = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
 
 
+class Body(BaseModel):
+    """A request body: strict types, finite numbers, no field beyond those declared."""
+
+    model_config = STRICT
+
+
 class ErrorOut(BaseModel):
     """The body of every refused request (4xx other than 422): ``detail`` is a sentence, or an
     object such as ``{"problems": [...]}`` listing every problem of a configuration."""
@@ -45,8 +51,7 @@ def finite_json(value: Any, where: str = "data") -> Any:
     return value
 
 
-class EventIn(BaseModel):
-    model_config = STRICT
+class EventIn(Body):
     t: float | None = Field(None, description="Client time, ms since the Unix epoch.")
     type: str = Field(..., min_length=1, max_length=40)
     trial: int | None = Field(None, ge=1, le=MAX_TRIAL)
@@ -61,20 +66,17 @@ class EventIn(BaseModel):
         return v
 
 
-class SessionsIn(BaseModel):
-    model_config = STRICT
+class SessionsIn(Body):
     participants: list[str] | None = Field(None, max_length=1000, description="Participant ids; default P001, P002, ...")
     count: int = Field(1, ge=1, le=1000, description="How many sessions when participants is not given.")
     pilot: bool = Field(False, description="Pilot sessions: flagged, left out of the analysis export unless asked for.")
 
 
-class StatusIn(BaseModel):
-    model_config = STRICT
+class StatusIn(Body):
     status: Literal["draft", "open", "paused", "closed"]
 
 
-class ConsentIn(BaseModel):
-    model_config = STRICT
+class ConsentIn(Body):
     agree: Literal[True]
     events: list[EventIn] = Field(default_factory=list, max_length=MAX_EVENTS_PER_POST)
     panel: dict[str, str] = Field(
@@ -96,8 +98,7 @@ class ConsentIn(BaseModel):
         return v
 
 
-class TrialIn(BaseModel):
-    model_config = STRICT
+class TrialIn(Body):
     trial: int = Field(..., ge=1, le=100000)
     submission_id: str = Field(..., min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_.:-]+$")
     human_action: Literal["intervene", "rely"]
@@ -105,27 +106,23 @@ class TrialIn(BaseModel):
     events: list[EventIn] = Field(default_factory=list, max_length=MAX_EVENTS_PER_POST)
 
 
-class ReportIn(BaseModel):
-    model_config = STRICT
+class ReportIn(Body):
     after_trial: int = Field(..., ge=1, le=100000)
     value: float = Field(..., ge=0, le=100, description="Trust self-report on a 0-100 slider.")
 
 
-class AnswersIn(BaseModel):
-    model_config = STRICT
+class AnswersIn(Body):
     questionnaire: str = Field(..., min_length=1, max_length=100)
     after_trial: int = Field(..., ge=1, le=100000)
     answers: dict[str, float] = Field(..., min_length=1, max_length=100, description="Item id -> a point of the scale.")
 
 
-class QuizAttemptIn(BaseModel):
-    model_config = STRICT
+class QuizAttemptIn(Body):
     attempt: int = Field(..., ge=1, le=10, description="The attempt's number, from 1 (a retry repeats it).")
     answers: dict[str, int] = Field(..., min_length=1, max_length=20, description="Question id -> option index.")
 
 
-class EventsIn(BaseModel):
-    model_config = STRICT
+class EventsIn(Body):
     events: list[EventIn] = Field(..., min_length=1, max_length=MAX_EVENTS_PER_POST)
     batch: str | None = Field(
         None,
@@ -144,8 +141,7 @@ def check_preset(v: Any, field: str) -> Any:
     return v
 
 
-class DeployIn(BaseModel):
-    model_config = STRICT
+class DeployIn(Body):
     label: str = Field("robot", min_length=1, max_length=200)
     task: str | dict[str, Any] = "paper"
     model: str | dict[str, Any] = "paper"
@@ -158,19 +154,17 @@ class DeployIn(BaseModel):
         return check_preset(v, info.field_name)
 
 
-class DecideIn(BaseModel):
+class DecideIn(Body):
     """A trial's complexity (the item is imposed), or, for a ``schedule`` policy, the items that
     remain (and those visible, when the policy sees a window) so that the policy picks the item."""
 
-    model_config = STRICT
     trial: int = Field(..., ge=1, le=MAX_TRIAL)
     complexity: str | None = Field(None, min_length=1, max_length=32)
     remaining: dict[str, int] | None = None
     visible: dict[str, int] | None = None
 
 
-class ObserveIn(BaseModel):
-    model_config = STRICT
+class ObserveIn(Body):
     trial: int = Field(..., ge=1, le=MAX_TRIAL)
     human_action: Literal["intervene", "rely"] | None = None
     outcome: Literal["success", "failure", "collision", "dropped", "teleoperated"] | None = None

@@ -1,19 +1,13 @@
-"""What happens in a session, independent of HTTP: serving a trial (complexity from the plan,
-action from the block's policy; in a block whose schedule policy picks the items, both from
-the policy, given the items that remain), committing a trial (outcome, experience, reward, belief
-update) and events; self-reports and questionnaires are in ``answers``.
+"""A study session, independent of HTTP: serving a trial (complexity from the plan, action from
+the block's policy; or both from a schedule policy, given the items that remain), committing it
+(outcome, experience, reward, belief update) and events; the answers are in ``answers``.
 
-Integrity rules:
-
-* a trial is committed (one database transaction with the belief update) before the next
-  trial is served;
-* the served trial is stored in the session row; its action comes from a generator seeded by
-  (session seed, trial number) and its outcome and scene layout from keys derived from the
-  session's secret (HMAC-SHA256 with a different label each), so a restarted server serves and
-  scores exactly what it would have before, and nothing the participant's page receives
-  (the scene seed included) says anything about an outcome before it is shown;
-* trial numbers are unique per session: a repeated submission returns the stored trial,
-  a conflicting one is refused.
+A trial is committed, with the belief update, before the next is served; the served trial is
+stored in the session row.  Its action comes from a generator seeded by (seed, trial), its
+outcome and scene layout from keys derived from the session's secret (HMAC-SHA256, a label
+each): a restarted server serves and scores what it would have before, and nothing the page
+receives says anything about an outcome before it is shown.  A repeated submission returns the
+stored trial; a conflicting one is refused.
 """
 
 from __future__ import annotations
@@ -23,8 +17,8 @@ import hmac
 import json
 import logging
 import secrets
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections import Counter
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -32,10 +26,8 @@ from sqlalchemy import func, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
-from ..errors import TrustseekError
 from ..model.core import TrustModel
 from ..model.task import Task
-from ..policies.scheduling import SchedulePolicy
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from .answers import questionnaire_due, quiz_due, report_due
 from .cache import caches_of
@@ -60,9 +52,8 @@ def new_id() -> str:
 
 
 def sealed(secret: str, label: str, n: int) -> int:
-    """A 128-bit number derived from the session's ``secret`` for ``label`` (``"outcome"``,
-    ``"scene"``) and trial ``n``: HMAC-SHA256, so that one label's numbers say nothing about
-    another's, and none can be computed without the secret."""
+    """A 128-bit number of the session's ``secret`` for ``label`` (``outcome``, ``scene``) and
+    trial ``n`` (HMAC-SHA256: one label's numbers say nothing of another's)."""
     digest = hmac.new(bytes.fromhex(secret), f"{label}:{n}".encode(), hashlib.sha256).digest()
     return int.from_bytes(digest[:16], "big")
 
@@ -79,49 +70,14 @@ def outcome_draws(s: Session, n: int) -> np.ndarray:
 
 
 def p_high(belief, n_trust: int | None = None) -> float | None:
-    """P(trust = the highest level) of a stored belief.  A type-aware policy's belief is over
-    (supervisor type, trust), type-major (``trustseek.pomdp.supervisor_types``): given the model's
-    ``n_trust`` levels, its trust marginal sums over the types."""
+    """P(trust = the highest level) of a stored belief; a belief over (supervisor type, trust),
+    type-major, is summed over the types given the model's ``n_trust`` levels."""
     if belief is None:
         return None
     b = np.asarray(belief, dtype=float)
     if n_trust and b.size > n_trust and b.size % n_trust == 0:
         b = b.reshape(-1, n_trust).sum(axis=0)
     return float(b[-1])
-
-
-# --------------------------------------------------------------------------- session context
-
-
-@dataclass
-class Context:
-    """A study's task and model, and each block's ``plan.PolicyPlan`` (its kind and
-    (the block's policy with ``PolicyRunner``'s step, parsed once and remembered by the
-    application); the index after the study's blocks is the practice block's."""
-
-    task: Task
-    model: TrustModel
-    plans: list[PolicyPlan]
-    load_policy: Callable[[int], dict[str, Any]]  # block -> its policy JSON, read when its plan has not parsed it
-
-    def decide(self, block: int, belief: list, seed: int, n: int, complexity: str) -> str:
-        """Block ``block``'s action at ``belief`` in trial ``n`` (drawing from ``default_rng([seed, n, 0])``)."""
-        return self.plans[block].decide(lambda: self.load_policy(block), belief, seed, n, complexity)
-
-    def update(self, block: int, belief: list, complexity: str, action: str, human: str | None, experience: str) -> list | None:
-        """The belief after a trial of block ``block``."""
-        return self.plans[block].update(lambda: self.load_policy(block), belief, complexity, action, human, experience)
-
-    def pick(self, block: int, belief, remaining: dict[str, int], visible: dict[str, int] | None) -> tuple[str, str]:
-        """(complexity, robot action) that block ``block``'s schedule policy picks for the
-        remaining (and visible) items."""
-        pol = self.plans[block].policy(lambda: self.load_policy(block))
-        if not isinstance(pol, SchedulePolicy):
-            raise TrustseekError([f"block {block} picks its items by policy but runs a {pol.kind} policy"])
-        cx = self.task.complexities
-        vis = None if visible is None else [visible.get(c, 0) for c in cx]
-        k, a = pol.choose(np.asarray(belief, dtype=float), [remaining.get(c, 0) for c in cx], vis)
-        return cx[k], ACTIONS[a]
 
 
 def study_config(db: DBSession, study_id: str) -> dict[str, Any]:
@@ -136,25 +92,20 @@ def study_config(db: DBSession, study_id: str) -> dict[str, Any]:
     return cfg
 
 
-def context(db: DBSession, s: Session) -> Context:
-    """The context of a study session (deploy sessions have their own: ``plan.Plans``)."""
+def block_plan(db: DBSession, s: Session, block: int) -> PolicyPlan:
+    """The plan of a study session's block (its policy with ``PolicyRunner``'s step, parsed once
+    and remembered by the application); the index after the study's blocks is the practice's."""
     if s.kind != "study" or s.study_id is None:
         raise Conflict("this is a deploy session; use /api/deploy")
-    study_id = s.study_id
     contexts = caches_of(db).contexts
-    ctx = contexts.get(study_id)
-    if ctx is None:
-        cfg = study_config(db, study_id)
+    plans = contexts.get(s.study_id)
+    if plans is None:
+        cfg = study_config(db, s.study_id)
         task, model = Task.from_dict(cfg["task"]), TrustModel.from_dict(cfg["model"])
-        kinds = [_block_policy(cfg, b)["kind"] for b in range(len(cfg["blocks"]) + bool(cfg.get("practice")))]
-        plans = [PolicyPlan(task, model, kind, f"study:{study_id}:{b}") for b, kind in enumerate(kinds)]
-        ctx = contexts.put(study_id, Context(task, model, plans, lambda b: _block_policy(cfg, b)))
-    return ctx
-
-
-def _block_policy(cfg: dict[str, Any], b: int) -> dict[str, Any]:
-    """Block ``b``'s policy; the index after the study's blocks is the practice block's."""
-    return cfg["blocks"][b]["policy"] if b < len(cfg["blocks"]) else cfg["practice"]["policy"]
+        policies = [*(b["policy"] for b in cfg["blocks"]), *([cfg["practice"]["policy"]] if cfg.get("practice") else [])]
+        plans = [PolicyPlan(task, model, p["kind"], f"study:{s.study_id}:{b}", partial(dict, p)) for b, p in enumerate(policies)]
+        contexts.put(s.study_id, plans)
+    return plans[block]
 
 
 def total_trials(s: Session) -> int | None:
@@ -184,14 +135,14 @@ def serve(db: DBSession, s: Session) -> dict[str, Any] | None:
     step = s.plan["trials"][n - 1]
     items = scheduled_items(db, s, step["block"]) if step["complexity"] is None else None
     if s.pending_trial != n:
-        ctx = context(db, s)
+        plan = block_plan(db, s, step["block"])
         if step.get("action"):  # a practice trial in which the robot asks, whatever the policy
             s.pending_complexity, s.pending_action = step["complexity"], step["action"]
         elif items is None:
             s.pending_complexity = step["complexity"]
-            s.pending_action = ctx.decide(step["block"], s.belief, s.seed, n, step["complexity"])
+            s.pending_action = plan.decide(s.belief, s.seed, n, step["complexity"])
         else:
-            s.pending_complexity, s.pending_action = ctx.pick(step["block"], s.belief, *items)
+            s.pending_complexity, s.pending_action = plan.pick(s.belief, *items)
         s.pending_trial = n
         s.updated_at = utcnow()
         db.commit()
@@ -260,12 +211,12 @@ def trial_experience(task: Task, c: int, action: str, human: str | None, success
     return "reliable" if success else "faulty"
 
 
-def _commit_trial(db: DBSession, s: Session, row: Trial, ctx: Context, block: int, events: list[dict] | None) -> Trial | None:
+def _commit_trial(db: DBSession, s: Session, row: Trial, plan: PolicyPlan, events: list[dict] | None) -> Trial | None:
     """Commit ``row`` with the belief update and the session's progress; None when another
     submission committed this trial first."""
-    after = ctx.update(block, s.belief, row.complexity, row.robot_action, row.human_action, row.experience)
-    row.belief, row.belief_after = p_high(s.belief, ctx.model.n_trust), p_high(after, ctx.model.n_trust)
-    row.reward = trial_reward(ctx.task, row.robot_action, row.human_action, row.experience)
+    after = plan.update(s.belief, row.complexity, row.robot_action, row.human_action, row.experience)
+    row.belief, row.belief_after = p_high(s.belief, plan.n_trust), p_high(after, plan.n_trust)
+    row.reward = trial_reward(plan.task, row.robot_action, row.human_action, row.experience)
     if row.practice:  # practice leaves the belief and the score as they were
         after, row.belief_after = None, row.belief
     db.add(row)
@@ -326,12 +277,12 @@ def submit_trial(
     if action == "ask" and human_action != "intervene":
         why = f"the robot asked for help in trial {n}: human_action must be 'intervene' (teleoperation)"
         raise NotAllowed(f"{why}, got {human_action!r}")
-    ctx = context(db, s)
     step = s.plan["trials"][n - 1]
-    c = ctx.task.complexity_index(complexity)
+    plan = block_plan(db, s, step["block"])
+    c = plan.task.complexity_index(complexity)
     if action == "autonomous" and human_action == "rely":
         r = outcome_draws(s, n)
-        success = bool(r[0] < ctx.task.success[c])
+        success = bool(r[0] < plan.task.success[c])
         outcome = "success" if success else ("collision" if r[1] < 0.5 else "dropped")
     else:
         success, outcome = None, "teleoperated"
@@ -339,18 +290,18 @@ def submit_trial(
         session_id=s.id,
         trial=n,
         block=step["block"],
-        policy=ctx.plans[step["block"]].kind,
+        policy=plan.kind,
         complexity=complexity,
         robot_action=action,
         human_action=human_action,
         outcome=outcome,
-        experience=trial_experience(ctx.task, c, action, human_action, success),
+        experience=trial_experience(plan.task, c, action, human_action, success),
         effort_ms=effort_ms,
         practice=bool(step.get("practice")),
         submission_id=submission_id,
     )
     check_event_room(db, s, events or [], n)
-    committed = _commit_trial(db, s, row, ctx, step["block"], events)
+    committed = _commit_trial(db, s, row, plan, events)
     if committed is not None:
         return committed, False
     old = _existing(db, s, n)
@@ -376,23 +327,15 @@ def check_event_room(db: DBSession, s: Session, events: list[dict], trial: int |
     """Refuse (413) events beyond the per-trial and per-session bounds."""
     if not events:
         return
-    total = db.scalar(select(func.count()).select_from(Event).where(Event.session_id == s.id)) or 0
+    query = select(Event.trial, func.count()).where(Event.session_id == s.id).group_by(Event.trial)
+    stored: dict[int | None, int] = dict(db.execute(query).all())
+    total = sum(stored.values())
     if total + len(events) > MAX_EVENTS_PER_SESSION:
         raise TooLarge(f"this session already holds {total} events; at most {MAX_EVENTS_PER_SESSION} are stored")
-    per: dict[int | None, int] = {}
-    for ev in events:
-        k = trial if trial is not None else ev.get("trial")
-        per[k] = per.get(k, 0) + 1
+    per = Counter(trial if trial is not None else ev.get("trial") for ev in events)
     for k, m in per.items():
-        have = (
-            db.scalar(
-                select(func.count())
-                .select_from(Event)
-                .where(Event.session_id == s.id, Event.trial.is_(None) if k is None else Event.trial == k)
-            )
-            or 0
-        )
-        if have + m > MAX_EVENTS_PER_TRIAL:
+        if stored.get(k, 0) + m > MAX_EVENTS_PER_TRIAL:
+            have = stored.get(k, 0)
             raise TooLarge(f"trial {k} already has {have} events; at most {MAX_EVENTS_PER_TRIAL} are stored per trial")
 
 

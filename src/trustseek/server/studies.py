@@ -1,23 +1,9 @@
-"""Study configuration: validation, policy resolution and per-participant plans.
-
-A study is created from a JSON object (see ``docs/experiments.md``)::
-
-    {"name": "pilot", "task": "paper", "model": "paper",
-     "blocks": [{"name": "agnostic", "policy": {"kind": "trust-agnostic"},
-                 "schedule": {"counts": {"low": 10, "high": 10}}},
-                {"name": "aware", "policy": {"kind": "trust-aware"},
-                 "schedule": {"trials": ["low", "high", "high"]}},
-                {"name": "scheduled", "schedule": "policy",
-                 "policy": {"kind": "schedule", "counts": {"low": 17, "high": 17}, "window": null}}],
-     "counterbalance": "rotate", "self_report": "block", "animation_speed": 1.0, "seed": 7}
-
-A block with ``"schedule": "policy"`` runs a ``schedule`` policy: its items are the policy's
-counts, and before each trial the policy picks which kind of item comes next (among the next
-``window`` items of a queue shuffled per participant, or among all remaining ones) and whether
-to ask (``docs/scheduling.md``).
-
-Policies are resolved once, at creation, into the core's policy JSON and stored with the
-study, so a study keeps behaving identically whatever the code later computes.
+"""Study configuration (``docs/experiments.md``): its request bodies and validation, policy
+resolution and per-participant plans.  A block with ``"schedule": "policy"`` runs a ``schedule``
+policy, which picks before each trial which kind of item comes next, among the next ``window``
+items of a queue shuffled per participant or among all remaining ones (``docs/scheduling.md``).
+Policies are resolved once, at creation, into the core's policy JSON stored with the study, so
+a study keeps behaving identically whatever the code later computes.
 """
 
 from __future__ import annotations
@@ -28,7 +14,7 @@ from pathlib import Path
 from typing import Any, Literal, TypeVar
 
 import numpy as np
-from pydantic import BaseModel, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from ..errors import TrustseekError
 from ..model.core import TrustModel
@@ -38,7 +24,7 @@ from ..model.task import Task
 from ..policies.scheduling import SCHEDULE
 from ..solvers import policy_from_spec
 from .cache import StudyCaches
-from .schemas import STRICT, check_preset
+from .schemas import Body, check_preset
 
 _Spec = TypeVar("_Spec", Task, TrustModel)
 
@@ -53,8 +39,7 @@ class ConfigError(TrustseekError, ValueError):
     """A study or deploy configuration is invalid; ``problems`` lists every reason."""
 
 
-class Schedule(BaseModel):
-    model_config = STRICT
+class Schedule(Body):
     counts: dict[str, int] | None = Field(None, description="Trials per complexity, shuffled per participant.")
     trials: list[str] | None = Field(None, description="A fixed list of complexities, in order.")
 
@@ -73,8 +58,7 @@ class Schedule(BaseModel):
         return self
 
 
-class BlockIn(BaseModel):
-    model_config = STRICT
+class BlockIn(Body):
     name: str | None = Field(None, max_length=100)
     policy: dict[str, Any] = Field(..., description="A policy spec ({'kind': ...}) or a full policy JSON.")
     schedule: Schedule | Literal["policy"] = Field(
@@ -82,13 +66,12 @@ class BlockIn(BaseModel):
     )
 
 
-class PracticeIn(BaseModel):
+class PracticeIn(Body):
     """Practice trials before the first block: logged (``practice`` true), left out of the
     analysis export, scored nowhere, and without effect on the trust belief.  The robot asks
     (the participant teleoperates) in the practice trials ``asks`` (numbers from 1; by default
     the last one), and follows ``policy`` in the others."""
 
-    model_config = STRICT
     trials: list[str] = Field(..., min_length=1, max_length=50, description="The practice trials' complexities, in order.")
     policy: dict[str, Any] = Field(default_factory=lambda: {"kind": "never-ask"}, description="The robot's policy in practice.")
     asks: list[int] | None = Field(
@@ -103,8 +86,7 @@ class PracticeIn(BaseModel):
         return self
 
 
-class ScaleIn(BaseModel):
-    model_config = STRICT
+class ScaleIn(Body):
     min: int = Field(1, ge=-1000, le=1000)
     max: int = Field(7, ge=-1000, le=1000)
     anchors: list[str] = Field(default_factory=list, max_length=2, description="Labels of the two ends.")
@@ -116,9 +98,8 @@ class ScaleIn(BaseModel):
         return self
 
 
-class _Asked(BaseModel):
+class _Asked(Body):
     # what a questionnaire's item and a quiz's question share
-    model_config = STRICT
     id: str = Field(..., min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
     text: str = Field(..., min_length=1, max_length=1000)
 
@@ -139,12 +120,11 @@ class QuizQuestionIn(_Asked):
         return self
 
 
-class QuizIn(BaseModel):
+class QuizIn(Body):
     """A comprehension quiz after the instructions: every question right to go on, within
     ``attempts`` attempts; then ``on_fail``: ``end`` (the session ends, with ``fail_code`` as the
     panel's code when given) or ``continue`` (the session goes on, the failure recorded)."""
 
-    model_config = STRICT
     questions: list[QuizQuestionIn] = Field(..., min_length=1, max_length=20)
     attempts: int = Field(2, ge=1, le=10)
     on_fail: Literal["end", "continue"] = "end"
@@ -157,11 +137,10 @@ class QuizIn(BaseModel):
         return self
 
 
-class QuestionnaireIn(BaseModel):
+class QuestionnaireIn(Body):
     """A questionnaire asked after every trial, after every block or at the end; either its
     items and scale, or ``template`` (a shipped questionnaire: ``questionnaire_templates()``)."""
 
-    model_config = STRICT
     name: str | None = Field(None, min_length=1, max_length=100, pattern=r"^[A-Za-z0-9_.-]+$")
     when: Literal["trial", "block", "end"] = "end"
     template: str | None = None
@@ -178,18 +157,16 @@ class QuestionnaireIn(BaseModel):
         return self
 
 
-class PanelIn(BaseModel):
+class PanelIn(Body):
     """An online panel (Prolific and the like): the completion code and the redirect shown at the
     end, and the query parameters of the participant link that carry the panel's ids."""
 
-    model_config = STRICT
     completion_code: str = Field(..., min_length=1, max_length=100)
     redirect_url: str | None = Field(None, max_length=2000, pattern=r"^https?://")
     id_params: list[str] = Field(default_factory=lambda: ["PROLIFIC_PID", "STUDY_ID", "SESSION_ID"], max_length=10)
 
 
-class StudyIn(BaseModel):
-    model_config = STRICT
+class StudyIn(Body):
     name: str = Field(..., min_length=1, max_length=200)
     task: str | dict[str, Any] = "paper"
     model: str | dict[str, Any] = "paper"
@@ -232,16 +209,6 @@ def complexity_problems(model: TrustModel, task: Task) -> list[str]:
     return [f"the model's complexities {list(model.complexities)} differ from the task's {list(task.complexities)}"]
 
 
-def _unknown(names: list[str], complexities: tuple[str, ...], where: str) -> list[str]:
-    """The problem of complexities ``names`` (of ``where``) that are not among ``complexities``."""
-    bad = sorted({c for c in names if c not in complexities})
-    return [f"{where} names unknown complexities {bad}; expected {list(complexities)}"] if bad else []
-
-
-def _names(s: Schedule) -> list[str]:
-    return list(s.counts) if s.counts is not None else list(s.trials or [])
-
-
 def load_task_spec(spec: str | dict) -> Task:
     return _from_spec("task", spec, TASK_PRESETS, Task)
 
@@ -282,43 +249,30 @@ def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dic
         model = load_model_spec(study.model)
     except ConfigError as exc:
         problems += exc.problems
+    # the other parts are checked against what is known, so that every problem is named at once
+    known = task or model
+    unknown = [] if known is None else unknown_complexities(study, tuple(known.complexities))
     if task is not None and model is not None:
         problems += complexity_problems(model, task)
     if problems or task is None or model is None:
-        # the other parts are still checked against what is known, so that every problem is named at once
-        known = task or model
-        problems += [] if known is None else unknown_complexities(study, tuple(known.complexities))
-        raise ConfigError(problems)
+        raise ConfigError(problems + unknown)
+    problems += unknown
     blocks = []
     for i, b in enumerate(study.blocks):
-        where = f"blocks[{i}]"
-        s = b.schedule
-        if not isinstance(s, Schedule):
-            try:
-                pol = resolve_policy(b.policy, model, task, f"{where}.policy", caches)
-                blocks.append({"name": b.name or f"block {i + 1}", "policy": pol, "schedule": chosen_schedule(pol, where)})
-            except ConfigError as exc:
-                problems += exc.problems
-            continue
-        problems += _unknown(_names(s), tuple(task.complexities), f"{where}.schedule")
+        where, s = f"blocks[{i}]", b.schedule
         try:
             pol = resolve_policy(b.policy, model, task, f"{where}.policy", caches)
+            if not isinstance(s, Schedule):
+                schedule = chosen_schedule(pol, where)
+            elif pol["kind"] == SCHEDULE:
+                raise ConfigError([f'{where}: a schedule policy picks the items: give the block "schedule": "{BY_POLICY}"'])
+            else:
+                schedule = {"counts": s.counts} if s.counts is not None else {"trials": s.trials}
+            blocks.append({"name": b.name or f"block {i + 1}", "policy": pol, "schedule": schedule})
         except ConfigError as exc:
             problems += exc.problems
-            continue
-        if pol["kind"] == SCHEDULE:
-            problems.append(f'{where}: a schedule policy picks the items: give the block "schedule": "{BY_POLICY}"')
-            continue
-        blocks.append(
-            {
-                "name": b.name or f"block {i + 1}",
-                "policy": pol,
-                "schedule": {"counts": s.counts} if s.counts is not None else {"trials": s.trials},
-            }
-        )
     practice = None
     if study.practice is not None:
-        problems += _unknown(study.practice.trials, tuple(task.complexities), "practice.trials")
         try:
             practice_policy = resolve_policy(study.practice.policy, model, task, "practice.policy", caches)
             asks = study.practice.asks if study.practice.asks is not None else [len(study.practice.trials)]
@@ -345,13 +299,15 @@ def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dic
 
 def unknown_complexities(study: StudyIn, complexities: tuple[str, ...]) -> list[str]:
     """The blocks' and the practice's complexities that are not among ``complexities``."""
-    problems = [
-        p
-        for i, b in enumerate(study.blocks)
-        if isinstance(b.schedule, Schedule)
-        for p in _unknown(_names(b.schedule), complexities, f"blocks[{i}].schedule")
-    ]
-    return problems + ([] if study.practice is None else _unknown(study.practice.trials, complexities, "practice.trials"))
+    named = [(f"blocks[{i}].schedule", b.schedule) for i, b in enumerate(study.blocks) if isinstance(b.schedule, Schedule)]
+    lists = [(w, list(s.counts) if s.counts is not None else list(s.trials or [])) for w, s in named]
+    lists += [] if study.practice is None else [("practice.trials", study.practice.trials)]
+    problems = []
+    for where, names in lists:
+        bad = sorted({c for c in names if c not in complexities})
+        if bad:
+            problems.append(f"{where} names unknown complexities {bad}; expected {list(complexities)}")
+    return problems
 
 
 def more_problems(body: Any, errors: list[dict[str, Any]]) -> list[str]:

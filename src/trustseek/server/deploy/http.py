@@ -1,101 +1,79 @@
-"""The decision API over HTTP: one answer per request (``answer``), served in plain ASGI in front
-of FastAPI (``DeployFront``).
+"""The decision API over HTTP: its FastAPI routes, and one answer of ``decide`` and ``observe``
+(``answer``) served in plain ASGI in front of FastAPI (``DeployFront``).
 
-Under many robots at once the server's capacity is its CPU time per request, and most of it
-went to the framework, not to the decision (measured in process, with the same ``answer``:
-0.24-0.26 ms of CPU per request through FastAPI's routing, dependency solving and pydantic,
-0.10-0.11 ms in plain ASGI).  So
-``decide`` and ``observe`` are answered by ``DeployFront``, the outermost layer of the
-application (``app.ServerApp``), whenever:
-
-* the path is ``/api/deploy/sessions/{id}/decide`` or ``.../observe``;
-* the bearer token is the token of that deploy session (the check of ``middleware.BodyGuard``
-  and the routes), and the declared body length is within ``SESSION_BODY_LIMIT`` (the body is
-  read only then);
-* the body is JSON (``Content-Type: application/json``) that the route's model, ``DecideIn`` or
-  ``ObserveIn``, accepts (validated by that model, as FastAPI would).
-
-It answers successes and the session's refusals (400, 404, 409: the server's domain errors,
-``..errors``, given their status by the one mapping, ``middleware.STATUS``) alike.  Anything else -- a malformed body,
-another token, a body above the limit -- is handed, body and all, to FastAPI, which refuses it
-(401, 403, 413, 422: ``middleware.BodyGuard`` and pydantic) or, for a body its validation takes,
-calls the same ``answer`` (``routes``).  Both return the same bytes, with the ``Server-Timing``
-header of ``middleware.RequestLog``.
+Under many robots at once the server's capacity is its CPU time per request, most of which went
+to the framework (0.24-0.26 ms per request through FastAPI's routing, dependencies and pydantic,
+0.10-0.11 ms in plain ASGI, with the same ``answer``).  So ``DeployFront``, the outermost layer
+of the application (``app.ServerApp``), answers a POST to ``/api/deploy/sessions/{id}/decide``
+or ``.../observe`` whose bearer token is that deploy session's, whose declared JSON body is
+within ``SESSION_BODY_LIMIT`` and accepted by the route's model (``DecideIn``, ``ObserveIn``).
+Anything else is handed, body and all, to FastAPI, which refuses it (401, 403, 413, 422) or
+calls the same ``answer``: both give the same bytes, with the ``Server-Timing`` header.
 
 ``answer`` runs the request first from the session's state this process knows, with one
-conditional write (``store.Known``; on PostgreSQL one statement, awaited), else in one
-transaction of ``store.DeployStore`` that reads the session.
+conditional write (``store.Known``), else in one transaction of ``store.DeployStore``.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import secrets
 import time
-from collections.abc import Callable
 from typing import Any
 
+from fastapi import APIRouter, Depends, HTTPException, Request, Response
 from pydantic import ValidationError
+from sqlalchemy import select
+from starlette.types import ASGIApp, Receive, Scope, Send
 
-from ..auth import Caller, bearer_token, caller_for_token
-from ..errors import Refused, TooLarge
-from ..middleware import (
-    SESSION_BODY_LIMIT,
-    ASGIApp,
-    Receive,
-    Scope,
-    Send,
-    read_body,
-    refusal,
-    refuse,
-    replaying,
-    status_of,
+from ...errors import TrustseekError
+from ..auth import (
+    Caller,
+    bearer,
+    bearer_token,
+    caller_for_token,
+    remember_token,
+    require_experimenter,
+    require_session,
+    session_caller,
+    token_of,
 )
-from ..schemas import DecideIn, ObserveIn
-from ..sessions import trial_dict
-from .service import deploy_decide, deploy_observe
-from .store import Known, Stale, Statements
+from ..errors import Refused, TooLarge
+from ..middleware import SESSION_BODY_LIMIT, json_bytes, read_body, refusal, refuse, replaying
+from ..orm import Session, Trial
+from ..routes import errors
+from ..schemas import DecideIn, DeployIn, ObserveIn
+from ..sessions import p_high, pending, trial_dict
+from ..studies import ConfigError, complexity_problems, load_model_spec, load_task_spec, resolve_policy
+from .service import create_deploy, deploy_decide, deploy_observe, score_problem
+from .store import Known, LiveRow, Stale, Statements
 
 log = logging.getLogger(__name__)
 
 PREFIX = "/api/deploy/sessions/"
-_JSON = (b"content-type", b"application/json")
 
 #: (trial, complexity, remaining, visible) of ``decide``; (trial, human action, outcome) of ``observe``
 Args = tuple[Any, ...]
 
 
-def _dump(out: dict[str, Any]) -> bytes:
-    return json.dumps(out, allow_nan=False, separators=(",", ":")).encode()
-
-
-def _request(plans: Any, sid: str, what: str, args: Args) -> Callable[[Statements], dict[str, Any]]:
+def _run(plans: Any, sid: str, what: str, args: Args, tx: Statements) -> dict[str, Any]:
     if what == "decide":
-        return lambda tx: deploy_decide(tx, plans, sid, *args)
-
-    def observe(tx: Statements) -> dict[str, Any]:
-        t, dup = deploy_observe(tx, plans, sid, *args)
-        return {"trial": t, "duplicate": dup, "belief": t["belief_after"]}
-
-    return observe
+        return deploy_decide(tx, plans, sid, *args)
+    t, dup = deploy_observe(tx, plans, sid, *args)
+    return {"trial": t, "duplicate": dup, "belief": t["belief_after"]}
 
 
 async def answer(state: Any, sid: str, what: str, args: Args) -> tuple[int, bytes]:
     """(status, body) of ``what`` (``decide`` or ``observe``) of deploy session ``sid`` with
-    ``args`` (``decide_args`` / ``observe_args``), the caller holding the session's token.
-
-    First from the session's state as this process knows it, with one conditional write
-    (``store.Known``: one statement on PostgreSQL, awaited on the event loop); when that cannot
-    answer, in a transaction that reads the session (``store.DeployStore.transaction``), tried
-    again once on a new connection when the database fails."""
-    store = state.deploy_store
-    run = _request(state.deploy_plans, sid, what, args)
+    ``args``, the caller holding the session's token: first from the session's state as this
+    process knows it, with one conditional write; when that cannot answer, in a transaction
+    that reads the session, tried again once on a new connection when the database fails."""
+    store, plans = state.deploy_store, state.deploy_plans
     try:
         known = Known(store)
-        out = run(known)
+        out = _run(plans, sid, what, args, known)
         if known.write is not None and await store.apply_async(known.write):
-            return 200, _dump(out)
+            return 200, json_bytes(out)
     except (Stale, Refused):
         pass  # the transaction below reads the session
     except Exception as exc:
@@ -103,7 +81,7 @@ async def answer(state: Any, sid: str, what: str, args: Args) -> tuple[int, byte
     for attempt in (1, 2):
         try:
             with store.transaction() as tx:
-                return 200, _dump(run(tx))
+                return 200, json_bytes(_run(plans, sid, what, args, tx))
         except Refused as exc:
             return refusal(exc)
         except store.IntegrityError:
@@ -114,7 +92,7 @@ async def answer(state: Any, sid: str, what: str, args: Args) -> tuple[int, byte
             if old is None:
                 raise
             t = trial_dict(old)
-            return 200, _dump({"trial": t, "duplicate": True, "belief": t["belief_after"]})
+            return 200, json_bytes({"trial": t, "duplicate": True, "belief": t["belief_after"]})
         except store.Error as exc:
             if attempt == 2:
                 raise
@@ -134,34 +112,30 @@ class DeployFront:
             return await self.app(scope, receive, send)
         t0 = time.perf_counter()
         sid, _, what = path[len(PREFIX) :].partition("/")
-        if not sid or what not in ("decide", "observe"):
-            return await self.app(scope, receive, send)
-        caller = _caller(scope, sid)
+        caller = _caller(scope, sid) if sid and what in ("decide", "observe") else None
         if caller is None:
             return await self.app(scope, receive, send)  # nothing read: the guard and the routes answer
         try:
             body = await read_body(receive, SESSION_BODY_LIMIT)  # its declared length is within the limit
         except TooLarge as exc:  # more than declared: the HTTP server refuses such a body before this
-            return await refuse(send, status_of(exc), exc.message)
+            return await refuse(send, 413, exc.message)
         if body is None:  # the client went away
             return
         args = _args(what, body)
-        if args is not None:
-            status, out = await answer(scope["app"].state, caller.id, what, args)
-            if status >= 400:
-                log.info("POST %s{session_id}/%s session_id=%s -> %d", PREFIX, what, caller.id, status)
-            timing = b"app;dur=%.3f" % ((time.perf_counter() - t0) * 1000)
-            head = [(b"content-length", b"%d" % len(out)), _JSON, (b"server-timing", timing)]
-            await send({"type": "http.response.start", "status": status, "headers": head})
-            await send({"type": "http.response.body", "body": out})
-            return
-        await self.app(scope, replaying(body, receive), send)
+        if args is None:
+            return await self.app(scope, replaying(body, receive), send)
+        status, out = await answer(scope["app"].state, caller.id, what, args)
+        if status >= 400:
+            log.info("POST %s{session_id}/%s session_id=%s -> %d", PREFIX, what, caller.id, status)
+        timing = b"app;dur=%.3f" % ((time.perf_counter() - t0) * 1000)
+        head = [(b"content-length", b"%d" % len(out)), (b"content-type", b"application/json"), (b"server-timing", timing)]
+        await send({"type": "http.response.start", "status": status, "headers": head})
+        await send({"type": "http.response.body", "body": out})
 
 
 def _args(what: str, raw: bytes) -> Args | None:
-    """The request's arguments, validated by the route's own model (``DecideIn``, ``ObserveIn``),
-    or None when that model refuses the body, or it holds a NUL character (the body guard's 400):
-    FastAPI then answers it."""
+    """The request's arguments, validated by the route's own model, or None when that model
+    refuses the body, or it holds a NUL character (the body guard's 400): FastAPI answers it."""
     if b"\\u0000" in raw:
         return None
     try:
@@ -174,31 +148,116 @@ def _args(what: str, raw: bytes) -> Args | None:
         return None
 
 
+_HEADERS = (b"authorization", b"content-type", b"content-length")
+
+
 def _caller(scope: Scope, sid: str) -> Caller | None:
-    """The deploy session ``sid`` if the request's bearer token is its token, its body is
-    declared as JSON and its declared length is within the session limit; else None."""
-    auth = kind = length = None
+    """The deploy session ``sid`` if the request's bearer token (one header of each) is its
+    token, its body is declared as JSON and its declared length is within the session limit."""
+    found: dict[bytes, bytes] = {}
     for k, v in scope.get("headers") or ():
-        if k == b"authorization":
-            if auth is not None:
+        if k in _HEADERS:
+            if k in found:
                 return None
-            auth = v
-        elif k == b"content-type":
-            if kind is not None:
-                return None
-            kind = v
-        elif k == b"content-length":
-            if length is not None:
-                return None
-            length = v
+            found[k] = v
+    auth, kind, length = (found.get(k) for k in _HEADERS)
     if auth is None or kind is None or length is None or kind.split(b";")[0].strip().lower() != b"application/json":
         return None
-    if not length.isdigit() or int(length) > SESSION_BODY_LIMIT:
-        return None
     token = bearer_token(auth.decode("latin-1"))
-    if token is None:
+    if not length.isdigit() or int(length) > SESSION_BODY_LIMIT or token is None:
         return None
     caller = caller_for_token(scope["app"].state, token)
     if caller is None or caller.kind != "deploy" or not secrets.compare_digest(caller.id.encode(), sid.encode()):
         return None
     return caller
+
+
+# --------------------------------------------------------------------------- the routes
+
+deploy = APIRouter(prefix="/api/deploy", tags=["deploy"], responses=errors(401, 403))
+
+
+@deploy.post(
+    "/sessions",
+    status_code=201,
+    summary="Open a deploy session with a model and a policy",
+    dependencies=[Depends(require_experimenter)],
+    responses=errors(400),
+)
+def open_deploy(body: DeployIn, request: Request):
+    state = request.app.state
+    try:
+        task, model = load_task_spec(body.task), load_model_spec(body.model)
+        problems = complexity_problems(model, task) or [p for p in [score_problem(task)] if p is not None]
+        if problems:
+            raise ConfigError(problems)
+        policy = resolve_policy(body.policy, model, task, caches=state.study_caches)
+        with state.db() as db:
+            s = create_deploy(db, state.deploy_plans, body.label, task, model, policy, body.seed)
+            db.commit()
+    except TrustseekError as exc:  # a policy that does not load (non-finite values)
+        raise HTTPException(400, {"problems": exc.lines()}) from None
+    # this process answers the session's first requests without reading it back
+    remember_token(state, s.token, Caller(s.id, s.kind))
+    state.deploy_store.remember(LiveRow(s.id, s.kind, s.seed, list(s.belief), s.trials_done, s.score))
+    log.info("deploy session %s opened: %s policy", s.id, policy["kind"])
+    return {
+        "session_id": s.id,
+        "token": s.token,
+        "policy": policy["kind"],
+        "belief": p_high(s.belief, model.n_trust),
+        "complexities": list(task.complexities),
+        "thresholds": policy.get("thresholds"),
+    }
+
+
+async def robot(s: Caller = Depends(require_session)) -> Caller:
+    """The deploy session named in the path, if the bearer token is its token."""
+    if s.kind != "deploy":
+        raise HTTPException(409, "this is a participant session; use /api/sessions")
+    return s
+
+
+@deploy.get("/sessions/{session_id}", summary="A deploy session's state and trials", responses=errors(409))
+def deploy_state(session_id: str, request: Request, s: Caller = Depends(robot)):
+    with request.app.state.db() as db:
+        row = db.get(Session, s.id)
+        trials = db.scalars(select(Trial).where(Trial.session_id == s.id).order_by(Trial.trial)).all()
+        return {
+            "session_id": row.id,
+            "label": row.participant,
+            "trials_done": row.trials_done,
+            "score": row.score,
+            "belief": p_high(row.belief, len(row.plan["model"]["trust_levels"])),
+            "pending": pending(row),
+            "trials": [trial_dict(t) for t in trials],
+        }
+
+
+async def _answer(request: Request, session_id: str, what: str, args: Args) -> Response:
+    """The answer of a body FastAPI validated, the token checked after it (as ``require_session``
+    and ``robot`` check it)."""
+    s = await robot(session_caller(request, token_of(await bearer(request)), session_id))
+    status, out = await answer(request.app.state, s.id, what, args)
+    return Response(out, status_code=status, media_type="application/json")
+
+
+#: what decide and observe share in the API description
+_ROBOT_ROUTE: dict[str, Any] = {"openapi_extra": {"security": [{"HTTPBearer": []}]}, "responses": errors(400, 404, 409)}
+
+
+@deploy.post(
+    "/sessions/{session_id}/decide",
+    summary="Post a trial's complexity (or, for a schedule policy, the remaining items), get the robot action",
+    **_ROBOT_ROUTE,
+)
+async def decide(session_id: str, body: DecideIn, request: Request):
+    # async on purpose: a short transaction run on the event loop, without a hop to a worker thread
+    return await _answer(request, session_id, "decide", (body.trial, body.complexity, body.remaining, body.visible))
+
+
+@deploy.post(
+    "/sessions/{session_id}/observe", summary="Post the observed human action and outcome; updates the belief", **_ROBOT_ROUTE
+)
+async def observe(session_id: str, body: ObserveIn, request: Request):
+    return await _answer(request, session_id, "observe", (body.trial, body.human_action, body.outcome))

@@ -1,11 +1,8 @@
 """The decision API's sessions, independent of HTTP: a robot opens a deploy session with a task,
 a model and a policy (``create_deploy``); then, trial by trial, it posts the complexity and gets
-the action (``deploy_decide``), and posts what the human did and the outcome
-(``deploy_observe``), which commits the trial and updates the belief with ``PolicyRunner``'s step.
-
-Each runs with the statements of ``store`` (a transaction of ``store.DeployStore``, or
-``store.Known``: a conditional write from the state this process knows) and the application's
-``plan.Plans``; refusals are the server's domain errors (``server.errors``).
+the action (``deploy_decide``), and posts what the human did and the outcome (``deploy_observe``),
+which commits the trial and updates the belief with ``PolicyRunner``'s step.  Each runs with the
+statements of ``store`` (a transaction, or ``store.Known``) and the application's ``plan.Plans``.
 """
 
 from __future__ import annotations
@@ -14,18 +11,16 @@ import math
 import sys
 from typing import Any
 
-import numpy as np
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
 from ...model.core import TrustModel
 from ...model.task import Task
-from ...policies import PolicyError
 from ...policies.scheduling import SchedulePolicy
-from ...vocab import ACTIONS, HUMAN_ACTIONS
+from ...vocab import HUMAN_ACTIONS
 from ..errors import Conflict, NotAllowed, NotFound
 from ..orm import PolicyBlob, Session, utcnow
-from ..plan import Plans, PolicyPlan, policy_sha256
+from ..plan import Plans, policy_sha256
 from ..schemas import MAX_TRIAL
 from ..sessions import new_id, new_token, p_high, trial_dict, trial_experience, trial_reward
 from .store import LiveRow, Statements
@@ -52,8 +47,8 @@ def create_deploy(
     A policy that does not load raises its ``ModelError``."""
     sha = policy_sha256(policy)
     content = {"task": task.to_dict(), "model": model.to_dict(), "policy_sha256": sha, "policy_kind": policy["kind"]}
-    plan = plans.shared(content, lambda: PolicyPlan(task, model, policy["kind"], sha))
-    pol = plan.policy(lambda: policy)  # sessions with the same plan share one parsed copy
+    plan = plans.shared(content, lambda: policy, task, model)  # sessions with the same plan share one parsed copy
+    pol = plan.policy()
     pm = getattr(pol, "model", None) or model
     if db.get(PolicyBlob, sha) is None:
         # the stored form: the policy's own to_dict() (its loaders match keys by name, so rows
@@ -86,34 +81,6 @@ def _live(store: Statements, session_id: str) -> LiveRow:
     if row is None:
         raise NotFound("no such session")
     return row
-
-
-def _counts(task: Task, counts: dict[str, int] | None, what: str) -> tuple[int, ...] | None:
-    if counts is None:
-        return None
-    unknown = sorted(set(counts) - set(task.complexities))
-    if unknown or any(not isinstance(v, int) or v < 0 for v in counts.values()):
-        raise NotAllowed(f"{what} must map complexities {list(task.complexities)} to non-negative numbers, got {counts!r}")
-    return tuple(int(counts.get(c, 0)) for c in task.complexities)
-
-
-def _scheduled(pol: Any, task: Task, belief, complexity: str | None, remaining, visible) -> tuple[str, str]:
-    """(complexity, action) of a schedule policy: the policy's pick among the remaining (visible)
-    items, or the action for an imposed item in that state."""
-    if not isinstance(pol, SchedulePolicy):
-        raise NotAllowed(f"remaining and visible items are for a schedule policy; this session runs a {pol.kind} policy")
-    rem = _counts(task, remaining, "remaining")
-    if rem is None:
-        raise NotAllowed("a schedule policy needs the remaining items: post remaining (per complexity)")
-    vis = _counts(task, visible, "visible")
-    try:
-        if complexity is None:
-            k, a = pol.choose(belief, rem, vis)
-            return task.complexities[k], ACTIONS[a]
-        bound = pol.at(rem, vis)
-        return complexity, ACTIONS[bound.action(belief, task.complexity_index(complexity))]
-    except (PolicyError, KeyError) as exc:
-        raise NotAllowed("; ".join(exc.problems) if isinstance(exc, PolicyError) else str(exc)) from None
 
 
 def _decision(n: int, complexity: Any, action: Any, belief: Any, committed: bool = False) -> dict[str, Any]:
@@ -153,15 +120,11 @@ def deploy_decide(
         if complexity is not None and s.pending_complexity != complexity:
             raise Conflict(f"trial {n} was already decided for complexity {s.pending_complexity!r}, not {complexity!r}")
         return _decision(n, s.pending_complexity, s.pending_action, p_high(s.belief, plan.n_trust))
-    load = lambda: store.policy(plan.sha)  # noqa: E731
-    if remaining is None and plan.kind == SchedulePolicy.kind:
-        raise NotAllowed("a schedule policy needs the remaining items: post remaining (per complexity)")
-    if remaining is not None or visible is not None:
-        pol = plan.policy(load)
-        complexity, action = _scheduled(pol, plan.task, np.asarray(s.belief, dtype=float), complexity, remaining, visible)
+    if remaining is not None or visible is not None or plan.kind == SchedulePolicy.kind:
+        complexity, action = plan.pick(s.belief, remaining, visible, complexity)
     else:
         assert complexity is not None
-        action = plan.decide(load, s.belief, s.seed, n, complexity)
+        action = plan.decide(s.belief, s.seed, n, complexity)
     store.decided(session_id, n, complexity, action, utcnow())
     return _decision(n, complexity, action, p_high(s.belief, plan.n_trust))
 
@@ -186,37 +149,25 @@ def deploy_observe(
     assert action is not None and complexity is not None  # stored together with pending_trial
     plan = plans.of(store, session_id)
     task = plan.task
-    c = task.complexity_index(complexity)
-    if action == "ask":
-        if human_action not in (None, "intervene"):
-            raise NotAllowed(
-                f"the robot asked in trial {n}: human_action must be 'intervene' (teleoperation) or omitted, "
-                f"got {human_action!r}",
-            )
-        if outcome not in (None, "teleoperated"):
-            raise NotAllowed(
-                f"the robot asked in trial {n}: the human teleoperated, so outcome must be 'teleoperated' or omitted, "
-                f"got {outcome!r}",
-            )
-        human_action, success, outcome = "intervene", None, "teleoperated"
-    else:
-        if human_action not in HUMAN_ACTIONS:
-            raise NotAllowed(f"human_action must be one of {list(HUMAN_ACTIONS)}, got {human_action!r}")
-        if human_action == "intervene":
-            if outcome not in (None, "teleoperated"):
-                raise NotAllowed(
-                    f"the human intervened in trial {n} and teleoperated: outcome must be 'teleoperated' or omitted, "
-                    f"got {outcome!r}",
-                )
-            success, outcome = None, "teleoperated"
+    if action == "ask" and human_action not in (None, "intervene"):
+        why = f"the robot asked in trial {n}: human_action must be 'intervene' (teleoperation) or omitted"
+        raise NotAllowed(f"{why}, got {human_action!r}")
+    if action != "ask" and human_action not in HUMAN_ACTIONS:
+        raise NotAllowed(f"human_action must be one of {list(HUMAN_ACTIONS)}, got {human_action!r}")
+    teleoperated = action == "ask" or human_action == "intervene"
+    if outcome not in ((None, "teleoperated") if teleoperated else ("success", "failure", "collision", "dropped")):
+        if action == "ask":
+            why = f"the robot asked in trial {n}: the human teleoperated, so outcome must be 'teleoperated' or omitted"
+        elif teleoperated:
+            why = f"the human intervened in trial {n} and teleoperated: outcome must be 'teleoperated' or omitted"
         else:
-            if outcome not in ("success", "failure", "collision", "dropped"):
-                raise NotAllowed(
-                    f"outcome must be 'success' or 'failure' (or 'collision'/'dropped') when the human relied, got {outcome!r}",
-                )
-            success = outcome == "success"
-    experience = trial_experience(task, c, action, human_action, success)
-    after = plan.update(lambda: store.policy(plan.sha), s.belief, complexity, action, human_action, experience)
+            why = "outcome must be 'success' or 'failure' (or 'collision'/'dropped') when the human relied"
+        raise NotAllowed(f"{why}, got {outcome!r}")
+    if teleoperated:
+        human_action, outcome = "intervene", "teleoperated"
+    success = None if teleoperated else outcome == "success"
+    experience = trial_experience(task, task.complexity_index(complexity), action, human_action, success)
+    after = plan.update(s.belief, complexity, action, human_action, experience)
     t: dict[str, Any] = {
         "trial": n,
         "block": 0,
