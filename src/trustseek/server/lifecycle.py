@@ -25,7 +25,7 @@ from ..model.core import TrustModel
 from .answers import ended
 from .errors import Conflict, NotAllowed
 from .orm import Session, Study, utcnow
-from .sessions import new_id, new_token, study_config
+from .sessions import new_session, study_config
 from .studies import participant_plan
 
 STATUSES = ("draft", "open", "paused", "closed")
@@ -92,9 +92,8 @@ def create_participant(
     seed = int(np.random.default_rng().integers(0, 2**31 - 1))
     plan = participant_plan(cfg, balanced_index(db, study), seed)
     model = TrustModel.from_dict(cfg["model"])
-    s = Session(
-        id=new_id(),
-        token=new_token(),
+    s = new_session(
+        model.initial,
         kind="study",
         study_id=study.id,
         participant=label,
@@ -102,9 +101,6 @@ def create_participant(
         secret=secrets.token_hex(16),
         plan=plan,
         status="new",
-        belief=[float(x) for x in model.initial],
-        trials_done=0,
-        score=0.0,
         role=role,
         panel_id=panel_id,
         panel=panel or None,

@@ -8,7 +8,6 @@ and served trial, reached through its token), ``Trial`` (unique per session and 
 from __future__ import annotations
 
 from datetime import UTC, datetime
-from typing import NamedTuple
 
 from sqlalchemy import JSON, Boolean, Float, ForeignKey, Index, Integer, String, Text, UniqueConstraint
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
@@ -121,23 +120,9 @@ class Trial(_SessionRow, Base):
     submission_id: Mapped[str] = mapped_column(String(64))
 
 
-class TrialRow(NamedTuple):
-    """A committed trial's columns as the API answers them (``sessions.trial_dict``), and as the
-    decision API's store reads them (``deploy.store``)."""
-
-    trial: int
-    block: int
-    policy: str
-    complexity: str
-    robot_action: str
-    human_action: str | None
-    outcome: str
-    experience: str
-    reward: float
-    belief: float | None
-    belief_after: float | None
-    effort_ms: float | None
-    submission_id: str
+#: a committed trial's columns as the API answers them (``sessions.trial_dict``), and as the
+#: decision API's store reads them (``deploy.store``)
+TRIAL_FIELDS = tuple(c.name for c in Trial.__table__.c if c.name not in ("id", "session_id", "practice", "created_at"))
 
 
 class Report(_SessionRow, Base):

@@ -32,7 +32,7 @@ from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from .answers import questionnaire_due, quiz_due, report_due
 from .cache import caches_of
 from .errors import Conflict, NotAllowed, NotFound, TooLarge
-from .orm import Event, EventBatch, Session, Study, Trial, TrialRow, utcnow
+from .orm import TRIAL_FIELDS, Event, EventBatch, Session, Study, Trial, utcnow
 from .plan import PolicyPlan
 from .studies import block_items
 
@@ -43,12 +43,14 @@ MAX_EVENTS_PER_TRIAL = 2000
 MAX_EVENTS_PER_SESSION = 50_000
 
 
-def new_token() -> str:
-    return secrets.token_urlsafe(32)
-
-
 def new_id() -> str:
     return secrets.token_hex(8)
+
+
+def new_session(initial: Any, **columns: Any) -> Session:
+    """A new session row: a fresh id and token, belief ``initial``, no trial done, score 0."""
+    belief = [float(x) for x in initial]
+    return Session(id=new_id(), token=secrets.token_urlsafe(32), belief=belief, trials_done=0, score=0.0, **columns)
 
 
 def sealed(secret: str, label: str, n: int) -> int:
@@ -184,9 +186,9 @@ def served(s: Session, n: int, items: tuple[dict[str, int], dict[str, int] | Non
     return out
 
 
-def trial_dict(t: Trial | TrialRow) -> dict[str, Any]:
-    """A committed trial (a row, or the decision API's ``TrialRow``) as the API answers it."""
-    return {k: getattr(t, k) for k in TrialRow._fields}
+def trial_dict(t: Any) -> dict[str, Any]:
+    """A committed trial (a ``Trial`` row, or the decision API's ``store.committed``) as the API answers it."""
+    return {k: getattr(t, k) for k in TRIAL_FIELDS}
 
 
 #: what a participant's page learns of a committed trial: never the belief or the experience

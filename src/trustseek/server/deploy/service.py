@@ -22,7 +22,7 @@ from ..errors import Conflict, NotAllowed, NotFound
 from ..orm import PolicyBlob, Session, utcnow
 from ..plan import Plans, policy_sha256
 from ..schemas import MAX_TRIAL
-from ..sessions import new_id, new_token, p_high, trial_dict, trial_experience, trial_reward
+from ..sessions import new_session, p_high, trial_dict, trial_experience, trial_reward
 from .store import LiveRow, Statements
 
 
@@ -58,19 +58,7 @@ def create_deploy(
             db.flush()
         except IntegrityError:  # stored concurrently by another request
             db.rollback()
-    s = Session(
-        id=new_id(),
-        token=new_token(),
-        kind="deploy",
-        study_id=None,
-        participant=label,
-        seed=seed,
-        plan=content,
-        status="running",
-        belief=[float(x) for x in pm.initial],
-        trials_done=0,
-        score=0.0,
-    )
+    s = new_session(pm.initial, kind="deploy", study_id=None, participant=label, seed=seed, plan=content, status="running")
     db.add(s)
     plans.by_session.put(s.id, plan)
     return s

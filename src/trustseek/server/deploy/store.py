@@ -21,13 +21,14 @@ import re
 import threading
 from collections.abc import Iterator
 from datetime import datetime
+from types import SimpleNamespace
 from typing import Any, NamedTuple
 
 from sqlalchemy.engine import Engine
 
 from ...errors import TrustseekError
 from ..cache import Bounded
-from ..orm import Trial, TrialRow
+from ..orm import TRIAL_FIELDS, Trial
 
 
 class LiveRow(NamedTuple):
@@ -44,13 +45,13 @@ class LiveRow(NamedTuple):
     pending_action: str | None = None
 
 
-_INSERTED = ("session_id", *TrialRow._fields, "practice", "created_at")
+_INSERTED = ("session_id", *TRIAL_FIELDS, "practice", "created_at")
 
 # written with :name parameters (PostgreSQL's rewritten to %(name)s); the writes change the row
 # only if it still holds what they were computed from (see ``Known``)
 _SQL = {
     "live": f"SELECT {', '.join(LiveRow._fields)} FROM sessions WHERE id = :sid{{lock}}",
-    "committed": f"SELECT {', '.join(TrialRow._fields)} FROM trials WHERE session_id = :sid AND trial = :n",
+    "committed": f"SELECT {', '.join(TRIAL_FIELDS)} FROM trials WHERE session_id = :sid AND trial = :n",
     "plan": "SELECT plan FROM sessions WHERE id = :sid",
     "policy": "SELECT policy FROM policies WHERE sha256 = :sha",
     "insert": f"INSERT INTO trials ({', '.join(_INSERTED)}) VALUES ({', '.join(':' + c for c in _INSERTED)})",
@@ -216,9 +217,10 @@ class DeployStore:
         self._seen = LiveRow(*row)._replace(belief=_json_value(row[3]))
         return self._seen
 
-    def committed(self, sid: str, n: int) -> TrialRow | None:
+    def committed(self, sid: str, n: int) -> Any:
+        """Trial ``n`` of the session (its ``TRIAL_FIELDS`` as attributes), or None."""
         row = self._one("committed", sid=sid, n=n)
-        return None if row is None else TrialRow(*row)
+        return None if row is None else SimpleNamespace(**dict(zip(TRIAL_FIELDS, row, strict=True)))
 
     def plan(self, sid: str) -> dict[str, Any] | None:
         row = self._one("plan", sid=sid)
