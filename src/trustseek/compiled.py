@@ -1,22 +1,17 @@
 """numba's ``njit``, applied on a function's first call; or the plain Python function where
-numba cannot be imported.
+numba cannot be imported (a declared dependency; the fallback keeps the compiled modules and their
+numpy or Python paths usable on a platform without a numba wheel; ``AVAILABLE`` says which).
 
-Decorating imports nothing: numba (half a second to import) and the compiled code (loaded from
-numba's cache, or compiled on a first use after installation) are paid for by the first call
-of a compiled function, so a program that takes only numpy paths (small data) never imports
-numba.  On that first call every function decorated so far is handed to numba at once, and the
-module attributes that named the stand-ins name numba's functions from then on (compiled code
-calls compiled code: numba reads those attributes when it compiles a caller).
+Decorating imports nothing: numba (half a second to import) and the compiled code (from numba's
+cache, or compiled on a first use after installation) are paid for by the first call of a compiled
+function, so a program that takes only numpy paths never imports numba.  That call hands every
+function decorated so far to numba and points the module attributes that named the stand-ins at
+numba's functions (numba reads them when it compiles a caller).
 
-numba is a declared dependency; the fallback keeps the compiled modules importable (and their
-numpy or Python paths usable) on a platform without a numba wheel.  ``AVAILABLE`` says which.
-
-:data:`prange` is ``range`` until numba is loaded and numba's ``prange`` from then on (a module
-that imports it sees the switch as it sees the compiled functions').  A function with a
-``prange`` loop is compiled with ``parallel=True``: its loop runs on numba's threads, in numba's
-``workqueue`` layer unless ``NUMBA_THREADING_LAYER`` names another (not GNU OpenMP, which hangs
-a process forked after using it); that layer must not be entered by two threads at once, so
-such a call is made under :data:`PARALLEL_LOCK`.
+:data:`prange` is ``range`` until numba is loaded, numba's ``prange`` from then on.  A function with
+a ``prange`` loop is compiled with ``parallel=True`` and runs on numba's ``workqueue`` threading layer
+unless ``NUMBA_THREADING_LAYER`` names another (not GNU OpenMP, which hangs a process forked after
+using it); the layer must not be entered by two threads at once: such calls hold :data:`PARALLEL_LOCK`.
 """
 
 from __future__ import annotations
@@ -181,15 +176,12 @@ def sources_stamp() -> bytes:
 
 
 def _stamp_our_caches() -> None:
-    """Key every cached compiled function of the package on :func:`sources_stamp`.
+    """Key every cached compiled function of the package on :func:`sources_stamp`, so that a change
+    to any module of :data:`COMPILED_SOURCES` (an update, an edit) compiles them all anew: numba keys
+    one on its own file alone, and its cache would keep the old code of what it calls (other numbers,
+    or a crash).  numba's own locators still find the cache (``NUMBA_CACHE_DIR``, beside the source,
+    or the user's cache)."""
 
-    numba keys a cached function on its own file's content alone, and a compiled function holds
-    the compiled code it calls: after a change to another module (an update, a ``git pull``, an
-    edit), its cached code stays the old one, and can give other numbers or crash (numba's
-    documented limit).  Here a change to any of the modules compiled code is made of compiles
-    them all anew.  numba's own locators find the cache (``NUMBA_CACHE_DIR``, beside the source,
-    or the user's cache); only the stamp they compare is this one.
-    """
     from numba.core import caching
 
     stamp = sources_stamp()

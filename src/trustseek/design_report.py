@@ -12,10 +12,9 @@ from typing import Any
 from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
 from .design.sweep import participants_needed
-from .plots.design import plot_ask_search, plot_power, plot_regret
 from .version import __version__
 
-__all__ = ["write_design_report"]
+__all__ = ["iv", "write_design_report"]
 
 TEMPLATES = Path(__file__).parent / "templates"
 
@@ -28,16 +27,18 @@ def _pct(v: Any) -> str:
     return "–" if v is None else f"{100 * v:.2f} %"
 
 
-def _iv(d: dict[str, Any]) -> str:
+def iv(d: dict[str, Any], spec: str = ".3f", scale: float = 1.0, unit: str = "") -> str:
+    """``mean [lo, hi]`` (the mean alone without an interval, – without a mean), each ``scale`` times, as ``spec``."""
     if d.get("mean") is None:
         return "–"
-    if d.get("lo") is None:
-        return f"{d['mean']:.3f}"
-    return f"{d['mean']:.3f} [{d['lo']:.3f}, {d['hi']:.3f}]"
+    mean = f"{scale * d['mean']:{spec}}{unit}"
+    return mean if d.get("lo") is None else f"{mean} [{scale * d['lo']:{spec}}, {scale * d['hi']:{spec}}]"
 
 
 def write_design_report(summary: dict[str, Any], out: str | Path, search: dict[str, Any] | None = None) -> dict[str, Path]:
     """Write ``out``/design.html (figures embedded), the PNGs and design.json."""
+    from .plots.design import plot_ask_search, plot_power, plot_regret
+
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     figures: list[tuple[str, Callable[..., Any], dict[str, Any], str]] = [
@@ -59,7 +60,7 @@ def write_design_report(summary: dict[str, Any], out: str | Path, search: dict[s
     (out / "design.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
     env = Environment(loader=FileSystemLoader(str(TEMPLATES)), autoescape=True, undefined=StrictUndefined)
     html = env.get_template("design.html.j2").render(
-        s=summary, search=search, figures=embedded, fmt=_fmt, pct=_pct, iv=_iv, needed=participants_needed, version=__version__
+        s=summary, search=search, figures=embedded, fmt=_fmt, pct=_pct, iv=iv, needed=participants_needed, version=__version__
     )
     (out / "design.html").write_text(html, encoding="utf-8")
     return {"html": out / "design.html", "json": out / "design.json", "dir": out}

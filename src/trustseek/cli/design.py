@@ -217,16 +217,12 @@ def _run(cfg, jobs: int, scheduler: str | None, quiet: bool, search_grid: tuple[
     return result, search
 
 
-def _iv(d: dict[str, Any], scale: float = 1.0, unit: str = "") -> str:
-    if d.get("mean") is None:
-        return "–"
-    if d.get("lo") is None:
-        return f"{scale * d['mean']:.3g}{unit}"
-    return escape(f"{scale * d['mean']:.3g}{unit} [{scale * d['lo']:.3g}, {scale * d['hi']:.3g}]")
-
-
 def _print(s: dict[str, Any], search: dict[str, Any] | None) -> None:
     from ..design import participants_needed
+    from ..design_report import iv
+
+    def _iv(d: dict[str, Any], scale: float = 1.0, unit: str = "") -> str:
+        return escape(iv(d, ".3g", scale, unit))
 
     console.print(
         f"V* = {s['optimal']['value']:.4f} (optimal threshold {s['optimal']['threshold']:.4f}); "
