@@ -240,17 +240,15 @@ class Task(JsonFile):
         if not isinstance(rw, Mapping):
             problems.append(f"rewards must be an object, got {rw!r}")
         else:
-            unknown_keys(rw, Rewards().to_dict().keys(), "rewards", problems)
-            for k in Rewards().to_dict():
-                if "rewards" in d and k not in rw:
-                    problems.append(f"rewards[{k}] is missing")
+            keys = Rewards().to_dict()
+            unknown_keys(rw, keys, "rewards", problems)
+            problems.extend(f"rewards[{k}] is missing" for k in keys if "rewards" in d and k not in rw)
             vals = {}
             for k, v in rw.items():
-                if k in Rewards().to_dict():
-                    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-                        problems.append(f"rewards[{k}] = {v!r} must be a finite number")
-                    else:
-                        vals[k] = float(v)
+                if k in keys and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v))):
+                    problems.append(f"rewards[{k}] = {v!r} must be a finite number")
+                elif k in keys:
+                    vals[k] = float(v)
             rewards = Rewards(**vals)
         disc = d.get("discount", Task.discount)
         if isinstance(disc, bool) or not isinstance(disc, (int, float)) or not (0.0 <= float(disc) < 1.0):

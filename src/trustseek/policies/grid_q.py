@@ -7,7 +7,8 @@ solution and how the paper's policy (Fig. 7) is drawn.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -21,27 +22,24 @@ from .regions import Interval, ask_intervals
 TABLE_POINTS = 4001  # points of a Q table made from another policy's Q-function
 
 
+@dataclass(eq=False, repr=False)
 class TrustAwarePolicy(Policy):
     """Greedy in the solved Q(b, C, a) on a belief grid over P(trust = high) (two trust levels);
     ties go to ``autonomous``."""
 
     kind = "trust-aware"
+    grid: np.ndarray
+    q: np.ndarray
+    model: TrustModel = field()  # field(): required, not the base class default
+    complexities: tuple[str, ...] = field()
+    belief_update: str = field()
+    info: dict[str, Any] = field(default_factory=dict)
 
-    def __init__(
-        self,
-        grid: np.ndarray,
-        q: np.ndarray,
-        model: TrustModel,
-        complexities: Sequence[str],
-        belief_update: str,
-        info: Mapping[str, Any] | None = None,
-    ):
-        self.grid = np.asarray(grid, dtype=float)
-        self.q = np.asarray(q, dtype=float)
-        self.model = model
-        self.complexities = tuple(complexities)
-        self.belief_update = belief_update
-        self.info = dict(info or {})
+    def __post_init__(self) -> None:
+        self.grid = np.asarray(self.grid, dtype=float)
+        self.q = np.asarray(self.q, dtype=float)
+        self.complexities = tuple(self.complexities)
+        self.info = dict(self.info or {})
         if self.q.shape != (len(self.grid), len(self.complexities), 2):
             raise ModelError([f"q has shape {self.q.shape}, expected {(len(self.grid), len(self.complexities), 2)}"])
 
@@ -118,4 +116,4 @@ class TrustAwarePolicy(Policy):
                 [f"q must map each complexity {cx} and action {list(ACTIONS)} to a list of numbers"], source
             ) from None
         grid = np.linspace(0.0, 1.0, arr.shape[0])
-        return cls(grid, arr, model, cx, bu, d.get("info"))
+        return cls(grid, arr, model, tuple(cx), bu, d.get("info") or {})

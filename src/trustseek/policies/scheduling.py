@@ -16,7 +16,7 @@ keeps the belief *and* the remaining items, ``choose()`` before a trial, ``obser
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -51,32 +51,28 @@ class PieceQ:
         return out if dtype is None else out.astype(dtype)
 
 
+@dataclass(eq=False, repr=False)
 class SchedulePolicy(Policy):
     """Greedy in Q(x, state, k, a) over the visible complexities k and the actions a (ties go to
     the lower complexity index, then to ``autonomous``)."""
 
     kind = SCHEDULE
+    q: Mapping[State, Mapping[int, PieceQ]]
+    model: TrustModel = field()  # field(): required, not the base class default
+    complexities: tuple[str, ...] = field()
+    belief_update: str = field()
+    counts: Sequence[int]
+    window: int | None
+    info: dict[str, Any] = field(default_factory=dict)
+    state: State | None = None
 
-    def __init__(
-        self,
-        q: Mapping[State, Mapping[int, PieceQ]],
-        model: TrustModel,
-        complexities: Sequence[str],
-        belief_update: str,
-        counts: Sequence[int],
-        window: int | None,
-        info: Mapping[str, Any] | None = None,
-        state: State | None = None,
-    ):
-        self.q = dict(q)
-        self.model = model
-        self.complexities = tuple(complexities)
-        self.belief_update = belief_update
-        self.counts = tuple(int(k) for k in counts)
-        self.window = window
-        self.info = dict(info or {})
+    def __post_init__(self) -> None:
+        self.q = dict(self.q)
+        self.complexities = tuple(self.complexities)
+        self.counts = tuple(int(k) for k in self.counts)
+        self.info = dict(self.info or {})
         starts = [s for s in self.q if s[0] == self.counts]
-        self.state = state if state is not None else (starts[0] if len(starts) == 1 else None)
+        self.state = self.state if self.state is not None else (starts[0] if len(starts) == 1 else None)
 
     # -- the scheduling interface --------------------------------------------------------
     def _state(self, remaining: Sequence[int], visible: Sequence[int] | None) -> State:
@@ -153,11 +149,7 @@ class SchedulePolicy(Policy):
     # -- bound to one state: a plain Policy -------------------------------------------------
     def at(self, remaining: Sequence[int], visible: Sequence[int] | None = None) -> SchedulePolicy:
         """This policy bound to a state: ``actions`` then decides for an item of a given complexity."""
-        assert self.model is not None and self.belief_update is not None
-        return SchedulePolicy(
-            self.q, self.model, self.complexities, self.belief_update, self.counts, self.window, self.info,
-            self._state(remaining, visible),
-        )  # fmt: skip
+        return replace(self, state=self._state(remaining, visible))
 
     def _bound(self) -> State:
         if self.state is None:
@@ -266,7 +258,7 @@ class SchedulePolicy(Policy):
             raise ModelError(
                 ["states must map 'remaining/visible' to, per visible complexity, breakpoints x and Q per action"], source
             ) from None
-        return cls(q, model, cx, bu, counts, window, d.get("info"))
+        return cls(q, model, tuple(cx), bu, counts, window, d.get("info") or {})
 
 
 def _high(belief: Any, model: TrustModel | None) -> float:
