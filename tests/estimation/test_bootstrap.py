@@ -90,9 +90,9 @@ def test_enough_resamples_give_no_warning_about_their_number():
     from trustseek.estimation.bootstrap import Intervals
 
     z = {"initial": np.zeros(2, dtype=bool)}
-    enough = Intervals({}, MIN_REPLICATES, 0.95, z, 0, {})
+    enough = Intervals({}, MIN_REPLICATES, 0.95, z, 0)
     assert enough.notes() == []
-    few = Intervals({}, MIN_REPLICATES - 1, 0.95, z, 0, {})
+    few = Intervals({}, MIN_REPLICATES - 1, 0.95, z, 0)
     assert "too few" in few.notes()[0]
 
 

@@ -317,7 +317,6 @@ class Intervals:
     level: float
     widened: dict[str, np.ndarray]
     other_maximum: int
-    draws: dict[str, np.ndarray] = field(repr=False)
     likelihood: dict[str, np.ndarray] = field(default_factory=dict)  # cells with the likelihood-ratio interval at a boundary
 
     @property
@@ -395,7 +394,6 @@ def bootstrap(
         level,
         split_cells(widened, shapes),
         int(sum(r[1] for r in results)),
-        split_cells(flat, shapes),
         split_cells(at_boundary, shapes),
     )
 

@@ -284,6 +284,15 @@ def _first(e, g0, g1, z, alpha, c_first):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _rescaled(z, g0, g1, w00, w01, w10, w11):
+    """Once ``z`` is above 2**RESCALE: ``z`` times 2**-RESCALE, the backward pair (g0, g1) and the
+    step's four products times 2**RESCALE; else all as given."""
+    if z > HUGE:
+        return z * TINY, g0 * HUGE, g1 * HUGE, w00 * HUGE, w01 * HUGE, w10 * HUGE, w11 * HUGE
+    return z, g0, g1, w00, w01, w10, w11
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _backward_codes(n, A, code, L, c_first, c_step, alpha, marks, s):
     """The backward pass after :func:`_forward_codes`: each step's posterior (t - 1, t) added to
     ``c_step[code[n, t]]`` (row-major 2 x 2), the first trial's to ``c_first`` (:func:`_first`).
@@ -307,14 +316,7 @@ def _backward_codes(n, A, code, L, c_first, c_step, alpha, marks, s):
             z *= HUGE
             j -= 1
             mark = marks[j] if j >= 0 else -1
-        if z > HUGE:
-            g0 *= HUGE
-            g1 *= HUGE
-            w00 *= HUGE
-            w01 *= HUGE
-            w10 *= HUGE
-            w11 *= HUGE
-            z *= TINY
+        z, g0, g1, w00, w01, w10, w11 = _rescaled(z, g0, g1, w00, w01, w10, w11)
         p0 = alpha[t - 1, 0] * z
         p1 = alpha[t - 1, 1] * z
         c_step[c, 0] += p0 * w00
@@ -428,22 +430,8 @@ def _backward_pair(n, m, A, code, L, first, second):
             y *= HUGE
             jb -= 1
             mb = marks2[jb] if jb >= 0 else -1
-        if z > HUGE:
-            g0 *= HUGE
-            g1 *= HUGE
-            w00 *= HUGE
-            w01 *= HUGE
-            w10 *= HUGE
-            w11 *= HUGE
-            z *= TINY
-        if y > HUGE:
-            h0 *= HUGE
-            h1 *= HUGE
-            q00 *= HUGE
-            q01 *= HUGE
-            q10 *= HUGE
-            q11 *= HUGE
-            y *= TINY
+        z, g0, g1, w00, w01, w10, w11 = _rescaled(z, g0, g1, w00, w01, w10, w11)
+        y, h0, h1, q00, q01, q10, q11 = _rescaled(y, h0, h1, q00, q01, q10, q11)
         p0 = alpha[t - 1, 0] * z
         p1 = alpha[t - 1, 1] * z
         r0 = alpha2[t - 1, 0] * y
