@@ -1,14 +1,16 @@
 """Supervisor types: the mixture IOHMM's E-step, its EM, M = 1 against the pooled fit, recovery
 of the paper + conservative population, empty types, shared parts, and the choice of M."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.special import logsumexp
 
 from trustseek.estimation import encode, fit_iohmm, fit_trust_model, kernels, paper_spec
-from trustseek.estimation.em import run_em
+from trustseek.estimation.em import CAPPED, run_em
 from trustseek.estimation.estep import Workspace
-from trustseek.estimation.mixture import bootstrap_types, decode_types, fit_mixture, fit_types, mixture_loglik
+from trustseek.estimation.mixture import bootstrap_types, decode_types, fit_mixture, fit_types, mixture_loglik, mixture_warnings
 from trustseek.estimation.mixture_em import EMPTY, MixtureParams, MixtureStructure, MixtureWorkspace, parse_differ
 from trustseek.estimation.options import FitOptions
 from trustseek.estimation.selection import select_types, type_selection_warnings
@@ -58,6 +60,20 @@ def test_one_type_is_the_pooled_fit():
     np.testing.assert_allclose(one.params.type_params(0).emission, pooled.params.emission, atol=1e-10)
     np.testing.assert_allclose(one.params.type_params(0).transition, pooled.params.transition, atol=1e-10)
     assert one.n_params == pooled.n_params and one.bic == pytest.approx(pooled.bic, abs=1e-6)
+
+
+def test_the_cap_is_a_warning_when_the_best_start_stopped_there_as_in_the_pooled_fit(mixture_fit):
+    """A mixture warned of any start stopped at the cap ("1 of 4 starts stopped at the E-step cap"),
+    though only the best start's end decides the estimates: the pooled fit's rule and words."""
+    assert mixture_fit.runs[mixture_fit.best].converged
+    runs = list(mixture_fit.runs)
+    other = next(i for i in range(len(runs)) if i != mixture_fit.best)
+    runs[other] = replace(runs[other], converged=False, ended=CAPPED)
+    assert mixture_warnings(replace(mixture_fit, runs=runs)) == mixture_warnings(mixture_fit)
+    assert not any("cap" in w for w in mixture_warnings(mixture_fit))
+    runs[mixture_fit.best] = replace(runs[mixture_fit.best], converged=False, ended=CAPPED)
+    (cap,) = [w for w in mixture_warnings(replace(mixture_fit, runs=runs)) if "cap" in w]
+    assert cap.startswith("the best restart stopped at the cap on E-steps")
 
 
 def test_fit_types_with_one_type_is_fit_trust_model():

@@ -49,13 +49,7 @@ def _warnings(fit: EMFit, events: dict[str, np.ndarray]) -> list[str]:
     """A line when the best start stopped at the cap on E-steps, not converged; and one per
     estimated row with fewer than :data:`MIN_EVENTS` expected events behind it."""
     s, spec = fit.structure, fit.spec
-    best = fit.runs[fit.best]
-    out = []
-    if not best.converged:
-        out.append(
-            f"the best restart stopped at the cap on E-steps ({best.iterations}) before it converged: its "
-            "estimates may still move (raise --max-iter, or loosen --tol)"
-        )
+    out = fit.cap_warnings()
     for name, table, inputs in (("emission", s.em, spec.emission_inputs), ("transition", s.tr, spec.transition_inputs)):
         ev = events[name]
         for g in range(table.G):

@@ -61,6 +61,17 @@ class EMFit:
     def bic(self) -> float:
         return self.n_params * math.log(max(self.n_observations, 1)) - 2 * self.loglik
 
+    def cap_warnings(self) -> list[str]:
+        """A line when the best start stopped at the cap on E-steps before it converged (another
+        start's cap leaves the estimates as they are)."""
+        best = self.runs[self.best]
+        if best.converged:
+            return []
+        return [
+            f"the best restart stopped at the cap on E-steps ({best.iterations}) before it converged: its "
+            "estimates may still move (raise --max-iter, or loosen --tol)"
+        ]
+
     @property
     def restart_logliks(self) -> list[float]:
         return [r.loglik for r in self.runs]

@@ -34,7 +34,7 @@ from .bootstrap import (
     replicate,
     split_cells,
 )
-from .em import STATIONARY, RunResult, converge_runs, run_em
+from .em import RunResult, converge_runs, run_em
 from .estep import EStep
 from .fit import never_estimated
 from .iohmm import EMFit, _describe, fit_iohmm, posteriors
@@ -226,10 +226,7 @@ def mixture_warnings(fit: MixtureFit) -> list[str]:
     for name, w in zip(fit.names, fit.weights, strict=True):
         if w * n < EMPTY:
             out.append(f"{name} is empty ({w * n:.2g} expected participants): fewer types fit these data as well")
-    capped = [i for i, r in enumerate(fit.runs) if r.ended != STATIONARY]
-    if capped:
-        out.append(f"{len(capped)} of {len(fit.runs)} starts stopped at the E-step cap before a stationary point")
-    return out
+    return out + fit.cap_warnings()
 
 
 def general_types(spec: IOHMMSpec) -> bool:
