@@ -552,9 +552,9 @@ REFUSED_UP_FRONT = [
     (["design", "--tol", "nan"], "--tol must be a finite number > 0, got nan"),
     (["design", "--search-ask-low", ""], "--search-ask-low: expected at least one value"),
     (["design", "--scheduler", ""], "--scheduler"),  # without dask: that it needs it
-    (["design", "--jobs", "1000000000"], "less than or equal to 256"),
-    (["reproduce", "--jobs", "1000000000", "-o", "{dir}/report"], "less than or equal to 256"),
-    (["fit", LOG, "--jobs", "1000000000"], "less than or equal to 256"),
+    (["design", "--jobs", "1000000000"], "1000000000 is not in the range 1<=x<=256"),
+    (["reproduce", "--jobs", "1000000000", "-o", "{dir}/report"], "1000000000 is not in the range 1<=x<=256"),
+    (["fit", LOG, "--jobs", "1000000000"], "1000000000 is not in the range 1<=x<=256"),
     (["select", LOG, "--folds", "10"], "--folds 10 is more than the 9 participants of the log"),
     (["select-types", LOG, "--folds", "1000000000"], "--folds 1000000000 is more than the 9 participants"),
     (["fit", LOG, "--plots", "{dir}/missing/figures"], "--plots {dir}/missing/figures: the folder {dir}/missing does not exist"),

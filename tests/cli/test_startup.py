@@ -18,12 +18,10 @@ from trustseek.cli import _lazy, app
 
 HEAVY = ("numba", "scipy", "pandas", "matplotlib", "fastapi", "sqlalchemy")
 
-#: what each program leaves in sys.modules, printed as JSON (a fresh interpreter each)
-LOADED = f"import json, sys; print(json.dumps(sorted(m for m in {HEAVY!r} if m in sys.modules)))"
 
-
-def heavy_modules_after(code: str) -> list[str]:
-    out = subprocess.run([sys.executable, "-c", f"{code}\n{LOADED}"], capture_output=True, text=True, timeout=120, check=True)
+def heavy_modules_after(code: str, heavy: tuple[str, ...] = HEAVY) -> list[str]:
+    loaded = f"import json, sys; print(json.dumps(sorted(m for m in {heavy!r} if m in sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", f"{code}\n{loaded}"], capture_output=True, text=True, timeout=120, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -41,6 +39,18 @@ def heavy_modules_after(code: str) -> list[str]:
 )
 def test_starting_loads_no_heavy_package(code):
     assert heavy_modules_after(code) == []
+
+
+@pytest.mark.parametrize("command", ["fit", "check", "select-types"])
+def test_a_command_s_help_loads_no_heavy_package_nor_pydantic(command):
+    """typer 0.29 checks every option through pydantic, 0.1 s more on every command's start
+    (``benchmarks/bench_startup.py``); pyproject.toml keeps typer below it."""
+    code = (
+        "import contextlib, io, sys\nfrom trustseek.cli import main\n"
+        f"sys.argv = ['trustseek', {command!r}, '--help']\n"
+        "with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()):\n    main()"
+    )
+    assert heavy_modules_after(code, (*HEAVY, "pydantic")) == []
 
 
 def test_the_check_can_fail():
