@@ -14,7 +14,17 @@ from __future__ import annotations
 import numpy as np
 
 from ..compiled import AVAILABLE as AVAILABLE  # callers read kernels.AVAILABLE
-from ..compiled import njit
+from ..compiled import loaded, njit
+
+
+def worth_calling() -> bool:
+    """Whether the compiled loops run: numba is installed and this process has loaded it already
+    (a fit or :func:`~trustseek.compiled.load` did).  They give the numpy loop's simulation to the
+    last bit and save only its per-call overhead (on a large run both draw about 30 M trials/s),
+    so a process that has not loaded numba, a one-off ``trustseek simulate`` among them, does not
+    pay its load (0.3-0.5 s) or, in a fresh environment, its compile."""
+    return AVAILABLE and loaded()
+
 
 THRESHOLD = 0  # ask when x < bounds[C]
 FIXED = 1  # ask with probability p_ask[C]

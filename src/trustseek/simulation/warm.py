@@ -13,6 +13,7 @@ import time
 
 import numpy as np
 
+from ..compiled import load
 from ..model.presets import paper_model, paper_task
 from ..policies import ComplexityPolicy, TrustAwarePolicy
 from .designs import crossover
@@ -22,6 +23,7 @@ from .engine import simulate
 def warm() -> float:
     """Run every compiled path once; the seconds it took."""
     t = time.perf_counter()
+    load()  # the kernels run once numba is loaded
     model, task = paper_model(), paper_task()
     grid = np.linspace(0.0, 1.0, 11)
     q = np.zeros((len(grid), 2, 2))
