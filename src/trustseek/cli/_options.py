@@ -18,6 +18,7 @@ import typer
 from rich.markup import escape
 
 from ..errors import TrustseekError
+from ..estimation.options import MAX_JOBS
 from ..vocab import check_belief_update
 from ._app import err_console
 
@@ -30,6 +31,14 @@ ModelOpt = typer.Option("paper", "--model", "-m", help="Trust model: a preset na
 TaskOpt = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file.")
 JsonOpt = typer.Option(False, "--json", help="Print one JSON object instead of tables.")
 PrintJsonOpt = typer.Option(False, "--json", help="Print JSON.")
+SelectionJobsOpt = typer.Option(
+    None,
+    "--jobs",
+    "-j",
+    min=1,
+    max=MAX_JOBS,
+    help="Processes: the fits of each number compared, side by side (default: all cores); numbers do not depend on it.",
+)
 QuietOpt = typer.Option(False, "--quiet", "-q", help="No progress bar on stderr (there is none when stderr is not a terminal).")
 #: the inputs of the commands that fit as ``fit`` does
 AsForFitTransitionsOpt = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit).")

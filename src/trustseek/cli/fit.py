@@ -31,6 +31,7 @@ from ._options import (
     PrintJsonOpt,
     QuietOpt,
     RatingPerOpt,
+    SelectionJobsOpt,
     log_options,
     widen_option,
 )
@@ -402,6 +403,7 @@ def select(
     transitions_on: str | None = AsForFitTransitionsOpt,
     emissions_on: str | None = AsForFitEmissionsOpt,
     widen: bool = widen_option(8, "1..--max-levels"),
+    jobs: int | None = SelectionJobsOpt,
     as_json: bool = PrintJsonOpt,
     reading: LogReading = FROM_OPTIONS,
     quiet: bool = QuietOpt,
@@ -418,6 +420,7 @@ def select(
             transition_inputs=tr,
             emission_inputs=em,
             widen=widen,
+            jobs=jobs,
         )
     warnings = _fit().selection_warnings(rows)
     warnings[:0] = widened_note(rows, "levels", max_levels)

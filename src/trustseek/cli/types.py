@@ -24,7 +24,7 @@ from ._app import (
     progress_task,
     write_atomic,
 )
-from ._options import FROM_OPTIONS, LogReading, PrintJsonOpt, QuietOpt, log_options, widen_option
+from ._options import FROM_OPTIONS, LogReading, PrintJsonOpt, QuietOpt, SelectionJobsOpt, log_options, widen_option
 from ._output import check_plots_folder, fit_summary, print_selection, print_warnings
 from ._reading import load_for_decoding, read_for_types, widened_note, write_log
 from .fit import POSTERIOR_SUFFIXES, read_with_inputs
@@ -239,7 +239,7 @@ def select_types(
     ),
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
-    jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, max=MAX_JOBS, help="Threads per fit."),
+    jobs: int | None = SelectionJobsOpt,
     widen: bool = widen_option(12, "the numbers given"),
     as_json: bool = PrintJsonOpt,
     reading: LogReading = FROM_OPTIONS,
@@ -255,12 +255,13 @@ def select_types(
             frame,
             types=values,
             folds=folds,
-            options=FitOptions(restarts=restarts, seed=seed, tol=tol, n_jobs=jobs),
+            options=FitOptions(restarts=restarts, seed=seed, tol=tol, n_jobs=1),
             differ=differ,
             progress=lambda what, d, t: update(d, t, what),
             transition_inputs=tr,
             emission_inputs=em,
             widen=widen,
+            jobs=jobs,
         )
     warnings = widened_note(rows, "types", max(values)) + selection.type_selection_warnings(rows)
     weights = {"weights": lambda r: ", ".join(f"{w:.2f}" for w in r["weights"])}

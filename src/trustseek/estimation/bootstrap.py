@@ -15,7 +15,6 @@ import copy
 import logging
 import os
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any
@@ -28,7 +27,7 @@ from .em import run_em
 from .estep import Workspace
 from .iohmm import fit_iohmm
 from .mixture_em import MixtureStructure
-from .options import FitOptions, check_jobs
+from .options import FitOptions, in_processes
 from .ratings import make_structure
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec, Params
@@ -410,20 +409,7 @@ def replicate(
     child of ``options.seed`` (whatever the number of processes), over ``options.n_jobs`` processes
     (all cores by default; in this process for one); ``done(b, finished)`` is called as each finishes."""
     jobs = [
-        _Replicate(seqs, ch, options, refit, compiled)
+        _Replicate(seqs, ch, options, refit, compiled).run
         for ch in np.random.SeedSequence([options.seed_number, 1]).spawn(replicates)
     ]
-    results: dict[int, Any] = {}
-    n_jobs = options.n_jobs or os.cpu_count() or 1
-    if n_jobs <= 1 or len(jobs) == 1:
-        for i, job in enumerate(jobs):
-            results[i] = job.run()
-            done(i, len(results))
-        return [results[i] for i in range(replicates)]
-    check_jobs(n_jobs)
-    with ProcessPoolExecutor(max_workers=min(n_jobs, len(jobs))) as ex:
-        futures = {ex.submit(job.run): i for i, job in enumerate(jobs)}
-        for f in as_completed(futures):
-            results[futures[f]] = f.result()
-            done(futures[f], len(results))
-    return [results[i] for i in range(replicates)]
+    return in_processes(jobs, options.n_jobs, done)

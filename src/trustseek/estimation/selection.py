@@ -24,7 +24,7 @@ from .estep import Workspace
 from .iohmm import EMFit, fit_iohmm
 from .mixture import MixtureFit, check_types, fit_mixture, split_type_starts
 from .mixture_em import MixtureWorkspace
-from .options import FitOptions
+from .options import FitOptions, in_processes
 from .sequences import Sequences, deal_folds, encode
 from .spec import FitError, IOHMMSpec, Params
 from .structure import Structure
@@ -181,35 +181,59 @@ def select_levels(
     progress: Callable[[str, int, int], None] | None = None,
     splits: int = SPLITS_PER_LEVEL,
     widen: bool = False,
+    jobs: int | None = 1,
     **spec_options: Any,
 ) -> list[dict[str, Any]]:
     """Compare numbers of trust levels: BIC on all data and k-fold participant-held-out log-likelihood
-    (:class:`HeldOutComparison`; with ``widen`` one more level while a best is the largest compared, up
-    to :data:`MAX_LEVELS`).  ``spec_options`` adjust the ``paper`` preset, or name inputs of a general
+    (:class:`HeldOutComparison`, over ``jobs`` processes; with ``widen`` one more level while a best
+    is the largest compared, up to :data:`MAX_LEVELS`).  ``spec_options`` adjust the ``paper`` preset, or name inputs of a general
     model (:func:`~.trust_iohmm.inputs_spec`).  Each fit is :func:`fit_with_moves` with ``splits``
     split starts per level, merge-and-split moves from the :data:`MOVE_SOURCES` best maxima on all
     participants, :data:`FOLD_MOVE_SOURCES` in the training folds."""
     base = inputs_spec(frame, "paper", prior, **spec_options)
     seqs = encode(frame, base)
-    previous: dict[int, EMFit] = {}  # per slot (-1: all participants, f: fold f's training participants)
-
-    def one_fit(data: Sequences, K: int, slot: int, key: list[int]) -> EMFit:
-        fit = fit_with_moves(
-            data,
-            base.with_levels(level_names(K)),
-            previous[slot].params if slot in previous else None,
-            replace(options, seed=np.random.SeedSequence(key)),
-            splits=splits,
-            sources_per_round=MOVE_SOURCES if slot < 0 else FOLD_MOVE_SOURCES,
-        )
-        previous[slot] = fit
-        return fit
-
-    comparison = HeldOutComparison("levels", folds, options.seed_number, MAX_LEVELS if widen else 0, progress)
-    rows = comparison.run(seqs, levels, one_fit, heldout_loglik)
+    cap = MAX_LEVELS if widen else 0
+    comparison = HeldOutComparison("levels", folds, options.seed_number, cap, progress, jobs)
+    rows = comparison.run(seqs, levels, _LevelFit(base, replace(options, n_jobs=1), splits), heldout_loglik)
     for w in selection_warnings(rows):
         log.warning("%s", w)
     return rows
+
+
+@dataclass(frozen=True)
+class _LevelFit:
+    """A slot's fit with ``K`` levels (:func:`fit_with_moves`), split from its fit with one level
+    fewer (``before``); the next number's ``before`` is this fit."""
+
+    base: IOHMMSpec
+    options: FitOptions
+    splits: int
+
+    def __call__(self, data: Sequences, K: int, slot: int, key: list[int], before: EMFit | None) -> tuple[EMFit, EMFit]:
+        fit = fit_with_moves(
+            data,
+            self.base.with_levels(level_names(K)),
+            before.params if before is not None else None,
+            replace(self.options, seed=np.random.SeedSequence(key)),
+            splits=self.splits,
+            sources_per_round=MOVE_SOURCES if slot < 0 else FOLD_MOVE_SOURCES,
+        )
+        return fit, fit
+
+
+@dataclass(frozen=True)
+class _SlotFit:
+    """One fit of a comparison, as a call without arguments (for :func:`~.options.in_processes`)."""
+
+    fit: Callable[[Sequences, int, int, list[int], Any], tuple[Any, Any]]
+    data: Sequences
+    n: int
+    slot: int
+    key: list[int]
+    before: Any
+
+    def __call__(self) -> tuple[Any, Any]:
+        return self.fit(self.data, self.n, self.slot, self.key, self.before)
 
 
 @dataclass(frozen=True)
@@ -217,46 +241,51 @@ class HeldOutComparison:
     """Numbers of levels or types (``key``) compared by BIC on all participants and by the
     log-likelihood of ``folds`` held-out folds of participants (seeded by ``seed``); with
     ``cap`` > 0 widened while a best is the largest compared (:func:`widening`).
-    ``progress(label, done, total)`` is called after every fit."""
+    ``progress(label, done, total)`` is called after every fit.  The fits of a number run over
+    ``jobs`` processes (None: all cores), with the same results."""
 
     key: str
     folds: int
     seed: int
     cap: int = 0
     progress: Callable[[str, int, int], None] | None = None
+    jobs: int | None = 1
 
     def run(
         self,
         seqs: Sequences,
         values: Sequence[int],
-        fit: Callable[[Sequences, int, int, list[int]], Any],
+        fit: Callable[[Sequences, int, int, list[int], Any], tuple[Any, Any]],
         heldout: Callable[[Sequences, Any], float],
         extra: Callable[[Any], dict[str, Any]] | None = None,
     ) -> list[dict[str, Any]]:
-        """One row per number compared: ``fit(data, n, slot, seed key)`` on all participants (slot
-        -1) and on each fold's training participants (slot f), scored by ``heldout(test, fit)``;
-        ``extra(full fit)`` adds entries to the row.  The rows' choices are marked."""
+        """One row per number compared: ``fit(data, n, slot, seed key, before)`` on all participants
+        (slot -1) and on each fold's training participants (slot f), scored by ``heldout(test,
+        fit)``, returns the fit and the slot's ``before`` for the next number (None at first): the
+        fits of a number are independent of each other.  ``extra(full fit)`` adds entries to the
+        row.  The rows' choices are marked."""
         N = seqs.n_participants
         folds = self.folds
         fold_of = deal_folds(N, folds, [self.seed, 2])  # refuses more folds than participants
+        data = [seqs] + [seqs.subset(np.flatnonzero(fold_of != f)) for f in range(folds)]
         asked = list(values)
         total, done = len(asked) * (folds + 1), 0
         rows: list[dict[str, Any]] = []
+        before: list[Any] = [None] * (folds + 1)
         for n in widening(asked, rows, self.key, self.cap):
             total += 0 if n in asked else folds + 1
             label = f"{n} {self.key}"
-            full = fit(seqs, n, -1, [self.seed, 3, n])
-            done += 1
-            if self.progress:
-                self.progress(label, done, total)
-            per_fold = []
-            for f in range(folds):
-                train, test = np.flatnonzero(fold_of != f), np.flatnonzero(fold_of == f)
-                per_fold.append(heldout(seqs.subset(test), fit(seqs.subset(train), n, f, [self.seed, 4, n, f])))
-                done += 1
+            keys = [[self.seed, 3, n]] + [[self.seed, 4, n, f] for f in range(folds)]
+            calls = [_SlotFit(fit, data[i], n, i - 1, keys[i], before[i]) for i in range(folds + 1)]
+
+            def finished(_i: int, count: int, label: str = label, start: int = done, total: int = total) -> None:
                 if self.progress:
-                    self.progress(label, done, total)
-            rows.append(self._row(n, full, per_fold, extra, n not in asked))
+                    self.progress(label, start + count, total)
+
+            fits, before = map(list, zip(*in_processes(calls, self.jobs, finished), strict=True))
+            done += folds + 1
+            per_fold = [heldout(seqs.subset(np.flatnonzero(fold_of == f)), fits[f + 1]) for f in range(folds)]
+            rows.append(self._row(n, fits[0], per_fold, extra, n not in asked))
         mark_choices(rows, self.key)
         return rows
 
@@ -401,6 +430,7 @@ def select_types(
     prior: float = 0.0,
     progress: Callable[[str, int, int], None] | None = None,
     widen: bool = False,
+    jobs: int | None = 1,
     **spec_options: Any,
 ) -> list[dict[str, Any]]:
     """Compare numbers of supervisor types (``types``, e.g. 1..4) as :func:`select_levels` compares levels
@@ -411,42 +441,50 @@ def select_types(
     spec = inputs_spec(frame, "paper", prior, **spec_options)
     seqs = encode(frame, spec)
     check_types(types[-1], seqs)
-    previous: dict[int, MixtureFit] = {}  # per slot (-1: all participants, f: fold f's training participants)
-    pooled: dict[int, MixtureFit] = {}  # the one-type fit of each slot
-
-    def one_fit(data: Sequences, M: int, slot: int, key: list[int]) -> MixtureFit:
-        ss = np.random.SeedSequence(key)
-        before = previous.get(slot)
-        init = []
-        if before is not None and before.n_types == M - 1:
-            init = split_type_starts(before.params, np.random.default_rng(ss.generate_state(4)), before.structure)
-            # the split starts live in the previous fit's structure: re-projected by the new one in fit_mixture
-        fit = fit_mixture(
-            data,
-            spec,
-            M,
-            replace(options, seed=ss),
-            differ=differ,
-            pooled=pooled[slot].params.type_params(0) if slot in pooled else None,
-            init=init,
-        )
-        previous[slot] = fit
-        if M == 1:
-            pooled[slot] = fit
-        return fit
 
     def extra(full: MixtureFit) -> dict[str, Any]:
         return {"weights": full.weights.tolist(), "empty_types": full.empty_types}
 
     cap = min(MAX_TYPES, seqs.n_participants) if widen else 0
-    comparison = HeldOutComparison("types", folds, options.seed_number, cap, progress)
-    rows = comparison.run(seqs, types, one_fit, heldout_loglik, extra)
+    comparison = HeldOutComparison("types", folds, options.seed_number, cap, progress, jobs)
+    rows = comparison.run(seqs, types, _TypeFit(spec, replace(options, n_jobs=1), differ), heldout_loglik, extra)
     for w in type_selection_warnings(rows):
         log.warning("%s", w)
     return rows
 
 
 MAX_TYPES = 12  # the most supervisor types select-types compares (the command's --types bound)
+
+
+@dataclass(frozen=True)
+class _TypeFit:
+    """A slot's fit of ``M`` types (:func:`~.mixture.fit_mixture`), from its fit with one type fewer,
+    each type split, and its one-type fit perturbed; ``before``: (the fit with one type fewer, the
+    one-type fit)."""
+
+    spec: IOHMMSpec
+    options: FitOptions
+    differ: str | Sequence[str]
+
+    def __call__(
+        self, data: Sequences, M: int, slot: int, key: list[int], before: tuple[MixtureFit, MixtureFit | None] | None
+    ) -> tuple[MixtureFit, tuple[MixtureFit, MixtureFit | None]]:
+        ss = np.random.SeedSequence(key)
+        previous, pooled = before if before is not None else (None, None)
+        init = []
+        if previous is not None and previous.n_types == M - 1:
+            init = split_type_starts(previous.params, np.random.default_rng(ss.generate_state(4)), previous.structure)
+            # the split starts live in the previous fit's structure: re-projected by the new one in fit_mixture
+        fit = fit_mixture(
+            data,
+            self.spec,
+            M,
+            replace(self.options, seed=ss),
+            differ=self.differ,
+            pooled=pooled.params.type_params(0) if pooled is not None else None,
+            init=init,
+        )
+        return fit, (fit, fit if M == 1 else pooled)
 
 
 def type_selection_warnings(rows: Sequence[dict[str, Any]]) -> list[str]:
