@@ -186,10 +186,11 @@ def select_levels(
 ) -> list[dict[str, Any]]:
     """Compare numbers of trust levels: BIC on all data and k-fold participant-held-out log-likelihood
     (:class:`HeldOutComparison`, over ``jobs`` processes; with ``widen`` one more level while a best
-    is the largest compared, up to :data:`MAX_LEVELS`).  ``spec_options`` adjust the ``paper`` preset, or name inputs of a general
-    model (:func:`~.trust_iohmm.inputs_spec`).  Each fit is :func:`fit_with_moves` with ``splits``
-    split starts per level, merge-and-split moves from the :data:`MOVE_SOURCES` best maxima on all
-    participants, :data:`FOLD_MOVE_SOURCES` in the training folds."""
+    is the largest compared, up to :data:`MAX_LEVELS`).  ``spec_options`` adjust the ``paper``
+    preset, or name inputs of a general model (:func:`~.trust_iohmm.inputs_spec`).  Each fit is
+    :func:`fit_with_moves` with ``splits`` split starts per level, merge-and-split moves from the
+    :data:`MOVE_SOURCES` best maxima on all participants, :data:`FOLD_MOVE_SOURCES` in the training
+    folds."""
     base = inputs_spec(frame, "paper", prior, **spec_options)
     seqs = encode(frame, base)
     cap = MAX_LEVELS if widen else 0
@@ -203,22 +204,22 @@ def select_levels(
 @dataclass(frozen=True)
 class _LevelFit:
     """A slot's fit with ``K`` levels (:func:`fit_with_moves`), split from its fit with one level
-    fewer (``before``); the next number's ``before`` is this fit."""
+    fewer (``before``: its tables); the next number's ``before`` is this fit's."""
 
     base: IOHMMSpec
     options: FitOptions
     splits: int
 
-    def __call__(self, data: Sequences, K: int, slot: int, key: list[int], before: EMFit | None) -> tuple[EMFit, EMFit]:
+    def __call__(self, data: Sequences, K: int, slot: int, key: list[int], before: Params | None) -> tuple[EMFit, Params]:
         fit = fit_with_moves(
             data,
             self.base.with_levels(level_names(K)),
-            before.params if before is not None else None,
+            before,
             replace(self.options, seed=np.random.SeedSequence(key)),
             splits=self.splits,
             sources_per_round=MOVE_SOURCES if slot < 0 else FOLD_MOVE_SOURCES,
         )
-        return fit, fit
+        return fit, fit.params
 
 
 @dataclass(frozen=True)
