@@ -15,6 +15,7 @@ import logging
 import math
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -223,21 +224,6 @@ class _LevelFit:
 
 
 @dataclass(frozen=True)
-class _SlotFit:
-    """One fit of a comparison, as a call without arguments (for :func:`~.options.in_processes`)."""
-
-    fit: Callable[[Sequences, int, int, list[int], Any], tuple[Any, Any]]
-    data: Sequences
-    n: int
-    slot: int
-    key: list[int]
-    before: Any
-
-    def __call__(self) -> tuple[Any, Any]:
-        return self.fit(self.data, self.n, self.slot, self.key, self.before)
-
-
-@dataclass(frozen=True)
 class HeldOutComparison:
     """Numbers of levels or types (``key``) compared by BIC on all participants and by the
     log-likelihood of ``folds`` held-out folds of participants (seeded by ``seed``); with
@@ -277,7 +263,7 @@ class HeldOutComparison:
             total += 0 if n in asked else folds + 1
             label = f"{n} {self.key}"
             keys = [[self.seed, 3, n]] + [[self.seed, 4, n, f] for f in range(folds)]
-            calls = [_SlotFit(fit, data[i], n, i - 1, keys[i], before[i]) for i in range(folds + 1)]
+            calls = [partial(fit, data[i], n, i - 1, keys[i], before[i]) for i in range(folds + 1)]
 
             def finished(_i: int, count: int, label: str = label, start: int = done, total: int = total) -> None:
                 if self.progress:
