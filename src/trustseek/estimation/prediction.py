@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -23,7 +24,7 @@ from ..model.core import TrustModel
 from ..vocab import HUMAN_ACTIONS
 from .baselines import BASELINES, BaselineFit, Features, baseline_predictions, features, fit_baselines, per_row
 from .iohmm import fit_iohmm
-from .options import DEFAULTS, FitOptions
+from .options import DEFAULTS, FitOptions, in_processes
 from .sequences import Sequences, deal_folds, encode
 from .spec import FitError, IOHMMSpec, Params
 from .trust_iohmm import from_model, preset_spec
@@ -377,8 +378,9 @@ def predict_heldout(
     """One-step-ahead predictions of held-out participants: ``folds`` folds of participants
     (seeded by ``options.seed``); each is predicted by a model fitted to the others (``options``
     as for :func:`~.fit.fit_trust_model`, the restarts seeded as a fit with that seed would be) and
-    scored against baselines estimated on the same training folds.  ``progress(done, folds)``
-    is called after each fold."""
+    scored against baselines estimated on the same training folds.  The folds' fits run side by
+    side over ``options.n_jobs`` processes (each on one thread; the same numbers).
+    ``progress(done, folds)`` is called after each fold."""
     seed = options.seed_number
     spec = preset_spec(preset, frame, prior=prior, **spec_options)
     seqs = encode(frame, spec)
@@ -386,16 +388,24 @@ def predict_heldout(
     T, N = seqs.y.shape
     p_model = np.full((T, N), np.nan)
     determined = np.zeros((T, N), dtype=bool)
-    for f in range(folds):
-        train, test = np.flatnonzero(fold_of != f), np.flatnonzero(fold_of == f)
-        fit = fit_iohmm(seqs.subset(train), spec, replace(options, seed=np.random.SeedSequence([seed, 0])))
+    calls = [
+        # a SeedSequence of each fold's own: a fit's spawn() moves the one it is given on
+        partial(
+            fit_iohmm,
+            seqs.subset(np.flatnonzero(fold_of != f)),
+            spec,
+            replace(options, seed=np.random.SeedSequence([seed, 0]), n_jobs=1),
+        )
+        for f in range(folds)
+    ]
+    fits = in_processes(calls, options.n_jobs, lambda _f, done: progress(done, folds) if progress else None)
+    for f, fit in enumerate(fits):
+        test = np.flatnonzero(fold_of == f)
         held = filter_beliefs(seqs.subset(test), fit.params)
         Tt = held.p_rely.shape[0]
         p_model[:Tt, test] = held.p_rely
         determined[:Tt, test] = held.determined
-        log.info("fold %d of %d: %d training participants, log-likelihood %.4f", f + 1, folds, len(train), fit.loglik)
-        if progress is not None:
-            progress(f + 1, folds)
+        log.info("fold %d of %d: %d training participants, log-likelihood %.4f", f + 1, folds, N - len(test), fit.loglik)
     feats = features(
         frame, seqs, determined, spec.n_combinations(spec.emission_inputs), spec.n_combinations(spec.transition_inputs)
     )
