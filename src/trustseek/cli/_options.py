@@ -18,7 +18,7 @@ import typer
 from rich.markup import escape
 
 from ..errors import TrustseekError
-from ..estimation.options import MAX_JOBS
+from ..parallel import MAX_JOBS
 from ..vocab import check_belief_update
 from ._app import err_console
 

@@ -12,7 +12,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from ..errors import TrustseekError
-from ..estimation.options import MAX_JOBS
+from ..parallel import MAX_JOBS
 from ._app import check_output, command, console, make_table, print_json, progress_bar
 from ._options import JsonOpt, QuietOpt, TaskOpt
 

@@ -10,7 +10,8 @@ import typer
 from rich.markup import escape
 
 from ..errors import TrustseekError
-from ..estimation.options import MAX_JOBS, FitOptions
+from ..estimation.options import FitOptions
+from ..parallel import MAX_JOBS
 from ._app import (
     check_outputs,
     check_tol,

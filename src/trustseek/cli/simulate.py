@@ -15,7 +15,7 @@ from rich.table import Table
 
 from .. import solvers
 from ..errors import TrustseekError
-from ..estimation.options import MAX_JOBS
+from ..parallel import MAX_JOBS
 from ..vocab import PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS, check_belief_update
 from ._app import (
     atomic_output,

@@ -10,7 +10,8 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..estimation.options import MAX_JOBS, FitOptions
+from ..estimation.options import FitOptions
+from ..parallel import MAX_JOBS
 from ._app import (
     check_output,
     check_outputs,

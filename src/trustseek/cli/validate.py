@@ -11,7 +11,8 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ..estimation.options import MAX_JOBS, FitOptions
+from ..estimation.options import FitOptions
+from ..parallel import MAX_JOBS
 from ._app import check_outputs, check_tol, command, console, err_console, make_table, print_json, progress_task, write_atomic
 from ._options import FROM_OPTIONS, AsForFitEmissionsOpt, AsForFitTransitionsOpt, LogReading, QuietOpt, RatingPerOpt, log_options
 from ._reading import keep_columns, read_for_types, write_log

@@ -22,11 +22,11 @@ import numpy as np
 
 from .. import vocab
 from ..errors import TrustseekError
-from ..estimation.options import check_jobs
 from ..model.core import TrustModel
 from ..model.jsonfile import json_safe
 from ..model.presets import paper_model, paper_task
 from ..model.task import Task
+from ..parallel import check_jobs
 from ..reproduction.robustness import solve_policy
 from ..reproduction.statistics import mean_ci, share_ci
 from ..solvers.base import one_blas_thread

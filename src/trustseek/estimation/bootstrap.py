@@ -22,12 +22,13 @@ from typing import Any
 import numpy as np
 
 from ..compiled import load as load_compiled
+from ..parallel import in_processes
 from . import kernels
 from .em import run_em
 from .estep import Workspace
 from .iohmm import fit_iohmm
 from .mixture_em import MixtureStructure
-from .options import FitOptions, in_processes
+from .options import FitOptions
 from .ratings import make_structure
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec, Params

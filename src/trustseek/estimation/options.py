@@ -4,19 +4,15 @@ from __future__ import annotations
 
 import operator
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, TypeVar, cast
+from typing import TYPE_CHECKING, Any, cast
 
 if TYPE_CHECKING:
     import numpy as np
 
 __all__ = ["DEFAULTS", "FINISH_SWITCH", "SERIAL", "FitOptions", "RunSettings", "counting"]
 
-#: the most worker processes (or threads) a computation starts: with the fork start method a pool
-#: starts all of its workers at once, so --jobs 1000000000 would fork until the machine gives out
-MAX_JOBS = 256
-T = TypeVar("T")
 FINISH_SWITCH = 1e-5  # EM hands over to the quasi-Newton finish at this relative change (or the fit's tol if looser)
 
 
@@ -82,37 +78,6 @@ class RunSettings:
     quasi_newton: bool = True
     accelerate: bool = True
     threads: int = 1
-
-
-def check_jobs(jobs: int | None, option: str = "jobs") -> None:
-    """Refuse a number of workers below 1 or above :data:`MAX_JOBS` (``option``: what the caller's
-    user sets it with, named in the message); None (all cores) passes."""
-    from ..errors import TrustseekError
-
-    if jobs is not None and not 1 <= jobs <= MAX_JOBS:
-        raise TrustseekError([f"{option} must be between 1 and {MAX_JOBS} worker processes, got {jobs}"])
-
-
-def in_processes(calls: Sequence[Callable[[], T]], n_jobs: int | None, done: Callable[[int, int], None]) -> list[T]:
-    """Every one of ``calls`` (picklable, without arguments), their results in order, over ``n_jobs``
-    processes (None: all cores; in this process for one, or for a single call); ``done(i,
-    finished)`` as call ``i`` finishes.  The results do not depend on the number of processes."""
-    from concurrent.futures import ProcessPoolExecutor, as_completed  # (not at the command line's start)
-
-    results: dict[int, T] = {}
-    jobs = n_jobs or os.cpu_count() or 1
-    if jobs <= 1 or len(calls) <= 1:
-        for i, call in enumerate(calls):
-            results[i] = call()
-            done(i, len(results))
-        return [results[i] for i in range(len(calls))]
-    check_jobs(jobs)
-    with ProcessPoolExecutor(max_workers=min(jobs, len(calls))) as ex:
-        futures = {ex.submit(call): i for i, call in enumerate(calls)}
-        for f in as_completed(futures):
-            results[futures[f]] = f.result()
-            done(futures[f], len(results))
-    return [results[i] for i in range(len(calls))]
 
 
 #: the options' defaults: 10 restarts from seed 0, to a relative tolerance of 1e-8, on all cores

@@ -21,10 +21,11 @@ import numpy as np
 import pandas as pd
 
 from ..model.core import TrustModel
+from ..parallel import in_processes
 from ..vocab import HUMAN_ACTIONS
 from .baselines import BASELINES, BaselineFit, Features, baseline_predictions, features, fit_baselines, per_row
 from .iohmm import fit_iohmm
-from .options import DEFAULTS, FitOptions, in_processes
+from .options import DEFAULTS, FitOptions
 from .sequences import Sequences, deal_folds, encode
 from .spec import FitError, IOHMMSpec, Params
 from .trust_iohmm import from_model, preset_spec

@@ -21,11 +21,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ..parallel import in_processes
 from .estep import Workspace
 from .iohmm import EMFit, fit_iohmm
 from .mixture import MixtureFit, check_types, fit_mixture, split_type_starts
 from .mixture_em import MixtureWorkspace
-from .options import FitOptions, in_processes
+from .options import FitOptions
 from .sequences import Sequences, deal_folds, encode
 from .spec import FitError, IOHMMSpec, Params
 from .structure import Structure

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from ..estimation.options import MAX_JOBS
+from ..parallel import MAX_JOBS
 from ..vocab import (
     BELIEF_UPDATES,
     PAPER_ASK_PROBABILITIES,
