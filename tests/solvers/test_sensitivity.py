@@ -26,6 +26,15 @@ def paper_run():
     return sensitivity(paper_model(), paper_task(), starts=1, samples=96, grid=201)
 
 
+def test_the_extremes_over_processes_are_the_extremes_in_one():
+    """The joint extremes run side by side in processes: the same ranges, points and number of
+    evaluations as one after another (the random starts drawn in the same order)."""
+    model, task = paper_model(), paper_task()
+    some = free_parameters(model, task, 2, include_task=False)[:6]
+    runs = [sensitivity(model, task, starts=3, samples=8, grid=101, parameters=some, jobs=jobs).to_dict() for jobs in (1, 2)]
+    assert json.dumps(runs[0], sort_keys=True) == json.dumps(runs[1], sort_keys=True)
+
+
 def test_free_parameters_of_the_paper_preset():
     params = free_parameters(paper_model(), paper_task())
     names = [p.name for p in params]

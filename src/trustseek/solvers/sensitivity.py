@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,7 @@ from scipy.optimize import minimize
 from ..errors import TrustseekError
 from ..model.core import TrustModel
 from ..model.task import Task
+from ..parallel import in_processes
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import ASK, AUTONOMOUS, RELY, check_belief_update
 from .registry import make_solver
@@ -202,12 +204,14 @@ def sensitivity(
     seed: int = 0,
     include_task: bool = True,
     parameters: Sequence[Parameter] | None = None,
+    jobs: int | None = 1,
 ) -> Sensitivity:
     """The threshold(s) and V when each free parameter moves within its printed precision,
     alone and jointly (see the module docstring).  ``samples`` Latin-hypercube points check the
     optimiser; ``starts`` (>= 1) L-BFGS-B runs per extreme: the first from the corner the
     one-at-a-time effects point to, the second from the printed values, further ones from
-    random points of the box."""
+    random points of the box.  The extremes run side by side over ``jobs`` processes (None: all
+    cores), with the same results."""
     check_belief_update(belief_update)
     if grid < 3 or samples < 0 or starts < 1:
         raise SensitivityError([f"need grid >= 3, samples >= 0 and starts >= 1; got {grid}, {samples}, {starts}"])
@@ -226,7 +230,7 @@ def sensitivity(
         )
     oat = _one_at_a_time(box, quantities)
     rng = np.random.default_rng(seed)
-    joint = {q: _joint(box, q, oat, nominal[q], starts, rng) for q in quantities}
+    joint = _joint(box, quantities, oat, nominal, starts, rng, jobs)
     sampled = _sampled(box, quantities, samples, rng) if samples else {}
     return Sensitivity(
         parameters=params,
@@ -309,30 +313,58 @@ def _one_at_a_time(box: _Box, quantities: list[str]) -> list[dict[str, Any]]:
     return oat
 
 
-def _joint(box: _Box, q: str, oat: list[dict[str, Any]], nominal: float, starts: int, rng: np.random.Generator) -> dict[str, Any]:
-    """The least and the greatest ``q`` over the box: L-BFGS-B on the unit cube from ``starts`` points per extreme."""
+def _joint(
+    box: _Box,
+    quantities: list[str],
+    oat: list[dict[str, Any]],
+    nominal: dict[str, float],
+    starts: int,
+    rng: np.random.Generator,
+    jobs: int | None,
+) -> dict[str, dict[str, Any]]:
+    """Per quantity the least and the greatest over the box (:func:`_extreme`), each extreme from
+    ``starts`` points: the one-at-a-time corner, the printed values and random points (drawn here,
+    in order, whatever the number of processes); the box's evaluations merged back."""
     n = len(box.params)
-    effect = np.nan_to_num(np.array([rec["at_upper"][q] - rec["at_lower"][q] for rec in oat]))
-    res: dict[str, Any] = {}
-    for sense, sign in (("min", 1.0), ("max", -1.0)):
-        corner = (sign * effect < 0).astype(float)
-        inits = [corner, box.u_nominal] + [rng.random(n) for _ in range(max(0, starts - 2))]
-        best_u, best = box.u_nominal, sign * nominal
-        for u_init in inits[:starts]:
+    calls = []
+    for q in quantities:
+        effect = np.nan_to_num(np.array([rec["at_upper"][q] - rec["at_lower"][q] for rec in oat]))
+        for sign in (1.0, -1.0):
+            corner = (sign * effect < 0).astype(float)
+            inits = [corner, box.u_nominal] + [rng.random(n) for _ in range(max(0, starts - 2))]
+            calls.append(partial(_extreme, box, q, sign, sign * nominal[q], inits[:starts]))
+    found = iter(in_processes(calls, jobs, lambda _i, _done: None))
+    out: dict[str, dict[str, Any]] = {}
+    for q in quantities:
+        res: dict[str, Any] = {}
+        for sense, sign in (("min", 1.0), ("max", -1.0)):
+            best, best_u, seen = next(found)
+            box.cache.update(seen)
+            res[sense] = sign * best
+            res[f"{sense}_at"] = {p.name: float(v) for p, v in zip(box.params, box.to_x(best_u), strict=True)}
+        res["method"] = f"L-BFGS-B from {starts} start(s) per extreme (the one-at-a-time corner first)"
+        out[q] = res
+    return out
 
-            def f(u: np.ndarray, sign: float = sign) -> float:
-                v = box.at(box.to_x(u))[q]
-                return sign * v if np.isfinite(v) else np.inf
 
-            if np.isfinite(f(u_init)) and f(u_init) < best:
-                best_u, best = u_init, f(u_init)
-            opt = minimize(f, u_init, method="L-BFGS-B", bounds=[(0.0, 1.0)] * n, options={"eps": 1e-3, "maxiter": 30})
-            if np.isfinite(opt.fun) and opt.fun < best:
-                best_u, best = np.clip(opt.x, 0.0, 1.0), float(opt.fun)
-        res[sense] = sign * best
-        res[f"{sense}_at"] = {p.name: float(v) for p, v in zip(box.params, box.to_x(best_u), strict=True)}
-    res["method"] = f"L-BFGS-B from {starts} start(s) per extreme (the one-at-a-time corner first)"
-    return res
+def _extreme(box: _Box, q: str, sign: float, best: float, inits: list[np.ndarray]) -> tuple[float, np.ndarray, dict]:
+    """The least of ``sign * q`` over the box by L-BFGS-B on the unit cube from each of ``inits``
+    (``best``: its value at the printed point): the value, where, and the points evaluated."""
+    n = len(box.params)
+    before = set(box.cache)
+    best_u = box.u_nominal
+
+    def f(u: np.ndarray) -> float:
+        v = box.at(box.to_x(u))[q]
+        return sign * v if np.isfinite(v) else np.inf
+
+    for u_init in inits:
+        if np.isfinite(f(u_init)) and f(u_init) < best:
+            best_u, best = u_init, f(u_init)
+        opt = minimize(f, u_init, method="L-BFGS-B", bounds=[(0.0, 1.0)] * n, options={"eps": 1e-3, "maxiter": 30})
+        if np.isfinite(opt.fun) and opt.fun < best:
+            best_u, best = np.clip(opt.x, 0.0, 1.0), float(opt.fun)
+    return best, best_u, {k: v for k, v in box.cache.items() if k not in before}
 
 
 def _sampled(box: _Box, quantities: list[str], samples: int, rng: np.random.Generator) -> dict[str, dict[str, float]]:
