@@ -31,14 +31,15 @@ ModelOpt = typer.Option("paper", "--model", "-m", help="Trust model: a preset na
 TaskOpt = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file.")
 JsonOpt = typer.Option(False, "--json", help="Print one JSON object instead of tables.")
 PrintJsonOpt = typer.Option(False, "--json", help="Print JSON.")
-SelectionJobsOpt = typer.Option(
-    None,
-    "--jobs",
-    "-j",
-    min=1,
-    max=MAX_JOBS,
-    help="Processes: the fits of each number compared, side by side (default: all cores); numbers do not depend on it.",
-)
+
+
+def processes_option(what: str) -> Any:
+    """``--jobs``: the processes that run ``what`` side by side."""
+    help_text = f"Processes: {what} side by side (default: all cores); numbers do not depend on it."
+    return typer.Option(None, "--jobs", "-j", min=1, max=MAX_JOBS, help=help_text)
+
+
+SelectionJobsOpt = processes_option("the fits of each number compared,")
 QuietOpt = typer.Option(False, "--quiet", "-q", help="No progress bar on stderr (there is none when stderr is not a terminal).")
 #: the inputs of the commands that fit as ``fit`` does
 AsForFitTransitionsOpt = typer.Option(None, "--transitions-on", help="Inputs of the transitions (as for fit).")

@@ -7,9 +7,8 @@ from pathlib import Path
 import typer
 from rich.markup import escape
 
-from ..parallel import MAX_JOBS
 from ._app import FIGURE_SUFFIXES, check_outputs, command, console, make_table, print_json
-from ._options import JsonOpt, ModelOpt, TaskOpt, model_and_task
+from ._options import JsonOpt, ModelOpt, TaskOpt, model_and_task, processes_option
 
 
 @command("sensitivity")
@@ -38,14 +37,7 @@ def sensitivity(
     model_only: bool = typer.Option(False, "--model-only", help="Leave the task's success probabilities and discount fixed."),
     top: int = typer.Option(10, "--top", min=1, help="Parameters shown in the one-at-a-time table."),
     plot: Path | None = typer.Option(None, "--plot", help="Write a tornado plot of the threshold to this PNG, PDF or SVG file."),
-    jobs: int | None = typer.Option(
-        None,
-        "--jobs",
-        "-j",
-        min=1,
-        max=MAX_JOBS,
-        help="Processes: the extremes side by side (default: all cores); numbers do not depend on it.",
-    ),
+    jobs: int | None = processes_option("the extremes"),
     as_json: bool = JsonOpt,
 ) -> None:
     from ..solvers.sensitivity import sensitivity as run_sensitivity

@@ -12,9 +12,17 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
-from ..parallel import MAX_JOBS
 from ._app import check_outputs, check_tol, command, console, err_console, make_table, print_json, progress_task, write_atomic
-from ._options import FROM_OPTIONS, AsForFitEmissionsOpt, AsForFitTransitionsOpt, LogReading, QuietOpt, RatingPerOpt, log_options
+from ._options import (
+    FROM_OPTIONS,
+    AsForFitEmissionsOpt,
+    AsForFitTransitionsOpt,
+    LogReading,
+    QuietOpt,
+    RatingPerOpt,
+    log_options,
+    processes_option,
+)
 from ._reading import keep_columns, read_for_types, write_log
 from .fit import POSTERIOR_SUFFIXES, general_inputs, read_with_inputs
 
@@ -73,14 +81,7 @@ def predict(
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed (folds, restarts, bootstrap)."),
     tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative log-likelihood tolerance of each fit (> 0)."),
     max_iter: int = typer.Option(1000, "--max-iter", min=1, help="Iteration cap per restart (E-steps)."),
-    jobs: int | None = typer.Option(
-        None,
-        "--jobs",
-        "-j",
-        min=1,
-        max=MAX_JOBS,
-        help="Processes: the held-out folds' fits side by side (default: all cores); numbers do not depend on it.",
-    ),
+    jobs: int | None = processes_option("the held-out folds' fits"),
     bootstrap: int = BootstrapOpt,
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the per-trial predictions (CSV or Parquet)."),
     as_json: bool = typer.Option(False, "--json", help="Print the scores as one JSON object."),
