@@ -237,6 +237,16 @@ def test_outcomes_experience_and_reward_follow_the_task(client):
 # --------------------------------------------------------------------------- integrity
 
 
+def test_a_consent_posted_again_stores_its_events_once(client):
+    """A page retries its consent when the answer is lost (a 5xx, a dropped connection): the
+    session stays started, and its consent event was stored a second time (seen in the crowd test)."""
+    st = study(client)
+    sid, ph = participant(client, st["id"])
+    first, again = start(client, sid, ph), start(client, sid, ph)
+    assert first["status"] == again["status"] == "running"
+    assert export(client, st["id"], table="events")["type"].tolist() == ["consent"]
+
+
 def test_submissions_are_validated_and_idempotent(client):
     st = study(client, blocks=[{"policy": {"kind": "always-ask"}, "schedule": {"trials": ["low", "high", "high"]}}])
     sid, ph = participant(client, st["id"])

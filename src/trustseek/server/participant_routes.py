@@ -133,7 +133,7 @@ def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depe
         row, cfg = _locked(db, s)
         if give_consent(db, row, cfg, body.panel):
             log.info("session %s of study %s started (consent given)", row.id, row.study_id)
-        if body.events:
+            # the consent's events once: a consent posted again (a retry whose answer was lost) stores none
             add_events(db, row, [e.model_dump() for e in body.events])
     return session_state(request, s)
 
