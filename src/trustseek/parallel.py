@@ -27,6 +27,7 @@ def in_processes(calls: Sequence[Callable[[], T]], n_jobs: int | None, done: Cal
     processes (None: all cores; in this process for one, or for a single call); ``done(i,
     finished)`` as call ``i`` finishes.  The results do not depend on the number of processes."""
     from concurrent.futures import ProcessPoolExecutor, as_completed  # (not at the command line's start)
+    from concurrent.futures.process import BrokenProcessPool
 
     results: dict[int, T] = {}
     jobs = n_jobs or os.cpu_count() or 1
@@ -36,9 +37,15 @@ def in_processes(calls: Sequence[Callable[[], T]], n_jobs: int | None, done: Cal
             done(i, len(results))
         return [results[i] for i in range(len(calls))]
     check_jobs(jobs)
-    with ProcessPoolExecutor(max_workers=min(jobs, len(calls))) as ex:
-        futures = {ex.submit(call): i for i, call in enumerate(calls)}
-        for f in as_completed(futures):
-            results[futures[f]] = f.result()
-            done(futures[f], len(results))
+    try:
+        with ProcessPoolExecutor(max_workers=min(jobs, len(calls))) as ex:
+            futures = {ex.submit(call): i for i, call in enumerate(calls)}
+            for f in as_completed(futures):
+                results[futures[f]] = f.result()
+                done(futures[f], len(results))
+    except BrokenProcessPool:
+        raise TrustseekError(
+            [f"a worker process ended abruptly (killed, or out of memory) after {len(results)} of {len(calls)} parts: "
+             "nothing was written; run again, or with --jobs 1 (in this process)"]
+        ) from None  # fmt: skip
     return [results[i] for i in range(len(calls))]

@@ -1,0 +1,26 @@
+"""Independent calls over processes: results in order whatever the number of processes, and a
+worker that dies is one clear error, not a traceback."""
+
+import os
+from functools import partial
+
+import pytest
+
+from trustseek.errors import TrustseekError
+from trustseek.parallel import in_processes
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_results_come_in_order_and_every_call_is_reported(jobs):
+    finished = []
+    out = in_processes([partial(pow, i, 2) for i in range(7)], jobs, lambda i, n: finished.append((i, n)))
+    assert out == [i * i for i in range(7)]
+    assert sorted(i for i, _ in finished) == list(range(7)) and [n for _, n in finished] == list(range(1, 8))
+
+
+def test_a_worker_that_dies_is_one_clear_error():
+    """A worker killed (by the kernel's out-of-memory killer, or kill -9) ended `select`, `predict`,
+    `sensitivity` and the bootstrap with a BrokenProcessPool traceback and exit code 1."""
+    calls = [partial(pow, 2, 3), partial(os._exit, 9), partial(pow, 3, 2)]
+    with pytest.raises(TrustseekError, match=r"a worker process ended abruptly .* run again, or with --jobs 1"):
+        in_processes(calls, 2, lambda i, n: None)
