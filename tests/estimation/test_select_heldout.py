@@ -54,14 +54,21 @@ def _interior(fit):
     return replace(fit, params=type(p)(ini, mix(p.emission, s.em.fixed), mix(p.transition, s.tr.fixed)))
 
 
-def test_a_fit_without_zero_cells_is_scored_as_fitted(train_test):
-    """Before, every free cell got 0.5 more counts: the score differed from the fitted model's."""
-    fit, test = train_test
+@pytest.mark.parametrize(
+    ("data", "workspace"),
+    [
+        pytest.param("train_test", lambda test, s: Workspace(test, *s.dims), id="model"),
+        pytest.param("types_train_test", lambda test, s: MixtureWorkspace(test, s), marks=needs_numba, id="types"),
+    ],
+)
+def test_a_fit_without_zero_cells_is_scored_as_fitted(request, data, workspace):
+    """Before, every free cell (of every type) got 0.5 more counts: the score differed from the fitted model's."""
+    fit, test = request.getfixturevalue(data)
     inner = _interior(fit)
     out = heldout_params(inner)
     for name in ("initial", "emission", "transition"):
         np.testing.assert_array_equal(getattr(out, name), getattr(inner.params, name))
-    direct = float(Workspace(test, *fit.structure.dims).loglik(inner.params))
+    direct = float(workspace(test, fit.structure).loglik(inner.params))
     assert heldout_loglik(test, inner) == pytest.approx(direct, abs=1e-9)
 
 
@@ -110,18 +117,6 @@ def test_the_pseudocount_is_the_module_default(train_test):
     np.testing.assert_array_equal(
         heldout_params(zeroed).transition, heldout_params(zeroed, pseudocount=selection.HELDOUT_PSEUDOCOUNT).transition
     )
-
-
-@needs_numba
-def test_a_mixture_without_zero_cells_is_scored_as_fitted(types_train_test):
-    """Before, every free cell of every type got 0.5 more counts: the score was not the fitted mixture's."""
-    fit, test = types_train_test
-    inner = _interior(fit)
-    out = heldout_params(inner)
-    for name in ("initial", "emission", "transition"):
-        np.testing.assert_array_equal(getattr(out, name), getattr(inner.params, name))
-    direct = float(MixtureWorkspace(test, fit.structure).loglik(inner.params))
-    assert heldout_loglik(test, inner) == pytest.approx(direct, abs=1e-9)
 
 
 @needs_numba

@@ -256,6 +256,7 @@ class HeldOutComparison:
         folds = self.folds
         fold_of = deal_folds(N, folds, [self.seed, 2])  # refuses more folds than participants
         data = [seqs] + [seqs.subset(np.flatnonzero(fold_of != f)) for f in range(folds)]
+        tests = [seqs.subset(np.flatnonzero(fold_of == f)) for f in range(folds)]
         asked = list(values)
         total, done = len(asked) * (folds + 1), 0
         rows: list[dict[str, Any]] = []
@@ -272,7 +273,7 @@ class HeldOutComparison:
 
             fits, before = map(list, zip(*in_processes(calls, self.jobs, finished), strict=True))
             done += folds + 1
-            per_fold = [heldout(seqs.subset(np.flatnonzero(fold_of == f)), fits[f + 1]) for f in range(folds)]
+            per_fold = [heldout(tests[f], fits[f + 1]) for f in range(folds)]
             rows.append(self._row(n, fits[0], per_fold, extra, n not in asked))
         mark_choices(rows, self.key)
         return rows
