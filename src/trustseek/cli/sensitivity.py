@@ -40,6 +40,7 @@ def sensitivity(
     jobs: int | None = processes_option("the extremes"),
     as_json: bool = JsonOpt,
 ) -> None:
+    from ..solvers.sensitivity import free_parameters
     from ..solvers.sensitivity import sensitivity as run_sensitivity
 
     check_outputs((plot, "--plot", FIGURE_SUFFIXES), inputs=((model, "--model file"), (task, "--task file")))
@@ -53,7 +54,7 @@ def sensitivity(
         samples=samples,
         starts=starts,
         seed=seed,
-        include_task=not model_only,
+        parameters=free_parameters(m, t, decimals, include_task=not model_only),
         jobs=jobs,
     )
     if plot is not None:

@@ -202,12 +202,12 @@ def sensitivity(
     samples: int = 256,
     starts: int = 2,
     seed: int = 0,
-    include_task: bool = True,
     parameters: Sequence[Parameter] | None = None,
     jobs: int | None = 1,
 ) -> Sensitivity:
     """The threshold(s) and V when each free parameter moves within its printed precision,
-    alone and jointly (see the module docstring).  ``samples`` Latin-hypercube points check the
+    alone and jointly (see the module docstring); the parameters moved are ``parameters``, by default
+    every free one of the model and the task (:func:`free_parameters`).  ``samples`` Latin-hypercube points check the
     optimiser; ``starts`` (>= 1) L-BFGS-B runs per extreme: the first from the corner the
     one-at-a-time effects point to, the second from the printed values, further ones from
     random points of the box.  The extremes run side by side over ``jobs`` processes (None: all
@@ -215,7 +215,7 @@ def sensitivity(
     check_belief_update(belief_update)
     if grid < 3 or samples < 0 or starts < 1:
         raise SensitivityError([f"need grid >= 3, samples >= 0 and starts >= 1; got {grid}, {samples}, {starts}"])
-    params = list(parameters) if parameters is not None else free_parameters(model, task, decimals, include_task=include_task)
+    params = list(parameters) if parameters is not None else free_parameters(model, task, decimals)
     _check_size(len(params), grid, samples, starts)
     _check(model, task)
     box = _Box(model, task, params, belief_update, grid)
