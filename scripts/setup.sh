@@ -2,7 +2,8 @@
 # Installs everything trustseek needs on a fresh Debian machine, idempotently:
 #   - Debian packages: chromium (browser tests, HTML report screenshots), fonts, and
 #     postgresql (the experiment server's PostgreSQL tests start a throwaway cluster)
-#   - a Python virtual environment in .venv with trustseek and its test extras
+#   - a Python virtual environment in .venv with trustseek and its test extras, at the exact
+#     versions of constraints.txt (scripts/lock.sh writes it)
 #   - the web front end (npm ci + build), when web/ exists
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -34,9 +35,9 @@ if [ ! -x .venv/bin/python ]; then
   "$PY" -m venv .venv
 fi
 stamp=.venv/.trustseek-installed
-if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
-  echo "setup: installing Python packages"
-  .venv/bin/python -m pip install -q -e '.[all,test]'
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ constraints.txt -nt "$stamp" ]; then
+  echo "setup: installing Python packages (the versions of constraints.txt)"
+  .venv/bin/python -m pip install -q -c constraints.txt -e '.[all,test]'
   touch "$stamp"
 fi
 

@@ -112,3 +112,45 @@ def test_the_cli_knows_the_extras_of_pyproject():
         assert module not in core
     assert set(EXTRAS.values()) | {"all", "test"} == set(extras)
     assert extras["all"] == ["trustseek[server,plots,design]"]
+
+
+def _pins() -> dict[str, str]:
+    """constraints.txt as {normalised name: version}."""
+    from packaging.utils import canonicalize_name
+
+    pins = {}
+    for line in (ROOT / "constraints.txt").read_text(encoding="utf-8").splitlines():
+        if line.strip() and not line.startswith("#"):
+            name, sep, version = line.partition("==")
+            assert sep and version.strip(), f"constraints.txt: {line!r} is not name==version"
+            pins[canonicalize_name(name)] = version.strip()
+    return pins
+
+
+def test_the_lock_pins_every_requirement_within_pyproject_s_ranges():
+    """constraints.txt (what scripts/setup.sh installs) pins each requirement of pyproject.toml,
+    core, extras and test tools, to a version that requirement accepts."""
+    from packaging.requirements import Requirement
+    from packaging.utils import canonicalize_name
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    requirements = [Requirement(r) for r in project["dependencies"]]
+    requirements += [Requirement(r) for extra in project["optional-dependencies"].values() for r in extra]
+    pins = _pins()
+    for r in requirements:
+        name = canonicalize_name(r.name)
+        if name == "trustseek":  # the "all" extra names the other extras
+            continue
+        assert name in pins, f"constraints.txt does not pin {r.name} (run scripts/lock.sh)"
+        assert r.specifier.contains(pins[name], prereleases=True), f"constraints.txt: {r.name}=={pins[name]} outside {r}"
+
+
+@pytest.mark.skipif(Path(sys.prefix).resolve() != (ROOT / ".venv").resolve(), reason="not the environment scripts/setup.sh made")
+def test_the_environment_setup_made_is_the_lock():
+    """Every package pinned in constraints.txt is installed at that version in .venv: the tests run
+    on the packages the lock names (a lock changed since the last setup is installed by it)."""
+    from packaging.utils import canonicalize_name
+
+    installed = {canonicalize_name(d.metadata["Name"]): d.version for d in importlib.metadata.distributions()}
+    wrong = {n: (v, installed.get(n)) for n, v in _pins().items() if installed.get(n) != v}
+    assert not wrong, f"pinned, installed: {wrong}; run scripts/setup.sh"
