@@ -7,7 +7,7 @@ from functools import partial
 import pytest
 
 from trustseek.errors import TrustseekError
-from trustseek.parallel import in_processes
+from trustseek.parallel import beside, in_processes
 
 
 @pytest.mark.parametrize("jobs", [1, 2])
@@ -24,3 +24,25 @@ def test_a_worker_that_dies_is_one_clear_error():
     calls = [partial(pow, 2, 3), partial(os._exit, 9), partial(pow, 3, 2)]
     with pytest.raises(TrustseekError, match=r"a worker process ended abruptly .* run again, or with --jobs 1"):
         in_processes(calls, 2, lambda i, n: None)
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_beside_runs_the_calls_in_other_processes_while_the_body_runs_here(jobs):
+    calls = [partial(pow, i, 2) for i in range(5)] + [os.getpid]
+    with beside(calls, jobs) as result:
+        here = os.getpid()
+        out = [result(i) for i in range(len(calls))]
+    assert out[:5] == [i * i for i in range(5)]
+    assert (out[5] == here) == (jobs == 1)  # the calls ran in other processes, unless one job
+
+
+def test_beside_a_worker_that_dies_is_one_clear_error():
+    with pytest.raises(TrustseekError, match=r"a worker process ended abruptly .*beside this one"):
+        with beside([partial(os._exit, 9)], 2) as result:
+            result(0)
+
+
+def test_beside_an_error_in_the_body_is_that_error():
+    with pytest.raises(ZeroDivisionError):
+        with beside([partial(pow, 2, 3), partial(pow, 3, 3)], 2):
+            1 / 0

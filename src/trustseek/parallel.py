@@ -4,8 +4,9 @@ calls side by side, their results in order and the same whatever the number of p
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
-from typing import TypeVar
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from typing import TYPE_CHECKING, TypeVar
 
 from .errors import TrustseekError
 
@@ -13,6 +14,9 @@ from .errors import TrustseekError
 #: starts all of its workers at once, so --jobs 1000000000 would fork until the machine gives out
 MAX_JOBS = 256
 T = TypeVar("T")
+
+if TYPE_CHECKING:
+    from concurrent.futures import ProcessPoolExecutor
 
 
 def check_jobs(jobs: int | None, option: str = "jobs") -> None:
@@ -26,26 +30,61 @@ def in_processes(calls: Sequence[Callable[[], T]], n_jobs: int | None, done: Cal
     """Every one of ``calls`` (picklable, without arguments), their results in order, over ``n_jobs``
     processes (None: all cores; in this process for one, or for a single call); ``done(i,
     finished)`` as call ``i`` finishes.  The results do not depend on the number of processes."""
-    from concurrent.futures import ProcessPoolExecutor, as_completed  # (not at the command line's start)
-    from concurrent.futures.process import BrokenProcessPool
+    from concurrent.futures import as_completed  # (not at the command line's start)
 
     results: dict[int, T] = {}
-    jobs = n_jobs or os.cpu_count() or 1
+    jobs = _jobs(n_jobs)
     if jobs <= 1 or len(calls) <= 1:
         for i, call in enumerate(calls):
             results[i] = call()
             done(i, len(results))
         return [results[i] for i in range(len(calls))]
-    check_jobs(jobs)
+    with _pool(min(jobs, len(calls)), lambda: f"after {len(results)} of {len(calls)} parts") as ex:
+        futures = {ex.submit(call): i for i, call in enumerate(calls)}
+        for f in as_completed(futures):
+            results[futures[f]] = f.result()
+            done(futures[f], len(results))
+    return [results[i] for i in range(len(calls))]
+
+
+@contextmanager
+def beside(calls: Sequence[Callable[[], T]], n_jobs: int | None) -> Iterator[Callable[[int], T]]:
+    """``calls`` (picklable, without arguments) started over as many as ``n_jobs`` other processes
+    (None: all cores) while the ``with`` body runs in this one; the body's ``result(i)`` is call
+    ``i``'s result, waited for.  With one job each call runs in this process when its result is
+    asked for.  The results do not depend on the number of processes."""
+    jobs = _jobs(n_jobs)
+    if jobs <= 1 or not calls:
+        yield lambda i: calls[i]()
+        return
+    with _pool(min(jobs, len(calls)), lambda: "beside this one") as ex:
+        futures = [ex.submit(call) for call in calls]  # the workers start now, before the body starts threads
+        try:
+            yield lambda i: futures[i].result()
+        except BaseException:
+            ex.shutdown(wait=False, cancel_futures=True)  # the calls not started yet are dropped
+            raise
+
+
+def _jobs(n_jobs: int | None) -> int:
+    jobs = n_jobs or os.cpu_count() or 1
+    if jobs > 1:
+        check_jobs(jobs)
+    return jobs
+
+
+@contextmanager
+def _pool(workers: int, where: Callable[[], str]) -> Iterator[ProcessPoolExecutor]:
+    """A pool of ``workers`` processes; a worker that dies is one :class:`TrustseekError` (``where``:
+    how far the work had come)."""
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
     try:
-        with ProcessPoolExecutor(max_workers=min(jobs, len(calls))) as ex:
-            futures = {ex.submit(call): i for i, call in enumerate(calls)}
-            for f in as_completed(futures):
-                results[futures[f]] = f.result()
-                done(futures[f], len(results))
+        with ProcessPoolExecutor(max_workers=workers) as ex:
+            yield ex
     except BrokenProcessPool:
         raise TrustseekError(
-            [f"a worker process ended abruptly (killed, or out of memory) after {len(results)} of {len(calls)} parts: "
+            [f"a worker process ended abruptly (killed, or out of memory) {where()}: "
              "nothing was written; run again, or with --jobs 1 (in this process)"]
         ) from None  # fmt: skip
-    return [results[i] for i in range(len(calls))]

@@ -99,3 +99,25 @@ def test_fit_is_the_same_with_one_and_two_threads(monkeypatch):
     assert one.loglik == two.loglik
     assert np.array_equal(one.params.vector(), two.params.vector())
     assert [r.iterations for r in one.runs] == [r.iterations for r in two.runs]
+
+
+def _pool_answers() -> None:
+    import os
+
+    os._exit(0 if kernels._pool(2).submit(pow, 2, 3).result() == 8 else 1)
+
+
+def test_a_forked_child_gets_e_step_threads_of_its_own():
+    """A process forked after a threaded E-step inherited the parent's thread pool without its
+    threads: its first threaded E-step waited forever (the reproduction's steps run beside the fit)."""
+    import multiprocessing
+
+    assert kernels._pool(2).submit(pow, 2, 3).result() == 8  # the pool exists in this process
+    child = multiprocessing.get_context("fork").Process(target=_pool_answers)
+    child.start()
+    child.join(timeout=60)
+    if child.is_alive():
+        child.kill()
+        child.join()
+        pytest.fail("the forked child's E-step threads never ran")
+    assert child.exitcode == 0

@@ -356,3 +356,12 @@ def test_simulated_log_round_trips_through_fit(tmp_path):
     ll_truth = loglik(encode(frame[frame.columns[:6]], spec), spec, params)
     assert out["loglik"] >= ll_truth - 1e-6
     assert out["loglik"] - ll_truth < 0.5 * out["n_params"] + 10  # not absurdly better: no overfitting bug
+
+
+def test_the_steps_run_beside_the_fit_give_the_same_summary(small_run):
+    """With two processes the sensitivity, scheduling and types steps run in other processes while
+    the fit and the plan run in this one, and the replicates over both: the summary is the one of
+    a run in this process alone, byte for byte."""
+    beside = reproduce(ReproduceConfig(seed=3, **{**SMALL, "jobs": 2}))
+    assert json.dumps(beside.summary) == json.dumps(small_run.summary)
+    assert beside.sensitivity is not None and beside.scheduling is not None and beside.types is not None

@@ -307,7 +307,12 @@ def reproduce(
         help="Belief update of the trust-aware policy: 'paper' (eq. 3, as in the paper) or 'bayes'.",
     ),
     jobs: int = typer.Option(
-        2, "--jobs", "-j", min=1, max=MAX_JOBS, help="Processes (bootstrap and replicates); numbers do not depend on it."
+        2,
+        "--jobs",
+        "-j",
+        min=1,
+        max=MAX_JOBS,
+        help="Processes (the bootstrap, the replicates, and the steps of the paper's model beside the fit); numbers do not depend on it.",
     ),
     schedule_participants: int = typer.Option(
         10_000,

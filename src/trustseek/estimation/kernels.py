@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
@@ -297,6 +298,15 @@ def _pool(n: int) -> ThreadPoolExecutor:
             _POOL.shutdown(wait=False)
         _POOL = ThreadPoolExecutor(max_workers=n, thread_name_prefix="trustseek-estep")
     return _POOL
+
+
+def _forget_pool() -> None:
+    """In a forked child: the parent's pool has no threads here (work given to it would wait forever)."""
+    global _POOL
+    _POOL = None
+
+
+os.register_at_fork(after_in_child=_forget_pool)
 
 
 class Kernel:

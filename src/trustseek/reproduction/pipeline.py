@@ -14,8 +14,8 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +31,7 @@ from ..model.core import TrustModel
 from ..model.jsonfile import json_safe
 from ..model.presets import paper_model, paper_task
 from ..model.task import Task
+from ..parallel import beside, in_processes
 from ..policies import ComplexityPolicy, Policy, ask_regions, randomized
 from ..simulation import CrossoverSimulation, Simulation, crossover, simulate
 from ..solvers.agnostic import trust_agnostic, trust_agnostic_from_data
@@ -315,45 +316,52 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
     s1, sfit, s2, s2l, scost, shet, sreps, ssched, stypes = ss.spawn(9)
     truth, task = paper_model(), paper_task()
     summary: dict[str, Any] = {"config": cfg.to_summary()}
-
-    frame1, summary["experiment1"] = _experiment1(cfg, truth, task, s1)
-    step("experiment 1")
-    fit, summary["fit"] = _fit_section(cfg, frame1, truth, sfit, report)
-    fitted = fit.model
-    step("fit")
-    plan, summary["plan"] = _plan_section(cfg, truth, task, fitted, frame1)
-    aware, true_pol, agn = plan.aware, plan.true_policy, plan.agnostic
-    step("plan")
-
-    # why the printed parameters give 0.78 and not the paper's 0.75
-    sens, summary["threshold_sensitivity"] = threshold_sensitivity(cfg, truth, task)
-    step("threshold sensitivity")
-
-    small, large, summary["experiment2"] = _experiment2_section(cfg, plan, s2, s2l)
-    step("experiment 2")
-
-    # 6. costs (same participants for every policy)
-    summary["costs"] = costs(cfg, plan, scost)
-    step("costs")
-    het = heterogeneity(cfg, plan, shet)
-    summary["heterogeneity"] = het["summary"]
-    step("heterogeneity")
-
-    # the paper's future work: choosing the order of the items, under the paper's model
-    sched = None
+    # the steps of the paper's model alone start in other processes (in the order they are needed),
+    # beside the fit and the plan; each has a seed of its own, so its numbers do not depend on where it runs
+    sched_seed, types_seed = (int(child.generate_state(1)[0]) for child in (ssched, stypes))
+    side: dict[str, Callable[[], Any]] = {"sensitivity": partial(threshold_sensitivity, cfg, truth, task)}
     if cfg.schedule_participants:
-        sched = scheduling_section(
-            truth, task, counts=cfg.counts_2, participants=cfg.schedule_participants, seed=int(ssched.generate_state(1)[0])
-        )
-        summary["scheduling"] = sched.numbers
-    step("scheduling")
-
-    # Remark 1 with supervisor types: planning for a population of types
-    types = None
+        n = cfg.schedule_participants
+        side["scheduling"] = partial(scheduling_section, truth, task, counts=cfg.counts_2, participants=n, seed=sched_seed)
     if cfg.types_participants:
-        types = types_section(participants=cfg.types_participants, seed=int(stypes.generate_state(1)[0]))
-        summary["types"] = types.numbers
-    step("types")
+        side["types"] = partial(types_section, participants=cfg.types_participants, seed=types_seed)
+    names = list(side)
+
+    with beside(list(side.values()), cfg.jobs) as result:
+        frame1, summary["experiment1"] = _experiment1(cfg, truth, task, s1)
+        step("experiment 1")
+        fit, summary["fit"] = _fit_section(cfg, frame1, truth, sfit, report)
+        fitted = fit.model
+        step("fit")
+        plan, summary["plan"] = _plan_section(cfg, truth, task, fitted, frame1)
+        aware, true_pol, agn = plan.aware, plan.true_policy, plan.agnostic
+        step("plan")
+
+        # why the printed parameters give 0.78 and not the paper's 0.75
+        sens, summary["threshold_sensitivity"] = result(names.index("sensitivity"))
+        step("threshold sensitivity")
+
+        small, large, summary["experiment2"] = _experiment2_section(cfg, plan, s2, s2l)
+        step("experiment 2")
+
+        # 6. costs (same participants for every policy)
+        summary["costs"] = costs(cfg, plan, scost)
+        step("costs")
+        het = heterogeneity(cfg, plan, shet)
+        summary["heterogeneity"] = het["summary"]
+        step("heterogeneity")
+
+        # the paper's future work: choosing the order of the items, under the paper's model
+        sched = result(names.index("scheduling")) if "scheduling" in side else None
+        if sched is not None:
+            summary["scheduling"] = sched.numbers
+        step("scheduling")
+
+        # Remark 1 with supervisor types: planning for a population of types
+        types = result(names.index("types")) if "types" in side else None
+        if types is not None:
+            summary["types"] = types.numbers
+        step("types")
 
     reps = _replicates(cfg, sreps, report)
     summary["replicates"] = _replicate_summary(reps)
@@ -404,19 +412,8 @@ def _replicates(
     cfg: ReproduceConfig, seed: np.random.SeedSequence, report: Callable[[str, int, int], None]
 ) -> list[dict[str, Any]]:
     """Step 5, the replicate experiments (in ``cfg.jobs`` processes)."""
-    reps: list[dict[str, Any]] = []
-    if cfg.replicates:
-        args = [(cfg, i, child) for i, child in enumerate(seed.spawn(cfg.replicates))]
-        if cfg.jobs > 1 and cfg.replicates > 1:
-            with ProcessPoolExecutor(max_workers=min(cfg.jobs, cfg.replicates)) as ex:
-                for r in ex.map(run_replicate, args):
-                    reps.append(r)
-                    report("replicates", len(reps), cfg.replicates)
-        else:
-            for a in args:
-                reps.append(run_replicate(a))
-                report("replicates", len(reps), cfg.replicates)
-    return reps
+    calls = [partial(run_replicate, (cfg, i, child)) for i, child in enumerate(seed.spawn(cfg.replicates))]
+    return in_processes(calls, cfg.jobs, lambda i, done: report("replicates", done, cfg.replicates))
 
 
 def _replicate_summary(reps: list[dict[str, Any]]) -> dict[str, Any]:
