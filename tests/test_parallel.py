@@ -37,12 +37,46 @@ def test_beside_runs_the_calls_in_other_processes_while_the_body_runs_here(jobs)
 
 
 def test_beside_a_worker_that_dies_is_one_clear_error():
-    with pytest.raises(TrustseekError, match=r"a worker process ended abruptly .*beside this one"):
-        with beside([partial(os._exit, 9)], 2) as result:
-            result(0)
+    with (
+        pytest.raises(TrustseekError, match=r"a worker process ended abruptly .*beside this one"),
+        beside([partial(os._exit, 9)], 2) as result,
+    ):
+        result(0)
 
 
 def test_beside_an_error_in_the_body_is_that_error():
-    with pytest.raises(ZeroDivisionError):
-        with beside([partial(pow, 2, 3), partial(pow, 3, 3)], 2):
-            1 / 0
+    with pytest.raises(ZeroDivisionError), beside([partial(pow, 2, 3), partial(pow, 3, 3)], 2):
+        raise ZeroDivisionError
+
+
+def _sleep_in(path, seconds):
+    import time
+
+    path.write_text(str(os.getpid()))
+    time.sleep(seconds)
+
+
+def _running(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rpartition(")")[2].split()[0] != "Z"  # a zombie has ended
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/stat"), reason="reads /proc")
+def test_beside_an_interrupted_body_stops_the_calls(tmp_path):
+    """Ctrl-C during `reproduce` left the steps running beside it to finish (15 s) before the
+    command ended: their results are not wanted, so the workers are stopped."""
+    import time
+
+    pid_file = tmp_path / "pid"
+    with pytest.raises(KeyboardInterrupt), beside([partial(_sleep_in, pid_file, 120)], 2):
+        while not pid_file.exists() or not pid_file.read_text():
+            time.sleep(0.05)
+        raise KeyboardInterrupt
+    pid = int(pid_file.read_text())
+    deadline = time.monotonic() + 30
+    while _running(pid) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not _running(pid)

@@ -61,8 +61,11 @@ def beside(calls: Sequence[Callable[[], T]], n_jobs: int | None) -> Iterator[Cal
         futures = [ex.submit(call) for call in calls]  # the workers start now, before the body starts threads
         try:
             yield lambda i: futures[i].result()
-        except BaseException:
-            ex.shutdown(wait=False, cancel_futures=True)  # the calls not started yet are dropped
+        except BaseException:  # (an interrupt too): the calls' results are not wanted, so stop them now
+            workers = list((getattr(ex, "_processes", None) or {}).values())  # (Python 3.14: ex.terminate_workers())
+            ex.shutdown(wait=False, cancel_futures=True)
+            for process in workers:
+                process.terminate()
             raise
 
 
