@@ -312,7 +312,7 @@ def reproduce(
         "-j",
         min=1,
         max=MAX_JOBS,
-        help="Processes (the bootstrap, the replicates, and the steps of the paper's model beside the fit); numbers do not depend on it.",
+        help="Processes (the bootstrap, the replicates, the steps beside the fit); numbers do not depend on it.",
     ),
     schedule_participants: int = typer.Option(
         10_000,
