@@ -52,7 +52,9 @@ def test_beside_an_error_in_the_body_is_that_error():
 def _sleep_in(path, seconds):
     import time
 
-    path.write_text(str(os.getpid()))
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(str(os.getpid()))
+    tmp.rename(path)  # whole, when the test sees it
     time.sleep(seconds)
 
 
@@ -72,7 +74,7 @@ def test_beside_an_interrupted_body_stops_the_calls(tmp_path):
 
     pid_file = tmp_path / "pid"
     with pytest.raises(KeyboardInterrupt), beside([partial(_sleep_in, pid_file, 120)], 2):
-        while not pid_file.exists() or not pid_file.read_text():
+        while not pid_file.exists():
             time.sleep(0.05)
         raise KeyboardInterrupt
     pid = int(pid_file.read_text())
