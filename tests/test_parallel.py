@@ -28,24 +28,24 @@ def test_a_worker_that_dies_is_one_clear_error():
 
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_beside_runs_the_calls_in_other_processes_while_the_body_runs_here(jobs):
-    calls = [partial(pow, i, 2) for i in range(5)] + [os.getpid]
+    calls = {f"{i} squared": partial(pow, i, 2) for i in range(5)} | {"pid": os.getpid}
     with beside(calls, jobs) as result:
         here = os.getpid()
-        out = [result(i) for i in range(len(calls))]
-    assert out[:5] == [i * i for i in range(5)]
-    assert (out[5] == here) == (jobs == 1)  # the calls ran in other processes, unless one job
+        out = {name: result(name) for name in reversed(calls)}
+    assert [out[f"{i} squared"] for i in range(5)] == [i * i for i in range(5)]
+    assert (out["pid"] == here) == (jobs == 1)  # the calls ran in other processes, unless one job
 
 
 def test_beside_a_worker_that_dies_is_one_clear_error():
     with (
         pytest.raises(TrustseekError, match=r"a worker process ended abruptly .*beside this one"),
-        beside([partial(os._exit, 9)], 2) as result,
+        beside({"dies": partial(os._exit, 9)}, 2) as result,
     ):
-        result(0)
+        result("dies")
 
 
 def test_beside_an_error_in_the_body_is_that_error():
-    with pytest.raises(ZeroDivisionError), beside([partial(pow, 2, 3), partial(pow, 3, 3)], 2):
+    with pytest.raises(ZeroDivisionError), beside({"a": partial(pow, 2, 3), "b": partial(pow, 3, 3)}, 2):
         raise ZeroDivisionError
 
 
@@ -73,7 +73,7 @@ def test_beside_an_interrupted_body_stops_the_calls(tmp_path):
     import time
 
     pid_file = tmp_path / "pid"
-    with pytest.raises(KeyboardInterrupt), beside([partial(_sleep_in, pid_file, 120)], 2):
+    with pytest.raises(KeyboardInterrupt), beside({"sleeps": partial(_sleep_in, pid_file, 120)}, 2):
         while not pid_file.exists():
             time.sleep(0.05)
         raise KeyboardInterrupt

@@ -4,7 +4,7 @@ calls side by side, their results in order and the same whatever the number of p
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, TypeVar
 
@@ -14,6 +14,7 @@ from .errors import TrustseekError
 #: starts all of its workers at once, so --jobs 1000000000 would fork until the machine gives out
 MAX_JOBS = 256
 T = TypeVar("T")
+K = TypeVar("K")
 
 if TYPE_CHECKING:
     from concurrent.futures import ProcessPoolExecutor
@@ -48,19 +49,19 @@ def in_processes(calls: Sequence[Callable[[], T]], n_jobs: int | None, done: Cal
 
 
 @contextmanager
-def beside(calls: Sequence[Callable[[], T]], n_jobs: int | None) -> Iterator[Callable[[int], T]]:
-    """``calls`` (picklable, without arguments) started over as many as ``n_jobs`` other processes
-    (None: all cores) while the ``with`` body runs in this one; the body's ``result(i)`` is call
-    ``i``'s result, waited for.  With one job each call runs in this process when its result is
-    asked for.  The results do not depend on the number of processes."""
+def beside(calls: Mapping[K, Callable[[], T]], n_jobs: int | None) -> Iterator[Callable[[K], T]]:
+    """``calls`` (by name; picklable, without arguments) started, in their order, over as many as
+    ``n_jobs`` other processes (None: all cores) while the ``with`` body runs in this one; the body's
+    ``result(name)`` is that call's result, waited for.  With one job each call runs in this process
+    when its result is asked for.  The results do not depend on the number of processes."""
     jobs = _jobs(n_jobs)
     if jobs <= 1 or not calls:
-        yield lambda i: calls[i]()
+        yield lambda name: calls[name]()
         return
     with _pool(min(jobs, len(calls)), lambda: "beside this one") as ex:
-        futures = [ex.submit(call) for call in calls]  # the workers start now, before the body starts threads
+        futures = {name: ex.submit(call) for name, call in calls.items()}  # the workers start now, before the body starts threads
         try:
-            yield lambda i: futures[i].result()
+            yield lambda name: futures[name].result()
         except BaseException:  # (an interrupt too): the calls' results are not wanted, so stop them now
             workers = list((getattr(ex, "_processes", None) or {}).values())  # (Python 3.14: ex.terminate_workers())
             ex.shutdown(wait=False, cancel_futures=True)

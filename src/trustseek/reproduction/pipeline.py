@@ -325,9 +325,8 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
         side["scheduling"] = partial(scheduling_section, truth, task, counts=cfg.counts_2, participants=n, seed=sched_seed)
     if cfg.types_participants:
         side["types"] = partial(types_section, participants=cfg.types_participants, seed=types_seed)
-    names = list(side)
 
-    with beside(list(side.values()), cfg.jobs) as result:
+    with beside(side, cfg.jobs) as result:
         frame1, summary["experiment1"] = _experiment1(cfg, truth, task, s1)
         step("experiment 1")
         fit, summary["fit"] = _fit_section(cfg, frame1, truth, sfit, report)
@@ -338,7 +337,7 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
         step("plan")
 
         # why the printed parameters give 0.78 and not the paper's 0.75
-        sens, summary["threshold_sensitivity"] = result(names.index("sensitivity"))
+        sens, summary["threshold_sensitivity"] = result("sensitivity")
         step("threshold sensitivity")
 
         small, large, summary["experiment2"] = _experiment2_section(cfg, plan, s2, s2l)
@@ -352,13 +351,13 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
         step("heterogeneity")
 
         # the paper's future work: choosing the order of the items, under the paper's model
-        sched = result(names.index("scheduling")) if "scheduling" in side else None
+        sched = result("scheduling") if "scheduling" in side else None
         if sched is not None:
             summary["scheduling"] = sched.numbers
         step("scheduling")
 
         # Remark 1 with supervisor types: planning for a population of types
-        types = result(names.index("types")) if "types" in side else None
+        types = result("types") if "types" in side else None
         if types is not None:
             summary["types"] = types.numbers
         step("types")

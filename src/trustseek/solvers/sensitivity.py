@@ -206,12 +206,12 @@ def sensitivity(
     jobs: int | None = 1,
 ) -> Sensitivity:
     """The threshold(s) and V when each free parameter moves within its printed precision,
-    alone and jointly (see the module docstring); the parameters moved are ``parameters``, by default
-    every free one of the model and the task (:func:`free_parameters`).  ``samples`` Latin-hypercube points check the
-    optimiser; ``starts`` (>= 1) L-BFGS-B runs per extreme: the first from the corner the
-    one-at-a-time effects point to, the second from the printed values, further ones from
-    random points of the box.  The extremes run side by side over ``jobs`` processes (None: all
-    cores), with the same results."""
+    alone and jointly (see the module docstring); the parameters moved are ``parameters``, by
+    default every free one of the model and the task (:func:`free_parameters`).  ``samples``
+    Latin-hypercube points check the optimiser; ``starts`` (>= 1) L-BFGS-B runs per extreme: the
+    first from the corner the one-at-a-time effects point to, the second from the printed values,
+    further ones from random points of the box.  The extremes run side by side over ``jobs``
+    processes (None: all cores), with the same results."""
     check_belief_update(belief_update)
     if grid < 3 or samples < 0 or starts < 1:
         raise SensitivityError([f"need grid >= 3, samples >= 0 and starts >= 1; got {grid}, {samples}, {starts}"])
