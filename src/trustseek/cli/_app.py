@@ -12,7 +12,7 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import typer
 from rich.console import Console
@@ -195,18 +195,44 @@ COMPILING = "compiling, once after installation (up to a minute)"
 
 class _Progress(Progress):
     """Rich's progress display, with a line of its own while numba compiles (a first use after
-    installation: a bar that stood still for a minute looked hung)."""
+    installation: a bar that stood still for a minute looked hung).
+
+    The display belongs to this process.  A process forked while it is open (the workers of
+    ``--jobs``) starts with it switched off, so that what the worker does (compiling, above all)
+    draws nothing on the terminal; and the fork waits until the display's refresh thread is not
+    drawing, whose lock the worker would otherwise inherit held, and wait on forever."""
+
+    shown: ClassVar[list[_Progress]] = []  # the displays open in this process, innermost last
 
     def __enter__(self) -> _Progress:
         super().__enter__()
         self._compiling: Any = None
         self._note = compiling_note(self.compiling)
         self._note.__enter__()
+        _Progress.shown.append(self)
         return self
 
     def __exit__(self, *exc: Any) -> None:
+        _Progress.shown.remove(self)
         self._note.__exit__(*exc)
         super().__exit__(*exc)
+
+    @staticmethod
+    def _before_fork() -> None:
+        for bar in _Progress.shown:
+            bar.live._lock.acquire()
+
+    @staticmethod
+    def _after_fork_in_parent() -> None:
+        for bar in reversed(_Progress.shown):
+            bar.live._lock.release()
+
+    @staticmethod
+    def _after_fork_in_child() -> None:
+        for bar in reversed(_Progress.shown):
+            bar.disable = True  # the parent's display: this process draws none of it
+            bar.live._lock.release()
+        _Progress.shown.clear()
 
     def compiling(self, on: bool) -> None:
         """Show (``on``) or take away the line saying that numba compiles."""
@@ -215,6 +241,13 @@ class _Progress(Progress):
         elif not on and self._compiling is not None:
             self.remove_task(self._compiling)
             self._compiling = None
+
+
+os.register_at_fork(
+    before=_Progress._before_fork,
+    after_in_parent=_Progress._after_fork_in_parent,
+    after_in_child=_Progress._after_fork_in_child,
+)
 
 
 def progress_bar(quiet: bool, *columns: Any) -> Progress:
