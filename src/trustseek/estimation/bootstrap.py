@@ -408,9 +408,17 @@ def replicate(
 ) -> list[Any]:
     """Every replicate's ``refit`` (:class:`_Replicate`), in order: replicate b resamples with the b-th
     child of ``options.seed`` (whatever the number of processes), over ``options.n_jobs`` processes
-    (all cores by default; in this process for one); ``done(b, finished)`` is called as each finishes."""
+    (all cores by default; in this process for one); ``done(b, finished)`` is called as each finishes.
+
+    ``compiled`` over several processes: the first replicate runs here before the others start, so
+    that numba compiles the run (or loads it from its cache) once, where a progress bar says so, and
+    every worker starts with it compiled (else each compiled it again, unseen)."""
     jobs = [
         _Replicate(seqs, ch, options, refit, compiled).run
         for ch in np.random.SeedSequence([options.seed_number, 1]).spawn(replicates)
     ]
-    return in_processes(jobs, options.n_jobs, done)
+    if not compiled or len(jobs) < 2 or (options.n_jobs or os.cpu_count() or 1) < 2:
+        return in_processes(jobs, options.n_jobs, done)
+    first = jobs[0]()
+    done(0, 1)
+    return [first, *in_processes(jobs[1:], options.n_jobs, lambda b, finished: done(b + 1, finished + 1))]
