@@ -8,6 +8,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, cast
 
+from ..seeds import seed_sequence
+
 if TYPE_CHECKING:
     import numpy as np
 
@@ -48,10 +50,9 @@ class FitOptions:
 
     @property
     def seed_sequence(self) -> np.random.SeedSequence:
-        """``seed`` as a :class:`numpy.random.SeedSequence` (the one given, whose children count on)."""
-        import numpy as np  # here: importing these options loads no numpy (the command line's help)
-
-        return self.seed if isinstance(self.seed, np.random.SeedSequence) else np.random.SeedSequence(self.seed)
+        """``seed`` as a :class:`numpy.random.SeedSequence` of the fit's own (:func:`~trustseek.seeds.seed_sequence`:
+        the same options give the same fit however often they are used)."""
+        return seed_sequence(self.seed)
 
     def run(self, quasi_newton: bool = True, accelerate: bool = True) -> RunSettings:
         """How each start of a fit with these options runs (:class:`RunSettings`)."""

@@ -16,8 +16,9 @@ from ..model.core import TrustModel
 from ..model.presets import paper_task
 from ..model.task import Task
 from ..policies import Policy, randomized
+from ..seeds import seed_sequence
 from ..vocab import PAPER_ASK_PROBABILITIES, PAPER_BLOCK_COUNTS, PAPER_DATA_COUNTS, TRIAL_COLUMNS
-from .engine import Block, run, seed_sequence, simulate
+from .engine import Block, run, simulate
 from .populations import SimulationError, Supervisors
 from .results import SUMMARY_QUANTITIES, CrossoverSimulation, Simulation, participant_ids
 from .trial_orders import schedule_counts

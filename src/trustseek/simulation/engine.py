@@ -28,6 +28,7 @@ from ..policies.base import Policy, PolicyError, ask_bounds
 from ..policies.complexity import ComplexityPolicy
 from ..policies.runner import PolicyRunner
 from ..pomdp.belief import ScalarBelief
+from ..seeds import seed_sequence
 from ..vocab import ASK, AUTONOMOUS, INTERVENE, RELIABLE, RELY, check_belief_update
 from . import kernels
 from .populations import SimulationError, Supervisors
@@ -280,11 +281,6 @@ def _summaries(tab: _Tables, blocks: list[Block], codes: np.ndarray, gamma: floa
         summ["asks"][:, j] = (cb >= ASK * 4).sum(axis=0)
         start += T
     return summ
-
-
-def seed_sequence(seed: int | np.random.SeedSequence | None) -> np.random.SeedSequence:
-    """``seed`` as a SeedSequence (one is passed through, so that callers can hand down children)."""
-    return seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
 
 
 def run(
