@@ -390,7 +390,7 @@ def predict_heldout(
     p_model = np.full((T, N), np.nan)
     determined = np.zeros((T, N), dtype=bool)
     calls = [
-        # a SeedSequence of each fold's own: a fit's spawn() moves the one it is given on
+        # each fold's restarts seeded as a fit with that seed would be
         partial(
             fit_iohmm,
             seqs.subset(np.flatnonzero(fold_of != f)),
