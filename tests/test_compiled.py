@@ -174,3 +174,42 @@ def test_a_compile_is_told_while_it_runs_and_a_cache_load_is_not():
             numba.njit(lambda x: x * 2)(1.5)
         lines.append([t.description for t in bar.tasks])
     assert lines == [["restarts", COMPILING], ["restarts"], ["restarts"]]
+
+
+def test_processes_that_need_the_same_compiled_function_at_once_compile_it_once(tmp_path):
+    """Several processes at a large compiled function's first call (the workers of --jobs, a
+    reproduction's step beside its fit) each compiled it, a minute of CPU each in a fresh
+    environment; within ``compiled_once`` one compiles and the others load it from the cache."""
+    (tmp_path / "slowmod.py").write_text(
+        "import numba\nimport numpy as np\n\n"
+        "@numba.njit(cache=True)\n"
+        "def f(x):\n"
+        "    a = np.array([[2.0, 1.0], [1.0, 3.0]]) * x\n"
+        "    return np.linalg.solve(a, np.ones(2)).sum() + np.linalg.det(a)\n"
+    )
+    script = tmp_path / "first_call.py"
+    script.write_text(
+        "import sys\n"
+        f"sys.path.insert(0, {str(tmp_path)!r})\n"
+        "from trustseek import compiled\n"
+        "compiled.load()\n"
+        "import slowmod\n"
+        "told = []\n"
+        "sys.stdout.write('ready\\n'); sys.stdout.flush(); sys.stdin.readline()\n"
+        "with compiled.compiling_note(told.append), compiled.compiled_once('test-slowmod'):\n"
+        "    slowmod.f(1.0)\n"
+        "print('compiled' if told else 'loaded')\n"
+    )
+    env = {"NUMBA_CACHE_DIR": str(tmp_path / "cache"), "PATH": "/usr/bin:/bin"}
+    procs = [
+        subprocess.Popen([sys.executable, str(script)], env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        for _ in range(2)
+    ]
+    for p in procs:  # both imported: they reach the first call together
+        assert p.stdout is not None and p.stdout.readline() == "ready\n"
+    for p in procs:
+        assert p.stdin is not None
+        p.stdin.write("go\n")
+        p.stdin.flush()
+    outs = sorted(p.communicate(timeout=120)[0].strip() for p in procs)
+    assert outs == ["compiled", "loaded"]

@@ -208,6 +208,37 @@ def _stamp_our_caches() -> None:
 
 
 @contextmanager
+def compiled_once(name: str) -> Iterator[None]:
+    """Within: no other process on this machine is inside ``compiled_once(name)`` with the same
+    numba cache and sources; around the first call of a large compiled function, so that of
+    several processes that need it at once (the workers of ``--jobs``, a reproduction's step
+    beside its fit) one compiles it and the others wait, then load it from the cache, instead
+    of each compiling it again (a minute of CPU, and half a gigabyte, each in a fresh
+    environment).  A lock file in numba's cache folder (or the temporary one), released by the
+    system when its holder ends however it ends; where none can be made, no wait."""
+    if not AVAILABLE or sys.platform == "win32":  # pragma: no cover - no flock there
+        yield
+        return
+    import fcntl
+    import tempfile
+
+    cache = os.environ.get("NUMBA_CACHE_DIR", "")
+    key = hashlib.sha256(sources_stamp() + cache.encode() + name.encode()).hexdigest()[:16]
+    try:
+        os.makedirs(cache or tempfile.gettempdir(), exist_ok=True)
+        lock = open(Path(cache or tempfile.gettempdir()) / f"trustseek-compile-{key}.lock", "a")  # noqa: SIM115 (closed by the with below)
+    except OSError:
+        yield
+        return
+    with lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+@contextmanager
 def load_meanwhile(first: Callable[[], object], when: bool = True) -> Iterator[None]:
     """Within: numba is imported and ``first`` (a call of a small compiled function, which sets up
     numba's code generator and its cache: about half a second) runs on a second thread, while

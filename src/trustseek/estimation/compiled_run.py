@@ -20,7 +20,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ..compiled import PARALLEL_LOCK, set_threads
+from ..compiled import PARALLEL_LOCK, compiled_once, set_threads
 from . import compiled_steps as steps
 from . import kernels
 from .em import CAPPED, STATIONARY, RunResult
@@ -379,7 +379,9 @@ def run_starts(structure: Structure, work: Workspace, starts: Sequence[Params], 
     :data:`SUBSAMPLE_EVERY`-th sequence to its own end, then on the whole data from there (at most
     ``max_iter`` more E-steps), the finish starting from the subsample's matrix scaled by the ratio of
     trials; ``subsample_iterations`` counts the subsample's E-steps.  A subsample end that gives the
-    whole data probability zero is run again from the start on the whole data."""
+    whole data probability zero is run again from the start on the whole data.  A process's first
+    start runs alone, in :func:`~trustseek.compiled.compiled_once`: of several processes that need
+    the run at once, one compiles it and the others load it from numba's cache."""
     K, M, Ue, Ut = structure.dims
     kern = work._kernel
     assert kern is not None
@@ -431,11 +433,18 @@ def run_starts(structure: Structure, work: Workspace, starts: Sequence[Params], 
             int(sub_its),
         )
 
-    if threaded:
-        with PARALLEL_LOCK:
-            set_threads(threads)
-            return [one(p) for p in starts]
-    if threads > 1 and len(starts) > 1:
-        with ThreadPoolExecutor(min(threads, len(starts)), thread_name_prefix="trustseek-fit") as pool:
-            return list(pool.map(one, starts))
-    return [one(p) for p in starts]
+    def each(todo: Sequence[Params]) -> list[RunResult]:
+        if threaded:
+            with PARALLEL_LOCK:
+                set_threads(threads)
+                return [one(p) for p in todo]
+        if threads > 1 and len(todo) > 1:
+            with ThreadPoolExecutor(min(threads, len(todo)), thread_name_prefix="trustseek-fit") as pool:
+                return list(pool.map(one, todo))
+        return [one(p) for p in todo]
+
+    if getattr(run_one, "signatures", None) or not starts:  # compiled, or loaded, in this process
+        return each(starts)
+    with compiled_once("compiled_run.run_one"):  # the first start compiles or loads it: one process at a time
+        first = each(starts[:1])
+    return first + each(starts[1:])
