@@ -213,3 +213,20 @@ def test_processes_that_need_the_same_compiled_function_at_once_compile_it_once(
         p.stdin.flush()
     outs = sorted(p.communicate(timeout=120)[0].strip() for p in procs)
     assert outs == ["compiled", "loaded"]
+
+
+def test_a_holder_that_does_not_end_is_waited_for_only_so_long(tmp_path, monkeypatch):
+    """A process stopped while it compiled (Ctrl-Z) keeps the lock: the others go on alone after
+    ``COMPILE_WAIT`` seconds, as they did before there was a lock, instead of waiting for ever."""
+    import time
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(compiled, "COMPILE_WAIT", 0.3)
+    with compiled.compiled_once("held"):  # the stopped holder (another open file: it conflicts)
+        start = time.monotonic()
+        with compiled.compiled_once("held"):
+            waited = time.monotonic() - start
+    assert 0.3 <= waited < 5
+    start = time.monotonic()
+    with compiled.compiled_once("held"):  # released: taken at once
+        assert time.monotonic() - start < 0.3

@@ -35,6 +35,7 @@ _PENDING: list[_Lazy] = []  # decorated, not yet handed to numba
 _LOCK = threading.RLock()
 _LOADED = False
 PARALLEL_LOCK = threading.Lock()  # held around every call that runs a prange loop on several threads
+COMPILE_WAIT = 180.0  # seconds a process waits at most for another to compile (compiled_once)
 _NOTES: list[Callable[[bool], None]] = []  # told when numba starts and ends compiling (compiling_note)
 
 
@@ -215,7 +216,8 @@ def compiled_once(name: str) -> Iterator[None]:
     beside its fit) one compiles it and the others wait, then load it from the cache, instead
     of each compiling it again (a minute of CPU, and half a gigabyte, each in a fresh
     environment).  A lock file in numba's cache folder (or the temporary one), released by the
-    system when its holder ends however it ends; where none can be made, no wait."""
+    system when its holder ends however it ends; where none can be made, or after
+    :data:`COMPILE_WAIT` seconds (a holder stopped, not ended), this process goes on alone."""
     if not AVAILABLE or sys.platform == "win32":  # pragma: no cover - no flock there
         yield
         return
@@ -231,11 +233,29 @@ def compiled_once(name: str) -> Iterator[None]:
         yield
         return
     with lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
+        held = _flock_within(lock, COMPILE_WAIT)
         try:
             yield
         finally:
-            fcntl.flock(lock, fcntl.LOCK_UN)
+            if held:
+                fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def _flock_within(lock: Any, seconds: float) -> bool:
+    """Take ``lock``'s exclusive flock, waiting at most ``seconds`` (a holder that is stopped, not
+    ended, would keep it); whether it was taken."""
+    import fcntl
+    import time
+
+    end = time.monotonic() + seconds
+    while True:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return True
+        except BlockingIOError:
+            if time.monotonic() >= end:
+                return False
+            time.sleep(0.05)
 
 
 @contextmanager
