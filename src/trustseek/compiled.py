@@ -226,9 +226,10 @@ def compiled_once(name: str) -> Iterator[None]:
 
     cache = os.environ.get("NUMBA_CACHE_DIR", "")
     key = hashlib.sha256(sources_stamp() + cache.encode() + name.encode()).hexdigest()[:16]
+    folder = Path(cache or tempfile.gettempdir())
     try:
-        os.makedirs(cache or tempfile.gettempdir(), exist_ok=True)
-        lock = open(Path(cache or tempfile.gettempdir()) / f"trustseek-compile-{key}.lock", "a")  # noqa: SIM115 (closed by the with below)
+        folder.mkdir(parents=True, exist_ok=True)
+        lock = open(folder / f"trustseek-compile-{key}.lock", "a")  # noqa: SIM115 (closed by the with below)
     except OSError:
         yield
         return
