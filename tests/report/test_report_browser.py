@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from small_runs import small_reproduction
 from trustseek.report import FIGURES, write_report
-from trustseek.reproduction.pipeline import ReproduceConfig, reproduce
 from trustseek.testing.browser import launch_chromium
 
 pytestmark = pytest.mark.browser
@@ -17,21 +17,7 @@ pytestmark = pytest.mark.browser
 def test_report_renders_with_figures(tmp_path):
     from playwright.sync_api import sync_playwright
 
-    cfg = ReproduceConfig(
-        seed=1,
-        replicates=2,
-        large_n=300,
-        bootstrap=0,
-        restarts=2,
-        replicate_restarts=1,
-        replicate_large_n=150,
-        grid=201,
-        jobs=1,
-        sensitivity_samples=8,
-        schedule_participants=300,  # every section and figure, on few simulated people
-        types_participants=300,
-    )
-    paths = write_report(reproduce(cfg), tmp_path / "report")
+    paths = write_report(small_reproduction(), tmp_path / "report")
     html = paths["html"]
     # the HTML must stand alone: move it away from its PNGs before opening it
     alone = tmp_path / "alone" / "report.html"
