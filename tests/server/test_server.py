@@ -295,13 +295,16 @@ def test_self_reports_per_block(client):
         "duplicate"
     ]
     assert client.post(f"/api/sessions/{sid}/reports", json={"after_trial": 2, "value": 10}, headers=ph).status_code == 409
-    submit(client, sid, ph, 3, "rely", events=[{"t": 1700000000000.5, "type": "grasp", "data": {"by": "robot"}}])
+    bad_page = {"t": 1, "type": "grasp", "page": "no spaces"}
+    assert client.post(f"/api/sessions/{sid}/events", json={"events": [bad_page]}, headers=ph).status_code == 422
+    submit(client, sid, ph, 3, "rely", events=[{"t": 1700000000000.5, "type": "grasp", "page": "4f2a", "data": {"by": "robot"}}])
     f = export(client, st["id"], fmt="parquet")
     assert f["self_report"].tolist()[:2] == [None, 64.0] or (np.isnan(f["self_report"][0]) and f["self_report"][1] == 64.0)
     ev = export(client, st["id"], table="events")
     assert ev["type"].tolist() == ["consent", "grasp"]
     assert ev["client_time"].tolist()[1] == 1700000000000.5 and json.loads(ev["data"][1]) == {"by": "robot"}
     assert ev["trial"].tolist()[1] == 3
+    assert ev["page"].isna().tolist() == [True, False] and ev["page"][1] == "4f2a"  # the page load that sent it, if told
 
 
 def test_export_is_read_by_the_data_module_and_cli(client, db_url, tmp_path):
@@ -332,7 +335,7 @@ def test_migrations_run_once_and_are_idempotent(db_url, tmp_path):
     create_app(db_url, token=TOKEN)  # a restart: nothing to do, nothing lost
     eng = create_engine(db_url)
     with eng.connect() as c:
-        assert c.execute(text("select version_num from alembic_version")).scalars().all() == ["0004"]
+        assert c.execute(text("select version_num from alembic_version")).scalars().all() == ["0005"]
         tables = set(c.execute(text("select name from sqlite_master where type='table'")).scalars())
     assert {"studies", "sessions", "trials", "reports", "events"} <= tables
 

@@ -72,7 +72,7 @@ def test_migrations_create_the_schema_and_rerun_as_a_no_op(pg_url, app):
     eng = create_engine(pg_url.replace("postgresql://", "postgresql+psycopg://"))
     with eng.connect() as c:
         assert c.execute(text("select version()")).scalar().startswith("PostgreSQL")
-        assert c.execute(text("select version_num from alembic_version")).scalars().all() == ["0004"]
+        assert c.execute(text("select version_num from alembic_version")).scalars().all() == ["0005"]
         tables = set(c.execute(text("select table_name from information_schema.tables where table_schema = 'public'")).scalars())
         uniques = set(
             c.execute(

@@ -192,8 +192,14 @@ def test_twenty_participants_through_one_study_link(tmp_path, backend):
     firsts = Counter(sessions["block_order"].str.slice(2, 7))
     assert max(firsts.values()) - min(firsts.values()) <= 1, firsts
     assert len(trials) == 17 * 2 and not trials.duplicated(["participant", "trial"]).any()
-    twice = events[events.duplicated(["session", "trial", "type", "client_time", "data"], keep=False)]
+    # every event names the page load that made it; an event stored twice would be the same
+    # page's same event (two tabs of one session, or a page and its reload, are two page loads)
+    assert events["page"].notna().all()
+    twice = events[events.duplicated(["session", "page", "trial", "type", "client_time", "data"], keep=False)]
     assert twice.empty, twice.to_string()
+    pages = events.groupby("session")["page"].nunique()
+    sid_of = dict(zip(sessions["panel_id"], sessions["session"], strict=True))
+    assert all(pages[sid_of[f"crowd-{k:02d}"]] >= 2 for k in (0, 1, 2, *RELOADERS)), pages  # a second tab, a reload
     shown = events[events["type"] == "outcome_shown"].groupby("session")["trial"].apply(sorted)
     # every outcome shown is stored once: also of a session whose two tabs took its trials in
     # turns (the tab that committed a trial shows its outcome), or whose page was reloaded

@@ -27,7 +27,7 @@ export interface TrialResult {
   trial: number; complexity: string; robot_action: string; human_action: string | null; outcome: string;
   reward: number; practice: boolean;
 }
-export interface UIEvent { t: number; type: string; trial?: number; data?: Record<string, unknown>; }
+export interface UIEvent { t: number; type: string; trial?: number; page?: string; data?: Record<string, unknown>; }
 
 export class ApiError extends Error {
   constructor(public status: number, message: string) { super(message); }
@@ -63,11 +63,20 @@ export interface RetryPolicy {
 
 const sleep = (ms: number) => new Promise((r) => setTimeout(r, ms));
 
-/** 128 random bits as hex (crypto.getRandomValues works on plain-HTTP pages too, unlike randomUUID). */
-function batchId(): string {
-  const b = new Uint8Array(16);
+/** `bytes` random bytes as hex (crypto.getRandomValues works on plain-HTTP pages too, unlike randomUUID). */
+function randomHex(bytes: number): string {
+  const b = new Uint8Array(bytes);
   crypto.getRandomValues(b);
   return Array.from(b, (x) => x.toString(16).padStart(2, "0")).join("");
+}
+
+/** This page load: every event it makes carries it, so that the events of a reloaded page, or of a
+ * second tab of the same session, are told apart from this one's. */
+const PAGE = randomHex(8);
+
+/** A UI event of this page, now. */
+export function uiEvent(type: string, data?: Record<string, unknown>, trial?: number): UIEvent {
+  return { t: Date.now(), type, trial, page: PAGE, data };
 }
 
 export class Api {
@@ -137,7 +146,7 @@ export class Api {
    * the server answers, the batch is kept in the page's storage (`outbox`): a page reloaded or
    * closed meanwhile sends it again when the session's page opens next (`resend`). */
   events(events: UIEvent[]) {
-    const batch = batchId();
+    const batch = randomHex(16);
     this.outbox((kept) => { kept[batch] = events; });
     return this.send(batch, events);
   }

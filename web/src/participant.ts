@@ -9,7 +9,7 @@
 // the page retries for as long as it stays open and keeps the trial in progress in
 // localStorage, so that a reload resumes it where it was.
 
-import { ApiError } from "./api";
+import { ApiError, uiEvent } from "./api";
 import { installKeyboard } from "./input";
 import { askQuestionnaire, askQuiz, askReport, onQuestionnaire, onQuiz, onReport } from "./participant/forms";
 import { $, Phase, api, clearError, fmtReward, forget, log, onConnection, page, save, showError, speedParam, touchOnly } from "./participant/state";
@@ -59,7 +59,7 @@ async function boot() {
   $<HTMLInputElement>("agree").addEventListener("change", (e) => ($<HTMLButtonElement>("consent-btn").disabled = !(e.target as HTMLInputElement).checked));
   $("consent-btn").addEventListener("click", onConsent);
   $("start-btn").addEventListener("click", () => {
-    api.events([{ t: Date.now(), type: "instructions_done" }]).catch(() => undefined);
+    api.events([uiEvent("instructions_done")]).catch(() => undefined);
     route();
   });
   $("intervene-btn").addEventListener("click", () => intervene("button"));
@@ -88,7 +88,7 @@ async function onConsent() {
   }
   $("consent-status").textContent = "Saving\u2026";
   try {
-    page.st = await api.consent([{ t: Date.now(), type: "consent" }], panel);
+    page.st = await api.consent([uiEvent("consent")], panel);
   } catch (e) {
     $("consent-status").textContent = "";
     $<HTMLButtonElement>("consent-btn").disabled = !$<HTMLInputElement>("agree").checked;

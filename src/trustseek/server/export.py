@@ -112,6 +112,7 @@ DICTIONARY: dict[str, dict[str, str]] = {
         "session": "session id",
         "trial": "session trial (empty outside trials)",
         "client_time": "browser time, ms since the Unix epoch",
+        "page": "the page load that sent the event (a reload or a second tab of the session is another)",
         "server_time": "server time (UTC)",
         "type": "event type (consent, trial_start, intervene, grasp, deposit, outcome_shown, ...)",
         "data": "the event's data, as JSON",
@@ -264,7 +265,7 @@ def events_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFra
     rows = db.execute(_exported_rows(Event, study, pilot, Session.participant).order_by(Session.participant, Event.id)).all()
     data = [
         {
-            **_columns(e, "trial client_time type data"),
+            **_columns(e, "trial client_time page type data"),
             "participant": p,
             "session": e.session_id,
             "server_time": iso(e.created_at),

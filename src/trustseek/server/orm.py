@@ -154,6 +154,7 @@ class Event(_SessionRow, Base):
 
     trial: Mapped[int | None] = mapped_column(Integer, nullable=True)
     client_time: Mapped[float | None] = mapped_column(Float, nullable=True)  # ms since the Unix epoch
+    page: Mapped[str | None] = mapped_column(String(32), nullable=True)  # the page load that made it
     type: Mapped[str] = mapped_column(String(40))
     data: Mapped[str] = mapped_column(Text, default="{}")
 

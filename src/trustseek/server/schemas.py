@@ -55,6 +55,14 @@ class EventIn(Body):
     t: float | None = Field(None, description="Client time, ms since the Unix epoch.")
     type: str = Field(..., min_length=1, max_length=40)
     trial: int | None = Field(None, ge=1, le=MAX_TRIAL)
+    page: str | None = Field(
+        None,
+        min_length=1,
+        max_length=32,
+        pattern=r"^[A-Za-z0-9_-]+$",
+        description="The page load that made the event: a random id the page makes when it opens "
+        "(a reload or a second tab makes another).",
+    )
     data: dict[str, Any] = Field(default_factory=dict)
 
     @field_validator("data")

@@ -344,7 +344,9 @@ def check_event_room(db: DBSession, s: Session, events: list[dict], trial: int |
 def _event(s: Session, trial: int | None, ev: dict) -> Event:
     """The row of a UI event (``schemas.EventIn``'s fields) of session ``s``."""
     data = json.dumps(ev.get("data", {}))
-    return Event(session_id=s.id, trial=trial, client_time=ev.get("t"), type=str(ev.get("type", ""))[:40], data=data)
+    return Event(
+        session_id=s.id, trial=trial, client_time=ev.get("t"), page=ev.get("page"), type=str(ev.get("type", ""))[:40], data=data
+    )
 
 
 def add_events(db: DBSession, s: Session, events: list[dict], batch: str | None = None) -> tuple[int, bool]:

@@ -1,7 +1,7 @@
 // The participant page's state, shared by its modules: the study's state from the server, the
 // trial in progress (kept in localStorage across reloads), the page's clock and its messages.
 
-import { Api, Connection, Current, State, TrialResult, UIEvent } from "../api";
+import { Api, Connection, Current, State, TrialResult, UIEvent, uiEvent } from "../api";
 import { Outcome2D } from "../outcome2d";
 import { ItemState, Layout, RobotState, makeLayout } from "../scene";
 import { Scene3D } from "../scene3d";
@@ -65,7 +65,7 @@ export const page = {
 export const contacts = new Contacts(); // teleoperation: contacts with shelves, products and obstacles
 
 export function log(type: string, data: Record<string, unknown> = {}) {
-  page.trialEvents.push({ t: Date.now(), type, trial: page.current?.trial, data });
+  page.trialEvents.push(uiEvent(type, data, page.current?.trial));
   save();
 }
 

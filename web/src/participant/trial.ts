@@ -3,7 +3,7 @@
 // outcome's animation and banner; the page's clock (`tick`), which `?manual=1` hands to the tests
 // (window.__scene.step).
 
-import { ApiError, Current } from "../api";
+import { ApiError, Current, uiEvent } from "../api";
 import { poll } from "../input";
 import { Outcome2D } from "../outcome2d";
 import { Cause, makeLayout, pathLength, pointAlong } from "../scene";
@@ -135,7 +135,7 @@ function showBanner() {
   b.innerHTML = `<span class="pts ${o.reward > 0 ? "pos" : o.reward < 0 ? "neg" : ""}">${r}</span> ${text[o.outcome] ?? o.outcome}${o.practice ? " (practice: not scored)" : ""}`;
   b.className = "show";
   page.shownScore = page.st.score;
-  api.events([{ t: Date.now(), type: "outcome_shown", trial: o.trial, data: { outcome: o.outcome, reward: o.reward, cause: g.cause } }]).catch(() => undefined);
+  api.events([uiEvent("outcome_shown", { outcome: o.outcome, reward: o.reward, cause: g.cause }, o.trial)]).catch(() => undefined);
 }
 
 /** The cause of a failure the outcome's animation showed (3-D or 2-D), and what was struck. */
@@ -222,7 +222,7 @@ export function useScene(asked: string | undefined) {
   const c = chooseScene(query, asked, { world: $<HTMLCanvasElement>("world"), local: $<HTMLCanvasElement>("local"), ee: $<HTMLCanvasElement>("ee") });
   page.scene3d = c.scene;
   document.body.dataset.scene = c.ran;
-  api.events([{ t: Date.now(), type: "scene", data: { scene: c.ran, asked: c.asked, reason: c.reason } }]).catch(() => undefined);
+  api.events([uiEvent("scene", { scene: c.ran, asked: c.asked, reason: c.reason })]).catch(() => undefined);
 }
 
 function approachLength(seed: number): number {
