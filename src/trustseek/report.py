@@ -1,21 +1,29 @@
-"""The reproduction report: one self-contained HTML file, the PNG figures, summary.json and the data.
+"""The HTML reports: the reproduction's (one self-contained HTML file, the PNG figures,
+summary.json and the data) and the design study's (the targets and the smallest design that
+meets them, the power and regret tables, the data-collection search and the figures).
 
-The HTML embeds every figure as base64 PNG and its styles inline, so it reads offline
-and can be mailed as a single file.
+Each page embeds its figures as base64 PNG and its styles inline, so it reads offline and can be
+mailed as a single file; both format their numbers with the same functions (:func:`fmt`,
+:func:`pct`, :func:`iv`, :func:`stat`).
 """
 
 from __future__ import annotations
 
 import base64
+import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
+from .design.sweep import participants_needed
 from .model.presets import paper_model, paper_task
 from .reproduction import AGNOSTIC, AWARE, PAPER, Reproduction, write_summary
 from .version import __version__
+
+__all__ = ["FIGURES", "fmt", "iv", "pct", "render_html", "stat", "write_design_report", "write_report"]
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 
@@ -94,7 +102,16 @@ def fmt(v: Any) -> str:
 
 
 def pct(v: Any) -> str:
-    return "–" if v is None else f"{100 * float(v):.0f}%"
+    """A share as a percentage, its number as :func:`fmt` writes it: 0.6 as "60 %", 0.0123 as "1.23 %"."""
+    return "–" if v is None else f"{fmt(100 * float(v))} %"
+
+
+def iv(d: dict[str, Any], spec: str = ".3f", scale: float = 1.0, unit: str = "") -> str:
+    """``mean [lo, hi]`` (the mean alone without an interval, – without a mean), each ``scale`` times, as ``spec``."""
+    if d.get("mean") is None:
+        return "–"
+    mean = f"{scale * d['mean']:{spec}}{unit}"
+    return mean if d.get("lo") is None else f"{mean} [{scale * d['lo']:{spec}}, {scale * d['hi']:{spec}}]"
 
 
 def stat(v: Any) -> str:
@@ -178,17 +195,24 @@ def make_figures(rep: Reproduction, out: Path) -> list[Path]:
     return paths
 
 
+def _page(template: str, **context: Any) -> str:
+    """``template`` rendered with ``context`` and the number formats every report shares."""
+    env = Environment(loader=FileSystemLoader(str(TEMPLATES)), autoescape=True, undefined=StrictUndefined)
+    return env.get_template(template).render(fmt=fmt, pct=pct, iv=iv, stat=stat, version=__version__, **context)
+
+
+def _embedded(path: Path) -> str:
+    return base64.b64encode(path.read_bytes()).decode("ascii")
+
+
 def render_html(summary: dict, figure_dir: Path) -> str:
     """The report as one HTML string with every figure embedded."""
-    env = Environment(loader=FileSystemLoader(str(TEMPLATES)), autoescape=True, undefined=StrictUndefined)
-    figures = []
-    for file, section, caption in FIGURES:
-        path = figure_dir / file
-        if not path.exists():
-            continue
-        data = base64.b64encode(path.read_bytes()).decode("ascii")
-        figures.append({"file": file, "section": section, "caption": caption, "alt": caption.split(":")[0], "data": data})
-    return env.get_template("report.html.j2").render(s=summary, figures=figures, fmt=fmt, pct=pct, stat=stat, version=__version__)
+    figures = [
+        {"file": file, "section": section, "caption": caption, "alt": caption.split(":")[0], "data": _embedded(figure_dir / file)}
+        for file, section, caption in FIGURES
+        if (figure_dir / file).exists()
+    ]
+    return _page("report.html.j2", s=summary, figures=figures)
 
 
 def write_report(rep: Reproduction, out: str | Path) -> dict[str, Path]:
@@ -205,3 +229,31 @@ def write_report(rep: Reproduction, out: str | Path) -> dict[str, Path]:
     html = out / "report.html"
     html.write_text(render_html(rep.summary, out), encoding="utf-8")
     return {"html": html, "summary": out / "summary.json", "dir": out}
+
+
+def write_design_report(summary: dict[str, Any], out: str | Path, search: dict[str, Any] | None = None) -> dict[str, Path]:
+    """Write ``out``/design.html (figures embedded), the PNGs and design.json."""
+    from .plots.design import plot_ask_search, plot_power, plot_regret
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    figures: list[tuple[str, Callable[..., Any], dict[str, Any], str]] = [
+        (
+            "power.png",
+            plot_power,
+            summary,
+            "Power of experiment 2 against its participants (bands: exact 95 % intervals, Wilcoxon)",
+        ),
+        ("regret.png", plot_regret, summary, "Regret of the policy estimated from each experiment-1 design (95 % intervals)"),
+    ]
+    if search is not None:
+        figures.append(("ask_search.png", plot_ask_search, search, "Mean regret by experiment 1's ask probabilities"))
+    embedded = []
+    for name, fn, data, caption in figures:
+        fn(data, out / name)
+        embedded.append({"caption": caption, "data": _embedded(out / name)})
+    doc = {"design": summary, "ask_search": search}
+    (out / "design.json").write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    html = _page("design.html.j2", s=summary, search=search, figures=embedded, needed=participants_needed)
+    (out / "design.html").write_text(html, encoding="utf-8")
+    return {"html": out / "design.html", "json": out / "design.json", "dir": out}

@@ -177,7 +177,7 @@ def design(
     result, search = _run(cfg, jobs, scheduler, quiet, search_grid)
     paths = None
     if out is not None:
-        from ..design_report import write_design_report
+        from ..report import write_design_report
 
         paths = write_design_report(result.summary, out, search)
     if as_json:
@@ -219,7 +219,7 @@ def _run(cfg, jobs: int, scheduler: str | None, quiet: bool, search_grid: tuple[
 
 def _print(s: dict[str, Any], search: dict[str, Any] | None) -> None:
     from ..design import participants_needed
-    from ..design_report import iv
+    from ..report import iv
 
     def _iv(d: dict[str, Any], scale: float = 1.0, unit: str = "") -> str:
         return escape(iv(d, ".3g", scale, unit))
