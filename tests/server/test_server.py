@@ -305,6 +305,8 @@ def test_self_reports_per_block(client):
     assert ev["client_time"].tolist()[1] == 1700000000000.5 and json.loads(ev["data"][1]) == {"by": "robot"}
     assert ev["trial"].tolist()[1] == 3
     assert ev["page"].isna().tolist() == [True, False] and ev["page"][1] == "4f2a"  # the page load that sent it, if told
+    client.post(f"/api/sessions/{sid}/events", json={"events": [{"t": 2, "type": "scene", "page": "9c"}]}, headers=ph)
+    assert export(client, st["id"], table="sessions")["pages"].tolist() == [2]  # 4f2a and 9c (a reload, a second tab)
 
 
 def test_export_is_read_by_the_data_module_and_cli(client, db_url, tmp_path):

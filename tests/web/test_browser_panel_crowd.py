@@ -197,9 +197,11 @@ def test_twenty_participants_through_one_study_link(tmp_path, backend):
     assert events["page"].notna().all()
     twice = events[events.duplicated(["session", "page", "trial", "type", "client_time", "data"], keep=False)]
     assert twice.empty, twice.to_string()
-    pages = events.groupby("session")["page"].nunique()
-    sid_of = dict(zip(sessions["panel_id"], sessions["session"], strict=True))
-    assert all(pages[sid_of[f"crowd-{k:02d}"]] >= 2 for k in (0, 1, 2, *RELOADERS)), pages  # a second tab, a reload
+    # the sessions table counts them: 2 or more for a session with a second tab or a reload
+    per_session = events.groupby("session")["page"].nunique()
+    assert (sessions["pages"] == sessions["session"].map(per_session)).all()
+    pages = dict(zip(sessions["panel_id"], sessions["pages"], strict=True))
+    assert all(pages[PIDS[k]] >= 2 for k in (0, 1, 2, *RELOADERS)), pages
     shown = events[events["type"] == "outcome_shown"].groupby("session")["trial"].apply(sorted)
     # every outcome shown is stored once: also of a session whose two tabs took its trials in
     # turns (the tab that committed a trial shows its outcome), or whose page was reloaded

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
-from sqlalchemy import Select, select
+from sqlalchemy import Select, func, select
 from sqlalchemy.orm import Session as DBSession
 
 from ..vocab import TRIAL_COLUMNS
@@ -106,6 +106,7 @@ DICTIONARY: dict[str, dict[str, str]] = {
         "quiz_attempts": "attempts at the comprehension quiz",
         "quiz_outcome": "passed or failed (empty: no quiz, or not finished)",
         "checks_failed": "attention-check items answered otherwise than instructed",
+        "pages": "page loads that sent events (more than 1: the participant reloaded the page or opened a second tab)",
     },
     "events": {
         "participant": "participant label",
@@ -242,6 +243,14 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
     for a in db.scalars(_exported_rows(Answer, study, pilot)):
         if (a.questionnaire, a.item) in items and not check_passed(items[(a.questionnaire, a.item)], a.value):
             failed[a.session_id] = failed.get(a.session_id, 0) + 1
+    pages = dict(
+        db.execute(
+            select(Event.session_id, func.count(Event.page.distinct()))
+            .join(Session, Event.session_id == Session.id)
+            .where(*exported(study, pilot))
+            .group_by(Event.session_id)
+        ).all()
+    )
     rows = [
         {
             **_columns(s, "participant role status trials_done score seed secret panel_id speed"),
@@ -255,6 +264,7 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
             "quiz_attempts": len((s.quiz or {}).get("attempts", [])),
             "quiz_outcome": (s.quiz or {}).get("outcome"),
             "checks_failed": failed.get(s.id, 0),
+            "pages": pages.get(s.id, 0),
         }
         for s in db.scalars(select(Session).where(*exported(study, pilot)).order_by(Session.participant))
     ]
