@@ -106,7 +106,8 @@ DICTIONARY: dict[str, dict[str, str]] = {
         "quiz_attempts": "attempts at the comprehension quiz",
         "quiz_outcome": "passed or failed (empty: no quiz, or not finished)",
         "checks_failed": "attention-check items answered otherwise than instructed",
-        "pages": "page loads that sent events (more than 1: the participant reloaded the page or opened a second tab)",
+        "pages": "page loads that sent events (more than 1: the participant reloaded the page or opened a second tab; "
+        "empty: events stored before events named their page)",
     },
     "events": {
         "participant": "participant label",
@@ -243,14 +244,17 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
     for a in db.scalars(_exported_rows(Answer, study, pilot)):
         if (a.questionnaire, a.item) in items and not check_passed(items[(a.questionnaire, a.item)], a.value):
             failed[a.session_id] = failed.get(a.session_id, 0) + 1
-    pages = dict(
-        db.execute(
-            select(Event.session_id, func.count(Event.page.distinct()))
+    # page loads per session: unknown (empty) for a session whose events came without one (stored
+    # before events named their page), 0 for a session that sent no event
+    pages = {
+        sid: n if n or not total else None
+        for sid, n, total in db.execute(
+            select(Event.session_id, func.count(Event.page.distinct()), func.count())
             .join(Session, Event.session_id == Session.id)
             .where(*exported(study, pilot))
             .group_by(Event.session_id)
-        ).all()
-    )
+        )
+    }
     rows = [
         {
             **_columns(s, "participant role status trials_done score seed secret panel_id speed"),
@@ -268,7 +272,7 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
         }
         for s in db.scalars(select(Session).where(*exported(study, pilot)).order_by(Session.participant))
     ]
-    return pd.DataFrame(rows, columns=list(DICTIONARY["sessions"]))
+    return pd.DataFrame(rows, columns=list(DICTIONARY["sessions"])).astype({"pages": "Int64"})
 
 
 def events_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame:
