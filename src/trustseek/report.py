@@ -102,8 +102,10 @@ def fmt(v: Any) -> str:
 
 
 def pct(v: Any) -> str:
-    """A share as a percentage, its number as :func:`fmt` writes it: 0.6 as "60 %", 0.0123 as "1.23 %"."""
-    return "–" if v is None else f"{fmt(100 * float(v))} %"
+    """A share as a percentage, its number as :func:`fmt` writes it: 0.6 as "60 %", 0.0123 as "1.23 %"
+    (– for none or a non-finite share)."""
+    text = fmt(None if v is None else 100 * float(v))
+    return text if text == "–" else f"{text} %"
 
 
 def iv(d: dict[str, Any], spec: str = ".3f", scale: float = 1.0, unit: str = "") -> str:
