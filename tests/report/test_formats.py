@@ -16,8 +16,7 @@ def test_shares_are_percentages_written_as_the_tables_write_numbers():
 def test_intervals_are_the_mean_and_its_ends_in_one_format():
     assert iv({"mean": 0.81712, "lo": 0.44, "hi": 1.19}) == "0.817 [0.440, 1.190]"
     assert iv({"mean": 0.05, "lo": 0.00127, "hi": 0.249}, ".2f") == "0.05 [0.00, 0.25]"
-    assert (
-        iv({"mean": 0.0074, "lo": 0.004, "hi": 0.0108}, ".3g", 100, " %") == "0.74 % [0.4, 1.08]"
-    )  # the unit once, after the mean
+    # the unit once, after the mean
+    assert iv({"mean": 0.0074, "lo": 0.004, "hi": 0.0108}, ".3g", 100, " %") == "0.74 % [0.4, 1.08]"
     assert iv({"mean": 2.0, "lo": None, "hi": None}) == "2.000" and iv({"mean": None}) == "–"
     assert fmt(None) == "–" and fmt(3) == "3" and fmt(12345) == "12,345"
