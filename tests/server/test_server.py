@@ -305,7 +305,8 @@ def test_self_reports_per_block(client, db_url):
     assert ev["client_time"].tolist()[1] == 1700000000000.5 and json.loads(ev["data"][1]) == {"by": "robot"}
     assert ev["trial"].tolist()[1] == 3
     assert ev["page"].isna().tolist() == [True, False] and ev["page"][1] == "4f2a"  # the page load that sent it, if told
-    client.post(f"/api/sessions/{sid}/events", json={"events": [{"t": 2, "type": "scene", "page": "9c"}]}, headers=ph)
+    later = client.post(f"/api/sessions/{sid}/events", json={"events": [{"t": 2, "type": "scene", "page": "9c"}]}, headers=ph)
+    assert later.status_code == 200 and later.json()["stored"] == 1
     assert export(client, st["id"], table="sessions")["pages"].tolist() == [2]  # 4f2a and 9c (a reload, a second tab)
     # events that came without a page (stored before events named it): the count is unknown, not 0
     with create_engine(db_url).begin() as conn:
