@@ -17,15 +17,15 @@ reproduce test: export NUMBA_CACHE_DIR := $(MAKE_NUMBA_CACHE)
 reproduce: setup
 	.venv/bin/trustseek reproduce --out report
 
-# the static checks first (while the numba kernels of the fit, the simulation and the design study
-# compile into their cache, once, on the other core: trustseek.estimation.warm, trustseek.design.warm),
+# the static checks first (while the numba kernels of the fit compile into their cache, once, on the
+# other core: trustseek.estimation.warm),
 # then every test; one BLAS thread per test worker, so that the two workers do not oversubscribe the cores.
 # The warm step loads the cache in about 3 s of CPU once it is filled; on a clean clone it compiles
 # on the core the static checks leave idle (39-43 s of CPU with empty caches), where without it
 # both test workers would compile the same kernels on their first compiled fit, on the tests'
 # critical path (at level 1, in the cache above).
 test: setup
-	@(.venv/bin/python -m trustseek.estimation.warm && .venv/bin/python -m trustseek.design.warm) & warm=$$!; status=0; \
+	@(.venv/bin/python -m trustseek.estimation.warm) & warm=$$!; status=0; \
 	  $(MAKE) --no-print-directory lint || status=$$?; \
 	  wait $$warm || status=$$?; exit $$status
 	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 .venv/bin/python -m pytest -n 2 --dist worksteal -q

@@ -1,7 +1,7 @@
 """Simulator throughput: trials per second on one core, paper model, trust-aware policy.
 
-The simulator (``trustseek.simulate``: its compiled kernel for the common cases, in a process
-that has loaded numba) is compared
+The simulator (``trustseek.simulate``: its compiled kernel for the common cases, built with the
+package) is compared
 with its own numpy loop (``compiled=False``, vectorized over participants, the reference the
 kernel is tested against) and two plain per-trial Python loops, measured in the same run on
 the same model and policy; and, at the design study's size (9 participants x 71 trials under
@@ -30,7 +30,6 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 
 from trustseek import PolicyRunner, paper_model, paper_task, randomized, solve
-from trustseek.compiled import load
 from trustseek.policies import ask_bounds
 from trustseek.simulation import simulate
 from trustseek.vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
@@ -110,7 +109,6 @@ def small(reps: int = 300) -> None:
 def main(argv: list[str] | None = None) -> None:
     argv = sys.argv[1:] if argv is None else argv
     n = int(argv[0]) if argv else 1_000_000
-    load()  # the compiled kernel runs once numba is loaded (a one-off simulation takes the numpy loop)
     model, task = paper_model(), paper_task()
     T = sum(COUNTS)
     print(

@@ -10,8 +10,7 @@ solve``, ``trustseek check model.json``, ``trustseek fit`` on the shipped exampl
 cache as it is and in a fresh environment (NUMBA_CACHE_DIR pointed at an empty folder: no
 compiled code of any kind), ``trustseek fit`` on 100,000 x 71 trials with one restart (best of
 two runs: the first fills numba's cache with whatever it lacks), and
-``make test``'s warm step (``python -m trustseek.estimation.warm``, then ``trustseek.design.warm``,
-as the Makefile runs it: ``NUMBA_OPT=1``, numba's cache ``.numba-make-cache``)
+``make test``'s warm step (``python -m trustseek.estimation.warm``, as the Makefile runs it: ``NUMBA_OPT=1``, numba's cache ``.numba-make-cache``)
 with that cache as it is and with an empty cache (a clean clone: it runs beside the static
 checks, on the core they leave idle), and those static checks (``make lint``): the warm step
 lengthens ``make test`` only by what it takes beyond them.  With ``--reproduce``, ``make
@@ -117,9 +116,9 @@ def main(argv: list[str] | None = None) -> int:
             # (54 s of CPU when the warm step had left the compiled fit out of it)
             row("trustseek fit 100,000 x 71, one restart, numba cache filled", wall(big, 2), 6.0)
     py = sys.executable
-    warm = ["bash", "-c", f"{py} -m trustseek.estimation.warm && {py} -m trustseek.design.warm"]
+    warm = ["bash", "-c", f"{py} -m trustseek.estimation.warm"]
     # as make test runs it: at LLVM's level 1 (the Makefile's NUMBA_OPT), in the Makefile's numba cache
-    row("make test's warm step (estimation + design), numba cache as is", wall(warm, 1, env_extra=MAKE_ENV), 10.0)
+    row("make test's warm step, numba cache as is", wall(warm, 1, env_extra=MAKE_ENV), 10.0)
     row(
         "make test's warm step, fresh environment (a clean clone; beside the lint)",
         wall(warm, 1, fresh_cache=True, env_extra=MAKE_ENV),

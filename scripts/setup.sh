@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs everything trustseek needs on a fresh Debian machine, idempotently:
-#   - Debian packages: chromium (browser tests, HTML report screenshots), fonts, and
-#     postgresql (the experiment server's PostgreSQL tests start a throwaway cluster)
+#   - Debian packages: chromium (browser tests, HTML report screenshots), fonts, a C compiler
+#     and Python's headers (the package's compiled loops), and postgresql (the experiment
+#     server's PostgreSQL tests start a throwaway cluster)
 #   - a Python virtual environment in .venv with trustseek and its test extras, at the exact
 #     versions of constraints.txt (scripts/lock.sh writes it)
 #   - the web front end (npm ci + build), when web/ exists
@@ -21,6 +22,17 @@ if ! command -v chromium >/dev/null 2>&1; then
   fi
 fi
 
+# a C compiler and Python's headers: the package's loops are compiled when it is installed
+if ! command -v cc >/dev/null 2>&1 || [ ! -f "$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')/Python.h" ]; then
+  if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then
+    echo "setup: installing a C compiler and Python's headers from Debian packages"
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq gcc python3-dev >/dev/null
+  else
+    echo "setup: no C compiler or no Python headers, and cannot apt-get install them (need root); the install will fail" >&2
+  fi
+fi
+
 if ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1; then
   if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null 2>&1; then
     echo "setup: installing postgresql from Debian packages"
@@ -36,7 +48,9 @@ if [ ! -x .venv/bin/python ]; then
   "$PY" -m venv .venv
 fi
 stamp=.venv/.trustseek-installed
-if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ constraints.txt -nt "$stamp" ]; then
+# (again when an extension's source changed: pip builds the compiled extensions of setup.py)
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ constraints.txt -nt "$stamp" ] || [ setup.py -nt "$stamp" ] ||
+  [ -n "$(find src -name '*.pyx' -newer "$stamp" 2>/dev/null | head -1)" ]; then
   echo "setup: installing Python packages (the versions of constraints.txt)"
   # with uv (at its own pinned version): the same packages as pip's install of constraints.txt,
   # compiled to bytecode as pip does, in about a third of the time (27 s against 90 s on 2 cores);

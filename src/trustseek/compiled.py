@@ -163,7 +163,6 @@ COMPILED_SOURCES = (
     "estimation/kernels.py",
     "estimation/sticks.py",
     "estimation/structure.py",
-    "simulation/kernels.py",
     "solvers/type_aware.py",
 )
 

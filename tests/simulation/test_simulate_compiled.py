@@ -9,32 +9,24 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from trustseek import TrustModel, paper_model, paper_task, trust_model
-from trustseek.compiled import load
 from trustseek.policies import ComplexityPolicy, TrustAwarePolicy, ask_bounds
 from trustseek.simulation import Block, Supervisors, crossover, kernels, run, schedule_counts, simulate
-
-pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 
 TASK = paper_task()
 
 
-@pytest.fixture(autouse=True)
-def numba_loaded():
-    """The compiled loops run once the process has loaded numba (kernels.worth_calling)."""
-    load()
-
-
-def test_a_one_off_simulation_leaves_numba_unloaded():
-    """The compiled loops save per-call overhead only: ``trustseek simulate -n 100`` loaded numba
-    for them (0.3-0.5 s; in a fresh environment, a compile too) and took 1.46 s instead of 0.73 s."""
+def test_a_simulation_runs_compiled_without_numba():
+    """The kernels are built with the package: a one-off simulation runs them (nothing compiles at
+    run time) and never loads numba."""
     code = (
-        "import sys\nfrom trustseek import paper_model, paper_task\nfrom trustseek.policies import ComplexityPolicy\n"
-        "from trustseek.simulation import simulate\nt = paper_task()\n"
-        "simulate(paper_model(), t, ComplexityPolicy('randomized', t.complexities, [0.1, 0.4]), 100, counts=(17, 17))\n"
-        "print('numba' in sys.modules)"
+        "import sys\nfrom unittest import mock\nfrom trustseek import paper_model, paper_task\n"
+        "from trustseek.policies import ComplexityPolicy\nfrom trustseek.simulation import kernels, simulate\n"
+        "t = paper_task()\nwith mock.patch.object(kernels, 'run_block', wraps=kernels.run_block) as block:\n"
+        "    simulate(paper_model(), t, ComplexityPolicy('randomized', t.complexities, [0.1, 0.4]), 100, counts=(17, 17))\n"
+        "print(block.call_count > 0, 'numba' in sys.modules, kernels.__file__.endswith('.so'))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
-    assert out.stdout.split() == ["False"]
+    assert out.stdout.split() == ["True", "False", "True"]
 
 
 def interior_model(seed: int) -> TrustModel:

@@ -11,8 +11,8 @@ draws the same three uniforms per participant whatever the robot does, from a ge
 from the policy's, so runs with the same seed and different policies face the same supervisors,
 schedules and luck (common random numbers).  The common cases (two trust levels; a threshold
 policy on the scalar belief, or fixed ask probabilities per complexity) run in the compiled loop
-of :mod:`.kernels` once the process has loaded numba (:func:`.kernels.worth_calling`), which
-gives the same simulation to the last bit; ``compiled=False`` runs the numpy loop for every block.
+of :mod:`.kernels` (built with the package), which gives the same simulation to the last bit;
+``compiled=False`` runs the numpy loop for every block.
 """
 
 from __future__ import annotations
@@ -107,7 +107,7 @@ def _compiled_action(policy: Policy, bounds: np.ndarray | None, scalar: bool) ->
     """How the compiled block chooses the robot's action under ``policy``: (THRESHOLD, bounds)
     on a scalar belief, (FIXED, p_ask) for a complexity policy; None when only the numpy loop
     can run it (``scalar``: the belief, if any, is a scalar one)."""
-    if not kernels.worth_calling() or not scalar:
+    if not scalar:
         return None
     if bounds is not None:
         return kernels.THRESHOLD, np.ascontiguousarray(bounds, dtype=np.float64)

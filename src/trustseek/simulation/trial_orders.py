@@ -25,9 +25,8 @@ def schedule_counts(
 ) -> np.ndarray:
     """(n, T) complexity indices: each participant gets ``counts[c]`` trials of complexity ``c``
     in an independent random order (the paper: 41 low and 30 high; 17 and 17 per block).
-    ``compiled``: two complexities run in :func:`.kernels.urn_schedule` once numba is loaded
-    (:func:`.kernels.worth_calling`; the same draws and the same schedule as the numpy loop, which
-    ``compiled=False`` runs)."""
+    ``compiled``: two complexities run in :func:`.kernels.urn_schedule` (the same draws and the
+    same schedule as the numpy loop, which ``compiled=False`` runs)."""
     check_participants(n)
     if isinstance(counts, Mapping):
         unknown = [k for k in counts if k not in complexities]
@@ -49,7 +48,7 @@ def schedule_counts(
     gen = np.random.default_rng(rng)
     T, N = sum(numbers), len(numbers)
     out = np.empty((T, n), dtype=np.int8)
-    if compiled and N == 2 and kernels.worth_calling():
+    if compiled and N == 2:
         kernels.urn_schedule(gen.random((T, n)), float(numbers[0]), out)  # = T successive random(n)
         return out.T
     remaining = [np.full(n, k, dtype=np.float64) for k in numbers]

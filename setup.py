@@ -1,0 +1,18 @@
+"""The compiled extensions, built with Cython by ``pip install`` (everything else is in pyproject.toml).
+
+The loops are compiled ahead of time, so no process compiles them at run time.
+``-ffp-contract=off``: no fused multiply-add, so the compiled loops give the numpy references'
+numbers to the last bit on every CPU.
+"""
+
+from Cython.Build import cythonize
+from setuptools import Extension, setup
+
+FLAGS = ["-O2", "-ffp-contract=off"]
+DIRECTIVES = {"language_level": 3, "boundscheck": False, "wraparound": False, "cdivision": True, "initializedcheck": False}
+
+EXTENSIONS = [
+    Extension("trustseek.simulation.kernels", ["src/trustseek/simulation/kernels.pyx"], extra_compile_args=FLAGS),
+]
+
+setup(ext_modules=cythonize(EXTENSIONS, compiler_directives=DIRECTIVES, build_dir="build/cython"))
