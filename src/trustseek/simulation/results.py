@@ -8,7 +8,7 @@ robot's P(trust = highest level) when it chose the action.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -103,19 +103,17 @@ class Simulation:
         a = self.arrays
         n, T = a["complexity"].shape
         blocks = self.block_of_trial()
-        cx = np.array(self.task.complexities, dtype=object)
-        tl = np.array(self.trust_levels, dtype=object)
         frame = pd.DataFrame(
             {
-                "participant": np.repeat(self.participants, T),
+                "participant": _labels(self.participants, np.repeat(np.arange(n), T)),
                 "trial": np.tile(np.arange(1, T + 1), n),
-                "complexity": cx[a["complexity"].reshape(-1)],
-                "robot_action": np.array(ACTIONS, dtype=object)[a["action"].reshape(-1)],
-                "human_action": np.array(HUMAN_ACTIONS, dtype=object)[a["human"].reshape(-1)],
-                "experience": np.array(EXPERIENCES, dtype=object)[a["experience"].reshape(-1)],
+                "complexity": _labels(self.task.complexities, a["complexity"]),
+                "robot_action": _labels(ACTIONS, a["action"]),
+                "human_action": _labels(HUMAN_ACTIONS, a["human"]),
+                "experience": _labels(EXPERIENCES, a["experience"]),
                 "block": np.tile(blocks, n),
-                "policy": np.tile(np.array(self.block_labels, dtype=object)[blocks - 1], n),
-                "true_trust": tl[a["trust"].reshape(-1)],
+                "policy": _labels(self.block_labels, np.tile(blocks - 1, n)),
+                "true_trust": _labels(self.trust_levels, a["trust"]),
                 "belief": a["belief"].reshape(-1),
                 "reward": a["reward"].reshape(-1),
             }
@@ -138,10 +136,15 @@ class CrossoverSimulation(Simulation):
 
     def trials(self) -> pd.DataFrame:
         frame = super().trials()
-        lab = np.array(self.block_labels, dtype=object)
         pos = self.block_of_trial() - 1  # position of each trial (blocks have equal lengths)
-        frame["policy"] = lab[self.orders[:, pos]].reshape(-1)
+        frame["policy"] = _labels(self.block_labels, self.orders[:, pos])
         return frame
+
+
+def _labels(levels: Sequence[str] | np.ndarray, codes: np.ndarray) -> pd.Index:
+    """The text of ``codes`` (any shape, read row by row) into ``levels``, made without a Python
+    string per trial."""
+    return pd.Index(levels, dtype="str").take(np.asarray(codes, dtype=np.intp).reshape(-1))
 
 
 def summarize(values: Mapping[str, np.ndarray]) -> dict[str, dict[str, float]]:
