@@ -99,6 +99,8 @@ cdef int estep_from(tuple ev, EStep* out, list keep) except -1:
     cdef unsigned char[::1] active = bufs.active
     bufs.data = data
     data_from(data, &out.data, keep)
+    if out.data.code == NULL:
+        raise ValueError("the E-step's data need the step codes: (eidx, tidx, code, lengths)")
     tables_from(bufs.tables, &out.tables, keep)
     out.ini, out.emit, out.trans = array_data(bufs.tables[0]), array_data(bufs.tables[1]), array_data(bufs.tables[2])
     sums_from(bufs.sums, bufs.C, &out.sums)

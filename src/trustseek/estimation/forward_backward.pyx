@@ -507,7 +507,7 @@ cdef void _fold(const double* ci, const double* cs, Py_ssize_t P, Py_ssize_t PE,
 # ---- the E-step's items ----
 
 cdef void* scratch(size_t size) noexcept nogil:
-    """``size`` zeroed bytes for one item's work (a few kilobytes: their lack ends the process)."""
+    """``size`` zeroed bytes of work space (a few kilobytes: their lack ends the process)."""
     cdef void* p = calloc(size if size > 0 else 1, 1)
     if p == NULL:
         abort()
@@ -520,7 +520,8 @@ cdef double _item2(Py_ssize_t r, Py_ssize_t lo, Py_ssize_t hi, const Tables* tb,
     folded into the tables at the end); sequences of equal length go two at a time, the second's
     counts into their own sums."""
     cdef Py_ssize_t PE = tb.PE, P = tb.P, NC = P * PE, T1 = max(d.T, 1), NI = 2 + 2 * PE, n, L, i
-    cdef double* work = <double*>scratch(sizeof(double) * (4 * NC + 4 * T1 + 2 * NI + 8 * NC))
+    # A (NC, 4), buf and buf2 (T, 2), ci and di (NI,), cs and ds (NC, 4)
+    cdef double* work = <double*>scratch(sizeof(double) * (12 * NC + 4 * T1 + 2 * NI))
     cdef int64_t* marks = <int64_t*>scratch(sizeof(int64_t) * 2 * T1)
     cdef double* A = work
     cdef double* buf = A + 4 * NC
@@ -749,6 +750,8 @@ def estep_items(Py_ssize_t first, Py_ssize_t last, Py_ssize_t C, Py_ssize_t chun
     cdef const unsigned char[::1] act = np.asarray(active).view(np.uint8)
     tables_from(tables, &tb, keep)
     data_from(data, &d, keep)
+    if d.code == NULL:
+        raise ValueError("the E-step's data need the step codes: (eidx, tidx, code, lengths)")
     sums_from(sums, C, &s)
     with nogil:
         estep_range(first, last, chunk, &tb, &d, &act[0], &s)
