@@ -66,7 +66,7 @@ def new_loglik(df, models: list[TrustModel]) -> float:
     """Log-likelihood of log ``df`` with participant n under ``models[n]``."""
     spec, _ = from_model(models[0])
     seqs = encode(df, spec)
-    work = _PersonalWorkspace(seqs, *Structure(spec, seqs).dims, method="numba")
+    work = _PersonalWorkspace(seqs, *Structure(spec, seqs).dims, method="compiled")
     params = Params.stack([from_model(m)[1] for m in models])
     return float(work.estep(params).loglik.sum())
 

@@ -3,20 +3,16 @@
     python benchmarks/bench_startup.py            # every row, best of 3 runs each
     python benchmarks/bench_startup.py --repeat 5
     python benchmarks/bench_startup.py --no-big   # without the 100,000 x 71 fit (its log takes a minute to make once)
-    python benchmarks/bench_startup.py --reproduce   # also ``trustseek reproduce`` with an empty numba cache (minutes)
+    python benchmarks/bench_startup.py --reproduce   # also ``trustseek reproduce`` (minutes)
 
 Rows: ``trustseek --help`` and every command's ``--help``, ``import trustseek``, ``trustseek
-solve``, ``trustseek check model.json``, ``trustseek fit`` on the shipped example with numba's
-cache as it is and in a fresh environment (NUMBA_CACHE_DIR pointed at an empty folder: no
-compiled code of any kind), ``trustseek fit`` on 100,000 x 71 trials with one restart (best of
-two runs: the first fills numba's cache with whatever it lacks), and
-``make test``'s warm step (``python -m trustseek.estimation.warm``, as the Makefile runs it: ``NUMBA_OPT=1``, numba's cache ``.numba-make-cache``)
-with that cache as it is and with an empty cache (a clean clone: it runs beside the static
-checks, on the core they leave idle), and those static checks (``make lint``): the warm step
-lengthens ``make test`` only by what it takes beyond them.  With ``--reproduce``, ``make
-reproduce``'s command (``trustseek reproduce``, at level 1 as the Makefile runs it) with an empty
-numba cache, as after setup on a fresh clone.  The in-run baseline is the bare interpreter (``python -c pass``) and ``import
-numpy, pandas``.  Last, ``trustseek simulate`` of 100,000 participants into a CSV file.
+solve``, ``trustseek check model.json``, ``trustseek fit`` on the shipped example (the numpy
+path) and on 100,000 x 71 trials with one restart (the compiled path: its code is built with the
+package, so a first run after installation compiles nothing either), and the static checks
+(``make lint``, with empty mypy and ruff caches as on a clean clone), which ``make test`` runs
+before the tests.  With ``--reproduce``, ``make reproduce``'s command (``trustseek reproduce``).
+``trustseek simulate`` of 100,000 participants into a CSV file.  The in-run baseline is the bare
+interpreter (``python -c pass``) and ``import numpy, pandas``.
 """
 
 from __future__ import annotations
@@ -35,18 +31,15 @@ BIN = Path(sys.executable).parent
 TRUSTSEEK = str(BIN / "trustseek")
 
 
-def wall(
-    argv: list[str], repeat: int, fresh_cache: bool = False, fresh: tuple[str, ...] = (), env_extra: dict[str, str] | None = None
-) -> tuple[float, float]:
-    """The best wall time of ``argv`` over ``repeat`` runs, each a fresh process (with
-    ``fresh_cache``: each with its own empty numba cache; ``fresh``: more such variables, each
-    pointed at an empty folder of its own), and that run's CPU time (user + system: what the
-    run costs when the machine is busy with other work)."""
+def wall(argv: list[str], repeat: int, fresh: tuple[str, ...] = ()) -> tuple[float, float]:
+    """The best wall time of ``argv`` over ``repeat`` runs, each a fresh process (``fresh``:
+    variables each pointed at an empty folder of its own), and that run's CPU time (user +
+    system: what the run costs when the machine is busy with other work)."""
     best = (float("inf"), float("inf"))
     for _ in range(repeat):
-        env = dict(os.environ, **(env_extra or {}))
-        with tempfile.TemporaryDirectory(prefix="trustseek-numba-") as cache:
-            for i, var in enumerate(("NUMBA_CACHE_DIR",) * fresh_cache + fresh):
+        env = dict(os.environ)
+        with tempfile.TemporaryDirectory(prefix="trustseek-bench-") as cache:
+            for i, var in enumerate(fresh):
                 env[var] = os.path.join(cache, str(i))
                 os.makedirs(env[var])
             before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -60,10 +53,6 @@ def wall(
 
 
 LINT_CACHES = ("MYPY_CACHE_DIR", "RUFF_CACHE_DIR")  # as on a clean clone
-MAKE_ENV = {
-    "NUMBA_OPT": "1",
-    "NUMBA_CACHE_DIR": str(HERE.parent / ".numba-make-cache"),
-}  # the Makefile's test and reproduce targets
 
 
 def row(what: str, seconds: tuple[float, float], target: float | None) -> None:
@@ -80,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--no-big", action="store_true", help="leave out the 100,000 x 71 fit")
-    ap.add_argument("--reproduce", action="store_true", help="add trustseek reproduce with an empty numba cache")
+    ap.add_argument("--reproduce", action="store_true", help="add trustseek reproduce")
     args = ap.parse_args(argv)
     n = args.repeat
     from trustseek.cli._lazy import COMMANDS
@@ -104,37 +93,24 @@ def main(argv: list[str] | None = None) -> int:
         subprocess.run([TRUSTSEEK, "preset", "paper", "--model-out", str(model)], check=True, stdout=subprocess.DEVNULL)
         row("trustseek check model.json", wall([TRUSTSEEK, "check", str(model)], n), 0.5)
         fit = [TRUSTSEEK, "fit", str(example_path()), "--preset", "paper", "--out", str(Path(tmp) / "fit.json")]
-        row("trustseek fit (shipped example, 9 x 71), numba cache as is", wall(fit, n), 1.0)
-        row("trustseek fit (shipped example), fresh environment", wall(fit, n, fresh_cache=True), 5.0)
+        row("trustseek fit (shipped example, 9 x 71)", wall(fit, n), 1.0)
         if not args.no_big:
             sys.path.insert(0, str(HERE))
             from bench_read import cached_logs
 
             log, _ = cached_logs(100_000)
             big = [TRUSTSEEK, "fit", str(log), "--preset", "paper", "--restarts", "1", "--out", str(Path(tmp) / "big.json")]
-            # best of two: with the cache as is, a first run compiles whatever kernels the cache lacks
-            # (54 s of CPU when the warm step had left the compiled fit out of it)
-            row("trustseek fit 100,000 x 71, one restart, numba cache filled", wall(big, 2), 6.0)
+            row("trustseek fit 100,000 x 71, one restart", wall(big, 2), 6.0)
     with tempfile.TemporaryDirectory(prefix="trustseek-bench-") as tmp:
         # what the 28 M trials/s of bench_simulate become for a person who wants the trials in a file
         sim = [TRUSTSEEK, "simulate", "-n", "100000", "--out", str(Path(tmp) / "trials.csv")]
         row("trustseek simulate -n 100000 --out trials.csv (7.1 M trials, 522 MB)", wall(sim, 1), None)
-    py = sys.executable
-    warm = ["bash", "-c", f"{py} -m trustseek.estimation.warm"]
-    # as make test runs it: at LLVM's level 1 (the Makefile's NUMBA_OPT), in the Makefile's numba cache
-    row("make test's warm step, numba cache as is", wall(warm, 1, env_extra=MAKE_ENV), 10.0)
-    row(
-        "make test's warm step, fresh environment (a clean clone; beside the lint)",
-        wall(warm, 1, fresh_cache=True, env_extra=MAKE_ENV),
-        None,
-    )
     lint = ["make", "-s", "-C", str(HERE.parent), "lint"]
-    row("make lint, empty mypy and ruff caches (what the warm step runs beside)", wall(lint, 1, fresh=LINT_CACHES), None)
+    row("make lint, empty mypy and ruff caches", wall(lint, 1, fresh=LINT_CACHES), None)
     if args.reproduce:
         with tempfile.TemporaryDirectory(prefix="trustseek-bench-") as tmp:
             reproduce = [TRUSTSEEK, "reproduce", "--out", str(Path(tmp) / "report")]
-            run = wall(reproduce, 1, fresh_cache=True, env_extra=MAKE_ENV)
-            row("make reproduce's command, fresh environment", run, 90.0)
+            row("make reproduce's command", wall(reproduce, 1), 90.0)
     return 0
 
 

@@ -7,13 +7,10 @@ import pandas as pd
 import pytest
 
 from cli_runner import run_cli
-from trustseek.estimation import kernels
 from trustseek.model.mixture import TypeMixture
 from trustseek.model.presets import paper_conservative_mixture
 from trustseek.simulation.designs import simulate_design
 from trustseek.simulation.populations import Supervisors
-
-pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 
 
 @pytest.fixture(scope="module")

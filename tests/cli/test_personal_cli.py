@@ -6,12 +6,9 @@ import json
 import pytest
 
 from cli_runner import run_cli
-from trustseek.estimation import kernels
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
 from trustseek.simulation.populations import Supervisors
-
-pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 
 
 @pytest.fixture(scope="module")

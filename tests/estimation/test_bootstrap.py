@@ -123,38 +123,3 @@ def test_an_interval_at_the_boundary_can_move():
     assert 0.05 < new_hi[at] < 1.0 and new_lo[at] == lo[at], new_hi[at]
     assert new_lo[mirror] == pytest.approx(1 - new_hi[at]) and moved[[at, mirror]].all()
     assert moved.sum() == 2  # the rest kept their (not collapsed) intervals
-
-
-def _refit_noting_the_compiled_run(spec, sample, options):
-    """A replicate's refit that says in which process it ran and whether the run was compiled there
-    before it started."""
-    import os
-
-    from trustseek.estimation import compiled_run, fit_iohmm
-
-    before = bool(getattr(compiled_run.run_one, "signatures", ()))
-    fit_iohmm(sample, spec, options)
-    return os.getpid(), before
-
-
-def test_a_compiled_bootstrap_compiles_the_run_here_once_not_in_each_worker(monkeypatch):
-    """Each worker of a compiled bootstrap compiled the run again (in a fresh environment: a minute
-    of CPU each, behind a progress bar that, in this process, stood still)."""
-    import functools
-    import os
-
-    from trustseek import compiled
-    from trustseek.estimation import compiled_run, encode, paper_spec
-    from trustseek.estimation.bootstrap import replicate
-
-    compiled.load()
-    # a dispatcher with nothing compiled yet (it loads from numba's cache when first called)
-    monkeypatch.setattr(compiled_run, "run_one", compiled.njit(cache=True, nogil=True)(compiled_run.run_one.py_func))
-    spec = paper_spec()
-    seqs = encode(simulate_design(paper_model(), 9, seed=0), spec)
-    refit = functools.partial(_refit_noting_the_compiled_run, spec)
-    seen = []
-    out = replicate(refit, seqs, 4, FitOptions(restarts=1, seed=0, n_jobs=2), lambda b, done: seen.append(done), compiled=True)
-    workers = [before for pid, before in out if pid != os.getpid()]
-    assert workers and all(workers)  # every worker started with the run compiled
-    assert sorted(seen) == [1, 2, 3, 4]

@@ -1,4 +1,4 @@
-"""The compiled whole run (estimation/compiled_run.py) and its steps (estimation/compiled_steps.py) against the numpy pieces and the lockstep path."""
+"""The compiled whole run (estimation/compiled_run.py, compiled_em.pyx) and its steps (estimation/compiled_steps.pyx) against the numpy pieces and the lockstep path."""
 
 import numpy as np
 import pytest
@@ -12,8 +12,6 @@ from trustseek.estimation.options import FitOptions, RunSettings
 from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
-
-pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 
 
 @pytest.fixture(autouse=True)
@@ -109,56 +107,21 @@ def test_a_start_giving_the_data_probability_zero_is_refused():
         cr.run_starts(s, w, [p, Params(p.initial, em, p.transition)], RunSettings(1e-8, 1000, 1e-5))
 
 
-def test_the_estep_on_numbas_threads_is_the_kernels_to_the_last_bit():
+def test_the_estep_on_threads_is_the_kernels_to_the_last_bit():
     """With fewer starts than threads, from steps.PARALLEL_ITEMS items, the compiled run's E-steps
-    run on numba's threads: the numbers of the kernel's E-step, and the run of one thread, on
-    one thread or two."""
-    import numba
-
-    from trustseek.compiled import PARALLEL_LOCK, set_threads
-
+    run their items on the E-step threads: the numbers of the kernel's E-step, and the run of one
+    thread, on one thread or two."""
     _spec, _seqs, s, w = problem(steps.PARALLEL_ITEMS * cr.CHUNK + 5, 4)
-    (K, Ue, M, Ut), data, bufs, emt, trt = pieces(s, w)
+    (K, Ue, M, Ut), data, _bufs, emt, trt = pieces(s, w)
     assert w._kernel.C > steps.PARALLEL_ITEMS
     p = s.random(np.random.default_rng(1))
     st = w.estep(p)
-    before = numba.get_num_threads()
-    try:
-        for threads in (1, 2):
-            with PARALLEL_LOCK:
-                if set_threads(threads) != threads:
-                    pytest.skip(f"numba runs {numba.config.NUMBA_NUM_THREADS} thread(s) here: two are needed")
-                flat, counts = p.vector().copy(), np.empty(len(p.vector()))
-                ll, _f = steps.evaluate(flat, (K, Ue, M, Ut, 0.0, emt, trt), (data, bufs), counts)
-            assert ll == st.loglik
-            assert np.array_equal(counts, np.concatenate([st.initial, st.emission.ravel(), st.transition.ravel()]))
-    finally:
-        set_threads(before)
+    for threads in (1, 2):
+        bufs = steps.estep_buffers(K, w.PE, Ut + 1, w._kernel.C, threads)
+        flat, counts = p.vector().copy(), np.empty(len(p.vector()))
+        ll, _f = steps.evaluate(flat, (K, Ue, M, Ut, 0.0, emt, trt), (data, bufs), counts)
+        assert ll == st.loglik
+        assert np.array_equal(counts, np.concatenate([st.initial, st.emission.ravel(), st.transition.ravel()]))
     one, two = (cr.run_starts(s, w, [p], RunSettings(1e-8, 40, 1e-5, threads=t))[0] for t in (1, 2))  # 40 E-steps: cheap
     assert (one.loglik, one.iterations, one.history) == (two.loglik, two.iterations, two.history)
     assert np.array_equal(one.params.vector(), two.params.vector())
-
-
-def test_the_estep_compiles_no_formatted_shape_error_and_one_reduction():
-    """Compile time: numba compiles every library with the code of all it calls.  An array
-    assignment's shape check brings a formatted error message (str of integers, join) into the
-    E-step and every library above it, and each layout of the item sums was a compilation of its
-    own: the E-step's libraries have no such check, and the plain and the mixture E-step reduce
-    their items with one compiled function."""
-    _spec, _seqs, s, w = problem(40, 3)
-    (K, Ue, M, Ut), data, bufs, emt, trt = pieces(s, w)
-    p = s.random(np.random.default_rng(0))
-    flat = p.vector().copy()
-    steps.evaluate(flat, (K, Ue, M, Ut, 0.0, emt, trt), (data, bufs), np.empty_like(flat))
-    kern = w._kernel
-    rng = np.random.default_rng(1)
-    initial = rng.dirichlet(np.ones(K), size=2) / 2
-    emit = rng.random((2, kern.PE, K))
-    trans = rng.dirichlet(np.ones(K), size=(2, kern.P, K))
-    kern.run(initial[:1], emit[:1], trans[:1])
-    kern.run_mixture(initial, emit, trans, 2)
-    assert len(kernels._reduce.signatures) == 1
-    for func in (steps.evaluate, kernels.estep_items, kernels._reduce):
-        for compiled in func.overloads.values():
-            code = str(compiled.library._get_module_for_linking())  # also of a library loaded from the cache
-            assert "raise_with_shape_context" not in code, func

@@ -13,8 +13,6 @@ from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
 
-pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
-
 
 @pytest.fixture(autouse=True)
 def compiled_at_any_size(monkeypatch):

@@ -11,8 +11,6 @@ from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
 
-pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
-
 
 @pytest.fixture(autouse=True)
 def compiled_at_any_size(monkeypatch):
@@ -34,7 +32,7 @@ def mixed(n: int, seed: int):
 
 def both(seqs, s, p):
     ref = Workspace(seqs, 2, 2, s.Ue, s.Ut, method="loop").estep(p)
-    got = Workspace(seqs, 2, 2, s.Ue, s.Ut, method="numba").estep(p)
+    got = Workspace(seqs, 2, 2, s.Ue, s.Ut, method="compiled").estep(p)
     return ref, got
 
 

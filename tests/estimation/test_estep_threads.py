@@ -13,8 +13,6 @@ from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
 
-pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
-
 
 @pytest.fixture(autouse=True)
 def compiled_at_any_size(monkeypatch):
@@ -49,7 +47,7 @@ def test_compiled_estep_equals_numpy_on_extreme_parameters(seed, K, floor_exp):
     _spec, seqs, s = data(6, seed % 1000, K)
     p = extreme(s, np.random.default_rng(seed), floor_exp)
     ref = Workspace(seqs, K, 2, s.Ue, s.Ut, method="loop").estep(p)
-    got = Workspace(seqs, K, 2, s.Ue, s.Ut, method="numba").estep(p)
+    got = Workspace(seqs, K, 2, s.Ue, s.Ut, method="compiled").estep(p)
     if not np.isfinite(ref.loglik):
         assert got.loglik == ref.loglik
         return
@@ -70,7 +68,7 @@ def test_long_sequence_with_tiny_cells_matches_reference():
     s = Structure(spec, seqs)
     p = extreme(s, np.random.default_rng(5), 6)
     ref = Workspace(seqs, 2, 2, s.Ue, s.Ut, method="loop").estep(p)
-    got = Workspace(seqs, 2, 2, s.Ue, s.Ut, method="numba").estep(p)
+    got = Workspace(seqs, 2, 2, s.Ue, s.Ut, method="compiled").estep(p)
     assert np.isfinite(got.loglik) and got.loglik < -2000
     assert got.loglik == pytest.approx(ref.loglik, rel=1e-9)
     for name in ("initial", "emission", "transition"):

@@ -15,14 +15,12 @@ import contextlib
 import numpy as np
 import pytest
 
-from trustseek.estimation import encode, fit_iohmm, from_model, kernels, loglik, paper_spec
+from trustseek.estimation import encode, fit_iohmm, from_model, loglik, paper_spec
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.kernels import many_fits
 from trustseek.estimation.options import FitOptions
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
-
-pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 
 #: how a fit runs: (compiled whole run, inside many_fits)
 WAYS = {"lockstep-numpy": (False, False), "lockstep-compiled-estep": (False, True), "compiled-run": (True, True)}
@@ -46,7 +44,7 @@ def test_every_way_a_fit_runs_conforms(data, way):
     # numpy and compiled E-steps agree at the end point
     K, M, Ue, Ut = fit.structure.dims
     ref = Workspace(seqs, K, M, Ue, Ut, method="loop").estep(fit.params)
-    got = Workspace(seqs, K, M, Ue, Ut, method="numba").estep(fit.params)
+    got = Workspace(seqs, K, M, Ue, Ut, method="compiled").estep(fit.params)
     np.testing.assert_allclose(got.loglik, ref.loglik, rtol=1e-12)
     for a, b in ((got.initial, ref.initial), (got.emission, ref.emission), (got.transition, ref.transition)):
         np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-10)

@@ -21,8 +21,6 @@ from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
 from trustseek.solvers.base import one_blas_thread
 
-pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
-
 
 @pytest.fixture(autouse=True)
 def compiled_at_any_size(monkeypatch):
@@ -49,7 +47,7 @@ def test_sequences_two_at_a_time_match_the_numpy_estep(seed):
     assert len(set(seqs.lengths.tolist())) > 2
     p = Params.stack([s.random(np.random.default_rng(seed + r)) for r in range(2)])
     ref = Workspace(seqs, *s.dims, method="loop").estep(p)
-    got = Workspace(seqs, *s.dims, method="numba").estep(p)
+    got = Workspace(seqs, *s.dims, method="compiled").estep(p)
     np.testing.assert_allclose(got.loglik, ref.loglik, rtol=1e-12)
     for name in ("initial", "emission", "transition"):
         np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=1e-10, atol=1e-10)
@@ -61,11 +59,11 @@ def test_a_pair_with_zero_probability_makes_the_set_impossible():
     emission = p.emission.copy()
     emission[:, :, 0] = 0.0  # no output can be the first category
     emission[:, :, 1] = 1.0
-    st = Workspace(seqs, *s.dims, method="numba").estep(Params(p.initial, emission, p.transition))
+    st = Workspace(seqs, *s.dims, method="compiled").estep(Params(p.initial, emission, p.transition))
     assert st.loglik == -np.inf and not st.emission.any() and not st.transition.any()
 
 
-@pytest.mark.parametrize("method", ["loop", "numba"])
+@pytest.mark.parametrize("method", ["loop", "compiled"])
 def test_pooled_finishes_give_the_numbers_of_one_at_a_time(monkeypatch, method):
     """The starts' finishes on threads of their own, their E-steps pooled into batches, give each
     start's numbers alone, and are reported in order whatever finished first."""

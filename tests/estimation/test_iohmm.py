@@ -279,11 +279,7 @@ def test_batched_restarts_take_the_same_path_as_one_at_a_time(method):
 
 @pytest.mark.parametrize("K", [2, 3])
 def test_compiled_estep_equals_the_numpy_reference(K):
-    """The fused numba kernel (general K and the K = 2 path) against the numpy time loop."""
-    from trustseek.estimation import kernels
-
-    if not kernels.AVAILABLE:
-        pytest.skip("numba is not installed")
+    """The fused compiled kernel (general K and the K = 2 path) against the numpy time loop."""
 
     df = small_paper_data(25, (41, 30), seed=21)
     df = df[~((df["participant"] == "p004") & (df["trial"] > 40))]  # sequences of different lengths
@@ -294,12 +290,12 @@ def test_compiled_estep_equals_the_numpy_reference(K):
     starts = [s.random(np.random.default_rng(r)) for r in range(3)]
     for p in starts:
         ref = Workspace(seqs, K, 2, s.Ue, s.Ut, method="loop").estep(p)
-        got = Workspace(seqs, K, 2, s.Ue, s.Ut, method="numba").estep(p)
+        got = Workspace(seqs, K, 2, s.Ue, s.Ut, method="compiled").estep(p)
         assert got.loglik == pytest.approx(ref.loglik, abs=1e-9)
         for name in ("initial", "emission", "transition"):
             np.testing.assert_allclose(getattr(got, name), getattr(ref, name), atol=1e-9)
     # the batched kernel skips inactive parameter sets and computes the others alike
-    st = Workspace(seqs, K, 2, s.Ue, s.Ut, method="numba").estep(Params.stack(starts), np.array([True, False, True]))
+    st = Workspace(seqs, K, 2, s.Ue, s.Ut, method="compiled").estep(Params.stack(starts), np.array([True, False, True]))
     assert st.loglik[1] == 0.0 and np.all(st.transition[1] == 0)
     for r in (0, 2):
         ref = Workspace(seqs, K, 2, s.Ue, s.Ut, method="loop").estep(starts[r])
@@ -317,7 +313,7 @@ def test_compiled_estep_equals_the_numpy_reference(K):
     bad = Params(starts[0].initial, starts[0].emission.copy(), starts[0].transition)
     bad.emission[:, :, 1] = 0.0
     bad.emission[:, :, 0] = 1.0
-    got = Workspace(seqs, K, 2, s.Ue, s.Ut, method="numba").estep(bad)
+    got = Workspace(seqs, K, 2, s.Ue, s.Ut, method="compiled").estep(bad)
     assert got.loglik == -np.inf and np.all(got.emission == 0)
 
 

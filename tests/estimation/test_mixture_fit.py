@@ -20,8 +20,6 @@ from trustseek.model.presets import conservative_model, paper_conservative_mixtu
 from trustseek.simulation.designs import simulate_design
 from trustseek.simulation.populations import Supervisors
 
-pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
-
 
 @pytest.fixture(autouse=True)
 def compiled_at_any_size(monkeypatch):
@@ -92,7 +90,7 @@ def test_mixture_estep_is_the_responsibility_weighted_sum_of_per_participant_cou
     s = MixtureStructure(spec, seqs, 3)
     p = s.random(np.random.default_rng(7))
     st = MixtureWorkspace(seqs, s).estep(p)
-    per = Workspace(seqs, *s.dims, method="numba")
+    per = Workspace(seqs, *s.dims, method="compiled")
     N = seqs.n_participants
     lls, counts = [], []
     for m in range(3):

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from scipy.optimize import minimize_scalar
 from scipy.special import gammaln
 
-from trustseek.estimation import encode, fit_trust_model, kernels, loglik, personal
+from trustseek.estimation import encode, fit_trust_model, loglik, personal
 from trustseek.estimation.options import FitOptions
 from trustseek.estimation.personal import EB, NOTHING, ONE_DRAW, blocks, personalize
 from trustseek.estimation.trust_iohmm import from_model
@@ -18,8 +18,6 @@ from trustseek.model.core import TrustModel, trust_model
 from trustseek.model.presets import paper_conservative_mixture, paper_model
 from trustseek.simulation.designs import simulate_design
 from trustseek.simulation.populations import Supervisors
-
-pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from trustseek import paper_model
-from trustseek.estimation import kernels, paper_spec, selection
+from trustseek.estimation import paper_spec, selection
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.iohmm import fit_iohmm
 from trustseek.estimation.mixture import fit_mixture
@@ -20,8 +20,6 @@ from trustseek.estimation.trust_iohmm import level_names, preset_spec
 from trustseek.model.presets import paper_conservative_mixture
 from trustseek.simulation.designs import simulate_design
 from trustseek.simulation.populations import Supervisors
-
-needs_numba = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 
 
 @pytest.fixture(scope="module")
@@ -58,7 +56,7 @@ def _interior(fit):
     ("data", "workspace"),
     [
         pytest.param("train_test", lambda test, s: Workspace(test, *s.dims), id="model"),
-        pytest.param("types_train_test", lambda test, s: MixtureWorkspace(test, s), marks=needs_numba, id="types"),
+        pytest.param("types_train_test", lambda test, s: MixtureWorkspace(test, s), id="types"),
     ],
 )
 def test_a_fit_without_zero_cells_is_scored_as_fitted(request, data, workspace):
@@ -119,7 +117,6 @@ def test_the_pseudocount_is_the_module_default(train_test):
     )
 
 
-@needs_numba
 def test_only_a_mixture_row_with_a_zero_free_cell_is_smoothed(types_train_test):
     fit, test = types_train_test
     inner = _interior(fit)
@@ -138,7 +135,6 @@ def test_only_a_mixture_row_with_a_zero_free_cell_is_smoothed(types_train_test):
     assert np.isfinite(heldout_loglik(test, zeroed))
 
 
-@needs_numba
 def test_a_zero_in_the_initial_table_smooths_the_whole_joint_table(types_train_test):
     fit, _ = types_train_test
     inner = _interior(fit)

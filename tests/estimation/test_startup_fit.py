@@ -1,5 +1,5 @@
-"""A fit starts fast: on small data it takes the numpy path and never imports numba (compiled
-code is loaded on the first call of a compiled function); ``never_estimated`` (whole arrays, no
+"""A fit starts fast: on small data it takes the numpy path, and no fit imports numba (the compiled
+code is built with the package); ``never_estimated`` (whole arrays, no
 longer a walk over every row in Python) says what a row-by-row reading of the log says, on logs
 in any row order, with gaps in the trial numbers, missing human actions and experiences."""
 
@@ -13,7 +13,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trustseek.compiled import load as load_compiled
 from trustseek.estimation import encode, kernels
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.fit import never_estimated
@@ -106,79 +105,23 @@ def test_the_fit_compiles_from_compile_min_trials():
         small = Workspace(seqs, *Structure(spec, seqs).dims)
         assert not small.compiled and small._kernel is None
         mp.setattr(kernels, "COMPILE_MIN", seqs.n_trials)
-        assert Workspace(seqs, *Structure(spec, seqs).dims).compiled == kernels.AVAILABLE
+        assert Workspace(seqs, *Structure(spec, seqs).dims).compiled
         mp.setattr(kernels, "COMPILE_MIN", seqs.n_trials + 1)
         with kernels.many_fits():  # many fits (a bootstrap, a design study): compiled at any size
-            assert Workspace(seqs, *Structure(spec, seqs).dims).compiled == kernels.AVAILABLE
-        # whatever the process ran before: numba loaded by a simulation changes nothing
-        load_compiled()
+            assert Workspace(seqs, *Structure(spec, seqs).dims).compiled
         assert not Workspace(seqs, *Structure(spec, seqs).dims).compiled
 
 
-def test_a_fit_gives_the_same_numbers_after_numba_was_loaded():
-    """The fit's numbers depend on the call alone: the same fit in a fresh process, before and
-    after the compiled code is loaded (the bootstrap intervals of a second run of the same command
-    in one process differed in the 7th digit).  A fresh process, so that nothing else has loaded
-    numba before the first fit."""
+def test_a_compiled_fit_imports_neither_numba_nor_scipy_optimize():
+    """The compiled code is the package's extensions, built when it is installed: a compiled fit
+    compiles nothing and imports no numba; scipy.optimize (half a second of CPU) is imported by the
+    numpy path's finish when it runs, never by the compiled fit."""
     code = (
         "import sys\n"
-        "from trustseek.compiled import load\n"
-        "from trustseek.data import read_trials, example_path\n"
-        "from trustseek.estimation import FitOptions\n"
-        "from trustseek.estimation.fit import fit_trust_model\n"
-        "frame = read_trials(example_path())\n"
-        "def cells():\n"
-        "    m = fit_trust_model(frame, options=FitOptions(restarts=2, seed=3, n_jobs=1)).model\n"
-        "    return b''.join(getattr(m, k).tobytes() for k in ('initial', 'emission', 'transition'))\n"
-        "first = cells()\n"
-        "assert 'numba' not in sys.modules\n"
-        "load()\n"
-        "assert 'numba' in sys.modules\n"
-        "print(first == cells())\n"
+        "from trustseek.data import example_path, read_trials\n"
+        "from trustseek.estimation import FitOptions, fit_trust_model, forward_backward, kernels\n"
+        "with kernels.many_fits():\n"
+        "    r = fit_trust_model(read_trials(example_path()), options=FitOptions(restarts=2, n_jobs=1))\n"
+        "print(forward_backward.__file__.endswith('.so'), 'numba' in sys.modules, 'scipy.optimize' in sys.modules)"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.strip() == "True"
-
-
-@pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
-def test_compiled_functions_import_numba_on_their_first_call_and_then_are_numbas():
-    code = (
-        "import sys\n"
-        "import numpy as np\n"
-        "from trustseek.estimation import sticks, compiled_run, fit, iohmm\n"
-        "before = 'numba' in sys.modules\n"
-        "lazy = sticks.stick_values\n"
-        "out = np.zeros(2)\n"
-        "i = np.zeros(1, dtype=np.int64)\n"
-        "lazy(np.array([0.25]), (i, i + 2, np.ones(1), i, i + 1, i, np.array([0, 1, 2]), np.array([0, 1])), (out, np.zeros(0), np.zeros(0)))\n"
-        "import numba\n"
-        "after = isinstance(sticks.stick_values, numba.core.registry.CPUDispatcher)\n"
-        "inner = isinstance(compiled_run.kernels._item, numba.core.registry.CPUDispatcher)\n"
-        "print(before, 'numba' in sys.modules, after, inner, out.tolist(), 'scipy.optimize' in sys.modules)"
-    )
-    # scipy.optimize (half a second of CPU) is imported by the numpy path's finish when it runs:
-    # the compiled fit and the commands that read a model never import it
-    assert run_python(code) == "False True True True [0.25, 0.75] False"
-
-
-def test_the_warm_step_runs_every_fit_compiled(monkeypatch):
-    """``python -m trustseek.estimation.warm`` fills numba's cache for the compiled fit: its fits,
-    on a log far below kernels.COMPILE_MIN trials, must take the compiled E-steps (a warm step
-    whose fits took the numpy path compiled almost nothing, and the first big fit then compiled)."""
-    from trustseek.estimation import warm
-
-    compiled: dict[str, bool] = {}
-
-    def record(name):
-        def fit(*args, **kwargs):
-            compiled[name] = kernels.worth_compiling(1)
-
-        return fit
-
-    for name in ("fit_iohmm", "fit_trust_model", "fit_types"):
-        monkeypatch.setattr(warm, name, record(name))
-    monkeypatch.setattr(warm, "load_compiled", lambda: None)
-    monkeypatch.setattr(kernels, "AVAILABLE", True)
-    warm.warm()
-    assert compiled == {"fit_iohmm": True, "fit_trust_model": True, "fit_types": True}
+    assert run_python(code) == "True False False"

@@ -4,15 +4,13 @@ maps give the numpy formulas' values and gradient, for the pooled structure and 
 import numpy as np
 import pytest
 
-from trustseek.estimation import encode, kernels, paper_spec
+from trustseek.estimation import encode, paper_spec
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.mixture_em import MixtureStructure, MixtureWorkspace
 from trustseek.estimation.sticks import Sticks
 from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
-
-pytestmark = pytest.mark.skipif(not kernels.AVAILABLE, reason="numba is not installed")
 
 
 def sticks_reference(sticks, theta, base, st):

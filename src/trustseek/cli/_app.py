@@ -19,7 +19,6 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from ..compiled import compiling_note
 from ..errors import TrustseekError
 from ._lazy import COMMANDS, LazyGroup
 
@@ -190,31 +189,23 @@ def check_positive(value: float | None, option: str) -> None:
 # --------------------------------------------------------------------------- progress
 
 
-COMPILING = "compiling, once after installation (up to a minute)"
-
-
 class _Progress(Progress):
-    """Rich's progress display, with a line of its own while numba compiles (a first use after
-    installation: a bar that stood still for a minute looked hung).
+    """Rich's progress display.
 
     The display belongs to this process.  A process forked while it is open (the workers of
-    ``--jobs``) starts with it switched off, so that what the worker does (compiling, above all)
-    draws nothing on the terminal; and the fork waits until the display's refresh thread is not
+    ``--jobs``) starts with it switched off, so that what the worker does draws nothing on the
+    terminal; and the fork waits until the display's refresh thread is not
     drawing, whose lock the worker would otherwise inherit held, and wait on forever."""
 
     shown: ClassVar[list[_Progress]] = []  # the displays open in this process, innermost last
 
     def __enter__(self) -> _Progress:
         super().__enter__()
-        self._compiling: Any = None
-        self._note = compiling_note(self.compiling)
-        self._note.__enter__()
         _Progress.shown.append(self)
         return self
 
     def __exit__(self, *exc: Any) -> None:
         _Progress.shown.remove(self)
-        self._note.__exit__(*exc)
         super().__exit__(*exc)
 
     @staticmethod
@@ -234,14 +225,6 @@ class _Progress(Progress):
             bar.live._lock.release()
         _Progress.shown.clear()
 
-    def compiling(self, on: bool) -> None:
-        """Show (``on``) or take away the line saying that numba compiles."""
-        if on and self._compiling is None:
-            self._compiling = self.add_task(COMPILING, total=None)
-        elif not on and self._compiling is not None:
-            self.remove_task(self._compiling)
-            self._compiling = None
-
 
 os.register_at_fork(
     before=_Progress._before_fork,
@@ -252,7 +235,7 @@ os.register_at_fork(
 
 def progress_bar(quiet: bool, *columns: Any) -> Progress:
     """The progress bar of a long run, on stderr: off with ``--quiet`` and when stderr is not a
-    terminal; while numba compiles, a line says so."""
+    terminal."""
     cols = columns or (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
     return _Progress(*cols, console=err_console, transient=True, disable=quiet or not err_console.is_terminal)
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 from typing import Annotated
 
@@ -39,7 +38,7 @@ from ._options import (
 from ._output import cells_table, check_plots_folder, fit_summary, print_intervals_note, print_selection, print_warnings
 from ._reading import keep_columns, load_for_decoding, read_for_types, widened_note, write_log
 
-# The fit and data modules (pandas, numba) load only when a command of this group runs,
+# The fit and data modules (pandas) load only when a command of this group runs,
 # so that the rest of the CLI starts fast.
 
 
@@ -47,25 +46,6 @@ def _fit():
     from .. import estimation
 
     return estimation
-
-
-#: a log this large (some 25,000 trials and more) is fitted compiled: numba loads while it is read
-_LOAD_FROM_BYTES = 1_000_000
-
-
-def _load_compiled_meanwhile(log: Path) -> AbstractContextManager[None]:
-    """numba loaded on a second thread while ``log`` is read, when it is large (about half a
-    second of the fit's start-up, on the core the end of the read leaves free)."""
-    try:
-        large = log.stat().st_size >= _LOAD_FROM_BYTES
-    except OSError:  # standard input, or a path the read reports
-        large = False
-    if not large:
-        return nullcontext()
-    from ..compiled import load_meanwhile
-    from ..estimation.warm import first_kernel  # (the fit's compiled modules imported first, on this thread)
-
-    return load_meanwhile(first_kernel)
 
 
 def _named_inputs(reading: LogReading, transitions_on, emissions_on) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
@@ -205,8 +185,7 @@ def fit(
     _check_fit_paths(log, reading, fill_from, out, posteriors, plots)
     tr, em, needed = _named_inputs(reading, transitions_on, emissions_on)
     rated = rating_entry(rating, rating_levels, rating_bins, rating_per)
-    with _load_compiled_meanwhile(log):
-        frame = reading.read(log, needed, rated, not ratings_only)
+    frame = reading.read(log, needed, rated, not ratings_only)
     options = FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs)
     settings = {"levels": levels, "options": options, "bootstrap": bootstrap, "prior": prior}
     settings |= {"rating": _rated(frame, log, ratings_only), "actions": not ratings_only}

@@ -1,7 +1,7 @@
 """The public names of :mod:`trustseek.design`: read by type checkers, and by ``__init__.py`` to load each on first use."""
 
 # every submodule, as the package attribute of that name
-from . import evaluation, replicate, sweep, warm
+from . import evaluation, replicate, sweep
 from .evaluation import EVALUATION_GRID, Evaluation, evaluate_policy, high_threshold
 from .replicate import Experiment1, FitSettings, Study, replicate_seed, run_replicate
 from .sweep import TESTS, DesignConfig, DesignResult, ask_search, ask_search_problems, participants_needed, run_design

@@ -4,6 +4,7 @@
 from . import (
     baselines,
     bootstrap,
+    compiled_em,
     compiled_run,
     compiled_steps,
     em,
@@ -22,11 +23,11 @@ from . import (
     selection,
     sequences,
     spec,
+    stick_maps,
     sticks,
     structure,
     trust_iohmm,
     validation,
-    warm,
 )
 from .fit import MIN_EVENTS, decode, fit_model, fit_trust_model, trust_loglik
 from .iohmm import EMFit, fit_iohmm, loglik, posteriors

@@ -21,7 +21,6 @@ from typing import Any
 
 import numpy as np
 
-from ..compiled import load as load_compiled
 from ..parallel import in_processes
 from . import kernels
 from .em import run_em
@@ -364,8 +363,6 @@ def bootstrap(
             "bootstrap: %d resamples are too few for %.0f%% intervals (at least %d)", replicates, 100 * level, MIN_REPLICATES
         )
     compiled = kernels.worth_compiling(replicates * seqs.n_trials)
-    if compiled:
-        load_compiled()  # many fits: the compiled E-step in every one (worker processes start from here)
     w = {k: np.asarray(v, dtype=float) for k, v in (weights or {}).items()}
 
     def done(i: int, finished: int) -> None:
@@ -409,16 +406,9 @@ def replicate(
     """Every replicate's ``refit`` (:class:`_Replicate`), in order: replicate b resamples with the b-th
     child of ``options.seed`` (whatever the number of processes), over ``options.n_jobs`` processes
     (all cores by default; in this process for one); ``done(b, finished)`` is called as each finishes.
-
-    ``compiled`` over several processes: the first replicate runs here before the others start, so
-    that numba compiles the run (or loads it from its cache) once, where a progress bar says so, and
-    every worker starts with it compiled (else each compiled it again, unseen)."""
+    ``compiled``: every replicate's E-steps compiled (:func:`.kernels.many_fits`)."""
     jobs = [
         _Replicate(seqs, ch, options, refit, compiled).run
         for ch in np.random.SeedSequence([options.seed_number, 1]).spawn(replicates)
     ]
-    if not compiled or len(jobs) < 2 or (options.n_jobs or os.cpu_count() or 1) < 2:
-        return in_processes(jobs, options.n_jobs, done)
-    first = jobs[0]()
-    done(0, 1)
-    return [first, *in_processes(jobs[1:], options.n_jobs, lambda b, finished: done(b + 1, finished + 1))]
+    return in_processes(jobs, options.n_jobs, done)

@@ -6,7 +6,7 @@ and, towards trial t+1, transition row ``tidx[t, n]`` (a last identity where the
 
 * compiled (:mod:`.kernels`): one pass per sequence and parameter set, stopped sets skipped;
 * numpy time loop: the R copies of the data side by side (column r*N + n), a Python loop over
-  trials; the reference the compiled pass is tested against, and the fallback without numba;
+  trials; the reference the compiled pass is tested against, and the path of small data;
 * numpy scan: prefix and suffix products of the step matrices in log2(T) rounds (few, long sequences).
 
 Per-trial posteriors come from a numpy method.
@@ -23,7 +23,7 @@ from . import kernels
 from .sequences import Sequences
 from .spec import FitError, Params
 
-METHODS = ("auto", "numba", "loop", "scan")
+METHODS = ("auto", "compiled", "loop", "scan")
 SCAN_RATIO = 20  # sequences at least this many times longer than their number: numpy E-step by prefix products
 LOCKSTEP_COLUMNS = 1000  # the numpy time loop runs parameter sets x participants up to this side by side
 _add = np.add.reduce  # the ufunc method directly: the time loop is call-overhead bound
@@ -68,7 +68,7 @@ class EStepper(Protocol):
 class Workspace:
     """Index arrays of one data set and one model size, reused by every E-step.
 
-    ``method``: ``numba``, ``loop``, ``scan`` or ``auto``: compiled where it pays
+    ``method``: ``compiled``, ``loop``, ``scan`` or ``auto``: compiled where it pays
     (:func:`.kernels.worth_compiling`), and for posteriors (or else) the scan for few, long
     sequences, else the loop.  ``threads``: for a compiled E-step (the result does not depend on it).
     """
@@ -76,16 +76,14 @@ class Workspace:
     def __init__(self, seqs: Sequences, K: int, M: int, Ue: int, Ut: int, method: str = "auto", threads: int = 1):
         if method not in METHODS:
             raise FitError([f"method must be one of {list(METHODS)}, got {method!r}"])
-        if method == "numba" and not kernels.AVAILABLE:
-            raise FitError(["method 'numba' needs the numba package"])
         self.seqs, self.K, self.M, self.Ue, self.Ut = seqs, K, M, Ue, Ut
         self.threads = max(1, int(threads))
         self.T, self.N = seqs.y.shape
         self.PE = Ue * M + 1  # emission rows + "nothing observed"
         self.eidx = np.where(seqs.y >= 0, seqs.ue * M + seqs.y, Ue * M)  # (T, N)
         self.tidx = np.where(seqs.has_successor(), seqs.ut[:-1], Ut)  # (T-1, N); row Ut = identity, not counted
-        self.compiled = method == "numba" or (method == "auto" and kernels.worth_compiling(seqs.n_trials))
-        self.scan = method == "scan" or (method in ("auto", "numba") and self.T > 1 and self.T >= SCAN_RATIO * self.N)
+        self.compiled = method == "compiled" or (method == "auto" and kernels.worth_compiling(seqs.n_trials))
+        self.scan = method == "scan" or (method in ("auto", "compiled") and self.T > 1 and self.T >= SCAN_RATIO * self.N)
         self._eye = np.eye(K)
         self._kernel = kernels.Kernel(self.eidx, self.tidx, seqs.lengths, K, self.PE, Ut + 1, threads) if self.compiled else None
         self._numpy: dict[int, _TimeLoop | _Scan] = {}

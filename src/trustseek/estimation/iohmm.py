@@ -112,7 +112,7 @@ def fit_iohmm(
     where one more EM step gains at most ``tol`` (relative) (:func:`~.em.converge`), else at
     ``max_iter`` E-steps.  Each run's outcome is logged (debug) and passed to ``on_restart``; the
     ``n_jobs`` threads change no number.  A spec with a rating is fitted by EM alone.  With
-    ``compiled`` (and numba, and no rating) each start runs compiled (:mod:`.compiled_run`), else
+    ``compiled`` (no rating, E-steps compiled) each start runs compiled (:mod:`.compiled_run`), else
     the starts run in lockstep and scipy's L-BFGS-B finishes them (:func:`~.em.converge_runs`).
     """
     structure = make_structure(spec, seqs)

@@ -1,5 +1,6 @@
-"""The compiled E-step of R parameter sets on the same sequences (numba), over the passes of
-:mod:`.forward_backward`; the numpy E-step of :mod:`.estep` is the reference it is tested against.
+"""The compiled E-step of R parameter sets on the same sequences, over the items of
+:mod:`.forward_backward` (built with the package); the numpy E-step of :mod:`.estep` is the
+reference it is tested against.
 
 Tables (leading axis R): ``initial`` (R, K); ``emit`` (R, PE, K), row ``emission-input combination
 * M + output`` and a last row of ones (unobserved output); ``trans`` (R, Ut + 1, K, K), the last
@@ -26,243 +27,11 @@ from typing import Any
 
 import numpy as np
 
-from ..compiled import AVAILABLE as AVAILABLE  # callers read kernels.AVAILABLE
-from ..compiled import njit
-from .forward_backward import (
-    _backward,
-    _backward2,
-    _backward_codes,
-    _backward_pair,
-    _fold,
-    _forward,
-    _forward2,
-    _forward_codes,
-    _forward_pair,
-    _sequence,
-    _sequence2,
-    _step_table,
-    step_codes,
-)
+from .forward_backward import each_items, estep_items, mixture_items, reduce_items, step_codes
 
 CHUNK = 128  # sequences per work item (a fixed grouping of the sums)
 PARALLEL_MIN = 40_000  # trials x parameter sets from which an E-step is split over threads
 COMPILE_MIN = 5_000  # trials from which a fit's E-steps run compiled (worth_compiling)
-
-
-@njit(cache=True, nogil=True)
-def _item(r, lo, hi, tables, data, counts):
-    """Sequences ``lo:hi`` under parameter set ``r`` of ``tables`` (initial, emit, trans) into this
-    item's ``counts`` (initial, emission, transition); their log-probability.  ``data``: (eidx,
-    tidx, code, lengths)."""
-    initial, emit, trans = tables
-    eidx, tidx, code, lengths = data
-    c_init, c_emit, c_trans = counts
-    K = initial.shape[1]
-    T = eidx.shape[1]
-    total = 0.0
-    if K == 2:
-        # on the step codes (one 2 x 2 matrix per code, the counts per code, folded into the
-        # tables at the end); sequences of equal length go two at a time, the second's counts
-        # into their own sums
-        PE = emit.shape[1]
-        NC = trans.shape[1] * PE
-        A = np.empty((NC, 4))
-        _step_table(emit[r], trans[r], PE, A)
-        buf = np.empty((max(T, 1), 2))
-        buf2 = np.empty((max(T, 1), 2))
-        marks = np.empty(max(T, 1), dtype=np.int64)
-        marks2 = np.empty(max(T, 1), dtype=np.int64)
-        ci = np.zeros(2 + 2 * PE)
-        cs = np.zeros((NC, 4))
-        di = np.zeros(2 + 2 * PE)
-        ds = np.zeros((NC, 4))
-        ini, em = initial[r], emit[r]
-        n = lo
-        while n < hi:
-            L = lengths[n]
-            if L > 0 and n + 1 < hi and lengths[n + 1] == L:
-                la, lb, sa, sb = _forward_pair(n, n + 1, ini, em, A, code, L, (buf, marks), (buf2, marks2))
-                total += la
-                total += lb
-                if not total > -math.inf:
-                    return -math.inf
-                _backward_pair(n, n + 1, A, code, L, (ci, cs, buf, marks, sa), (di, ds, buf2, marks2, sb))
-                n += 2
-                continue
-            if L > 0:
-                la, sa = _forward_codes(n, ini, em, A, code, L, buf, marks)
-                total += la
-                if not total > -math.inf:
-                    return -math.inf
-                _backward_codes(n, A, code, L, ci, cs, buf, marks, sa)
-            n += 1
-        ci += di
-        cs += ds
-        _fold(ci, cs, PE, c_init, c_emit, c_trans)
-    else:
-        alpha = np.empty((max(T, 1), K))
-        beta = np.empty((max(T, 1), K))
-        scale = np.empty(max(T, 1))
-        work = (alpha, beta, scale, np.empty(K))
-        for n in range(lo, hi):
-            L = lengths[n]
-            if L > 0:
-                total += _sequence(r, n, initial, emit, trans, eidx, tidx, L, counts, work)
-                if not total > -math.inf:
-                    return -math.inf
-    return total
-
-
-@njit(cache=True, nogil=True)
-def _reduce(active, ll, pi, pe, pt, loglik, c_init, c_emit, c_trans):
-    """Add the items' sums per parameter set, in item order: ``ll`` (R, C) and the counts ``pi``,
-    ``pe``, ``pt`` (R, C, X; trailing axes flattened: one function for every layout) into ``loglik``
-    (R,) and ``c_init``, ``c_emit``, ``c_trans`` (R, X), cell by cell."""
-    R, C = ll.shape
-    for r in range(R):
-        loglik[r] = 0.0
-        c_init[r, :] = 0.0
-        c_emit[r, :] = 0.0
-        c_trans[r, :] = 0.0
-        if not active[r]:
-            continue
-        dead = False
-        for c in range(C):
-            if not ll[r, c] > -math.inf:
-                dead = True
-        if dead:
-            loglik[r] = -math.inf
-            continue
-        for c in range(C):
-            loglik[r] += ll[r, c]
-            for x in range(pi.shape[2]):
-                c_init[r, x] += pi[r, c, x]
-            for x in range(pe.shape[2]):
-                c_emit[r, x] += pe[r, c, x]
-            for x in range(pt.shape[2]):
-                c_trans[r, x] += pt[r, c, x]
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _slot(item, C, chunk, N, sums):
-    """Item ``item`` (= r * C + c): its parameter set r, c, its sequences lo:hi and its own sums
-    (initial, emission, transition), zeroed."""
-    _ll, pi, pe, pt = sums
-    r = item // C
-    c = item % C
-    lo = c * chunk
-    pi[r, c] = 0.0
-    pe[r, c] = 0.0
-    pt[r, c] = 0.0
-    return r, c, lo, min(N, lo + chunk), (pi[r, c], pe[r, c], pt[r, c])
-
-
-@njit(cache=True, nogil=True)
-def estep_items(first, last, C, chunk, tables, data, active, sums):
-    """Items ``first:last`` (item = r * C + c: parameter set r, sequences c*chunk onwards) into their
-    own ``sums`` (log-likelihood (R, C), initial, emission and transition counts per item)."""
-    N = data[0].shape[0]
-    for item in range(first, last):
-        if active[item // C]:
-            r, c, lo, hi, counts = _slot(item, C, chunk, N, sums)
-            sums[0][r, c] = _item(r, lo, hi, tables, data, counts)
-
-
-@njit(cache=True, nogil=True)
-def _mixture_item(r, lo, hi, M, tables, data, counts, seq_ll):
-    """Sequences ``lo:hi`` under the M types of parameter set ``r`` (sets ``r * M + m``; ``initial`` the
-    joint P(type, S_1)): per sequence every type's forward pass, the responsibilities, then each
-    type's backward pass weighted by its responsibility, counts into ``counts[.][m]`` and log
-    P(sequence n, type m) into ``seq_ll[m, n]``; the mixture log-probability (-inf: zero)."""
-    initial, emit, trans = tables
-    eidx, tidx, lengths = data
-    c_init, c_emit, c_trans = counts
-    K = initial.shape[1]
-    T = eidx.shape[1]
-    alpha = np.empty((M, max(T, 1), K))
-    beta = np.empty((max(T, 1), K))
-    scale = np.empty((M, max(T, 1)))
-    tmp = np.empty(K)
-    v = np.empty(M)
-    total = 0.0
-    for n in range(lo, hi):
-        L = lengths[n]
-        if L <= 0:
-            for m in range(M):
-                seq_ll[m, n] = 0.0
-            continue
-        best = -math.inf
-        for m in range(M):
-            q = r * M + m
-            if K == 2:
-                lm = _forward2(n, initial[q], emit[q], trans[q], eidx, tidx, L, alpha[m])
-            else:
-                lm = _forward(q, n, initial, emit, trans, eidx, tidx, L, alpha[m], scale[m])
-            seq_ll[m, n] = lm
-            v[m] = lm
-            if v[m] > best:
-                best = v[m]
-        if not best > -math.inf:
-            return -math.inf
-        s = 0.0
-        for m in range(M):
-            s += math.exp(v[m] - best)
-        lse = best + math.log(s)
-        total += lse
-        for m in range(M):
-            w = math.exp(v[m] - lse)
-            if w > 0.0:
-                q = r * M + m
-                if K == 2:
-                    _backward2(n, emit[q], trans[q], eidx, tidx, L, w, (c_init[m], c_emit[m], c_trans[m]), alpha[m])
-                else:
-                    cm = (c_init[m], c_emit[m], c_trans[m])
-                    _backward(q, n, emit, trans, eidx, tidx, L, w, cm, (alpha[m], beta, scale[m], tmp))
-    return total
-
-
-@njit(cache=True, nogil=True)
-def mixture_items(first, last, C, chunk, M, tables, data, active, sums, seq_ll):
-    """Items ``first:last`` of a mixture E-step (item = r * C + c) into their own ``sums``: ``ll`` (R, C),
-    ``pi`` (R, C, M, K), ``pe`` (R, C, M, PE, K), ``pt`` (R, C, M, P, K, K); ``seq_ll`` (R, M, N)."""
-    N = data[0].shape[0]
-    for item in range(first, last):
-        if active[item // C]:
-            r, c, lo, hi, counts = _slot(item, C, chunk, N, sums)
-            sums[0][r, c] = _mixture_item(r, lo, hi, M, tables, data, counts, seq_ll[r])
-
-
-@njit(cache=True, nogil=True)
-def each_items(lo, hi, pidx, tables, data, active, out):
-    """Sequences ``lo:hi``, sequence n under parameter set ``pidx[n]`` of ``tables`` (initial, emit,
-    trans), each into its own counts ``ci[n]``, ``ce[n]``, ``ct[n]`` and log-probability ``ll[n]``
-    (``out``: (ll, ci, ce, ct); skipped where ``active[n]`` is false).  ``data``: (eidx, tidx, lengths)."""
-    initial, emit, trans = tables
-    eidx, tidx, lengths = data
-    ll, ci, ce, ct = out
-    K = initial.shape[1]
-    T = eidx.shape[1]
-    alpha = np.empty((max(T, 1), K))
-    beta = np.empty((max(T, 1), K))
-    scale = np.empty(max(T, 1))
-    work = (alpha, beta, scale, np.empty(K))
-    for n in range(lo, hi):
-        ci[n] = 0.0
-        ce[n] = 0.0
-        ct[n] = 0.0
-        ll[n] = 0.0
-        L = lengths[n]
-        if not active[n] or L <= 0:
-            continue
-        q = pidx[n]
-        if K == 2:
-            ll[n] = _sequence2(n, initial[q], emit[q], trans[q], eidx, tidx, L, (ci[n], ce[n], ct[n]), alpha)
-        else:
-            ll[n] = _sequence(q, n, initial, emit, trans, eidx, tidx, L, (ci[n], ce[n], ct[n]), work)
-        if not ll[n] > -math.inf:
-            ci[n] = 0.0
-            ce[n] = 0.0
-            ct[n] = 0.0
 
 
 #: set inside :func:`many_fits`: every fit compiled whatever its size
@@ -281,10 +50,11 @@ def many_fits() -> Iterator[None]:
 
 
 def worth_compiling(trials: int) -> bool:
-    """Whether E-steps on ``trials`` trials run compiled: from :data:`COMPILE_MIN` trials (below, a
-    numpy fit takes less than loading numba, ~1 s), or inside :func:`many_fits`.  The choice depends
-    on the call alone, so a fit gives the same numbers wherever it runs."""
-    return AVAILABLE and (trials >= COMPILE_MIN or _MANY_FITS.get())
+    """Whether E-steps on ``trials`` trials run compiled: from :data:`COMPILE_MIN` trials, or inside
+    :func:`many_fits` (below, the numpy path: about as fast on so few trials, and the numbers small
+    fits, the shipped example's among them, have always had).  The choice depends on the call
+    alone, so a fit gives the same numbers wherever it runs."""
+    return trials >= COMPILE_MIN or _MANY_FITS.get()
 
 
 _POOL: ThreadPoolExecutor | None = None
@@ -328,7 +98,7 @@ class Kernel:
         self.trials = int(self.lengths.sum())
         self.C = max((N + CHUNK - 1) // CHUNK, 1)  # items per parameter set
         self.every = np.ones(1, dtype=np.bool_)  # the default "all parameter sets active", grown as needed
-        self._partials: dict[tuple[int, tuple[int, ...]], tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]] = {}
+        self._partials: dict[tuple[int, tuple[int, ...]], tuple[np.ndarray, ...]] = {}
 
     def run(
         self, initial: np.ndarray, emit: np.ndarray, trans: np.ndarray, active: np.ndarray | None = None
@@ -353,11 +123,9 @@ class Kernel:
         order: (loglik (R,), initial (R, *lead, K), emission (R, *lead, PE, K), transition (R, *lead, P, K, K))."""
         C, K = self.C, self.K
         shapes = ((K,), (self.PE, K), (self.P, K, K))
-        cached = self._partials.get((R, lead))
-        if cached is None:  # each item's own sums, zeroed by the item itself, and their views for _reduce
-            parts = (np.empty((R, C)), *(np.empty((R, C, *lead, *sh)) for sh in shapes))
-            cached = self._partials[(R, lead)] = (parts, (parts[0], *(p.reshape(R, C, -1) for p in parts[1:])))
-        parts, flat = cached
+        parts = self._partials.get((R, lead))
+        if parts is None:  # each item's own sums, zeroed by the item itself
+            parts = self._partials[(R, lead)] = (np.empty((R, C)), *(np.empty((R, C, *lead, *sh)) for sh in shapes))
         args = (*before, act, parts, *after)
         n_active = int(act.sum())
         if self.threads > 1 and n_active * C > 1 and self.trials * n_active * math.prod(lead) >= PARALLEL_MIN:
@@ -368,7 +136,7 @@ class Kernel:
             kernel(0, R * C, C, CHUNK, *args)
         ll = np.empty(R)
         totals = [np.empty((R, math.prod(lead) * math.prod(sh))) for sh in shapes]
-        _reduce(act, *flat, ll, *totals)
+        reduce_items(act, parts, ll, *totals)
         ci, ce, ct = (t.reshape((R, *lead, *sh)) for t, sh in zip(totals, shapes, strict=True))
         return ll, ci, ce, ct
 

@@ -11,7 +11,6 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from . import kernels
 from .estep import EStep, Workspace
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec, Params
@@ -254,9 +253,7 @@ class MixtureWorkspace(Workspace):
     """The data's index arrays for the compiled mixture E-step (M types, any number of mixtures)."""
 
     def __init__(self, seqs: Sequences, structure: MixtureStructure, threads: int = 1):
-        if not kernels.AVAILABLE:
-            raise FitError(["the mixture fit needs the numba package"])
-        super().__init__(seqs, *structure.dims, method="numba", threads=threads)
+        super().__init__(seqs, *structure.dims, method="compiled", threads=threads)
         self.n_types = structure.n_types
 
     def as_own(self, p: Params) -> MixtureParams:

@@ -32,7 +32,6 @@ from ..model.core import TrustModel
 from ..model.files import planning_refusal
 from ..model.jsonfile import json_safe
 from ..model.mixture import TypeMixture
-from . import kernels
 from .em import RunResult, run_em
 from .estep import EStep, Workspace
 from .mixture import general_types, mixture_params, type_posteriors
@@ -284,8 +283,6 @@ class _Prepared:
 
     @classmethod
     def of(cls, frame: pd.DataFrame, model: TrustModel | TypeMixture, n_jobs: int | None = 1) -> _Prepared:
-        if not kernels.AVAILABLE:
-            raise FitError(["per-person models need the numba package"])
         mixture = model if isinstance(model, TypeMixture) else TypeMixture.single(model)
         spec, mp = mixture_params(mixture)
         seqs = encode(frame, spec)
@@ -298,7 +295,7 @@ class _Prepared:
             types = np.zeros(N, dtype=np.int64)
         each = [mp.type_params(m) for m in range(mixture.n_types)]
         centre = Params.stack([each[i] for i in types])
-        work = _PersonalWorkspace(seqs, *base.dims, method="numba", threads=n_jobs or 1)
+        work = _PersonalWorkspace(seqs, *base.dims, method="compiled", threads=n_jobs or 1)
         start = base.project(centre)
         rows = {
             "initial": _Rows(centre.initial, None),
@@ -348,7 +345,7 @@ class _CrossValidation:
             _PersonalWorkspace(
                 replace(seqs, y=np.where(block == f, -1, seqs.y).astype(seqs.y.dtype)),
                 *prep.base.dims,
-                method="numba",
+                method="compiled",
                 threads=prep.work.threads,
             )
             for f in range(folds)

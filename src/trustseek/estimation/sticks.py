@@ -3,8 +3,8 @@
 A row with free cells c_0..c_{m-1} and free mass s holds p_0 = s v_0,
 p_j = s v_j prod_{i<j} (1 - v_i), p_{m-1} = s prod_{i<m-1} (1 - v_i); the gradient of the
 objective comes from the E-step's expected counts by Fisher's identity.  :class:`Sticks` is
-the layout (numpy); :func:`stick_theta`, :func:`stick_values` and :func:`stick_gradient` are its
-maps, run in plain Python by :class:`Sticks` (a few cells) and compiled inside :mod:`.compiled_run`.
+the layout (numpy); its maps, compiled, are those of :mod:`.stick_maps`, which the compiled run's
+finish (:mod:`.compiled_em`) calls too.
 """
 
 from __future__ import annotations
@@ -13,12 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..compiled import njit, python
 from .estep import EStep
 from .spec import Params
-from .structure import FLOOR, Structure
-
-EPS = 1e-12  # the fractions' box: [EPS, 1 - EPS]
+from .stick_maps import EPS as EPS  # the fractions' box: [EPS, 1 - EPS]
+from .stick_maps import stick_gradient, stick_theta, stick_values
+from .structure import Structure
 
 
 @dataclass
@@ -70,7 +69,7 @@ class Sticks:
         """The fractions of the free cells of ``p``."""
         out = np.empty(self.size)
         cells = tuple(np.ascontiguousarray(a, dtype=float).reshape(-1) for a in (p.initial, p.emission, p.transition))
-        python(stick_theta)(cells, self._layout(), out)  # a few cells: not worth loading numba for
+        stick_theta(cells, self._layout(), out)
         return out
 
     def _layout(self) -> tuple[np.ndarray, ...]:
@@ -113,7 +112,7 @@ class Sticks:
     def params(self, theta: np.ndarray, base: Params) -> Params:
         """``base`` with its free cells set from the fractions ``theta``."""
         out = Params(base.initial.copy(), base.emission.copy(), base.transition.copy())
-        python(stick_values)(  # a few cells: not worth loading numba for
+        stick_values(
             np.ascontiguousarray(theta, dtype=float),
             self._layout(),
             (out.initial.reshape(-1), out.emission.reshape(-1), out.transition.reshape(-1)),
@@ -124,7 +123,7 @@ class Sticks:
         """Gradient of the objective with respect to ``theta`` from the E-step at that point."""
         out = np.empty(len(theta))
         counts = (st.initial, st.emission, st.transition)
-        python(stick_gradient)(
+        stick_gradient(
             np.ascontiguousarray(theta, dtype=float),
             float(self.structure.spec.prior),
             self._layout(),
@@ -132,75 +131,3 @@ class Sticks:
             out,
         )
         return out
-
-
-@njit(cache=True, nogil=True, inline="always")
-def stick_theta(cells, layout, out):
-    """The fractions of the flat ``cells`` (initial, emission, transition) in the ``layout`` of
-    :func:`stick_values` into ``out``, each in [EPS, 1 - EPS]."""
-    table, m, mass, tbase, tstride, coff, cptr, cdst = layout
-    f0, f1, f2 = cells
-    for i in range(len(m)):
-        rem = mass[i]
-        for j in range(m[i] - 1):
-            q = cdst[cptr[coff[i] + j]]
-            val = f0[q] if table[i] == 0 else (f1[q] if table[i] == 1 else f2[q])
-            out[tbase[i] + j * tstride[i]] = min(max(val / max(rem, FLOOR), EPS), 1 - EPS)
-            rem = rem - val
-
-
-@njit(cache=True, nogil=True)
-def stick_values(theta, layout, out):
-    """The cells of stick-breaking rows from their fractions ``theta``, in the ``layout`` (table, m,
-    mass, tbase, tstride, coff, cptr, cdst) of :meth:`Sticks._layout`: row i (``m[i]`` cells of
-    total ``mass[i]`` in table ``table[i]``: 0 initial, 1 emission, 2 transition) has fraction j
-    at ``theta[tbase[i] + j * tstride[i]]``; its cell j goes to the flat positions
-    ``cdst[cptr[c]:cptr[c + 1]]`` of that table's ``out`` (initial, emission, transition; flat),
-    c = ``coff[i] + j``."""
-    table, m, mass, tbase, tstride, coff, cptr, cdst = layout
-    out0, out1, out2 = out
-    for i in range(len(m)):
-        rem = mass[i]
-        for j in range(m[i]):
-            if j < m[i] - 1:
-                v = theta[tbase[i] + j * tstride[i]]
-                val = rem * v
-                rem = rem * (1 - v)
-            else:
-                val = rem
-            c = coff[i] + j
-            for q in range(cptr[c], cptr[c + 1]):
-                if table[i] == 0:
-                    out0[cdst[q]] = val
-                elif table[i] == 1:
-                    out1[cdst[q]] = val
-                else:
-                    out2[cdst[q]] = val
-
-
-@njit(cache=True, nogil=True)
-def stick_gradient(theta, prior, layout, counts, out):
-    """The gradient of the objective in the fractions of :func:`stick_values`' ``layout`` into ``out``,
-    from the expected ``counts`` of the three tables (initial, emission, transition; flat):
-    w_j / v_j - (sum_{i>j} w_i) / (1 - v_j) with w the row's counts plus ``prior``."""
-    table, m, _mass, tbase, tstride, coff, cptr, cdst = layout
-    w0, w1, w2 = counts
-    w = np.empty(int(m.max()) if len(m) else 0)
-    for i in range(len(m)):
-        for j in range(m[i]):
-            c = coff[i] + j
-            acc = 0.0
-            for q in range(cptr[c], cptr[c + 1]):
-                if table[i] == 0:
-                    acc += w0[cdst[q]]
-                elif table[i] == 1:
-                    acc += w1[cdst[q]]
-                else:
-                    acc += w2[cdst[q]]
-            w[j] = acc + prior
-        tail = w[m[i] - 1]
-        for j in range(m[i] - 2, -1, -1):
-            k = tbase[i] + j * tstride[i]
-            v = theta[k]
-            out[k] = w[j] / v - tail / (1 - v)
-            tail = tail + w[j]

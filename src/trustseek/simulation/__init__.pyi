@@ -1,7 +1,7 @@
 """The public names of :mod:`trustseek.simulation`: read by type checkers, and by ``__init__.py`` to load each on first use."""
 
 # every submodule, as the package attribute of that name
-from . import designs, engine, kernels, populations, results, scheduling, trial_orders, warm
+from . import designs, engine, kernels, populations, results, scheduling, trial_orders
 from .designs import add_ratings, crossover, simulate_design
 from .engine import Block, run, simulate
 from .populations import SimulationError, Supervisors

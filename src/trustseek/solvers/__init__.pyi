@@ -16,6 +16,7 @@ from . import (
     sensitivity,
     summary,
     type_aware,
+    type_bounds,
     upper_bounds,
 )
 from .agnostic import TrustAgnosticSolver, trust_agnostic, trust_agnostic_from_data

@@ -31,7 +31,6 @@ from typing import Any, ClassVar
 import numpy as np
 import scipy.sparse as sp
 
-from ..compiled import njit
 from ..model.core import TrustModel, trust_model
 from ..model.mixture import TypeMixture
 from ..model.task import Task
@@ -51,6 +50,7 @@ from .point import (
     PointSolver,
 )
 from .registry import make_solver
+from .type_bounds import base_many
 from .upper_bounds import closed_blocks, fast_informed_bound, one_state_value
 
 __all__ = ["DEFAULT_TYPE_AWARE_SOLVER", "TypeAwareSolver", "TypeBound", "solve_type_aware", "type_bound"]
@@ -83,7 +83,7 @@ class TypeBound:
     def __call__(self, B: np.ndarray) -> np.ndarray:
         """The base bound at beliefs B (n, states)."""
         B = np.ascontiguousarray(np.atleast_2d(np.asarray(B, dtype=float)))
-        return _base_many(B, self.pc, self.beta, self.lo, self.hi, self.vt, self.qt)
+        return base_many(B, self.pc, self.beta, self.lo, self.hi, self.vt, self.qt)
 
 
 def type_bound(problem: AssistancePOMDP | FlatPOMDP, model: BranchModel, block_tol: float = 1e-6) -> TypeBound:
@@ -287,65 +287,6 @@ class TypeAwareSolver(PointSolver):
 
     def _upper_at_start(self, b0: np.ndarray) -> float:
         return self.lookahead_upper(b0)
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _interp(tab: np.ndarray, x: float) -> float:
-    """Linear interpolation of ``tab`` (values on a uniform grid of [0, 1]) at x."""
-    r = tab.shape[0] - 1
-    y = x * r
-    j = min(max(int(y), 0), r - 1)
-    return tab[j] + (y - j) * (tab[j + 1] - tab[j])
-
-
-@njit(cache=True, nogil=True)
-def _base_many(
-    B: np.ndarray, pc: np.ndarray, beta: np.ndarray, lo: np.ndarray, hi: np.ndarray, vt: np.ndarray, qt: np.ndarray
-) -> np.ndarray:
-    """The base bound (see :class:`TypeBound`) at each row of B: the smallest of the fast
-    informed bound Σ_c P(c) max_a β[c, a]·b, the type revealed now Σ_m w_m V̄_m(p_m) and the
-    type revealed after one trial Σ_c P(c) max_a Σ_m w_m Q̄_m(c, a, p_m)."""
-    n, S = B.shape
-    N, A, _ = beta.shape
-    nb = lo.shape[0]
-    out = np.empty(n)
-    ws = np.empty(max(nb, 1))
-    ps = np.empty(max(nb, 1))
-    for k in range(n):
-        b = B[k]
-        fib = 0.0
-        for c in range(N):
-            best = -np.inf
-            for a in range(A):
-                s = 0.0
-                for t in range(S):
-                    s += beta[c, a, t] * b[t]
-                best = max(best, s)
-            fib += pc[c] * best
-        out[k] = fib
-        if nb == 0:
-            continue
-        f = 0.0
-        for m in range(nb):
-            i, j = lo[m], hi[m]
-            w = b[i] if i == j else b[i] + b[j]
-            p = min(b[j] / w, 1.0) if (i != j and w > 0) else 0.0
-            ws[m] = w
-            ps[m] = p
-            if w > 0:
-                f += w * _interp(vt[m], p)
-        hf = 0.0
-        for c in range(N):
-            best = -np.inf
-            for a in range(A):
-                s = 0.0
-                for m in range(nb):
-                    if ws[m] > 0:
-                        s += ws[m] * _interp(qt[m, c, a], ps[m])
-                best = max(best, s)
-            hf += pc[c] * best
-        out[k] = min(fib, f, hf)
-    return out
 
 
 def solve_type_aware(

@@ -1,0 +1,9 @@
+import numpy as np
+
+EPS: float
+
+def stick_theta(cells: tuple[np.ndarray, ...], layout: tuple[np.ndarray, ...], out: np.ndarray) -> None: ...
+def stick_values(theta: np.ndarray, layout: tuple[np.ndarray, ...], out: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None: ...
+def stick_gradient(
+    theta: np.ndarray, prior: float, layout: tuple[np.ndarray, ...], counts: tuple[np.ndarray, ...], out: np.ndarray
+) -> None: ...
