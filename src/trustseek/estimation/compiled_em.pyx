@@ -12,6 +12,7 @@ import numpy as np
 from libc.math cimport fabs, isfinite, sqrt
 from libc.stdint cimport int64_t
 from libc.stdlib cimport free
+from ..minmax cimport py_max, py_min
 from scipy.linalg.cython_blas cimport ddot, dgemv
 from scipy.linalg.cython_lapack cimport dgesv
 
@@ -32,16 +33,6 @@ ARMIJO = 1e-4  # sufficient decrease of the finish's line search
 ENDED_STATIONARY, ENDED_CAPPED, ENDED_ZERO = STATIONARY_, CAPPED_, ZERO_
 cdef double C_ARMIJO = ARMIJO
 cdef double C_EPS = _EPS
-
-
-cdef inline double _max(double a, double b) noexcept nogil:
-    """Python's ``max(a, b)``: ``b`` only when it is greater."""
-    return b if b > a else a
-
-
-cdef inline double _min(double a, double b) noexcept nogil:
-    """Python's ``min(a, b)``: ``b`` only when it is smaller."""
-    return b if b < a else a
 
 
 cdef inline double _dot(Py_ssize_t n, const double* x, const double* y) noexcept nogil:
@@ -190,7 +181,7 @@ cdef int _active_set(Py_ssize_t n, const double* g, const double* B, const doubl
                     t, hit = ti, i
         for a in range(nf):
             i = free_[a]
-            d[i] = _min(_max(d[i] + t * (target[i] - d[i]), lo[i]), hi[i])
+            d[i] = py_min(py_max(d[i] + t * (target[i] - d[i]), lo[i]), hi[i])
         if hit >= 0:
             if target[hit] < lo[hit]:
                 d[hit], bound[hit] = lo[hit], -1
@@ -275,7 +266,7 @@ cdef int _quasi_newton(Run* run, Py_ssize_t budget, double ftol, double* B, bint
             for i in range(n):
                 for j in range(n):
                     B[i * n + j] = 0.0
-                B[i * n + i] = _max(gg, 1e-300)
+                B[i * n + i] = py_max(gg, 1e-300)
         for i in range(n):
             dl[i] = lo - x[i]
             dh[i] = hi - x[i]
@@ -292,7 +283,7 @@ cdef int _quasi_newton(Run* run, Py_ssize_t budget, double ftol, double* B, bint
                 out.capped = True
                 return 0
             for i in range(n):
-                xn[i] = _min(_max(x[i] + step * d[i], lo), hi)
+                xn[i] = py_min(py_max(x[i] + step * d[i], lo), hi)
             _fg(run, xn, base, fln, cnn, gn, &lln, &fn, w)
             out.calls += 1
             Fn = -fn
@@ -321,7 +312,7 @@ cdef int _quasi_newton(Run* run, Py_ssize_t budget, double ftol, double* B, bint
                     for j in range(n):
                         B[i * n + j] += y_[i] * y_[j] / sy - Bs[i] * Bs[j] / sBs
         # a shortened step's small change says little about the distance to the maximum
-        small = step == 1.0 and F - Fn <= ftol * _max(_max(fabs(F), fabs(Fn)), 1.0)
+        small = step == 1.0 and F - Fn <= ftol * py_max(py_max(fabs(F), fabs(Fn)), 1.0)
         copy(x, xn, n)
         copy(g, gn, n)
         F = Fn

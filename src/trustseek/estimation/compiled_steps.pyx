@@ -9,14 +9,13 @@ transition (Ut, K, K)); ``model`` is (K, Ue, M, Ut, prior, emission table, trans
 structs (:func:`model_from`, :func:`estep_from`); those of Python the tuples, for the tests.
 """
 
-import itertools
-
 import numpy as np
 
 from cpython.ref cimport PyObject
 from libc.math cimport log, sqrt
 from libc.stdint cimport int64_t
 from libc.stdlib cimport free
+from ..minmax cimport np_maximum, py_max
 
 from .forward_backward cimport (
     Data,
@@ -45,16 +44,6 @@ cdef double PROJECT_FLOOR = _PROJECT_FLOOR
 cdef double SHRINK = _SHRINK
 
 
-cdef inline double _max(double a, double b) noexcept nogil:
-    """Python's ``max(a, b)``: ``b`` only when it is greater."""
-    return b if b > a else a
-
-
-cdef inline double _maximum(double a, double b) noexcept nogil:
-    """numpy's ``maximum(a, b)`` for ``b`` not NaN: ``a`` when it is NaN or at least ``b``."""
-    return a if (a != a or a >= b) else b
-
-
 # ---- the E-step ----
 
 cdef class EStepBuffers:
@@ -79,11 +68,8 @@ cdef class EStepBuffers:
     def run_items(self):
         """The items on the E-step threads of :mod:`.kernels`, one contiguous run per thread, each item
         into its own sums (the same numbers on any number of threads)."""
-        bounds = np.linspace(0, self.C, min(self.threads, self.C) + 1).astype(int)
-        pool = kernels._pool(len(bounds) - 1)
         args = (self.C, CHUNK, self.tables, self.data, self.active, self.sums)
-        for f in [pool.submit(estep_items, a, b, *args) for a, b in itertools.pairwise(bounds)]:
-            f.result()
+        kernels.split(self.C, self.threads, lambda a, b: estep_items(a, b, *args))
 
 
 def estep_buffers(Py_ssize_t K, Py_ssize_t PE, Py_ssize_t U1, Py_ssize_t C, Py_ssize_t threads):
@@ -245,7 +231,7 @@ cdef void _table_project(const double* p, const Tie* tab, Py_ssize_t K, Py_ssize
     cdef double* num = <double*>scratch(sizeof(double) * tab.G * K * M)
     for g in range(tab.G):
         for x in range(K * M):
-            num[g * K * M + x] = _maximum(p[tab.rep[g] * K * M + x], PROJECT_FLOOR)
+            num[g * K * M + x] = np_maximum(p[tab.rep[g] * K * M + x], PROJECT_FLOOR)
     _rows(num, p, tab, K, M, out)
     free(num)
 
@@ -256,7 +242,7 @@ cdef double _table_log_prior(const double* p, double prior, const Tie* tab, Py_s
     for g in range(tab.G):
         for x in range(K * M):
             if not tab.gfixed[g * K * M + x]:
-                s += log(_max(p[tab.rep[g] * K * M + x], FLOOR))
+                s += log(py_max(p[tab.rep[g] * K * M + x], FLOOR))
     return prior * s
 
 
@@ -267,7 +253,7 @@ cdef double _log_prior(const double* flat, const Model* md) noexcept nogil:
     if md.prior == 0:
         return 0.0
     for k in range(K):
-        s += log(_max(flat[k], FLOOR))
+        s += log(py_max(flat[k], FLOOR))
     return (md.prior * s + _table_log_prior(flat + K, md.prior, &md.em, K, md.M)
             + _table_log_prior(flat + K + md.Ue * K * md.M, md.prior, &md.tr, K, K))
 
@@ -291,12 +277,12 @@ cdef bint extrapolate_at(const double* p0, const double* p1, const double* p2, c
     for i in range(L):
         r = p1[i] - p0[i]
         v = p2[i] - 2 * p1[i] + p0[i]
-        x[i] = _max(p0[i] - 2 * step * r + step * step * v, SHRINK * p2[i])
+        x[i] = py_max(p0[i] - 2 * step * r + step * step * v, SHRINK * p2[i])
     s = 0.0
     for k in range(K):
-        s += _max(x[k], PROJECT_FLOOR)
+        s += py_max(x[k], PROJECT_FLOOR)
     for k in range(K):
-        out[k] = _max(x[k], PROJECT_FLOOR) / s
+        out[k] = py_max(x[k], PROJECT_FLOOR) / s
     _table_project(x + a, &md.em, K, md.M, out + a)
     _table_project(x + b, &md.tr, K, K, out + b)
     free(x)

@@ -131,7 +131,7 @@ class Kernel:
         if self.threads > 1 and n_active * C > 1 and self.trials * n_active * math.prod(lead) >= PARALLEL_MIN:
             # contiguous runs of the active items, one per thread; each item writes only its own sums
             items = [r * C + c for r in np.flatnonzero(act) for c in range(C)]
-            self._split(len(items), lambda a, b: _run_items(items[a:b], C, args, kernel))
+            split(len(items), self.threads, lambda a, b: _run_items(items[a:b], C, args, kernel))
         else:
             kernel(0, R * C, C, CHUNK, *args)
         ll = np.empty(R)
@@ -167,21 +167,23 @@ class Kernel:
         args = (np.ascontiguousarray(pidx, dtype=np.int64), tables, (self.eidx, self.tidx, self.lengths), act, (ll, ci, ce, ct))
         work = int(self.lengths[act].sum()) if active is not None else self.trials
         if self.threads > 1 and N > CHUNK and work >= PARALLEL_MIN:
-            self._split(N, lambda a, b: each_items(a, b, *args))
+            split(N, self.threads, lambda a, b: each_items(a, b, *args))
         else:
             each_items(0, N, *args)
         return ll, ci, ce, ct
 
-    def _split(self, n: int, part: Callable[[int, int], Any]) -> None:
-        """``part(a, b)`` of ``n`` things cut into one contiguous run per thread, on the E-step threads."""
-        bounds = np.linspace(0, n, min(self.threads, n) + 1).astype(int)
-        pool = _pool(len(bounds) - 1)
-        for f in [pool.submit(part, a, b) for a, b in itertools.pairwise(bounds)]:
-            f.result()
-
 
 def _tables(initial: np.ndarray, emit: np.ndarray, trans: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return tuple(np.ascontiguousarray(x, dtype=np.float64) for x in (initial, emit, trans))  # type: ignore[return-value]
+
+
+def split(n: int, threads: int, part: Callable[[int, int], Any]) -> None:
+    """``part(a, b)`` of ``n`` things cut into one contiguous run per thread, on ``threads`` of the
+    E-step threads."""
+    bounds = np.linspace(0, n, min(threads, n) + 1).astype(int)
+    pool = _pool(len(bounds) - 1)
+    for f in [pool.submit(part, a, b) for a, b in itertools.pairwise(bounds)]:
+        f.result()
 
 
 def _run_items(items: list[int], C: int, args: tuple, kernel: Callable[..., Any]) -> None:

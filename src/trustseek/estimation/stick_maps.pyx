@@ -10,6 +10,7 @@ positions ``cdst[cptr[c]:cptr[c + 1]]`` of that table, c = ``coff[i] + j``.
 """
 
 from libc.stdint cimport int64_t
+from ..minmax cimport py_max, py_min
 
 import numpy as np
 
@@ -18,16 +19,6 @@ from .structure import FLOOR as _FLOOR
 EPS = 1e-12  # the fractions' box: [EPS, 1 - EPS]
 cdef double C_EPS = EPS
 cdef double C_FLOOR = _FLOOR
-
-
-cdef inline double _max(double a, double b) noexcept nogil:
-    """Python's ``max(a, b)``: ``b`` only when it is greater."""
-    return b if b > a else a
-
-
-cdef inline double _min(double a, double b) noexcept nogil:
-    """Python's ``min(a, b)``: ``b`` only when it is smaller."""
-    return b if b < a else a
 
 
 cdef inline double* _pick(Py_ssize_t table, double* out0, double* out1, double* out2) noexcept nogil:
@@ -65,7 +56,7 @@ cdef void theta_of(const double* f0, const double* f1, const double* f2, const L
         for j in range(lay.m[i] - 1):
             q = lay.cdst[lay.cptr[lay.coff[i] + j]]
             val = f0[q] if lay.table[i] == 0 else (f1[q] if lay.table[i] == 1 else f2[q])
-            out[lay.tbase[i] + j * lay.tstride[i]] = _min(_max(val / _max(rem, C_FLOOR), C_EPS), 1 - C_EPS)
+            out[lay.tbase[i] + j * lay.tstride[i]] = py_min(py_max(val / py_max(rem, C_FLOOR), C_EPS), 1 - C_EPS)
             rem = rem - val
 
 

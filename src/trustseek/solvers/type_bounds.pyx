@@ -4,16 +4,7 @@ import numpy as np
 
 from libc.math cimport INFINITY
 from libc.stdint cimport int64_t
-
-
-cdef inline double _max(double a, double b) noexcept nogil:
-    """Python's ``max(a, b)``: ``b`` only when it is greater."""
-    return b if b > a else a
-
-
-cdef inline double _min(double a, double b) noexcept nogil:
-    """Python's ``min(a, b)``: ``b`` only when it is smaller."""
-    return b if b < a else a
+from ..minmax cimport py_max, py_min
 
 
 cdef inline double _interp(const double[:] tab, double x) noexcept nogil:
@@ -49,7 +40,7 @@ def base_many(const double[:, ::1] B, const double[:] pc, const double[:, :, :] 
                     s = 0.0
                     for t in range(S):
                         s += beta[c, a, t] * B[k, t]
-                    best = _max(best, s)
+                    best = py_max(best, s)
                 fib += pc[c] * best
             o[k] = fib
             if nb == 0:
@@ -58,7 +49,7 @@ def base_many(const double[:, ::1] B, const double[:] pc, const double[:, :, :] 
             for m in range(nb):
                 i, j = lo[m], hi[m]
                 w = B[k, i] if i == j else B[k, i] + B[k, j]
-                p = _min(B[k, j] / w, 1.0) if (i != j and w > 0) else 0.0
+                p = py_min(B[k, j] / w, 1.0) if (i != j and w > 0) else 0.0
                 ws[m] = w
                 ps[m] = p
                 if w > 0:
@@ -71,7 +62,7 @@ def base_many(const double[:, ::1] B, const double[:] pc, const double[:, :, :] 
                     for m in range(nb):
                         if ws[m] > 0:
                             s += ws[m] * _interp(qt[m, c, a], ps[m])
-                    best = _max(best, s)
+                    best = py_max(best, s)
                 hf += pc[c] * best
-            o[k] = _min(_min(fib, f), hf)
+            o[k] = py_min(py_min(fib, f), hf)
     return out
