@@ -25,13 +25,16 @@ import argparse
 import os
 import sys
 import time
+from functools import partial
+from unittest import mock
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 
-from trustseek.estimation import compiled_run, encode, fit_iohmm, fit_trust_model, from_model, kernels, loglik, paper_spec
+import trustseek.estimation.iohmm as iohmm
+from trustseek.estimation import compiled_run, encode, fit_iohmm, fit_trust_model, from_model, loglik, paper_spec
 from trustseek.estimation.em import run_em
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.options import FitOptions
@@ -122,13 +125,10 @@ def timing(n: int, restarts: int = 10, tol: float = 1e-8, target: float | None =
     p = s.random(np.random.default_rng(0))
     estep_speed(seqs, s, p, reps=max(5, min(200, 20000 // n)))
     if numpy_fit:  # the same fit with the numpy E-step (the previous implementation)
-        compile_min, kernels.COMPILE_MIN = kernels.COMPILE_MIN, sys.maxsize
-        try:
+        with mock.patch.object(iohmm, "Workspace", partial(Workspace, method="loop")):
             t = clocks()
             ref = fit_iohmm(seqs, spec, options=FitOptions(restarts=restarts, seed=0, tol=tol, n_jobs=1))
             w2, c2 = since(t)
-        finally:
-            kernels.COMPILE_MIN = compile_min
         print(
             f"  numpy E-step fit: {w2:.3f} s wall, {c2:.3f} s CPU; compiled x{c2 / cpu:.1f} (CPU); "
             f"same best log-likelihood: {abs(ref.loglik - fit.loglik) < 1e-6}"

@@ -9,7 +9,6 @@ from scipy.stats import ttest_rel
 
 from trustseek.design.replicate import FitSettings, fit_model
 from trustseek.estimation.fit import fit_trust_model
-from trustseek.estimation.kernels import many_fits
 from trustseek.estimation.options import FitOptions
 from trustseek.model.presets import paper_model
 from trustseek.reproduction.statistics import paired_tests
@@ -32,8 +31,7 @@ def test_the_replicate_fit_is_fit_trust_models_model():
     frame = simulate_design(paper_model(), 9, seed=3)
     fs = FitSettings(restarts=2)
     got = fit_model(frame, fs, 17)
-    with many_fits():  # a replicate's fit runs compiled, as fit_trust_model does among many fits
-        ref = fit_trust_model(frame, options=FitOptions(restarts=2, seed=17, tol=fs.tol, max_iter=fs.max_iter, n_jobs=1)).model
+    ref = fit_trust_model(frame, options=FitOptions(restarts=2, seed=17, tol=fs.tol, max_iter=fs.max_iter, n_jobs=1)).model
     for name in ("initial", "emission", "transition"):
         assert np.array_equal(getattr(got, name), getattr(ref, name))
 

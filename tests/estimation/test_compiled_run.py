@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from trustseek.estimation import FitError, Params, encode, fit_iohmm, kernels, paper_spec
+from trustseek.estimation import FitError, Params, encode, fit_iohmm, paper_spec
 from trustseek.estimation import compiled_run as cr
 from trustseek.estimation import compiled_steps as steps
 from trustseek.estimation.em import em_step, run_em
@@ -12,12 +12,6 @@ from trustseek.estimation.options import FitOptions, RunSettings
 from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
-
-
-@pytest.fixture(autouse=True)
-def compiled_at_any_size(monkeypatch):
-    """These tests are about the compiled paths, on data smaller than the fit compiles for."""
-    monkeypatch.setattr(kernels, "COMPILE_MIN", 0)
 
 
 def problem(n: int, seed: int, **spec_options):

@@ -5,19 +5,13 @@ import numpy as np
 import pytest
 
 from trustseek.estimation import compiled_run as cr
-from trustseek.estimation import encode, fit_iohmm, kernels, paper_spec
+from trustseek.estimation import encode, fit_iohmm, paper_spec
 from trustseek.estimation.em import em_step
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.options import FitOptions
 from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
-
-
-@pytest.fixture(autouse=True)
-def compiled_at_any_size(monkeypatch):
-    """These tests are about the compiled paths, on data smaller than the fit compiles for."""
-    monkeypatch.setattr(kernels, "COMPILE_MIN", 0)
 
 
 def problem(n: int, seed: int):

@@ -5,17 +5,11 @@ mixed lengths (pairs and single sequences), unobserved outputs, and rescaled rec
 import numpy as np
 import pytest
 
-from trustseek.estimation import Params, encode, forward_backward, kernels, paper_spec
+from trustseek.estimation import Params, encode, forward_backward, paper_spec
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
-
-
-@pytest.fixture(autouse=True)
-def compiled_at_any_size(monkeypatch):
-    """These tests are about the compiled paths, on data smaller than the fit compiles for."""
-    monkeypatch.setattr(kernels, "COMPILE_MIN", 0)
 
 
 def mixed(n: int, seed: int):

@@ -14,12 +14,6 @@ from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
 
 
-@pytest.fixture(autouse=True)
-def compiled_at_any_size(monkeypatch):
-    """These tests are about the compiled paths, on data smaller than the fit compiles for."""
-    monkeypatch.setattr(kernels, "COMPILE_MIN", 0)
-
-
 def data(n, seed, K=2, trials=(41, 30)):
     df = simulate_design(paper_model(), n, seed=seed, n_trials=trials)
     spec = paper_spec(levels=K)

@@ -1,38 +1,38 @@
 """Conformance of every way a fit runs (in the spirit of the solvers' tests/solvers/test_conformance.py
 and scikit-learn's check_estimator).
 
-A fit of the IOHMM runs one of three ways, chosen by the call: EM in lockstep with scipy's
-L-BFGS-B finish on the numpy E-step (small data), the same on the compiled E-step (inside
-``many_fits()``, or from ``kernels.COMPILE_MIN`` trials), and the whole run compiled per start
-(``compiled_run``, the default where it applies).  Each must: give the E-step's numbers of the
+A fit of the IOHMM runs one of three ways: EM in lockstep with scipy's L-BFGS-B finish on the
+numpy E-step (the reference, ``Workspace(method="loop")``), the same on the compiled E-step
+(``fit_iohmm(..., compiled=False)``: a fit with a rating, the supervisor types), and the whole run
+compiled per start (``compiled_run``, the default where it applies).  Each must: give the E-step's numbers of the
 numpy reference at its end point (numpy and compiled E-steps agree); never let a run's objective
 decrease; end every start stationary; and recover the model that generated the data (its
 log-likelihood at least that of the truth, its identified cells near the truth's).
 """
 
-import contextlib
+from functools import partial
+from unittest import mock
 
 import numpy as np
 import pytest
 
-from trustseek.estimation import encode, fit_iohmm, from_model, loglik, paper_spec
+from trustseek.estimation import encode, fit_iohmm, from_model, iohmm, loglik, paper_spec
 from trustseek.estimation.estep import Workspace
-from trustseek.estimation.kernels import many_fits
 from trustseek.estimation.options import FitOptions
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
 
-#: how a fit runs: (compiled whole run, inside many_fits)
-WAYS = {"lockstep-numpy": (False, False), "lockstep-compiled-estep": (False, True), "compiled-run": (True, True)}
+#: how a fit runs: (compiled whole run, the E-step's method)
+WAYS = {"lockstep-numpy": (False, "loop"), "lockstep-compiled-estep": (False, "auto"), "compiled-run": (True, "auto")}
 
 
 @pytest.fixture(scope="module")
 def data():
     spec = paper_spec()
-    seqs = encode(simulate_design(paper_model(), 40, seed=7), spec)  # 2,840 trials: below COMPILE_MIN
+    seqs = encode(simulate_design(paper_model(), 40, seed=7), spec)
     fits = {}
-    for way, (compiled, many) in WAYS.items():
-        with many_fits() if many else contextlib.nullcontext():
+    for way, (compiled, method) in WAYS.items():
+        with mock.patch.object(iohmm, "Workspace", partial(Workspace, method=method)):
             fits[way] = fit_iohmm(seqs, spec, options=FitOptions(restarts=2, seed=0, n_jobs=1), compiled=compiled)
     return spec, seqs, fits
 

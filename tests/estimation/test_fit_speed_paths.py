@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from threadpoolctl import threadpool_info, threadpool_limits
 
-from trustseek.estimation import Params, em, encode, fit_iohmm, iohmm, kernels, paper_spec
+from trustseek.estimation import Params, em, encode, fit_iohmm, iohmm, paper_spec
 from trustseek.estimation.em import run_em
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.options import FitOptions
@@ -20,12 +20,6 @@ from trustseek.estimation.structure import Structure
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
 from trustseek.solvers.base import one_blas_thread
-
-
-@pytest.fixture(autouse=True)
-def compiled_at_any_size(monkeypatch):
-    """These tests are about the compiled paths, on data smaller than the fit compiles for."""
-    monkeypatch.setattr(kernels, "COMPILE_MIN", 0)
 
 
 def ragged(n: int, seed: int):
@@ -195,7 +189,7 @@ from trustseek.data import example_path, read_trials
 from trustseek.estimation import em, encode, fit_iohmm, paper_spec
 
 log = read_trials(example_path())
-log = log[log["participant"].isin(log["participant"].unique()[:4])]  # 4 x 71: the numpy time loop, starts pooled
+log = log[log["participant"].isin(log["participant"].unique()[:4])]  # 4 x 71, starts pooled
 assert "scipy.linalg" not in sys.modules  # scipy's BLAS is loaded by the first finish
 seen = set()
 finish = em.finish
@@ -207,7 +201,7 @@ def watched(*args, **kwargs):
 
 em.finish = watched
 spec = paper_spec()
-fit_iohmm(encode(log, spec), spec)
+fit_iohmm(encode(log, spec), spec, compiled=False)  # EM in lockstep, scipy's L-BFGS-B finish
 print(sorted(seen))
 """
 

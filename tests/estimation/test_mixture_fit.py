@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.special import logsumexp
 
-from trustseek.estimation import encode, fit_iohmm, fit_trust_model, kernels, paper_spec
+from trustseek.estimation import encode, fit_iohmm, fit_trust_model, paper_spec
 from trustseek.estimation.em import CAPPED, run_em
 from trustseek.estimation.estep import Workspace
 from trustseek.estimation.mixture import bootstrap_types, decode_types, fit_mixture, fit_types, mixture_loglik, mixture_warnings
@@ -19,13 +19,6 @@ from trustseek.model.mixture import TypeMixture
 from trustseek.model.presets import conservative_model, paper_conservative_mixture, paper_model
 from trustseek.simulation.designs import simulate_design
 from trustseek.simulation.populations import Supervisors
-
-
-@pytest.fixture(autouse=True)
-def compiled_at_any_size(monkeypatch):
-    """These tests are about the compiled paths, on data smaller than the fit compiles for."""
-    monkeypatch.setattr(kernels, "COMPILE_MIN", 0)
-
 
 SPEC = paper_spec()
 

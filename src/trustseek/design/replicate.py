@@ -15,7 +15,6 @@ import numpy as np
 
 from ..errors import TrustseekError
 from ..estimation.fit import fit_sequences
-from ..estimation.kernels import many_fits
 from ..estimation.options import FitOptions
 from ..estimation.sequences import Sequences, encode
 from ..estimation.spec import IOHMMSpec
@@ -113,13 +112,12 @@ def fit_model(frame: Any, settings: FitSettings, seed: int) -> TrustModel:
 
 
 def fit_encoded(seqs: Sequences, spec: IOHMMSpec, settings: FitSettings, seed: int) -> TrustModel:
-    """:func:`fit_model` on trials already encoded for ``spec`` (compiled: a study is many fits)."""
-    with many_fits():
-        fit = fit_sequences(
-            seqs,
-            spec,
-            options=FitOptions(restarts=settings.restarts, seed=seed, tol=settings.tol, max_iter=settings.max_iter, n_jobs=1),
-        )
+    """:func:`fit_model` on trials already encoded for ``spec``."""
+    fit = fit_sequences(
+        seqs,
+        spec,
+        options=FitOptions(restarts=settings.restarts, seed=seed, tol=settings.tol, max_iter=settings.max_iter, n_jobs=1),
+    )
     return fit.model
 
 

@@ -22,7 +22,6 @@ from typing import Any
 import numpy as np
 
 from ..parallel import in_processes
-from . import kernels
 from .em import run_em
 from .estep import Workspace
 from .iohmm import fit_iohmm
@@ -259,13 +258,9 @@ class _Replicate:
     seed: np.random.SeedSequence
     options: FitOptions  # the refit's search (its seed: the replicate's)
     refit: Callable[[Sequences, FitOptions], Any]
-    compiled: bool = False  # every replicate compiled (the bootstrap as a whole pays for it)
 
     def run(self) -> Any:
         sample, options = resample(self.seqs, self.seed, self.options)
-        if self.compiled:
-            with kernels.many_fits():
-                return self.refit(sample, options)
         return self.refit(sample, options)
 
 
@@ -362,7 +357,6 @@ def bootstrap(
         log.info(
             "bootstrap: %d resamples are too few for %.0f%% intervals (at least %d)", replicates, 100 * level, MIN_REPLICATES
         )
-    compiled = kernels.worth_compiling(replicates * seqs.n_trials)
     w = {k: np.asarray(v, dtype=float) for k, v in (weights or {}).items()}
 
     def done(i: int, finished: int) -> None:
@@ -376,7 +370,7 @@ def bootstrap(
         seqs.n_participants,
         min(options.n_jobs or os.cpu_count() or 1, replicates),
     )
-    results = replicate(partial(_refit, spec, params, w), seqs, replicates, options, done, compiled)
+    results = replicate(partial(_refit, spec, params, w), seqs, replicates, options, done)
     flat = np.vstack([r[0] for r in results])
     ref = cell_tables(spec, params)
     shapes = {name: ref[name].shape for name in TABLES}
@@ -401,14 +395,9 @@ def replicate(
     replicates: int,
     options: FitOptions,
     done: Callable[[int, int], None],
-    compiled: bool = False,
 ) -> list[Any]:
     """Every replicate's ``refit`` (:class:`_Replicate`), in order: replicate b resamples with the b-th
     child of ``options.seed`` (whatever the number of processes), over ``options.n_jobs`` processes
-    (all cores by default; in this process for one); ``done(b, finished)`` is called as each finishes.
-    ``compiled``: every replicate's E-steps compiled (:func:`.kernels.many_fits`)."""
-    jobs = [
-        _Replicate(seqs, ch, options, refit, compiled).run
-        for ch in np.random.SeedSequence([options.seed_number, 1]).spawn(replicates)
-    ]
+    (all cores by default; in this process for one); ``done(b, finished)`` is called as each finishes."""
+    jobs = [_Replicate(seqs, ch, options, refit).run for ch in np.random.SeedSequence([options.seed_number, 1]).spawn(replicates)]
     return in_processes(jobs, options.n_jobs, done)

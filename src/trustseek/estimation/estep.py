@@ -68,9 +68,9 @@ class EStepper(Protocol):
 class Workspace:
     """Index arrays of one data set and one model size, reused by every E-step.
 
-    ``method``: ``compiled``, ``loop``, ``scan`` or ``auto``: compiled where it pays
-    (:func:`.kernels.worth_compiling`), and for posteriors (or else) the scan for few, long
-    sequences, else the loop.  ``threads``: for a compiled E-step (the result does not depend on it).
+    ``method``: ``compiled``, ``loop``, ``scan`` or ``auto``: compiled (built with the package: at
+    any size), and for posteriors (or else) the scan for few, long sequences, else the loop (the
+    numpy reference).  ``threads``: for a compiled E-step (the result does not depend on it).
     """
 
     def __init__(self, seqs: Sequences, K: int, M: int, Ue: int, Ut: int, method: str = "auto", threads: int = 1):
@@ -82,7 +82,7 @@ class Workspace:
         self.PE = Ue * M + 1  # emission rows + "nothing observed"
         self.eidx = np.where(seqs.y >= 0, seqs.ue * M + seqs.y, Ue * M)  # (T, N)
         self.tidx = np.where(seqs.has_successor(), seqs.ut[:-1], Ut)  # (T-1, N); row Ut = identity, not counted
-        self.compiled = method == "compiled" or (method == "auto" and kernels.worth_compiling(seqs.n_trials))
+        self.compiled = method in ("compiled", "auto")
         self.scan = method == "scan" or (method in ("auto", "compiled") and self.T > 1 and self.T >= SCAN_RATIO * self.N)
         self._eye = np.eye(K)
         self._kernel = kernels.Kernel(self.eidx, self.tidx, seqs.lengths, K, self.PE, Ut + 1, threads) if self.compiled else None

@@ -19,10 +19,8 @@ from __future__ import annotations
 import itertools
 import math
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import contextmanager
-from contextvars import ContextVar
 from typing import Any
 
 import numpy as np
@@ -31,32 +29,6 @@ from .forward_backward import each_items, estep_items, mixture_items, reduce_ite
 
 CHUNK = 128  # sequences per work item (a fixed grouping of the sums)
 PARALLEL_MIN = 40_000  # trials x parameter sets from which an E-step is split over threads
-COMPILE_MIN = 5_000  # trials from which a fit's E-steps run compiled (worth_compiling)
-
-
-#: set inside :func:`many_fits`: every fit compiled whatever its size
-_MANY_FITS: ContextVar[bool] = ContextVar("many_fits", default=False)
-
-
-@contextmanager
-def many_fits() -> Iterator[None]:
-    """Within: every fit's E-steps run compiled whatever its size (many fits of small data: a
-    bootstrap, a design study, the reproduction's replicates)."""
-    token = _MANY_FITS.set(True)
-    try:
-        yield
-    finally:
-        _MANY_FITS.reset(token)
-
-
-def worth_compiling(trials: int) -> bool:
-    """Whether E-steps on ``trials`` trials run compiled: from :data:`COMPILE_MIN` trials, or inside
-    :func:`many_fits` (below, the numpy path: about as fast on so few trials, and the numbers small
-    fits, the shipped example's among them, have always had).  The choice depends on the call
-    alone, so a fit gives the same numbers wherever it runs."""
-    return trials >= COMPILE_MIN or _MANY_FITS.get()
-
-
 _POOL: ThreadPoolExecutor | None = None
 
 

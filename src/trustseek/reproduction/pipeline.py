@@ -24,7 +24,6 @@ import pandas as pd
 
 from ..errors import TrustseekError
 from ..estimation.fit import fit_trust_model
-from ..estimation.kernels import many_fits
 from ..estimation.options import FitOptions
 from ..estimation.result import FitResult
 from ..model.core import TrustModel
@@ -117,16 +116,14 @@ def _fit(
     n_jobs: int,
     progress: Callable[[int, int], None] | None = None,
 ) -> FitResult:
-    """The paper-structured IOHMM fitted to the canonical columns of ``frame`` (compiled: the
-    reproduction is many fits)."""
-    with many_fits():
-        return fit_trust_model(
-            frame[CANONICAL],
-            preset="paper",
-            options=FitOptions(restarts=restarts, seed=seed, n_jobs=n_jobs),
-            bootstrap=bootstrap,
-            progress=progress,
-        )
+    """The paper-structured IOHMM fitted to the canonical columns of ``frame``."""
+    return fit_trust_model(
+        frame[CANONICAL],
+        preset="paper",
+        options=FitOptions(restarts=restarts, seed=seed, n_jobs=n_jobs),
+        bootstrap=bootstrap,
+        progress=progress,
+    )
 
 
 def _ask_policy(cfg: ReproduceConfig) -> ComplexityPolicy:
