@@ -2,14 +2,13 @@
 
 On a few thousand trials an E-step takes microseconds and a run spends its time in Python between
 E-steps.  :func:`run_starts` runs each start from its first E-step to its end in compiled code
-(:func:`.compiled_em.run_one`), with the
-decisions of :func:`~.em.run_em` and :func:`~.em.converge`: EM with SQUAREM to the hand-over
-tolerance; the finish, a projected BFGS on the stick-breaking fractions (:mod:`.sticks`: the same
-box and gradient) with a backtracking line search, to the finish tolerance (as L-BFGS-B's
-``ftol``); the check, one EM step from the end point (its counts known: one E-step).  A start runs
-on one thread from start to end, so the result does not depend on the number of threads; the
-E-step is :mod:`.kernels`' pass over the same items in the same order, so its numbers are those of
-:meth:`~.estep.Workspace.estep`.
+(:func:`.compiled_em.run_one`), with the decisions of :func:`~.em.run_em` and
+:func:`~.em.converge`: EM with SQUAREM to the hand-over tolerance; the finish, a projected BFGS on
+the stick-breaking fractions (:mod:`.sticks`: the same box and gradient) with a backtracking line
+search, to the finish tolerance (as L-BFGS-B's ``ftol``); the check, one EM step from the end
+point (its counts known: one E-step).  A start runs on one thread from start to end, so the result
+does not depend on the number of threads; the E-step is :mod:`.kernels`' pass over the same items
+in the same order, so its numbers are those of :meth:`~.estep.Workspace.estep`.
 """
 
 from __future__ import annotations
