@@ -12,7 +12,9 @@ FLAGS = ["-O2", "-ffp-contract=off"]
 DIRECTIVES = {"language_level": 3, "boundscheck": False, "wraparound": False, "cdivision": True, "initializedcheck": False}
 
 EXTENSIONS = [
-    Extension("trustseek.estimation.forward_backward", ["src/trustseek/estimation/forward_backward.pyx"], extra_compile_args=FLAGS),
+    Extension(
+        "trustseek.estimation.forward_backward", ["src/trustseek/estimation/forward_backward.pyx"], extra_compile_args=FLAGS
+    ),
     Extension("trustseek.estimation.stick_maps", ["src/trustseek/estimation/stick_maps.pyx"], extra_compile_args=FLAGS),
     Extension("trustseek.estimation.compiled_steps", ["src/trustseek/estimation/compiled_steps.pyx"], extra_compile_args=FLAGS),
     Extension("trustseek.estimation.compiled_em", ["src/trustseek/estimation/compiled_em.pyx"], extra_compile_args=FLAGS),

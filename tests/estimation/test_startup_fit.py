@@ -1,5 +1,5 @@
-"""A fit starts fast: on small data it takes the numpy path, and no fit imports numba (the compiled
-code is built with the package); ``never_estimated`` (whole arrays, no
+"""A fit starts fast: every fit runs the compiled code built with the package (no numba, and no
+scipy.optimize for the compiled run); ``never_estimated`` (whole arrays, no
 longer a walk over every row in Python) says what a row-by-row reading of the log says, on logs
 in any row order, with gaps in the trial numbers, missing human actions and experiences."""
 
