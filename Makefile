@@ -18,8 +18,8 @@ test: setup lint
 # and the front end's types
 lint: setup
 	@echo "lint: ruff, mypy, import contracts, front-end types"
-	.venv/bin/ruff check src tests benchmarks scripts
-	.venv/bin/ruff format --check src tests benchmarks scripts
+	.venv/bin/ruff check src tests benchmarks scripts setup.py
+	.venv/bin/ruff format --check src tests benchmarks scripts setup.py
 	.venv/bin/mypy
 	.venv/bin/lint-imports
 	cd web && npm run typecheck --silent
