@@ -417,8 +417,8 @@ QUOTED = re.compile(r'[,"\r\n]')  # a field with one of these is quoted in a CSV
 def write_csv(frame: pd.DataFrame, path: str | Path) -> None:
     """``frame.to_csv(path, index=False)``, byte for byte, written by Arrow's CSV writer when every
     column is text, whole numbers, float64 or true/false and no field needs quotes (each column's
-    distinct values formatted once: 7.1 million simulated trials in about 2 s instead of 35 s);
-    by pandas otherwise."""
+    distinct values formatted once: ``trustseek simulate`` of 100,000 participants, 7.1 million
+    trials, writes its file in 12-14 s instead of 48 s); by pandas otherwise."""
     import pyarrow as pa
     import pyarrow.csv as pcsv
 
