@@ -39,3 +39,13 @@ def test_every_cython_source_is_an_extension_built_with_the_package_and_stubbed(
 def test_nothing_in_the_package_imports_numba():
     for path in [*PACKAGE.rglob("*.py"), *PACKAGE.rglob("*.pyx"), *PACKAGE.rglob("*.pxd")]:
         assert "numba" not in path.read_text(), path
+
+
+def test_every_installed_extension_is_built_from_its_current_source():
+    """An edited .pyx or .pxd is built again by ``bash scripts/setup.sh`` (``make test`` runs it);
+    a test run on an extension older than its sources would test the old code."""
+    shared = [p.stat().st_mtime for p in PACKAGE.rglob("*.pxd")]
+    for name, source in _extensions().items():
+        built = Path(importlib.import_module(name).__file__ or "").stat().st_mtime
+        newest = max([(ROOT / source).stat().st_mtime, *shared])
+        assert built >= newest, f"{name} is older than its sources: run bash scripts/setup.sh"
