@@ -423,8 +423,10 @@ def write_csv(frame: pd.DataFrame, path: str | Path) -> None:
     import pyarrow.csv as pcsv
 
     names = [str(c) for c in frame.columns]
-    columns = [_csv_column(frame.iloc[:, j]) for j in range(frame.shape[1])] if frame.shape[1] > 1 else [None]
-    if any(c is None for c in columns) or any(QUOTED.search(n) for n in names):
+    # pandas' cases: a name to quote, or a single column (its empty field is quoted, as a row)
+    plain = frame.shape[1] > 1 and not any(QUOTED.search(n) for n in names)
+    columns = [_csv_column(frame.iloc[:, j]) for j in range(frame.shape[1])] if plain else []
+    if not plain or any(c is None for c in columns):
         frame.to_csv(path, index=False)
         return
     with open(path, "wb") as fh:
