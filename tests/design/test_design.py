@@ -17,10 +17,10 @@ from trustseek.errors import TrustseekError
 from trustseek.model.presets import paper_model, paper_task
 from trustseek.policies import randomized
 from trustseek.pomdp.problem import AssistancePOMDP
-from trustseek.reproduction.statistics import paired_tests, signed_rank_p
 from trustseek.simulation import simulate
 from trustseek.solvers.agnostic import trust_agnostic
 from trustseek.solvers.registry import make_solver
+from trustseek.statistics import paired_tests, signed_rank_p
 
 
 def _other_model():

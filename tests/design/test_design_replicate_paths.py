@@ -11,8 +11,8 @@ from trustseek.design.replicate import FitSettings, fit_model
 from trustseek.estimation.fit import fit_trust_model
 from trustseek.estimation.options import FitOptions
 from trustseek.model.presets import paper_model
-from trustseek.reproduction.statistics import paired_tests
 from trustseek.simulation.designs import simulate_design
+from trustseek.statistics import paired_tests
 
 
 @settings(max_examples=60, deadline=None)

@@ -16,7 +16,6 @@ from trustseek.estimation import encode, from_model, loglik, posteriors
 from trustseek.estimation.baselines import features
 from trustseek.estimation.options import FitOptions
 from trustseek.estimation.prediction import (
-    auc,
     filter_beliefs,
     fold_assignment,
     predict_heldout,
@@ -117,33 +116,6 @@ def test_changing_later_trials_does_not_change_earlier_predictions(seed, length,
     ga, gb = features(frame, a, fa.determined, *sizes), features(changed, b, fb.determined, *sizes)
     for name in ("rate_n", "rate_k", "last", "reliable_logit", "ue", "ut_prev"):
         np.testing.assert_array_equal(getattr(ga, name)[: t + 1], getattr(gb, name)[: t + 1])
-
-
-def _auc_reference(s: np.ndarray, y: np.ndarray) -> float:
-    try:
-        from sklearn.metrics import roc_auc_score
-    except ImportError:
-        pos, neg = s[y == 1], s[y == 0]
-        return float(((pos[:, None] > neg[None, :]).sum() + 0.5 * (pos[:, None] == neg[None, :]).sum()) / (len(pos) * len(neg)))
-    return float(roc_auc_score(y, s))
-
-
-@settings(max_examples=60, deadline=None)
-@given(
-    data=st.lists(st.tuples(st.integers(0, 6), st.booleans()), min_size=2, max_size=60).filter(
-        lambda d: len({y for _, y in d}) == 2
-    ),
-    reps=st.lists(st.integers(0, 3), min_size=60, max_size=60),
-)
-def test_auc_matches_the_reference_with_ties_and_with_weights(data, reps):
-    s = np.array([x / 6 for x, _ in data])
-    y = np.array([float(v) for _, v in data])
-    assert float(auc(s, y)) == pytest.approx(_auc_reference(s, y), abs=1e-12)
-    w = np.array(reps[: len(s)], dtype=float)
-    rs, ry = np.repeat(s, w.astype(int)), np.repeat(y, w.astype(int))
-    expected = _auc_reference(rs, ry) if len(set(ry)) == 2 else np.nan
-    got = float(auc(s, y, w[None])[0])
-    assert (np.isnan(got) and np.isnan(expected)) or got == pytest.approx(expected, abs=1e-12)
 
 
 def test_folds_are_by_participant_seeded_and_balanced():

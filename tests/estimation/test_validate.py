@@ -7,13 +7,10 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
-from scipy import stats
 
 from cli_runner import run_cli
 from trustseek.data.trials import DataError, example_path, read_trials
-from trustseek.estimation.validation import correlations, parse_ratings, validate_ratings
+from trustseek.estimation.validation import parse_ratings, validate_ratings
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
 
@@ -73,24 +70,6 @@ def test_ordinal_labels_missing_cells_and_errors():
     frame["e"] = ""
     with pytest.raises(DataError, match="no trial has a rating"):
         parse_ratings(frame, "e")
-
-
-@settings(max_examples=50, deadline=None)
-@given(
-    xs=st.lists(st.tuples(st.integers(0, 4), st.integers(0, 5)), min_size=4, max_size=30),
-    reps=st.lists(st.integers(0, 3), min_size=30, max_size=30),
-)
-def test_weighted_correlations_are_those_of_the_repeated_data(xs, reps):
-    x = np.array([a for a, _ in xs], dtype=float)
-    y = np.array([b for _, b in xs], dtype=float)
-    w = np.array(reps[: len(x)], dtype=float)
-    got = correlations(x, y, w[None])
-    rx, ry = np.repeat(x, w.astype(int)), np.repeat(y, w.astype(int))
-    if len(rx) < 3 or np.ptp(rx) == 0 or np.ptp(ry) == 0:
-        assert np.isnan(got["spearman"][0]) and np.isnan(got["pearson"][0])
-        return
-    assert got["spearman"][0] == pytest.approx(stats.spearmanr(rx, ry).statistic, abs=1e-9)
-    assert got["pearson"][0] == pytest.approx(stats.pearsonr(rx, ry).statistic, abs=1e-9)
 
 
 def test_cli_validate_json_and_per_trial_file(tmp_path):

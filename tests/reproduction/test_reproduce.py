@@ -27,7 +27,7 @@ from trustseek.reproduction.comparison import (
     comparison_rows,
     judge,
 )
-from trustseek.reproduction.statistics import mean_ci, share_ci, wilcoxon
+from trustseek.statistics import mean_ci, share_ci, wilcoxon
 
 
 @pytest.fixture(scope="module")

@@ -24,10 +24,10 @@ from ..model.task import Task
 from ..policies import ComplexityPolicy, randomized
 from ..reproduction.config import seed_int
 from ..reproduction.robustness import solve_policy
-from ..reproduction.statistics import paired_tests
 from ..simulation import Simulation, crossover, simulate
 from ..solvers.agnostic import agnostic_from_intervention_rates, trust_agnostic_from_data
 from ..solvers.base import one_blas_thread
+from ..statistics import paired_tests
 from ..vocab import ACTIONS, AUTONOMOUS, EXPERIENCES, HUMAN_ACTIONS, INTERVENE, LEVELS
 from .evaluation import EVALUATION_GRID, evaluate_policy, high_threshold
 

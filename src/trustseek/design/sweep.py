@@ -28,8 +28,8 @@ from ..model.presets import paper_model, paper_task
 from ..model.task import Task
 from ..parallel import check_jobs
 from ..reproduction.robustness import solve_policy
-from ..reproduction.statistics import mean_ci, share_ci
 from ..solvers.base import one_blas_thread
+from ..statistics import finite, mean_interval, share_ci
 from .evaluation import evaluate_policy, high_threshold
 from .replicate import Experiment1, FitSettings, Study, run_chunk
 
@@ -259,11 +259,10 @@ def run_design(
 
 
 def _interval(values: Sequence[float], level: float) -> dict[str, Any]:
-    v = [x for x in values if x is not None and math.isfinite(x)]
+    v = finite(values)
     if not v:
         return {"n": 0, "mean": None, "lo": None, "hi": None}
-    m, lo, hi = mean_ci(v, level) if len(v) > 1 else (v[0], float("nan"), float("nan"))
-    return {"n": len(v), "mean": m, "lo": lo, "hi": hi, "median": float(np.median(v))}
+    return {"n": len(v), **mean_interval(v, level, names=("mean", "lo", "hi")), "median": float(np.median(v))}
 
 
 def _share(flags: Sequence[bool], level: float) -> dict[str, Any]:

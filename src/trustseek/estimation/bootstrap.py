@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..parallel import in_processes
+from ..statistics import LEVEL, percentile_bounds
 from .em import run_em
 from .estep import Workspace
 from .iohmm import fit_iohmm
@@ -39,8 +40,6 @@ REFITS = FitOptions(restarts=3)
 log = logging.getLogger(__name__)
 
 TABLES = ("initial", "emission", "transition")
-LEVEL = 0.95
-OUTSIDE = 1e-9  # an estimate this close to its percentile interval is not outside it
 MIN_REPLICATES = 200  # fewest resamples for a 95 % interval: each 2.5 % tail then rests on 5 replicates
 OTHER_MAXIMUM = 1e-4  # a random start beats the refit continued from the estimate by more than this (log-likelihood)
 BOUNDARY = 1e-6  # a free cell estimated below this is at the boundary
@@ -286,17 +285,6 @@ def split_cells(flat: np.ndarray, shapes: Mapping[str, tuple[int, ...]]) -> dict
         out[name] = flat[..., pos : pos + size].reshape(*flat.shape[:-1], *shapes[name])
         pos += size
     return out
-
-
-def percentile_bounds(flat: np.ndarray, est: np.ndarray, level: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The percentile interval at ``level`` of the replicates ``flat`` (B, cells), widened to contain the
-    estimate ``est``, and where it had to be."""
-    alpha = (1 - level) / 2
-    lo, hi = np.quantile(flat, [alpha, 1 - alpha], axis=0)
-    # outside by more than rounding: a cell on the stick-breaking boundary sits at 1e-12 times the
-    # row's free mass, which differs between the estimate and a replicate in the 17th decimal
-    widened = (est < lo - OUTSIDE) | (est > hi + OUTSIDE)
-    return np.minimum(lo, est), np.maximum(hi, est), widened
 
 
 @dataclass

@@ -23,6 +23,7 @@ import pandas as pd
 
 from ..model.core import TrustModel
 from ..model.mixture import TypeMixture
+from ..statistics import percentile_bounds
 from .bootstrap import (
     TABLES,
     bound_zero_cells,
@@ -30,7 +31,6 @@ from .bootstrap import (
     cell_tables,
     few_resamples,
     flat_cells,
-    percentile_bounds,
     replicate,
     split_cells,
 )

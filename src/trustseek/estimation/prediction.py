@@ -22,6 +22,7 @@ import pandas as pd
 
 from ..model.core import TrustModel
 from ..parallel import in_processes
+from ..statistics import LEVEL, auc, bootstrap_counts, paired, percentile_interval
 from ..vocab import HUMAN_ACTIONS
 from .baselines import BASELINES, BaselineFit, Features, baseline_predictions, features, fit_baselines, per_row
 from .iohmm import fit_iohmm
@@ -36,7 +37,6 @@ EPS = 1e-9  # predictions are clipped to [EPS, 1 - EPS] for the log-loss
 CONFIDENT = 1e-6  # a scored trial whose action the model gave less than this probability: a confident miss
 METRICS = ("log_loss", "brier", "auc")
 LOWER_IS_BETTER = {"log_loss": True, "brier": True, "auc": False}
-LEVEL = 0.95
 RELY = HUMAN_ACTIONS.index("rely")
 
 
@@ -101,47 +101,9 @@ def filter_beliefs(seqs: Sequences, params: Params) -> Filtered:
 # --------------------------------------------------------------------------- scores
 
 
-def auc(scores: np.ndarray, labels: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
-    """Area under the ROC curve by the rank formula (a tie between a positive and a negative
-    counts one half); ``weights`` (n,) or (B, n) weigh the trials (a bootstrap's counts):
-    one AUC per row of weights.  NaN when a class is absent."""
-    scores = np.asarray(scores, dtype=float)
-    y = np.asarray(labels, dtype=float)
-    w = np.ones_like(scores) if weights is None else np.asarray(weights, dtype=float)
-    if scores.size == 0:
-        return np.full(w.shape[:-1], np.nan)
-    order = np.argsort(scores, kind="stable")
-    s, y, w = scores[order], y[order], w[..., order]
-    starts = np.flatnonzero(np.r_[True, s[1:] != s[:-1]])
-    pos = np.add.reduceat(w * y, starts, axis=-1)
-    neg = np.add.reduceat(w * (1.0 - y), starts, axis=-1)
-    below = np.cumsum(neg, axis=-1) - neg
-    num = (pos * (below + 0.5 * neg)).sum(-1)
-    den = pos.sum(-1) * neg.sum(-1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.nan)
-
-
 def _losses(p: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     q = np.clip(p, EPS, 1 - EPS)
     return -(y * np.log(q) + (1 - y) * np.log1p(-q)), (p - y) ** 2
-
-
-def percentile_interval(values: np.ndarray) -> tuple[float, float]:
-    """The central :data:`LEVEL` percentile interval of the finite ``values`` (NaN, NaN: none)."""
-    v = values[np.isfinite(values)]
-    if v.size == 0:
-        return float("nan"), float("nan")
-    lo, hi = np.percentile(v, [100 * (1 - LEVEL) / 2, 100 * (1 + LEVEL) / 2])
-    return float(lo), float(hi)
-
-
-def bootstrap_counts(n_participants: int, replicates: int, seed: int) -> np.ndarray:
-    """(B, N): how often each participant is drawn in each participant-bootstrap resample."""
-    rng = np.random.default_rng(np.random.SeedSequence([seed, 7]))
-    if replicates <= 0 or n_participants == 0:
-        return np.zeros((0, n_participants), dtype=np.int64)
-    return rng.multinomial(n_participants, np.full(n_participants, 1.0 / n_participants), size=replicates)
 
 
 CHUNK_CELLS = 4_000_000  # resamples x trials held in memory at once by the bootstrap of AUCs and correlations
@@ -190,17 +152,6 @@ def score(
         if base != "model"
     }
     return metrics, diffs
-
-
-def paired(estimate: float, reps: np.ndarray, lower_is_better: bool = False, ours: str = "model") -> dict[str, Any]:
-    """A difference ``ours`` - baseline: its ``estimate``, the percentile interval of its resamples ``reps``
-    and which of the two is better (``neither`` where the interval includes 0)."""
-    lo, hi = percentile_interval(reps)
-    better = "neither"
-    if np.isfinite(lo) and np.isfinite(hi):
-        good, bad = (hi < 0, lo > 0) if lower_is_better else (lo > 0, hi < 0)
-        better = ours if good else "baseline" if bad else "neither"
-    return {"estimate": estimate, "lower": lo, "upper": hi, "better": better}
 
 
 # --------------------------------------------------------------------------- reports

@@ -19,9 +19,10 @@ import pandas as pd
 
 from ..data.cells import NAN_WORDS, DataError
 from ..model.core import TrustModel
+from ..statistics import LEVEL, bootstrap_counts, correlations, paired, percentile_interval
 from .baselines import indicators, per_row, running_rate, spread
 from .iohmm import posteriors
-from .prediction import LEVEL, bootstrap_counts, chunks, filter_beliefs, paired, percentile_interval
+from .prediction import chunks, filter_beliefs
 from .sequences import encode
 from .spec import FitError
 from .trust_iohmm import from_model
@@ -94,49 +95,6 @@ def parse_ratings(
     if not np.isfinite(out).any():
         raise DataError([f"rating column {column!r}: no trial has a rating (every cell is empty)"])
     return out
-
-
-# --------------------------------------------------------------------------- weighted correlations
-
-
-def _weighted_ranks(x: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Mid-ranks of ``x`` in the data where element i appears ``w[b, i]`` times, (B, n)."""
-    order = np.argsort(x, kind="stable")
-    xs = x[order]
-    starts = np.flatnonzero(np.r_[True, xs[1:] != xs[:-1]])
-    group = np.cumsum(np.r_[True, xs[1:] != xs[:-1]]) - 1
-    g = np.add.reduceat(w[:, order], starts, axis=1)  # (B, G)
-    mid = np.cumsum(g, axis=1) - g + (g + 1) / 2
-    ranks = np.empty_like(w, dtype=float)
-    ranks[:, order] = mid[:, group]
-    return ranks
-
-
-def _weighted_pearson(x: np.ndarray, y: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Pearson correlation for every row of weights; x, y are (n,) or (B, n)."""
-    W = w.sum(-1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mx = (w * x).sum(-1) / W
-        my = (w * y).sum(-1) / W
-        dx = x - mx[:, None]
-        dy = y - my[:, None]
-        sxy = (w * dx * dy).sum(-1)
-        sxx = (w * dx * dx).sum(-1)
-        syy = (w * dy * dy).sum(-1)
-        # a constant variable (up to rounding) has no correlation
-        ok = (sxx > 1e-12 * (w * x * x).sum(-1) + 1e-300) & (syy > 1e-12 * (w * y * y).sum(-1) + 1e-300) & (W >= 3)
-        return np.where(ok, sxy / np.sqrt(np.where(ok, sxx * syy, 1.0)), np.nan)
-
-
-def correlations(x: np.ndarray, y: np.ndarray, w: np.ndarray) -> dict[str, np.ndarray]:
-    """Spearman and Pearson correlations of ``x`` and ``y`` (n,) for every row of weights (B, n)."""
-    if x.size == 0:
-        nan = np.full(w.shape[0], np.nan)
-        return {"spearman": nan, "pearson": nan}
-    return {
-        "spearman": _weighted_pearson(_weighted_ranks(x, w), _weighted_ranks(y, w), w),
-        "pearson": _weighted_pearson(x, y, w),
-    }
 
 
 # --------------------------------------------------------------------------- the report

@@ -1,4 +1,4 @@
-"""The paper's Sections V-VI end to end on simulated supervisors: settings (:mod:`.config`), statistics,
+"""The paper's Sections V-VI end to end on simulated supervisors: settings (:mod:`.config`),
 the paper-vs-reproduction rows (:mod:`.comparison`), the run (:mod:`.pipeline`), its sections and the
 bootstrap coverage study.  Names load on first use (``__init__.pyi``)."""
 

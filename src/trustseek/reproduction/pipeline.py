@@ -35,6 +35,7 @@ from ..policies import ComplexityPolicy, Policy, ask_regions, randomized
 from ..simulation import CrossoverSimulation, Simulation, crossover, simulate
 from ..solvers.agnostic import trust_agnostic, trust_agnostic_from_data
 from ..solvers.sensitivity import Sensitivity
+from ..statistics import distribution, mean_ci, share_ci, wilcoxon
 from ..vocab import TRIAL_COLUMNS
 from .comparison import (
     RULES,
@@ -48,7 +49,6 @@ from .comparison import (
 from .config import AGNOSTIC, AWARE, ReproduceConfig, seed_int
 from .robustness import Plan, bound, costs, heterogeneity, solve_policy, threshold_of, threshold_sensitivity
 from .scheduling import SchedulingSection, scheduling_section
-from .statistics import distribution, mean_ci, share_ci, wilcoxon
 from .supervisor_types import TypesSection, types_section
 
 CANONICAL = list(TRIAL_COLUMNS)

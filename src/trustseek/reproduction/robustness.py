@@ -18,9 +18,9 @@ from ..simulation import Supervisors, crossover, simulate
 from ..solvers.agnostic import trust_agnostic
 from ..solvers.registry import make_solver
 from ..solvers.sensitivity import Sensitivity, evaluate, sensitivity
+from ..statistics import mean_interval
 from ..vocab import AUTONOMOUS, FAULTY, INTERVENE
 from .config import AGNOSTIC, AWARE, LOW, PAPER, ReproduceConfig
-from .statistics import mean_ci
 
 
 def high_threshold(policy: Policy) -> float:
@@ -55,9 +55,8 @@ class Plan:
     agnostic: ComplexityPolicy
 
 
-def _interval(values: np.ndarray) -> dict[str, float]:
-    """The mean of ``values`` and its t interval as ``{"mean", "lo", "hi"}``."""
-    return dict(zip(("mean", "lo", "hi"), mean_ci(values), strict=True))
+def _lo_hi(values: np.ndarray) -> dict[str, float]:
+    return mean_interval(values, names=("mean", "lo", "hi"))
 
 
 def costs(cfg: ReproduceConfig, plan: Plan, seed: np.random.SeedSequence) -> dict[str, Any]:
@@ -90,7 +89,7 @@ def costs(cfg: ReproduceConfig, plan: Plan, seed: np.random.SeedSequence) -> dic
             {
                 "label": label,
                 "group": group,
-                **_interval(r),
+                **_lo_hi(r),
                 "median": float(np.median(r)),
                 "threshold_high": threshold_of(pol),
                 "autonomous_collections": float(sim.summary_arrays["autonomous_collections"][:, 0].mean()),
@@ -99,7 +98,7 @@ def costs(cfg: ReproduceConfig, plan: Plan, seed: np.random.SeedSequence) -> dic
         )
     ref = rewards[variants[0][0]]
     for row in rows:
-        row["vs_true_policy"] = _interval(rewards[row["label"]] - ref)
+        row["vs_true_policy"] = _lo_hi(rewards[row["label"]] - ref)
     est = rewards[variants[2][0]] - ref
     upd = rewards[variants[1][0]] - ref
     return {
@@ -107,8 +106,8 @@ def costs(cfg: ReproduceConfig, plan: Plan, seed: np.random.SeedSequence) -> dic
         "participants": n,
         "trials_per_block": int(sum(cfg.counts_2)),
         "rows": rows,
-        "estimation_cost": _interval(-est),
-        "belief_update_gain": {"from": cfg.belief_update, "to": other, **_interval(upd)},
+        "estimation_cost": _lo_hi(-est),
+        "belief_update_gain": {"from": cfg.belief_update, "to": other, **_lo_hi(upd)},
     }
 
 
@@ -128,7 +127,7 @@ def model_gain(cfg: ReproduceConfig, aware: np.ndarray, agnostic: np.ndarray) ->
     stat = np.median(aware[groups], axis=1) - np.median(agnostic[groups], axis=1)
     return {
         "participants": len(d),
-        **_interval(d),
+        **_lo_hi(d),
         "sd": float(d.std(ddof=1)),
         "p2.5": float(np.percentile(d, 2.5)),
         "p97.5": float(np.percentile(d, 97.5)),

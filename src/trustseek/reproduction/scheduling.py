@@ -22,8 +22,8 @@ from ..pomdp.problem import AssistancePOMDP
 from ..pomdp.scheduling import SchedulingProblem
 from ..simulation.scheduling import ScheduleRuns, exact_values, iid_value, schedule_policies, simulate_schedules
 from ..solvers.registry import make_solver
+from ..statistics import mean_interval
 from ..vocab import PAPER_BLOCK_COUNTS
-from .statistics import mean_interval
 
 BASELINE = "random + trust-aware"
 

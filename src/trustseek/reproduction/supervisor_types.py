@@ -36,8 +36,8 @@ from ..simulation.engine import simulate
 from ..simulation.populations import Supervisors
 from ..solvers.agnostic import trust_agnostic_from_data
 from ..solvers.type_aware import solve_type_aware
+from ..statistics import mean_interval
 from ..vocab import PAPER_BLOCK_COUNTS, TRIAL_COLUMNS
-from .statistics import mean_interval
 
 POOLED, TYPE_AWARE, ORACLE, AGNOSTIC = "pooled trust-aware", "type-aware", "oracle (type known)", "trust-agnostic"
 FITTED = "type-aware (fitted types)"
