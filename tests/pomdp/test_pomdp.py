@@ -8,6 +8,11 @@ from trustseek.vocab import ASK, AUTONOMOUS, FAULTY, INTERVENE, RELIABLE, RELY
 LOW, HIGH = 0, 1
 
 
+def state_index(pomdp, t: int, e: int, c: int) -> int:
+    """The index of state (trust, experience, complexity) in the flat arrays (``pomdp.states``)."""
+    return (t * 2 + e) * pomdp.n_complexity + c
+
+
 def test_expected_reward_by_hand(pomdp):
     R = pomdp.expected_reward  # [c, a, t]
     # eq. (2): P(rely) * (p_suc * 2 + (1 - p_suc) * (-3)) + P(intervene) * 0
@@ -31,34 +36,33 @@ def test_flat_transition_entries(pomdp):
     T = pomdp.transition_matrix  # [a, s, s2]
     assert T.shape == (2, 8, 8)
     np.testing.assert_allclose(T.sum(axis=2), 1.0, atol=1e-12)
-    s = pomdp.state_index(HIGH, RELIABLE, HIGH)
+    s = state_index(pomdp, HIGH, RELIABLE, HIGH)
     # high trust, high complexity, autonomous -> low trust, faulty, next complexity low:
     # P(E'=faulty | T=high) = P(intervene) + P(rely) (1 - p_suc) = 0.05 + 0.95 * 0.17; then trust drops w.p. 1
-    s2 = pomdp.state_index(LOW, FAULTY, LOW)
+    s2 = state_index(pomdp, LOW, FAULTY, LOW)
     assert T[AUTONOMOUS, s, s2] == pytest.approx((0.05 + 0.95 * 0.17) * 1.0 * 0.5)
     # low trust, high complexity, autonomous -> high trust after success: 0.46 * 0.83 * 1.0 * 0.5
-    s = pomdp.state_index(LOW, FAULTY, HIGH)
-    assert T[AUTONOMOUS, s, pomdp.state_index(HIGH, RELIABLE, HIGH)] == pytest.approx(0.46 * 0.83 * 0.5)
+    s = state_index(pomdp, LOW, FAULTY, HIGH)
+    assert T[AUTONOMOUS, s, state_index(pomdp, HIGH, RELIABLE, HIGH)] == pytest.approx(0.46 * 0.83 * 0.5)
     # ... and stays low after a failure or intervention w.p. 0.7
-    assert T[AUTONOMOUS, s, pomdp.state_index(LOW, FAULTY, LOW)] == pytest.approx((0.54 + 0.46 * 0.17) * 0.7 * 0.5)
+    assert T[AUTONOMOUS, s, state_index(pomdp, LOW, FAULTY, LOW)] == pytest.approx((0.54 + 0.46 * 0.17) * 0.7 * 0.5)
     # asking in high complexity from low trust: reliable experience, trust repaired w.p. 0.44
-    assert T[ASK, s, pomdp.state_index(HIGH, RELIABLE, LOW)] == pytest.approx(0.44 * 0.5)
-    assert T[ASK, s, pomdp.state_index(LOW, FAULTY, LOW)] == 0.0
+    assert T[ASK, s, state_index(pomdp, HIGH, RELIABLE, LOW)] == pytest.approx(0.44 * 0.5)
+    assert T[ASK, s, state_index(pomdp, LOW, FAULTY, LOW)] == 0.0
     # the experience in the state has no influence on where the state goes
     for a in range(2):
-        np.testing.assert_array_equal(T[a, pomdp.state_index(LOW, FAULTY, HIGH)], T[a, pomdp.state_index(LOW, RELIABLE, HIGH)])
+        np.testing.assert_array_equal(T[a, state_index(pomdp, LOW, FAULTY, HIGH)], T[a, state_index(pomdp, LOW, RELIABLE, HIGH)])
 
 
 def test_flat_observation_and_reward(pomdp):
     Z = pomdp.observation_matrix
     R = pomdp.reward_matrix
-    s = pomdp.state_index(LOW, FAULTY, HIGH)
+    s = state_index(pomdp, LOW, FAULTY, HIGH)
     assert Z[AUTONOMOUS, s].tolist() == pytest.approx([0.54, 0.46])
     assert Z[ASK, s].tolist() == [1.0, 0.0]
     assert R[s, AUTONOMOUS] == pytest.approx(0.46 * 1.15)
     assert R[s, ASK] == 1.0
     assert pomdp.states[s] == ("low", "faulty", "high")
-    assert pomdp.initial_state_distribution.sum() == pytest.approx(1.0)
 
 
 def test_kernel_marginals(pomdp):

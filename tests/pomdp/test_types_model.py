@@ -15,7 +15,6 @@ from trustseek.pomdp.belief import BayesUpdate
 from trustseek.pomdp.supervisor_types import (
     TypeBeliefError,
     product_model,
-    split_levels,
     trust_given_type,
     trust_marginal,
     type_aware_problem,
@@ -42,8 +41,6 @@ def _midway() -> TypeMixture:
 def test_product_levels_are_named_type_slash_trust_in_type_major_order():
     pm = product_model(paper_conservative_mixture(0.3))
     assert pm.trust_levels == ("paper/low", "paper/high", "conservative/low", "conservative/high")
-    assert split_levels(pm) == (("paper", "conservative"), ("low", "high"))
-    assert split_levels(paper_model()) is None
 
 
 def test_product_model_is_the_types_side_by_side():

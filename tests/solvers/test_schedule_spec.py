@@ -63,5 +63,5 @@ def test_schedule_spec_bounded_before_solving():
     assert schedule_size((2, 2), 9, 5) == 9 * 2 * 2 * 5  # a window wider than the items is full control
     with pytest.raises(PolicySpecError, match="more than the 1000 allowed"):
         policy_from_spec({"kind": "schedule", "counts": [17, 17]}, model, task, max_values=1000)
-    n_states = SchedulingProblem(AssistancePOMDP(model, task), (5, 4), 2).n_states
+    n_states = len(SchedulingProblem(AssistancePOMDP(model, task), (5, 4), 2).states())
     assert n_states * 2 * 2 * 7 <= schedule_size((5, 4), 2, 7)

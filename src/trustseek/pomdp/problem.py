@@ -150,9 +150,6 @@ class AssistancePOMDP:
         """Enumerated states (trust, experience, complexity); index = (t * 2 + e) * N + c."""
         return tuple((tn, en, cn) for tn in self.trust_levels for en in EXPERIENCES for cn in self.complexities)
 
-    def state_index(self, t: int, e: int, c: int) -> int:
-        return (t * 2 + e) * self.n_complexity + c
-
     @cached_property
     def transition_matrix(self) -> np.ndarray:
         """P(S' | S, a), axes [a, s, s2]."""
@@ -172,11 +169,3 @@ class AssistancePOMDP:
         """R(S, a) of eq. (2), axes [s, a]."""
         K, N = self.n_trust, self.n_complexity
         return np.broadcast_to(self.expected_reward.transpose(2, 0, 1)[:, None], (K, 2, N, 2)).reshape(-1, 2)
-
-    @cached_property
-    def initial_state_distribution(self) -> np.ndarray:
-        """Initial trust from the model, complexity from the task, experience ``reliable``."""
-        K, N = self.n_trust, self.n_complexity
-        out = np.zeros((K, 2, N))
-        out[:, 1, :] = self.model.initial[:, None] * self.complexity_probs[None, :]
-        return out.reshape(-1)

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from functools import cached_property
 from math import comb, prod
 
 from ..errors import TrustseekError
@@ -151,10 +150,6 @@ class SchedulingProblem:
                             nxt.append(s2)
             frontier = nxt
         return sorted(seen, key=lambda s: (-sum(s[0]), s))
-
-    @cached_property
-    def n_states(self) -> int:
-        return len(self.states())
 
 
 def _minus(c: Counts, k: int) -> Counts:

@@ -85,19 +85,6 @@ def type_aware_problem(mixture: TypeMixture | TrustModel, task: Task) -> Assista
     return AssistancePOMDP(product_model(mixture), task)
 
 
-def split_levels(model: TrustModel) -> tuple[tuple[str, ...], tuple[str, ...]] | None:
-    """(type names, trust level names) of a product model read back from its level names, or None
-    when the names are not a full (type, trust) product in type-major order."""
-    parts = [n.rsplit(LEVEL_SEPARATOR, 1) for n in model.trust_levels]
-    if any(len(p) != 2 for p in parts):
-        return None
-    types = tuple(dict.fromkeys(p[0] for p in parts))
-    trust = tuple(dict.fromkeys(p[1] for p in parts))
-    if [tuple(p) for p in parts] != [(m, k) for m in types for k in trust]:
-        return None
-    return types, trust
-
-
 def _grid(beliefs: np.ndarray | Sequence[float], n_types: int) -> np.ndarray:
     b = np.asarray(beliefs, dtype=float)
     if b.shape[-1] % n_types:
