@@ -31,7 +31,7 @@ def test_the_solve_returns_a_type_aware_policy_with_its_bounds(policy, mixture):
     assert policy.model.trust_levels == product_model(mixture).trust_levels
     lo, up = policy.info["value_bounds_at_initial_belief"]
     assert lo <= up
-    assert policy.value_bound(product_model(mixture).initial) == pytest.approx(lo)
+    assert (policy.value_vectors @ product_model(mixture).initial).max() == pytest.approx(lo)
 
 
 def test_the_file_holds_the_mixture_not_the_product_model(policy):

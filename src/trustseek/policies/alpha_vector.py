@@ -24,7 +24,6 @@ import numpy as np
 from ..model.core import TrustModel
 from ..model.jsonfile import ModelError, build
 from ..model.mixture import TypeMixture
-from ..pomdp.belief import to_vector
 from ..pomdp.supervisor_types import product_model, trust_marginal, type_marginal, warm_start_belief
 from ..vocab import ACTIONS, ASK, AUTONOMOUS
 from .base import Policy, PolicyError, planned_for
@@ -103,12 +102,6 @@ class AlphaVectorPolicy(Policy):
         x = np.asarray(b_high, dtype=float)
         b = np.stack([1 - x, x], axis=-1)
         return np.stack([np.stack([(b @ v.T).max(axis=-1) for v in per_a], axis=-1) for per_a in self.q_vectors], axis=-2)
-
-    def value_bound(self, belief: Any) -> float:
-        """The certified lower bound on W(b) = Σ_C P(C) V(b, C) (any number of trust levels)."""
-        assert self.model is not None
-        b = to_vector(belief, self.model.n_trust)
-        return float((self.value_vectors @ b).max())
 
     def ask_intervals(self) -> dict[str, list[Interval]]:
         """Per complexity, the belief intervals where the policy asks (exact: the advantage is
@@ -191,10 +184,6 @@ class FlatAlphaPolicy(Policy):
     def action(self, belief: Any, complexity: int | str = 0, rng: np.random.Generator | None = None) -> int:
         self.complexity_index(complexity)
         return int(self.actions(np.asarray(belief, dtype=float)[None, :], np.zeros(1, dtype=np.int64))[0])
-
-    def value_bound(self, belief: Any) -> float:
-        """The certified lower bound on the value of a belief over the states."""
-        return float((self.value_vectors @ np.asarray(belief, dtype=float)).max())
 
     def ask_intervals(self) -> dict[str, list[Interval]] | None:
         actions = list(self.action_names)

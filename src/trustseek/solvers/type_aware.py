@@ -76,10 +76,6 @@ class TypeBound:
     qt: np.ndarray
     controllers: list[np.ndarray]
 
-    @property
-    def uses_types(self) -> bool:
-        return len(self.lo) > 0
-
     def __call__(self, B: np.ndarray) -> np.ndarray:
         """The base bound at beliefs B (n, states)."""
         B = np.ascontiguousarray(np.atleast_2d(np.asarray(B, dtype=float)))
