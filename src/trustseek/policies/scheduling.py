@@ -134,17 +134,13 @@ class SchedulePolicy(Policy):
             items[sel], acts[sel] = self._best(x[sel], s)
         return items, acts
 
-    def start_value(self, belief: Any = None, starts: Sequence[tuple[State, float]] | None = None) -> float:
-        """The expected value of the session from a belief (default: the model's initial trust),
-        over the start states ``starts`` (default: ``info['start']``)."""
+    def start_value(self) -> float:
+        """The expected value of the session from the model's initial trust, over the start
+        states (``info['start']``)."""
         assert self.model is not None
-        x = np.array([_high(self.model.initial if belief is None else belief, self.model)])
-        if starts is None:
-            starts = [(parse_state_key(k), p) for k, p in self.info.get("start", {}).items()]
-        total = 0.0
-        for s, p in starts:
-            total += p * float(np.nanmax(self.q_table(x, s)))
-        return total
+        x = np.array([_high(self.model.initial, self.model)])
+        starts = self.info.get("start", {})
+        return sum((p * float(np.nanmax(self.q_table(x, parse_state_key(k)))) for k, p in starts.items()), 0.0)
 
     # -- bound to one state: a plain Policy -------------------------------------------------
     def at(self, remaining: Sequence[int], visible: Sequence[int] | None = None) -> SchedulePolicy:

@@ -35,7 +35,7 @@ from ..policies.regions import ask_intervals, threshold
 from ..pomdp.problem import AssistancePOMDP
 from ..vocab import ASK, AUTONOMOUS
 from .base import Solver, one_blas_thread
-from .numerics import improve, policy_values
+from .numerics import howard
 
 __all__ = [
     "CertifiedGridSolver",
@@ -86,24 +86,20 @@ def paper_grid_values(
     def q_of(V: np.ndarray) -> np.ndarray:  # [c, a, G]
         return r + gamma * (wl * V[j] + wr * V[j + 1]).sum(axis=2)
 
-    policy = r.argmax(axis=1) if guess is None else q_of(guess).argmax(axis=1)  # [c, G]
-    V = np.zeros(G) if guess is None else np.asarray(guess, dtype=float)
     indptr = np.arange(0, G * N * 4 + 1, N * 4)
-    for _ in range(max_iter):
+
+    def chain(policy: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
         # the policy's rows: per (c, e), weights on grid[j] and grid[j + 1]
         jl = np.take_along_axis(j, policy[:, None, None, :], axis=1)[:, 0]  # [c, e, G]
         al = np.take_along_axis(wl, policy[:, None, None, :], axis=1)[:, 0] * (gamma * pc)[:, None, None]  # [c, e, G]
         ar = np.take_along_axis(wr, policy[:, None, None, :], axis=1)[:, 0] * (gamma * pc)[:, None, None]
         data = np.stack([al, ar], axis=-1).transpose(2, 0, 1, 3).reshape(-1)  # rows G, then (c, e, side)
         cols = np.stack([jl, jl + 1], axis=-1).transpose(2, 0, 1, 3).reshape(-1)
-        P = sp.csr_matrix((data, cols, indptr), shape=(G, G))
-        rr = pc @ np.take_along_axis(r, policy[:, None, :], axis=1)[:, 0]
-        V = policy_values(P, rr, V)
-        new_policy = improve(q_of(V), policy, axis=1)
-        if new_policy is None:
-            break
-        policy = new_policy
-    return V
+        return sp.csr_matrix((data, cols, indptr), shape=(G, G)), pc @ np.take_along_axis(r, policy[:, None, :], axis=1)[:, 0]
+
+    policy = r.argmax(axis=1) if guess is None else q_of(guess).argmax(axis=1)  # [c, G]
+    V = np.zeros(G) if guess is None else np.asarray(guess, dtype=float)
+    return howard(policy, chain, q_of, V, max_iter)[0]
 
 
 def paper_q(pomdp: AssistancePOMDP, values: np.ndarray, x: np.ndarray, grid: np.ndarray | None = None) -> np.ndarray:

@@ -22,7 +22,7 @@ from ..policies.grid_q import TrustAwarePolicy
 from ..pomdp.problem import AssistancePOMDP
 from .base import Solver, SolverError, one_blas_thread
 from .defaults import DEFAULT_GRID, METHODS
-from .numerics import improve, policy_values
+from .numerics import howard
 
 #: policy iteration on grids of up to this many points uses dense linear algebra: the transition
 #: matrices built dense for every (C, a) at once and dense linear solves (a few hundred points:
@@ -107,10 +107,8 @@ class GridSolver(Solver):
         P[c][a] (G, G) on the grid, q_of, bellman), q_of(W) -> Q (G, N, 2) and the Bellman
         operator W -> T W, where W(b) = Σ_C P(C) max_a Q(b, C, a)."""
         self.check(pomdp)
-        grid = np.linspace(0.0, 1.0, self.grid)
-        beliefs = np.stack([1.0 - grid, grid], axis=1)
+        grid, beliefs, r = _grid_rewards(pomdp, self.grid)
         branches = pomdp.branches(self.belief_update)
-        r = np.einsum("gk,cak->cag", beliefs, pomdp.expected_reward)
         P = []
         for c in range(pomdp.n_complexity):
             row = []
@@ -188,6 +186,13 @@ class GridSolver(Solver):
         )
 
 
+def _grid_rewards(pomdp: AssistancePOMDP, G: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The uniform grid of ``G`` points of P(trust = high), its beliefs (G, 2) and the rewards there, r[c, a, G]."""
+    grid = np.linspace(0.0, 1.0, G)
+    beliefs = np.stack([1.0 - grid, grid], axis=1)
+    return grid, beliefs, np.einsum("gk,cak->cag", beliefs, pomdp.expected_reward)
+
+
 def dense_policy_iteration(pomdp: AssistancePOMDP, update: str, G: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """(grid, Q[c, a, G], W, iterations) of the grid MDP on ``G`` points by Howard's policy
     iteration with dense matrices, started from the policy of a grid of about G/4 points (its Q
@@ -208,28 +213,27 @@ def _dense_howard(
     """(grid, Q[c, a, G], W, iterations) by Howard's policy iteration from ``policy`` [c, G]
     (default: the greedy one of the rewards), with dense linear solves."""
     N, gamma, pc = pomdp.n_complexity, pomdp.discount, pomdp.complexity_probs
-    grid = np.linspace(0.0, 1.0, G)
-    beliefs = np.stack([1.0 - grid, grid], axis=1)
-    r = np.einsum("gk,cak->cag", beliefs, pomdp.expected_reward)  # [c, a, G]
+    grid, beliefs, r = _grid_rewards(pomdp, G)
     dense = dense_transitions(pomdp, update, beliefs)  # [c, a, G, G]
-    policy = r.argmax(axis=1) if policy is None else policy  # [c, G]
     rows = np.arange(G)
-    q, W = r, np.zeros(G)
-    it = 0
-    while it < 1000:
-        it += 1
+
+    def chain(policy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         M = np.zeros((G, G))
         rr = np.zeros(G)
         for c in range(N):
             M += (gamma * pc[c]) * dense[c, policy[c], rows]
             rr += pc[c] * r[c, policy[c], rows]
-        W = np.asarray(np.linalg.solve(np.eye(G) - M, rr), dtype=float)
-        q = r + gamma * (dense @ W)  # [c, a, G]
-        new = improve(q, policy, axis=1)
-        if new is None:
-            break
-        policy = new
-    return grid, q, W, it
+        return M, rr
+
+    def q_of(W: np.ndarray) -> np.ndarray:
+        return r + gamma * (dense @ W)  # [c, a, G]
+
+    def solve(M: np.ndarray, rr: np.ndarray, _: np.ndarray) -> np.ndarray:
+        return np.asarray(np.linalg.solve(np.eye(G) - M, rr), dtype=float)
+
+    start = r.argmax(axis=1) if policy is None else policy  # [c, G]
+    W, _, it = howard(start, chain, q_of, np.zeros(G), 1000, solve=solve)
+    return grid, q_of(W), W, it
 
 
 def dense_transitions(pomdp: AssistancePOMDP, update: str, beliefs: np.ndarray) -> np.ndarray:
@@ -257,11 +261,8 @@ def policy_iteration(
     one-step reward).  Returns (W, policy, iterations) with W(b) = Σ_C P(C) max_a Q(b, C, a).
     """
     N, G = len(pc), r.shape[-1]
-    policy = r.argmax(axis=1) if policy is None else np.asarray(policy)
-    W = np.zeros(G)
-    it = 0
-    while it < max_iter:
-        it += 1
+
+    def chain(policy: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
         M = sp.csr_matrix((G, G))
         rr = np.zeros(G)
         for c in range(N):
@@ -269,10 +270,10 @@ def policy_iteration(
             rows = sp.diags((sel == 0).astype(float)) @ P[c][0] + sp.diags((sel == 1).astype(float)) @ P[c][1]
             M = M + (gamma * pc[c]) * rows
             rr += pc[c] * np.where(sel == 0, r[c, 0], r[c, 1])
-        W = policy_values(M.tocsr(), rr, W)
-        q = np.stack([np.stack([r[c, a] + gamma * (P[c][a] @ W) for a in range(2)]) for c in range(N)])  # [c, a, G]
-        new_policy = improve(q, policy, axis=1)
-        if new_policy is None:
-            break
-        policy = new_policy
-    return W, policy, it
+        return M.tocsr(), rr
+
+    def q_of(W: np.ndarray) -> np.ndarray:
+        return np.stack([np.stack([r[c, a] + gamma * (P[c][a] @ W) for a in range(2)]) for c in range(N)])  # [c, a, G]
+
+    start = r.argmax(axis=1) if policy is None else np.asarray(policy)
+    return howard(start, chain, q_of, np.zeros(G), max_iter)

@@ -1,7 +1,7 @@
 """Numerics shared by the solvers: policy evaluation (:func:`policy_values`: BiCGSTAB from a warm
 start, checked by its residual, a direct sparse solve as the fallback), Howard's improvement step
-(:func:`improve`), the best of a set of vectors at many beliefs (:func:`best_vectors`,
-:func:`best_at`), the point-based backup and its greedy controller, point-based policy iteration
+(:func:`improve`) and policy iteration (:func:`howard`), the best of a set of vectors at many
+beliefs (:func:`best_vectors`, :func:`best_at`), the point-based backup and its greedy controller, point-based policy iteration
 (:func:`controller_iteration`), the exact evaluation of a finite-state controller on a POMDP in
 branch form (:func:`evaluate_controller`), and the beliefs reachable from b0 or met on simulated
 trajectories."""
@@ -12,6 +12,7 @@ import itertools
 import math
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -25,6 +26,7 @@ __all__ = [
     "controller_iteration",
     "evaluate_controller",
     "greedy_controller",
+    "howard",
     "improve",
     "memoryless_controllers",
     "point_backup",
@@ -85,6 +87,34 @@ def improve(q: np.ndarray, policy: np.ndarray, axis: int) -> np.ndarray | None:
     if not np.any(better):
         return None
     return np.where(better, q.argmax(axis=axis), policy)
+
+
+def howard(
+    policy: np.ndarray,
+    chain: Callable[[np.ndarray], tuple[Any, np.ndarray]],
+    q_of: Callable[[np.ndarray], np.ndarray],
+    values: np.ndarray,
+    max_iter: int,
+    axis: int = 1,
+    solve: Callable[[Any, np.ndarray, np.ndarray], np.ndarray] | None = None,
+    t_end: float = math.inf,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Howard's policy iteration from ``policy``: ``chain(policy)`` gives the discounted transition
+    matrix P and the rewards r of following it, whose values x = r + P x are solved from the last
+    ones (by :func:`policy_values`, or ``solve(P, r, values)``), and the policy improves greedily in
+    ``q_of(values)`` (actions along ``axis``: :func:`improve`).  Stops when no action changes, after
+    ``max_iter`` rounds or past ``t_end``: (values, policy, rounds)."""
+    solve = solve or policy_values
+    rounds = 0
+    while rounds < max_iter:
+        rounds += 1
+        P, r = chain(policy)
+        values = solve(P, r, values)
+        new = improve(q_of(values), policy, axis)
+        if new is None or time.perf_counter() > t_end:
+            break
+        policy = new
+    return values, policy, rounds
 
 
 def evaluate_controller(

@@ -31,9 +31,8 @@ from ..pomdp.problem import AssistancePOMDP
 from .base import Solver, SolverError, bayes_only, one_blas_thread
 from .numerics import (
     controller_iteration,
-    improve,
+    howard,
     memoryless_controllers,
-    policy_values,
     q_vectors,
     reachable_beliefs,
     sample_beliefs,
@@ -174,9 +173,7 @@ class PointSolver(Solver):
         def q_of(u: np.ndarray) -> np.ndarray:
             return rew + gamma * np.einsum("ncabk,ncabk->nca", wt, u[col])
 
-        acts = rew.argmax(axis=2)
-        u = np.zeros(nV)
-        for _ in range(500):
+        def chain(acts: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
             rr = np.zeros(nV)
             Wm = sp.csr_matrix((nV, nV))
             for c in range(N):
@@ -184,11 +181,9 @@ class PointSolver(Solver):
                 rr += pc[c] * rew[ii, c, a]
                 entries = (gamma * pc[c] * wt[ii, c, a]).ravel(), (rows.ravel(), col[ii, c, a].ravel())
                 Wm = Wm + sp.csr_matrix(entries, shape=(nV, nV))
-            u = policy_values(Wm, rr, u)
-            new_acts = improve(q_of(u), acts, axis=2)
-            if new_acts is None:
-                break
-            acts = new_acts
+            return Wm, rr
+
+        u = howard(rew.argmax(axis=2), chain, q_of, np.zeros(nV), 500, axis=2)[0]
         # H is monotone with modulus γ: u + max(H u - u)+ / (1 - γ) bounds its fixed point
         eta = max(0.0, float(np.max(q_of(u).max(axis=2) @ pc - u)))
         return V, u + eta / (1 - gamma), lookup

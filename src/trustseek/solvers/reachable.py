@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import time
+from functools import partial
 from math import comb
 from typing import ClassVar
 
@@ -255,23 +256,22 @@ class ReachableSolver(Solver):
             val = a0 + slope * v[col]
             return rew + self.discount * (p * val.reshape(n, N, A, Br)).sum(axis=3)
 
+        def chain(acts: np.ndarray, aff: tuple[np.ndarray, np.ndarray, np.ndarray]) -> tuple[sp.csr_matrix, np.ndarray]:
+            """The values' linear system when the actions ``acts`` and the successors' bounds ``aff`` are fixed."""
+            a0, slope, col = aff
+            sel = np.zeros((n, N, A, Br), dtype=bool)
+            sel[np.arange(n)[:, None], np.arange(N)[None, :], acts] = True
+            sel = sel.reshape(m)
+            rhs = np.einsum("c,nc->n", self.context_probs, rew[np.arange(n)[:, None], np.arange(N)[None, :], acts])
+            rhs = rhs + np.bincount(rows_of[sel], weights=(wt * a0)[sel], minlength=n)
+            lin = sel & (slope > 0)
+            return sp.csr_matrix(((wt * slope)[lin], (rows_of[lin], col[lin])), shape=(n, n)), rhs
+
         acts = q_of(v).argmax(axis=2)
         for _ in range(rounds):
             aff = choose(v)
-            a0, slope, col = aff
-            for _inner in range(50):
-                sel = np.zeros((n, N, A, Br), dtype=bool)
-                sel[np.arange(n)[:, None], np.arange(N)[None, :], acts] = True
-                sel = sel.reshape(m)
-                rhs = np.einsum("c,nc->n", self.context_probs, rew[np.arange(n)[:, None], np.arange(N)[None, :], acts])
-                rhs = rhs + np.bincount(rows_of[sel], weights=(wt * a0)[sel], minlength=n)
-                lin = sel & (slope > 0)
-                W = sp.csr_matrix(((wt * slope)[lin], (rows_of[lin], col[lin])), shape=(n, n))
-                v = numerics.policy_values(W, rhs, v)
-                new_acts = numerics.improve(q_of(v, aff), acts, axis=2)
-                if new_acts is None or time.perf_counter() > t_end:
-                    break
-                acts = new_acts
+            _, slope, col = aff
+            v, acts = numerics.howard(acts, partial(chain, aff=aff), partial(q_of, aff=aff), v, 50, axis=2, t_end=t_end)[:2]
             again = choose(v)
             if (np.array_equal(again[2], col) and np.array_equal(again[1] > 0, slope > 0)) or time.perf_counter() > t_end:
                 break

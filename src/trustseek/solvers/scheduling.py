@@ -160,8 +160,6 @@ class ScheduleSolver(Solver):
                 parts.append((fn, lines, acts))
             table[s] = per_k
             V[s] = value(parts)
-        x0 = float(pomdp.model.initial[-1])
-        starts = problem.start()
         info = {
             "solver": self.name,
             "representation": self.representation,
@@ -170,17 +168,14 @@ class ScheduleSolver(Solver):
             "discount": pomdp.discount,
             "task": pomdp.task.to_dict(),
             "states": len(table),
-            "start": {state_key(s): p for s, p in starts},
-            "value": float(sum(p * _max_q(table[s], x0) for s, p in starts)),
-            "seconds": time.perf_counter() - t0,
+            "start": {state_key(s): p for s, p in problem.start()},
         }
+        policy = SchedulePolicy(table, pomdp.model, pomdp.complexities, self.belief_update, problem.counts, problem.window, info)
+        policy.info["value"] = policy.start_value()
+        policy.info["seconds"] = time.perf_counter() - t0
         if self.representation == "grid":
-            info["grid"] = self.grid
-        return SchedulePolicy(table, pomdp.model, pomdp.complexities, self.belief_update, problem.counts, problem.window, info)
-
-
-def _max_q(per_k: dict[int, PieceQ], x: float) -> float:
-    return max(float(fn(np.array([x])).max()) for fn in per_k.values())
+            policy.info["grid"] = self.grid
+        return policy
 
 
 # --------------------------------------------------------------------------- alpha vectors
