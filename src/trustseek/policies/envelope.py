@@ -80,9 +80,9 @@ def cross_sum(xs1: np.ndarray, xs2: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     return u, active_piece(xs1, mids), active_piece(xs2, mids)
 
 
-def strip(u: np.ndarray) -> np.ndarray:
-    """Sorted breakpoints with pieces narrower than WIDTH_EPS removed, from 0 to 1."""
-    u = u[np.concatenate([[True], np.diff(u) > WIDTH_EPS])]
+def strip(u: np.ndarray, width: float = WIDTH_EPS) -> np.ndarray:
+    """Sorted breakpoints with pieces narrower than ``width`` removed, from 0 to 1."""
+    u = u[np.concatenate([[True], np.diff(u) > width])]
     u[0], u[-1] = 0.0, 1.0
     return u
 

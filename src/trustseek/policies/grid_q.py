@@ -22,6 +22,14 @@ from .regions import Interval, ask_intervals
 TABLE_POINTS = 4001  # points of a Q table made from another policy's Q-function
 
 
+def grid_cells(x: Any, G: int) -> tuple[np.ndarray, np.ndarray]:
+    """The cell j and the position f in it of each x (clipped to [0, 1]) on the uniform grid of
+    ``G`` points: x lies between points j and j + 1, at f in [0, 1]."""
+    pos = np.clip(np.asarray(x, dtype=float), 0.0, 1.0) * (G - 1)
+    j = np.minimum(np.floor(pos).astype(np.int64), G - 2)
+    return j, pos - j
+
+
 @dataclass(eq=False, repr=False)
 class TrustAwarePolicy(Policy):
     """Greedy in the solved Q(b, C, a) on a belief grid over P(trust = high) (two trust levels);
@@ -54,24 +62,16 @@ class TrustAwarePolicy(Policy):
         return cls(grid, q, policy.model, policy.complexities, policy.belief_update, policy.info)
 
     # -- the Q-function ------------------------------------------------------
-    def _locate(self, b_high: Any) -> tuple[np.ndarray, np.ndarray]:
-        """Grid cell j and position f in it of each P(trust = high)."""
-        x = np.clip(np.asarray(b_high, dtype=float), 0.0, 1.0)
-        G = len(self.grid)
-        pos = x * (G - 1)
-        j = np.minimum(np.floor(pos).astype(np.int64), G - 2)
-        return j, pos - j
-
     def q_values(self, b_high: Any) -> np.ndarray:
         """Q at P(trust = high) = b_high, linearly interpolated; shape (..., N, 2)."""
-        j, f = self._locate(b_high)
+        j, f = grid_cells(b_high, len(self.grid))
         f = f[..., None, None]
         return self.q[j] * (1 - f) + self.q[j + 1] * f
 
     def actions(self, beliefs: np.ndarray | None, complexities: np.ndarray, rng: np.random.Generator | None = None) -> np.ndarray:
         beliefs = np.asarray(beliefs, dtype=float)
         complexities = np.asarray(complexities, dtype=np.int64)
-        j, f = self._locate(beliefs[..., -1])
+        j, f = grid_cells(beliefs[..., -1], len(self.grid))
         d = self.q[:, :, ASK] - self.q[:, :, AUTONOMOUS]  # (G, N): advantage of asking
         adv = d[j, complexities] * (1 - f) + d[j + 1, complexities] * f
         return np.where(adv > 0, ASK, AUTONOMOUS).astype(np.int64)

@@ -29,7 +29,7 @@ from scipy.optimize import brentq
 
 from ..policies.alpha_vector import AlphaVectorPolicy
 from ..policies.base import Policy
-from ..policies.envelope import envelope_values
+from ..policies.envelope import envelope_values, strip
 from ..policies.grid_q import TABLE_POINTS, TrustAwarePolicy
 from ..policies.regions import ask_intervals, threshold
 from ..pomdp.problem import AssistancePOMDP
@@ -59,6 +59,17 @@ def paper_maps(pomdp: AssistancePOMDP) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([p0, p1], axis=-1), np.stack([m0, m1], axis=-1)
 
 
+def paper_lines(pomdp: AssistancePOMDP, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """At beliefs x (n,): the rewards r[c, a, n], and for each (c, a, e) the branch probabilities
+    p[c, a, e, n] and next beliefs f[c, a, e, n] of the eq.-3 update (each linear in x)."""
+
+    def at(ends: np.ndarray) -> np.ndarray:
+        return ends[..., 0, None] * (1 - x) + ends[..., 1, None] * x
+
+    p, f = paper_maps(pomdp)
+    return at(pomdp.expected_reward), at(p), at(f)
+
+
 def paper_grid_values(
     pomdp: AssistancePOMDP, grid: np.ndarray, guess: np.ndarray | None = None, max_iter: int = 200
 ) -> np.ndarray:
@@ -70,15 +81,10 @@ def paper_grid_values(
     directly in CSR form and evaluated from ``guess`` (:func:`~.numerics.policy_values`).
     The first policy is greedy in ``guess`` (in the reward without one); ties keep the
     current action, so the iteration terminates."""
-    p, f = paper_maps(pomdp)
-    R = pomdp.expected_reward
-    gamma = pomdp.discount
-    pc = pomdp.complexity_probs
+    gamma, pc = pomdp.discount, pomdp.complexity_probs
     N, G = pomdp.n_complexity, len(grid)
-    x = grid
-    r = R[:, :, 0, None] * (1 - x) + R[:, :, 1, None] * x  # [c, a, G]
-    w = p[..., 0, None] * (1 - x) + p[..., 1, None] * x  # [c, a, e, G] branch probabilities
-    nx = np.clip(f[..., 0, None] * (1 - x) + f[..., 1, None] * x, 0.0, 1.0)  # next beliefs
+    r, w, nx = paper_lines(pomdp, grid)
+    nx = np.clip(nx, 0.0, 1.0)
     j = np.clip(np.searchsorted(grid, nx.ravel(), side="right").reshape(nx.shape) - 1, 0, G - 2)
     t = (nx - grid[j]) / (grid[j + 1] - grid[j])
     wl, wr = w * (1 - t), w * t  # weights of grid[j] and grid[j + 1]
@@ -106,15 +112,10 @@ def paper_q(pomdp: AssistancePOMDP, values: np.ndarray, x: np.ndarray, grid: np.
     """Q[c, a, ...] at beliefs x for the eq.-3 belief MDP with W = linear interpolation of values
     (all (c, a, E') branches interpolated in one pass)."""
     grid = np.linspace(0.0, 1.0, len(values)) if grid is None else grid
-    p, f = paper_maps(pomdp)
-    R = pomdp.expected_reward
-    gamma = pomdp.discount
     x = np.asarray(x, dtype=float)
-    z = x.reshape(-1)
-    pr = p[..., 0, None] * (1 - z) + p[..., 1, None] * z  # [c, a, e, n]
-    nx = f[..., 0, None] * (1 - z) + f[..., 1, None] * z
-    w = np.interp(nx.ravel(), grid, values).reshape(nx.shape)  # each row is monotone in z
-    out = R[:, :, 0, None] * (1 - z) + R[:, :, 1, None] * z + gamma * (pr * w).sum(axis=2)
+    r, pr, nx = paper_lines(pomdp, x.reshape(-1))
+    w = np.interp(nx.ravel(), grid, values).reshape(nx.shape)  # each row is monotone in x
+    out = r + pomdp.discount * (pr * w).sum(axis=2)
     return out.reshape(out.shape[:2] + x.shape)
 
 
@@ -145,9 +146,7 @@ def residual_pieces(pomdp: AssistancePOMDP, grid: np.ndarray, values: np.ndarray
                 if abs(f1 - f0) > 1e-15:
                     pre = (grid - f0) / (f1 - f0)
                     cuts.append(pre[(pre > 0) & (pre < 1)])
-    pts = np.unique(np.concatenate(cuts))
-    pts = pts[np.concatenate([[True], np.diff(pts) > 1e-15])]
-    pts[0], pts[-1] = 0.0, 1.0
+    pts = strip(np.unique(np.concatenate(cuts)), 1e-15)
 
     def coeffs(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray]]:
         lo, hi = pts[:-1], pts[1:]
@@ -168,9 +167,7 @@ def residual_pieces(pomdp: AssistancePOMDP, grid: np.ndarray, values: np.ndarray
             ok = np.isfinite(rr)
             roots.append(mid[ok] + rr[ok])
     if roots:
-        pts = np.unique(np.concatenate([pts] + roots))
-        pts = pts[np.concatenate([[True], np.diff(pts) > 1e-15])]
-        pts[0], pts[-1] = 0.0, 1.0
+        pts = strip(np.unique(np.concatenate([pts] + roots)), 1e-15)
         lo, hi, mid, w, qs, v = coeffs(pts)
     # pass 2: one quadratic per piece (the action active at the midpoint, per complexity)
     pc = pomdp.complexity_probs

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from ..policies.grid_q import TrustAwarePolicy
+from ..policies.grid_q import TrustAwarePolicy, grid_cells
 from ..pomdp.problem import AssistancePOMDP
 from .base import Solver, SolverError, one_blas_thread
 from .defaults import DEFAULT_GRID, METHODS
@@ -42,10 +42,8 @@ def interpolation_matrix(points: np.ndarray, grid: np.ndarray, weights: np.ndarr
     [0, 1]) and adds them up."""
     G = len(grid)
     n = points.shape[0]
-    x = np.clip(points, 0.0, 1.0).T.ravel() * (G - 1)
+    j, f = grid_cells(points.T.ravel(), G)
     w = weights.T.ravel()
-    j = np.minimum(np.floor(x).astype(np.int64), G - 2)
-    f = x - j
     rows = np.tile(np.arange(n), points.shape[1])
     data = np.concatenate([w * (1.0 - f), w * f])
     cols = np.concatenate([j, j + 1])
@@ -242,9 +240,7 @@ def dense_transitions(pomdp: AssistancePOMDP, update: str, beliefs: np.ndarray) 
     dense, summed by one ``bincount`` for every (C, a))."""
     G, N = len(beliefs), pomdp.n_complexity
     p, nxt = pomdp.branches(update).successors(beliefs)  # (G, c, a, br), (G, c, a, br, K)
-    x = np.clip(nxt[..., 1], 0.0, 1.0) * (G - 1)
-    j = np.minimum(np.floor(x).astype(np.int64), G - 2)
-    f = x - j
+    j, f = grid_cells(nxt[..., 1], G)
     start = ((np.arange(N)[:, None] * 2 + np.arange(2)) * G)[None, :, :, None] + np.arange(G)[:, None, None, None]
     at = (start * G + j).reshape(-1)  # row (c, a, g), column j
     weights = np.concatenate([(p * (1.0 - f)).reshape(-1), (p * f).reshape(-1)])
