@@ -41,17 +41,6 @@ from .certified import CertifiedGridSolver, CertifiedSolution, CertifiedSolver
 from .grid import GridSolver
 from .numerics import evaluate_controller, memoryless_controllers
 
-__all__ = [
-    "AlphaSolver",
-    "Backup",
-    "BranchLines",
-    "branch_lines",
-    "exact_backup",
-    "finite_horizon_value",
-    "finite_horizon_vectors",
-]
-
-
 # --------------------------------------------------------------------------- the exact backup
 
 

@@ -37,18 +37,6 @@ from ..vocab import ASK, AUTONOMOUS
 from .base import Solver, one_blas_thread
 from .numerics import howard
 
-__all__ = [
-    "CertifiedGridSolver",
-    "CertifiedSolution",
-    "Residual",
-    "paper_grid_values",
-    "paper_maps",
-    "paper_q",
-    "policy_from_solution",
-    "residual_pieces",
-]
-
-
 # --------------------------------------------------------------------------- the eq.-3 numerics
 
 

@@ -20,23 +20,6 @@ import scipy.sparse.linalg as spla
 
 from ..pomdp.belief import BranchModel
 
-__all__ = [
-    "best_at",
-    "best_vectors",
-    "controller_iteration",
-    "evaluate_controller",
-    "greedy_controller",
-    "howard",
-    "improve",
-    "memoryless_controllers",
-    "point_backup",
-    "policy_values",
-    "q_vectors",
-    "reachable_beliefs",
-    "sample_beliefs",
-    "unique_rows",
-]
-
 BLOCK_ROWS = 1 << 15  # beliefs per block of best_vectors (with 500 vectors: 130 MB of products)
 
 

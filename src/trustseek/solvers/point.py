@@ -39,8 +39,6 @@ from .numerics import (
     unique_rows,
 )
 
-__all__ = ["PointSolution", "PointSolver", "bounds_policy", "freudenthal_weights", "next_round_seconds"]
-
 
 @dataclass
 class PointSolution:

@@ -36,8 +36,6 @@ from .base import Solver, bayes_only, one_blas_thread
 from .point import PointSolution, bounds_policy
 from .upper_bounds import BlockGrid, fast_informed_bound, grid_blocks, inverse_points, phi_of, phi_pairs
 
-__all__ = ["ReachableSolver"]
-
 
 class ReachableSolver(Solver):
     """Heuristic search over the beliefs reachable from b0 with a lower bound of alpha vectors

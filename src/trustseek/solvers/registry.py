@@ -43,20 +43,6 @@ from .agnostic import PAPER_HORIZON, TrustAgnosticSolver
 from .base import Solver, SolverError
 from .defaults import DEFAULT_GRID, DEFAULT_SCHEDULE_GRID, ORDERS
 
-__all__ = [
-    "SCHEDULE",
-    "SOLVERS",
-    "SPEC_KINDS",
-    "PolicySpecError",
-    "SolverEntry",
-    "make_solver",
-    "policy_from_spec",
-    "schedule_size",
-    "solve",
-    "solve_with",
-    "solver_names",
-]
-
 
 @dataclass(frozen=True)
 class SolverEntry:

@@ -31,15 +31,6 @@ from ..pomdp.problem import AssistancePOMDP
 from ..vocab import ASK, AUTONOMOUS, RELY, check_belief_update
 from .registry import make_solver
 
-__all__ = [
-    "Parameter",
-    "Sensitivity",
-    "SensitivityError",
-    "evaluate",
-    "free_parameters",
-    "sensitivity",
-]
-
 #: the value quantity's name (the thresholds are ``threshold[<complexity>]``)
 VALUE = "V"
 #: the most belief-grid points x solves of the Latin-hypercube check (samples x grid; on the paper's

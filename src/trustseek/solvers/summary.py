@@ -15,8 +15,6 @@ from ..policies.base import Policy, ask_regions
 from ..pomdp.problem import AssistancePOMDP
 from .registry import make_solver
 
-__all__ = ["summarize"]
-
 
 def summarize(policy: Policy, pomdp: AssistancePOMDP) -> dict[str, Any]:
     """The summary of ``policy`` solved for ``pomdp`` (any number of trust levels)."""

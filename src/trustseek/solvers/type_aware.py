@@ -45,15 +45,10 @@ from . import numerics
 from .alpha import AlphaSolver
 from .base import bayes_only, one_blas_thread
 from .defaults import DEFAULT_TYPE_AWARE_SOLVER
-from .point import (
-    PointSolution,
-    PointSolver,
-)
+from .point import PointSolution, PointSolver
 from .registry import make_solver
 from .type_bounds import base_many
 from .upper_bounds import closed_blocks, fast_informed_bound, one_state_value
-
-__all__ = ["DEFAULT_TYPE_AWARE_SOLVER", "TypeAwareSolver", "TypeBound", "solve_type_aware", "type_bound"]
 
 #: intervals of the uniform grid on which each type's value bound is tabulated
 TABLE_INTERVALS = 4096

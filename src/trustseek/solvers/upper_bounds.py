@@ -14,17 +14,6 @@ from ..pomdp.belief import Branches, BranchModel
 from .base import SolverError
 from .point import PointSolver
 
-__all__ = [
-    "BlockGrid",
-    "closed_blocks",
-    "fast_informed_bound",
-    "grid_blocks",
-    "inverse_points",
-    "one_state_value",
-    "phi_of",
-    "phi_pairs",
-]
-
 
 def fast_informed_bound(model: BranchModel, max_rounds: int = 200) -> np.ndarray:
     """The fast informed bound (Hauskrecht 2000) of a problem in branch form, as Q-vectors
