@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.markup import escape
 
+from .. import estimation  # its names load on first use, when a command runs
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
 from ..parallel import MAX_JOBS
@@ -38,23 +39,14 @@ from ._options import (
 from ._output import cells_table, check_plots_folder, fit_summary, print_intervals_note, print_selection, print_warnings
 from ._reading import keep_columns, load_for_decoding, read_for_types, widened_note, write_log
 
-# The fit and data modules (pandas) load only when a command of this group runs,
-# so that the rest of the CLI starts fast.
-
-
-def _fit():
-    from .. import estimation
-
-    return estimation
-
 
 def _named_inputs(reading: LogReading, transitions_on, emissions_on) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
     """The transition and emission inputs named by the flags (canonical ones or the --mapping
     file's ``inputs``), and the canonical columns they need."""
     declared = () if reading.column_mapping is None else tuple(reading.column_mapping.inputs)
-    tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on", declared)
-    em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on", declared)
-    return tr, em, tuple(c for c in dict.fromkeys((*tr, *em)) if c in _fit().MODEL_INPUTS)
+    tr = _inputs(transitions_on, estimation.PAPER_TRANSITION_INPUTS, "--transitions-on", declared)
+    em = _inputs(emissions_on, estimation.PAPER_EMISSION_INPUTS, "--emissions-on", declared)
+    return tr, em, tuple(c for c in dict.fromkeys((*tr, *em)) if c in estimation.MODEL_INPUTS)
 
 
 def read_with_inputs(log: Path, reading: LogReading, transitions_on: str | None, emissions_on: str | None):
@@ -65,7 +57,7 @@ def read_with_inputs(log: Path, reading: LogReading, transitions_on: str | None,
 
 def general_inputs(tr: tuple[str, ...], em: tuple[str, ...]) -> bool:
     """True when the inputs are not a trust model's: the fit is a general model (trustseek.iohmm/1)."""
-    return not _fit().trust_iohmm.is_trust_structure(tr, em)
+    return not estimation.trust_iohmm.is_trust_structure(tr, em)
 
 
 POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
@@ -77,11 +69,11 @@ def _inputs(text: str | None, default: tuple[str, ...], flag: str, declared: tup
     if text.strip().lower() in ("", "none", "-"):
         return ()
     cols = tuple(c.strip() for c in text.split(",") if c.strip())
-    allowed = [*_fit().MODEL_INPUTS, *declared]
+    allowed = [*estimation.MODEL_INPUTS, *declared]
     bad = [c for c in cols if c not in allowed]
     if bad:
         where = f"the mapping's inputs {list(declared)}" if declared else "the inputs a --mapping file declares ('inputs')"
-        raise TrustseekError([f"{flag}: {c!r} is not one of {list(_fit().MODEL_INPUTS)}, {where} (or 'none')" for c in bad])
+        raise TrustseekError([f"{flag}: {c!r} is not one of {list(estimation.MODEL_INPUTS)}, {where} (or 'none')" for c in bad])
     if len(set(cols)) != len(cols):
         raise TrustseekError([f"{flag}: an input is named twice: {list(cols)}"])
     return cols
@@ -187,7 +179,7 @@ def fit(
     rated = rating_entry(rating, rating_levels, rating_bins, rating_per)
     frame = reading.read(log, needed, rated, not ratings_only)
     options = FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs)
-    settings = {"levels": levels, "options": options, "bootstrap": bootstrap, "prior": prior}
+    settings: dict[str, Any] = {"levels": levels, "options": options, "bootstrap": bootstrap, "prior": prior}
     settings |= {"rating": _rated(frame, log, ratings_only), "actions": not ratings_only}
     general = general_inputs(tr, em)
     if general and fill_from is not None:
@@ -196,9 +188,9 @@ def fit(
     with progress_bar(quiet or as_json) as bar:
         settings["progress"] = _progress(bar, options.starts, bootstrap)
         if general:
-            result = _fit().fit.fit_model(frame, em, tr, **settings)
+            result = estimation.fit_model(frame, em, tr, **settings)
         else:
-            result = _fit().fit_trust_model(frame, preset=preset, transition_inputs=tr, emission_inputs=em, **settings)
+            result = estimation.fit_trust_model(frame, preset=preset, transition_inputs=tr, emission_inputs=em, **settings)
     drawn = result.model  # the figures show only what the data estimated
     if fill_from is not None and result.model.not_estimated:
         from ..model.presets import load_model
@@ -209,7 +201,8 @@ def fit(
     write_atomic(out, result.model.save)
     write_atomic(posteriors, lambda tmp: write_log(keep_columns(result.posteriors(), frame, reading.keep), tmp))
     if plots is not None:
-        _plot(result, drawn, plots, general, preset == "paper" and (tr, em) == _paper_inputs())
+        paper_like = preset == "paper" and tr == estimation.PAPER_TRANSITION_INPUTS and em == estimation.PAPER_EMISSION_INPUTS
+        _plot(result, drawn, plots, general, paper_like)
     if as_json:
         print_json({**result.to_dict(), "cells": result.cells()})
         return
@@ -273,10 +266,6 @@ def _rated(frame, log: Path, ratings_only: bool) -> str | None:
     return rated
 
 
-def _paper_inputs() -> tuple[tuple[str, ...], tuple[str, ...]]:
-    return _fit().PAPER_TRANSITION_INPUTS, _fit().PAPER_EMISSION_INPUTS
-
-
 def _progress(bar, restarts: int, bootstrap: int):
     """A progress callback counting the restarts, then the bootstrap's replicates."""
     task = bar.add_task("restarts", total=restarts + bootstrap)
@@ -312,11 +301,11 @@ def _print_fit(result, tr, em, general: bool) -> None:
     summary = fit_summary(result, "restarts", len(result.restart_logliks))
     if general:
         inputs = f"emissions on {', '.join(em) or 'none'}; transitions on {', '.join(tr) or 'none'}"
-        console.print(cells_table(f"Fitted model (inputs: {inputs}; {n})", result, _fit().MIN_EVENTS, escape_cells=True))
+        console.print(cells_table(f"Fitted model (inputs: {inputs}; {n})", result, estimation.MIN_EVENTS, escape_cells=True))
         print_intervals_note(result.intervals)
         console.print(summary, highlight=False)
     else:
-        console.print(cells_table(f"Fitted trust model ({n})", result, _fit().MIN_EVENTS))
+        console.print(cells_table(f"Fitted trust model ({n})", result, estimation.MIN_EVENTS))
         console.print(summary)
         print_intervals_note(result.intervals)
     print_warnings(result.warnings)
@@ -352,7 +341,7 @@ def decode_cmd(
 
         post = decode_types(frame, types)
     else:
-        post = _fit().decode(frame, types.models[0] if isinstance(types, TypeMixture) else types)
+        post = estimation.decode(frame, types.models[0] if isinstance(types, TypeMixture) else types)
     post = keep_columns(post, frame, reading.keep)
     write_atomic(out, lambda tmp: write_log(post, tmp))
     console.print(f"wrote {len(post)} trials to {out}")
@@ -389,20 +378,17 @@ def select(
     quiet: bool = QuietOpt,
 ) -> None:
     tr, em, frame = read_with_inputs(log, reading, transitions_on, emissions_on)
-    with progress_task(quiet or as_json, "model selection") as update:
-        rows = _fit().select_levels(
-            frame,
-            levels=tuple(range(1, max_levels + 1)),
-            folds=folds,
-            options=FitOptions(restarts=restarts, seed=seed, tol=tol, n_jobs=1),
-            prior=prior,
-            progress=lambda what, d, t: update(d, t, what),
-            transition_inputs=tr,
-            emission_inputs=em,
-            widen=widen,
-            jobs=jobs,
-        )
-    warnings = _fit().selection_warnings(rows)
+    options = FitOptions(restarts=restarts, seed=seed, tol=tol, n_jobs=1)
+    how = {"folds": folds, "options": options, "widen": widen, "jobs": jobs, "prior": prior}
+    rows = run_selection(estimation.select_levels, frame, quiet or as_json, tr, em, levels=tuple(range(1, max_levels + 1)), **how)
+    warnings = estimation.selection_warnings(rows)
     warnings[:0] = widened_note(rows, "levels", max_levels)
     starts = " (random, and the fit with one level fewer split)"
     print_selection("Number of trust levels", "levels", rows, folds, warnings, as_json, starts=starts)
+
+
+def run_selection(select, frame, quiet: bool, tr: tuple[str, ...], em: tuple[str, ...], **how):
+    """A model selection (``select_levels``, ``select_types``) on the inputs ``tr`` and ``em``,
+    with its progress bar; ``how`` its other arguments."""
+    with progress_task(quiet, "model selection") as update:
+        return select(frame, progress=lambda what, d, t: update(d, t, what), transition_inputs=tr, emission_inputs=em, **how)

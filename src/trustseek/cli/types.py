@@ -13,6 +13,7 @@ from ..errors import TrustseekError
 from ..estimation.options import FitOptions
 from ..parallel import MAX_JOBS
 from ._app import (
+    bar_task,
     check_output,
     check_outputs,
     check_tol,
@@ -22,13 +23,12 @@ from ._app import (
     print_json,
     print_written,
     progress_bar,
-    progress_task,
     write_atomic,
 )
 from ._options import FROM_OPTIONS, LogReading, PrintJsonOpt, QuietOpt, SelectionJobsOpt, log_options, widen_option
 from ._output import check_plots_folder, fit_summary, print_selection, print_warnings
 from ._reading import load_for_decoding, read_for_types, widened_note, write_log
-from .fit import POSTERIOR_SUFFIXES, read_with_inputs
+from .fit import POSTERIOR_SUFFIXES, read_with_inputs, run_selection
 
 TransitionsOnOpt = typer.Option(
     None, "--transitions-on", help="Inputs of the trust transitions (as for fit: complexity, robot_action, experience)."
@@ -111,15 +111,13 @@ def fit_types(
         raise TrustseekError([f"--plots draws trust-model types; types of the named inputs {named} have no figures here"])
     from ..estimation.mixture import fit_types as fit_mixture
 
-    bar = progress_bar(quiet or as_json)
-    with bar:
-        task = bar.add_task("starts", total=restarts)
+    with progress_bar(quiet or as_json) as bar:
         fit = fit_mixture(
             frame,
             types,
             options=FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs),
             differ=differ,
-            progress=lambda d, t: bar.update(task, completed=d, total=t),
+            progress=bar_task(bar, "starts", restarts),
             transition_inputs=tr,
             emission_inputs=em,
         )
@@ -146,15 +144,10 @@ def _bootstrap_types(fit, bootstrap: int, seed: int, jobs: int | None, bar):
     """The types' bootstrap intervals (None without --bootstrap), with a progress bar of their own."""
     if bootstrap <= 0:
         return None
-    task = bar.add_task("bootstrap", total=bootstrap)
     from ..estimation.mixture import TYPE_REFITS, bootstrap_types
 
-    return bootstrap_types(
-        fit,
-        bootstrap,
-        options=replace(TYPE_REFITS, seed=seed, n_jobs=jobs),
-        progress=lambda d, t: bar.update(task, completed=d, total=t),
-    )
+    options = replace(TYPE_REFITS, seed=seed, n_jobs=jobs)
+    return bootstrap_types(fit, bootstrap, options=options, progress=bar_task(bar, "bootstrap", bootstrap))
 
 
 def _types_json(fit, mixture, post, intervals) -> dict:
@@ -251,19 +244,9 @@ def select_types(
     from ..estimation import selection
 
     tr, em, frame = read_with_inputs(log, reading, transitions_on, emissions_on)
-    with progress_task(quiet or as_json, "model selection") as update:
-        rows = selection.select_types(
-            frame,
-            types=values,
-            folds=folds,
-            options=FitOptions(restarts=restarts, seed=seed, tol=tol, n_jobs=1),
-            differ=differ,
-            progress=lambda what, d, t: update(d, t, what),
-            transition_inputs=tr,
-            emission_inputs=em,
-            widen=widen,
-            jobs=jobs,
-        )
+    options = FitOptions(restarts=restarts, seed=seed, tol=tol, n_jobs=1)
+    how = {"folds": folds, "options": options, "widen": widen, "jobs": jobs, "differ": differ}
+    rows = run_selection(selection.select_types, frame, quiet or as_json, tr, em, types=values, **how)
     warnings = widened_note(rows, "types", max(values)) + selection.type_selection_warnings(rows)
     weights = {"weights": lambda r: ", ".join(f"{w:.2f}" for w in r["weights"])}
     print_selection("Number of supervisor types", "types", rows, folds, warnings, as_json, extra=weights)
