@@ -25,10 +25,20 @@ from ._app import (
     progress_bar,
     write_atomic,
 )
-from ._options import FROM_OPTIONS, LogReading, PrintJsonOpt, QuietOpt, SelectionJobsOpt, log_options, widen_option
-from ._output import check_plots_folder, fit_summary, print_selection, print_warnings
-from ._reading import load_for_decoding, read_for_types, widened_note, write_log
-from .fit import POSTERIOR_SUFFIXES, read_with_inputs, run_selection
+from ._options import (
+    FROM_OPTIONS,
+    LogArg,
+    LogReading,
+    OneRowPerTrialLogArg,
+    PrintJsonOpt,
+    QuietOpt,
+    SeedOpt,
+    SelectionJobsOpt,
+    log_options,
+    widen_option,
+)
+from ._output import check_plots_folder, fit_summary, print_selection, print_warnings, run_selection
+from ._reading import POSTERIOR_SUFFIXES, load_for_decoding, read_for_types, read_with_inputs, widened_note, write_log
 
 TransitionsOnOpt = typer.Option(
     None, "--transitions-on", help="Inputs of the trust transitions (as for fit: complexity, robot_action, experience)."
@@ -77,7 +87,7 @@ def parse_types(text: str) -> tuple[int, ...]:
 @command("fit-types")
 @log_options()
 def fit_types(
-    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
+    log: Path = OneRowPerTrialLogArg,
     types: int = typer.Option(2, "--types", "-m", min=1, max=12, help="Number of supervisor types."),
     differ: str = DifferOpt,
     transitions_on: str | None = TransitionsOnOpt,
@@ -88,7 +98,7 @@ def fit_types(
     bootstrap: int = typer.Option(
         0, "--bootstrap", "-b", min=0, max=10_000, help="Participant bootstrap resamples for 95% intervals."
     ),
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
+    seed: int = SeedOpt,
     tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative log-likelihood tolerance (> 0)."),
     max_iter: int = typer.Option(1000, "--max-iter", min=1, help="E-step cap per start."),
     jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, max=MAX_JOBS, help="Threads (fit) and processes (bootstrap)."),
@@ -222,7 +232,7 @@ def _rely_cells(mixture):
 @command("select-types")
 @log_options()
 def select_types(
-    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
+    log: Path = LogArg,
     types: str = typer.Option("1..4", "--types", help="Numbers of types to compare, e.g. 1..4 or 1,2,3."),
     differ: str = DifferOpt,
     transitions_on: str | None = TransitionsOnOpt,
@@ -231,7 +241,7 @@ def select_types(
     restarts: int = typer.Option(
         10, "--restarts", "-r", min=1, max=1000, help="Starts per fit (and the fit with one type fewer, split)."
     ),
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
+    seed: int = SeedOpt,
     tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
     jobs: int | None = SelectionJobsOpt,
     widen: bool = widen_option(12, "the numbers given"),
@@ -255,7 +265,7 @@ def select_types(
 @command("personalize")
 @log_options()
 def personalize(
-    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
+    log: Path = LogArg,
     model: str = typer.Option(
         ..., "--model", "-m", help="The centre: a trust model or types JSON (e.g. from fit / fit-types), or a preset name."
     ),
