@@ -240,6 +240,12 @@ def progress_bar(quiet: bool, *columns: Any) -> Progress:
     return _Progress(*cols, console=err_console, transient=True, disable=quiet or not err_console.is_terminal)
 
 
+def bar_task(bar: Progress, description: str, total: int | None = None) -> Callable[[float, float | None], None]:
+    """A new task on ``bar`` and its progress callback ``update(done, total)``."""
+    task = bar.add_task(description, total=total)
+    return lambda done, of: bar.update(task, completed=done, total=of)
+
+
 @contextmanager
 def progress_task(quiet: bool, description: str, total: int | None = None) -> Iterator[Callable[..., None]]:
     """A :func:`progress_bar` with one task, open for the block: yields ``update(done, total,

@@ -1,8 +1,9 @@
 """Options several commands take, declared once: --model and --task (and reading what they
-name), --json, --quiet, --widen, --counts, the inputs of the commands that fit as fit does, and
-those that say how a command reads its trial log (--mapping, --column, --label, --missing,
---delimiter, --order, --keep, --no-experience-rule), which a command takes with
-:func:`log_options`, as one :class:`LogReading`."""
+name: a trust model or supervisor types, a task; the grid solver's two trust levels), --json,
+--quiet, --widen, --counts, the inputs of the commands that fit as fit does, and those that say
+how a command reads its trial log (--mapping, --column, --label, --missing, --delimiter,
+--order, --keep, --no-experience-rule), which a command takes with :func:`log_options`, as one
+:class:`LogReading`."""
 
 from __future__ import annotations
 
@@ -25,12 +26,18 @@ from ._app import err_console
 if TYPE_CHECKING:
     from ..data.mapping import ColumnMapping
     from ..model.core import TrustModel
+    from ..model.mixture import TypeMixture
     from ..model.task import Task
 
 ModelOpt = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file.")
 TaskOpt = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file.")
 JsonOpt = typer.Option(False, "--json", help="Print one JSON object instead of tables.")
 PrintJsonOpt = typer.Option(False, "--json", help="Print JSON.")
+SeedOpt = typer.Option(0, "--seed", min=0, help="Random seed.")
+MaxIterOpt = typer.Option(1000, "--max-iter", min=1, help="Iteration cap per restart (E-steps).")
+PolicyOutOpt = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file.")
+LogArg = typer.Argument(..., help="Trial log (CSV or Parquet).")
+OneRowPerTrialLogArg = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial.")
 
 
 def processes_option(what: str) -> Any:
@@ -71,6 +78,39 @@ def model_and_task(model: str, task: str, belief_update: str | None = None) -> t
     if belief_update is not None:
         check_belief_update(belief_update, "--belief-update")
     return load_model(model), load_task(task)
+
+
+def mixture_of(spec: str, types: str | None = None) -> TypeMixture | None:
+    """The supervisor types --types names (``types``, when given), else those ``spec`` names when
+    it is a mixture (a mixture preset such as paper+conservative, or a trustseek.mixture/1 file);
+    None for a plain trust model."""
+    from ..model.jsonfile import load_json
+    from ..model.mixture import MIXTURE_FORMAT
+    from ..model.presets import MIXTURE_PRESETS, MODEL_PRESETS, load_mixture
+
+    if types is not None:
+        return load_mixture(types)
+    if spec in MODEL_PRESETS:
+        return None
+    if spec in MIXTURE_PRESETS:
+        return load_mixture(spec)
+    p = Path(spec)
+    if p.is_file():
+        d, _ = load_json(p)
+        if isinstance(d, dict) and (d.get("format") == MIXTURE_FORMAT or "types" in d):
+            return load_mixture(p)
+    return None
+
+
+def need_two_levels(model: TrustModel, command: str) -> None:
+    """The belief-grid solver handles two trust levels; say what to use for more."""
+    if model.n_trust != 2:
+        alternative = {
+            "solve": "use --solver point",
+            "plot-q": "solve it with 'trustseek solve --solver point' (the plot needs a two-level model)",
+            "simulate": "solve it with 'trustseek solve --solver point --out policy.json' and pass --policy policy.json",
+        }[command]
+        raise TrustseekError([f"the default grid solver needs two trust levels; this model has {model.n_trust}: {alternative}"])
 
 
 def parse_counts(text: str, complexities: Sequence[str], option: str = "--counts") -> tuple[int, ...]:

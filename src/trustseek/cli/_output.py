@@ -11,7 +11,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import check_output, console, make_table, print_json
+from ._app import check_output, console, make_table, print_json, progress_task
 
 
 def check_plots_folder(plots: Path | None) -> None:
@@ -38,6 +38,13 @@ def print_wide(table: Table) -> None:
     from rich.console import Console
 
     (console if console.is_terminal else Console(width=400)).print(table)
+
+
+def run_selection(select, frame, quiet: bool, tr: tuple[str, ...], em: tuple[str, ...], **how):
+    """A model selection (``select_levels``, ``select_types``) on the inputs ``tr`` and ``em``,
+    with its progress bar; ``how`` its other arguments."""
+    with progress_task(quiet, "model selection") as update:
+        return select(frame, progress=lambda what, d, t: update(d, t, what), transition_inputs=tr, emission_inputs=em, **how)
 
 
 def print_selection(

@@ -1,12 +1,14 @@
 """Reading a model or supervisor types and the log they need, for the analysis commands (decode,
-predict, validate, personalize), and carrying the log's --keep columns into their output; the
-widened-range note of the selection commands."""
+predict, validate, personalize), or the log with the inputs --transitions-on and --emissions-on
+name, for those that fit; carrying the log's --keep columns into their output; the widened-range
+note of the selection commands."""
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from .. import estimation  # its names load on first use, when a command runs
 from ..errors import TrustseekError
 
 if TYPE_CHECKING:
@@ -123,3 +125,44 @@ def write_log(frame, path: Path) -> None:
     from ..data.trials import write_trials
 
     write_trials(frame, path)
+
+
+def named_inputs(reading: LogReading, transitions_on, emissions_on) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
+    """The transition and emission inputs named by the flags (canonical ones or the --mapping
+    file's ``inputs``), and the canonical columns they need."""
+    declared = () if reading.column_mapping is None else tuple(reading.column_mapping.inputs)
+    tr = _inputs(transitions_on, estimation.PAPER_TRANSITION_INPUTS, "--transitions-on", declared)
+    em = _inputs(emissions_on, estimation.PAPER_EMISSION_INPUTS, "--emissions-on", declared)
+    return tr, em, tuple(c for c in dict.fromkeys((*tr, *em)) if c in estimation.MODEL_INPUTS)
+
+
+def read_with_inputs(log: Path, reading: LogReading, transitions_on: str | None, emissions_on: str | None):
+    """The inputs named by the flags (:func:`named_inputs`) and the log with the columns they need."""
+    tr, em, needed = named_inputs(reading, transitions_on, emissions_on)
+    return tr, em, reading.read(log, needed)
+
+
+def general_inputs(tr: tuple[str, ...], em: tuple[str, ...]) -> bool:
+    """True when the inputs are not a trust model's: the fit is a general model (trustseek.iohmm/1)."""
+    return not estimation.trust_iohmm.is_trust_structure(tr, em)
+
+
+#: the file suffixes of a per-trial output (posteriors, predictions)
+POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
+
+
+def _inputs(text: str | None, default: tuple[str, ...], flag: str, declared: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """The inputs ``flag`` names (``default`` when not given, none for 'none')."""
+    if text is None:
+        return default
+    if text.strip().lower() in ("", "none", "-"):
+        return ()
+    cols = tuple(c.strip() for c in text.split(",") if c.strip())
+    allowed = [*estimation.MODEL_INPUTS, *declared]
+    bad = [c for c in cols if c not in allowed]
+    if bad:
+        where = f"the mapping's inputs {list(declared)}" if declared else "the inputs a --mapping file declares ('inputs')"
+        raise TrustseekError([f"{flag}: {c!r} is not one of {list(estimation.MODEL_INPUTS)}, {where} (or 'none')" for c in bad])
+    if len(set(cols)) != len(cols):
+        raise TrustseekError([f"{flag}: an input is named twice: {list(cols)}"])
+    return cols

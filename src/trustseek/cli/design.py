@@ -13,7 +13,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsed
 
 from ..errors import TrustseekError
 from ..parallel import MAX_JOBS
-from ._app import check_output, command, console, make_table, print_json, progress_bar
+from ._app import bar_task, check_output, command, console, make_table, print_json, progress_bar
 from ._options import JsonOpt, QuietOpt, TaskOpt
 
 
@@ -201,15 +201,10 @@ def _run(cfg, jobs: int, scheduler: str | None, quiet: bool, search_grid: tuple[
     columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
     try:
         with progress_bar(quiet, *columns) as bar:
-            tid = bar.add_task("design replicates", total=None)
-
-            def progress(done: int, total: int) -> None:
-                bar.update(tid, completed=done, total=total)
-
-            result = run_design(cfg, jobs=jobs, client=client, progress=progress)
+            result = run_design(cfg, jobs=jobs, client=client, progress=bar_task(bar, "design replicates"))
             search = None
             if search_grid is not None:
-                tid = bar.add_task("ask-probability search", total=None)
+                progress = bar_task(bar, "ask-probability search")
                 search = ask_search(cfg, *search_grid, jobs=jobs, client=client, progress=progress)
     finally:
         if client is not None:

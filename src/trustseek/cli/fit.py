@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Any
 
 import typer
 from rich.markup import escape
 
+from .. import estimation  # its names load on first use, when a command runs
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
 from ..parallel import MAX_JOBS
@@ -20,160 +21,123 @@ from ._app import (
     print_json,
     print_written,
     progress_bar,
-    progress_task,
     write_atomic,
 )
 from ._options import (
     FROM_OPTIONS,
     AsForFitEmissionsOpt,
     AsForFitTransitionsOpt,
+    LogArg,
     LogReading,
+    MaxIterOpt,
+    OneRowPerTrialLogArg,
     PrintJsonOpt,
     QuietOpt,
     RatingPerOpt,
+    SeedOpt,
     SelectionJobsOpt,
     log_options,
     widen_option,
 )
-from ._output import cells_table, check_plots_folder, fit_summary, print_intervals_note, print_selection, print_warnings
-from ._reading import keep_columns, load_for_decoding, read_for_types, widened_note, write_log
-
-# The fit and data modules (pandas) load only when a command of this group runs,
-# so that the rest of the CLI starts fast.
-
-
-def _fit():
-    from .. import estimation
-
-    return estimation
-
-
-def _named_inputs(reading: LogReading, transitions_on, emissions_on) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
-    """The transition and emission inputs named by the flags (canonical ones or the --mapping
-    file's ``inputs``), and the canonical columns they need."""
-    declared = () if reading.column_mapping is None else tuple(reading.column_mapping.inputs)
-    tr = _inputs(transitions_on, _fit().PAPER_TRANSITION_INPUTS, "--transitions-on", declared)
-    em = _inputs(emissions_on, _fit().PAPER_EMISSION_INPUTS, "--emissions-on", declared)
-    return tr, em, tuple(c for c in dict.fromkeys((*tr, *em)) if c in _fit().MODEL_INPUTS)
-
-
-def read_with_inputs(log: Path, reading: LogReading, transitions_on: str | None, emissions_on: str | None):
-    """The inputs named by the flags (:func:`_named_inputs`) and the log with the columns they need."""
-    tr, em, needed = _named_inputs(reading, transitions_on, emissions_on)
-    return tr, em, reading.read(log, needed)
-
-
-def general_inputs(tr: tuple[str, ...], em: tuple[str, ...]) -> bool:
-    """True when the inputs are not a trust model's: the fit is a general model (trustseek.iohmm/1)."""
-    return not _fit().trust_iohmm.is_trust_structure(tr, em)
-
-
-POSTERIOR_SUFFIXES = (".csv", ".parquet", ".pq")
-
-
-def _inputs(text: str | None, default: tuple[str, ...], flag: str, declared: tuple[str, ...] = ()) -> tuple[str, ...]:
-    if text is None:
-        return default
-    if text.strip().lower() in ("", "none", "-"):
-        return ()
-    cols = tuple(c.strip() for c in text.split(",") if c.strip())
-    allowed = [*_fit().MODEL_INPUTS, *declared]
-    bad = [c for c in cols if c not in allowed]
-    if bad:
-        where = f"the mapping's inputs {list(declared)}" if declared else "the inputs a --mapping file declares ('inputs')"
-        raise TrustseekError([f"{flag}: {c!r} is not one of {list(_fit().MODEL_INPUTS)}, {where} (or 'none')" for c in bad])
-    if len(set(cols)) != len(cols):
-        raise TrustseekError([f"{flag}: an input is named twice: {list(cols)}"])
-    return cols
-
-
-# fit's options
-_TransitionsOnOpt = typer.Option(
-    None,
-    "--transitions-on",
-    help="Comma-separated inputs of the trust transitions (default: complexity, robot_action, experience; 'none' for "
-    "none); the mapping's 'inputs' may be named too: the fit is then a general model (trustseek.iohmm/1).",
+from ._output import (
+    cells_table,
+    check_plots_folder,
+    fit_summary,
+    print_intervals_note,
+    print_selection,
+    print_warnings,
+    run_selection,
 )
-_EmissionsOnOpt = typer.Option(
-    None,
-    "--emissions-on",
-    help="Comma-separated inputs of the human-action probabilities (default: complexity, robot_action; 'none' for "
-    "none); the mapping's 'inputs' may be named too.",
+from ._reading import (
+    POSTERIOR_SUFFIXES,
+    general_inputs,
+    keep_columns,
+    load_for_decoding,
+    named_inputs,
+    read_for_types,
+    read_with_inputs,
+    widened_note,
+    write_log,
 )
-_BootstrapOpt = typer.Option(
-    0,
-    "--bootstrap",
-    "-b",
-    min=0,
-    max=10_000,
-    help="Participant-level bootstrap resamples for 95% intervals (0 = none; at least 200 advised, fewer warn).",
-)
-_PriorOpt = typer.Option(
-    0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."
-)
-_TolOpt = typer.Option(
-    1e-8, "--tol", callback=check_tol, help="Stop when the relative change of the log-likelihood is below this (> 0)."
-)
-_JobsOpt = typer.Option(
-    None,
-    "--jobs",
-    "-j",
-    min=1,
-    max=MAX_JOBS,
-    help="Threads for the fit and processes for the bootstrap (default: all cores); numbers do not depend on it.",
-)
-_OutOpt = typer.Option(
-    None, "--out", "-o", help="Write the fitted trust model (JSON, same format as the presets; a general model for other inputs)."
-)
-_PosteriorsOpt = typer.Option(
-    None, "--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet)."
-)
-_PlotsOpt = typer.Option(None, "--plots", help="Write the emission and transition figures (Fig. 4-6 style) into this directory.")
-_FillFromOpt = typer.Option(
-    None,
-    "--fill-from",
-    help="Take the rows the data never estimated (e.g. every ask row of a study without asking) from this model "
-    "(a preset name, e.g. paper, or a JSON file with the same levels and complexities).",
-)
-_RatingOpt = typer.Option(
-    None,
-    "--rating",
-    help="The log's self-reported trust rating column, fitted jointly as a second emission of the trust "
-    "(empty cells: no rating); or give 'rating' in the mapping file.",
-)
-_RatingLevelsOpt = typer.Option(
-    None, "--rating-levels", help="The rating's levels, lowest first, comma-separated (e.g. 1,2,3,4,5,6,7 or low,mid,high)."
-)
-_RatingBinsOpt = typer.Option(
-    None, "--rating-bins", help="Bin a numeric rating at these edges, comma-separated (e.g. 0,25,50,75,100)."
-)
-_RatingsOnlyOpt = typer.Option(False, "--ratings-only", help="Leave the human actions out: fit the trust on the ratings alone.")
 
 
 @command("fit")
 @log_options(keep=True)
 def fit(
-    log: Annotated[Path, typer.Argument(help="Trial log (CSV or Parquet), one row per trial.")],
-    preset: Annotated[str, typer.Option("--preset", help="Model structure preset (paper).")] = "paper",
-    levels: Annotated[int, typer.Option("--levels", "-k", min=2, max=8, help="Number of trust levels.")] = 2,
-    transitions_on: str | None = _TransitionsOnOpt,
-    emissions_on: str | None = _EmissionsOnOpt,
-    restarts: Annotated[int, typer.Option("--restarts", "-r", min=1, max=1000, help="Random restarts; the best is kept.")] = 10,
-    bootstrap: int = _BootstrapOpt,
-    prior: float = _PriorOpt,
-    seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed (restarts and bootstrap).")] = 0,
-    tol: float = _TolOpt,
-    max_iter: Annotated[int, typer.Option("--max-iter", min=1, help="Iteration cap per restart (E-steps).")] = 1000,
-    jobs: int | None = _JobsOpt,
-    out: Path | None = _OutOpt,
-    posteriors: Path | None = _PosteriorsOpt,
-    plots: Path | None = _PlotsOpt,
-    fill_from: str | None = _FillFromOpt,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the fitted model and diagnostics as one JSON object.")] = False,
-    rating: str | None = _RatingOpt,
-    rating_levels: str | None = _RatingLevelsOpt,
-    rating_bins: str | None = _RatingBinsOpt,
-    ratings_only: bool = _RatingsOnlyOpt,
+    log: Path = OneRowPerTrialLogArg,
+    preset: str = typer.Option("paper", "--preset", help="Model structure preset (paper)."),
+    levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Number of trust levels."),
+    transitions_on: str | None = typer.Option(
+        None,
+        "--transitions-on",
+        help="Comma-separated inputs of the trust transitions (default: complexity, robot_action, experience; 'none' for "
+        "none); the mapping's 'inputs' may be named too: the fit is then a general model (trustseek.iohmm/1).",
+    ),
+    emissions_on: str | None = typer.Option(
+        None,
+        "--emissions-on",
+        help="Comma-separated inputs of the human-action probabilities (default: complexity, robot_action; 'none' for "
+        "none); the mapping's 'inputs' may be named too.",
+    ),
+    restarts: int = typer.Option(10, "--restarts", "-r", min=1, max=1000, help="Random restarts; the best is kept."),
+    bootstrap: int = typer.Option(
+        0,
+        "--bootstrap",
+        "-b",
+        min=0,
+        max=10_000,
+        help="Participant-level bootstrap resamples for 95% intervals (0 = none; at least 200 advised, fewer warn).",
+    ),
+    prior: float = typer.Option(
+        0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."
+    ),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed (restarts and bootstrap)."),
+    tol: float = typer.Option(
+        1e-8, "--tol", callback=check_tol, help="Stop when the relative change of the log-likelihood is below this (> 0)."
+    ),
+    max_iter: int = MaxIterOpt,
+    jobs: int | None = typer.Option(
+        None,
+        "--jobs",
+        "-j",
+        min=1,
+        max=MAX_JOBS,
+        help="Threads for the fit and processes for the bootstrap (default: all cores); numbers do not depend on it.",
+    ),
+    out: Path | None = typer.Option(
+        None,
+        "--out",
+        "-o",
+        help="Write the fitted trust model (JSON, same format as the presets; a general model for other inputs).",
+    ),
+    posteriors: Path | None = typer.Option(
+        None, "--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet)."
+    ),
+    plots: Path | None = typer.Option(
+        None, "--plots", help="Write the emission and transition figures (Fig. 4-6 style) into this directory."
+    ),
+    fill_from: str | None = typer.Option(
+        None,
+        "--fill-from",
+        help="Take the rows the data never estimated (e.g. every ask row of a study without asking) from this model "
+        "(a preset name, e.g. paper, or a JSON file with the same levels and complexities).",
+    ),
+    as_json: bool = typer.Option(False, "--json", help="Print the fitted model and diagnostics as one JSON object."),
+    rating: str | None = typer.Option(
+        None,
+        "--rating",
+        help="The log's self-reported trust rating column, fitted jointly as a second emission of the trust "
+        "(empty cells: no rating); or give 'rating' in the mapping file.",
+    ),
+    rating_levels: str | None = typer.Option(
+        None, "--rating-levels", help="The rating's levels, lowest first, comma-separated (e.g. 1,2,3,4,5,6,7 or low,mid,high)."
+    ),
+    rating_bins: str | None = typer.Option(
+        None, "--rating-bins", help="Bin a numeric rating at these edges, comma-separated (e.g. 0,25,50,75,100)."
+    ),
+    ratings_only: bool = typer.Option(
+        False, "--ratings-only", help="Leave the human actions out: fit the trust on the ratings alone."
+    ),
     rating_per: str | None = RatingPerOpt,
     reading: LogReading = FROM_OPTIONS,
     quiet: bool = QuietOpt,
@@ -183,11 +147,11 @@ def fit(
     rating column (--rating or the mapping's 'rating') the fit is joint on the human actions
     and the ratings, and the model file carries P(rating | trust)."""
     _check_fit_paths(log, reading, fill_from, out, posteriors, plots)
-    tr, em, needed = _named_inputs(reading, transitions_on, emissions_on)
+    tr, em, needed = named_inputs(reading, transitions_on, emissions_on)
     rated = rating_entry(rating, rating_levels, rating_bins, rating_per)
     frame = reading.read(log, needed, rated, not ratings_only)
     options = FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs)
-    settings = {"levels": levels, "options": options, "bootstrap": bootstrap, "prior": prior}
+    settings: dict[str, Any] = {"levels": levels, "options": options, "bootstrap": bootstrap, "prior": prior}
     settings |= {"rating": _rated(frame, log, ratings_only), "actions": not ratings_only}
     general = general_inputs(tr, em)
     if general and fill_from is not None:
@@ -196,9 +160,9 @@ def fit(
     with progress_bar(quiet or as_json) as bar:
         settings["progress"] = _progress(bar, options.starts, bootstrap)
         if general:
-            result = _fit().fit.fit_model(frame, em, tr, **settings)
+            result = estimation.fit_model(frame, em, tr, **settings)
         else:
-            result = _fit().fit_trust_model(frame, preset=preset, transition_inputs=tr, emission_inputs=em, **settings)
+            result = estimation.fit_trust_model(frame, preset=preset, transition_inputs=tr, emission_inputs=em, **settings)
     drawn = result.model  # the figures show only what the data estimated
     if fill_from is not None and result.model.not_estimated:
         from ..model.presets import load_model
@@ -209,7 +173,8 @@ def fit(
     write_atomic(out, result.model.save)
     write_atomic(posteriors, lambda tmp: write_log(keep_columns(result.posteriors(), frame, reading.keep), tmp))
     if plots is not None:
-        _plot(result, drawn, plots, general, preset == "paper" and (tr, em) == _paper_inputs())
+        paper_like = preset == "paper" and tr == estimation.PAPER_TRANSITION_INPUTS and em == estimation.PAPER_EMISSION_INPUTS
+        _plot(result, drawn, plots, general, paper_like)
     if as_json:
         print_json({**result.to_dict(), "cells": result.cells()})
         return
@@ -273,10 +238,6 @@ def _rated(frame, log: Path, ratings_only: bool) -> str | None:
     return rated
 
 
-def _paper_inputs() -> tuple[tuple[str, ...], tuple[str, ...]]:
-    return _fit().PAPER_TRANSITION_INPUTS, _fit().PAPER_EMISSION_INPUTS
-
-
 def _progress(bar, restarts: int, bootstrap: int):
     """A progress callback counting the restarts, then the bootstrap's replicates."""
     task = bar.add_task("restarts", total=restarts + bootstrap)
@@ -312,11 +273,11 @@ def _print_fit(result, tr, em, general: bool) -> None:
     summary = fit_summary(result, "restarts", len(result.restart_logliks))
     if general:
         inputs = f"emissions on {', '.join(em) or 'none'}; transitions on {', '.join(tr) or 'none'}"
-        console.print(cells_table(f"Fitted model (inputs: {inputs}; {n})", result, _fit().MIN_EVENTS, escape_cells=True))
+        console.print(cells_table(f"Fitted model (inputs: {inputs}; {n})", result, estimation.MIN_EVENTS, escape_cells=True))
         print_intervals_note(result.intervals)
         console.print(summary, highlight=False)
     else:
-        console.print(cells_table(f"Fitted trust model ({n})", result, _fit().MIN_EVENTS))
+        console.print(cells_table(f"Fitted trust model ({n})", result, estimation.MIN_EVENTS))
         console.print(summary)
         print_intervals_note(result.intervals)
     print_warnings(result.warnings)
@@ -325,16 +286,14 @@ def _print_fit(result, tr, em, general: bool) -> None:
 @command("decode")
 @log_options(keep=True)
 def decode_cmd(
-    log: Annotated[Path, typer.Argument(help="Trial log (CSV or Parquet).")],
-    model: Annotated[
-        Path,
-        typer.Option(
-            "--model",
-            "-m",
-            help="Trust model or general model JSON (from 'trustseek fit') or supervisor types (from 'trustseek fit-types').",
-        ),
-    ],
-    out: Annotated[Path, typer.Option("--out", "-o", help="Output file (.csv or .parquet).")] = Path("posteriors.csv"),
+    log: Path = LogArg,
+    model: Path = typer.Option(
+        ...,
+        "--model",
+        "-m",
+        help="Trust model or general model JSON (from 'trustseek fit') or supervisor types (from 'trustseek fit-types').",
+    ),
+    out: Path = typer.Option(Path("posteriors.csv"), "--out", "-o", help="Output file (.csv or .parquet)."),
     reading: LogReading = FROM_OPTIONS,
 ) -> None:
     """Under supervisor types, also each participant's most probable ``type`` and P(type | trials)
@@ -352,7 +311,7 @@ def decode_cmd(
 
         post = decode_types(frame, types)
     else:
-        post = _fit().decode(frame, types.models[0] if isinstance(types, TypeMixture) else types)
+        post = estimation.decode(frame, types.models[0] if isinstance(types, TypeMixture) else types)
     post = keep_columns(post, frame, reading.keep)
     write_atomic(out, lambda tmp: write_log(post, tmp))
     console.print(f"wrote {len(post)} trials to {out}")
@@ -361,25 +320,21 @@ def decode_cmd(
 @command("select")
 @log_options()
 def select(
-    log: Annotated[Path, typer.Argument(help="Trial log (CSV or Parquet).")],
-    max_levels: Annotated[int, typer.Option("--max-levels", min=1, max=8, help="Compare 1..this many trust levels.")] = 4,
-    folds: Annotated[int, typer.Option("--folds", min=2, help="Folds over participants for the held-out log-likelihood.")] = 5,
-    restarts: Annotated[
-        int | None,
-        typer.Option(
-            "--restarts",
-            "-r",
-            min=1,
-            max=1000,
-            help="Random starts per fit (default: max(10, free parameters / 4)); each fit also starts from the "
-            "fit with one level fewer, each level split in two.",
-        ),
-    ] = None,
-    prior: Annotated[float, typer.Option("--prior", min=0.0, help="Dirichlet pseudo-count (MAP).")] = 0.0,
-    seed: Annotated[int, typer.Option("--seed", min=0, help="Random seed.")] = 0,
-    tol: Annotated[
-        float, typer.Option("--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0).")
-    ] = 1e-6,
+    log: Path = LogArg,
+    max_levels: int = typer.Option(4, "--max-levels", min=1, max=8, help="Compare 1..this many trust levels."),
+    folds: int = typer.Option(5, "--folds", min=2, help="Folds over participants for the held-out log-likelihood."),
+    restarts: int | None = typer.Option(
+        None,
+        "--restarts",
+        "-r",
+        min=1,
+        max=1000,
+        help="Random starts per fit (default: max(10, free parameters / 4)); each fit also starts from the "
+        "fit with one level fewer, each level split in two.",
+    ),
+    prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count (MAP)."),
+    seed: int = SeedOpt,
+    tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
     transitions_on: str | None = AsForFitTransitionsOpt,
     emissions_on: str | None = AsForFitEmissionsOpt,
     widen: bool = widen_option(8, "1..--max-levels"),
@@ -389,20 +344,10 @@ def select(
     quiet: bool = QuietOpt,
 ) -> None:
     tr, em, frame = read_with_inputs(log, reading, transitions_on, emissions_on)
-    with progress_task(quiet or as_json, "model selection") as update:
-        rows = _fit().select_levels(
-            frame,
-            levels=tuple(range(1, max_levels + 1)),
-            folds=folds,
-            options=FitOptions(restarts=restarts, seed=seed, tol=tol, n_jobs=1),
-            prior=prior,
-            progress=lambda what, d, t: update(d, t, what),
-            transition_inputs=tr,
-            emission_inputs=em,
-            widen=widen,
-            jobs=jobs,
-        )
-    warnings = _fit().selection_warnings(rows)
+    options = FitOptions(restarts=restarts, seed=seed, tol=tol, n_jobs=1)
+    how = {"folds": folds, "options": options, "widen": widen, "jobs": jobs, "prior": prior}
+    rows = run_selection(estimation.select_levels, frame, quiet or as_json, tr, em, levels=tuple(range(1, max_levels + 1)), **how)
+    warnings = estimation.selection_warnings(rows)
     warnings[:0] = widened_note(rows, "levels", max_levels)
     starts = " (random, and the fit with one level fewer split)"
     print_selection("Number of trust levels", "levels", rows, folds, warnings, as_json, starts=starts)

@@ -22,10 +22,21 @@ from ._app import (
     print_json,
     write_atomic,
 )
-from ._options import FROM_OPTIONS, JsonOpt, LogReading, ModelOpt, PrintJsonOpt, TaskOpt, log_options, model_and_task
+from ._options import (
+    FROM_OPTIONS,
+    JsonOpt,
+    LogReading,
+    ModelOpt,
+    PolicyOutOpt,
+    PrintJsonOpt,
+    TaskOpt,
+    log_options,
+    mixture_of,
+    model_and_task,
+    need_two_levels,
+)
 
 if TYPE_CHECKING:
-    from ..model.core import TrustModel
     from ..model.mixture import TypeMixture
     from ..policies.base import Policy
 
@@ -34,42 +45,12 @@ UpdateOpt = typer.Option(
 )
 
 
-def mixture_of(spec: str) -> TypeMixture | None:
-    """The supervisor types ``spec`` names when it is a mixture (a mixture preset such as
-    paper+conservative, or a trustseek.mixture/1 file), else None (a plain trust model)."""
-    from ..model.jsonfile import load_json
-    from ..model.mixture import MIXTURE_FORMAT
-    from ..model.presets import MIXTURE_PRESETS, MODEL_PRESETS, load_mixture
-
-    if spec in MODEL_PRESETS:
-        return None
-    if spec in MIXTURE_PRESETS:
-        return load_mixture(spec)
-    p = Path(spec)
-    if p.is_file():
-        d, _ = load_json(p)
-        if isinstance(d, dict) and (d.get("format") == MIXTURE_FORMAT or "types" in d):
-            return load_mixture(p)
-    return None
-
-
 def type_posterior(mixture: TypeMixture, history: Path, participant: str | None, session: str | None):
     """The type posterior of one person from their earlier trials (--history, --participant, --session)."""
     from ..pomdp.supervisor_types import type_belief_from_log
 
     frame = LogReading().read(history, ("complexity", "robot_action", "experience"))
     return type_belief_from_log(mixture, frame, participant=participant, session=session)
-
-
-def need_two_levels(model: TrustModel, command: str) -> None:
-    """The belief-grid solver handles two trust levels; say what to use for more."""
-    if model.n_trust != 2:
-        alternative = {
-            "solve": "use --solver point",
-            "plot-q": "solve it with 'trustseek solve --solver point' (the plot needs a two-level model)",
-            "simulate": "solve it with 'trustseek solve --solver point --out policy.json' and pass --policy policy.json",
-        }[command]
-        raise TrustseekError([f"the default grid solver needs two trust levels; this model has {model.n_trust}: {alternative}"])
 
 
 @command("solve")
@@ -82,7 +63,7 @@ def solve(
     tol: float = typer.Option(
         1e-9, "--tol", callback=check_tol, help="Value iteration: stop when the certified error bound is below this (> 0)."
     ),
-    out: Path | None = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
+    out: Path | None = PolicyOutOpt,
     as_json: bool = JsonOpt,
     solver: str | None = typer.Option(
         None,
@@ -112,7 +93,7 @@ def solve(
         None, "--session", help="With --history: the column that separates sessions (trust restarts in each)."
     ),
 ) -> None:
-    from ..model.presets import load_mixture, load_task
+    from ..model.presets import load_task
     from ..pomdp.problem import AssistancePOMDP
     from ..pomdp.supervisor_types import type_aware_problem, type_marginal
     from ..solvers import make_solver, summarize
@@ -120,15 +101,16 @@ def solve(
     _check_solve(belief_update, method, solver, gap, max_seconds)
     inputs = ((model, "--model file"), (task, "--task file"), (types, "--types file"), (history, "--history log"))
     check_outputs((out, "--out", (".json",)), inputs=inputs)
-    mixture = load_mixture(types) if types is not None else mixture_of(model)
+    mixture = mixture_of(model, types)
     if mixture is None and (history is not None or participant is not None or session is not None):
         raise TrustseekError(["--history, --participant and --session need supervisor types (--types or a mixture with --model)"])
     if mixture is not None:
         solver = solver or DEFAULT_TYPE_AWARE_SOLVER
         prior = None if history is None else type_posterior(mixture, history, participant, session)
         options = {"belief_update": belief_update, "grid": grid, "method": method, "tol": tol, "max_seconds": max_seconds}
-        policy = solvers.solve_type_aware(mixture, load_task(task), solver, gap or 1e-3, type_belief=prior, **options)
-        pomdp = type_aware_problem(mixture if prior is None else mixture.with_weights(list(prior)), load_task(task))
+        t = load_task(task)
+        policy = solvers.solve_type_aware(mixture, t, solver, gap or 1e-3, type_belief=prior, **options)
+        pomdp = type_aware_problem(mixture if prior is None else mixture.with_weights(list(prior)), t)
     else:
         solver = solver or "grid"
         pomdp = AssistancePOMDP(*model_and_task(model, task))
@@ -241,7 +223,7 @@ def agnostic(
     model: str = ModelOpt,
     task: str = TaskOpt,
     data: Path | None = typer.Option(None, "--data", help="Estimate P(intervene | C) from this trial log instead of the model."),
-    out: Path | None = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
+    out: Path | None = PolicyOutOpt,
     as_json: bool = PrintJsonOpt,
     reading: LogReading = FROM_OPTIONS,
 ) -> None:

@@ -10,7 +10,7 @@ import typer
 from ..solvers.defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
 from ..vocab import PAPER_BLOCK_COUNTS
 from ._app import FIGURE_SUFFIXES, check_outputs, command, console, make_table, print_json, progress_task
-from ._options import JsonOpt, ModelOpt, TaskOpt, model_and_task, parse_counts
+from ._options import JsonOpt, ModelOpt, PolicyOutOpt, TaskOpt, model_and_task, parse_counts
 
 
 @command("schedule")
@@ -30,7 +30,7 @@ def schedule(
     ),
     order: str = typer.Option("optimal", "--order", help=f"Item order: {', '.join(ORDERS)}."),
     ask_first_hard: bool = typer.Option(False, "--ask-first-hard", help="Always ask on the first high-complexity item."),
-    out: Path | None = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file."),
+    out: Path | None = PolicyOutOpt,
     compare: bool = typer.Option(
         False, "--compare", help="Also compare the schedules (random order + trust-aware, optimal, heuristics)."
     ),

@@ -18,6 +18,10 @@ import typer
 from ..errors import TrustseekError
 from ._app import check_output, check_outputs, command, console, print_json, write_atomic
 
+StudyArg = typer.Argument(..., help="Study id.")
+StudyDbOpt = typer.Option("sqlite:///trustseek.sqlite", "--db", help="Database URL.")
+SummaryJsonOpt = typer.Option(False, "--json", help="Print a JSON summary.")
+
 
 def _check_db(db: str) -> str:
     if "://" not in db:
@@ -201,8 +205,8 @@ def log_to_stderr(level: str) -> Iterator[None]:
 
 @command("export")
 def export_cmd(
-    study: str = typer.Argument(..., help="Study id."),
-    db: str = typer.Option("sqlite:///trustseek.sqlite", "--db", help="Database URL."),
+    study: str = StudyArg,
+    db: str = StudyDbOpt,
     out: Path | None = typer.Option(
         None, "--out", "-o", help="Trial log to write (.csv or .parquet): the canonical format `trustseek fit` reads."
     ),
@@ -214,7 +218,7 @@ def export_cmd(
         "the study's configuration and a data dictionary into this new (or empty) folder.",
     ),
     pilot: bool = typer.Option(False, "--pilot", help="Include the pilot sessions (left out by default)."),
-    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+    as_json: bool = SummaryJsonOpt,
 ) -> None:
     sqlite = _check_existing_sqlite(db)
     if out is None and bundle is None:
@@ -264,12 +268,12 @@ def _stored_study(s, study: str, db: str):
 
 @command("study")
 def study_cmd(
-    study: str = typer.Argument(..., help="Study id."),
-    db: str = typer.Option("sqlite:///trustseek.sqlite", "--db", help="Database URL."),
+    study: str = StudyArg,
+    db: str = StudyDbOpt,
     status: str | None = typer.Option(
         None, "--status", help="Move the study to open, paused or closed (a draft opens; a closed study stays closed)."
     ),
-    as_json: bool = typer.Option(False, "--json", help="Print a JSON summary."),
+    as_json: bool = SummaryJsonOpt,
 ) -> None:
     from ..server.db import open_database
     from ..server.errors import Refused

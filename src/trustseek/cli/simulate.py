@@ -11,7 +11,6 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
 
 from .. import solvers
 from ..errors import TrustseekError
@@ -29,7 +28,7 @@ from ._app import (
     progress_bar,
     write_atomic,
 )
-from ._options import JsonOpt, QuietOpt, TaskOpt, parse_counts
+from ._options import JsonOpt, QuietOpt, TaskOpt, mixture_of, need_two_levels, parse_counts
 
 if TYPE_CHECKING:
     from ..model.core import TrustModel
@@ -176,7 +175,6 @@ class _Population:
         --belief-update and --policy-model are refused with it rather than ignored."""
         from ..model.jsonfile import load_json
         from ..solvers import policy_from_spec
-        from .plan import need_two_levels
 
         if spec == TYPE_AWARE:
             if self.policy_types is None:
@@ -219,13 +217,12 @@ def _population(
     ctx: typer.Context, model: str, types: str | None, policy_model: str | None, concentration, task: str
 ) -> _Population:
     """--model or --types (one of them), --policy-model, --concentration and --task read and checked."""
-    from ..model.presets import load_mixture, load_model, load_task
+    from ..model.presets import load_model, load_task
     from ..pomdp.supervisor_types import product_model
-    from .plan import mixture_of
 
     if types is not None and _given(ctx, "model", "--model"):
         raise TrustseekError(["give the supervisors with --model or with --types, not both"])
-    mixture = load_mixture(types) if types is not None else mixture_of(model)
+    mixture = mixture_of(model, types)
     m = mixture.models[0] if mixture is not None else load_model(model)
     if mixture is not None and mixture.n_types == 1:  # one supervisor type is a trust model
         mixture = None
@@ -391,12 +388,8 @@ def print_comparison(summary: dict) -> None:
     """The console table 'paper vs reproduction'."""
     from ..report import fmt
 
-    table = Table(title="Paper vs reproduction", title_justify="left", show_lines=False)
-    table.add_column("quantity")
-    table.add_column("paper", justify="right")
-    table.add_column("ours", justify="right")
-    table.add_column("95% interval", justify="right")
-    table.add_column("verdict")
+    table = make_table("Paper vs reproduction", "quantity", "paper", "ours", "95% interval", "verdict")
+    table.columns[-1].justify = "left"
     for r in summary["comparison"]:
         iv = r["interval"]
         ivs = f"[{fmt(iv[0])}, {fmt(iv[1])}]" if iv else (r["note"] or "–")

@@ -13,6 +13,7 @@ from ..errors import TrustseekError
 from ..estimation.options import FitOptions
 from ..parallel import MAX_JOBS
 from ._app import (
+    bar_task,
     check_output,
     check_outputs,
     check_tol,
@@ -22,13 +23,22 @@ from ._app import (
     print_json,
     print_written,
     progress_bar,
-    progress_task,
     write_atomic,
 )
-from ._options import FROM_OPTIONS, LogReading, PrintJsonOpt, QuietOpt, SelectionJobsOpt, log_options, widen_option
-from ._output import check_plots_folder, fit_summary, print_selection, print_warnings
-from ._reading import load_for_decoding, read_for_types, widened_note, write_log
-from .fit import POSTERIOR_SUFFIXES, read_with_inputs
+from ._options import (
+    FROM_OPTIONS,
+    LogArg,
+    LogReading,
+    OneRowPerTrialLogArg,
+    PrintJsonOpt,
+    QuietOpt,
+    SeedOpt,
+    SelectionJobsOpt,
+    log_options,
+    widen_option,
+)
+from ._output import check_plots_folder, fit_summary, print_selection, print_warnings, run_selection
+from ._reading import POSTERIOR_SUFFIXES, load_for_decoding, read_for_types, read_with_inputs, widened_note, write_log
 
 TransitionsOnOpt = typer.Option(
     None, "--transitions-on", help="Inputs of the trust transitions (as for fit: complexity, robot_action, experience)."
@@ -77,7 +87,7 @@ def parse_types(text: str) -> tuple[int, ...]:
 @command("fit-types")
 @log_options()
 def fit_types(
-    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial."),
+    log: Path = OneRowPerTrialLogArg,
     types: int = typer.Option(2, "--types", "-m", min=1, max=12, help="Number of supervisor types."),
     differ: str = DifferOpt,
     transitions_on: str | None = TransitionsOnOpt,
@@ -88,7 +98,7 @@ def fit_types(
     bootstrap: int = typer.Option(
         0, "--bootstrap", "-b", min=0, max=10_000, help="Participant bootstrap resamples for 95% intervals."
     ),
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
+    seed: int = SeedOpt,
     tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative log-likelihood tolerance (> 0)."),
     max_iter: int = typer.Option(1000, "--max-iter", min=1, help="E-step cap per start."),
     jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, max=MAX_JOBS, help="Threads (fit) and processes (bootstrap)."),
@@ -111,15 +121,13 @@ def fit_types(
         raise TrustseekError([f"--plots draws trust-model types; types of the named inputs {named} have no figures here"])
     from ..estimation.mixture import fit_types as fit_mixture
 
-    bar = progress_bar(quiet or as_json)
-    with bar:
-        task = bar.add_task("starts", total=restarts)
+    with progress_bar(quiet or as_json) as bar:
         fit = fit_mixture(
             frame,
             types,
             options=FitOptions(restarts=restarts, seed=seed, tol=tol, max_iter=max_iter, n_jobs=jobs),
             differ=differ,
-            progress=lambda d, t: bar.update(task, completed=d, total=t),
+            progress=bar_task(bar, "starts", restarts),
             transition_inputs=tr,
             emission_inputs=em,
         )
@@ -146,15 +154,10 @@ def _bootstrap_types(fit, bootstrap: int, seed: int, jobs: int | None, bar):
     """The types' bootstrap intervals (None without --bootstrap), with a progress bar of their own."""
     if bootstrap <= 0:
         return None
-    task = bar.add_task("bootstrap", total=bootstrap)
     from ..estimation.mixture import TYPE_REFITS, bootstrap_types
 
-    return bootstrap_types(
-        fit,
-        bootstrap,
-        options=replace(TYPE_REFITS, seed=seed, n_jobs=jobs),
-        progress=lambda d, t: bar.update(task, completed=d, total=t),
-    )
+    options = replace(TYPE_REFITS, seed=seed, n_jobs=jobs)
+    return bootstrap_types(fit, bootstrap, options=options, progress=bar_task(bar, "bootstrap", bootstrap))
 
 
 def _types_json(fit, mixture, post, intervals) -> dict:
@@ -229,7 +232,7 @@ def _rely_cells(mixture):
 @command("select-types")
 @log_options()
 def select_types(
-    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
+    log: Path = LogArg,
     types: str = typer.Option("1..4", "--types", help="Numbers of types to compare, e.g. 1..4 or 1,2,3."),
     differ: str = DifferOpt,
     transitions_on: str | None = TransitionsOnOpt,
@@ -238,7 +241,7 @@ def select_types(
     restarts: int = typer.Option(
         10, "--restarts", "-r", min=1, max=1000, help="Starts per fit (and the fit with one type fewer, split)."
     ),
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
+    seed: int = SeedOpt,
     tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
     jobs: int | None = SelectionJobsOpt,
     widen: bool = widen_option(12, "the numbers given"),
@@ -251,19 +254,9 @@ def select_types(
     from ..estimation import selection
 
     tr, em, frame = read_with_inputs(log, reading, transitions_on, emissions_on)
-    with progress_task(quiet or as_json, "model selection") as update:
-        rows = selection.select_types(
-            frame,
-            types=values,
-            folds=folds,
-            options=FitOptions(restarts=restarts, seed=seed, tol=tol, n_jobs=1),
-            differ=differ,
-            progress=lambda what, d, t: update(d, t, what),
-            transition_inputs=tr,
-            emission_inputs=em,
-            widen=widen,
-            jobs=jobs,
-        )
+    options = FitOptions(restarts=restarts, seed=seed, tol=tol, n_jobs=1)
+    how = {"folds": folds, "options": options, "widen": widen, "jobs": jobs, "differ": differ}
+    rows = run_selection(selection.select_types, frame, quiet or as_json, tr, em, types=values, **how)
     warnings = widened_note(rows, "types", max(values)) + selection.type_selection_warnings(rows)
     weights = {"weights": lambda r: ", ".join(f"{w:.2f}" for w in r["weights"])}
     print_selection("Number of supervisor types", "types", rows, folds, warnings, as_json, extra=weights)
@@ -272,7 +265,7 @@ def select_types(
 @command("personalize")
 @log_options()
 def personalize(
-    log: Path = typer.Argument(..., help="Trial log (CSV or Parquet)."),
+    log: Path = LogArg,
     model: str = typer.Option(
         ..., "--model", "-m", help="The centre: a trust model or types JSON (e.g. from fit / fit-types), or a preset name."
     ),

@@ -18,13 +18,13 @@ from ._options import (
     AsForFitEmissionsOpt,
     AsForFitTransitionsOpt,
     LogReading,
+    MaxIterOpt,
     QuietOpt,
     RatingPerOpt,
     log_options,
     processes_option,
 )
-from ._reading import keep_columns, read_for_types, write_log
-from .fit import POSTERIOR_SUFFIXES, general_inputs, read_with_inputs
+from ._reading import POSTERIOR_SUFFIXES, general_inputs, keep_columns, read_for_types, read_with_inputs, write_log
 
 BootstrapOpt = typer.Option(
     1000, "--bootstrap", "-b", min=0, max=10_000, help="Participant-bootstrap resamples for the 95% intervals (0 = none)."
@@ -80,7 +80,7 @@ def predict(
     prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count of the held-out fits (as for fit)."),
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed (folds, restarts, bootstrap)."),
     tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative log-likelihood tolerance of each fit (> 0)."),
-    max_iter: int = typer.Option(1000, "--max-iter", min=1, help="Iteration cap per restart (E-steps)."),
+    max_iter: int = MaxIterOpt,
     jobs: int | None = processes_option("the held-out folds' fits"),
     bootstrap: int = BootstrapOpt,
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the per-trial predictions (CSV or Parquet)."),
