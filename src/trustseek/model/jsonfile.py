@@ -55,6 +55,22 @@ class UnknownComplexityError(ModelError, KeyError):
     failed lookup by name)."""
 
 
+def complexity_index(complexities: Sequence[str], name: str) -> int:
+    """The index of complexity ``name`` among ``complexities`` (a model's or a task's)."""
+    try:
+        return complexities.index(name)
+    except ValueError:
+        raise UnknownComplexityError([f"unknown complexity {name!r}; expected one of {list(complexities)}"]) from None
+
+
+def read_notes(d: Mapping[str, Any], problems: list[str]) -> str:
+    """A file's ``notes`` (empty when absent): a string."""
+    notes = d.get("notes", "")
+    if not isinstance(notes, str):
+        problems.append(f"notes must be a string, got {notes!r}")
+    return notes
+
+
 def json_safe(obj: Any) -> Any:
     """``obj`` as plain JSON values: every NaN or infinite float becomes None (e.g. a threshold
     that does not exist because a policy's ask region is not an interval), numpy scalars and

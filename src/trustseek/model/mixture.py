@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from .core import TrustModel
-from .jsonfile import JsonFile, ModelError, build, freeze_arrays, raise_problems
+from .jsonfile import JsonFile, ModelError, build, freeze_arrays, raise_problems, read_notes
 
 MIXTURE_FORMAT = "trustseek.mixture/1"
 
@@ -173,9 +173,7 @@ class TypeMixture(JsonFile):
                 continue
             names.append(name)
             weights.append(float(weight))
-        notes = d.get("notes", "")
-        if not isinstance(notes, str):
-            problems.append(f"notes must be a string, got {notes!r}")
+        notes = read_notes(d, problems)
         return build(problems, source, lambda: cls(tuple(names), np.asarray(weights), tuple(models), notes))
 
 

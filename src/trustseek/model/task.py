@@ -23,10 +23,10 @@ from .jsonfile import (
     ATOL,
     JsonFile,
     ModelError,
-    UnknownComplexityError,
     build,
     check_names,
     check_row_array,
+    complexity_index,
     fmt_number,
     freeze_arrays,
     get_key,
@@ -119,10 +119,7 @@ class Task(JsonFile):
         return problems
 
     def complexity_index(self, name: str) -> int:
-        try:
-            return self.complexities.index(name)
-        except ValueError:
-            raise UnknownComplexityError([f"unknown complexity {name!r}; expected one of {list(self.complexities)}"]) from None
+        return complexity_index(self.complexities, name)
 
     def p_experience(self, c: int, a: int, o: int) -> np.ndarray:
         """P(E_{t+1} | o_t, C_t = c, a_t = a) as a length-2 array over (faulty, reliable)."""
