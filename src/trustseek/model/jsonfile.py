@@ -274,13 +274,12 @@ def read_text(path: str | Path, kind: str, error: type[TrustseekError], encoding
         raise error([f"is not UTF-8 text (byte {exc.start}){hint}"], source) from None
 
 
-def load_json(path: str | Path, expect: type | None = dict) -> tuple[Any, str]:
-    """The parsed JSON of the file at ``path`` and the file's name (for error messages).
+def load_json(path: str | Path) -> tuple[Any, str]:
+    """The parsed JSON object of the file at ``path`` and the file's name (for error messages).
 
-    Every way a file can fail to be JSON is a :class:`ModelError` naming the file: missing,
-    a directory, unreadable, not UTF-8 text (binary or another encoding), invalid JSON (with
-    line and column), the non-standard ``NaN``/``Infinity`` literals, and (with ``expect``,
-    an object by default) the wrong top-level type.
+    Every way a file can fail to be a JSON object is a :class:`ModelError` naming the file:
+    missing, a directory, unreadable, not UTF-8 text (binary or another encoding), invalid JSON
+    (with line and column), the non-standard ``NaN``/``Infinity`` literals, another top-level type.
     """
     source = str(path)
     text = read_text(path, "JSON", ModelError, encoding="utf-8-sig", hint=": save it as UTF-8 JSON")
@@ -297,9 +296,8 @@ def load_json(path: str | Path, expect: type | None = dict) -> tuple[Any, str]:
         raise ModelError(["invalid JSON: nested too deeply"], source) from None
     if duplicates:
         raise ModelError(duplicates, source)
-    if expect is not None and not isinstance(data, expect):
-        kind = "an object" if expect is dict else expect.__name__
-        raise ModelError([f"the top level must be {kind} ({{...}}), got {type(data).__name__}"], source)
+    if not isinstance(data, dict):
+        raise ModelError([f"the top level must be an object ({{...}}), got {type(data).__name__}"], source)
     return data, source
 
 

@@ -180,13 +180,13 @@ def _belief_start(runner: PolicyRunner, m: int) -> tuple[ScalarBelief | None, np
     """The robot's belief at the start of a block: the scalar filter on P(trust = high) with its
     start ``x`` for two trust levels, else the runner's beliefs ``B`` (tracked row by row for
     more levels; NaN when the policy has no belief)."""
-    x = _EMPTY
-    tracked = runner.model is not None and runner.model.n_trust > 2  # the runner's own filter, row by row
-    if runner.model is not None and runner.model.n_trust == 2:
-        scalar = ScalarBelief(runner.model, runner.belief_update or "bayes")  # the same filter on P(trust = high)
-        return scalar, np.full(m, scalar.x0), np.empty((m, 2)), tracked
+    model = runner.model
+    if model is not None and model.n_trust == 2:
+        scalar = ScalarBelief(model, runner.belief_update or "bayes")  # the same filter on P(trust = high)
+        return scalar, np.full(m, scalar.x0), np.empty((m, 2)), False
     b0 = runner.initial_beliefs(m)
-    return None, x, b0 if b0 is not None else np.full((m, 2), np.nan), tracked
+    tracked = model is not None and model.n_trust > 2  # the runner's own filter, row by row
+    return None, _EMPTY, np.full((m, 2), np.nan) if b0 is None else b0, tracked
 
 
 def _compiled_block(
