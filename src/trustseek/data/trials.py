@@ -25,7 +25,7 @@ from .layouts import join_file, unpivot
 from .levels import category_codes, input_codes, one_rating_per_block, rating_codes
 from .mapping import CANONICAL, CATEGORICAL, RATING, ColumnMapping, as_mapping, label_key
 from .order import check_trials, order_trials, trial_numbers
-from .sources import load_source, missing_column_hint
+from .sources import PARQUET_SUFFIXES, load_source, missing_column_hint
 
 
 def read_trials(
@@ -405,7 +405,7 @@ def write_trials(frame: pd.DataFrame, path: str | Path) -> None:
     """Write a trial table as CSV or Parquet, chosen by the suffix of ``path``."""
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix in (".parquet", ".pq"):
+    if suffix in PARQUET_SUFFIXES:
         frame.to_parquet(path, index=False)
     elif suffix == ".csv":
         write_csv(frame, path)
