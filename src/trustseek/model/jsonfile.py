@@ -10,7 +10,7 @@ import stat
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import fields
 from pathlib import Path
-from typing import Any, Self, TypeVar
+from typing import Any, Self, TypeGuard, TypeVar
 
 import numpy as np
 
@@ -91,6 +91,11 @@ def json_safe(obj: Any) -> Any:
     return obj
 
 
+def is_number(v: Any) -> TypeGuard[int | float]:
+    """Whether a JSON value is a number (``true`` and ``false`` are not)."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
 def fmt_number(x: float) -> str:
     return f"{x:.12g}"
 
@@ -120,7 +125,7 @@ def read_row(obj: Any, keys: Sequence[str], label: str, problems: list[str]) -> 
         v = obj.get(k)
         if k not in obj:
             problems.append(f"{label}[{k}] is missing")
-        elif isinstance(v, bool) or not isinstance(v, (int, float)):
+        elif not is_number(v):
             problems.append(f"{label}[{k}] must be a number, got {v!r}")
         elif not math.isfinite(v) or v < 0.0 or v > 1.0:
             problems.append(f"{label}[{k}] = {fmt_number(float(v))} is outside [0, 1]")
