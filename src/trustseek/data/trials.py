@@ -92,9 +92,7 @@ def read_trials(
             f"{column('human_action')}: no trial has a recorded human action (every cell is empty): nothing to fit"
         )
     rated = _ratings(problems, get, mapping, pcode, perm)
-    by_input = {
-        inp: input_codes(problems, get(src), mapping, inp, src) for inp in mapping.inputs for src in (mapping.input_column(inp),)
-    }
+    by_input = {inp: input_codes(problems, get(mapping.input_column(inp)), mapping, inp) for inp in mapping.inputs}
     if check_experience and mapping.experience_rule is not False:
         _check_experience(problems, codes, mapping, present, column)
     if problems.lines:
