@@ -4,6 +4,7 @@ export, and finite-horizon cross-checks against pomdp-py."""
 import json
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
@@ -14,7 +15,6 @@ from trustseek.interop.files import (
     flat_belief,
     flat_from_assistance,
     read_pomdp,
-    read_pomdpx_tables,
     write_pomdp,
     write_pomdpx,
 )
@@ -111,6 +111,35 @@ def test_export_matches_the_belief_mdp_at_horizons_1_to_3_via_pomdp_py(pomdp):
                 ours = finite_horizon_value(pomdp, h, belief, c)
                 assert flat.finite_horizon_value(b, h) == pytest.approx(ours, abs=1e-9)
                 assert pomdp_py_value(flat, b, h) == pytest.approx(ours, abs=1e-6)
+
+
+def read_pomdpx_tables(text: str) -> dict[str, tuple[list[str], np.ndarray]]:
+    """The conditional tables of a POMDPX file written by :func:`write_pomdpx`: variable ->
+    (parents, table with one axis per parent and a last axis for the variable)."""
+    root = ET.fromstring(text)
+
+    def words(elem: ET.Element, path: str) -> list[str]:
+        found = elem.find(path)
+        if found is None or found.text is None:
+            raise AssertionError(f"POMDPX element <{elem.tag}> has no <{path}>")
+        return found.text.split()
+
+    sizes: dict[str | None, int] = {}
+    for sv in root.iter("StateVar"):
+        sizes[sv.get("vnamePrev")] = sizes[sv.get("vnameCurr")] = len(words(sv, "ValueEnum"))
+    for tag in ("ObsVar", "ActionVar"):
+        for v in root.iter(tag):
+            sizes[v.get("vname")] = len(words(v, "ValueEnum"))
+    out = {}
+    for section in ("InitialStateBelief", "StateTransitionFunction", "ObsFunction"):
+        for c in root.iter(section):
+            for cp in c.iter("CondProb"):
+                name = words(cp, "Var")[0]
+                parents = words(cp, "Parent")
+                shape = [sizes[p] for p in parents if p != "null"] + [sizes[name]]
+                vals = np.array([float(x) for x in words(cp, "Parameter/Entry/ProbTable")])
+                out[f"{section}/{name}"] = (parents, vals.reshape(shape))
+    return out
 
 
 def test_pomdpx_tables_reproduce_the_flat_transition(pomdp):

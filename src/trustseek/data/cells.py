@@ -60,7 +60,7 @@ class Problems:
         if count == 1:
             self.lines.append(f"{head}: {items[0]}")
             return
-        shown = "; ".join(items[:SHOWN])
+        shown = "; ".join(items)
         more = f"; ... ({count - SHOWN} more)" if count > SHOWN else ""
         self.lines.append(f"{head} in {count} {unit}: {shown}{more}")
 

@@ -181,13 +181,8 @@ def table_from_records(records: list[dict[str, Any]], lists: set[str]) -> Any:
 
     from .cells import as_text
 
-    columns: dict[str, list[Any]] = {}
-    for i, r in enumerate(records):
-        for k in r:
-            if k not in columns:
-                columns[k] = [None] * i
-        for k, vals in columns.items():
-            vals.append(r.get(k))
+    names = dict.fromkeys(k for r in records for k in r)  # in the order they first appear
+    columns = {k: [r.get(k) for r in records] for k in names}
     arrays = {}
     for k, vals in columns.items():
         try:

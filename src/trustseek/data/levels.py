@@ -43,14 +43,15 @@ def _level_of(levels: tuple[str, ...]) -> Callable[[str], int | None]:
     return lambda label: next((by_spelling[s] for s in spellings(label) if s in by_spelling), None)
 
 
-def input_codes(problems: Problems, cc: Column, mapping: ColumnMapping, name: str, src: str) -> np.ndarray:
-    """Per row the code of an input's level; an empty cell, a NaN or a value outside the declared
-    levels is reported with its rows (every row of a model's input needs a level)."""
+def input_codes(problems: Problems, cc: Column, mapping: ColumnMapping, name: str) -> np.ndarray:
+    """Per row the code of input ``name``'s level (``cc``: its column); an empty cell, a NaN or a
+    value outside the declared levels is reported with its rows (every row of a model's input
+    needs a level)."""
     levels = mapping.input_levels()[name]
     table, known = _mapped(mapping.inputs[name])
     lookup, kind = level_lookup(cc, table, _level_of(levels), np.int16 if len(levels) < 2**15 else np.int32)
     expected = f"expected one of {known}the levels {list(levels)}"
-    head = f"column {src!r} (input {name!r})"
+    head = f"column {mapping.input_column(name)!r} (input {name!r})"
     heads = (
         f"{head}: empty value ({expected})",
         f"{head}: value is NaN ({expected})",

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from ..model.jsonfile import is_number
 from ..vocab import ACTIONS, CATEGORICAL_COLUMNS, EXPERIENCES, HUMAN_ACTIONS, LEVELS, TRIAL_COLUMNS
 from .cells import DataError, names_list, shorten, unknown_entries
 from .layouts import explode_entry, explode_problems, join_entry, join_problems, wide_entry, wide_problems
@@ -381,12 +382,12 @@ def _rating_problems(r: Any) -> list[str]:
         p.append(f"{head}: declare the levels, lowest first ('levels': [1, 2, 3, 4, 5]) or numeric bins ('bins': [edges])")
     names: list[str] = []
     if levels is not None:
-        ok = isinstance(levels, list) and all(isinstance(v, (str, int, float)) and not isinstance(v, bool) for v in levels)
+        ok = isinstance(levels, list) and all(isinstance(v, str) or is_number(v) for v in levels)
         names = [label_key(v) for v in levels] if ok else []
         if not ok or len(names) < 2 or len(set(names)) != len(names) or not all(n.strip() for n in names):
             p.append(f"{head}: 'levels' must list at least 2 distinct levels, lowest first, got {levels!r}")
     if bins is not None:
-        ok = isinstance(bins, list) and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in bins)
+        ok = isinstance(bins, list) and all(is_number(v) for v in bins)
         edges = [float(v) for v in bins] if ok else []
         if not ok or len(edges) < 3 or not all(map(math.isfinite, edges)) or any(b <= a for a, b in itertools.pairwise(edges)):
             p.append(f"{head}: 'bins' must list at least 3 increasing finite edges (2 bins), got {bins!r}")

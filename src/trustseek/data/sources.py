@@ -153,19 +153,18 @@ def _exploded_frame(source: pd.DataFrame, missing: frozenset[str], explode: dict
 
 
 def _arrow_raw(table: Any, name: str, missing: frozenset[str]) -> RawLog:
+    """A pyarrow table as a log: refused when a column holds lists or objects or a name repeats;
+    its columns read as codes on demand, and let go of when no longer needed."""
+    import pyarrow as pa
+
     from .layouts import refuse_nested
 
     refuse_nested(table, name)
     names = [str(c) for c in table.column_names]
-    dupes = sorted({c for c in names if names.count(c) > 1})
+    counts = collections.Counter(names)
+    dupes = sorted(c for c, k in counts.items() if k > 1)
     if dupes:
-        raise DataError([f"column {c!r} appears {names.count(c)} times" for c in dupes], name)
-    return _arrow_source(table, name, names, missing)
-
-
-def _arrow_source(table: Any, name: str, names: list[str], missing: frozenset[str]) -> RawLog:
-    import pyarrow as pa
-
+        raise DataError([f"column {c!r} appears {counts[c]} times" for c in dupes], name)
     held = {"table": table}
 
     def release(cs: list[str]) -> None:
@@ -399,7 +398,7 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
             [_bad_row(number, got, text, skip) for part in bad_rows for number, got, text in part],
         )
         raise DataError(p.lines, name)
-    return _arrow_source(table, name, header, missing)
+    return _arrow_raw(table, name, missing)
 
 
 def _check_utf8(table: Any) -> None:

@@ -25,7 +25,7 @@ from .layouts import join_file, unpivot
 from .levels import category_codes, input_codes, one_rating_per_block, rating_codes
 from .mapping import CANONICAL, CATEGORICAL, RATING, ColumnMapping, as_mapping, label_key
 from .order import check_trials, order_trials, trial_numbers
-from .sources import load_source, missing_column_hint
+from .sources import PARQUET_SUFFIXES, load_source, missing_column_hint
 
 
 def read_trials(
@@ -68,9 +68,9 @@ def read_trials(
     if mapping.join is not None:
         raw, joined = join_file(raw, load_source(mapping.join["file"], None, markers), mapping.join, theirs["participant"])
     known = _check_columns(raw, mapping, theirs, required, delimiter)
-    read: dict[str, Column] = {}  # the file's columns as codes, each converted once
-    rowid, dropped = _drop_rows(raw, mapping, markers, read)
-    get = _Columns(raw, rowid, read)
+    get = _Columns(raw)  # the file's columns as codes, each converted once
+    rowid, dropped = _drop_rows(raw, mapping, markers, get)
+    get.keep(rowid)
     present = [c for c in CANONICAL if theirs[c] in known]
     canonical = [theirs[c] for c in present if theirs[c] in raw.columns]
     if raw.release is not None:  # the canonical columns as codes; the file's copy of them goes
@@ -92,9 +92,7 @@ def read_trials(
             f"{column('human_action')}: no trial has a recorded human action (every cell is empty): nothing to fit"
         )
     rated = _ratings(problems, get, mapping, pcode, perm)
-    by_input = {
-        inp: input_codes(problems, get(src), mapping, inp, src) for inp in mapping.inputs for src in (mapping.input_column(inp),)
-    }
+    by_input = {inp: input_codes(problems, get(mapping.input_column(inp)), mapping, inp) for inp in mapping.inputs}
     if check_experience and mapping.experience_rule is not False:
         _check_experience(problems, codes, mapping, present, column)
     if problems.lines:
@@ -169,19 +167,37 @@ def _check_columns(
     return known
 
 
+class _Columns:
+    """The log's columns as codes, each read on first use (of the kept rows only, once :meth:`keep`
+    has named them), and the derived columns."""
+
+    def __init__(self, raw: RawLog) -> None:
+        self.raw, self.n = raw, raw.n
+        self.rowid: np.ndarray | None = None
+        self.read: dict[str, Column] = {}  # columns read of every row, before some rows were dropped
+        self.cols: dict[str, Column] = {}
+
+    def keep(self, rowid: np.ndarray | None) -> None:
+        """From now on the rows ``rowid`` only (None: every row)."""
+        if rowid is not None:
+            self.read, self.cols = self.cols, {}
+            self.rowid, self.n = rowid, len(rowid)
+
+    def __call__(self, c: str) -> Column:
+        if c not in self.cols:
+            col = self.read.pop(c, None)
+            col = self.raw.col(c) if col is None else col
+            self.cols[c] = col if self.rowid is None else col.take(self.rowid)
+        return self.cols[c]
+
+
 def _drop_rows(
-    raw: RawLog, mapping: ColumnMapping, markers: frozenset[str], read: dict[str, Column]
+    raw: RawLog, mapping: ColumnMapping, markers: frozenset[str], column: _Columns
 ) -> tuple[np.ndarray | None, list[tuple[str, int]]]:
     """The rows kept (None: every row) and per drop rule the rows it drops, each rule counted on
     the rows the rules before it left.  Rows with every cell empty (a spreadsheet's formatted but
     unused rows: ``,,,,``; null or NaN in Parquet and JSON) go first, as blank lines do, counted
-    as a rule of their own.  The columns it reads go into ``read``."""
-
-    def column(c: str) -> Column:
-        if c not in read:
-            read[c] = raw.col(c)
-        return read[c]
-
+    as a rule of their own."""
     empty = np.ones(raw.n, dtype=bool)
     for c in raw.columns:  # usually one column tells: no row is empty in the participant's
         cc = column(c)
@@ -205,22 +221,6 @@ def _drop_rows(
     if not keep.any():
         raise DataError([f"every row is dropped by the drop rules ({'; '.join(f'{r}: {k}' for r, k in dropped)})"], raw.name)
     return np.flatnonzero(keep), dropped
-
-
-class _Columns:
-    """The log's columns as codes, each read on first use (the kept rows only), and the derived columns."""
-
-    def __init__(self, raw: RawLog, rowid: np.ndarray | None, read: dict[str, Column]) -> None:
-        self.raw, self.rowid, self.read = raw, rowid, read
-        self.n = raw.n if rowid is None else len(rowid)
-        self.cols: dict[str, Column] = {}
-
-    def __call__(self, c: str) -> Column:
-        if c not in self.cols:
-            col = self.read.pop(c, None)
-            col = self.raw.col(c) if col is None else col
-            self.cols[c] = col if self.rowid is None else col.take(self.rowid)
-        return self.cols[c]
 
 
 def _trials(
@@ -403,7 +403,7 @@ def write_trials(frame: pd.DataFrame, path: str | Path) -> None:
     """Write a trial table as CSV or Parquet, chosen by the suffix of ``path``."""
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix in (".parquet", ".pq"):
+    if suffix in PARQUET_SUFFIXES:
         frame.to_parquet(path, index=False)
     elif suffix == ".csv":
         write_csv(frame, path)

@@ -90,9 +90,6 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
     states = _tokens([f"{T_[t]}_{EXPERIENCES[e]}_{C_[c]}_{HUMAN_ACTIONS[o]}" for t, e, c, o in cells])
     obs = _tokens([f"{HUMAN_ACTIONS[o]}_{EXPERIENCES[e]}_{C_[c]}" for o in range(2) for e in range(2) for c in range(N)])
 
-    def oidx(o, e, c):
-        return (o * 2 + e) * N + c
-
     n_s, n_o = len(states), len(obs)
     Tm = np.zeros((2, n_s, n_s))
     Om = np.zeros((2, n_s, n_o))
@@ -101,7 +98,7 @@ def flat_from_assistance(pomdp: AssistancePOMDP, initial_complexity: int | None 
     for a in range(2):
         for t, e, c, o in product(range(K), range(2), range(N), range(2)):
             s = _state_index(t, e, c, o, N)
-            Om[a, s, oidx(o, e, c)] = 1.0
+            Om[a, s, (o * 2 + e) * N + c] = 1.0  # observation (o, e, c)
             Rm[a, s] = R[c, a, t]
             for o2, e2, u, c2 in product(range(2), range(2), range(K), range(N)):
                 Tm[a, s, _state_index(u, e2, c2, o2, N)] += pc[c2] * kern[c, a, t, o2, e2, u]
@@ -183,10 +180,7 @@ def write_pomdp(flat: FlatPOMDP, path: str | Path | None = None) -> str:
                 continue
             for s2, o in zip(*np.nonzero(block), strict=True):
                 lines.append(f"R: {an} : {sn} : {states[s2]} : {observations[o]} {_num(block[s2, o])}")
-    text = "\n".join(lines) + "\n"
-    if path is not None:
-        Path(path).write_text(text, encoding="utf-8")
-    return text
+    return _written("\n".join(lines) + "\n", path)
 
 
 def read_pomdp(source: str | Path, text: str | None = None) -> FlatPOMDP:
@@ -443,39 +437,14 @@ def write_pomdpx(pomdp: AssistancePOMDP, path: str | Path | None = None) -> str:
     R = np.transpose(pomdp.expected_reward, (1, 0, 2))  # [a, c, t]
     cond(rf, "reward", ["robot", "complexity_0", "trust_0"], R, "Func", "ValueTable")
     ET.indent(root)
-    text = '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    return _written('<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n", path)
+
+
+def _written(text: str, path: str | Path | None) -> str:
+    """``text``, written to ``path`` first when one is given."""
     if path is not None:
         Path(path).write_text(text, encoding="utf-8")
     return text
-
-
-def read_pomdpx_tables(text: str) -> dict[str, tuple[list[str], np.ndarray]]:
-    """The conditional tables of a POMDPX file written by :func:`write_pomdpx`: variable ->
-    (parents, table with one axis per parent and a last axis for the variable)."""
-    root = ET.fromstring(text)
-
-    def words(elem: ET.Element, path: str) -> list[str]:
-        found = elem.find(path)
-        if found is None or found.text is None:
-            raise PomdpFileError([f"POMDPX element <{elem.tag}> has no <{path}>"])
-        return found.text.split()
-
-    sizes: dict[str | None, int] = {}
-    for sv in root.iter("StateVar"):
-        sizes[sv.get("vnamePrev")] = sizes[sv.get("vnameCurr")] = len(words(sv, "ValueEnum"))
-    for tag in ("ObsVar", "ActionVar"):
-        for v in root.iter(tag):
-            sizes[v.get("vname")] = len(words(v, "ValueEnum"))
-    out = {}
-    for section in ("InitialStateBelief", "StateTransitionFunction", "ObsFunction"):
-        for c in root.iter(section):
-            for cp in c.iter("CondProb"):
-                name = words(cp, "Var")[0]
-                parents = words(cp, "Parent")
-                shape = [sizes[p] for p in parents if p != "null"] + [sizes[name]]
-                vals = np.array([float(x) for x in words(cp, "Parameter/Entry/ProbTable")])
-                out[f"{section}/{name}"] = (parents, vals.reshape(shape))
-    return out
 
 
 def export_assistance(

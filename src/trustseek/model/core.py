@@ -49,10 +49,10 @@ from .files import (
 from .jsonfile import (
     JsonFile,
     ModelError,
-    UnknownComplexityError,
     build,
     check_names,
     check_row_array,
+    complexity_index,
     freeze_arrays,
     load_json,
     raise_problems,
@@ -235,10 +235,7 @@ class TrustModel(JsonFile):
         return len(self.complexities)
 
     def complexity_index(self, name: str) -> int:
-        try:
-            return self.complexities.index(name)
-        except ValueError:
-            raise UnknownComplexityError([f"unknown complexity {name!r}; expected one of {list(self.complexities)}"]) from None
+        return complexity_index(self.complexities, name)
 
     def not_estimated_rows(self) -> list[str]:
         """The rows no data estimated, by name (:meth:`row_name`)."""

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
-from .jsonfile import ModelError, check_names, get_key, nested, read_row, read_table, unknown_keys
+from .jsonfile import ModelError, check_names, get_key, nested, read_notes, read_row, read_table, unknown_keys
 from .rating import RatingTable
 
 MODEL_FORMAT = "trustseek.trust-model/1"
@@ -157,9 +157,7 @@ def _trust_header(d: Mapping[str, Any], problems: list[str]):
     kw = trust_fields(T, C)
 
     def rest(problems: list[str]) -> dict[str, Any]:
-        notes = d.get("notes", "")
-        if not isinstance(notes, str):
-            problems.append(f"notes must be a string, got {notes!r}")
+        notes = read_notes(d, problems)
         not_estimated = _read_not_estimated(d.get("not_estimated", []), C, problems)
         rating = RatingTable.read(d["rating"], T, problems) if d.get("rating") is not None else None
         return {"notes": notes, "not_estimated": not_estimated, "rating": rating}
@@ -194,9 +192,7 @@ def _general_header(d: Mapping[str, Any], problems: list[str]):
         problems.append(f"structure must be an object, got {structure!r}")
         structure = {}
     unknown_keys(structure, STRUCTURE_KEYS, "structure", problems)
-    notes = d.get("notes", "")
-    if not isinstance(notes, str):
-        problems.append(f"notes must be a string, got {notes!r}")
+    notes = read_notes(d, problems)
     if not levels or not out_cats:
         return None, {}, None
     kw = {

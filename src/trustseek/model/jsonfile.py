@@ -10,7 +10,7 @@ import stat
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import fields
 from pathlib import Path
-from typing import Any, Self, TypeVar
+from typing import Any, Self, TypeGuard, TypeVar
 
 import numpy as np
 
@@ -55,6 +55,22 @@ class UnknownComplexityError(ModelError, KeyError):
     failed lookup by name)."""
 
 
+def complexity_index(complexities: Sequence[str], name: str) -> int:
+    """The index of complexity ``name`` among ``complexities`` (a model's or a task's)."""
+    try:
+        return complexities.index(name)
+    except ValueError:
+        raise UnknownComplexityError([f"unknown complexity {name!r}; expected one of {list(complexities)}"]) from None
+
+
+def read_notes(d: Mapping[str, Any], problems: list[str]) -> str:
+    """A file's ``notes`` (empty when absent): a string."""
+    notes = d.get("notes", "")
+    if not isinstance(notes, str):
+        problems.append(f"notes must be a string, got {notes!r}")
+    return notes
+
+
 def json_safe(obj: Any) -> Any:
     """``obj`` as plain JSON values: every NaN or infinite float becomes None (e.g. a threshold
     that does not exist because a policy's ask region is not an interval), numpy scalars and
@@ -73,6 +89,11 @@ def json_safe(obj: Any) -> Any:
     if isinstance(obj, np.integer):
         return int(obj)
     return obj
+
+
+def is_number(v: Any) -> TypeGuard[int | float]:
+    """Whether a JSON value is a number (``true`` and ``false`` are not)."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
 def fmt_number(x: float) -> str:
@@ -104,7 +125,7 @@ def read_row(obj: Any, keys: Sequence[str], label: str, problems: list[str]) -> 
         v = obj.get(k)
         if k not in obj:
             problems.append(f"{label}[{k}] is missing")
-        elif isinstance(v, bool) or not isinstance(v, (int, float)):
+        elif not is_number(v):
             problems.append(f"{label}[{k}] must be a number, got {v!r}")
         elif not math.isfinite(v) or v < 0.0 or v > 1.0:
             problems.append(f"{label}[{k}] = {fmt_number(float(v))} is outside [0, 1]")
@@ -258,13 +279,12 @@ def read_text(path: str | Path, kind: str, error: type[TrustseekError], encoding
         raise error([f"is not UTF-8 text (byte {exc.start}){hint}"], source) from None
 
 
-def load_json(path: str | Path, expect: type | None = dict) -> tuple[Any, str]:
-    """The parsed JSON of the file at ``path`` and the file's name (for error messages).
+def load_json(path: str | Path) -> tuple[Any, str]:
+    """The parsed JSON object of the file at ``path`` and the file's name (for error messages).
 
-    Every way a file can fail to be JSON is a :class:`ModelError` naming the file: missing,
-    a directory, unreadable, not UTF-8 text (binary or another encoding), invalid JSON (with
-    line and column), the non-standard ``NaN``/``Infinity`` literals, and (with ``expect``,
-    an object by default) the wrong top-level type.
+    Every way a file can fail to be a JSON object is a :class:`ModelError` naming the file:
+    missing, a directory, unreadable, not UTF-8 text (binary or another encoding), invalid JSON
+    (with line and column), the non-standard ``NaN``/``Infinity`` literals, another top-level type.
     """
     source = str(path)
     text = read_text(path, "JSON", ModelError, encoding="utf-8-sig", hint=": save it as UTF-8 JSON")
@@ -281,9 +301,8 @@ def load_json(path: str | Path, expect: type | None = dict) -> tuple[Any, str]:
         raise ModelError(["invalid JSON: nested too deeply"], source) from None
     if duplicates:
         raise ModelError(duplicates, source)
-    if expect is not None and not isinstance(data, expect):
-        kind = "an object" if expect is dict else expect.__name__
-        raise ModelError([f"the top level must be {kind} ({{...}}), got {type(data).__name__}"], source)
+    if not isinstance(data, dict):
+        raise ModelError([f"the top level must be an object ({{...}}), got {type(data).__name__}"], source)
     return data, source
 
 

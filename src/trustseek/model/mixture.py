@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from .core import TrustModel
-from .jsonfile import JsonFile, ModelError, build, freeze_arrays, raise_problems
+from .jsonfile import JsonFile, ModelError, build, freeze_arrays, is_number, raise_problems, read_notes
 
 MIXTURE_FORMAT = "trustseek.mixture/1"
 
@@ -163,7 +163,7 @@ class TypeMixture(JsonFile):
             if not isinstance(name, str) or not name:
                 problems.append(f"{where}.name must be a non-empty string, got {name!r}")
                 name = f"type{i}"
-            if isinstance(weight, bool) or not isinstance(weight, int | float) or not math.isfinite(weight) or weight < 0:
+            if not is_number(weight) or not math.isfinite(weight) or weight < 0:
                 problems.append(f"{where}.weight must be a non-negative number, got {weight!r}")
                 weight = 0.0
             try:
@@ -173,9 +173,7 @@ class TypeMixture(JsonFile):
                 continue
             names.append(name)
             weights.append(float(weight))
-        notes = d.get("notes", "")
-        if not isinstance(notes, str):
-            problems.append(f"notes must be a string, got {notes!r}")
+        notes = read_notes(d, problems)
         return build(problems, source, lambda: cls(tuple(names), np.asarray(weights), tuple(models), notes))
 
 

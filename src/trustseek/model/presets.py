@@ -43,30 +43,38 @@ PAPER_UNOBSERVED_CELLS = (
 LOW, HIGH = 0, 1
 
 
+def _supervisor(initial: list[float], emission: list, transition: dict, notes: str) -> TrustModel:
+    """A two-level supervisor over low and high complexity: ``emission[c]`` the rows P(o | T) of
+    acting autonomously, [intervene, rely] for T = low then high (asked, the human always
+    teleoperates: Fig. 4a); ``transition[(c, a, E')]`` the rows P(T' | T), T' = low then high,
+    every cell not given the identity (trust does not change)."""
+    em = np.zeros((2, 2, 2, 2))
+    em[:, AUTONOMOUS] = emission
+    em[:, ASK] = [[1.0, 0.0], [1.0, 0.0]]
+    tr = np.zeros((2, 2, 2, 2, 2))
+    tr[...] = np.eye(2)
+    for cell, rows in transition.items():
+        tr[cell] = rows
+    return trust_model(LEVELS, LEVELS, np.array(initial), em, tr, notes)
+
+
 def paper_model() -> TrustModel:
     """The supervisor model estimated in Section V (Figs. 4-6)."""
-    # P(o | T, C, a), written as [intervene, rely] rows, T = low then high
-    emission = np.zeros((2, 2, 2, 2))
-    emission[LOW, AUTONOMOUS] = [[0.02, 0.98], [0.00, 1.00]]  # Fig. 4b
-    emission[HIGH, AUTONOMOUS] = [[0.54, 0.46], [0.05, 0.95]]  # Fig. 4c
-    emission[:, ASK] = [[1.0, 0.0], [1.0, 0.0]]  # Fig. 4a: asked -> always teleoperates
-
-    # P(T' | T, E', C, a), rows T = low then high, columns T' = low then high
-    eye = [[1.0, 0.0], [0.0, 1.0]]
-    transition = np.zeros((2, 2, 2, 2, 2))
-    transition[LOW, AUTONOMOUS, RELIABLE] = eye  # Fig. 5a
-    transition[LOW, AUTONOMOUS, FAULTY] = [[0.99, 0.01], [0.39, 0.61]]  # Fig. 5b
-    transition[LOW, ASK, FAULTY] = eye  # Fig. 5c
-    transition[LOW, ASK, RELIABLE] = eye  # never observed (identity)
-    transition[HIGH, AUTONOMOUS, RELIABLE] = [[0.0, 1.0], [0.0, 1.0]]  # Fig. 6a
-    transition[HIGH, AUTONOMOUS, FAULTY] = [[0.70, 0.30], [1.00, 0.00]]  # Fig. 6b
-    transition[HIGH, ASK, RELIABLE] = [[0.56, 0.44], [0.06, 0.94]]  # Fig. 6c
-    transition[HIGH, ASK, FAULTY] = eye  # never observed (identity)
+    emission = [
+        [[0.02, 0.98], [0.00, 1.00]],  # Fig. 4b
+        [[0.54, 0.46], [0.05, 0.95]],  # Fig. 4c
+    ]
+    transition = {  # Fig. 5a (low, autonomous, reliable) and 5c (low, ask, faulty): the identity
+        (LOW, AUTONOMOUS, FAULTY): [[0.99, 0.01], [0.39, 0.61]],  # Fig. 5b
+        (HIGH, AUTONOMOUS, RELIABLE): [[0.0, 1.0], [0.0, 1.0]],  # Fig. 6a
+        (HIGH, AUTONOMOUS, FAULTY): [[0.70, 0.30], [1.00, 0.00]],  # Fig. 6b
+        (HIGH, ASK, RELIABLE): [[0.56, 0.44], [0.06, 0.94]],  # Fig. 6c
+    }
     notes = (
         "Section V of Mangalindan, Rovira & Srivastava, 'On trust-aware assistance-seeking in "
         "human-supervised autonomy'. Never-observed cells (identity): " + "; ".join(PAPER_UNOBSERVED_CELLS)
     )
-    return trust_model(LEVELS, LEVELS, np.array([0.0, 1.0]), emission, transition, notes)
+    return _supervisor([0.0, 1.0], emission, transition, notes)
 
 
 def conservative_model() -> TrustModel:
@@ -74,26 +82,19 @@ def conservative_model() -> TrustModel:
     often intervenes in low complexity when trust is low, loses trust after any failure and
     repairs it slowly.  Same structure and fixed cells as :func:`paper_model`; the numbers are
     illustrative, not estimated from data."""
-    emission = np.zeros((2, 2, 2, 2))
-    emission[LOW, AUTONOMOUS] = [[0.35, 0.65], [0.02, 0.98]]
-    emission[HIGH, AUTONOMOUS] = [[0.85, 0.15], [0.10, 0.90]]
-    emission[:, ASK] = [[1.0, 0.0], [1.0, 0.0]]
-
-    eye = [[1.0, 0.0], [0.0, 1.0]]
-    transition = np.zeros((2, 2, 2, 2, 2))
-    transition[LOW, AUTONOMOUS, RELIABLE] = [[0.95, 0.05], [0.0, 1.0]]
-    transition[LOW, AUTONOMOUS, FAULTY] = [[1.0, 0.0], [0.70, 0.30]]
-    transition[LOW, ASK, FAULTY] = eye
-    transition[LOW, ASK, RELIABLE] = eye  # never observed (identity)
-    transition[HIGH, AUTONOMOUS, RELIABLE] = [[0.80, 0.20], [0.0, 1.0]]
-    transition[HIGH, AUTONOMOUS, FAULTY] = [[1.0, 0.0], [1.0, 0.0]]
-    transition[HIGH, ASK, RELIABLE] = [[0.85, 0.15], [0.15, 0.85]]
-    transition[HIGH, ASK, FAULTY] = eye  # never observed (identity)
+    emission = [[[0.35, 0.65], [0.02, 0.98]], [[0.85, 0.15], [0.10, 0.90]]]
+    transition = {
+        (LOW, AUTONOMOUS, RELIABLE): [[0.95, 0.05], [0.0, 1.0]],
+        (LOW, AUTONOMOUS, FAULTY): [[1.0, 0.0], [0.70, 0.30]],
+        (HIGH, AUTONOMOUS, RELIABLE): [[0.80, 0.20], [0.0, 1.0]],
+        (HIGH, AUTONOMOUS, FAULTY): [[1.0, 0.0], [1.0, 0.0]],
+        (HIGH, ASK, RELIABLE): [[0.85, 0.15], [0.15, 0.85]],
+    }
     notes = (
         "A conservative supervisor (Remark 1 of the paper): intervenes in low complexity when trust is low, "
         "loses trust after failures and repairs it slowly. Illustrative numbers, not estimated."
     )
-    return trust_model(LEVELS, LEVELS, np.array([0.5, 0.5]), emission, transition, notes)
+    return _supervisor([0.5, 0.5], emission, transition, notes)
 
 
 def paper_conservative_mixture(conservative_share: float = 0.3) -> TypeMixture:

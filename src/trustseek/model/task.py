@@ -23,13 +23,14 @@ from .jsonfile import (
     ATOL,
     JsonFile,
     ModelError,
-    UnknownComplexityError,
     build,
     check_names,
     check_row_array,
+    complexity_index,
     fmt_number,
     freeze_arrays,
     get_key,
+    is_number,
     raise_problems,
     unknown_keys,
 )
@@ -119,10 +120,7 @@ class Task(JsonFile):
         return problems
 
     def complexity_index(self, name: str) -> int:
-        try:
-            return self.complexities.index(name)
-        except ValueError:
-            raise UnknownComplexityError([f"unknown complexity {name!r}; expected one of {list(self.complexities)}"]) from None
+        return complexity_index(self.complexities, name)
 
     def p_experience(self, c: int, a: int, o: int) -> np.ndarray:
         """P(E_{t+1} | o_t, C_t = c, a_t = a) as a length-2 array over (faulty, reliable)."""
@@ -218,7 +216,7 @@ class Task(JsonFile):
                     unknown_keys(spec, ["probability", "success", "ask_experience"], lab, problems)
                     for key, store in (("probability", probs), ("success", succ)):
                         v = get_key(spec, key, f"{lab}.{key}", problems)
-                        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= v <= 1.0):
+                        if v is not None and (not is_number(v) or not 0.0 <= v <= 1.0):
                             problems.append(f"{lab}.{key} = {v!r} must be a probability in [0, 1]")
                         elif v is not None:
                             store.append(float(v))
@@ -245,13 +243,13 @@ class Task(JsonFile):
             problems.extend(f"rewards[{k}] is missing" for k in keys if "rewards" in d and k not in rw)
             vals = {}
             for k, v in rw.items():
-                if k in keys and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v))):
+                if k in keys and (not is_number(v) or not math.isfinite(float(v))):
                     problems.append(f"rewards[{k}] = {v!r} must be a finite number")
                 elif k in keys:
                     vals[k] = float(v)
             rewards = Rewards(**vals)
         disc = d.get("discount", Task.discount)
-        if isinstance(disc, bool) or not isinstance(disc, (int, float)) or not (0.0 <= float(disc) < 1.0):
+        if not is_number(disc) or not (0.0 <= float(disc) < 1.0):
             problems.append(f"discount = {disc!r} must be a number in [0, 1)")
 
         def make() -> Task:  # only once the reader found no problem: ``disc`` is then a number

@@ -103,6 +103,11 @@ def _runner(block: Block) -> PolicyRunner:
 RECORDED = ("complexity", "action", "human", "experience", "trust")  # int8 arrays of a recorded run
 
 
+def _records(shape: tuple[int, int]) -> dict[str, np.ndarray]:
+    """Arrays of ``shape`` for what a recorded run keeps of each trial: :data:`RECORDED` and the belief."""
+    return {k: np.empty(shape, dtype=np.int8) for k in RECORDED} | {"belief": np.empty(shape)}
+
+
 def _compiled_action(policy: Policy, bounds: np.ndarray | None, scalar: bool) -> tuple[int, np.ndarray] | None:
     """How the compiled block chooses the robot's action under ``policy``: (THRESHOLD, bounds)
     on a scalar belief, (FIXED, p_ask) for a complexity policy; None when only the numpy loop
@@ -168,10 +173,7 @@ class _Chunk:
         self.poff = None if tab.pooled else rows * (2 * tab.N)  # parameter-row offsets for heterogeneous populations
         u0 = self.rng_sup.random(m)  # the initial hidden trust
         self.trust = (u0[:, None] >= tab.init_cum[rows]).sum(axis=1).astype(np.int64)
-        self.rec: dict[str, np.ndarray] = {}
-        if record:
-            self.rec = {k: np.empty((total, m), dtype=np.int8) for k in RECORDED}
-            self.rec["belief"] = np.empty((total, m))
+        self.rec = _records((total, m)) if record else {}
         self.codes = np.empty((total, m), dtype=np.int8)
         self.t = 0  # the next trial of the chunk
 
@@ -180,13 +182,13 @@ def _belief_start(runner: PolicyRunner, m: int) -> tuple[ScalarBelief | None, np
     """The robot's belief at the start of a block: the scalar filter on P(trust = high) with its
     start ``x`` for two trust levels, else the runner's beliefs ``B`` (tracked row by row for
     more levels; NaN when the policy has no belief)."""
-    x = _EMPTY
-    tracked = runner.model is not None and runner.model.n_trust > 2  # the runner's own filter, row by row
-    if runner.model is not None and runner.model.n_trust == 2:
-        scalar = ScalarBelief(runner.model, runner.belief_update or "bayes")  # the same filter on P(trust = high)
-        return scalar, np.full(m, scalar.x0), np.empty((m, 2)), tracked
+    model = runner.model
+    if model is not None and model.n_trust == 2:
+        scalar = ScalarBelief(model, runner.belief_update or "bayes")  # the same filter on P(trust = high)
+        return scalar, np.full(m, scalar.x0), np.empty((m, 2)), False
     b0 = runner.initial_beliefs(m)
-    return None, x, b0 if b0 is not None else np.full((m, 2), np.nan), tracked
+    tracked = model is not None and model.n_trust > 2  # the runner's own filter, row by row
+    return None, _EMPTY, np.full((m, 2), np.nan) if b0 is None else b0, tracked
 
 
 def _compiled_block(
@@ -205,10 +207,10 @@ def _compiled_block(
         sb = (scalar.a0, scalar.slope, scalar.lik_high, scalar.lik_low)
     else:
         bel, sb, x = kernels.NO_BELIEF, (_EMPTY,) * 4, np.zeros(m)
-    into = st.rec if st.record else {k: np.zeros((0, 0), dtype=np.int8) for k in RECORDED} | {"belief": np.zeros((0, 0))}
+    into = st.rec if st.record else _records((0, 0))
     offsets = np.zeros(m, dtype=np.int64) if st.poff is None else st.poff.astype(np.int64)
     tables = (tab.p_int, tab.p_reliable, tab.trust_low, offsets)
-    records = (st.record, *(into[k] for k in ("complexity", "action", "human", "experience", "trust", "belief")))
+    records = (st.record, *(into[k] for k in (*RECORDED, "belief")))
     span = max(1, WINDOW // m)
     for t0 in range(0, T, span):  # the uniforms of ``span`` trials at a time
         t1 = min(T, t0 + span)
@@ -248,13 +250,8 @@ def _numpy_block(
         e = (u[1] < tab.p_reliable[ca * 2 + o]).astype(np.int64)
         kt = (cap * 2 + e) * K + trust
         if st.record:
-            rec, t = st.rec, st.t
-            rec["complexity"][t] = c
-            rec["action"][t] = a
-            rec["human"][t] = o
-            rec["experience"][t] = e
-            rec["trust"][t] = trust
-            rec["belief"][t] = x if scalar is not None else B[:, -1]
+            for k, v in zip((*RECORDED, "belief"), (c, a, o, e, trust, x if scalar is not None else B[:, -1]), strict=True):
+                st.rec[k][st.t] = v
         st.codes[st.t] = (a * 2 + o) * 2 + e
         # the next hidden trust: below P(T' = low) for two levels, #(u >= cumulative row) otherwise
         st.trust = (u[2] >= tab.trust_low[kt]).astype(np.int64) if two else (u[2][:, None] >= tab.trust_cum[kt]).sum(axis=1)
@@ -322,11 +319,7 @@ def run(
     nb = len(blocks)
     summary = {k: np.zeros((n, nb)) for k in SUMMARY_QUANTITIES}
     T_total = sum(b.schedule.shape[1] for b in blocks)
-    arrays: dict[str, np.ndarray] = {}
-    if record:
-        arrays = {k: np.empty((n, T_total), dtype=np.int8) for k in RECORDED}
-        arrays["belief"] = np.empty((n, T_total))
-        arrays["reward"] = np.empty((n, T_total))
+    arrays = _records((n, T_total)) | {"reward": np.empty((n, T_total))} if record else {}
     for i in range(n_chunks):
         sl = slice(i * CHUNK, min(n, (i + 1) * CHUNK))
         summ, rec = _run_chunk(tab, supervisors.index[sl], blocks, sl, chunk_seeds[i], record, task.discount, progress, compiled)

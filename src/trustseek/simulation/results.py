@@ -34,10 +34,10 @@ SUMMARY_COLUMNS = (
 SUMMARY_QUANTITIES = SUMMARY_COLUMNS[4:]
 
 
-def participant_ids(n: int, prefix: str = "p", start: int = 1) -> np.ndarray:
+def participant_ids(n: int) -> np.ndarray:
     """Ids ``p001``, ``p002``, ... (zero-padded to sort in order)."""
-    width = max(3, len(str(start + n - 1)))
-    return np.array([f"{prefix}{i:0{width}d}" for i in range(start, start + n)], dtype=object)
+    width = max(3, len(str(n)))
+    return np.array([f"p{i:0{width}d}" for i in range(1, n + 1)], dtype=object)
 
 
 @dataclass
@@ -103,7 +103,7 @@ class Simulation:
         a = self.arrays
         n, T = a["complexity"].shape
         blocks = self.block_of_trial()
-        frame = pd.DataFrame(
+        return pd.DataFrame(
             {
                 "participant": _labels(self.participants, np.repeat(np.arange(n), T)),
                 "trial": np.tile(np.arange(1, T + 1), n),
@@ -118,7 +118,6 @@ class Simulation:
                 "reward": a["reward"].reshape(-1),
             }
         )
-        return frame
 
 
 @dataclass

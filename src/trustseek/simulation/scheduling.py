@@ -107,7 +107,6 @@ def simulate_schedules(
     counts: tuple[int, ...],
     n_participants: int,
     seed: int = 0,
-    belief_update: str | None = None,
 ) -> ScheduleRuns:
     """Run every policy on the same ``n_participants`` supervisors drawn from ``model`` (two
     trust levels): the same queue of items and the same uniforms on trial t.  A schedule
@@ -136,8 +135,7 @@ def simulate_schedules(
     )
     idx = np.arange(m)
     for j, (name, pol) in enumerate(policies.items()):
-        update = belief_update or pol.belief_update or "bayes"
-        sb = ScalarBelief(pol.model or model, update)
+        sb = ScalarBelief(pol.model or model, pol.belief_update or "bayes")
         x = np.full(m, sb.x0)
         trust = (u_all[T, 0] >= model.initial[0]).astype(np.int64)
         taken = np.zeros((m, T), dtype=bool)

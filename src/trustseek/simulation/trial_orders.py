@@ -52,10 +52,9 @@ def schedule_counts(
         kernels.urn_schedule(gen.random((T, n)), float(numbers[0]), out)  # = T successive random(n)
         return out.T
     remaining = [np.full(n, k, dtype=np.float64) for k in numbers]
-    left = T
     for t in range(T):
         x = gen.random(n)
-        x *= left  # uniform over the trials left: below remaining[0] -> complexity 0, ...
+        x *= T - t  # uniform over the trials left: below remaining[0] -> complexity 0, ...
         c = np.zeros(n, dtype=np.int8)
         edge = remaining[0].copy()
         for k in range(1, N):
@@ -64,7 +63,6 @@ def schedule_counts(
         out[t] = c
         for k in range(N):
             remaining[k] -= c == k
-        left -= 1
     return out.T  # (n, T), stored trial-major: the simulator reads one trial of everyone at a time
 
 
