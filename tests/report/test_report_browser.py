@@ -9,7 +9,7 @@ import pytest
 
 from small_runs import small_reproduction
 from trustseek.report import FIGURES, write_report
-from trustseek.testing.browser import launch_chromium
+from trustseek.testing.browser import launch_chromium, screenshot
 
 pytestmark = pytest.mark.browser
 
@@ -45,7 +45,7 @@ def test_report_renders_with_figures(tmp_path):
             rows = page.locator("table >> nth=0").locator("tr").count()
             assert rows >= 30
             shot = shots / "reproduction_report.png"
-            page.screenshot(path=str(shot), full_page=True)
+            screenshot(page, path=str(shot), full_page=True)
             assert shot.stat().st_size > 50_000
         finally:
             browser.close()

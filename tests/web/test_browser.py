@@ -18,7 +18,7 @@ import scene_drive
 from scene_drive import step_until
 from trustseek.client import Client
 from trustseek.server.app import STATIC
-from trustseek.testing.browser import CHROMIUM, launch_chromium
+from trustseek.testing.browser import CHROMIUM, launch_chromium, screenshot
 from trustseek.testing.servers import ThreadServer
 
 pytestmark = pytest.mark.browser
@@ -101,7 +101,7 @@ def test_participant_study_in_chromium(tmp_path):
             assert st(page)["trial"] == 1 and st(page)["complexity"] == "high"
             assert page.inner_text("#mode") == "Collecting autonomously"
             step_until(page, "true")  # the robot sets off
-            page.screenshot(path=str(out / "browser_autonomous.png"))
+            screenshot(page, path=str(out / "browser_autonomous.png"))
             page.keyboard.press(" ")
             step_until(page, "s.phase === 'teleop'", frames=1, limit=3)
             assert "intervention" in page.inner_text("#mode")
@@ -123,11 +123,11 @@ def test_participant_study_in_chromium(tmp_path):
             teleoperate(page)
             step_until(page, "s.phase === 'report'")
             page.fill("#report-slider", "81")
-            page.screenshot(path=str(out / "browser_report.png"))
+            screenshot(page, path=str(out / "browser_report.png"))
             page.click("#report-btn")
             step_until(page, "s.phase === 'done'")
             final_score = float(page.inner_text("#final-score"))
-            page.screenshot(path=str(out / "browser_done.png"))
+            screenshot(page, path=str(out / "browser_done.png"))
 
             # the experimenter's dashboard shows the finished participant and creates a study
             dash = browser.new_page(viewport={"width": 1000, "height": 600})
@@ -143,7 +143,7 @@ def test_participant_study_in_chromium(tmp_path):
             dash.wait_for_function("document.getElementById('create-msg').textContent.startsWith('Created pilot')", timeout=20000)
             dash.click("#new-session")
             dash.wait_for_selector("#rows td:has-text('P001')")
-            dash.screenshot(path=str(out / "browser_dashboard.png"))
+            screenshot(dash, path=str(out / "browser_dashboard.png"))
             browser.close()
         assert not errors, errors
         assert all(u.startswith((url, "data:", "blob:")) for u in requests), [u for u in requests if not u.startswith(url)]

@@ -15,7 +15,7 @@ from scene_drive import step_until
 from test_browser import artifacts_dir, teleoperate
 from trustseek.client import Client
 from trustseek.server.app import STATIC
-from trustseek.testing.browser import CHROMIUM, launch_chromium
+from trustseek.testing.browser import CHROMIUM, launch_chromium, screenshot
 from trustseek.testing.servers import ThreadServer
 
 pytestmark = pytest.mark.browser
@@ -118,7 +118,7 @@ def test_keyboard_only_run_with_axe_on_every_screen_at_1280x720(tmp_path):
             # the task at 1280 x 720: everything, the Intervene button too, without scrolling
             page.wait_for_function("window.trustseek.state().phase === 'approach'")
             step_until(page, "true")  # drawn
-            page.screenshot(path=str(out / "access_task_1280x720.png"))
+            screenshot(page, path=str(out / "access_task_1280x720.png"))
             assert in_view(page, "#intervene-btn"), page.locator("#intervene-btn").bounding_box()
             assert in_view(page, "#world") and in_view(page, "#status")
             assert page.evaluate("document.documentElement.scrollHeight <= innerHeight + 1")

@@ -23,7 +23,7 @@ from server_checks import database_rows
 from test_browser import artifacts_dir
 from trustseek.client import Client
 from trustseek.server.app import STATIC
-from trustseek.testing.browser import CHROMIUM, CHROMIUM_ARGS
+from trustseek.testing.browser import CHROMIUM, CHROMIUM_ARGS, screenshot
 from trustseek.testing.servers import TemporaryPostgres, ThreadServer, postgres_binaries
 
 pytestmark = pytest.mark.browser
@@ -241,21 +241,21 @@ def test_dashboard_the_pages_of_a_paused_closed_or_revoked_link_and_a_preview(tm
             for pid in ("dash-1", "dash-2"):
                 page.goto(f"{study['link']}?PROLIFIC_PID={pid}")
                 page.wait_for_selector("#screen-consent:not([hidden])")
-            page.screenshot(path=str(out / "page_join.png"))  # the consent page a study link opens
+            screenshot(page, path=str(out / "page_join.png"))  # the consent page a study link opens
             page.check("#agree")
             page.click("#consent-btn")
             page.wait_for_selector("#screen-instructions:not([hidden])")
             page.click("#start-btn")
             page.wait_for_selector("#screen-quiz:not([hidden])")
-            page.screenshot(path=str(out / "page_quiz.png"))
+            screenshot(page, path=str(out / "page_quiz.png"))
             c.revoke(study["id"], link["session_id"])
             page.goto(link["link"])
             assert page.get_attribute("body", "data-page") == "revoked"
-            page.screenshot(path=str(out / "page_revoked.png"))
+            screenshot(page, path=str(out / "page_revoked.png"))
             c.set_status(study["id"], "paused")
             page.goto(f"{study['link']}?PROLIFIC_PID=late")
             assert page.get_attribute("body", "data-page") == "paused"
-            page.screenshot(path=str(out / "page_paused.png"))
+            screenshot(page, path=str(out / "page_paused.png"))
 
             dash = browser.new_page(viewport={"width": 1320, "height": 700})
             dash.on("pageerror", lambda e: errors.append(str(e)))
@@ -275,18 +275,18 @@ def test_dashboard_the_pages_of_a_paused_closed_or_revoked_link_and_a_preview(tm
             pilot_row = dash.inner_text(f"#rows tr:has-text('{pilot['participant']}')")
             assert "teleoperated (asked)" in pilot_row and "intervene" not in pilot_row, pilot_row
             assert "0 / 2" in pilot_row and "(practice)" in pilot_row  # the practice trial counted apart
-            dash.screenshot(path=str(out / "dashboard_study.png"))
+            screenshot(dash, path=str(out / "dashboard_study.png"))
             # a preview: the participant's view, where ?speed= works (and only there)
             page.goto(c.preview(study["id"]) + "?speed=3")
             page.wait_for_selector("#preview-tag:not([hidden])")
             assert page.evaluate("window.trustseek.state().speed") == 3 * STUDY["animation_speed"]
-            page.screenshot(path=str(out / "page_preview.png"))
+            screenshot(page, path=str(out / "page_preview.png"))
             dash.on("dialog", lambda d: d.accept())
             dash.click("#close-study")
             dash.wait_for_function("document.getElementById('study-status').textContent === 'closed'")
             page.goto(f"{study['link']}?PROLIFIC_PID=later")
             assert page.get_attribute("body", "data-page") == "closed"
-            page.screenshot(path=str(out / "page_closed.png"))
+            screenshot(page, path=str(out / "page_closed.png"))
             browser.close()
         # a preview run to its end page (of a study without the practice's teleoperation) leaves
         # the database and the export unchanged

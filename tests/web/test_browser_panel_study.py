@@ -20,7 +20,7 @@ from scene_drive import step_until
 from test_browser import artifacts_dir, st, teleoperate
 from trustseek.client import Client
 from trustseek.server.app import STATIC
-from trustseek.testing.browser import CHROMIUM, launch_chromium
+from trustseek.testing.browser import CHROMIUM, launch_chromium, screenshot
 from trustseek.testing.servers import ThreadServer
 
 pytestmark = pytest.mark.browser
@@ -104,7 +104,7 @@ def test_panel_study_in_chromium(tmp_path):
             page.wait_for_selector("#screen-consent:not([hidden])")
             # the trials counted, not a fixed duration, and the practice trials said apart
             assert "has 3 trials (after 2 practice trials, not scored). " in page.inner_text("#consent-text")
-            page.screenshot(path=str(out / "browser_panel_consent.png"))
+            screenshot(page, path=str(out / "browser_panel_consent.png"))
             page.check("#agree")
             page.click("#consent-btn")
             page.wait_for_selector("#screen-instructions:not([hidden])")
@@ -114,10 +114,10 @@ def test_panel_study_in_chromium(tmp_path):
             page.wait_for_selector("#screen-quiz:not([hidden])")
             assert page.is_disabled("#quiz-btn")
             page.check("input[name='quiz-ask'][value='0']")
-            page.screenshot(path=str(out / "browser_panel_quiz.png"))
+            screenshot(page, path=str(out / "browser_panel_quiz.png"))
             page.click("#quiz-btn")
             page.wait_for_selector("#instructions-again:not([hidden])")
-            page.screenshot(path=str(out / "browser_panel_quiz_again.png"))
+            screenshot(page, path=str(out / "browser_panel_quiz_again.png"))
             page.click("#start-btn")
             page.wait_for_selector("#screen-quiz:not([hidden])")
             assert "Attempt 2 of 2" in page.inner_text("#quiz-attempt")
@@ -131,7 +131,7 @@ def test_panel_study_in_chromium(tmp_path):
             assert s["speed"] == 6.0 and s["trial_label"] == "1 / 2"
             step_until(page, "s.trial === 2 && s.phase === 'teleop'")
             assert st(page)["robot_action"] == "ask" and "Practice" in page.inner_text("#hint")
-            page.screenshot(path=str(out / "browser_panel_practice_ask.png"))
+            screenshot(page, path=str(out / "browser_panel_practice_ask.png"))
             teleoperate(page)
             step_until(page, "s.trial === 3 && s.phase === 'approach'")
             assert st(page)["practice"] is False and page.inner_text("#score") == "0"
@@ -163,12 +163,12 @@ def test_panel_study_in_chromium(tmp_path):
             step_until(page, "s.phase === 'done'")
             assert page.inner_text("#completion-code") == "E2E-CODE"
             assert page.inner_text("#final-trials") == "3"
-            page.screenshot(path=str(out / "browser_panel_done.png"))
+            screenshot(page, path=str(out / "browser_panel_done.png"))
             page.wait_for_url(PANEL + "?cc=E2E-CODE", timeout=15000)
             # back at the study link with the same panel id: a page says so, and no new session
             page.goto(link + "?PROLIFIC_PID=pp-42&STUDY_ID=st-7&SESSION_ID=se-10")
             assert page.get_attribute("body", "data-page") == "completed"
-            page.screenshot(path=str(out / "browser_panel_completed.png"))
+            screenshot(page, path=str(out / "browser_panel_completed.png"))
             browser.close()
         assert not errors, errors
 

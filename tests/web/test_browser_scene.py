@@ -19,7 +19,7 @@ import pytest
 from scene_drive import hold, start, step_until, teleoperate
 from trustseek.client import Client
 from trustseek.server.app import STATIC
-from trustseek.testing.browser import CHROMIUM, launch_chromium
+from trustseek.testing.browser import CHROMIUM, launch_chromium, screenshot
 from trustseek.testing.servers import ThreadServer
 
 pytestmark = pytest.mark.browser
@@ -74,9 +74,9 @@ def new_page(browser):
 
 def shot(page, out: Path, name: str) -> None:
     if SHOTS:  # for the documentation: JPEG, smaller
-        page.screenshot(path=str(out / f"scene-{name}.jpg"), quality=80)
+        screenshot(page, path=str(out / f"scene-{name}.jpg"), quality=80)
     else:
-        page.screenshot(path=str(out / f"scene-{name}.png"))
+        screenshot(page, path=str(out / f"scene-{name}.png"))
 
 
 def _drawn(page) -> bool:
@@ -85,7 +85,7 @@ def _drawn(page) -> bool:
     from PIL import Image, ImageStat
 
     for view in ("#world", "#local", "#ee"):
-        picture = Image.open(io.BytesIO(page.locator(view).screenshot())).convert("L")
+        picture = Image.open(io.BytesIO(screenshot(page.locator(view)))).convert("L")
         if ImageStat.Stat(picture).stddev[0] < 5.0:
             return False
     return True

@@ -27,7 +27,7 @@ from trustseek.server import create_app
 from trustseek.server.app import STATIC
 from trustseek.server.studies import block_items
 from trustseek.solvers.registry import policy_from_spec
-from trustseek.testing.browser import CHROMIUM, launch_chromium
+from trustseek.testing.browser import CHROMIUM, launch_chromium, screenshot
 from trustseek.testing.servers import ThreadServer
 
 TOKEN = "schedule-block-token"
@@ -258,7 +258,7 @@ def test_scheduled_block_in_chromium(tmp_path):
                 assert [t["complexity"] for t in picks if t["next"]] == [s["complexity"]]
                 shown.append((s["complexity"], s["robot_action"]))
                 if n == 1:
-                    page.screenshot(path=str(out / "browser_schedule_block.png"))
+                    screenshot(page, path=str(out / "browser_schedule_block.png"))
                 if s["phase"] == "teleop":
                     teleoperate(page)
                 else:  # the participant relies on the robot
