@@ -1,10 +1,10 @@
 """Numerics shared by the solvers: policy evaluation (:func:`policy_values`: BiCGSTAB from a warm
 start, checked by its residual, a direct sparse solve as the fallback), Howard's improvement step
 (:func:`improve`) and policy iteration (:func:`howard`), the best of a set of vectors at many
-beliefs (:func:`best_vectors`, :func:`best_at`), the point-based backup and its greedy controller, point-based policy iteration
-(:func:`controller_iteration`), the exact evaluation of a finite-state controller on a POMDP in
-branch form (:func:`evaluate_controller`), and the beliefs reachable from b0 or met on simulated
-trajectories."""
+beliefs (:func:`best_vectors`, :func:`best_at`), the point-based backup and its greedy controller,
+point-based policy iteration (:func:`controller_iteration`), the exact evaluation of a
+finite-state controller on a POMDP in branch form (:func:`evaluate_controller`), and the beliefs
+reachable from b0 or met on simulated trajectories."""
 
 from __future__ import annotations
 
