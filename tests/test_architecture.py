@@ -61,3 +61,15 @@ def test_solvers_are_built_through_the_registry_outside_the_solvers():
                 if name.endswith("Solver"):
                     built.append(f"{path.relative_to(ROOT)}:{node.lineno} {name}")
     assert not built, built
+
+
+def test_test_modules_have_names_of_their_own():
+    """pytest imports a test module by its file name (``rootdir``-relative, no packages), and the
+    browser tests import helpers from each other by that name: two test files of one name in
+    different folders would break the collection of the other (a ``tests/testing/test_browser.py``
+    once shadowed ``tests/web/test_browser.py``)."""
+    names: dict[str, list[str]] = {}
+    for path in sorted((ROOT / "tests").rglob("*.py")):
+        if path.name not in ("__init__.py", "conftest.py"):
+            names.setdefault(path.name, []).append(str(path.relative_to(ROOT)))
+    assert {n: p for n, p in names.items() if len(p) > 1} == {}
