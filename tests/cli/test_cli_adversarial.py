@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import random
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -388,6 +389,46 @@ def test_an_output_naming_an_input_is_refused_and_the_input_kept(tmp_path, args)
     code, output = run_cli(line)
     assert code == 2 and "would overwrite the input" in output and "Traceback" not in output, output
     assert (log.read_bytes(), model.read_bytes()) == before
+
+
+#: the folder of the shipped examples, inside the package
+SHIPPED = Path(LOG).parent
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["simulate", "-n", "2", "-o", "{shipped}"],
+        ["simulate", "-n", "2", "-o", "{new}.csv"],
+        ["simulate", "-n", "2", "--summary-out", "{new}.json"],
+        ["fit", LOG, "-r", "1", "-o", "{new}.json"],
+        ["fit", LOG, "-r", "1", "--plots", "{new}"],
+        ["fit", LOG, "-r", "1", "--plots", "{folder}"],
+        ["fit-types", LOG, "-r", "1", "-o", "{new}.json"],
+        ["solve", "--grid", "11", "-o", "{new}.json"],
+        ["agnostic", "-o", "{new}.json"],
+        ["preset", "--model-out", "{new}.json"],
+        ["schedule", "-n", "2,2", "--figure", "{new}.png"],
+        ["reproduce", "-o", "{new}"],
+        ["export-pomdp", "{new}.pomdpx"],
+    ],
+)
+def test_an_output_inside_the_package_is_refused(args):
+    before = {p.name: p.read_bytes() if p.is_file() else None for p in SHIPPED.iterdir()}
+    new = SHIPPED / "written-by-a-test"
+    line = [a.format(shipped=SHIPPED / "paper_trials.csv", new=new, folder=SHIPPED) for a in args]
+    try:
+        code, output = run_cli(line)
+        assert code == 2 and "is inside the trustseek package" in output and "Traceback" not in output, output
+    finally:
+        after = {p.name: p.read_bytes() if p.is_file() else None for p in SHIPPED.iterdir()}
+        for name in set(after) - set(before):  # put the package back as it was, whatever the command did
+            path = SHIPPED / name
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
+        for name, data in before.items():
+            if after.get(name) != data:
+                (SHIPPED / name).write_bytes(data)
+    assert after == before
 
 
 @pytest.mark.parametrize(

@@ -82,6 +82,9 @@ def print_json(obj: Any) -> None:
 # --------------------------------------------------------------------------- outputs
 
 
+#: the installed package's folder: outputs never go there (they would replace a shipped file)
+PACKAGE = Path(__file__).resolve().parent.parent
+
 #: the file suffixes a figure option takes (the formats every figure is written in)
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
 
@@ -89,12 +92,16 @@ FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
 def check_output(path: Path | None, option: str, suffixes: tuple[str, ...] | None = None, directory: bool = False) -> None:
     """Refuse, before any work, an output path that cannot be written: its folder must exist and
     be writable, and the path must not be a folder (for ``directory`` outputs: not a file, and
-    an existing folder must be empty).  ``suffixes`` are the accepted file suffixes."""
+    an existing folder must be empty) nor inside the installed package (its shipped examples and
+    page assets).  ``suffixes`` are the accepted file suffixes."""
     if path is None:
         return
 
     def fail(what: str) -> None:
         raise TrustseekError([f"{option} {path}: {what}"])
+
+    if path.resolve().is_relative_to(PACKAGE):
+        fail(f"is inside the trustseek package ({PACKAGE}), among the files it ships; choose a folder of your own")
 
     if suffixes is not None and path.suffix.lower() not in suffixes:
         fail(f"expected a file ending in {' or '.join(suffixes)}")

@@ -11,16 +11,16 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import check_output, console, make_table, print_json, progress_task
+from ._app import PACKAGE, check_output, console, make_table, print_json, progress_task
 
 
 def check_plots_folder(plots: Path | None) -> None:
     """--plots refused before anything is read when it names a file, or a new folder whose own
     folder does not exist or is not writable (as every other output: a typo is not a tree of new
-    folders); an existing folder is written into (figures of the same name are replaced)."""
+    folders), or a folder inside the package; an existing folder is written into (figures of the same name are replaced)."""
     if plots is None:
         return
-    if not plots.exists():
+    if not plots.exists() or plots.resolve().is_relative_to(PACKAGE):
         check_output(plots, "--plots", directory=True)
     elif not plots.is_dir():
         raise TrustseekError([f"--plots {plots}: exists and is not a folder"])
