@@ -50,8 +50,22 @@ def test_bad_model_file_gives_one_line_per_problem(tmp_path, model):
     ]
 
 
+def _taking(option: str) -> list[str]:
+    """The commands that take ``option``."""
+    import click
+    import typer
+
+    from trustseek.cli import app
+
+    group = typer.main.get_command(app)
+    ctx = click.Context(group)
+    commands = [group.get_command(ctx, name) for name in group.list_commands(ctx)]
+    return [c.name for c in commands if any(option in p.opts for p in c.params)]
+
+
 def test_bad_option_values(tmp_path):
-    for command in ("solve", "simulate", "schedule"):  # one check, one message
+    assert {"solve", "simulate", "schedule", "reproduce", "design", "sensitivity"} <= set(_taking("--belief-update"))
+    for command in _taking("--belief-update"):  # one check, one message
         proc = run(command, "--belief-update", "magic", check=False)
         assert proc.returncode == 2 and "Traceback" not in proc.stderr
         assert "--belief-update must be 'bayes' or 'paper', got 'magic'" in proc.stderr, command

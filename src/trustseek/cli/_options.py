@@ -40,6 +40,17 @@ LogArg = typer.Argument(..., help="Trial log (CSV or Parquet).")
 OneRowPerTrialLogArg = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial.")
 
 
+def belief_update_option(default: str, of: str = "") -> Any:
+    """``--belief-update``/``-u`` (of ``of``), refused before the command runs unless bayes or paper."""
+    return typer.Option(
+        default,
+        "--belief-update",
+        "-u",
+        callback=lambda value: check_belief_update(value, "--belief-update"),
+        help=f"Belief update{of}: 'bayes' (the exact filter) or 'paper' (the paper's eq. 3).",
+    )
+
+
 def processes_option(what: str) -> Any:
     """``--jobs``: the processes that run ``what`` side by side."""
     help_text = f"Processes: {what} side by side (default: all cores); numbers do not depend on it."
@@ -70,13 +81,10 @@ def widen_option(most: int, otherwise: str) -> Any:
     )
 
 
-def model_and_task(model: str, task: str, belief_update: str | None = None) -> tuple[TrustModel, Task]:
-    """The trust model and the task that --model and --task name (a preset or a file), after the
-    --belief-update given is checked."""
+def model_and_task(model: str, task: str) -> tuple[TrustModel, Task]:
+    """The trust model and the task that --model and --task name (a preset or a file)."""
     from ..model.presets import load_model, load_task
 
-    if belief_update is not None:
-        check_belief_update(belief_update, "--belief-update")
     return load_model(model), load_task(task)
 
 

@@ -14,7 +14,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsed
 from ..errors import TrustseekError
 from ..parallel import MAX_JOBS
 from ._app import bar_task, check_output, command, console, make_table, print_json, progress_bar
-from ._options import JsonOpt, QuietOpt, TaskOpt
+from ._options import JsonOpt, QuietOpt, TaskOpt, belief_update_option
 
 
 def _floats(text: str, option: str) -> tuple[float, ...]:
@@ -126,7 +126,7 @@ def design(
     regret_target: float = typer.Option(0.01, "--regret-target", help="Target mean regret, as a share of V*."),
     restarts: int = typer.Option(2, "--restarts", help="Random starts of each replicate's fit."),
     tol: float = typer.Option(1e-8, "--tol", help="Relative tolerance of each replicate's fit."),
-    belief_update: str = typer.Option("paper", "--belief-update", "-u", help="Belief update of the policies: paper or bayes."),
+    belief_update: str = belief_update_option("paper", " of the policies"),
     grid: int = typer.Option(201, "--grid", help="Belief grid points of each replicate's solve."),
     search_low: str | None = typer.Option(
         None, "--search-ask-low", help="Also search experiment 1's ask probabilities: P(ask | low) grid."

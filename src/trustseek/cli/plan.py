@@ -10,7 +10,6 @@ import typer
 from .. import solvers
 from ..errors import TrustseekError
 from ..solvers.defaults import DEFAULT_GRID, DEFAULT_TYPE_AWARE_SOLVER, METHODS
-from ..vocab import check_belief_update
 from ._app import (
     FIGURE_SUFFIXES,
     check_outputs,
@@ -30,6 +29,7 @@ from ._options import (
     PolicyOutOpt,
     PrintJsonOpt,
     TaskOpt,
+    belief_update_option,
     log_options,
     mixture_of,
     model_and_task,
@@ -40,9 +40,7 @@ if TYPE_CHECKING:
     from ..model.mixture import TypeMixture
     from ..policies.base import Policy
 
-UpdateOpt = typer.Option(
-    "bayes", "--belief-update", "-u", help="Belief update: 'bayes' (exact filter, default) or 'paper' (eq. 3)."
-)
+UpdateOpt = belief_update_option("bayes")
 
 
 def type_posterior(mixture: TypeMixture, history: Path, participant: str | None, session: str | None):
@@ -146,7 +144,6 @@ def _check_solve(belief_update: str, method: str, solver: str | None, gap: float
     """solve's options refused before anything is loaded."""
     from ..solvers import solver_names
 
-    check_belief_update(belief_update, "--belief-update")
     if method not in METHODS:
         raise TrustseekError([f"--method must be one of {list(METHODS)}, got {method!r}"])
     if solver is not None and solver not in solver_names():
@@ -279,7 +276,7 @@ def plot_q_cmd(
         except PolicyError as exc:
             raise TrustseekError([f"{p} to plot" for p in exc.problems], str(policy_file)) from None
     else:
-        pomdp = AssistancePOMDP(*model_and_task(model, task, belief_update))
+        pomdp = AssistancePOMDP(*model_and_task(model, task))
         need_two_levels(pomdp.model, "plot-q")
         policy = cast(TrustAwarePolicy, make_solver("grid", grid=grid, belief_update=belief_update).solve(pomdp))
     write_atomic(out, lambda tmp: plot_q(policy, tmp))

@@ -10,7 +10,7 @@ import typer
 from ..solvers.defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
 from ..vocab import PAPER_BLOCK_COUNTS
 from ._app import FIGURE_SUFFIXES, check_outputs, command, console, make_table, print_json, progress_task
-from ._options import JsonOpt, ModelOpt, PolicyOutOpt, TaskOpt, model_and_task, parse_counts
+from ._options import JsonOpt, ModelOpt, PolicyOutOpt, TaskOpt, belief_update_option, model_and_task, parse_counts
 
 
 @command("schedule")
@@ -21,7 +21,7 @@ def schedule(
         ",".join(map(str, PAPER_BLOCK_COUNTS)), "--counts", "-n", help="Items per complexity: 17,17 or low=17,high=17."
     ),
     window: int = typer.Option(0, "--window", "-w", min=0, help="Items the robot sees ahead (0: every item, full control)."),
-    belief_update: str = typer.Option("bayes", "--belief-update", "-u", help="Belief update: 'bayes' or 'paper' (eq. 3)."),
+    belief_update: str = belief_update_option("bayes"),
     representation: str = typer.Option(
         "grid", "--representation", help=f"Value functions: {' or '.join(REPRESENTATIONS)} (alpha: exact, bayes only)."
     ),
@@ -46,7 +46,7 @@ def schedule(
 
     inputs = ((model, "--model file"), (task, "--task file"))
     check_outputs((out, "--out", (".json",)), (figure, "--figure", FIGURE_SUFFIXES), inputs=inputs)
-    m, t = model_and_task(model, task, belief_update)
+    m, t = model_and_task(model, task)
     pomdp = AssistancePOMDP(m, t)
     n = parse_counts(counts, pomdp.complexities)
     problem = SchedulingProblem.build(pomdp, n, window or None)

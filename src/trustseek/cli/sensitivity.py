@@ -8,16 +8,14 @@ import typer
 from rich.markup import escape
 
 from ._app import FIGURE_SUFFIXES, check_outputs, command, console, make_table, print_json
-from ._options import JsonOpt, ModelOpt, TaskOpt, model_and_task, processes_option
+from ._options import JsonOpt, ModelOpt, TaskOpt, belief_update_option, model_and_task, processes_option
 
 
 @command("sensitivity")
 def sensitivity(
     model: str = ModelOpt,
     task: str = TaskOpt,
-    belief_update: str = typer.Option(
-        "paper", "--belief-update", "-u", help="Belief update of the policy: 'paper' (eq. 3, default) or 'bayes'."
-    ),
+    belief_update: str = belief_update_option("paper", " of the policy"),
     decimals: int = typer.Option(
         2,
         "--decimals",
@@ -44,7 +42,7 @@ def sensitivity(
     from ..solvers.sensitivity import sensitivity as run_sensitivity
 
     check_outputs((plot, "--plot", FIGURE_SUFFIXES), inputs=((model, "--model file"), (task, "--task file")))
-    m, t = model_and_task(model, task, belief_update)
+    m, t = model_and_task(model, task)
     res = run_sensitivity(
         m,
         t,

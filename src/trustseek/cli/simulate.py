@@ -15,7 +15,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from .. import solvers
 from ..errors import TrustseekError
 from ..parallel import MAX_JOBS
-from ..vocab import PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS, check_belief_update
+from ..vocab import PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS
 from ._app import (
     atomic_output,
     check_output,
@@ -28,7 +28,7 @@ from ._app import (
     progress_bar,
     write_atomic,
 )
-from ._options import JsonOpt, QuietOpt, TaskOpt, mixture_of, need_two_levels, parse_counts
+from ._options import JsonOpt, QuietOpt, TaskOpt, belief_update_option, mixture_of, need_two_levels, parse_counts
 
 if TYPE_CHECKING:
     from ..model.core import TrustModel
@@ -77,12 +77,7 @@ def simulate(
         max=100_000,
         help="Number of trials with i.i.d. complexities from the task's probabilities (instead of --counts).",
     ),
-    belief_update: str = typer.Option(
-        "bayes",
-        "--belief-update",
-        "-u",
-        help="Belief update of the trust-aware policy: 'bayes' (exact filter, default) or 'paper' (eq. 3).",
-    ),
+    belief_update: str = belief_update_option("bayes", " of the trust-aware policy"),
     policy_model: str | None = typer.Option(
         None, "--policy-model", help="Model the trust-aware policy is solved for (default: the supervisors' model)."
     ),
@@ -152,7 +147,6 @@ def _given(ctx: typer.Context, *names: str) -> list[str]:
 def _check_simulate(ctx: typer.Context, belief_update: str, counts, trials) -> list[str]:
     """simulate's options refused before anything is loaded; the options a solved policy file would
     silently override (refused with one)."""
-    check_belief_update(belief_update, "--belief-update")
     if counts is not None and trials is not None:
         raise TrustseekError(["give either --counts or --trials, not both"])
     return _given(ctx, "belief_update", "--belief-update", "policy_model", "--policy-model")
@@ -297,12 +291,7 @@ def reproduce(
     replicate_large_n: int = typer.Option(
         2_000, "--replicate-large-n", help="Participants of each replicate's large experiment 2.", min=1, max=1_000_000
     ),
-    belief_update: str = typer.Option(
-        "paper",
-        "--belief-update",
-        "-u",
-        help="Belief update of the trust-aware policy: 'paper' (eq. 3, as in the paper) or 'bayes'.",
-    ),
+    belief_update: str = belief_update_option("paper", " of the trust-aware policy"),
     jobs: int = typer.Option(
         2,
         "--jobs",
