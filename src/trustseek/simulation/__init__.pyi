@@ -5,7 +5,7 @@ from . import designs, engine, kernels, populations, results, scheduling, trial_
 from .designs import add_ratings, crossover, simulate_design
 from .engine import Block, run, simulate
 from .populations import SimulationError, Supervisors
-from .results import CrossoverSimulation, Simulation, participant_ids, summarize
+from .results import CrossoverSimulation, Simulation, participant_ids
 from .trial_orders import schedule_counts, schedule_iid
 
 __all__ = [
@@ -22,5 +22,4 @@ __all__ = [
     "schedule_iid",
     "simulate",
     "simulate_design",
-    "summarize",
 ]

@@ -8,7 +8,7 @@ robot's P(trust = highest level) when it chose the action.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -144,19 +144,3 @@ def _labels(levels: Sequence[str] | np.ndarray, codes: np.ndarray) -> pd.Index:
     """The text of ``codes`` (any shape, read row by row) into ``levels``, made without a Python
     string per trial."""
     return pd.Index(levels, dtype="str").take(np.asarray(codes, dtype=np.intp).reshape(-1))
-
-
-def summarize(values: Mapping[str, np.ndarray]) -> dict[str, dict[str, float]]:
-    """Median, mean and quartiles of per-participant values, per policy label."""
-    out: dict[str, dict[str, float]] = {}
-    for k, values_k in values.items():
-        v = np.asarray(values_k, dtype=float)
-        out[k] = {
-            "n": len(v),
-            "median": float(np.median(v)),
-            "mean": float(np.mean(v)),
-            "q1": float(np.percentile(v, 25)),
-            "q3": float(np.percentile(v, 75)),
-            "sd": float(np.std(v, ddof=1)) if len(v) > 1 else 0.0,
-        }
-    return out
