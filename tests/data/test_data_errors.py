@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shlex
 import tempfile
 from pathlib import Path
 
@@ -115,6 +116,33 @@ def test_a_missing_column_says_how_to_map_it_and_which_model_needs_none(tmp_path
     assert "missing column 'complexity'" in text
     assert "--column" in text and "--mapping" in text
     assert "--transitions-on" in text and "--emissions-on" in text
+
+
+def test_columns_named_in_another_style_get_the_flags_that_map_them(tmp_path):
+    header = "Participant,TRIAL,complexity,Robot Action,human-action,Experience"
+    path = write(tmp_path, GOOD.replace(HEADER, header, 1))
+    with pytest.raises(DataError) as exc:
+        read_trials(path)
+    flags = "--column participant=Participant --column trial=TRIAL --column 'robot_action=Robot Action' "
+    flags += "--column human_action=human-action --column experience=Experience"
+    assert any(line.endswith(f"hint: columns named in another style: {flags}") for line in lines_of(exc))
+    code, output = run_cli(
+        ["decode", str(path), "-m", "paper", "-o", str(tmp_path / "p.csv"), *shlex.split(flags)]
+    )  # the hint, followed, reads the log
+    assert code == 0, output
+
+
+def test_a_spreadsheet_s_empty_header_cells_name_their_columns_by_place(tmp_path):
+    text = "\n".join(line + ";;" for line in [HEADER, *ROWS]).replace(",", ";")
+    df, good = read_trials(write(tmp_path, text)), read_trials(write(tmp_path, GOOD, "good.csv"))
+    assert list(df.columns) == [*good.columns, "(column 7)", "(column 8)"]
+    pd.testing.assert_frame_equal(df[good.columns], good)
+    with pytest.raises(DataError) as exc:
+        read_trials(write(tmp_path, text.replace("experience;", "exp;", 1)))
+    assert (
+        "columns present: ['participant', 'trial', 'complexity', 'robot_action', 'human_action', 'exp', '(column 7)', '(column 8)']"
+        in lines_of(exc)[0]
+    )
 
 
 def test_an_unknown_delimiter_gets_a_hint(tmp_path):

@@ -15,6 +15,7 @@ import json
 import mmap
 import os
 import re
+import shlex
 import sys
 from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from pathlib import Path
@@ -92,8 +93,9 @@ def _sniff(path: Path, sep: str | None, name: str) -> tuple[str, list[str], int]
             counts = {d: unquoted.count(d) for d in DELIMITERS}
             best = max(counts, key=lambda d: counts[d])
             sep = best if counts[best] > 0 else ","
-    names = next(csv.reader(io.StringIO(first), delimiter=sep), []) if first else []
-    return sep, [n.strip() for n in names], 2 if declared else 1
+    names = [n.strip() for n in next(csv.reader(io.StringIO(first), delimiter=sep), [])] if first else []
+    # a header cell left empty (a spreadsheet's formatted but unused columns: ``a;b;;``) names its column by place
+    return sep, [n or f"(column {i})" for i, n in enumerate(names, 1)], 2 if declared else 1
 
 
 def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: dict[str, Any] | None = None) -> RawLog:
@@ -479,8 +481,17 @@ def _bad_row(number: int | None, got: int, text: str, skip: int = 1) -> str:
     return f"{where} ({got} fields{quote}): {text[:60]!r}"
 
 
+def _plain(name: str) -> str:
+    """A column name without case, spacing and word style: ``Robot Action``, ``robot-action``,
+    ``ROBOT_ACTION`` and ``robotAction`` read ``robotaction``."""
+    return re.sub(r"[\s_\-.]+", "", name).lower()
+
+
 def missing_column_hint(missing: list[str], present: list[str], sep: str | None) -> list[str]:
-    hints = ["name another column with --column canonical=theirs or a --mapping file (Python: ColumnMapping)"]
+    alike = {c: [p for p in present if _plain(p) == _plain(c)] for c in missing}
+    named = " ".join(f"--column {shlex.quote(f'{c}={shorten(found[0], 80)}')}" for c, found in alike.items() if len(found) == 1)
+    hints = [f"columns named in another style: {named}"] if named else []
+    hints.append("name another column with --column canonical=theirs or a --mapping file (Python: ColumnMapping)")
     if {"complexity", "robot_action"} & set(missing):
         hints.append(
             "a log without complexity/robot_action can be fitted by a model that does not use them: "
