@@ -132,6 +132,33 @@ def test_columns_named_in_another_style_get_the_flags_that_map_them(tmp_path):
     assert code == 0, output
 
 
+def test_a_log_without_trial_numbers_is_pointed_to_its_time_column(tmp_path):
+    lines = [HEADER.replace("trial,", "", 1) + ",started at"]
+    lines += [",".join(r.split(",")[:1] + r.split(",")[2:]) + f",2026-01-01T10:{i:02d}:00" for i, r in enumerate(ROWS)]
+    path = write(tmp_path, "\n".join(lines) + "\n")
+    with pytest.raises(DataError) as exc:
+        read_trials(path)
+    hint = "hint: trials without numbers are put in order by a column of times or numbers: --order 'started at'"
+    assert any(line.endswith(hint) for line in lines_of(exc))
+    df = read_trials(path, mapping=ColumnMapping(order=["started at"]))  # the hint, followed, reads the log
+    assert list(df["trial"]) == [1, 2, 3, 4, 1, 2, 3]
+
+
+def test_labels_coded_as_numbers_get_the_flags_to_say_which_is_which(tmp_path):
+    path = write(tmp_path, GOOD.replace(",rely,", ",0,").replace(",intervene,", ",1,"))
+    with pytest.raises(DataError) as exc:
+        read_trials(path)
+    hint = (
+        "hint: if '0', '1' code the labels of human_action, say which label each is: --label human_action:0=LABEL "
+        "--label human_action:1=LABEL, LABEL one of ['intervene', 'rely'] (or a mapping file's labels)"
+    )
+    assert any(line.endswith(hint) for line in lines_of(exc))
+    good = read_trials(write(tmp_path, GOOD, "good.csv"))
+    pd.testing.assert_frame_equal(
+        read_trials(path, ColumnMapping(labels={"human_action": {"0": "rely", "1": "intervene"}})), good
+    )
+
+
 def test_a_spreadsheet_s_empty_header_cells_name_their_columns_by_place(tmp_path):
     text = "\n".join(line + ";;" for line in [HEADER, *ROWS]).replace(",", ";")
     df, good = read_trials(write(tmp_path, text)), read_trials(write(tmp_path, GOOD, "good.csv"))

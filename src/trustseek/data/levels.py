@@ -8,6 +8,7 @@ levels); values outside the levels are reported with their rows (:class:`~.cells
 from __future__ import annotations
 
 import math
+import shlex
 from collections.abc import Callable
 from typing import Any
 
@@ -77,14 +78,19 @@ def category_codes(problems: Problems, cc: Column, mapping: ColumnMapping, c: st
         f"{head}: unknown category (expected one of {known_labels}{list(allowed)})",
     )
     k = report_kinds(problems, cc, kind, heads)
-    near = {
-        t: a
-        for j, t in enumerate(cc.texts)
-        if kind[j] == UNKNOWN and t is not None
-        for a in allowed
-        if t.strip().lower() == a.lower()
-    }
-    if near and k is not None and (k == UNKNOWN).any():
+    unknown = sorted(t for j, t in enumerate(cc.texts) if kind[j] == UNKNOWN and t is not None)
+    near = {t: a for t in unknown for a in allowed if t.strip().lower() == a.lower()}
+    if k is None or not (k == UNKNOWN).any():
+        return cc.per_row(lookup)
+    labelled = any(kind[j] == 0 and t not in (None, NAN_MARK) and t.strip() for j, t in enumerate(cc.texts))
+    if not near and not labelled and 2 <= len(unknown) <= len(allowed) and all(len(t) <= 40 for t in unknown):
+        # no label at all, two or more short values, no more than labels (0/1, y/n): a coding; which is which is theirs to say
+        flags = " ".join(f"--label {shlex.quote(f'{c}:{t.strip()}=LABEL')}" for t in unknown)
+        problems.lines.append(
+            f"hint: if {', '.join(repr(t) for t in unknown)} code the labels of {c}, say which label each is: {flags}, "
+            f"LABEL one of {list(allowed)} (or a mapping file's labels)"
+        )
+    if near:
         flags = " ".join(f"--label {c}:{t.strip()}={a}" for t, a in list(near.items())[:SHOWN])
         one = len(near) == 1
         problems.lines.append(

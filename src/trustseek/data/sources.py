@@ -492,6 +492,10 @@ def missing_column_hint(missing: list[str], present: list[str], sep: str | None)
     named = " ".join(f"--column {shlex.quote(f'{c}={shorten(found[0], 80)}')}" for c, found in alike.items() if len(found) == 1)
     hints = [f"columns named in another style: {named}"] if named else []
     hints.append("name another column with --column canonical=theirs or a --mapping file (Python: ColumnMapping)")
+    if "trial" in missing and not alike["trial"]:
+        times = [p for p in present if re.search("time|stamp|date|onset|start", p, re.IGNORECASE)]
+        order = shlex.quote(times[0]) if times else "COLUMN"
+        hints.append(f"trials without numbers are put in order by a column of times or numbers: --order {order}")
     if {"complexity", "robot_action"} & set(missing):
         hints.append(
             "a log without complexity/robot_action can be fitted by a model that does not use them: "
