@@ -23,8 +23,9 @@ import pandas as pd
 
 from ..model.core import TrustModel
 from ..model.mixture import TypeMixture
-from ..statistics import percentile_bounds
+from ..statistics import LEVEL, percentile_bounds
 from .bootstrap import (
+    TABLE_NAMES,
     TABLES,
     bound_zero_cells,
     boundary_note,
@@ -37,7 +38,7 @@ from .bootstrap import (
 from .em import RunResult, converge_runs, run_em
 from .estep import EStep
 from .fit import never_estimated
-from .iohmm import EMFit, _describe, fit_iohmm, posteriors
+from .iohmm import EMFit, describe_run, fit_iohmm, posteriors, trial_columns
 from .mixture_em import EMPTY, FINISH_MARGIN, PERTURB, MixtureParams, MixtureStructure, MixtureWorkspace
 from .options import DEFAULTS, SERIAL, FitOptions, counting
 from .sequences import Sequences, encode
@@ -207,7 +208,7 @@ def fit_mixture(
             for i, r in zip(near, done, strict=True):
                 runs[i] = r
     for i, r in enumerate(runs):
-        log.debug("%s", _describe(i, r))
+        log.debug("%s", describe_run(i, r))
         if on_restart is not None:
             on_restart(i, r)
     best = int(np.argmax([r.objective for r in runs]))
@@ -292,10 +293,6 @@ def decode_types(frame: pd.DataFrame, mixture: TypeMixture) -> pd.DataFrame:
     seqs = encode(frame, spec)
     structure = MixtureStructure(spec, seqs, mixture.n_types)
     post = type_posteriors(MixtureWorkspace(seqs, structure), params)  # (N, M)
-    valid = seqs.rows >= 0
-    tt, nn = np.nonzero(valid)
-    order = np.argsort(seqs.rows[valid], kind="stable")
-    tt, nn = tt[order], nn[order]
     gamma = np.zeros((*seqs.rows.shape, spec.n_levels))
     best = post.argmax(1)
     path = np.full(seqs.rows.shape, -1, dtype=np.int64)
@@ -309,10 +306,7 @@ def decode_types(frame: pd.DataFrame, mixture: TypeMixture) -> pd.DataFrame:
         gamma[:T, keep] += post[keep, m][None, :, None] * g
         mine = best[keep] == m
         path[:T, keep[mine]] = vpath[:, mine]
-    out: dict[str, Any] = {"participant": [seqs.participants[i] for i in nn], "trial": seqs.trial_numbers(tt, nn)}
-    for k, name in enumerate(spec.levels):
-        out[f"p_trust_{name}"] = gamma[tt, nn, k]
-    out["viterbi_trust"] = np.array(spec.levels, dtype=object)[path[tt, nn]]
+    out, nn = trial_columns(seqs, spec.levels, gamma, path)
     out["type"] = np.array(mixture.names, dtype=object)[best[nn]]
     for m, name in enumerate(mixture.names):
         out[f"p_type_{name}"] = post[nn, m]
@@ -365,7 +359,7 @@ def bootstrap_types(
     fit: MixtureFit,
     replicates: int,
     options: FitOptions = TYPE_REFITS,
-    level: float = 0.95,
+    level: float = LEVEL,
     progress: Callable[[int, int], None] | None = None,
 ) -> TypeIntervals:
     """Intervals at ``level`` for the types of ``fit`` over ``replicates`` resamples of the participants;
@@ -418,7 +412,7 @@ class _HeldType(MixtureStructure):
 
 
 def _hold_type(structure: MixtureStructure, table: str, which: int | slice, rows: np.ndarray, k: int, row: np.ndarray):
-    return _HeldType(structure, "emission" if table == "em" else "transition", which, rows, k, row)
+    return _HeldType(structure, TABLE_NAMES[table], which, rows, k, row)
 
 
 def _type_boundary_bounds(fit: MixtureFit, lo: np.ndarray, hi: np.ndarray, per: int) -> tuple[np.ndarray, np.ndarray, int]:

@@ -15,7 +15,7 @@ from .estep import EStep, Workspace
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec, Params
 from .sticks import Sticks, _Part
-from .structure import FLOOR, PROJECT_FLOOR, START_MIX, Structure
+from .structure import FLOOR, PROJECT_FLOOR, START_MIX, Structure, normalised
 
 PARTS = ("initial", "emission", "transition")
 EMPTY = 1e-3  # a type with fewer expected participants than this is empty
@@ -166,9 +166,7 @@ class MixtureStructure(Structure):
             ok = (wt > 0) & (pt > 0)
             ini = np.where(ok, (wc / np.where(wt > 0, wt, 1.0)) * (pc / np.where(pt > 0, pt, 1.0)), previous.initial)
         else:
-            c0 = stats.initial + a
-            tot = c0.sum((-2, -1), keepdims=True)
-            ini = np.where(tot > 0, c0 / np.where(tot > 0, tot, 1.0), previous.initial)
+            ini = normalised(stats.initial + a, previous.initial, (-2, -1))
         em = self._table_mstep(self.em, stats.emission, a, previous.emission, self.shared("emission"))
         tr = self._table_mstep(self.tr, stats.transition, a, previous.transition, self.shared("transition"))
         return MixtureParams(ini, em, tr)

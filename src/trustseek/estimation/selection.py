@@ -291,10 +291,9 @@ class HeldOutComparison:
             full.bic,
             held,
         )
-        scores = {"loglik": full.loglik, "n_params": full.n_params, "aic": full.aic, "bic": full.bic}
         return {
             self.key: n,
-            **scores,
+            **full.criteria(),
             "heldout_loglik": held,
             "heldout_per_fold": per_fold,
             **(extra(full) if extra else {}),
@@ -386,16 +385,8 @@ def heldout_params(fit: EMFit, pseudocount: float = HELDOUT_PSEUDOCOUNT) -> Para
     smoothed row: one M-step from the fit's expected counts plus ``pseudocount`` per free cell (on top of
     the spec's prior); a mixture's initial table, one distribution over (type, first level), as a whole."""
     p = fit.params
-    st = fit.workspace().estep(p)
-    a = fit.spec.prior + pseudocount
-    smooth: Params
-    axes: tuple[int, ...]
-    if isinstance(fit, MixtureFit):
-        smooth, axes = fit.structure.mstep(st, p, prior=a), (-2, -1)
-    else:
-        s, c0 = fit.structure, st.initial + a
-        smooth = Params(c0 / c0.sum(), s.em.mstep(st.emission, a, p.emission), s.tr.mstep(st.transition, a, p.transition))
-        axes = (-1,)
+    smooth = fit.structure.mstep(fit.workspace().estep(p), p, prior=fit.spec.prior + pseudocount)
+    axes = (-2, -1) if isinstance(fit, MixtureFit) else (-1,)
     return type(p)(
         smooth_zero_rows(p.initial, smooth.initial, axes),
         smooth_zero_rows(p.emission, smooth.emission),

@@ -21,6 +21,12 @@ PROJECT_FLOOR = 1e-12  # an extrapolated cell is clipped to at least this before
 START_MIX = 0.2  # random starts mix this much of the uniform row into a Dirichlet draw: never an exact zero
 
 
+def normalised(counts: np.ndarray, previous: np.ndarray, axis: int | tuple[int, ...] = -1) -> np.ndarray:
+    """Counts scaled to sum to 1 over ``axis``; ``previous`` where they sum to 0 (the M-step of a free row)."""
+    tot = counts.sum(axis, keepdims=True)
+    return np.where(tot > 0, counts / np.where(tot > 0, tot, 1.0), previous)
+
+
 class Table:
     """Fixed cells, tie groups and defaults of one table (U input combinations x K levels x M): the spec
     sets ``fixed``, ``values`` and ``group``, then :meth:`finish` adds what the data decide."""
@@ -218,14 +224,14 @@ class Structure:
         pi = np.clip(p.initial, PROJECT_FLOOR, None)
         return Params(pi / pi.sum(-1, keepdims=True), self.em.project(p.emission), self.tr.project(p.transition))
 
-    def mstep(self, stats: EStep, previous: Params) -> Params:
-        """The maximising parameters for the expected counts ``stats`` (plus the prior's pseudo-counts)."""
-        a = self.spec.prior
-        c0 = stats.initial + a
-        tot = c0.sum(-1, keepdims=True)
-        pi = np.where(tot > 0, c0 / np.where(tot > 0, tot, 1.0), previous.initial)
+    def mstep(self, stats: EStep, previous: Params, prior: float | None = None) -> Params:
+        """The maximising parameters for the expected counts ``stats`` plus ``prior`` pseudo-counts
+        per free cell (the spec's by default)."""
+        a = self.spec.prior if prior is None else prior
         return Params(
-            pi, self.em.mstep(stats.emission, a, previous.emission), self.tr.mstep(stats.transition, a, previous.transition)
+            normalised(stats.initial + a, previous.initial),
+            self.em.mstep(stats.emission, a, previous.emission),
+            self.tr.mstep(stats.transition, a, previous.transition),
         )
 
     def log_prior(self, p: Params) -> np.ndarray:
