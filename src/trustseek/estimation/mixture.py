@@ -212,7 +212,7 @@ def fit_mixture(
         if on_restart is not None:
             on_restart(i, r)
     best = int(np.argmax([r.objective for r in runs]))
-    p = structure.relabel(MixtureParams(runs[best].params.initial, runs[best].params.emission, runs[best].params.transition))
+    p = structure.relabel(work.as_own(runs[best].params))
     names = tuple(f"type{m + 1}" for m in range(M))
     fit = MixtureFit(spec, structure, seqs, p, runs[best].loglik, runs[best].objective, runs, best, names)
     fit.warnings = mixture_warnings(fit)

@@ -525,11 +525,11 @@ def personalize(
         else:
             s_tab, score, centre_score = _cv_strengths(prep, free, folds, tol, max_iter)
         bound = {k: k not in free or s_tab[k] >= S_MAX for k in TABLES}
-        for name in TABLES:
-            if bound[name] and method[name] not in (NOTHING, ONE_DRAW):
-                warnings.append(
-                    f"{name}: the strength is at its bound ({s_tab[name]:.3g}): the data show no individual differences there"
-                )
+        warnings += [
+            f"{name}: the strength is at its bound ({s_tab[name]:.3g}): the data show no individual differences there"
+            for name in free
+            if bound[name]
+        ]
         warnings += [
             f"{name}: the strength is at its lower bound ({s_tab[name]:.3g}): each participant's rows are their own counts"
             for name in TABLES

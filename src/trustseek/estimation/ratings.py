@@ -17,7 +17,7 @@ import numpy as np
 from .estep import EStep
 from .sequences import Sequences
 from .spec import IOHMMSpec, Params
-from .structure import FLOOR, PROJECT_FLOOR, START_MIX, Structure, normalised
+from .structure import FLOOR, PROJECT_FLOOR, Structure, normalised, random_rows
 
 
 def split_joint(joint: np.ndarray, M: int, R: int) -> tuple[np.ndarray, np.ndarray]:
@@ -83,9 +83,7 @@ class RatingStructure(Structure):
 
     def random(self, rng: np.random.Generator) -> Params:
         base = super().random(rng)
-        R = self.R
-        rating = (1 - START_MIX) * rng.dirichlet(np.ones(R), size=self.K) + START_MIX / R
-        return self.combined(base, rating)
+        return self.combined(base, random_rows(rng, self.R, self.K))
 
     def project(self, p: Params) -> Params:
         base, rating = self.factors(p)
