@@ -392,12 +392,12 @@ def bootstrap_types(
 
 
 class _HeldType(MixtureStructure):
-    """A mixture's structure whose EM keeps rows ``rows``, level ``k`` of table ``name`` of type ``m``
-    (every type for a part they share: ``m`` a slice) at ``row``."""
+    """A mixture's structure whose EM keeps rows ``rows``, level ``k`` of ``table`` (``em`` or ``tr``) of
+    type ``m`` (every type for a part they share: ``m`` a slice) at ``row``."""
 
-    def __init__(self, base: MixtureStructure, name: str, m: int | slice, rows: np.ndarray, k: int, row: np.ndarray):
+    def __init__(self, base: MixtureStructure, table: str, m: int | slice, rows: np.ndarray, k: int, row: np.ndarray):
         self.__dict__.update(base.__dict__)
-        self.held = (name, m, rows, k, row)
+        self.held = (TABLE_NAMES[table], m, rows, k, row)
 
     def _hold(self, p: MixtureParams) -> MixtureParams:
         name, m, rows, k, row = self.held
@@ -411,16 +411,12 @@ class _HeldType(MixtureStructure):
         return self._hold(super().project(p))
 
 
-def _hold_type(structure: MixtureStructure, table: str, which: int | slice, rows: np.ndarray, k: int, row: np.ndarray):
-    return _HeldType(structure, TABLE_NAMES[table], which, rows, k, row)
-
-
 def _type_boundary_bounds(fit: MixtureFit, lo: np.ndarray, hi: np.ndarray, per: int) -> tuple[np.ndarray, np.ndarray, int]:
     """Likelihood-ratio intervals (:func:`~.bootstrap.bound_zero_cells`, the mixture refitted by EM) for
     the types' cells (``per`` each in ``lo``, ``hi``, as :func:`_type_vectors` lays them out, the
     weights after them).  The new bounds, and how many cells got one."""
     types = [fit.params.type_params(m) for m in range(fit.n_types)]
     n = fit.n_types * per
-    hold = partial(_hold_type, fit.structure)
+    hold = partial(_HeldType, fit.structure)
     lo_c, hi_c, bounded, _ = bound_zero_cells(fit.structure, fit.workspace(), fit.spec, fit.params, types, lo[:n], hi[:n], hold)
     return np.concatenate([lo_c, lo[n:]]), np.concatenate([hi_c, hi[n:]]), int(bounded.sum())
