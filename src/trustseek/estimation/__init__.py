@@ -9,7 +9,7 @@
   cells' stick-breaking fractions, the stationarity check; :mod:`.compiled_run`, the same run compiled;
 * :mod:`.options` -- how a fit searches (:class:`FitOptions`: restarts, seed, tolerance, iteration
   cap, workers), one set taken by every fit, selection and bootstrap;
-* :mod:`.iohmm` -- :func:`fit_iohmm`, log-likelihood, posteriors, Viterbi;;
+* :mod:`.iohmm` -- :func:`fit_iohmm`, log-likelihood, posteriors, Viterbi;
 * :mod:`.trust_iohmm` -- the paper's structure, tables to and from a TrustModel;
 * :mod:`.fit`, :mod:`.bootstrap`, :mod:`.selection` -- the trust-model fit, its intervals,
   and the choice of the number of levels; :func:`fit_model`, the same fit with any named

@@ -168,7 +168,7 @@ def _held_loglik(
     """The largest log-likelihood with a row of table ``name`` held at ``row`` (``hold(row)``: the structure
     keeping it, ``index``: where it lies in ``params``): EM from ``params``; ``-inf`` where the data are impossible."""
     held = hold(row)
-    start = type(params)(params.initial.copy(), params.emission.copy(), params.transition.copy())
+    start = params.copy()
     getattr(start, name)[index] = row
     try:
         (r,) = run_em(held, work, [held.project(start)], tol=1e-5, max_iter=200)

@@ -14,7 +14,6 @@ import numpy as np
 import pandas as pd
 
 from ..model.core import TrustModel
-from ..vocab import ACTIONS, EXPERIENCES
 from .bootstrap import bootstrap as _bootstrap
 from .iohmm import EMFit, fit_iohmm, loglik, posterior_frame
 from .options import DEFAULTS, FitOptions, counting
@@ -28,6 +27,7 @@ from .trust_iohmm import (
     check_convertible,
     from_model,
     general_spec,
+    model_categories,
     model_complexities,
     preset_spec,
     to_model,
@@ -100,9 +100,7 @@ def fit_sequences(
 ) -> FitResult:
     """:func:`fit_trust_model` on already encoded sequences."""
     check_convertible(spec)
-    _check_bootstrap(spec, bootstrap)
-    tick = counting(progress, options.starts + len(init) + bootstrap)
-    result = _fitted(seqs, spec, options, tick, init)
+    result, tick = _fitted(seqs, spec, options, bootstrap, progress, init)
     events = result.events
     counts = broadcast(spec, events)
     estimated = {k: v.astype(bool) for k, v in broadcast(spec, _estimated_mask(result.structure)).items()}
@@ -114,14 +112,24 @@ def fit_sequences(
 
 
 def _fitted(
-    seqs: Sequences, spec: IOHMMSpec, options: FitOptions, tick: Callable[..., None], init: Sequence[Params] = (), general=False
-) -> FitResult:
-    """The EM fit of ``spec`` (:func:`~.iohmm.fit_iohmm`, ``tick`` after each start) with its model (with
-    ``general``, a general model) and the expected events behind its rows (a rating's too)."""
+    seqs: Sequences,
+    spec: IOHMMSpec,
+    options: FitOptions,
+    bootstrap: int,
+    progress: Callable[[int, int], None] | None,
+    init: Sequence[Params] = (),
+    general: bool = False,
+) -> tuple[FitResult, Callable[..., None]]:
+    """The EM fit of ``spec`` (:func:`~.iohmm.fit_iohmm`) with its model (with ``general``, a general
+    model) and the expected events behind its rows (a rating's too); and the tick that reports
+    ``progress`` after each start and each of the ``bootstrap`` replicates to come."""
+    if bootstrap > 0 and spec.rating is not None:
+        raise FitError(["bootstrap intervals are not available for a fit with ratings (fit without --bootstrap)"])
+    tick = counting(progress, options.starts + len(init) + bootstrap)
     seed = options.seed_number
     fit = fit_iohmm(seqs, spec, replace(options, seed=np.random.SeedSequence([seed, 0])), init=init, on_restart=tick)
     notes = f"fitted by trustseek: {seqs.n_participants} participants, {seqs.n_trials} trials, log-likelihood {fit.loglik:.4f}"
-    return FitResult.of(fit, to_model(spec, fit.params, notes, general=general), _expected_events(fit), seed)
+    return FitResult.of(fit, to_model(spec, fit.params, notes, general=general), _expected_events(fit), seed), tick
 
 
 def _expected_events(fit: EMFit) -> dict[str, np.ndarray]:
@@ -135,11 +143,6 @@ def _expected_events(fit: EMFit) -> dict[str, np.ndarray]:
     if isinstance(s, RatingStructure):
         out["rating"] = s.rating_counts(st.emission)
     return out
-
-
-def _check_bootstrap(spec: IOHMMSpec, bootstrap: int) -> None:
-    if bootstrap > 0 and spec.rating is not None:
-        raise FitError(["bootstrap intervals are not available for a fit with ratings (fit without --bootstrap)"])
 
 
 def _with_intervals(result: FitResult, bootstrap: int, options: FitOptions, tick: Callable[[], None]) -> FitResult:
@@ -251,10 +254,10 @@ def never_estimated(frame: pd.DataFrame, spec: IOHMMSpec) -> tuple[tuple[str, tu
     Rows that inputs a table ignores repeat (e.g. the ask rows when transitions do not depend
     on the robot action) are copies of other rows, not estimates: they are listed too."""
     complexities = model_complexities(spec)
-    columns = (("complexity", complexities), ("robot_action", ACTIONS), ("experience", EXPERIENCES))
-    if any(name not in frame for name, _ in columns):
+    columns = model_categories(complexities)
+    if any(name not in frame for name in columns):
         return ()  # a log without these columns: nothing to say per row
-    c, a, e = (_index_codes(frame[name], names) for name, names in columns)
+    c, a, e = (_index_codes(frame[name], names) for name, names in columns.items())
     if (c < 0).any() or (a < 0).any():
         return ()
     # a trial has a next one when it is not its participant's last (encode refused repeated indices)
@@ -340,12 +343,8 @@ def fit_model(
     problems = spec.problems()
     if problems:
         raise FitError(problems)
-    seqs = encode(frame, spec)
-    _check_bootstrap(spec, bootstrap)
-    tick = counting(progress, options.starts + bootstrap)
-    result = _fitted(seqs, spec, options, tick, general=True)
-    warnings = result.warnings
-    warnings += _warnings(result, result.events)
+    result, tick = _fitted(encode(frame, spec), spec, options, bootstrap, progress, general=True)
+    warnings = result.warnings = _warnings(result, result.events)
     never = [
         f"{name}[{describe_combination(int(u), inputs, spec.categories)}]"
         for name, table, inputs in (

@@ -79,13 +79,17 @@ class EMFit:
     def workspace(self) -> Workspace:
         return Workspace(self.seqs, *self.structure.dims)
 
+    def criteria(self) -> dict[str, Any]:
+        """The log-likelihood, free parameters, AIC and BIC."""
+        return {"loglik": self.loglik, "n_params": self.n_params, "aic": self.aic, "bic": self.bic}
+
     def figures(self) -> dict[str, Any]:
-        """The log-likelihood, the criteria and the data's size, for JSON."""
-        criteria = {name: getattr(self, name) for name in ("loglik", "n_params", "aic", "bic")}
-        return {**criteria, "n_participants": self.seqs.n_participants, "n_trials": self.seqs.n_trials}
+        """The criteria and the data's size, for JSON."""
+        return {**self.criteria(), "n_participants": self.seqs.n_participants, "n_trials": self.seqs.n_trials}
 
 
-def _describe(i: int, r: RunResult) -> str:
+def describe_run(i: int, r: RunResult) -> str:
+    """Start ``i``'s run ``r`` in one line of the log."""
     state = "converged: stationary" if r.ended == STATIONARY else f"not converged: {r.ended}"
     sub = f" (after {r.subsample_iterations} on a subsample)" if r.subsample_iterations else ""
     return (
@@ -134,7 +138,7 @@ def fit_iohmm(
     runs: list[RunResult] = []
 
     def record(r: RunResult) -> None:
-        log.debug("%s", _describe(len(runs), r))
+        log.debug("%s", describe_run(len(runs), r))
         if on_restart is not None:
             on_restart(len(runs), r)
         runs.append(r)
@@ -149,7 +153,7 @@ def fit_iohmm(
                 record(r)
     best = int(np.argmax([r.objective for r in runs]))
     p = runs[best].params
-    log.info("best of %d starts: %s", len(runs), _describe(best, runs[best]))
+    log.info("best of %d starts: %s", len(runs), describe_run(best, runs[best]))
     return EMFit(spec, structure, seqs, p.permuted(structure.order(p)), runs[best].loglik, runs[best].objective, runs, best)
 
 
@@ -195,15 +199,20 @@ def viterbi(work: Workspace, p: Params) -> np.ndarray:
 def posterior_frame(seqs: Sequences, spec: IOHMMSpec, params: Params) -> pd.DataFrame:
     """Per trial, in the frame's row order: P(level | all trials of the participant) and the Viterbi level."""
     gamma, path, _ = posteriors(seqs, spec, params)
+    return pd.DataFrame(trial_columns(seqs, spec.levels, gamma, path)[0])
+
+
+def trial_columns(
+    seqs: Sequences, levels: Sequence[str], gamma: np.ndarray, path: np.ndarray
+) -> tuple[dict[str, Any], np.ndarray]:
+    """Per trial, in the frame's row order: the participant, the trial, ``p_trust_<level>`` from
+    ``gamma`` (T, N, K) and ``viterbi_trust`` from ``path`` (T, N); and each trial's sequence."""
     valid = seqs.rows >= 0
     tt, nn = np.nonzero(valid)
     order = np.argsort(seqs.rows[valid], kind="stable")
     tt, nn = tt[order], nn[order]
-    out: dict[str, Any] = {
-        "participant": [seqs.participants[i] for i in nn],
-        "trial": seqs.trial_numbers(tt, nn),
-    }
-    for k, name in enumerate(spec.levels):
+    out: dict[str, Any] = {"participant": [seqs.participants[i] for i in nn], "trial": seqs.trial_numbers(tt, nn)}
+    for k, name in enumerate(levels):
         out[f"p_trust_{name}"] = gamma[tt, nn, k]
-    out["viterbi_trust"] = np.array(spec.levels, dtype=object)[path[tt, nn]]
-    return pd.DataFrame(out)
+    out["viterbi_trust"] = np.array(levels, dtype=object)[path[tt, nn]]
+    return out, nn

@@ -23,8 +23,9 @@ import pandas as pd
 
 from ..model.core import TrustModel
 from ..model.mixture import TypeMixture
-from ..statistics import percentile_bounds
+from ..statistics import LEVEL, percentile_bounds
 from .bootstrap import (
+    TABLE_NAMES,
     TABLES,
     bound_zero_cells,
     boundary_note,
@@ -37,7 +38,7 @@ from .bootstrap import (
 from .em import RunResult, converge_runs, run_em
 from .estep import EStep
 from .fit import never_estimated
-from .iohmm import EMFit, _describe, fit_iohmm, posteriors
+from .iohmm import EMFit, describe_run, fit_iohmm, posteriors, trial_columns
 from .mixture_em import EMPTY, FINISH_MARGIN, PERTURB, MixtureParams, MixtureStructure, MixtureWorkspace
 from .options import DEFAULTS, SERIAL, FitOptions, counting
 from .sequences import Sequences, encode
@@ -207,11 +208,11 @@ def fit_mixture(
             for i, r in zip(near, done, strict=True):
                 runs[i] = r
     for i, r in enumerate(runs):
-        log.debug("%s", _describe(i, r))
+        log.debug("%s", describe_run(i, r))
         if on_restart is not None:
             on_restart(i, r)
     best = int(np.argmax([r.objective for r in runs]))
-    p = structure.relabel(MixtureParams(runs[best].params.initial, runs[best].params.emission, runs[best].params.transition))
+    p = structure.relabel(work.as_own(runs[best].params))
     names = tuple(f"type{m + 1}" for m in range(M))
     fit = MixtureFit(spec, structure, seqs, p, runs[best].loglik, runs[best].objective, runs, best, names)
     fit.warnings = mixture_warnings(fit)
@@ -292,10 +293,6 @@ def decode_types(frame: pd.DataFrame, mixture: TypeMixture) -> pd.DataFrame:
     seqs = encode(frame, spec)
     structure = MixtureStructure(spec, seqs, mixture.n_types)
     post = type_posteriors(MixtureWorkspace(seqs, structure), params)  # (N, M)
-    valid = seqs.rows >= 0
-    tt, nn = np.nonzero(valid)
-    order = np.argsort(seqs.rows[valid], kind="stable")
-    tt, nn = tt[order], nn[order]
     gamma = np.zeros((*seqs.rows.shape, spec.n_levels))
     best = post.argmax(1)
     path = np.full(seqs.rows.shape, -1, dtype=np.int64)
@@ -309,10 +306,7 @@ def decode_types(frame: pd.DataFrame, mixture: TypeMixture) -> pd.DataFrame:
         gamma[:T, keep] += post[keep, m][None, :, None] * g
         mine = best[keep] == m
         path[:T, keep[mine]] = vpath[:, mine]
-    out: dict[str, Any] = {"participant": [seqs.participants[i] for i in nn], "trial": seqs.trial_numbers(tt, nn)}
-    for k, name in enumerate(spec.levels):
-        out[f"p_trust_{name}"] = gamma[tt, nn, k]
-    out["viterbi_trust"] = np.array(spec.levels, dtype=object)[path[tt, nn]]
+    out, nn = trial_columns(seqs, spec.levels, gamma, path)
     out["type"] = np.array(mixture.names, dtype=object)[best[nn]]
     for m, name in enumerate(mixture.names):
         out[f"p_type_{name}"] = post[nn, m]
@@ -365,7 +359,7 @@ def bootstrap_types(
     fit: MixtureFit,
     replicates: int,
     options: FitOptions = TYPE_REFITS,
-    level: float = 0.95,
+    level: float = LEVEL,
     progress: Callable[[int, int], None] | None = None,
 ) -> TypeIntervals:
     """Intervals at ``level`` for the types of ``fit`` over ``replicates`` resamples of the participants;
@@ -398,12 +392,12 @@ def bootstrap_types(
 
 
 class _HeldType(MixtureStructure):
-    """A mixture's structure whose EM keeps rows ``rows``, level ``k`` of table ``name`` of type ``m``
-    (every type for a part they share: ``m`` a slice) at ``row``."""
+    """A mixture's structure whose EM keeps rows ``rows``, level ``k`` of ``table`` (``em`` or ``tr``) of
+    type ``m`` (every type for a part they share: ``m`` a slice) at ``row``."""
 
-    def __init__(self, base: MixtureStructure, name: str, m: int | slice, rows: np.ndarray, k: int, row: np.ndarray):
+    def __init__(self, base: MixtureStructure, table: str, m: int | slice, rows: np.ndarray, k: int, row: np.ndarray):
         self.__dict__.update(base.__dict__)
-        self.held = (name, m, rows, k, row)
+        self.held = (TABLE_NAMES[table], m, rows, k, row)
 
     def _hold(self, p: MixtureParams) -> MixtureParams:
         name, m, rows, k, row = self.held
@@ -417,16 +411,12 @@ class _HeldType(MixtureStructure):
         return self._hold(super().project(p))
 
 
-def _hold_type(structure: MixtureStructure, table: str, which: int | slice, rows: np.ndarray, k: int, row: np.ndarray):
-    return _HeldType(structure, "emission" if table == "em" else "transition", which, rows, k, row)
-
-
 def _type_boundary_bounds(fit: MixtureFit, lo: np.ndarray, hi: np.ndarray, per: int) -> tuple[np.ndarray, np.ndarray, int]:
     """Likelihood-ratio intervals (:func:`~.bootstrap.bound_zero_cells`, the mixture refitted by EM) for
     the types' cells (``per`` each in ``lo``, ``hi``, as :func:`_type_vectors` lays them out, the
     weights after them).  The new bounds, and how many cells got one."""
     types = [fit.params.type_params(m) for m in range(fit.n_types)]
     n = fit.n_types * per
-    hold = partial(_hold_type, fit.structure)
+    hold = partial(_HeldType, fit.structure)
     lo_c, hi_c, bounded, _ = bound_zero_cells(fit.structure, fit.workspace(), fit.spec, fit.params, types, lo[:n], hi[:n], hold)
     return np.concatenate([lo_c, lo[n:]]), np.concatenate([hi_c, hi[n:]]), int(bounded.sum())

@@ -15,7 +15,7 @@ from .estep import EStep, Workspace
 from .sequences import Sequences
 from .spec import FitError, IOHMMSpec, Params
 from .sticks import Sticks, _Part
-from .structure import FLOOR, PROJECT_FLOOR, START_MIX, Structure
+from .structure import FLOOR, PROJECT_FLOOR, START_MIX, Structure, mixed, normalised, random_rows
 
 PARTS = ("initial", "emission", "transition")
 EMPTY = 1e-3  # a type with fewer expected participants than this is empty
@@ -135,19 +135,17 @@ class MixtureStructure(Structure):
     def random(self, rng: np.random.Generator) -> MixtureParams:
         """Random types inside the constraints (M = 1: the pooled structure's random start, draw for draw)."""
         types = [super(MixtureStructure, self).random(rng) for _ in range(self.n_types)]
-        w = np.ones(1) if self.n_types == 1 else (1 - START_MIX) * rng.dirichlet(np.ones(self.n_types)) + START_MIX / self.n_types
+        w = np.ones(1) if self.n_types == 1 else random_rows(rng, self.n_types)
         return self._share(MixtureParams.from_types(w, types))
 
     def perturbed(self, pooled: Params, rng: np.random.Generator) -> MixtureParams:
         """M copies of ``pooled``, every row's log-odds moved by normal draws, random weights."""
 
         def jiggle(rows: np.ndarray) -> np.ndarray:
-            x = np.maximum(rows, 1e-6) * np.exp(rng.normal(0.0, PERTURB, size=rows.shape))
-            x = x / x.sum(-1, keepdims=True)
-            return (1 - START_MIX) * x + START_MIX * rng.dirichlet(np.ones(rows.shape[-1]), size=rows.shape[:-1])
+            return mixed(np.maximum(rows, 1e-6) * np.exp(rng.normal(0.0, PERTURB, size=rows.shape)), rng, START_MIX)
 
         types = [Params(jiggle(pooled.initial), jiggle(pooled.emission), jiggle(pooled.transition)) for _ in range(self.n_types)]
-        w = (1 - START_MIX) * rng.dirichlet(np.ones(self.n_types)) + START_MIX / self.n_types
+        w = random_rows(rng, self.n_types)
         return self.project(MixtureParams.from_types(w, types))
 
     def project(self, p: Params) -> MixtureParams:
@@ -166,9 +164,7 @@ class MixtureStructure(Structure):
             ok = (wt > 0) & (pt > 0)
             ini = np.where(ok, (wc / np.where(wt > 0, wt, 1.0)) * (pc / np.where(pt > 0, pt, 1.0)), previous.initial)
         else:
-            c0 = stats.initial + a
-            tot = c0.sum((-2, -1), keepdims=True)
-            ini = np.where(tot > 0, c0 / np.where(tot > 0, tot, 1.0), previous.initial)
+            ini = normalised(stats.initial + a, previous.initial, (-2, -1))
         em = self._table_mstep(self.em, stats.emission, a, previous.emission, self.shared("emission"))
         tr = self._table_mstep(self.tr, stats.transition, a, previous.transition, self.shared("transition"))
         return MixtureParams(ini, em, tr)

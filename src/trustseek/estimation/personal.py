@@ -82,15 +82,10 @@ class _PersonalStructure(Structure):
 
     pseudo: dict[str, np.ndarray]
 
-    def mstep(self, stats: EStep, previous: Params) -> Params:
-        c0 = stats.initial + self.pseudo["initial"]
-        tot = c0.sum(-1, keepdims=True)
-        pi = np.where(tot > 0, c0 / np.where(tot > 0, tot, 1.0), previous.initial)
-        return Params(
-            pi,
-            self.em.mstep(stats.emission + self.pseudo["emission"], 0.0, previous.emission),
-            self.tr.mstep(stats.transition + self.pseudo["transition"], 0.0, previous.transition),
-        )
+    def mstep(self, stats: EStep, previous: Params, prior: float | None = None) -> Params:
+        """The pooled M-step of the expected counts plus the pseudo-counts (in place of any ``prior``)."""
+        counts = {name: getattr(stats, name) + self.pseudo[name] for name in TABLES}
+        return super().mstep(replace(stats, **counts), previous, prior=0.0)
 
     def log_prior(self, p: Params) -> np.ndarray:
         out = (self.pseudo["initial"] * np.log(np.maximum(p.initial, FLOOR))).sum(-1)
@@ -530,11 +525,11 @@ def personalize(
         else:
             s_tab, score, centre_score = _cv_strengths(prep, free, folds, tol, max_iter)
         bound = {k: k not in free or s_tab[k] >= S_MAX for k in TABLES}
-        for name in TABLES:
-            if bound[name] and method[name] not in (NOTHING, ONE_DRAW):
-                warnings.append(
-                    f"{name}: the strength is at its bound ({s_tab[name]:.3g}): the data show no individual differences there"
-                )
+        warnings += [
+            f"{name}: the strength is at its bound ({s_tab[name]:.3g}): the data show no individual differences there"
+            for name in free
+            if bound[name]
+        ]
         warnings += [
             f"{name}: the strength is at its lower bound ({s_tab[name]:.3g}): each participant's rows are their own counts"
             for name in TABLES

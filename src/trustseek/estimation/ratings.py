@@ -17,7 +17,7 @@ import numpy as np
 from .estep import EStep
 from .sequences import Sequences
 from .spec import IOHMMSpec, Params
-from .structure import FLOOR, PROJECT_FLOOR, START_MIX, Structure
+from .structure import FLOOR, PROJECT_FLOOR, Structure, normalised, random_rows
 
 
 def split_joint(joint: np.ndarray, M: int, R: int) -> tuple[np.ndarray, np.ndarray]:
@@ -83,23 +83,19 @@ class RatingStructure(Structure):
 
     def random(self, rng: np.random.Generator) -> Params:
         base = super().random(rng)
-        R = self.R
-        rating = (1 - START_MIX) * rng.dirichlet(np.ones(R), size=self.K) + START_MIX / R
-        return self.combined(base, rating)
+        return self.combined(base, random_rows(rng, self.R, self.K))
 
     def project(self, p: Params) -> Params:
         base, rating = self.factors(p)
         rating = np.clip(rating, PROJECT_FLOOR, None)
         return self.combined(super().project(base), rating / rating.sum(-1, keepdims=True))
 
-    def mstep(self, stats: EStep, previous: Params) -> Params:
+    def mstep(self, stats: EStep, previous: Params, prior: float | None = None) -> Params:
+        a = self.spec.prior if prior is None else prior
         action, rc = split_counts(stats.emission, self.M_out, self.R)
         prev, prev_rating = self.factors(previous)
-        base = super().mstep(replace(stats, emission=action), prev)
-        c = rc + self.spec.prior
-        tot = c.sum(-1, keepdims=True)
-        rating = np.where(tot > 0, c / np.where(tot > 0, tot, 1.0), prev_rating)
-        return self.combined(base, rating)
+        base = super().mstep(replace(stats, emission=action), prev, a)
+        return self.combined(base, normalised(rc + a, prev_rating))
 
     def log_prior(self, p: Params) -> np.ndarray:
         base, rating = self.factors(p)

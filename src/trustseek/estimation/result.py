@@ -12,12 +12,16 @@ import numpy as np
 import pandas as pd
 
 from ..model.core import TrustModel
-from ..vocab import ACTIONS, EXPERIENCES
 from .iohmm import EMFit, posterior_frame
-from .trust_iohmm import index_grid
+from .trust_iohmm import index_grid, model_categories
 
 if TYPE_CHECKING:
     from .bootstrap import Intervals
+
+
+def _listed(n: int) -> range:
+    """The categories of a distribution over ``n`` whose cells are listed: of two, the second only."""
+    return range(1, n) if n == 2 else range(n)
 
 
 @dataclass
@@ -115,7 +119,7 @@ class FitResult(EMFit):
         spec = self.spec
         T = m.trust_levels
         short = {"complexity": "C", "robot_action": "a", "experience": "E'"}
-        names = {"complexity": m.complexities, "robot_action": ACTIONS, "experience": EXPERIENCES}
+        names = model_categories(m.complexities)
         out: list[dict[str, Any]] = []
         seen: set[tuple[Any, ...]] = set()
 
@@ -135,7 +139,7 @@ class FitResult(EMFit):
         def cond(inputs: Sequence[str], values: dict[str, int]) -> str:
             return "".join(f", {short[c]}={names[c][values[c]]}" for c in inputs)
 
-        for t in range(1, m.n_trust) if m.n_trust == 2 else range(m.n_trust):
+        for t in _listed(m.n_trust):
             add("initial", (t,), f"P(T1={T[t]})", ("i", t))
         eg = index_grid(spec, spec.emission_inputs, False)
         for c in range(m.n_complexity):
@@ -148,9 +152,7 @@ class FitResult(EMFit):
             for a in range(2):
                 for e in range(2):
                     for t in range(m.n_trust):
-                        for u in range(m.n_trust):
-                            if m.n_trust == 2 and u == 0:
-                                continue
+                        for u in _listed(m.n_trust):
                             v = {"complexity": c, "robot_action": a, "experience": e}
                             add(
                                 "transition",
@@ -172,7 +174,7 @@ class FitResult(EMFit):
         L = m.levels
         out: list[dict[str, Any]] = []
 
-        for k in range(1, m.n_levels) if m.n_levels == 2 else range(m.n_levels):
+        for k in _listed(m.n_levels):
             rec = {
                 "table": "initial",
                 "where": {},
@@ -194,7 +196,7 @@ class FitResult(EMFit):
                 for k in range(m.n_levels):
                     if np.all(table.fixed[u, k]):
                         continue
-                    for j in range(1, len(cats)) if len(cats) == 2 else range(len(cats)):
+                    for j in _listed(len(cats)):
                         head = f"{m.output}={cats[j]}" if name == "emission" else f"S'={cats[j]}"
                         rec = {
                             "table": name,

@@ -29,7 +29,7 @@ from .mixture_em import MixtureWorkspace
 from .options import FitOptions
 from .sequences import Sequences, deal_folds, encode
 from .spec import FitError, IOHMMSpec, Params
-from .structure import Structure
+from .structure import Structure, mixed
 from .trust_iohmm import inputs_spec, level_names
 
 log = logging.getLogger(__name__)
@@ -85,7 +85,7 @@ def split_starts(previous: Params, rng: np.random.Generator, per_level: int = SP
             tr = np.concatenate([tr, tr[:, :, j : j + 1] * (1 - f)], axis=2)  # (U, K0, K): column j split
             tr[:, :, j] *= f
             tr = np.concatenate([tr, tr[:, j : j + 1]], axis=1)  # (U, K, K): the copy's row is j's
-            out.append(Params(_mix(pi, rng), _mix(em, rng), _mix(tr, rng)))
+            out.append(Params(mixed(pi, rng, SPLIT_MIX), mixed(em, rng, SPLIT_MIX), mixed(tr, rng, SPLIT_MIX)))
     return out
 
 
@@ -169,11 +169,6 @@ def move_sources(fit: EMFit, used: Sequence[float], n: int) -> list[int]:
     return out
 
 
-def _mix(rows: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    rows = rows / rows.sum(-1, keepdims=True)
-    return (1 - SPLIT_MIX) * rows + SPLIT_MIX * rng.dirichlet(np.ones(rows.shape[-1]), size=rows.shape[:-1])
-
-
 def select_levels(
     frame: pd.DataFrame,
     levels: Sequence[int] = (1, 2, 3, 4),
@@ -197,7 +192,7 @@ def select_levels(
     seqs = encode(frame, base)
     cap = MAX_LEVELS if widen else 0
     comparison = HeldOutComparison("levels", folds, options.seed_number, cap, progress, jobs)
-    rows = comparison.run(seqs, levels, _LevelFit(base, replace(options, n_jobs=1), splits), heldout_loglik)
+    rows = comparison.run(seqs, levels, _LevelFit(base, replace(options, n_jobs=1), splits))
     for w in selection_warnings(rows):
         log.warning("%s", w)
     return rows
@@ -244,14 +239,13 @@ class HeldOutComparison:
         seqs: Sequences,
         values: Sequence[int],
         fit: Callable[[Sequences, int, int, list[int], Any], tuple[Any, Any]],
-        heldout: Callable[[Sequences, Any], float],
         extra: Callable[[Any], dict[str, Any]] | None = None,
     ) -> list[dict[str, Any]]:
         """One row per number compared: ``fit(data, n, slot, seed key, before)`` on all participants
-        (slot -1) and on each fold's training participants (slot f), scored by ``heldout(test,
-        fit)``, returns the fit and the slot's ``before`` for the next number (None at first): the
-        fits of a number are independent of each other.  ``extra(full fit)`` adds entries to the
-        row.  The rows' choices are marked."""
+        (slot -1) and on each fold's training participants (slot f, scored by :func:`heldout_loglik`)
+        returns the fit and the slot's ``before`` for the next number (None at first): the fits of
+        a number are independent of each other.  ``extra(full fit)`` adds entries to the row.  The
+        rows' choices are marked."""
         N = seqs.n_participants
         folds = self.folds
         fold_of = deal_folds(N, folds, [self.seed, 2])  # refuses more folds than participants
@@ -273,7 +267,7 @@ class HeldOutComparison:
 
             fits, before = map(list, zip(*in_processes(calls, self.jobs, finished), strict=True))
             done += folds + 1
-            per_fold = [heldout(tests[f], fits[f + 1]) for f in range(folds)]
+            per_fold = [heldout_loglik(tests[f], fits[f + 1]) for f in range(folds)]
             rows.append(self._row(n, fits[0], per_fold, extra, n not in asked))
         mark_choices(rows, self.key)
         return rows
@@ -291,10 +285,9 @@ class HeldOutComparison:
             full.bic,
             held,
         )
-        scores = {"loglik": full.loglik, "n_params": full.n_params, "aic": full.aic, "bic": full.bic}
         return {
             self.key: n,
-            **scores,
+            **full.criteria(),
             "heldout_loglik": held,
             "heldout_per_fold": per_fold,
             **(extra(full) if extra else {}),
@@ -386,16 +379,8 @@ def heldout_params(fit: EMFit, pseudocount: float = HELDOUT_PSEUDOCOUNT) -> Para
     smoothed row: one M-step from the fit's expected counts plus ``pseudocount`` per free cell (on top of
     the spec's prior); a mixture's initial table, one distribution over (type, first level), as a whole."""
     p = fit.params
-    st = fit.workspace().estep(p)
-    a = fit.spec.prior + pseudocount
-    smooth: Params
-    axes: tuple[int, ...]
-    if isinstance(fit, MixtureFit):
-        smooth, axes = fit.structure.mstep(st, p, prior=a), (-2, -1)
-    else:
-        s, c0 = fit.structure, st.initial + a
-        smooth = Params(c0 / c0.sum(), s.em.mstep(st.emission, a, p.emission), s.tr.mstep(st.transition, a, p.transition))
-        axes = (-1,)
+    smooth = fit.structure.mstep(fit.workspace().estep(p), p, prior=fit.spec.prior + pseudocount)
+    axes = (-2, -1) if isinstance(fit, MixtureFit) else (-1,)
     return type(p)(
         smooth_zero_rows(p.initial, smooth.initial, axes),
         smooth_zero_rows(p.emission, smooth.emission),
@@ -436,7 +421,7 @@ def select_types(
 
     cap = min(MAX_TYPES, seqs.n_participants) if widen else 0
     comparison = HeldOutComparison("types", folds, options.seed_number, cap, progress, jobs)
-    rows = comparison.run(seqs, types, _TypeFit(spec, replace(options, n_jobs=1), differ), heldout_loglik, extra)
+    rows = comparison.run(seqs, types, _TypeFit(spec, replace(options, n_jobs=1), differ), extra)
     for w in type_selection_warnings(rows):
         log.warning("%s", w)
     return rows

@@ -21,6 +21,23 @@ PROJECT_FLOOR = 1e-12  # an extrapolated cell is clipped to at least this before
 START_MIX = 0.2  # random starts mix this much of the uniform row into a Dirichlet draw: never an exact zero
 
 
+def random_rows(rng: np.random.Generator, M: int, size: int | tuple[int, ...] | None = None) -> np.ndarray:
+    """Random rows of ``M`` cells: a Dirichlet(1) draw with :data:`START_MIX` of the uniform row mixed in."""
+    return (1 - START_MIX) * rng.dirichlet(np.ones(M), size=size) + START_MIX / M
+
+
+def mixed(rows: np.ndarray, rng: np.random.Generator, share: float) -> np.ndarray:
+    """``rows`` normalised, with ``share`` of a random (Dirichlet(1)) row mixed into each: no exact zero."""
+    rows = rows / rows.sum(-1, keepdims=True)
+    return (1 - share) * rows + share * rng.dirichlet(np.ones(rows.shape[-1]), size=rows.shape[:-1])
+
+
+def normalised(counts: np.ndarray, previous: np.ndarray, axis: int | tuple[int, ...] = -1) -> np.ndarray:
+    """Counts scaled to sum to 1 over ``axis``; ``previous`` where they sum to 0 (the M-step of a free row)."""
+    tot = counts.sum(axis, keepdims=True)
+    return np.where(tot > 0, counts / np.where(tot > 0, tot, 1.0), previous)
+
+
 class Table:
     """Fixed cells, tie groups and defaults of one table (U input combinations x K levels x M): the spec
     sets ``fixed``, ``values`` and ``group``, then :meth:`finish` adds what the data decide."""
@@ -72,8 +89,7 @@ class Table:
         return g[..., self.group, :, :]
 
     def random(self, rng: np.random.Generator) -> np.ndarray:
-        d = rng.dirichlet(np.ones(self.M), size=(self.G, self.K))
-        return self._normalised((1 - START_MIX) * d + START_MIX / self.M)
+        return self._normalised(random_rows(rng, self.M, (self.G, self.K)))
 
     def project(self, p: np.ndarray) -> np.ndarray:
         """Put a (..., U, K, M) table back on the constraint set (after extrapolation)."""
@@ -210,22 +226,20 @@ class Structure:
 
     def random(self, rng: np.random.Generator) -> Params:
         """A random start inside the constraints, with no exact zero (EM could not leave it)."""
-        K = self.K
-        pi = (1 - START_MIX) * rng.dirichlet(np.ones(K)) + START_MIX / K
-        return Params(pi, self.em.random(rng), self.tr.random(rng))
+        return Params(random_rows(rng, self.K), self.em.random(rng), self.tr.random(rng))
 
     def project(self, p: Params) -> Params:
         pi = np.clip(p.initial, PROJECT_FLOOR, None)
         return Params(pi / pi.sum(-1, keepdims=True), self.em.project(p.emission), self.tr.project(p.transition))
 
-    def mstep(self, stats: EStep, previous: Params) -> Params:
-        """The maximising parameters for the expected counts ``stats`` (plus the prior's pseudo-counts)."""
-        a = self.spec.prior
-        c0 = stats.initial + a
-        tot = c0.sum(-1, keepdims=True)
-        pi = np.where(tot > 0, c0 / np.where(tot > 0, tot, 1.0), previous.initial)
+    def mstep(self, stats: EStep, previous: Params, prior: float | None = None) -> Params:
+        """The maximising parameters for the expected counts ``stats`` plus ``prior`` pseudo-counts
+        per free cell (the spec's by default)."""
+        a = self.spec.prior if prior is None else prior
         return Params(
-            pi, self.em.mstep(stats.emission, a, previous.emission), self.tr.mstep(stats.transition, a, previous.transition)
+            normalised(stats.initial + a, previous.initial),
+            self.em.mstep(stats.emission, a, previous.emission),
+            self.tr.mstep(stats.transition, a, previous.transition),
         )
 
     def log_prior(self, p: Params) -> np.ndarray:

@@ -27,6 +27,11 @@ PAPER_EMISSION_INPUTS = EMISSION_INPUTS
 PRESETS = ("paper",)
 
 
+def model_categories(complexities: Sequence[str] = LEVELS) -> dict[str, tuple[str, ...]]:
+    """A trust model's inputs and their levels, with these complexities."""
+    return {"complexity": tuple(complexities), "robot_action": ACTIONS, "experience": EXPERIENCES}
+
+
 def level_names(k: int) -> tuple[str, ...]:
     """Names of k trust levels, lowest first."""
     names = {1: ("single",), 2: ("low", "high"), 3: ("low", "medium", "high"), 4: ("low", "medium-low", "medium-high", "high")}
@@ -47,8 +52,7 @@ def paper_spec(
     action.  Levels are ordered by P(rely) in high complexity without asking (as far
     as the emission inputs resolve it), lowest first.
     """
-    complexities = tuple(complexities)
-    cats = {"complexity": complexities, "robot_action": ACTIONS, "experience": EXPERIENCES}
+    cats = model_categories(complexities)
     bad = [c for c in (*transition_inputs, *emission_inputs) if c not in cats]
     if bad:
         raise FitError([f"input {c!r} is not one of {list(MODEL_INPUTS)}" for c in bad])
@@ -199,8 +203,6 @@ def from_model(model: TrustModel, rating: str | None = None) -> tuple[IOHMMSpec,
 
 # --------------------------------------------------------------------------- the general model: any named inputs
 
-CANONICAL_CATEGORIES = {"complexity": LEVELS, "robot_action": ACTIONS, "experience": EXPERIENCES}
-
 
 def is_trust_structure(transition_inputs: Sequence[str], emission_inputs: Sequence[str]) -> bool:
     """True when every input is one a trust model has (the paper's preset and its variants)."""
@@ -212,7 +214,7 @@ def input_levels(frame: pd.DataFrame, inputs: Sequence[str]) -> dict[str, tuple[
     names first); an input absent from ``frame`` or without values is an error."""
     out, problems = {}, []
     for c in dict.fromkeys(inputs):
-        levels = declared_levels(frame, c, CANONICAL_CATEGORIES.get(c, ()))
+        levels = declared_levels(frame, c, model_categories().get(c, ()))
         if levels is None:
             problems.append(f"input {c!r}: no such column with values in the log")
         else:
