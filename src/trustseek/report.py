@@ -22,6 +22,7 @@ from .data.trials import write_csv
 from .design.sweep import participants_needed
 from .model.presets import paper_model, paper_task
 from .reproduction import AGNOSTIC, AWARE, PAPER, Reproduction, write_summary
+from .reproduction.comparison import floored
 from .version import __version__
 
 __all__ = ["FIGURES", "fmt", "iv", "pct", "render_html", "stat", "write_design_report", "write_report"]
@@ -73,10 +74,6 @@ FIGURES = [
 ]
 
 
-#: below this a probability is the estimator's numerical floor (1e-12), shown as 0 (and 1 - it as 1)
-FLOOR = 1e-9
-
-
 def fmt(v: Any) -> str:
     """Numbers for tables: integers plainly, others with 3 significant decimals; the numerical
     floor of a probability (1e-12) shows as 0, and one minus it as 1."""
@@ -87,13 +84,9 @@ def fmt(v: Any) -> str:
     if isinstance(v, (int, np.integer)):
         return f"{v:,}"
     if isinstance(v, (float, np.floating)):
-        x = float(v)
+        x = floored(float(v))
         if not np.isfinite(x):
             return "–"
-        if abs(x) < FLOOR:
-            return "0"
-        if 0 < 1 - x < FLOOR:
-            return "1"
         if x.is_integer() and abs(x) < 1e6:
             return f"{int(x)}"
         if abs(x) >= 100:
@@ -127,74 +120,50 @@ def make_figures(rep: Reproduction, out: Path) -> list[Path]:
     from .plots.model import plot_emissions, plot_transitions
     from .plots.q import plot_q
     from .plots.rewards import plot_heterogeneity, plot_policy_values, plot_replicates, plot_rewards
+    from .plots.scheduling import plot_scheduling_section
     from .plots.sensitivity import plot_tornado
+    from .plots.type_comparison import plot_types_section
+
+    paths: list[Path] = []
+
+    def draw(file: str, plot: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
+        paths.append(out / file)
+        plot(*args, path=paths[-1], **kwargs)
 
     s = rep.summary
     paper = paper_model()
     ci = getattr(rep.fit, "ci", None)
-    paths = []
-    p = out / "fig4_emissions.png"
-    plot_emissions(rep.fitted, p, ci=ci, reference=paper, reference_label="paper")
-    paths.append(p)
-    p = out / "fig5_6_transitions.png"
-    plot_transitions(rep.fitted, p, ci=ci, reference=paper, reference_label="paper", ask_experience=paper_task().ask_experience)
-    paths.append(p)
-    p = out / "fig7_q.png"
-    plot_q(rep.aware, p, title=f"Action-value functions of the fitted model (belief update: {rep.aware.belief_update})")
-    paths.append(p)
-    p = out / "fig8_rewards.png"
-    plot_rewards(
-        rep.experiment2.by_policy(),
-        rep.experiment2_large.by_policy(),
-        p,
-        paper_medians={AWARE: PAPER["median_aware"], AGNOSTIC: PAPER["median_agnostic"]},
-    )
-    paths.append(p)
+    draw("fig4_emissions.png", plot_emissions, rep.fitted, ci=ci, reference=paper)
+    asked = paper_task().ask_experience
+    draw("fig5_6_transitions.png", plot_transitions, rep.fitted, ci=ci, reference=paper, ask_experience=asked)
+    title = f"Action-value functions of the fitted model (belief update: {rep.aware.belief_update})"
+    draw("fig7_q.png", plot_q, rep.aware, title=title)
+    medians = {AWARE: PAPER["median_aware"], AGNOSTIC: PAPER["median_agnostic"]}
+    draw("fig8_rewards.png", plot_rewards, rep.experiment2.by_policy(), rep.experiment2_large.by_policy(), paper_medians=medians)
     r = s["replicates"]
-    p = out / "replicates.png"
-    plot_replicates(
+    draw(
+        "replicates.png",
+        plot_replicates,
         [np.nan if v is None else v for v in r["threshold"]["values"]],
         r["median_diff_small"]["values"],
         r["mean_diff_large"]["values"],
-        p,
         paper_threshold=PAPER["threshold_high"],
         true_threshold=s["plan"]["true_model"]["thresholds"]["high"],
         paper_difference=PAPER["median_aware"] - PAPER["median_agnostic"],
         design=f"{s['config']['participants_1']} × {sum(s['config']['counts_1'])}",
     )
-    paths.append(p)
-    p = out / "sensitivity_tornado.png"
     if rep.sensitivity is not None:
-        plot_tornado(
-            rep.sensitivity,
-            s["threshold_sensitivity"]["quantity"],
-            p,
-            paper_value=PAPER["threshold_high"],
-            title="Threshold in high complexity within the printed precision of the paper's parameters",
-        )
-        paths.append(p)
+        title = "Threshold in high complexity within the printed precision of the paper's parameters"
+        quantity = s["threshold_sensitivity"]["quantity"]
+        draw("sensitivity_tornado.png", plot_tornado, rep.sensitivity, quantity, paper_value=PAPER["threshold_high"], title=title)
     if rep.scheduling is not None:
-        from .plots.scheduling import plot_scheduling_section
-
-        p = out / "scheduling.png"
-        plot_scheduling_section(rep.scheduling, p)
-        paths.append(p)
+        draw("scheduling.png", plot_scheduling_section, rep.scheduling)
     if rep.types is not None:
-        from .plots.type_comparison import plot_types_section
-
-        p = out / "types.png"
-        plot_types_section(rep.types.numbers, p)
-        paths.append(p)
-    p = out / "policies.png"
-    plot_policy_values(
-        s["costs"]["rows"],
-        p,
-        title=f"{s['costs']['participants']:,} simulated participants, one block of {s['costs']['trials_per_block']} trials",
-    )
-    paths.append(p)
-    p = out / "remark1.png"
-    plot_heterogeneity(s["heterogeneity"]["quartiles"], p)
-    paths.append(p)
+        draw("types.png", plot_types_section, rep.types.numbers)
+    costs = s["costs"]
+    title = f"{costs['participants']:,} simulated participants, one block of {costs['trials_per_block']} trials"
+    draw("policies.png", plot_policy_values, costs["rows"], title=title)
+    draw("remark1.png", plot_heterogeneity, s["heterogeneity"]["quartiles"])
     return paths
 
 

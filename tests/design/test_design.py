@@ -195,7 +195,7 @@ def test_sizes_beyond_the_machine_are_refused_before_any_replicate():
         with pytest.raises(TrustseekError, match=expected):
             run_design(cfg)
     with pytest.raises(TrustseekError, match="--jobs must be between 1 and 256"):
-        execute(None, [], jobs=10**9)  # type: ignore[arg-type]
+        execute(None, [], 1, jobs=10**9)  # type: ignore[arg-type]
     with pytest.raises(TrustseekError, match="--search-ask-low needs values in"):
         ask_search(DesignConfig(), [float("nan")], [0.4])
 

@@ -7,9 +7,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import ttest_rel
 
-from trustseek.design.replicate import FitSettings, fit_model
+from trustseek.design.replicate import FitSettings, fit_encoded
 from trustseek.estimation.fit import fit_trust_model
 from trustseek.estimation.options import FitOptions
+from trustseek.estimation.sequences import encode
+from trustseek.estimation.trust_iohmm import preset_spec
 from trustseek.model.presets import paper_model
 from trustseek.simulation.designs import simulate_design
 from trustseek.statistics import paired_tests
@@ -30,7 +32,8 @@ def test_paired_t_is_scipys(values, seed):
 def test_the_replicate_fit_is_fit_trust_models_model():
     frame = simulate_design(paper_model(), 9, seed=3)
     fs = FitSettings(restarts=2)
-    got = fit_model(frame, fs, 17)
+    spec = preset_spec("paper", frame)
+    got = fit_encoded(encode(frame, spec), spec, fs, 17)
     ref = fit_trust_model(frame, options=FitOptions(restarts=2, seed=17, tol=fs.tol, max_iter=fs.max_iter, n_jobs=1)).model
     for name in ("initial", "emission", "transition"):
         assert np.array_equal(getattr(got, name), getattr(ref, name))

@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import TrustseekError
 from ..estimation.fit import fit_sequences
 from ..estimation.options import FitOptions
-from ..estimation.sequences import Sequences, encode
+from ..estimation.sequences import Sequences
 from ..estimation.spec import IOHMMSpec
 from ..estimation.trust_iohmm import preset_spec
 from ..model.core import TrustModel
@@ -103,16 +103,10 @@ def block_counts(trials: int, n_complexity: int) -> tuple[int, ...]:
     return tuple(base + (1 if c < rest else 0) for c in range(n_complexity))
 
 
-def fit_model(frame: Any, settings: FitSettings, seed: int) -> TrustModel:
-    """The model a replicate fits to experiment 1's trials: :func:`~trustseek.estimation.fit_trust_model`'s
-    (the ``paper`` preset, one thread), without marking the rows no trial informs (neither the
-    plan nor the simulation reads them)."""
-    spec = preset_spec("paper", frame)
-    return fit_encoded(encode(frame, spec), spec, settings, seed)
-
-
 def fit_encoded(seqs: Sequences, spec: IOHMMSpec, settings: FitSettings, seed: int) -> TrustModel:
-    """:func:`fit_model` on trials already encoded for ``spec``."""
+    """The model a replicate fits to experiment 1's trials, encoded for ``spec``:
+    :func:`~trustseek.estimation.fit_trust_model`'s (the ``paper`` preset, one thread), without
+    marking the rows no trial informs (neither the plan nor the simulation reads them)."""
     fit = fit_sequences(
         seqs,
         spec,
@@ -121,14 +115,19 @@ def fit_encoded(seqs: Sequences, spec: IOHMMSpec, settings: FitSettings, seed: i
     return fit.model
 
 
+def _recorded(sim: Simulation) -> dict[str, np.ndarray]:
+    """The recorded trials of experiment 1, as integer arrays."""
+    if sim.arrays is None:
+        raise TrustseekError(["experiment 1 must record its trials"])
+    return sim.arrays
+
+
 def experiment1_sequences(sim: Simulation) -> tuple[Sequences, IOHMMSpec]:
     """The ``paper`` spec and the encoded trials of a recorded one-block simulation, straight from
     its integer arrays: what :func:`~trustseek.estimation.sequences.encode` makes of
     ``sim.trials()`` with ``preset_spec("paper", frame)``, without the frame of strings (the
     tests check that both are equal)."""
-    if sim.arrays is None:
-        raise TrustseekError(["experiment 1 must record its trials"])
-    arr = sim.arrays
+    arr = _recorded(sim)
     n, T = arr["complexity"].shape
     cx = tuple(sim.task.complexities)
     used = np.flatnonzero(np.bincount(arr["complexity"].reshape(-1).astype(np.int64), minlength=len(cx)))
@@ -174,11 +173,10 @@ def agnostic_of(sim: Simulation) -> ComplexityPolicy:
     """The trust-agnostic policy from experiment 1's trials (as
     :func:`~trustseek.solvers.agnostic.trust_agnostic_from_data` of ``sim.trials()``: P(intervene |
     C, autonomous) estimated by its share), on the simulation's integer arrays."""
-    if sim.arrays is None:
-        raise TrustseekError(["experiment 1 must record its trials"])
-    c = sim.arrays["complexity"].reshape(-1)
-    auto = sim.arrays["action"].reshape(-1) == AUTONOMOUS
-    intervene = sim.arrays["human"].reshape(-1) == INTERVENE
+    arr = _recorded(sim)
+    c = arr["complexity"].reshape(-1)
+    auto = arr["action"].reshape(-1) == AUTONOMOUS
+    intervene = arr["human"].reshape(-1) == INTERVENE
     p_int = []
     for k in range(sim.task.n_complexity):
         sel = auto & (c == k)

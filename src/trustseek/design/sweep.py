@@ -200,14 +200,16 @@ def _even_parts(items: list[Any], workers: int, most: int = 8) -> list[list[Any]
 
 def execute(
     study: Study,
-    items: list[tuple[int, Experiment1, int]],
+    designs: Sequence[Experiment1],
+    replicates: int,
     jobs: int = 1,
     client: Any = None,
     progress: Progress | None = None,
 ) -> list[dict[str, Any]]:
-    """Every replicate of ``items`` (point, design, replicate), sorted by (point, replicate):
-    in this process (``jobs`` = 1), in ``jobs`` local processes, or on the Dask ``client``."""
+    """``replicates`` replicates of each of ``designs`` (design point: its index), sorted by (point,
+    replicate): in this process (``jobs`` = 1), in ``jobs`` local processes, or on the Dask ``client``."""
     check_jobs(jobs, "--jobs")
+    items = [(i, d, r) for i, d in enumerate(designs) for r in range(replicates)]
     total = len(items)
     report = progress or (lambda done, tot: None)
     out: list[dict[str, Any]] = []
@@ -252,8 +254,7 @@ def run_design(
     t0 = time.perf_counter()
     study = study_of(cfg)
     designs = cfg.designs()
-    items = [(i, d, r) for i, d in enumerate(designs) for r in range(cfg.replicates)]
-    reps = execute(study, items, jobs=jobs, client=client, progress=progress)
+    reps = execute(study, designs, cfg.replicates, jobs=jobs, client=client, progress=progress)
     summary = summarize(cfg, study, designs, reps)
     return DesignResult(summary=json_safe(summary), replicates=json_safe(reps), seconds=time.perf_counter() - t0)
 
@@ -274,10 +275,15 @@ def _share(flags: Sequence[bool], level: float) -> dict[str, Any]:
 def _power(pvalues: Sequence[float], diffs: Sequence[float], alpha: float, level: float) -> dict[str, Any]:
     """Share of replicates whose test detects the trust-aware advantage (p < α and a positive
     mean paired difference), with its exact interval."""
-    hits = sum(1 for p, d in zip(pvalues, diffs, strict=True) if p < alpha and d > 0)
-    n = len(pvalues)
-    lo, hi = share_ci(hits, n, level) if n else (float("nan"), float("nan"))
-    return {"power": hits / n if n else None, "lo": lo, "hi": hi, "detected": hits, "n": n}
+    hits = [p < alpha and d > 0 for p, d in zip(pvalues, diffs, strict=True)]
+    share = _share(hits, level)
+    return {"power": share["share"], "lo": share["lo"], "hi": share["hi"], "detected": int(sum(hits)), "n": share["n"]}
+
+
+def _of_point(reps: list[dict[str, Any]], point: int) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The replicates of design point ``point``, and those of them that ran to the end (no error)."""
+    mine = [r for r in reps if r["point"] == point]
+    return mine, [r for r in mine if "error" not in r]
 
 
 def summarize(cfg: DesignConfig, study: Study, designs: list[Experiment1], reps: list[dict[str, Any]]) -> dict[str, Any]:
@@ -287,8 +293,7 @@ def summarize(cfg: DesignConfig, study: Study, designs: list[Experiment1], reps:
     points: list[dict[str, Any]] = []
     candidates: list[dict[str, Any]] = []
     for i, d in enumerate(designs):
-        mine = [r for r in reps if r["point"] == i]
-        ok = [r for r in mine if "error" not in r]
+        mine, ok = _of_point(reps, i)
         regret = _interval([r["regret"] for r in ok], cfg.level)
         rel = {k: (None if v is None else v / v_star) for k, v in regret.items() if k in ("mean", "lo", "hi", "median")}
         point: dict[str, Any] = {
@@ -382,10 +387,8 @@ def _search_of(
     grid = [(lo, hi) for lo in lows for hi in highs]
     if PAPER_ASK not in grid:
         grid.append(PAPER_ASK)
-    sub = DesignConfig(**{**cfg.__dict__, "participants_1": cfg.participants_1[:1], "trials_1": cfg.trials_1[:1]})
-    sub.share_high_1 = cfg.share_high_1[:1]
-    sub.participants_2 = cfg.participants_2[:1]
-    sub.trials_2 = cfg.trials_2[:1]
+    firsts = ("participants_1", "trials_1", "share_high_1", "participants_2", "trials_2")
+    sub = replace(cfg, **{name: getattr(cfg, name)[:1] for name in firsts})
     return sub, grid, problems or sub.problems() or sub.size_problems(len(grid))
 
 
@@ -434,11 +437,12 @@ def ask_search(
         raise TrustseekError(problems)
     study = study_of(sub)
     designs = [replace(sub.designs()[0], ask_low=lo, ask_high=hi) for lo, hi in grid]
-    items = [(i, d, r) for i, d in enumerate(designs) for r in range(sub.replicates)]
-    reps = execute(study, items, jobs=jobs, client=client, progress=progress)
+    reps = execute(study, designs, sub.replicates, jobs=jobs, client=client, progress=progress)
     rows: list[dict[str, Any]] = []
+    regrets: list[np.ndarray] = []
     for i, d in enumerate(designs):
-        ok = [r for r in reps if r["point"] == i and "error" not in r]
+        mine, ok = _of_point(reps, i)
+        regrets.append(np.array([r["regret"] for r in ok]))
         regret = _interval([r["regret"] for r in ok], sub.level)
         rows.append(
             {
@@ -447,13 +451,12 @@ def ask_search(
                 "regret": regret,
                 "relative_regret": None if regret["mean"] is None else regret["mean"] / study.optimal_value,
                 "threshold_error": _interval([r["threshold_error"] for r in ok], sub.level),
-                "failed": sum(1 for r in reps if r["point"] == i and "error" in r),
+                "failed": len(mine) - len(ok),
             }
         )
     ranked = sorted(rows, key=lambda r: math.inf if r["regret"]["mean"] is None else r["regret"]["mean"])
     best = ranked[0]
     at_paper = next(r for r in rows if (r["ask_low"], r["ask_high"]) == PAPER_ASK)
-    regrets = {i: np.array([r["regret"] for r in reps if r["point"] == i and "error" not in r]) for i in range(len(designs))}
     i_best, i_paper = rows.index(best), rows.index(at_paper)
     difference: dict[str, Any] = {"mean": None, "lo": None, "hi": None}
     if i_best != i_paper and len(regrets[i_best]) > 1 and len(regrets[i_paper]) > 1:

@@ -27,6 +27,7 @@ RC: dict[RcKeyType, Any] = {
     "font.serif": ["DejaVu Serif"],
     "font.size": 9,
     "axes.titlesize": 9,
+    "figure.titlesize": 9,
     "axes.labelsize": 9,
     "legend.fontsize": 8,
     "xtick.labelsize": 8,
@@ -47,6 +48,12 @@ def figure(*args: Any, **kwargs: Any) -> Iterator[Any]:
     """``(fig, axes)`` of ``plt.subplots(*args, **kwargs)`` drawn with the paper's look (restored on exit)."""
     with plt.rc_context(RC):
         yield plt.subplots(*args, **kwargs)
+
+
+def legend_below(fig, ax, fontsize: float = 7, y: float = -0.01) -> None:
+    """The legend of ``ax`` in one row below the panels (the layout leaves it room: ``finish(..., rect=(0, 0.07, 1, 1))``)."""
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), frameon=False, fontsize=fontsize, bbox_to_anchor=(0.5, y))
 
 
 def finish(fig, path=None, title: str | None = None, rect: tuple[float, float, float, float] | None = None, layout: bool = True):

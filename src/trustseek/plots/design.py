@@ -18,7 +18,7 @@ def _label(point: dict[str, Any]) -> str:
     return f"{e['participants']} × {e['trials']} (ask {e['ask_low']:.2f}/{e['ask_high']:.2f})"
 
 
-def plot_power(summary: dict[str, Any], path=None, title: str | None = None):
+def plot_power(summary: dict[str, Any], path=None):
     """Power of experiment 2 against its participants, one line per test and experiment-1 design
     and block length, with the exact 95 % intervals as bands and the target power as a line."""
     target = summary["targets"]["power"]
@@ -46,12 +46,12 @@ def plot_power(summary: dict[str, Any], path=None, title: str | None = None):
         ax.set_xlabel("participants in experiment 2")
         ax.set_ylabel(f"power (α = {summary['targets']['alpha']:g})")
         ax.set_ylim(0, 1)
-        ax.set_title(title or "Experiment 2: power to detect the trust-aware advantage")
+        ax.set_title("Experiment 2: power to detect the trust-aware advantage")
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
         return finish(fig, path, layout=False)
 
 
-def plot_regret(summary: dict[str, Any], path=None, title: str | None = None):
+def plot_regret(summary: dict[str, Any], path=None):
     """Mean regret of the estimated policy (share of V*) per experiment-1 design, with its 95 %
     interval, and the regret target."""
     pts = summary["points"]
@@ -68,12 +68,12 @@ def plot_regret(summary: dict[str, Any], path=None, title: str | None = None):
         ax.axvline(100 * target, color="black", lw=0.8, ls=":", label=f"target {100 * target:g} % of V*")
         ax.set_yticks(range(len(pts)), [_label(p) for p in pts])
         ax.set_xlabel("regret of the estimated policy (% of V*, exact evaluation under the true model)")
-        ax.set_title(title or "Experiment 1: how close the estimated policy is to the optimal one")
+        ax.set_title("Experiment 1: how close the estimated policy is to the optimal one")
         ax.legend(loc="lower right", frameon=False)
         return finish(fig, path, layout=False)
 
 
-def plot_ask_search(search: dict[str, Any], path=None, title: str | None = None):
+def plot_ask_search(search: dict[str, Any], path=None):
     """Mean regret (share of V*) of every (ask_low, ask_high) of the search, as a heat map, with
     the best and the paper's choice marked."""
     rows = search["rows"]
@@ -96,5 +96,5 @@ def plot_ask_search(search: dict[str, Any], path=None, title: str | None = None)
         ax.grid(False)
         ax.legend(loc="upper left", bbox_to_anchor=(1.35, 1.0), frameon=False)
         b = search["budget"]
-        ax.set_title(title or f"Data collection: {b['participants']} × {b['trials']} trials")
+        ax.set_title(f"Data collection: {b['participants']} × {b['trials']} trials")
         return finish(fig, path, layout=False)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..vocab import ACTIONS, EXPERIENCES, RELY
-from . import figure, finish
+from . import figure, finish, legend_below
 
 _LEVEL_COLORS = ("#c8102e", "#1f5fa8", "#2a9d3f", "#7b3294", "#e08214", "#666666", "#000000", "#8c510a")
 
@@ -82,7 +82,6 @@ def plot_transitions(model, path=None, ci=None, reference=None, reference_label=
             ax.set_title(f"complexity {C[c]}")
             ax.set_ylabel(rf"$P(T' = \mathrm{{{T[top]}}} \mid T, E', C, a)$")
             ax.tick_params(axis="x", labelsize=6.5)
-        handles, labels = axes[0, 0].get_legend_handles_labels()
-        fig.legend(handles, labels, loc="lower center", ncol=len(labels), frameon=False, fontsize=7, bbox_to_anchor=(0.5, -0.01))
-        fig.suptitle("Estimated trust transitions" + (" (95% CI)" if ci is not None else ""), fontsize=9)
-        return finish(fig, path, rect=(0, 0.07, 1, 1))
+        legend_below(fig, axes[0, 0])
+        title = "Estimated trust transitions" + (" (95% CI)" if ci is not None else "")
+        return finish(fig, path, title, rect=(0, 0.07, 1, 1))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import COLORS, figure, finish
+from . import COLORS, figure, finish, legend_below
 
 
 def plot_q(policy, path=None, title: str | None = None):
@@ -38,7 +38,6 @@ def plot_q(policy, path=None, title: str | None = None):
             ax.set_xlabel(r"belief $b^T = P(T = \mathrm{high})$")
             ax.set_ylabel(r"$Q(b^T, C, a)$")
             ax.set_title(f"complexity {cn}")
-        handles, labels = axes[0, 0].get_legend_handles_labels()
-        fig.legend(handles, labels, loc="lower center", ncol=2, frameon=False, bbox_to_anchor=(0.5, -0.02))
-        fig.suptitle(title or f"Action-value functions (belief update: {policy.belief_update})", fontsize=9)
-        return finish(fig, path, rect=(0, 0.07, 1, 1))
+        legend_below(fig, axes[0, 0], fontsize=8, y=-0.02)
+        title = title or f"Action-value functions (belief update: {policy.belief_update})"
+        return finish(fig, path, title, rect=(0, 0.07, 1, 1))

@@ -71,7 +71,6 @@ def plot_rewards(
             ax.set_ylabel("cumulative reward per block")
             ax.set_xlim(0.5, len(order) + 0.7)
             ax.set_title(f"{'(a)' if paired else '(b)'} {n:,} simulated participants")
-        fig.suptitle("Cumulative reward, 17 low + 17 high trials per block (Fig. 8)", fontsize=9)
         if paper_medians:
             from matplotlib.lines import Line2D
 
@@ -80,7 +79,8 @@ def plot_rewards(
             labels = ["median (simulation)", "median reported in the paper"]
             where = {"loc": "lower center", "bbox_to_anchor": (0.5, 0.0)}
             fig.legend([median_line, handle], labels, ncols=2, frameon=False, fontsize=7, **where)
-        return finish(fig, path, rect=(0, 0.06, 1, 1) if paper_medians else None)
+        title = "Cumulative reward, 17 low + 17 high trials per block (Fig. 8)"
+        return finish(fig, path, title, rect=(0, 0.06, 1, 1) if paper_medians else None)
 
 
 def plot_replicates(
@@ -148,8 +148,7 @@ def plot_replicates(
         ax.set_title("(b) reward difference")
         ax.grid(axis="y", visible=False)
         ax.legend(frameon=False, loc="lower left", fontsize=7)
-        fig.suptitle(f"{len(thresholds)} replicate experiments ({design} data collection, fit, plan, evaluation)", fontsize=9)
-        return finish(fig, path)
+        return finish(fig, path, f"{len(thresholds)} replicate experiments ({design} data collection, fit, plan, evaluation)")
 
 
 def _no_data(ax, text: str) -> None:
@@ -182,38 +181,25 @@ def plot_policy_values(rows: Sequence[Mapping], path=None, title: str | None = N
         return finish(fig, path)
 
 
-def plot_heterogeneity(quartiles: Sequence[Mapping], path=None, score: str = ""):
+def plot_heterogeneity(quartiles: Sequence[Mapping], path=None):
     """Remark 1: mean reward and interventions per policy, by quartile of how conservative the
     simulated individuals are (1 = least)."""
-    q = [r["quartile"] for r in quartiles]
-    x = np.arange(len(q))
+    x = np.arange(len(quartiles))
     w = 0.36
-    with figure(1, 2, figsize=(6.8, 2.5)) as (fig, axes):
-        for ax, (ka, kg, ylabel) in zip(
-            axes,
-            [
-                ("mean_aware", "mean_agnostic", "mean cumulative reward per block"),
-                ("interventions_aware", "interventions_agnostic", "interventions per block"),
-            ],
-            strict=True,
-        ):
-            va = [r[ka] for r in quartiles]
-            vg = [r[kg] for r in quartiles]
-            if ka == "mean_aware":  # levels close together: points, not bars on a cut axis
-                ax.plot(x, vg, marker="s", ms=4, color=POLICY_COLORS["trust-agnostic"], label="trust-agnostic")
-                ax.plot(x, va, marker="o", ms=4, color=POLICY_COLORS["trust-aware"], label="trust-aware")
-            else:
-                ax.bar(x - w / 2, vg, w, color=POLICY_COLORS["trust-agnostic"], alpha=0.6, label="trust-agnostic")
-                ax.bar(x + w / 2, va, w, color=POLICY_COLORS["trust-aware"], alpha=0.7, label="trust-aware")
-            ax.set_xticks(x, [f"Q{k}" for k in q])
+    aware, agnostic = POLICY_COLORS["trust-aware"], POLICY_COLORS["trust-agnostic"]
+    with figure(1, 2, figsize=(6.8, 2.5)) as (fig, (rewards, interventions)):
+        # the rewards' levels lie close together: points, not bars on a cut axis
+        va, vg = [r["mean_aware"] for r in quartiles], [r["mean_agnostic"] for r in quartiles]
+        rewards.plot(x, vg, marker="s", ms=4, color=agnostic, label="trust-agnostic")
+        rewards.plot(x, va, marker="o", ms=4, color=aware, label="trust-aware")
+        pad = max(0.3, 0.3 * (max(va + vg) - min(va + vg)))
+        rewards.set_ylim(min(va + vg) - pad, max(va + vg) + pad)
+        rewards.legend(frameon=False, loc="upper right", fontsize=7)
+        interventions.bar(x - w / 2, [r["interventions_agnostic"] for r in quartiles], w, color=agnostic, alpha=0.6)
+        interventions.bar(x + w / 2, [r["interventions_aware"] for r in quartiles], w, color=aware, alpha=0.7)
+        for ax, ylabel in ((rewards, "mean cumulative reward per block"), (interventions, "interventions per block")):
+            ax.set_xticks(x, [f"Q{r['quartile']}" for r in quartiles])
             ax.set_xlabel("conservativeness quartile (Q4 = most)")
             ax.set_ylabel(ylabel)
             ax.grid(axis="x", visible=False)
-            if ka == "mean_aware":
-                lo = min(min(va), min(vg))
-                hi = max(max(va), max(vg))
-                pad = max(0.3, 0.3 * (hi - lo))
-                ax.set_ylim(lo - pad, hi + pad)
-        axes[0].legend(frameon=False, loc="upper right", fontsize=7)
-        fig.suptitle("Heterogeneous supervisors under the pooled policies (Remark 1)", fontsize=9)
-        return finish(fig, path)
+        return finish(fig, path, "Heterogeneous supervisors under the pooled policies (Remark 1)")

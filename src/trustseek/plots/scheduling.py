@@ -11,9 +11,7 @@ from . import COLORS, figure, finish
 DECISION_COLORS = ("#9ecae1", "#c8102e", "#1f5fa8", "#fd8d3c")  # low/auto, low/ask, high/auto, high/ask
 
 
-def plot_schedule(
-    policy, runs, name: str = "optimal", baseline: str | None = None, path=None, title: str | None = None, points: int = 201
-):
+def plot_schedule(policy, runs, name: str = "optimal", baseline: str | None = None, path=None, points: int = 201):
     """Two panels.  Left: the decision of the schedule ``policy`` (full control, two complexities)
     at every belief on each trial along the most common path of remaining items in ``runs``
     (its column ``name``; which item it collects and whether it asks), with the simulated mean belief on top.  Right:
@@ -58,12 +56,12 @@ def plot_schedule(
         ax.set_ylabel("share of participants")
         ax.legend(fontsize=6, loc="center left")
         ax.set_title("item order and asks (simulated)")
-        return finish(fig, path, title)
+        return finish(fig, path)
 
 
-def plot_scheduling_section(section, path=None, title: str | None = None):
+def plot_scheduling_section(section, path=None):
     """The report section's figure: :func:`plot_schedule` of its optimal policy against the
     paper's random order (``section``: a ``reproduction.scheduling.SchedulingSection``)."""
     from ..reproduction.scheduling import BASELINE
 
-    return plot_schedule(section.optimal, section.runs, "optimal", BASELINE, path=path, title=title)
+    return plot_schedule(section.optimal, section.runs, "optimal", BASELINE, path=path)

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..vocab import AUTONOMOUS, RELY
-from . import figure, finish
+from . import figure, finish, legend_below
 from .model import _bars, plot_emissions, plot_transitions
 
 
@@ -31,8 +31,7 @@ def plot_type_emissions(mixture, path=None, ci=None):
         _bars(ax, vals, lo, hi, None, [f"C={C[c]}\nT={T[t]}" for c, t in groups], series)
         ax.set_ylabel(r"$P(o = \mathrm{rely} \mid T, C, a = \mathrm{autonomous})$")
         ax.set_title("Supervisor types: probability of relying" + (" (95% CI)" if ci is not None else ""))
-        handles, labels = ax.get_legend_handles_labels()
-        fig.legend(handles, labels, loc="lower center", ncol=len(labels), frameon=False, fontsize=7, bbox_to_anchor=(0.5, -0.01))
+        legend_below(fig, ax)
         return finish(fig, path, rect=(0, 0.07, 1, 1))
 
 

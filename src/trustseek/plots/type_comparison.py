@@ -34,7 +34,7 @@ def _bars(ax, block: dict[str, Any], policies: list[str]) -> None:
     ax.set_title(f"{block['population']}, {block['trials']} trials")
 
 
-def plot_types_section(numbers: dict[str, Any], path=None, title: str | None = None):
+def plot_types_section(numbers: dict[str, Any], path=None):
     """The report section's figure (``numbers``: ``TypesSection.numbers``).  Left: mean reward
     per block of each policy, per type and overall, at the first block length on the mixture,
     with 95 % intervals.  Right: the paired differences from the pooled trust-aware policy of
@@ -63,4 +63,4 @@ def plot_types_section(numbers: dict[str, Any], path=None, title: str | None = N
         ax.set_yticks(y, labels, fontsize=6)
         ax.set_xlabel("difference from pooled trust-aware\n(reward per block, paired 95 % CI)")
         ax.set_title("gain of planning for types")
-        return finish(fig, path, title)
+        return finish(fig, path)

@@ -195,6 +195,11 @@ def _replicate_range(d: dict[str, Any] | None) -> tuple[float | None, float | No
     return (d["min"], d["max"]) if d and d.get("n") else None
 
 
+def _replicates_kind(summary: dict[str, Any]) -> str:
+    """The kind of interval the replicate experiments give."""
+    return f"range of {summary['replicates']['n']} replicates (min–max)"
+
+
 def comparison_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
     """Every number the paper reports, next to ours and an interval, with a verdict (:func:`judge`).
 
@@ -210,25 +215,23 @@ def _parameter_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
     boot = summary["fit"].get("bootstrap_ci") or {}
     fixed = set(summary["fit"].get("fixed") or ())
     reps = summary["replicates"]["params"]
-    n_rep = summary["replicates"]["n"]
-    rep_kind = f"range of {n_rep} replicates (min–max)"
+    rep_kind = _replicates_kind(summary)
     n_boot = summary["fit"].get("bootstrap", 0)
     for key, label, paper_val, _, _ in param_specs():
         rep_range = _replicate_range(reps.get(key))
-        notes = []
+        note = ""
         interval: tuple[float | None, float | None] | None
-        if key in boot and key not in fixed:
+        if key in fixed:
+            interval, kind = None, ""
+        elif key in boot:
             interval, kind = tuple(boot[key]), f"bootstrap 95% ({n_boot} resamples)"
             if rep_range is not None:
-                notes.append(f"{rep_kind}: [{rep_range[0]:.3f}, {rep_range[1]:.3f}]")
+                note = f"{rep_kind}: [{rep_range[0]:.3f}, {rep_range[1]:.3f}]"
         else:
             interval, kind = rep_range, rep_kind
-        if key in fixed:
-            interval, kind, notes = None, "", []
         row = _row(
-            label, paper_val, fitted[key], interval, kind, "; ".join(notes), fixed=key in fixed, max_width=MAX_WIDTH,
-            replicates=rep_range,
-        )  # fmt: skip
+            label, paper_val, fitted[key], interval, kind, note, fixed=key in fixed, max_width=MAX_WIDTH, replicates=rep_range
+        )
         row["replicate_range"] = list(rep_range) if rep_range is not None else None
         rows.append(row)
     return rows
@@ -237,7 +240,7 @@ def _parameter_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
 def _policy_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
     """The planned policies: the threshold, its sensitivity, where each policy asks."""
     rows = []
-    rep_kind = f"range of {summary['replicates']['n']} replicates (min–max)"
+    rep_kind = _replicates_kind(summary)
     plan = summary["plan"]
     th = summary["replicates"]["threshold"]
     rows.append(
@@ -285,8 +288,7 @@ def _policy_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
 def _experiment2_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
     """Experiment 2: the medians, their difference, the share better off, the autonomous collections."""
     rows = []
-    n_rep = summary["replicates"]["n"]
-    rep_kind = f"range of {n_rep} replicates (min–max)"
+    rep_kind = _replicates_kind(summary)
     small, large = summary["experiment2"]["small"], summary["experiment2"]["large"]
     rr = summary["replicates"]
     rr_large = summary["config"]["replicate_large_n"]
@@ -317,7 +319,7 @@ def _experiment2_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
     share_ci = large.get("share_aware_better_ci")
     share_iv: tuple[float | None, float | None] | None
     if share_rep is not None:
-        share_iv, share_kind = share_rep, f"range of {n_rep} replicates (min–max), {rr_large:,} participants each"
+        share_iv, share_kind = share_rep, f"{rep_kind}, {rr_large:,} participants each"
         share_note = f"this run's exact binomial 95%: [{share_ci[0]:.3f}, {share_ci[1]:.3f}]; " if share_ci else ""
     else:
         share_iv, share_kind = ((share_ci[0], share_ci[1]) if share_ci else None), "exact binomial 95%"
@@ -368,15 +370,18 @@ def disagreements(rows: list[dict[str, Any]]) -> list[str]:
     return out
 
 
-#: a probability this close to 0 or 1 is the estimator's numerical floor, not a value
+#: a probability this close to 0 or 1 is the estimator's numerical floor (1e-12), not a value
 FLOOR = 1e-9
 
 
+def floored(x: float) -> float:
+    """``x``, or 0 or 1 where it lies within :data:`FLOOR` of it."""
+    if abs(x) < FLOOR:
+        return 0.0
+    if 0 < 1 - x < FLOOR:
+        return 1.0
+    return x
+
+
 def _fmt(v: Any) -> str:
-    if isinstance(v, float):
-        if abs(v) < FLOOR:
-            return "0"
-        if 0 < 1 - v < FLOOR:
-            return "1"
-        return f"{v:.3g}"
-    return str(v)
+    return f"{floored(v):.3g}" if isinstance(v, float) else str(v)

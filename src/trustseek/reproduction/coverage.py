@@ -11,6 +11,7 @@ from ..estimation.fit import fit_trust_model
 from ..estimation.options import FitOptions
 from ..model.core import TrustModel
 from ..simulation.designs import simulate_design
+from .config import seed_int
 
 
 def coverage_study(
@@ -39,7 +40,7 @@ def coverage_study(
     edge: dict[str, list[float]] = {}
     lr: dict[str, int] = {}
     for d in range(datasets):
-        df = simulate_design(model, n_participants, seed=int(np.random.SeedSequence([seed, 5, d]).generate_state(1)[0]))
+        df = simulate_design(model, n_participants, seed=seed_int(np.random.SeedSequence([seed, 5, d])))
         res = fit_trust_model(
             df, options=FitOptions(restarts=restarts, seed=seed + d, tol=tol, n_jobs=n_jobs), bootstrap=bootstrap
         )

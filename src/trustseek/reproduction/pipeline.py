@@ -131,6 +131,26 @@ def _ask_policy(cfg: ReproduceConfig) -> ComplexityPolicy:
     return randomized({"low": cfg.ask_low, "high": cfg.ask_high})
 
 
+def _plan(cfg: ReproduceConfig, truth: TrustModel, task: Task, fitted: TrustModel, frame1: pd.DataFrame) -> Plan:
+    """Step 3: the trust-aware policies of the fitted and the true model and the trust-agnostic
+    policy estimated from experiment 1's trials."""
+    agnostic = trust_agnostic_from_data(frame1, task)
+    agnostic.kind = AGNOSTIC
+    aware, true_policy = (solve_policy(m, task, cfg.belief_update, cfg.grid) for m in (fitted, truth))
+    return Plan(truth, task, fitted, aware, true_policy, agnostic)
+
+
+def _crossover(
+    cfg: ReproduceConfig, plan: Plan, participants: int, seed: np.random.SeedSequence, record: bool = True
+) -> CrossoverSimulation:
+    """Experiment 2 on ``participants`` supervisors of the true model: the trust-aware and the
+    trust-agnostic policy in a counterbalanced crossover, the belief tracked with the fitted model."""
+    return crossover(
+        plan.truth, plan.task, [plan.aware, plan.agnostic], participants, counts=cfg.counts_2, seed=seed, record=record,
+        belief_model=plan.fitted,
+    )  # fmt: skip
+
+
 # --------------------------------------------------------------------------- one replicate
 
 
@@ -140,23 +160,19 @@ def run_replicate(args: tuple[ReproduceConfig, int, np.random.SeedSequence]) -> 
     s1, sfit, s2, s3, scost = ss.spawn(5)
     truth, task = paper_model(), paper_task()
     out: dict[str, Any] = {"index": index}
-    sim1 = simulate(truth, task, _ask_policy(cfg), cfg.participants_1, counts=cfg.counts_1, seed=s1)
-    frame = sim1.trials()
+    frame = simulate(truth, task, _ask_policy(cfg), cfg.participants_1, counts=cfg.counts_1, seed=s1).trials()
     try:
         fit = _fit(frame, cfg.replicate_restarts, seed_int(sfit), 0, 1)
     except TrustseekError as exc:
         out["error"] = "; ".join(exc.lines())
         return out
-    model = fit.model
-    aware = solve_policy(model, task, cfg.belief_update, cfg.grid)
-    agn = trust_agnostic_from_data(frame, task)
-    agn.kind = AGNOSTIC
-    out["threshold"] = threshold_of(aware)
-    out["asks_low"] = bool((aware.ask_intervals() or {}).get("low"))
-    out["agnostic"] = _agnostic_summary(agn)["action"]
-    out["params"] = param_values(model)
+    plan = _plan(cfg, truth, task, fit.model, frame)
+    out["threshold"] = threshold_of(plan.aware)
+    out["asks_low"] = bool((plan.aware.ask_intervals() or {}).get("low"))
+    out["agnostic"] = _agnostic_summary(plan.agnostic)["action"]
+    out["params"] = param_values(plan.fitted)
     e2, e2l = (  # paper-sized, then large
-        _experiment2(crossover(truth, task, [aware, agn], n, counts=cfg.counts_2, seed=s, record=False, belief_model=model))
+        _experiment2(_crossover(cfg, plan, n, s, record=False))
         for n, s in ((cfg.participants_2, s2), (cfg.replicate_large_n, s3))
     )
     out["median_aware"] = e2["median_aware"]
@@ -167,10 +183,9 @@ def run_replicate(args: tuple[ReproduceConfig, int, np.random.SeedSequence]) -> 
     out["share_better_large"] = e2l["share_aware_better"]
     out["median_diff_large"] = e2l["median_difference"]
     # cost of estimation: the same participants under the true model's policy
-    true_pol = solve_policy(truth, task, cfg.belief_update, cfg.grid)
     r_fit, r_true = (
         simulate(truth, task, pol, cfg.replicate_large_n, counts=cfg.counts_2, seed=scost, record=False).by_policy()[AWARE]
-        for pol in (aware, true_pol)
+        for pol in (plan.aware, plan.true_policy)
     )
     out["estimation_loss"] = float(np.mean(r_true - r_fit))
     return out
@@ -180,8 +195,7 @@ def _experiment1(
     cfg: ReproduceConfig, truth: TrustModel, task: Task, seed: np.random.SeedSequence
 ) -> tuple[pd.DataFrame, dict[str, Any]]:
     """Step 1, the data collection: its trials and their summary."""
-    sim1 = simulate(truth, task, _ask_policy(cfg), cfg.participants_1, counts=cfg.counts_1, seed=seed)
-    frame1 = sim1.trials()
+    frame1 = simulate(truth, task, _ask_policy(cfg), cfg.participants_1, counts=cfg.counts_1, seed=seed).trials()
     auto = frame1[frame1["robot_action"] == "autonomous"]
     return frame1, {
         "participants": cfg.participants_1,
@@ -206,11 +220,7 @@ def _fit_section(
     report: Callable[[str, int, int], None],
 ) -> tuple[FitResult, dict[str, Any]]:
     """Step 2, the fit of experiment 1's trials with bootstrap intervals, next to the paper's values."""
-
-    def fit_progress(d: int, tot: int) -> None:
-        report("bootstrap", d, tot)
-
-    fit = _fit(frame1, cfg.restarts, seed_int(seed), cfg.bootstrap, cfg.jobs, progress=fit_progress)
+    fit = _fit(frame1, cfg.restarts, seed_int(seed), cfg.bootstrap, cfg.jobs, progress=partial(report, "bootstrap"))
     fitted = fit.model
     boot: dict[str, list[float]] = {}
     fixed: list[str] = []
@@ -238,18 +248,14 @@ def _fit_section(
 def _plan_section(
     cfg: ReproduceConfig, truth: TrustModel, task: Task, fitted: TrustModel, frame1: pd.DataFrame
 ) -> tuple[Plan, dict[str, Any]]:
-    """Step 3, the trust-aware policies of the fitted and the true model and the trust-agnostic
-    policy estimated from experiment 1."""
-    aware = solve_policy(fitted, task, cfg.belief_update, cfg.grid)
-    true_pol = solve_policy(truth, task, cfg.belief_update, cfg.grid)
-    agn = trust_agnostic_from_data(frame1, task)
-    agn.kind = AGNOSTIC
-    return Plan(truth, task, fitted, aware, true_pol, agn), {
+    """Step 3, :func:`_plan` and its summary."""
+    plan = _plan(cfg, truth, task, fitted, frame1)
+    return plan, {
         "belief_update": cfg.belief_update,
         "grid": cfg.grid,
-        "fitted": _policy_summary(aware),
-        "true_model": _policy_summary(true_pol),
-        "agnostic": _agnostic_summary(agn),
+        "fitted": _policy_summary(plan.aware),
+        "true_model": _policy_summary(plan.true_policy),
+        "agnostic": _agnostic_summary(plan.agnostic),
         "agnostic_true_model": _agnostic_summary(trust_agnostic(truth, task)),
     }
 
@@ -315,7 +321,7 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
     summary: dict[str, Any] = {"config": cfg.to_summary()}
     # the steps of the paper's model alone start in other processes (in the order they are needed),
     # beside the fit and the plan; each has a seed of its own, so its numbers do not depend on where it runs
-    sched_seed, types_seed = (int(child.generate_state(1)[0]) for child in (ssched, stypes))
+    sched_seed, types_seed = seed_int(ssched), seed_int(stypes)
     side: dict[str, Callable[[], Any]] = {"sensitivity": partial(threshold_sensitivity, cfg, truth, task)}
     if cfg.schedule_participants:
         n = cfg.schedule_participants
@@ -327,10 +333,8 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
         frame1, summary["experiment1"] = _experiment1(cfg, truth, task, s1)
         step("experiment 1")
         fit, summary["fit"] = _fit_section(cfg, frame1, truth, sfit, report)
-        fitted = fit.model
         step("fit")
-        plan, summary["plan"] = _plan_section(cfg, truth, task, fitted, frame1)
-        aware, true_pol, agn = plan.aware, plan.true_policy, plan.agnostic
+        plan, summary["plan"] = _plan_section(cfg, truth, task, fit.model, frame1)
         step("plan")
 
         # why the printed parameters give 0.78 and not the paper's 0.75
@@ -347,17 +351,18 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
         summary["heterogeneity"] = het["summary"]
         step("heterogeneity")
 
-        # the paper's future work: choosing the order of the items, under the paper's model
-        sched = result("scheduling") if "scheduling" in side else None
-        if sched is not None:
-            summary["scheduling"] = sched.numbers
-        step("scheduling")
+        def section(name: str) -> Any:
+            """A section of the paper's model alone (None when ``cfg`` leaves it out), its numbers in the summary."""
+            out = result(name) if name in side else None
+            if out is not None:
+                summary[name] = out.numbers
+            step(name)
+            return out
 
+        # the paper's future work: choosing the order of the items, under the paper's model
+        sched: SchedulingSection | None = section("scheduling")
         # Remark 1 with supervisor types: planning for a population of types
-        types = result("types") if "types" in side else None
-        if types is not None:
-            summary["types"] = types.numbers
-        step("types")
+        types: TypesSection | None = section("types")
 
     reps = _replicates(cfg, sreps, report)
     summary["replicates"] = _replicate_summary(reps)
@@ -370,10 +375,10 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
     return Reproduction(
         summary=json_safe(summary),
         fit=fit,
-        fitted=fitted,
-        aware=aware,
-        agnostic=agn,
-        true_policy=true_pol,
+        fitted=plan.fitted,
+        aware=plan.aware,
+        agnostic=plan.agnostic,
+        true_policy=plan.true_policy,
         experiment1=frame1,
         experiment2=small,
         experiment2_large=large,
@@ -390,11 +395,8 @@ def _experiment2_section(
 ) -> tuple[CrossoverSimulation, CrossoverSimulation, dict[str, Any]]:
     """Step 4, the crossover of the trust-aware and trust-agnostic policies: with the paper's
     participants and with a large N, and their summary."""
-    pols = [plan.aware, plan.agnostic]
-    small = crossover(plan.truth, plan.task, pols, cfg.participants_2, counts=cfg.counts_2, seed=seed, belief_model=plan.fitted)
-    large = crossover(
-        plan.truth, plan.task, pols, cfg.large_n, counts=cfg.counts_2, seed=seed_large, record=False, belief_model=plan.fitted
-    )
+    small = _crossover(cfg, plan, cfg.participants_2, seed)
+    large = _crossover(cfg, plan, cfg.large_n, seed_large, record=False)
     rewards = {k: v.tolist() for k, v in small.by_policy().items()}
     first = [small.block_labels[o[0]] for o in small.orders]
     return (
@@ -415,31 +417,34 @@ def _replicates(
 def _replicate_summary(reps: list[dict[str, Any]]) -> dict[str, Any]:
     """Distributions over the replicates of every number a replicate records."""
     ok = [r for r in reps if "error" not in r]
-    keys = [spec.key for spec in param_specs()]
-    out = {
+
+    def over(key: str) -> dict[str, Any]:  # a missing number (no threshold, no test) counts as NaN
+        return distribution([float("nan") if r[key] is None else r[key] for r in ok])
+
+    def share(flags: list[bool], without: float | None) -> float | None:  # ``without``: the share of no replicate
+        return float(np.mean(flags)) if ok else without
+
+    return {
         "n": len(reps),
         "failed": [{"index": r["index"], "error": r["error"]} for r in reps if "error" in r],
-        "threshold": distribution([r["threshold"] if r["threshold"] is not None else float("nan") for r in ok]),
-        "share_threshold_policy": float(np.mean([r["threshold"] is not None for r in ok])) if ok else None,
-        "share_never_ask_low": float(np.mean([not r["asks_low"] for r in ok])) if ok else 0.0,
+        "threshold": over("threshold"),
+        "share_threshold_policy": share([r["threshold"] is not None for r in ok], None),
+        "share_never_ask_low": share([not r["asks_low"] for r in ok], 0.0),
         "agnostic_share_paper": {
-            "low": float(np.mean([r["agnostic"]["low"] == "autonomous" for r in ok])) if ok else 0.0,
-            "high": float(np.mean([r["agnostic"]["high"] == "ask" for r in ok])) if ok else 0.0,
+            "low": share([r["agnostic"]["low"] == "autonomous" for r in ok], 0.0),
+            "high": share([r["agnostic"]["high"] == "ask" for r in ok], 0.0),
         },
-        "median_aware": distribution([r["median_aware"] for r in ok]),
-        "median_agnostic": distribution([r["median_agnostic"] for r in ok]),
-        "median_diff_small": distribution([r["median_diff_small"] for r in ok]),
-        "mean_diff_large": distribution([r["mean_diff_large"] for r in ok]),
-        "share_better_large": distribution([r["share_better_large"] for r in ok]),
-        "wilcoxon_p_small": distribution(
-            [r["wilcoxon_p_small"] if r["wilcoxon_p_small"] is not None else float("nan") for r in ok]
-        ),
-        "share_aware_better_small": float(np.mean([r["median_diff_small"] > 0 for r in ok])) if ok else None,
-        "share_aware_better_large": float(np.mean([r["mean_diff_large"] > 0 for r in ok])) if ok else None,
-        "estimation_loss": distribution([r["estimation_loss"] for r in ok]),
-        "params": {k: distribution([r["params"][k] for r in ok]) for k in keys},
+        "median_aware": over("median_aware"),
+        "median_agnostic": over("median_agnostic"),
+        "median_diff_small": over("median_diff_small"),
+        "mean_diff_large": over("mean_diff_large"),
+        "share_better_large": over("share_better_large"),
+        "wilcoxon_p_small": over("wilcoxon_p_small"),
+        "share_aware_better_small": share([r["median_diff_small"] > 0 for r in ok], None),
+        "share_aware_better_large": share([r["mean_diff_large"] > 0 for r in ok], None),
+        "estimation_loss": over("estimation_loss"),
+        "params": {spec.key: distribution([r["params"][spec.key] for r in ok]) for spec in param_specs()},
     }
-    return out
 
 
 def write_summary(summary: dict[str, Any], path: str | Path) -> None:

@@ -107,10 +107,9 @@ def explain(policy: SchedulePolicy, runs: Any, name: str = "optimal") -> str:
             start = t
     same = float((cx == cx[0]).all(axis=1).mean())
     asks = {c: float(act[cx == k].mean()) if (cx == k).any() else None for k, c in enumerate(cn)}
-    text = (
+    return (
         f"The most common order is {', then '.join(runs_text)} items "
         f"({same:.0%} of simulated sessions follow the first session's order exactly). "
         + " ".join(f"On {c} items it asks {p:.0%} of the time." for c, p in asks.items() if p is not None)
         + f" The mean belief in high trust falls from {bel[:, 0].mean():.2f} to {bel[:, -1].mean():.2f}."
     )
-    return text
