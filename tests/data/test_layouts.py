@@ -57,6 +57,46 @@ def test_a_record_per_participant_is_exploded_into_its_trials(small, tmp_path, s
     same_trials(frame, read_trials(small))
 
 
+@pytest.mark.parametrize("suffix", [".json", ".jsonl", ".parquet"])
+def test_a_record_per_participant_with_a_list_of_trial_objects_is_exploded(small, tmp_path, suffix):
+    trials = [{"pid": pid, "trials": g[FIELDS].to_dict("records")} for pid, g in small.groupby("participant")]
+    path = tmp_path / f"people{suffix}"
+    if suffix == ".json":
+        path.write_text(json.dumps({"study": "s1", "participants": trials}))  # the array inside an object
+    elif suffix == ".jsonl":
+        path.write_text("".join(json.dumps(r) + "\n" for r in trials))
+    else:
+        pd.DataFrame(trials).to_parquet(path)
+    frame = read_trials(path, {"columns": {"participant": "pid"}, "explode": ["trials"]})
+    same_trials(frame, read_trials(small))
+    trials[1]["trials"][0]["pid"] = "X"  # a trial's field that is a field of its record too
+    path = tmp_path / "clash.json"
+    path.write_text(json.dumps(trials))
+    with pytest.raises(DataError) as exc:
+        read_trials(path, {"columns": {"participant": "pid"}, "explode": ["trials"]})
+    assert "explode: column 'trials': its objects' field 'pid' is a column of the record too" in exc.value.problems
+
+
+@pytest.mark.parametrize("orient", ["records", "columns", "index", "split", "table"])
+def test_a_frame_written_by_pandas_to_json_is_read_in_every_orientation(small, tmp_path, orient):
+    path = tmp_path / f"{orient}.json"
+    small.to_json(path, orient=orient)
+    frame = read_trials(path)
+    if orient == "table":  # the table's records carry the frame's index as a column of their own
+        frame = frame.drop(columns="index")
+    pd.testing.assert_frame_equal(frame, read_trials(small))
+
+
+def test_a_json_object_of_several_arrays_or_none_says_what_it_holds(tmp_path):
+    path = tmp_path / "two.json"
+    path.write_text(json.dumps({"practice": [{"trial": 1}], "main": [{"trial": 1}]}))
+    with pytest.raises(DataError, match=r"this object holds 2: \['practice', 'main'\]: keep the one of the trials"):
+        read_trials(path)
+    path.write_text(json.dumps({"study": "s1", "n": 3}))
+    with pytest.raises(DataError, match=r"or an object holding one \(this object's keys: \['study', 'n'\]\)"):
+        read_trials(path)
+
+
 def test_a_record_per_block_numbers_its_items_for_the_order(small, tmp_path):
     recs = records(small, ["participant", "block"], FIELDS[1:])
     path = tmp_path / "blocks.json"

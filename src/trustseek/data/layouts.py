@@ -128,8 +128,9 @@ def refuse_nested(table: Any, name: str) -> None:
 def explode_table(table: Any, spec: dict[str, Any], name: str, unit: str = "record") -> Any:
     """One row per item of the ``spec["columns"]`` lists of each row of ``table`` (a pyarrow table);
     the row's other cells are copied onto each item, ``spec["position"]`` (if named) numbers the
-    items 1, 2, ... within their row.  Lists of different lengths within a row, a cell that is not
-    a list and lists of lists or objects are errors naming the ``unit`` (record, row) and column."""
+    items 1, 2, ... within their row; a list of objects (a trial each) gives their fields as columns.
+    Lists of different lengths within a row, a cell that is not a list, lists of lists and objects
+    holding lists or objects are errors naming the ``unit`` (record, row) and column."""
     import pyarrow as pa
     import pyarrow.compute as pc
 
@@ -146,8 +147,14 @@ def explode_table(table: Any, spec: dict[str, Any], name: str, unit: str = "reco
         typ = table.schema.field(c).type
         if not (pa.types.is_list(typ) or pa.types.is_large_list(typ)):
             lines.append(f"explode: column {c!r} holds {typ}, not lists (expected a list of per-trial values per {unit})")
+        elif pa.types.is_struct(typ.value_type):  # a list of trial objects: their fields become columns
+            fields = [f.name for f in typ.value_type]
+            clash = [f for f in fields if f in table.column_names and f != c]
+            lines += [f"explode: column {c!r}: its objects' field {f!r} is a column of the {unit} too" for f in clash]
+            if any(pa.types.is_nested(f.type) for f in typ.value_type):
+                lines.append(f"explode: column {c!r}: objects holding lists or objects (expected texts or numbers)")
         elif pa.types.is_nested(typ.value_type):
-            lines.append(f"explode: column {c!r} holds lists of lists or objects (expected a list of texts or numbers)")
+            lines.append(f"explode: column {c!r} holds lists of lists (expected a list of texts, numbers or objects)")
     others = [c for c in nested_columns(table) if c not in cols]
     lines += [f"column {shorten(c, 80)!r}: lists or objects, and not listed in the mapping's explode" for c in others]
     if lines:
@@ -167,6 +174,10 @@ def explode_table(table: Any, spec: dict[str, Any], name: str, unit: str = "reco
         raise DataError(p.lines, name)
     parent = pc.list_parent_indices(table[cols[0]].chunk(0) if table.num_rows else pa.array([], pa.list_(pa.int8())))
     out = {c: pc.list_flatten(table[c]) if c in cols else table[c].take(parent) for c in table.column_names}
+    for c in cols:
+        if pa.types.is_struct(out[c].type):
+            items = out.pop(c)
+            out.update({f.name: pc.struct_field(items, [i]) for i, f in enumerate(items.type)})
     if position is not None:
         idx = parent.to_numpy(zero_copy_only=False)
         offsets = np.cumsum(first.astype(np.int64)) - first

@@ -261,10 +261,8 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str], expl
             data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise DataError([f"invalid JSON: {exc}"], name) from None
-        if not isinstance(data, list):
-            raise DataError(["a JSON trial log must be an array of records (objects), one per trial"], name)
-        records = data
-        where = [f"record {i}" for i in range(1, len(data) + 1)]
+        records = _json_records(data, name)
+        where = [f"record {i}" for i in range(1, len(records) + 1)]
     p.add("records that are not objects", [w for w, r in zip(where, records, strict=True) if not isinstance(r, dict)])
     if p.lines:
         raise DataError(p.lines, name)
@@ -273,6 +271,44 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str], expl
     if explode is not None:
         table = explode_table(table, explode, name)
     return _arrow_raw(table, name, missing)
+
+
+def _json_records(data: Any, name: str) -> list[Any]:
+    """The records of a JSON log: an array of them; the one array of objects an object holds
+    (``{"participants": [...]}``, pandas' ``orient="table"``); or a table as pandas writes it,
+    ``orient="split"`` (``columns`` and ``data``), ``"columns"`` (its default: each column an object
+    by row label) or ``"index"`` (each row an object by row label), its row labels numbers."""
+    if isinstance(data, list):
+        return data
+    expected = "a JSON trial log must be an array of records (objects), one per trial"
+    if not isinstance(data, dict):
+        raise DataError([expected], name)
+    if isinstance(data.get("columns"), list) and isinstance(data.get("data"), list):  # orient="split"
+        return [dict(zip(data["columns"], row, strict=False)) if isinstance(row, list) else row for row in data["data"]]
+    arrays = [k for k, v in data.items() if isinstance(v, list) and v and all(isinstance(r, dict) for r in v)]
+    if len(arrays) == 1:
+        return data[arrays[0]]
+    if data and all(isinstance(v, dict) for v in data.values()):
+        inner = list(dict.fromkeys(k for v in data.values() for k in v))
+
+        def numbered(keys: Any) -> bool:
+            return all(re.fullmatch(r"-?[0-9]+", str(k)) for k in keys)
+
+        if numbered(inner) and not numbered(data):  # orient="columns": each column by row label
+            return [{c: v.get(r) for c, v in data.items()} for r in inner]
+        if numbered(data) and not numbered(inner):  # orient="index": each row by its label
+            return list(data.values())
+    if arrays:
+        raise DataError([f"{expected}; this object holds {len(arrays)}: {arrays[:SHOWN]}: keep the one of the trials"], name)
+    keys = [shorten(k, 40) for k in list(data)[:SHOWN]]
+    raise DataError([f"{expected}, or an object holding one (this object's keys: {keys})"], name)
+
+
+def _items(values: list[Any]) -> bool:
+    """Whether a list holds per-trial items: texts and numbers, or objects of them (a trial each)."""
+    if all(isinstance(x, dict) for x in values):
+        return not any(isinstance(y, (dict, list)) for x in values for y in x.values())
+    return not any(isinstance(x, (dict, list)) for x in values)
 
 
 def _nested_values(records: list[dict[str, Any]], where: list[str], name: str, lists: set[str]) -> None:
@@ -289,7 +325,7 @@ def _nested_values(records: list[dict[str, Any]], where: list[str], name: str, l
                 bad.setdefault(k, []).append(f"{w} {json.dumps(v)[:40]}")
                 if isinstance(v, list):
                     found.add(k)
-            elif k in lists and v is not None and (not isinstance(v, list) or any(isinstance(x, (dict, list)) for x in v)):
+            elif k in lists and v is not None and (not isinstance(v, list) or not _items(v)):
                 scalar.setdefault(k, []).append(f"{w} {json.dumps(v)[:40]}")
     p = Problems()
     for k, items in bad.items():
@@ -297,7 +333,8 @@ def _nested_values(records: list[dict[str, Any]], where: list[str], name: str, l
     if found:
         p.lines.append(explode_hint([k for k in bad if k in found]))
     for k, items in scalar.items():
-        p.add(f"explode: column {shorten(k, 80)!r}: not a list of per-trial texts or numbers", items, unit="records")
+        what = "not a list of per-trial texts or numbers, or of objects of them"
+        p.add(f"explode: column {shorten(k, 80)!r}: {what}", items, unit="records")
     if p.lines:
         raise DataError(p.lines, name)
 
