@@ -274,9 +274,7 @@ def events_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFra
         }
         for e, p in rows
     ]
-    frame = pd.DataFrame(data, columns=list(DICTIONARY["events"]))
-    frame["trial"] = frame["trial"].astype("Int64")
-    return frame
+    return pd.DataFrame(data, columns=list(DICTIONARY["events"])).astype({"trial": "Int64"})
 
 
 def table_bytes(frame: pd.DataFrame, fmt: str, escaped: bool = False) -> bytes:

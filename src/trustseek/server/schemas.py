@@ -22,13 +22,11 @@ MAX_EVENT_DATA = 4096
 #: UI events in one post
 MAX_EVENTS_PER_POST = 5000
 
-STRICT = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
-
 
 class Body(BaseModel):
     """A request body: strict types, finite numbers, no field beyond those declared."""
 
-    model_config = STRICT
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
 
 
 class ErrorOut(BaseModel):
