@@ -12,10 +12,12 @@ from contextlib import closing
 
 import httpx
 import pandas as pd
+import pytest
 
 from trustseek.client import Client
 from trustseek.data.trials import read_trials
 from trustseek.testing.servers import ThreadServer, free_port, serve_process
+from trustseek.vocab import ACTIONS
 
 
 def database_rows(path) -> dict[str, list[str]]:
@@ -127,6 +129,63 @@ def check_policies_decide_after_restart(db_url: str, token: str, rewrite=None) -
             assert nxt.status_code == 200, (p["kind"], nxt.text)
     finally:
         srv.close()
+
+
+def deploy_step(robot, pol, upd, task, b, cx, human, outcome):
+    """One trial of deploy session ``robot`` checked against policy ``pol`` and belief updater
+    ``upd`` at belief ``b``: the human's action and the outcome (None: the usual ones); returns
+    the belief after it, and the action and outcome observed."""
+    a = robot.decide(cx)
+    c = task.complexity_index(cx)
+    assert a == ACTIONS[pol.action(b, c)]
+    if a == "ask":
+        human, outcome, e = None, None, task.ask_experience[c]
+    else:
+        human = human or "rely"
+        outcome = outcome or ("success" if human == "rely" else None)
+        e = 0 if human == "intervene" or outcome == "failure" else 1
+    belief = robot.observe(human_action=human, outcome=outcome)
+    b = upd.update(b, c, ACTIONS.index(a), 0 if a == "ask" or human == "intervene" else 1, e)
+    assert belief == pytest.approx(b[1], abs=1e-12)
+    return b, human, outcome
+
+
+def api_ids(client, token: str) -> dict[str, str]:
+    """A study with a participant session, and a deploy session, made through ``client`` (a
+    ``TestClient``): their ids and the sessions' tokens."""
+    h = {"Authorization": f"Bearer {token}"}
+    blocks = [{"name": "b", "policy": {"kind": "never-ask"}, "schedule": {"trials": ["low", "high"]}}]
+    r = client.post("/api/studies", headers=h, json={"name": "s", "blocks": blocks})
+    assert r.status_code == 201, r.text
+    study = r.json()["id"]
+    r = client.post(f"/api/studies/{study}/sessions", headers=h, json={"count": 1})
+    assert r.status_code == 201, r.text
+    part = r.json()[0]
+    r = client.post("/api/deploy/sessions", headers=h, json={"model": "paper", "policy": {"kind": "never-ask"}})
+    assert r.status_code == 201, r.text
+    dep = r.json()
+    return {
+        "study": study,
+        "participant": part["session_id"],
+        "participant_token": part["token"],
+        "deploy": dep["session_id"],
+        "deploy_token": dep["token"],
+    }
+
+
+def case_headers(case, ids: dict[str, str], token: str) -> dict[str, str]:
+    """A schemathesis ``case`` given the real ids of ``api_ids`` in its path; the headers of the
+    token that may call it (the session's on session paths, else the experimenter's ``token``)."""
+    path = case.operation.path
+    if "{study_id}" in path:
+        case.path_parameters["study_id"] = ids["study"]
+    if "{session_id}" in path:
+        kind = "deploy" if path.startswith("/api/deploy/") else "participant"
+        case.path_parameters["session_id"] = ids[kind]
+        token = ids[f"{kind}_token"]
+    elif path == "/api/session":
+        token = ids["participant_token"]
+    return {"Authorization": f"Bearer {token}"}
 
 
 def experimenter_view(client, study_id: str, session_id: str, headers: dict) -> dict:

@@ -11,7 +11,7 @@ import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import create_engine, text
 
-from server_checks import check_concurrent_duplicate_submissions, experimenter_view
+from server_checks import check_concurrent_duplicate_submissions, deploy_step, experimenter_view
 from trustseek import BayesUpdate, paper_model, paper_task, solve
 from trustseek.client import Client, ServerError
 from trustseek.server import create_app
@@ -364,18 +364,7 @@ def test_deploy_api_through_the_client(client):
         ("high", None, None),
     ]
     for cx, human, outcome in events:
-        a = robot.decide(cx)
-        cidx = task.complexity_index(cx)
-        assert a == ACTIONS[pol.action(b, cidx)]
-        if a == "ask":
-            human, outcome, e = None, None, task.ask_experience[cidx]
-        else:
-            human = human or "rely"
-            outcome = outcome or ("success" if human == "rely" else None)
-            e = 0 if human == "intervene" or outcome == "failure" else 1
-        belief = robot.observe(human_action=human, outcome=outcome)
-        b = upd.update(b, cidx, ACTIONS.index(a), 0 if a == "ask" or human == "intervene" else 1, e)
-        assert belief == pytest.approx(b[1], abs=1e-12)
+        b, _, _ = deploy_step(robot, pol, upd, task, b, cx, human, outcome)
     state = robot.state()
     assert [t["trial"] for t in state["trials"]] == [1, 2, 3, 4, 5]
     # idempotent retries, conflicts and validation

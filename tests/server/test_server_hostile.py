@@ -17,6 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from schemathesis.checks import not_a_server_error
 
+from server_checks import api_ids, case_headers
 from trustseek import paper_task
 from trustseek.testing.servers import TemporaryPostgres, ThreadServer, postgres_binaries
 
@@ -224,18 +225,7 @@ def pg_ids(pg_app) -> dict[str, str]:
     """A study with a participant session, and a deploy session on PostgreSQL."""
     from fastapi.testclient import TestClient
 
-    c = TestClient(pg_app)
-    study = {"name": "s", "blocks": [{"name": "b", "policy": {"kind": "never-ask"}, "schedule": {"trials": ["low", "high"]}}]}
-    sid = c.post("/api/studies", headers=H, json=study).json()["id"]
-    part = c.post(f"/api/studies/{sid}/sessions", headers=H, json={"count": 1}).json()[0]
-    dep = c.post("/api/deploy/sessions", headers=H, json={"model": "paper", "policy": {"kind": "never-ask"}}).json()
-    return {
-        "study": sid,
-        "participant": part["session_id"],
-        "participant_token": part["token"],
-        "deploy": dep["session_id"],
-        "deploy_token": dep["token"],
-    }
+    return api_ids(TestClient(pg_app), TOKEN)
 
 
 def test_no_operation_gets_a_5xx_on_postgresql(pg_app, pg_ids):
@@ -247,15 +237,6 @@ def test_no_operation_gets_a_5xx_on_postgresql(pg_app, pg_ids):
         @settings(max_examples=10, deadline=None, suppress_health_check=list(HealthCheck), database=None)
         @given(case=operation.as_strategy())
         def no_5xx(case):
-            path, token = case.operation.path, TOKEN
-            if "{study_id}" in path:
-                case.path_parameters["study_id"] = pg_ids["study"]
-            if "{session_id}" in path:
-                kind = "deploy" if path.startswith("/api/deploy/") else "participant"
-                case.path_parameters["session_id"] = pg_ids[kind]
-                token = pg_ids[f"{kind}_token"]
-            elif path == "/api/session":
-                token = pg_ids["participant_token"]
-            case.call_and_validate(headers={"Authorization": f"Bearer {token}"}, checks=[not_a_server_error])
+            case.call_and_validate(headers=case_headers(case, pg_ids, TOKEN), checks=[not_a_server_error])
 
         no_5xx()

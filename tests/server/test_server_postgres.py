@@ -27,6 +27,7 @@ from server_checks import (
     check_concurrent_duplicate_submissions,
     check_policies_decide_after_restart,
     check_two_processes_serve_one_robot,
+    deploy_step,
     experimenter_view,
 )
 from trustseek import BayesUpdate, paper_model, paper_task, solve
@@ -199,7 +200,7 @@ def test_deploy_api_on_postgresql_resumes_after_a_restart(pg_url, app):
     with TestClient(app) as http:
         robot = Client("http://test", TOKEN, http=http).open_deploy(model="paper", policy={"kind": "trust-aware", "grid": 401})
         for cx, human, outcome in steps[:3]:
-            b, _, _ = _deploy_step(robot, pol, upd, task, b, cx, human, outcome)
+            b, _, _ = deploy_step(robot, pol, upd, task, b, cx, human, outcome)
         assert robot.decide("low", trial=3) == robot.state()["trials"][2]["robot_action"]  # retry of a committed trial
         first = robot.state()
         sid, token = robot.session_id, robot.token
@@ -208,7 +209,7 @@ def test_deploy_api_on_postgresql_resumes_after_a_restart(pg_url, app):
         robot2.trial = robot2.state()["trials_done"]
         assert robot2.trial == first["trials_done"] == 3
         cx, human, outcome = steps[3]
-        b, human, outcome = _deploy_step(robot2, pol, upd, task, b, cx, human, outcome)
+        b, human, outcome = deploy_step(robot2, pol, upd, task, b, cx, human, outcome)
         again = robot2.observe(human_action=human, outcome=outcome, trial=4)  # a repeated observation
         assert again == pytest.approx(b[1], abs=1e-12)
         state = robot2.state()
@@ -221,22 +222,6 @@ def test_every_policy_kind_decides_after_a_server_process_restart(pg_url, app):
     """Deploy sessions of the trust-agnostic, randomized, always-ask and never-ask policies keep
     deciding after their ``trustseek serve`` process is killed and a new one starts."""
     check_policies_decide_after_restart(pg_url, TOKEN)
-
-
-def _deploy_step(robot, pol, upd, task, b, cx, human, outcome):
-    a = robot.decide(cx)
-    c = task.complexity_index(cx)
-    assert a == ACTIONS[pol.action(b, c)]
-    if a == "ask":
-        human, outcome, e = None, None, task.ask_experience[c]
-    else:
-        human = human or "rely"
-        outcome = outcome or ("success" if human == "rely" else None)
-        e = 0 if human == "intervene" or outcome == "failure" else 1
-    belief = robot.observe(human_action=human, outcome=outcome)
-    b = upd.update(b, c, ACTIONS.index(a), 0 if a == "ask" or human == "intervene" else 1, e)
-    assert belief == pytest.approx(b[1], abs=1e-12)
-    return b, human, outcome
 
 
 def test_each_decision_and_observation_is_one_statement_on_postgresql(pg_app, monkeypatch):

@@ -19,6 +19,7 @@ from schemathesis.specs.openapi.checks import (
     status_code_conformance,
 )
 
+from server_checks import api_ids, case_headers
 from trustseek.server.app import create_app
 
 TOKEN = "schema-test-token"
@@ -42,44 +43,13 @@ def ids() -> dict[str, str]:
 
 def make_ids() -> dict[str, str]:
     """A study with a participant session, and a deploy session: real ids and their tokens."""
-    c = TestClient(APP)
-    h = {"Authorization": f"Bearer {TOKEN}"}
-    r = c.post(
-        "/api/studies",
-        headers=h,
-        json={"name": "s", "blocks": [{"name": "b", "policy": {"kind": "never-ask"}, "schedule": {"trials": ["low", "high"]}}]},
-    )
-    assert r.status_code == 201, r.text
-    study = r.json()["id"]
-    r = c.post(f"/api/studies/{study}/sessions", headers=h, json={"count": 1})
-    assert r.status_code == 201, r.text
-    part = r.json()[0]
-    r = c.post("/api/deploy/sessions", headers=h, json={"model": "paper", "policy": {"kind": "never-ask"}})
-    assert r.status_code == 201, r.text
-    dep = r.json()
-    return {
-        "study": study,
-        "participant": part["session_id"],
-        "participant_token": part["token"],
-        "deploy": dep["session_id"],
-        "deploy_token": dep["token"],
-    }
+    return api_ids(TestClient(APP), TOKEN)
 
 
 @schema.parametrize()
 @settings(max_examples=20, deadline=None, suppress_health_check=list(HealthCheck), database=None)
 def test_api_conforms(case, ids):
-    path = case.operation.path
-    token = TOKEN
-    if "{study_id}" in path:
-        case.path_parameters["study_id"] = ids["study"]
-    if "{session_id}" in path:
-        kind = "deploy" if path.startswith("/api/deploy/") else "participant"
-        case.path_parameters["session_id"] = ids[kind]
-        token = ids[f"{kind}_token"]
-    elif path == "/api/session":
-        token = ids["participant_token"]
-    case.call_and_validate(headers={"Authorization": f"Bearer {token}"}, checks=CHECKS)
+    case.call_and_validate(headers=case_headers(case, ids, TOKEN), checks=CHECKS)
 
 
 def test_export_documents_its_file_types(ids):

@@ -11,14 +11,18 @@ from __future__ import annotations
 from typing import Any
 
 from sqlalchemy import select
-from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session as DBSession
 
 from .errors import Conflict, NotAllowed, NotFound
-from .orm import Answer, Report, Session, iso, utcnow
+from .orm import Answer, Report, Session, iso, try_commit, utcnow
 
 #: a session's status once a failed quiz has ended it
 SCREENED = "screened"
+
+
+def quiz_attempts(s: Session) -> list[dict[str, Any]]:
+    """The session's attempts at the quiz so far: {"answers", "wrong", "at"} each."""
+    return (s.quiz or {}).get("attempts", [])
 
 
 def quiz_due(s: Session, cfg: dict[str, Any]) -> dict[str, Any] | None:
@@ -27,12 +31,12 @@ def quiz_due(s: Session, cfg: dict[str, Any]) -> dict[str, Any] | None:
     quiz = cfg.get("quiz")
     if not quiz or s.status != "running" or (s.quiz or {}).get("outcome"):
         return None
-    done = len((s.quiz or {}).get("attempts", []))
+    done = quiz_attempts(s)
     return {
-        "attempt": done + 1,
+        "attempt": len(done) + 1,
         "attempts": quiz["attempts"],
         "questions": [{"id": q["id"], "text": q["text"], "options": q["options"]} for q in quiz["questions"]],
-        "wrong": (s.quiz or {}).get("attempts", [{}])[-1].get("wrong", []) if done else [],
+        "wrong": done[-1].get("wrong", []) if done else [],
     }
 
 
@@ -51,7 +55,7 @@ def answer_quiz(db: DBSession, s: Session, cfg: dict[str, Any], attempt: int, an
     """Take attempt ``attempt`` at the quiz of session ``s`` (locked): (the ids of the questions
     it got wrong, whether it repeats a stored attempt).  The last failed attempt settles the
     outcome (and, with ``on_fail: end``, screens the session out).  Commits."""
-    done = (s.quiz or {}).get("attempts", [])
+    done = quiz_attempts(s)
     if attempt <= len(done):  # a repeat of a stored attempt (a retry after a lost answer)
         db.rollback()
         if done[attempt - 1]["answers"] != answers:
@@ -68,7 +72,7 @@ def answer_quiz(db: DBSession, s: Session, cfg: dict[str, Any], attempt: int, an
     quiz = cfg["quiz"]
     wrong = [q["id"] for q in quiz["questions"] if answers[q["id"]] != q["answer"]]
     record = dict(s.quiz or {"attempts": [], "outcome": None})
-    record["attempts"] = [*record.get("attempts", []), {"answers": answers, "wrong": wrong, "at": iso(utcnow())}]
+    record["attempts"] = [*done, {"answers": answers, "wrong": wrong, "at": iso(utcnow())}]
     if not wrong:
         record["outcome"] = "passed"
     elif len(record["attempts"]) >= quiz["attempts"]:
@@ -115,7 +119,8 @@ def add_report(db: DBSession, s: Session, cfg: dict[str, Any], after_trial: int,
     mode = cfg.get("self_report", "none")
     if mode == "none":
         raise Conflict("this study takes no trust self-reports")
-    old = db.scalar(select(Report).where(Report.session_id == s.id, Report.after_trial == after_trial))
+    stored = select(Report).where(Report.session_id == s.id, Report.after_trial == after_trial)
+    old = db.scalar(stored)
     if old is not None:
         if abs(old.value - value) < 1e-12:
             return old, True
@@ -127,15 +132,12 @@ def add_report(db: DBSession, s: Session, cfg: dict[str, Any], after_trial: int,
     block = s.plan["trials"][after_trial - 1]["block"]
     rep = Report(session_id=s.id, after_trial=after_trial, block=block, scope=mode, value=value)
     db.add(rep)
-    try:
-        db.commit()
-    except IntegrityError:
-        db.rollback()
-        old = db.scalar(select(Report).where(Report.session_id == s.id, Report.after_trial == after_trial))
-        if old is None:
-            raise Conflict(f"the self-report after trial {after_trial} could not be stored; try again") from None
-        return old, True
-    return rep, False
+    if try_commit(db):
+        return rep, False
+    old = db.scalar(stored)  # stored by a concurrent request meanwhile
+    if old is None:
+        raise Conflict(f"the self-report after trial {after_trial} could not be stored; try again")
+    return old, True
 
 
 def questionnaire_due(db: DBSession, s: Session, cfg: dict[str, Any]) -> dict[str, Any] | None:
@@ -207,9 +209,6 @@ def add_answers(
         for i in ids
     ]
     db.add_all(rows)
-    try:
-        db.commit()
-    except IntegrityError:
-        db.rollback()
-        raise Conflict(f"{name!r} after trial {after_trial} was answered concurrently; fetch the state") from None
+    if not try_commit(db):
+        raise Conflict(f"{name!r} after trial {after_trial} was answered concurrently; fetch the state")
     return rows, False

@@ -9,9 +9,8 @@ from typing import Any
 
 from fastapi import Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
-from sqlalchemy import select
 
-from .orm import Session
+from .orm import token_session
 
 bearer = HTTPBearer(auto_error=False, description="Experimenter token, or a session token for session endpoints.")
 
@@ -52,11 +51,12 @@ def caller_for_token(state: Any, token: str) -> Caller | None:
     caller = state.tokens.get(token)
     if caller is None:
         with state.db() as db:
-            row = db.execute(select(Session.id, Session.kind).where(Session.token == token)).first()
-        found = (row.id, row.kind) if row is not None else state.previews.find(token)
+            found = token_session(db, token)
+        preview = found is None
+        found = state.previews.find(token) if preview else found
         if found is None:
             return None
-        caller = remember_token(state, token, Caller(found[0], found[1], preview=row is None))
+        caller = remember_token(state, token, Caller(found[0], found[1], preview=preview))
     return caller
 
 

@@ -34,4 +34,5 @@ class Gone(Refused):
 
 
 class TooLarge(Refused):
-    """More than the server takes: a request body over the size limit, or more events than a session may hold."""
+    """More events than a session or one of its trials may hold (a request body over the size
+    limit is refused before it is read: ``middleware.read_body``)."""

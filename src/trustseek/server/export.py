@@ -13,16 +13,18 @@ from __future__ import annotations
 import io
 import json
 import zipfile
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
-from sqlalchemy import Select, func, select
+from sqlalchemy import func, select
 from sqlalchemy.orm import Session as DBSession
 
 from ..vocab import TRIAL_COLUMNS
-from .answers import check_passed
-from .orm import Answer, Event, Report, Session, Study, Trial, iso
+from .answers import check_passed, quiz_attempts
+from .orm import Answer, Event, Report, Session, Study, Trial, iso, row_dict, session_rows
+from .studies import practice_count
 
 #: the meaning of every column of the bundle, by table
 DICTIONARY: dict[str, dict[str, str]] = {
@@ -147,41 +149,30 @@ def exported(study: Study, pilot: bool = False) -> tuple:
     return (Session.study_id == study.id, Session.role.in_(("participant", "pilot") if pilot else ("participant",)))
 
 
-def _exported_rows(table, study: Study, pilot: bool, *columns) -> Select:
-    """The rows of ``table`` (with ``columns`` of their session) of the sessions a table holds."""
-    return select(table, *columns).join(Session, table.session_id == Session.id).where(*exported(study, pilot))
-
-
 def _block_names(study: Study) -> list[str]:
     return [b["name"] for b in study.config["blocks"]] + ["practice"]
 
 
-def _practice_counts(db: DBSession, study: Study) -> dict[str, int]:
-    """Practice trials per session (they come first, so analysed trial = session trial - count)."""
-    n = len((study.config.get("practice") or {}).get("trials", []))
-    return dict.fromkeys(db.scalars(select(Session.id).where(Session.study_id == study.id)), n)
-
-
-def _columns(row: Any, names: str) -> dict[str, Any]:
-    """The columns ``names`` (space-separated) of a row, as the table names them."""
-    return {c: getattr(row, c) for c in names.split()}
+def _items(study: Study) -> dict[tuple[str, str], dict[str, Any]]:
+    """The study's questionnaire items by (questionnaire, item id)."""
+    return {(q["name"], i["id"]): i for q in study.config.get("questionnaires") or () for i in q["items"]}
 
 
 def trials_frame(db: DBSession, study: Study, practice: bool = False, pilot: bool = False) -> pd.DataFrame:
     """The study's trial log: the analysed trials, or every trial with ``practice=True``; pilot
     sessions with ``pilot=True``."""
     names = _block_names(study)
-    skip = _practice_counts(db, study)
-    trials = _exported_rows(Trial, study, pilot, Session.participant)
+    skip = practice_count(study.config)  # the practice trials come first in every session
+    trials = session_rows(Trial, exported(study, pilot), Trial, Session.participant)
     if not practice:
         trials = trials.where(Trial.practice.is_(False))
     rows = db.execute(trials.order_by(Session.participant, Trial.trial)).all()
-    reports = {(r.session_id, r.after_trial): r.value for r in db.scalars(_exported_rows(Report, study, pilot))}
+    reports = {(r.session_id, r.after_trial): r.value for r in db.scalars(session_rows(Report, exported(study, pilot)))}
     data = [
         {
-            **_columns(t, "complexity robot_action human_action experience policy outcome reward belief belief_after effort_ms"),
+            **row_dict(t, "complexity robot_action human_action experience policy outcome reward belief belief_after effort_ms"),
             "participant": p,
-            "trial": t.trial if practice else t.trial - skip.get(t.session_id, 0),
+            "trial": t.trial if practice else t.trial - skip,
             "block": t.block + 1,
             "block_name": names[t.block],
             "self_report": reports.get((t.session_id, t.trial)),
@@ -202,17 +193,17 @@ def answers_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFr
     """Every self-report (0-100 slider, questionnaire ``self_report``, item ``trust``) and every
     questionnaire item, one row each, next to the analysed trial each follows."""
     names = _block_names(study)
-    skip = _practice_counts(db, study)
-    items = {(q["name"], i["id"]): i for q in study.config.get("questionnaires") or () for i in q["items"]}
+    skip = practice_count(study.config)
+    items = _items(study)
     data: list[tuple[str, str, str, float, dict, Report | Answer, str]] = []
-    for r, p in db.execute(_exported_rows(Report, study, pilot, Session.participant)).all():
+    for r, p in db.execute(session_rows(Report, exported(study, pilot), Report, Session.participant)).all():
         data.append(("self_report", r.scope, "trust", r.value, {}, r, p))
-    for a, p in db.execute(_exported_rows(Answer, study, pilot, Session.participant)).all():
+    for a, p in db.execute(session_rows(Answer, exported(study, pilot), Answer, Session.participant)).all():
         data.append((a.questionnaire, a.when, a.item, a.value, items.get((a.questionnaire, a.item), {}), a, p))
     rows = [
         {
             "participant": p,
-            "trial": r.after_trial - skip.get(r.session_id, 0),
+            "trial": r.after_trial - skip,
             "session_trial": r.after_trial,
             "block": r.block + 1,
             "block_name": names[r.block],
@@ -238,26 +229,22 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
     """One row per participant: status, the panel's ids (JSON) and the seed and secret that
     reproduce the session's plan, actions, outcomes and scenes."""
     names = _block_names(study)
-    checks = study.config.get("questionnaires") or ()
-    items = {(q["name"], i["id"]): i for q in checks for i in q["items"] if i.get("check") is not None}
-    failed: dict[str, int] = {}
-    for a in db.scalars(_exported_rows(Answer, study, pilot)):
-        if (a.questionnaire, a.item) in items and not check_passed(items[(a.questionnaire, a.item)], a.value):
-            failed[a.session_id] = failed.get(a.session_id, 0) + 1
+    items = _items(study)
+    answers = db.scalars(session_rows(Answer, exported(study, pilot)))
+    failed = Counter(a.session_id for a in answers if check_passed(items.get((a.questionnaire, a.item), {}), a.value) is False)
     # page loads per session: unknown (empty) for a session whose events came without one (stored
     # before events named their page), 0 for a session that sent no event
     pages = {
         sid: n if n or not total else None
         for sid, n, total in db.execute(
-            select(Event.session_id, func.count(Event.page.distinct()), func.count())
-            .join(Session, Event.session_id == Session.id)
-            .where(*exported(study, pilot))
-            .group_by(Event.session_id)
+            session_rows(
+                Event, exported(study, pilot), Event.session_id, func.count(Event.page.distinct()), func.count()
+            ).group_by(Event.session_id)
         )
     }
     rows = [
         {
-            **_columns(s, "participant role status trials_done score seed secret panel_id speed"),
+            **row_dict(s, "participant role status trials_done score seed secret panel_id speed"),
             "session": s.id,
             "block_order": json.dumps([names[b] for b in s.plan["block_order"]]),
             "panel": json.dumps(s.panel or {}),
@@ -265,7 +252,7 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
             "started_at": iso(s.consented_at),
             "ended_at": iso(s.ended_at),
             "revoked_at": iso(s.revoked_at),
-            "quiz_attempts": len((s.quiz or {}).get("attempts", [])),
+            "quiz_attempts": len(quiz_attempts(s)),
             "quiz_outcome": (s.quiz or {}).get("outcome"),
             "checks_failed": failed.get(s.id, 0),
             "pages": pages.get(s.id, 0),
@@ -276,19 +263,18 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
 
 
 def events_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame:
-    rows = db.execute(_exported_rows(Event, study, pilot, Session.participant).order_by(Session.participant, Event.id)).all()
+    events = session_rows(Event, exported(study, pilot), Event, Session.participant)
+    rows = db.execute(events.order_by(Session.participant, Event.id)).all()
     data = [
         {
-            **_columns(e, "trial client_time page type data"),
+            **row_dict(e, "trial client_time page type data"),
             "participant": p,
             "session": e.session_id,
             "server_time": iso(e.created_at),
         }
         for e, p in rows
     ]
-    frame = pd.DataFrame(data, columns=list(DICTIONARY["events"]))
-    frame["trial"] = frame["trial"].astype("Int64")
-    return frame
+    return pd.DataFrame(data, columns=list(DICTIONARY["events"])).astype({"trial": "Int64"})
 
 
 def table_bytes(frame: pd.DataFrame, fmt: str, escaped: bool = False) -> bytes:
@@ -314,7 +300,7 @@ def write_frame(frame: pd.DataFrame, path: str | Path) -> None:
 def questionnaires_frame(study: Study) -> pd.DataFrame:
     """Every questionnaire item and quiz question as asked."""
     cfg = study.config
-    rows = [
+    questionnaires = [
         {
             "questionnaire": q["name"],
             "when": q["when"],
@@ -330,25 +316,23 @@ def questionnaires_frame(study: Study) -> pd.DataFrame:
         for q in cfg.get("questionnaires") or ()
         for i in q["items"]
     ]
-    for qq in (cfg.get("quiz") or {}).get("questions", []):
-        rows.append(
-            {
-                "questionnaire": "quiz",
-                "when": "instructions",
-                "title": None,
-                "item": qq["id"],
-                "text": qq["text"],
-                "reverse": False,
-                "check": qq["answer"],
-                "scale_min": None,
-                "scale_max": None,
-                "options": json.dumps(qq["options"]),
-            }
-        )
-    frame = pd.DataFrame(rows, columns=list(DICTIONARY["questionnaires"]))
-    for col in ("check", "scale_min", "scale_max"):
-        frame[col] = frame[col].astype("Int64")
-    return frame
+    quiz = [
+        {
+            "questionnaire": "quiz",
+            "when": "instructions",
+            "title": None,
+            "item": qq["id"],
+            "text": qq["text"],
+            "reverse": False,
+            "check": qq["answer"],
+            "scale_min": None,
+            "scale_max": None,
+            "options": json.dumps(qq["options"]),
+        }
+        for qq in (cfg.get("quiz") or {}).get("questions", [])
+    ]
+    frame = pd.DataFrame(questionnaires + quiz, columns=list(DICTIONARY["questionnaires"]))
+    return frame.astype(dict.fromkeys(("check", "scale_min", "scale_max"), "Int64"))
 
 
 def quiz_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame:
@@ -364,7 +348,7 @@ def quiz_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame
             "answered_at": at["at"],
         }
         for s in db.scalars(select(Session).where(*exported(study, pilot)).order_by(Session.participant))
-        for k, at in enumerate((s.quiz or {}).get("attempts", []))
+        for k, at in enumerate(quiz_attempts(s))
         for q, a in at["answers"].items()
     ]
     return pd.DataFrame(rows, columns=list(DICTIONARY["quiz"]))

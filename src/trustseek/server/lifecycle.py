@@ -24,7 +24,7 @@ from sqlalchemy.orm import Session as DBSession
 from ..model.core import TrustModel
 from .answers import ended
 from .errors import Conflict, NotAllowed
-from .orm import Session, Study, utcnow
+from .orm import Session, Study, try_commit, utcnow
 from .sessions import new_session, study_config
 from .studies import participant_plan
 
@@ -201,11 +201,8 @@ def give_consent(db: DBSession, s: Session, cfg: dict[str, Any], query: dict[str
     elif ended(db, s, cfg):
         db.rollback()
         raise Conflict("this session has ended")
-    try:
-        db.commit()
-    except IntegrityError:  # the same panel id already has a session of this study
-        db.rollback()
-        raise Conflict("this panel id already has a session in this study: use that session's link") from None
+    if not try_commit(db):  # the same panel id already has a session of this study
+        raise Conflict("this panel id already has a session in this study: use that session's link")
     return started
 
 

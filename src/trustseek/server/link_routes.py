@@ -16,13 +16,15 @@ from sqlalchemy import select
 from .auth import require_experimenter
 from .lifecycle import Arrival, arrive, panel_ids, refusal, revoke, set_status
 from .orm import Session, Study, iso
-from .routes import errors, public_url, study_or_404
+from .routes import errors, public_url, session_link, study_or_404
 from .schemas import StatusIn
 from .sessions import study_config
 
 log = logging.getLogger(__name__)
 
 STATIC = Path(__file__).resolve().parent.parent / "static" / "app"
+#: the headers of every page: never cached, and the link (with its token) never sent on
+PAGE_HEADERS = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer"}
 
 #: (HTTP status, title, text) of each page shown instead of the study
 PAGES = {
@@ -64,14 +66,14 @@ def message_page(kind: str) -> HTMLResponse:
         f'</head><body data-page="{kind}"><main id="app"><section class="screen card"><h1>{html.escape(title)}</h1>'
         f"<p>{html.escape(text)}</p></section></main></body></html>"
     )
-    return HTMLResponse(body, status_code=status, headers={"Cache-Control": "no-store", "Referrer-Policy": "no-referrer"})
+    return HTMLResponse(body, status_code=status, headers=PAGE_HEADERS)
 
 
 def static_page(name: str) -> FileResponse:
     path = STATIC / name
     if not path.exists():
         raise HTTPException(503, "the web front end is not built: run scripts/setup.sh (npm ci && npm run build in web/)")
-    return FileResponse(path, media_type="text/html", headers={"Cache-Control": "no-store", "Referrer-Policy": "no-referrer"})
+    return FileResponse(path, media_type="text/html", headers=PAGE_HEADERS)
 
 
 pages = APIRouter(include_in_schema=False)
@@ -125,7 +127,7 @@ def post_preview(study_id: str, request: Request):
     with request.app.state.db() as db:
         st = study_or_404(db, study_id)
         s = request.app.state.previews.start(st)
-    return {"session_id": s.id, "link": public_url(request, f"/s/{s.token}"), "role": s.role}
+    return {"session_id": s.id, "link": session_link(request, s), "role": s.role}
 
 
 @lifecycle.post("/studies/{study_id}/sessions/{session_id}/revoke", summary="Revoke a participant's link")

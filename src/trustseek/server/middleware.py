@@ -83,9 +83,9 @@ EXPERIMENTER_BODY_LIMIT = 16 * 1024 * 1024
 _WRITES = frozenset({"POST", "PUT", "PATCH", "DELETE"})
 
 
-async def read_body(receive: Receive, limit: int) -> bytes | None:
-    """A request's whole body, read from ``receive`` (None when the client went away first);
-    ``TooLarge`` past ``limit`` bytes, before more is read."""
+async def read_body(receive: Receive, send: Send, limit: int) -> bytes | None:
+    """A request's whole body, read from ``receive``; None when the client went away first, or
+    when the body is longer than ``limit`` bytes (refused with 413 before more is read)."""
     chunks, size = [], 0
     while True:
         message = await receive()
@@ -94,7 +94,8 @@ async def read_body(receive: Receive, limit: int) -> bytes | None:
         chunk = message.get("body", b"")
         size += len(chunk)
         if size > limit:
-            raise TooLarge(f"the request body must be at most {limit} bytes")
+            await too_large(send, limit)
+            return None
         chunks.append(chunk)
         if not message.get("more_body"):
             return b"".join(chunks)
@@ -119,6 +120,11 @@ async def refuse(send: Send, status: int, detail: str | list[dict[str, Any]], he
     head = [(b"content-type", b"application/json"), (b"content-length", b"%d" % len(body)), *headers]
     await send({"type": "http.response.start", "status": status, "headers": head})
     await send({"type": "http.response.body", "body": body})
+
+
+async def too_large(send: Send, limit: int) -> None:
+    """Refuse a request whose body is longer than ``limit`` bytes (413)."""
+    await refuse(send, 413, f"the request body must be at most {limit} bytes")
 
 
 #: the deepest nesting of arrays and objects a JSON body may have (refused before it is parsed,
@@ -195,12 +201,9 @@ class BodyGuard:
             return await refuse(send, 403, "wrong experimenter token")
         declared = headers.get(b"content-length")
         if declared is not None and (not declared.isdigit() or int(declared) > limit):
-            return await refuse(send, 413, f"the request body must be at most {limit} bytes")
-        try:
-            body = await read_body(receive, limit)
-        except TooLarge as exc:
-            return await refuse(send, 413, exc.message)
-        if body is None:  # the client went away
+            return await too_large(send, limit)
+        body = await read_body(receive, send, limit)
+        if body is None:  # refused, or the client went away
             return
         problem = json_body_problem(headers, body)
         if problem is not None:  # (FastAPI would answer an undecodable body with an undocumented 400)

@@ -7,10 +7,14 @@ and served trial, reached through its token), ``Trial`` (unique per session and 
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from datetime import UTC, datetime
+from typing import Any
 
-from sqlalchemy import JSON, Boolean, Float, ForeignKey, Index, Integer, String, Text, UniqueConstraint
+from sqlalchemy import JSON, Boolean, Float, ForeignKey, Index, Integer, Select, String, Text, UniqueConstraint, select
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+from sqlalchemy.orm import Session as DBSession
 
 
 def utcnow() -> datetime:
@@ -20,6 +24,28 @@ def utcnow() -> datetime:
 def iso(t: datetime | None) -> str | None:
     """A stored (UTC) time as the API and the exports write it: ISO 8601 ending in ``Z``."""
     return None if t is None else t.isoformat() + "Z"
+
+
+def row_dict(row: Any, names: str | Iterable[str]) -> dict[str, Any]:
+    """The columns ``names`` (or a space-separated string of them) of a row, by name."""
+    return {c: getattr(row, c) for c in (names.split() if isinstance(names, str) else names)}
+
+
+def token_session(db: DBSession, token: str) -> tuple[str, str] | None:
+    """(id, kind) of the session whose token is ``token``, or None."""
+    row = db.execute(select(Session.id, Session.kind).where(Session.token == token)).first()
+    return None if row is None else (row.id, row.kind)
+
+
+def try_commit(db: DBSession) -> bool:
+    """Commit; False, rolled back, when a unique constraint refuses it (a concurrent request
+    stored the same row first)."""
+    try:
+        db.commit()
+    except IntegrityError:
+        db.rollback()
+        return False
+    return True
 
 
 class Base(DeclarativeBase):
@@ -169,3 +195,9 @@ class EventBatch(Base):
     batch: Mapped[str] = mapped_column(String(64), primary_key=True)
     events: Mapped[int] = mapped_column(Integer)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+def session_rows(table: Any, where: Iterable[Any], *columns: Any) -> Select:
+    """``columns`` (by default the whole rows) of ``table``, joined to their sessions (whose
+    columns may be among them), of the sessions that meet the conditions ``where``."""
+    return select(*(columns or (table,))).join(Session, table.session_id == Session.id).where(*where)

@@ -7,17 +7,18 @@ import logging
 from collections.abc import Callable
 from typing import Any
 
-from fastapi import APIRouter, Depends, HTTPException, Request
+from fastapi import APIRouter, Depends, Request
 from fastapi.security import HTTPAuthorizationCredentials
 
 from .answers import SCREENED, add_answers, add_report, answer_quiz, ended, questionnaire_due, quiz_due, report_due
 from .auth import Caller, bearer, require_session, session_for_token, token_of
-from .errors import Conflict
+from .errors import Conflict, Gone, NotFound
 from .lifecycle import give_consent
 from .orm import Session, utcnow
 from .routes import errors
 from .schemas import AnswersIn, ConsentIn, EventsIn, QuizAttemptIn, ReportIn, TrialIn
-from .sessions import add_events, lock, participant_trial, serve, study_config, submit_trial, total_trials
+from .sessions import DEPLOY_SESSION, add_events, lock, participant_trial, serve, study_config, submit_trial, total_trials
+from .studies import practice_count
 
 log = logging.getLogger(__name__)
 
@@ -30,12 +31,12 @@ own = APIRouter(prefix="/api", tags=["participant"], responses=errors(401, 409, 
 
 def _study_session(s: Caller) -> None:
     if s.kind != "study":
-        raise HTTPException(409, "this is a deploy session; use /api/deploy")
+        raise Conflict(DEPLOY_SESSION)
 
 
 def _not_revoked(row: Session) -> Session:
     if row.revoked_at is not None:
-        raise HTTPException(410, "this link has been revoked by the experimenter")
+        raise Gone("this link has been revoked by the experimenter")
     return row
 
 
@@ -55,7 +56,7 @@ def _row(db, caller: Caller) -> Session:
     """The caller's session; refused when its link is revoked."""
     row = db.get(Session, caller.id)
     if row is None:  # a preview forgotten after newer ones (preview.MAX_PREVIEWS)
-        raise HTTPException(404, "this preview has expired: open a new one from the dashboard")
+        raise NotFound("this preview has expired: open a new one from the dashboard")
     return _not_revoked(row)
 
 
@@ -68,12 +69,10 @@ def session_state(request: Request, caller: Caller) -> dict:
         asked = questionnaire_due(db, s, cfg) if due is None else None
         # the next trial is served once the quiz, and the self-report and questionnaires it follows, are answered
         current = serve(db, s) if due is None and asked is None and quiz is None else None
-        blocks = s.plan["block_order"]
         over = ended(db, s, cfg)
         if over and s.ended_at is None:
             s.ended_at = utcnow()
             db.commit()
-        completion = _completion(cfg, s) if over else None
         return {
             "session_id": s.id,
             "participant": s.participant,
@@ -82,16 +81,16 @@ def session_state(request: Request, caller: Caller) -> dict:
             "trials_total": total_trials(s),
             "trials_done": s.trials_done,
             "score": s.score,
-            "blocks": [cfg["blocks"][b]["name"] for b in blocks],
+            "blocks": [cfg["blocks"][b]["name"] for b in s.plan["block_order"]],
             "current": current,
             "report_due": due,
             "questionnaire": asked,
             "quiz": quiz,
             "screened": s.status == SCREENED,
             "ended": over,
-            "completion": completion,
+            "completion": _completion(cfg, s) if over else None,
             "panel_params": cfg["panel"]["id_params"] if cfg.get("panel") else [],
-            "practice_trials": len(cfg["practice"]["trials"]) if cfg.get("practice") else 0,
+            "practice_trials": practice_count(cfg),
             "self_report": cfg["self_report"],
             "animation_speed": s.speed or cfg["animation_speed"],
             "scene": cfg.get("scene", "3d"),

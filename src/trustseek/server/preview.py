@@ -23,7 +23,7 @@ from sqlalchemy.orm import sessionmaker
 from .cache import StudyCaches
 from .db import open_database
 from .lifecycle import create_participant
-from .orm import Answer, Event, EventBatch, Report, Session, Study, Trial
+from .orm import Answer, Event, EventBatch, Report, Session, Study, Trial, token_session
 
 MAX_PREVIEWS = 50
 #: the tables holding a session's rows, removed with a forgotten preview
@@ -68,8 +68,7 @@ class Previews:
         if made is None:
             return None
         with made() as db:
-            row = db.execute(select(Session.id, Session.kind).where(Session.token == token)).first()
-        return None if row is None else (row.id, row.kind)
+            return token_session(db, token)
 
     def start(self, study: Study) -> Session:
         """A new preview session of ``study`` (copied into the previews' database as it is now)."""

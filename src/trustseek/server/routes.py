@@ -14,10 +14,10 @@ from sqlalchemy.exc import IntegrityError
 from .auth import require_experimenter
 from .export import answers_frame, bundle_files, bundle_zip, events_frame, sessions_frame, table_bytes, trials_frame
 from .lifecycle import create_participant, progress
-from .orm import Event, Report, Session, Study, Trial, iso, utcnow
+from .orm import Event, Report, Session, Study, Trial, iso, session_rows, utcnow
 from .schemas import ErrorOut, SessionsIn
 from .sessions import new_id, p_high, pending, study_config, total_trials, trial_dict
-from .studies import ConfigError, StudyIn, build_study_config
+from .studies import ConfigError, StudyIn, build_study_config, practice_count
 
 log = logging.getLogger(__name__)
 
@@ -52,8 +52,14 @@ def public_url(request: Request, path: str) -> str:
     return f"{request.app.state.public_url or str(request.base_url).rstrip('/')}{path}"
 
 
-def _link(request: Request, s: Session) -> str:
+def session_link(request: Request, s: Session) -> str:
+    """The participant's link of session ``s``."""
     return public_url(request, f"/s/{s.token}")
+
+
+def attachment(content: bytes, media_type: str, name: str) -> Response:
+    """A file to download, named ``name``."""
+    return Response(content, media_type=media_type, headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
 
 # --------------------------------------------------------------------------- experimenter
@@ -140,31 +146,29 @@ def create_sessions(study_id: str, body: SessionsIn, request: Request):
         bad = [p for p in body.participants if not p or len(p) > 200]
         if bad or len(set(body.participants)) != len(body.participants):
             raise HTTPException(400, "participant ids must be unique, non-empty strings of at most 200 characters")
-    out = []
     with _db(request) as db:
         st = study_or_404(db, study_id)
         if st.status == "closed":
             raise HTTPException(409, f"study {study_id} is closed: it takes no new participants")
         role = "pilot" if body.pilot or st.status == "draft" else "participant"
-        try:
-            for label in labels:
-                s = create_participant(db, st, label, role=role)
-                db.flush()
-                out.append(
-                    {
-                        "participant": s.participant,
-                        "session_id": s.id,
-                        "role": s.role,
-                        "token": s.token,
-                        "link": _link(request, s),
-                        "block_order": [st.config["blocks"][b]["name"] for b in s.plan["block_order"]],
-                        "trials": total_trials(s),
-                    }
-                )
+        try:  # each session is flushed before the next is made (the database session autoflushes)
+            made = [create_participant(db, st, label, role=role) for label in labels]
             db.commit()
         except IntegrityError:
             db.rollback()
             raise HTTPException(409, "a participant id was taken concurrently; retry") from None
+        out = [
+            {
+                "participant": s.participant,
+                "session_id": s.id,
+                "role": s.role,
+                "token": s.token,
+                "link": session_link(request, s),
+                "block_order": [st.config["blocks"][b]["name"] for b in s.plan["block_order"]],
+                "trials": total_trials(s),
+            }
+            for s in made
+        ]
     log.info("study %s: %d participant sessions created", study_id, len(out))
     return out
 
@@ -178,21 +182,23 @@ def dashboard(study_id: str, request: Request):
             .where(Session.study_id == st.id, Session.role != "preview")
             .order_by(Session.created_at, Session.participant)
         ).all()
-        latest = _in_study(Event, st, Event.session_id, func.max(Event.created_at)).group_by(Event.session_id)
+        in_study = [Session.study_id == st.id]
+        latest = session_rows(Event, in_study, Event.session_id, func.max(Event.created_at)).group_by(Event.session_id)
         seen = dict(db.execute(latest).all())
-        last_trials = db.scalars(_in_study(Trial, st).where(Trial.trial == Session.trials_done))
+        last_trials = db.scalars(session_rows(Trial, in_study).where(Trial.trial == Session.trials_done))
         last = {t.session_id: {**trial_dict(t), "practice": bool(t.practice)} for t in last_trials}
-        reports = {r.session_id: r.value for r in db.scalars(_in_study(Report, st).order_by(Report.after_trial))}
-        n_trust = len(study_config(db, st.id)["model"]["trust_levels"])
+        reports = {r.session_id: r.value for r in db.scalars(session_rows(Report, in_study).order_by(Report.after_trial))}
+        cfg = study_config(db, st.id)
+        n_trust, practice = len(cfg["model"]["trust_levels"]), practice_count(cfg)
         rows = [
             {
                 "participant": s.participant,
                 "session_id": s.id,
                 "status": s.status,
-                "link": _link(request, s),
+                "link": session_link(request, s),
                 "trials_done": s.trials_done,
                 "trials_total": total_trials(s),
-                "practice_trials": sum(1 for t in s.plan["trials"] if t.get("practice")),
+                "practice_trials": practice,
                 "score": s.score,
                 "belief": p_high(s.belief, n_trust),
                 "current": pending(s),
@@ -210,11 +216,6 @@ def dashboard(study_id: str, request: Request):
             for s in sessions
         ]
         return {"study": study_summary(db, st, request), "participants": rows, "time": iso(utcnow())}
-
-
-def _in_study(table: Any, st: Study, *columns: Any) -> Any:
-    """The rows of ``table`` (or its ``columns``) that belong to the sessions of study ``st``."""
-    return select(*(columns or (table,))).join(Session, table.session_id == Session.id).where(Session.study_id == st.id)
 
 
 def _first_panel_id(panel: dict | None) -> str | None:
@@ -259,8 +260,7 @@ def export(
     # text from participants' browsers: formulas escaped, CR/LF quoted
     content = table_bytes(frame, format, escaped=table != "trials")
     media = "text/csv" if format == "csv" else "application/vnd.apache.parquet"
-    name = f"{st.id}-{table}.{format}"
-    return Response(content, media_type=media, headers={"Content-Disposition": f'attachment; filename="{name}"'})
+    return attachment(content, media, f"{st.id}-{table}.{format}")
 
 
 @experimenter.get(
@@ -279,5 +279,4 @@ def bundle(study_id: str, request: Request, pilot: bool = Query(False, descripti
     with _db(request) as db:
         st = study_or_404(db, study_id)
         content = bundle_zip(bundle_files(db, st, pilot), f"{st.id}-bundle")
-    name = f"{st.id}-bundle.zip"
-    return Response(content, media_type="application/zip", headers={"Content-Disposition": f'attachment; filename="{name}"'})
+    return attachment(content, "application/zip", f"{st.id}-bundle.zip")

@@ -22,13 +22,11 @@ MAX_EVENT_DATA = 4096
 #: UI events in one post
 MAX_EVENTS_PER_POST = 5000
 
-STRICT = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
-
 
 class Body(BaseModel):
     """A request body: strict types, finite numbers, no field beyond those declared."""
 
-    model_config = STRICT
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
 
 
 class ErrorOut(BaseModel):
@@ -51,17 +49,18 @@ def finite_json(value: Any, where: str = "data") -> Any:
     return value
 
 
+def page_made_id(max_length: int, description: str) -> Any:
+    """An optional field holding an id that the participant's page makes (letters, digits, ``_`` and ``-``)."""
+    return Field(None, min_length=1, max_length=max_length, pattern=r"^[A-Za-z0-9_-]+$", description=description)
+
+
 class EventIn(Body):
     t: float | None = Field(None, description="Client time, ms since the Unix epoch.")
     type: str = Field(..., min_length=1, max_length=40)
     trial: int | None = Field(None, ge=1, le=MAX_TRIAL)
-    page: str | None = Field(
-        None,
-        min_length=1,
-        max_length=32,
-        pattern=r"^[A-Za-z0-9_-]+$",
-        description="The page load that made the event: a random id the page makes when it opens "
-        "(a reload or a second tab makes another).",
+    page: str | None = page_made_id(
+        32,
+        "The page load that made the event: a random id the page makes when it opens (a reload or a second tab makes another).",
     )
     data: dict[str, Any] = Field(default_factory=dict)
 
@@ -132,13 +131,7 @@ class QuizAttemptIn(Body):
 
 class EventsIn(Body):
     events: list[EventIn] = Field(..., min_length=1, max_length=MAX_EVENTS_PER_POST)
-    batch: str | None = Field(
-        None,
-        min_length=1,
-        max_length=64,
-        pattern=r"^[A-Za-z0-9_-]+$",
-        description="A client-made id of this batch: the same batch posted again (a retry) is stored once.",
-    )
+    batch: str | None = page_made_id(64, "A client-made id of this batch: the same batch posted again (a retry) is stored once.")
 
 
 def check_preset(v: Any, field: str) -> Any:
@@ -149,17 +142,17 @@ def check_preset(v: Any, field: str) -> Any:
     return v
 
 
+#: the validator of a body's ``task`` and ``model``: a name must name a preset
+PRESETS_NAMED = field_validator("task", "model")(lambda cls, v, info: check_preset(v, info.field_name))
+
+
 class DeployIn(Body):
     label: str = Field("robot", min_length=1, max_length=200)
     task: str | dict[str, Any] = "paper"
     model: str | dict[str, Any] = "paper"
     policy: dict[str, Any] = Field(default_factory=lambda: {"kind": "trust-aware"})
     seed: int = Field(0, ge=0, lt=2**31)
-
-    @field_validator("task", "model")
-    @classmethod
-    def _preset(cls, v, info):
-        return check_preset(v, info.field_name)
+    _presets = PRESETS_NAMED
 
 
 class DecideIn(Body):

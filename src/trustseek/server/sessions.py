@@ -32,7 +32,7 @@ from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from .answers import questionnaire_due, quiz_due, report_due
 from .cache import caches_of
 from .errors import Conflict, NotAllowed, NotFound, TooLarge
-from .orm import TRIAL_FIELDS, Event, EventBatch, Session, Study, Trial, utcnow
+from .orm import TRIAL_FIELDS, Event, EventBatch, Session, Study, Trial, row_dict, try_commit, utcnow
 from .plan import PolicyPlan
 from .studies import block_items
 
@@ -41,6 +41,8 @@ log = logging.getLogger(__name__)
 #: stored UI events per trial (events outside any trial count together) and per session
 MAX_EVENTS_PER_TRIAL = 2000
 MAX_EVENTS_PER_SESSION = 50_000
+#: the refusal of a deploy session's token on a study session's route
+DEPLOY_SESSION = "this is a deploy session; use /api/deploy"
 
 
 def new_id() -> str:
@@ -98,7 +100,7 @@ def block_plan(db: DBSession, s: Session, block: int) -> PolicyPlan:
     """The plan of a study session's block (its policy with ``PolicyRunner``'s step, parsed once
     and remembered by the application); the index after the study's blocks is the practice's."""
     if s.kind != "study" or s.study_id is None:
-        raise Conflict("this is a deploy session; use /api/deploy")
+        raise Conflict(DEPLOY_SESSION)
     contexts = caches_of(db).contexts
     plans = contexts.get(s.study_id)
     if plans is None:
@@ -188,7 +190,7 @@ def served(s: Session, n: int, items: tuple[dict[str, int], dict[str, int] | Non
 
 def trial_dict(t: Any) -> dict[str, Any]:
     """A committed trial (a ``Trial`` row, or the decision API's ``store.committed``) as the API answers it."""
-    return {k: getattr(t, k) for k in TRIAL_FIELDS}
+    return row_dict(t, TRIAL_FIELDS)
 
 
 #: what a participant's page learns of a committed trial: never the belief or the experience
@@ -196,7 +198,7 @@ PARTICIPANT_TRIAL = ("trial", "block", "complexity", "robot_action", "human_acti
 
 
 def participant_trial(t: Trial) -> dict[str, Any]:
-    return {**{k: getattr(t, k) for k in PARTICIPANT_TRIAL}, "practice": bool(t.practice)}
+    return {**row_dict(t, PARTICIPANT_TRIAL), "practice": bool(t.practice)}
 
 
 def trial_reward(task: Task, action: str, human: str | None, experience: str) -> float:
@@ -231,10 +233,7 @@ def _commit_trial(db: DBSession, s: Session, row: Trial, plan: PolicyPlan, event
     if total is not None and row.trial >= total:
         s.status = "done"
     s.updated_at = utcnow()
-    try:
-        db.commit()
-    except IntegrityError:
-        db.rollback()
+    if not try_commit(db):
         return None
     if s.status == "done":
         log.info("session %s of study %s finished: %d trials, score %g", s.id, s.study_id, s.trials_done, s.score)

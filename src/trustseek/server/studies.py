@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any, Literal, TypeVar
 
 import numpy as np
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, model_validator
 
 from ..errors import TrustseekError
 from ..model.core import TrustModel
@@ -24,9 +24,10 @@ from ..model.task import Task
 from ..policies.scheduling import SCHEDULE
 from ..solvers import policy_from_spec
 from .cache import StudyCaches
-from .schemas import Body, check_preset
+from .schemas import PRESETS_NAMED, Body, check_preset
 
 _Spec = TypeVar("_Spec", Task, TrustModel)
+_T = TypeVar("_T")
 
 MAX_TRIALS_PER_BLOCK = 1000
 MAX_GRID = 20001  # the largest belief grid a study may ask the server to solve
@@ -184,11 +185,7 @@ class StudyIn(Body):
     panel: PanelIn | None = None
     quota: int | None = Field(None, ge=1, le=100_000, description="Participants the study link takes; then it closes.")
     quiz: QuizIn | None = None
-
-    @field_validator("task", "model")
-    @classmethod
-    def _preset(cls, v, info):
-        return check_preset(v, info.field_name)
+    _presets = PRESETS_NAMED
 
 
 def _from_spec(field: str, spec: str | dict, presets: dict[str, Callable[[], _Spec]], cls: type[_Spec]) -> _Spec:
@@ -240,15 +237,16 @@ def resolve_policy(
 def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dict[str, Any]:
     """Validate every part of a study and return the stored configuration."""
     problems: list[str] = []
-    task = model = None
-    try:
-        task = load_task_spec(study.task)
-    except ConfigError as exc:
-        problems += exc.problems
-    try:
-        model = load_model_spec(study.model)
-    except ConfigError as exc:
-        problems += exc.problems
+
+    def checked(make: Callable[..., _T], *args: Any) -> _T | None:
+        """``make(*args)``, or None with its problems noted."""
+        try:
+            return make(*args)
+        except ConfigError as exc:
+            problems.extend(exc.problems)
+            return None
+
+    task, model = checked(load_task_spec, study.task), checked(load_model_spec, study.model)
     # the other parts are checked against what is known, so that every problem is named at once
     known = task or model
     unknown = [] if known is None else unknown_complexities(study, tuple(known.complexities))
@@ -257,37 +255,10 @@ def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dic
     if problems or task is None or model is None:
         raise ConfigError(problems + unknown)
     problems += unknown
-    blocks = []
-    for i, b in enumerate(study.blocks):
-        where, s = f"blocks[{i}]", b.schedule
-        try:
-            pol = resolve_policy(b.policy, model, task, f"{where}.policy", caches)
-            if not isinstance(s, Schedule):
-                schedule = chosen_schedule(pol, where)
-            elif pol["kind"] == SCHEDULE:
-                raise ConfigError([f'{where}: a schedule policy picks the items: give the block "schedule": "{BY_POLICY}"'])
-            else:
-                schedule = {"counts": s.counts} if s.counts is not None else {"trials": s.trials}
-            blocks.append({"name": b.name or f"block {i + 1}", "policy": pol, "schedule": schedule})
-        except ConfigError as exc:
-            problems += exc.problems
-    practice = None
-    if study.practice is not None:
-        try:
-            practice_policy = resolve_policy(study.practice.policy, model, task, "practice.policy", caches)
-            asks = study.practice.asks if study.practice.asks is not None else [len(study.practice.trials)]
-            practice = {"trials": list(study.practice.trials), "policy": practice_policy, "asks": sorted(set(asks))}
-            if practice_policy["kind"] == SCHEDULE:
-                problems.append("practice.policy: practice trials are a fixed list; a schedule policy runs in a block")
-        except ConfigError as exc:
-            problems += exc.problems
-    questionnaires = []
-    for i, q in enumerate(study.questionnaires):
-        try:
-            questionnaires.append(resolve_questionnaire(q, f"questionnaires[{i}]"))
-        except ConfigError as exc:
-            problems += exc.problems
-    names = [q["name"] for q in questionnaires]
+    blocks = [checked(resolve_block, b, i, model, task, caches) for i, b in enumerate(study.blocks)]
+    practice = None if study.practice is None else checked(resolve_practice, study.practice, model, task, caches)
+    questionnaires = [checked(resolve_questionnaire, q, f"questionnaires[{i}]") for i, q in enumerate(study.questionnaires)]
+    names = [q["name"] for q in questionnaires if q is not None]
     if len(set(names)) != len(names):
         problems.append(f"questionnaire names must be unique, got {names}")
     if problems:
@@ -295,6 +266,28 @@ def build_study_config(study: StudyIn, caches: StudyCaches | None = None) -> dic
     cfg = study.model_dump(exclude={"blocks", "task", "model", "practice", "questionnaires"})
     cfg.update(task=task.to_dict(), model=model.to_dict(), blocks=blocks, practice=practice, questionnaires=questionnaires)
     return cfg
+
+
+def resolve_block(b: BlockIn, i: int, model: TrustModel, task: Task, caches: StudyCaches | None) -> dict[str, Any]:
+    """Block ``i`` as stored with the study: its name, resolved policy and schedule."""
+    where, s = f"blocks[{i}]", b.schedule
+    pol = resolve_policy(b.policy, model, task, f"{where}.policy", caches)
+    if not isinstance(s, Schedule):
+        schedule = chosen_schedule(pol, where)
+    elif pol["kind"] == SCHEDULE:
+        raise ConfigError([f'{where}: a schedule policy picks the items: give the block "schedule": "{BY_POLICY}"'])
+    else:
+        schedule = {"counts": s.counts} if s.counts is not None else {"trials": s.trials}
+    return {"name": b.name or f"block {i + 1}", "policy": pol, "schedule": schedule}
+
+
+def resolve_practice(p: PracticeIn, model: TrustModel, task: Task, caches: StudyCaches | None) -> dict[str, Any]:
+    """The practice as stored with the study: its trials, resolved policy and the trials the robot asks in."""
+    policy = resolve_policy(p.policy, model, task, "practice.policy", caches)
+    if policy["kind"] == SCHEDULE:
+        raise ConfigError(["practice.policy: practice trials are a fixed list; a schedule policy runs in a block"])
+    asks = p.asks if p.asks is not None else [len(p.trials)]
+    return {"trials": list(p.trials), "policy": policy, "asks": sorted(set(asks))}
 
 
 def unknown_complexities(study: StudyIn, complexities: tuple[str, ...]) -> list[str]:
@@ -322,12 +315,11 @@ def more_problems(body: Any, errors: list[dict[str, Any]]) -> list[str]:
         rest.setdefault("name", "x")
         rest.setdefault("blocks", [{"policy": {"kind": "never-ask"}, "schedule": {"trials": ["low"]}}])
     try:
-        study = StudyIn.model_validate(rest)
-        build_study_config(study)
+        build_study_config(StudyIn.model_validate(rest))
     except ConfigError as exc:
         return exc.problems
-    except ValueError:
-        return []
+    except ValueError:  # refused by the fields' validation after all
+        pass
     return []
 
 
@@ -377,6 +369,11 @@ def resolve_questionnaire(q: QuestionnaireIn, where: str) -> dict[str, Any]:
         "scale": scale.model_dump(),
         "items": [i.model_dump() for i in q.items],
     }
+
+
+def practice_count(cfg: dict[str, Any]) -> int:
+    """The practice trials of a study (the first trials of every session)."""
+    return len((cfg.get("practice") or {}).get("trials", []))
 
 
 def block_order(cfg: dict[str, Any], index: int, rng: np.random.Generator) -> list[int]:

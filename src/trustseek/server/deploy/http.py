@@ -38,8 +38,8 @@ from ..auth import (
     session_caller,
     token_of,
 )
-from ..errors import Refused, TooLarge
-from ..middleware import SESSION_BODY_LIMIT, json_bytes, read_body, refusal, refuse, replaying
+from ..errors import Refused
+from ..middleware import SESSION_BODY_LIMIT, json_bytes, read_body, refusal, replaying
 from ..orm import Session, Trial
 from ..routes import errors
 from ..schemas import DecideIn, DeployIn, ObserveIn
@@ -115,11 +115,9 @@ class DeployFront:
         caller = _caller(scope, sid) if sid and what in ("decide", "observe") else None
         if caller is None:
             return await self.app(scope, receive, send)  # nothing read: the guard and the routes answer
-        try:
-            body = await read_body(receive, SESSION_BODY_LIMIT)  # its declared length is within the limit
-        except TooLarge as exc:  # more than declared: the HTTP server refuses such a body before this
-            return await refuse(send, 413, exc.message)
-        if body is None:  # the client went away
+        # its declared length is within the limit (the HTTP server refuses a body longer than declared)
+        body = await read_body(receive, send, SESSION_BODY_LIMIT)
+        if body is None:  # refused, or the client went away
             return
         args = _args(what, body)
         if args is None:
