@@ -134,3 +134,17 @@ def test_an_output_may_not_overwrite_the_file_a_mapping_joins(study, tmp_path):
     code, output = run_cli([*argv, "--out", str(ratings)])
     assert code == 2 and "the file the --mapping file joins" in " ".join(output.split()), output
     assert ratings.read_bytes() == before
+
+
+def test_a_folder_of_logs_one_per_participant_is_fitted_as_the_whole_log(tmp_path):
+    frame = pd.read_csv(example_path())
+    folder = tmp_path / "data"
+    folder.mkdir()
+    for pid, g in frame.groupby("participant"):
+        g.drop(columns="participant").to_csv(folder / f"{pid}.csv", index=False)
+    outputs = []
+    for log in (folder, example_path()):
+        code, output = run_cli(["fit", str(log), "-r", "2", "--json"])
+        assert code == 0, output
+        outputs.append(json.loads(output))
+    assert outputs[0]["loglik"] == outputs[1]["loglik"] and outputs[0]["model"] == outputs[1]["model"]

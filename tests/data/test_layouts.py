@@ -328,3 +328,55 @@ def test_the_new_entries_survive_a_round_trip_and_a_toml_file(tmp_path):
     (tmp_path / "m.toml").write_text('explode = ["choice"]\n[join]\nfile = "ratings.csv"\n')
     m = ColumnMapping.load(tmp_path / "m.toml")
     assert m.explode == {"columns": ["choice"], "position": None} and m.join == {"file": str(tmp_path / "ratings.csv")}
+
+
+# --------------------------------------------------------------------------- a folder of logs
+
+
+def test_a_folder_of_logs_one_per_participant_reads_as_one_log(small, tmp_path):
+    for pid, g in small.groupby("participant"):  # as PsychoPy writes them: no participant column
+        g.drop(columns="participant").to_csv(tmp_path / f"{pid}.csv", index=False)
+    (tmp_path / ".hidden.csv").write_text("junk\n")
+    (tmp_path / "mapping.json").write_text("{}")  # files of another kind than most are left out
+    (tmp_path / "notes.txt").write_text("notes")
+    frame = read_trials(tmp_path)
+    same_trials(frame, read_trials(small))
+    assert "file" not in frame.columns  # it gave the participants
+
+
+def test_a_folder_s_files_with_participant_ids_keep_their_file_names(small, tmp_path):
+    for i, (_, g) in enumerate(small.groupby("participant")):
+        g.to_parquet(tmp_path / f"session{i}.parquet")
+    frame = read_trials(tmp_path)
+    same_trials(frame, read_trials(small))
+    assert frame.groupby("participant", observed=True)["file"].first().to_dict() == {
+        "P001": "session0",
+        "P002": "session1",
+        "P003": "session2",
+    }
+
+
+def test_a_folder_s_problems_name_the_file_and_its_row(small, tmp_path):
+    for pid, g in small.groupby("participant"):
+        g.drop(columns="participant").to_csv(tmp_path / f"{pid}.csv", index=False)
+    text = (tmp_path / "P002.csv").read_text().splitlines()
+    text[3] = text[3].replace(",low,", ",medium,").replace(",high,", ",medium,")
+    (tmp_path / "P002.csv").write_text("\n".join(text) + "\n")
+    with pytest.raises(DataError) as exc:
+        read_trials(tmp_path)
+    assert exc.value.problems == [
+        "column 'complexity': unknown category (expected one of ['low', 'high']): P002.csv row 3 'medium'"
+    ]
+    (tmp_path / "P002.csv").write_text((tmp_path / "P001.csv").read_text().replace("experience", "exp"))
+    with pytest.raises(DataError) as exc:
+        read_trials(tmp_path)
+    assert exc.value.problems == ["P002.csv: its columns are not those of P001.csv: lacks ['experience'], has ['exp'] too"]
+
+
+def test_a_folder_without_logs_or_with_two_kinds_alike_is_refused(small, tmp_path):
+    with pytest.raises(DataError, match="the folder holds no trial log"):
+        read_trials(tmp_path)
+    small.to_csv(tmp_path / "a.csv", index=False)
+    small.to_parquet(tmp_path / "b.parquet")
+    with pytest.raises(DataError, match=r"as many logs of two kinds \(\{'.csv': 1, '.parquet': 1\}\): keep one kind"):
+        read_trials(tmp_path)

@@ -36,8 +36,10 @@ PrintJsonOpt = typer.Option(False, "--json", help="Print JSON.")
 SeedOpt = typer.Option(0, "--seed", min=0, help="Random seed.")
 MaxIterOpt = typer.Option(1000, "--max-iter", min=1, help="Iteration cap per restart (E-steps).")
 PolicyOutOpt = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file.")
-LogArg = typer.Argument(..., help="Trial log (CSV or Parquet).")
-OneRowPerTrialLogArg = typer.Argument(..., help="Trial log (CSV or Parquet), one row per trial.")
+LogArg = typer.Argument(..., help="Trial log (CSV, Parquet, JSON), or a folder of them (a file per participant or session).")
+OneRowPerTrialLogArg = typer.Argument(
+    ..., help="Trial log (CSV, Parquet, JSON), one row per trial, or a folder of them (a file per participant or session)."
+)
 
 
 def belief_update_option(default: str, of: str = "") -> Any:

@@ -19,6 +19,7 @@ from ._options import (
     AsForFitTransitionsOpt,
     LogReading,
     MaxIterOpt,
+    OneRowPerTrialLogArg,
     QuietOpt,
     RatingPerOpt,
     log_options,
@@ -65,7 +66,7 @@ def _load(path: Path) -> Any:
 @command("predict")
 @log_options(keep=True)
 def predict(
-    log: Path = typer.Argument(..., help="Trial log (CSV, Parquet, JSON), one row per trial."),
+    log: Path = OneRowPerTrialLogArg,
     model: Path | None = typer.Option(
         None,
         "--model",

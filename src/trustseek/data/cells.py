@@ -43,14 +43,17 @@ class Problems:
     """Problems grouped by kind: one line per kind with the count and the first locations.
 
     ``rowid`` maps the rows being checked to the file's data rows (rows left out by a
-    drop rule are not checked, and locations still name the file's rows)."""
+    drop rule are not checked, and locations still name the file's rows); ``place`` names the
+    location of a row of the log (0-based) when it is not ``row N`` (a folder's files)."""
 
     rowid: np.ndarray | None = None
+    place: Callable[[int], str] | None = None
     lines: list[str] = field(default_factory=list)
 
-    def row(self, r: int) -> int:
-        """The file's data row (1-based) of checked row ``r`` (0-based)."""
-        return int(self.rowid[r] if self.rowid is not None else r) + 1
+    def where(self, r: int) -> str:
+        """The location of checked row ``r`` (0-based): ``row N``, the file's N-th data row."""
+        i = int(self.rowid[r] if self.rowid is not None else r)
+        return f"row {i + 1}" if self.place is None else self.place(i)
 
     def add(self, head: str, items: Sequence[str], count: int | None = None, unit: str = "rows") -> None:
         count = len(items) if count is None else count
@@ -69,7 +72,7 @@ class Problems:
         if len(rows) == 0:
             return
         first = rows[:SHOWN]
-        items = [f"row {self.row(int(r))}" + (f" {describe(int(r))}" if describe else "") for r in first]
+        items = [self.where(int(r)) + (f" {describe(int(r))}" if describe else "") for r in first]
         self.add(head, items, len(rows))
 
 
@@ -183,6 +186,7 @@ class RawLog:
     col: Any  # name -> Column
     extras: Any  # list of names -> DataFrame of those columns
     release: Any = None  # list of names -> None: those columns are no longer needed (their memory goes)
+    place: Callable[[int], str] | None = None  # row (0-based) -> its location, when not ``row N`` (a folder's files)
 
 
 def column_from_pandas(values: pd.Series, missing: frozenset[str]) -> Column:

@@ -94,7 +94,7 @@ def order_trials(
     dup = np.flatnonzero(same) + 1
     if len(dup):
         items = [
-            f"row {problems.row(int(perm[d]))}: same {' / '.join(order)} as row {problems.row(int(perm[d - 1]))} "
+            f"{problems.where(int(perm[d]))}: same {' / '.join(order)} as {problems.where(int(perm[d - 1]))} "
             f"for participant {ids[ps[d]]!r}"
             for d in dup[:SHOWN]
         ]
@@ -127,11 +127,11 @@ def check_trials(
     if len(dup):
         first = np.searchsorted(ks, ks[dup], side="left")
 
-        def at(i: int) -> int:
-            return problems.row(int(order[i] if rows is None else rows[order[i]]))
+        def at(i: int) -> str:
+            return problems.where(int(order[i] if rows is None else rows[order[i]]))
 
         items = [
-            f"row {at(d)}: duplicate trial index {t[order[d]]} for participant {ids[p[order[d]]]!r} (first at row {at(f)})"
+            f"{at(d)}: duplicate trial index {t[order[d]]} for participant {ids[p[order[d]]]!r} (first at {at(f)})"
             for d, f in zip(dup[:SHOWN], first[:SHOWN], strict=True)
         ]
         problems.add(f"{column}: duplicate trial indices", items, len(dup))

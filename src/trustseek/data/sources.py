@@ -21,6 +21,7 @@ from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from ..model.jsonfile import special_file
@@ -115,7 +116,7 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: 
     if not path.exists():
         raise DataError(["file not found"], name)
     if path.is_dir():
-        raise DataError(["is a directory, not a trial log"], name)
+        return _load_folder(path, name, sep, missing, explode)
     special = special_file(path)
     if special:
         raise DataError([f"is {special}; expected a trial log file"], name)
@@ -139,6 +140,71 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: 
          ".csv.bz2, .csv.zst)"],
         name,
     )  # fmt: skip
+
+
+#: the column a folder's log adds: the name of each trial's file, less its suffix
+FILE_COLUMN = "file"
+#: the files a folder's log reads, by the suffix that says what they hold
+FOLDER_SUFFIXES = (".csv", ".tsv", *PARQUET_SUFFIXES, *JSONL_SUFFIXES, *JSON_SUFFIXES)
+
+
+def _load_folder(path: Path, name: str, sep: str | None, missing: frozenset[str], explode: dict[str, Any] | None) -> RawLog:
+    """The logs of a folder as one (one file per participant or session, as PsychoPy and most
+    experiment software write them): its files of the kind most of them are (``.csv``, ``.parquet``,
+    ...; hidden files and others left out), in name order, each with the same columns, and a column
+    :data:`FILE_COLUMN` naming each trial's file; locations name the file and its row."""
+    kinds = collections.defaultdict(list)
+    for p in sorted(path.iterdir()):
+        if p.is_file() and not p.name.startswith(".") and _csv_suffix(p) in FOLDER_SUFFIXES:
+            kinds[_csv_suffix(p)].append(p)
+    if not kinds:
+        raise DataError([f"the folder holds no trial log (files ending in {', '.join(FOLDER_SUFFIXES)})"], name)
+    files = max(kinds.values(), key=len)
+    if [k for k, v in kinds.items() if len(v) == len(files)] != [_csv_suffix(files[0])]:
+        counts = {k: len(v) for k, v in kinds.items()}
+        raise DataError([f"the folder holds as many logs of two kinds ({counts}): keep one kind"], name)
+    raws = [load_source(p, sep, missing, explode) for p in files]  # each file's own errors name it
+    columns = raws[0].columns
+    lines = [
+        f"{p.name}: its columns are not those of {files[0].name}: lacks {sorted(set(columns) - set(r.columns))}, "
+        f"has {sorted(set(r.columns) - set(columns))} too"
+        for p, r in zip(files, raws, strict=True)
+        if set(r.columns) != set(columns)
+    ]
+    if lines:
+        raise DataError(lines[:SHOWN] + ([f"... ({len(lines) - SHOWN} more files)"] if len(lines) > SHOWN else []), name)
+    sizes = np.array([r.n for r in raws])
+    starts = np.cumsum(sizes) - sizes
+    stems = [p.name.removesuffix("".join(p.suffixes[-2:] if p.suffix.lower() in COMPRESSED else p.suffixes[-1:])) for p in files]
+    added = [FILE_COLUMN] if FILE_COLUMN not in columns else []
+
+    def col(c: str) -> Column:
+        if c == FILE_COLUMN and added:
+            return Column(np.repeat(np.arange(len(files), dtype=np.int32), sizes), [*stems, None], last_unused=True)
+        merged: dict[str | None, int] = {}
+        parts = []
+        for r in raws:
+            one = r.col(c)
+            parts.append(np.array([merged.setdefault(t, len(merged)) for t in one.texts], dtype=np.int32)[one.codes])
+        return Column(np.concatenate(parts), list(merged))
+
+    def extras(cs: list[str]) -> pd.DataFrame:
+        own = [c for c in cs if c not in added]
+        frame = pd.concat([r.extras(own) for r in raws], ignore_index=True) if own else pd.DataFrame(index=range(sizes.sum()))
+        if added and FILE_COLUMN in cs:
+            frame[FILE_COLUMN] = np.repeat(np.array(stems, dtype=object), sizes)
+        return frame[cs]
+
+    def release(cs: list[str]) -> None:
+        for r in raws:
+            if r.release is not None:
+                r.release([c for c in cs if c in r.columns])
+
+    def place(i: int) -> str:
+        k = int(np.searchsorted(starts, i, side="right")) - 1
+        return f"{files[k].name} row {i - starts[k] + 1}"
+
+    return RawLog(name, int(sizes.sum()), [*columns, *added], col, extras, release, place)
 
 
 def _exploded_frame(source: pd.DataFrame, missing: frozenset[str], explode: dict[str, Any]) -> RawLog:

@@ -25,7 +25,7 @@ from .layouts import join_file, unpivot
 from .levels import category_codes, input_codes, one_rating_per_block, rating_codes
 from .mapping import CANONICAL, CATEGORICAL, RATING, ColumnMapping, as_mapping, label_key
 from .order import check_trials, order_trials, trial_numbers
-from .sources import PARQUET_SUFFIXES, load_source, missing_column_hint
+from .sources import FILE_COLUMN, PARQUET_SUFFIXES, load_source, missing_column_hint
 
 
 def read_trials(
@@ -61,7 +61,9 @@ def read_trials(
     theirs = {c: mapping.columns.get(c, c) for c in CANONICAL}
     markers = frozenset(m.strip().lower() for m in (mapping.missing or ()))
     raw = load_source(source, delimiter or mapping.delimiter, markers, mapping.explode)
-    name = raw.name
+    name, place = raw.name, raw.place
+    if place is not None and theirs["participant"] not in raw.columns and "participant" not in mapping.columns:
+        theirs["participant"] = FILE_COLUMN  # a folder of logs without participant ids: one participant per file
     if mapping.wide is not None:
         raw = unpivot(raw, mapping.wide)
     joined: list[str] = []
@@ -77,7 +79,7 @@ def read_trials(
         for c in canonical:
             get(c)
         raw.release(canonical)
-    problems = Problems(rowid)
+    problems = Problems(rowid, place if raw.place is place else None)  # (a wide log's rows are its trials)
 
     def column(c: str) -> str:
         return f"column {theirs[c]!r}"
