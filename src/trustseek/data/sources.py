@@ -427,6 +427,8 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
     types = dict.fromkeys(header, dictionary)
     parts, quoted = _csv_parts(path)
     bad_rows: list[list[tuple[int | None, int, str]]] = [[] for _ in parts]
+    # a small plain file in one block of its size: each block's buffer is allocated whole (16 MB for a file of 2 kB)
+    block = BLOCK_BYTES if len(parts) > 1 or path.suffix.lower() in COMPRESSED else min(BLOCK_BYTES, path.stat().st_size + 1)
 
     def parse(i: int) -> Any:
         if len(parts) > 1 and quoted(i):
@@ -447,7 +449,7 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
             return pcsv.read_csv(
                 pa.BufferReader(parts[i]) if len(parts) > 1 else _input(path),
                 read_options=pcsv.ReadOptions(
-                    column_names=header, skip_rows=skip if i == 0 else 0, block_size=BLOCK_BYTES, use_threads=False
+                    column_names=header, skip_rows=skip if i == 0 else 0, block_size=block, use_threads=False
                 ),
                 parse_options=pcsv.ParseOptions(
                     delimiter=sep,
