@@ -380,3 +380,20 @@ def test_a_folder_without_logs_or_with_two_kinds_alike_is_refused(small, tmp_pat
     small.to_parquet(tmp_path / "b.parquet")
     with pytest.raises(DataError, match=r"as many logs of two kinds \(\{'.csv': 1, '.parquet': 1\}\): keep one kind"):
         read_trials(tmp_path)
+
+
+def test_a_folder_of_wide_files_names_the_file_and_the_record_of_a_bad_trial(small, tmp_path):
+    for pid, g in small.groupby("participant"):  # a row per participant, a column per trial of each field
+        row = {
+            f"{c}_{t}": v for t, r in zip(g["trial"], g.to_dict("records"), strict=True) for c, v in r.items() if c in FIELDS[1:]
+        }
+        pd.DataFrame([row]).to_csv(tmp_path / f"{pid}.csv", index=False)
+    mapping = {"wide": {"columns": FIELDS[1:], "position": "trial"}}
+    same_trials(read_trials(tmp_path, mapping), read_trials(small))
+    text = (tmp_path / "P003.csv").read_text().replace(",low,", ",medium,", 1)
+    (tmp_path / "P003.csv").write_text(text)
+    with pytest.raises(DataError) as exc:
+        read_trials(tmp_path, mapping)
+    assert exc.value.problems == [
+        "column 'complexity': unknown category (expected one of ['low', 'high']): P003.csv row 1 'medium'"
+    ]

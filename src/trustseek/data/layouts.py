@@ -271,7 +271,9 @@ def unpivot(raw: RawLog, spec: dict[str, Any]) -> RawLog:
                 frame[c] = np.array(stacked[c].texts, dtype=object)[stacked[c].codes]
         return frame[cs]
 
-    return RawLog(raw.name, len(rows), [*others, *stacked], col, extras)
+    of = raw.place
+    place = None if of is None else (lambda i: of(int(rows[i])))  # a folder's file and the trial's record
+    return RawLog(raw.name, len(rows), [*others, *stacked], col, extras, place=place)
 
 
 def _keys(raw: Any, on: list[str], tables: list[dict[str, int]]) -> np.ndarray:
@@ -355,7 +357,7 @@ def join_file(raw: RawLog, second: RawLog, spec: dict[str, Any], participant: st
         return frame[cs]
 
     release = raw.release and (lambda cs: raw.release([c for c in cs if c not in added]))
-    return RawLog(raw.name, raw.n, [*raw.columns, *added], col, extras, release), notes
+    return RawLog(raw.name, raw.n, [*raw.columns, *added], col, extras, release, raw.place), notes
 
 
 def _by_participant(codes: np.ndarray, texts: dict[int, str]) -> str:

@@ -61,8 +61,8 @@ def read_trials(
     theirs = {c: mapping.columns.get(c, c) for c in CANONICAL}
     markers = frozenset(m.strip().lower() for m in (mapping.missing or ()))
     raw = load_source(source, delimiter or mapping.delimiter, markers, mapping.explode)
-    name, place = raw.name, raw.place
-    if place is not None and theirs["participant"] not in raw.columns and "participant" not in mapping.columns:
+    name = raw.name
+    if raw.place is not None and theirs["participant"] not in raw.columns and "participant" not in mapping.columns:
         theirs["participant"] = FILE_COLUMN  # a folder of logs without participant ids: one participant per file
     if mapping.wide is not None:
         raw = unpivot(raw, mapping.wide)
@@ -79,7 +79,7 @@ def read_trials(
         for c in canonical:
             get(c)
         raw.release(canonical)
-    problems = Problems(rowid, place if raw.place is place else None)  # (a wide log's rows are its trials)
+    problems = Problems(rowid, raw.place)
 
     def column(c: str) -> str:
         return f"column {theirs[c]!r}"
