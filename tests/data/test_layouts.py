@@ -4,11 +4,15 @@ the trial order given by columns (``order``, ``--order``)."""
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+from test_write_csv import frames
 
 from trustseek.data import ColumnMapping, DataError, example_path, read_trials
 
@@ -396,4 +400,30 @@ def test_a_folder_of_wide_files_names_the_file_and_the_record_of_a_bad_trial(sma
         read_trials(tmp_path, mapping)
     assert exc.value.problems == [
         "column 'complexity': unknown category (expected one of ['low', 'high']): P003.csv row 1 'medium'"
+    ]
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(frame=frames(), cuts=st.lists(st.integers(0, 12), max_size=3), suffix=st.sampled_from([".csv", ".parquet"]))
+def test_a_log_cut_into_a_folder_of_files_reads_cell_for_cell_as_the_whole(tmp_path_factory, frame, cuts, suffix):
+    from trustseek.data.sources import load_source
+
+    texts = [str(v) for c in frame.columns for v in frame[c] if isinstance(v, str)]
+    assume(
+        suffix == ".parquet" or not any("\r" in t for t in texts)
+    )  # a bare CR is a line end in a CSV (pandas does not quote it)
+    folder = tmp_path_factory.mktemp("folder")
+    bounds = [0, *sorted(min(c, len(frame)) for c in cuts), len(frame)]
+    for i, (a, b) in enumerate(itertools.pairwise(bounds)):
+        part = frame.iloc[a:b]
+        part.to_csv(folder / f"part{i}.csv", index=False) if suffix == ".csv" else part.to_parquet(folder / f"part{i}.parquet")
+    whole = folder.parent / f"{folder.name}-whole{suffix}"
+    frame.to_csv(whole, index=False) if suffix == ".csv" else frame.to_parquet(whole)
+    one, many = load_source(whole, None, frozenset()), load_source(folder, None, frozenset())
+    assert many.n == one.n and many.columns == [*one.columns, "file"]
+    for c in one.columns:
+        a, b = one.col(c), many.col(c)
+        assert [a.texts[k] for k in a.codes] == [b.texts[k] for k in b.codes], c
+    assert [many.place(i) for i in range(many.n)] == [
+        f"part{i}{suffix} row {r + 1}" for i, (a, b) in enumerate(itertools.pairwise(bounds)) for r in range(b - a)
     ]
