@@ -143,8 +143,13 @@ def test_a_folder_of_logs_one_per_participant_is_fitted_as_the_whole_log(tmp_pat
     for pid, g in frame.groupby("participant"):
         g.drop(columns="participant").to_csv(folder / f"{pid}.csv", index=False)
     outputs = []
-    for log in (folder, example_path()):
-        code, output = run_cli(["fit", str(log), "-r", "2", "--json"])
+    for log in ([folder], sorted(folder.iterdir()), [example_path()]):  # the folder, its files (a shell's data/*.csv)
+        code, output = run_cli(["fit", *map(str, log), "-r", "2", "--json"])
         assert code == 0, output
         outputs.append(json.loads(output))
-    assert outputs[0]["loglik"] == outputs[1]["loglik"] and outputs[0]["model"] == outputs[1]["model"]
+    assert outputs[0]["loglik"] == outputs[1]["loglik"] == outputs[2]["loglik"]
+    assert outputs[0]["model"] == outputs[1]["model"] == outputs[2]["model"]
+    code, output = run_cli(
+        ["decode", str(folder / "P001.csv"), str(folder / "P002.csv"), "-m", "paper", "-o", str(folder / "P002.csv")]
+    )
+    assert code == 2 and "--out" in output and "would overwrite the input" in output, output  # any of its files is an input

@@ -377,6 +377,30 @@ def test_a_folder_s_problems_name_the_file_and_its_row(small, tmp_path):
     assert exc.value.problems == ["P002.csv: its columns are not those of P001.csv: lacks ['experience'], has ['exp'] too"]
 
 
+def test_several_files_read_as_one_log_named_by_their_paths_where_names_are_alike(small, tmp_path):
+    paths = []
+    for site, pids in (("siteA", ["P001", "P002"]), ("siteB", ["P003"])):
+        (tmp_path / site).mkdir()
+        for i, pid in enumerate(pids):  # each site numbers its sessions from 1
+            paths.append(tmp_path / site / f"session{i + 1}.csv")
+            small[small.participant == pid].to_csv(paths[-1], index=False)
+    frame = read_trials(paths)
+    same_trials(frame, read_trials(small))
+    assert sorted(set(frame["file"])) == ["siteA/session1", "siteA/session2", "siteB/session1"]
+    text = paths[2].read_text().splitlines()
+    text[2] = text[2].replace(",low,", ",medium,").replace(",high,", ",medium,")
+    paths[2].write_text("\n".join(text) + "\n")
+    with pytest.raises(DataError) as exc:
+        read_trials(paths)
+    assert exc.value.problems == [
+        "column 'complexity': unknown category (expected one of ['low', 'high']): siteB/session1.csv row 2 'medium'"
+    ]
+    with pytest.raises(DataError, match="a file is given twice"):
+        read_trials([paths[0], tmp_path / "siteA" / ".." / "siteA" / "session1.csv"])
+    with pytest.raises(DataError, match="no trial log given"):
+        read_trials([])
+
+
 def test_a_folder_without_logs_or_with_two_kinds_alike_is_refused(small, tmp_path):
     with pytest.raises(DataError, match="the folder holds no trial log"):
         read_trials(tmp_path)

@@ -36,10 +36,26 @@ PrintJsonOpt = typer.Option(False, "--json", help="Print JSON.")
 SeedOpt = typer.Option(0, "--seed", min=0, help="Random seed.")
 MaxIterOpt = typer.Option(1000, "--max-iter", min=1, help="Iteration cap per restart (E-steps).")
 PolicyOutOpt = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file.")
-LogArg = typer.Argument(..., help="Trial log (CSV, Parquet, JSON), or a folder of them (a file per participant or session).")
-OneRowPerTrialLogArg = typer.Argument(
-    ..., help="Trial log (CSV, Parquet, JSON), one row per trial, or a folder of them (a file per participant or session)."
+#: the trial log: a file, or several (a file per participant or session) or a folder of them, read as one
+LogArg = typer.Argument(
+    ...,
+    help="Trial log (CSV, Parquet, JSON); several files or a folder of them (a file per participant) read as one.",
 )
+OneRowPerTrialLogArg = typer.Argument(
+    ...,
+    help="Trial log (CSV, Parquet, JSON), one row per trial; several files or a folder of them (a file per participant) "
+    "read as one.",
+)
+
+
+def log_name(log: Sequence[Path]) -> str:
+    """The trial log as messages name it: its path, or how many files it is."""
+    return str(log[0]) if len(log) == 1 else f"the {len(log)} files of the log"
+
+
+def log_inputs(log: Sequence[Path]) -> tuple[tuple[Path, str], ...]:
+    """The trial log's files, as (path, what) for :func:`~._app.check_outputs`."""
+    return tuple((p, "trial log") for p in log)
 
 
 def belief_update_option(default: str, of: str = "") -> Any:
@@ -241,7 +257,7 @@ class LogReading:
         joined = None if mapping is None or mapping.join is None else mapping.join["file"]
         return ((self.mapping, "--mapping file"), (joined, "file the --mapping file joins"))
 
-    def read(self, log: Path, needed: tuple[str, ...], rating: dict | None = None, actions: bool = True):
+    def read(self, log: Sequence[Path], needed: tuple[str, ...], rating: dict | None = None, actions: bool = True):
         """The trial log with these options applied; ``needed`` are the canonical columns the
         command uses beyond participant, trial and human_action (not required without
         ``actions``); ``rating`` a rating entry of a mapping (from --rating flags).  Rows left
@@ -252,16 +268,16 @@ class LogReading:
             self.column or [], self.label or [], self.column_mapping, self.missing, self.delimiter, rating, self.order
         )
         outputs = ("human_action",) if actions else ()
-        frame = read_trials(log, m, required=("participant", "trial", *outputs, *needed))
+        frame = read_trials(log[0] if len(log) == 1 else list(log), m, required=("participant", "trial", *outputs, *needed))
         for rule, count in frame.attrs.get("dropped", []):
-            err_console.print(f"dropped {count} rows of {log} ({escape(rule)})", highlight=False)
+            err_console.print(f"dropped {count} rows of {log_name(log)} ({escape(rule)})", highlight=False)
         for note in frame.attrs.get("joined", []):
-            err_console.print(f"{log}: {escape(note)}", highlight=False)
+            err_console.print(f"{log_name(log)}: {escape(note)}", highlight=False)
         if self.no_rule:
             err_console.print("--no-experience-rule: the paper's experience rule is not checked", highlight=False)
         elif m.experience_rule is False:
             note = "the paper's experience rule is not checked (the mapping's experience_rule: false)"
-            err_console.print(f"{log}: {note}", highlight=False)
+            err_console.print(f"{log_name(log)}: {note}", highlight=False)
         return frame
 
 

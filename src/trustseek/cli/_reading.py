@@ -5,6 +5,7 @@ note of the selection commands."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -74,7 +75,7 @@ def load_for_decoding(path: Path):
     return TypeMixture.from_dict(d, source, general=True)
 
 
-def read_for_types(log: Path, types, reading: LogReading):
+def read_for_types(log: Sequence[Path], types, reading: LogReading):
     """The log read for supervisor types or one model (a trust or general model): the columns they
     use, those a trust model ignores filled."""
     from ..model.mixture import TypeMixture
@@ -87,7 +88,7 @@ def read_for_types(log: Path, types, reading: LogReading):
     return fill_unused(reading.read(log, used), types.models[0], used)
 
 
-def read_for_model(log: Path, model, reading: LogReading):
+def read_for_model(log: Sequence[Path], model, reading: LogReading):
     """The log read with the columns a general model's inputs need: the canonical ones it uses,
     and the others declared as the mapping's ``inputs``."""
     from ..model.files import PLANNING_INPUTS
@@ -136,7 +137,7 @@ def named_inputs(reading: LogReading, transitions_on, emissions_on) -> tuple[tup
     return tr, em, tuple(c for c in dict.fromkeys((*tr, *em)) if c in estimation.MODEL_INPUTS)
 
 
-def read_with_inputs(log: Path, reading: LogReading, transitions_on: str | None, emissions_on: str | None):
+def read_with_inputs(log: Sequence[Path], reading: LogReading, transitions_on: str | None, emissions_on: str | None):
     """The inputs named by the flags (:func:`named_inputs`) and the log with the columns they need."""
     tr, em, needed = named_inputs(reading, transitions_on, emissions_on)
     return tr, em, reading.read(log, needed)

@@ -36,6 +36,8 @@ from ._options import (
     RatingPerOpt,
     SeedOpt,
     SelectionJobsOpt,
+    log_inputs,
+    log_name,
     log_options,
     widen_option,
 )
@@ -128,7 +130,7 @@ _RatingsOnlyOpt = typer.Option(False, "--ratings-only", help="Leave the human ac
 @command("fit")
 @log_options(keep=True)
 def fit(
-    log: Path = OneRowPerTrialLogArg,
+    log: list[Path] = OneRowPerTrialLogArg,
     preset: str = typer.Option("paper", "--preset", help="Model structure preset (paper)."),
     levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Number of trust levels."),
     transitions_on: str | None = _TransitionsOnOpt,
@@ -225,14 +227,14 @@ def rating_entry(rating: str | None, levels: str | None, bins: str | None, per: 
 
 def _check_fit_paths(log, reading: LogReading, fill_from, out, posteriors, plots) -> None:
     """fit's output options refused before the log is read."""
-    inputs = ((log, "trial log"), *reading.inputs(), (fill_from, "--fill-from model"))
+    inputs = (*log_inputs(log), *reading.inputs(), (fill_from, "--fill-from model"))
     check_outputs((out, "--out"), (posteriors, "--posteriors", POSTERIOR_SUFFIXES), inputs=inputs)
     check_plots_folder(plots)
     if reading.keep and posteriors is None:
         raise TrustseekError(["--keep carries log columns into --posteriors: give --posteriors"])
 
 
-def _rated(frame, log: Path, ratings_only: bool) -> str | None:
+def _rated(frame, log: list[Path], ratings_only: bool) -> str | None:
     """The rating column fitted jointly ("rating") when the log has one; a note when the ratings
     look copied over a block's trials."""
     rated = "rating" if frame.attrs.get("rating_levels") else None
@@ -241,7 +243,7 @@ def _rated(frame, log: Path, ratings_only: bool) -> str | None:
 
         note = copied_per_block(frame, rated, shown=frame.attrs.get("rating_column"))
         if note:
-            err_console.print(f"{log}: note: {escape(note)}", highlight=False)
+            err_console.print(f"{log_name(log)}: note: {escape(note)}", highlight=False)
     if ratings_only and rated is None:
         raise TrustseekError(
             ["--ratings-only needs a rating column: --rating COLUMN --rating-levels ..., or the mapping's 'rating'"]
@@ -297,7 +299,7 @@ def _print_fit(result, tr, em, general: bool) -> None:
 @command("decode")
 @log_options(keep=True)
 def decode_cmd(
-    log: Path = LogArg,
+    log: list[Path] = LogArg,
     model: Path = typer.Option(
         ...,
         "--model",
@@ -312,7 +314,7 @@ def decode_cmd(
 
     The log needs the columns the model depends on: a model fitted with fewer inputs
     (--transitions-on/--emissions-on) decodes a log without the others."""
-    check_outputs((out, "--out", POSTERIOR_SUFFIXES), inputs=((log, "trial log"), (model, "--model file"), *reading.inputs()))
+    check_outputs((out, "--out", POSTERIOR_SUFFIXES), inputs=(*log_inputs(log), (model, "--model file"), *reading.inputs()))
     from ..model.mixture import TypeMixture
 
     types = load_for_decoding(model)  # a trust model, a general model or types
@@ -331,7 +333,7 @@ def decode_cmd(
 @command("select")
 @log_options()
 def select(
-    log: Path = LogArg,
+    log: list[Path] = LogArg,
     max_levels: int = typer.Option(4, "--max-levels", min=1, max=8, help="Compare 1..this many trust levels."),
     folds: int = typer.Option(5, "--folds", min=2, help="Folds over participants for the held-out log-likelihood."),
     restarts: int | None = typer.Option(

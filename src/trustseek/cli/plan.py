@@ -47,7 +47,7 @@ def type_posterior(mixture: TypeMixture, history: Path, participant: str | None,
     """The type posterior of one person from their earlier trials (--history, --participant, --session)."""
     from ..pomdp.supervisor_types import type_belief_from_log
 
-    frame = LogReading().read(history, ("complexity", "robot_action", "experience"))
+    frame = LogReading().read([history], ("complexity", "robot_action", "experience"))
     return type_belief_from_log(mixture, frame, participant=participant, session=session)
 
 
@@ -236,7 +236,7 @@ def agnostic(
     t = load_task(task)
     pol: Policy
     if data is not None:
-        frame = reading.read(data, ("complexity", "robot_action"))
+        frame = reading.read([data], ("complexity", "robot_action"))
         pol = trust_agnostic_from_data(frame, t)
     else:
         pol = make_solver("trust-agnostic").solve(AssistancePOMDP(load_model(model), t))

@@ -34,6 +34,7 @@ from ._options import (
     QuietOpt,
     SeedOpt,
     SelectionJobsOpt,
+    log_inputs,
     log_options,
     widen_option,
 )
@@ -87,7 +88,7 @@ def parse_types(text: str) -> tuple[int, ...]:
 @command("fit-types")
 @log_options()
 def fit_types(
-    log: Path = OneRowPerTrialLogArg,
+    log: list[Path] = OneRowPerTrialLogArg,
     types: int = typer.Option(2, "--types", "-m", min=1, max=12, help="Number of supervisor types."),
     differ: str = DifferOpt,
     transitions_on: str | None = TransitionsOnOpt,
@@ -112,7 +113,7 @@ def fit_types(
     quiet: bool = QuietOpt,
 ) -> None:
     outputs = ((out, "--out"), (type_posteriors, "--type-posteriors", POSTERIOR_SUFFIXES))
-    check_outputs(*outputs, inputs=((log, "trial log"), *reading.inputs()))
+    check_outputs(*outputs, inputs=(*log_inputs(log), *reading.inputs()))
     check_plots_folder(plots)
     _check_differ(differ)
     tr, em, frame = read_with_inputs(log, reading, transitions_on, emissions_on)
@@ -232,7 +233,7 @@ def _rely_cells(mixture):
 @command("select-types")
 @log_options()
 def select_types(
-    log: Path = LogArg,
+    log: list[Path] = LogArg,
     types: str = typer.Option("1..4", "--types", help="Numbers of types to compare, e.g. 1..4 or 1,2,3."),
     differ: str = DifferOpt,
     transitions_on: str | None = TransitionsOnOpt,
@@ -265,7 +266,7 @@ def select_types(
 @command("personalize")
 @log_options()
 def personalize(
-    log: Path = LogArg,
+    log: list[Path] = LogArg,
     model: str = typer.Option(
         ..., "--model", "-m", help="The centre: a trust model or types JSON (e.g. from fit / fit-types), or a preset name."
     ),

@@ -22,6 +22,8 @@ from ._options import (
     OneRowPerTrialLogArg,
     QuietOpt,
     RatingPerOpt,
+    log_inputs,
+    log_name,
     log_options,
     processes_option,
 )
@@ -66,7 +68,7 @@ def _load(path: Path) -> Any:
 @command("predict")
 @log_options(keep=True)
 def predict(
-    log: Path = OneRowPerTrialLogArg,
+    log: list[Path] = OneRowPerTrialLogArg,
     model: Path | None = typer.Option(
         None,
         "--model",
@@ -130,9 +132,9 @@ def predict(
         console.print(f"per-trial predictions written to {out}")
 
 
-def _check_trial_output(out: Path | None, log: Path, model: Path | None, reading: LogReading) -> None:
+def _check_trial_output(out: Path | None, log: list[Path], model: Path | None, reading: LogReading) -> None:
     """--out (per-trial values) and --keep refused before anything is read."""
-    check_outputs((out, "--out", POSTERIOR_SUFFIXES), inputs=((log, "trial log"), (model, "--model file"), *reading.inputs()))
+    check_outputs((out, "--out", POSTERIOR_SUFFIXES), inputs=(*log_inputs(log), (model, "--model file"), *reading.inputs()))
     if reading.keep and out is None:
         raise TrustseekError(["--keep carries log columns into --out: give --out"])
 
@@ -174,24 +176,27 @@ def _print_prediction(report, model: Path | None, metrics: tuple[str, ...]) -> N
     )
 
 
-def _one_rating_per_block(frame, log: Path, rating: str, per: str | None, missing: list[str] | None) -> None:
+def _one_rating_per_block(frame, log: list[Path], rating: str, per: str | None, missing: list[str] | None) -> None:
     """--rating-per: the rating kept on each block's last trial; without it (and without the
     mapping's rating "per"), a note on stderr when the rating looks copied onto a block's trials."""
     from ..data import levels
 
     markers = frozenset(m.strip().lower() for m in missing or ())
     if per is not None:
-        frame[rating] = levels.one_per_block(frame, rating, per, markers, str(log))
+        frame[rating] = levels.one_per_block(frame, rating, per, markers, log_name(log))
     elif not frame.attrs.get("rating_per"):
         note = levels.copied_per_block(frame, rating, markers)
         if note:
-            err_console.print(f"{log}: note: {escape(note)}", highlight=False)
+            err_console.print(f"{log_name(log)}: note: {escape(note)}", highlight=False)
 
 
 @command("validate")
 @log_options(keep=True)
 def validate(
-    log: Path = typer.Argument(..., help="Trial log with a self-reported trust rating column (every trial, or some)."),
+    log: list[Path] = typer.Argument(
+        ...,
+        help="Trial log with a self-reported trust rating column (every trial, or some); several files or a folder.",
+    ),
     model: Path = typer.Option(..., "--model", "-m", help="Trust model or general model JSON (e.g. from 'trustseek fit')."),
     rating: str | None = typer.Option(
         None,

@@ -111,6 +111,13 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: 
             return column_from_pandas(frame[c], missing)
 
         return RawLog("<table>", len(frame), [str(c) for c in frame.columns], col, lambda cs: frame[cs].reset_index(drop=True))
+    if isinstance(source, (list, tuple)):  # several files, as one log
+        if len(source) == 1:
+            return load_source(source[0], sep, missing, explode)
+        if not source:
+            raise DataError(["no trial log given"], "<no files>")
+        files = [Path(p) for p in source]
+        return _load_files(files, os.path.commonpath([p.absolute() for p in files]), sep, missing, explode)
     path = Path(source)
     name = str(path)
     if not path.exists():
@@ -151,8 +158,7 @@ FOLDER_SUFFIXES = (".csv", ".tsv", *PARQUET_SUFFIXES, *JSONL_SUFFIXES, *JSON_SUF
 def _load_folder(path: Path, name: str, sep: str | None, missing: frozenset[str], explode: dict[str, Any] | None) -> RawLog:
     """The logs of a folder as one (one file per participant or session, as PsychoPy and most
     experiment software write them): its files of the kind most of them are (``.csv``, ``.parquet``,
-    ...; hidden files and others left out), in name order, each with the same columns, and a column
-    :data:`FILE_COLUMN` naming each trial's file; locations name the file and its row."""
+    ...; hidden files and others left out), in name order (:func:`_load_files`)."""
     kinds = collections.defaultdict(list)
     for p in sorted(path.iterdir()):
         if p.is_file() and not p.name.startswith(".") and _csv_suffix(p) in FOLDER_SUFFIXES:
@@ -163,19 +169,34 @@ def _load_folder(path: Path, name: str, sep: str | None, missing: frozenset[str]
     if [k for k, v in kinds.items() if len(v) == len(files)] != [_csv_suffix(files[0])]:
         counts = {k: len(v) for k, v in kinds.items()}
         raise DataError([f"the folder holds as many logs of two kinds ({counts}): keep one kind"], name)
+    return _load_files(files, name, sep, missing, explode)
+
+
+def _load_files(files: list[Path], name: str, sep: str | None, missing: frozenset[str], explode: dict[str, Any] | None) -> RawLog:
+    """Several logs as one, in the order given, each with the same columns, and a column
+    :data:`FILE_COLUMN` naming each trial's file (less its suffix); locations name the file and its
+    row.  A file goes by its name, or by its path from the files' common folder where two names are alike."""
+    seen = collections.Counter(p.resolve() for p in files)
+    twice = sorted(str(p) for p, k in seen.items() if k > 1)
+    if twice:
+        raise DataError([f"a file is given twice: {twice[:SHOWN]}"], name)
+    labels = [p.name for p in files]
+    if len(set(labels)) < len(labels):
+        labels = [str(p.absolute().relative_to(name)) for p in files]
     raws = [load_source(p, sep, missing, explode) for p in files]  # each file's own errors name it
     columns = raws[0].columns
     lines = [
-        f"{p.name}: its columns are not those of {files[0].name}: lacks {sorted(set(columns) - set(r.columns))}, "
+        f"{t}: its columns are not those of {labels[0]}: lacks {sorted(set(columns) - set(r.columns))}, "
         f"has {sorted(set(r.columns) - set(columns))} too"
-        for p, r in zip(files, raws, strict=True)
+        for t, r in zip(labels, raws, strict=True)
         if set(r.columns) != set(columns)
     ]
     if lines:
         raise DataError(lines[:SHOWN] + ([f"... ({len(lines) - SHOWN} more files)"] if len(lines) > SHOWN else []), name)
     sizes = np.array([r.n for r in raws])
     starts = np.cumsum(sizes) - sizes
-    stems = [p.name.removesuffix("".join(p.suffixes[-2:] if p.suffix.lower() in COMPRESSED else p.suffixes[-1:])) for p in files]
+    suffixes = [p.suffixes[-2:] if p.suffix.lower() in COMPRESSED else p.suffixes[-1:] for p in files]
+    stems = [t.removesuffix("".join(x)) for t, x in zip(labels, suffixes, strict=True)]
     added = [FILE_COLUMN] if FILE_COLUMN not in columns else []
 
     def col(c: str) -> Column:
@@ -202,7 +223,7 @@ def _load_folder(path: Path, name: str, sep: str | None, missing: frozenset[str]
 
     def place(i: int) -> str:
         k = int(np.searchsorted(starts, i, side="right")) - 1
-        return f"{files[k].name} row {i - starts[k] + 1}"
+        return f"{labels[k]} row {i - starts[k] + 1}"
 
     return RawLog(name, int(sizes.sum()), [*columns, *added], col, extras, release, place)
 
