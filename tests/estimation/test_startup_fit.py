@@ -97,13 +97,14 @@ def test_a_fit_of_any_size_runs_compiled():
 def test_the_shipped_example_fits_compiled_without_numba_or_scipy_optimize():
     """A fit compiles nothing and imports no numba; scipy.optimize (half a second of CPU) is
     imported by the numpy path's finish when it runs (a rating, the types), never by the compiled
-    run.  The example's log-likelihood is the README's."""
+    run, and scipy.linalg (0.13-0.16 s) neither: its BLAS routines are found in scipy's library
+    (:mod:`~trustseek.estimation.blas`).  The example's log-likelihood is the README's."""
     code = (
         "import sys\n"
         "from trustseek.data import example_path, read_trials\n"
         "from trustseek.estimation import FitOptions, fit_trust_model, forward_backward\n"
         "r = fit_trust_model(read_trials(example_path()), options=FitOptions(restarts=2, n_jobs=1))\n"
         "print(f'{r.loglik:.4f}', forward_backward.__file__.endswith('.so'), 'numba' in sys.modules, "
-        "'scipy.optimize' in sys.modules)"
+        "'scipy.optimize' in sys.modules, 'scipy.linalg' in sys.modules)"
     )
-    assert run_python(code).split() == ["-69.9113", "True", "False", "False"]
+    assert run_python(code).split() == ["-69.9113", "True", "False", "False", "False"]

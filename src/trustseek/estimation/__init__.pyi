@@ -3,6 +3,7 @@
 # every submodule, as the package attribute of that name
 from . import (
     baselines,
+    blas,
     bootstrap,
     compiled_em,
     compiled_run,

@@ -7,6 +7,7 @@ ENDED_STATIONARY: int
 ENDED_CAPPED: int
 ENDED_ZERO: int
 
+def bind(addresses: tuple[int | None, int | None, int | None]) -> None: ...
 def run_one(
     start: np.ndarray,
     model: tuple[Any, ...],

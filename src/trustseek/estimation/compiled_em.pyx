@@ -4,7 +4,7 @@ finish and the stationarity check in one call, with the decisions of :func:`~.em
 
 The steps are :mod:`.compiled_steps`' on flat cells; the finish works on the stick-breaking
 fractions of :mod:`.stick_maps`.  Dot products, the matrix-vector product and the linear solve
-are BLAS's ``ddot`` and ``dgemv`` and LAPACK's ``dgesv``, from scipy.
+are BLAS's ``ddot`` and ``dgemv`` and LAPACK's ``dgesv``, scipy's (:mod:`.blas`, bound at import).
 """
 
 import numpy as np
@@ -13,15 +13,35 @@ from libc.math cimport fabs, isfinite, sqrt
 from libc.stdint cimport int64_t
 from libc.stdlib cimport free
 from ..minmax cimport py_max, py_min
-from scipy.linalg.cython_blas cimport ddot, dgemv
-from scipy.linalg.cython_lapack cimport dgesv
 
 from .compiled_steps cimport EStep, Model, copy, em_step_at, estep_from, evaluate_at, extrapolate_at, model_from, size
 from .forward_backward cimport scratch
 from .stick_maps cimport Layout, gradient_of, layout_from, theta_of, values_of
 
+from .blas import routines
 from .compiled_steps import estep_buffers
 from .stick_maps import EPS as _EPS
+
+# the Fortran calling convention of scipy.linalg.cython_blas and cython_lapack (32-bit integers)
+ctypedef double (*ddot_t)(int* n, double* x, int* incx, double* y, int* incy) noexcept nogil
+ctypedef void (*dgemv_t)(char* trans, int* m, int* n, double* alpha, double* a, int* lda, double* x, int* incx,
+                         double* beta, double* y, int* incy) noexcept nogil
+ctypedef void (*dgesv_t)(int* n, int* nrhs, double* a, int* lda, int* ipiv, double* b, int* ldb, int* info) noexcept nogil
+cdef ddot_t ddot = NULL
+cdef dgemv_t dgemv = NULL
+cdef dgesv_t dgesv = NULL
+
+
+def bind(addresses):
+    """Call the ``ddot``, ``dgemv`` and ``dgesv`` at these addresses (:func:`.blas.routines`)."""
+    global ddot, dgemv, dgesv
+    a, b, c = (int(x or 0) for x in addresses)
+    if not (a and b and c):
+        raise ValueError(f"a BLAS or LAPACK routine without an address: {addresses}")
+    ddot, dgemv, dgesv = <ddot_t><size_t>a, <dgemv_t><size_t>b, <dgesv_t><size_t>c
+
+
+bind(routines())
 
 cdef enum:
     BACKTRACKS = 30  # halvings of the step before the line search gives up
