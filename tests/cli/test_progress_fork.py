@@ -8,7 +8,7 @@ import time
 from rich.console import Console
 from rich.progress import TextColumn
 
-from trustseek.cli._app import _Progress
+from trustseek.cli._progress import _Progress
 
 
 def display(**options) -> _Progress:

@@ -49,10 +49,10 @@ def test_the_comparison_says_what_it_does_while_it_runs(monkeypatch):
     from rich.console import Console
 
     from cli_runner import run_cli
-    from trustseek.cli import _app
+    from trustseek.cli import _progress
 
     screen = io.StringIO()
-    monkeypatch.setattr(_app, "err_console", Console(file=screen, force_terminal=True, width=100))
+    monkeypatch.setattr(_progress, "err_console", Console(file=screen, force_terminal=True, width=100))
     code, out = run_cli(["schedule", "--counts", "3,3", "--compare", "--participants", "40"])
     assert code == 0, out
     assert "comparing the schedules on 40 simulated participants" in screen.getvalue()

@@ -12,11 +12,10 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any
 
 import typer
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from ..errors import TrustseekError
@@ -191,77 +190,3 @@ def check_positive(value: float | None, option: str) -> None:
     """A number option, when given, refused unless it is finite and > 0."""
     if value is not None and not (math.isfinite(value) and value > 0):
         raise TrustseekError([f"{option} must be a finite number > 0, got {value}"])
-
-
-# --------------------------------------------------------------------------- progress
-
-
-class _Progress(Progress):
-    """Rich's progress display.
-
-    The display belongs to this process.  A process forked while it is open (the workers of
-    ``--jobs``) starts with it switched off, so that what the worker does draws nothing on the
-    terminal; and the fork waits until the display's refresh thread is not
-    drawing, whose lock the worker would otherwise inherit held, and wait on forever."""
-
-    shown: ClassVar[list[_Progress]] = []  # the displays open in this process, innermost last
-
-    def __enter__(self) -> _Progress:
-        super().__enter__()
-        _Progress.shown.append(self)
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        _Progress.shown.remove(self)
-        super().__exit__(*exc)
-
-    @staticmethod
-    def _before_fork() -> None:
-        for bar in _Progress.shown:
-            bar.live._lock.acquire()
-
-    @staticmethod
-    def _after_fork_in_parent() -> None:
-        for bar in reversed(_Progress.shown):
-            bar.live._lock.release()
-
-    @staticmethod
-    def _after_fork_in_child() -> None:
-        for bar in reversed(_Progress.shown):
-            bar.disable = True  # the parent's display: this process draws none of it
-            bar.live._lock.release()
-        _Progress.shown.clear()
-
-
-os.register_at_fork(
-    before=_Progress._before_fork,
-    after_in_parent=_Progress._after_fork_in_parent,
-    after_in_child=_Progress._after_fork_in_child,
-)
-
-
-def progress_bar(quiet: bool, *columns: Any) -> Progress:
-    """The progress bar of a long run, on stderr: off with ``--quiet`` and when stderr is not a
-    terminal."""
-    cols = columns or (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
-    return _Progress(*cols, console=err_console, transient=True, disable=quiet or not err_console.is_terminal)
-
-
-def bar_task(bar: Progress, description: str, total: int | None = None) -> Callable[[float, float | None], None]:
-    """A new task on ``bar`` and its progress callback ``update(done, total)``."""
-    task = bar.add_task(description, total=total)
-    return lambda done, of: bar.update(task, completed=done, total=of)
-
-
-@contextmanager
-def progress_task(quiet: bool, description: str, total: int | None = None) -> Iterator[Callable[..., None]]:
-    """A :func:`progress_bar` with one task, open for the block: yields ``update(done, total,
-    description=None)``, a progress callback."""
-    bar = progress_bar(quiet)
-    with bar:
-        task = bar.add_task(description, total=total)
-
-        def update(done: float, of: float | None, description: str | None = None) -> None:
-            bar.update(task, completed=done, total=of, description=description)
-
-        yield update

@@ -11,7 +11,8 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import PACKAGE, check_output, console, make_table, print_json, progress_task
+from ._app import PACKAGE, check_output, console, make_table, print_json
+from ._progress import progress_task
 
 
 def check_plots_folder(plots: Path | None) -> None:

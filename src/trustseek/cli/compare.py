@@ -10,8 +10,9 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import FIGURE_SUFFIXES, check_output, check_positive, command, console, print_json, progress_bar
+from ._app import FIGURE_SUFFIXES, check_output, check_positive, command, console, print_json
 from ._options import JsonOpt, QuietOpt, TaskOpt, parse_counts
+from ._progress import progress_bar
 
 
 @command("compare-types")

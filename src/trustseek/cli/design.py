@@ -13,8 +13,9 @@ from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsed
 
 from ..errors import TrustseekError
 from ..parallel import MAX_JOBS
-from ._app import bar_task, check_output, command, console, make_table, print_json, progress_bar
+from ._app import check_output, command, console, make_table, print_json
 from ._options import JsonOpt, QuietOpt, TaskOpt, belief_update_option
+from ._progress import bar_task, progress_bar
 
 
 def _floats(text: str, option: str) -> tuple[float, ...]:

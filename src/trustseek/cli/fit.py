@@ -12,17 +12,7 @@ from .. import estimation  # its names load on first use, when a command runs
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
 from ..parallel import MAX_JOBS
-from ._app import (
-    check_outputs,
-    check_tol,
-    command,
-    console,
-    err_console,
-    print_json,
-    print_written,
-    progress_bar,
-    write_atomic,
-)
+from ._app import check_outputs, check_tol, command, console, err_console, print_json, print_written, write_atomic
 from ._options import (
     FROM_OPTIONS,
     AsForFitEmissionsOpt,
@@ -50,6 +40,7 @@ from ._output import (
     print_warnings,
     run_selection,
 )
+from ._progress import progress_bar
 from ._reading import (
     POSTERIOR_SUFFIXES,
     general_inputs,

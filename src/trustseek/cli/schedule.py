@@ -9,8 +9,9 @@ import typer
 
 from ..solvers.defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
 from ..vocab import PAPER_BLOCK_COUNTS
-from ._app import FIGURE_SUFFIXES, check_outputs, command, console, make_table, print_json, progress_task
+from ._app import FIGURE_SUFFIXES, check_outputs, command, console, make_table, print_json
 from ._options import JsonOpt, ModelOpt, PolicyOutOpt, TaskOpt, belief_update_option, model_and_task, parse_counts
+from ._progress import progress_task
 
 
 @command("schedule")

@@ -25,10 +25,10 @@ from ._app import (
     make_table,
     print_json,
     print_written,
-    progress_bar,
     write_atomic,
 )
 from ._options import JsonOpt, QuietOpt, TaskOpt, belief_update_option, mixture_of, need_two_levels, parse_counts
+from ._progress import progress_bar
 
 if TYPE_CHECKING:
     from ..model.core import TrustModel

@@ -12,19 +12,7 @@ from rich.table import Table
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
 from ..parallel import MAX_JOBS
-from ._app import (
-    bar_task,
-    check_output,
-    check_outputs,
-    check_tol,
-    command,
-    console,
-    make_table,
-    print_json,
-    print_written,
-    progress_bar,
-    write_atomic,
-)
+from ._app import check_output, check_outputs, check_tol, command, console, make_table, print_json, print_written, write_atomic
 from ._options import (
     FROM_OPTIONS,
     LogArg,
@@ -39,6 +27,7 @@ from ._options import (
     widen_option,
 )
 from ._output import check_plots_folder, fit_summary, print_selection, print_warnings, run_selection
+from ._progress import bar_task, progress_bar
 from ._reading import POSTERIOR_SUFFIXES, load_for_decoding, read_for_types, read_with_inputs, widened_note, write_log
 
 TransitionsOnOpt = typer.Option(

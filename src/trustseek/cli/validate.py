@@ -12,7 +12,7 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
-from ._app import check_outputs, check_tol, command, console, err_console, make_table, print_json, progress_task, write_atomic
+from ._app import check_outputs, check_tol, command, console, err_console, make_table, print_json, write_atomic
 from ._options import (
     FROM_OPTIONS,
     AsForFitEmissionsOpt,
@@ -27,6 +27,7 @@ from ._options import (
     log_options,
     processes_option,
 )
+from ._progress import progress_task
 from ._reading import POSTERIOR_SUFFIXES, general_inputs, keep_columns, read_for_types, read_with_inputs, write_log
 
 BootstrapOpt = typer.Option(
