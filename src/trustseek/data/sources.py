@@ -26,6 +26,7 @@ import pandas as pd
 
 from ..model.jsonfile import special_file
 from .cells import SHOWN, Column, DataError, Problems, RawLog, column_from_arrow, column_from_pandas, shorten
+from .folders import stacked
 
 DELIMITERS = (",", ";", "\t", "|")
 CSV_SUFFIXES = (".csv", ".txt", ".tsv")
@@ -37,7 +38,9 @@ SHEET_SUFFIXES = (".xlsx", ".xls", ".xlsm", ".ods", ".numbers")
 PACKED_SUFFIXES = (".gz", ".zip", ".bz2", ".xz", ".zst", ".7z")
 MAX_COLUMNS = 10_000  # a CSV's columns: parsing takes ~6 s at this width and grows with its square
 HEADER_BYTES = 1 << 26  # the longest header line read (64 MB: millions of columns)
-BLOCK_BYTES = 1 << 24  # a CSV is parsed in blocks of this size (16 MB), each with its own dictionaries
+#: a CSV is parsed in blocks of this size (16 MB), each with its own dictionaries; a smaller file in one
+#: block of its own size (a block's buffer is allocated whole)
+BLOCK_BYTES = 1 << 24
 SPLIT_BYTES = 1 << 26  # a CSV from this size (64 MB) is parsed in parts on two threads
 PART_BYTES = 1 << 25  # the size of those parts (32 MB)
 SPLIT_SEARCH = 1 << 20  # how far past a part's end a line end is looked for
@@ -149,8 +152,6 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: 
     )  # fmt: skip
 
 
-#: the column a folder's log adds: the name of each trial's file, less its suffix
-FILE_COLUMN = "file"
 #: the files a folder's log reads, by the suffix that says what they hold
 FOLDER_SUFFIXES = (".csv", ".tsv", *PARQUET_SUFFIXES, *JSONL_SUFFIXES, *JSON_SUFFIXES)
 
@@ -173,9 +174,8 @@ def _load_folder(path: Path, name: str, sep: str | None, missing: frozenset[str]
 
 
 def _load_files(files: list[Path], name: str, sep: str | None, missing: frozenset[str], explode: dict[str, Any] | None) -> RawLog:
-    """Several logs as one, in the order given, each with the same columns, and a column
-    :data:`FILE_COLUMN` naming each trial's file (less its suffix); locations name the file and its
-    row.  A file goes by its name, or by its path from the files' common folder where two names are alike."""
+    """Several logs as one, in the order given (:func:`.folders.stacked`).  A file goes by its name,
+    or by its path from the files' common folder where two names are alike."""
     seen = collections.Counter(p.resolve() for p in files)
     twice = sorted(str(p) for p, k in seen.items() if k > 1)
     if twice:
@@ -184,48 +184,9 @@ def _load_files(files: list[Path], name: str, sep: str | None, missing: frozense
     if len(set(labels)) < len(labels):
         labels = [str(p.absolute().relative_to(name)) for p in files]
     raws = [load_source(p, sep, missing, explode) for p in files]  # each file's own errors name it
-    columns = raws[0].columns
-    lines = [
-        f"{t}: its columns are not those of {labels[0]}: lacks {sorted(set(columns) - set(r.columns))}, "
-        f"has {sorted(set(r.columns) - set(columns))} too"
-        for t, r in zip(labels, raws, strict=True)
-        if set(r.columns) != set(columns)
-    ]
-    if lines:
-        raise DataError(lines[:SHOWN] + ([f"... ({len(lines) - SHOWN} more files)"] if len(lines) > SHOWN else []), name)
-    sizes = np.array([r.n for r in raws])
-    starts = np.cumsum(sizes) - sizes
     suffixes = [p.suffixes[-2:] if p.suffix.lower() in COMPRESSED else p.suffixes[-1:] for p in files]
     stems = [t.removesuffix("".join(x)) for t, x in zip(labels, suffixes, strict=True)]
-    added = [FILE_COLUMN] if FILE_COLUMN not in columns else []
-
-    def col(c: str) -> Column:
-        if c == FILE_COLUMN and added:
-            return Column(np.repeat(np.arange(len(files), dtype=np.int32), sizes), [*stems, None], last_unused=True)
-        merged: dict[str | None, int] = {}
-        parts = []
-        for r in raws:
-            one = r.col(c)
-            parts.append(np.array([merged.setdefault(t, len(merged)) for t in one.texts], dtype=np.int32)[one.codes])
-        return Column(np.concatenate(parts), list(merged))
-
-    def extras(cs: list[str]) -> pd.DataFrame:
-        own = [c for c in cs if c not in added]
-        frame = pd.concat([r.extras(own) for r in raws], ignore_index=True) if own else pd.DataFrame(index=range(sizes.sum()))
-        if added and FILE_COLUMN in cs:
-            frame[FILE_COLUMN] = np.repeat(np.array(stems, dtype=object), sizes)
-        return frame[cs]
-
-    def release(cs: list[str]) -> None:
-        for r in raws:
-            if r.release is not None:
-                r.release([c for c in cs if c in r.columns])
-
-    def place(i: int) -> str:
-        k = int(np.searchsorted(starts, i, side="right")) - 1
-        return f"{labels[k]} row {i - starts[k] + 1}"
-
-    return RawLog(name, int(sizes.sum()), [*columns, *added], col, extras, release, place)
+    return stacked(raws, labels, stems, name)
 
 
 def _exploded_frame(source: pd.DataFrame, missing: frozenset[str], explode: dict[str, Any]) -> RawLog:
@@ -448,7 +409,6 @@ def _load_csv(path: Path, name: str, sep: str | None, missing: frozenset[str]) -
     types = dict.fromkeys(header, dictionary)
     parts, quoted = _csv_parts(path)
     bad_rows: list[list[tuple[int | None, int, str]]] = [[] for _ in parts]
-    # a small plain file in one block of its size: each block's buffer is allocated whole (16 MB for a file of 2 kB)
     block = BLOCK_BYTES if len(parts) > 1 or path.suffix.lower() in COMPRESSED else min(BLOCK_BYTES, path.stat().st_size + 1)
 
     def parse(i: int) -> Any:
@@ -593,7 +553,6 @@ def _csv_parts(path: Path) -> tuple[list[Any], Any]:
 
 def _line_ends(part: Any) -> int:
     """The line ends in a part of the file (the lines before the next part)."""
-    import numpy as np
 
     return int(np.count_nonzero(np.frombuffer(part, dtype=np.uint8) == ord("\n")))
 

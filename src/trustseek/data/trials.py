@@ -21,11 +21,12 @@ import pandas as pd
 
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
 from .cells import NAN_MARK, Column, DataError, Problems, RawLog, spellings, value_ids
+from .folders import FILE_COLUMN
 from .layouts import join_file, unpivot
 from .levels import category_codes, input_codes, one_rating_per_block, rating_codes
 from .mapping import CANONICAL, CATEGORICAL, RATING, ColumnMapping, as_mapping, label_key
 from .order import check_trials, order_trials, trial_numbers
-from .sources import FILE_COLUMN, PARQUET_SUFFIXES, load_source, missing_column_hint
+from .sources import PARQUET_SUFFIXES, load_source, missing_column_hint
 
 
 def read_trials(
