@@ -41,6 +41,7 @@ if TYPE_CHECKING:
     from ..policies.base import Policy
 
 UpdateOpt = belief_update_option("bayes")
+GridOpt = typer.Option(DEFAULT_GRID, "--grid", "-g", min=3, max=1_000_001, help="Number of belief grid points on [0, 1].")
 
 
 def type_posterior(mixture: TypeMixture, history: Path, participant: str | None, session: str | None):
@@ -56,7 +57,7 @@ def solve(
     model: str = ModelOpt,
     task: str = TaskOpt,
     belief_update: str = UpdateOpt,
-    grid: int = typer.Option(DEFAULT_GRID, "--grid", "-g", min=3, max=1_000_001, help="Number of belief grid points on [0, 1]."),
+    grid: int = GridOpt,
     method: str = typer.Option("policy-iteration", "--method", help=f"Grid solver method: {', '.join(METHODS)}."),
     tol: float = typer.Option(
         1e-9, "--tol", callback=check_tol, help="Value iteration: stop when the certified error bound is below this (> 0)."
@@ -259,7 +260,7 @@ def plot_q_cmd(
     model: str = ModelOpt,
     task: str = TaskOpt,
     belief_update: str = UpdateOpt,
-    grid: int = typer.Option(DEFAULT_GRID, "--grid", "-g", min=3, max=1_000_001, help="Number of belief grid points."),
+    grid: int = GridOpt,
     policy_file: Path | None = typer.Option(None, "--policy", help="Plot a solved policy file instead of solving."),
     out: Path = typer.Option(Path("q.png"), "--out", "-o", help="PNG file to write."),
 ) -> None:
