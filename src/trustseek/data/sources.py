@@ -553,7 +553,6 @@ def _csv_parts(path: Path) -> tuple[list[Any], Any]:
 
 def _line_ends(part: Any) -> int:
     """The line ends in a part of the file (the lines before the next part)."""
-
     return int(np.count_nonzero(np.frombuffer(part, dtype=np.uint8) == ord("\n")))
 
 
