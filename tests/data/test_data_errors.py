@@ -172,6 +172,22 @@ def test_a_spreadsheet_s_empty_header_cells_name_their_columns_by_place(tmp_path
     )
 
 
+@pytest.mark.parametrize("folder", [False, True])
+def test_a_log_without_permission_to_read_it_is_refused_by_name(tmp_path, monkeypatch, folder):
+    path = write(tmp_path, GOOD)
+    opened = Path.open
+
+    def denied(self: Path, *args, **kwargs):  # as a file of another user, which root (the tests' user here) could read
+        if self.name == path.name:
+            raise PermissionError(13, "Permission denied", str(self))
+        return opened(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "open", denied)
+    with pytest.raises(DataError) as exc:
+        read_trials(tmp_path if folder else path)
+    assert str(exc.value) == f"{path}: cannot read the file: Permission denied"
+
+
 def test_an_unknown_delimiter_gets_a_hint(tmp_path):
     with pytest.raises(DataError) as exc:
         read_trials(write(tmp_path, GOOD.replace(",", ";")), delimiter=",")

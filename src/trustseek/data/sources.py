@@ -80,8 +80,10 @@ def _sniff(path: Path, sep: str | None, name: str) -> tuple[str, list[str], int]
             if declared:
                 sep = sep or declared.group(1).decode("utf-8", "replace")
                 head = fh.readline(HEADER_BYTES)
-    except OSError as exc:  # a compressed file that is not what its suffix says
-        raise _not_decompressed(path, name, exc) from None
+    except OSError as exc:
+        if path.suffix.lower() in COMPRESSED:  # a compressed file that is not what its suffix says
+            raise _not_decompressed(path, name, exc) from None
+        raise DataError([f"cannot read the file: {exc.strerror or exc}"], name) from None  # (no permission to read it)
     if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
         fix = f"save it as 'CSV UTF-8' or iconv -f UTF-16 -t UTF-8 {shorten(path.name, 80)} > log.csv"
         raise DataError([f"the file is UTF-16 text (as Excel's 'Unicode Text'), not UTF-8: {fix}"], name)
