@@ -47,10 +47,12 @@ def test_signed_rank_is_its_definition(values, scale):
 
 
 def test_signed_rank_of_distinct_differences():
+    """Without ties or zeros, also scipy's exact test (an implementation of its own)."""
     rng = np.random.default_rng(4)
     for n in (1, 2, 5, 30, EXACT_SIGNED_RANK):
         d = rng.normal(0.3, 1.0, n)
         assert signed_rank_p(d) == reference(d)
+        assert signed_rank_p(d) == pytest.approx(stats.wilcoxon(d, method="exact").pvalue, rel=1e-12, abs=0)
 
 
 def _auc_reference(s: np.ndarray, y: np.ndarray) -> float:
