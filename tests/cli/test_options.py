@@ -106,3 +106,39 @@ def test_a_toml_mapping_is_read_as_a_json_one(tmp_path):
     mapping.write_text('[columns]\nparticipant = "person"\n')
     code, output = run_cli(["agnostic", "--data", str(log), "--mapping", str(mapping), "--json"])
     assert code == 0 and json.loads(output)["kind"] == "trust-agnostic", output
+
+
+def _shared(flag: str) -> dict[str, object]:
+    """Every command's option ``flag``, by command (design takes its bounds in DesignConfig)."""
+    from trustseek.cli import app
+
+    group = typer.main.get_command(app)
+    found = {}
+    for name in group.commands:
+        for p in group.commands[name].params:
+            if flag in p.opts and name != "design":
+                found[name] = p
+    return found
+
+
+@pytest.mark.parametrize(
+    ("flag", "low", "high"),
+    [("--restarts", 1, 1000), ("--bootstrap", 0, 10_000), ("--participants", 1, 1_000_000), ("--seed", 0, None)],
+)
+def test_an_option_several_commands_take_has_one_range_in_all(flag, low, high):
+    """--restarts, --bootstrap, --participants and --seed are declared once (cli/_options): a command
+    that declares its own instead, with other bounds, fails here."""
+    options = _shared(flag)
+    assert len(options) >= 2
+    for name, p in options.items():
+        least = 2 if (name, flag) == ("schedule", "--participants") else low
+        assert (p.type.min, p.type.max) == (least, high), (name, flag)
+
+
+def test_every_tolerance_is_refused_unless_finite_and_positive():
+    names = sorted(_shared("--tol"))
+    assert len(names) >= 5
+    for name in names:
+        args = [name, LOG] if name in {"fit", "select", "fit-types", "select-types", "validate", "personalize"} else [name]
+        code, output = run_cli([*args, "--tol", "0"])
+        assert code == 2 and "--tol" in output and "must be a finite number > 0" in output, (name, output)

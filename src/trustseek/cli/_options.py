@@ -21,7 +21,7 @@ from rich.markup import escape
 from ..errors import TrustseekError
 from ..parallel import MAX_JOBS
 from ..vocab import check_belief_update
-from ._app import err_console
+from ._app import check_tol, err_console
 
 if TYPE_CHECKING:
     from ..data.mapping import ColumnMapping
@@ -31,9 +31,6 @@ if TYPE_CHECKING:
 
 ModelOpt = typer.Option("paper", "--model", "-m", help="Trust model: a preset name (paper) or a JSON file.")
 TaskOpt = typer.Option("paper", "--task", "-t", help="Task: a preset name (paper) or a JSON file.")
-JsonOpt = typer.Option(False, "--json", help="Print one JSON object instead of tables.")
-PrintJsonOpt = typer.Option(False, "--json", help="Print JSON.")
-SeedOpt = typer.Option(0, "--seed", min=0, help="Random seed.")
 MaxIterOpt = typer.Option(1000, "--max-iter", min=1, help="Iteration cap per restart (E-steps).")
 PolicyOutOpt = typer.Option(None, "--out", "-o", help="Write the policy to this JSON file.")
 #: the trial log: a file, or several (a file per participant or session) or a folder of them, read as one
@@ -69,12 +66,45 @@ def belief_update_option(default: str, of: str = "") -> Any:
     )
 
 
+def people_option(default: int, *flags: str, help: str, least: int = 1) -> Any:
+    """A number of simulated participants: at least ``least``, at most a million."""
+    return typer.Option(default, *flags, min=least, max=1_000_000, help=help)
+
+
+def restarts_option(default: int | None, *flags: str, help: str) -> Any:
+    """``--restarts`` (or ``flags``): random starts of a fit, 1 to 1000."""
+    return typer.Option(default, *(flags or ("--restarts", "-r")), min=1, max=1000, help=help)
+
+
+def tol_option(default: float, help: str) -> Any:
+    """``--tol``: a fit's relative log-likelihood tolerance, refused unless finite and > 0."""
+    return typer.Option(default, "--tol", callback=check_tol, help=help)
+
+
+def bootstrap_option(default: int, help: str) -> Any:
+    """``--bootstrap``/``-b``: participant-bootstrap resamples, 0 to 10,000."""
+    return typer.Option(default, "--bootstrap", "-b", min=0, max=10_000, help=help)
+
+
+def json_option(help: str) -> Any:
+    """``--json``: print ``help``'s JSON instead of tables."""
+    return typer.Option(False, "--json", help=help)
+
+
+def seed_option(help: str) -> Any:
+    """``--seed``: a random seed (>= 0)."""
+    return typer.Option(0, "--seed", min=0, help=help)
+
+
 def processes_option(what: str) -> Any:
     """``--jobs``: the processes that run ``what`` side by side."""
     help_text = f"Processes: {what} side by side (default: all cores); numbers do not depend on it."
     return typer.Option(None, "--jobs", "-j", min=1, max=MAX_JOBS, help=help_text)
 
 
+JsonOpt = json_option("Print one JSON object instead of tables.")
+PrintJsonOpt = json_option("Print JSON.")
+SeedOpt = seed_option("Random seed.")
 SelectionJobsOpt = processes_option("the fits of each number compared,")
 QuietOpt = typer.Option(False, "--quiet", "-q", help="No progress bar on stderr (there is none when stderr is not a terminal).")
 #: the inputs of the commands that fit as ``fit`` does

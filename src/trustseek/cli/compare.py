@@ -11,7 +11,7 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ._app import FIGURE_SUFFIXES, check_output, check_positive, command, console, print_json
-from ._options import JsonOpt, QuietOpt, TaskOpt, parse_counts
+from ._options import JsonOpt, QuietOpt, TaskOpt, parse_counts, people_option, restarts_option, seed_option
 from ._progress import progress_bar
 
 
@@ -29,15 +29,9 @@ def compare_types(
         None, "--share", min=0.0, max=1.0, help="Share of the last type of two, e.g. 0.3 (default: the mixture's weights)."
     ),
     task: str = TaskOpt,
-    participants: int = typer.Option(
-        2000, "--participants", "-n", min=1, max=1_000_000, help="Simulated people per population and block."
-    ),
-    fit_participants: int = typer.Option(
-        200,
-        "--fit-participants",
-        min=2,
-        max=1_000_000,
-        help="People of experiment 1 that the pooled model is fitted to (paper design).",
+    participants: int = people_option(2_000, "--participants", "-n", help="Simulated people per population and block."),
+    fit_participants: int = people_option(
+        200, "--fit-participants", help="People of experiment 1 that the pooled model is fitted to (paper design).", least=2
     ),
     block: list[str] = typer.Option(
         ["17,17", "68,68"],
@@ -45,14 +39,14 @@ def compare_types(
         "-b",
         help="Trials per complexity in a block, e.g. 17,17 or low=17,high=17 (repeat for several lengths).",
     ),
-    restarts: int = typer.Option(4, "--restarts", min=1, max=1000, help="EM restarts of the pooled fit."),
+    restarts: int = restarts_option(4, "--restarts", help="EM restarts of the pooled fit."),
     gap: float = typer.Option(
         0.03, "--gap", min=0.0, help="Certified bound gap of each trust-aware solve at its initial belief."
     ),
     max_seconds: float = typer.Option(
         600.0, "--max-seconds", min=0.0, help="Safety time limit of each solve (the gap reached is kept)."
     ),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of every simulation and fit."),
+    seed: int = seed_option("Seed of every simulation and fit."),
     plot: Path | None = typer.Option(None, "--plot", help="Write the figure to this PNG, PDF or SVG file."),
     as_json: bool = JsonOpt,
     quiet: bool = QuietOpt,

@@ -14,7 +14,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsed
 from ..errors import TrustseekError
 from ..parallel import MAX_JOBS
 from ._app import check_output, command, console, make_table, print_json
-from ._options import JsonOpt, QuietOpt, TaskOpt, belief_update_option
+from ._options import JsonOpt, QuietOpt, TaskOpt, belief_update_option, seed_option
 from ._progress import bar_task, progress_bar
 
 
@@ -104,9 +104,7 @@ def design(
     ),
     task: str = TaskOpt,
     replicates: int = typer.Option(100, "--replicates", "-r", help="Replicates per design point."),
-    seed: int = typer.Option(
-        0, "--seed", min=0, help="Sweep seed (replicate seeds derive from it, the design point and the index)."
-    ),
+    seed: int = seed_option("Sweep seed (replicate seeds derive from it, the design point and the index)."),
     participants_1: str = typer.Option("9", "--participants-1", help="Experiment 1: participants (comma-separated grid)."),
     trials_1: str = typer.Option("71", "--trials-1", help="Experiment 1: trials per participant (grid)."),
     share_high_1: str = typer.Option(

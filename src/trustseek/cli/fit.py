@@ -12,7 +12,7 @@ from .. import estimation  # its names load on first use, when a command runs
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
 from ..parallel import MAX_JOBS
-from ._app import check_outputs, check_tol, command, console, err_console, print_json, print_written, write_atomic
+from ._app import check_outputs, command, console, err_console, print_json, print_written, write_atomic
 from ._options import (
     FROM_OPTIONS,
     AsForFitEmissionsOpt,
@@ -26,9 +26,14 @@ from ._options import (
     RatingPerOpt,
     SeedOpt,
     SelectionJobsOpt,
+    bootstrap_option,
+    json_option,
     log_inputs,
     log_name,
     log_options,
+    restarts_option,
+    seed_option,
+    tol_option,
     widen_option,
 )
 from ._output import (
@@ -65,20 +70,13 @@ _EmissionsOnOpt = typer.Option(
     help="Comma-separated inputs of the human-action probabilities (default: complexity, robot_action; 'none' for "
     "none); the mapping's 'inputs' may be named too.",
 )
-_BootstrapOpt = typer.Option(
-    0,
-    "--bootstrap",
-    "-b",
-    min=0,
-    max=10_000,
-    help="Participant-level bootstrap resamples for 95% intervals (0 = none; at least 200 advised, fewer warn).",
+_BootstrapOpt = bootstrap_option(
+    0, "Participant-level bootstrap resamples for 95% intervals (0 = none; at least 200 advised, fewer warn)."
 )
 _PriorOpt = typer.Option(
     0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."
 )
-_TolOpt = typer.Option(
-    1e-8, "--tol", callback=check_tol, help="Stop when the relative change of the log-likelihood is below this (> 0)."
-)
+_TolOpt = tol_option(1e-8, "Stop when the relative change of the log-likelihood is below this (> 0).")
 _JobsOpt = typer.Option(
     None,
     "--jobs",
@@ -126,10 +124,10 @@ def fit(
     levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Number of trust levels."),
     transitions_on: str | None = _TransitionsOnOpt,
     emissions_on: str | None = _EmissionsOnOpt,
-    restarts: int = typer.Option(10, "--restarts", "-r", min=1, max=1000, help="Random restarts; the best is kept."),
+    restarts: int = restarts_option(10, help="Random restarts; the best is kept."),
     bootstrap: int = _BootstrapOpt,
     prior: float = _PriorOpt,
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed (restarts and bootstrap)."),
+    seed: int = seed_option("Random seed (restarts and bootstrap)."),
     tol: float = _TolOpt,
     max_iter: int = MaxIterOpt,
     jobs: int | None = _JobsOpt,
@@ -137,7 +135,7 @@ def fit(
     posteriors: Path | None = _PosteriorsOpt,
     plots: Path | None = _PlotsOpt,
     fill_from: str | None = _FillFromOpt,
-    as_json: bool = typer.Option(False, "--json", help="Print the fitted model and diagnostics as one JSON object."),
+    as_json: bool = json_option("Print the fitted model and diagnostics as one JSON object."),
     rating: str | None = _RatingOpt,
     rating_levels: str | None = _RatingLevelsOpt,
     rating_bins: str | None = _RatingBinsOpt,
@@ -327,18 +325,14 @@ def select(
     log: list[Path] = LogArg,
     max_levels: int = typer.Option(4, "--max-levels", min=1, max=8, help="Compare 1..this many trust levels."),
     folds: int = typer.Option(5, "--folds", min=2, help="Folds over participants for the held-out log-likelihood."),
-    restarts: int | None = typer.Option(
+    restarts: int | None = restarts_option(
         None,
-        "--restarts",
-        "-r",
-        min=1,
-        max=1000,
         help="Random starts per fit (default: max(10, free parameters / 4)); each fit also starts from the "
         "fit with one level fewer, each level split in two.",
     ),
     prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count (MAP)."),
     seed: int = SeedOpt,
-    tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
+    tol: float = tol_option(1e-6, "Relative log-likelihood tolerance per fit (> 0)."),
     transitions_on: str | None = AsForFitTransitionsOpt,
     emissions_on: str | None = AsForFitEmissionsOpt,
     widen: bool = widen_option(8, "1..--max-levels"),

@@ -14,7 +14,6 @@ from ._app import (
     FIGURE_SUFFIXES,
     check_outputs,
     check_positive,
-    check_tol,
     command,
     console,
     make_table,
@@ -34,6 +33,7 @@ from ._options import (
     mixture_of,
     model_and_task,
     need_two_levels,
+    tol_option,
 )
 
 if TYPE_CHECKING:
@@ -59,9 +59,7 @@ def solve(
     belief_update: str = UpdateOpt,
     grid: int = GridOpt,
     method: str = typer.Option("policy-iteration", "--method", help=f"Grid solver method: {', '.join(METHODS)}."),
-    tol: float = typer.Option(
-        1e-9, "--tol", callback=check_tol, help="Value iteration: stop when the certified error bound is below this (> 0)."
-    ),
+    tol: float = tol_option(1e-9, "Value iteration: stop when the certified error bound is below this (> 0)."),
     out: Path | None = PolicyOutOpt,
     as_json: bool = JsonOpt,
     solver: str | None = typer.Option(

@@ -10,7 +10,17 @@ import typer
 from ..solvers.defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
 from ..vocab import PAPER_BLOCK_COUNTS
 from ._app import FIGURE_SUFFIXES, check_outputs, command, console, make_table, print_json
-from ._options import JsonOpt, ModelOpt, PolicyOutOpt, TaskOpt, belief_update_option, model_and_task, parse_counts
+from ._options import (
+    JsonOpt,
+    ModelOpt,
+    PolicyOutOpt,
+    TaskOpt,
+    belief_update_option,
+    model_and_task,
+    parse_counts,
+    people_option,
+    seed_option,
+)
 from ._progress import progress_task
 
 
@@ -35,8 +45,8 @@ def schedule(
     compare: bool = typer.Option(
         False, "--compare", help="Also compare the schedules (random order + trust-aware, optimal, heuristics)."
     ),
-    participants: int = typer.Option(20000, "--participants", min=2, max=1_000_000, help="--compare: simulated participants."),
-    seed: int = typer.Option(0, "--seed", min=0, help="--compare: random seed."),
+    participants: int = people_option(20_000, "--participants", help="--compare: simulated participants.", least=2),
+    seed: int = seed_option("--compare: random seed."),
     figure: Path | None = typer.Option(None, "--figure", help="--compare: write the schedule figure (PNG, PDF or SVG) here."),
     as_json: bool = JsonOpt,
 ) -> None:

@@ -8,7 +8,7 @@ import typer
 from rich.markup import escape
 
 from ._app import FIGURE_SUFFIXES, check_outputs, command, console, make_table, print_json
-from ._options import JsonOpt, ModelOpt, TaskOpt, belief_update_option, model_and_task, processes_option
+from ._options import JsonOpt, ModelOpt, TaskOpt, belief_update_option, model_and_task, processes_option, seed_option
 
 
 @command("sensitivity")
@@ -31,7 +31,7 @@ def sensitivity(
     starts: int = typer.Option(
         2, "--starts", min=1, max=1000, help="L-BFGS-B starts per extreme (the one-at-a-time corner first)."
     ),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the sample and of random starts."),
+    seed: int = seed_option("Seed of the sample and of random starts."),
     model_only: bool = typer.Option(False, "--model-only", help="Leave the task's success probabilities and discount fixed."),
     top: int = typer.Option(10, "--top", min=1, help="Parameters shown in the one-at-a-time table."),
     plot: Path | None = typer.Option(None, "--plot", help="Write a tornado plot of the threshold to this PNG, PDF or SVG file."),

@@ -17,10 +17,11 @@ import typer
 
 from ..errors import TrustseekError
 from ._app import check_output, check_outputs, command, console, print_json, write_atomic
+from ._options import json_option
 
 StudyArg = typer.Argument(..., help="Study id.")
 StudyDbOpt = typer.Option("sqlite:///trustseek.sqlite", "--db", help="Database URL.")
-SummaryJsonOpt = typer.Option(False, "--json", help="Print a JSON summary.")
+SummaryJsonOpt = json_option("Print a JSON summary.")
 
 
 def _check_db(db: str) -> str:

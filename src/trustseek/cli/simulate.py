@@ -27,7 +27,20 @@ from ._app import (
     print_written,
     write_atomic,
 )
-from ._options import JsonOpt, QuietOpt, TaskOpt, belief_update_option, mixture_of, need_two_levels, parse_counts
+from ._options import (
+    JsonOpt,
+    QuietOpt,
+    TaskOpt,
+    belief_update_option,
+    bootstrap_option,
+    json_option,
+    mixture_of,
+    need_two_levels,
+    parse_counts,
+    people_option,
+    restarts_option,
+    seed_option,
+)
 from ._progress import progress_bar
 
 if TYPE_CHECKING:
@@ -63,7 +76,7 @@ def simulate(
         help=f"Robot policy: {', '.join(POLICY_SPEC_KINDS)}, {TYPE_AWARE} (for a mixture of supervisor types), "
         "or a policy JSON file (e.g. from 'trustseek solve --out').",
     ),
-    participants: int = typer.Option(9, "--participants", "-n", min=1, max=1_000_000, help="Number of simulated participants."),
+    participants: int = people_option(9, "--participants", "-n", help="Number of simulated participants."),
     counts: str | None = typer.Option(
         None,
         "--counts",
@@ -100,7 +113,7 @@ def simulate(
     pseudo: float = typer.Option(
         0.0, "--pseudo", min=0.0, help="Dirichlet pseudo-count added to every cell (with --concentration)."
     ),
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed (same seed, same supervisors and luck for any policy)."),
+    seed: int = seed_option("Random seed (same seed, same supervisors and luck for any policy)."),
     out: Path | None = typer.Option(
         None,
         "--out",
@@ -276,20 +289,16 @@ def _write(frame, path: Path) -> None:
 @command("reproduce")
 def reproduce(
     out: Path = typer.Option(Path("report"), "--out", "-o", help="Report folder (report.html, PNGs, summary.json, data)."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed: the same seed gives the same numbers."),
+    seed: int = seed_option("Random seed: the same seed gives the same numbers."),
     replicates: int = typer.Option(
         20, "--replicates", "-r", min=0, max=10_000, help="Replicate experiments of the whole pipeline."
     ),
-    large_n: int = typer.Option(
-        10_000, "--large-n", min=1, max=1_000_000, help="Participants of the large experiment 2 and of the cost studies."
-    ),
-    bootstrap: int = typer.Option(
-        200, "--bootstrap", "-b", min=0, max=10_000, help="Bootstrap resamples for the fitted model's intervals."
-    ),
-    restarts: int = typer.Option(10, "--restarts", min=1, max=1000, help="EM restarts of the main fit."),
-    replicate_restarts: int = typer.Option(4, "--replicate-restarts", min=1, max=1000, help="EM restarts per replicate fit."),
-    replicate_large_n: int = typer.Option(
-        2_000, "--replicate-large-n", help="Participants of each replicate's large experiment 2.", min=1, max=1_000_000
+    large_n: int = people_option(10_000, "--large-n", help="Participants of the large experiment 2 and of the cost studies."),
+    bootstrap: int = bootstrap_option(200, "Bootstrap resamples for the fitted model's intervals."),
+    restarts: int = restarts_option(10, "--restarts", help="EM restarts of the main fit."),
+    replicate_restarts: int = restarts_option(4, "--replicate-restarts", help="EM restarts per replicate fit."),
+    replicate_large_n: int = people_option(
+        2_000, "--replicate-large-n", help="Participants of each replicate's large experiment 2."
     ),
     belief_update: str = belief_update_option("paper", " of the trust-aware policy"),
     jobs: int = typer.Option(
@@ -300,21 +309,19 @@ def reproduce(
         max=MAX_JOBS,
         help="Processes (the bootstrap, the replicates, the steps beside the fit); numbers do not depend on it.",
     ),
-    schedule_participants: int = typer.Option(
+    schedule_participants: int = people_option(
         10_000,
         "--schedule-participants",
-        min=0,
-        max=1_000_000,
         help="Simulated participants of the trial-scheduling section (0: leave the section out).",
+        least=0,
     ),
-    types_participants: int = typer.Option(
+    types_participants: int = people_option(
         2_000,
         "--types-participants",
-        min=0,
-        max=1_000_000,
         help="Simulated participants of the supervisor-types section (Remark 1; 0: leave the section out).",
+        least=0,
     ),
-    as_json: bool = typer.Option(False, "--json", help="Print summary.json to stdout instead of tables."),
+    as_json: bool = json_option("Print summary.json to stdout instead of tables."),
     quiet: bool = QuietOpt,
 ) -> None:
     from ..report import write_report

@@ -12,7 +12,7 @@ from rich.table import Table
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
 from ..parallel import MAX_JOBS
-from ._app import check_output, check_outputs, check_tol, command, console, make_table, print_json, print_written, write_atomic
+from ._app import check_output, check_outputs, command, console, make_table, print_json, print_written, write_atomic
 from ._options import (
     FROM_OPTIONS,
     LogArg,
@@ -22,8 +22,12 @@ from ._options import (
     QuietOpt,
     SeedOpt,
     SelectionJobsOpt,
+    bootstrap_option,
+    json_option,
     log_inputs,
     log_options,
+    restarts_option,
+    tol_option,
     widen_option,
 )
 from ._output import check_plots_folder, fit_summary, print_selection, print_warnings, run_selection
@@ -82,14 +86,10 @@ def fit_types(
     differ: str = DifferOpt,
     transitions_on: str | None = TransitionsOnOpt,
     emissions_on: str | None = EmissionsOnOpt,
-    restarts: int = typer.Option(
-        10, "--restarts", "-r", min=1, max=1000, help="Starts (half from the perturbed pooled fit, half random)."
-    ),
-    bootstrap: int = typer.Option(
-        0, "--bootstrap", "-b", min=0, max=10_000, help="Participant bootstrap resamples for 95% intervals."
-    ),
+    restarts: int = restarts_option(10, help="Starts (half from the perturbed pooled fit, half random)."),
+    bootstrap: int = bootstrap_option(0, "Participant bootstrap resamples for 95% intervals."),
     seed: int = SeedOpt,
-    tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative log-likelihood tolerance (> 0)."),
+    tol: float = tol_option(1e-8, "Relative log-likelihood tolerance (> 0)."),
     max_iter: int = typer.Option(1000, "--max-iter", min=1, help="E-step cap per start."),
     jobs: int | None = typer.Option(None, "--jobs", "-j", min=1, max=MAX_JOBS, help="Threads (fit) and processes (bootstrap)."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the types (JSON trustseek.mixture/1)."),
@@ -97,7 +97,7 @@ def fit_types(
         None, "--type-posteriors", help="Write P(type | trials) per participant (CSV/Parquet)."
     ),
     plots: Path | None = typer.Option(None, "--plots", help="Write per-type figures into this directory."),
-    as_json: bool = typer.Option(False, "--json", help="Print the fit as one JSON object."),
+    as_json: bool = json_option("Print the fit as one JSON object."),
     reading: LogReading = FROM_OPTIONS,
     quiet: bool = QuietOpt,
 ) -> None:
@@ -228,11 +228,9 @@ def select_types(
     transitions_on: str | None = TransitionsOnOpt,
     emissions_on: str | None = EmissionsOnOpt,
     folds: int = typer.Option(5, "--folds", min=2, help="Folds over participants for the held-out log-likelihood."),
-    restarts: int = typer.Option(
-        10, "--restarts", "-r", min=1, max=1000, help="Starts per fit (and the fit with one type fewer, split)."
-    ),
+    restarts: int = restarts_option(10, help="Starts per fit (and the fit with one type fewer, split)."),
     seed: int = SeedOpt,
-    tol: float = typer.Option(1e-6, "--tol", callback=check_tol, help="Relative log-likelihood tolerance per fit (> 0)."),
+    tol: float = tol_option(1e-6, "Relative log-likelihood tolerance per fit (> 0)."),
     jobs: int | None = SelectionJobsOpt,
     widen: bool = widen_option(12, "the numbers given"),
     as_json: bool = PrintJsonOpt,
@@ -269,8 +267,8 @@ def personalize(
         help="How s is estimated: held-out (log-likelihood of blocks of each participant's trials) or variational "
         "(variational empirical Bayes, which shrinks more).",
     ),
-    tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative tolerance of each participant's EM (> 0)."),
-    as_json: bool = typer.Option(False, "--json", help="Print the strengths and the per-participant summary as JSON."),
+    tol: float = tol_option(1e-8, "Relative tolerance of each participant's EM (> 0)."),
+    as_json: bool = json_option("Print the strengths and the per-participant summary as JSON."),
     reading: LogReading = FROM_OPTIONS,
 ) -> None:
     if estimate not in ("held-out", "variational"):

@@ -12,7 +12,7 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
-from ._app import check_outputs, check_tol, command, console, err_console, make_table, print_json, write_atomic
+from ._app import check_outputs, command, console, err_console, make_table, print_json, write_atomic
 from ._options import (
     FROM_OPTIONS,
     AsForFitEmissionsOpt,
@@ -22,17 +22,20 @@ from ._options import (
     OneRowPerTrialLogArg,
     QuietOpt,
     RatingPerOpt,
+    bootstrap_option,
+    json_option,
     log_inputs,
     log_name,
     log_options,
     processes_option,
+    restarts_option,
+    seed_option,
+    tol_option,
 )
 from ._progress import progress_task
 from ._reading import POSTERIOR_SUFFIXES, general_inputs, keep_columns, read_for_types, read_with_inputs, write_log
 
-BootstrapOpt = typer.Option(
-    1000, "--bootstrap", "-b", min=0, max=10_000, help="Participant-bootstrap resamples for the 95% intervals (0 = none)."
-)
+BootstrapOpt = bootstrap_option(1000, "Participant-bootstrap resamples for the 95% intervals (0 = none).")
 
 
 def _table(title: str, *columns: str) -> Table:
@@ -80,15 +83,15 @@ def predict(
     levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Trust levels of the held-out fits."),
     transitions_on: str | None = AsForFitTransitionsOpt,
     emissions_on: str | None = AsForFitEmissionsOpt,
-    restarts: int = typer.Option(10, "--restarts", "-r", min=1, max=1000, help="Random restarts of each held-out fit."),
+    restarts: int = restarts_option(10, help="Random restarts of each held-out fit."),
     prior: float = typer.Option(0.0, "--prior", min=0.0, help="Dirichlet pseudo-count of the held-out fits (as for fit)."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed (folds, restarts, bootstrap)."),
-    tol: float = typer.Option(1e-8, "--tol", callback=check_tol, help="Relative log-likelihood tolerance of each fit (> 0)."),
+    seed: int = seed_option("Random seed (folds, restarts, bootstrap)."),
+    tol: float = tol_option(1e-8, "Relative log-likelihood tolerance of each fit (> 0)."),
     max_iter: int = MaxIterOpt,
     jobs: int | None = processes_option("the held-out folds' fits"),
     bootstrap: int = BootstrapOpt,
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the per-trial predictions (CSV or Parquet)."),
-    as_json: bool = typer.Option(False, "--json", help="Print the scores as one JSON object."),
+    as_json: bool = json_option("Print the scores as one JSON object."),
     reading: LogReading = FROM_OPTIONS,
     quiet: bool = QuietOpt,
 ) -> None:
@@ -211,9 +214,9 @@ def validate(
     ),
     rating_per: str | None = RatingPerOpt,
     bootstrap: int = BootstrapOpt,
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed of the bootstrap."),
+    seed: int = seed_option("Random seed of the bootstrap."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write per trial the rating, decoded trust and baselines."),
-    as_json: bool = typer.Option(False, "--json", help="Print the correlations as one JSON object."),
+    as_json: bool = json_option("Print the correlations as one JSON object."),
     reading: LogReading = FROM_OPTIONS,
 ) -> None:
     _check_trial_output(out, log, model, reading)
