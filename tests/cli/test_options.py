@@ -15,7 +15,7 @@ from trustseek.cli._options import FROM_OPTIONS, LogReading, QuietOpt, log_optio
 from trustseek.data.trials import example_path
 
 LOG = str(example_path("paper_trials.csv"))
-READING = ["--mapping", "--column", "--label", "--missing", "--delimiter", "--order"]
+READING = ["--mapping", "--column", "--label", "--missing", "--delimiter", "--sheet", "--order"]
 
 
 def _options(app) -> list[str]:

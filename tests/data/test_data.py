@@ -194,9 +194,9 @@ def test_each_column_of_a_file_is_turned_into_codes_once(monkeypatch):
     seen: Counter[str] = Counter()
     convert = sources.column_from_arrow
 
-    def counted(chunked, missing):
+    def counted(chunked, missing, *how):
         seen[str(chunked.type)] += 1
-        return convert(chunked, missing)
+        return convert(chunked, missing, *how)
 
     monkeypatch.setattr(sources, "column_from_arrow", counted)
     frame = read_trials(example_path())

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shlex
 import tempfile
 from pathlib import Path
@@ -550,7 +551,11 @@ def test_rows_with_every_cell_empty_are_dropped_and_counted(tmp_path):
 
 @pytest.mark.parametrize(
     ("name", "expected"),
-    [("log.xlsx", "save its sheet as 'CSV UTF-8'"), ("log.json.gz", "decompress it first"), ("log.zip", "decompress it first")],
+    [
+        ("log.ods", "a spreadsheet: save it as an Excel workbook"),
+        ("log.json.gz", "decompress it first"),
+        ("log.zip", "decompress it first"),
+    ],
 )
 def test_a_workbook_or_a_packed_log_gets_the_way_to_a_readable_one(tmp_path, name, expected):
     path = tmp_path / name
@@ -604,3 +609,27 @@ def test_a_damaged_compressed_csv_is_refused_by_name(tmp_path, damage):
     with pytest.raises(DataError, match=r"cannot decompress the file \(gzip, by its suffix\)") as exc:
         read_trials(path)
     assert str(path) in str(exc.value)
+
+
+def test_a_json_null_among_numbers_is_an_empty_cell_and_a_nan_a_nan(tmp_path):
+    """A JSON null in a column of codes (human_action 0/1) was read as a NaN, refused with 'leave
+    the cell empty for not recorded' although it was empty; Parquet's null stays a NaN (pandas
+    writes its NaN as null)."""
+    frame = pd.read_csv(example_path()).head(6)
+    frame["human_action"] = (frame.human_action == "rely").astype(float)
+    frame.loc[3, "human_action"] = np.nan
+    records = [{k: None if isinstance(v, float) and np.isnan(v) else v for k, v in r.items()} for r in frame.to_dict("records")]
+    (tmp_path / "log.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    (tmp_path / "log.json").write_text(json.dumps(records))
+    frame.to_parquet(tmp_path / "log.parquet")
+    codes = {"labels": {"human_action": {"1": "rely", "0": "intervene"}}}
+    for name in ("log.jsonl", "log.json"):
+        assert read_trials(tmp_path / name, codes).human_action.isna().tolist() == [False, False, False, True, False, False]
+    nan = "value is NaN (expected one of ['intervene', 'rely']; leave the cell empty for not recorded): row 4"
+    with pytest.raises(DataError, match=re.escape(nan)):
+        read_trials(tmp_path / "log.parquet", codes)
+    (tmp_path / "nan.jsonl").write_text(
+        (tmp_path / "log.jsonl").read_text().replace('"human_action": null', '"human_action": NaN')
+    )
+    with pytest.raises(DataError, match=re.escape(nan)):
+        read_trials(tmp_path / "nan.jsonl", codes)

@@ -2,7 +2,7 @@
 name: a trust model or supervisor types, a task; the grid solver's two trust levels), --json,
 --quiet, --widen, --counts, the inputs of the commands that fit as fit does, and those that say
 how a command reads its trial log (--mapping, --column, --label, --missing, --delimiter,
---order, --keep, --no-experience-rule), which a command takes with :func:`log_options`, as one
+--sheet, --order, --keep, --no-experience-rule), which a command takes with :func:`log_options`, as one
 :class:`LogReading`."""
 
 from __future__ import annotations
@@ -36,11 +36,11 @@ PolicyOutOpt = typer.Option(None, "--out", "-o", help="Write the policy to this 
 #: the trial log: a file, or several (a file per participant or session) or a folder of them, read as one
 LogArg = typer.Argument(
     ...,
-    help="Trial log (CSV, Parquet, JSON); several files or a folder of them (a file per participant) read as one.",
+    help="Trial log (CSV, Parquet, JSON, Excel); several files or a folder of them (a file per participant) read as one.",
 )
 OneRowPerTrialLogArg = typer.Argument(
     ...,
-    help="Trial log (CSV, Parquet, JSON), one row per trial; several files or a folder of them (a file per participant) "
+    help="Trial log (CSV, Parquet, JSON, Excel), one row per trial; several files or a folder of them (a file per participant) "
     "read as one.",
 )
 
@@ -229,6 +229,10 @@ _OPTIONS: dict[str, tuple[Any, Any]] = {
         str | None,
         typer.Option(None, "--delimiter", help="A CSV's delimiter (default: sniffed from the header; 'tab' for TAB)."),
     ),
+    "sheet": (
+        str | None,
+        typer.Option(None, "--sheet", help="An Excel workbook's sheet holding the log (default: its only sheet with values)."),
+    ),
     "order": (
         list[str] | None,
         typer.Option(
@@ -253,7 +257,7 @@ _OPTIONS: dict[str, tuple[Any, Any]] = {
         ),
     ),
 }
-_DEFAULT = ("mapping", "column", "label", "missing", "delimiter", "order")
+_DEFAULT = ("mapping", "column", "label", "missing", "delimiter", "sheet", "order")
 
 
 @dataclass(frozen=True)
@@ -265,6 +269,7 @@ class LogReading:
     label: list[str] | None = None
     missing: list[str] | None = None
     delimiter: str | None = None
+    sheet: str | None = None
     order: list[str] | None = None
     keep: list[str] | None = None
     no_rule: bool = False
@@ -295,7 +300,7 @@ class LogReading:
         from ..data import ColumnMapping, read_trials
 
         m = ColumnMapping.from_flags(
-            self.column or [], self.label or [], self.column_mapping, self.missing, self.delimiter, rating, self.order
+            self.column or [], self.label or [], self.column_mapping, self.missing, self.delimiter, rating, self.order, self.sheet
         )
         outputs = ("human_action",) if actions else ()
         frame = read_trials(log[0] if len(log) == 1 else list(log), m, required=("participant", "trial", *outputs, *needed))
@@ -318,7 +323,7 @@ FROM_OPTIONS = LogReading()
 
 def log_options(keep: bool = False, names: tuple[str, ...] | None = None) -> Callable[[Callable[..., None]], Callable[..., None]]:
     """A command's log options: its parameter ``reading`` (a :class:`LogReading`) becomes the
-    options --mapping, --column, --label, --missing, --delimiter, --order, (--keep,)
+    options --mapping, --column, --label, --missing, --delimiter, --sheet, --order, (--keep,)
     --no-experience-rule, or those ``names`` (keys of :data:`_OPTIONS`), in that order where
     ``reading`` stands."""
     chosen = names or (*_DEFAULT, *(["keep"] if keep else []), "no_rule")

@@ -187,6 +187,7 @@ class RawLog:
     extras: Any  # list of names -> DataFrame of those columns
     release: Any = None  # list of names -> None: those columns are no longer needed (their memory goes)
     place: Callable[[int], str] | None = None  # row (0-based) -> its location, when not ``row N`` (a folder's files)
+    from_files: bool = False  # the rows are a folder's files' (or files given together), a column naming each one's file
 
 
 def column_from_pandas(values: pd.Series, missing: frozenset[str]) -> Column:
@@ -231,7 +232,9 @@ def _clean_ascii(texts: Any, missing: frozenset[str]) -> bool:
     return bool(pc.all(pc.and_(trimmed, pc.invert(pc.is_in(pc.ascii_lower(texts), marks)))).as_py())
 
 
-def column_from_arrow(chunked: Any, missing: frozenset[str]) -> Column:
+def column_from_arrow(chunked: Any, missing: frozenset[str], null_is_nan: bool = False) -> Column:
+    """A pyarrow column as codes; a null is an empty cell, or with ``null_is_nan`` in a numeric
+    column a NaN (Parquet: pandas writes a float column's NaN as null)."""
     import pyarrow as pa
     import pyarrow.compute as pc
 
@@ -243,7 +246,7 @@ def column_from_arrow(chunked: Any, missing: frozenset[str]) -> Column:
         value_type = typ
         chunked = pc.dictionary_encode(chunked)
     numeric = pa.types.is_integer(value_type) or pa.types.is_floating(value_type) or pa.types.is_decimal(value_type)
-    null = NAN_MARK if numeric and not missing & NAN_WORDS else None
+    null = NAN_MARK if null_is_nan and numeric and not missing & NAN_WORDS else None
     if chunked.num_chunks == 0:
         return Column(np.zeros(0, dtype=np.int32), [null])
     texts = _arrow_texts(chunked.chunk(0).dictionary, missing)

@@ -55,4 +55,4 @@ def stacked(raws: list[RawLog], labels: list[str], stems: list[str], name: str) 
         k = int(np.searchsorted(starts, i, side="right")) - 1
         return f"{labels[k]} row {i - starts[k] + 1}"
 
-    return RawLog(name, int(sizes.sum()), [*columns, *added], col, extras, release, place)
+    return RawLog(name, int(sizes.sum()), [*columns, *added], col, extras, release, place, True)

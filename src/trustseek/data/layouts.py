@@ -90,9 +90,11 @@ def join_problems(j: Any) -> list[str]:
     """Everything wrong with a mapping's ``join`` entry."""
     if not isinstance(j, Mapping):
         return [f'join: expected {{"file": "ratings.csv", "on": ["participant"]}}, got {j!r}']
-    p = unknown_entries("join", j, ("file", "on"))
+    p = unknown_entries("join", j, ("file", "on", "sheet"))
     if not isinstance(j.get("file"), str) or not j.get("file"):
-        p.append(f"join: 'file' names the second file (CSV, JSON or Parquet), got {j.get('file')!r}")
+        p.append(f"join: 'file' names the second file (CSV, JSON, Parquet or an Excel workbook), got {j.get('file')!r}")
+    if "sheet" in j and (not isinstance(j["sheet"], str) or not j["sheet"]):
+        p.append(f"join: 'sheet' names the second file's sheet, got {j['sheet']!r}")
     on = j.get("on")
     on = [on] if isinstance(on, str) else [*on.keys(), *on.values()] if isinstance(on, Mapping) else on
     if on is not None and not names_list(on):

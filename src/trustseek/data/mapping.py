@@ -42,6 +42,7 @@ class ColumnMapping:
     ``drop``         rows to leave out: ``[{"column": col, "values": [...]}, ...]``
     ``missing``      cell texts meaning "not recorded" (besides the empty cell), e.g. ``NA``
     ``delimiter``    a CSV's delimiter (default: sniffed from the header)
+    ``sheet``        an Excel workbook's sheet that holds the log (default: its only sheet with values)
     ``rating``       a self-reported trust rating (optional): ``{"column": theirs, "levels": [...]}``
                      with the ordinal levels lowest first (numbers or labels; ``"labels"``
                      maps the log's texts to levels), or ``{"column": theirs, "bins": [edges]}``
@@ -87,6 +88,7 @@ class ColumnMapping:
     explode: dict[str, Any] | None = None  # {"columns": [...], "position": name or None}
     join: dict[str, Any] | None = None  # {"file": path, "on": [columns] or None}
     wide: dict[str, Any] | None = None  # {"columns": [...], "separator": "_", "position": name or None}
+    sheet: str | None = None
 
     def problems(self) -> list[str]:
         p = []
@@ -149,6 +151,8 @@ class ColumnMapping:
             p.append(f"experience_rule: expected true or false, got {self.experience_rule!r}")
         if self.delimiter is not None and (not isinstance(self.delimiter, str) or len(self.delimiter) != 1):
             p.append(f"delimiter: expected one character, got {self.delimiter!r}")
+        if self.sheet is not None and (not isinstance(self.sheet, str) or not self.sheet):
+            p.append(f"sheet: expected the name of a workbook's sheet, got {self.sheet!r}")
         return p
 
     def _marker_problems(self) -> list[str]:
@@ -248,6 +252,7 @@ class ColumnMapping:
             explode_entry(d["explode"]) if "explode" in d else None,
             join_entry(d["join"]) if "join" in d else None,
             wide_entry(d["wide"]) if "wide" in d else None,
+            d.get("sheet"),
         )
         problems += m.problems()
         if problems:
@@ -288,10 +293,11 @@ class ColumnMapping:
         delimiter: str | None = None,
         rating: Mapping[str, Any] | None = None,
         order: Iterable[str] | None = None,
+        sheet: str | None = None,
     ) -> ColumnMapping:
         """Command-line flags: ``--column canonical=theirs``, ``--label column:theirs=canonical``,
-        ``--missing TEXT``, ``--delimiter CHAR`` and ``--order COLUMN[,COLUMN]`` (the columns, each
-        flag one or more separated by commas); ``rating`` as in a mapping file (``--rating``
+        ``--missing TEXT``, ``--delimiter CHAR``, ``--order COLUMN[,COLUMN]`` (the columns, each
+        flag one or more separated by commas) and ``--sheet NAME``; ``rating`` as in a mapping file (``--rating``
         with ``--rating-levels`` or ``--rating-bins``); ``file`` a mapping file or one already read."""
         base = file if isinstance(file, ColumnMapping) else (cls.load(file) if file else cls())
         problems = []
@@ -329,6 +335,7 @@ class ColumnMapping:
             delimiter=delimiter,
             rating=dict(rating) if rating is not None else None,
             order=tuple(by) if by else None,
+            sheet=sheet,
         )
         if by and "trial" in base.columns:  # --order replaces the file's trial column
             base = replace(base, columns={k: v for k, v in base.columns.items() if k != "trial"})

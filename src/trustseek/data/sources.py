@@ -1,5 +1,5 @@
 """The sources a log is read from: CSV (delimiter sniffed; gzip, bzip2 or zstd compressed too),
-Parquet, JSON lines, JSON and data frames.
+Parquet, JSON lines, JSON, Excel workbooks (:mod:`.workbooks`) and data frames.
 
 Each source becomes a :class:`RawLog`: its columns as :class:`~.cells.Column` codes, read
 column by column (pyarrow where it can), with the rows numbered as in the file.
@@ -27,6 +27,7 @@ import pandas as pd
 from ..model.jsonfile import special_file
 from .cells import SHOWN, Column, DataError, Problems, RawLog, column_from_arrow, column_from_pandas, shorten
 from .folders import stacked
+from .workbooks import SUFFIXES as WORKBOOK_SUFFIXES
 
 DELIMITERS = (",", ";", "\t", "|")
 CSV_SUFFIXES = (".csv", ".txt", ".tsv")
@@ -34,7 +35,7 @@ COMPRESSED = {".gz": "gzip", ".bz2": "bz2", ".zst": "zstd"}  # a CSV's compressi
 PARQUET_SUFFIXES = (".parquet", ".pq")
 JSONL_SUFFIXES = (".jsonl", ".ndjson")
 JSON_SUFFIXES = (".json",)
-SHEET_SUFFIXES = (".xlsx", ".xls", ".xlsm", ".ods", ".numbers")
+OTHER_SHEET_SUFFIXES = (".xls", ".ods", ".numbers")  # spreadsheets not read: saved as .xlsx or CSV first
 PACKED_SUFFIXES = (".gz", ".zip", ".bz2", ".xz", ".zst", ".7z")
 MAX_COLUMNS = 10_000  # a CSV's columns: parsing takes ~6 s at this width and grows with its square
 HEADER_BYTES = 1 << 26  # the longest header line read (64 MB: millions of columns)
@@ -104,9 +105,12 @@ def _sniff(path: Path, sep: str | None, name: str) -> tuple[str, list[str], int]
     return sep, [n or f"(column {i})" for i, n in enumerate(names, 1)], 2 if declared else 1
 
 
-def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: dict[str, Any] | None = None) -> RawLog:
+def load_source(
+    source: Any, sep: str | None, missing: frozenset[str], explode: dict[str, Any] | None = None, sheet: str | None = None
+) -> RawLog:
     """A log as read, one row per trial: ``explode`` (a mapping's entry) turns the per-trial
-    lists of a record per participant or block into rows (JSON, JSON lines, Parquet, a data frame)."""
+    lists of a record per participant or block into rows (JSON, JSON lines, Parquet, a data frame);
+    ``sheet`` names a workbook's sheet."""
     if isinstance(source, pd.DataFrame):
         if explode is not None:
             return _exploded_frame(source, missing, explode)
@@ -118,17 +122,17 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: 
         return RawLog("<table>", len(frame), [str(c) for c in frame.columns], col, lambda cs: frame[cs].reset_index(drop=True))
     if isinstance(source, (list, tuple)):  # several files, as one log
         if len(source) == 1:
-            return load_source(source[0], sep, missing, explode)
+            return load_source(source[0], sep, missing, explode, sheet)
         if not source:
             raise DataError(["no trial log given"], "<no files>")
         files = [Path(p) for p in source]
-        return _load_files(files, os.path.commonpath([p.absolute() for p in files]), sep, missing, explode)
+        return _load_files(files, os.path.commonpath([p.absolute() for p in files]), sep, missing, explode, sheet)
     path = Path(source)
     name = str(path)
     if not path.exists():
         raise DataError(["file not found"], name)
     if path.is_dir():
-        return _load_folder(path, name, sep, missing, explode)
+        return _load_folder(path, name, sep, missing, explode, sheet)
     special = special_file(path)
     if special:
         raise DataError([f"is {special}; expected a trial log file"], name)
@@ -137,28 +141,38 @@ def load_source(source: Any, sep: str | None, missing: frozenset[str], explode: 
         from .layouts import explode_table
 
         table = _parquet_table(path, name)
-        return _arrow_raw(table if explode is None else explode_table(table, explode, name, "row"), name, missing)
+        return _arrow_raw(table if explode is None else explode_table(table, explode, name, "row"), name, missing, True)
     if _csv_suffix(path) in CSV_SUFFIXES:
         if explode is not None:
             raise DataError(["explode: a CSV cell is text, not a list; per-trial lists are read from JSON or Parquet"], name)
         return _load_csv(path, name, sep, missing)
     if suffix in JSONL_SUFFIXES + JSON_SUFFIXES:
         return _load_json(path, name, _json_lines(path, suffix in JSONL_SUFFIXES), missing, explode)
-    how = {**dict.fromkeys(SHEET_SUFFIXES, "a spreadsheet: save its sheet as 'CSV UTF-8'"),
+    if suffix in WORKBOOK_SUFFIXES:
+        if explode is not None:
+            raise DataError(
+                ["explode: a sheet's cell is a value, not a list; per-trial lists are read from JSON or Parquet"], name
+            )
+        from .workbooks import load_workbook
+
+        return load_workbook(path, name, sheet, missing)
+    how = {**dict.fromkeys(OTHER_SHEET_SUFFIXES, "a spreadsheet: save it as an Excel workbook (.xlsx) or 'CSV UTF-8'"),
            **dict.fromkeys(PACKED_SUFFIXES, "a compressed file: decompress it first, e.g. with gunzip or unzip")}  # fmt: skip
     hint = f" ({how[suffix]})" if suffix in how else ""
     raise DataError(
-        [f"unknown file type {suffix!r}{hint}: use .csv, .tsv, .parquet, .jsonl or .json (a CSV may be compressed: .csv.gz, "
-         ".csv.bz2, .csv.zst)"],
+        [f"unknown file type {suffix!r}{hint}: use .csv, .tsv, .parquet, .jsonl, .json or .xlsx (a CSV may be compressed: "
+         ".csv.gz, .csv.bz2, .csv.zst)"],
         name,
     )  # fmt: skip
 
 
 #: the files a folder's log reads, by the suffix that says what they hold
-FOLDER_SUFFIXES = (".csv", ".tsv", *PARQUET_SUFFIXES, *JSONL_SUFFIXES, *JSON_SUFFIXES)
+FOLDER_SUFFIXES = (".csv", ".tsv", *PARQUET_SUFFIXES, *JSONL_SUFFIXES, *JSON_SUFFIXES, *WORKBOOK_SUFFIXES)
 
 
-def _load_folder(path: Path, name: str, sep: str | None, missing: frozenset[str], explode: dict[str, Any] | None) -> RawLog:
+def _load_folder(
+    path: Path, name: str, sep: str | None, missing: frozenset[str], explode: dict[str, Any] | None, sheet: str | None
+) -> RawLog:
     """The logs of a folder as one (one file per participant or session, as PsychoPy and most
     experiment software write them): its files of the kind most of them are (``.csv``, ``.parquet``,
     ...; hidden files and others left out), in name order (:func:`_load_files`)."""
@@ -172,10 +186,12 @@ def _load_folder(path: Path, name: str, sep: str | None, missing: frozenset[str]
     if [k for k, v in kinds.items() if len(v) == len(files)] != [_csv_suffix(files[0])]:
         counts = {k: len(v) for k, v in kinds.items()}
         raise DataError([f"the folder holds as many logs of two kinds ({counts}): keep one kind"], name)
-    return _load_files(files, name, sep, missing, explode)
+    return _load_files(files, name, sep, missing, explode, sheet)
 
 
-def _load_files(files: list[Path], name: str, sep: str | None, missing: frozenset[str], explode: dict[str, Any] | None) -> RawLog:
+def _load_files(
+    files: list[Path], name: str, sep: str | None, missing: frozenset[str], explode: dict[str, Any] | None, sheet: str | None
+) -> RawLog:
     """Several logs as one, in the order given (:func:`.folders.stacked`).  A file goes by its name,
     or by its path from the files' common folder where two names are alike."""
     seen = collections.Counter(p.resolve() for p in files)
@@ -185,7 +201,7 @@ def _load_files(files: list[Path], name: str, sep: str | None, missing: frozense
     labels = [p.name for p in files]
     if len(set(labels)) < len(labels):
         labels = [str(p.absolute().relative_to(name)) for p in files]
-    raws = [load_source(p, sep, missing, explode) for p in files]  # each file's own errors name it
+    raws = [load_source(p, sep, missing, explode, sheet) for p in files]  # each file's own errors name it
     suffixes = [p.suffixes[-2:] if p.suffix.lower() in COMPRESSED else p.suffixes[-1:] for p in files]
     stems = [t.removesuffix("".join(x)) for t, x in zip(labels, suffixes, strict=True)]
     return stacked(raws, labels, stems, name)
@@ -201,12 +217,13 @@ def _exploded_frame(source: pd.DataFrame, missing: frozenset[str], explode: dict
         table = pa.Table.from_pandas(source, preserve_index=False)
     except (pa.ArrowInvalid, pa.ArrowTypeError) as exc:
         raise DataError([f"explode: the table's columns cannot be read as lists: {exc}"], "<table>") from None
-    return _arrow_raw(explode_table(table, explode, "<table>", "row"), "<table>", missing)
+    return _arrow_raw(explode_table(table, explode, "<table>", "row"), "<table>", missing, True)
 
 
-def _arrow_raw(table: Any, name: str, missing: frozenset[str]) -> RawLog:
+def _arrow_raw(table: Any, name: str, missing: frozenset[str], null_is_nan: bool = False) -> RawLog:
     """A pyarrow table as a log: refused when a column holds lists or objects or a name repeats;
-    its columns read as codes on demand, and let go of when no longer needed."""
+    its columns read as codes on demand, and let go of when no longer needed.  A null is an empty
+    cell, or with ``null_is_nan`` in a numeric column a NaN (a table from pandas)."""
     import pyarrow as pa
 
     from .layouts import refuse_nested
@@ -227,7 +244,7 @@ def _arrow_raw(table: Any, name: str, missing: frozenset[str]) -> RawLog:
         name,
         table.num_rows,
         names,
-        lambda c: column_from_arrow(held["table"].column(c), missing),
+        lambda c: column_from_arrow(held["table"].column(c), missing, null_is_nan),
         lambda cs: held["table"].select(cs).to_pandas(),
         release,
     )

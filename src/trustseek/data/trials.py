@@ -35,9 +35,11 @@ def read_trials(
     *,
     required: Sequence[str] | None = None,
     delimiter: str | None = None,
+    sheet: str | None = None,
     check_experience: bool = True,
 ) -> pd.DataFrame:
-    """Read, map and validate a trial log (CSV/TSV, Parquet, JSON lines, a JSON array or a DataFrame).
+    """Read, map and validate a trial log (CSV/TSV, Parquet, JSON lines, a JSON array, an Excel
+    workbook or a DataFrame).
 
     Returns the canonical columns in order (``participant`` and the categorical
     columns as pandas categoricals with the canonical labels, ``trial`` as int64,
@@ -53,7 +55,8 @@ def read_trials(
     column named by the input (a categorical of its declared levels; ``frame.attrs["inputs"]``
     holds every input's levels).  A CSV's delimiter is taken
     from ``delimiter`` (or the mapping's), else ``.tsv`` means tab, else the most
-    frequent of ``, ; TAB |`` in the header.  ``check_experience`` checks the
+    frequent of ``, ; TAB |`` in the header.  ``sheet`` (or the mapping's) names an Excel
+    workbook's sheet (default: its only visible sheet holding values).  ``check_experience`` checks the
     experience rule of the data format where the columns it needs are present.
     Raises :class:`DataError` listing every kind of problem at once.
     """
@@ -61,15 +64,20 @@ def read_trials(
     required = _required(mapping, required)
     theirs = {c: mapping.columns.get(c, c) for c in CANONICAL}
     markers = frozenset(m.strip().lower() for m in (mapping.missing or ()))
-    raw = load_source(source, delimiter or mapping.delimiter, markers, mapping.explode)
+    raw = load_source(source, delimiter or mapping.delimiter, markers, mapping.explode, sheet or mapping.sheet)
     name = raw.name
-    if raw.place is not None and theirs["participant"] not in raw.columns and "participant" not in mapping.columns:
+    if raw.from_files and theirs["participant"] not in raw.columns and "participant" not in mapping.columns:
         theirs["participant"] = FILE_COLUMN  # a folder of logs without participant ids: one participant per file
     if mapping.wide is not None:
         raw = unpivot(raw, mapping.wide)
     joined: list[str] = []
     if mapping.join is not None:
-        raw, joined = join_file(raw, load_source(mapping.join["file"], None, markers), mapping.join, theirs["participant"])
+        raw, joined = join_file(
+            raw,
+            load_source(mapping.join["file"], None, markers, sheet=mapping.join.get("sheet")),
+            mapping.join,
+            theirs["participant"],
+        )
     known = _check_columns(raw, mapping, theirs, required, delimiter)
     get = _Columns(raw)  # the file's columns as codes, each converted once
     rowid, dropped = _drop_rows(raw, mapping, markers, get)

@@ -1,0 +1,181 @@
+"""Excel workbooks (``.xlsx``, ``.xlsm``) as trial logs, read with python-calamine.
+
+One sheet is the log: the one named (``--sheet``, the mapping's ``"sheet"``), else the only
+visible sheet that holds any value.  Its header is the first row with at least half as many values
+as the fullest of its first :data:`LOOK` rows (a title above it is passed over); every row below
+is a trial, numbered as the other formats number theirs (``row N``: the N-th data row) with the
+row Excel shows beside it.  A cell is read as the value the spreadsheet program last computed for
+it, a whole number as an integer, a date as its ISO text.  An error cell (``#N/A``, ``#DIV/0!``)
+is read as its error's text and a formula never computed (as Python libraries save them) as its
+formula (``=B2*2``), so that the checks of the columns name them where the reader alone would
+give an empty cell.
+"""
+
+from __future__ import annotations
+
+import collections
+import re
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path, PurePosixPath
+from typing import Any
+from xml.sax.saxutils import unescape
+
+import pandas as pd
+
+from .cells import SHOWN, DataError, RawLog, column_from_pandas, shorten
+
+SUFFIXES = (".xlsx", ".xlsm")
+LOOK = 50  # rows of a sheet looked at to tell whether it holds any value and where its header is
+_MAIN = "{http://schemas.openxmlformats.org/spreadsheetml/2006/main}"
+_REL = "{http://schemas.openxmlformats.org/officeDocument/2006/relationships}id"
+#: a cell of a sheet's XML (any namespace prefix): its attributes, and what it holds
+_CELL = re.compile(rb"<((?:\w+:)?)c\b([^>]*?)(?:/>|>(.*?)</\1c>)", re.S)
+_REF = re.compile(rb'\br="([A-Z]+)([0-9]+)"')
+_VALUE = re.compile(rb"<(?:\w+:)?v>([^<]*)</(?:\w+:)?v>")
+_FORMULA = re.compile(rb"<(?:\w+:)?f\b[^>]*?(?:/>|>([^<]*)</(?:\w+:)?f>)")
+
+
+def load_workbook(path: Path, name: str, sheet: str | None, missing: frozenset[str]) -> RawLog:
+    """The log one sheet of the workbook at ``path`` holds."""
+    from python_calamine import CalamineError, CalamineWorkbook
+
+    try:
+        book = CalamineWorkbook.from_path(str(path))
+        chosen = _sheet(book, sheet, name)
+        label = f"{name} (sheet {chosen!r})" if len(book.sheet_names) > 1 else name
+        grid = book.get_sheet_by_name(chosen).to_python(skip_empty_area=False)
+        marked = _marked_cells(path, chosen, label)
+    except CalamineError as exc:
+        raise DataError([f"cannot read the file as an Excel workbook (.xlsx): {shorten(str(exc), 200)}"], name) from None
+    except OSError as exc:
+        raise DataError([f"cannot read the file: {exc.strerror or exc}"], name) from None
+    every = [[_cell(v) for v in row] for row in grid]
+    for (r, c), text in marked.items():  # what the reader gives as empty: the error's text, the formula
+        every += [[] for _ in range(r + 1 - len(every))]
+        every[r] += [None] * (c + 1 - len(every[r]))
+        every[r][c] = text
+    fullest = max((_count(r) for r in every[:LOOK]), default=0)
+    top = next((i for i, r in enumerate(every) if fullest and 2 * _count(r) >= fullest), None)
+    if top is None:
+        raise DataError(["the sheet is empty (expected a header row naming the columns)"], label)
+    header, rows = every[top], every[top + 1 :]
+    while rows and not _count(rows[-1]):  # formatted but unused rows at the end
+        rows.pop()
+    width = max([_last(header), *(_last(r) for r in rows)])
+    names = [_name(header[i] if i < len(header) else None, i) for i in range(width)]
+    counts = collections.Counter(names)
+    dupes = sorted(c for c, k in counts.items() if k > 1)
+    if dupes:
+        lines = [f"column {shorten(c, 80)!r} appears {counts[c]} times in the header (row {top + 1})" for c in dupes[:SHOWN]]
+        raise DataError(lines, label)
+    frame = pd.DataFrame(
+        {c: pd.Series([r[i] if i < len(r) else None for r in rows], dtype=object) for i, c in enumerate(names)},
+        index=pd.RangeIndex(len(rows)),
+    )
+    return RawLog(
+        label,
+        len(rows),
+        names,
+        lambda c: column_from_pandas(frame[c], missing),
+        lambda cs: frame[cs].infer_objects().reset_index(drop=True),
+        place=lambda i: f"row {i + 1} (Excel row {top + i + 2})",
+    )
+
+
+def _sheet(book: Any, sheet: str | None, name: str) -> str:
+    """The name of the sheet to read: ``sheet``, else the only visible one holding a value."""
+    names = list(book.sheet_names)
+    if sheet is not None:
+        if sheet in names:
+            return sheet
+        raise DataError([f"no sheet named {sheet!r}; the workbook's sheets are {names}"], name)
+    visible = [m.name for m in book.sheets_metadata if str(m.visible).endswith("Visible") and m.name in names]
+    used = [n for n in visible if any(_count([_cell(v) for v in r]) for r in book.get_sheet_by_name(n).to_python(nrows=LOOK))]
+    if len(used) == 1:
+        return used[0]
+    if not used:
+        raise DataError([f"no visible sheet holds a value (sheets: {names}); name one with --sheet"], name)
+    raise DataError(
+        [f"the workbook has {len(used)} sheets holding values, {used}: name the log's with --sheet NAME "
+         f"(or the mapping's \"sheet\"), e.g. --sheet {used[0]!r}"],
+        name,
+    )  # fmt: skip
+
+
+def _marked_cells(path: Path, sheet: str, label: str) -> dict[tuple[int, int], str]:
+    """The cells of ``sheet`` that hold an error value (as its text, ``#N/A``) or a formula
+    without a computed value (as ``=`` and the formula), by (row, column) from 0, read from the
+    sheet's XML (python-calamine gives both as empty)."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            part = _sheet_part(z, sheet)
+            data = z.read(part) if part is not None else b""
+    except (zipfile.BadZipFile, KeyError, ET.ParseError, OSError) as exc:
+        raise DataError([f"cannot read the sheet: {shorten(str(exc), 200)}"], label) from None
+    if b't="e"' not in data and not re.search(rb"<(?:\w+:)?f\b", data):
+        return {}
+    out: dict[tuple[int, int], str] = {}
+    for m in _CELL.finditer(data):
+        attrs, body = m.group(2), m.group(3) or b""
+        value = _VALUE.search(body)
+        if b't="e"' in attrs:
+            text = _text(value.group(1)) if value else "#ERROR"
+        elif (value is None or not value.group(1)) and (f := _FORMULA.search(body)) is not None:
+            text = "=" + _text(f.group(1)) if f.group(1) else "=(a shared formula)"
+        else:
+            continue  # a value, or a formula with its computed value: the reader has it
+        ref = _REF.search(attrs)
+        if ref is None:
+            raise DataError([f"a cell holds {text} and names no place (no r attribute): correct it in the sheet"], label)
+        out[(int(ref.group(2)) - 1, _column_index(ref.group(1).decode()))] = text
+    return out
+
+
+def _sheet_part(z: zipfile.ZipFile, sheet: str) -> str | None:
+    """The path in the package of the XML of the sheet named ``sheet``."""
+    book = ET.fromstring(z.read("xl/workbook.xml"))
+    rid = next((s.get(_REL) for s in book.iter(f"{_MAIN}sheet") if s.get("name") == sheet), None)
+    rels = ET.fromstring(z.read("xl/_rels/workbook.xml.rels"))
+    target = next((r.get("Target") for r in rels if r.get("Id") == rid), None)
+    if target is None:
+        return None
+    return target.lstrip("/") if target.startswith("/") else str(PurePosixPath("xl") / target)
+
+
+def _text(raw: bytes) -> str:
+    return unescape(raw.decode("utf-8"), {"&quot;": '"', "&apos;": "'"})
+
+
+def _column_index(letters: str) -> int:
+    n = 0
+    for ch in letters:
+        n = n * 26 + ord(ch) - ord("A") + 1
+    return n - 1
+
+
+def _cell(v: Any) -> Any:
+    """A cell's value as the other formats give it: empty as None, a date or time as ISO text,
+    a float that is a whole number as an integer (a sheet stores every number as a float)."""
+    if isinstance(v, str):
+        return v if v.strip() else None
+    if isinstance(v, float) and v.is_integer() and abs(v) < 2**53:
+        return int(v)
+    if hasattr(v, "isoformat"):
+        return v.isoformat(sep=" ") if hasattr(v, "date") else v.isoformat()
+    return v
+
+
+def _count(row: list[Any]) -> int:
+    return sum(v is not None for v in row)
+
+
+def _last(row: list[Any]) -> int:
+    """How many cells of ``row`` reach its last value."""
+    return max((i + 1 for i, v in enumerate(row) if v is not None), default=0)
+
+
+def _name(v: Any, i: int) -> str:
+    """A header cell as a column name; an empty one by its place, as a CSV's: ``(column 7)``."""
+    text = "" if v is None else str(v).strip()
+    return text or f"(column {i + 1})"
