@@ -625,7 +625,9 @@ def test_a_json_null_among_numbers_is_an_empty_cell_and_a_nan_a_nan(tmp_path):
     codes = {"labels": {"human_action": {"1": "rely", "0": "intervene"}}}
     for name in ("log.jsonl", "log.json"):
         assert read_trials(tmp_path / name, codes).human_action.isna().tolist() == [False, False, False, True, False, False]
-    nan = "value is NaN (expected one of ['intervene', 'rely']; leave the cell empty for not recorded): row 4"
+    nan = (
+        "value is NaN (expected one of ['intervene', 'rely']; an empty cell, or a NaN with --missing nan, is not recorded): row 4"
+    )
     with pytest.raises(DataError, match=re.escape(nan)):
         read_trials(tmp_path / "log.parquet", codes)
     (tmp_path / "nan.jsonl").write_text(

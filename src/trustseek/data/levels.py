@@ -70,7 +70,7 @@ def category_codes(problems: Problems, cc: Column, mapping: ColumnMapping, c: st
     table = mapping.labels.get(c, {})
     empty = 0 if c == "human_action" else EMPTY  # an empty human action: not recorded
     lookup, kind = level_lookup(cc, table, lambda label: allowed.index(label) if label in allowed else None, np.int8, empty)
-    hint = "; leave the cell empty for not recorded" if c == "human_action" else ""
+    hint = "; an empty cell, or a NaN with --missing nan, is not recorded" if c == "human_action" else ""
     known_labels = f"{sorted(table)} (mapped) or " if table else ""
     heads = (
         f"{head}: empty value (expected one of {list(allowed)})",
