@@ -4,8 +4,10 @@ import json
 import subprocess
 import sys
 
+import pandas as pd
 import pytest
 
+from cli_runner import run_cli
 from trustseek import TrustModel, load_policy
 
 
@@ -112,3 +114,39 @@ def test_solvers_come_from_the_registry_and_refuse_cleanly():
     assert proc.stderr.strip().splitlines() == [
         "error: the default grid solver needs two trust levels; this model has 3: use --solver point"
     ]
+
+
+def test_check_reads_a_trial_log_as_the_fit_does_and_says_what_it_holds(tmp_path):
+    """A researcher's first step: `trustseek check log.csv` said 'invalid JSON at line 1'."""
+    from trustseek.data import example_path
+
+    log = str(example_path())
+    code, output = run_cli(["check", log])
+    assert code == 0, output
+    said = " ".join(output.split())
+    assert f"{log}: ok: 639 trials of 9 participants (71 each); human_action: intervene 172, rely 467;" in said
+    assert "complexity: low 369, high 270; robot_action: autonomous 501, ask 138; experience: faulty 107, reliable 532" in said
+    # with the log options, as the fit reads it; a JSON array of records and a folder too
+    frame = pd.read_csv(log).rename(columns={"human_action": "response"})
+    frame["response"] = frame.response.map({"rely": 1, "intervene": 0}).astype("Int64")
+    frame.loc[3, "response"] = pd.NA
+    frame.to_json(tmp_path / "log.json", orient="records")
+    (tmp_path / "logs").mkdir()
+    for pid, g in frame.groupby("participant"):
+        g.to_csv(tmp_path / "logs" / f"{pid}.csv", index=False)
+    flags = ["--column", "human_action=response", "--label", "human_action:1=rely", "--label", "human_action:0=intervene"]
+    code, output = run_cli(["check", str(tmp_path / "log.json"), str(tmp_path / "logs"), *flags])
+    said = " ".join(output.split())
+    assert code == 0 and said.count("human_action: intervene 172, rely 466, not recorded 1") == 2, output
+    code, output = run_cli(["check", str(tmp_path / "log.json")])  # without the flags: located, exit 2
+    assert code == 2 and "missing column 'human_action'" in output and "--column 'human_action=response'" not in output
+
+
+def test_check_validates_a_mapping_file_and_still_a_model(tmp_path):
+    from trustseek.data import example_path
+
+    code, output = run_cli(["check", str(example_path("study_mapping.json")), str(example_path("three_level_model.json"))])
+    assert code == 0 and output.count(": ok") == 2 and "a column mapping" in output, output
+    (tmp_path / "m.json").write_text('{"columns": {"participant": 3}, "order": "block"}')
+    code, output = run_cli(["check", str(tmp_path / "m.json")])
+    assert code == 2 and "participant must map to a column name, got 3" in output, output

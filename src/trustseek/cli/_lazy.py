@@ -47,7 +47,9 @@ COMMANDS: dict[str, Command] = {
     "preset": Command(
         "plan", FILES, "Print or export a built-in preset (model and task JSON), a starting point for your own files."
     ),
-    "check": Command("plan", FILES, "Validate model (trust or general), task and policy files; print every problem found."),
+    "check": Command(
+        "plan", FILES, "Validate model (trust or general), task, policy and mapping files and trial logs; print every problem."
+    ),
     "export-pomdp": Command(
         "interop", FILES, "Export the assistance POMDP to a standard file (state augmented with the last human action)."
     ),

@@ -303,7 +303,16 @@ def preset(
 
 
 @command("check")
-def check(files: list[Path] = typer.Argument(..., help="Trust model, task or policy JSON files.")) -> None:
+@log_options()
+def check(
+    files: list[Path] = typer.Argument(
+        ..., help="Trust model, task, policy or mapping files, or trial logs (CSV, Parquet, JSON, Excel, a folder)."
+    ),
+    reading: LogReading = FROM_OPTIONS,
+) -> None:
+    """Validate model (trust or general), task, policy and mapping files, and trial logs as the fit
+    reads them (with the log options); print every problem found, and what each log holds."""
+    from ..data.suffixes import is_mapping_file, is_trial_log
     from ..model.core import TrustModel
     from ..model.files import IOHMM_FORMAT
     from ..model.jsonfile import ModelError, load_json
@@ -312,6 +321,22 @@ def check(files: list[Path] = typer.Argument(..., help="Trust model, task or pol
 
     problems: list[str] = []
     for f in files:
+        if is_trial_log(f):
+            try:
+                console.print(f"{f}: ok: {_log_summary(reading.read([f], ('complexity', 'robot_action', 'experience')))}",
+                              soft_wrap=True, highlight=False)  # fmt: skip
+            except TrustseekError as exc:
+                problems.extend(exc.lines())
+            continue
+        if is_mapping_file(f):
+            from ..data.mapping import ColumnMapping
+
+            try:
+                ColumnMapping.load(f)
+                console.print(f"{f}: ok (a column mapping, for --mapping)", soft_wrap=True, highlight=False)
+            except TrustseekError as exc:
+                problems.extend(exc.lines())
+            continue
         try:
             text, _ = load_json(f)
         except ModelError as exc:
@@ -350,3 +375,17 @@ def check(files: list[Path] = typer.Argument(..., help="Trust model, task or pol
             problems.extend(exc.lines())
     if problems:
         raise TrustseekError(problems)
+
+
+def _log_summary(frame) -> str:
+    """What a trial log holds, as a line: trials, participants and the count of each label."""
+    per = frame.groupby("participant", observed=True).size()
+    people = f"{len(per):,} participant{'s' if len(per) != 1 else ''}"
+    each = f"{per.min()} each" if per.min() == per.max() else f"{per.min()} to {per.max()} each"
+    parts = [f"{len(frame):,} trials of {people} ({each})"]
+    for c in ("human_action", "complexity", "robot_action", "experience"):
+        counts = frame[c].value_counts(dropna=False, sort=False)
+        shown = [f"{'not recorded' if label != label else label} {n:,}" for label, n in counts.items() if n]
+        parts.append(f"{c}: {', '.join(shown)}")
+    extra = [str(c) for c in frame.columns[6:]]
+    return "; ".join(parts + ([f"other columns: {', '.join(extra)}"] if extra else []))

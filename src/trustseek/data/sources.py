@@ -27,16 +27,20 @@ import pandas as pd
 from ..model.jsonfile import special_file
 from .cells import SHOWN, Column, DataError, Problems, RawLog, column_from_arrow, column_from_pandas, shorten
 from .folders import stacked
-from .workbooks import SUFFIXES as WORKBOOK_SUFFIXES
+from .suffixes import (
+    COMPRESSED,
+    CSV_SUFFIXES,
+    FOLDER_SUFFIXES,
+    JSON_SUFFIXES,
+    JSONL_SUFFIXES,
+    OTHER_SHEET_SUFFIXES,
+    PACKED_SUFFIXES,
+    PARQUET_SUFFIXES,
+    WORKBOOK_SUFFIXES,
+    kind_suffix,
+)
 
 DELIMITERS = (",", ";", "\t", "|")
-CSV_SUFFIXES = (".csv", ".txt", ".tsv")
-COMPRESSED = {".gz": "gzip", ".bz2": "bz2", ".zst": "zstd"}  # a CSV's compressions, by suffix (log.csv.gz)
-PARQUET_SUFFIXES = (".parquet", ".pq")
-JSONL_SUFFIXES = (".jsonl", ".ndjson")
-JSON_SUFFIXES = (".json",)
-OTHER_SHEET_SUFFIXES = (".xls", ".ods", ".numbers")  # spreadsheets not read: saved as .xlsx or CSV first
-PACKED_SUFFIXES = (".gz", ".zip", ".bz2", ".xz", ".zst", ".7z")
 MAX_COLUMNS = 10_000  # a CSV's columns: parsing takes ~6 s at this width and grows with its square
 HEADER_BYTES = 1 << 26  # the longest header line read (64 MB: millions of columns)
 #: a CSV is parsed in blocks of this size (16 MB), each with its own dictionaries; a smaller file in one
@@ -60,12 +64,6 @@ def _input(path: Path) -> Any:
 
 def _not_decompressed(path: Path, name: str, why: Exception) -> DataError:
     return DataError([f"cannot decompress the file ({COMPRESSED[path.suffix.lower()]}, by its suffix): {why}"], name)
-
-
-def _csv_suffix(path: Path) -> str:
-    """The suffix that says what the file holds: ``.csv`` of ``log.csv`` and of ``log.csv.gz``."""
-    suffixes = [s.lower() for s in path.suffixes]
-    return suffixes[-2] if len(suffixes) > 1 and suffixes[-1] in COMPRESSED else path.suffix.lower()
 
 
 def _sniff(path: Path, sep: str | None, name: str) -> tuple[str, list[str], int]:
@@ -93,7 +91,7 @@ def _sniff(path: Path, sep: str | None, name: str) -> tuple[str, list[str], int]
     text = head.decode("utf-8", "replace").lstrip("\ufeff")
     first = text.splitlines()[0] if text.strip() else ""
     if sep is None:
-        if _csv_suffix(path) == ".tsv":
+        if kind_suffix(path) == ".tsv":
             sep = "\t"
         else:
             unquoted = re.sub(r'"[^"]*"', "", first)
@@ -142,7 +140,7 @@ def load_source(
 
         table = _parquet_table(path, name)
         return _arrow_raw(table if explode is None else explode_table(table, explode, name, "row"), name, missing, True)
-    if _csv_suffix(path) in CSV_SUFFIXES:
+    if kind_suffix(path) in CSV_SUFFIXES:
         if explode is not None:
             raise DataError(["explode: a CSV cell is text, not a list; per-trial lists are read from JSON or Parquet"], name)
         return _load_csv(path, name, sep, missing)
@@ -166,10 +164,6 @@ def load_source(
     )  # fmt: skip
 
 
-#: the files a folder's log reads, by the suffix that says what they hold
-FOLDER_SUFFIXES = (".csv", ".tsv", *PARQUET_SUFFIXES, *JSONL_SUFFIXES, *JSON_SUFFIXES, *WORKBOOK_SUFFIXES)
-
-
 def _load_folder(
     path: Path, name: str, sep: str | None, missing: frozenset[str], explode: dict[str, Any] | None, sheet: str | None
 ) -> RawLog:
@@ -178,12 +172,12 @@ def _load_folder(
     ...; hidden files and others left out), in name order (:func:`_load_files`)."""
     kinds = collections.defaultdict(list)
     for p in sorted(path.iterdir()):
-        if p.is_file() and not p.name.startswith(".") and _csv_suffix(p) in FOLDER_SUFFIXES:
-            kinds[_csv_suffix(p)].append(p)
+        if p.is_file() and not p.name.startswith(".") and kind_suffix(p) in FOLDER_SUFFIXES:
+            kinds[kind_suffix(p)].append(p)
     if not kinds:
         raise DataError([f"the folder holds no trial log (files ending in {', '.join(FOLDER_SUFFIXES)})"], name)
     files = max(kinds.values(), key=len)
-    if [k for k, v in kinds.items() if len(v) == len(files)] != [_csv_suffix(files[0])]:
+    if [k for k, v in kinds.items() if len(v) == len(files)] != [kind_suffix(files[0])]:
         counts = {k: len(v) for k, v in kinds.items()}
         raise DataError([f"the folder holds as many logs of two kinds ({counts}): keep one kind"], name)
     return _load_files(files, name, sep, missing, explode, sheet)
@@ -328,7 +322,7 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str], expl
             data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise DataError([f"invalid JSON: {exc}"], name) from None
-        records = _json_records(data, name)
+        records = json_records(data, name)
         where = [f"record {i}" for i in range(1, len(records) + 1)]
     p.add("records that are not objects", [w for w, r in zip(where, records, strict=True) if not isinstance(r, dict)])
     if p.lines:
@@ -340,7 +334,7 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str], expl
     return _arrow_raw(table, name, missing)
 
 
-def _json_records(data: Any, name: str) -> list[Any]:
+def json_records(data: Any, name: str) -> list[Any]:
     """The records of a JSON log: an array of them; the one array of objects an object holds
     (``{"participants": [...]}``, pandas' ``orient="table"``); or a table as pandas writes it,
     ``orient="split"`` (``columns`` and ``data``), ``"columns"`` (its default: each column an object

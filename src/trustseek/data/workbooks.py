@@ -25,7 +25,6 @@ import pandas as pd
 
 from .cells import SHOWN, DataError, RawLog, column_from_pandas, shorten
 
-SUFFIXES = (".xlsx", ".xlsm")
 LOOK = 50  # rows of a sheet looked at to tell whether it holds any value and where its header is
 _MAIN = "{http://schemas.openxmlformats.org/spreadsheetml/2006/main}"
 _REL = "{http://schemas.openxmlformats.org/officeDocument/2006/relationships}id"
