@@ -202,3 +202,20 @@ def test_other_spreadsheets_are_refused_with_the_way_to_save_them(tmp_path, suff
     path.write_bytes(b"\xd0\xcf\x11\xe0")
     with pytest.raises(DataError, match=r"save it as an Excel workbook \(.xlsx\) or 'CSV UTF-8'"):
         read_trials(path)
+
+
+def test_a_merged_cell_holds_its_value_in_each_of_its_rows(small, tmp_path):
+    """A lab sheet merges a participant's id over their rows: the reader gives it in the first row
+    only, so every other row was an empty participant id."""
+    rows = frame_rows(small)  # P001's ten trials, then P002's
+    for r in [*range(2, 11), *range(12, 21)]:
+        rows[r][0] = None
+    book = openpyxl.Workbook()
+    ws = book.active
+    for row in rows:
+        ws.append(row)
+    ws.merge_cells("A2:A11")  # P001's ten trials
+    ws.merge_cells("A12:A21")  # P002's
+    book.save(tmp_path / "log.xlsx")
+    assert [r[0] for r in rows[1:]].count(None) == 18
+    assert read_trials(tmp_path / "log.xlsx").equals(read_trials(small))

@@ -214,7 +214,7 @@ def _print_certified(policy: Policy, summary: dict) -> None:
 
 
 @command("agnostic")
-@log_options(names=("mapping", "column", "label", "order"))
+@log_options(names=("mapping", "column", "label", "sheet", "order"))
 def agnostic(
     model: str = ModelOpt,
     task: str = TaskOpt,
@@ -228,8 +228,8 @@ def agnostic(
     from ..solvers import make_solver, trust_agnostic_from_data
     from ..vocab import ACTIONS
 
-    if data is None and (reading.mapping is not None or reading.column or reading.label or reading.order):
-        raise TrustseekError(["--mapping, --column, --label and --order apply to a log: give it with --data"])
+    if data is None and (reading.mapping is not None or reading.column or reading.label or reading.sheet or reading.order):
+        raise TrustseekError(["--mapping, --column, --label, --sheet and --order apply to a log: give it with --data"])
     inputs = ((model, "--model file"), (task, "--task file"), (data, "--data log"), *reading.inputs())
     check_outputs((out, "--out", (".json",)), inputs=inputs)
     t = load_task(task)

@@ -5,7 +5,8 @@ visible sheet that holds any value.  Its header is the first row with at least h
 as the fullest of its first :data:`LOOK` rows (a title above it is passed over); every row below
 is a trial, numbered as the other formats number theirs (``row N``: the N-th data row) with the
 row Excel shows beside it.  A cell is read as the value the spreadsheet program last computed for
-it, a whole number as an integer, a date as its ISO text.  An error cell (``#N/A``, ``#DIV/0!``)
+it, a whole number as an integer, a date as its ISO text, a merged cell's value in each of its
+cells (a participant's id merged over their rows).  An error cell (``#N/A``, ``#DIV/0!``)
 is read as its error's text and a formula never computed (as Python libraries save them) as its
 formula (``=B2*2``), so that the checks of the columns name them where the reader alone would
 give an empty cell.
@@ -26,8 +27,6 @@ import pandas as pd
 from .cells import SHOWN, DataError, RawLog, column_from_pandas, shorten
 
 LOOK = 50  # rows of a sheet looked at to tell whether it holds any value and where its header is
-_MAIN = "{http://schemas.openxmlformats.org/spreadsheetml/2006/main}"
-_REL = "{http://schemas.openxmlformats.org/officeDocument/2006/relationships}id"
 #: a cell of a sheet's XML (any namespace prefix): its attributes, and what it holds
 _CELL = re.compile(rb"<((?:\w+:)?)c\b([^>]*?)(?:/>|>(.*?)</\1c>)", re.S)
 _REF = re.compile(rb'\br="([A-Z]+)([0-9]+)"')
@@ -43,7 +42,8 @@ def load_workbook(path: Path, name: str, sheet: str | None, missing: frozenset[s
         book = CalamineWorkbook.from_path(str(path))
         chosen = _sheet(book, sheet, name)
         label = f"{name} (sheet {chosen!r})" if len(book.sheet_names) > 1 else name
-        grid = book.get_sheet_by_name(chosen).to_python(skip_empty_area=False)
+        ws = book.get_sheet_by_name(chosen)
+        grid, merged = ws.to_python(skip_empty_area=False), ws.merged_cell_ranges or []
         marked = _marked_cells(path, chosen, label)
     except CalamineError as exc:
         raise DataError([f"cannot read the file as an Excel workbook (.xlsx): {shorten(str(exc), 200)}"], name) from None
@@ -54,6 +54,12 @@ def load_workbook(path: Path, name: str, sheet: str | None, missing: frozenset[s
         every += [[] for _ in range(r + 1 - len(every))]
         every[r] += [None] * (c + 1 - len(every[r]))
         every[r][c] = text
+    for (r0, c0), (r1, c1) in merged:  # a merged cell (a participant's id over their rows): its value in each
+        every += [[] for _ in range(r1 + 1 - len(every))]
+        value = every[r0][c0] if c0 < len(every[r0]) else None
+        for r in range(r0, r1 + 1):
+            every[r] += [None] * (c1 + 1 - len(every[r]))
+            every[r][c0 : c1 + 1] = [value] * (c1 + 1 - c0)
     fullest = max((_count(r) for r in every[:LOOK]), default=0)
     top = next((i for i, r in enumerate(every) if fullest and 2 * _count(r) >= fullest), None)
     if top is None:
@@ -132,9 +138,11 @@ def _marked_cells(path: Path, sheet: str, label: str) -> dict[tuple[int, int], s
 
 
 def _sheet_part(z: zipfile.ZipFile, sheet: str) -> str | None:
-    """The path in the package of the XML of the sheet named ``sheet``."""
+    """The path in the package of the XML of the sheet named ``sheet`` (transitional or strict
+    Office Open XML: elements and the relationship id by their local names)."""
     book = ET.fromstring(z.read("xl/workbook.xml"))
-    rid = next((s.get(_REL) for s in book.iter(f"{_MAIN}sheet") if s.get("name") == sheet), None)
+    sheets = [e for e in book.iter() if e.tag.rsplit("}", 1)[-1] == "sheet" and e.get("name") == sheet]
+    rid = next((v for e in sheets for k, v in e.attrib.items() if k.endswith("}id")), None)
     rels = ET.fromstring(z.read("xl/_rels/workbook.xml.rels"))
     target = next((r.get("Target") for r in rels if r.get("Id") == rid), None)
     if target is None:
