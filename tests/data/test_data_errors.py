@@ -133,6 +133,20 @@ def test_columns_named_in_another_style_get_the_flags_that_map_them(tmp_path):
     assert code == 0, output
 
 
+def test_a_mapped_name_found_in_another_style_gets_its_flag(tmp_path):
+    """A mapping's 'pid' for a log whose columns an SPSS portable file wrote in capitals ('PID'): the
+    hint named only the canonical names, and the model hint called present columns absent."""
+    header = "PID,trial,CX,robot_action,human_action,experience"
+    path = write(tmp_path, GOOD.replace(HEADER, header, 1))
+    with pytest.raises(DataError) as exc:
+        read_trials(path, {"columns": {"participant": "pid", "complexity": "cx"}})
+    lines = lines_of(exc)
+    assert any(
+        line.endswith("hint: columns named in another style: --column participant=PID --column complexity=CX") for line in lines
+    )
+    assert not any("--transitions-on" in line for line in lines)
+
+
 def test_a_log_without_trial_numbers_is_pointed_to_its_time_column(tmp_path):
     lines = [HEADER.replace("trial,", "", 1) + ",started at"]
     lines += [",".join(r.split(",")[:1] + r.split(",")[2:]) + f",2026-01-01T10:{i:02d}:00" for i, r in enumerate(ROWS)]

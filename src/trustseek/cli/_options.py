@@ -36,12 +36,13 @@ PolicyOutOpt = typer.Option(None, "--out", "-o", help="Write the policy to this 
 #: the trial log: a file, or several (a file per participant or session) or a folder of them, read as one
 LogArg = typer.Argument(
     ...,
-    help="Trial log (CSV, Parquet, JSON, Excel); several files or a folder of them (a file per participant) read as one.",
+    help="Trial log (CSV, Parquet, JSON, Excel, SPSS, Stata); several files or a folder of them (a file per participant) "
+    "read as one.",
 )
 OneRowPerTrialLogArg = typer.Argument(
     ...,
-    help="Trial log (CSV, Parquet, JSON, Excel), one row per trial; several files or a folder of them (a file per participant) "
-    "read as one.",
+    help="Trial log (CSV, Parquet, JSON, Excel, SPSS, Stata), one row per trial; several files or a folder of them (a file "
+    "per participant) read as one.",
 )
 
 

@@ -1,5 +1,6 @@
 """The sources a log is read from: CSV (delimiter sniffed; gzip, bzip2 or zstd compressed too),
-Parquet, JSON lines, JSON, Excel workbooks (:mod:`.workbooks`) and data frames.
+Parquet, JSON lines, JSON, Excel workbooks (:mod:`.workbooks`), SPSS, Stata and SAS data files
+(:mod:`.statfiles`) and data frames.
 
 Each source becomes a :class:`RawLog`: its columns as :class:`~.cells.Column` codes, read
 column by column (pyarrow where it can), with the rows numbered as in the file.
@@ -36,6 +37,7 @@ from .suffixes import (
     OTHER_SHEET_SUFFIXES,
     PACKED_SUFFIXES,
     PARQUET_SUFFIXES,
+    STAT_SUFFIXES,
     WORKBOOK_SUFFIXES,
     kind_suffix,
 )
@@ -154,12 +156,18 @@ def load_source(
         from .workbooks import load_workbook
 
         return load_workbook(path, name, sheet, missing)
+    if suffix in STAT_SUFFIXES:
+        if explode is not None:
+            raise DataError(["explode: a variable's value is not a list; per-trial lists are read from JSON or Parquet"], name)
+        from .statfiles import load_statfile
+
+        return load_statfile(path, name, missing)
     how = {**dict.fromkeys(OTHER_SHEET_SUFFIXES, "a spreadsheet: save it as an Excel workbook (.xlsx) or 'CSV UTF-8'"),
            **dict.fromkeys(PACKED_SUFFIXES, "a compressed file: decompress it first, e.g. with gunzip or unzip")}  # fmt: skip
     hint = f" ({how[suffix]})" if suffix in how else ""
     raise DataError(
-        [f"unknown file type {suffix!r}{hint}: use .csv, .tsv, .parquet, .jsonl, .json or .xlsx (a CSV may be compressed: "
-         ".csv.gz, .csv.bz2, .csv.zst)"],
+        [f"unknown file type {suffix!r}{hint}: use .csv, .tsv, .parquet, .jsonl, .json, .xlsx, .sav, .dta or .sas7bdat (a CSV "
+         "may be compressed: .csv.gz, .csv.bz2, .csv.zst)"],
         name,
     )  # fmt: skip
 
@@ -584,8 +592,13 @@ def _plain(name: str) -> str:
     return re.sub(r"[\s_\-.]+", "", name).lower()
 
 
-def missing_column_hint(missing: list[str], present: list[str], sep: str | None) -> list[str]:
-    alike = {c: [p for p in present if _plain(p) == _plain(c)] for c in missing}
+def missing_column_hint(
+    missing: list[str], present: list[str], sep: str | None, sought: dict[str, str] | None = None
+) -> list[str]:
+    """Hints for the canonical columns ``missing`` (``sought`` under the names a mapping gave them):
+    the flags naming a column of the log written in another style, and what else may help."""
+    sought = sought or {}
+    alike = {c: [p for p in present if _plain(p) in (_plain(c), _plain(sought.get(c, c)))] for c in missing}
     named = " ".join(f"--column {shlex.quote(f'{c}={shorten(found[0], 80)}')}" for c, found in alike.items() if len(found) == 1)
     hints = [f"columns named in another style: {named}"] if named else []
     hints.append("name another column with --column canonical=theirs or a --mapping file (Python: ColumnMapping)")
@@ -593,7 +606,7 @@ def missing_column_hint(missing: list[str], present: list[str], sep: str | None)
         times = [p for p in present if re.search("time|stamp|date|onset|start", p, re.IGNORECASE)]
         order = shlex.quote(times[0]) if times else "COLUMN"
         hints.append(f"trials without numbers are put in order by a column of times or numbers: --order {order}")
-    if {"complexity", "robot_action"} & set(missing):
+    if any(c in missing and not alike[c] for c in ("complexity", "robot_action")):
         hints.append(
             "a log without complexity/robot_action can be fitted by a model that does not use them: "
             "--transitions-on experience --emissions-on none"

@@ -12,10 +12,11 @@ PARQUET_SUFFIXES = (".parquet", ".pq")
 JSONL_SUFFIXES = (".jsonl", ".ndjson")
 JSON_SUFFIXES = (".json",)
 WORKBOOK_SUFFIXES = (".xlsx", ".xlsm")
+STAT_SUFFIXES = (".sav", ".zsav", ".por", ".dta", ".sas7bdat", ".xpt")  # SPSS, Stata, SAS
 OTHER_SHEET_SUFFIXES = (".xls", ".ods", ".numbers")  # spreadsheets not read: saved as .xlsx or CSV first
 PACKED_SUFFIXES = (".gz", ".zip", ".bz2", ".xz", ".zst", ".7z")
 #: the files a folder's log reads, by the suffix that says what they hold
-FOLDER_SUFFIXES = (".csv", ".tsv", *PARQUET_SUFFIXES, *JSONL_SUFFIXES, *JSON_SUFFIXES, *WORKBOOK_SUFFIXES)
+FOLDER_SUFFIXES = (".csv", ".tsv", *PARQUET_SUFFIXES, *JSONL_SUFFIXES, *JSON_SUFFIXES, *WORKBOOK_SUFFIXES, *STAT_SUFFIXES)
 
 
 def kind_suffix(path: Path) -> str:
@@ -26,7 +27,7 @@ def kind_suffix(path: Path) -> str:
 
 def is_trial_log(path: Path) -> bool:
     """Whether ``path`` names a trial log rather than a model, task or policy file: a folder, a
-    log's suffix (``.csv``, ``.parquet``, ``.jsonl``, ``.xlsx``, ...), or a ``.json`` file of records
+    log's suffix (``.csv``, ``.parquet``, ``.jsonl``, ``.xlsx``, ``.sav``, ...), or a ``.json`` file of records
     (an array, or an object holding them: not a file with a ``"format"``)."""
     suffix = kind_suffix(path)
     if path.is_dir() or (suffix in (*CSV_SUFFIXES, *FOLDER_SUFFIXES) and suffix not in JSON_SUFFIXES):

@@ -39,7 +39,7 @@ def read_trials(
     check_experience: bool = True,
 ) -> pd.DataFrame:
     """Read, map and validate a trial log (CSV/TSV, Parquet, JSON lines, a JSON array, an Excel
-    workbook or a DataFrame).
+    workbook, an SPSS, Stata or SAS file, or a DataFrame).
 
     Returns the canonical columns in order (``participant`` and the categorical
     columns as pandas categoricals with the canonical labels, ``trial`` as int64,
@@ -171,7 +171,7 @@ def _check_columns(
         f"missing column {theirs[c]!r}{f' (mapped from canonical {c!r})' if theirs[c] != c else ''}{present}" for c in absent
     ]
     if lines:
-        hints = missing_column_hint(absent, raw.columns, delimiter or mapping.delimiter) if absent else []
+        hints = missing_column_hint(absent, raw.columns, delimiter or mapping.delimiter, theirs) if absent else []
         raise DataError(lines + hints, raw.name)
     if raw.n == 0:
         raise DataError(["the log has no trials (only a header)"], raw.name)

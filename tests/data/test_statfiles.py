@@ -1,0 +1,74 @@
+"""data/statfiles: SPSS, Stata and SAS data files read as trial logs, as the same table in CSV;
+value labels read as their labels, missing values as empty cells, damaged files refused by name."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pyreadstat
+import pytest
+
+from cli_runner import run_cli
+from trustseek.data import DataError, example_path, read_trials
+
+SHORT = {"participant": "pid", "human_action": "human", "robot_action": "robot", "complexity": "cx", "experience": "exp"}
+
+
+@pytest.fixture(scope="module")
+def log() -> pd.DataFrame:
+    return pd.read_csv(example_path())
+
+
+@pytest.mark.parametrize(
+    ("suffix", "write"),
+    [
+        (".sav", pyreadstat.write_sav),
+        (".zsav", lambda f, p: pyreadstat.write_sav(f, p, compress=True)),
+        (".dta", pyreadstat.write_dta),
+        (".xpt", pyreadstat.write_xport),  # SAS transport: names of at most 8 characters
+        (".por", pyreadstat.write_por),
+    ],
+)
+def test_each_format_reads_as_the_same_log_in_csv(log, tmp_path, suffix, write):
+    frame = log.drop(columns="true_trust").rename(columns=SHORT)
+    write(frame, str(tmp_path / f"log{suffix}"))
+    case = str.upper if suffix == ".por" else str  # SPSS portable files keep names in capitals
+    mapping = {"columns": {canon: case(short) for canon, short in SHORT.items()} | {"trial": case("trial")}}
+    got = read_trials(tmp_path / f"log{suffix}", mapping)
+    pd.testing.assert_frame_equal(got, read_trials(log.drop(columns="true_trust")), check_categorical=False)
+
+
+def test_value_labels_are_read_as_labels_and_missing_values_as_empty(log, tmp_path):
+    """A human action coded 0/1 with value labels reads as its labels; SPSS's system-missing and a
+    value the file declares missing (9) are not recorded."""
+    frame = log.drop(columns="true_trust").copy()
+    frame["human_action"] = (frame.human_action == "rely").astype(float)
+    frame.loc[3, "human_action"] = float("nan")
+    frame.loc[5, "human_action"] = 9.0
+    pyreadstat.write_sav(
+        frame,
+        str(tmp_path / "log.sav"),
+        variable_value_labels={"human_action": {0.0: "intervene", 1.0: "rely", 9.0: "no answer"}},
+        missing_ranges={"human_action": [9.0]},
+    )
+    got = read_trials(tmp_path / "log.sav")
+    assert got.human_action.isna().tolist()[:7] == [False, False, False, True, False, True, False]
+    assert got.human_action.dropna().tolist() == log.human_action.drop([3, 5]).tolist()
+    pyreadstat.write_sav(frame.fillna(9.0).replace(9.0, 2.0), str(tmp_path / "coded.sav"),
+                         variable_value_labels={"human_action": {0.0: "intervene", 1.0: "rely"}})  # fmt: skip
+    with pytest.raises(DataError, match=r"column 'human_action': unknown category .* row 4 '2'"):
+        read_trials(tmp_path / "coded.sav")
+
+
+def test_a_folder_of_spss_files_one_per_participant_reads_as_one_log(log, tmp_path):
+    small = log[log.participant.isin(["P001", "P002"])]
+    for pid, g in small.groupby("participant"):
+        pyreadstat.write_sav(g.drop(columns="participant"), str(tmp_path / f"{pid}.sav"))
+    assert read_trials(tmp_path).equals(read_trials(small))
+
+
+@pytest.mark.parametrize("suffix", [".sav", ".dta", ".sas7bdat", ".xpt", ".por"])
+def test_a_damaged_file_is_refused_by_name(tmp_path, suffix):
+    path = tmp_path / f"log{suffix}"
+    path.write_bytes(b"participant,trial\nP1,1\n")
+    code, output = run_cli(["fit", str(path)])
+    assert code == 2 and f"{path}: cannot read the file as " in output and "Traceback" not in output, output
