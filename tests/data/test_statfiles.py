@@ -72,3 +72,13 @@ def test_a_damaged_file_is_refused_by_name(tmp_path, suffix):
     path.write_bytes(b"participant,trial\nP1,1\n")
     code, output = run_cli(["fit", str(path)])
     assert code == 2 and f"{path}: cannot read the file as " in output and "Traceback" not in output, output
+
+
+@pytest.mark.parametrize(
+    ("suffix", "what"), [(".csv", "a CSV cell is text"), (".xlsx", "a sheet's cell is a value"), (".sav", "a variable's value")]
+)
+def test_explode_is_refused_for_a_file_of_single_values(log, tmp_path, suffix, what):
+    path = tmp_path / f"log{suffix}"
+    path.write_bytes(b"")  # refused before the file is read
+    with pytest.raises(DataError, match=f"explode: {what}.*, not a list; per-trial lists are read from JSON or Parquet"):
+        read_trials(path, {"explode": ["human_action"]})

@@ -142,23 +142,19 @@ def load_source(
 
         table = _parquet_table(path, name)
         return _arrow_raw(table if explode is None else explode_table(table, explode, name, "row"), name, missing, True)
+    flat = {**dict.fromkeys(CSV_SUFFIXES, "a CSV cell is text"), **dict.fromkeys(WORKBOOK_SUFFIXES, "a sheet's cell is a value"),
+            **dict.fromkeys(STAT_SUFFIXES, "a variable's value is one value")}  # fmt: skip
+    if explode is not None and kind_suffix(path) in flat:
+        raise DataError([f"explode: {flat[kind_suffix(path)]}, not a list; per-trial lists are read from JSON or Parquet"], name)
     if kind_suffix(path) in CSV_SUFFIXES:
-        if explode is not None:
-            raise DataError(["explode: a CSV cell is text, not a list; per-trial lists are read from JSON or Parquet"], name)
         return _load_csv(path, name, sep, missing)
     if suffix in JSONL_SUFFIXES + JSON_SUFFIXES:
         return _load_json(path, name, _json_lines(path, suffix in JSONL_SUFFIXES), missing, explode)
     if suffix in WORKBOOK_SUFFIXES:
-        if explode is not None:
-            raise DataError(
-                ["explode: a sheet's cell is a value, not a list; per-trial lists are read from JSON or Parquet"], name
-            )
         from .workbooks import load_workbook
 
         return load_workbook(path, name, sheet, missing)
     if suffix in STAT_SUFFIXES:
-        if explode is not None:
-            raise DataError(["explode: a variable's value is not a list; per-trial lists are read from JSON or Parquet"], name)
         from .statfiles import load_statfile
 
         return load_statfile(path, name, missing)
