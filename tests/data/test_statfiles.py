@@ -3,6 +3,8 @@ value labels read as their labels, missing values as empty cells, damaged files 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pandas as pd
 import pyreadstat
 import pytest
@@ -82,3 +84,13 @@ def test_explode_is_refused_for_a_file_of_single_values(log, tmp_path, suffix, w
     path.write_bytes(b"")  # refused before the file is read
     with pytest.raises(DataError, match=f"explode: {what}.*, not a list; per-trial lists are read from JSON or Parquet"):
         read_trials(path, {"explode": ["human_action"]})
+
+
+def test_a_file_that_crashes_the_reader_is_refused_and_the_command_goes_on(tmp_path):
+    """files/damaged.sav (an SPSS file with a few bytes changed) makes readstat's C parser end its
+    process with a segmentation fault: read in this process, the command died without a word."""
+    damaged = Path(__file__).parent / "files" / "damaged.sav"
+    with pytest.raises(DataError, match=r"cannot read the file as SPSS data: the reader stopped on it \(exit code -\d+\)"):
+        read_trials(damaged)
+    code, output = run_cli(["check", str(damaged), str(example_path())])
+    assert code == 2 and "the file is damaged" in output and f"{example_path()}: ok" in output, output

@@ -9,6 +9,7 @@ case, as the data view numbers them.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
@@ -27,16 +28,7 @@ READERS = {
 
 def load_statfile(path: Path, name: str, missing: frozenset[str]) -> RawLog:
     """The log a statistics package's data file holds."""
-    import pyreadstat
-
-    read = getattr(pyreadstat, READERS[path.suffix.lower()])
-    try:
-        frame, meta = read(str(path))  # the codes, with the labels in meta
-    except pyreadstat.ReadstatError as exc:
-        raise DataError([f"cannot read the file as {_kind(path)} data: {shorten(str(exc), 200)}"], name) from None
-    except OSError as exc:
-        raise DataError([f"cannot read the file: {exc.strerror or exc}"], name) from None
-    labels = getattr(meta, "variable_value_labels", {}) or {}
+    frame, labels = _read_apart(path, name)
     columns = {c: _cells(frame[c], labels.get(c, {})) for c in frame.columns}
     frame = pd.DataFrame(columns, index=pd.RangeIndex(len(frame)))
     return RawLog(
@@ -48,6 +40,53 @@ def load_statfile(path: Path, name: str, missing: frozenset[str]) -> RawLog:
     )
 
 
+def _read(path: str, suffix: str) -> tuple[pd.DataFrame, dict] | str:
+    """The file's data and value labels, or what is wrong with it."""
+    import pyreadstat
+
+    try:
+        frame, meta = getattr(pyreadstat, READERS[suffix])(path)  # the codes, with the labels in meta
+    except pyreadstat.ReadstatError as exc:
+        return f"cannot read the file as {_kind(suffix)} data: {shorten(str(exc), 200)}"
+    except OSError as exc:
+        return f"cannot read the file: {exc.strerror or exc}"
+    return frame, dict(getattr(meta, "variable_value_labels", {}) or {})
+
+
+def _child(path: str, suffix: str, conn: Any) -> None:
+    try:
+        conn.send(_read(path, suffix))
+    except Exception as exc:  # whatever the reader raises is said, not raised, in the parent
+        conn.send(f"cannot read the file as {_kind(suffix)} data: {type(exc).__name__}: {shorten(str(exc), 200)}")
+    conn.close()
+
+
+def _read_apart(path: Path, name: str) -> tuple[pd.DataFrame, dict]:
+    """:func:`_read` in a forked process: readstat's C parser can crash on a damaged file (a
+    segmentation fault on a damaged .sav), which would end the command without a word."""
+    import multiprocessing as mp
+
+    suffix = path.suffix.lower()
+    if "fork" not in mp.get_all_start_methods():  # no fork (Windows): read here
+        got = _read(str(path), suffix)
+    else:
+        ctx = mp.get_context("fork")
+        receive, send = ctx.Pipe(duplex=False)
+        child = ctx.Process(target=_child, args=(str(path), suffix, send), daemon=True)
+        child.start()
+        send.close()
+        try:
+            got = receive.recv()
+        except EOFError:  # the reader died without an answer
+            child.join()
+            stopped = f"the reader stopped on it (exit code {child.exitcode}): the file is damaged"
+            got = f"cannot read the file as {_kind(suffix)} data: {stopped}"
+        child.join()
+    if isinstance(got, str):
+        raise DataError([got], name)
+    return got
+
+
 def _cells(values: pd.Series, labels: dict) -> pd.Series:
     """A variable's cells as Python values: a labelled code as its label, a missing value as None."""
     out = values.astype(object).where(values.notna(), None)
@@ -56,6 +95,5 @@ def _cells(values: pd.Series, labels: dict) -> pd.Series:
     return out
 
 
-def _kind(path: Path) -> str:
-    suffix = path.suffix.lower()
+def _kind(suffix: str) -> str:
     return "SPSS" if suffix in (".sav", ".zsav", ".por") else "Stata" if suffix == ".dta" else "SAS"

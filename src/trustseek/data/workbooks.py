@@ -18,6 +18,7 @@ import collections
 import re
 import xml.etree.ElementTree as ET
 import zipfile
+import zlib
 from pathlib import Path, PurePosixPath
 from typing import Any
 from xml.sax.saxutils import unescape
@@ -46,6 +47,10 @@ def load_workbook(path: Path, name: str, sheet: str | None, missing: frozenset[s
         marked = _marked_cells(path, chosen, label)
     except CalamineError as exc:
         raise DataError([f"cannot read the file as an Excel workbook (.xlsx): {shorten(str(exc), 200)}"], name) from None
+    except BaseException as exc:  # the Rust reader's panic on a damaged file (pyo3's PanicException is no Exception)
+        if type(exc).__name__ != "PanicException":
+            raise
+        raise DataError([f"cannot read the file as an Excel workbook (.xlsx): the reader stopped on it: {exc}"], name) from None
     except OSError as exc:
         raise DataError([f"cannot read the file: {exc.strerror or exc}"], name) from None
     every = grid  # the cells as read; each converted (:func:`_cell`) when its column is used
@@ -127,7 +132,8 @@ def _marked_cells(path: Path, sheet: str, label: str) -> dict[tuple[int, int], s
         with zipfile.ZipFile(path) as z:
             part = _sheet_part(z, sheet)
             data = z.read(part) if part is not None else b""
-    except (zipfile.BadZipFile, KeyError, ET.ParseError, OSError) as exc:
+    except (zipfile.BadZipFile, KeyError, ET.ParseError, OSError, EOFError, NotImplementedError, RuntimeError, zlib.error) as exc:
+        # a damaged package, or one zipfile cannot open (patched or encrypted data)
         raise DataError([f"cannot read the sheet: {shorten(str(exc), 200)}"], label) from None
     if b't="e"' not in data and b"<f" not in data and b":f" not in data:  # no error cell, no formula (a quick test)
         return {}
@@ -162,7 +168,7 @@ def _sheet_part(z: zipfile.ZipFile, sheet: str) -> str | None:
 
 
 def _text(raw: bytes) -> str:
-    return unescape(raw.decode("utf-8"), {"&quot;": '"', "&apos;": "'"})
+    return unescape(raw.decode("utf-8", "replace"), {"&quot;": '"', "&apos;": "'"})
 
 
 def _column_index(letters: str) -> int:
