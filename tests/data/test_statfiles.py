@@ -118,3 +118,13 @@ def test_a_corrupted_file_is_refused_or_read_never_a_crash(tmp_path_factory, val
     path.write_bytes(bytes(raw[: data.draw(st.one_of(st.none(), st.integers(0, len(raw))))]))
     with contextlib.suppress(DataError):  # refused by name, or read: anything else fails the test
         read_trials(path)
+
+
+def test_a_reader_that_never_ends_is_stopped_and_the_file_refused(log, tmp_path, monkeypatch):
+    from trustseek.data import statfiles
+
+    pyreadstat.write_dta(log.head(5), str(tmp_path / "log.dta"))
+    monkeypatch.setattr(statfiles, "READ_SECONDS", 0.5)
+    monkeypatch.setattr(statfiles, "_read", lambda path, suffix: __import__("time").sleep(60))  # in the forked reader
+    with pytest.raises(DataError, match=r"log.dta: cannot read the file as Stata data: the reader did not finish in 1 s"):
+        read_trials(tmp_path / "log.dta")

@@ -8,6 +8,7 @@ case, as the data view numbers them.
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +16,7 @@ import pandas as pd
 
 from .cells import DataError, RawLog, column_from_pandas, shorten
 
+READ_SECONDS = 60  # the longest a file is read (a second more per MB) before its reader is stopped
 #: the readers of pyreadstat, by suffix
 READERS = {
     ".sav": "read_sav",
@@ -75,12 +77,18 @@ def _read_apart(path: Path, name: str) -> tuple[pd.DataFrame, dict]:
         child = ctx.Process(target=_child, args=(str(path), suffix, send), daemon=True)
         child.start()
         send.close()
+        seconds = READ_SECONDS + path.stat().st_size / 1e6  # and a second more per MB
+        deadline = time.monotonic() + seconds
+        while not receive.poll(0.05) and child.is_alive() and time.monotonic() < deadline:
+            pass
+        kind = f"cannot read the file as {_kind(suffix)} data"
         try:
-            got = receive.recv()
+            got = receive.recv() if receive.poll() else f"{kind}: the reader did not finish in {seconds:.0f} s"
         except EOFError:  # the reader died without an answer
             child.join()
-            stopped = f"the reader stopped on it (exit code {child.exitcode}): the file is damaged"
-            got = f"cannot read the file as {_kind(suffix)} data: {stopped}"
+            got = f"{kind}: the reader stopped on it (exit code {child.exitcode}): the file is damaged"
+        if child.is_alive() and not isinstance(got, tuple):
+            child.kill()
         child.join()
     if isinstance(got, str):
         raise DataError([got], name)
