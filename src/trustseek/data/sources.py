@@ -16,7 +16,6 @@ import json
 import mmap
 import os
 import re
-import shlex
 import sys
 from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from pathlib import Path
@@ -580,33 +579,3 @@ def _bad_row(number: int | None, got: int, text: str, skip: int = 1) -> str:
     where = f"row {number - skip}" if number is not None else "a row"
     quote = ", an unterminated quote" if text.count('"') % 2 else ""
     return f"{where} ({got} fields{quote}): {text[:60]!r}"
-
-
-def _plain(name: str) -> str:
-    """A column name without case, spacing and word style: ``Robot Action``, ``robot-action``,
-    ``ROBOT_ACTION`` and ``robotAction`` read ``robotaction``."""
-    return re.sub(r"[\s_\-.]+", "", name).lower()
-
-
-def missing_column_hint(
-    missing: list[str], present: list[str], sep: str | None, sought: dict[str, str] | None = None
-) -> list[str]:
-    """Hints for the canonical columns ``missing`` (``sought`` under the names a mapping gave them):
-    the flags naming a column of the log written in another style, and what else may help."""
-    sought = sought or {}
-    alike = {c: [p for p in present if _plain(p) in (_plain(c), _plain(sought.get(c, c)))] for c in missing}
-    named = " ".join(f"--column {shlex.quote(f'{c}={shorten(found[0], 80)}')}" for c, found in alike.items() if len(found) == 1)
-    hints = [f"columns named in another style: {named}"] if named else []
-    hints.append("name another column with --column canonical=theirs or a --mapping file (Python: ColumnMapping)")
-    if "trial" in missing and not alike["trial"]:
-        times = [p for p in present if re.search("time|stamp|date|onset|start", p, re.IGNORECASE)]
-        order = shlex.quote(times[0]) if times else "COLUMN"
-        hints.append(f"trials without numbers are put in order by a column of times or numbers: --order {order}")
-    if any(c in missing and not alike[c] for c in ("complexity", "robot_action")):
-        hints.append(
-            "a log without complexity/robot_action can be fitted by a model that does not use them: "
-            "--transitions-on experience --emissions-on none"
-        )
-    if len(present) == 1 and any(d in present[0] for d in DELIMITERS if d != sep):
-        hints.append(f"the header has a single column {present[0]!r}: is the file separated by another delimiter?")
-    return [f"hint: {h}" for h in hints]

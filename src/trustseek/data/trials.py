@@ -12,6 +12,7 @@ drop rules, participants, trials, derived columns, labels, rating, experience.
 from __future__ import annotations
 
 import re
+import shlex
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -20,13 +21,13 @@ import numpy as np
 import pandas as pd
 
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
-from .cells import NAN_MARK, Column, DataError, Problems, RawLog, spellings, value_ids
+from .cells import NAN_MARK, Column, DataError, Problems, RawLog, shorten, spellings, value_ids
 from .folders import FILE_COLUMN
 from .layouts import join_file, unpivot
 from .levels import category_codes, input_codes, one_rating_per_block, rating_codes
 from .mapping import CANONICAL, CATEGORICAL, RATING, ColumnMapping, as_mapping, label_key
 from .order import check_trials, order_trials, trial_numbers
-from .sources import PARQUET_SUFFIXES, load_source, missing_column_hint
+from .sources import DELIMITERS, PARQUET_SUFFIXES, load_source
 
 
 def read_trials(
@@ -171,7 +172,7 @@ def _check_columns(
         f"missing column {theirs[c]!r}{f' (mapped from canonical {c!r})' if theirs[c] != c else ''}{present}" for c in absent
     ]
     if lines:
-        hints = missing_column_hint(absent, raw.columns, delimiter or mapping.delimiter, theirs) if absent else []
+        hints = _missing_column_hint(absent, raw.columns, delimiter or mapping.delimiter, theirs) if absent else []
         raise DataError(lines + hints, raw.name)
     if raw.n == 0:
         raise DataError(["the log has no trials (only a header)"], raw.name)
@@ -481,3 +482,33 @@ def _dictionary(codes: np.ndarray, values: list[str]) -> Any:
 def example_path(name: str = "paper_trials.csv") -> Path:
     """Path of an example file shipped in ``trustseek/examples``."""
     return Path(__file__).resolve().parent.parent / "examples" / name
+
+
+def _plain(name: str) -> str:
+    """A column name without case, spacing and word style: ``Robot Action``, ``robot-action``,
+    ``ROBOT_ACTION`` and ``robotAction`` read ``robotaction``."""
+    return re.sub(r"[\s_\-.]+", "", name).lower()
+
+
+def _missing_column_hint(
+    missing: list[str], present: list[str], sep: str | None, sought: dict[str, str] | None = None
+) -> list[str]:
+    """Hints for the canonical columns ``missing`` (``sought`` under the names a mapping gave them):
+    the flags naming a column of the log written in another style, and what else may help."""
+    sought = sought or {}
+    alike = {c: [p for p in present if _plain(p) in (_plain(c), _plain(sought.get(c, c)))] for c in missing}
+    named = " ".join(f"--column {shlex.quote(f'{c}={shorten(found[0], 80)}')}" for c, found in alike.items() if len(found) == 1)
+    hints = [f"columns named in another style: {named}"] if named else []
+    hints.append("name another column with --column canonical=theirs or a --mapping file (Python: ColumnMapping)")
+    if "trial" in missing and not alike["trial"]:
+        times = [p for p in present if re.search("time|stamp|date|onset|start", p, re.IGNORECASE)]
+        order = shlex.quote(times[0]) if times else "COLUMN"
+        hints.append(f"trials without numbers are put in order by a column of times or numbers: --order {order}")
+    if any(c in missing and not alike[c] for c in ("complexity", "robot_action")):
+        hints.append(
+            "a log without complexity/robot_action can be fitted by a model that does not use them: "
+            "--transitions-on experience --emissions-on none"
+        )
+    if len(present) == 1 and any(d in present[0] for d in DELIMITERS if d != sep):
+        hints.append(f"the header has a single column {present[0]!r}: is the file separated by another delimiter?")
+    return [f"hint: {h}" for h in hints]
