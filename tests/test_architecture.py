@@ -73,3 +73,29 @@ def test_test_modules_have_names_of_their_own():
         if path.name not in ("__init__.py", "conftest.py"):
             names.setdefault(path.name, []).append(str(path.relative_to(ROOT)))
     assert {n: p for n, p in names.items() if len(p) > 1} == {}
+
+
+def test_modules_and_functions_stay_small():
+    """A module of at most 600 lines, a function of at most 100, and at most 10 parameters outside
+    the command line's commands (Typer's options are parameters there): a newcomer reads a module at
+    a sitting.  data/sources.py once grew to 612 lines unseen, measured only by hand."""
+    import ast
+
+    big, long, wide = [], [], []
+    for path in sorted((ROOT / "src" / "trustseek").rglob("*.py")):
+        text = path.read_text()
+        name = str(path.relative_to(ROOT))
+        if text.count("\n") > 600:
+            big.append(f"{name}: {text.count(chr(10))} lines")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lines = node.end_lineno - node.lineno + 1
+                if lines > 100:
+                    long.append(f"{name}:{node.lineno} {node.name}: {lines} lines")
+                a = node.args
+                count = (
+                    len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs) - (a.args[:1] != [] and a.args[0].arg in ("self", "cls"))
+                )
+                if count > 10 and "/cli/" not in name:
+                    wide.append(f"{name}:{node.lineno} {node.name}: {count} parameters")
+    assert (big, long, wide) == ([], [], [])
