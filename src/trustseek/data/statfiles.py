@@ -56,6 +56,9 @@ def _read(path: str, suffix: str) -> tuple[pd.DataFrame, dict] | str:
 
 
 def _child(path: str, suffix: str, conn: Any) -> None:
+    import faulthandler
+
+    faulthandler.disable()  # a crash here is the parent's to say (pytest's handler would print a trace)
     try:
         conn.send(_read(path, suffix))
     except Exception as exc:  # whatever the reader raises is said, not raised, in the parent
