@@ -71,6 +71,8 @@ def _read_apart(path: Path, name: str) -> tuple[pd.DataFrame, dict]:
     segmentation fault on a damaged .sav), which would end the command without a word."""
     import multiprocessing as mp
 
+    import pyreadstat  # noqa: F401  (here, once: each forked reader has it without importing it, 0.2 s)
+
     suffix = path.suffix.lower()
     if "fork" not in mp.get_all_start_methods():  # no fork (Windows): read here
         got = _read(str(path), suffix)
