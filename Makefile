@@ -8,11 +8,17 @@ setup:
 reproduce: setup
 	.venv/bin/trustseek reproduce --out report
 
-# the static checks first, then every test; one BLAS thread per test worker, so that the two
-# workers do not oversubscribe the cores (the compiled code is built by setup: nothing compiles
+# every test, with the static checks (make lint) beside them in a process of their own (mypy on a
+# clean clone takes a minute of one core, which the tests' waits leave free), their output printed
+# after the tests'; either failing fails the target.  One BLAS thread per test worker, so that the
+# two workers do not oversubscribe the cores (the compiled code is built by setup: nothing compiles
 # while the tests run)
-test: setup lint
-	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 .venv/bin/python -m pytest -n 2 --dist worksteal -q
+test: setup
+	@log=$$(mktemp); $(MAKE) --no-print-directory lint > "$$log" 2>&1 & lint=$$!; \
+	OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 .venv/bin/python -m pytest -n 2 --dist worksteal -q; tests=$$?; \
+	wait $$lint; checks=$$?; cat "$$log"; rm -f "$$log"; \
+	if [ $$checks -ne 0 ]; then echo "test: the static checks failed (above)"; fi; \
+	[ $$tests -eq 0 ] && [ $$checks -eq 0 ]
 
 # static checks: lint and formatting, types, the layer contracts of docs/architecture.md,
 # and the front end's types
