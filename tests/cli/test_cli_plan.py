@@ -124,10 +124,27 @@ def test_check_reads_a_trial_log_as_the_fit_does_and_says_what_it_holds(tmp_path
     code, output = run_cli(["check", log])
     assert code == 0, output
     said = " ".join(output.split())
-    assert f"{log}: ok: 639 trials of 9 participants (71 each); human_action: intervene 172, rely 467;" in said
-    assert "complexity: low 369, high 270; robot_action: autonomous 501, ask 138; experience: faulty 107, reliable 532" in said
+    raw = pd.read_csv(log)  # the counts the summary must give, counted here from the file
+
+    def counts(c: str, order: list[str]) -> str:
+        n = raw[c].value_counts()
+        return f"{c}: " + ", ".join(f"{v} {n[v]}" for v in order)
+
+    per = raw.groupby("participant").size()
+    assert per.nunique() == 1
+    assert f"{log}: ok: {len(raw)} trials of {len(per)} participants ({per.iloc[0]} each); " in said
+    summary = "; ".join(
+        counts(c, order)
+        for c, order in (
+            ("human_action", ["intervene", "rely"]),
+            ("complexity", ["low", "high"]),
+            ("robot_action", ["autonomous", "ask"]),
+            ("experience", ["faulty", "reliable"]),
+        )
+    )
+    assert summary in said, (summary, said)
     # with the log options, as the fit reads it; a JSON array of records and a folder too
-    frame = pd.read_csv(log).rename(columns={"human_action": "response"})
+    frame = raw.rename(columns={"human_action": "response"})
     frame["response"] = frame.response.map({"rely": 1, "intervene": 0}).astype("Int64")
     frame.loc[3, "response"] = pd.NA
     frame.to_json(tmp_path / "log.json", orient="records")
@@ -137,7 +154,9 @@ def test_check_reads_a_trial_log_as_the_fit_does_and_says_what_it_holds(tmp_path
     flags = ["--column", "human_action=response", "--label", "human_action:1=rely", "--label", "human_action:0=intervene"]
     code, output = run_cli(["check", str(tmp_path / "log.json"), str(tmp_path / "logs"), *flags])
     said = " ".join(output.split())
-    assert code == 0 and said.count("human_action: intervene 172, rely 466, not recorded 1") == 2, output
+    recorded = frame.response.drop(3).value_counts()
+    expected = f"human_action: intervene {recorded[0]}, rely {recorded[1]}, not recorded 1"
+    assert code == 0 and said.count(expected) == 2, output
     code, output = run_cli(["check", str(tmp_path / "log.json")])  # without the flags: located, exit 2
     assert code == 2 and "missing column 'human_action'" in output and "--column 'human_action=response'" not in output
 

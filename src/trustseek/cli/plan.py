@@ -312,7 +312,7 @@ def check(
 ) -> None:
     """Validate model (trust or general), task, policy and mapping files, and trial logs as the fit
     reads them (with the log options); print every problem found, and what each log holds."""
-    from ..data.suffixes import is_mapping_file, is_trial_log
+    from ..data.suffixes import file_kind
     from ..model.core import TrustModel
     from ..model.files import IOHMM_FORMAT
     from ..model.jsonfile import ModelError, load_json
@@ -321,14 +321,15 @@ def check(
 
     problems: list[str] = []
     for f in files:
-        if is_trial_log(f):
+        kind = file_kind(f)
+        if kind == "log":
             try:
                 console.print(f"{f}: ok: {_log_summary(reading.read([f], ('complexity', 'robot_action', 'experience')))}",
                               soft_wrap=True, highlight=False)  # fmt: skip
             except TrustseekError as exc:
                 problems.extend(exc.lines())
             continue
-        if is_mapping_file(f):
+        if kind == "mapping":
             from ..data.mapping import ColumnMapping
 
             try:

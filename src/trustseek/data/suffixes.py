@@ -25,36 +25,28 @@ def kind_suffix(path: Path) -> str:
     return suffixes[-2] if len(suffixes) > 1 and suffixes[-1] in COMPRESSED else path.suffix.lower()
 
 
-def is_trial_log(path: Path) -> bool:
-    """Whether ``path`` names a trial log rather than a model, task or policy file: a folder, a
-    log's suffix (``.csv``, ``.parquet``, ``.jsonl``, ``.xlsx``, ``.sav``, ...), or a ``.json`` file of records
-    (an array, or an object holding them: not a file with a ``"format"``)."""
+def file_kind(path: Path) -> str:
+    """What ``path`` names, as ``trustseek check`` reads it: ``"log"`` (a folder, a log's suffix
+    such as ``.csv``, ``.parquet``, ``.xlsx``, ``.sav``, or a ``.json`` file of records: an array, or
+    an object holding them), ``"mapping"`` (a ``.toml`` file, or a ``.json`` object of a mapping's
+    entries only) or ``"json"`` (a model, task or policy file, or one the model reader says is not).
+    A ``.json`` file is read once, and only when its suffix leaves the kind open."""
     suffix = kind_suffix(path)
     if path.is_dir() or (suffix in (*CSV_SUFFIXES, *FOLDER_SUFFIXES) and suffix not in JSON_SUFFIXES):
-        return True
+        return "log"
+    if suffix == ".toml":
+        return "mapping"
     if suffix not in JSON_SUFFIXES or not path.is_file():
-        return False
+        return "json"
     try:
         data = json.loads(path.read_bytes())
     except (OSError, ValueError, RecursionError):
-        return False  # the model reader says what is wrong with it
+        return "json"  # the model reader says what is wrong with it
     if isinstance(data, list):
-        return True
-    return isinstance(data, dict) and "format" not in data and not _mapping(data) and _holds_records(data)
-
-
-def is_mapping_file(path: Path) -> bool:
-    """Whether ``path`` names a column mapping: a ``.toml`` file, or a ``.json`` object whose entries
-    are all a mapping's (``columns``, ``labels``, ``order``, ...)."""
-    if path.suffix.lower() == ".toml":
-        return True
-    if path.suffix.lower() not in JSON_SUFFIXES or not path.is_file():
-        return False
-    try:
-        data = json.loads(path.read_bytes())
-    except (OSError, ValueError, RecursionError):
-        return False
-    return isinstance(data, dict) and "format" not in data and _mapping(data)
+        return "log"
+    if not isinstance(data, dict) or "format" in data:
+        return "json"
+    return "mapping" if _mapping(data) else "log" if _holds_records(data) else "json"
 
 
 def _mapping(data: dict) -> bool:
