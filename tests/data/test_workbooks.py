@@ -111,6 +111,9 @@ def test_the_only_sheet_with_values_is_read_and_several_are_refused_naming_them(
     assert read_trials(tmp_path / "two.xlsx", sheet="Trials").equals(read_trials(small))
     with pytest.raises(DataError, match=r"no sheet named 'trials'; the workbook's sheets are \['Trials', 'Ratings'\]"):
         read_trials(tmp_path / "two.xlsx", sheet="trials")
+    with pytest.raises(DataError) as exc:  # a name of any length is cut in the message (it was echoed whole)
+        read_trials(tmp_path / "two.xlsx", sheet="x" * 100_000)
+    assert len(str(exc.value)) < 300 and "more characters" in str(exc.value)
     code, output = run_cli(["fit", str(tmp_path / "two.xlsx"), "--sheet", "Trials", "--restarts", "1"])
     assert code == 0 and "Fitted trust model (2 participants, 20 trials)" in output
     code, output = run_cli(["fit", str(tmp_path / "two.xlsx"), "--restarts", "1"])

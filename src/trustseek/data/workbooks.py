@@ -109,7 +109,7 @@ def _sheet(book: Any, sheet: str | None, name: str) -> tuple[str, Any]:
     if sheet is not None:
         if sheet in names:
             return sheet, book.get_sheet_by_name(sheet)
-        raise DataError([f"no sheet named {sheet!r}; the workbook's sheets are {names}"], name)
+        raise DataError([f"no sheet named {shorten(sheet, 80)!r}; the workbook's sheets are {names}"], name)
     visible = [m.name for m in book.sheets_metadata if str(m.visible).endswith("Visible") and m.name in names]
     loaded = {n: book.get_sheet_by_name(n) for n in visible}
     used = [n for n, ws in loaded.items() if any(_count(r) for r in ws.to_python(nrows=LOOK))]
