@@ -1,5 +1,6 @@
 """The command line's application (cli/_app.py): what every command does before it runs."""
 
+import os
 import subprocess
 import sys
 
@@ -19,7 +20,9 @@ def rss():
 before = rss()
 a = np.ones(2**25)
 del a
-print(set_, round(rss() - before))
+kept = round(rss() - before)
+import pyarrow as pa
+print(set_, kept, pa.default_memory_pool().backend_name)
 """
 
 
@@ -28,12 +31,17 @@ def test_freed_memory_is_kept_for_the_next_arrays():
     """With the setting, a freed 256 MB array stays with the process for the next one (its pages are
     not zeroed again); without it, the C library gives it back at once."""
 
-    def after(mode):
-        out = subprocess.run([sys.executable, "-c", FREED, mode], capture_output=True, text=True, check=True).stdout.split()
-        return out[0], int(out[1])
+    def after(mode, pool=None):
+        env = {k: v for k, v in os.environ.items() if k != "ARROW_DEFAULT_MEMORY_POOL"}
+        env |= {"ARROW_DEFAULT_MEMORY_POOL": pool} if pool else {}
+        run = subprocess.run([sys.executable, "-c", FREED, mode], capture_output=True, text=True, check=True, env=env)
+        kept, rss, arrow = run.stdout.split()
+        return kept, int(rss), arrow
 
-    assert after("keep") == ("True", pytest.approx(256, abs=16))
-    assert after("default")[1] < 16
+    # pyarrow's memory from the same allocator, unless the user named a pool
+    assert after("keep") == ("True", pytest.approx(256, abs=16), "system")
+    assert after("keep", pool="jemalloc")[2] == "jemalloc"
+    assert after("default")[1:] == (pytest.approx(0, abs=16), "mimalloc")
 
 
 def test_every_command_but_the_server_keeps_freed_memory(monkeypatch, tmp_path):
