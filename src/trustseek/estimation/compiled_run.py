@@ -54,16 +54,13 @@ def subsample(kern: kernels.Kernel, every: int = SUBSAMPLE_EVERY) -> np.ndarray 
     if len(idx) == kern.eidx.shape[0]:  # one sequence (or every one): the subsample would be the data
         return None
     PE, U1, T = kern.PE, kern.P, kern.eidx.shape[1]
-
-    def rows(e: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """Which emission rows with an observed output and which transition rows occur (padding
-        and unobserved outputs read the last emission row, a trial without successor the last
-        transition row: neither has parameters)."""
-        seen_e = np.bincount(e.ravel(), minlength=PE)[: PE - 1] > 0
-        seen_t = np.bincount(t.ravel(), minlength=U1)[: U1 - 1] > 0
-        return np.concatenate([seen_e, seen_t])
-
-    if np.any(rows(kern.eidx, kern.tidx[:, : T - 1]) & ~rows(kern.eidx[idx], kern.tidx[idx, : T - 1])):
+    # the emission rows with an observed output and the transition rows the subsample lacks (padding
+    # and unobserved outputs read the last emission row, a trial without successor the last
+    # transition row: neither has parameters), looked up in the whole data (a gather, not a count)
+    lacks_e = np.bincount(kern.eidx[idx].ravel(), minlength=PE) == 0
+    lacks_t = np.bincount(kern.tidx[idx, : T - 1].ravel(), minlength=U1) == 0
+    lacks_e[PE - 1] = lacks_t[U1 - 1] = False
+    if lacks_e[kern.eidx].any() or lacks_t[kern.tidx[:, : T - 1]].any():
         return None
     return idx
 

@@ -77,11 +77,10 @@ def _constant_output(fit: EMFit) -> list[str]:
     """A warning when every output the model does not fix is the same category (e.g. everyone always
     relies): the initial distribution and the transitions are then not identified."""
     seqs, s = fit.seqs, fit.structure
-    free = ~np.all(s.em.fixed, axis=(1, 2))  # (Ue,): some level's row is estimated
-    ue = np.where(seqs.ue >= 0, seqs.ue, 0)
-    seen = (seqs.y >= 0) & (seqs.ue >= 0) & free[ue]
-    values = np.unique(seqs.y[seen])
-    if fit.spec.n_levels < 2 or len(values) != 1:
+    # (Ue + 1,): some level's row is estimated; the last entry for no combination (code -1)
+    free = np.append(~np.all(s.em.fixed, axis=(1, 2)), False)
+    values = seqs.y[(seqs.y >= 0) & free[seqs.ue]]
+    if fit.spec.n_levels < 2 or values.size == 0 or values.min() != values.max():
         return []
     only = fit.spec.output_categories[int(values[0])]
     return [

@@ -204,9 +204,13 @@ class Structure:
     def _check_possible(self, seqs: Sequences) -> None:
         """Report every observed output that a fixed cell rules out at all levels."""
         spec = self.spec
+        zero_all = np.all(self.em.fixed & (self.em.values == 0), axis=1)  # (Ue, M): impossible at every level
+        # (the rows of an output no fixed cell rules out need not be looked at)
+        ruled_out = np.append(zero_all.any(0), False)  # (M + 1,): the last entry for an unobserved output (-1)
+        if not ruled_out[seqs.y].any():
+            return
         obs = seqs.y >= 0
         yo, uo = seqs.y[obs], seqs.ue[obs]
-        zero_all = np.all(self.em.fixed & (self.em.values == 0), axis=1)  # (Ue, M): impossible at every level
         bad = zero_all[uo, yo]
         if not bad.any():
             return
