@@ -6,11 +6,12 @@
     python benchmarks/bench_startup.py --reproduce   # also ``trustseek reproduce`` (minutes)
 
 Rows: ``trustseek --help`` and every command's ``--help``, ``import trustseek``, ``trustseek
-solve``, ``trustseek check model.json``, ``trustseek fit`` on the shipped example (the numpy
-path) and on 100,000 x 71 trials with one restart (the compiled path: its code is built with the
+solve``, ``trustseek check model.json``, ``trustseek fit`` on the shipped example (as installed,
+and in a fresh environment: no bytecode cached, of the package or of its dependencies) and on
+100,000 x 71 trials with one restart (the compiled path: its code is built with the
 package, so a first run after installation compiles nothing either), and the static checks
 (``make lint``, with empty mypy and ruff caches as on a clean clone), which ``make test`` runs
-before the tests.  With ``--reproduce``, ``make reproduce``'s command (``trustseek reproduce``).
+beside the tests.  With ``--reproduce``, ``make reproduce``'s command (``trustseek reproduce``).
 ``trustseek simulate`` of 100,000 participants into a CSV file.  The in-run baseline is the bare
 interpreter (``python -c pass``) and ``import numpy, pandas``.
 """
@@ -102,6 +103,10 @@ def main(argv: list[str] | None = None) -> int:
         row("trustseek check model.json", wall([TRUSTSEEK, "check", str(model)], n), 0.5)
         fit = [TRUSTSEEK, "fit", str(example_path()), "--preset", "paper", "--out", str(Path(tmp) / "fit.json")]
         row("trustseek fit (shipped example, 9 x 71)", wall(fit, n), 1.0)
+        # a fresh environment: no compiled-code cache of any kind, not even Python's bytecode of
+        # numpy, pandas or trustseek (an empty PYTHONPYCACHEPREFIX each run; the package's loops
+        # are compiled by its installation, so nothing else is compiled at run time)
+        row("  the same in a fresh environment (no bytecode cached)", wall(fit, n, fresh=("PYTHONPYCACHEPREFIX",)), 5.0)
         if not args.no_big:
             sys.path.insert(0, str(HERE))
             from bench_read import cached_logs
