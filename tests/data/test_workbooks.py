@@ -269,3 +269,19 @@ def test_a_sheet_part_zipfile_cannot_open_is_refused_by_name(tmp_path, valid_boo
     (tmp_path / "log.xlsx").write_bytes(bytes(raw))
     code, output = run_cli(["check", str(tmp_path / "log.xlsx"), "--sheet", "Trials"])
     assert code == 2 and "log.xlsx (sheet 'Trials'): cannot read the sheet" in output and "Traceback" not in output, output
+
+
+def test_a_workbook_the_system_cannot_read_is_refused_by_name(monkeypatch, tmp_path, valid_book):
+    """The reader's OSError (a file without read permission, an I/O error on a network drive) is one
+    located line, not a traceback."""
+    import python_calamine
+
+    class Unreadable:
+        @staticmethod
+        def from_path(path):
+            raise PermissionError(13, "Permission denied", path)
+
+    monkeypatch.setattr(python_calamine, "CalamineWorkbook", Unreadable)
+    (tmp_path / "log.xlsx").write_bytes(valid_book)
+    with pytest.raises(DataError, match=r"log\.xlsx: cannot read the file: Permission denied$"):
+        read_trials(tmp_path / "log.xlsx")

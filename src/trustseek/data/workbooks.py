@@ -47,12 +47,12 @@ def load_workbook(path: Path, name: str, sheet: str | None, missing: frozenset[s
         marked = _marked_cells(path, chosen, label)
     except CalamineError as exc:
         raise DataError([f"cannot read the file as an Excel workbook (.xlsx): {shorten(str(exc), 200)}"], name) from None
+    except OSError as exc:  # (before the clause below, which would take it)
+        raise DataError([f"cannot read the file: {exc.strerror or exc}"], name) from None
     except BaseException as exc:  # the Rust reader's panic on a damaged file (pyo3's PanicException is no Exception)
         if type(exc).__name__ != "PanicException":
             raise
         raise DataError([f"cannot read the file as an Excel workbook (.xlsx): the reader stopped on it: {exc}"], name) from None
-    except OSError as exc:
-        raise DataError([f"cannot read the file: {exc.strerror or exc}"], name) from None
     every = grid  # the cells as read; each converted (:func:`_cell`) when its column is used
     for (r, c), text in marked.items():  # what the reader gives as empty: the error's text, the formula
         every += [[] for _ in range(r + 1 - len(every))]
