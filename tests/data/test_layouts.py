@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 from test_write_csv import frames
 
 from trustseek.data import ColumnMapping, DataError, example_path, read_trials
+from trustseek.data.suffixes import file_kind
 
 FIELDS = ["trial", "complexity", "robot_action", "human_action", "experience"]
 
@@ -85,6 +86,7 @@ def test_a_record_per_participant_with_a_list_of_trial_objects_is_exploded(small
 def test_a_frame_written_by_pandas_to_json_is_read_in_every_orientation(small, tmp_path, orient):
     path = tmp_path / f"{orient}.json"
     small.to_json(path, orient=orient)
+    assert file_kind(path) == "log"  # what `trustseek check` reads it as: the same rule as the reader's
     frame = read_trials(path)
     if orient == "table":  # the table's records carry the frame's index as a column of their own
         frame = frame.drop(columns="index")
@@ -94,6 +96,7 @@ def test_a_frame_written_by_pandas_to_json_is_read_in_every_orientation(small, t
 def test_a_json_object_of_several_arrays_or_none_says_what_it_holds(tmp_path):
     path = tmp_path / "two.json"
     path.write_text(json.dumps({"practice": [{"trial": 1}], "main": [{"trial": 1}]}))
+    assert file_kind(path) == "log"  # checked as a log, which says the same
     with pytest.raises(DataError, match=r"this object holds 2: \['practice', 'main'\]: keep the one of the trials"):
         read_trials(path)
     path.write_text(json.dumps({"study": "s1", "n": 3}))

@@ -39,6 +39,8 @@ from .suffixes import (
     STAT_SUFFIXES,
     WORKBOOK_SUFFIXES,
     kind_suffix,
+    object_arrays,
+    table_records,
 )
 
 DELIMITERS = (",", ";", "\t", "|")
@@ -325,7 +327,7 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str], expl
             data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise DataError([f"invalid JSON: {exc}"], name) from None
-        records = json_records(data, name)
+        records = _json_records(data, name)
         where = [f"record {i}" for i in range(1, len(records) + 1)]
     p.add("records that are not objects", [w for w, r in zip(where, records, strict=True) if not isinstance(r, dict)])
     if p.lines:
@@ -337,31 +339,15 @@ def _load_json(path: Path, name: str, lines: bool, missing: frozenset[str], expl
     return _arrow_raw(table, name, missing)
 
 
-def json_records(data: Any, name: str) -> list[Any]:
-    """The records of a JSON log: an array of them; the one array of objects an object holds
-    (``{"participants": [...]}``, pandas' ``orient="table"``); or a table as pandas writes it,
-    ``orient="split"`` (``columns`` and ``data``), ``"columns"`` (its default: each column an object
-    by row label) or ``"index"`` (each row an object by row label), its row labels numbers."""
-    if isinstance(data, list):
-        return data
+def _json_records(data: Any, name: str) -> list[Any]:
+    """The records of a JSON log (:func:`.suffixes.table_records`), or what it holds instead."""
+    records = table_records(data)
+    if records is not None:
+        return records
     expected = "a JSON trial log must be an array of records (objects), one per trial"
     if not isinstance(data, dict):
         raise DataError([expected], name)
-    if isinstance(data.get("columns"), list) and isinstance(data.get("data"), list):  # orient="split"
-        return [dict(zip(data["columns"], row, strict=False)) if isinstance(row, list) else row for row in data["data"]]
-    arrays = [k for k, v in data.items() if isinstance(v, list) and v and all(isinstance(r, dict) for r in v)]
-    if len(arrays) == 1:
-        return data[arrays[0]]
-    if data and all(isinstance(v, dict) for v in data.values()):
-        inner = list(dict.fromkeys(k for v in data.values() for k in v))
-
-        def numbered(keys: Any) -> bool:
-            return all(re.fullmatch(r"-?[0-9]+", str(k)) for k in keys)
-
-        if numbered(inner) and not numbered(data):  # orient="columns": each column by row label
-            return [{c: v.get(r) for c, v in data.items()} for r in inner]
-        if numbered(data) and not numbered(inner):  # orient="index": each row by its label
-            return list(data.values())
+    arrays = object_arrays(data)
     if arrays:
         raise DataError([f"{expected}; this object holds {len(arrays)}: {arrays[:SHOWN]}: keep the one of the trials"], name)
     keys = [shorten(k, 40) for k in list(data)[:SHOWN]]

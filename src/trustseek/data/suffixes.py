@@ -4,7 +4,9 @@ that a command telling a log from a model file loads no pandas)."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
+from typing import Any
 
 CSV_SUFFIXES = (".csv", ".txt", ".tsv")
 COMPRESSED = {".gz": "gzip", ".bz2": "bz2", ".zst": "zstd"}  # a CSV's compressions, by suffix (log.csv.gz)
@@ -46,7 +48,9 @@ def file_kind(path: Path) -> str:
         return "log"
     if not isinstance(data, dict) or "format" in data:
         return "json"
-    return "mapping" if _mapping(data) else "log" if _holds_records(data) else "json"
+    if _mapping(data):
+        return "mapping"
+    return "log" if table_records(data) is not None or object_arrays(data) else "json"
 
 
 def _mapping(data: dict) -> bool:
@@ -55,16 +59,34 @@ def _mapping(data: dict) -> bool:
     return bool(data) and set(data) <= set(MAPPING_KEYS)
 
 
-def _holds_records(data: dict) -> bool:
-    """Whether a JSON object holds a table, as the log reader finds one: an array of objects in
-    it, pandas' ``split`` (``columns`` and ``data``), or objects by row number and column (pandas'
-    ``index`` and ``columns``); not a mapping file (objects by name)."""
-    values = list(data.values())
-    if any(isinstance(v, list) and v and all(isinstance(r, dict) for r in v) for v in values):
-        return True
-    if isinstance(data.get("columns"), list) and isinstance(data.get("data"), list):
-        return True
-    if not values or not all(isinstance(v, dict) and v for v in values):
-        return False
-    numbered = [*data] if all(k.isdigit() for k in data) else [k for v in values for k in v]  # pandas' orient="index"
-    return all(k.isdigit() for k in numbered)  # orient="columns": each column an object by row number
+def object_arrays(data: dict[str, Any]) -> list[str]:
+    """The keys of a JSON object whose values are arrays of objects (a log's records)."""
+    return [k for k, v in data.items() if isinstance(v, list) and v and all(isinstance(r, dict) for r in v)]
+
+
+def table_records(data: Any) -> list[Any] | None:
+    """The records of a JSON log: an array of them; the one array of objects an object holds
+    (``{"participants": [...]}``, pandas' ``orient="table"``); or a table as pandas writes it,
+    ``orient="split"`` (``columns`` and ``data``), ``"columns"`` (its default: each column an object
+    by row label) or ``"index"`` (each row an object by row label), its row labels numbers.  None
+    when ``data`` holds a table in none of these shapes."""
+    if isinstance(data, list):
+        return data
+    if not isinstance(data, dict):
+        return None
+    if isinstance(data.get("columns"), list) and isinstance(data.get("data"), list):  # orient="split"
+        return [dict(zip(data["columns"], row, strict=False)) if isinstance(row, list) else row for row in data["data"]]
+    arrays = object_arrays(data)
+    if len(arrays) == 1:
+        return data[arrays[0]]
+    if data and all(isinstance(v, dict) for v in data.values()):
+        inner = list(dict.fromkeys(k for v in data.values() for k in v))
+        if _numbered(inner) and not _numbered(data):  # orient="columns": each column by row label
+            return [{c: v.get(r) for c, v in data.items()} for r in inner]
+        if _numbered(data) and not _numbered(inner):  # orient="index": each row by its label
+            return list(data.values())
+    return None
+
+
+def _numbered(keys: Any) -> bool:
+    return all(re.fullmatch(r"-?[0-9]+", str(k)) for k in keys)
