@@ -9,6 +9,7 @@ import pytest
 
 from cli_runner import run_cli
 from trustseek import TrustModel, load_policy
+from trustseek.vocab import TRIAL_COLUMNS
 
 
 def run(*args, check=True):
@@ -143,6 +144,8 @@ def test_check_reads_a_trial_log_as_the_fit_does_and_says_what_it_holds(tmp_path
         )
     )
     assert summary in said, (summary, said)
+    others = [c for c in raw.columns if c not in TRIAL_COLUMNS]
+    assert others and f"other columns: {', '.join(others)}" in said
     # with the log options, as the fit reads it; a JSON array of records and a folder too
     frame = raw.rename(columns={"human_action": "response"})
     frame["response"] = frame.response.map({"rely": 1, "intervene": 0}).astype("Int64")

@@ -388,5 +388,7 @@ def _log_summary(frame) -> str:
         counts = frame[c].value_counts(dropna=False, sort=False)
         shown = [f"{'not recorded' if label != label else label} {n:,}" for label, n in counts.items() if n]
         parts.append(f"{c}: {', '.join(shown)}")
-    extra = [str(c) for c in frame.columns[6:]]
+    from ..vocab import TRIAL_COLUMNS
+
+    extra = [str(c) for c in frame.columns if c not in TRIAL_COLUMNS]
     return "; ".join(parts + ([f"other columns: {', '.join(extra)}"] if extra else []))
