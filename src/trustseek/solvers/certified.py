@@ -188,10 +188,7 @@ def _quad_roots(y0: np.ndarray, y1: np.ndarray, y2: np.ndarray, w: np.ndarray) -
         qq = -0.5 * (c1 + np.where(c1 >= 0, sq, -sq))
         r1 = np.where(small, lin, qq / c2)
         r2 = np.where(small, np.nan, np.where(qq != 0, c0 / qq, np.nan))
-    out = []
-    for r in (r1, r2):
-        out.append(np.where((r > -half) & (r < half), r, np.nan))
-    return out
+    return [np.where((r > -half) & (r < half), r, np.nan) for r in (r1, r2)]
 
 
 def _quad_extrema(y0: np.ndarray, y1: np.ndarray, y2: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import itertools
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from math import comb
 from typing import Any, ClassVar
@@ -160,11 +161,22 @@ class PointSolver(Solver):
     def _upper(self, r: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Vertex beliefs, certified upper values and the code lookup at resolution r."""
         m = self.model
-        N, gamma, pc = len(m.context_probs), m.discount, m.context_probs
         V, lookup, p, S, col, w = self._vertex_grid(r)
+        u, q_of = self._vertex_values(V, p, S, col, w, np.einsum("cat,nt->nca", m.rewards, V))
+        # the operator H is monotone with modulus γ: u + max(H u - u)+ / (1 - γ) bounds its fixed point
+        eta = max(0.0, float(np.max(q_of(u).max(axis=2) @ m.context_probs - u)))
+        return V, u + eta / (1 - m.discount), lookup
+
+    def _vertex_values(
+        self, V: np.ndarray, p: np.ndarray, S: np.ndarray, col: np.ndarray, w: np.ndarray, rew: np.ndarray
+    ) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
+        """The fixed point u of the Bellman operator on the vertex values (successors ``S``, interpolated
+        from the vertices ``col`` with weights ``w``; ``rew[n, c, a]`` the rewards at the vertices)
+        by policy iteration, and the operator's Q: (u, q_of)."""
+        m = self.model
+        N, gamma, pc = m.n_contexts, m.discount, m.context_probs
         nV = len(V)
         wt = w * p[..., None]
-        rew = np.einsum("cat,nt->nca", m.rewards, V)
         rows = np.broadcast_to(np.arange(nV)[:, None, None], (nV, *S.shape[3:]))
         ii = np.arange(nV)
 
@@ -181,10 +193,7 @@ class PointSolver(Solver):
                 Wm = Wm + sp.csr_matrix(entries, shape=(nV, nV))
             return Wm, rr
 
-        u = howard(rew.argmax(axis=2), chain, q_of, np.zeros(nV), 500, axis=2)[0]
-        # H is monotone with modulus γ: u + max(H u - u)+ / (1 - γ) bounds its fixed point
-        eta = max(0.0, float(np.max(q_of(u).max(axis=2) @ pc - u)))
-        return V, u + eta / (1 - gamma), lookup
+        return howard(rew.argmax(axis=2), chain, q_of, np.zeros(nV), 500, axis=2)[0], q_of
 
     def grid_bound(self, model: BranchModel, r: int) -> tuple[np.ndarray, np.ndarray]:
         """Solve the grid upper bound of ``model`` at resolution r and keep it (``upper_at`` reads

@@ -363,8 +363,7 @@ class ReachableSolver(Solver):
         b0 = np.asarray(model.initial, dtype=float)
         width = float(np.max(self.corners) - np.min(self.vectors.max(axis=0).min()))
         span = max(width, self.tol)
-        depth_cap = math.ceil(math.log(self.tol / (2 * span)) / math.log(self.discount)) + 1
-        depth_cap = max(1, depth_cap)
+        depth_cap = max(1, math.ceil(math.log(self.tol / (2 * span)) / math.log(self.discount)) + 1)
         visited: list[np.ndarray] = list(numerics.reachable_beliefs(b0, self.seed_depth, self._successors_many, self.decimals))
         history = []
         trials = backups = consolidated = 0

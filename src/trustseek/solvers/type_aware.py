@@ -24,7 +24,7 @@ A problem without two-state blocks gets the fast informed bound as the only cap.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -220,16 +220,15 @@ class TypeAwareSolver(PointSolver):
             values = np.minimum(self.upper_at(B), q.max(axis=2) @ m.context_probs)
         return float(values[0])
 
-    def _upper(self, r: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Vertex beliefs, certified upper values and the code lookup at resolution r: the fixed
-        point of the Bellman operator whose successor values are min(interpolation, base bound),
-        by policy iteration over the actions and the choice of the smaller bound."""
+    def _vertex_values(
+        self, V: np.ndarray, p: np.ndarray, S: np.ndarray, col: np.ndarray, w: np.ndarray, rew: np.ndarray
+    ) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
+        """The fixed point of the Bellman operator whose successor values are min(interpolation,
+        base bound), by policy iteration over the actions and the choice of the smaller bound."""
         m = self.model
         K, N, gamma, pc = m.n_hidden, m.n_contexts, m.discount, m.context_probs
-        V, lookup, p, S, col, w = self._vertex_grid(r)
-        nV, Br = len(V), S.shape[3]
+        nV, Br = len(V), p.shape[3]
         cap = self.bound(S.reshape(-1, K)).reshape(p.shape)
-        rew = np.einsum("cat,nt->nca", m.rewards, V)
         ii = np.arange(nV)
 
         def successor_values(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -264,9 +263,7 @@ class TypeAwareSolver(PointSolver):
                 break
             if new_acts is not None:
                 acts = new_acts
-        # the capped operator is monotone with modulus γ: u + max(H u - u)+ / (1 - γ) bounds its fixed point
-        eta = max(0.0, float(np.max(q_of(u).max(axis=2) @ pc - u)))
-        return V, u + eta / (1 - gamma), lookup
+        return u, q_of
 
     def _start(self, model: BranchModel, b0: np.ndarray, reach: np.ndarray) -> np.ndarray:
         """The memoryless controllers and each type's own controller, keeping the vectors best at

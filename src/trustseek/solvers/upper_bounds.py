@@ -12,6 +12,7 @@ from scipy.sparse.csgraph import connected_components
 
 from ..pomdp.belief import Branches, BranchModel
 from .base import SolverError
+from .numerics import howard
 from .point import PointSolver
 
 
@@ -32,21 +33,18 @@ def fast_informed_bound(model: BranchModel, max_rounds: int = 200) -> np.ndarray
     def project(beta: np.ndarray) -> np.ndarray:  # [c, a, br, t, c', a'] = Σ_u M[c, a, br, t, u] beta[c', a', u]
         return np.einsum("cabtu,dfu->cabtdf", M, beta)
 
-    ch = np.zeros((N, A, Br, K, N), dtype=np.int64)  # the choice of a' per (c, a, br, t, c')
-    beta = np.zeros((N, A, K))
     w = g * np.einsum("cabtu,d->cabtdu", M, pc)  # [c, a, br, t, c', u]
-    for _ in range(max_rounds):
-        # the linear system of fixed choices: beta = R + P beta
-        P = np.einsum("cabtdu,cabtdf->catdfu", w, ch[..., None] == np.arange(A))
-        beta_new = np.linalg.solve(np.eye(n) - P.reshape(n, n), R.reshape(-1)).reshape(N, A, K)
-        # keep a choice unless another is better by more than rounding
-        proj = project(beta_new)
-        cur = np.take_along_axis(proj, ch[..., None], axis=-1)[..., 0]
-        better = proj.max(axis=-1) > cur + 1e-12 * (1 + np.abs(cur))
-        beta = beta_new
-        if not np.any(better):
-            break
-        ch = np.where(better, proj.argmax(axis=-1), ch)
+
+    def chain(ch: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The linear system of fixed choices ``ch`` of a' per (c, a, br, t, c'): beta = R + P beta."""
+        return np.einsum("cabtdu,cabtdf->catdfu", w, ch[..., None] == np.arange(A)).reshape(n, n), R.reshape(-1)
+
+    def solve(P: np.ndarray, r: np.ndarray, _: np.ndarray) -> np.ndarray:
+        return np.linalg.solve(np.eye(n) - P, r)
+
+    ch = np.zeros((N, A, Br, K, N), dtype=np.int64)
+    beta = howard(ch, chain, lambda b: project(b.reshape(N, A, K)), np.zeros(n), max_rounds, axis=-1, solve=solve)[0]
+    beta = beta.reshape(N, A, K)
     residual = float(np.max(R + g * np.einsum("cabtd,d->cat", project(beta).max(axis=-1), pc) - beta))
     return beta + max(0.0, residual) / (1.0 - g)
 
