@@ -7,8 +7,8 @@ import pytest
 
 from trustseek import AssistancePOMDP, paper_model, paper_task
 from trustseek.policies.scheduling import SchedulePolicy
-from trustseek.pomdp.scheduling import SchedulingProblem
-from trustseek.solvers.registry import PolicySpecError, policy_from_spec, schedule_size
+from trustseek.pomdp.scheduling import SchedulingProblem, schedule_size
+from trustseek.solvers.registry import PolicySpecError, policy_from_spec
 from trustseek.solvers.scheduling import ScheduleSolver
 
 

@@ -152,6 +152,16 @@ class SchedulingProblem:
         return sorted(seen, key=lambda s: (-sum(s[0]), s))
 
 
+def schedule_size(counts: tuple[int, ...], window: int | None, grid: int) -> int:
+    """An upper bound on the number of Q values of a schedule policy (without enumerating its
+    states): prod(counts + 1) remaining states, times the visible compositions of a window,
+    times complexities, actions and grid points."""
+    states = prod(k + 1 for k in counts)
+    if window is not None and window < sum(counts):
+        states *= (window + 1) ** (len(counts) - 1)
+    return states * len(counts) * 2 * grid
+
+
 def _minus(c: Counts, k: int) -> Counts:
     return tuple(x - (i == k) for i, x in enumerate(c))
 

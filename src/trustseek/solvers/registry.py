@@ -37,7 +37,7 @@ from ..policies.complexity import ComplexityPolicy, always_ask, never_ask, rando
 from ..policies.kinds import policy_from_dict
 from ..policies.scheduling import SCHEDULE
 from ..pomdp.problem import AssistancePOMDP
-from ..pomdp.scheduling import SchedulingError, SchedulingProblem
+from ..pomdp.scheduling import SchedulingError, SchedulingProblem, schedule_size
 from ..vocab import BELIEF_UPDATES, PAPER_ASK_PROBABILITIES, POLICY_SPEC_KINDS
 from .agnostic import PAPER_HORIZON, TrustAgnosticSolver
 from .base import Solver, SolverError
@@ -248,19 +248,6 @@ def _randomized_spec(p: Any, cx: tuple[str, ...], where: str) -> ComplexityPolic
         return ComplexityPolicy("randomized", cx, [p[c] for c in cx])
     except ModelError as exc:
         raise PolicySpecError([f"{where}: {x}" for x in exc.problems]) from None
-
-
-def schedule_size(counts: tuple[int, ...], window: int | None, grid: int) -> int:
-    """An upper bound on the number of Q values of a schedule policy (without enumerating its
-    states): prod(counts + 1) remaining states, times the visible compositions of a window,
-    times complexities, actions and grid points."""
-    n = sum(counts)
-    states = 1
-    for k in counts:
-        states *= k + 1
-    if window is not None and window < n:
-        states *= (window + 1) ** (len(counts) - 1)
-    return states * len(counts) * 2 * grid
 
 
 def _schedule_spec(spec: Mapping[str, Any], model: TrustModel, task: Task, where: str, max_values: int | None) -> Policy:

@@ -24,7 +24,7 @@ import numpy as np
 from ..policies.envelope import cross_sum, envelope_values, max_of
 from ..policies.scheduling import PieceQ, SchedulePolicy
 from ..pomdp.problem import AssistancePOMDP
-from ..pomdp.scheduling import SchedulingProblem, State, state_key
+from ..pomdp.scheduling import SchedulingProblem, State, schedule_size, state_key
 from .alpha import exact_backup
 from .base import Solver, SolverError, one_blas_thread
 from .defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
@@ -112,8 +112,6 @@ class ScheduleSolver(Solver):
             reasons.append(
                 f"alpha vectors are exact for the bayes update only; for {self.belief_update!r} use the grid representation"
             )
-        from .registry import schedule_size  # (the registry loads this module when it builds the solver)
-
         items = f"{sum(problem.counts):,} items {list(problem.counts)}"
         if self.representation == "grid":
             size = schedule_size(problem.counts, problem.window, self.grid)
