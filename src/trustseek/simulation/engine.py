@@ -69,7 +69,7 @@ class Block:
 # --------------------------------------------------------------------------- the kernel
 
 
-class _Tables:
+class Tables:
     """Flat lookup tables for one population and task (two trust levels use scalar beliefs)."""
 
     def __init__(self, sup: Supervisors, task: Task):
@@ -85,6 +85,21 @@ class _Tables:
         self.reward = task.reward_table().reshape(-1)  # [a, o, e]
         if K == 2:
             self.trust_low = self.trust_cum[:, 0].copy()  # P(T' = low | ...)
+
+    def trial(
+        self, u: np.ndarray, ca: np.ndarray, cap: np.ndarray, trust: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One trial of every participant from its three uniforms ``u`` (3, m), with ``ca`` = c * 2 + a
+        (``cap``: plus the participants' parameter-row offsets) and the hidden ``trust``: the human
+        action, the experience and the next hidden trust."""
+        K = self.K
+        o = (u[0] >= self.p_int[cap * K + trust]).astype(np.int64)
+        e = (u[1] < self.p_reliable[ca * 2 + o]).astype(np.int64)
+        kt = (cap * 2 + e) * K + trust
+        # the next hidden trust: below P(T' = low) for two levels, #(u >= cumulative row) otherwise
+        if K == 2:
+            return o, e, (u[2] >= self.trust_low[kt]).astype(np.int64)
+        return o, e, (u[2][:, None] >= self.trust_cum[kt]).sum(axis=1)
 
 
 def _runner(block: Block) -> PolicyRunner:
@@ -125,7 +140,7 @@ _EMPTY = np.zeros(0)
 
 
 def _run_chunk(
-    tab: _Tables,
+    tab: Tables,
     rows: np.ndarray,
     blocks: list[Block],
     sl: slice,
@@ -164,7 +179,7 @@ class _Chunk:
     trust (it carries over from block to block), the trials' codes and, when ``record``, every trial."""
 
     def __init__(
-        self, tab: _Tables, rows: np.ndarray, sl: slice, seeds: Sequence[np.random.SeedSequence], record: bool, total: int
+        self, tab: Tables, rows: np.ndarray, sl: slice, seeds: Sequence[np.random.SeedSequence], record: bool, total: int
     ) -> None:
         self.tab, self.record = tab, record
         self.m = m = sl.stop - sl.start
@@ -233,7 +248,7 @@ def _numpy_block(
     tracked: bool,
 ) -> None:
     """A block in the numpy loop, one trial of every participant at a time."""
-    tab, K, two = st.tab, st.tab.K, st.tab.K == 2
+    tab = st.tab
     for c in sched:
         if bounds is not None:
             a = (x < bounds[c]).astype(np.int64)
@@ -245,16 +260,12 @@ def _numpy_block(
         u = st.rng_sup.random((3, st.m))
         ca = c * 2 + a
         cap = ca if st.poff is None else ca + st.poff
-        trust = st.trust
-        o = (u[0] >= tab.p_int[cap * K + trust]).astype(np.int64)
-        e = (u[1] < tab.p_reliable[ca * 2 + o]).astype(np.int64)
-        kt = (cap * 2 + e) * K + trust
+        o, e, trust = tab.trial(u, ca, cap, st.trust)
         if st.record:
-            for k, v in zip((*RECORDED, "belief"), (c, a, o, e, trust, x if scalar is not None else B[:, -1]), strict=True):
+            for k, v in zip((*RECORDED, "belief"), (c, a, o, e, st.trust, x if scalar is not None else B[:, -1]), strict=True):
                 st.rec[k][st.t] = v
         st.codes[st.t] = (a * 2 + o) * 2 + e
-        # the next hidden trust: below P(T' = low) for two levels, #(u >= cumulative row) otherwise
-        st.trust = (u[2] >= tab.trust_low[kt]).astype(np.int64) if two else (u[2][:, None] >= tab.trust_cum[kt]).sum(axis=1)
+        st.trust = trust
         if scalar is not None:
             x = scalar.step(x, ca, o, e)
         elif tracked:
@@ -262,7 +273,7 @@ def _numpy_block(
         st.t += 1
 
 
-def _summaries(tab: _Tables, blocks: list[Block], codes: np.ndarray, gamma: float, m: int) -> dict[str, np.ndarray]:
+def _summaries(tab: Tables, blocks: list[Block], codes: np.ndarray, gamma: float, m: int) -> dict[str, np.ndarray]:
     """The per-block summaries of every participant, from the trials' codes."""
     summ = {k: np.zeros((m, len(blocks))) for k in SUMMARY_QUANTITIES}
     start = 0
@@ -312,7 +323,7 @@ def run(
         ids = np.asarray(participants, dtype=object)
         if len(ids) != n:
             raise SimulationError([f"{len(ids)} participant ids for {n} participants"])
-    tab = _Tables(supervisors, task)
+    tab = Tables(supervisors, task)
     ss = seed_sequence(seed)
     n_chunks = -(-n // CHUNK)
     chunk_seeds = [s.spawn(2) for s in ss.spawn(n_chunks)]

@@ -26,8 +26,8 @@ from ..pomdp.scheduling import SchedulingProblem
 from ..solvers.alpha import finite_horizon_value
 from ..solvers.defaults import DEFAULT_SCHEDULE_GRID
 from ..solvers.registry import make_solver
-from ..vocab import INTERVENE, RELIABLE
-from .populations import SimulationError, check_participants
+from .engine import Tables
+from .populations import SimulationError, Supervisors, check_participants
 from .trial_orders import schedule_counts
 
 #: name -> (window (0: full control), order, ask on the first hard item); None: the paper's policy
@@ -120,10 +120,7 @@ def simulate_schedules(
     s_queue, s_sup = ss.spawn(2)
     queue0 = schedule_counts(m, counts, np.random.default_rng(s_queue), task.complexities).astype(np.int64)
     u_all = np.random.default_rng(s_sup).random((T + 1, 3, m))
-    p_int = model.emission[..., INTERVENE]  # [c, a, t]
-    p_rel = task.experience_table()[..., RELIABLE]  # [c, a, o]
-    t_low = model.transition[..., 0]  # [c, a, e, t]: P(T' = low)
-    reward = task.reward_table()  # [a, o, e]
+    tab = Tables(Supervisors.pooled(model, 1), task)
     S = len(policies)
     out = ScheduleRuns(
         list(policies),
@@ -158,13 +155,11 @@ def simulate_schedules(
                 raise SimulationError([f"{name}: a pick that is not among the visible items"])
             taken[idx, pos] = True
             remaining[idx, c] -= 1
-            u = u_all[t]
-            o = (u[0] >= p_int[c, a, trust]).astype(np.int64)
-            e = (u[1] < p_rel[c, a, o]).astype(np.int64)
-            r = reward[a, o, e]
+            ca = c * 2 + a
+            o, e, trust = tab.trial(u_all[t], ca, ca, trust)
+            r = tab.reward[(a * 2 + o) * 2 + e]
             out.complexity[j, :, t], out.action[j, :, t], out.belief[j, :, t] = c, a, x
             out.discounted[:, j] += task.discount**t * r
             out.cumulative[:, j] += r
-            trust = (u[2] >= t_low[c, a, e, trust]).astype(np.int64)
-            x = sb.step(x, c * 2 + a, o, e)
+            x = sb.step(x, ca, o, e)
     return out
