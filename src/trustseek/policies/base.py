@@ -143,8 +143,7 @@ def ask_bounds(policy: Policy) -> np.ndarray | None:
         return None
     out = []
     for cn in policy.complexities:
-        iv = intervals[cn]
-        th = threshold(iv)
+        th = threshold(intervals[cn])
         if th is None:
             out.append(-np.inf)
         elif np.isnan(th):

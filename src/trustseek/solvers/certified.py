@@ -236,11 +236,7 @@ class CertifiedSolution:
 
     def advantage(self, pomdp: AssistancePOMDP, x: np.ndarray, c: int) -> np.ndarray:
         """D(x) = Q(x, C=c, ask) - Q(x, C=c, autonomous) of the computed Q."""
-        x = np.asarray(x, dtype=float)
-        if self.q is not None:
-            qa = [envelope_values(v, xs, x) for v, xs in self.q[c]]
-            return qa[ASK] - qa[AUTONOMOUS]
-        q = self._q(pomdp, x)
+        q = self._q(pomdp, np.asarray(x, dtype=float))
         return q[c, ASK] - q[c, AUTONOMOUS]
 
     def value(self, pomdp: AssistancePOMDP, x: Any) -> np.ndarray:

@@ -77,10 +77,9 @@ class ScheduleSolver(Solver):
         order: str = "optimal",
         ask_first_hard: bool = False,
     ):
-        rep = representation
         problems = []
-        if rep not in REPRESENTATIONS:
-            problems.append(f"unknown representation {rep!r}; expected one of {list(REPRESENTATIONS)}")
+        if representation not in REPRESENTATIONS:
+            problems.append(f"unknown representation {representation!r}; expected one of {list(REPRESENTATIONS)}")
         if order not in ORDERS:
             problems.append(f"unknown order {order!r}; expected one of {list(ORDERS)}")
         if int(grid) != grid or grid < 2:
@@ -88,7 +87,7 @@ class ScheduleSolver(Solver):
         if problems:
             raise SolverError(problems)
         self.belief_update: str = belief_update
-        self.representation = rep
+        self.representation = representation
         self.grid = int(grid)
         self.order = order
         self.ask_first_hard = bool(ask_first_hard)
