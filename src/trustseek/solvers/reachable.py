@@ -110,7 +110,7 @@ class ReachableSolver(Solver):
                     else np.broadcast_to(np.arange(k), saw.shape)
                 )
                 phi = phi_pairs(B, self.points, idx)
-                out = np.minimum(out, self._through(B, idx, phi, self.point_values[idx]).min(axis=1))
+                out = np.minimum(out, self._through(B, self.points, idx, phi, self.point_values[idx]).min(axis=1))
         return out
 
     def _basefun(self, B: np.ndarray) -> np.ndarray:
@@ -121,7 +121,7 @@ class ReachableSolver(Solver):
             out = np.minimum(out, self.whole.upper_at(B))
         return np.minimum(out, self._base(B)) if self.blocks else out
 
-    def _through(self, B: np.ndarray, idx: np.ndarray, phi: np.ndarray, vals: np.ndarray) -> np.ndarray:
+    def _through(self, B: np.ndarray, P: np.ndarray, idx: np.ndarray, phi: np.ndarray, vals: np.ndarray) -> np.ndarray:
         """φ v_i + (1 - φ) U0(b') with b = φ b_i + (1 - φ) b': the bound at B[n] through point
         P[idx[n, j]] of value vals[n, j] (φ = phi[n, j]), U0 the bound without points beyond it.
         Convexity of the value makes it valid for any valid U0."""
@@ -130,7 +130,7 @@ class ReachableSolver(Solver):
         far = rest > 1e-9
         Bp = np.where(
             far[..., None],
-            (B[:, None, :] - phi[..., None] * self.points[idx]) / np.where(far, rest, 1.0)[..., None],
+            (B[:, None, :] - phi[..., None] * P[idx]) / np.where(far, rest, 1.0)[..., None],
             B[:, None, :],
         )
         Bp = np.clip(Bp, 0.0, None)
@@ -225,14 +225,10 @@ class ReachableSolver(Solver):
         rew = np.einsum("cat,nt->nca", self.rewards, B)
         # the affine bound of successor s through candidate point j: a0[s, j] + phis[s, j] v_j
         if self.blocks:
-            save = self.points
-            self.points = B
-            u0 = np.empty((m, candidates))
+            a0c = np.empty((m, candidates))
             for lo in range(0, m, 4096):
                 sl = slice(lo, min(m, lo + 4096))
-                u0[sl] = self._through(Sf[sl], cand[sl], phis[sl], np.zeros(cand[sl].shape))
-            self.points = save
-            a0c = u0
+                a0c[sl] = self._through(Sf[sl], B, cand[sl], phis[sl], np.zeros(cand[sl].shape))
         else:
             a0c = base_s[:, None] - phis * base_b[cand]
         # weight of successor s in the value of its belief: P(c) γ P(branch)
