@@ -22,7 +22,6 @@ from .cells import DataError, names_list, shorten, unknown_entries
 from .layouts import explode_entry, explode_problems, join_entry, join_problems, wide_entry, wide_problems
 
 CANONICAL = TRIAL_COLUMNS
-CATEGORICAL = CATEGORICAL_COLUMNS
 
 
 @dataclass
@@ -102,8 +101,8 @@ class ColumnMapping:
             if not isinstance(theirs, str) or not theirs:
                 p.append(f"column mapping: {canon} must map to a column name, got {theirs!r}")
         for canon, table in self.labels.items():
-            if canon not in CATEGORICAL:
-                p.append(f"label mapping: {canon!r} is not a categorical column {list(CATEGORICAL)}")
+            if canon not in CATEGORICAL_COLUMNS:
+                p.append(f"label mapping: {canon!r} is not a categorical column {list(CATEGORICAL_COLUMNS)}")
                 continue
             if not isinstance(table, Mapping):
                 p.append(f"label mapping: {canon} must map labels to labels, got {table!r}")
@@ -159,7 +158,7 @@ class ColumnMapping:
         """A missing-value marker that is also a label of a categorical column would turn that label's
         cells into unrecorded ones."""
         labels: dict[str, str] = {}
-        for col in CATEGORICAL:
+        for col in CATEGORICAL_COLUMNS:
             table = self.labels.get(col)
             theirs = list(table) if isinstance(table, Mapping) else []
             for text in (*self.categories(col), *theirs):
