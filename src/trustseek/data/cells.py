@@ -69,10 +69,7 @@ class Problems:
 
     def rows(self, head: str, rows: np.ndarray, describe: Any = None) -> None:
         """A kind of problem at checked rows ``rows`` (0-based), each described by ``describe(row)``."""
-        if len(rows) == 0:
-            return
-        first = rows[:SHOWN]
-        items = [self.where(int(r)) + (f" {describe(int(r))}" if describe else "") for r in first]
+        items = [self.where(int(r)) + (f" {describe(int(r))}" if describe else "") for r in rows[:SHOWN]]
         self.add(head, items, len(rows))
 
 

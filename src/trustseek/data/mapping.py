@@ -237,21 +237,23 @@ class ColumnMapping:
             given[key] = v
         cx, order, missing, labels = given["complexities"], given["order"], given["missing"], given["labels"]
         m = cls(
-            {str(k): v for k, v in given["columns"].items()},
-            {str(k): (_label_table(v, problems, f"labels[{k}]") if isinstance(v, Mapping) else v) for k, v in labels.items()},
-            tuple(cx) if cx else None,
-            tuple(order) if order is not None else None,
-            {str(k): v for k, v in given["derived"].items()},
-            list(given["drop"]),
-            tuple(missing) if missing is not None else None,
-            d.get("delimiter"),
-            dict(d["rating"]) if isinstance(d.get("rating"), Mapping) else d.get("rating"),
-            {str(k): (_input_entry(v) if isinstance(v, Mapping) else v) for k, v in given["inputs"].items()},
-            d.get("experience_rule"),
-            explode_entry(d["explode"]) if "explode" in d else None,
-            join_entry(d["join"]) if "join" in d else None,
-            wide_entry(d["wide"]) if "wide" in d else None,
-            d.get("sheet"),
+            columns={str(k): v for k, v in given["columns"].items()},
+            labels={
+                str(k): _label_table(v, problems, f"labels[{k}]") if isinstance(v, Mapping) else v for k, v in labels.items()
+            },
+            complexities=tuple(cx) if cx else None,
+            order=tuple(order) if order is not None else None,
+            derived={str(k): v for k, v in given["derived"].items()},
+            drop=list(given["drop"]),
+            missing=tuple(missing) if missing is not None else None,
+            delimiter=d.get("delimiter"),
+            rating=dict(d["rating"]) if isinstance(d.get("rating"), Mapping) else d.get("rating"),
+            inputs={str(k): (_input_entry(v) if isinstance(v, Mapping) else v) for k, v in given["inputs"].items()},
+            experience_rule=d.get("experience_rule"),
+            explode=explode_entry(d["explode"]) if "explode" in d else None,
+            join=join_entry(d["join"]) if "join" in d else None,
+            wide=wide_entry(d["wide"]) if "wide" in d else None,
+            sheet=d.get("sheet"),
         )
         problems += m.problems()
         if problems:
