@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
-from .jsonfile import ModelError, check_names, get_key, nested, read_notes, read_row, read_table, unknown_keys
+from .jsonfile import ModelError, check_names, get_key, nested, read_entry, read_notes, read_table, unknown_keys
 from .rating import RatingTable
 
 MODEL_FORMAT = "trustseek.trust-model/1"
@@ -124,13 +124,8 @@ def _read_tables(d: Mapping[str, Any], kw: dict[str, Any], symbols: Mapping[str,
     """The tables ``initial``, ``emission`` and ``transition`` of a model file whose levels,
     output categories and inputs are ``kw``'s (a cell not read is NaN)."""
     L, inputs = kw["levels"], kw["inputs"]
-    initial = np.full(len(L), np.nan)
-    init = get_key(d, "initial", "initial", problems)
-    if init is not None:
-        row = read_row(init, L, "initial", problems)
-        if row is not None:
-            initial[:] = row
-    tables: dict[str, Any] = {"initial": initial}
+    initial = read_entry(d, "initial", "initial", L, problems)
+    tables: dict[str, Any] = {"initial": np.full(len(L), np.nan) if initial is None else initial}
     for name, axes, keys in (
         ("emission", kw["emission_inputs"], kw["output_categories"]),
         ("transition", kw["transition_inputs"], L),

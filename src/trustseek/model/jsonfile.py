@@ -140,6 +140,13 @@ def read_row(obj: Any, keys: Sequence[str], label: str, problems: list[str]) -> 
     return row
 
 
+def read_entry(obj: Any, key: str, label: str, keys: Sequence[str], problems: list[str]) -> np.ndarray | None:
+    """The probability row ``obj[key]`` (``{key: p}`` over ``keys``), named ``label``; None if
+    missing or unusable."""
+    cell = get_key(obj, key, label, problems)
+    return None if cell is None else read_row(cell, keys, label, problems)
+
+
 def get_key(obj: Any, key: str, label: str, problems: list[str]) -> Any:
     if not isinstance(obj, Mapping):
         problems.append(f"{label} must be an object, got {obj!r}")
@@ -189,11 +196,9 @@ def read_table(
         if depth == len(outer):
             unknown_keys(node, names_in, label(parts), problems)
             for t, tn in enumerate(names_in):
-                cell = get_key(node, tn, label(parts, tn), problems)
-                if cell is not None:
-                    row = read_row(cell, row_keys, label(parts, tn), problems)
-                    if row is not None:
-                        out[idx + (t,)] = row
+                row = read_entry(node, tn, label(parts, tn), row_keys, problems)
+                if row is not None:
+                    out[idx + (t,)] = row
             return
         sym, names = outer[depth]
         unknown_keys(node, names, label(parts), problems)
