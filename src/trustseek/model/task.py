@@ -38,13 +38,6 @@ from .jsonfile import (
 TASK_FORMAT = "trustseek.task/1"
 
 
-def _paper_value(key: str) -> str:
-    """The default of a Task field, as the error for a task file that lacks it shows it."""
-    if key == "rewards":
-        return json.dumps(Rewards().to_dict())
-    return fmt_number(Task.discount)
-
-
 # --------------------------------------------------------------------------- Task
 
 
@@ -229,10 +222,11 @@ class Task(JsonFile):
                     problems.append(f"complexity probabilities sum to {fmt_number(sum(probs))}")
         rw = d.get("rewards", {})
         rewards = Rewards()
+        paper = {"rewards": json.dumps(rewards.to_dict()), "discount": fmt_number(Task.discount)}  # the defaults
         for key in ("rewards", "discount"):
             if key not in d:
                 problems.append(
-                    f"{key} is missing (the paper's task has {key} = {_paper_value(key)}; 'trustseek preset "
+                    f"{key} is missing (the paper's task has {key} = {paper[key]}; 'trustseek preset "
                     "--task-out task.json' writes a complete task to start from)"
                 )
         if not isinstance(rw, Mapping):
