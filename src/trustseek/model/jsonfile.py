@@ -43,13 +43,6 @@ def build(problems: list[str], source: str | None, make: Callable[[], T]) -> T:
         raise ModelError(exc.problems, source) from None
 
 
-def raise_problems(obj: Any) -> None:
-    """Every problem ``obj.problems()`` finds, raised at once as one :class:`ModelError`."""
-    problems = obj.problems()
-    if problems:
-        raise ModelError(problems)
-
-
 class UnknownComplexityError(ModelError, KeyError):
     """A complexity name that the model or task does not have (a ``KeyError`` too: it is a
     failed lookup by name)."""
@@ -324,10 +317,21 @@ def same_fields(a: Any, b: Any, skip: Sequence[str] = ()) -> bool:
 
 
 class JsonFile:
-    """``save`` and ``load`` for a class with ``to_dict()`` and ``from_dict(d, source)``: the JSON
-    written with two-space indents (NaN and infinities as null), and read with every problem
-    located in the file (``load_json``, then ``from_dict`` naming the file).  Two are equal when
-    every field but the notes is (:func:`same_fields`)."""
+    """``save`` and ``load`` for a frozen dataclass with ``to_dict()``, ``from_dict(d, source)`` and
+    ``problems()``: the JSON written with two-space indents (NaN and infinities as null), and read
+    with every problem located in the file (``load_json``, then ``from_dict`` naming the file).
+    Two are equal when every field but the notes is (:func:`same_fields`)."""
+
+    def _freeze_and_check(self, *arrays: str) -> None:
+        """The named fields as read-only float64 arrays, then every problem ``problems()`` finds
+        raised at once as one :class:`ModelError` (the end of ``__post_init__``)."""
+        freeze_arrays(self, *arrays)
+        problems = self.problems()
+        if problems:
+            raise ModelError(problems)
+
+    def problems(self) -> list[str]:
+        raise NotImplementedError
 
     def __eq__(self, other: object) -> bool:
         if type(other) is not type(self):

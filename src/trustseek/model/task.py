@@ -28,10 +28,8 @@ from .jsonfile import (
     check_row_array,
     complexity_index,
     fmt_number,
-    freeze_arrays,
     get_key,
     is_number,
-    raise_problems,
     unknown_keys,
 )
 
@@ -80,8 +78,7 @@ class Task(JsonFile):
     def __post_init__(self) -> None:
         object.__setattr__(self, "complexities", tuple(self.complexities))
         object.__setattr__(self, "ask_experience", tuple(int(x) for x in self.ask_experience))
-        freeze_arrays(self, "complexity_probs", "success")
-        raise_problems(self)
+        self._freeze_and_check("complexity_probs", "success")
 
     @property
     def n_complexity(self) -> int:
