@@ -35,12 +35,7 @@ from .mapping import ColumnMapping, format_number, label_key
 def _mapped(entry: Any) -> tuple[dict[str, str], str]:
     """An entry's label table (the log's texts -> levels) and how an error names it."""
     table = {label_key(k): label_key(v) for k, v in (entry.get("labels") or {}).items()}
-    return table, _named(table)
-
-
-def _named(table: dict[str, str]) -> str:
-    """How an error names the labels of a label table: ``['0', '1'] (mapped) or `` (none: empty)."""
-    return f"{sorted(table)} (mapped) or " if table else ""
+    return table, f"{sorted(table)} (mapped) or " if table else ""
 
 
 def _level_of(levels: tuple[str, ...]) -> Callable[[str], int | None]:
@@ -76,10 +71,11 @@ def category_codes(problems: Problems, cc: Column, mapping: ColumnMapping, c: st
     empty = 0 if c == "human_action" else EMPTY  # an empty human action: not recorded
     lookup, kind = level_lookup(cc, table, lambda label: allowed.index(label) if label in allowed else None, np.int8, empty)
     hint = "; an empty cell, or a NaN with --missing nan, is not recorded" if c == "human_action" else ""
+    known_labels = f"{sorted(table)} (mapped) or " if table else ""
     heads = (
         f"{head}: empty value (expected one of {list(allowed)})",
         f"{head}: value is NaN (expected one of {list(allowed)}{hint})",
-        f"{head}: unknown category (expected one of {_named(table)}{list(allowed)})",
+        f"{head}: unknown category (expected one of {known_labels}{list(allowed)})",
     )
     k = report_kinds(problems, cc, kind, heads)
     unknown = sorted(t for j, t in enumerate(cc.texts) if kind[j] == UNKNOWN and t is not None)
