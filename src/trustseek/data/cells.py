@@ -113,8 +113,8 @@ def as_text(v: Any, missing: frozenset[str] = frozenset()) -> str | None:
 def spellings(text: str) -> tuple[str, ...]:
     """The ways a label may be written in a mapping: a number as read ('1.0') and as an
     integer ('1'); a boolean as true/false and as 1/0."""
-    if text.lower() in ("true", "false"):
-        low = text.lower()
+    low = text.lower()
+    if low in ("true", "false"):
         return tuple(dict.fromkeys((text, low, low.capitalize(), low.upper(), "1" if low == "true" else "0")))
     try:
         f = float(text)

@@ -132,13 +132,8 @@ def _required(mapping: ColumnMapping, required: Sequence[str] | None) -> tuple[s
     mapping orders the trials by its own columns)."""
     if required is None:  # a mapping that declares inputs is for a model of those: the canonical inputs are optional
         required = ("participant", "trial", "human_action") if mapping.inputs else CANONICAL
-    required = tuple(required)
-    for col in ("trial", "participant"):
-        if col not in required:
-            required = (col, *required)
-    if mapping.order is not None:
-        required = tuple(c for c in required if c != "trial")
-    return required
+    required = (*[c for c in ("participant", "trial") if c not in required], *required)
+    return tuple(c for c in required if c != "trial" or mapping.order is None)
 
 
 def _check_columns(
