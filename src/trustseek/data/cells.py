@@ -69,10 +69,7 @@ class Problems:
 
     def rows(self, head: str, rows: np.ndarray, describe: Any = None) -> None:
         """A kind of problem at checked rows ``rows`` (0-based), each described by ``describe(row)``."""
-        if len(rows) == 0:
-            return
-        first = rows[:SHOWN]
-        items = [self.where(int(r)) + (f" {describe(int(r))}" if describe else "") for r in first]
+        items = [self.where(int(r)) + (f" {describe(int(r))}" if describe else "") for r in rows[:SHOWN]]
         self.add(head, items, len(rows))
 
 
@@ -116,8 +113,8 @@ def as_text(v: Any, missing: frozenset[str] = frozenset()) -> str | None:
 def spellings(text: str) -> tuple[str, ...]:
     """The ways a label may be written in a mapping: a number as read ('1.0') and as an
     integer ('1'); a boolean as true/false and as 1/0."""
-    if text.lower() in ("true", "false"):
-        low = text.lower()
+    low = text.lower()
+    if low in ("true", "false"):
         return tuple(dict.fromkeys((text, low, low.capitalize(), low.upper(), "1" if low == "true" else "0")))
     try:
         f = float(text)

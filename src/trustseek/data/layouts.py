@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from .cells import SHOWN, Column, DataError, Problems, RawLog, names_list, shorten, unknown_entries, value_ids
+from .order import by_participant
 
 
 def explode_hint(columns: list[str]) -> str:
@@ -214,21 +215,15 @@ def table_from_records(records: list[dict[str, Any]], lists: set[str]) -> Any:
 def _stack(raw: RawLog, names: list[str | None], rows: np.ndarray, k: np.ndarray) -> Column:
     """One column from per-trial columns ``names`` (None: absent): row i of the result is
     ``names[k[i]]`` at record ``rows[i]``, the texts merged."""
-    texts: list[str | None] = [None]
-    index: dict[str | None, int] = {None: 0}
+    merged: dict[str | None, int] = {None: 0}
     codes = np.zeros(len(rows), dtype=np.int32)
     for j, name in enumerate(names):
-        if name is None:
-            continue
-        col = raw.col(name)
-        for t in col.texts:
-            if t not in index:
-                index[t] = len(texts)
-                texts.append(t)
-        remap = np.array([index[t] for t in col.texts], dtype=np.int32)
-        at = k == j
-        codes[at] = remap[col.codes[rows[at]]]
-    return Column(codes, texts)
+        if name is not None:
+            col = raw.col(name)
+            remap = np.array([merged.setdefault(t, len(merged)) for t in col.texts], dtype=np.int32)
+            at = k == j
+            codes[at] = remap[col.codes[rows[at]]]
+    return Column(codes, list(merged))
 
 
 def unpivot(raw: RawLog, spec: dict[str, Any]) -> RawLog:
@@ -363,7 +358,5 @@ def join_file(raw: RawLog, second: RawLog, spec: dict[str, Any], participant: st
 
 
 def _by_participant(codes: np.ndarray, texts: dict[int, str]) -> str:
-    who, count = np.unique(codes, return_counts=True)
-    shown = ", ".join(f"{texts.get(int(w), '')!r} {c}" for w, c in zip(who[:20], count[:20], strict=True))
-    more = f", ... ({len(who) - 20} more participants)" if len(who) > 20 else ""
-    return f"by participant, {len(who)}: {shown}{more}"
+    n, shown = by_participant(codes, lambda w: texts.get(w, ""), 20)
+    return f"by participant, {n}: {shown}"

@@ -154,10 +154,7 @@ def one_rating_per_block(
     last = np.full(ng, -1, dtype=np.int64)
     np.maximum.at(last, g, pos)
     has = rated >= 0
-    lo = np.full(ng, np.iinfo(np.int64).max)
-    hi = np.full(ng, -1, dtype=np.int64)
-    np.minimum.at(lo, g[has], rated[has])
-    np.maximum.at(hi, g[has], rated[has])
+    lo, hi = _group_range(g[has], ng, rated[has])
     conflict = np.flatnonzero(has & (lo[g] != hi[g]))
     problems.rows(
         f"column {rating!r}: different ratings within one block (column {per!r}) of a participant; a rating per block "
@@ -167,6 +164,16 @@ def one_rating_per_block(
     out = np.full(n, -1, dtype=rated.dtype)
     out[order[last]] = hi.astype(rated.dtype)
     return out
+
+
+def _group_range(group: np.ndarray, n_groups: int, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per group (``group``: one per value) the least and the greatest of ``values`` (a group
+    without a value: the largest int64 and -1)."""
+    lo = np.full(n_groups, np.iinfo(np.int64).max)
+    hi = np.full(n_groups, -1, dtype=np.int64)
+    np.minimum.at(lo, group, values)
+    np.maximum.at(hi, group, values)
+    return lo, hi
 
 
 def _rated_rows(frame: pd.DataFrame, column: str, block: str, missing: frozenset[str]) -> tuple[Any, ...]:
@@ -216,10 +223,7 @@ def copied_per_block(
         if not has.any():
             return None
         g, inverse, count = np.unique(group[has], return_inverse=True, return_counts=True)
-        lo = np.full(len(g), np.iinfo(np.int64).max)
-        hi = np.full(len(g), -1, dtype=np.int64)
-        np.minimum.at(lo, inverse, rated[has])
-        np.maximum.at(hi, inverse, rated[has])
+        lo, hi = _group_range(inverse, len(g), rated[has])
         if (lo == hi).all() and (count > 1).any():
             return (
                 f"{shown or column!r} holds one value per {block!r}, on {int(has.sum()):,} trials of {len(g):,} blocks: "

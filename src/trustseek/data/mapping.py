@@ -22,7 +22,6 @@ from .cells import DataError, names_list, shorten, unknown_entries
 from .layouts import explode_entry, explode_problems, join_entry, join_problems, wide_entry, wide_problems
 
 CANONICAL = TRIAL_COLUMNS
-CATEGORICAL = CATEGORICAL_COLUMNS
 
 
 @dataclass
@@ -102,8 +101,8 @@ class ColumnMapping:
             if not isinstance(theirs, str) or not theirs:
                 p.append(f"column mapping: {canon} must map to a column name, got {theirs!r}")
         for canon, table in self.labels.items():
-            if canon not in CATEGORICAL:
-                p.append(f"label mapping: {canon!r} is not a categorical column {list(CATEGORICAL)}")
+            if canon not in CATEGORICAL_COLUMNS:
+                p.append(f"label mapping: {canon!r} is not a categorical column {list(CATEGORICAL_COLUMNS)}")
                 continue
             if not isinstance(table, Mapping):
                 p.append(f"label mapping: {canon} must map labels to labels, got {table!r}")
@@ -159,7 +158,7 @@ class ColumnMapping:
         """A missing-value marker that is also a label of a categorical column would turn that label's
         cells into unrecorded ones."""
         labels: dict[str, str] = {}
-        for col in CATEGORICAL:
+        for col in CATEGORICAL_COLUMNS:
             table = self.labels.get(col)
             theirs = list(table) if isinstance(table, Mapping) else []
             for text in (*self.categories(col), *theirs):
@@ -238,21 +237,23 @@ class ColumnMapping:
             given[key] = v
         cx, order, missing, labels = given["complexities"], given["order"], given["missing"], given["labels"]
         m = cls(
-            {str(k): v for k, v in given["columns"].items()},
-            {str(k): (_label_table(v, problems, f"labels[{k}]") if isinstance(v, Mapping) else v) for k, v in labels.items()},
-            tuple(cx) if cx else None,
-            tuple(order) if order is not None else None,
-            {str(k): v for k, v in given["derived"].items()},
-            list(given["drop"]),
-            tuple(missing) if missing is not None else None,
-            d.get("delimiter"),
-            dict(d["rating"]) if isinstance(d.get("rating"), Mapping) else d.get("rating"),
-            {str(k): (_input_entry(v) if isinstance(v, Mapping) else v) for k, v in given["inputs"].items()},
-            d.get("experience_rule"),
-            explode_entry(d["explode"]) if "explode" in d else None,
-            join_entry(d["join"]) if "join" in d else None,
-            wide_entry(d["wide"]) if "wide" in d else None,
-            d.get("sheet"),
+            columns={str(k): v for k, v in given["columns"].items()},
+            labels={
+                str(k): _label_table(v, problems, f"labels[{k}]") if isinstance(v, Mapping) else v for k, v in labels.items()
+            },
+            complexities=tuple(cx) if cx else None,
+            order=tuple(order) if order is not None else None,
+            derived={str(k): v for k, v in given["derived"].items()},
+            drop=list(given["drop"]),
+            missing=tuple(missing) if missing is not None else None,
+            delimiter=d.get("delimiter"),
+            rating=dict(d["rating"]) if isinstance(d.get("rating"), Mapping) else d.get("rating"),
+            inputs={str(k): (_input_entry(v) if isinstance(v, Mapping) else v) for k, v in given["inputs"].items()},
+            experience_rule=d.get("experience_rule"),
+            explode=explode_entry(d["explode"]) if "explode" in d else None,
+            join=join_entry(d["join"]) if "join" in d else None,
+            wide=wide_entry(d["wide"]) if "wide" in d else None,
+            sheet=d.get("sheet"),
         )
         problems += m.problems()
         if problems:

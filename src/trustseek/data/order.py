@@ -7,6 +7,7 @@ Every check works on integer codes with array operations; problems go to
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -146,7 +147,14 @@ def check_trials(
 
 def offenders(codes: np.ndarray, ids: list[str]) -> str:
     """Every participant among ``codes`` (one per offending row) with its count of rows."""
+    n, per = by_participant(codes, ids.__getitem__, LISTED)
+    return f"by participant, {n} ({per})"
+
+
+def by_participant(codes: np.ndarray, name: Callable[[int], str], listed: int) -> tuple[int, str]:
+    """The participants among ``codes`` (one per row): how many, and the first ``listed`` of them
+    by ``name``, each with its count of rows (``'P1' 3, 'P2' 1, ... (7 more participants)``)."""
     who, count = np.unique(codes, return_counts=True)
-    per = ", ".join(f"{ids[w]!r} {c}" for w, c in zip(who[:LISTED], count[:LISTED], strict=True))
-    more = f", ... ({len(who) - LISTED} more participants)" if len(who) > LISTED else ""
-    return f"by participant, {len(who)} ({per}{more})"
+    shown = ", ".join(f"{name(int(w))!r} {c}" for w, c in zip(who[:listed], count[:listed], strict=True))
+    more = f", ... ({len(who) - listed} more participants)" if len(who) > listed else ""
+    return len(who), shown + more

@@ -17,14 +17,14 @@ import pandas as pd
 from .cells import DataError, RawLog, column_from_pandas, shorten
 
 READ_SECONDS = 60  # the longest a file is read (a second more per MB) before its reader is stopped
-#: the readers of pyreadstat, by suffix
+#: by suffix, the reader of pyreadstat and the statistics package whose data the file holds
 READERS = {
-    ".sav": "read_sav",
-    ".zsav": "read_sav",
-    ".por": "read_por",
-    ".dta": "read_dta",
-    ".sas7bdat": "read_sas7bdat",
-    ".xpt": "read_xport",
+    ".sav": ("read_sav", "SPSS"),
+    ".zsav": ("read_sav", "SPSS"),
+    ".por": ("read_por", "SPSS"),
+    ".dta": ("read_dta", "Stata"),
+    ".sas7bdat": ("read_sas7bdat", "SAS"),
+    ".xpt": ("read_xport", "SAS"),
 }
 
 
@@ -47,9 +47,9 @@ def _read(path: str, suffix: str) -> tuple[pd.DataFrame, dict] | str:
     import pyreadstat
 
     try:
-        frame, meta = getattr(pyreadstat, READERS[suffix])(path)  # the codes, with the labels in meta
+        frame, meta = getattr(pyreadstat, READERS[suffix][0])(path)  # the codes, with the labels in meta
     except pyreadstat.ReadstatError as exc:
-        return f"cannot read the file as {_kind(suffix)} data: {shorten(str(exc), 200)}"
+        return f"cannot read the file as {READERS[suffix][1]} data: {shorten(str(exc), 200)}"
     except OSError as exc:
         return f"cannot read the file: {exc.strerror or exc}"
     return frame, dict(getattr(meta, "variable_value_labels", {}) or {})
@@ -62,7 +62,7 @@ def _child(path: str, suffix: str, conn: Any) -> None:
     try:
         conn.send(_read(path, suffix))
     except Exception as exc:  # whatever the reader raises is said, not raised, in the parent
-        conn.send(f"cannot read the file as {_kind(suffix)} data: {type(exc).__name__}: {shorten(str(exc), 200)}")
+        conn.send(f"cannot read the file as {READERS[suffix][1]} data: {type(exc).__name__}: {shorten(str(exc), 200)}")
     conn.close()
 
 
@@ -86,7 +86,7 @@ def _read_apart(path: Path, name: str) -> tuple[pd.DataFrame, dict]:
         deadline = time.monotonic() + seconds
         while not receive.poll(0.05) and child.is_alive() and time.monotonic() < deadline:
             pass
-        kind = f"cannot read the file as {_kind(suffix)} data"
+        kind = f"cannot read the file as {READERS[suffix][1]} data"
         try:
             got = receive.recv() if receive.poll() else f"{kind}: the reader did not finish in {seconds:.0f} s"
         except EOFError:  # the reader died without an answer
@@ -106,7 +106,3 @@ def _cells(values: pd.Series, labels: dict) -> pd.Series:
     if labels:
         out = out.map(lambda v: labels.get(v, v) if v is not None else None)
     return out
-
-
-def _kind(suffix: str) -> str:
-    return "SPSS" if suffix in (".sav", ".zsav", ".por") else "Stata" if suffix == ".dta" else "SAS"

@@ -20,12 +20,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
+from ..vocab import ACTIONS, CATEGORICAL_COLUMNS, EXPERIENCES, HUMAN_ACTIONS
 from .cells import NAN_MARK, Column, DataError, Problems, RawLog, shorten, spellings, value_ids
 from .folders import FILE_COLUMN
 from .layouts import join_file, unpivot
 from .levels import category_codes, input_codes, one_rating_per_block, rating_codes
-from .mapping import CANONICAL, CATEGORICAL, RATING, ColumnMapping, as_mapping, label_key
+from .mapping import CANONICAL, RATING, ColumnMapping, as_mapping, label_key
 from .order import check_trials, order_trials, trial_numbers
 from .sources import DELIMITERS, PARQUET_SUFFIXES, load_source
 
@@ -132,13 +132,8 @@ def _required(mapping: ColumnMapping, required: Sequence[str] | None) -> tuple[s
     mapping orders the trials by its own columns)."""
     if required is None:  # a mapping that declares inputs is for a model of those: the canonical inputs are optional
         required = ("participant", "trial", "human_action") if mapping.inputs else CANONICAL
-    required = tuple(required)
-    for col in ("trial", "participant"):
-        if col not in required:
-            required = (col, *required)
-    if mapping.order is not None:
-        required = tuple(c for c in required if c != "trial")
-    return required
+    required = (*[c for c in ("participant", "trial") if c not in required], *required)
+    return tuple(c for c in required if c != "trial" or mapping.order is None)
 
 
 def _check_columns(
@@ -260,9 +255,8 @@ def _derive(get: _Columns, mapping: ColumnMapping, pcode: np.ndarray, perm: np.n
             a, b = (get(s) for s in d["equal"])
             get.cols[new] = _equal(a, b)
         elif perm is not None:
-            fill = d.get("fill")
-            shifted = _shift(get(d["shift"]), pcode, perm, int(d.get("by", 1)), None if fill is None else label_key(fill))
-            get.cols[new] = shifted
+            fill = None if d.get("fill") is None else label_key(d["fill"])
+            get.cols[new] = _shift(get(d["shift"]), pcode, perm, int(d.get("by", 1)), fill)
         else:  # the trial order is broken (reported already): nothing to shift by
             get.cols[new] = Column(np.zeros(get.n, np.int32), [None])
 
@@ -275,7 +269,7 @@ def _categories(
         c: category_codes(problems, get(mapping.columns.get(c, c)), mapping, c, column(c))
         if c in present
         else np.full(get.n, -1, dtype=np.int8)
-        for c in CATEGORICAL
+        for c in CATEGORICAL_COLUMNS
     }
 
 
@@ -310,7 +304,7 @@ def _frame(
             "trial": trial,
         }
     )
-    for c in CATEGORICAL:
+    for c in CATEGORICAL_COLUMNS:
         frame[c] = pd.Categorical.from_codes(codes[c], categories=pd.Index(list(mapping.categories(c)), dtype=object))
     if rated is not None and mapping.rating is not None:
         levels = pd.Index(list(mapping.rating_levels()), dtype=object)

@@ -228,10 +228,7 @@ class _PomdpReader:
 
     def __init__(self, label: str, groups: list[tuple[int, str, str]]) -> None:
         self.label, self.groups = label, groups
-        self.header: dict[str, tuple[int, str]] = {}
-        for no, k, rest in groups:
-            if k in _HEADER or k.startswith("start"):
-                self.header[k] = (no, rest.strip())
+        self.header = {k: (no, rest.strip()) for no, k, rest in groups if k in _HEADER or k.startswith("start")}
         self.states, self.actions, self.observations = self.names("states"), self.names("actions"), self.names("observations")
         self.discount, self.sign = self._discount(), self._sign()
 

@@ -53,9 +53,7 @@ from .jsonfile import (
     check_names,
     check_row_array,
     complexity_index,
-    freeze_arrays,
     load_json,
-    raise_problems,
 )
 from .rating import RatingTable
 
@@ -94,8 +92,7 @@ class TrustModel(JsonFile):
         object.__setattr__(
             self, "not_estimated", tuple(sorted({(str(t), tuple(int(i) for i in idx)) for t, idx in self.not_estimated}))
         )
-        freeze_arrays(self, "initial", "emission", "transition")
-        raise_problems(self)
+        self._freeze_and_check("initial", "emission", "transition")
 
     # -- configuration -----------------------------------------------------
     @property

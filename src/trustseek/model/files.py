@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
-from .jsonfile import ModelError, check_names, get_key, nested, read_notes, read_row, read_table, unknown_keys
+from .jsonfile import ModelError, check_names, get_key, nested, read_entry, read_notes, read_table, unknown_keys
 from .rating import RatingTable
 
 MODEL_FORMAT = "trustseek.trust-model/1"
@@ -102,70 +102,65 @@ def is_iohmm_file(d: Any) -> bool:
 def model_fields(d: Any, source: str | None = None, general: bool = False) -> dict[str, Any]:
     """The fields of a model (a :class:`~trustseek.model.core.TrustModel`'s) from its JSON form,
     every problem reported at once; a general model file only with ``general`` (else the planning
-    refusal)."""
+    refusal).  The header is read first: its problems are reported before the tables are read."""
     if general and is_iohmm_file(d):
-        return _read(d, source, _general_header)
-    if not isinstance(d, Mapping):
+        read = _general_fields
+    elif not isinstance(d, Mapping):
         raise ModelError([f"a trust model must be a JSON object, got {type(d).__name__}"], source)
-    if d.get("format", MODEL_FORMAT) == IOHMM_FORMAT:
+    elif d.get("format", MODEL_FORMAT) == IOHMM_FORMAT:
         named = [d.get("emission_inputs"), d.get("transition_inputs")]
         inputs = [c for names in named if isinstance(names, list) for c in names if isinstance(c, str)]
         raise ModelError([planning_refusal(list(dict.fromkeys(inputs)))], source)
-    return _read(d, source, _trust_header)
-
-
-def _read(d: Mapping[str, Any], source: str | None, header) -> dict[str, Any]:
-    """The header (by format), then the tables, then what follows them."""
+    else:
+        read = _trust_fields
     problems: list[str] = []
-    kw, symbols, rest = header(d, problems)
-    if problems or kw is None:
+    fields = read(d, problems)
+    if problems or fields is None:
         raise ModelError(problems, source)
+    return fields
+
+
+def _read_tables(d: Mapping[str, Any], kw: dict[str, Any], symbols: Mapping[str, str], problems: list[str]) -> dict[str, Any]:
+    """The tables ``initial``, ``emission`` and ``transition`` of a model file whose levels,
+    output categories and inputs are ``kw``'s (a cell not read is NaN)."""
     L, inputs = kw["levels"], kw["inputs"]
-    K = len(L)
-    initial = np.full(K, np.nan)
-    init = get_key(d, "initial", "initial", problems)
-    if init is not None:
-        row = read_row(init, L, "initial", problems)
-        if row is not None:
-            initial[:] = row
-    tables: dict[str, Any] = {"initial": initial}
+    initial = read_entry(d, "initial", "initial", L, problems)
+    tables: dict[str, Any] = {"initial": np.full(len(L), np.nan) if initial is None else initial}
     for name, axes, keys in (
         ("emission", kw["emission_inputs"], kw["output_categories"]),
         ("transition", kw["transition_inputs"], L),
     ):
-        arr = np.full((*[len(inputs[c]) for c in axes], K, len(keys)), np.nan)
+        arr = np.full((*[len(inputs[c]) for c in axes], len(L), len(keys)), np.nan)
         node = get_key(d, name, name, problems)
         if node is not None:
             outer = [(symbols.get(c, c), inputs[c]) for c in axes]
             read_table(node, name, outer, (symbols.get("level", "level"), L), keys, arr, problems)
         tables[name] = arr
-    kw.update(rest(problems))
-    if problems:
-        raise ModelError(problems, source)
-    return {**kw, **tables}
+    return tables
 
 
-def _trust_header(d: Mapping[str, Any], problems: list[str]):
+def _trust_fields(d: Mapping[str, Any], problems: list[str]) -> dict[str, Any] | None:
+    """A trust model file's fields: the header, the tables, then the notes, the never-estimated
+    rows and the rating."""
     fmt = d.get("format", MODEL_FORMAT)
     if fmt != MODEL_FORMAT:
         problems.append(f"format is {fmt!r}, expected {MODEL_FORMAT!r}")
     unknown_keys(d, TRUST_KEYS, "model", problems)
     T = check_names(get_key(d, "trust_levels", "trust_levels", problems), "trust_levels", problems)
     C = check_names(get_key(d, "complexities", "complexities", problems), "complexities", problems)
-    if not T or not C:
-        return None, {}, None
+    if problems or not T or not C:
+        return None
     kw = trust_fields(T, C)
-
-    def rest(problems: list[str]) -> dict[str, Any]:
-        notes = read_notes(d, problems)
-        not_estimated = _read_not_estimated(d.get("not_estimated", []), C, problems)
-        rating = RatingTable.read(d["rating"], T, problems) if d.get("rating") is not None else None
-        return {"notes": notes, "not_estimated": not_estimated, "rating": rating}
-
-    return kw, {**SYMBOLS, "level": "T"}, rest
+    tables = _read_tables(d, kw, {**SYMBOLS, "level": "T"}, problems)
+    notes = read_notes(d, problems)
+    not_estimated = _read_not_estimated(d.get("not_estimated", []), C, problems)
+    rating = RatingTable.read(d["rating"], T, problems) if d.get("rating") is not None else None
+    return {**kw, **tables, "notes": notes, "not_estimated": not_estimated, "rating": rating}
 
 
-def _general_header(d: Mapping[str, Any], problems: list[str]):
+def _general_fields(d: Mapping[str, Any], problems: list[str]) -> dict[str, Any] | None:
+    """A general model file's fields: the header (levels, output, inputs, structure, notes), the
+    tables, then the rating and its column."""
     unknown_keys(d, GENERAL_KEYS, "model", problems)
     levels = check_names(get_key(d, "levels", "levels", problems), "levels", problems, minimum=1)
     out = get_key(d, "output", "output", problems)
@@ -193,8 +188,8 @@ def _general_header(d: Mapping[str, Any], problems: list[str]):
         structure = {}
     unknown_keys(structure, STRUCTURE_KEYS, "structure", problems)
     notes = read_notes(d, problems)
-    if not levels or not out_cats:
-        return None, {}, None
+    if problems or not levels or not out_cats:
+        return None
     kw = {
         "levels": tuple(levels),
         "output": str(out_name),
@@ -205,19 +200,16 @@ def _general_header(d: Mapping[str, Any], problems: list[str]):
         "structure": structure,
         "notes": notes,
     }
-
-    def rest(problems: list[str]) -> dict[str, Any]:
-        if d.get("rating") is None:
-            return {}
-        r, column = d["rating"], None
-        if isinstance(r, Mapping):
-            column = r.get("column", "rating")
-            if not isinstance(column, str) or not column:
-                problems.append(f"rating.column must name the rating column, got {column!r}")
-            r = {k: v for k, v in r.items() if k != "column"}
-        return {"rating": RatingTable.read(r, levels, problems), "rating_column": column}
-
-    return kw, {}, rest
+    kw.update(_read_tables(d, kw, {}, problems))
+    if d.get("rating") is None:
+        return kw
+    r, column = d["rating"], None
+    if isinstance(r, Mapping):
+        column = r.get("column", "rating")
+        if not isinstance(column, str) or not column:
+            problems.append(f"rating.column must name the rating column, got {column!r}")
+        r = {k: v for k, v in r.items() if k != "column"}
+    return {**kw, "rating": RatingTable.read(r, levels, problems), "rating_column": column}
 
 
 def _input_list(raw: Any, what: str, inputs: Mapping[str, Any], problems: list[str]) -> list[str]:

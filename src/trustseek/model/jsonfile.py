@@ -43,13 +43,6 @@ def build(problems: list[str], source: str | None, make: Callable[[], T]) -> T:
         raise ModelError(exc.problems, source) from None
 
 
-def raise_problems(obj: Any) -> None:
-    """Every problem ``obj.problems()`` finds, raised at once as one :class:`ModelError`."""
-    problems = obj.problems()
-    if problems:
-        raise ModelError(problems)
-
-
 class UnknownComplexityError(ModelError, KeyError):
     """A complexity name that the model or task does not have (a ``KeyError`` too: it is a
     failed lookup by name)."""
@@ -140,6 +133,13 @@ def read_row(obj: Any, keys: Sequence[str], label: str, problems: list[str]) -> 
     return row
 
 
+def read_entry(obj: Any, key: str, label: str, keys: Sequence[str], problems: list[str]) -> np.ndarray | None:
+    """The probability row ``obj[key]`` (``{key: p}`` over ``keys``), named ``label``; None if
+    missing or unusable."""
+    cell = get_key(obj, key, label, problems)
+    return None if cell is None else read_row(cell, keys, label, problems)
+
+
 def get_key(obj: Any, key: str, label: str, problems: list[str]) -> Any:
     if not isinstance(obj, Mapping):
         problems.append(f"{label} must be an object, got {obj!r}")
@@ -189,11 +189,9 @@ def read_table(
         if depth == len(outer):
             unknown_keys(node, names_in, label(parts), problems)
             for t, tn in enumerate(names_in):
-                cell = get_key(node, tn, label(parts, tn), problems)
-                if cell is not None:
-                    row = read_row(cell, row_keys, label(parts, tn), problems)
-                    if row is not None:
-                        out[idx + (t,)] = row
+                row = read_entry(node, tn, label(parts, tn), row_keys, problems)
+                if row is not None:
+                    out[idx + (t,)] = row
             return
         sym, names = outer[depth]
         unknown_keys(node, names, label(parts), problems)
@@ -319,10 +317,21 @@ def same_fields(a: Any, b: Any, skip: Sequence[str] = ()) -> bool:
 
 
 class JsonFile:
-    """``save`` and ``load`` for a class with ``to_dict()`` and ``from_dict(d, source)``: the JSON
-    written with two-space indents (NaN and infinities as null), and read with every problem
-    located in the file (``load_json``, then ``from_dict`` naming the file).  Two are equal when
-    every field but the notes is (:func:`same_fields`)."""
+    """``save`` and ``load`` for a frozen dataclass with ``to_dict()``, ``from_dict(d, source)`` and
+    ``problems()``: the JSON written with two-space indents (NaN and infinities as null), and read
+    with every problem located in the file (``load_json``, then ``from_dict`` naming the file).
+    Two are equal when every field but the notes is (:func:`same_fields`)."""
+
+    def _freeze_and_check(self, *arrays: str) -> None:
+        """The named fields as read-only float64 arrays, then every problem ``problems()`` finds
+        raised at once as one :class:`ModelError` (the end of ``__post_init__``)."""
+        freeze_arrays(self, *arrays)
+        problems = self.problems()
+        if problems:
+            raise ModelError(problems)
+
+    def problems(self) -> list[str]:
+        raise NotImplementedError
 
     def __eq__(self, other: object) -> bool:
         if type(other) is not type(self):

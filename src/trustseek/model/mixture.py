@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from .core import TrustModel
-from .jsonfile import JsonFile, ModelError, build, freeze_arrays, is_number, raise_problems, read_notes
+from .jsonfile import JsonFile, ModelError, build, is_number, read_notes
 
 MIXTURE_FORMAT = "trustseek.mixture/1"
 
@@ -39,8 +39,7 @@ class TypeMixture(JsonFile):
         object.__setattr__(self, "names", tuple(str(n) for n in self.names))
         object.__setattr__(self, "models", tuple(self.models))
         object.__setattr__(self, "weights", np.reshape(np.asarray(self.weights, dtype=np.float64), -1))
-        freeze_arrays(self, "weights")
-        raise_problems(self)
+        self._freeze_and_check("weights")
 
     @property
     def n_types(self) -> int:

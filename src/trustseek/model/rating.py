@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from .jsonfile import check_names, check_row_array, freeze_arrays, get_key, nested, read_row, same_fields, unknown_keys
+from .jsonfile import check_names, check_row_array, freeze_arrays, get_key, nested, read_entry, same_fields, unknown_keys
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,11 +63,9 @@ class RatingTable:
         probs = np.full((len(trust_levels), len(levels)), np.nan)
         unknown_keys(raw, trust_levels, "rating.probs", problems)
         for t, name in enumerate(trust_levels):
-            cell = get_key(raw, name, f"rating[T={name}]", problems)
-            if cell is not None:
-                row = read_row(cell, levels, f"rating[T={name}]", problems)
-                if row is not None:
-                    probs[t] = row
+            row = read_entry(raw, name, f"rating[T={name}]", levels, problems)
+            if row is not None:
+                probs[t] = row
         return cls(tuple(levels), probs)
 
     def __eq__(self, other: object) -> bool:

@@ -28,21 +28,12 @@ from .jsonfile import (
     check_row_array,
     complexity_index,
     fmt_number,
-    freeze_arrays,
     get_key,
     is_number,
-    raise_problems,
     unknown_keys,
 )
 
 TASK_FORMAT = "trustseek.task/1"
-
-
-def _paper_value(key: str) -> str:
-    """The default of a Task field, as the error for a task file that lacks it shows it."""
-    if key == "rewards":
-        return json.dumps(Rewards().to_dict())
-    return fmt_number(Task.discount)
 
 
 # --------------------------------------------------------------------------- Task
@@ -87,8 +78,7 @@ class Task(JsonFile):
     def __post_init__(self) -> None:
         object.__setattr__(self, "complexities", tuple(self.complexities))
         object.__setattr__(self, "ask_experience", tuple(int(x) for x in self.ask_experience))
-        freeze_arrays(self, "complexity_probs", "success")
-        raise_problems(self)
+        self._freeze_and_check("complexity_probs", "success")
 
     @property
     def n_complexity(self) -> int:
@@ -229,10 +219,11 @@ class Task(JsonFile):
                     problems.append(f"complexity probabilities sum to {fmt_number(sum(probs))}")
         rw = d.get("rewards", {})
         rewards = Rewards()
+        paper = {"rewards": json.dumps(rewards.to_dict()), "discount": fmt_number(Task.discount)}  # the defaults
         for key in ("rewards", "discount"):
             if key not in d:
                 problems.append(
-                    f"{key} is missing (the paper's task has {key} = {_paper_value(key)}; 'trustseek preset "
+                    f"{key} is missing (the paper's task has {key} = {paper[key]}; 'trustseek preset "
                     "--task-out task.json' writes a complete task to start from)"
                 )
         if not isinstance(rw, Mapping):

@@ -24,21 +24,16 @@ def plot_power(summary: dict[str, Any], path=None):
     target = summary["targets"]["power"]
     with figure(figsize=(5.6, 3.4)) as (fig, ax):
         colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
-        k = 0
-        for point in summary["points"]:
-            for e2 in point["experiment2"]:
-                for test, ls in (("wilcoxon", "-"), ("t", "--")):
-                    curve = e2["curve"]
-                    n = [c["participants"] for c in curve]
-                    p = [c[test]["power"] for c in curve]
-                    lo = [c[test]["lo"] for c in curve]
-                    hi = [c[test]["hi"] for c in curve]
-                    color = colors[k % len(colors)]
-                    lab = f"{TEST_LABELS[test]}, exp. 1 {_label(point)}, {e2['trials_per_block']} trials/block"
-                    ax.plot(n, p, ls=ls, marker="o", ms=3, color=color, label=lab)
-                    if test == "wilcoxon":
-                        ax.fill_between(n, lo, hi, color=color, alpha=0.15, lw=0)
-                k += 1
+        designs = [(point, e2) for point in summary["points"] for e2 in point["experiment2"]]
+        for k, (point, e2) in enumerate(designs):
+            color, curve = colors[k % len(colors)], e2["curve"]
+            n = [c["participants"] for c in curve]
+            for test, ls in (("wilcoxon", "-"), ("t", "--")):
+                lab = f"{TEST_LABELS[test]}, exp. 1 {_label(point)}, {e2['trials_per_block']} trials/block"
+                ax.plot(n, [c[test]["power"] for c in curve], ls=ls, marker="o", ms=3, color=color, label=lab)
+                if test == "wilcoxon":  # the band of its exact interval
+                    lo, hi = [c[test]["lo"] for c in curve], [c[test]["hi"] for c in curve]
+                    ax.fill_between(n, lo, hi, color=color, alpha=0.15, lw=0)
         ax.axhline(target, color="black", lw=0.8, ls=":", label=f"target power {target:g}")
         ns = [c["participants"] for p in summary["points"] for e in p["experiment2"] for c in e["curve"]]
         if ns and max(ns) > 20 * min(ns):

@@ -117,8 +117,7 @@ def plot_replicates(
         ax.legend(frameon=False, loc="upper left", ncols=2, fontsize=7)
         ax.yaxis.get_major_locator().set_params(integer=True)
         ax = axes[1]
-        ds = np.asarray([np.nan if v is None else v for v in diff_small], dtype=float)
-        dl = np.asarray([np.nan if v is None else v for v in diff_large], dtype=float)
+        ds, dl = np.asarray(diff_small, dtype=float), np.asarray(diff_large, dtype=float)  # None: NaN
         if not (np.isfinite(ds).any() or np.isfinite(dl).any()):
             _no_data(ax, "no replicates were run")
         rows = [("large N:\nmean diff.", dl, COLORS["autonomous"]), ("5 participants:\nmedian diff.", ds, "0.45")]
