@@ -17,7 +17,7 @@ from starlette.concurrency import run_in_threadpool
 
 from ..model.jsonfile import json_safe
 from ..version import __version__
-from .cache import StudyCaches
+from .cache import Bounded, StudyCaches
 from .db import DEFAULT_URL, open_database, safe_url
 from .deploy.http import DeployFront, deploy
 from .deploy.store import DeployStore
@@ -124,7 +124,7 @@ def create_app(
     app.state.engine = app.state.db.kw["bind"]
     app.state.token = token or secrets.token_urlsafe(24)
     app.state.public_url = public_url
-    app.state.tokens = {}  # session token -> Caller
+    app.state.tokens = Bounded(100_000)  # session token -> auth.Caller
     # what the application remembers is the application's: nothing is cached in a module
     app.state.deploy_store = DeployStore(app.state.engine)  # the decision API's connections and sessions' live rows
     app.state.deploy_plans = Plans()  # the deploy sessions' plans, one parsed copy per content

@@ -1,7 +1,8 @@
 """``Bounded``: the server's one bounded mapping (the least recently used entries forgotten
 first), for what it remembers, always in objects the application owns (``app.state``), never in
-a module: ``StudyCaches``, the deploy sessions' plans (``plan.Plans``) with their decisions and
-belief updates, and their live rows (``deploy.store.DeployStore``)."""
+a module: ``StudyCaches``, the sessions' tokens (``auth.Caller``), the deploy sessions' plans
+(``plan.Plans``) with their decisions and belief updates, and their live rows
+(``deploy.store.DeployStore``)."""
 
 from __future__ import annotations
 
