@@ -17,7 +17,7 @@ from .lifecycle import give_consent
 from .orm import Session, utcnow
 from .routes import errors
 from .schemas import AnswersIn, ConsentIn, EventsIn, QuizAttemptIn, ReportIn, TrialIn
-from .sessions import DEPLOY_SESSION, add_events, lock, participant_trial, serve, study_config, submit_trial, total_trials
+from .sessions import add_events, lock, participant_trial, serve, study_config, submit_trial, total_trials
 from .studies import practice_count
 
 log = logging.getLogger(__name__)
@@ -39,7 +39,7 @@ def _db(request: Request, caller: Caller, study: bool = True):
     """The caller's database: the previews' for a preview (``preview.Previews``), else the study's;
     refused for a deploy session's token unless the route takes any session (``study=False``)."""
     if study and caller.kind != "study":
-        raise Conflict(DEPLOY_SESSION)
+        raise Conflict("this is a deploy session; use /api/deploy")
     return request.app.state.previews.db() if caller.preview else request.app.state.db()
 
 

@@ -41,8 +41,6 @@ log = logging.getLogger(__name__)
 #: stored UI events per trial (events outside any trial count together) and per session
 MAX_EVENTS_PER_TRIAL = 2000
 MAX_EVENTS_PER_SESSION = 50_000
-#: the refusal of a deploy session's token on a study session's route
-DEPLOY_SESSION = "this is a deploy session; use /api/deploy"
 
 
 def new_id() -> str:
@@ -99,8 +97,7 @@ def study_config(db: DBSession, study_id: str) -> dict[str, Any]:
 def block_plan(db: DBSession, s: Session, block: int) -> PolicyPlan:
     """The plan of a study session's block (its policy with ``PolicyRunner``'s step, parsed once
     and remembered by the application); the index after the study's blocks is the practice's."""
-    if s.kind != "study" or s.study_id is None:
-        raise Conflict(DEPLOY_SESSION)
+    assert s.study_id is not None, "a study session"
     contexts = caches_of(db).contexts
     plans = contexts.get(s.study_id)
     if plans is None:
@@ -112,8 +109,9 @@ def block_plan(db: DBSession, s: Session, block: int) -> PolicyPlan:
     return plans[block]
 
 
-def total_trials(s: Session) -> int | None:
-    return len(s.plan["trials"]) if s.kind == "study" else None
+def total_trials(s: Session) -> int:
+    """The trials of a study session, practice included."""
+    return len(s.plan["trials"])
 
 
 # --------------------------------------------------------------------------- serving
@@ -133,8 +131,7 @@ def serve(db: DBSession, s: Session) -> dict[str, Any] | None:
     if s.status != "running":
         return None
     n = s.trials_done + 1
-    total = total_trials(s)
-    if total is None or n > total:
+    if n > total_trials(s):
         return None
     step = s.plan["trials"][n - 1]
     items = scheduled_items(db, s, step["block"]) if step["complexity"] is None else None
@@ -229,8 +226,7 @@ def _commit_trial(db: DBSession, s: Session, row: Trial, after: list | None, eve
     s.trials_done = row.trial
     s.score = float(s.score + (0.0 if row.practice else row.reward))
     s.pending_trial = s.pending_complexity = s.pending_action = None
-    total = total_trials(s)
-    if total is not None and row.trial >= total:
+    if row.trial >= total_trials(s):
         s.status = "done"
     s.updated_at = utcnow()
     if not try_commit(db):
@@ -256,8 +252,6 @@ def submit_trial(
     """Commit trial ``n`` of a study session with the human action (``intervene`` or ``rely``, as
     ``schemas.TrialIn`` takes it); returns (trial, duplicate)."""
     s = lock(db, session_id)
-    if s.kind != "study":
-        raise Conflict("this is a deploy session: post its trials to /api/deploy/sessions/{id}/decide and /observe")
     # trials are committed in order together with trials_done, so trial n exists iff n <= trials_done
     old = _existing(db, s, n) if n <= s.trials_done else None
     if old is not None:
