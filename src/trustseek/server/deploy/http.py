@@ -44,7 +44,7 @@ from ..routes import errors
 from ..schemas import DecideIn, DeployIn, ObserveIn
 from ..sessions import p_high, pending, trial_dict
 from ..studies import ConfigError, complexity_problems, load_model_spec, load_task_spec, resolve_policy
-from .service import create_deploy, deploy_decide, deploy_observe, score_problem
+from .service import create_deploy, deploy_decide, deploy_observe, score_problems
 from .store import Known, LiveRow, Stale, Statements
 
 log = logging.getLogger(__name__)
@@ -183,7 +183,7 @@ def open_deploy(body: DeployIn, request: Request):
     state = request.app.state
     try:
         task, model = load_task_spec(body.task), load_model_spec(body.model)
-        problems = complexity_problems(model, task) or [p for p in [score_problem(task)] if p is not None]
+        problems = complexity_problems(model, task) or score_problems(task)
         if problems:
             raise ConfigError(problems)
         policy = resolve_policy(body.policy, model, task, caches=state.study_caches)

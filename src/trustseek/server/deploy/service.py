@@ -26,16 +26,16 @@ from ..sessions import new_session, p_high, scored, trial_dict
 from .store import LiveRow, Statements
 
 
-def score_problem(task: Task) -> str | None:
+def score_problems(task: Task) -> list[str]:
     """Why a deploy session of ``task`` could not keep its score, a sum of up to ``MAX_TRIAL``
-    rewards, as a finite number (nor a policy its values), or None."""
+    rewards, as a finite number (nor a policy its values); empty when it can."""
     largest = max(abs(v) for v in task.rewards.to_dict().values())
     if math.isfinite(largest * MAX_TRIAL):
-        return None
-    return (
+        return []
+    return [
         f"task rewards: the largest reward in magnitude, {largest:g}, overflows a session's score over {MAX_TRIAL} trials; "
         f"keep every reward within +-{sys.float_info.max / MAX_TRIAL:.3g}"
-    )
+    ]
 
 
 def create_deploy(
