@@ -44,8 +44,9 @@ async def refused(request: Request, exc: Exception) -> Response:
 async def validation_error(request: Request, exc: Exception) -> JSONResponse:
     """422 with every problem, as FastAPI answers, a refused ``NaN`` or infinity echoed as
     ``null`` (``model.jsonfile.json_safe``; FastAPI's own answer would fail to serialise, a 500)."""
-    errors = list(exc.errors()) if isinstance(exc, RequestValidationError) else []
-    if isinstance(exc, RequestValidationError) and request.method == "POST" and request.url.path == "/api/studies":
+    assert isinstance(exc, RequestValidationError)
+    errors = list(exc.errors())
+    if request.method == "POST" and request.url.path == "/api/studies":
         # a study's other problems too, not only its fields' (solving a policy may take a moment)
         more = await run_in_threadpool(more_problems, exc.body, errors)
         errors += [{"type": "study", "loc": ["body"], "msg": p} for p in more]
