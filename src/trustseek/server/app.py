@@ -17,7 +17,7 @@ from starlette.concurrency import run_in_threadpool
 
 from ..model.jsonfile import json_safe
 from ..version import __version__
-from .cache import StudyCaches
+from .cache import Bounded, StudyCaches
 from .db import DEFAULT_URL, open_database, safe_url
 from .deploy.http import DeployFront, deploy
 from .deploy.store import DeployStore
@@ -44,8 +44,9 @@ async def refused(request: Request, exc: Exception) -> Response:
 async def validation_error(request: Request, exc: Exception) -> JSONResponse:
     """422 with every problem, as FastAPI answers, a refused ``NaN`` or infinity echoed as
     ``null`` (``model.jsonfile.json_safe``; FastAPI's own answer would fail to serialise, a 500)."""
-    errors = list(exc.errors()) if isinstance(exc, RequestValidationError) else []
-    if isinstance(exc, RequestValidationError) and request.method == "POST" and request.url.path == "/api/studies":
+    assert isinstance(exc, RequestValidationError)
+    errors = list(exc.errors())
+    if request.method == "POST" and request.url.path == "/api/studies":
         # a study's other problems too, not only its fields' (solving a policy may take a moment)
         more = await run_in_threadpool(more_problems, exc.body, errors)
         errors += [{"type": "study", "loc": ["body"], "msg": p} for p in more]
@@ -124,7 +125,7 @@ def create_app(
     app.state.engine = app.state.db.kw["bind"]
     app.state.token = token or secrets.token_urlsafe(24)
     app.state.public_url = public_url
-    app.state.tokens = {}  # session token -> Caller
+    app.state.tokens = Bounded(100_000)  # session token -> auth.Caller
     # what the application remembers is the application's: nothing is cached in a module
     app.state.deploy_store = DeployStore(app.state.engine)  # the decision API's connections and sessions' live rows
     app.state.deploy_plans = Plans()  # the deploy sessions' plans, one parsed copy per content

@@ -56,23 +56,7 @@ def caller_for_token(state: Any, token: str) -> Caller | None:
         found = state.previews.find(token) if preview else found
         if found is None:
             return None
-        caller = remember_token(state, token, Caller(found[0], found[1], preview=preview))
-    return caller
-
-
-def remember_token(state: Any, token: str, caller: Caller) -> Caller:
-    """Cache the session of a token (``state`` is the application's state)."""
-    cache: dict[str, Caller] = state.tokens
-    if len(cache) > 100_000:
-        cache.clear()
-    cache[token] = caller
-    return caller
-
-
-def session_for_token(request: Request, token: str) -> Caller:
-    caller = caller_for_token(request.app.state, token)
-    if caller is None:
-        raise HTTPException(401, "unknown session token")
+        caller = state.tokens.put(token, Caller(found[0], found[1], preview=preview))
     return caller
 
 
@@ -83,9 +67,11 @@ async def require_session(
     return session_caller(request, token_of(creds), session_id)
 
 
-def session_caller(request: Request, token: str, session_id: str) -> Caller:
-    """The session of ``token``, if it is session ``session_id``."""
-    s = session_for_token(request, token)
-    if not secrets.compare_digest(s.id.encode(), session_id.encode()):
+def session_caller(request: Request, token: str, session_id: str | None = None) -> Caller:
+    """The session of ``token``, if it is session ``session_id`` (when one is named)."""
+    s = caller_for_token(request.app.state, token)
+    if s is None:
+        raise HTTPException(401, "unknown session token")
+    if session_id is not None and not secrets.compare_digest(s.id.encode(), session_id.encode()):
         raise HTTPException(403, "this token belongs to another session")
     return s

@@ -192,34 +192,31 @@ def trials_frame(db: DBSession, study: Study, practice: bool = False, pilot: boo
 def answers_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataFrame:
     """Every self-report (0-100 slider, questionnaire ``self_report``, item ``trust``) and every
     questionnaire item, one row each, next to the analysed trial each follows."""
-    names = _block_names(study)
-    skip = practice_count(study.config)
-    items = _items(study)
-    data: list[tuple[str, str, str, float, dict, Report | Answer, str]] = []
-    for r, p in db.execute(session_rows(Report, exported(study, pilot), Report, Session.participant)).all():
-        data.append(("self_report", r.scope, "trust", r.value, {}, r, p))
-    for a, p in db.execute(session_rows(Answer, exported(study, pilot), Answer, Session.participant)).all():
-        data.append((a.questionnaire, a.when, a.item, a.value, items.get((a.questionnaire, a.item), {}), a, p))
-    rows = [
-        {
+    names, skip, items = _block_names(study), practice_count(study.config), _items(study)
+
+    def row(r: Report | Answer, p: str, questionnaire: str, when: str, item: str, asked: dict[str, Any]) -> dict[str, Any]:
+        return {
             "participant": p,
             "trial": r.after_trial - skip,
             "session_trial": r.after_trial,
             "block": r.block + 1,
             "block_name": names[r.block],
-            "questionnaire": q,
+            "questionnaire": questionnaire,
             "when": when,
             "item": item,
-            "value": value,
-            "reverse": bool(item_.get("reverse")),
-            "check": item_.get("check"),
-            "check_passed": check_passed(item_, value),
+            "value": r.value,
+            "reverse": bool(asked.get("reverse")),
+            "check": asked.get("check"),
+            "check_passed": check_passed(asked, r.value),
             "study": study.id,
             "session": r.session_id,
             "answered_at": iso(r.created_at),
         }
-        for q, when, item, value, item_, r, p in data
-    ]
+
+    reports = db.execute(session_rows(Report, exported(study, pilot), Report, Session.participant))
+    answers = db.execute(session_rows(Answer, exported(study, pilot), Answer, Session.participant))
+    rows = [row(r, p, "self_report", r.scope, "trust", {}) for r, p in reports]
+    rows += [row(a, p, a.questionnaire, a.when, a.item, items.get((a.questionnaire, a.item), {})) for a, p in answers]
     frame = pd.DataFrame(rows, columns=list(DICTIONARY["reports"]))
     frame = frame.sort_values(["participant", "session_trial", "questionnaire"], kind="stable").reset_index(drop=True)
     return frame.astype({"trial": "int64", "value": "float64", "check": "Int64", "check_passed": "boolean"})
@@ -234,14 +231,8 @@ def sessions_frame(db: DBSession, study: Study, pilot: bool = False) -> pd.DataF
     failed = Counter(a.session_id for a in answers if check_passed(items.get((a.questionnaire, a.item), {}), a.value) is False)
     # page loads per session: unknown (empty) for a session whose events came without one (stored
     # before events named their page), 0 for a session that sent no event
-    pages = {
-        sid: n if n or not total else None
-        for sid, n, total in db.execute(
-            session_rows(
-                Event, exported(study, pilot), Event.session_id, func.count(Event.page.distinct()), func.count()
-            ).group_by(Event.session_id)
-        )
-    }
+    loads = session_rows(Event, exported(study, pilot), Event.session_id, func.count(Event.page.distinct()), func.count())
+    pages = {sid: n if n or not total else None for sid, n, total in db.execute(loads.group_by(Event.session_id))}
     rows = [
         {
             **row_dict(s, "participant role status trials_done score seed secret panel_id speed"),

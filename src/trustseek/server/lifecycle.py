@@ -28,9 +28,9 @@ from .orm import Session, Study, try_commit, utcnow
 from .sessions import new_session, study_config
 from .studies import participant_plan
 
-STATUSES = ("draft", "open", "paused", "closed")
 #: the states each state may move to
 MOVES = {"draft": ("open", "closed"), "open": ("paused", "closed"), "paused": ("open", "closed"), "closed": ()}
+STATUSES = tuple(MOVES)
 #: the panels' names of a participant's id in a study link's query, first found wins when the
 #: study names none (Prolific, MTurk, SONA)
 PANEL_ID_PARAMS = ("PROLIFIC_PID", "workerId", "id")

@@ -137,6 +137,6 @@ def post_revoke(study_id: str, session_id: str, request: Request):
         if s is None or s.study_id != study_id:
             raise HTTPException(404, f"no session {session_id!r} in study {study_id!r}")
         revoke(db, s)
-        request.app.state.tokens.pop(s.token, None)
+        request.app.state.tokens.pop(s.token)
         log.info("study %s: session %s revoked", study_id, s.id)
         return {"session_id": s.id, "revoked_at": iso(s.revoked_at)}

@@ -115,11 +115,15 @@ def replaying(body: bytes, receive: Receive) -> Receive:
     return replay
 
 
-async def refuse(send: Send, status: int, detail: str | list[dict[str, Any]], headers: tuple = ()) -> None:
-    body = json_bytes({"detail": detail})
-    head = [(b"content-type", b"application/json"), (b"content-length", b"%d" % len(body)), *headers]
+async def respond(send: Send, status: int, body: bytes, *headers: tuple[bytes, bytes]) -> None:
+    """Send a JSON answer, its headers in the order Starlette writes them."""
+    head = [(b"content-length", b"%d" % len(body)), (b"content-type", b"application/json"), *headers]
     await send({"type": "http.response.start", "status": status, "headers": head})
     await send({"type": "http.response.body", "body": body})
+
+
+async def refuse(send: Send, status: int, detail: str | list[dict[str, Any]], *headers: tuple[bytes, bytes]) -> None:
+    await respond(send, status, json_bytes({"detail": detail}), *headers)
 
 
 async def too_large(send: Send, limit: int) -> None:
@@ -190,7 +194,7 @@ class BodyGuard:
         headers = dict(scope.get("headers") or ())
         token = bearer_token(headers.get(b"authorization", b"").decode("latin-1"))
         if token is None:
-            return await refuse(send, 401, MISSING_TOKEN, ((b"www-authenticate", b"Bearer"),))
+            return await refuse(send, 401, MISSING_TOKEN, (b"www-authenticate", b"Bearer"))
         if secrets.compare_digest(token.encode(), state.token.encode()):
             limit = EXPERIMENTER_BODY_LIMIT
         elif caller_for_token(state, token) is not None:

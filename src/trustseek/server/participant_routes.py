@@ -11,13 +11,13 @@ from fastapi import APIRouter, Depends, Request
 from fastapi.security import HTTPAuthorizationCredentials
 
 from .answers import SCREENED, add_answers, add_report, answer_quiz, ended, questionnaire_due, quiz_due, report_due
-from .auth import Caller, bearer, require_session, session_for_token, token_of
+from .auth import Caller, bearer, require_session, session_caller, token_of
 from .errors import Conflict, Gone, NotFound
 from .lifecycle import give_consent
 from .orm import Session, utcnow
 from .routes import errors
 from .schemas import AnswersIn, ConsentIn, EventsIn, QuizAttemptIn, ReportIn, TrialIn
-from .sessions import DEPLOY_SESSION, add_events, lock, participant_trial, serve, study_config, submit_trial, total_trials
+from .sessions import add_events, lock, participant_trial, serve, study_config, submit_trial, total_trials
 from .studies import practice_count
 
 log = logging.getLogger(__name__)
@@ -29,19 +29,17 @@ own = APIRouter(prefix="/api", tags=["participant"], responses=errors(401, 409, 
 # --------------------------------------------------------------------------- participant
 
 
-def _study_session(s: Caller) -> None:
-    if s.kind != "study":
-        raise Conflict(DEPLOY_SESSION)
-
-
 def _not_revoked(row: Session) -> Session:
     if row.revoked_at is not None:
         raise Gone("this link has been revoked by the experimenter")
     return row
 
 
-def _db(request: Request, caller: Caller):
-    """The caller's database: the previews' for a preview (``preview.Previews``), else the study's."""
+def _db(request: Request, caller: Caller, study: bool = True):
+    """The caller's database: the previews' for a preview (``preview.Previews``), else the study's;
+    refused for a deploy session's token unless the route takes any session (``study=False``)."""
+    if study and caller.kind != "study":
+        raise Conflict("this is a deploy session; use /api/deploy")
     return request.app.state.previews.db() if caller.preview else request.app.state.db()
 
 
@@ -114,20 +112,16 @@ def _completion(cfg: dict, s: Session) -> dict | None:
 
 @own.get("/session", summary="The state of the session that the bearer token belongs to")
 def own_state(request: Request, creds: HTTPAuthorizationCredentials | None = Depends(bearer)):
-    s = session_for_token(request, token_of(creds))
-    _study_session(s)
-    return session_state(request, s)
+    return session_state(request, session_caller(request, token_of(creds)))
 
 
 @participant.get("/{session_id}/state", summary="The participant's session: status, current trial, score")
 def get_state(session_id: str, request: Request, s: Caller = Depends(require_session)):
-    _study_session(s)
     return session_state(request, s)
 
 
 @participant.post("/{session_id}/consent", summary="Record consent and start the session")
 def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depends(require_session)):
-    _study_session(s)
     with _db(request, s) as db:
         row, cfg = _locked(db, s)
         if give_consent(db, row, cfg, body.panel):
@@ -139,7 +133,6 @@ def consent(session_id: str, body: ConsentIn, request: Request, s: Caller = Depe
 
 @participant.post("/{session_id}/trials", summary="Submit the current trial (idempotent by submission_id)", responses=errors(400))
 def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Depends(require_session)):
-    _study_session(s)
     with _db(request, s) as db:
         _row(db, s)
         t, dup = submit_trial(
@@ -151,7 +144,6 @@ def post_trial(session_id: str, body: TrialIn, request: Request, s: Caller = Dep
 
 @participant.post("/{session_id}/quiz", summary="Answer the comprehension quiz (one attempt)", responses=errors(400))
 def post_quiz(session_id: str, body: QuizAttemptIn, request: Request, s: Caller = Depends(require_session)):
-    _study_session(s)
     with _db(request, s) as db:
         wrong, dup = answer_quiz(db, *_locked(db, s), body.attempt, body.answers)
     return {"wrong": wrong, "duplicate": dup, "state": session_state(request, s)}
@@ -181,7 +173,6 @@ def _submitted(request: Request, s: Caller, add: Callable[..., tuple[dict[str, A
     """A study session's self-report or questionnaire, stored by ``add(db, row, config)`` ->
     (its answer, whether it repeats a stored one); after the session's end only a repeat (a
     retry) is taken."""
-    _study_session(s)
     with _db(request, s) as db:
         row = _row(db, s)
         cfg = study_config(db, str(row.study_id))
@@ -194,7 +185,7 @@ def _submitted(request: Request, s: Caller, add: Callable[..., tuple[dict[str, A
 
 @participant.post("/{session_id}/events", summary="Log UI events")
 def post_events(session_id: str, body: EventsIn, request: Request, s: Caller = Depends(require_session)):
-    with _db(request, s) as db:
+    with _db(request, s, study=False) as db:
         row = _row(db, s)
         events = [e.model_dump() for e in body.events]
         # after the end, the outcome shown of a committed trial is still taken: the page posts

@@ -43,10 +43,6 @@ experimenter = APIRouter(
 )
 
 
-def _db(request: Request):
-    return request.app.state.db()
-
-
 def public_url(request: Request, path: str) -> str:
     """``path`` on the server as participants reach it: under ``public_url``, else the request's base."""
     return f"{request.app.state.public_url or str(request.base_url).rstrip('/')}{path}"
@@ -78,7 +74,7 @@ def create_study(body: StudyIn, request: Request, status: str = Query("open", pa
         cfg = build_study_config(body, request.app.state.study_caches)
     except ConfigError as exc:
         raise HTTPException(400, {"problems": exc.problems}) from None
-    with _db(request) as db:
+    with request.app.state.db() as db:
         st = Study(id=new_id(), name=body.name, config=cfg, status=status, link_token=secrets.token_urlsafe(24))
         db.add(st)
         db.commit()
@@ -115,7 +111,7 @@ def study_summary(db, st: Study, request: Request) -> dict:
 
 @experimenter.get("/studies", summary="List studies")
 def list_studies(request: Request):
-    with _db(request) as db:
+    with request.app.state.db() as db:
         return [study_summary(db, st, request) for st in db.scalars(select(Study).order_by(Study.created_at))]
 
 
@@ -129,7 +125,7 @@ def study_or_404(db, study_id: str) -> Study:
 
 @experimenter.get("/studies/{study_id}", summary="A study's configuration", responses=errors(404))
 def get_study(study_id: str, request: Request):
-    with _db(request) as db:
+    with request.app.state.db() as db:
         st = study_or_404(db, study_id)
         return {**study_summary(db, st, request), "config": st.config}
 
@@ -146,7 +142,7 @@ def create_sessions(study_id: str, body: SessionsIn, request: Request):
         bad = [p for p in body.participants if not p or len(p) > 200]
         if bad or len(set(body.participants)) != len(body.participants):
             raise HTTPException(400, "participant ids must be unique, non-empty strings of at most 200 characters")
-    with _db(request) as db:
+    with request.app.state.db() as db:
         st = study_or_404(db, study_id)
         if st.status == "closed":
             raise HTTPException(409, f"study {study_id} is closed: it takes no new participants")
@@ -175,7 +171,7 @@ def create_sessions(study_id: str, body: SessionsIn, request: Request):
 
 @experimenter.get("/studies/{study_id}/dashboard", summary="Live state of every participant", responses=errors(404))
 def dashboard(study_id: str, request: Request):
-    with _db(request) as db:
+    with request.app.state.db() as db:
         st = study_or_404(db, study_id)
         sessions = db.scalars(
             select(Session)
@@ -206,7 +202,7 @@ def dashboard(study_id: str, request: Request):
                 "last_self_report": reports.get(s.id),
                 "updated_at": iso(s.updated_at),
                 "role": s.role,
-                "panel_id": s.panel_id or _first_panel_id(s.panel),
+                "panel_id": s.panel_id or next(iter((s.panel or {}).values()), None),
                 "created_at": iso(s.created_at),
                 "started_at": iso(s.consented_at),
                 "ended_at": iso(s.ended_at),
@@ -216,10 +212,6 @@ def dashboard(study_id: str, request: Request):
             for s in sessions
         ]
         return {"study": study_summary(db, st, request), "participants": rows, "time": iso(utcnow())}
-
-
-def _first_panel_id(panel: dict | None) -> str | None:
-    return next(iter(panel.values()), None) if panel else None
 
 
 @experimenter.get(
@@ -251,7 +243,7 @@ def export(
     practice: bool = Query(False, description="Trials: include the practice trials (the full log)."),
     pilot: bool = Query(False, description="Include the pilot sessions (left out of the analysis export by default)."),
 ):
-    with _db(request) as db:
+    with request.app.state.db() as db:
         st = study_or_404(db, study_id)
         if table == "trials":
             frame = trials_frame(db, st, practice=practice, pilot=pilot)
@@ -276,7 +268,7 @@ def export(
     },
 )
 def bundle(study_id: str, request: Request, pilot: bool = Query(False, description="Include the pilot sessions.")):
-    with _db(request) as db:
+    with request.app.state.db() as db:
         st = study_or_404(db, study_id)
         content = bundle_zip(bundle_files(db, st, pilot), f"{st.id}-bundle")
     return attachment(content, "application/zip", f"{st.id}-bundle.zip")

@@ -41,8 +41,6 @@ log = logging.getLogger(__name__)
 #: stored UI events per trial (events outside any trial count together) and per session
 MAX_EVENTS_PER_TRIAL = 2000
 MAX_EVENTS_PER_SESSION = 50_000
-#: the refusal of a deploy session's token on a study session's route
-DEPLOY_SESSION = "this is a deploy session; use /api/deploy"
 
 
 def new_id() -> str:
@@ -99,8 +97,7 @@ def study_config(db: DBSession, study_id: str) -> dict[str, Any]:
 def block_plan(db: DBSession, s: Session, block: int) -> PolicyPlan:
     """The plan of a study session's block (its policy with ``PolicyRunner``'s step, parsed once
     and remembered by the application); the index after the study's blocks is the practice's."""
-    if s.kind != "study" or s.study_id is None:
-        raise Conflict(DEPLOY_SESSION)
+    assert s.study_id is not None, "a study session"
     contexts = caches_of(db).contexts
     plans = contexts.get(s.study_id)
     if plans is None:
@@ -112,8 +109,9 @@ def block_plan(db: DBSession, s: Session, block: int) -> PolicyPlan:
     return plans[block]
 
 
-def total_trials(s: Session) -> int | None:
-    return len(s.plan["trials"]) if s.kind == "study" else None
+def total_trials(s: Session) -> int:
+    """The trials of a study session, practice included."""
+    return len(s.plan["trials"])
 
 
 # --------------------------------------------------------------------------- serving
@@ -133,8 +131,7 @@ def serve(db: DBSession, s: Session) -> dict[str, Any] | None:
     if s.status != "running":
         return None
     n = s.trials_done + 1
-    total = total_trials(s)
-    if total is None or n > total:
+    if n > total_trials(s):
         return None
     step = s.plan["trials"][n - 1]
     items = scheduled_items(db, s, step["block"]) if step["complexity"] is None else None
@@ -201,26 +198,26 @@ def participant_trial(t: Trial) -> dict[str, Any]:
     return {**row_dict(t, PARTICIPANT_TRIAL), "practice": bool(t.practice)}
 
 
-def trial_reward(task: Task, action: str, human: str | None, experience: str) -> float:
-    """The trial's points, eq. (1) (no human action is counted as relying)."""
-    o = HUMAN_ACTIONS.index(human) if human is not None else HUMAN_ACTIONS.index("rely")
-    return float(task.rewards.of(ACTIONS.index(action), o, EXPERIENCES.index(experience)))
-
-
-def trial_experience(task: Task, c: int, action: str, human: str | None, success: bool | None) -> str:
+def scored(
+    plan: PolicyPlan, belief: list, complexity: str, action: str, human: str, success: bool | None
+) -> tuple[dict[str, Any], list | None]:
+    """What a trial's human action and success (None: teleoperated) make of it: its experience,
+    points (eq. (1)) and P(trust = high) before and after, and the belief after it (a study
+    session's trial and a deploy session's alike)."""
+    task = plan.task
     if action == "ask":
-        return EXPERIENCES[task.ask_experience[c]]
-    if human == "intervene":
-        return "faulty"
-    return "reliable" if success else "faulty"
+        experience = EXPERIENCES[task.ask_experience[task.complexity_index(complexity)]]
+    else:
+        experience = "reliable" if human == "rely" and success else "faulty"
+    after = plan.update(belief, complexity, action, human, experience)
+    reward = float(task.rewards.of(ACTIONS.index(action), HUMAN_ACTIONS.index(human), EXPERIENCES.index(experience)))
+    before, later = p_high(belief, plan.n_trust), p_high(after, plan.n_trust)
+    return {"experience": experience, "reward": reward, "belief": before, "belief_after": later}, after
 
 
-def _commit_trial(db: DBSession, s: Session, row: Trial, plan: PolicyPlan, events: list[dict] | None) -> Trial | None:
-    """Commit ``row`` with the belief update and the session's progress; None when another
+def _commit_trial(db: DBSession, s: Session, row: Trial, after: list | None, events: list[dict] | None) -> Trial | None:
+    """Commit ``row`` with the belief ``after`` it and the session's progress; None when another
     submission committed this trial first."""
-    after = plan.update(s.belief, row.complexity, row.robot_action, row.human_action, row.experience)
-    row.belief, row.belief_after = p_high(s.belief, plan.n_trust), p_high(after, plan.n_trust)
-    row.reward = trial_reward(plan.task, row.robot_action, row.human_action, row.experience)
     if row.practice:  # practice leaves the belief and the score as they were
         after, row.belief_after = None, row.belief
     db.add(row)
@@ -229,8 +226,7 @@ def _commit_trial(db: DBSession, s: Session, row: Trial, plan: PolicyPlan, event
     s.trials_done = row.trial
     s.score = float(s.score + (0.0 if row.practice else row.reward))
     s.pending_trial = s.pending_complexity = s.pending_action = None
-    total = total_trials(s)
-    if total is not None and row.trial >= total:
+    if row.trial >= total_trials(s):
         s.status = "done"
     s.updated_at = utcnow()
     if not try_commit(db):
@@ -256,8 +252,6 @@ def submit_trial(
     """Commit trial ``n`` of a study session with the human action (``intervene`` or ``rely``, as
     ``schemas.TrialIn`` takes it); returns (trial, duplicate)."""
     s = lock(db, session_id)
-    if s.kind != "study":
-        raise Conflict("this is a deploy session: post its trials to /api/deploy/sessions/{id}/decide and /observe")
     # trials are committed in order together with trials_done, so trial n exists iff n <= trials_done
     old = _existing(db, s, n) if n <= s.trials_done else None
     if old is not None:
@@ -280,13 +274,14 @@ def submit_trial(
         raise NotAllowed(f"{why}, got {human_action!r}")
     step = s.plan["trials"][n - 1]
     plan = block_plan(db, s, step["block"])
-    c = plan.task.complexity_index(complexity)
     if action == "autonomous" and human_action == "rely":
         r = outcome_draws(s, n)
-        success = bool(r[0] < plan.task.success[c])
+        success = bool(r[0] < plan.task.success[plan.task.complexity_index(complexity)])
         outcome = "success" if success else ("collision" if r[1] < 0.5 else "dropped")
     else:
         success, outcome = None, "teleoperated"
+    check_event_room(db, s, events or [], n)
+    result, after = scored(plan, s.belief, complexity, action, human_action, success)
     row = Trial(
         session_id=s.id,
         trial=n,
@@ -296,13 +291,12 @@ def submit_trial(
         robot_action=action,
         human_action=human_action,
         outcome=outcome,
-        experience=trial_experience(plan.task, c, action, human_action, success),
         effort_ms=effort_ms,
         practice=bool(step.get("practice")),
         submission_id=submission_id,
+        **result,
     )
-    check_event_room(db, s, events or [], n)
-    committed = _commit_trial(db, s, row, plan, events)
+    committed = _commit_trial(db, s, row, after, events)
     if committed is not None:
         return committed, False
     old = _existing(db, s, n)

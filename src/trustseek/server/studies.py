@@ -396,18 +396,17 @@ def participant_plan(cfg: dict[str, Any], index: int, seed: int) -> dict[str, An
     queues: dict[str, list[str]] = {}
     for b in order:
         sched = cfg["blocks"][b]["schedule"]
-        if sched.get("by") == BY_POLICY:  # the policy picks each item when it is served
-            seq = [c for c, k in sched["counts"].items() for _ in range(k)]
-            if sched.get("window") is not None:  # the queue the robot sees the front of
-                queues[str(b)] = [seq[i] for i in rng.permutation(len(seq))]
-            trials.extend({"block": b, "complexity": None} for _ in seq)
-            continue
         if "trials" in sched:
-            seq = list(sched["trials"])
-        else:
-            seq = [c for c, k in sched["counts"].items() for _ in range(k)]
-            seq = [seq[i] for i in rng.permutation(len(seq))]
-        trials.extend({"block": b, "complexity": c} for c in seq)
+            trials.extend({"block": b, "complexity": c} for c in sched["trials"])
+            continue
+        items = [c for c, k in sched["counts"].items() for _ in range(k)]
+        if sched.get("by") != BY_POLICY:
+            trials.extend({"block": b, "complexity": items[i]} for i in rng.permutation(len(items)))
+            continue
+        # the policy picks each item when it is served, when it sees a window from the front of a queue
+        if sched.get("window") is not None:
+            queues[str(b)] = [items[i] for i in rng.permutation(len(items))]
+        trials.extend({"block": b, "complexity": None} for _ in items)
     practice = cfg.get("practice")
     if practice:
         # the practice block's index follows the study's blocks

@@ -32,20 +32,19 @@ from ..auth import (
     bearer,
     bearer_token,
     caller_for_token,
-    remember_token,
     require_experimenter,
     require_session,
     session_caller,
     token_of,
 )
 from ..errors import Refused
-from ..middleware import SESSION_BODY_LIMIT, json_bytes, read_body, refusal, replaying
+from ..middleware import SESSION_BODY_LIMIT, json_bytes, read_body, refusal, replaying, respond
 from ..orm import Session, Trial
 from ..routes import errors
 from ..schemas import DecideIn, DeployIn, ObserveIn
 from ..sessions import p_high, pending, trial_dict
 from ..studies import ConfigError, complexity_problems, load_model_spec, load_task_spec, resolve_policy
-from .service import create_deploy, deploy_decide, deploy_observe, score_problem
+from .service import create_deploy, deploy_decide, deploy_observe, score_problems
 from .store import Known, LiveRow, Stale, Statements
 
 log = logging.getLogger(__name__)
@@ -57,10 +56,12 @@ Args = tuple[Any, ...]
 
 
 def _run(plans: Any, sid: str, what: str, args: Args, tx: Statements) -> dict[str, Any]:
-    if what == "decide":
-        return deploy_decide(tx, plans, sid, *args)
-    t, dup = deploy_observe(tx, plans, sid, *args)
-    return {"trial": t, "duplicate": dup, "belief": t["belief_after"]}
+    return deploy_decide(tx, plans, sid, *args) if what == "decide" else _observed(*deploy_observe(tx, plans, sid, *args))
+
+
+def _observed(t: dict[str, Any], duplicate: bool) -> dict[str, Any]:
+    """``observe``'s answer: the committed trial, whether it repeats one, the belief after it."""
+    return {"trial": t, "duplicate": duplicate, "belief": t["belief_after"]}
 
 
 async def answer(state: Any, sid: str, what: str, args: Args) -> tuple[int, bytes]:
@@ -91,8 +92,7 @@ async def answer(state: Any, sid: str, what: str, args: Args) -> tuple[int, byte
                 old = tx.committed(sid, args[0])
             if old is None:
                 raise
-            t = trial_dict(old)
-            return 200, json_bytes({"trial": t, "duplicate": True, "belief": t["belief_after"]})
+            return 200, json_bytes(_observed(trial_dict(old), True))
         except store.Error as exc:
             if attempt == 2:
                 raise
@@ -125,10 +125,7 @@ class DeployFront:
         status, out = await answer(scope["app"].state, caller.id, what, args)
         if status >= 400:
             log.info("POST %s{session_id}/%s session_id=%s -> %d", PREFIX, what, caller.id, status)
-        timing = b"app;dur=%.3f" % ((time.perf_counter() - t0) * 1000)
-        head = [(b"content-length", b"%d" % len(out)), (b"content-type", b"application/json"), (b"server-timing", timing)]
-        await send({"type": "http.response.start", "status": status, "headers": head})
-        await send({"type": "http.response.body", "body": out})
+        await respond(send, status, out, (b"server-timing", b"app;dur=%.3f" % ((time.perf_counter() - t0) * 1000)))
 
 
 def _args(what: str, raw: bytes) -> Args | None:
@@ -186,7 +183,7 @@ def open_deploy(body: DeployIn, request: Request):
     state = request.app.state
     try:
         task, model = load_task_spec(body.task), load_model_spec(body.model)
-        problems = complexity_problems(model, task) or [p for p in [score_problem(task)] if p is not None]
+        problems = complexity_problems(model, task) or score_problems(task)
         if problems:
             raise ConfigError(problems)
         policy = resolve_policy(body.policy, model, task, caches=state.study_caches)
@@ -196,7 +193,7 @@ def open_deploy(body: DeployIn, request: Request):
     except TrustseekError as exc:  # a policy that does not load (non-finite values)
         raise HTTPException(400, {"problems": exc.lines()}) from None
     # this process answers the session's first requests without reading it back
-    remember_token(state, s.token, Caller(s.id, s.kind))
+    state.tokens.put(s.token, Caller(s.id, s.kind))
     state.deploy_store.remember(LiveRow(s.id, s.kind, s.seed, list(s.belief), s.trials_done, s.score))
     log.info("deploy session %s opened: %s policy", s.id, policy["kind"])
     return {

@@ -22,20 +22,20 @@ from ..errors import Conflict, NotAllowed, NotFound
 from ..orm import PolicyBlob, Session, utcnow
 from ..plan import Plans, policy_sha256
 from ..schemas import MAX_TRIAL
-from ..sessions import new_session, p_high, trial_dict, trial_experience, trial_reward
+from ..sessions import new_session, p_high, scored, trial_dict
 from .store import LiveRow, Statements
 
 
-def score_problem(task: Task) -> str | None:
+def score_problems(task: Task) -> list[str]:
     """Why a deploy session of ``task`` could not keep its score, a sum of up to ``MAX_TRIAL``
-    rewards, as a finite number (nor a policy its values), or None."""
+    rewards, as a finite number (nor a policy its values); empty when it can."""
     largest = max(abs(v) for v in task.rewards.to_dict().values())
     if math.isfinite(largest * MAX_TRIAL):
-        return None
-    return (
+        return []
+    return [
         f"task rewards: the largest reward in magnitude, {largest:g}, overflows a session's score over {MAX_TRIAL} trials; "
         f"keep every reward within +-{sys.float_info.max / MAX_TRIAL:.3g}"
-    )
+    ]
 
 
 def create_deploy(
@@ -136,7 +136,6 @@ def deploy_observe(
     action, complexity = s.pending_action, s.pending_complexity
     assert action is not None and complexity is not None  # stored together with pending_trial
     plan = plans.of(store, session_id)
-    task = plan.task
     if action == "ask" and human_action not in (None, "intervene"):
         why = f"the robot asked in trial {n}: human_action must be 'intervene' (teleoperation) or omitted"
         raise NotAllowed(f"{why}, got {human_action!r}")
@@ -153,9 +152,8 @@ def deploy_observe(
         raise NotAllowed(f"{why}, got {outcome!r}")
     if teleoperated:
         human_action, outcome = "intervene", "teleoperated"
-    success = None if teleoperated else outcome == "success"
-    experience = trial_experience(task, task.complexity_index(complexity), action, human_action, success)
-    after = plan.update(s.belief, complexity, action, human_action, experience)
+    assert human_action is not None
+    result, after = scored(plan, s.belief, complexity, action, human_action, None if teleoperated else outcome == "success")
     t: dict[str, Any] = {
         "trial": n,
         "block": 0,
@@ -164,10 +162,7 @@ def deploy_observe(
         "robot_action": action,
         "human_action": human_action,
         "outcome": outcome,
-        "experience": experience,
-        "reward": trial_reward(task, action, human_action, experience),
-        "belief": p_high(s.belief, plan.n_trust),
-        "belief_after": p_high(after, plan.n_trust),
+        **result,
         "effort_ms": None,
         "submission_id": f"deploy-{n}",
     }
