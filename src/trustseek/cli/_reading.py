@@ -122,7 +122,7 @@ def keep_columns(out, frame, keep: list[str] | None):
 
 
 def write_log(frame, path: Path) -> None:
-    """A table of trials written as a trial log (CSV or Parquet, by the suffix)."""
+    """A table (of trials, or per participant) written as CSV or Parquet, by the suffix."""
     from ..data.trials import write_trials
 
     write_trials(frame, path)

@@ -42,6 +42,7 @@ from ._options import (
     seed_option,
 )
 from ._progress import progress_bar
+from ._reading import write_log
 
 if TYPE_CHECKING:
     from ..model.core import TrustModel
@@ -141,9 +142,9 @@ def simulate(
         sup, t, pol, participants, counts=cnt, trials=trials, seed=seed, record=out is not None, belief_model=pop.pm
     )
     dt = time.perf_counter() - t0
-    write_atomic(out, lambda tmp: _write(sim.trials(), tmp))
+    write_atomic(out, lambda tmp: write_log(sim.trials(), tmp))
     summ = sim.summary()
-    write_atomic(summary_out, lambda tmp: _write(summ, tmp))
+    write_atomic(summary_out, lambda tmp: write_log(summ, tmp))
     _report_simulation(summ, pol, participants, seed, dt, out, summary_out, as_json)
 
 
@@ -272,18 +273,6 @@ def _report_simulation(summ, pol: Policy, participants: int, seed: int, dt: floa
     console.print(out_table)
     console.print(f"{n_trials:,} trials in {dt:.2f} s ({n_trials / max(dt, 1e-9) / 1e6:.1f} M trials/s), seed {seed}")
     print_written(("trials", out), ("summary", summary_out))
-
-
-def _write(frame, path: Path) -> None:
-    """A table of trials as a trial log, another (the summary) as it is."""
-    from ..data.trials import write_csv, write_trials
-
-    if list(frame.columns[:2]) == ["participant", "trial"]:
-        write_trials(frame, path)
-    elif path.suffix.lower() == ".parquet":
-        frame.to_parquet(path, index=False)
-    else:
-        write_csv(frame, path)
 
 
 @command("reproduce")
