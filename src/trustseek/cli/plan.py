@@ -18,6 +18,7 @@ from ._app import (
     console,
     make_table,
     print_json,
+    print_written,
     write_atomic,
 )
 from ._options import (
@@ -135,8 +136,7 @@ def solve(
     if mixture is not None:
         start = ", ".join(f"{name} {p:.3f}" for name, p in summary["type_belief"].items())
         console.print(f"supervisor types at the start: {start}; the belief is over (type, trust)")
-    if out is not None:
-        console.print(f"policy written to {out}")
+    print_written(("policy", out))
 
 
 def _check_solve(belief_update: str, method: str, solver: str | None, gap: float | None, max_seconds: float | None) -> None:
@@ -312,70 +312,61 @@ def check(
 ) -> None:
     """Validate model (trust or general), task, policy and mapping files, and trial logs as the fit
     reads them (with the log options); print every problem found, and what each log holds."""
-    from ..data.suffixes import file_kind
-    from ..model.core import TrustModel
-    from ..model.files import IOHMM_FORMAT
-    from ..model.jsonfile import ModelError, load_json
-    from ..model.task import Task
-    from ..policies import load_policy
-
     problems: list[str] = []
     for f in files:
-        kind = file_kind(f)
-        if kind == "log":
-            try:
-                console.print(f"{f}: ok: {_log_summary(reading.read([f], ('complexity', 'robot_action', 'experience')))}",
-                              soft_wrap=True, highlight=False)  # fmt: skip
-            except TrustseekError as exc:
-                problems.extend(exc.lines())
-            continue
-        if kind == "mapping":
-            from ..data.mapping import ColumnMapping
-
-            try:
-                ColumnMapping.load(f)
-                console.print(f"{f}: ok (a column mapping, for --mapping)", soft_wrap=True, highlight=False)
-            except TrustseekError as exc:
-                problems.extend(exc.lines())
-            continue
         try:
-            text, _ = load_json(f)
-        except ModelError as exc:
-            problems.extend(exc.lines())
-            continue
-        fmt = text.get("format", "")
-        if not isinstance(fmt, str):
-            problems.append(f"{f}: format must be a string, got {fmt!r}")
-            continue
-        try:
-            if "task" in fmt:
-                Task.from_dict(text, str(f))
-            elif "policy" in fmt:
-                load_policy(f)
-            elif fmt == IOHMM_FORMAT:
-                g = TrustModel.from_dict(text, str(f), general=True)
-                console.print(
-                    f"{f}: a general model, inputs: {', '.join(g.used_inputs) or 'none'} (decode, predict and validate "
-                    "read it; solve and simulate need a trust model)",
-                    soft_wrap=True,
-                    highlight=False,
-                )
-            else:
-                m = TrustModel.from_dict(text, str(f))
-                rows = m.not_estimated_rows()
-                if rows:
-                    console.print(
-                        f"[yellow]warning:[/] {f}: never estimated (copies or defaults, not data): {', '.join(rows)}; "
-                        "solve, plot-q and simulate refuse the ones a task can reach until they are supplied "
-                        "('trustseek fit ... --fill-from paper', or by hand: docs/formats.md)",
-                        soft_wrap=True,
-                        highlight=False,
-                    )
-            console.print(f"{f}: ok", soft_wrap=True, highlight=False)
-        except ModelError as exc:
+            console.print(f"{f}: {_check_file(f, reading)}", soft_wrap=True, highlight=False)
+        except TrustseekError as exc:
             problems.extend(exc.lines())
     if problems:
         raise TrustseekError(problems)
+
+
+def _check_file(f: Path, reading: LogReading) -> str:
+    """What ``check`` says of one file that holds no problem (a note before it, for a model some of
+    whose rows were never estimated); its problems raised."""
+    from ..data.suffixes import file_kind
+    from ..model.core import TrustModel
+    from ..model.files import IOHMM_FORMAT
+    from ..model.jsonfile import load_json
+    from ..model.task import Task
+    from ..policies import load_policy
+
+    kind = file_kind(f)
+    if kind == "log":
+        return f"ok: {_log_summary(reading.read([f], ('complexity', 'robot_action', 'experience')))}"
+    if kind == "mapping":
+        from ..data.mapping import ColumnMapping
+
+        ColumnMapping.load(f)
+        return "ok (a column mapping, for --mapping)"
+    text, _ = load_json(f)
+    fmt = text.get("format", "")
+    if not isinstance(fmt, str):
+        raise TrustseekError([f"{f}: format must be a string, got {fmt!r}"])
+    if "task" in fmt:
+        Task.from_dict(text, str(f))
+    elif "policy" in fmt:
+        load_policy(f)
+    elif fmt == IOHMM_FORMAT:
+        g = TrustModel.from_dict(text, str(f), general=True)
+        console.print(
+            f"{f}: a general model, inputs: {', '.join(g.used_inputs) or 'none'} (decode, predict and validate "
+            "read it; solve and simulate need a trust model)",
+            soft_wrap=True,
+            highlight=False,
+        )
+    else:
+        rows = TrustModel.from_dict(text, str(f)).not_estimated_rows()
+        if rows:
+            console.print(
+                f"[yellow]warning:[/] {f}: never estimated (copies or defaults, not data): {', '.join(rows)}; "
+                "solve, plot-q and simulate refuse the ones a task can reach until they are supplied "
+                "('trustseek fit ... --fill-from paper', or by hand: docs/formats.md)",
+                soft_wrap=True,
+                highlight=False,
+            )
+    return "ok"
 
 
 def _log_summary(frame) -> str:

@@ -9,7 +9,7 @@ import typer
 
 from ..solvers.defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
 from ..vocab import PAPER_BLOCK_COUNTS
-from ._app import FIGURE_SUFFIXES, check_outputs, command, console, make_table, print_json
+from ._app import FIGURE_SUFFIXES, check_outputs, command, console, make_table, print_json, print_written
 from ._options import (
     JsonOpt,
     ModelOpt,
@@ -108,8 +108,7 @@ def schedule(
     )
     if first is not None:
         console.print(f"first trial: a {first['complexity']} item, {first['robot_action']}")
-    if out is not None:
-        console.print(f"policy written to {out}")
+    print_written(("policy", out))
     if "comparison" in summary:
         _print_comparison(summary["comparison"])
 

@@ -12,7 +12,7 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
-from ._app import check_outputs, command, console, err_console, make_table, print_json, write_atomic
+from ._app import check_outputs, command, console, err_console, make_table, print_json, print_written, write_atomic
 from ._options import (
     FROM_OPTIONS,
     AsForFitEmissionsOpt,
@@ -132,8 +132,7 @@ def predict(
         print_json(report.to_dict())
         return
     _print_prediction(report, model, pr.METRICS)
-    if out is not None:
-        console.print(f"per-trial predictions written to {out}")
+    print_written(("per-trial predictions", out))
 
 
 def _check_trial_output(out: Path | None, log: list[Path], model: Path | None, reading: LogReading) -> None:
@@ -260,5 +259,4 @@ def validate(
         report.statements(),
         "the decoded trust beats every baseline in every scope (Spearman; 95% intervals of the differences exclude 0)",
     )
-    if out is not None:
-        console.print(f"per-trial values written to {out}")
+    print_written(("per-trial values", out))
