@@ -57,9 +57,9 @@ def widened_note(rows, key: str, asked: int) -> list[str]:
     return [f"the best was at {asked} {unit}, the largest asked: compared up to {max(more)} (--no-widen: only the range asked)"]
 
 
-def load_for_decoding(path: Path):
-    """A trust model, supervisor types (a mixture) or a general model, by the file's format; or a
-    preset name (paper, paper+conservative)."""
+def load_types(path: Path):
+    """Supervisor types (a mixture), or a trust or general model as one type, by the file's format;
+    or a preset name (paper, paper+conservative)."""
     from ..model.core import TrustModel
     from ..model.files import is_iohmm_file
     from ..model.jsonfile import load_json
@@ -68,10 +68,9 @@ def load_for_decoding(path: Path):
 
     if str(path) in MIXTURE_PRESETS and not path.exists():
         return load_mixture(str(path))
-
     d, source = load_json(path)
     if is_iohmm_file(d):
-        return TrustModel.from_dict(d, source, general=True)
+        return TypeMixture.single(TrustModel.from_dict(d, source, general=True))
     return TypeMixture.from_dict(d, source, general=True)
 
 

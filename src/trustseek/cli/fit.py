@@ -50,70 +50,13 @@ from ._reading import (
     POSTERIOR_SUFFIXES,
     general_inputs,
     keep_columns,
-    load_for_decoding,
+    load_types,
     named_inputs,
     read_for_types,
     read_with_inputs,
     widened_note,
     write_log,
 )
-
-_TransitionsOnOpt = typer.Option(
-    None,
-    "--transitions-on",
-    help="Comma-separated inputs of the trust transitions (default: complexity, robot_action, experience; 'none' for "
-    "none); the mapping's 'inputs' may be named too: the fit is then a general model (trustseek.iohmm/1).",
-)
-_EmissionsOnOpt = typer.Option(
-    None,
-    "--emissions-on",
-    help="Comma-separated inputs of the human-action probabilities (default: complexity, robot_action; 'none' for "
-    "none); the mapping's 'inputs' may be named too.",
-)
-_BootstrapOpt = bootstrap_option(
-    0, "Participant-level bootstrap resamples for 95% intervals (0 = none; at least 200 advised, fewer warn)."
-)
-_PriorOpt = typer.Option(
-    0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."
-)
-_TolOpt = tol_option(1e-8, "Stop when the relative change of the log-likelihood is below this (> 0).")
-_JobsOpt = typer.Option(
-    None,
-    "--jobs",
-    "-j",
-    min=1,
-    max=MAX_JOBS,
-    help="Threads for the fit and processes for the bootstrap (default: all cores); numbers do not depend on it.",
-)
-_OutOpt = typer.Option(
-    None,
-    "--out",
-    "-o",
-    help="Write the fitted trust model (JSON, same format as the presets; a general model for other inputs).",
-)
-_PosteriorsOpt = typer.Option(
-    None, "--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet)."
-)
-_PlotsOpt = typer.Option(None, "--plots", help="Write the emission and transition figures (Fig. 4-6 style) into this directory.")
-_FillFromOpt = typer.Option(
-    None,
-    "--fill-from",
-    help="Take the rows the data never estimated (e.g. every ask row of a study without asking) from this model "
-    "(a preset name, e.g. paper, or a JSON file with the same levels and complexities).",
-)
-_RatingOpt = typer.Option(
-    None,
-    "--rating",
-    help="The log's self-reported trust rating column, fitted jointly as a second emission of the trust "
-    "(empty cells: no rating); or give 'rating' in the mapping file.",
-)
-_RatingLevelsOpt = typer.Option(
-    None, "--rating-levels", help="The rating's levels, lowest first, comma-separated (e.g. 1,2,3,4,5,6,7 or low,mid,high)."
-)
-_RatingBinsOpt = typer.Option(
-    None, "--rating-bins", help="Bin a numeric rating at these edges, comma-separated (e.g. 0,25,50,75,100)."
-)
-_RatingsOnlyOpt = typer.Option(False, "--ratings-only", help="Leave the human actions out: fit the trust on the ratings alone.")
 
 
 @command("fit")
@@ -122,24 +65,70 @@ def fit(
     log: list[Path] = OneRowPerTrialLogArg,
     preset: str = typer.Option("paper", "--preset", help="Model structure preset (paper)."),
     levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Number of trust levels."),
-    transitions_on: str | None = _TransitionsOnOpt,
-    emissions_on: str | None = _EmissionsOnOpt,
+    transitions_on: str | None = typer.Option(
+        None,
+        "--transitions-on",
+        help="Comma-separated inputs of the trust transitions (default: complexity, robot_action, experience; 'none' for "
+        "none); the mapping's 'inputs' may be named too: the fit is then a general model (trustseek.iohmm/1).",
+    ),
+    emissions_on: str | None = typer.Option(
+        None,
+        "--emissions-on",
+        help="Comma-separated inputs of the human-action probabilities (default: complexity, robot_action; 'none' for "
+        "none); the mapping's 'inputs' may be named too.",
+    ),
     restarts: int = restarts_option(10, help="Random restarts; the best is kept."),
-    bootstrap: int = _BootstrapOpt,
-    prior: float = _PriorOpt,
+    bootstrap: int = bootstrap_option(
+        0, "Participant-level bootstrap resamples for 95% intervals (0 = none; at least 200 advised, fewer warn)."
+    ),
+    prior: float = typer.Option(
+        0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."
+    ),
     seed: int = seed_option("Random seed (restarts and bootstrap)."),
-    tol: float = _TolOpt,
+    tol: float = tol_option(1e-8, "Stop when the relative change of the log-likelihood is below this (> 0)."),
     max_iter: int = MaxIterOpt,
-    jobs: int | None = _JobsOpt,
-    out: Path | None = _OutOpt,
-    posteriors: Path | None = _PosteriorsOpt,
-    plots: Path | None = _PlotsOpt,
-    fill_from: str | None = _FillFromOpt,
+    jobs: int | None = typer.Option(
+        None,
+        "--jobs",
+        "-j",
+        min=1,
+        max=MAX_JOBS,
+        help="Threads for the fit and processes for the bootstrap (default: all cores); numbers do not depend on it.",
+    ),
+    out: Path | None = typer.Option(
+        None,
+        "--out",
+        "-o",
+        help="Write the fitted trust model (JSON, same format as the presets; a general model for other inputs).",
+    ),
+    posteriors: Path | None = typer.Option(
+        None, "--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet)."
+    ),
+    plots: Path | None = typer.Option(
+        None, "--plots", help="Write the emission and transition figures (Fig. 4-6 style) into this directory."
+    ),
+    fill_from: str | None = typer.Option(
+        None,
+        "--fill-from",
+        help="Take the rows the data never estimated (e.g. every ask row of a study without asking) from this model "
+        "(a preset name, e.g. paper, or a JSON file with the same levels and complexities).",
+    ),
     as_json: bool = json_option("Print the fitted model and diagnostics as one JSON object."),
-    rating: str | None = _RatingOpt,
-    rating_levels: str | None = _RatingLevelsOpt,
-    rating_bins: str | None = _RatingBinsOpt,
-    ratings_only: bool = _RatingsOnlyOpt,
+    rating: str | None = typer.Option(
+        None,
+        "--rating",
+        help="The log's self-reported trust rating column, fitted jointly as a second emission of the trust "
+        "(empty cells: no rating); or give 'rating' in the mapping file.",
+    ),
+    rating_levels: str | None = typer.Option(
+        None, "--rating-levels", help="The rating's levels, lowest first, comma-separated (e.g. 1,2,3,4,5,6,7 or low,mid,high)."
+    ),
+    rating_bins: str | None = typer.Option(
+        None, "--rating-bins", help="Bin a numeric rating at these edges, comma-separated (e.g. 0,25,50,75,100)."
+    ),
+    ratings_only: bool = typer.Option(
+        False, "--ratings-only", help="Leave the human actions out: fit the trust on the ratings alone."
+    ),
     rating_per: str | None = RatingPerOpt,
     reading: LogReading = FROM_OPTIONS,
     quiet: bool = QuietOpt,
@@ -304,16 +293,14 @@ def decode_cmd(
     The log needs the columns the model depends on: a model fitted with fewer inputs
     (--transitions-on/--emissions-on) decodes a log without the others."""
     check_outputs((out, "--out", POSTERIOR_SUFFIXES), inputs=(*log_inputs(log), (model, "--model file"), *reading.inputs()))
-    from ..model.mixture import TypeMixture
-
-    types = load_for_decoding(model)  # a trust model, a general model or types
+    types = load_types(model)
     frame = read_for_types(log, types, reading)
-    if isinstance(types, TypeMixture) and types.n_types > 1:  # P(type | trials) and the type-averaged posteriors
+    if types.n_types > 1:  # P(type | trials) and the type-averaged posteriors
         from ..estimation.mixture import decode_types
 
         post = decode_types(frame, types)
     else:
-        post = estimation.decode(frame, types.models[0] if isinstance(types, TypeMixture) else types)
+        post = estimation.decode(frame, types.models[0])
     post = keep_columns(post, frame, reading.keep)
     write_atomic(out, lambda tmp: write_log(post, tmp))
     console.print(f"wrote {len(post)} trials to {out}")
