@@ -42,20 +42,12 @@ def _table(title: str, *columns: str) -> Table:
     return make_table(title, *columns, no_wrap=True, box=None, padding=(0, 2, 0, 0), header_style="bold underline")
 
 
-def _pair(d: dict[str, Any], signed: bool) -> tuple[str, str]:
+def _pair(d: dict[str, Any], spec: str = ".3f") -> tuple[str, str]:
     """An estimate and its interval as two cells (a difference coloured by which side is better)."""
-    f = "+.3f" if signed else ".3f"
-    est = f"{d['estimate']:{f}}" if math.isfinite(d["estimate"]) else "-"
-    ci = escape(f"[{d['lower']:{f}}, {d['upper']:{f}}]") if math.isfinite(d["lower"]) else ""
+    est = f"{d['estimate']:{spec}}" if math.isfinite(d["estimate"]) else "-"
+    ci = escape(f"[{d['lower']:{spec}}, {d['upper']:{spec}}]") if math.isfinite(d["lower"]) else ""
     colour = {"model": "green", "trust": "green", "baseline": "red"}.get(d.get("better", ""))
     return (f"[{colour}]{est}[/]", ci) if colour else (est, ci)
-
-
-def _ci(d: dict[str, Any], digits: int = 3) -> str:
-    est = f"{d['estimate']:.{digits}f}" if math.isfinite(d["estimate"]) else "-"
-    if not math.isfinite(d.get("lower", math.nan)):
-        return est
-    return escape(f"{est} [{d['lower']:.{digits}f}, {d['upper']:.{digits}f}]")
 
 
 def _load(path: Path) -> Any:
@@ -166,7 +158,7 @@ def _print_prediction(report, model: Path | None, metrics: tuple[str, ...]) -> N
         table = _table(titles[m], "predictor", "estimate", "95% CI", "model - this", "95% CI")
         for name, per in report.metrics.items():
             d = report.differences.get(name, {}).get(m)
-            table.add_row(name, *_pair(per[m], False), *(_pair(d, True) if d else ("", "")))
+            table.add_row(name, *_pair(per[m]), *(_pair(d, "+.3f") if d else ("", "")))
         console.print(table)
     if report.bootstrap:
         console.print(f"intervals: 95% participant bootstrap, {report.bootstrap} resamples", highlight=False)
@@ -248,7 +240,7 @@ def validate(
     for method in va.METHODS:
         table = _table(f"{method.capitalize()} correlation with {rating!r} ({rated})", "measure", *va.SCOPES)
         for key, per in report.correlations.items():
-            table.add_row(names.get(key, key), *(_ci(per[s][method], 2) for s in va.SCOPES))
+            table.add_row(names.get(key, key), *(" ".join(filter(None, _pair(per[s][method], ".2f"))) for s in va.SCOPES))
         console.print(table)
     console.print(
         "within: values and ratings centred on each participant's means, then pooled; between: participant means"
