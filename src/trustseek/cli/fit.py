@@ -6,13 +6,12 @@ from pathlib import Path
 from typing import Any
 
 import typer
-from rich.markup import escape
 
 from .. import estimation  # its names load on first use, when a command runs
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
 from ..parallel import MAX_JOBS
-from ._app import check_outputs, command, console, err_console, print_json, print_written, write_atomic
+from ._app import check_outputs, command, console, print_json, print_written, write_atomic
 from ._options import (
     FROM_OPTIONS,
     AsForFitEmissionsOpt,
@@ -29,7 +28,6 @@ from ._options import (
     bootstrap_option,
     json_option,
     log_inputs,
-    log_name,
     log_options,
     restarts_option,
     seed_option,
@@ -52,6 +50,7 @@ from ._reading import (
     keep_columns,
     load_types,
     named_inputs,
+    note_copied_rating,
     read_for_types,
     read_with_inputs,
     widened_note,
@@ -216,12 +215,8 @@ def _rated(frame, log: list[Path], ratings_only: bool) -> str | None:
     """The rating column fitted jointly ("rating") when the log has one; a note when the ratings
     look copied over a block's trials."""
     rated = "rating" if frame.attrs.get("rating_levels") else None
-    if rated and not frame.attrs.get("rating_per"):
-        from ..data.levels import copied_per_block
-
-        note = copied_per_block(frame, rated, shown=frame.attrs.get("rating_column"))
-        if note:
-            err_console.print(f"{log_name(log)}: note: {escape(note)}", highlight=False)
+    if rated:
+        note_copied_rating(frame, log, rated, shown=frame.attrs.get("rating_column"))
     if ratings_only and rated is None:
         raise TrustseekError(
             ["--ratings-only needs a rating column: --rating COLUMN --rating-levels ..., or the mapping's 'rating'"]

@@ -12,7 +12,7 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
-from ._app import check_outputs, command, console, err_console, make_table, print_json, print_written, write_atomic
+from ._app import check_outputs, command, console, make_table, print_json, print_written, write_atomic
 from ._options import (
     FROM_OPTIONS,
     AsForFitEmissionsOpt,
@@ -33,7 +33,15 @@ from ._options import (
     tol_option,
 )
 from ._progress import progress_task
-from ._reading import POSTERIOR_SUFFIXES, general_inputs, keep_columns, read_for_types, read_with_inputs, write_log
+from ._reading import (
+    POSTERIOR_SUFFIXES,
+    general_inputs,
+    keep_columns,
+    note_copied_rating,
+    read_for_types,
+    read_with_inputs,
+    write_log,
+)
 
 BootstrapOpt = bootstrap_option(1000, "Participant-bootstrap resamples for the 95% intervals (0 = none).")
 
@@ -179,10 +187,8 @@ def _one_rating_per_block(frame, log: list[Path], rating: str, per: str | None, 
     markers = frozenset(m.strip().lower() for m in missing or ())
     if per is not None:
         frame[rating] = levels.one_per_block(frame, rating, per, markers, log_name(log))
-    elif not frame.attrs.get("rating_per"):
-        note = levels.copied_per_block(frame, rating, markers)
-        if note:
-            err_console.print(f"{log_name(log)}: note: {escape(note)}", highlight=False)
+    else:
+        note_copied_rating(frame, log, rating, markers)
 
 
 @command("validate")
