@@ -10,7 +10,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import FIGURE_SUFFIXES, check_output, check_positive, command, console, print_json
+from ._app import FIGURE_SUFFIXES, check_output, check_positive, command, console, print_json, write_atomic
 from ._options import JsonOpt, QuietOpt, TaskOpt, parse_counts, people_option, restarts_option, seed_option
 from ._progress import progress_bar
 
@@ -85,7 +85,7 @@ def compare_types(
     if plot is not None:
         from ..plots.type_comparison import plot_types_section
 
-        plot_types_section(sec.numbers, plot)
+        write_atomic(plot, lambda tmp: plot_types_section(sec.numbers, tmp))
     if as_json:
         print_json(sec.numbers)
         return

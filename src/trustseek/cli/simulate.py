@@ -128,7 +128,9 @@ def simulate(
 ) -> None:
     from ..simulation.engine import simulate as run_simulation
 
-    given = _check_simulate(ctx, belief_update, counts, trials)
+    if counts is not None and trials is not None:
+        raise TrustseekError(["give either --counts or --trials, not both"])
+    given = _given(ctx, "belief_update", "--belief-update", "policy_model", "--policy-model")  # a policy file's own
     inputs = ((model, "--model file"), (task, "--task file"), (policy, "--policy file"), (policy_model, "--policy-model file"))
     tables = (".csv", ".parquet")
     check_outputs((out, "--out", tables), (summary_out, "--summary-out", tables), inputs=inputs)
@@ -156,14 +158,6 @@ def _given(ctx: typer.Context, *names: str) -> list[str]:
         if source is not None and source.name != "DEFAULT":
             out.append(option)
     return out
-
-
-def _check_simulate(ctx: typer.Context, belief_update: str, counts, trials) -> list[str]:
-    """simulate's options refused before anything is loaded; the options a solved policy file would
-    silently override (refused with one)."""
-    if counts is not None and trials is not None:
-        raise TrustseekError(["give either --counts or --trials, not both"])
-    return _given(ctx, "belief_update", "--belief-update", "policy_model", "--policy-model")
 
 
 @dataclass
