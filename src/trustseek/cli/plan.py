@@ -102,10 +102,10 @@ def solve(
     mixture = mixture_of(model, types)
     if mixture is None and (history is not None or participant is not None or session is not None):
         raise TrustseekError(["--history, --participant and --session need supervisor types (--types or a mixture with --model)"])
+    options = {"belief_update": belief_update, "grid": grid, "method": method, "tol": tol, "max_seconds": max_seconds}
     if mixture is not None:
         solver = solver or DEFAULT_TYPE_AWARE_SOLVER
         prior = None if history is None else type_posterior(mixture, history, participant, session)
-        options = {"belief_update": belief_update, "grid": grid, "method": method, "tol": tol, "max_seconds": max_seconds}
         t = load_task(task)
         policy = solvers.solve_type_aware(mixture, t, solver, gap or 1e-3, type_belief=prior, **options)
         pomdp = type_aware_problem(mixture if prior is None else mixture.with_weights(list(prior)), t)
@@ -114,10 +114,7 @@ def solve(
         pomdp = AssistancePOMDP(*model_and_task(model, task))
         if solver == "grid":
             need_two_levels(pomdp.model, "solve")
-        built = make_solver(
-            solver, belief_update=belief_update, grid=grid, method=method, tol=tol, gap=gap, max_seconds=max_seconds
-        )
-        policy = built.solve(pomdp)
+        policy = make_solver(solver, gap=gap, **options).solve(pomdp)
     summary = summarize(policy, pomdp)
     if mixture is not None:
         summary["type_belief"] = dict(
