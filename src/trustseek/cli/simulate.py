@@ -344,23 +344,21 @@ def _stages_bar(quiet: bool) -> Progress:
 
 def _print_reproduction(s: dict) -> None:
     """Paper vs reproduction, experiment 2's difference, the disagreements and the verdicts."""
+    from ..report import stat
+
     print_comparison(s)
     large, small = s["experiment2"]["large"], s["experiment2"]["small"]
     lo, hi = large["mean_difference_ci"]
     console.print(
         f"Experiment 2, {large['participants']:,} participants: mean aware − agnostic "
         f"{large['mean_difference']:.2f} [{lo:.2f}, {hi:.2f}] per block; "
-        f"Wilcoxon p = {_p(large['wilcoxon']['p_value'])}; 5 participants: p = {_p(small['wilcoxon']['p_value'])}"
+        f"Wilcoxon p = {stat(large['wilcoxon']['p_value'])}; 5 participants: p = {stat(small['wilcoxon']['p_value'])}"
     )
     if s["disagreements"]:
         console.print("[bold red]Where the simulation disagrees with the paper:[/]")
         for d in s["disagreements"]:
             console.print(f"  • {escape(d)}", highlight=False)
     console.print("Rows: " + "; ".join(f"{n} {v}" for v, n in s["verdict_counts"].items()))
-
-
-def _p(v) -> str:
-    return "–" if v is None else f"{v:.3g}"
 
 
 def print_comparison(summary: dict) -> None:
@@ -372,11 +370,7 @@ def print_comparison(summary: dict) -> None:
     for r in summary["comparison"]:
         iv = r["interval"]
         ivs = f"[{fmt(iv[0])}, {fmt(iv[1])}]" if iv else (r["note"] or "–")
-        verdict = (
-            "[green]agrees[/]"
-            if r["verdict"] == "agrees"
-            else ("[bold red]DISAGREES[/]" if r["verdict"] == "DISAGREES" else r["verdict"])
-        )
+        verdict = {"agrees": "[green]agrees[/]", "DISAGREES": "[bold red]DISAGREES[/]"}.get(r["verdict"], r["verdict"])
         table.add_row(escape(r["quantity"]), escape(fmt(r["paper"])), escape(fmt(r["ours"])), escape(ivs), verdict)
     out = console if console.is_terminal else Console(width=max(console.width, 150))
     out.print(table)
