@@ -96,7 +96,7 @@ def solve(
     from ..pomdp.supervisor_types import type_aware_problem, type_marginal
     from ..solvers import make_solver, summarize
 
-    _check_solve(belief_update, method, solver, gap, max_seconds)
+    _check_solve(method, solver, gap, max_seconds)
     inputs = ((model, "--model file"), (task, "--task file"), (types, "--types file"), (history, "--history log"))
     check_outputs((out, "--out", (".json",)), inputs=inputs)
     mixture = mixture_of(model, types)
@@ -136,7 +136,7 @@ def solve(
     print_written(("policy", out))
 
 
-def _check_solve(belief_update: str, method: str, solver: str | None, gap: float | None, max_seconds: float | None) -> None:
+def _check_solve(method: str, solver: str | None, gap: float | None, max_seconds: float | None) -> None:
     """solve's options refused before anything is loaded."""
     from ..solvers import solver_names
 
