@@ -188,7 +188,7 @@ class _Population:
             raise TrustseekError(
                 [f"the supervisors are a mixture of types: use --policy {TYPE_AWARE}, or --policy-model MODEL for one model"]
             )
-        if spec == "trust-aware" and self.pm.n_trust != 2:
+        if spec == "trust-aware":
             need_two_levels(self.pm, "simulate")
         if spec in POLICY_SPEC_KINDS:
             p_ask = dict(zip(self.task.complexities, [ask_low, ask_high], strict=False))  # --ask-low, --ask-high: the first two
