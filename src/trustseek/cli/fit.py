@@ -57,6 +57,63 @@ from ._reading import (
     write_log,
 )
 
+_TransitionsOnOpt = typer.Option(
+    None,
+    "--transitions-on",
+    help="Comma-separated inputs of the trust transitions (default: complexity, robot_action, experience; 'none' for "
+    "none); the mapping's 'inputs' may be named too: the fit is then a general model (trustseek.iohmm/1).",
+)
+_EmissionsOnOpt = typer.Option(
+    None,
+    "--emissions-on",
+    help="Comma-separated inputs of the human-action probabilities (default: complexity, robot_action; 'none' for "
+    "none); the mapping's 'inputs' may be named too.",
+)
+_BootstrapOpt = bootstrap_option(
+    0, "Participant-level bootstrap resamples for 95% intervals (0 = none; at least 200 advised, fewer warn)."
+)
+_PriorOpt = typer.Option(
+    0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."
+)
+_TolOpt = tol_option(1e-8, "Stop when the relative change of the log-likelihood is below this (> 0).")
+_JobsOpt = typer.Option(
+    None,
+    "--jobs",
+    "-j",
+    min=1,
+    max=MAX_JOBS,
+    help="Threads for the fit and processes for the bootstrap (default: all cores); numbers do not depend on it.",
+)
+_OutOpt = typer.Option(
+    None,
+    "--out",
+    "-o",
+    help="Write the fitted trust model (JSON, same format as the presets; a general model for other inputs).",
+)
+_PosteriorsOpt = typer.Option(
+    None, "--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet)."
+)
+_PlotsOpt = typer.Option(None, "--plots", help="Write the emission and transition figures (Fig. 4-6 style) into this directory.")
+_FillFromOpt = typer.Option(
+    None,
+    "--fill-from",
+    help="Take the rows the data never estimated (e.g. every ask row of a study without asking) from this model "
+    "(a preset name, e.g. paper, or a JSON file with the same levels and complexities).",
+)
+_RatingOpt = typer.Option(
+    None,
+    "--rating",
+    help="The log's self-reported trust rating column, fitted jointly as a second emission of the trust "
+    "(empty cells: no rating); or give 'rating' in the mapping file.",
+)
+_RatingLevelsOpt = typer.Option(
+    None, "--rating-levels", help="The rating's levels, lowest first, comma-separated (e.g. 1,2,3,4,5,6,7 or low,mid,high)."
+)
+_RatingBinsOpt = typer.Option(
+    None, "--rating-bins", help="Bin a numeric rating at these edges, comma-separated (e.g. 0,25,50,75,100)."
+)
+_RatingsOnlyOpt = typer.Option(False, "--ratings-only", help="Leave the human actions out: fit the trust on the ratings alone.")
+
 
 @command("fit")
 @log_options(keep=True)
@@ -64,70 +121,24 @@ def fit(
     log: list[Path] = OneRowPerTrialLogArg,
     preset: str = typer.Option("paper", "--preset", help="Model structure preset (paper)."),
     levels: int = typer.Option(2, "--levels", "-k", min=2, max=8, help="Number of trust levels."),
-    transitions_on: str | None = typer.Option(
-        None,
-        "--transitions-on",
-        help="Comma-separated inputs of the trust transitions (default: complexity, robot_action, experience; 'none' for "
-        "none); the mapping's 'inputs' may be named too: the fit is then a general model (trustseek.iohmm/1).",
-    ),
-    emissions_on: str | None = typer.Option(
-        None,
-        "--emissions-on",
-        help="Comma-separated inputs of the human-action probabilities (default: complexity, robot_action; 'none' for "
-        "none); the mapping's 'inputs' may be named too.",
-    ),
+    transitions_on: str | None = _TransitionsOnOpt,
+    emissions_on: str | None = _EmissionsOnOpt,
     restarts: int = restarts_option(10, help="Random restarts; the best is kept."),
-    bootstrap: int = bootstrap_option(
-        0, "Participant-level bootstrap resamples for 95% intervals (0 = none; at least 200 advised, fewer warn)."
-    ),
-    prior: float = typer.Option(
-        0.0, "--prior", min=0.0, help="Dirichlet pseudo-count added to every free cell (MAP); 0 = maximum likelihood."
-    ),
+    bootstrap: int = _BootstrapOpt,
+    prior: float = _PriorOpt,
     seed: int = seed_option("Random seed (restarts and bootstrap)."),
-    tol: float = tol_option(1e-8, "Stop when the relative change of the log-likelihood is below this (> 0)."),
+    tol: float = _TolOpt,
     max_iter: int = MaxIterOpt,
-    jobs: int | None = typer.Option(
-        None,
-        "--jobs",
-        "-j",
-        min=1,
-        max=MAX_JOBS,
-        help="Threads for the fit and processes for the bootstrap (default: all cores); numbers do not depend on it.",
-    ),
-    out: Path | None = typer.Option(
-        None,
-        "--out",
-        "-o",
-        help="Write the fitted trust model (JSON, same format as the presets; a general model for other inputs).",
-    ),
-    posteriors: Path | None = typer.Option(
-        None, "--posteriors", help="Also write per-trial P(trust | data) and the Viterbi path (CSV/Parquet)."
-    ),
-    plots: Path | None = typer.Option(
-        None, "--plots", help="Write the emission and transition figures (Fig. 4-6 style) into this directory."
-    ),
-    fill_from: str | None = typer.Option(
-        None,
-        "--fill-from",
-        help="Take the rows the data never estimated (e.g. every ask row of a study without asking) from this model "
-        "(a preset name, e.g. paper, or a JSON file with the same levels and complexities).",
-    ),
+    jobs: int | None = _JobsOpt,
+    out: Path | None = _OutOpt,
+    posteriors: Path | None = _PosteriorsOpt,
+    plots: Path | None = _PlotsOpt,
+    fill_from: str | None = _FillFromOpt,
     as_json: bool = json_option("Print the fitted model and diagnostics as one JSON object."),
-    rating: str | None = typer.Option(
-        None,
-        "--rating",
-        help="The log's self-reported trust rating column, fitted jointly as a second emission of the trust "
-        "(empty cells: no rating); or give 'rating' in the mapping file.",
-    ),
-    rating_levels: str | None = typer.Option(
-        None, "--rating-levels", help="The rating's levels, lowest first, comma-separated (e.g. 1,2,3,4,5,6,7 or low,mid,high)."
-    ),
-    rating_bins: str | None = typer.Option(
-        None, "--rating-bins", help="Bin a numeric rating at these edges, comma-separated (e.g. 0,25,50,75,100)."
-    ),
-    ratings_only: bool = typer.Option(
-        False, "--ratings-only", help="Leave the human actions out: fit the trust on the ratings alone."
-    ),
+    rating: str | None = _RatingOpt,
+    rating_levels: str | None = _RatingLevelsOpt,
+    rating_bins: str | None = _RatingBinsOpt,
+    ratings_only: bool = _RatingsOnlyOpt,
     rating_per: str | None = RatingPerOpt,
     reading: LogReading = FROM_OPTIONS,
     quiet: bool = QuietOpt,
