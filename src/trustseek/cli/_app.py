@@ -108,8 +108,9 @@ def print_written(*outputs: tuple[str, Any]) -> None:
 
 
 def make_table(title: str, *columns: str, left: int = 1, no_wrap: bool = False, **options: Any) -> Table:
-    """A table titled on the left; its first ``left`` columns justified left, the others right."""
-    out = Table(title=title, title_justify="left", **options)
+    """A table titled on the left (unless ``options`` say otherwise); its first ``left`` columns
+    justified left, the others right."""
+    out = Table(title=title, **{"title_justify": "left", **options})
     for i, column in enumerate(columns):
         out.add_column(column, justify="left" if i < left else "right", no_wrap=no_wrap)
     return out

@@ -13,7 +13,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cached_property, wraps
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, get_type_hints
 
 import typer
 from rich.markup import escape
@@ -208,54 +208,29 @@ def parse_counts(text: str, complexities: Sequence[str], option: str = "--counts
     return tuple(int(n) for n in numbers)
 
 
-#: the options :func:`log_options` adds, in the order the help lists them: (annotation, option)
-_OPTIONS: dict[str, tuple[Any, Any]] = {
-    "mapping": (
-        Path | None,
-        typer.Option(None, "--mapping", help="Column/label mapping file (JSON or TOML) for a log with other names."),
+#: the options :func:`log_options` adds, in the order the help lists them (their types: :class:`LogReading`'s fields)
+_OPTIONS: dict[str, Any] = {
+    "mapping": typer.Option(None, "--mapping", help="Column/label mapping file (JSON or TOML) for a log with other names."),
+    "column": typer.Option(None, "--column", help="Map a column: canonical=theirs (e.g. human_action=rely). Repeatable."),
+    "label": typer.Option(None, "--label", help="Map a label: column:theirs=canonical (e.g. human_action:1=rely). Repeatable."),
+    "missing": typer.Option(None, "--missing", help="A cell text meaning not recorded, e.g. NA (besides empty). Repeatable."),
+    "delimiter": typer.Option(None, "--delimiter", help="A CSV's delimiter (default: sniffed from the header; 'tab' for TAB)."),
+    "sheet": typer.Option(
+        None, "--sheet", help="An Excel workbook's sheet holding the log (default: its only sheet with values)."
     ),
-    "column": (
-        list[str] | None,
-        typer.Option(None, "--column", help="Map a column: canonical=theirs (e.g. human_action=rely). Repeatable."),
+    "order": typer.Option(
+        None,
+        "--order",
+        metavar="COLUMN[,COLUMN]",
+        help="Columns that order each participant's trials, e.g. block,trial for a trial number that restarts every "
+        "block (the mapping's 'order'); the trials are numbered 1, 2, ... in that order.",
     ),
-    "label": (
-        list[str] | None,
-        typer.Option(None, "--label", help="Map a label: column:theirs=canonical (e.g. human_action:1=rely). Repeatable."),
-    ),
-    "missing": (
-        list[str] | None,
-        typer.Option(None, "--missing", help="A cell text meaning not recorded, e.g. NA (besides empty). Repeatable."),
-    ),
-    "delimiter": (
-        str | None,
-        typer.Option(None, "--delimiter", help="A CSV's delimiter (default: sniffed from the header; 'tab' for TAB)."),
-    ),
-    "sheet": (
-        str | None,
-        typer.Option(None, "--sheet", help="An Excel workbook's sheet holding the log (default: its only sheet with values)."),
-    ),
-    "order": (
-        list[str] | None,
-        typer.Option(
-            None,
-            "--order",
-            metavar="COLUMN[,COLUMN]",
-            help="Columns that order each participant's trials, e.g. block,trial for a trial number that restarts every "
-            "block (the mapping's 'order'); the trials are numbered 1, 2, ... in that order.",
-        ),
-    ),
-    "keep": (
-        list[str] | None,
-        typer.Option(None, "--keep", help="Carry this column of the log into the output (e.g. a condition). Repeatable."),
-    ),
-    "no_rule": (
-        bool,
-        typer.Option(
-            False,
-            "--no-experience-rule",
-            help="Do not check the paper's experience rule (an intervention ends faulty, an ask as the task says): "
-            'for a study where it does not hold, e.g. advice taking; as the mapping\'s "experience_rule": false.',
-        ),
+    "keep": typer.Option(None, "--keep", help="Carry this column of the log into the output (e.g. a condition). Repeatable."),
+    "no_rule": typer.Option(
+        False,
+        "--no-experience-rule",
+        help="Do not check the paper's experience rule (an intervention ends faulty, an ask as the task says): "
+        'for a study where it does not hold, e.g. advice taking; as the mapping\'s "experience_rule": false.',
     ),
 }
 _DEFAULT = ("mapping", "column", "label", "missing", "delimiter", "sheet", "order")
@@ -328,19 +303,14 @@ def log_options(keep: bool = False, names: tuple[str, ...] | None = None) -> Cal
     --no-experience-rule, or those ``names`` (keys of :data:`_OPTIONS`), in that order where
     ``reading`` stands."""
     chosen = names or (*_DEFAULT, *(["keep"] if keep else []), "no_rule")
-    unknown = [n for n in chosen if n not in _OPTIONS]
-    if unknown:
-        raise ValueError(f"no log option {unknown}")
 
     def decorate(command: Callable[..., None]) -> Callable[..., None]:
         own = [
             p.replace(kind=inspect.Parameter.KEYWORD_ONLY) for p in inspect.signature(command, eval_str=True).parameters.values()
         ]
         at = [p.name for p in own].index("reading")
-        added = [
-            inspect.Parameter(n, inspect.Parameter.KEYWORD_ONLY, default=_OPTIONS[n][1], annotation=_OPTIONS[n][0])
-            for n in chosen
-        ]
+        types = get_type_hints(LogReading)
+        added = [inspect.Parameter(n, inspect.Parameter.KEYWORD_ONLY, default=_OPTIONS[n], annotation=types[n]) for n in chosen]
 
         @wraps(command)
         def run(**values: Any) -> None:

@@ -49,16 +49,16 @@ def run_selection(select, frame, quiet: bool, tr: tuple[str, ...], em: tuple[str
 
 
 def print_selection(
-    title: str, key: str, rows: list[dict[str, Any]], folds: int, warnings: list[str], as_json: bool, **how: Any
+    title: str, key: str, rows: list[dict], folds: int, warnings: list[str], as_json: bool, starts: str = "", extra=None
 ) -> None:
     """A model selection (``select``, ``select-types``) as JSON, or its table, legend and warnings:
-    per compared size ``key`` its log-likelihood, starts that reached the best (``how["starts"]``
-    says which), parameters, AIC, BIC and held-out score, the best by each criterion starred;
-    ``how["extra"]`` maps further column names to a cell function."""
+    per compared size ``key`` its log-likelihood, starts that reached the best (``starts`` says
+    which), parameters, AIC, BIC and held-out score, the best by each criterion starred; ``extra``
+    maps further column names to a cell function."""
     if as_json:
         print_json({key: rows, "warnings": warnings})
         return
-    extra = how.get("extra", {})
+    extra = extra or {}
     columns = (key, "log-likelihood", "reached best", "parameters", "AIC", "BIC", f"held-out LL ({folds}-fold)", *extra)
     table = make_table(title, *columns, left=0)
     for r in rows:
@@ -73,7 +73,7 @@ def print_selection(
             *(cell(r) for cell in extra.values()),
         )
     print_wide(table)
-    legend = f"* best by that criterion; reached best: starts{how.get('starts', '')} within 0.01 of the best log-likelihood"
+    legend = f"* best by that criterion; reached best: starts{starts} within 0.01 of the best log-likelihood"
     console.print(legend, highlight=False)
     print_warnings(warnings)
 

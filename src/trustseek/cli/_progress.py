@@ -74,11 +74,6 @@ def bar_task(bar: Progress, description: str, total: int | None = None) -> Calla
 def progress_task(quiet: bool, description: str, total: int | None = None) -> Iterator[Callable[..., None]]:
     """A :func:`progress_bar` with one task, open for the block: yields ``update(done, total,
     description=None)``, a progress callback."""
-    bar = progress_bar(quiet)
-    with bar:
+    with progress_bar(quiet) as bar:
         task = bar.add_task(description, total=total)
-
-        def update(done: float, of: float | None, description: str | None = None) -> None:
-            bar.update(task, completed=done, total=of, description=description)
-
-        yield update
+        yield lambda done, of, description=None: bar.update(task, completed=done, total=of, description=description)

@@ -1,7 +1,7 @@
 """Reading a model or supervisor types and the log they need, for the analysis commands (decode,
 predict, validate, personalize), or the log with the inputs --transitions-on and --emissions-on
-name, for those that fit; carrying the log's --keep columns into their output; the widened-range
-note of the selection commands."""
+name, for those that fit; carrying the log's --keep columns into their output; the note on a rating
+that looks copied over a block's trials; the widened-range note of the selection commands."""
 
 from __future__ import annotations
 
@@ -9,8 +9,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from rich.markup import escape
+
 from .. import estimation  # its names load on first use, when a command runs
 from ..errors import TrustseekError
+from ._app import err_console
+from ._options import log_name
 
 if TYPE_CHECKING:
     from ..model.core import TrustModel
@@ -57,9 +61,9 @@ def widened_note(rows, key: str, asked: int) -> list[str]:
     return [f"the best was at {asked} {unit}, the largest asked: compared up to {max(more)} (--no-widen: only the range asked)"]
 
 
-def load_for_decoding(path: Path):
-    """A trust model, supervisor types (a mixture) or a general model, by the file's format; or a
-    preset name (paper, paper+conservative)."""
+def load_types(path: Path):
+    """Supervisor types (a mixture), or a trust or general model as one type, by the file's format;
+    or a preset name (paper, paper+conservative)."""
     from ..model.core import TrustModel
     from ..model.files import is_iohmm_file
     from ..model.jsonfile import load_json
@@ -68,10 +72,9 @@ def load_for_decoding(path: Path):
 
     if str(path) in MIXTURE_PRESETS and not path.exists():
         return load_mixture(str(path))
-
     d, source = load_json(path)
     if is_iohmm_file(d):
-        return TrustModel.from_dict(d, source, general=True)
+        return TypeMixture.single(TrustModel.from_dict(d, source, general=True))
     return TypeMixture.from_dict(d, source, general=True)
 
 
@@ -121,8 +124,18 @@ def keep_columns(out, frame, keep: list[str] | None):
     return out
 
 
+def note_copied_rating(frame, log: Sequence[Path], column: str, markers: frozenset[str] = frozenset(), shown=None) -> None:
+    """A note on stderr when the rating ``column`` looks like one per block copied onto the block's
+    trials, unless the mapping's rating says so ("per"); ``shown`` its name in the log."""
+    from ..data.levels import copied_per_block
+
+    note = None if frame.attrs.get("rating_per") else copied_per_block(frame, column, markers, shown)
+    if note:
+        err_console.print(f"{log_name(log)}: note: {escape(note)}", highlight=False)
+
+
 def write_log(frame, path: Path) -> None:
-    """A table of trials written as a trial log (CSV or Parquet, by the suffix)."""
+    """A table (of trials, or per participant) written as CSV or Parquet, by the suffix."""
     from ..data.trials import write_trials
 
     write_trials(frame, path)

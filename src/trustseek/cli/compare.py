@@ -7,10 +7,9 @@ from pathlib import Path
 
 import typer
 from rich.markup import escape
-from rich.table import Table
 
 from ..errors import TrustseekError
-from ._app import FIGURE_SUFFIXES, check_output, check_positive, command, console, print_json
+from ._app import FIGURE_SUFFIXES, check_output, check_positive, command, console, make_table, print_json, write_atomic
 from ._options import JsonOpt, QuietOpt, TaskOpt, parse_counts, people_option, restarts_option, seed_option
 from ._progress import progress_bar
 
@@ -85,17 +84,14 @@ def compare_types(
     if plot is not None:
         from ..plots.type_comparison import plot_types_section
 
-        plot_types_section(sec.numbers, plot)
+        write_atomic(plot, lambda tmp: plot_types_section(sec.numbers, tmp))
     if as_json:
         print_json(sec.numbers)
         return
     for pop in sec.numbers["populations"]:
-        tab = Table(title=f"{pop['population']}, {pop['trials']} trials: cumulative reward per block [95 % CI]")
-        tab.add_column("group")
+        title = f"{pop['population']}, {pop['trials']} trials: cumulative reward per block [95 % CI]"
         policies = list(pop["groups"][0]["reward"])
-        for p in policies:
-            tab.add_column(p, justify="right")
-        tab.add_column("type-aware − pooled", justify="right")
+        tab = make_table(title, "group", *policies, "type-aware − pooled", title_justify="center")
         for g in pop["groups"]:
             d = next(d for d in g["differences"] if d["policy"] == "type-aware" and d["against"] == "pooled trust-aware")
             tab.add_row(

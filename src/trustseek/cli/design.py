@@ -14,7 +14,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsed
 from ..errors import TrustseekError
 from ..parallel import MAX_JOBS
 from ._app import check_output, command, console, make_table, print_json
-from ._options import JsonOpt, QuietOpt, TaskOpt, belief_update_option, seed_option
+from ._options import JsonOpt, QuietOpt, TaskOpt, belief_update_option, model_and_task, seed_option
 from ._progress import bar_task, progress_bar
 
 
@@ -142,12 +142,12 @@ def design(
     quiet: bool = QuietOpt,
 ) -> None:
     from ..design import DesignConfig, FitSettings, ask_search_problems
-    from ..model.presets import load_model, load_task
 
     check_output(out, "--out", directory=True)
+    truth, t = model_and_task(model, task)
     cfg = DesignConfig(
-        truth=load_model(model),
-        task=load_task(task),
+        truth=truth,
+        task=t,
         seed=seed,
         replicates=replicates,
         participants_1=_ints(participants_1, "--participants-1"),

@@ -6,13 +6,12 @@ from pathlib import Path
 from typing import Any
 
 import typer
-from rich.markup import escape
 
 from .. import estimation  # its names load on first use, when a command runs
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
 from ..parallel import MAX_JOBS
-from ._app import check_outputs, command, console, err_console, print_json, print_written, write_atomic
+from ._app import check_outputs, command, console, print_json, print_written, write_atomic
 from ._options import (
     FROM_OPTIONS,
     AsForFitEmissionsOpt,
@@ -29,7 +28,6 @@ from ._options import (
     bootstrap_option,
     json_option,
     log_inputs,
-    log_name,
     log_options,
     restarts_option,
     seed_option,
@@ -50,8 +48,9 @@ from ._reading import (
     POSTERIOR_SUFFIXES,
     general_inputs,
     keep_columns,
-    load_for_decoding,
+    load_types,
     named_inputs,
+    note_copied_rating,
     read_for_types,
     read_with_inputs,
     widened_note,
@@ -227,12 +226,8 @@ def _rated(frame, log: list[Path], ratings_only: bool) -> str | None:
     """The rating column fitted jointly ("rating") when the log has one; a note when the ratings
     look copied over a block's trials."""
     rated = "rating" if frame.attrs.get("rating_levels") else None
-    if rated and not frame.attrs.get("rating_per"):
-        from ..data.levels import copied_per_block
-
-        note = copied_per_block(frame, rated, shown=frame.attrs.get("rating_column"))
-        if note:
-            err_console.print(f"{log_name(log)}: note: {escape(note)}", highlight=False)
+    if rated:
+        note_copied_rating(frame, log, rated, shown=frame.attrs.get("rating_column"))
     if ratings_only and rated is None:
         raise TrustseekError(
             ["--ratings-only needs a rating column: --rating COLUMN --rating-levels ..., or the mapping's 'rating'"]
@@ -304,16 +299,14 @@ def decode_cmd(
     The log needs the columns the model depends on: a model fitted with fewer inputs
     (--transitions-on/--emissions-on) decodes a log without the others."""
     check_outputs((out, "--out", POSTERIOR_SUFFIXES), inputs=(*log_inputs(log), (model, "--model file"), *reading.inputs()))
-    from ..model.mixture import TypeMixture
-
-    types = load_for_decoding(model)  # a trust model, a general model or types
+    types = load_types(model)
     frame = read_for_types(log, types, reading)
-    if isinstance(types, TypeMixture) and types.n_types > 1:  # P(type | trials) and the type-averaged posteriors
+    if types.n_types > 1:  # P(type | trials) and the type-averaged posteriors
         from ..estimation.mixture import decode_types
 
         post = decode_types(frame, types)
     else:
-        post = estimation.decode(frame, types.models[0] if isinstance(types, TypeMixture) else types)
+        post = estimation.decode(frame, types.models[0])
     post = keep_columns(post, frame, reading.keep)
     write_atomic(out, lambda tmp: write_log(post, tmp))
     console.print(f"wrote {len(post)} trials to {out}")

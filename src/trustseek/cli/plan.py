@@ -18,6 +18,7 @@ from ._app import (
     console,
     make_table,
     print_json,
+    print_written,
     write_atomic,
 )
 from ._options import (
@@ -95,16 +96,16 @@ def solve(
     from ..pomdp.supervisor_types import type_aware_problem, type_marginal
     from ..solvers import make_solver, summarize
 
-    _check_solve(belief_update, method, solver, gap, max_seconds)
+    _check_solve(method, solver, gap, max_seconds)
     inputs = ((model, "--model file"), (task, "--task file"), (types, "--types file"), (history, "--history log"))
     check_outputs((out, "--out", (".json",)), inputs=inputs)
     mixture = mixture_of(model, types)
     if mixture is None and (history is not None or participant is not None or session is not None):
         raise TrustseekError(["--history, --participant and --session need supervisor types (--types or a mixture with --model)"])
+    options = {"belief_update": belief_update, "grid": grid, "method": method, "tol": tol, "max_seconds": max_seconds}
     if mixture is not None:
         solver = solver or DEFAULT_TYPE_AWARE_SOLVER
         prior = None if history is None else type_posterior(mixture, history, participant, session)
-        options = {"belief_update": belief_update, "grid": grid, "method": method, "tol": tol, "max_seconds": max_seconds}
         t = load_task(task)
         policy = solvers.solve_type_aware(mixture, t, solver, gap or 1e-3, type_belief=prior, **options)
         pomdp = type_aware_problem(mixture if prior is None else mixture.with_weights(list(prior)), t)
@@ -113,10 +114,7 @@ def solve(
         pomdp = AssistancePOMDP(*model_and_task(model, task))
         if solver == "grid":
             need_two_levels(pomdp.model, "solve")
-        built = make_solver(
-            solver, belief_update=belief_update, grid=grid, method=method, tol=tol, gap=gap, max_seconds=max_seconds
-        )
-        policy = built.solve(pomdp)
+        policy = make_solver(solver, gap=gap, **options).solve(pomdp)
     summary = summarize(policy, pomdp)
     if mixture is not None:
         summary["type_belief"] = dict(
@@ -135,11 +133,10 @@ def solve(
     if mixture is not None:
         start = ", ".join(f"{name} {p:.3f}" for name, p in summary["type_belief"].items())
         console.print(f"supervisor types at the start: {start}; the belief is over (type, trust)")
-    if out is not None:
-        console.print(f"policy written to {out}")
+    print_written(("policy", out))
 
 
-def _check_solve(belief_update: str, method: str, solver: str | None, gap: float | None, max_seconds: float | None) -> None:
+def _check_solve(method: str, solver: str | None, gap: float | None, max_seconds: float | None) -> None:
     """solve's options refused before anything is loaded."""
     from ..solvers import solver_names
 
@@ -312,70 +309,61 @@ def check(
 ) -> None:
     """Validate model (trust or general), task, policy and mapping files, and trial logs as the fit
     reads them (with the log options); print every problem found, and what each log holds."""
-    from ..data.suffixes import file_kind
-    from ..model.core import TrustModel
-    from ..model.files import IOHMM_FORMAT
-    from ..model.jsonfile import ModelError, load_json
-    from ..model.task import Task
-    from ..policies import load_policy
-
     problems: list[str] = []
     for f in files:
-        kind = file_kind(f)
-        if kind == "log":
-            try:
-                console.print(f"{f}: ok: {_log_summary(reading.read([f], ('complexity', 'robot_action', 'experience')))}",
-                              soft_wrap=True, highlight=False)  # fmt: skip
-            except TrustseekError as exc:
-                problems.extend(exc.lines())
-            continue
-        if kind == "mapping":
-            from ..data.mapping import ColumnMapping
-
-            try:
-                ColumnMapping.load(f)
-                console.print(f"{f}: ok (a column mapping, for --mapping)", soft_wrap=True, highlight=False)
-            except TrustseekError as exc:
-                problems.extend(exc.lines())
-            continue
         try:
-            text, _ = load_json(f)
-        except ModelError as exc:
-            problems.extend(exc.lines())
-            continue
-        fmt = text.get("format", "")
-        if not isinstance(fmt, str):
-            problems.append(f"{f}: format must be a string, got {fmt!r}")
-            continue
-        try:
-            if "task" in fmt:
-                Task.from_dict(text, str(f))
-            elif "policy" in fmt:
-                load_policy(f)
-            elif fmt == IOHMM_FORMAT:
-                g = TrustModel.from_dict(text, str(f), general=True)
-                console.print(
-                    f"{f}: a general model, inputs: {', '.join(g.used_inputs) or 'none'} (decode, predict and validate "
-                    "read it; solve and simulate need a trust model)",
-                    soft_wrap=True,
-                    highlight=False,
-                )
-            else:
-                m = TrustModel.from_dict(text, str(f))
-                rows = m.not_estimated_rows()
-                if rows:
-                    console.print(
-                        f"[yellow]warning:[/] {f}: never estimated (copies or defaults, not data): {', '.join(rows)}; "
-                        "solve, plot-q and simulate refuse the ones a task can reach until they are supplied "
-                        "('trustseek fit ... --fill-from paper', or by hand: docs/formats.md)",
-                        soft_wrap=True,
-                        highlight=False,
-                    )
-            console.print(f"{f}: ok", soft_wrap=True, highlight=False)
-        except ModelError as exc:
+            console.print(f"{f}: {_check_file(f, reading)}", soft_wrap=True, highlight=False)
+        except TrustseekError as exc:
             problems.extend(exc.lines())
     if problems:
         raise TrustseekError(problems)
+
+
+def _check_file(f: Path, reading: LogReading) -> str:
+    """What ``check`` says of one file that holds no problem (a note before it, for a model some of
+    whose rows were never estimated); its problems raised."""
+    from ..data.suffixes import file_kind
+    from ..model.core import TrustModel
+    from ..model.files import IOHMM_FORMAT
+    from ..model.jsonfile import load_json
+    from ..model.task import Task
+    from ..policies import load_policy
+
+    kind = file_kind(f)
+    if kind == "log":
+        return f"ok: {_log_summary(reading.read([f], ('complexity', 'robot_action', 'experience')))}"
+    if kind == "mapping":
+        from ..data.mapping import ColumnMapping
+
+        ColumnMapping.load(f)
+        return "ok (a column mapping, for --mapping)"
+    text, _ = load_json(f)
+    fmt = text.get("format", "")
+    if not isinstance(fmt, str):
+        raise TrustseekError([f"{f}: format must be a string, got {fmt!r}"])
+    if "task" in fmt:
+        Task.from_dict(text, str(f))
+    elif "policy" in fmt:
+        load_policy(f)
+    elif fmt == IOHMM_FORMAT:
+        g = TrustModel.from_dict(text, str(f), general=True)
+        console.print(
+            f"{f}: a general model, inputs: {', '.join(g.used_inputs) or 'none'} (decode, predict and validate "
+            "read it; solve and simulate need a trust model)",
+            soft_wrap=True,
+            highlight=False,
+        )
+    else:
+        rows = TrustModel.from_dict(text, str(f)).not_estimated_rows()
+        if rows:
+            console.print(
+                f"[yellow]warning:[/] {f}: never estimated (copies or defaults, not data): {', '.join(rows)}; "
+                "solve, plot-q and simulate refuse the ones a task can reach until they are supplied "
+                "('trustseek fit ... --fill-from paper', or by hand: docs/formats.md)",
+                soft_wrap=True,
+                highlight=False,
+            )
+    return "ok"
 
 
 def _log_summary(frame) -> str:

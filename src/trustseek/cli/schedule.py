@@ -9,7 +9,7 @@ import typer
 
 from ..solvers.defaults import DEFAULT_SCHEDULE_GRID, ORDERS, REPRESENTATIONS
 from ..vocab import PAPER_BLOCK_COUNTS
-from ._app import FIGURE_SUFFIXES, check_outputs, command, console, make_table, print_json
+from ._app import FIGURE_SUFFIXES, check_outputs, command, console, make_table, print_json, print_written, write_atomic
 from ._options import (
     JsonOpt,
     ModelOpt,
@@ -83,8 +83,8 @@ def schedule(
         "seconds": policy.info["seconds"],
         "first_choice": first,
     }
+    write_atomic(out, policy.save)
     if out is not None:
-        policy.save(out)
         summary["policy_file"] = str(out)
     if compare or figure is not None:
         from ..reproduction.scheduling import scheduling_section
@@ -96,7 +96,7 @@ def schedule(
         if figure is not None:
             from ..plots.scheduling import plot_scheduling_section
 
-            plot_scheduling_section(section, figure)
+            write_atomic(figure, lambda tmp: plot_scheduling_section(section, tmp))
             section.numbers["figure"] = str(figure)
     if as_json:
         print_json(summary)
@@ -108,8 +108,7 @@ def schedule(
     )
     if first is not None:
         console.print(f"first trial: a {first['complexity']} item, {first['robot_action']}")
-    if out is not None:
-        console.print(f"policy written to {out}")
+    print_written(("policy", out))
     if "comparison" in summary:
         _print_comparison(summary["comparison"])
 

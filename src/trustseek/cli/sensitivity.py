@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 from rich.markup import escape
 
-from ._app import FIGURE_SUFFIXES, check_outputs, command, console, make_table, print_json
+from ._app import FIGURE_SUFFIXES, check_outputs, command, console, make_table, print_json, print_written, write_atomic
 from ._options import JsonOpt, ModelOpt, TaskOpt, belief_update_option, model_and_task, processes_option, seed_option
 
 
@@ -59,7 +59,7 @@ def sensitivity(
         from ..plots.sensitivity import plot_tornado
 
         q = next(q for q in res.quantities if q.startswith("threshold"))
-        plot_tornado(res, q, plot)
+        write_atomic(plot, lambda tmp: plot_tornado(res, q, tmp))
     if as_json:
         d = res.to_dict()
         if plot is not None:
@@ -95,5 +95,4 @@ def sensitivity(
                 f"{r['at_upper'][q]:.4f}",
             )
         console.print(table)
-    if plot is not None:
-        console.print(f"tornado plot written to {plot}")
+    print_written(("tornado plot", plot))

@@ -16,7 +16,7 @@ from typing import Any
 import typer
 
 from ..errors import TrustseekError
-from ._app import check_output, check_outputs, command, console, print_json, write_atomic
+from ._app import atomic_output, check_output, check_outputs, command, console, print_json, write_atomic
 from ._options import json_option
 
 StudyArg = typer.Argument(..., help="Study id.")
@@ -158,15 +158,13 @@ def _experimenter_token(token: str | None, token_file: Path | None) -> tuple[str
         return token, "from $TRUSTSEEK_TOKEN" if from_env else "from --token"
     token = secrets.token_urlsafe(24)
     path = GENERATED_TOKEN_FILE.resolve()
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(token + "\n")
-        os.chmod(tmp, 0o600)
-        os.replace(tmp, path)
+        with atomic_output(path) as tmp:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                f.write(token + "\n")
+            os.chmod(tmp, 0o600)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
         raise TrustseekError(
             [f"cannot write the generated token to {path} ({exc.strerror or exc}): pass --token-file or set $TRUSTSEEK_TOKEN"]
         ) from None

@@ -42,6 +42,7 @@ from ._options import (
     seed_option,
 )
 from ._progress import progress_bar
+from ._reading import write_log
 
 if TYPE_CHECKING:
     from ..model.core import TrustModel
@@ -127,7 +128,9 @@ def simulate(
 ) -> None:
     from ..simulation.engine import simulate as run_simulation
 
-    given = _check_simulate(ctx, belief_update, counts, trials)
+    if counts is not None and trials is not None:
+        raise TrustseekError(["give either --counts or --trials, not both"])
+    given = _given(ctx, "belief_update", "--belief-update", "policy_model", "--policy-model")  # a policy file's own
     inputs = ((model, "--model file"), (task, "--task file"), (policy, "--policy file"), (policy_model, "--policy-model file"))
     tables = (".csv", ".parquet")
     check_outputs((out, "--out", tables), (summary_out, "--summary-out", tables), inputs=inputs)
@@ -141,9 +144,9 @@ def simulate(
         sup, t, pol, participants, counts=cnt, trials=trials, seed=seed, record=out is not None, belief_model=pop.pm
     )
     dt = time.perf_counter() - t0
-    write_atomic(out, lambda tmp: _write(sim.trials(), tmp))
+    write_atomic(out, lambda tmp: write_log(sim.trials(), tmp))
     summ = sim.summary()
-    write_atomic(summary_out, lambda tmp: _write(summ, tmp))
+    write_atomic(summary_out, lambda tmp: write_log(summ, tmp))
     _report_simulation(summ, pol, participants, seed, dt, out, summary_out, as_json)
 
 
@@ -155,14 +158,6 @@ def _given(ctx: typer.Context, *names: str) -> list[str]:
         if source is not None and source.name != "DEFAULT":
             out.append(option)
     return out
-
-
-def _check_simulate(ctx: typer.Context, belief_update: str, counts, trials) -> list[str]:
-    """simulate's options refused before anything is loaded; the options a solved policy file would
-    silently override (refused with one)."""
-    if counts is not None and trials is not None:
-        raise TrustseekError(["give either --counts or --trials, not both"])
-    return _given(ctx, "belief_update", "--belief-update", "policy_model", "--policy-model")
 
 
 @dataclass
@@ -193,7 +188,7 @@ class _Population:
             raise TrustseekError(
                 [f"the supervisors are a mixture of types: use --policy {TYPE_AWARE}, or --policy-model MODEL for one model"]
             )
-        if spec == "trust-aware" and self.pm.n_trust != 2:
+        if spec == "trust-aware":
             need_two_levels(self.pm, "simulate")
         if spec in POLICY_SPEC_KINDS:
             p_ask = dict(zip(self.task.complexities, [ask_low, ask_high], strict=False))  # --ask-low, --ask-high: the first two
@@ -274,18 +269,6 @@ def _report_simulation(summ, pol: Policy, participants: int, seed: int, dt: floa
     print_written(("trials", out), ("summary", summary_out))
 
 
-def _write(frame, path: Path) -> None:
-    """A table of trials as a trial log, another (the summary) as it is."""
-    from ..data.trials import write_csv, write_trials
-
-    if list(frame.columns[:2]) == ["participant", "trial"]:
-        write_trials(frame, path)
-    elif path.suffix.lower() == ".parquet":
-        frame.to_parquet(path, index=False)
-    else:
-        write_csv(frame, path)
-
-
 @command("reproduce")
 def reproduce(
     out: Path = typer.Option(Path("report"), "--out", "-o", help="Report folder (report.html, PNGs, summary.json, data)."),
@@ -361,23 +344,21 @@ def _stages_bar(quiet: bool) -> Progress:
 
 def _print_reproduction(s: dict) -> None:
     """Paper vs reproduction, experiment 2's difference, the disagreements and the verdicts."""
+    from ..report import stat
+
     print_comparison(s)
     large, small = s["experiment2"]["large"], s["experiment2"]["small"]
     lo, hi = large["mean_difference_ci"]
     console.print(
         f"Experiment 2, {large['participants']:,} participants: mean aware − agnostic "
         f"{large['mean_difference']:.2f} [{lo:.2f}, {hi:.2f}] per block; "
-        f"Wilcoxon p = {_p(large['wilcoxon']['p_value'])}; 5 participants: p = {_p(small['wilcoxon']['p_value'])}"
+        f"Wilcoxon p = {stat(large['wilcoxon']['p_value'])}; 5 participants: p = {stat(small['wilcoxon']['p_value'])}"
     )
     if s["disagreements"]:
         console.print("[bold red]Where the simulation disagrees with the paper:[/]")
         for d in s["disagreements"]:
             console.print(f"  • {escape(d)}", highlight=False)
     console.print("Rows: " + "; ".join(f"{n} {v}" for v, n in s["verdict_counts"].items()))
-
-
-def _p(v) -> str:
-    return "–" if v is None else f"{v:.3g}"
 
 
 def print_comparison(summary: dict) -> None:
@@ -389,11 +370,7 @@ def print_comparison(summary: dict) -> None:
     for r in summary["comparison"]:
         iv = r["interval"]
         ivs = f"[{fmt(iv[0])}, {fmt(iv[1])}]" if iv else (r["note"] or "–")
-        verdict = (
-            "[green]agrees[/]"
-            if r["verdict"] == "agrees"
-            else ("[bold red]DISAGREES[/]" if r["verdict"] == "DISAGREES" else r["verdict"])
-        )
+        verdict = {"agrees": "[green]agrees[/]", "DISAGREES": "[bold red]DISAGREES[/]"}.get(r["verdict"], r["verdict"])
         table.add_row(escape(r["quantity"]), escape(fmt(r["paper"])), escape(fmt(r["ours"])), escape(ivs), verdict)
     out = console if console.is_terminal else Console(width=max(console.width, 150))
     out.print(table)

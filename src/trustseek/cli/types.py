@@ -32,7 +32,7 @@ from ._options import (
 )
 from ._output import check_plots_folder, fit_summary, print_selection, print_warnings, run_selection
 from ._progress import bar_task, progress_bar
-from ._reading import POSTERIOR_SUFFIXES, load_for_decoding, read_for_types, read_with_inputs, widened_note, write_log
+from ._reading import POSTERIOR_SUFFIXES, load_types, read_for_types, read_with_inputs, widened_note, write_log
 
 TransitionsOnOpt = typer.Option(
     None, "--transitions-on", help="Inputs of the trust transitions (as for fit: complexity, robot_action, experience)."
@@ -275,11 +275,8 @@ def personalize(
         raise TrustseekError([f"--estimate must be held-out or variational, got {estimate!r}"])
     check_output(out, "--out", directory=True)
     from ..estimation.personal import personalize as run
-    from ..model.mixture import TypeMixture
 
-    centre = load_for_decoding(Path(model))  # a trust model, a general model or types
-    if not isinstance(centre, TypeMixture):
-        centre = TypeMixture.single(centre)
+    centre = load_types(Path(model))
     frame = read_for_types(log, centre, reading)  # the columns it uses
     centre_model = centre if centre.n_types > 1 else centre.models[0]
     res = run(frame, centre_model, strength=strength, options=FitOptions(tol=tol, n_jobs=1), estimate=estimate)

@@ -12,7 +12,7 @@ from rich.table import Table
 
 from ..errors import TrustseekError
 from ..estimation.options import FitOptions
-from ._app import check_outputs, command, console, err_console, make_table, print_json, write_atomic
+from ._app import check_outputs, command, console, make_table, print_json, print_written, write_atomic
 from ._options import (
     FROM_OPTIONS,
     AsForFitEmissionsOpt,
@@ -33,7 +33,15 @@ from ._options import (
     tol_option,
 )
 from ._progress import progress_task
-from ._reading import POSTERIOR_SUFFIXES, general_inputs, keep_columns, read_for_types, read_with_inputs, write_log
+from ._reading import (
+    POSTERIOR_SUFFIXES,
+    general_inputs,
+    keep_columns,
+    note_copied_rating,
+    read_for_types,
+    read_with_inputs,
+    write_log,
+)
 
 BootstrapOpt = bootstrap_option(1000, "Participant-bootstrap resamples for the 95% intervals (0 = none).")
 
@@ -42,20 +50,12 @@ def _table(title: str, *columns: str) -> Table:
     return make_table(title, *columns, no_wrap=True, box=None, padding=(0, 2, 0, 0), header_style="bold underline")
 
 
-def _pair(d: dict[str, Any], signed: bool) -> tuple[str, str]:
+def _pair(d: dict[str, Any], spec: str = ".3f") -> tuple[str, str]:
     """An estimate and its interval as two cells (a difference coloured by which side is better)."""
-    f = "+.3f" if signed else ".3f"
-    est = f"{d['estimate']:{f}}" if math.isfinite(d["estimate"]) else "-"
-    ci = escape(f"[{d['lower']:{f}}, {d['upper']:{f}}]") if math.isfinite(d["lower"]) else ""
+    est = f"{d['estimate']:{spec}}" if math.isfinite(d["estimate"]) else "-"
+    ci = escape(f"[{d['lower']:{spec}}, {d['upper']:{spec}}]") if math.isfinite(d["lower"]) else ""
     colour = {"model": "green", "trust": "green", "baseline": "red"}.get(d.get("better", ""))
     return (f"[{colour}]{est}[/]", ci) if colour else (est, ci)
-
-
-def _ci(d: dict[str, Any], digits: int = 3) -> str:
-    est = f"{d['estimate']:.{digits}f}" if math.isfinite(d["estimate"]) else "-"
-    if not math.isfinite(d.get("lower", math.nan)):
-        return est
-    return escape(f"{est} [{d['lower']:.{digits}f}, {d['upper']:.{digits}f}]")
 
 
 def _load(path: Path) -> Any:
@@ -132,8 +132,7 @@ def predict(
         print_json(report.to_dict())
         return
     _print_prediction(report, model, pr.METRICS)
-    if out is not None:
-        console.print(f"per-trial predictions written to {out}")
+    print_written(("per-trial predictions", out))
 
 
 def _check_trial_output(out: Path | None, log: list[Path], model: Path | None, reading: LogReading) -> None:
@@ -167,7 +166,7 @@ def _print_prediction(report, model: Path | None, metrics: tuple[str, ...]) -> N
         table = _table(titles[m], "predictor", "estimate", "95% CI", "model - this", "95% CI")
         for name, per in report.metrics.items():
             d = report.differences.get(name, {}).get(m)
-            table.add_row(name, *_pair(per[m], False), *(_pair(d, True) if d else ("", "")))
+            table.add_row(name, *_pair(per[m]), *(_pair(d, "+.3f") if d else ("", "")))
         console.print(table)
     if report.bootstrap:
         console.print(f"intervals: 95% participant bootstrap, {report.bootstrap} resamples", highlight=False)
@@ -188,10 +187,8 @@ def _one_rating_per_block(frame, log: list[Path], rating: str, per: str | None, 
     markers = frozenset(m.strip().lower() for m in missing or ())
     if per is not None:
         frame[rating] = levels.one_per_block(frame, rating, per, markers, log_name(log))
-    elif not frame.attrs.get("rating_per"):
-        note = levels.copied_per_block(frame, rating, markers)
-        if note:
-            err_console.print(f"{log_name(log)}: note: {escape(note)}", highlight=False)
+    else:
+        note_copied_rating(frame, log, rating, markers)
 
 
 @command("validate")
@@ -249,7 +246,7 @@ def validate(
     for method in va.METHODS:
         table = _table(f"{method.capitalize()} correlation with {rating!r} ({rated})", "measure", *va.SCOPES)
         for key, per in report.correlations.items():
-            table.add_row(names.get(key, key), *(_ci(per[s][method], 2) for s in va.SCOPES))
+            table.add_row(names.get(key, key), *(" ".join(filter(None, _pair(per[s][method], ".2f"))) for s in va.SCOPES))
         console.print(table)
     console.print(
         "within: values and ratings centred on each participant's means, then pooled; between: participant means"
@@ -260,5 +257,4 @@ def validate(
         report.statements(),
         "the decoded trust beats every baseline in every scope (Spearman; 95% intervals of the differences exclude 0)",
     )
-    if out is not None:
-        console.print(f"per-trial values written to {out}")
+    print_written(("per-trial values", out))
