@@ -112,3 +112,47 @@ def test_the_application_remembers_what_its_sessions_need(tmp_path):
     assert len(second.study_caches.configs) == len(second.deploy_plans.by_session) == 0
     for app in apps:
         app.state.deploy_store.close()
+
+
+def test_a_state_request_asks_the_database_once_for_what_is_still_due(tmp_path):
+    """The session's state says what is still due (a self-report, a questionnaire) and whether the
+    session is over from one look at the reports and answers: the check of its end reuses it."""
+    from fastapi.testclient import TestClient
+    from sqlalchemy import event
+
+    from trustseek.server.app import create_app
+
+    app = create_app(f"sqlite:///{tmp_path / 'due.sqlite'}", token="t")
+    h = {"Authorization": "Bearer t"}
+    questionnaire = {"name": "q", "when": "end", "items": [{"id": "i1", "text": "It was easy."}]}
+    with TestClient(app) as c:
+        blocks = [{"policy": {"kind": "never-ask"}, "schedule": {"counts": {"low": 1}}}]
+        body = {"name": "due", "blocks": blocks, "self_report": "trial", "questionnaires": [questionnaire]}
+        study = c.post("/api/studies", json=body, headers=h)
+        assert study.status_code == 201, study.text
+        s = c.post(f"/api/studies/{study.json()['id']}/sessions", json={"count": 1}, headers=h).json()[0]
+        sid, ph = s["session_id"], {"Authorization": f"Bearer {s['token']}"}
+        assert c.post(f"/api/sessions/{sid}/consent", json={"agree": True}, headers=ph).status_code == 200
+        state = c.get(f"/api/sessions/{sid}/state", headers=ph).json()
+        trial = {
+            "trial": 1,
+            "submission_id": "s1",
+            "human_action": "rely" if state["current"]["robot_action"] == "autonomous" else "intervene",
+        }
+        assert c.post(f"/api/sessions/{sid}/trials", json=trial, headers=ph).status_code == 200
+        seen: list[str] = []
+
+        def count(conn, cursor, statement, *args):
+            seen.append(statement)
+
+        event.listen(app.state.engine, "before_cursor_execute", count)
+        for expected in ({"report_due": 1}, {"report_due": None, "ended": False}):
+            seen.clear()
+            state = c.get(f"/api/sessions/{sid}/state", headers=ph).json()
+            assert {k: state[k] for k in expected} == expected
+            assert sum("FROM reports" in q for q in seen) == 1, seen
+            assert sum("FROM answers" in q for q in seen) <= 1, seen
+            if expected["report_due"]:
+                assert c.post(f"/api/sessions/{sid}/reports", json={"after_trial": 1, "value": 5}, headers=ph).status_code == 200
+        assert state["questionnaire"]["name"] == "q"
+    app.state.deploy_store.close()

@@ -152,11 +152,19 @@ def questionnaire_due(db: DBSession, s: Session, cfg: dict[str, Any]) -> dict[st
     return None
 
 
-def ended(db: DBSession, s: Session, cfg: dict[str, Any]) -> bool:
-    """Whether the session is over: every trial committed and nothing left to answer."""
+def still_due(db: DBSession, s: Session, cfg: dict[str, Any]) -> tuple[int | None, dict[str, Any] | None]:
+    """What the participant must answer before going on: the trial a self-report is still expected
+    after (:func:`report_due`), and, when none is, the questionnaire still to answer (:func:`questionnaire_due`)."""
+    due = report_due(db, s, cfg)
+    return due, questionnaire_due(db, s, cfg) if due is None else None
+
+
+def ended(db: DBSession, s: Session, cfg: dict[str, Any], due: tuple[int | None, Any] | None = None) -> bool:
+    """Whether the session is over: every trial committed and nothing left to answer (``due``: what
+    :func:`still_due` gave, when already known)."""
     if s.status == SCREENED:
         return True
-    return s.status == "done" and report_due(db, s, cfg) is None and questionnaire_due(db, s, cfg) is None
+    return s.status == "done" and (still_due(db, s, cfg) if due is None else due) == (None, None)
 
 
 def answer_problems(q: dict[str, Any], answers: dict[str, float]) -> list[str]:

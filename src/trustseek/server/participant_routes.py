@@ -10,7 +10,7 @@ from typing import Any
 from fastapi import APIRouter, Depends, Request
 from fastapi.security import HTTPAuthorizationCredentials
 
-from .answers import SCREENED, add_answers, add_report, answer_quiz, ended, questionnaire_due, quiz_due, report_due
+from .answers import SCREENED, add_answers, add_report, answer_quiz, ended, quiz_due, still_due
 from .auth import Caller, bearer, require_session, session_caller, token_of
 from .errors import Conflict, Gone, NotFound
 from .lifecycle import give_consent
@@ -63,11 +63,10 @@ def session_state(request: Request, caller: Caller) -> dict:
         s = _row(db, caller)
         cfg = study_config(db, str(s.study_id))
         quiz = quiz_due(s, cfg)
-        due = report_due(db, s, cfg)
-        asked = questionnaire_due(db, s, cfg) if due is None else None
+        due, asked = still_due(db, s, cfg)
         # the next trial is served once the quiz, and the self-report and questionnaires it follows, are answered
         current = serve(db, s) if due is None and asked is None and quiz is None else None
-        over = ended(db, s, cfg)
+        over = ended(db, s, cfg, (due, asked))
         if over and s.ended_at is None:
             s.ended_at = utcnow()
             db.commit()

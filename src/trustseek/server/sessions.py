@@ -29,7 +29,7 @@ from sqlalchemy.orm import Session as DBSession
 from ..model.core import TrustModel
 from ..model.task import Task
 from ..vocab import ACTIONS, EXPERIENCES, HUMAN_ACTIONS
-from .answers import questionnaire_due, quiz_due, report_due
+from .answers import quiz_due, still_due
 from .cache import caches_of
 from .errors import Conflict, NotAllowed, NotFound, TooLarge
 from .orm import TRIAL_FIELDS, Event, EventBatch, Session, Study, Trial, row_dict, try_commit, utcnow
@@ -264,7 +264,7 @@ def submit_trial(
     cfg = study_config(db, s.study_id) if s.study_id else {}
     if quiz_due(s, cfg) is not None:
         raise Conflict("answer the comprehension quiz before the first trial")
-    if report_due(db, s, cfg) is not None or questionnaire_due(db, s, cfg) is not None:
+    if still_due(db, s, cfg) != (None, None):
         raise Conflict(f"answer the questions after trial {s.trials_done} before trial {n}")
     action, complexity = s.pending_action, s.pending_complexity
     if s.pending_trial != n or action is None or complexity is None:
