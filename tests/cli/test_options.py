@@ -142,3 +142,34 @@ def test_every_tolerance_is_refused_unless_finite_and_positive():
         args = [name, LOG] if name in {"fit", "select", "fit-types", "select-types", "validate", "personalize"} else [name]
         code, output = run_cli([*args, "--tol", "0"])
         assert code == 2 and "--tol" in output and "must be a finite number > 0" in output, (name, output)
+
+
+@pytest.mark.parametrize(
+    "name, content",
+    [
+        ("mapping.json", '{"columns": {"participant": "person",}}'),
+        ("mapping.json", '["columns"]'),
+        ("mapping.json", b"\x00\x01"),
+        ("mapping.toml", "columns = ["),
+        ("folder.json", None),
+    ],
+)
+def test_a_mapping_file_is_read_by_one_reader_for_the_option_and_the_api(tmp_path, name, content):
+    """--mapping and ColumnMapping.load (read_trials, check) read a mapping file the same way: a
+    problem with the file is the same text, the option naming itself in front."""
+    from trustseek.data.cells import DataError
+    from trustseek.data.mapping import ColumnMapping
+
+    path = tmp_path / name
+    if content is None:
+        path.mkdir()
+    elif isinstance(content, bytes):
+        path.write_bytes(content)
+    else:
+        path.write_text(content)
+    with pytest.raises(DataError) as caught:
+        ColumnMapping.load(path)
+    (problem,) = caught.value.problems
+    code, output = run_cli(["fit", LOG, "--mapping", str(path), "-r", "1"])
+    assert code == 2 and f"{path}: --mapping: {problem}" in " ".join(output.split()), (problem, output)
+    assert "Traceback" not in output

@@ -324,22 +324,13 @@ def log_options(keep: bool = False, names: tuple[str, ...] | None = None) -> Cal
 
 
 def read_mapping(path: Path) -> ColumnMapping:
-    """A --mapping file (JSON or TOML), read once; a file that is not readable text (a folder,
-    binary, not UTF-8) or not a JSON object or TOML table is refused naming the file."""
-    import tomllib
-
+    """A --mapping file (JSON or TOML), read once (:meth:`~trustseek.data.mapping.ColumnMapping.read`),
+    a problem reading it named by the option."""
+    from ..data.cells import DataError
     from ..data.mapping import ColumnMapping
-    from ..model.jsonfile import ModelError, load_json, read_text
 
     try:
-        if path.suffix.lower() == ".toml":
-            text = read_text(path, "JSON or TOML", ModelError, hint=": save it as UTF-8 TOML")
-            try:
-                content: Any = tomllib.loads(text)
-            except tomllib.TOMLDecodeError as exc:
-                raise ModelError([f"invalid TOML: {exc}"], str(path)) from None
-        else:
-            content, _ = load_json(path)
-    except ModelError as exc:
+        content = ColumnMapping.read(path)
+    except DataError as exc:
         raise TrustseekError([f"--mapping: {p}" for p in exc.problems], str(path)) from None
     return ColumnMapping.from_file(content, path)

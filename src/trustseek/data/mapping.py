@@ -8,7 +8,6 @@ it is checked as a whole and reports every problem at once (``docs/data-format.m
 from __future__ import annotations
 
 import itertools
-import json
 import math
 import tomllib
 from collections.abc import Iterable, Mapping
@@ -16,7 +15,7 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
-from ..model.jsonfile import is_number
+from ..model.jsonfile import ModelError, is_number, load_json, read_text
 from ..vocab import ACTIONS, CATEGORICAL_COLUMNS, EXPERIENCES, HUMAN_ACTIONS, LEVELS, TRIAL_COLUMNS
 from .cells import DataError, names_list, shorten, unknown_entries
 from .layouts import explode_entry, explode_problems, join_entry, join_problems, wide_entry, wide_problems
@@ -260,20 +259,26 @@ class ColumnMapping:
             raise DataError(problems, source)
         return m
 
+    @staticmethod
+    def read(path: str | Path) -> Any:
+        """The content of a mapping file: TOML (``.toml``), else JSON.  Every way it can fail to be
+        read is a :class:`DataError` naming the file: missing, a folder, binary or not UTF-8, invalid
+        (JSON with the line and column), a JSON file whose top level is not an object."""
+        try:
+            if Path(path).suffix.lower() != ".toml":
+                return load_json(path)[0]
+            text = read_text(path, "JSON or TOML", ModelError, hint=": save it as UTF-8 TOML")
+            try:
+                return tomllib.loads(text)
+            except tomllib.TOMLDecodeError as exc:
+                raise ModelError([f"invalid TOML: {exc}"], str(path)) from None
+        except ModelError as exc:
+            raise DataError(exc.problems, str(path)) from None
+
     @classmethod
     def load(cls, path: str | Path) -> ColumnMapping:
-        """A mapping file: JSON (``.json``) or TOML (``.toml``)."""
-        path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-            raise DataError([f"cannot read mapping file: {reason}"], str(path)) from None
-        try:
-            d = tomllib.loads(text) if path.suffix.lower() == ".toml" else json.loads(text)
-        except (json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
-            raise DataError([f"invalid {'TOML' if path.suffix.lower() == '.toml' else 'JSON'}: {exc}"], str(path)) from None
-        return cls.from_file(d, path)
+        """A mapping file (:meth:`read`, then :meth:`from_file`)."""
+        return cls.from_file(cls.read(path), path)
 
     @classmethod
     def from_file(cls, d: Any, path: str | Path) -> ColumnMapping:
