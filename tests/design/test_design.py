@@ -5,6 +5,7 @@ LocalCluster)."""
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -142,6 +143,21 @@ def test_sweep_is_the_same_in_process_and_in_local_processes():
     for c in curve:
         for test in ("wilcoxon", "t"):
             assert c[test]["n"] == 3 and 0 <= c[test]["lo"] <= c[test]["power"] <= c[test]["hi"] <= 1
+
+
+def _dies(study, part):
+    os._exit(9)
+
+
+def test_sweep_a_worker_that_dies_is_one_clear_error(monkeypatch):
+    """A local worker killed (out of memory, kill -9) ended the sweep with a BrokenProcessPool traceback."""
+    from trustseek.design import sweep
+
+    cfg = _small()
+    study = sweep.study_of(cfg)
+    monkeypatch.setattr(sweep, "run_chunk", _dies)
+    with pytest.raises(TrustseekError, match=r"a worker process ended abruptly .* run again, or with --jobs 1"):
+        sweep.execute(study, cfg.designs(), cfg.replicates, jobs=2)
 
 
 def test_sweep_is_the_same_on_a_dask_local_cluster():

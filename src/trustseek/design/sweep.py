@@ -14,8 +14,8 @@ import itertools
 import math
 import time
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field, fields, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -26,7 +26,7 @@ from ..model.core import TrustModel
 from ..model.jsonfile import json_safe
 from ..model.presets import paper_model, paper_task
 from ..model.task import Task
-from ..parallel import check_jobs
+from ..parallel import check_jobs, in_processes
 from ..reproduction.robustness import solve_policy
 from ..solvers.base import one_blas_thread
 from ..statistics import finite, mean_interval, share_ci
@@ -210,30 +210,29 @@ def execute(
     replicate): in this process (``jobs`` = 1), in ``jobs`` local processes, or on the Dask ``client``."""
     check_jobs(jobs, "--jobs")
     items = [(i, d, r) for i, d in enumerate(designs) for r in range(replicates)]
-    total = len(items)
-    report = progress or (lambda done, tot: None)
-    out: list[dict[str, Any]] = []
-    if client is None and jobs <= 1:
-        for item in items:
-            out.extend(run_chunk(study, [item]))
-            report(len(out), total)
-    else:
-        workers = jobs if client is None else max(1, len(client.scheduler_info().get("workers", {})))
-        parts = _even_parts(items, workers)
-        if client is not None:
-            from dask.distributed import as_completed as dask_completed
+    report = progress or (lambda done, total: None)
+    workers = jobs if client is None else max(1, len(client.scheduler_info().get("workers", {})))
+    parts = [[item] for item in items] if workers <= 1 else _even_parts(items, workers)
+    done = 0
 
-            shared = client.scatter(study, broadcast=True)
-            futures = client.map(run_chunk, [shared] * len(parts), parts, pure=False)
-            for fut in dask_completed(futures):
-                out.extend(fut.result())
-                report(len(out), total)
-        else:
-            with ProcessPoolExecutor(max_workers=min(jobs, len(parts))) as ex:
-                futs = [ex.submit(run_chunk, study, part) for part in parts]
-                for f in as_completed(futs):
-                    out.extend(f.result())
-                    report(len(out), total)
+    def finished(part: int) -> None:
+        nonlocal done
+        done += len(parts[part])
+        report(done, len(items))
+
+    if client is None:
+        calls = [partial(run_chunk, study, part) for part in parts]
+        chunks = in_processes(calls, jobs, lambda part, _: finished(part))
+    else:
+        from dask.distributed import as_completed as dask_completed
+
+        shared = client.scatter(study, broadcast=True)
+        futures = client.map(run_chunk, [shared] * len(parts), parts, pure=False)
+        part_of = {fut.key: part for part, fut in enumerate(futures)}
+        for fut in dask_completed(futures):
+            finished(part_of[fut.key])
+        chunks = [fut.result() for fut in futures]
+    out = [record for chunk in chunks for record in chunk]
     out.sort(key=lambda r: (r["point"], r["replicate"]))
     return out
 
