@@ -31,6 +31,13 @@ class ParamSpec(NamedTuple):
         """This cell of ``model``."""
         return float(getattr(model, self.table)[self.cell])
 
+    def interval(self, ci: dict[str, tuple[np.ndarray, np.ndarray]] | None) -> tuple[float, float] | None:
+        """This cell's interval in a fit's bootstrap intervals ``ci`` (None without a bootstrap)."""
+        if not ci:
+            return None
+        lo, hi = ci[self.table]
+        return float(lo[self.cell]), float(hi[self.cell])
+
 
 def param_specs() -> list[ParamSpec]:
     """The cells of Figs. 4-6 (initial trust, emissions, transitions), in the report's order."""
@@ -66,18 +73,6 @@ def param_specs() -> list[ParamSpec]:
 def param_values(model: TrustModel) -> dict[str, float]:
     """Every reported cell of ``model``, by summary key."""
     return {spec.key: spec.value(model) for spec in param_specs()}
-
-
-def bootstrap_interval(fit: Any, spec: ParamSpec) -> tuple[float, float] | None:
-    """The fit's bootstrap interval of one cell, or None when the fit has none."""
-    ci = getattr(fit, "ci", None)
-    if not ci:
-        return None
-    try:
-        lo, hi = ci[spec.table]
-        return float(np.asarray(lo)[spec.cell]), float(np.asarray(hi)[spec.cell])
-    except (KeyError, IndexError, TypeError, ValueError):
-        return None
 
 
 AGREES = "agrees"

@@ -39,7 +39,6 @@ from ..statistics import distribution, mean_ci, share_ci, wilcoxon
 from ..vocab import TRIAL_COLUMNS
 from .comparison import (
     RULES,
-    bootstrap_interval,
     comparison_rows,
     disagreements,
     param_specs,
@@ -72,10 +71,10 @@ def _agnostic_summary(pol: ComplexityPolicy) -> dict[str, Any]:
 PER_POLICY = ("cumulative_reward", "autonomous_collections", "interventions", "asks", "failures")
 
 
-def _per_policy(sim: Simulation, keys: tuple[str, ...] = PER_POLICY) -> dict[str, dict[str, dict[str, float]]]:
-    """Median, mean and sum of each quantity, per policy."""
+def _per_policy(sim: Simulation) -> dict[str, dict[str, dict[str, float]]]:
+    """Median, mean and sum of each of :data:`PER_POLICY`, per policy."""
     out: dict[str, dict[str, dict[str, float]]] = {}
-    for key in keys:
+    for key in PER_POLICY:
         for lab, values in sim.by_policy(key).items():
             v = np.asarray(values, dtype=float)
             out.setdefault(lab, {})[key] = {"median": float(np.median(v)), "mean": float(v.mean()), "sum": float(v.sum())}
@@ -227,7 +226,7 @@ def _fit_section(
     for spec in param_specs():
         if not fit.estimated[spec.table][spec.cell]:
             fixed.append(spec.key)
-        iv = bootstrap_interval(fit, spec)
+        iv = spec.interval(fit.ci)
         if iv is not None:
             boot[spec.key] = list(iv)
     return fit, {

@@ -38,8 +38,9 @@ from ..solvers.agnostic import trust_agnostic_from_data
 from ..solvers.type_aware import solve_type_aware
 from ..statistics import mean_interval
 from ..vocab import PAPER_BLOCK_COUNTS, TRIAL_COLUMNS
+from .config import AGNOSTIC
 
-POOLED, TYPE_AWARE, ORACLE, AGNOSTIC = "pooled trust-aware", "type-aware", "oracle (type known)", "trust-agnostic"
+POOLED, TYPE_AWARE, ORACLE = "pooled trust-aware", "type-aware", "oracle (type known)"
 FITTED = "type-aware (fitted types)"
 POLICIES = (POOLED, FITTED, TYPE_AWARE, ORACLE, AGNOSTIC)
 # the paired differences the section reports: (policy, against)
