@@ -268,11 +268,9 @@ class Reproduction:
     fitted: TrustModel
     aware: Policy
     agnostic: ComplexityPolicy
-    true_policy: Policy
     experiment1: pd.DataFrame
     experiment2: CrossoverSimulation  # the paper-sized run
     experiment2_large: CrossoverSimulation
-    heterogeneity: dict[str, Any]
     sensitivity: Sensitivity | None = None
     scheduling: SchedulingSection | None = None
     types: TypesSection | None = None
@@ -346,8 +344,7 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
         # 6. costs (same participants for every policy)
         summary["costs"] = costs(cfg, plan, scost)
         step("costs")
-        het = heterogeneity(cfg, plan, shet)
-        summary["heterogeneity"] = het["summary"]
+        summary["heterogeneity"] = heterogeneity(cfg, plan, shet)
         step("heterogeneity")
 
         def section(name: str) -> Any:
@@ -377,11 +374,9 @@ def reproduce(cfg: ReproduceConfig | None = None, progress: Callable[[str, int, 
         fitted=plan.fitted,
         aware=plan.aware,
         agnostic=plan.agnostic,
-        true_policy=plan.true_policy,
         experiment1=frame1,
         experiment2=small,
         experiment2_large=large,
-        heterogeneity=het,
         sensitivity=sens,
         scheduling=sched,
         types=types,

@@ -234,16 +234,12 @@ def heterogeneity(cfg: ReproduceConfig, plan: Plan, seed: np.random.SeedSequence
 
     rho = spearmanr(score, r[AWARE] + r[AGNOSTIC]).statistic
     return {
-        "summary": {
-            "participants": cfg.large_n,
-            "concentration": cfg.concentration,
-            "pseudo": cfg.pseudo,
-            "score": "P(high -> low | faulty, low, autonomous) x P(intervene | low trust, low, autonomous)",
-            "quartiles": rows,
-            "spearman_score_vs_reward": float(rho),
-            "median_aware": float(np.median(r[AWARE])),
-            "median_agnostic": float(np.median(r[AGNOSTIC])),
-        },
-        "simulation": sim,
-        "score": score,
+        "participants": cfg.large_n,
+        "concentration": cfg.concentration,
+        "pseudo": cfg.pseudo,
+        "score": "P(high -> low | faulty, low, autonomous) x P(intervene | low trust, low, autonomous)",
+        "quartiles": rows,
+        "spearman_score_vs_reward": float(rho),
+        "median_aware": float(np.median(r[AWARE])),
+        "median_agnostic": float(np.median(r[AGNOSTIC])),
     }
