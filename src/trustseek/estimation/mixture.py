@@ -26,7 +26,6 @@ from ..model.mixture import TypeMixture
 from ..statistics import LEVEL, percentile_bounds
 from .bootstrap import (
     TABLE_NAMES,
-    TABLES,
     bound_zero_cells,
     boundary_note,
     cell_tables,
@@ -42,7 +41,7 @@ from .iohmm import EMFit, describe_run, fit_iohmm, posteriors, trial_columns
 from .mixture_em import EMPTY, FINISH_MARGIN, PERTURB, MixtureParams, MixtureStructure, MixtureWorkspace
 from .options import DEFAULTS, SERIAL, FitOptions, counting
 from .sequences import Sequences, encode
-from .spec import FitError, IOHMMSpec, Params
+from .spec import TABLES, FitError, IOHMMSpec, Params
 from .trust_iohmm import (
     from_model,
     inputs_spec,

@@ -187,27 +187,21 @@ class FitResult(EMFit):
             ("emission", s.em, m.emission_rows, m.output_categories),
             ("transition", s.tr, m.transition_rows, L),
         ):
-            for g in range(table.G):
-                u = int(table.rep[g])
-                if table.empty[u]:
-                    continue
+            for u, k in table.estimated_rows():
                 where = m.combination(name, u)
                 cond = "".join(f", {c}={v}" for c, v in where.items())
-                for k in range(m.n_levels):
-                    if np.all(table.fixed[u, k]):
-                        continue
-                    for j in _listed(len(cats)):
-                        head = f"{m.output}={cats[j]}" if name == "emission" else f"S'={cats[j]}"
-                        rec = {
-                            "table": name,
-                            "where": where,
-                            "level": L[k],
-                            "category": cats[j],
-                            "cell": f"P({head} | S={L[k]}{cond})",
-                            "estimate": float(arr[u, k, j]),
-                            "events": float(self.events[name][u, k]),
-                        }
-                        out.append(self._with_interval(rec, name, (u, k, j)))
+                for j in _listed(len(cats)):
+                    head = f"{m.output}={cats[j]}" if name == "emission" else f"S'={cats[j]}"
+                    rec = {
+                        "table": name,
+                        "where": where,
+                        "level": L[k],
+                        "category": cats[j],
+                        "cell": f"P({head} | S={L[k]}{cond})",
+                        "estimate": float(arr[u, k, j]),
+                        "events": float(self.events[name][u, k]),
+                    }
+                    out.append(self._with_interval(rec, name, (u, k, j)))
         if m.rating is not None and "rating" in self.events:
             for k in range(m.n_levels):
                 for r, lv in enumerate(m.rating.levels):
