@@ -80,8 +80,8 @@ class MixtureFit(EMFit):
         n = self.seqs.n_participants
         return [name for name, w in zip(self.names, self.weights, strict=True) if w * n < EMPTY]
 
-    def workspace(self) -> MixtureWorkspace:
-        return MixtureWorkspace(self.seqs, self.structure)
+    def workspace(self, seqs: Sequences | None = None) -> MixtureWorkspace:
+        return MixtureWorkspace(self.seqs if seqs is None else seqs, self.structure)
 
     def type_posteriors(self) -> np.ndarray:
         """(N, M): P(type | all trials of the participant)."""

@@ -84,18 +84,14 @@ class FitResult(EMFit):
     def to_dict(self) -> dict[str, Any]:
         """The model, the fit's figures and runs, the seed, the bootstrap, the spec and the warnings
         (a trust model's also its counts, estimated cells and intervals), for JSON."""
-        if self.model.general:
-            return {"model": self.model.to_dict(), **self.fit_record(), "warnings": list(self.warnings)}
-        return {
-            "model": self.model.to_dict(),
-            **self.fit_record(),
-            "counts": {k: v.tolist() for k, v in self.counts.items()},
-            "estimated": {k: v.tolist() for k, v in self.estimated.items()},
-            "ci": None
-            if self.ci is None
-            else {k: {"lower": lo.tolist(), "upper": hi.tolist()} for k, (lo, hi) in self.ci.items()},
-            "warnings": list(self.warnings),
-        }
+        out = {"model": self.model.to_dict(), **self.fit_record()}
+        if not self.model.general:
+            out["counts"] = {k: v.tolist() for k, v in self.counts.items()}
+            out["estimated"] = {k: v.tolist() for k, v in self.estimated.items()}
+            out["ci"] = (
+                None if self.ci is None else {k: {"lower": lo.tolist(), "upper": hi.tolist()} for k, (lo, hi) in self.ci.items()}
+            )
+        return out | {"warnings": list(self.warnings)}
 
     def cells(self) -> list[dict[str, Any]]:
         """One record per estimated cell: label, index (a trust model's) or table, input levels and
