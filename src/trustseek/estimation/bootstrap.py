@@ -237,18 +237,11 @@ def boundary_bounds(
     return lo, hi, bounded | mirrored
 
 
-def resample(seqs: Sequences, seed: np.random.SeedSequence, options: FitOptions) -> tuple[Sequences, FitOptions]:
-    """A bootstrap replicate's participants (drawn with replacement, seeded by ``seed``) and the
-    options of its refit (seeded by the seed's first child, on one thread)."""
-    rng = np.random.default_rng(seed)
-    n = seqs.n_participants
-    return seqs.subset(rng.integers(0, n, n)), replace(options, seed=seed.spawn(1)[0], n_jobs=1)
-
-
 @dataclass(frozen=True)
 class _Replicate:
     """One bootstrap replicate, sent whole to a worker process: ``refit(sample, options)`` (picklable)
-    on the resample of ``seed`` (:func:`resample`)."""
+    on the participants drawn with replacement (seeded by ``seed``), the refit seeded by the seed's
+    first child, on one thread."""
 
     seqs: Sequences
     seed: np.random.SeedSequence
@@ -256,8 +249,9 @@ class _Replicate:
     refit: Callable[[Sequences, FitOptions], Any]
 
     def run(self) -> Any:
-        sample, options = resample(self.seqs, self.seed, self.options)
-        return self.refit(sample, options)
+        n = self.seqs.n_participants
+        sample = self.seqs.subset(np.random.default_rng(self.seed).integers(0, n, n))
+        return self.refit(sample, replace(self.options, seed=self.seed.spawn(1)[0], n_jobs=1))
 
 
 def _refit(spec: IOHMMSpec, params: Params, weights: Mapping[str, np.ndarray], sample: Sequences, options: FitOptions):

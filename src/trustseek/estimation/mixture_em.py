@@ -78,10 +78,8 @@ class MixtureEStep(EStep):
     sequence: np.ndarray | None = None
 
     def take(self, r: int | slice) -> MixtureEStep:
-        return MixtureEStep(self.loglik[r], self.initial[r], self.emission[r], self.transition[r], None, self._seq(r))
-
-    def _seq(self, r: int | slice) -> np.ndarray | None:
-        return None if self.sequence is None else self.sequence[r]
+        seq = None if self.sequence is None else self.sequence[r]
+        return MixtureEStep(self.loglik[r], self.initial[r], self.emission[r], self.transition[r], None, seq)
 
     def where(self, mask: np.ndarray, other: EStep) -> MixtureEStep:
         m2, m4 = mask[:, None, None], mask[:, None, None, None, None]
