@@ -138,29 +138,19 @@ class FitResult(EMFit):
         for t in _listed(m.n_trust):
             add("initial", (t,), f"P(T1={T[t]})", ("i", t))
         eg = index_grid(spec, spec.emission_inputs, False)
-        for c in range(m.n_complexity):
-            for a in range(2):
-                for t in range(m.n_trust):
-                    v = {"complexity": c, "robot_action": a}
-                    add("emission", (c, a, t, 1), f"P(rely | T={T[t]}{cond(spec.emission_inputs, v)})", ("e", int(eg[c, a]), t))
+        for c, a, t in np.ndindex(m.n_complexity, 2, m.n_trust):
+            v = {"complexity": c, "robot_action": a}
+            add("emission", (c, a, t, 1), f"P(rely | T={T[t]}{cond(spec.emission_inputs, v)})", ("e", int(eg[c, a]), t))
         tg = index_grid(spec, spec.transition_inputs, True)
-        for c in range(m.n_complexity):
-            for a in range(2):
-                for e in range(2):
-                    for t in range(m.n_trust):
-                        for u in _listed(m.n_trust):
-                            v = {"complexity": c, "robot_action": a, "experience": e}
-                            add(
-                                "transition",
-                                (c, a, e, t, u),
-                                f"P(T'={T[u]} | T={T[t]}{cond(spec.transition_inputs, v)})",
-                                ("t", int(tg[c, a, e]), t, u),
-                            )
+        for c, a, e, t in np.ndindex(m.n_complexity, 2, 2, m.n_trust):
+            v = {"complexity": c, "robot_action": a, "experience": e}
+            for u in _listed(m.n_trust):
+                label = f"P(T'={T[u]} | T={T[t]}{cond(spec.transition_inputs, v)})"
+                add("transition", (c, a, e, t, u), label, ("t", int(tg[c, a, e]), t, u))
         if m.rating is not None and "rating" in self.estimated:
             levels = m.rating.levels
-            for t in range(m.n_trust):
-                for r in range(len(levels)):
-                    add("rating", (t, r), f"P(rating={levels[r]} | T={T[t]})", ("r", t, r))
+            for t, r in np.ndindex(m.n_trust, len(levels)):
+                add("rating", (t, r), f"P(rating={levels[r]} | T={T[t]})", ("r", t, r))
         return out
 
     def _model_cells(self, m: TrustModel) -> list[dict[str, Any]]:
