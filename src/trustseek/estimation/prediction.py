@@ -121,16 +121,17 @@ def score(
     """Metrics of every predictor on scored trials (``y`` 0/1, ``participant`` codes 0..N-1), with
     participant-bootstrap intervals, and the paired differences model - baseline."""
     counts = bootstrap_counts(n_participants, bootstrap, seed)
-    ntr = np.bincount(participant, minlength=n_participants).astype(float)
+    total = counts @ np.bincount(participant, minlength=n_participants).astype(float)  # trials per resample
     point: dict[str, dict[str, float]] = {}
     reps: dict[str, dict[str, np.ndarray]] = {}
     for name, p in predictions.items():
         ll, br = _losses(p, y)
-        point[name] = {"log_loss": float(ll.mean()) if ll.size else float("nan")}
-        point[name]["brier"] = float(br.mean()) if br.size else float("nan")
-        point[name]["auc"] = float(auc(p, y))
+        point[name] = {
+            "log_loss": float(ll.mean()) if ll.size else float("nan"),
+            "brier": float(br.mean()) if br.size else float("nan"),
+            "auc": float(auc(p, y)),
+        }
         with np.errstate(invalid="ignore", divide="ignore"):
-            total = counts @ ntr
             reps[name] = {
                 "log_loss": (counts @ np.bincount(participant, ll, n_participants)) / total,
                 "brier": (counts @ np.bincount(participant, br, n_participants)) / total,
