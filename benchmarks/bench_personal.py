@@ -34,8 +34,8 @@ import numpy as np
 
 from trustseek.estimation import encode, fit_trust_model
 from trustseek.estimation.options import FitOptions
-from trustseek.estimation.personal import TABLES, _PersonalWorkspace, personalize
-from trustseek.estimation.spec import Params
+from trustseek.estimation.personal import _PersonalWorkspace, personalize
+from trustseek.estimation.spec import TABLES, Params
 from trustseek.estimation.structure import Structure
 from trustseek.estimation.trust_iohmm import from_model
 from trustseek.model.core import TrustModel

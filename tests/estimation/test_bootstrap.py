@@ -100,7 +100,8 @@ def test_an_interval_at_the_boundary_can_move():
     """The reproduction's experiment 1 (9 x 71): Fig. 5b's P(T'=low | T=high, E'=faulty, C=low, autonomous)
     is estimated at 0, and every resample's own maximum is 0 too (the percentile interval was
     [1e-12, 1e-12]); there the interval is the likelihood-ratio one, and the row's other cell mirrors it."""
-    from trustseek.estimation.bootstrap import TABLES, boundary_bounds, cell_tables
+    from trustseek.estimation.bootstrap import boundary_bounds, cell_tables
+    from trustseek.estimation.spec import TABLES
     from trustseek.reproduction import pipeline
     from trustseek.reproduction.config import ReproduceConfig, seed_int
     from trustseek.simulation import simulate

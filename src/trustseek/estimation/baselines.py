@@ -25,22 +25,6 @@ RIDGE = 1e-3  # ridge of the logistic regressions' shared coefficients
 INTERCEPT_RIDGE = 1.0  # ridge of the participant intercepts: shrunk toward the shared intercept
 
 
-def spread(values: np.ndarray, seqs: Sequences, fill: float = np.nan) -> np.ndarray:
-    """A per-row array of the frame laid out (T, N) like ``seqs``."""
-    out = np.full(seqs.rows.shape, fill, dtype=float)
-    valid = seqs.rows >= 0
-    out[valid] = values[seqs.rows[valid]]
-    return out
-
-
-def per_row(arr: np.ndarray, seqs: Sequences, n: int, fill: Any = np.nan, dtype: Any = float) -> np.ndarray:
-    """The inverse of :func:`spread`: a (T, N) array as the values of the frame's ``n`` rows (``fill`` elsewhere)."""
-    out = np.full(n, fill, dtype=dtype)
-    valid = seqs.rows >= 0
-    out[seqs.rows[valid]] = arr[valid]
-    return out
-
-
 def _exclusive_cumsum(a: np.ndarray) -> np.ndarray:
     """Along trials: the sum over earlier trials (0 at the first)."""
     c = np.cumsum(a, axis=0)
@@ -129,7 +113,7 @@ def features(frame: pd.DataFrame, seqs: Sequences, determined: np.ndarray, n_ue:
     """The baselines' inputs of every trial of ``seqs`` (the model's ``n_ue`` emission and ``n_ut``
     transition input combinations; ``determined`` trials are not scored)."""
     rely_row, rel_row = indicators(frame)
-    rely = spread(rely_row, seqs)
+    rely = seqs.spread(rely_row)
     scored = np.isfinite(rely) & ~determined
     r = np.where(scored, rely, 0.0)
     rate_n = _exclusive_cumsum(scored.astype(float))
@@ -141,7 +125,7 @@ def features(frame: pd.DataFrame, seqs: Sequences, determined: np.ndarray, n_ue:
     for t in range(T):
         last[t] = cur
         cur = np.where(scored[t], rely[t], cur)
-    f = running_rate(spread(rel_row, seqs))
+    f = running_rate(seqs.spread(rel_row))
     valid = seqs.rows >= 0
     ue = np.where(valid, seqs.ue, 0).astype(np.int64)
     ut_prev = np.full((T, N), n_ut, dtype=np.int64)

@@ -30,7 +30,7 @@ from .mixture_em import MixtureStructure
 from .options import FitOptions
 from .ratings import make_structure
 from .sequences import Sequences
-from .spec import FitError, IOHMMSpec, Params
+from .spec import TABLES, FitError, IOHMMSpec, Params
 from .structure import Structure, Table
 from .trust_iohmm import check_convertible, index_grid, to_model
 
@@ -39,7 +39,6 @@ REFITS = FitOptions(restarts=3)
 
 log = logging.getLogger(__name__)
 
-TABLES = ("initial", "emission", "transition")
 MIN_REPLICATES = 200  # fewest resamples for a 95 % interval: each 2.5 % tail then rests on 5 replicates
 OTHER_MAXIMUM = 1e-4  # a random start beats the refit continued from the estimate by more than this (log-likelihood)
 BOUNDARY = 1e-6  # a free cell estimated below this is at the boundary
@@ -224,9 +223,7 @@ def _hold_row(structure: Structure, table: str, _which: None, rows: np.ndarray, 
     t: Table = getattr(held, table)
     t.fixed[rows, k, :] = True
     t.values[rows, k, :] = row
-    t.gfixed, t.gvalues = t.fixed[t.rep], t.values[t.rep]
-    t.mass = 1.0 - np.where(t.gfixed, t.gvalues, 0.0).sum(-1)
-    t.free_cells = (~t.gfixed).sum(-1)
+    t.refresh()
     return held
 
 
@@ -240,18 +237,11 @@ def boundary_bounds(
     return lo, hi, bounded | mirrored
 
 
-def resample(seqs: Sequences, seed: np.random.SeedSequence, options: FitOptions) -> tuple[Sequences, FitOptions]:
-    """A bootstrap replicate's participants (drawn with replacement, seeded by ``seed``) and the
-    options of its refit (seeded by the seed's first child, on one thread)."""
-    rng = np.random.default_rng(seed)
-    n = seqs.n_participants
-    return seqs.subset(rng.integers(0, n, n)), replace(options, seed=seed.spawn(1)[0], n_jobs=1)
-
-
 @dataclass(frozen=True)
 class _Replicate:
     """One bootstrap replicate, sent whole to a worker process: ``refit(sample, options)`` (picklable)
-    on the resample of ``seed`` (:func:`resample`)."""
+    on the participants drawn with replacement (seeded by ``seed``), the refit seeded by the seed's
+    first child, on one thread."""
 
     seqs: Sequences
     seed: np.random.SeedSequence
@@ -259,8 +249,9 @@ class _Replicate:
     refit: Callable[[Sequences, FitOptions], Any]
 
     def run(self) -> Any:
-        sample, options = resample(self.seqs, self.seed, self.options)
-        return self.refit(sample, options)
+        n = self.seqs.n_participants
+        sample = self.seqs.subset(np.random.default_rng(self.seed).integers(0, n, n))
+        return self.refit(sample, replace(self.options, seed=self.seed.spawn(1)[0], n_jobs=1))
 
 
 def _refit(spec: IOHMMSpec, params: Params, weights: Mapping[str, np.ndarray], sample: Sequences, options: FitOptions):

@@ -20,7 +20,7 @@ from .options import DEFAULTS, FitOptions, counting
 from .ratings import RatingStructure
 from .result import FitResult
 from .sequences import Sequences, encode, participant_codes
-from .spec import FitError, IOHMMSpec, Params
+from .spec import TABLES, FitError, IOHMMSpec, Params
 from .structure import Structure, describe_combination
 from .trust_iohmm import (
     broadcast,
@@ -40,9 +40,8 @@ MIN_EVENTS = 5  # fewer expected events than this behind a row: "not identified 
 
 def _estimated_mask(structure: Structure) -> dict[str, np.ndarray]:
     """Row-level: True where a row is estimated (not fixed, not empty)."""
-    em = ~np.all(structure.em.fixed, axis=-1)  # (Ue, K)
-    tr = ~np.all(structure.tr.fixed, axis=-1)  # (Ut, K)
-    return {"initial": np.full(structure.K, structure.K > 1), "emission": em.astype(float), "transition": tr.astype(float)}
+    s = structure
+    return {"initial": np.full(s.K, s.K > 1), "emission": s.em.estimated(), "transition": s.tr.estimated()}
 
 
 def _warnings(fit: EMFit, events: dict[str, np.ndarray]) -> list[str]:
@@ -51,18 +50,13 @@ def _warnings(fit: EMFit, events: dict[str, np.ndarray]) -> list[str]:
     s, spec = fit.structure, fit.spec
     out = fit.cap_warnings()
     for name, table, inputs in (("emission", s.em, spec.emission_inputs), ("transition", s.tr, spec.transition_inputs)):
-        ev = events[name]
-        for g in range(table.G):
-            u = int(table.rep[g])
-            for k in range(s.K):
-                if np.all(table.fixed[u, k]):
-                    continue
-                n = float(ev[u, k])
-                if n < MIN_EVENTS:
-                    out.append(
-                        f"{name}[{describe_combination(u, inputs, spec.categories)}][T={spec.levels[k]}]: "
-                        f"{n:.1f} expected events, not identified by this data"
-                    )
+        for u, k in table.estimated_rows():
+            n = float(events[name][u, k])
+            if n < MIN_EVENTS:
+                out.append(
+                    f"{name}[{describe_combination(u, inputs, spec.categories)}][T={spec.levels[k]}]: "
+                    f"{n:.1f} expected events, not identified by this data"
+                )
     if "rating" in events:
         for k in range(s.K):
             n = float(events["rating"][k].sum())
@@ -78,7 +72,7 @@ def _constant_output(fit: EMFit) -> list[str]:
     relies): the initial distribution and the transitions are then not identified."""
     seqs, s = fit.seqs, fit.structure
     # (Ue + 1,): some level's row is estimated; the last entry for no combination (code -1)
-    free = np.append(~np.all(s.em.fixed, axis=(1, 2)), False)
+    free = np.append(s.em.estimated().any(-1), False)
     values = seqs.y[(seqs.y >= 0) & free[seqs.ue]]
     if fit.spec.n_levels < 2 or values.size == 0 or values.min() != values.max():
         return []
@@ -157,7 +151,7 @@ def _with_intervals(result: FitResult, bootstrap: int, options: FitOptions, tick
             bootstrap,
             replace(options, restarts=min(options.starts, 3)),
             progress=lambda label, d, t: tick(),
-            weights={k: v for k, v in result.events.items() if k in ("initial", "emission", "transition")},
+            weights={k: v for k, v in result.events.items() if k in TABLES},
         )
         result.warnings += result.intervals.notes()
     return result

@@ -76,8 +76,9 @@ class EMFit:
     def restart_logliks(self) -> list[float]:
         return [r.loglik for r in self.runs]
 
-    def workspace(self) -> Workspace:
-        return Workspace(self.seqs, *self.structure.dims)
+    def workspace(self, seqs: Sequences | None = None) -> Workspace:
+        """The E-step of the fitted structure on its data (or on ``seqs``)."""
+        return Workspace(self.seqs if seqs is None else seqs, *self.structure.dims)
 
     def criteria(self) -> dict[str, Any]:
         """The log-likelihood, free parameters, AIC and BIC."""

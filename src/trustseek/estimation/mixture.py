@@ -26,7 +26,6 @@ from ..model.mixture import TypeMixture
 from ..statistics import LEVEL, percentile_bounds
 from .bootstrap import (
     TABLE_NAMES,
-    TABLES,
     bound_zero_cells,
     boundary_note,
     cell_tables,
@@ -42,7 +41,7 @@ from .iohmm import EMFit, describe_run, fit_iohmm, posteriors, trial_columns
 from .mixture_em import EMPTY, FINISH_MARGIN, PERTURB, MixtureParams, MixtureStructure, MixtureWorkspace
 from .options import DEFAULTS, SERIAL, FitOptions, counting
 from .sequences import Sequences, encode
-from .spec import FitError, IOHMMSpec, Params
+from .spec import TABLES, FitError, IOHMMSpec, Params
 from .trust_iohmm import (
     from_model,
     inputs_spec,
@@ -81,8 +80,8 @@ class MixtureFit(EMFit):
         n = self.seqs.n_participants
         return [name for name, w in zip(self.names, self.weights, strict=True) if w * n < EMPTY]
 
-    def workspace(self) -> MixtureWorkspace:
-        return MixtureWorkspace(self.seqs, self.structure)
+    def workspace(self, seqs: Sequences | None = None) -> MixtureWorkspace:
+        return MixtureWorkspace(self.seqs if seqs is None else seqs, self.structure)
 
     def type_posteriors(self) -> np.ndarray:
         """(N, M): P(type | all trials of the participant)."""

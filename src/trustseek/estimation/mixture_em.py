@@ -13,11 +13,10 @@ import numpy as np
 
 from .estep import EStep, Workspace
 from .sequences import Sequences
-from .spec import FitError, IOHMMSpec, Params
+from .spec import TABLES, FitError, IOHMMSpec, Params
 from .sticks import Sticks, _Part
 from .structure import FLOOR, PROJECT_FLOOR, START_MIX, Structure, mixed, normalised, random_rows
 
-PARTS = ("initial", "emission", "transition")
 EMPTY = 1e-3  # a type with fewer expected participants than this is empty
 FINISH_MARGIN = 1.0  # with M >= 2, the starts ending this close to the best (nats) get the L-BFGS-B finish
 PERTURB = 1.0  # perturbed pooled starts: every row's log-odds moved by a normal draw of this scale
@@ -29,11 +28,11 @@ def parse_differ(differ: str | Sequence[str]) -> tuple[str, ...]:
     items = [s.strip() for s in differ.split(",")] if isinstance(differ, str) else [str(s).strip() for s in differ]
     items = [s for s in items if s]
     if items == ["all"]:
-        return PARTS
-    bad = [s for s in items if s not in PARTS]
+        return TABLES
+    bad = [s for s in items if s not in TABLES]
     if bad or not items:
-        raise FitError([f"differ: expected 'all' or some of {list(PARTS)}, got {differ!r}"])
-    return tuple(p for p in PARTS if p in items)
+        raise FitError([f"differ: expected 'all' or some of {list(TABLES)}, got {differ!r}"])
+    return tuple(p for p in TABLES if p in items)
 
 
 class MixtureParams(Params):
@@ -79,10 +78,8 @@ class MixtureEStep(EStep):
     sequence: np.ndarray | None = None
 
     def take(self, r: int | slice) -> MixtureEStep:
-        return MixtureEStep(self.loglik[r], self.initial[r], self.emission[r], self.transition[r], None, self._seq(r))
-
-    def _seq(self, r: int | slice) -> np.ndarray | None:
-        return None if self.sequence is None else self.sequence[r]
+        seq = None if self.sequence is None else self.sequence[r]
+        return MixtureEStep(self.loglik[r], self.initial[r], self.emission[r], self.transition[r], None, seq)
 
     def where(self, mask: np.ndarray, other: EStep) -> MixtureEStep:
         m2, m4 = mask[:, None, None], mask[:, None, None, None, None]
@@ -215,7 +212,7 @@ class MixtureStructure(Structure):
     def relabel(self, p: MixtureParams) -> MixtureParams:
         """Levels named by the spec's rule, types ordered by the module's rule (see the module docstring)."""
         M = self.n_types
-        if self.differ == PARTS or M == 1:
+        if self.differ == TABLES or M == 1:
             levels = [Structure.order(self, p.type_params(m)) for m in range(M)]
         else:
             w = p.weights
@@ -236,8 +233,7 @@ class MixtureStructure(Structure):
         cat = 0
         if self.spec.order_by is not None:
             cat = self.spec.output_categories.index(self.spec.order_by[1])
-        em_free = ~self.em.empty & ~np.all(self.em.fixed, axis=(-2, -1))
-        tr_free = ~self.tr.empty & ~np.all(self.tr.fixed, axis=(-2, -1))
+        em_free, tr_free = self.em.estimated().any(-1), self.tr.estimated().any(-1)
         rely = np.array([p.emission[m][em_free][:, :, cat].mean() if em_free.any() else 0.0 for m in range(M)])
         top = np.array([p.type_params(m).initial[-1] for m in range(M)])
         up = np.array([p.transition[m][tr_free][:, :, K - 1].mean() if tr_free.any() else 0.0 for m in range(M)])

@@ -38,13 +38,12 @@ from .mixture import general_types, mixture_params, type_posteriors
 from .mixture_em import MixtureStructure, MixtureWorkspace
 from .options import SERIAL, FitOptions
 from .sequences import Sequences, encode
-from .spec import MAX_PSEUDOCOUNT, FitError, IOHMMSpec, Params
+from .spec import MAX_PSEUDOCOUNT, TABLES, FitError, IOHMMSpec, Params
 from .structure import FLOOR, Structure, Table
 from .trust_iohmm import to_model
 
 log = logging.getLogger(__name__)
 
-TABLES = ("initial", "emission", "transition")
 S_MIN, S_MAX = 1e-2, 1e6
 GRID = 9  # strengths tried per table from S_MAX down to S_MIN (log-spaced) before the joint search
 INNER_TOL = 1e-10  # relative gain of the summed bound below which the variational E-steps stop

@@ -24,7 +24,7 @@ from ..model.core import TrustModel
 from ..parallel import in_processes
 from ..statistics import LEVEL, auc, bootstrap_counts, paired, percentile_interval
 from ..vocab import HUMAN_ACTIONS
-from .baselines import BASELINES, BaselineFit, Features, baseline_predictions, features, fit_baselines, per_row
+from .baselines import BASELINES, BaselineFit, Features, baseline_predictions, features, fit_baselines
 from .iohmm import fit_iohmm
 from .options import DEFAULTS, FitOptions
 from .sequences import Sequences, deal_folds, encode
@@ -121,16 +121,17 @@ def score(
     """Metrics of every predictor on scored trials (``y`` 0/1, ``participant`` codes 0..N-1), with
     participant-bootstrap intervals, and the paired differences model - baseline."""
     counts = bootstrap_counts(n_participants, bootstrap, seed)
-    ntr = np.bincount(participant, minlength=n_participants).astype(float)
+    total = counts @ np.bincount(participant, minlength=n_participants).astype(float)  # trials per resample
     point: dict[str, dict[str, float]] = {}
     reps: dict[str, dict[str, np.ndarray]] = {}
     for name, p in predictions.items():
         ll, br = _losses(p, y)
-        point[name] = {"log_loss": float(ll.mean()) if ll.size else float("nan")}
-        point[name]["brier"] = float(br.mean()) if br.size else float("nan")
-        point[name]["auc"] = float(auc(p, y))
+        point[name] = {
+            "log_loss": float(ll.mean()) if ll.size else float("nan"),
+            "brier": float(br.mean()) if br.size else float("nan"),
+            "auc": float(auc(p, y)),
+        }
         with np.errstate(invalid="ignore", divide="ignore"):
-            total = counts @ ntr
             reps[name] = {
                 "log_loss": (counts @ np.bincount(participant, ll, n_participants)) / total,
                 "brier": (counts @ np.bincount(participant, br, n_participants)) / total,
@@ -254,23 +255,18 @@ def _report(
     y = feats.rely[s]
     metrics, diffs = score({k: v[s] for k, v in preds.items()}, y, nn, seqs.n_participants, bootstrap, seed)
     # per trial, in the frame's row order
-    rows = seqs.rows[valid]
-    n = len(frame)
-    out: dict[str, Any] = {}
-    vt, vn = np.nonzero(valid)
-    out["participant"] = np.empty(n, dtype=object)
-    out["participant"][rows] = np.asarray(seqs.participants, dtype=object)[vn]
-    out["trial"] = np.zeros(n, dtype=np.int64)
-    out["trial"][rows] = seqs.trial_numbers(vt, vn)
+    who = seqs.row_participants()
+    out: dict[str, Any] = {"participant": np.asarray(seqs.participants, dtype=object)[who]}
+    out["trial"] = seqs.per_row(seqs.trial_numbers(*np.indices(valid.shape)), 0, np.int64)
     for c in ("complexity", "robot_action", "human_action"):
-        out[c] = frame[c].to_numpy() if c in frame else np.full(n, None)
-    out["scored"], out["fixed_by_model"] = per_row(s, seqs, n, False, bool), per_row(determined, seqs, n, False, bool)
+        out[c] = frame[c].to_numpy() if c in frame else np.full(len(frame), None)
+    out["scored"], out["fixed_by_model"] = seqs.per_row(s, False, bool), seqs.per_row(determined, False, bool)
     if fold_of is not None:
-        out["fold"] = per_row(np.broadcast_to(fold_of + 1, valid.shape), seqs, n, 0, np.int64)
-    out |= {f"p_rely_{k}": per_row(v, seqs, n) for k, v in preds.items()}
+        out["fold"] = fold_of[who] + 1
+    out |= {f"p_rely_{k}": seqs.per_row(v) for k, v in preds.items()}
     trials = pd.DataFrame(out)
-    pm, ys = p_model[s], feats.rely[s]
-    misses = int((np.where(ys == 1, pm, 1 - pm) < CONFIDENT).sum())
+    pm = p_model[s]
+    misses = int((np.where(y == 1, pm, 1 - pm) < CONFIDENT).sum())
     unrecorded = int((valid & ~np.isfinite(feats.rely)).sum())
     det_obs = determined & np.isfinite(feats.rely)
     matched = int((det_obs & (feats.rely == np.where(np.isfinite(p_model), np.round(p_model), -1))).sum())

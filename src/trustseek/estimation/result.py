@@ -84,18 +84,14 @@ class FitResult(EMFit):
     def to_dict(self) -> dict[str, Any]:
         """The model, the fit's figures and runs, the seed, the bootstrap, the spec and the warnings
         (a trust model's also its counts, estimated cells and intervals), for JSON."""
-        if self.model.general:
-            return {"model": self.model.to_dict(), **self.fit_record(), "warnings": list(self.warnings)}
-        return {
-            "model": self.model.to_dict(),
-            **self.fit_record(),
-            "counts": {k: v.tolist() for k, v in self.counts.items()},
-            "estimated": {k: v.tolist() for k, v in self.estimated.items()},
-            "ci": None
-            if self.ci is None
-            else {k: {"lower": lo.tolist(), "upper": hi.tolist()} for k, (lo, hi) in self.ci.items()},
-            "warnings": list(self.warnings),
-        }
+        out = {"model": self.model.to_dict(), **self.fit_record()}
+        if not self.model.general:
+            out["counts"] = {k: v.tolist() for k, v in self.counts.items()}
+            out["estimated"] = {k: v.tolist() for k, v in self.estimated.items()}
+            out["ci"] = (
+                None if self.ci is None else {k: {"lower": lo.tolist(), "upper": hi.tolist()} for k, (lo, hi) in self.ci.items()}
+            )
+        return out | {"warnings": list(self.warnings)}
 
     def cells(self) -> list[dict[str, Any]]:
         """One record per estimated cell: label, index (a trust model's) or table, input levels and
@@ -142,29 +138,19 @@ class FitResult(EMFit):
         for t in _listed(m.n_trust):
             add("initial", (t,), f"P(T1={T[t]})", ("i", t))
         eg = index_grid(spec, spec.emission_inputs, False)
-        for c in range(m.n_complexity):
-            for a in range(2):
-                for t in range(m.n_trust):
-                    v = {"complexity": c, "robot_action": a}
-                    add("emission", (c, a, t, 1), f"P(rely | T={T[t]}{cond(spec.emission_inputs, v)})", ("e", int(eg[c, a]), t))
+        for c, a, t in np.ndindex(m.n_complexity, 2, m.n_trust):
+            v = {"complexity": c, "robot_action": a}
+            add("emission", (c, a, t, 1), f"P(rely | T={T[t]}{cond(spec.emission_inputs, v)})", ("e", int(eg[c, a]), t))
         tg = index_grid(spec, spec.transition_inputs, True)
-        for c in range(m.n_complexity):
-            for a in range(2):
-                for e in range(2):
-                    for t in range(m.n_trust):
-                        for u in _listed(m.n_trust):
-                            v = {"complexity": c, "robot_action": a, "experience": e}
-                            add(
-                                "transition",
-                                (c, a, e, t, u),
-                                f"P(T'={T[u]} | T={T[t]}{cond(spec.transition_inputs, v)})",
-                                ("t", int(tg[c, a, e]), t, u),
-                            )
+        for c, a, e, t in np.ndindex(m.n_complexity, 2, 2, m.n_trust):
+            v = {"complexity": c, "robot_action": a, "experience": e}
+            for u in _listed(m.n_trust):
+                label = f"P(T'={T[u]} | T={T[t]}{cond(spec.transition_inputs, v)})"
+                add("transition", (c, a, e, t, u), label, ("t", int(tg[c, a, e]), t, u))
         if m.rating is not None and "rating" in self.estimated:
             levels = m.rating.levels
-            for t in range(m.n_trust):
-                for r in range(len(levels)):
-                    add("rating", (t, r), f"P(rating={levels[r]} | T={T[t]})", ("r", t, r))
+            for t, r in np.ndindex(m.n_trust, len(levels)):
+                add("rating", (t, r), f"P(rating={levels[r]} | T={T[t]})", ("r", t, r))
         return out
 
     def _model_cells(self, m: TrustModel) -> list[dict[str, Any]]:
@@ -187,27 +173,21 @@ class FitResult(EMFit):
             ("emission", s.em, m.emission_rows, m.output_categories),
             ("transition", s.tr, m.transition_rows, L),
         ):
-            for g in range(table.G):
-                u = int(table.rep[g])
-                if table.empty[u]:
-                    continue
+            for u, k in table.estimated_rows():
                 where = m.combination(name, u)
                 cond = "".join(f", {c}={v}" for c, v in where.items())
-                for k in range(m.n_levels):
-                    if np.all(table.fixed[u, k]):
-                        continue
-                    for j in _listed(len(cats)):
-                        head = f"{m.output}={cats[j]}" if name == "emission" else f"S'={cats[j]}"
-                        rec = {
-                            "table": name,
-                            "where": where,
-                            "level": L[k],
-                            "category": cats[j],
-                            "cell": f"P({head} | S={L[k]}{cond})",
-                            "estimate": float(arr[u, k, j]),
-                            "events": float(self.events[name][u, k]),
-                        }
-                        out.append(self._with_interval(rec, name, (u, k, j)))
+                for j in _listed(len(cats)):
+                    head = f"{m.output}={cats[j]}" if name == "emission" else f"S'={cats[j]}"
+                    rec = {
+                        "table": name,
+                        "where": where,
+                        "level": L[k],
+                        "category": cats[j],
+                        "cell": f"P({head} | S={L[k]}{cond})",
+                        "estimate": float(arr[u, k, j]),
+                        "events": float(self.events[name][u, k]),
+                    }
+                    out.append(self._with_interval(rec, name, (u, k, j)))
         if m.rating is not None and "rating" in self.events:
             for k in range(m.n_levels):
                 for r, lv in enumerate(m.rating.levels):

@@ -22,10 +22,8 @@ import numpy as np
 import pandas as pd
 
 from ..parallel import in_processes
-from .estep import Workspace
 from .iohmm import EMFit, fit_iohmm
 from .mixture import MixtureFit, check_types, fit_mixture, split_type_starts
-from .mixture_em import MixtureWorkspace
 from .options import FitOptions
 from .sequences import Sequences, deal_folds, encode
 from .spec import FitError, IOHMMSpec, Params
@@ -370,8 +368,7 @@ def heldout_loglik(test: Sequences, fit: EMFit) -> float:
     log sum_m w_m P(trials | type m)), its tables as fitted but where a free cell at 0 would make it
     -inf (:func:`heldout_params`): smoothing every row would pull the many sparsely visited rows of a
     larger model towards uniform (docs/fitting.md, "Choosing the number of levels")."""
-    work = MixtureWorkspace(test, fit.structure) if isinstance(fit, MixtureFit) else Workspace(test, *fit.structure.dims)
-    return float(work.loglik(heldout_params(fit)))
+    return float(fit.workspace(test).loglik(heldout_params(fit)))
 
 
 def heldout_params(fit: EMFit, pseudocount: float = HELDOUT_PSEUDOCOUNT) -> Params:

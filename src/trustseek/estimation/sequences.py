@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -66,6 +67,24 @@ class Sequences:
             self.base,
             self.trial_of_row,
         )
+
+    def spread(self, values: np.ndarray, fill: float = np.nan) -> np.ndarray:
+        """Values of the frame's rows laid out (T, N) like these arrays (``fill`` at padding)."""
+        out = np.full(self.rows.shape, fill, dtype=float)
+        valid = self.rows >= 0
+        out[valid] = values[self.rows[valid]]
+        return out
+
+    def per_row(self, arr: np.ndarray, fill: Any = np.nan, dtype: Any = float) -> np.ndarray:
+        """The inverse of :meth:`spread`: a (T, N) array as the values of the frame's rows (``fill`` elsewhere)."""
+        out = np.full(self.n_rows, fill, dtype=dtype)
+        valid = self.rows >= 0
+        out[self.rows[valid]] = arr[valid]
+        return out
+
+    def row_participants(self) -> np.ndarray:
+        """Every row of the frame's participant (an index into ``participants``)."""
+        return self.per_row(np.broadcast_to(np.arange(self.n_participants), self.rows.shape), 0, np.int64)
 
     def trial_numbers(self, t: np.ndarray, i: np.ndarray) -> np.ndarray:
         """The table's trial index of position ``t`` of sequence ``i`` (arrays of positions)."""

@@ -36,6 +36,8 @@ from ..errors import TrustseekError
 #: large already fixes every row at the prior's; near 1e308 the log-prior overflowed and the fit
 #: failed with "the initial values give the data probability zero"
 MAX_PSEUDOCOUNT = 1e12
+#: the tables of a model (:class:`Params`' arrays)
+TABLES = ("initial", "emission", "transition")
 
 
 class FitError(TrustseekError, ValueError):

@@ -8,7 +8,7 @@ the log-prior and the permutation that names the levels, all over leading axes (
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -68,11 +68,27 @@ class Table:
             free = ~self.fixed[u]
             self.values[u][free] = default[free]
             self.fixed[u] = True
-        # rows fully fixed (and not empty) need no estimate either
+        self.refresh()
+
+    def refresh(self) -> None:
+        """The per-group views of ``fixed`` and ``values`` (after they changed): fixed cells, their
+        values, the mass left to the free cells and how many there are."""
         self.gfixed = self.fixed[self.rep]  # (G, K, M)
         self.gvalues = self.values[self.rep]
         self.mass = 1.0 - np.where(self.gfixed, self.gvalues, 0.0).sum(-1)
         self.free_cells = (~self.gfixed).sum(-1)
+
+    def estimated(self) -> np.ndarray:
+        """(U, K): True where a row is estimated (its cells not all fixed; a row the data never reach is)."""
+        return ~np.all(self.fixed, axis=-1)
+
+    def estimated_rows(self) -> Iterator[tuple[int, int]]:
+        """(u, k) of every estimated row, each tie group's representative once, in order."""
+        estimated = self.estimated()
+        for u in self.rep:
+            for k in range(self.K):
+                if estimated[u, k]:
+                    yield int(u), k
 
     def grouped(self, x: np.ndarray) -> np.ndarray:
         """Sums over the combinations of each tie group: (U, ...) -> (G, ...)."""
@@ -271,7 +287,7 @@ class Structure:
         if not mask.any():
             mask = rows
         score = p.emission[mask][:, :, o].mean(0)
-        free = ~self.em.empty & ~np.all(self.em.fixed, axis=(-2, -1))
+        free = self.em.estimated().any(-1)
         overall = p.emission[free][:, :, o].mean(0) if free.any() else np.zeros(self.K)
         keys = (np.arange(self.K), np.round(p.initial, 9), np.round(overall, 9), np.round(score, 9))
         return np.lexsort(keys)

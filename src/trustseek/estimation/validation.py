@@ -20,7 +20,7 @@ import pandas as pd
 from ..data.cells import NAN_WORDS, DataError
 from ..model.core import TrustModel
 from ..statistics import LEVEL, bootstrap_counts, correlations, paired, percentile_interval
-from .baselines import indicators, per_row, running_rate, spread
+from .baselines import indicators, running_rate
 from .iohmm import posteriors
 from .prediction import chunks, filter_beliefs
 from .sequences import encode
@@ -210,18 +210,14 @@ def _decoded_values(frame: pd.DataFrame, model: TrustModel) -> tuple[dict[str, n
     except FitError:
         raise FitError(["the trials have probability zero under this model: nothing to decode"]) from None
     filt = filter_beliefs(seqs, params)
-    valid = seqs.rows >= 0
-    n = len(frame)
-    pcode = np.empty(n, dtype=np.int64)
-    pcode[seqs.rows[valid]] = np.nonzero(valid)[1]
     rely, reliable = indicators(frame)
-    values = {name: per_row((arr * scale).sum(-1), seqs, n) for name, arr in (("smoothed", gamma), ("filtered", filt.posterior))}
-    values["reliable_fraction"] = per_row(running_rate(spread(reliable, seqs), inclusive=True), seqs, n)
+    values = {name: seqs.per_row((arr * scale).sum(-1)) for name, arr in (("smoothed", gamma), ("filtered", filt.posterior))}
+    values["reliable_fraction"] = seqs.per_row(running_rate(seqs.spread(reliable), inclusive=True))
     if not np.isfinite(reliable).any():
-        values["reliable_fraction"] = np.full(n, np.nan)
+        values["reliable_fraction"] = np.full(len(frame), np.nan)
     values["reliance"] = rely
-    values["reliance_rate"] = per_row(running_rate(spread(rely, seqs), inclusive=True), seqs, n)
-    return values, pcode, seqs.n_participants
+    values["reliance_rate"] = seqs.per_row(running_rate(seqs.spread(rely), inclusive=True))
+    return values, seqs.row_participants(), seqs.n_participants
 
 
 def _correlations(values: dict[str, np.ndarray], ratings: np.ndarray, pcode: np.ndarray, N: int, counts: np.ndarray):
