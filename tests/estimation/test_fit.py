@@ -433,3 +433,24 @@ def test_a_best_restart_stopped_at_the_cap_is_a_warning():
     done = fit_trust_model(frame, options=FitOptions(restarts=2, seed=0))
     assert done.runs[done.best].converged
     assert not any("cap on E-steps" in w for w in done.warnings)
+
+
+def test_a_general_fit_names_the_rows_no_trial_reaches():
+    """A general model's rows that no trial reaches (a declared level without trials) hold defaults,
+    not data: the fit says which (a row the structure fixes whole, e.g. P(intervene | ask) = 1, is
+    not news and is not named)."""
+    import pandas as pd
+
+    from trustseek.data import example_path, read_trials
+    from trustseek.estimation.fit import fit_model
+    from trustseek.estimation.options import FitOptions
+
+    frame = read_trials(example_path("paper_trials.csv"))
+    frame["condition"] = pd.Categorical(
+        np.where(frame["participant"].astype(str).str[-1].isin(list("02468")), "a", "b"), categories=["a", "b", "unused"]
+    )
+    result = fit_model(frame, ("complexity", "robot_action"), ("condition",), options=FitOptions(restarts=1, max_iter=30))
+    (note,) = [w for w in result.warnings if w.startswith("never estimated")]
+    assert "condition=unused" in note and "condition=a" not in note and "robot_action=ask" not in note, note
+    full = fit_model(frame, ("complexity", "robot_action"), ("experience",), options=FitOptions(restarts=1, max_iter=30))
+    assert not [w for w in full.warnings if w.startswith("never estimated")], full.warnings

@@ -344,8 +344,7 @@ def fit_model(
             ("emission", result.structure.em, spec.emission_inputs),
             ("transition", result.structure.tr, spec.transition_inputs),
         )
-        for u in table.rep[table.empty[table.rep]]
-        if not np.all(table.fixed[u])
+        for u in table.rep[table.defaulted[table.rep]]
     ]
     if never:
         warnings.append(f"never estimated (no such trials in the data; the model file holds defaults): {', '.join(never)}")

@@ -51,13 +51,15 @@ class Table:
         self.rep = np.arange(U)  # (G,) a representative combination per tie group
         self.onehot = np.eye(U)  # (U, G) combination -> its group
         self.empty = np.zeros(U, dtype=bool)  # (U,) rows no data event reaches
+        self.defaulted = np.zeros(U, dtype=bool)  # (U,) of those, the rows with a free cell, set to the default
         self.gfixed = self.fixed
         self.gvalues = self.values
         self.mass = np.ones((U, K))  # (G, K) probability left to the free cells
         self.free_cells = np.full((U, K), M)  # (G, K)
 
     def finish(self, events: np.ndarray, default: np.ndarray) -> None:
-        """Renumber tie groups, and fix rows of groups with no data events to ``default`` (K, M)."""
+        """Renumber tie groups, and fix rows of groups with no data events to ``default`` (K, M)
+        (``defaulted``: those with a cell the structure left free)."""
         _, inverse = np.unique(self.group, return_inverse=True)
         self.group = inverse.ravel()
         self.G = int(self.group.max()) + 1 if self.U else 0
@@ -66,6 +68,7 @@ class Table:
         self.empty = self.grouped(events)[self.group] == 0
         for u in np.flatnonzero(self.empty):
             free = ~self.fixed[u]
+            self.defaulted[u] = free.any()
             self.values[u][free] = default[free]
             self.fixed[u] = True
         self.refresh()
