@@ -144,10 +144,8 @@ def design(
     from ..design import DesignConfig, FitSettings, ask_search_problems
 
     check_output(out, "--out", directory=True)
-    truth, t = model_and_task(model, task)
     cfg = DesignConfig(
-        truth=truth,
-        task=t,
+        *model_and_task(model, task),  # the truth and the task
         seed=seed,
         replicates=replicates,
         participants_1=_ints(participants_1, "--participants-1"),
