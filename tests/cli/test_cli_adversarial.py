@@ -636,3 +636,19 @@ def test_an_option_beyond_its_bounds_is_refused_before_any_work(tmp_path, args, 
     text = " ".join(output.split())
     assert code == 2 and "Traceback" not in output and expected.format(dir=tmp_path) in text, output
     assert _listing(tmp_path) == before
+
+
+def test_a_figure_whose_writing_is_interrupted_leaves_no_partial_file(tmp_path, monkeypatch):
+    """An output is replaced whole or not at all: sensitivity's --plot interrupted while the
+    figure is written (Ctrl-C, or a full disk) leaves neither a half-written figure nor a temporary."""
+    import trustseek.plots.sensitivity as figures
+
+    def interrupted(res, quantity, path, **kwargs):
+        Path(path).write_bytes(b"\x89PNG half a figure")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(figures, "plot_tornado", interrupted)
+    out = tmp_path / "tornado.png"
+    code, _ = run_cli(["sensitivity", "--samples", "0", "--starts", "1", "--grid", "101", "--plot", str(out)])
+    assert code != 0
+    assert _listing(tmp_path) == set(), sorted(_listing(tmp_path))
