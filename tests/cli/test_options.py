@@ -151,6 +151,7 @@ def test_every_tolerance_is_refused_unless_finite_and_positive():
         ("mapping.json", '["columns"]'),
         ("mapping.json", b"\x00\x01"),
         ("mapping.toml", "columns = ["),
+        ("mapping.toml", "columns = " + "[" * 100_000 + "]" * 100_000),
         ("folder.json", None),
     ],
 )

@@ -263,7 +263,7 @@ class ColumnMapping:
     def read(path: str | Path) -> Any:
         """The content of a mapping file: TOML (``.toml``), else JSON.  Every way it can fail to be
         read is a :class:`DataError` naming the file: missing, a folder, binary or not UTF-8, invalid
-        (JSON with the line and column), a JSON file whose top level is not an object."""
+        (JSON with the line and column) or nested too deeply, a JSON file whose top level is not an object."""
         try:
             if Path(path).suffix.lower() != ".toml":
                 return load_json(path)[0]
@@ -272,6 +272,8 @@ class ColumnMapping:
                 return tomllib.loads(text)
             except tomllib.TOMLDecodeError as exc:
                 raise ModelError([f"invalid TOML: {exc}"], str(path)) from None
+            except RecursionError:  # as load_json says of JSON
+                raise ModelError(["invalid TOML: nested too deeply"], str(path)) from None
         except ModelError as exc:
             raise DataError(exc.problems, str(path)) from None
 
